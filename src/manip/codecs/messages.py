@@ -1,0 +1,515 @@
+"""Manip request and response bodies, built from the spec's layouts.
+
+Nothing about an individual opcode is written here: each request and response layout in
+``manip/spec/data/manip.toml`` becomes a construct ``Struct`` (compiled for speed) when first used.  This
+module adds what construct cannot say well: exact length checks with byte offsets, the ``small`` field
+that may arrive as one byte or one word, and errors that name the clause they break.
+
+Wire conventions (see the errata): words are little-endian, floats are PDP-11 F floats, and every packet
+the server sends begins with a request-number word.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import cache
+from typing import Any, Final
+
+from construct import (
+    Array,
+    Construct,
+    ConstructError,
+    GreedyBytes,
+    Int16sl,
+    Int16ul,
+    PrefixedArray,
+    Struct,
+    Terminated,
+)
+
+from manip.codecs.error_string import ErrorMessage, parse_error
+from manip.codecs.errors import CodecError, DecodeError, EncodeError
+from manip.codecs.lispm_text import decode_lispm, encode_lispm
+from manip.codecs.pdp11float import Float32F, f_to_u32, u32_to_f
+from manip.spec import SPEC, Field, FieldType, Layout, RequestOpcode
+from manip.spec.constants import AsyncCondition, ServerOp
+
+Value = float | int | str | tuple[float, ...] | tuple[int, ...]
+"""A decoded field: a scalar for count 1, a tuple otherwise, str for text."""
+
+REQUEST_NUMBER_BYTES: Final = 2
+MAX_TEXT_PER_PACKET: Final = 488 - REQUEST_NUMBER_BYTES
+
+_WORD = struct.Struct("<H")
+
+
+# ----------------------------------------------------------------------------------------- layouts
+
+
+def _element(ft: FieldType) -> Construct:
+    match ft.element:
+        case "float":
+            base: Construct = Float32F
+        case "word" | "small":
+            base = Int16ul
+        case "int16":
+            base = Int16sl
+        case "counted":
+            return PrefixedArray(Int16ul, Int16ul)
+        case "text":
+            return GreedyBytes
+    return base if ft.count == 1 else Array(ft.count, base)
+
+
+@dataclass(frozen=True)
+class _Codec:
+    """The construct form of one layout, with and without a leading request number."""
+
+    layout: Layout
+    struct: Any
+    with_number: Any
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(f.name for f in self.layout.fields)
+
+
+@cache
+def _codec(layout: Layout) -> _Codec:
+    fields = [f.name / _element(f.type) for f in layout.fields]
+    plain = Struct(*fields, Terminated)
+    numbered = Struct("request_number" / Int16ul, *fields, Terminated)
+    return _Codec(layout, plain.compile(), numbered.compile())
+
+
+def _has_small(layout: Layout) -> bool:
+    return any(f.type.element == "small" for f in layout.fields)
+
+
+def _check_length(layout: Layout, data: bytes, start: int, what: str, clause: str) -> bytes:
+    """Check ``data[start:]`` against a layout's size; return data with a one-byte ``small`` widened."""
+    body = len(data) - start
+    size = layout.fixed_size
+    if size is not None:
+        if _has_small(layout) and body == size - 1:
+            return data + b"\0"
+        if body != size:
+            raise DecodeError(
+                f"{what} needs {size} data bytes after offset {start}, got {body}",
+                path=what,
+                offset=min(len(data), start + size),
+                clause=clause,
+            )
+        return data
+    # Variable layouts: counted words check their own count; text takes the rest.
+    for f in layout.fields:
+        if f.type.element == "counted":
+            if body < 2:
+                raise DecodeError(f"{what}.{f.name}: missing word count", what, start + body, clause)
+            (n,) = _WORD.unpack_from(data, start)
+            if body != 2 + 2 * n:
+                raise DecodeError(
+                    f"{what}.{f.name}: count says {n} words ({2 + 2 * n} bytes), {body} bytes present",
+                    path=f"{what}.{f.name}",
+                    offset=start,
+                    clause=clause,
+                )
+    return data
+
+
+def _float_fault(layout: Layout, data: bytes, start: int, what: str, exc: Exception) -> CodecError:
+    """Locate the float that made a parse fail, for an error that points at its byte offset."""
+    offset = start
+    for f in layout.fields:
+        ft = f.type
+        if ft.element == "float" and ft.count is not None:
+            for i in range(ft.count):
+                (u,) = struct.unpack_from("<I", data, offset + 4 * i)
+                try:
+                    u32_to_f(u)
+                except CodecError as inner:
+                    index = f"[{i}]" if ft.count > 1 else ""
+                    return DecodeError(inner.message, f"{what}.{f.name}{index}", offset + 4 * i, inner.clause)
+        size = ft.fixed_size
+        if size is None:
+            break
+        offset += size
+    return DecodeError(f"{what}: {exc}", path=what, offset=start)
+
+
+def _parse(
+    layout: Layout, data: bytes, *, numbered: bool, what: str, clause: str
+) -> tuple[int | None, dict[str, Value]]:
+    start = REQUEST_NUMBER_BYTES if numbered else 0
+    if len(data) < start:
+        raise DecodeError(
+            f"{what}: no request-number word", what, len(data), "response.echoes-request-number"
+        )
+    data = _check_length(layout, data, start, what, clause)
+    codec = _codec(layout)
+    try:
+        parsed = (codec.with_number if numbered else codec.struct).parse(data)
+    except CodecError as exc:
+        raise _float_fault(layout, data, start, what, exc) from exc
+    except ConstructError as exc:
+        raise _float_fault(layout, data, start, what, exc) from exc
+    values: dict[str, Value] = {}
+    for f in layout.fields:
+        raw = parsed[f.name]
+        if f.type.element == "text":
+            values[f.name] = decode_lispm(bytes(raw))
+        elif isinstance(raw, list):
+            values[f.name] = tuple(raw)
+        else:
+            values[f.name] = raw
+    return (parsed["request_number"] if numbered else None), values
+
+
+def _build(layout: Layout, values: Mapping[str, Any], what: str, request_number: int | None = None) -> bytes:
+    known = {f.name for f in layout.fields}
+    extra = set(values) - known
+    if extra:
+        raise EncodeError(f"{what}: unknown field(s) {sorted(extra)}; expects {sorted(known)}", path=what)
+    obj: dict[str, Any] = {}
+    for f in layout.fields:
+        if f.name not in values:
+            raise EncodeError(f"{what}: missing field {f.name!r}", path=f"{what}.{f.name}")
+        v = values[f.name]
+        ft = f.type
+        if ft.element == "text":
+            v = encode_lispm(str(v))
+        elif ft.count not in (None, 1):
+            v = list(v)
+            if len(v) != ft.count:
+                raise EncodeError(
+                    f"{what}.{f.name}: needs {ft.count} values, got {len(v)}", path=f"{what}.{f.name}"
+                )
+        obj[f.name] = v
+        _check_types(ft, v, f"{what}.{f.name}")
+    codec = _codec(layout)
+    try:
+        if request_number is None:
+            return bytes(codec.struct.build(obj))
+        return bytes(codec.with_number.build({"request_number": request_number, **obj}))
+    except CodecError:
+        raise
+    except ConstructError as exc:
+        raise EncodeError(f"{what}: {exc}", path=what) from exc
+
+
+def _check_types(ft: FieldType, value: Any, path: str) -> None:
+    """Apply the copy-manipulator-request-data rule: the right kind of number for each field."""
+    items = value if isinstance(value, list) else [value]
+    for i, item in enumerate(items):
+        where = f"{path}[{i}]" if isinstance(value, list) else path
+        if ft.element == "float":
+            if isinstance(item, bool) or not isinstance(item, float):
+                raise EncodeError(
+                    f"{type(item).__name__} {item!r} where a float is required",
+                    path=where,
+                    clause="request-data.types",
+                )
+        elif ft.element in ("word", "int16", "small", "counted"):
+            lo, hi = (-0x8000, 0x7FFF) if ft.element == "int16" else (0, 0xFFFF)
+            if isinstance(item, bool) or not isinstance(item, int):
+                raise EncodeError(
+                    f"{type(item).__name__} {item!r} where an integer is required",
+                    path=where,
+                    clause="request-data.types",
+                )
+            if not lo <= item <= hi:
+                raise EncodeError(f"{item} outside {lo}..{hi}", path=where, clause="request-data.types")
+
+
+# ----------------------------------------------------------------------------------------- requests
+
+
+@dataclass(frozen=True)
+class Request:
+    """A decoded request: its opcode entry in the spec and its field values."""
+
+    op: RequestOpcode
+    values: Mapping[str, Value] = field(default_factory=dict)
+
+    @property
+    def opcode(self) -> int:
+        return self.op.opcode
+
+
+def request_op(key: int | str) -> RequestOpcode:
+    """The spec entry for a request opcode given by number or name; KeyError names the unknown key."""
+    try:
+        return SPEC.request(key)
+    except KeyError:
+        shown = f"{key:#o}" if isinstance(key, int) else repr(key)
+        raise KeyError(f"no request opcode {shown} in the spec") from None
+
+
+def encode_request(op: int | str, **values: Any) -> bytes:
+    """Data bytes of a request packet (its Chaos opcode is ``request_op(op).opcode``)."""
+    spec_op = request_op(op)
+    return _build(spec_op.request, values, spec_op.name)
+
+
+def decode_request(opcode: int, data: bytes) -> Request:
+    """Decode a request's data.  Unknown opcodes raise DecodeError (clause request.unknown-opcode)."""
+    try:
+        spec_op = SPEC.requests[opcode]
+    except KeyError:
+        raise DecodeError(
+            f"opcode {opcode:#o} is not a request opcode of the spec",
+            path="opcode",
+            offset=0,
+            clause="request.unknown-opcode",
+        ) from None
+    _, values = _parse(spec_op.request, data, numbered=False, what=spec_op.name, clause="request.data-length")
+    return Request(spec_op, values)
+
+
+def copy_request_data(items: object) -> bytes:
+    """The seed's copy-manipulator-request-data: ints as 16-bit words, floats as F floats, lists flattened.
+
+    Integers may be -32768..65535 (negatives are sent in two's complement); any other type is an error.
+    """
+    out = bytearray()
+
+    def put(item: object, path: str) -> None:
+        if isinstance(item, bool):
+            raise EncodeError(
+                f"bool {item!r} is neither a fixnum nor a flonum", path, clause="request-data.types"
+            )
+        if isinstance(item, int):
+            if not -0x8000 <= item <= 0xFFFF:
+                raise EncodeError(f"{item} does not fit in 16 bits", path, clause="request-data.types")
+            out.extend(_WORD.pack(item & 0xFFFF))
+        elif isinstance(item, float):
+            try:
+                out.extend(struct.pack("<I", f_to_u32(item)))
+            except CodecError as exc:
+                raise exc.at(path) from exc
+        elif isinstance(item, (list, tuple)):
+            for i, sub in enumerate(item):
+                put(sub, f"{path}[{i}]")
+        else:
+            raise EncodeError(
+                f"{type(item).__name__} {item!r} cannot be request data", path, clause="request-data.types"
+            )
+
+    put(items, "data")
+    return bytes(out)
+
+
+# ----------------------------------------------------------------------------------------- responses
+
+
+@dataclass(frozen=True)
+class Reply:
+    """A RESPONSE (0200) packet.  ``op`` is the request it answers, when the caller knows it."""
+
+    request_number: int
+    op: RequestOpcode | None
+    values: Mapping[str, Value] = field(default_factory=dict)
+    payload: bytes = b""
+    """The data after the request number, undecoded (always set)."""
+
+    @property
+    def is_empty(self) -> bool:
+        """True for a done reply and for the terminator of a multi-packet reply."""
+        return not self.payload
+
+    @property
+    def segment(self) -> int:
+        """The segment number of a motion reply."""
+        seg = self.values.get("segment")
+        if not isinstance(seg, int):
+            raise ValueError("this reply carries no segment number")
+        return seg
+
+
+@dataclass(frozen=True)
+class ErrorReply:
+    """A fatal (0201), non-fatal (0202), asynchronous error (0204) or warning (0205) packet."""
+
+    opcode: int
+    request_number: int
+    error: ErrorMessage
+
+    @property
+    def fatal(self) -> bool:
+        return self.opcode == ServerOp.FATAL_ERROR
+
+
+@dataclass(frozen=True)
+class AsyncResponse:
+    """An asynchronous response (0203): a guard hit or a completed segment."""
+
+    request_number: int
+    condition: int
+    word2: int
+    word3: int
+
+    @property
+    def condition_name(self) -> str:
+        entry = SPEC.async_codes.get(self.condition)
+        return entry.name if entry else f"unknown-{self.condition}"
+
+
+ServerMessage = Reply | ErrorReply | AsyncResponse
+
+_SEGMENT = Layout((Field("segment", SPEC.field_types["word"]),))
+
+
+def response_layout(op: RequestOpcode) -> Layout:
+    """The data layout after the request number of a (non-terminator) RESPONSE to ``op``."""
+    match op.response.kind:
+        case "done":
+            return Layout(())
+        case "segment":
+            return _SEGMENT
+        case _:
+            return op.response.data
+
+
+def encode_reply(op: int | str, request_number: int, **values: Any) -> bytes:
+    """Data of a RESPONSE packet answering ``op`` (for a multi reply: one text chunk)."""
+    spec_op = request_op(op)
+    return _build(response_layout(spec_op), values, f"{spec_op.name}.reply", request_number)
+
+
+def encode_terminator(request_number: int) -> bytes:
+    """The empty RESPONSE that ends a multi-packet reply (request number only)."""
+    return _WORD.pack(request_number)
+
+
+def encode_multi_text(request_number: int, text: str) -> list[bytes]:
+    """A multi-packet text reply: chunks of at most 486 text bytes, then the terminator."""
+    raw = encode_lispm(text)
+    number = _WORD.pack(request_number)
+    chunks = [number + raw[i : i + MAX_TEXT_PER_PACKET] for i in range(0, len(raw), MAX_TEXT_PER_PACKET)]
+    return [*chunks, encode_terminator(request_number)]
+
+
+def decode_reply(data: bytes, op: int | str | RequestOpcode | None = None) -> Reply:
+    """Decode a RESPONSE packet's data; with ``op`` the payload is decoded by that request's layout."""
+    if len(data) < REQUEST_NUMBER_BYTES:
+        raise DecodeError(
+            f"response has {len(data)} data bytes; the request number needs 2",
+            path="request_number",
+            offset=len(data),
+            clause="response.echoes-request-number",
+        )
+    (number,) = _WORD.unpack_from(data, 0)
+    payload = bytes(data[REQUEST_NUMBER_BYTES:])
+    if op is None:
+        return Reply(number, None, {}, payload)
+    spec_op = op if isinstance(op, RequestOpcode) else request_op(op)
+    if spec_op.response.kind == "multi" and not payload:
+        return Reply(number, spec_op, {}, payload)
+    clause = {
+        "done": "response.done-empty",
+        "segment": "response.segment-number",
+    }.get(spec_op.response.kind, "response.data-layout")
+    _, values = _parse(
+        response_layout(spec_op), data, numbered=True, what=f"{spec_op.name}.reply", clause=clause
+    )
+    return Reply(number, spec_op, values, payload)
+
+
+def encode_error(opcode: int, request_number: int, error: ErrorMessage) -> bytes:
+    """Data of an error packet (0201, 0202, 0204 or 0205)."""
+    if opcode not in (
+        ServerOp.FATAL_ERROR,
+        ServerOp.NON_FATAL_ERROR,
+        ServerOp.ASYNCHRONOUS_ERROR,
+        ServerOp.ASYNCHRONOUS_WARNING,
+    ):
+        raise EncodeError(f"opcode {opcode:#o} does not carry an error string", path="opcode")
+    return _WORD.pack(request_number) + error.encode()
+
+
+def decode_error(opcode: int, data: bytes, *, align_args: bool = True) -> ErrorReply:
+    if len(data) < REQUEST_NUMBER_BYTES:
+        raise DecodeError(
+            "error packet without a request number",
+            "request_number",
+            len(data),
+            "response.echoes-request-number",
+        )
+    (number,) = _WORD.unpack_from(data, 0)
+    try:
+        error = parse_error(data[REQUEST_NUMBER_BYTES:], align_args=align_args)
+    except CodecError as exc:
+        raise exc.at("error", REQUEST_NUMBER_BYTES) from exc
+    return ErrorReply(opcode, number, error)
+
+
+_ASYNC = struct.Struct("<4H")
+_ASYNC_NO_NUMBER = struct.Struct("<3H")
+
+
+def encode_async(
+    request_number: int, condition: int, word2: int, word3: int, *, async_has_request_number: bool = True
+) -> bytes:
+    """Data of an asynchronous response (0203); see erratum ``async-request-number``."""
+    for name, v in (
+        ("request_number", request_number),
+        ("condition", condition),
+        ("word2", word2),
+        ("word3", word3),
+    ):
+        if not 0 <= v <= 0xFFFF:
+            raise EncodeError(f"{v} does not fit in a word", path=name, clause="async.layout")
+    if async_has_request_number:
+        return _ASYNC.pack(request_number, condition, word2, word3)
+    return _ASYNC_NO_NUMBER.pack(condition, word2, word3)
+
+
+def decode_async(data: bytes, *, async_has_request_number: bool = True) -> AsyncResponse:
+    codec = _ASYNC if async_has_request_number else _ASYNC_NO_NUMBER
+    if len(data) != codec.size:
+        raise DecodeError(
+            f"asynchronous response needs {codec.size} data bytes, got {len(data)}",
+            path="async",
+            offset=min(len(data), codec.size),
+            clause="async.layout",
+        )
+    if async_has_request_number:
+        number, condition, w2, w3 = codec.unpack(data)
+    else:
+        number = 0
+        condition, w2, w3 = codec.unpack(data)
+    return AsyncResponse(number, condition, w2, w3)
+
+
+def guard_hit(request_number: int, guard: int, *, stop: bool) -> bytes:
+    return encode_async(request_number, AsyncCondition.GUARD_HIT, 1 if stop else 2, guard)
+
+
+def segment_completed(request_number: int, segment: int) -> bytes:
+    return encode_async(request_number, AsyncCondition.SEGMENT_COMPLETED, 0, segment)
+
+
+def decode_server_packet(
+    opcode: int, data: bytes, op: int | str | RequestOpcode | None = None, *, align_args: bool = True
+) -> ServerMessage:
+    """Decode any packet a server sends, by its Chaos opcode."""
+    match opcode:
+        case ServerOp.RESPONSE:
+            return decode_reply(data, op)
+        case ServerOp.ASYNCHRONOUS_RESPONSE:
+            return decode_async(data)
+        case (
+            ServerOp.FATAL_ERROR
+            | ServerOp.NON_FATAL_ERROR
+            | ServerOp.ASYNCHRONOUS_ERROR
+            | ServerOp.ASYNCHRONOUS_WARNING
+        ):
+            return decode_error(opcode, data, align_args=align_args)
+    raise DecodeError(
+        f"opcode {opcode:#o} is not a server opcode (0200-0205)",
+        path="opcode",
+        offset=0,
+        clause="response.server-opcodes",
+    )

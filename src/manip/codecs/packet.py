@@ -1,0 +1,45 @@
+"""The Chaos packet as a value: header fields plus data, independent of any link framing.
+
+A packet is eight 16-bit header words followed by ``nbytes`` of data.  How those words become bytes
+depends on the link (see :mod:`manip.codecs.framing`); this module knows nothing about bytes on a wire.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+MAX_DATA = 488
+"""Largest data field of a Chaos packet, in bytes (clause ``chaos.data.max-488``)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Trailer:
+    """The three hardware-trailer words that follow the data on CHUDP, TCP and chaosd links."""
+
+    dest: int
+    source: int
+    checksum: int
+
+
+@dataclass(frozen=True, slots=True)
+class Packet:
+    """One Chaos packet.  ``nbytes`` is always ``len(data)``; ``fc`` is the forwarding count."""
+
+    opcode: int
+    dest_host: int = 0
+    dest_index: int = 0
+    src_host: int = 0
+    src_index: int = 0
+    packet_no: int = 0
+    ack_no: int = 0
+    data: bytes = b""
+    fc: int = 0
+    trailer: Trailer | None = field(default=None, compare=False)
+
+    @property
+    def nbytes(self) -> int:
+        return len(self.data)
+
+    def with_(self, **changes: object) -> Packet:
+        """A copy with some fields changed (``dataclasses.replace`` under a short name)."""
+        return replace(self, **changes)  # type: ignore[arg-type]

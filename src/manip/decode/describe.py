@@ -1,0 +1,321 @@
+"""Turn a packet into a labelled tree: the Chaos header, then what the data mean in the manip protocol.
+
+Pure code with no I/O; :mod:`manip.decode.render` prints the tree as text, JSON or an annotated hex
+dump.  Offsets of data fields count from the start of the Chaos data in natural byte order.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from manip.codecs.cougar import CougarMsg, Malformed, OutOfSync, StreamItem
+from manip.codecs.errors import CodecError
+from manip.codecs.lispm_text import decode_lispm
+from manip.codecs.messages import (
+    AsyncResponse,
+    ErrorReply,
+    Reply,
+    ServerMessage,
+    decode_request,
+    decode_server_packet,
+    request_op,
+    response_layout,
+)
+from manip.codecs.packet import Packet
+from manip.spec import SPEC, Layout, RequestOpcode
+from manip.spec.constants import ChaosOp, ServerOp
+
+Direction = Literal["auto", "request", "response"]
+
+
+@dataclass
+class Node:
+    """One labelled item of a decoded packet."""
+
+    label: str
+    text: str = ""
+    value: Any = None
+    offset: int | None = None
+    size: int | None = None
+    children: list[Node] = field(default_factory=list)
+
+    def add(
+        self,
+        label: str,
+        text: str = "",
+        value: Any = None,
+        offset: int | None = None,
+        size: int | None = None,
+    ) -> Node:
+        child = Node(label, text, value, offset, size)
+        self.children.append(child)
+        return child
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"label": self.label}
+        if self.text:
+            out["text"] = self.text
+        if self.value is not None:
+            out["value"] = self.value
+        if self.offset is not None:
+            out["offset"] = self.offset
+            out["size"] = self.size
+        if self.children:
+            out["children"] = [c.to_json() for c in self.children]
+        return out
+
+
+def octal(v: int) -> str:
+    """Chaosnet style: a leading 0, as the seed writes opcodes and addresses."""
+    return f"0{v:o}" if v else "0"
+
+
+def _chaos_opcode_name(op: int) -> str:
+    if 0o200 <= op <= 0o277:
+        return "DAT (8-bit data)"
+    if op >= 0o300:
+        return "DWD (16-bit data)"
+    try:
+        return ChaosOp(op).name
+    except ValueError:
+        return "illegal"
+
+
+def describe_header(p: Packet) -> Node:
+    node = Node("chaos header", offset=0, size=16)
+    node.add("opcode", f"{octal(p.opcode)} {_chaos_opcode_name(p.opcode)}", p.opcode, 1, 1)
+    node.add("fc", str(p.fc), p.fc, 2, 2)
+    node.add("nbytes", str(p.nbytes), p.nbytes, 2, 2)
+    node.add(
+        "destination",
+        f"host {octal(p.dest_host)} index {octal(p.dest_index)}",
+        {"host": p.dest_host, "index": p.dest_index},
+        4,
+        4,
+    )
+    node.add(
+        "source",
+        f"host {octal(p.src_host)} index {octal(p.src_index)}",
+        {"host": p.src_host, "index": p.src_index},
+        8,
+        4,
+    )
+    node.add("packet number", str(p.packet_no), p.packet_no, 12, 2)
+    node.add("ack number", str(p.ack_no), p.ack_no, 14, 2)
+    if p.trailer is not None:
+        t = p.trailer
+        node.add(
+            "trailer",
+            f"hw dest {octal(t.dest)} hw source {octal(t.source)} checksum {t.checksum:#06x}",
+            {"dest": t.dest, "source": t.source, "checksum": t.checksum},
+        )
+    return node
+
+
+def _format_value(v: Any) -> str:
+    if isinstance(v, float):
+        return repr(v)
+    if isinstance(v, tuple):
+        return "(" + ", ".join(_format_value(x) for x in v) + ")"
+    if isinstance(v, str):
+        return repr(v)
+    return str(v)
+
+
+def _fields(node: Node, layout: Layout, values: dict[str, Any] | Any, start: int) -> None:
+    offset: int | None = start
+    for f in layout.fields:
+        size = f.type.fixed_size
+        v = values.get(f.name)
+        text = _format_value(v)
+        if f.type.name == "transform" and isinstance(v, tuple):
+            cols = ["N", "O", "A", "P"]
+            text = "  ".join(
+                f"{c}=({v[3 * i]:.6g}, {v[3 * i + 1]:.6g}, {v[3 * i + 2]:.6g})" for i, c in enumerate(cols)
+            )
+        node.add(f.name, text, list(v) if isinstance(v, tuple) else v, offset, size)
+        offset = None if size is None or offset is None else offset + size
+
+
+def describe_request(p: Packet) -> Node:
+    request = decode_request(p.opcode, p.data)
+    op = request.op
+    node = Node(
+        "manip request", f"{octal(op.opcode)} {op.name}: {op.title}", {"opcode": op.opcode, "name": op.name}
+    )
+    node.add("hazard", op.hazard, op.hazard)
+    if op.extension:
+        node.add("defined by", "manip (Puma extension opcode)")
+    _fields(node, op.request, dict(request.values), 0)
+    return node
+
+
+def _describe_reply(reply: Reply, op: RequestOpcode | None) -> Node:
+    node = Node(
+        "manip response",
+        f"0200 response to request {reply.request_number}",
+        {"opcode": ServerOp.RESPONSE, "request_number": reply.request_number},
+    )
+    node.add("request number", str(reply.request_number), reply.request_number, 0, 2)
+    if op is None:
+        if reply.payload:
+            node.add("data", reply.payload.hex(" "), reply.payload.hex(), 2, len(reply.payload))
+            node.add("note", "pass --request-opcode to decode the data by the request's layout")
+        else:
+            node.add("data", "none (a done reply, or the end of a multi-packet reply)")
+        return node
+    node.text += f" ({op.name}, {op.response.kind} reply)"
+    if op.response.kind == "multi" and reply.is_empty:
+        node.add("end", "empty packet: end of the multi-packet reply")
+    elif op.response.kind == "multi":
+        text = decode_lispm(reply.payload)
+        node.add("text", repr(text), text, 2, len(reply.payload))
+    else:
+        _fields(node, response_layout(op), dict(reply.values), 2)
+    return node
+
+
+def _describe_error(err: ErrorReply) -> Node:
+    name = ServerOp(err.opcode).name.lower().replace("_", "-")
+    e = err.error
+    node = Node(
+        "manip error",
+        f"{octal(err.opcode)} {name}: {e.render()}",
+        {"opcode": err.opcode, "request_number": err.request_number},
+    )
+    node.add("request number", str(err.request_number), err.request_number, 0, 2)
+    node.add("where", e.where, e.where)
+    sev = SPEC.severities.get(e.severity)
+    node.add("severity", f"{e.severity} ({sev.meaning if sev else 'unknown severity'})", e.severity)
+    code = SPEC.error_codes.get(e.code)
+    node.add("code", f"{e.code} ({code.meaning if code else 'not a code of the spec'})", e.code)
+    node.add("message", repr(e.message), e.message)
+    if e.args:
+        node.add("arguments", ", ".join(str(a) for a in e.args), list(e.args))
+    node.add("rendered", e.render(), e.render())
+    for problem in e.problems:
+        node.add("problem", problem, problem)
+    return node
+
+
+def _describe_async(a: AsyncResponse) -> Node:
+    node = Node(
+        "manip asynchronous response",
+        f"0203 {a.condition_name}",
+        {"opcode": ServerOp.ASYNCHRONOUS_RESPONSE, "condition": a.condition},
+    )
+    node.add("request number", str(a.request_number), a.request_number, 0, 2)
+    node.add("condition", f"{a.condition} {a.condition_name}", a.condition, 2, 2)
+    if a.condition == 1:
+        node.add(
+            "action",
+            {1: "1 stop trajectory", 2: "2 continue"}.get(a.word2, f"{a.word2} (undefined)"),
+            a.word2,
+            4,
+            2,
+        )
+        node.add("guard", str(a.word3), a.word3, 6, 2)
+    else:
+        node.add("reserved", str(a.word2), a.word2, 4, 2)
+        node.add("segment" if a.condition == 2 else "word 3", str(a.word3), a.word3, 6, 2)
+    return node
+
+
+def describe_server_message(msg: ServerMessage, op: RequestOpcode | None = None) -> Node:
+    if isinstance(msg, Reply):
+        return _describe_reply(msg, op)
+    if isinstance(msg, ErrorReply):
+        return _describe_error(msg)
+    return _describe_async(msg)
+
+
+def _guess_direction(p: Packet) -> Literal["request", "response"]:
+    """Requests and server packets share opcodes 0200-0205; the data usually tell them apart."""
+    if p.opcode > 0o205 or not p.data:
+        return "request"
+    if p.opcode in (ServerOp.RESPONSE, ServerOp.ASYNCHRONOUS_RESPONSE):
+        return "response"
+    try:
+        decode_server_packet(p.opcode, p.data)
+    except CodecError:
+        return "request"
+    return "response"
+
+
+def describe_control(p: Packet) -> Node | None:
+    """The meaning of the data of Chaos control packets."""
+    match p.opcode:
+        case ChaosOp.RFC:
+            text = p.data.decode("ascii", "replace")
+            contact, _, args = text.partition(" ")
+            node = Node("rfc", f"contact {contact!r}" + (f" args {args!r}" if args else ""))
+            node.add("contact", contact, contact, 0, len(contact))
+            if args:
+                node.add("arguments", args, args, len(contact) + 1, len(args))
+            return node
+        case ChaosOp.OPN | ChaosOp.STS if len(p.data) >= 4:
+            receipt, window = struct.unpack_from("<HH", p.data)
+            node = Node(ChaosOp(p.opcode).name.lower(), f"receipt {receipt} window {window}")
+            node.add("receipt", str(receipt), receipt, 0, 2)
+            node.add("window", str(window), window, 2, 2)
+            return node
+        case ChaosOp.CLS | ChaosOp.LOS | ChaosOp.ANS | ChaosOp.FWD:
+            text = decode_lispm(p.data)
+            node = Node(ChaosOp(p.opcode).name.lower(), repr(text), text)
+            if p.opcode == ChaosOp.FWD:
+                node.add("new host", octal(p.ack_no), p.ack_no)
+            return node
+    return None
+
+
+def describe_packet(p: Packet, *, direction: Direction = "auto", request: int | str | None = None) -> Node:
+    """The whole tree for one packet; decode problems become a ``decode error`` node (never raised)."""
+    root = Node("packet", f"{_chaos_opcode_name(p.opcode)} {octal(p.opcode)}, {p.nbytes} data bytes")
+    root.children.append(describe_header(p))
+    control = describe_control(p)
+    if control is not None:
+        root.children.append(control)
+        return root
+    if not 0o200 <= p.opcode <= 0o277:
+        if p.data:
+            root.add("data", p.data.hex(" "), p.data.hex(), 0, len(p.data))
+        return root
+    side = _guess_direction(p) if direction == "auto" else direction
+    op = request_op(request) if request is not None else None
+    try:
+        if side == "request":
+            node = describe_request(p)
+        else:
+            node = describe_server_message(decode_server_packet(p.opcode, p.data, op), op)
+    except CodecError as exc:
+        node = Node(
+            "decode error",
+            str(exc),
+            {"message": exc.message, "path": exc.path, "offset": exc.offset, "clause": exc.clause},
+        )
+    if direction == "auto":
+        node.add("direction", f"{side} (guessed from opcode and length; --direction to choose)")
+    root.children.append(node)
+    return root
+
+
+def describe_words(items: Sequence[StreamItem], direction: str) -> Node:
+    """A Cougar word stream, message by message."""
+    root = Node(f"cougar {direction} stream", f"{len(items)} item(s)")
+    for item in items:
+        if isinstance(item, CougarMsg):
+            node = root.add(item.name, f"code {item.code}: {item.spec.remarks}", {"code": item.code})
+            for name, v in item.values.items():
+                node.add(name, _format_value(v), list(v) if isinstance(v, tuple) else v)
+        elif isinstance(item, OutOfSync):
+            root.add(
+                "out of sync",
+                f"unknown code {item.code}; buffer of {len(item.discarded)} word(s) dumped",
+                {"code": item.code, "discarded": list(item.discarded)},
+            )
+        elif isinstance(item, Malformed):
+            root.add("malformed", str(item.error), {"words": list(item.words)})
+    return root

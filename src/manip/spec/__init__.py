@@ -1,0 +1,45 @@
+"""The protocols as data: clauses, opcode tables, layouts, error codes, Cougar commands and errata.
+
+``SPEC`` is the loaded, cross-checked specification; everything else in manip is driven from it.
+"""
+
+from manip.spec.loader import Spec, SpecError, load_spec
+from manip.spec.model import (
+    AsyncCode,
+    ChaosOpcode,
+    Clause,
+    CougarField,
+    CougarMessage,
+    Erratum,
+    ErrorCode,
+    Field,
+    FieldType,
+    Layout,
+    RequestOpcode,
+    ResponseShape,
+    ServerOpcode,
+    Severity,
+)
+
+SPEC: Spec = load_spec()
+
+__all__ = [
+    "SPEC",
+    "AsyncCode",
+    "ChaosOpcode",
+    "Clause",
+    "CougarField",
+    "CougarMessage",
+    "Erratum",
+    "ErrorCode",
+    "Field",
+    "FieldType",
+    "Layout",
+    "RequestOpcode",
+    "ResponseShape",
+    "ServerOpcode",
+    "Severity",
+    "Spec",
+    "SpecError",
+    "load_spec",
+]

@@ -1,0 +1,208 @@
+"""Load the spec data files once and check that they hang together.
+
+The checks here are what keeps "the spec is data" honest: a clause that names a missing erratum, an
+opcode defined twice, a layout naming an unknown field type or a Cougar response that does not exist
+makes loading fail with a message that says which file and entry are wrong.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import cache
+from importlib import resources
+from types import MappingProxyType
+from typing import Any, TypeVar, cast
+
+from manip.spec.model import (
+    AsyncCode,
+    ChaosOpcode,
+    Clause,
+    CougarField,
+    CougarMessage,
+    Element,
+    Erratum,
+    ErrorCode,
+    Field,
+    FieldType,
+    Layout,
+    RequestOpcode,
+    ResponseShape,
+    ServerOpcode,
+    Severity,
+)
+
+K = TypeVar("K")
+V = TypeVar("V")
+
+DATA_FILES = ("chaos.toml", "manip.toml", "cougar.toml", "clauses.toml", "errata.toml")
+
+
+class SpecError(Exception):
+    """The spec data files are inconsistent."""
+
+
+@dataclass(frozen=True)
+class Spec:
+    """Everything manip knows about the protocols, as read from ``manip/spec/data``."""
+
+    revision: str
+    protocol_version: int
+    clauses: Mapping[str, Clause]
+    errata: Mapping[str, Erratum]
+    field_types: Mapping[str, FieldType]
+    requests: Mapping[int, RequestOpcode]
+    server_opcodes: Mapping[int, ServerOpcode]
+    severities: Mapping[str, Severity]
+    error_codes: Mapping[str, ErrorCode]
+    async_codes: Mapping[int, AsyncCode]
+    chaos_opcodes: Mapping[str, ChaosOpcode]
+    cougar_commands: Mapping[int, CougarMessage]
+    cougar_responses: Mapping[int, CougarMessage]
+
+    def request(self, key: int | str) -> RequestOpcode:
+        """A request opcode by number or by name (``"here"``)."""
+        if isinstance(key, int):
+            return self.requests[key]
+        for op in self.requests.values():
+            if op.name == key:
+                return op
+        raise KeyError(key)
+
+    def clause(self, clause_id: str) -> Clause:
+        return self.clauses[clause_id]
+
+
+def _read(name: str) -> dict[str, Any]:
+    text = resources.files("manip.spec").joinpath("data", name).read_bytes()
+    try:
+        return tomllib.loads(text.decode("utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"{name}: {exc}") from exc
+
+
+def _unique(items: list[tuple[K, V]], what: str) -> Mapping[K, V]:
+    out: dict[K, V] = {}
+    for key, value in items:
+        if key in out:
+            raise SpecError(f"{what} {key!r} is defined twice")
+        out[key] = value
+    return MappingProxyType(out)
+
+
+def _layout(raw: list[dict[str, Any]], types: Mapping[str, FieldType], where: str) -> Layout:
+    fields = []
+    for f in raw:
+        if f["type"] not in types:
+            raise SpecError(f"{where}: field {f['name']!r} has unknown type {f['type']!r}")
+        fields.append(Field(f["name"], types[f["type"]]))
+    return Layout(tuple(fields))
+
+
+def _cougar(raw: list[dict[str, Any]], where: str) -> Mapping[int, CougarMessage]:
+    items = []
+    for m in raw:
+        data = []
+        for f in m.get("data", []):
+            element = "counted" if f["type"] == "counted-words" else f["type"]
+            if element not in ("float", "word", "int16", "counted"):
+                raise SpecError(f"{where} {m['name']}: unknown field type {f['type']!r}")
+            count = None if element == "counted" else int(f.get("count", 1))
+            data.append(CougarField(f["name"], cast(Element, element), count))
+        msg = CougarMessage(
+            code=m["code"],
+            name=m["name"],
+            data=tuple(data),
+            remarks=m["remarks"],
+            label=m.get("label"),
+            response=m.get("response"),
+        )
+        items.append((msg.code, msg))
+    return _unique(items, where)
+
+
+def _check(spec: Spec) -> None:
+    for c in spec.clauses.values():
+        if c.errata is not None and c.errata not in spec.errata:
+            raise SpecError(f"clause {c.id} names unknown erratum {c.errata!r}")
+    for e in spec.errata.values():
+        for cid in e.clauses:
+            if cid not in spec.clauses:
+                raise SpecError(f"erratum {e.id} names unknown clause {cid!r}")
+    names = {r.name: r for r in spec.cougar_responses.values()}
+    for cmd in spec.cougar_commands.values():
+        for resp in (cmd.response or "").split("|"):
+            if resp and resp not in names:
+                raise SpecError(f"Cougar command {cmd.name} names unknown response {resp!r}")
+    for req in spec.requests.values():
+        if not 0o200 <= req.opcode <= 0o277:
+            raise SpecError(f"request {req.name} opcode {req.opcode:o} outside 0200-0277")
+        if req.cougar and req.cougar not in {c.name for c in spec.cougar_commands.values()}:
+            raise SpecError(f"request {req.name} names unknown Cougar command {req.cougar!r}")
+        if req.response.kind in ("done", "segment") and req.response.data.fields:
+            raise SpecError(f"request {req.name}: a {req.response.kind} response carries no layout")
+
+
+@cache
+def load_spec() -> Spec:
+    """Read and cross-check the spec data (cached: the files are read once per process)."""
+    chaos = _read("chaos.toml")
+    manip = _read("manip.toml")
+    cougar = _read("cougar.toml")
+    clauses = _read("clauses.toml")
+    errata = _read("errata.toml")
+
+    types = _unique(
+        [(t["name"], FieldType(t["name"], t["element"], t.get("count"))) for t in manip["field_type"]],
+        "field type",
+    )
+    requests = []
+    for r in manip["request"]:
+        where = f"request {r['name']}"
+        shape = ResponseShape(r["response"]["kind"], _layout(r["response"].get("data", []), types, where))
+        op = RequestOpcode(
+            opcode=r["opcode"],
+            name=r["name"],
+            title=r["title"],
+            hazard=r["hazard"],
+            request=_layout(r["request"], types, where),
+            response=shape,
+            section=r["section"],
+            summary=r["summary"],
+            extension=r.get("extension", False),
+            cougar=r.get("cougar"),
+        )
+        requests.append((op.opcode, op))
+
+    spec = Spec(
+        revision=manip["revision"],
+        protocol_version=manip["protocol_version"],
+        clauses=_unique(
+            [(c["id"], Clause(**c)) for c in clauses["clause"]],
+            "clause",
+        ),
+        errata=_unique(
+            [(e["id"], Erratum(**{**e, "clauses": tuple(e["clauses"])})) for e in errata["erratum"]],
+            "erratum",
+        ),
+        field_types=types,
+        requests=_unique(requests, "request opcode"),
+        server_opcodes=_unique(
+            [(s["opcode"], ServerOpcode(**s)) for s in manip["server_opcode"]], "server opcode"
+        ),
+        severities=_unique(
+            [
+                (s["letter"], Severity(**{**s, "server_opcodes": tuple(s["server_opcodes"])}))
+                for s in manip["severity"]
+            ],
+            "severity",
+        ),
+        error_codes=_unique([(e["code"], ErrorCode(**e)) for e in manip["error_code"]], "error code"),
+        async_codes=_unique([(a["code"], AsyncCode(**a)) for a in manip["async_code"]], "async code"),
+        chaos_opcodes=_unique([(o["name"], ChaosOpcode(**o)) for o in chaos["chaos_opcode"]], "Chaos opcode"),
+        cougar_commands=_cougar(cougar["command"], "Cougar command"),
+        cougar_responses=_cougar(cougar["response"], "Cougar response"),
+    )
+    _check(spec)
+    return spec

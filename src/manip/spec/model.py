@@ -1,0 +1,169 @@
+"""Typed view of the spec data.  Plain frozen dataclasses: the TOML files are the source of truth."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+Level = Literal["MUST", "SHOULD", "MAY", "INFO"]
+Party = Literal["server", "client", "both", "cougar", "puma", "link"]
+Hazard = Literal["read-only", "config", "motion", "power"]
+ResponseKind = Literal["done", "data", "segment", "multi"]
+Element = Literal["float", "word", "int16", "small", "counted", "text"]
+
+ELEMENT_BYTES: dict[str, int] = {"float": 4, "word": 2, "int16": 2, "small": 2}
+"""Bytes per element of fixed-size element kinds (``small`` may also arrive as a single byte)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Clause:
+    id: str
+    level: Level
+    party: Party
+    section: str
+    text: str
+    errata: str | None = None
+    retired: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class Erratum:
+    id: str
+    clauses: tuple[str, ...]
+    question: str
+    decision: str
+    reason: str | None = None
+    parameter: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class FieldType:
+    name: str
+    element: Element
+    count: int | None  # None: variable length (counted words, text)
+
+    @property
+    def fixed_size(self) -> int | None:
+        """Size in bytes when fixed (``small`` counts as its word form)."""
+        if self.count is None:
+            return None
+        return ELEMENT_BYTES[self.element] * self.count
+
+
+@dataclass(frozen=True, slots=True)
+class Field:
+    name: str
+    type: FieldType
+
+
+@dataclass(frozen=True, slots=True)
+class Layout:
+    fields: tuple[Field, ...]
+
+    @property
+    def fixed_size(self) -> int | None:
+        sizes = [f.type.fixed_size for f in self.fields]
+        if any(s is None for s in sizes):
+            return None
+        return sum(s for s in sizes if s is not None)
+
+
+@dataclass(frozen=True, slots=True)
+class ResponseShape:
+    kind: ResponseKind
+    data: Layout
+
+
+@dataclass(frozen=True, slots=True)
+class RequestOpcode:
+    opcode: int
+    name: str
+    title: str
+    hazard: Hazard
+    request: Layout
+    response: ResponseShape
+    section: str
+    summary: str
+    extension: bool = False
+    cougar: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ServerOpcode:
+    opcode: int
+    name: str
+    title: str
+    generic_code: int
+    body: str
+    generic_name: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Severity:
+    letter: str
+    name: str
+    meaning: str
+    fatal: bool
+    bug: bool
+    server_opcodes: tuple[int, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class ErrorCode:
+    code: str
+    meaning: str
+    origin: str
+    args: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class AsyncCode:
+    code: int
+    name: str
+    word2: str
+    word3: str
+    notification_bit: int
+
+
+@dataclass(frozen=True, slots=True)
+class ChaosOpcode:
+    name: str
+    value: int
+    controlled: bool
+    meaning: str
+
+
+@dataclass(frozen=True, slots=True)
+class CougarField:
+    name: str
+    element: Element
+    count: int | None  # None only for counted words
+
+    @property
+    def words(self) -> int | None:
+        if self.count is None:
+            return None
+        per = 2 if self.element == "float" else 1
+        return per * self.count
+
+
+@dataclass(frozen=True, slots=True)
+class CougarMessage:
+    """A Puma->Cougar command or a Cougar->Puma response of Table 1."""
+
+    code: int
+    name: str
+    data: tuple[CougarField, ...]
+    remarks: str
+    label: str | None = None
+    response: str | None = None
+
+    @property
+    def data_words(self) -> int | None:
+        """Number of data words after the code word; None when the message carries its own count."""
+        total = 0
+        for f in self.data:
+            if f.words is None:
+                return None
+            total += f.words
+        return total

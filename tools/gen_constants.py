@@ -1,0 +1,96 @@
+"""Generate src/manip/spec/constants.py (typed IntEnums) from the spec data files.
+
+Run after editing src/manip/spec/data/*.toml; tests/test_spec.py fails while the file is stale.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from manip.spec import load_spec
+
+TARGET = Path(__file__).resolve().parents[1] / "src" / "manip" / "spec" / "constants.py"
+
+HEADER = '''"""Named constants generated from the spec data (``manip/spec/data/*.toml``).
+
+DO NOT EDIT: regenerate with ``python tools/gen_constants.py``; a test checks this file is current.
+"""
+
+from enum import IntEnum
+'''
+
+
+def _ident(name: str) -> str:
+    return name.upper().replace("-", "_").replace("|", "_")
+
+
+def _enum(name: str, doc: str, members: list[tuple[str, int]], octal: bool) -> str:
+    lines = ["", "", f"class {name}(IntEnum):", f'    """{doc}"""', ""]
+    for member, value in members:
+        lines.append(f"    {_ident(member)} = {oct(value) if octal else value}")
+    return "\n".join(lines) + "\n"
+
+
+def render() -> str:
+    spec = load_spec()
+    parts = [HEADER]
+    parts.append(
+        _enum(
+            "ChaosOp",
+            "Chaosnet packet opcodes.",
+            [(o.name, o.value) for o in spec.chaos_opcodes.values()],
+            octal=True,
+        )
+    )
+    parts.append(
+        _enum(
+            "RequestOp",
+            "Chaos manipulator protocol request opcodes (Puma extensions included).",
+            [(r.name, r.opcode) for r in spec.requests.values()],
+            octal=True,
+        )
+    )
+    parts.append(
+        _enum(
+            "ServerOp",
+            "Opcodes of packets sent by the server.",
+            [(s.name, s.opcode) for s in spec.server_opcodes.values()],
+            octal=True,
+        )
+    )
+    parts.append(
+        _enum(
+            "AsyncCondition",
+            "Condition codes of asynchronous responses (0203).",
+            [(a.name, a.code) for a in spec.async_codes.values()],
+            octal=False,
+        )
+    )
+    parts.append(
+        _enum(
+            "CougarCommand",
+            "Puma-to-Cougar command codes (Table 1).",
+            [(c.name, c.code) for c in spec.cougar_commands.values()],
+            octal=False,
+        )
+    )
+    parts.append(
+        _enum(
+            "CougarResponse",
+            "Cougar-to-Puma response codes (Table 1).",
+            [(c.name, c.code) for c in spec.cougar_responses.values()],
+            octal=False,
+        )
+    )
+    return "".join(parts)
+
+
+def main() -> int:
+    TARGET.write_text(render())
+    print(f"wrote {TARGET}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

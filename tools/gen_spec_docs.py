@@ -1,0 +1,139 @@
+"""Generate docs/spec.md (opcode tables, clauses, errata) from the spec data files.
+
+Run after editing src/manip/spec/data/*.toml; tests/test_spec_docs.py fails while docs/spec.md is stale.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+from manip.spec import SPEC, Layout
+
+TARGET = Path(__file__).resolve().parents[1] / "docs" / "spec.md"
+
+
+def _layout(layout: Layout) -> str:
+    if not layout.fields:
+        return "—"
+    return ", ".join(f"{f.name}: {f.type.name}" for f in layout.fields)
+
+
+def _reply(kind: str, layout: Layout) -> str:
+    return {
+        "done": "done",
+        "segment": "segment number",
+        "multi": "multi-packet text, empty packet ends it",
+    }.get(kind, _layout(layout))
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def render() -> str:
+    out: list[str] = [
+        "# The Chaos manipulator protocol and the Cougar word protocol, as manip specifies them",
+        "",
+        f"Generated from `src/manip/spec/data/*.toml` (revision `{SPEC.revision}`) by "
+        "`tools/gen_spec_docs.py`; do not edit by hand.",
+        "",
+        "Opcodes are octal. Layouts give the request data and, after the request number, the reply data. "
+        "Field types: float = PDP-11 F float (4 bytes); word = unsigned 16-bit; int16 = signed 16-bit; "
+        "transform = 12 floats column major N O A P; joints = 6 floats from the base; pose-delta = dX dY dZ "
+        "dO dA dT; small = one byte or one word.",
+        "",
+        "## Request opcodes",
+        "",
+        "| opcode | name | hazard | request data | reply | seed |",
+        "|---|---|---|---|---|---|",
+    ]
+    for op in SPEC.requests.values():
+        name = f"{op.name} *(manip extension)*" if op.extension else op.name
+        out.append(
+            f"| {op.opcode:o} | {name} | {op.hazard} | {_layout(op.request)} | "
+            f"{_reply(op.response.kind, op.response.data)} | {_cell(op.section)} |"
+        )
+    out += [
+        "",
+        "## Server opcodes",
+        "",
+        "| opcode | name | Manip response code | body |",
+        "|---|---|---|---|",
+    ]
+    for s in SPEC.server_opcodes.values():
+        code = f"{s.generic_code} ({s.generic_name})" if s.generic_name else str(s.generic_code)
+        out.append(f"| {s.opcode:o} | {s.name} | {code} | {s.body} |")
+    out += ["", "## Severities", "", "| letter | meaning | server opcodes |", "|---|---|---|"]
+    for sev in SPEC.severities.values():
+        ops = ", ".join(f"{o:o}" for o in sev.server_opcodes)
+        out.append(f"| {sev.letter} | {sev.meaning} | {ops} |")
+    out += ["", "## Error codes", "", "| code | meaning | arguments | defined by |", "|---|---|---|---|"]
+    for e in SPEC.error_codes.values():
+        out.append(f"| {e.code} | {e.meaning} | {_cell(e.args or '—')} | {e.origin} |")
+    out += [
+        "",
+        "## Asynchronous conditions (0203)",
+        "",
+        "| code | name | word 2 | word 3 |",
+        "|---|---|---|---|",
+    ]
+    for a in SPEC.async_codes.values():
+        out.append(f"| {a.code} | {a.name} | {a.word2} | {a.word3} |")
+    out += [
+        "",
+        "## Cougar commands (Table 1)",
+        "",
+        "| code | name | label | data words | response | remarks |",
+        "|---|---|---|---|---|---|",
+    ]
+    for c in SPEC.cougar_commands.values():
+        out.append(
+            f"| {c.code} | {c.name} | {c.label} | {c.data_words} | {_cell(c.response or '—')} | {c.remarks} |"
+        )
+    out += ["", "## Cougar responses", "", "| code | name | data words | remarks |", "|---|---|---|---|"]
+    for c in SPEC.cougar_responses.values():
+        words = "count + words" if c.data_words is None else str(c.data_words)
+        out.append(f"| {c.code} | {c.name} | {words} | {c.remarks} |")
+
+    out += ["", "## Clauses", ""]
+    groups: dict[str, list[str]] = defaultdict(list)
+    for clause in SPEC.clauses.values():
+        if clause.retired:
+            continue
+        errata = f" (erratum `{clause.errata}`)" if clause.errata else ""
+        groups[clause.id.split(".")[0]].append(
+            f"| `{clause.id}` | {clause.level} | {clause.party} | {_cell(clause.text)}{errata} | "
+            f"{_cell(clause.section)} |"
+        )
+    for group, rows in groups.items():
+        out += [
+            f"### {group}",
+            "",
+            "| id | level | binds | requirement | seed |",
+            "|---|---|---|---|---|",
+            *rows,
+            "",
+        ]
+
+    out += ["## Errata", ""]
+    for e in SPEC.errata.values():
+        out += [f"### `{e.id}`", "", f"*Clauses:* {', '.join(f'`{c}`' for c in e.clauses)}", ""]
+        out += [f"*Question.* {e.question}", "", f"*Decision.* {e.decision}", ""]
+        if e.reason:
+            out += [f"*Why.* {e.reason}", ""]
+        if e.parameter:
+            out += [f"*Configurable:* `{e.parameter}`", ""]
+    return "\n".join(out).rstrip() + "\n"
+
+
+def main() -> int:
+    TARGET.parent.mkdir(exist_ok=True)
+    TARGET.write_text(render())
+    print(f"wrote {TARGET}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
