@@ -37,7 +37,7 @@ def field_values(ft: FieldType) -> st.SearchStrategy[Any]:
     if ft.element == "counted":
         return st.lists(words, max_size=200).map(tuple)
     if ft.element == "text":
-        return lispm_text
+        return lispm_text.filter(bool)  # an empty chunk is the terminator, not data
     one = element_values(ft.element)
     if ft.count == 1:
         return one

@@ -14,7 +14,6 @@ from __future__ import annotations
 import struct
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from functools import cache
 from typing import Any, Final
 
 from construct import (
@@ -31,6 +30,7 @@ from construct import (
 
 from manip.codecs.error_string import ErrorMessage, parse_error
 from manip.codecs.errors import CodecError, DecodeError, EncodeError
+from manip.codecs.fastpath import FastLayout, plan
 from manip.codecs.lispm_text import decode_lispm, encode_lispm
 from manip.codecs.pdp11float import Float32F, f_to_u32, u32_to_f
 from manip.spec import SPEC, Field, FieldType, Layout, RequestOpcode
@@ -70,18 +70,38 @@ class _Codec:
     layout: Layout
     struct: Any
     with_number: Any
+    fast: FastLayout | None
+    fast_numbered: FastLayout | None
 
     @property
     def names(self) -> tuple[str, ...]:
         return tuple(f.name for f in self.layout.fields)
 
 
-@cache
+_CODECS: dict[int, tuple[Layout, _Codec]] = {}
+
+
 def _codec(layout: Layout) -> _Codec:
+    """The codec of a layout, built once; keyed by identity (spec layouts live as long as the process)."""
+    entry = _CODECS.get(id(layout))
+    if entry is not None and entry[0] is layout:
+        return entry[1]
+    codec = _make_codec(layout)
+    _CODECS[id(layout)] = (layout, codec)
+    return codec
+
+
+def _make_codec(layout: Layout) -> _Codec:
     fields = [f.name / _element(f.type) for f in layout.fields]
     plain = Struct(*fields, Terminated)
     numbered = Struct("request_number" / Int16ul, *fields, Terminated)
-    return _Codec(layout, plain.compile(), numbered.compile())
+    return _Codec(
+        layout,
+        plain.compile(),
+        numbered.compile(),
+        plan(layout, numbered=False),
+        plan(layout, numbered=True),
+    )
 
 
 def _has_small(layout: Layout) -> bool:
@@ -142,13 +162,18 @@ def _float_fault(layout: Layout, data: bytes, start: int, what: str, exc: Except
 def _parse(
     layout: Layout, data: bytes, *, numbered: bool, what: str, clause: str
 ) -> tuple[int | None, dict[str, Value]]:
+    codec = _codec(layout)
+    fast = codec.fast_numbered if numbered else codec.fast
+    if fast is not None:
+        result = fast.parse(data)
+        if result is not None:
+            return result
     start = REQUEST_NUMBER_BYTES if numbered else 0
     if len(data) < start:
         raise DecodeError(
             f"{what}: no request-number word", what, len(data), "response.echoes-request-number"
         )
     data = _check_length(layout, data, start, what, clause)
-    codec = _codec(layout)
     try:
         parsed = (codec.with_number if numbered else codec.struct).parse(data)
     except CodecError as exc:
@@ -180,9 +205,9 @@ def _build(layout: Layout, values: Mapping[str, Any], what: str, request_number:
         ft = f.type
         if ft.element == "text":
             v = encode_lispm(str(v))
-        elif ft.count not in (None, 1):
+        elif ft.count != 1:
             v = list(v)
-            if len(v) != ft.count:
+            if ft.count is not None and len(v) != ft.count:
                 raise EncodeError(
                     f"{what}.{f.name}: needs {ft.count} values, got {len(v)}", path=f"{what}.{f.name}"
                 )
@@ -238,10 +263,14 @@ class Request:
         return self.op.opcode
 
 
+_REQUESTS_BY_KEY: dict[int | str, RequestOpcode] = {op.opcode: op for op in SPEC.requests.values()}
+_REQUESTS_BY_KEY.update({op.name: op for op in SPEC.requests.values()})
+
+
 def request_op(key: int | str) -> RequestOpcode:
     """The spec entry for a request opcode given by number or name; KeyError names the unknown key."""
     try:
-        return SPEC.request(key)
+        return _REQUESTS_BY_KEY[key]
     except KeyError:
         shown = f"{key:#o}" if isinstance(key, int) else repr(key)
         raise KeyError(f"no request opcode {shown} in the spec") from None
@@ -304,7 +333,7 @@ def copy_request_data(items: object) -> bytes:
 # ----------------------------------------------------------------------------------------- responses
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Reply:
     """A RESPONSE (0200) packet.  ``op`` is the request it answers, when the caller knows it."""
 
@@ -359,13 +388,20 @@ class AsyncResponse:
 ServerMessage = Reply | ErrorReply | AsyncResponse
 
 _SEGMENT = Layout((Field("segment", SPEC.field_types["word"]),))
+_EMPTY = Layout(())
+_REPLY_CLAUSE: Final[Mapping[str, str]] = {
+    "done": "response.done-empty",
+    "segment": "response.segment-number",
+    "data": "response.data-layout",
+    "multi": "response.data-layout",
+}
 
 
 def response_layout(op: RequestOpcode) -> Layout:
     """The data layout after the request number of a (non-terminator) RESPONSE to ``op``."""
     match op.response.kind:
         case "done":
-            return Layout(())
+            return _EMPTY
         case "segment":
             return _SEGMENT
         case _:
@@ -375,6 +411,12 @@ def response_layout(op: RequestOpcode) -> Layout:
 def encode_reply(op: int | str, request_number: int, **values: Any) -> bytes:
     """Data of a RESPONSE packet answering ``op`` (for a multi reply: one text chunk)."""
     spec_op = request_op(op)
+    if spec_op.response.kind == "multi" and not any(values.values()):
+        raise EncodeError(
+            f"{spec_op.name}.reply: an empty chunk would end the reply; use encode_terminator",
+            path=f"{spec_op.name}.reply",
+            clause="multi.terminated-by-empty",
+        )
     return _build(response_layout(spec_op), values, f"{spec_op.name}.reply", request_number)
 
 
@@ -405,14 +447,15 @@ def decode_reply(data: bytes, op: int | str | RequestOpcode | None = None) -> Re
     if op is None:
         return Reply(number, None, {}, payload)
     spec_op = op if isinstance(op, RequestOpcode) else request_op(op)
-    if spec_op.response.kind == "multi" and not payload:
+    kind = spec_op.response.kind
+    if kind == "multi" and not payload:
         return Reply(number, spec_op, {}, payload)
-    clause = {
-        "done": "response.done-empty",
-        "segment": "response.segment-number",
-    }.get(spec_op.response.kind, "response.data-layout")
     _, values = _parse(
-        response_layout(spec_op), data, numbered=True, what=f"{spec_op.name}.reply", clause=clause
+        response_layout(spec_op),
+        data,
+        numbered=True,
+        what=f"{spec_op.name}.reply",
+        clause=_REPLY_CLAUSE[kind],
     )
     return Reply(number, spec_op, values, payload)
 

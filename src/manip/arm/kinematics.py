@@ -1,0 +1,528 @@
+"""Exact kinematics of a PUMA-type arm in the Lee/VAL joint convention (millimetres, degrees).
+
+The protocol's "solve backwards" (joint angles to transform) is :func:`forward`; its "solve forwards"
+(transform to joint angles) is :func:`inverse_nearest`, built on the closed-form :func:`inverse_all`.
+
+Convention (errata ``joint-convention``): standard Denavit-Hartenberg, A_i = Rz(θ_i)·Tz(d_i)·Tx(a_i)·Rx(α_i),
+with the Lee & Ziegler / Fu-Gonzalez-Lee table (notes/puma-kinematics.md §1.3)::
+
+    joint   α     a      d
+      1    −90    0      0
+      2      0   a2     d2      (d2: shoulder offset)
+      3    +90  −a3      0
+      4    −90    0     d4
+      5    +90    0      0
+      6      0    0     d6      (d6 = 0: the end frame is the wrist centre)
+
+The world origin is on the J1 axis at shoulder height.  Ready, (0, −90, 90, 0, 0, 0), points the arm
+straight up with the end frame aligned with the world.  The roboticstoolbox (Corke) convention maps onto
+this one exactly: q_Lee = q_RTB + (0, 180, 180, 0, 0, 0), with world and tool frames turned 180° about z.
+
+The PUMA 600 has no published geometry of its own, so it is modelled with the PUMA 560's
+(:data:`PUMA560_LEE`); pass another :class:`PumaGeometry` for other numbers.
+
+Inverse kinematics follows Pieper's split: joints 1-3 place the wrist centre p − d6·a (two waist
+solutions, lefty/righty, times two elbow solutions, above/below), and joints 4-6 are the ZYZ Euler angles
+of R03ᵀ·R, because with this table R36 = Rz(θ4)·Ry(θ5)·Rz(θ6) (two wrist solutions, noflip/flip).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import ClassVar, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from manip.arm.oat import wrap_deg
+from manip.arm.transform import Transform
+
+__all__ = [
+    "LEE_FLANGE_MM",
+    "LIMIT_TOL_DEG",
+    "PUMA560_CORKE",
+    "PUMA560_LEE",
+    "PUMA600",
+    "REACH_TOL_MM",
+    "READY",
+    "UNIMATION_LIMITS",
+    "WRIST_SINGULAR_DEG",
+    "ArmModel",
+    "JointLimits",
+    "Joints",
+    "JointsLike",
+    "KinematicsError",
+    "OutOfRange",
+    "PumaGeometry",
+    "Solution",
+    "Unreachable",
+    "configuration",
+    "forward",
+    "inverse_all",
+    "inverse_nearest",
+    "jacobian",
+    "joint_mask",
+    "nearest_solution",
+    "within_limits",
+]
+
+Joints = tuple[float, float, float, float, float, float]
+#: What the public functions accept for joint angles (deg): any 6-sequence of floats or a float array.
+JointsLike = Sequence[float] | NDArray[np.float64]
+Matrix = NDArray[np.float64]
+
+#: |J5| (deg) below which the wrist counts as singular and J4 is held at the reference (current) value.
+#: A pose rebuilt from such a solution is off by at most this angle.  Poses with J5 = 0 rounded to
+#: 24-bit PDP-11 floats come back with |J5| ~ 2e-6° typically and ~1e-4° at the 99th percentile (measured
+#: on random poses), so they take the singular branch instead of spinning J4 to an arbitrary angle.
+WRIST_SINGULAR_DEG = 1e-3
+#: Slack (mm) on the workspace boundary: a pose up to this far outside it is solved as if on it, because
+#: rounding to 24-bit floats (~6e-5 mm at 1 m) can push a boundary pose, e.g. one with the wrist centre on
+#: the shoulder-offset cylinder, just outside.
+REACH_TOL_MM = 1e-3
+#: Slack (deg) when comparing joint angles with their limits.
+LIMIT_TOL_DEG = 1e-9
+#: Lee's flange distance d6 from the wrist centre (mm); use it as ``PumaGeometry.d6`` for a flange frame.
+LEE_FLANGE_MM = 56.25
+
+
+@dataclass(frozen=True)
+class PumaGeometry:
+    """Link dimensions (mm) of a six-joint PUMA-type arm with a spherical wrist, in the table above."""
+
+    a2: float
+    """Upper arm length (shoulder to elbow)."""
+    a3: float
+    """Elbow offset; Lee's table lists it as DH a3 = −a3."""
+    d2: float
+    """Shoulder offset along the J2 axis."""
+    d4: float
+    """Forearm length (elbow to wrist centre)."""
+    d6: float = 0.0
+    """Wrist centre to the end frame along the approach vector."""
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        for name in ("a2", "a3", "d2", "d4", "d6"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"PumaGeometry.{name} must be finite")
+        if self.a2 <= 0.0 or math.hypot(self.a3, self.d4) <= 0.0:
+            raise ValueError("PumaGeometry needs a2 > 0 and a non-zero forearm")
+
+    def dh(self) -> tuple[tuple[float, float, float], ...]:
+        """Standard-DH rows (α deg, a mm, d mm) for joints 1-6."""
+        return (
+            (-90.0, 0.0, 0.0),
+            (0.0, self.a2, self.d2),
+            (90.0, -self.a3, 0.0),
+            (-90.0, 0.0, self.d4),
+            (90.0, 0.0, 0.0),
+            (0.0, 0.0, self.d6),
+        )
+
+
+#: The PUMA 560 as given by Lee & Ziegler 1984 and Fu-Gonzalez-Lee 1987 (also the comp.robotics FAQ):
+#: a2 = 431.8, a3 = 20.32, shoulder offset 149.09, d4 = 433.07 mm; end frame at the wrist centre.
+#: Used for the MIT PUMA 600 (errata ``joint-convention``).
+PUMA560_LEE = PumaGeometry(
+    a2=431.8, a3=20.32, d2=149.09, d4=433.07, d6=0.0, name="PUMA 560 (Lee/FGL numbers)"
+)
+#: The same arm with roboticstoolbox-python's numbers (without its 671.83 mm pedestal), for comparisons.
+PUMA560_CORKE = PumaGeometry(
+    a2=431.8, a3=20.3, d2=150.05, d4=431.8, d6=0.0, name="PUMA 560 (roboticstoolbox)"
+)
+
+#: The ready position: arm straight up.
+READY: Joints = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Inclusive joint ranges in degrees, joint 1 first."""
+
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if len(self.lower) != 6 or len(self.upper) != 6:
+            raise ValueError("JointLimits needs six lower and six upper bounds")
+        for j, (lo, hi) in enumerate(zip(self.lower, self.upper, strict=True), start=1):
+            if not lo < hi:
+                raise ValueError(f"joint {j}: lower limit {lo} is not below upper limit {hi}")
+
+    def violations(self, q: JointsLike, tol: float = LIMIT_TOL_DEG) -> list[int]:
+        """1-based numbers of the joints of ``q`` outside their range."""
+        return [
+            j
+            for j, (v, lo, hi) in enumerate(zip(_as_joints(q), self.lower, self.upper, strict=True), start=1)
+            if not lo - tol <= v <= hi + tol
+        ]
+
+    def representations(self, j: int, angle: float, tol: float = LIMIT_TOL_DEG) -> list[float]:
+        """Every angle ≡ ``angle`` (mod 360) within joint ``j``'s range (1-based), nearest to it first."""
+        lo, hi = self.lower[j - 1], self.upper[j - 1]
+        k_min = math.ceil((lo - tol - angle) / 360.0)
+        k_max = math.floor((hi + tol - angle) / 360.0)
+        return sorted((angle + 360.0 * k for k in range(k_min, k_max + 1)), key=lambda v: abs(v - angle))
+
+
+#: Unimation's ranges in the Lee/VAL convention (notes §1.6).
+UNIMATION_LIMITS = JointLimits(
+    lower=(-160.0, -225.0, -45.0, -110.0, -100.0, -266.0),
+    upper=(160.0, 45.0, 225.0, 170.0, 100.0, 266.0),
+)
+
+
+@dataclass(frozen=True)
+class ArmModel:
+    """Everything the simulator needs to know about one arm's kinematics."""
+
+    geometry: PumaGeometry
+    limits: JointLimits
+    ready: Joints = READY
+    name: str = ""
+
+
+#: The MIT AI Lab PUMA 600, modelled as a PUMA 560 with Lee's numbers and Unimation's joint ranges.
+PUMA600 = ArmModel(PUMA560_LEE, UNIMATION_LIMITS, READY, "MIT AI Lab PUMA 600")
+
+
+# ------------------------------------------------------------------------------------------ errors
+class KinematicsError(ValueError):
+    """A transform the arm cannot take; ``error_code`` is the protocol error a server answers."""
+
+    error_code: ClassVar[str] = ""
+
+
+class Unreachable(KinematicsError):  # noqa: N818 -- the name the protocol layer uses
+    """No joint angles reach the transform at all, whatever the limits (protocol error TOR)."""
+
+    error_code: ClassVar[str] = "TOR"
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(f"transform unreachable: {reason}")
+        self.reason = reason
+
+
+class OutOfRange(KinematicsError):  # noqa: N818 -- the name the protocol layer uses
+    """The transform is reachable, but every solution breaks a joint limit (protocol error JOR).
+
+    ``joints`` are the joints (1-based) the closest configuration breaks: the configuration with fewest
+    offending joints, ties going to the one nearest the current angles.  ``mask`` is the same set as the
+    error's ``$`` joint bit mask (bit 0 = joint 1).
+    """
+
+    error_code: ClassVar[str] = "JOR"
+
+    def __init__(self, joints: Sequence[int], solutions: Sequence[Solution]) -> None:
+        self.joints = tuple(joints)
+        self.solutions = tuple(solutions)
+        names = ", ".join(f"J{j}" for j in self.joints)
+        super().__init__(f"every solution breaks a joint limit; nearest configuration breaks {names}")
+
+    @property
+    def mask(self) -> int:
+        return joint_mask(self.joints)
+
+
+def joint_mask(joints: Iterable[int]) -> int:
+    """The protocol's ``$`` joint mask of 1-based joint numbers: bit 0 is joint 1."""
+    mask = 0
+    for j in joints:
+        if j < 1:
+            raise ValueError(f"joint numbers start at 1, got {j}")
+        mask |= 1 << (j - 1)
+    return mask
+
+
+def within_limits(q: JointsLike, limits: JointLimits = UNIMATION_LIMITS) -> list[int]:
+    """1-based numbers of the joints of ``q`` outside ``limits`` (empty when all are in range)."""
+    return limits.violations(q)
+
+
+# ------------------------------------------------------------------------------------------ forward
+def _as_joints(q: JointsLike) -> Joints:
+    """Validate and copy joint angles: exactly six finite numbers."""
+    if len(q) != 6:
+        raise ValueError(f"expected 6 joint angles, got {len(q)}")
+    v = tuple(float(x) for x in q)
+    if not all(math.isfinite(x) for x in v):
+        raise ValueError(f"joint angles must be finite, got {v}")
+    return (v[0], v[1], v[2], v[3], v[4], v[5])
+
+
+# Exact cos/sin of the table's twists, so that zero entries stay exactly zero.
+_TWIST = {-90.0: (0.0, -1.0), 0.0: (1.0, 0.0), 90.0: (0.0, 1.0)}
+
+
+def _link(theta: float, alpha_deg: float, a: float, d: float) -> Matrix:
+    ct, st = math.cos(theta), math.sin(theta)
+    ca, sa = _TWIST[alpha_deg]
+    return np.array(
+        [
+            [ct, -st * ca, st * sa, a * ct],
+            [st, ct * ca, -ct * sa, a * st],
+            [0.0, sa, ca, d],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    )
+
+
+def _frames(q_deg: Sequence[float], geometry: PumaGeometry, upto: int = 6) -> list[Matrix]:
+    """Base-to-frame-i transforms for i = 0..upto."""
+    out = [np.eye(4)]
+    for qi, (alpha, a, d) in zip(q_deg[:upto], geometry.dh()[:upto], strict=False):
+        out.append(out[-1] @ _link(math.radians(qi), alpha, a, d))
+    return out
+
+
+def forward(q_deg: JointsLike, geometry: PumaGeometry = PUMA560_LEE) -> Transform:
+    """Joint angles (deg) to the end-frame transform (mm): the protocol's "solve backwards"."""
+    return Transform(_frames(_as_joints(q_deg), geometry)[-1])
+
+
+def jacobian(
+    q_deg: JointsLike, geometry: PumaGeometry = PUMA560_LEE, *, frame: Literal["world", "tool"] = "world"
+) -> Matrix:
+    """Geometric Jacobian (6x6) of the end frame at ``q_deg``, in API units.
+
+    Rows are (vx, vy, vz) in mm/s then (ωx, ωy, ωz) in deg/s, for joint rates in deg/s; so the upper
+    block is mm per degree and the lower block is dimensionless.  ``frame="world"`` expresses both
+    vectors in base coordinates; ``frame="tool"`` in end-frame coordinates (what a wrist-mounted force
+    sensor sees).  The reference point is always the end-frame origin.
+    """
+    frames = _frames(_as_joints(q_deg), geometry)
+    p = frames[-1][:3, 3]
+    jac = np.empty((6, 6))
+    for i in range(6):
+        z = frames[i][:3, 2]
+        jac[:3, i] = np.cross(z, p - frames[i][:3, 3]) * (math.pi / 180.0)
+        jac[3:, i] = z
+    if frame == "tool":
+        rt = frames[-1][:3, :3].T
+        jac[:3] = rt @ jac[:3]
+        jac[3:] = rt @ jac[3:]
+    elif frame != "world":
+        raise ValueError(f"frame must be 'world' or 'tool', got {frame!r}")
+    return jac
+
+
+# ------------------------------------------------------------------------------------------ inverse
+@dataclass(frozen=True)
+class Solution:
+    """One joint-angle solution (deg) and its VAL arm configuration.
+
+    ``lefty``: the wrist centre lies on the +x side of link 1 (Lee's LEFT arm: raising J2 alone lowers
+    the wrist).  ``above``: the elbow is above the shoulder-to-wrist line.  ``flip``: J5 < 0; this is
+    VAL-II's FLIP as we recall it (unconfirmed); roboticstoolbox's n/f letters are the other way round
+    for the same angles.
+    """
+
+    q: Joints
+    lefty: bool
+    above: bool
+    flip: bool
+    singular: bool = False
+    """The wrist was singular (J5 ≈ 0): J4 was held at the reference value, and ``flip`` only
+    follows the sign of the fitted J5, which is noise there."""
+    out_of_range: tuple[int, ...] = field(default=())
+    """Joints (1-based) of ``q`` outside the limits the solution was computed against."""
+
+    @property
+    def config(self) -> str:
+        """VAL's configuration words, e.g. ``"RIGHTY ABOVE NOFLIP"``."""
+        return " ".join(
+            (
+                "LEFTY" if self.lefty else "RIGHTY",
+                "ABOVE" if self.above else "BELOW",
+                "FLIP" if self.flip else "NOFLIP",
+            )
+        )
+
+
+def _arm_values(q2: float, q3: float, g: PumaGeometry) -> tuple[float, float]:
+    """(u, e): u = wrist reach along link 1's x axis, e = signed elbow bend term."""
+    c2 = math.cos(q2)
+    c23, s23 = math.cos(q2 + q3), math.sin(q2 + q3)
+    u = g.a2 * c2 - g.a3 * c23 + g.d4 * s23
+    e = -g.a3 * math.sin(q3) - g.d4 * math.cos(q3)
+    return u, e
+
+
+def configuration(q_deg: JointsLike, geometry: PumaGeometry = PUMA560_LEE) -> tuple[bool, bool, bool]:
+    """(lefty, above, flip) of joint angles, with the meanings of :class:`Solution`."""
+    q_deg = _as_joints(q_deg)
+    u, e = _arm_values(math.radians(q_deg[1]), math.radians(q_deg[2]), geometry)
+    return u > 0.0, (u > 0.0) == (e > 0.0), q_deg[4] < 0.0
+
+
+def _wrist(r36: Matrix, q4_ref: float, tol_deg: float) -> tuple[list[tuple[float, float, float]], bool]:
+    """(θ4, θ5, θ6) in degrees with R36 = Rz(θ4)·Ry(θ5)·Rz(θ6): the noflip (θ5 ≥ 0) then flip solution.
+
+    At the singularity (θ5 within ``tol_deg`` of 0° or 180°) only θ4 ± θ6 is defined, so θ4 is held at
+    ``q4_ref`` and the one solution is returned; θ5 and θ6 are then fitted to Rz(−θ4)·R36, so a tilt
+    that happens to lie in the held J4 plane is still reproduced exactly.
+    """
+    s5 = math.hypot(float(r36[0, 2]), float(r36[1, 2]))
+    t5 = math.degrees(math.atan2(s5, float(r36[2, 2])))
+    if t5 <= tol_deg or t5 >= 180.0 - tol_deg:
+        c4, s4 = math.cos(math.radians(q4_ref)), math.sin(math.radians(q4_ref))
+        held = np.array([[c4, s4, 0.0], [-s4, c4, 0.0], [0.0, 0.0, 1.0]]) @ r36  # Rz(−θ4)·R36 ≈ Ry(θ5)·Rz(θ6)
+        fit5 = math.atan2(float(held[0, 2]), float(held[2, 2]))
+        c5, s5 = math.cos(fit5), math.sin(fit5)
+        # Rz(θ6) ≈ Ry(−θ5)·held: its first column is (c5·h00 − s5·h20, h10, ...)
+        fit6 = math.atan2(float(held[1, 0]), c5 * float(held[0, 0]) - s5 * float(held[2, 0]))
+        return [(q4_ref, math.degrees(fit5), math.degrees(fit6))], True
+    t4 = math.degrees(math.atan2(float(r36[1, 2]), float(r36[0, 2])))
+    t6 = math.degrees(math.atan2(float(r36[2, 1]), -float(r36[2, 0])))
+    return [(t4, t5, t6), (t4 + 180.0, -t5, t6 + 180.0)], False
+
+
+def inverse_all(
+    pose: Transform,
+    geometry: PumaGeometry = PUMA560_LEE,
+    limits: JointLimits | None = UNIMATION_LIMITS,
+    *,
+    current: JointsLike | None = None,
+    wrist_tol_deg: float = WRIST_SINGULAR_DEG,
+) -> list[Solution]:
+    """Every closed-form solution of ``pose``: 8 configurations, and their in-range ±360° variants.
+
+    Order: righty before lefty, above before below, noflip before flip.  Each configuration first gives
+    its base solution with every angle wrapped into (−180, 180], whether or not it is in range; then,
+    when ``limits`` is given, every other angle-equivalent vector (shifts by multiples of 360° per joint)
+    that lies wholly inside the limits.  That matters for J6 (532° of travel) and for J2 and J3, whose
+    ranges extend past ±180°.  ``out_of_range`` is filled against ``limits``.
+
+    At a wrist singularity (J5 within ``wrist_tol_deg`` of 0) flip and noflip coincide: one solution per
+    arm/elbow pair, with J4 = ``current[3]`` (0 without ``current``) and J6 taking the rest.  If the wrist
+    centre is on the J1 axis (possible only with d2 = 0), J1 = ``current[0]``.
+
+    Raises :class:`Unreachable` when the wrist centre is out of the workspace.
+    """
+    ref = _as_joints(current) if current is not None else (0.0,) * 6
+    g = geometry
+    r = np.asarray(pose.rotation)
+    pw = np.asarray(pose.p) - g.d6 * np.asarray(pose.a)
+    px, py, pz = (float(v) for v in pw)
+
+    radial = math.hypot(px, py)
+    if radial < abs(g.d2) - REACH_TOL_MM:
+        raise Unreachable(
+            f"the wrist centre is {radial:.6g} mm from the J1 axis, "
+            f"inside the {abs(g.d2):.6g} mm shoulder offset"
+        )
+    u_abs = math.sqrt(max(radial * radial - g.d2 * g.d2, 0.0))
+    forearm = math.hypot(g.a3, g.d4)
+    reach = math.hypot(u_abs, pz)  # shoulder (J2 axis) to wrist centre, the same for both arms
+    if reach > g.a2 + forearm + REACH_TOL_MM:
+        raise Unreachable(
+            f"the wrist centre is {reach:.6g} mm from the shoulder, beyond the {g.a2 + forearm:.6g} mm reach"
+        )
+    if reach < abs(g.a2 - forearm) - REACH_TOL_MM:
+        raise Unreachable(
+            f"the wrist centre is {reach:.6g} mm from the shoulder, closer than {abs(g.a2 - forearm):.6g} mm"
+        )
+    sin_elbow = (reach * reach - g.a2 * g.a2 - forearm * forearm) / (2.0 * g.a2 * forearm)
+    beta = math.asin(min(1.0, max(-1.0, sin_elbow)))
+    phi = math.atan2(g.a3, g.d4)
+
+    out: list[Solution] = []
+    for lefty in (False, True):
+        u = u_abs if lefty else -u_abs
+        on_axis = radial == 0.0 and u == 0.0
+        q1 = math.radians(ref[0]) if on_axis else math.atan2(py, px) - math.atan2(g.d2, u)
+        elbows = sorted(
+            (phi + beta, phi + math.pi - beta),
+            # above when sign(u) == sign(e); e = −a3·sin q3 − d4·cos q3 = −|forearm|·cos(q3 − φ)
+            key=lambda q3: (_arm_values(0.0, q3, g)[1] > 0.0) != lefty,
+        )
+        for q3 in elbows:
+            b_x = g.a2 - g.a3 * math.cos(q3) + g.d4 * math.sin(q3)
+            b_y = -g.a3 * math.sin(q3) - g.d4 * math.cos(q3)
+            q2 = math.atan2(-pz, u) - math.atan2(b_y, b_x)
+            above = lefty == (b_y > 0.0)
+            arm = [math.degrees(q1), math.degrees(q2), math.degrees(q3)]
+            r03 = _frames(arm, g, upto=3)[-1][:3, :3]
+            wrists, singular = _wrist(r03.T @ r, ref[3], wrist_tol_deg)
+            for t4, t5, t6 in wrists:
+                q = tuple(wrap_deg(v) for v in (*arm, t4, t5, t6))
+                out.extend(_with_variants(q, lefty, above, t5 < 0.0, singular, limits))
+    return out
+
+
+def _with_variants(
+    q: tuple[float, ...], lefty: bool, above: bool, flip: bool, singular: bool, limits: JointLimits | None
+) -> list[Solution]:
+    def make(v: Sequence[float]) -> Solution:
+        bad = tuple(limits.violations(v)) if limits is not None else ()
+        return Solution(_joints(v), lefty, above, flip, singular, bad)
+
+    base = make(q)
+    if limits is None:
+        return [base]
+    options = [limits.representations(j, v) for j, v in enumerate(q, start=1)]
+    variants = [make(v) for v in itertools.product(*options) if v != q]
+    return [base, *variants]
+
+
+def _joints(v: Sequence[float]) -> Joints:
+    return (float(v[0]), float(v[1]), float(v[2]), float(v[3]), float(v[4]), float(v[5]))
+
+
+def _distance(q: Sequence[float], current: Sequence[float], weights: Sequence[float]) -> float:
+    return sum(w * (a - b) ** 2 for a, b, w in zip(q, current, weights, strict=True))
+
+
+def nearest_solution(
+    pose: Transform,
+    current: JointsLike,
+    geometry: PumaGeometry = PUMA560_LEE,
+    limits: JointLimits = UNIMATION_LIMITS,
+    *,
+    weights: Sequence[float] = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0),
+    wrist_tol_deg: float = WRIST_SINGULAR_DEG,
+) -> Solution:
+    """The in-range solution nearest ``current`` (see :func:`inverse_nearest`), with its configuration."""
+    current = _as_joints(current)
+    if len(weights) != 6:
+        raise ValueError("weights needs one value per joint")
+    solutions = inverse_all(pose, geometry, limits, current=current, wrist_tol_deg=wrist_tol_deg)
+    legal = [s for s in solutions if not s.out_of_range]
+    if legal:
+        return min(legal, key=lambda s: _distance(s.q, current, weights))
+
+    def badness(s: Solution) -> tuple[int, float]:
+        return len(_unfixable(s.q, limits)), _distance(s.q, current, weights)
+
+    worst = min(solutions, key=badness)
+    raise OutOfRange(_unfixable(worst.q, limits), solutions)
+
+
+def _unfixable(q: Sequence[float], limits: JointLimits) -> list[int]:
+    """Joints with no 360°-equivalent angle inside their range."""
+    return [j for j, v in enumerate(q, start=1) if not limits.representations(j, v)]
+
+
+def inverse_nearest(
+    pose: Transform,
+    current: JointsLike,
+    geometry: PumaGeometry = PUMA560_LEE,
+    limits: JointLimits = UNIMATION_LIMITS,
+    *,
+    weights: Sequence[float] = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0),
+    wrist_tol_deg: float = WRIST_SINGULAR_DEG,
+) -> Joints:
+    """Transform to joint angles (deg): the protocol's "solve forwards".
+
+    Among all solutions and their ±360° variants that respect ``limits``, return the one with the least
+    weighted squared distance Σ w_j (q_j − current_j)² to ``current``; so the arm keeps its present
+    configuration whenever it can.  At the wrist singularity J4 stays at ``current[3]``.
+
+    Raises :class:`Unreachable` (TOR) when no solution exists, :class:`OutOfRange` (JOR) when every
+    solution breaks a limit.
+    """
+    return nearest_solution(pose, current, geometry, limits, weights=weights, wrist_tol_deg=wrist_tol_deg).q

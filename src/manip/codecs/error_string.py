@@ -1,0 +1,274 @@
+"""The server error string of E.2: ``where: severity code message``, optionally a NUL and 16-bit numbers.
+
+Layout decided for manip (erratum ``error-arg-layout``; the seed's NZI example calls the NUL and the joint
+mask "single bytes", which we read as loose wording, since the format paragraph says 16-bit numbers):
+
+* the text is Lisp Machine text (:mod:`manip.codecs.lispm_text`);
+* an optional NUL byte ends the text; only then are ``~`` and ``$`` in the message special;
+* the numbers follow as 16-bit words, low byte first;
+* with ``align_args=True`` (the default) the words start at an even offset *of the error string as it sits in
+  the response data*.  The data begin with the 2-byte request number, so an even offset within the string is
+  an even offset in the packet: a PDP-11 cannot store a word at an odd address.  When the NUL ends at an
+  odd offset one pad byte follows, and it must be zero.  ``align_args=False`` reads the words right after
+  the NUL.
+
+Substitutions (clause ``error-string.substitution``): each ``~`` takes one number, printed as an unsigned
+integer; each ``$`` takes one number as a joint bit mask (bit 0 = joint 1): 6 -> ``2 and 3``.
+
+Hard decode errors (:class:`DecodeError` with the byte offset in the error string): no ``": "`` separator,
+a missing severity or code (``error-string.format``), an odd number of argument bytes
+(``error-string.args``), a non-zero pad byte (``error-string.arg-alignment``).  Everything else that is off
+(unknown severity or code, a code that is not three letters, a colon in *where*, numbers and special
+characters that do not correspond) is listed in :attr:`ErrorMessage.problems`, so a decoder never fails on it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Iterable
+from dataclasses import dataclass, field
+
+from manip.codecs.errors import DecodeError, EncodeError
+from manip.codecs.lispm_text import decode_lispm, encode_lispm
+from manip.spec import SPEC
+
+RAW = "~"
+"""Special character: one number printed as an unsigned integer."""
+JOINT_MASK = "$"
+"""Special character: one number read as a joint bit mask (bit 0 = joint 1)."""
+SPECIALS = RAW + JOINT_MASK
+SEPARATOR = ": "
+
+
+def known_severities() -> frozenset[str]:
+    """The severities of the spec (F, E, C, W, BF, BE)."""
+    return frozenset(SPEC.severities)
+
+
+def known_codes() -> frozenset[str]:
+    """The error codes of the spec (the seed's and manip's own)."""
+    return frozenset(SPEC.error_codes)
+
+
+def format_joint_mask(mask: int) -> str:
+    """Joints of a bit mask (bit 0 = joint 1) in English.
+
+    6 -> ``2 and 3``, 1 -> ``1``, 0b100011 -> ``1, 2 and 6``, 0 -> ``none``.
+    """
+    if mask < 0:
+        raise ValueError("a joint mask is not negative")
+    joints = [str(bit + 1) for bit in range(mask.bit_length()) if mask >> bit & 1]
+    if not joints:
+        return "none"
+    if len(joints) == 1:
+        return joints[0]
+    return f"{', '.join(joints[:-1])} and {joints[-1]}"
+
+
+def format_unsigned(value: int, radix: int = 10) -> str:
+    """``value`` in ``radix`` (2..36) without a marker, digits above 9 in upper case."""
+    if not 2 <= radix <= 36:
+        raise ValueError(f"radix must be 2..36, not {radix}")
+    if value < 0:
+        raise ValueError("the numbers of an error string are unsigned")
+    digits = []
+    while True:
+        value, d = divmod(value, radix)
+        digits.append("0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ"[d])
+        if value == 0:
+            return "".join(reversed(digits))
+
+
+def count_specials(message: str) -> int:
+    """How many numbers a message consumes when a NUL is present."""
+    return sum(message.count(ch) for ch in SPECIALS)
+
+
+def substitute(message: str, args: Iterable[int], *, radix: int = 10) -> str:
+    """Replace each ``~`` and ``$`` of ``message`` by the next number; specials beyond the numbers stay."""
+    it = iter(args)
+    out: list[str] = []
+    for ch in message:
+        if ch in SPECIALS:
+            arg = next(it, None)
+            if arg is not None:
+                out.append(format_unsigned(arg, radix) if ch == RAW else format_joint_mask(arg))
+                continue
+        out.append(ch)
+    return "".join(out)
+
+
+def split_error_text(text: str) -> tuple[str, str, str, str]:
+    """``(where, severity, code, message)`` of the text part; offsets in errors are character offsets."""
+    sep = text.find(SEPARATOR)
+    if sep < 0:
+        raise DecodeError(
+            "no ': ' separating where from the severity",
+            path="where",
+            offset=len(text),
+            clause="error-string.format",
+        )
+    where = text[:sep]
+    pos = sep + len(SEPARATOR)
+    end = text.find(" ", pos)
+    severity = text[pos:] if end < 0 else text[pos:end]
+    if not severity:
+        raise DecodeError("missing severity", path="severity", offset=pos, clause="error-string.format")
+    if end < 0:
+        raise DecodeError("missing error code", path="code", offset=len(text), clause="error-string.format")
+    pos = end + 1
+    end = text.find(" ", pos)
+    code = text[pos:] if end < 0 else text[pos:end]
+    if not code:
+        raise DecodeError("missing error code", path="code", offset=pos, clause="error-string.format")
+    message = "" if end < 0 else text[end + 1 :]
+    return where, severity, code, message
+
+
+@dataclass(frozen=True)
+class ErrorMessage:
+    """One error string.  ``message`` is the template, with ``~`` and ``$`` still in it.
+
+    ``has_nul`` says whether a NUL follows the text (it makes ``~`` and ``$`` special); it is set
+    automatically when there are ``args``.  ``known_severities`` / ``known_codes`` are the sets
+    :attr:`problems` checks against (the spec's when None); they take no part in equality.
+    """
+
+    where: str
+    severity: str
+    code: str
+    message: str
+    args: tuple[int, ...] = ()
+    has_nul: bool = False
+    known_severities: frozenset[str] | None = field(default=None, compare=False, repr=False)
+    known_codes: frozenset[str] | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "args", tuple(self.args))
+        if self.args and not self.has_nul:
+            object.__setattr__(self, "has_nul", True)
+
+    @property
+    def text(self) -> str:
+        """The text part as sent: ``where: severity code message`` (no trailing space if no message)."""
+        head = f"{self.where}{SEPARATOR}{self.severity} {self.code}"
+        return f"{head} {self.message}" if self.message else head
+
+    def render_message(self, *, radix: int = 10) -> str:
+        """The message with the numbers substituted (only when a NUL is present)."""
+        if not self.has_nul:
+            return self.message
+        return substitute(self.message, self.args, radix=radix)
+
+    def render(self, *, radix: int = 10) -> str:
+        """The whole line for a human: ``where: severity code`` and the substituted message."""
+        head = f"{self.where}{SEPARATOR}{self.severity} {self.code}"
+        body = self.render_message(radix=radix)
+        return f"{head} {body}" if body else head
+
+    @property
+    def problems(self) -> tuple[str, ...]:
+        """What is off about this error string, for a human; empty when it conforms."""
+        severities = known_severities() if self.known_severities is None else self.known_severities
+        codes = known_codes() if self.known_codes is None else self.known_codes
+        out: list[str] = []
+        if not self.where:
+            out.append("where is empty (error-string.where-no-colon)")
+        if ":" in self.where:
+            out.append(f"where {self.where!r} contains a colon (error-string.where-no-colon)")
+        if self.severity not in severities:
+            out.append(
+                f"unknown severity {self.severity!r}; expected one of {', '.join(sorted(severities))}"
+                " (error-string.severity)"
+            )
+        if not (len(self.code) == 3 and self.code.isascii() and self.code.isalpha()):
+            out.append(f"error code {self.code!r} is not three letters (error-string.code)")
+        elif self.code not in codes:
+            out.append(f"error code {self.code!r} is not one of the spec's codes (error-string.code)")
+        if self.has_nul:
+            wanted = count_specials(self.message)
+            if wanted != len(self.args):
+                more = "more" if len(self.args) > wanted else "fewer"
+                out.append(
+                    f"{len(self.args)} number(s) follow the NUL, {more} than the {wanted} ~/$ in the message"
+                    " (error-string.substitution)"
+                )
+        return tuple(out)
+
+    def encode(self, *, align_args: bool = True) -> bytes:
+        """The error-string bytes, padded as if the string starts at an even offset of the packet data.
+
+        Only what would not read back is refused (a NUL in the text, ``": "`` in *where*, an empty or spaced
+        severity or code, numbers outside 0..0xFFFF, characters outside the Lisp Machine set); a
+        non-conforming but readable string (unknown severity, say) is encoded so test peers can send it.
+        """
+        if SEPARATOR in self.where:
+            raise EncodeError("where contains ': '", path="where", clause="error-string.where-no-colon")
+        for name, value in (("severity", self.severity), ("code", self.code)):
+            if not value or " " in value:
+                raise EncodeError(
+                    f"{name} must be non-empty without spaces", path=name, clause="error-string.format"
+                )
+        text = self.text
+        if "\0" in text:
+            raise EncodeError("NUL inside the text", path="message", clause="error-string.args")
+        out = bytearray(encode_lispm(text))
+        if not self.has_nul:
+            return bytes(out)
+        out.append(0)
+        if self.args and align_args and len(out) % 2:
+            out.append(0)
+        for i, arg in enumerate(self.args):
+            if not 0 <= arg <= 0xFFFF:
+                raise EncodeError(
+                    f"number {arg} is not a 16-bit word", path=f"args[{i}]", clause="error-string.args"
+                )
+            out += arg.to_bytes(2, "little")
+        return bytes(out)
+
+
+def parse_error(
+    data: bytes,
+    *,
+    align_args: bool = True,
+    severities: Collection[str] | None = None,
+    codes: Collection[str] | None = None,
+) -> ErrorMessage:
+    """Decode an error string: the response data after the 2-byte request number.
+
+    ``severities`` and ``codes`` replace the spec's tables for :attr:`ErrorMessage.problems`.
+    """
+    nul = data.find(0)
+    raw_text = data if nul < 0 else data[:nul]
+    text = decode_lispm(bytes(raw_text))
+    where, severity, code, message = split_error_text(text)
+    args: tuple[int, ...] = ()
+    if nul >= 0:
+        pos = nul + 1
+        if align_args and pos % 2 and pos < len(data):
+            if data[pos] != 0:
+                raise DecodeError(
+                    f"pad byte before the numbers is {data[pos]:#04x}, not zero",
+                    path="args",
+                    offset=pos,
+                    clause="error-string.arg-alignment",
+                )
+            pos += 1
+        rest = data[pos:]
+        if len(rest) % 2:
+            raise DecodeError(
+                f"{len(rest)} bytes of numbers after the NUL: not whole 16-bit words",
+                path="args",
+                offset=len(data) - 1,
+                clause="error-string.args",
+            )
+        args = tuple(int.from_bytes(rest[i : i + 2], "little") for i in range(0, len(rest), 2))
+    return ErrorMessage(
+        where,
+        severity,
+        code,
+        message,
+        args,
+        has_nul=nul >= 0,
+        known_severities=None if severities is None else frozenset(severities),
+        known_codes=None if codes is None else frozenset(codes),
+    )

@@ -1,0 +1,453 @@
+"""Chaos packet codec and link framings: golden vectors, round trips, streams, and every refusal."""
+
+from __future__ import annotations
+
+import json
+import struct
+from importlib import resources
+from itertools import pairwise
+from typing import Any
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from manip.codecs.chaos import (
+    HEADER,
+    PACKET,
+    chaos_checksum,
+    compiled_packet,
+    decode_raw,
+    encode_raw,
+    is_legal_opcode,
+    packet_words,
+    parse_header,
+)
+from manip.codecs.errors import DecodeError, EncodeError
+from manip.codecs.framing import (
+    FRAMINGS,
+    ChaosdFrameDecoder,
+    FrameSyncError,
+    StreamDecoder,
+    TcpFrameDecoder,
+    decode_chaosd,
+    decode_chudp,
+    decode_tcp,
+    encode_chaosd,
+    encode_chudp,
+    encode_tcp,
+)
+from manip.codecs.packet import MAX_DATA, Packet, Trailer
+
+# ------------------------------------------------------------------------------------ vectors
+
+
+def _load() -> list[dict[str, Any]]:
+    doc = json.loads(resources.files("manip.vectors").joinpath("chaos.json").read_text())
+    assert doc["format"] == "manip-vectors/1"
+    assert doc["subject"] == "chaos-framing"
+    return list(doc["vectors"])
+
+
+VECTORS = _load()
+GOOD = [v for v in VECTORS if "packet" in v]
+BAD = [v for v in VECTORS if "error" in v]
+
+
+def _packet(spec: dict[str, Any]) -> tuple[Packet, Trailer | None]:
+    t = spec["trailer"]
+    trailer = None if t is None else Trailer(t["dest"], t["source"], t["checksum"])
+    p = Packet(
+        opcode=spec["opcode"],
+        dest_host=spec["dest_host"],
+        dest_index=spec["dest_index"],
+        src_host=spec["src_host"],
+        src_index=spec["src_index"],
+        packet_no=spec["packet_no"],
+        ack_no=spec["ack_no"],
+        data=bytes.fromhex(spec["data_hex"]),
+        fc=spec["fc"],
+    )
+    return p, trailer
+
+
+def _decode_one(framing: str, b: bytes) -> Packet:
+    match framing:
+        case "chudp":
+            return decode_chudp(b)
+        case "tcp":
+            return decode_tcp(b)
+        case "chaosd":
+            return decode_chaosd(b, verify=True)
+        case _:
+            return decode_raw(b)
+
+
+def _encode_one(framing: str, p: Packet, trailer: Trailer | None) -> bytes:
+    hw: dict[str, int] = {} if trailer is None else {"hw_dest": trailer.dest, "hw_src": trailer.source}
+    match framing:
+        case "chudp":
+            return encode_chudp(p, **hw)
+        case "tcp":
+            return encode_tcp(p, **hw)
+        case "chaosd":
+            return encode_chaosd(p, **hw)
+        case _:
+            return encode_raw(p)
+
+
+def test_vector_file_covers_every_framing_and_notes_vector() -> None:
+    assert {v["framing"] for v in GOOD} == set(FRAMINGS)
+    assert sum(v["framing"] == "chudp" for v in GOOD) == 7
+    assert len({v["name"] for v in VECTORS}) == len(VECTORS)
+
+
+@pytest.mark.parametrize("vec", GOOD, ids=lambda v: v["name"])
+def test_golden_decode(vec: dict[str, Any]) -> None:
+    expected, trailer = _packet(vec["packet"])
+    got = _decode_one(vec["framing"], bytes.fromhex(vec["hex"]))
+    assert got == expected
+    assert got.trailer == trailer
+    assert FRAMINGS[vec["framing"]].decode(bytes.fromhex(vec["hex"])) == [expected]
+
+
+@pytest.mark.parametrize("vec", GOOD, ids=lambda v: v["name"])
+def test_golden_encode(vec: dict[str, Any]) -> None:
+    p, trailer = _packet(vec["packet"])
+    assert _encode_one(vec["framing"], p, trailer).hex() == vec["hex"]
+    # The vectors use a direct link (trailer = packet addresses), which is also the registry's default.
+    assert FRAMINGS[vec["framing"]].encode(p).hex() == vec["hex"]
+
+
+@pytest.mark.parametrize("vec", BAD, ids=lambda v: v["name"])
+def test_error_vectors(vec: dict[str, Any]) -> None:
+    with pytest.raises(DecodeError) as info:
+        FRAMINGS[vec["framing"]].decode(bytes.fromhex(vec["hex"]))
+    want = vec["error"]
+    assert info.value.clause == want["clause"], str(info.value)
+    assert info.value.offset == want["offset"], str(info.value)
+    assert info.value.path == want["path"], str(info.value)
+
+
+def test_checksum_error_message_shows_expected_and_found() -> None:
+    bad = next(v for v in BAD if v["name"] == "chudp-bad-checksum")
+    with pytest.raises(DecodeError, match=r"0x5a1b.*0x5a1a"):
+        decode_chudp(bytes.fromhex(bad["hex"]))
+    p = decode_chudp(bytes.fromhex(bad["hex"]), verify=False)
+    assert p.data == b"PUMA"
+    assert p.trailer == Trailer(0o440, 0o401, 0x5A1B)
+
+
+# ------------------------------------------------------------------------------------ strategies
+
+legal_opcodes = st.one_of(st.integers(0o1, 0o16), st.integers(0o200, 0o377))
+words = st.integers(0, 0xFFFF)
+packets = st.builds(
+    Packet,
+    opcode=legal_opcodes,
+    dest_host=words,
+    dest_index=words,
+    src_host=words,
+    src_index=words,
+    packet_no=words,
+    ack_no=words,
+    data=st.binary(max_size=MAX_DATA),
+    fc=st.integers(0, 15),
+)
+
+
+# ------------------------------------------------------------------------------------ round trips
+
+
+@given(packets)
+def test_raw_round_trip(p: Packet) -> None:
+    b = encode_raw(p)
+    assert len(b) == 16 + len(p.data) + len(p.data) % 2
+    assert decode_raw(b) == p
+
+
+@given(packets)
+def test_construct_definition_agrees_with_fast_codec(p: Packet) -> None:
+    b = encode_raw(p)
+    obj = {
+        "header": {
+            "op": {"opcode": p.opcode, "unused": 0},
+            "count": {"fc": p.fc, "nbytes": p.nbytes},
+            "dest_host": p.dest_host,
+            "dest_index": p.dest_index,
+            "src_host": p.src_host,
+            "src_index": p.src_index,
+            "packet_no": p.packet_no,
+            "ack_no": p.ack_no,
+        },
+        "data": p.data,
+        "pad": None,
+    }
+    assert PACKET.build(obj) == b
+    assert compiled_packet().build(obj) == b
+    for parsed in (PACKET.parse(b), compiled_packet().parse(b)):
+        assert parsed.header.op.opcode == p.opcode
+        assert parsed.header.count.fc == p.fc
+        assert parsed.header.count.nbytes == p.nbytes
+        assert parsed.header.ack_no == p.ack_no
+        assert parsed.data == p.data
+    assert parse_header(b).dest_index == p.dest_index
+
+
+def test_construct_header_shape() -> None:
+    assert HEADER.sizeof() == 16
+    with pytest.raises(DecodeError) as info:
+        parse_header(b"\0" * 15)
+    assert info.value.clause == "chaos.header.layout"
+
+
+@given(packets, words, words)
+def test_chudp_round_trip(p: Packet, hw_dest: int, hw_src: int) -> None:
+    b = encode_chudp(p, hw_dest=hw_dest, hw_src=hw_src)
+    assert len(b) == 4 + 16 + len(p.data) + len(p.data) % 2 + 6
+    got = decode_chudp(b)
+    assert got == p
+    assert got.trailer is not None
+    assert (got.trailer.dest, got.trailer.source) == (hw_dest, hw_src)
+    # Each packet word goes out most significant byte first.
+    assert struct.unpack(f">{len(packet_words(p))}H", b[4:-6]) == tuple(packet_words(p))
+
+
+@given(packets)
+def test_tcp_round_trip(p: Packet) -> None:
+    b = encode_tcp(p)
+    assert b[2:] == encode_chudp(p)[4:]
+    assert int.from_bytes(b[:2], "big") == len(b) - 2
+    assert decode_tcp(b) == p
+
+
+@given(packets)
+def test_chaosd_round_trip(p: Packet) -> None:
+    b = encode_chaosd(p)
+    assert (b[0] << 8 | b[1], b[2], b[3]) == (len(b) - 4, 1, 0)
+    got = decode_chaosd(b, verify=True)
+    assert got == p
+    assert got.trailer == decode_chudp(encode_chudp(p)).trailer
+
+
+@given(packets)
+def test_registry_round_trip(p: Packet) -> None:
+    for framing in FRAMINGS.values():
+        assert framing.decode(framing.encode(p)) == [p], framing.name
+
+
+def test_raw_pad_byte_optional_but_nothing_after_it() -> None:
+    p = Packet(0o200, 1, 2, 3, 4, 5, 6, b"ABC")
+    b = encode_raw(p)
+    assert b.endswith(b"C\0")
+    assert decode_raw(b[:-1]) == p
+    with pytest.raises(DecodeError) as info:
+        decode_raw(b + b"\0")
+    assert (info.value.clause, info.value.path) == ("chaos.header.nbytes", "header.nbytes")
+
+
+# ------------------------------------------------------------------------------------ streams
+
+DECODERS: dict[str, type[StreamDecoder]] = {"tcp": TcpFrameDecoder, "chaosd": ChaosdFrameDecoder}
+
+
+def _chunks(data: bytes, cuts: list[int]) -> list[bytes]:
+    edges = [0, *sorted(c % (len(data) + 1) for c in cuts), len(data)]
+    return [data[a:b] for a, b in pairwise(edges)]
+
+
+@settings(max_examples=60)
+@given(
+    st.sampled_from(sorted(DECODERS)),
+    st.lists(packets, min_size=1, max_size=4),
+    st.lists(st.integers(0, 10_000), max_size=12),
+)
+def test_stream_any_chunking(name: str, ps: list[Packet], cuts: list[int]) -> None:
+    stream = b"".join(FRAMINGS[name].encode(p) for p in ps)
+    decoder = DECODERS[name]()
+    got: list[Packet | DecodeError] = []
+    for chunk in _chunks(stream, cuts):
+        got += decoder.feed(chunk)
+    decoder.finish()
+    assert got == ps
+    assert decoder.pending == 0
+    assert decoder.offset == len(stream)
+    assert FRAMINGS[name].decode(stream) == ps
+
+
+@settings(max_examples=40)
+@given(st.sampled_from(sorted(DECODERS)), st.lists(st.integers(0, 200), max_size=6))
+def test_stream_reports_bad_frame_in_place_and_continues(name: str, cuts: list[int]) -> None:
+    a = Packet(0o200, 0o440, 1, 0o401, 2, 10, 3, b"first")
+    b = Packet(0o200, 0o440, 1, 0o401, 2, 11, 3, b"second")
+    c = Packet(0o200, 0o440, 1, 0o401, 2, 12, 3, b"third")
+    fa, fb, fc = (FRAMINGS[name].encode(p) for p in (a, b, c))
+    fb = fb[:-1] + bytes([fb[-1] ^ 0x01])  # corrupt b's checksum
+    decoder = DECODERS[name](verify=True)
+    items: list[Packet | DecodeError] = []
+    for chunk in _chunks(fa + fb + fc, cuts):
+        items += decoder.feed(chunk)
+    decoder.finish()
+    assert items[0] == a and items[2] == c
+    err = items[1]
+    assert isinstance(err, DecodeError)
+    assert err.clause == "chudp.checksum"
+    assert err.offset == len(fa) + len(fb) - 2  # the checksum word, counted from the stream start
+
+
+def test_stream_nbytes_mismatch_is_reported_and_skipped() -> None:
+    a = Packet(0o200, 0o440, 1, 0o401, 2, 10, 3, b"abcd")
+    frame = bytearray(encode_tcp(a))
+    frame[5] = 2  # nbytes 4 -> 2 (word 1 low byte, MSB-first); fix the checksum by hand
+    body = bytes(frame[2:-2])
+    frame[-2:] = chaos_checksum(struct.unpack(f">{len(body) // 2}H", body)).to_bytes(2, "big")
+    items = TcpFrameDecoder().feed(bytes(frame) + encode_tcp(a))
+    assert isinstance(items[0], DecodeError) and items[0].clause == "chaos.header.nbytes"
+    assert items[0].offset == 2 + 2
+    assert items[1] == a
+
+
+@pytest.mark.parametrize(
+    ("name", "bad"),
+    [("tcp", b"\x00\x15"), ("tcp", b"\x00\x00"), ("tcp", b"\x02\x00"), ("chaosd", b"\x00\x1a\x00\x00")],
+)
+def test_stream_framing_error_raises_and_keeps_earlier_packets(name: str, bad: bytes) -> None:
+    good = Packet(0o5, 1, 2, 3, 4, 0, 0, b"OK")
+    frame = FRAMINGS[name].encode(good)
+    decoder = DECODERS[name]()
+    with pytest.raises(FrameSyncError) as info:
+        decoder.feed(frame + frame + bad + frame)
+    err = info.value
+    assert err.items == (good, good)
+    assert err.offset is not None and err.offset >= 2 * len(frame)
+    assert err.clause == DECODERS[name].clause
+    assert decoder.failed is err
+    with pytest.raises(FrameSyncError):
+        decoder.feed(frame)
+
+
+def test_stream_finish_inside_frame() -> None:
+    frame = encode_tcp(Packet(0o1, data=b"PUMA"))
+    decoder = TcpFrameDecoder()
+    assert decoder.feed(frame + frame[:5]) == [Packet(0o1, data=b"PUMA")]
+    assert decoder.pending == 5
+    with pytest.raises(DecodeError) as info:
+        decoder.finish()
+    assert (info.value.clause, info.value.offset) == ("link.tcp.framing", len(frame))
+
+
+def test_single_frame_decoders_want_exactly_one_frame() -> None:
+    frame = encode_tcp(Packet(0o1, data=b"PUMA"))
+    with pytest.raises(DecodeError, match="one frame"):
+        decode_tcp(frame + frame)
+    with pytest.raises(DecodeError) as info:
+        decode_chaosd(b"\x00\x1a\x01")
+    assert info.value.clause == "link.chaosd.framing"
+
+
+def test_chaosd_checksum_verified_only_on_request() -> None:
+    frame = bytearray(encode_chaosd(Packet(0o1, 0o440, 0, 0o401, 0x0A01, 1, 0, b"PUMA")))
+    frame[-2:] = frame[-1:-3:-1]  # checksum bytes swapped, as usim writes them on a little-endian host
+    assert decode_chaosd(bytes(frame)).data == b"PUMA"
+    with pytest.raises(DecodeError) as info:
+        decode_chaosd(bytes(frame), verify=True)
+    assert info.value.clause == "chudp.checksum"
+
+
+# ------------------------------------------------------------------------------------ refusals
+
+
+@pytest.mark.parametrize("opcode", range(256))
+def test_opcode_legality(opcode: int) -> None:
+    b = encode_raw(Packet(opcode, data=b"x"))  # encoding an illegal opcode is allowed, on purpose
+    assert is_legal_opcode(opcode) == (1 <= opcode <= 0o16 or opcode >= 0o200)
+    if is_legal_opcode(opcode):
+        assert decode_raw(b).opcode == opcode
+    else:
+        with pytest.raises(DecodeError) as info:
+            decode_raw(b)
+        assert (info.value.clause, info.value.path, info.value.offset) == (
+            "chaos.opcode.legal",
+            "header.opcode",
+            1,
+        )
+
+
+def test_raw_refusals() -> None:
+    good = encode_raw(Packet(0o1, data=b"PUMA"))
+    cases = {
+        "chaos.header.layout": good[:15],
+        "chaos.header.unused-byte-zero": b"\x07" + good[1:],
+        "chaos.data.max-488": good[:2] + (489).to_bytes(2, "little") + good[4:] + bytes(489),
+        "chaos.header.nbytes": good[:-1],
+    }
+    for clause, b in cases.items():
+        with pytest.raises(DecodeError) as info:
+            decode_raw(b)
+        assert info.value.clause == clause
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("opcode", 256),
+        ("opcode", -1),
+        ("fc", 16),
+        ("dest_host", 0x10000),
+        ("dest_index", -1),
+        ("src_host", 0x10000),
+        ("src_index", 0x10000),
+        ("packet_no", 0x10000),
+        ("ack_no", 0x10000),
+    ],
+)
+def test_encode_refuses_out_of_range_fields(field: str, value: int) -> None:
+    p = Packet(0o1).with_(**{field: value})
+    for encode in (encode_raw, encode_chudp, encode_tcp, encode_chaosd):
+        with pytest.raises(EncodeError) as info:
+            encode(p)
+        assert info.value.path == field
+        assert field in str(info.value)
+
+
+def test_encode_refuses_too_much_data_and_bad_trailer() -> None:
+    assert len(encode_raw(Packet(0o200, data=bytes(MAX_DATA)))) == 16 + MAX_DATA
+    for encode in (encode_raw, encode_chudp, encode_tcp, encode_chaosd):
+        with pytest.raises(EncodeError) as info:
+            encode(Packet(0o200, data=bytes(MAX_DATA + 1)))
+        assert info.value.clause == "chaos.data.max-488"
+    with pytest.raises(EncodeError) as info:
+        encode_chudp(Packet(0o1), hw_dest=0x10000)
+    assert info.value.path == "trailer.dest"
+
+
+@given(packets, st.data())
+def test_chudp_single_bit_flip_detected(p: Packet, data: st.DataObject) -> None:
+    b = bytearray(encode_chudp(p))
+    bit = data.draw(st.integers(8 * 4, 8 * len(b) - 1), label="bit")
+    b[bit // 8] ^= 1 << (bit % 8)
+    with pytest.raises(DecodeError) as info:
+        decode_chudp(bytes(b))
+    assert info.value.clause == "chudp.checksum"
+
+
+# ------------------------------------------------------------------------------------ checksum
+
+
+def _simple_checksum(words: list[int]) -> int:
+    """Ones'-complement sum as arithmetic modulo 0xFFFF, written independently of the codec."""
+    total = sum(words)
+    folded = 0 if total == 0 else (total - 1) % 0xFFFF + 1  # 0xFFFF, not 0, for a non-zero sum
+    return 0xFFFF - folded
+
+
+@given(st.lists(words, max_size=300))
+def test_checksum_matches_simple_sum(ws: list[int]) -> None:
+    assert chaos_checksum(ws) == _simple_checksum(ws)
+
+
+def test_checksum_worked_example() -> None:
+    # Notes section 8, vector 1: the words sum to 0xA5E5 without carries, so the checksum is 0x5A1A.
+    ws = [0x0100, 0x0004, 0x0120, 0x0000, 0x0101, 0x0A01, 0x0001, 0x0000, 0x5550, 0x414D, 0x0120, 0x0101]
+    assert chaos_checksum(ws) == 0x5A1A == _simple_checksum(ws)
+    assert chaos_checksum([0xFFFF, 0x0001]) == _simple_checksum([0xFFFF, 0x0001]) == 0xFFFE

@@ -1,0 +1,105 @@
+"""The transition table: well formed, fully implemented, and the generated diagram is current."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+from manip.ncp.connection import implemented_actions
+from manip.ncp.states import (
+    ACTION_DOCS,
+    FINAL_STATES,
+    TRANSITIONS,
+    ConnState,
+    Input,
+    Source,
+    all_actions,
+    transition,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _generator() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("gen_ncp_diagram", ROOT / "tools" / "gen_ncp_diagram.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_generated_diagram_is_current() -> None:
+    on_disk = (ROOT / "docs" / "ncp-states.md").read_text()
+    assert on_disk == _generator().render(), "run: python tools/gen_ncp_diagram.py"
+
+
+def test_every_action_is_implemented_and_documented() -> None:
+    assert all_actions() <= implemented_actions()
+    assert implemented_actions() <= all_actions(), "an implemented action the table never uses"
+    assert set(ACTION_DOCS) == set(all_actions())
+
+
+def test_every_state_is_reachable_from_closed() -> None:
+    seen = {ConnState.CLOSED}
+    frontier = [ConnState.CLOSED]
+    while frontier:
+        state = frontier.pop()
+        for (src, _inp), tr in TRANSITIONS.items():
+            if src is state and tr.next_state not in seen:
+                seen.add(tr.next_state)
+                frontier.append(tr.next_state)
+    assert seen == set(ConnState)
+
+
+def test_every_input_is_used() -> None:
+    assert {inp for (_s, inp) in TRANSITIONS} == set(Input)
+
+
+def test_final_states_only_answer_close_and_abort() -> None:
+    for (state, inp), tr in TRANSITIONS.items():
+        if state in FINAL_STATES and not (state is ConnState.CLOSED and inp in (Input.CONNECT, Input.LISTEN)):
+            assert inp in (Input.CLOSE, Input.ABORT), (state, inp)
+            assert tr.next_state is state and tr.actions == ()
+
+
+def test_leaving_a_sending_state_stops_retransmission() -> None:
+    for (state, inp), tr in TRANSITIONS.items():
+        if state in (ConnState.RFC_SENT, ConnState.OPEN) and tr.next_state in FINAL_STATES:
+            assert "discard_queues" in tr.actions, (state, inp)
+
+
+def test_only_packets_deliver_packet_events() -> None:
+    packet_events = {"deliver_request", "deliver_answer", "deliver_forward", "deliver_lost", "deliver_unc"}
+    for (_state, inp), tr in TRANSITIONS.items():
+        if packet_events & set(tr.actions):
+            assert inp.source is Source.PACKET, inp
+
+
+@pytest.mark.parametrize(
+    ("state", "inp", "next_state"),
+    [
+        (ConnState.CLOSED, Input.CONNECT, ConnState.RFC_SENT),
+        (ConnState.RFC_SENT, Input.OPN, ConnState.OPEN),
+        (ConnState.RFC_SENT, Input.CLS, ConnState.CLOSED),
+        (ConnState.RFC_SENT, Input.LOS, ConnState.LOST),
+        (ConnState.RFC_SENT, Input.RFC_TIMEOUT, ConnState.INCOMPLETE),
+        (ConnState.LISTEN, Input.RFC, ConnState.RFC_RECEIVED),
+        (ConnState.RFC_RECEIVED, Input.ACCEPT, ConnState.OPEN),
+        (ConnState.RFC_RECEIVED, Input.ANSWER, ConnState.CLOSED),
+        (ConnState.OPEN, Input.DATA, ConnState.OPEN),
+        (ConnState.OPEN, Input.EOF_ACKED, ConnState.CLOSED),
+        (ConnState.OPEN, Input.LOS, ConnState.LOST),
+        (ConnState.OPEN, Input.SILENCE, ConnState.INCOMPLETE),
+    ],
+)
+def test_key_transitions(state: ConnState, inp: Input, next_state: ConnState) -> None:
+    tr = transition(state, inp)
+    assert tr is not None and tr.next_state is next_state
+
+
+def test_missing_entries_are_none() -> None:
+    assert transition(ConnState.OPEN, Input.ACCEPT) is None
+    assert transition(ConnState.LOST, Input.DATA) is None
