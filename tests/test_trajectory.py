@@ -153,6 +153,7 @@ def test_quintic_monotonic_and_coordinated(q0: np.ndarray, q1: np.ndarray, f: fl
 
 @FAST
 @given(joint_vectors, joint_vectors, speeds)
+@example(np.zeros(6), np.array([0, 0, 0, 0, 0, 2.225073858507e-311]), 1.0)  # regression: T² underflowed
 def test_quintic_limits_never_exceeded(q0: np.ndarray, q1: np.ndarray, f: float) -> None:
     seg = QuinticSegment(q0, q1, speed=f)
     vmax, amax = V * f, A * f * f
@@ -409,6 +410,12 @@ def test_blended_errors() -> None:
 # ---------------------------------------------------------------------------------------- Cartesian
 @FAST
 @given(poses, poses, speeds, st.sampled_from(Profile))
+@example(  # regression: a tiny rotation was mistaken for a half turn
+    _pose(np.array([0, 0, 1.0]), 0.0, np.zeros(3)),
+    _pose(np.array([0, 0, 1.0]), 5.960464477539063e-08, np.zeros(3)),
+    1.0,
+    Profile.QUINTIC,
+)
 def test_cartesian_straight_line(t0: np.ndarray, t1: np.ndarray, f: float, profile: Profile) -> None:
     seg = CartesianSegment(t0, t1, speed=f, profile=profile)
     p0, p1 = t0[:3, 3], t1[:3, 3]
@@ -466,6 +473,17 @@ def test_cartesian_half_turn_and_identity() -> None:
     assert np.allclose(np.abs(seg.axis), np.array([1, 1, 0]) / math.sqrt(2))
     mid = seg.pose_at(seg.duration / 2)
     assert _angle_deg(mid[:3, :3]) == pytest.approx(90.0) and np.allclose(mid[:3, 3], [50, 0, 0])
+    axis = np.array([0.3, -0.5, 0.8])
+    for deg in (180.0, 179.9999999, 179.99, 1e-7):  # around the branch points of the axis extraction
+        seg = CartesianSegment(t0, _pose(axis, deg, np.zeros(3)))
+        assert seg.angle == pytest.approx(deg, abs=1e-6)
+        assert np.allclose(seg.axis, axis / np.linalg.norm(axis), atol=1e-5) or deg == 180.0
+        for u in (0.25, 0.5, 1.0):
+            expected = _rot(axis, u * deg) if deg < 180.0 else None
+            r = seg.pose_at(u * seg.duration)[:3, :3]
+            assert _angle_deg(r) == pytest.approx(u * deg, abs=1e-6)
+            if expected is not None:
+                assert np.allclose(r, expected, atol=1e-7)
     same = CartesianSegment(t0, t0)
     assert same.duration == 0.0 and np.array_equal(same.pose_at(0.0), t0)
     fixed = CartesianSegment(t0, t1, duration=4.0, profile=Profile.TRAPEZOID)

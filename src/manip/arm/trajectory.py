@@ -402,14 +402,14 @@ class QuinticSegment:
         _, ds, _ = self._scaling(t)
         if ds == 0.0:
             return np.zeros_like(self._delta)
-        out: Vector = self._delta * (ds / self._duration)
+        out: Vector = (self._delta / self._duration) * ds  # this order cannot overflow for tiny moves
         return out
 
     def acceleration(self, t: float) -> Vector:
         _, _, dds = self._scaling(t)
         if dds == 0.0:
             return np.zeros_like(self._delta)
-        out: Vector = self._delta * (dds / (self._duration * self._duration))
+        out: Vector = (self._delta / self._duration / self._duration) * dds
         return out
 
     def done(self, t: float) -> bool:
@@ -711,7 +711,7 @@ def _rotation_log(r: Vector) -> tuple[Vector, float]:
     angle = math.atan2(sin2, cos2)
     if angle < 1e-12:
         return np.array([0.0, 0.0, 1.0]), 0.0
-    if math.sin(angle) > 1e-6:
+    if angle < 0.5 * math.pi or math.sin(angle) > 1e-6:
         return w / sin2, angle
     # Near π the skew part vanishes: (R + Rᵀ)/2 - cos θ·I = (1 - cos θ)·k·kᵀ.
     b = 0.5 * (r + r.T) - math.cos(angle) * np.eye(3)

@@ -119,7 +119,7 @@ def main(
                 f"{len(stream.pending)} word(s) waiting for the rest of a message",
                 list(stream.pending),
             )
-        _emit([node], fmt, b"")
+        _emit([node], fmt)
         if stream.pending or any(c.label in ("out of sync", "malformed") for c in node.children):
             sys.exit(1)
         return
@@ -135,7 +135,7 @@ def main(
         for p, node in zip(packets, nodes, strict=True):
             click.echo(render_hexdump(encode_raw(p), node))
     else:
-        _emit(nodes, fmt, data)
+        _emit(nodes, fmt)
     if any(c.label == "decode error" for n in nodes for c in n.children):
         sys.exit(1)
 
@@ -148,7 +148,7 @@ def _read_text(source: str | None) -> str:
     return source
 
 
-def _emit(nodes: list[Node], fmt: str, _raw: bytes) -> None:
+def _emit(nodes: list[Node], fmt: str) -> None:
     if fmt == "json":
         click.echo(render_json(nodes))
     else:

@@ -1,0 +1,1 @@
+"""The reference Puma server: a simulated arm that implements the whole Chaos manipulator protocol."""
