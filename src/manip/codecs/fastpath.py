@@ -7,25 +7,25 @@ which sends the caller down the construct path.  A test checks the two agree on 
 Why it is exact: a PDP-11 F float and an IEEE single with the same 32 bits differ by a factor of 4
 (F = 0.1f x 2^(e-128), IEEE = 1.f x 2^(e-127)) whenever the IEEE reading is a normal number, i.e. the
 exponent is neither 0 nor 255.  So the floats are read by reordering each float's two words into IEEE
-order, unpacking them as IEEE singles in C, and multiplying by 0.25 (exact).  Exponent 0 (zero, dirty
-zero, reserved operand) and 255 show up as IEEE zeros, subnormals, infinities or NaNs and are checked
-for before any value is returned.
+order (one byte swap of the whole buffer), unpacking them as IEEE singles in C, and multiplying by
+0.25 (exact).  Exponents 0 (zero, dirty zero, reserved operand) and 255 are the only ones the identity
+gets wrong; they are found from the high byte of each float's first word with one ``translate`` and
+``count`` and, unless they are all clean zeros, the slow path decides.
 """
 
 from __future__ import annotations
 
-import math
 import struct
 from array import array
-from bisect import bisect_left
 from dataclasses import dataclass
 from operator import itemgetter
 from typing import Any
 
 from manip.spec import Layout
 
-_FLT_MIN = 2.0**-126  # smallest normal IEEE single
-_NEGATIVE_ZERO = 0x80000000  # the reserved operand with fraction 0 reads as IEEE -0.0
+# 1 for a w0 high byte whose exponent bits are all 0 or all 1 (ignoring the sign and the lowest bit).
+_EDGE_EXPONENT = bytes(1 if b & 0x7F in (0, 0x7F) else 0 for b in range(256))
+_SIGN_ONLY = 0x80  # sign 1, exponent 0 or 1: the reserved operand (or a tiny negative number)
 
 
 @dataclass(frozen=True)
@@ -34,7 +34,7 @@ class FastLayout:
 
     size: int
     values: struct.Struct  # big-endian view of the word-swapped data: H/h words, f floats (x4)
-    bits: struct.Struct  # the same with I for floats: the raw IEEE bit patterns
+    high_bytes: Any  # slice (or itemgetter) of each float's w0 high byte in the raw data
     float_get: Any  # itemgetter of the float positions in the unpacked tuple (None: no floats)
     fields: tuple[tuple[str, slice, bool, bool], ...]  # name, slice of the unpacked tuple, is float, single
     numbered: bool
@@ -47,14 +47,14 @@ class FastLayout:
         swapped.byteswap()  # each word now high byte first: floats read as IEEE singles, big-endian
         vals = self.values.unpack(swapped)
         if self.float_get is not None:
-            fvals = self.float_get(vals)
-            smallest = sorted(map(abs, fvals))
-            if smallest[0] < _FLT_MIN and (
-                bisect_left(smallest, _FLT_MIN) != fvals.count(0.0)  # subnormal: exponent 0, not zero
-                or _NEGATIVE_ZERO in self.float_get(self.bits.unpack(swapped))  # reserved operand
-            ):
-                return None
-            if not math.isfinite(sum(fvals)):  # exponent 255
+            # The high byte of each float's sign/exponent word holds the sign and the top 7 exponent
+            # bits: only 0 (exponent 0 or 1) or 0x7F (254 or 255) there can mean a float that the IEEE
+            # reading gets wrong.  Such floats are accepted only if they are all clean zeros.
+            high = (
+                data[self.high_bytes] if isinstance(self.high_bytes, slice) else bytes(self.high_bytes(data))
+            )
+            flagged = high.translate(_EDGE_EXPONENT).count(1)
+            if flagged and (flagged != self.float_get(vals).count(0.0) or _SIGN_ONLY in high):
                 return None
         out: dict[str, Any] = {}
         for name, where, is_float, single in self.fields:
@@ -68,9 +68,10 @@ class FastLayout:
 def plan(layout: Layout, *, numbered: bool) -> FastLayout | None:
     """A fast plan for ``layout``, or None when it has variable or one-byte fields."""
     value_codes = ["H"] if numbered else []
-    bit_codes = list(value_codes)
     fields: list[tuple[str, slice, bool, bool]] = []
     float_positions: list[int] = []
+    high: list[int] = []
+    offset = 2 * len(value_codes)
     for f in layout.fields:
         element, count = f.type.element, f.type.count
         if element not in ("float", "word", "int16") or count is None:
@@ -78,24 +79,34 @@ def plan(layout: Layout, *, numbered: bool) -> FastLayout | None:
         start = len(value_codes)
         code = {"float": "f", "word": "H", "int16": "h"}[element]
         value_codes += [code] * count
-        bit_codes += ["I" if element == "float" else "H"] * count
         if element == "float":
             float_positions += range(start, start + count)
+            high += [offset + 4 * i + 1 for i in range(count)]
+        offset += (4 if element == "float" else 2) * count
         fields.append((f.name, slice(start, start + count), element == "float", count == 1))
     values = struct.Struct(">" + "".join(value_codes))
     getter: Any = None
+    high_bytes: Any = None
     if len(float_positions) == 1:
-        getter = _one(float_positions[0])  # a tuple even for one float, so the checks can count it
+        getter = _one(float_positions[0])  # a tuple even for one float, so the check can count it
     elif float_positions:
         getter = itemgetter(*float_positions)
+    if high:
+        contiguous = high == list(range(high[0], high[-1] + 1, 4))
+        high_bytes = slice(high[0], high[-1] + 1, 4) if contiguous else _bytes_at(high)
     return FastLayout(
         size=values.size,
         values=values,
-        bits=struct.Struct(">" + "".join(bit_codes)),
+        high_bytes=high_bytes,
         float_get=getter,
         fields=tuple(fields),
         numbered=numbered,
     )
+
+
+def _bytes_at(positions: list[int]) -> Any:
+    pick = itemgetter(*positions) if len(positions) > 1 else _one(positions[0])
+    return lambda data: bytes(pick(data))
 
 
 def _one(index: int) -> Any:
