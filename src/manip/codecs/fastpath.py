@@ -105,7 +105,9 @@ def plan(layout: Layout, *, numbered: bool) -> FastLayout | None:
 
 
 def _bytes_at(positions: list[int]) -> Any:
-    pick = itemgetter(*positions) if len(positions) > 1 else _one(positions[0])
+    pick: Any = _one(positions[0])
+    if len(positions) > 1:
+        pick = itemgetter(*positions)
     return lambda data: bytes(pick(data))
 
 
