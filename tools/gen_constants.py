@@ -8,7 +8,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from manip.spec import load_spec
+from manip.spec import Spec, load_spec
 
 TARGET = Path(__file__).resolve().parents[1] / "src" / "manip" / "spec" / "constants.py"
 
@@ -32,58 +32,50 @@ def _enum(name: str, doc: str, members: list[tuple[str, int]], octal: bool) -> s
     return "\n".join(lines) + "\n"
 
 
-def render() -> str:
-    spec = load_spec()
-    parts = [HEADER]
-    parts.append(
-        _enum(
+def _tables(spec: Spec) -> list[tuple[str, str, list[tuple[str, int]], bool]]:
+    """(enum name, docstring, members, octal?) for every generated enum."""
+    return [
+        (
             "ChaosOp",
             "Chaosnet packet opcodes.",
             [(o.name, o.value) for o in spec.chaos_opcodes.values()],
-            octal=True,
-        )
-    )
-    parts.append(
-        _enum(
+            True,
+        ),
+        (
             "RequestOp",
             "Chaos manipulator protocol request opcodes (Puma extensions included).",
             [(r.name, r.opcode) for r in spec.requests.values()],
-            octal=True,
-        )
-    )
-    parts.append(
-        _enum(
+            True,
+        ),
+        (
             "ServerOp",
             "Opcodes of packets sent by the server.",
             [(s.name, s.opcode) for s in spec.server_opcodes.values()],
-            octal=True,
-        )
-    )
-    parts.append(
-        _enum(
+            True,
+        ),
+        (
             "AsyncCondition",
             "Condition codes of asynchronous responses (0203).",
             [(a.name, a.code) for a in spec.async_codes.values()],
-            octal=False,
-        )
-    )
-    parts.append(
-        _enum(
+            False,
+        ),
+        (
             "CougarCommand",
             "Puma-to-Cougar command codes (Table 1).",
             [(c.name, c.code) for c in spec.cougar_commands.values()],
-            octal=False,
-        )
-    )
-    parts.append(
-        _enum(
+            False,
+        ),
+        (
             "CougarResponse",
             "Cougar-to-Puma response codes (Table 1).",
             [(c.name, c.code) for c in spec.cougar_responses.values()],
-            octal=False,
-        )
-    )
-    return "".join(parts)
+            False,
+        ),
+    ]
+
+
+def render() -> str:
+    return HEADER + "".join(_enum(*table) for table in _tables(load_spec()))
 
 
 def main() -> int:
