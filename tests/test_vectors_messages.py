@@ -12,9 +12,11 @@ from manip.codecs import cougar
 from manip.codecs.errors import DecodeError
 from manip.codecs.messages import (
     decode_async,
+    decode_error,
     decode_reply,
     decode_request,
     encode_async,
+    encode_error,
     encode_reply,
     encode_request,
     encode_terminator,
@@ -70,6 +72,27 @@ def test_terminator_and_async_vectors() -> None:
                 vec["word3"],
             )
             assert encode_async(a.request_number, a.condition, a.word2, a.word3) == data
+
+
+@pytest.mark.parametrize("vec", [v for v in MANIP if v["kind"] == "error"], ids=lambda v: v["name"])
+def test_error_packet_vectors(vec: dict[str, Any]) -> None:
+    opcode = int(vec["opcode"], 8)
+    data = bytes.fromhex(vec["hex"])
+    reply = decode_error(opcode, data)
+    assert reply.request_number == vec["request_number"]
+    assert reply.error.render() == vec["rendered"]
+    assert list(reply.error.args) == vec["args"] and not reply.error.problems
+    assert encode_error(opcode, reply.request_number, reply.error) == data
+
+
+def test_every_server_opcode_has_a_vector() -> None:
+    from manip.spec import SPEC
+
+    kinds = {int(v["opcode"], 8) for v in MANIP if v["kind"] == "error"}
+    has_reply = any(v["kind"] == "reply" for v in MANIP)
+    has_async = any(v["kind"] == "async" for v in MANIP)
+    assert has_reply and has_async
+    assert kinds | {0o200, 0o203} == set(SPEC.server_opcodes)
 
 
 @pytest.mark.parametrize("vec", [v for v in MANIP if v["kind"].endswith("-error")], ids=lambda v: v["name"])

@@ -219,6 +219,66 @@ def manip_vectors() -> list[dict[str, Any]]:
             "hex": wire([("w", 21), ("w", 2), ("w", 0), ("w", 12)]).hex(),
         },
     ]
+
+    def err(opcode: int, name: str, number: int, text: str, args: list[int], rendered: str) -> dict[str, Any]:
+        body = [("w", number), ("t", text)]
+        if args:
+            body.append(("b", 0))
+            if (len(text) + 1) % 2:  # words start at an even offset of the data
+                body.append(("b", 0))
+            body += [("w", a) for a in args]
+        return {
+            "kind": "error",
+            "opcode": f"{opcode:o}",
+            "name": name,
+            "request_number": number,
+            "rendered": rendered,
+            "args": args,
+            "hex": wire(body).hex(),
+        }
+
+    v += [
+        err(
+            0o201,
+            "fatal NZI with a joint mask",
+            3,
+            "During calibration: F NZI No zero index found on joint(s) $.",
+            [6],
+            "During calibration: F NZI No zero index found on joint(s) 2 and 3.",
+        ),
+        err(
+            0o202,
+            "non-fatal JOR",
+            8,
+            "set-joint-angles: E JOR Joint out of range on joint(s) $",
+            [0o41],
+            "set-joint-angles: E JOR Joint out of range on joint(s) 1 and 6",
+        ),
+        err(
+            0o202,
+            "command error BDL",
+            9,
+            "dispatch: C BDL Expected ~ data bytes, got ~",
+            [48, 44],
+            "dispatch: C BDL Expected 48 data bytes, got 44",
+        ),
+        err(
+            0o204,
+            "asynchronous error PAN",
+            10,
+            "move process: E PAN Panic button pressed",
+            [],
+            "move process: E PAN Panic button pressed",
+        ),
+        err(
+            0o205,
+            "asynchronous warning",
+            11,
+            "wrist: W WSY Wrist resynchronised",
+            [],
+            "wrist: W WSY Wrist resynchronised",
+        ),
+    ]
     move = wire(fl(*T1))
     bad_float = bytearray(wire(fl(*READY)))
     bad_float[12:16] = bytes.fromhex("00800000")
