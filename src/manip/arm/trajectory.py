@@ -101,7 +101,10 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = [
     "DEFAULT_CARTESIAN_LIMITS",
     "PUMA_LIMITS",
+    "QUINTIC_PEAK_ACCEL",
+    "QUINTIC_PEAK_VELOCITY",
     "TICK",
+    "TRAPEZOID_BLEND_FRACTION",
     "BlendedPath",
     "CartesianLimits",
     "CartesianSegment",
