@@ -1,0 +1,1 @@
+"""manip.cougar (in progress)."""

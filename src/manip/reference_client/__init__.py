@@ -1,0 +1,1 @@
+"""manip.reference_client (in progress)."""
