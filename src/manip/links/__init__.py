@@ -1,0 +1,52 @@
+"""asyncio drivers for the sans-I/O NCP: packet links, the node that drives the core, and the user API.
+
+* :func:`open_connection`, :func:`start_server`, :class:`ChaosConnection`, :class:`ChaosServer`:
+  what an application uses;
+* :class:`Node`: one NCP on one or more links (:mod:`~manip.links.node` explains the routing);
+* links: :mod:`~manip.links.tcp` (manip's own, the default), :mod:`~manip.links.chudp`,
+  :mod:`~manip.links.chaosd`, all :class:`Link`;
+* :mod:`~manip.links.errors`: everything raised is a :class:`ChaosError`.
+"""
+
+from .address import AddressError, LinkAddress, parse_address
+from .api import ChaosServer, Handler, open_connection, start_server
+from .base import Link, LinkStats
+from .connection import ChaosConnection, ConnectionStats
+from .errors import (
+    ChaosError,
+    ConnectionAnswered,
+    ConnectionBroken,
+    ConnectionClosed,
+    ConnectionForwarded,
+    ConnectionLost,
+    ConnectionRefused,
+    ConnectTimeout,
+    LinkError,
+)
+from .node import NcpOptions, Node, NodeStats
+
+__all__ = [
+    "AddressError",
+    "ChaosConnection",
+    "ChaosError",
+    "ChaosServer",
+    "ConnectTimeout",
+    "ConnectionAnswered",
+    "ConnectionBroken",
+    "ConnectionClosed",
+    "ConnectionForwarded",
+    "ConnectionLost",
+    "ConnectionRefused",
+    "ConnectionStats",
+    "Handler",
+    "Link",
+    "LinkAddress",
+    "LinkError",
+    "LinkStats",
+    "NcpOptions",
+    "Node",
+    "NodeStats",
+    "open_connection",
+    "parse_address",
+    "start_server",
+]

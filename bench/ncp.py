@@ -1,0 +1,233 @@
+"""NCP driver benchmark (run by hand): request/response over manip's TCP link against a raw TCP echo.
+
+A round trip is the manip client's common case: send one 66-byte data packet and wait for the server's
+66-byte answer.  The baseline is a bare asyncio TCP echo of the same framed bytes (2 + 16 + 66 + 6 = 90),
+measured in the same run with rounds alternating between the two, so that machine load hits both alike.
+Then sustained one-way throughput: 66-byte packets/s from a client to a server that reads them as fast as
+it can, through the Chaos window (the client ends with a marker packet the server answers, so the time
+covers delivery of everything).
+
+Two placements, both by default: ``same`` runs servers and client on one event loop (every microsecond
+of both sides is on the path), ``split`` runs the servers in a child process (client and server are
+separate programs in real use, so this is the realistic one).
+
+    .venv/bin/python bench/ncp.py [--mode same|split|both] [--rounds 5000] [--packets 20000] [--window 15]
+
+Target: NCP p50 round trip at most 2x the raw echo's.  Figures only; nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import statistics
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+
+from manip.codecs.framing import encode_tcp
+from manip.codecs.packet import Packet
+from manip.links import ChaosConnection, ChaosServer, NcpOptions, open_connection, start_server
+
+PAYLOAD = bytes(range(66))
+FRAME = encode_tcp(Packet(0o200, 0o440, 0x101, 0o401, 0x201, 2, 1, PAYLOAD))
+MARKER = 0o201
+"""Opcode of the packet that ends a throughput run; the sink answers it with its count."""
+
+
+class _Echo(asyncio.Protocol):
+    """Raw baseline server: send every complete frame straight back."""
+
+    def __init__(self) -> None:
+        self.transport: asyncio.Transport | None = None
+        self.buf = bytearray()
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+
+    def data_received(self, data: bytes) -> None:
+        buf = self.buf
+        buf += data
+        size = len(FRAME)
+        while len(buf) >= size:
+            assert self.transport is not None
+            self.transport.write(bytes(buf[:size]))
+            del buf[:size]
+
+
+class _EchoClient(asyncio.Protocol):
+    """Raw baseline client: one frame out, wait for one frame back."""
+
+    def __init__(self) -> None:
+        self.transport: asyncio.Transport | None = None
+        self.buf = bytearray()
+        self.waiter: asyncio.Future[None] | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+
+    def data_received(self, data: bytes) -> None:
+        self.buf += data
+        if len(self.buf) >= len(FRAME) and self.waiter is not None and not self.waiter.done():
+            del self.buf[: len(FRAME)]
+            self.waiter.set_result(None)
+
+    async def round_trip(self) -> None:
+        assert self.transport is not None
+        self.waiter = asyncio.get_running_loop().create_future()
+        self.transport.write(FRAME)
+        await self.waiter
+
+
+async def _echo_handler(conn: ChaosConnection) -> None:
+    async for _packet in conn:
+        await conn.send(PAYLOAD)
+
+
+async def _sink_handler(conn: ChaosConnection) -> None:
+    count = 0
+    async for packet in conn:
+        if packet.opcode == MARKER:
+            await conn.send(count.to_bytes(4, "big"))
+            count = 0
+        else:
+            count += 1
+
+
+@dataclass
+class Servers:
+    raw_port: int
+    echo_port: int
+    sink_port: int
+
+
+async def _start_servers(options: NcpOptions) -> tuple[Servers, asyncio.Server, ChaosServer, ChaosServer]:
+    loop = asyncio.get_running_loop()
+    raw = await loop.create_server(_Echo, "127.0.0.1", 0)
+    echo = await start_server("tcp://127.0.0.1:0", "ECHO", _echo_handler, options=options)
+    sink = await start_server("tcp://127.0.0.1:0", "SINK", _sink_handler, options=options)
+    ports = Servers(raw.sockets[0].getsockname()[1], echo.port, sink.port)
+    return ports, raw, echo, sink
+
+
+async def _serve_until_stdin_closes(options: NcpOptions) -> None:
+    """The child process of ``split`` mode: print the ports, serve until the parent closes stdin."""
+    ports, raw, echo, sink = await _start_servers(options)
+    print(ports.raw_port, ports.echo_port, ports.sink_port, flush=True)
+    await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)
+    await echo.aclose()
+    await sink.aclose()
+    raw.close()
+
+
+def _percentile(samples: list[float], q: float) -> float:
+    ordered = sorted(samples)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+
+async def _round_trips(ports: Servers, rounds: int, options: NcpOptions) -> None:
+    loop = asyncio.get_running_loop()
+    transport, raw = await loop.create_connection(_EchoClient, "127.0.0.1", ports.raw_port)
+    conn = await open_connection(f"tcp://127.0.0.1:{ports.echo_port}?contact=ECHO", options=options)
+    async with conn:
+        ncp: list[float] = []
+        base: list[float] = []
+        for _ in range(max(100, rounds // 10)):  # warm up both paths
+            await conn.send(PAYLOAD)
+            await conn.receive()
+            await raw.round_trip()
+        clock = time.perf_counter
+        for _ in range(rounds):
+            t0 = clock()
+            await conn.send(PAYLOAD)
+            await conn.receive()
+            t1 = clock()
+            await raw.round_trip()
+            t2 = clock()
+            ncp.append(t1 - t0)
+            base.append(t2 - t1)
+    transport.close()
+    print(f"  round trip, 66-byte data packet each way, {rounds} rounds (microseconds)")
+    print(f"    {'':10} {'p50':>8} {'p99':>8} {'mean':>8}")
+    for name, samples in (("NCP/TCP", ncp), ("raw echo", base)):
+        p50, p99 = _percentile(samples, 0.5), _percentile(samples, 0.99)
+        print(f"    {name:10} {p50 * 1e6:8.1f} {p99 * 1e6:8.1f} {statistics.fmean(samples) * 1e6:8.1f}")
+    ratio50 = _percentile(ncp, 0.5) / _percentile(base, 0.5)
+    ratio99 = _percentile(ncp, 0.99) / _percentile(base, 0.99)
+    print(f"    ratio NCP/raw: p50 {ratio50:.2f}x, p99 {ratio99:.2f}x (target p50 <= 2x)")
+
+
+async def _throughput(ports: Servers, packets: int, options: NcpOptions) -> None:
+    conn = await open_connection(f"tcp://127.0.0.1:{ports.sink_port}?contact=SINK", options=options)
+    async with conn:
+        t0 = time.perf_counter()
+        for _ in range(packets):
+            await conn.send(PAYLOAD)
+        await conn.send(b"", MARKER)
+        count = int.from_bytes((await conn.receive()).data, "big")
+        elapsed = time.perf_counter() - t0
+        waits = conn.stats.send_waits
+    assert count == packets, (count, packets)
+    rate = packets / elapsed
+    print(f"  one-way, {packets} packets of 66 bytes, window {options.window}:")
+    mb = rate * len(PAYLOAD) / 1e6
+    print(f"    {rate:,.0f} packets/s ({mb:.2f} MB/s of data); the sender waited {waits} times")
+
+
+async def _same(ns: argparse.Namespace, options: NcpOptions) -> None:
+    ports, raw, echo, sink = await _start_servers(options)
+    try:
+        await _round_trips(ports, ns.rounds, options)
+        await _throughput(ports, ns.packets, options)
+    finally:
+        await echo.aclose()
+        await sink.aclose()
+        raw.close()
+
+
+async def _split(ns: argparse.Namespace, options: NcpOptions) -> None:
+    child = subprocess.Popen(
+        [sys.executable, __file__, "--serve", "--window", str(ns.window)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert child.stdin is not None and child.stdout is not None
+    try:
+        line = await asyncio.get_running_loop().run_in_executor(None, child.stdout.readline)
+        ports = Servers(*map(int, line.split()))
+        await _round_trips(ports, ns.rounds, options)
+        await _throughput(ports, ns.packets, options)
+    finally:
+        child.stdin.close()
+        child.wait(timeout=10)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--mode", choices=("same", "split", "both"), default="both")
+    parser.add_argument("--rounds", type=int, default=5000)
+    parser.add_argument("--packets", type=int, default=20000)
+    parser.add_argument("--window", type=int, default=15)
+    parser.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
+    ns = parser.parse_args()
+    options = NcpOptions(window=ns.window)
+    if ns.serve:
+        asyncio.run(_serve_until_stdin_closes(options))
+        return
+    print(f"Python {sys.version.split()[0]}, {sys.platform}")
+    if ns.mode in ("same", "both"):
+        print("same process (client and servers on one event loop):")
+        asyncio.run(_same(ns, options))
+    if ns.mode in ("split", "both"):
+        print("split (servers in a child process):")
+        asyncio.run(_split(ns, options))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,632 @@
+"""The simulated Puma arm and its move process (sans-I/O: time is always an argument).
+
+Theory of operation
+===================
+
+On the 1985 Puma-11 the *move process* was the 16 ms clock interrupt (Part II §5.2).  Each servo cycle it
+checked that the arm had reached the angles commanded on the previous cycle (the collision test),
+computed the next joint-angle vector with the interpolation routine of the segment being run, and sent it
+to the Unimation controller.  The main process checked motion requests at once, queued them as *move
+packets* and answered with a segment number before any motion happened (§5.1, §6.2).
+
+:class:`ArmSim` plays both the arm and the move process for one connection:
+
+* **Requests** (:meth:`ArmSim.move_joints`, :meth:`ArmSim.move_to`, :meth:`ArmSim.move_increment`,
+  :meth:`ArmSim.move_ready`, :meth:`ArmSim.move_cosine`) are checked at once and either raise
+  :class:`Refused` (carrying the protocol error code: AWA, NAP, SQF, JOR, TOR, BVA) or queue a segment
+  and return its number.  Numbers come from a per-connection counter that starts at 1 and grows by one
+  per queued segment, modulo 2^16 (erratum ``segment-numbers``).
+* **Goals are planned from the end of the queue**, not from where the arm is now: a move queued behind
+  others starts where they end, so inverse kinematics picks the solution nearest *that* configuration and
+  incremental moves add to *that* pose.
+* **Time** enters only through :meth:`ArmSim.tick`.  Servo cycles run at ``epoch + k·TICK``; a call runs
+  every cycle due up to ``now`` (while the arm is idle the cycles in between are skipped, since they
+  change nothing).  The caller must bring the arm up to date (``tick(now)``) before a request at ``now``.
+* **Interpolation**: joint moves go to :class:`~manip.arm.trajectory.MoveInterpolator` (linear with
+  parabolic blends by default, quintic on request, the cosine debugging wave, and the compliant schemes
+  whose nominal path is the blended one).  Straight-line moves are planned in full when queued: the
+  Cartesian path (:class:`~manip.arm.trajectory.CartesianSegment`) is sampled at every tick and solved
+  there, each solution nearest the previous one, so a path that leaves the workspace or breaks a joint
+  limit anywhere is refused at once (TOR/JOR) and playback is a table lookup.  Segments queued behind a
+  straight-line move wait until it ends, then start from rest.
+* **The arm**: the actual angles follow the commanded ones, except where an :class:`Obstacle` stops a
+  joint.  The collision test compares the actual angles with those commanded on the previous cycle; a
+  joint off by more than ``collision_tol_deg`` (the freed joint excepted, and never under a compliant
+  scheme, as on the Puma) stops the arm where it is.
+* **Aborts**: a collision, the panic button (which cuts arm power) or arm power lost while segments are
+  in flight stop the arm, drop the current and queued segments and emit :class:`MotionAborted`; from
+  then on motion is refused with AWA until :meth:`ArmSim.reset_abort` or :meth:`ArmSim.enable_power`
+  (erratum ``abort-reset``).
+* **Events** out of :meth:`ArmSim.tick`: :class:`SegmentCompleted` (in queue order, once each),
+  :class:`MotionAborted`, and :class:`FollowingWarning` when a joint lags by more than half the
+  collision tolerance (once per episode).
+
+The compliant schemes are a seam for later: a :class:`Compliance` object, when given, adjusts the nominal
+commanded angles of compliant segments each cycle (the Cougar "new theta dot" corrections).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Final, Protocol
+
+import numpy as np
+
+from manip.arm.kinematics import (
+    PUMA600,
+    ArmModel,
+    Joints,
+    JointsLike,
+    OutOfRange,
+    Unreachable,
+    forward,
+    inverse_all,
+    nearest_solution,
+    within_limits,
+)
+from manip.arm.oat import apply_increment, xyzoat_from_transform
+from manip.arm.trajectory import (
+    DEFAULT_CARTESIAN_LIMITS,
+    PUMA_LIMITS,
+    TICK,
+    CartesianLimits,
+    CartesianSegment,
+    MotionLimits,
+    MoveInterpolator,
+    MoveRequest,
+    Scheme,
+)
+from manip.arm.transform import Transform
+
+__all__ = [
+    "COLLISION_TOL_DEG",
+    "MAX_QUEUE",
+    "SEGMENT_MODULUS",
+    "STRAIGHT_JUMP_DEG",
+    "AbortCause",
+    "ArmEvent",
+    "ArmSim",
+    "Compliance",
+    "FollowingWarning",
+    "MotionAborted",
+    "Obstacle",
+    "Refused",
+    "SegmentCompleted",
+]
+
+#: Default collision tolerance (deg): how far a joint may be from the angle commanded on the previous cycle.
+COLLISION_TOL_DEG: Final = 0.5
+#: Default limit on segments accepted but not completed; one more is refused with SQF.
+MAX_QUEUE: Final = 64
+#: Segment numbers are words.
+SEGMENT_MODULUS: Final = 1 << 16
+#: Largest change of any joint between two ticks of a straight-line move (deg).  A bigger step means
+#: the line passes through (or very near) a singularity, where no smooth joint motion follows it; the
+#: move is refused with TOR.
+STRAIGHT_JUMP_DEG: Final = 5.0
+_EPS: Final = 1e-9
+
+
+# ---------------------------------------------------------------------------------------- refusals
+class Refused(Exception):  # noqa: N818 -- a refusal is an answer, not a failure of the simulator
+    """A request the arm will not carry out; ``code`` is the protocol error code to answer with.
+
+    ``joints`` (1-based) go into the error's ``$`` mask (JOR); ``detail`` is for humans.
+    """
+
+    def __init__(self, code: str, detail: str, joints: Sequence[int] = ()) -> None:
+        super().__init__(f"{code}: {detail}")
+        self.code = code
+        self.detail = detail
+        self.joints = tuple(joints)
+
+
+# ------------------------------------------------------------------------------------------ events
+class AbortCause(enum.Enum):
+    """Why the move process aborted motion."""
+
+    COLLISION = "collision"
+    PANIC = "panic"
+    POWER_LOST = "power-lost"
+
+
+@dataclass(frozen=True, slots=True)
+class SegmentCompleted:
+    """Segment ``segment`` finished at servo time ``time``."""
+
+    segment: int
+    time: float
+
+
+@dataclass(frozen=True, slots=True)
+class MotionAborted:
+    """Motion stopped at ``time``; ``joints`` are the colliding joints (1-based, empty otherwise) and
+    ``dropped`` the segments abandoned (never to complete), in execution order."""
+
+    cause: AbortCause
+    time: float
+    joints: tuple[int, ...]
+    dropped: tuple[int, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class FollowingWarning:
+    """Joints (1-based) lagging the commanded angles by more than half the collision tolerance."""
+
+    time: float
+    joints: tuple[int, ...]
+
+
+ArmEvent = SegmentCompleted | MotionAborted | FollowingWarning
+
+
+# --------------------------------------------------------------------------------- the environment
+@dataclass(frozen=True)
+class Obstacle:
+    """Something in the way of joint ``joint`` (1-based): the actual angle cannot go below ``lower`` or
+    above ``upper`` (deg; ``None`` = no bound on that side), whatever is commanded."""
+
+    joint: int
+    lower: float | None = None
+    upper: float | None = None
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.joint <= 6:
+            raise ValueError(f"obstacle joint must be 1..6, got {self.joint}")
+        if self.lower is None and self.upper is None:
+            raise ValueError("an obstacle needs a lower or an upper bound")
+        if self.lower is not None and self.upper is not None and not self.lower < self.upper:
+            raise ValueError("obstacle lower bound must be below its upper bound")
+
+    def clamp(self, q: Joints) -> Joints:
+        """The angles the arm actually reaches when ``q`` is commanded."""
+        v = list(q)
+        i = self.joint - 1
+        if self.lower is not None:
+            v[i] = max(v[i], self.lower)
+        if self.upper is not None:
+            v[i] = min(v[i], self.upper)
+        return _joints(v)
+
+
+class Compliance(Protocol):
+    """Seam for the compliant schemes: turns the nominal commanded angles into the compliant ones.
+
+    Called once per servo cycle while a compliant segment runs, with the cycle time, the nominal angles
+    of the blended path and the angles the arm actually reached.  Not implemented yet (no Cougar model);
+    without one the compliant schemes follow their nominal path.
+    """
+
+    def adjust(self, t: float, nominal: Joints, actual: Joints) -> Joints: ...
+
+
+# ----------------------------------------------------------------------------------- move packets
+@dataclass(frozen=True)
+class _JointPacket:
+    request: MoveRequest
+
+
+@dataclass(frozen=True)
+class _PathPacket:
+    """A straight-line move, solved at every tick when it was queued."""
+
+    segment: int
+    samples: tuple[Joints, ...]
+
+
+@dataclass
+class _Playback:
+    packet: _PathPacket
+    index: int = 0
+
+
+def _joints(v: Sequence[float] | np.ndarray) -> Joints:
+    return (float(v[0]), float(v[1]), float(v[2]), float(v[3]), float(v[4]), float(v[5]))
+
+
+def _sq_distance(a: Sequence[float], b: Sequence[float]) -> float:
+    return sum((x - y) ** 2 for x, y in zip(a, b, strict=True))
+
+
+# --------------------------------------------------------------------------------------------- arm
+class ArmSim:
+    """One connection's simulated arm and move process.  See the module docstring.
+
+    ``start`` is where the arm stands (default: the model's ready position); ``powered`` whether arm
+    power is on at the start (off by default, as on a freshly connected Puma: Enable high power first).
+    ``segment_step`` is the increment of the segment counter (1; other values exist to model a faulty
+    server).
+    """
+
+    def __init__(
+        self,
+        model: ArmModel = PUMA600,
+        limits: MotionLimits = PUMA_LIMITS,
+        *,
+        start: JointsLike | None = None,
+        powered: bool = False,
+        tick_period: float = TICK,
+        scheme: Scheme = Scheme.LINEAR_BLEND,
+        cartesian_limits: CartesianLimits = DEFAULT_CARTESIAN_LIMITS,
+        collision_tol_deg: float = COLLISION_TOL_DEG,
+        max_queue: int = MAX_QUEUE,
+        segment_step: int = 1,
+        compliance: Compliance | None = None,
+    ) -> None:
+        if scheme is Scheme.COSINE:
+            raise ValueError("the cosine scheme needs its own parameters; use move_cosine")
+        if not (math.isfinite(tick_period) and tick_period > 0.0):
+            raise ValueError("tick_period must be finite and positive")
+        self.model = model
+        self.limits = limits
+        self.tick_period = float(tick_period)
+        self.scheme = scheme
+        self.cartesian_limits = cartesian_limits
+        self.collision_tol_deg = float(collision_tol_deg)
+        self.max_queue = int(max_queue)
+        self.segment_step = int(segment_step)
+        self.compliance = compliance
+
+        here = _joints(model.ready if start is None else start)
+        self.commanded: Joints = here
+        """Angles sent to the controller on the last servo cycle."""
+        self.actual: Joints = here
+        """Angles the arm actually reached (the sensed angles)."""
+        self.powered = bool(powered)
+        self.aborted = False
+        self.abort_cause: AbortCause | None = None
+        self.speed = 1.0
+        self.lefty: bool | None = None
+        """Configuration preference from Set configuration (None until set)."""
+        self.hand_open = True
+        self.free_joint: int | None = None
+        self.obstacle: Obstacle | None = None
+        self.enforce_power = True
+        """Refuse motion without arm power (NAP); False models a faulty server."""
+        self.enforce_abort = True
+        """Refuse motion after an abort (AWA); False models a faulty server."""
+
+        self._next_segment = 1
+        self._interp = MoveInterpolator(here, limits, 1.0)
+        self._backlog: deque[_JointPacket | _PathPacket] = deque()
+        self._playback: _Playback | None = None
+        self._planned: Joints = here
+        self._planned_oat: tuple[float, float, float] | None = None
+        self._scheme_now: Scheme | None = None
+        self._lag_warned = False
+        self._panic_at: float | None = None
+        self._epoch: float | None = None
+        self._cycle = 0  # index of the next servo cycle
+        self._clock = -math.inf
+
+    # ------------------------------------------------------------------------------------ status
+    @property
+    def time(self) -> float:
+        """Time of the last servo cycle run (-inf before the first)."""
+        return self._clock
+
+    @property
+    def queued(self) -> int:
+        """Segments accepted and not yet completed (running or waiting)."""
+        running = 1 if self._playback is not None else 0
+        return self._interp.queued + len(self._backlog) + running
+
+    @property
+    def moving(self) -> bool:
+        """True while any segment is running or waiting."""
+        return self.queued > 0
+
+    @property
+    def planned(self) -> Joints:
+        """Where the arm will stand once every queued segment has run."""
+        return self._planned
+
+    @property
+    def next_segment(self) -> int:
+        """The number the next queued segment will get."""
+        return self._next_segment
+
+    def pose(self) -> Transform:
+        """The transform of the actual angles (what Here reports)."""
+        return forward(self.actual, self.model.geometry)
+
+    # ----------------------------------------------------------------------------- power, abort
+    def enable_power(self) -> None:
+        """Arm power on; also clears an abort (erratum ``abort-reset``)."""
+        self.powered = True
+        self.reset_abort()
+
+    def kill_power(self) -> None:
+        """Arm power off.  Segments in flight are aborted on the next servo cycle (cause POWER_LOST)."""
+        self.powered = False
+
+    def reset_abort(self) -> None:
+        """Accept motion requests again after an abort."""
+        self.aborted = False
+        self.abort_cause = None
+
+    def press_panic(self, at: float | None = None) -> None:
+        """The panic button: cuts arm power and aborts motion on the first servo cycle at or after ``at``
+        (the next cycle when ``at`` is None)."""
+        self._panic_at = -math.inf if at is None else float(at)
+
+    def place_obstacle(self, obstacle: Obstacle | None) -> None:
+        """Put an obstacle in the arm's way (None removes it)."""
+        self.obstacle = obstacle
+
+    # ---------------------------------------------------------------------------- settings
+    def set_speed(self, factor: float) -> None:
+        """Speed factor for segments queued from now on: 0 < factor <= 1, else BVA."""
+        if not (math.isfinite(factor) and 0.0 < factor <= 1.0):
+            raise Refused("BVA", f"speed factor {factor!r} is not in 0 < n <= 1")
+        self.speed = float(factor)
+        self._interp.set_speed(self.speed)
+
+    def set_configuration(self, lefty: bool) -> None:
+        """Prefer the lefty (True) or righty arm configuration when solving transforms of later moves."""
+        self.lefty = bool(lefty)
+
+    def set_hand(self, open_: bool) -> None:
+        """Open (True) or close the binary hand; the hand is worked by the arm's controller, so it needs
+        arm power (NAP) and no pending abort (AWA) like any motion."""
+        self.check_motion()
+        self.hand_open = bool(open_)
+
+    def free(self, joint: int) -> None:
+        """Free joint ``joint`` (1-based): its brake is off and the collision test ignores it."""
+        if not 1 <= joint <= 6:
+            raise Refused("BVA", f"joint {joint} is not 1..6")
+        self.check_motion()
+        self.free_joint = joint
+
+    def unfree(self) -> None:
+        self.free_joint = None
+
+    # ---------------------------------------------------------------------------------- motion
+    def check_motion(self, now: float | None = None) -> None:
+        """Refuse motion while aborted (AWA) or without power (NAP); with ``now`` (a segment to be queued
+        at that time) also with a full queue (SQF) or before the last servo cycle (ValueError)."""
+        if now is not None and now < self._clock:
+            raise ValueError(f"request at {now} before the last servo cycle {self._clock}; tick first")
+        if self.aborted and self.enforce_abort:
+            cause = self.abort_cause.value if self.abort_cause else "abort"
+            raise Refused("AWA", f"motion aborted ({cause}); reset first")
+        if not self.powered and self.enforce_power:
+            raise Refused("NAP", "arm power is off")
+        if now is not None and self.queued >= self.max_queue:
+            raise Refused("SQF", f"{self.queued} segments queued")
+
+    def move_joints(
+        self, goal: JointsLike, now: float, *, scheme: Scheme | None = None, check_limits: bool = True
+    ) -> int:
+        """Queue a joint-interpolated move to ``goal`` (deg); JOR when a joint is out of range.
+
+        With ``check_limits=False`` (a faulty server) out-of-range goals are clamped to the limits.
+        """
+        self.check_motion(now)
+        q = _joints(goal)
+        lim = self.model.limits
+        if check_limits:
+            bad = within_limits(q, lim)
+            if bad:
+                raise Refused("JOR", "goal out of range", bad)
+        else:
+            q = _joints([min(max(v, lo), hi) for v, lo, hi in zip(q, lim.lower, lim.upper, strict=True)])
+        return self._queue_joints(q, now, scheme)
+
+    def move_ready(self, now: float) -> int:
+        """Queue a move to the ready position (arm straight up)."""
+        self.check_motion(now)
+        return self._queue_joints(self.model.ready, now, None)
+
+    def move_to(self, pose: Transform, now: float, *, straight: bool = False) -> int:
+        """Queue a move to ``pose``: joint-interpolated, or along a straight line with ``straight``."""
+        self.check_motion(now)
+        if straight:
+            return self._queue_straight(pose, now)
+        return self._queue_joints(self.solve(pose, self._planned), now, None)
+
+    def move_increment(self, delta: Sequence[float], now: float, *, straight: bool = False) -> int:
+        """Queue an incremental move by dX dY dZ (mm, world) dO dA dT (deg, VAL angles) from the pose
+        where the queue ends."""
+        self.check_motion(now)
+        if len(delta) != 6:
+            raise ValueError("an increment is dX dY dZ dO dA dT")
+        base = forward(self._planned, self.model.geometry)
+        oat = self._planned_oat
+        if oat is None:
+            _, _, _, o, a, t = xyzoat_from_transform(base)
+            oat = (o, a, t)
+        dx, dy, dz, do, da, dt = (float(v) for v in delta)
+        target = apply_increment(base, dx, dy, dz, do, da, dt, oat=oat)
+        number = self.move_to(target, now, straight=straight)
+        self._planned_oat = (oat[0] + do, oat[1] + da, oat[2] + dt)
+        return number
+
+    def move_cosine(self, joint: int, amplitude: float, period: float, now: float, cycles: int = 1) -> int:
+        """Queue the cosine-wave debugging segment on ``joint`` (1-based); it ends where it starts."""
+        self.check_motion(now)
+        if not 1 <= joint <= 6:
+            raise Refused("BVA", f"joint {joint} is not 1..6")
+        start = self._planned[joint - 1]
+        low, high = sorted((start, start + amplitude))
+        if low < self.model.limits.lower[joint - 1] or high > self.model.limits.upper[joint - 1]:
+            raise Refused("JOR", "the wave leaves the joint's range", (joint,))
+        try:
+            request = MoveRequest.cosine(self._allocate(), joint - 1, amplitude, period, cycles)
+        except ValueError as exc:
+            raise Refused("BVA", str(exc)) from exc
+        self._enqueue(_JointPacket(request), now)
+        return request.segment_id
+
+    # ----------------------------------------------------------------------------- the servo loop
+    def tick(self, now: float) -> list[ArmEvent]:
+        """Run every servo cycle due by ``now``; return what happened, in order."""
+        now = float(now)
+        if math.isnan(now):
+            raise ValueError("now must not be NaN")
+        if self._epoch is None:
+            self._epoch = now
+        events: list[ArmEvent] = []
+        h = self.tick_period
+        while True:
+            if not self.moving:
+                # Idle cycles change nothing: jump to the last one due (or to the panic, if sooner).
+                last = math.floor((now - self._epoch) / h + _EPS)
+                if self._panic_at is not None and self._panic_at <= now:
+                    last = min(last, math.ceil((self._panic_at - self._epoch) / h - _EPS))
+                self._cycle = max(self._cycle, last)
+            t = self._epoch + self._cycle * h
+            if t > now + _EPS * h:
+                return events
+            self._cycle += 1
+            self._clock = t
+            self._servo(t, events)
+
+    def _servo(self, t: float, events: list[ArmEvent]) -> None:
+        """One servo cycle at time ``t``."""
+        if self._panic_at is not None and t >= self._panic_at:
+            self._panic_at = None
+            self.powered = False
+            self._abort(t, AbortCause.PANIC, (), events)
+            return
+        if self.moving and not self.powered:
+            self._abort(t, AbortCause.POWER_LOST, (), events)
+            return
+        if self.moving and not (self._scheme_now is not None and self._scheme_now.compliant):
+            lagging = self._lagging(self.collision_tol_deg)
+            if lagging:
+                self._abort(t, AbortCause.COLLISION, lagging, events)
+                return
+            warn = self._lagging(0.5 * self.collision_tol_deg)
+            if warn and not self._lag_warned:
+                events.append(FollowingWarning(t, warn))
+            self._lag_warned = bool(warn)
+        q = self._next_command(t, events)
+        self.commanded = q
+        self.actual = self.obstacle.clamp(q) if self.obstacle is not None else q
+
+    def _lagging(self, tol: float) -> tuple[int, ...]:
+        return tuple(
+            j
+            for j, (a, c) in enumerate(zip(self.actual, self.commanded, strict=True), start=1)
+            if j != self.free_joint and abs(a - c) > tol
+        )
+
+    def _next_command(self, t: float, events: list[ArmEvent]) -> Joints:
+        play = self._playback
+        if play is not None:
+            q = play.packet.samples[play.index]
+            play.index += 1
+            if play.index == len(play.packet.samples):
+                events.append(SegmentCompleted(play.packet.segment, t))
+                self._playback = None
+                self._interp = MoveInterpolator(q, self.limits, self.speed)
+                self._flush(t)
+            return q
+        sample = self._interp.sample(t)
+        events.extend(SegmentCompleted(sid, t) for sid in sample.completed)
+        self._scheme_now = sample.scheme
+        q = _joints(sample.joints)
+        if sample.scheme is not None and sample.scheme.compliant and self.compliance is not None:
+            q = _joints(self.compliance.adjust(t, q, self.actual))
+        if sample.done and self._backlog and isinstance(self._backlog[0], _PathPacket):
+            packet = self._backlog.popleft()
+            assert isinstance(packet, _PathPacket)
+            self._playback = _Playback(packet)
+            self._scheme_now = None
+        return q
+
+    def _flush(self, t: float) -> None:
+        """Hand the joint packets behind a finished straight-line move to the interpolator."""
+        while self._backlog and isinstance(self._backlog[0], _JointPacket):
+            packet = self._backlog.popleft()
+            assert isinstance(packet, _JointPacket)
+            self._interp.enqueue(packet.request, t)
+
+    def _abort(self, t: float, cause: AbortCause, joints: tuple[int, ...], events: list[ArmEvent]) -> None:
+        dropped = list(self._interp.abort(t))
+        finished = self._interp.sample(t).completed  # segments that ended just before the abort
+        events.extend(SegmentCompleted(sid, t) for sid in finished)
+        if self._playback is not None:
+            dropped.append(self._playback.packet.segment)
+        for packet in self._backlog:
+            dropped.append(packet.segment if isinstance(packet, _PathPacket) else packet.request.segment_id)
+        self._playback = None
+        self._backlog.clear()
+        stop = self.actual  # the arm stops where it is
+        self.commanded = stop
+        self._interp = MoveInterpolator(stop, self.limits, self.speed)
+        self._planned, self._planned_oat = stop, None
+        self._scheme_now = None
+        self._lag_warned = False
+        self.aborted, self.abort_cause = True, cause
+        events.append(MotionAborted(cause, t, joints, tuple(dropped)))
+
+    # ---------------------------------------------------------------------------- queueing
+    def _allocate(self) -> int:
+        number = self._next_segment
+        self._next_segment = (number + self.segment_step) % SEGMENT_MODULUS
+        return number
+
+    def _enqueue(self, packet: _JointPacket | _PathPacket, now: float) -> None:
+        if isinstance(packet, _JointPacket) and self._playback is None and not self._backlog:
+            self._interp.enqueue(packet.request, now)
+        else:
+            self._backlog.append(packet)
+
+    def _queue_joints(self, goal: Joints, now: float, scheme: Scheme | None) -> int:
+        request = MoveRequest.to(self._allocate(), goal, scheme or self.scheme, self.speed)
+        self._enqueue(_JointPacket(request), now)
+        self._planned, self._planned_oat = goal, None
+        return request.segment_id
+
+    def solve(self, pose: Transform, near: JointsLike) -> Joints:
+        """Joint angles for ``pose`` nearest ``near``, in the preferred configuration when there is one
+        (Solve forwards); TOR when no angles reach it, JOR when every solution breaks a limit."""
+        near = _joints(near)
+        g, lim = self.model.geometry, self.model.limits
+        try:
+            best = nearest_solution(pose, near, g, lim)
+        except Unreachable as exc:
+            raise Refused("TOR", exc.reason) from exc
+        except OutOfRange as exc:
+            raise Refused("JOR", str(exc), exc.joints) from exc
+        if self.lefty is not None and best.lefty != self.lefty:
+            alternatives = [
+                s
+                for s in inverse_all(pose, g, lim, current=near)
+                if not s.out_of_range and s.lefty == self.lefty
+            ]
+            if alternatives:
+                return min(alternatives, key=lambda s: _sq_distance(s.q, near)).q
+        return best.q
+
+    def _queue_straight(self, pose: Transform, now: float) -> int:
+        g, lim = self.model.geometry, self.model.limits
+        start = forward(self._planned, g)
+        segment = CartesianSegment(start.matrix, pose.matrix, self.cartesian_limits, self.speed)
+        h = self.tick_period
+        n = max(1, math.ceil(segment.duration / h - _EPS))
+        samples: list[Joints] = []
+        previous = self._planned
+        for k in range(1, n + 1):
+            at = Transform(segment.pose_at(min(k * h, segment.duration)))
+            try:
+                q = nearest_solution(at, previous, g, lim).q
+            except Unreachable as exc:
+                raise Refused("TOR", f"the line leaves the workspace ({exc.reason})") from exc
+            except OutOfRange as exc:
+                raise Refused("JOR", f"the line breaks a joint limit ({exc})", exc.joints) from exc
+            if max(abs(a - b) for a, b in zip(q, previous, strict=True)) > STRAIGHT_JUMP_DEG:
+                raise Refused("TOR", "the line passes through a singularity")
+            samples.append(q)
+            previous = q
+        packet = _PathPacket(self._allocate(), tuple(samples))
+        self._enqueue(packet, now)
+        self._planned, self._planned_oat = samples[-1], None
+        return packet.segment

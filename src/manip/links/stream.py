@@ -1,0 +1,147 @@
+"""Links over a byte stream (TCP, unix socket): one connection is one point-to-point Chaos link.
+
+The framing codec finds the packets; this module only moves bytes.  A frame that decodes badly is
+counted and skipped (its length says where the next starts); a bad length means the frame boundaries
+are lost, so the stream is closed and counted under ``framing``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from typing import Final, cast
+
+from manip.codecs.errors import DecodeError, EncodeError
+from manip.codecs.framing import FrameSyncError, StreamDecoder, StreamItem
+from manip.codecs.packet import Packet
+
+from .base import Link, bad_reason
+
+Encoder = Callable[..., bytes]
+"""``encode(packet, hw_dest=..., hw_src=...)``, one of the framing module's encoders."""
+
+WRITE_BUFFER_LIMIT: Final = 256 * 1024
+"""Above this many unsent bytes a link drops packets (``dropped['congested']``) instead of queueing
+more: a peer that stopped reading must not make us buffer without end, and the NCP retransmits."""
+
+
+class StreamLink(Link, asyncio.Protocol):
+    """An asyncio protocol that is a link: frames out with ``encode``, frames in with ``decoder``."""
+
+    learns_peer: bool = True
+    """Take ``peer_addr`` from the trailer source of the first good frame when it is not known."""
+
+    def __init__(
+        self,
+        encode: Encoder,
+        decoder: StreamDecoder,
+        *,
+        my_addr: int,
+        peer_addr: int | None = None,
+        name: str = "",
+    ) -> None:
+        super().__init__(my_addr=my_addr, peer_addr=peer_addr, name=name)
+        self._encode = encode
+        self._decoder = decoder
+        self._transport: asyncio.Transport | None = None
+        self._closing_reason: str | None = None
+
+    # ---------------------------------------------------------------- asyncio.Protocol
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self._transport = cast(asyncio.Transport, transport)
+        if self._closing_reason is not None:  # closed before the connection was made
+            transport.close()
+
+    def data_received(self, data: bytes) -> None:
+        if self._closing_reason is not None:
+            return  # closing (framing lost, or closed by us): what follows is not read
+        self.stats.bytes_in += len(data)
+        try:
+            items = self._decoder.feed(data)
+        except FrameSyncError as exc:
+            self._take(exc.items)
+            self._bad("framing", exc)
+            self.abort(f"framing lost: {exc}")
+            return
+        self._take(items)
+
+    def eof_received(self) -> bool | None:
+        if self._closing_reason is None:
+            self._closing_reason = "end of stream from the peer"
+        return None  # let the transport close
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._transport = None
+        reason = self._closing_reason
+        if reason is None:
+            reason = f"connection lost: {exc}" if exc is not None else "closed by the peer"
+        self._set_closed(reason)
+
+    # ---------------------------------------------------------------- Link
+
+    def send(self, packet: Packet, next_hop: int | None = None) -> bool:
+        transport = self._transport
+        if transport is None or self._closing_reason is not None:
+            return self._drop("closed", packet)
+        if transport.get_write_buffer_size() > WRITE_BUFFER_LIMIT:
+            return self._drop("congested", packet)
+        hop = next_hop if next_hop is not None else self.peer_addr
+        try:
+            frame = self._encode(packet, hw_dest=hop, hw_src=self.my_addr)
+        except EncodeError:
+            return self._drop("encode", packet)
+        transport.write(frame)
+        stats = self.stats
+        stats.frames_out += 1
+        stats.bytes_out += len(frame)
+        return True
+
+    def close(self) -> None:
+        self._shut("closed locally", abort=False)
+
+    def abort(self, reason: str = "aborted locally") -> None:
+        """Drop the connection at once, discarding unsent output."""
+        self._shut(reason, abort=True)
+
+    # ---------------------------------------------------------------- extras
+
+    def pause_reading(self) -> None:
+        """Stop reading from the socket (tests use it to make a peer fall silent)."""
+        if self._transport is not None:
+            self._transport.pause_reading()
+
+    def resume_reading(self) -> None:
+        if self._transport is not None:
+            self._transport.resume_reading()
+
+    @property
+    def transport(self) -> asyncio.Transport | None:
+        return self._transport
+
+    # ---------------------------------------------------------------- internals
+
+    def _take(self, items: list[StreamItem] | tuple[StreamItem, ...]) -> None:
+        for item in items:
+            if isinstance(item, DecodeError):
+                self._bad(bad_reason(item), item)
+                continue
+            if (
+                self.peer_addr is None
+                and self.learns_peer
+                and item.trailer is not None
+                and item.trailer.source
+            ):
+                self.peer_addr = item.trailer.source
+            self._deliver(item)
+
+    def _shut(self, reason: str, *, abort: bool) -> None:
+        if self._closing_reason is None:
+            self._closing_reason = reason
+        transport = self._transport
+        if transport is None:
+            self._set_closed(self._closing_reason)
+        elif abort:
+            transport.abort()
+        else:
+            transport.close()

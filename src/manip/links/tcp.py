@@ -1,0 +1,71 @@
+"""manip's TCP link: each TCP connection is one point-to-point Chaos link (framing ``tcp``).
+
+The client dials the server's host and port; the server accepts any number of TCP connections and
+hands each new link to its driver.  The peer's Chaos address is known up front on the client side
+(``addr=`` of the link address) and learnt from the first good frame's trailer on the server side.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+
+from manip.codecs.framing import TcpFrameDecoder, encode_tcp
+
+from .errors import LinkError
+from .stream import StreamLink
+
+
+class TcpLink(StreamLink):
+    """One TCP connection carrying manip TCP link framing v1."""
+
+    kind = "tcp"
+
+    def __init__(self, *, my_addr: int, peer_addr: int | None = None, name: str = "") -> None:
+        super().__init__(encode_tcp, TcpFrameDecoder(), my_addr=my_addr, peer_addr=peer_addr, name=name)
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        peer = transport.get_extra_info("peername")
+        if peer is not None and self.name == self.kind:
+            self.name = f"tcp:{_endpoint(peer)}"
+        super().connection_made(transport)
+
+
+def _endpoint(sockaddr: tuple[object, ...]) -> str:
+    host, port = str(sockaddr[0]), sockaddr[1]
+    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+
+
+async def connect_tcp(
+    host: str, port: int, *, my_addr: int, peer_addr: int | None = None, timeout: float | None = 10.0
+) -> TcpLink:
+    """Dial a TCP link; raise :class:`LinkError` if the TCP connection cannot be made."""
+    loop = asyncio.get_running_loop()
+    link = TcpLink(my_addr=my_addr, peer_addr=peer_addr)
+    try:
+        async with asyncio.timeout(timeout):
+            await loop.create_connection(lambda: link, host, port)
+    except (OSError, TimeoutError) as exc:
+        link.close()
+        what = "timed out" if isinstance(exc, TimeoutError) else str(exc)
+        raise LinkError(f"cannot reach tcp://{_endpoint((host, port))}: {what}") from exc
+    return link
+
+
+async def serve_tcp(
+    host: str, port: int, *, my_addr: int, on_link: Callable[[TcpLink], None]
+) -> asyncio.Server:
+    """Listen for TCP links; ``on_link`` gets each new link before any packet arrives on it.
+
+    ``port`` 0 picks a free port: read it from the server's ``sockets``."""
+    loop = asyncio.get_running_loop()
+
+    def factory() -> TcpLink:
+        link = TcpLink(my_addr=my_addr)
+        on_link(link)
+        return link
+
+    try:
+        return await loop.create_server(factory, host, port)
+    except OSError as exc:
+        raise LinkError(f"cannot listen on tcp://{_endpoint((host, port))}: {exc}") from exc

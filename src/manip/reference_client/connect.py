@@ -1,0 +1,79 @@
+"""Opening a connection: ``await aconnect(...)`` or ``async with aconnect(...) as arm``.
+
+For now a connection is made from a transport (or a factory that makes one when called in the event
+loop); the Chaos transports over ``manip.links`` will be accepted here as URLs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Generator
+from types import TracebackType
+from typing import Any, cast
+
+from manip.reference_client.background import BackgroundProcess
+from manip.reference_client.manipulator import Manipulator
+from manip.reference_client.matching import MatchingCore
+from manip.reference_client.options import ClientOptions
+from manip.reference_client.transport import ManipTransport
+
+TransportFactory = Callable[[], ManipTransport]
+"""Makes a not-yet-connected transport; called inside the event loop that will run it."""
+
+TransportSource = ManipTransport | TransportFactory
+
+
+def _transport(source: TransportSource) -> ManipTransport:
+    if not isinstance(source, type) and isinstance(source, ManipTransport):
+        return source
+    factory = cast(TransportFactory, source)  # a class is a factory even though it has the methods
+    transport = factory()
+    if not isinstance(transport, ManipTransport):
+        raise TypeError(f"the transport factory returned {type(transport).__name__}, not a ManipTransport")
+    return transport
+
+
+async def open_manipulator(source: TransportSource, options: ClientOptions | None = None) -> Manipulator:
+    """Connect, start the background process, wait for the initial RESPONSE; return the manipulator.
+
+    Raises ConnectionLost (or FatalError, when the server sends one instead of its initial RESPONSE).
+    """
+    options = options or ClientOptions()
+    core = MatchingCore(
+        options.registry,
+        options.effective_handler_types(),
+        expect_initial_response=options.expect_initial_response,
+        trivial_errors=options.trivial_errors,
+        history=options.history,
+        align_args=options.align_args,
+    )
+    process = BackgroundProcess(_transport(source), core, name=options.name)
+    arm = Manipulator(process, options)  # listens before any packet can arrive
+    await process.start(options.connect_timeout)
+    return arm
+
+
+class Connector:
+    """What :func:`aconnect` returns: awaitable, and an async context manager that closes on exit."""
+
+    def __init__(self, source: TransportSource, options: ClientOptions | None) -> None:
+        self._source = source
+        self._options = options
+        self._arm: Manipulator | None = None
+
+    def __await__(self) -> Generator[Any, None, Manipulator]:
+        return open_manipulator(self._source, self._options).__await__()
+
+    async def __aenter__(self) -> Manipulator:
+        self._arm = await open_manipulator(self._source, self._options)
+        return self._arm
+
+    async def __aexit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        if self._arm is not None:
+            await self._arm.aclose()
+
+
+def aconnect(source: TransportSource, options: ClientOptions | None = None) -> Connector:
+    """Connect to a manipulator: ``arm = await aconnect(...)`` or ``async with aconnect(...) as arm``."""
+    return Connector(source, options)

@@ -1,0 +1,122 @@
+"""The built-in response handlers and the handler types they belong to.
+
+=========================  ======  ===================================================================
+handler type               code    handler
+=========================  ======  ===================================================================
+``generic``                0       :func:`handle_normal_response` (the seed's four generic codes ...)
+``generic``                1       :func:`handle_fatal_error`
+``generic``                2       :func:`handle_non_fatal_error`
+``generic``                4       :func:`handle_asynchronous_error`
+``chaos-manipulator``      3       :func:`handle_asynchronous_response` (... and the two more codes of
+``chaos-manipulator``      5       :func:`handle_asynchronous_warning`   Appendix E.3)
+``notify-trivial-errors``  2       :func:`notify_trivial_error` (passes anything not trivial on)
+=========================  ======  ===================================================================
+
+A manipulator's handler-type list is ``("chaos-manipulator", "generic")``, with
+``"notify-trivial-errors"`` in front when trivial errors are notified.
+"""
+
+from __future__ import annotations
+
+import struct
+from typing import Final
+
+from manip.codecs.messages import AsyncResponse
+from manip.reference_client.errors import (
+    AsynchronousError,
+    AsynchronousWarning,
+    FatalError,
+    NonFatalError,
+    OutOfSequenceReason,
+)
+from manip.reference_client.events import (
+    AsyncErrorReceived,
+    AsyncResponseReceived,
+    FatalErrorReceived,
+    TrivialErrorNotified,
+    WarningReceived,
+)
+from manip.reference_client.matching import ResponseContext
+from manip.reference_client.request import ResponseType
+
+GENERIC: Final = "generic"
+CHAOS_MANIPULATOR: Final = "chaos-manipulator"
+NOTIFY_TRIVIAL_ERRORS: Final = "notify-trivial-errors"
+
+DEFAULT_HANDLER_TYPES: Final = (CHAOS_MANIPULATOR, GENERIC)
+
+_ASYNC_BODY = struct.Struct("<3H")
+
+
+def handle_normal_response(ctx: ResponseContext) -> None:
+    """Code 0: the reply (or one packet of the reply) to the request with the packet's number."""
+    request = ctx.find_matching_request()
+    if request is None:
+        ctx.out_of_sequence()
+        return
+    payload = ctx.payload
+    if request.response_type is ResponseType.MULTI:
+        if payload:
+            request.responses.append(payload)
+            return
+    else:
+        request.responses.append(payload)
+    ctx.extract(request)
+
+
+def handle_non_fatal_error(ctx: ResponseContext) -> None:
+    """Code 2: the request with the packet's number failed."""
+    request = ctx.find_matching_request()
+    if request is None:
+        ctx.out_of_sequence(detail=f"non-fatal error {ctx.error_message().render()!r}")
+        return
+    ctx.fail(request, NonFatalError(ctx.error_message(), request_number=ctx.request_number, request=request))
+
+
+def handle_fatal_error(ctx: ResponseContext) -> None:
+    """Code 1: every pending request fails at once; the number is the last packet the server got."""
+    message = ctx.error_message()
+    number = ctx.request_number
+    ctx.emit(
+        FatalErrorReceived(FatalError(message, request_number=number, request=ctx.find_matching_request()))
+    )
+    ctx.fail_all(lambda request: FatalError(message, request_number=number, request=request))
+
+
+def handle_asynchronous_error(ctx: ResponseContext) -> None:
+    """Code 4: an error outside any request."""
+    ctx.emit(AsyncErrorReceived(AsynchronousError(ctx.error_message(), request_number=ctx.request_number)))
+
+
+def handle_asynchronous_warning(ctx: ResponseContext) -> None:
+    """Code 5: a warning for the human."""
+    ctx.emit(WarningReceived(AsynchronousWarning(ctx.error_message(), request_number=ctx.request_number)))
+
+
+def handle_asynchronous_response(ctx: ResponseContext) -> None:
+    """Code 3: condition code and two words after the request number (erratum async-request-number)."""
+    payload = ctx.payload
+    if len(payload) != _ASYNC_BODY.size:
+        ctx.out_of_sequence(
+            OutOfSequenceReason.MALFORMED,
+            f"asynchronous response needs {_ASYNC_BODY.size} bytes after the request number, "
+            f"got {len(payload)}",
+        )
+        return
+    condition, word2, word3 = _ASYNC_BODY.unpack(payload)
+    ctx.emit(AsyncResponseReceived(AsyncResponse(ctx.request_number, condition, word2, word3)))
+
+
+def notify_trivial_error(ctx: ResponseContext) -> None:
+    """Code 2, ahead of ``generic``: answer a trivial error's request with None and only notify it."""
+    request = ctx.find_matching_request()
+    policy = ctx.core.trivial_errors
+    if request is None or policy is None or not request.value_optional:
+        ctx.pass_on()
+        return
+    error = NonFatalError(ctx.error_message(), request_number=ctx.request_number, request=request)
+    if not policy(error):
+        ctx.pass_on()
+        return
+    ctx.answer(request, None)
+    ctx.emit(TrivialErrorNotified(error))

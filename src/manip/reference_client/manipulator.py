@@ -1,0 +1,316 @@
+"""The manipulator object: requests, operations, asynchronous responses and segments.
+
+:class:`Manipulator` is what :func:`~manip.reference_client.connect.aconnect` returns.  It has the
+seed's three request entry points (``make_request``, ``send_request``, ``request``), every operation of
+E.1 (:mod:`~manip.reference_client.generic`) and of manip's Puma extensions
+(:mod:`~manip.reference_client.puma`), and the asynchronous side of E.3.
+
+Free joint (0213, erratum ``free-joint-replies``): after the server frees a joint it discards the next
+packet, whatever it is, and answers it with done.  The manipulator therefore refuses every request with
+:class:`~manip.reference_client.errors.JointFreedError` between :meth:`Manipulator.free_joint` and
+:meth:`Manipulator.release_joint`, which sends that throw-away packet (a Here request, harmless if a
+server were to execute it).  ``async with arm.joint_freed(3): ...`` does both.
+
+Segments: :meth:`Manipulator.wait_for_segment` waits for the segment-completed asynchronous response
+(E.3 code 2) of a segment number a motion request returned.  It asks for segment notifications first
+if they are not on (request-notifications, 0257).  Segments complete in order, so a completion of a
+later segment also completes the ones before it (numbers compare modulo 2^16).  A segment that
+completed while notifications were off was never reported: turn them on (``request_notifications``)
+before the motion you will wait for.  An asynchronous error (motion aborted) fails every segment
+waiter with that error, and a guard hit that stops the move fails them with
+:class:`~manip.reference_client.errors.GuardTrippedError`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator, Callable, Iterable, Mapping, Sequence
+from contextlib import asynccontextmanager
+from types import TracebackType
+from typing import Any, Final, SupportsInt, TypeVar
+
+from manip.codecs.messages import AsyncResponse, copy_request_data, encode_request
+from manip.ncp.seq import seq_gt, seq_le
+from manip.reference_client.arguments import word
+from manip.reference_client.background import AsyncListener, BackgroundProcess, CloseListener, ErrorListener
+from manip.reference_client.errors import (
+    AsynchronousError,
+    ConnectionLost,
+    GuardTrippedError,
+    JointFreedError,
+    ManipError,
+    NonFatalError,
+    RequestTimeout,
+)
+from manip.reference_client.extractors import extract_done, extract_nothing
+from manip.reference_client.generic import GenericOperations
+from manip.reference_client.handlers import NOTIFY_TRIVIAL_ERRORS
+from manip.reference_client.issuer import DEFAULT, Default, Timeout
+from manip.reference_client.options import ClientOptions
+from manip.reference_client.puma import PumaOperations
+from manip.reference_client.request import DataExtractor, Request, RequestCode, ResponseType
+from manip.reference_client.stream import AsyncResponseStream
+from manip.spec import SPEC
+from manip.spec.constants import AsyncCondition
+
+T = TypeVar("T")
+
+NOTIFY_GUARD_HITS: Final = 1 << SPEC.async_codes[AsyncCondition.GUARD_HIT].notification_bit
+NOTIFY_SEGMENTS: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
+GUARD_STOPS: Final = 1
+"""Word 2 of a guard-hit response when the trip stopped the trajectory."""
+
+RequestData = bytes | bytearray | int | float | Iterable[Any]
+"""Request data for ``copy-manipulator-request-data``: integers are words, floats PDP-11 floats,
+sequences are flattened; bytes are sent as they are."""
+
+
+def _extract_unfree(request: Request[Any], payloads: Sequence[bytes]) -> None:
+    """The reply to the packet that un-frees a joint: done (or a Here reply from a lax server)."""
+    return None
+
+
+class Manipulator(GenericOperations, PumaOperations):
+    """One connected manipulator.  Use it as ``async with await aconnect(...)`` or ``async with
+    aconnect(...) as arm``; :meth:`aclose` ends it and fails whatever is still waiting."""
+
+    def __init__(self, process: BackgroundProcess, options: ClientOptions) -> None:
+        self._process = process
+        self.options = options
+        self.registry = options.registry
+        self._freed_joint: int | None = None
+        self._notifications = 0
+        self._last_segment: int | None = None
+        self._segment_waiters: list[tuple[int, asyncio.Future[None]]] = []
+        process.add_async_listener(self._on_async_response)
+        process.add_error_listener(self._on_error)
+        process.add_close_listener(self._on_close)
+
+    # ------------------------------------------------------------------ state
+
+    @property
+    def process(self) -> BackgroundProcess:
+        return self._process
+
+    @property
+    def closed(self) -> bool:
+        return self._process.closed
+
+    @property
+    def notify_trivial_errors(self) -> bool:
+        """Whether trivial errors are notified instead of raised (settable while connected)."""
+        return NOTIFY_TRIVIAL_ERRORS in self._process.core.handler_types
+
+    @notify_trivial_errors.setter
+    def notify_trivial_errors(self, on: bool) -> None:
+        self._process.core.handler_types = self.options.effective_handler_types(on)
+
+    @property
+    def freed_joint(self) -> int | None:
+        """The joint freed by :meth:`free_joint` and not yet released."""
+        return self._freed_joint
+
+    @property
+    def notifications(self) -> int:
+        """The notification mask last set with :meth:`request_notifications`."""
+        return self._notifications
+
+    @property
+    def last_completed_segment(self) -> int | None:
+        return self._last_segment
+
+    # ------------------------------------------------------------------ requests
+
+    def make_request(
+        self,
+        code: str | int | RequestCode,
+        data: RequestData | None = None,
+        *,
+        fields: Mapping[str, Any] | None = None,
+        response_type: ResponseType | None = None,
+        extractor: str | DataExtractor[Any] | Default | None = DEFAULT,
+        timeout: Timeout = DEFAULT,
+    ) -> Request[Any]:
+        """Build a request (``:make-request``).  Its data come from ``data`` by the
+        copy-manipulator-request-data rules, or from ``fields`` by the spec layout of the opcode (a
+        spec opcode with neither gets its layout checked with no fields).  Encoding errors are raised
+        here, in the caller's task."""
+        rc = self.registry.request_code(code, self.options.manipulator_type)
+        if data is not None and fields is not None:
+            raise ValueError("give the request data or its fields, not both")
+        if isinstance(data, bytes | bytearray):
+            payload = bytes(data)
+        elif data is not None:
+            payload = copy_request_data(data)
+        elif rc.spec is not None:
+            payload = encode_request(rc.spec.opcode, **(fields or {}))
+        elif fields:
+            raise ValueError(f"{rc} has no spec layout for fields; pass data")
+        else:
+            payload = b""
+        chosen = rc.default_extractor if isinstance(extractor, Default) else extractor
+        function = self.registry.resolve_extractor(chosen)
+        return Request(
+            rc,
+            payload,
+            response_type or rc.response_type,
+            function,
+            self.options.timeout if isinstance(timeout, Default) else timeout,
+            value_optional=function is None or function in (extract_done, extract_nothing),
+        )
+
+    def send_request(self, request: Request[T]) -> asyncio.Future[T]:
+        """Queue ``request`` (``:send-request``); await the future for its result."""
+        if self._freed_joint is not None:
+            raise JointFreedError(self._freed_joint)
+        return self._process.submit(request)
+
+    async def request(
+        self,
+        code: str | int | RequestCode,
+        data: RequestData | None = None,
+        *,
+        fields: Mapping[str, Any] | None = None,
+        response_type: ResponseType | None = None,
+        extractor: str | DataExtractor[Any] | Default | None = DEFAULT,
+        timeout: Timeout = DEFAULT,
+    ) -> Any:
+        """Make, send and wait for a request (``:request``); returns its extractor's value."""
+        request = self.make_request(
+            code, data, fields=fields, response_type=response_type, extractor=extractor, timeout=timeout
+        )
+        return await self.send_request(request)
+
+    async def _call(
+        self,
+        code: str,
+        extractor: DataExtractor[T],
+        fields: Mapping[str, Any] | None = None,
+        *,
+        timeout: Timeout = DEFAULT,
+    ) -> T:
+        request = self.make_request(code, fields=fields, extractor=extractor, timeout=timeout)
+        result: T = await self.send_request(request)
+        return result
+
+    # ------------------------------------------------------------------ free joint
+
+    async def free_joint(self, joint: int, *, timeout: Timeout = DEFAULT) -> None:
+        """Free joint (0213), 1-based; afterwards only :meth:`release_joint` may be sent."""
+        number = word(joint, "joint", 1, 0xFF)
+        future = self.send_request(
+            self.make_request("free-joint", fields={"joint": number}, extractor=extract_done, timeout=timeout)
+        )
+        self._freed_joint = number
+        try:
+            await future
+        except NonFatalError:
+            self._freed_joint = None  # the server refused: nothing was freed
+            raise
+
+    async def release_joint(self, *, timeout: Timeout = DEFAULT) -> None:
+        """Send the packet that un-frees the joint (the server discards it and answers done)."""
+        if self._freed_joint is None:
+            return
+        request = self.make_request("here", extractor=_extract_unfree, timeout=timeout)
+        try:
+            await self._process.submit(request)
+        finally:
+            self._freed_joint = None
+
+    @asynccontextmanager
+    async def joint_freed(self, joint: int) -> AsyncIterator[None]:
+        """Free ``joint`` for the body of the ``async with``."""
+        await self.free_joint(joint)
+        try:
+            yield
+        finally:
+            await self.release_joint()
+
+    # ------------------------------------------------------------------ asynchronous responses
+
+    async def request_notifications(self, mask: int, *, timeout: Timeout = DEFAULT) -> None:
+        """Choose the asynchronous responses wanted (0257): :data:`NOTIFY_GUARD_HITS` |
+        :data:`NOTIFY_SEGMENTS`."""
+        value = word(mask, "mask")
+        await self._call("request-notifications", extract_done, {"mask": value}, timeout=timeout)
+        self._notifications = value
+
+    def async_responses(self) -> AsyncResponseStream:
+        """An async iterator of asynchronous responses from now on."""
+        return AsyncResponseStream(self._process)
+
+    def add_async_listener(self, listener: AsyncListener) -> Callable[[], None]:
+        """Call ``listener(response)`` for each asynchronous response; returns a remover."""
+        return self._process.add_async_listener(listener)
+
+    def add_error_listener(self, listener: ErrorListener) -> Callable[[], None]:
+        """Call ``listener(error)`` for asynchronous errors, warnings, trivial errors, fatal errors and
+        out-of-sequence responses; returns a remover."""
+        return self._process.add_error_listener(listener)
+
+    def add_close_listener(self, listener: CloseListener) -> Callable[[], None]:
+        """Call ``listener(error)`` once when the connection ends; returns a remover."""
+        return self._process.add_close_listener(listener)
+
+    async def wait_for_segment(self, segment: SupportsInt, *, timeout: float | None = None) -> None:
+        """Return when segment ``segment`` has completed (see the module docstring)."""
+        number = word(segment, "segment")
+        if self._segment_done(number):
+            return
+        if self._process.closed:
+            raise ConnectionLost(f"cannot wait for segment {number}: the connection is closed")
+        future: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        entry = (number, future)
+        self._segment_waiters.append(entry)
+        try:
+            if not self._notifications & NOTIFY_SEGMENTS:
+                await self.request_notifications(self._notifications | NOTIFY_SEGMENTS)
+            try:
+                await asyncio.wait_for(future, timeout)
+            except TimeoutError as exc:
+                if isinstance(exc, ManipError):
+                    raise
+                raise RequestTimeout(None, timeout or 0.0, f"segment {number} did not complete") from None
+        finally:
+            if entry in self._segment_waiters:
+                self._segment_waiters.remove(entry)
+
+    def _segment_done(self, number: int) -> bool:
+        return self._last_segment is not None and seq_le(number, self._last_segment)
+
+    def _on_async_response(self, response: AsyncResponse) -> None:
+        if response.condition == AsyncCondition.SEGMENT_COMPLETED:
+            if self._last_segment is None or seq_gt(response.word3, self._last_segment):
+                self._last_segment = response.word3
+            for number, future in list(self._segment_waiters):
+                if self._segment_done(number) and not future.done():
+                    future.set_result(None)
+        elif response.condition == AsyncCondition.GUARD_HIT and response.word2 == GUARD_STOPS:
+            self._fail_segment_waiters(GuardTrippedError(response))
+
+    def _on_error(self, error: ManipError) -> None:
+        if isinstance(error, AsynchronousError):
+            self._fail_segment_waiters(error)
+
+    def _on_close(self, error: ManipError) -> None:
+        self._fail_segment_waiters(error)
+
+    def _fail_segment_waiters(self, error: ManipError) -> None:
+        for _, future in self._segment_waiters:
+            if not future.done():
+                future.set_exception(error)
+
+    # ------------------------------------------------------------------ lifecycle
+
+    async def aclose(self) -> None:
+        """Disconnect; requests still waiting fail with ConnectionLost("closed by the user")."""
+        await self._process.close()
+
+    async def __aenter__(self) -> Manipulator:
+        return self
+
+    async def __aexit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        await self.aclose()

@@ -1,0 +1,47 @@
+"""How a client connection behaves: timeouts, handler types, trivial errors, registry."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from manip.reference_client.definitions import DEFAULT_REGISTRY, PUMA
+from manip.reference_client.errors import NonFatalError
+from manip.reference_client.handlers import DEFAULT_HANDLER_TYPES, NOTIFY_TRIVIAL_ERRORS
+from manip.reference_client.matching import DEFAULT_HISTORY
+from manip.reference_client.policy import TrivialErrors
+from manip.reference_client.registry import Registry
+
+
+@dataclass(frozen=True)
+class ClientOptions:
+    """Options of :func:`~manip.reference_client.connect.aconnect` and ``connect``."""
+
+    timeout: float | None = 30.0
+    """Default seconds from queueing a request to its reply (None: no limit).  Motion requests are
+    answered when the segment is queued, not when the motion ends, so this is not a motion time."""
+    connect_timeout: float | None = 30.0
+    """Seconds to wait for the initial RESPONSE after the connection opens."""
+    expect_initial_response: bool = True
+    """Wait for the server's initial RESPONSE before sending (clause connect.initial-response)."""
+    notify_trivial_errors: bool = False
+    """Notify trivial non-fatal errors of "done" requests instead of raising them."""
+    trivial_errors: Callable[[NonFatalError], bool] = field(default_factory=TrivialErrors)
+    """Which non-fatal errors are trivial."""
+    handler_types: tuple[str, ...] = DEFAULT_HANDLER_TYPES
+    """The response-handler types, in lookup order (notify-trivial-errors is put in front when
+    ``notify_trivial_errors`` is on)."""
+    manipulator_type: str | None = PUMA
+    """Selects request codes by opcode when several manipulator types define the same one."""
+    registry: Registry = DEFAULT_REGISTRY
+    history: int = DEFAULT_HISTORY
+    """How many finished request numbers are remembered to tell duplicates and late replies apart."""
+    align_args: bool = True
+    """Error-string numbers start at an even offset (erratum error-arg-layout)."""
+    name: str = "manipulator"
+    """Used in log messages."""
+
+    def effective_handler_types(self, notify_trivial_errors: bool | None = None) -> tuple[str, ...]:
+        notify = self.notify_trivial_errors if notify_trivial_errors is None else notify_trivial_errors
+        types = tuple(t for t in self.handler_types if t != NOTIFY_TRIVIAL_ERRORS)
+        return (NOTIFY_TRIVIAL_ERRORS, *types) if notify else types

@@ -1,0 +1,340 @@
+"""Fault switches of the reference server: conditions and defects injected on purpose.
+
+A conformance suite is only as good as the defects it catches.  Each switch here makes the reference
+server either meet a condition of the arm's world (``environment`` faults: the panic button, an obstacle,
+a calibration failure; the server stays conformant and the suite can check how it reports them) or break
+exactly one rule of the protocol (``protocol`` faults).  Running the suite against the server with each
+protocol fault on, one at a time, shows whether some case catches it (mutation testing of the suite).
+
+:data:`FAULTS` describes every switch: its name, one line saying what changes, the clause ids involved
+(for a protocol fault the clauses it violates, for an environment fault the clauses whose behaviour it
+triggers) and, when it takes one, what its argument means.  :class:`FaultSet` is the set a server runs
+with; :meth:`FaultSet.parse` reads the ``NAME`` / ``NAME=ARG`` form a command line gives.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, replace
+from types import MappingProxyType
+from typing import Final, Literal
+
+from manip.arm.sim import Obstacle
+from manip.spec import SPEC
+
+__all__ = ["FAULTS", "Fault", "FaultInfo", "FaultSet"]
+
+
+class Fault(enum.StrEnum):
+    """Names of the fault switches."""
+
+    # environment
+    PANIC_BUTTON = "panic-button"
+    OBSTACLE = "obstacle"
+    CALIBRATE_NZI = "calibrate-nzi"
+    # protocol defects
+    WRONG_REQUEST_NUMBER = "wrong-request-number"
+    ECHO_ACK_NUMBER = "echo-ack-number"
+    NO_INITIAL_RESPONSE = "no-initial-response"
+    INITIAL_RESPONSE_NUMBER = "initial-response-wrong-number"
+    NO_DESCRIBE_TERMINATOR = "no-describe-terminator"
+    MULTI_WRONG_NUMBER = "multi-wrong-number"
+    NO_PROTOCOL_VERSION = "no-protocol-version"
+    SWAPPED_FLOAT_WORDS = "swapped-float-words"
+    WRONG_SEVERITY = "wrong-severity"
+    ERROR_WITHOUT_COLON = "error-without-colon"
+    UNALIGNED_ERROR_ARGS = "unaligned-error-args"
+    UNKNOWN_OPCODE_ANSWERED = "unknown-opcode-answered"
+    LENGTH_UNCHECKED = "length-unchecked"
+    EXTRA_REPLY_AFTER_ERROR = "extra-reply-after-error"
+    FATAL_WITHOUT_CLOSE = "fatal-without-close"
+    NO_JOR = "no-jor"
+    NO_NAP = "no-nap"
+    AWA_IGNORED = "awa-ignored"
+    SPEED_UNCHECKED = "speed-unchecked"
+    SEGMENT_NUMBER_STUCK = "segment-number-stuck"
+    UNREQUESTED_ASYNC = "unrequested-async"
+    ASYNC_WITHOUT_NUMBER = "async-without-request-number"
+    FREE_JOINT_EXECUTES = "free-joint-executes"
+
+
+Kind = Literal["environment", "protocol"]
+
+
+@dataclass(frozen=True)
+class FaultInfo:
+    """What a fault switch does."""
+
+    fault: Fault
+    kind: Kind
+    description: str
+    clauses: tuple[str, ...]
+    argument: str | None = None
+    """What ``NAME=ARG`` means, for the switches that take an argument."""
+
+    @property
+    def name(self) -> str:
+        return self.fault.value
+
+
+def _info(
+    fault: Fault, kind: Kind, description: str, *clauses: str, argument: str | None = None
+) -> tuple[Fault, FaultInfo]:
+    return fault, FaultInfo(fault, kind, description, clauses, argument)
+
+
+FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
+    dict(
+        [
+            _info(
+                Fault.PANIC_BUTTON,
+                "environment",
+                "The panic button is pressed: arm power off, motion aborted with an asynchronous error.",
+                "motion.abort",
+                "motion.reset",
+                "async-error.request-number",
+                argument="seconds after the connection opens (default 1)",
+            ),
+            _info(
+                Fault.OBSTACLE,
+                "environment",
+                "An obstacle stops one joint; moving into it is a collision (asynchronous COL error).",
+                "motion.abort",
+                "motion.reset",
+                "async-error.request-number",
+                argument="JOINT:LOWER:UPPER in degrees, either bound may be empty (e.g. 2::-60)",
+            ),
+            _info(
+                Fault.CALIBRATE_NZI,
+                "environment",
+                "Calibrate finds no zero index: fatal F NZI with the joint mask, then the connection closes.",
+                "calibrate.nzi",
+                "error.fatal-request-number",
+                "error.fatal-then-close",
+                argument="joint numbers, comma separated (default 2,3)",
+            ),
+            _info(
+                Fault.WRONG_REQUEST_NUMBER,
+                "protocol",
+                "Replies echo the request's packet number plus one.",
+                "response.echoes-request-number",
+            ),
+            _info(
+                Fault.ECHO_ACK_NUMBER,
+                "protocol",
+                "Replies echo the request's Chaos ack field instead of its packet number.",
+                "response.echoes-request-number",
+            ),
+            _info(
+                Fault.NO_INITIAL_RESPONSE,
+                "protocol",
+                "No RESPONSE is sent when the connection opens.",
+                "connect.initial-response",
+            ),
+            _info(
+                Fault.INITIAL_RESPONSE_NUMBER,
+                "protocol",
+                "The initial RESPONSE carries the RFC's packet number plus one.",
+                "connect.initial-response-number",
+            ),
+            _info(
+                Fault.NO_DESCRIBE_TERMINATOR,
+                "protocol",
+                "Describe self is not ended by an empty response packet.",
+                "multi.terminated-by-empty",
+                "describe.reply-shape",
+            ),
+            _info(
+                Fault.MULTI_WRONG_NUMBER,
+                "protocol",
+                "Packets of describe self after the first carry the request number plus one.",
+                "multi.same-request-number",
+            ),
+            _info(
+                Fault.NO_PROTOCOL_VERSION,
+                "protocol",
+                "The describe-self alist has no :protocol-version.",
+                "describe.protocol-version",
+            ),
+            _info(
+                Fault.SWAPPED_FLOAT_WORDS,
+                "protocol",
+                "Floats in replies are sent with their two words swapped.",
+                "float.format",
+            ),
+            _info(
+                Fault.WRONG_SEVERITY,
+                "protocol",
+                "Non-fatal and asynchronous errors carry severity F (and fatal errors E).",
+                "error.severity-matches-opcode",
+                "request.unknown-opcode",
+            ),
+            _info(
+                Fault.ERROR_WITHOUT_COLON,
+                "protocol",
+                "Error strings lose the colon after where.",
+                "error-string.format",
+            ),
+            _info(
+                Fault.UNALIGNED_ERROR_ARGS,
+                "protocol",
+                "The numbers after the NUL of an error string start at an odd offset.",
+                "error-string.arg-alignment",
+            ),
+            _info(
+                Fault.UNKNOWN_OPCODE_ANSWERED,
+                "protocol",
+                "An unknown opcode gets an empty normal response instead of C UOP.",
+                "request.unknown-opcode",
+            ),
+            _info(
+                Fault.LENGTH_UNCHECKED,
+                "protocol",
+                "A request with the wrong data length is cut or zero-padded and executed instead of C BDL.",
+                "request.data-length",
+            ),
+            _info(
+                Fault.EXTRA_REPLY_AFTER_ERROR,
+                "protocol",
+                "A non-fatal error is followed by an empty normal response to the same request.",
+                "error.non-fatal-is-reply",
+                "request.one-reply",
+            ),
+            _info(
+                Fault.FATAL_WITHOUT_CLOSE,
+                "protocol",
+                "A fatal error leaves the connection open and the session running.",
+                "error.fatal-then-close",
+            ),
+            _info(
+                Fault.NO_JOR,
+                "protocol",
+                "Set joint angles accepts out-of-range joints (clamped to the limits) instead of JOR.",
+                "motion.checked-before-queue",
+            ),
+            _info(
+                Fault.NO_NAP,
+                "protocol",
+                "Motion requests are accepted without arm power instead of NAP.",
+                "motion.no-power",
+            ),
+            _info(
+                Fault.AWA_IGNORED,
+                "protocol",
+                "Motion requests are accepted after an abort instead of AWA.",
+                "motion.abort",
+            ),
+            _info(
+                Fault.SPEED_UNCHECKED,
+                "protocol",
+                "Set speed answers done to any factor (out-of-range ones are ignored) instead of C BVA.",
+                "speed.range",
+            ),
+            _info(
+                Fault.SEGMENT_NUMBER_STUCK,
+                "protocol",
+                "Every segment gets number 1.",
+                "segment.number-increases",
+            ),
+            _info(
+                Fault.UNREQUESTED_ASYNC,
+                "protocol",
+                "Segment-completed asynchronous responses are sent without being requested.",
+                "async.only-when-requested",
+            ),
+            _info(
+                Fault.ASYNC_WITHOUT_NUMBER,
+                "protocol",
+                "Asynchronous responses lack the leading request-number word.",
+                "async.layout",
+            ),
+            _info(
+                Fault.FREE_JOINT_EXECUTES,
+                "protocol",
+                "The packet after free joint is executed instead of discarded with done.",
+                "free-joint.awaits-next-packet",
+                "free-joint.replies",
+            ),
+        ]
+    )
+)
+
+for _fault in Fault:
+    if _fault not in FAULTS:
+        raise RuntimeError(f"fault {_fault.value} has no description")
+for _info_entry in FAULTS.values():
+    for _clause in _info_entry.clauses:
+        if _clause not in SPEC.clauses:
+            raise RuntimeError(f"fault {_info_entry.name} names unknown clause {_clause!r}")
+
+DEFAULT_PANIC_DELAY: Final = 1.0
+DEFAULT_NZI_JOINTS: Final = (2, 3)
+
+
+@dataclass(frozen=True)
+class FaultSet:
+    """The faults a server runs with, and the arguments of the environment faults."""
+
+    active: frozenset[Fault] = frozenset()
+    panic_delay: float = DEFAULT_PANIC_DELAY
+    """Seconds after the connection opens at which the panic button is pressed."""
+    obstacle: Obstacle | None = None
+    nzi_joints: tuple[int, ...] = DEFAULT_NZI_JOINTS
+
+    def __post_init__(self) -> None:
+        if Fault.OBSTACLE in self.active and self.obstacle is None:
+            raise ValueError("the obstacle fault needs an Obstacle")
+        if not self.nzi_joints or any(not 1 <= j <= 6 for j in self.nzi_joints):
+            raise ValueError("calibrate-nzi joints must be 1..6")
+        if self.panic_delay < 0.0:
+            raise ValueError("the panic delay must not be negative")
+
+    def __contains__(self, fault: object) -> bool:
+        return fault in self.active
+
+    @classmethod
+    def of(cls, *faults: Fault, obstacle: Obstacle | None = None) -> FaultSet:
+        """A set of argument-free faults (and an obstacle, switched on when given)."""
+        active = frozenset(faults) | ({Fault.OBSTACLE} if obstacle is not None else frozenset())
+        return cls(active, obstacle=obstacle)
+
+    @classmethod
+    def parse(cls, specs: Iterable[str]) -> FaultSet:
+        """Read ``NAME`` or ``NAME=ARG`` items; ValueError names the bad one."""
+        out = cls()
+        for spec in specs:
+            name, sep, arg = spec.partition("=")
+            try:
+                fault = Fault(name.strip())
+            except ValueError:
+                known = ", ".join(f.value for f in Fault)
+                raise ValueError(f"unknown fault {name!r}; known: {known}") from None
+            if sep and FAULTS[fault].argument is None:
+                raise ValueError(f"fault {fault.value} takes no argument")
+            try:
+                out = _apply(out, fault, arg.strip() if sep else None)
+            except ValueError as exc:
+                raise ValueError(f"fault {fault.value}: {exc} (argument: {FAULTS[fault].argument})") from exc
+        return out
+
+
+def _apply(faults: FaultSet, fault: Fault, arg: str | None) -> FaultSet:
+    """``faults`` with ``fault`` switched on and its argument read."""
+    active = faults.active | {fault}
+    if fault is Fault.PANIC_BUTTON:
+        delay = DEFAULT_PANIC_DELAY if arg is None else float(arg)
+        return replace(faults, active=active, panic_delay=delay)
+    if fault is Fault.CALIBRATE_NZI:
+        joints = DEFAULT_NZI_JOINTS if arg is None else tuple(int(j) for j in arg.split(","))
+        return replace(faults, active=active, nzi_joints=joints)
+    if fault is Fault.OBSTACLE:
+        if arg is None:
+            raise ValueError("needs an argument")
+        parts = arg.split(":")
+        if len(parts) != 3:
+            raise ValueError(f"{arg!r} is not JOINT:LOWER:UPPER")
+        lower = float(parts[1]) if parts[1] else None
+        upper = float(parts[2]) if parts[2] else None
+        return replace(faults, active=active, obstacle=Obstacle(int(parts[0]), lower, upper))
+    return replace(faults, active=active)

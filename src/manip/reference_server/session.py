@@ -1,0 +1,577 @@
+"""One connection of the reference Puma server, as a sans-I/O state machine.
+
+Theory of operation
+===================
+
+A driver (not here: it owns the Chaos connection, the clock and the timers) feeds the session what
+happens and sends what the session returns:
+
+* :meth:`ServerSession.on_open` once the connection is open, with the packet number of the RFC;
+* :meth:`ServerSession.on_request` for every data packet, with its opcode, packet number, data and
+  (optionally) the Chaos ack field;
+* :meth:`ServerSession.tick` every 16 ms (any period works: the arm runs every servo cycle due);
+* :meth:`ServerSession.on_close` when the peer closes or the connection breaks.
+
+Each call returns an :class:`Output`: the server packets to send, in order, as ``(opcode, data)``, and
+``close``, set after a fatal error: send the packets, then close the connection (CLS).  Time is always an
+argument (seconds, any origin, never decreasing); nothing here reads a clock or touches a socket.
+
+States and transitions (:data:`TRANSITIONS` is the table the code runs)::
+
+    state              open             request                        tick      close
+    AWAITING_INITIAL   initial RESPONSE  (driver error)                 -         -> CLOSED
+                       -> READY
+    READY              (driver error)   serve it; stay, or             run arm   -> CLOSED
+                                        -> FREE_JOINT_WAIT (free joint),
+                                        -> CLOSED (fatal error)
+    FREE_JOINT_WAIT    (driver error)   un-free, answer done           run arm   -> CLOSED
+                                        without executing -> READY
+    CLOSED             (driver error)   ignored                        ignored   ignored
+
+The initial RESPONSE carries only the RFC's packet number (erratum ``initial-response``).  Serving a
+request goes: run the arm up to ``now`` (so asynchronous events that happened first are sent first,
+and requests read fresh move-process data); look the opcode up in the spec (C UOP if unknown); decode
+its data by the spec layout (C BDL for a wrong length, C BFL for a reserved-operand float); call the
+handler that :data:`HANDLERS` maps the spec name to (the wrist opcodes go to the :class:`Wrist`); send
+its reply in the form the spec gives the opcode (done, data, segment number, multi-packet text).  A
+handler refuses with :class:`RequestError`: a non-fatal error (0202) is the reply; a fatal one (0201,
+first word = the packet last received) ends the session.  Motion requests are checked and queued on
+the :class:`~manip.arm.sim.ArmSim` and answered with the segment number before the arm moves.
+
+Asynchronous packets carry the number of the last request processed (the RFC's before the first one):
+segment completed (0203, code 2) only while the client has asked for it with request-notifications
+(0257, mask bit 1; bit 0 = guard hit, for the wrist); aborts of the move process as asynchronous errors
+(0204); a joint lagging its command as an asynchronous warning (0205).
+
+Fault switches (:mod:`manip.reference_server.faults`) bend single behaviours for testing conformance
+suites; each place that consults one names it.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any, Final
+
+from manip.arm.kinematics import PUMA600, ArmModel, forward
+from manip.arm.sim import ArmSim, FollowingWarning, MotionAborted, Refused, SegmentCompleted
+from manip.arm.transform import Transform
+from manip.codecs.error_string import ErrorMessage
+from manip.codecs.errors import DecodeError
+from manip.codecs.lispm_text import encode_lispm
+from manip.codecs.messages import (
+    MAX_TEXT_PER_PACKET,
+    Value,
+    decode_request,
+    encode_async,
+    encode_error,
+    encode_reply,
+)
+from manip.reference_server import errors
+from manip.reference_server.describe import Description, describe_text
+from manip.reference_server.errors import RequestError
+from manip.reference_server.faults import Fault, FaultSet
+from manip.reference_server.wrist import NoWrist, Wrist
+from manip.spec import SPEC, RequestOpcode
+from manip.spec.constants import AsyncCondition, ServerOp
+
+__all__ = [
+    "HANDLERS",
+    "TRANSITIONS",
+    "WRIST_OPERATIONS",
+    "Input",
+    "Outgoing",
+    "Output",
+    "ServerConfig",
+    "ServerSession",
+    "SessionUsageError",
+    "State",
+]
+
+log = logging.getLogger("manip.reference_server")
+
+WORD_MASK: Final = 0xFFFF
+
+
+class State(enum.Enum):
+    """Where a session stands (see the table in the module docstring)."""
+
+    AWAITING_INITIAL = "awaiting-initial"
+    READY = "ready"
+    FREE_JOINT_WAIT = "free-joint-wait"
+    CLOSED = "closed"
+
+
+class Input(enum.Enum):
+    """What the driver tells the session."""
+
+    OPEN = "open"
+    REQUEST = "request"
+    TICK = "tick"
+    CLOSE = "close"
+
+
+class SessionUsageError(RuntimeError):
+    """The driver called the session out of order (a request before open, open twice, ...)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Outgoing:
+    """One server packet: Chaos opcode and data."""
+
+    opcode: int
+    data: bytes
+
+
+@dataclass(frozen=True)
+class Output:
+    """What to send, in order; with ``close`` the driver closes the connection after sending."""
+
+    packets: tuple[Outgoing, ...] = ()
+    close: bool = False
+
+
+@dataclass(frozen=True)
+class ServerConfig:
+    """How the server describes itself, which arm it simulates, and its fault switches."""
+
+    description: Description = field(default_factory=Description)
+    model: ArmModel = PUMA600
+    powered_at_open: bool = False
+    """Arm power at the start (off: clients send Enable high power before moving)."""
+    faults: FaultSet = field(default_factory=FaultSet)
+
+
+@dataclass(frozen=True, slots=True)
+class _Event:
+    kind: Input
+    now: float
+    opcode: int = 0
+    packet_no: int = 0
+    data: bytes = b""
+    ack_no: int | None = None
+
+
+Handler = Callable[["ServerSession", Mapping[str, Value], float], dict[str, Any]]
+"""A request handler: the decoded values and the time in, the reply's values out (``{}`` for done)."""
+
+_SEGMENT_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
+_NOTIFICATION_MASK: Final = sum(1 << code.notification_bit for code in SPEC.async_codes.values())
+
+
+def _word(n: int) -> bytes:
+    return (n & WORD_MASK).to_bytes(2, "little")
+
+
+class ServerSession:
+    """One connection's protocol state machine; see the module docstring."""
+
+    def __init__(
+        self, config: ServerConfig | None = None, *, arm: ArmSim | None = None, wrist: Wrist | None = None
+    ) -> None:
+        self.config = config or ServerConfig()
+        faults = self.config.faults
+        self.faults = faults
+        self.arm = arm or ArmSim(self.config.model, powered=self.config.powered_at_open)
+        self.wrist: Wrist = wrist or NoWrist()
+        if Fault.SEGMENT_NUMBER_STUCK in faults:
+            self.arm.segment_step = 0
+        self.arm.enforce_power = Fault.NO_NAP not in faults
+        self.arm.enforce_abort = Fault.AWA_IGNORED not in faults
+        if faults.obstacle is not None and Fault.OBSTACLE in faults:
+            self.arm.place_obstacle(faults.obstacle)
+        self.state = State.AWAITING_INITIAL
+        self.notifications = 0
+        """The request-notifications mask in force (bit 0 guard hit, bit 1 segment completed)."""
+        self.last_processed: int | None = None
+        """Packet number of the last request processed (the RFC's until the first request)."""
+        self.last_received: int | None = None
+        self._now = float("-inf")
+        self._out: list[Outgoing] = []
+        self._close = False
+        self._next_state: State | None = None
+
+    # ------------------------------------------------------------------------------ driver inputs
+    def on_open(self, now: float, rfc_packet_no: int) -> Output:
+        """The connection is open; ``rfc_packet_no`` is the packet number of the RFC that opened it."""
+        return self._step(_Event(Input.OPEN, now, packet_no=rfc_packet_no))
+
+    def on_request(
+        self, now: float, opcode: int, packet_no: int, data: bytes, ack_no: int | None = None
+    ) -> Output:
+        """A data packet from the client (``ack_no``: its Chaos ack field, when the driver has it)."""
+        return self._step(_Event(Input.REQUEST, now, opcode, packet_no, bytes(data), ack_no))
+
+    def tick(self, now: float) -> Output:
+        """Run the arm up to ``now``; returns the asynchronous packets due."""
+        return self._step(_Event(Input.TICK, now))
+
+    def on_close(self, now: float) -> Output:
+        """The connection is gone; the session ends (the arm stops with it)."""
+        return self._step(_Event(Input.CLOSE, now))
+
+    @property
+    def operations(self) -> tuple[int, ...]:
+        """The opcodes this session answers normally, as describe self lists them."""
+        served = {SPEC.request(name).opcode for name in HANDLERS}
+        return tuple(sorted(served | self.wrist.served))
+
+    # ---------------------------------------------------------------------------- the machine
+    def _step(self, event: _Event) -> Output:
+        transition = TRANSITIONS.get((self.state, event.kind))
+        if transition is None:
+            raise SessionUsageError(f"{event.kind.value} in state {self.state.value}")
+        if event.now < self._now:
+            raise ValueError(f"time went backwards: {event.now} < {self._now}")
+        self._now = event.now
+        self._out, self._close = [], False
+        action, fixed = transition
+        decided = action(self, event)
+        self.state = decided or fixed or self.state
+        return Output(tuple(self._out), self._close)
+
+    def _emit(self, opcode: int, data: bytes) -> None:
+        self._out.append(Outgoing(opcode, data))
+
+    def _ignore(self, event: _Event) -> State | None:
+        return None
+
+    def _send_initial(self, event: _Event) -> State | None:
+        self.last_processed = event.packet_no
+        self.arm.tick(event.now)  # the move process starts with the connection
+        if Fault.PANIC_BUTTON in self.faults:
+            self.arm.press_panic(at=event.now + self.faults.panic_delay)
+        if Fault.NO_INITIAL_RESPONSE not in self.faults:
+            number = event.packet_no + (1 if Fault.INITIAL_RESPONSE_NUMBER in self.faults else 0)
+            self._emit(ServerOp.RESPONSE, _word(number))
+        return None
+
+    def _run_arm(self, event: _Event) -> State | None:
+        """Run the move process up to ``now`` and report what it did."""
+        number = self.last_processed or 0
+        for ev in self.arm.tick(event.now):
+            if isinstance(ev, SegmentCompleted):
+                if self.notifications & _SEGMENT_BIT or Fault.UNREQUESTED_ASYNC in self.faults:
+                    self._emit_async(number, AsyncCondition.SEGMENT_COMPLETED, 0, ev.segment)
+            elif isinstance(ev, MotionAborted):
+                self._emit_error(ServerOp.ASYNCHRONOUS_ERROR, number, errors.abort_error(ev))
+            elif isinstance(ev, FollowingWarning):
+                self._emit_error(ServerOp.ASYNCHRONOUS_WARNING, number, errors.warning_error(ev))
+        return None
+
+    def _discard(self, event: _Event) -> State | None:
+        """The packet after free joint: un-free the joint, answer done, do not execute it."""
+        self._run_arm(event)
+        self.arm.unfree()
+        if Fault.FREE_JOINT_EXECUTES in self.faults:
+            return self._serve(event)
+        self.last_received = self.last_processed = event.packet_no
+        self._emit(ServerOp.RESPONSE, _word(self._echo(event)))
+        return None
+
+    def _serve(self, event: _Event) -> State | None:
+        self._run_arm(event)
+        self.last_received = self.last_processed = event.packet_no
+        number = self._echo(event)
+        self._next_state = None
+        op = SPEC.requests.get(event.opcode)
+        try:
+            if op is None:
+                if Fault.UNKNOWN_OPCODE_ANSWERED in self.faults:
+                    self._emit(ServerOp.RESPONSE, _word(number))
+                    return None
+                raise errors.unknown_opcode(event.opcode)
+            values = self._decode(op, event.data)
+            try:
+                handler = HANDLERS.get(op.name)
+                if handler is None:
+                    result = self.wrist.handle(op, values, event.now, self.arm)
+                else:
+                    result = handler(self, values, event.now)
+            except Refused as refusal:
+                raise errors.refusal_error(op.name, refusal) from refusal
+        except RequestError as exc:
+            if exc.fatal:
+                return self._fatal(number, exc.error)
+            self._emit_error(ServerOp.NON_FATAL_ERROR, number, exc.error)
+            if Fault.EXTRA_REPLY_AFTER_ERROR in self.faults:
+                self._emit(ServerOp.RESPONSE, _word(number))
+            return None
+        except Exception:
+            log.exception("handler for opcode %#o failed", event.opcode)
+            self._emit_error(ServerOp.NON_FATAL_ERROR, number, errors.internal_error(event.opcode).error)
+            return None
+        self._reply(op, number, result)
+        return self._next_state
+
+    def _fatal(self, number: int, error: ErrorMessage) -> State | None:
+        self._emit_error(ServerOp.FATAL_ERROR, number, error)
+        if Fault.FATAL_WITHOUT_CLOSE in self.faults:
+            return None
+        self._close = True
+        return State.CLOSED
+
+    # ------------------------------------------------------------------------------- encoding
+    def _echo(self, event: _Event) -> int:
+        """The request number a reply to ``event`` carries."""
+        if Fault.ECHO_ACK_NUMBER in self.faults:
+            return event.ack_no if event.ack_no is not None else 0
+        if Fault.WRONG_REQUEST_NUMBER in self.faults:
+            return (event.packet_no + 1) & WORD_MASK
+        return event.packet_no
+
+    def _decode(self, op: RequestOpcode, data: bytes) -> Mapping[str, Value]:
+        try:
+            return decode_request(op.opcode, data).values
+        except DecodeError as exc:
+            expected = op.request.fixed_size or 0
+            if exc.clause == "request.data-length":
+                if Fault.LENGTH_UNCHECKED in self.faults:
+                    return decode_request(op.opcode, data[:expected].ljust(expected, b"\0")).values
+                raise errors.bad_length(expected, len(data)) from exc
+            if exc.clause == "float.reserved-operand":
+                raise errors.bad_float((exc.offset or 0) // 2) from exc
+            raise errors.bad_value(op.name, exc.message) from exc
+
+    def _reply(self, op: RequestOpcode, number: int, values: dict[str, Any]) -> None:
+        if op.response.kind == "multi":
+            self._reply_text(number, str(values["text"]))
+            return
+        data = encode_reply(op.opcode, number, **values)
+        floats_only = all(f.type.element == "float" for f in op.response.data.fields)
+        if Fault.SWAPPED_FLOAT_WORDS in self.faults and op.response.kind == "data" and floats_only:
+            body = data[2:]
+            swapped = (body[i + 2 : i + 4] + body[i : i + 2] for i in range(0, len(body), 4))
+            data = data[:2] + b"".join(swapped)
+        self._emit(ServerOp.RESPONSE, data)
+
+    def _reply_text(self, number: int, text: str) -> None:
+        """A multi-packet text reply: one packet per line (split further if a line is too long)."""
+        first = True
+        for line in text.splitlines(keepends=True):
+            raw = encode_lispm(line)
+            for i in range(0, len(raw), MAX_TEXT_PER_PACKET):
+                n = number if first or Fault.MULTI_WRONG_NUMBER not in self.faults else number + 1
+                self._emit(ServerOp.RESPONSE, _word(n) + raw[i : i + MAX_TEXT_PER_PACKET])
+                first = False
+        if Fault.NO_DESCRIBE_TERMINATOR not in self.faults:
+            self._emit(ServerOp.RESPONSE, _word(number))
+
+    def _emit_error(self, opcode: int, number: int, error: ErrorMessage) -> None:
+        if Fault.WRONG_SEVERITY in self.faults:
+            error = replace(error, severity="E" if opcode == ServerOp.FATAL_ERROR else "F")
+        if Fault.UNALIGNED_ERROR_ARGS not in self.faults and Fault.ERROR_WITHOUT_COLON not in self.faults:
+            self._emit(opcode, encode_error(opcode, number, error))
+            return
+        body = error.encode(align_args=Fault.UNALIGNED_ERROR_ARGS not in self.faults)
+        if Fault.UNALIGNED_ERROR_ARGS in self.faults and error.args:
+            after_nul = body.index(0) + 1
+            if after_nul % 2 == 0:  # would be aligned by luck: push the numbers to an odd offset
+                body = body[:after_nul] + b"\0" + body[after_nul:]
+        if Fault.ERROR_WITHOUT_COLON in self.faults:
+            body = body.replace(b": ", b" ", 1)
+        self._emit(opcode, _word(number) + body)
+
+    def _emit_async(self, number: int, condition: int, word2: int, word3: int) -> None:
+        with_number = Fault.ASYNC_WITHOUT_NUMBER not in self.faults
+        data = encode_async(number, condition, word2, word3, async_has_request_number=with_number)
+        self._emit(ServerOp.ASYNCHRONOUS_RESPONSE, data)
+
+    # ------------------------------------------------------------------------------- handlers
+    def _transform(self, op: str, values: Mapping[str, Value]) -> Transform:
+        floats = values["transform"]
+        assert isinstance(floats, tuple)
+        try:
+            return Transform.from_floats([float(x) for x in floats], orthonormalise=True)
+        except ValueError as exc:
+            raise errors.bad_value(op, "N, O and A are not a rotation") from exc
+
+    def _describe_self(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        text = describe_text(
+            self.config.description,
+            self.arm.model,
+            self.operations,
+            with_protocol_version=Fault.NO_PROTOCOL_VERSION not in self.faults,
+        )
+        return {"text": text}
+
+    def _here(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        return {"transform": self.arm.pose().to_floats()}
+
+    def _joint_angles(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        return {"joints": self.arm.actual}
+
+    def _calibrate(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        if Fault.CALIBRATE_NZI in self.faults:
+            raise errors.nzi_error(self.faults.nzi_joints)
+        return {}  # the simulated arm needs no calibration
+
+    def _move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        return {"segment": self.arm.move_to(self._transform("move", values), now)}
+
+    def _straight_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        pose = self._transform("straight-move", values)
+        return {"segment": self.arm.move_to(pose, now, straight=True)}
+
+    def _kill_power(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        self.arm.kill_power()
+        return {}
+
+    def _set_configuration(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        low = _int(values["configuration"]) & 0xFF  # erratum set-configuration: the low byte counts
+        if low & 0xFE:
+            raise errors.bad_value("set-configuration", f"configuration {low} has bits other than bit 0 set")
+        self.arm.set_configuration(lefty=bool(low & 1))
+        return {}
+
+    def _hand(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        self.arm.set_hand(_int(values["amount"]) != 0)
+        return {}
+
+    def _incremental_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        return {"segment": self.arm.move_increment(_floats(values["delta"]), now)}
+
+    def _incremental_straight_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        return {"segment": self.arm.move_increment(_floats(values["delta"]), now, straight=True)}
+
+    def _free_joint(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        self.arm.free(_int(values["joint"]) & 0xFF)  # the first byte is the joint number
+        self._next_state = State.FREE_JOINT_WAIT
+        return {}
+
+    def _ready(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        return {"segment": self.arm.move_ready(now)}
+
+    def _set_joint_angles(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        goal = _floats(values["joints"])
+        return {"segment": self.arm.move_joints(goal, now, check_limits=Fault.NO_JOR not in self.faults)}
+
+    def _set_speed(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        factor = values["factor"]
+        assert isinstance(factor, float)
+        try:
+            self.arm.set_speed(factor)
+        except Refused:
+            if Fault.SPEED_UNCHECKED not in self.faults:
+                raise
+        return {}
+
+    def _enable_power(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        self.arm.enable_power()
+        return {}
+
+    def _solve_forwards(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        pose = self._transform("solve-forwards", values)
+        return {"joints": self.arm.solve(pose, _floats(values["current"]))}
+
+    def _solve_backwards(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        return {"transform": forward(_floats(values["joints"]), self.arm.model.geometry).to_floats()}
+
+    def _request_notifications(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        mask = _int(values["mask"])
+        if mask & ~_NOTIFICATION_MASK:
+            raise errors.bad_value("request-notifications", f"mask {mask:#o} has undefined bits set")
+        self.notifications = mask
+        return {}
+
+    def _reset_abort(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        self.arm.reset_abort()
+        return {}
+
+
+def _int(value: Value) -> int:
+    assert isinstance(value, int)
+    return value
+
+
+def _floats(value: Value) -> tuple[float, ...]:
+    assert isinstance(value, tuple)
+    return tuple(float(x) for x in value)
+
+
+Transition = tuple[Callable[[ServerSession, _Event], State | None], State | None]
+"""An action and the state after it (None: the state the action returns, else unchanged)."""
+
+TRANSITIONS: Final[Mapping[tuple[State, Input], Transition]] = {
+    (State.AWAITING_INITIAL, Input.OPEN): (ServerSession._send_initial, State.READY),
+    (State.AWAITING_INITIAL, Input.TICK): (ServerSession._ignore, None),
+    (State.AWAITING_INITIAL, Input.CLOSE): (ServerSession._ignore, State.CLOSED),
+    (State.READY, Input.REQUEST): (ServerSession._serve, None),
+    (State.READY, Input.TICK): (ServerSession._run_arm, None),
+    (State.READY, Input.CLOSE): (ServerSession._ignore, State.CLOSED),
+    (State.FREE_JOINT_WAIT, Input.REQUEST): (ServerSession._discard, State.READY),
+    (State.FREE_JOINT_WAIT, Input.TICK): (ServerSession._run_arm, None),
+    (State.FREE_JOINT_WAIT, Input.CLOSE): (ServerSession._ignore, State.CLOSED),
+    (State.CLOSED, Input.REQUEST): (ServerSession._ignore, None),
+    (State.CLOSED, Input.TICK): (ServerSession._ignore, None),
+    (State.CLOSED, Input.CLOSE): (ServerSession._ignore, None),
+}
+"""The state table.  A missing pair (open twice, a request before open) is a driver error."""
+
+HANDLERS: Final[Mapping[str, Handler]] = {
+    "describe-self": ServerSession._describe_self,
+    "here": ServerSession._here,
+    "joint-angles": ServerSession._joint_angles,
+    "calibrate": ServerSession._calibrate,
+    "move": ServerSession._move,
+    "straight-move": ServerSession._straight_move,
+    "kill-power": ServerSession._kill_power,
+    "set-configuration": ServerSession._set_configuration,
+    "hand": ServerSession._hand,
+    "incremental-move": ServerSession._incremental_move,
+    "incremental-straight-move": ServerSession._incremental_straight_move,
+    "free-joint": ServerSession._free_joint,
+    "ready": ServerSession._ready,
+    "set-joint-angles": ServerSession._set_joint_angles,
+    "set-speed": ServerSession._set_speed,
+    "enable-power": ServerSession._enable_power,
+    "solve-forwards": ServerSession._solve_forwards,
+    "solve-backwards": ServerSession._solve_backwards,
+    "request-notifications": ServerSession._request_notifications,
+    "reset-abort": ServerSession._reset_abort,
+}
+"""Request handlers by spec name: every opcode the session itself serves."""
+
+WRIST_OPERATIONS: Final = frozenset(
+    {
+        "read-forces",
+        "read-raw-gauges",
+        "set-gauge-offsets",
+        "calibrate-wrist",
+        "set-spring",
+        "set-damping",
+        "set-joint-damping",
+        "set-frame-vector",
+        "set-weight",
+        "set-guard",
+        "clear-guard",
+        "compliant-move",
+        "examine-wrist",
+        "deposit-wrist",
+        "wrist-version",
+        "set-commanded-force",
+    }
+)
+"""Spec requests handed to the :class:`Wrist` (answered C UIM without one)."""
+
+
+def _check_tables() -> None:
+    """Every spec request is served by a handler or handed to the wrist, and nothing else is named."""
+    names = {op.name for op in SPEC.requests.values()}
+    unknown = (set(HANDLERS) | WRIST_OPERATIONS) - names
+    if unknown:
+        raise RuntimeError(f"dispatch names requests the spec does not define: {sorted(unknown)}")
+    both = set(HANDLERS) & WRIST_OPERATIONS
+    if both:
+        raise RuntimeError(f"requests both served and handed to the wrist: {sorted(both)}")
+    missing = names - set(HANDLERS) - WRIST_OPERATIONS
+    if missing:
+        raise RuntimeError(f"spec requests with no handler: {sorted(missing)}")
+    pairs = {(s, i) for s in State for i in Input}
+    if set(TRANSITIONS) - pairs:
+        raise RuntimeError("the state table names unknown states")
+
+
+_check_tables()

@@ -1,0 +1,366 @@
+"""The simulated arm and move process: queueing, servo cycles, collisions, the panic button, aborts."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from manip.arm.kinematics import READY, forward
+from manip.arm.sim import (
+    AbortCause,
+    ArmEvent,
+    ArmSim,
+    FollowingWarning,
+    MotionAborted,
+    Obstacle,
+    Refused,
+    SegmentCompleted,
+)
+from manip.arm.trajectory import TICK, Scheme
+from manip.arm.transform import Transform
+
+GOAL = (10.0, -80.0, 100.0, 20.0, 30.0, 40.0)
+OTHER = (-20.0, -100.0, 80.0, -10.0, 20.0, -30.0)
+
+
+def _arm(**kw: object) -> ArmSim:
+    arm = ArmSim(powered=True, **kw)  # type: ignore[arg-type]
+    arm.tick(0.0)
+    return arm
+
+
+def _run(arm: ArmSim, until: float, step: float = TICK) -> tuple[list[ArmEvent], float]:
+    """Tick every ``step`` from the arm's clock to ``until``."""
+    events: list[ArmEvent] = []
+    t = arm.time
+    while t < until - 1e-12:
+        t = min(until, t + step)
+        events += arm.tick(t)
+    return events, t
+
+
+def _run_idle(arm: ArmSim, limit: float = 30.0) -> tuple[list[ArmEvent], float]:
+    events: list[ArmEvent] = []
+    t = arm.time
+    while arm.moving:
+        assert t < limit, "the arm never came to rest"
+        t += TICK
+        events += arm.tick(t)
+    return events, t
+
+
+def _completed(events: list[ArmEvent]) -> list[int]:
+    return [e.segment for e in events if isinstance(e, SegmentCompleted)]
+
+
+def _close(a: tuple[float, ...], b: tuple[float, ...], tol: float = 1e-6) -> bool:
+    return max(abs(x - y) for x, y in zip(a, b, strict=True)) <= tol
+
+
+# ------------------------------------------------------------------------------------- basics
+def test_starts_at_ready_unpowered_and_refuses_motion() -> None:
+    arm = ArmSim()
+    assert arm.actual == READY and arm.commanded == READY and not arm.powered
+    with pytest.raises(Refused) as info:
+        arm.move_joints(GOAL, 0.0)
+    assert info.value.code == "NAP"
+    assert arm.next_segment == 1  # a refusal uses no segment number
+
+
+def test_moves_over_ticks_to_the_goal_and_reports_completion() -> None:
+    arm = _arm()
+    n = arm.move_joints(GOAL, 0.001)
+    assert n == 1 and arm.moving and arm.actual == READY  # queued, not moved yet
+    events, _ = _run(arm, 0.2)
+    assert not _completed(events)
+    assert not _close(arm.actual, READY) and not _close(arm.actual, GOAL)
+    events, _ = _run_idle(arm)
+    assert _completed(events) == [1]
+    assert _close(arm.actual, GOAL) and arm.commanded == arm.actual
+
+
+def test_segment_numbers_increase_in_queue_order_and_complete_in_order() -> None:
+    arm = _arm()
+    numbers = [arm.move_joints(g, 0.0) for g in (GOAL, OTHER, READY, GOAL)]
+    assert numbers == [1, 2, 3, 4]
+    events, _ = _run_idle(arm)
+    assert _completed(events) == numbers
+    assert _close(arm.actual, GOAL)
+
+
+def test_segment_numbers_wrap_modulo_2_16() -> None:
+    arm = _arm()
+    arm._next_segment = 0xFFFE  # skip 65533 moves
+    numbers = [arm.move_joints(g, 0.0) for g in (GOAL, OTHER, READY)]
+    assert numbers == [0xFFFE, 0xFFFF, 0]
+
+
+def test_queue_full_is_refused_with_sqf() -> None:
+    arm = _arm(max_queue=3)
+    for g in (GOAL, OTHER, READY):
+        arm.move_joints(g, 0.0)
+    with pytest.raises(Refused) as info:
+        arm.move_joints(GOAL, 0.0)
+    assert info.value.code == "SQF"
+
+
+def test_joint_limits_are_checked_before_queueing() -> None:
+    arm = _arm()
+    with pytest.raises(Refused) as info:
+        arm.move_joints((0.0, -90.0, 90.0, 0.0, 150.0, 0.0), 0.0)
+    assert info.value.code == "JOR" and info.value.joints == (5,)
+    assert not arm.moving and arm.next_segment == 1
+    # a faulty server clamps instead
+    n = arm.move_joints((0.0, -90.0, 90.0, 0.0, 150.0, 0.0), 0.0, check_limits=False)
+    _run_idle(arm)
+    assert n == 1 and arm.actual[4] == pytest.approx(100.0)
+
+
+def test_requests_must_not_be_older_than_the_last_servo_cycle() -> None:
+    arm = _arm()
+    arm.tick(1.0)
+    with pytest.raises(ValueError, match="tick first"):
+        arm.move_joints(GOAL, 0.5)
+
+
+def test_idle_cycles_are_skipped() -> None:
+    arm = _arm()
+    started = time.perf_counter()
+    arm.tick(10_000.0)
+    assert time.perf_counter() - started < 0.05
+    assert arm.time == pytest.approx(10_000.0)
+
+
+# ----------------------------------------------------------------------------------- schemes
+def _duration(arm: ArmSim, goal: tuple[float, ...]) -> float:
+    start = arm.time
+    arm.move_joints(goal, start)
+    _, end = _run_idle(arm)
+    return end - start
+
+
+@pytest.mark.parametrize("scheme", [Scheme.LINEAR_BLEND, Scheme.QUINTIC])
+def test_speed_factor_scales_durations(scheme: Scheme) -> None:
+    full = _duration(_arm(scheme=scheme), GOAL)
+    slow = _arm(scheme=scheme)
+    slow.set_speed(0.5)
+    assert _duration(slow, GOAL) == pytest.approx(2 * full, abs=2 * TICK)
+
+
+def test_speed_factor_bounds() -> None:
+    arm = _arm()
+    for bad in (0.0, -0.5, 1.0001, math.inf):
+        with pytest.raises(Refused) as info:
+            arm.set_speed(bad)
+        assert info.value.code == "BVA"
+    arm.set_speed(1.0)
+    arm.set_speed(1e-3)
+    assert arm.speed == 1e-3
+
+
+def test_quintic_segments_arrive_at_rest_on_the_goal() -> None:
+    arm = _arm(scheme=Scheme.QUINTIC)
+    arm.move_joints(GOAL, 0.0)
+    arm.move_joints(OTHER, 0.0)
+    events, _ = _run_idle(arm)
+    assert _completed(events) == [1, 2] and _close(arm.actual, OTHER)
+
+
+def test_cosine_debugging_wave_returns_to_its_start() -> None:
+    arm = _arm()
+    n = arm.move_cosine(1, 20.0, 1.0, 0.0)
+    _, _ = _run(arm, 0.5)
+    assert arm.actual[0] == pytest.approx(20.0, abs=0.1)
+    events, _ = _run_idle(arm)
+    assert _completed(events) == [n] and _close(arm.actual, READY)
+    with pytest.raises(Refused, match="JOR"):
+        arm.move_cosine(5, 150.0, 1.0, arm.time)
+
+
+def test_moves_plan_from_the_end_of_the_queue() -> None:
+    arm = _arm()
+    arm.move_joints(GOAL, 0.0)
+    pose = forward(OTHER)
+    arm.move_to(pose, 0.0)
+    assert arm.planned == arm.solve(pose, GOAL)  # nearest solution to GOAL, where the queue ends
+    _run_idle(arm)
+    assert arm.pose().almost_equal(pose, 1e-6)
+
+
+def test_incremental_moves_accumulate() -> None:
+    arm = _arm()
+    arm.move_joints(GOAL, 0.0)
+    _run_idle(arm)
+    start = arm.pose()
+    arm.move_increment((0.0, 0.0, -20.0, 0.0, 0.0, 0.0), arm.time)
+    arm.move_increment((5.0, 0.0, -20.0, 0.0, 0.0, 0.0), arm.time)
+    _run_idle(arm)
+    assert np.allclose(arm.pose().p, start.p + np.array((5.0, 0.0, -40.0)), atol=1e-6)
+    assert np.allclose(arm.pose().rotation, start.rotation, atol=1e-6)
+
+
+def test_straight_line_moves_follow_the_line() -> None:
+    arm = _arm()
+    arm.move_joints(GOAL, 0.0)
+    _run_idle(arm)
+    start = arm.pose()
+    goal = Transform.trans(-80.0, 40.0, -60.0) @ start
+    n = arm.move_to(goal, arm.time, straight=True)
+    a, b = start.p, goal.p
+    seen = 0
+    while arm.moving:
+        arm.tick(arm.time + TICK)
+        p = arm.pose().p
+        along = float(np.dot(p - a, b - a) / np.dot(b - a, b - a))
+        assert -1e-9 <= along <= 1 + 1e-9
+        assert np.linalg.norm(p - (a + along * (b - a))) < 1e-6
+        seen += 1
+    assert seen > 10 and n == 2
+    assert arm.pose().almost_equal(goal, 1e-6)
+
+
+def test_segments_behind_a_straight_line_wait_for_it() -> None:
+    arm = _arm()
+    arm.move_joints(GOAL, 0.0)
+    _run_idle(arm)
+    line = arm.move_increment((0.0, 0.0, -30.0, 0.0, 0.0, 0.0), arm.time, straight=True)
+    after = arm.move_joints(OTHER, arm.time)
+    events, _ = _run_idle(arm)
+    assert _completed(events) == [line, after] and _close(arm.actual, OTHER)
+
+
+def test_straight_line_out_of_the_workspace_is_refused_at_once() -> None:
+    arm = _arm()
+    far = Transform.trans(0.0, 0.0, 5000.0) @ arm.pose()
+    with pytest.raises(Refused) as info:
+        arm.move_to(far, 0.0, straight=True)
+    assert info.value.code == "TOR" and not arm.moving and arm.next_segment == 1
+    with pytest.raises(Refused, match="TOR"):
+        arm.move_to(far, 0.0)
+
+
+def test_configuration_preference_picks_the_solution() -> None:
+    pose = forward(GOAL)
+    arm = _arm()
+    natural = arm.solve(pose, READY)
+    arm.set_configuration(lefty=True)
+    lefty = arm.solve(pose, READY)
+    arm.set_configuration(lefty=False)
+    righty = arm.solve(pose, READY)
+    assert lefty != righty and natural in (lefty, righty)
+    for q in (lefty, righty):
+        assert forward(q).almost_equal(pose, 1e-6)
+
+
+# -------------------------------------------------------------------------- aborts and faults
+def test_obstacle_stops_the_arm_with_a_collision() -> None:
+    arm = _arm()
+    arm.place_obstacle(Obstacle(2, upper=-85.0))
+    arm.move_joints(GOAL, 0.0)
+    arm.move_joints(OTHER, 0.0)
+    events, _ = _run(arm, 5.0)
+    aborts = [e for e in events if isinstance(e, MotionAborted)]
+    assert len(aborts) == 1
+    abort = aborts[0]
+    assert abort.cause is AbortCause.COLLISION and abort.joints == (2,) and abort.dropped == (1, 2)
+    assert any(isinstance(e, FollowingWarning) and e.joints == (2,) for e in events)
+    assert events.index(abort) > next(i for i, e in enumerate(events) if isinstance(e, FollowingWarning))
+    assert arm.actual[1] == pytest.approx(-85.0) and arm.commanded == arm.actual and not arm.moving
+    with pytest.raises(Refused, match="AWA"):
+        arm.move_joints(READY, arm.time)
+    arm.reset_abort()
+    n = arm.move_joints(READY, arm.time)  # away from the obstacle
+    events, _ = _run_idle(arm)
+    assert _completed(events) == [n] and _close(arm.actual, READY)
+
+
+def test_free_joint_is_exempt_from_the_collision_test() -> None:
+    arm = _arm()
+    arm.place_obstacle(Obstacle(2, upper=-85.0))
+    arm.free(2)
+    arm.move_joints(GOAL, 0.0)
+    events, _ = _run_idle(arm)
+    assert _completed(events) == [1] and arm.actual[1] == -85.0
+    with pytest.raises(Refused, match="BVA"):
+        arm.free(7)
+
+
+class _Nominal:
+    """A compliance model that changes nothing (the seam is called; the path stays nominal)."""
+
+    calls = 0
+
+    def adjust(self, t: float, nominal: tuple[float, ...], actual: tuple[float, ...]) -> tuple[float, ...]:
+        self.calls += 1
+        return nominal
+
+
+def test_compliant_schemes_inhibit_the_collision_test() -> None:
+    for scheme, aborted in ((Scheme.LINEAR_BLEND, True), (Scheme.COMPLIANT_MOTION, False)):
+        compliance = _Nominal()
+        arm = _arm(compliance=compliance)
+        arm.place_obstacle(Obstacle(1, upper=5.0))
+        arm.move_joints(GOAL, 0.0, scheme=scheme)
+        events, _ = _run(arm, 4.0)
+        assert any(isinstance(e, MotionAborted) for e in events) is aborted
+        assert (compliance.calls > 0) is not aborted
+
+
+def test_panic_button_cuts_power_and_aborts_at_its_time() -> None:
+    arm = _arm()
+    arm.press_panic(at=0.5)
+    arm.move_joints(GOAL, 0.0)
+    arm.move_joints(OTHER, 0.0)
+    events, _ = _run(arm, 0.48)
+    assert not events
+    events, _ = _run(arm, 3.0)
+    (abort,) = events
+    assert isinstance(abort, MotionAborted) and abort.cause is AbortCause.PANIC
+    assert 0.5 <= abort.time < 0.5 + TICK and abort.dropped == (1, 2)
+    assert not arm.powered and arm.aborted
+    stopped = arm.actual
+    _run(arm, 5.0)
+    assert arm.actual == stopped
+    with pytest.raises(Refused, match="AWA"):
+        arm.move_joints(READY, arm.time)
+    arm.reset_abort()
+    with pytest.raises(Refused, match="NAP"):
+        arm.move_joints(READY, arm.time)
+    arm.enable_power()
+    arm.move_joints(READY, arm.time)
+
+
+def test_panic_button_while_idle_still_aborts() -> None:
+    arm = _arm()
+    arm.press_panic(at=100.0)
+    events = arm.tick(200.0)
+    assert [type(e) for e in events] == [MotionAborted]
+    assert events[0].time == pytest.approx(100.0, abs=TICK)
+
+
+def test_losing_power_while_moving_aborts() -> None:
+    arm = _arm()
+    arm.move_joints(GOAL, 0.0)
+    _run(arm, 0.3)
+    arm.kill_power()
+    events, _ = _run(arm, 0.4)
+    assert [e.cause for e in events if isinstance(e, MotionAborted)] == [AbortCause.POWER_LOST]
+    arm.enable_power()  # also clears the abort
+    assert not arm.aborted
+    arm.kill_power()
+    assert arm.tick(1.0) == []  # idle: nothing to abort
+
+
+def test_segments_that_finished_before_an_abort_still_complete() -> None:
+    arm = _arm()
+    arm.move_joints(GOAL, 0.0)
+    events, _ = _run_idle(arm)
+    assert _completed(events) == [1]
+    arm.move_joints(OTHER, arm.time)
+    arm.press_panic()
+    events = arm.tick(arm.time + TICK)
+    assert [type(e) for e in events] == [MotionAborted]
+    assert events[0].dropped == (2,)  # type: ignore[union-attr]

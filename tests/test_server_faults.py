@@ -1,0 +1,393 @@
+"""Fault switches: each one changes the observable behaviour it claims to, and nothing is left untested.
+
+Every test runs the same scenario against a clean session and against one with the fault switched on,
+and checks that the clean one conforms and the faulted one differs in the claimed way.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TypeVar
+
+import pytest
+
+from manip.arm.kinematics import READY
+from manip.arm.sim import Obstacle
+from manip.codecs.errors import DecodeError
+from manip.codecs.lisp import read_alist
+from manip.codecs.messages import decode_async, decode_error, decode_reply, encode_request
+from manip.codecs.pdp11float import pack_f
+from manip.reference_server import FAULTS, Fault, FaultSet, Output, ServerConfig, State
+from manip.spec import SPEC
+from manip.spec.constants import RequestOp, ServerOp
+from tests.test_server_session import GOAL, OTHER, Client
+
+T = TypeVar("T")
+COVERED: set[Fault] = set()
+
+
+def covers(fault: Fault) -> Callable[[Callable[[], None]], Callable[[], None]]:
+    def mark(test: Callable[[], None]) -> Callable[[], None]:
+        COVERED.add(fault)
+        return test
+
+    return mark
+
+
+def pair(
+    fault: Fault | FaultSet,
+    scenario: Callable[[Client], T],
+    *,
+    base: FaultSet | None = None,
+    powered: bool = True,
+) -> tuple[T, T]:
+    """The scenario's result on a clean session (``base`` faults only) and on one with ``fault`` added."""
+    clean = base or FaultSet()
+    if isinstance(fault, FaultSet):
+        faulty = FaultSet(clean.active | fault.active, fault.panic_delay, fault.obstacle, fault.nzi_joints)
+    else:
+        faulty = FaultSet(clean.active | {fault}, clean.panic_delay, clean.obstacle, clean.nzi_joints)
+    results = [scenario(Client(ServerConfig(powered_at_open=powered, faults=f))) for f in (clean, faulty)]
+    return results[0], results[1]
+
+
+def _packets(out: Output) -> list[tuple[int, bytes]]:
+    return [(p.opcode, p.data) for p in out.packets]
+
+
+def _raw(client: Client, op: str, data: bytes | None = None, **values: object) -> list[tuple[int, bytes]]:
+    spec_op = SPEC.request(op)
+    return _packets(client.raw(spec_op.opcode, encode_request(op, **values) if data is None else data))
+
+
+# ------------------------------------------------------------------------------- the registry
+def test_registry_describes_every_fault() -> None:
+    assert set(FAULTS) == set(Fault)
+    for info in FAULTS.values():
+        assert info.name == info.fault.value and info.description.endswith(".")
+        assert info.clauses and all(c in SPEC.clauses for c in info.clauses)
+        if info.kind == "protocol":
+            assert any(SPEC.clauses[c].level in ("MUST", "SHOULD") for c in info.clauses)
+
+
+def test_parse() -> None:
+    faults = FaultSet.parse(["panic-button=2.5", "obstacle=2::-60", "calibrate-nzi=1,6", "no-jor"])
+    assert faults.active == {Fault.PANIC_BUTTON, Fault.OBSTACLE, Fault.CALIBRATE_NZI, Fault.NO_JOR}
+    assert faults.panic_delay == 2.5 and faults.nzi_joints == (1, 6)
+    assert faults.obstacle == Obstacle(2, None, -60.0)
+    assert Fault.NO_JOR in faults and Fault.NO_NAP not in faults
+    assert FaultSet.parse(["panic-button", "calibrate-nzi"]).nzi_joints == (2, 3)
+    for bad, message in [
+        (["no-such-fault"], "unknown fault"),
+        (["no-jor=1"], "takes no argument"),
+        (["obstacle"], "needs an argument"),
+        (["obstacle=2:1"], "JOINT:LOWER:UPPER"),
+        (["obstacle=9::1"], "1..6"),
+        (["calibrate-nzi=0"], "1..6"),
+        (["panic-button=soon"], "panic-button"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            FaultSet.parse(bad)
+
+
+def test_every_fault_has_a_test() -> None:
+    assert set(Fault) == COVERED
+
+
+# ---------------------------------------------------------------------------- environment
+@covers(Fault.PANIC_BUTTON)
+def test_panic_button() -> None:
+    def scenario(c: Client) -> list[str]:
+        c.one("set-joint-angles", joints=GOAL)
+        return [decode_error(ServerOp.ASYNCHRONOUS_ERROR, d).error.code for _, d in _async(c, 3.0)]
+
+    assert pair(FaultSet.parse(["panic-button=0.5"]), scenario) == ([], ["PAN"])
+
+
+@covers(Fault.OBSTACLE)
+def test_obstacle() -> None:
+    def scenario(c: Client) -> list[int]:
+        c.one("set-joint-angles", joints=GOAL)
+        return [op for op, _ in _async(c, 3.0)]
+
+    clean, faulty = pair(FaultSet.parse(["obstacle=2::-85"]), scenario)
+    assert clean == [] and faulty == [ServerOp.ASYNCHRONOUS_WARNING, ServerOp.ASYNCHRONOUS_ERROR]
+
+
+@covers(Fault.CALIBRATE_NZI)
+def test_calibrate_nzi() -> None:
+    def scenario(c: Client) -> tuple[list[int], bool]:
+        out = c.raw(RequestOp.CALIBRATE, b"")
+        return [p.opcode for p in out.packets], out.close
+
+    assert pair(FaultSet.parse(["calibrate-nzi"]), scenario) == (
+        ([ServerOp.RESPONSE], False),
+        ([ServerOp.FATAL_ERROR], True),
+    )
+
+
+def _async(c: Client, seconds: float) -> list[tuple[int, bytes]]:
+    out: list[tuple[int, bytes]] = []
+    end = c.now + seconds
+    while c.now < end:
+        c.now += 0.016
+        out += _packets(c.session.tick(c.now))
+    return out
+
+
+# ---------------------------------------------------------------------------- request numbers
+@covers(Fault.WRONG_REQUEST_NUMBER)
+def test_wrong_request_number() -> None:
+    def scenario(c: Client) -> int:
+        (packet,) = _raw(c, "here")
+        return decode_reply(packet[1]).request_number - c.packet_no
+
+    assert pair(Fault.WRONG_REQUEST_NUMBER, scenario) == (0, 1)
+
+
+@covers(Fault.ECHO_ACK_NUMBER)
+def test_echo_ack_number() -> None:
+    def scenario(c: Client) -> tuple[int, int]:
+        (packet,) = _packets(c.raw(RequestOp.HERE, b"", ack_no=0o777))
+        return decode_reply(packet[1]).request_number, c.packet_no
+
+    (clean, sent), (faulty, _) = pair(Fault.ECHO_ACK_NUMBER, scenario)
+    assert clean == sent and faulty == 0o777
+
+
+@covers(Fault.NO_INITIAL_RESPONSE)
+def test_no_initial_response() -> None:
+    assert pair(Fault.NO_INITIAL_RESPONSE, lambda c: len(c.initial.packets)) == (1, 0)
+
+
+@covers(Fault.INITIAL_RESPONSE_NUMBER)
+def test_initial_response_number() -> None:
+    def scenario(c: Client) -> int:
+        return decode_reply(c.initial.packets[0].data).request_number - c.packet_no
+
+    assert pair(Fault.INITIAL_RESPONSE_NUMBER, scenario) == (0, 1)
+
+
+# ------------------------------------------------------------------------------ describe self
+def _describe(c: Client) -> list[bytes]:
+    return [d for _, d in _raw(c, "describe-self")]
+
+
+@covers(Fault.NO_DESCRIBE_TERMINATOR)
+def test_no_describe_terminator() -> None:
+    def scenario(c: Client) -> tuple[bool, int]:
+        packets = _describe(c)
+        return decode_reply(packets[-1]).is_empty, len(packets)
+
+    (clean_ends, n), (faulty_ends, m) = pair(Fault.NO_DESCRIBE_TERMINATOR, scenario)
+    assert clean_ends and not faulty_ends and m == n - 1
+
+
+@covers(Fault.MULTI_WRONG_NUMBER)
+def test_multi_wrong_number() -> None:
+    def scenario(c: Client) -> set[int]:
+        return {decode_reply(d).request_number - c.packet_no for d in _describe(c)}
+
+    clean, faulty = pair(Fault.MULTI_WRONG_NUMBER, scenario)
+    assert clean == {0} and faulty == {0, 1}
+
+
+@covers(Fault.NO_PROTOCOL_VERSION)
+def test_no_protocol_version() -> None:
+    def scenario(c: Client) -> bool:
+        text = "".join(str(decode_reply(d, "describe-self").values.get("text", "")) for d in _describe(c))
+        return "protocol-version" in read_alist(text)
+
+    assert pair(Fault.NO_PROTOCOL_VERSION, scenario) == (True, False)
+
+
+# ------------------------------------------------------------------------------ data replies
+@covers(Fault.SWAPPED_FLOAT_WORDS)
+def test_swapped_float_words() -> None:
+    def scenario(c: Client) -> bytes:
+        ((_, data),) = _raw(c, "joint-angles")
+        return data[2:]
+
+    clean, faulty = pair(Fault.SWAPPED_FLOAT_WORDS, scenario)
+    assert decode_reply(b"\0\0" + clean, "joint-angles").values["joints"] == READY
+    assert faulty != clean
+    assert faulty == b"".join(clean[i + 2 : i + 4] + clean[i : i + 2] for i in range(0, len(clean), 4))
+
+
+@covers(Fault.SEGMENT_NUMBER_STUCK)
+def test_segment_number_stuck() -> None:
+    def scenario(c: Client) -> list[int]:
+        replies = [_raw(c, "set-joint-angles", joints=g)[0][1] for g in (GOAL, OTHER, READY)]
+        return [decode_reply(data, "set-joint-angles").segment for data in replies]
+
+    assert pair(Fault.SEGMENT_NUMBER_STUCK, scenario) == ([1, 2, 3], [1, 1, 1])
+
+
+# ------------------------------------------------------------------------------ error strings
+def _uop(c: Client) -> bytes:
+    ((opcode, data),) = _packets(c.raw(0o230, b""))
+    assert opcode == ServerOp.NON_FATAL_ERROR
+    return data
+
+
+@covers(Fault.WRONG_SEVERITY)
+def test_wrong_severity() -> None:
+    def scenario(c: Client) -> tuple[str, bool]:
+        error = decode_error(ServerOp.NON_FATAL_ERROR, _uop(c)).error
+        return error.severity, ServerOp.NON_FATAL_ERROR in SPEC.severities[error.severity].server_opcodes
+
+    assert pair(Fault.WRONG_SEVERITY, scenario) == (("C", True), ("F", False))
+
+
+@covers(Fault.ERROR_WITHOUT_COLON)
+def test_error_without_colon() -> None:
+    def scenario(c: Client) -> str | None:
+        try:
+            decode_error(ServerOp.NON_FATAL_ERROR, _uop(c))
+        except DecodeError as exc:
+            return exc.clause
+        return None
+
+    assert pair(Fault.ERROR_WITHOUT_COLON, scenario) == (None, "error-string.format")
+
+
+@covers(Fault.UNALIGNED_ERROR_ARGS)
+def test_unaligned_error_args() -> None:
+    def scenario(c: Client) -> tuple[int, ...] | str:
+        try:
+            return decode_error(ServerOp.NON_FATAL_ERROR, _uop(c)).error.args
+        except DecodeError as exc:
+            return exc.clause or ""
+
+    clean, faulty = pair(Fault.UNALIGNED_ERROR_ARGS, scenario)
+    assert clean == (0o230,) and faulty != clean
+
+    def bdl(c: Client) -> bytes:
+        ((_, data),) = _raw(c, "set-speed", b"")
+        return data
+
+    clean_bdl, faulty_bdl = pair(Fault.UNALIGNED_ERROR_ARGS, bdl)
+    assert decode_error(ServerOp.NON_FATAL_ERROR, clean_bdl).error.args == (4, 0)
+    with pytest.raises(DecodeError):
+        decode_error(ServerOp.NON_FATAL_ERROR, faulty_bdl)
+
+
+# ------------------------------------------------------------------------------ request handling
+@covers(Fault.UNKNOWN_OPCODE_ANSWERED)
+def test_unknown_opcode_answered() -> None:
+    assert pair(Fault.UNKNOWN_OPCODE_ANSWERED, lambda c: [op for op, _ in _packets(c.raw(0o230, b""))]) == (
+        [ServerOp.NON_FATAL_ERROR],
+        [ServerOp.RESPONSE],
+    )
+
+
+@covers(Fault.LENGTH_UNCHECKED)
+def test_length_unchecked() -> None:
+    def scenario(c: Client) -> tuple[int, float]:
+        ((opcode, _),) = _raw(c, "set-speed", pack_f(0.5) + b"\0\0")
+        return opcode, c.session.arm.speed
+
+    assert pair(Fault.LENGTH_UNCHECKED, scenario) == (
+        (ServerOp.NON_FATAL_ERROR, 1.0),
+        (ServerOp.RESPONSE, 0.5),
+    )
+
+
+@covers(Fault.EXTRA_REPLY_AFTER_ERROR)
+def test_extra_reply_after_error() -> None:
+    def scenario(c: Client) -> list[int]:
+        return [op for op, _ in _raw(c, "set-joint-angles", joints=(0.0, 0.0, 0.0, 0.0, 0.0, 500.0))]
+
+    assert pair(Fault.EXTRA_REPLY_AFTER_ERROR, scenario) == (
+        [ServerOp.NON_FATAL_ERROR],
+        [ServerOp.NON_FATAL_ERROR, ServerOp.RESPONSE],
+    )
+
+
+@covers(Fault.FATAL_WITHOUT_CLOSE)
+def test_fatal_without_close() -> None:
+    def scenario(c: Client) -> tuple[int, bool, State]:
+        out = c.raw(RequestOp.CALIBRATE, b"")
+        return out.packets[0].opcode, out.close, c.session.state
+
+    clean, faulty = pair(Fault.FATAL_WITHOUT_CLOSE, scenario, base=FaultSet.parse(["calibrate-nzi"]))
+    assert clean == (ServerOp.FATAL_ERROR, True, State.CLOSED)
+    assert faulty == (ServerOp.FATAL_ERROR, False, State.READY)
+
+
+@covers(Fault.FREE_JOINT_EXECUTES)
+def test_free_joint_executes() -> None:
+    def scenario(c: Client) -> tuple[bytes, bool]:
+        c.one("free-joint", joint=1)
+        ((_, data),) = _raw(c, "set-joint-angles", joints=GOAL)
+        return data[2:], c.session.arm.moving
+
+    assert pair(Fault.FREE_JOINT_EXECUTES, scenario) == ((b"", False), (b"\x01\x00", True))
+
+
+# ------------------------------------------------------------------------------------ motion
+def _motion_reply(c: Client, joints: tuple[float, ...] = GOAL) -> str:
+    ((opcode, data),) = _raw(c, "set-joint-angles", joints=joints)
+    if opcode == ServerOp.NON_FATAL_ERROR:
+        return decode_error(opcode, data).error.code
+    return f"segment {decode_reply(data, 'set-joint-angles').segment}"
+
+
+@covers(Fault.NO_JOR)
+def test_no_jor() -> None:
+    assert pair(Fault.NO_JOR, lambda c: _motion_reply(c, (200.0, -90.0, 90.0, 0.0, 0.0, 0.0))) == (
+        "JOR",
+        "segment 1",
+    )
+
+
+@covers(Fault.NO_NAP)
+def test_no_nap() -> None:
+    assert pair(Fault.NO_NAP, _motion_reply, powered=False) == ("NAP", "segment 1")
+
+
+@covers(Fault.AWA_IGNORED)
+def test_awa_ignored() -> None:
+    def scenario(c: Client) -> str:
+        c.one("set-joint-angles", joints=GOAL)
+        c.run(3.0)  # collides with the obstacle
+        return _motion_reply(c, READY)
+
+    assert pair(Fault.AWA_IGNORED, scenario, base=FaultSet.parse(["obstacle=2::-85"])) == ("AWA", "segment 2")
+
+
+@covers(Fault.SPEED_UNCHECKED)
+def test_speed_unchecked() -> None:
+    def scenario(c: Client) -> tuple[int, float]:
+        ((opcode, _),) = _raw(c, "set-speed", factor=2.0)
+        return opcode, c.session.arm.speed
+
+    assert pair(Fault.SPEED_UNCHECKED, scenario) == (
+        (ServerOp.NON_FATAL_ERROR, 1.0),
+        (ServerOp.RESPONSE, 1.0),
+    )
+
+
+# ------------------------------------------------------------------------------ asynchronous
+@covers(Fault.UNREQUESTED_ASYNC)
+def test_unrequested_async() -> None:
+    def scenario(c: Client) -> list[int]:
+        c.one("set-joint-angles", joints=GOAL)
+        return [op for op, _ in _async(c, 3.0)]
+
+    assert pair(Fault.UNREQUESTED_ASYNC, scenario) == ([], [ServerOp.ASYNCHRONOUS_RESPONSE])
+
+
+@covers(Fault.ASYNC_WITHOUT_NUMBER)
+def test_async_without_number() -> None:
+    def scenario(c: Client) -> tuple[int, int] | str:
+        c.one("request-notifications", mask=2)
+        c.one("set-joint-angles", joints=GOAL)
+        ((_, data),) = _async(c, 3.0)
+        try:
+            response = decode_async(data)
+        except DecodeError as exc:
+            return exc.clause or ""
+        return response.condition, response.word3
+
+    assert pair(Fault.ASYNC_WITHOUT_NUMBER, scenario) == ((2, 1), "async.layout")
