@@ -129,7 +129,9 @@ def test_quintic_boundary_conditions(q0: np.ndarray, q1: np.ndarray, f: float) -
     t_end = seg.duration
     assert np.array_equal(seg.position(0.0), q0) or t_end == 0.0
     assert np.array_equal(seg.position(t_end), q1)
-    assert np.array_equal(seg.position(t_end + 5.0), q1) and np.array_equal(seg.position(-1.0), q0)
+    assert np.array_equal(seg.position(t_end + 5.0), q1)
+    # A segment too short to take a tick (a subnormal step) is already at its goal.
+    assert np.array_equal(seg.position(-1.0), q0) or t_end == 0.0
     for t in (0.0, t_end):
         assert np.allclose(seg.velocity(t), 0.0, atol=1e-12)
         assert np.allclose(seg.acceleration(t), 0.0, atol=1e-12)
