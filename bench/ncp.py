@@ -2,7 +2,9 @@
 
 A round trip is the manip client's common case: send one 66-byte data packet and wait for the server's
 66-byte answer.  The baseline is a bare asyncio TCP echo of the same framed bytes (2 + 16 + 66 + 6 = 90),
-measured in the same run with rounds alternating between the two, so that machine load hits both alike.
+measured in the same run with rounds alternating between the two (and which of the two goes first), so
+that machine load hits both alike; the rounds are split into trials and the median of the per-trial
+ratios is printed too, with their spread, because a shared machine's load comes and goes.
 Then sustained one-way throughput: 66-byte packets/s from a client to a server that reads them as fast as
 it can, through the Chaos window (the client ends with a marker packet the server answers, so the time
 covers delivery of everything).
@@ -11,7 +13,8 @@ Two placements, both by default: ``same`` runs servers and client on one event l
 of both sides is on the path), ``split`` runs the servers in a child process (client and server are
 separate programs in real use, so this is the realistic one).
 
-    .venv/bin/python bench/ncp.py [--mode same|split|both] [--rounds 5000] [--packets 20000] [--window 15]
+    .venv/bin/python bench/ncp.py [--mode same|split|both] [--rounds 5000] [--trials 5] [--packets 20000]
+                                  [--window 15]
 
 Target: NCP p50 round trip at most 2x the raw echo's.  Figures only; nothing is asserted.
 """
@@ -128,29 +131,45 @@ def _percentile(samples: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
-async def _round_trips(ports: Servers, rounds: int, options: NcpOptions) -> None:
+async def _round_trips(ports: Servers, rounds: int, trials: int, options: NcpOptions) -> None:
     loop = asyncio.get_running_loop()
     transport, raw = await loop.create_connection(_EchoClient, "127.0.0.1", ports.raw_port)
     conn = await open_connection(f"tcp://127.0.0.1:{ports.echo_port}?contact=ECHO", options=options)
+
+    async def ncp_round_trip() -> None:
+        await conn.send(PAYLOAD)
+        await conn.receive()
+
     async with conn:
         ncp: list[float] = []
         base: list[float] = []
+        trial_ratios: list[float] = []
         for _ in range(max(100, rounds // 10)):  # warm up both paths
-            await conn.send(PAYLOAD)
-            await conn.receive()
+            await ncp_round_trip()
             await raw.round_trip()
         clock = time.perf_counter
-        for _ in range(rounds):
-            t0 = clock()
-            await conn.send(PAYLOAD)
-            await conn.receive()
-            t1 = clock()
-            await raw.round_trip()
-            t2 = clock()
-            ncp.append(t1 - t0)
-            base.append(t2 - t1)
+        per_trial = max(1, rounds // trials)
+        for _ in range(trials):
+            ncp_t: list[float] = []
+            base_t: list[float] = []
+            for i in range(per_trial):
+                # Alternate which goes first, so neither always runs right after the other's work.
+                first, second = (
+                    (ncp_round_trip, raw.round_trip) if i & 1 else (raw.round_trip, ncp_round_trip)
+                )
+                t0 = clock()
+                await first()
+                t1 = clock()
+                await second()
+                t2 = clock()
+                a, b = (ncp_t, base_t) if i & 1 else (base_t, ncp_t)
+                a.append(t1 - t0)
+                b.append(t2 - t1)
+            trial_ratios.append(statistics.median(ncp_t) / statistics.median(base_t))
+            ncp += ncp_t
+            base += base_t
     transport.close()
-    print(f"  round trip, 66-byte data packet each way, {rounds} rounds (microseconds)")
+    print(f"  round trip, 66-byte data packet each way, {len(ncp)} rounds in {trials} trials (microseconds)")
     print(f"    {'':10} {'p50':>8} {'p99':>8} {'mean':>8}")
     for name, samples in (("NCP/TCP", ncp), ("raw echo", base)):
         p50, p99 = _percentile(samples, 0.5), _percentile(samples, 0.99)
@@ -158,6 +177,8 @@ async def _round_trips(ports: Servers, rounds: int, options: NcpOptions) -> None
     ratio50 = _percentile(ncp, 0.5) / _percentile(base, 0.5)
     ratio99 = _percentile(ncp, 0.99) / _percentile(base, 0.99)
     print(f"    ratio NCP/raw: p50 {ratio50:.2f}x, p99 {ratio99:.2f}x (target p50 <= 2x)")
+    spread = ", ".join(f"{r:.2f}" for r in sorted(trial_ratios))
+    print(f"    p50 ratio per trial: median {statistics.median(trial_ratios):.2f}x ({spread})")
 
 
 async def _throughput(ports: Servers, packets: int, options: NcpOptions) -> None:
@@ -180,7 +201,7 @@ async def _throughput(ports: Servers, packets: int, options: NcpOptions) -> None
 async def _same(ns: argparse.Namespace, options: NcpOptions) -> None:
     ports, raw, echo, sink = await _start_servers(options)
     try:
-        await _round_trips(ports, ns.rounds, options)
+        await _round_trips(ports, ns.rounds, ns.trials, options)
         await _throughput(ports, ns.packets, options)
     finally:
         await echo.aclose()
@@ -199,7 +220,7 @@ async def _split(ns: argparse.Namespace, options: NcpOptions) -> None:
     try:
         line = await asyncio.get_running_loop().run_in_executor(None, child.stdout.readline)
         ports = Servers(*map(int, line.split()))
-        await _round_trips(ports, ns.rounds, options)
+        await _round_trips(ports, ns.rounds, ns.trials, options)
         await _throughput(ports, ns.packets, options)
     finally:
         child.stdin.close()
@@ -212,6 +233,7 @@ def main() -> None:
     )
     parser.add_argument("--mode", choices=("same", "split", "both"), default="both")
     parser.add_argument("--rounds", type=int, default=5000)
+    parser.add_argument("--trials", type=int, default=5, help="the rounds are split into this many trials")
     parser.add_argument("--packets", type=int, default=20000)
     parser.add_argument("--window", type=int, default=15)
     parser.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)

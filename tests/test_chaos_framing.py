@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from manip.codecs import framing as fw
 from manip.codecs.chaos import (
     HEADER,
     PACKET,
@@ -451,3 +452,162 @@ def test_checksum_worked_example() -> None:
     ws = [0x0100, 0x0004, 0x0120, 0x0000, 0x0101, 0x0A01, 0x0001, 0x0000, 0x5550, 0x414D, 0x0120, 0x0101]
     assert chaos_checksum(ws) == 0x5A1A == _simple_checksum(ws)
     assert chaos_checksum([0xFFFF, 0x0001]) == _simple_checksum([0xFFFF, 0x0001]) == 0xFFFE
+
+
+# ------------------------------------------------------------------------------------ fast paths
+#
+# fw._fast_body and fw._decode_body are the per-packet fast paths; _body_checked and
+# _decode_body_checked are the reference.  The fast paths must give the same bytes, packets, trailers and
+# errors, and must hand anything unusual to the reference.
+
+any_opcodes = st.integers(0, 0xFF)
+fast_packets = st.builds(
+    Packet,
+    opcode=any_opcodes,
+    dest_host=words,
+    dest_index=words,
+    src_host=words,
+    src_index=words,
+    packet_no=words,
+    ack_no=words,
+    data=st.binary(max_size=MAX_DATA),
+    fc=st.integers(0, 15),
+)
+hops = st.one_of(st.none(), words)
+orders = st.sampled_from([">", "<"])
+
+
+@given(fast_packets, hops, hops, orders)
+def test_fast_encode_equals_reference(p: Packet, hw_dest: int | None, hw_src: int | None, order: str) -> None:
+    want = fw._body_checked(p, order, hw_dest, hw_src)  # type: ignore[arg-type]
+    assert fw._fast_body(p, order, hw_dest, hw_src, False) == want  # type: ignore[arg-type]
+    assert fw._body(p, order, hw_dest, hw_src) == want  # type: ignore[arg-type]
+    if order == ">":
+        tcp = fw._fast_body(p, ">", hw_dest, hw_src, True)
+        assert tcp == len(want).to_bytes(2, "big") + want
+        assert encode_tcp(p, hw_dest=hw_dest, hw_src=hw_src) == tcp
+
+
+class _Index:
+    """Not an int, but usable as one by struct: the reference refuses it, so the fast path must too."""
+
+    def __init__(self, value: int) -> None:
+        self.value = value
+
+    def __index__(self) -> int:
+        return self.value
+
+
+FIELDS = ("opcode", "fc", "dest_host", "dest_index", "src_host", "src_index", "packet_no", "ack_no")
+
+
+@given(
+    fast_packets,
+    st.sampled_from(FIELDS),
+    st.one_of(
+        st.integers(-(2**20), -1),
+        st.integers(0x10000, 2**20),
+        st.floats(0, 10),
+        st.none(),
+        st.builds(_Index, st.integers(0, 0xF)),
+    ),
+)
+def test_fast_encode_hands_bad_fields_to_the_reference(p: Packet, name: str, value: object) -> None:
+    bad = p.with_(**{name: value})
+    assert fw._fast_body(bad, ">", None, None, True) is None
+    for encode in (encode_chudp, encode_tcp, encode_chaosd):
+        with pytest.raises(EncodeError) as fast:
+            encode(bad)
+        with pytest.raises(EncodeError) as ref:
+            fw._body_checked(bad, ">", None, None)
+        assert (fast.value.path, str(fast.value)) == (ref.value.path, str(ref.value))
+
+
+@given(
+    fast_packets, st.sampled_from(["hw_dest", "hw_src"]), st.one_of(st.integers(0x10000, 2**20), st.none())
+)
+def test_fast_encode_bad_hop_and_oversize(p: Packet, which: str, value: int | None) -> None:
+    if value is not None:
+        with pytest.raises(EncodeError) as info:
+            encode_tcp(p, **{which: value})
+        assert info.value.path == {"hw_dest": "trailer.dest", "hw_src": "trailer.source"}[which]
+    big = p.with_(data=bytes(MAX_DATA + 1))
+    assert fw._fast_body(big, "<", None, None, False) is None
+    with pytest.raises(EncodeError):
+        encode_chaosd(big)
+
+
+@given(fast_packets)
+def test_fast_encode_leaves_a_bytearray_alone(p: Packet) -> None:
+    """Data that is not ``bytes`` goes the checked way, and an odd-length bytearray is not padded in place."""
+    raw = bytearray(p.data)
+    q = p.with_(data=raw)
+    assert fw._fast_body(q, ">", None, None, True) is None
+    assert encode_tcp(q) == encode_tcp(p)
+    assert raw == p.data
+
+
+def _same_decode(body: bytes, base: int, order: str, verify: bool) -> None:
+    """Decode ``body`` both ways (inside a larger buffer, to exercise the offsets): same packet or error."""
+    buf = b"\xaa" * 3 + body + b"\x55"
+    try:
+        want = fw._decode_body_checked(body, base, order, verify=verify)  # type: ignore[arg-type]
+    except DecodeError as exc:
+        with pytest.raises(DecodeError) as info:
+            fw._decode_body(buf, 3, 3 + len(body), base, order, verify=verify)  # type: ignore[arg-type]
+        got = info.value
+        assert (got.message, got.path, got.offset, got.clause) == (
+            exc.message,
+            exc.path,
+            exc.offset,
+            exc.clause,
+        )
+        return
+    got_p = fw._decode_body(buf, 3, 3 + len(body), base, order, verify=verify)  # type: ignore[arg-type]
+    assert got_p == want
+    assert got_p.trailer == want.trailer
+    assert type(got_p.data) is bytes
+
+
+@given(fast_packets, hops, hops, orders, st.booleans())
+def test_fast_decode_equals_reference_on_good_frames(
+    p: Packet, hw_dest: int | None, hw_src: int | None, order: str, verify: bool
+) -> None:
+    _same_decode(fw._body_checked(p, order, hw_dest, hw_src), 7, order, verify)  # type: ignore[arg-type]
+
+
+@given(fast_packets, orders, st.booleans(), st.data())
+def test_fast_decode_equals_reference_on_damaged_frames(
+    p: Packet, order: str, verify: bool, data: st.DataObject
+) -> None:
+    body = bytearray(fw._body_checked(p, order, None, None))  # type: ignore[arg-type]
+    for _ in range(data.draw(st.integers(1, 3), label="flips")):
+        at = data.draw(st.integers(0, len(body) - 1), label="byte")
+        body[at] = data.draw(st.integers(0, 255), label="value")
+    _same_decode(bytes(body), 0, order, verify)
+
+
+@given(
+    st.integers(11, 255).flatmap(lambda n: st.binary(min_size=2 * n, max_size=2 * n)), orders, st.booleans()
+)
+def test_fast_decode_equals_reference_on_random_bodies(body: bytes, order: str, verify: bool) -> None:
+    _same_decode(body, 2, order, verify)
+
+
+@given(st.binary(max_size=600).filter(lambda b: len(b) % 2 == 0), orders)
+def test_block_checksum_identity(b: bytes, order: str) -> None:
+    """The fast paths' checksum: the bytes read as one integer fold like the sum of their words."""
+    ws = list(struct.unpack(f"{order}{len(b) // 2}H", b))
+    assert fw._ones_sum(int.from_bytes(b, "big" if order == ">" else "little")) == 0xFFFF - _simple_checksum(
+        ws
+    ) or not any(ws)
+    assert ~fw._ones_sum(sum(ws)) & 0xFFFF == _simple_checksum(ws)
+
+
+@given(st.lists(packets, max_size=5), st.sampled_from([bytes, bytearray, memoryview]))
+def test_stream_decoder_takes_any_buffer(ps: list[Packet], kind: type) -> None:
+    stream = b"".join(encode_tcp(p) for p in ps)
+    d = TcpFrameDecoder()
+    got = d.feed(kind(stream[:5])) + d.feed(kind(stream[5:]))
+    assert got == [fw._decode_body_checked(encode_tcp(p)[2:], 0, ">", verify=True) for p in ps]
+    assert d.pending == 0 and d.offset == len(stream)

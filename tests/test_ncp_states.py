@@ -8,7 +8,7 @@ from types import ModuleType
 
 import pytest
 
-from manip.ncp.connection import implemented_actions
+from manip.ncp.connection import _PLAN, implemented_actions
 from manip.ncp.states import (
     ACTION_DOCS,
     FINAL_STATES,
@@ -103,3 +103,21 @@ def test_key_transitions(state: ConnState, inp: Input, next_state: ConnState) ->
 def test_missing_entries_are_none() -> None:
     assert transition(ConnState.OPEN, Input.ACCEPT) is None
     assert transition(ConnState.LOST, Input.DATA) is None
+
+
+def test_resolved_plan_is_the_table() -> None:
+    """Connections run a copy of the table with the action names resolved; it must say the same."""
+    assert set(_PLAN) == set(TRANSITIONS)
+    for key, tr in TRANSITIONS.items():
+        actions, next_state = _PLAN[key]
+        assert [fn.__name__.removeprefix("_a_") for fn in actions] == list(tr.actions), key
+        assert next_state is tr.next_state
+
+
+def test_enum_members_hash_by_identity_and_still_compare_as_before() -> None:
+    # The table is keyed by (state, input); identity hashing keeps lookups in C and must not merge members.
+    assert len({*ConnState, *Input}) == len(ConnState) + len(Input)
+    assert all(hash(m) == object.__hash__(m) for m in (*ConnState, *Input))
+    assert all(ConnState[m.name] is m and ConnState(m.value) is m for m in ConnState)
+    assert all(Input[m.name] is m for m in Input)
+    assert ConnState.OPEN.value == "OPEN" and Input.SEND.source is Source.USER

@@ -132,6 +132,8 @@ class AbortCause(enum.Enum):
     COLLISION = "collision"
     PANIC = "panic"
     POWER_LOST = "power-lost"
+    GUARD = "guard"
+    """A wrist guard of the stop-the-move type tripped (:meth:`ArmSim.halt`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -353,6 +355,23 @@ class ArmSim:
         """The panic button: cuts arm power and aborts motion on the first servo cycle at or after ``at``
         (the next cycle when ``at`` is None)."""
         self._panic_at = -math.inf if at is None else float(at)
+
+    def halt(self, cause: AbortCause) -> list[ArmEvent]:
+        """Abort motion now (at the last servo cycle run), as the move process does on an error: the arm
+        stops where it is, the current and queued segments are dropped, and motion is refused (AWA) until
+        reset.  Returns the events: segments that had just completed, then the :class:`MotionAborted`.
+        Used for a wrist guard that stops the move; an idle arm is left alone (no events)."""
+        if not self.moving or not math.isfinite(self._clock):
+            return []
+        events: list[ArmEvent] = []
+        self._abort(self._clock, cause, (), events)
+        return events
+
+    @property
+    def current_scheme(self) -> Scheme | None:
+        """Interpolation scheme of the segment run on the last servo cycle (None when idle or playing a
+        straight-line move); a :class:`Compliance` reads it to tell the two compliant schemes apart."""
+        return self._scheme_now
 
     def place_obstacle(self, obstacle: Obstacle | None) -> None:
         """Put an obstacle in the arm's way (None removes it)."""

@@ -111,7 +111,8 @@ def is_legal_opcode(opcode: int) -> bool:
     return 0o1 <= opcode <= 0o16 or 0o200 <= opcode <= 0o377
 
 
-_LEGAL: Final = tuple(is_legal_opcode(op) for op in range(256))
+LEGAL_OPCODES: Final = tuple(is_legal_opcode(op) for op in range(256))
+"""``LEGAL_OPCODES[op]`` is :func:`is_legal_opcode` of ``op`` for every byte, for decoders' hot paths."""
 
 
 def padded_size(nbytes: int) -> int:
@@ -332,7 +333,7 @@ def decode_raw(b: bytes) -> Packet:
     present = len(b) - HEADER_SIZE
     if (
         w0 & 0xFF
-        or not _LEGAL[w0 >> 8]
+        or not LEGAL_OPCODES[w0 >> 8]
         or nbytes > MAX_DATA
         or not nbytes <= present <= nbytes + (nbytes & 1)
     ):

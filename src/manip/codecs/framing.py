@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import struct
 from abc import ABC, abstractmethod
+from array import array
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -59,6 +60,7 @@ from typing import ClassVar, Final, Literal
 
 from manip.codecs.chaos import (
     HEADER_SIZE,
+    LEGAL_OPCODES,
     TRAILER_SIZE,
     WordLocator,
     chaos_checksum,
@@ -74,7 +76,7 @@ from manip.codecs.chaos import (
     padded_size,
 )
 from manip.codecs.errors import DecodeError
-from manip.codecs.packet import MAX_DATA, Packet, Trailer
+from manip.codecs.packet import MAX_DATA, Packet, Trailer, make_packet, make_trailer_value
 
 CHUDP_HEADER: Final = b"\x01\x01\x00\x00"
 """Version 1, function 1 (a Chaos packet), two zero argument bytes."""
@@ -86,27 +88,147 @@ MAX_BODY: Final = HEADER_SIZE + MAX_DATA + TRAILER_SIZE
 """Largest packet-plus-trailer: 488 data bytes (510 bytes)."""
 
 WordOrder = Literal["<", ">"]
+Buffer = bytes | bytearray | memoryview
 StreamItem = Packet | DecodeError
 """What a stream decoder returns for each frame: the packet, or why that frame was refused."""
 
 
 # ------------------------------------------------------------------------------------ shared body
+#
+# Every packet a link moves goes through :func:`_body` and :func:`_decode_body`, so both have a fast
+# path for the well-formed case (checks inline, the data handled as one block, not word by word).
+# Anything the fast path is not sure of goes to the checked versions (``_body_checked``,
+# ``_decode_body_checked``), which are the reference: they raise the precise errors, and tests check
+# the two paths give identical results on random packets and frames.
+
+
+_HEAD: Final = {">": struct.Struct(">8H"), "<": struct.Struct("<8H")}
+_TRAILER: Final = {">": struct.Struct(">3H"), "<": struct.Struct("<3H")}
+_TCP_HEAD: Final = struct.Struct(">H8H")  # the frame length, then the header words
+
+
+def _ones_sum(total: int) -> int:
+    """The RFC 1071 (end-around carry) sum of 16-bit words whose plain sum is ``total``, or whose bytes
+    read as one integer (in either byte order) are ``total``: both are congruent to it modulo 0xFFFF."""
+    return (total - 1) % 0xFFFF + 1 if total else 0
+
+
+def _fast_body(
+    p: Packet, order: WordOrder, hw_dest: int | None, hw_src: int | None, tcp: bool
+) -> bytes | None:
+    """:func:`_body` for a packet whose fields all fit (None otherwise), with the TCP length if ``tcp``.
+
+    The data are never split into words: the checksum takes them as one integer (2^16 is 1 modulo
+    0xFFFF, so that integer is congruent to the sum of its words), and the big-endian links swap each
+    byte pair with ``array.byteswap``.
+    """
+    data = p.data
+    n = len(data)
+    opcode = p.opcode
+    fc = p.fc
+    dh = p.dest_host
+    di = p.dest_index
+    sh = p.src_host
+    si = p.src_index
+    pn = p.packet_no
+    an = p.ack_no
+    dest = dh if hw_dest is None else hw_dest
+    source = sh if hw_src is None else hw_src
+    if not (
+        isinstance(opcode, int)
+        and isinstance(fc, int)
+        and isinstance(dh, int)
+        and isinstance(di, int)
+        and isinstance(sh, int)
+        and isinstance(si, int)
+        and isinstance(pn, int)
+        and isinstance(an, int)
+        and isinstance(dest, int)
+        and isinstance(source, int)
+        and isinstance(data, bytes)
+        and n <= MAX_DATA
+        and 0 <= opcode <= 0xFF
+        and 0 <= fc <= 0xF
+        and 0 <= dh <= 0xFFFF
+        and 0 <= di <= 0xFFFF
+        and 0 <= sh <= 0xFFFF
+        and 0 <= si <= 0xFFFF
+        and 0 <= pn <= 0xFFFF
+        and 0 <= an <= 0xFFFF
+        and 0 <= dest <= 0xFFFF
+        and 0 <= source <= 0xFFFF
+    ):
+        return None
+    if n & 1:
+        data += b"\0"
+    w0 = opcode << 8
+    w1 = fc << 12 | n
+    total = w0 + w1 + dh + di + sh + si + pn + an + dest + source + int.from_bytes(data, "little")
+    checksum = ~_ones_sum(total) & 0xFFFF
+    if order == ">":
+        swapped = array("H", data)
+        swapped.byteswap()
+        data = swapped.tobytes()
+    trailer = _TRAILER[order].pack(dest, source, checksum)
+    if tcp:
+        return _TCP_HEAD.pack(MIN_BODY + len(data), w0, w1, dh, di, sh, si, pn, an) + data + trailer
+    return _HEAD[order].pack(w0, w1, dh, di, sh, si, pn, an) + data + trailer
 
 
 def _body(p: Packet, order: WordOrder, hw_dest: int | None, hw_src: int | None) -> bytes:
     """Header, padded data and trailer as words in ``order``: the part every trailer-carrying link shares."""
+    body = _fast_body(p, order, hw_dest, hw_src, False)
+    return _body_checked(p, order, hw_dest, hw_src) if body is None else body
+
+
+def _body_checked(p: Packet, order: WordOrder, hw_dest: int | None, hw_src: int | None) -> bytes:
+    """:func:`_body` by the book: every field checked (the precise :class:`EncodeError`), then packed."""
     check_encodable(p)
     trailer = make_trailer(p, hw_dest, hw_src)
     words = packet_words(p)
     return struct.pack(f"{order}{len(words) + 3}H", *words, trailer.dest, trailer.source, trailer.checksum)
 
 
-def _decode_body(body: bytes, base: int, order: WordOrder, *, verify: bool) -> Packet:
-    """Decode header, padded data and trailer that a framing has delimited; ``base`` is its input offset.
+def _decode_body(buf: Buffer, start: int, end: int, base: int, order: WordOrder, *, verify: bool) -> Packet:
+    """Decode the header, padded data and trailer in ``buf[start:end]``; ``base`` is its input offset.
+
+    The caller guarantees an even length of at least :data:`MIN_BODY`.  This is the fast path (the
+    checksum is taken over the body read as one integer, as in :func:`_fast_body`); a frame it has any
+    doubt about is decoded again by :func:`_decode_body_checked`, which says what is wrong.
+    """
+    big = order == ">"
+    if verify:
+        total = int.from_bytes(memoryview(buf)[start:end], "big" if big else "little")
+        if total % 0xFFFF or not total:  # the words do not sum to 0xFFFF (ones' complement)
+            return _decode_body_checked(bytes(buf[start:end]), base, order, verify=verify)
+    w0, w1, dh, di, sh, si, pn, an = _HEAD[order].unpack_from(buf, start)
+    nbytes = w1 & 0x0FFF
+    if (
+        w0 & 0xFF
+        or not LEGAL_OPCODES[w0 >> 8]
+        or nbytes > MAX_DATA
+        or nbytes + (nbytes & 1) != end - start - MIN_BODY
+    ):
+        return _decode_body_checked(bytes(buf[start:end]), base, order, verify=verify)
+    if big:
+        swapped = array("H", buf[start + HEADER_SIZE : end - TRAILER_SIZE])
+        swapped.byteswap()
+        data = swapped.tobytes()
+        if nbytes & 1:
+            data = data[:nbytes]
+    else:
+        data = bytes(buf[start + HEADER_SIZE : start + HEADER_SIZE + nbytes])
+    dest, source, checksum = _TRAILER[order].unpack_from(buf, end - TRAILER_SIZE)
+    return make_packet(
+        w0 >> 8, dh, di, sh, si, pn, an, data, w1 >> 12, make_trailer_value(dest, source, checksum)
+    )
+
+
+def _decode_body_checked(body: bytes, base: int, order: WordOrder, *, verify: bool) -> Packet:
+    """:func:`_decode_body` by the book, raising the precise :class:`DecodeError` for a bad frame.
 
     The checksum is tested first: when it fails, nothing else in the frame can be trusted, and a corrupt
-    count or opcode would otherwise be reported as if the sender had meant it.  The caller guarantees an
-    even length of at least :data:`MIN_BODY`.
+    count or opcode would otherwise be reported as if the sender had meant it.
     """
     n = len(body) // 2
     words = struct.unpack(f"{order}{n}H", body)
@@ -177,7 +299,7 @@ def decode_chudp(datagram: bytes, *, verify: bool = True) -> Packet:
             offset=size,
             clause="chudp.length",
         )
-    return _decode_body(bytes(datagram[4:]), 4, ">", verify=verify)
+    return _decode_body(datagram, 4, size, 4, ">", verify=verify)
 
 
 # ------------------------------------------------------------------------------------ stream links
@@ -224,41 +346,57 @@ class StreamDecoder(ABC):
         return self._failed
 
     @abstractmethod
-    def _body_length(self, header: bytes, offset: int) -> int:
-        """Validate a frame header found at stream ``offset``; return the body length."""
+    def _body_length(self, src: Buffer, pos: int, offset: int) -> int:
+        """Validate the frame header at ``src[pos:]`` (stream ``offset``); return the body length."""
 
     @abstractmethod
-    def _decode(self, body: bytes, offset: int) -> Packet:
-        """Decode one frame body found at stream ``offset``."""
+    def _decode(self, src: Buffer, start: int, end: int, offset: int) -> Packet:
+        """Decode the frame body ``src[start:end]``, found at stream ``offset``."""
 
     def feed(self, data: bytes) -> list[StreamItem]:
         """Add ``data``; return the packets (or per-frame errors) of every frame now complete, in order."""
         if self._failed is not None:
             raise self._failed
         buf = self._buf
-        buf += data
+        # Frames are read straight out of ``data`` when nothing is held back (the usual case: a read
+        # returns whole frames), so only an incomplete tail is ever copied into the buffer.
+        src: Buffer
+        if buf:
+            buf += data
+            src = buf
+        else:
+            src = data
+        size = len(src)
+        prefix = self.prefix
         items: list[StreamItem] = []
         pos = 0
-        while len(buf) - pos >= self.prefix:
+        while size - pos >= prefix:
             here = self._start + pos
             try:
-                length = self._body_length(bytes(buf[pos : pos + self.prefix]), here)
+                length = self._body_length(src, pos, here)
             except DecodeError as exc:
-                del buf[:pos]
-                self._start += pos
+                self._keep(src, pos)
                 self._failed = FrameSyncError(exc.message, exc.path, exc.offset, exc.clause, tuple(items))
                 raise self._failed from None
-            end = pos + self.prefix + length
-            if len(buf) < end:
+            end = pos + prefix + length
+            if size < end:
                 break
             try:
-                items.append(self._decode(bytes(buf[pos + self.prefix : end]), here + self.prefix))
+                items.append(self._decode(src, pos + prefix, end, here + prefix))
             except DecodeError as exc:
                 items.append(exc)
             pos = end
-        del buf[:pos]
-        self._start += pos
+        self._keep(src, pos)
         return items
+
+    def _keep(self, src: Buffer, pos: int) -> None:
+        """Hold back ``src[pos:]`` (consumed up to ``pos``) for the next :meth:`feed`."""
+        buf = self._buf
+        if src is buf:
+            del buf[:pos]
+        elif pos < len(src):
+            buf += src[pos:]
+        self._start += pos
 
     def finish(self) -> None:
         """Declare the end of the stream; raise :class:`DecodeError` if it stopped inside a frame."""
@@ -279,13 +417,14 @@ class TcpFrameDecoder(StreamDecoder):
     prefix = 2
     clause = "link.tcp.framing"
 
-    def _body_length(self, header: bytes, offset: int) -> int:
-        length = int.from_bytes(header, "big")
-        _check_body_length(length, offset, self.clause, "frame length")
+    def _body_length(self, src: Buffer, pos: int, offset: int) -> int:
+        length = src[pos] << 8 | src[pos + 1]
+        if length & 1 or not MIN_BODY <= length <= MAX_BODY:
+            _check_body_length(length, offset, self.clause, "frame length")
         return length
 
-    def _decode(self, body: bytes, offset: int) -> Packet:
-        return _decode_body(body, offset, ">", verify=self.verify)
+    def _decode(self, src: Buffer, start: int, end: int, offset: int) -> Packet:
+        return _decode_body(src, start, end, offset, ">", verify=self.verify)
 
 
 class ChaosdFrameDecoder(StreamDecoder):
@@ -297,7 +436,8 @@ class ChaosdFrameDecoder(StreamDecoder):
     def __init__(self, *, verify: bool = False) -> None:
         super().__init__(verify=verify)
 
-    def _body_length(self, header: bytes, offset: int) -> int:
+    def _body_length(self, src: Buffer, pos: int, offset: int) -> int:
+        header = bytes(src[pos : pos + 4])
         if header[2:4] != b"\x01\x00":
             raise DecodeError(
                 f"chaosd frame header bytes 2-3 are {header[2:4].hex(' ')}, expected 01 00",
@@ -309,8 +449,8 @@ class ChaosdFrameDecoder(StreamDecoder):
         _check_body_length(length, offset, self.clause, "chaosd length")
         return length
 
-    def _decode(self, body: bytes, offset: int) -> Packet:
-        return _decode_body(body, offset, "<", verify=self.verify)
+    def _decode(self, src: Buffer, start: int, end: int, offset: int) -> Packet:
+        return _decode_body(src, start, end, offset, "<", verify=self.verify)
 
 
 def _one_frame(decoder: StreamDecoder, frame: bytes) -> Packet:
@@ -344,8 +484,11 @@ def decode_stream(decoder: StreamDecoder, data: bytes) -> list[Packet]:
 
 def encode_tcp(p: Packet, *, hw_dest: int | None = None, hw_src: int | None = None) -> bytes:
     """One frame of manip TCP link framing v1 carrying ``p``."""
-    body = _body(p, ">", hw_dest, hw_src)
-    return len(body).to_bytes(2, "big") + body
+    frame = _fast_body(p, ">", hw_dest, hw_src, True)
+    if frame is None:
+        body = _body_checked(p, ">", hw_dest, hw_src)
+        return len(body).to_bytes(2, "big") + body
+    return frame
 
 
 def decode_tcp(frame: bytes, *, verify: bool = True) -> Packet:

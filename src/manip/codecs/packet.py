@@ -47,6 +47,7 @@ class Packet:
 
 _new = object.__new__
 _slot = Packet.__dict__
+_trailer_slot = Trailer.__dict__
 
 
 def make_packet(
@@ -77,3 +78,12 @@ def make_packet(
     _slot["fc"].__set__(p, fc)
     _slot["trailer"].__set__(p, trailer)
     return p
+
+
+def make_trailer_value(dest: int, source: int, checksum: int) -> Trailer:
+    """Build a Trailer without the frozen-dataclass ``__init__`` (for decoders, like :func:`make_packet`)."""
+    t = _new(Trailer)
+    _trailer_slot["dest"].__set__(t, dest)
+    _trailer_slot["source"].__set__(t, source)
+    _trailer_slot["checksum"].__set__(t, checksum)
+    return t

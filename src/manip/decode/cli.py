@@ -12,6 +12,8 @@ from pathlib import Path
 
 import click
 
+from manip.captures import CaptureError, iter_packets
+from manip.captures.listing import packet_line
 from manip.codecs.chaos import encode_raw
 from manip.codecs.cougar import WordStream
 from manip.codecs.errors import CodecError
@@ -97,6 +99,12 @@ def _request_key(value: str | None) -> int | str | None:
     help="Decode a Cougar word stream (hex words) as Puma commands or Cougar responses.",
 )
 @click.option("--binary/--hex", "binary", default=None, help="How to read a SOURCE file (default: guess).")
+@click.option(
+    "--mcap",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="Decode every packet of a capture (manip-capture) instead of SOURCE.",
+)
 @click.version_option(package_name="manip")
 def main(
     source: str | None,
@@ -106,8 +114,11 @@ def main(
     request: str | None,
     cougar: str | None,
     binary: bool | None,
+    mcap: str | None,
 ) -> None:
     """Decode SOURCE: a hex string, a file, or - for standard input (the default)."""
+    if mcap is not None:
+        sys.exit(_decode_capture(mcap, fmt))
     if cougar is not None:
         text = _read_text(source)
         stream = WordStream("command" if cougar == "command" else "response")
@@ -138,6 +149,45 @@ def main(
         _emit(nodes, fmt)
     if any(c.label == "decode error" for n in nodes for c in n.children):
         sys.exit(1)
+
+
+def _decode_capture(path: str, fmt: str) -> int:
+    """Every packet of a capture: its listing line, then its tree; 1 if any fails to decode."""
+    failed = False
+    nodes: list[Node] = []
+    start: int | None = None
+    try:
+        for item in iter_packets(path):
+            start = item.time_ns if start is None else start
+            if item.packet is None:
+                failed = True
+                click.echo(packet_line(item, start))
+                continue
+            direction: Direction = "request" if item.direction == "c2s" else "response"
+            request = item.op if item.direction == "s2c" and item.op is not None else None
+            if request is not None:
+                try:
+                    request_op(request)
+                except KeyError:  # the initial RESPONSE (to the RFC), or a reply to an unknown opcode
+                    request = None
+            node = describe_packet(item.packet, direction=direction, request=request)
+            failed = failed or any(c.label == "decode error" for c in node.children)
+            if fmt == "json":
+                node.label = f"packet {item.seq}"
+                node.text = packet_line(item, start)
+                nodes.append(node)
+            elif fmt == "hexdump":
+                click.echo(packet_line(item, start))
+                click.echo(render_hexdump(encode_raw(item.packet), node) + "\n")
+            else:
+                click.echo(packet_line(item, start))
+                click.echo(render_tree(node, 1) + "\n")
+    except CaptureError as exc:
+        click.echo(f"manip-decode: {exc}", err=True)
+        return 1
+    if fmt == "json":
+        click.echo(render_json(nodes))
+    return 1 if failed else 0
 
 
 def _read_text(source: str | None) -> str:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import asyncio
 import ipaddress
 import logging
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import replace
 from types import TracebackType
 
@@ -27,6 +27,8 @@ log = logging.getLogger("manip.links")
 
 Handler = Callable[[ChaosConnection], Awaitable[None]]
 """A server's per-connection coroutine; the connection is closed gracefully when it returns."""
+LinkWrapper = Callable[[Link], Link]
+"""Given each new link, returns the link the node should use (the same one, or a wrapper of it)."""
 
 
 def _address(address: str | LinkAddress) -> LinkAddress:
@@ -73,19 +75,21 @@ async def open_connection(
     args: bytes | str = b"",
     options: NcpOptions | None = None,
     learn_peers: bool = False,
+    wrap_link: LinkWrapper | None = None,
 ) -> ChaosConnection:
     """Make the link, send the RFC to the address's contact and wait for the OPN.
 
-    The connection owns its link: closing it closes the link.  Raises LinkError (no link),
-    ConnectionRefused (CLS, with the server's reason), ConnectionLost (LOS), ConnectTimeout, or
-    ConnectionAnswered / ConnectionForwarded for the rarer answers to an RFC."""
+    The connection owns its link: closing it closes the link.  ``wrap_link`` may put a wrapper
+    between the node and its link (a recording tap, :class:`manip.captures.TappedLink`).  Raises
+    LinkError (no link), ConnectionRefused (CLS, with the server's reason), ConnectionLost (LOS),
+    ConnectTimeout, or ConnectionAnswered / ConnectionForwarded for the rarer answers to an RFC."""
     addr = _address(address)
     loop = asyncio.get_running_loop()
     deadline = None if timeout is None else loop.time() + timeout
     node = Node(addr.my_addr, options)
     try:
         link, default = await _client_link(addr, timeout, learn_peers)
-        node.attach(link, hosts=[addr.peer_addr], default=default)
+        node.attach(wrap_link(link) if wrap_link else link, hosts=[addr.peer_addr], default=default)
         remaining = None if deadline is None else max(0.0, deadline - loop.time())
         conn = await node.connect(addr.peer_addr, contact or addr.contact, args, timeout=remaining)
     except BaseException:
@@ -190,31 +194,37 @@ async def start_server(
     options: NcpOptions | None = None,
     learn_peers: bool = True,
     peers: Mapping[int, Endpoint] | None = None,
+    wrap_link: LinkWrapper | None = None,
 ) -> ChaosServer:
     """Listen for ``contact`` (None: the address's) as Chaos host ``addr`` of ``address``.
 
     tcp:// listens on HOST:PORT (port 0: a free one, see ``ChaosServer.port``); chudp:// binds
     HOST:PORT and learns its clients (``learn_peers``) besides the configured ``peers``; chaosd://
     connects to the daemon.  ``max_connections=1`` refuses a second client with ``busy_reason`` while
-    one is connected: one Puma server is one robot."""
+    one is connected: one Puma server is one robot.  ``wrap_link`` wraps every link the node gets
+    (see :func:`open_connection`)."""
     addr = _address(address)
     name = contact or addr.contact
     node = Node(addr.peer_addr, options)
+
+    def attach(link: Link, hosts: Iterable[int] = (), default: bool = False) -> None:
+        node.attach(wrap_link(link) if wrap_link else link, hosts=hosts, default=default)
+
     server: ChaosServer | None = None
     tcp: asyncio.Server | None = None
     try:
         if addr.scheme == "tcp":
-            tcp = await serve_tcp(addr.host, addr.port, my_addr=addr.peer_addr, on_link=node.attach)
+            tcp = await serve_tcp(addr.host, addr.port, my_addr=addr.peer_addr, on_link=attach)
             bound = replace(addr, port=int(tcp.sockets[0].getsockname()[1]))
         elif addr.scheme == "chudp":
             link = await bind_chudp(
                 addr.host, addr.port, my_addr=addr.peer_addr, peers=peers, learn_peers=learn_peers
             )
-            node.attach(link, hosts=list(link.peers))
+            attach(link, hosts=list(link.peers))
             bound = replace(addr, port=link.local_address[1])
         else:
             assert addr.path is not None
-            node.attach(await connect_chaosd(addr.path, my_addr=addr.peer_addr), default=True)
+            attach(await connect_chaosd(addr.path, my_addr=addr.peer_addr), default=True)
             bound = addr
         server = ChaosServer(node, bound, name, handler, tcp)
         node.listen(

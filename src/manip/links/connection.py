@@ -28,6 +28,8 @@ if TYPE_CHECKING:
 UNCONTROLLED_KEPT: Final = 64
 """UNC packets kept per connection (oldest dropped); they are not sequenced or acknowledged."""
 CLOSE_TIMEOUT: Final = 5.0
+_DAT: Final = int(ChaosOp.DAT)  # plain ints: enum attribute reads are slow on the per-packet path
+_EOF: Final = int(ChaosOp.EOF)
 
 
 @dataclass(slots=True)
@@ -152,19 +154,21 @@ class ChaosConnection:
 
         Waits while the peer's window is full.  Raises the connection's end (ConnectionClosed, ...)
         if it is over, and ConnectionClosed if we are closing it."""
-        if not ChaosOp.DAT <= opcode <= 0o377:
+        if not _DAT <= opcode <= 0o377:
             raise ValueError(f"data opcodes are 0200-0377, not {opcode:#o}")
         if len(data) > MAX_DATA:
             raise ValueError(f"data is {len(data)} bytes, more than {MAX_DATA}")
         node = self._node
         ncp = node.ncp
+        conn_id = self.conn_id
         while True:
-            self._check_sendable()
-            if ncp.can_send(self.conn_id):
+            if self._end is not None or self._closing:
+                self._check_sendable()
+            if ncp.window_space(conn_id) > 0:
                 break
             self.stats.send_waits += 1
             await self._wait_window()
-        number = ncp.send(node._now(), self.conn_id, data, opcode=opcode)
+        number = ncp.send(node._now(), conn_id, data, opcode=opcode)
         stats = self.stats
         stats.packets_sent += 1
         stats.bytes_sent += len(data)
@@ -195,7 +199,7 @@ class ChaosConnection:
         if self._rx:
             packet = self._rx.popleft()
             self._node._read(self.conn_id, packet.packet_no)
-            if packet.opcode != ChaosOp.EOF:
+            if packet.opcode != _EOF:
                 return packet
             self._eof_read = True
         if self._eof_read:

@@ -21,9 +21,9 @@ aborted at once (ConnectionBroken) rather than waiting ``broken_after``.
 
 The timer: one ``call_at`` handle, armed at ``ncp.next_deadline()`` after every call into the core.
 Asking the core costs a scan of its connections, so it is skipped while the armed time is no later than
-``now`` plus the shortest of the NCP's intervals: every deadline the core sets is at least that far
-after the call that sets it, so none can be earlier than the armed one.  A timer that fires before
-anything is due just re-arms itself.
+the ``now`` of the latest call into the core plus the shortest of the NCP's intervals: every deadline
+the core sets is at least that far after the call that sets it, so none can be earlier than the armed
+one.  A timer that fires before anything is due just re-arms itself.
 """
 
 from __future__ import annotations
@@ -78,6 +78,7 @@ AcceptPolicy = Callable[[ConnectionRequested], str | None]
 OnOpen = Callable[[ChaosConnection], None]
 
 _FINAL: Final = frozenset({ConnState.CLOSED, ConnState.LOST, ConnState.INCOMPLETE})
+_RFC: Final = int(ChaosOp.RFC)  # a plain int: enum attribute reads are slow on the per-packet path
 NO_SERVER: Final = "No server for this contact name"
 BUSY: Final = "Busy: the robot already has a client"
 
@@ -312,21 +313,24 @@ class Node:
             return  # the outer pump drains whatever this call would have
         self._pumping = True
         ncp = self.ncp
+        route = self._route
         try:
             while True:  # packets first: a connection's last packet leaves before its end forgets its route
                 for packet in ncp.packets_to_send():
-                    self._route(packet)
+                    route(packet)
                 event = ncp.next_event()
                 if event is None:
                     break
                 self._dispatch(event)
         finally:
             self._pumping = False
-        self._arm_timer()
+        if self._timer is None or self._timer_at > self._last_now + self._min_interval:
+            self._arm_timer()  # (the test is _arm_timer's first one, inlined: it usually says "no")
         if self._send_waiting:
             self._wake_senders()
-        for conn in self._watching:
-            conn._check_window()
+        if self._watching:
+            for conn in self._watching:
+                conn._check_window()
 
     def _route(self, packet: Packet) -> None:
         rx = self._rx
@@ -337,7 +341,7 @@ class Node:
             route = self._by_conn.get(packet.src_index) if packet.src_index else None
             if route is None:
                 route = self._routes.get(packet.dest_host) or self._default
-        if route is None or route[0].is_closed:
+        if route is None or route[0].close_reason is not None:  # (no route, or its link is closed)
             self.stats.no_route += 1
             log.debug("node %o: no route for %r", self.address, packet)
             return
@@ -346,7 +350,7 @@ class Node:
 
     def _arm_timer(self) -> None:
         handle = self._timer
-        if handle is not None and self._timer_at <= self._loop.time() + self._min_interval:
+        if handle is not None and self._timer_at <= self._last_now + self._min_interval:
             return  # armed no later than any deadline the core can have set since (module docstring)
         deadline = self.ncp.next_deadline()
         if deadline is None or not math.isfinite(deadline):
@@ -394,7 +398,7 @@ class Node:
             if bound is not None and bound[0] is not link:
                 self.stats.wrong_link += 1
                 return
-        if packet.opcode == ChaosOp.RFC and self._rfc_conflict(link, packet):
+        if packet.opcode == _RFC and self._rfc_conflict(link, packet):
             return
         trailer = packet.trailer
         hop = trailer.source if trailer is not None and trailer.source else packet.src_host
@@ -444,6 +448,11 @@ class Node:
     # ---------------------------------------------------------------- events
 
     def _dispatch(self, event: Event) -> None:
+        if type(event) is DataReceived:  # the common case first
+            conn = self._conns.get(event.conn_id)
+            if conn is not None:
+                conn._on_data(event.packet)
+            return
         if isinstance(event, ConnectionRequested):
             self._on_request(event)
             return

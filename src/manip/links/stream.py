@@ -126,13 +126,10 @@ class StreamLink(Link, asyncio.Protocol):
             if isinstance(item, DecodeError):
                 self._bad(bad_reason(item), item)
                 continue
-            if (
-                self.peer_addr is None
-                and self.learns_peer
-                and item.trailer is not None
-                and item.trailer.source
-            ):
-                self.peer_addr = item.trailer.source
+            if self.peer_addr is None:
+                trailer = item.trailer
+                if self.learns_peer and trailer is not None and trailer.source:
+                    self.peer_addr = trailer.source
             self._deliver(item)
 
     def _shut(self, reason: str, *, abort: bool) -> None:

@@ -1,7 +1,9 @@
 """One Chaos connection: its state, its two packet-number sequences, its queues and its timers.
 
 The state logic is the table in :mod:`manip.ncp.states`; this module implements each action the table
-names (methods decorated with ``@_action``) and the bookkeeping that does not change the state.
+names (methods decorated with ``@_action``) and the bookkeeping that does not change the state.  At
+import the table is copied into ``_PLAN`` with every action name resolved to its method, so running a
+transition is one dictionary lookup (states and inputs hash by identity) and a few direct calls.
 
 Bookkeeping, per direction (all numbers modulo 2^16, see :mod:`manip.ncp.seq`):
 
@@ -36,9 +38,9 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, NamedTuple
 
-from manip.codecs.packet import Packet
+from manip.codecs.packet import Packet, make_packet
 from manip.spec.constants import ChaosOp
 
 from .errors import InvalidStateError, WindowFullError
@@ -56,8 +58,15 @@ from .events import (
     UncontrolledReceived,
 )
 from .packets import make_los, pack_status, text, unpack_status
-from .seq import seq_add, seq_gt, seq_le, seq_lt, seq_sub
-from .states import FINAL_STATES, ConnState, Input, Source, transition
+from .seq import seq_add, seq_le, seq_lt, seq_sub
+from .states import FINAL_STATES, TRANSITIONS, ConnState, Input, Source
+
+# Module-level aliases: reading an attribute of an enum class is several times slower than reading a
+# global, and these are read on every packet's path.
+_EOF: Final = int(ChaosOp.EOF)
+_OPEN: Final = ConnState.OPEN
+_RFC_SENT: Final = ConnState.RFC_SENT
+_RFC_RECEIVED: Final = ConnState.RFC_RECEIVED
 
 MAX_WINDOW: Final = 0x4000
 """Largest window we accept from a peer (well inside the half of the sequence space that compares)."""
@@ -117,12 +126,12 @@ class Outbox:
         self.events.append(event)
 
 
-@dataclass(frozen=True, slots=True)
-class Trigger:
+class Trigger(NamedTuple):
     """The arguments of one input: when it happens and whatever it carries.
 
     ``data`` is the user's data or reason text; ``packet_no`` the first packet number (connect, accept)
-    or the packet read (read_ack); ``host`` the host to connect or forward to."""
+    or the packet read (read_ack); ``host`` the host to connect or forward to.  (A named tuple: one is
+    built for every input, and this is the cheapest immutable record to build.)"""
 
     now: float
     packet: Packet | None = None
@@ -214,32 +223,34 @@ class Connection:
 
     def handle(self, inp: Input, trig: Trigger) -> bool:
         """Run the table's transition for ``inp``.  False if the table has none (packet ignored)."""
-        tr = transition(self.state, inp)
-        if tr is None:
+        plan = _PLAN.get((self.state, inp))
+        if plan is None:
             if inp.source is Source.USER:
                 raise InvalidStateError(
                     f"connection {self.index:#06x}: {inp.name} is not allowed in {self.state.name}"
                 )
             return False
-        for name in tr.actions:
-            _ACTIONS[name](self, trig)
-        self.state = tr.next_state
-        self._after(trig.now)
+        actions, next_state = plan
+        for action in actions:
+            action(self, trig)
+        self.state = next_state
+        if self.closing:
+            self._after(trig.now)
         return True
 
     def timer(self, now: float) -> None:
         """Retransmit, probe, send a delayed STS or time the connection out, as due at ``now``."""
         cfg = self.config
         state = self.state
-        if state is ConnState.RFC_SENT:
+        if state is _RFC_SENT:
             if now >= self.started_at + cfg.rfc_timeout:
                 self.handle(Input.RFC_TIMEOUT, Trigger(now, data=b"Host not responding"))
                 return
             self._retransmit(now, cfg.retransmit_interval)
-        elif state is ConnState.RFC_RECEIVED:
+        elif state is _RFC_RECEIVED:
             if now >= self.started_at + cfg.rfc_timeout:
                 self.handle(Input.UNANSWERED, Trigger(now, data=b"Timeout"))
-        elif state is ConnState.OPEN:
+        elif state is _OPEN:
             if now >= self.last_heard + cfg.broken_after:
                 reason = f"No packet from the peer for {cfg.broken_after:g} s"
                 self.handle(Input.SILENCE, Trigger(now, data=reason.encode()))
@@ -259,11 +270,11 @@ class Connection:
         """When :meth:`timer` next has something to do (None: never, the connection is idle for good)."""
         cfg = self.config
         state = self.state
-        if state is ConnState.RFC_SENT:
+        if state is _RFC_SENT:
             return min(self.started_at + cfg.rfc_timeout, self._retransmit_deadline())
-        if state is ConnState.RFC_RECEIVED:
+        if state is _RFC_RECEIVED:
             return self.started_at + cfg.rfc_timeout
-        if state is ConnState.OPEN:
+        if state is _OPEN:
             due = min(self.last_heard + cfg.broken_after, self.probe_at, self._retransmit_deadline())
             if self.ack_due is not None:
                 due = min(due, self.ack_due)
@@ -278,9 +289,9 @@ class Connection:
         return seq_sub(self.tlast, self.tacked)
 
     def window_space(self) -> int:
-        if self.state is not ConnState.OPEN or self.closing or not self.established:
+        if self.state is not _OPEN or self.closing or not self.established:
             return 0
-        return max(0, self.twsize - self.outstanding)
+        return max(0, self.twsize - ((self.tlast - self.tacked) & 0xFFFF))  # twsize - outstanding
 
     def info(self) -> ConnectionInfo:
         return ConnectionInfo(
@@ -305,23 +316,16 @@ class Connection:
     # ------------------------------------------------------------------ packet building
 
     def _packet(self, opcode: int, *, packet_no: int = 0, ack_no: int = 0, data: bytes = b"") -> Packet:
-        return Packet(
-            opcode=opcode,
-            dest_host=self.peer_host,
-            dest_index=self.peer_index,
-            src_host=self.address,
-            src_index=self.index,
-            packet_no=packet_no,
-            ack_no=ack_no,
-            data=data,
+        return make_packet(
+            opcode, self.peer_host, self.peer_index, self.address, self.index, packet_no, ack_no, data
         )
 
     def _told_ack(self) -> int:
         """Note that the packet being built carries the current ack; return it."""
-        self.racked = self.rread
-        if seq_gt(self.rread, self.receipt_told):
-            self.receipt_told = self.rread
-        return self.rread
+        rread = self.racked = self.rread
+        if (self.receipt_told - rread) & 0x8000:  # seq_gt(rread, receipt_told)
+            self.receipt_told = rread
+        return rread
 
     def _start_sequence(self, first: int) -> None:
         self.tlast = first & 0xFFFF
@@ -330,8 +334,10 @@ class Connection:
         self.twsize = 0
 
     def _send_controlled(self, now: float, opcode: int, data: bytes) -> int:
-        number = seq_add(self.tlast, 1)
-        packet = self._packet(opcode, packet_no=number, ack_no=self._told_ack(), data=data)
+        number = (self.tlast + 1) & 0xFFFF
+        packet = make_packet(
+            opcode, self.peer_host, self.peer_index, self.address, self.index, number, self._told_ack(), data
+        )
         self.tlast = number
         self.queue.append(_Sent(packet, now))
         self.out.packet(packet)
@@ -355,16 +361,25 @@ class Connection:
 
     # ------------------------------------------------------------------ transmit bookkeeping
 
+    # The methods below run for every packet, so they compare packet numbers inline rather than through
+    # manip.ncp.seq: all the numbers kept here are already reduced to 16 bits, so ``a`` comes before
+    # ``b`` exactly when ``(a - b) & 0x8000`` (seq_lt), and seq_le(a, b) is ``a == b or seq_lt(a, b)``.
+
     def _take_ack(self, ack: int) -> None:
-        if seq_lt(self.tacked, ack) and seq_le(ack, self.tlast):
+        tlast = self.tlast
+        if (self.tacked - ack) & 0x8000 and (ack == tlast or (ack - tlast) & 0x8000):
             self.tacked = ack
         self._take_receipt(ack)
 
     def _take_receipt(self, receipt: int) -> None:
-        if seq_lt(self.receipted, receipt) and seq_le(receipt, self.tlast):
+        tlast = self.tlast
+        if (self.receipted - receipt) & 0x8000 and (receipt == tlast or (receipt - tlast) & 0x8000):
             self.receipted = receipt
             queue = self.queue
-            while queue and seq_le(queue[0].packet.packet_no, receipt):
+            while queue:
+                number = queue[0].packet.packet_no
+                if number != receipt and not (number - receipt) & 0x8000:
+                    break
                 queue.popleft()
 
     def _retransmit_deadline(self) -> float:
@@ -392,7 +407,7 @@ class Connection:
 
     def _after(self, now: float) -> None:
         """Consequences of an input that the table does not spell out: the EOF of a close."""
-        if self.state is not ConnState.OPEN or not self.closing:
+        if self.state is not _OPEN or not self.closing:
             return
         if self.eof_no is None:
             if self.established and self.outstanding < self.twsize:
@@ -408,7 +423,7 @@ class Connection:
     def _deliver(self, packet: Packet) -> None:
         self.rlast = packet.packet_no
         self.out.stats.delivered += 1
-        if packet.opcode == ChaosOp.EOF:
+        if packet.opcode == _EOF:
             self.peer_eof = packet.packet_no
             self.out.event(EofReceived(self.index, packet))
         else:
@@ -418,7 +433,7 @@ class Connection:
         self.rread = number
         eof = self.peer_eof
         eof_read = eof is not None and seq_le(eof, number) and seq_lt(self.racked, eof)
-        if eof_read or 3 * seq_sub(self.rread, self.racked) > self.rwsize:
+        if eof_read or 3 * ((number - self.racked) & 0xFFFF) > self.rwsize:
             self._send_sts()
         elif self.ack_due is None:
             self.ack_due = now + self.config.ack_delay
@@ -553,7 +568,10 @@ class Connection:
 
     @_action
     def _a_process_ack(self, t: Trigger) -> None:
-        self._take_ack(_need(t).ack_no)
+        p = t.packet  # _need(t), inlined: this runs for every packet
+        if p is None:  # pragma: no cover - the table only routes packet inputs here
+            raise AssertionError("this action needs a packet")
+        self._take_ack(p.ack_no)
 
     @_action
     def _a_take_sts(self, t: Trigger) -> None:
@@ -573,15 +591,18 @@ class Connection:
 
     @_action
     def _a_take_data(self, t: Trigger) -> None:
-        p = _need(t)
+        p = t.packet  # _need(t), inlined: this runs for every data packet
+        if p is None:  # pragma: no cover - the table only routes packet inputs here
+            raise AssertionError("this action needs a packet")
         number = p.packet_no
-        if seq_le(number, self.rlast) or number in self.ooo:
+        rlast = self.rlast
+        if number == rlast or (number - rlast) & 0x8000 or number in self.ooo:  # seq_le(number, rlast)
             self.out.stats.duplicates_received += 1
             self._send_sts()
             return
-        if seq_sub(number, self.rread) > self.rwsize:
+        if (number - self.rread) & 0xFFFF > self.rwsize:
             return  # beyond our window: the sender broke the rules, or it is very old
-        if number != seq_add(self.rlast, 1):
+        if number != (rlast + 1) & 0xFFFF:
             self.ooo[number] = p
             return
         self._deliver(p)
@@ -600,7 +621,7 @@ class Connection:
     def _a_send_data(self, t: Trigger) -> None:
         if self.closing:
             raise InvalidStateError(f"connection {self.index:#06x} is closing: no more data")
-        if not self.established or self.outstanding >= self.twsize:
+        if not self.established or (self.tlast - self.tacked) & 0xFFFF >= self.twsize:  # outstanding
             raise WindowFullError(
                 f"connection {self.index:#06x}: {self.outstanding} packets unacknowledged, "
                 f"peer window {self.twsize}"
@@ -610,11 +631,12 @@ class Connection:
     @_action
     def _a_mark_read(self, t: Trigger) -> None:
         number = t.packet_no & 0xFFFF
-        if seq_gt(number, self.rlast):
+        if (self.rlast - number) & 0x8000:  # seq_gt(number, rlast)
             raise InvalidStateError(
                 f"connection {self.index:#06x}: packet {number} has not been delivered (last {self.rlast})"
             )
-        if seq_le(number, self.rread):
+        rread = self.rread
+        if number == rread or (number - rread) & 0x8000:  # seq_le(number, rread)
             return
         self._read_up_to(t.now, number)
 
@@ -629,6 +651,12 @@ class Connection:
     @property
     def finished(self) -> bool:
         return self.state in FINAL_STATES
+
+
+_PLAN: Final[dict[tuple[ConnState, Input], tuple[tuple[_ActionFn, ...], ConnState]]] = {
+    key: (tuple(_ACTIONS[name] for name in tr.actions), tr.next_state) for key, tr in TRANSITIONS.items()
+}
+"""The table with each action name resolved to its method, so running a transition does no name lookups."""
 
 
 def _need(t: Trigger) -> Packet:

@@ -35,7 +35,7 @@ from manip.spec.constants import ChaosOp
 from .connection import Config, Connection, ConnectionInfo, NcpStats, Outbox, Trigger
 from .errors import NoFreeIndexError, UnknownConnectionError
 from .events import Event
-from .packets import is_data, is_legal_opcode, make_los
+from .packets import is_legal_opcode, make_los
 from .states import FINAL_STATES, ConnState, Input
 
 _SLOTS: Final = 255
@@ -57,6 +57,12 @@ _PACKET_INPUTS: Final[Mapping[int, Input]] = MappingProxyType(
 _NO_LOS_FOR: Final = frozenset({ChaosOp.LOS, ChaosOp.CLS})
 _SILENT_IF_UNKNOWN: Final = frozenset({ChaosOp.LOS, ChaosOp.CLS, ChaosOp.ANS, ChaosOp.FWD})
 _DROPPED: Final = frozenset({ChaosOp.MNT, ChaosOp.RUT, ChaosOp.BRD})
+_RFC_SENT: Final = ConnState.RFC_SENT
+_DATA: Final = Input.DATA
+_SEND: Final = Input.SEND
+_READ: Final = Input.READ
+_RFC: Final = int(ChaosOp.RFC)  # plain ints for the per-packet path (enum attribute reads are slow)
+_DAT: Final = int(ChaosOp.DAT)
 
 
 def _check_word(name: str, value: int, low: int = 0) -> None:
@@ -220,12 +226,12 @@ class Ncp:
 
         Raises WindowFullError when the peer's window is full or not yet known (check :meth:`can_send`
         first) and InvalidStateError when the connection is not open or is closing."""
-        if not is_data(opcode):
+        if not _DAT <= opcode <= 0o377:
             raise ValueError(f"data opcodes are 0200-0377, not {opcode:#o}")
         if len(data) > MAX_DATA:
             raise ValueError(f"data is {len(data)} bytes, more than {MAX_DATA}")
         conn = self._conn(conn_id)
-        self._handle(conn, Input.SEND, Trigger(now, data=bytes(data), opcode=opcode))
+        self._handle(conn, _SEND, Trigger(now, None, bytes(data), opcode))
         return conn.tlast
 
     def can_send(self, conn_id: int) -> bool:
@@ -238,7 +244,7 @@ class Ncp:
 
     def read_ack(self, now: float, conn_id: int, packet_no: int) -> None:
         """Mark every delivered packet up to ``packet_no`` as read (needed only without ``auto_read``)."""
-        self._handle(self._conn(conn_id), Input.READ, Trigger(now, packet_no=packet_no))
+        self._handle(self._conn(conn_id), _READ, Trigger(now, None, b"", 0, 0, packet_no))
 
     def close(self, now: float, conn_id: int) -> None:
         """Close gracefully: EOF after the data; CLS once the peer acknowledges the EOF; event Closed.
@@ -260,25 +266,32 @@ class Ncp:
             out.stats.dropped += 1
             return
         opcode = packet.opcode
-        if packet.nbytes > MAX_DATA:
+        if len(packet.data) > MAX_DATA:
             self._los(packet, "Illegal byte count")
             return
-        if not is_legal_opcode(opcode):
-            self._los(packet, "Illegal opcode")
-            return
-        if opcode in _DROPPED:
-            out.stats.dropped += 1
-            return
-        if opcode == ChaosOp.RFC:
-            self._take_rfc(now, packet)
-            return
-        conn = self._find(packet)
+        data = _DAT <= opcode <= 0o377
+        if not data:
+            if not is_legal_opcode(opcode):
+                self._los(packet, "Illegal opcode")
+                return
+            if opcode in _DROPPED:
+                out.stats.dropped += 1
+                return
+            if opcode == _RFC:
+                self._take_rfc(now, packet)
+                return
+        conn = self._live.get(packet.dest_index)  # self._find(packet), inlined: every packet comes here
+        if conn is not None and (
+            packet.src_host != conn.peer_host
+            or (packet.src_index != conn.peer_index and conn.state is not _RFC_SENT)
+        ):
+            conn = None
         if conn is None:
             if opcode not in _SILENT_IF_UNKNOWN:
                 self._los(packet, "Connection doesn't exist")
             return
         conn.last_heard = now
-        inp = Input.DATA if is_data(opcode) else _PACKET_INPUTS.get(opcode)
+        inp = _DATA if data else _PACKET_INPUTS.get(opcode)
         if inp is None:  # LSN from the network: nothing to do with it
             return
         self._handle(conn, inp, Trigger(now, packet))
@@ -366,7 +379,8 @@ class Ncp:
         try:
             conn.handle(inp, trig)
         finally:
-            self._settle(conn)
+            if conn.state in FINAL_STATES:
+                self._settle(conn)
 
     def _settle(self, conn: Connection) -> None:
         if conn.state in FINAL_STATES:
@@ -374,17 +388,6 @@ class Ncp:
             key = (conn.peer_host, conn.peer_index)
             if self._by_peer.get(key) is conn:
                 del self._by_peer[key]
-
-    def _find(self, packet: Packet) -> Connection | None:
-        index = packet.dest_index
-        conn = self._live.get(index)
-        if conn is None:
-            return None
-        if packet.src_host != conn.peer_host:
-            return None
-        if conn.state is not ConnState.RFC_SENT and packet.src_index != conn.peer_index:
-            return None
-        return conn
 
     def _take_rfc(self, now: float, packet: Packet) -> None:
         key = (packet.src_host, packet.src_index)

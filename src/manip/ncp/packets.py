@@ -21,21 +21,27 @@ __all__ = [
 ]
 
 _STATUS: Final = struct.Struct("<HH")
+# Plain ints: reading an attribute of the ChaosOp enum class costs more than the comparison itself.
+_RFC: Final = int(ChaosOp.RFC)
+_OPN: Final = int(ChaosOp.OPN)
+_EOF: Final = int(ChaosOp.EOF)
+_BRD: Final = int(ChaosOp.BRD)
+_DAT: Final = int(ChaosOp.DAT)
 
 
 def is_data(opcode: int) -> bool:
     """Data opcodes: 0200-0277 (8-bit) and 0300-0377 (16-bit)."""
-    return ChaosOp.DAT <= opcode <= 0o377
+    return _DAT <= opcode <= 0o377
 
 
 def is_legal_opcode(opcode: int) -> bool:
     """Opcodes 001-016 and 0200-0377; anything else draws a LOS (clause ``chaos.opcode.legal``)."""
-    return ChaosOp.RFC <= opcode <= ChaosOp.BRD or is_data(opcode)
+    return _RFC <= opcode <= _BRD or _DAT <= opcode <= 0o377
 
 
 def is_controlled(opcode: int) -> bool:
     """Controlled packets are numbered, windowed and retransmitted: RFC, OPN, EOF and data."""
-    return opcode in (ChaosOp.RFC, ChaosOp.OPN, ChaosOp.EOF) or is_data(opcode)
+    return opcode in (_RFC, _OPN, _EOF) or _DAT <= opcode <= 0o377
 
 
 def pack_status(receipt: int, window: int) -> bytes:

@@ -56,6 +56,10 @@ class ConnState(enum.Enum):
     LOST = "LOST"
     INCOMPLETE = "INCOMPLETE"
 
+    # Members are singletons compared by identity, so identity hashing is exact, and it is done in C;
+    # ``Enum.__hash__`` hashes the name in Python, which showed up on every packet's path.
+    __hash__ = object.__hash__
+
 
 FINAL_STATES: Final = frozenset({ConnState.CLOSED, ConnState.LOST, ConnState.INCOMPLETE})
 """States a connection never leaves once it got there after being used."""
@@ -100,6 +104,8 @@ class Input(enum.Enum):
     RFC_TIMEOUT = (Source.INTERNAL, "no reply to our RFC within rfc_timeout")
     UNANSWERED = (Source.INTERNAL, "the user left a received RFC unanswered for rfc_timeout")
     SILENCE = (Source.INTERNAL, "no packet from the peer for broken_after")
+
+    __hash__ = object.__hash__  # see ConnState
 
     @property
     def source(self) -> Source:

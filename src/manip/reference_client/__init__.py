@@ -7,24 +7,34 @@ Layers, bottom up (each module's docstring says more):
 * :mod:`~.matching` (with :mod:`~.handlers`, :mod:`~.events`): the sans-I/O core that matches
   responses to requests by the request number in the first data word;
 * :mod:`~.transport`: the operations a communication protocol provides (§3.1);
-  :mod:`~.memory` is an in-memory one with a server end for test peers;
+  :mod:`~.ncp_transport` is the Chaos one over ``manip.links`` (what a URL connects with),
+  :mod:`~.core_transport` runs a sans-I/O server core in memory on a virtual clock, and
+  :mod:`~.memory` is an in-memory one with a server end for scripted test peers;
 * :mod:`~.background`: the asyncio background process;
 * :mod:`~.manipulator` (:mod:`~.generic`, :mod:`~.puma`): the operations;
-  :mod:`~.connect` opens a connection, :mod:`~.sync` is the blocking facade.
+  :mod:`~.connect` opens a connection (URL or transport), :mod:`~.sync` is the blocking facade;
+* :mod:`~.cli` is ``manip-client URL COMMAND``, printing through :mod:`~.cli_output`.
 
 ::
 
-    async with aconnect(make_transport) as arm:        # a ManipTransport or a factory of one
+    async with aconnect("tcp://127.0.0.1:42085") as arm:   # a URL, a ManipTransport or a factory
         pose = await arm.here()
         segment = await arm.move(pose @ Transform.trans(0, 0, 10))
         await arm.wait_for_segment(segment)
 
-    with connect(factory) as arm:
+    with connect("tcp://127.0.0.1:42085") as arm:
         print(arm.joint_angles())
 """
 
 from manip.reference_client.background import BackgroundProcess
-from manip.reference_client.connect import Connector, TransportFactory, aconnect, open_manipulator
+from manip.reference_client.connect import (
+    Connector,
+    TransportFactory,
+    TransportSource,
+    aconnect,
+    open_manipulator,
+)
+from manip.reference_client.core_transport import CoreTransport, ServerCore, VirtualClock
 from manip.reference_client.definitions import (
     DEFAULT_REGISTRY,
     default_registry,
@@ -54,6 +64,7 @@ from manip.reference_client.issuer import DEFAULT
 from manip.reference_client.manipulator import NOTIFY_GUARD_HITS, NOTIFY_SEGMENTS, Manipulator
 from manip.reference_client.matching import MatchingCore, Phase, ResponseContext
 from manip.reference_client.memory import MemoryPeer, MemoryTransport, SentRequest
+from manip.reference_client.ncp_transport import NcpTransport
 from manip.reference_client.options import ClientOptions
 from manip.reference_client.packets import ResponseInfo, ServerPacket, chaos_response_info
 from manip.reference_client.policy import TrivialErrors
@@ -78,6 +89,7 @@ __all__ = [
     "ClientOptions",
     "ConnectionLost",
     "Connector",
+    "CoreTransport",
     "FatalError",
     "GuardTrippedError",
     "JointFreedError",
@@ -87,6 +99,7 @@ __all__ = [
     "MatchingCore",
     "MemoryPeer",
     "MemoryTransport",
+    "NcpTransport",
     "NonFatalError",
     "OutOfSequenceReason",
     "OutOfSequenceResponse",
@@ -102,11 +115,14 @@ __all__ = [
     "ResponseInfo",
     "ResponseType",
     "SentRequest",
+    "ServerCore",
     "ServerError",
     "ServerPacket",
     "SyncManipulator",
     "TransportFactory",
+    "TransportSource",
     "TrivialErrors",
+    "VirtualClock",
     "aconnect",
     "chaos_response_info",
     "connect",

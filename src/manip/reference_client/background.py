@@ -75,7 +75,9 @@ def _error_for(error: ManipError, request: Request[Any]) -> ManipError:
     if isinstance(error, FatalError):
         return FatalError(error.error, request_number=error.request_number, request=request)
     if isinstance(error, ConnectionLost):
-        return ConnectionLost(error.reason)
+        lost = ConnectionLost(error.reason)
+        lost.__cause__ = error.__cause__
+        return lost
     return error
 
 
@@ -194,7 +196,10 @@ class BackgroundProcess:
                 if not self.transport.connection_open():
                     reason = self.transport.handle_closed_connection()
                     log.info("%s: connection closed: %s", self.name, reason)
-                    self._handle(self.core.connection_lost(reason))
+                    cause = getattr(self.transport, "close_cause", None)  # optional transport extra
+                    self._handle(
+                        self.core.connection_lost(reason, cause if isinstance(cause, BaseException) else None)
+                    )
                     break
                 await self._send_queued()
                 if self._terminal is None and not self._wake.is_set():
@@ -281,8 +286,10 @@ class BackgroundProcess:
                 case FatalErrorReceived(error):
                     self._report(logging.ERROR, error)
                     self._terminate(error)
-                case ConnectionClosed(reason):
-                    self._terminate(ConnectionLost(reason))
+                case ConnectionClosed(reason, cause):
+                    lost = ConnectionLost(reason)
+                    lost.__cause__ = cause
+                    self._terminate(lost)
                 case PacketKept():
                     pass
 

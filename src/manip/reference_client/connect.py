@@ -1,28 +1,50 @@
 """Opening a connection: ``await aconnect(...)`` or ``async with aconnect(...) as arm``.
 
-For now a connection is made from a transport (or a factory that makes one when called in the event
-loop); the Chaos transports over ``manip.links`` will be accepted here as URLs.
+The source of a connection is one of
+
+* a link address, as a URL string or a :class:`manip.links.LinkAddress`: ``tcp://HOST:PORT``,
+  ``chudp://HOST:PORT?addr=OCTAL``, ``chaosd:///PATH`` (see :mod:`manip.links.address`), connected with
+  :class:`~manip.reference_client.ncp_transport.NcpTransport`; ``contact=`` (or
+  ``ClientOptions.contact``) overrides the URL's contact name;
+* a transport (:class:`~manip.reference_client.transport.ManipTransport`), or a factory that makes one
+  when called inside the event loop that will run it.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Generator
 from types import TracebackType
 from typing import Any, cast
 
+from manip.links import LinkAddress
 from manip.reference_client.background import BackgroundProcess
 from manip.reference_client.manipulator import Manipulator
 from manip.reference_client.matching import MatchingCore
+from manip.reference_client.ncp_transport import NcpTransport
 from manip.reference_client.options import ClientOptions
 from manip.reference_client.transport import ManipTransport
 
 TransportFactory = Callable[[], ManipTransport]
 """Makes a not-yet-connected transport; called inside the event loop that will run it."""
 
-TransportSource = ManipTransport | TransportFactory
+TransportSource = str | LinkAddress | ManipTransport | TransportFactory
 
 
-def _transport(source: TransportSource) -> ManipTransport:
+def _transport(source: TransportSource, options: ClientOptions) -> ManipTransport:
+    if isinstance(source, str | LinkAddress):
+        return NcpTransport(
+            source,
+            contact=options.contact,
+            connect_timeout=options.connect_timeout,
+            close_timeout=options.close_timeout,
+            wrap_link=options.wrap_link,
+        )
+    if options.wrap_link is not None:
+        raise ValueError(
+            "ClientOptions.wrap_link applies when connecting by URL; give a transport its own "
+            "(NcpTransport(..., wrap_link=...))"
+        )
     if not isinstance(source, type) and isinstance(source, ManipTransport):
         return source
     factory = cast(TransportFactory, source)  # a class is a factory even though it has the methods
@@ -32,12 +54,20 @@ def _transport(source: TransportSource) -> ManipTransport:
     return transport
 
 
+def with_contact(options: ClientOptions | None, contact: str | None) -> ClientOptions:
+    """``options`` (or the defaults) with ``contact`` when one is given."""
+    options = options or ClientOptions()
+    return options if contact is None else dataclasses.replace(options, contact=contact)
+
+
 async def open_manipulator(source: TransportSource, options: ClientOptions | None = None) -> Manipulator:
     """Connect, start the background process, wait for the initial RESPONSE; return the manipulator.
 
-    Raises ConnectionLost (or FatalError, when the server sends one instead of its initial RESPONSE).
+    Raises ConnectionLost (or FatalError, when the server sends one instead of its initial RESPONSE);
+    ``manip.links.AddressError`` (a ValueError) for a URL that cannot be parsed.
     """
     options = options or ClientOptions()
+    transport = _transport(source, options)
     core = MatchingCore(
         options.registry,
         options.effective_handler_types(),
@@ -46,7 +76,7 @@ async def open_manipulator(source: TransportSource, options: ClientOptions | Non
         history=options.history,
         align_args=options.align_args,
     )
-    process = BackgroundProcess(_transport(source), core, name=options.name)
+    process = BackgroundProcess(transport, core, name=options.name)
     arm = Manipulator(process, options)  # listens before any packet can arrive
     await process.start(options.connect_timeout)
     return arm
@@ -74,6 +104,8 @@ class Connector:
             await self._arm.aclose()
 
 
-def aconnect(source: TransportSource, options: ClientOptions | None = None) -> Connector:
-    """Connect to a manipulator: ``arm = await aconnect(...)`` or ``async with aconnect(...) as arm``."""
-    return Connector(source, options)
+def aconnect(
+    source: TransportSource, options: ClientOptions | None = None, *, contact: str | None = None
+) -> Connector:
+    """Connect to a manipulator: ``arm = await aconnect(url)`` or ``async with aconnect(url) as arm``."""
+    return Connector(source, with_contact(options, contact))

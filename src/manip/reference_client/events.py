@@ -89,6 +89,8 @@ class OutOfSequence:
 @dataclass(frozen=True, slots=True)
 class ConnectionClosed:
     reason: str
+    cause: BaseException | None = None
+    """The transport's error that ended the connection, if it has one (chained to ConnectionLost)."""
 
 
 @dataclass(frozen=True, slots=True)

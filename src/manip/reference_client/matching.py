@@ -195,11 +195,15 @@ class MatchingCore:
             self._remember(number, _Finished.ABANDONED)
         return [self._failed(request, error)]
 
-    def connection_lost(self, reason: str) -> list[Event]:
-        """The connection is gone: every pending request fails with ConnectionLost."""
-        events: list[Event] = [self._failed(req, ConnectionLost(reason)) for req in self._take_all()]
+    def connection_lost(self, reason: str, cause: BaseException | None = None) -> list[Event]:
+        """The connection is gone: every pending request fails with ConnectionLost (``cause`` chained)."""
+        events: list[Event] = []
+        for request in self._take_all():
+            error = ConnectionLost(reason)
+            error.__cause__ = cause
+            events.append(self._failed(request, error))
         self.phase = Phase.CLOSED
-        events.append(ConnectionClosed(reason))
+        events.append(ConnectionClosed(reason, cause))
         return events
 
     # ------------------------------------------------------------------ primitives for handlers

@@ -18,18 +18,16 @@ from __future__ import annotations
 
 import asyncio
 from collections import deque
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_async, encode_error, encode_terminator
 from manip.reference_client.errors import ConnectionLost
-from manip.reference_client.packets import ResponseInfo, ServerPacket, chaos_response_info
+from manip.reference_client.inbox import InboxTransport
+from manip.reference_client.packets import ServerPacket
 from manip.reference_client.request import Request
 from manip.spec.constants import AsyncCondition, ServerOp
-
-_MOD = 0x10000
 
 
 @dataclass(frozen=True, slots=True)
@@ -41,66 +39,37 @@ class SentRequest:
     data: bytes
 
 
-class MemoryTransport:
+class MemoryTransport(InboxTransport):
     """The client end.  ``refuse`` makes ``set_up_communications`` fail with that reason."""
 
     def __init__(self, *, window: int = 8, first_number: int = 1, refuse: str | None = None) -> None:
-        if window < 1:
-            raise ValueError("the window must be at least 1")
-        self.window = window
-        self.first_number = first_number & 0xFFFF
+        super().__init__(window=window, first_number=first_number)
         self.refuse = refuse
         self.peer = MemoryPeer(self)
         self.returned = 0
         """How many packets the background process returned."""
-        self._open = False
-        self._ever_opened = False
-        self._close_reason = ""
-        self._inbox: deque[ServerPacket] = deque()
         self._outbox: deque[SentRequest | None] = deque()
         self._outbox_ready = asyncio.Event()
         self._connected = asyncio.Event()
-        self._next_number = self.first_number
         self._unread = 0
-        self._wakeup: Callable[[], None] | None = None
 
     # ------------------------------------------------------------------ ManipTransport
 
     def may_transmit(self) -> bool:
         return self._open and self._unread < self.window
 
-    def get_next_packet(self) -> ServerPacket | None:
-        return self._inbox.popleft() if self._inbox else None
-
     def return_packet(self, packet: ServerPacket) -> None:
         self.returned += 1
 
-    def response_available(self) -> bool:
-        return bool(self._inbox)
-
-    def connection_open(self) -> bool:
-        return self._open
-
-    def handle_closed_connection(self) -> str:
-        return self._close_reason or "connection closed"
-
     async def send_user_request(self, request: Request[Any]) -> None:
-        if not self._open:
-            raise ConnectionLost(self._close_reason or "not connected")
-        self._next_number = (self._next_number + 1) % _MOD
-        request.packet_number = self._next_number
+        number = self._number(request)
         self._unread += 1
-        self._push(SentRequest(request.opcode, self._next_number, bytes(request.data)))
-
-    def get_response_info(self, packet: ServerPacket) -> ResponseInfo:
-        return chaos_response_info(packet)
+        self._push(SentRequest(request.opcode, number, bytes(request.data)))
 
     async def set_up_communications(self) -> None:
         if self.refuse is not None:
             raise ConnectionLost(f"refused: {self.refuse}")
-        if self._ever_opened:
-            raise ConnectionLost("a memory transport opens only once")
-        self._open = self._ever_opened = True
+        self._opening("memory")
         self._connected.set()
 
     async def disconnect(self) -> None:
@@ -108,24 +77,11 @@ class MemoryTransport:
             self._close("closed by the client")
             self._push(None)
 
-    def set_wakeup(self, callback: Callable[[], None] | None) -> None:
-        self._wakeup = callback
-
     # ------------------------------------------------------------------ used by the peer
-
-    def _wake(self) -> None:
-        if self._wakeup is not None:
-            self._wakeup()
 
     def _push(self, item: SentRequest | None) -> None:
         self._outbox.append(item)
         self._outbox_ready.set()
-
-    def _close(self, reason: str) -> None:
-        if self._open:
-            self._open = False
-            self._close_reason = reason
-            self._wake()
 
 
 class MemoryPeer:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from manip.links.api import LinkWrapper
 from manip.reference_client.definitions import DEFAULT_REGISTRY, PUMA
 from manip.reference_client.errors import NonFatalError
 from manip.reference_client.handlers import DEFAULT_HANDLER_TYPES, NOTIFY_TRIVIAL_ERRORS
@@ -40,6 +41,14 @@ class ClientOptions:
     """Error-string numbers start at an even offset (erratum error-arg-layout)."""
     name: str = "manipulator"
     """Used in log messages."""
+    contact: str | None = None
+    """The Chaos contact name to connect to when connecting by URL (None: the URL's, default PUMA)."""
+    close_timeout: float = 2.0
+    """Seconds a graceful close of a Chaos connection waits for the server before aborting."""
+    wrap_link: LinkWrapper | None = None
+    """Put between the Chaos node and its link when connecting by URL (:func:`manip.links.open_connection`):
+    ``RecorderTap(recorder, "client").wrap`` (:mod:`manip.captures`) records the session.  A transport
+    given ready-made takes its own (``NcpTransport(..., wrap_link=)``)."""
 
     def effective_handler_types(self, notify_trivial_errors: bool | None = None) -> tuple[str, ...]:
         notify = self.notify_trivial_errors if notify_trivial_errors is None else notify_trivial_errors

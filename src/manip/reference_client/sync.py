@@ -28,7 +28,7 @@ from manip.arm.transform import Transform
 from manip.codecs.lisp import LispValue
 from manip.reference_client.arguments import FloatArray
 from manip.reference_client.background import AsyncListener, CloseListener, ErrorListener
-from manip.reference_client.connect import TransportSource, open_manipulator
+from manip.reference_client.connect import TransportSource, open_manipulator, with_contact
 from manip.reference_client.issuer import DEFAULT, Default, Timeout
 from manip.reference_client.manipulator import Manipulator, RequestData
 from manip.reference_client.options import ClientOptions
@@ -324,14 +324,17 @@ class SyncManipulator:
         self._run(self.arm.set_commanded_force(force, timeout=timeout))
 
 
-def connect(source: TransportSource, options: ClientOptions | None = None) -> SyncManipulator:
+def connect(
+    source: TransportSource, options: ClientOptions | None = None, *, contact: str | None = None
+) -> SyncManipulator:
     """Connect and return a blocking manipulator; use it in ``with`` to disconnect at the end.
 
-    ``source`` is a transport factory (called in the connection's own event loop thread, so the
-    transport's asyncio objects belong to that loop) or a transport made for that loop.
+    ``source`` is a URL (``tcp://127.0.0.1:42085``, see :mod:`~manip.reference_client.connect`), a
+    transport factory (called in the connection's own event loop thread, so the transport's asyncio
+    objects belong to that loop) or a transport made for that loop.
     """
-    name = (options or ClientOptions()).name
-    runner = _LoopThread(f"manip client ({name})")
+    options = with_contact(options, contact)
+    runner = _LoopThread(f"manip client ({options.name})")
     try:
         arm = runner.run(open_manipulator(source, options))
     except BaseException:

@@ -15,7 +15,13 @@ Rules every transport keeps (the background process relies on them):
   returning them after ``connection_open()`` turns false, so a fatal error followed at once by CLS is
   seen as the fatal error;
 * ``handle_closed_connection`` is called once, after the last packet was read, and returns why the
-  connection closed (CLS text, LOS reason, "broken", ...).
+  connection closed (CLS text, LOS reason, "broken", ...).  A transport may also have a
+  ``close_cause`` attribute (an exception or None): it becomes the ``__cause__`` of the
+  ConnectionLost errors.
+
+Implementations: :class:`~manip.reference_client.ncp_transport.NcpTransport` (Chaos over
+``manip.links``), :class:`~manip.reference_client.core_transport.CoreTransport` (a sans-I/O server core
+in memory), :class:`~manip.reference_client.memory.MemoryTransport` (scripted test peers).
 """
 
 from __future__ import annotations

@@ -3,10 +3,12 @@
 This package is the sans-I/O core: :class:`ServerSession` (one connection's protocol state machine, fed
 packets and time, returning packets to send), the fault switches that bend it for testing conformance
 suites (:mod:`~manip.reference_server.faults`), the describe-self text and the seam for the Cougar wrist.
-The simulated arm itself is :class:`manip.arm.sim.ArmSim`.
+The simulated arm itself is :class:`manip.arm.sim.ArmSim`.  :func:`serve` (:mod:`~.driver`) runs it over
+Chaos links with asyncio; ``manip-server`` (:mod:`~.cli`) is the command.
 """
 
 from manip.reference_server.describe import Description, describe_text
+from manip.reference_server.driver import ReferenceServer, ServerStats, serve
 from manip.reference_server.errors import RequestError
 from manip.reference_server.faults import FAULTS, Fault, FaultInfo, FaultSet
 from manip.reference_server.session import (
@@ -36,11 +38,14 @@ __all__ = [
     "NoWrist",
     "Outgoing",
     "Output",
+    "ReferenceServer",
     "RequestError",
     "ServerConfig",
     "ServerSession",
+    "ServerStats",
     "SessionUsageError",
     "State",
     "Wrist",
     "describe_text",
+    "serve",
 ]

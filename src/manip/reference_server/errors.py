@@ -20,6 +20,7 @@ __all__ = [
     "bad_float",
     "bad_length",
     "bad_value",
+    "guard_stop_error",
     "internal_error",
     "nzi_error",
     "refusal_error",
@@ -29,6 +30,8 @@ __all__ = [
 
 MOVE: Final = "move"
 """Where asynchronous errors of the move process come from."""
+WRIST: Final = "wrist"
+"""Where errors of the wrist computer and its link come from."""
 DISPATCH: Final = "dispatch"
 """Where errors found before a request reaches its handler come from."""
 
@@ -123,6 +126,14 @@ def abort_error(event: MotionAborted) -> ErrorMessage:
             return ErrorMessage(MOVE, "E", "PAN", "Panic button pressed; arm power off, motion aborted")
         case AbortCause.POWER_LOST:
             return ErrorMessage(MOVE, "E", "NAP", "Arm power lost while moving; motion aborted")
+        case AbortCause.GUARD:
+            return ErrorMessage(MOVE, "E", "GRD", "A wrist guard stopped the move; motion aborted")
+
+
+def guard_stop_error(index: int) -> ErrorMessage:
+    """The asynchronous error (0204) for a stop-the-move guard trip the client did not ask to hear of
+    as a guard-hit response (erratum ``guard-stop``): the abort is never silent."""
+    return ErrorMessage(WRIST, "E", "GRD", "Guard ~ tripped; arm stopped, motion aborted", (index,))
 
 
 def warning_error(event: FollowingWarning) -> ErrorMessage:

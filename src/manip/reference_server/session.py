@@ -26,6 +26,9 @@ States and transitions (:data:`TRANSITIONS` is the table the code runs)::
                                         -> CLOSED (fatal error)
     FREE_JOINT_WAIT    (driver error)   un-free, answer done           run arm   -> CLOSED
                                         without executing -> READY
+    WRIST_WAIT         (driver error)   hold it                        run arm;  -> CLOSED
+                                                                       answered? reply, serve the
+                                                                       held requests -> READY ...
     CLOSED             (driver error)   ignored                        ignored   ignored
 
 The initial RESPONSE carries only the RFC's packet number (erratum ``initial-response``).  Serving a
@@ -37,6 +40,16 @@ its reply in the form the spec gives the opcode (done, data, segment number, mul
 handler refuses with :class:`RequestError`: a non-fatal error (0202) is the reply; a fatal one (0201,
 first word = the packet last received) ends the session.  Motion requests are checked and queued on
 the :class:`~manip.arm.sim.ArmSim` and answered with the segment number before the arm moves.
+
+A wrist request that needs data from Cougar returns a :class:`~manip.reference_server.wrist.Pending`:
+the session enters WRIST_WAIT, where later requests are held in order (the Puma's main process waits
+for the data, Part II §5.1); each tick runs the arm and the wrist, and once the wrist has resolved the
+pending reply (data, or a non-fatal error on timeout) it is sent and the held requests are served, at
+the current time, as if they had just arrived.  Running the arm always ends with the wrist's turn
+(:meth:`~manip.reference_server.wrist.Wrist.tick`): guard hits become guard-hit asynchronous responses
+(0203 code 1: word 2 is 1 to stop, 2 to continue, word 3 the guard) when the client asked for them
+(mask bit 0); a stop-the-move guard the client did not ask to hear of is reported as an asynchronous
+error instead (erratum ``guard-stop``).
 
 Asynchronous packets carry the number of the last request processed (the RFC's before the first one):
 segment completed (0203, code 2) only while the client has asked for it with request-notifications
@@ -51,12 +64,13 @@ from __future__ import annotations
 
 import enum
 import logging
+from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, Final
 
 from manip.arm.kinematics import PUMA600, ArmModel, forward
-from manip.arm.sim import ArmSim, FollowingWarning, MotionAborted, Refused, SegmentCompleted
+from manip.arm.sim import ArmEvent, ArmSim, FollowingWarning, MotionAborted, Refused, SegmentCompleted
 from manip.arm.transform import Transform
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.errors import DecodeError
@@ -73,7 +87,7 @@ from manip.reference_server import errors
 from manip.reference_server.describe import Description, describe_text
 from manip.reference_server.errors import RequestError
 from manip.reference_server.faults import Fault, FaultSet
-from manip.reference_server.wrist import NoWrist, Wrist
+from manip.reference_server.wrist import GuardHit, NoWrist, Pending, Wrist, WristNotice
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
 
@@ -101,6 +115,7 @@ class State(enum.Enum):
     AWAITING_INITIAL = "awaiting-initial"
     READY = "ready"
     FREE_JOINT_WAIT = "free-joint-wait"
+    WRIST_WAIT = "wrist-wait"
     CLOSED = "closed"
 
 
@@ -158,6 +173,10 @@ Handler = Callable[["ServerSession", Mapping[str, Value], float], dict[str, Any]
 """A request handler: the decoded values and the time in, the reply's values out (``{}`` for done)."""
 
 _SEGMENT_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
+_GUARD_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.GUARD_HIT].notification_bit
+_GUARD_STOP: Final = 1
+"""Word 2 of a guard-hit response: 1 = the trajectory was stopped, 2 = it continues (E.3)."""
+_GUARD_CONTINUE: Final = 2
 _NOTIFICATION_MASK: Final = sum(1 << code.notification_bit for code in SPEC.async_codes.values())
 
 
@@ -192,6 +211,15 @@ class ServerSession:
         self._out: list[Outgoing] = []
         self._close = False
         self._next_state: State | None = None
+        self._payloads: dict[int, tuple[tuple[Any, ...], bytes]] = {}
+        """The last reply payload (after the request number) per opcode, by its values: Here polled while
+        the arm stands still is answered without encoding (bench/server.py)."""
+        self._pose: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+        """The last Here transform and the joint angles it is of."""
+        self._waiting: tuple[RequestOpcode, int, Pending] | None = None
+        """The request whose answer waits for the wrist: spec entry, reply number, pending reply."""
+        self._held: deque[_Event] = deque()
+        """Requests that arrived while waiting for the wrist, in order."""
 
     # ------------------------------------------------------------------------------ driver inputs
     def on_open(self, now: float, rfc_packet_no: int) -> Output:
@@ -249,9 +277,25 @@ class ServerSession:
         return None
 
     def _run_arm(self, event: _Event) -> State | None:
-        """Run the move process up to ``now`` and report what it did."""
+        """Run the move process up to ``now``, then the wrist processes, and report what they did."""
         number = self.last_processed or 0
-        for ev in self.arm.tick(event.now):
+        self._report_arm(number, self.arm.tick(event.now))
+        for wev in self.wrist.tick(event.now, self.arm):
+            if isinstance(wev, GuardHit):
+                # The abort is the guard hit itself: report only the segments that ended before it.
+                self._report_arm(number, [e for e in wev.arm_events if not isinstance(e, MotionAborted)])
+                if self.notifications & _GUARD_BIT or Fault.UNREQUESTED_ASYNC in self.faults:
+                    word2 = _GUARD_STOP if wev.stop else _GUARD_CONTINUE
+                    self._emit_async(number, AsyncCondition.GUARD_HIT, word2, wev.index)
+                elif wev.stop:
+                    self._emit_error(ServerOp.ASYNCHRONOUS_ERROR, number, errors.guard_stop_error(wev.index))
+            elif isinstance(wev, WristNotice):
+                opcode = ServerOp.ASYNCHRONOUS_ERROR if wev.error else ServerOp.ASYNCHRONOUS_WARNING
+                self._emit_error(opcode, number, wev.message)
+        return None
+
+    def _report_arm(self, number: int, events: list[ArmEvent]) -> None:
+        for ev in events:
             if isinstance(ev, SegmentCompleted):
                 if self.notifications & _SEGMENT_BIT or Fault.UNREQUESTED_ASYNC in self.faults:
                     self._emit_async(number, AsyncCondition.SEGMENT_COMPLETED, 0, ev.segment)
@@ -259,6 +303,44 @@ class ServerSession:
                 self._emit_error(ServerOp.ASYNCHRONOUS_ERROR, number, errors.abort_error(ev))
             elif isinstance(ev, FollowingWarning):
                 self._emit_error(ServerOp.ASYNCHRONOUS_WARNING, number, errors.warning_error(ev))
+
+    # ---------------------------------------------------------------- waiting for the wrist
+    def _hold(self, event: _Event) -> State | None:
+        """A request while the main process waits for Cougar: it is served after the wait."""
+        self.last_received = event.packet_no
+        self._held.append(event)
+        return None
+
+    def _wait_tick(self, event: _Event) -> State | None:
+        self._run_arm(event)
+        return self._settle(event.now)
+
+    def _settle(self, now: float) -> State | None:
+        """Answer the waiting request once the wrist has resolved it, then serve the held ones."""
+        waiting = self._waiting
+        if waiting is None or not waiting[2].done:
+            return None
+        op, number, pending = waiting
+        self._waiting = None
+        state: State | None = None
+        try:
+            values = pending.outcome()
+        except RequestError as exc:
+            state = self._refuse(number, exc)
+        else:
+            self._reply(op, number, values)
+        state = state or State.READY
+        while self._held and state in (State.READY, State.FREE_JOINT_WAIT):
+            held = replace(self._held.popleft(), now=now)
+            action, fixed = TRANSITIONS[(state, Input.REQUEST)]
+            state = action(self, held) or fixed or state
+        return state
+
+    def _abandon(self, event: _Event) -> State | None:
+        if self._waiting is not None:
+            self._waiting[2].cancel()
+            self._waiting = None
+        self._held.clear()
         return None
 
     def _discard(self, event: _Event) -> State | None:
@@ -286,6 +368,7 @@ class ServerSession:
             values = self._decode(op, event.data)
             try:
                 handler = HANDLERS.get(op.name)
+                result: dict[str, Any] | Pending
                 if handler is None:
                     result = self.wrist.handle(op, values, event.now, self.arm)
                 else:
@@ -293,18 +376,24 @@ class ServerSession:
             except Refused as refusal:
                 raise errors.refusal_error(op.name, refusal) from refusal
         except RequestError as exc:
-            if exc.fatal:
-                return self._fatal(number, exc.error)
-            self._emit_error(ServerOp.NON_FATAL_ERROR, number, exc.error)
-            if Fault.EXTRA_REPLY_AFTER_ERROR in self.faults:
-                self._emit(ServerOp.RESPONSE, _word(number))
-            return None
+            return self._refuse(number, exc)
         except Exception:
             log.exception("handler for opcode %#o failed", event.opcode)
             self._emit_error(ServerOp.NON_FATAL_ERROR, number, errors.internal_error(event.opcode).error)
             return None
+        if isinstance(result, Pending):
+            self._waiting = (op, number, result)
+            return self._settle(event.now) or State.WRIST_WAIT  # already failed: answer at once
         self._reply(op, number, result)
         return self._next_state
+
+    def _refuse(self, number: int, exc: RequestError) -> State | None:
+        if exc.fatal:
+            return self._fatal(number, exc.error)
+        self._emit_error(ServerOp.NON_FATAL_ERROR, number, exc.error)
+        if Fault.EXTRA_REPLY_AFTER_ERROR in self.faults:
+            self._emit(ServerOp.RESPONSE, _word(number))
+        return None
 
     def _fatal(self, number: int, error: ErrorMessage) -> State | None:
         self._emit_error(ServerOp.FATAL_ERROR, number, error)
@@ -339,13 +428,22 @@ class ServerSession:
         if op.response.kind == "multi":
             self._reply_text(number, str(values["text"]))
             return
-        data = encode_reply(op.opcode, number, **values)
+        data = _word(number) + self._payload(op, values)
         floats_only = all(f.type.element == "float" for f in op.response.data.fields)
         if Fault.SWAPPED_FLOAT_WORDS in self.faults and op.response.kind == "data" and floats_only:
             body = data[2:]
             swapped = (body[i + 2 : i + 4] + body[i : i + 2] for i in range(0, len(body), 4))
             data = data[:2] + b"".join(swapped)
         self._emit(ServerOp.RESPONSE, data)
+
+    def _payload(self, op: RequestOpcode, values: dict[str, Any]) -> bytes:
+        key = tuple(values.values())  # equal values encode alike (-0.0 and 0.0 both as a clean zero)
+        cached = self._payloads.get(op.opcode)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        payload = encode_reply(op.opcode, 0, **values)[2:]
+        self._payloads[op.opcode] = (key, payload)
+        return payload
 
     def _reply_text(self, number: int, text: str) -> None:
         """A multi-packet text reply: one packet per line (split further if a line is too long)."""
@@ -398,7 +496,10 @@ class ServerSession:
         return {"text": text}
 
     def _here(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
-        return {"transform": self.arm.pose().to_floats()}
+        actual = self.arm.actual
+        if self._pose is None or self._pose[0] != actual:
+            self._pose = (actual, self.arm.pose().to_floats())
+        return {"transform": self._pose[1]}
 
     def _joint_angles(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         return {"joints": self.arm.actual}
@@ -504,6 +605,9 @@ TRANSITIONS: Final[Mapping[tuple[State, Input], Transition]] = {
     (State.FREE_JOINT_WAIT, Input.REQUEST): (ServerSession._discard, State.READY),
     (State.FREE_JOINT_WAIT, Input.TICK): (ServerSession._run_arm, None),
     (State.FREE_JOINT_WAIT, Input.CLOSE): (ServerSession._ignore, State.CLOSED),
+    (State.WRIST_WAIT, Input.REQUEST): (ServerSession._hold, None),
+    (State.WRIST_WAIT, Input.TICK): (ServerSession._wait_tick, None),
+    (State.WRIST_WAIT, Input.CLOSE): (ServerSession._abandon, State.CLOSED),
     (State.CLOSED, Input.REQUEST): (ServerSession._ignore, None),
     (State.CLOSED, Input.TICK): (ServerSession._ignore, None),
     (State.CLOSED, Input.CLOSE): (ServerSession._ignore, None),

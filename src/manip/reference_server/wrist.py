@@ -6,12 +6,23 @@ its :class:`Wrist` and sends what comes back:
 
 * the values of the normal reply, by the field names of the spec's reply layout (``{}`` for done,
   ``{"segment": n}`` for a motion request queued on the arm);
+* a :class:`Pending` when the answer needs data from Cougar (Part II §5.1: "if the request itself
+  requires information from the appropriate ancillary process ... the main process will indeed wait
+  for the data to be returned").  The session then holds this request *and every later one* (the
+  Puma's main process waits), and answers once the wrist has resolved the :class:`Pending` with values
+  or a :class:`~manip.reference_server.errors.RequestError` (a wrist that does not answer in time is a
+  non-fatal error, §6.3);
 * or a :class:`~manip.reference_server.errors.RequestError` raised with the error string to answer,
   non-fatal or fatal.
 
 ``served`` lists the opcodes the wrist answers normally; they are added to describe-self's
-``:operations``.  Guard hits are to be reported through the session as asynchronous responses (code 1);
-that hook comes with the Cougar simulator.
+``:operations``.
+
+:meth:`Wrist.tick` is called by the session whenever it runs the arm (every servo tick, and before each
+request), after the arm has run; it is the wrist processes' turn: talk to Cougar, resolve pending
+requests, and report what happened asynchronously as :data:`WristEvent`\\ s -- :class:`GuardHit` (the
+session sends a guard-hit asynchronous response, 0203 code 1, when the client asked for them with
+request-notifications mask bit 0) and :class:`WristNotice` (an asynchronous error or warning).
 
 :class:`NoWrist` is the default: a Puma without Cougar.  It serves nothing and answers every wrist
 opcode with ``wrist: C UIM No wrist computer: opcode ~ is not served`` (severity C, as clause
@@ -21,15 +32,86 @@ opcode with ``wrist: C UIM No wrist computer: opcode ~ is not served`` (severity
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any, Protocol
 
-from manip.arm.sim import ArmSim
+from manip.arm.sim import ArmEvent, ArmSim
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import Value
 from manip.reference_server.errors import RequestError
 from manip.spec import RequestOpcode
 
-__all__ = ["NoWrist", "Wrist"]
+__all__ = ["GuardHit", "NoWrist", "Pending", "Wrist", "WristEvent", "WristNotice"]
+
+
+class Pending:
+    """A reply that waits for Cougar.  The wrist resolves it (:meth:`resolve` or :meth:`fail`) from its
+    :meth:`Wrist.tick`; the session reads :meth:`outcome` once :attr:`done`.  The session
+    :meth:`cancel`\\ s it when the connection ends first."""
+
+    __slots__ = ("_error", "_values", "cancelled", "what")
+
+    def __init__(self, what: str) -> None:
+        self.what = what
+        """The request waiting (for messages)."""
+        self.cancelled = False
+        self._values: dict[str, Any] | None = None
+        self._error: RequestError | None = None
+
+    def __repr__(self) -> str:
+        state = "cancelled" if self.cancelled else "done" if self.done else "waiting"
+        return f"<Pending {self.what} {state}>"
+
+    @property
+    def done(self) -> bool:
+        return self._values is not None or self._error is not None
+
+    def resolve(self, values: dict[str, Any]) -> None:
+        """The reply's values arrived."""
+        if not self.done:
+            self._values = values
+
+    def fail(self, error: RequestError) -> None:
+        """The request failed (timeout, link down, ...); ``error`` is the answer."""
+        if not self.done:
+            self._error = error
+
+    def cancel(self) -> None:
+        """Nobody waits any more (the connection ended)."""
+        self.cancelled = True
+
+    def outcome(self) -> dict[str, Any]:
+        """The reply's values; raises the :class:`RequestError` it failed with."""
+        if self._error is not None:
+            raise self._error
+        if self._values is None:
+            raise RuntimeError(f"{self.what}: outcome read before it was resolved")
+        return self._values
+
+
+@dataclass(frozen=True, slots=True)
+class GuardHit:
+    """Cougar reported guard ``index`` tripped (response 6 or 7).
+
+    ``stop``: a stop-the-move guard; the wrist has then halted the arm (:meth:`ArmSim.halt`) and
+    ``arm_events`` are what that returned (segments that had just completed, then the abort)."""
+
+    index: int
+    stop: bool
+    time: float
+    arm_events: tuple[ArmEvent, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class WristNotice:
+    """Something the user should hear of asynchronously: a warning (0205) or, with ``error``, an
+    asynchronous non-fatal error (0204)."""
+
+    message: ErrorMessage
+    error: bool = False
+
+
+WristEvent = GuardHit | WristNotice
 
 
 class Wrist(Protocol):
@@ -42,8 +124,12 @@ class Wrist(Protocol):
 
     def handle(
         self, op: RequestOpcode, values: Mapping[str, Value], now: float, arm: ArmSim
-    ) -> dict[str, Any]:
-        """Serve one request; return the reply's values or raise RequestError."""
+    ) -> dict[str, Any] | Pending:
+        """Serve one request: the reply's values, a :class:`Pending`, or raise RequestError."""
+        ...
+
+    def tick(self, now: float, arm: ArmSim) -> list[WristEvent]:
+        """The wrist processes' turn after the arm ran up to ``now``; returns what to report."""
         ...
 
 
@@ -56,7 +142,10 @@ class NoWrist:
 
     def handle(
         self, op: RequestOpcode, values: Mapping[str, Value], now: float, arm: ArmSim
-    ) -> dict[str, Any]:
+    ) -> dict[str, Any] | Pending:
         raise RequestError(
             ErrorMessage("wrist", "C", "UIM", "No wrist computer: opcode ~ is not served", (op.opcode,))
         )
+
+    def tick(self, now: float, arm: ArmSim) -> list[WristEvent]:
+        return []

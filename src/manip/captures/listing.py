@@ -1,0 +1,120 @@
+"""A readable listing of a capture (``manip-capture info``): header, channels, sessions, one line a packet."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterator
+from typing import Any
+
+from manip.spec import SPEC
+
+from .reader import Capture, CapturedPacket
+from .view import opcode_name
+
+
+def _value(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    if isinstance(v, (tuple, list)):
+        return "(" + ", ".join(_value(x) for x in v) + ")"
+    if isinstance(v, str):
+        return repr(v)
+    return str(v)
+
+
+def _fields(fields: dict[str, Any] | None) -> str:
+    return " ".join(f"{k}={_value(v)}" for k, v in (fields or {}).items())
+
+
+def packet_line(p: CapturedPacket, t0_ns: int) -> str:
+    """One line for a packet: time from ``t0_ns``, direction, link, connection, then its meaning."""
+    a = p.annotation
+    head = f"{(p.time_ns - t0_ns) / 1e9:11.6f}  {p.direction}  L{p.link} C{a.conn}"
+    if p.packet is None:
+        message = (a.decode_error or {}).get("message", "?")
+        return f"{head}  bad frame ({len(p.frame)} bytes): {message}"
+    pk = p.packet
+    head += f"  #{pk.packet_no:<5d} {opcode_name(pk.opcode):<3}"
+    match a.kind:
+        case "request":
+            body = f"request {a.op or f'0{pk.opcode:o}'} {_fields(a.fields)}"
+        case "reply":
+            if a.fields:
+                rest = _fields(a.fields)
+            elif a.text is not None:
+                rest = repr(a.text if len(a.text) <= 60 else a.text[:57] + "...")
+            elif a.payload_hex:
+                rest = f"data {a.payload_hex}"
+            else:
+                spec_op = next((o for o in SPEC.requests.values() if o.name == a.op), None)
+                kind = spec_op.response.kind if spec_op is not None else None
+                rest = {"multi": "(end)", "done": "done"}.get(kind or "", "")
+            body = f"reply to #{a.request_number} ({a.op or 'unknown request'}) {rest}"
+        case "error":
+            server = SPEC.server_opcodes.get(pk.opcode)
+            rendered = (a.error or {}).get("rendered", "")
+            body = f"{server.name if server else 'error'} #{a.request_number}: {rendered}"
+        case "async":
+            info = a.async_ or {}
+            body = (
+                f"async #{a.request_number} {info.get('condition_name', '?')} "
+                f"word2={info.get('word2')} word3={info.get('word3')}"
+            )
+        case "control":
+            body = repr(a.text) if a.text else ""
+        case _:
+            body = f"{a.kind} {a.payload_hex or ''}"
+    if a.decode_error is not None:
+        body += f"  !! {a.decode_error['message']}"
+    if a.pair is not None:
+        body += f"  [pair {a.pair}]"
+    if a.retransmission:
+        body += "  (retransmission)"
+    return f"{head} {body}".rstrip()
+
+
+def _iso(ns: int) -> str:
+    return time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(ns / 1e9)) + f".{ns % 1_000_000_000 // 1000:06d}Z"
+
+
+def info_lines(capture: Capture, *, packets: bool = True) -> Iterator[str]:
+    """The ``manip-capture info`` listing."""
+    size = os.path.getsize(capture.path) if os.path.exists(capture.path) else 0
+    yield f"capture {capture.path} ({size} bytes), profile {capture.profile!r}, library {capture.library!r}"
+    for name, meta in capture.metadata.items():
+        yield f"metadata {name}:"
+        for key, value in meta.items():
+            yield f"  {key}: {value}"
+    start, end = capture.start_ns, capture.end_ns
+    yield f"time span: {_iso(start)} .. {_iso(end)} ({(end - start) / 1e9:.3f} s)"
+    yield "channels:"
+    for topic, count in sorted(capture.counts.items()):
+        yield f"  {topic:<16} {count:>8} messages"
+    yield "links:"
+    for link in capture.links.values():
+        yield f"  L{link.id} {link.framing} {link.name}"
+    for event in capture.events:
+        detail = " ".join(f"{k}={v}" for k, v in event.fields.items())
+        yield f"  {(event.time_ns - start) / 1e9:11.6f}  {event.event} {detail}".rstrip()
+    yield f"sessions: {len(capture.sessions)}"
+    for s in capture.sessions:
+        c2s = len(s.client_packets)
+        pairs = s.pairs
+        done = sum(1 for p in pairs.values() if p.complete)
+        events = ", ".join(
+            f"{e.event}({e.fields['reason']!r})" if "reason" in e.fields else e.event for e in s.events
+        )
+        yield (
+            f"  C{s.conn} on L{s.link}, contact {s.contact!r}: {len(s.packets)} packets "
+            f"({c2s} c2s, {len(s.packets) - c2s} s2c), {len(s.requests)} requests, "
+            f"{len(pairs)} pairs ({done} answered); {events}"
+        )
+    if capture.bad_frames:
+        yield f"bad frames: {len(capture.bad_frames)}"
+    if packets:
+        yield "packets:"
+        for p in capture.packets:
+            yield "  " + packet_line(p, start)
+        for p in capture.bad_frames:
+            yield "  " + packet_line(p, start)

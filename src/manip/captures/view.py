@@ -1,0 +1,528 @@
+"""The decoded view of a capture: which connection a packet belongs to, what it means, what it answers.
+
+Theory of operation
+===================
+
+:class:`Annotator` is sans-I/O: it is fed the packets of a capture in the order they were seen, each with
+its link id and direction (``c2s`` client to server, ``s2c`` back), and returns an :class:`Annotation`.
+The recorder uses it to write the JSON view; the reader runs the same code over the raw frames, so both
+always agree and a file without the view can still be read.
+
+* **Connections.**  A connection is keyed by (link, client host, client index): the source of a ``c2s``
+  packet, the destination of an ``s2c`` one.  A ``c2s`` RFC opens a new connection unless it repeats the
+  RFC that opened the current one (a retransmission).  Connections are numbered from 1 in the order
+  they appear.
+* **Retransmissions.**  A controlled packet (RFC, OPN, EOF, data) whose packet number was already seen
+  in the same direction of the same connection is marked ``retransmission`` and pairs like the first.
+* **Pairs.**  Every request (and the RFC, answered by the initial RESPONSE) gets a new pair id; the
+  server packets that answer it carry the same id: RESPONSE and non-fatal error by their
+  request-number word (clause ``response.echoes-request-number``), a fatal error by the packet number it
+  quotes.  A multi-packet reply keeps its pair until the empty terminator, which is ``final``.
+  Asynchronous packets (0203-0205) quote the last request processed; they are not replies and carry
+  no pair.
+* **Meaning.**  Requests are decoded by their opcode's layout; a RESPONSE by the layout of the request
+  it answers, when that request was seen (otherwise its payload is shown in hex); error strings are
+  parsed; decode failures become a ``decode_error`` entry, never an exception.
+* **Events.**  RFC, OPN, CLS (``refused`` before the OPN), LOS, EOF, ANS and FWD produce connection
+  events with their texts.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any, Final
+
+from manip.codecs.errors import CodecError, DecodeError
+from manip.codecs.fastpath import FastLayout, plan
+from manip.codecs.lispm_text import decode_lispm
+from manip.codecs.messages import (
+    decode_async,
+    decode_error,
+    decode_reply,
+    decode_request,
+    response_layout,
+)
+from manip.codecs.packet import Packet
+from manip.spec import SPEC, RequestOpcode
+from manip.spec.constants import ChaosOp, ServerOp
+
+from .format import Direction
+
+SEEN_KEPT: Final = 2048
+"""Packet numbers remembered per direction for spotting retransmissions (a window is at most 15)."""
+
+_CONTROLLED: Final = frozenset(op.value for op in SPEC.chaos_opcodes.values() if op.controlled)
+_ERROR_OPS: Final = frozenset(
+    {
+        ServerOp.FATAL_ERROR,
+        ServerOp.NON_FATAL_ERROR,
+        ServerOp.ASYNCHRONOUS_ERROR,
+        ServerOp.ASYNCHRONOUS_WARNING,
+    }
+)
+_REPLY_OPS: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
+_TEXT_EVENTS: Final = {
+    ChaosOp.CLS: "cls",
+    ChaosOp.LOS: "los",
+    ChaosOp.ANS: "ans",
+    ChaosOp.FWD: "fwd",
+}
+RFC_NAME: Final = "rfc"
+"""The ``op`` of an RFC and of the initial RESPONSE that answers it."""
+
+# Plain ints for the per-packet tests (an enum member costs an attribute lookup on every packet).
+_RFC: Final = int(ChaosOp.RFC)
+_DAT: Final = int(ChaosOp.DAT)
+_LAST_ERROR_OP: Final = int(ServerOp.ASYNCHRONOUS_WARNING)
+_ASYNC_RESPONSE: Final = int(ServerOp.ASYNCHRONOUS_RESPONSE)
+_C2S_SEEN: Final = "c2s"
+
+
+@dataclass(frozen=True, slots=True)
+class _RequestPlan:
+    """What the annotator needs of one request opcode, worked out once: its spec entry, its name and the
+    fast decoder of its data layout (None: :func:`decode_request` decides, and raises what is wrong)."""
+
+    op: RequestOpcode | None
+    name: str | None
+    pending_name: str
+    fast: FastLayout | None
+
+
+@dataclass(frozen=True, slots=True)
+class _ReplyPlan:
+    """How a RESPONSE to one request is read: ``multi`` replies go through :func:`decode_reply`; the
+    others through the fast numbered decoder of their layout when it has one."""
+
+    multi: bool
+    fast: FastLayout | None
+
+
+def _request_plan(opcode: int) -> _RequestPlan:
+    op = SPEC.requests.get(opcode)
+    if op is None:
+        return _RequestPlan(None, None, f"0{opcode:o}", None)
+    return _RequestPlan(op, op.name, op.name, plan(op.request, numbered=False))
+
+
+def _reply_plan(op: RequestOpcode) -> _ReplyPlan:
+    multi = op.response.kind == "multi"
+    return _ReplyPlan(multi, None if multi else plan(response_layout(op), numbered=True))
+
+
+_REQUEST_PLANS: Final = {opcode: _request_plan(opcode) for opcode in range(_DAT, 0o400)}
+_REPLY_PLANS: Final = {op.opcode: _reply_plan(op) for op in SPEC.requests.values()}
+
+
+def opcode_name(opcode: int) -> str:
+    """Chaos opcode name: RFC, OPN, ... DAT for 0200-0277, DWD above."""
+    if opcode >= ChaosOp.DWD:
+        return "DWD"
+    if opcode >= ChaosOp.DAT:
+        return "DAT"
+    try:
+        return ChaosOp(opcode).name
+    except ValueError:
+        return f"0{opcode:o}"
+
+
+@dataclass(slots=True)
+class Annotation:
+    """What the annotator made of one packet (the JSON view, minus the Chaos header)."""
+
+    conn: int
+    kind: str
+    retransmission: bool = False
+    op: str | None = None
+    request_number: int | None = None
+    pair: int | None = None
+    final: bool | None = None
+    fields: dict[str, Any] | None = None
+    text: str | None = None
+    error: dict[str, Any] | None = None
+    async_: dict[str, Any] | None = None
+    payload_hex: str | None = None
+    decode_error: dict[str, Any] | None = None
+    events: list[dict[str, Any]] = field(default_factory=list)
+
+
+@dataclass(slots=True)
+class _Pending:
+    pair: int
+    op: RequestOpcode | None
+    name: str
+
+
+@dataclass(slots=True)
+class _Conn:
+    id: int
+    link: int
+    client: tuple[int, int]
+    rfc_no: int | None = None
+    opened: bool = False
+    ended: bool = False
+    pending: dict[int, _Pending] = field(default_factory=dict)
+    seen: dict[Direction, dict[int, int | None]] = field(default_factory=lambda: {"c2s": {}, "s2c": {}})
+
+
+def decode_error_dict(exc: CodecError) -> dict[str, Any]:
+    out: dict[str, Any] = {"message": exc.message}
+    if exc.path:
+        out["path"] = exc.path
+    if exc.offset is not None:
+        out["offset"] = exc.offset
+    if exc.clause:
+        out["clause"] = exc.clause
+    return out
+
+
+class Annotator:
+    """Feed it every packet of a capture in order (:meth:`annotate`); see the module docstring."""
+
+    def __init__(self) -> None:
+        self._conns: dict[tuple[int, int, int], _Conn] = {}
+        self._next_conn = 1
+        self._next_pair = 1
+
+    @property
+    def connections(self) -> int:
+        """Connections seen so far."""
+        return self._next_conn - 1
+
+    def annotate(self, link: int, direction: Direction, packet: Packet) -> Annotation:
+        opcode = packet.opcode
+        if direction == "c2s":
+            key = (link, packet.src_host, packet.src_index)
+        else:
+            key = (link, packet.dest_host, packet.dest_index)
+        conn = self._conns.get(key)
+        if conn is None or (
+            opcode == _RFC and direction == "c2s" and (conn.rfc_no != packet.packet_no or conn.ended)
+        ):
+            conn = _Conn(self._next_conn, link, (key[1], key[2]))
+            self._next_conn += 1
+            self._conns[key] = conn
+        retransmission = False
+        previous_pair: int | None = None
+        if opcode >= _DAT or opcode in _CONTROLLED:
+            seen = conn.seen[direction]
+            number = packet.packet_no
+            if number in seen:
+                retransmission = True
+                previous_pair = seen[number]
+            else:
+                if len(seen) >= SEEN_KEPT:
+                    del seen[next(iter(seen))]
+                seen[number] = None
+        if opcode >= _DAT:
+            if direction == "c2s":
+                ann = self._request(conn, packet, retransmission, previous_pair)
+            else:
+                ann = self._server_packet(conn, packet, retransmission)
+        else:
+            ann = self._control(conn, direction, packet, retransmission)
+        ann.retransmission = retransmission
+        return ann
+
+    # ------------------------------------------------------------------------------ requests
+
+    def _new_pair(self) -> int:
+        pair = self._next_pair
+        self._next_pair += 1
+        return pair
+
+    def _request(self, conn: _Conn, packet: Packet, retransmission: bool, previous: int | None) -> Annotation:
+        number = packet.packet_no
+        req = _REQUEST_PLANS[packet.opcode]
+        ann = Annotation(conn.id, "request", op=req.name, request_number=number)
+        data = packet.data
+        fast = req.fast.parse(data) if req.fast is not None else None
+        if fast is not None:
+            ann.fields = fast[1]
+        else:
+            try:
+                ann.fields = dict(decode_request(packet.opcode, data).values)
+            except CodecError as exc:
+                ann.decode_error = decode_error_dict(exc)
+                if data:
+                    ann.payload_hex = data.hex()
+        if retransmission and previous is not None:
+            ann.pair = previous
+            return ann
+        pair = ann.pair = self._next_pair
+        self._next_pair = pair + 1
+        conn.seen[_C2S_SEEN][number] = pair
+        conn.pending[number] = _Pending(pair, req.op, req.pending_name)
+        return ann
+
+    # ------------------------------------------------------------------------------ server packets
+
+    def _server_packet(self, conn: _Conn, packet: Packet, retransmission: bool) -> Annotation:
+        opcode, data = packet.opcode, packet.data
+        if opcode > _LAST_ERROR_OP:
+            ann = Annotation(conn.id, "data")
+            if data:
+                ann.payload_hex = data.hex()
+            return ann
+        number = int.from_bytes(data[:2], "little") if len(data) >= 2 else None
+        pending = conn.pending.get(number) if number is not None and opcode in _REPLY_OPS else None
+        if opcode == _ASYNC_RESPONSE:
+            kind = "async"
+        elif opcode in _ERROR_OPS:
+            kind = "error"
+        else:
+            kind = "reply"
+        ann = Annotation(conn.id, kind, request_number=number)
+        if pending is not None:
+            ann.pair = pending.pair
+            ann.op = pending.name
+        try:
+            if kind == "reply":
+                self._reply(ann, pending, data)
+            elif kind == "error":
+                err = decode_error(opcode, data).error
+                ann.error = {
+                    "where": err.where,
+                    "severity": err.severity,
+                    "code": err.code,
+                    "message": err.message,
+                    "args": list(err.args),
+                    "rendered": err.render(),
+                    "problems": list(err.problems),
+                }
+                if opcode in _REPLY_OPS:
+                    ann.final = True
+            else:
+                a = decode_async(data)
+                ann.async_ = {
+                    "condition": a.condition,
+                    "condition_name": a.condition_name,
+                    "word2": a.word2,
+                    "word3": a.word3,
+                }
+        except CodecError as exc:
+            ann.decode_error = decode_error_dict(exc)
+            if len(data) > 2:
+                ann.payload_hex = data[2:].hex()
+            if kind != "async":
+                ann.final = True
+        if ann.final and pending is not None and number is not None and not retransmission:
+            del conn.pending[number]
+        return ann
+
+    @staticmethod
+    def _reply(ann: Annotation, pending: _Pending | None, data: bytes) -> None:
+        op = pending.op if pending is not None else None
+        if op is not None:
+            how = _REPLY_PLANS[op.opcode]
+            fast = how.fast.parse(data) if how.fast is not None else None
+            if fast is not None:  # the common case: a fixed numeric layout, well formed
+                ann.final = True
+                if fast[1]:
+                    ann.fields = fast[1]
+                return
+        reply = decode_reply(data, op)
+        payload = reply.payload
+        if op is None:
+            if payload:
+                ann.payload_hex = payload.hex()
+            ann.final = pending is not None  # the initial RESPONSE answers the RFC
+            return
+        if op.response.kind == "multi":
+            ann.final = not payload
+            if payload:
+                ann.text = decode_lispm(payload)
+            return
+        ann.final = True
+        if reply.values:
+            ann.fields = dict(reply.values)
+
+    # ------------------------------------------------------------------------------ control
+
+    def _control(self, conn: _Conn, direction: Direction, packet: Packet, retransmission: bool) -> Annotation:
+        opcode = packet.opcode
+        ann = Annotation(conn.id, "control")
+        if retransmission:
+            return ann
+        base = {"conn": conn.id, "link": conn.link, "direction": direction}
+        if opcode == ChaosOp.RFC:
+            text = packet.data.decode("latin-1")
+            contact, _, args = text.partition(" ")
+            ann.text = text
+            ann.op = RFC_NAME
+            if direction == "c2s":
+                conn.rfc_no = packet.packet_no
+                ann.pair = self._new_pair()
+                conn.seen["c2s"][packet.packet_no] = ann.pair
+                conn.pending[packet.packet_no] = _Pending(ann.pair, None, RFC_NAME)
+            ann.events.append({**base, "event": "rfc", "contact": contact, "args": args})
+        elif opcode == ChaosOp.OPN:
+            conn.opened = True
+            ann.events.append({**base, "event": "open"})
+        elif opcode == ChaosOp.EOF:
+            ann.events.append({**base, "event": "eof"})
+        elif opcode in _TEXT_EVENTS:
+            try:
+                ann.text = decode_lispm(packet.data)
+            except CodecError:
+                ann.text = packet.data.decode("latin-1")
+            event = _TEXT_EVENTS[ChaosOp(opcode)]
+            if event == "cls" and not conn.opened and direction == "s2c":
+                event = "refused"
+            if event in ("cls", "los", "refused"):
+                conn.ended = True
+            ann.events.append({**base, "event": event, "reason": ann.text})
+        return ann
+
+
+def bad_frame(exc: DecodeError) -> Annotation:
+    """The annotation of a frame that did not decode (it belongs to no connection: ``conn`` 0)."""
+    return Annotation(0, "bad-frame", decode_error=decode_error_dict(exc))
+
+
+def view_json(
+    ann: Annotation, link: int, direction: Direction, seq: int, packet: Packet | None, nbytes: int
+) -> dict[str, Any]:
+    """The ``/manip/c2s|s2c`` message of one frame (``manip.Packet`` schema)."""
+    out: dict[str, Any] = {"link": link, "conn": ann.conn, "direction": direction, "seq": seq}
+    if packet is not None:
+        out["opcode"] = packet.opcode
+        out["opcode_name"] = opcode_name(packet.opcode)
+        out["src_host"] = packet.src_host
+        out["src_index"] = packet.src_index
+        out["dest_host"] = packet.dest_host
+        out["dest_index"] = packet.dest_index
+        out["packet_no"] = packet.packet_no
+        out["ack_no"] = packet.ack_no
+    out["nbytes"] = nbytes
+    out["kind"] = ann.kind
+    if ann.retransmission:
+        out["retransmission"] = True
+    if ann.op is not None:
+        out["op"] = ann.op
+    if ann.request_number is not None:
+        out["request_number"] = ann.request_number
+    if ann.pair is not None:
+        out["pair"] = ann.pair
+    if ann.final is not None:
+        out["final"] = ann.final
+    if ann.fields:
+        out["fields"] = ann.fields
+    if ann.text is not None:
+        out["text"] = ann.text
+    if ann.error is not None:
+        out["error"] = ann.error
+    if ann.async_ is not None:
+        out["async"] = ann.async_
+    if ann.payload_hex is not None:
+        out["payload_hex"] = ann.payload_hex
+    if ann.decode_error is not None:
+        out["decode_error"] = ann.decode_error
+    return out
+
+
+# ---------------------------------------------------------------------------------------- view bytes
+
+_JSON: Final = json.JSONEncoder(separators=(",", ":"), check_circular=False)
+_encode = _JSON.encode
+_HEADER: Final = (
+    '{"link":%d,"conn":%d,"direction":"%s","seq":%d,"opcode":%d,"opcode_name":"%s","src_host":%d,'
+    '"src_index":%d,"dest_host":%d,"dest_index":%d,"packet_no":%d,"ack_no":%d,"nbytes":%d,"kind":%s'
+)
+_NO_PACKET: Final = '{"link":%d,"conn":%d,"direction":"%s","seq":%d,"nbytes":%d,"kind":%s'
+_OPCODE_NAMES: Final = tuple(opcode_name(op) for op in range(256))
+_quoted: dict[str, str] = {}
+"""JSON of the short strings that recur (kinds, op and field names), made once each."""
+
+
+def _quote(text: str) -> str:
+    out = _quoted.get(text)
+    if out is None:
+        out = _encode(text)
+        if len(_quoted) < 4096:  # op and field names come from the spec; a bound all the same
+            _quoted[text] = out
+    return out
+
+
+def _value_json(value: Any) -> str:
+    """One field value as :data:`_JSON` writes it, the float arrays of transforms and joints quickly."""
+    kind = type(value)
+    if kind is tuple:
+        try:
+            text = ",".join(map(float.__repr__, value))
+        except TypeError:  # not all floats
+            return _encode(value)
+        if "n" in text:  # nan or inf: JSON spells them NaN and Infinity
+            return _encode(value)
+        return f"[{text}]"
+    if kind is int:
+        return int.__repr__(value)
+    return _encode(value)
+
+
+def view_bytes(
+    ann: Annotation, link: int, direction: Direction, seq: int, packet: Packet | None, nbytes: int
+) -> bytes:
+    """The encoded ``/manip/c2s|s2c`` message of one frame: exactly the compact JSON of
+    :func:`view_json` (same keys, order and number spelling), written without building the dict.
+    The recorder calls it for every frame; a test holds it to :func:`view_json`."""
+    if packet is not None:
+        opcode = packet.opcode
+        head = _HEADER % (
+            link,
+            ann.conn,
+            direction,
+            seq,
+            opcode,
+            _OPCODE_NAMES[opcode],
+            packet.src_host,
+            packet.src_index,
+            packet.dest_host,
+            packet.dest_index,
+            packet.packet_no,
+            packet.ack_no,
+            nbytes,
+            _quote(ann.kind),
+        )
+    else:
+        head = _NO_PACKET % (link, ann.conn, direction, seq, nbytes, _quote(ann.kind))
+    parts = [head]
+    add = parts.append
+    if ann.retransmission:
+        add(',"retransmission":true')
+    if ann.op is not None:
+        add(',"op":')
+        add(_quote(ann.op))
+    if ann.request_number is not None:
+        add(',"request_number":%d' % ann.request_number)
+    if ann.pair is not None:
+        add(',"pair":%d' % ann.pair)
+    if ann.final is not None:
+        add(',"final":true' if ann.final else ',"final":false')
+    if ann.fields:
+        sep = ',"fields":{'
+        for name, value in ann.fields.items():
+            add(sep)
+            add(_quote(name))
+            add(":")
+            add(_value_json(value))
+            sep = ","
+        add("}")
+    if ann.text is not None:
+        add(',"text":')
+        add(_encode(ann.text))
+    if ann.error is not None:
+        add(',"error":')
+        add(_encode(ann.error))
+    if ann.async_ is not None:
+        add(',"async":')
+        add(_encode(ann.async_))
+    if ann.payload_hex is not None:
+        add(',"payload_hex":')
+        add(_encode(ann.payload_hex))
+    if ann.decode_error is not None:
+        add(',"decode_error":')
+        add(_encode(ann.decode_error))
+    add("}")
+    return "".join(parts).encode()

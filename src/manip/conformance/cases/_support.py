@@ -1,0 +1,153 @@
+"""Helpers shared by the scripted and negative cases (no cases are declared here).
+
+Valid request values are built from the spec's field types and from what the target itself reports
+(its current transform and joint angles), so a well-formed request is valid for any arm: a move to
+where the arm stands, a zero increment, the ready position.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Final
+
+from manip.codecs.errors import CodecError
+from manip.codecs.messages import ErrorReply, decode_error, decode_reply
+from manip.conformance.context import Answer, CaseContext, Probe
+from manip.spec import SPEC, RequestOpcode
+from manip.spec.constants import ServerOp
+
+UNASSIGNED_OPCODES: Final[tuple[int, ...]] = tuple(
+    code for code in range(0o200, 0o400) if code not in SPEC.requests
+)
+"""Data opcodes the spec gives no request (0222-0237, 0262-0377)."""
+
+SMALL_DEFAULT: Final = 1
+"""A valid ``small`` value for every opcode that has one (joint 1; configuration lefty)."""
+FLOAT_DEFAULT: Final = 0.5
+"""A valid single float for every opcode that has one (speed factor, weight, guard tolerance)."""
+
+
+def floats(answer: Answer) -> tuple[float, ...]:
+    """The floats of a data reply (transform or joints), decoded by the request's layout."""
+    op = SPEC.requests[answer.request.opcode]
+    reply = decode_reply(answer.data, op)
+    out: list[float] = []
+    for value in reply.values.values():
+        if isinstance(value, tuple):
+            out += [float(v) for v in value]
+        elif isinstance(value, float):
+            out.append(value)
+    return tuple(out)
+
+
+async def read_floats(ctx: CaseContext, probe: Probe, op: str) -> tuple[float, ...]:
+    """Here or joint angles, as floats; a failure of the target to answer is a failure of the case."""
+    answer = await probe.call(op)
+    ctx.expect(
+        answer.is_response,
+        clause="request.one-reply",
+        expected=f"a normal reply to {op}",
+        actual=str(answer),
+        data=answer.data,
+    )
+    try:
+        return floats(answer)
+    except CodecError as exc:
+        ctx.fail(
+            f"{op} reply does not decode: {exc}",
+            clause=exc.clause or "response.data-layout",
+            expected=f"the {op} layout",
+            actual=str(exc),
+            data=answer.data,
+        )
+
+
+async def valid_values(ctx: CaseContext, probe: Probe, op: RequestOpcode) -> dict[str, Any]:
+    """Values for a well-formed request of ``op`` that any conforming arm can carry out."""
+    values: dict[str, Any] = {}
+    for f in op.request.fields:
+        ft = f.type
+        if ft.name == "transform":
+            values[f.name] = list(await read_floats(ctx, probe, "here"))
+        elif ft.name == "joints":
+            values[f.name] = list(await read_floats(ctx, probe, "joint-angles"))
+        elif ft.element == "float":
+            values[f.name] = FLOAT_DEFAULT if ft.count == 1 else [0.0] * (ft.count or 0)
+        elif ft.element == "small":
+            values[f.name] = SMALL_DEFAULT
+        elif ft.element in ("word", "int16"):
+            values[f.name] = 0 if ft.count == 1 else [0] * (ft.count or 0)
+        else:
+            raise ValueError(f"no default value for field type {ft.name}")
+    return values
+
+
+def error_of(answer: Answer) -> ErrorReply | None:
+    """The decoded error of an error answer (None for a normal response or an undecodable string)."""
+    if answer.opcode not in (ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):
+        return None
+    for align in (True, False):
+        try:
+            return decode_error(answer.opcode, answer.data, align_args=align)
+        except CodecError:
+            continue
+    return None
+
+
+async def power_on(ctx: CaseContext, probe: Probe) -> None:
+    """Enable high power (it also clears an abort); the answer must be done."""
+    answer = await probe.call("enable-power")
+    ctx.expect(
+        answer.is_response and len(answer.data) == 2,
+        clause="enable-power.done",
+        expected="an empty done to enable high power",
+        actual=str(answer),
+        data=answer.data,
+    )
+
+
+def expect_refusal(
+    ctx: CaseContext,
+    answer: Answer,
+    *,
+    clause: str,
+    severities: tuple[str, ...] = ("C",),
+    codes: tuple[str, ...] = (),
+    what: str,
+) -> ErrorReply | None:
+    """The answer must be a non-fatal error with one of ``severities`` (and, when given, one of
+    ``codes``; the codes are the seed's where it names them)."""
+    wanted = f"a non-fatal error (202) of severity {'/'.join(severities)}" + (
+        f" and code {'/'.join(codes)}" if codes else ""
+    )
+    ctx.expect(
+        answer.opcode == ServerOp.NON_FATAL_ERROR,
+        clause=clause,
+        expected=f"{wanted} for {what}",
+        actual=str(answer),
+        data=answer.data,
+    )
+    error = error_of(answer)
+    if error is None:
+        ctx.fail(
+            f"the error string for {what} does not decode",
+            clause="error-string.format",
+            expected="an error string",
+            actual=answer.data.hex(),
+            data=answer.data,
+        )
+    ctx.expect(
+        error.error.severity in severities,
+        clause=clause,
+        expected=f"{wanted} for {what}",
+        actual=repr(error.error.render()),
+        data=answer.data,
+    )
+    if codes:
+        ctx.expect(
+            error.error.code in codes,
+            clause=clause,
+            expected=f"{wanted} for {what}",
+            actual=repr(error.error.render()),
+            data=answer.data,
+        )
+    return error

@@ -1,0 +1,431 @@
+"""``manip-conform``: run the conformance suite, list its cases, map clause coverage.
+
+Commands::
+
+    manip-conform run [HOST] [options]     run the suite (no HOST: against the embedded reference server)
+    manip-conform cases [--format table|json] [--select P]...
+    manip-conform coverage [--format table|json] [--party P]...
+
+Exit codes of ``run`` (documented in ``--help``):
+
+    0  conformant: no MUST failure (nor SHOULD failure with --strict), no stale known-failing entry
+    1  non-conformant: a failure, a stale known-failing entry, or the target died during the run
+    2  usage error (bad option, pattern, address or pattern file)
+    3  target unreachable, or dead before any case reached a verdict
+    4  interrupted, or an internal error of the suite (a partial report is still written)
+
+``coverage`` exits 1 when a MUST clause in scope has no case.  The group leaves room for more
+subcommands (``replay``, ``verify``) added by other modules: they register on :data:`main`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import shlex
+import sys
+import traceback
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import click
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from manip.conformance.case import Case, all_cases
+from manip.conformance.context import DEFAULT_REPLY_TIMEOUT, RunOptions
+from manip.conformance.coverage import DEFAULT_PARTIES, coverage, gaps
+from manip.conformance.report import failure_text, write_json, write_junit
+from manip.conformance.results import CaseResult, ExitCode, LivenessCheck, RunReport
+from manip.conformance.runner import RunConfig, RunEvents, Runner
+from manip.conformance.selection import PatternError, PatternSet
+from manip.links import AddressError, parse_address
+
+__all__ = ["main"]
+
+EXIT_CODES_HELP = """\b
+Exit codes:
+  0  conformant
+  1  non-conformant (a failure, a stale --known-failing entry, the target died)
+  2  usage error
+  3  target unreachable, or dead before any verdict
+  4  interrupted or internal error (a partial report is still written)"""
+
+_STYLE = {
+    "pass": "green",
+    "fail": "bold red",
+    "warn": "yellow",
+    "error": "bold magenta",
+    "skip": "dim",
+    "known-fail": "cyan",
+    "fixed": "bold red",
+}
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def main() -> None:
+    """Conformance suite for servers of the Chaos manipulator protocol (MIT Puma/Cougar, 1985)."""
+
+
+# ----------------------------------------------------------------------------------------------- run
+
+
+@main.command(epilog=EXIT_CODES_HELP)
+@click.argument("host", required=False)
+@click.option(
+    "--select",
+    "select",
+    multiple=True,
+    metavar="PATTERN",
+    help="Run only cases matching PATTERN (glob per dot component, ** any depth; @FILE reads a list).",
+)
+@click.option("--skip", "skip", multiple=True, metavar="PATTERN", help="Leave out cases matching PATTERN.")
+@click.option(
+    "--known-failing",
+    "known_failing",
+    multiple=True,
+    metavar="@FILE|PATTERN",
+    help="Cases expected to fail: they still run; entries matching nothing or now passing fail the run.",
+)
+@click.option("--strict", is_flag=True, help="SHOULD failures count (without it they are warnings).")
+@click.option(
+    "--seed",
+    type=click.IntRange(0, 2**63 - 1),
+    default=None,
+    help="Seed of every random choice (printed always; the same seed gives the same run).",
+)
+@click.option(
+    "--max-examples",
+    type=click.IntRange(1),
+    default=25,
+    show_default=True,
+    help="Examples per property-based case.",
+)
+@click.option(
+    "--target",
+    "target_kind",
+    type=click.Choice(["sim", "hardware"]),
+    default="sim",
+    show_default=True,
+    help="hardware: motion and power cases are left out unless --allow-motion.",
+)
+@click.option("--allow-motion", is_flag=True, help="With --target hardware, run motion and power cases too.")
+@click.option(
+    "--reply-timeout",
+    type=click.FloatRange(0.01),
+    default=DEFAULT_REPLY_TIMEOUT,
+    show_default=True,
+    help="Seconds to wait for each reply.",
+)
+@click.option(
+    "--deadline-scale",
+    type=click.FloatRange(0.01),
+    default=1.0,
+    show_default=True,
+    help="Multiply every case deadline (slow links, real arms).",
+)
+@click.option(
+    "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the JSON report."
+)
+@click.option(
+    "--junit", "junit_path", type=click.Path(dir_okay=False, path_type=Path), help="Write JUnit XML."
+)
+@click.option(
+    "--server-fault",
+    "server_faults",
+    multiple=True,
+    metavar="NAME[=ARG]",
+    help="Embedded server only: switch on a fault of the reference server (see manip-server --help).",
+)
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar; failures and the summary only.")
+def run(
+    host: str | None,
+    select: tuple[str, ...],
+    skip: tuple[str, ...],
+    known_failing: tuple[str, ...],
+    strict: bool,
+    seed: int | None,
+    max_examples: int,
+    target_kind: str,
+    allow_motion: bool,
+    reply_timeout: float,
+    deadline_scale: float,
+    json_path: Path | None,
+    junit_path: Path | None,
+    server_faults: tuple[str, ...],
+    quiet: bool,
+) -> None:
+    """Run the suite against HOST (a link address: tcp://HOST:PORT, chudp://HOST:PORT?addr=OCTAL,
+    chaosd:///PATH, or HOST[:PORT] for tcp).  Without HOST the embedded reference server is started
+    on a free loopback port and the suite runs against it."""
+    console = Console(stderr=False, highlight=False)
+    try:
+        select_set = PatternSet.of(select, "--select")
+        skip_set = PatternSet.of(skip, "--skip")
+        known_set = PatternSet.of(known_failing, "--known-failing")
+        address = str(parse_address(host)) if host else ""
+    except (PatternError, AddressError) as exc:
+        raise click.UsageError(str(exc)) from None
+    if host and server_faults:
+        raise click.UsageError("--server-fault applies to the embedded server only (omit HOST)")
+    config_faults = None
+    if server_faults:
+        from manip.reference_server import FaultSet  # the embedded server only
+
+        try:
+            config_faults = FaultSet.parse(server_faults)
+        except ValueError as exc:
+            raise click.UsageError(f"--server-fault: {exc}") from None
+    if seed is None:
+        seed = int.from_bytes(os.urandom(4), "big")
+    cases = all_cases()
+    options = RunOptions(
+        target="hardware" if target_kind == "hardware" else "sim",
+        allow_motion=allow_motion,
+        strict=strict,
+        reply_timeout=reply_timeout,
+        deadline_scale=deadline_scale,
+        max_examples=max_examples,
+        address=address,
+    )
+    extra: list[str] = []
+    if strict:
+        extra.append("--strict")
+    if max_examples != 25:
+        extra += ["--max-examples", str(max_examples)]
+    if target_kind == "hardware":
+        extra += ["--target", "hardware"] + (["--allow-motion"] if allow_motion else [])
+    for fault in server_faults:
+        extra += ["--server-fault", fault]
+    config = RunConfig(
+        address=address,
+        options=options,
+        seed=seed,
+        select=select_set,
+        skip=skip_set,
+        known_failing=known_set,
+        embedded=not host,
+        reproduce_options=extra,
+        command=shlex.join(["manip-conform", *sys.argv[1:]]),
+    )
+    console.print(f"manip-conform: seed [bold]{seed}[/] (rerun with --seed {seed})")
+    holder: dict[str, Runner] = {}
+    code = _execute(config, cases, config_faults, holder, console, quiet)
+    report = holder["runner"].report if "runner" in holder else None
+    if report is not None:
+        if code == ExitCode.INTERNAL and not report.interrupted and not report.internal_error:
+            report.internal_error = "internal error"
+        if json_path is not None:
+            write_json(report, json_path)
+        if junit_path is not None:
+            write_junit(report, junit_path)
+        _summary(console, report)
+        code = int(report.exit_code) if code is None else code
+    sys.exit(int(code) if code is not None else int(ExitCode.INTERNAL))
+
+
+def _execute(
+    config: RunConfig,
+    cases: Sequence[Case],
+    faults: Any,
+    holder: dict[str, Runner],
+    console: Console,
+    quiet: bool,
+) -> int | None:
+    """Run; None means "use the report's exit code"."""
+    try:
+        asyncio.run(_run_async(config, cases, faults, holder, console, quiet))
+    except KeyboardInterrupt:
+        if "runner" in holder:
+            holder["runner"].report.interrupted = True
+            problems = holder["runner"].report.problems
+            if not any("interrupted" in p for p in problems):
+                problems.append("the run was interrupted; this report is partial")
+        console.print("[bold]interrupted[/]: the report is partial")
+        return int(ExitCode.INTERNAL)
+    except Exception as exc:  # an internal error of the suite: keep what was done
+        text = traceback.format_exc()
+        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {exc}")
+        if "runner" in holder:
+            holder["runner"].report.internal_error = text
+        else:
+            console.print(text)
+        return int(ExitCode.INTERNAL)
+    return None
+
+
+async def _run_async(
+    config: RunConfig,
+    cases: Sequence[Case],
+    faults: Any,
+    holder: dict[str, Runner],
+    console: Console,
+    quiet: bool,
+) -> None:
+    if not config.embedded:
+        await _run_with(config, cases, holder, console, quiet)
+        return
+    from manip.reference_server import ServerConfig  # embedded target only
+    from manip.reference_server.driver import serve
+
+    server_config = ServerConfig() if faults is None else ServerConfig(faults=faults)
+    async with serve("tcp://127.0.0.1:0", server_config) as server:
+        config.address = server.address
+        config.options = _with_address(config.options, server.address)
+        console.print(f"embedded reference server at {server.address}")
+        await _run_with(config, cases, holder, console, quiet)
+
+
+def _with_address(options: RunOptions, address: str) -> RunOptions:
+    from dataclasses import replace
+
+    return replace(options, address=address)
+
+
+async def _run_with(
+    config: RunConfig, cases: Sequence[Case], holder: dict[str, Runner], console: Console, quiet: bool
+) -> None:
+    progress = Progress(
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+        disable=quiet or not console.is_terminal,
+    )
+    task_id = progress.add_task("conformance", total=0)
+
+    def started(selected: list[Case]) -> None:
+        progress.update(task_id, total=len(selected))
+
+    def case_started(item: Case) -> None:
+        progress.update(task_id, description=item.id)
+
+    def case_finished(result: CaseResult) -> None:
+        progress.advance(task_id)
+        if result.outcome in ("fail", "error", "fixed") or (result.outcome == "warn" and not quiet):
+            style = _STYLE[result.outcome]
+            progress.console.print(
+                f"[{style}]{result.outcome.upper():>10}[/] {result.id} ({result.duration:.2f} s)"
+            )
+            body = failure_text(result) if result.outcome != "error" else result.traceback.rstrip()
+            if result.outcome == "fixed":
+                body = "listed in --known-failing but passed: remove the entry"
+            if body:
+                progress.console.print(body, markup=False, highlight=False)
+
+    def liveness(check: LivenessCheck) -> None:
+        if not check.alive:
+            progress.console.print(f"[bold red]target not alive[/] ({check.when}): {check.detail}")
+
+    runner = Runner(config, cases, RunEvents(started, case_started, case_finished, liveness))
+    holder["runner"] = runner
+    with progress:
+        await runner.run()
+
+
+def _summary(console: Console, report: RunReport) -> None:
+    counts = report.counts()
+    parts = [f"[{_STYLE[k]}]{v} {k}[/]" for k, v in counts.items() if v]
+    for problem in report.problems:
+        console.print(f"[bold red]problem[/]: {problem}")
+    verdict_style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
+    console.print(
+        f"[{verdict_style}]{report.verdict}[/] (exit {int(report.exit_code)}): {', '.join(parts) or 'no cases'}"
+        f" in {report.duration:.1f} s; seed {report.seed}"
+    )
+    slow = [r for r in report.results if r.deadline and r.duration > 0.8 * r.deadline]
+    for r in slow:
+        console.print(f"[yellow]slow[/]: {r.id} took {r.duration:.2f} s of its {r.deadline:g} s deadline")
+
+
+# ----------------------------------------------------------------------------------------------- cases
+
+
+@main.command("cases")
+@click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table", show_default=True)
+@click.option("--select", "select", multiple=True, metavar="PATTERN", help="Only cases matching PATTERN.")
+def cases_command(fmt: str, select: tuple[str, ...]) -> None:
+    """List every case: id, clauses, level, kind, hazard."""
+    try:
+        patterns = PatternSet.of(select, "--select")
+    except PatternError as exc:
+        raise click.UsageError(str(exc)) from None
+    items = [c for c in all_cases() if not patterns or patterns.matches(c.id)]
+    if fmt == "json":
+        data = [
+            {
+                "id": c.id,
+                "clauses": list(c.clauses),
+                "level": c.level,
+                "kind": c.kind,
+                "hazard": c.hazard,
+                "deadline": c.deadline,
+                "summary": c.summary,
+            }
+            for c in items
+        ]
+        click.echo(json.dumps(data, indent=2))
+        return
+    table = Table(title=f"{len(items)} cases", show_lines=False)
+    for column in ("id", "level", "kind", "hazard", "clauses"):
+        table.add_column(column)
+    for c in items:
+        table.add_row(c.id, c.level, c.kind, c.hazard, " ".join(c.clauses))
+    Console(width=max(160, Console().width)).print(table)
+
+
+# ----------------------------------------------------------------------------------------------- coverage
+
+
+@main.command("coverage")
+@click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table", show_default=True)
+@click.option(
+    "--party",
+    "parties",
+    multiple=True,
+    type=click.Choice(["server", "client", "both", "cougar", "puma", "link"]),
+    help=f"Parties whose MUST clauses must be covered (default: {', '.join(sorted(DEFAULT_PARTIES))}).",
+)
+def coverage_command(fmt: str, parties: tuple[str, ...]) -> None:
+    """Map every clause to the cases that check it; exit 1 if a MUST clause in scope has none."""
+    rows = coverage(all_cases(), parties or DEFAULT_PARTIES)
+    missing = gaps(rows)
+    if fmt == "json":
+        data = {
+            "parties": sorted(parties or DEFAULT_PARTIES),
+            "clauses": [
+                {
+                    "clause": r.clause,
+                    "level": r.level,
+                    "party": r.party,
+                    "in_scope": r.in_scope,
+                    "cases": list(r.cases),
+                }
+                for r in rows
+            ],
+            "uncovered_must": [r.clause for r in missing],
+        }
+        click.echo(json.dumps(data, indent=2))
+    else:
+        table = Table(title="clause coverage")
+        for column in ("clause", "level", "party", "cases"):
+            table.add_column(column)
+        for r in rows:
+            cases_text = ", ".join(r.cases) if r.cases else ("[bold red]NONE[/]" if r.gap else "[dim]-[/]")
+            table.add_row(r.clause, r.level, r.party + ("" if r.in_scope else " (out of scope)"), cases_text)
+        console = Console(width=max(160, Console().width))
+        console.print(table)
+        covered = sum(1 for r in rows if r.cases)
+        console.print(
+            f"{covered} of {len(rows)} clauses have a case; {len(missing)} MUST clause(s) in scope have none"
+        )
+    sys.exit(1 if missing else 0)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

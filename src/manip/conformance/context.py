@@ -1,0 +1,480 @@
+"""What a case works with: :class:`CaseContext` (options, seed, expectations) and :class:`Probe` (a raw
+manip session over one fresh Chaos connection that records every packet both ways).
+
+A probe is deliberately *not* a client library: it sends exactly the bytes a case gives it, takes the
+server's packets in the order they come, and judges nothing by itself (the checks of
+:mod:`manip.conformance.checks` do).  What it adds:
+
+* ``await ctx.connect()`` opens a connection (Chaos contact from the target address) and, unless
+  ``initial=False``, waits for the initial RESPONSE (``probe.initial``); no initial RESPONSE is a
+  failure of ``connect.initial-response``.
+* ``await probe.request(opcode, data=b"")`` sends a request packet (opcode as number or spec name) and
+  returns its Chaos packet number; ``await probe.send(name, **values)`` encodes the values with the
+  spec layout first.  ``await probe.call(name, **values)`` = send + :meth:`Probe.reply`.
+* ``await probe.reply(number, timeout=None)`` returns the next :class:`Answer` (the next RESPONSE,
+  non-fatal or fatal error; asynchronous packets are set aside in ``probe.unsolicited``).  Answers come
+  in request order, so the probe does not match them by number: ``number`` only labels the record (the
+  checks compare it).  No answer within the timeout (``ctx.options.reply_timeout`` by default), or the
+  connection ending first, raises :class:`CaseFailure` (``request.one-reply``).
+* ``await probe.replies_until_empty(number)``: every packet of a multi-packet reply up to and
+  including its empty terminator (or up to an error, a timeout or the close: ``answer.terminated``).
+* ``await probe.next_packet(timeout)``: the next server packet of any kind, or None on timeout or at
+  the end of the connection (``probe.closed``, ``probe.end_reason``).
+* ``probe.packets``: the recording (:class:`~manip.conformance.checks.WirePacket`, both directions,
+  times from the start of the case; the end of the connection is a CLS/EOF/LOS pseudo-packet).
+
+``ctx.expect(cond, clause=..., expected=..., actual=..., data=...)`` is the one way to state a check:
+false on a MUST clause raises :class:`CaseFailure`; false on a SHOULD/MAY/INFO clause is recorded
+(``ctx.soft_failures``) and the case goes on.  ``ctx.check(findings)`` applies the same rule to the
+findings of a checker; ``ctx.fail(...)`` fails outright; ``ctx.skip(reason)`` ends the case as skipped.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import random
+import time
+from collections.abc import Awaitable, Callable, Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any, Final, Literal, NoReturn
+
+from manip.codecs.messages import encode_request, request_op
+from manip.codecs.packet import Packet
+from manip.conformance.case import LEVEL_ORDER, CaseFailure, CaseSkipped
+from manip.conformance.checks import ANSWER_OPCODES, Finding, WirePacket, describe, word
+from manip.links import ChaosConnection, ChaosError, ConnectionClosed, ConnectionLost, LinkAddress
+from manip.spec import SPEC
+from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.model import Hazard, Level
+
+__all__ = [
+    "Answer",
+    "CaseContext",
+    "Connector",
+    "Probe",
+    "RunOptions",
+    "SoftFailure",
+]
+
+Target = Literal["sim", "hardware"]
+DEFAULT_REPLY_TIMEOUT: Final = 2.0
+DEFAULT_CONNECT_TIMEOUT: Final = 5.0
+
+Connector = Callable[[bool], Awaitable[ChaosConnection]]
+"""Opens one fresh Chaos connection to the target (the runner provides it); the argument says whether
+a refusal as busy (the previous case's connection still closing) is retried."""
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """The run's settings, as cases see them."""
+
+    target: Target = "sim"
+    allow_motion: bool = False
+    strict: bool = False
+    reply_timeout: float = DEFAULT_REPLY_TIMEOUT
+    connect_timeout: float = DEFAULT_CONNECT_TIMEOUT
+    deadline_scale: float = 1.0
+    max_examples: int = 25
+    address: str = ""
+    """The target's link address, as given (for messages and reproduce commands)."""
+
+    @property
+    def allowed_hazards(self) -> frozenset[Hazard]:
+        """Opcode hazard classes cases may send: all on a simulator; on hardware read-only and config
+        unless ``--allow-motion``."""
+        if self.target == "sim" or self.allow_motion:
+            return frozenset({"read-only", "config", "motion", "power"})
+        return frozenset({"read-only", "config"})
+
+
+@dataclass(frozen=True)
+class SoftFailure:
+    """A SHOULD/MAY/INFO clause the target broke; the case went on."""
+
+    message: str
+    clause: str | None
+    level: Level
+    expected: str = ""
+    actual: str = ""
+    data: bytes = b""
+
+
+@dataclass(frozen=True)
+class Answer:
+    """The server's answer to one request: one packet, or every packet of a multi-packet reply."""
+
+    request: WirePacket
+    packets: tuple[WirePacket, ...]
+    terminated: bool = True
+    """For multi-packet replies: whether the empty terminator came."""
+
+    @property
+    def first(self) -> WirePacket:
+        return self.packets[0]
+
+    @property
+    def opcode(self) -> int:
+        return self.first.opcode
+
+    @property
+    def number(self) -> int | None:
+        """The request number the (first) answer packet carries."""
+        return word(self.first.data)
+
+    @property
+    def data(self) -> bytes:
+        return self.first.data
+
+    @property
+    def payload(self) -> bytes:
+        """The first packet's data after the request number."""
+        return self.first.data[2:]
+
+    @property
+    def is_response(self) -> bool:
+        return self.opcode == ServerOp.RESPONSE
+
+    @property
+    def is_error(self) -> bool:
+        return self.opcode in (ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR)
+
+    @property
+    def all_data(self) -> bytes:
+        return b"".join(p.data for p in self.packets)
+
+    def __str__(self) -> str:
+        return describe(self.first) + (f" + {len(self.packets) - 1} more" if len(self.packets) > 1 else "")
+
+
+class Probe:
+    """A raw manip session over one Chaos connection; see the module docstring."""
+
+    def __init__(self, ctx: CaseContext, conn: ChaosConnection, index: int) -> None:
+        self._ctx = ctx
+        self.conn = conn
+        self.index = index
+        self.packets: list[WirePacket] = []
+        self.unsolicited: list[WirePacket] = []
+        """Asynchronous packets (0203, 0204, 0205) received while waiting for replies."""
+        self.initial: WirePacket | None = None
+        self.rfc_packet_no: int | None = None
+        self.end_reason: ChaosError | None = None
+        self._buffer: list[WirePacket] = []
+
+    @property
+    def closed(self) -> bool:
+        """The connection has ended (and every packet before the end has been taken)."""
+        return self.end_reason is not None and not self._buffer
+
+    def _record(
+        self, direction: Literal["c2s", "s2c"], opcode: int, number: int, ack: int, data: bytes
+    ) -> WirePacket:
+        packet = WirePacket(direction, opcode, number, ack, bytes(data), self._ctx.clock(), self.index)
+        self.packets.append(packet)
+        self._ctx.transcript.append(packet)
+        return packet
+
+    # ------------------------------------------------------------------------------------- sending
+
+    async def request(self, opcode: int | str, data: bytes = b"") -> int:
+        """Send one request packet with exactly ``data``; return its Chaos packet number."""
+        code = request_op(opcode).opcode if isinstance(opcode, str) else opcode
+        number = await self.conn.send(bytes(data), code)
+        ack = 0
+        self._record("c2s", code, number, ack, data)
+        return number
+
+    async def send(self, op: int | str, **values: Any) -> int:
+        """Encode ``values`` by the spec layout of ``op`` and send the request."""
+        return await self.request(request_op(op).opcode, encode_request(op, **values))
+
+    async def call(self, op: int | str, *, timeout: float | None = None, **values: Any) -> Answer:
+        """Send a well-formed request and wait for its answer (multi-packet replies in full)."""
+        spec_op = request_op(op)
+        number = await self.send(op, **values)
+        if spec_op.response.kind == "multi":
+            return await self.replies_until_empty(number, timeout=timeout)
+        return await self.reply(number, timeout=timeout)
+
+    async def call_raw(self, opcode: int, data: bytes = b"", *, timeout: float | None = None) -> Answer:
+        """Send raw bytes and wait for the single answer."""
+        number = await self.request(opcode, data)
+        return await self.reply(number, timeout=timeout)
+
+    # ------------------------------------------------------------------------------------- receiving
+
+    async def next_packet(self, timeout: float | None = None) -> WirePacket | None:
+        """The next server packet (any opcode), or None on timeout or once the connection has ended."""
+        if self._buffer:
+            return self._buffer.pop(0)
+        if self.end_reason is not None:
+            return None
+        wait = self._ctx.options.reply_timeout if timeout is None else timeout
+        try:
+            async with asyncio.timeout(wait):
+                packet: Packet = await self.conn.receive()
+        except TimeoutError:
+            return None
+        except ChaosError as exc:
+            self.end_reason = exc
+            kind = ChaosOp.LOS if isinstance(exc, ConnectionLost) else ChaosOp.CLS
+            if isinstance(exc, ConnectionClosed) and exc.reason == "EOF":
+                kind = ChaosOp.EOF
+            self._record("s2c", kind, 0, 0, str(exc).encode("ascii", "replace"))
+            return None
+        return self._record("s2c", packet.opcode, packet.packet_no, packet.ack_no, packet.data)
+
+    def push_back(self, packet: WirePacket) -> None:
+        """Return a packet so the next :meth:`next_packet` gives it again."""
+        self._buffer.insert(0, packet)
+
+    async def _next_answer_packet(self, number: int, timeout: float | None, what: str) -> WirePacket:
+        loop = asyncio.get_running_loop()
+        wait = self._ctx.options.reply_timeout if timeout is None else timeout
+        deadline = loop.time() + wait
+        while True:
+            packet = await self.next_packet(max(0.0, deadline - loop.time()))
+            if packet is None:
+                if self.end_reason is not None:
+                    raise CaseFailure(
+                        f"the connection ended while waiting for {what}",
+                        clause="request.one-reply",
+                        expected=what,
+                        actual=f"connection ended: {self.end_reason}",
+                        kind="closed",
+                    )
+                raise CaseFailure(
+                    f"no {what} within {wait:g} s",
+                    clause="request.one-reply",
+                    expected=f"{what} within {wait:g} s",
+                    actual="nothing (timeout)",
+                    kind="timeout",
+                )
+            if packet.opcode in ANSWER_OPCODES:
+                return packet
+            self.unsolicited.append(packet)
+
+    async def reply(self, number: int, timeout: float | None = None) -> Answer:
+        """The next answer packet (RESPONSE, 0201 or 0202), taken as the answer to request ``number``."""
+        request = self._request(number)
+        packet = await self._next_answer_packet(number, timeout, f"a reply to request #{number}")
+        return Answer(request, (packet,))
+
+    async def replies_until_empty(self, number: int, timeout: float | None = None) -> Answer:
+        """Every packet of a multi-packet reply to ``number``, up to its empty terminator.
+
+        Stops early (``terminated=False``) at an error packet, a packet that is not a RESPONSE, a timeout
+        or the end of the connection; the first packet missing altogether raises like :meth:`reply`."""
+        request = self._request(number)
+        first = await self._next_answer_packet(number, timeout, f"a reply to request #{number}")
+        packets = [first]
+        if first.opcode != ServerOp.RESPONSE or len(first.data) <= 2:
+            return Answer(request, (first,), terminated=first.opcode == ServerOp.RESPONSE)
+        while True:
+            packet = await self.next_packet(timeout)
+            if packet is None:
+                return Answer(request, tuple(packets), terminated=False)
+            if packet.opcode in (
+                ServerOp.ASYNCHRONOUS_RESPONSE,
+                ServerOp.ASYNCHRONOUS_ERROR,
+                ServerOp.ASYNCHRONOUS_WARNING,
+            ):
+                self.unsolicited.append(packet)
+                continue
+            if packet.opcode != ServerOp.RESPONSE:
+                self.push_back(packet)
+                return Answer(request, tuple(packets), terminated=False)
+            packets.append(packet)
+            if len(packet.data) <= 2:
+                return Answer(request, tuple(packets), terminated=True)
+
+    async def drain(self, quiet: float = 0.2) -> list[WirePacket]:
+        """Take every packet that arrives until ``quiet`` seconds pass without one."""
+        out: list[WirePacket] = []
+        while (packet := await self.next_packet(quiet)) is not None:
+            out.append(packet)
+        return out
+
+    async def wait_closed(self, timeout: float | None = None) -> bool:
+        """Wait for the connection to end, taking (and recording) what arrives; True if it ended."""
+        loop = asyncio.get_running_loop()
+        wait = self._ctx.options.reply_timeout if timeout is None else timeout
+        deadline = loop.time() + wait
+        while self.end_reason is None:
+            remaining = deadline - loop.time()
+            if remaining <= 0:
+                return False
+            await self.next_packet(remaining)
+        return True
+
+    def _request(self, number: int) -> WirePacket:
+        for packet in reversed(self.packets):
+            if packet.direction == "c2s" and packet.packet_no == number:
+                return packet
+        raise ValueError(f"request #{number} was not sent on this probe")
+
+    async def close(self) -> None:
+        """Close the connection (abort after a short wait: the target may already be gone)."""
+        if self.end_reason is None:
+            self.end_reason = ConnectionClosed("closed by the case", by_peer=False)
+        try:
+            await self.conn.close(timeout=1.0)
+        except ChaosError:
+            pass
+
+
+class CaseContext:
+    """Everything a running case may use; see the module docstring."""
+
+    def __init__(
+        self,
+        *,
+        case_id: str,
+        level: Level,
+        seed: int,
+        options: RunOptions,
+        connector: Connector,
+    ) -> None:
+        self.case_id = case_id
+        self.level = level
+        self.seed = seed
+        """This case's seed: derived from the run's ``--seed`` and the case id, so it does not change
+        when other cases are selected or skipped."""
+        self.random = random.Random(seed)
+        self.options = options
+        self.transcript: list[WirePacket] = []
+        """Every packet of every probe of this case, in the order recorded."""
+        self.probes: list[Probe] = []
+        self.soft_failures: list[SoftFailure] = []
+        self.notes: list[str] = []
+        self.auto_check = True
+        """After the case, the runner checks every probe's whole recording with
+        :func:`~manip.conformance.checks.check_transcript`; a case that leaves the protocol on purpose
+        (it sends a raw packet the transcript checker would misjudge) sets this False."""
+        self._connector = connector
+        self._t0 = time.monotonic()
+
+    @property
+    def max_examples(self) -> int:
+        return self.options.max_examples
+
+    def clock(self) -> float:
+        """Seconds since the case started."""
+        return time.monotonic() - self._t0
+
+    def note(self, text: str) -> None:
+        """A line of information for the report (what the case observed)."""
+        self.notes.append(text)
+
+    # ------------------------------------------------------------------------------------- connecting
+
+    async def connect(self, *, initial: bool = True, retry_busy: bool = True) -> Probe:
+        """A new probe over a fresh connection; with ``initial`` the initial RESPONSE is taken first.
+
+        ``retry_busy=False`` for a case that expects the refusal (one server per robot)."""
+        try:
+            conn = await self._connector(retry_busy)
+        except ChaosError as exc:
+            raise CaseFailure(
+                f"could not connect: {exc}",
+                expected="the connection to open",
+                actual=f"{type(exc).__name__}: {exc}",
+                kind="closed",
+            ) from exc
+        probe = Probe(self, conn, len(self.probes))
+        info = conn.info()
+        probe.rfc_packet_no = info.last_sent if info is not None else None
+        self.probes.append(probe)
+        if initial:
+            packet = await probe.next_packet(self.options.reply_timeout)
+            if packet is None or packet.opcode != ServerOp.RESPONSE:
+                if packet is not None:
+                    probe.push_back(packet)
+                raise CaseFailure(
+                    "no initial RESPONSE after the connection opened",
+                    clause="connect.initial-response",
+                    expected=f"a RESPONSE (200) within {self.options.reply_timeout:g} s of the open",
+                    actual="nothing" if packet is None else describe(packet),
+                    data=b"" if packet is None else packet.data,
+                    kind="missing_response",
+                )
+            probe.initial = packet
+        return probe
+
+    async def close_all(self) -> None:
+        for probe in self.probes:
+            await probe.close()
+
+    # ------------------------------------------------------------------------------------- verdicts
+
+    def _clause_level(self, clause: str | None, level: Level | None) -> Level:
+        if level is not None:
+            return level
+        if clause is not None:
+            if clause not in SPEC.clauses:
+                raise ValueError(f"unknown clause {clause!r}")
+            return SPEC.clauses[clause].level
+        return self.level
+
+    def expect(
+        self,
+        condition: object,
+        *,
+        clause: str | None = None,
+        expected: str = "",
+        actual: object = "",
+        data: bytes = b"",
+        message: str | None = None,
+        level: Level | None = None,
+    ) -> bool:
+        """Check ``condition``; when false: MUST raises CaseFailure, weaker levels are recorded.
+
+        The level is ``level`` if given, else the clause's, else the case's.  Returns ``bool(condition)``."""
+        if condition:
+            return True
+        lv = self._clause_level(clause, level)
+        text = message or (f"expected {expected}" if expected else "check failed")
+        if lv == "MUST":
+            raise CaseFailure(text, clause=clause, expected=expected, actual=str(actual), data=data)
+        self.soft_failures.append(SoftFailure(text, clause, lv, expected, str(actual), bytes(data)))
+        return False
+
+    def check(self, findings: Iterable[Finding]) -> bool:
+        """Apply :meth:`expect` to a checker's findings (MUST ones raise, the first first).  True when
+        there were none."""
+        items = sorted(findings, key=lambda f: -LEVEL_ORDER[f.level])
+        for finding in items:
+            self.expect(
+                False,
+                clause=finding.clause,
+                expected=finding.expected,
+                actual=finding.actual,
+                data=finding.data,
+                message=finding.message,
+            )
+        return not items
+
+    def fail(
+        self,
+        message: str,
+        *,
+        clause: str | None = None,
+        expected: str = "",
+        actual: object = "",
+        data: bytes = b"",
+    ) -> NoReturn:
+        raise CaseFailure(message, clause=clause, expected=expected, actual=str(actual), data=data)
+
+    def skip(self, reason: str) -> NoReturn:
+        raise CaseSkipped(reason)
+
+    def require_hazard(self, hazard: Hazard) -> None:
+        """Skip unless the run allows opcodes of ``hazard`` (for cases that decide at run time)."""
+        if hazard not in self.options.allowed_hazards:
+            self.skip(f"{hazard} requests are not allowed on {self.options.target} without --allow-motion")
+
+
+def request_packets(packets: Sequence[WirePacket]) -> list[WirePacket]:
+    """The client's requests of a recording."""
+    return [p for p in packets if p.direction == "c2s" and not p.is_close]

@@ -1,0 +1,52 @@
+"""Clause coverage: which cases check each clause, and which MUST clauses no case checks.
+
+Scope (erratum ``conformance-scope``): a server run can observe what binds the server, what binds both
+parties, and the links it runs over, so a MUST clause of party ``server``, ``both`` or ``link`` with no
+case is a gap.  Clauses of party ``client`` are for a client suite, and ``cougar``/``puma`` ones for the
+Cougar target (``--cougar``); they are listed, and count as gaps only when their party is asked for.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Final
+
+from manip.conformance.case import Case
+from manip.spec import SPEC
+
+__all__ = ["DEFAULT_PARTIES", "ClauseCoverage", "coverage", "gaps"]
+
+DEFAULT_PARTIES: Final = frozenset({"server", "both", "link"})
+
+
+@dataclass(frozen=True)
+class ClauseCoverage:
+    clause: str
+    level: str
+    party: str
+    cases: tuple[str, ...]
+    in_scope: bool
+
+    @property
+    def gap(self) -> bool:
+        return self.in_scope and self.level == "MUST" and not self.cases
+
+
+def coverage(cases: Sequence[Case], parties: Iterable[str] = DEFAULT_PARTIES) -> list[ClauseCoverage]:
+    """Every live clause of the spec with the ids of the cases that name it."""
+    scope = frozenset(parties)
+    by_clause: dict[str, list[str]] = {cid: [] for cid in SPEC.clauses}
+    for item in cases:
+        for clause in item.clauses:
+            by_clause[clause].append(item.id)
+    return [
+        ClauseCoverage(cid, c.level, c.party, tuple(sorted(by_clause[cid])), c.party in scope)
+        for cid, c in SPEC.clauses.items()
+        if not c.retired
+    ]
+
+
+def gaps(rows: Iterable[ClauseCoverage]) -> list[ClauseCoverage]:
+    """MUST clauses in scope that no case checks."""
+    return [row for row in rows if row.gap]

@@ -1,0 +1,146 @@
+"""The results of a run as values: one :class:`CaseResult` per case, one :class:`RunReport` per run.
+
+Outcomes (``Outcome``):
+
+* ``pass``: every clause the case checks held;
+* ``fail``: a MUST clause broke, or (with ``--strict``) a SHOULD clause;
+* ``warn``: only SHOULD/MAY/INFO clauses broke, without ``--strict`` (they do not fail the run);
+* ``error``: the suite itself failed (an exception in the case); the traceback is kept;
+* ``skip``: not applicable (hazard not allowed on hardware, a capability the target lacks...);
+* ``known-fail``: failed (or erred) and listed in ``--known-failing``; does not fail the run;
+* ``fixed``: listed in ``--known-failing`` but passed: the entry is stale and fails the run.
+
+Exit codes (:class:`ExitCode`): 0 conformant, 1 non-conformant (or a stale known-failing entry),
+2 usage error, 3 target unreachable or dead before any verdict, 4 interrupted or internal error.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Final, Literal
+
+from manip.conformance.checks import WirePacket
+
+__all__ = ["OUTCOMES", "CaseResult", "ExitCode", "LivenessCheck", "Outcome", "RunReport", "Violation"]
+
+Outcome = Literal["pass", "fail", "warn", "error", "skip", "known-fail", "fixed"]
+OUTCOMES: Final[tuple[str, ...]] = ("pass", "fail", "warn", "error", "skip", "known-fail", "fixed")
+
+
+class ExitCode(enum.IntEnum):
+    CONFORMANT = 0
+    NON_CONFORMANT = 1
+    USAGE = 2
+    UNREACHABLE = 3
+    INTERNAL = 4
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One clause the target broke, as a case saw it."""
+
+    message: str
+    clause: str | None
+    level: str
+    expected: str = ""
+    actual: str = ""
+    data: bytes = b""
+    kind: str = "wrong_value"
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "message": self.message,
+            "clause": self.clause,
+            "level": self.level,
+            "expected": self.expected,
+            "actual": self.actual,
+            "bytes": self.data.hex(),
+            "kind": self.kind,
+        }
+
+
+@dataclass
+class CaseResult:
+    id: str
+    clauses: tuple[str, ...]
+    level: str
+    kind: str
+    hazard: str
+    summary: str
+    outcome: Outcome
+    seed: int
+    deadline: float
+    duration: float = 0.0
+    violations: list[Violation] = field(default_factory=list)
+    """The failure that ended the case first (if any), then the soft failures recorded on the way."""
+    reason: str = ""
+    """Why the case was skipped, or what the error was."""
+    traceback: str = ""
+    notes: list[str] = field(default_factory=list)
+    packets: list[WirePacket] = field(default_factory=list)
+    known_failing: bool = False
+    reproduce: str = ""
+
+    @property
+    def failure(self) -> Violation | None:
+        return self.violations[0] if self.violations else None
+
+
+@dataclass(frozen=True)
+class LivenessCheck:
+    """A liveness probe: connect, initial RESPONSE, one read-only request answered."""
+
+    when: str
+    """``before``, ``after:CASE_ID`` or ``end``."""
+    alive: bool
+    detail: str
+    duration: float
+
+
+@dataclass
+class RunReport:
+    target: str
+    embedded: bool
+    seed: int
+    strict: bool
+    options: dict[str, object]
+    command: str
+    started: str = ""
+    duration: float = 0.0
+    results: list[CaseResult] = field(default_factory=list)
+    liveness: list[LivenessCheck] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+    """Run-level failures: stale known-failing entries, the target dying, an interruption."""
+    interrupted: bool = False
+    internal_error: str = ""
+    target_died_after: str | None = None
+    unreachable: bool = False
+
+    def counts(self) -> dict[str, int]:
+        counter = Counter(r.outcome for r in self.results)
+        return {name: counter.get(name, 0) for name in OUTCOMES}
+
+    @property
+    def exit_code(self) -> ExitCode:
+        counts = self.counts()
+        if self.unreachable:
+            return ExitCode.UNREACHABLE
+        if self.interrupted or self.internal_error:
+            return ExitCode.INTERNAL
+        if counts["fail"] or counts["fixed"] or self.problems:
+            return ExitCode.NON_CONFORMANT
+        if counts["error"]:
+            return ExitCode.INTERNAL
+        return ExitCode.CONFORMANT
+
+    @property
+    def verdict(self) -> str:
+        return {
+            ExitCode.CONFORMANT: "conformant",
+            ExitCode.NON_CONFORMANT: "non-conformant",
+            ExitCode.USAGE: "usage error",
+            ExitCode.UNREACHABLE: "target unreachable",
+            ExitCode.INTERNAL: "interrupted" if self.interrupted else "internal error",
+        }[self.exit_code]

@@ -1,0 +1,464 @@
+"""The Cougar wrist computer, simulated behind its 16-bit word protocol (seed Part III, Appendices B and C).
+
+Sans-I/O: :meth:`CougarSim.receive` buffers words from the Puma, :meth:`CougarSim.tick` is one Puma clock
+tick and returns the words Cougar sends back during it.  Time is only ever an argument; given a seed the
+simulation is deterministic.
+
+Theory of operation (one tick = one GUTS interrupt, B.6, then background time):
+
+1. Re-entry check (errata ``cougar-guts-reentry``).  GUTS must never interrupt itself; the seed's GUTS
+   checks on entry and, if it finds itself already running, sends a character to the terminal and returns
+   from the interrupt.  A sans-I/O simulator sees re-entry two ways: ``tick`` called while a ``tick`` is
+   running (e.g. from an :class:`~manip.cougar.environment.Environment` callback), or a tick arriving
+   before the previous GUTS would have finished on the LSI-11/23 by the cost model (``guts_base_s`` plus
+   ``guts_per_command_s`` per command and ``guts_per_word_s`` per data word).  Either way the tick does
+   nothing but append ``reentry_char`` to :attr:`CougarSim.terminal` and count ``guts_reentries``; it
+   returns no words and its gauge sample is lost.
+2. ADC8 (B.4): the physical wrench on the hand (contact from the environment at the pose of the joint
+   angles Cougar was last sent, plus gravity on the true hand and payload) becomes eight 12-bit gauge
+   counts through the wrist model; each channel is filtered in integers (:mod:`manip.cougar.adc`).
+3. Conversion (§8.2): force = voltmat · (Y − gauge offsets).
+4. GRAVITY (B.8), then LIMIT (B.5) if bit 0 of ``flags`` is set (it is not, by default).
+5. GUARDM (B.9): every armed guard whose dot(force, dvec) exceeds tol trips: response 6 (stop the move,
+   bit 15 of its type word set) or 7 (continue) with its index, and it is disarmed.
+6. COMINT (B.7, :mod:`manip.cougar.comint`): every complete command in the input buffer runs, in order.
+7. Background: JACOB (:mod:`manip.cougar.jacob`) runs ``jacob_steps_per_tick`` steps.
+
+Everything Cougar keeps is in its simulated memory (:mod:`manip.cougar.memory`), so EXMN and DPST see
+and change what the routines use.  The commands (Table 1):
+
+=======  ====  =========================================================================================
+NOP      0     nothing
+WINIT    1     nothing (obsolete)
+SEN      2     θ_sensed to memory; the simulated arm moves there
+FINIT    3     as SEN (obsolete)
+NPR      4     θ_sensed, θ_commanded, rate difference to memory; the arm moves; answers NTD (1) with Δθ̇
+NFC      5     force commanded to memory
+NK/NB    6/7   spring constants (6, diagonal) / damping matrix (36, row after row) to memory
+NBJI     8     joint damping inverse (6, diagonal) to memory; JACOB folds it into P
+NFV      9     frame vector to memory; voltmat's torque rows and the GRAVITY model are redone
+RST      10    FILTER state and the last Δθ̇ set to zero
+DPST     11    memory[address] = value (no answer; a bad address is counted)
+EXMN     12    answers 4, n, then n words from address (n < count at the end of memory; 0 if bad)
+VERS     13    stores the Puma's word; answers 8 with Cougar's version
+RFRC     14    answers 5 with the six force floats
+NEWWC    15    object weight and cg to memory; the GRAVITY model is redone
+GUARDS   16    arms guard (word & 15)
+GUARDC   17    disarms guard (word & 15)
+RRAW     18    answers 9 with the eight filtered gauge readings (before offsets)
+WGOV     19    gauge offset vector to memory
+=======  ====  =========================================================================================
+
+The compliance equation NPR answers is in :mod:`manip.cougar.compliance`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+
+from manip.arm import PUMA560_LEE, READY, PumaGeometry, Transform, forward
+from manip.cougar.adc import GAUGES, GaugeModel, adc8_filter
+from manip.cougar.comint import Comint, Executable, OutOfSyncEvent
+from manip.cougar.compliance import (
+    compliance_sample,
+    cross,
+    filter_constants,
+    gravity_load,
+    gravity_model,
+    hand_rotation,
+    limit,
+    output_filter,
+    voltmat,
+    voltmat_torque_rows,
+)
+from manip.cougar.environment import Environment, FreeSpace
+from manip.cougar.jacob import STEPS, Jacob, front_buffer
+from manip.cougar.memory import GUARD_DVEC, GUARD_TOL, GUARD_WORDS, MEMORY_BYTES, Memory, region
+from manip.spec.constants import CougarResponse
+
+__all__ = ["CougarConfig", "CougarSim", "CougarStats"]
+
+Vector = npt.NDArray[np.float64]
+#: Bit 15 of a guard's type word: a trip stops the move (errata ``guard-type-bit``).
+GUARD_STOP_BIT: Final = 0x8000
+#: Bit 0 of the ``flags`` word: LIMIT is applied.
+FLAG_LIMIT: Final = 1
+
+
+@dataclass(frozen=True)
+class CougarConfig:
+    """The simulated machine: the arm and wrist it is attached to, and Cougar's start-up values."""
+
+    geometry: PumaGeometry = PUMA560_LEE
+    tool: Transform = field(default_factory=lambda: Transform.trans(0.0, 0.0, 150.0))
+    """End frame (wrist centre) to the tool point the environment touches, mm."""
+    initial_angles: tuple[float, ...] = READY
+    gauges: GaugeModel = field(default_factory=GaugeModel)
+    hand_weight_oz: float = 32.0
+    hand_cg_mm: tuple[float, float, float] = (0.0, 0.0, 60.0)
+    """The real hand (from the wrist centre, hand axes); Cougar's GRAVITY model starts equal to it."""
+    payload_weight_oz: float = 0.0
+    payload_cg_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """A real held object (from the wrist centre); Cougar learns of it only through NEWWC."""
+    calibration: tuple[float, ...] | None = None
+    """Cougar's calibration matrix (48 floats, oz/V, row after row); None: exact for ``gauges``."""
+    version: int = 1
+    tick_hz: float = 60.0
+    """Puma clock rate, used only for FILTER's constants (a·T)."""
+    filter_cutoff_hz: float = 2.0
+    filter_con3: float = 0.0
+    filter_con4: float = 1.0
+    limit_on: bool = False
+    limit_dead: float = 0.5
+    limit_clamp: float = 500.0
+    jacob_steps_per_tick: int = STEPS
+    """Background steps run after each GUTS (STEPS = one whole Jacobian per tick)."""
+    guts_base_s: float = 0.004
+    guts_per_command_s: float = 0.0002
+    guts_per_word_s: float = 0.00002
+    """The GUTS cost model for re-entry detection; all zero disables it."""
+    reentry_char: str = "!"
+    wake_message: str = "Cougar {version}\r\n"
+
+    def __post_init__(self) -> None:
+        if len(self.initial_angles) != 6:
+            raise ValueError("CougarConfig.initial_angles needs six joint angles")
+        if self.calibration is not None and len(self.calibration) != 48:
+            raise ValueError("CougarConfig.calibration needs 48 floats (6x8)")
+        if not 0 <= self.version <= 0xFFFF:
+            raise ValueError("CougarConfig.version must be a 16-bit word")
+        if self.jacob_steps_per_tick < 0 or self.tick_hz <= 0:
+            raise ValueError("CougarConfig needs jacob_steps_per_tick >= 0 and tick_hz > 0")
+
+
+@dataclass
+class CougarStats:
+    """Counters since start-up."""
+
+    ticks: int = 0
+    """GUTS runs that did their work (re-entries not included)."""
+    commands: int = 0
+    out_of_sync: int = 0
+    """Out-of-sync dumps (each sends one response 2)."""
+    discarded_words: int = 0
+    guts_reentries: int = 0
+    words_received: int = 0
+    words_sent: int = 0
+    guards_tripped: int = 0
+    jacob_cycles: int = 0
+    bad_addresses: int = 0
+    """EXMN/DPST at an odd address or outside memory."""
+    float_faults: int = 0
+    """Floats that overflowed the F range (saturated) or were not finite when stored."""
+
+
+class CougarSim:
+    """Cougar behind its word protocol; see the module docstring."""
+
+    def __init__(
+        self,
+        config: CougarConfig | None = None,
+        *,
+        environment: Environment | None = None,
+        seed: int | None = None,
+    ) -> None:
+        self.config = config or CougarConfig()
+        self.environment: Environment = environment if environment is not None else FreeSpace()
+        self.memory = Memory()
+        self._rng = np.random.default_rng(seed)
+        self._comint = Comint()
+        self._jacob = Jacob(self.config.geometry)
+        self._stats = CougarStats()
+        self._pose = np.array(self.config.initial_angles, dtype=np.float64)
+        self._busy_until: float | None = None
+        self._last_now: float | None = None
+        self._terminal: list[str] = []
+        self._out: list[int] = []
+        self._init()
+
+    # ------------------------------------------------------------------ public surface
+    @property
+    def stats(self) -> CougarStats:
+        """A snapshot of the counters."""
+        s = self._stats
+        return CougarStats(**{**s.__dict__, "jacob_cycles": self._jacob.cycles})
+
+    @property
+    def terminal(self) -> str:
+        """Everything Cougar printed on its console terminal (wake-up message, re-entry characters)."""
+        return "".join(self._terminal)
+
+    @property
+    def pose(self) -> tuple[float, ...]:
+        """The simulated arm's joint angles (deg): the θ_sensed Cougar was last sent."""
+        return tuple(float(x) for x in self._pose)
+
+    @property
+    def pending(self) -> tuple[int, ...]:
+        """Input words waiting for the rest of their command."""
+        return self._comint.pending
+
+    def tool_pose(self) -> Transform:
+        """The tool frame the environment sees (world, mm)."""
+        return forward(self._pose, self.config.geometry) @ self.config.tool
+
+    def receive(self, words: Iterable[int]) -> None:
+        """Words from the Puma (the DRV-11J input port); they wait in the input buffer for COMINT."""
+        self._stats.words_received += self._comint.receive(words)
+
+    def tick(self, now: float) -> list[int]:
+        """One Puma clock tick at time ``now`` (seconds): GUTS, then background; the words sent, in order."""
+        mem = self.memory
+        nested = mem.word("guts_busy") != 0
+        if not nested and self._last_now is not None and now < self._last_now:
+            raise ValueError(f"tick time went backwards: {now} after {self._last_now}")
+        if nested or (self._busy_until is not None and now < self._busy_until):
+            self._stats.guts_reentries += 1
+            self._terminal.append(self.config.reentry_char)
+            return []
+        self._last_now = now
+        mem.set_word("guts_busy", 1)
+        self._out = []
+        try:
+            self._adc8()
+            self._convert()
+            self._gravity()
+            self._guardm()
+            commands, words = self._comint_run()
+        finally:
+            mem.set_word("guts_busy", 0)
+        c = self.config
+        cost = c.guts_base_s + c.guts_per_command_s * commands + c.guts_per_word_s * words
+        self._busy_until = now + cost if cost > 0 else None
+        self._stats.ticks += 1
+        self._jacob.run(mem, c.jacob_steps_per_tick)
+        out, self._out = self._out, []
+        self._stats.words_sent += len(out)
+        self._stats.float_faults = mem.float_faults
+        return out
+
+    def run_background(self, steps: int) -> None:
+        """Run JACOB for ``steps`` more steps (background time between ticks, for tests and tools)."""
+        self._jacob.run(self.memory, steps)
+
+    # ------------------------------------------------------------------ INIT (B.1)
+    def _init(self) -> None:
+        c, mem = self.config, self.memory
+        mem.set_word("version", c.version)
+        mem.set_word("flags", FLAG_LIMIT if c.limit_on else 0)
+        mem.put("limit_dead", [c.limit_dead])
+        mem.put("limit_clamp", [c.limit_clamp])
+        mem.put("con", filter_constants(c.filter_cutoff_hz, c.tick_hz, c.filter_con3, c.filter_con4))
+        mem.put("hand_weight", [c.hand_weight_oz])
+        mem.put("hand_cg", c.hand_cg_mm)
+        mem.put("theta_sensed", self._pose)
+        cal = (
+            np.array(c.calibration, dtype=np.float64)
+            if c.calibration is not None
+            else c.gauges.calibration_matrix()
+        )
+        mem.put("calmat", cal.reshape(-1))
+        mem.put("voltmat", voltmat(mem.get("calmat"), mem.get("fv")).reshape(-1))
+        self._newwc()
+        u = c.gauges.convert(c.gauges.analog(self._physical_load(), self._rng))
+        mem.put_int16s("gauge_raw", u)  # prime the filter with a first reading
+        mem.put_int16s("gauge_filtered", u)
+        self._jacob.run(mem, STEPS)
+        if c.wake_message:
+            self._terminal.append(c.wake_message.format(version=c.version))
+
+    # ------------------------------------------------------------------ GUTS parts
+    def _physical_load(self) -> Vector:
+        """The wrench on the hand (oz, oz-in; hand axes, about the wrist centre): contact plus gravity."""
+        c = self.config
+        t6 = forward(self._pose, c.geometry)
+        tool = t6 @ c.tool
+        contact = self.environment.wrench(tool)
+        r = np.array(t6.rotation)
+        f = np.array(contact.force, dtype=np.float64)
+        lever_in = (np.array(tool.p) - np.array(t6.p)) / 25.4
+        tau = np.array(contact.torque, dtype=np.float64) + cross(lever_in, f)
+        load = np.concatenate([r.T @ f, r.T @ tau])
+        load += gravity_load(r, c.hand_weight_oz, np.array(c.hand_cg_mm))
+        load += gravity_load(r, c.payload_weight_oz, np.array(c.payload_cg_mm))
+        return load
+
+    def _adc8(self) -> None:
+        mem, gauges = self.memory, self.config.gauges
+        u = gauges.convert(gauges.analog(self._physical_load(), self._rng))
+        u_previous = mem.get_int16s("gauge_raw")
+        y_previous = mem.get_int16s("gauge_filtered")
+        y = [adc8_filter(u[i], int(u_previous[i]), int(y_previous[i])) for i in range(GAUGES)]
+        mem.put_int16s("gauge_raw", u)
+        mem.put_int16s("gauge_filtered", y)
+
+    def _convert(self) -> None:
+        mem = self.memory
+        counts = (mem.get_int16s("gauge_filtered") - mem.get_int16s("gauge_offsets")).astype(np.float64)
+        mem.put("force_sensed", mem.get("voltmat").reshape(6, 8) @ counts)
+
+    def _gravity(self) -> None:
+        mem = self.memory
+        r = hand_rotation(mem.get("theta_sensed"), self.config.geometry)
+        weight = float(mem.get("grav_weight")[0])
+        force = mem.get("force_sensed") + gravity_load(r, weight, mem.get("grav_cg"))
+        if mem.word("flags") & FLAG_LIMIT:
+            force = limit(force, float(mem.get("limit_dead")[0]), float(mem.get("limit_clamp")[0]))
+        mem.put("force", force)
+
+    def _guardm(self) -> None:
+        mem = self.memory
+        active = mem.word("guard_active")
+        if not active:
+            return
+        force = mem.get("force")
+        base = region("guards").address
+        for i in range(16):
+            if not active >> i & 1:
+                continue
+            entry = base + 2 * GUARD_WORDS * i
+            dvec = mem.read_floats(entry + 2 * GUARD_DVEC, 6)
+            tol = float(mem.read_floats(entry + 2 * GUARD_TOL, 1)[0])
+            if float(np.dot(force, dvec)) > tol:
+                active &= ~(1 << i)
+                stop = mem.read_word(entry) & GUARD_STOP_BIT
+                code = CougarResponse.GUARD_STOP if stop else CougarResponse.GUARD_CONTINUE
+                self._send(code, [i])
+                self._stats.guards_tripped += 1
+        mem.set_word("guard_active", active)
+
+    def _comint_run(self) -> tuple[int, int]:
+        commands = words = 0
+        while (item := self._comint.take()) is not None:
+            if isinstance(item, OutOfSyncEvent):
+                self._stats.out_of_sync += 1
+                self._stats.discarded_words += len(item.discarded)
+                self._send(CougarResponse.OUT_OF_SYNC, [item.code])
+                continue
+            self._execute(item)
+            commands += 1
+            words += len(item.data)
+        self._stats.commands += commands
+        return commands, words
+
+    def _send(self, code: int, words: Sequence[int]) -> None:
+        self._out.append(int(code))
+        self._out.extend(int(w) for w in words)
+
+    # ------------------------------------------------------------------ commands
+    def _execute(self, cmd: Executable) -> None:
+        if cmd.entry.destination is not None:
+            self.memory.write_words(cmd.entry.destination, cmd.data)
+        handler = _HANDLERS.get(cmd.entry.name)
+        if handler is not None:
+            handler(self)
+
+    def _moved(self) -> None:
+        """SEN, FINIT: the arm is where the Puma says (the simulated arm follows θ_sensed)."""
+        self._pose = self.memory.get("theta_sensed").copy()
+
+    def _newpr(self) -> None:
+        self._moved()
+        mem = self.memory
+        j, _, p = front_buffer(mem)
+        theta_error = mem.get("theta_sensed") - mem.get("theta_commanded")
+        sample = compliance_sample(
+            j,
+            p,
+            k=mem.get("k"),
+            b=mem.get("b").reshape(6, 6),
+            fc=mem.get("fc"),
+            force=mem.get("force"),
+            theta_error=theta_error,
+            rate_difference=mem.get("rate_difference"),
+        )
+        filtered, output = output_filter(
+            sample, mem.get("dtheta_previous"), mem.get("dtheta_filtered"), mem.get("con")
+        )
+        mem.put("dtheta_previous", sample)
+        mem.put("dtheta_filtered", filtered)
+        mem.put("dtheta_out", output)  # RATEO
+        self._send(CougarResponse.NTD, self._region_words("dtheta_out"))
+
+    def _newfv(self) -> None:
+        mem = self.memory
+        rows = voltmat_torque_rows(mem.get("calmat"), mem.get("fv"))
+        mem.write_floats(region("voltmat").at(24), rows.reshape(-1))  # rows 4-6 only
+        self._newwc()
+
+    def _newwc(self) -> None:
+        mem = self.memory
+        obj = mem.get("object")
+        weight, cg = gravity_model(
+            float(mem.get("hand_weight")[0]), mem.get("hand_cg"), float(obj[0]), obj[1:], mem.get("fv")
+        )
+        mem.put("grav_weight", [weight])
+        mem.put("grav_cg", cg)
+
+    def _resetw(self) -> None:
+        for name in ("dtheta_previous", "dtheta_filtered", "dtheta_out", "rate_difference"):
+            self.memory.put(name, np.zeros(6))
+
+    def _dep(self) -> None:
+        address, value = self.memory.read_words(region("args").address, 2)
+        if Memory.valid(address):
+            self.memory.write_word(address, value)
+        else:
+            self._stats.bad_addresses += 1
+
+    def _exp(self) -> None:
+        address, count = self.memory.read_words(region("args").address, 2)
+        if Memory.valid(address):
+            n = min(count, (MEMORY_BYTES - address) // 2)
+        else:
+            n = 0
+            self._stats.bad_addresses += 1
+        words = self.memory.read_words(address, n) if n else []
+        self._send(CougarResponse.EXMN_DATA, [n, *words])
+
+    def _version(self) -> None:
+        self._send(CougarResponse.VERSION, [self.memory.word("version")])
+
+    def _rfr(self) -> None:
+        self._send(CougarResponse.FORCES, self._region_words("force"))
+
+    def _guards(self) -> None:
+        mem = self.memory
+        data = mem.read_words(region("guard_in").address, GUARD_WORDS)
+        index = data[0] & 0xF
+        data[0] &= GUARD_STOP_BIT | 0xF  # bits 4-14 are ignored (errata guard-type-bit)
+        mem.write_words(region("guards").address + 2 * GUARD_WORDS * index, data)
+        mem.set_word("guard_active", mem.word("guard_active") | 1 << index)
+
+    def _guardc(self) -> None:
+        index = self.memory.word("args") & 0xF
+        self.memory.set_word("guard_active", self.memory.word("guard_active") & ~(1 << index) & 0xFFFF)
+
+    def _reraw(self) -> None:
+        self._send(CougarResponse.RAW, self._region_words("gauge_filtered"))
+
+    def _region_words(self, name: str) -> list[int]:
+        r = region(name)
+        return self.memory.read_words(r.address, r.words)
+
+
+_HANDLERS: Final[dict[str, Callable[[CougarSim], None]]] = {
+    "SEN": CougarSim._moved,
+    "FINIT": CougarSim._moved,
+    "NPR": CougarSim._newpr,
+    "NFV": CougarSim._newfv,
+    "RST": CougarSim._resetw,
+    "DPST": CougarSim._dep,
+    "EXMN": CougarSim._exp,
+    "VERS": CougarSim._version,
+    "RFRC": CougarSim._rfr,
+    "NEWWC": CougarSim._newwc,
+    "GUARDS": CougarSim._guards,
+    "GUARDC": CougarSim._guardc,
+    "RRAW": CougarSim._reraw,
+}

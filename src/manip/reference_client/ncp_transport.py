@@ -1,0 +1,207 @@
+"""The Chaos NCP transport: a :class:`~manip.reference_client.transport.ManipTransport` over a
+:class:`manip.links.ChaosConnection` (TCP link, CHUDP or chaosd, whatever the address names).
+
+Theory of operation
+-------------------
+* ``set_up_communications`` opens the connection (RFC to the address's contact, or ``contact``),
+  with ``wrap_link`` (a recording tap, :class:`manip.captures.RecorderTap`) between node and link;
+  a refusal, a timeout or a link failure becomes :class:`~manip.reference_client.errors.ConnectionLost`
+  with the links' :class:`~manip.links.ChaosError` as its ``__cause__``.
+* ``send_user_request`` sends the request's opcode and data as one data packet and sets
+  ``request.packet_number`` to the number the NCP gave it (the number the reply will carry).
+  ``may_transmit`` is the connection's ``can_send``: the send window has room.
+* Packets are read with ``receive_nowait``, one packet of lookahead: ``response_available`` fetches
+  the next packet (taking it acknowledges it, erratum ``links-read-on-take``) and ``get_next_packet``
+  hands it over as a :class:`~manip.reference_client.packets.ServerPacket` with the Chaos opcode,
+  packet number, ack number and data.  Packets buffered before the connection ended stay readable.
+* The connection's wake-up drives the background process: a packet arrived, the window opened or the
+  connection ended.
+* The end of the connection (the server's EOF, CLS, LOS, a broken link) is read like a packet: from
+  then on ``connection_open`` is false and ``handle_closed_connection`` says why; ``close_cause`` is
+  the ChaosError.
+* ``disconnect`` is idempotent: a graceful close (our EOF, then CLS once the server acknowledges it,
+  bounded by ``close_timeout``), or an abort (CLS at once) after the server sent a fatal error (0201)
+  or when :meth:`NcpTransport.abort` was called.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable
+from typing import Any
+
+from manip.codecs.packet import Packet
+from manip.links import (
+    ChaosConnection,
+    ChaosError,
+    ConnectionBroken,
+    ConnectionClosed,
+    LinkAddress,
+    NcpOptions,
+    open_connection,
+    parse_address,
+)
+from manip.links import ConnectionLost as ChaosConnectionLost
+from manip.links.api import LinkWrapper
+from manip.reference_client.errors import ConnectionLost
+from manip.reference_client.packets import ResponseInfo, ServerPacket, chaos_response_info
+from manip.reference_client.request import Request
+from manip.spec.constants import ServerOp
+
+DEFAULT_CLOSE_TIMEOUT = 2.0
+"""Seconds a graceful close waits for the server to acknowledge our EOF before aborting."""
+
+
+def describe_chaos_end(error: ChaosError) -> str:
+    """How a links error reads in a ConnectionLost: who ended the connection and why."""
+    reason = error.reason or type(error).__name__
+    if isinstance(error, ConnectionClosed):
+        return f"closed by the server ({reason})" if error.by_peer else f"closed here ({reason})"
+    if isinstance(error, ChaosConnectionLost):
+        return f"lost (LOS: {reason})"
+    if isinstance(error, ConnectionBroken):
+        return f"broken ({reason})"
+    return str(error)
+
+
+class NcpTransport:
+    """The client end of the Chaos manipulator protocol over ``manip.links``."""
+
+    def __init__(
+        self,
+        address: str | LinkAddress,
+        *,
+        contact: str | None = None,
+        connect_timeout: float | None = 10.0,
+        close_timeout: float = DEFAULT_CLOSE_TIMEOUT,
+        ncp_options: NcpOptions | None = None,
+        wrap_link: LinkWrapper | None = None,
+    ) -> None:
+        self.address = parse_address(address) if isinstance(address, str) else address
+        self.contact = contact or self.address.contact
+        self.connect_timeout = connect_timeout
+        self.close_timeout = close_timeout
+        self.ncp_options = ncp_options
+        self.wrap_link = wrap_link
+        self._conn: ChaosConnection | None = None
+        self._ahead: Packet | None = None
+        self._end: ChaosError | None = None
+        self._fatal_seen = False
+        self._abort_reason: str | None = None
+        self._disconnected = False
+        self._wakeup: Callable[[], None] | None = None
+
+    def __repr__(self) -> str:
+        return f"<NcpTransport {self.address} contact {self.contact}>"
+
+    @property
+    def connection(self) -> ChaosConnection | None:
+        """The Chaos connection once open (for its statistics)."""
+        return self._conn
+
+    @property
+    def close_cause(self) -> ChaosError | None:
+        """The links error that ended the connection, once it has ended."""
+        if self._end is not None:
+            return self._end
+        return None if self._conn is None else self._conn.end_reason
+
+    # ------------------------------------------------------------------ ManipTransport
+
+    def may_transmit(self) -> bool:
+        return self._conn is not None and self._conn.can_send()
+
+    def response_available(self) -> bool:
+        self._look_ahead()
+        return self._ahead is not None
+
+    def get_next_packet(self) -> ServerPacket | None:
+        self._look_ahead()
+        packet, self._ahead = self._ahead, None
+        if packet is None:
+            return None
+        if packet.opcode == ServerOp.FATAL_ERROR:
+            self._fatal_seen = True  # the server gives up: no point in a graceful close
+        return ServerPacket(packet.opcode, packet.data, packet.packet_no, packet.ack_no)
+
+    def return_packet(self, packet: ServerPacket) -> None:
+        pass  # taking the packet already acknowledged it
+
+    def connection_open(self) -> bool:
+        conn = self._conn
+        return conn is not None and self._end is None and not conn.ended and self._abort_reason is None
+
+    def handle_closed_connection(self) -> str:
+        cause = self.close_cause
+        if cause is not None:
+            return describe_chaos_end(cause)
+        if self._abort_reason is not None:
+            return f"aborted ({self._abort_reason})"
+        return "not connected" if self._conn is None else "connection closed"
+
+    async def send_user_request(self, request: Request[Any]) -> None:
+        conn = self._conn
+        if conn is None or not self.connection_open():
+            raise ConnectionLost(self.handle_closed_connection())
+        try:
+            number = await conn.send(bytes(request.data), request.opcode)
+        except ChaosError as exc:
+            raise ConnectionLost(describe_chaos_end(exc)) from exc
+        request.packet_number = number
+
+    def get_response_info(self, packet: ServerPacket) -> ResponseInfo:
+        return chaos_response_info(packet)
+
+    async def set_up_communications(self) -> None:
+        if self._conn is not None or self._disconnected:
+            raise ConnectionLost("an NCP transport opens only once")
+        try:
+            conn = await open_connection(
+                self.address,
+                timeout=self.connect_timeout,
+                contact=self.contact,
+                options=self.ncp_options,
+                wrap_link=self.wrap_link,
+            )
+        except (ChaosError, OSError) as exc:
+            raise ConnectionLost(f"cannot connect to {self.address} (contact {self.contact}): {exc}") from exc
+        self._conn = conn
+        conn.set_wakeup(self._poke)
+
+    async def disconnect(self) -> None:
+        conn = self._conn
+        if conn is None or self._disconnected:
+            self._disconnected = True
+            return
+        self._disconnected = True
+        conn.set_wakeup(None)
+        if self._fatal_seen or self._abort_reason is not None:
+            conn.abort(self._abort_reason or "fatal error")
+        with contextlib.suppress(ChaosError):
+            await conn.close(self.close_timeout)  # after an abort this only closes the node
+
+    def set_wakeup(self, callback: Callable[[], None] | None) -> None:
+        self._wakeup = callback
+
+    # ------------------------------------------------------------------ more
+
+    def abort(self, reason: str = "aborted by the client") -> None:
+        """End the connection at once (CLS ``reason``); the background process sees it closed."""
+        if self._abort_reason is None:
+            self._abort_reason = reason
+            if self._conn is not None:
+                self._conn.abort(reason)
+            self._poke()
+
+    def _look_ahead(self) -> None:
+        conn = self._conn
+        if self._ahead is not None or conn is None or self._end is not None:
+            return
+        try:
+            self._ahead = conn.receive_nowait()
+        except ChaosError as exc:
+            self._end = exc
+
+    def _poke(self) -> None:
+        if self._wakeup is not None:
+            self._wakeup()

@@ -1,0 +1,172 @@
+"""``manip-client``: every command against the reference server (in a thread of the test), the error
+lines and exit statuses, and ``watch`` against a scripted server."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator
+
+import pytest
+from click.testing import CliRunner, Result
+
+from manip.arm.kinematics import PUMA600, forward
+from manip.arm.transform import Transform
+from manip.reference_client.cli import (
+    EXIT_CONNECTION,
+    EXIT_SERVER_ERROR,
+    EXIT_TIMEOUT,
+    EXIT_USAGE,
+    main,
+)
+from manip.reference_server import ServerConfig
+from tests.test_client_tcp import (
+    READY,
+    TARGET,
+    closed_port,
+    in_thread,
+    never_answers,
+    reference_server,
+    scripted_server,
+    segment_reporter,
+)
+
+
+@pytest.fixture(scope="module")
+def url() -> Iterator[str]:
+    with in_thread(reference_server(ServerConfig())) as address:
+        yield address
+
+
+def invoke(*args: str) -> Result:
+    return CliRunner().invoke(main, list(args), catch_exceptions=False)
+
+
+def ok(*args: str) -> str:
+    result = invoke(*args)
+    assert result.exit_code == 0, (result.exit_code, result.output)
+    assert result.stderr == ""
+    return result.stdout
+
+
+def ok_json(*args: str) -> dict[str, object]:
+    out = ok(*args, "--json")
+    value = json.loads(out)
+    assert isinstance(value, dict)
+    return value
+
+
+def failed(code: int, *args: str) -> str:
+    """The one stderr line of a failure with exit status ``code``."""
+    result = invoke(*args)
+    assert result.exit_code == code, (result.exit_code, result.output)
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("manip-client: ")
+    return lines[0]
+
+
+# ------------------------------------------------------------------ commands
+
+
+def test_describe(url: str) -> None:
+    text = ok(url, "describe")
+    assert "degrees-of-freedom  6" in text
+    assert "200 201 202" in text  # opcodes in octal
+    record = ok_json(url, "describe")
+    assert record["degrees-of-freedom"] == 6
+
+
+def test_here_text_and_json(url: str) -> None:
+    ok(url, "move-joints", *map(str, READY), "--power", "--wait")
+    text = ok(url, "here")
+    lines = dict(line.split(None, 1) for line in text.splitlines()[:6])
+    assert set(lines) == {"x", "y", "z", "O", "A", "T"}
+    assert lines["x"].endswith("mm") and lines["O"].endswith("deg")
+    record = ok_json(url, "here")
+    floats = record["transform"]
+    assert isinstance(floats, list)
+    assert Transform.from_floats(floats).almost_equal(forward(READY, PUMA600.geometry), 1e-2)
+    assert float(lines["z"].split()[0]) == pytest.approx(record["xyzoat"]["z"], abs=1e-3)  # type: ignore[index]
+
+
+def test_move_joints_waits_then_joints_reports_them(url: str) -> None:
+    assert ok(url, "move-joints", *map(str, TARGET), "--power", "--wait").startswith("segment ")
+    assert ok_json(url, "joints")["joints"] == pytest.approx(TARGET, abs=1e-3)
+    text = ok(url, "joints")
+    assert text.splitlines()[1].split() == ["joint", "2", f"{TARGET[1]:.3f}", "deg"]
+    record = ok_json(url, "ready", "--power", "--wait")
+    assert record["completed"] is True
+    assert ok_json(url, "--json", "joints")["joints"] == pytest.approx(READY, abs=1e-3)
+
+
+def test_motion_without_power_is_a_protocol_error(url: str) -> None:
+    line = failed(EXIT_SERVER_ERROR, url, "ready")
+    assert line.startswith("manip-client: NAP: No arm power (ready: E NAP")
+
+
+def test_power_and_speed(url: str) -> None:
+    assert ok(url, "power", "on") == "arm power on\n"
+    assert ok_json(url, "power", "off") == {"power": "off"}
+    assert ok(url, "speed", "0.5") == "speed factor 0.5\n"
+    assert "speed factor" in failed(EXIT_USAGE, url, "speed", "1.5")
+    assert invoke(url, "power", "sideways").exit_code == EXIT_USAGE
+
+
+def test_solve_backwards_then_forwards(url: str) -> None:
+    pose = ok_json(url, "solve-backwards", *map(str, TARGET))
+    floats = pose["transform"]
+    assert isinstance(floats, list)
+    assert Transform.from_floats(floats).almost_equal(forward(TARGET, PUMA600.geometry), 1e-2)
+    current = ["--current", *map(str, TARGET)]
+    by_transform = ok_json(url, "solve-forwards", *map(str, floats), *current)
+    assert by_transform["joints"] == pytest.approx(TARGET, abs=1e-2)
+    xyzoat = pose["xyzoat"]
+    assert isinstance(xyzoat, dict)
+    six = [str(xyzoat[k]) for k in ("x", "y", "z", "o", "a", "t")]
+    assert ok_json(url, "solve-forwards", *six, *current)["joints"] == pytest.approx(TARGET, abs=1e-2)
+    assert invoke(url, "solve-forwards", "1", "2", "3").exit_code == EXIT_USAGE
+
+
+# ------------------------------------------------------------------ failures and watch
+
+
+def test_cannot_connect() -> None:
+    line = failed(EXIT_CONNECTION, f"tcp://127.0.0.1:{closed_port()}", "here", "--timeout", "2")
+    assert "cannot connect to tcp://127.0.0.1:" in line
+
+
+def test_bad_url_is_a_usage_error() -> None:
+    assert "unknown link scheme" in failed(EXIT_USAGE, "http://example.invalid", "here")
+
+
+def test_no_reply_in_time() -> None:
+    with in_thread(scripted_server(never_answers)) as address:
+        line = failed(EXIT_TIMEOUT, address, "--timeout", "0.2", "here")
+    assert "no reply within 0.2 s" in line
+
+
+def test_watch_prints_asynchronous_responses() -> None:
+    with in_thread(scripted_server(segment_reporter)) as address:
+        assert ok(address, "watch", "--count", "2") == "segment 7 completed\nsegment 8 completed\n"
+        lines = ok(address, "watch", "--count", "1", "--json").splitlines()
+        assert [json.loads(line)["segment"] for line in lines] == [7]
+        assert ok(address, "watch", "--seconds", "0") == ""
+
+
+def test_watch_stops_cleanly_on_ctrl_c() -> None:
+    with in_thread(scripted_server(segment_reporter)) as address:
+        command = [sys.executable, "-m", "manip.reference_client.cli", address, "watch"]
+        with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+            try:
+                assert proc.stdout is not None
+                assert proc.stdout.readline() == "segment 7 completed\n"
+                assert proc.stdout.readline() == "segment 8 completed\n"
+                proc.send_signal(signal.SIGINT)
+                assert proc.wait(10) == 0
+                assert proc.stderr is not None and proc.stderr.read() == ""
+            finally:
+                if proc.poll() is None:
+                    proc.kill()

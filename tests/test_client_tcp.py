@@ -1,0 +1,321 @@
+"""The client over real Chaos connections (``manip.links``, loopback, ephemeral ports): the reference
+server's asyncio driver, and scripted links servers for the failures.
+
+:func:`in_thread` runs a server in its own event loop thread, for the blocking ``manip.connect`` and
+the command-line tests.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import threading
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
+from contextlib import AbstractAsyncContextManager, asynccontextmanager, contextmanager
+
+import pytest
+
+import manip
+from manip.codecs.error_string import ErrorMessage
+from manip.codecs.messages import encode_async, encode_error
+from manip.links import (
+    ChaosConnection,
+    ChaosError,
+    ConnectionBroken,
+    ConnectionClosed,
+    ConnectionRefused,
+    LinkError,
+    start_server,
+)
+from manip.links import ConnectionLost as Los
+from manip.reference_client import (
+    NOTIFY_SEGMENTS,
+    ClientOptions,
+    ConnectionLost,
+    FatalError,
+    NcpTransport,
+    RequestTimeout,
+    aconnect,
+)
+from manip.reference_client.ncp_transport import describe_chaos_end
+from manip.reference_server import Fault, FaultSet, ServerConfig
+from manip.reference_server.driver import serve
+from manip.spec.constants import AsyncCondition, ServerOp
+from tests.test_client_fakes import run
+
+READY = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
+TARGET = (20.0, -70.0, 100.0, 10.0, 30.0, -15.0)
+TIME_SCALE = 50.0
+"""Simulated seconds per real second: motions of a few seconds take a few tens of milliseconds."""
+
+
+@asynccontextmanager
+async def reference_server(
+    config: ServerConfig | None = None, *, address: str = "tcp://127.0.0.1:0", contact: str = "PUMA"
+) -> AsyncIterator[str]:
+    async with serve(address, config or ServerConfig(), contact=contact, time_scale=TIME_SCALE) as server:
+        yield server.address
+
+
+Handler = Callable[[ChaosConnection], Awaitable[None]]
+
+
+@asynccontextmanager
+async def scripted_server(handler: Handler) -> AsyncIterator[str]:
+    server = await start_server("tcp://127.0.0.1:0", None, handler)
+    async with server:
+        yield str(server.address)
+
+
+async def send_initial(conn: ChaosConnection) -> None:
+    assert conn.rfc is not None
+    await conn.send(conn.rfc.packet_no.to_bytes(2, "little"), ServerOp.RESPONSE)
+
+
+async def reply_done(conn: ChaosConnection, number: int) -> None:
+    await conn.send(number.to_bytes(2, "little"), ServerOp.RESPONSE)
+
+
+async def never_answers(conn: ChaosConnection) -> None:
+    await send_initial(conn)
+    async for _ in conn:
+        pass
+
+
+async def segment_reporter(conn: ChaosConnection) -> None:
+    """Answers request-notifications, then reports segments 7 and 8 completed."""
+    await send_initial(conn)
+    request = await conn.receive()
+    await reply_done(conn, request.packet_no)
+    for segment in (7, 8):
+        data = encode_async(request.packet_no, AsyncCondition.SEGMENT_COMPLETED, 0, segment)
+        await conn.send(data, ServerOp.ASYNCHRONOUS_RESPONSE)
+    async for _ in conn:
+        pass
+
+
+@contextmanager
+def in_thread(server: AbstractAsyncContextManager[str]) -> Iterator[str]:
+    """Run ``server`` in an event loop of its own thread; yields its address; stops it at the end."""
+    started = threading.Event()
+    loop: asyncio.AbstractEventLoop | None = None
+    stop: asyncio.Event | None = None
+    address: str | None = None
+    failure: BaseException | None = None
+
+    async def main() -> None:
+        nonlocal loop, stop, address, failure
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        try:
+            async with server as bound:
+                address = bound
+                started.set()
+                await stop.wait()
+        except BaseException as exc:
+            failure = exc
+            started.set()
+
+    thread = threading.Thread(target=asyncio.run, args=(main(),), name="test server", daemon=True)
+    thread.start()
+    assert started.wait(10), "the server did not start"
+    if failure is not None:
+        raise RuntimeError("the server failed to start") from failure
+    assert loop is not None and stop is not None and address is not None
+    try:
+        yield address
+    finally:
+        loop.call_soon_threadsafe(stop.set)
+        thread.join(10)
+        assert not thread.is_alive(), "the server did not stop"
+
+
+def closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+# ------------------------------------------------------------------ the reference server
+
+
+def test_async_with_aconnect_url() -> None:
+    async def main() -> None:
+        async with reference_server() as url, manip.aconnect(url) as arm:
+            assert isinstance(arm.process.transport, NcpTransport)
+            request = arm.make_request("joint-angles")
+            joints = await arm.send_request(request)
+            assert joints == pytest.approx(READY, abs=1e-3)
+            assert request.packet_number == 2  # the NCP's number: the RFC was 1
+            info = await arm.describe()
+            assert info["degrees-of-freedom"] == 6
+            await arm.enable_power()
+            await arm.request_notifications(NOTIFY_SEGMENTS)
+            segment = await arm.set_joint_angles(TARGET)
+            await arm.wait_for_segment(segment, timeout=5.0)
+            assert await arm.joint_angles() == pytest.approx(TARGET, abs=1e-3)
+            pose = await arm.here()
+            assert await arm.solve_forwards(pose, TARGET) == pytest.approx(TARGET, abs=1e-2)
+        assert arm.closed
+        transport = arm.process.transport
+        assert isinstance(transport, NcpTransport)
+        conn = transport.connection
+        assert conn is not None and conn.ended
+
+    run(main())
+
+
+def test_blocking_connect_url() -> None:
+    with in_thread(reference_server()) as url, manip.connect(url) as arm:
+        assert arm.joint_angles() == pytest.approx(READY, abs=1e-3)
+        arm.enable_power()
+        arm.set_speed(0.5)
+        pose = arm.here()
+        assert arm.solve_backwards(READY).almost_equal(pose, 1e-2)
+    assert arm.closed
+
+
+def test_chudp_url() -> None:
+    async def main() -> None:
+        async with reference_server(address="chudp://127.0.0.1:0?addr=440") as url:
+            assert url.startswith("chudp://")
+            async with aconnect(url) as arm:
+                assert await arm.joint_angles() == pytest.approx(READY, abs=1e-3)
+
+    run(main())
+
+
+def test_contact_option_and_url_parameter() -> None:
+    async def main() -> None:
+        async with reference_server(contact="ARM") as served:
+            assert served.endswith("?contact=ARM")  # the server's address names its contact
+            url = served.partition("?")[0]
+            with pytest.raises(ConnectionLost, match="contact PUMA") as info:
+                await aconnect(url)
+            assert isinstance(info.value.__cause__, ConnectionRefused)
+            async with aconnect(url, contact="ARM") as arm:
+                assert len(await arm.joint_angles()) == 6
+            async with aconnect(url, ClientOptions(contact="ARM")) as arm:
+                assert len(await arm.joint_angles()) == 6
+            async with aconnect(f"{url}?contact=ARM") as arm:
+                assert len(await arm.joint_angles()) == 6
+
+    run(main())
+
+
+def test_cannot_connect_to_a_closed_port() -> None:
+    async def main() -> None:
+        with pytest.raises(ConnectionLost, match="cannot connect") as info:
+            await aconnect(f"tcp://127.0.0.1:{closed_port()}", ClientOptions(connect_timeout=2.0))
+        assert isinstance(info.value.__cause__, LinkError)
+
+    run(main())
+
+
+def test_a_fatal_error_fails_the_pipelined_requests_and_aborts() -> None:
+    async def main() -> None:
+        config = ServerConfig(faults=FaultSet.of(Fault.CALIBRATE_NZI))
+        async with reference_server(config) as url, aconnect(url) as arm:
+            futures = [
+                arm.send_request(arm.make_request(name)) for name in ("calibrate", "here", "joint-angles")
+            ]
+            outcomes = await asyncio.gather(*futures, return_exceptions=True)
+            assert all(isinstance(o, FatalError) for o in outcomes), outcomes
+            assert {o.code for o in outcomes if isinstance(o, FatalError)} == {"NZI"}
+            assert arm.closed
+            with pytest.raises(ConnectionLost):
+                await arm.here()
+
+    run(main())
+
+
+# ------------------------------------------------------------------ scripted servers
+
+
+def test_connection_dropped_mid_request() -> None:
+    async def unplugged(conn: ChaosConnection) -> None:
+        await send_initial(conn)
+        await conn.receive()
+        conn.abort("robot unplugged")
+
+    async def main() -> None:
+        async with scripted_server(unplugged) as url, aconnect(url) as arm:
+            with pytest.raises(ConnectionLost, match="robot unplugged") as info:
+                await arm.here()
+            assert isinstance(info.value.__cause__, ChaosError)
+            assert arm.closed
+
+    run(main())
+
+
+def test_a_server_that_never_answers_times_out() -> None:
+    async def main() -> None:
+        async with scripted_server(never_answers) as url, aconnect(url, ClientOptions(timeout=0.2)) as arm:
+            with pytest.raises(RequestTimeout):
+                await arm.here()
+            assert not arm.closed  # a timeout gives up one request, not the connection
+
+    run(main())
+
+
+def test_asynchronous_responses_over_tcp() -> None:
+    async def main() -> None:
+        async with scripted_server(segment_reporter) as url, aconnect(url) as arm:
+            async with arm.async_responses() as stream:
+                await arm.request_notifications(NOTIFY_SEGMENTS)
+                got = [await anext(stream), await anext(stream)]
+            assert [r.word3 for r in got] == [7, 8]
+            await arm.wait_for_segment(8)  # already completed: returns at once
+
+    run(main())
+
+
+def test_graceful_close_sends_eof_and_a_fatal_error_aborts() -> None:
+    endings: list[str] = []
+
+    async def recorder(conn: ChaosConnection, fatal: bool) -> None:
+        await send_initial(conn)
+        request = await conn.receive()
+        if fatal:
+            error = ErrorMessage("test", "F", "XYZ", "gave up")
+            await conn.send(
+                encode_error(ServerOp.FATAL_ERROR, request.packet_no, error), ServerOp.FATAL_ERROR
+            )
+        else:
+            await reply_done(conn, request.packet_no)
+        try:
+            while True:
+                await conn.receive()
+        except ChaosError as exc:
+            endings.append(str(exc))
+
+    async def main() -> None:
+        for fatal in (False, True):
+
+            async def handler(conn: ChaosConnection, fatal: bool = fatal) -> None:
+                await recorder(conn, fatal)
+
+            async with scripted_server(handler) as url:
+                transport = NcpTransport(url)
+                async with aconnect(transport) as arm:
+                    if fatal:
+                        with pytest.raises(FatalError, match="XYZ"):
+                            await arm.calibrate()
+                    else:
+                        await arm.calibrate()
+                await transport.disconnect()  # again: nothing happens
+                for _ in range(100):
+                    if len(endings) == (2 if fatal else 1):
+                        break
+                    await asyncio.sleep(0.01)
+        assert endings[0] == "EOF"
+        assert "fatal error" in endings[1]
+
+    run(main())
+
+
+def test_links_errors_read_as_who_ended_the_connection() -> None:
+    assert describe_chaos_end(ConnectionClosed("EOF", by_peer=True)) == "closed by the server (EOF)"
+    assert describe_chaos_end(ConnectionClosed("bye", by_peer=False)) == "closed here (bye)"
+    assert describe_chaos_end(Los("unknown connection")) == "lost (LOS: unknown connection)"
+    assert describe_chaos_end(ConnectionBroken("silent for 90 s")) == "broken (silent for 90 s)"
