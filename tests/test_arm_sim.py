@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from manip.arm.kinematics import READY, forward
+from manip.arm.kinematics import PUMA600, READY, Joints, forward
 from manip.arm.sim import (
+    STRAIGHT_JUMP_DEG,
     AbortCause,
     ArmEvent,
     ArmSim,
@@ -19,7 +23,7 @@ from manip.arm.sim import (
     Refused,
     SegmentCompleted,
 )
-from manip.arm.trajectory import TICK, Scheme
+from manip.arm.trajectory import PUMA_LIMITS, TICK, Scheme
 from manip.arm.transform import Transform
 
 GOAL = (10.0, -80.0, 100.0, 20.0, 30.0, 40.0)
@@ -364,3 +368,196 @@ def test_segments_that_finished_before_an_abort_still_complete() -> None:
     events = arm.tick(arm.time + TICK)
     assert [type(e) for e in events] == [MotionAborted]
     assert events[0].dropped == (2,)  # type: ignore[union-attr]
+
+
+# ------------------------------------------------------------- the end of a compliant episode
+class _Drift:
+    """A compliance model whose correction drifts, as integrated New Theta Dot does: each cycle it
+    grows by a rate drawn once per episode plus noise, at most ``step`` degrees per joint per cycle; it
+    starts from zero on an episode's first cycle and is clamped to the joint limits."""
+
+    def __init__(self, seed: int, step: float) -> None:
+        self.rng = np.random.default_rng(seed)
+        self.step = step
+        self.last = -math.inf
+        self.offset = np.zeros(6)
+        self.rate = np.zeros(6)
+        self.episodes = 0
+
+    def adjust(self, t: float, nominal: tuple[float, ...], actual: tuple[float, ...]) -> tuple[float, ...]:
+        if t - self.last > 1.5 * TICK:
+            self.offset = np.zeros(6)
+            self.rate = self.rng.uniform(-0.8, 0.8, 6) * self.step
+            self.episodes += 1
+        self.last = t
+        self.offset = self.offset + self.rate + self.rng.uniform(-0.2, 0.2, 6) * self.step
+        lim = READY_LIMITS
+        q = np.clip(np.asarray(nominal) + self.offset, lim.lower, lim.upper)
+        self.offset = q - np.asarray(nominal)
+        return tuple(float(v) for v in q)
+
+
+READY_LIMITS = PUMA600.limits
+STEP_BOUND = PUMA_LIMITS.speed * TICK
+"""The most any joint's nominal command moves in one cycle (speed factor 1)."""
+
+
+def _trace(arm: ArmSim, until: float | None = None, limit: float = 60.0) -> list[Joints]:
+    """The commanded angles of every cycle from now until ``until`` (or until the arm is idle)."""
+    out = [arm.commanded]
+    while (arm.moving if until is None else arm.time < until - 1e-9) and arm.time < limit:
+        arm.tick(arm.time + TICK)
+        out.append(arm.commanded)
+    return out
+
+
+def _steps(trace: Sequence[Sequence[float]]) -> np.ndarray:
+    return np.abs(np.diff(np.asarray(trace), axis=0))
+
+
+def test_a_compliant_segment_ends_where_compliance_left_the_arm() -> None:
+    arm = _arm(compliance=_Drift(seed=5, step=0.05))
+    first = arm.move_joints(GOAL, 0.0, scheme=Scheme.COMPLIANT_MOTION)
+    events, _ = _run_idle(arm)
+    assert _completed(events) == [first]
+    rest = arm.commanded
+    assert max(abs(a - b) for a, b in zip(rest, GOAL, strict=True)) > 1.0  # short of (or past) the goal
+    assert arm.planned == rest and arm.actual == rest and arm.correction is None
+    _run(arm, arm.time + 1.0)
+    assert arm.commanded == rest  # it stays there
+    # The next move starts from there: no jump, and it reaches its own (absolute) goal exactly.
+    arm.move_joints(OTHER, arm.time)
+    trace = _trace(arm)
+    assert trace[0] == rest
+    assert np.all(_steps(trace) <= STEP_BOUND + 1e-9)
+    assert _close(arm.commanded, OTHER, 1e-9)
+
+
+def test_the_segment_queued_behind_a_compliant_one_starts_from_where_it_ended() -> None:
+    arm = _arm(compliance=_Drift(seed=6, step=0.05))
+    first = arm.move_joints(GOAL, 0.0, scheme=Scheme.COMPLIANT_MOTION)
+    second = arm.move_joints(OTHER, 0.0)
+    completions: list[tuple[int, float, tuple[float, ...]]] = []
+    trace = [arm.commanded]
+    while arm.moving:
+        completions += [
+            (e.segment, e.time, arm.commanded)
+            for e in arm.tick(arm.time + TICK)
+            if isinstance(e, SegmentCompleted)
+        ]
+        trace.append(arm.commanded)
+    (n1, t1, end1), (n2, _, end2) = completions
+    assert (n1, n2) == (first, second)
+    assert max(abs(a - b) for a, b in zip(end1, GOAL, strict=True)) > 1.0
+    assert _close(end2, OTHER, 1e-9)
+    # From the compliant segment's last cycle on, every cycle moves at most one tick of nominal motion.
+    k = round(t1 / TICK)
+    assert np.all(_steps(trace[k - 1 :]) <= STEP_BOUND + 1e-9)
+
+
+def test_a_straight_line_behind_a_compliant_segment_starts_from_where_it_ended() -> None:
+    arm = _arm(compliance=_Drift(seed=7, step=0.02))
+    arm.move_joints(GOAL, 0.0)
+    _run_idle(arm)
+    arm.move_joints(OTHER, arm.time, scheme=Scheme.COMPLIANT_MOTION)
+    goal = Transform.trans(30.0, -20.0, 10.0) @ forward(OTHER)
+    line = arm.move_to(goal, arm.time, straight=True)
+    events: list[ArmEvent] = []
+    while arm.current_scheme is not None or not events:
+        events += arm.tick(arm.time + TICK)
+    start = arm.commanded  # where compliance left the arm: the line starts here
+    assert max(abs(a - b) for a, b in zip(start, OTHER, strict=True)) > 0.5
+    a, b = forward(start).p, goal.p
+    trace = [start]
+    while arm.moving:
+        events += arm.tick(arm.time + TICK)
+        trace.append(arm.commanded)
+        p = arm.pose().p
+        along = float(np.dot(p - a, b - a) / np.dot(b - a, b - a))
+        assert np.linalg.norm(p - (a + along * (b - a))) < 1e-6  # on the line from the rebased start
+    assert line in _completed(events) and arm.pose().almost_equal(goal, 1e-6)
+    assert np.max(_steps(trace)) < STRAIGHT_JUMP_DEG
+
+
+_SCHEMES = st.sampled_from(
+    [Scheme.LINEAR_BLEND, Scheme.QUINTIC, Scheme.COMPLIANT_MOTION, Scheme.COMPLIANT_DEBUG]
+)
+_GOALS = st.tuples(*(st.floats(-30.0, 30.0) for _ in range(6))).map(
+    lambda d: tuple(r + x for r, x in zip(READY, d, strict=True))
+)
+_SEGMENTS = st.lists(
+    st.tuples(_SCHEMES, _GOALS, st.sampled_from([0.0, 0.0, 0.1, 0.4, 1.0, 2.5])), min_size=1, max_size=6
+)
+
+
+@settings(max_examples=40, deadline=None)
+@given(_SEGMENTS, st.integers(0, 2**32 - 1), st.floats(0.005, 0.1))
+def test_the_commanded_path_is_continuous_across_segment_boundaries(
+    segments: list[tuple[Scheme, tuple[float, ...], float]], seed: int, step: float
+) -> None:
+    """Whatever the corrections and however the segments are queued (at once, while moving, when
+    idle), no cycle moves a joint's command by more than one tick of nominal motion plus the correction
+    made on that cycle; non-compliant segments end on their goals, compliant ones where compliance left
+    the arm, and every segment completes once, in order."""
+    arm = _arm(compliance=_Drift(seed, step))
+    numbers: list[int] = []
+    trace = [arm.commanded]
+    completed: list[int] = []
+    t = 0.0
+    for scheme, goal, gap in segments:
+        t += gap
+        while arm.time < t - 1e-9:
+            completed += _completed(arm.tick(arm.time + TICK))
+            trace.append(arm.commanded)
+        numbers.append(arm.move_joints(goal, arm.time, scheme=scheme))
+    while arm.moving:
+        completed += _completed(arm.tick(arm.time + TICK))
+        trace.append(arm.commanded)
+    assert completed == numbers
+    assert np.all(_steps(trace) <= STEP_BOUND + step + 1e-9)
+    last_scheme, last_goal, _ = segments[-1]
+    if not last_scheme.compliant:
+        assert _close(arm.commanded, last_goal, 1e-9)
+    assert arm.planned == arm.commanded == arm.actual
+    _run(arm, arm.time + 0.5)
+    assert arm.commanded == trace[-1]  # at rest where it ended
+
+
+class _Twist:
+    """A compliance model that turns joint 6 steadily (as a torque about the tool axis would), up to
+    its limit."""
+
+    def __init__(self, rate: float) -> None:
+        self.rate = rate
+        self.offset = 0.0
+
+    def adjust(self, t: float, nominal: tuple[float, ...], actual: tuple[float, ...]) -> tuple[float, ...]:
+        self.offset += self.rate
+        q6 = min(nominal[5] + self.offset, PUMA600.limits.upper[5])
+        self.offset = q6 - nominal[5]
+        return (*nominal[:5], q6)
+
+
+def test_a_line_that_cannot_be_followed_from_where_compliance_left_the_arm_fades_in() -> None:
+    arm = _arm(compliance=_Twist(3.0))
+    start = (10.0, -80.0, 100.0, 20.0, 30.0, 50.0)
+    arm.move_joints(start, 0.0, scheme=Scheme.COMPLIANT_MOTION)
+    goal = Transform.trans(0.0, 0.0, -30.0) @ forward(start)
+    line = arm.move_to(goal, 0.0, straight=True)
+    events: list[ArmEvent] = []
+    while arm.current_scheme is not None or not events:
+        events += arm.tick(arm.time + TICK)
+    here = arm.commanded
+    assert here[5] == PUMA600.limits.upper[5]  # twisted to the limit: the line from here breaks it
+    with pytest.raises(Refused):  # a joint limit, or the wrist flipping to avoid it
+        ArmSim(powered=True, start=here).move_to(goal, 0.0, straight=True)
+    trace = [here]
+    while arm.moving:
+        events += arm.tick(arm.time + TICK)
+        trace.append(arm.commanded)
+    assert line in _completed(events) and not arm.aborted
+    assert arm.pose().almost_equal(goal, 1e-6)  # the fade is over by the end of the line
+    offset = here[5] - start[5]
+    n = len(trace) - 1
+    assert np.max(_steps(trace)) <= offset / n + STRAIGHT_JUMP_DEG
+    assert np.all(np.asarray(trace) <= np.asarray(PUMA600.limits.upper) + 1e-9)

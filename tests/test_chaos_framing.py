@@ -38,7 +38,7 @@ from manip.codecs.framing import (
     encode_chudp,
     encode_tcp,
 )
-from manip.codecs.packet import MAX_DATA, Packet, Trailer
+from manip.codecs.packet import MAX_DATA, Packet, Trailer, make_packet, make_trailer_value
 
 # ------------------------------------------------------------------------------------ vectors
 
@@ -611,3 +611,15 @@ def test_stream_decoder_takes_any_buffer(ps: list[Packet], kind: type) -> None:
     got = d.feed(kind(stream[:5])) + d.feed(kind(stream[5:]))
     assert got == [fw._decode_body_checked(encode_tcp(p)[2:], 0, ">", verify=True) for p in ps]
     assert d.pending == 0 and d.offset == len(stream)
+
+
+@given(fast_packets, st.one_of(st.none(), st.builds(Trailer, words, words, words)))
+def test_make_packet_builds_a_real_packet(p: Packet, trailer: Trailer | None) -> None:
+    fields = (p.opcode, p.dest_host, p.dest_index, p.src_host, p.src_index, p.packet_no, p.ack_no, p.data)
+    made = make_packet(*fields, p.fc, trailer)
+    assert type(made) is Packet and made == p and hash(made) == hash(p)
+    assert made.trailer == trailer and repr(made) == repr(p.with_(trailer=trailer))
+    with pytest.raises(AttributeError):
+        made.opcode = 1  # type: ignore[misc]
+    t = make_trailer_value(1, 2, 3)
+    assert type(t) is Trailer and t == Trailer(1, 2, 3) and hash(t) == hash(Trailer(1, 2, 3))

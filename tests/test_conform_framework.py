@@ -100,14 +100,18 @@ def test_required_refusal_and_unknown_opcode_answered_normally() -> None:
 
 
 def test_check_error_packet_severity_and_format() -> None:
-    ok = encode_error(ServerOp.NON_FATAL_ERROR, 1, ErrorMessage("dispatch", "C", "UOP", "Unknown opcode ~", (0o277,)))
+    ok = encode_error(
+        ServerOp.NON_FATAL_ERROR, 1, ErrorMessage("dispatch", "C", "UOP", "Unknown opcode ~", (0o277,))
+    )
     assert check_error_packet(_srv(ServerOp.NON_FATAL_ERROR, ok)) == []
     fatal_in_202 = encode_error(ServerOp.NON_FATAL_ERROR, 1, ErrorMessage("x", "F", "NZI", "bad"))
     assert [f.clause for f in check_error_packet(_srv(ServerOp.NON_FATAL_ERROR, fatal_in_202))] == [
         "error.severity-matches-opcode"
     ]
     no_colon = struct.pack("<H", 1) + b"dispatch C UOP Unknown"
-    assert [f.clause for f in check_error_packet(_srv(ServerOp.NON_FATAL_ERROR, no_colon))] == ["error-string.format"]
+    assert [f.clause for f in check_error_packet(_srv(ServerOp.NON_FATAL_ERROR, no_colon))] == [
+        "error-string.format"
+    ]
     long_code = encode_error(ServerOp.NON_FATAL_ERROR, 1, ErrorMessage("x", "Q", "LONG", "m ~", ()))
     clauses = {f.clause for f in check_error_packet(_srv(ServerOp.NON_FATAL_ERROR, long_code))}
     assert clauses == {"error-string.severity", "error-string.code"}
@@ -161,8 +165,14 @@ def test_case_seed_depends_on_run_seed_and_id_only() -> None:
 
 def _case(case_id: str, body: Callable[[CaseContext], Awaitable[None]], **kw: Any) -> Case:
     defaults: dict[str, Any] = {
-        "clauses": ("request.one-reply",), "level": "MUST", "kind": "scripted", "hazard": "read-only",
-        "fresh": True, "deadline": 2.0, "summary": "", "module": __name__,
+        "clauses": ("request.one-reply",),
+        "level": "MUST",
+        "kind": "scripted",
+        "hazard": "read-only",
+        "fresh": True,
+        "deadline": 2.0,
+        "summary": "",
+        "module": __name__,
     }
     defaults.update(kw)
     return Case(id=case_id, function=body, **defaults)
@@ -202,18 +212,33 @@ CASES = [
 ]
 
 
-def _run(select: list[str], *, known: list[str] = (), strict: bool = False,  # type: ignore[assignment]
-         target: str = "sim", address: str | None = None) -> RunReport:
+def _run(
+    select: list[str],
+    *,
+    known: list[str] = (),
+    strict: bool = False,  # type: ignore[assignment]
+    target: str = "sim",
+    address: str | None = None,
+) -> RunReport:
     async def go() -> RunReport:
         options = RunOptions(strict=strict, target=target, reply_timeout=0.5, connect_timeout=1.0)  # type: ignore[arg-type]
         if address is not None:
-            config = RunConfig(address=address, options=options, seed=3, select=PatternSet.of(select, "--select"),
-                               known_failing=PatternSet.of(known, "--known-failing"))
+            config = RunConfig(
+                address=address,
+                options=options,
+                seed=3,
+                select=PatternSet.of(select, "--select"),
+                known_failing=PatternSet.of(known, "--known-failing"),
+            )
             return await Runner(config, CASES).run()
         async with serve("tcp://127.0.0.1:0") as server:
-            config = RunConfig(address=server.address, options=options, seed=3,
-                               select=PatternSet.of(select, "--select"),
-                               known_failing=PatternSet.of(known, "--known-failing"))
+            config = RunConfig(
+                address=server.address,
+                options=options,
+                seed=3,
+                select=PatternSet.of(select, "--select"),
+                known_failing=PatternSet.of(known, "--known-failing"),
+            )
             return await Runner(config, CASES).run()
 
     return asyncio.run(go())
@@ -226,7 +251,11 @@ def _outcomes(report: RunReport) -> dict[str, str]:
 def test_runner_outcomes_and_exit_codes() -> None:
     report = _run(["t"])
     assert _outcomes(report) == {
-        "t.error": "error", "t.fail": "fail", "t.motion": "pass", "t.pass": "pass", "t.slow": "fail",
+        "t.error": "error",
+        "t.fail": "fail",
+        "t.motion": "pass",
+        "t.pass": "pass",
+        "t.slow": "fail",
         "t.warn": "warn",
     }
     slow = next(r for r in report.results if r.id == "t.slow")
@@ -278,8 +307,10 @@ def _validate(instance: Any, schema: dict[str, Any], root: dict[str, Any], path:
         names = kinds if isinstance(kinds, list) else [kinds]
         py = {"object": dict, "array": list, "string": str, "boolean": bool, "null": type(None)}
         ok = any(
-            (isinstance(instance, (int, float)) and not isinstance(instance, bool)) if k == "number"
-            else (isinstance(instance, int) and not isinstance(instance, bool)) if k == "integer"
+            (isinstance(instance, (int, float)) and not isinstance(instance, bool))
+            if k == "number"
+            else (isinstance(instance, int) and not isinstance(instance, bool))
+            if k == "integer"
             else isinstance(instance, py[k])
             for k in names
         )

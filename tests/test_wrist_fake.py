@@ -9,9 +9,11 @@ from __future__ import annotations
 import itertools
 from typing import Any
 
+import numpy as np
 import pytest
 
-from manip.arm.trajectory import TICK, Scheme
+from manip.arm.kinematics import READY
+from manip.arm.trajectory import PUMA_LIMITS, TICK, Scheme
 from manip.codecs.messages import AsyncResponse, ErrorReply, Reply
 from manip.reference_server import State
 from manip.reference_server.cougar_port import SimPort
@@ -23,6 +25,7 @@ from tests.cougar_fake import FakeCougar, WristClient
 
 J2_WALL = -70.0
 INTO_WALL = (0.0, -40.0, 90.0, 0.0, 0.0, 0.0)
+READY_J = READY
 
 
 def _setup(**fake: Any) -> tuple[WristClient, FakeCougar, CougarWrist]:
@@ -58,7 +61,8 @@ def test_read_forces_waits_for_cougar_and_sends_the_angles_first() -> None:
     assert msg.values["forces"] == pytest.approx((50.0, 0, 0, 0, 0, 0))
     codes = [m.code for m in cougar.log]
     assert codes.index(CougarCommand.SEN) < codes.index(CougarCommand.RFRC)
-    assert client.session.state is State.READY
+    state: State = client.session.state  # read again: the tick changed it (mypy keeps the narrowing)
+    assert state is State.READY
 
 
 def test_read_raw_gauges_examine_deposit_and_version() -> None:
@@ -257,6 +261,40 @@ def test_guard_hits_are_sent_only_when_asked_for() -> None:
     assert client.session.arm.aborted
 
 
+def test_the_segments_a_stop_guard_drops_are_named_in_a_warning() -> None:
+    for notify in (True, False):
+        client, _, _ = _setup(wall_at=J2_WALL)
+        if notify:
+            client.call("request-notifications", mask=0b11)
+        client.call("set-guard", type_index=0x8000 | 3, dvec=(1.0, 0.0, 0.0, 0.0, 0.0, 0.0), tol=10.0)
+        numbers = [
+            _reply(client.call("set-joint-angles", joints=joints)).values["segment"]
+            for joints in (INTO_WALL, READY_J, INTO_WALL)
+        ]
+        client.run(4.0)
+        completed = [a.word3 for a in client.asyncs() if a.condition == AsyncCondition.SEGMENT_COMPLETED]
+        assert completed == []  # none of them will ever complete...
+        (warning,) = client.errors(ServerOp.ASYNCHRONOUS_WARNING)  # ...and the client is told so, once
+        assert (warning.error.where, warning.error.severity, warning.error.code) == ("wrist", "W", "AWA")
+        assert warning.error.args == (3, 3, numbers[0], numbers[2])
+        assert warning.error.problems == ()
+        # Besides the guard hit (asked for) or the guard-stop error (not asked for): no other report.
+        assert len(_guard_hits(client)) == (1 if notify else 0)
+        assert len(client.errors(ServerOp.ASYNCHRONOUS_ERROR)) == (0 if notify else 1)
+
+
+def test_a_stop_guard_that_drops_nothing_warns_of_nothing() -> None:
+    client, _, _ = _setup(wall_at=J2_WALL)
+    client.call("request-notifications", mask=0b01)
+    client.call("compliant-move", joints=INTO_WALL, scheme=0)
+    client.run(4.0)  # the arm now rests against the wall, idle
+    client.call("set-guard", type_index=0x8000 | 4, dvec=(1.0, 0.0, 0.0, 0.0, 0.0, 0.0), tol=1e-3)
+    client.run(0.5)
+    assert [(h.word2, h.word3) for h in _guard_hits(client)] == [(1, 4)]
+    assert client.errors(ServerOp.ASYNCHRONOUS_WARNING) == []
+    assert not client.session.arm.aborted  # an idle arm has nothing to stop
+
+
 # ----------------------------------------------------------------------------- compliance
 def _compliant(scheme: int) -> tuple[WristClient, CougarWrist, list[float], list[float]]:
     client, _, wrist = _setup(wall_at=J2_WALL)
@@ -293,6 +331,28 @@ def test_the_ntd_used_is_from_an_earlier_tick() -> None:
             expected = -4.0 * 5.0 * max(0.0, before.sensed[1] - J2_WALL)
             assert after.ntd[1] == pytest.approx(expected, rel=1e-5, abs=1e-4)
     assert checked > 10
+
+
+def test_a_compliant_segment_ends_at_the_wall_and_the_next_one_starts_there() -> None:
+    client, _, wrist = _setup(wall_at=J2_WALL)
+    client.call("request-notifications", mask=0b10)
+    pressed = _reply(client.call("compliant-move", joints=INTO_WALL, scheme=0)).values["segment"]
+    back = _reply(client.call("set-joint-angles", joints=READY_J)).values["segment"]
+    assert isinstance(pressed, int)
+    arm = client.session.arm
+    trace = [arm.commanded]
+    ends: dict[int, int] = {}
+    for _ in range(round(8.0 / TICK)):
+        for msg in client.tick():
+            if isinstance(msg, AsyncResponse) and msg.condition == AsyncCondition.SEGMENT_COMPLETED:
+                ends[msg.word3] = len(trace)
+        trace.append(arm.commanded)
+    k = ends[pressed]
+    assert J2_WALL < trace[k][1] < J2_WALL + 4.0  # held against the wall, not on the nominal goal
+    assert wrist.meter[-1].nominal[1] > J2_WALL + 25.0
+    steps = np.abs(np.diff(np.asarray(trace[k - 1 :]), axis=0))
+    assert np.all(steps <= PUMA_LIMITS.speed * TICK + 1e-9)  # no jump from there on
+    assert back in ends and trace[-1] == pytest.approx(READY_J, abs=1e-9)
 
 
 def test_the_debugging_scheme_runs_compliance_open_loop() -> None:

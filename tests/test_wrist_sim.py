@@ -13,6 +13,7 @@ import pytest
 
 from manip.arm import Transform
 from manip.arm.kinematics import PUMA600, forward
+from manip.arm.trajectory import PUMA_LIMITS, TICK
 from manip.codecs.messages import AsyncResponse, Reply
 from manip.cougar import CougarConfig, CougarSim, GaugeModel, Surface
 from manip.cougar.memory import region
@@ -124,6 +125,36 @@ def test_under_compliance_the_arm_yields_to_the_surface() -> None:
         depths[scheme] = deepest
     assert depths[1] > 300.0  # open loop: the nominal path, deep into the surface
     assert depths[0] < 0.2 * depths[1]  # closed loop: the arm gives way
+
+
+def test_a_compliant_segment_ends_where_the_surface_let_it_go_and_the_next_starts_there() -> None:
+    surface = _surface()
+    client, sim = _setup(environment=surface)
+    client.call("set-joint-damping", bji=(0.1,) * 6)
+    client.call("request-notifications", mask=0b10)
+    pressed = _reply(client.call("compliant-move", joints=GOAL, scheme=0)).values["segment"]
+    back = _reply(client.call("set-joint-angles", joints=START)).values["segment"]
+    assert isinstance(pressed, int)
+    arm = client.session.arm
+    trace = [arm.commanded]
+    ends: dict[int, tuple[int, float]] = {}  # segment -> (cycle, penetration) when it completed
+    for _ in range(round(10.0 / TICK)):
+        for msg in client.tick():
+            if isinstance(msg, AsyncResponse) and msg.condition == AsyncCondition.SEGMENT_COMPLETED:
+                ends[msg.word3] = (len(trace), surface.penetration(sim.tool_pose()))
+        trace.append(arm.commanded)
+    assert set(ends) == {pressed, back} and not arm.moving
+    k, depth = ends[pressed]
+    end = np.asarray(trace[k])
+    # Short of the nominal goal, which is deep inside the surface: the arm is not (with this damping
+    # the simulated compliance law throws it back out of the contact, and there it stays).
+    assert np.max(np.abs(end - np.asarray(GOAL))) > 10.0
+    assert depth < 20.0 < surface.penetration(forward(GOAL, PUMA600.geometry) @ TOOL)
+    # The next segment starts from there: from the last compliant cycle on no cycle moves a joint's
+    # command by more than one tick of nominal motion; it ends on its own goal.
+    steps = np.abs(np.diff(np.asarray(trace[k - 1 :]), axis=0))
+    assert np.all(steps <= PUMA_LIMITS.speed * TICK + 1e-9)
+    assert trace[-1] == pytest.approx(START, abs=1e-9)
 
 
 def test_calibrate_wrist_recovers_the_gauge_offsets() -> None:

@@ -41,8 +41,22 @@ packets* and answered with a segment number before any motion happened (ยง5.1, ย
   :class:`MotionAborted`, and :class:`FollowingWarning` when a joint lags by more than half the
   collision tolerance (once per episode).
 
-The compliant schemes are a seam for later: a :class:`Compliance` object, when given, adjusts the nominal
-commanded angles of compliant segments each cycle (the Cougar "new theta dot" corrections).
+Compliance (erratum ``compliant-segment-end``)
+----------------------------------------------
+A :class:`Compliance` object (the Puma's wrist processes and Cougar) turns the nominal commanded angles
+of each cycle of a compliant segment into the compliant ones; the *correction* is their difference.
+Consecutive compliant segments share one blended path and one correction (a compliant episode).  When
+the episode ends -- on the cycle its last segment completes -- the correction then in force is kept:
+the arm stays where the contact let it go, short of (or past) the nominal goal, instead of snapping back
+to it.  Segments queued behind a compliant one that are not compliant themselves wait in the backlog
+(they do not blend into it) and are handed to a fresh interpolator that starts, at rest, from where
+compliance left the arm: their *start* is rebased, their goals stay what they were (absolute goals,
+or increments resolved from the pose planned when they were queued).  A straight-line move right behind
+a compliant episode is solved again from there, or, if the line can no longer be followed from there,
+its planned path is shifted by the correction fading linearly to zero along the line.  Either way the
+commanded angles never jump: each cycle moves them by at most one tick of nominal motion plus the
+compliance correction made on that cycle.  With nothing queued the arm rests where compliance left it
+and later moves are planned from there.
 """
 
 from __future__ import annotations
@@ -109,6 +123,8 @@ SEGMENT_MODULUS: Final = 1 << 16
 #: move is refused with TOR.
 STRAIGHT_JUMP_DEG: Final = 5.0
 _EPS: Final = 1e-9
+#: A straight-line move starting within this of where it was planned from (deg) is played as planned.
+_SAME_START_DEG: Final = 1e-6
 
 
 # ---------------------------------------------------------------------------------------- refusals
@@ -199,8 +215,10 @@ class Compliance(Protocol):
     """Seam for the compliant schemes: turns the nominal commanded angles into the compliant ones.
 
     Called once per servo cycle while a compliant segment runs, with the cycle time, the nominal angles
-    of the blended path and the angles the arm actually reached.  Not implemented yet (no Cougar model);
-    without one the compliant schemes follow their nominal path.
+    of the blended path and the angles the arm actually reached (the Puma side of Cougar,
+    :class:`~manip.reference_server.cougar_wrist.CougarWrist`, is one).  Without one the compliant
+    schemes follow their nominal path.  What happens to the correction when the segment ends: see the
+    module docstring.
     """
 
     def adjust(self, t: float, nominal: Joints, actual: Joints) -> Joints: ...
@@ -214,10 +232,13 @@ class _JointPacket:
 
 @dataclass(frozen=True)
 class _PathPacket:
-    """A straight-line move, solved at every tick when it was queued."""
+    """A straight-line move, solved at every tick from ``start`` when it was queued."""
 
     segment: int
     samples: tuple[Joints, ...]
+    start: Joints
+    goal: Transform
+    speed: float
 
 
 @dataclass
@@ -299,6 +320,10 @@ class ArmSim:
         self._planned: Joints = here
         self._planned_oat: tuple[float, float, float] | None = None
         self._scheme_now: Scheme | None = None
+        self._correction: Joints | None = None
+        """Compliant minus nominal angles on the last compliant cycle of the running episode."""
+        self._compliant_tail = False
+        """The interpolator's last segment is compliant: segments that are not wait in the backlog."""
         self._lag_warned = False
         self._panic_at: float | None = None
         self._epoch: float | None = None
@@ -366,6 +391,12 @@ class ArmSim:
         events: list[ArmEvent] = []
         self._abort(self._clock, cause, (), events)
         return events
+
+    @property
+    def correction(self) -> Joints | None:
+        """Compliant minus nominal commanded angles on the last cycle of the compliant episode running
+        (None outside one)."""
+        return self._correction
 
     @property
     def current_scheme(self) -> Scheme | None:
@@ -544,28 +575,81 @@ class ArmSim:
             if play.index == len(play.packet.samples):
                 events.append(SegmentCompleted(play.packet.segment, t))
                 self._playback = None
-                self._interp = MoveInterpolator(q, self.limits, self.speed)
-                self._flush(t)
+                self._restart(q, t)
             return q
         sample = self._interp.sample(t)
         events.extend(SegmentCompleted(sid, t) for sid in sample.completed)
         self._scheme_now = sample.scheme
-        q = _joints(sample.joints)
-        if sample.scheme is not None and sample.scheme.compliant and self.compliance is not None:
-            q = _joints(self.compliance.adjust(t, q, self.actual))
-        if sample.done and self._backlog and isinstance(self._backlog[0], _PathPacket):
-            packet = self._backlog.popleft()
-            assert isinstance(packet, _PathPacket)
-            self._playback = _Playback(packet)
-            self._scheme_now = None
+        nominal = q = _joints(sample.joints)
+        if sample.scheme is not None and sample.scheme.compliant:
+            if self.compliance is not None:
+                q = _joints(self.compliance.adjust(t, nominal, self.actual))
+            self._correction = _joints([a - b for a, b in zip(q, nominal, strict=True)])
+        elif self._correction is not None:
+            # The episode's last segment completed on this cycle: the arm stays where the contact let
+            # it go (erratum compliant-segment-end), not on the nominal goal; never past a joint limit.
+            lim = self.model.limits
+            q = _joints(
+                [
+                    min(max(a + b, lo), hi)
+                    for a, b, lo, hi in zip(nominal, self._correction, lim.lower, lim.upper, strict=True)
+                ]
+            )
+        if sample.done:
+            if self._compliant_tail:
+                self._restart(q, t)  # rebase what waits behind the episode
+            if self._backlog and isinstance(self._backlog[0], _PathPacket):
+                packet = self._backlog.popleft()
+                assert isinstance(packet, _PathPacket)
+                self._playback = _Playback(self._from(packet, q))
+                self._scheme_now = None
         return q
 
+    def _restart(self, here: Joints, t: float) -> None:
+        """A fresh interpolator at rest on ``here`` (where the arm stands at ``t``), fed the joint packets
+        that wait in the backlog."""
+        self._interp = MoveInterpolator(here, self.limits, self.speed)
+        self._compliant_tail = False
+        self._correction = None
+        self._flush(t)
+        if not self.queued:
+            self._planned, self._planned_oat = here, None
+
+    def _joins(self, packet: _JointPacket) -> bool:
+        """Whether ``packet`` may join the interpolator's path (nothing but compliant segments may blend
+        out of a compliant one: the others start from where compliance leaves the arm)."""
+        return packet.request.scheme.compliant or not self._compliant_tail
+
     def _flush(self, t: float) -> None:
-        """Hand the joint packets behind a finished straight-line move to the interpolator."""
-        while self._backlog and isinstance(self._backlog[0], _JointPacket):
+        """Hand the joint packets at the head of the backlog to the interpolator."""
+        while self._backlog and isinstance(self._backlog[0], _JointPacket) and self._joins(self._backlog[0]):
             packet = self._backlog.popleft()
             assert isinstance(packet, _JointPacket)
             self._interp.enqueue(packet.request, t)
+            self._compliant_tail = packet.request.scheme.compliant
+
+    def _from(self, packet: _PathPacket, here: Joints) -> _PathPacket:
+        """``packet`` starting from ``here``: as planned when it starts where it was planned from;
+        otherwise (behind a compliant episode) solved again from ``here``, or, when the line can no longer
+        be followed from there, its samples shifted by the offset fading linearly to zero."""
+        offset = [a - b for a, b in zip(here, packet.start, strict=True)]
+        if max(abs(d) for d in offset) <= _SAME_START_DEG:
+            return packet
+        try:
+            samples = self._plan_line(here, packet.goal, packet.speed)
+        except Refused:
+            lim = self.model.limits
+            n = len(packet.samples)
+            samples = tuple(
+                _joints(
+                    [
+                        min(max(v + d * (n - k) / n, lo), hi)
+                        for v, d, lo, hi in zip(q, offset, lim.lower, lim.upper, strict=True)
+                    ]
+                )
+                for k, q in enumerate(packet.samples, start=1)
+            )
+        return _PathPacket(packet.segment, samples, here, packet.goal, packet.speed)
 
     def _abort(self, t: float, cause: AbortCause, joints: tuple[int, ...], events: list[ArmEvent]) -> None:
         dropped = list(self._interp.abort(t))
@@ -582,6 +666,7 @@ class ArmSim:
         self._interp = MoveInterpolator(stop, self.limits, self.speed)
         self._planned, self._planned_oat = stop, None
         self._scheme_now = None
+        self._correction, self._compliant_tail = None, False
         self._lag_warned = False
         self.aborted, self.abort_cause = True, cause
         events.append(MotionAborted(cause, t, joints, tuple(dropped)))
@@ -593,8 +678,14 @@ class ArmSim:
         return number
 
     def _enqueue(self, packet: _JointPacket | _PathPacket, now: float) -> None:
-        if isinstance(packet, _JointPacket) and self._playback is None and not self._backlog:
+        if (
+            isinstance(packet, _JointPacket)
+            and self._playback is None
+            and not self._backlog
+            and self._joins(packet)
+        ):
             self._interp.enqueue(packet.request, now)
+            self._compliant_tail = packet.request.scheme.compliant
         else:
             self._backlog.append(packet)
 
@@ -626,13 +717,21 @@ class ArmSim:
         return best.q
 
     def _queue_straight(self, pose: Transform, now: float) -> int:
+        samples = self._plan_line(self._planned, pose, self.speed)
+        packet = _PathPacket(self._allocate(), samples, self._planned, pose, self.speed)
+        self._enqueue(packet, now)
+        self._planned, self._planned_oat = samples[-1], None
+        return packet.segment
+
+    def _plan_line(self, start: Joints, pose: Transform, speed: float) -> tuple[Joints, ...]:
+        """The joint angles at every tick of the straight line from ``start`` to ``pose``, each solution
+        nearest the previous one; TOR/JOR when the line cannot be followed."""
         g, lim = self.model.geometry, self.model.limits
-        start = forward(self._planned, g)
-        segment = CartesianSegment(start.matrix, pose.matrix, self.cartesian_limits, self.speed)
+        segment = CartesianSegment(forward(start, g).matrix, pose.matrix, self.cartesian_limits, speed)
         h = self.tick_period
         n = max(1, math.ceil(segment.duration / h - _EPS))
         samples: list[Joints] = []
-        previous = self._planned
+        previous = start
         for k in range(1, n + 1):
             at = Transform(segment.pose_at(min(k * h, segment.duration)))
             try:
@@ -645,7 +744,4 @@ class ArmSim:
                 raise Refused("TOR", "the line passes through a singularity")
             samples.append(q)
             previous = q
-        packet = _PathPacket(self._allocate(), tuple(samples))
-        self._enqueue(packet, now)
-        self._planned, self._planned_oat = samples[-1], None
-        return packet.segment
+        return tuple(samples)

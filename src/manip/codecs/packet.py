@@ -45,9 +45,52 @@ class Packet:
         return replace(self, **changes)  # type: ignore[arg-type]
 
 
-_new = object.__new__
-_slot = Packet.__dict__
-_trailer_slot = Trailer.__dict__
+class _PacketBuilder:
+    """A plain class with exactly :class:`Packet`'s slots, so an instance can become a Packet.
+
+    Building a frozen dataclass field by field goes through ``object.__setattr__`` (or the slot
+    descriptors) once per field, which is most of the cost of a packet on the per-packet path.  This class
+    sets the same slots with ordinary attribute stores; :func:`make_packet` then reassigns ``__class__``,
+    which Python allows between classes whose instance layouts are identical (same slots, same base).
+    The result is an ordinary Packet: same type, fields, equality, hash and immutability.
+    """
+
+    __slots__ = Packet.__slots__
+
+    def __init__(
+        self,
+        opcode: int,
+        dest_host: int,
+        dest_index: int,
+        src_host: int,
+        src_index: int,
+        packet_no: int,
+        ack_no: int,
+        data: bytes,
+        fc: int,
+        trailer: Trailer | None,
+    ) -> None:
+        self.opcode = opcode
+        self.dest_host = dest_host
+        self.dest_index = dest_index
+        self.src_host = src_host
+        self.src_index = src_index
+        self.packet_no = packet_no
+        self.ack_no = ack_no
+        self.data = data
+        self.fc = fc
+        self.trailer = trailer
+
+
+class _TrailerBuilder:
+    """:class:`_PacketBuilder` for :class:`Trailer`."""
+
+    __slots__ = Trailer.__slots__
+
+    def __init__(self, dest: int, source: int, checksum: int) -> None:
+        self.dest = dest
+        self.source = source
+        self.checksum = checksum
 
 
 def make_packet(
@@ -62,28 +105,17 @@ def make_packet(
     fc: int = 0,
     trailer: Trailer | None = None,
 ) -> Packet:
-    """Build a Packet without the frozen-dataclass ``__init__`` (about twice as fast; for decoders).
-
-    Sets the same slots ``__init__`` would; callers have already validated the values.
-    """
-    p = _new(Packet)
-    _slot["opcode"].__set__(p, opcode)
-    _slot["dest_host"].__set__(p, dest_host)
-    _slot["dest_index"].__set__(p, dest_index)
-    _slot["src_host"].__set__(p, src_host)
-    _slot["src_index"].__set__(p, src_index)
-    _slot["packet_no"].__set__(p, packet_no)
-    _slot["ack_no"].__set__(p, ack_no)
-    _slot["data"].__set__(p, data)
-    _slot["fc"].__set__(p, fc)
-    _slot["trailer"].__set__(p, trailer)
-    return p
+    """Build a Packet without the frozen-dataclass ``__init__`` (about three times as fast; for codecs
+    and the NCP).  Sets the same slots ``__init__`` would; callers have already validated the values."""
+    p = _PacketBuilder(
+        opcode, dest_host, dest_index, src_host, src_index, packet_no, ack_no, data, fc, trailer
+    )
+    p.__class__ = Packet  # type: ignore[assignment]
+    return p  # type: ignore[return-value]
 
 
 def make_trailer_value(dest: int, source: int, checksum: int) -> Trailer:
     """Build a Trailer without the frozen-dataclass ``__init__`` (for decoders, like :func:`make_packet`)."""
-    t = _new(Trailer)
-    _trailer_slot["dest"].__set__(t, dest)
-    _trailer_slot["source"].__set__(t, source)
-    _trailer_slot["checksum"].__set__(t, checksum)
-    return t
+    t = _TrailerBuilder(dest, source, checksum)
+    t.__class__ = Trailer  # type: ignore[assignment]
+    return t  # type: ignore[return-value]

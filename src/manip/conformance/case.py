@@ -117,7 +117,9 @@ class CaseFailure(Exception):  # noqa: N818 - an outcome, not an error of the su
     @property
     def level(self) -> Level | None:
         """The level of the clause broken, when one is named."""
-        return SPEC.clauses[self.clause].level if self.clause in SPEC.clauses else None
+        if self.clause is None or self.clause not in SPEC.clauses:
+            return None
+        return SPEC.clauses[self.clause].level
 
 
 class CaseSkipped(Exception):  # noqa: N818 - an outcome

@@ -46,8 +46,6 @@ __all__ = [
     "check_async_packet",
     "check_description",
     "check_description_entries",
-    "description_operations",
-    "multi_text",
     "check_echo",
     "check_error_packet",
     "check_initial_response",
@@ -55,6 +53,8 @@ __all__ = [
     "check_server_opcode",
     "check_transcript",
     "describe",
+    "description_operations",
+    "multi_text",
     "parse_description",
     "required_refusal",
     "word",
@@ -292,7 +292,7 @@ def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Findin
 
 
 def _codec_finding(exc: CodecError, packet: WirePacket, default: str, expected: str) -> Finding:
-    clause = exc.clause if exc.clause in SPEC.clauses else default
+    clause = exc.clause if exc.clause is not None and exc.clause in SPEC.clauses else default
     return Finding(clause, str(exc), expected=expected, actual=str(exc), data=packet.data, packet=packet)
 
 
@@ -525,7 +525,7 @@ def _check_single(op: RequestOpcode, packet: WirePacket) -> list[Finding]:
     try:
         decode_reply(packet.data, op)
     except CodecError as exc:
-        clause = exc.clause if exc.clause in SPEC.clauses else _KIND_CLAUSE[kind]
+        clause = exc.clause if exc.clause is not None and exc.clause in SPEC.clauses else _KIND_CLAUSE[kind]
         expected = {
             "done": "the request number only (2 data bytes)",
             "segment": "the request number and one segment-number word (4 data bytes)",
@@ -608,7 +608,9 @@ def parse_description(text: str) -> tuple[dict[str, LispValue] | None, list[Find
     try:
         return read_alist(text), []
     except DecodeError as exc:
-        clause = exc.clause if exc.clause in SPEC.clauses else "describe.alist-readable"
+        clause = (
+            exc.clause if exc.clause is not None and exc.clause in SPEC.clauses else "describe.alist-readable"
+        )
         return None, [
             Finding(
                 clause,

@@ -27,6 +27,7 @@ import shlex
 import sys
 import traceback
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -37,12 +38,15 @@ from rich.table import Table
 
 from manip.conformance.case import Case, all_cases
 from manip.conformance.context import DEFAULT_REPLY_TIMEOUT, RunOptions
+from manip.conformance.cougar_target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.coverage import DEFAULT_PARTIES, coverage, gaps
+from manip.conformance.embedded import EmbeddedServer
 from manip.conformance.report import failure_text, write_json, write_junit
 from manip.conformance.results import CaseResult, ExitCode, LivenessCheck, RunReport
 from manip.conformance.runner import RunConfig, RunEvents, Runner
 from manip.conformance.selection import PatternError, PatternSet
 from manip.links import AddressError, parse_address
+from manip.reference_server import FaultSet, ServerConfig
 
 __all__ = ["main"]
 
@@ -140,6 +144,23 @@ def main() -> None:
     metavar="NAME[=ARG]",
     help="Embedded server only: switch on a fault of the reference server (see manip-server --help).",
 )
+@click.option(
+    "--cougar",
+    "cougar",
+    is_flag=False,
+    flag_value="sim",
+    default=None,
+    metavar="URL",
+    help="Check a Cougar instead of a server: tcp://HOST:PORT of a DRV-11J Cougar (manip-cougar), or "
+    "'sim' (the default value) for the simulated one in-process.  Only cougar cases run.",
+)
+@click.option(
+    "--cougar-fault",
+    "cougar_faults",
+    multiple=True,
+    metavar="NAME",
+    help="With --cougar sim: switch on a defect of the simulated Cougar (see manip-cougar --help).",
+)
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar; failures and the summary only.")
 def run(
     host: str | None,
@@ -156,11 +177,14 @@ def run(
     json_path: Path | None,
     junit_path: Path | None,
     server_faults: tuple[str, ...],
+    cougar: str | None,
+    cougar_faults: tuple[str, ...],
     quiet: bool,
 ) -> None:
     """Run the suite against HOST (a link address: tcp://HOST:PORT, chudp://HOST:PORT?addr=OCTAL,
     chaosd:///PATH, or HOST[:PORT] for tcp).  Without HOST the embedded reference server is started
-    on a free loopback port and the suite runs against it."""
+    on a free loopback port and the suite runs against it.  With --cougar the Cougar cases run against
+    a Cougar over the emulated DRV-11J link instead."""
     console = Console(stderr=False, highlight=False)
     try:
         select_set = PatternSet.of(select, "--select")
@@ -173,15 +197,22 @@ def run(
         raise click.UsageError("--server-fault applies to the embedded server only (omit HOST)")
     config_faults = None
     if server_faults:
-        from manip.reference_server import FaultSet  # the embedded server only
-
         try:
             config_faults = FaultSet.parse(server_faults)
         except ValueError as exc:
             raise click.UsageError(f"--server-fault: {exc}") from None
+    target: CougarTarget | None = None
+    if cougar is not None or cougar_faults:
+        if host or server_faults:
+            raise click.UsageError("--cougar checks a Cougar: give no HOST and no --server-fault")
+        try:
+            target = CougarTarget.parse(cougar, cougar_faults)
+        except ValueError as exc:
+            raise click.UsageError(f"--cougar: {exc}") from None
+        address = "" if target.embedded else target.url
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "big")
-    cases = all_cases()
+    cases = cougar_cases(all_cases(), cougar=target is not None)
     options = RunOptions(
         target="hardware" if target_kind == "hardware" else "sim",
         allow_motion=allow_motion,
@@ -207,13 +238,16 @@ def run(
         select=select_set,
         skip=skip_set,
         known_failing=known_set,
-        embedded=not host,
+        embedded=not host if target is None else target.embedded,
         reproduce_options=extra,
         command=shlex.join(["manip-conform", *sys.argv[1:]]),
     )
+    if target is not None:
+        config.reproduce_prefix = target.reproduce_prefix()
+        config.liveness_check = liveness_check
     console.print(f"manip-conform: seed [bold]{seed}[/] (rerun with --seed {seed})")
     holder: dict[str, Runner] = {}
-    code = _execute(config, cases, config_faults, holder, console, quiet)
+    code = _execute(config, cases, config_faults, holder, console, quiet, cougar=target)
     report = holder["runner"].report if "runner" in holder else None
     if report is not None:
         if code == ExitCode.INTERNAL and not report.interrupted and not report.internal_error:
@@ -234,10 +268,11 @@ def _execute(
     holder: dict[str, Runner],
     console: Console,
     quiet: bool,
+    cougar: CougarTarget | None = None,
 ) -> int | None:
     """Run; None means "use the report's exit code"."""
     try:
-        asyncio.run(_run_async(config, cases, faults, holder, console, quiet))
+        asyncio.run(_run_async(config, cases, faults, holder, console, quiet, cougar))
     except KeyboardInterrupt:
         if "runner" in holder:
             holder["runner"].report.interrupted = True
@@ -264,24 +299,28 @@ async def _run_async(
     holder: dict[str, Runner],
     console: Console,
     quiet: bool,
+    cougar: CougarTarget | None = None,
 ) -> None:
+    if cougar is not None:  # --cougar: the Cougar target (embedded or not)
+        async with cougar.running() as address:
+            config.address = address
+            config.options = _with_address(config.options, address)
+            if cougar.embedded:
+                console.print(f"embedded simulated Cougar at {address}")
+            await _run_with(config, cases, holder, console, quiet)
+        return
     if not config.embedded:
         await _run_with(config, cases, holder, console, quiet)
         return
-    from manip.reference_server import ServerConfig  # embedded target only
-    from manip.reference_server.driver import serve
-
     server_config = ServerConfig() if faults is None else ServerConfig(faults=faults)
-    async with serve("tcp://127.0.0.1:0", server_config) as server:
-        config.address = server.address
-        config.options = _with_address(config.options, server.address)
-        console.print(f"embedded reference server at {server.address}")
+    with EmbeddedServer(server_config) as address:
+        config.address = address
+        config.options = replace(config.options, address=address)
+        console.print(f"embedded reference server at {address}")
         await _run_with(config, cases, holder, console, quiet)
 
 
 def _with_address(options: RunOptions, address: str) -> RunOptions:
-    from dataclasses import replace
-
     return replace(options, address=address)
 
 
@@ -334,8 +373,9 @@ def _summary(console: Console, report: RunReport) -> None:
     for problem in report.problems:
         console.print(f"[bold red]problem[/]: {problem}")
     verdict_style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
+    shown = ", ".join(parts) or "no cases"
     console.print(
-        f"[{verdict_style}]{report.verdict}[/] (exit {int(report.exit_code)}): {', '.join(parts) or 'no cases'}"
+        f"[{verdict_style}]{report.verdict}[/] (exit {int(report.exit_code)}): {shown}"
         f" in {report.duration:.1f} s; seed {report.seed}"
     )
     slow = [r for r in report.results if r.deadline and r.duration > 0.8 * r.deadline]

@@ -32,6 +32,7 @@ findings of a checker; ``ctx.fail(...)`` fails outright; ``ctx.skip(reason)`` en
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import random
 import time
 from collections.abc import Awaitable, Callable, Iterable, Sequence
@@ -42,7 +43,7 @@ from manip.codecs.messages import encode_request, request_op
 from manip.codecs.packet import Packet
 from manip.conformance.case import LEVEL_ORDER, CaseFailure, CaseSkipped
 from manip.conformance.checks import ANSWER_OPCODES, Finding, WirePacket, describe, word
-from manip.links import ChaosConnection, ChaosError, ConnectionClosed, ConnectionLost, LinkAddress
+from manip.links import ChaosConnection, ChaosError, ConnectionClosed, ConnectionLost
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
 from manip.spec.model import Hazard, Level
@@ -318,10 +319,8 @@ class Probe:
         """Close the connection (abort after a short wait: the target may already be gone)."""
         if self.end_reason is None:
             self.end_reason = ConnectionClosed("closed by the case", by_peer=False)
-        try:
+        with contextlib.suppress(ChaosError):
             await self.conn.close(timeout=1.0)
-        except ChaosError:
-            pass
 
 
 class CaseContext:

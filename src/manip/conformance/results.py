@@ -119,8 +119,8 @@ class RunReport:
     unreachable: bool = False
 
     def counts(self) -> dict[str, int]:
-        counter = Counter(r.outcome for r in self.results)
-        return {name: counter.get(name, 0) for name in OUTCOMES}
+        counter: Counter[str] = Counter(r.outcome for r in self.results)
+        return {name: counter[name] for name in OUTCOMES}
 
     @property
     def exit_code(self) -> ExitCode:

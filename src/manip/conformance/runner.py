@@ -36,7 +36,7 @@ import hashlib
 import shlex
 import time
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
@@ -77,6 +77,9 @@ class RunConfig:
     """The command a failing case's reproduce line starts with (target and options are appended)."""
     reproduce_options: Sequence[str] = ()
     command: str = ""
+    liveness_check: Callable[[RunOptions], Awaitable[tuple[bool, str]]] | None = None
+    """Replaces the Chaos liveness probe: (alive, detail) for targets that are not manip servers
+    (the Cougar target, :mod:`manip.conformance.cougar_target`)."""
 
 
 @dataclass
@@ -154,6 +157,8 @@ class Runner:
 
     async def _probe_once(self) -> tuple[bool, str]:
         options = self.config.options
+        if self.config.liveness_check is not None:
+            return await self.config.liveness_check(options)
         ctx = CaseContext(case_id="liveness", level="MUST", seed=0, options=options, connector=self.connect)
         try:
             async with asyncio.timeout(options.connect_timeout + 2 * options.reply_timeout + 1.0):
@@ -362,5 +367,5 @@ async def _quietly(awaitable: object) -> None:
     try:
         async with asyncio.timeout(CLOSE_GRACE):
             await awaitable  # type: ignore[misc]
-    except Exception:  # noqa: BLE001 - cleanup of a connection the target may have broken
+    except Exception:
         pass

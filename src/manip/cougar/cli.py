@@ -23,8 +23,9 @@ from typing import Final
 import click
 
 from manip.cougar.environment import Contacts, Spring, Surface
+from manip.cougar.faults import FAULTS, parse_faults
 from manip.cougar.link import CougarEnd, CougarModel, Drv11jError, parse_address
-from manip.cougar.sim import CougarSim
+from manip.cougar.sim import CougarConfig, CougarSim
 
 __all__ = ["CougarServer", "main", "parse_surface", "serve_cougar"]
 
@@ -42,9 +43,11 @@ class CougarServer:
         self.busy = False
         self.server: asyncio.Server | None = None
         self.address = ""
+        self.last_time: float | None = None
+        """The model's time at the last tick of any link: the next link's clock continues from it."""
 
     async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        end = CougarEnd(self.model)
+        end = CougarEnd(self.model, resume_after=self.last_time)
         writer.write(end.hello())
         if self.busy:
             writer.write(end.bye(BUSY))
@@ -70,6 +73,7 @@ class CougarServer:
         except (ConnectionError, OSError) as exc:
             log.info("link from %s broke: %s", peer, exc)
         finally:
+            self.last_time = end.last_time
             self.busy = False
             log.info("Puma %s gone (%s); %d ticks", peer, end.closed or "EOF", end.ticks)
             await _close(writer)
@@ -110,7 +114,12 @@ def parse_surface(text: str) -> tuple[tuple[float, float, float], tuple[float, f
     return (v[0], v[1], v[2]), normal, (v[6] if len(v) == 7 else None)
 
 
-def _make_model(seed: int | None, surfaces: tuple[str, ...], springs: tuple[str, ...]) -> CougarModel:
+def _make_model(
+    seed: int | None,
+    surfaces: tuple[str, ...],
+    springs: tuple[str, ...],
+    faults: frozenset[str] = frozenset(),
+) -> CougarModel:
     parts: list[Surface | Spring] = []
     for text in surfaces:
         point, normal, stiffness = parse_surface(text)
@@ -119,7 +128,7 @@ def _make_model(seed: int | None, surfaces: tuple[str, ...], springs: tuple[str,
         point, _, stiffness = parse_surface(text)
         parts.append(Spring(point) if stiffness is None else Spring(point, stiffness))
     environment = Contacts(tuple(parts)) if parts else None
-    sim: CougarModel = CougarSim(environment=environment, seed=seed)
+    sim: CougarModel = CougarSim(CougarConfig(faults=faults), environment=environment, seed=seed)
     return sim
 
 
@@ -148,9 +157,21 @@ async def _serve_forever(model: CougarModel, address: str) -> None:
     metavar="AX,AY,AZ[,_,_,_,K]",
     help="A spring from the tool point to an anchor (mm), stiffness K (oz/mm).",
 )
+@click.option(
+    "--cougar-fault",
+    "faults",
+    multiple=True,
+    type=click.Choice(sorted(FAULTS)),
+    help="Simulate a protocol defect (to check a conformance suite catches it); repeatable.",
+)
 @click.option("-v", "--verbose", is_flag=True, help="Log connections.")
 def main(
-    address: str, seed: int | None, surfaces: tuple[str, ...], springs: tuple[str, ...], verbose: bool
+    address: str,
+    seed: int | None,
+    surfaces: tuple[str, ...],
+    springs: tuple[str, ...],
+    faults: tuple[str, ...],
+    verbose: bool,
 ) -> None:
     """Serve a simulated Cougar wrist computer over the emulated DRV-11J link."""
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, stream=sys.stderr)
@@ -158,6 +179,6 @@ def main(
         parse_address(address)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--listen") from None
-    model = _make_model(seed, surfaces, springs)
+    model = _make_model(seed, surfaces, springs, parse_faults(faults))
     with contextlib.suppress(KeyboardInterrupt):
         asyncio.run(_serve_forever(model, address))

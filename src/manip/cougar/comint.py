@@ -97,8 +97,10 @@ class OutOfSyncEvent:
 class Comint:
     """The input buffer and its parser; :meth:`take` yields the next thing to do, or None."""
 
-    def __init__(self) -> None:
+    def __init__(self, *, execute_partial: bool = False) -> None:
         self._buffer: list[int] = []
+        self._execute_partial = execute_partial
+        """A defect for mutation testing (fault ``comint-executes-partial``): never set it otherwise."""
 
     @property
     def pending(self) -> tuple[int, ...]:
@@ -124,7 +126,9 @@ class Comint:
             return OutOfSyncEvent(dumped[0], dumped)
         need = 1 + entry.data_words
         if len(self._buffer) < need:
-            return None
+            if not self._execute_partial:
+                return None
+            self._buffer += [0] * (need - len(self._buffer))
         data = tuple(self._buffer[1:need])
         del self._buffer[:need]
         return Executable(entry, data)

@@ -57,6 +57,8 @@ VERSION: Final = 1
 MAX_PAYLOAD: Final = 0xFFFF
 """Most payload words in one frame (longer word runs are split over several WORDS frames)."""
 _US: Final = 1_000_000
+RESUME_GAP: Final = 1.0 / 60.0
+"""Model time between the last tick of one link and the first of the next (one 60 Hz period)."""
 DEFAULT_PORT: Final = 42011
 """TCP port of ``manip-cougar`` when the address names none ("DRV-11")."""
 
@@ -329,10 +331,26 @@ class CougarEnd(_End):
 
     role = Role.COUGAR
 
-    def __init__(self, cougar: CougarModel) -> None:
+    def __init__(self, cougar: CougarModel, *, resume_after: float | None = None) -> None:
         super().__init__()
         self.cougar = cougar
         self.ticks = 0
+        self.last_time: float | None = resume_after
+        """The model time of the last tick run (``resume_after`` before the first): the time a
+        Cougar that outlives the link resumes after on the next one (``CougarServer``)."""
+        self._shift = 0.0
+
+    def _model_time(self, time: float) -> float:
+        """Each link's clock has its own origin (docs/drv11j.md): a first tick behind the model's last
+        time is moved to one period after it; a later tick going backwards is a bad stream."""
+        last = self.last_time
+        if self.ticks == 0 and last is not None and time <= last:
+            self._shift = last + RESUME_GAP - time
+        now = time + self._shift
+        if last is not None and now < last:
+            self.closed = f"tick time went backwards ({time} s after {last - self._shift} s)"
+            raise Drv11jError(self.closed)
+        return now
 
     def receive(self, data: bytes) -> bytes:
         out: list[bytes] = []
@@ -340,8 +358,10 @@ class CougarEnd(_End):
             if isinstance(frame, Words) and frame.source is Role.PUMA:
                 self.cougar.receive(frame.words)
             elif isinstance(frame, Tick):
-                words = self.cougar.tick(frame.time)
+                now = self._model_time(frame.time)
+                words = self.cougar.tick(now)
                 self.ticks += 1
+                self.last_time = now
                 if words:
                     out.append(encode_frame(Words(Role.COUGAR, tuple(words))))
                 out.append(encode_frame(Ticked(frame.index)))

@@ -77,6 +77,7 @@ from manip.cougar.compliance import (
     voltmat_torque_rows,
 )
 from manip.cougar.environment import Environment, FreeSpace
+from manip.cougar.faults import parse_faults
 from manip.cougar.jacob import STEPS, Jacob, front_buffer
 from manip.cougar.memory import GUARD_DVEC, GUARD_TOL, GUARD_WORDS, MEMORY_BYTES, Memory, region
 from manip.spec.constants import CougarResponse
@@ -124,6 +125,8 @@ class CougarConfig:
     """The GUTS cost model for re-entry detection; all zero disables it."""
     reentry_char: str = "!"
     wake_message: str = "Cougar {version}\r\n"
+    faults: frozenset[str] = frozenset()
+    """Defects to simulate (:data:`manip.cougar.faults.FAULTS`), for testing conformance suites."""
 
     def __post_init__(self) -> None:
         if len(self.initial_angles) != 6:
@@ -134,6 +137,7 @@ class CougarConfig:
             raise ValueError("CougarConfig.version must be a 16-bit word")
         if self.jacob_steps_per_tick < 0 or self.tick_hz <= 0:
             raise ValueError("CougarConfig needs jacob_steps_per_tick >= 0 and tick_hz > 0")
+        object.__setattr__(self, "faults", parse_faults(self.faults))
 
 
 @dataclass
@@ -171,7 +175,9 @@ class CougarSim:
         self.environment: Environment = environment if environment is not None else FreeSpace()
         self.memory = Memory()
         self._rng = np.random.default_rng(seed)
-        self._comint = Comint()
+        self._faults = self.config.faults
+        self._comint = Comint(execute_partial="comint-executes-partial" in self._faults)
+        self._tripped_once: set[int] = set()  # fault guard-trips-twice
         self._jacob = Jacob(self.config.geometry)
         self._stats = CougarStats()
         self._pose = np.array(self.config.initial_angles, dtype=np.float64)
@@ -294,13 +300,16 @@ class CougarSim:
         u_previous = mem.get_int16s("gauge_raw")
         y_previous = mem.get_int16s("gauge_filtered")
         y = [adc8_filter(u[i], int(u_previous[i]), int(y_previous[i])) for i in range(GAUGES)]
+        if "filter-float-instead-of-integer" in self._faults:
+            y = [round((u[i] + int(u_previous[i]) + 6 * int(y_previous[i])) / 8) for i in range(GAUGES)]
         mem.put_int16s("gauge_raw", u)
         mem.put_int16s("gauge_filtered", y)
 
     def _convert(self) -> None:
         mem = self.memory
         counts = (mem.get_int16s("gauge_filtered") - mem.get_int16s("gauge_offsets")).astype(np.float64)
-        mem.put("force_sensed", mem.get("voltmat").reshape(6, 8) @ counts)
+        sign = -1.0 if "forces-wrong-sign" in self._faults else 1.0
+        mem.put("force_sensed", sign * (mem.get("voltmat").reshape(6, 8) @ counts))
 
     def _gravity(self) -> None:
         mem = self.memory
@@ -325,7 +334,11 @@ class CougarSim:
             dvec = mem.read_floats(entry + 2 * GUARD_DVEC, 6)
             tol = float(mem.read_floats(entry + 2 * GUARD_TOL, 1)[0])
             if float(np.dot(force, dvec)) > tol:
-                active &= ~(1 << i)
+                if "guard-trips-twice" in self._faults and i not in self._tripped_once:
+                    self._tripped_once.add(i)
+                else:
+                    self._tripped_once.discard(i)
+                    active &= ~(1 << i)
                 stop = mem.read_word(entry) & GUARD_STOP_BIT
                 code = CougarResponse.GUARD_STOP if stop else CougarResponse.GUARD_CONTINUE
                 self._send(code, [i])
@@ -338,7 +351,8 @@ class CougarSim:
             if isinstance(item, OutOfSyncEvent):
                 self._stats.out_of_sync += 1
                 self._stats.discarded_words += len(item.discarded)
-                self._send(CougarResponse.OUT_OF_SYNC, [item.code])
+                if "no-out-of-sync" not in self._faults:
+                    self._send(CougarResponse.OUT_OF_SYNC, [item.code])
                 continue
             self._execute(item)
             commands += 1
@@ -370,7 +384,7 @@ class CougarSim:
         sample = compliance_sample(
             j,
             p,
-            k=mem.get("k"),
+            k=np.zeros(6) if "npr-ignores-k" in self._faults else mem.get("k"),
             b=mem.get("b").reshape(6, 6),
             fc=mem.get("fc"),
             force=mem.get("force"),
@@ -401,6 +415,8 @@ class CougarSim:
         mem.put("grav_cg", cg)
 
     def _resetw(self) -> None:
+        if "rst-ignored" in self._faults:
+            return
         for name in ("dtheta_previous", "dtheta_filtered", "dtheta_out", "rate_difference"):
             self.memory.put(name, np.zeros(6))
 
@@ -415,6 +431,8 @@ class CougarSim:
         address, count = self.memory.read_words(region("args").address, 2)
         if Memory.valid(address):
             n = min(count, (MEMORY_BYTES - address) // 2)
+            if "exmn-wrong-count" in self._faults and n > 0:
+                n -= 1
         else:
             n = 0
             self._stats.bad_addresses += 1
@@ -422,7 +440,8 @@ class CougarSim:
         self._send(CougarResponse.EXMN_DATA, [n, *words])
 
     def _version(self) -> None:
-        self._send(CougarResponse.VERSION, [self.memory.word("version")])
+        code = 3 if "wrong-version-code" in self._faults else CougarResponse.VERSION
+        self._send(code, [self.memory.word("version")])
 
     def _rfr(self) -> None:
         self._send(CougarResponse.FORCES, self._region_words("force"))
@@ -436,6 +455,8 @@ class CougarSim:
         mem.set_word("guard_active", mem.word("guard_active") | 1 << index)
 
     def _guardc(self) -> None:
+        if "ignores-guardc" in self._faults:
+            return
         index = self.memory.word("args") & 0xF
         self.memory.set_word("guard_active", self.memory.word("guard_active") & ~(1 << index) & 0xFFFF)
 

@@ -19,8 +19,9 @@ Part II §5.3 and the move process's part in compliance (§5.2, §6.4):
   Theta Dot (NTD) is stored for the compliant interpolation; replies (forces, raw gauges, examine data,
   version) resolve the oldest request waiting for that response code; guard trips become
   :class:`~manip.reference_server.wrist.GuardHit` events (a stop-the-move guard halts the arm first:
-  current and queued segments dropped, :meth:`~manip.arm.sim.ArmSim.halt`); out-of-sync and undecodable
-  words become asynchronous warnings.
+  current and queued segments dropped, :meth:`~manip.arm.sim.ArmSim.halt`, and the segments dropped
+  are named in an asynchronous warning, ``wrist: W AWA``, since they will never be reported complete --
+  erratum ``guard-stop``); out-of-sync and undecodable words become asynchronous warnings.
 * **Requests.**  Configuration opcodes (spring, damping, joint damping, frame vector, weight, guards,
   gauge offsets, commanded force, deposit) put their command on the user queue and are answered done at
   once (§5.1).  Opcodes that need Cougar's data (read forces -- preceded by SEN as §6.3 says --, raw
@@ -37,7 +38,8 @@ Part II §5.3 and the move process's part in compliance (§5.2, §6.4):
   the joint limits); the *debugging* scheme exchanges NPR/NTD the same way but follows the nominal path,
   only recording the corrections (:attr:`CougarWrist.meter`, the last 128 cycles) -- compliance run
   open loop.  A compliant episode starts with a reset (RST) and zero offset; so does the first cycle
-  after a break.
+  after a break.  When the episode ends the arm keeps the last offset -- it stays where the contact let
+  it go -- and what follows starts from there (the arm's side, erratum ``compliant-segment-end``).
 """
 
 from __future__ import annotations
@@ -45,12 +47,12 @@ from __future__ import annotations
 import itertools
 import math
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final
 
 from manip.arm.kinematics import Joints, forward
-from manip.arm.sim import AbortCause, ArmSim
+from manip.arm.sim import AbortCause, ArmSim, MotionAborted
 from manip.arm.trajectory import Scheme
 from manip.codecs.cougar import CougarMsg, Malformed, OutOfSync, WordStream, encode
 from manip.codecs.error_string import SPECIALS, ErrorMessage
@@ -78,6 +80,7 @@ __all__ = [
     "MeterEntry",
     "WristStats",
     "calibration_poses",
+    "dropped_warning",
     "make_cougar_wrist",
 ]
 
@@ -125,6 +128,19 @@ def _sync_error(command: int) -> RequestError:
         ErrorMessage(
             errors.WRIST, "E", "OOS", "Wrist computer lost sync; command ~ was discarded", (command,)
         )
+    )
+
+
+def dropped_warning(guard: int, dropped: Sequence[int]) -> ErrorMessage:
+    """The asynchronous warning naming the segments a stop-the-move guard dropped (erratum
+    ``guard-stop``): how many, and the first and last of them in queue order (they were numbered
+    consecutively, so a client can tell exactly which segments will never be reported complete)."""
+    return ErrorMessage(
+        errors.WRIST,
+        "W",
+        "AWA",
+        "Guard ~ stopped the move; ~ segment(s) dropped, ~ to ~",
+        (guard, min(len(dropped), 0xFFFF), dropped[0], dropped[-1]),
     )
 
 
@@ -454,15 +470,19 @@ class CougarWrist:
         )
 
     def _guard(self, msg: CougarMsg, arm: ArmSim) -> None:
-        index = msg.values["index"]
-        assert isinstance(index, int)
+        word = msg.values["index"]
+        assert isinstance(word, int)
+        index = word & GUARD_INDEX_MASK
         stop = msg.code == CougarResponse.GUARD_STOP
         self.stats.guard_hits += 1
         arm_events = tuple(arm.halt(AbortCause.GUARD)) if stop else ()
         if stop:
             self._reset = True
             self._episode = None
-        self._events.append(GuardHit(index & GUARD_INDEX_MASK, stop, arm.time, arm_events))
+        self._events.append(GuardHit(index, stop, arm.time, arm_events))
+        dropped = [s for e in arm_events if isinstance(e, MotionAborted) for s in e.dropped]
+        if dropped:
+            self._warn(dropped_warning(index, dropped))
 
     def _lost_sync(self, msg: CougarMsg) -> None:
         """Cougar dumped its input buffer: nothing sent before will be answered."""

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from manip.codecs.errors import CodecError
-from manip.codecs.messages import decode_error
 from manip.conformance.case import case
 from manip.conformance.cases._support import UNASSIGNED_OPCODES, error_of
 from manip.conformance.checks import check_error_packet
@@ -66,10 +64,10 @@ async def severity_matches(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     answer = await _command_error(ctx, probe)
     ctx.check(f for f in check_error_packet(answer.first) if f.clause == "error.severity-matches-opcode")
-    try:
-        error = decode_error(answer.opcode, answer.data, align_args=False).error
-    except CodecError:
-        return
+    decoded = error_of(answer)
+    if decoded is None:
+        return  # the format case says what is wrong with the string
+    error = decoded.error
     ctx.expect(
         error.severity == "C",
         clause="request.unknown-opcode",

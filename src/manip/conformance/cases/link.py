@@ -3,6 +3,8 @@ and asynchronous warnings in the error format when the arm produces any."""
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 from manip.conformance.case import case
 from manip.conformance.cases._support import UNASSIGNED_OPCODES
 from manip.conformance.checks import check_error_packet
@@ -34,16 +36,21 @@ def _make_frames_case(scheme: str, clauses: tuple[str, ...]) -> None:
         probe = await ctx.connect()
         await _exchange(probe)
         stats = probe.conn.node.link_stats()
-        ctx.expect(stats.bad_total == 0, clause=clauses[0],
-                   expected=f"every {scheme} frame from the server well formed",
-                   actual=f"{stats.bad_total} bad frame(s): {dict(stats.bad)}")
+        ctx.expect(
+            stats.bad_total == 0,
+            clause=clauses[0],
+            expected=f"every {scheme} frame from the server well formed",
+            actual=f"{stats.bad_total} bad frame(s): {dict(stats.bad)}",
+        )
 
     frames.__doc__ = f"Every frame the server sends on a {scheme} link decodes (header, length, checksum)."
     case(f"server.link.{scheme}-frames", clauses=[*clauses, *_FRAME_CLAUSES])(frames)
 
 
 _make_frames_case("tcp", ("link.tcp.framing",))
-_make_frames_case("chudp", ("chudp.header", "chudp.length", "chudp.word-order", "chudp.trailer", "chudp.checksum"))
+_make_frames_case(
+    "chudp", ("chudp.header", "chudp.length", "chudp.word-order", "chudp.trailer", "chudp.checksum")
+)
 _make_frames_case("chaosd", ("link.chaosd.framing",))
 
 
@@ -53,13 +60,21 @@ async def packet_numbers(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     await _exchange(probe)
     numbers = [p.packet_no for p in probe.packets if p.direction == "s2c" and not p.is_close]
-    bad = [(a, b) for a, b in zip(numbers, numbers[1:], strict=False) if b != (a + 1) & 0xFFFF]
-    ctx.expect(not bad, clause="ncp.packet-numbers", expected="consecutive packet numbers",
-               actual=f"jumps {bad[:5]} in {numbers[:20]}")
+    bad = [(a, b) for a, b in pairwise(numbers) if b != (a + 1) & 0xFFFF]
+    ctx.expect(
+        not bad,
+        clause="ncp.packet-numbers",
+        expected="consecutive packet numbers",
+        actual=f"jumps {bad[:5]} in {numbers[:20]}",
+    )
 
 
-@case("server.async.warning-format", clauses=["async-warning.format", "async-error.request-number"],
-      hazard="motion", deadline=8.0)
+@case(
+    "server.async.warning-format",
+    clauses=["async-warning.format", "async-error.request-number"],
+    hazard="motion",
+    deadline=8.0,
+)
 async def warning_format(ctx: CaseContext) -> None:
     """Asynchronous warnings and errors seen during fast moves have the error format (W for 205).
 
@@ -67,8 +82,11 @@ async def warning_format(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     await probe.call("enable-power")
     await probe.drain(0.3)
-    seen = [p for p in probe.packets if p.direction == "s2c"
-            and p.opcode in (ServerOp.ASYNCHRONOUS_WARNING, ServerOp.ASYNCHRONOUS_ERROR)]
+    seen = [
+        p
+        for p in probe.packets
+        if p.direction == "s2c" and p.opcode in (ServerOp.ASYNCHRONOUS_WARNING, ServerOp.ASYNCHRONOUS_ERROR)
+    ]
     if not seen:
         ctx.skip("no asynchronous warning or error was produced")
     for packet in seen:

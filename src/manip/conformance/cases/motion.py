@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import time
+from itertools import pairwise
 
 from manip.conformance.case import case
 from manip.conformance.cases._support import expect_refusal, power_on, read_floats
@@ -17,6 +18,19 @@ FAR_MM = 100_000.0
 OUT_OF_RANGE_DEG = 1000.0
 """A joint angle past any revolute joint's limit."""
 SMALL_STEP_DEG = 2.0
+
+
+async def _wait_still(ctx: CaseContext, probe: Probe, limit: float = 5.0) -> None:
+    """Poll joint angles until two readings 0.1 s apart agree (the queued motion has ended)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + limit
+    last = await read_floats(ctx, probe, "joint-angles")
+    while loop.time() < deadline:
+        await asyncio.sleep(0.1)
+        now = await read_floats(ctx, probe, "joint-angles")
+        if max(abs(a - b) for a, b in zip(now, last, strict=True)) < 1e-4:
+            return
+        last = now
 
 
 def _shifted(joints: tuple[float, ...], joint: int, by: float) -> list[float]:
@@ -165,7 +179,7 @@ async def awa_reset_by_power(ctx: CaseContext) -> None:
     last_request = max(p.packet_no for p in probe.packets if p.direction == "c2s")
     for packet in (p for p in probe.unsolicited if p.opcode == ServerOp.ASYNCHRONOUS_ERROR):
         ctx.expect(
-            word(packet.data) is not None and word(packet.data) <= last_request,
+            (word(packet.data) or 0) <= last_request and len(packet.data) >= 2,
             clause="async-error.request-number",
             expected="the number of the last request processed",
             actual=str(word(packet.data)),
@@ -252,7 +266,7 @@ async def segment_numbers(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     await power_on(ctx, probe)
     numbers = [await _small_move(ctx, probe, 0.5 * (-1) ** i) for i in range(3)]
-    ok = all(b == (a + 1) & 0xFFFF for a, b in zip(numbers, numbers[1:], strict=False))
+    ok = all(b == (a + 1) & 0xFFFF for a, b in pairwise(numbers))
     ctx.expect(
         ok,
         clause="segment.number-increases",
@@ -310,8 +324,9 @@ async def segment_completed(ctx: CaseContext) -> None:
     asked for, nothing is reported."""
     probe = await ctx.connect()
     await power_on(ctx, probe)
-    segment = await _small_move(ctx, probe, 1.0)
-    quiet = await probe.drain(0.6)
+    await _small_move(ctx, probe, 1.0)
+    await _wait_still(ctx, probe)
+    quiet = await probe.drain(0.3)
     unrequested = [p for p in quiet if p.opcode == ServerOp.ASYNCHRONOUS_RESPONSE]
     ctx.expect(
         not unrequested,

@@ -21,11 +21,12 @@ from manip.conformance.context import CaseContext
 from manip.links.address import parse_address
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import ServerOp
+from manip.spec.model import Hazard
 
 RESERVED_OPERAND: Final = struct.pack("<HH", 0x8000, 0)
 """Sign 1, exponent 0: the PDP-11 reserved operand (sign/exponent word first, low byte first)."""
-SAFE: Final = ("read-only", "config")
-UNSAFE: Final = ("motion", "power")
+SAFE: Final[tuple[Hazard, ...]] = ("read-only", "config")
+UNSAFE: Final[tuple[Hazard, ...]] = ("motion", "power")
 
 
 def _ops(hazards: Iterable[str]) -> list[RequestOpcode]:
@@ -75,7 +76,7 @@ async def unknown_opcodes(ctx: CaseContext) -> None:
     )
 
 
-def _make_length_case(suffix: str, hazards: tuple[str, ...]) -> None:
+def _make_length_case(suffix: str, hazards: tuple[Hazard, ...]) -> None:
     async def data_length(ctx: CaseContext) -> None:
         probe = await ctx.connect()
         for op in _ops(hazards):
@@ -97,10 +98,10 @@ def _make_length_case(suffix: str, hazards: tuple[str, ...]) -> None:
         kind="negative",
         hazard=hazards[-1],
         deadline=10.0,
-    )(data_length)  # type: ignore[arg-type]
+    )(data_length)
 
 
-def _make_float_case(suffix: str, hazards: tuple[str, ...]) -> None:
+def _make_float_case(suffix: str, hazards: tuple[Hazard, ...]) -> None:
     async def reserved_float(ctx: CaseContext) -> None:
         probe = await ctx.connect()
         for op in _ops(hazards):
@@ -127,7 +128,7 @@ def _make_float_case(suffix: str, hazards: tuple[str, ...]) -> None:
         kind="negative",
         hazard=hazards[-1],
         deadline=10.0,
-    )(reserved_float)  # type: ignore[arg-type]
+    )(reserved_float)
 
 
 _make_length_case("safe", SAFE)

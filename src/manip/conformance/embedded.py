@@ -1,0 +1,65 @@
+"""The embedded reference server, run on its own thread and event loop.
+
+The suite must judge the target, not share its fate: if the server's simulator spends seconds on one
+request (or loops), a server on the runner's own event loop would freeze the runner and every case
+deadline with it.  On a separate thread the runner keeps its clock (the GIL is handed over every few
+milliseconds), so a stuck server shows up as a failed deadline and a dead liveness probe, exactly as a
+remote server would.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from types import TracebackType
+from typing import Final
+
+from manip.reference_server import ServerConfig
+from manip.reference_server.driver import serve
+
+__all__ = ["EmbeddedServer"]
+
+START_TIMEOUT: Final = 10.0
+STOP_TIMEOUT: Final = 5.0
+
+
+class EmbeddedServer:
+    """``with EmbeddedServer(config) as address:`` runs a reference server on a loopback port."""
+
+    def __init__(self, config: ServerConfig | None = None, address: str = "tcp://127.0.0.1:0") -> None:
+        self._config = config or ServerConfig()
+        self._bind = address
+        self._ready = threading.Event()
+        self._address: str | None = None
+        self._error: BaseException | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._thread = threading.Thread(target=self._main, name="manip-embedded-server", daemon=True)
+
+    def _main(self) -> None:
+        try:
+            asyncio.run(self._serve())
+        except BaseException as exc:  # reported to the starting thread
+            self._error = exc
+            self._ready.set()
+
+    async def _serve(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stop = asyncio.Event()
+        async with serve(self._bind, self._config) as server:
+            self._address = server.address
+            self._ready.set()
+            await self._stop.wait()
+
+    def __enter__(self) -> str:
+        self._thread.start()
+        if not self._ready.wait(START_TIMEOUT) or self._address is None:
+            raise RuntimeError(f"the embedded server did not start: {self._error!r}")
+        return self._address
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        if self._loop is not None and self._stop is not None and not self._loop.is_closed():
+            self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(STOP_TIMEOUT)

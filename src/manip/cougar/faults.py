@@ -1,0 +1,41 @@
+"""Defects the simulated Cougar can be told to have, so the conformance suite can be shown to catch them.
+
+Each fault is a name in :attr:`manip.cougar.CougarConfig.faults` (``manip-cougar --cougar-fault NAME``,
+``manip-conform run --cougar sim --cougar-fault NAME``) and is honoured at exactly one place of the
+simulator, named below.  A clean Cougar has none; the mutation test (``tests/test_conform_cougar.py``)
+runs the Cougar cases against each fault and requires at least one case to fail.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import Final
+
+__all__ = ["FAULTS", "parse_faults"]
+
+#: Fault name -> what goes wrong (and where it is honoured).
+FAULTS: Final[Mapping[str, str]] = {
+    "wrong-version-code": "VERS is answered with response code 3 instead of 8 (CougarSim._version)",
+    "no-out-of-sync": "an unknown command code dumps the buffer but sends no out-of-sync message "
+    "(CougarSim._comint_run)",
+    "guard-trips-twice": "a tripped guard stays armed for one more trip (CougarSim._guardm)",
+    "filter-float-instead-of-integer": "ADC8 filters in floating point and rounds to nearest instead of "
+    "shifting (CougarSim._adc8)",
+    "forces-wrong-sign": "the conversion drops the -1: forces are the load on the hand, not the force the "
+    "robot applies (CougarSim._convert)",
+    "exmn-wrong-count": "EXMN retrieves one word fewer than asked (CougarSim._exp)",
+    "comint-executes-partial": "COMINT runs a command whose data words have not all arrived, the missing "
+    "ones taken as 0 (Comint.take)",
+    "ignores-guardc": "GUARDC leaves the guard armed (CougarSim._guardc)",
+    "rst-ignored": "RST leaves the velocities as they were (CougarSim._resetw)",
+    "npr-ignores-k": "the compliance equation leaves out the spring term K (CougarSim._newpr)",
+}
+
+
+def parse_faults(names: Iterable[str]) -> frozenset[str]:
+    """The set of fault names; ValueError naming the known ones for an unknown name."""
+    chosen = frozenset(n.strip() for n in names if n.strip())
+    unknown = sorted(chosen - FAULTS.keys())
+    if unknown:
+        raise ValueError(f"unknown Cougar fault(s) {unknown}; known: {', '.join(sorted(FAULTS))}")
+    return chosen
