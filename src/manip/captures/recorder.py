@@ -47,6 +47,7 @@ from manip.codecs.framing import (
 from manip.codecs.packet import Packet
 from manip.spec import SPEC
 
+from .appender import message_adder
 from .format import (
     DIRECTIONS,
     EVENT_SCHEMA_NAME,
@@ -212,6 +213,7 @@ class Recorder:
         self.flushes = 0
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
         self._writer.start(profile=PROFILE, library=LIBRARY)
+        self._add, self.fast_append = message_adder(self._writer)
         self._writer.add_metadata(
             METADATA_NAME,
             {
@@ -347,14 +349,13 @@ class Recorder:
         channel = info.channels.get(direction)
         if channel is None:
             channel = info.channels[direction] = self._raw_channel(info, direction)
-        writer = self._writer
-        writer.add_message(channel, t, frame, t, seq)
+        add = self._add
+        add(channel, t, frame, seq)
         counts = self.counts
         counts[RAW_TOPIC[direction]] += 1
         if self.decoded_view:
             nbytes = len(packet.data) if packet is not None else len(frame)
-            view = view_bytes(annotation, info.id, direction, seq, packet, nbytes)
-            writer.add_message(self._view_channels[direction], t, view, t, seq)
+            add(self._view_channels[direction], t, view_bytes(annotation, info.id, direction, seq, packet, nbytes), seq)
             counts[VIEW_TOPIC[direction]] += 1
         for event in annotation.events:
             self._event(event, t)
@@ -383,7 +384,7 @@ class Recorder:
             raise CaptureError("the recorder is closed")
         t = time.time_ns() if t_ns is None else t_ns
         self._event_seq += 1
-        self._writer.add_message(self._event_channel, t, _JSON.encode(body).encode(), t, self._event_seq)
+        self._add(self._event_channel, t, _JSON.encode(body).encode(), self._event_seq)
         self.counts[EVENT_TOPIC] += 1
 
     # ------------------------------------------------------------------------------ durability

@@ -319,6 +319,14 @@ class CougarProbe:
                 self._decode(index, words)
             if self._end.closed is not None and self._end.ticks_done <= index:
                 raise _link_failure(self.address, f"Cougar ended the link: {self._end.closed}")
+        if self._end.ticks_done != index + 1:
+            raise CaseFailure(
+                f"Cougar answered TICK #{index} with TICKED #{self._end.ticks_done - 1}",
+                clause="link.drv11j.framing",
+                expected=f"TICKED #{index}",
+                actual=f"TICKED #{self._end.ticks_done - 1}",
+                kind="wrong_value",
+            )
 
     def _decode(self, tick: int, words: Sequence[int]) -> None:
         for item in self._stream.feed(words):
@@ -345,7 +353,9 @@ class CougarProbe:
     def transcript(self, last: int = _TRANSCRIPT_NOTE) -> str:
         """The last ``last`` link events, one a line."""
         shown = self.events[-last:]
-        head = [f"... {len(self.events) - len(shown)} earlier events"] if len(shown) < len(self.events) else []
+        head = (
+            [f"... {len(self.events) - len(shown)} earlier events"] if len(shown) < len(self.events) else []
+        )
         return "\n".join(head + [str(e) for e in shown])
 
 
@@ -381,7 +391,9 @@ async def cougar_probe(ctx: CaseContext) -> AsyncIterator[CougarProbe]:
     try:
         yield probe
     except CaseFailure:
-        ctx.note("DRV-11J exchange (-> Puma to Cougar, <- Cougar to Puma, octal words):\n" + probe.transcript())
+        ctx.note(
+            "DRV-11J exchange (-> Puma to Cougar, <- Cougar to Puma, octal words):\n" + probe.transcript()
+        )
         raise
     finally:
         await probe.close()

@@ -17,15 +17,15 @@ from dataclasses import dataclass, field, replace
 from manip.conformance.case import Case, all_cases
 from manip.conformance.context import RunOptions
 from manip.conformance.cougar_probe import cougar_liveness
-from manip.cougar.cli import CougarServer, serve_cougar
-from manip.cougar.faults import parse_faults
-from manip.cougar.link import parse_address
 from manip.conformance.results import RunReport
 from manip.conformance.runner import RunConfig, RunEvents, Runner
 from manip.conformance.selection import PatternSet
+from manip.cougar.cli import CougarServer, serve_cougar
+from manip.cougar.faults import parse_faults
+from manip.cougar.link import parse_address
 from manip.cougar.sim import CougarConfig, CougarSim
 
-__all__ = ["EMBEDDED", "CougarTarget", "cougar_cases", "liveness_check", "run_cougar_suite"]
+__all__ = ["EMBEDDED", "CougarTarget", "cougar_cases", "liveness_check", "run_cougar_suite", "wait_idle"]
 
 EMBEDDED = "sim"
 """The ``--cougar`` value that starts the simulated Cougar in-process."""
@@ -63,7 +63,7 @@ class CougarTarget:
         sim = CougarSim(CougarConfig(faults=self.faults), seed=0)
         async with serve_cougar(sim, "tcp://127.0.0.1:0") as server:
             yield server.address
-            await _idle(server)
+            await wait_idle(server)
 
     def reproduce_prefix(self) -> tuple[str, ...]:
         """The start of a reproduce command (an external target's address is appended by the runner)."""
@@ -73,9 +73,9 @@ class CougarTarget:
         return ("manip-conform", "run", "--cougar")
 
 
-async def _idle(server: CougarServer, timeout: float = 1.0) -> None:
-    """Let the last link's handler finish closing before the server stops (a handler cancelled in
-    the middle of its close is reported by asyncio as an error)."""
+async def wait_idle(server: CougarServer, timeout: float = 1.0) -> None:
+    """Let the last link's handler finish closing before ``server`` stops (on Python 3.11 a handler
+    cancelled in the middle of its close is logged by asyncio as an error)."""
     loop = asyncio.get_running_loop()
     give_up = loop.time() + timeout
     while server.busy and loop.time() < give_up:

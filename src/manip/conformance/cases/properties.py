@@ -24,7 +24,7 @@ from typing import Any, Final
 
 from hypothesis import given, seed
 from hypothesis import strategies as st
-from hypothesis.errors import FlakyFailure
+from hypothesis.errors import Flaky
 
 from manip.arm.kinematics import Joints
 from manip.arm.transform import FLOAT_ROTATION_TOL, Transform
@@ -202,9 +202,15 @@ async def run_property(
             test()
         except Evidence as exc:
             return exc, "\n".join(getattr(exc, "__notes__", []))
-        except FlakyFailure as exc:
-            found = _first_evidence(exc)
-            return found, "the failure did not reproduce on every replay (flaky target?)"
+        except Flaky as exc:
+            found = _first_evidence(exc) or log.best
+            if found is None:
+                ctx.note(f"Hypothesis: {type(exc).__name__}, but no failure was seen")
+                return None, ""
+            return (
+                found,
+                f"the failure did not reproduce on every replay (flaky target?); {type(exc).__name__}",
+            )
         except StopRun:
             if log.best is not None:
                 return (
