@@ -32,7 +32,7 @@ import itertools
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import ClassVar, Literal
+from typing import ClassVar, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -73,6 +73,8 @@ Joints = tuple[float, float, float, float, float, float]
 #: What the public functions accept for joint angles (deg): any 6-sequence of floats or a float array.
 JointsLike = Sequence[float] | NDArray[np.float64]
 Matrix = NDArray[np.float64]
+#: A 3x3 matrix as rows of plain floats.
+Rows = Sequence[Sequence[float]]
 
 #: |J5| (deg) below which the wrist counts as singular and J4 is held at the reference (current) value.
 #: A pose rebuilt from such a solution is off by at most this angle.  Poses with J5 = 0 rounded to
@@ -359,26 +361,97 @@ def configuration(q_deg: JointsLike, geometry: PumaGeometry = PUMA560_LEE) -> tu
     return u > 0.0, (u > 0.0) == (e > 0.0), q_deg[4] < 0.0
 
 
-def _wrist(r36: Matrix, q4_ref: float, tol_deg: float) -> tuple[list[tuple[float, float, float]], bool]:
+def _wrist(r36: Rows, q4_ref: float, tol_deg: float) -> tuple[list[tuple[float, float, float]], bool]:
     """(θ4, θ5, θ6) in degrees with R36 = Rz(θ4)·Ry(θ5)·Rz(θ6): the noflip (θ5 ≥ 0) then flip solution.
 
     At the singularity (θ5 within ``tol_deg`` of 0° or 180°) only θ4 ± θ6 is defined, so θ4 is held at
     ``q4_ref`` and the one solution is returned; θ5 and θ6 are then fitted to Rz(−θ4)·R36, so a tilt
     that happens to lie in the held J4 plane is still reproduced exactly.
     """
-    s5 = math.hypot(float(r36[0, 2]), float(r36[1, 2]))
-    t5 = math.degrees(math.atan2(s5, float(r36[2, 2])))
+    s5 = math.hypot(r36[0][2], r36[1][2])
+    t5 = math.degrees(math.atan2(s5, r36[2][2]))
     if t5 <= tol_deg or t5 >= 180.0 - tol_deg:
         c4, s4 = math.cos(math.radians(q4_ref)), math.sin(math.radians(q4_ref))
-        held = np.array([[c4, s4, 0.0], [-s4, c4, 0.0], [0.0, 0.0, 1.0]]) @ r36  # Rz(−θ4)·R36 ≈ Ry(θ5)·Rz(θ6)
-        fit5 = math.atan2(float(held[0, 2]), float(held[2, 2]))
+        # held = Rz(−θ4)·R36 ≈ Ry(θ5)·Rz(θ6); only the entries used below
+        h00 = c4 * r36[0][0] + s4 * r36[1][0]
+        h02 = c4 * r36[0][2] + s4 * r36[1][2]
+        h10 = -s4 * r36[0][0] + c4 * r36[1][0]
+        h20, h22 = r36[2][0], r36[2][2]
+        fit5 = math.atan2(h02, h22)
         c5, s5 = math.cos(fit5), math.sin(fit5)
         # Rz(θ6) ≈ Ry(−θ5)·held: its first column is (c5·h00 − s5·h20, h10, ...)
-        fit6 = math.atan2(float(held[1, 0]), c5 * float(held[0, 0]) - s5 * float(held[2, 0]))
+        fit6 = math.atan2(h10, c5 * h00 - s5 * h20)
         return [(q4_ref, math.degrees(fit5), math.degrees(fit6))], True
-    t4 = math.degrees(math.atan2(float(r36[1, 2]), float(r36[0, 2])))
-    t6 = math.degrees(math.atan2(float(r36[2, 1]), -float(r36[2, 0])))
+    t4 = math.degrees(math.atan2(r36[1][2], r36[0][2]))
+    t6 = math.degrees(math.atan2(r36[2][1], -r36[2][0]))
     return [(t4, t5, t6), (t4 + 180.0, -t5, t6 + 180.0)], False
+
+
+class _Base(NamedTuple):
+    """One configuration's solution with every angle wrapped into (−180, 180]."""
+
+    q: Joints
+    lefty: bool
+    above: bool
+    flip: bool
+    singular: bool
+
+
+def _configurations(pose: Transform, g: PumaGeometry, ref: Joints, wrist_tol_deg: float) -> list[_Base]:
+    """The closed-form solutions of ``pose``, one per configuration (see :func:`inverse_all`), in plain
+    floats: this runs at every tick of a straight-line move, where numpy's per-call cost on 3x3
+    matrices would dominate."""
+    m = pose.matrix.tolist()
+    r = (m[0][:3], m[1][:3], m[2][:3])
+    px, py, pz = (m[i][3] - g.d6 * m[i][2] for i in range(3))  # the wrist centre p − d6·a
+
+    radial = math.hypot(px, py)
+    if radial < abs(g.d2) - REACH_TOL_MM:
+        raise Unreachable(
+            f"the wrist centre is {radial:.6g} mm from the J1 axis, "
+            f"inside the {abs(g.d2):.6g} mm shoulder offset"
+        )
+    u_abs = math.sqrt(max(radial * radial - g.d2 * g.d2, 0.0))
+    forearm = math.hypot(g.a3, g.d4)
+    reach = math.hypot(u_abs, pz)  # shoulder (J2 axis) to wrist centre, the same for both arms
+    if reach > g.a2 + forearm + REACH_TOL_MM:
+        raise Unreachable(
+            f"the wrist centre is {reach:.6g} mm from the shoulder, beyond the {g.a2 + forearm:.6g} mm reach"
+        )
+    if reach < abs(g.a2 - forearm) - REACH_TOL_MM:
+        raise Unreachable(
+            f"the wrist centre is {reach:.6g} mm from the shoulder, closer than {abs(g.a2 - forearm):.6g} mm"
+        )
+    sin_elbow = (reach * reach - g.a2 * g.a2 - forearm * forearm) / (2.0 * g.a2 * forearm)
+    beta = math.asin(min(1.0, max(-1.0, sin_elbow)))
+    phi = math.atan2(g.a3, g.d4)
+
+    out: list[_Base] = []
+    for lefty in (False, True):
+        u = u_abs if lefty else -u_abs
+        on_axis = radial == 0.0 and u == 0.0
+        q1 = math.radians(ref[0]) if on_axis else math.atan2(py, px) - math.atan2(g.d2, u)
+        c1, s1 = math.cos(q1), math.sin(q1)
+        elbows = sorted(
+            (phi + beta, phi + math.pi - beta),
+            # above when sign(u) == sign(e); e = −a3·sin q3 − d4·cos q3 = −|forearm|·cos(q3 − φ)
+            key=lambda q3: (_arm_values(0.0, q3, g)[1] > 0.0) != lefty,
+        )
+        for q3 in elbows:
+            b_x = g.a2 - g.a3 * math.cos(q3) + g.d4 * math.sin(q3)
+            b_y = -g.a3 * math.sin(q3) - g.d4 * math.cos(q3)
+            q2 = math.atan2(-pz, u) - math.atan2(b_y, b_x)
+            above = lefty == (b_y > 0.0)
+            # R03 = Rz(q1)·Rx(−90°)·Rz(q2 + q3)·Rx(90°); its columns are the rows of R03ᵀ
+            c23, s23 = math.cos(q2 + q3), math.sin(q2 + q3)
+            axes = ((c1 * c23, s1 * c23, -s23), (-s1, c1, 0.0), (c1 * s23, s1 * s23, c23))
+            r36 = [[a[0] * r[0][j] + a[1] * r[1][j] + a[2] * r[2][j] for j in range(3)] for a in axes]
+            wrists, singular = _wrist(r36, ref[3], wrist_tol_deg)
+            arm = (wrap_deg(math.degrees(q1)), wrap_deg(math.degrees(q2)), wrap_deg(math.degrees(q3)))
+            for t4, t5, t6 in wrists:
+                q = (*arm, wrap_deg(t4), wrap_deg(t5), wrap_deg(t6))
+                out.append(_Base(q, lefty, above, t5 < 0.0, singular))
+    return out
 
 
 def inverse_all(
@@ -404,53 +477,9 @@ def inverse_all(
     Raises :class:`Unreachable` when the wrist centre is out of the workspace.
     """
     ref = _as_joints(current) if current is not None else (0.0,) * 6
-    g = geometry
-    r = np.asarray(pose.rotation)
-    pw = np.asarray(pose.p) - g.d6 * np.asarray(pose.a)
-    px, py, pz = (float(v) for v in pw)
-
-    radial = math.hypot(px, py)
-    if radial < abs(g.d2) - REACH_TOL_MM:
-        raise Unreachable(
-            f"the wrist centre is {radial:.6g} mm from the J1 axis, "
-            f"inside the {abs(g.d2):.6g} mm shoulder offset"
-        )
-    u_abs = math.sqrt(max(radial * radial - g.d2 * g.d2, 0.0))
-    forearm = math.hypot(g.a3, g.d4)
-    reach = math.hypot(u_abs, pz)  # shoulder (J2 axis) to wrist centre, the same for both arms
-    if reach > g.a2 + forearm + REACH_TOL_MM:
-        raise Unreachable(
-            f"the wrist centre is {reach:.6g} mm from the shoulder, beyond the {g.a2 + forearm:.6g} mm reach"
-        )
-    if reach < abs(g.a2 - forearm) - REACH_TOL_MM:
-        raise Unreachable(
-            f"the wrist centre is {reach:.6g} mm from the shoulder, closer than {abs(g.a2 - forearm):.6g} mm"
-        )
-    sin_elbow = (reach * reach - g.a2 * g.a2 - forearm * forearm) / (2.0 * g.a2 * forearm)
-    beta = math.asin(min(1.0, max(-1.0, sin_elbow)))
-    phi = math.atan2(g.a3, g.d4)
-
     out: list[Solution] = []
-    for lefty in (False, True):
-        u = u_abs if lefty else -u_abs
-        on_axis = radial == 0.0 and u == 0.0
-        q1 = math.radians(ref[0]) if on_axis else math.atan2(py, px) - math.atan2(g.d2, u)
-        elbows = sorted(
-            (phi + beta, phi + math.pi - beta),
-            # above when sign(u) == sign(e); e = −a3·sin q3 − d4·cos q3 = −|forearm|·cos(q3 − φ)
-            key=lambda q3: (_arm_values(0.0, q3, g)[1] > 0.0) != lefty,
-        )
-        for q3 in elbows:
-            b_x = g.a2 - g.a3 * math.cos(q3) + g.d4 * math.sin(q3)
-            b_y = -g.a3 * math.sin(q3) - g.d4 * math.cos(q3)
-            q2 = math.atan2(-pz, u) - math.atan2(b_y, b_x)
-            above = lefty == (b_y > 0.0)
-            arm = [math.degrees(q1), math.degrees(q2), math.degrees(q3)]
-            r03 = _frames(arm, g, upto=3)[-1][:3, :3]
-            wrists, singular = _wrist(r03.T @ r, ref[3], wrist_tol_deg)
-            for t4, t5, t6 in wrists:
-                q = tuple(wrap_deg(v) for v in (*arm, t4, t5, t6))
-                out.extend(_with_variants(q, lefty, above, t5 < 0.0, singular, limits))
+    for b in _configurations(pose, geometry, ref, wrist_tol_deg):
+        out.extend(_with_variants(b.q, b.lefty, b.above, b.flip, b.singular, limits))
     return out
 
 
@@ -490,10 +519,26 @@ def nearest_solution(
     current = _as_joints(current)
     if len(weights) != 6:
         raise ValueError("weights needs one value per joint")
+    # The distance is a sum over joints and the limits hold joint by joint, so each configuration's
+    # nearest in-range ±360° variant is found joint by joint: the same answer as the least of
+    # inverse_all's enumeration (ties too: first representation wins, as the product's order has it)
+    # for a fraction of the work, which matters at every tick of a straight-line move.
+    best: Solution | None = None
+    best_distance = math.inf
+    for b in _configurations(pose, geometry, current, wrist_tol_deg):
+        q: list[float] = []
+        for j, (v, c, w) in enumerate(zip(b.q, current, weights, strict=True), start=1):
+            options = limits.representations(j, v)
+            if not options:
+                break
+            q.append(min(options, key=lambda x, c=c, w=w: w * (x - c) ** 2))
+        else:
+            d = _distance(q, current, weights)
+            if d < best_distance:
+                best, best_distance = Solution(_joints(q), b.lefty, b.above, b.flip, b.singular), d
+    if best is not None:
+        return best
     solutions = inverse_all(pose, geometry, limits, current=current, wrist_tol_deg=wrist_tol_deg)
-    legal = [s for s in solutions if not s.out_of_range]
-    if legal:
-        return min(legal, key=lambda s: _distance(s.q, current, weights))
 
     def badness(s: Solution) -> tuple[int, float]:
         return len(_unfixable(s.q, limits)), _distance(s.q, current, weights)

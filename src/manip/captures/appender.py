@@ -33,18 +33,26 @@ _OPCODE: Final = int(Opcode.MESSAGE)
 
 AddMessage = Callable[[int, int, bytes, int], None]
 """``add(channel, t, data, sequence)``: one message with log and publish time ``t``."""
+AddPair = Callable[[int, bytes, int, bytes, int, int], None]
+"""``add_pair(channel, data, channel2, data2, t, sequence)``: two messages with the same times and sequence
+(a frame and its view), in that order."""
 
 
-def message_adder(writer: Writer) -> tuple[AddMessage, bool]:
-    """A function adding messages to ``writer`` (chunked), and whether it is the fast one."""
+def message_adder(writer: Writer) -> tuple[AddMessage, AddPair, bool]:
+    """Functions adding one and two messages to ``writer`` (chunked), and whether they are the fast ones."""
     internals = _internals(writer)
     if internals is None:
 
         def add_message(channel: int, t: int, data: bytes, sequence: int) -> None:
             writer.add_message(channel, t, data, t, sequence)
 
-        return add_message, False
-    return MessageAppender(*internals).add, True
+        def add_pair(channel: int, data: bytes, channel2: int, data2: bytes, t: int, sequence: int) -> None:
+            writer.add_message(channel, t, data, t, sequence)
+            writer.add_message(channel2, t, data2, t, sequence)
+
+        return add_message, add_pair, False
+    appender = MessageAppender(*internals)
+    return appender.add, appender.add_pair, True
 
 
 class MessageAppender:
@@ -84,6 +92,47 @@ class MessageAppender:
         buffer.write(_MESSAGE.pack(_OPCODE, _MESSAGE_FIXED + len(data), channel, sequence, t, t))
         buffer.write(data)
         if offset + _MESSAGE.size + len(data) > self._chunk_size:
+            self._finalize()
+
+    def add_pair(self, channel: int, data: bytes, channel2: int, data2: bytes, t: int, sequence: int) -> None:
+        """:meth:`add` of both messages, sharing the bookkeeping."""
+        chunk = self._chunk
+        buffer: BytesIO = chunk.record_writer._buffer
+        offset = buffer.tell()
+        end = offset + _MESSAGE.size + len(data)
+        if end > self._chunk_size:  # the first message closes the chunk: the second starts a new one
+            self.add(channel, t, data, sequence)
+            self.add(channel2, t, data2, sequence)
+            return
+        stats = self._stats
+        if stats.message_count == 0 or t < stats.message_start_time:
+            stats.message_start_time = t
+        if t > stats.message_end_time:
+            stats.message_end_time = t
+        counts = stats.channel_message_counts
+        counts[channel] += 1
+        counts[channel2] += 1
+        stats.message_count += 2
+        if chunk.num_messages == 0 or t < chunk.message_start_time:
+            chunk.message_start_time = t
+        if t > chunk.message_end_time:
+            chunk.message_end_time = t
+        chunk.num_messages += 2
+        indexes = chunk.message_indices
+        index = indexes.get(channel)
+        if index is None:
+            index = indexes[channel] = MessageIndex(channel_id=channel, records=[])
+        index.records.append((t, offset))
+        index = indexes.get(channel2)
+        if index is None:
+            index = indexes[channel2] = MessageIndex(channel_id=channel2, records=[])
+        index.records.append((t, end))
+        pack = _MESSAGE.pack
+        buffer.write(pack(_OPCODE, _MESSAGE_FIXED + len(data), channel, sequence, t, t))
+        buffer.write(data)
+        buffer.write(pack(_OPCODE, _MESSAGE_FIXED + len(data2), channel2, sequence, t, t))
+        buffer.write(data2)
+        if end + _MESSAGE.size + len(data2) > self._chunk_size:
             self._finalize()
 
 

@@ -213,7 +213,7 @@ class Recorder:
         self.flushes = 0
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
         self._writer.start(profile=PROFILE, library=LIBRARY)
-        self._add, self.fast_append = message_adder(self._writer)
+        self._add, self._add_pair, self.fast_append = message_adder(self._writer)
         self._writer.add_metadata(
             METADATA_NAME,
             {
@@ -288,13 +288,22 @@ class Recorder:
     def frame(self, link: int, direction: Direction, frame: bytes, t_ns: int | None = None) -> None:
         """Record one frame exactly as it crossed ``link``."""
         info = self._links[link]
-        if not self.decoded_view:
-            at = _OPCODE_BYTE.get(info.framing)
-            if at is not None and len(frame) > at and frame[at] >= 0o200:
-                # Raw only: a data frame needs no decoding (the reader decodes and checks it).
-                self._write(info, direction, frame, None, _DATA, t_ns)
-                return
-        packet: Packet | None
+        if self.decoded_view:  # the common case, kept short
+            packet: Packet | None
+            try:
+                packet = info.decode(frame)
+            except DecodeError as exc:
+                packet = None
+                annotation = bad_frame(exc)
+            else:
+                annotation = self._annotator.annotate(link, direction, packet)
+            self._write(info, direction, frame, packet, annotation, t_ns)
+            return
+        at = _OPCODE_BYTE.get(info.framing)
+        if at is not None and len(frame) > at and frame[at] >= 0o200:
+            # Raw only: a data frame needs no decoding (the reader decodes and checks it).
+            self._write(info, direction, frame, None, _DATA, t_ns)
+            return
         try:
             packet = info.decode(frame)
         except DecodeError as exc:
@@ -349,17 +358,20 @@ class Recorder:
         channel = info.channels.get(direction)
         if channel is None:
             channel = info.channels[direction] = self._raw_channel(info, direction)
-        add = self._add
-        add(channel, t, frame, seq)
         counts = self.counts
         counts[RAW_TOPIC[direction]] += 1
         if self.decoded_view:
             nbytes = len(packet.data) if packet is not None else len(frame)
-            add(self._view_channels[direction], t, view_bytes(annotation, info.id, direction, seq, packet, nbytes), seq)
+            view = view_bytes(annotation, info.id, direction, seq, packet, nbytes)
+            self._add_pair(channel, frame, self._view_channels[direction], view, t, seq)
             counts[VIEW_TOPIC[direction]] += 1
+        else:
+            self._add(channel, t, frame, seq)
         for event in annotation.events:
             self._event(event, t)
-        self._written()
+        self._pending = True
+        if time.monotonic() >= self._due:
+            self.flush()
 
     def _raw_channel(self, info: _Link, direction: Direction) -> int:
         schema = self._raw_schemas.get(info.framing)

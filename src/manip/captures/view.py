@@ -432,6 +432,8 @@ _HEADER: Final = (
 )
 _NO_PACKET: Final = '{"link":%d,"conn":%d,"direction":"%s","seq":%d,"nbytes":%d,"kind":%s'
 _OPCODE_NAMES: Final = tuple(opcode_name(op) for op in range(256))
+_float_repr: Final = float.__repr__
+"""How JSON spells a finite float (json's encoder calls the same)."""
 _quoted: dict[str, str] = {}
 """JSON of the short strings that recur (kinds, op and field names), made once each."""
 
@@ -445,28 +447,15 @@ def _quote(text: str) -> str:
     return out
 
 
-def _value_json(value: Any) -> str:
-    """One field value as :data:`_JSON` writes it, the float arrays of transforms and joints quickly."""
-    kind = type(value)
-    if kind is tuple:
-        try:
-            text = ",".join(map(float.__repr__, value))
-        except TypeError:  # not all floats
-            return _encode(value)
-        if "n" in text:  # nan or inf: JSON spells them NaN and Infinity
-            return _encode(value)
-        return f"[{text}]"
-    if kind is int:
-        return int.__repr__(value)
-    return _encode(value)
-
-
 def view_bytes(
     ann: Annotation, link: int, direction: Direction, seq: int, packet: Packet | None, nbytes: int
 ) -> bytes:
     """The encoded ``/manip/c2s|s2c`` message of one frame: exactly the compact JSON of
     :func:`view_json` (same keys, order and number spelling), written without building the dict.
     The recorder calls it for every frame; a test holds it to :func:`view_json`."""
+    quoted = _quoted
+    kind = ann.kind
+    qkind = quoted.get(kind) or _quote(kind)
     if packet is not None:
         opcode = packet.opcode
         head = _HEADER % (
@@ -483,30 +472,47 @@ def view_bytes(
             packet.packet_no,
             packet.ack_no,
             nbytes,
-            _quote(ann.kind),
+            qkind,
         )
     else:
-        head = _NO_PACKET % (link, ann.conn, direction, seq, nbytes, _quote(ann.kind))
+        head = _NO_PACKET % (link, ann.conn, direction, seq, nbytes, qkind)
     parts = [head]
     add = parts.append
     if ann.retransmission:
         add(',"retransmission":true')
-    if ann.op is not None:
+    op = ann.op
+    if op is not None:
         add(',"op":')
-        add(_quote(ann.op))
+        add(quoted.get(op) or _quote(op))
     if ann.request_number is not None:
         add(',"request_number":%d' % ann.request_number)
     if ann.pair is not None:
         add(',"pair":%d' % ann.pair)
     if ann.final is not None:
         add(',"final":true' if ann.final else ',"final":false')
-    if ann.fields:
+    fields = ann.fields
+    if fields:
         sep = ',"fields":{'
-        for name, value in ann.fields.items():
+        for name, value in fields.items():
             add(sep)
-            add(_quote(name))
-            add(":")
-            add(_value_json(value))
+            add(quoted.get(name) or _quote(name))
+            if type(value) is tuple:
+                try:
+                    text = ",".join(map(_float_repr, value))
+                except TypeError:  # not all floats
+                    text = ""
+                if text and "n" not in text:  # nan and inf are spelt NaN and Infinity in JSON
+                    add(":[")
+                    add(text)
+                    add("]")
+                else:
+                    add(":")
+                    add(_encode(value))
+            elif type(value) is int:
+                add(":%d" % value)
+            else:
+                add(":")
+                add(_encode(value))
             sep = ","
         add("}")
     if ann.text is not None:

@@ -26,8 +26,17 @@ STOP_TIMEOUT: Final = 5.0
 class EmbeddedServer:
     """``with EmbeddedServer(config) as address:`` runs a reference server on a loopback port."""
 
-    def __init__(self, config: ServerConfig | None = None, address: str = "tcp://127.0.0.1:0") -> None:
+    def __init__(
+        self,
+        config: ServerConfig | None = None,
+        address: str = "tcp://127.0.0.1:0",
+        *,
+        time_scale: float = 1.0,
+        seed: int | None = None,
+    ) -> None:
         self._config = config or ServerConfig()
+        self._time_scale = time_scale
+        self._seed = seed
         self._bind = address
         self._ready = threading.Event()
         self._address: str | None = None
@@ -46,7 +55,7 @@ class EmbeddedServer:
     async def _serve(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stop = asyncio.Event()
-        async with serve(self._bind, self._config) as server:
+        async with serve(self._bind, self._config, time_scale=self._time_scale, seed=self._seed) as server:
             self._address = server.address
             self._ready.set()
             await self._stop.wait()

@@ -25,13 +25,15 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import struct
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Final, Literal
 
+from manip.codecs.chaos import make_trailer, packet_words
 from manip.codecs.errors import DecodeError
-from manip.codecs.framing import decode_chudp, decode_tcp, encode_chudp, encode_tcp
+from manip.codecs.framing import CHUDP_HEADER, decode_chudp, decode_tcp, encode_chudp, encode_tcp
 from manip.codecs.packet import Packet
 from manip.links.address import LinkAddress, parse_address
 from manip.ncp.packets import is_data, pack_status, text, unpack_status
@@ -114,6 +116,16 @@ class _Transport:
     def encode(self, p: Packet) -> bytes:
         raise NotImplementedError
 
+    def forge(self, p: Packet) -> bytes:
+        """``p`` framed with no checks at all (an illegal opcode, more than 488 data bytes...)."""
+        trailer = make_trailer(p, self.address.peer_addr, self.address.my_addr)
+        words = [*packet_words(p), trailer.dest, trailer.source, trailer.checksum]
+        return self.wrap(struct.pack(f">{len(words)}H", *words))
+
+    def wrap(self, body: bytes) -> bytes:
+        """The framing around a packet-plus-trailer body."""
+        raise NotImplementedError
+
     def write(self, frame: bytes) -> None:
         raise NotImplementedError
 
@@ -122,7 +134,9 @@ class _Transport:
 
 
 class _TcpTransport(_Transport):
-    def __init__(self, address: LinkAddress, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    def __init__(
+        self, address: LinkAddress, reader: asyncio.StreamReader, writer: asyncio.StreamWriter
+    ) -> None:
         super().__init__(address)
         self._reader = reader
         self._writer = writer
@@ -130,6 +144,9 @@ class _TcpTransport(_Transport):
 
     def encode(self, p: Packet) -> bytes:
         return encode_tcp(p, hw_dest=self.address.peer_addr, hw_src=self.address.my_addr)
+
+    def wrap(self, body: bytes) -> bytes:
+        return len(body).to_bytes(2, "big") + body
 
     def write(self, frame: bytes) -> None:
         if self.ended is None:
@@ -190,6 +207,9 @@ class _ChudpTransport(_Transport):
 
     def encode(self, p: Packet) -> bytes:
         return encode_chudp(p, hw_dest=self.address.peer_addr, hw_src=self.address.my_addr)
+
+    def wrap(self, body: bytes) -> bytes:
+        return CHUDP_HEADER + body
 
     def write(self, frame: bytes) -> None:
         if self._udp is not None and self.ended is None:
@@ -337,6 +357,12 @@ class RawPeer:
     def send(self, p: Packet) -> bytes:
         """Send ``p`` as it is; return the frame bytes written."""
         frame = self._transport.encode(p)
+        self.send_frame(frame, p)
+        return frame
+
+    def send_forged(self, p: Packet) -> bytes:
+        """Send ``p`` framed without any check (see :meth:`_Transport.forge`); return the frame."""
+        frame = self._transport.forge(p)
         self.send_frame(frame, p)
         return frame
 
