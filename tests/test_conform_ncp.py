@@ -93,7 +93,9 @@ class FakeNcp:
         self.next_index = 0x2001
 
     def _out(self, conn: FakeConn, opcode: int, number: int, data: bytes) -> Packet:
-        return Packet(opcode, conn.peer_host, conn.peer_index, SERVER_ADDR, conn.index, number, conn.rlast, data)
+        return Packet(
+            opcode, conn.peer_host, conn.peer_index, SERVER_ADDR, conn.index, number, conn.rlast, data
+        )
 
     def _open(self, p: Packet, send: Send) -> None:
         conn = FakeConn(self.next_index, p.src_host, p.src_index, p.packet_no, send, rlast=p.packet_no)
@@ -110,7 +112,9 @@ class FakeNcp:
                 send(make_los(p, SERVER_ADDR, "Illegal packet"))
             return
         if p.opcode == ChaosOp.RFC:
-            live = [c for c in self.conns.values() if (c.peer_host, c.peer_index) == (p.src_host, p.src_index)]
+            live = [
+                c for c in self.conns.values() if (c.peer_host, c.peer_index) == (p.src_host, p.src_index)
+            ]
             if not live or flaws.dup_rfc == "new":
                 self._open(p, send)
             elif flaws.dup_rfc == "same" and live[0].opn is not None:
@@ -268,7 +272,9 @@ def _against_reference(case_id: str, address: str = "tcp://127.0.0.1:0") -> Case
 
 
 def _why(result: CaseResult) -> str:
-    return f"{result.outcome}: {result.reason} {[(v.message, v.expected, v.actual) for v in result.violations]}"
+    return (
+        f"{result.outcome}: {result.reason} {[(v.message, v.expected, v.actual) for v in result.violations]}"
+    )
 
 
 # ------------------------------------------------------------------------------------- tests
@@ -328,7 +334,12 @@ def test_conforming_fake_passes(case_id: str, scheme: str) -> None:
         ("server.ncp.duplicate-rfc", Flaws(dup_rfc="refuse"), "ncp.duplicate-rfc", "new request"),
         ("server.ncp.retransmission", Flaws(retransmit=False), "ncp.retransmission", "not sent again"),
         ("server.ncp.retransmission", Flaws(stop_on_receipt=False), "ncp.retransmission", "kept coming"),
-        ("server.ncp.retransmission", Flaws(deliver_duplicates=True), "ncp.retransmission", "answered a second"),
+        (
+            "server.ncp.retransmission",
+            Flaws(deliver_duplicates=True),
+            "ncp.retransmission",
+            "answered a second",
+        ),
         ("server.ncp.window", Flaws(window=False), "ncp.window", "nothing acknowledged yet"),
         ("server.ncp.window", Flaws(receipt_opens_window=True), "ncp.window", "receipt"),
     ],
@@ -359,17 +370,16 @@ def test_raw_peer_handshake_and_forged_frames() -> None:
     """The raw peer opens a connection by hand and forges frames the codecs refuse to encode."""
 
     async def go() -> None:
-        async with fake_server(Flaws()) as address:
-            async with await RawPeer.open(address) as peer:
-                conn = await peer.handshake(0x0A01, 0xFFFF)
-                assert conn.opn.packet.ack_no == 0xFFFF and conn.next_packet_no == 0
-                conn.sts(ack=conn.opn_no, window=3)
-                initial = await peer.receive(conn.mine, 2.0)
-                assert initial is not None and initial.packet.data == (0xFFFF).to_bytes(2, "little")
-                forged = peer.send_forged(conn.packet(0o20, packet_no=5, data=b"x"))
-                assert forged[2] == 0o20 and len(forged) == 2 + 16 + 2 + 6
-                los = await peer.receive(lambda p: p.opcode == ChaosOp.LOS, 2.0)
-                assert los is not None and los.raw[2] == ChaosOp.LOS
-                assert "LOS" in format_packet(los.packet)
+        async with fake_server(Flaws()) as address, await RawPeer.open(address) as peer:
+            conn = await peer.handshake(0x0A01, 0xFFFF)
+            assert conn.opn.packet.ack_no == 0xFFFF and conn.next_packet_no == 0
+            conn.sts(ack=conn.opn_no, window=3)
+            initial = await peer.receive(conn.mine, 2.0)
+            assert initial is not None and initial.packet.data == (0xFFFF).to_bytes(2, "little")
+            forged = peer.send_forged(conn.packet(0o20, packet_no=5, data=b"x"))
+            assert forged[2] == 0o20 and len(forged) == 2 + 16 + 2 + 6
+            los = await peer.receive(lambda p: p.opcode == ChaosOp.LOS, 2.0)
+            assert los is not None and los.raw[2] == ChaosOp.LOS
+            assert "LOS" in format_packet(los.packet)
 
     asyncio.run(go())

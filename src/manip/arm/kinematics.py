@@ -397,11 +397,13 @@ class _Base(NamedTuple):
     singular: bool
 
 
-def _configurations(pose: Transform, g: PumaGeometry, ref: Joints, wrist_tol_deg: float) -> list[_Base]:
+def _configurations(
+    pose: Transform | Matrix, g: PumaGeometry, ref: Joints, wrist_tol_deg: float
+) -> list[_Base]:
     """The closed-form solutions of ``pose``, one per configuration (see :func:`inverse_all`), in plain
     floats: this runs at every tick of a straight-line move, where numpy's per-call cost on 3x3
     matrices would dominate."""
-    m = pose.matrix.tolist()
+    m = (pose.matrix if isinstance(pose, Transform) else np.asarray(pose, dtype=np.float64)).tolist()
     r = (m[0][:3], m[1][:3], m[2][:3])
     px, py, pz = (m[i][3] - g.d6 * m[i][2] for i in range(3))  # the wrist centre p − d6·a
 
@@ -507,7 +509,7 @@ def _distance(q: Sequence[float], current: Sequence[float], weights: Sequence[fl
 
 
 def nearest_solution(
-    pose: Transform,
+    pose: Transform | Matrix,
     current: JointsLike,
     geometry: PumaGeometry = PUMA560_LEE,
     limits: JointLimits = UNIMATION_LIMITS,
@@ -515,7 +517,11 @@ def nearest_solution(
     weights: Sequence[float] = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0),
     wrist_tol_deg: float = WRIST_SINGULAR_DEG,
 ) -> Solution:
-    """The in-range solution nearest ``current`` (see :func:`inverse_nearest`), with its configuration."""
+    """The in-range solution nearest ``current`` (see :func:`inverse_nearest`), with its configuration.
+
+    ``pose`` may also be a 4x4 matrix, taken as is (no checks: for poses computed in the simulator,
+    such as the points of a straight line, which are solved at every servo cycle).
+    """
     current = _as_joints(current)
     if len(weights) != 6:
         raise ValueError("weights needs one value per joint")
@@ -525,19 +531,27 @@ def nearest_solution(
     # for a fraction of the work, which matters at every tick of a straight-line move.
     best: Solution | None = None
     best_distance = math.inf
+    low = [lo - LIMIT_TOL_DEG for lo in limits.lower]
+    high = [hi + LIMIT_TOL_DEG for hi in limits.upper]
+    prune = all(w >= 0.0 for w in weights)  # partial sums then only grow
     for b in _configurations(pose, geometry, current, wrist_tol_deg):
         q: list[float] = []
-        for j, (v, c, w) in enumerate(zip(b.q, current, weights, strict=True), start=1):
-            options = limits.representations(j, v)
-            if not options:
+        d = 0.0
+        for v, c, w, lo, hi in zip(b.q, current, weights, low, high, strict=True):
+            x = _nearest_in_range(v, c, w, lo, hi)
+            if x is None:
                 break
-            q.append(min(options, key=lambda x, c=c, w=w: w * (x - c) ** 2))
-        else:
-            d = _distance(q, current, weights)
+            d += w * (x - c) ** 2
+            if prune and d >= best_distance:
+                break  # no nearer than the best so far: not chosen
+            q.append(x)
+        else:  # d is _distance(q, current, weights), summed in the same order
             if d < best_distance:
                 best, best_distance = Solution(_joints(q), b.lefty, b.above, b.flip, b.singular), d
     if best is not None:
         return best
+    if not isinstance(pose, Transform):
+        pose = Transform(pose)
     solutions = inverse_all(pose, geometry, limits, current=current, wrist_tol_deg=wrist_tol_deg)
 
     def badness(s: Solution) -> tuple[int, float]:
@@ -545,6 +559,28 @@ def nearest_solution(
 
     worst = min(solutions, key=badness)
     raise OutOfRange(_unfixable(worst.q, limits), solutions)
+
+
+def _nearest_in_range(angle: float, near: float, weight: float, low: float, high: float) -> float | None:
+    """The angle ≡ ``angle`` (mod 360) in [low, high] minimising ``weight·(x − near)²``, None if none:
+    the first such angle of :meth:`JointLimits.representations` (bounds already widened by its
+    tolerance), found without listing them."""
+    k_min = math.ceil((low - angle) / 360.0)
+    k_max = math.floor((high - angle) / 360.0)
+    if k_min > k_max:
+        return None
+    if not weight > 0.0:  # the farthest, or any: rare enough to list them all, in that order
+        return min((angle + 360.0 * i for i in sorted(range(k_min, k_max + 1), key=abs)),
+                   key=lambda x: weight * (x - near) ** 2)  # fmt: skip
+    # The nearest is the k-th or the (k+1)-th, clamped; on a tie, the one nearer ``angle``.
+    k = math.floor((near - angle) / 360.0)
+    k0, k1 = min(max(k, k_min), k_max), min(max(k + 1, k_min), k_max)
+    x0 = angle + 360.0 * k0
+    if k1 == k0:
+        return x0
+    x1 = angle + 360.0 * k1
+    d0, d1 = weight * (x0 - near) ** 2, weight * (x1 - near) ** 2
+    return x1 if d1 < d0 or (d1 == d0 and abs(k1) < abs(k0)) else x0
 
 
 def _unfixable(q: Sequence[float], limits: JointLimits) -> list[int]:

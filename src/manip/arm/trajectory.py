@@ -829,7 +829,13 @@ class CartesianSegment:
 
     def pose_at(self, t: float) -> Vector:
         """The commanded 4x4 pose at ``t`` seconds from the segment's start (clamped)."""
-        s = self.progress(t)
+        return self.pose_along(self.progress(t))
+
+    def pose_along(self, s: float) -> Vector:
+        """The 4x4 pose at path parameter ``s`` (0 = start, 1 = goal, clamped): the same line whatever
+        the timing, so a path can be checked independently of the speed factor."""
+        if math.isnan(s):
+            raise ValueError("the path parameter must not be NaN")
         if s <= 0.0:
             return self._start.copy()
         if s >= 1.0:

@@ -78,53 +78,37 @@ COMPRESSIONS: Final = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
 
 class OneFrameDecoder:
     """Decodes single frames of a stream framing.  A frame that is exactly one whole frame (the recorder
-    and reader only ever see those) goes straight to the framing's body decoder: feeding a stream decoder
-    costs more than the decoding.  Anything else is fed to a fresh stream decoder, which says precisely
-    what is wrong; error offsets are within the frame either way."""
+    and reader only ever see those) goes straight to the framing decoder's own length check and body
+    decoder: feeding a stream decoder costs more than the decoding.  Anything else is fed to a fresh
+    stream decoder, which says precisely what is wrong; error offsets are within the frame either way."""
+
+    __slots__ = ("_body", "_factory", "_length", "_prefix")
 
     def __init__(self, factory: Callable[[], StreamDecoder]) -> None:
         self._factory = factory
-        self._body = _BodyDecoder.of(factory())
+        decoder = factory()
+        self._prefix = decoder.prefix
+        # The decoder's hooks for its subclasses, called directly: they hold the framing's checks.
+        self._length = decoder._body_length
+        self._body = decoder._decode
 
     def __call__(self, frame: bytes) -> Packet:
-        body = self._body
-        prefix = body.prefix
-        if len(frame) > prefix and body.whole(frame):
-            return body.decode_body(frame)
+        prefix = self._prefix
+        size = len(frame)
+        if size > prefix:
+            try:
+                whole = self._length(frame, 0, 0) == size - prefix
+            except DecodeError:
+                whole = False
+            if whole:
+                return self._body(frame, prefix, size, prefix)
         decoder = self._factory()
         items = decoder.feed(frame)
         if len(items) == 1 and not decoder.pending and isinstance(items[0], Packet):
             return items[0]
         if len(items) == 1 and isinstance(items[0], DecodeError):
             raise items[0]
-        raise DecodeError(f"expected one whole frame, got {len(items)} and {len(frame)} bytes", path="frame")
-
-
-class _BodyDecoder:
-    """The two steps of a stream decoder that one whole frame needs: read its length, decode its body
-    (the decoder's own methods, so the checks and the errors are the framing's)."""
-
-    __slots__ = ("_decoder", "prefix")
-
-    def __init__(self, decoder: StreamDecoder) -> None:
-        self._decoder = decoder
-        self.prefix = decoder.prefix
-
-    @classmethod
-    def of(cls, decoder: StreamDecoder) -> _BodyDecoder:
-        return cls(decoder)
-
-    def whole(self, frame: bytes) -> bool:
-        """True if ``frame`` is one frame whose length field is valid and matches its size."""
-        try:
-            length = self._decoder._body_length(frame, 0, 0)
-        except DecodeError:
-            return False
-        return length == len(frame) - self.prefix
-
-    def decode_body(self, frame: bytes) -> Packet:
-        prefix = self.prefix
-        return self._decoder._decode(frame, prefix, len(frame), prefix)
+        raise DecodeError(f"expected one whole frame, got {len(items)} and {size} bytes", path="frame")
 
 
 def frame_decoder(framing: str) -> Callable[[bytes], Packet]:
@@ -288,16 +272,35 @@ class Recorder:
     def frame(self, link: int, direction: Direction, frame: bytes, t_ns: int | None = None) -> None:
         """Record one frame exactly as it crossed ``link``."""
         info = self._links[link]
-        if self.decoded_view:  # the common case, kept short
+        if self.decoded_view:  # the common case: :meth:`_write` inlined, the frame decoded once
+            if self._closed:
+                raise CaptureError("the recorder is closed")
             packet: Packet | None
             try:
                 packet = info.decode(frame)
             except DecodeError as exc:
                 packet = None
                 annotation = bad_frame(exc)
+                nbytes = len(frame)
             else:
                 annotation = self._annotator.annotate(link, direction, packet)
-            self._write(info, direction, frame, packet, annotation, t_ns)
+                nbytes = len(packet.data)
+            t = time.time_ns() if t_ns is None else t_ns
+            seq = self._seq = self._seq + 1
+            channel = info.channels.get(direction)
+            if channel is None:
+                channel = info.channels[direction] = self._raw_channel(info, direction)
+            view = view_bytes(annotation, info.id, direction, seq, packet, nbytes)
+            self._add_pair(channel, frame, self._view_channels[direction], view, t, seq)
+            counts = self.counts
+            counts[RAW_TOPIC[direction]] += 1
+            counts[VIEW_TOPIC[direction]] += 1
+            if annotation.events:
+                for event in annotation.events:
+                    self._event(event, t)
+            self._pending = True
+            if time.monotonic() >= self._due:
+                self.flush()
             return
         at = _OPCODE_BYTE.get(info.framing)
         if at is not None and len(frame) > at and frame[at] >= 0o200:

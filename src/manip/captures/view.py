@@ -76,6 +76,7 @@ _RFC: Final = int(ChaosOp.RFC)
 _DAT: Final = int(ChaosOp.DAT)
 _LAST_ERROR_OP: Final = int(ServerOp.ASYNCHRONOUS_WARNING)
 _ASYNC_RESPONSE: Final = int(ServerOp.ASYNCHRONOUS_RESPONSE)
+_RESPONSE: Final = int(ServerOp.RESPONSE)
 _C2S_SEEN: Final = "c2s"
 
 
@@ -88,31 +89,19 @@ class _RequestPlan:
     name: str | None
     pending_name: str
     fast: FastLayout | None
-
-
-@dataclass(frozen=True, slots=True)
-class _ReplyPlan:
-    """How a RESPONSE to one request is read: ``multi`` replies go through :func:`decode_reply`; the
-    others through the fast numbered decoder of their layout when it has one."""
-
-    multi: bool
-    fast: FastLayout | None
+    reply_fast: FastLayout | None
+    """The fast decoder of its RESPONSE's numbered layout (None for multi-packet replies)."""
 
 
 def _request_plan(opcode: int) -> _RequestPlan:
     op = SPEC.requests.get(opcode)
     if op is None:
-        return _RequestPlan(None, None, f"0{opcode:o}", None)
-    return _RequestPlan(op, op.name, op.name, plan(op.request, numbered=False))
-
-
-def _reply_plan(op: RequestOpcode) -> _ReplyPlan:
-    multi = op.response.kind == "multi"
-    return _ReplyPlan(multi, None if multi else plan(response_layout(op), numbered=True))
+        return _RequestPlan(None, None, f"0{opcode:o}", None, None)
+    reply = None if op.response.kind == "multi" else plan(response_layout(op), numbered=True)
+    return _RequestPlan(op, op.name, op.name, plan(op.request, numbered=False), reply)
 
 
 _REQUEST_PLANS: Final = {opcode: _request_plan(opcode) for opcode in range(_DAT, 0o400)}
-_REPLY_PLANS: Final = {op.opcode: _reply_plan(op) for op in SPEC.requests.values()}
 
 
 def opcode_name(opcode: int) -> str:
@@ -152,6 +141,7 @@ class _Pending:
     pair: int
     op: RequestOpcode | None
     name: str
+    reply_fast: FastLayout | None = None
 
 
 @dataclass(slots=True)
@@ -253,13 +243,31 @@ class Annotator:
         pair = ann.pair = self._next_pair
         self._next_pair = pair + 1
         conn.seen[_C2S_SEEN][number] = pair
-        conn.pending[number] = _Pending(pair, req.op, req.pending_name)
+        conn.pending[number] = _Pending(pair, req.op, req.pending_name, req.reply_fast)
         return ann
 
     # ------------------------------------------------------------------------------ server packets
 
     def _server_packet(self, conn: _Conn, packet: Packet, retransmission: bool) -> Annotation:
         opcode, data = packet.opcode, packet.data
+        if opcode == _RESPONSE and len(data) >= 2:
+            # The common case first: a well-formed reply of a fixed numeric layout to a request seen.
+            number = data[0] | data[1] << 8
+            pending = conn.pending.get(number)
+            if pending is not None and pending.reply_fast is not None:
+                parsed = pending.reply_fast.parse(data)
+                if parsed is not None:
+                    if not retransmission:
+                        del conn.pending[number]
+                    return Annotation(
+                        conn.id,
+                        "reply",
+                        op=pending.name,
+                        request_number=number,
+                        pair=pending.pair,
+                        final=True,
+                        fields=parsed[1] or None,
+                    )
         if opcode > _LAST_ERROR_OP:
             ann = Annotation(conn.id, "data")
             if data:
@@ -314,14 +322,6 @@ class Annotator:
     @staticmethod
     def _reply(ann: Annotation, pending: _Pending | None, data: bytes) -> None:
         op = pending.op if pending is not None else None
-        if op is not None:
-            how = _REPLY_PLANS[op.opcode]
-            fast = how.fast.parse(data) if how.fast is not None else None
-            if fast is not None:  # the common case: a fixed numeric layout, well formed
-                ann.final = True
-                if fast[1]:
-                    ann.fields = fast[1]
-                return
         reply = decode_reply(data, op)
         payload = reply.payload
         if op is None:

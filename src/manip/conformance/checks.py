@@ -767,13 +767,15 @@ def check_transcript(
     unanswered at the end is a finding (leave it False for a case that stopped early)."""
     s = _Session()
     server = [p for p in packets if p.direction == "s2c"]
-    start = 0
+    skip = -1
     if expect_initial:
         initial = server[0] if server else None
         s.findings += check_initial_response(initial, rfc_packet_no)
         if initial is not None and not initial.is_close and initial.opcode == ServerOp.RESPONSE:
-            start = packets.index(initial) + 1
-    for packet in packets[start:]:
+            skip = packets.index(initial)
+    for index, packet in enumerate(packets):
+        if index == skip:
+            continue  # the initial RESPONSE; requests sent before it came are still requests
         if packet.direction == "c2s":
             if not packet.is_close:
                 _on_request(s, packet)

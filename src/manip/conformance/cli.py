@@ -41,6 +41,7 @@ from manip.conformance.context import DEFAULT_REPLY_TIMEOUT, RunOptions
 from manip.conformance.cougar_target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.coverage import DEFAULT_PARTIES, coverage, gaps
 from manip.conformance.embedded import EmbeddedServer
+from manip.conformance.replay_cli import check_record_path, recording, replay_command, verify_command
 from manip.conformance.report import failure_text, write_json, write_junit
 from manip.conformance.results import CaseResult, ExitCode, LivenessCheck, RunReport
 from manip.conformance.runner import RunConfig, RunEvents, Runner
@@ -161,6 +162,13 @@ def main() -> None:
     metavar="NAME",
     help="With --cougar sim: switch on a defect of the simulated Cougar (see manip-cougar --help).",
 )
+@click.option(
+    "--record",
+    "record",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Record every Chaos connection of the run (client side) to an MCAP capture FILE "
+    "(judge it with: manip-conform verify FILE).",
+)
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar; failures and the summary only.")
 def run(
     host: str | None,
@@ -179,6 +187,7 @@ def run(
     server_faults: tuple[str, ...],
     cougar: str | None,
     cougar_faults: tuple[str, ...],
+    record: Path | None,
     quiet: bool,
 ) -> None:
     """Run the suite against HOST (a link address: tcp://HOST:PORT, chudp://HOST:PORT?addr=OCTAL,
@@ -210,6 +219,9 @@ def run(
         except ValueError as exc:
             raise click.UsageError(f"--cougar: {exc}") from None
         address = "" if target.embedded else target.url
+    if record is not None and target is not None:
+        raise click.UsageError("--record records Chaos connections: not with --cougar")
+    check_record_path(record)
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "big")
     cases = cougar_cases(all_cases(), cougar=target is not None)
@@ -247,7 +259,9 @@ def run(
         config.liveness_check = liveness_check
     console.print(f"manip-conform: seed [bold]{seed}[/] (rerun with --seed {seed})")
     holder: dict[str, Runner] = {}
-    code = _execute(config, cases, config_faults, holder, console, quiet, cougar=target)
+    with recording(record, how="manip-conform run (client side)", seed=seed) as wrap:
+        config.wrap_link = wrap
+        code = _execute(config, cases, config_faults, holder, console, quiet, cougar=target)
     report = holder["runner"].report if "runner" in holder else None
     if report is not None:
         if code == ExitCode.INTERNAL and not report.interrupted and not report.internal_error:
@@ -466,6 +480,9 @@ def coverage_command(fmt: str, parties: tuple[str, ...]) -> None:
         )
     sys.exit(1 if missing else 0)
 
+
+main.add_command(replay_command)
+main.add_command(verify_command)
 
 if __name__ == "__main__":  # pragma: no cover
     main()

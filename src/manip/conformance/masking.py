@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from manip.codecs.errors import CodecError
-from manip.codecs.lisp import Cons, Keyword, LispValue, Symbol, print_lisp
+from manip.codecs.lisp import Cons, Keyword, Symbol, print_lisp
 from manip.codecs.messages import decode_async, decode_error, decode_reply, decode_request
 from manip.conformance.checks import WirePacket, describe, multi_text, parse_description, word
 from manip.spec import SPEC
@@ -151,14 +151,14 @@ def masked(mismatches: Iterable[Mismatch], patterns: Sequence[str]) -> tuple[lis
 def _show(value: object) -> str:
     if isinstance(value, float):
         return repr(value)
+    if isinstance(value, list) and all(isinstance(v, (int, float)) for v in value):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
     if isinstance(value, (Keyword, Symbol, Cons, list)):
         return print_lisp(value, base=10)
     return repr(value)
 
 
-def _values(
-    path: str, recorded: object, live: object, add: Callable[[str, object, object], None]
-) -> None:
+def _values(path: str, recorded: object, live: object, add: Callable[[str, object, object], None]) -> None:
     """Compare two decoded values (numbers, strings, tuples, Lisp data) recursively."""
     if isinstance(recorded, bool) or isinstance(live, bool):
         if recorded != live:
@@ -175,7 +175,17 @@ def _values(
         if len(recorded) != len(live):
             add(f"{path}.length", len(recorded), len(live))
             return
-        for i, (r, v) in enumerate(zip(recorded, live, strict=True)):
+        differing = [
+            (i, r, v)
+            for i, (r, v) in enumerate(zip(recorded, live, strict=True))
+            if _differs(f"{path}[{i}]", r, v)
+        ]
+        if len(differing) > 1 and all(not isinstance(r, (tuple, list, Cons)) for _, r, _ in differing):
+            # one mismatch for a vector (a transform with swapped words differs everywhere)
+            where = ",".join(str(i) for i, _, _ in differing)
+            add(f"{path}[{where}]", [r for _, r, _ in differing], [v for _, _, v in differing])
+            return
+        for i, r, v in differing:
             _values(f"{path}[{i}]", r, v, add)
         return
     if isinstance(recorded, Cons) and isinstance(live, Cons):
@@ -184,6 +194,12 @@ def _values(
         return
     if recorded != live:
         add(path, recorded, live)
+
+
+def _differs(path: str, recorded: object, live: object) -> bool:
+    found: list[str] = []
+    _values(path, recorded, live, lambda p, _r, _v: found.append(p))
+    return bool(found)
 
 
 class _Collector:
@@ -217,12 +233,13 @@ def _number(c: _Collector, path: str, recorded: WirePacket, live: WirePacket, nu
         return
     want = numbers.expected(r)
     if v != want:
-        clause = (
-            "error.fatal-request-number"
-            if live.opcode == ServerOp.FATAL_ERROR
-            else "response.echoes-request-number"
-        )
-        c.add(path, f"{r} (live: {want})", "missing" if v is None else v, clause)
+        clause = "response.echoes-request-number"
+        if live.opcode == ServerOp.FATAL_ERROR:
+            clause = "error.fatal-request-number"
+        elif live.opcode == ServerOp.ASYNCHRONOUS_RESPONSE:
+            clause = "async.layout"
+        shown = f"{r}" if want == r else f"{r} (the replayed request is #{want})"
+        c.add(path, shown, "missing" if v is None else v, clause)
 
 
 # ------------------------------------------------------------------------------------- answers
@@ -257,7 +274,7 @@ def compare_answer(
         number_clause = "connect.initial-response-number"
         r, v = word(first.data), word(live[0].data)
         if r is not None and v != numbers.expected(r):
-            c.add("request_number", f"{r} (live: the RFC's {numbers.expected(r)})", v, number_clause)
+            c.add("request_number", f"{r} (the live RFC is #{numbers.expected(r)})", v, number_clause)
         if len(first.data) != len(live[0].data):
             c.add("data.length", len(first.data), len(live[0].data), number_clause)
         return c.out
@@ -273,7 +290,9 @@ def compare_answer(
     return c.out
 
 
-def _compare_reply(opcode: int, recorded: WirePacket, live: WirePacket, segments: SegmentBase) -> list[Mismatch]:
+def _compare_reply(
+    opcode: int, recorded: WirePacket, live: WirePacket, segments: SegmentBase
+) -> list[Mismatch]:
     c = _Collector(recorded, live)
     op = SPEC.requests.get(opcode)
     try:
@@ -305,13 +324,20 @@ def _compare_reply(opcode: int, recorded: WirePacket, live: WirePacket, segments
     return c.out
 
 
-def _compare_multi(recorded: Sequence[WirePacket], live: Sequence[WirePacket], numbers: NumberMap) -> list[Mismatch]:
+def _compare_multi(
+    recorded: Sequence[WirePacket], live: Sequence[WirePacket], numbers: NumberMap
+) -> list[Mismatch]:
     c = _Collector(recorded[-1], live[-1])
-    for i, packet in enumerate(live[1:], start=1):
+    for i, packet in enumerate(live[1:], start=1):  # the first wrong number stands for the rest
         sub = _Collector(recorded[min(i, len(recorded) - 1)], packet)
         _number(sub, f"packets[{i}].request_number", recorded[min(i, len(recorded) - 1)], packet, numbers)
-        c.out += sub.out
-    r_done, v_done = len(recorded[-1].data) == 2, len(live[-1].data) == 2 and live[-1].opcode == ServerOp.RESPONSE
+        if sub.out:
+            c.out += sub.out
+            break
+    r_done, v_done = (
+        len(recorded[-1].data) == 2,
+        len(live[-1].data) == 2 and live[-1].opcode == ServerOp.RESPONSE,
+    )
     if r_done != v_done:
         c.add(
             "terminator",
@@ -329,14 +355,12 @@ def _compare_multi(recorded: Sequence[WirePacket], live: Sequence[WirePacket], n
     for key in sorted(r_entries.keys() | v_entries.keys()):
         path = f"describe.{key}"
         if key not in v_entries or key not in r_entries:
-            c.add(path, "present" if key in r_entries else "absent", "present" if key in v_entries else "absent")
+            c.add(
+                path, "present" if key in r_entries else "absent", "present" if key in v_entries else "absent"
+            )
         elif key not in DESCRIBE_MASKED_KEYS:
-            _lisp(path, r_entries[key], v_entries[key], c)
+            _values(path, r_entries[key], v_entries[key], c.add)
     return c.out
-
-
-def _lisp(path: str, recorded: LispValue, live: LispValue, c: _Collector) -> None:
-    _values(path, recorded, live, c.add)
 
 
 def _compare_error(recorded: WirePacket, live: WirePacket) -> list[Mismatch]:
@@ -385,7 +409,12 @@ def compare_async(
     try:
         got = decode_async(live.data)
     except CodecError as exc:
-        c.add("async", f"{len(recorded.data)} data bytes", f"{len(live.data)} data bytes ({exc})", "async.layout")
+        c.add(
+            "async",
+            f"{len(recorded.data)} data bytes",
+            f"{len(live.data)} data bytes ({exc})",
+            "async.layout",
+        )
         return c.out
     if want.condition != got.condition:
         c.add("async.condition", want.condition_name, got.condition_name)

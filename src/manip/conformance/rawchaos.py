@@ -29,12 +29,13 @@ import struct
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Final, Literal
+from typing import Final
 
 from manip.codecs.chaos import make_trailer, packet_words
 from manip.codecs.errors import DecodeError
 from manip.codecs.framing import CHUDP_HEADER, decode_chudp, decode_tcp, encode_chudp, encode_tcp
 from manip.codecs.packet import Packet
+from manip.conformance.checks import Direction
 from manip.links.address import LinkAddress, parse_address
 from manip.ncp.packets import is_data, pack_status, text, unpack_status
 from manip.ncp.seq import seq_add
@@ -51,7 +52,6 @@ __all__ = [
     "format_packet",
 ]
 
-Direction = Literal["c2s", "s2c"]
 PacketHook = Callable[[Direction, Packet, bytes], None]
 Match = Callable[[Packet], bool]
 

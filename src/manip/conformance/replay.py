@@ -42,6 +42,7 @@ the target unreachable before any session was compared, 4 internal error.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import shlex
 import time
@@ -53,7 +54,6 @@ from typing import Final
 from manip.captures import CaptureError, Session, read_capture
 from manip.conformance.checks import (
     ANSWER_OPCODES,
-    CLOSE_OPCODES,
     UNSOLICITED_OPCODES,
     WirePacket,
     check_transcript,
@@ -78,8 +78,14 @@ from manip.conformance.verify import (
     session_hazard,
     wire_packets,
 )
-from manip.links import ChaosConnection, ChaosError, ConnectionClosed, ConnectionLost, ConnectionRefused
-from manip.links import open_connection
+from manip.links import (
+    ChaosConnection,
+    ChaosError,
+    ConnectionClosed,
+    ConnectionLost,
+    ConnectionRefused,
+    open_connection,
+)
 from manip.links.api import LinkWrapper
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
@@ -153,7 +159,11 @@ def _final(request: WirePacket | None, packet: WirePacket) -> bool:
     if request is None or packet.opcode != ServerOp.RESPONSE:
         return True
     op = SPEC.requests.get(request.opcode)
-    multi = op is not None and op.response.kind == "multi" and required_refusal(request.opcode, request.data) is None
+    multi = (
+        op is not None
+        and op.response.kind == "multi"
+        and required_refusal(request.opcode, request.data) is None
+    )
     return not multi or len(packet.data) <= 2
 
 
@@ -304,8 +314,11 @@ class _Live:
         while len(live.asyncs) < barrier.asyncs:
             if not await self.take(deadline - loop.time()):
                 if live.closed is not None:
-                    return f"the connection ended ({describe(live.closed)}) before the asynchronous packet came"
-                return f"asynchronous packet {len(live.asyncs) + 1} did not come within {options.async_timeout:g} s"
+                    return (
+                        f"the connection ended ({describe(live.closed)}) before the asynchronous packet came"
+                    )
+                wanted = len(live.asyncs) + 1
+                return f"asynchronous packet {wanted} did not come within {options.async_timeout:g} s"
         return ""
 
     async def quiet(self, seconds: float) -> None:
@@ -317,7 +330,9 @@ class _Live:
 async def _connect(address: str, options: ReplayOptions) -> ChaosConnection:
     for attempt in range(BUSY_RETRIES + 1):
         try:
-            return await open_connection(address, timeout=options.connect_timeout, wrap_link=options.wrap_link)
+            return await open_connection(
+                address, timeout=options.connect_timeout, wrap_link=options.wrap_link
+            )
         except ConnectionRefused as exc:
             if attempt == BUSY_RETRIES or "busy" not in exc.reason.lower():
                 raise
@@ -345,14 +360,11 @@ async def replay_session(script: Script, address: str, options: ReplayOptions) -
     try:
         await _play(script, live, options)
     finally:
-        if replay.live.closed is None:
-            try:
-                await conn.close(timeout=1.0)
-            except ChaosError:
-                pass
+        ours = replay.live.closed is None
+        with contextlib.suppress(ChaosError):
+            await conn.close(timeout=1.0)  # also closes the node and link (after the peer's end: only them)
+        if ours:
             live.record("c2s", ChaosOp.EOF, 0, 0, b"closed by the replay")
-        elif conn.owns_node:
-            conn.abort()
     replay.duration = time.monotonic() - t0
     _judge(replay, options)
     return replay
@@ -413,7 +425,9 @@ def _judge(replay: SessionReplay, options: ReplayOptions) -> None:
         where = f"asynchronous packet {j + 1}"
         if j >= len(live.asyncs):
             r = recorded.asyncs[j]
-            out.append(Mismatch("async", f"{where}: recorded {describe(r)}, none came", describe(r), "none", r.data))
+            out.append(
+                Mismatch("async", f"{where}: recorded {describe(r)}, none came", describe(r), "none", r.data)
+            )
         elif j >= len(recorded.asyncs):
             v = live.asyncs[j]
             message = f"{where}: not in the recording, live {describe(v)}"
@@ -444,11 +458,28 @@ def _close_mismatches(replay: SessionReplay) -> list[Mismatch]:
     fatal = any(p.opcode == ServerOp.FATAL_ERROR for p in script.packets if p.direction == "s2c")
     clause = "error.fatal-then-close" if fatal else None
     if script.server_closes and live.closed is None:
-        return [Mismatch("close", "close: the recorded server closed the connection, the live one did not",
-                         "the server closes", "still open", b"", b"", clause)]
+        return [
+            Mismatch(
+                "close",
+                "close: the recorded server closed the connection, the live one did not",
+                "the server closes",
+                "still open",
+                b"",
+                b"",
+                clause,
+            )
+        ]
     if not script.server_closes and live.closed is not None:
-        return [Mismatch("close", f"close: the live server ended the connection ({describe(live.closed)})",
-                         "open until the client closes", describe(live.closed), b"", live.closed.data)]
+        return [
+            Mismatch(
+                "close",
+                f"close: the live server ended the connection ({describe(live.closed)})",
+                "open until the client closes",
+                describe(live.closed),
+                b"",
+                live.closed.data,
+            )
+        ]
     return []
 
 
@@ -461,7 +492,9 @@ def _request_name(index: int, request: WirePacket | None) -> str:
 
 
 def _located(m: Mismatch, where: str) -> Mismatch:
-    return Mismatch(m.path, f"{where}: {m.message}", m.recorded, m.live, m.recorded_bytes, m.live_bytes, m.clause)
+    return Mismatch(
+        m.path, f"{where}: {m.message}", m.recorded, m.live, m.recorded_bytes, m.live_bytes, m.clause
+    )
 
 
 # ------------------------------------------------------------------------------------- results
@@ -471,9 +504,7 @@ def _results(replay: SessionReplay, path: str, reproduce: Sequence[str], strict:
     script = replay.script
     number = script.number
     hazard = session_hazard(script.packets)
-    deadline = (
-        2 * (len(script.sends) + 1) * DEFAULT_REPLY_TIMEOUT + script.end.asyncs * DEFAULT_ASYNC_TIMEOUT
-    )
+    deadline = 2 * (len(script.sends) + 1) * DEFAULT_REPLY_TIMEOUT + script.end.asyncs * DEFAULT_ASYNC_TIMEOUT
     command = shlex.join([*reproduce, "--session", str(number)])
     exchange = CaseResult(
         id=f"replay.session-{number}.exchange",
@@ -494,11 +525,20 @@ def _results(replay: SessionReplay, path: str, reproduce: Sequence[str], strict:
     )
     for m in replay.mismatches:
         expected = m.recorded + (f" (recorded bytes {m.recorded_bytes.hex(' ')})" if m.recorded_bytes else "")
-        exchange.violations.append(Violation(m.message, m.clause, "MUST", expected, m.live, m.live_bytes, "mismatch"))
+        exchange.violations.append(
+            Violation(m.message, m.clause, "MUST", expected, m.live, m.live_bytes, "mismatch")
+        )
     if replay.stopped and not replay.mismatches:
         exchange.violations.append(
-            Violation(f"the replay stopped: {replay.stopped}", "request.one-reply", "MUST",
-                      "every recorded request replayed", replay.stopped, b"", "stopped")
+            Violation(
+                f"the replay stopped: {replay.stopped}",
+                "request.one-reply",
+                "MUST",
+                "every recorded request replayed",
+                replay.stopped,
+                b"",
+                "stopped",
+            )
         )
     if exchange.violations:
         exchange.outcome = "fail"
@@ -568,7 +608,9 @@ async def replay_capture(
         report.duration = time.monotonic() - t0
         return report
     chosen = select_sessions(capture.sessions, options.sessions, report)
-    words = list(reproduce) if reproduce is not None else ["manip-conform", "replay", name, "--against", address]
+    words = (
+        list(reproduce) if reproduce is not None else ["manip-conform", "replay", name, "--against", address]
+    )
     try:
         for number, session in chosen:
             replay = await replay_session(script_of(session, number), address, options)

@@ -46,6 +46,7 @@ from manip.conformance.context import CaseContext, RunOptions
 from manip.conformance.results import CaseResult, LivenessCheck, Outcome, RunReport, Violation
 from manip.conformance.selection import PatternSet
 from manip.links import ChaosConnection, ConnectionRefused, open_connection
+from manip.links.api import LinkWrapper
 from manip.spec.constants import ServerOp
 
 __all__ = ["LIVENESS_RETRY_DELAY", "RunConfig", "RunEvents", "Runner", "case_seed"]
@@ -80,6 +81,9 @@ class RunConfig:
     liveness_check: Callable[[RunOptions], Awaitable[tuple[bool, str]]] | None = None
     """Replaces the Chaos liveness probe: (alive, detail) for targets that are not manip servers
     (the Cougar target, :mod:`manip.conformance.cougar_target`)."""
+    wrap_link: LinkWrapper | None = None
+    """Given every link the run's connections make (``RecorderTap(recorder, "client").wrap`` records
+    the run: ``manip-conform run --record``)."""
 
 
 @dataclass
@@ -135,7 +139,9 @@ class Runner:
         options = self.config.options
         for attempt in range(BUSY_RETRIES + 1 if retry_busy else 1):
             try:
-                return await open_connection(self.config.address, timeout=options.connect_timeout)
+                return await open_connection(
+                    self.config.address, timeout=options.connect_timeout, wrap_link=self.config.wrap_link
+                )
             except ConnectionRefused as exc:
                 if not retry_busy or attempt == BUSY_RETRIES or "busy" not in exc.reason.lower():
                     raise

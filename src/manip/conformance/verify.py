@@ -66,7 +66,12 @@ __all__ = [
 VERIFY_DEADLINE: Final = 1.0
 HAZARD_ORDER: Final[tuple[Hazard, ...]] = ("read-only", "config", "motion", "power")
 _ERRORS: Final = frozenset(
-    {ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR, ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING}
+    {
+        ServerOp.FATAL_ERROR,
+        ServerOp.NON_FATAL_ERROR,
+        ServerOp.ASYNCHRONOUS_ERROR,
+        ServerOp.ASYNCHRONOUS_WARNING,
+    }
 )
 
 
@@ -283,7 +288,9 @@ def judge_session(session: Session, connection: int = 0) -> tuple[list[WirePacke
 
 def session_hazard(packets: Sequence[WirePacket]) -> Hazard:
     """The highest hazard class among the session's request opcodes."""
-    levels = [HAZARD_ORDER.index(op.hazard) for p in _requests(packets) if (op := SPEC.requests.get(p.opcode))]
+    levels = [
+        HAZARD_ORDER.index(op.hazard) for p in _requests(packets) if (op := SPEC.requests.get(p.opcode))
+    ]
     return HAZARD_ORDER[max(levels, default=0)]
 
 
@@ -394,4 +401,3 @@ def select_sessions(
             return []
         numbered = [item for item in numbered if item[0] in wanted]
     return numbered
-

@@ -1,0 +1,315 @@
+"""The ``replay`` and ``verify`` subcommands of ``manip-conform`` (registered by :mod:`.cli`), and the
+capture that ``run --record`` writes.
+
+Commands::
+
+    manip-conform verify FILE [--session N]... [--strict] [--json F] [--junit F]
+    manip-conform replay FILE [--against URL | --serve URL] [--session N]... [--ignore PATH]...
+                              [--reply-timeout S] [--async-timeout S] [--settle S] [--seconds S]
+                              [--server-fault NAME]... [--record OUT] [--strict] [--json F] [--junit F]
+
+``replay`` without ``--against`` or ``--serve`` replays against the embedded reference server, started
+at the time scale and seed the capture's metadata name (the golden captures': 20 and 1985).
+Exit codes are the suite's (erratum ``verify-exit-codes``): 0 conformant (and, for replay, every answer
+as recorded), 1 not, 2 usage (a missing FILE, bad options), 3 the capture unreadable or holding no
+session, or the target unreachable (``--serve``: no client came), 4 interrupted or internal error.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import shlex
+import sys
+import traceback
+from collections.abc import Awaitable, Callable, Iterator
+from pathlib import Path
+
+import click
+from rich.console import Console
+
+from manip.conformance.embedded import EmbeddedServer
+from manip.conformance.report import failure_text, write_json, write_junit
+from manip.conformance.results import ExitCode, RunReport
+from manip.links import AddressError, parse_address
+from manip.links.api import LinkWrapper
+from manip.reference_server import FaultSet, ServerConfig
+
+__all__ = ["EXIT_CODES_HELP", "check_record_path", "recording", "replay_command", "verify_command"]
+
+EXIT_CODES_HELP = """\b
+Exit codes:
+  0  conformant (replay: every answer as recorded)
+  1  non-conformant, or a replayed answer differs from the recording
+  2  usage error
+  3  the capture cannot be read or holds no session; the target unreachable
+  4  interrupted or internal error"""
+
+_STYLE = {"fail": "bold red", "warn": "yellow", "error": "bold magenta", "pass": "green", "skip": "dim"}
+
+
+@contextlib.contextmanager
+def recording(
+    path: str | os.PathLike[str] | None, *, how: str, side: str = "client", seed: int | None = None
+) -> Iterator[LinkWrapper | None]:
+    """A capture at ``path`` recording every link the yielded wrapper is given, as the ``side``
+    (``client`` or ``server``) of the protocol; None (no wrapper) when ``path`` is None.  Enter it inside
+    the running loop (the recorder's timer flushes it while the session is idle)."""
+    if path is None:
+        yield None
+        return
+    # Imported here: the capture library (mcap, zstd) loads only when recording.
+    from manip.captures import Recorder, RecorderTap  # noqa: PLC0415
+
+    with Recorder(path, how=how, seed=seed, command_line=["manip-conform", *sys.argv[1:]]) as recorder:
+        yield RecorderTap(recorder, "server" if side == "server" else "client").wrap
+
+
+def check_record_path(path: Path | None) -> None:
+    """Fail early (usage error) when a ``--record`` file cannot be created."""
+    if path is not None and not path.resolve().parent.is_dir():
+        raise click.UsageError(f"--record: the directory of {path} does not exist")
+
+
+def _finish(
+    report: RunReport, console: Console, quiet: bool, json_path: Path | None, junit_path: Path | None
+) -> None:
+    for result in report.results:
+        if result.outcome in ("fail", "error") or (result.outcome == "warn" and not quiet):
+            style = _STYLE.get(result.outcome, "")
+            console.print(f"[{style}]{result.outcome.upper():>10}[/] {result.id}")
+            body = failure_text(result) if result.outcome != "error" else result.traceback.rstrip()
+            if body:
+                console.print(body, markup=False, highlight=False)
+            for note in result.notes:
+                console.print(f"           note: {note}", markup=False, highlight=False)
+    if json_path is not None:
+        write_json(report, json_path)
+    if junit_path is not None:
+        write_junit(report, junit_path)
+    for problem in report.problems:
+        console.print(f"[bold red]problem[/]: {problem}", highlight=False)
+    counts = ", ".join(f"{v} {k}" for k, v in report.counts().items() if v) or "no results"
+    style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
+    console.print(
+        f"[{style}]{report.verdict}[/] (exit {int(report.exit_code)}): {counts} in {report.duration:.1f} s"
+    )
+
+
+def _run(job: Callable[[], Awaitable[RunReport]], console: Console) -> RunReport | int:
+    try:
+        return asyncio.run(job())  # type: ignore[arg-type]
+    except KeyboardInterrupt:
+        console.print("[bold]interrupted[/]")
+        return int(ExitCode.INTERNAL)
+    except Exception as exc:
+        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {exc}")
+        console.print(traceback.format_exc(), markup=False, highlight=False)
+        return int(ExitCode.INTERNAL)
+
+
+_json_option = click.option(
+    "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the JSON report."
+)
+_junit_option = click.option(
+    "--junit", "junit_path", type=click.Path(dir_okay=False, path_type=Path), help="Write JUnit XML."
+)
+_session_option = click.option(
+    "--session",
+    "sessions",
+    multiple=True,
+    type=click.IntRange(1),
+    metavar="N",
+    help="Only session N (1-based, in the order they started; repeatable).",
+)
+_file_argument = click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+
+
+# ----------------------------------------------------------------------------------------------- verify
+
+
+@click.command("verify", epilog=EXIT_CODES_HELP)
+@_file_argument
+@_session_option
+@click.option("--strict", is_flag=True, help="SHOULD failures count (without it they are warnings).")
+@_json_option
+@_junit_option
+@click.option("-q", "--quiet", is_flag=True, help="Failures and the summary only.")
+def verify_command(
+    file: Path,
+    sessions: tuple[int, ...],
+    strict: bool,
+    json_path: Path | None,
+    junit_path: Path | None,
+    quiet: bool,
+) -> None:
+    """Judge a recorded capture FILE offline with the suite's checks (request-number echo, reply
+    shapes, error strings, asynchronous rules, describe-self...), citing clauses."""
+    from manip.conformance.verify import verify_capture  # noqa: PLC0415
+
+    console = Console(highlight=False)
+    command = shlex.join(["manip-conform", *sys.argv[1:]])
+    try:
+        report = verify_capture(file, strict=strict, sessions=sessions, command=command)
+    except Exception as exc:
+        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {exc}")
+        console.print(traceback.format_exc(), markup=False, highlight=False)
+        sys.exit(int(ExitCode.INTERNAL))
+    _finish(report, console, quiet, json_path, junit_path)
+    sys.exit(int(report.exit_code))
+
+
+# ----------------------------------------------------------------------------------------------- replay
+
+
+def _capture_settings(file: Path) -> tuple[float, int | None]:
+    """The time scale and seed the capture's metadata name (for the embedded server)."""
+    from manip.captures import CaptureError, read_capture  # noqa: PLC0415
+
+    try:
+        meta = read_capture(file).metadata.get("manip.capture", {})
+    except CaptureError:
+        return 1.0, None  # replay_capture reports the unreadable file
+    try:
+        scale = float(meta.get("time_scale", "") or 1.0)
+    except ValueError:
+        scale = 1.0
+    seed_text = meta.get("seed", "")
+    return scale, int(seed_text) if seed_text.isdigit() else None
+
+
+@click.command("replay", epilog=EXIT_CODES_HELP)
+@_file_argument
+@click.option("--against", "against", metavar="URL", help="Replay the client side to the server at URL.")
+@click.option(
+    "--serve", "serve", metavar="URL", help="Play the server side to clients at URL (port 0: a free one)."
+)
+@_session_option
+@click.option(
+    "--ignore",
+    "ignore",
+    multiple=True,
+    metavar="PATH",
+    help="Leave out mismatches whose field path matches PATH (glob: error.message, describe.*).",
+)
+@click.option("--reply-timeout", type=click.FloatRange(0.01), default=2.0, show_default=True,
+              help="Seconds to wait for each live answer.")  # fmt: skip
+@click.option("--async-timeout", type=click.FloatRange(0.01), default=10.0, show_default=True,
+              help="Seconds to wait for each recorded asynchronous packet's counterpart.")  # fmt: skip
+@click.option("--settle", type=click.FloatRange(0.0), default=0.2, show_default=True,
+              help="Seconds of quiet listened for after each session (extra packets).")  # fmt: skip
+@click.option("--seconds", type=click.FloatRange(0.01), default=None,
+              help="--serve: stop after this many seconds even if sessions are left.")  # fmt: skip
+@click.option(
+    "--server-fault",
+    "server_faults",
+    multiple=True,
+    metavar="NAME[=ARG]",
+    help="Embedded server only: switch on a fault of the reference server.",
+)
+@click.option(
+    "--record",
+    "record",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Record the live side to an MCAP capture (then: manip-conform verify OUT).",
+)
+@click.option("--strict", is_flag=True, help="SHOULD failures of the live checks count.")
+@_json_option
+@_junit_option
+@click.option("-q", "--quiet", is_flag=True, help="Failures and the summary only.")
+def replay_command(
+    file: Path,
+    against: str | None,
+    serve: str | None,
+    sessions: tuple[int, ...],
+    ignore: tuple[str, ...],
+    reply_timeout: float,
+    async_timeout: float,
+    settle: float,
+    seconds: float | None,
+    server_faults: tuple[str, ...],
+    record: Path | None,
+    strict: bool,
+    json_path: Path | None,
+    junit_path: Path | None,
+    quiet: bool,
+) -> None:
+    """Replay a recorded capture FILE: its client side to a live server (--against URL; without it the
+    embedded reference server), comparing every answer with the recording (masks: erratum
+    replay-masking), or its server side to a client under test (--serve URL)."""
+    from manip.conformance.replay import ReplayOptions, replay_capture  # noqa: PLC0415
+    from manip.conformance.replay_serve import ServeOptions, serve_capture  # noqa: PLC0415
+
+    console = Console(highlight=False)
+    if against and serve:
+        raise click.UsageError("give --against URL or --serve URL, not both")
+    try:
+        for url in (against, serve):
+            if url:
+                parse_address(url)
+    except AddressError as exc:
+        raise click.UsageError(str(exc)) from None
+    if server_faults and (against or serve):
+        raise click.UsageError("--server-fault applies to the embedded server only (omit --against/--serve)")
+    if seconds is not None and not serve:
+        raise click.UsageError("--seconds applies to --serve")
+    try:
+        faults = FaultSet.parse(server_faults) if server_faults else None
+    except ValueError as exc:
+        raise click.UsageError(f"--server-fault: {exc}") from None
+    check_record_path(record)
+    command = shlex.join(["manip-conform", *sys.argv[1:]])
+
+    if serve:
+
+        def listening(address: str) -> None:
+            console.print(
+                f"manip-conform: serving the recorded sessions of {file} at {address}", highlight=False
+            )
+            sys.stdout.flush()
+
+        async def serve_job() -> RunReport:
+            with recording(record, how="manip-conform replay --serve", side="server") as wrap:
+                options = ServeOptions(
+                    seconds=seconds,
+                    ignore=ignore,
+                    strict=strict,
+                    sessions=sessions,
+                    wrap_link=wrap,
+                    on_listening=listening,
+                )
+                return await serve_capture(file, serve, options, command=command)
+
+        outcome = _run(serve_job, console)
+    else:
+
+        async def replay_job() -> RunReport:
+            with recording(record, how="manip-conform replay") as wrap:
+                options = ReplayOptions(
+                    reply_timeout=reply_timeout,
+                    async_timeout=async_timeout,
+                    settle=settle,
+                    ignore=ignore,
+                    strict=strict,
+                    sessions=sessions,
+                    wrap_link=wrap,
+                )
+                if against:
+                    return await replay_capture(file, against, options, command=command)
+                scale, seed = _capture_settings(file)
+                config = ServerConfig() if faults is None else ServerConfig(faults=faults)
+                with EmbeddedServer(config, time_scale=scale, seed=seed) as address:
+                    console.print(f"embedded reference server at {address} (time scale {scale:g})")
+                    reproduce = ["manip-conform", "replay", str(file)]
+                    for fault in server_faults:
+                        reproduce += ["--server-fault", fault]
+                    return await replay_capture(
+                        file, address, options, embedded=True, command=command, reproduce=reproduce
+                    )
+
+        outcome = _run(replay_job, console)
+    if isinstance(outcome, int):
+        sys.exit(outcome)
+    _finish(outcome, console, quiet, json_path, junit_path)
+    sys.exit(int(outcome.exit_code))

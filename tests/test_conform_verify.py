@@ -1,0 +1,122 @@
+"""``manip-conform verify``: golden captures pass, captures of faulty servers fail with the clause, the
+report is the suite's (schema, exit codes), ``run --record`` makes a capture verify passes."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from manip.captures import read_session
+from manip.conformance.checks import WirePacket
+from manip.conformance.cli import main
+from manip.conformance.embedded import EmbeddedServer
+from manip.conformance.replay import ReplayOptions, replay_capture
+from manip.conformance.replay_cli import recording
+from manip.conformance.report import load_schema, report_json
+from manip.conformance.verify import fatal_close_findings, verify_capture, wire_packets
+from manip.reference_server import FaultSet, ServerConfig
+from manip.spec.constants import ChaosOp, ServerOp
+from tests.test_conform_framework import _validate
+
+ROOT = Path(__file__).resolve().parents[1]
+GOLDEN = ROOT / "captures"
+NAMES = ("describe-self", "motion", "errors")
+
+
+def record_replay(name: str, fault: str, out: Path) -> None:
+    """Record (client side) a replay of golden capture ``name`` against a server with ``fault`` on."""
+
+    async def job() -> None:
+        with recording(out, how="test") as wrap:
+            options = ReplayOptions(reply_timeout=0.5, async_timeout=2.0, settle=0.05, wrap_link=wrap)
+            with EmbeddedServer(ServerConfig(faults=FaultSet.parse([fault])), time_scale=20) as address:
+                await replay_capture(GOLDEN / f"{name}.mcap", address, options)
+
+    asyncio.run(job())
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_golden_capture_verifies(name: str) -> None:
+    report = verify_capture(GOLDEN / f"{name}.mcap")
+    assert report.exit_code == 0, [(r.id, r.violations) for r in report.results if r.violations]
+    outcomes = {r.id.rsplit(".", 1)[1]: r.outcome for r in report.results}
+    assert outcomes["initial-response"] == outcomes["request-numbers"] == "pass"
+    schema = load_schema()
+    _validate(json.loads(json.dumps(report_json(report))), schema, schema)
+
+
+def test_wire_packets_keep_data_and_closes_in_order() -> None:
+    session = read_session(GOLDEN / "describe-self.mcap")
+    packets = wire_packets(session)
+    assert [p.opcode for p in packets if p.direction == "c2s" and not p.is_close] == [0o200, 0o201]
+    assert all(p.opcode >= ChaosOp.DAT or p.is_close for p in packets)
+    assert packets[0].direction == "s2c" and packets[0].data == b"\x01\x00"  # the initial RESPONSE
+    assert any(p.is_close for p in packets)
+
+
+@pytest.mark.parametrize(
+    ("name", "fault", "clause", "family"),
+    [
+        ("motion", "wrong-request-number", "response.echoes-request-number", "request-numbers"),
+        ("describe-self", "no-describe-terminator", "multi.terminated-by-empty", "describe"),
+        ("errors", "wrong-severity", "error.severity-matches-opcode", "error-strings"),
+    ],
+)
+def test_capture_of_a_faulty_server_fails_verify(
+    tmp_path: Path, name: str, fault: str, clause: str, family: str
+) -> None:
+    out = tmp_path / "faulty.mcap"
+    record_replay(name, fault, out)
+    report = verify_capture(out)
+    assert report.exit_code == 1
+    failed = {r.id: r for r in report.results if r.outcome in ("fail", "warn")}
+    assert f"verify.session-1.{family}" in failed, sorted(failed)
+    violation = next(v for v in failed[f"verify.session-1.{family}"].violations if v.clause == clause)
+    assert violation.data  # the bytes of the offending packet
+
+
+def test_fatal_error_then_client_close_is_a_finding() -> None:
+    fatal = WirePacket("s2c", ServerOp.FATAL_ERROR, 5, 3, b"\x03\x00x: F ABC boom")
+    client_close = WirePacket("c2s", ChaosOp.CLS, 0, 0, b"bye")
+    server_close = WirePacket("s2c", ChaosOp.CLS, 0, 0, b"bye")
+    (finding,) = fatal_close_findings([fatal, client_close, server_close])
+    assert finding.clause == "error.fatal-then-close"
+    assert fatal_close_findings([fatal, server_close, client_close]) == []
+
+
+def test_cli_exit_codes_and_reports(tmp_path: Path) -> None:
+    runner = CliRunner()
+    json_path, junit_path = tmp_path / "r.json", tmp_path / "r.xml"
+    ok = runner.invoke(
+        main, ["verify", str(GOLDEN / "errors.mcap"), "--json", str(json_path), "--junit", str(junit_path)]
+    )
+    assert ok.exit_code == 0, ok.output
+    data = json.loads(json_path.read_text())
+    schema = load_schema()
+    _validate(data, schema, schema)
+    assert data["verdict"] == "conformant" and all(c["kind"] == "verify" for c in data["cases"])
+    refusals = next(c for c in data["cases"] if c["id"] == "verify.session-1.refusals")
+    assert refusals["outcome"] == "pass" and "request.unknown-opcode" in refusals["clauses"]
+    assert "<testsuites" in junit_path.read_text()
+    assert runner.invoke(main, ["verify", str(tmp_path / "missing.mcap")]).exit_code == 2
+    garbage = tmp_path / "garbage.mcap"
+    garbage.write_bytes(b"not an mcap file at all")
+    unreadable = runner.invoke(main, ["verify", str(garbage)])
+    assert unreadable.exit_code == 3 and "cannot be read" in unreadable.output
+    assert runner.invoke(main, ["verify", str(GOLDEN / "errors.mcap"), "--session", "2"]).exit_code == 3
+
+
+def test_run_record_produces_a_capture_that_verifies(tmp_path: Path) -> None:
+    out = tmp_path / "run.mcap"
+    result = CliRunner().invoke(
+        main, ["run", "-q", "--seed", "3", "--select", "server.reply", "--select", "server.error", "--record", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    report = verify_capture(out)
+    assert report.exit_code == 0, [(r.id, r.violations) for r in report.results if r.violations]
+    sessions = {r.id.split(".")[1] for r in report.results}
+    assert len(sessions) > 5  # every case's connection and the liveness probes
