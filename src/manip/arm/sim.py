@@ -24,11 +24,15 @@ packets* and answered with a segment number before any motion happened (§5.1, �
   change nothing).  The caller must bring the arm up to date (``tick(now)``) before a request at ``now``.
 * **Interpolation**: joint moves go to :class:`~manip.arm.trajectory.MoveInterpolator` (linear with
   parabolic blends by default, quintic on request, the cosine debugging wave, and the compliant schemes
-  whose nominal path is the blended one).  Straight-line moves are planned in full when queued: the
-  Cartesian path (:class:`~manip.arm.trajectory.CartesianSegment`) is sampled at every tick and solved
-  there, each solution nearest the previous one, so a path that leaves the workspace or breaks a joint
-  limit anywhere is refused at once (TOR/JOR) and playback is a table lookup.  Segments queued behind a
-  straight-line move wait until it ends, then start from rest.
+  whose nominal path is the blended one).  Straight-line moves
+  (:class:`~manip.arm.trajectory.CartesianSegment`) are checked when queued at evenly spaced points of
+  the line, each solved nearest the previous one, so a line that leaves the workspace, breaks a joint
+  limit or passes through a singularity is refused at once (TOR/JOR).  The points are at most one
+  full-speed servo cycle apart and at most :data:`MAX_LINE_CHECKS`: the work is bounded whatever the
+  distance and the speed factor (erratum ``motion-planning-bounds``).  The move process then solves the
+  line's pose on every cycle as it runs, nearest the previous cycle's angles, and falls back on the
+  checked path where that fails.  Segments queued behind a straight-line move wait until it ends, then
+  start from rest.
 * **The arm**: the actual angles follow the commanded ones, except where an :class:`Obstacle` stops a
   joint.  The collision test compares the actual angles with those commanded on the previous cycle; a
   joint off by more than ``collision_tol_deg`` (the freed joint excepted, and never under a compliant
@@ -65,7 +69,7 @@ import enum
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final, Protocol
 
 import numpy as np
@@ -75,6 +79,7 @@ from manip.arm.kinematics import (
     ArmModel,
     Joints,
     JointsLike,
+    KinematicsError,
     OutOfRange,
     Unreachable,
     forward,
@@ -95,10 +100,13 @@ from manip.arm.trajectory import (
     Scheme,
 )
 from manip.arm.transform import Transform
+from manip.codecs.pdp11float import F_MIN_NORMAL
 
 __all__ = [
     "COLLISION_TOL_DEG",
+    "MAX_LINE_CHECKS",
     "MAX_QUEUE",
+    "MIN_SPEED_FACTOR",
     "SEGMENT_MODULUS",
     "STRAIGHT_JUMP_DEG",
     "AbortCause",
@@ -122,6 +130,14 @@ SEGMENT_MODULUS: Final = 1 << 16
 #: the line passes through (or very near) a singularity, where no smooth joint motion follows it; the
 #: move is refused with TOR.
 STRAIGHT_JUMP_DEG: Final = 5.0
+#: Most points a straight-line move is checked at when queued (erratum ``motion-planning-bounds``).
+#: The points are at most one full-speed servo cycle apart (4 mm and 0.96 deg with the default limits),
+#: so a PUMA 600 line, at most ~1.7 m long between two reachable poses, needs ~430; the cap only
+#: coarsens the check for a bigger arm or a shorter tick.
+MAX_LINE_CHECKS: Final = 1024
+#: Smallest speed factor accepted: the smallest PDP-11 float, so no factor from the protocol is refused,
+#: while f² (which scales accelerations) stays a normal double and every duration stays finite.
+MIN_SPEED_FACTOR: Final = F_MIN_NORMAL
 _EPS: Final = 1e-9
 #: A straight-line move starting within this of where it was planned from (deg) is played as planned.
 _SAME_START_DEG: Final = 1e-6
@@ -232,19 +248,32 @@ class _JointPacket:
 
 @dataclass(frozen=True)
 class _PathPacket:
-    """A straight-line move, solved at every tick from ``start`` when it was queued."""
+    """A straight-line move from ``start``: ``line`` (its geometry and timing) and ``checks``, the
+    solutions at the evenly spaced points it was checked at (``checks[0]`` is ``start``, the last the
+    solution at the goal).  ``offset`` (a start shifted behind a compliant episode) fades to zero."""
 
     segment: int
-    samples: tuple[Joints, ...]
+    line: CartesianSegment
+    checks: tuple[Joints, ...]
     start: Joints
     goal: Transform
     speed: float
+    offset: Joints | None = None
+
+    @property
+    def end(self) -> Joints:
+        return self.checks[-1]
 
 
 @dataclass
 class _Playback:
+    """A straight-line move being run: ``done`` of its ``ticks`` servo cycles, ``previous`` the
+    solution of the last one (without the offset)."""
+
     packet: _PathPacket
-    index: int = 0
+    ticks: int
+    previous: Joints
+    done: int = 0
 
 
 def _joints(v: Sequence[float] | np.ndarray) -> Joints:
@@ -410,9 +439,12 @@ class ArmSim:
 
     # ---------------------------------------------------------------------------- settings
     def set_speed(self, factor: float) -> None:
-        """Speed factor for segments queued from now on: 0 < factor <= 1, else BVA."""
+        """Speed factor for segments queued from now on: 0 < factor <= 1, else BVA (also below
+        :data:`MIN_SPEED_FACTOR`, which no PDP-11 float is)."""
         if not (math.isfinite(factor) and 0.0 < factor <= 1.0):
             raise Refused("BVA", f"speed factor {factor!r} is not in 0 < n <= 1")
+        if factor < MIN_SPEED_FACTOR:
+            raise Refused("BVA", f"speed factor {factor!r} is below the smallest PDP-11 float")
         self.speed = float(factor)
         self._interp.set_speed(self.speed)
 
@@ -570,9 +602,8 @@ class ArmSim:
     def _next_command(self, t: float, events: list[ArmEvent]) -> Joints:
         play = self._playback
         if play is not None:
-            q = play.packet.samples[play.index]
-            play.index += 1
-            if play.index == len(play.packet.samples):
+            q = self._line_step(play)
+            if play.done == play.ticks:
                 events.append(SegmentCompleted(play.packet.segment, t))
                 self._playback = None
                 self._restart(q, t)
@@ -601,7 +632,7 @@ class ArmSim:
             if self._backlog and isinstance(self._backlog[0], _PathPacket):
                 packet = self._backlog.popleft()
                 assert isinstance(packet, _PathPacket)
-                self._playback = _Playback(self._from(packet, q))
+                self._playback = self._play(self._from(packet, q))
                 self._scheme_now = None
         return q
 
@@ -630,26 +661,59 @@ class ArmSim:
 
     def _from(self, packet: _PathPacket, here: Joints) -> _PathPacket:
         """``packet`` starting from ``here``: as planned when it starts where it was planned from;
-        otherwise (behind a compliant episode) solved again from ``here``, or, when the line can no longer
-        be followed from there, its samples shifted by the offset fading linearly to zero."""
-        offset = [a - b for a, b in zip(here, packet.start, strict=True)]
+        otherwise (behind a compliant episode) checked and solved again from ``here``, or, when the line
+        can no longer be followed from there, played as planned plus the offset fading linearly to
+        zero."""
+        offset = _joints([a - b for a, b in zip(here, packet.start, strict=True)])
         if max(abs(d) for d in offset) <= _SAME_START_DEG:
             return packet
         try:
-            samples = self._plan_line(here, packet.goal, packet.speed)
+            line, checks = self._plan_line(here, packet.goal, packet.speed)
         except Refused:
-            lim = self.model.limits
-            n = len(packet.samples)
-            samples = tuple(
-                _joints(
-                    [
-                        min(max(v + d * (n - k) / n, lo), hi)
-                        for v, d, lo, hi in zip(q, offset, lim.lower, lim.upper, strict=True)
-                    ]
-                )
-                for k, q in enumerate(packet.samples, start=1)
-            )
-        return _PathPacket(packet.segment, samples, here, packet.goal, packet.speed)
+            return replace(packet, offset=offset)
+        return _PathPacket(packet.segment, line, checks, here, packet.goal, packet.speed)
+
+    def _play(self, packet: _PathPacket) -> _Playback:
+        ticks = max(1, math.ceil(packet.line.duration / self.tick_period - _EPS))
+        return _Playback(packet, ticks, packet.start)
+
+    def _line_step(self, play: _Playback) -> Joints:
+        """The next servo cycle of a straight-line move.
+
+        The line's pose at the cycle's time is solved nearest the previous cycle's angles: the move
+        process does the inverse kinematics as the line runs, so a slow line costs no more to queue than
+        a fast one.  Where that fails, jumps, or strays from the checked path (by more than
+        :data:`STRAIGHT_JUMP_DEG`, which only a line grazing a boundary between two check points can
+        do), the checked path -- joint-interpolated between check points -- is commanded instead.  The
+        last cycle commands the planned end exactly.
+        """
+        packet, line = play.packet, play.packet.line
+        play.done += 1
+        k, n = play.done, play.ticks
+        if k >= n:
+            q = packet.end
+        else:
+            s = line.progress(min(k * self.tick_period, line.duration))
+            guide = _along(packet.checks, s)
+            try:
+                q = nearest_solution(
+                    line.pose_along(s), play.previous, self.model.geometry, self.model.limits
+                ).q
+            except KinematicsError:
+                q = guide
+            if _deviation(q, play.previous) > STRAIGHT_JUMP_DEG or _deviation(q, guide) > STRAIGHT_JUMP_DEG:
+                q = guide
+        play.previous = q
+        if packet.offset is None:
+            return q
+        fade = (n - k) / n
+        lim = self.model.limits
+        return _joints(
+            [
+                min(max(v + d * fade, lo), hi)
+                for v, d, lo, hi in zip(q, packet.offset, lim.lower, lim.upper, strict=True)
+            ]
+        )
 
     def _abort(self, t: float, cause: AbortCause, joints: tuple[int, ...], events: list[ArmEvent]) -> None:
         dropped = list(self._interp.abort(t))
@@ -717,31 +781,60 @@ class ArmSim:
         return best.q
 
     def _queue_straight(self, pose: Transform, now: float) -> int:
-        samples = self._plan_line(self._planned, pose, self.speed)
-        packet = _PathPacket(self._allocate(), samples, self._planned, pose, self.speed)
+        line, checks = self._plan_line(self._planned, pose, self.speed)
+        packet = _PathPacket(self._allocate(), line, checks, self._planned, pose, self.speed)
         self._enqueue(packet, now)
-        self._planned, self._planned_oat = samples[-1], None
+        self._planned, self._planned_oat = packet.end, None
         return packet.segment
 
-    def _plan_line(self, start: Joints, pose: Transform, speed: float) -> tuple[Joints, ...]:
-        """The joint angles at every tick of the straight line from ``start`` to ``pose``, each solution
-        nearest the previous one; TOR/JOR when the line cannot be followed."""
+    def _plan_line(
+        self, start: Joints, pose: Transform, speed: float
+    ) -> tuple[CartesianSegment, tuple[Joints, ...]]:
+        """Check the straight line from ``start`` to ``pose`` (erratum ``motion-planning-bounds``).
+
+        The goal first (one solution: a goal out of reach is refused before anything else is done);
+        then evenly spaced points of the line, at most as far apart as a full-speed line moves in one
+        servo cycle and never more than :data:`MAX_LINE_CHECKS`, each solved nearest the previous one.
+        TOR when a point is out of the workspace or two neighbours' solutions are more than
+        :data:`STRAIGHT_JUMP_DEG` apart on a joint (a singularity), JOR when a point breaks a joint
+        limit.  The speed factor only times the line: it never changes the verdict or the work.
+        Returns the line, timed for ``speed``, and the solutions at the points (``start`` first).
+        """
         g, lim = self.model.geometry, self.model.limits
-        segment = CartesianSegment(forward(start, g).matrix, pose.matrix, self.cartesian_limits, speed)
-        h = self.tick_period
-        n = max(1, math.ceil(segment.duration / h - _EPS))
-        samples: list[Joints] = []
-        previous = start
-        for k in range(1, n + 1):
-            at = Transform(segment.pose_at(min(k * h, segment.duration)))
+        try:
+            nearest_solution(pose, start, g, lim)
+        except Unreachable as exc:
+            raise Refused("TOR", f"the goal is out of the workspace ({exc.reason})") from exc
+        except OutOfRange as exc:
+            raise Refused("JOR", f"the goal breaks a joint limit ({exc})", exc.joints) from exc
+        line = CartesianSegment(forward(start, g).matrix, pose.matrix, self.cartesian_limits, speed)
+        h, cl = self.tick_period, self.cartesian_limits
+        spacing = max(line.distance / (cl.max_speed * h), line.angle / (cl.max_rot_speed * h))
+        n = min(max(1, math.ceil(spacing - _EPS)), MAX_LINE_CHECKS)
+        checks = [start]
+        for i in range(1, n + 1):
+            previous = checks[-1]
             try:
-                q = nearest_solution(at, previous, g, lim).q
+                q = nearest_solution(line.pose_along(i / n), previous, g, lim).q
             except Unreachable as exc:
                 raise Refused("TOR", f"the line leaves the workspace ({exc.reason})") from exc
             except OutOfRange as exc:
                 raise Refused("JOR", f"the line breaks a joint limit ({exc})", exc.joints) from exc
-            if max(abs(a - b) for a, b in zip(q, previous, strict=True)) > STRAIGHT_JUMP_DEG:
+            if _deviation(q, previous) > STRAIGHT_JUMP_DEG:
                 raise Refused("TOR", "the line passes through a singularity")
-            samples.append(q)
-            previous = q
-        return tuple(samples)
+            checks.append(q)
+        return line, tuple(checks)
+
+
+def _deviation(a: Sequence[float], b: Sequence[float]) -> float:
+    """The largest difference of one joint between ``a`` and ``b``."""
+    return max(abs(x - y) for x, y in zip(a, b, strict=True))
+
+
+def _along(checks: Sequence[Joints], s: float) -> Joints:
+    """The checked path at ``s`` in [0, 1]: joint-interpolated between the evenly spaced checks."""
+    n = len(checks) - 1
+    x = min(max(s, 0.0), 1.0) * n
+    i = min(int(x), n - 1)
+    f = x - i
+    return _joints([a + (b - a) * f for a, b in zip(checks[i], checks[i + 1], strict=True)])

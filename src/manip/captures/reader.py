@@ -41,6 +41,9 @@ from .view import Annotation, Annotator, bad_frame
 _RECORD_HEAD: Final = struct.Struct("<BQ")
 _MESSAGE_HEAD: Final = struct.Struct("<HIQQ")
 """A message record: channel id, sequence, log time, publish time; the data follow."""
+_MESSAGE: Final = int(Opcode.MESSAGE)
+_CHANNEL: Final = int(Opcode.CHANNEL)
+_SCHEMA: Final = int(Opcode.SCHEMA)
 
 
 class CaptureTruncatedError(CaptureError):
@@ -107,6 +110,46 @@ class CapturedPacket:
     @property
     def data(self) -> bytes:
         return b"" if self.packet is None else self.packet.data
+
+
+class _CapturedBuilder:
+    """A plain class with exactly :class:`CapturedPacket`'s slots: the reader fills one with ordinary
+    attribute stores and makes it a CapturedPacket by assigning ``__class__`` (allowed between classes of
+    the same instance layout), which costs far less than the frozen dataclass's ``__init__``."""
+
+    __slots__ = CapturedPacket.__slots__
+
+    def __init__(
+        self,
+        seq: int,
+        time_ns: int,
+        link: int,
+        direction: Direction,
+        frame: bytes,
+        packet: Packet | None,
+        annotation: Annotation,
+    ) -> None:
+        self.seq = seq
+        self.time_ns = time_ns
+        self.link = link
+        self.direction = direction
+        self.frame = frame
+        self.packet = packet
+        self.annotation = annotation
+
+
+def _captured(
+    seq: int,
+    time_ns: int,
+    link: int,
+    direction: Direction,
+    frame: bytes,
+    packet: Packet | None,
+    annotation: Annotation,
+) -> CapturedPacket:
+    built = _CapturedBuilder(seq, time_ns, link, direction, frame, packet, annotation)
+    built.__class__ = CapturedPacket  # type: ignore[assignment]
+    return built  # type: ignore[return-value]
 
 
 @dataclass(frozen=True, slots=True)
@@ -309,29 +352,47 @@ class _Stream:
             data = chunk.data
         else:
             raise CaptureError(f"chunk compression {chunk.compression!r} is not supported")
+        if type(data) is not bytes:  # frames handed out are bytes
+            data = bytes(data)
         pos, size = 0, len(data)
-        head, message_head = _RECORD_HEAD, _MESSAGE_HEAD
-        wanted = self.raw.keys() | self.events
-        counts = self.capture.counts
-        topics = self.topics
-        while pos < size:
-            opcode, length = head.unpack_from(data, pos)
-            start = pos + head.size
-            pos = start + length
-            if opcode == Opcode.MESSAGE:
-                cid, sequence, log_time, _ = message_head.unpack_from(data, start)
-                if cid in wanted:
-                    item = self._message(cid, sequence, log_time, data[start + message_head.size : pos])
-                    if item is not None:
-                        yield item
-                else:
-                    counts[topics.get(cid, "?")] += 1
-            elif opcode == Opcode.CHANNEL:
-                self._channel(Channel.read(ReadDataStream(io.BytesIO(data[start:pos]))))
-                wanted = self.raw.keys() | self.events
-            elif opcode == Opcode.SCHEMA:
-                schema = Schema.read(ReadDataStream(io.BytesIO(data[start:pos])))
-                self.schemas[schema.id] = schema
+        head, message_head = _RECORD_HEAD.unpack_from, _MESSAGE_HEAD.unpack_from
+        message_at = _RECORD_HEAD.size + _MESSAGE_HEAD.size
+        raw_channels, events = self.raw, self.events
+        annotate = self.annotator.annotate
+        seen: Counter[int] = Counter()  # messages per channel id, added to the topic counts at the end
+        try:
+            while pos < size:
+                opcode, length = head(data, pos)
+                start = pos
+                pos += 9 + length
+                if opcode == _MESSAGE:
+                    cid, sequence, log_time, _ = message_head(data, start + 9)
+                    seen[cid] += 1
+                    raw = raw_channels.get(cid)
+                    if raw is not None:  # a frame: decoded and annotated like the recorder did
+                        frame = data[start + message_at : pos]
+                        packet: Packet | None
+                        try:
+                            packet = raw.decode(frame)
+                        except DecodeError as exc:
+                            packet = None
+                            annotation = bad_frame(exc)
+                        else:
+                            annotation = annotate(raw.link, raw.direction, packet)
+                        yield _captured(
+                            sequence, log_time, raw.link, raw.direction, frame, packet, annotation
+                        )
+                    elif cid in events:
+                        yield self._event(log_time, data[start + message_at : pos])
+                elif opcode == _CHANNEL:
+                    self._channel(Channel.read(ReadDataStream(io.BytesIO(data[start + 9 : pos]))))
+                elif opcode == _SCHEMA:
+                    schema = Schema.read(ReadDataStream(io.BytesIO(data[start + 9 : pos])))
+                    self.schemas[schema.id] = schema
+        finally:
+            counts, topics = self.capture.counts, self.topics
+            for cid, n in seen.items():
+                counts[topics.get(cid, "?")] += n
 
     def _message(
         self, cid: int, sequence: int, log_time: int, data: bytes
@@ -351,10 +412,14 @@ class _Stream:
                 annotation = self.annotator.annotate(raw.link, raw.direction, packet)
             return CapturedPacket(sequence, log_time, raw.link, raw.direction, frame, packet, annotation)
         if cid in self.events:
-            body = json.loads(data)
-            name = str(body.pop("event", "?"))
-            return CapturedEvent(log_time, name, body)
+            return self._event(log_time, data)
         return None
+
+    @staticmethod
+    def _event(log_time: int, data: bytes) -> CapturedEvent:
+        body = json.loads(data)
+        name = str(body.pop("event", "?"))
+        return CapturedEvent(log_time, name, body)
 
 
 def iter_packets(source: str | os.PathLike[str] | IO[bytes]) -> Iterator[CapturedPacket]:

@@ -73,6 +73,7 @@ from manip.conformance.results import CaseResult, RunReport, Violation
 from manip.conformance.verify import (
     FAMILIES,
     judge_findings,
+    opened,
     rfc_number,
     select_sessions,
     session_hazard,
@@ -570,6 +571,23 @@ def _results(replay: SessionReplay, path: str, reproduce: Sequence[str], strict:
     return [exchange, checks]
 
 
+def _refused(number: int, session: Session, path: str) -> CaseResult:
+    """A recorded connection that never opened (refused as busy, say): nothing to replay."""
+    return CaseResult(
+        id=f"replay.session-{number}.exchange",
+        clauses=EXCHANGE_CLAUSES,
+        level="MUST",
+        kind="replay",
+        hazard="read-only",
+        summary=f"session {number} of {os.path.basename(path)}",
+        outcome="skip",
+        seed=0,
+        deadline=DEFAULT_REPLY_TIMEOUT,
+        reason="the recorded connection never opened (refused): not replayed",
+        packets=wire_packets(session, number - 1),
+    )
+
+
 async def replay_capture(
     path: str | os.PathLike[str],
     address: str,
@@ -613,6 +631,9 @@ async def replay_capture(
     )
     try:
         for number, session in chosen:
+            if not opened(session):
+                report.results.append(_refused(number, session, name))
+                continue
             replay = await replay_session(script_of(session, number), address, options)
             if not replay.connected and not report.results:
                 report.unreachable = True

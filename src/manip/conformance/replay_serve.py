@@ -7,7 +7,8 @@ Theory of operation
 before the first request (the initial RESPONSE, and anything else it sent unasked), turn k the answer
 to the k-th recorded request (sorted as :class:`~manip.conformance.replay.AnswerSorter` sorts them,
 by order) followed by the asynchronous packets the recording shows after it, before the next request.
-When the recorded server closed the connection first (after a fatal error, say), the turn it closed
+Recorded connections that never opened (refused as busy) are left out.  When the recorded server
+closed the connection first (after a fatal error, say), the turn it closed
 after is noted.
 
 :func:`serve_capture` listens at the link address (``tcp://127.0.0.1:0``: a free port, reported through
@@ -41,7 +42,7 @@ from manip.conformance.checks import WirePacket, describe
 from manip.conformance.masking import Mismatch, NumberMap, compare_request, masked
 from manip.conformance.replay import AnswerSorter
 from manip.conformance.results import CaseResult, RunReport, Violation
-from manip.conformance.verify import rfc_number, select_sessions, session_hazard, wire_packets
+from manip.conformance.verify import opened, rfc_number, select_sessions, session_hazard, wire_packets
 from manip.links import ChaosConnection, ChaosError, start_server
 from manip.links.api import LinkWrapper
 
@@ -257,7 +258,7 @@ async def serve_capture(
         report.problems.append(f"the capture cannot be read: {exc}")
         report.duration = time.monotonic() - t0
         return report
-    chosen = select_sessions(capture.sessions, options.sessions, report)
+    chosen = [(n, s) for n, s in select_sessions(capture.sessions, options.sessions, report) if opened(s)]
     sessions = [
         ServedSession(number, turns_of(wire_packets(s, number - 1), rfc_number(s))) for number, s in chosen
     ]

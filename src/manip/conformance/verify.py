@@ -56,6 +56,7 @@ __all__ = [
     "fatal_close_findings",
     "judge_findings",
     "judge_session",
+    "opened",
     "rfc_number",
     "select_sessions",
     "session_hazard",
@@ -102,8 +103,16 @@ def wire_packets(session: Session, connection: int = 0) -> list[WirePacket]:
     return out
 
 
+def opened(session: Session) -> bool:
+    """Whether the connection opened (False: refused, busy say, or the recording starts after it)."""
+    return any(e.event == "open" for e in session.events)
+
+
 def rfc_number(session: Session) -> int | None:
-    """The recorded RFC's packet number (None when the recording starts after it)."""
+    """The recorded RFC's packet number (None when the recording starts after it, or the connection
+    was refused: then there is no initial RESPONSE to expect)."""
+    if not opened(session):
+        return None
     for p in session.packets:
         if p.packet is not None and p.packet.opcode == ChaosOp.RFC and p.direction == "c2s":
             return p.packet.packet_no
@@ -358,7 +367,7 @@ def verify_capture(
                 kind="verify",
                 hazard=hazard,
                 summary=f"session {number} ({session.contact or 'no RFC recorded'}): {family.summary}",
-                outcome="pass" if family.exercised(packets, initial) else "skip",
+                outcome="pass" if opened(session) and family.exercised(packets, initial) else "skip",
                 seed=0,
                 deadline=VERIFY_DEADLINE,
                 duration=elapsed,
@@ -369,7 +378,9 @@ def verify_capture(
                 ),
             )
             if result.outcome == "skip":
-                result.reason = "the recording does not exercise it"
+                result.reason = (
+                    "the recording does not exercise it" if opened(session) else "the connection never opened"
+                )
             judge_findings(result, by_family.get(family.name, ()), strict=strict)
             report.results.append(result)
     if capture.bad_frames:
