@@ -209,9 +209,11 @@ def test_cli_info_and_recover(tmp_path: Path) -> None:
     assert runner.invoke(capture_main, ["info", str(tmp_path / "fixed.mcap")]).exit_code == 0
 
 
-def test_cli_record_refuses_mixed_schemes() -> None:
+def test_cli_record_refuses_mixed_schemes(tmp_path: Path) -> None:
+    out = tmp_path / "x.mcap"
     result = CliRunner().invoke(
         capture_main,
-        ["record", "--listen", "tcp://127.0.0.1:0", "--upstream", "chudp://127.0.0.1:1", "-o", "x.mcap"],
+        ["record", "--listen", "tcp://127.0.0.1:0", "--upstream", "chudp://127.0.0.1:1", "-o", str(out)],
     )
-    assert result.exit_code == 1 and "same link" in result.output
+    assert result.exit_code == 2 and "same link" in result.output
+    assert not out.exists()  # refused before anything was written
