@@ -16,6 +16,7 @@ from manip.codecs import framing as fw
 from manip.codecs.chaos import (
     HEADER,
     PACKET,
+    IllegalPacketError,
     chaos_checksum,
     compiled_packet,
     decode_raw,
@@ -33,12 +34,14 @@ from manip.codecs.framing import (
     TcpFrameDecoder,
     decode_chaosd,
     decode_chudp,
+    decode_stream,
     decode_tcp,
     encode_chaosd,
     encode_chudp,
     encode_tcp,
 )
 from manip.codecs.packet import MAX_DATA, Packet, Trailer, make_packet, make_trailer_value
+from manip.spec.constants import ChaosOp
 
 # ------------------------------------------------------------------------------------ vectors
 
@@ -143,18 +146,29 @@ def test_checksum_error_message_shows_expected_and_found() -> None:
 
 legal_opcodes = st.one_of(st.integers(0o1, 0o16), st.integers(0o200, 0o377))
 words = st.integers(0, 0xFFFF)
-packets = st.builds(
-    Packet,
-    opcode=legal_opcodes,
-    dest_host=words,
-    dest_index=words,
-    src_host=words,
-    src_index=words,
-    packet_no=words,
-    ack_no=words,
-    data=st.binary(max_size=MAX_DATA),
-    fc=st.integers(0, 15),
-)
+
+
+any_data = st.binary(max_size=MAX_DATA)
+
+
+def packet_strategy(
+    opcodes: st.SearchStrategy[int], data: st.SearchStrategy[bytes] = any_data
+) -> st.SearchStrategy[Packet]:
+    return st.builds(
+        Packet,
+        opcode=opcodes,
+        dest_host=words,
+        dest_index=words,
+        src_host=words,
+        src_index=words,
+        packet_no=words,
+        ack_no=words,
+        data=data,
+        fc=st.integers(0, 15),
+    )
+
+
+packets = packet_strategy(legal_opcodes)
 
 
 # ------------------------------------------------------------------------------------ round trips
@@ -461,18 +475,7 @@ def test_checksum_worked_example() -> None:
 # errors, and must hand anything unusual to the reference.
 
 any_opcodes = st.integers(0, 0xFF)
-fast_packets = st.builds(
-    Packet,
-    opcode=any_opcodes,
-    dest_host=words,
-    dest_index=words,
-    src_host=words,
-    src_index=words,
-    packet_no=words,
-    ack_no=words,
-    data=st.binary(max_size=MAX_DATA),
-    fc=st.integers(0, 15),
-)
+fast_packets = packet_strategy(any_opcodes)
 hops = st.one_of(st.none(), words)
 orders = st.sampled_from([">", "<"])
 
@@ -547,6 +550,10 @@ def test_fast_encode_leaves_a_bytearray_alone(p: Packet) -> None:
     assert raw == p.data
 
 
+def _fields(exc: DecodeError) -> tuple[str, str, int | None, str | None]:
+    return exc.message, exc.path, exc.offset, exc.clause
+
+
 def _same_decode(body: bytes, base: int, order: str, verify: bool) -> None:
     """Decode ``body`` both ways (inside a larger buffer, to exercise the offsets): same packet or error."""
     buf = b"\xaa" * 3 + body + b"\x55"
@@ -556,12 +563,11 @@ def _same_decode(body: bytes, base: int, order: str, verify: bool) -> None:
         with pytest.raises(DecodeError) as info:
             fw._decode_body(buf, 3, 3 + len(body), base, order, verify=verify)  # type: ignore[arg-type]
         got = info.value
-        assert (got.message, got.path, got.offset, got.clause) == (
-            exc.message,
-            exc.path,
-            exc.offset,
-            exc.clause,
-        )
+        assert _fields(got) == _fields(exc)
+        assert type(got) is type(exc)
+        if isinstance(exc, IllegalPacketError):
+            assert isinstance(got, IllegalPacketError)
+            assert got.packet == exc.packet and got.packet.trailer == exc.packet.trailer
         return
     got_p = fw._decode_body(buf, 3, 3 + len(body), base, order, verify=verify)  # type: ignore[arg-type]
     assert got_p == want
@@ -623,3 +629,182 @@ def test_make_packet_builds_a_real_packet(p: Packet, trailer: Trailer | None) ->
         made.opcode = 1  # type: ignore[misc]
     t = make_trailer_value(1, 2, 3)
     assert type(t) is Trailer and t == Trailer(1, 2, 3) and hash(t) == hash(Trailer(1, 2, 3))
+
+
+# ------------------------------------------------------------------------------------ illegal but sound
+#
+# A frame whose framing, checksum and lengths check out but whose packet has an illegal opcode or more
+# than 488 data bytes: strict decoding raises the error it always did, as an IllegalPacketError holding
+# the packet; strict=False returns the packet.  Anything garbled is refused in both modes.
+
+SOUND_ILLEGAL_VECTORS = {"chudp-opcode-0", "chudp-opcode-017", "chudp-opcode-0177", "raw-opcode-0177"}
+"""The error vectors that are illegal but sound; every other error vector is garbled."""
+
+
+def _decode_lenient(framing: str, b: bytes) -> Packet:
+    match framing:
+        case "chudp":
+            return decode_chudp(b, strict=False)
+        case "tcp":
+            return decode_tcp(b, strict=False)
+        case "chaosd":
+            return decode_chaosd(b, verify=True, strict=False)
+        case _:
+            return decode_raw(b, strict=False)
+
+
+@pytest.mark.parametrize("vec", BAD, ids=lambda v: v["name"])
+def test_error_vectors_strict_and_lenient(vec: dict[str, Any]) -> None:
+    raw = bytes.fromhex(vec["hex"])
+    want = vec["error"]
+    with pytest.raises(DecodeError) as info:
+        _decode_one(vec["framing"], raw)
+    strict = info.value
+    assert (strict.clause, strict.offset, strict.path) == (want["clause"], want["offset"], want["path"])
+    if vec["name"] in SOUND_ILLEGAL_VECTORS:
+        assert isinstance(strict, IllegalPacketError)
+        got = _decode_lenient(vec["framing"], raw)
+        assert got == strict.packet and not is_legal_opcode(got.opcode)
+        assert got.opcode == (raw[4] if vec["framing"] == "chudp" else raw[1])
+        assert got.data == b"PUMA"
+    else:
+        assert not isinstance(strict, IllegalPacketError)
+        with pytest.raises(DecodeError) as lenient:
+            _decode_lenient(vec["framing"], raw)
+        assert not isinstance(lenient.value, IllegalPacketError)
+        assert _fields(lenient.value) == _fields(strict)
+
+
+def _forge_body(p: Packet, order: str, hw_dest: int = 0o440, hw_src: int = 0o401) -> bytes:
+    """Header, padded data and trailer with a correct checksum, whatever the opcode or data length."""
+    ws = [*packet_words(p), hw_dest, hw_src]
+    ws.append(chaos_checksum(ws))
+    return struct.pack(f"{order}{len(ws)}H", *ws)
+
+
+def _forge(framing: str, p: Packet) -> bytes:
+    if framing == "chudp":
+        return fw.CHUDP_HEADER + _forge_body(p, ">")
+    if framing == "tcp":
+        body = _forge_body(p, ">")
+        return len(body).to_bytes(2, "big") + body
+    if framing == "chaosd":
+        body = _forge_body(p, "<")
+        return bytes((len(body) >> 8, len(body) & 0xFF, 1, 0)) + body
+    return encode_raw(p) if len(p.data) <= MAX_DATA else struct.pack("<8H", *packet_words(p)[:8]) + p.data
+
+
+def _is_illegal(p: Packet) -> bool:
+    return not is_legal_opcode(p.opcode) or len(p.data) > MAX_DATA
+
+
+any_packets = packet_strategy(
+    any_opcodes, st.one_of(st.binary(max_size=MAX_DATA), st.binary(min_size=MAX_DATA + 1, max_size=700))
+)
+
+
+@given(any_packets, st.sampled_from(["chudp", "tcp", "chaosd", "raw"]))
+def test_sound_frames_decode_leniently_whatever_the_opcode_or_count(p: Packet, framing: str) -> None:
+    if framing in ("tcp", "chaosd") and len(p.data) > MAX_DATA:
+        p = p.with_(data=p.data[:MAX_DATA])  # a stream frame cannot hold more (its length is framing)
+    frame = _forge(framing, p)
+    got = _decode_lenient(framing, frame)
+    assert got == p
+    if _is_illegal(p):
+        with pytest.raises(IllegalPacketError) as info:
+            _decode_one(framing, frame)
+        assert info.value.packet == got and info.value.packet.trailer == got.trailer
+        # The opcode is reported first, as strict decoding always has.
+        legal = is_legal_opcode(p.opcode)
+        assert info.value.clause == ("chaos.data.max-488" if legal else "chaos.opcode.legal")
+    else:
+        assert _decode_one(framing, frame) == got
+
+
+def _frame_words(framing: str, ws: list[int], *, checksum_delta: int = 0) -> bytes:
+    """Frame header and data words ``ws`` with trailer 0440/0401 and a checksum (off by the delta)."""
+    ws = [*ws, 0o440, 0o401]
+    ws.append((chaos_checksum(ws) + checksum_delta) & 0xFFFF)
+    body = struct.pack(f"{'<' if framing == 'chaosd' else '>'}{len(ws)}H", *ws)
+    if framing == "chudp":
+        return fw.CHUDP_HEADER + body
+    if framing == "tcp":
+        return len(body).to_bytes(2, "big") + body
+    return bytes((len(body) >> 8, len(body) & 0xFF, 1, 0)) + body
+
+
+@pytest.mark.parametrize("framing", ["chudp", "tcp", "chaosd"])
+def test_illegal_and_garbled_is_garbled(framing: str) -> None:
+    """An illegal opcode does not make a frame deliverable when anything else about it is wrong."""
+    ws = packet_words(Packet(0o177, 0o440, 0, 0o401, 0x0A01, 1, 0, b"PUMA"))
+    unused = [ws[0] | 1, *ws[1:]]
+    short = [ws[0], 6, *ws[2:]]  # nbytes 6, 4 data bytes
+    cases = [
+        (_frame_words(framing, unused), "chaos.header.unused-byte-zero"),
+        (_frame_words(framing, short), "chaos.opcode.legal"),  # strict order: the opcode is named
+    ]
+    if framing != "chaosd":  # chaosd checksums are not verified by default
+        cases.append((_frame_words(framing, ws, checksum_delta=1), "chudp.checksum"))
+    assert isinstance(_decode_lenient(framing, _frame_words(framing, ws)), Packet)  # the control
+    for frame, clause in cases:
+        for decode in (_decode_one, _decode_lenient):
+            with pytest.raises(DecodeError) as info:
+                decode(framing, frame)
+            assert not isinstance(info.value, IllegalPacketError)
+            assert info.value.clause == clause, str(info.value)
+
+
+def test_oversize_count_without_the_data_is_garbled() -> None:
+    """nbytes 490 in a datagram with 4 data bytes: the count is refused, in both modes, not answered."""
+    p = Packet(ChaosOp.DAT, 0o440, 0x5E02, 0o401, 0x0A01, 2, 1, b"abcd")
+    ws = list(packet_words(p))
+    ws[1] = 490
+    ws += [0o440, 0o401]
+    ws.append(chaos_checksum(ws))
+    datagram = fw.CHUDP_HEADER + struct.pack(f">{len(ws)}H", *ws)
+    for strict in (True, False):
+        with pytest.raises(DecodeError) as info:
+            decode_chudp(datagram, strict=strict)
+        assert not isinstance(info.value, IllegalPacketError)
+        assert info.value.clause == "chaos.data.max-488"
+
+
+def test_oversize_fits_only_in_a_datagram() -> None:
+    p = Packet(ChaosOp.DAT, 0o440, 0x5E02, 0o401, 0x0A01, 2, 1, bytes(range(256)) + bytes(234))
+    datagram = _forge("chudp", p)
+    assert len(datagram) == 4 + 16 + 490 + 6
+    got = decode_chudp(datagram, strict=False)
+    assert got == p and got.trailer == Trailer(0o440, 0o401, struct.unpack(">H", datagram[-2:])[0])
+    with pytest.raises(IllegalPacketError, match="at most 488") as info:
+        decode_chudp(datagram)
+    assert (info.value.path, info.value.offset) == ("header.nbytes", 6)
+    # The same packet cannot be framed for TCP: its length is beyond what the framing allows.
+    with pytest.raises(FrameSyncError):
+        decode_tcp(_forge("tcp", p), strict=False)
+    with pytest.raises(EncodeError):
+        encode_chudp(p)
+
+
+def test_stream_items_carry_illegal_packets() -> None:
+    good = Packet(ChaosOp.DAT, 0o440, 0x5E02, 0o401, 0x0A01, 2, 1, b"ok")
+    illegal = good.with_(opcode=0o20, packet_no=3)
+    stream = encode_tcp(good) + _forge("tcp", illegal) + encode_tcp(good.with_(packet_no=4))
+    d = TcpFrameDecoder()
+    items = d.feed(stream[:7]) + d.feed(stream[7:])
+    assert [type(item) for item in items] == [Packet, IllegalPacketError, Packet]
+    assert isinstance(items[1], IllegalPacketError) and items[1].packet == illegal
+    assert items[1].offset == len(encode_tcp(good)) + 2 + 0  # word 0, high byte first
+    assert decode_stream(TcpFrameDecoder(), stream, strict=False)[1] == illegal
+    with pytest.raises(IllegalPacketError):
+        decode_stream(TcpFrameDecoder(), stream)
+    with pytest.raises(IllegalPacketError):
+        FRAMINGS["tcp"].decode(stream)  # the registry (manip-decode) stays strict
+
+
+def test_illegal_packet_error_moves_with_its_packet() -> None:
+    p = Packet(0o177, 0o440, 0, 0o401, 0x0A01, 1, 0, b"x")
+    with pytest.raises(IllegalPacketError) as info:
+        decode_raw(encode_raw(p))
+    moved = info.value.at("frame", 10)
+    assert isinstance(moved, IllegalPacketError) and moved.packet == p
+    assert (moved.path, moved.offset, moved.clause) == ("frame.header.opcode", 11, "chaos.opcode.legal")

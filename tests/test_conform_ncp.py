@@ -305,10 +305,6 @@ def test_oversize_is_skipped_on_tcp() -> None:
     assert result.outcome == "skip"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="reference links refuse illegal-opcode frames in the decoder, so the NCP never sends its LOS",
-)
 def test_reference_server_answers_an_illegal_opcode() -> None:
     result = _against_reference("server.ncp.los-illegal-opcode")
     assert result.outcome == "pass", _why(result)

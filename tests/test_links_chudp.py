@@ -52,6 +52,17 @@ def with_checksum(datagram: bytes) -> bytes:
     return datagram[:-2] + struct.pack(">H", ~ones_sum(w) & 0xFFFF)
 
 
+def forge(
+    opcode: int, data: bytes, packet_no: int, *, nbytes: int | None = None, dest_index: int = 0
+) -> bytes:
+    """A datagram from 0401 index 0A01 to 0440 with any opcode, data length and count, checksum right."""
+    padded = data + b"\0" * (len(data) & 1)
+    data_words = struct.unpack(f"<{len(padded) // 2}H", padded)
+    count = len(data) if nbytes is None else nbytes
+    ws = [opcode << 8, count, 0o440, dest_index, 0o401, 0x0A01, packet_no, 1, *data_words, 0o440, 0o401, 0]
+    return with_checksum(b"\x01\x01\x00\x00" + struct.pack(f">{len(ws)}H", *ws))
+
+
 async def echo(conn: ChaosConnection) -> None:
     async for packet in conn:
         await conn.send(packet.data[::-1], packet.opcode)
@@ -166,7 +177,13 @@ def test_vector_1_draws_the_expected_opn() -> None:
         pytest.param(
             with_checksum(VECTOR_1[:6] + b"\x00\x10" + VECTOR_1[8:]), "nbytes", id="nbytes-beyond-datagram"
         ),
-        pytest.param(with_checksum(VECTOR_1[:4] + b"\x42" + VECTOR_1[5:]), "opcode", id="illegal-opcode"),
+        pytest.param(
+            forge(0o42, b"PUMA", 1)[:-1] + bytes([forge(0o42, b"PUMA", 1)[-1] ^ 0x40]),
+            "checksum",
+            id="illegal-opcode-bad-checksum",
+        ),
+        pytest.param(forge(0, b"PUMA", 1, nbytes=6), "opcode", id="illegal-opcode-nbytes-beyond"),
+        pytest.param(forge(ChaosOp.DAT, b"PUMA", 1, nbytes=489), "oversize", id="oversize-count-only"),
         pytest.param(with_checksum(VECTOR_1[:5] + b"\x01" + VECTOR_1[6:]), "header", id="unused-byte-set"),
     ],
 )
@@ -183,6 +200,71 @@ def test_bad_datagrams_are_counted_and_dropped(datagram: bytes, reason: str) -> 
             link = chudp_link(server)
             assert link.stats.bad == {reason: 2}
             assert link.stats.frames_in == 1
+        finally:
+            raw.close()
+            await server.aclose()
+
+    run(main())
+
+
+def test_illegal_packets_draw_los_but_never_a_los_for_a_los() -> None:
+    """Sound datagrams with an illegal opcode or more than 488 data bytes reach the NCP, which answers
+    with LOS, except an oversized LOS or CLS, which is answered by nothing."""
+
+    async def main() -> None:
+        server = await start_server("chudp://127.0.0.1:0?addr=0440", "PUMA", echo, options=FAST)
+        raw = RawUdp()
+        try:
+            await raw.send(forge(0o42, b"PUMA", 3, dest_index=0x1234), server.port)
+            los = decode_chudp(await raw.recv())
+            assert los.opcode == ChaosOp.LOS and los.data == b"Illegal opcode 042"
+            assert (los.dest_host, los.dest_index, los.src_index, los.packet_no) == (0o401, 0x0A01, 0x1234, 3)
+            assert los.trailer is not None and (los.trailer.dest, los.trailer.source) == (0o401, 0o440)
+
+            oversize = forge(ChaosOp.DAT, bytes(range(245)) * 2, 4, dest_index=0x1234)
+            assert len(oversize) == 4 + 16 + 490 + 6
+            await raw.send(oversize, server.port)
+            los = decode_chudp(await raw.recv())
+            assert los.data == b"Illegal byte count 490 (at most 488)" and los.packet_no == 4
+
+            # Never a LOS in answer to a LOS (nor a CLS); garbage is dropped.  The last datagram's LOS
+            # must then be the next thing to arrive.
+            await raw.send(forge(ChaosOp.LOS, bytes(490), 5, dest_index=0x1234), server.port)
+            await raw.send(forge(ChaosOp.CLS, bytes(501), 6, dest_index=0x1234), server.port)
+            await raw.send(forge(0o177, b"x", 7, nbytes=3), server.port)
+            await raw.send(forge(0o177, b"x", 8), server.port)
+            los = decode_chudp(await asyncio.wait_for(raw.recv(), 3))
+            assert los.data == b"Illegal opcode 177" and los.packet_no == 8
+
+            link = chudp_link(server)
+            assert link.stats.illegal == {"opcode": 2, "oversize": 3}
+            assert link.stats.bad == {"opcode": 1}
+            assert link.stats.frames_in == 5
+            assert server.node.ncp.stats.los_sent == 3
+
+            await raw.send(VECTOR_1, server.port)  # the node still opens connections
+            assert (await raw.recv())[4] == ChaosOp.OPN
+        finally:
+            raw.close()
+            await server.aclose()
+
+    run(main())
+
+
+def test_illegal_packet_from_an_unknown_peer_is_not_answered() -> None:
+    async def main() -> None:
+        server = await start_server(
+            "chudp://127.0.0.1:0?addr=0440", "PUMA", echo, options=FAST, learn_peers=False
+        )
+        raw = RawUdp()
+        try:
+            await raw.send(forge(0o177, b"x", 1), server.port)
+            await raw.send(forge(ChaosOp.DAT, bytes(490), 2), server.port)
+            link = chudp_link(server)
+            while link.stats.bad_total < 2:
+                await asyncio.sleep(0.005)
+            assert link.stats.bad == {"unknown_peer": 2} and not link.stats.illegal
+            assert link.stats.frames_out == 0
         finally:
             raw.close()
             await server.aclose()

@@ -8,7 +8,8 @@ from typing import Any
 
 import pytest
 
-from manip.codecs.framing import TcpFrameDecoder, encode_tcp
+from manip.codecs.errors import DecodeError
+from manip.codecs.framing import TcpFrameDecoder, decode_tcp, encode_tcp
 from manip.codecs.packet import Packet
 from manip.links import (
     ChaosConnection,
@@ -442,6 +443,63 @@ def test_framing_garbage_closes_only_that_link() -> None:
             await good.send(b"after")  # the other link never noticed
             assert (await good.receive()).data == b"retfa"
             await good.close()
+
+    run(main())
+
+
+def _ones_sum(body: bytes | bytearray) -> int:
+    """RFC 1071 sum of MSB-first words, written out so the test does not trust the codec."""
+    total = 0
+    for i in range(0, len(body), 2):
+        total += body[i] << 8 | body[i + 1]
+        total = (total & 0xFFFF) + (total >> 16)
+    return total
+
+
+async def _read_frame(reader: asyncio.StreamReader, timeout: float = 3.0) -> bytes:
+    head = await asyncio.wait_for(reader.readexactly(2), timeout)
+    return head + await asyncio.wait_for(reader.readexactly(int.from_bytes(head, "big")), timeout)
+
+
+def test_illegal_opcode_frame_draws_los_and_garbled_frames_are_still_dropped() -> None:
+    """A sound frame with an illegal opcode reaches the NCP, which answers LOS; garbled frames do not."""
+
+    async def main() -> None:
+        server, _url = await serve(echo)
+        async with server:
+            reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
+            illegal = Packet(0o177, 0o440, 0x1234, 0o401, 0x0A01, 7, 6, b"xy")
+            writer.write(encode_tcp(illegal))  # the encoder lets an illegal opcode through, on purpose
+            los = decode_tcp(await _read_frame(reader))
+            assert los.opcode == ChaosOp.LOS and los.data == b"Illegal opcode 177"
+            assert (los.dest_host, los.dest_index, los.src_host, los.src_index) == (
+                0o401,
+                0x0A01,
+                0o440,
+                0x1234,
+            )
+            assert (los.packet_no, los.ack_no) == (7, 6)
+            (link,) = server_links(server)
+            assert link.stats.illegal == {"opcode": 1} and not link.stats.bad
+
+            # Garbled: the same frame with a corrupt checksum; an opcode-0 frame whose count (489) is
+            # beyond the frame.  Both are counted and dropped without an answer; the stream goes on.
+            corrupt = bytearray(encode_tcp(illegal.with_(packet_no=8)))
+            corrupt[-1] ^= 0xFF
+            beyond = bytearray(encode_tcp(illegal.with_(opcode=0, packet_no=9)))
+            beyond[4:6] = (489).to_bytes(2, "big")
+            beyond[-2:] = (~_ones_sum(beyond[2:-2]) & 0xFFFF).to_bytes(2, "big")
+            with pytest.raises(DecodeError) as garbled:
+                decode_tcp(bytes(beyond), strict=False)
+            assert garbled.value.clause == "chaos.opcode.legal"  # checksum fine: only the count is off
+            writer.write(bytes(corrupt) + bytes(beyond) + encode_tcp(illegal.with_(packet_no=10)))
+            los = decode_tcp(await _read_frame(reader))
+            assert los.packet_no == 10  # nothing answered the two garbled frames
+            assert link.stats.bad == {"checksum": 1, "opcode": 1}
+            assert link.stats.illegal == {"opcode": 2} and not link.is_closed
+            assert server.node.link_stats().illegal == {"opcode": 2}
+            assert server.node.ncp.stats.los_sent == 2
+            writer.close()
 
     run(main())
 

@@ -257,7 +257,7 @@ def test_byte_count_over_488_draws_los() -> None:
     b = Ncp(B)
     b.receive(0.0, _stray(ChaosOp.DAT, bytes(489)))
     [los] = b.packets_to_send()
-    assert los.data == b"Illegal byte count" and los.packet_no == 7
+    assert los.data == b"Illegal byte count 489 (at most 488)" and los.packet_no == 7
 
 
 def test_488_bytes_is_fine() -> None:
@@ -273,7 +273,11 @@ def test_illegal_opcode_draws_los(opcode: int) -> None:
     b = Ncp(B)
     b.receive(0.0, _stray(opcode))
     [los] = b.packets_to_send()
-    assert los.opcode == ChaosOp.LOS and los.data == b"Illegal opcode"
+    assert los.opcode == ChaosOp.LOS and los.data == f"Illegal opcode {opcode:03o}".encode()
+    # Reflected like every LOS: indices swapped, packet and ack numbers kept.
+    assert (los.dest_host, los.dest_index, los.src_index) == (A, 0x0202, 0x0101)
+    assert (los.packet_no, los.ack_no) == (7, 6)
+    assert b.stats.los_sent == 1
 
 
 def test_no_los_for_an_oversized_los_or_cls() -> None:
@@ -281,6 +285,31 @@ def test_no_los_for_an_oversized_los_or_cls() -> None:
     b.receive(0.0, _stray(ChaosOp.LOS, bytes(500)))
     b.receive(0.0, _stray(ChaosOp.CLS, bytes(500)))
     assert b.packets_to_send() == []
+    assert b.stats.los_sent == 0 and b.stats.dropped == 2
+
+
+@pytest.mark.parametrize(
+    ("opcode", "data", "says"),
+    [(0o177, b"xy", b"Illegal opcode 177"), (ChaosOp.DAT, bytes(490), b"Illegal byte count 490")],
+)
+def test_illegal_packet_on_an_open_connection_draws_los_and_leaves_it_open(
+    opcode: int, data: bytes, says: bytes
+) -> None:
+    a, b, ca, cb = open_pair()
+    b.receive(0.0, Packet(opcode, B, cb, A, ca, 2, 1, data))
+    [los] = b.packets_to_send()
+    assert los.opcode == ChaosOp.LOS and los.data.startswith(says)
+    assert (los.dest_index, los.src_index, los.packet_no, los.ack_no) == (ca, cb, 2, 1)
+    assert b.state(cb) is ConnState.OPEN and b.events() == []
+    a.receive(0.0, los)  # the sender of the illegal packet loses its connection, as AIM 628 says
+    assert a.state(ca) is ConnState.LOST
+
+
+def test_illegal_packet_for_another_host_is_dropped_not_answered() -> None:
+    b = Ncp(B)
+    b.receive(0.0, _stray(0o177).with_(dest_host=0o777))
+    b.receive(0.0, _stray(ChaosOp.DAT, bytes(490)).with_(dest_host=0o777))
+    assert b.packets_to_send() == [] and b.stats.dropped == 2
 
 
 def test_packets_for_other_hosts_are_dropped() -> None:

@@ -11,7 +11,7 @@ The most used names are here; the modules hold the rest:
 * :mod:`~manip.codecs.cougar`      the Puma <-> Cougar word protocol and COMINT's streaming decoder
 """
 
-from manip.codecs.chaos import decode_raw, encode_raw
+from manip.codecs.chaos import IllegalPacketError, decode_raw, encode_raw
 from manip.codecs.error_string import ErrorMessage, parse_error
 from manip.codecs.errors import CodecError, DecodeError, EncodeError
 from manip.codecs.framing import FRAMINGS, decode_chudp, decode_tcp, encode_chudp, encode_tcp
@@ -33,6 +33,7 @@ __all__ = [
     "DecodeError",
     "EncodeError",
     "ErrorMessage",
+    "IllegalPacketError",
     "Packet",
     "Trailer",
     "copy_request_data",

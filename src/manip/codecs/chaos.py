@@ -14,13 +14,22 @@ job with ``struct`` because they sit on every packet's path and are several time
 checks that they and the construct definition agree.  What construct cannot say well (which clause a bad
 packet breaks, at which byte) is done by :func:`check_header` and :func:`check_data_length`, which the
 framings reuse with their own byte offsets via :class:`WordLocator`.
+
+Garbled versus illegal (erratum ``illegal-packet-delivery``).  A receiver treats two kinds of bad packet
+differently.  A *garbled* one (short, lengths that disagree, a bad checksum, the unused header byte set)
+cannot be trusted at all and is counted and dropped.  An *illegal* one is sound as a frame (its framing,
+checksum and lengths all check out) but breaks a protocol rule that a receiving NCP answers with LOS: an
+illegal opcode (clause ``chaos.opcode.legal``) or more than 488 data bytes (``chaos.data.max-488``).  The
+strict decoders raise the same :class:`DecodeError` for both, with the same message, path, offset and
+clause as always; for an illegal packet the error is an :class:`IllegalPacketError` that also carries the
+decoded packet, so a link can hand it to its NCP.  ``strict=False`` returns that packet instead.
 """
 
 from __future__ import annotations
 
 import struct
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
 from functools import cache
 from typing import Any, Final
 
@@ -237,11 +246,28 @@ CANONICAL: Final = WordLocator()
 """Offsets in the canonical (raw) form: words little-endian from byte 0."""
 
 
-def check_header(word0: int, word1: int, at: WordLocator = CANONICAL) -> int:
-    """Apply the header checks every link shares; return ``nbytes``.
+@dataclass(eq=False)
+class IllegalPacketError(DecodeError):
+    """A packet that is sound as a frame but illegal: an illegal opcode, or more than 488 data bytes.
 
-    Order: the unused byte, the opcode, then the 488-byte limit, so a corrupt count is reported as such
-    before any length comparison a framing makes afterwards.
+    Message, path, offset and clause are those of the plain :class:`DecodeError` a strict decode has
+    always raised for it (so callers that only show errors see no difference); ``packet`` is the packet
+    as decoded, data and trailer included, for a receiver whose NCP answers it with LOS.
+    """
+
+    packet: Packet = field(kw_only=True)
+
+    def at(self, path: str, offset: int | None = None) -> IllegalPacketError:
+        moved = DecodeError(self.message, self.path, self.offset, self.clause).at(path, offset)
+        return IllegalPacketError(moved.message, moved.path, moved.offset, moved.clause, packet=self.packet)
+
+
+def check_header_split(word0: int, word1: int, at: WordLocator = CANONICAL) -> tuple[int, DecodeError | None]:
+    """The header checks, split by what a receiver does about them; return ``(nbytes, problem)``.
+
+    A set unused byte means the header is garbled: :class:`DecodeError` is raised.  An illegal opcode or
+    a count over 488 is returned as ``problem`` (opcode first), because a receiver answers those with LOS
+    once the framing has shown the rest of the packet to be sound.
     """
     if word0 & 0xFF:
         raise DecodeError(
@@ -251,21 +277,33 @@ def check_header(word0: int, word1: int, at: WordLocator = CANONICAL) -> int:
             clause="chaos.header.unused-byte-zero",
         )
     opcode = word0 >> 8
+    nbytes = word1 & 0x0FFF
     if not is_legal_opcode(opcode):
-        raise DecodeError(
+        return nbytes, DecodeError(
             f"opcode {opcode:#o} is not a Chaos opcode (001-016, 0200-0377)",
             path="header.opcode",
             offset=at.high_byte(0),
             clause="chaos.opcode.legal",
         )
-    nbytes = word1 & 0x0FFF
     if nbytes > MAX_DATA:
-        raise DecodeError(
+        return nbytes, DecodeError(
             f"nbytes is {nbytes}; a Chaos packet holds at most {MAX_DATA}",
             path="header.nbytes",
             offset=at.word(1),
             clause="chaos.data.max-488",
         )
+    return nbytes, None
+
+
+def check_header(word0: int, word1: int, at: WordLocator = CANONICAL) -> int:
+    """Apply the header checks every link shares; return ``nbytes``.
+
+    Order: the unused byte, the opcode, then the 488-byte limit, so a corrupt count is reported as such
+    before any length comparison a framing makes afterwards.
+    """
+    nbytes, problem = check_header_split(word0, word1, at)
+    if problem is not None:
+        raise problem
     return nbytes
 
 
@@ -301,6 +339,35 @@ def packet_from_words(words: Sequence[int], data: bytes, trailer: Trailer | None
     )
 
 
+def checked_packet(
+    words: Sequence[int],
+    data_present: int,
+    data: Callable[[int], bytes],
+    at: WordLocator,
+    *,
+    exact: bool,
+    trailer: Trailer | None = None,
+) -> Packet:
+    """The slow, precise decode shared by every framing, once the framing itself has been checked.
+
+    ``words`` starts with the eight header words, ``data_present`` counts the data bytes the framing
+    found and ``data(nbytes)`` extracts them.  A garbled header or inconsistent lengths raise
+    :class:`DecodeError`; an otherwise sound illegal packet raises :class:`IllegalPacketError` with the
+    packet.  Error order is the strict one: header problems before length problems.
+    """
+    nbytes, problem = check_header_split(words[0], words[1], at)
+    try:
+        check_data_length(nbytes, data_present, at, exact=exact)
+    except DecodeError:
+        if problem is not None:
+            raise problem from None  # illegal and garbled: the header error, as strict decoding says
+        raise
+    packet = packet_from_words(words[:8], data(nbytes), trailer)
+    if problem is not None:
+        raise IllegalPacketError(problem.message, problem.path, problem.offset, problem.clause, packet=packet)
+    return packet
+
+
 # ------------------------------------------------------------------------------------ raw codec
 
 
@@ -320,11 +387,12 @@ def encode_raw(p: Packet) -> bytes:
     return _HEADER_WORDS.pack(*header_words(p)) + bytes(p.data) + pad
 
 
-def decode_raw(b: bytes) -> Packet:
+def decode_raw(b: bytes, *, strict: bool = True) -> Packet:
     """Decode one canonical packet (no trailer); the input must end after the data or its pad byte.
 
     A missing pad byte after odd data is tolerated (nothing is lost without it); anything after the pad
-    byte is an error, because in this form nothing else says where the packet ends.
+    byte is an error, because in this form nothing else says where the packet ends.  An illegal but
+    otherwise sound packet raises :class:`IllegalPacketError`, or with ``strict=False`` is returned.
     """
     if len(b) < HEADER_SIZE:
         raise _short_header(b)
@@ -338,8 +406,18 @@ def decode_raw(b: bytes) -> Packet:
         or not nbytes <= present <= nbytes + (nbytes & 1)
     ):
         # Something is wrong: let the shared checks say exactly what.
-        check_header(w0, w1)
-        check_data_length(nbytes, present, exact=False)
+        try:
+            return checked_packet(
+                _HEADER_WORDS.unpack_from(b),
+                present,
+                lambda n: bytes(b[HEADER_SIZE : HEADER_SIZE + n]),
+                CANONICAL,
+                exact=False,
+            )
+        except IllegalPacketError as exc:
+            if strict:
+                raise
+            return exc.packet
     return make_packet(
         w0 >> 8, dh, di, sh, si, pn, an, bytes(b[HEADER_SIZE : HEADER_SIZE + nbytes]), w1 >> 12
     )

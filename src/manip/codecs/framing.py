@@ -41,9 +41,11 @@ checksum over header, padded data, trailer destination and source (:func:`~manip
 Stream links (``tcp``, ``chaosd``) have a decoder class: feed it bytes in any chunks and it returns what
 the bytes completed, as a list of :class:`~manip.codecs.packet.Packet` or
 :class:`~manip.codecs.errors.DecodeError` items in stream order (a malformed frame is consumed and
-reported in place, so the caller sees it and carries on).  A bad length or header means the frame
-boundaries are lost: ``feed`` then raises :class:`FrameSyncError`, which carries the items decoded before
-it, and every later ``feed`` raises it again.  All error offsets count from the start of the stream.
+reported in place, so the caller sees it and carries on; a sound frame holding an illegal packet is
+reported as an :class:`~manip.codecs.chaos.IllegalPacketError`, which carries the packet).  A bad length
+or header means the frame boundaries are lost: ``feed`` then raises :class:`FrameSyncError`, which
+carries the items decoded before it, and every later ``feed`` raises it again.  All error offsets count
+from the start of the stream.
 
 :data:`FRAMINGS` maps each name to a :class:`Framing`, for command-line tools that pick a link by name.
 """
@@ -62,16 +64,15 @@ from manip.codecs.chaos import (
     HEADER_SIZE,
     LEGAL_OPCODES,
     TRAILER_SIZE,
+    IllegalPacketError,
     WordLocator,
     chaos_checksum,
-    check_data_length,
     check_encodable,
-    check_header,
+    checked_packet,
     checksum_ok,
     decode_raw,
     encode_raw,
     make_trailer,
-    packet_from_words,
     packet_words,
     padded_size,
 )
@@ -90,7 +91,8 @@ MAX_BODY: Final = HEADER_SIZE + MAX_DATA + TRAILER_SIZE
 WordOrder = Literal["<", ">"]
 Buffer = bytes | bytearray | memoryview
 StreamItem = Packet | DecodeError
-"""What a stream decoder returns for each frame: the packet, or why that frame was refused."""
+"""What a stream decoder returns for each frame: the packet, or why that frame was refused (for an
+illegal but sound packet an :class:`IllegalPacketError`, which holds the packet)."""
 
 
 # ------------------------------------------------------------------------------------ shared body
@@ -228,7 +230,8 @@ def _decode_body_checked(body: bytes, base: int, order: WordOrder, *, verify: bo
     """:func:`_decode_body` by the book, raising the precise :class:`DecodeError` for a bad frame.
 
     The checksum is tested first: when it fails, nothing else in the frame can be trusted, and a corrupt
-    count or opcode would otherwise be reported as if the sender had meant it.
+    count or opcode would otherwise be reported as if the sender had meant it.  A sound frame carrying an
+    illegal packet raises :class:`IllegalPacketError` (see :mod:`manip.codecs.chaos`).
     """
     n = len(body) // 2
     words = struct.unpack(f"{order}{n}H", body)
@@ -240,15 +243,15 @@ def _decode_body_checked(body: bytes, base: int, order: WordOrder, *, verify: bo
             offset=base + len(body) - 2,
             clause="chudp.checksum",
         )
-    at = WordLocator(base, msb_first=order == ">")
-    nbytes = check_header(words[0], words[1], at)
-    check_data_length(nbytes, len(body) - MIN_BODY, at, exact=True)
-    if order == "<":
-        data = bytes(body[HEADER_SIZE : HEADER_SIZE + nbytes])
-    else:
+
+    def data(nbytes: int) -> bytes:
+        if order == "<":
+            return bytes(body[HEADER_SIZE : HEADER_SIZE + nbytes])
         count = padded_size(nbytes) // 2
-        data = struct.pack(f"<{count}H", *words[8 : 8 + count])[:nbytes]
-    return packet_from_words(words[:8], data, Trailer(*words[-3:]))
+        return struct.pack(f"<{count}H", *words[8 : 8 + count])[:nbytes]
+
+    at = WordLocator(base, msb_first=order == ">")
+    return checked_packet(words, len(body) - MIN_BODY, data, at, exact=True, trailer=Trailer(*words[-3:]))
 
 
 def _check_body_length(length: int, offset: int, clause: str, what: str) -> None:
@@ -269,10 +272,12 @@ def encode_chudp(p: Packet, *, hw_dest: int | None = None, hw_src: int | None = 
     return CHUDP_HEADER + _body(p, ">", hw_dest, hw_src)
 
 
-def decode_chudp(datagram: bytes, *, verify: bool = True) -> Packet:
+def decode_chudp(datagram: bytes, *, verify: bool = True, strict: bool = True) -> Packet:
     """Decode one CHUDP datagram; the packet's ``trailer`` is filled in.
 
-    ``verify=False`` skips the checksum test, to look at a corrupt datagram instead of refusing it.
+    ``verify=False`` skips the checksum test, to look at a corrupt datagram instead of refusing it.  A
+    sound datagram holding an illegal packet (opcode, or more than 488 data bytes: the datagram, unlike a
+    stream frame, can hold them) raises :class:`IllegalPacketError`; ``strict=False`` returns the packet.
     """
     size = len(datagram)
     if size < len(CHUDP_HEADER):
@@ -299,7 +304,12 @@ def decode_chudp(datagram: bytes, *, verify: bool = True) -> Packet:
             offset=size,
             clause="chudp.length",
         )
-    return _decode_body(datagram, 4, size, 4, ">", verify=verify)
+    try:
+        return _decode_body(datagram, 4, size, 4, ">", verify=verify)
+    except IllegalPacketError as exc:
+        if strict:
+            raise
+        return exc.packet
 
 
 # ------------------------------------------------------------------------------------ stream links
@@ -453,7 +463,7 @@ class ChaosdFrameDecoder(StreamDecoder):
         return _decode_body(src, start, end, offset, "<", verify=self.verify)
 
 
-def _one_frame(decoder: StreamDecoder, frame: bytes) -> Packet:
+def _one_frame(decoder: StreamDecoder, frame: bytes, strict: bool) -> Packet:
     """Decode a buffer that must hold exactly one frame."""
     items = decoder.feed(frame)
     decoder.finish()
@@ -465,21 +475,25 @@ def _one_frame(decoder: StreamDecoder, frame: bytes) -> Packet:
             clause=decoder.clause,
         )
     (item,) = items
+    return _packet(item, strict)
+
+
+def _packet(item: StreamItem, strict: bool) -> Packet:
+    """The packet of a stream item; raise its error (not for an illegal packet when not ``strict``)."""
     if isinstance(item, DecodeError):
-        raise item
+        if strict or not isinstance(item, IllegalPacketError):
+            raise item
+        return item.packet
     return item
 
 
-def decode_stream(decoder: StreamDecoder, data: bytes) -> list[Packet]:
-    """All packets of a complete stream capture; the first bad frame (or a cut-off last one) raises."""
+def decode_stream(decoder: StreamDecoder, data: bytes, *, strict: bool = True) -> list[Packet]:
+    """All packets of a complete stream capture; the first bad frame (or a cut-off last one) raises.
+
+    ``strict=False`` keeps illegal but sound packets (:class:`IllegalPacketError`) instead."""
     items = decoder.feed(data)
     decoder.finish()
-    packets: list[Packet] = []
-    for item in items:
-        if isinstance(item, DecodeError):
-            raise item
-        packets.append(item)
-    return packets
+    return [_packet(item, strict) for item in items]
 
 
 def encode_tcp(p: Packet, *, hw_dest: int | None = None, hw_src: int | None = None) -> bytes:
@@ -491,9 +505,10 @@ def encode_tcp(p: Packet, *, hw_dest: int | None = None, hw_src: int | None = No
     return frame
 
 
-def decode_tcp(frame: bytes, *, verify: bool = True) -> Packet:
-    """Decode a buffer holding exactly one TCP-link frame."""
-    return _one_frame(TcpFrameDecoder(verify=verify), frame)
+def decode_tcp(frame: bytes, *, verify: bool = True, strict: bool = True) -> Packet:
+    """Decode a buffer holding exactly one TCP-link frame (``strict`` as for :func:`decode_chudp`; a TCP
+    frame cannot hold more than 488 data bytes, so only an illegal opcode can pass)."""
+    return _one_frame(TcpFrameDecoder(verify=verify), frame, strict)
 
 
 def encode_chaosd(p: Packet, *, hw_dest: int | None = None, hw_src: int | None = None) -> bytes:
@@ -502,9 +517,10 @@ def encode_chaosd(p: Packet, *, hw_dest: int | None = None, hw_src: int | None =
     return bytes((len(body) >> 8, len(body) & 0xFF, 1, 0)) + body
 
 
-def decode_chaosd(frame: bytes, *, verify: bool = False) -> Packet:
-    """Decode a buffer holding exactly one chaosd frame (checksum checked only with ``verify=True``)."""
-    return _one_frame(ChaosdFrameDecoder(verify=verify), frame)
+def decode_chaosd(frame: bytes, *, verify: bool = False, strict: bool = True) -> Packet:
+    """Decode a buffer holding exactly one chaosd frame (checksum checked only with ``verify=True``;
+    ``strict`` as for :func:`decode_tcp`)."""
+    return _one_frame(ChaosdFrameDecoder(verify=verify), frame, strict)
 
 
 # ------------------------------------------------------------------------------------ registry

@@ -4,6 +4,11 @@ A link moves whole Chaos packets; it knows framings and sockets, not connections
 is untrusted, so a link never lets a bad frame escape as an exception: it counts the frame under a short
 reason (:data:`BAD_REASONS`), logs it at debug level and drops it.  Only a stream whose framing is lost
 is closed, because nothing after the bad length can be trusted.
+
+A frame that is sound (framing, checksum and lengths check out) but carries an *illegal* packet (an
+illegal opcode, more than 488 data bytes) is not bad input: the NCP must answer it with LOS, so the link
+delivers it like any other packet and counts it under ``LinkStats.illegal`` (erratum
+``illegal-packet-delivery``; the codec reports it as :class:`~manip.codecs.chaos.IllegalPacketError`).
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Final
 
+from manip.codecs.chaos import IllegalPacketError
 from manip.codecs.errors import DecodeError
 from manip.codecs.packet import Packet
 
@@ -61,7 +67,9 @@ def bad_reason(exc: DecodeError) -> str:
 
 @dataclass(slots=True)
 class LinkStats:
-    """Counters of one link.  ``bad`` counts refused input by reason, ``dropped`` refused output."""
+    """Counters of one link.  ``bad`` counts refused input by reason, ``dropped`` refused output, and
+    ``illegal`` the sound frames with an illegal packet that were delivered for the NCP to answer with LOS
+    (also counted in ``frames_in``), under ``opcode`` or ``oversize``."""
 
     frames_in: int = 0
     frames_out: int = 0
@@ -69,6 +77,7 @@ class LinkStats:
     bytes_out: int = 0
     bad: Counter[str] = field(default_factory=Counter)
     dropped: Counter[str] = field(default_factory=Counter)
+    illegal: Counter[str] = field(default_factory=Counter)
 
     @property
     def bad_total(self) -> int:
@@ -82,6 +91,7 @@ class LinkStats:
         self.bytes_out += other.bytes_out
         self.bad.update(other.bad)
         self.dropped.update(other.dropped)
+        self.illegal.update(other.illegal)
 
 
 class Link(ABC):
@@ -153,6 +163,12 @@ class Link(ABC):
             receiver(self, packet)
         except Exception:  # the driver must survive anything; a bug there must not kill the link
             log.exception("%s: receiver failed on %r", self.name, packet)
+
+    def _illegal(self, exc: IllegalPacketError, detail: object = "") -> Packet:
+        """Count a sound frame holding an illegal packet; return the packet, which is to be delivered."""
+        self.stats.illegal[bad_reason(exc)] += 1
+        log.debug("%s: illegal packet passed on for a LOS: %s%s", self.name, exc, detail)
+        return exc.packet
 
     def _bad(self, reason: str, detail: object) -> None:
         self.stats.bad[reason] += 1

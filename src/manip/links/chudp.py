@@ -4,11 +4,13 @@ One UDP socket reaches many neighbours, so the link keeps a table from Chaos add
 and the driver names the neighbour (``next_hop``) for each packet.  Outgoing trailers carry our own
 address as source and the neighbour's as destination, which is what klh10 learns peers from.
 
-Incoming datagrams are decoded with the checksum checked; a bad one is counted and dropped.  A good one
-is accepted from a configured endpoint or from a known address; from anyone else only if
-``learn_peers`` is on (klh10's dynamic peers), in which case its trailer source and UDP endpoint join
-the table.  Configured entries are never replaced; a learnt entry follows its address to a new
-endpoint (a client that restarted on another port).
+Incoming datagrams are decoded with the checksum checked; a bad one is counted and dropped.  A sound
+one holding an illegal packet (opcode, or more than 488 data bytes) is treated as good, so the NCP can
+answer it with LOS, and counted under ``stats.illegal``.  A good one is accepted from a configured
+endpoint or from a known address; from anyone else only if ``learn_peers`` is on (klh10's dynamic
+peers), in which case its trailer source and UDP endpoint join the table.  Configured entries are never
+replaced; a learnt entry follows its address to a new endpoint (a client that restarted on another
+port).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import socket
 from collections.abc import Mapping
 from typing import Any, cast
 
+from manip.codecs.chaos import IllegalPacketError
 from manip.codecs.errors import DecodeError, EncodeError
 from manip.codecs.framing import decode_chudp, encode_chudp
 from manip.codecs.packet import Packet
@@ -80,8 +83,11 @@ class ChudpLink(Link, asyncio.DatagramProtocol):
     def datagram_received(self, data: bytes, addr: Any) -> None:
         self.stats.bytes_in += len(data)
         sender = _endpoint(addr)
+        illegal: IllegalPacketError | None = None
         try:
             packet = decode_chudp(data)
+        except IllegalPacketError as exc:
+            packet, illegal = exc.packet, exc
         except DecodeError as exc:
             self._bad(bad_reason(exc), f"{exc} (from {sender})")
             return
@@ -94,6 +100,8 @@ class ChudpLink(Link, asyncio.DatagramProtocol):
                 return
             self.peers[source] = sender
             self.peers_learned += 1
+        if illegal is not None:
+            self._illegal(illegal, f" (from {sender})")
         self._deliver(packet)
 
     def error_received(self, exc: Exception) -> None:

@@ -2,7 +2,8 @@
 
 The framing codec finds the packets; this module only moves bytes.  A frame that decodes badly is
 counted and skipped (its length says where the next starts); a bad length means the frame boundaries
-are lost, so the stream is closed and counted under ``framing``.
+are lost, so the stream is closed and counted under ``framing``.  A sound frame with an illegal opcode is
+delivered for the NCP to answer (``stats.illegal``); a stream frame cannot hold more than 488 data bytes.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import asyncio
 from collections.abc import Callable
 from typing import Final, cast
 
+from manip.codecs.chaos import IllegalPacketError
 from manip.codecs.errors import DecodeError, EncodeError
 from manip.codecs.framing import FrameSyncError, StreamDecoder, StreamItem
 from manip.codecs.packet import Packet
@@ -124,8 +126,10 @@ class StreamLink(Link, asyncio.Protocol):
     def _take(self, items: list[StreamItem] | tuple[StreamItem, ...]) -> None:
         for item in items:
             if isinstance(item, DecodeError):
-                self._bad(bad_reason(item), item)
-                continue
+                if not isinstance(item, IllegalPacketError):
+                    self._bad(bad_reason(item), item)
+                    continue
+                item = self._illegal(item)
             if self.peer_addr is None:
                 trailer = item.trailer
                 if self.learns_peer and trailer is not None and trailer.source:

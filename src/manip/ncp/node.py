@@ -4,8 +4,9 @@
 connection is known, in this order (each step ends processing when it applies):
 
 1. a packet for another host is dropped (we are a host, not a bridge; destination 0 is accepted);
-2. more than 488 data bytes draws LOS "Illegal byte count"; an opcode outside 001-016 and 0200-0377
-   draws LOS "Illegal opcode";
+2. more than 488 data bytes draws LOS "Illegal byte count N (at most 488)"; an opcode outside 001-016
+   and 0200-0377 draws LOS "Illegal opcode NNN" (octal).  The links deliver such packets when their
+   frame is otherwise sound (erratum ``illegal-packet-delivery``), so this is where they are answered;
 3. MNT, RUT and BRD are dropped (a host has no use for them; BRD is not supported);
 4. an RFC is matched against live connections by (source host, source index) - a duplicate goes to
    its connection - and otherwise against the listeners by contact name; no listener: CLS refusal;
@@ -267,12 +268,12 @@ class Ncp:
             return
         opcode = packet.opcode
         if len(packet.data) > MAX_DATA:
-            self._los(packet, "Illegal byte count")
+            self._los(packet, f"Illegal byte count {len(packet.data)} (at most {MAX_DATA})")
             return
         data = _DAT <= opcode <= 0o377
         if not data:
             if not is_legal_opcode(opcode):
-                self._los(packet, "Illegal opcode")
+                self._los(packet, f"Illegal opcode {opcode:03o}")
                 return
             if opcode in _DROPPED:
                 out.stats.dropped += 1

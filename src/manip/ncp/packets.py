@@ -6,6 +6,7 @@ from __future__ import annotations
 import struct
 from typing import Final
 
+from manip.codecs.chaos import is_legal_opcode  # the codec's test: one definition of legality
 from manip.codecs.packet import MAX_DATA, Packet
 from manip.spec.constants import ChaosOp
 
@@ -25,18 +26,12 @@ _STATUS: Final = struct.Struct("<HH")
 _RFC: Final = int(ChaosOp.RFC)
 _OPN: Final = int(ChaosOp.OPN)
 _EOF: Final = int(ChaosOp.EOF)
-_BRD: Final = int(ChaosOp.BRD)
 _DAT: Final = int(ChaosOp.DAT)
 
 
 def is_data(opcode: int) -> bool:
     """Data opcodes: 0200-0277 (8-bit) and 0300-0377 (16-bit)."""
     return _DAT <= opcode <= 0o377
-
-
-def is_legal_opcode(opcode: int) -> bool:
-    """Opcodes 001-016 and 0200-0377; anything else draws a LOS (clause ``chaos.opcode.legal``)."""
-    return _RFC <= opcode <= _BRD or _DAT <= opcode <= 0o377
 
 
 def is_controlled(opcode: int) -> bool:
