@@ -130,10 +130,14 @@ class Bridge:
 
 
 async def run_in_worker(
-    fn: Callable[[Bridge], T], *, budget: float | None = None, shrink_budget: float = DEFAULT_SHRINK_BUDGET
+    fn: Callable[[Bridge], T], *, budget: float | None = None, shrink_budget: float | None = None
 ) -> T:
-    """Run ``fn(bridge)`` in a worker thread; cancelling this coroutine stops the worker's next step."""
-    bridge = Bridge(asyncio.get_running_loop(), budget=budget, shrink_budget=shrink_budget)
+    """Run ``fn(bridge)`` in a worker thread; cancelling this coroutine stops the worker's next step.
+
+    ``shrink_budget`` defaults to the module's :data:`DEFAULT_SHRINK_BUDGET` as it is at the call (a test
+    suite that only needs to know *that* a case fails may lower it)."""
+    limit = DEFAULT_SHRINK_BUDGET if shrink_budget is None else shrink_budget
+    bridge = Bridge(asyncio.get_running_loop(), budget=budget, shrink_budget=limit)
     try:
         return await asyncio.to_thread(fn, bridge)
     except asyncio.CancelledError:

@@ -26,11 +26,13 @@ How a request is judged (:meth:`ProtocolModel.expect`), from its bytes alone:
 2. an opcode the spec does not define: a command error (C), never a normal reply;
 3. data that do not decode by the layout: wrong length or a reserved-operand float, a command error;
 4. values outside what the spec allows (speed factor, free-joint joint number, configuration bits): C;
-5. motion requests go through the gate: aborted -> AWA only (erratum ``abort-before-power``: the abort
+5. manip's extension opcodes (0240 and up) the server does not list under :operations may also be
+   refused with a command error (an unserved opcode);
+6. motion requests go through the gate: aborted -> AWA only (erratum ``abort-before-power``: the abort
    condition is reported before missing power); power off -> NAP; joints past a limit -> JOR; a
    transform the model cannot vouch for -> TOR or JOR also allowed; when a state is unknown, both
    outcomes are allowed and the reply that comes settles it (:meth:`observe`);
-6. otherwise the normal reply of the opcode's shape.
+7. otherwise the normal reply of the opcode's shape.
 
 The model never allows a fatal error or a BE (bug) error; it allows SQF (queue full) only while
 segments are outstanding.  Segment numbers that do not increase by one are recorded in
@@ -41,7 +43,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Final
 
 from manip.arm.kinematics import PUMA600, JointLimits
@@ -136,6 +138,9 @@ class ProtocolModel:
     outstanding: list[int] = field(default_factory=list)
     next_segment: int | None = None
     segment_findings: list[Finding] = field(default_factory=list)
+    served: frozenset[int] | None = None
+    """The opcodes describe self lists under :operations (None: unknown); extensions outside it may be
+    refused as unserved."""
     reachable: set[tuple[float, ...]] = field(default_factory=set)
     """Transforms (12 floats) the server itself produced from in-range joint angles."""
     _mask_after: dict[int, int] = field(default_factory=dict)
@@ -167,7 +172,12 @@ class ProtocolModel:
             return Expectation(False, command=True, clause=clause, why=exc.message)
         except CodecError as exc:
             return Expectation(False, command=True, clause="request.data-length", why=exc.message)
-        return self._expect_valid(op, values)
+        expectation = self._expect_valid(op, values)
+        if op.extension and expectation.normal and (self.served is None or opcode not in self.served):
+            # manip's Puma extensions are optional: a server that does not list one may refuse it (C)
+            why = "; ".join(w for w in (expectation.why, "an extension the server does not list") if w)
+            expectation = replace(expectation, command=True, why=why)
+        return expectation
 
     def _expect_valid(self, op: RequestOpcode, values: Mapping[str, Value]) -> Expectation:
         name = op.name

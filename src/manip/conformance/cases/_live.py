@@ -10,7 +10,14 @@ from manip.arm.kinematics import PUMA600, JointLimits, Joints
 from manip.codecs.errors import CodecError
 from manip.codecs.lisp import LispValue
 from manip.codecs.messages import ErrorReply, decode_error
-from manip.conformance.checks import Finding, WirePacket, multi_text, parse_description, word
+from manip.conformance.checks import (
+    Finding,
+    WirePacket,
+    description_operations,
+    multi_text,
+    parse_description,
+    word,
+)
 from manip.conformance.context import Answer, CaseContext, Probe
 from manip.conformance.model import Reply
 from manip.spec import SPEC
@@ -36,6 +43,8 @@ class TargetArm:
     """The limits came from the target itself."""
     dof: int = 6
     ready: Joints = PUMA600.ready
+    operations: frozenset[int] | None = None
+    """The opcodes describe self lists under :operations (None: no usable list)."""
 
 
 def _number(value: LispValue) -> float | None:
@@ -72,10 +81,12 @@ async def describe_target(ctx: CaseContext, probe: Probe) -> TargetArm:
     limits = _limits(entries["joint-limits"]) if "joint-limits" in entries else None
     dof_value = entries.get("degrees-of-freedom")
     dof = int(dof_value) if isinstance(dof_value, int) and dof_value > 0 else 6
+    listed = description_operations(entries)
+    operations = frozenset(listed) if listed else None
     if limits is None:
         ctx.note("describe self gives no usable :joint-limits; assuming the PUMA 600's")
-        return TargetArm(dof=dof)
-    return TargetArm(limits=limits, declared=True, dof=dof)
+        return TargetArm(dof=dof, operations=operations)
+    return TargetArm(limits=limits, declared=True, dof=dof, operations=operations)
 
 
 def reply_view(answer: Answer) -> Reply:

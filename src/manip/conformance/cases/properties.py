@@ -41,7 +41,7 @@ from manip.conformance.bridge import (
 from manip.conformance.case import CaseFailure, case
 from manip.conformance.cases._live import Evidence, describe_target, must, reply_view
 from manip.conformance.cases._support import floats
-from manip.conformance.checks import check_reply, describe
+from manip.conformance.checks import ANSWER_OPCODES, WirePacket, check_reply, describe, word
 from manip.conformance.context import Answer, CaseContext, Probe
 from manip.conformance.strategies import (
     f_ulp,
@@ -52,7 +52,7 @@ from manip.conformance.strategies import (
     valid_requests,
 )
 from manip.spec import SPEC
-from manip.spec.constants import ServerOp
+from manip.spec.constants import AsyncCondition, ServerOp
 
 __all__ = ["FLOAT_TRIP_ULPS", "POSE_TOL_DEG", "POSE_TOL_MM"]
 
@@ -70,8 +70,10 @@ TRIP_STEP_DEG: Final = 0.25
 #: at full speed), so this case runs ``max_examples / TRIP_EXAMPLE_DIVISOR`` examples (at least 3).
 TRIP_EXAMPLE_DIVISOR: Final = 5
 POLL_PERIOD: Final = 0.02
-SETTLE_POLLS: Final = 3
-"""Identical joint-angle readings in a row that mean the arm stands still."""
+SETTLE_POLLS: Final = 5
+"""Identical joint-angle readings in a row that mean the arm stands still (when the target does not
+send segment-completed responses)."""
+SEGMENT_MASK: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
 SETTLE_LIMIT: Final = 5.0
 PROPERTY_BUDGET: Final = 45.0
 
@@ -373,8 +375,44 @@ def _close_enough(got: Sequence[float], sent: Sequence[float]) -> bool:
     return all(abs(g - s) <= FLOAT_TRIP_ULPS * f_ulp(s) for g, s in zip(got, sent, strict=True))
 
 
-async def _settle(probe: Probe, goal: Sequence[float]) -> tuple[Answer, tuple[float, ...]]:
-    """Poll joint angles until they match ``goal`` or stop changing (or :data:`SETTLE_LIMIT` passes)."""
+async def _segment_done(probe: Probe, segment: int, seen: int) -> bool:
+    """Wait (up to :data:`SETTLE_LIMIT`) for the segment-completed response of ``segment``; the
+    unsolicited packets from index ``seen`` on are looked at first."""
+
+    def done(packet: WirePacket) -> bool:
+        return (
+            packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE
+            and word(packet.data, 2) == AsyncCondition.SEGMENT_COMPLETED
+            and word(packet.data, 6) == segment
+        )
+
+    if any(done(p) for p in probe.unsolicited[seen:]):
+        return True
+    loop = asyncio.get_running_loop()
+    end = loop.time() + SETTLE_LIMIT
+    while (left := end - loop.time()) > 0:
+        packet = await probe.next_packet(left)
+        if packet is None:
+            return False
+        if packet.opcode in ANSWER_OPCODES:
+            probe.push_back(packet)  # not ours to take: the transcript check will judge it
+            return False
+        if done(packet):
+            return True
+    return False
+
+
+async def _settle(
+    probe: Probe, goal: Sequence[float], segment: int | None, seen: int
+) -> tuple[Answer, tuple[float, ...]]:
+    """The joint angles once the arm stands: after the segment-completed response when notifications
+    work, else by polling until they match ``goal`` or stop changing (or :data:`SETTLE_LIMIT` passes)."""
+    if segment is not None and await _segment_done(probe, segment, seen):
+        answer = await probe.call("joint-angles")
+        try:
+            return answer, floats(answer) if answer.is_response else ()
+        except CodecError:
+            return answer, ()
     loop = asyncio.get_running_loop()
     end = loop.time() + SETTLE_LIMIT
     previous: bytes | None = None
@@ -413,6 +451,8 @@ async def floats_round_trip(ctx: CaseContext) -> None:
     def build(session: _Session) -> tuple[Example, Sequence[st.SearchStrategy[Any]]]:
         power = session.call("enable-power")
         _check_answer(power)
+        notified = session.call("request-notifications", mask=SEGMENT_MASK)
+        _check_answer(notified)
         start = _decode_floats(session.call("joint-angles"), "joint angles")
         home = tuple(
             min(max(q, lo + 1.0), hi - 1.0)
@@ -420,6 +460,7 @@ async def floats_round_trip(ctx: CaseContext) -> None:
         )
 
         def body(goal: Joints) -> None:
+            seen = len(session.probe.unsolicited)
             answer = session.call("set-joint-angles", joints=list(goal))
             _check_answer(answer)
             if not answer.is_response:
@@ -431,7 +472,8 @@ async def floats_round_trip(ctx: CaseContext) -> None:
                     answer.data,
                     [answer.request, answer.first],
                 )
-            settled, got = session.bridge.call(_settle(session.probe, goal))
+            segment = reply_view(answer).segment if notified.is_response else None
+            settled, got = session.bridge.call(_settle(session.probe, goal, segment, seen))
             _check_answer(settled)
             if not got or not _close_enough(got, goal):
                 worst = (

@@ -98,10 +98,12 @@ from manip.spec.constants import ServerOp
 __all__ = ["STEPS_PER_EXAMPLE", "Step", "replay", "replay_async"]
 
 STEPS_PER_EXAMPLE: Final = 20
+MIN_WORKING_SPEED: Final = 0.05
+"""The slowest speed factor the machine leaves in force while it may queue moves."""
 MACHINE_BUDGET: Final = 50.0
-END_QUIET: Final = 0.02
+END_QUIET: Final = 0.01
 """Seconds the end of each run waits for stray answers."""
-ABORT_WAIT: Final = 0.06
+ABORT_WAIT: Final = 0.05
 """Seconds the abort rule waits after killing power: a few servo cycles for the move process to notice."""
 
 
@@ -180,7 +182,8 @@ class ArmProtocolMachine(RuleBasedStateMachine):
     def __init__(self) -> None:
         super().__init__()
         self.env.runs["examples"] += 1
-        self.model = ProtocolModel(limits=self.env.arm.limits, dof=self.env.arm.dof)
+        arm = self.env.arm
+        self.model = ProtocolModel(limits=arm.limits, dof=arm.dof, served=arm.operations)
         self.steps: list[Step] = []
         self.probe: Probe | None = None
         self.position: Joints = self.env.arm.ready
@@ -209,12 +212,16 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         return failure
 
     def _finding(
-        self, finding: Finding | None, packets: Sequence[WirePacket] = (), data: bytes = b""
+        self,
+        finding: Finding | None,
+        packets: Sequence[WirePacket] = (),
+        data: bytes = b"",
+        what: str = "an asynchronous packet",
     ) -> None:
         if finding is not None:
             raise self._fail(
                 finding.clause,
-                f"{finding.clause}: {finding.actual}",
+                f"{what}: the arm model does not allow {finding.actual}",
                 finding.expected,
                 finding.actual,
                 data,
@@ -320,7 +327,9 @@ class ArmProtocolMachine(RuleBasedStateMachine):
                 answer.data,
                 packets,
             )
-        self._finding(self.model.judge(expectation, view), packets, answer.data)
+        op = SPEC.requests.get(opcode)
+        what = f"request #{number} ({op.name if op else f'opcode {opcode:o}'})"
+        self._finding(self.model.judge(expectation, view), packets, answer.data, what)
         self.model.observe(number, opcode, data, view)
         return answer
 
@@ -412,9 +421,17 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         self.call("describe-self", "describe-self")
 
     # ------------------------------------------------------------------------------- config
-    @rule(factor=speed_factors)
+    @rule(factor=st.one_of(st.just(1.0), f_floats_between(MIN_WORKING_SPEED, 1.0)))
     def set_speed(self, factor: float) -> None:
         self.call("set-speed", "set-speed", factor=factor)
+
+    @rule(factor=speed_factors)
+    def set_speed_extreme(self, factor: float) -> None:
+        """Any factor the spec allows, down to the smallest F float; then back to full speed, because a
+        move queued at 1e-38 of full speed would take longer than the run (and a server that plans the
+        whole path of a straight-line move when it is queued may take as long to plan it)."""
+        self.call("set-speed-extreme", "set-speed", factor=factor)
+        self.call("set-speed-extreme: restore", "set-speed", factor=1.0)
 
     @rule(factor=bad_speed_factors)
     def set_speed_out_of_range(self, factor: float) -> None:
@@ -508,7 +525,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         self.call("abort: kill-power", "kill-power")
         self.pause(ABORT_WAIT)
 
-    @rule(seconds=st.sampled_from([0.01, 0.03, 0.1]))
+    @rule(seconds=st.sampled_from([0.005, 0.02, 0.06]))
     def wait(self, seconds: float) -> None:
         self.pause(seconds)
 
@@ -535,6 +552,14 @@ def _machine_class(env: _Env) -> type[ArmProtocolMachine]:
 
 
 # ------------------------------------------------------------------------------------- the case
+def _packet_line(packet: WirePacket) -> str:
+    if packet.direction == "c2s" and not packet.is_close:
+        op = SPEC.requests.get(packet.opcode)
+        name = op.name if op else "unknown opcode"
+        return f"sent #{packet.packet_no} {packet.opcode:o} {name}: {packet.data.hex(' ') or '(no data)'}"
+    return f"got  {describe(packet)}: {packet.data.hex(' ')}"
+
+
 def _counterexample(failure: MachineFailure, address: str) -> str:
     lines = [
         failure.actual,
@@ -550,7 +575,7 @@ def _counterexample(failure: MachineFailure, address: str) -> str:
     ]
     if failure.packets:
         lines.append("packets:")
-        lines += [f"  {p.direction} {describe(p)}: {p.data.hex(' ')}" for p in failure.packets]
+        lines += [f"  {_packet_line(p)}" for p in failure.packets]
     return "\n".join(lines)
 
 

@@ -1,0 +1,103 @@
+"""Mutation testing of the conformance suite: every protocol fault of the reference server is caught.
+
+Each protocol fault of :data:`manip.reference_server.faults.FAULTS` is switched on alone, the embedded
+reference server (``serve`` on port 0, in this process) runs with it, and the suite's server cases run
+against it; at least one case must end ``fail`` (or ``warn``, for a fault that breaks a SHOULD clause).
+The clean server must pass every case.
+
+To stay within the CI budget each fault runs only the cases that cite one of the clauses the fault
+breaks, plus the stateful case (which checks the whole protocol model), with a reduced number of
+Hypothesis examples, a short shrinking budget (only *that* a case fails matters here), and the
+simulated arm running :data:`TIME_SCALE` times faster than real time (moves end sooner; timing-based
+cases compare durations, which scale alike).  A fault whose defect can only show under a condition of
+the arm's world runs with the environment fault that creates the condition (:data:`CONDITIONS`): the
+reference arm never sends a fatal error unless calibration fails.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Iterator, Sequence
+
+import pytest
+
+from manip.conformance import bridge
+from manip.conformance.case import Case, all_cases
+from manip.conformance.context import RunOptions
+from manip.conformance.results import RunReport
+from manip.conformance.runner import RunConfig, Runner
+from manip.reference_server.driver import serve
+from manip.reference_server.faults import FAULTS, Fault, FaultSet
+from manip.reference_server.session import ServerConfig
+
+SEED = 20260
+MAX_EXAMPLES = 10
+TIME_SCALE = 8.0
+SHRINK_BUDGET = 0.2
+REPLY_TIMEOUT = 1.0
+"""Seconds to wait for an answer: loopback answers take well under a millisecond; a fault that drops a
+packet costs this much per wait."""
+SUITE_PREFIXES = ("server.", "property.", "stateful.")
+"""The cases that judge a server over the default link (the Cougar cases need --cougar)."""
+GENERIC = ("stateful.arm-model",)
+CONDITIONS: dict[Fault, tuple[str, ...]] = {Fault.FATAL_WITHOUT_CLOSE: ("calibrate-nzi",)}
+CAUGHT = ("fail", "warn")
+
+PROTOCOL_FAULTS = sorted((f for f, info in FAULTS.items() if info.kind == "protocol"), key=lambda f: f.value)
+
+
+@pytest.fixture(autouse=True)
+def short_shrinking(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    monkeypatch.setattr(bridge, "DEFAULT_SHRINK_BUDGET", SHRINK_BUDGET)
+    yield
+
+
+def suite() -> list[Case]:
+    return [c for c in all_cases() if c.id.startswith(SUITE_PREFIXES)]
+
+
+def cases_for(fault: Fault) -> list[Case]:
+    """The cases citing a clause the fault breaks, and the generic ones."""
+    broken = set(FAULTS[fault].clauses)
+    return [c for c in suite() if broken & set(c.clauses) or c.id in GENERIC]
+
+
+async def run_suite(faults: FaultSet, cases: Sequence[Case]) -> RunReport:
+    async with serve("tcp://127.0.0.1:0", ServerConfig(faults=faults), time_scale=TIME_SCALE) as server:
+        options = RunOptions(max_examples=MAX_EXAMPLES, address=server.address, reply_timeout=REPLY_TIMEOUT)
+        config = RunConfig(address=server.address, options=options, seed=SEED, embedded=True)
+        return await Runner(config, cases).run()
+
+
+def test_every_protocol_fault_has_a_case_citing_its_clauses() -> None:
+    """The selection is not empty beyond the generic cases: some case names each fault's clauses."""
+    for fault in PROTOCOL_FAULTS:
+        specific = [c.id for c in cases_for(fault) if c.id not in GENERIC]
+        assert specific, f"no case cites a clause of fault {fault.value}: {FAULTS[fault].clauses}"
+
+
+def test_clean_server_passes_every_case() -> None:
+    report = asyncio.run(run_suite(FaultSet(), suite()))
+    bad = [
+        (r.id, r.outcome, r.reason or [v.message for v in r.violations])
+        for r in report.results
+        if r.outcome not in ("pass", "skip")
+    ]
+    print(f"clean server: {len(report.results)} cases in {report.duration:.1f} s")
+    assert not bad, bad
+    assert not report.problems, report.problems
+    assert sum(r.outcome == "pass" for r in report.results) > len(report.results) // 2
+
+
+@pytest.mark.parametrize("fault", PROTOCOL_FAULTS, ids=lambda f: f.value)
+def test_protocol_fault_is_caught(fault: Fault) -> None:
+    faults = FaultSet.parse([fault.value, *CONDITIONS.get(fault, ())])
+    report = asyncio.run(run_suite(faults, cases_for(fault)))
+    caught = [r for r in report.results if r.outcome in CAUGHT]
+    errors = [(r.id, r.reason) for r in report.results if r.outcome == "error"]
+    shown = ", ".join(
+        f"{r.id} ({r.outcome}: {r.violations[0].clause if r.violations else r.reason})" for r in caught
+    )
+    print(f"fault {fault.value}: caught by {shown or 'NO CASE'} [{report.duration:.1f} s]")
+    assert not errors, errors
+    assert caught, f"no case caught fault {fault.value} ({FAULTS[fault].description})"

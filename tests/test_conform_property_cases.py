@@ -1,0 +1,177 @@
+"""The property-based cases against the embedded reference server: they pass on the clean server, each
+fails on the defect it is about (with Hypothesis's falsifying example in the report), the same seed
+gives the same run, hardware targets get no motion, and the Hypothesis bridge stops when cancelled."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from collections.abc import Sequence
+
+import pytest
+
+from manip.conformance import bridge
+from manip.conformance.bridge import Bridge, StopRun, run_in_worker
+from manip.conformance.case import all_cases
+from manip.conformance.context import RunOptions
+from manip.conformance.results import CaseResult, RunReport
+from manip.conformance.runner import RunConfig, Runner
+from manip.reference_server.driver import serve
+from manip.reference_server.faults import FaultSet
+from manip.reference_server.session import ServerConfig
+from manip.spec import SPEC
+
+TIME_SCALE = 8.0
+
+
+@pytest.fixture(autouse=True)
+def short_shrinking(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(bridge, "DEFAULT_SHRINK_BUDGET", 2.0)
+
+
+def run(
+    ids: Sequence[str], faults: Sequence[str] = (), *, seed: int = 5, examples: int = 10, **options: object
+) -> RunReport:
+    async def go() -> RunReport:
+        config = ServerConfig(faults=FaultSet.parse(faults))
+        async with serve("tcp://127.0.0.1:0", config, time_scale=TIME_SCALE) as server:
+            opts = RunOptions(max_examples=examples, address=server.address, **options)  # type: ignore[arg-type]
+            cases = [c for c in all_cases() if c.id in ids]
+            assert len(cases) == len(ids)
+            return await Runner(RunConfig(address=server.address, options=opts, seed=seed), cases).run()
+
+    return asyncio.run(go())
+
+
+def result(report: RunReport, case_id: str) -> CaseResult:
+    return next(r for r in report.results if r.id == case_id)
+
+
+PROPERTY_CASES = (
+    "property.requests.well-formed",
+    "property.kinematics.round-trip",
+    "property.floats.round-trip",
+    "property.segments.numbering",
+)
+
+
+def test_clean_server_passes_the_property_cases() -> None:
+    report = run(PROPERTY_CASES)
+    for r in report.results:
+        assert r.outcome == "pass", (r.id, r.reason, [v.message for v in r.violations])
+        assert any("examples run" in n for n in r.notes)
+
+
+@pytest.mark.parametrize(
+    ("case_id", "fault", "outcome", "clauses"),
+    [
+        (
+            "property.requests.well-formed",
+            "error-without-colon",
+            "fail",
+            {"error-string.format", "error-string.args"},  # the lost ': ' also shifts the numbers
+        ),
+        ("property.requests.well-formed", "wrong-request-number", "fail", {"response.echoes-request-number"}),
+        (
+            "property.kinematics.round-trip",
+            "swapped-float-words",
+            "fail",
+            {
+                "solve-backwards.data",
+                "float.reserved-operand",
+                "float.format",
+                "solve-forwards.errors",
+                "solve-forwards.data",
+            },
+        ),
+        (
+            "property.floats.round-trip",
+            "swapped-float-words",
+            "fail",
+            {"float.format", "float.reserved-operand"},
+        ),
+        ("property.segments.numbering", "segment-number-stuck", "warn", {"segment.number-increases"}),
+    ],
+)
+def test_property_case_catches_its_defect(case_id: str, fault: str, outcome: str, clauses: set[str]) -> None:
+    r = result(run([case_id], [fault]), case_id)
+    assert r.outcome == outcome, (r.reason, r.traceback)
+    assert r.violations[0].clause in clauses
+    assert r.violations[0].actual
+
+
+def test_a_failure_shows_the_falsifying_example_and_the_same_seed_finds_it_again() -> None:
+    first = result(
+        run(["property.requests.well-formed"], ["error-without-colon"], seed=9),
+        "property.requests.well-formed",
+    )
+    again = result(
+        run(["property.requests.well-formed"], ["error-without-colon"], seed=9),
+        "property.requests.well-formed",
+    )
+    assert first.outcome == again.outcome == "fail"
+    assert "example(" in first.violations[0].actual  # Hypothesis's note naming the failing example
+    assert first.violations[0].actual == again.violations[0].actual
+
+
+def test_hardware_target_without_motion_sends_no_motion_or_power_request() -> None:
+    report = run(PROPERTY_CASES, target="hardware")
+    assert result(report, "property.floats.round-trip").outcome == "skip"
+    assert result(report, "property.segments.numbering").outcome == "skip"
+    sent = [p.opcode for r in report.results for p in r.packets if p.direction == "c2s" and not p.is_close]
+    assert sent
+    hazards = {SPEC.requests[o].hazard for o in sent if o in SPEC.requests}
+    assert hazards <= {"read-only", "config"}
+    assert result(report, "property.requests.well-formed").outcome == "pass"
+
+
+def test_bridge_runs_coroutines_on_the_loop_and_stops_when_cancelled() -> None:
+    calls: list[int] = []
+    stopped = threading.Event()
+
+    async def step(i: int) -> int:
+        calls.append(i)
+        await asyncio.sleep(0.01)
+        return i * 2
+
+    def work(b: Bridge) -> None:
+        assert b.call(step(1)) == 2
+        try:
+            for i in range(2, 1000):
+                b.call(step(i))
+        except StopRun:
+            stopped.set()
+            raise
+
+    async def go() -> None:
+        task = asyncio.create_task(run_in_worker(work))
+        for _ in range(500):  # until the worker is well under way
+            if len(calls) >= 3:
+                break
+            await asyncio.sleep(0.01)
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        await asyncio.sleep(0.1)
+
+    asyncio.run(go())
+    assert stopped.wait(2.0)
+    assert 3 <= len(calls) < 400
+
+
+def test_bridge_budget_ends_the_run_after_a_failure() -> None:
+    async def nothing() -> None:
+        await asyncio.sleep(0.005)
+
+    def work(b: Bridge) -> str:
+        b.failure_seen()
+        start = time.monotonic()
+        try:
+            while True:
+                b.call(nothing())
+        except StopRun:
+            return f"{time.monotonic() - start:.2f}"
+
+    waited = float(asyncio.run(run_in_worker(work, shrink_budget=0.2)))
+    assert 0.15 <= waited < 2.0

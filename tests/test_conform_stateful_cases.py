@@ -1,0 +1,111 @@
+"""The stateful case against the embedded reference server: it passes on the clean server, a defect of
+the arm's state rules fails it with a shrunk, replayable request list, the same seed finds the same
+counterexample, and a hardware target without --allow-motion gets no motion or power request."""
+
+from __future__ import annotations
+
+import ast
+import asyncio
+import re
+from collections.abc import Sequence
+
+import pytest
+
+from manip.conformance import bridge
+from manip.conformance.case import all_cases
+from manip.conformance.cases.stateful import replay_async
+from manip.conformance.context import RunOptions
+from manip.conformance.results import CaseResult
+from manip.conformance.runner import RunConfig, Runner
+from manip.reference_server.driver import serve
+from manip.reference_server.faults import FaultSet
+from manip.reference_server.session import ServerConfig
+from manip.spec import SPEC
+
+CASE = "stateful.arm-model"
+TIME_SCALE = 8.0
+
+
+@pytest.fixture(autouse=True)
+def short_shrinking(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(bridge, "DEFAULT_SHRINK_BUDGET", 1.0)
+
+
+def run(faults: Sequence[str] = (), *, seed: int = 5, examples: int = 10, **options: object) -> CaseResult:
+    async def go() -> CaseResult:
+        config = ServerConfig(faults=FaultSet.parse(faults))
+        async with serve("tcp://127.0.0.1:0", config, time_scale=TIME_SCALE) as server:
+            opts = RunOptions(max_examples=examples, address=server.address, **options)  # type: ignore[arg-type]
+            cases = [c for c in all_cases() if c.id == CASE]
+            report = await Runner(RunConfig(address=server.address, options=opts, seed=seed), cases).run()
+            return report.results[0]
+
+    return asyncio.run(go())
+
+
+def replay_steps(actual: str) -> list[object]:
+    """The request list of the replay line of a counterexample."""
+    match = re.search(r"replay\('[^']*', (\[.*\])\)", actual)
+    assert match, actual
+    steps = ast.literal_eval(match.group(1))
+    assert isinstance(steps, list)
+    return steps
+
+
+def test_clean_server_passes() -> None:
+    r = run(examples=10)
+    assert r.outcome == "pass", (r.reason, [v.actual for v in r.violations], r.traceback)
+    assert any("runs of up to" in n and "motion and power rules on" in n for n in r.notes)
+    sent = {p.opcode for p in r.packets if p.direction == "c2s" and not p.is_close}
+    names = {SPEC.requests[o].name for o in sent if o in SPEC.requests}
+    assert {"enable-power", "set-joint-angles", "kill-power"} <= names  # the machine really explores
+    assert any(o not in SPEC.requests for o in sent)  # and sends malformed requests too
+
+
+@pytest.mark.parametrize(
+    ("fault", "clauses"),
+    [
+        ("no-nap", {"motion.no-power"}),
+        ("awa-ignored", {"motion.abort"}),  # found through the abort rule (power killed mid-move)
+    ],
+)
+def test_state_rule_defects_fail_with_a_replayable_counterexample(fault: str, clauses: set[str]) -> None:
+    r = run([fault])
+    assert r.outcome == "fail", (r.reason, r.traceback)
+    violation = r.violations[0]
+    assert violation.clause in clauses
+    assert "requests of the shrunk counterexample" in violation.actual
+    steps = replay_steps(violation.actual)
+    assert steps and all(isinstance(s, float) or (isinstance(s, tuple) and len(s) == 2) for s in steps)
+
+
+def test_the_same_seed_finds_the_same_counterexample(monkeypatch: pytest.MonkeyPatch) -> None:
+    # no shrinking: a shrink cut short by its time budget depends on timing, generation does not
+    monkeypatch.setattr(bridge, "DEFAULT_SHRINK_BUDGET", 0.0)
+    first = run(["speed-unchecked"], seed=21)
+    again = run(["speed-unchecked"], seed=21)
+    assert first.outcome == again.outcome == "fail"
+    assert replay_steps(first.violations[0].actual) == replay_steps(again.violations[0].actual)
+
+
+def test_replay_sends_the_counterexample_again() -> None:
+    r = run(["no-nap"])
+    steps = replay_steps(r.violations[0].actual)
+
+    async def go() -> list[str]:
+        async with serve("tcp://127.0.0.1:0", ServerConfig(faults=FaultSet.parse(["no-nap"]))) as server:
+            return await replay_async(server.address, steps, timeout=0.2)  # type: ignore[arg-type]
+
+    lines = asyncio.run(go())
+    sent = [line for line in lines if line.startswith("->")]
+    assert len(sent) == sum(1 for s in steps if isinstance(s, tuple))
+    assert sum(1 for line in lines if line.startswith("  <- 200")) >= len(sent)  # each answered
+
+
+def test_hardware_target_without_motion_keeps_to_read_only_and_config() -> None:
+    r = run(target="hardware", examples=8)
+    assert r.outcome == "pass", (r.reason, [v.actual for v in r.violations], r.traceback)
+    assert any("motion and power rules off" in n for n in r.notes)
+    sent = [p.opcode for p in r.packets if p.direction == "c2s" and not p.is_close]
+    hazards = {SPEC.requests[o].hazard for o in sent if o in SPEC.requests}
+    assert hazards <= {"read-only", "config"}
