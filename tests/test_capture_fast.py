@@ -240,12 +240,14 @@ def damaged(frame: bytes, how: Any) -> bytes:
         return frame[:at] + bytes([frame[at] ^ how[2]]) + frame[at + 1 :]
     if how[0] == "cut":
         return frame[: max(0, len(frame) - how[1])]
-    return frame + how[1]
+    extra: bytes = how[1]
+    return frame + extra
 
 
 def outcome(decode: Any, frame: bytes) -> Packet | str:
     try:
-        return decode(frame)  # type: ignore[no-any-return]
+        packet: Packet = decode(frame)
+        return packet
     except DecodeError:
         return "error"
 

@@ -4,26 +4,27 @@ Why: ``Writer.add_message`` builds a ``Message`` record object, then writes it f
 record builder (about 25 Python calls a message), and a recorder writes two messages a frame (the raw
 frame and its JSON view).  That was the largest single cost of recording.
 
-How: :func:`message_adder` gives a :class:`MessageAppender`'s ``add``, which does the bookkeeping ``add_message`` does (file statistics, the chunk's time
-range, its message index, closing a chunk once it exceeds the chunk size) on the writer's own state and
-writes each message record with one ``struct.pack``; the file is byte for byte the one ``add_message``
-writes (a test holds it to that).  The writer's state is internal to ``mcap`` (checked against 1.6): when
-it is not what the appender expects, :func:`message_adder` gives ``add_message`` instead, so a different
-``mcap`` costs speed, never a wrong file.
+How: :func:`message_adder` gives a :class:`MessageAppender`'s ``add`` and ``add_pair``, which do the
+bookkeeping ``add_message`` does (file statistics, the chunk's time range, its message index, closing a
+chunk once it exceeds the chunk size) on the writer's own state and write each message record with one
+``struct.pack``; message indexes are written with one ``struct.pack`` each too.  The file is byte for
+byte the one ``add_message`` writes (a property test holds it to that).  The writer's state is internal
+to ``mcap`` (checked against 1.6): when it is not what the appender expects, :func:`message_adder` gives
+``add_message`` instead, so a different ``mcap`` costs speed, never a wrong file.
 """
 
 from __future__ import annotations
 
 import struct
 from collections.abc import Callable
-from itertools import chain
 from io import BytesIO
+from itertools import chain
 from typing import Any, Final
 
 from mcap._chunk_builder import ChunkBuilder
+from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import MessageIndex, Statistics
-from mcap.data_stream import RecordBuilder
 from mcap.writer import Writer
 
 _MESSAGE: Final = struct.Struct("<BQHIQQ")
@@ -89,15 +90,13 @@ class MessageAppender:
         stats = self._stats
         if stats.message_count == 0 or t < stats.message_start_time:
             stats.message_start_time = t
-        if t > stats.message_end_time:
-            stats.message_end_time = t
+        stats.message_end_time = max(stats.message_end_time, t)
         stats.channel_message_counts[channel] += 1
         stats.message_count += 1
         chunk = self._chunk
         if chunk.num_messages == 0 or t < chunk.message_start_time:
             chunk.message_start_time = t
-        if t > chunk.message_end_time:
-            chunk.message_end_time = t
+        chunk.message_end_time = max(chunk.message_end_time, t)
         buffer: BytesIO = chunk.record_writer._buffer
         offset = buffer.tell()
         index = chunk.message_indices.get(channel)
@@ -123,16 +122,14 @@ class MessageAppender:
         stats = self._stats
         if stats.message_count == 0 or t < stats.message_start_time:
             stats.message_start_time = t
-        if t > stats.message_end_time:
-            stats.message_end_time = t
+        stats.message_end_time = max(stats.message_end_time, t)
         counts = stats.channel_message_counts
         counts[channel] += 1
         counts[channel2] += 1
         stats.message_count += 2
         if chunk.num_messages == 0 or t < chunk.message_start_time:
             chunk.message_start_time = t
-        if t > chunk.message_end_time:
-            chunk.message_end_time = t
+        chunk.message_end_time = max(chunk.message_end_time, t)
         chunk.num_messages += 2
         indexes = chunk.message_indices
         index = indexes.get(channel)
@@ -153,7 +150,7 @@ class MessageAppender:
 
 
 def _internals(writer: Writer) -> tuple[ChunkBuilder, Statistics, int, Callable[[], Any]] | None:
-    """The writer's chunk builder, statistics, chunk size and chunk-closing method, if they are as expected."""
+    """The writer's chunk builder, statistics, chunk size and chunk-closing method, if as expected."""
     chunk = getattr(writer, "_Writer__chunk_builder", None)
     stats = getattr(writer, "_Writer__statistics", None)
     size = getattr(writer, "_Writer__chunk_size", None)

@@ -2,7 +2,8 @@
 
 The raw channels are the source of truth: every frame is decoded again by its framing and annotated by
 the same :class:`~manip.captures.view.Annotator` the recorder used, so connection numbers, pair ids and
-meanings are exactly those of the JSON view (which the reader does not need, and skips).  The file is
+meanings are exactly those of the JSON view (which the reader does not need, and skips without building
+its messages: chunks are unpacked here rather than by ``mcap``'s record classes).  The file is
 read as a stream in the order it was written, so a capture without its summary section can be read up
 to where it breaks (:class:`CaptureTruncatedError` then says how far it got; ``manip-capture recover`` makes
 it whole).
@@ -358,7 +359,6 @@ class _Stream:
         head, message_head = _RECORD_HEAD.unpack_from, _MESSAGE_HEAD.unpack_from
         message_at = _RECORD_HEAD.size + _MESSAGE_HEAD.size
         raw_channels, events = self.raw, self.events
-        annotate = self.annotator.annotate
         seen: Counter[int] = Counter()  # messages per channel id, added to the topic counts at the end
         try:
             while pos < size:
@@ -369,19 +369,8 @@ class _Stream:
                     cid, sequence, log_time, _ = message_head(data, start + 9)
                     seen[cid] += 1
                     raw = raw_channels.get(cid)
-                    if raw is not None:  # a frame: decoded and annotated like the recorder did
-                        frame = data[start + message_at : pos]
-                        packet: Packet | None
-                        try:
-                            packet = raw.decode(frame)
-                        except DecodeError as exc:
-                            packet = None
-                            annotation = bad_frame(exc)
-                        else:
-                            annotation = annotate(raw.link, raw.direction, packet)
-                        yield _captured(
-                            sequence, log_time, raw.link, raw.direction, frame, packet, annotation
-                        )
+                    if raw is not None:
+                        yield self._frame(raw, sequence, log_time, data[start + message_at : pos])
                     elif cid in events:
                         yield self._event(log_time, data[start + message_at : pos])
                 elif opcode == _CHANNEL:
@@ -400,20 +389,22 @@ class _Stream:
         self.capture.counts[self.topics.get(cid, "?")] += 1
         raw = self.raw.get(cid)
         if raw is not None:
-            frame = bytes(data)
-            packet: Packet | None
-            try:
-                packet = raw.decode(frame)
-            except DecodeError as exc:
-                packet = None
-                annotation = bad_frame(exc)
-            else:
-                assert packet is not None
-                annotation = self.annotator.annotate(raw.link, raw.direction, packet)
-            return CapturedPacket(sequence, log_time, raw.link, raw.direction, frame, packet, annotation)
+            return self._frame(raw, sequence, log_time, bytes(data))
         if cid in self.events:
             return self._event(log_time, data)
         return None
+
+    def _frame(self, raw: _Raw, sequence: int, log_time: int, frame: bytes) -> CapturedPacket:
+        """A frame, decoded and annotated as the recorder did."""
+        packet: Packet | None
+        try:
+            packet = raw.decode(frame)
+        except DecodeError as exc:
+            packet = None
+            annotation = bad_frame(exc)
+        else:
+            annotation = self.annotator.annotate(raw.link, raw.direction, packet)
+        return _captured(sequence, log_time, raw.link, raw.direction, frame, packet, annotation)
 
     @staticmethod
     def _event(log_time: int, data: bytes) -> CapturedEvent:

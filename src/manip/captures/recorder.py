@@ -10,6 +10,11 @@ while anything is pending: on the next write once the interval has passed, and f
 running event loop when the recorder was made inside one (so an idle session is written too).  A
 recorder killed without :meth:`Recorder.close` loses at most the last interval; ``manip-capture
 recover`` rebuilds the file's index (:mod:`manip.captures.recover`).
+
+Speed (``bench/capture.py``): each frame is decoded once (the framing's body decoder called directly,
+:class:`OneFrameDecoder`), annotated once (fast numeric layouts, :mod:`manip.codecs.fastpath`), its view
+written straight to JSON text (:func:`~manip.captures.view.view_bytes`), and both messages added by
+:mod:`manip.captures.appender` (the bytes ``Writer.add_message`` would write, at a fraction of the cost).
 """
 
 from __future__ import annotations
@@ -197,7 +202,7 @@ class Recorder:
         self.flushes = 0
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
         self._writer.start(profile=PROFILE, library=LIBRARY)
-        self._add, self._add_pair, self.fast_append = message_adder(self._writer)
+        self._add, self._add_pair, _ = message_adder(self._writer)
         self._writer.add_metadata(
             METADATA_NAME,
             {
@@ -272,48 +277,25 @@ class Recorder:
     def frame(self, link: int, direction: Direction, frame: bytes, t_ns: int | None = None) -> None:
         """Record one frame exactly as it crossed ``link``."""
         info = self._links[link]
-        if self.decoded_view:  # the common case: :meth:`_write` inlined, the frame decoded once
-            if self._closed:
-                raise CaptureError("the recorder is closed")
-            packet: Packet | None
-            try:
-                packet = info.decode(frame)
-            except DecodeError as exc:
-                packet = None
-                annotation = bad_frame(exc)
-                nbytes = len(frame)
-            else:
-                annotation = self._annotator.annotate(link, direction, packet)
-                nbytes = len(packet.data)
-            t = time.time_ns() if t_ns is None else t_ns
-            seq = self._seq = self._seq + 1
-            channel = info.channels.get(direction)
-            if channel is None:
-                channel = info.channels[direction] = self._raw_channel(info, direction)
-            view = view_bytes(annotation, info.id, direction, seq, packet, nbytes)
-            self._add_pair(channel, frame, self._view_channels[direction], view, t, seq)
-            counts = self.counts
-            counts[RAW_TOPIC[direction]] += 1
-            counts[VIEW_TOPIC[direction]] += 1
-            if annotation.events:
-                for event in annotation.events:
-                    self._event(event, t)
-            self._pending = True
-            if time.monotonic() >= self._due:
-                self.flush()
-            return
-        at = _OPCODE_BYTE.get(info.framing)
-        if at is not None and len(frame) > at and frame[at] >= 0o200:
-            # Raw only: a data frame needs no decoding (the reader decodes and checks it).
-            self._write(info, direction, frame, None, _DATA, t_ns)
-            return
+        view = self.decoded_view
+        if not view:
+            at = _OPCODE_BYTE.get(info.framing)
+            if at is not None and len(frame) > at and frame[at] >= 0o200:
+                # Raw only: a data frame needs no decoding (the reader decodes and checks it).
+                self._write(info, direction, frame, None, _DATA, t_ns)
+                return
+        packet: Packet | None
         try:
             packet = info.decode(frame)
         except DecodeError as exc:
             packet = None
             annotation = bad_frame(exc)
         else:
-            annotation = self._annotate(link, direction, packet)
+            # Without the view only the connection events are needed: they come from control packets.
+            if view or packet.opcode < 0o200:
+                annotation = self._annotator.annotate(link, direction, packet)
+            else:
+                annotation = _DATA
         self._write(info, direction, frame, packet, annotation, t_ns)
 
     def _annotate(self, link: int, direction: Direction, packet: Packet) -> Annotation:

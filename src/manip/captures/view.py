@@ -30,7 +30,9 @@ always agree and a file without the view can still be read.
 from __future__ import annotations
 
 import json
+from collections import deque
 from dataclasses import dataclass, field
+from operator import attrgetter
 from typing import Any, Final
 
 from manip.codecs.errors import CodecError, DecodeError
@@ -154,6 +156,9 @@ class _Conn:
     ended: bool = False
     pending: dict[int, _Pending] = field(default_factory=dict)
     seen: dict[Direction, dict[int, int | None]] = field(default_factory=lambda: {"c2s": {}, "s2c": {}})
+    order: dict[Direction, deque[int]] = field(default_factory=lambda: {"c2s": deque(), "s2c": deque()})
+    """The packet numbers of ``seen`` oldest first: dropping the oldest from a dict by iterating it
+    would walk past every entry deleted before (the dict only compacts when it grows)."""
 
 
 def decode_error_dict(exc: CodecError) -> dict[str, Any]:
@@ -202,9 +207,11 @@ class Annotator:
                 retransmission = True
                 previous_pair = seen[number]
             else:
+                order = conn.order[direction]
                 if len(seen) >= SEEN_KEPT:
-                    del seen[next(iter(seen))]
+                    del seen[order.popleft()]
                 seen[number] = None
+                order.append(number)
         if opcode >= _DAT:
             if direction == "c2s":
                 ann = self._request(conn, packet, retransmission, previous_pair)
@@ -252,19 +259,19 @@ class Annotator:
         opcode, data = packet.opcode, packet.data
         if opcode == _RESPONSE and len(data) >= 2:
             # The common case first: a well-formed reply of a fixed numeric layout to a request seen.
-            number = data[0] | data[1] << 8
-            pending = conn.pending.get(number)
-            if pending is not None and pending.reply_fast is not None:
-                parsed = pending.reply_fast.parse(data)
+            echoed = data[0] | data[1] << 8
+            waiting = conn.pending.get(echoed)
+            if waiting is not None and waiting.reply_fast is not None:
+                parsed = waiting.reply_fast.parse(data)
                 if parsed is not None:
                     if not retransmission:
-                        del conn.pending[number]
+                        del conn.pending[echoed]
                     return Annotation(
                         conn.id,
                         "reply",
-                        op=pending.name,
-                        request_number=number,
-                        pair=pending.pair,
+                        op=waiting.name,
+                        request_number=echoed,
+                        pair=waiting.pair,
                         final=True,
                         fields=parsed[1] or None,
                     )
@@ -434,6 +441,9 @@ _NO_PACKET: Final = '{"link":%d,"conn":%d,"direction":"%s","seq":%d,"nbytes":%d,
 _OPCODE_NAMES: Final = tuple(opcode_name(op) for op in range(256))
 _float_repr: Final = float.__repr__
 """How JSON spells a finite float (json's encoder calls the same)."""
+_TAIL_KEYS: Final = (',"text":', ',"error":', ',"async":', ',"payload_hex":', ',"decode_error":')
+_tail: Final = attrgetter("text", "error", "async_", "payload_hex", "decode_error")
+"""The last, rarer entries of the view, in its order, and where the annotation keeps them."""
 _quoted: dict[str, str] = {}
 """JSON of the short strings that recur (kinds, op and field names), made once each."""
 
@@ -458,7 +468,7 @@ def view_bytes(
     qkind = quoted.get(kind) or _quote(kind)
     if packet is not None:
         opcode = packet.opcode
-        head = _HEADER % (
+        out = _HEADER % (
             link,
             ann.conn,
             direction,
@@ -475,60 +485,42 @@ def view_bytes(
             qkind,
         )
     else:
-        head = _NO_PACKET % (link, ann.conn, direction, seq, nbytes, qkind)
-    parts = [head]
-    add = parts.append
+        out = _NO_PACKET % (link, ann.conn, direction, seq, nbytes, qkind)
     if ann.retransmission:
-        add(',"retransmission":true')
+        out += ',"retransmission":true'
     op = ann.op
     if op is not None:
-        add(',"op":')
-        add(quoted.get(op) or _quote(op))
+        out += ',"op":' + (quoted.get(op) or _quote(op))
     if ann.request_number is not None:
-        add(',"request_number":%d' % ann.request_number)
+        out += f',"request_number":{ann.request_number}'
     if ann.pair is not None:
-        add(',"pair":%d' % ann.pair)
+        out += f',"pair":{ann.pair}'
     if ann.final is not None:
-        add(',"final":true' if ann.final else ',"final":false')
+        out += ',"final":true' if ann.final else ',"final":false'
     fields = ann.fields
     if fields:
         sep = ',"fields":{'
         for name, value in fields.items():
-            add(sep)
-            add(quoted.get(name) or _quote(name))
+            out += sep + (quoted.get(name) or _quote(name))
             if type(value) is tuple:
                 try:
                     text = ",".join(map(_float_repr, value))
                 except TypeError:  # not all floats
                     text = ""
                 if text and "n" not in text:  # nan and inf are spelt NaN and Infinity in JSON
-                    add(":[")
-                    add(text)
-                    add("]")
+                    out += ":[" + text + "]"
                 else:
-                    add(":")
-                    add(_encode(value))
+                    out += ":" + _encode(value)
             elif type(value) is int:
-                add(":%d" % value)
+                out += f":{value}"
             else:
-                add(":")
-                add(_encode(value))
+                out += ":" + _encode(value)
             sep = ","
-        add("}")
-    if ann.text is not None:
-        add(',"text":')
-        add(_encode(ann.text))
-    if ann.error is not None:
-        add(',"error":')
-        add(_encode(ann.error))
-    if ann.async_ is not None:
-        add(',"async":')
-        add(_encode(ann.async_))
-    if ann.payload_hex is not None:
-        add(',"payload_hex":')
-        add(_encode(ann.payload_hex))
-    if ann.decode_error is not None:
-        add(',"decode_error":')
-        add(_encode(ann.decode_error))
-    add("}")
-    return "".join(parts).encode()
+        out += "}"
+    if ann.text is not None or ann.error is not None or ann.async_ is not None or ann.payload_hex is not None:
+        for key, value in zip(_TAIL_KEYS, _tail(ann), strict=True):
+            if value is not None:
+                out += key + _encode(value)
+    elif ann.decode_error is not None:
+        out += ',"decode_error":' + _encode(ann.decode_error)
+    return (out + "}").encode()
