@@ -71,9 +71,8 @@ def record(
     except CaptureError as exc:
         raise click.BadParameter(str(exc)) from None
     if listen_end.scheme != upstream_end.scheme:  # refuse before the capture file is created
-        raise click.UsageError(
-            f"cannot proxy {listen_end.scheme}:// to {upstream_end.scheme}://: use the same link on both sides"
-        )
+        schemes = f"{listen_end.scheme}:// to {upstream_end.scheme}://"
+        raise click.UsageError(f"cannot proxy {schemes}: use the same link on both sides")
     try:
         asyncio.run(
             _record(listen_end, upstream_end, output, seconds, seed, compression, flush_interval, not no_view)
