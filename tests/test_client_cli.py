@@ -4,13 +4,9 @@ lines and exit statuses, and ``watch`` against a scripted server."""
 from __future__ import annotations
 
 import json
-import signal
-import subprocess
-import sys
 from collections.abc import Iterator
 
 import pytest
-from click.testing import CliRunner, Result
 
 from manip.arm.kinematics import PUMA600, forward
 from manip.arm.transform import Transform
@@ -19,16 +15,14 @@ from manip.reference_client.cli import (
     EXIT_SERVER_ERROR,
     EXIT_TIMEOUT,
     EXIT_USAGE,
-    main,
 )
-from manip.reference_server import ServerConfig
+from tests.client_cli_support import invoke, reference_url, watch_until_ctrl_c
 from tests.test_client_tcp import (
     READY,
     TARGET,
     closed_port,
     in_thread,
     never_answers,
-    reference_server,
     scripted_server,
     segment_reporter,
 )
@@ -36,12 +30,7 @@ from tests.test_client_tcp import (
 
 @pytest.fixture(scope="module")
 def url() -> Iterator[str]:
-    with in_thread(reference_server(ServerConfig())) as address:
-        yield address
-
-
-def invoke(*args: str) -> Result:
-    return CliRunner().invoke(main, list(args), catch_exceptions=False)
+    yield from reference_url()
 
 
 def ok(*args: str) -> str:
@@ -157,16 +146,4 @@ def test_watch_prints_asynchronous_responses() -> None:
 
 
 def test_watch_stops_cleanly_on_ctrl_c() -> None:
-    with in_thread(scripted_server(segment_reporter)) as address:
-        command = [sys.executable, "-m", "manip.reference_client.cli", address, "watch"]
-        with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
-            try:
-                assert proc.stdout is not None
-                assert proc.stdout.readline() == "segment 7 completed\n"
-                assert proc.stdout.readline() == "segment 8 completed\n"
-                proc.send_signal(signal.SIGINT)
-                assert proc.wait(10) == 0
-                assert proc.stderr is not None and proc.stderr.read() == ""
-            finally:
-                if proc.poll() is None:
-                    proc.kill()
+    watch_until_ctrl_c()

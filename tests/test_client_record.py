@@ -5,42 +5,29 @@ from __future__ import annotations
 
 import asyncio
 import json
-import signal
-import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner, Result
 
 from manip.arm.transform import Transform
 from manip.captures import Session, read_capture, read_session
 from manip.codecs.messages import Reply, decode_server_packet
 from manip.reference_client import ClientOptions, aconnect
-from manip.reference_client.cli import EXIT_CONNECTION, EXIT_SERVER_ERROR, EXIT_USAGE, main
+from manip.reference_client.cli import EXIT_CONNECTION, EXIT_SERVER_ERROR, EXIT_USAGE
 from manip.reference_client.ncp_transport import NcpTransport
-from manip.reference_server import ServerConfig
 from manip.spec.constants import RequestOp, ServerOp
+from tests.client_cli_support import invoke, reference_url, watch_until_ctrl_c
 from tests.test_client_tcp import (
     TARGET,
     closed_port,
-    in_thread,
-    reference_server,
-    scripted_server,
-    segment_reporter,
 )
 
 
 @pytest.fixture(scope="module")
 def url() -> Iterator[str]:
-    with in_thread(reference_server(ServerConfig())) as address:
-        yield address
-
-
-def invoke(*args: str) -> Result:
-    return CliRunner().invoke(main, list(args), catch_exceptions=False)
+    yield from reference_url()
 
 
 def _opcodes(session: Session) -> list[int | None]:
@@ -127,27 +114,7 @@ def test_a_record_file_that_cannot_be_created_is_a_usage_error(url: str, tmp_pat
 
 def test_watch_stopped_by_ctrl_c_leaves_a_complete_capture(tmp_path: Path) -> None:
     path = tmp_path / "watch.mcap"
-    with in_thread(scripted_server(segment_reporter)) as address:
-        command = [
-            sys.executable,
-            "-m",
-            "manip.reference_client.cli",
-            address,
-            "watch",
-            "--record",
-            str(path),
-        ]
-        with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
-            try:
-                assert proc.stdout is not None
-                assert proc.stdout.readline() == "segment 7 completed\n"
-                assert proc.stdout.readline() == "segment 8 completed\n"
-                proc.send_signal(signal.SIGINT)
-                assert proc.wait(10) == 0
-                assert proc.stderr is not None and proc.stderr.read() == ""
-            finally:
-                if proc.poll() is None:
-                    proc.kill()
+    watch_until_ctrl_c("--record", str(path))
     session = read_session(path)
     assert _opcodes(session) == [RequestOp.REQUEST_NOTIFICATIONS]
     asyncs = [p for p in session.server_packets if p.kind == "async"]

@@ -125,6 +125,15 @@ class Finding:
     def __str__(self) -> str:
         return f"[{self.clause}] {self.message}"
 
+    @classmethod
+    def at(
+        cls, packet: WirePacket, clause: str, message: str, *, expected: str = "", actual: str | None = None
+    ) -> Finding:
+        """A finding about ``packet``, with its data; ``actual`` defaults to the packet's description."""
+        return cls(
+            clause, message, expected, describe(packet) if actual is None else actual, packet.data, packet
+        )
+
 
 @dataclass(frozen=True)
 class Refusal:
@@ -170,13 +179,12 @@ def check_server_opcode(packet: WirePacket) -> list[Finding]:
     if packet.opcode in SPEC.server_opcodes or packet.opcode in ARM_SPECIFIC_SERVER_OPCODES:
         return []
     return [
-        Finding(
+        Finding.at(
+            packet,
             "response.server-opcodes",
             f"server packet with opcode {packet.opcode:o}",
             expected="a server opcode 200-205 (or 250-277)",
             actual=f"opcode {packet.opcode:o}",
-            data=packet.data,
-            packet=packet,
         )
     ]
 
@@ -190,14 +198,13 @@ def check_echo(request: WirePacket, reply: WirePacket) -> list[Finding]:
         return []
     actual = "no request-number word" if number is None else f"request number {number}"
     return [
-        Finding(
+        Finding.at(
+            reply,
             clause,
             f"reply to request #{request.packet_no} ({_opcode_name(request)}) carries the wrong number",
             expected=f"request number {request.packet_no} (the request's Chaos packet number)",
             actual=actual
             + (f" (the request's ack field is {request.ack_no})" if number == request.ack_no else ""),
-            data=reply.data,
-            packet=reply,
         )
     ]
 
@@ -207,13 +214,12 @@ def check_error_packet(packet: WirePacket) -> list[Finding]:
     data = packet.data
     if len(data) < 2:
         return [
-            Finding(
+            Finding.at(
+                packet,
                 "response.echoes-request-number",
                 "error packet without a request number",
                 expected="a request-number word then an error string",
                 actual=f"{len(data)} data bytes",
-                data=data,
-                packet=packet,
             )
         ]
     out: list[Finding] = []
@@ -227,13 +233,12 @@ def check_error_packet(packet: WirePacket) -> list[Finding]:
                 )
             ]
         out.append(
-            Finding(
+            Finding.at(
+                packet,
                 "error-string.arg-alignment",
                 "the numbers after the NUL do not start at an even offset",
                 expected="a zero pad byte so the numbers start at an even offset of the packet data",
                 actual=str(exc),
-                data=data,
-                packet=packet,
             )
         )
         try:
@@ -302,13 +307,12 @@ def check_async_packet(packet: WirePacket, requested_mask: int | None = None) ->
     data = packet.data
     if len(data) != 8:
         return [
-            Finding(
+            Finding.at(
+                packet,
                 "async.layout",
                 f"asynchronous response of {len(data)} data bytes",
                 expected="8 data bytes: request number, condition code, two words",
                 actual=f"{len(data)} bytes",
-                data=data,
-                packet=packet,
             )
         ]
     condition = word(data, 2) or 0
@@ -317,47 +321,43 @@ def check_async_packet(packet: WirePacket, requested_mask: int | None = None) ->
     code = SPEC.async_codes.get(condition)
     if code is None:
         out.append(
-            Finding(
+            Finding.at(
+                packet,
                 "async.codes",
                 f"unknown condition code {condition}",
                 expected=f"one of {sorted(SPEC.async_codes)}",
                 actual=str(condition),
-                data=data,
-                packet=packet,
             )
         )
         return out
     if condition == AsyncCondition.GUARD_HIT and word2 not in (1, 2):
         out.append(
-            Finding(
+            Finding.at(
+                packet,
                 "async.layout",
                 f"guard hit with stop/continue word {word2}",
                 expected="1 (stop) or 2 (continue)",
                 actual=str(word2),
-                data=data,
-                packet=packet,
             )
         )
     if condition == AsyncCondition.SEGMENT_COMPLETED and word2 != 0:
         out.append(
-            Finding(
+            Finding.at(
+                packet,
                 "async.layout",
                 f"segment completed with reserved word {word2}",
                 expected="0",
                 actual=str(word2),
-                data=data,
-                packet=packet,
             )
         )
     if requested_mask is not None and not requested_mask >> code.notification_bit & 1:
         out.append(
-            Finding(
+            Finding.at(
+                packet,
                 "async.only-when-requested",
                 f"asynchronous {code.name} that was not asked for",
                 expected=f"no {code.name} responses (request-notifications mask {requested_mask:#o})",
                 actual=f"an asynchronous {code.name} response",
-                data=data,
-                packet=packet,
             )
         )
     return out
@@ -378,13 +378,11 @@ def check_initial_response(packet: WirePacket | None, rfc_packet_no: int | None 
         ]
     if packet.opcode != ServerOp.RESPONSE:
         return [
-            Finding(
+            Finding.at(
+                packet,
                 "connect.initial-response",
                 "the first server packet is not a RESPONSE",
                 expected="a RESPONSE (200) packet first",
-                actual=describe(packet),
-                data=packet.data,
-                packet=packet,
             )
         ]
     number = word(packet.data)
@@ -393,13 +391,12 @@ def check_initial_response(packet: WirePacket | None, rfc_packet_no: int | None 
             f" holding {rfc_packet_no}, the RFC's packet number" if rfc_packet_no is not None else ""
         )
         return [
-            Finding(
+            Finding.at(
+                packet,
                 "connect.initial-response-number",
                 "the initial RESPONSE carries the wrong data",
                 expected=expected,
                 actual=f"{len(packet.data)} data bytes, first word {number}",
-                data=packet.data,
-                packet=packet,
             )
         ]
     return []
@@ -435,26 +432,23 @@ def check_reply(request: WirePacket, answer: Sequence[WirePacket]) -> list[Findi
     multi-packet reply including its terminator (asynchronous packets already taken out)."""
     if not answer:
         return [
-            Finding(
+            Finding.at(
+                request,
                 "request.one-reply",
                 f"no reply to request #{request.packet_no} ({_opcode_name(request)})",
                 expected="one reply",
                 actual="nothing",
-                data=request.data,
-                packet=request,
             )
         ]
     first = answer[0]
     out = check_server_opcode(first)
     if first.is_close:
         return [
-            Finding(
+            Finding.at(
+                first,
                 "request.one-reply",
                 f"the connection ended before request #{request.packet_no} was answered",
                 expected="one reply",
-                actual=describe(first),
-                data=first.data,
-                packet=first,
             )
         ]
     out += check_echo(request, first)
@@ -467,25 +461,21 @@ def check_reply(request: WirePacket, answer: Sequence[WirePacket]) -> list[Findi
     if refusal is not None:
         return [
             *out,
-            Finding(
+            Finding.at(
+                first,
                 refusal.clause,
                 f"{refusal.reason}, but the server answered {describe(first)}",
                 expected="a non-fatal error (202) of severity C",
-                actual=describe(first),
-                data=first.data,
-                packet=first,
             ),
         ]
     if first.opcode != ServerOp.RESPONSE:
         return [
             *out,
-            Finding(
+            Finding.at(
+                first,
                 "request.one-reply",
                 f"the answer to #{request.packet_no} is {describe(first)}",
                 expected="a RESPONSE or an error",
-                actual=describe(first),
-                data=first.data,
-                packet=first,
             ),
         ]
     op = SPEC.requests[request.opcode]
@@ -502,13 +492,12 @@ def _check_refusal(refusal: Refusal, packet: WirePacket) -> list[Finding]:
     if packet.opcode == ServerOp.NON_FATAL_ERROR and error.severity == "C":
         return []
     return [
-        Finding(
+        Finding.at(
+            packet,
             refusal.clause,
             f"{refusal.reason}: answered with severity {error.severity} in {packet.opcode:o}",
             expected="a non-fatal error (202) of severity C",
             actual=repr(error.render()),
-            data=packet.data,
-            packet=packet,
         )
     ]
 
@@ -531,13 +520,12 @@ def _check_single(op: RequestOpcode, packet: WirePacket) -> list[Finding]:
             "segment": "the request number and one segment-number word (4 data bytes)",
         }.get(kind, f"the request number then {_layout_text(op)}")
         return [
-            Finding(
+            Finding.at(
+                packet,
                 clause,
                 f"{op.name} reply: {exc}",
                 expected=expected,
                 actual=f"{len(packet.data)} data bytes",
-                data=packet.data,
-                packet=packet,
             )
         ]
     return []
@@ -559,13 +547,12 @@ def _check_multi(op: RequestOpcode, request: WirePacket, answer: Sequence[WirePa
         number = word(packet.data)
         if number != request.packet_no:
             out.append(
-                Finding(
+                Finding.at(
+                    packet,
                     "multi.same-request-number",
                     f"a packet of the {op.name} reply carries request number {number}",
                     expected=f"request number {request.packet_no} in every packet",
                     actual=f"request number {number}",
-                    data=packet.data,
-                    packet=packet,
                 )
             )
         if len(packet.data) == 2:
@@ -575,15 +562,14 @@ def _check_multi(op: RequestOpcode, request: WirePacket, answer: Sequence[WirePa
     if not terminated:
         last = answer[-1]
         out.append(
-            Finding(
+            Finding.at(
+                last,
                 "multi.terminated-by-empty",
                 f"the {op.name} reply is not ended by an empty packet",
                 expected="an empty RESPONSE (request number only) after the text packets",
                 actual=f"{texts} text packet(s), then {describe(last)}"
                 if last.is_close or last.opcode != ServerOp.RESPONSE
                 else f"{texts} text packet(s), no terminator",
-                data=last.data,
-                packet=last,
             )
         )
     if texts == 0:
@@ -840,13 +826,11 @@ def _on_server_packet(s: _Session, packet: WirePacket) -> None:
     s.findings.extend(check_server_opcode(packet))
     if s.fatal is not None:
         s.findings.append(
-            Finding(
+            Finding.at(
+                packet,
                 "error.fatal-then-close",
                 f"{describe(packet)} after a fatal error",
                 expected="nothing but the close after a fatal error",
-                actual=describe(packet),
-                data=packet.data,
-                packet=packet,
             )
         )
         return
@@ -869,13 +853,12 @@ def _on_server_packet(s: _Session, packet: WirePacket) -> None:
         number = word(packet.data)
         clause = "error.non-fatal-is-reply" if number in s.answered_with_error else "request.one-reply"
         s.findings.append(
-            Finding(
+            Finding.at(
+                packet,
                 clause,
                 f"{describe(packet)} answers no outstanding request",
                 expected="one reply per request",
                 actual=f"an extra {describe(packet)}",
-                data=packet.data,
-                packet=packet,
             )
         )
         return
@@ -906,14 +889,12 @@ def _check_discarded(s: _Session, request: WirePacket, packet: WirePacket) -> No
     s.findings.extend(check_echo(request, packet))
     if packet.opcode != ServerOp.RESPONSE or len(packet.data) != 2:
         s.findings.append(
-            Finding(
+            Finding.at(
+                packet,
                 "free-joint.replies",
                 f"the packet after free joint (#{request.packet_no}, "
                 f"{_opcode_name(request)}) was answered with {describe(packet)}",
                 expected="an empty done: the packet is discarded, not executed",
-                actual=describe(packet),
-                data=packet.data,
-                packet=packet,
             )
         )
 
@@ -934,13 +915,12 @@ def _after_answer(s: _Session, request: WirePacket, packet: WirePacket) -> None:
         assert segment is not None
         if s.last_segment is not None and segment != (s.last_segment + 1) & 0xFFFF:
             s.findings.append(
-                Finding(
+                Finding.at(
+                    packet,
                     "segment.number-increases",
                     f"segment {segment} follows segment {s.last_segment}",
                     expected=f"segment {(s.last_segment + 1) & 0xFFFF}",
                     actual=f"segment {segment}",
-                    data=packet.data,
-                    packet=packet,
                 )
             )
         s.last_segment = segment

@@ -26,10 +26,10 @@ import os
 import shlex
 import sys
 import traceback
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import click
 from rich.console import Console
@@ -41,7 +41,14 @@ from manip.conformance.context import DEFAULT_REPLY_TIMEOUT, RunOptions
 from manip.conformance.cougar_target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.coverage import DEFAULT_PARTIES, coverage, gaps
 from manip.conformance.embedded import EmbeddedServer
-from manip.conformance.replay_cli import check_record_path, recording, replay_command, verify_command
+from manip.conformance.replay_cli import (
+    check_record_path,
+    json_option,
+    junit_option,
+    recording,
+    replay_command,
+    verify_command,
+)
 from manip.conformance.report import failure_text, write_json, write_junit
 from manip.conformance.results import CaseResult, ExitCode, LivenessCheck, RunReport
 from manip.conformance.runner import RunConfig, RunEvents, Runner
@@ -59,6 +66,8 @@ Exit codes:
   3  target unreachable, or dead before any verdict
   4  interrupted or internal error (a partial report is still written)"""
 
+F = TypeVar("F", bound=Callable[..., Any])
+
 _STYLE = {
     "pass": "green",
     "fail": "bold red",
@@ -68,6 +77,11 @@ _STYLE = {
     "known-fail": "cyan",
     "fixed": "bold red",
 }
+
+
+def _number_option(name: str, kind: click.ParamType[Any, Any], default: float, help: str) -> Callable[[F], F]:
+    """A numeric option whose default is shown in --help."""
+    return click.option(name, type=kind, default=default, show_default=True, help=help)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -102,13 +116,7 @@ def main() -> None:
     default=None,
     help="Seed of every random choice (printed always; the same seed gives the same run).",
 )
-@click.option(
-    "--max-examples",
-    type=click.IntRange(1),
-    default=25,
-    show_default=True,
-    help="Examples per property-based case.",
-)
+@_number_option("--max-examples", click.IntRange(1), 25, "Examples per property-based case.")
 @click.option(
     "--target",
     "target_kind",
@@ -118,26 +126,14 @@ def main() -> None:
     help="hardware: motion and power cases are left out unless --allow-motion.",
 )
 @click.option("--allow-motion", is_flag=True, help="With --target hardware, run motion and power cases too.")
-@click.option(
-    "--reply-timeout",
-    type=click.FloatRange(0.01),
-    default=DEFAULT_REPLY_TIMEOUT,
-    show_default=True,
-    help="Seconds to wait for each reply.",
+@_number_option(
+    "--reply-timeout", click.FloatRange(0.01), DEFAULT_REPLY_TIMEOUT, "Seconds to wait for each reply."
 )
-@click.option(
-    "--deadline-scale",
-    type=click.FloatRange(0.01),
-    default=1.0,
-    show_default=True,
-    help="Multiply every case deadline (slow links, real arms).",
+@_number_option(
+    "--deadline-scale", click.FloatRange(0.01), 1.0, "Multiply every case deadline (slow links, real arms)."
 )
-@click.option(
-    "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the JSON report."
-)
-@click.option(
-    "--junit", "junit_path", type=click.Path(dir_okay=False, path_type=Path), help="Write JUnit XML."
-)
+@json_option
+@junit_option
 @click.option(
     "--server-fault",
     "server_faults",

@@ -48,10 +48,10 @@ import shlex
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from typing import Final
 
-from manip.captures import CaptureError, Session, read_capture
+from manip.captures import Session
+from manip.conformance.capture_report import capture_report, read_sessions
 from manip.conformance.checks import (
     ANSWER_OPCODES,
     UNSOLICITED_OPCODES,
@@ -75,7 +75,6 @@ from manip.conformance.verify import (
     judge_findings,
     opened,
     rfc_number,
-    select_sessions,
     session_hazard,
     wire_packets,
 )
@@ -601,10 +600,9 @@ async def replay_capture(
     options = options or ReplayOptions()
     t0 = time.monotonic()
     name = os.fspath(path)
-    report = RunReport(
-        target=address,
+    report = capture_report(
+        address,
         embedded=embedded,
-        seed=0,
         strict=options.strict,
         options={
             "mode": "replay",
@@ -616,16 +614,11 @@ async def replay_capture(
             "sessions": list(options.sessions),
         },
         command=command or shlex.join(["manip-conform", "replay", name, "--against", address]),
-        started=datetime.now(UTC).isoformat(timespec="seconds"),
     )
-    try:
-        capture = read_capture(path)
-    except CaptureError as exc:
-        report.unreachable = True
-        report.problems.append(f"the capture cannot be read: {exc}")
+    chosen = read_sessions(path, options.sessions, report)
+    if report.unreachable:
         report.duration = time.monotonic() - t0
         return report
-    chosen = select_sessions(capture.sessions, options.sessions, report)
     words = (
         list(reproduce) if reproduce is not None else ["manip-conform", "replay", name, "--against", address]
     )

@@ -36,7 +36,15 @@ from manip.links import AddressError, parse_address
 from manip.links.api import LinkWrapper
 from manip.reference_server import FaultSet, ServerConfig
 
-__all__ = ["EXIT_CODES_HELP", "check_record_path", "recording", "replay_command", "verify_command"]
+__all__ = [
+    "EXIT_CODES_HELP",
+    "check_record_path",
+    "json_option",
+    "junit_option",
+    "recording",
+    "replay_command",
+    "verify_command",
+]
 
 EXIT_CODES_HELP = """\b
 Exit codes:
@@ -109,10 +117,11 @@ def _run(job: Callable[[], Awaitable[RunReport]], console: Console) -> RunReport
         return int(ExitCode.INTERNAL)
 
 
-_json_option = click.option(
+# Shared with ``manip-conform run``.
+json_option = click.option(
     "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the JSON report."
 )
-_junit_option = click.option(
+junit_option = click.option(
     "--junit", "junit_path", type=click.Path(dir_okay=False, path_type=Path), help="Write JUnit XML."
 )
 _session_option = click.option(
@@ -133,8 +142,8 @@ _file_argument = click.argument("file", type=click.Path(exists=True, dir_okay=Fa
 @_file_argument
 @_session_option
 @click.option("--strict", is_flag=True, help="SHOULD failures count (without it they are warnings).")
-@_json_option
-@_junit_option
+@json_option
+@junit_option
 @click.option("-q", "--quiet", is_flag=True, help="Failures and the summary only.")
 def verify_command(
     file: Path,
@@ -215,8 +224,8 @@ def _capture_settings(file: Path) -> tuple[float, int | None]:
     help="Record the live side to an MCAP capture (then: manip-conform verify OUT).",
 )
 @click.option("--strict", is_flag=True, help="SHOULD failures of the live checks count.")
-@_json_option
-@_junit_option
+@json_option
+@junit_option
 @click.option("-q", "--quiet", is_flag=True, help="Failures and the summary only.")
 def replay_command(
     file: Path,

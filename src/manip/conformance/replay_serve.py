@@ -34,15 +34,14 @@ import shlex
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from typing import Final
 
-from manip.captures import CaptureError, read_capture
+from manip.conformance.capture_report import capture_report, read_sessions
 from manip.conformance.checks import WirePacket, describe
 from manip.conformance.masking import Mismatch, NumberMap, compare_request, masked
 from manip.conformance.replay import AnswerSorter
 from manip.conformance.results import CaseResult, RunReport, Violation
-from manip.conformance.verify import opened, rfc_number, select_sessions, session_hazard, wire_packets
+from manip.conformance.verify import opened, rfc_number, session_hazard, wire_packets
 from manip.links import ChaosConnection, ChaosError, start_server
 from manip.links.api import LinkWrapper
 
@@ -236,10 +235,9 @@ async def serve_capture(
     options = options or ServeOptions()
     t0 = time.monotonic()
     name = os.fspath(path)
-    report = RunReport(
-        target=address,
+    report = capture_report(
+        address,
         embedded=False,
-        seed=0,
         strict=options.strict,
         options={
             "mode": "serve",
@@ -249,16 +247,8 @@ async def serve_capture(
             "sessions": list(options.sessions),
         },
         command=command or shlex.join(["manip-conform", "replay", name, "--serve", address]),
-        started=datetime.now(UTC).isoformat(timespec="seconds"),
     )
-    try:
-        capture = read_capture(path)
-    except CaptureError as exc:
-        report.unreachable = True
-        report.problems.append(f"the capture cannot be read: {exc}")
-        report.duration = time.monotonic() - t0
-        return report
-    chosen = [(n, s) for n, s in select_sessions(capture.sessions, options.sessions, report) if opened(s)]
+    chosen = [(n, s) for n, s in read_sessions(path, options.sessions, report) if opened(s)]
     sessions = [
         ServedSession(number, turns_of(wire_packets(s, number - 1), rfc_number(s))) for number, s in chosen
     ]

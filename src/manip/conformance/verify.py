@@ -30,10 +30,10 @@ import shlex
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from datetime import UTC, datetime
 from typing import Final
 
-from manip.captures import CaptureError, Session, read_capture
+from manip.captures import Session
+from manip.conformance.capture_report import capture_report, open_capture, select_sessions
 from manip.conformance.case import LEVEL_ORDER
 from manip.conformance.checks import (
     CLOSE_OPCODES,
@@ -330,24 +330,16 @@ def verify_capture(
     An unreadable capture, or one without the sessions asked for, gives a report with ``unreachable``
     set (exit 3) and the reason in ``problems``."""
     t0 = time.monotonic()
-    report = RunReport(
-        target=os.fspath(path),
+    report = capture_report(
+        os.fspath(path),
         embedded=False,
-        seed=0,
         strict=strict,
         options={"mode": "verify", "capture": os.fspath(path), "sessions": list(sessions)},
         command=command or shlex.join(["manip-conform", "verify", os.fspath(path)]),
-        started=datetime.now(UTC).isoformat(timespec="seconds"),
     )
-    try:
-        capture = read_capture(path)
-    except CaptureError as exc:
-        report.unreachable = True
-        report.problems.append(f"the capture cannot be read: {exc}")
-        report.duration = time.monotonic() - t0
-        return report
-    chosen = select_sessions(capture.sessions, sessions, report)
-    if report.unreachable:
+    capture = open_capture(path, report)
+    chosen = [] if capture is None else select_sessions(capture.sessions, sessions, report)
+    if capture is None or report.unreachable:
         report.duration = time.monotonic() - t0
         return report
     for number, session in chosen:
@@ -390,25 +382,3 @@ def verify_capture(
         )
     report.duration = time.monotonic() - t0
     return report
-
-
-def select_sessions(
-    sessions: Sequence[Session], wanted: Sequence[int], report: RunReport
-) -> list[tuple[int, Session]]:
-    """(1-based number, session) of the sessions asked for; marks ``report`` unreachable when there
-    is nothing to judge."""
-    numbered = list(enumerate(sessions, start=1))
-    if not numbered:
-        report.unreachable = True
-        report.problems.append("the capture holds no session (no Chaos connection was recorded)")
-        return []
-    if wanted:
-        missing = [n for n in wanted if not 1 <= n <= len(numbered)]
-        if missing:
-            report.unreachable = True
-            report.problems.append(
-                f"no session {', '.join(map(str, missing))} in the capture (it has {len(numbered)})"
-            )
-            return []
-        numbered = [item for item in numbered if item[0] in wanted]
-    return numbered

@@ -19,22 +19,20 @@ Consequences:
 from __future__ import annotations
 
 import asyncio
+import inspect
 import threading
-from collections.abc import Callable, Coroutine, Mapping, Sequence
+from collections.abc import Callable, Coroutine
 from types import TracebackType
-from typing import Any, SupportsFloat, SupportsInt, TypeVar
+from typing import Any, Concatenate, ParamSpec, TypeVar
 
-from manip.arm.transform import Transform
-from manip.codecs.lisp import LispValue
-from manip.reference_client.arguments import FloatArray
-from manip.reference_client.background import AsyncListener, CloseListener, ErrorListener
+from manip.reference_client.background import AsyncListener, ErrorListener
 from manip.reference_client.connect import TransportSource, open_manipulator, with_contact
-from manip.reference_client.issuer import DEFAULT, Default, Timeout
-from manip.reference_client.manipulator import Manipulator, RequestData
+from manip.reference_client.manipulator import Manipulator
 from manip.reference_client.options import ClientOptions
-from manip.reference_client.request import DataExtractor, Request, RequestCode, ResponseType
+from manip.reference_client.request import Request
 
 T = TypeVar("T")
+P = ParamSpec("P")
 
 
 class _LoopThread:
@@ -70,8 +68,49 @@ class _LoopThread:
                 self._thread.join()
 
 
+def _named(call: Callable[..., Any], method: Callable[..., Any]) -> None:
+    """Give the facade's ``call`` the name and docstring of the manipulator's ``method``."""
+    call.__name__ = method.__name__
+    call.__qualname__ = f"SyncManipulator.{method.__name__}"
+    call.__doc__ = method.__doc__
+    # help() and IDEs show the manipulator's parameters, not *args/**kwargs.
+    setattr(call, "__signature__", inspect.signature(method))  # noqa: B010
+
+
+def _blocking(
+    method: Callable[Concatenate[Manipulator, P], Coroutine[Any, Any, T]],
+) -> Callable[Concatenate[SyncManipulator, P], T]:
+    """The facade's method for the coroutine method ``method``: it runs ``arm.<method>(...)`` in the
+    loop thread and waits for its result.  The signature (hence mypy's view of it) is the manipulator's;
+    the method is looked up on the arm at call time, as a hand-written ``self.arm.name(...)`` would."""
+    name = method.__name__
+
+    def call(self: SyncManipulator, /, *args: P.args, **kwargs: P.kwargs) -> T:
+        bound: Callable[P, Coroutine[Any, Any, T]] = getattr(self.arm, name)
+        return self._run(bound(*args, **kwargs))
+
+    _named(call, method)
+    return call
+
+
+def _delegated(
+    method: Callable[Concatenate[Manipulator, P], T],
+) -> Callable[Concatenate[SyncManipulator, P], T]:
+    """The facade's method for the plain (not coroutine) method ``method``: called directly, in the
+    caller's thread."""
+    name = method.__name__
+
+    def call(self: SyncManipulator, /, *args: P.args, **kwargs: P.kwargs) -> T:
+        bound: Callable[P, T] = getattr(self.arm, name)
+        return bound(*args, **kwargs)
+
+    _named(call, method)
+    return call
+
+
 class SyncManipulator:
-    """The blocking twin of :class:`~manip.reference_client.manipulator.Manipulator`."""
+    """The blocking twin of :class:`~manip.reference_client.manipulator.Manipulator`: each request
+    method has the manipulator's signature and docstring, and blocks until its result."""
 
     def __init__(self, runner: _LoopThread, arm: Manipulator) -> None:
         self._runner = runner
@@ -104,35 +143,8 @@ class SyncManipulator:
 
     # ------------------------------------------------------------------ requests
 
-    def make_request(
-        self,
-        code: str | int | RequestCode,
-        data: RequestData | None = None,
-        *,
-        fields: Mapping[str, Any] | None = None,
-        response_type: ResponseType | None = None,
-        extractor: str | DataExtractor[Any] | Default | None = DEFAULT,
-        timeout: Timeout = DEFAULT,
-    ) -> Request[Any]:
-        return self.arm.make_request(
-            code, data, fields=fields, response_type=response_type, extractor=extractor, timeout=timeout
-        )
-
-    def request(
-        self,
-        code: str | int | RequestCode,
-        data: RequestData | None = None,
-        *,
-        fields: Mapping[str, Any] | None = None,
-        response_type: ResponseType | None = None,
-        extractor: str | DataExtractor[Any] | Default | None = DEFAULT,
-        timeout: Timeout = DEFAULT,
-    ) -> Any:
-        return self._run(
-            self.arm.request(
-                code, data, fields=fields, response_type=response_type, extractor=extractor, timeout=timeout
-            )
-        )
+    make_request = _delegated(Manipulator.make_request)
+    request = _blocking(Manipulator.request)
 
     def perform(self, request: Request[T]) -> T:
         """Send a request made with :meth:`make_request` and wait for its result."""
@@ -164,164 +176,53 @@ class SyncManipulator:
         """``listener`` runs in the loop thread."""
         return self.arm.add_error_listener(listener)
 
-    def add_close_listener(self, listener: CloseListener) -> Callable[[], None]:
-        return self.arm.add_close_listener(listener)
-
-    def request_notifications(self, mask: int, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.request_notifications(mask, timeout=timeout))
-
-    def wait_for_segment(self, segment: SupportsInt, *, timeout: float | None = None) -> None:
-        self._run(self.arm.wait_for_segment(segment, timeout=timeout))
-
-    def free_joint(self, joint: int, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.free_joint(joint, timeout=timeout))
-
-    def release_joint(self, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.release_joint(timeout=timeout))
+    add_close_listener = _delegated(Manipulator.add_close_listener)
+    request_notifications = _blocking(Manipulator.request_notifications)
+    wait_for_segment = _blocking(Manipulator.wait_for_segment)
+    free_joint = _blocking(Manipulator.free_joint)
+    release_joint = _blocking(Manipulator.release_joint)
 
     # ------------------------------------------------------------------ E.1 operations
 
-    def describe(self, *, timeout: Timeout = DEFAULT) -> dict[str, LispValue]:
-        return self._run(self.arm.describe(timeout=timeout))
-
-    def here(self, *, timeout: Timeout = DEFAULT) -> Transform:
-        return self._run(self.arm.here(timeout=timeout))
-
-    def joint_angles(self, *, timeout: Timeout = DEFAULT) -> tuple[float, ...]:
-        return self._run(self.arm.joint_angles(timeout=timeout))
-
-    def calibrate(self, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.calibrate(timeout=timeout))
-
-    def move(self, target: Transform, *, timeout: Timeout = DEFAULT) -> int:
-        return self._run(self.arm.move(target, timeout=timeout))
-
-    def straight_move(self, target: Transform, *, timeout: Timeout = DEFAULT) -> int:
-        return self._run(self.arm.straight_move(target, timeout=timeout))
-
-    def kill_power(self, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.kill_power(timeout=timeout))
-
-    def set_configuration(self, lefty: bool, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.set_configuration(lefty, timeout=timeout))
-
-    def hand(self, amount: int, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.hand(amount, timeout=timeout))
-
-    def open_hand(self, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.open_hand(timeout=timeout))
-
-    def close_hand(self, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.close_hand(timeout=timeout))
-
-    def incremental_move(
-        self,
-        dx: float = 0.0,
-        dy: float = 0.0,
-        dz: float = 0.0,
-        do: float = 0.0,
-        da: float = 0.0,
-        dt: float = 0.0,
-        *,
-        timeout: Timeout = DEFAULT,
-    ) -> int:
-        return self._run(self.arm.incremental_move(dx, dy, dz, do, da, dt, timeout=timeout))
-
-    def incremental_straight_move(
-        self,
-        dx: float = 0.0,
-        dy: float = 0.0,
-        dz: float = 0.0,
-        do: float = 0.0,
-        da: float = 0.0,
-        dt: float = 0.0,
-        *,
-        timeout: Timeout = DEFAULT,
-    ) -> int:
-        return self._run(self.arm.incremental_straight_move(dx, dy, dz, do, da, dt, timeout=timeout))
-
-    def ready(self, *, timeout: Timeout = DEFAULT) -> int:
-        return self._run(self.arm.ready(timeout=timeout))
-
-    def set_joint_angles(self, joints: Sequence[SupportsFloat], *, timeout: Timeout = DEFAULT) -> int:
-        return self._run(self.arm.set_joint_angles(joints, timeout=timeout))
-
-    def set_speed(self, factor: float, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.set_speed(factor, timeout=timeout))
-
-    def enable_power(self, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.enable_power(timeout=timeout))
-
-    def solve_forwards(
-        self, target: Transform, current: Sequence[SupportsFloat], *, timeout: Timeout = DEFAULT
-    ) -> tuple[float, ...]:
-        return self._run(self.arm.solve_forwards(target, current, timeout=timeout))
-
-    def solve_backwards(self, joints: Sequence[SupportsFloat], *, timeout: Timeout = DEFAULT) -> Transform:
-        return self._run(self.arm.solve_backwards(joints, timeout=timeout))
+    describe = _blocking(Manipulator.describe)
+    here = _blocking(Manipulator.here)
+    joint_angles = _blocking(Manipulator.joint_angles)
+    calibrate = _blocking(Manipulator.calibrate)
+    move = _blocking(Manipulator.move)
+    straight_move = _blocking(Manipulator.straight_move)
+    kill_power = _blocking(Manipulator.kill_power)
+    set_configuration = _blocking(Manipulator.set_configuration)
+    hand = _blocking(Manipulator.hand)
+    open_hand = _blocking(Manipulator.open_hand)
+    close_hand = _blocking(Manipulator.close_hand)
+    incremental_move = _blocking(Manipulator.incremental_move)
+    incremental_straight_move = _blocking(Manipulator.incremental_straight_move)
+    ready = _blocking(Manipulator.ready)
+    set_joint_angles = _blocking(Manipulator.set_joint_angles)
+    set_speed = _blocking(Manipulator.set_speed)
+    enable_power = _blocking(Manipulator.enable_power)
+    solve_forwards = _blocking(Manipulator.solve_forwards)
+    solve_backwards = _blocking(Manipulator.solve_backwards)
 
     # ------------------------------------------------------------------ Puma extensions
 
-    def read_forces(self, *, timeout: Timeout = DEFAULT) -> tuple[float, ...]:
-        return self._run(self.arm.read_forces(timeout=timeout))
-
-    def read_raw_gauges(self, *, timeout: Timeout = DEFAULT) -> tuple[int, ...]:
-        return self._run(self.arm.read_raw_gauges(timeout=timeout))
-
-    def set_gauge_offsets(self, offsets: Sequence[SupportsInt], *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.set_gauge_offsets(offsets, timeout=timeout))
-
-    def calibrate_wrist(self, *, timeout: Timeout = DEFAULT) -> tuple[int, ...]:
-        return self._run(self.arm.calibrate_wrist(timeout=timeout))
-
-    def set_spring(self, k: Sequence[SupportsFloat], *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.set_spring(k, timeout=timeout))
-
-    def set_damping(self, b: FloatArray, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.set_damping(b, timeout=timeout))
-
-    def set_joint_damping(self, bji: Sequence[SupportsFloat], *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.set_joint_damping(bji, timeout=timeout))
-
-    def set_frame_vector(self, offset: Sequence[SupportsFloat], *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.set_frame_vector(offset, timeout=timeout))
-
-    def set_weight(self, weight: float, cg: Sequence[SupportsFloat], *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.set_weight(weight, cg, timeout=timeout))
-
-    def set_guard(
-        self,
-        index: int,
-        dvec: Sequence[SupportsFloat],
-        tol: float,
-        *,
-        stop: bool = True,
-        timeout: Timeout = DEFAULT,
-    ) -> None:
-        self._run(self.arm.set_guard(index, dvec, tol, stop=stop, timeout=timeout))
-
-    def clear_guard(self, index: int, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.clear_guard(index, timeout=timeout))
-
-    def compliant_move(
-        self, joints: Sequence[SupportsFloat], scheme: int = 0, *, timeout: Timeout = DEFAULT
-    ) -> int:
-        return self._run(self.arm.compliant_move(joints, scheme, timeout=timeout))
-
-    def examine_wrist(self, address: int, count: int, *, timeout: Timeout = DEFAULT) -> tuple[int, ...]:
-        return self._run(self.arm.examine_wrist(address, count, timeout=timeout))
-
-    def deposit_wrist(self, address: int, value: int, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.deposit_wrist(address, value, timeout=timeout))
-
-    def wrist_version(self, *, timeout: Timeout = DEFAULT) -> int:
-        return self._run(self.arm.wrist_version(timeout=timeout))
-
-    def reset_abort(self, *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.reset_abort(timeout=timeout))
-
-    def set_commanded_force(self, force: Sequence[SupportsFloat], *, timeout: Timeout = DEFAULT) -> None:
-        self._run(self.arm.set_commanded_force(force, timeout=timeout))
+    read_forces = _blocking(Manipulator.read_forces)
+    read_raw_gauges = _blocking(Manipulator.read_raw_gauges)
+    set_gauge_offsets = _blocking(Manipulator.set_gauge_offsets)
+    calibrate_wrist = _blocking(Manipulator.calibrate_wrist)
+    set_spring = _blocking(Manipulator.set_spring)
+    set_damping = _blocking(Manipulator.set_damping)
+    set_joint_damping = _blocking(Manipulator.set_joint_damping)
+    set_frame_vector = _blocking(Manipulator.set_frame_vector)
+    set_weight = _blocking(Manipulator.set_weight)
+    set_guard = _blocking(Manipulator.set_guard)
+    clear_guard = _blocking(Manipulator.clear_guard)
+    compliant_move = _blocking(Manipulator.compliant_move)
+    examine_wrist = _blocking(Manipulator.examine_wrist)
+    deposit_wrist = _blocking(Manipulator.deposit_wrist)
+    wrist_version = _blocking(Manipulator.wrist_version)
+    reset_abort = _blocking(Manipulator.reset_abort)
+    set_commanded_force = _blocking(Manipulator.set_commanded_force)
 
 
 def connect(

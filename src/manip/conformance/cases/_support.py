@@ -42,13 +42,7 @@ def floats(answer: Answer) -> tuple[float, ...]:
 async def read_floats(ctx: CaseContext, probe: Probe, op: str) -> tuple[float, ...]:
     """Here or joint angles, as floats; a failure of the target to answer is a failure of the case."""
     answer = await probe.call(op)
-    ctx.expect(
-        answer.is_response,
-        clause="request.one-reply",
-        expected=f"a normal reply to {op}",
-        actual=str(answer),
-        data=answer.data,
-    )
+    expect_response(ctx, answer, clause="request.one-reply", expected=f"a normal reply to {op}")
     try:
         return floats(answer)
     except CodecError as exc:
@@ -93,16 +87,47 @@ def error_of(answer: Answer) -> ErrorReply | None:
     return None
 
 
-async def power_on(ctx: CaseContext, probe: Probe) -> None:
-    """Enable high power (it also clears an abort); the answer must be done."""
-    answer = await probe.call("enable-power")
+DONE_SIZE: Final = 2
+"""Data bytes of an empty done: the request number alone."""
+
+
+def expect_response(
+    ctx: CaseContext,
+    answer: Answer,
+    *,
+    clause: str,
+    expected: str,
+    size: int | None = None,
+    min_size: int = 0,
+) -> None:
+    """The answer must be a normal response, of exactly ``size`` data bytes when given and of at
+    least ``min_size``."""
     ctx.expect(
-        answer.is_response and len(answer.data) == 2,
-        clause="enable-power.done",
-        expected="an empty done to enable high power",
+        answer.is_response and (size is None or len(answer.data) == size) and len(answer.data) >= min_size,
+        clause=clause,
+        expected=expected,
         actual=str(answer),
         data=answer.data,
     )
+
+
+def expect_done(ctx: CaseContext, answer: Answer, *, clause: str, expected: str) -> None:
+    """The answer must be an empty done (a normal response carrying only the request number)."""
+    expect_response(ctx, answer, clause=clause, expected=expected, size=DONE_SIZE)
+
+
+async def expect_here_served(ctx: CaseContext, probe: Probe, expected: str) -> None:
+    """Here must be served normally, with its transform (after a discarded packet, for example)."""
+    again = await probe.call("here")
+    expect_response(
+        ctx, again, clause="free-joint.awaits-next-packet", expected=expected, min_size=DONE_SIZE + 1
+    )
+
+
+async def power_on(ctx: CaseContext, probe: Probe) -> None:
+    """Enable high power (it also clears an abort); the answer must be done."""
+    answer = await probe.call("enable-power")
+    expect_done(ctx, answer, clause="enable-power.done", expected="an empty done to enable high power")
 
 
 def expect_refusal(

@@ -8,9 +8,16 @@ import time
 from itertools import pairwise
 
 from manip.conformance.case import case
-from manip.conformance.cases._support import expect_refusal, power_on, read_floats
+from manip.conformance.cases._support import (
+    expect_done,
+    expect_here_served,
+    expect_refusal,
+    expect_response,
+    power_on,
+    read_floats,
+)
 from manip.conformance.checks import check_async_packet, word
-from manip.conformance.context import CaseContext, Probe
+from manip.conformance.context import Answer, CaseContext, Probe
 from manip.spec.constants import AsyncCondition, ServerOp
 
 FAR_MM = 100_000.0
@@ -18,6 +25,8 @@ FAR_MM = 100_000.0
 OUT_OF_RANGE_DEG = 1000.0
 """A joint angle past any revolute joint's limit."""
 SMALL_STEP_DEG = 2.0
+SEGMENT_REPLY_SIZE = 4
+"""Data bytes of a segment-number reply: request number and segment number."""
 
 
 async def _wait_still(ctx: CaseContext, probe: Probe, limit: float = 5.0) -> None:
@@ -39,21 +48,38 @@ def _shifted(joints: tuple[float, ...], joint: int, by: float) -> list[float]:
     return out
 
 
+def _away_from_zero(joints: tuple[float, ...], by: float) -> list[float]:
+    """``joints`` with joint 1 moved ``by`` degrees, towards zero (so the move stays in range)."""
+    direction = -1.0 if joints[0] > 0 else 1.0
+    return _shifted(joints, 0, direction * by)
+
+
+def _expect_segment_reply(ctx: CaseContext, answer: Answer, expected: str) -> None:
+    expect_response(ctx, answer, clause="response.segment-number", expected=expected, size=SEGMENT_REPLY_SIZE)
+
+
 async def _small_move(ctx: CaseContext, probe: Probe, by: float = SMALL_STEP_DEG) -> int:
     """A small joint move of joint 1; returns its segment number."""
     joints = await read_floats(ctx, probe, "joint-angles")
-    direction = -1.0 if joints[0] > 0 else 1.0
-    answer = await probe.call("set-joint-angles", joints=_shifted(joints, 0, direction * by))
-    ctx.expect(
-        answer.is_response and len(answer.data) == 4,
-        clause="response.segment-number",
-        expected="a segment-number reply to set joint angles",
-        actual=str(answer),
-        data=answer.data,
-    )
+    answer = await probe.call("set-joint-angles", joints=_away_from_zero(joints, by))
+    _expect_segment_reply(ctx, answer, "a segment-number reply to set joint angles")
     segment = word(answer.data, 2)
     assert segment is not None
     return segment
+
+
+async def _refused_stay(
+    ctx: CaseContext,
+    probe: Probe,
+    joints: tuple[float, ...],
+    *,
+    clause: str,
+    codes: tuple[str, ...],
+    what: str,
+) -> None:
+    """Ask the arm to move to ``joints`` (where it stands): the answer must be an E error of ``codes``."""
+    answer = await probe.call("set-joint-angles", joints=list(joints))
+    expect_refusal(ctx, answer, clause=clause, severities=("E",), codes=codes, what=what)
 
 
 @case("server.motion.jor", clauses=["motion.checked-before-queue"], hazard="motion")
@@ -115,22 +141,10 @@ async def no_arm_power(ctx: CaseContext) -> None:
     """After kill power, motion is refused with NAP; enable power makes it accepted again."""
     probe = await ctx.connect()
     answer = await probe.call("kill-power")
-    ctx.expect(
-        answer.is_response and len(answer.data) == 2,
-        clause="kill-power.done",
-        expected="an empty done",
-        actual=str(answer),
-        data=answer.data,
-    )
+    expect_done(ctx, answer, clause="kill-power.done", expected="an empty done")
     joints = await read_floats(ctx, probe, "joint-angles")
-    answer = await probe.call("set-joint-angles", joints=list(joints))
-    expect_refusal(
-        ctx,
-        answer,
-        clause="motion.no-power",
-        severities=("E",),
-        codes=("NAP",),
-        what="a move without arm power",
+    await _refused_stay(
+        ctx, probe, joints, clause="motion.no-power", codes=("NAP",), what="a move without arm power"
     )
     await power_on(ctx, probe)
     await _small_move(ctx, probe, 0.5)
@@ -140,15 +154,8 @@ async def _abort_by_power_loss(ctx: CaseContext, probe: Probe) -> None:
     """Start a long move, kill power while it runs: the move process must report an abort."""
     await power_on(ctx, probe)
     joints = await read_floats(ctx, probe, "joint-angles")
-    direction = -1.0 if joints[0] > 0 else 1.0
-    answer = await probe.call("set-joint-angles", joints=_shifted(joints, 0, direction * 30.0))
-    ctx.expect(
-        answer.is_response,
-        clause="response.segment-number",
-        expected="the move accepted",
-        actual=str(answer),
-        data=answer.data,
-    )
+    answer = await probe.call("set-joint-angles", joints=_away_from_zero(joints, 30.0))
+    expect_response(ctx, answer, clause="response.segment-number", expected="the move accepted")
     await asyncio.sleep(0.05)
     await probe.call("kill-power")
     loop = asyncio.get_running_loop()
@@ -186,14 +193,8 @@ async def awa_reset_by_power(ctx: CaseContext) -> None:
             data=packet.data,
         )
     joints = await read_floats(ctx, probe, "joint-angles")
-    answer = await probe.call("set-joint-angles", joints=list(joints))
-    expect_refusal(
-        ctx,
-        answer,
-        clause="motion.abort",
-        severities=("E",),
-        codes=("AWA", "NAP"),
-        what="a move after an abort",
+    await _refused_stay(
+        ctx, probe, joints, clause="motion.abort", codes=("AWA", "NAP"), what="a move after an abort"
     )
     await power_on(ctx, probe)
     await _small_move(ctx, probe, 0.5)
@@ -205,24 +206,22 @@ async def awa_reset_abort(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     await _abort_by_power_loss(ctx, probe)
     joints = await read_floats(ctx, probe, "joint-angles")
-    answer = await probe.call("set-joint-angles", joints=list(joints))
-    expect_refusal(
+    await _refused_stay(
         ctx,
-        answer,
+        probe,
+        joints,
         clause="motion.abort",
-        severities=("E",),
         codes=("AWA",),
         what="a move after an abort (the abort is reported before the missing power)",
     )
     reset = await probe.call("reset-abort")
     if not reset.is_response:
         ctx.skip(f"the target does not serve Reset abort (260): {reset}")
-    answer = await probe.call("set-joint-angles", joints=list(joints))
-    expect_refusal(
+    await _refused_stay(
         ctx,
-        answer,
+        probe,
+        joints,
         clause="motion.reset",
-        severities=("E",),
         codes=("NAP",),
         what="a move after Reset abort without power",
     )
@@ -238,18 +237,11 @@ async def reply_before_motion(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     await power_on(ctx, probe)
     before = await read_floats(ctx, probe, "joint-angles")
-    direction = -1.0 if before[0] > 0 else 1.0
-    goal = _shifted(before, 0, direction * 20.0)
+    goal = _away_from_zero(before, 20.0)
     start = time.monotonic()
     answer = await probe.call("set-joint-angles", joints=goal)
     took = time.monotonic() - start
-    ctx.expect(
-        answer.is_response and len(answer.data) == 4,
-        clause="response.segment-number",
-        expected="a segment-number reply",
-        actual=str(answer),
-        data=answer.data,
-    )
+    _expect_segment_reply(ctx, answer, "a segment-number reply")
     now = await read_floats(ctx, probe, "joint-angles")
     ctx.expect(
         abs(now[0] - goal[0]) > 0.5,
@@ -281,13 +273,7 @@ async def speed_bounds(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     for factor in (1.0, 0.5, 2.0**-20):
         answer = await probe.call("set-speed", factor=factor)
-        ctx.expect(
-            answer.is_response and len(answer.data) == 2,
-            clause="speed.range",
-            expected=f"done for speed factor {factor!r}",
-            actual=str(answer),
-            data=answer.data,
-        )
+        expect_done(ctx, answer, clause="speed.range", expected=f"done for speed factor {factor!r}")
     for factor in (0.0, -0.5, 1.0 + 2.0**-20, 2.0, 1e30):
         answer = await probe.call("set-speed", factor=factor)
         expect_refusal(ctx, answer, clause="speed.range", what=f"speed factor {factor!r}")
@@ -295,9 +281,7 @@ async def speed_bounds(ctx: CaseContext) -> None:
 
 async def _segment_time(ctx: CaseContext, probe: Probe, factor: float, by: float) -> float:
     answer = await probe.call("set-speed", factor=factor)
-    ctx.expect(
-        answer.is_response, clause="speed.range", expected="done", actual=str(answer), data=answer.data
-    )
+    expect_response(ctx, answer, clause="speed.range", expected="done")
     start = time.monotonic()
     segment = await _small_move(ctx, probe, by)
     while True:
@@ -391,29 +375,15 @@ async def free_joint_discard(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     await power_on(ctx, probe)
     answer = await probe.call("free-joint", joint=1)
-    ctx.expect(
-        answer.is_response and len(answer.data) == 2,
-        clause="free-joint.replies",
-        expected="done once the joint is freed",
-        actual=str(answer),
-        data=answer.data,
-    )
+    expect_done(ctx, answer, clause="free-joint.replies", expected="done once the joint is freed")
     discarded = await probe.call("here")
-    ctx.expect(
-        discarded.is_response and len(discarded.data) == 2,
+    expect_done(
+        ctx,
+        discarded,
         clause="free-joint.awaits-next-packet",
         expected="an empty done: the packet after free joint is not executed",
-        actual=str(discarded),
-        data=discarded.data,
     )
-    again = await probe.call("here")
-    ctx.expect(
-        again.is_response and len(again.data) > 2,
-        clause="free-joint.awaits-next-packet",
-        expected="Here served normally once the joint is un-freed",
-        actual=str(again),
-        data=again.data,
-    )
+    await expect_here_served(ctx, probe, "Here served normally once the joint is un-freed")
 
 
 @case("server.free-joint.bad-joint", clauses=["free-joint.data"], kind="negative", hazard="motion")

@@ -15,7 +15,14 @@ from manip.codecs.framing import encode_tcp
 from manip.codecs.messages import encode_request
 from manip.codecs.packet import Packet
 from manip.conformance.case import case
-from manip.conformance.cases._support import UNASSIGNED_OPCODES, expect_refusal, valid_values
+from manip.conformance.cases._support import (
+    UNASSIGNED_OPCODES,
+    expect_done,
+    expect_here_served,
+    expect_refusal,
+    expect_response,
+    valid_values,
+)
 from manip.conformance.checks import check_reply
 from manip.conformance.context import CaseContext
 from manip.links.address import parse_address
@@ -67,12 +74,11 @@ async def unknown_opcodes(ctx: CaseContext) -> None:
         ctx.check(check_reply(answer.request, answer.packets))
         expect_refusal(ctx, answer, clause="request.unknown-opcode", what=f"unknown opcode {opcode:o}")
     answer = await probe.call("here")
-    ctx.expect(
-        answer.is_response,
+    expect_response(
+        ctx,
+        answer,
         clause="request.unknown-opcode",
         expected="the connection still serving after unknown opcodes",
-        actual=str(answer),
-        data=answer.data,
     )
 
 
@@ -148,12 +154,8 @@ async def set_configuration_sizes(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     for data in (b"\x01", b"\x00\x00"):
         answer = await probe.call_raw(SPEC.request("set-configuration").opcode, data)
-        ctx.expect(
-            answer.is_response and len(answer.data) == 2,
-            clause="set-configuration.data",
-            expected=f"done for configuration data {data.hex()}",
-            actual=str(answer),
-            data=answer.data,
+        expect_done(
+            ctx, answer, clause="set-configuration.data", expected=f"done for configuration data {data.hex()}"
         )
     answer = await probe.call_raw(SPEC.request("set-configuration").opcode, b"\x01\x00\x00")
     expect_refusal(ctx, answer, clause="request.data-length", what="set configuration with 3 data bytes")
@@ -173,12 +175,11 @@ async def during_free_joint(ctx: CaseContext) -> None:
     if not answer.is_response:
         ctx.skip(f"free joint was refused: {answer}")
     discarded = await probe.call_raw(UNASSIGNED_OPCODES[0], b"\x01\x02\x03")
-    ctx.expect(
-        discarded.is_response and len(discarded.data) == 2,
+    expect_done(
+        ctx,
+        discarded,
         clause="free-joint.replies",
         expected="an empty done for the packet after free joint, whatever it is",
-        actual=str(discarded),
-        data=discarded.data,
     )
     ctx.expect(
         discarded.number == discarded.request.packet_no,
@@ -187,14 +188,7 @@ async def during_free_joint(ctx: CaseContext) -> None:
         actual=str(discarded),
         data=discarded.data,
     )
-    again = await probe.call("here")
-    ctx.expect(
-        again.is_response and len(again.data) > 2,
-        clause="free-joint.awaits-next-packet",
-        expected="Here served normally afterwards",
-        actual=str(again),
-        data=again.data,
-    )
+    await expect_here_served(ctx, probe, "Here served normally afterwards")
 
 
 @case("server.negative.oversize-frame", clauses=["chaos.data.max-488"], kind="negative", deadline=8.0)

@@ -1,0 +1,43 @@
+"""Shared by the ``manip-client`` command tests (test_client_cli, test_client_record): the reference
+server in a thread, invoking the command in-process, and ``watch`` stopped by Ctrl-C in a subprocess."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator
+
+from click.testing import CliRunner, Result
+
+from manip.reference_client.cli import main
+from manip.reference_server import ServerConfig
+from tests.test_client_tcp import in_thread, reference_server, scripted_server, segment_reporter
+
+
+def reference_url() -> Iterator[str]:
+    """The URL of a default reference server running in a thread (for a module-scoped fixture)."""
+    with in_thread(reference_server(ServerConfig())) as address:
+        yield address
+
+
+def invoke(*args: str) -> Result:
+    return CliRunner().invoke(main, list(args), catch_exceptions=False)
+
+
+def watch_until_ctrl_c(*options: str) -> None:
+    """Run ``manip-client ADDRESS watch OPTIONS`` in a subprocess against a server reporting segments 7
+    and 8; after both lines, Ctrl-C must end it cleanly (exit 0, nothing on stderr)."""
+    with in_thread(scripted_server(segment_reporter)) as address:
+        command = [sys.executable, "-m", "manip.reference_client.cli", address, "watch", *options]
+        with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+            try:
+                assert proc.stdout is not None
+                assert proc.stdout.readline() == "segment 7 completed\n"
+                assert proc.stdout.readline() == "segment 8 completed\n"
+                proc.send_signal(signal.SIGINT)
+                assert proc.wait(10) == 0
+                assert proc.stderr is not None and proc.stderr.read() == ""
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
