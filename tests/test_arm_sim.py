@@ -4,15 +4,20 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
+from unittest.mock import patch
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import event, given, settings
 from hypothesis import strategies as st
 
-from manip.arm.kinematics import PUMA600, READY, Joints, forward
+from manip.arm import sim
+from manip.arm.kinematics import PUMA600, READY, Joints, Unreachable, forward
 from manip.arm.sim import (
+    MAX_LINE_CHECKS,
+    MIN_SPEED_FACTOR,
     STRAIGHT_JUMP_DEG,
     AbortCause,
     ArmEvent,
@@ -25,6 +30,10 @@ from manip.arm.sim import (
 )
 from manip.arm.trajectory import PUMA_LIMITS, TICK, Scheme
 from manip.arm.transform import Transform
+from manip.codecs.messages import ErrorReply, Reply, decode_server_packet, encode_request
+from manip.reference_server import ServerConfig, ServerSession
+from manip.spec import SPEC
+from manip.spec.constants import ServerOp
 
 GOAL = (10.0, -80.0, 100.0, 20.0, 30.0, 40.0)
 OTHER = (-20.0, -100.0, 80.0, -10.0, 20.0, -30.0)
@@ -561,3 +570,251 @@ def test_a_line_that_cannot_be_followed_from_where_compliance_left_the_arm_fades
     n = len(trace) - 1
     assert np.max(_steps(trace)) <= offset / n + STRAIGHT_JUMP_DEG
     assert np.all(np.asarray(trace) <= np.asarray(PUMA600.limits.upper) + 1e-9)
+
+
+# ---------------------------------------------------------- bounded planning (erratum motion-planning-bounds)
+class _Solves:
+    """Counts the inverse-kinematics solutions the simulator asks for (the unit of planning work); past
+    ``limit`` since the last :meth:`take` the next one fails at once, so unbounded work fails the test
+    instead of hanging it."""
+
+    def __init__(self, limit: int | None = None) -> None:
+        self.count = 0
+        self.limit = limit
+
+    def __enter__(self) -> _Solves:
+        self._patches = [
+            patch.object(sim, name, self._counting(getattr(sim, name)))
+            for name in ("nearest_solution", "inverse_all")
+        ]
+        for p in self._patches:
+            p.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for p in self._patches:
+            p.stop()
+
+    def _counting(self, fn: Callable[..., Any]) -> Callable[..., Any]:
+        def counted(*args: Any, **kwargs: Any) -> Any:
+            self.count += 1
+            if self.limit is not None and self.count > self.limit:
+                raise AssertionError(f"more than {self.limit} solutions")
+            return fn(*args, **kwargs)
+
+        return counted
+
+    def take(self) -> int:
+        n, self.count = self.count, 0
+        return n
+
+
+#: The most solutions one request may cost: its goal, the checked points, the preferred configuration.
+REQUEST_BOUND = MAX_LINE_CHECKS + 3
+
+
+def test_a_slow_straight_line_costs_no_more_to_queue_than_a_fast_one() -> None:
+    """The reproduced hang: an incremental straight move at speed factor 1e-6 was solved at every one of
+    its ~5 million servo cycles before it was answered; now it is checked at the same points as at full
+    speed, and solved cycle by cycle as it runs, on the line."""
+    counts, checked = [], []
+    for speed in (1.0, 1e-6, MIN_SPEED_FACTOR):
+        arm = _arm()
+        arm.move_joints(GOAL, 0.0)
+        _run_idle(arm)
+        arm.set_speed(speed)
+        start = arm.pose()
+        with _Solves(limit=REQUEST_BOUND) as solves:
+            line = arm.move_increment((10.0, 0.0, -10.0, 0.0, 0.0, 0.0), arm.time, straight=True)
+            counts.append(solves.take())
+            checked.append(arm.planned)
+            goal = Transform.trans(10.0, 0.0, -10.0) @ start
+            for _ in range(200):  # every cycle is solved on the line, however slow
+                arm.tick(arm.time + TICK)
+                assert solves.take() <= 1
+                p, a, b = arm.pose().p, start.p, goal.p
+                along = float(np.dot(p - a, b - a) / np.dot(b - a, b - a))
+                assert np.linalg.norm(p - (a + along * (b - a))) < 1e-6
+        assert arm.moving == (speed < 1.0) and line == 2
+    assert counts[0] == counts[1] == counts[2] < 40
+    assert checked[0] == checked[1] == checked[2]
+
+
+def test_the_reproduced_hang_through_the_server_session() -> None:
+    """The conformance run's case, through the session: incremental straight moves at speed factor 1e-6,
+    by 10 mm (accepted: a segment number) and by dX = 1e30 (TOR), each answered after a bounded number
+    of solutions (the first took hours, the second minutes)."""
+    session = ServerSession(ServerConfig(powered_at_open=True))
+    session.on_open(100.0, 1)
+    session.arm.move_joints(GOAL, 100.0)
+    session.tick(110.0)
+    requests: list[tuple[str, dict[str, Any]]] = [
+        ("set-speed", {"factor": 1e-6}),
+        ("incremental-straight-move", {"delta": (10.0, 0.0, -10.0, 0.0, 0.0, 0.0)}),
+        ("incremental-straight-move", {"delta": (1e30, 0.0, 0.0, 0.0, 0.0, 0.0)}),
+    ]
+    replies = []
+    with _Solves(limit=REQUEST_BOUND) as solves:
+        for number, (op, values) in enumerate(requests, start=2):
+            out = session.on_request(110.0, SPEC.request(op).opcode, number, encode_request(op, **values))
+            (packet,) = out.packets
+            replies.append(decode_server_packet(packet.opcode, packet.data, SPEC.request(op).opcode))
+            assert solves.take() <= 40
+    _, line, far = replies
+    assert isinstance(line, Reply) and line.values["segment"] == 2
+    assert isinstance(far, ErrorReply) and far.error.code == "TOR"
+
+
+def test_unreachable_goals_are_refused_after_one_solution() -> None:
+    arm = _arm()
+    arm.set_speed(1e-6)
+    for delta in (
+        (1e6, 0.0, 0.0, 0.0, 0.0, 0.0),
+        (1e30, 0.0, 0.0, 0.0, 0.0, 0.0),
+        (0.0, 0.0, -1e4, 0.0, 0.0, 0.0),
+    ):
+        with _Solves() as solves, pytest.raises(Refused, match="TOR"):
+            arm.move_increment(delta, 0.0, straight=True)
+        assert solves.count == 1
+    assert not arm.moving and arm.next_segment == 1
+
+
+def test_a_line_needing_more_points_than_allowed_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    arm = _arm()
+    arm.move_joints(GOAL, 0.0)
+    _run_idle(arm)
+    monkeypatch.setattr(sim, "MAX_LINE_CHECKS", 5)
+    with _Solves() as solves, pytest.raises(Refused, match=r"TOR.*too near a singularity"):
+        arm.move_increment((0.0, 0.0, -60.0, 0.0, 0.0, 0.0), arm.time, straight=True)
+    assert solves.count == 1 + 5 and not arm.moving
+
+
+def test_a_line_through_a_singularity_is_refused_at_every_speed() -> None:
+    """Joint 6 at its limit: following the line needs it beyond, so the nearest solutions jump to the
+    other wrist (a 180 degree turn of joint 4) however finely the line is cut."""
+    here = (10.0, -80.0, 100.0, 20.0, 30.0, PUMA600.limits.upper[5] - 1.0)
+    for speed in (1.0, 1e-6):
+        arm = ArmSim(powered=True, start=here)
+        arm.set_speed(speed)
+        with pytest.raises(Refused) as info:
+            arm.move_increment((0.0, 0.0, 0.0, 0.0, 0.0, 30.0), 0.0, straight=True)
+        assert info.value.code in ("TOR", "JOR")
+
+
+def test_a_fast_joint_near_the_elbow_singularity_is_followed_not_refused() -> None:
+    """Near the stretched elbow joint 3 turns fast for a small move: the check halves the gaps there
+    instead of calling it a singularity."""
+    arm = _arm()
+    arm.move_joints(GOAL, 0.0)
+    _run_idle(arm)
+    start = arm.pose()
+    arm.move_increment((0.0, 0.0, -30.0, 0.0, 0.0, 0.0), arm.time, straight=True)
+    trace = [arm.commanded]
+    while arm.moving:
+        arm.tick(arm.time + TICK)
+        trace.append(arm.commanded)
+    assert arm.pose().almost_equal(Transform.trans(0.0, 0.0, -30.0) @ start, 1e-6)
+    assert np.max(_steps(trace)) < STRAIGHT_JUMP_DEG
+
+
+def test_a_cycle_that_cannot_be_solved_follows_the_checked_path() -> None:
+    arm = _arm()
+    arm.move_joints(GOAL, 0.0)
+    _run_idle(arm)
+    goal = Transform.trans(-40.0, 30.0, -20.0) @ arm.pose()
+    line = arm.move_to(goal, arm.time, straight=True)
+    end = arm.planned
+
+    def fail(*args: object, **kwargs: object) -> object:
+        raise Unreachable("injected")
+
+    trace = [arm.commanded]
+    events: list[ArmEvent] = []
+    with patch.object(sim, "nearest_solution", fail):
+        while arm.moving:
+            events += arm.tick(arm.time + TICK)
+            trace.append(arm.commanded)
+    assert _completed(events) == [line] and arm.commanded == end and not arm.aborted
+    assert np.max(_steps(trace)) < STRAIGHT_JUMP_DEG
+    assert arm.pose().almost_equal(goal, 1e-6)
+
+
+def test_speed_factors_below_the_smallest_pdp11_float_are_refused() -> None:
+    arm = _arm()
+    for bad in (1e-300, MIN_SPEED_FACTOR / 2.0):
+        with pytest.raises(Refused, match="BVA"):
+            arm.set_speed(bad)
+    arm.set_speed(MIN_SPEED_FACTOR)
+    arm.move_increment((0.0, 0.0, -5.0, 0.0, 0.0, 0.0), 0.0, straight=True)
+    arm.move_increment((0.0, 0.0, -5.0, 0.0, 0.0, 0.0), 0.0)
+    _run(arm, 1.0)
+    assert arm.moving and _close(arm.commanded, READY, 1e-9)
+
+
+# The motion requests a conformance run throws at the server: mostly moves that can be made, extremes too.
+_HUGE = st.sampled_from([0.0, 180.0, -180.0, 360.0, 720.0, 1e6, -1e6, 1e30, -1e30, 1.7e38, -1.7e38])
+_NUMBER = st.one_of(st.floats(-40.0, 40.0), st.floats(-40.0, 40.0), st.floats(-2000.0, 2000.0), _HUGE)
+_SMALL = st.tuples(*(st.floats(-40.0, 40.0) for _ in range(3)), *(st.floats(-15.0, 15.0) for _ in range(3)))
+_DELTA = st.one_of(_SMALL, _SMALL, _SMALL, st.tuples(*(_NUMBER for _ in range(6))))
+_LEGAL = st.tuples(
+    *(st.floats(lo, hi) for lo, hi in zip(PUMA600.limits.lower, PUMA600.limits.upper, strict=True))
+)
+_NEAR = st.tuples(*(st.floats(-15.0, 15.0) for _ in range(6))).map(
+    lambda d: tuple(g + x for g, x in zip(GOAL, d, strict=True))
+)
+_POSE = st.one_of(
+    st.tuples(st.one_of(_NEAR, _NEAR, _LEGAL), st.one_of(_SMALL, _SMALL, _DELTA).map(lambda d: d[:3])).map(
+        lambda qd: tuple(float(x) for x in (Transform.trans(*qd[1]) @ forward(qd[0])).to_floats())
+    ),
+    st.tuples(*(_NUMBER for _ in range(12))),
+)
+_SPEED = st.one_of(
+    st.sampled_from([1e-6, 1e-30, MIN_SPEED_FACTOR]), st.sampled_from([1.0, 0.01, 0.0, -1.0, 2.0])
+)
+_MOTION = st.one_of(
+    st.tuples(st.just("incremental-straight-move"), st.fixed_dictionaries({"delta": _DELTA})),
+    st.tuples(st.just("straight-move"), st.fixed_dictionaries({"transform": _POSE})),
+    st.tuples(st.just("incremental-move"), st.fixed_dictionaries({"delta": _DELTA})),
+    st.tuples(st.just("move"), st.fixed_dictionaries({"transform": _POSE})),
+)
+_REQUEST = st.one_of(
+    _MOTION,
+    _MOTION,
+    _MOTION,
+    st.tuples(st.just("set-speed"), st.fixed_dictionaries({"factor": _SPEED})),
+    st.tuples(st.just("solve-forwards"), st.fixed_dictionaries({"transform": _POSE, "current": _LEGAL})),
+    st.tuples(
+        st.just("set-joint-angles"), st.fixed_dictionaries({"joints": st.one_of(_NEAR, _NEAR, _LEGAL)})
+    ),
+    st.tuples(st.sampled_from(["ready", "reset-abort", "here"]), st.just({})),
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(_SPEED, st.lists(st.tuples(_REQUEST, st.integers(0, 8)), min_size=1, max_size=12))
+def test_every_motion_request_is_answered_with_bounded_work(
+    speed: float, steps: list[tuple[tuple[str, dict[str, Any]], int]]
+) -> None:
+    """However large, far, slow or singular, a motion request costs at most the bounded check of one
+    line; every servo cycle at most one solution (no compliance here: nothing is solved again)."""
+    session = ServerSession(ServerConfig(powered_at_open=True))
+    now, number = 100.0, 0o1000
+    session.on_open(now, number)
+    session.arm.move_joints(GOAL, now)  # away from the singularities of ready
+    with _Solves(limit=REQUEST_BOUND) as solves:
+        for (op, values), gap in [(("set-speed", {"factor": speed}), 0), *steps]:
+            for _ in range(gap):  # the driver's servo: one cycle per call
+                now += TICK
+                session.tick(now)
+                assert solves.take() <= 1
+            number += 1
+            out = session.on_request(now, SPEC.request(op).opcode, number, encode_request(op, **values))
+            assert solves.take() <= REQUEST_BOUND, op
+            (reply,) = out.packets
+            assert reply.opcode in (ServerOp.RESPONSE, ServerOp.NON_FATAL_ERROR) and not out.close
+            if reply.opcode == ServerOp.NON_FATAL_ERROR:
+                msg = decode_server_packet(reply.opcode, reply.data)
+                assert isinstance(msg, ErrorReply) and msg.error.code != "BUG", msg
+                event(f"{op}: {msg.error.code}")
+            else:
+                event(f"{op}: done")

@@ -417,3 +417,62 @@ def test_jacobian_at_ready_and_bad_frame() -> None:
     assert np.allclose(jac[3:, 3], jac[3:, 5])  # J4 and J6 aligned: the wrist singularity
     with pytest.raises(ValueError):
         jacobian(READY, frame="elbow")  # type: ignore[arg-type]
+
+
+# ------------------------------------------------------------------- nearest without enumeration
+def _brute_nearest(
+    pose: Transform, current: Sequence[float], g: PumaGeometry, weights: Sequence[float]
+) -> float:
+    """The least weighted distance over inverse_all's whole enumeration of in-range solutions."""
+    legal = [s for s in inverse_all(pose, g, UNIMATION_LIMITS, current=current) if not s.out_of_range]
+    assert legal
+    return min(sum(w * (a - b) ** 2 for a, b, w in zip(s.q, current, weights, strict=True)) for s in legal)
+
+
+_WEIGHTS = st.one_of(
+    st.just((1.0,) * 6),
+    st.tuples(*(st.sampled_from([0.0, 0.5, 1.0, 3.0]) for _ in range(6))),
+    st.tuples(*(st.floats(-1.0, 2.0) for _ in range(6))),
+)
+#: Current angles anywhere, even out of range or a whole turn off (the ±360° choice then matters).
+_ANY = st.tuples(*(st.floats(-400.0, 400.0) for _ in range(6)))
+
+
+@settings(max_examples=300, deadline=None)
+@given(legal_q, st.one_of(legal_q, _ANY), st.sampled_from(GEOMETRIES), _WEIGHTS)
+def test_nearest_solution_is_the_least_of_the_enumeration(
+    q: tuple[float, ...], current: tuple[float, ...], g: PumaGeometry, weights: tuple[float, ...]
+) -> None:
+    """nearest_solution picks joint by joint instead of enumerating the ±360° variants: the same least
+    weighted distance, an in-range solution that reaches the pose, with its configuration."""
+    pose = forward(q, g)
+    got = nearest_solution(pose, current, g, weights=weights)
+    d = sum(w * (a - b) ** 2 for a, b, w in zip(got.q, current, weights, strict=True))
+    assert d == pytest.approx(_brute_nearest(pose, current, g, weights), rel=1e-9, abs=1e-9)
+    assert not within_limits(got.q) and not got.out_of_range
+    reached = forward(got.q, g).distance(pose)  # off by at most the singular tolerance at the wrist
+    assert reached.translation_mm < 1e-3 and reached.rotation_deg <= WRIST_SINGULAR_DEG + 1e-9
+    if not got.singular:
+        assert configuration(got.q, g) == (got.lefty, got.above, got.flip)
+    assert nearest_solution(pose.matrix, current, g, weights=weights) == got  # a bare matrix: the same
+
+
+def test_nearest_solution_ties_go_to_the_first_of_the_enumeration() -> None:
+    """Joint 6 at 120 from a current −60 is as near as at −240 (both in range); with joint 6 out of the
+    distance every variant ties.  Either way the first of inverse_all's list wins, as min() over it
+    would have it: the wrapped angle."""
+    q = (10.0, -80.0, 100.0, 20.0, 30.0, 120.0)
+    pose = forward(q)
+    heavy = (100.0, 100.0, 100.0, 100.0, 100.0, 1.0)  # keeps the other configurations out of it
+    for current, weights in (
+        ((*q[:5], -60.0), heavy),
+        ((*q[:5], -240.0), (1.0, 1.0, 1.0, 1.0, 1.0, 0.0)),
+        ((*q[:5], 250.0), (1.0, 1.0, 1.0, 1.0, 1.0, 0.0)),
+    ):
+        legal = [s for s in inverse_all(pose, current=current) if not s.out_of_range]
+        first = min(
+            legal, key=lambda s: sum(w * (a - b) ** 2 for a, b, w in zip(s.q, current, weights, strict=True))
+        )
+        got = nearest_solution(pose, current, weights=weights)
+        assert np.allclose(got.q, first.q, atol=1e-9) and got.q[5] == pytest.approx(120.0)
+    assert nearest_solution(pose, (*q[:5], -200.0), weights=heavy).q[5] == pytest.approx(-240.0)

@@ -612,3 +612,35 @@ def test_dispatcher_speed_factor_and_abort() -> None:
         MoveRequest(5, Scheme.QUINTIC)  # no goal
     with pytest.raises(ValueError):
         m.set_speed(0.0)
+
+
+@FAST
+@given(axes, st.floats(0.0, 180.0), st.floats(-500.0, 500.0), st.floats(0.0, 1.0))
+def test_cartesian_pose_along_the_path_parameter(axis: np.ndarray, deg: float, x: float, s: float) -> None:
+    """pose_along(s) is the line at path parameter s whatever the timing; pose_at(t) is it at s(t)."""
+    t0 = _pose(np.array([0.2, -0.4, 1.0]), 30.0, np.array([10.0, 20.0, 30.0]))
+    t1 = _pose(axis, deg, np.array([x, -x, 0.5 * x])) @ t0
+    slow, fast = CartesianSegment(t0, t1, speed=1e-6), CartesianSegment(t0, t1)
+    pose = slow.pose_along(s)
+    assert np.array_equal(pose, fast.pose_along(s))
+    assert np.allclose(pose[:3, 3], t0[:3, 3] + s * (t1[:3, 3] - t0[:3, 3]), atol=1e-9)
+    assert _angle_deg(t0[:3, :3].T @ pose[:3, :3]) == pytest.approx(s * fast.angle, abs=1e-6)
+    assert _angle_deg(pose[:3, :3].T @ t1[:3, :3]) == pytest.approx((1.0 - s) * fast.angle, abs=1e-6)
+    assert np.allclose(pose[:3, :3].T @ pose[:3, :3], np.eye(3), atol=1e-12) and pose[3].tolist() == [
+        0,
+        0,
+        0,
+        1,
+    ]
+    t = 0.37 * fast.duration
+    assert np.array_equal(fast.pose_at(t), fast.pose_along(fast.progress(t)))
+
+
+def test_cartesian_pose_along_ends_and_bad_parameters() -> None:
+    t0 = _pose(np.array([0, 0, 1.0]), 10.0, np.zeros(3))
+    t1 = _pose(np.array([1.0, 0, 0]), 90.0, np.array([0.0, 50.0, 0.0]))
+    seg = CartesianSegment(t0, t1)
+    assert np.array_equal(seg.pose_along(0.0), t0) and np.array_equal(seg.pose_along(-1.0), t0)
+    assert np.array_equal(seg.pose_along(1.0), t1) and np.array_equal(seg.pose_along(7.0), t1)
+    with pytest.raises(ValueError, match="NaN"):
+        seg.pose_along(math.nan)

@@ -397,12 +397,19 @@ class _Base(NamedTuple):
     singular: bool
 
 
-def _configurations(
-    pose: Transform | Matrix, g: PumaGeometry, ref: Joints, wrist_tol_deg: float
-) -> list[_Base]:
-    """The closed-form solutions of ``pose``, one per configuration (see :func:`inverse_all`), in plain
-    floats: this runs at every tick of a straight-line move, where numpy's per-call cost on 3x3
-    matrices would dominate."""
+class _Arm(NamedTuple):
+    """Joints 1-3 of one arm configuration (wrapped, deg) and the rows of R03ᵀ."""
+
+    q: tuple[float, float, float]
+    lefty: bool
+    above: bool
+    r03t: tuple[tuple[float, float, float], ...]
+
+
+def _arms(pose: Transform | Matrix, g: PumaGeometry, ref: Joints) -> tuple[Rows, list[_Arm]]:
+    """The rotation of ``pose`` and its four arm solutions (righty before lefty, above before below), in
+    plain floats: this runs at every servo cycle of a straight-line move, where numpy's per-call cost on
+    3x3 matrices would dominate.  Raises :class:`Unreachable` when the wrist centre is out of reach."""
     m = (pose.matrix if isinstance(pose, Transform) else np.asarray(pose, dtype=np.float64)).tolist()
     r = (m[0][:3], m[1][:3], m[2][:3])
     px, py, pz = (m[i][3] - g.d6 * m[i][2] for i in range(3))  # the wrist centre p − d6·a
@@ -428,32 +435,39 @@ def _configurations(
     beta = math.asin(min(1.0, max(-1.0, sin_elbow)))
     phi = math.atan2(g.a3, g.d4)
 
-    out: list[_Base] = []
+    # The two elbows (q3) and what depends on them alone: (q3, b_x, b_y, e > 0), where
+    # e = −a3·sin q3 − d4·cos q3 = −|forearm|·cos(q3 − φ) is the elbow bend term of _arm_values.
+    elbows = []
+    for q3 in (phi + beta, phi + math.pi - beta):
+        c3, s3 = math.cos(q3), math.sin(q3)
+        b_y = -g.a3 * s3 - g.d4 * c3
+        elbows.append((q3, g.a2 - g.a3 * c3 + g.d4 * s3, b_y, b_y > 0.0))
+    arms: list[_Arm] = []
     for lefty in (False, True):
         u = u_abs if lefty else -u_abs
         on_axis = radial == 0.0 and u == 0.0
         q1 = math.radians(ref[0]) if on_axis else math.atan2(py, px) - math.atan2(g.d2, u)
         c1, s1 = math.cos(q1), math.sin(q1)
-        elbows = sorted(
-            (phi + beta, phi + math.pi - beta),
-            # above when sign(u) == sign(e); e = −a3·sin q3 − d4·cos q3 = −|forearm|·cos(q3 − φ)
-            key=lambda q3: (_arm_values(0.0, q3, g)[1] > 0.0) != lefty,
-        )
-        for q3 in elbows:
-            b_x = g.a2 - g.a3 * math.cos(q3) + g.d4 * math.sin(q3)
-            b_y = -g.a3 * math.sin(q3) - g.d4 * math.cos(q3)
+        q1_deg = wrap_deg(math.degrees(q1))
+        # above first: above when sign(u) == sign(e) (lefty: e > 0); b_y is e
+        for q3, b_x, b_y, bent in sorted(elbows, key=lambda el: el[3] != lefty):
             q2 = math.atan2(-pz, u) - math.atan2(b_y, b_x)
-            above = lefty == (b_y > 0.0)
             # R03 = Rz(q1)·Rx(−90°)·Rz(q2 + q3)·Rx(90°); its columns are the rows of R03ᵀ
             c23, s23 = math.cos(q2 + q3), math.sin(q2 + q3)
-            axes = ((c1 * c23, s1 * c23, -s23), (-s1, c1, 0.0), (c1 * s23, s1 * s23, c23))
-            r36 = [[a[0] * r[0][j] + a[1] * r[1][j] + a[2] * r[2][j] for j in range(3)] for a in axes]
-            wrists, singular = _wrist(r36, ref[3], wrist_tol_deg)
-            arm = (wrap_deg(math.degrees(q1)), wrap_deg(math.degrees(q2)), wrap_deg(math.degrees(q3)))
-            for t4, t5, t6 in wrists:
-                q = (*arm, wrap_deg(t4), wrap_deg(t5), wrap_deg(t6))
-                out.append(_Base(q, lefty, above, t5 < 0.0, singular))
-    return out
+            r03t = ((c1 * c23, s1 * c23, -s23), (-s1, c1, 0.0), (c1 * s23, s1 * s23, c23))
+            q = (q1_deg, wrap_deg(math.degrees(q2)), wrap_deg(math.degrees(q3)))
+            arms.append(_Arm(q, lefty, lefty == bent, r03t))
+    return r, arms
+
+
+def _wrists(arm: _Arm, r: Rows, q4_ref: float, wrist_tol_deg: float) -> list[_Base]:
+    """The solutions of one arm configuration: noflip then flip (one solution at the singularity)."""
+    r36 = [[a[0] * r[0][j] + a[1] * r[1][j] + a[2] * r[2][j] for j in range(3)] for a in arm.r03t]
+    wrists, singular = _wrist(r36, q4_ref, wrist_tol_deg)
+    return [
+        _Base((*arm.q, wrap_deg(t4), wrap_deg(t5), wrap_deg(t6)), arm.lefty, arm.above, t5 < 0.0, singular)
+        for t4, t5, t6 in wrists
+    ]
 
 
 def inverse_all(
@@ -479,9 +493,11 @@ def inverse_all(
     Raises :class:`Unreachable` when the wrist centre is out of the workspace.
     """
     ref = _as_joints(current) if current is not None else (0.0,) * 6
+    r, arms = _arms(pose, geometry, ref)
     out: list[Solution] = []
-    for b in _configurations(pose, geometry, ref, wrist_tol_deg):
-        out.extend(_with_variants(b.q, b.lefty, b.above, b.flip, b.singular, limits))
+    for arm in arms:
+        for b in _wrists(arm, r, ref[3], wrist_tol_deg):
+            out.extend(_with_variants(b.q, b.lefty, b.above, b.flip, b.singular, limits))
     return out
 
 
@@ -526,28 +542,30 @@ def nearest_solution(
     if len(weights) != 6:
         raise ValueError("weights needs one value per joint")
     # The distance is a sum over joints and the limits hold joint by joint, so each configuration's
-    # nearest in-range ±360° variant is found joint by joint: the same answer as the least of
-    # inverse_all's enumeration (ties too: first representation wins, as the product's order has it)
-    # for a fraction of the work, which matters at every tick of a straight-line move.
+    # nearest in-range ±360° variant is found joint by joint, and with weights >= 0 a configuration whose
+    # arm joints alone are already farther than the best so far needs no wrist: the same answer as the
+    # least of inverse_all's enumeration (ties too: the first in its order wins) for a fraction of the
+    # work, which matters at every servo cycle of a straight-line move.
+    r, arms = _arms(pose, geometry, current)
+    near = _Nearest(current, weights, limits)
+    scored: list[tuple[float, int, list[float]]] = []
+    for index, arm in enumerate(arms):
+        found = near.part(arm.q, 0, 0.0, math.inf)
+        if found is not None:
+            scored.append((found[1], index, found[0]))
+    if near.prune:
+        scored.sort(key=lambda e: (e[0], e[1]))
     best: Solution | None = None
-    best_distance = math.inf
-    low = [lo - LIMIT_TOL_DEG for lo in limits.lower]
-    high = [hi + LIMIT_TOL_DEG for hi in limits.upper]
-    prune = all(w >= 0.0 for w in weights)  # partial sums then only grow
-    for b in _configurations(pose, geometry, current, wrist_tol_deg):
-        q: list[float] = []
-        d = 0.0
-        for v, c, w, lo, hi in zip(b.q, current, weights, low, high, strict=True):
-            x = _nearest_in_range(v, c, w, lo, hi)
-            if x is None:
-                break
-            d += w * (x - c) ** 2
-            if prune and d >= best_distance:
-                break  # no nearer than the best so far: not chosen
-            q.append(x)
-        else:  # d is _distance(q, current, weights), summed in the same order
-            if d < best_distance:
-                best, best_distance = Solution(_joints(q), b.lefty, b.above, b.flip, b.singular), d
+    best_key = (math.inf, 0, 0)
+    for d_arm, index, head in scored:
+        if near.prune and d_arm > best_key[0]:
+            break  # this arm and every later one are farther than the best
+        for k, b in enumerate(_wrists(arms[index], r, current[3], wrist_tol_deg)):
+            found = near.part(b.q[3:], 3, d_arm, best_key[0] if near.prune else math.inf)
+            # found[1] is _distance(q, current, weights): the same terms summed in the same order
+            if found is not None and (found[1], index, k) < best_key:
+                q = _joints(head + found[0])
+                best, best_key = Solution(q, b.lefty, b.above, b.flip, b.singular), (found[1], index, k)
     if best is not None:
         return best
     if not isinstance(pose, Transform):
@@ -559,6 +577,35 @@ def nearest_solution(
 
     worst = min(solutions, key=badness)
     raise OutOfRange(_unfixable(worst.q, limits), solutions)
+
+
+class _Nearest:
+    """Joint-by-joint choice of the in-range angles nearest ``current`` (for :func:`nearest_solution`)."""
+
+    def __init__(self, current: Joints, weights: Sequence[float], limits: JointLimits) -> None:
+        self.current = current
+        self.weights = tuple(float(w) for w in weights)
+        self.low = tuple(lo - LIMIT_TOL_DEG for lo in limits.lower)
+        self.high = tuple(hi + LIMIT_TOL_DEG for hi in limits.upper)
+        self.prune = all(w >= 0.0 for w in self.weights)
+        """Every term is >= 0, so partial sums only grow and may be cut off."""
+
+    def part(
+        self, values: Sequence[float], first: int, distance: float, bound: float
+    ) -> tuple[list[float], float] | None:
+        """The nearest in-range angles for ``values`` (joints ``first``, ``first`` + 1, ... 0-based) and
+        ``distance`` plus their terms; None when a joint has no such angle or the sum passes ``bound``."""
+        chosen: list[float] = []
+        for j, v in enumerate(values, start=first):
+            c, w = self.current[j], self.weights[j]
+            x = _nearest_in_range(v, c, w, self.low[j], self.high[j])
+            if x is None:
+                return None
+            distance += w * (x - c) ** 2
+            if distance > bound:
+                return None
+            chosen.append(x)
+        return chosen, distance
 
 
 def _nearest_in_range(angle: float, near: float, weight: float, low: float, high: float) -> float | None:

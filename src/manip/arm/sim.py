@@ -27,12 +27,12 @@ packets* and answered with a segment number before any motion happened (§5.1, �
   whose nominal path is the blended one).  Straight-line moves
   (:class:`~manip.arm.trajectory.CartesianSegment`) are checked when queued at evenly spaced points of
   the line, each solved nearest the previous one, so a line that leaves the workspace, breaks a joint
-  limit or passes through a singularity is refused at once (TOR/JOR).  The points are at most one
-  full-speed servo cycle apart and at most :data:`MAX_LINE_CHECKS`: the work is bounded whatever the
-  distance and the speed factor (erratum ``motion-planning-bounds``).  The move process then solves the
-  line's pose on every cycle as it runs, nearest the previous cycle's angles, and falls back on the
-  checked path where that fails.  Segments queued behind a straight-line move wait until it ends, then
-  start from rest.
+  limit or passes through a singularity is refused at once (TOR/JOR).  The points are a few millimetres
+  apart, closer where a joint moves fast, and at most :data:`MAX_LINE_CHECKS`: the work is bounded
+  whatever the distance and the speed factor (erratum ``motion-planning-bounds``).  The move process
+  then solves the line's pose on every cycle as it runs, nearest the previous cycle's angles, and falls
+  back on the checked path where that fails.  Segments queued behind a straight-line move wait until it
+  ends, then start from rest.
 * **The arm**: the actual angles follow the commanded ones, except where an :class:`Obstacle` stops a
   joint.  The collision test compares the actual angles with those commanded on the previous cycle; a
   joint off by more than ``collision_tol_deg`` (the freed joint excepted, and never under a compliant
@@ -65,6 +65,7 @@ and later moves are planned from there.
 
 from __future__ import annotations
 
+import bisect
 import enum
 import math
 from collections import deque
@@ -104,9 +105,12 @@ from manip.codecs.pdp11float import F_MIN_NORMAL
 
 __all__ = [
     "COLLISION_TOL_DEG",
+    "LINE_CHECK_DEG",
+    "LINE_CHECK_MM",
     "MAX_LINE_CHECKS",
     "MAX_QUEUE",
     "MIN_SPEED_FACTOR",
+    "REFINE_DEPTH",
     "SEGMENT_MODULUS",
     "STRAIGHT_JUMP_DEG",
     "AbortCause",
@@ -126,15 +130,22 @@ COLLISION_TOL_DEG: Final = 0.5
 MAX_QUEUE: Final = 64
 #: Segment numbers are words.
 SEGMENT_MODULUS: Final = 1 << 16
-#: Largest change of any joint between two ticks of a straight-line move (deg).  A bigger step means
-#: the line passes through (or very near) a singularity, where no smooth joint motion follows it; the
-#: move is refused with TOR.
+#: Largest change of any joint between two neighbouring points a straight-line move is checked at
+#: (deg).  A bigger step is looked at more closely (the gap is halved); one that does not shrink means
+#: the line passes through a singularity, where no smooth joint motion follows it: TOR.  On playback a
+#: cycle never strays further than this from the checked path.
 STRAIGHT_JUMP_DEG: Final = 5.0
-#: Most points a straight-line move is checked at when queued (erratum ``motion-planning-bounds``).
-#: The points are at most one full-speed servo cycle apart (4 mm and 0.96 deg with the default limits),
-#: so a PUMA 600 line, at most ~1.7 m long between two reachable poses, needs ~430; the cap only
-#: coarsens the check for a bigger arm or a shorter tick.
-MAX_LINE_CHECKS: Final = 1024
+#: Largest gap (mm of travel, degrees of turn) between the points a straight-line move is checked at
+#: when queued, before halving (erratum ``motion-planning-bounds``).
+LINE_CHECK_MM: Final = 8.0
+LINE_CHECK_DEG: Final = 2.0
+#: How many times such a gap may be halved where a joint moves fast; a joint that still jumps by more
+#: than STRAIGHT_JUMP_DEG across 1/2^REFINE_DEPTH of a gap (1/8 mm) marks a singularity.
+REFINE_DEPTH: Final = 6
+#: Most points a straight-line move is solved at when queued, besides its goal: a PUMA 600 line, at most
+#: ~1.7 m long between two reachable poses, has at most ~215 gaps; the rest is for halving.  Lines
+#: needing more are refused (TOR).
+MAX_LINE_CHECKS: Final = 384
 #: Smallest speed factor accepted: the smallest PDP-11 float, so no factor from the protocol is refused,
 #: while f² (which scales accelerations) stays a normal double and every duration stays finite.
 MIN_SPEED_FACTOR: Final = F_MIN_NORMAL
@@ -247,14 +258,30 @@ class _JointPacket:
 
 
 @dataclass(frozen=True)
+class _Checked:
+    """The solutions ``solved`` of a straight line at the points ``at`` (path parameters from 0 to 1,
+    increasing) it was checked at; the first is where it starts, the last the solution at the goal."""
+
+    at: tuple[float, ...]
+    solved: tuple[Joints, ...]
+
+    def along(self, s: float) -> Joints:
+        """The checked path at ``s``: joint-interpolated between the neighbouring points."""
+        i = min(max(bisect.bisect_right(self.at, s), 1), len(self.at) - 1)
+        s_a, s_b = self.at[i - 1], self.at[i]
+        f = min(max((s - s_a) / (s_b - s_a), 0.0), 1.0)
+        return _joints([a + (b - a) * f for a, b in zip(self.solved[i - 1], self.solved[i], strict=True)])
+
+
+@dataclass(frozen=True)
 class _PathPacket:
-    """A straight-line move from ``start``: ``line`` (its geometry and timing) and ``checks``, the
-    solutions at the evenly spaced points it was checked at (``checks[0]`` is ``start``, the last the
-    solution at the goal).  ``offset`` (a start shifted behind a compliant episode) fades to zero."""
+    """A straight-line move from ``start``: ``line`` (its geometry and timing) and ``checked``, its
+    solutions where it was checked.  ``offset`` (a start shifted behind a compliant episode) fades to
+    zero along the line."""
 
     segment: int
     line: CartesianSegment
-    checks: tuple[Joints, ...]
+    checked: _Checked
     start: Joints
     goal: Transform
     speed: float
@@ -262,7 +289,7 @@ class _PathPacket:
 
     @property
     def end(self) -> Joints:
-        return self.checks[-1]
+        return self.checked.solved[-1]
 
 
 @dataclass
@@ -668,10 +695,10 @@ class ArmSim:
         if max(abs(d) for d in offset) <= _SAME_START_DEG:
             return packet
         try:
-            line, checks = self._plan_line(here, packet.goal, packet.speed)
+            line, checked = self._plan_line(here, packet.goal, packet.speed)
         except Refused:
             return replace(packet, offset=offset)
-        return _PathPacket(packet.segment, line, checks, here, packet.goal, packet.speed)
+        return _PathPacket(packet.segment, line, checked, here, packet.goal, packet.speed)
 
     def _play(self, packet: _PathPacket) -> _Playback:
         ticks = max(1, math.ceil(packet.line.duration / self.tick_period - _EPS))
@@ -682,10 +709,10 @@ class ArmSim:
 
         The line's pose at the cycle's time is solved nearest the previous cycle's angles: the move
         process does the inverse kinematics as the line runs, so a slow line costs no more to queue than
-        a fast one.  Where that fails, jumps, or strays from the checked path (by more than
-        :data:`STRAIGHT_JUMP_DEG`, which only a line grazing a boundary between two check points can
-        do), the checked path -- joint-interpolated between check points -- is commanded instead.  The
-        last cycle commands the planned end exactly.
+        a fast one.  Where that fails or strays from the checked path (joint-interpolated between the
+        checked points) by more than :data:`STRAIGHT_JUMP_DEG` -- which only a line grazing a boundary
+        between two checked points can do -- the checked path is commanded instead.  The last cycle
+        commands the planned end exactly.
         """
         packet, line = play.packet, play.packet.line
         play.done += 1
@@ -694,14 +721,14 @@ class ArmSim:
             q = packet.end
         else:
             s = line.progress(min(k * self.tick_period, line.duration))
-            guide = _along(packet.checks, s)
+            guide = packet.checked.along(s)
             try:
                 q = nearest_solution(
                     line.pose_along(s), play.previous, self.model.geometry, self.model.limits
                 ).q
             except KinematicsError:
                 q = guide
-            if _deviation(q, play.previous) > STRAIGHT_JUMP_DEG or _deviation(q, guide) > STRAIGHT_JUMP_DEG:
+            if _deviation(q, guide) > STRAIGHT_JUMP_DEG:
                 q = guide
         play.previous = q
         if packet.offset is None:
@@ -781,60 +808,63 @@ class ArmSim:
         return best.q
 
     def _queue_straight(self, pose: Transform, now: float) -> int:
-        line, checks = self._plan_line(self._planned, pose, self.speed)
-        packet = _PathPacket(self._allocate(), line, checks, self._planned, pose, self.speed)
+        line, checked = self._plan_line(self._planned, pose, self.speed)
+        packet = _PathPacket(self._allocate(), line, checked, self._planned, pose, self.speed)
         self._enqueue(packet, now)
         self._planned, self._planned_oat = packet.end, None
         return packet.segment
 
-    def _plan_line(
-        self, start: Joints, pose: Transform, speed: float
-    ) -> tuple[CartesianSegment, tuple[Joints, ...]]:
+    def _plan_line(self, start: Joints, pose: Transform, speed: float) -> tuple[CartesianSegment, _Checked]:
         """Check the straight line from ``start`` to ``pose`` (erratum ``motion-planning-bounds``).
 
-        The goal first (one solution: a goal out of reach is refused before anything else is done);
-        then evenly spaced points of the line, at most as far apart as a full-speed line moves in one
-        servo cycle and never more than :data:`MAX_LINE_CHECKS`, each solved nearest the previous one.
-        TOR when a point is out of the workspace or two neighbours' solutions are more than
-        :data:`STRAIGHT_JUMP_DEG` apart on a joint (a singularity), JOR when a point breaks a joint
-        limit.  The speed factor only times the line: it never changes the verdict or the work.
-        Returns the line, timed for ``speed``, and the solutions at the points (``start`` first).
+        The goal first: one solution, so a goal out of reach costs no more (TOR).  Then points of the line,
+        each solved nearest the previous one: evenly spaced at most :data:`LINE_CHECK_MM` of travel and
+        :data:`LINE_CHECK_DEG` of turn apart, and where two neighbours' solutions differ by more than
+        :data:`STRAIGHT_JUMP_DEG` on a joint, the gap is halved until they do not -- a joint that still
+        jumps across 1/2^:data:`REFINE_DEPTH` of the spacing means the line passes through a singularity
+        (or must change configuration to keep within the limits).  TOR when a point is out of the
+        workspace, at a singularity, or when more than :data:`MAX_LINE_CHECKS` points would be needed;
+        JOR when every solution of a point breaks a joint limit.  The speed factor only times the line:
+        it changes neither the verdict nor the work.
         """
         g, lim = self.model.geometry, self.model.limits
         try:
             nearest_solution(pose, start, g, lim)
         except Unreachable as exc:
             raise Refused("TOR", f"the goal is out of the workspace ({exc.reason})") from exc
-        except OutOfRange as exc:
-            raise Refused("JOR", f"the goal breaks a joint limit ({exc})", exc.joints) from exc
+        except OutOfRange:
+            pass  # reachable, so the line is short enough to walk: where it breaks a limit is said there
         line = CartesianSegment(forward(start, g).matrix, pose.matrix, self.cartesian_limits, speed)
-        h, cl = self.tick_period, self.cartesian_limits
-        spacing = max(line.distance / (cl.max_speed * h), line.angle / (cl.max_rot_speed * h))
+        spacing = max(line.distance / LINE_CHECK_MM, line.angle / LINE_CHECK_DEG)
         n = min(max(1, math.ceil(spacing - _EPS)), MAX_LINE_CHECKS)
-        checks = [start]
+        finest = (1.0 + _EPS) / (n << REFINE_DEPTH)
+        at, solved = [0.0], [start]
+        budget = MAX_LINE_CHECKS
         for i in range(1, n + 1):
-            previous = checks[-1]
-            try:
-                q = nearest_solution(line.pose_along(i / n), previous, g, lim).q
-            except Unreachable as exc:
-                raise Refused("TOR", f"the line leaves the workspace ({exc.reason})") from exc
-            except OutOfRange as exc:
-                raise Refused("JOR", f"the line breaks a joint limit ({exc})", exc.joints) from exc
-            if _deviation(q, previous) > STRAIGHT_JUMP_DEG:
-                raise Refused("TOR", "the line passes through a singularity")
-            checks.append(q)
-        return line, tuple(checks)
+            pending = [i / n]  # where to go next, the nearest last
+            while pending:
+                if budget == 0:
+                    raise Refused(
+                        "TOR", f"the line passes too near a singularity to check in {MAX_LINE_CHECKS} points"
+                    )
+                budget -= 1
+                s_a, q_a, s_b = at[-1], solved[-1], pending[-1]
+                try:
+                    q_b = nearest_solution(line.pose_along(s_b), q_a, g, lim).q
+                except Unreachable as exc:
+                    raise Refused("TOR", f"the line leaves the workspace ({exc.reason})") from exc
+                except OutOfRange as exc:
+                    raise Refused("JOR", f"the line breaks a joint limit ({exc})", exc.joints) from exc
+                if _deviation(q_b, q_a) <= STRAIGHT_JUMP_DEG:
+                    at.append(pending.pop())
+                    solved.append(q_b)
+                elif s_b - s_a <= finest:
+                    raise Refused("TOR", "the line passes through a singularity")
+                else:
+                    pending.append(0.5 * (s_a + s_b))
+        return line, _Checked(tuple(at), tuple(solved))
 
 
 def _deviation(a: Sequence[float], b: Sequence[float]) -> float:
     """The largest difference of one joint between ``a`` and ``b``."""
     return max(abs(x - y) for x, y in zip(a, b, strict=True))
-
-
-def _along(checks: Sequence[Joints], s: float) -> Joints:
-    """The checked path at ``s`` in [0, 1]: joint-interpolated between the evenly spaced checks."""
-    n = len(checks) - 1
-    x = min(max(s, 0.0), 1.0) * n
-    i = min(int(x), n - 1)
-    f = x - i
-    return _joints([a + (b - a) * f for a, b in zip(checks[i], checks[i + 1], strict=True)])

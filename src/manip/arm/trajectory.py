@@ -726,14 +726,6 @@ def _rotation_log(r: Vector) -> tuple[Vector, float]:
     return axis, angle
 
 
-def _rotation_exp(axis: Vector, angle: float) -> Vector:
-    """Rodrigues: rotation by ``angle`` (radians) about the unit ``axis``."""
-    kx, ky, kz = (float(a) for a in axis)
-    k = np.array([[0.0, -kz, ky], [kz, 0.0, -kx], [-ky, kx, 0.0]])
-    out: Vector = np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
-    return out
-
-
 def _pose(m: ArrayLike, name: str) -> Vector:
     a = np.array(m, dtype=np.float64)
     if a.shape != (4, 4):
@@ -766,7 +758,7 @@ class CartesianSegment:
     transform visits the same positions but different intermediate orientations.
     """
 
-    __slots__ = ("_angle", "_axis", "_duration", "_goal", "_r0", "_start", "profile")
+    __slots__ = ("_angle", "_axis", "_duration", "_goal", "_plain", "_r0", "_start", "profile")
 
     def __init__(
         self,
@@ -784,6 +776,15 @@ class CartesianSegment:
         f = _check_speed(speed)
         self._r0 = _orthonormal(self._start[:3, :3])
         self._axis, self._angle = _rotation_log(self._r0.T @ _orthonormal(self._goal[:3, :3]))
+        kx, ky, kz = (float(a) for a in self._axis)
+        k = ((0.0, -kz, ky), (kz, 0.0, -kx), (-ky, kx, 0.0))
+        self._plain = (  # for pose_along, which runs at every servo cycle: plain floats beat numpy on 3x3
+            self._r0.tolist(),
+            k,
+            tuple(tuple(sum(k[i][m] * k[m][j] for m in range(3)) for j in range(3)) for i in range(3)),
+            self._start[:3, 3].tolist(),
+            (self._goal[:3, 3] - self._start[:3, 3]).tolist(),
+        )
         if duration is None:
             t_lin = profile.duration(self.distance, limits.max_speed * f, limits.max_accel * f * f)
             t_rot = profile.duration(self.angle, limits.max_rot_speed * f, limits.max_rot_accel * f * f)
@@ -840,10 +841,15 @@ class CartesianSegment:
             return self._start.copy()
         if s >= 1.0:
             return self._goal.copy()
-        out = np.eye(4)
-        out[:3, :3] = self._r0 @ _rotation_exp(self._axis, s * self._angle)
-        out[:3, 3] = self._start[:3, 3] + s * (self._goal[:3, 3] - self._start[:3, 3])
-        return out
+        r0, k, k2, p0, dp = self._plain
+        sn, vs = math.sin(s * self._angle), 1.0 - math.cos(s * self._angle)
+        # Rodrigues, Rot(k, sθ) = I + sin·K + (1 − cos)·K², then R0·Rot
+        rot = [[float(i == j) + sn * k[i][j] + vs * k2[i][j] for j in range(3)] for i in range(3)]
+        rows = [
+            [*(sum(r0[i][m] * rot[m][j] for m in range(3)) for j in range(3)), p0[i] + s * dp[i]]
+            for i in range(3)
+        ]
+        return np.array([*rows, [0.0, 0.0, 0.0, 1.0]])
 
     def done(self, t: float) -> bool:
         return _check_time(t) >= self._duration
