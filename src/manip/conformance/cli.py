@@ -323,10 +323,11 @@ async def _run_async(
         await _run_with(config, cases, holder, console, quiet)
         return
     server_config = ServerConfig() if faults is None else ServerConfig(faults=faults)
-    with EmbeddedServer(server_config) as address:
+    # The embedded robot has the simulated Cougar wrist, so the wrist opcodes are checked too.
+    with EmbeddedServer(server_config, wrist=True) as address:
         config.address = address
         config.options = replace(config.options, address=address)
-        console.print(f"embedded reference server at {address}")
+        console.print(f"embedded reference server at {address} (with the simulated Cougar wrist)")
         await _run_with(config, cases, holder, console, quiet)
 
 

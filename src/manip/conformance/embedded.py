@@ -10,11 +10,13 @@ remote server would.
 from __future__ import annotations
 
 import asyncio
+import functools
 import threading
 from types import TracebackType
 from typing import Final
 
 from manip.reference_server import ServerConfig
+from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import serve
 
 __all__ = ["EmbeddedServer"]
@@ -33,8 +35,12 @@ class EmbeddedServer:
         *,
         time_scale: float = 1.0,
         seed: int | None = None,
+        wrist: bool = False,
     ) -> None:
+        """``wrist``: give the robot the simulated Cougar wrist, so the wrist opcodes are served (and
+        checked) rather than refused with C UIM."""
         self._config = config or ServerConfig()
+        self._wrist = functools.partial(make_cougar_wrist, "sim", seed=seed) if wrist else None
         self._time_scale = time_scale
         self._seed = seed
         self._bind = address
@@ -55,7 +61,9 @@ class EmbeddedServer:
     async def _serve(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stop = asyncio.Event()
-        async with serve(self._bind, self._config, time_scale=self._time_scale, seed=self._seed) as server:
+        async with serve(
+            self._bind, self._config, time_scale=self._time_scale, seed=self._seed, wrist_factory=self._wrist
+        ) as server:
             self._address = server.address
             self._ready.set()
             await self._stop.wait()

@@ -34,7 +34,9 @@ from manip.conformance.report import failure_text, write_json, write_junit
 from manip.conformance.results import ExitCode, RunReport
 from manip.links import AddressError, parse_address
 from manip.links.api import LinkWrapper
-from manip.reference_server import FaultSet, ServerConfig
+from manip.reference_server import WRIST_OPERATIONS, FaultSet, ServerConfig
+from manip.spec import SPEC
+from manip.spec.constants import ServerOp
 
 __all__ = [
     "EXIT_CODES_HELP",
@@ -172,20 +174,30 @@ def verify_command(
 # ----------------------------------------------------------------------------------------------- replay
 
 
-def _capture_settings(file: Path) -> tuple[float, int | None]:
-    """The time scale and seed the capture's metadata name (for the embedded server)."""
-    from manip.captures import CaptureError, read_capture  # noqa: PLC0415
+def _capture_settings(file: Path) -> tuple[float, int | None, bool]:
+    """The time scale and seed the capture's metadata name, and whether the recorded server had a
+    wrist (it answered a wrist opcode normally), so the embedded server can be set up like it."""
+    from manip.captures import CaptureError, read_capture, read_sessions  # noqa: PLC0415
 
     try:
         meta = read_capture(file).metadata.get("manip.capture", {})
+        sessions = read_sessions(file)
     except CaptureError:
-        return 1.0, None  # replay_capture reports the unreadable file
+        return 1.0, None, False  # replay_capture reports the unreadable file
     try:
         scale = float(meta.get("time_scale", "") or 1.0)
     except ValueError:
         scale = 1.0
     seed_text = meta.get("seed", "")
-    return scale, int(seed_text) if seed_text.isdigit() else None
+    wrist_ops = {SPEC.request(name).opcode for name in WRIST_OPERATIONS}
+    wrist = any(
+        pair.request.packet is not None
+        and pair.request.packet.opcode in wrist_ops
+        and any(r.packet is not None and r.packet.opcode == ServerOp.RESPONSE for r in pair.replies)
+        for session in sessions
+        for pair in session.pairs.values()
+    )
+    return scale, int(seed_text) if seed_text.isdigit() else None, wrist
 
 
 @click.command("replay", epilog=EXIT_CODES_HELP)
@@ -306,9 +318,9 @@ def replay_command(
                 )
                 if against:
                     return await replay_capture(file, against, options, command=command)
-                scale, seed = _capture_settings(file)
+                scale, seed, wrist = _capture_settings(file)
                 config = ServerConfig() if faults is None else ServerConfig(faults=faults)
-                with EmbeddedServer(config, time_scale=scale, seed=seed) as address:
+                with EmbeddedServer(config, time_scale=scale, seed=seed, wrist=wrist) as address:
                     console.print(f"embedded reference server at {address} (time scale {scale:g})")
                     reproduce = ["manip-conform", "replay", str(file)]
                     for fault in server_faults:

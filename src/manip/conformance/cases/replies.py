@@ -53,13 +53,21 @@ def opcode_clauses(op: RequestOpcode) -> tuple[str, ...]:
     return (*_COMMON, *_KIND_CLAUSES[op.response.kind], *own)
 
 
+_SLOW_REPLIES: Final = {"calibrate-wrist": 20.0}
+"""Seconds to allow for a reply that waits for the arm: calibrate-wrist moves the arm to two poses and
+averages readings at each before it answers (erratum ``calibrate-wrist``)."""
+
+
 def _make(op: RequestOpcode) -> None:
+    slow = _SLOW_REPLIES.get(op.name)
+
     async def reply_shape(ctx: CaseContext) -> None:
         probe = await ctx.connect()
         if op.hazard in ("motion", "power") or op.name == "hand":
             await power_on(ctx, probe)
         values = await valid_values(ctx, probe, op)
-        answer = await probe.call(op.name, timeout=None, **values)
+        timeout = None if slow is None else max(slow * ctx.options.deadline_scale, ctx.options.reply_timeout)
+        answer = await probe.call(op.name, timeout=timeout, **values)
         error = error_of(answer)
         if error is not None:
             ctx.check(check_reply(answer.request, answer.packets))  # echo and error-string format
@@ -82,7 +90,7 @@ def _make(op: RequestOpcode) -> None:
         f"server.reply.{op.name}",
         clauses=opcode_clauses(op),
         hazard=op.hazard,
-        deadline=10.0,
+        deadline=10.0 + (slow or 0.0),
     )(reply_shape)
 
 
