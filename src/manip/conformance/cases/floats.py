@@ -7,7 +7,7 @@ import math
 import struct
 
 from manip.conformance.case import case
-from manip.conformance.cases._support import floats, read_floats
+from manip.conformance.cases._support import expect_response, floats, read_floats
 from manip.conformance.context import CaseContext
 
 ORTHO_TOL = 1e-3
@@ -63,13 +63,7 @@ async def here_consistent(ctx: CaseContext) -> None:
         actual=joints,
     )
     answer = await probe.call("solve-backwards", joints=list(joints))
-    ctx.expect(
-        answer.is_response,
-        clause="solve-backwards.data",
-        expected="a transform",
-        actual=str(answer),
-        data=answer.data,
-    )
+    expect_response(ctx, answer, clause="solve-backwards.data", expected="a transform")
     solved = floats(answer)
     err = max(abs(x - y) for x, y in zip(solved[9:], pose[9:], strict=True))
     ctx.expect(
@@ -87,22 +81,10 @@ async def solve_round_trip(ctx: CaseContext) -> None:
     pose = await read_floats(ctx, probe, "here")
     joints = await read_floats(ctx, probe, "joint-angles")
     answer = await probe.call("solve-forwards", transform=list(pose), current=list(joints))
-    ctx.expect(
-        answer.is_response,
-        clause="solve-forwards.data",
-        expected="six joint angles",
-        actual=str(answer),
-        data=answer.data,
-    )
+    expect_response(ctx, answer, clause="solve-forwards.data", expected="six joint angles")
     solved = floats(answer)
     back = await probe.call("solve-backwards", joints=list(solved))
-    ctx.expect(
-        back.is_response,
-        clause="solve-backwards.data",
-        expected="a transform",
-        actual=str(back),
-        data=back.data,
-    )
+    expect_response(ctx, back, clause="solve-backwards.data", expected="a transform")
     again = floats(back)
     err = max(abs(x - y) for x, y in zip(again, pose, strict=True))
     ctx.expect(
