@@ -177,13 +177,13 @@ def verify_command(
 def _capture_settings(file: Path) -> tuple[float, int | None, bool]:
     """The time scale and seed the capture's metadata name, and whether the recorded server had a
     wrist (it answered a wrist opcode normally), so the embedded server can be set up like it."""
-    from manip.captures import CaptureError, read_capture, read_sessions  # noqa: PLC0415
+    from manip.captures import CaptureError, read_capture  # noqa: PLC0415
 
     try:
-        meta = read_capture(file).metadata.get("manip.capture", {})
-        sessions = read_sessions(file)
+        capture = read_capture(file)
     except CaptureError:
         return 1.0, None, False  # replay_capture reports the unreadable file
+    meta = capture.metadata.get("manip.capture", {})
     try:
         scale = float(meta.get("time_scale", "") or 1.0)
     except ValueError:
@@ -194,7 +194,7 @@ def _capture_settings(file: Path) -> tuple[float, int | None, bool]:
         pair.request.packet is not None
         and pair.request.packet.opcode in wrist_ops
         and any(r.packet is not None and r.packet.opcode == ServerOp.RESPONSE for r in pair.replies)
-        for session in sessions
+        for session in capture.sessions
         for pair in session.pairs.values()
     )
     return scale, int(seed_text) if seed_text.isdigit() else None, wrist
