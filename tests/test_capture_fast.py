@@ -1,7 +1,8 @@
 """The recorder's and reader's fast paths agree with the slow ones they replace.
 
 * the message appender writes the very bytes ``mcap``'s ``Writer.add_message`` writes;
-* ``view_bytes`` is the compact JSON of ``view_json``, byte for byte;
+* ``view_bytes`` is the compact JSON of ``view_json``, byte for byte, with the floats of ``fields`` in
+  nine significant digits (and those digits give back every PDP-11 single exactly);
 * the single-frame decoder gives what the framing's own decoders give, and fails where they fail;
 * the annotator's fast request/reply decoding gives what ``decode_request`` / ``decode_reply`` give.
 """
@@ -16,15 +17,20 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
+from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
+from mcap.records import Channel
+from mcap.records import Message as McapMessage
+from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
+import manip.captures.recorder as recorder_module
 from manip.captures import Annotation, Annotator, Recorder, iter_packets, read_capture
 from manip.captures.appender import message_adder
 from manip.captures.recorder import frame_decoder
-from manip.captures.view import view_bytes, view_json
+from manip.captures.view import field_json, view_bytes, view_json
 from manip.codecs.errors import CodecError, DecodeError
 from manip.codecs.framing import decode_chaosd, decode_tcp, encode_chaosd, encode_tcp
 from manip.codecs.messages import (
@@ -36,6 +42,7 @@ from manip.codecs.messages import (
     response_layout,
 )
 from manip.codecs.packet import Packet
+from manip.codecs.pdp11float import pack_f, unpack_f, words_to_f
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
 
@@ -45,10 +52,41 @@ SERVER = (0o440, 0x5678)
 _JSON = json.JSONEncoder(separators=(",", ":"))
 
 
+def compact(value: Any, in_fields: bool = False) -> str:
+    """Compact JSON, written out plainly: Python's json, except the finite floats under ``fields``."""
+    if isinstance(value, dict):
+        items = (_JSON.encode(k) + ":" + compact(v, in_fields or k == "fields") for k, v in value.items())
+        return "{" + ",".join(items) + "}"
+    if isinstance(value, list | tuple):
+        return "[" + ",".join(compact(v, in_fields) for v in value) + "]"
+    if in_fields and type(value) is float and math.isfinite(value):
+        text = f"{value:.9g}"
+        return text if "." in text or "e" in text else text + ".0"
+    return _JSON.encode(value)
+
+
 def slow_view(
     ann: Annotation, link: int, direction: Any, seq: int, packet: Packet | None, nbytes: int
 ) -> bytes:
-    return _JSON.encode(view_json(ann, link, direction, seq, packet, nbytes)).encode()
+    return compact(view_json(ann, link, direction, seq, packet, nbytes)).encode()
+
+
+@settings(max_examples=500, deadline=None)
+@given(st.binary(min_size=4, max_size=4))
+@example(pack_f(words_to_f(0x7FFF, 0xFFFF)))  # the largest single
+@example(pack_f(words_to_f(0x0080, 0x0000)))  # the smallest
+@example(pack_f(words_to_f(0x0080, 0x0001)))
+def test_nine_digits_give_back_every_pdp11_single(wire: bytes) -> None:
+    try:
+        value = unpack_f(wire)
+    except CodecError:  # a reserved operand: no number to spell
+        return
+    text = field_json(value)
+    assert pack_f(float(text)) == pack_f(value)
+    back = json.loads(text)
+    assert type(back) is float and back == float(text)
+    assert math.copysign(1.0, back) == math.copysign(1.0, value)
+    assert len(text.lstrip("-").replace(".", "").split("e")[0].strip("0")) <= 9
 
 
 # ------------------------------------------------------------------------------ appender
@@ -322,3 +360,75 @@ def test_a_closed_recorder_refuses_frames_either_way(how: str) -> None:
             rec.frame(link, "c2s", encode_tcp(packet), 1)
         else:
             rec.packet(link, "c2s", packet, t_ns=1)
+
+
+# ------------------------------------------------------------------------------ batching
+
+
+def _record_mixed(batch: int, monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, int, int, bytes]]:
+    """A session over two links through frame(), packet(), events and bad frames, recorded with the
+    recorder's batch set to ``batch``; every message in file order."""
+    monkeypatch.setattr(recorder_module, "BATCH", batch)
+    out = io.BytesIO()
+    rec = Recorder(out, command_line=["t"])
+    tcp, chaosd = rec.open_link("tcp", t_ns=1), rec.open_link("chaosd", t_ns=2)
+    t = 10
+    for i in range(30):
+        number = 2 + i
+        request = Packet(request_op("joint-angles").opcode, *SERVER, *CLIENT, number, number - 1, b"")
+        reply = encode_reply("joint-angles", number, joints=(float(i), 0.5, -1.0, 2.0, 3.0, 125.0))
+        answer = Packet(ServerOp.RESPONSE, *CLIENT, *SERVER, number, number, reply)
+        rec.frame(tcp, "c2s", encode_tcp(request), t)
+        rec.packet(chaosd, "s2c", answer, t_ns=t + 1)
+        rec.frame(tcp, "s2c", encode_tcp(answer), t + 2)
+        if i % 7 == 3:
+            rec.frame(tcp, "c2s", b"\x00\x03bad", t + 3)
+            rec.event("note", t + 4, link=tcp)
+        if i % 11 == 5:
+            rec.close_link(chaosd, "test", t + 5)
+            chaosd = rec.open_link("chaosd", t_ns=t + 6)
+        if i == 17:
+            rec.flush()
+        t += 10
+    assert rec.counts["/chaos/c2s"] == 30 + 4  # counts include frames still waiting
+    rec.close()
+    reader = make_reader(io.BytesIO(out.getvalue()))
+    return [  # the recording-started and -stopped events carry the clock's time
+        (
+            channel.topic,
+            message.sequence,
+            0 if b'"recording-' in message.data else message.log_time,
+            message.data,
+        )
+        for _, channel, message in reader.iter_messages(log_time_order=False)
+    ]
+
+
+def test_batching_writes_what_frame_by_frame_recording_writes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    one_by_one = _record_mixed(1, monkeypatch)
+    assert len(one_by_one) > 200
+    for batch in (2, 7, 256):
+        assert _record_mixed(batch, monkeypatch) == one_by_one
+
+
+def test_a_flush_writes_the_frames_waiting_in_the_batch() -> None:
+    out = io.BytesIO()
+    rec = Recorder(out, command_line=["t"])
+    link = rec.open_link("tcp")
+    request = Packet(request_op("here").opcode, *SERVER, *CLIENT, 2, 1, b"")
+    rec.frame(link, "c2s", encode_tcp(request), 5)
+    before = len(out.getvalue())
+    rec.flush()
+    assert len(out.getvalue()) > before
+    topics: dict[int, str] = {}
+    written = []
+    with pytest.raises(EndOfFile):  # the file is not finished: read up to its end
+        for record in StreamReader(io.BytesIO(out.getvalue())).records:
+            if isinstance(record, Channel):
+                topics[record.id] = record.topic
+            elif isinstance(record, McapMessage):
+                written.append(topics[record.channel_id])
+    assert written.count("/chaos/c2s") == 1 and written.count("/manip/c2s") == 1
+    rec.close()

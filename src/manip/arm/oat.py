@@ -90,6 +90,9 @@ def xyzoat_from_transform(
     horiz = math.hypot(ax, ay)
     theta = math.degrees(math.atan2(horiz, az))  # ZYZ middle angle, in [0, 180]
     if theta <= tol_deg or theta >= 180.0 - tol_deg:
+        # Treated as vertical: A is exactly ±90, so the rebuilt rotation is off by the tilt only
+        # (keeping the tilt would point it the wrong way as well, doubling the error).
+        theta = 0.0 if az > 0.0 else 180.0
         t = wrap_deg(singular_t)
         if az > 0.0:  # hand up: R ≈ Rz(φ + ψ)
             phi = math.degrees(math.atan2(float(r[1, 0]), float(r[0, 0]))) - t

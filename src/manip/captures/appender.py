@@ -141,10 +141,16 @@ class MessageAppender:
             index = indexes[channel2] = _MessageIndex(channel_id=channel2, records=[])
         index.records.append((t, end))
         pack = _MESSAGE.pack
-        buffer.write(pack(_OPCODE, _MESSAGE_FIXED + len(data), channel, sequence, t, t))
-        buffer.write(data)
-        buffer.write(pack(_OPCODE, _MESSAGE_FIXED + len(data2), channel2, sequence, t, t))
-        buffer.write(data2)
+        buffer.write(
+            b"".join(
+                (
+                    pack(_OPCODE, _MESSAGE_FIXED + len(data), channel, sequence, t, t),
+                    data,
+                    pack(_OPCODE, _MESSAGE_FIXED + len(data2), channel2, sequence, t, t),
+                    data2,
+                )
+            )
+        )
         if end + _MESSAGE.size + len(data2) > self._chunk_size:
             self._finalize()
 

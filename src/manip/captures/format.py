@@ -12,7 +12,9 @@ A capture is an MCAP file (profile ``manip``), chunked and zstd-compressed, with
     The same packets decoded: Chaos header, then the manip meaning (request name and fields, reply
     fields, parsed error strings, asynchronous conditions), the connection and the pair id that ties a
     request to its replies.  Each decoded message has the ``log_time`` and ``sequence`` of its frame.
-    Foxglove lists and plots these fields (``/manip/s2c.fields.joints[0]``).
+    Foxglove lists and plots these fields (``/manip/s2c.fields.joints[0]``).  Field floats were PDP-11
+    singles on the wire and are written with nine significant digits, which name each exactly
+    (``-131.628876``, not the double's ``-131.62887573242188``); a whole one keeps its point (``1.0``).
 ``/manip/events`` (``json``, schema ``manip.Event``)
     Link and connection events: link opened or closed (with the reason), RFC, OPN, CLS and LOS with
     their texts, EOF, framing lost, recording started and stopped.

@@ -15,11 +15,17 @@ Speed (``bench/capture.py``): each frame is decoded once (the framing's body dec
 :class:`OneFrameDecoder`), annotated once (fast numeric layouts, :mod:`manip.codecs.fastpath`), its view
 written straight to JSON text (:func:`~manip.captures.view.view_bytes`), and both messages added by
 :mod:`manip.captures.appender` (the bytes ``Writer.add_message`` would write, at a fraction of the cost).
+With the view, frames wait in a batch of up to :data:`BATCH` and go through those steps a step at a
+time: the same work runs about a third faster than frame by frame, as each step's code stays hot.  The
+batch is written before anything else is (an event, a flush, the end), so the file is the same one,
+message for message; a batch is held no longer than the chunk it goes into, which is only on disk
+after the next flush anyway.
 """
 
 from __future__ import annotations
 
 import asyncio
+import itertools
 import json
 import logging
 import os
@@ -141,6 +147,8 @@ _FRAME_ENCODERS: Final[Mapping[str, FrameEncoder]] = {
 _JSON: Final = json.JSONEncoder(separators=(",", ":"))
 _OPCODE_BYTE: Final = {"tcp": 2, "chudp": 4, "chaosd": 5, "raw": 1}
 """Where each framing puts the Chaos opcode byte of a frame."""
+BATCH: Final = 256
+"""Frames waiting to be decoded, annotated and written together (see the module docstring)."""
 _DATA: Final = Annotation(0, "data")
 """What a data packet is annotated with when no view is written (nothing reads it)."""
 
@@ -197,8 +205,7 @@ class Recorder:
             self._owns_stream = False
         self.decoded_view = decoded_view
         self.flush_interval = flush_interval
-        self.counts: Counter[str] = Counter()
-        """Messages written per topic."""
+        self._counts: Counter[str] = Counter()
         self.flushes = 0
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
         self._writer.start(profile=PROFILE, library=LIBRARY)
@@ -231,6 +238,7 @@ class Recorder:
         )
         self._event_channel = self._writer.register_channel(EVENT_TOPIC, "json", events)
         self._links: dict[int, _Link] = {}
+        self._batch: list[tuple[_Link, Direction, bytes, Packet | None, int]] = []
         self._annotator = Annotator()
         self._seq = 0
         self._event_seq = 0
@@ -247,6 +255,13 @@ class Recorder:
 
     def __repr__(self) -> str:
         return f"<Recorder {self.path or self._stream!r} {sum(self.counts.values())} messages>"
+
+    @property
+    def counts(self) -> Counter[str]:
+        """Messages written per topic (frames still in the batch are written first)."""
+        if self._batch:
+            self._drain()
+        return self._counts
 
     # ------------------------------------------------------------------------------ links
 
@@ -277,13 +292,15 @@ class Recorder:
     def frame(self, link: int, direction: Direction, frame: bytes, t_ns: int | None = None) -> None:
         """Record one frame exactly as it crossed ``link``."""
         info = self._links[link]
-        view = self.decoded_view
-        if not view:
-            at = _OPCODE_BYTE.get(info.framing)
-            if at is not None and len(frame) > at and frame[at] >= 0o200:
-                # Raw only: a data frame needs no decoding (the reader decodes and checks it).
-                self._write(info, direction, frame, None, _DATA, t_ns)
-                return
+        t = time.time_ns() if t_ns is None else t_ns
+        if self.decoded_view:
+            self._enqueue(info, direction, frame, None, t)
+            return
+        at = _OPCODE_BYTE.get(info.framing)
+        if at is not None and len(frame) > at and frame[at] >= 0o200:
+            # Raw only: a data frame needs no decoding (the reader decodes and checks it).
+            self._write(info, direction, frame, None, _DATA, t)
+            return
         packet: Packet | None
         try:
             packet = info.decode(frame)
@@ -292,11 +309,73 @@ class Recorder:
             annotation = bad_frame(exc)
         else:
             # Without the view only the connection events are needed: they come from control packets.
-            if view or packet.opcode < 0o200:
-                annotation = self._annotator.annotate(link, direction, packet)
-            else:
-                annotation = _DATA
-        self._write(info, direction, frame, packet, annotation, t_ns)
+            annotation = self._annotate(link, direction, packet)
+        self._write(info, direction, frame, packet, annotation, t)
+
+    def _enqueue(
+        self, info: _Link, direction: Direction, frame: bytes, packet: Packet | None, t: int
+    ) -> None:
+        if self._closed:
+            raise CaptureError("the recorder is closed")
+        batch = self._batch
+        batch.append((info, direction, frame, packet, t))
+        if len(batch) >= BATCH:
+            self._drain()
+        if time.monotonic() >= self._due:
+            self.flush()
+
+    def _drain(self) -> None:
+        """Decode, annotate, view and write the batch, one step at a time over all of it."""
+        batch = self._batch
+        if not batch:
+            return
+        self._batch = []
+        packets: list[Packet | None] = []
+        bad: dict[int, Annotation] = {}
+        for k, (info, _, frame, packet, _) in enumerate(batch):
+            if packet is None:
+                try:
+                    packet = info.decode(frame)
+                except DecodeError as exc:
+                    bad[k] = bad_frame(exc)
+            packets.append(packet)
+        annotate = self._annotator.annotate
+        annotations = [
+            bad[k] if packet is None else annotate(item[0].id, item[1], packet)
+            for k, (item, packet) in enumerate(zip(batch, packets, strict=True))
+        ]
+        first = self._seq + 1
+        views = [
+            view_bytes(
+                annotation,
+                info.id,
+                direction,
+                seq,
+                packet,
+                len(frame) if packet is None else len(packet.data),
+            )
+            for seq, (info, direction, frame, _, _), packet, annotation in zip(
+                itertools.count(first), batch, packets, annotations
+            )
+        ]
+        add_pair, view_channels = self._add_pair, self._view_channels
+        for seq, (info, direction, frame, _, t), view, annotation in zip(
+            itertools.count(first), batch, views, annotations
+        ):
+            channel = info.channels.get(direction)
+            if channel is None:
+                channel = info.channels[direction] = self._raw_channel(info, direction)
+            add_pair(channel, frame, view_channels[direction], view, t, seq)
+            for event in annotation.events:
+                self._event(event, t)
+        self._seq += len(batch)
+        c2s = sum(1 for item in batch if item[1] == "c2s")
+        counts = self._counts
+        for direction, n in (("c2s", c2s), ("s2c", len(batch) - c2s)):
+            if n:
+                counts[RAW_TOPIC[direction]] += n
+                counts[VIEW_TOPIC[direction]] += n
+        self._pending = True
 
     def _annotate(self, link: int, direction: Direction, packet: Packet) -> Annotation:
         # Without the view only the connection events are needed: they come from control packets.
@@ -322,9 +401,13 @@ class Recorder:
             frame = encode_raw(packet) if encode is None else encode(packet, hw_dest=hw_dest, hw_src=hw_src)
         except EncodeError as exc:
             log.warning("%s: cannot record %r: %s", info.name, packet, exc)
-            self.counts["unrecordable"] += 1
+            self._counts["unrecordable"] += 1
             return
-        self._write(info, direction, frame, packet, self._annotate(link, direction, packet), t_ns)
+        t = time.time_ns() if t_ns is None else t_ns
+        if self.decoded_view:
+            self._enqueue(info, direction, frame, packet, t)
+            return
+        self._write(info, direction, frame, packet, self._annotate(link, direction, packet), t)
 
     def _write(
         self,
@@ -333,30 +416,20 @@ class Recorder:
         frame: bytes,
         packet: Packet | None,
         annotation: Annotation,
-        t_ns: int | None,
+        t: int,
     ) -> None:
+        """Write one frame without the view (with the view, frames go through the batch)."""
         if self._closed:
             raise CaptureError("the recorder is closed")
-        t = time.time_ns() if t_ns is None else t_ns
         self._seq += 1
-        seq = self._seq
         channel = info.channels.get(direction)
         if channel is None:
             channel = info.channels[direction] = self._raw_channel(info, direction)
-        counts = self.counts
-        counts[RAW_TOPIC[direction]] += 1
-        if self.decoded_view:
-            nbytes = len(packet.data) if packet is not None else len(frame)
-            view = view_bytes(annotation, info.id, direction, seq, packet, nbytes)
-            self._add_pair(channel, frame, self._view_channels[direction], view, t, seq)
-            counts[VIEW_TOPIC[direction]] += 1
-        else:
-            self._add(channel, t, frame, seq)
+        self._counts[RAW_TOPIC[direction]] += 1
+        self._add(channel, t, frame, self._seq)
         for event in annotation.events:
             self._event(event, t)
-        self._pending = True
-        if time.monotonic() >= self._due:
-            self.flush()
+        self._written()
 
     def _raw_channel(self, info: _Link, direction: Direction) -> int:
         schema = self._raw_schemas.get(info.framing)
@@ -373,6 +446,7 @@ class Recorder:
 
     def event(self, event: str, t_ns: int | None = None, /, **fields: Any) -> None:
         """Record an event on ``/manip/events`` (fields as the ``manip.Event`` schema allows)."""
+        self._drain()  # frames before the event are written before it
         self._event({"event": event, **{k: v for k, v in fields.items() if v not in (None, "")}}, t_ns)
         self._written()
 
@@ -382,7 +456,7 @@ class Recorder:
         t = time.time_ns() if t_ns is None else t_ns
         self._event_seq += 1
         self._add(self._event_channel, t, _JSON.encode(body).encode(), self._event_seq)
-        self.counts[EVENT_TOPIC] += 1
+        self._counts[EVENT_TOPIC] += 1
 
     # ------------------------------------------------------------------------------ durability
 
@@ -395,6 +469,7 @@ class Recorder:
         """Close the chunk in progress and write it out now."""
         if self._closed:
             return
+        self._drain()
         self._due = time.monotonic() + self.flush_interval
         if self._pending:
             self._pending = False
