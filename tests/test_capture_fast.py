@@ -391,6 +391,7 @@ def _record_mixed(batch: int, monkeypatch: pytest.MonkeyPatch) -> list[tuple[str
             rec.flush()
         t += 10
     assert rec.counts["/chaos/c2s"] == 30 + 4  # counts include frames still waiting
+    assert rec.connections == 5  # one on the tcp link, one on each of the four chaosd links
     rec.close()
     reader = make_reader(io.BytesIO(out.getvalue()))
     return [  # the recording-started and -stopped events carry the clock's time

@@ -515,7 +515,9 @@ class Recorder:
 
     @property
     def connections(self) -> int:
-        """Chaos connections seen so far."""
+        """Chaos connections seen so far (frames still in the batch are written first)."""
+        if self._batch:
+            self._drain()
         return self._annotator.connections
 
     def __enter__(self) -> Recorder:
