@@ -108,6 +108,22 @@ async def round_trip(client: Node, data: bytes = b"ping") -> None:
     await conn.close()
 
 
+def test_clients_sharing_an_address_draw_their_indices_from_both_bytes() -> None:
+    """Two clients with the default address clash only if their indices do: both bytes are random."""
+
+    async def main() -> None:
+        firsts = set()
+        for _ in range(40):
+            node = Node(CLIENT, FAST)
+            firsts.add(node.ncp.connect(0.0, SERVER, "PUMA"))
+            node.close()
+        assert len({index & 0xFF for index in firsts}) > 1  # the slot too, not just the uniquizer
+        assert len({index >> 8 for index in firsts}) > 1
+        assert all(index & 0xFF for index in firsts)  # slot 0 is never used
+
+    run(main())
+
+
 def test_pipe_round_trip_and_routes() -> None:
     async def main() -> None:
         client, server, c_link, s_link = pair()

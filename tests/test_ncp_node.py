@@ -82,6 +82,16 @@ def ops(packets: list[Packet]) -> list[int]:
 # ---------------------------------------------------------------------- opening
 
 
+def test_indices_start_at_the_given_slot_and_uniquizer() -> None:
+    a = Ncp(A, uniquizer=0x12, first_slot=0xFE)
+    first, second, third = (a.connect(0.0, B, "TEST") for _ in range(3))
+    assert (first, second, third) == (0x12FE, 0x13FF, 0x1401)  # the slot wraps past 255 to 1
+    with pytest.raises(ValueError, match="first_slot"):
+        Ncp(A, first_slot=0)
+    with pytest.raises(ValueError, match="first_slot"):
+        Ncp(A, first_slot=256)
+
+
 def test_connect_and_accept_open_both_sides() -> None:
     a = Ncp(A, window=7)
     b = Ncp(B, window=9)

@@ -131,12 +131,18 @@ class _Listener:
 class Node:
     """One Chaos host on one or more links.  Create it inside a running event loop.
 
-    ``uniquizer`` seeds the high byte of connection indices; by default it is random, so two clients
-    that share a Chaos address (every client defaults to 0401) are unlikely to share an index too.
+    ``uniquizer`` seeds the high byte of connection indices and ``first_slot`` the low byte of the first
+    one; by default both are random, so two clients that share a Chaos address (every client defaults
+    to 0401) share an index only once in 65,280 (the server refuses the second, see above).
     """
 
     def __init__(
-        self, address: int, options: NcpOptions | None = None, *, uniquizer: int | None = None
+        self,
+        address: int,
+        options: NcpOptions | None = None,
+        *,
+        uniquizer: int | None = None,
+        first_slot: int | None = None,
     ) -> None:
         self._loop = asyncio.get_running_loop()
         self.options = options or NcpOptions()
@@ -144,6 +150,7 @@ class Node:
             address,
             auto_read=False,
             uniquizer=random.randrange(256) if uniquizer is None else uniquizer,
+            first_slot=random.randrange(1, 256) if first_slot is None else first_slot,
             **asdict(self.options),
         )
         self.address = address

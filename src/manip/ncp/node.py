@@ -97,7 +97,8 @@ class Ncp:
     ``auto_read``            True: a packet counts as read (and is acknowledged) when it is delivered;
                              False: only when the user calls :meth:`read_ack`;
     ``first_packet_no``      default number of the first packet (RFC or OPN) of each connection;
-    ``uniquizer``            the high byte of the first local index handed out.
+    ``uniquizer``            the high byte of the first local index handed out;
+    ``first_slot``           the low byte of the first one (1-255; later ones take the next free slot).
     """
 
     def __init__(
@@ -113,6 +114,7 @@ class Ncp:
         auto_read: bool = True,
         first_packet_no: int = 1,
         uniquizer: int = 1,
+        first_slot: int = 1,
     ) -> None:
         _check_word("address", address, 1)
         _check_word("first_packet_no", first_packet_no)
@@ -129,6 +131,8 @@ class Ncp:
             raise ValueError(f"ack_delay must be >= 0, not {ack_delay!r}")
         if not 0 <= uniquizer <= 0xFF:
             raise ValueError(f"uniquizer must be a byte, not {uniquizer!r}")
+        if not 1 <= first_slot <= _SLOTS:
+            raise ValueError(f"first_slot must be 1-{_SLOTS}, not {first_slot!r}")
         self._address = address
         self._config = Config(
             window=window,
@@ -141,7 +145,7 @@ class Ncp:
         )
         self._first_packet_no = first_packet_no
         self._uniquizer = uniquizer
-        self._next_slot = 1
+        self._next_slot = first_slot
         self._slots: list[Connection | None] = [None] * (_SLOTS + 1)
         self._live: dict[int, Connection] = {}
         self._by_peer: dict[tuple[int, int], Connection] = {}
