@@ -51,9 +51,10 @@ def render() -> str:
     ]
     for op in SPEC.requests.values():
         name = f"{op.name} *(manip extension)*" if op.extension else op.name
+        within = "" if op.answer_within is None else f" (within {op.answer_within:g} s)"
         out.append(
             f"| {op.opcode:o} | {name} | {op.hazard} | {_layout(op.request)} | "
-            f"{_reply(op.response.kind, op.response.data)} | {_cell(op.section)} |"
+            f"{_reply(op.response.kind, op.response.data)}{within} | {_cell(op.section)} |"
         )
     out += [
         "",

@@ -172,6 +172,7 @@ def load_spec() -> Spec:
             summary=r["summary"],
             extension=r.get("extension", False),
             cougar=r.get("cougar"),
+            answer_within=r.get("answer_within"),
         )
         requests.append((op.opcode, op))
 

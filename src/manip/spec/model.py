@@ -86,6 +86,9 @@ class RequestOpcode:
     summary: str
     extension: bool = False
     cougar: str | None = None
+    answer_within: float | None = None
+    """Seconds a server may take to answer because the answer waits for the arm (None: no such wait,
+    the answer comes as soon as the request is processed)."""
 
 
 @dataclass(frozen=True, slots=True)

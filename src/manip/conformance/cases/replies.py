@@ -53,13 +53,8 @@ def opcode_clauses(op: RequestOpcode) -> tuple[str, ...]:
     return (*_COMMON, *_KIND_CLAUSES[op.response.kind], *own)
 
 
-_SLOW_REPLIES: Final = {"calibrate-wrist": 20.0}
-"""Seconds to allow for a reply that waits for the arm: calibrate-wrist moves the arm to two poses and
-averages readings at each before it answers (erratum ``calibrate-wrist``)."""
-
-
 def _make(op: RequestOpcode) -> None:
-    slow = _SLOW_REPLIES.get(op.name)
+    slow = op.answer_within  # a reply that waits for the arm gets the time the spec allows it
 
     async def reply_shape(ctx: CaseContext) -> None:
         probe = await ctx.connect()
