@@ -23,6 +23,7 @@ from manip.conformance.context import RunOptions
 from manip.conformance.rawchaos import RawPeer, format_packet
 from manip.conformance.results import CaseResult
 from manip.conformance.runner import RunConfig, Runner
+from manip.links import NcpOptions
 from manip.ncp.packets import is_data, is_legal_opcode, make_los, pack_status, unpack_status
 from manip.ncp.seq import seq_add, seq_gt, seq_le, seq_sub
 from manip.reference_server.driver import serve
@@ -249,8 +250,10 @@ async def fake_server(flaws: Flaws, scheme: str = "tcp") -> AsyncIterator[str]:
 # ------------------------------------------------------------------------------------- running cases
 
 
-async def _run_case(address: str, case_id: str, seed: int = 7) -> CaseResult:
-    options = RunOptions(address=address, reply_timeout=1.0, connect_timeout=2.0)
+async def _run_case(
+    address: str, case_id: str, seed: int = 7, broken_after: float | None = None
+) -> CaseResult:
+    options = RunOptions(address=address, reply_timeout=1.0, connect_timeout=2.0, broken_after=broken_after)
     config = RunConfig(address=address, options=options, seed=seed)
     return await Runner(config, list(CASES.values())).run_case(CASES[case_id])
 
@@ -360,6 +363,33 @@ def test_duplicate_rfc_ignored_passes() -> None:
     """Ignoring a duplicate RFC (the retransmitted OPN then answers it) conforms as well."""
     result = _against_fake("server.ncp.duplicate-rfc", Flaws(dup_rfc="ignore"))
     assert result.outcome == "pass", _why(result)
+
+
+def test_broken_is_skipped_unless_the_run_knows_the_timer() -> None:
+    result = _against_reference("server.ncp.broken")
+    assert result.outcome == "skip" and "--broken-after" in result.reason
+
+
+def _broken_against_reference(server_timer: float, told: float) -> CaseResult:
+    async def go() -> CaseResult:
+        async with serve("tcp://127.0.0.1:0", options=NcpOptions.breaking_after(server_timer)) as server:
+            return await _run_case(server.address, "server.ncp.broken", broken_after=told)
+
+    return asyncio.run(go())
+
+
+def test_reference_server_gives_up_a_silent_connection() -> None:
+    result = _broken_against_reference(1.0, told=1.0)
+    assert result.outcome == "pass", _why(result)
+    assert any("SNS probe" in note for note in result.notes)
+    assert result.deadline > 1.0 + CASES["server.ncp.broken"].deadline  # the wait is on top
+
+
+def test_a_server_that_keeps_a_silent_connection_is_caught() -> None:
+    result = _broken_against_reference(60.0, told=1.0)
+    assert result.outcome == "warn", _why(result)  # a SHOULD clause
+    assert result.violations[0].clause == "ncp.broken"
+    assert "LOS" in result.violations[0].expected
 
 
 def test_raw_peer_handshake_and_forged_frames() -> None:

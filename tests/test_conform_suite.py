@@ -209,3 +209,14 @@ def test_cli_cases_and_coverage() -> None:
 def test_every_server_must_clause_has_a_case() -> None:
     rows = coverage(all_cases(), {"server", "both"})
     assert [r.clause for r in gaps(rows)] == []
+
+
+def test_cli_broken_after_gives_the_embedded_server_the_timer_and_the_case_its_wait(tmp_path: Path) -> None:
+    json_path = tmp_path / "r.json"
+    result = CliRunner().invoke(
+        main,
+        ["run", "--select", "server.ncp.broken", "--broken-after", "1", "-q", "--json", str(json_path)],
+    )
+    assert result.exit_code == 0, result.output
+    case = json.loads(json_path.read_text())["cases"][0]
+    assert case["outcome"] == "pass" and "--broken-after 1" in case["reproduce"]

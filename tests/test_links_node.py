@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import socket
 from collections.abc import Coroutine
+from dataclasses import replace
 from typing import Any
 
 import pytest
@@ -322,3 +323,12 @@ def test_chudp_link_survives_random_datagrams(datagrams: list[bytes]) -> None:
         assert link.stats.frames_in == len(got)
 
     run(main())
+
+
+def test_breaking_after_shrinks_the_probe_interval_with_the_timer() -> None:
+    assert NcpOptions.breaking_after(90) == replace(NcpOptions(), broken_after=90)  # the seed's: unchanged
+    short = NcpOptions.breaking_after(3)
+    assert short.broken_after == 3 and short.probe_interval == 1.0  # three probes before giving up
+    for bad in (0, -1, float("inf"), float("nan")):
+        with pytest.raises(ValueError, match="broken_after"):
+            NcpOptions.breaking_after(bad)

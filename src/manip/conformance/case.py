@@ -14,6 +14,7 @@ A case is an ``async`` function of a :class:`~manip.conformance.context.CaseCont
         hazard="read-only",                          # the most dangerous opcode the case may send
         fresh=True,                                  # False: the case may share the previous case's link
         deadline=5.0,                                # seconds for the whole case (scaled by --deadline-scale)
+        waits=None,                                  # or: options -> seconds spent on a target's timer
     )
     async def describe_terminator(ctx: CaseContext) -> None:
         probe = await ctx.connect()                  # fresh Chaos connection, initial RESPONSE consumed
@@ -53,7 +54,7 @@ from manip.spec import SPEC
 from manip.spec.model import Hazard, Level
 
 if TYPE_CHECKING:
-    from manip.conformance.context import CaseContext
+    from manip.conformance.context import CaseContext, RunOptions
 
 __all__ = [
     "HAZARD_ORDER",
@@ -144,6 +145,13 @@ class Case:
     deadline: float
     summary: str
     module: str
+    waits: Callable[[RunOptions], float] | None = None
+    """Seconds the case spends waiting on a timer of the target's, added to its deadline unscaled."""
+
+    def deadline_for(self, options: RunOptions) -> float:
+        """The case's deadline in a run with ``options``."""
+        wait = 0.0 if self.waits is None else self.waits(options)
+        return self.deadline * options.deadline_scale + wait
 
     @property
     def components(self) -> tuple[str, ...]:
@@ -193,6 +201,7 @@ def case(
     fresh: bool = True,
     deadline: float = 5.0,
     summary: str | None = None,
+    waits: Callable[[RunOptions], float] | None = None,
 ) -> Callable[[CaseFunction], CaseFunction]:
     """Declare a case; the decorated function is returned unchanged (and registered).
 
@@ -215,6 +224,7 @@ def case(
                 deadline=deadline,
                 summary=summary if summary is not None else (doc[0] if doc else ""),
                 module=function.__module__,
+                waits=waits,
             )
         )
         return function

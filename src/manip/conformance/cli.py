@@ -132,6 +132,15 @@ def main() -> None:
 @_number_option(
     "--deadline-scale", click.FloatRange(0.01), 1.0, "Multiply every case deadline (slow links, real arms)."
 )
+@click.option(
+    "--broken-after",
+    type=click.FloatRange(min=0.1),
+    default=None,
+    metavar="SECONDS",
+    help="The target's broken-connection timer (the seed's is 90 s): server.ncp.broken goes silent that "
+    "long and checks the connection was given up.  Without it that case is skipped.  With the embedded "
+    "server, the server gets this timer too.",
+)
 @json_option
 @junit_option
 @click.option(
@@ -178,6 +187,7 @@ def run(
     allow_motion: bool,
     reply_timeout: float,
     deadline_scale: float,
+    broken_after: float | None,
     json_path: Path | None,
     junit_path: Path | None,
     server_faults: tuple[str, ...],
@@ -229,8 +239,11 @@ def run(
         deadline_scale=deadline_scale,
         max_examples=max_examples,
         address=address,
+        broken_after=broken_after,
     )
     extra: list[str] = []
+    if broken_after is not None:
+        extra += ["--broken-after", f"{broken_after:g}"]
     if strict:
         extra.append("--strict")
     if max_examples != 25:
@@ -324,7 +337,7 @@ async def _run_async(
         return
     server_config = ServerConfig() if faults is None else ServerConfig(faults=faults)
     # The embedded robot has the simulated Cougar wrist, so the wrist opcodes are checked too.
-    with EmbeddedServer(server_config, wrist=True) as address:
+    with EmbeddedServer(server_config, wrist=True, broken_after=config.options.broken_after) as address:
         config.address = address
         config.options = replace(config.options, address=address)
         console.print(f"embedded reference server at {address} (with the simulated Cougar wrist)")

@@ -79,6 +79,8 @@ class RunOptions:
     max_examples: int = 25
     address: str = ""
     """The target's link address, as given (for messages and reproduce commands)."""
+    broken_after: float | None = None
+    """The target's broken-connection timer, when the run is to check it (``--broken-after``)."""
 
     @property
     def allowed_hazards(self) -> frozenset[Hazard]:

@@ -15,6 +15,7 @@ import threading
 from types import TracebackType
 from typing import Final
 
+from manip.links import NcpOptions
 from manip.reference_server import ServerConfig
 from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import serve
@@ -36,9 +37,12 @@ class EmbeddedServer:
         time_scale: float = 1.0,
         seed: int | None = None,
         wrist: bool = False,
+        broken_after: float | None = None,
     ) -> None:
         """``wrist``: give the robot the simulated Cougar wrist, so the wrist opcodes are served (and
-        checked) rather than refused with C UIM."""
+        checked) rather than refused with C UIM.  ``broken_after``: the server's broken-connection timer
+        (default the seed's 90 s)."""
+        self._ncp = None if broken_after is None else NcpOptions.breaking_after(broken_after)
         self._config = config or ServerConfig()
         self._wrist = functools.partial(make_cougar_wrist, "sim", seed=seed) if wrist else None
         self._time_scale = time_scale
@@ -62,7 +66,12 @@ class EmbeddedServer:
         self._loop = asyncio.get_running_loop()
         self._stop = asyncio.Event()
         async with serve(
-            self._bind, self._config, time_scale=self._time_scale, seed=self._seed, wrist_factory=self._wrist
+            self._bind,
+            self._config,
+            time_scale=self._time_scale,
+            seed=self._seed,
+            wrist_factory=self._wrist,
+            options=self._ncp,
         ) as server:
             self._address = server.address
             self._ready.set()

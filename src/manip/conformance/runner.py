@@ -13,11 +13,12 @@ Theory of operation
    fails it is *unreachable*: no case runs, exit code 3.
 3. **Each case**, one at a time, gets a :class:`~manip.conformance.context.CaseContext` with its own
    seed (derived from the run seed and the case id, so a case's seed does not depend on what else
-   runs) and its deadline (``case.deadline * deadline_scale``).  Its connections are closed after it,
-   whatever happened.  After the body, unless the case turned it off (``ctx.auto_check = False``),
-   every probe's recording goes through :func:`~manip.conformance.checks.check_transcript`, so each
-   case also checks the invariants of the whole exchange (one reply per request, echoes, error
-   formats, asynchronous responses only when asked for...).  An exception of the case never stops the
+   runs) and its deadline (``case.deadline * deadline_scale``, plus any wait on a target's timer).  Its
+   connections are closed after it, whatever happened.  After the body, unless the case turned it off
+   (``ctx.auto_check = False``), every probe's recording goes through
+   :func:`~manip.conformance.checks.check_transcript`, so each case also checks the invariants of the
+   whole exchange (one reply per request, echoes, error formats, asynchronous responses only when
+   asked for...).  An exception of the case never stops the
    run: it becomes an ``error`` outcome with its traceback.
 4. **Liveness after** every failure or error and after every negative case; if the target is dead
    (after one retry) the remaining cases are skipped, the run records which case it died after, and
@@ -269,7 +270,7 @@ class Runner:
             summary=item.summary,
             outcome=outcome,
             seed=case_seed(self.config.seed, item.id),
-            deadline=item.deadline * self.config.options.deadline_scale,
+            deadline=item.deadline_for(self.config.options),
             reason=reason,
             reproduce=self.reproduce(item),
             known_failing=self.config.known_failing.matches(item.id),

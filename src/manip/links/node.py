@@ -103,6 +103,15 @@ class NcpOptions:
     ack_delay: float = 0.1
     first_packet_no: int = 1
 
+    @classmethod
+    def breaking_after(cls, seconds: float) -> NcpOptions:
+        """The defaults, but a connection whose peer is silent for ``seconds`` is broken.  The probe
+        interval shrinks with it (a third of it, at most the usual 5 s): a quiet but healthy peer must
+        be asked for news, and answer, well before its connection would be given up."""
+        if not (seconds > 0 and math.isfinite(seconds)):
+            raise ValueError(f"broken_after must be a positive number of seconds, not {seconds!r}")
+        return cls(broken_after=seconds, probe_interval=min(cls().probe_interval, seconds / 3))
+
 
 @dataclass(slots=True)
 class NodeStats:

@@ -31,7 +31,7 @@ import click
 
 from manip.arm.kinematics import PUMA600, ArmModel
 from manip.cougar.link import parse_address as parse_drv11j_address
-from manip.links import AddressError, ChaosError, parse_address
+from manip.links import AddressError, ChaosError, NcpOptions, parse_address
 from manip.links.address import DEFAULT_CONTACT, DEFAULT_TCP_PORT, Scheme
 from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import DEFAULT_ADDRESS, ReferenceServer, serve
@@ -123,6 +123,14 @@ def command_line(ctx: click.Context) -> list[str]:
 )
 @click.option("--seed", type=int, default=None, help="Seed of the server's random generator.")
 @click.option(
+    "--broken-after",
+    type=click.FloatRange(min=0.1),
+    default=None,
+    metavar="SECONDS",
+    help="Declare a connection broken when its client is silent this long (default 90, as the seed; "
+    "shorter to check a client's or the suite's handling quickly).",
+)
+@click.option(
     "--fault",
     "faults",
     multiple=True,
@@ -168,6 +176,7 @@ def main(
     model: str,
     time_scale: float,
     seed: int | None,
+    broken_after: float | None,
     faults: FaultSet,
     list_faults: bool,
     powered: bool,
@@ -205,6 +214,7 @@ def main(
         max_clients=max_clients,
         extra_addresses=extra,
         wrist_factory=None if cougar is None else functools.partial(make_cougar_wrist, cougar, seed=seed),
+        options=None if broken_after is None else NcpOptions.breaking_after(broken_after),
     )
     recording = None
     if record is not None:

@@ -19,7 +19,7 @@ from manip.codecs.messages import encode_request
 from manip.codecs.packet import MAX_DATA, Packet
 from manip.conformance.case import CaseFailure, case
 from manip.conformance.checks import WirePacket
-from manip.conformance.context import CaseContext
+from manip.conformance.context import CaseContext, RunOptions
 from manip.conformance.rawchaos import (
     Direction,
     RawConnection,
@@ -329,6 +329,75 @@ async def duplicate_rfc(ctx: CaseContext) -> None:
             data=reply.raw,
         )
         conn.sts(ack=reply.packet.packet_no, window=5)
+
+
+# ------------------------------------------------------------------------------------------ broken
+
+
+def _broken_slack(broken_after: float) -> float:
+    """Seconds beyond the target's timer before the broken case looks: timers run on a coarse clock
+    (the ITS NCP checks its connections every few seconds)."""
+    return max(2.0, 0.25 * broken_after)
+
+
+def _broken_wait(options: RunOptions) -> float:
+    if options.broken_after is None:
+        return 0.0
+    return options.broken_after + _broken_slack(options.broken_after)
+
+
+@case(
+    "server.ncp.broken",
+    clauses=["ncp.broken"],
+    kind="scripted",
+    deadline=15.0,
+    waits=_broken_wait,
+)
+async def broken(ctx: CaseContext) -> None:
+    """A connection whose client falls silent is given up after the target's timer: a packet on it
+    then draws a LOS, and the robot is free for a new connection.
+
+    Runs only with ``--broken-after SECONDS`` (the target's timer; the seed says 90), as it spends that
+    long in silence.  Our side answers nothing, not even the target's SNS probes."""
+    after = ctx.options.broken_after
+    if after is None:
+        ctx.skip("it waits out the target's broken-connection timer: run with --broken-after SECONDS")
+    async with await _open(ctx) as peer:
+        index = _index(ctx)
+        conn = await _handshake(ctx, peer, index, ctx.random.randrange(0x10000))
+        conn.sts(ack=conn.opn_no, window=5)  # the connection is open on both sides; now silence
+        silent_from = ctx.clock()
+        wait = after + _broken_slack(after)
+        seen = await peer.collect(wait, lambda p: p.dest_index == index)
+        probes = sum(1 for r in seen if r.packet.opcode == ChaosOp.SNS)
+        ended = [r for r in seen if r.packet.opcode in (ChaosOp.LOS, ChaosOp.CLS)]
+        ctx.note(f"{wait:g} s of silence: {probes} SNS probe(s), {len(seen)} packet(s) in all")
+        if ended:
+            first = ended[0]
+            gave_up = first.time - silent_from
+            ctx.note(f"the target said so after {gave_up:.1f} s: {format_packet(first.packet)}")
+        last_ack = max((r.packet.packet_no for r in seen if is_data(r.packet.opcode)), default=conn.opn_no)
+        request = _request(conn, ack=last_ack)
+        answer = await peer.receive(
+            lambda p: p.dest_index == index and p.opcode == ChaosOp.LOS, _scale(ctx, LOS_BOUND)
+        )
+        late = [r for r in peer.inbox if conn.mine(r.packet) and is_data(r.packet.opcode)]
+        ctx.expect(
+            answer is not None,
+            clause="ncp.broken",
+            expected=f"a LOS for {format_packet(request)}: the connection given up after {after:g} s "
+            "of silence",
+            actual=_lines(late) if late else "no LOS and no reply",
+        )
+    fresh = await ctx.connect()
+    here = await fresh.call("here")
+    ctx.expect(
+        here.is_response,
+        clause="ncp.broken",
+        expected="a new connection served (the robot freed when the silent one was given up)",
+        actual=str(here),
+        data=here.data,
+    )
 
 
 # ------------------------------------------------------------------------------------------ retransmission
