@@ -30,7 +30,15 @@ def watch_until_ctrl_c(*options: str) -> None:
     and 8; after both lines, Ctrl-C must end it cleanly (exit 0, nothing on stderr)."""
     with in_thread(scripted_server(segment_reporter)) as address:
         command = [sys.executable, "-m", "manip.reference_client.cli", address, "watch", *options]
-        with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+        # A shell starts background jobs with SIGINT ignored, and a child inherits an ignored signal
+        # (a handled one is reset by exec): handle it while starting the command, so Ctrl-C reaches it
+        # however the tests were started.
+        previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+        try:
+            proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        finally:
+            signal.signal(signal.SIGINT, previous)
+        with proc:
             try:
                 assert proc.stdout is not None
                 assert proc.stdout.readline() == "segment 7 completed\n"
