@@ -561,6 +561,40 @@ def test_graceful_close_sends_eof_then_cls() -> None:
     assert a.state(ca) is b.state(cb) is ConnState.CLOSED
 
 
+def test_closing_after_the_peers_eof_sends_cls_alone() -> None:
+    """Both ends close, the peer first: no EOF of ours to cross its CLS (and draw a LOS)."""
+    a, b, ca, cb = open_pair()
+    a.close(0.0, ca)
+    [eof] = a.packets_to_send()
+    b.receive(0.0, eof)
+    assert [type(e) for e in b.events()] == [EofReceived]
+    b.read_ack(0.0, cb, eof.packet_no)  # b's user takes the EOF (an STS acknowledges it) and closes
+    b.close(0.0, cb)
+    sent = b.packets_to_send()
+    assert ops(sent) == [ChaosOp.STS, ChaosOp.CLS]
+    assert b.events() == [Closed(cb, "", by_peer=False)] and b.state(cb) is ConnState.CLOSED
+    for p in sent:
+        a.receive(0.0, p)
+    assert a.state(ca) is ConnState.CLOSED
+    assert ChaosOp.LOS not in ops(a.packets_to_send())  # a's own CLS (if any) draws nothing
+
+
+def test_closing_after_the_peers_eof_waits_for_our_data_to_be_acknowledged() -> None:
+    a, b, ca, cb = open_pair()
+    a.close(0.0, ca)
+    b.receive(0.0, a.packets_to_send()[0])
+    b.events()
+    b.send(0.0, cb, b"last words")
+    b.close(0.0, cb)
+    assert ChaosOp.CLS not in ops(b.packets_to_send())  # "last words" is not acknowledged yet
+    assert b.state(cb) is ConnState.OPEN
+    b.timer(0.5)
+    moved = shuttle(0.5, a, b)
+    assert [type(e) for e in a.events()] == [DataReceived, Closed]  # the data came before the end
+    assert ChaosOp.EOF not in [p.opcode for p in moved if p.src_host == B]
+    assert b.state(cb) is ConnState.CLOSED
+
+
 def test_close_with_a_full_window_waits_to_send_the_eof() -> None:
     a, b, ca, _cb = open_pair(window=2)
     a.send(0.0, ca, b"1")

@@ -222,7 +222,9 @@ class ChaosConnection:
 
     async def close(self, timeout: float | None = CLOSE_TIMEOUT) -> None:
         """Close gracefully: anything unread is discarded, our EOF follows our data, and once the peer
-        acknowledges it a CLS ends the connection.  After ``timeout`` seconds we abort instead."""
+        acknowledges it a CLS ends the connection (after the peer's own EOF, no EOF: a CLS once our data
+        is acknowledged; erratum ``ncp-close-after-peer-eof``).  After ``timeout`` seconds we abort
+        instead."""
         node = self._node
         if self._end is None:
             if not self._closing:

@@ -410,7 +410,10 @@ class Connection:
         if self.state is not _OPEN or not self.closing:
             return
         if self.eof_no is None:
-            if self.established and self.outstanding < self.twsize:
+            if self.peer_eof is not None:  # the peer closes too: no EOF of ours (see states.py)
+                if self.outstanding == 0:
+                    self.handle(Input.PEER_FINISHED, Trigger(now))
+            elif self.established and self.outstanding < self.twsize:
                 self.eof_no = self._send_controlled(now, ChaosOp.EOF, b"")
         elif self.tacked == self.eof_no:
             self.handle(Input.EOF_ACKED, Trigger(now))

@@ -26,7 +26,10 @@ The life of a connection:
 * Sequencing inside OPEN (packet numbers, acknowledgements, receipts, windows, retransmission,
   probing) is bookkeeping, not state: it lives in the connection object and never changes the state.
 * ``close`` is graceful: an EOF is queued behind the data, and when the peer acknowledges it (meaning
-  its user has read everything) a CLS is sent and the connection is CLOSED (EOF_ACKED).  ``abort``
+  its user has read everything) a CLS is sent and the connection is CLOSED (EOF_ACKED).  If the peer
+  sent its EOF first, ours is left out: the peer is closing too and sends CLS once its EOF is
+  acknowledged, so an EOF of ours would cross that CLS and draw a LOS.  A CLS alone ends it, once
+  everything we sent is acknowledged (PEER_FINISHED).  ``abort``
   sends a CLS at once.  A CLS from the peer closes, a LOS loses, and ``broken_after`` seconds without
   any packet from the peer (SILENCE) make the connection INCOMPLETE.
 * CLOSED, LOST and INCOMPLETE are final: an NCP treats packets for a finished connection exactly as
@@ -101,6 +104,7 @@ class Input(enum.Enum):
     DATA = (Source.PACKET, "data packet (0200-0377) received")
     # Time and internal conditions.
     EOF_ACKED = (Source.INTERNAL, "our EOF was acknowledged after close()")
+    PEER_FINISHED = (Source.INTERNAL, "close() after the peer's EOF, everything we sent acknowledged")
     RFC_TIMEOUT = (Source.INTERNAL, "no reply to our RFC within rfc_timeout")
     UNANSWERED = (Source.INTERNAL, "the user left a received RFC unanswered for rfc_timeout")
     SILENCE = (Source.INTERNAL, "no packet from the peer for broken_after")
@@ -181,6 +185,7 @@ _TABLE: dict[tuple[ConnState, Input], Transition] = {
     (_S.OPEN, _I.READ): _t(_S.OPEN, "mark_read"),
     (_S.OPEN, _I.CLOSE): _t(_S.OPEN, "start_close"),
     (_S.OPEN, _I.EOF_ACKED): _t(_S.CLOSED, "send_cls", "discard_queues", "deliver_closed"),
+    (_S.OPEN, _I.PEER_FINISHED): _t(_S.CLOSED, "send_cls", "discard_queues", "deliver_closed"),
     (_S.OPEN, _I.ABORT): _t(_S.CLOSED, "send_cls", "discard_queues"),
     (_S.OPEN, _I.SILENCE): _t(_S.INCOMPLETE, "discard_queues", "deliver_broken"),
     # --- LOST and INCOMPLETE: final; closing them again is harmless.
