@@ -1,0 +1,59 @@
+"""Every ``manip-*`` command line in the README parses with the command it names: an option renamed or
+dropped breaks this test, not a reader's first try.  (Parsing only: the commands' bodies are replaced.)"""
+
+from __future__ import annotations
+
+import itertools
+import re
+import shlex
+from importlib.metadata import entry_points
+from pathlib import Path
+
+import click
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+COMMANDS = {e.name: e for e in entry_points(group="console_scripts") if e.name.startswith("manip-")}
+
+
+def readme_command_lines() -> list[str]:
+    """Command lines of the README's ``sh`` blocks, comments cut, ``a|b`` shorthand spelt out."""
+    text = (ROOT / "README.md").read_text()
+    lines: list[str] = []
+    for block in re.findall(r"```sh\n(.*?)```", text, re.S):
+        for raw in block.splitlines():
+            line = raw.split("  #")[0].strip()
+            if not line.startswith("manip-"):
+                continue
+            words = shlex.split(line)
+            choices = [word.split("|") if "|" in word else [word] for word in words]
+            lines += [shlex.join(variant) for variant in itertools.product(*choices)]
+    return lines
+
+
+LINES = readme_command_lines()
+
+
+def test_the_readme_shows_every_command() -> None:
+    assert {shlex.split(line)[0] for line in LINES} == set(COMMANDS)
+
+
+def _leaves(command: click.Command) -> list[click.Command]:
+    if isinstance(command, click.Group):
+        return [leaf for sub in command.commands.values() for leaf in _leaves(sub)]
+    return [command]
+
+
+@pytest.mark.parametrize("line", LINES)
+def test_readme_command_line_parses(line: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    words = shlex.split(line)
+    monkeypatch.chdir(tmp_path)
+    for word in words:  # the files a line reads exist, empty (their content is not looked at)
+        if re.fullmatch(r"[\w.-]+\.(mcap|bin)", word):
+            (tmp_path / word).touch()
+    command = COMMANDS[words[0]].load()
+    ran: list[str] = []
+    for leaf in _leaves(command):  # parsed as usual, then nothing done: no server, no connection
+        monkeypatch.setattr(leaf, "callback", lambda *args, _name=leaf.name, **kwargs: ran.append(_name))
+    command.main(words[1:], prog_name=words[0], standalone_mode=False)  # a usage error raises
+    assert len(ran) == 1
