@@ -200,3 +200,17 @@ def test_embedded_replay_server_gets_a_wrist_only_when_the_recording_had_one(tmp
     assert _capture_settings(recorded)[2] is True
     replayed = CliRunner().invoke(main, ["replay", str(recorded), "-q"])
     assert replayed.exit_code == 0, replayed.output
+
+
+def test_replay_waits_for_an_answer_the_spec_lets_take_longer(tmp_path: Path) -> None:
+    """calibrate-wrist answers after moving the arm (answer_within 20 s): far beyond --reply-timeout."""
+    recorded, report = tmp_path / "calibrate.mcap", tmp_path / "replay.json"
+    args = ["run", "--select", "server.reply.calibrate-wrist", "--record", str(recorded), "-q", "--seed", "3"]
+    run = CliRunner().invoke(main, args)
+    assert run.exit_code == 0, run.output
+    CliRunner().invoke(main, ["replay", str(recorded), "-q", "--reply-timeout", "0.3", "--json", str(report)])
+    cases = json.loads(report.read_text())["cases"]
+    calibrating = [
+        c for c in cases if c["id"].endswith(".exchange") and any(p["opcode"] == "243" for p in c["packets"])
+    ]
+    assert len(calibrating) == 1 and calibrating[0]["outcome"] == "pass", calibrating

@@ -17,7 +17,8 @@ reads the recording and the live connection, so both sides are cut into the same
 how many requests had been fully answered and how many asynchronous packets had come (a *barrier*):
 the recorded client had seen those before it sent the request.  The replay keeps that order and
 nothing else of the timing: it sends each request as soon as the live server has reached the same
-barrier (answers within ``reply_timeout``, asynchronous packets within ``async_timeout``), so a client
+barrier (each answer within ``reply_timeout``, or the spec's ``answer_within`` for a request that waits
+for the arm; asynchronous packets within ``async_timeout``), so a client
 that pipelined is replayed pipelined and one that waited for a notification waits for it.
 
 **A session.**  Each recorded session gets a fresh connection to the target (a refusal as busy is
@@ -304,12 +305,15 @@ class _Live:
         """Wait until the live side has reached ``barrier``; "" or what is missing."""
         live = self.replay.live
         loop = asyncio.get_running_loop()
-        deadline = loop.time() + options.reply_timeout
         while live.completed < barrier.answers:
-            if not await self.take(deadline - loop.time()):
-                if live.closed is not None:
-                    return f"the connection ended ({describe(live.closed)}) before the answer came"
-                return f"no answer within {options.reply_timeout:g} s"
+            waiting = live.completed
+            allowed = _answer_time(live.requests[waiting], options)
+            deadline = loop.time() + allowed
+            while live.completed == waiting:
+                if not await self.take(deadline - loop.time()):
+                    if live.closed is not None:
+                        return f"the connection ended ({describe(live.closed)}) before the answer came"
+                    return f"no answer within {allowed:g} s"
         deadline = loop.time() + options.async_timeout
         while len(live.asyncs) < barrier.asyncs:
             if not await self.take(deadline - loop.time()):
@@ -325,6 +329,15 @@ class _Live:
         """Take whatever arrives until ``seconds`` pass without a packet."""
         while await self.take(seconds):
             pass
+
+
+def _answer_time(request: WirePacket | None, options: ReplayOptions) -> float:
+    """Seconds to wait for the answer to ``request``: the reply timeout, or longer for a request whose
+    answer waits for the arm (the spec's ``answer_within``, e.g. calibrate-wrist)."""
+    op = SPEC.requests.get(request.opcode) if request is not None else None
+    if op is None or op.answer_within is None:
+        return options.reply_timeout
+    return max(options.reply_timeout, op.answer_within)
 
 
 async def _connect(address: str, options: ReplayOptions) -> ChaosConnection:
