@@ -18,8 +18,8 @@ how many requests had been fully answered and how many asynchronous packets had 
 the recorded client had seen those before it sent the request.  The replay keeps that order and
 nothing else of the timing: it sends each request as soon as the live server has reached the same
 barrier (each answer within ``reply_timeout``, or the spec's ``answer_within`` for a request that waits
-for the arm; asynchronous packets within ``async_timeout``), so a client
-that pipelined is replayed pipelined and one that waited for a notification waits for it.
+for the arm; asynchronous packets within ``async_timeout``), so a client that pipelined is replayed
+pipelined and one that waited for a notification waits for it.
 
 **A session.**  Each recorded session gets a fresh connection to the target (a refusal as busy is
 retried briefly: the previous session's connection may still be closing).  Requests go out with their
