@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import subprocess
 import sys
 from pathlib import Path
@@ -82,3 +83,12 @@ def test_manip_decode_lists_a_capture() -> None:
     result = CliRunner().invoke(decode_main, ["--mcap", str(GOLDEN / "motion.mcap"), "--format", "json"])
     assert result.exit_code == 0, result.output
     assert "segment-completed" in result.output and '"transform"' in result.output
+
+
+def test_generated_capture_docs_are_current() -> None:
+    spec = importlib.util.spec_from_file_location("gen_capture_docs", ROOT / "tools" / "gen_capture_docs.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    current = (ROOT / "docs" / "captures.md").read_text()
+    assert current == module.render(), "run: python tools/gen_capture_docs.py"
