@@ -30,8 +30,9 @@ Rules a case follows:
   raises :class:`CaseFailure` (the case stops there); a violated SHOULD/MAY clause is recorded and the
   case goes on (it becomes ``warn``, or ``fail`` under ``--strict``).  ``ctx.skip(reason)`` ends it as
   not applicable.  Any other exception is an ``error`` of the suite, reported with its traceback.
-* It never assumes state left by another case: each gets a fresh connection (and the reference server
-  gives each connection a fresh simulated arm).  Only ``fresh=False`` cases may reuse a probe.
+* It never assumes state left by another case: each gets a fresh connection, which starts the
+  per-connection state afresh (power, speed, segments; erratum ``server-robot``), but the arm stands
+  wherever the last case left it.  Only ``fresh=False`` cases may reuse a probe.
 * ``hazard`` is honest: with ``--target hardware`` cases above ``config`` are left out unless
   ``--allow-motion`` (property/stateful cases also read ``ctx.options.allowed_hazards`` to restrict
   what they generate).
