@@ -105,8 +105,14 @@ def test_cli_exit_codes_and_reports(tmp_path: Path) -> None:
     assert runner.invoke(main, ["verify", str(tmp_path / "missing.mcap")]).exit_code == 2
     garbage = tmp_path / "garbage.mcap"
     garbage.write_bytes(b"not an mcap file at all")
-    unreadable = runner.invoke(main, ["verify", str(garbage)])
-    assert unreadable.exit_code == 3 and "cannot be read" in unreadable.output
+    unreadable = runner.invoke(main, ["verify", str(garbage), "--json", str(json_path)])
+    assert unreadable.exit_code == 3 and "not an MCAP file" in unreadable.output
+    data = json.loads(json_path.read_text())
+    _validate(data, schema, schema)
+    assert data["verdict"] == "capture unusable"  # not "target unreachable": there is no target
+    short = tmp_path / "short.mcap"
+    short.write_bytes(b"\x89MC")
+    assert "ends before an MCAP header" in runner.invoke(main, ["verify", str(short)]).output
     assert runner.invoke(main, ["verify", str(GOLDEN / "errors.mcap"), "--session", "2"]).exit_code == 3
 
 

@@ -27,7 +27,7 @@ from typing import IO, Any, Final
 import lz4.frame  # type: ignore[import-untyped]
 import zstandard
 from mcap.data_stream import ReadDataStream
-from mcap.exceptions import McapError
+from mcap.exceptions import InvalidMagic, McapError
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
@@ -322,7 +322,11 @@ class _Stream:
                 elif isinstance(record, Header):
                     self.capture.profile = record.profile
                     self.capture.library = record.library
+        except InvalidMagic as exc:
+            raise CaptureError(f"{path} is not an MCAP file (it does not start with the MCAP magic)") from exc
         except (McapError, EOFError, struct.error, ValueError) as exc:
+            if records == 0:  # not even a header: nothing a recovery could start from
+                raise CaptureError(f"{path} is not a capture: it ends before an MCAP header") from exc
             raise CaptureTruncatedError(path, records, f"{type(exc).__name__}: {exc}") from exc
         finally:
             if stream is not source:

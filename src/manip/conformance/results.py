@@ -117,6 +117,8 @@ class RunReport:
     internal_error: str = ""
     target_died_after: str | None = None
     unreachable: bool = False
+    capture_unusable: bool = False
+    """With ``unreachable``: what failed was the capture a replay or verify reads, not the target."""
 
     def counts(self) -> dict[str, int]:
         counter: Counter[str] = Counter(r.outcome for r in self.results)
@@ -141,6 +143,6 @@ class RunReport:
             ExitCode.CONFORMANT: "conformant",
             ExitCode.NON_CONFORMANT: "non-conformant",
             ExitCode.USAGE: "usage error",
-            ExitCode.UNREACHABLE: "target unreachable",
+            ExitCode.UNREACHABLE: "capture unusable" if self.capture_unusable else "target unreachable",
             ExitCode.INTERNAL: "interrupted" if self.interrupted else "internal error",
         }[self.exit_code]

@@ -241,7 +241,7 @@ class Node:
                 await conn._wait_opened()
         except TimeoutError:
             if conn._end is None:
-                self._abandon(conn, ConnectTimeout(f"no answer from host {host:o} within {timeout:g} s"))
+                self._abandon(conn, ConnectTimeout(f"no answer from host {host:o} within {timeout:.3g} s"))
         except BaseException:
             self._abandon(conn, ConnectionClosed("connect cancelled", by_peer=False))
             raise
