@@ -1,8 +1,10 @@
-"""Every ``manip-*`` command line in the README parses with the command it names: an option renamed or
-dropped breaks this test, not a reader's first try.  (Parsing only: the commands' bodies are replaced.)"""
+"""The README's examples work: every ``manip-*`` command line parses with the command it names (an
+option renamed or dropped breaks this test, not a reader's first try; the commands' bodies are replaced),
+and the client example runs against a reference server."""
 
 from __future__ import annotations
 
+import asyncio
 import itertools
 import re
 import shlex
@@ -57,3 +59,20 @@ def test_readme_command_line_parses(line: str, tmp_path: Path, monkeypatch: pyte
         monkeypatch.setattr(leaf, "callback", lambda *args, _name=leaf.name, **kwargs: ran.append(_name))
     command.main(words[1:], prog_name=words[0], standalone_mode=False)  # a usage error raises
     assert len(ran) == 1
+
+
+def test_the_readme_client_example_runs(capsys: pytest.CaptureFixture[str]) -> None:
+    """The first Python example, as written, against a reference server (its address swapped in)."""
+    from tests.test_client_tcp import in_thread, reference_server
+
+    text = (ROOT / "README.md").read_text()
+    example = re.findall(r"```python\n(.*?)```", text, re.S)[0]
+    assert "manip.connect(" in example and "async def main" in example
+    with in_thread(reference_server()) as address:
+        namespace: dict[str, object] = {}
+        exec(compile(example.replace("tcp://127.0.0.1:42085", address), "README.md", "exec"), namespace)
+        main = namespace["main"]
+        assert callable(main)
+        asyncio.run(main())
+    shown = capsys.readouterr().out
+    assert "Transform" in shown and ":" in shown  # here()'s transform, then describe()'s alist
