@@ -139,7 +139,8 @@ def main() -> None:
     metavar="SECONDS",
     help="The target's broken-connection timer (the seed's is 90 s): server.ncp.broken goes silent that "
     "long and checks the connection was given up.  Without it that case is skipped.  With the embedded "
-    "server, the server gets this timer too.",
+    "server, the server gets this timer too (below 5 s the other NCP cases, which keep quiet for up to "
+    "3 s on purpose, may lose their connections).",
 )
 @json_option
 @junit_option
