@@ -12,6 +12,7 @@ Target (issue brief): bulk decode >= 5 M floats/s.  Nothing is asserted about ti
 from __future__ import annotations
 
 import argparse
+import functools
 import struct
 import time
 from collections.abc import Callable
@@ -135,15 +136,15 @@ def main() -> None:
     for label, a, b in (("interpreted", ours, theirs), ("compiled", ours.compile(), theirs.compile())):
         row(
             f"parse {label}",
-            rate(lambda a=a: a.parse(wire_ours), args.seconds),
-            rate(lambda b=b: b.parse(wire_theirs), args.seconds),
+            rate(functools.partial(a.parse, wire_ours), args.seconds),
+            rate(functools.partial(b.parse, wire_theirs), args.seconds),
             "Float32l",
             "records/s",
         )
         row(
             f"build {label}",
-            rate(lambda a=a: a.build(rec), args.seconds),
-            rate(lambda b=b: b.build(rec), args.seconds),
+            rate(functools.partial(a.build, rec), args.seconds),
+            rate(functools.partial(b.build, rec), args.seconds),
             "Float32l",
             "records/s",
         )

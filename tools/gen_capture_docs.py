@@ -7,14 +7,16 @@ docs/captures.md is stale.
 
 from __future__ import annotations
 
+import importlib
 import json
 import re
 import sys
 from pathlib import Path
 from types import ModuleType
+from typing import Final
 
 from manip.captures import format as capture_format
-from manip.captures import recorder, recover, view
+from manip.captures import recorder, view
 from manip.captures.format import (
     EVENT_SCHEMA_NAME,
     EVENT_TOPIC,
@@ -32,6 +34,8 @@ from manip.codecs.framing import FRAMINGS
 from manip.conformance import masking
 
 TARGET = Path(__file__).resolve().parents[1] / "docs" / "captures.md"
+RECOVER: Final = importlib.import_module("manip.captures.recover")
+"""The module (``manip.captures.recover`` as an attribute is the function the package exports)."""
 
 _ROLE = re.compile(r":(?:class|func|meth|mod|data|attr):`~?([^`]+)`")
 
@@ -110,7 +114,7 @@ def render() -> str:
         "",
         "## Recovering a cut file",
         "",
-        _body(recover),
+        _body(RECOVER),
         "",
         "## What replay compares",
         "",

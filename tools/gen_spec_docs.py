@@ -119,13 +119,14 @@ def render() -> str:
         ]
 
     out += ["## Errata", ""]
-    for e in SPEC.errata.values():
-        out += [f"### `{e.id}`", "", f"*Clauses:* {', '.join(f'`{c}`' for c in e.clauses)}", ""]
-        out += [f"*Question.* {e.question}", "", f"*Decision.* {e.decision}", ""]
-        if e.reason:
-            out += [f"*Why.* {e.reason}", ""]
-        if e.parameter:
-            out += [f"*Configurable:* `{e.parameter}`", ""]
+    for erratum in SPEC.errata.values():
+        clauses = ", ".join(f"`{c}`" for c in erratum.clauses)
+        out += [f"### `{erratum.id}`", "", f"*Clauses:* {clauses}", ""]
+        out += [f"*Question.* {erratum.question}", "", f"*Decision.* {erratum.decision}", ""]
+        if erratum.reason:
+            out += [f"*Why.* {erratum.reason}", ""]
+        if erratum.parameter:
+            out += [f"*Configurable:* `{erratum.parameter}`", ""]
     return "\n".join(out).rstrip() + "\n"
 
 

@@ -4,7 +4,7 @@ The message is the common case of the protocol: a Chaos header, the request numb
 transform (66 bytes).  The baseline is hand-written ``struct`` code doing the same job in the same run,
 so the printed ratios are comparable across machines.  Also: the bulk numpy float path.
 
-    .venv/bin/python bench/codecs.py [--seconds 1.0]
+    .venv/bin/python bench/codec_speed.py [--seconds 1.0]
 
 Targets (issue 2): single-packet decode >= 0.5x the baseline's rate; bulk decode >= 5 M floats/s.
 """
