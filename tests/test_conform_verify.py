@@ -11,14 +11,18 @@ import pytest
 from click.testing import CliRunner
 
 from manip.captures import read_session
-from manip.conformance.checks import WirePacket
+from manip.codecs.messages import encode_request
+from manip.conformance.case import all_cases
+from manip.conformance.checks import WirePacket, check_client_request
 from manip.conformance.cli import main
+from manip.conformance.coverage import coverage, gaps
 from manip.conformance.embedded import EmbeddedServer
 from manip.conformance.replay import ReplayOptions, replay_capture
 from manip.conformance.replay_cli import recording
 from manip.conformance.report import load_schema, report_json
 from manip.conformance.verify import fatal_close_findings, verify_capture, wire_packets
 from manip.reference_server import FaultSet, ServerConfig
+from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
 from tests.test_conform_framework import _validate
 
@@ -125,3 +129,42 @@ def test_run_record_produces_a_capture_that_verifies(tmp_path: Path) -> None:
     assert report.exit_code == 0, [(r.id, r.violations) for r in report.results if r.violations]
     sessions = {r.id.split(".")[1] for r in report.results}
     assert len(sessions) > 5  # every case's connection and the liveness probes
+
+
+# ------------------------------------------------------------------------------ the client's side
+
+
+def _request(opcode: int, data: bytes = b"", number: int = 5) -> WirePacket:
+    return WirePacket("c2s", opcode, number, 0, data, 0.0, 0)
+
+
+def test_client_requests_are_judged_by_opcode_and_layout() -> None:
+    here, move = SPEC.request("here").opcode, SPEC.request("move").opcode
+    assert check_client_request(_request(here)) == []
+    assert check_client_request(_request(move, encode_request("move", transform=(0.0,) * 12))) == []
+    assert check_client_request(_request(0o276, b"xy")) == []  # undefined: the server's to refuse
+    [dwd] = check_client_request(_request(0o300))
+    assert dwd.clause == "request.opcode-range" and "opcode 300" in dwd.message
+    [short] = check_client_request(_request(move, bytes(44)))
+    assert short.clause == "move.transform-data" and "48 bytes" in short.expected
+    [extra] = check_client_request(_request(here, b"\x01\x02"))
+    assert extra.clause == "request-data.types" and extra.data == b"\x01\x02"
+
+
+def test_verify_judges_the_client_side_when_asked() -> None:
+    clean = verify_capture(GOLDEN / "motion.mcap", judge="both")
+    assert clean.exit_code == 0
+    assert any(r.id == "verify.session-1.client-requests" and r.outcome == "pass" for r in clean.results)
+    server_only = verify_capture(GOLDEN / "errors.mcap")
+    assert server_only.exit_code == 0  # the errors session's malformed requests are refused as they must be
+    client = verify_capture(GOLDEN / "errors.mcap", judge="client")
+    [result] = client.results
+    assert result.outcome == "fail" and client.exit_code == 1
+    assert {v.clause for v in result.violations} == {"request-data.types"}
+    assert "--judge client" in result.reproduce
+
+
+def test_coverage_names_verify_for_the_client_clauses() -> None:
+    rows = {r.clause: r for r in coverage(all_cases(), {"client"})}
+    assert rows["request-data.types"].cases == ("verify:client-requests",)
+    assert not gaps(rows.values())

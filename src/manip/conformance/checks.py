@@ -35,7 +35,7 @@ from manip.codecs.lispm_text import decode_lispm
 from manip.codecs.messages import decode_error, decode_reply, decode_request
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import AsyncCondition, ChaosOp, ServerOp
-from manip.spec.model import Level
+from manip.spec.model import Layout, Level
 
 __all__ = [
     "CLOSE_OPCODES",
@@ -44,6 +44,7 @@ __all__ = [
     "Refusal",
     "WirePacket",
     "check_async_packet",
+    "check_client_request",
     "check_description",
     "check_description_entries",
     "check_echo",
@@ -425,6 +426,44 @@ def required_refusal(opcode: int, data: bytes) -> Refusal | None:
             )
         return Refusal("request.data-length", f"{op.name}: {exc.message}", ("BDL", "BVA"))
     return None
+
+
+_MOVE_OPCODES: Final = frozenset(SPEC.request(name).opcode for name in ("move", "straight-move"))
+
+
+def check_client_request(request: WirePacket) -> list[Finding]:
+    """Judge one request as its client built it: a request opcode (0200-0277), and data laid out as the
+    opcode's layout says (words, PDP-11 floats, nothing else; a move's 12 floats).  An opcode the spec
+    does not define is the server's to refuse (request.unknown-opcode), not a client finding."""
+    opcode = request.opcode
+    if not ChaosOp.DAT <= opcode < ChaosOp.DWD:
+        return [
+            Finding.at(
+                request,
+                "request.opcode-range",
+                f"a data packet with opcode {opcode:o} is not a request (8-bit data, 0200-0277)",
+                expected="a request opcode, 0200-0277",
+            )
+        ]
+    op = SPEC.requests.get(opcode)
+    refusal = None if op is None else required_refusal(opcode, request.data)
+    if op is None or refusal is None:
+        return []
+    clause = "move.transform-data" if opcode in _MOVE_OPCODES else "request-data.types"
+    return [
+        Finding.at(
+            request,
+            clause,
+            f"request #{request.packet_no}: {refusal.reason}",
+            expected=f"{op.name} data as its layout says ({_layout_size(op.request)})",
+            actual=f"{len(request.data)} data bytes",
+        )
+    ]
+
+
+def _layout_size(layout: Layout) -> str:
+    size = layout.fixed_size
+    return "no data" if size == 0 else f"{size} bytes" if size is not None else "a variable length"
 
 
 def check_reply(request: WirePacket, answer: Sequence[WirePacket]) -> list[Finding]:

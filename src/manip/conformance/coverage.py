@@ -2,8 +2,9 @@
 
 Scope (erratum ``conformance-scope``): a server run can observe what binds the server, what binds both
 parties, and the links it runs over, so a MUST clause of party ``server``, ``both`` or ``link`` with no
-case is a gap.  Clauses of party ``client`` are for a client suite, and ``cougar``/``puma`` ones for the
-Cougar target (``--cougar``); they are listed, and count as gaps only when their party is asked for.
+case is a gap.  Clauses of party ``client`` are judged from recordings of a client
+(``manip-conform verify --judge client``; listed as ``verify:FAMILY``), and ``cougar``/``puma`` ones by
+the Cougar target (``--cougar``); they are listed, and count as gaps only when their party is asked for.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from dataclasses import dataclass
 from typing import Final
 
 from manip.conformance.case import Case
+from manip.conformance.verify import CLIENT_FAMILIES
 from manip.spec import SPEC
 
 __all__ = ["DEFAULT_PARTIES", "ClauseCoverage", "coverage", "gaps"]
@@ -40,6 +42,9 @@ def coverage(cases: Sequence[Case], parties: Iterable[str] = DEFAULT_PARTIES) ->
     for item in cases:
         for clause in item.clauses:
             by_clause[clause].append(item.id)
+    for family in CLIENT_FAMILIES:  # judged offline, from a recording of the client
+        for clause in family.clauses:
+            by_clause[clause].append(f"verify:{family.name}")
     return [
         ClauseCoverage(cid, c.level, c.party, tuple(sorted(by_clause[cid])), c.party in scope)
         for cid, c in SPEC.clauses.items()

@@ -25,6 +25,7 @@ import sys
 import traceback
 from collections.abc import Awaitable, Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 from rich.console import Console
@@ -32,6 +33,9 @@ from rich.console import Console
 from manip.conformance.embedded import EmbeddedServer
 from manip.conformance.report import failure_text, write_json, write_junit
 from manip.conformance.results import ExitCode, RunReport
+
+if TYPE_CHECKING:
+    from manip.conformance.verify import Judge
 from manip.links import AddressError, parse_address
 from manip.links.api import LinkWrapper
 from manip.reference_server import WRIST_OPERATIONS, FaultSet, ServerConfig
@@ -144,6 +148,13 @@ _file_argument = click.argument("file", type=click.Path(exists=True, dir_okay=Fa
 @_file_argument
 @_session_option
 @click.option("--strict", is_flag=True, help="SHOULD failures count (without it they are warnings).")
+@click.option(
+    "--judge",
+    type=click.Choice(["server", "client", "both"]),
+    default="server",
+    show_default=True,
+    help="Whose side of each session to judge: the server's answers, the client's requests, or both.",
+)
 @json_option
 @junit_option
 @click.option("-q", "--quiet", is_flag=True, help="Failures and the summary only.")
@@ -151,18 +162,20 @@ def verify_command(
     file: Path,
     sessions: tuple[int, ...],
     strict: bool,
+    judge: Judge,
     json_path: Path | None,
     junit_path: Path | None,
     quiet: bool,
 ) -> None:
     """Judge a recorded capture FILE offline with the suite's checks (request-number echo, reply
-    shapes, error strings, asynchronous rules, describe-self...), citing clauses."""
+    shapes, error strings, asynchronous rules, describe-self...), citing clauses; with --judge client,
+    the client's requests instead (opcodes, data layouts)."""
     from manip.conformance.verify import verify_capture  # noqa: PLC0415
 
     console = Console(highlight=False)
     command = shlex.join(["manip-conform", *sys.argv[1:]])
     try:
-        report = verify_capture(file, strict=strict, sessions=sessions, command=command)
+        report = verify_capture(file, strict=strict, sessions=sessions, command=command, judge=judge)
     except Exception as exc:
         console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {exc}")
         console.print(traceback.format_exc(), markup=False, highlight=False)

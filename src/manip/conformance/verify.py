@@ -17,7 +17,10 @@ The findings are sorted into :data:`FAMILIES` (initial response, request numbers
 request, reply shapes, refusals, error strings, asynchronous responses, describe-self, segments, fatal
 close, free joint); each family of each session is one result ``verify.session-N.FAMILY`` of the
 suite's report, with its clauses and level: ``pass``, ``fail`` (a MUST clause broke; a SHOULD one too
-with ``--strict``), ``warn``, or ``skip`` when the recording does not exercise it.  The report and the
+with ``--strict``), ``warn``, or ``skip`` when the recording does not exercise it.  That judges the
+server.  ``--judge client`` judges the client instead (:data:`CLIENT_FAMILIES`: every request a request
+opcode, its data laid out as the opcode's layout says), ``--judge both`` both sides; a recording of the
+suite itself is no client to judge, as it sends malformed requests on purpose.  The report and the
 exit codes are the suite's (erratum ``verify-exit-codes``): 0 conformant, 1 not, 2 usage, 3 the
 capture cannot be read (damaged, truncated: ``manip-capture recover`` first) or holds no session,
 4 internal error.  A result's ``deadline`` is a nominal second (offline checks have no deadline).
@@ -28,9 +31,9 @@ from __future__ import annotations
 import os
 import shlex
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, Literal
 
 from manip.captures import Session
 from manip.conformance.capture_report import capture_report, open_capture, select_sessions
@@ -39,6 +42,7 @@ from manip.conformance.checks import (
     CLOSE_OPCODES,
     Finding,
     WirePacket,
+    check_client_request,
     check_transcript,
     describe,
     required_refusal,
@@ -49,9 +53,12 @@ from manip.spec.constants import ChaosOp, ServerOp
 from manip.spec.model import Hazard, Level
 
 __all__ = [
+    "CLIENT_FAMILIES",
     "FAMILIES",
+    "JUDGED",
     "VERIFY_DEADLINE",
     "Family",
+    "Judge",
     "family_of",
     "fatal_close_findings",
     "judge_findings",
@@ -239,7 +246,22 @@ FAMILIES: Final[tuple[Family, ...]] = (
         _asks_op("free-joint"),
     ),
 )
-_BY_CLAUSE: Final = {clause: f for f in FAMILIES for clause in f.clauses}
+CLIENT_FAMILIES: Final[tuple[Family, ...]] = (
+    Family(
+        "client-requests",
+        "requests as the client built them: request opcodes, data by the opcode's layout",
+        ("request.opcode-range", "request-data.types", "move.transform-data"),
+        lambda packets, _initial: bool(_requests(packets)),
+    ),
+)
+"""What ``--judge client`` reports: the client's side of each session."""
+Judge = Literal["server", "client", "both"]
+JUDGED: Final[Mapping[str, tuple[Family, ...]]] = {
+    "server": FAMILIES,
+    "client": CLIENT_FAMILIES,
+    "both": FAMILIES + CLIENT_FAMILIES,
+}
+_BY_CLAUSE: Final = {clause: f for f in FAMILIES + CLIENT_FAMILIES for clause in f.clauses}
 _PREFIX_FAMILY: Final = {
     "connect": "initial-response",
     "error-string": "error-strings",
@@ -285,13 +307,15 @@ def fatal_close_findings(packets: Sequence[WirePacket]) -> list[Finding]:
 
 
 def judge_session(session: Session, connection: int = 0) -> tuple[list[WirePacket], list[Finding]]:
-    """The session's packets and every finding about them."""
+    """The session's packets and every finding about them (the server's and the client's)."""
     packets = wire_packets(session, connection)
     rfc = rfc_number(session)
     complete = any(p.is_close for p in packets)
     findings = check_transcript(packets, rfc_packet_no=rfc, expect_initial=rfc is not None, complete=complete)
     if not any(f.clause == "error.fatal-then-close" for f in findings):
         findings += fatal_close_findings(packets)
+    for request in _requests(packets):
+        findings += check_client_request(request)
     return packets, findings
 
 
@@ -324,8 +348,10 @@ def verify_capture(
     strict: bool = False,
     sessions: Sequence[int] = (),
     command: str = "",
+    judge: Judge = "server",
 ) -> RunReport:
-    """Judge every session of the capture (or those numbered in ``sessions``, 1-based).
+    """Judge every session of the capture (or those numbered in ``sessions``, 1-based): the server's
+    side, the client's (``judge="client"``) or both.
 
     An unreadable capture, or one without the sessions asked for, gives a report with ``unreachable``
     set (exit 3) and the reason in ``problems``."""
@@ -334,7 +360,7 @@ def verify_capture(
         os.fspath(path),
         embedded=False,
         strict=strict,
-        options={"mode": "verify", "capture": os.fspath(path), "sessions": list(sessions)},
+        options={"mode": "verify", "capture": os.fspath(path), "sessions": list(sessions), "judge": judge},
         command=command or shlex.join(["manip-conform", "verify", os.fspath(path)]),
     )
     capture = open_capture(path, report)
@@ -342,6 +368,7 @@ def verify_capture(
     if capture is None or report.unreachable:
         report.duration = time.monotonic() - t0
         return report
+    families = JUDGED[judge]
     for number, session in chosen:
         start = time.monotonic()
         packets, findings = judge_session(session, connection=number - 1)
@@ -350,8 +377,8 @@ def verify_capture(
         for f in findings:
             by_family.setdefault(family_of(f.clause).name, []).append(f)
         hazard = session_hazard(packets)
-        elapsed = (time.monotonic() - start) / len(FAMILIES)
-        for family in FAMILIES:
+        elapsed = (time.monotonic() - start) / len(families)
+        for family in families:
             result = CaseResult(
                 id=f"verify.session-{number}.{family.name}",
                 clauses=tuple(c for c in family.clauses if c in SPEC.clauses),
@@ -367,6 +394,7 @@ def verify_capture(
                 reproduce=shlex.join(
                     ["manip-conform", "verify", os.fspath(path), "--session", str(number)]
                     + (["--strict"] if strict else [])
+                    + ([] if judge == "server" else ["--judge", judge])
                 ),
             )
             if result.outcome == "skip":
