@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from mcap.reader import make_reader
 
 from manip.captures import read_capture, read_session
+from manip.captures.cli import main as capture_main
 from manip.decode.cli import main as decode_main
 from manip.spec import SPEC
 
@@ -92,3 +95,23 @@ def test_generated_capture_docs_are_current() -> None:
     spec.loader.exec_module(module)
     current = (ROOT / "docs" / "captures.md").read_text()
     assert current == module.render(), "run: python tools/gen_capture_docs.py"
+
+
+def test_info_json_gives_the_recorded_view_of_every_packet() -> None:
+    path = GOLDEN / "motion.mcap"
+    result = CliRunner().invoke(capture_main, ["info", str(path), "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    stored = {
+        message.sequence: json.loads(message.data)
+        for _, channel, message in make_reader(path.open("rb")).iter_messages()
+        if channel.topic in ("/manip/c2s", "/manip/s2c")
+    }
+    assert (
+        len(data["packets"]) == len(stored) == data["channels"]["/chaos/c2s"] + data["channels"]["/chaos/s2c"]
+    )
+    for packet in data["packets"]:  # the reader's annotation is the recorder's, field for field
+        assert {k: v for k, v in packet.items() if k != "time_ns"} == stored[packet["seq"]]
+    [session] = data["sessions"]
+    assert session["answered"] == session["pairs"] and session["events"][-1]["event"] == "cls"
+    assert data["metadata"]["manip.capture"]["tool"] == "manip"

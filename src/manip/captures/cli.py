@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import signal
 import sys
 
 import click
 
-from .listing import info_lines
+from .listing import info_json, info_lines
 from .proxy import Endpoint, parse_endpoint, start_proxy
 from .reader import read_capture
 from .recorder import COMPRESSIONS, DEFAULT_FLUSH_INTERVAL, CaptureError, Recorder
@@ -125,13 +126,17 @@ async def _record(
 @main.command()
 @click.argument("capture", type=click.Path(exists=True, dir_okay=False))
 @click.option("--packets/--no-packets", default=True, help="List every packet.")
-def info(capture: str, packets: bool) -> None:
+@click.option("--json", "as_json", is_flag=True, help="One JSON document (each packet as its decoded view).")
+def info(capture: str, packets: bool, as_json: bool) -> None:
     """List a capture: metadata, channels, time span, links, sessions, one line per packet."""
     try:
         cap = read_capture(capture)
     except CaptureError as exc:
         click.echo(f"manip-capture: {exc}", err=True)
         sys.exit(1)
+    if as_json:
+        click.echo(json.dumps(info_json(cap, packets=packets), indent=1))
+        return
     for line in info_lines(cap, packets=packets):
         click.echo(line)
 

@@ -1,7 +1,9 @@
-"""A readable listing of a capture (``manip-capture info``): header, channels, sessions, one line a packet."""
+"""A readable listing of a capture (``manip-capture info``): header, channels, sessions, one line a packet;
+and the same as one JSON document (``--json``), each packet as its decoded view."""
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from collections.abc import Iterator
@@ -10,7 +12,7 @@ from typing import Any
 from manip.spec import SPEC
 
 from .reader import Capture, CapturedPacket
-from .view import opcode_name
+from .view import opcode_name, view_bytes
 
 
 def _value(v: Any) -> str:
@@ -78,6 +80,58 @@ def _iso(ns: int) -> str:
     return time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(ns / 1e9)) + f".{ns % 1_000_000_000 // 1000:06d}Z"
 
 
+def _session_events(events: list[Any]) -> str:
+    return ", ".join(
+        f"{e.event}({e.fields['reason']!r})" if "reason" in e.fields else e.event for e in events
+    )
+
+
+def packet_view(p: CapturedPacket) -> dict[str, Any]:
+    """A packet as the ``/manip/c2s|s2c`` view holds it, with its time."""
+    nbytes = len(p.packet.data) if p.packet is not None else len(p.frame)
+    view: dict[str, Any] = json.loads(view_bytes(p.annotation, p.link, p.direction, p.seq, p.packet, nbytes))
+    return {"time_ns": p.time_ns, **view}
+
+
+def info_json(capture: Capture, *, packets: bool = True) -> dict[str, Any]:
+    """The ``manip-capture info --json`` document: what :func:`info_lines` lists, as data."""
+    sessions = []
+    for s in capture.sessions:
+        c2s = len(s.client_packets)
+        pairs = s.pairs
+        sessions.append(
+            {
+                "conn": s.conn,
+                "link": s.link,
+                "contact": s.contact,
+                "packets": len(s.packets),
+                "c2s": c2s,
+                "s2c": len(s.packets) - c2s,
+                "requests": len(s.requests),
+                "pairs": len(pairs),
+                "answered": sum(1 for p in pairs.values() if p.complete),
+                "events": [{"time_ns": e.time_ns, "event": e.event, **e.fields} for e in s.events],
+            }
+        )
+    out: dict[str, Any] = {
+        "capture": capture.path,
+        "bytes": os.path.getsize(capture.path) if os.path.exists(capture.path) else 0,
+        "profile": capture.profile,
+        "library": capture.library,
+        "metadata": capture.metadata,
+        "start_ns": capture.start_ns,
+        "end_ns": capture.end_ns,
+        "channels": dict(sorted(capture.counts.items())),
+        "links": [{"id": k.id, "framing": k.framing, "name": k.name} for k in capture.links.values()],
+        "events": [{"time_ns": e.time_ns, "event": e.event, **e.fields} for e in capture.events],
+        "sessions": sessions,
+        "bad_frames": len(capture.bad_frames),
+    }
+    if packets:
+        out["packets"] = [packet_view(p) for p in [*capture.packets, *capture.bad_frames]]
+    return out
+
+
 def info_lines(capture: Capture, *, packets: bool = True) -> Iterator[str]:
     """The ``manip-capture info`` listing."""
     size = os.path.getsize(capture.path) if os.path.exists(capture.path) else 0
@@ -102,9 +156,7 @@ def info_lines(capture: Capture, *, packets: bool = True) -> Iterator[str]:
         c2s = len(s.client_packets)
         pairs = s.pairs
         done = sum(1 for p in pairs.values() if p.complete)
-        events = ", ".join(
-            f"{e.event}({e.fields['reason']!r})" if "reason" in e.fields else e.event for e in s.events
-        )
+        events = _session_events(s.events)
         yield (
             f"  C{s.conn} on L{s.link}, contact {s.contact!r}: {len(s.packets)} packets "
             f"({c2s} c2s, {len(s.packets) - c2s} s2c), {len(s.requests)} requests, "
