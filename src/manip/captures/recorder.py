@@ -253,8 +253,9 @@ class Recorder:
         self.event("recording-started")
         self._arm_timer()
 
-    def __repr__(self) -> str:
-        return f"<Recorder {self.path or self._stream!r} {sum(self.counts.values())} messages>"
+    def __repr__(self) -> str:  # no draining here: looking at a recorder must not write to its file
+        waiting = f", {len(self._batch)} frames waiting" if self._batch else ""
+        return f"<Recorder {self.path or self._stream!r} {sum(self._counts.values())} messages{waiting}>"
 
     @property
     def counts(self) -> Counter[str]:
