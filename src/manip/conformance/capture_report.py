@@ -37,14 +37,12 @@ def select_sessions(
     is nothing to judge."""
     numbered = list(enumerate(sessions, start=1))
     if not numbered:
-        report.unreachable = report.capture_unusable = True
-        report.problems.append("the capture holds no session (no Chaos connection was recorded)")
+        report.capture_problem("the capture holds no session (no Chaos connection was recorded)")
         return []
     if wanted:
         missing = [n for n in wanted if not 1 <= n <= len(numbered)]
         if missing:
-            report.unreachable = report.capture_unusable = True
-            report.problems.append(
+            report.capture_problem(
                 f"no session {', '.join(map(str, missing))} in the capture (it has {len(numbered)})"
             )
             return []
@@ -57,8 +55,7 @@ def open_capture(path: str | os.PathLike[str], report: RunReport) -> Capture | N
     try:
         return read_capture(path)
     except CaptureError as exc:
-        report.unreachable = report.capture_unusable = True
-        report.problems.append(f"the capture cannot be read: {exc}")
+        report.capture_problem(f"the capture cannot be read: {exc}")
         return None
 
 

@@ -120,6 +120,11 @@ class RunReport:
     capture_unusable: bool = False
     """With ``unreachable``: what failed was the capture a replay or verify reads, not the target."""
 
+    def capture_problem(self, problem: str) -> None:
+        """The capture cannot be used (unreadable, or without the sessions asked for): exit 3."""
+        self.unreachable = self.capture_unusable = True
+        self.problems.append(problem)
+
     def counts(self) -> dict[str, int]:
         counter: Counter[str] = Counter(r.outcome for r in self.results)
         return {name: counter[name] for name in OUTCOMES}
