@@ -11,7 +11,7 @@ from typing import Any
 
 from manip.spec import SPEC
 
-from .reader import Capture, CapturedPacket
+from .reader import Capture, CapturedEvent, CapturedPacket, Session
 from .view import opcode_name, view_bytes
 
 
@@ -80,10 +80,31 @@ def _iso(ns: int) -> str:
     return time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(ns / 1e9)) + f".{ns % 1_000_000_000 // 1000:06d}Z"
 
 
-def _session_events(events: list[Any]) -> str:
+def _session_events(events: list[CapturedEvent]) -> str:
     return ", ".join(
         f"{e.event}({e.fields['reason']!r})" if "reason" in e.fields else e.event for e in events
     )
+
+
+def _session_summary(s: Session) -> dict[str, Any]:
+    """What the listing says of a session, for the text and the JSON alike."""
+    c2s = len(s.client_packets)
+    pairs = s.pairs
+    return {
+        "conn": s.conn,
+        "link": s.link,
+        "contact": s.contact,
+        "packets": len(s.packets),
+        "c2s": c2s,
+        "s2c": len(s.packets) - c2s,
+        "requests": len(s.requests),
+        "pairs": len(pairs),
+        "answered": sum(1 for p in pairs.values() if p.complete),
+    }
+
+
+def _event_json(e: CapturedEvent) -> dict[str, Any]:
+    return {"time_ns": e.time_ns, "event": e.event, **e.fields}
 
 
 def packet_view(p: CapturedPacket) -> dict[str, Any]:
@@ -95,24 +116,9 @@ def packet_view(p: CapturedPacket) -> dict[str, Any]:
 
 def info_json(capture: Capture, *, packets: bool = True) -> dict[str, Any]:
     """The ``manip-capture info --json`` document: what :func:`info_lines` lists, as data."""
-    sessions = []
-    for s in capture.sessions:
-        c2s = len(s.client_packets)
-        pairs = s.pairs
-        sessions.append(
-            {
-                "conn": s.conn,
-                "link": s.link,
-                "contact": s.contact,
-                "packets": len(s.packets),
-                "c2s": c2s,
-                "s2c": len(s.packets) - c2s,
-                "requests": len(s.requests),
-                "pairs": len(pairs),
-                "answered": sum(1 for p in pairs.values() if p.complete),
-                "events": [{"time_ns": e.time_ns, "event": e.event, **e.fields} for e in s.events],
-            }
-        )
+    sessions = [
+        {**_session_summary(s), "events": [_event_json(e) for e in s.events]} for s in capture.sessions
+    ]
     out: dict[str, Any] = {
         "capture": capture.path,
         "bytes": os.path.getsize(capture.path) if os.path.exists(capture.path) else 0,
@@ -123,7 +129,7 @@ def info_json(capture: Capture, *, packets: bool = True) -> dict[str, Any]:
         "end_ns": capture.end_ns,
         "channels": dict(sorted(capture.counts.items())),
         "links": [{"id": k.id, "framing": k.framing, "name": k.name} for k in capture.links.values()],
-        "events": [{"time_ns": e.time_ns, "event": e.event, **e.fields} for e in capture.events],
+        "events": [_event_json(e) for e in capture.events],
         "sessions": sessions,
         "bad_frames": len(capture.bad_frames),
     }
@@ -153,14 +159,11 @@ def info_lines(capture: Capture, *, packets: bool = True) -> Iterator[str]:
         yield f"  {(event.time_ns - start) / 1e9:11.6f}  {event.event} {detail}".rstrip()
     yield f"sessions: {len(capture.sessions)}"
     for s in capture.sessions:
-        c2s = len(s.client_packets)
-        pairs = s.pairs
-        done = sum(1 for p in pairs.values() if p.complete)
-        events = _session_events(s.events)
+        n = _session_summary(s)
         yield (
-            f"  C{s.conn} on L{s.link}, contact {s.contact!r}: {len(s.packets)} packets "
-            f"({c2s} c2s, {len(s.packets) - c2s} s2c), {len(s.requests)} requests, "
-            f"{len(pairs)} pairs ({done} answered); {events}"
+            f"  C{n['conn']} on L{n['link']}, contact {n['contact']!r}: {n['packets']} packets "
+            f"({n['c2s']} c2s, {n['s2c']} s2c), {n['requests']} requests, "
+            f"{n['pairs']} pairs ({n['answered']} answered); {_session_events(s.events)}"
         )
     if capture.bad_frames:
         yield f"bad frames: {len(capture.bad_frames)}"
