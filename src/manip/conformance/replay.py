@@ -335,9 +335,7 @@ def _answer_time(request: WirePacket | None, options: ReplayOptions) -> float:
     """Seconds to wait for the answer to ``request``: the reply timeout, or longer for a request whose
     answer waits for the arm (the spec's ``answer_within``, e.g. calibrate-wrist)."""
     op = SPEC.requests.get(request.opcode) if request is not None else None
-    if op is None or op.answer_within is None:
-        return options.reply_timeout
-    return max(options.reply_timeout, op.answer_within)
+    return options.reply_timeout if op is None else op.answer_time(options.reply_timeout)
 
 
 async def _connect(address: str, options: ReplayOptions) -> ChaosConnection:

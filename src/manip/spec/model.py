@@ -90,6 +90,13 @@ class RequestOpcode:
     """Seconds a server may take to answer because the answer waits for the arm (None: no such wait,
     the answer comes as soon as the request is processed)."""
 
+    def answer_time(self, reply_timeout: float, scale: float = 1.0) -> float:
+        """How long to wait for the answer: ``reply_timeout``, or ``answer_within`` (times ``scale``)
+        when the answer waits for the arm and that is longer."""
+        if self.answer_within is None:
+            return reply_timeout
+        return max(reply_timeout, self.answer_within * scale)
+
 
 @dataclass(frozen=True, slots=True)
 class ServerOpcode:

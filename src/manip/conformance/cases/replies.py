@@ -54,14 +54,13 @@ def opcode_clauses(op: RequestOpcode) -> tuple[str, ...]:
 
 
 def _make(op: RequestOpcode) -> None:
-    slow = op.answer_within  # a reply that waits for the arm gets the time the spec allows it
-
     async def reply_shape(ctx: CaseContext) -> None:
         probe = await ctx.connect()
         if op.hazard in ("motion", "power") or op.name == "hand":
             await power_on(ctx, probe)
         values = await valid_values(ctx, probe, op)
-        timeout = None if slow is None else max(slow * ctx.options.deadline_scale, ctx.options.reply_timeout)
+        # a reply that waits for the arm gets the time the spec allows it
+        timeout = op.answer_time(ctx.options.reply_timeout, ctx.options.deadline_scale)
         answer = await probe.call(op.name, timeout=timeout, **values)
         error = error_of(answer)
         if error is not None:
@@ -85,7 +84,7 @@ def _make(op: RequestOpcode) -> None:
         f"server.reply.{op.name}",
         clauses=opcode_clauses(op),
         hazard=op.hazard,
-        deadline=10.0 + (slow or 0.0),
+        deadline=10.0 + (op.answer_within or 0.0),
     )(reply_shape)
 
 
