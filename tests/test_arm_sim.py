@@ -139,6 +139,21 @@ def test_requests_must_not_be_older_than_the_last_servo_cycle() -> None:
         arm.move_joints(GOAL, 0.5)
 
 
+@pytest.mark.parametrize("moving", [False, True])
+def test_a_request_at_the_instant_of_a_cycle_is_served_whatever_the_rounding(moving: bool) -> None:
+    # A virtual clock lands on cycle k exactly, but computes "now" with other rounding than the arm's
+    # epoch + k * TICK: the cycle then falls a few ulps after now and must not count as later.
+    arm = _arm()
+    if moving:
+        arm.move_joints(GOAL, 0.0)
+    k = 227
+    now = math.nextafter(k * TICK, 0.0) - 4e-14
+    assert now < k * TICK
+    arm.tick(now)
+    assert arm.time <= now
+    assert arm.move_joints(GOAL, now) > 0
+
+
 def test_idle_cycles_are_skipped() -> None:
     arm = _arm()
     started = time.perf_counter()

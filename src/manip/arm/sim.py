@@ -592,6 +592,10 @@ class ArmSim:
             t = self._epoch + self._cycle * h
             if t > now + _EPS * h:
                 return events
+            # A cycle due within rounding after ``now`` runs at ``now``: a request served at that same
+            # instant must not find the servo ahead of it (clocks that land on the tick exactly, such
+            # as a virtual one, compute ``now`` and ``t`` with different rounding).
+            t = min(t, now)
             self._cycle += 1
             self._clock = t
             self._servo(t, events)
