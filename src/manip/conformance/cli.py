@@ -20,7 +20,6 @@ subcommands (``replay``, ``verify``) added by other modules: they register on :d
 
 from __future__ import annotations
 
-import asyncio
 import json
 import os
 import shlex
@@ -40,7 +39,7 @@ from manip.conformance.case import Case, all_cases
 from manip.conformance.context import DEFAULT_REPLY_TIMEOUT, RunOptions
 from manip.conformance.cougar_target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.coverage import DEFAULT_PARTIES, coverage, gaps
-from manip.conformance.embedded import EmbeddedServer
+from manip.conformance.embedded import EmbeddedServer, simulated_server
 from manip.conformance.replay_cli import (
     check_record_path,
     json_option,
@@ -53,7 +52,8 @@ from manip.conformance.report import failure_text, write_json, write_junit
 from manip.conformance.results import CaseResult, ExitCode, LivenessCheck, RunReport
 from manip.conformance.runner import RunConfig, RunEvents, Runner
 from manip.conformance.selection import PatternError, PatternSet
-from manip.links import AddressError, parse_address
+from manip.conformance.stability import instability, repeat_seeds
+from manip.links import AddressError, parse_address, virtual_clock
 from manip.reference_server import FaultSet, ServerConfig
 
 __all__ = ["main"]
@@ -175,6 +175,25 @@ def main() -> None:
     help="Record every Chaos connection of the run (client side) to an MCAP capture FILE "
     "(judge it with: manip-conform verify FILE).",
 )
+@click.option(
+    "--time",
+    "time_mode",
+    type=click.Choice(["virtual", "real"]),
+    default=None,
+    help="virtual (the default without HOST): the embedded server and the suite share one simulated "
+    "clock that skips idle time; the same seed gives the same verdict and the same packets.  real (the "
+    "default, and the only mode, with HOST): wall-clock time, the embedded server on its own thread.",
+)
+@click.option(
+    "--repeat",
+    type=click.IntRange(1),
+    default=1,
+    show_default=True,
+    metavar="N",
+    help="A stability gate: run the selection with N seeds (--seed first, then seeds derived from it) "
+    "and once more with the first; a case whose verdict changes between seeds, or between the two runs "
+    "of one seed (in virtual time: whose packets change), is a problem of the suite: exit 4.",
+)
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar; failures and the summary only.")
 def run(
     host: str | None,
@@ -195,6 +214,8 @@ def run(
     cougar: str | None,
     cougar_faults: tuple[str, ...],
     record: Path | None,
+    time_mode: str | None,
+    repeat: int,
     quiet: bool,
 ) -> None:
     """Run the suite against HOST (a link address: tcp://HOST:PORT, chudp://HOST:PORT?addr=OCTAL,
@@ -228,6 +249,15 @@ def run(
         address = "" if target.embedded else target.url
     if record is not None and target is not None:
         raise click.UsageError("--record records Chaos connections: not with --cougar")
+    if record is not None and repeat > 1:
+        raise click.UsageError("--record records one run: not with --repeat")
+    simulated = not host and target is None
+    if time_mode == "virtual" and not simulated:
+        raise click.UsageError(
+            "--time virtual needs the embedded reference server (no HOST, no --cougar): "
+            "another target keeps its own clock"
+        )
+    virtual = simulated and time_mode != "real"
     check_record_path(record)
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "big")
@@ -253,6 +283,8 @@ def run(
         extra += ["--target", "hardware"] + (["--allow-motion"] if allow_motion else [])
     for fault in server_faults:
         extra += ["--server-fault", fault]
+    if simulated and not virtual:
+        extra += ["--time", "real"]
     config = RunConfig(
         address=address,
         options=options,
@@ -261,6 +293,7 @@ def run(
         skip=skip_set,
         known_failing=known_set,
         embedded=not host if target is None else target.embedded,
+        virtual_time=virtual,
         reproduce_options=extra,
         command=shlex.join(["manip-conform", *sys.argv[1:]]),
     )
@@ -268,11 +301,14 @@ def run(
         config.reproduce_prefix = target.reproduce_prefix()
         config.liveness_check = liveness_check
     console.print(f"manip-conform: seed [bold]{seed}[/] (rerun with --seed {seed})")
-    holder: dict[str, Runner] = {}
-    with recording(record, how="manip-conform run (client side)", seed=seed) as wrap:
-        config.wrap_link = wrap
-        code = _execute(config, cases, config_faults, holder, console, quiet, cougar=target)
-    report = holder["runner"].report if "runner" in holder else None
+    if repeat > 1:
+        report, code = _repeat(config, cases, config_faults, console, quiet, target, repeat)
+    else:
+        holder: dict[str, Runner] = {}
+        with recording(record, how="manip-conform run (client side)", seed=seed) as wrap:
+            config.wrap_link = wrap
+            code = _execute(config, cases, config_faults, holder, console, quiet, cougar=target)
+        report = holder["runner"].report if "runner" in holder else None
     if report is not None:
         if code == ExitCode.INTERNAL and not report.interrupted and not report.internal_error:
             report.internal_error = "internal error"
@@ -283,6 +319,50 @@ def run(
         _summary(console, report)
         code = int(report.exit_code) if code is None else code
     sys.exit(int(code) if code is not None else int(ExitCode.INTERNAL))
+
+
+def _repeat(
+    config: RunConfig,
+    cases: Sequence[Case],
+    faults: Any,
+    console: Console,
+    quiet: bool,
+    cougar: CougarTarget | None,
+    runs: int,
+) -> tuple[RunReport | None, int | None]:
+    """``--repeat``: the selection with ``runs`` seeds, then the first seed again; the first run's report
+    carries what changed between them (:mod:`manip.conformance.stability`)."""
+    seeds = repeat_seeds(config.seed, runs)
+    reports: list[RunReport] = []
+    worst: int | None = None
+    for number, seed in enumerate([*seeds, seeds[0]], start=1):
+        holder: dict[str, Runner] = {}
+        run_config = replace(config, seed=seed, options=replace(config.options))
+        code = _execute(run_config, cases, faults, holder, console, True, cougar=cougar)
+        if "runner" not in holder:
+            return None, code
+        report = holder["runner"].report
+        reports.append(report)
+        if code is not None or report.interrupted:
+            return reports[0], code
+        again = " (its seed again)" if number == len(seeds) + 1 else ""
+        console.print(
+            f"run {number}/{len(seeds) + 1}{again}: {report.verdict}, {_counts_text(report)}"
+            f" in {report.duration:.1f} s; seed {seed}",
+            markup=False,
+        )
+        worst = max(worst or 0, int(report.exit_code))
+    first = reports[0]
+    first.unstable = instability(reports, compare_packets=config.virtual_time)
+    if not first.unstable and worst and worst > int(first.exit_code):
+        first.problems.append(f"a repeated run was {ExitCode(worst).name.lower().replace('_', '-')}")
+    if not quiet:
+        console.print(f"{len(reports)} runs, {len(first.unstable)} stability problem(s)", markup=False)
+    return first, None
+
+
+def _counts_text(report: RunReport) -> str:
+    return ", ".join(f"{v} {k}" for k, v in report.counts().items() if v) or "no cases"
 
 
 def _execute(
@@ -296,7 +376,9 @@ def _execute(
 ) -> int | None:
     """Run; None means "use the report's exit code"."""
     try:
-        asyncio.run(_run_async(config, cases, faults, holder, console, quiet, cougar))
+        virtual_clock.run(
+            _run_async(config, cases, faults, holder, console, quiet, cougar), virtual=config.virtual_time
+        )
     except KeyboardInterrupt:
         if "runner" in holder:
             holder["runner"].report.interrupted = True
@@ -338,6 +420,15 @@ async def _run_async(
         return
     server_config = ServerConfig() if faults is None else ServerConfig(faults=faults)
     # The embedded robot has the simulated Cougar wrist, so the wrist opcodes are checked too.
+    if config.virtual_time:
+        async with simulated_server(
+            server_config, seed=config.seed, wrist=True, broken_after=config.options.broken_after
+        ) as address:
+            config.address = address
+            config.options = replace(config.options, address=address)
+            console.print("embedded reference server in virtual time (with the simulated Cougar wrist)")
+            await _run_with(config, cases, holder, console, quiet)
+        return
     with EmbeddedServer(server_config, wrist=True, broken_after=config.options.broken_after) as address:
         config.address = address
         config.options = replace(config.options, address=address)
@@ -397,11 +488,14 @@ def _summary(console: Console, report: RunReport) -> None:
     parts = [f"[{_STYLE[k]}]{v} {k}[/]" for k, v in counts.items() if v]
     for problem in report.problems:
         console.print(f"[bold red]problem[/]: {problem}")
+    for problem in report.unstable:
+        console.print(f"[bold magenta]unstable[/]: {problem}")
     verdict_style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
     shown = ", ".join(parts) or "no cases"
     console.print(
         f"[{verdict_style}]{report.verdict}[/] (exit {int(report.exit_code)}): {shown}"
         f" in {report.duration:.1f} s; seed {report.seed}"
+        + ("; virtual time" if report.time == "virtual" else "")
     )
     slow = [r for r in report.results if r.deadline and r.duration > 0.8 * r.deadline]
     for r in slow:

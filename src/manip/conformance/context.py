@@ -39,8 +39,10 @@ from collections.abc import Awaitable, Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, Final, Literal, NoReturn
 
+from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request, request_op
 from manip.codecs.packet import Packet
+from manip.codecs.pdp11float import unpack_f
 from manip.conformance.case import LEVEL_ORDER, CaseFailure, CaseSkipped
 from manip.conformance.checks import ANSWER_OPCODES, Finding, WirePacket, describe, word
 from manip.links import ChaosConnection, ChaosError, ConnectionClosed, ConnectionLost
@@ -164,6 +166,13 @@ class Probe:
         self.rfc_packet_no: int | None = None
         self.end_reason: ChaosError | None = None
         self._buffer: list[WirePacket] = []
+        self._unanswered: dict[int, tuple[int, float]] = {}
+        """Requests sent and not yet answered, in order: packet number -> (opcode, the seconds its answer
+        may wait for the arm, 0 for most)."""
+        self._speed = 1.0
+        """The speed factor this connection last set (accepted set-speed-factor)."""
+        self._motion_until = 0.0
+        """When (loop clock) the motion this connection queued may at the latest be done."""
 
     @property
     def closed(self) -> bool:
@@ -186,7 +195,60 @@ class Probe:
         number = await self.conn.send(bytes(data), code)
         ack = 0
         self._record("c2s", code, number, ack, data)
+        self._unanswered[number] = (code, self.arm_wait(code))
         return number
+
+    def arm_wait(self, code: int) -> float:
+        """Seconds the answer to request ``code`` sent now may wait for the arm (erratum
+        ``answer-allowance``): its own ``answer_within`` at the speed factor in force, after the motion
+        still queued before it; 0 for a request whose answer does not wait for the arm."""
+        op = SPEC.requests.get(code)
+        if op is None or op.answer_within is None:
+            return 0.0
+        queued = max(0.0, self._motion_until - self._ctx.clock())
+        return queued + op.answer_within * self._ctx.options.deadline_scale / self._speed
+
+    def _answered(self, number: int, answer: WirePacket) -> None:
+        """Note what an answer tells about the connection's motion queue and speed."""
+        code, _ = self._unanswered.pop(number, (None, 0.0))
+        op = SPEC.requests.get(code) if code is not None else None
+        if op is None or answer.opcode != ServerOp.RESPONSE:
+            return
+        if op.name == "set-speed":
+            sent = self._request(number).data
+            with contextlib.suppress(CodecError):
+                factor = unpack_f(sent[:4])
+                if 0.0 < factor <= 1.0:
+                    self._speed = factor
+        elif op.response.kind == "segment" or (op.hazard == "motion" and op.answer_within is not None):
+            # One more segment in the queue (calibrate-wrist leaves its move back queued).
+            segment = SPEC.segment_within * self._ctx.options.deadline_scale / self._speed
+            self._motion_until = max(self._motion_until, self._ctx.clock()) + segment
+
+    def allowance(self, number: int) -> tuple[float, str]:
+        """How long request ``number`` may wait for its answer, and why (for failure messages).
+
+        Each request gets the reply timeout or, when its answer waits for the arm, the time the arm may
+        take (:meth:`arm_wait`) if longer.  A server answers in order, so the arm waits of the
+        unanswered requests sent before it are added (erratum ``answer-allowance``)."""
+        options = self._ctx.options
+        code, wait = self._unanswered.get(number, (None, 0.0))
+        own = max(options.reply_timeout, wait)
+        name = SPEC.requests[code].name if code is not None and code in SPEC.requests else "the request"
+        parts = [
+            f"{own:g} s "
+            + (f"the arm may take for {name} #{number}" if wait > options.reply_timeout else "reply timeout")
+        ]
+        total = own
+        for earlier, (earlier_code, earlier_wait) in self._unanswered.items():
+            if earlier == number:
+                break
+            if earlier_wait > 0:
+                total += earlier_wait
+                parts.append(
+                    f"{earlier_wait:g} s for {SPEC.requests[earlier_code].name} #{earlier} before it"
+                )
+        return total, " + ".join(parts)
 
     async def send(self, op: int | str, **values: Any) -> int:
         """Encode ``values`` by the spec layout of ``op`` and send the request."""
@@ -234,7 +296,10 @@ class Probe:
 
     async def _next_answer_packet(self, number: int, timeout: float | None, what: str) -> WirePacket:
         loop = asyncio.get_running_loop()
-        wait = self._ctx.options.reply_timeout if timeout is None else timeout
+        if timeout is None:
+            wait, budget = self.allowance(number)
+        else:
+            wait, budget = timeout, "the case's own wait"
         deadline = loop.time() + wait
         while True:
             packet = await self.next_packet(max(0.0, deadline - loop.time()))
@@ -248,13 +313,14 @@ class Probe:
                         kind="closed",
                     )
                 raise CaseFailure(
-                    f"no {what} within {wait:g} s",
+                    f"no {what} within {wait:g} s ({budget})",
                     clause="request.one-reply",
                     expected=f"{what} within {wait:g} s",
                     actual="nothing (timeout)",
                     kind="timeout",
                 )
             if packet.opcode in ANSWER_OPCODES:
+                self._answered(number, packet)
                 return packet
             self.unsolicited.append(packet)
 
@@ -354,15 +420,16 @@ class CaseContext:
         :func:`~manip.conformance.checks.check_transcript`; a case that leaves the protocol on purpose
         (it sends a raw packet the transcript checker would misjudge) sets this False."""
         self._connector = connector
-        self._t0 = time.monotonic()
+        self._clock = _loop_clock()
+        self._t0 = self._clock()
 
     @property
     def max_examples(self) -> int:
         return self.options.max_examples
 
     def clock(self) -> float:
-        """Seconds since the case started."""
-        return time.monotonic() - self._t0
+        """Seconds since the case started, on the event loop's clock (virtual in a simulated run)."""
+        return self._clock() - self._t0
 
     def note(self, text: str) -> None:
         """A line of information for the report (what the case observed)."""
@@ -479,3 +546,11 @@ class CaseContext:
 def request_packets(packets: Sequence[WirePacket]) -> list[WirePacket]:
     """The client's requests of a recording."""
     return [p for p in packets if p.direction == "c2s" and not p.is_close]
+
+
+def _loop_clock() -> Callable[[], float]:
+    """The running loop's clock (the one every deadline uses), or the monotonic clock outside a loop."""
+    try:
+        return asyncio.get_running_loop().time
+    except RuntimeError:
+        return time.monotonic

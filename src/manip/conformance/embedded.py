@@ -1,17 +1,29 @@
-"""The embedded reference server, run on its own thread and event loop.
+"""The embedded reference server: the target of ``manip-conform run`` when no HOST is given.
 
-The suite must judge the target, not share its fate: if the server's simulator spends seconds on one
-request (or loops), a server on the runner's own event loop would freeze the runner and every case
-deadline with it.  On a separate thread the runner keeps its clock (the GIL is handed over every few
-milliseconds), so a stuck server shows up as a failed deadline and a dead liveness probe, exactly as a
-remote server would.
+Two ways to run it, one per time mode:
+
+* **Virtual time** (the default, :func:`simulated_server`): the server runs on the runner's own event
+  loop, a :class:`~manip.links.virtual_clock.VirtualClockLoop`, and listens on a Unix-domain socket in a
+  private temporary directory.  Suite, NCPs, move process and Cougar share one clock that jumps over
+  idle time, and every random choice comes from the run seed: the same seed gives the same verdict and
+  the same bytes on the wire, and a motion of five simulated seconds costs microseconds.  A server that
+  loops forever would freeze the run with it; the reference server is under test elsewhere for that.
+* **Real time** (:class:`EmbeddedServer`): the server runs on its own thread and event loop on a
+  loopback TCP port, so the suite judges it exactly as it judges a remote server: if the simulator
+  spends seconds on one request, the runner keeps its clock (the GIL is handed over every few
+  milliseconds) and a stuck server shows up as a failed deadline and a dead liveness probe.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
+import os
+import random
+import tempfile
 import threading
+from collections.abc import AsyncIterator
 from types import TracebackType
 from typing import Final
 
@@ -20,14 +32,43 @@ from manip.reference_server import ServerConfig
 from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import serve
 
-__all__ = ["EmbeddedServer"]
+__all__ = ["EmbeddedServer", "simulated_server"]
 
 START_TIMEOUT: Final = 10.0
 STOP_TIMEOUT: Final = 5.0
+SOCKET_NAME: Final = "puma.sock"
+
+
+@contextlib.asynccontextmanager
+async def simulated_server(
+    config: ServerConfig | None = None,
+    *,
+    seed: int,
+    wrist: bool = False,
+    broken_after: float | None = None,
+) -> AsyncIterator[str]:
+    """``async with simulated_server(config, seed=...) as address:`` a reference server on this loop.
+
+    The global ``random`` generator is part of the simulated world (connection indices are drawn from
+    it): it is seeded from ``seed`` here, so both ends' indices repeat with the run."""
+    random.seed(seed)
+    options = None if broken_after is None else NcpOptions.breaking_after(broken_after)
+    wrist_factory = functools.partial(make_cougar_wrist, "sim", seed=seed) if wrist else None
+    with tempfile.TemporaryDirectory(prefix="manip-sim-") as directory:
+        path = os.path.join(directory, SOCKET_NAME)
+        async with serve(
+            f"unix://{path}",
+            config or ServerConfig(),
+            seed=seed,
+            wrist_factory=wrist_factory,
+            options=options,
+        ) as server:
+            yield server.address
 
 
 class EmbeddedServer:
-    """``with EmbeddedServer(config) as address:`` runs a reference server on a loopback port."""
+    """``with EmbeddedServer(config) as address:`` runs a reference server on a loopback port, on its own
+    thread, in real time."""
 
     def __init__(
         self,
@@ -41,7 +82,7 @@ class EmbeddedServer:
     ) -> None:
         """``wrist``: give the robot the simulated Cougar wrist, so the wrist opcodes are served (and
         checked) rather than refused with C UIM.  ``broken_after``: the server's broken-connection timer
-        (default the seed's 90 s)."""
+        (default the NCP's 90 s)."""
         self._ncp = None if broken_after is None else NcpOptions.breaking_after(broken_after)
         self._config = config or ServerConfig()
         self._wrist = functools.partial(make_cougar_wrist, "sim", seed=seed) if wrist else None

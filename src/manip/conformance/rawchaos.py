@@ -319,6 +319,10 @@ class RawPeer:
                 if addr.scheme == "tcp":
                     reader, writer = await asyncio.open_connection(addr.host, addr.port)
                     transport = _TcpTransport(addr, reader, writer)
+                elif addr.scheme == "unix":
+                    assert addr.path is not None
+                    reader, writer = await asyncio.open_unix_connection(addr.path)
+                    transport = _TcpTransport(addr, reader, writer)
                 elif addr.scheme == "chudp":
                     udp = _ChudpTransport(addr)
                     await udp.start()

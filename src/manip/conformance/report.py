@@ -78,6 +78,8 @@ def report_json(report: RunReport) -> dict[str, Any]:
         "exit_code": int(report.exit_code),
         "counts": report.counts(),
         "problems": list(report.problems),
+        "time": report.time,
+        "unstable": list(report.unstable),
         "interrupted": report.interrupted,
         "internal_error": report.internal_error,
         "target_died_after": report.target_died_after,

@@ -119,6 +119,12 @@ class RunReport:
     unreachable: bool = False
     capture_unusable: bool = False
     """With ``unreachable``: what failed was the capture a replay or verify reads, not the target."""
+    time: str = "real"
+    """The clock the run used: ``real`` (wall clock) or ``virtual`` (the embedded server simulated on the
+    runner's loop; case durations and packet times are then simulated seconds)."""
+    unstable: list[str] = field(default_factory=list)
+    """Suite problems found by ``--repeat``: cases whose verdict changed between seeds or between two
+    runs of one seed (exit 4: a verdict that depends on the draw cannot be trusted)."""
 
     def capture_problem(self, problem: str) -> None:
         """The capture cannot be used (unreadable, or without the sessions asked for): exit 3."""
@@ -134,7 +140,7 @@ class RunReport:
         counts = self.counts()
         if self.unreachable:
             return ExitCode.UNREACHABLE
-        if self.interrupted or self.internal_error:
+        if self.interrupted or self.internal_error or self.unstable:
             return ExitCode.INTERNAL
         if counts["fail"] or counts["fixed"] or self.problems:
             return ExitCode.NON_CONFORMANT
@@ -149,5 +155,7 @@ class RunReport:
             ExitCode.NON_CONFORMANT: "non-conformant",
             ExitCode.USAGE: "usage error",
             ExitCode.UNREACHABLE: "capture unusable" if self.capture_unusable else "target unreachable",
-            ExitCode.INTERNAL: "interrupted" if self.interrupted else "internal error",
+            ExitCode.INTERNAL: "interrupted"
+            if self.interrupted
+            else ("unstable suite" if self.unstable and not self.internal_error else "internal error"),
         }[self.exit_code]

@@ -75,6 +75,9 @@ class RunConfig:
     skip: PatternSet = field(default_factory=PatternSet)
     known_failing: PatternSet = field(default_factory=PatternSet)
     embedded: bool = False
+    virtual_time: bool = False
+    """The run's event loop is a :class:`~manip.links.virtual_clock.VirtualClockLoop` (the embedded
+    server simulated on the same loop)."""
     reproduce_prefix: Sequence[str] = ("manip-conform", "run")
     """The command a failing case's reproduce line starts with (target and options are appended)."""
     reproduce_options: Sequence[str] = ()
@@ -118,6 +121,7 @@ class Runner:
                 "known_failing": [p.text for p in config.known_failing.patterns],
             },
             command=config.command,
+            time="virtual" if config.virtual_time else "real",
         )
 
     # --------------------------------------------------------------------------------- selection
@@ -298,7 +302,8 @@ class Runner:
             case_id=item.id, level=item.level, seed=result.seed, options=options, connector=self.connect
         )
         failure: CaseFailure | None = None
-        start = time.monotonic()
+        clock = asyncio.get_running_loop().time  # the clock of every deadline (virtual when simulated)
+        start = clock()
         scope: asyncio.Timeout | None = None
         try:
             async with asyncio.timeout(result.deadline) as scope:
@@ -318,7 +323,7 @@ class Runner:
                 result.traceback = traceback.format_exc()
                 failure = None
             else:
-                elapsed = time.monotonic() - start
+                elapsed = clock() - start
                 failure = CaseFailure(
                     f"the case did not finish within its deadline of {result.deadline:g} s",
                     expected=f"the exchange to finish within {result.deadline:g} s",
@@ -333,7 +338,7 @@ class Runner:
             result.reason = f"{type(exc).__name__}: {exc}"
             result.traceback = traceback.format_exc()
         finally:
-            result.duration = time.monotonic() - start
+            result.duration = clock() - start
         await _quietly(ctx.close_all())
         result.notes = list(ctx.notes)
         result.packets = list(ctx.transcript)

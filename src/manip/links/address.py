@@ -3,6 +3,7 @@
     tcp://HOST:PORT[?contact=PUMA&me=0401&addr=0440]        manip's TCP link (the embedded default)
     chudp://HOST:PORT?addr=0440[&me=0401&local=HOST:PORT]   Chaos over UDP, as klh10 and simh speak it
     chaosd:///PATH[?addr=0440&me=0401]                      usim's chaosd unix socket
+    unix:///PATH[?contact=PUMA&me=0401&addr=0440]           manip's TCP link framing on a Unix-domain socket
 
 ``addr`` is the Chaos address of the far end (the robot's host), ``me`` our own; both are octal, as
 Chaosnet addresses are always written.  ``contact`` is the contact name the server listens on.  IPv6
@@ -15,7 +16,7 @@ from dataclasses import dataclass, replace
 from typing import Final, Literal
 from urllib.parse import parse_qs, urlencode, urlsplit
 
-Scheme = Literal["tcp", "chudp", "chaosd"]
+Scheme = Literal["tcp", "chudp", "chaosd", "unix"]
 
 DEFAULT_TCP_PORT: Final = 42085
 """manip's TCP link port (an arbitrary choice: "Puma, 1985")."""
@@ -44,6 +45,11 @@ class LinkAddress:
     contact: str = DEFAULT_CONTACT
     local: tuple[str, int] | None = None
 
+    @property
+    def framing(self) -> Literal["tcp", "chudp", "chaosd"]:
+        """How packets are framed on this link: a ``unix://`` link carries the TCP link's frames."""
+        return "tcp" if self.scheme == "unix" else self.scheme
+
     def with_port(self, port: int) -> LinkAddress:
         return replace(self, port=port)
 
@@ -58,8 +64,8 @@ class LinkAddress:
         if self.local is not None:
             params["local"] = f"{_host(self.local[0])}:{self.local[1]}"
         query = f"?{urlencode(params, safe=':[]')}" if params else ""
-        if self.scheme == "chaosd":
-            return f"chaosd://{self.path}{query}"
+        if self.scheme in ("chaosd", "unix"):
+            return f"{self.scheme}://{self.path}{query}"
         return f"{self.scheme}://{_host(self.host)}:{self.port}{query}"
 
 
@@ -91,8 +97,8 @@ def parse_address(url: str, *, default_scheme: Scheme = "tcp") -> LinkAddress:
         url = f"{default_scheme}://{url}"
     split = urlsplit(url)
     scheme = split.scheme
-    if scheme not in ("tcp", "chudp", "chaosd"):
-        raise AddressError(f"unknown link scheme {scheme!r}; use tcp://, chudp:// or chaosd://")
+    if scheme not in ("tcp", "chudp", "chaosd", "unix"):
+        raise AddressError(f"unknown link scheme {scheme!r}; use tcp://, chudp://, chaosd:// or unix://")
     raw = parse_qs(split.query, keep_blank_values=True)
     unknown = set(raw) - _KNOWN_PARAMS
     if unknown:
@@ -107,6 +113,11 @@ def parse_address(url: str, *, default_scheme: Scheme = "tcp") -> LinkAddress:
     if scheme == "chaosd":
         path = (split.netloc + split.path) or DEFAULT_CHAOSD_PATH
         return LinkAddress("chaosd", path=path, peer_addr=peer, my_addr=me, contact=contact)
+    if scheme == "unix":
+        path = split.netloc + split.path
+        if not path:
+            raise AddressError("a unix:// address needs the socket's path: unix:///PATH")
+        return LinkAddress("unix", path=path, peer_addr=peer, my_addr=me, contact=contact)
     if scheme == "chudp" and "addr" not in params:
         raise AddressError("a chudp:// address needs addr=OCTAL, the Chaos address of the peer")
     try:

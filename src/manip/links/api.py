@@ -21,7 +21,7 @@ from .chudp import Endpoint, bind_chudp
 from .connection import CLOSE_TIMEOUT, ChaosConnection
 from .errors import ChaosError
 from .node import BUSY, AcceptPolicy, NcpOptions, Node
-from .tcp import connect_tcp, serve_tcp
+from .tcp import connect_tcp, connect_unix, serve_tcp, serve_unix
 
 log = logging.getLogger("manip.links")
 
@@ -64,6 +64,10 @@ async def _client_link(addr: LinkAddress, timeout: float | None, learn_peers: bo
         )
         return link, False
     assert addr.path is not None
+    if addr.scheme == "unix":
+        return await connect_unix(
+            addr.path, my_addr=addr.my_addr, peer_addr=addr.peer_addr, timeout=timeout
+        ), False
     return await connect_chaosd(addr.path, my_addr=addr.my_addr, timeout=timeout), True
 
 
@@ -198,7 +202,8 @@ async def start_server(
 ) -> ChaosServer:
     """Listen for ``contact`` (None: the address's) as Chaos host ``addr`` of ``address``.
 
-    tcp:// listens on HOST:PORT (port 0: a free one, see ``ChaosServer.port``); chudp:// binds
+    tcp:// listens on HOST:PORT (port 0: a free one, see ``ChaosServer.port``), unix:// on a socket
+    file (which must not exist yet); chudp:// binds
     HOST:PORT and learns its clients (``learn_peers``) besides the configured ``peers``; chaosd://
     connects to the daemon.  ``max_connections=1`` refuses a second client with ``busy_reason`` while
     one is connected: one Puma server is one robot.  ``wrap_link`` wraps every link the node gets
@@ -216,6 +221,10 @@ async def start_server(
         if addr.scheme == "tcp":
             tcp = await serve_tcp(addr.host, addr.port, my_addr=addr.peer_addr, on_link=attach)
             bound = replace(addr, port=int(tcp.sockets[0].getsockname()[1]))
+        elif addr.scheme == "unix":
+            assert addr.path is not None
+            tcp = await serve_unix(addr.path, my_addr=addr.peer_addr, on_link=attach)
+            bound = addr
         elif addr.scheme == "chudp":
             link = await bind_chudp(
                 addr.host, addr.port, my_addr=addr.peer_addr, peers=peers, learn_peers=learn_peers

@@ -1,13 +1,17 @@
 """manip's TCP link: each TCP connection is one point-to-point Chaos link (framing ``tcp``).
 
 The client dials the server's host and port; the server accepts any number of TCP connections and
-hands each new link to its driver.  The peer's Chaos address is known up front on the client side
-(``addr=`` of the link address) and learnt from the first good frame's trailer on the server side.
+hands each new link to its driver.  The same framing runs on Unix-domain stream sockets (``unix://``
+addresses): a local link whose writes reach the reader before ``send`` returns, which a simulated run
+on a virtual clock needs (:mod:`manip.links.virtual_clock`).  The peer's Chaos address is known up
+front on the client side (``addr=`` of the link address) and learnt from the first good frame's trailer
+on the server side.
 """
 
 from __future__ import annotations
 
 import asyncio
+import socket
 from collections.abc import Callable
 
 from manip.codecs.framing import TcpFrameDecoder, encode_tcp
@@ -26,8 +30,10 @@ class TcpLink(StreamLink):
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         peer = transport.get_extra_info("peername")
-        if peer is not None and self.name == self.kind:
+        if isinstance(peer, tuple) and self.name == self.kind:
             self.name = f"tcp:{_endpoint(peer)}"
+        elif self.name == self.kind and transport.get_extra_info("socket").family == socket.AF_UNIX:
+            self.name = "unix"  # a Unix peer has no name worth showing (the client's socket is unbound)
         super().connection_made(transport)
 
 
@@ -69,3 +75,34 @@ async def serve_tcp(
         return await loop.create_server(factory, host, port)
     except OSError as exc:
         raise LinkError(f"cannot listen on tcp://{_endpoint((host, port))}: {exc}") from exc
+
+
+async def connect_unix(
+    path: str, *, my_addr: int, peer_addr: int | None = None, timeout: float | None = 10.0
+) -> TcpLink:
+    """Dial the TCP link framing on a Unix-domain socket; :class:`LinkError` if it cannot be made."""
+    loop = asyncio.get_running_loop()
+    link = TcpLink(my_addr=my_addr, peer_addr=peer_addr)
+    try:
+        async with asyncio.timeout(timeout):
+            await loop.create_unix_connection(lambda: link, path)
+    except (OSError, TimeoutError) as exc:
+        link.close()
+        what = "timed out" if isinstance(exc, TimeoutError) else str(exc)
+        raise LinkError(f"cannot reach unix://{path}: {what}") from exc
+    return link
+
+
+async def serve_unix(path: str, *, my_addr: int, on_link: Callable[[TcpLink], None]) -> asyncio.Server:
+    """Listen for links with the TCP link framing on a Unix-domain socket at ``path``."""
+    loop = asyncio.get_running_loop()
+
+    def factory() -> TcpLink:
+        link = TcpLink(my_addr=my_addr)
+        on_link(link)
+        return link
+
+    try:
+        return await loop.create_unix_server(factory, path)
+    except OSError as exc:
+        raise LinkError(f"cannot listen on unix://{path}: {exc}") from exc

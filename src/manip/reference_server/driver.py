@@ -63,6 +63,7 @@ from manip.codecs.errors import CodecError
 from manip.codecs.messages import decode_error
 from manip.links import ChaosConnection, ChaosError, ChaosServer, NcpOptions, start_server
 from manip.links.api import LinkWrapper
+from manip.links.virtual_clock import is_virtual
 from manip.ncp import ConnectionRequested
 from manip.reference_server.session import Outgoing, Output, ServerConfig, ServerSession, State
 from manip.reference_server.wrist import Wrist
@@ -396,7 +397,8 @@ class ReferenceServer:
         hold the servo back."""
         loop = self._loop
         period = self.servo_period
-        spin = SERVO_SPIN if period >= 8 * SERVO_SPIN else 0.0  # sped-up clocks just sleep
+        # Sped-up clocks just sleep; so does a virtual clock, whose sleeps end exactly on time.
+        spin = SERVO_SPIN if period >= 8 * SERVO_SPIN and not is_virtual(loop) else 0.0
         while True:
             if not self._clients:
                 self._due = math.inf

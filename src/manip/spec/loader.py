@@ -49,6 +49,8 @@ class Spec:
 
     revision: str
     protocol_version: int
+    segment_within: float
+    """Seconds one queued motion segment may take at speed factor 1 (erratum ``answer-allowance``)."""
     clauses: Mapping[str, Clause]
     errata: Mapping[str, Erratum]
     field_types: Mapping[str, FieldType]
@@ -179,6 +181,7 @@ def load_spec() -> Spec:
     spec = Spec(
         revision=manip["revision"],
         protocol_version=manip["protocol_version"],
+        segment_within=float(manip["segment_within"]),
         clauses=_unique(
             [(c["id"], Clause(**c)) for c in clauses["clause"]],
             "clause",

@@ -31,7 +31,7 @@ async def _exchange(probe: Probe) -> None:
 
 def _make_frames_case(scheme: str, clauses: tuple[str, ...]) -> None:
     async def frames(ctx: CaseContext) -> None:
-        if parse_address(ctx.options.address).scheme != scheme:
+        if parse_address(ctx.options.address).framing != scheme:
             ctx.skip(f"the target is not on a {scheme} link")
         probe = await ctx.connect()
         await _exchange(probe)

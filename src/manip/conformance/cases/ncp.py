@@ -79,8 +79,8 @@ def _lines(items: Sequence[Received]) -> str:
 async def _open(ctx: CaseContext) -> RawPeer:
     """A raw peer on the target's link, recording into the case's transcript."""
     address = parse_address(ctx.options.address)
-    if address.scheme not in ("tcp", "chudp"):
-        ctx.skip(f"raw Chaos packets are sent on tcp:// and chudp:// links, not {address.scheme}://")
+    if address.framing not in ("tcp", "chudp"):
+        ctx.skip(f"raw Chaos packets are sent on tcp://, unix:// and chudp:// links, not {address.scheme}://")
     ctx.auto_check = False  # the transcript holds Chaos control packets, not a manip session
 
     def record(direction: Direction, p: Packet, raw: bytes) -> None:

@@ -194,7 +194,7 @@ async def during_free_joint(ctx: CaseContext) -> None:
 @case("server.negative.oversize-frame", clauses=["chaos.data.max-488"], kind="negative", deadline=8.0)
 async def oversize_frame(ctx: CaseContext) -> None:
     """A frame claiming more than 488 data bytes is not served; the server survives it."""
-    if parse_address(ctx.options.address).scheme != "tcp":
+    if parse_address(ctx.options.address).framing != "tcp":
         ctx.skip("the oversize frame is written on the TCP link only")
     ctx.auto_check = False
     probe = await ctx.connect()

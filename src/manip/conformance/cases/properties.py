@@ -22,7 +22,7 @@ import asyncio
 from collections.abc import Callable, Sequence
 from typing import Any, Final
 
-from hypothesis import given, seed
+from hypothesis import given, reject, seed
 from hypothesis import strategies as st
 from hypothesis.errors import Flaky
 
@@ -31,6 +31,7 @@ from manip.arm.transform import FLOAT_ROTATION_TOL, Transform
 from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request
 from manip.conformance.bridge import (
+    DEFAULT_SHRINK_BUDGET,
     Bridge,
     FailureLog,
     StopRun,
@@ -42,7 +43,7 @@ from manip.conformance.case import CaseFailure, case
 from manip.conformance.cases._live import Evidence, describe_target, must, reply_view
 from manip.conformance.cases._support import floats
 from manip.conformance.checks import ANSWER_OPCODES, WirePacket, check_reply, describe, word
-from manip.conformance.context import Answer, CaseContext, Probe
+from manip.conformance.context import DEFAULT_REPLY_TIMEOUT, Answer, CaseContext, Probe
 from manip.conformance.strategies import (
     f_ulp,
     joints_near,
@@ -76,6 +77,13 @@ send segment-completed responses)."""
 SEGMENT_MASK: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
 SETTLE_LIMIT: Final = 5.0
 PROPERTY_BUDGET: Final = 45.0
+"""Seconds (on the run's clock) after which a property case draws no new example."""
+SLOWEST_STEP: Final = DEFAULT_REPLY_TIMEOUT + max(op.answer_within or 0.0 for op in SPEC.requests.values())
+"""The longest one step of an example may wait: a reply to a request whose answer waits for the arm
+or the wrist (the spec's ``answer_within``) after the reply timeout."""
+PROPERTY_DEADLINE: Final = PROPERTY_BUDGET + SLOWEST_STEP + DEFAULT_SHRINK_BUDGET
+"""A property case's deadline: its budget, then the step under way when the budget ran out, then
+shrinking (so the budget, not the deadline, ends a case whose examples are slow by the spec)."""
 
 
 # ------------------------------------------------------------------------------------- machinery
@@ -260,7 +268,7 @@ async def run_property(
     ],
     kind="property",
     hazard="config",
-    deadline=60.0,
+    deadline=PROPERTY_DEADLINE,
 )
 async def well_formed_replies(ctx: CaseContext) -> None:
     """Random well-formed requests (of the allowed hazard classes) get one well-formed answer each."""
@@ -270,6 +278,10 @@ async def well_formed_replies(ctx: CaseContext) -> None:
     def build(session: _Session) -> tuple[Example, Sequence[st.SearchStrategy[Any]]]:
         def body(request: tuple[Any, bytes]) -> None:
             op, data = request
+            if session.probe.arm_wait(op.opcode) > SLOWEST_STEP * ctx.options.deadline_scale:
+                # An earlier example set a crawling speed or queued long motion: this answer may
+                # conformingly take longer than any case can wait (erratum answer-allowance).
+                reject()
             answer = session.ask(op.opcode, data)
             _check_answer(answer)
             if answer.opcode == ServerOp.FATAL_ERROR:
@@ -322,7 +334,7 @@ def _pose(values: Sequence[float], answer: Answer) -> Transform:
     clauses=["solve-backwards.data", "solve-forwards.data", "solve-forwards.errors"],
     kind="property",
     hazard="read-only",
-    deadline=60.0,
+    deadline=PROPERTY_DEADLINE,
 )
 async def kinematics_round_trip(ctx: CaseContext) -> None:
     """Solve backwards, forwards from other angles, backwards again: the same pose (erratum
@@ -439,7 +451,7 @@ async def _settle(
     clauses=["float.format", "joints.reply", "response.segment-number"],
     kind="property",
     hazard="motion",
-    deadline=60.0,
+    deadline=PROPERTY_DEADLINE,
 )
 async def floats_round_trip(ctx: CaseContext) -> None:
     """Set joint angles, read them back when the arm stands: each float survives the trip within
@@ -500,7 +512,7 @@ async def floats_round_trip(ctx: CaseContext) -> None:
     clauses=["segment.number-increases"],
     kind="property",
     hazard="motion",
-    deadline=60.0,
+    deadline=PROPERTY_DEADLINE,
 )
 async def segment_numbering(ctx: CaseContext) -> None:
     """Accepted motion requests get segment numbers one apart, refused ones take none."""
