@@ -124,8 +124,23 @@ async def expect_here_served(ctx: CaseContext, probe: Probe, expected: str) -> N
     )
 
 
+GUARDS: Final = 16
+"""Guards a Cougar holds at once (Part III §B.9)."""
+
+
+async def clear_guards(probe: Probe) -> None:
+    """Clear every wrist guard, if the target serves clear-guard.  Guards live in the wrist, not in the
+    connection (erratum ``server-robot``): one an earlier session set would trip this case's moves."""
+    for index in range(GUARDS):
+        answer = await probe.call("clear-guard", index=index)
+        if not answer.is_response:
+            return  # no wrist, or no such operation: nothing to clear
+
+
 async def power_on(ctx: CaseContext, probe: Probe) -> None:
-    """Enable high power (it also clears an abort); the answer must be done."""
+    """Clear leftover wrist guards, then enable high power (it also clears an abort); the answer must
+    be done."""
+    await clear_guards(probe)
     answer = await probe.call("enable-power")
     expect_done(ctx, answer, clause="enable-power.done", expected="an empty done to enable high power")
 
