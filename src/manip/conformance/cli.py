@@ -12,7 +12,8 @@ Exit codes of ``run`` (documented in ``--help``):
     1  non-conformant: a failure, a stale known-failing entry, or the target died during the run
     2  usage error (bad option, pattern, address or pattern file)
     3  target unreachable, or dead before any case reached a verdict
-    4  interrupted, or an internal error of the suite (a partial report is still written)
+    4  interrupted, an internal error of the suite, or a verdict that changed with the seed (``--repeat``;
+       a partial report is still written)
 
 ``coverage`` exits 1 when a MUST clause in scope has no case.  The group leaves room for more
 subcommands (``replay``, ``verify``) added by other modules: they register on :data:`main`.
@@ -64,7 +65,7 @@ Exit codes:
   1  non-conformant (a failure, a stale --known-failing entry, the target died)
   2  usage error
   3  target unreachable, or dead before any verdict
-  4  interrupted or internal error (a partial report is still written)"""
+  4  interrupted, internal error, or an unstable suite (--repeat; a partial report is still written)"""
 
 F = TypeVar("F", bound=Callable[..., Any])
 
