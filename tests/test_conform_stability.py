@@ -118,3 +118,20 @@ def test_an_unstable_report_exits_4() -> None:
     report.unstable.append("case a changes its verdict with the seed")
     assert report.exit_code == ExitCode.INTERNAL
     assert report.verdict == "unstable suite"
+
+
+@pytest.mark.slow
+def test_a_simulated_run_capture_replays_cleanly(tmp_path: Path) -> None:
+    capture = tmp_path / "run.mcap"
+    code, output = _invoke("--seed", "6", "-q", "--record", str(capture))
+    assert code == ExitCode.CONFORMANT, output
+    report_path = tmp_path / "replay.json"
+    result = CliRunner().invoke(main, ["replay", str(capture), "-q", "--json", str(report_path)])
+    assert result.exit_code == ExitCode.CONFORMANT, result.output
+    report = json.loads(report_path.read_text())
+    outcomes = {c["outcome"] for c in report["cases"]}
+    assert outcomes <= {"pass", "skip"}
+    passed = [c for c in report["cases"] if c["outcome"] == "pass"]
+    assert len(passed) > 200  # every session's exchange and checks
+    skipped = [c["reason"] for c in report["cases"] if c["outcome"] == "skip"]
+    assert all("never opened" in reason for reason in skipped)  # the refused second client only

@@ -172,7 +172,8 @@ class Recorder:
 
     ``output`` is a path or a binary stream (left open).  ``seed`` and ``command_line`` go into the
     ``manip.capture`` metadata with the tool version and spec revision (``how`` says what recorded:
-    ``proxy``, ``server``, ``client``...); ``metadata`` adds more string pairs."""
+    ``proxy``, ``server``, ``client``...); ``metadata`` adds more string pairs; ``clock_ns`` gives the log
+    times (see :attr:`clock_ns`)."""
 
     def __init__(
         self,
@@ -186,6 +187,7 @@ class Recorder:
         compression: str = "zstd",
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         flush_interval: float = DEFAULT_FLUSH_INTERVAL,
+        clock_ns: Callable[[], int] = time.time_ns,
     ) -> None:
         if compression not in COMPRESSIONS:
             raise CaptureError(f"unknown compression {compression!r}; use one of {sorted(COMPRESSIONS)}")
@@ -205,6 +207,9 @@ class Recorder:
             self._owns_stream = False
         self.decoded_view = decoded_view
         self.flush_interval = flush_interval
+        self.clock_ns = clock_ns
+        """Log times of what is recorded without a time of its own (Unix nanoseconds by default; a
+        simulated run gives its virtual clock, so one seed records the same file)."""
         self._counts: Counter[str] = Counter()
         self.flushes = 0
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
@@ -293,7 +298,7 @@ class Recorder:
     def frame(self, link: int, direction: Direction, frame: bytes, t_ns: int | None = None) -> None:
         """Record one frame exactly as it crossed ``link``."""
         info = self._links[link]
-        t = time.time_ns() if t_ns is None else t_ns
+        t = self.clock_ns() if t_ns is None else t_ns
         if self.decoded_view:
             self._enqueue(info, direction, frame, None, t)
             return
@@ -404,7 +409,7 @@ class Recorder:
             log.warning("%s: cannot record %r: %s", info.name, packet, exc)
             self._counts["unrecordable"] += 1
             return
-        t = time.time_ns() if t_ns is None else t_ns
+        t = self.clock_ns() if t_ns is None else t_ns
         if self.decoded_view:
             self._enqueue(info, direction, frame, packet, t)
             return
@@ -454,7 +459,7 @@ class Recorder:
     def _event(self, body: dict[str, Any], t_ns: int | None) -> None:
         if self._closed:
             raise CaptureError("the recorder is closed")
-        t = time.time_ns() if t_ns is None else t_ns
+        t = self.clock_ns() if t_ns is None else t_ns
         self._event_seq += 1
         self._add(self._event_channel, t, _JSON.encode(body).encode(), self._event_seq)
         self._counts[EVENT_TOPIC] += 1

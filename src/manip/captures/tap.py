@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import time
 from typing import Any, Literal, Protocol
 
 from manip.codecs.packet import Packet
@@ -36,7 +35,10 @@ Side = Literal["client", "server"]
 
 
 class PacketTap(Protocol):
-    """What a :class:`TappedLink` reports.  Times are Unix nanoseconds."""
+    """What a :class:`TappedLink` reports.  Times are nanoseconds of the tap's clock (Unix time, or a
+    simulated run's virtual clock)."""
+
+    def clock_ns(self) -> int: ...
 
     def link_opened(self, link: TappedLink) -> None: ...
 
@@ -127,7 +129,7 @@ class TappedLink(Link):
     def send(self, packet: Packet, next_hop: int | None = None) -> bool:
         sent = self.inner.send(packet, next_hop)
         if sent:
-            self._report(self.tap.packet_sent, self, packet, next_hop, time.time_ns())
+            self._report(self.tap.packet_sent, self, packet, next_hop, self.tap.clock_ns())
         return sent
 
     def close(self) -> None:
@@ -136,13 +138,13 @@ class TappedLink(Link):
     # ------------------------------------------------------------------------------ internals
 
     def _on_packet(self, _inner: Link, packet: Packet) -> None:
-        self._report(self.tap.packet_received, self, packet, time.time_ns())
+        self._report(self.tap.packet_received, self, packet, self.tap.clock_ns())
         receiver = self._receiver
         if receiver is not None:
             receiver(self, packet)
 
     def _inner_closed(self, inner: Link) -> None:
-        self._report(self.tap.link_closed, self, inner.close_reason or "closed", time.time_ns())
+        self._report(self.tap.link_closed, self, inner.close_reason or "closed", self.tap.clock_ns())
 
     def _report(self, method: Any, *args: Any) -> None:
         try:
@@ -166,6 +168,9 @@ class RecorderTap:
         self._sent: Direction = "c2s" if side == "client" else "s2c"
         self._received: Direction = "s2c" if side == "client" else "c2s"
         self._ids: dict[int, int] = {}
+
+    def clock_ns(self) -> int:
+        return self.recorder.clock_ns()
 
     def wrap(self, link: Link) -> Link:
         """The ``wrap_link`` hook of :func:`manip.links.open_connection` and ``start_server``."""

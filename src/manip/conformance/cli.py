@@ -306,9 +306,7 @@ def run(
         report, code = _repeat(config, cases, config_faults, console, quiet, target, repeat)
     else:
         holder: dict[str, Runner] = {}
-        with recording(record, how="manip-conform run (client side)", seed=seed) as wrap:
-            config.wrap_link = wrap
-            code = _execute(config, cases, config_faults, holder, console, quiet, cougar=target)
+        code = _execute(config, cases, config_faults, holder, console, quiet, cougar=target, record=record)
         report = holder["runner"].report if "runner" in holder else None
     if report is not None:
         if code == ExitCode.INTERNAL and not report.interrupted and not report.internal_error:
@@ -374,11 +372,13 @@ def _execute(
     console: Console,
     quiet: bool,
     cougar: CougarTarget | None = None,
+    record: Path | None = None,
 ) -> int | None:
     """Run; None means "use the report's exit code"."""
     try:
         virtual_clock.run(
-            _run_async(config, cases, faults, holder, console, quiet, cougar), virtual=config.virtual_time
+            _run_async(config, cases, faults, holder, console, quiet, cougar, record),
+            virtual=config.virtual_time,
         )
     except KeyboardInterrupt:
         if "runner" in holder:
@@ -406,7 +406,24 @@ async def _run_async(
     holder: dict[str, Runner],
     console: Console,
     quiet: bool,
-    cougar: CougarTarget | None = None,
+    cougar: CougarTarget | None,
+    record: Path | None,
+) -> None:
+    # The recording starts on the run's loop, so a simulated run records on its virtual clock.
+    how = "manip-conform run (client side)"
+    with recording(record, how=how, seed=config.seed, virtual=config.virtual_time) as wrap:
+        config.wrap_link = wrap
+        await _run_target(config, cases, faults, holder, console, quiet, cougar)
+
+
+async def _run_target(
+    config: RunConfig,
+    cases: Sequence[Case],
+    faults: Any,
+    holder: dict[str, Runner],
+    console: Console,
+    quiet: bool,
+    cougar: CougarTarget | None,
 ) -> None:
     if cougar is not None:  # --cougar: the Cougar target (embedded or not)
         async with cougar.running() as address:

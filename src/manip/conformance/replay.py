@@ -236,6 +236,9 @@ class ReplayOptions:
     sessions: tuple[int, ...] = ()
     """1-based numbers of the sessions to replay (all when empty)."""
     wrap_link: LinkWrapper | None = None
+    paced: bool = False
+    """Open each session, send each request and end each session at its recorded time on the loop's
+    clock (a simulated run's capture replayed in virtual time: same instants, same server states)."""
     """Put between the node and its link (``RecorderTap(recorder, "client").wrap`` records the replay)."""
 
 
@@ -330,6 +333,17 @@ class _Live:
         while await self.take(seconds):
             pass
 
+    async def quiet_until(self, t_ns: int) -> None:
+        """Take whatever arrives until the loop's clock reads ``t_ns``."""
+        loop = asyncio.get_running_loop()
+        while await self.take(t_ns / 1e9 - loop.time()):
+            pass
+
+
+async def _until(t_ns: int) -> None:
+    """Sleep until the loop's clock reads ``t_ns`` (a recorded log time, paced replay)."""
+    await asyncio.sleep(max(0.0, t_ns / 1e9 - asyncio.get_running_loop().time()))
+
 
 def _answer_time(request: WirePacket | None, options: ReplayOptions) -> float:
     """Seconds to wait for the answer to ``request``: the reply timeout, or longer for a request whose
@@ -355,6 +369,8 @@ async def replay_session(script: Script, address: str, options: ReplayOptions) -
     """Replay one recorded session against the server at ``address`` and compare (never raises a
     ChaosError: a failure to connect is ``stopped``)."""
     replay = SessionReplay(script, AnswerSorter(initial=script.rfc is not None))
+    if options.paced:
+        await _until(script.session.start_ns)
     t0 = time.monotonic()
     try:
         conn = await _connect(address, options)
@@ -391,6 +407,8 @@ async def _play(script: Script, live: _Live, options: ReplayOptions) -> None:
             break
         if missing:
             replay.notes.append(f"before request {replay.sent + 1}: {missing}")
+        if options.paced:
+            await _until(script.session.start_ns + round(packet.time * 1e9))
         try:
             number = await live.conn.send(packet.data, packet.opcode)
         except ChaosError as exc:
@@ -408,6 +426,8 @@ async def _play(script: Script, live: _Live, options: ReplayOptions) -> None:
             deadline = loop.time() + options.reply_timeout
             while replay.live.closed is None and await live.take(deadline - loop.time()):
                 pass
+        elif options.paced:
+            await live.quiet_until(script.session.start_ns + round(script.packets[-1].time * 1e9))
         else:
             await live.quiet(options.settle)
     if replay.stopped:

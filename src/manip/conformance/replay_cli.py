@@ -17,26 +17,27 @@ session, or the target unreachable (``--serve``: no client came), 4 interrupted 
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import os
 import shlex
 import sys
+import time
 import traceback
 from collections.abc import Awaitable, Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
 from rich.console import Console
 
-from manip.conformance.embedded import EmbeddedServer
+from manip.conformance.embedded import EmbeddedServer, simulated_server
 from manip.conformance.report import failure_text, write_json, write_junit
 from manip.conformance.results import ExitCode, RunReport
 
 if TYPE_CHECKING:
     from manip.conformance.verify import Judge
-from manip.links import AddressError, parse_address
+from manip.links import AddressError, parse_address, virtual_clock
 from manip.links.api import LinkWrapper
 from manip.reference_server import WRIST_OPERATIONS, FaultSet, ServerConfig
 from manip.spec import SPEC
@@ -65,18 +66,32 @@ _STYLE = {"fail": "bold red", "warn": "yellow", "error": "bold magenta", "pass":
 
 @contextlib.contextmanager
 def recording(
-    path: str | os.PathLike[str] | None, *, how: str, side: str = "client", seed: int | None = None
+    path: str | os.PathLike[str] | None,
+    *,
+    how: str,
+    side: str = "client",
+    seed: int | None = None,
+    virtual: bool = False,
 ) -> Iterator[LinkWrapper | None]:
     """A capture at ``path`` recording every link the yielded wrapper is given, as the ``side``
     (``client`` or ``server``) of the protocol; None (no wrapper) when ``path`` is None.  Enter it inside
-    the running loop (the recorder's timer flushes it while the session is idle)."""
+    the running loop (the recorder's timer flushes it while the session is idle).  ``virtual``: the run
+    is simulated; log times are its virtual clock (metadata ``time``: ``virtual``), so a replay can put
+    every request at its recorded instant."""
     if path is None:
         yield None
         return
     # Imported here: the capture library (mcap, zstd) loads only when recording.
     from manip.captures import Recorder, RecorderTap  # noqa: PLC0415
 
-    with Recorder(path, how=how, seed=seed, command_line=["manip-conform", *sys.argv[1:]]) as recorder:
+    with Recorder(
+        path,
+        how=how,
+        seed=seed,
+        command_line=["manip-conform", *sys.argv[1:]],
+        metadata={"time": "virtual" if virtual else "real"},
+        clock_ns=virtual_clock.loop_clock_ns if virtual else time.time_ns,
+    ) as recorder:
         yield RecorderTap(recorder, "server" if side == "server" else "client").wrap
 
 
@@ -111,9 +126,11 @@ def _finish(
     )
 
 
-def _run(job: Callable[[], Awaitable[RunReport]], console: Console) -> RunReport | int:
+def _run(
+    job: Callable[[], Awaitable[RunReport]], console: Console, *, virtual: bool = False
+) -> RunReport | int:
     try:
-        return asyncio.run(job())  # type: ignore[arg-type]
+        return virtual_clock.run(job(), virtual=virtual)  # type: ignore[arg-type]
     except KeyboardInterrupt:
         console.print("[bold]interrupted[/]")
         return int(ExitCode.INTERNAL)
@@ -187,15 +204,27 @@ def verify_command(
 # ----------------------------------------------------------------------------------------------- replay
 
 
-def _capture_settings(file: Path) -> tuple[float, int | None, bool]:
-    """The time scale and seed the capture's metadata name, and whether the recorded server had a
-    wrist (it answered a wrist opcode normally), so the embedded server can be set up like it."""
+@dataclass(frozen=True)
+class _Recorded:
+    """How the server of a capture was set up, so the embedded server can be set up like it."""
+
+    time_scale: float = 1.0
+    seed: int | None = None
+    wrist: bool = False
+    """The recorded server had a wrist (it answered a wrist opcode normally)."""
+    virtual: bool = False
+    """A simulated run recorded it on its virtual clock: replay it in virtual time, each request at its
+    recorded instant, and the embedded server goes through the same states."""
+
+
+def _capture_settings(file: Path) -> _Recorded:
+    """What the capture's metadata and sessions say of its server (see :class:`_Recorded`)."""
     from manip.captures import CaptureError, read_capture  # noqa: PLC0415
 
     try:
         capture = read_capture(file)
     except CaptureError:
-        return 1.0, None, False  # replay_capture reports the unreadable file
+        return _Recorded()  # replay_capture reports the unreadable file
     meta = capture.metadata.get("manip.capture", {})
     try:
         scale = float(meta.get("time_scale", "") or 1.0)
@@ -210,7 +239,8 @@ def _capture_settings(file: Path) -> tuple[float, int | None, bool]:
         for session in capture.sessions
         for pair in session.pairs.values()
     )
-    return scale, int(seed_text) if seed_text.isdigit() else None, wrist
+    seed = int(seed_text) if seed_text.isdigit() else None
+    return _Recorded(scale, seed, wrist, meta.get("time") == "virtual" and seed is not None)
 
 
 @click.command("replay", epilog=EXIT_CODES_HELP)
@@ -317,9 +347,11 @@ def replay_command(
 
         outcome = _run(serve_job, console)
     else:
+        recorded = _Recorded() if against else _capture_settings(file)
+        virtual = recorded.virtual
 
         async def replay_job() -> RunReport:
-            with recording(record, how="manip-conform replay") as wrap:
+            with recording(record, how="manip-conform replay", virtual=virtual) as wrap:
                 options = ReplayOptions(
                     reply_timeout=reply_timeout,
                     async_timeout=async_timeout,
@@ -328,21 +360,33 @@ def replay_command(
                     strict=strict,
                     sessions=sessions,
                     wrap_link=wrap,
+                    paced=virtual,
                 )
                 if against:
                     return await replay_capture(file, against, options, command=command)
-                scale, seed, wrist = _capture_settings(file)
                 config = ServerConfig() if faults is None else ServerConfig(faults=faults)
-                with EmbeddedServer(config, time_scale=scale, seed=seed, wrist=wrist) as address:
+                reproduce = ["manip-conform", "replay", str(file)]
+                for fault in server_faults:
+                    reproduce += ["--server-fault", fault]
+                if virtual:
+                    assert recorded.seed is not None
+                    async with simulated_server(config, seed=recorded.seed, wrist=recorded.wrist) as address:
+                        console.print(
+                            f"embedded reference server in virtual time (seed {recorded.seed}, as recorded)"
+                        )
+                        return await replay_capture(
+                            file, address, options, embedded=True, command=command, reproduce=reproduce
+                        )
+                scale = recorded.time_scale
+                with EmbeddedServer(
+                    config, time_scale=scale, seed=recorded.seed, wrist=recorded.wrist
+                ) as address:
                     console.print(f"embedded reference server at {address} (time scale {scale:g})")
-                    reproduce = ["manip-conform", "replay", str(file)]
-                    for fault in server_faults:
-                        reproduce += ["--server-fault", fault]
                     return await replay_capture(
                         file, address, options, embedded=True, command=command, reproduce=reproduce
                     )
 
-        outcome = _run(replay_job, console)
+        outcome = _run(replay_job, console, virtual=virtual)
     if isinstance(outcome, int):
         sys.exit(outcome)
     _finish(outcome, console, quiet, json_path, junit_path)

@@ -35,7 +35,7 @@ import selectors
 from collections.abc import Callable, Coroutine, Iterator, Mapping
 from typing import Any, TypeVar
 
-__all__ = ["VirtualClockLoop", "is_virtual", "run"]
+__all__ = ["VirtualClockLoop", "is_virtual", "loop_clock_ns", "run"]
 
 T = TypeVar("T")
 
@@ -125,6 +125,11 @@ def is_virtual(loop: asyncio.AbstractEventLoop | None = None) -> bool:
     """True when ``loop`` (default: the running loop) runs on a virtual clock."""
     loop = loop or asyncio.get_running_loop()
     return bool(getattr(loop, "virtual", False))
+
+
+def loop_clock_ns() -> int:
+    """The running loop's clock in nanoseconds: log times of a simulated run's recording."""
+    return round(asyncio.get_running_loop().time() * 1e9)
 
 
 def run(main: Coroutine[Any, Any, T], *, virtual: bool = False) -> T:
