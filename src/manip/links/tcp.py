@@ -13,6 +13,8 @@ from collections.abc import Callable
 from manip.codecs.framing import TcpFrameDecoder, encode_tcp
 
 from .errors import LinkError
+from .guard import LinkGuard, LinkLimits
+from .listener import StreamListener, bind_stream
 from .stream import StreamLink
 
 
@@ -53,12 +55,17 @@ async def connect_tcp(
 
 
 async def serve_tcp(
-    host: str, port: int, *, my_addr: int, on_link: Callable[[TcpLink], None]
-) -> asyncio.Server:
+    host: str,
+    port: int,
+    *,
+    my_addr: int,
+    on_link: Callable[[TcpLink], None],
+    guard: LinkGuard | None = None,
+) -> StreamListener:
     """Listen for TCP links; ``on_link`` gets each new link before any packet arrives on it.
 
-    ``port`` 0 picks a free port: read it from the server's ``sockets``."""
-    loop = asyncio.get_running_loop()
+    ``guard`` admits each peer first and bounds the links (:mod:`~manip.links.guard`; default: everyone,
+    no bounds).  ``port`` 0 picks a free port: read it from the listener's ``sockets``."""
 
     def factory() -> TcpLink:
         link = TcpLink(my_addr=my_addr)
@@ -66,6 +73,7 @@ async def serve_tcp(
         return link
 
     try:
-        return await loop.create_server(factory, host, port)
+        sockets = await bind_stream(host, port)
     except OSError as exc:
         raise LinkError(f"cannot listen on tcp://{_endpoint((host, port))}: {exc}") from exc
+    return StreamListener(sockets, factory, guard or LinkGuard(LinkLimits.unlimited()))
