@@ -29,6 +29,7 @@ from manip.links import (
     open_connection,
     start_server,
 )
+from manip.links.chaosd import ChaosdLink
 from manip.links.guard import RateLimitedLog
 from manip.links.listener import StreamListener, bind_stream
 from manip.links.stream import StreamLink
@@ -485,6 +486,39 @@ def test_out_of_descriptors_lowers_the_limit_and_makes_room() -> None:
         await listener.wait_closed()
         guard.close()
         for _, writer in peers:
+            writer.close()
+        for link in made:
+            link.close()
+
+    run(main())
+
+
+def test_unix_socket_peers_are_not_held_to_the_ip_rules(tmp_path: Any) -> None:
+    async def main() -> None:
+        path = str(tmp_path / "listen.sock")
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        sock.bind(path)
+        sock.listen(8)
+        sock.setblocking(False)
+        guard = LinkGuard(LinkLimits(max_links=1), AccessList.parse(["10.0.0.0/8"]))
+        made: list[ChaosdLink] = []  # any stream link: TcpLink names itself by an IP peer
+
+        def make() -> ChaosdLink:
+            made.append(ChaosdLink(my_addr=0o440))
+            guard.track(made[-1])
+            return made[-1]
+
+        listener = StreamListener([sock], make, guard)
+        first = await asyncio.open_unix_connection(path)
+        await wait_for(lambda: guard.links == 1)
+        second = await asyncio.open_unix_connection(path)  # over the limit: the idle first makes room
+        assert await hung_up(first[0])
+        assert guard.stats.accepted == 2 and not guard.stats.refused
+        assert guard.stats.over_limit == {"displaced": 1}
+        listener.close()
+        await listener.wait_closed()
+        guard.close()
+        for _, writer in (first, second):
             writer.close()
         for link in made:
             link.close()

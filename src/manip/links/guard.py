@@ -341,12 +341,13 @@ class LinkGuard:
 
     # ---------------------------------------------------------------- the listener's side
 
-    def admit(self, peer: Endpoint, opening: int = 0) -> bool:
+    def admit(self, peer: Endpoint | None, opening: int = 0) -> bool:
         """May the link just accepted from ``peer`` stay?  ``opening`` links were admitted and are not
-        yet tracked.  False: close its socket at once (counted and logged here)."""
-        host, port = peer
-        where = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
-        if not self.access.allows_ip(host):
+        yet tracked.  False: close its socket at once (counted and logged here).  A peer of None (a
+        unix socket's, which the file's permissions guard) is not checked against the IP rules."""
+        host, port = peer or ("", 0)
+        where = f"[{host}]:{port}" if ":" in host else f"{host}:{port}" if peer else "a unix socket peer"
+        if peer is not None and not self.access.allows_ip(host):
             self.stats.refused["address"] += 1
             self.log.log(
                 "TCP peers refused by address",

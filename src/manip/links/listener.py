@@ -34,11 +34,11 @@ ACCEPT_BATCH: Final = 64
 _RESET: Final = struct.pack("ii", 1, 0)  # SO_LINGER on, 0 s: close with a reset, keep no TIME_WAIT
 
 
-def _peer(addr: Any) -> Endpoint:
-    """(host, port) of an accepted peer; a unix socket's peer has no address."""
+def _peer(addr: Any) -> Endpoint | None:
+    """(host, port) of an accepted peer; None for a unix socket's, which has no address."""
     if isinstance(addr, tuple):
         return str(addr[0]), int(addr[1])
-    return ("", 0)
+    return None
 
 
 def _reset(sock: socket.socket) -> None:
