@@ -5,6 +5,8 @@
 * :class:`Node`: one NCP on one or more links (:mod:`~manip.links.node` explains the routing);
 * links: :mod:`~manip.links.tcp` (manip's own, the default), :mod:`~manip.links.chudp`,
   :mod:`~manip.links.chaosd`, all :class:`Link`;
+* :mod:`~manip.links.guard`: a server's bounds on its links (:class:`LinkLimits`) and who may use it
+  (:class:`AccessList`);
 * :mod:`~manip.links.errors`: everything raised is a :class:`ChaosError`.
 """
 
@@ -23,9 +25,12 @@ from .errors import (
     ConnectTimeout,
     LinkError,
 )
+from .guard import AccessError, AccessList, GuardStats, LinkGuard, LinkLimits
 from .node import NcpOptions, Node, NodeStats
 
 __all__ = [
+    "AccessError",
+    "AccessList",
     "AddressError",
     "ChaosConnection",
     "ChaosError",
@@ -38,10 +43,13 @@ __all__ = [
     "ConnectionLost",
     "ConnectionRefused",
     "ConnectionStats",
+    "GuardStats",
     "Handler",
     "Link",
     "LinkAddress",
     "LinkError",
+    "LinkGuard",
+    "LinkLimits",
     "LinkStats",
     "NcpOptions",
     "Node",

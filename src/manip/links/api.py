@@ -13,6 +13,9 @@ import logging
 from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import replace
 from types import TracebackType
+from typing import Protocol
+
+from manip.ncp import ConnectionRequested
 
 from .address import LinkAddress, parse_address
 from .base import Link
@@ -20,6 +23,7 @@ from .chaosd import connect_chaosd
 from .chudp import Endpoint, bind_chudp
 from .connection import CLOSE_TIMEOUT, ChaosConnection
 from .errors import ChaosError
+from .guard import AccessList, LinkGuard, LinkLimits
 from .node import BUSY, AcceptPolicy, NcpOptions, Node
 from .tcp import connect_tcp, connect_unix, serve_tcp, serve_unix
 
@@ -29,6 +33,14 @@ Handler = Callable[[ChaosConnection], Awaitable[None]]
 """A server's per-connection coroutine; the connection is closed gracefully when it returns."""
 LinkWrapper = Callable[[Link], Link]
 """Given each new link, returns the link the node should use (the same one, or a wrapper of it)."""
+
+
+class Listening(Protocol):
+    """What a server listens with (a :class:`~manip.links.listener.StreamListener`, an asyncio server)."""
+
+    def close(self) -> None: ...
+
+    async def wait_closed(self) -> None: ...
 
 
 def _address(address: str | LinkAddress) -> LinkAddress:
@@ -106,12 +118,20 @@ async def open_connection(
 class ChaosServer:
     """A listening node: one contact name on one link address, a handler task per connection.
 
-    ``address`` is the address actually bound (port 0 replaced by the real port)."""
+    ``address`` is the address actually bound (port 0 replaced by the real port); ``guard`` applies
+    the server's limits and access rules and counts what it refused (``guard.stats``)."""
 
     def __init__(
-        self, node: Node, address: LinkAddress, contact: str, handler: Handler, server: asyncio.Server | None
+        self,
+        node: Node,
+        address: LinkAddress,
+        contact: str,
+        handler: Handler,
+        server: Listening | None,
+        guard: LinkGuard | None = None,
     ) -> None:
         self.node = node
+        self.guard = guard or LinkGuard(LinkLimits.unlimited(), name=str(address))
         self.address = address
         self.contact = contact
         self._handler = handler
@@ -158,6 +178,7 @@ class ChaosServer:
         self._closed.set_result(None)
         if self._server is not None:
             self._server.close()
+        self.guard.close()
         for task in list(self._tasks):
             task.cancel()
         self.node.close(reason)
@@ -199,6 +220,8 @@ async def start_server(
     learn_peers: bool = True,
     peers: Mapping[int, Endpoint] | None = None,
     wrap_link: LinkWrapper | None = None,
+    limits: LinkLimits | None = None,
+    allow: AccessList | None = None,
 ) -> ChaosServer:
     """Listen for ``contact`` (None: the address's) as Chaos host ``addr`` of ``address``.
 
@@ -207,27 +230,54 @@ async def start_server(
     HOST:PORT and learns its clients (``learn_peers``) besides the configured ``peers``; chaosd://
     connects to the daemon.  ``max_connections=1`` refuses a second client with ``busy_reason`` while
     one is connected: one Puma server is one robot.  ``wrap_link`` wraps every link the node gets
-    (see :func:`open_connection`)."""
+    (see :func:`open_connection`).
+
+    ``limits`` bound the TCP links (default :class:`LinkLimits`: idle and half-sent links are closed,
+    at most 256 at once) and ``allow`` says who may connect (default: everyone), by IP address for TCP
+    and CHUDP peers and by Chaos address for RFCs; see :mod:`manip.links.guard`."""
     addr = _address(address)
     name = contact or addr.contact
     node = Node(addr.peer_addr, options)
+    guard = LinkGuard(limits, allow, in_use=node.links_in_use, name=str(addr))
 
-    def attach(link: Link, hosts: Iterable[int] = (), default: bool = False) -> None:
-        node.attach(wrap_link(link) if wrap_link else link, hosts=hosts, default=default)
+    def attach(link: Link, hosts: Iterable[int] = (), default: bool = False) -> Link:
+        seen = wrap_link(link) if wrap_link else link
+        node.attach(seen, hosts=hosts, default=default)
+        return seen
 
+    if guard.access.restricts_chaos:
+        policy = _guarded(guard, policy)
     server: ChaosServer | None = None
-    tcp: asyncio.Server | None = None
+    tcp: Listening | None = None
     try:
         if addr.scheme == "tcp":
-            tcp = await serve_tcp(addr.host, addr.port, my_addr=addr.peer_addr, on_link=attach)
-            bound = replace(addr, port=int(tcp.sockets[0].getsockname()[1]))
+            listener = await serve_tcp(
+                addr.host,
+                addr.port,
+                my_addr=addr.peer_addr,
+                on_link=lambda link: guard.track(link, attach(link)),
+                guard=guard,
+            )
+            tcp = listener
+            bound = replace(addr, port=int(listener.sockets[0].getsockname()[1]))
         elif addr.scheme == "unix":
             assert addr.path is not None
-            tcp = await serve_unix(addr.path, my_addr=addr.peer_addr, on_link=attach)
+            tcp = await serve_unix(
+                addr.path,
+                my_addr=addr.peer_addr,
+                on_link=lambda link: guard.track(link, attach(link)),
+                guard=guard,
+            )
             bound = addr
         elif addr.scheme == "chudp":
+            admit = guard.admit_datagram if guard.access.restricts_ip else None
             link = await bind_chudp(
-                addr.host, addr.port, my_addr=addr.peer_addr, peers=peers, learn_peers=learn_peers
+                addr.host,
+                addr.port,
+                my_addr=addr.peer_addr,
+                peers=peers,
+                learn_peers=learn_peers,
+                admit=admit,
             )
             attach(link, hosts=list(link.peers))
             bound = replace(addr, port=link.local_address[1])
@@ -235,13 +285,27 @@ async def start_server(
             assert addr.path is not None
             attach(await connect_chaosd(addr.path, my_addr=addr.peer_addr), default=True)
             bound = addr
-        server = ChaosServer(node, bound, name, handler, tcp)
+        guard.name = str(bound)
+        server = ChaosServer(node, bound, name, handler, tcp, guard)
         node.listen(
             name, server._on_open, policy=policy, max_connections=max_connections, busy_reason=busy_reason
         )
     except BaseException:
         if tcp is not None:
             tcp.close()
+        guard.close()
         await node.aclose()
         raise
     return server
+
+
+def _guarded(guard: LinkGuard, policy: AcceptPolicy | None) -> AcceptPolicy:
+    """``policy`` behind the guard's Chaos address rules (a refused host never reaches ``policy``)."""
+
+    def check(request: ConnectionRequested) -> str | None:
+        refusal = guard.admit_rfc(request)
+        if refusal is not None or policy is None:
+            return refusal
+        return policy(request)
+
+    return check

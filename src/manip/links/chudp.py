@@ -10,14 +10,15 @@ answer it with LOS, and counted under ``stats.illegal``.  A good one is accepted
 endpoint or from a known address; from anyone else only if ``learn_peers`` is on (klh10's dynamic
 peers), in which case its trailer source and UDP endpoint join the table.  Configured entries are never
 replaced; a learnt entry follows its address to a new endpoint (a client that restarted on another
-port).
+port).  A server's access rules come first (``admit``): a datagram from an address they do not allow is
+dropped before it is decoded, and counted by them.
 """
 
 from __future__ import annotations
 
 import asyncio
 import socket
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, cast
 
 from manip.codecs.chaos import IllegalPacketError
@@ -29,6 +30,8 @@ from .base import Link, bad_reason
 from .errors import LinkError
 
 Endpoint = tuple[str, int]
+Admit = Callable[[Endpoint], bool]
+"""Asked about each datagram's sender before it is decoded: False drops it (the callable counts it)."""
 
 
 def _endpoint(addr: Any) -> Endpoint:
@@ -48,9 +51,11 @@ class ChudpLink(Link, asyncio.DatagramProtocol):
         my_addr: int,
         peers: Mapping[int, Endpoint] | None = None,
         learn_peers: bool = False,
+        admit: Admit | None = None,
         name: str = "",
     ) -> None:
         super().__init__(my_addr=my_addr, name=name)
+        self.admit = admit
         self.peers: dict[int, Endpoint] = dict(peers or {})
         """Chaos address -> UDP endpoint of every neighbour, configured and learnt."""
         self.learn_peers = learn_peers
@@ -83,6 +88,8 @@ class ChudpLink(Link, asyncio.DatagramProtocol):
     def datagram_received(self, data: bytes, addr: Any) -> None:
         self.stats.bytes_in += len(data)
         sender = _endpoint(addr)
+        if self.admit is not None and not self.admit(sender):
+            return
         illegal: IllegalPacketError | None = None
         try:
             packet = decode_chudp(data)
@@ -154,8 +161,11 @@ async def bind_chudp(
     my_addr: int,
     peers: Mapping[int, Endpoint] | None = None,
     learn_peers: bool = False,
+    admit: Admit | None = None,
 ) -> ChudpLink:
-    """Bind a CHUDP socket at ``host:port`` (0: any free port); peer hosts are resolved here, once."""
+    """Bind a CHUDP socket at ``host:port`` (0: any free port); peer hosts are resolved here, once.
+
+    ``admit`` is asked about every datagram's sender first (a server's access rules)."""
     loop = asyncio.get_running_loop()
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     resolved: dict[int, Endpoint] = {}
@@ -165,7 +175,7 @@ async def bind_chudp(
         except OSError as exc:
             raise LinkError(f"cannot resolve CHUDP peer {peer_host}:{peer_port}: {exc}") from exc
         resolved[address] = _endpoint(infos[0][4])
-    link = ChudpLink(my_addr=my_addr, peers=resolved, learn_peers=learn_peers)
+    link = ChudpLink(my_addr=my_addr, peers=resolved, learn_peers=learn_peers, admit=admit)
     try:
         await loop.create_datagram_endpoint(lambda: link, local_addr=(host, port), family=family)
     except OSError as exc:

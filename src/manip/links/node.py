@@ -282,6 +282,10 @@ class Node:
         """The live connections (requested, opening or open)."""
         return list(self._conns.values())
 
+    def links_in_use(self) -> set[Link]:
+        """The links that carry at least one live connection (a server's guard closes idle others)."""
+        return {route[0] for route in self._by_conn.values()}
+
     # ---------------------------------------------------------------- shutting down
 
     def close(self, reason: str = "Node shutting down") -> None:

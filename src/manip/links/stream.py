@@ -4,6 +4,7 @@ The framing codec finds the packets; this module only moves bytes.  A frame that
 counted and skipped (its length says where the next starts); a bad length means the frame boundaries
 are lost, so the stream is closed and counted under ``framing``.  A sound frame with an illegal opcode is
 delivered for the NCP to answer (``stats.illegal``); a stream frame cannot hold more than 488 data bytes.
+``waiting_since`` says how long a frame has been awaited, for a server's guard to close links that stall.
 """
 
 from __future__ import annotations
@@ -47,11 +48,17 @@ class StreamLink(Link, asyncio.Protocol):
         self._decoder = decoder
         self._transport: asyncio.Transport | None = None
         self._closing_reason: str | None = None
+        self._loop = asyncio.get_running_loop()
+        self.waiting_since: float | None = None
+        """Loop time since which a frame is awaited: from the connection until the first frame, then
+        from the first byte of each frame until it is complete; None while nothing is held back (a
+        server's :class:`~manip.links.guard.LinkGuard` closes a link on which it grows old)."""
 
     # ---------------------------------------------------------------- asyncio.Protocol
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self._transport = cast(asyncio.Transport, transport)
+        self.waiting_since = self._loop.time()
         if self._closing_reason is not None:  # closed before the connection was made
             transport.close()
 
@@ -66,6 +73,10 @@ class StreamLink(Link, asyncio.Protocol):
             self._bad("framing", exc)
             self.abort(f"framing lost: {exc}")
             return
+        if items:
+            self.waiting_since = self._loop.time() if self._decoder.pending else None
+        elif self.waiting_since is None and self._decoder.pending:
+            self.waiting_since = self._loop.time()
         self._take(items)
 
     def eof_received(self) -> bool | None:

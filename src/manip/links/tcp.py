@@ -17,6 +17,8 @@ from collections.abc import Callable
 from manip.codecs.framing import TcpFrameDecoder, encode_tcp
 
 from .errors import LinkError
+from .guard import LinkGuard, LinkLimits
+from .listener import BACKLOG, StreamListener, bind_stream
 from .stream import StreamLink
 
 
@@ -59,12 +61,17 @@ async def connect_tcp(
 
 
 async def serve_tcp(
-    host: str, port: int, *, my_addr: int, on_link: Callable[[TcpLink], None]
-) -> asyncio.Server:
+    host: str,
+    port: int,
+    *,
+    my_addr: int,
+    on_link: Callable[[TcpLink], None],
+    guard: LinkGuard | None = None,
+) -> StreamListener:
     """Listen for TCP links; ``on_link`` gets each new link before any packet arrives on it.
 
-    ``port`` 0 picks a free port: read it from the server's ``sockets``."""
-    loop = asyncio.get_running_loop()
+    ``guard`` admits each peer first and bounds the links (:mod:`~manip.links.guard`; default: everyone,
+    no bounds).  ``port`` 0 picks a free port: read it from the listener's ``sockets``."""
 
     def factory() -> TcpLink:
         link = TcpLink(my_addr=my_addr)
@@ -72,9 +79,10 @@ async def serve_tcp(
         return link
 
     try:
-        return await loop.create_server(factory, host, port)
+        sockets = await bind_stream(host, port)
     except OSError as exc:
         raise LinkError(f"cannot listen on tcp://{_endpoint((host, port))}: {exc}") from exc
+    return StreamListener(sockets, factory, guard or LinkGuard(LinkLimits.unlimited()))
 
 
 async def connect_unix(
@@ -93,16 +101,23 @@ async def connect_unix(
     return link
 
 
-async def serve_unix(path: str, *, my_addr: int, on_link: Callable[[TcpLink], None]) -> asyncio.Server:
-    """Listen for links with the TCP link framing on a Unix-domain socket at ``path``."""
-    loop = asyncio.get_running_loop()
+async def serve_unix(
+    path: str, *, my_addr: int, on_link: Callable[[TcpLink], None], guard: LinkGuard | None = None
+) -> StreamListener:
+    """Listen for links with the TCP link framing on a Unix-domain socket at ``path`` (which must not
+    exist yet), under ``guard`` as :func:`serve_tcp` is."""
 
     def factory() -> TcpLink:
         link = TcpLink(my_addr=my_addr)
         on_link(link)
         return link
 
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     try:
-        return await loop.create_unix_server(factory, path)
+        sock.bind(path)
+        sock.listen(BACKLOG)
+        sock.setblocking(False)
     except OSError as exc:
+        sock.close()
         raise LinkError(f"cannot listen on unix://{path}: {exc}") from exc
+    return StreamListener([sock], factory, guard or LinkGuard(LinkLimits.unlimited()))

@@ -8,6 +8,13 @@ so a script that asked for port 0 can read the real one.  SIGINT or SIGTERM stop
 a usage error (unknown fault, bad address) exits 2; a failure to bind, or to create the ``--record``
 file, exits 1.
 
+Links are bounded and access is ruled (:mod:`manip.links.guard`): ``--frame-timeout``,
+``--link-idle-timeout`` and ``--max-links`` bound what a peer can hold; ``--allow`` (repeatable) names
+who may connect, by IP address or network and by Chaos address.  Listening on anything but loopback
+without an IP ``--allow`` prints a warning: the 1985 protocol has no authentication, so anyone who can
+reach the port can move the arm.  ``--stats`` prints one line of link counters at exit; SIGUSR1 prints
+it at any time.
+
 ``--record FILE`` writes every packet of every connection, both ways, to an MCAP capture
 (:mod:`manip.captures`; ``manip-capture info FILE`` lists it), with the seed and the command line in its
 metadata.  The file is closed, complete, when the server stops (after the connections got their CLS),
@@ -20,9 +27,11 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
+import ipaddress
 import logging
 import signal
 import sys
+from collections import Counter
 from collections.abc import Callable, Sequence
 from contextlib import AbstractAsyncContextManager
 from typing import TYPE_CHECKING, Any, Final
@@ -31,8 +40,18 @@ import click
 
 from manip.arm.kinematics import PUMA600, ArmModel
 from manip.cougar.link import parse_address as parse_drv11j_address
-from manip.links import AddressError, ChaosError, NcpOptions, parse_address
+from manip.links import (
+    AccessError,
+    AccessList,
+    AddressError,
+    ChaosError,
+    LinkAddress,
+    LinkLimits,
+    NcpOptions,
+    parse_address,
+)
 from manip.links.address import DEFAULT_CONTACT, DEFAULT_TCP_PORT, Scheme
+from manip.links.guard import DEFAULT_FRAME_TIMEOUT, DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_LINKS
 from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import DEFAULT_ADDRESS, ReferenceServer, serve
 from manip.reference_server.faults import FAULTS, FaultSet
@@ -67,6 +86,38 @@ def _faults(ctx: click.Context, param: click.Parameter, value: Sequence[str]) ->
         return FaultSet.parse(value)
     except ValueError as exc:
         raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
+
+
+def _allow(ctx: click.Context, param: click.Parameter, value: Sequence[str]) -> AccessList:
+    try:
+        return AccessList.parse(value)
+    except AccessError as exc:
+        raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
+
+
+def _off_if_zero(value: float) -> float | None:
+    return None if value == 0 else value
+
+
+def exposure_warning(address: LinkAddress, access: AccessList) -> str | None:
+    """The warning for listening on ``address`` with ``access``: None on loopback (or a chaosd
+    socket, reached only from this machine) or when IP rules say who may connect."""
+    if address.scheme == "chaosd" or access.restricts_ip:
+        return None
+    try:
+        if ipaddress.ip_address(address.host).is_loopback:
+            return None
+    except ValueError:
+        if address.host == "localhost":
+            return None
+    where = f"{address.scheme}://{address.host}:{address.port}"
+    line = (
+        f"{PROG}: warning: {where} is not loopback and no --allow names who may connect: anyone who "
+        "can reach this port can move the arm (the 1985 protocol has no authentication)."
+    )
+    if access.restricts_chaos:
+        line += " Chaos address rules alone do not stop them: a peer writes its own Chaos address."
+    return line + " Give --allow ADDRESS or NETWORK, or listen on 127.0.0.1."
 
 
 def _address(url: str, param: str, scheme: Scheme) -> str:
@@ -163,6 +214,59 @@ def command_line(ctx: click.Context) -> list[str]:
     help="Record every connection's packets, both ways, to an MCAP capture FILE (see manip-capture).",
 )
 @click.option(
+    "--allow",
+    multiple=True,
+    callback=_allow,
+    metavar="RULE",
+    help="Who may connect; repeatable; everyone else is refused. An IP address or network for TCP and "
+    "CHUDP peers (127.0.0.1, 10.0.0.0/8, ::1) or a Chaos address or range for RFCs (chaos:0401, "
+    "chaos:0400-0477, octal). A kind not given restricts nothing. Default: everyone (with a warning "
+    "unless on loopback).",
+)
+@click.option(
+    "--frame-timeout",
+    type=click.FloatRange(min=0.0),
+    default=DEFAULT_FRAME_TIMEOUT,
+    show_default=True,
+    metavar="SECONDS",
+    help="Close a TCP link whose first frame, or any frame once begun, is not complete within SECONDS "
+    "(0: never).",
+)
+@click.option(
+    "--link-idle-timeout",
+    type=click.FloatRange(min=0.0),
+    default=DEFAULT_IDLE_TIMEOUT,
+    show_default=True,
+    metavar="SECONDS",
+    help="Close a TCP link that carries no Chaos connection for SECONDS, from its opening or its last "
+    "connection's end (0: never).",
+)
+@click.option(
+    "--max-links",
+    type=click.IntRange(min=0),
+    default=DEFAULT_MAX_LINKS,
+    show_default=True,
+    metavar="N",
+    help="TCP links open at once (0: no limit). A new one beyond it displaces the oldest link without a "
+    "Chaos connection, or is closed at once if every link has one.",
+)
+@click.option(
+    "--accept-backoff",
+    type=click.FloatRange(min=0.001),
+    default=1.0,
+    show_default=True,
+    metavar="SECONDS",
+    help="Pause accepting TCP connections this long when out of file descriptors (then logged at most "
+    "once per 10 s, with a count).",
+)
+@click.option(
+    "--stats",
+    "show_stats",
+    is_flag=True,
+    help="Print one line of link counters at exit: accepted, refused by reason, idle-closed, over-limit, "
+    "accept errors, bad frames (SIGUSR1 prints it at any time).",
+)
+@click.option(
     "--log-level",
     type=click.Choice(LOG_LEVELS, case_sensitive=False),
     default="INFO",
@@ -183,6 +287,12 @@ def main(
     max_clients: int,
     cougar: str | None,
     record: str | None,
+    allow: AccessList,
+    frame_timeout: float,
+    link_idle_timeout: float,
+    max_links: int,
+    accept_backoff: float,
+    show_stats: bool,
     log_level: str,
 ) -> None:
     """Run the manip reference Puma server: a simulated PUMA 600 speaking the Chaos manipulator protocol."""
@@ -198,6 +308,16 @@ def main(
         except ValueError as exc:
             raise click.BadParameter(str(exc), param_hint="--cougar") from None
     extra = [_address(url, "--chudp", "chudp") for url in chudp]
+    limits = LinkLimits(
+        frame_timeout=_off_if_zero(frame_timeout),
+        idle_timeout=_off_if_zero(link_idle_timeout),
+        max_links=max_links or None,
+        accept_backoff=accept_backoff,
+    )
+    for url in [address, *extra]:
+        warning = exposure_warning(parse_address(url), allow)
+        if warning is not None:
+            click.echo(warning, err=True)
     logging.basicConfig(
         level=log_level.upper(),
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
@@ -215,6 +335,8 @@ def main(
         extra_addresses=extra,
         wrist_factory=None if cougar is None else functools.partial(make_cougar_wrist, cougar, seed=seed),
         options=None if broken_after is None else NcpOptions.breaking_after(broken_after),
+        limits=limits,
+        allow=allow if allow.restricts_ip or allow.restricts_chaos else None,
     )
     recording = None
     if record is not None:
@@ -222,7 +344,7 @@ def main(
             _recording, record, seed=seed, command_line=command_line(click.get_current_context())
         )
     try:
-        asyncio.run(_run(server, contact, recording))
+        asyncio.run(_run(server, contact, recording, show_stats=show_stats))
     except (OSError, ChaosError) as exc:
         raise click.ClickException(f"cannot listen: {exc}") from exc
 
@@ -244,8 +366,11 @@ async def _run(
     server: Callable[..., AbstractAsyncContextManager[ReferenceServer]],
     contact: str,
     recording: Callable[[], tuple[Recorder, LinkWrapper]] | None = None,
+    *,
+    show_stats: bool = False,
 ) -> None:
-    """Run ``server()`` until SIGINT or SIGTERM, recording it with what ``recording()`` makes."""
+    """Run ``server()`` until SIGINT or SIGTERM, recording it with what ``recording()`` makes; print the
+    stats line on SIGUSR1 and, with ``show_stats``, at exit."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -259,13 +384,40 @@ async def _run(
         async with server(**extra) as running:
             for bound in running.addresses:
                 print(f"{PROG}: listening on {bound} (contact {contact})", flush=True)
-            await stop.wait()
+            if hasattr(signal, "SIGUSR1"):
+                with contextlib.suppress(NotImplementedError):
+                    loop.add_signal_handler(signal.SIGUSR1, lambda: print(stats_line(running), flush=True))
+            try:
+                await stop.wait()
+            finally:
+                if hasattr(signal, "SIGUSR1"):
+                    loop.remove_signal_handler(signal.SIGUSR1)
             _report(running)
+        if show_stats:  # after the close: the links it closed are counted
+            print(stats_line(running), flush=True)
     finally:
         # After the server's close, so the CLS each connection got is in the file.
         if recorder is not None:
             recorder.close()
             _report_recording(recorder)
+
+
+def _counts(counter: Counter[str]) -> str:
+    total = sum(counter.values())
+    parts = ", ".join(f"{key} {n}" for key, n in sorted(counter.items()) if n)
+    return f"{total} ({parts})" if parts else str(total)
+
+
+def stats_line(server: ReferenceServer) -> str:
+    """One line of the server's link counters: what it accepted, refused, closed and dropped."""
+    guards, links = server.link_stats()
+    refused = guards.refused.copy()
+    refused["busy"] += server.stats.refused
+    return (
+        f"{PROG}: stats: links accepted {guards.accepted}, refused {_counts(refused)}, "
+        f"idle-closed {_counts(guards.idle_closed)}, over-limit {_counts(guards.over_limit)}, "
+        f"accept errors {guards.accept_errors}, bad frames {_counts(links.bad)}"
+    )
 
 
 def _report(server: ReferenceServer) -> None:

@@ -40,6 +40,10 @@ this module only moves packets and time:
   its stream and the NCP ends that connection.
 * **Logging**: one INFO line per request on ``manip.reference_server``: peer, packet number, opcode
   name, outcome.
+* **Links and access** (:mod:`manip.links.guard`): ``limits`` bound every TCP link (a link that sends
+  no frame, or half of one, or opens no connection is closed in time; at most so many at once) and
+  ``allow`` says who may connect, by IP address and by Chaos address.  What they refused is in
+  :meth:`ReferenceServer.link_stats`.
 """
 
 from __future__ import annotations
@@ -61,7 +65,17 @@ from manip.arm.trajectory import TICK
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.errors import CodecError
 from manip.codecs.messages import decode_error
-from manip.links import ChaosConnection, ChaosError, ChaosServer, NcpOptions, start_server
+from manip.links import (
+    AccessList,
+    ChaosConnection,
+    ChaosError,
+    ChaosServer,
+    GuardStats,
+    LinkLimits,
+    LinkStats,
+    NcpOptions,
+    start_server,
+)
 from manip.links.api import LinkWrapper
 from manip.links.virtual_clock import is_virtual
 from manip.ncp import ConnectionRequested
@@ -221,6 +235,15 @@ class ReferenceServer:
     @property
     def sessions(self) -> list[ServerSession]:
         return [client.session for client in self._clients.values()]
+
+    def link_stats(self) -> tuple[GuardStats, LinkStats]:
+        """What every address's guard refused and closed (RFCs refused as busy are ``stats.refused``),
+        and the counters of every link, closed ones included, summed."""
+        guards, links = GuardStats(), LinkStats()
+        for server in self.servers:
+            guards.add(server.guard.stats)
+            links.add(server.node.link_stats())
+        return guards, links
 
     @property
     def bad_frames(self) -> int:
@@ -451,7 +474,12 @@ class ReferenceServer:
 
     # ----------------------------------------------------------------------------- lifetime
     async def _start(
-        self, addresses: Sequence[str], options: NcpOptions | None, wrap_link: LinkWrapper | None
+        self,
+        addresses: Sequence[str],
+        options: NcpOptions | None,
+        wrap_link: LinkWrapper | None,
+        limits: LinkLimits | None = None,
+        allow: AccessList | None = None,
     ) -> None:
         for address in addresses:
             server = await start_server(
@@ -461,6 +489,8 @@ class ReferenceServer:
                 policy=self._policy,
                 options=options,
                 wrap_link=wrap_link,
+                limits=limits,
+                allow=allow,
             )
             self.servers.append(server)
             log.info("listening on %s (contact %s)", server.address, self.contact)
@@ -517,6 +547,8 @@ async def serve(
     extra_addresses: Sequence[str] = (),
     options: NcpOptions | None = None,
     wrap_link: LinkWrapper | None = None,
+    limits: LinkLimits | None = None,
+    allow: AccessList | None = None,
 ) -> AsyncIterator[ReferenceServer]:
     """Run a reference server for the ``async with`` block.
 
@@ -525,7 +557,9 @@ async def serve(
     real port.  ``time_scale`` is simulated seconds per real second; ``max_clients`` how many
     connections may be open at once (one robot: 1); ``wrist_factory`` makes the robot's wrist once.
     ``wrap_link`` is given every link of every address (:func:`manip.links.start_server`): a capture's
-    ``RecorderTap(recorder, "server").wrap`` records all the server's traffic."""
+    ``RecorderTap(recorder, "server").wrap`` records all the server's traffic.  ``limits`` and
+    ``allow`` bound the links and say who may connect (:func:`manip.links.start_server`; default:
+    :class:`~manip.links.LinkLimits`, everyone)."""
     server = ReferenceServer(
         config or ServerConfig(),
         contact=contact,
@@ -535,7 +569,7 @@ async def serve(
         wrist=wrist_factory() if wrist_factory is not None else None,
     )
     try:
-        await server._start([address, *extra_addresses], options, wrap_link)
+        await server._start([address, *extra_addresses], options, wrap_link, limits, allow)
         yield server
     finally:
         await server.aclose()
