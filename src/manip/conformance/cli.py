@@ -33,10 +33,12 @@ from typing import Any, TypeVar
 
 import click
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from manip.conformance.case import Case, all_cases
+from manip.conformance.console import make_console
 from manip.conformance.context import DEFAULT_REPLY_TIMEOUT, RunOptions
 from manip.conformance.cougar_target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.coverage import DEFAULT_PARTIES, coverage, gaps
@@ -45,6 +47,7 @@ from manip.conformance.replay_cli import (
     check_record_path,
     json_option,
     junit_option,
+    print_by_clause,
     recording,
     replay_command,
     verify_command,
@@ -67,6 +70,9 @@ Exit codes:
   4  interrupted or internal error (a partial report is still written)"""
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+TABLE_WIDTH = 160
+"""On a terminal, the ``cases`` and ``coverage`` tables are laid out at least this wide."""
 
 _STYLE = {
     "pass": "green",
@@ -137,8 +143,8 @@ def main() -> None:
     type=click.FloatRange(min=0.1),
     default=None,
     metavar="SECONDS",
-    help="The target's broken-connection timer (the seed's is 90 s): server.ncp.broken goes silent that "
-    "long and checks the connection was given up.  Without it that case is skipped.  With the embedded "
+    help="The target's broken-connection timer (the 1985 guide's is 90 s): server.ncp.broken goes silent "
+    "that long and checks the connection was given up.  Without it that case is skipped.  With the embedded "
     "server, the server gets this timer too (below 5 s the other NCP cases, which keep quiet for up to "
     "3 s on purpose, may lose their connections).",
 )
@@ -201,7 +207,7 @@ def run(
     chaosd:///PATH, or HOST[:PORT] for tcp).  Without HOST the embedded reference server is started
     on a free loopback port and the suite runs against it.  With --cougar the Cougar cases run against
     a Cougar over the emulated DRV-11J link instead."""
-    console = Console(stderr=False, highlight=False)
+    console = make_console()
     try:
         select_set = PatternSet.of(select, "--select")
         skip_set = PatternSet.of(skip, "--skip")
@@ -307,11 +313,11 @@ def _execute(
         return int(ExitCode.INTERNAL)
     except Exception as exc:  # an internal error of the suite: keep what was done
         text = traceback.format_exc()
-        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {exc}")
+        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {escape(str(exc))}")
         if "runner" in holder:
             holder["runner"].report.internal_error = text
         else:
-            console.print(text)
+            console.print(text, markup=False)
         return int(ExitCode.INTERNAL)
     return None
 
@@ -330,7 +336,7 @@ async def _run_async(
             config.address = address
             config.options = _with_address(config.options, address)
             if cougar.embedded:
-                console.print(f"embedded simulated Cougar at {address}")
+                console.print(f"embedded simulated Cougar at {address}", markup=False)
             await _run_with(config, cases, holder, console, quiet)
         return
     if not config.embedded:
@@ -341,7 +347,9 @@ async def _run_async(
     with EmbeddedServer(server_config, wrist=True, broken_after=config.options.broken_after) as address:
         config.address = address
         config.options = replace(config.options, address=address)
-        console.print(f"embedded reference server at {address} (with the simulated Cougar wrist)")
+        console.print(
+            f"embedded reference server at {address} (with the simulated Cougar wrist)", markup=False
+        )
         await _run_with(config, cases, holder, console, quiet)
 
 
@@ -384,7 +392,9 @@ async def _run_with(
 
     def liveness(check: LivenessCheck) -> None:
         if not check.alive:
-            progress.console.print(f"[bold red]target not alive[/] ({check.when}): {check.detail}")
+            progress.console.print(
+                f"[bold red]target not alive[/] ({escape(check.when)}): {escape(check.detail)}"
+            )
 
     runner = Runner(config, cases, RunEvents(started, case_started, case_finished, liveness))
     holder["runner"] = runner
@@ -395,8 +405,9 @@ async def _run_with(
 def _summary(console: Console, report: RunReport) -> None:
     counts = report.counts()
     parts = [f"[{_STYLE[k]}]{v} {k}[/]" for k, v in counts.items() if v]
+    print_by_clause(console, report)
     for problem in report.problems:
-        console.print(f"[bold red]problem[/]: {problem}")
+        console.print(f"[bold red]problem[/]: {escape(problem)}")
     verdict_style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
     shown = ", ".join(parts) or "no cases"
     console.print(
@@ -405,7 +416,9 @@ def _summary(console: Console, report: RunReport) -> None:
     )
     slow = [r for r in report.results if r.deadline and r.duration > 0.8 * r.deadline]
     for r in slow:
-        console.print(f"[yellow]slow[/]: {r.id} took {r.duration:.2f} s of its {r.deadline:g} s deadline")
+        console.print(
+            f"[yellow]slow[/]: {escape(r.id)} took {r.duration:.2f} s of its {r.deadline:g} s deadline"
+        )
 
 
 # ----------------------------------------------------------------------------------------------- cases
@@ -441,7 +454,7 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
         table.add_column(column)
     for c in items:
         table.add_row(c.id, c.level, c.kind, c.hazard, " ".join(c.clauses))
-    Console(width=max(160, Console().width)).print(table)
+    make_console(min_width=TABLE_WIDTH).print(table)
 
 
 # ----------------------------------------------------------------------------------------------- coverage
@@ -483,7 +496,7 @@ def coverage_command(fmt: str, parties: tuple[str, ...]) -> None:
         for r in rows:
             cases_text = ", ".join(r.cases) if r.cases else ("[bold red]NONE[/]" if r.gap else "[dim]-[/]")
             table.add_row(r.clause, r.level, r.party + ("" if r.in_scope else " (out of scope)"), cases_text)
-        console = Console(width=max(160, Console().width))
+        console = make_console(min_width=TABLE_WIDTH)
         console.print(table)
         covered = sum(1 for r in rows if r.cases)
         console.print(

@@ -29,9 +29,11 @@ from typing import TYPE_CHECKING
 
 import click
 from rich.console import Console
+from rich.markup import escape
 
+from manip.conformance.console import make_console
 from manip.conformance.embedded import EmbeddedServer
-from manip.conformance.report import failure_text, write_json, write_junit
+from manip.conformance.report import clause_lines, failure_text, write_json, write_junit
 from manip.conformance.results import ExitCode, RunReport
 
 if TYPE_CHECKING:
@@ -47,6 +49,7 @@ __all__ = [
     "check_record_path",
     "json_option",
     "junit_option",
+    "print_by_clause",
     "recording",
     "replay_command",
     "verify_command",
@@ -102,13 +105,23 @@ def _finish(
         write_json(report, json_path)
     if junit_path is not None:
         write_junit(report, junit_path)
+    print_by_clause(console, report)
     for problem in report.problems:
-        console.print(f"[bold red]problem[/]: {problem}", highlight=False)
+        console.print(f"[bold red]problem[/]: {escape(problem)}")
     counts = ", ".join(f"{v} {k}" for k, v in report.counts().items() if v) or "no results"
     style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
     console.print(
         f"[{style}]{report.verdict}[/] (exit {int(report.exit_code)}): {counts} in {report.duration:.1f} s"
     )
+
+
+def print_by_clause(console: Console, report: RunReport) -> None:
+    """One line per broken clause (count, id, text, section), under a heading; nothing if none broke."""
+    lines = clause_lines(report)
+    if lines:
+        console.print("[bold]broken clauses[/]:")
+        for line in lines:
+            console.print(f"  {line}", markup=False)
 
 
 def _run(job: Callable[[], Awaitable[RunReport]], console: Console) -> RunReport | int:
@@ -118,7 +131,7 @@ def _run(job: Callable[[], Awaitable[RunReport]], console: Console) -> RunReport
         console.print("[bold]interrupted[/]")
         return int(ExitCode.INTERNAL)
     except Exception as exc:
-        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {exc}")
+        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {escape(str(exc))}")
         console.print(traceback.format_exc(), markup=False, highlight=False)
         return int(ExitCode.INTERNAL)
 
@@ -172,12 +185,12 @@ def verify_command(
     the client's requests instead (opcodes, data layouts)."""
     from manip.conformance.verify import verify_capture  # noqa: PLC0415
 
-    console = Console(highlight=False)
+    console = make_console()
     command = shlex.join(["manip-conform", *sys.argv[1:]])
     try:
         report = verify_capture(file, strict=strict, sessions=sessions, command=command, judge=judge)
     except Exception as exc:
-        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {exc}")
+        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {escape(str(exc))}")
         console.print(traceback.format_exc(), markup=False, highlight=False)
         sys.exit(int(ExitCode.INTERNAL))
     _finish(report, console, quiet, json_path, junit_path)
@@ -275,7 +288,7 @@ def replay_command(
     from manip.conformance.replay import ReplayOptions, replay_capture  # noqa: PLC0415
     from manip.conformance.replay_serve import ServeOptions, serve_capture  # noqa: PLC0415
 
-    console = Console(highlight=False)
+    console = make_console()
     if against and serve:
         raise click.UsageError("give --against URL or --serve URL, not both")
     try:
@@ -299,7 +312,7 @@ def replay_command(
 
         def listening(address: str) -> None:
             console.print(
-                f"manip-conform: serving the recorded sessions of {file} at {address}", highlight=False
+                f"manip-conform: serving the recorded sessions of {file} at {address}", markup=False
             )
             sys.stdout.flush()
 
@@ -334,7 +347,9 @@ def replay_command(
                 scale, seed, wrist = _capture_settings(file)
                 config = ServerConfig() if faults is None else ServerConfig(faults=faults)
                 with EmbeddedServer(config, time_scale=scale, seed=seed, wrist=wrist) as address:
-                    console.print(f"embedded reference server at {address} (time scale {scale:g})")
+                    console.print(
+                        f"embedded reference server at {address} (time scale {scale:g})", markup=False
+                    )
                     reproduce = ["manip-conform", "replay", str(file)]
                     for fault in server_faults:
                         reproduce += ["--server-fault", fault]

@@ -1,0 +1,137 @@
+"""manip-conform as a user meets it: output that survives a pipe, failures grouped by the clause they
+break, usage errors instead of empty passes, and a target that is not a manip server said to be so."""
+
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from manip.conformance.cli import main
+from manip.conformance.report import by_clause, clause_lines, load_schema, report_json
+from manip.conformance.results import CaseResult, RunReport, Violation
+from manip.spec import SPEC
+from tests.test_conform_framework import _validate
+
+ROOT = Path(__file__).resolve().parents[1]
+GOLDEN = ROOT / "captures"
+ECHO = "response.echoes-request-number"
+
+
+# ------------------------------------------------------------------------------------------- pipes
+
+
+def test_output_to_a_pipe_is_never_wrapped(tmp_path: Path) -> None:
+    """A failing replay of a capture under a 150+ character directory, stdout a pipe: every reproduce
+    line is one command naming the whole path, and every hex dump is whole."""
+    deep = tmp_path / ("a-directory-name-long-enough-to-break-any-line-" * 4)
+    assert len(deep.name) > 150
+    deep.mkdir()
+    capture = deep / "describe-self.mcap"
+    capture.write_bytes((GOLDEN / "describe-self.mcap").read_bytes())
+    report = deep / "report.json"
+    proc = subprocess.run(
+        [sys.executable, "-m", "manip.conformance.cli", "replay", str(capture),
+         "--server-fault", "wrong-request-number", "--json", str(report)],
+        check=False, capture_output=True, text=True, timeout=60,
+        env={**os.environ, "COLUMNS": "40", "FORCE_COLOR": "1"},
+    )  # fmt: skip
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    lines = proc.stdout.splitlines()
+    assert "\x1b" not in proc.stdout  # no colour in a pipe, whatever FORCE_COLOR says
+    reproduce = [line.removeprefix("reproduce: ") for line in lines if line.startswith("reproduce: ")]
+    data = json.loads(report.read_text())
+    failed = [c for c in data["cases"] if c["outcome"] == "fail"]
+    assert failed and len(reproduce) == len(failed)
+    for line, case in zip(reproduce, failed, strict=True):
+        words = shlex.split(line)
+        assert words[:3] == ["manip-conform", "replay", str(capture)], line
+        assert line == case["reproduce"]
+    dumps = [line.removeprefix("  bytes:    ") for line in lines if line.startswith("  bytes:    ")]
+    expected = [v["bytes"] for c in failed for v in c["violations"] if v["bytes"]]
+    assert [bytes.fromhex(d).hex() for d in dumps] == expected
+    assert max(map(len, dumps)) > 80  # long enough that a wrapping console would have broken them
+
+
+# ------------------------------------------------------------------------------------------- by clause
+
+
+def _result(case_id: str, outcome: str, *violations: Violation) -> CaseResult:
+    return CaseResult(
+        id=case_id,
+        clauses=(ECHO,),
+        level="MUST",
+        kind="scripted",
+        hazard="read-only",
+        summary="",
+        outcome=outcome,  # type: ignore[arg-type]
+        seed=1,
+        deadline=1.0,
+        violations=list(violations),
+    )
+
+
+def _violation(clause: str | None, level: str = "MUST", kind: str = "wrong_value") -> Violation:
+    return Violation("m", clause, level, "e", "a", b"\x01", kind)
+
+
+def test_by_clause_counts_cases_per_clause_and_kind_of_failure() -> None:
+    segment = "segment.number-increases"  # a SHOULD clause
+    report = RunReport(target="t", embedded=True, seed=1, strict=False, options={}, command="c")
+    report.results = [
+        _result("a.one", "fail", _violation(ECHO), _violation(ECHO), _violation(segment, "SHOULD")),
+        _result("a.two", "fail", _violation(ECHO)),
+        _result("a.three", "warn", _violation(segment, "SHOULD")),
+        _result("a.four", "known-fail", _violation(ECHO)),
+        _result("a.five", "fail", _violation(None, kind="deadline")),
+        _result("a.six", "pass"),
+    ]
+    tallies = {t.name: t for t in by_clause(report)}
+    assert set(tallies) == {ECHO, segment, "(no clause: deadline)"}
+    echo = tallies[ECHO]
+    assert (echo.failures, echo.warnings, echo.known_failures) == (2, 0, 1)  # a.one counts once
+    assert echo.cases == ("a.four", "a.one", "a.two")
+    assert (echo.text, echo.section) == (SPEC.clauses[ECHO].text, SPEC.clauses[ECHO].section)
+    assert (tallies[segment].failures, tallies[segment].warnings) == (0, 2)  # SHOULD: warnings
+    assert tallies["(no clause: deadline)"].failures == 1
+    first = clause_lines(report)[0]
+    assert first == (
+        f"2 failures, 1 known failure: {ECHO} \u2014 {SPEC.clauses[ECHO].text} ({SPEC.clauses[ECHO].section})"
+    )
+    report.strict = True
+    assert {t.name: t.failures for t in by_clause(report)}[segment] == 1  # --strict: a failure in a.one
+    data = json.loads(json.dumps(report_json(report)))
+    schema = load_schema()
+    _validate(data, schema, schema)
+    assert [t["clause"] for t in data["by_clause"]] == [ECHO, segment, None]
+    assert list(data).index("by_clause") < list(data).index("cases")  # the summary before the details
+
+
+def test_run_groups_failures_by_clause_in_console_json_and_junit(tmp_path: Path) -> None:
+    json_path, junit_path = tmp_path / "r.json", tmp_path / "r.xml"
+    selected = ["server.reply.here", "server.reply.joint-angles"]
+    result = CliRunner().invoke(
+        main,
+        ["run", "-q", "--seed", "2", "--server-fault", "wrong-request-number",
+         *[w for s in selected for w in ("--select", s)],
+         "--json", str(json_path), "--junit", str(junit_path)],
+    )  # fmt: skip
+    assert result.exit_code == 1, result.output
+    clause = SPEC.clauses[ECHO]
+    line = f"  2 failures: {ECHO} \u2014 {clause.text} ({clause.section})"
+    lines = result.output.splitlines()
+    assert line in lines
+    assert lines.index(line) < next(i for i, t in enumerate(lines) if t.startswith("non-conformant"))
+    data = json.loads(json_path.read_text())
+    assert [(t["clause"], t["failures"], t["cases"]) for t in data["by_clause"]] == [(ECHO, 2, selected)]
+    failures = list(ET.parse(junit_path).getroot().iter("failure"))
+    assert len(failures) == 2
+    for failure in failures:
+        assert clause.text in failure.get("message", "") and clause.section in failure.get("message", "")
+        assert f"clause:   {clause.text} ({clause.section})" in (failure.text or "")
