@@ -135,3 +135,59 @@ def test_run_groups_failures_by_clause_in_console_json_and_junit(tmp_path: Path)
     for failure in failures:
         assert clause.text in failure.get("message", "") and clause.section in failure.get("message", "")
         assert f"clause:   {clause.text} ({clause.section})" in (failure.text or "")
+
+
+# ------------------------------------------------------------------------------------------- usage errors
+
+
+def _usage(args: list[str]) -> str:
+    """The error message of a command that must end as a usage error (exit 2) before running anything."""
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 2, result.output
+    assert "embedded reference server at" not in result.output  # nothing ran
+    message = result.output.strip().splitlines()[-1]
+    assert message.startswith("Error: "), result.output
+    return message
+
+
+def test_a_selection_that_matches_nothing_is_a_usage_error(tmp_path: Path) -> None:
+    assert "'nomatch.*' matches no case" in _usage(["run", "--select", "nomatch.*"])
+    typo = _usage(["run", "--select", "server.reply.heer", "--select", "server.describe"])
+    assert "'server.reply.heer' matches no case" in typo and "close matches: server.reply.here" in typo
+    assert "close matches: server.reply" in _usage(["run", "--select", "server.repyl.*"])
+    other = _usage(["run", "--select", "cougar.reply"])  # Cougar cases, in a server run
+    assert "of --cougar" in other and "cougar.reply." in other
+    server_only = _usage(["run", "--cougar", "--select", "server.reply.here"])
+    assert "a server run (without --cougar)" in server_only
+    listing = tmp_path / "select.txt"
+    listing.write_text("server.reply.here\nserver.nothing-here\n")
+    assert f"({listing}:2)" in _usage(["run", "--select", f"@{listing}"])
+    emptied = _usage(["run", "--select", "server.reply.here", "--skip", "server.reply"])
+    assert "leave no case to run" in emptied
+    assert "matches no case" in _usage(["cases", "--select", "nomatch"])
+
+
+def test_an_option_of_a_target_not_chosen_is_a_usage_error() -> None:
+    assert "add --cougar sim" in _usage(["run", "--cougar-fault", "no-out-of-sync"])
+    assert "--target hardware" in _usage(["run", "--allow-motion"])
+    for option in (["--broken-after", "3"], ["--max-examples", "3"], ["--record", "x.mcap"]):
+        assert "not with --cougar" in _usage(["run", "--cougar", "sim", *option])
+    for option in (["--settle", "1"], ["--reply-timeout", "1"], ["--async-timeout", "1"]):
+        message = _usage(["replay", str(GOLDEN / "errors.mcap"), "--serve", "tcp://127.0.0.1:0", *option])
+        assert f"{option[0]} applies to a replay against a server" in message
+
+
+def test_report_paths_are_checked_before_the_run(tmp_path: Path) -> None:
+    missing = tmp_path / "no-such-dir" / "r.json"
+    not_a_dir = tmp_path / "file"
+    not_a_dir.write_text("")
+    capture = str(GOLDEN / "errors.mcap")
+    for option in ("--json", "--junit", "--record"):
+        message = _usage(["run", "--select", "server.reply.here", option, str(missing)])
+        assert f"{option}: the directory {missing.parent} of {missing} does not exist" in message
+        inside_a_file = str(not_a_dir / "r.out")
+        assert "is not a directory" in _usage(["run", option, inside_a_file])
+        assert "does not exist" in _usage(["replay", capture, option, str(missing)])
+    for option in ("--json", "--junit"):
+        assert "does not exist" in _usage(["verify", capture, option, str(missing)])
+    assert not missing.parent.exists()

@@ -21,6 +21,7 @@ subcommands (``replay``, ``verify``) added by other modules: they register on :d
 from __future__ import annotations
 
 import asyncio
+import difflib
 import json
 import os
 import shlex
@@ -44,7 +45,8 @@ from manip.conformance.cougar_target import CougarTarget, cougar_cases, liveness
 from manip.conformance.coverage import DEFAULT_PARTIES, coverage, gaps
 from manip.conformance.embedded import EmbeddedServer
 from manip.conformance.replay_cli import (
-    check_record_path,
+    check_output_paths,
+    given,
     json_option,
     junit_option,
     print_by_clause,
@@ -55,7 +57,7 @@ from manip.conformance.replay_cli import (
 from manip.conformance.report import failure_text, write_json, write_junit
 from manip.conformance.results import CaseResult, ExitCode, LivenessCheck, RunReport
 from manip.conformance.runner import RunConfig, RunEvents, Runner
-from manip.conformance.selection import PatternError, PatternSet
+from manip.conformance.selection import PatternError, PatternSet, match_id
 from manip.links import AddressError, parse_address
 from manip.reference_server import FaultSet, ServerConfig
 
@@ -70,6 +72,13 @@ Exit codes:
   4  interrupted or internal error (a partial report is still written)"""
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+_NOT_WITH_COUGAR = {
+    "record": "records Chaos connections",
+    "broken_after": "is the timer of a Chaos target",
+    "max_examples": "sets the examples of the property cases of a server run",
+}
+"""Options of ``run`` that mean nothing for a Cougar target: giving one with ``--cougar`` is an error."""
 
 TABLE_WIDTH = 160
 """On a terminal, the ``cases`` and ``coverage`` tables are laid out at least this wide."""
@@ -223,8 +232,17 @@ def run(
             config_faults = FaultSet.parse(server_faults)
         except ValueError as exc:
             raise click.UsageError(f"--server-fault: {exc}") from None
+    if cougar_faults and cougar is None:
+        raise click.UsageError(
+            "--cougar-fault switches on a defect of the simulated Cougar: add --cougar sim "
+            "(without --cougar the suite checks a manip server)"
+        )
+    if allow_motion and target_kind != "hardware":
+        raise click.UsageError(
+            "--allow-motion applies to --target hardware (the simulated arm always gets the motion cases)"
+        )
     target: CougarTarget | None = None
-    if cougar is not None or cougar_faults:
+    if cougar is not None:
         if host or server_faults:
             raise click.UsageError("--cougar checks a Cougar: give no HOST and no --server-fault")
         try:
@@ -232,12 +250,14 @@ def run(
         except ValueError as exc:
             raise click.UsageError(f"--cougar: {exc}") from None
         address = "" if target.embedded else target.url
-    if record is not None and target is not None:
-        raise click.UsageError("--record records Chaos connections: not with --cougar")
-    check_record_path(record)
+        for name, why in _NOT_WITH_COUGAR.items():
+            if given(name):
+                raise click.UsageError(f"--{name.replace('_', '-')} {why}, not with --cougar")
+    check_output_paths(record=record, json=json_path, junit=junit_path)
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "big")
     cases = cougar_cases(all_cases(), cougar=target is not None)
+    check_selection(select_set, skip_set, cases, cougar=target is not None)
     options = RunOptions(
         target="hardware" if target_kind == "hardware" else "sim",
         allow_motion=allow_motion,
@@ -289,6 +309,51 @@ def run(
         _summary(console, report)
         code = int(report.exit_code) if code is None else code
     sys.exit(int(code) if code is not None else int(ExitCode.INTERNAL))
+
+
+def check_selection(
+    select: PatternSet,
+    skip: PatternSet,
+    cases: Sequence[Case],
+    *,
+    cougar: bool = False,
+    hint: str = " (manip-conform cases lists every case)",
+) -> None:
+    """A usage error when a ``--select`` pattern matches none of ``cases``, or when ``--select`` and
+    ``--skip`` together leave no case: a run of nothing would pass, and say nothing of the typo."""
+    ids = sorted(c.id for c in cases)
+    for pattern in select.patterns:
+        if any(match_id(pattern.text, case_id) for case_id in ids):
+            continue
+        where = "" if pattern.source == "--select" else f" ({pattern.source})"
+        message = f"--select {pattern.text!r}{where} matches no case"
+        others = [c.id for c in all_cases() if c.id not in ids and match_id(pattern.text, c.id)]
+        if others:
+            mode = "--cougar" if not cougar else "a server run (without --cougar)"
+            message += f" of this run: it names {len(others)} case(s) of {mode}, such as {others[0]}"
+        elif close := close_case_ids(pattern.text, ids):
+            message += f"; close matches: {', '.join(close)}"
+        else:
+            areas = sorted({case_id.split(".")[0] + ".*" for case_id in ids})
+            message += f"; the case ids are under {', '.join(areas)}"
+        raise click.UsageError(message + hint)
+    if any((not select or select.matches(i)) and not skip.matches(i) for i in ids):
+        return
+    options = [f"--select {p.text}" for p in select.patterns] + [f"--skip {p.text}" for p in skip.patterns]
+    verb = "leave" if len(options) > 1 else "leaves"
+    raise click.UsageError(f"{' '.join(options)} {verb} no case to run")
+
+
+def close_case_ids(pattern: str, ids: Sequence[str], limit: int = 3) -> list[str]:
+    """Case ids (or the areas above them: ``server.reply``) that look like ``pattern``, its wildcards
+    left out, the closest first."""
+    names = set(ids)
+    for case_id in ids:
+        parts = case_id.split(".")
+        names.update(".".join(parts[:n]) for n in range(1, len(parts)))
+    stem = ".".join(p for p in pattern.split(".") if not any(ch in p for ch in "*?["))
+    close = difflib.get_close_matches(stem or pattern, sorted(names), n=limit, cutoff=0.6)
+    return close
 
 
 def _execute(
@@ -433,6 +498,7 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
         patterns = PatternSet.of(select, "--select")
     except PatternError as exc:
         raise click.UsageError(str(exc)) from None
+    check_selection(patterns, PatternSet(), all_cases(), hint="")
     items = [c for c in all_cases() if not patterns or patterns.matches(c.id)]
     if fmt == "json":
         data = [

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
+from click.core import ParameterSource
 from rich.console import Console
 from rich.markup import escape
 
@@ -46,7 +47,8 @@ from manip.spec.constants import ServerOp
 
 __all__ = [
     "EXIT_CODES_HELP",
-    "check_record_path",
+    "check_output_paths",
+    "given",
     "json_option",
     "junit_option",
     "print_by_clause",
@@ -83,10 +85,33 @@ def recording(
         yield RecorderTap(recorder, "server" if side == "server" else "client").wrap
 
 
-def check_record_path(path: Path | None) -> None:
-    """Fail early (usage error) when a ``--record`` file cannot be created."""
-    if path is not None and not path.resolve().parent.is_dir():
-        raise click.UsageError(f"--record: the directory of {path} does not exist")
+def given(name: str) -> bool:
+    """Whether the current command's parameter ``name`` was given (command line or environment), not
+    left at its default."""
+    source = click.get_current_context().get_parameter_source(name)
+    return source is not None and source not in (ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP)
+
+
+def check_output_paths(**paths: Path | None) -> None:
+    """Fail early (usage error) when a file an option names cannot be written, before the run starts
+    rather than with a traceback at its end.  Keywords name the options: ``json=``, ``junit=``,
+    ``record=`` check ``--json``, ``--junit``, ``--record``."""
+    for name, path in paths.items():
+        if path is None:
+            continue
+        option = "--" + name.replace("_", "-")
+        resolved = path.resolve()
+        parent = resolved.parent
+        if resolved.is_dir():
+            raise click.UsageError(f"{option}: {path} is a directory (give a file name)")
+        if not parent.exists():
+            raise click.UsageError(f"{option}: the directory {parent} of {path} does not exist")
+        if not parent.is_dir():
+            raise click.UsageError(f"{option}: {parent} (the directory of {path}) is not a directory")
+        if resolved.exists() and not os.access(resolved, os.W_OK):
+            raise click.UsageError(f"{option}: {path} exists and is not writable")
+        if not resolved.exists() and not os.access(parent, os.W_OK | os.X_OK):
+            raise click.UsageError(f"{option}: cannot create files in {parent} (permission denied)")
 
 
 def _finish(
@@ -185,6 +210,7 @@ def verify_command(
     the client's requests instead (opcodes, data layouts)."""
     from manip.conformance.verify import verify_capture  # noqa: PLC0415
 
+    check_output_paths(json=json_path, junit=junit_path)
     console = make_console()
     command = shlex.join(["manip-conform", *sys.argv[1:]])
     try:
@@ -301,11 +327,16 @@ def replay_command(
         raise click.UsageError("--server-fault applies to the embedded server only (omit --against/--serve)")
     if seconds is not None and not serve:
         raise click.UsageError("--seconds applies to --serve")
+    if serve:
+        for name in ("reply_timeout", "async_timeout", "settle"):
+            if given(name):
+                option = "--" + name.replace("_", "-")
+                raise click.UsageError(f"{option} applies to a replay against a server, not to --serve")
     try:
         faults = FaultSet.parse(server_faults) if server_faults else None
     except ValueError as exc:
         raise click.UsageError(f"--server-fault: {exc}") from None
-    check_record_path(record)
+    check_output_paths(record=record, json=json_path, junit=junit_path)
     command = shlex.join(["manip-conform", *sys.argv[1:]])
 
     if serve:
