@@ -3,19 +3,29 @@ break, usage errors instead of empty passes, and a target that is not a manip se
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
 import os
 import shlex
 import subprocess
 import sys
+import threading
 import xml.etree.ElementTree as ET
+from collections.abc import Awaitable, Callable, Iterator
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
+from manip.conformance.case import all_cases
 from manip.conformance.cli import main
+from manip.conformance.context import RunOptions
+from manip.conformance.rawchaos import RawError, RawPeer
 from manip.conformance.report import by_clause, clause_lines, load_schema, report_json
-from manip.conformance.results import CaseResult, RunReport, Violation
+from manip.conformance.results import CaseResult, ExitCode, RunReport, Violation
+from manip.conformance.runner import RunConfig, Runner
+from manip.conformance.selection import PatternSet
 from manip.spec import SPEC
 from tests.test_conform_framework import _validate
 
@@ -191,3 +201,88 @@ def test_report_paths_are_checked_before_the_run(tmp_path: Path) -> None:
     for option in ("--json", "--junit"):
         assert "does not exist" in _usage(["verify", capture, option, str(missing)])
     assert not missing.parent.exists()
+
+
+# ------------------------------------------------------------------------------------ not a manip server
+
+Handler = Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]]
+HTTP_ANSWER = b"HTTP/1.0 400 Bad Request\r\nContent-Type: text/html\r\n\r\n<h1>Bad Request</h1>\r\n"
+
+
+async def _http(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    """What a web server does with a Chaos RFC frame: reads a little, answers 400, hangs up."""
+    with contextlib.suppress(TimeoutError):
+        await asyncio.wait_for(reader.read(64), 0.5)
+    writer.write(HTTP_ANSWER)
+    await writer.drain()
+    writer.close()
+
+
+async def _silent(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    """Accepts the TCP connection and never says a word."""
+    await reader.read()
+    writer.close()
+
+
+@contextlib.contextmanager
+def foreign_server(handler: Handler) -> Iterator[str]:
+    """A TCP server on 127.0.0.1:0 in its own thread and loop (the command under test runs its own)."""
+    loop = asyncio.new_event_loop()
+    ready = threading.Event()
+    stop = asyncio.Event()
+    ports: list[int] = []
+
+    async def serve() -> None:
+        server = await asyncio.start_server(handler, "127.0.0.1", 0)
+        ports.append(server.sockets[0].getsockname()[1])
+        ready.set()
+        async with server:
+            await stop.wait()
+
+    thread = threading.Thread(target=loop.run_until_complete, args=(serve(),), daemon=True)
+    thread.start()
+    try:
+        assert ready.wait(5), "the foreign server did not start"
+        yield f"tcp://127.0.0.1:{ports[0]}"
+    finally:
+        loop.call_soon_threadsafe(stop.set)
+        thread.join(5)
+        loop.close()
+
+
+def test_a_web_server_at_the_address_is_said_not_to_be_a_chaos_link(tmp_path: Path) -> None:
+    json_path = tmp_path / "r.json"
+    with foreign_server(_http) as address:
+        result = CliRunner().invoke(
+            main, ["run", address, "-q", "--select", "server.reply.here", "--json", str(json_path)]
+        )
+    assert result.exit_code == 3, result.output
+    said = "the peer answered `HTTP/1.0 400 Bad Request`: not a Chaos link"
+    assert said in result.output
+    (before,) = json.loads(json_path.read_text())["liveness"]
+    assert before["when"] == "before" and not before["alive"] and said in before["detail"]
+
+
+def test_the_raw_peer_says_so_too() -> None:
+    async def go() -> str:
+        with foreign_server(_http) as address:
+            async with await RawPeer.open(address) as peer:
+                with pytest.raises(RawError) as caught:
+                    await peer.handshake(0x0A01, 1, timeout=2.0)
+        return str(caught.value)
+
+    assert "the peer answered `HTTP/1.0 400 Bad Request`: not a Chaos link" in asyncio.run(go())
+
+
+def test_a_silent_peer_names_the_default_chaos_address_as_such() -> None:
+    async def go() -> RunReport:
+        with foreign_server(_silent) as address:
+            options = RunOptions(address=address, reply_timeout=0.2, connect_timeout=0.3)
+            select = PatternSet.of(["server.reply.here"], "--select")
+            config = RunConfig(address, options, seed=1, select=select)
+            return await Runner(config, all_cases()).run()
+
+    report = asyncio.run(go())
+    assert report.exit_code == ExitCode.UNREACHABLE
+    detail = report.liveness[0].detail
+    assert "Chaos host 0440 (the robot's default address)" in detail and "contact 'PUMA'" in detail
