@@ -18,15 +18,20 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
+from manip.codecs.error_string import ErrorMessage
+from manip.codecs.messages import encode_error, encode_reply, encode_request, segment_completed
 from manip.conformance.case import all_cases
+from manip.conformance.checks import WirePacket, describe
 from manip.conformance.cli import main
 from manip.conformance.context import RunOptions
+from manip.conformance.packet_text import packet_listing
 from manip.conformance.rawchaos import RawError, RawPeer
 from manip.conformance.report import by_clause, clause_lines, load_schema, report_json
 from manip.conformance.results import CaseResult, ExitCode, RunReport, Violation
 from manip.conformance.runner import RunConfig, Runner
 from manip.conformance.selection import PatternSet
 from manip.spec import SPEC
+from manip.spec.constants import ChaosOp, ServerOp
 from tests.test_conform_framework import _validate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -286,3 +291,54 @@ def test_a_silent_peer_names_the_default_chaos_address_as_such() -> None:
     assert report.exit_code == ExitCode.UNREACHABLE
     detail = report.liveness[0].detail
     assert "Chaos host 0440 (the robot's default address)" in detail and "contact 'PUMA'" in detail
+
+
+# ------------------------------------------------------------------------------------ readable packets
+
+
+def _c2s(name: str, number: int, **values: object) -> WirePacket:
+    return WirePacket("c2s", SPEC.request(name).opcode, number, 0, encode_request(name, **values))
+
+
+def _s2c(opcode: int, data: bytes) -> WirePacket:
+    return WirePacket("s2c", opcode, 0, 0, data)
+
+
+def test_a_request_is_described_with_its_packet_number_and_octal_opcode() -> None:
+    assert describe(_c2s("here", 23)) == "here 0201 (packet number 23, 0 data bytes)"
+    reply = _s2c(ServerOp.RESPONSE, encode_reply("here", 23, transform=[0.0] * 12))
+    assert describe(reply) == "response 0200 (request number 23, 50 data bytes)"
+
+
+def test_packets_are_listed_numbered_and_decoded() -> None:
+    joints = [10.5, -90.0, 90.0, 0.0, 0.25, 1e-3]
+    transform = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 100.0, 200.0, 300.0]
+    move = _c2s("set-joint-angles", 3, joints=joints)
+    wrong = _s2c(ServerOp.RESPONSE, encode_reply("set-joint-angles", 4, segment=7))  # names request 4
+    nap = ErrorMessage("move", "E", "NAP", "No arm power")
+    packets = [
+        _s2c(ServerOp.RESPONSE, b"\x01\x00"),
+        _c2s("here", 2),
+        _s2c(ServerOp.RESPONSE, encode_reply("here", 2, transform=transform)),
+        move,
+        wrong,
+        _c2s("move", 5, transform=transform),
+        _s2c(ServerOp.NON_FATAL_ERROR, encode_error(ServerOp.NON_FATAL_ERROR, 5, nap)),
+        _s2c(ServerOp.ASYNCHRONOUS_RESPONSE, segment_completed(3, 7)),
+        WirePacket("c2s", 0o276, 6, 0, b"\xab\xcd"),
+        WirePacket("s2c", ChaosOp.CLS, 0, 0, b"closed by the server"),
+    ]
+    lines = packet_listing(packets, marked=[move, wrong], from_open=True)
+    assert [int(line[4:7]) for line in lines] == list(range(1, len(packets) + 1))
+    assert [line[2] for line in lines] == [" ", " ", " ", ">", ">", " ", " ", " ", " ", " "]
+    text = [line.split(": ", 1)[1] for line in lines]
+    assert "initial RESPONSE" in text[0]
+    assert lines[1].endswith("c2s here 0201 (packet number 2, 0 data bytes): no data")
+    assert text[2] == "transform N=(1, 0, 0) O=(0, 1, 0) A=(0, 0, 1) P=(100, 200, 300)"
+    assert text[3] == "joints=(10.5, -90, 90, 0, 0.25, 0.001)"
+    assert text[4] == "segment=7"  # decoded by the last request, though it names another
+    assert text[6] == repr(nap.render())
+    assert text[7].startswith("segment-completed") and "request number 3" in text[7]
+    assert text[8] == "unknown opcode, data ab cd"
+    assert text[9] == "closed by the server"
+    assert len(packet_listing(packets, limit=4)) == 5  # a line saying what was left out, then the last 4
