@@ -20,12 +20,13 @@ from click.testing import CliRunner
 
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_error, encode_reply, encode_request, segment_completed
+from manip.codecs.packet import Packet
 from manip.conformance.case import all_cases
 from manip.conformance.checks import WirePacket, describe
 from manip.conformance.cli import main
 from manip.conformance.context import RunOptions
 from manip.conformance.packet_text import packet_listing
-from manip.conformance.rawchaos import RawError, RawPeer
+from manip.conformance.rawchaos import RawError, RawPeer, format_packet
 from manip.conformance.report import by_clause, clause_lines, load_schema, report_json
 from manip.conformance.results import CaseResult, ExitCode, RunReport, Violation
 from manip.conformance.runner import RunConfig, Runner
@@ -342,3 +343,12 @@ def test_packets_are_listed_numbered_and_decoded() -> None:
     assert text[8] == "unknown opcode, data ab cd"
     assert text[9] == "closed by the server"
     assert len(packet_listing(packets, limit=4)) == 5  # a line saying what was left out, then the last 4
+
+
+def test_raw_packets_say_what_their_chaos_addresses_are() -> None:
+    rfc = Packet(ChaosOp.RFC, dest_host=0o440, dest_index=0, src_host=0o401, src_index=0x0A01, packet_no=1)
+    shown = format_packet(rfc)
+    assert shown.startswith("RFC Chaos host 0401 (the client's default address) index 0x0a01 -> ")
+    assert "Chaos host 0440 (the robot's default address) index 0x0000" in shown
+    other = Packet(ChaosOp.LOS, dest_host=0o3001, dest_index=1, src_host=0o440, src_index=2)
+    assert "-> Chaos host 03001 index 0x0001" in format_packet(other)

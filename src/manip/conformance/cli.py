@@ -10,7 +10,8 @@ Exit codes of ``run`` (documented in ``--help``):
 
     0  conformant: no MUST failure (nor SHOULD failure with --strict), no stale known-failing entry
     1  non-conformant: a failure, a stale known-failing entry, or the target died during the run
-    2  usage error (bad option, pattern, address or pattern file)
+    2  usage error (bad option, pattern, address or pattern file; a --select matching no case; an
+       option of a target not chosen; a report or capture path that cannot be written)
     3  target unreachable, or dead before any case reached a verdict
     4  interrupted, or an internal error of the suite (a partial report is still written)
 

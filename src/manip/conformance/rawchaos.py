@@ -44,7 +44,7 @@ from manip.codecs.framing import (
 from manip.codecs.packet import Packet
 from manip.conformance.checks import Direction
 from manip.links.address import LinkAddress, parse_address
-from manip.links.errors import not_a_chaos_link
+from manip.links.errors import chaos_host, not_a_chaos_link
 from manip.ncp.packets import is_data, pack_status, text, unpack_status
 from manip.ncp.seq import seq_add
 from manip.spec.constants import ChaosOp
@@ -98,16 +98,17 @@ class Received:
 
 def _opname(opcode: int) -> str:
     if is_data(opcode):
-        return f"DAT {opcode:o}"
+        return f"DAT 0{opcode:o}"
     try:
         return ChaosOp(opcode).name
     except ValueError:
-        return f"opcode {opcode:o}"
+        return f"opcode 0{opcode:o}"
 
 
 def format_packet(p: Packet) -> str:
     """One line: opcode, addresses and indices (octal / hex), numbers, data length and a data preview."""
-    what = f"{_opname(p.opcode)} {p.src_host:o}/{p.src_index:#06x} -> {p.dest_host:o}/{p.dest_index:#06x}"
+    source = f"{chaos_host(p.src_host)} index {p.src_index:#06x}"
+    what = f"{_opname(p.opcode)} {source} -> {chaos_host(p.dest_host)} index {p.dest_index:#06x}"
     numbers = f"pkt#{p.packet_no} ack#{p.ack_no}"
     if p.opcode in (ChaosOp.OPN, ChaosOp.STS) and (status := unpack_status(p.data)) is not None:
         return f"{what} {numbers} receipt {status[0]} window {status[1]}"

@@ -8,7 +8,7 @@ which is why most of them do not end in ``Error``.
 
 from __future__ import annotations
 
-from .address import DEFAULT_SERVER_ADDR
+from .address import DEFAULT_CLIENT_ADDR, DEFAULT_SERVER_ADDR
 
 
 class ChaosError(Exception):
@@ -70,9 +70,12 @@ class ConnectionBroken(ChaosError):  # noqa: N818 - Chaos vocabulary (INCOMPLETE
 
 
 def chaos_host(host: int) -> str:
-    """A Chaos address for a message, in octal, saying what it is when it is the default a user who
-    gave no ``addr=`` did not type: ``Chaos host 0440 (the robot's default address)``."""
-    default = " (the robot's default address)" if host == DEFAULT_SERVER_ADDR else ""
+    """A Chaos address for a message, in octal, saying what it is when it is a default a user who gave
+    no ``addr=`` or ``me=`` did not type: ``Chaos host 0440 (the robot's default address)``."""
+    default = {
+        DEFAULT_SERVER_ADDR: " (the robot's default address)",
+        DEFAULT_CLIENT_ADDR: " (the client's default address)",
+    }.get(host, "")
     return f"Chaos host 0{host:o}{default}" if host else f"Chaos host 0{default}"
 
 

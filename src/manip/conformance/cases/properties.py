@@ -12,8 +12,8 @@
 
 Each case runs its Hypothesis test in a worker thread that drives the probe on the runner's loop
 (:mod:`manip.conformance.bridge`), seeded with the case's seed, ``ctx.max_examples`` examples.  A
-failure is shrunk (within a time budget) and reported with Hypothesis's falsifying example and the
-packets of that example.
+failure is shrunk (within a time budget) and reported with what was drawn for the shrunk example and
+every packet of it, numbered and decoded (:mod:`manip.conformance.packet_text`).
 """
 
 from __future__ import annotations
