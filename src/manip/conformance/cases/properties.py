@@ -180,7 +180,7 @@ def _example_text(failure: Evidence) -> str:
         inside = {id(p) for p in failure.example}
         before = [p for p in failure.packets if id(p) not in inside]  # e.g. the previous segment's
         text += "\npackets of the example (> the ones that show the failure"
-        text += ", the first ones from before the example):" if before else "):"
+        text += f"; the first {len(before)} came before the example):" if before else "):"
         listing = packet_listing([*before, *failure.example], marked=failure.packets)
     else:
         text += "\npackets:" if failure.packets else ""
