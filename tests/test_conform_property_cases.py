@@ -1,10 +1,11 @@
 """The property-based cases against the embedded reference server: they pass on the clean server, each
-fails on the defect it is about (with Hypothesis's falsifying example in the report), the same seed
+fails on the defect it is about (with the packets of the shrunk example in the report), the same seed
 gives the same run, hardware targets get no motion, and the Hypothesis bridge stops when cancelled."""
 
 from __future__ import annotations
 
 import asyncio
+import re
 import threading
 import time
 from collections.abc import Sequence
@@ -111,7 +112,11 @@ def test_a_failure_shows_the_falsifying_example_and_the_same_seed_finds_it_again
         "property.requests.well-formed",
     )
     assert first.outcome == again.outcome == "fail"
-    assert "example(" in first.violations[0].actual  # Hypothesis's note naming the failing example
+    shown = first.violations[0].actual
+    assert "shrunk example: " in shown  # what Hypothesis drew, by request name and octal opcode
+    assert "packets of the example" in shown and "RequestOpcode(" not in shown
+    requests = [line for line in shown.splitlines() if re.match(r"  [ >] +\d+  c2s ", line)]
+    assert requests and all(re.search(r" 0[0-7]{3} \(packet number \d+, ", line) for line in requests)
     assert first.violations[0].actual == again.violations[0].actual
 
 

@@ -77,6 +77,9 @@ def test_state_rule_defects_fail_with_a_replayable_counterexample(fault: str, cl
     assert "requests of the shrunk counterexample" in violation.actual
     steps = replay_steps(violation.actual)
     assert steps and all(isinstance(s, float) or (isinstance(s, tuple) and len(s) == 2) for s in steps)
+    sent = [line for line in violation.actual.splitlines() if re.match(r" +\d+\. #\d+ +0[0-7]{3} ", line)]
+    assert len(sent) == sum(1 for s in steps if isinstance(s, tuple))  # each request with its number
+    assert "packets of the failing run" in violation.actual
 
 
 def test_the_same_seed_finds_the_same_counterexample(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -99,7 +102,7 @@ def test_replay_sends_the_counterexample_again() -> None:
     lines = asyncio.run(go())
     sent = [line for line in lines if line.startswith("->")]
     assert len(sent) == sum(1 for s in steps if isinstance(s, tuple))
-    assert sum(1 for line in lines if line.startswith("  <- 200")) >= len(sent)  # each answered
+    assert sum(1 for line in lines if line.startswith("  <- 0200")) >= len(sent)  # each answered
 
 
 def test_hardware_target_without_motion_keeps_to_read_only_and_config() -> None:

@@ -154,14 +154,20 @@ def word(data: bytes, offset: int = 0) -> int | None:
 
 
 def describe(packet: WirePacket) -> str:
-    """A short human description of a packet: opcode, number and data length."""
+    """A short human description of a packet: opcode (octal), number and data length.  A request shows
+    its Chaos packet number (which its answer must echo), a server packet the request number its first
+    data word carries: ``here 0201 (packet number 23, 0 data bytes)``, ``response 0200 (request number
+    23, 50 data bytes)``."""
     if packet.is_close:
         reason = packet.data.decode("ascii", "replace")
         return f"{ChaosOp(packet.opcode).name} ({reason})" if reason else ChaosOp(packet.opcode).name
     name = _opcode_name(packet)
-    number = word(packet.data)
-    shown = "no request number" if number is None else f"request number {number}"
-    return f"{name} {packet.opcode:o} ({shown}, {len(packet.data)} data bytes)"
+    if packet.direction == "c2s":
+        shown = f"packet number {packet.packet_no}"
+    else:
+        number = word(packet.data)
+        shown = "no request number" if number is None else f"request number {number}"
+    return f"{name} 0{packet.opcode:o} ({shown}, {len(packet.data)} data bytes)"
 
 
 def _opcode_name(packet: WirePacket) -> str:

@@ -10,7 +10,8 @@ Exit codes of ``run`` (documented in ``--help``):
 
     0  conformant: no MUST failure (nor SHOULD failure with --strict), no stale known-failing entry
     1  non-conformant: a failure, a stale known-failing entry, or the target died during the run
-    2  usage error (bad option, pattern, address or pattern file)
+    2  usage error (bad option, pattern, address or pattern file; a --select matching no case; an
+       option of a target not chosen; a report or capture path that cannot be written)
     3  target unreachable, or dead before any case reached a verdict
     4  interrupted, an internal error of the suite, or a verdict that changed with the seed (``--repeat``;
        a partial report is still written)
@@ -21,6 +22,7 @@ subcommands (``replay``, ``verify``) added by other modules: they register on :d
 
 from __future__ import annotations
 
+import difflib
 import json
 import os
 import shlex
@@ -33,18 +35,22 @@ from typing import Any, TypeVar
 
 import click
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from manip.conformance.case import Case, all_cases
+from manip.conformance.console import make_console
 from manip.conformance.context import DEFAULT_REPLY_TIMEOUT, RunOptions
 from manip.conformance.cougar_target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.coverage import DEFAULT_PARTIES, coverage, gaps
 from manip.conformance.embedded import EmbeddedServer, simulated_server
 from manip.conformance.replay_cli import (
-    check_record_path,
+    check_output_paths,
+    given,
     json_option,
     junit_option,
+    print_by_clause,
     recording,
     replay_command,
     verify_command,
@@ -52,7 +58,7 @@ from manip.conformance.replay_cli import (
 from manip.conformance.report import failure_text, write_json, write_junit
 from manip.conformance.results import CaseResult, ExitCode, LivenessCheck, RunReport
 from manip.conformance.runner import RunConfig, RunEvents, Runner
-from manip.conformance.selection import PatternError, PatternSet
+from manip.conformance.selection import PatternError, PatternSet, match_id
 from manip.conformance.stability import instability, repeat_seeds
 from manip.links import AddressError, parse_address, virtual_clock
 from manip.reference_server import FaultSet, ServerConfig
@@ -68,6 +74,16 @@ Exit codes:
   4  interrupted, internal error, or an unstable suite (--repeat; a partial report is still written)"""
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+_NOT_WITH_COUGAR = {
+    "record": "records Chaos connections",
+    "broken_after": "is the timer of a Chaos target",
+    "max_examples": "sets the examples of the property cases of a server run",
+}
+"""Options of ``run`` that mean nothing for a Cougar target: giving one with ``--cougar`` is an error."""
+
+TABLE_WIDTH = 160
+"""On a terminal, the ``cases`` and ``coverage`` tables are laid out at least this wide."""
 
 _STYLE = {
     "pass": "green",
@@ -138,8 +154,8 @@ def main() -> None:
     type=click.FloatRange(min=0.1),
     default=None,
     metavar="SECONDS",
-    help="The target's broken-connection timer (the seed's is 90 s): server.ncp.broken goes silent that "
-    "long and checks the connection was given up.  Without it that case is skipped.  With the embedded "
+    help="The target's broken-connection timer (the 1985 guide's is 90 s): server.ncp.broken goes silent "
+    "that long and checks the connection was given up.  Without it that case is skipped.  With the embedded "
     "server, the server gets this timer too (below 5 s the other NCP cases, which keep quiet for up to "
     "3 s on purpose, may lose their connections).",
 )
@@ -223,7 +239,7 @@ def run(
     chaosd:///PATH, or HOST[:PORT] for tcp).  Without HOST the embedded reference server is started
     on a free loopback port and the suite runs against it.  With --cougar the Cougar cases run against
     a Cougar over the emulated DRV-11J link instead."""
-    console = Console(stderr=False, highlight=False)
+    console = make_console()
     try:
         select_set = PatternSet.of(select, "--select")
         skip_set = PatternSet.of(skip, "--skip")
@@ -239,8 +255,17 @@ def run(
             config_faults = FaultSet.parse(server_faults)
         except ValueError as exc:
             raise click.UsageError(f"--server-fault: {exc}") from None
+    if cougar_faults and cougar is None:
+        raise click.UsageError(
+            "--cougar-fault switches on a defect of the simulated Cougar: add --cougar sim "
+            "(without --cougar the suite checks a manip server)"
+        )
+    if allow_motion and target_kind != "hardware":
+        raise click.UsageError(
+            "--allow-motion applies to --target hardware (the simulated arm always gets the motion cases)"
+        )
     target: CougarTarget | None = None
-    if cougar is not None or cougar_faults:
+    if cougar is not None:
         if host or server_faults:
             raise click.UsageError("--cougar checks a Cougar: give no HOST and no --server-fault")
         try:
@@ -248,8 +273,9 @@ def run(
         except ValueError as exc:
             raise click.UsageError(f"--cougar: {exc}") from None
         address = "" if target.embedded else target.url
-    if record is not None and target is not None:
-        raise click.UsageError("--record records Chaos connections: not with --cougar")
+        for name, why in _NOT_WITH_COUGAR.items():
+            if given(name):
+                raise click.UsageError(f"--{name.replace('_', '-')} {why}, not with --cougar")
     if record is not None and repeat > 1:
         raise click.UsageError("--record records one run: not with --repeat")
     simulated = not host and target is None
@@ -259,10 +285,11 @@ def run(
             "another target keeps its own clock"
         )
     virtual = simulated and time_mode != "real"
-    check_record_path(record)
+    check_output_paths(record=record, json=json_path, junit=junit_path)
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "big")
     cases = cougar_cases(all_cases(), cougar=target is not None)
+    check_selection(select_set, skip_set, cases, cougar=target is not None)
     options = RunOptions(
         target="hardware" if target_kind == "hardware" else "sim",
         allow_motion=allow_motion,
@@ -364,6 +391,51 @@ def _counts_text(report: RunReport) -> str:
     return ", ".join(f"{v} {k}" for k, v in report.counts().items() if v) or "no cases"
 
 
+def check_selection(
+    select: PatternSet,
+    skip: PatternSet,
+    cases: Sequence[Case],
+    *,
+    cougar: bool = False,
+    hint: str = " (manip-conform cases lists every case)",
+) -> None:
+    """A usage error when a ``--select`` pattern matches none of ``cases``, or when ``--select`` and
+    ``--skip`` together leave no case: a run of nothing would pass, and say nothing of the typo."""
+    ids = sorted(c.id for c in cases)
+    for pattern in select.patterns:
+        if any(match_id(pattern.text, case_id) for case_id in ids):
+            continue
+        where = "" if pattern.source == "--select" else f" ({pattern.source})"
+        message = f"--select {pattern.text!r}{where} matches no case"
+        others = [c.id for c in all_cases() if c.id not in ids and match_id(pattern.text, c.id)]
+        if others:
+            mode = "--cougar" if not cougar else "a server run (without --cougar)"
+            message += f" of this run: it names {len(others)} case(s) of {mode}, such as {others[0]}"
+        elif close := close_case_ids(pattern.text, ids):
+            message += f"; close matches: {', '.join(close)}"
+        else:
+            areas = sorted({case_id.split(".")[0] + ".*" for case_id in ids})
+            message += f"; the case ids are under {', '.join(areas)}"
+        raise click.UsageError(message + hint)
+    if any((not select or select.matches(i)) and not skip.matches(i) for i in ids):
+        return
+    options = [f"--select {p.text}" for p in select.patterns] + [f"--skip {p.text}" for p in skip.patterns]
+    verb = "leave" if len(options) > 1 else "leaves"
+    raise click.UsageError(f"{' '.join(options)} {verb} no case to run")
+
+
+def close_case_ids(pattern: str, ids: Sequence[str], limit: int = 3) -> list[str]:
+    """Case ids (or the areas above them: ``server.reply``) that look like ``pattern``, its wildcards
+    left out, the closest first."""
+    names = set(ids)
+    for case_id in ids:
+        parts = case_id.split(".")
+        names.update(".".join(parts[:n]) for n in range(1, len(parts)))
+    stem = ".".join(p for p in pattern.split(".") if not any(ch in p for ch in "*?["))
+    close = difflib.get_close_matches(stem or pattern, sorted(names), n=limit, cutoff=0.6)
+    return close
+
+
 def _execute(
     config: RunConfig,
     cases: Sequence[Case],
@@ -390,11 +462,11 @@ def _execute(
         return int(ExitCode.INTERNAL)
     except Exception as exc:  # an internal error of the suite: keep what was done
         text = traceback.format_exc()
-        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {exc}")
+        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {escape(str(exc))}")
         if "runner" in holder:
             holder["runner"].report.internal_error = text
         else:
-            console.print(text)
+            console.print(text, markup=False)
         return int(ExitCode.INTERNAL)
     return None
 
@@ -430,7 +502,7 @@ async def _run_target(
             config.address = address
             config.options = _with_address(config.options, address)
             if cougar.embedded:
-                console.print(f"embedded simulated Cougar at {address}")
+                console.print(f"embedded simulated Cougar at {address}", markup=False)
             await _run_with(config, cases, holder, console, quiet)
         return
     if not config.embedded:
@@ -450,7 +522,9 @@ async def _run_target(
     with EmbeddedServer(server_config, wrist=True, broken_after=config.options.broken_after) as address:
         config.address = address
         config.options = replace(config.options, address=address)
-        console.print(f"embedded reference server at {address} (with the simulated Cougar wrist)")
+        console.print(
+            f"embedded reference server at {address} (with the simulated Cougar wrist)", markup=False
+        )
         await _run_with(config, cases, holder, console, quiet)
 
 
@@ -493,7 +567,9 @@ async def _run_with(
 
     def liveness(check: LivenessCheck) -> None:
         if not check.alive:
-            progress.console.print(f"[bold red]target not alive[/] ({check.when}): {check.detail}")
+            progress.console.print(
+                f"[bold red]target not alive[/] ({escape(check.when)}): {escape(check.detail)}"
+            )
 
     runner = Runner(config, cases, RunEvents(started, case_started, case_finished, liveness))
     holder["runner"] = runner
@@ -504,10 +580,11 @@ async def _run_with(
 def _summary(console: Console, report: RunReport) -> None:
     counts = report.counts()
     parts = [f"[{_STYLE[k]}]{v} {k}[/]" for k, v in counts.items() if v]
+    print_by_clause(console, report)
     for problem in report.problems:
-        console.print(f"[bold red]problem[/]: {problem}")
+        console.print(f"[bold red]problem[/]: {escape(problem)}")
     for problem in report.unstable:
-        console.print(f"[bold magenta]unstable[/]: {problem}")
+        console.print(f"[bold magenta]unstable[/]: {escape(problem)}")
     verdict_style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
     shown = ", ".join(parts) or "no cases"
     console.print(
@@ -517,7 +594,9 @@ def _summary(console: Console, report: RunReport) -> None:
     )
     slow = [r for r in report.results if r.deadline and r.duration > 0.8 * r.deadline]
     for r in slow:
-        console.print(f"[yellow]slow[/]: {r.id} took {r.duration:.2f} s of its {r.deadline:g} s deadline")
+        console.print(
+            f"[yellow]slow[/]: {escape(r.id)} took {r.duration:.2f} s of its {r.deadline:g} s deadline"
+        )
 
 
 # ----------------------------------------------------------------------------------------------- cases
@@ -532,6 +611,7 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
         patterns = PatternSet.of(select, "--select")
     except PatternError as exc:
         raise click.UsageError(str(exc)) from None
+    check_selection(patterns, PatternSet(), all_cases(), hint="")
     items = [c for c in all_cases() if not patterns or patterns.matches(c.id)]
     if fmt == "json":
         data = [
@@ -553,7 +633,7 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
         table.add_column(column)
     for c in items:
         table.add_row(c.id, c.level, c.kind, c.hazard, " ".join(c.clauses))
-    Console(width=max(160, Console().width)).print(table)
+    make_console(min_width=TABLE_WIDTH).print(table)
 
 
 # ----------------------------------------------------------------------------------------------- coverage
@@ -595,7 +675,7 @@ def coverage_command(fmt: str, parties: tuple[str, ...]) -> None:
         for r in rows:
             cases_text = ", ".join(r.cases) if r.cases else ("[bold red]NONE[/]" if r.gap else "[dim]-[/]")
             table.add_row(r.clause, r.level, r.party + ("" if r.in_scope else " (out of scope)"), cases_text)
-        console = Console(width=max(160, Console().width))
+        console = make_console(min_width=TABLE_WIDTH)
         console.print(table)
         covered = sum(1 for r in rows if r.cases)
         console.print(

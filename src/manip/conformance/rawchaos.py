@@ -33,10 +33,18 @@ from typing import Final
 
 from manip.codecs.chaos import make_trailer, packet_words
 from manip.codecs.errors import DecodeError
-from manip.codecs.framing import CHUDP_HEADER, decode_chudp, decode_tcp, encode_chudp, encode_tcp
+from manip.codecs.framing import (
+    CHUDP_HEADER,
+    MAX_BODY,
+    decode_chudp,
+    decode_tcp,
+    encode_chudp,
+    encode_tcp,
+)
 from manip.codecs.packet import Packet
 from manip.conformance.checks import Direction
 from manip.links.address import LinkAddress, parse_address
+from manip.links.errors import chaos_host, not_a_chaos_link
 from manip.ncp.packets import is_data, pack_status, text, unpack_status
 from manip.ncp.seq import seq_add
 from manip.spec.constants import ChaosOp
@@ -59,6 +67,9 @@ BUSY_RETRIES: Final = 20
 BUSY_DELAY: Final = 0.25
 RFC_RETRY: Final = 1.0
 """Seconds between copies of an unanswered RFC during :meth:`RawPeer.handshake`."""
+FOREIGN_HEAD: Final = 78
+"""Bytes read after a first frame length no frame can have, to show what the peer is."""
+FOREIGN_WAIT: Final = 0.5
 
 
 class RawError(Exception):
@@ -87,16 +98,17 @@ class Received:
 
 def _opname(opcode: int) -> str:
     if is_data(opcode):
-        return f"DAT {opcode:o}"
+        return f"DAT 0{opcode:o}"
     try:
         return ChaosOp(opcode).name
     except ValueError:
-        return f"opcode {opcode:o}"
+        return f"opcode 0{opcode:o}"
 
 
 def format_packet(p: Packet) -> str:
     """One line: opcode, addresses and indices (octal / hex), numbers, data length and a data preview."""
-    what = f"{_opname(p.opcode)} {p.src_host:o}/{p.src_index:#06x} -> {p.dest_host:o}/{p.dest_index:#06x}"
+    source = f"{chaos_host(p.src_host)} index {p.src_index:#06x}"
+    what = f"{_opname(p.opcode)} {source} -> {chaos_host(p.dest_host)} index {p.dest_index:#06x}"
     numbers = f"pkt#{p.packet_no} ack#{p.ack_no}"
     if p.opcode in (ChaosOp.OPN, ChaosOp.STS) and (status := unpack_status(p.data)) is not None:
         return f"{what} {numbers} receipt {status[0]} window {status[1]}"
@@ -154,9 +166,18 @@ class _TcpTransport(_Transport):
 
     async def _read(self) -> None:
         try:
+            first = True
             while True:
                 head = await self._reader.readexactly(2)
-                body = await self._reader.readexactly(int.from_bytes(head, "big"))
+                length = int.from_bytes(head, "big")
+                if first and length > MAX_BODY:
+                    # no frame is that long (text is: b"HT" reads as 18516): say what the peer is
+                    with contextlib.suppress(TimeoutError):
+                        head += await asyncio.wait_for(self._reader.read(FOREIGN_HEAD), FOREIGN_WAIT)
+                    self.ended = not_a_chaos_link(head)
+                    return
+                first = False
+                body = await self._reader.readexactly(length)
                 frame = head + body
                 try:
                     self.deliver(frame, decode_tcp(frame))

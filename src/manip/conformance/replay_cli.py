@@ -29,10 +29,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
+from click.core import ParameterSource
 from rich.console import Console
+from rich.markup import escape
 
+from manip.conformance.console import make_console
 from manip.conformance.embedded import EmbeddedServer, simulated_server
-from manip.conformance.report import failure_text, write_json, write_junit
+from manip.conformance.report import clause_lines, failure_text, write_json, write_junit
 from manip.conformance.results import ExitCode, RunReport
 
 if TYPE_CHECKING:
@@ -45,9 +48,11 @@ from manip.spec.constants import ServerOp
 
 __all__ = [
     "EXIT_CODES_HELP",
-    "check_record_path",
+    "check_output_paths",
+    "given",
     "json_option",
     "junit_option",
+    "print_by_clause",
     "recording",
     "replay_command",
     "verify_command",
@@ -95,10 +100,33 @@ def recording(
         yield RecorderTap(recorder, "server" if side == "server" else "client").wrap
 
 
-def check_record_path(path: Path | None) -> None:
-    """Fail early (usage error) when a ``--record`` file cannot be created."""
-    if path is not None and not path.resolve().parent.is_dir():
-        raise click.UsageError(f"--record: the directory of {path} does not exist")
+def given(name: str) -> bool:
+    """Whether the current command's parameter ``name`` was given (command line or environment), not
+    left at its default."""
+    source = click.get_current_context().get_parameter_source(name)
+    return source is not None and source not in (ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP)
+
+
+def check_output_paths(**paths: Path | None) -> None:
+    """Fail early (usage error) when a file an option names cannot be written, before the run starts
+    rather than with a traceback at its end.  Keywords name the options: ``json=``, ``junit=``,
+    ``record=`` check ``--json``, ``--junit``, ``--record``."""
+    for name, path in paths.items():
+        if path is None:
+            continue
+        option = "--" + name.replace("_", "-")
+        resolved = path.resolve()
+        parent = resolved.parent
+        if resolved.is_dir():
+            raise click.UsageError(f"{option}: {path} is a directory (give a file name)")
+        if not parent.exists():
+            raise click.UsageError(f"{option}: the directory {parent} of {path} does not exist")
+        if not parent.is_dir():
+            raise click.UsageError(f"{option}: {parent} (the directory of {path}) is not a directory")
+        if resolved.exists() and not os.access(resolved, os.W_OK):
+            raise click.UsageError(f"{option}: {path} exists and is not writable")
+        if not resolved.exists() and not os.access(parent, os.W_OK | os.X_OK):
+            raise click.UsageError(f"{option}: cannot create files in {parent} (permission denied)")
 
 
 def _finish(
@@ -117,13 +145,23 @@ def _finish(
         write_json(report, json_path)
     if junit_path is not None:
         write_junit(report, junit_path)
+    print_by_clause(console, report)
     for problem in report.problems:
-        console.print(f"[bold red]problem[/]: {problem}", highlight=False)
+        console.print(f"[bold red]problem[/]: {escape(problem)}")
     counts = ", ".join(f"{v} {k}" for k, v in report.counts().items() if v) or "no results"
     style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
     console.print(
         f"[{style}]{report.verdict}[/] (exit {int(report.exit_code)}): {counts} in {report.duration:.1f} s"
     )
+
+
+def print_by_clause(console: Console, report: RunReport) -> None:
+    """One line per broken clause (count, id, text, section), under a heading; nothing if none broke."""
+    lines = clause_lines(report)
+    if lines:
+        console.print("[bold]broken clauses[/]:")
+        for line in lines:
+            console.print(f"  {line}", markup=False)
 
 
 def _run(
@@ -135,7 +173,7 @@ def _run(
         console.print("[bold]interrupted[/]")
         return int(ExitCode.INTERNAL)
     except Exception as exc:
-        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {exc}")
+        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {escape(str(exc))}")
         console.print(traceback.format_exc(), markup=False, highlight=False)
         return int(ExitCode.INTERNAL)
 
@@ -189,12 +227,13 @@ def verify_command(
     the client's requests instead (opcodes, data layouts)."""
     from manip.conformance.verify import verify_capture  # noqa: PLC0415
 
-    console = Console(highlight=False)
+    check_output_paths(json=json_path, junit=junit_path)
+    console = make_console()
     command = shlex.join(["manip-conform", *sys.argv[1:]])
     try:
         report = verify_capture(file, strict=strict, sessions=sessions, command=command, judge=judge)
     except Exception as exc:
-        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {exc}")
+        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {escape(str(exc))}")
         console.print(traceback.format_exc(), markup=False, highlight=False)
         sys.exit(int(ExitCode.INTERNAL))
     _finish(report, console, quiet, json_path, junit_path)
@@ -305,7 +344,7 @@ def replay_command(
     from manip.conformance.replay import ReplayOptions, replay_capture  # noqa: PLC0415
     from manip.conformance.replay_serve import ServeOptions, serve_capture  # noqa: PLC0415
 
-    console = Console(highlight=False)
+    console = make_console()
     if against and serve:
         raise click.UsageError("give --against URL or --serve URL, not both")
     try:
@@ -318,18 +357,23 @@ def replay_command(
         raise click.UsageError("--server-fault applies to the embedded server only (omit --against/--serve)")
     if seconds is not None and not serve:
         raise click.UsageError("--seconds applies to --serve")
+    if serve:
+        for name in ("reply_timeout", "async_timeout", "settle"):
+            if given(name):
+                option = "--" + name.replace("_", "-")
+                raise click.UsageError(f"{option} applies to a replay against a server, not to --serve")
     try:
         faults = FaultSet.parse(server_faults) if server_faults else None
     except ValueError as exc:
         raise click.UsageError(f"--server-fault: {exc}") from None
-    check_record_path(record)
+    check_output_paths(record=record, json=json_path, junit=junit_path)
     command = shlex.join(["manip-conform", *sys.argv[1:]])
 
     if serve:
 
         def listening(address: str) -> None:
             console.print(
-                f"manip-conform: serving the recorded sessions of {file} at {address}", highlight=False
+                f"manip-conform: serving the recorded sessions of {file} at {address}", markup=False
             )
             sys.stdout.flush()
 
@@ -372,7 +416,8 @@ def replay_command(
                     assert recorded.seed is not None
                     async with simulated_server(config, seed=recorded.seed, wrist=recorded.wrist) as address:
                         console.print(
-                            f"embedded reference server in virtual time (seed {recorded.seed}, as recorded)"
+                            f"embedded reference server in virtual time (seed {recorded.seed}, as recorded)",
+                            markup=False,
                         )
                         return await replay_capture(
                             file, address, options, embedded=True, command=command, reproduce=reproduce
@@ -381,7 +426,9 @@ def replay_command(
                 with EmbeddedServer(
                     config, time_scale=scale, seed=recorded.seed, wrist=recorded.wrist
                 ) as address:
-                    console.print(f"embedded reference server at {address} (time scale {scale:g})")
+                    console.print(
+                        f"embedded reference server at {address} (time scale {scale:g})", markup=False
+                    )
                     return await replay_capture(
                         file, address, options, embedded=True, command=command, reproduce=reproduce
                     )

@@ -6,6 +6,12 @@ the violations (expected / actual / bytes in hex), the duration against the dead
 packets both ways, and a command that reproduces the case.  JUnit XML has one ``testsuite`` per
 top-level area (``server.reply``, ``server.motion``...), ``classname`` = the area and ``name`` = the case
 id; ``warn`` and ``known-fail`` cases pass with a property saying so, ``skip`` is ``<skipped>``.
+
+Failures grouped by clause (:func:`by_clause`): how many cases broke each clause, with the clause's text
+and section from the spec, so a report says first *what* is broken (``74 failures:
+response.echoes-request-number``) and then where.  The JSON report has them as ``by_clause``, the
+console prints one line per clause (:func:`clause_lines`), and each JUnit failure message names the
+clause's text and section.
 """
 
 from __future__ import annotations
@@ -13,14 +19,25 @@ from __future__ import annotations
 import json
 import xml.etree.ElementTree as ET
 from collections import defaultdict
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any, Final
 
-from manip.conformance.results import CaseResult, RunReport
+from manip.conformance.results import CaseResult, RunReport, Violation
 from manip.spec import SPEC
 
-__all__ = ["SCHEMA_VERSION", "load_schema", "report_json", "report_junit", "write_json", "write_junit"]
+__all__ = [
+    "SCHEMA_VERSION",
+    "ClauseTally",
+    "by_clause",
+    "clause_lines",
+    "load_schema",
+    "report_json",
+    "report_junit",
+    "write_json",
+    "write_junit",
+]
 
 SCHEMA_VERSION: Final = 1
 MAX_PACKETS_IN_REPORT: Final = 200
@@ -31,6 +48,124 @@ def load_schema() -> dict[str, Any]:
     """The JSON Schema of the report."""
     text = resources.files("manip.conformance").joinpath("report.schema.json").read_text(encoding="utf-8")
     return dict(json.loads(text))
+
+
+_NO_CLAUSE_TEXT: Final = {
+    "deadline": "the case did not finish within its deadline",
+}
+
+
+@dataclass(frozen=True)
+class ClauseTally:
+    """The cases that broke one clause: counted as failures (they fail the run), warnings (SHOULD or MAY
+    clauses without ``--strict``, or in a ``warn`` case) and known failures (``--known-failing``)."""
+
+    clause: str | None
+    """None for violations that cite no clause (``kind`` says what they are)."""
+    kind: str
+    level: str
+    section: str
+    text: str
+    failures: int
+    warnings: int
+    known_failures: int
+    cases: tuple[str, ...]
+
+    @property
+    def total(self) -> int:
+        return self.failures + self.warnings + self.known_failures
+
+    @property
+    def name(self) -> str:
+        """The clause id, or what a violation without a clause is."""
+        return self.clause if self.clause is not None else f"(no clause: {self.kind})"
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "clause": self.clause,
+            "kind": self.kind,
+            "level": self.level,
+            "section": self.section,
+            "text": self.text,
+            "failures": self.failures,
+            "warnings": self.warnings,
+            "known_failures": self.known_failures,
+            "cases": list(self.cases),
+        }
+
+
+def _tally_key(violation: Violation) -> tuple[str | None, str]:
+    return (violation.clause, "clause") if violation.clause is not None else (None, violation.kind)
+
+
+def by_clause(report: RunReport) -> list[ClauseTally]:
+    """Every clause some case broke, the most failures first; a case counts once per clause."""
+    counted = {"MUST", "SHOULD"} if report.strict else {"MUST"}
+    buckets: dict[tuple[str | None, str], dict[str, set[str]]] = defaultdict(
+        lambda: {"failures": set(), "warnings": set(), "known_failures": set()}
+    )
+    levels: dict[tuple[str | None, str], str] = {}
+    for result in report.results:
+        for violation in result.violations:
+            key = _tally_key(violation)
+            if result.outcome == "known-fail":
+                bucket = "known_failures"
+            elif result.outcome == "fail" and violation.level in counted:
+                bucket = "failures"
+            elif result.outcome in ("fail", "warn"):
+                bucket = "warnings"
+            else:
+                continue
+            buckets[key][bucket].add(result.id)
+            levels.setdefault(key, violation.level)
+    tallies = []
+    for (clause, kind), groups in buckets.items():
+        spec = SPEC.clauses.get(clause) if clause is not None else None
+        level: str = spec.level if spec is not None else levels[(clause, kind)]
+        section = spec.section if spec is not None else ""
+        if spec is not None:
+            text = spec.text
+        else:
+            text = _NO_CLAUSE_TEXT.get(kind, f"failures of kind {kind} that cite no clause")
+        tallies.append(
+            ClauseTally(
+                clause,
+                kind,
+                level,
+                section,
+                text,
+                len(groups["failures"]),
+                len(groups["warnings"]),
+                len(groups["known_failures"]),
+                tuple(sorted(set().union(*groups.values()))),
+            )
+        )
+    tallies.sort(key=lambda t: (-t.failures, -t.warnings, -t.known_failures, t.name))
+    return tallies
+
+
+def _plural(count: int, word: str) -> str:
+    return f"{count} {word}" if count == 1 else f"{count} {word}s"
+
+
+def clause_line(tally: ClauseTally) -> str:
+    """``74 failures: response.echoes-request-number — <the clause's text> (E.3 ...)``."""
+    counts = [
+        _plural(n, word)
+        for n, word in (
+            (tally.failures, "failure"),
+            (tally.warnings, "warning"),
+            (tally.known_failures, "known failure"),
+        )
+        if n
+    ]
+    section = f" ({tally.section})" if tally.section else ""
+    return f"{', '.join(counts)}: {tally.name} \u2014 {tally.text}{section}"
+
+
+def clause_lines(report: RunReport) -> list[str]:
+    """One line per broken clause (see :func:`clause_line`), the most failures first."""
+    return [clause_line(t) for t in by_clause(report)]
 
 
 def _case_json(result: CaseResult) -> dict[str, Any]:
@@ -87,6 +222,7 @@ def report_json(report: RunReport) -> dict[str, Any]:
             {"when": c.when, "alive": c.alive, "detail": c.detail, "duration": round(c.duration, 6)}
             for c in report.liveness
         ],
+        "by_clause": [t.to_json() for t in by_clause(report)],
         "cases": [_case_json(r) for r in report.results],
     }
 
@@ -132,10 +268,10 @@ def _junit_case(suite: ET.Element, area: str, result: CaseResult) -> None:
     ET.SubElement(props, "property", name="level", value=result.level)
     ET.SubElement(props, "property", name="outcome", value=result.outcome)
     ET.SubElement(props, "property", name="seed", value=str(result.seed))
-    text = _failure_text(result)
+    text = _failure_text(result, with_clause_text=True)
     if result.outcome in ("fail", "fixed"):
         failure = result.failure
-        message = failure.message if failure else "listed as known failing but passed"
+        message = _junit_message(failure) if failure else "listed as known failing but passed"
         element = ET.SubElement(
             node, "failure", message=message, type=failure.clause or "" if failure else "fixed"
         )
@@ -149,10 +285,26 @@ def _junit_case(suite: ET.Element, area: str, result: CaseResult) -> None:
         ET.SubElement(node, "system-out").text = text
 
 
-def _failure_text(result: CaseResult) -> str:
+def _clause_reference(clause: str | None) -> str:
+    """``the clause's text (its section)``, or "" for no clause or one the spec does not hold."""
+    spec = SPEC.clauses.get(clause) if clause is not None else None
+    return f"{spec.text} ({spec.section})" if spec is not None else ""
+
+
+def _junit_message(failure: Violation) -> str:
+    """The failure's message, then the clause it breaks: a CI page shows only this line."""
+    reference = _clause_reference(failure.clause)
+    if not reference:
+        return failure.message
+    return f"{failure.message} \u2014 {failure.clause}: {reference}"
+
+
+def _failure_text(result: CaseResult, *, with_clause_text: bool = False) -> str:
     lines = []
     for v in result.violations:
         lines.append(f"[{v.clause or '-'}] ({v.level}) {v.message}")
+        if with_clause_text and (reference := _clause_reference(v.clause)):
+            lines.append(f"  clause:   {reference}")
         if v.expected:
             lines.append(f"  expected: {v.expected}")
         if v.actual:

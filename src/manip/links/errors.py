@@ -8,6 +8,8 @@ which is why most of them do not end in ``Error``.
 
 from __future__ import annotations
 
+from .address import DEFAULT_CLIENT_ADDR, DEFAULT_SERVER_ADDR
+
 
 class ChaosError(Exception):
     """Base class of every error the links, the driver and the connection API raise."""
@@ -40,7 +42,7 @@ class ConnectionForwarded(ChaosError):  # noqa: N818 - Chaos vocabulary (FWD in 
     """The server forwarded the RFC: try ``contact`` at ``host`` instead."""
 
     def __init__(self, host: int, contact: str) -> None:
-        super().__init__(f"forwarded to contact {contact!r} at host {host:o}")
+        super().__init__(f"forwarded to contact {contact!r} at {chaos_host(host)} (named by the FWD)")
         self.host = host
         self.contact = contact
 
@@ -65,6 +67,34 @@ class ConnectionLost(ChaosError):  # noqa: N818 - Chaos vocabulary (LOS)
 
 class ConnectionBroken(ChaosError):  # noqa: N818 - Chaos vocabulary (INCOMPLETE)
     """The peer fell silent for ``broken_after`` seconds, or the link under the connection closed."""
+
+
+def chaos_host(host: int) -> str:
+    """A Chaos address for a message, in octal, saying what it is when it is a default a user who gave
+    no ``addr=`` or ``me=`` did not type: ``Chaos host 0440 (the robot's default address)``."""
+    default = {
+        DEFAULT_SERVER_ADDR: " (the robot's default address)",
+        DEFAULT_CLIENT_ADDR: " (the client's default address)",
+    }.get(host, "")
+    return f"Chaos host 0{host:o}{default}" if host else f"Chaos host 0{default}"
+
+
+PEER_LINE_SHOWN = 72
+"""Characters of a foreign peer's first line shown in :func:`not_a_chaos_link`."""
+
+
+def not_a_chaos_link(head: bytes) -> str:
+    """Why a link whose peer's first bytes are not the link framing is dropped, showing what the peer
+    sent: its first line when it is text (an HTTP server's status line, an SSH greeting), else the
+    first bytes in hex.  ``the peer answered `HTTP/1.0 400 Bad Request`: not a Chaos link``."""
+    line = head.split(b"\n", 1)[0].rstrip(b"\r")
+    printable = sum(32 <= b < 127 or b == 9 for b in line)
+    if line and printable * 4 >= len(line) * 3:
+        text = "".join(chr(b) if 32 <= b < 127 else f"\\x{b:02x}" for b in line[:PEER_LINE_SHOWN])
+        shown = f"`{text}{'...' if len(line) > PEER_LINE_SHOWN else ''}`"
+    else:
+        shown = f"bytes {head[:16].hex(' ')}{' ...' if len(head) > 16 else ''}"
+    return f"the peer answered {shown}: not a Chaos link"
 
 
 def fresh(exc: ChaosError) -> ChaosError:

@@ -67,6 +67,7 @@ from .errors import (
     ConnectionRefused,
     ConnectTimeout,
     LinkError,
+    chaos_host,
 )
 
 log = logging.getLogger("manip.links")
@@ -224,7 +225,7 @@ class Node:
             raise LinkError("the node is closed")
         route = self._routes.get(host) or self._default
         if route is None or route[0].is_closed:
-            raise LinkError(f"no route to Chaos host {host:o}")
+            raise LinkError(f"no route to {chaos_host(host)}")
         raw_args = args.encode("latin-1") if isinstance(args, str) else bytes(args)
         try:
             conn_id = self.ncp.connect(self._now(), host, contact, raw_args)
@@ -241,7 +242,13 @@ class Node:
                 await conn._wait_opened()
         except TimeoutError:
             if conn._end is None:
-                self._abandon(conn, ConnectTimeout(f"no answer from host {host:o} within {timeout:.3g} s"))
+                self._abandon(
+                    conn,
+                    ConnectTimeout(
+                        f"no answer to the RFC for contact {contact!r} from {chaos_host(host)} "
+                        f"within {timeout:.3g} s"
+                    ),
+                )
         except BaseException:
             self._abandon(conn, ConnectionClosed("connect cancelled", by_peer=False))
             raise

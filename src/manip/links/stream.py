@@ -19,10 +19,14 @@ from manip.codecs.framing import FrameSyncError, StreamDecoder, StreamItem
 from manip.codecs.packet import Packet
 
 from .base import Link, bad_reason
+from .errors import not_a_chaos_link
 
 Encoder = Callable[..., bytes]
 """``encode(packet, hw_dest=..., hw_src=...)``, one of the framing module's encoders."""
 
+HEAD_KEPT: Final = 80
+"""Bytes kept of what the peer sent first: when it is not the link framing at all (an HTTP server at the
+address), the reason the link closes shows them (:func:`~manip.links.errors.not_a_chaos_link`)."""
 WRITE_BUFFER_LIMIT: Final = 256 * 1024
 """Above this many unsent bytes a link drops packets (``dropped['congested']``) instead of queueing
 more: a peer that stopped reading must not make us buffer without end, and the NCP retransmits."""
@@ -53,6 +57,7 @@ class StreamLink(Link, asyncio.Protocol):
         """Loop time since which a frame is awaited: from the connection until the first frame, then
         from the first byte of each frame until it is complete; None while nothing is held back (a
         server's :class:`~manip.links.guard.LinkGuard` closes a link on which it grows old)."""
+        self._head = b""
 
     # ---------------------------------------------------------------- asyncio.Protocol
 
@@ -66,12 +71,18 @@ class StreamLink(Link, asyncio.Protocol):
         if self._closing_reason is not None:
             return  # closing (framing lost, or closed by us): what follows is not read
         self.stats.bytes_in += len(data)
+        if len(self._head) < HEAD_KEPT:
+            self._head += data[: HEAD_KEPT - len(self._head)]
         try:
             items = self._decoder.feed(data)
         except FrameSyncError as exc:
+            foreign = not exc.items and not self.stats.frames_in and not self.stats.bad_total
             self._take(exc.items)
             self._bad("framing", exc)
-            self.abort(f"framing lost: {exc}")
+            if foreign:  # not one frame before the framing broke: the peer does not speak it at all
+                self.abort(f"{not_a_chaos_link(self._head)} (framing lost: {exc})")
+            else:
+                self.abort(f"framing lost: {exc}")
             return
         if items:
             self.waiting_since = self._loop.time() if self._decoder.pending else None

@@ -128,6 +128,11 @@ class Evidence(AssertionError):  # noqa: N818 - a failed example, not an error o
     actual: str
     data: bytes = b""
     packets: list[WirePacket] = field(default_factory=list)
+    example: list[WirePacket] = field(default_factory=list)
+    """Every packet of the example that failed, both ways (set by the case's runner; ``packets`` are the
+    ones among them that show the failure)."""
+    drawn: str = ""
+    """What Hypothesis drew for that example, as the report shows it (set by the case's runner)."""
 
     def __post_init__(self) -> None:
         super().__init__(f"[{self.clause}] {self.message}")

@@ -12,8 +12,8 @@
 
 Each case runs its Hypothesis test in a worker thread that drives the probe on the runner's loop
 (:mod:`manip.conformance.bridge`), seeded with the case's seed, ``ctx.max_examples`` examples.  A
-failure is shrunk (within a time budget) and reported with Hypothesis's falsifying example and the
-packets of that example.
+failure is shrunk (within a time budget) and reported with what was drawn for the shrunk example and
+every packet of it, numbered and decoded (:mod:`manip.conformance.packet_text`).
 """
 
 from __future__ import annotations
@@ -42,8 +42,9 @@ from manip.conformance.bridge import (
 from manip.conformance.case import CaseFailure, case
 from manip.conformance.cases._live import Evidence, describe_target, must, reply_view
 from manip.conformance.cases._support import floats
-from manip.conformance.checks import ANSWER_OPCODES, WirePacket, check_reply, describe, word
+from manip.conformance.checks import ANSWER_OPCODES, WirePacket, check_reply, word
 from manip.conformance.context import DEFAULT_REPLY_TIMEOUT, Answer, CaseContext, Probe
+from manip.conformance.packet_text import packet_listing, show_value
 from manip.conformance.strategies import (
     f_ulp,
     joints_near,
@@ -52,7 +53,7 @@ from manip.conformance.strategies import (
     requests_of,
     valid_requests,
 )
-from manip.spec import SPEC
+from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
 
 __all__ = ["FLOAT_TRIP_ULPS", "POSE_TOL_DEG", "POSE_TOL_MM"]
@@ -163,6 +164,38 @@ def _size(evidence: Evidence) -> int:
     return sum(len(p.data) + 8 for p in evidence.packets)
 
 
+def _drawn(args: tuple[Any, ...]) -> str:
+    """The arguments of an example as a person reads them (requests by name and octal opcode)."""
+    return "; ".join(_show_drawn(a) for a in args)
+
+
+def _show_drawn(value: Any) -> str:
+    if isinstance(value, RequestOpcode):
+        return f"{value.name} 0{value.opcode:o}"
+    if isinstance(value, (bytes, bytearray)):
+        return f"data {value.hex(' ')}" if value else "no data"
+    if isinstance(value, tuple) and value and isinstance(value[0], RequestOpcode):
+        return ", ".join(_show_drawn(v) for v in value)  # a request: its opcode, then its data
+    if isinstance(value, (tuple, list)):
+        return "(" + ", ".join(_show_drawn(v) for v in value) + ")"
+    return show_value(value)
+
+
+def _example_text(failure: Evidence) -> str:
+    """The shrunk example: what was drawn, then its packets numbered and decoded (``>``: the failure's)."""
+    text = f"\nshrunk example: {failure.drawn}" if failure.drawn else ""
+    if failure.example:
+        inside = {id(p) for p in failure.example}
+        before = [p for p in failure.packets if id(p) not in inside]  # e.g. the previous segment's
+        text += "\npackets of the example (> the ones that show the failure"
+        text += f"; the first {len(before)} came before the example):" if before else "):"
+        listing = packet_listing([*before, *failure.example], marked=failure.packets)
+    else:
+        text += "\npackets:" if failure.packets else ""
+        listing = packet_listing(failure.packets)
+    return text + "".join(f"\n{line}" for line in listing)
+
+
 def _first_evidence(group: BaseException) -> Evidence | None:
     if isinstance(group, Evidence):
         return group
@@ -200,9 +233,11 @@ async def run_property(
 
         def example(args: tuple[Any, ...]) -> None:
             stats["examples"] += 1
+            start = len(ctx.transcript)
             try:
                 body(*args)
             except Evidence as exc:
+                exc.example, exc.drawn = list(ctx.transcript[start:]), _drawn(args)
                 log.add(exc, _size(exc))
                 bridge.failure_seen()
                 raise
@@ -211,7 +246,7 @@ async def run_property(
         try:
             test()
         except Evidence as exc:
-            return exc, "\n".join(getattr(exc, "__notes__", []))
+            return exc, ""  # Hypothesis's notes show Python objects: the report shows the packets
         except Flaky as exc:
             found = _first_evidence(exc) or log.best
             if found is None:
@@ -235,12 +270,10 @@ async def run_property(
     failure, notes = await run_in_worker(work, budget=budget)
     ctx.note(f"{stats['examples']} examples run (seed {ctx.seed})")
     if failure is not None:
-        packets = "\n".join(f"  {p.direction} {describe(p)}: {p.data.hex(' ')}" for p in failure.packets)
         actual = failure.actual
         if notes:
             actual += f"\n{notes}"
-        if packets:
-            actual += f"\npackets of the example:\n{packets}"
+        actual += _example_text(failure)
         ctx.fail(
             failure.message,
             clause=failure.clause,

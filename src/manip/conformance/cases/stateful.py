@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar, Final
 
 from hypothesis import seed
@@ -77,6 +77,7 @@ from manip.conformance.checks import (
 )
 from manip.conformance.context import Answer, CaseContext, Probe
 from manip.conformance.model import Finding, ProtocolModel
+from manip.conformance.packet_text import packet_listing
 from manip.conformance.strategies import (
     bad_speed_factors,
     f_floats_between,
@@ -115,13 +116,17 @@ class Step:
     opcode: int = 0
     data: bytes = b""
     wait: float = 0.0
+    packet_no: int | None = None
+    """The Chaos packet number the request went out with (None: not sent)."""
 
     def show(self) -> str:
         if self.opcode == 0:
             return f"wait {self.wait:g} s"
         op = SPEC.requests.get(self.opcode)
         name = op.name if op else "unknown opcode"
-        return f"{self.opcode:o} {name:<26} data {self.data.hex() or '(none)'}   [{self.rule}]"
+        number = f"#{self.packet_no}" if self.packet_no is not None else "(not sent)"
+        data = self.data.hex(" ") or "(none)"
+        return f"{number:<6} 0{self.opcode:o} {name:<26} data {data}   [{self.rule}]"
 
     def as_python(self) -> str:
         return repr(self.wait) if self.opcode == 0 else f"(0o{self.opcode:o}, {self.data.hex()!r})"
@@ -204,8 +209,9 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         packets: Sequence[WirePacket] = (),
     ) -> MachineFailure:
         self.failed = True
+        run = list(self.probe.packets) if self.probe is not None else []
         failure = MachineFailure(
-            clause, message, expected, actual, data, list(packets), steps=list(self.steps)
+            clause, message, expected, actual, data, list(packets), run, steps=list(self.steps)
         )
         self.env.log.add(failure, len(self.steps))
         self.bridge.failure_seen()
@@ -289,9 +295,11 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         """One request through the model: send, judge what came before the answer, judge the answer."""
         assert self.probe is not None
         self.steps.append(Step(rule, opcode, data))
+        sent = len(self.probe.packets)
         try:
             number, answer, early = self.bridge.call(_exchange(self.probe, opcode, data))
         except CaseFailure as exc:
+            self._sent_as(sent)
             raise self._fail(
                 exc.clause or "request.one-reply",
                 exc.message,
@@ -300,6 +308,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
                 exc.data,
                 self.probe.packets[-3:],
             ) from None
+        self._sent_as(sent)
         self.model.sent(number)
         self._unsolicited(early)
         expectation = self.model.expect(opcode, data)
@@ -332,6 +341,15 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         self._finding(self.model.judge(expectation, view), packets, answer.data, what)
         self.model.observe(number, opcode, data, view)
         return answer
+
+    def _sent_as(self, since: int) -> None:
+        """Give the last step the packet number its request went out with (the first request recorded
+        on the probe from index ``since`` on)."""
+        assert self.probe is not None
+        for packet in self.probe.packets[since:]:
+            if packet.direction == "c2s" and not packet.is_close:
+                self.steps[-1] = replace(self.steps[-1], packet_no=packet.packet_no)
+                return
 
     def _check_echo(self, answer: Answer, packets: Sequence[WirePacket]) -> None:
         if answer.number != answer.request.packet_no:
@@ -552,14 +570,6 @@ def _machine_class(env: _Env) -> type[ArmProtocolMachine]:
 
 
 # ------------------------------------------------------------------------------------- the case
-def _packet_line(packet: WirePacket) -> str:
-    if packet.direction == "c2s" and not packet.is_close:
-        op = SPEC.requests.get(packet.opcode)
-        name = op.name if op else "unknown opcode"
-        return f"sent #{packet.packet_no} {packet.opcode:o} {name}: {packet.data.hex(' ') or '(no data)'}"
-    return f"got  {describe(packet)}: {packet.data.hex(' ')}"
-
-
 def _counterexample(failure: MachineFailure, address: str) -> str:
     lines = [
         failure.actual,
@@ -573,9 +583,12 @@ def _counterexample(failure: MachineFailure, address: str) -> str:
         "replay with:",
         f'  python -c "from manip.conformance.cases.stateful import replay; replay({address!r}, [{shown}])"',
     ]
-    if failure.packets:
+    if failure.example:
+        lines.append("packets of the failing run (> the ones that show the failure):")
+        lines += packet_listing(failure.example, marked=failure.packets, from_open=True)
+    elif failure.packets:
         lines.append("packets:")
-        lines += [f"  {_packet_line(p)}" for p in failure.packets]
+        lines += packet_listing(failure.packets)
     return "\n".join(lines)
 
 
@@ -683,7 +696,7 @@ async def replay_async(address: str, steps: Sequence[Replayable], *, timeout: fl
                         packet = await conn.receive()
                 except TimeoutError:
                     return
-                lines.append(f"  <- {packet.opcode:o} {packet.data.hex(' ')}")
+                lines.append(f"  <- 0{packet.opcode:o} {packet.data.hex(' ')}")
 
         await take(0.1)
         for step in steps:
@@ -692,7 +705,7 @@ async def replay_async(address: str, steps: Sequence[Replayable], *, timeout: fl
                 continue
             opcode, data = step
             number = await conn.send(bytes.fromhex(data), opcode)
-            lines.append(f"-> #{number} {opcode:o} {data}")
+            lines.append(f"-> #{number} 0{opcode:o} {data}")
             await take(0.05)
         await take(timeout)
     finally:

@@ -1,0 +1,51 @@
+"""The rich consoles of the manip commands: styled on a terminal, plain text anywhere else.
+
+Rich wraps every line at the console width, and when the stream is not a terminal it takes 80
+columns: a ``reproduce:`` line, a hex dump or a path written to a pipe or a CI log would come out
+broken in two.  So a console made here never wraps a printed line (``soft_wrap``: a terminal folds a
+long line for display, but it stays one line when copied), and when its stream is not a terminal it
+has no width limit and writes no colour or style codes, whatever the environment asks (``FORCE_COLOR``,
+``TTY_COMPATIBLE``): a line of output is a line of the file.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Final, TextIO
+
+from rich.console import Console
+
+__all__ = ["UNLIMITED_WIDTH", "make_console", "stream_is_terminal"]
+
+UNLIMITED_WIDTH: Final = 1_000_000
+"""The width of a console whose stream is not a terminal: wider than any line or table we print."""
+
+
+def stream_is_terminal(stream: TextIO) -> bool:
+    """Whether ``stream`` is a terminal (a stream without ``isatty``, or a closed one, is not)."""
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError, OSError):
+        return False
+
+
+def make_console(*, stderr: bool = False, min_width: int = 0) -> Console:
+    """A console on stdout (``stderr``: on stderr).  ``min_width``: on a terminal, lay tables out at
+    least this wide (a narrower terminal folds their lines) rather than squeezing their columns."""
+    stream = sys.stderr if stderr else sys.stdout
+    if stream_is_terminal(stream):
+        console = Console(stderr=stderr, highlight=False, soft_wrap=True)
+        if min_width and console.width < min_width:
+            console = Console(stderr=stderr, highlight=False, soft_wrap=True, width=min_width)
+        return console
+    return Console(
+        stderr=stderr,
+        force_terminal=False,
+        force_interactive=False,
+        color_system=None,
+        no_color=True,
+        highlight=False,
+        soft_wrap=True,
+        width=UNLIMITED_WIDTH,
+        emoji=False,
+    )
