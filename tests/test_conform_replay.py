@@ -192,12 +192,12 @@ def test_serve_cli_prints_the_real_address_and_stops_after_seconds() -> None:
 def test_embedded_replay_server_gets_a_wrist_only_when_the_recording_had_one(tmp_path: Path) -> None:
     from manip.conformance.replay_cli import _capture_settings
 
-    assert _capture_settings(GOLDEN / "describe-self.mcap")[2] is False  # recorded without a wrist
+    assert _capture_settings(GOLDEN / "describe-self.mcap").wrist is False  # recorded without a wrist
     recorded = tmp_path / "wrist.mcap"
     args = ["run", "--select", "server.reply.wrist-version", "--record", str(recorded), "-q", "--seed", "1"]
     run = CliRunner().invoke(main, args)
     assert run.exit_code == 0, run.output  # the embedded robot of `run` has the simulated wrist
-    assert _capture_settings(recorded)[2] is True
+    assert _capture_settings(recorded).wrist is True
     replayed = CliRunner().invoke(main, ["replay", str(recorded), "-q"])
     assert replayed.exit_code == 0, replayed.output
 
