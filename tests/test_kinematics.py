@@ -7,7 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 from manip.arm.kinematics import (
@@ -319,6 +319,72 @@ def test_wrist_singularity_keeps_current_j4() -> None:
     assert len(same) == 1 and same[0].singular  # flip and noflip coincide there
 
 
+def test_wrist_singularity_brings_an_out_of_range_j4_into_range() -> None:
+    """Current J4 just past a limit: the singular solution takes the nearest in-range J4 and gives J6
+    the rest, instead of holding J4 past its limit and answering JOR."""
+    pose = forward((0.0, 9.0, -40.0, 0.0, 0.0, 0.0))
+    for j4, held in ((-111.0, -110.0), (175.0, 170.0), (-400.0, -110.0)):
+        got = nearest_solution(pose, (0.0, 0.0, 0.0, j4, 0.0, 0.0))
+        assert got.singular and not got.out_of_range and not within_limits(got.q)
+        assert got.q[3] == pytest.approx(held)
+        assert wrap_deg(got.q[3] + got.q[5]) == pytest.approx(0.0, abs=1e-9)
+        assert forward(got.q).almost_equal(pose, 1e-9)
+        legal = [s for s in inverse_all(pose, current=(0.0, 0.0, 0.0, j4, 0.0, 0.0)) if s.singular]
+        assert legal and all(s.q[3] == pytest.approx(held) for s in legal)
+
+
+def test_wrist_singularity_j4_leaves_a_narrow_j6_in_range() -> None:
+    """With J6's range under 360° not every J4 leaves J6 an in-range angle: J4 moves (least) so that it
+    does, J4 + J6 kept at J5 = 0 and J4 − J6 at J5 = 180°."""
+    lower, upper = UNIMATION_LIMITS.lower, UNIMATION_LIMITS.upper
+    narrow = JointLimits((*lower[:4], -200.0, -90.0), (*upper[:4], 200.0, 90.0))
+    arm = (100.0, 100.0, 100.0, 1.0, 1.0, 1.0)  # keeps the other configurations out of it
+    pose = forward((20.0, -60.0, 120.0, 100.0, 0.0, 50.0))  # J4 + J6 = 150: J4 in [60, 170]
+    for j4, want in ((0.0, 60.0), (-111.0, 60.0), (100.0, 100.0), (175.0, 170.0)):
+        got = nearest_solution(pose, (20.0, -60.0, 120.0, j4, 0.0, 0.0), limits=narrow, weights=arm)
+        assert got.singular and not narrow.violations(got.q)
+        assert got.q[3] == pytest.approx(want, abs=1e-5) and got.q[3] + got.q[5] == pytest.approx(150.0)
+        assert forward(got.q).almost_equal(pose, 1e-9)
+    pose = forward((20.0, -60.0, 120.0, 100.0, 180.0, 20.0))  # J4 − J6 = 80: J4 in [−10, 170]
+    for j4, want in ((0.0, 0.0), (-111.0, -10.0), (175.0, 170.0)):
+        got = nearest_solution(pose, (20.0, -60.0, 120.0, j4, 180.0, 0.0), limits=narrow, weights=arm)
+        assert got.singular and not narrow.violations(got.q)
+        assert got.q[3] == pytest.approx(want, abs=1e-5) and got.q[3] - got.q[5] == pytest.approx(80.0)
+        assert forward(got.q).almost_equal(pose, 1e-9)
+
+
+def test_wrist_centre_on_the_j1_axis_brings_an_out_of_range_j1_into_range() -> None:
+    """With no shoulder offset and no elbow offset the wrist centre can lie on the J1 axis, where J1 is
+    free: it is held at the current J1, or the in-range angle nearest it."""
+    g = PumaGeometry(a2=431.8, a3=0.0, d2=0.0, d4=433.07, name="no offsets")
+    pose = Transform.trans(0.0, 0.0, 500.0)
+    for j1, held in ((30.0, 30.0), (170.0, 160.0), (-200.0, -160.0)):
+        got = nearest_solution(pose, (j1, -90.0, 90.0, 0.0, 0.0, 0.0), g)
+        assert got.q[0] == pytest.approx(held) and not within_limits(got.q)
+        assert forward(got.q, g).almost_equal(pose, 1e-9)
+
+
+_SINGULAR_Q = st.tuples(*(_joint(j) for j in range(4)), st.just(0.0), _joint(5))
+
+
+@FAST
+@given(_SINGULAR_Q, st.floats(-400.0, 400.0), st.sampled_from(GEOMETRIES))
+def test_wrist_singular_poses_are_solved_from_any_current_j4(
+    q: tuple[float, ...], j4: float, g: PumaGeometry
+) -> None:
+    """A pose with J5 = 0 always has an in-range solution (its own configuration, with J4 anywhere in
+    range and J6 taking the rest); a singular answer holds J4 at the in-range angle nearest the current."""
+    assume(_well_conditioned(q, g))
+    pose = forward(q, g)
+    current = (*q[:3], j4, 0.0, q[5])
+    got = nearest_solution(pose, current, g)
+    assert not within_limits(got.q)
+    assert forward(got.q, g).distance(pose).rotation_deg <= WRIST_SINGULAR_DEG + 1e-9
+    if got.singular:
+        held = min(max(j4, UNIMATION_LIMITS.lower[3]), UNIMATION_LIMITS.upper[3])
+        assert got.q[3] == pytest.approx(held, abs=1e-9)
+
+
 def test_near_singular_tilt_in_the_held_j4_plane_is_exact() -> None:
     q = (20.0, -60.0, 120.0, 40.0, -0.5 * WRIST_SINGULAR_DEG, 15.0)
     got = nearest_solution(forward(q), (20.0, -60.0, 120.0, 40.0, 0.0, 0.0))
@@ -440,6 +506,8 @@ _ANY = st.tuples(*(st.floats(-400.0, 400.0) for _ in range(6)))
 
 @settings(max_examples=300, deadline=None)
 @given(legal_q, st.one_of(legal_q, _ANY), st.sampled_from(GEOMETRIES), _WEIGHTS)
+# At the wrist singularity J4 was held at the current −111, just past its limit: OutOfRange (JOR).
+@example((0.0, 9.0, -40.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, -111.0, 0.0, 0.0), PUMA560_LEE, (1.0,) * 6)
 def test_nearest_solution_is_the_least_of_the_enumeration(
     q: tuple[float, ...], current: tuple[float, ...], g: PumaGeometry, weights: tuple[float, ...]
 ) -> None:

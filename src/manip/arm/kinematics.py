@@ -76,7 +76,8 @@ Matrix = NDArray[np.float64]
 #: A 3x3 matrix as rows of plain floats.
 Rows = Sequence[Sequence[float]]
 
-#: |J5| (deg) below which the wrist counts as singular and J4 is held at the reference (current) value.
+#: |J5| (deg) below which the wrist counts as singular and J4 is held at the reference (current) value,
+#: or the in-range angle nearest it.
 #: A pose rebuilt from such a solution is off by at most this angle.  Poses with J5 = 0 rounded to
 #: 24-bit PDP-11 floats come back with |J5| ~ 2e-6° typically and ~1e-4° at the 99th percentile (measured
 #: on random poses), so they take the singular branch instead of spinning J4 to an arbitrary angle.
@@ -328,8 +329,8 @@ class Solution:
     above: bool
     flip: bool
     singular: bool = False
-    """The wrist was singular (J5 ≈ 0): J4 was held at the reference value, and ``flip`` only
-    follows the sign of the fitted J5, which is noise there."""
+    """The wrist was singular (J5 ≈ 0): J4 was held at the reference value (or the in-range angle
+    nearest it), and ``flip`` only follows the sign of the fitted J5, which is noise there."""
     out_of_range: tuple[int, ...] = field(default=())
     """Joints (1-based) of ``q`` outside the limits the solution was computed against."""
 
@@ -361,30 +362,80 @@ def configuration(q_deg: JointsLike, geometry: PumaGeometry = PUMA560_LEE) -> tu
     return u > 0.0, (u > 0.0) == (e > 0.0), q_deg[4] < 0.0
 
 
-def _wrist(r36: Rows, q4_ref: float, tol_deg: float) -> tuple[list[tuple[float, float, float]], bool]:
+def _wrist(
+    r36: Rows, q4_ref: float, tol_deg: float, limits: JointLimits | None
+) -> tuple[list[tuple[float, float, float]], bool]:
     """(θ4, θ5, θ6) in degrees with R36 = Rz(θ4)·Ry(θ5)·Rz(θ6): the noflip (θ5 ≥ 0) then flip solution.
 
     At the singularity (θ5 within ``tol_deg`` of 0° or 180°) only θ4 ± θ6 is defined, so θ4 is held at
-    ``q4_ref`` and the one solution is returned; θ5 and θ6 are then fitted to Rz(−θ4)·R36, so a tilt
-    that happens to lie in the held J4 plane is still reproduced exactly.
+    ``q4_ref`` (brought into range, see :func:`_singular_j4`) and the one solution is returned; θ5 and θ6
+    are then fitted to Rz(−θ4)·R36, so a tilt that happens to lie in the held J4 plane is still
+    reproduced exactly.
     """
     s5 = math.hypot(r36[0][2], r36[1][2])
     t5 = math.degrees(math.atan2(s5, r36[2][2]))
     if t5 <= tol_deg or t5 >= 180.0 - tol_deg:
-        c4, s4 = math.cos(math.radians(q4_ref)), math.sin(math.radians(q4_ref))
-        # held = Rz(−θ4)·R36 ≈ Ry(θ5)·Rz(θ6); only the entries used below
-        h00 = c4 * r36[0][0] + s4 * r36[1][0]
-        h02 = c4 * r36[0][2] + s4 * r36[1][2]
-        h10 = -s4 * r36[0][0] + c4 * r36[1][0]
-        h20, h22 = r36[2][0], r36[2][2]
-        fit5 = math.atan2(h02, h22)
-        c5, s5 = math.cos(fit5), math.sin(fit5)
-        # Rz(θ6) ≈ Ry(−θ5)·held: its first column is (c5·h00 − s5·h20, h10, ...)
-        fit6 = math.atan2(h10, c5 * h00 - s5 * h20)
-        return [(q4_ref, math.degrees(fit5), math.degrees(fit6))], True
+        if limits is None:
+            return [(q4_ref, *_held_wrist(r36, q4_ref))], True
+        q4 = min(max(q4_ref, limits.lower[3]), limits.upper[3])
+        fit5, fit6 = _held_wrist(r36, q4)
+        # J6 follows J4: J6 ≡ c + sign·J4 (mod 360), J4 + J6 kept near θ5 = 0, J4 − J6 near 180°.
+        sign = -1.0 if t5 <= tol_deg else 1.0
+        better = _singular_j4(q4_ref, fit6 - sign * q4, sign, limits)
+        if better != q4:
+            q4 = better
+            fit5, fit6 = _held_wrist(r36, q4)
+        return [(q4, fit5, fit6)], True
     t4 = math.degrees(math.atan2(r36[1][2], r36[0][2]))
     t6 = math.degrees(math.atan2(r36[2][1], -r36[2][0]))
     return [(t4, t5, t6), (t4 + 180.0, -t5, t6 + 180.0)], False
+
+
+def _held_wrist(r36: Rows, q4: float) -> tuple[float, float]:
+    """(θ5, θ6) in degrees fitted to Rz(−θ4)·R36 for the held θ4 = ``q4``."""
+    c4, s4 = math.cos(math.radians(q4)), math.sin(math.radians(q4))
+    # held = Rz(−θ4)·R36 ≈ Ry(θ5)·Rz(θ6); only the entries used below
+    h00 = c4 * r36[0][0] + s4 * r36[1][0]
+    h02 = c4 * r36[0][2] + s4 * r36[1][2]
+    h10 = -s4 * r36[0][0] + c4 * r36[1][0]
+    h20, h22 = r36[2][0], r36[2][2]
+    fit5 = math.atan2(h02, h22)
+    c5, s5 = math.cos(fit5), math.sin(fit5)
+    # Rz(θ6) ≈ Ry(−θ5)·held: its first column is (c5·h00 − s5·h20, h10, ...)
+    fit6 = math.atan2(h10, c5 * h00 - s5 * h20)
+    return math.degrees(fit5), math.degrees(fit6)
+
+
+#: How far inside J6's range (deg) a singular J4 keeps J6 when J6's range is what bounds J4: the fitted
+#: J6 moves with J4 by up to ~1e-8° more than the coupling says (θ5 up to the singular tolerance), which
+#: must not carry it past LIMIT_TOL_DEG.
+_SINGULAR_J6_MARGIN_DEG = 1e-6
+
+
+def _singular_j4(q4_ref: float, c: float, sign: float, limits: JointLimits) -> float:
+    """J4 at the wrist singularity: the angle nearest ``q4_ref`` inside J4's range that leaves J6
+    (≡ ``c`` + ``sign``·J4 mod 360) an angle inside J6's range.  Holding J4 at the reference itself
+    would break J4's limit whenever the reference does (e.g. the current angles just past a limit),
+    though J6 can take up the difference.  With no such angle (J6's range under 360° and J4's too
+    narrow to help) J4's range alone decides, and J6's limit is reported."""
+    lo4, hi4 = limits.lower[3], limits.upper[3]
+    clamped = min(max(q4_ref, lo4), hi4)
+    lo6, hi6 = limits.lower[5], limits.upper[5]
+    width = hi6 - lo6
+    if width >= 360.0:  # every J4 leaves J6 an angle in range (the PUMA's J6 has 532°)
+        return clamped
+    # lo6 ≤ c + sign·J4 + 360k ≤ hi6  ⇔  J4 ∈ [start + 360k, start + width + 360k]
+    start = c - hi6 if sign < 0.0 else lo6 - c
+    margin = min(_SINGULAR_J6_MARGIN_DEG, width / 4.0)
+    best: float | None = None
+    for k in range(math.ceil((lo4 - start - width) / 360.0), math.floor((hi4 - start) / 360.0) + 1):
+        low = max(lo4, start + 360.0 * k + margin)
+        high = min(hi4, start + width + 360.0 * k - margin)
+        if low <= high:
+            x = min(max(q4_ref, low), high)
+            if best is None or abs(x - q4_ref) < abs(best - q4_ref):
+                best = x
+    return clamped if best is None else best
 
 
 class _Base(NamedTuple):
@@ -406,10 +457,15 @@ class _Arm(NamedTuple):
     r03t: tuple[tuple[float, float, float], ...]
 
 
-def _arms(pose: Transform | Matrix, g: PumaGeometry, ref: Joints) -> tuple[Rows, list[_Arm]]:
+def _arms(
+    pose: Transform | Matrix, g: PumaGeometry, ref: Joints, limits: JointLimits | None
+) -> tuple[Rows, list[_Arm]]:
     """The rotation of ``pose`` and its four arm solutions (righty before lefty, above before below), in
     plain floats: this runs at every servo cycle of a straight-line move, where numpy's per-call cost on
-    3x3 matrices would dominate.  Raises :class:`Unreachable` when the wrist centre is out of reach."""
+    3x3 matrices would dominate.  Raises :class:`Unreachable` when the wrist centre is out of reach.
+
+    With the wrist centre on the J1 axis (only with d2 = 0) J1 is free: it is held at ``ref[0]``,
+    brought into J1's range when ``limits`` are given."""
     m = (pose.matrix if isinstance(pose, Transform) else np.asarray(pose, dtype=np.float64)).tolist()
     r = (m[0][:3], m[1][:3], m[2][:3])
     px, py, pz = (m[i][3] - g.d6 * m[i][2] for i in range(3))  # the wrist centre p − d6·a
@@ -442,11 +498,12 @@ def _arms(pose: Transform | Matrix, g: PumaGeometry, ref: Joints) -> tuple[Rows,
         c3, s3 = math.cos(q3), math.sin(q3)
         b_y = -g.a3 * s3 - g.d4 * c3
         elbows.append((q3, g.a2 - g.a3 * c3 + g.d4 * s3, b_y, b_y > 0.0))
+    q1_ref = ref[0] if limits is None else min(max(ref[0], limits.lower[0]), limits.upper[0])
     arms: list[_Arm] = []
     for lefty in (False, True):
         u = u_abs if lefty else -u_abs
         on_axis = radial == 0.0 and u == 0.0
-        q1 = math.radians(ref[0]) if on_axis else math.atan2(py, px) - math.atan2(g.d2, u)
+        q1 = math.radians(q1_ref) if on_axis else math.atan2(py, px) - math.atan2(g.d2, u)
         c1, s1 = math.cos(q1), math.sin(q1)
         q1_deg = wrap_deg(math.degrees(q1))
         # above first: above when sign(u) == sign(e) (lefty: e > 0); b_y is e
@@ -460,10 +517,12 @@ def _arms(pose: Transform | Matrix, g: PumaGeometry, ref: Joints) -> tuple[Rows,
     return r, arms
 
 
-def _wrists(arm: _Arm, r: Rows, q4_ref: float, wrist_tol_deg: float) -> list[_Base]:
+def _wrists(
+    arm: _Arm, r: Rows, q4_ref: float, wrist_tol_deg: float, limits: JointLimits | None
+) -> list[_Base]:
     """The solutions of one arm configuration: noflip then flip (one solution at the singularity)."""
     r36 = [[a[0] * r[0][j] + a[1] * r[1][j] + a[2] * r[2][j] for j in range(3)] for a in arm.r03t]
-    wrists, singular = _wrist(r36, q4_ref, wrist_tol_deg)
+    wrists, singular = _wrist(r36, q4_ref, wrist_tol_deg, limits)
     return [
         _Base((*arm.q, wrap_deg(t4), wrap_deg(t5), wrap_deg(t6)), arm.lefty, arm.above, t5 < 0.0, singular)
         for t4, t5, t6 in wrists
@@ -487,16 +546,18 @@ def inverse_all(
     ranges extend past ±180°.  ``out_of_range`` is filled against ``limits``.
 
     At a wrist singularity (J5 within ``wrist_tol_deg`` of 0) flip and noflip coincide: one solution per
-    arm/elbow pair, with J4 = ``current[3]`` (0 without ``current``) and J6 taking the rest.  If the wrist
-    centre is on the J1 axis (possible only with d2 = 0), J1 = ``current[0]``.
+    arm/elbow pair, with J4 = ``current[3]`` (0 without ``current``) and J6 taking the rest; with
+    ``limits``, a reference outside J4's range gives way to the in-range J4 nearest it (that leaves J6 an
+    in-range angle), J4 + J6 kept.  If the wrist centre is on the J1 axis (possible only with d2 = 0),
+    J1 = ``current[0]``, likewise brought into range.
 
     Raises :class:`Unreachable` when the wrist centre is out of the workspace.
     """
     ref = _as_joints(current) if current is not None else (0.0,) * 6
-    r, arms = _arms(pose, geometry, ref)
+    r, arms = _arms(pose, geometry, ref, limits)
     out: list[Solution] = []
     for arm in arms:
-        for b in _wrists(arm, r, ref[3], wrist_tol_deg):
+        for b in _wrists(arm, r, ref[3], wrist_tol_deg, limits):
             out.extend(_with_variants(b.q, b.lefty, b.above, b.flip, b.singular, limits))
     return out
 
@@ -546,7 +607,7 @@ def nearest_solution(
     # arm joints alone are already farther than the best so far needs no wrist: the same answer as the
     # least of inverse_all's enumeration (ties too: the first in its order wins) for a fraction of the
     # work, which matters at every servo cycle of a straight-line move.
-    r, arms = _arms(pose, geometry, current)
+    r, arms = _arms(pose, geometry, current, limits)
     near = _Nearest(current, weights, limits)
     scored: list[tuple[float, int, list[float]]] = []
     for index, arm in enumerate(arms):
@@ -560,7 +621,7 @@ def nearest_solution(
     for d_arm, index, head in scored:
         if near.prune and d_arm > best_key[0]:
             break  # this arm and every later one are farther than the best
-        for k, b in enumerate(_wrists(arms[index], r, current[3], wrist_tol_deg)):
+        for k, b in enumerate(_wrists(arms[index], r, current[3], wrist_tol_deg, limits)):
             found = near.part(b.q[3:], 3, d_arm, best_key[0] if near.prune else math.inf)
             # found[1] is _distance(q, current, weights): the same terms summed in the same order
             if found is not None and (found[1], index, k) < best_key:
@@ -648,7 +709,8 @@ def inverse_nearest(
 
     Among all solutions and their ±360° variants that respect ``limits``, return the one with the least
     weighted squared distance Σ w_j (q_j − current_j)² to ``current``; so the arm keeps its present
-    configuration whenever it can.  At the wrist singularity J4 stays at ``current[3]``.
+    configuration whenever it can.  At the wrist singularity J4 stays at ``current[3]``, or moves to the
+    nearest angle in its range when ``current[3]`` is outside it, and J6 keeps J4 + J6.
 
     Raises :class:`Unreachable` (TOR) when no solution exists, :class:`OutOfRange` (JOR) when every
     solution breaks a limit.
