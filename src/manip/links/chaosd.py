@@ -12,8 +12,7 @@ import asyncio
 from manip.codecs.framing import ChaosdFrameDecoder, encode_chaosd
 from manip.codecs.packet import Packet
 
-from .errors import LinkError
-from .stream import StreamLink
+from .stream import StreamLink, dial
 
 
 class ChaosdLink(StreamLink):
@@ -32,13 +31,8 @@ class ChaosdLink(StreamLink):
 
 async def connect_chaosd(path: str, *, my_addr: int, timeout: float | None = 10.0) -> ChaosdLink:
     """Connect to the chaosd daemon's socket at ``path``; raise :class:`LinkError` if that fails."""
-    loop = asyncio.get_running_loop()
     link = ChaosdLink(my_addr=my_addr, name=f"chaosd:{path}")
-    try:
-        async with asyncio.timeout(timeout):
-            await loop.create_unix_connection(lambda: link, path)
-    except (OSError, TimeoutError) as exc:
-        link.close()
-        what = "timed out" if isinstance(exc, TimeoutError) else str(exc)
-        raise LinkError(f"cannot reach chaosd socket {path}: {what}") from exc
-    return link
+    loop = asyncio.get_running_loop()
+    return await dial(
+        link, lambda: loop.create_unix_connection(lambda: link, path), f"chaosd socket {path}", timeout
+    )

@@ -10,8 +10,8 @@ delivered for the NCP to answer (``stats.illegal``); a stream frame cannot hold 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable
-from typing import Final, cast
+from collections.abc import Awaitable, Callable
+from typing import Final, TypeVar, cast
 
 from manip.codecs.chaos import IllegalPacketError
 from manip.codecs.errors import DecodeError, EncodeError
@@ -19,7 +19,9 @@ from manip.codecs.framing import FrameSyncError, StreamDecoder, StreamItem
 from manip.codecs.packet import Packet
 
 from .base import Link, bad_reason
-from .errors import not_a_chaos_link
+from .errors import LinkError, not_a_chaos_link
+
+S = TypeVar("S", bound="StreamLink")
 
 Encoder = Callable[..., bytes]
 """``encode(packet, hw_dest=..., hw_src=...)``, one of the framing module's encoders."""
@@ -168,3 +170,16 @@ class StreamLink(Link, asyncio.Protocol):
             transport.abort()
         else:
             transport.close()
+
+
+async def dial(link: S, connect: Callable[[], Awaitable[object]], where: str, timeout: float | None) -> S:
+    """Make ``link``'s connection with ``connect`` (``loop.create_connection`` and its kin) within
+    ``timeout``; :class:`LinkError` naming ``where`` if it cannot be made (the link is closed then)."""
+    try:
+        async with asyncio.timeout(timeout):
+            await connect()
+    except (OSError, TimeoutError) as exc:
+        link.close()
+        what = "timed out" if isinstance(exc, TimeoutError) else str(exc)
+        raise LinkError(f"cannot reach {where}: {what}") from exc
+    return link

@@ -19,7 +19,7 @@ from manip.codecs.framing import TcpFrameDecoder, encode_tcp
 from .errors import LinkError
 from .guard import LinkGuard, LinkLimits
 from .listener import BACKLOG, StreamListener, bind_stream
-from .stream import StreamLink
+from .stream import StreamLink, dial
 
 
 class TcpLink(StreamLink):
@@ -48,16 +48,10 @@ async def connect_tcp(
     host: str, port: int, *, my_addr: int, peer_addr: int | None = None, timeout: float | None = 10.0
 ) -> TcpLink:
     """Dial a TCP link; raise :class:`LinkError` if the TCP connection cannot be made."""
-    loop = asyncio.get_running_loop()
     link = TcpLink(my_addr=my_addr, peer_addr=peer_addr)
-    try:
-        async with asyncio.timeout(timeout):
-            await loop.create_connection(lambda: link, host, port)
-    except (OSError, TimeoutError) as exc:
-        link.close()
-        what = "timed out" if isinstance(exc, TimeoutError) else str(exc)
-        raise LinkError(f"cannot reach tcp://{_endpoint((host, port))}: {what}") from exc
-    return link
+    loop = asyncio.get_running_loop()
+    where = f"tcp://{_endpoint((host, port))}"
+    return await dial(link, lambda: loop.create_connection(lambda: link, host, port), where, timeout)
 
 
 async def serve_tcp(
@@ -72,33 +66,22 @@ async def serve_tcp(
 
     ``guard`` admits each peer first and bounds the links (:mod:`~manip.links.guard`; default: everyone,
     no bounds).  ``port`` 0 picks a free port: read it from the listener's ``sockets``."""
-
-    def factory() -> TcpLink:
-        link = TcpLink(my_addr=my_addr)
-        on_link(link)
-        return link
-
     try:
         sockets = await bind_stream(host, port)
     except OSError as exc:
         raise LinkError(f"cannot listen on tcp://{_endpoint((host, port))}: {exc}") from exc
-    return StreamListener(sockets, factory, guard or LinkGuard(LinkLimits.unlimited()))
+    return _listener(sockets, my_addr, on_link, guard)
 
 
 async def connect_unix(
     path: str, *, my_addr: int, peer_addr: int | None = None, timeout: float | None = 10.0
 ) -> TcpLink:
     """Dial the TCP link framing on a Unix-domain socket; :class:`LinkError` if it cannot be made."""
-    loop = asyncio.get_running_loop()
     link = TcpLink(my_addr=my_addr, peer_addr=peer_addr)
-    try:
-        async with asyncio.timeout(timeout):
-            await loop.create_unix_connection(lambda: link, path)
-    except (OSError, TimeoutError) as exc:
-        link.close()
-        what = "timed out" if isinstance(exc, TimeoutError) else str(exc)
-        raise LinkError(f"cannot reach unix://{path}: {what}") from exc
-    return link
+    loop = asyncio.get_running_loop()
+    return await dial(
+        link, lambda: loop.create_unix_connection(lambda: link, path), f"unix://{path}", timeout
+    )
 
 
 async def serve_unix(
@@ -106,12 +89,6 @@ async def serve_unix(
 ) -> StreamListener:
     """Listen for links with the TCP link framing on a Unix-domain socket at ``path`` (which must not
     exist yet), under ``guard`` as :func:`serve_tcp` is."""
-
-    def factory() -> TcpLink:
-        link = TcpLink(my_addr=my_addr)
-        on_link(link)
-        return link
-
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     try:
         sock.bind(path)
@@ -120,4 +97,17 @@ async def serve_unix(
     except OSError as exc:
         sock.close()
         raise LinkError(f"cannot listen on unix://{path}: {exc}") from exc
-    return StreamListener([sock], factory, guard or LinkGuard(LinkLimits.unlimited()))
+    return _listener([sock], my_addr, on_link, guard)
+
+
+def _listener(
+    sockets: list[socket.socket], my_addr: int, on_link: Callable[[TcpLink], None], guard: LinkGuard | None
+) -> StreamListener:
+    """Accept TCP-framed links on ``sockets``; each new link goes to ``on_link`` before it reads."""
+
+    def factory() -> TcpLink:
+        link = TcpLink(my_addr=my_addr)
+        on_link(link)
+        return link
+
+    return StreamListener(sockets, factory, guard or LinkGuard(LinkLimits.unlimited()))
