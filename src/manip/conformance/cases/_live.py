@@ -19,6 +19,7 @@ from manip.conformance.checks import (
     word,
 )
 from manip.conformance.context import Answer, CaseContext, Probe
+from manip.conformance.invariants import TRANSCRIPT
 from manip.conformance.model import Reply
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
@@ -120,7 +121,10 @@ def must(findings: Iterable[Finding]) -> list[Finding]:
 
 @dataclass(eq=False)
 class Evidence(AssertionError):  # noqa: N818 - a failed example, not an error of the suite
-    """A failed example: the clause, expected and actual, and the packets that showed it."""
+    """A failed example: the clause, expected and actual, and the packets that showed it.
+
+    ``invariant``: the suite invariant that found it (a checker's finding, a probe's failure), passed
+    on to ``ctx.fail`` so that a clause the case does not declare is attributed to it."""
 
     clause: str
     message: str
@@ -128,12 +132,20 @@ class Evidence(AssertionError):  # noqa: N818 - a failed example, not an error o
     actual: str
     data: bytes = b""
     packets: list[WirePacket] = field(default_factory=list)
+    invariant: str | None = None
 
     def __post_init__(self) -> None:
         super().__init__(f"[{self.clause}] {self.message}")
 
     @classmethod
     def of(cls, finding: Finding, packets: Iterable[WirePacket] = ()) -> Evidence:
+        """A checker's finding (the transcript invariant's checkers)."""
         return cls(
-            finding.clause, finding.message, finding.expected, finding.actual, finding.data, list(packets)
+            finding.clause,
+            finding.message,
+            finding.expected,
+            finding.actual,
+            finding.data,
+            list(packets),
+            invariant=TRANSCRIPT.name,
         )
