@@ -33,11 +33,13 @@ States and transitions (:data:`TRANSITIONS` is the table the code runs)::
 
 The initial RESPONSE carries only the RFC's packet number (erratum ``initial-response``).  Serving a
 request goes: run the arm up to ``now`` (so asynchronous events that happened first are sent first,
-and requests read fresh move-process data); look the opcode up in the spec (C UOP if unknown); decode
-its data by the spec layout (C BDL for a wrong length, C BFL for a reserved-operand float); call the
-handler that :data:`HANDLERS` maps the spec name to (the wrist opcodes go to the :class:`Wrist`); send
-its reply in the form the spec gives the opcode (done, data, segment number, multi-packet text).  A
-handler refuses with :class:`RequestError`: a non-fatal error (0202) is the reply; a fatal one (0201,
+and requests read fresh move-process data); look the opcode up in the spec (C UOP if unknown, C UIM if
+this robot does not serve it, e.g. a wrist opcode without a wrist: both whatever the data, so that what
+describe self lists is what a probe finds served, erratum ``describe-self-truthful``); decode its data
+by the spec layout (C BDL for a wrong length, C BFL for a reserved-operand float); call the handler
+that :data:`HANDLERS` maps the spec name to (the wrist opcodes go to the :class:`Wrist`); send its
+reply in the form the spec gives the opcode (done, data, segment number, multi-packet text).  A handler
+refuses with :class:`RequestError`: a non-fatal error (0202) is the reply; a fatal one (0201,
 first word = the packet last received) ends the session.  Motion requests are checked and queued on
 the :class:`~manip.arm.sim.ArmSim` and answered with the segment number before the arm moves.
 
@@ -365,9 +367,11 @@ class ServerSession:
                     self._emit(ServerOp.RESPONSE, _word(number))
                     return None
                 raise errors.unknown_opcode(event.opcode)
+            handler = HANDLERS.get(op.name)
+            if handler is None and op.opcode not in self.wrist.served:
+                raise errors.not_served(op.opcode)
             values = self._decode(op, event.data)
             try:
-                handler = HANDLERS.get(op.name)
                 result: dict[str, Any] | Pending
                 if handler is None:
                     result = self.wrist.handle(op, values, event.now, self.arm)
