@@ -109,6 +109,10 @@ __all__ = [
 log = logging.getLogger("manip.reference_server")
 
 WORD_MASK: Final = 0xFFFF
+MISSING_OPERATION: Final = "solve-backwards"
+"""The served opcode describe self leaves out under the ``describe-missing-operation`` fault."""
+NARROWED_DEG: Final = 5.0
+"""How much narrower than the arm's each joint range is stated under ``describe-narrow-limits``."""
 
 
 class State(enum.Enum):
@@ -491,11 +495,24 @@ class ServerSession:
             raise errors.bad_value(op, "N, O and A are not a rotation") from exc
 
     def _describe_self(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        faults = self.faults
+        operations = set(self.operations)
+        if Fault.DESCRIBE_EXTRA_OPERATION in faults:
+            operations.add(min(set(range(0o200, 0o300)) - operations))  # listed, answered C UOP
+        if Fault.DESCRIBE_MISSING_OPERATION in faults:
+            operations.discard(SPEC.request(MISSING_OPERATION).opcode)  # answered, not listed
+        model = self.arm.model
+        dof = len(model.ready) + (1 if Fault.DESCRIBE_WRONG_DOF in faults else 0)
+        limits = [(lo, hi) for lo, hi in zip(model.limits.lower, model.limits.upper, strict=True)]
+        if Fault.DESCRIBE_NARROW_LIMITS in faults:
+            limits = [(lo + NARROWED_DEG, hi - NARROWED_DEG) for lo, hi in limits]
         text = describe_text(
             self.config.description,
-            self.arm.model,
-            self.operations,
-            with_protocol_version=Fault.NO_PROTOCOL_VERSION not in self.faults,
+            model,
+            operations,
+            with_protocol_version=Fault.NO_PROTOCOL_VERSION not in faults,
+            degrees_of_freedom=dof,
+            joint_limits=limits,
         )
         return {"text": text}
 

@@ -31,6 +31,7 @@ __all__ = [
     "lenient_error",
     "must",
     "reply_view",
+    "stated_limits",
 ]
 
 
@@ -52,7 +53,8 @@ def _number(value: LispValue) -> float | None:
     return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
 
 
-def _limits(value: LispValue) -> JointLimits | None:
+def stated_limits(value: LispValue) -> JointLimits | None:
+    """The joint limits of a ``:joint-limits`` value (six (lower upper) pairs), or None."""
     if not isinstance(value, list) or len(value) != 6:
         return None
     lower: list[float] = []
@@ -79,7 +81,7 @@ async def describe_target(ctx: CaseContext, probe: Probe) -> TargetArm:
     entries, _ = parse_description(multi_text(answer.packets))
     if entries is None:
         return TargetArm()
-    limits = _limits(entries["joint-limits"]) if "joint-limits" in entries else None
+    limits = stated_limits(entries["joint-limits"]) if "joint-limits" in entries else None
     dof_value = entries.get("degrees-of-freedom")
     dof = int(dof_value) if isinstance(dof_value, int) and dof_value > 0 else 6
     listed = description_operations(entries)

@@ -155,13 +155,14 @@ def expect_refusal(
     wanted = f"a non-fatal error (202) of severity {'/'.join(severities)}" + (
         f" and code {'/'.join(codes)}" if codes else ""
     )
-    ctx.expect(
+    if not ctx.expect(
         answer.opcode == ServerOp.NON_FATAL_ERROR,
         clause=clause,
         expected=f"{wanted} for {what}",
         actual=str(answer),
         data=answer.data,
-    )
+    ):
+        return None  # a weaker clause than MUST: recorded, and there is no error string to judge
     error = error_of(answer)
     if error is None:
         ctx.check(check_error_packet(answer.first))  # what is wrong with the string: the invariant's
