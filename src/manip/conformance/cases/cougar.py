@@ -1139,6 +1139,34 @@ async def jacob_front_buffer(ctx: CaseContext) -> None:
         await probe.run(1)
 
 
+REENTRY_GAP_S: Final = 1e-6
+"""A tick this soon after the previous one (the TICK frame's resolution) finds any GUTS still running."""
+
+
+@case("cougar.guts.no-nesting", clauses=["cougar.guts-reentry"], kind="cougar")
+async def guts_no_nesting(ctx: CaseContext) -> None:
+    """A tick one microsecond after the previous one finds GUTS still running, however fast Cougar is:
+    it sends no words, and a command sent before it runs at the next tick."""
+    async with cougar_probe(ctx) as probe:
+        await _clean(probe)
+        await probe.run(1)
+        await probe.send("VERS", version=1)
+        nested = await probe.run(1, gap=REENTRY_GAP_S)
+        ctx.expect(
+            not nested,
+            clause="cougar.guts-reentry",
+            expected=f"no words from a tick {REENTRY_GAP_S * 1e6:g} us after the previous one",
+            actual="; ".join(str(r) for r in nested),
+        )
+        late = await probe.run(1)
+        ctx.expect(
+            [r.name for r in late] == ["VERSION"],
+            clause="cougar.guts-reentry",
+            expected="the VERS waiting in the buffer answered at the next full tick",
+            actual="; ".join(str(r) for r in late) or "nothing",
+        )
+
+
 @case(
     "cougar.guts.reentry",
     clauses=["cougar.guts-cost-model"],
@@ -1148,9 +1176,9 @@ async def guts_reentry(ctx: CaseContext) -> None:
     """A tick 0.5 ms after the previous one finds GUTS still running (erratum cougar-guts-reentry's
     cost model): it returns at once, and a command sent before it runs at the next tick instead.
 
-    It checks clause cougar.guts-cost-model (SHOULD), not the MUST of cougar.guts-reentry: it relies on
-    the erratum's GUTS time, and a Cougar whose GUTS finishes in under 0.5 ms breaks no MUST by running
-    the command early."""
+    It checks clause cougar.guts-cost-model (SHOULD), not the MUST of cougar.guts-reentry (that is
+    cougar.guts.no-nesting's): it relies on the erratum's GUTS time, and a Cougar whose GUTS finishes in
+    under 0.5 ms breaks no MUST by running the command early."""
     async with cougar_probe(ctx) as probe:
         await _clean(probe)
         await probe.run(1)
