@@ -19,7 +19,8 @@ Theory of operation
    :func:`~manip.conformance.checks.check_transcript`, so each case also checks the invariants of the
    whole exchange (one reply per request, echoes, error formats, asynchronous responses only when
    asked for...).  An exception of the case never stops the
-   run: it becomes an ``error`` outcome with its traceback.
+   run: it becomes an ``error`` outcome with its traceback, and so does a violation of a clause the
+   case does not declare that no suite invariant reported (:mod:`manip.conformance.invariants`).
 4. **Liveness after** every failure or error and after every negative case; if the target is dead
    (after one retry) the remaining cases are skipped, the run records which case it died after, and
    the run is non-conformant (or unreachable, exit 3, when no case had reached a verdict).
