@@ -204,7 +204,7 @@ async def _sleeps(ctx: CaseContext) -> None:
 
 CASES = [
     _case("t.pass", _passes),
-    _case("t.fail", _fails),
+    _case("t.fail", _fails, clauses=("response.echoes-request-number",)),
     _case("t.warn", _warns, clauses=("segment.number-increases",), level="SHOULD"),
     _case("t.error", _crashes),
     _case("t.slow", _sleeps, deadline=0.2),

@@ -112,6 +112,12 @@ def test_clean_reference_server_passes_every_case() -> None:
             "server.connect.initial-response",
             "connect.initial-response",
         ),
+        (
+            "describe-wrong-dof",
+            ["server.describe.degrees-of-freedom"],
+            "server.describe.degrees-of-freedom",
+            "describe.dof-joint-vectors",
+        ),
     ],
 )
 def test_fault_is_caught_by_its_case(fault: str, select: list[str], case_id: str, clause: str | None) -> None:

@@ -201,6 +201,61 @@ def test_no_protocol_version() -> None:
     assert pair(Fault.NO_PROTOCOL_VERSION, scenario) == (True, False)
 
 
+def _alist(c: Client) -> dict[str, object]:
+    text = "".join(str(decode_reply(d, "describe-self").values.get("text", "")) for d in _describe(c))
+    return dict(read_alist(text))
+
+
+def _refusal_code(c: Client, opcode: int, data: bytes) -> str | None:
+    """The code of the non-fatal error answering the request (None: not one)."""
+    ((op, answer),) = _packets(c.raw(opcode, data))
+    return decode_error(op, answer).error.code if op == ServerOp.NON_FATAL_ERROR else None
+
+
+@covers(Fault.DESCRIBE_EXTRA_OPERATION)
+def test_describe_extra_operation() -> None:
+    def scenario(c: Client) -> tuple[bool, str | None]:
+        listed = _alist(c)["operations"]
+        assert isinstance(listed, list)
+        return 0o222 in listed, _refusal_code(c, 0o222, b"")
+
+    assert pair(Fault.DESCRIBE_EXTRA_OPERATION, scenario) == ((False, "UOP"), (True, "UOP"))
+
+
+@covers(Fault.DESCRIBE_MISSING_OPERATION)
+def test_describe_missing_operation() -> None:
+    def scenario(c: Client) -> tuple[bool, str | None]:
+        listed = _alist(c)["operations"]
+        assert isinstance(listed, list)
+        return RequestOp.SOLVE_BACKWARDS in listed, _refusal_code(c, RequestOp.SOLVE_BACKWARDS, b"")
+
+    assert pair(Fault.DESCRIBE_MISSING_OPERATION, scenario) == ((True, "BDL"), (False, "BDL"))
+
+
+@covers(Fault.DESCRIBE_WRONG_DOF)
+def test_describe_wrong_dof() -> None:
+    def scenario(c: Client) -> tuple[object, int]:
+        ((_, data),) = _raw(c, "joint-angles")
+        return _alist(c)["degrees-of-freedom"], (len(data) - 2) // 4
+
+    assert pair(Fault.DESCRIBE_WRONG_DOF, scenario) == ((6, 6), (7, 6))
+
+
+@covers(Fault.DESCRIBE_NARROW_LIMITS)
+def test_describe_narrow_limits() -> None:
+    def scenario(c: Client) -> tuple[object, str | None]:
+        limits = _alist(c)["joint-limits"]
+        assert isinstance(limits, list) and isinstance(limits[0], list)
+        upper = float(limits[0][1])
+        beyond = [upper + 0.5, *READY[1:]]  # just beyond the stated upper limit of joint 1
+        ((op, data),) = _raw(c, "set-joint-angles", joints=beyond)
+        return limits[0], decode_error(op, data).error.code if op == ServerOp.NON_FATAL_ERROR else None
+
+    clean, faulty = pair(Fault.DESCRIBE_NARROW_LIMITS, scenario)
+    assert clean == ([-160.0, 160.0], "JOR")
+    assert faulty == ([-155.0, 155.0], None)  # accepted: the arm's range is wider than stated
+
+
 # ------------------------------------------------------------------------------ data replies
 @covers(Fault.SWAPPED_FLOAT_WORDS)
 def test_swapped_float_words() -> None:

@@ -420,9 +420,15 @@ def test_wrist_opcodes_without_a_wrist() -> None:
     client = Client()
     for name in sorted(WRIST_OPERATIONS):
         op = SPEC.request(name)
-        data = b"\0" * (op.request.fixed_size or 0)
-        error = _error(client.one(name, data))
-        assert (error.where, error.severity, error.code, error.args) == ("wrist", "C", "UIM", (op.opcode,))
+        # not served: refused as such whatever the data, before its length is looked at
+        for data in (b"\0" * (op.request.fixed_size or 0), b"\0" * ((op.request.fixed_size or 0) + 1)):
+            error = _error(client.one(name, data))
+            assert (error.where, error.severity, error.code, error.args) == (
+                "wrist",
+                "C",
+                "UIM",
+                (op.opcode,),
+            )
 
 
 def test_handler_failure_is_a_non_fatal_bug(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -9,7 +9,7 @@ A case is an ``async`` function of a :class:`~manip.conformance.context.CaseCont
     @case(
         "server.describe.terminator",                # hierarchical id: dot-separated components
         clauses=["multi.terminated-by-empty"],       # clause ids of manip/spec/data/clauses.toml
-        level="MUST",                                # default: the strongest level among the clauses
+        level="MUST",                                # the strongest level among the clauses (the default)
         kind="scripted",                             # scripted | negative | property | stateful | cougar
         hazard="read-only",                          # the most dangerous opcode the case may send
         fresh=True,                                  # False: the case may share the previous case's link
@@ -26,6 +26,10 @@ A case is an ``async`` function of a :class:`~manip.conformance.context.CaseCont
 
 Rules a case follows:
 
+* It reports only the clauses it declares (checked at every ``ctx.expect``/``ctx.fail``, and by
+  ``tests/test_conform_clauses.py`` over the source of every case); what the suite's own machinery
+  finds on every exchange is attributed to an invariant instead (:mod:`manip.conformance.invariants`).
+  Its level is the strongest of its clauses' levels, and a check never overrides a clause's level.
 * It says what it checks through ``ctx.expect`` / ``ctx.check`` / ``ctx.fail``: a violated MUST clause
   raises :class:`CaseFailure` (the case stops there); a violated SHOULD/MAY clause is recorded and the
   case goes on (it becomes ``warn``, or ``fail`` under ``--strict``).  ``ctx.skip(reason)`` ends it as
@@ -67,6 +71,7 @@ __all__ = [
     "CaseFunction",
     "CaseSkipped",
     "Kind",
+    "UndeclaredClauseError",
     "all_cases",
     "case",
     "load_cases",
@@ -91,12 +96,18 @@ class CaseError(Exception):
     """A case was declared wrongly (unknown clause, duplicate id, bad level...): a bug of the suite."""
 
 
+class UndeclaredClauseError(CaseError):
+    """A case reported a clause it does not declare (``manip.conformance.invariants``)."""
+
+
 class CaseFailure(Exception):  # noqa: N818 - an outcome, not an error of the suite
     """The target broke a clause.  Raised by ``ctx.expect``/``ctx.fail``; ends the case as ``fail``.
 
     ``expected`` and ``actual`` are short human texts (h2spec's two-part message); ``data`` the bytes
     that showed it (shown in hex); ``kind`` one of ``wrong_value``, ``malformed``, ``timeout``,
-    ``closed``, ``missing_response``, ``unexpected_message``, ``deadline``."""
+    ``closed``, ``missing_response``, ``unexpected_message``, ``deadline``.  ``invariant`` names the
+    suite invariant whose machinery found it (the probes set it); otherwise the clause must be one the
+    running case declares."""
 
     def __init__(
         self,
@@ -107,6 +118,7 @@ class CaseFailure(Exception):  # noqa: N818 - an outcome, not an error of the su
         actual: str = "",
         data: bytes = b"",
         kind: str = "wrong_value",
+        invariant: str | None = None,
     ) -> None:
         super().__init__(message)
         self.message = message
@@ -115,6 +127,7 @@ class CaseFailure(Exception):  # noqa: N818 - an outcome, not an error of the su
         self.actual = actual
         self.data = bytes(data)
         self.kind = kind
+        self.invariant = invariant
 
     @property
     def level(self) -> Level | None:
@@ -184,6 +197,12 @@ def _validate(
         raise CaseError(f"case {case_id}: retired clause(s) {retired}")
     if level not in LEVEL_ORDER:
         raise CaseError(f"case {case_id}: level {level!r} is not one of {sorted(LEVEL_ORDER)}")
+    strongest = strongest_level(clauses)
+    if level != strongest:
+        raise CaseError(
+            f"case {case_id}: level {level} disagrees with its clauses, the strongest of which is "
+            f"{strongest} in the spec: a check that is weaker than its clause needs a clause of its own"
+        )
     if kind not in KINDS:
         raise CaseError(f"case {case_id}: kind {kind!r} is not one of {KINDS}")
     if hazard not in HAZARD_ORDER:

@@ -25,7 +25,10 @@ server's packets in the order they come, and judges nothing by itself (the check
 
 ``ctx.expect(cond, clause=..., expected=..., actual=..., data=...)`` is the one way to state a check:
 false on a MUST clause raises :class:`CaseFailure`; false on a SHOULD/MAY/INFO clause is recorded
-(``ctx.soft_failures``) and the case goes on.  ``ctx.check(findings)`` applies the same rule to the
+(``ctx.soft_failures``) and the case goes on.  The clause must be one the case declares: any other is a
+bug of the suite (:class:`~manip.conformance.case.UndeclaredClauseError`, raised at the call whether the
+condition holds or not), except a finding of the transcript invariant's checkers
+(:mod:`manip.conformance.invariants`).  ``ctx.check(findings)`` applies the same rule to the
 findings of a checker; ``ctx.fail(...)`` fails outright; ``ctx.skip(reason)`` ends the case as skipped.
 """
 
@@ -43,8 +46,9 @@ from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request, request_op
 from manip.codecs.packet import Packet
 from manip.codecs.pdp11float import unpack_f
-from manip.conformance.case import LEVEL_ORDER, CaseFailure, CaseSkipped
+from manip.conformance.case import LEVEL_ORDER, CaseError, CaseFailure, CaseSkipped, UndeclaredClauseError
 from manip.conformance.checks import ANSWER_OPCODES, Finding, WirePacket, describe, word
+from manip.conformance.invariants import TRANSCRIPT, attribution_problem
 from manip.links import ChaosConnection, ChaosError, ConnectionClosed, ConnectionLost
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
@@ -103,6 +107,8 @@ class SoftFailure:
     expected: str = ""
     actual: str = ""
     data: bytes = b""
+    invariant: str | None = None
+    """The suite invariant it is attributed to, when the case does not declare the clause."""
 
 
 @dataclass(frozen=True)
@@ -311,6 +317,7 @@ class Probe:
                         expected=what,
                         actual=f"connection ended: {self.end_reason}",
                         kind="closed",
+                        invariant=TRANSCRIPT.name,
                     )
                 raise CaseFailure(
                     f"no {what} within {wait:g} s ({budget})",
@@ -318,6 +325,7 @@ class Probe:
                     expected=f"{what} within {wait:g} s",
                     actual="nothing (timeout)",
                     kind="timeout",
+                    invariant=TRANSCRIPT.name,
                 )
             if packet.opcode in ANSWER_OPCODES:
                 self._answered(number, packet)
@@ -402,9 +410,13 @@ class CaseContext:
         seed: int,
         options: RunOptions,
         connector: Connector,
+        clauses: Iterable[str] | None = None,
     ) -> None:
         self.case_id = case_id
         self.level = level
+        self.clauses: frozenset[str] | None = None if clauses is None else frozenset(clauses)
+        """The clauses the case declares: the only ones it may report (None: any, for contexts that
+        run no registered case, such as the liveness probe)."""
         self.seed = seed
         """This case's seed: derived from the run's ``--seed`` and the case id, so it does not change
         when other cases are selected or skipped."""
@@ -466,6 +478,7 @@ class CaseContext:
                     actual="nothing" if packet is None else describe(packet),
                     data=b"" if packet is None else packet.data,
                     kind="missing_response",
+                    invariant=TRANSCRIPT.name,
                 )
             probe.initial = packet
         return probe
@@ -475,6 +488,16 @@ class CaseContext:
             await probe.close()
 
     # ------------------------------------------------------------------------------------- verdicts
+
+    def _attribute(self, clause: str | None, invariant: str | None) -> str | None:
+        """The invariant a report of ``clause`` counts under (None: the case's own); a clause the case
+        does not declare, outside that invariant, is a bug of the suite and raises at once."""
+        if self.clauses is None or clause is None or clause in self.clauses:
+            return None
+        problem = attribution_problem(self.case_id, self.clauses, clause, invariant)
+        if problem is not None:
+            raise UndeclaredClauseError(problem)
+        return invariant
 
     def _clause_level(self, clause: str | None, level: Level | None) -> Level:
         if level is not None:
@@ -495,22 +518,41 @@ class CaseContext:
         data: bytes = b"",
         message: str | None = None,
         level: Level | None = None,
+        invariant: str | None = None,
     ) -> bool:
         """Check ``condition``; when false: MUST raises CaseFailure, weaker levels are recorded.
 
-        The level is ``level`` if given, else the clause's, else the case's.  Returns ``bool(condition)``."""
+        The level is ``level`` if given, else the clause's, else the case's.  Returns ``bool(condition)``.
+        ``clause`` must be one the case declares, or one of ``invariant``'s when a suite invariant's
+        finding is passed on: checked at every call, true or not (UndeclaredClauseError)."""
+        attributed = self._attribute(clause, invariant)
+        if (
+            level is not None
+            and clause is not None
+            and clause in SPEC.clauses
+            and SPEC.clauses[clause].level != level
+        ):
+            raise CaseError(
+                f"case {self.case_id} checks clause {clause} as {level}; the spec says "
+                f"{SPEC.clauses[clause].level} (a weaker check needs a clause of its own)"
+            )
         if condition:
             return True
         lv = self._clause_level(clause, level)
         text = message or (f"expected {expected}" if expected else "check failed")
         if lv == "MUST":
-            raise CaseFailure(text, clause=clause, expected=expected, actual=str(actual), data=data)
-        self.soft_failures.append(SoftFailure(text, clause, lv, expected, str(actual), bytes(data)))
+            raise CaseFailure(
+                text, clause=clause, expected=expected, actual=str(actual), data=data, invariant=attributed
+            )
+        self.soft_failures.append(
+            SoftFailure(text, clause, lv, expected, str(actual), bytes(data), attributed)
+        )
         return False
 
     def check(self, findings: Iterable[Finding]) -> bool:
         """Apply :meth:`expect` to a checker's findings (MUST ones raise, the first first).  True when
-        there were none."""
+        there were none.  The checkers are the transcript invariant's: a finding of a clause the case
+        does not declare is attributed to it."""
         items = sorted(findings, key=lambda f: -LEVEL_ORDER[f.level])
         for finding in items:
             self.expect(
@@ -520,6 +562,7 @@ class CaseContext:
                 actual=finding.actual,
                 data=finding.data,
                 message=finding.message,
+                invariant=TRANSCRIPT.name,
             )
         return not items
 
@@ -531,8 +574,13 @@ class CaseContext:
         expected: str = "",
         actual: object = "",
         data: bytes = b"",
+        invariant: str | None = None,
     ) -> NoReturn:
-        raise CaseFailure(message, clause=clause, expected=expected, actual=str(actual), data=data)
+        """Fail outright; ``clause`` and ``invariant`` as for :meth:`expect`."""
+        attributed = self._attribute(clause, invariant)
+        raise CaseFailure(
+            message, clause=clause, expected=expected, actual=str(actual), data=data, invariant=attributed
+        )
 
     def skip(self, reason: str) -> NoReturn:
         raise CaseSkipped(reason)

@@ -21,7 +21,9 @@ which words Cougar had when each of its clock ticks ran:
 Tick times come from one clock per process (:data:`TICK_CLOCK`): the monotonic clock, but always at
 least one 60 Hz period after the previous tick sent, so a target that keeps its state across links (as
 ``manip-cougar`` does) never sees time go backwards.  A failure of the link raises
-:class:`~manip.conformance.case.CaseFailure` (``closed`` or ``timeout``, clause ``link.drv11j.framing``).
+:class:`~manip.conformance.case.CaseFailure` (``closed`` or ``timeout``, clause ``link.drv11j.framing``;
+no response in time: ``cougar.word-link``), attributed to the ``cougar-link`` invariant whatever the
+case declares.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from manip.codecs.cougar import CougarMsg, CougarValue, Malformed, OutOfSync, Wo
 from manip.codecs.pdp11float import words_to_f
 from manip.conformance.case import CaseFailure
 from manip.conformance.context import CaseContext
+from manip.conformance.invariants import COUGAR_LINK
 from manip.cougar.link import Drv11jError, PumaEnd, parse_address
 
 __all__ = [
@@ -271,6 +274,7 @@ class CougarProbe:
             expected=f"a response to {what} within {within} ticks",
             actual="nothing",
             kind="timeout",
+            invariant=COUGAR_LINK.name,
         )
 
     async def call(self, name: str, *, within: int = DEFAULT_WITHIN, **values: Any) -> WordReply:
@@ -300,6 +304,7 @@ class CougarProbe:
                     expected=f"TICKED #{index}",
                     actual="nothing (timeout)",
                     kind="timeout",
+                    invariant=COUGAR_LINK.name,
                 )
             try:
                 async with asyncio.timeout(remaining):
@@ -326,6 +331,7 @@ class CougarProbe:
                 expected=f"TICKED #{index}",
                 actual=f"TICKED #{self._end.ticks_done - 1}",
                 kind="wrong_value",
+                invariant=COUGAR_LINK.name,
             )
 
     def _decode(self, tick: int, words: Sequence[int]) -> None:
@@ -377,6 +383,7 @@ def _link_failure(address: str, why: str) -> CaseFailure:
         expected="the link to stay up and every TICK answered with TICKED",
         actual=why,
         kind="closed",
+        invariant=COUGAR_LINK.name,
     )
 
 

@@ -54,11 +54,46 @@ from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import AsyncCondition
 
 __all__ = [
+    "MODEL_CLAUSES",
     "Expectation",
     "Finding",
     "ProtocolModel",
     "Reply",
 ]
+
+MODEL_CLAUSES: Final = frozenset(
+    {
+        "async-error.request-number",
+        "async.codes",
+        "async.layout",
+        "async.only-when-requested",
+        "calibrate.done",
+        "enable-power.done",
+        "error.severity-matches-opcode",
+        "free-joint.data",
+        "free-joint.replies",
+        "hand.data",
+        "here.transform",
+        "kill-power.done",
+        "motion.abort",
+        "motion.checked-before-queue",
+        "motion.no-power",
+        "motion.reset",
+        "request.data-length",
+        "request.one-reply",
+        "request.reserved-float",
+        "request.unknown-opcode",
+        "response.data-layout",
+        "response.done-empty",
+        "response.segment-number",
+        "segment.number-increases",
+        "set-configuration.data",
+        "solve-forwards.errors",
+        "speed.range",
+    }
+)
+"""Every clause a :class:`Finding` of the model may name (checked when one is made): the stateful case,
+which reports the model's findings, declares them all."""
 
 WORD: Final = 0xFFFF
 #: A transform whose rotation deviates less than this from orthonormal is certainly valid; more than
@@ -122,6 +157,10 @@ class Finding:
     clause: str
     expected: str
     actual: str
+
+    def __post_init__(self) -> None:
+        if self.clause not in MODEL_CLAUSES:
+            raise ValueError(f"model finding of clause {self.clause!r}, which is not in MODEL_CLAUSES")
 
 
 @dataclass

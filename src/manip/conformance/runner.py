@@ -19,7 +19,8 @@ Theory of operation
    :func:`~manip.conformance.checks.check_transcript`, so each case also checks the invariants of the
    whole exchange (one reply per request, echoes, error formats, asynchronous responses only when
    asked for...).  An exception of the case never stops the
-   run: it becomes an ``error`` outcome with its traceback.
+   run: it becomes an ``error`` outcome with its traceback, and so does a violation of a clause the
+   case does not declare that no suite invariant reported (:mod:`manip.conformance.invariants`).
 4. **Liveness after** every failure or error and after every negative case; if the target is dead
    (after one retry) the remaining cases are skipped, the run records which case it died after, and
    the run is non-conformant (or unreachable, exit 3, when no case had reached a verdict).
@@ -44,6 +45,7 @@ from datetime import UTC, datetime
 from manip.conformance.case import Case, CaseFailure, CaseSkipped
 from manip.conformance.checks import check_transcript
 from manip.conformance.context import CaseContext, RunOptions
+from manip.conformance.invariants import attribution_problem
 from manip.conformance.results import CaseResult, LivenessCheck, Outcome, RunReport, Violation
 from manip.conformance.selection import PatternSet
 from manip.links import ChaosConnection, ConnectionRefused, open_connection
@@ -299,7 +301,12 @@ class Runner:
             result.reason = f"{item.hazard} case on {options.target} target without --allow-motion"
             return result
         ctx = CaseContext(
-            case_id=item.id, level=item.level, seed=result.seed, options=options, connector=self.connect
+            case_id=item.id,
+            level=item.level,
+            seed=result.seed,
+            options=options,
+            connector=self.connect,
+            clauses=item.clauses,
         )
         failure: CaseFailure | None = None
         clock = asyncio.get_running_loop().time  # the clock of every deadline (virtual when simulated)
@@ -343,7 +350,22 @@ class Runner:
         result.notes = list(ctx.notes)
         result.packets = list(ctx.transcript)
         self._judge(result, ctx, failure)
+        self._check_attribution(result, ctx, failure)
         return result
+
+    @staticmethod
+    def _check_attribution(result: CaseResult, ctx: CaseContext, failure: CaseFailure | None) -> None:
+        """A violation of a clause the case does not declare (and no invariant reported) is a bug of
+        the suite, whichever way it was raised: the case ends as ``error`` naming case and clause."""
+        reported = [(s.clause, s.invariant) for s in ctx.soft_failures]
+        if failure is not None:
+            reported.insert(0, (failure.clause, failure.invariant))
+        for clause, invariant in reported:
+            problem = attribution_problem(result.id, result.clauses, clause, invariant)
+            if problem is not None:
+                result.outcome = "error"
+                result.reason = f"bug of the suite: {problem}"
+                return
 
     def _judge(self, result: CaseResult, ctx: CaseContext, failure: CaseFailure | None) -> None:
         strict = self.config.options.strict

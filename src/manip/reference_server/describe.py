@@ -42,11 +42,14 @@ def describe_text(
     operations: Iterable[int],
     *,
     with_protocol_version: bool = True,
+    degrees_of_freedom: int | None = None,
+    joint_limits: Sequence[tuple[float, float]] | None = None,
 ) -> str:
-    """The alist, one entry per line, the first line opening and the last closing the list."""
-    limits: list[LispValue] = [
-        [lo, hi] for lo, hi in zip(model.limits.lower, model.limits.upper, strict=True)
-    ]
+    """The alist, one entry per line, the first line opening and the last closing the list.
+
+    ``degrees_of_freedom`` and ``joint_limits`` state other values than the model's (fault switches)."""
+    pairs = joint_limits or list(zip(model.limits.lower, model.limits.upper, strict=True))
+    limits: list[LispValue] = [[lo, hi] for lo, hi in pairs]
     version: list[LispValue] = []
     for module, number in description.software_version:
         version += [Keyword(module), number]
@@ -54,7 +57,7 @@ def describe_text(
     entries = [
         _entry("brand-name", description.brand_name),
         _entry("unique-name", description.unique_name),
-        _entry("degrees-of-freedom", len(model.ready)),
+        _entry("degrees-of-freedom", len(model.ready) if degrees_of_freedom is None else degrees_of_freedom),
         _entry("operations", list(sorted(set(operations)))),
         _entry("software-version", version),
     ]

@@ -22,6 +22,7 @@ __all__ = [
     "bad_value",
     "guard_stop_error",
     "internal_error",
+    "not_served",
     "nzi_error",
     "refusal_error",
     "unknown_opcode",
@@ -80,6 +81,15 @@ def bad_value(where: str, detail: str) -> RequestError:
 def unknown_opcode(opcode: int) -> RequestError:
     """Erratum ``unknown-opcode``: exactly ``dispatch: C UOP Unknown opcode ~``."""
     return RequestError(ErrorMessage(DISPATCH, "C", "UOP", "Unknown opcode ~", (opcode,)))
+
+
+def not_served(opcode: int) -> RequestError:
+    """A wrist opcode on a robot without a wrist computer: C UIM, whatever its data, as an unknown
+    opcode is refused whatever its data (erratum describe-self-truthful: describe self does not list
+    it, and a client probing it learns the same)."""
+    return RequestError(
+        ErrorMessage(WRIST, "C", "UIM", "No wrist computer: opcode ~ is not served", (opcode,))
+    )
 
 
 def bad_length(expected: int, received: int) -> RequestError:

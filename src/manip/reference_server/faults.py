@@ -57,6 +57,10 @@ class Fault(enum.StrEnum):
     UNREQUESTED_ASYNC = "unrequested-async"
     ASYNC_WITHOUT_NUMBER = "async-without-request-number"
     FREE_JOINT_EXECUTES = "free-joint-executes"
+    DESCRIBE_EXTRA_OPERATION = "describe-extra-operation"
+    DESCRIBE_MISSING_OPERATION = "describe-missing-operation"
+    DESCRIBE_WRONG_DOF = "describe-wrong-dof"
+    DESCRIBE_NARROW_LIMITS = "describe-narrow-limits"
 
 
 Kind = Literal["environment", "protocol"]
@@ -255,6 +259,30 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "The packet after free joint is executed instead of discarded with done.",
                 "free-joint.awaits-next-packet",
                 "free-joint.replies",
+            ),
+            _info(
+                Fault.DESCRIBE_EXTRA_OPERATION,
+                "protocol",
+                "Describe self lists an opcode the server refuses as unknown (the first unassigned one).",
+                "describe.operations-answered",
+            ),
+            _info(
+                Fault.DESCRIBE_MISSING_OPERATION,
+                "protocol",
+                "Describe self leaves solve backwards (0221) out of :operations, though it is served.",
+                "describe.operations-complete",
+            ),
+            _info(
+                Fault.DESCRIBE_WRONG_DOF,
+                "protocol",
+                "Describe self states one more degree of freedom than the arm's joint vectors have.",
+                "describe.dof-joint-vectors",
+            ),
+            _info(
+                Fault.DESCRIBE_NARROW_LIMITS,
+                "protocol",
+                "Describe self states every joint range 5 degrees narrower at each end than the arm's.",
+                "describe.joint-limits",
             ),
         ]
     )

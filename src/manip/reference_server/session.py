@@ -33,11 +33,13 @@ States and transitions (:data:`TRANSITIONS` is the table the code runs)::
 
 The initial RESPONSE carries only the RFC's packet number (erratum ``initial-response``).  Serving a
 request goes: run the arm up to ``now`` (so asynchronous events that happened first are sent first,
-and requests read fresh move-process data); look the opcode up in the spec (C UOP if unknown); decode
-its data by the spec layout (C BDL for a wrong length, C BFL for a reserved-operand float); call the
-handler that :data:`HANDLERS` maps the spec name to (the wrist opcodes go to the :class:`Wrist`); send
-its reply in the form the spec gives the opcode (done, data, segment number, multi-packet text).  A
-handler refuses with :class:`RequestError`: a non-fatal error (0202) is the reply; a fatal one (0201,
+and requests read fresh move-process data); look the opcode up in the spec (C UOP if unknown, C UIM if
+this robot does not serve it, e.g. a wrist opcode without a wrist: both whatever the data, so that what
+describe self lists is what a probe finds served, erratum ``describe-self-truthful``); decode its data
+by the spec layout (C BDL for a wrong length, C BFL for a reserved-operand float); call the handler
+that :data:`HANDLERS` maps the spec name to (the wrist opcodes go to the :class:`Wrist`); send its
+reply in the form the spec gives the opcode (done, data, segment number, multi-packet text).  A handler
+refuses with :class:`RequestError`: a non-fatal error (0202) is the reply; a fatal one (0201,
 first word = the packet last received) ends the session.  Motion requests are checked and queued on
 the :class:`~manip.arm.sim.ArmSim` and answered with the segment number before the arm moves.
 
@@ -107,6 +109,10 @@ __all__ = [
 log = logging.getLogger("manip.reference_server")
 
 WORD_MASK: Final = 0xFFFF
+MISSING_OPERATION: Final = "solve-backwards"
+"""The served opcode describe self leaves out under the ``describe-missing-operation`` fault."""
+NARROWED_DEG: Final = 5.0
+"""How much narrower than the arm's each joint range is stated under ``describe-narrow-limits``."""
 
 
 class State(enum.Enum):
@@ -365,9 +371,11 @@ class ServerSession:
                     self._emit(ServerOp.RESPONSE, _word(number))
                     return None
                 raise errors.unknown_opcode(event.opcode)
+            handler = HANDLERS.get(op.name)
+            if handler is None and op.opcode not in self.wrist.served:
+                raise errors.not_served(op.opcode)
             values = self._decode(op, event.data)
             try:
-                handler = HANDLERS.get(op.name)
                 result: dict[str, Any] | Pending
                 if handler is None:
                     result = self.wrist.handle(op, values, event.now, self.arm)
@@ -487,11 +495,24 @@ class ServerSession:
             raise errors.bad_value(op, "N, O and A are not a rotation") from exc
 
     def _describe_self(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        faults = self.faults
+        operations = set(self.operations)
+        if Fault.DESCRIBE_EXTRA_OPERATION in faults:
+            operations.add(min(set(range(0o200, 0o300)) - operations))  # listed, answered C UOP
+        if Fault.DESCRIBE_MISSING_OPERATION in faults:
+            operations.discard(SPEC.request(MISSING_OPERATION).opcode)  # answered, not listed
+        model = self.arm.model
+        dof = len(model.ready) + (1 if Fault.DESCRIBE_WRONG_DOF in faults else 0)
+        limits = [(lo, hi) for lo, hi in zip(model.limits.lower, model.limits.upper, strict=True)]
+        if Fault.DESCRIBE_NARROW_LIMITS in faults:
+            limits = [(lo + NARROWED_DEG, hi - NARROWED_DEG) for lo, hi in limits]
         text = describe_text(
             self.config.description,
-            self.arm.model,
-            self.operations,
-            with_protocol_version=Fault.NO_PROTOCOL_VERSION not in self.faults,
+            model,
+            operations,
+            with_protocol_version=Fault.NO_PROTOCOL_VERSION not in faults,
+            degrees_of_freedom=dof,
+            joint_limits=limits,
         )
         return {"text": text}
 

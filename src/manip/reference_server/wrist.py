@@ -38,7 +38,7 @@ from typing import Any, Protocol
 from manip.arm.sim import ArmEvent, ArmSim
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import Value
-from manip.reference_server.errors import RequestError
+from manip.reference_server.errors import RequestError, not_served
 from manip.spec import RequestOpcode
 
 __all__ = ["GuardHit", "NoWrist", "Pending", "Wrist", "WristEvent", "WristNotice"]
@@ -143,9 +143,7 @@ class NoWrist:
     def handle(
         self, op: RequestOpcode, values: Mapping[str, Value], now: float, arm: ArmSim
     ) -> dict[str, Any] | Pending:
-        raise RequestError(
-            ErrorMessage("wrist", "C", "UIM", "No wrist computer: opcode ~ is not served", (op.opcode,))
-        )
+        raise not_served(op.opcode)
 
     def tick(self, now: float, arm: ArmSim) -> list[WristEvent]:
         return []

@@ -19,6 +19,7 @@ from manip.conformance.checks import (
     word,
 )
 from manip.conformance.context import Answer, CaseContext, Probe
+from manip.conformance.invariants import TRANSCRIPT
 from manip.conformance.model import Reply
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
@@ -30,6 +31,7 @@ __all__ = [
     "lenient_error",
     "must",
     "reply_view",
+    "stated_limits",
 ]
 
 
@@ -51,7 +53,8 @@ def _number(value: LispValue) -> float | None:
     return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
 
 
-def _limits(value: LispValue) -> JointLimits | None:
+def stated_limits(value: LispValue) -> JointLimits | None:
+    """The joint limits of a ``:joint-limits`` value (six (lower upper) pairs), or None."""
     if not isinstance(value, list) or len(value) != 6:
         return None
     lower: list[float] = []
@@ -78,7 +81,7 @@ async def describe_target(ctx: CaseContext, probe: Probe) -> TargetArm:
     entries, _ = parse_description(multi_text(answer.packets))
     if entries is None:
         return TargetArm()
-    limits = _limits(entries["joint-limits"]) if "joint-limits" in entries else None
+    limits = stated_limits(entries["joint-limits"]) if "joint-limits" in entries else None
     dof_value = entries.get("degrees-of-freedom")
     dof = int(dof_value) if isinstance(dof_value, int) and dof_value > 0 else 6
     listed = description_operations(entries)
@@ -120,7 +123,10 @@ def must(findings: Iterable[Finding]) -> list[Finding]:
 
 @dataclass(eq=False)
 class Evidence(AssertionError):  # noqa: N818 - a failed example, not an error of the suite
-    """A failed example: the clause, expected and actual, and the packets that showed it."""
+    """A failed example: the clause, expected and actual, and the packets that showed it.
+
+    ``invariant``: the suite invariant that found it (a checker's finding, a probe's failure), passed
+    on to ``ctx.fail`` so that a clause the case does not declare is attributed to it."""
 
     clause: str
     message: str
@@ -133,12 +139,20 @@ class Evidence(AssertionError):  # noqa: N818 - a failed example, not an error o
     ones among them that show the failure)."""
     drawn: str = ""
     """What Hypothesis drew for that example, as the report shows it (set by the case's runner)."""
+    invariant: str | None = None
 
     def __post_init__(self) -> None:
         super().__init__(f"[{self.clause}] {self.message}")
 
     @classmethod
     def of(cls, finding: Finding, packets: Iterable[WirePacket] = ()) -> Evidence:
+        """A checker's finding (the transcript invariant's checkers)."""
         return cls(
-            finding.clause, finding.message, finding.expected, finding.actual, finding.data, list(packets)
+            finding.clause,
+            finding.message,
+            finding.expected,
+            finding.actual,
+            finding.data,
+            list(packets),
+            invariant=TRANSCRIPT.name,
         )

@@ -19,14 +19,9 @@ async def initial_response(ctx: CaseContext) -> None:
     ctx.check(check_initial_response(first, probe.rfc_packet_no))
     if first is not None:
         probe.initial = first
-    answer = await probe.call("here")
-    ctx.expect(
-        answer.number == answer.request.packet_no,
-        clause="response.echoes-request-number",
-        expected="the reply after the initial RESPONSE echoes its request",
-        actual=str(answer),
-        data=answer.data,
-    )
+    # A second RESPONSE after the initial one would be taken as Here's answer: the transcript invariant
+    # then finds its number wrong (response.echoes-request-number is not this case's clause).
+    await probe.call("here")
 
 
 @case("server.connect.one-server-per-robot", clauses=["connect.one-server-per-robot"])

@@ -15,6 +15,7 @@ from manip.conformance.cases._support import (
     expect_response,
     power_on,
     read_floats,
+    require_response,
 )
 from manip.conformance.checks import check_async_packet, word
 from manip.conformance.context import Answer, CaseContext, Probe
@@ -58,11 +59,23 @@ def _expect_segment_reply(ctx: CaseContext, answer: Answer, expected: str) -> No
     expect_response(ctx, answer, clause="response.segment-number", expected=expected, size=SEGMENT_REPLY_SIZE)
 
 
-async def _small_move(ctx: CaseContext, probe: Probe, by: float = SMALL_STEP_DEG) -> int:
-    """A small joint move of joint 1; returns its segment number."""
+async def _small_move(
+    ctx: CaseContext, probe: Probe, by: float = SMALL_STEP_DEG, *, clause: str | None = None
+) -> int:
+    """A small joint move of joint 1; returns its segment number.  With ``clause`` the move being
+    accepted is what the case checks; without, the case needs the move and skips when it is refused."""
     joints = await read_floats(ctx, probe, "joint-angles")
     answer = await probe.call("set-joint-angles", joints=_away_from_zero(joints, by))
-    _expect_segment_reply(ctx, answer, "a segment-number reply to set joint angles")
+    if clause is None:
+        require_response(ctx, answer, "a small move of joint 1 accepted")
+    else:
+        expect_response(
+            ctx,
+            answer,
+            clause=clause,
+            expected="a segment-number reply to set joint angles",
+            size=SEGMENT_REPLY_SIZE,
+        )
     segment = word(answer.data, 2)
     assert segment is not None
     return segment
@@ -147,7 +160,7 @@ async def no_arm_power(ctx: CaseContext) -> None:
         ctx, probe, joints, clause="motion.no-power", codes=("NAP",), what="a move without arm power"
     )
     await power_on(ctx, probe)
-    await _small_move(ctx, probe, 0.5)
+    await _small_move(ctx, probe, 0.5, clause="motion.no-power")  # power back: motion accepted again
 
 
 async def _abort_by_power_loss(ctx: CaseContext, probe: Probe) -> None:
@@ -155,7 +168,7 @@ async def _abort_by_power_loss(ctx: CaseContext, probe: Probe) -> None:
     await power_on(ctx, probe)
     joints = await read_floats(ctx, probe, "joint-angles")
     answer = await probe.call("set-joint-angles", joints=_away_from_zero(joints, 30.0))
-    expect_response(ctx, answer, clause="response.segment-number", expected="the move accepted")
+    require_response(ctx, answer, "a 30-degree move accepted")
     await asyncio.sleep(0.05)
     await probe.call("kill-power")
     loop = asyncio.get_running_loop()
@@ -197,7 +210,7 @@ async def awa_reset_by_power(ctx: CaseContext) -> None:
         ctx, probe, joints, clause="motion.abort", codes=("AWA", "NAP"), what="a move after an abort"
     )
     await power_on(ctx, probe)
-    await _small_move(ctx, probe, 0.5)
+    await _small_move(ctx, probe, 0.5, clause="motion.reset")  # enable power reset the abort
 
 
 @case("server.motion.awa-reset-abort", clauses=["motion.abort", "motion.reset"], hazard="power")
@@ -281,18 +294,13 @@ async def speed_bounds(ctx: CaseContext) -> None:
 
 async def _segment_time(ctx: CaseContext, probe: Probe, factor: float, by: float) -> float:
     answer = await probe.call("set-speed", factor=factor)
-    expect_response(ctx, answer, clause="speed.range", expected="done")
+    require_response(ctx, answer, f"speed factor {factor!r} accepted")
     start = time.monotonic()
     segment = await _small_move(ctx, probe, by)
     while True:
         packet = await probe.next_packet(5.0)
-        if packet is None:
-            ctx.fail(
-                "no segment-completed response",
-                clause="async.only-when-requested",
-                expected=f"segment {segment} completed (asked for)",
-                actual="nothing within 5 s",
-            )
+        if packet is None:  # server.async.segment-completed judges the missing report
+            ctx.skip(f"the case times moves by their segment-completed reports; none came for {segment}")
         if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(packet.data, 6) == segment:
             return time.monotonic() - start
 

@@ -39,11 +39,12 @@ from manip.conformance.bridge import (
     hypothesis_settings,
     run_in_worker,
 )
-from manip.conformance.case import CaseFailure, case
+from manip.conformance.case import CaseFailure, CaseSkipped, case
 from manip.conformance.cases._live import Evidence, describe_target, must, reply_view
 from manip.conformance.cases._support import floats
 from manip.conformance.checks import ANSWER_OPCODES, WirePacket, check_reply, word
 from manip.conformance.context import DEFAULT_REPLY_TIMEOUT, Answer, CaseContext, Probe
+from manip.conformance.invariants import TRANSCRIPT
 from manip.conformance.packet_text import packet_listing, show_value
 from manip.conformance.strategies import (
     f_ulp,
@@ -115,6 +116,7 @@ class _Session:
                 exc.actual,
                 exc.data,
                 list(probe.packets[-4:]),
+                invariant=TRANSCRIPT.name,  # the probe's own failures (no answer, no connection)
             ) from None
 
     def call(self, name: str, **values: Any) -> Answer:
@@ -137,10 +139,15 @@ def _check_answer(answer: Answer) -> None:
         raise Evidence.of(found[0], [answer.request, *answer.packets])
 
 
-def _decode_floats(answer: Answer, what: str) -> tuple[float, ...]:
+def _decode_floats(answer: Answer, what: str, clause: str | None) -> tuple[float, ...]:
+    """The floats of a data reply.  A malformed reply is the transcript invariant's evidence; a refusal
+    breaks ``clause``, or skips the case when it only needs the values (``clause`` None)."""
+    _check_answer(answer)
     if not answer.is_response:
+        if clause is None:
+            raise CaseSkipped(f"the case needs {what}, which the target refused: {answer}")
         raise Evidence(
-            "request.one-reply",
+            clause,
             f"{what} was refused",
             f"a normal reply to {what}",
             str(answer),
@@ -151,12 +158,13 @@ def _decode_floats(answer: Answer, what: str) -> tuple[float, ...]:
         return floats(answer)
     except CodecError as exc:
         raise Evidence(
-            exc.clause or "response.data-layout",
+            exc.clause if exc.clause in TRANSCRIPT.clauses else "response.data-layout",
             f"{what} reply does not decode: {exc}",
             f"the {what} layout",
             str(exc),
             answer.data,
             [answer.request, *answer.packets],
+            invariant=TRANSCRIPT.name,
         ) from None
 
 
@@ -280,6 +288,7 @@ async def run_property(
             expected=failure.expected,
             actual=actual,
             data=failure.data,
+            invariant=failure.invariant,
         )
 
 
@@ -298,6 +307,7 @@ async def run_property(
         "error-string.severity",
         "error-string.code",
         "error.fatal-then-close",
+        "free-joint.replies",
     ],
     kind="property",
     hazard="config",
@@ -379,11 +389,13 @@ async def kinematics_round_trip(ctx: CaseContext) -> None:
     def build(session: _Session) -> tuple[Example, Sequence[st.SearchStrategy[Any]]]:
         def body(q: Joints, near: Joints) -> None:
             first = session.call("solve-backwards", joints=list(q))
-            t1 = _pose(_decode_floats(first, "solve backwards"), first)
+            t1 = _pose(_decode_floats(first, "solve backwards", "solve-backwards.data"), first)
             second = session.call("solve-forwards", transform=list(t1.to_floats()), current=list(near))
             if not second.is_response and not arm.declared:
                 return  # the target's own limits are unknown: a JOR may be right
-            q2 = _decode_floats(second, "solve forwards of a transform made from in-range joint angles")
+            q2 = _decode_floats(
+                second, "solve forwards of a transform made from in-range joint angles", "solve-forwards.data"
+            )
             bad = arm.limits.violations(q2, tol=1e-3)
             if bad:
                 raise Evidence(
@@ -395,7 +407,7 @@ async def kinematics_round_trip(ctx: CaseContext) -> None:
                     [second.request, second.first],
                 )
             third = session.call("solve-backwards", joints=list(q2))
-            t2 = _pose(_decode_floats(third, "solve backwards"), third)
+            t2 = _pose(_decode_floats(third, "solve backwards", "solve-backwards.data"), third)
             distance = t1.distance(t2)
             if distance.translation_mm > POSE_TOL_MM or distance.rotation_deg > POSE_TOL_DEG:
                 raise Evidence(
@@ -481,7 +493,7 @@ async def _settle(
 
 @case(
     "property.floats.round-trip",
-    clauses=["float.format", "joints.reply", "response.segment-number"],
+    clauses=["float.format", "joints.reply", "response.segment-number", "motion.no-power"],
     kind="property",
     hazard="motion",
     deadline=PROPERTY_DEADLINE,
@@ -498,7 +510,7 @@ async def floats_round_trip(ctx: CaseContext) -> None:
         _check_answer(power)
         notified = session.call("request-notifications", mask=SEGMENT_MASK)
         _check_answer(notified)
-        start = _decode_floats(session.call("joint-angles"), "joint angles")
+        start = _decode_floats(session.call("joint-angles"), "joint angles", None)
         home = tuple(
             min(max(q, lo + 1.0), hi - 1.0)
             for q, lo, hi in zip(start, arm.limits.lower, arm.limits.upper, strict=True)
@@ -508,7 +520,7 @@ async def floats_round_trip(ctx: CaseContext) -> None:
             seen = len(session.probe.unsolicited)
             answer = session.call("set-joint-angles", joints=list(goal))
             _check_answer(answer)
-            if not answer.is_response:
+            if not answer.is_response:  # powered, in range, not aborted: nothing may refuse it
                 raise Evidence(
                     "motion.no-power",
                     "an in-range set joint angles was refused on a powered arm",
@@ -555,7 +567,7 @@ async def segment_numbering(ctx: CaseContext) -> None:
 
     def build(session: _Session) -> tuple[Example, Sequence[st.SearchStrategy[Any]]]:
         _check_answer(session.call("enable-power"))
-        start = _decode_floats(session.call("joint-angles"), "joint angles")
+        start = _decode_floats(session.call("joint-angles"), "joint angles", None)
         home = tuple(
             min(max(q, lo + 1.0), hi - 1.0)
             for q, lo, hi in zip(start, arm.limits.lower, arm.limits.upper, strict=True)

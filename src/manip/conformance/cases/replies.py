@@ -9,13 +9,13 @@ case is skipped with the error it gave (the error string itself is still checked
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Awaitable, Callable, Mapping
 from typing import Final
 
 from manip.conformance.case import case
 from manip.conformance.cases._support import error_of, power_on, valid_values
 from manip.conformance.checks import check_reply
-from manip.conformance.context import CaseContext
+from manip.conformance.context import CaseContext, Probe
 from manip.spec import SPEC, RequestOpcode
 
 _KIND_CLAUSES: Final[Mapping[str, tuple[str, ...]]] = {
@@ -53,7 +53,28 @@ def opcode_clauses(op: RequestOpcode) -> tuple[str, ...]:
     return (*_COMMON, *_KIND_CLAUSES[op.response.kind], *own)
 
 
+async def _release_free_joint(ctx: CaseContext, probe: Probe) -> None:
+    """The packet after free joint is discarded with an empty done (it un-frees the joint)."""
+    follow = await probe.call("here")
+    ctx.expect(
+        follow.is_response and len(follow.data) == 2,
+        clause="free-joint.replies",
+        expected="an empty done for the packet after free joint",
+        actual=str(follow),
+        data=follow.data,
+    )
+
+
+FollowUp = Callable[[CaseContext, Probe], Awaitable[None]]
+_FOLLOW_UPS: Final[Mapping[str, tuple[FollowUp, tuple[str, ...]]]] = {
+    "free-joint": (_release_free_joint, ("free-joint.replies",)),
+}
+"""What an opcode's case does after a normal reply, and the clauses that adds."""
+
+
 def _make(op: RequestOpcode) -> None:
+    follow_up, follow_clauses = _FOLLOW_UPS.get(op.name, (None, ()))
+
     async def reply_shape(ctx: CaseContext) -> None:
         probe = await ctx.connect()
         if op.hazard in ("motion", "power") or op.name == "hand":
@@ -67,22 +88,15 @@ def _make(op: RequestOpcode) -> None:
             ctx.check(check_reply(answer.request, answer.packets))  # echo and error-string format
             ctx.skip(f"the target refused a well-formed {op.name}: {error.error.render()!r}")
         ctx.check(check_reply(answer.request, answer.packets))
-        if op.name == "free-joint":
-            follow = await probe.call("here")  # discarded: un-frees the joint
-            ctx.expect(
-                follow.is_response and len(follow.data) == 2,
-                clause="free-joint.replies",
-                expected="an empty done for the packet after free joint",
-                actual=str(follow),
-                data=follow.data,
-            )
+        if follow_up is not None:
+            await follow_up(ctx, probe)
         ctx.note(f"{op.name}: {answer}")
 
     reply_shape.__doc__ = f"{op.title} ({op.opcode:o}): one {op.response.kind} reply echoing the request."
     reply_shape.__name__ = f"reply_{op.name.replace('-', '_')}"
     case(
         f"server.reply.{op.name}",
-        clauses=opcode_clauses(op),
+        clauses=(*opcode_clauses(op), *follow_clauses),
         hazard=op.hazard,
         deadline=10.0 + (op.answer_within or 0.0),
     )(reply_shape)

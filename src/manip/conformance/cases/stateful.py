@@ -76,7 +76,8 @@ from manip.conformance.checks import (
     word,
 )
 from manip.conformance.context import Answer, CaseContext, Probe
-from manip.conformance.model import Finding, ProtocolModel
+from manip.conformance.invariants import TRANSCRIPT
+from manip.conformance.model import MODEL_CLAUSES, Finding, ProtocolModel
 from manip.conformance.packet_text import packet_listing
 from manip.conformance.strategies import (
     bad_speed_factors,
@@ -207,11 +208,20 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         actual: str,
         data: bytes = b"",
         packets: Sequence[WirePacket] = (),
+        invariant: str | None = None,
     ) -> MachineFailure:
         self.failed = True
         run = list(self.probe.packets) if self.probe is not None else []
         failure = MachineFailure(
-            clause, message, expected, actual, data, list(packets), run, steps=list(self.steps)
+            clause,
+            message,
+            expected,
+            actual,
+            data,
+            list(packets),
+            run,
+            invariant=invariant,
+            steps=list(self.steps),
         )
         self.env.log.add(failure, len(self.steps))
         self.bridge.failure_seen()
@@ -240,7 +250,15 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         if found:
             first = found[0]
             packets = [first.packet] if first.packet is not None else []
-            raise self._fail(first.clause, first.message, first.expected, first.actual, first.data, packets)
+            raise self._fail(
+                first.clause,
+                first.message,
+                first.expected,
+                first.actual,
+                first.data,
+                packets,
+                invariant=TRANSCRIPT.name,
+            )
 
     def _unsolicited(self, packets: Sequence[WirePacket]) -> None:
         """Judge packets that arrived while no answer was due (asynchronous ones, or stray answers)."""
@@ -286,6 +304,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
                             packet.data.hex(),
                             packet.data,
                             [packet],
+                            invariant=TRANSCRIPT.name,  # what check_error_packet finds
                         )
                     self._finding(
                         self.model.on_async_error(error.request_number, error.error), [packet], packet.data
@@ -307,6 +326,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
                 exc.actual,
                 exc.data,
                 self.probe.packets[-3:],
+                invariant=TRANSCRIPT.name,  # the probe's own failures (no answer, no connection)
             ) from None
         self._sent_as(sent)
         self.model.sent(number)
@@ -335,6 +355,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
                 answer.data.hex(),
                 answer.data,
                 packets,
+                invariant=TRANSCRIPT.name,  # what check_error_packet finds
             )
         op = SPEC.requests.get(opcode)
         what = f"request #{number} ({op.name if op else f'opcode {opcode:o}'})"
@@ -594,30 +615,34 @@ def _counterexample(failure: MachineFailure, address: str) -> str:
 
 @case(
     "stateful.arm-model",
-    clauses=[
-        "request.one-reply",
-        "response.echoes-request-number",
-        "error.non-fatal-is-reply",
-        "motion.no-power",
-        "motion.abort",
-        "motion.reset",
-        "motion.checked-before-queue",
-        "motion.reply-before-motion",
-        "speed.range",
-        "async.only-when-requested",
-        "async.layout",
-        "async-error.request-number",
-        "free-joint.data",
-        "free-joint.awaits-next-packet",
-        "free-joint.replies",
-        "kill-power.done",
-        "enable-power.done",
-        "set-configuration.data",
-        "hand.data",
-        "request.unknown-opcode",
-        "request.data-length",
-        "request.reserved-float",
-    ],
+    # the model's findings (it names no other clause), and what the machine checks itself
+    clauses=sorted(
+        MODEL_CLAUSES
+        | {
+            "request.one-reply",
+            "response.echoes-request-number",
+            "error.non-fatal-is-reply",
+            "motion.no-power",
+            "motion.abort",
+            "motion.reset",
+            "motion.checked-before-queue",
+            "motion.reply-before-motion",
+            "speed.range",
+            "async.only-when-requested",
+            "async.layout",
+            "async-error.request-number",
+            "free-joint.data",
+            "free-joint.awaits-next-packet",
+            "free-joint.replies",
+            "kill-power.done",
+            "enable-power.done",
+            "set-configuration.data",
+            "hand.data",
+            "request.unknown-opcode",
+            "request.data-length",
+            "request.reserved-float",
+        }
+    ),
     kind="stateful",
     hazard="config",
     deadline=90.0,
@@ -673,6 +698,7 @@ async def arm_model(ctx: CaseContext) -> None:
             expected=failure.expected,
             actual=_counterexample(failure, ctx.options.address or "tcp://HOST:PORT"),
             data=failure.data,
+            invariant=failure.invariant,
         )
 
 
