@@ -379,10 +379,14 @@ def _wrist(
             return [(q4_ref, *_held_wrist(r36, q4_ref))], True
         q4 = min(max(q4_ref, limits.lower[3]), limits.upper[3])
         fit5, fit6 = _held_wrist(r36, q4)
-        # J6 follows J4: J6 ≡ c + sign·J4 (mod 360), J4 + J6 kept near θ5 = 0, J4 − J6 near 180°.
+        # J6 follows J4: J6 ≡ c + sign·J4 (mod 360), J4 + J6 kept near θ5 = 0, J4 − J6 near 180°.  With
+        # θ5 off 0 the fitted c drifts with the held J4 (~1e-8° for θ5 at the tolerance), so c is measured
+        # once more at the new J4: a J4 that J6's range pins to one angle must be exact to LIMIT_TOL_DEG.
         sign = -1.0 if t5 <= tol_deg else 1.0
-        better = _singular_j4(q4_ref, fit6 - sign * q4, sign, limits)
-        if better != q4:
+        for _ in range(2):
+            better = _singular_j4(q4_ref, fit6 - sign * q4, sign, limits)
+            if better == q4:
+                break
             q4 = better
             fit5, fit6 = _held_wrist(r36, q4)
         return [(q4, fit5, fit6)], True
@@ -406,12 +410,6 @@ def _held_wrist(r36: Rows, q4: float) -> tuple[float, float]:
     return math.degrees(fit5), math.degrees(fit6)
 
 
-#: How far inside J6's range (deg) a singular J4 keeps J6 when J6's range is what bounds J4: the fitted
-#: J6 moves with J4 by up to ~1e-8° more than the coupling says (θ5 up to the singular tolerance), which
-#: must not carry it past LIMIT_TOL_DEG.
-_SINGULAR_J6_MARGIN_DEG = 1e-6
-
-
 def _singular_j4(q4_ref: float, c: float, sign: float, limits: JointLimits) -> float:
     """J4 at the wrist singularity: the angle nearest ``q4_ref`` inside J4's range that leaves J6
     (≡ ``c`` + ``sign``·J4 mod 360) an angle inside J6's range.  Holding J4 at the reference itself
@@ -426,15 +424,17 @@ def _singular_j4(q4_ref: float, c: float, sign: float, limits: JointLimits) -> f
         return clamped
     # lo6 ≤ c + sign·J4 + 360k ≤ hi6  ⇔  J4 ∈ [start + 360k, start + width + 360k]
     start = c - hi6 if sign < 0.0 else lo6 - c
-    margin = min(_SINGULAR_J6_MARGIN_DEG, width / 4.0)
     best: float | None = None
-    for k in range(math.ceil((lo4 - start - width) / 360.0), math.floor((hi4 - start) / 360.0) + 1):
-        low = max(lo4, start + 360.0 * k + margin)
-        high = min(hi4, start + width + 360.0 * k - margin)
-        if low <= high:
-            x = min(max(q4_ref, low), high)
-            if best is None or abs(x - q4_ref) < abs(best - q4_ref):
-                best = x
+    tol = LIMIT_TOL_DEG  # the limits' own slack: ranges that meet at one angle still do
+    k_min = math.ceil((lo4 - tol - start - width) / 360.0)
+    k_max = math.floor((hi4 + tol - start) / 360.0)
+    for k in range(k_min, k_max + 1):
+        low, high = max(lo4, start + 360.0 * k), min(hi4, start + width + 360.0 * k)
+        if low > high + tol:
+            continue
+        x = min(max(q4_ref, low), high)
+        if best is None or abs(x - q4_ref) < abs(best - q4_ref):
+            best = x
     return clamped if best is None else best
 
 
