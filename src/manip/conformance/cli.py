@@ -154,7 +154,8 @@ def main() -> None:
     type=click.FloatRange(min=0.1),
     default=None,
     metavar="SECONDS",
-    help="The target's broken-connection timer (the 1985 guide's is 90 s): server.ncp.broken goes silent "
+    help="The target's broken-connection timer (90 s by default, the ITS Chaos NCP's: the 1985 guide "
+    "gives none; erratum ncp-timers): server.ncp.broken goes silent "
     "that long and checks the connection was given up.  Without it that case is skipped.  With the embedded "
     "server, the server gets this timer too (below 5 s the other NCP cases, which keep quiet for up to "
     "3 s on purpose, may lose their connections).",
