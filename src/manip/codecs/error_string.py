@@ -44,11 +44,6 @@ def known_severities() -> frozenset[str]:
     return frozenset(SPEC.severities)
 
 
-def known_codes() -> frozenset[str]:
-    """The error codes of the spec (the seed's and manip's own)."""
-    return frozenset(SPEC.error_codes)
-
-
 def format_joint_mask(mask: int) -> str:
     """Joints of a bit mask (bit 0 = joint 1) in English.
 
@@ -129,8 +124,9 @@ class ErrorMessage:
     """One error string.  ``message`` is the template, with ``~`` and ``$`` still in it.
 
     ``has_nul`` says whether a NUL follows the text (it makes ``~`` and ``$`` special); it is set
-    automatically when there are ``args``.  ``known_severities`` / ``known_codes`` are the sets
-    :attr:`problems` checks against (the spec's when None); they take no part in equality.
+    automatically when there are ``args``.  ``known_severities`` is the set
+    :attr:`problems` checks severities against (the spec's when None); it takes no part in equality.
+    Any three-letter code conforms: the spec's table lists the 1985 guide's and the reference server's.
     """
 
     where: str
@@ -140,7 +136,6 @@ class ErrorMessage:
     args: tuple[int, ...] = ()
     has_nul: bool = False
     known_severities: frozenset[str] | None = field(default=None, compare=False, repr=False)
-    known_codes: frozenset[str] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "args", tuple(self.args))
@@ -169,7 +164,6 @@ class ErrorMessage:
     def problems(self) -> tuple[str, ...]:
         """What is off about this error string, for a human; empty when it conforms."""
         severities = known_severities() if self.known_severities is None else self.known_severities
-        codes = known_codes() if self.known_codes is None else self.known_codes
         out: list[str] = []
         if not self.where:
             out.append("where is empty (error-string.where-no-colon)")
@@ -180,10 +174,9 @@ class ErrorMessage:
                 f"unknown severity {self.severity!r}; expected one of {', '.join(sorted(severities))}"
                 " (error-string.severity)"
             )
+        # Any three letters will do: the 1985 guide lets each manipulator add codes of its own (E.2).
         if not (len(self.code) == 3 and self.code.isascii() and self.code.isalpha()):
             out.append(f"error code {self.code!r} is not three letters (error-string.code)")
-        elif self.code not in codes:
-            out.append(f"error code {self.code!r} is not one of the spec's codes (error-string.code)")
         if self.has_nul:
             wanted = count_specials(self.message)
             if wanted != len(self.args):
@@ -231,11 +224,10 @@ def parse_error(
     *,
     align_args: bool = True,
     severities: Collection[str] | None = None,
-    codes: Collection[str] | None = None,
 ) -> ErrorMessage:
     """Decode an error string: the response data after the 2-byte request number.
 
-    ``severities`` and ``codes`` replace the spec's tables for :attr:`ErrorMessage.problems`.
+    ``severities`` replaces the spec's table for :attr:`ErrorMessage.problems`.
     """
     nul = data.find(0)
     raw_text = data if nul < 0 else data[:nul]
@@ -270,5 +262,4 @@ def parse_error(
         args,
         has_nul=nul >= 0,
         known_severities=None if severities is None else frozenset(severities),
-        known_codes=None if codes is None else frozenset(codes),
     )

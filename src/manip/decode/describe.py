@@ -191,7 +191,8 @@ def _describe_error(err: ErrorReply) -> Node:
     sev = SPEC.severities.get(e.severity)
     node.add("severity", f"{e.severity} ({sev.meaning if sev else 'unknown severity'})", e.severity)
     code = SPEC.error_codes.get(e.code)
-    node.add("code", f"{e.code} ({code.meaning if code else 'not a code of the spec'})", e.code)
+    meaning = code.meaning if code else "a code of this server's own"
+    node.add("code", f"{e.code} ({meaning})", e.code)
     node.add("message", repr(e.message), e.message)
     if e.args:
         node.add("arguments", ", ".join(str(a) for a in e.args), list(e.args))
