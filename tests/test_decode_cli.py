@@ -68,7 +68,10 @@ def test_json_and_async() -> None:
 def test_hexdump_annotates_fields() -> None:
     code, out, _ = _run("--format", "hexdump", RFC_PUMA)
     assert code == 0
-    assert "0000  00 01 04 00 20 01" in out  # the packet in PDP-11 memory order
+    assert out.startswith("wire order (chudp: ")  # the header line says which order and from where
+    assert "0000  01 01 00 00 01 00 00 04 01 20" in out  # the datagram as it was on the wire
+    assert "  0004-0004  chaos header         opcode" in out  # opcode: high byte of word 0, sent first
+    assert "  0014-0017  rfc                  contact          PUMA" in out  # 'UPAM' on the wire
     assert "packet number" in out
 
 
