@@ -112,7 +112,7 @@ local ASYNC_CONDITIONS = {
   [2] = "segment-completed",
 }
 
--- Lisp Machine characters that are not themselves in UTF-8 (manip.codecs.lispm_text).
+-- Lisp Machine codes shown as private-use characters (manip.codecs.lispm_text).
 local LISPM_PRIVATE = {
   [8] = true, [9] = true, [10] = true, [12] = true, [13] = true, [128] = true, [129] = true, [130] = true, [131] = true, [132] = true, [133] = true, [134] = true, [135] = true, [139] = true, [142] = true, [143] = true,
   [144] = true, [145] = true, [146] = true, [147] = true, [148] = true, [149] = true, [150] = true, [151] = true, [152] = true, [153] = true, [154] = true, [155] = true, [156] = true, [157] = true, [158] = true, [159] = true,
@@ -436,7 +436,9 @@ local function error_string(tree, data, dtvb)
                                               "error-string.arg-alignment" end
       pos = pos + 1
     end
-    if bit.band(n - pos, 1) == 1 then return "numbers after the NUL are not whole words", "error-string.args" end
+    if bit.band(n - pos, 1) == 1 then
+      return "numbers after the NUL are not whole words", "error-string.args"
+    end
     for i = pos, n - 2, 2 do args[#args + 1] = {u16(data, i), i} end
   end
   local rendered = message
@@ -453,8 +455,10 @@ local function error_string(tree, data, dtvb)
   local head = where .. ": " .. severity .. " " .. code
   rendered = rendered ~= "" and head .. " " .. rendered or head
   tree:add(f_manip.where, dtvb(2, sep - 1), where)
-  tree:add(f_manip.severity, severity):append_text(" (" .. (SEVERITIES[severity] or "unknown severity") .. ")")
-  tree:add(f_manip.code, code):append_text(" (" .. (ERROR_CODES[code] or "not a code of the spec") .. ")")
+  local meaning = SEVERITIES[severity] or "unknown severity"
+  tree:add(f_manip.severity, severity):append_text(" (" .. meaning .. ")")
+  meaning = ERROR_CODES[code] or "not a code of the spec"
+  tree:add(f_manip.code, code):append_text(" (" .. meaning .. ")")
   tree:add(f_manip.message, message)
   for _, a in ipairs(args) do tree:add(f_manip.arguments, dtvb(a[2], 2), a[1]) end
   tree:add(f_manip.rendered, rendered)
@@ -566,7 +570,8 @@ local function control(tree, opcode, data, dtvb, ack)
     local text = ascii(data, 0, n)
     local space = string.find(text, " ", 1, true)
     local contact = space and string.sub(text, 1, space - 1) or text
-    if dtvb then tree:add(f_chaos.contact, dtvb(0, #contact), contact) else tree:add(f_chaos.contact, contact) end
+    if dtvb then tree:add(f_chaos.contact, dtvb(0, #contact), contact)
+    else tree:add(f_chaos.contact, contact) end
     if space and space < #text then tree:add(f_chaos.arguments, string.sub(text, space + 1)) end
     return "contact " .. contact
   elseif (opcode == 2 or opcode == 7) and n >= 4 then  -- OPN, STS

@@ -67,7 +67,8 @@ def _lua_string(text: str) -> str:
 
 def _layout(layout: Layout) -> str:
     fields = ", ".join(
-        f"{{{_lua_string(f.name)}, {_lua_string(f.type.element)}, {f.type.count or 0}}}" for f in layout.fields
+        f"{{{_lua_string(f.name)}, {_lua_string(f.type.element)}, {f.type.count or 0}}}"
+        for f in layout.fields
     )
     return "{" + fields + "}"
 
@@ -87,7 +88,9 @@ def _field_types() -> dict[str, tuple[str, str]]:
 def tables() -> str:
     """The Lua tables generated from the spec."""
     lines = [f"local SPEC_REVISION = {_lua_string(SPEC.revision)}", "", "local CHAOS_OPCODES = {"]
-    lines += [f"  [{o.value}] = {_lua_string(o.name)}," for o in SPEC.chaos_opcodes.values() if o.value < 0o200]
+    lines += [
+        f"  [{o.value}] = {_lua_string(o.name)}," for o in SPEC.chaos_opcodes.values() if o.value < 0o200
+    ]
     lines += ["}", "", "local REQUESTS = {"]
     for op in SPEC.requests.values():
         lines.append(
@@ -104,7 +107,7 @@ def tables() -> str:
     lines += [f"  [{_lua_string(c.code)}] = {_lua_string(c.meaning)}," for c in SPEC.error_codes.values()]
     lines += ["}", "", "local ASYNC_CONDITIONS = {"]
     lines += [f"  [{a.code}] = {_lua_string(a.name)}," for a in SPEC.async_codes.values()]
-    lines += ["}", "", "-- Lisp Machine characters that are not themselves in UTF-8 (manip.codecs.lispm_text)."]
+    lines += ["}", "", "-- Lisp Machine codes shown as private-use characters (manip.codecs.lispm_text)."]
     lines += ["local LISPM_PRIVATE = {"]
     private = sorted(PRIVATE_CODES)
     for i in range(0, len(private), 16):
@@ -392,7 +395,9 @@ local function error_string(tree, data, dtvb)
                                               "error-string.arg-alignment" end
       pos = pos + 1
     end
-    if bit.band(n - pos, 1) == 1 then return "numbers after the NUL are not whole words", "error-string.args" end
+    if bit.band(n - pos, 1) == 1 then
+      return "numbers after the NUL are not whole words", "error-string.args"
+    end
     for i = pos, n - 2, 2 do args[#args + 1] = {u16(data, i), i} end
   end
   local rendered = message
@@ -409,8 +414,10 @@ local function error_string(tree, data, dtvb)
   local head = where .. ": " .. severity .. " " .. code
   rendered = rendered ~= "" and head .. " " .. rendered or head
   tree:add(f_manip.where, dtvb(2, sep - 1), where)
-  tree:add(f_manip.severity, severity):append_text(" (" .. (SEVERITIES[severity] or "unknown severity") .. ")")
-  tree:add(f_manip.code, code):append_text(" (" .. (ERROR_CODES[code] or "not a code of the spec") .. ")")
+  local meaning = SEVERITIES[severity] or "unknown severity"
+  tree:add(f_manip.severity, severity):append_text(" (" .. meaning .. ")")
+  meaning = ERROR_CODES[code] or "not a code of the spec"
+  tree:add(f_manip.code, code):append_text(" (" .. meaning .. ")")
   tree:add(f_manip.message, message)
   for _, a in ipairs(args) do tree:add(f_manip.arguments, dtvb(a[2], 2), a[1]) end
   tree:add(f_manip.rendered, rendered)
@@ -522,7 +529,8 @@ local function control(tree, opcode, data, dtvb, ack)
     local text = ascii(data, 0, n)
     local space = string.find(text, " ", 1, true)
     local contact = space and string.sub(text, 1, space - 1) or text
-    if dtvb then tree:add(f_chaos.contact, dtvb(0, #contact), contact) else tree:add(f_chaos.contact, contact) end
+    if dtvb then tree:add(f_chaos.contact, dtvb(0, #contact), contact)
+    else tree:add(f_chaos.contact, contact) end
     if space and space < #text then tree:add(f_chaos.arguments, string.sub(text, space + 1)) end
     return "contact " .. contact
   elseif (opcode == 2 or opcode == 7) and n >= 4 then  -- OPN, STS
