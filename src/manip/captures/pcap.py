@@ -88,11 +88,13 @@ class PcapStats:
     """UDP datagrams on the ports asked for (all of them when no port was given)."""
     not_udp: int = 0
     """Frames that are not UDP over IPv4 or IPv6 (or are IP fragments after the first)."""
+    cut: int = 0
+    """UDP datagrams not captured whole (the snap length, or the file ends inside one): left out."""
 
     def summary(self) -> str:
         return (
             f"{self.frames} frames, {self.udp} UDP datagrams, {self.selected} on the ports asked for, "
-            f"{self.not_udp} not UDP"
+            f"{self.not_udp} not UDP" + (f", {self.cut} cut short (left out)" if self.cut else "")
         )
 
 
@@ -141,8 +143,14 @@ def _udp(ip: Any) -> tuple[Address, Address, bytes] | None:
     dst = (socket.inet_ntop(family, ip.dst), int(udp.dport))
     payload = bytes(udp.data)
     if udp.ulen >= 8:  # Ethernet pads short frames: the UDP length says where the datagram ends
+        if len(payload) < udp.ulen - 8:
+            raise _Cut
         payload = payload[: udp.ulen - 8]
     return src, dst, payload
+
+
+class _Cut(Exception):  # noqa: N818  # internal signal, never seen outside this module
+    """The datagram was not captured whole (a snap length, or the file ends inside it)."""
 
 
 def _time_ns(ts: float | Decimal) -> int:
@@ -206,6 +214,9 @@ def iter_datagrams(
             stats.frames += 1
             try:
                 found = _udp(_ip_of(frame, linktype))
+            except _Cut:
+                stats.cut += 1
+                continue
             except (dpkt.Error, struct.error, ValueError, IndexError):
                 found = None
             if found is None:

@@ -150,35 +150,42 @@ def _op_filter(value: str) -> _OpFilter:
 
 
 class _Out:
-    """Writes packets as they come: trees separated by blank lines, or one JSON array."""
+    """Writes packets as they come: trees separated by blank lines, or one JSON array.
+
+    Straight to ``sys.stdout`` (what ``click.echo`` would do for plain text, without its per-call cost,
+    which is a fifth of the decoder's time on a long stream); never coloured, never wrapped."""
 
     def __init__(self, fmt: str) -> None:
         self.fmt = fmt
         self.count = 0
+        self.write = sys.stdout.write
 
     def node(self, node: Node, *, hexdump: Callable[[], str] | None = None, line: str | None = None) -> None:
+        parts = []
         if self.fmt == "json":
-            text = json.dumps(node.to_json(), indent=2)
-            click.echo(("[\n" if not self.count else ",\n") + text, nl=False)
+            parts.append("[\n" if not self.count else ",\n")
+            parts.append(json.dumps(node.to_json(), indent=2))
         else:
             if self.count:
-                click.echo("")
+                parts.append("\n")
             if line is not None:
-                click.echo(line)
+                parts.append(line + "\n")
             if self.fmt == "hexdump" and hexdump is not None:
-                click.echo(hexdump())
+                parts.append(hexdump() + "\n")
             else:
-                click.echo(render_tree(node, 1 if line is not None else 0))
+                parts.append(render_tree(node, 1 if line is not None else 0) + "\n")
+        self.write("".join(parts))
         self.count += 1
 
     def text(self, line: str) -> None:
         """A line that is not a packet (never in JSON, whose output must stay one document)."""
         if self.fmt != "json":
-            click.echo(line)
+            self.write(line + "\n")
 
     def close(self) -> None:
         if self.fmt == "json":
-            click.echo("\n]" if self.count else "[]")
+            self.write("\n]\n" if self.count else "[]\n")
+        sys.stdout.flush()
 
 
 def _failed(node: Node) -> bool:

@@ -11,15 +11,18 @@ HEADER_BYTES = 16
 
 
 def render_tree(node: Node, indent: int = 0) -> str:
-    return "\n".join(_tree_lines(node, indent))
+    lines: list[str] = []
+    _tree_lines(node, indent, lines)
+    return "\n".join(lines)
 
 
-def _tree_lines(node: Node, indent: int) -> Iterator[str]:
+def _tree_lines(node: Node, indent: int, lines: list[str]) -> None:
+    # Appends to one list (no generator per level): this runs for every node of every packet.
     pad = "  " * indent
     where = f"  @{node.offset}+{node.size}" if node.offset is not None and node.size else ""
-    yield f"{pad}{node.label}: {node.text}{where}" if node.text else f"{pad}{node.label}{where}"
+    lines.append(f"{pad}{node.label}: {node.text}{where}" if node.text else f"{pad}{node.label}{where}")
     for child in node.children:
-        yield from _tree_lines(child, indent + 1)
+        _tree_lines(child, indent + 1, lines)
 
 
 def render_json(nodes: list[Node]) -> str:
