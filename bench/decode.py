@@ -119,7 +119,8 @@ def main(argv: list[str] | None = None) -> int:
             seconds, rss, status = whole(path, fmt)
             verdict = "ok" if rss < RSS_TARGET_MB else "OVER TARGET"
             print(
-                f"{fmt:>6}: {seconds:.1f} s, {frames / seconds:,.0f} frames/s, {size / 1e6 / seconds:.2f} MB/s, "
+                f"{fmt:>6}: {seconds:.1f} s, {frames / seconds:,.0f} frames/s, "
+                f"{size / 1e6 / seconds:.2f} MB/s, "
                 f"peak RSS {rss:.1f} MB (target < {RSS_TARGET_MB:.0f} MB: {verdict}), exit {status}"
             )
     return 0
