@@ -139,9 +139,7 @@ def frame_transform(pose: Transform, t_ns: int) -> dict[str, Any]:
     }
 
 
-def arm_messages(
-    ann: Annotation, link: int, t_ns: int, model: ArmModel = PUMA600
-) -> list[tuple[str, bytes]]:
+def arm_messages(ann: Annotation, link: int, t_ns: int, model: ArmModel = PUMA600) -> list[tuple[str, bytes]]:
     """The ``/arm/*`` messages of one annotated packet (none unless it is a pose-bearing reply)."""
     fields = ann.fields
     if ann.kind != "reply" or ann.op not in POSE_OPS or not fields:

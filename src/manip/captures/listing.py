@@ -82,7 +82,6 @@ def when(ns: int) -> str:
     return time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(seconds)) + f".{rest // 1000:06d}Z"
 
 
-
 def _session_events(events: list[CapturedEvent]) -> str:
     return ", ".join(
         f"{e.event}({e.fields['reason']!r})" if "reason" in e.fields else e.event for e in events
