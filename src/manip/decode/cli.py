@@ -351,6 +351,8 @@ def _decode_packets(
     out.close()
     if bad:
         click.echo(f"manip-decode: {bad} {link} frame(s) did not decode (shown in place)", err=True)
+    if _nothing_matched(filters, out):
+        return 1
     return 1 if failed or bad else 0
 
 
@@ -480,7 +482,17 @@ def _decode_capture(
     if start is None:
         click.echo(f"manip-decode: {path} holds no packets", err=True)
         return 1
+    if _nothing_matched(filters, out):
+        return 1
     return 1 if failed else 0
+
+
+def _nothing_matched(filters: Filters, out: _Out) -> bool:
+    """Like grep: a filter that selects nothing is said, and is exit status 1."""
+    if (filters.ops or filters.conns) and not out.count:
+        click.echo("manip-decode: no packet matches --filter", err=True)
+        return True
+    return False
 
 
 def _mcap_items(path: str, framings: dict[int, str]) -> Iterator[Any]:
