@@ -482,7 +482,7 @@ def decode_error(opcode: int, data: bytes, *, align_args: bool = True) -> ErrorR
         )
     (number,) = _WORD.unpack_from(data, 0)
     try:
-        error = parse_error(data[REQUEST_NUMBER_BYTES:], align_args=align_args)
+        error = parse_error(data[REQUEST_NUMBER_BYTES:], align_args=align_args, body="string")
     except CodecError as exc:
         raise exc.at("error", REQUEST_NUMBER_BYTES) from exc
     return ErrorReply(opcode, number, error)
