@@ -129,6 +129,8 @@ def info_json(capture: Capture, *, packets: bool = True) -> dict[str, Any]:
         "metadata": capture.metadata,
         "start_ns": capture.start_ns,
         "end_ns": capture.end_ns,
+        "start": when(capture.start_ns),
+        "end": when(capture.end_ns),
         "channels": dict(sorted(capture.counts.items())),
         "links": [{"id": k.id, "framing": k.framing, "name": k.name} for k in capture.links.values()],
         "events": [_event_json(e) for e in capture.events],
