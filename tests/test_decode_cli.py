@@ -271,3 +271,9 @@ def test_hex_text_split_anywhere_decodes_the_same() -> None:
 def test_no_python_octal_in_messages() -> None:
     code, out, _ = _run("--direction", "request", encode_chudp(_pkt(0o277, b"")).hex())
     assert code == 1 and "opcode 0277 is not a request opcode" in out and "0o" not in out
+
+
+def test_cougar_words_or_a_missing_file() -> None:
+    code, _, err = _run("--cougar", "command", "words.txt")
+    assert code == 2 and "no such file: words.txt" in err
+    assert _run("--cougar", "command", "000d 0003")[0] in (0, 1)  # words, not a file name

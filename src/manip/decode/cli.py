@@ -2,8 +2,9 @@
 
 Output is streamed: each packet is printed as soon as its frame is complete, so the first line comes at
 once and memory stays flat whatever the size of the input (a JSON array is written element by
-element).  Exit status: 0 decoded; 1 the input is malformed or empty (the message says what, where and
-which clause); 2 usage error (a missing file among them).
+element, one packet a line).  Exit status: 0 decoded; 1 the input is malformed or empty (the message
+says what, where and which clause) or a filter selects nothing; 2 usage error (a missing file among
+them).
 """
 
 from __future__ import annotations
@@ -37,6 +38,8 @@ from manip.spec import SPEC
 from manip.spec.constants import ChaosOp
 
 _SERVER_NAMES: Final = {s.name: s.opcode for s in SPEC.server_opcodes.values()}
+_JSON: Final = json.JSONEncoder(separators=(",", ":")).encode
+_WORDS: Final = re.compile(r"^[\s,0-9a-fA-FxXoObB]+$")
 
 
 def _parse_words(text: str) -> list[int]:
@@ -164,7 +167,7 @@ class _Out:
         parts = []
         if self.fmt == "json":
             parts.append("[\n" if not self.count else ",\n")
-            parts.append(json.dumps(node.to_json(), indent=2))
+            parts.append(_JSON(node.to_json()))  # one packet a line: compact, and C-encoded
         else:
             if self.count:
                 parts.append("\n")
@@ -398,6 +401,8 @@ def _decode_body(body: tuple[str, str], source: str | None, binary: bool | None,
 
 
 def _decode_cougar(source: str | None, cougar: str, fmt: str) -> int:
+    if source not in (None, "-") and not os.path.exists(source) and not _WORDS.match(source):
+        raise SourceError(f"no such file: {source} (and it is not a list of hex words either)", usage=True)
     text = read_text(source)
     stream = WordStream("command" if cougar == "command" else "response")
     items = stream.feed(_parse_words(text))
