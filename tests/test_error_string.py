@@ -229,3 +229,23 @@ def test_parse_never_crashes(data: bytes, align: bool) -> None:
     else:
         assert isinstance(m.problems, tuple)
         m.render()
+
+
+def test_parse_error_takes_either_form_of_body() -> None:
+    err = ErrorMessage("During calibration", "F", "NZI", "No zero index found on joint(s) $.", (6,))
+    string = err.encode()
+    packet = (3).to_bytes(2, "little") + string  # what a fatal-error packet's data hold
+    assert parse_error(string) == parse_error(packet) == err
+    assert parse_error(packet, body="packet") == parse_error(string, body="string") == err
+    assert parse_error(packet).render().endswith("No zero index found on joint(s) 2 and 3.")
+    with pytest.raises(DecodeError) as caught:
+        parse_error(packet, body="string")
+    assert caught.value.clause == "error-string.format"
+    with pytest.raises(DecodeError) as caught:  # neither reading works: the message says both were tried
+        parse_error((3).to_bytes(2, "little") + b"no separator here")
+    assert "read as an error string" in caught.value.message and "request number 3" in caught.value.message
+    with pytest.raises(DecodeError) as caught:  # offsets count from the start of the bytes given
+        parse_error((3).to_bytes(2, "little") + b"arm: E", body="packet")
+    assert caught.value.offset == 2 + len(b"arm: E") and caught.value.path == "error.code"
+    with pytest.raises(ValueError, match="body must be"):
+        parse_error(string, body="both")  # type: ignore[arg-type]

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Collection, Iterable
 from dataclasses import dataclass, field
+from typing import Literal
 
 from manip.codecs.errors import DecodeError, EncodeError
 from manip.codecs.lispm_text import decode_lispm, encode_lispm
@@ -224,11 +225,56 @@ def parse_error(
     *,
     align_args: bool = True,
     severities: Collection[str] | None = None,
+    body: Literal["auto", "string", "packet"] = "auto",
 ) -> ErrorMessage:
-    """Decode an error string: the response data after the 2-byte request number.
+    """Decode an error string, from either form of the bytes that hold it.
+
+    ``body="string"``: ``data`` is the error string, the packet data after the 2-byte request number.
+    ``body="packet"``: ``data`` is the whole data of the error packet, request number first (the number
+    is skipped; :func:`manip.codecs.messages.decode_error` returns it).  ``body="auto"`` (the default)
+    reads ``data`` as the string, and when that fails and its first two bytes are not text (a request
+    number: a control byte, a NUL or a byte above 0177) as the packet form; an error that neither
+    reading explains says which forms were tried.  Offsets in errors count from the start of ``data``.
 
     ``severities`` replaces the spec's table for :attr:`ErrorMessage.problems`.
     """
+    if body not in ("auto", "string", "packet"):
+        raise ValueError(f"body must be 'auto', 'string' or 'packet', not {body!r}")
+    if body == "packet":
+        return _parse_numbered(data, align_args, severities)
+    try:
+        return _parse_string(data, align_args, severities)
+    except DecodeError as exc:
+        numbered = len(data) >= 2 and any(b < 0x20 or b >= 0x80 for b in data[:2])
+        if body == "string" or not numbered:
+            raise
+        try:
+            return _parse_numbered(data, align_args, severities)
+        except DecodeError:
+            raise DecodeError(
+                f"{exc.message} (read as an error string; read as a whole error packet, request "
+                f"number {int.from_bytes(data[:2], 'little')} first, it does not parse either)",
+                exc.path,
+                exc.offset,
+                exc.clause,
+            ) from None
+
+
+def _parse_numbered(data: bytes, align_args: bool, severities: Collection[str] | None) -> ErrorMessage:
+    if len(data) < 2:
+        raise DecodeError(
+            f"{len(data)} bytes: an error packet's data begin with a 2-byte request number",
+            path="request_number",
+            offset=len(data),
+            clause="response.echoes-request-number",
+        )
+    try:
+        return _parse_string(data[2:], align_args, severities)
+    except DecodeError as exc:
+        raise exc.at("error", 2) from exc
+
+
+def _parse_string(data: bytes, align_args: bool, severities: Collection[str] | None) -> ErrorMessage:
     nul = data.find(0)
     raw_text = data if nul < 0 else data[:nul]
     text = decode_lispm(bytes(raw_text))
