@@ -24,17 +24,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import manip.conformance.checks as checks_module
-import manip.conformance.model as model_module
+import manip.conformance.judge.checks as checks_module
+import manip.conformance.judge.model as model_module
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_async, encode_error, encode_reply
-from manip.conformance.case import Case, CaseError, CaseFailure, UndeclaredClauseError, all_cases, case
-from manip.conformance.checks import TRANSCRIPT_CLAUSES, Finding, WirePacket, check_transcript
-from manip.conformance.context import CaseContext, RunOptions
-from manip.conformance.coverage import coverage
-from manip.conformance.invariants import COUGAR_LINK, INVARIANTS, TRANSCRIPT, attribution_problem
-from manip.conformance.model import MODEL_CLAUSES
-from manip.conformance.runner import RunConfig, Runner
+from manip.conformance.judge.checks import TRANSCRIPT_CLAUSES, Finding, WirePacket, check_transcript
+from manip.conformance.judge.model import MODEL_CLAUSES
+from manip.conformance.output.coverage import coverage
+from manip.conformance.suite.case import Case, CaseError, CaseFailure, UndeclaredClauseError, all_cases, case
+from manip.conformance.suite.context import CaseContext, RunOptions
+from manip.conformance.suite.invariants import COUGAR_LINK, INVARIANTS, TRANSCRIPT, attribution_problem
+from manip.conformance.suite.runner import RunConfig, Runner
 from manip.links import ChaosConnection
 from manip.reference_server.driver import serve
 from manip.spec import SPEC
@@ -59,8 +59,8 @@ def test_no_case_can_report_a_clause_it_does_not_declare() -> None:
 
 
 _PLANTED = """
-from manip.conformance.case import CaseFailure
-from manip.conformance.cases._live import Evidence
+from manip.conformance.suite.case import CaseFailure
+from manip.conformance.cases._support import Evidence
 
 TABLE = {"a": "async.codes", "b": "async.layout"}
 
@@ -138,7 +138,7 @@ def _fake_case(function: Callable[..., Awaitable[None]], *clauses: str) -> Case:
 
 def test_the_scan_finds_what_a_case_reports(planted: Any) -> None:
     """The scan can fail: it finds clauses however they are passed, and flags what it cannot resolve."""
-    live = importlib.import_module("manip.conformance.cases._live")
+    live = importlib.import_module("manip.conformance.cases._support")
     scanner = Scanner(Index([planted, live]))
 
     def found(function: Callable[..., Awaitable[None]]) -> set[str]:

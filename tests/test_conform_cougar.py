@@ -13,13 +13,13 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from manip.conformance.case import CaseFailure, all_cases
 from manip.conformance.cli import main as conform_main
-from manip.conformance.context import RunOptions
-from manip.conformance.cougar_probe import CougarProbe, TickClock, cougar_liveness
-from manip.conformance.cougar_target import CougarTarget, cougar_cases, run_cougar_suite, wait_idle
-from manip.conformance.coverage import coverage, gaps
-from manip.conformance.results import ExitCode, RunReport
+from manip.conformance.cougar.probe import CougarProbe, TickClock, cougar_liveness
+from manip.conformance.cougar.target import CougarTarget, cougar_cases, run_cougar_suite, wait_idle
+from manip.conformance.output.coverage import coverage, gaps
+from manip.conformance.suite.case import CaseFailure, all_cases
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.results import ExitCode, RunReport
 from manip.cougar import CougarConfig, CougarSim
 from manip.cougar.cli import main as cougar_main
 from manip.cougar.cli import serve_cougar

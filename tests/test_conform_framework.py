@@ -15,19 +15,19 @@ import pytest
 
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_error, encode_reply
-from manip.conformance.case import Case, CaseError, case
-from manip.conformance.checks import (
+from manip.conformance.judge.checks import (
     WirePacket,
     check_error_packet,
     check_reply,
     check_transcript,
     required_refusal,
 )
-from manip.conformance.context import CaseContext, RunOptions
-from manip.conformance.report import load_schema, report_json, report_junit
-from manip.conformance.results import ExitCode, RunReport
-from manip.conformance.runner import RunConfig, Runner, case_seed
-from manip.conformance.selection import PatternError, PatternSet, match_id
+from manip.conformance.output.report import load_schema, report_json, report_junit
+from manip.conformance.suite.case import Case, CaseError, case
+from manip.conformance.suite.context import CaseContext, RunOptions
+from manip.conformance.suite.results import ExitCode, RunReport
+from manip.conformance.suite.runner import RunConfig, Runner, case_seed
+from manip.conformance.suite.selection import PatternError, PatternSet, match_id
 from manip.reference_server.driver import serve
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp

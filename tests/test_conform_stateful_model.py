@@ -10,7 +10,7 @@ import pytest
 
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_request
-from manip.conformance.model import Expectation, ProtocolModel, Reply
+from manip.conformance.judge.model import Expectation, ProtocolModel, Reply
 from manip.spec import SPEC
 
 READY = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]

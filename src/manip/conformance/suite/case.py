@@ -1,0 +1,275 @@
+"""Conformance cases: how one is declared, and the registry that holds them all.
+
+A case is an ``async`` function of a :class:`~manip.conformance.suite.context.CaseContext`, declared with
+:func:`case`::
+
+    from manip.conformance.suite.case import case
+    from manip.conformance.suite.context import CaseContext
+
+    @case(
+        "server.describe.terminator",                # hierarchical id: dot-separated components
+        clauses=["multi.terminated-by-empty"],       # clause ids of manip/spec/data/clauses.toml
+        level="MUST",                                # the strongest level among the clauses (the default)
+        kind="scripted",                             # scripted | negative | property | stateful | cougar
+        hazard="read-only",                          # the most dangerous opcode the case may send
+        fresh=True,                                  # False: the case may share the previous case's link
+        deadline=5.0,                                # seconds for the whole case (scaled by --deadline-scale)
+        waits=None,                                  # or: options -> seconds spent on a target's timer
+    )
+    async def describe_terminator(ctx: CaseContext) -> None:
+        probe = await ctx.connect()                  # fresh Chaos connection, initial RESPONSE consumed
+        number = await probe.request("describe-self")
+        answer = await probe.replies_until_empty(number)
+        ctx.check(checks.check_multi_reply(...))     # findings from the pure checkers
+        ctx.expect(answer.terminated, clause="multi.terminated-by-empty",
+                   expected="an empty RESPONSE ending the reply", actual="...", data=b"...")
+
+Rules a case follows:
+
+* It reports only the clauses it declares (checked at every ``ctx.expect``/``ctx.fail``, and by
+  ``tests/test_conform_clauses.py`` over the source of every case); what the suite's own machinery
+  finds on every exchange is attributed to an invariant instead (:mod:`manip.conformance.suite.invariants`).
+  Its level is the strongest of its clauses' levels, and a check never overrides a clause's level.
+* It says what it checks through ``ctx.expect`` / ``ctx.check`` / ``ctx.fail``: a violated MUST clause
+  raises :class:`CaseFailure` (the case stops there); a violated SHOULD/MAY clause is recorded and the
+  case goes on (it becomes ``warn``, or ``fail`` under ``--strict``).  ``ctx.skip(reason)`` ends it as
+  not applicable.  Any other exception is an ``error`` of the suite, reported with its traceback.
+* It never assumes state left by another case: each gets a fresh connection, which starts the
+  per-connection state afresh (power, speed, segments; erratum ``server-robot``), but the arm stands
+  wherever the last case left it.  Only ``fresh=False`` cases may reuse a probe.
+* ``hazard`` is honest: with ``--target hardware`` cases above ``config`` are left out unless
+  ``--allow-motion`` (property/stateful cases also read ``ctx.options.allowed_hazards`` to restrict
+  what they generate).
+* Cases live in modules of :mod:`manip.conformance.cases` (any module there is imported by
+  :func:`load_cases`); a module may also generate cases in a loop by calling ``case(...)(function)``.
+
+Case ids are stable: never rename one that has shipped (known-failing files and reports name them).
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+import re
+from collections.abc import Awaitable, Callable, Iterable, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Final, Literal, get_args
+
+from manip.spec import SPEC
+from manip.spec.model import Hazard, Level
+
+if TYPE_CHECKING:
+    from manip.conformance.suite.context import CaseContext, RunOptions
+
+__all__ = [
+    "HAZARD_ORDER",
+    "KINDS",
+    "LEVEL_ORDER",
+    "Case",
+    "CaseError",
+    "CaseFailure",
+    "CaseFunction",
+    "CaseSkipped",
+    "Kind",
+    "UndeclaredClauseError",
+    "all_cases",
+    "case",
+    "load_cases",
+    "register",
+    "strongest_level",
+]
+
+Kind = Literal["scripted", "negative", "property", "stateful", "cougar"]
+KINDS: Final[tuple[str, ...]] = get_args(Kind)
+
+LEVEL_ORDER: Final[Mapping[str, int]] = {"MUST": 3, "SHOULD": 2, "MAY": 1, "INFO": 0}
+"""Strength of a level; a case's default level is the strongest among its clauses."""
+HAZARD_ORDER: Final[Mapping[str, int]] = {"read-only": 0, "config": 1, "motion": 2, "power": 3}
+"""How dangerous an opcode class is on real hardware (the spec's hazard classes)."""
+
+CaseFunction = Callable[["CaseContext"], Awaitable[None]]
+
+_ID_COMPONENT = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
+
+
+class CaseError(Exception):
+    """A case was declared wrongly (unknown clause, duplicate id, bad level...): a bug of the suite."""
+
+
+class UndeclaredClauseError(CaseError):
+    """A case reported a clause it does not declare (``manip.conformance.suite.invariants``)."""
+
+
+class CaseFailure(Exception):  # noqa: N818 - an outcome, not an error of the suite
+    """The target broke a clause.  Raised by ``ctx.expect``/``ctx.fail``; ends the case as ``fail``.
+
+    ``expected`` and ``actual`` are short human texts (h2spec's two-part message); ``data`` the bytes
+    that showed it (shown in hex); ``kind`` one of ``wrong_value``, ``malformed``, ``timeout``,
+    ``closed``, ``missing_response``, ``unexpected_message``, ``deadline``.  ``invariant`` names the
+    suite invariant whose machinery found it (the probes set it); otherwise the clause must be one the
+    running case declares."""
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        clause: str | None = None,
+        expected: str = "",
+        actual: str = "",
+        data: bytes = b"",
+        kind: str = "wrong_value",
+        invariant: str | None = None,
+    ) -> None:
+        super().__init__(message)
+        self.message = message
+        self.clause = clause
+        self.expected = expected
+        self.actual = actual
+        self.data = bytes(data)
+        self.kind = kind
+        self.invariant = invariant
+
+    @property
+    def level(self) -> Level | None:
+        """The level of the clause broken, when one is named."""
+        if self.clause is None or self.clause not in SPEC.clauses:
+            return None
+        return SPEC.clauses[self.clause].level
+
+
+class CaseSkipped(Exception):  # noqa: N818 - an outcome
+    """The case does not apply to this target or these options (``ctx.skip``)."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class Case:
+    """A registered case (see the module docstring for the meaning of each field)."""
+
+    id: str
+    function: CaseFunction
+    clauses: tuple[str, ...]
+    level: Level
+    kind: Kind
+    hazard: Hazard
+    fresh: bool
+    deadline: float
+    summary: str
+    module: str
+    waits: Callable[[RunOptions], float] | None = None
+    """Seconds the case spends waiting on a timer of the target's, added to its deadline unscaled."""
+
+    def deadline_for(self, options: RunOptions) -> float:
+        """The case's deadline in a run with ``options``."""
+        wait = 0.0 if self.waits is None else self.waits(options)
+        return self.deadline * options.deadline_scale + wait
+
+    @property
+    def components(self) -> tuple[str, ...]:
+        return tuple(self.id.split("."))
+
+
+_REGISTRY: dict[str, Case] = {}
+
+
+def strongest_level(clauses: Iterable[str]) -> Level:
+    """The strongest level among clause ids (INFO when none)."""
+    levels: list[Level] = [SPEC.clauses[c].level for c in clauses if c in SPEC.clauses]
+    return max(levels, key=lambda lv: LEVEL_ORDER[lv], default="INFO")
+
+
+def _validate(
+    case_id: str, clauses: tuple[str, ...], level: str, kind: str, hazard: str, deadline: float
+) -> None:
+    parts = case_id.split(".")
+    if len(parts) < 2 or not all(_ID_COMPONENT.match(p) for p in parts):
+        raise CaseError(f"case id {case_id!r}: dot-separated lower-case components, at least two")
+    if not clauses:
+        raise CaseError(f"case {case_id}: names no clause")
+    unknown = [c for c in clauses if c not in SPEC.clauses]
+    if unknown:
+        raise CaseError(f"case {case_id}: unknown clause(s) {unknown}")
+    retired = [c for c in clauses if SPEC.clauses[c].retired]
+    if retired:
+        raise CaseError(f"case {case_id}: retired clause(s) {retired}")
+    if level not in LEVEL_ORDER:
+        raise CaseError(f"case {case_id}: level {level!r} is not one of {sorted(LEVEL_ORDER)}")
+    strongest = strongest_level(clauses)
+    if level != strongest:
+        raise CaseError(
+            f"case {case_id}: level {level} disagrees with its clauses, the strongest of which is "
+            f"{strongest} in the spec: a check that is weaker than its clause needs a clause of its own"
+        )
+    if kind not in KINDS:
+        raise CaseError(f"case {case_id}: kind {kind!r} is not one of {KINDS}")
+    if hazard not in HAZARD_ORDER:
+        raise CaseError(f"case {case_id}: hazard {hazard!r} is not one of {sorted(HAZARD_ORDER)}")
+    if not deadline > 0:
+        raise CaseError(f"case {case_id}: deadline must be positive")
+
+
+def case(
+    case_id: str,
+    *,
+    clauses: Iterable[str],
+    level: Level | None = None,
+    kind: Kind = "scripted",
+    hazard: Hazard = "read-only",
+    fresh: bool = True,
+    deadline: float = 5.0,
+    summary: str | None = None,
+    waits: Callable[[RunOptions], float] | None = None,
+) -> Callable[[CaseFunction], CaseFunction]:
+    """Declare a case; the decorated function is returned unchanged (and registered).
+
+    ``summary`` defaults to the first line of the function's docstring."""
+    clause_ids = tuple(clauses)
+    chosen: Level = level if level is not None else strongest_level(clause_ids)
+    _validate(case_id, clause_ids, chosen, kind, hazard, deadline)
+
+    def decorate(function: CaseFunction) -> CaseFunction:
+        doc = (function.__doc__ or "").strip().splitlines()
+        register(
+            Case(
+                id=case_id,
+                function=function,
+                clauses=clause_ids,
+                level=chosen,
+                kind=kind,
+                hazard=hazard,
+                fresh=fresh,
+                deadline=deadline,
+                summary=summary if summary is not None else (doc[0] if doc else ""),
+                module=function.__module__,
+                waits=waits,
+            )
+        )
+        return function
+
+    return decorate
+
+
+def register(item: Case) -> Case:
+    """Add a case to the registry; the same id twice is a :class:`CaseError`."""
+    existing = _REGISTRY.get(item.id)
+    if existing is not None and existing.function is not item.function:
+        raise CaseError(f"case id {item.id} registered twice ({existing.module} and {item.module})")
+    _REGISTRY[item.id] = item
+    return item
+
+
+def load_cases(package: str = "manip.conformance.cases") -> None:
+    """Import every module of ``package`` so that their ``@case`` declarations run."""
+    pkg = importlib.import_module(package)
+    for info in pkgutil.walk_packages(pkg.__path__, prefix=f"{package}."):
+        importlib.import_module(info.name)
+
+
+def all_cases(*, load: bool = True) -> list[Case]:
+    """Every registered case, sorted by id (``load``: import :mod:`manip.conformance.cases` first)."""
+    if load:
+        load_cases()
+    return sorted(_REGISTRY.values(), key=lambda c: c.id)
