@@ -28,8 +28,9 @@ import manip.conformance.judge.checks as checks_module
 import manip.conformance.judge.model as model_module
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_async, encode_error, encode_reply
-from manip.conformance.judge.checks import TRANSCRIPT_CLAUSES, Finding, WirePacket, check_transcript
+from manip.conformance.judge.checks import TRANSCRIPT_CLAUSES, WirePacket, check_transcript
 from manip.conformance.judge.model import MODEL_CLAUSES
+from manip.conformance.judge.violation import Violation
 from manip.conformance.output.coverage import coverage
 from manip.conformance.suite.case import Case, CaseError, CaseFailure, UndeclaredClauseError, all_cases, case
 from manip.conformance.suite.context import CaseContext, RunOptions
@@ -292,7 +293,7 @@ def test_the_stateful_case_declares_every_clause_of_the_model() -> None:
     stateful = next(c for c in CASES if c.id == "stateful.arm-model")
     assert set(MODEL_CLAUSES) <= set(stateful.clauses)
     with pytest.raises(ValueError, match="MODEL_CLAUSES"):
-        model_module.Finding("describe.brand-name", "x", "y")
+        model_module.finding("describe.brand-name", "x", "y")
 
 
 # ------------------------------------------------------------------------------- at run time
@@ -331,16 +332,16 @@ def test_expect_and_fail_refuse_an_undeclared_clause_even_when_it_holds() -> Non
 
 def test_check_attributes_the_checkers_findings_to_the_transcript_invariant() -> None:
     ctx = _context("describe.brand-name")
-    ctx.check([Finding("describe.brand-name", "m"), Finding("connect.initial-response-number", "m")])
+    ctx.check([Violation("m", "describe.brand-name"), Violation("m", "connect.initial-response-number")])
     assert [(s.clause, s.invariant) for s in ctx.soft_failures] == [
         ("describe.brand-name", None),
         ("connect.initial-response-number", "transcript"),
     ]
     with pytest.raises(CaseFailure) as raised:
-        ctx.check([Finding("response.echoes-request-number", "m")])
+        ctx.check([Violation("m", "response.echoes-request-number")])
     assert raised.value.invariant == "transcript"
     with pytest.raises(UndeclaredClauseError, match=r"here\.transform"):
-        ctx.check([Finding("here.transform", "m")])  # no checker names it: a bug of the suite
+        ctx.check([Violation("m", "here.transform")])  # no checker names it: a bug of the suite
 
 
 def test_attribution_problem_names_case_and_clause() -> None:

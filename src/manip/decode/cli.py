@@ -19,7 +19,7 @@ from manip.codecs.cougar import WordStream
 from manip.codecs.errors import CodecError
 from manip.codecs.framing import FRAMINGS
 from manip.codecs.messages import request_op
-from manip.decode.describe import Direction, Node, describe_packet, describe_words
+from manip.decode.describe import Node, ReadAs, describe_packet, describe_words
 from manip.decode.render import render_hexdump, render_json, render_tree
 
 _HEX_TEXT = re.compile(rb"^[\s0-9a-fA-Fx:,]*$")
@@ -110,7 +110,7 @@ def main(
     source: str | None,
     link: str,
     fmt: str,
-    direction: Direction,
+    direction: ReadAs,
     request: str | None,
     cougar: str | None,
     binary: bool | None,
@@ -163,7 +163,7 @@ def _decode_capture(path: str, fmt: str) -> int:
                 failed = True
                 click.echo(packet_line(item, start))
                 continue
-            direction: Direction = "request" if item.direction == "c2s" else "response"
+            direction: ReadAs = "request" if item.direction == "c2s" else "response"
             request = item.op if item.direction == "s2c" and item.op is not None else None
             if request is not None:
                 try:

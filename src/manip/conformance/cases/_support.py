@@ -16,7 +16,7 @@ check take the clause from their caller.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from typing import Any, Final
 
 from manip.arm.kinematics import PUMA600, JointLimits, Joints
@@ -25,7 +25,6 @@ from manip.codecs.lisp import LispValue
 from manip.codecs.messages import ErrorReply, decode_error, decode_reply
 from manip.conformance.judge.checks import (
     ERROR_OPCODES,
-    Finding,
     WirePacket,
     check_error_packet,
     check_reply,
@@ -35,6 +34,7 @@ from manip.conformance.judge.checks import (
     word,
 )
 from manip.conformance.judge.model import Reply
+from manip.conformance.judge.violation import Violation
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.conformance.suite.invariants import TRANSCRIPT
 from manip.spec import SPEC, RequestOpcode
@@ -136,8 +136,7 @@ def expect_response(
         answer.is_response and (size is None or len(answer.data) == size) and len(answer.data) >= min_size,
         clause=clause,
         expected=expected,
-        actual=str(answer),
-        data=answer.data,
+        seen=answer,
     )
 
 
@@ -193,8 +192,7 @@ def expect_refusal(
         answer.opcode == ServerOp.NON_FATAL_ERROR,
         clause=clause,
         expected=f"{wanted} for {what}",
-        actual=str(answer),
-        data=answer.data,
+        seen=answer,
     ):
         return None  # a weaker clause than MUST: recorded, and there is no error string to judge
     error = error_of(answer)
@@ -295,43 +293,71 @@ def reply_view(answer: Answer) -> Reply:
     return Reply(False, error=None if decoded is None else decoded.error)
 
 
-def must(findings: Iterable[Finding]) -> list[Finding]:
+def must(findings: Iterable[Violation]) -> list[Violation]:
     """The findings that break a MUST clause."""
     return [f for f in findings if f.level == "MUST"]
 
 
-@dataclass(eq=False)
 class Evidence(AssertionError):  # noqa: N818 - a failed example, not an error of the suite
-    """A failed example: the clause, expected and actual, and the packets that showed it.
+    """A failed example: its :class:`~manip.conformance.judge.violation.Violation` (``.violation``), and
+    the packets that showed it.
 
     ``invariant``: the suite invariant that found it (a checker's finding, a probe's failure), passed
-    on to ``ctx.fail`` so that a clause the case does not declare is attributed to it."""
+    on to ``ctx.fail_with`` so that a clause the case does not declare is attributed to it."""
 
-    clause: str
-    message: str
-    expected: str
-    actual: str
-    data: bytes = b""
-    packets: list[WirePacket] = field(default_factory=list)
-    example: list[WirePacket] = field(default_factory=list)
-    """Every packet of the example that failed, both ways (set by the case's runner; ``packets`` are the
-    ones among them that show the failure)."""
-    drawn: str = ""
-    """What Hypothesis drew for that example, as the report shows it (set by the case's runner)."""
-    invariant: str | None = None
+    # ``args`` is set instead of calling ``super().__init__``: tests/clause_scan.py binds the positional
+    # arguments of any ``__init__`` call here to this signature, whose first parameter is a clause.
+    def __init__(
+        self,
+        clause: str,
+        message: str,
+        expected: str,
+        actual: str,
+        data: bytes = b"",
+        packets: Iterable[WirePacket] = (),
+        example: Iterable[WirePacket] = (),
+        drawn: str = "",
+        invariant: str | None = None,
+    ) -> None:
+        self.violation = Violation(
+            message, clause, expected=expected, actual=actual, data=data, invariant=invariant
+        )
+        self.args = (str(self.violation),)  # the exception's message (no super() call: see below)
+        self.packets = list(packets)
+        self.example = list(example)
+        """Every packet of the example that failed, both ways (set by the case's runner; ``packets``
+        are the ones among them that show the failure)."""
+        self.drawn = drawn
+        """What Hypothesis drew for that example, as the report shows it (set by the case's runner)."""
 
-    def __post_init__(self) -> None:
-        super().__init__(f"[{self.clause}] {self.message}")
+    @property
+    def clause(self) -> str | None:
+        return self.violation.clause
+
+    @property
+    def message(self) -> str:
+        return self.violation.message
+
+    @property
+    def expected(self) -> str:
+        return self.violation.expected
+
+    @property
+    def actual(self) -> str:
+        return self.violation.actual
+
+    @property
+    def data(self) -> bytes:
+        return self.violation.data
+
+    @property
+    def invariant(self) -> str | None:
+        return self.violation.invariant
 
     @classmethod
-    def of(cls, finding: Finding, packets: Iterable[WirePacket] = ()) -> Evidence:
+    def of(cls, finding: Violation, packets: Iterable[WirePacket] = ()) -> Evidence:
         """A checker's finding (the transcript invariant's checkers)."""
-        return cls(
-            finding.clause,
-            finding.message,
-            finding.expected,
-            finding.actual,
-            finding.data,
-            list(packets),
-            invariant=TRANSCRIPT.name,
-        )
+        evidence = cls("", "", "", "", packets=packets)
+        evidence.violation = replace(finding, invariant=TRANSCRIPT.name)
+        evidence.args = (str(evidence.violation),)
+        return evidence

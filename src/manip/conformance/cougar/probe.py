@@ -135,6 +135,11 @@ class WordReply:
     def data_words(self) -> tuple[int, ...]:
         return self.words[1:]
 
+    @property
+    def data(self) -> bytes:
+        """The words as they travel on the link (a failure's bytes)."""
+        return words_bytes(self.words)
+
     def __str__(self) -> str:
         head = self.name if not self.problem else f"{self.name} ({self.problem})"
         return f"{head}: {octal(self.words)}"

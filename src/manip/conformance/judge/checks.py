@@ -1,10 +1,11 @@
 """Pure checkers over manip packets: what a server sent, judged against the spec's clauses.
 
 Nothing here does I/O or reads a clock.  Every checker takes packets (:class:`WirePacket`: direction,
-Chaos opcode, packet and ack numbers, data bytes, time) and returns a list of :class:`Finding` (empty
-when everything conforms), each naming the clause it breaks with what was expected, what came, and
-the bytes.  Live cases call them on what their probe recorded; ``manip-conform verify`` calls them on a
-recording; the stateful machine uses :func:`check_transcript` as its invariant.
+Chaos opcode, packet and ack numbers, data bytes, time) and returns a list of
+:class:`~manip.conformance.judge.violation.Violation` (empty when everything conforms), each naming the
+clause it breaks with what was expected, what came, and the bytes.  Live cases call them on what their
+probe recorded; ``manip-conform verify`` calls them on a recording; the stateful machine uses
+:func:`check_transcript` as its invariant.
 
 Checkers, from the smallest up:
 
@@ -26,23 +27,25 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Final, Literal
+from typing import Final
 
 from manip.codecs.error_string import SPECIALS, ErrorMessage
 from manip.codecs.errors import CodecError, DecodeError
 from manip.codecs.lisp import Cons, Keyword, LispValue, read_alist
 from manip.codecs.lispm_text import decode_lispm
 from manip.codecs.messages import decode_error, decode_reply, decode_request
+from manip.conformance.judge.packets import CLOSE_OPCODES, Direction, WirePacket, describe, opcode_name, word
+from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import AsyncCondition, ChaosOp, ServerOp
-from manip.spec.model import Layout, Level
+from manip.spec.model import Layout
 
 __all__ = [
     "CLOSE_OPCODES",
     "TRANSCRIPT_CLAUSES",
     "Direction",
-    "Finding",
     "Refusal",
+    "Violation",
     "WirePacket",
     "check_async_packet",
     "check_client_request",
@@ -62,9 +65,6 @@ __all__ = [
     "word",
 ]
 
-Direction = Literal["c2s", "s2c"]
-CLOSE_OPCODES: Final = frozenset({ChaosOp.CLS, ChaosOp.EOF, ChaosOp.LOS})
-"""Pseudo-packets a recorder writes when the connection ends (data: the reason text)."""
 ERROR_OPCODES: Final = frozenset(
     {
         ServerOp.FATAL_ERROR,
@@ -131,63 +131,6 @@ checker's default clause, so the set is closed: the runner's transcript invarian
 clauses whatever case it runs after (``manip.conformance.suite.invariants``)."""
 
 
-@dataclass(frozen=True, slots=True)
-class WirePacket:
-    """One packet as a recorder saw it.  ``time``: seconds from the start of the recording."""
-
-    direction: Direction
-    opcode: int
-    packet_no: int
-    ack_no: int
-    data: bytes
-    time: float = 0.0
-    connection: int = 0
-    """Which connection of a case (0, 1, ...) the packet belongs to."""
-
-    @property
-    def is_close(self) -> bool:
-        return self.opcode in CLOSE_OPCODES
-
-    def to_json(self) -> dict[str, object]:
-        return {
-            "dir": self.direction,
-            "opcode": f"{self.opcode:o}",
-            "packet_no": self.packet_no,
-            "ack_no": self.ack_no,
-            "data": self.data.hex(),
-            "time": round(self.time, 6),
-            "connection": self.connection,
-        }
-
-
-@dataclass(frozen=True)
-class Finding:
-    """One violation: the clause, a one-line message, expected vs actual, and the bytes."""
-
-    clause: str
-    message: str
-    expected: str = ""
-    actual: str = ""
-    data: bytes = b""
-    packet: WirePacket | None = field(default=None, compare=False)
-
-    @property
-    def level(self) -> Level:
-        return SPEC.clauses[self.clause].level
-
-    def __str__(self) -> str:
-        return f"[{self.clause}] {self.message}"
-
-    @classmethod
-    def at(
-        cls, packet: WirePacket, clause: str, message: str, *, expected: str = "", actual: str | None = None
-    ) -> Finding:
-        """A finding about ``packet``, with its data; ``actual`` defaults to the packet's description."""
-        return cls(
-            clause, message, expected, describe(packet) if actual is None else actual, packet.data, packet
-        )
-
-
 @dataclass(frozen=True)
 class Refusal:
     """What the spec requires for a request that must be refused: a non-fatal error of severity C."""
@@ -198,47 +141,15 @@ class Refusal:
     """The error codes manip's errata name for it (informational: only the severity is a MUST)."""
 
 
-def word(data: bytes, offset: int = 0) -> int | None:
-    """The little-endian word at ``offset``, or None when the data are too short."""
-    if len(data) < offset + 2:
-        return None
-    return int.from_bytes(data[offset : offset + 2], "little")
-
-
-def describe(packet: WirePacket) -> str:
-    """A short human description of a packet: opcode (octal), number and data length.  A request shows
-    its Chaos packet number (which its answer must echo), a server packet the request number its first
-    data word carries: ``here 0201 (packet number 23, 0 data bytes)``, ``response 0200 (request number
-    23, 50 data bytes)``."""
-    if packet.is_close:
-        reason = packet.data.decode("ascii", "replace")
-        return f"{ChaosOp(packet.opcode).name} ({reason})" if reason else ChaosOp(packet.opcode).name
-    name = _opcode_name(packet)
-    if packet.direction == "c2s":
-        shown = f"packet number {packet.packet_no}"
-    else:
-        number = word(packet.data)
-        shown = "no request number" if number is None else f"request number {number}"
-    return f"{name} 0{packet.opcode:o} ({shown}, {len(packet.data)} data bytes)"
-
-
-def _opcode_name(packet: WirePacket) -> str:
-    if packet.direction == "c2s":
-        op = SPEC.requests.get(packet.opcode)
-        return op.name if op else "unknown-request"
-    server = SPEC.server_opcodes.get(packet.opcode)
-    return server.name if server else "unknown-server-opcode"
-
-
 # ------------------------------------------------------------------------------------- single packets
 
 
-def check_server_opcode(packet: WirePacket) -> list[Finding]:
+def check_server_opcode(packet: WirePacket) -> list[Violation]:
     """Server packets use 0200-0205 or the arm-specific 0250-0277."""
     if packet.opcode in SPEC.server_opcodes or packet.opcode in ARM_SPECIFIC_SERVER_OPCODES:
         return []
     return [
-        Finding.at(
+        Violation.at(
             packet,
             "response.server-opcodes",
             f"server packet with opcode {packet.opcode:o}",
@@ -248,7 +159,7 @@ def check_server_opcode(packet: WirePacket) -> list[Finding]:
     ]
 
 
-def check_echo(request: WirePacket, reply: WirePacket) -> list[Finding]:
+def check_echo(request: WirePacket, reply: WirePacket) -> list[Violation]:
     """The reply's first data word is the request's packet number (a fatal error's: the last received)."""
     clause = "error.fatal-request-number" if reply.opcode == ServerOp.FATAL_ERROR else None
     clause = clause or "response.echoes-request-number"
@@ -257,10 +168,10 @@ def check_echo(request: WirePacket, reply: WirePacket) -> list[Finding]:
         return []
     actual = "no request-number word" if number is None else f"request number {number}"
     return [
-        Finding.at(
+        Violation.at(
             reply,
             clause,
-            f"reply to request #{request.packet_no} ({_opcode_name(request)}) carries the wrong number",
+            f"reply to request #{request.packet_no} ({opcode_name(request)}) carries the wrong number",
             expected=f"request number {request.packet_no} (the request's Chaos packet number)",
             actual=actual
             + (f" (the request's ack field is {request.ack_no})" if number == request.ack_no else ""),
@@ -268,12 +179,12 @@ def check_echo(request: WirePacket, reply: WirePacket) -> list[Finding]:
     ]
 
 
-def check_error_packet(packet: WirePacket) -> list[Finding]:
+def check_error_packet(packet: WirePacket) -> list[Violation]:
     """The error string of an 0201, 0202, 0204 or 0205 packet (E.2), and its severity for the opcode."""
     data = packet.data
     if len(data) < 2:
         return [
-            Finding.at(
+            Violation.at(
                 packet,
                 "response.echoes-request-number",
                 "error packet without a request number",
@@ -281,7 +192,7 @@ def check_error_packet(packet: WirePacket) -> list[Finding]:
                 actual=f"{len(data)} data bytes",
             )
         ]
-    out: list[Finding] = []
+    out: list[Violation] = []
     try:
         error = decode_error(packet.opcode, data).error
     except CodecError as exc:
@@ -292,7 +203,7 @@ def check_error_packet(packet: WirePacket) -> list[Finding]:
                 )
             ]
         out.append(
-            Finding.at(
+            Violation.at(
                 packet,
                 "error-string.arg-alignment",
                 "the numbers after the NUL do not start at an even offset",
@@ -309,13 +220,13 @@ def check_error_packet(packet: WirePacket) -> list[Finding]:
     return out
 
 
-def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Finding]:
-    out: list[Finding] = []
+def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Violation]:
+    out: list[Violation] = []
     shown = repr(error.render())
 
     def add(clause: str, message: str, expected: str, actual: str) -> None:
         out.append(
-            Finding(clause, message, expected=expected, actual=actual, data=packet.data, packet=packet)
+            Violation(message, clause, expected=expected, actual=actual, data=packet.data, packet=packet)
         )
 
     if ":" in error.where or not error.where:
@@ -337,7 +248,7 @@ def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Findin
         allowed = [s.letter for s in SPEC.severities.values() if packet.opcode in s.server_opcodes]
         add(
             "error.severity-matches-opcode",
-            f"severity {error.severity} in a {_opcode_name(packet)} ({packet.opcode:o}) packet",
+            f"severity {error.severity} in a {opcode_name(packet)} ({packet.opcode:o}) packet",
             f"one of {', '.join(allowed)} in opcode {packet.opcode:o}",
             shown,
         )
@@ -355,18 +266,18 @@ def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Findin
     return out
 
 
-def _codec_finding(exc: CodecError, packet: WirePacket, default: str, expected: str) -> Finding:
+def _codec_finding(exc: CodecError, packet: WirePacket, default: str, expected: str) -> Violation:
     clause = exc.clause if exc.clause in TRANSCRIPT_CLAUSES else default
-    return Finding(clause, str(exc), expected=expected, actual=str(exc), data=packet.data, packet=packet)
+    return Violation(str(exc), clause, expected=expected, actual=str(exc), data=packet.data, packet=packet)
 
 
-def check_async_packet(packet: WirePacket, requested_mask: int | None = None) -> list[Finding]:
+def check_async_packet(packet: WirePacket, requested_mask: int | None = None) -> list[Violation]:
     """An asynchronous response (0203): layout, condition code, and (given the mask asked for) that it
     was requested.  ``requested_mask``: bit n = condition n+1 (request-notifications); None skips that."""
     data = packet.data
     if len(data) != 8:
         return [
-            Finding.at(
+            Violation.at(
                 packet,
                 "async.layout",
                 f"asynchronous response of {len(data)} data bytes",
@@ -376,11 +287,11 @@ def check_async_packet(packet: WirePacket, requested_mask: int | None = None) ->
         ]
     condition = word(data, 2) or 0
     word2 = word(data, 4) or 0
-    out: list[Finding] = []
+    out: list[Violation] = []
     code = SPEC.async_codes.get(condition)
     if code is None:
         out.append(
-            Finding.at(
+            Violation.at(
                 packet,
                 "async.codes",
                 f"unknown condition code {condition}",
@@ -391,7 +302,7 @@ def check_async_packet(packet: WirePacket, requested_mask: int | None = None) ->
         return out
     if condition == AsyncCondition.GUARD_HIT and word2 not in (1, 2):
         out.append(
-            Finding.at(
+            Violation.at(
                 packet,
                 "async.layout",
                 f"guard hit with stop/continue word {word2}",
@@ -401,7 +312,7 @@ def check_async_packet(packet: WirePacket, requested_mask: int | None = None) ->
         )
     if condition == AsyncCondition.SEGMENT_COMPLETED and word2 != 0:
         out.append(
-            Finding.at(
+            Violation.at(
                 packet,
                 "async.layout",
                 f"segment completed with reserved word {word2}",
@@ -411,7 +322,7 @@ def check_async_packet(packet: WirePacket, requested_mask: int | None = None) ->
         )
     if requested_mask is not None and not requested_mask >> code.notification_bit & 1:
         out.append(
-            Finding.at(
+            Violation.at(
                 packet,
                 "async.only-when-requested",
                 f"asynchronous {code.name} that was not asked for",
@@ -422,13 +333,13 @@ def check_async_packet(packet: WirePacket, requested_mask: int | None = None) ->
     return out
 
 
-def check_initial_response(packet: WirePacket | None, rfc_packet_no: int | None = None) -> list[Finding]:
+def check_initial_response(packet: WirePacket | None, rfc_packet_no: int | None = None) -> list[Violation]:
     """The first server packet is a RESPONSE (0200) holding only the RFC's packet number."""
     if packet is None or packet.is_close:
         return [
-            Finding(
-                "connect.initial-response",
+            Violation(
                 "no initial RESPONSE after the connection opened",
+                "connect.initial-response",
                 expected="a RESPONSE (200) packet first",
                 actual="nothing" if packet is None else describe(packet),
                 data=b"" if packet is None else packet.data,
@@ -437,7 +348,7 @@ def check_initial_response(packet: WirePacket | None, rfc_packet_no: int | None 
         ]
     if packet.opcode != ServerOp.RESPONSE:
         return [
-            Finding.at(
+            Violation.at(
                 packet,
                 "connect.initial-response",
                 "the first server packet is not a RESPONSE",
@@ -450,7 +361,7 @@ def check_initial_response(packet: WirePacket | None, rfc_packet_no: int | None 
             f" holding {rfc_packet_no}, the RFC's packet number" if rfc_packet_no is not None else ""
         )
         return [
-            Finding.at(
+            Violation.at(
                 packet,
                 "connect.initial-response-number",
                 "the initial RESPONSE carries the wrong data",
@@ -489,14 +400,14 @@ def required_refusal(opcode: int, data: bytes) -> Refusal | None:
 _MOVE_OPCODES: Final = frozenset(SPEC.request(name).opcode for name in ("move", "straight-move"))
 
 
-def check_client_request(request: WirePacket) -> list[Finding]:
+def check_client_request(request: WirePacket) -> list[Violation]:
     """Judge one request as its client built it: a request opcode (0200-0277), and data laid out as the
     opcode's layout says (words, PDP-11 floats, nothing else; a move's 12 floats).  An opcode the spec
     does not define is the server's to refuse (request.unknown-opcode), not a client finding."""
     opcode = request.opcode
     if not ChaosOp.DAT <= opcode < ChaosOp.DWD:
         return [
-            Finding.at(
+            Violation.at(
                 request,
                 "request.opcode-range",
                 f"a data packet with opcode {opcode:o} is not a request (8-bit data, 0200-0277)",
@@ -509,7 +420,7 @@ def check_client_request(request: WirePacket) -> list[Finding]:
         return []
     clause = "move.transform-data" if opcode in _MOVE_OPCODES else "request-data.types"
     return [
-        Finding.at(
+        Violation.at(
             request,
             clause,
             f"request #{request.packet_no}: {refusal.reason}",
@@ -524,15 +435,15 @@ def _layout_size(layout: Layout) -> str:
     return "no data" if size == 0 else f"{size} bytes" if size is not None else "a variable length"
 
 
-def check_reply(request: WirePacket, answer: Sequence[WirePacket]) -> list[Finding]:
+def check_reply(request: WirePacket, answer: Sequence[WirePacket]) -> list[Violation]:
     """Judge the answer to one request: ``answer`` is the reply packet, or every packet of a
     multi-packet reply including its terminator (asynchronous packets already taken out)."""
     if not answer:
         return [
-            Finding.at(
+            Violation.at(
                 request,
                 "request.one-reply",
-                f"no reply to request #{request.packet_no} ({_opcode_name(request)})",
+                f"no reply to request #{request.packet_no} ({opcode_name(request)})",
                 expected="one reply",
                 actual="nothing",
             )
@@ -541,7 +452,7 @@ def check_reply(request: WirePacket, answer: Sequence[WirePacket]) -> list[Findi
     out = check_server_opcode(first)
     if first.is_close:
         return [
-            Finding.at(
+            Violation.at(
                 first,
                 "request.one-reply",
                 f"the connection ended before request #{request.packet_no} was answered",
@@ -558,7 +469,7 @@ def check_reply(request: WirePacket, answer: Sequence[WirePacket]) -> list[Findi
     if refusal is not None:
         return [
             *out,
-            Finding.at(
+            Violation.at(
                 first,
                 refusal.clause,
                 f"{refusal.reason}, but the server answered {describe(first)}",
@@ -568,7 +479,7 @@ def check_reply(request: WirePacket, answer: Sequence[WirePacket]) -> list[Findi
     if first.opcode != ServerOp.RESPONSE:
         return [
             *out,
-            Finding.at(
+            Violation.at(
                 first,
                 "request.one-reply",
                 f"the answer to #{request.packet_no} is {describe(first)}",
@@ -581,7 +492,7 @@ def check_reply(request: WirePacket, answer: Sequence[WirePacket]) -> list[Findi
     return out + _check_single(op, first)
 
 
-def _check_refusal(refusal: Refusal, packet: WirePacket) -> list[Finding]:
+def _check_refusal(refusal: Refusal, packet: WirePacket) -> list[Violation]:
     try:
         error = decode_error(packet.opcode, packet.data, align_args=False).error
     except CodecError:
@@ -589,7 +500,7 @@ def _check_refusal(refusal: Refusal, packet: WirePacket) -> list[Finding]:
     if packet.opcode == ServerOp.NON_FATAL_ERROR and error.severity == "C":
         return []
     return [
-        Finding.at(
+        Violation.at(
             packet,
             refusal.clause,
             f"{refusal.reason}: answered with severity {error.severity} in {packet.opcode:o}",
@@ -606,7 +517,7 @@ _KIND_CLAUSE: Final[Mapping[str, str]] = {
 }
 
 
-def _check_single(op: RequestOpcode, packet: WirePacket) -> list[Finding]:
+def _check_single(op: RequestOpcode, packet: WirePacket) -> list[Violation]:
     kind = op.response.kind
     try:
         decode_reply(packet.data, op)
@@ -617,7 +528,7 @@ def _check_single(op: RequestOpcode, packet: WirePacket) -> list[Finding]:
             "segment": "the request number and one segment-number word (4 data bytes)",
         }.get(kind, f"the request number then {_layout_text(op)}")
         return [
-            Finding.at(
+            Violation.at(
                 packet,
                 clause,
                 f"{op.name} reply: {exc}",
@@ -634,8 +545,8 @@ def _layout_text(op: RequestOpcode) -> str:
     return f"{names}" + (f" = {size} bytes" if size is not None else "")
 
 
-def _check_multi(op: RequestOpcode, request: WirePacket, answer: Sequence[WirePacket]) -> list[Finding]:
-    out: list[Finding] = []
+def _check_multi(op: RequestOpcode, request: WirePacket, answer: Sequence[WirePacket]) -> list[Violation]:
+    out: list[Violation] = []
     texts = 0
     terminated = False
     for packet in answer:
@@ -644,7 +555,7 @@ def _check_multi(op: RequestOpcode, request: WirePacket, answer: Sequence[WirePa
         number = word(packet.data)
         if number != request.packet_no:
             out.append(
-                Finding.at(
+                Violation.at(
                     packet,
                     "multi.same-request-number",
                     f"a packet of the {op.name} reply carries request number {number}",
@@ -659,7 +570,7 @@ def _check_multi(op: RequestOpcode, request: WirePacket, answer: Sequence[WirePa
     if not terminated:
         last = answer[-1]
         out.append(
-            Finding.at(
+            Violation.at(
                 last,
                 "multi.terminated-by-empty",
                 f"the {op.name} reply is not ended by an empty packet",
@@ -671,9 +582,9 @@ def _check_multi(op: RequestOpcode, request: WirePacket, answer: Sequence[WirePa
         )
     if texts == 0:
         out.append(
-            Finding(
-                "describe.reply-shape",
+            Violation(
                 f"the {op.name} reply has no text packet",
+                "describe.reply-shape",
                 expected="one or more text packets, then an empty one",
                 actual="an empty reply",
                 data=answer[0].data,
@@ -686,16 +597,16 @@ def _check_multi(op: RequestOpcode, request: WirePacket, answer: Sequence[WirePa
 # ------------------------------------------------------------------------------------- describe self
 
 
-def parse_description(text: str) -> tuple[dict[str, LispValue] | None, list[Finding]]:
+def parse_description(text: str) -> tuple[dict[str, LispValue] | None, list[Violation]]:
     """Read the describe-self alist: the entries by keyword name, or None and the findings."""
     try:
         return read_alist(text), []
     except DecodeError as exc:
         clause = exc.clause if exc.clause in TRANSCRIPT_CLAUSES else "describe.alist-readable"
         return None, [
-            Finding(
-                clause,
+            Violation(
                 f"describe-self text: {exc}",
+                clause,
                 expected="one Lisp-readable alist",
                 actual=_excerpt(text, exc.offset),
                 data=text.encode("utf-8", "replace"),
@@ -714,7 +625,7 @@ def _scalar(value: LispValue) -> LispValue:
     return value[0] if isinstance(value, list) and len(value) == 1 else value
 
 
-def check_description(text: str, *, protocol_version: int = SPEC.protocol_version) -> list[Finding]:
+def check_description(text: str, *, protocol_version: int = SPEC.protocol_version) -> list[Violation]:
     """The describe-self alist: readable, and the seed's keys shaped as E.1 says."""
     entries, out = parse_description(text)
     if entries is None:
@@ -724,13 +635,13 @@ def check_description(text: str, *, protocol_version: int = SPEC.protocol_versio
 
 def check_description_entries(
     entries: Mapping[str, LispValue], text: str = "", *, protocol_version: int = SPEC.protocol_version
-) -> list[Finding]:
+) -> list[Violation]:
     """The seed's keys of a read description (``text``: the raw text, kept as the finding's bytes)."""
-    out: list[Finding] = []
+    out: list[Violation] = []
     data = text.encode("utf-8", "replace")
 
     def add(clause: str, message: str, expected: str, actual: object) -> None:
-        out.append(Finding(clause, message, expected=expected, actual=repr(actual), data=data))
+        out.append(Violation(message, clause, expected=expected, actual=repr(actual), data=data))
 
     if "protocol-version" not in entries:
         add(
@@ -821,7 +732,7 @@ class _Pending:
 
 @dataclass
 class _Session:
-    findings: list[Finding] = field(default_factory=list)
+    findings: list[Violation] = field(default_factory=list)
     pending: deque[_Pending] = field(default_factory=deque)
     multi: list[WirePacket] | None = None
     mask: int = 0
@@ -840,7 +751,7 @@ def check_transcript(
     rfc_packet_no: int | None = None,
     expect_initial: bool = True,
     complete: bool = False,
-) -> list[Finding]:
+) -> list[Violation]:
     """Judge one connection's packets in order (both directions, closes included).
 
     ``expect_initial``: the recording starts at the open, so the first server packet must be the
@@ -868,9 +779,9 @@ def check_transcript(
     _finish_multi(s)
     if s.fatal is not None and not s.closed and complete:
         s.findings.append(
-            Finding(
-                "error.fatal-then-close",
+            Violation(
                 "the connection stayed open after a fatal error",
+                "error.fatal-then-close",
                 expected="CLS after the fatal error",
                 actual="the connection open",
                 data=s.fatal.data,
@@ -880,9 +791,9 @@ def check_transcript(
     if complete and not s.closed:
         for item in s.pending:
             s.findings.append(
-                Finding(
+                Violation(
+                    f"request #{item.request.packet_no} ({opcode_name(item.request)}) was never answered",
                     "request.one-reply",
-                    f"request #{item.request.packet_no} ({_opcode_name(item.request)}) was never answered",
                     expected="one reply",
                     actual="nothing",
                     data=item.request.data,
@@ -921,7 +832,7 @@ def _on_server_packet(s: _Session, packet: WirePacket) -> None:
     s.findings.extend(check_server_opcode(packet))
     if s.fatal is not None:
         s.findings.append(
-            Finding.at(
+            Violation.at(
                 packet,
                 "error.fatal-then-close",
                 f"{describe(packet)} after a fatal error",
@@ -948,7 +859,7 @@ def _on_server_packet(s: _Session, packet: WirePacket) -> None:
         number = word(packet.data)
         clause = "error.non-fatal-is-reply" if number in s.answered_with_error else "request.one-reply"
         s.findings.append(
-            Finding.at(
+            Violation.at(
                 packet,
                 clause,
                 f"{describe(packet)} answers no outstanding request",
@@ -984,11 +895,11 @@ def _check_discarded(s: _Session, request: WirePacket, packet: WirePacket) -> No
     s.findings.extend(check_echo(request, packet))
     if packet.opcode != ServerOp.RESPONSE or len(packet.data) != 2:
         s.findings.append(
-            Finding.at(
+            Violation.at(
                 packet,
                 "free-joint.replies",
                 f"the packet after free joint (#{request.packet_no}, "
-                f"{_opcode_name(request)}) was answered with {describe(packet)}",
+                f"{opcode_name(request)}) was answered with {describe(packet)}",
                 expected="an empty done: the packet is discarded, not executed",
             )
         )
@@ -1010,7 +921,7 @@ def _after_answer(s: _Session, request: WirePacket, packet: WirePacket) -> None:
         assert segment is not None
         if s.last_segment is not None and segment != (s.last_segment + 1) & 0xFFFF:
             s.findings.append(
-                Finding.at(
+                Violation.at(
                     packet,
                     "segment.number-increases",
                     f"segment {segment} follows segment {s.last_segment}",

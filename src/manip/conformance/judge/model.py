@@ -50,15 +50,16 @@ from manip.arm.kinematics import PUMA600, JointLimits
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.errors import CodecError, DecodeError
 from manip.codecs.messages import Value, decode_request
+from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import AsyncCondition
 
 __all__ = [
     "MODEL_CLAUSES",
     "Expectation",
-    "Finding",
     "ProtocolModel",
     "Reply",
+    "finding",
 ]
 
 MODEL_CLAUSES: Final = frozenset(
@@ -92,7 +93,7 @@ MODEL_CLAUSES: Final = frozenset(
         "speed.range",
     }
 )
-"""Every clause a :class:`Finding` of the model may name (checked when one is made): the stateful case,
+"""Every clause a :func:`finding` of the model may name (checked when one is made): the stateful case,
 which reports the model's findings, declares them all."""
 
 WORD: Final = 0xFFFF
@@ -150,17 +151,11 @@ class Reply:
     """The error string of a non-fatal error."""
 
 
-@dataclass(frozen=True)
-class Finding:
-    """A rule the server broke, found by the model."""
-
-    clause: str
-    expected: str
-    actual: str
-
-    def __post_init__(self) -> None:
-        if self.clause not in MODEL_CLAUSES:
-            raise ValueError(f"model finding of clause {self.clause!r}, which is not in MODEL_CLAUSES")
+def finding(clause: str, expected: str, actual: str) -> Violation:
+    """A rule the server broke, found by the model: a clause of :data:`MODEL_CLAUSES` (checked)."""
+    if clause not in MODEL_CLAUSES:
+        raise ValueError(f"model finding of clause {clause!r}, which is not in MODEL_CLAUSES")
+    return Violation(f"the arm model does not allow {actual}", clause, expected=expected, actual=actual)
 
 
 @dataclass
@@ -176,7 +171,7 @@ class ProtocolModel:
     speed: float | None = None
     outstanding: list[int] = field(default_factory=list)
     next_segment: int | None = None
-    segment_findings: list[Finding] = field(default_factory=list)
+    segment_findings: list[Violation] = field(default_factory=list)
     served: frozenset[int] | None = None
     """The opcodes describe self lists under :operations (None: unknown); extensions outside it may be
     refused as unserved."""
@@ -328,27 +323,27 @@ class ProtocolModel:
         return self.limits.lower[joint - 1] + slack <= q <= self.limits.upper[joint - 1] - slack
 
     # -------------------------------------------------------------------------------- replies
-    def judge(self, expectation: Expectation, reply: Reply) -> Finding | None:
+    def judge(self, expectation: Expectation, reply: Reply) -> Violation | None:
         """Whether ``reply`` is one ``expectation`` allows."""
         if expectation.discard:
             if reply.normal and reply.empty:
                 return None
-            return Finding(expectation.clause, expectation.describe(), _show(reply))
+            return finding(expectation.clause, expectation.describe(), _show(reply))
         if reply.normal:
             if expectation.normal:
                 return None
-            return Finding(expectation.clause, expectation.describe(), _show(reply))
+            return finding(expectation.clause, expectation.describe(), _show(reply))
         err = reply.error
         assert err is not None
         if err.severity in ("F", "BF", "BE"):
-            return Finding(
+            return finding(
                 "error.severity-matches-opcode" if err.severity != "BE" else expectation.clause,
                 expectation.describe(),
                 _show(reply),
             )
         if err.code in expectation.codes or (expectation.command and err.severity == "C"):
             return None
-        return Finding(expectation.clause, expectation.describe(), _show(reply))
+        return finding(expectation.clause, expectation.describe(), _show(reply))
 
     def observe(self, number: int, opcode: int, data: bytes, reply: Reply) -> None:
         """Take the (already judged) reply to request ``number`` into the state."""
@@ -413,7 +408,7 @@ class ProtocolModel:
         expected = self.next_segment
         if expected is not None and segment != expected:
             self.segment_findings.append(
-                Finding(
+                finding(
                     "segment.number-increases",
                     f"segment number {expected} (one more than the last, mod 2^16)",
                     f"segment number {segment}",
@@ -429,10 +424,10 @@ class ProtocolModel:
         index = self._order.get(number & WORD)
         return index is not None and index >= self._answered
 
-    def on_async_response(self, number: int, condition: int, word2: int, word3: int) -> Finding | None:
+    def on_async_response(self, number: int, condition: int, word2: int, word3: int) -> Violation | None:
         """An asynchronous response (0203) arrived carrying request number ``number``."""
         if not self.last_processed_ok(number):
-            return Finding(
+            return finding(
                 "async.layout",
                 "the number of the last request processed (one sent and not older than the last answered)",
                 f"request number {number}",
@@ -440,15 +435,15 @@ class ProtocolModel:
         mask = self._mask_after.get(number & WORD, self.notifications)
         if condition == AsyncCondition.SEGMENT_COMPLETED:
             if not mask & _SEGMENT_BIT:
-                return Finding(
+                return finding(
                     "async.only-when-requested",
                     "no segment-completed response: not asked for (0257 mask bit 1 clear)",
                     f"segment-completed for segment {word3} after request {number}",
                 )
             if word2 != 0:
-                return Finding("async.layout", "reserved word 0", f"word2 = {word2}")
+                return finding("async.layout", "reserved word 0", f"word2 = {word2}")
             if word3 not in self.outstanding:
-                return Finding(
+                return finding(
                     "async.layout",
                     f"a queued segment not yet reported or dropped (outstanding: {self.outstanding})",
                     f"segment {word3}",
@@ -457,29 +452,29 @@ class ProtocolModel:
             return None
         if condition == AsyncCondition.GUARD_HIT:
             if not mask & _GUARD_BIT:
-                return Finding(
+                return finding(
                     "async.only-when-requested",
                     "no guard-hit response: not asked for (0257 mask bit 0 clear)",
                     f"guard hit, guard {word3}",
                 )
             if word2 not in (1, 2):
-                return Finding("async.layout", "word2 1 (stop) or 2 (continue)", f"word2 = {word2}")
+                return finding("async.layout", "word2 1 (stop) or 2 (continue)", f"word2 = {word2}")
             return None
-        return Finding(
+        return finding(
             "async.codes", "condition 1 (guard hit) or 2 (segment completed)", f"condition {condition}"
         )
 
-    def on_async_error(self, number: int, error: ErrorMessage) -> Finding | None:
+    def on_async_error(self, number: int, error: ErrorMessage) -> Violation | None:
         """An asynchronous error (0204) arrived.  While segments may be running it reports an abort
         (clause motion.abort): queued segments are dropped and motion is refused until a reset."""
         if not self.last_processed_ok(number):
-            return Finding(
+            return finding(
                 "async-error.request-number",
                 "the number of the last request processed",
                 f"request number {number}",
             )
         if error.severity not in ("E", "C", "BE"):
-            return Finding(
+            return finding(
                 "error.severity-matches-opcode", "severity E, C or BE on 0204", f"severity {error.severity}"
             )
         if self.outstanding or self.aborted is None:

@@ -117,7 +117,7 @@ def by_clause(report: RunReport) -> list[ClauseTally]:
             else:
                 continue
             buckets[key][bucket].add(result.id)
-            levels.setdefault(key, violation.level)
+            levels.setdefault(key, violation.strength)
     tallies = []
     for (clause, kind), groups in buckets.items():
         spec = SPEC.clauses.get(clause) if clause is not None else None

@@ -38,7 +38,6 @@ from typing import Final, Literal
 from manip.captures import Session
 from manip.conformance.judge.checks import (
     CLOSE_OPCODES,
-    Finding,
     WirePacket,
     check_client_request,
     check_transcript,
@@ -274,15 +273,16 @@ _PREFIX_FAMILY: Final = {
 }
 
 
-def family_of(clause: str) -> Family:
-    """The family a finding's clause belongs to (codec clauses by their area; the rest: reply shapes)."""
+def family_of(clause: str | None) -> Family:
+    """The family a finding's clause belongs to (codec clauses by their area; the rest, and a finding
+    without a clause: reply shapes)."""
     if clause in _BY_CLAUSE:
         return _BY_CLAUSE[clause]
-    name = _PREFIX_FAMILY.get(clause.split(".", 1)[0], "reply-shapes")
+    name = _PREFIX_FAMILY.get((clause or "").split(".", 1)[0], "reply-shapes")
     return next(f for f in FAMILIES if f.name == name)
 
 
-def fatal_close_findings(packets: Sequence[WirePacket]) -> list[Finding]:
+def fatal_close_findings(packets: Sequence[WirePacket]) -> list[Violation]:
     """After a fatal error the first close must be the server's (a recording shows who closed first)."""
     fatal: WirePacket | None = None
     for p in packets:
@@ -293,9 +293,9 @@ def fatal_close_findings(packets: Sequence[WirePacket]) -> list[Finding]:
         if p.is_close:
             if p.direction == "c2s":
                 return [
-                    Finding(
-                        "error.fatal-then-close",
+                    Violation(
                         "the client closed the connection first after the fatal error",
+                        "error.fatal-then-close",
                         expected="CLS from the server after the fatal error",
                         actual=f"the client's {describe(p)} first",
                         data=fatal.data,
@@ -306,7 +306,7 @@ def fatal_close_findings(packets: Sequence[WirePacket]) -> list[Finding]:
     return []
 
 
-def judge_session(session: Session, connection: int = 0) -> tuple[list[WirePacket], list[Finding]]:
+def judge_session(session: Session, connection: int = 0) -> tuple[list[WirePacket], list[Violation]]:
     """The session's packets and every finding about them (the server's and the client's)."""
     packets = wire_packets(session, connection)
     rfc = rfc_number(session)
@@ -327,11 +327,9 @@ def session_hazard(packets: Sequence[WirePacket]) -> Hazard:
     return HAZARD_ORDER[max(levels, default=0)]
 
 
-def judge_findings(result: CaseResult, findings: Iterable[Finding], *, strict: bool) -> None:
+def judge_findings(result: CaseResult, findings: Iterable[Violation], *, strict: bool) -> None:
     """Record ``findings`` as the result's violations (MUST first) and set its outcome."""
-    items = sorted(findings, key=lambda f: -LEVEL_ORDER[f.level])
-    for f in items:
-        result.violations.append(Violation(f.message, f.clause, f.level, f.expected, f.actual, f.data))
+    result.violations.extend(sorted(findings, key=lambda f: -LEVEL_ORDER[f.strength]))
     counted = {"MUST", "SHOULD"} if strict else {"MUST"}
     if result.violations and result.outcome in ("pass", "skip"):
         result.outcome = "fail" if any(v.level in counted for v in result.violations) else "warn"
@@ -373,7 +371,7 @@ def verify_capture(
         start = time.monotonic()
         packets, findings = judge_session(session, connection=number - 1)
         initial = rfc_number(session) is not None
-        by_family: dict[str, list[Finding]] = {}
+        by_family: dict[str, list[Violation]] = {}
         for f in findings:
             by_family.setdefault(family_of(f.clause).name, []).append(f)
         hazard = session_hazard(packets)

@@ -55,6 +55,7 @@ from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final, Literal, get_args
 
+from manip.conformance.judge.violation import FailureKind, Violation
 from manip.spec import SPEC
 from manip.spec.model import Hazard, Level
 
@@ -101,40 +102,69 @@ class UndeclaredClauseError(CaseError):
 
 
 class CaseFailure(Exception):  # noqa: N818 - an outcome, not an error of the suite
-    """The target broke a clause.  Raised by ``ctx.expect``/``ctx.fail``; ends the case as ``fail``.
-
-    ``expected`` and ``actual`` are short human texts (h2spec's two-part message); ``data`` the bytes
-    that showed it (shown in hex); ``kind`` one of ``wrong_value``, ``malformed``, ``timeout``,
-    ``closed``, ``missing_response``, ``unexpected_message``, ``deadline``.  ``invariant`` names the
-    suite invariant whose machinery found it (the probes set it); otherwise the clause must be one the
-    running case declares."""
+    """The target broke a clause: raised by ``ctx.expect``/``ctx.fail`` and the probes; ends the case as
+    ``fail``.  It carries one :class:`~manip.conformance.judge.violation.Violation` (``.violation``),
+    given whole or built from the same arguments (``CaseFailure("message", clause=..., ...)``)."""
 
     def __init__(
         self,
-        message: str,
+        message: str | Violation,
         *,
         clause: str | None = None,
         expected: str = "",
         actual: str = "",
         data: bytes = b"",
-        kind: str = "wrong_value",
+        kind: FailureKind = "wrong_value",
         invariant: str | None = None,
     ) -> None:
-        super().__init__(message)
-        self.message = message
-        self.clause = clause
-        self.expected = expected
-        self.actual = actual
-        self.data = bytes(data)
-        self.kind = kind
-        self.invariant = invariant
+        violation = (
+            message
+            if isinstance(message, Violation)
+            else Violation(
+                message,
+                clause,
+                expected=expected,
+                actual=actual,
+                data=data,
+                kind=kind,
+                invariant=invariant,
+            )
+        )
+        super().__init__(violation.message)
+        self.violation = violation
+
+    # The violation's fields, read through the failure (``exc.clause``...).
+    @property
+    def message(self) -> str:
+        return self.violation.message
+
+    @property
+    def clause(self) -> str | None:
+        return self.violation.clause
+
+    @property
+    def expected(self) -> str:
+        return self.violation.expected
+
+    @property
+    def actual(self) -> str:
+        return self.violation.actual
+
+    @property
+    def data(self) -> bytes:
+        return self.violation.data
+
+    @property
+    def kind(self) -> FailureKind:
+        return self.violation.kind
+
+    @property
+    def invariant(self) -> str | None:
+        return self.violation.invariant
 
     @property
     def level(self) -> Level | None:
-        """The level of the clause broken, when one is named."""
-        if self.clause is None or self.clause not in SPEC.clauses:
-            return None
-        return SPEC.clauses[self.clause].level
+        return self.violation.level
 
 
 class CaseSkipped(Exception):  # noqa: N818 - an outcome

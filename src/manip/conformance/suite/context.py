@@ -23,7 +23,7 @@ server's packets in the order they come, and judges nothing by itself (the check
 * ``probe.packets``: the recording (:class:`~manip.conformance.judge.checks.WirePacket`, both directions,
   times from the start of the case; the end of the connection is a CLS/EOF/LOS pseudo-packet).
 
-``ctx.expect(cond, clause=..., expected=..., actual=..., data=...)`` is the one way to state a check:
+``ctx.expect(cond, clause=..., expected=..., seen=answer)`` is the one way to state a check:
 false on a MUST clause raises :class:`CaseFailure`; false on a SHOULD/MAY/INFO clause is recorded
 (``ctx.soft_failures``) and the case goes on.  The clause must be one the case declares: any other is a
 bug of the suite (:class:`~manip.conformance.suite.case.UndeclaredClauseError`, raised at the call whether the
@@ -39,14 +39,15 @@ import contextlib
 import random
 import time
 from collections.abc import Awaitable, Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Final, Literal, NoReturn
 
 from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request, request_op
 from manip.codecs.packet import Packet
 from manip.codecs.pdp11float import unpack_f
-from manip.conformance.judge.checks import ANSWER_OPCODES, Finding, WirePacket, describe, word
+from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, describe, word
+from manip.conformance.judge.violation import Violation, evidence
 from manip.conformance.suite.case import (
     LEVEL_ORDER,
     CaseError,
@@ -66,7 +67,6 @@ __all__ = [
     "Connector",
     "Probe",
     "RunOptions",
-    "SoftFailure",
 ]
 
 Target = Literal["sim", "hardware"]
@@ -101,20 +101,6 @@ class RunOptions:
         if self.target == "sim" or self.allow_motion:
             return frozenset({"read-only", "config", "motion", "power"})
         return frozenset({"read-only", "config"})
-
-
-@dataclass(frozen=True)
-class SoftFailure:
-    """A SHOULD/MAY/INFO clause the target broke; the case went on."""
-
-    message: str
-    clause: str | None
-    level: Level
-    expected: str = ""
-    actual: str = ""
-    data: bytes = b""
-    invariant: str | None = None
-    """The suite invariant it is attributed to, when the case does not declare the clause."""
 
 
 @dataclass(frozen=True)
@@ -431,7 +417,8 @@ class CaseContext:
         self.transcript: list[WirePacket] = []
         """Every packet of every probe of this case, in the order recorded."""
         self.probes: list[Probe] = []
-        self.soft_failures: list[SoftFailure] = []
+        self.soft_failures: list[Violation] = []
+        """The SHOULD/MAY/INFO violations recorded on the way (the case went on)."""
         self.notes: list[str] = []
         self.auto_check = True
         """After the case, the runner checks every probe's whole recording with
@@ -520,6 +507,7 @@ class CaseContext:
         *,
         clause: str | None = None,
         expected: str = "",
+        seen: object = None,
         actual: object = "",
         data: bytes = b"",
         message: str | None = None,
@@ -528,9 +516,14 @@ class CaseContext:
     ) -> bool:
         """Check ``condition``; when false: MUST raises CaseFailure, weaker levels are recorded.
 
-        The level is ``level`` if given, else the clause's, else the case's.  Returns ``bool(condition)``.
-        ``clause`` must be one the case declares, or one of ``invariant``'s when a suite invariant's
-        finding is passed on: checked at every call, true or not (UndeclaredClauseError)."""
+        ``seen`` is the evidence (an answer, a packet, Cougar responses, a list of them...): the
+        violation's ``actual`` text and bytes are derived from it
+        (:func:`~manip.conformance.judge.violation.evidence`); ``actual``/``data`` say it in the case's
+        own words instead.  The level is ``level`` if given, else the clause's, else the case's.
+        Returns ``bool(condition)``.  ``clause`` must be one the case declares, or one of
+        ``invariant``'s when a suite invariant's finding is passed on: checked at every call, true or
+        not (UndeclaredClauseError).  ``clause`` and ``expected`` are keywords so that the clause scan of
+        ``tests/clause_scan.py`` sees every clause a case can report."""
         attributed = self._attribute(clause, invariant)
         if (
             level is not None
@@ -544,32 +537,34 @@ class CaseContext:
             )
         if condition:
             return True
-        lv = self._clause_level(clause, level)
-        text = message or (f"expected {expected}" if expected else "check failed")
-        if lv == "MUST":
-            raise CaseFailure(
-                text, clause=clause, expected=expected, actual=str(actual), data=data, invariant=attributed
+        shown, shown_data = evidence(seen) if seen is not None else ("", b"")
+        self._report(
+            Violation(
+                message or (f"expected {expected}" if expected else "check failed"),
+                clause,
+                self._clause_level(clause, level),
+                expected,
+                str(actual) if actual != "" else shown,
+                bytes(data) if data else shown_data,
+                invariant=attributed,
             )
-        self.soft_failures.append(
-            SoftFailure(text, clause, lv, expected, str(actual), bytes(data), attributed)
         )
         return False
 
-    def check(self, findings: Iterable[Finding]) -> bool:
-        """Apply :meth:`expect` to a checker's findings (MUST ones raise, the first first).  True when
-        there were none.  The checkers are the transcript invariant's: a finding of a clause the case
-        does not declare is attributed to it."""
-        items = sorted(findings, key=lambda f: -LEVEL_ORDER[f.level])
+    def _report(self, violation: Violation) -> None:
+        """A MUST violation ends the case; a weaker one is recorded and the case goes on."""
+        if violation.level == "MUST":
+            raise CaseFailure(violation)
+        self.soft_failures.append(violation)
+
+    def check(self, findings: Iterable[Violation]) -> bool:
+        """Report a checker's findings (MUST ones raise, the first first).  True when there were none.
+        The checkers are the transcript invariant's: a finding of a clause the case does not declare is
+        attributed to it."""
+        items = sorted(findings, key=lambda f: -LEVEL_ORDER[f.strength])
         for finding in items:
-            self.expect(
-                False,
-                clause=finding.clause,
-                expected=finding.expected,
-                actual=finding.actual,
-                data=finding.data,
-                message=finding.message,
-                invariant=TRANSCRIPT.name,
-            )
+            attributed = self._attribute(finding.clause, TRANSCRIPT.name)
+            self._report(replace(finding, invariant=attributed))
         return not items
 
     def fail(
@@ -578,15 +573,29 @@ class CaseContext:
         *,
         clause: str | None = None,
         expected: str = "",
+        seen: object = None,
         actual: object = "",
         data: bytes = b"",
         invariant: str | None = None,
     ) -> NoReturn:
-        """Fail outright; ``clause`` and ``invariant`` as for :meth:`expect`."""
+        """Fail outright; ``clause``, ``seen`` and ``invariant`` as for :meth:`expect`."""
         attributed = self._attribute(clause, invariant)
+        shown, shown_data = evidence(seen) if seen is not None else ("", b"")
         raise CaseFailure(
-            message, clause=clause, expected=expected, actual=str(actual), data=data, invariant=attributed
+            Violation(
+                message,
+                clause,
+                expected=expected,
+                actual=str(actual) if actual != "" else shown,
+                data=bytes(data) if data else shown_data,
+                invariant=attributed,
+            )
         )
+
+    def fail_with(self, violation: Violation) -> NoReturn:
+        """Fail with a violation found elsewhere (a failed example's); attributed as for :meth:`expect`."""
+        attributed = self._attribute(violation.clause, violation.invariant)
+        raise CaseFailure(replace(violation, invariant=attributed))
 
     def skip(self, reason: str) -> NoReturn:
         raise CaseSkipped(reason)

@@ -21,7 +21,9 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Final, Literal
 
-from manip.conformance.judge.checks import WirePacket
+from manip.conformance.judge.packets import WirePacket
+from manip.conformance.judge.violation import Violation
+from manip.spec.model import Level
 
 __all__ = ["OUTCOMES", "CaseResult", "ExitCode", "LivenessCheck", "Outcome", "RunReport", "Violation"]
 
@@ -37,35 +39,11 @@ class ExitCode(enum.IntEnum):
     INTERNAL = 4
 
 
-@dataclass(frozen=True)
-class Violation:
-    """One clause the target broke, as a case saw it."""
-
-    message: str
-    clause: str | None
-    level: str
-    expected: str = ""
-    actual: str = ""
-    data: bytes = b""
-    kind: str = "wrong_value"
-
-    def to_json(self) -> dict[str, object]:
-        return {
-            "message": self.message,
-            "clause": self.clause,
-            "level": self.level,
-            "expected": self.expected,
-            "actual": self.actual,
-            "bytes": self.data.hex(),
-            "kind": self.kind,
-        }
-
-
 @dataclass
 class CaseResult:
     id: str
     clauses: tuple[str, ...]
-    level: str
+    level: Level
     kind: str
     hazard: str
     summary: str

@@ -39,14 +39,14 @@ import shlex
 import time
 import traceback
 from collections.abc import Awaitable, Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 
 from manip.conformance.judge.checks import check_transcript
 from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
 from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.invariants import attribution_problem
-from manip.conformance.suite.results import CaseResult, LivenessCheck, Outcome, RunReport, Violation
+from manip.conformance.suite.results import CaseResult, LivenessCheck, Outcome, RunReport
 from manip.conformance.suite.selection import PatternSet
 from manip.links import ChaosConnection, ConnectionRefused, open_connection
 from manip.links.api import LinkWrapper
@@ -371,22 +371,8 @@ class Runner:
         strict = self.config.options.strict
         counted = {"MUST", "SHOULD"} if strict else {"MUST"}
         if failure is not None:
-            level = failure.level or result.level
-            result.violations.append(
-                Violation(
-                    failure.message,
-                    failure.clause,
-                    level,
-                    failure.expected,
-                    failure.actual,
-                    failure.data,
-                    failure.kind,
-                )
-            )
-        for soft in ctx.soft_failures:
-            result.violations.append(
-                Violation(soft.message, soft.clause, soft.level, soft.expected, soft.actual, soft.data)
-            )
+            result.violations.append(replace(failure.violation, level=failure.level or result.level))
+        result.violations += ctx.soft_failures
         if result.outcome in ("pass",) and result.violations:
             result.outcome = "fail" if any(v.level in counted for v in result.violations) else "warn"
         if result.known_failing:

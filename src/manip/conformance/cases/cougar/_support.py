@@ -69,15 +69,13 @@ def expect_reply(ctx: CaseContext, reply: WordReply, name: str, clause: str, *, 
         not reply.problem,
         clause="cougar.response.layout",
         expected=f"a Table 1 response{where} ({name}, code {code})",
-        actual=str(reply),
-        data=words_bytes(reply.words),
+        seen=reply,
     )
     ctx.expect(
         reply.name == name,
         clause=clause,
         expected=f"{name} (code {code}){where}",
-        actual=str(reply),
-        data=words_bytes(reply.words),
+        seen=reply,
     )
     return reply
 
@@ -87,8 +85,7 @@ def expect_none(ctx: CaseContext, replies: Sequence[WordReply], clause: str, why
         not replies,
         clause=clause,
         expected=f"no response ({why})",
-        actual="; ".join(str(r) for r in replies),
-        data=words_bytes([w for r in replies for w in r.words]),
+        seen=replies,
     )
 
 
@@ -107,8 +104,7 @@ async def expect_examine(ctx: CaseContext, probe: CougarProbe, address: int, cou
         reply.data_words[:1] == (count,) and len(words) == count,
         clause="cougar.exmn.reply",
         expected=f"EXMN of {count} word(s) at {address:o}: count word {count}, then {count} words",
-        actual=str(reply),
-        data=words_bytes(reply.words),
+        seen=reply,
     )
     return words
 

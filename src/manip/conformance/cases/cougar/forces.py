@@ -21,7 +21,6 @@ from manip.conformance.cases.cougar._support import (
 from manip.conformance.cougar.probe import (
     CougarProbe,
     cougar_probe,
-    words_bytes,
 )
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
@@ -57,8 +56,7 @@ async def adc8_integer_filter(ctx: CaseContext) -> None:
                 reply.data_words[:1] == (r.words,),
                 clause="cougar.exmn.reply",
                 expected=f"{r.words} words of {r.name}",
-                actual=str(reply),
-                data=words_bytes(reply.words),
+                seen=reply,
             )
         ctx.expect(
             got[0].tick == got[1].tick,

@@ -15,7 +15,6 @@ from manip.conformance.cases.cougar._support import (
 )
 from manip.conformance.cougar.probe import (
     cougar_probe,
-    words_bytes,
 )
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
@@ -44,8 +43,7 @@ async def guard_trips_once(ctx: CaseContext) -> None:
             clause="cougar.guard-trips-once",
             expected="exactly one GUARD-STOP (6) for guard 3 and one GUARD-CONTINUE (7) for guard 12 "
             "in 8 ticks, none for guard 7 (tolerance never reached)",
-            actual="; ".join(str(r) for r in got) or "nothing",
-            data=words_bytes([w for r in got for w in r.words]),
+            seen=got,
         )
         expect_none(ctx, others(got), "cougar.guards", "only guard responses")
         await probe.send_words(guard_words(STOP_BIT | 3))
@@ -54,8 +52,7 @@ async def guard_trips_once(ctx: CaseContext) -> None:
             guard_trips(got) == [("GUARD-STOP", 3)],
             clause="cougar.guard-trips-once",
             expected="guard 3, armed again, trips once more (one GUARD-STOP 3)",
-            actual="; ".join(str(r) for r in got) or "nothing",
-            data=words_bytes([w for r in got for w in r.words]),
+            seen=got,
         )
         await probe.send("GUARDC", index=7)
         await probe.run(1)
@@ -79,8 +76,7 @@ async def guard_clear(ctx: CaseContext) -> None:
             guard_trips(got) == [("GUARD-CONTINUE", 9)],
             clause="cougar.guardc",
             expected="guard 5 cleared in the same tick it was armed never trips; guard 9 trips once",
-            actual="; ".join(str(r) for r in got) or "nothing",
-            data=words_bytes([w for r in got for w in r.words]),
+            seen=got,
         )
 
 
@@ -116,7 +112,6 @@ async def guard_condition(ctx: CaseContext) -> None:
             sorted(guard_trips(got)) == sorted(expected),
             clause="cougar.guards",
             expected=f"with force[{axis}] = {f:.4g}: guards 1 and 3 trip (dot > tol), 2 and 4 do not",
-            actual="; ".join(str(r) for r in got) or "nothing",
-            data=words_bytes([w for r in got for w in r.words]),
+            seen=got,
         )
         await clean(probe)

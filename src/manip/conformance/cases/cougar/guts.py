@@ -83,14 +83,14 @@ async def guts_no_nesting(ctx: CaseContext) -> None:
             not nested,
             clause="cougar.guts-reentry",
             expected=f"no words from a tick {REENTRY_GAP_S * 1e6:g} us after the previous one",
-            actual="; ".join(str(r) for r in nested),
+            seen=nested,
         )
         late = await probe.run(1)
         ctx.expect(
             [r.name for r in late] == ["VERSION"],
             clause="cougar.guts-reentry",
             expected="the VERS waiting in the buffer answered at the next full tick",
-            actual="; ".join(str(r) for r in late) or "nothing",
+            seen=late,
         )
 
 
@@ -115,12 +115,12 @@ async def guts_reentry(ctx: CaseContext) -> None:
             not early,
             clause="cougar.guts-cost-model",
             expected="no words from a tick that re-entered GUTS",
-            actual="; ".join(str(r) for r in early),
+            seen=early,
         )
         late = await probe.run(1) if not early else []
         ctx.expect(
             [r.name for r in late] == ["VERSION"] or bool(early),
             clause="cougar.guts-cost-model",
             expected="the VERS waiting in the buffer answered at the next full tick",
-            actual="; ".join(str(r) for r in late) or "nothing",
+            seen=late,
         )

@@ -74,8 +74,7 @@ async def comint_in_order(ctx: CaseContext) -> None:
             [r.name for r in replies] == expected,
             clause="cougar.comint.partial-waits",
             expected=" then ".join(expected),
-            actual="; ".join(str(r) for r in replies) or "nothing",
-            data=words_bytes([w for r in replies for w in r.words]),
+            seen=replies,
         )
 
 
@@ -110,8 +109,7 @@ async def comint_partial_waits(ctx: CaseContext) -> None:
                     [r.words for r in got] == [whole.words],
                     clause="cougar.comint.partial-waits",
                     expected=f"the split EXMN answered as the whole one: {octal(whole.words)}",
-                    actual="; ".join(str(r) for r in got) or "nothing",
-                    data=words_bytes([w for r in got for w in r.words]),
+                    seen=got,
                 )
         npr = encode("command", "NPR", theta_sensed=READY, theta_commanded=READY, rate_difference=(0.0,) * 6)
         cuts = (1, 6, 30, len(npr))
@@ -128,8 +126,7 @@ async def comint_partial_waits(ctx: CaseContext) -> None:
                     [r.name for r in got] == ["NTD"],
                     clause="cougar.comint.partial-waits",
                     expected="one NTD once the last word of the split NPR arrived",
-                    actual="; ".join(str(r) for r in got) or "nothing",
-                    data=words_bytes([w for r in got for w in r.words]),
+                    seen=got,
                 )
         expect_reply(ctx, await probe.call("VERS", version=1), "VERSION", "cougar.word-link")
 
@@ -157,15 +154,13 @@ async def comint_unknown_code(ctx: CaseContext) -> None:
                 clause="cougar.comint.unknown-code",
                 expected=f"one OUT-OF-SYNC (code 2) for the unknown code {bad:o}, "
                 "and the VERS after it dumped with the buffer",
-                actual="; ".join(str(r) for r in got) or "nothing",
-                data=words_bytes([w for r in got for w in r.words]),
+                seen=got,
             )
             ctx.expect(
                 got[0].data_words == (bad,),
                 clause="cougar.comint.unknown-code",
                 expected=f"OUT-OF-SYNC carrying the bad word {bad:o} (erratum cougar-out-of-sync)",
-                actual=str(got[0]),
-                data=words_bytes(got[0].words),
+                seen=got[0],
             )
             reply = await probe.call("VERS", version=1)
             expect_reply(ctx, reply, "VERSION", "cougar.comint.unknown-code", after="the next VERS")

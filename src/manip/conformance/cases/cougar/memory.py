@@ -49,8 +49,7 @@ async def memory_deposit_examine(ctx: CaseContext) -> None:
                 reply.data_words == (new,),
                 clause="cougar.memory",
                 expected=f"VERS reports the deposited version word {new:o}",
-                actual=str(reply),
-                data=words_bytes(reply.words),
+                seen=reply,
             )
         finally:
             await probe.send("DPST", address=address, value=old)

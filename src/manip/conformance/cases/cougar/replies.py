@@ -150,8 +150,7 @@ async def exmn_bad_address(ctx: CaseContext) -> None:
                 reply.data_words[:1] == (returned,) and len(reply.data_words) == 1 + returned,
                 clause="cougar.exmn.reply",
                 expected=f"EXMN of {count} at {address:o} ({what}): count word {returned}, {returned} words",
-                actual=str(reply),
-                data=words_bytes(reply.words),
+                seen=reply,
             )
         ctx.expect(
             (await probe.call("VERS", version=1)).name == "VERSION",

@@ -21,7 +21,6 @@ from manip.conformance.cougar.probe import (
     cougar_probe,
     floats_of,
     octal,
-    words_bytes,
 )
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
@@ -101,8 +100,7 @@ def _expect_sync(
         clause="cougar.word-link",
         expected=f"{msg.name} ({octal(sent)}), NOP, VERS answered by {', '.join(expected)}: "
         "the command taken with its Table 1 data length, sync kept",
-        actual="; ".join(str(r) for r in replies) or "nothing",
-        data=words_bytes([w for r in replies for w in r.words]),
+        seen=replies,
     )
 
 

@@ -73,8 +73,7 @@ async def reply_shape(ctx: CaseContext) -> None:
         after.number == after.request.packet_no,
         clause="request.one-reply",
         expected=f"the reply to request #{after.request.packet_no} after the terminator",
-        actual=str(after),
-        data=after.data,
+        seen=after,
     )
 
 

@@ -19,8 +19,7 @@ async def _command_error(ctx: CaseContext, probe: Probe, clause: str | None = No
             answer.opcode == ServerOp.NON_FATAL_ERROR,
             clause=clause,
             expected="a non-fatal error (202) for an unknown opcode",
-            actual=str(answer),
-            data=answer.data,
+            seen=answer,
         )
     elif answer.opcode != ServerOp.NON_FATAL_ERROR:
         ctx.skip(f"no non-fatal error to judge: an unknown opcode was answered with {answer}")
@@ -100,8 +99,7 @@ async def non_fatal_is_reply(ctx: CaseContext) -> None:
         after.number == after.request.packet_no,
         clause="request.one-reply",
         expected="the next reply answers the next request",
-        actual=str(after),
-        data=after.data,
+        seen=after,
     )
 
 
@@ -121,8 +119,7 @@ async def fatal_then_close(ctx: CaseContext) -> None:
             len(answer.data) == 2,
             clause="calibrate.done",
             expected="an empty done",
-            actual=str(answer),
-            data=answer.data,
+            seen=answer,
         )
         ctx.skip("calibrate succeeded: the target gave no fatal error to observe")
     if answer.opcode != ServerOp.FATAL_ERROR:
@@ -132,8 +129,7 @@ async def fatal_then_close(ctx: CaseContext) -> None:
         answer.number == answer.request.packet_no,
         clause="error.fatal-request-number",
         expected=f"request number {answer.request.packet_no}, the packet last received",
-        actual=str(answer),
-        data=answer.data,
+        seen=answer,
     )
     error = error_of(answer)
     if error is not None and error.error.code == "NZI":

@@ -395,8 +395,7 @@ async def broken(ctx: CaseContext) -> None:
         here.is_response,
         clause="ncp.broken",
         expected="a new connection served (the robot freed when the silent one was given up)",
-        actual=str(here),
-        data=here.data,
+        seen=here,
     )
 
 

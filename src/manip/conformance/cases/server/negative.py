@@ -221,8 +221,7 @@ async def oversize_frame(ctx: CaseContext) -> None:
             "the oversize packet was served",
             clause="chaos.data.max-488",
             expected="the frame refused (LOS, or the link closed)",
-            actual=str(first),
-            data=first.data,
+            seen=first,
         )
     fresh = await ctx.connect()
     answer = await fresh.call("here")

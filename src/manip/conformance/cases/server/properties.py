@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any, Final
 
 from hypothesis import given, reject, seed
@@ -281,14 +282,7 @@ async def run_property(
         if notes:
             actual += f"\n{notes}"
         actual += _example_text(failure)
-        ctx.fail(
-            failure.message,
-            clause=failure.clause,
-            expected=failure.expected,
-            actual=actual,
-            data=failure.data,
-            invariant=failure.invariant,
-        )
+        ctx.fail_with(replace(failure.violation, actual=actual))
 
 
 # ------------------------------------------------------------------------------- well-formed replies

@@ -60,8 +60,7 @@ async def _release_free_joint(ctx: CaseContext, probe: Probe) -> None:
         follow.is_response and len(follow.data) == 2,
         clause="free-joint.replies",
         expected="an empty done for the packet after free joint",
-        actual=str(follow),
-        data=follow.data,
+        seen=follow,
     )
 
 

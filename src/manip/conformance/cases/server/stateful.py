@@ -27,8 +27,8 @@ name, data in hex, the waits in between) with a Python line that replays it: :fu
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar, Final
 
 from hypothesis import seed
@@ -66,7 +66,8 @@ from manip.conformance.judge.checks import (
     describe,
     word,
 )
-from manip.conformance.judge.model import MODEL_CLAUSES, Finding, ProtocolModel
+from manip.conformance.judge.model import MODEL_CLAUSES, ProtocolModel
+from manip.conformance.judge.violation import Violation
 from manip.conformance.output.packet_text import packet_listing
 from manip.conformance.suite.bridge import (
     Bridge,
@@ -137,7 +138,9 @@ class Step:
 class MachineFailure(Evidence):
     """A failed run of the machine, with the steps that led to it."""
 
-    steps: list[Step] = field(default_factory=list)
+    def __init__(self, *args: Any, steps: Iterable[Step] = (), **kwargs: Any) -> None:
+        Evidence.__init__(self, *args, **kwargs)
+        self.steps = list(steps)
 
 
 @dataclass
@@ -229,12 +232,13 @@ class ArmProtocolMachine(RuleBasedStateMachine):
 
     def _finding(
         self,
-        finding: Finding | None,
+        finding: Violation | None,
         packets: Sequence[WirePacket] = (),
         data: bytes = b"",
         what: str = "an asynchronous packet",
     ) -> None:
         if finding is not None:
+            assert finding.clause is not None  # the model's findings always name one
             raise self._fail(
                 finding.clause,
                 f"{what}: the arm model does not allow {finding.actual}",
@@ -249,6 +253,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         found = must(findings)
         if found:
             first = found[0]
+            assert first.clause is not None  # a checker's findings always name one
             packets = [first.packet] if first.packet is not None else []
             raise self._fail(
                 first.clause,
@@ -693,14 +698,8 @@ async def arm_model(ctx: CaseContext) -> None:
     if note:
         ctx.note(note)
     if failure is not None:
-        ctx.fail(
-            failure.message,
-            clause=failure.clause,
-            expected=failure.expected,
-            actual=_counterexample(failure, ctx.options.address or "tcp://HOST:PORT"),
-            data=failure.data,
-            invariant=failure.invariant,
-        )
+        shown = _counterexample(failure, ctx.options.address or "tcp://HOST:PORT")
+        ctx.fail_with(replace(failure.violation, actual=shown))
 
 
 # ------------------------------------------------------------------------------------- replay
