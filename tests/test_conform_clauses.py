@@ -128,9 +128,8 @@ def _fake_case(function: Callable[..., Awaitable[None]], *clauses: str) -> Case:
         function=function,
         clauses=clauses or ("request.one-reply",),
         level="MUST",
-        kind="scripted",
+        technique="scripted",
         hazard="read-only",
-        fresh=True,
         deadline=1.0,
         summary="",
         module=function.__module__,
@@ -369,7 +368,7 @@ async def _times_out(ctx: CaseContext) -> None:
 def test_the_runner_turns_an_undeclared_report_into_an_error() -> None:
     def item(case_id: str, body: Callable[[CaseContext], Awaitable[None]]) -> Case:
         return Case(
-            case_id, body, ("here.transform",), "MUST", "scripted", "read-only", True, 2.0, "", __name__
+            case_id, body, ("here.transform",), "MUST", "scripted", "read-only", 2.0, "", __name__
         )
 
     cases = [item("t.raised", _raises_undeclared), item("t.expected", _expects_undeclared)]

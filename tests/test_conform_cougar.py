@@ -91,8 +91,8 @@ def test_server_runs_leave_out_cougar_cases() -> None:
     server = cougar_cases(cases, cougar=False)
     cougar = cougar_cases(cases, cougar=True)
     assert server and cougar
-    assert all(c.kind != "cougar" for c in server)
-    assert all(c.kind == "cougar" and c.id.startswith("cougar.") for c in cougar)
+    assert all(c.target == "server" for c in server)
+    assert all(c.target == "cougar" and c.id.startswith("cougar.") for c in cougar)
 
 
 def test_external_cougar_is_checked_over_its_url() -> None:

@@ -167,9 +167,8 @@ def _case(case_id: str, body: Callable[[CaseContext], Awaitable[None]], **kw: An
     defaults: dict[str, Any] = {
         "clauses": ("request.one-reply",),
         "level": "MUST",
-        "kind": "scripted",
+        "technique": "scripted",
         "hazard": "read-only",
-        "fresh": True,
         "deadline": 2.0,
         "summary": "",
         "module": __name__,

@@ -619,7 +619,8 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
                 "id": c.id,
                 "clauses": list(c.clauses),
                 "level": c.level,
-                "kind": c.kind,
+                "kind": c.technique,
+                "target": c.target,
                 "hazard": c.hazard,
                 "deadline": c.deadline,
                 "summary": c.summary,
@@ -632,7 +633,7 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
     for column in ("id", "level", "kind", "hazard", "clauses"):
         table.add_column(column)
     for c in items:
-        table.add_row(c.id, c.level, c.kind, c.hazard, " ".join(c.clauses))
+        table.add_row(c.id, c.level, c.technique, c.hazard, " ".join(c.clauses))
     make_console(min_width=TABLE_WIDTH).print(table)
 
 

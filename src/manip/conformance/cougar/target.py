@@ -3,8 +3,9 @@
 ``--cougar tcp://HOST:PORT`` checks a Cougar already listening on the emulated DRV-11J (``manip-cougar``
 or a third party's); ``--cougar sim`` starts the simulated Cougar in-process on a free loopback port for
 the run (optionally with ``--cougar-fault`` defects, for proving the suite).  In this mode only cases of
-kind ``cougar`` run, each over its own DRV-11J link (:mod:`manip.conformance.cougar.probe`), and the
-liveness probe is a HELLO and one tick instead of a Chaos request.
+target ``cougar`` (ids ``cougar.*``) run, each over its own DRV-11J link
+(:mod:`manip.conformance.cougar.probe`), and the liveness probe is a HELLO and one tick instead of a
+Chaos request.
 """
 
 from __future__ import annotations
@@ -84,8 +85,8 @@ async def wait_idle(server: CougarServer, timeout: float = 1.0) -> None:
 
 
 def cougar_cases(cases: Sequence[Case], *, cougar: bool) -> list[Case]:
-    """The cases of a Cougar run (kind ``cougar``) or of a server run (every other kind)."""
-    return [c for c in cases if (c.kind == "cougar") == cougar]
+    """The cases of a Cougar run (target ``cougar``: ids ``cougar.*``) or of a server run (``server.*``)."""
+    return [c for c in cases if c.target == ("cougar" if cougar else "server")]
 
 
 async def liveness_check(options: RunOptions) -> tuple[bool, str]:

@@ -176,6 +176,7 @@ def _case_json(result: CaseResult) -> dict[str, Any]:
         "clauses": list(result.clauses),
         "level": result.level,
         "kind": result.kind,
+        "target": result.target,
         "hazard": result.hazard,
         "outcome": result.outcome,
         "known_failing": result.known_failing,

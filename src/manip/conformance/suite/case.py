@@ -7,22 +7,30 @@ A case is an ``async`` function of a :class:`~manip.conformance.suite.context.Ca
     from manip.conformance.suite.context import CaseContext
 
     @case(
-        "server.describe.terminator",                # hierarchical id: dot-separated components
+        "server.describe.terminator",                # id: target.area.name (server, cougar or client)
         clauses=["multi.terminated-by-empty"],       # clause ids of manip/spec/data/clauses.toml
         level="MUST",                                # the strongest level among the clauses (the default)
-        kind="scripted",                             # scripted | negative | property | stateful | cougar
+        technique="scripted",                        # scripted | negative | property | stateful
         hazard="read-only",                          # the most dangerous opcode the case may send
-        fresh=True,                                  # False: the case may share the previous case's link
         deadline=5.0,                                # seconds for the whole case (scaled by --deadline-scale)
         waits=None,                                  # or: options -> seconds spent on a target's timer
     )
     async def describe_terminator(ctx: CaseContext) -> None:
+        # (a docstring here: its first line is the case's summary)
         probe = await ctx.connect()                  # fresh Chaos connection, initial RESPONSE consumed
-        number = await probe.request("describe-self")
-        answer = await probe.replies_until_empty(number)
-        ctx.check(checks.check_multi_reply(...))     # findings from the pure checkers
+        answer = await probe.call("describe-self")   # every packet up to the empty terminator
+        ctx.check(check_reply(answer.request, answer.packets))   # findings of the pure checkers
         ctx.expect(answer.terminated, clause="multi.terminated-by-empty",
-                   expected="an empty RESPONSE ending the reply", actual="...", data=b"...")
+                   expected="an empty RESPONSE ending the reply", seen=answer)
+
+A family of cases generated from a table is declared once with :meth:`case.each <Declare.each>`: the
+decorated factory is called for every row and declares that row's case, giving its summary with
+``summary=`` (nothing mutates ``__doc__`` or ``__name__``)::
+
+    @case.each(SPEC.requests.values())
+    def _reply_case(op: RequestOpcode) -> None:
+        async def reply_shape(ctx: CaseContext) -> None: ...
+        case(f"server.reply.{op.name}", clauses=opcode_clauses(op), summary=f"{op.title}: ...")(reply_shape)
 
 Rules a case follows:
 
@@ -36,12 +44,12 @@ Rules a case follows:
   not applicable.  Any other exception is an ``error`` of the suite, reported with its traceback.
 * It never assumes state left by another case: each gets a fresh connection, which starts the
   per-connection state afresh (power, speed, segments; erratum ``server-robot``), but the arm stands
-  wherever the last case left it.  Only ``fresh=False`` cases may reuse a probe.
+  wherever the last case left it.
 * ``hazard`` is honest: with ``--target hardware`` cases above ``config`` are left out unless
   ``--allow-motion`` (property/stateful cases also read ``ctx.options.allowed_hazards`` to restrict
   what they generate).
 * Cases live in modules of :mod:`manip.conformance.cases` (any module there is imported by
-  :func:`load_cases`); a module may also generate cases in a loop by calling ``case(...)(function)``.
+  :func:`load_cases`), under ``cases/server/`` or ``cases/cougar/`` as the id's target says.
 
 Case ids are stable: never rename one that has shipped (known-failing files and reports name them).
 """
@@ -53,7 +61,7 @@ import pkgutil
 import re
 from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final, Literal, get_args
+from typing import TYPE_CHECKING, Final, Literal, TypeVar, get_args
 
 from manip.conformance.judge.violation import FailureKind, Violation
 from manip.spec import SPEC
@@ -66,22 +74,37 @@ __all__ = [
     "HAZARD_ORDER",
     "KINDS",
     "LEVEL_ORDER",
+    "TARGETS",
+    "TECHNIQUES",
     "Case",
     "CaseError",
     "CaseFailure",
     "CaseFunction",
     "CaseSkipped",
+    "Declare",
     "Kind",
+    "Target",
+    "Technique",
     "UndeclaredClauseError",
     "all_cases",
     "case",
     "load_cases",
     "register",
     "strongest_level",
+    "target_of",
 ]
 
-Kind = Literal["scripted", "negative", "property", "stateful", "cougar"]
-KINDS: Final[tuple[str, ...]] = get_args(Kind)
+Technique = Literal["scripted", "negative", "property", "stateful"]
+"""How a case tests: a scripted exchange, malformed input (``negative``: the target's liveness is
+checked after it), Hypothesis properties, or a Hypothesis state machine."""
+TECHNIQUES: Final[tuple[str, ...]] = get_args(Technique)
+Target = Literal["server", "cougar", "client"]
+"""What a case tests, from the first component of its id: a manip server, a Cougar, a client."""
+TARGETS: Final[tuple[str, ...]] = get_args(Target)
+Kind = Technique
+"""Deprecated name of :data:`Technique`."""
+KINDS: Final = TECHNIQUES
+"""Deprecated name of :data:`TECHNIQUES`."""
 
 LEVEL_ORDER: Final[Mapping[str, int]] = {"MUST": 3, "SHOULD": 2, "MAY": 1, "INFO": 0}
 """Strength of a level; a case's default level is the strongest among its clauses."""
@@ -89,6 +112,7 @@ HAZARD_ORDER: Final[Mapping[str, int]] = {"read-only": 0, "config": 1, "motion":
 """How dangerous an opcode class is on real hardware (the spec's hazard classes)."""
 
 CaseFunction = Callable[["CaseContext"], Awaitable[None]]
+Row = TypeVar("Row")
 
 _ID_COMPONENT = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
 
@@ -183,9 +207,8 @@ class Case:
     function: CaseFunction
     clauses: tuple[str, ...]
     level: Level
-    kind: Kind
+    technique: Technique
     hazard: Hazard
-    fresh: bool
     deadline: float
     summary: str
     module: str
@@ -201,8 +224,29 @@ class Case:
     def components(self) -> tuple[str, ...]:
         return tuple(self.id.split("."))
 
+    @property
+    def target(self) -> Target:
+        """What the case tests (the first component of its id)."""
+        return target_of(self.id)
+
+    @property
+    def kind(self) -> Technique:
+        """Deprecated name of :attr:`technique` (the report's ``kind``)."""
+        return self.technique
+
 
 _REGISTRY: dict[str, Case] = {}
+
+
+def target_of(case_id: str) -> Target:
+    """The target a case id names: ``cougar.*`` and ``client.*`` say so; every other id is a server's
+    (``server.*``, and the ``property.*``/``stateful.*`` ids that shipped before targets had names)."""
+    first = case_id.split(".", 1)[0]
+    if first == "cougar":
+        return "cougar"
+    if first == "client":
+        return "client"
+    return "server"
 
 
 def strongest_level(clauses: Iterable[str]) -> Level:
@@ -212,7 +256,7 @@ def strongest_level(clauses: Iterable[str]) -> Level:
 
 
 def _validate(
-    case_id: str, clauses: tuple[str, ...], level: str, kind: str, hazard: str, deadline: float
+    case_id: str, clauses: tuple[str, ...], level: str, technique: str, hazard: str, deadline: float
 ) -> None:
     parts = case_id.split(".")
     if len(parts) < 2 or not all(_ID_COMPONENT.match(p) for p in parts):
@@ -233,53 +277,71 @@ def _validate(
             f"case {case_id}: level {level} disagrees with its clauses, the strongest of which is "
             f"{strongest} in the spec: a check that is weaker than its clause needs a clause of its own"
         )
-    if kind not in KINDS:
-        raise CaseError(f"case {case_id}: kind {kind!r} is not one of {KINDS}")
+    if technique not in TECHNIQUES:
+        raise CaseError(f"case {case_id}: technique {technique!r} is not one of {TECHNIQUES}")
     if hazard not in HAZARD_ORDER:
         raise CaseError(f"case {case_id}: hazard {hazard!r} is not one of {sorted(HAZARD_ORDER)}")
     if not deadline > 0:
         raise CaseError(f"case {case_id}: deadline must be positive")
 
 
-def case(
-    case_id: str,
-    *,
-    clauses: Iterable[str],
-    level: Level | None = None,
-    kind: Kind = "scripted",
-    hazard: Hazard = "read-only",
-    fresh: bool = True,
-    deadline: float = 5.0,
-    summary: str | None = None,
-    waits: Callable[[RunOptions], float] | None = None,
-) -> Callable[[CaseFunction], CaseFunction]:
-    """Declare a case; the decorated function is returned unchanged (and registered).
+class Declare:
+    """The ``case`` decorator (an object, so that ``case.each`` can go with it)."""
 
-    ``summary`` defaults to the first line of the function's docstring."""
-    clause_ids = tuple(clauses)
-    chosen: Level = level if level is not None else strongest_level(clause_ids)
-    _validate(case_id, clause_ids, chosen, kind, hazard, deadline)
+    def __call__(
+        self,
+        case_id: str,
+        *,
+        clauses: Iterable[str],
+        level: Level | None = None,
+        technique: Technique = "scripted",
+        hazard: Hazard = "read-only",
+        deadline: float = 5.0,
+        summary: str | None = None,
+        waits: Callable[[RunOptions], float] | None = None,
+    ) -> Callable[[CaseFunction], CaseFunction]:
+        """Declare a case; the decorated function is returned unchanged (and registered).
 
-    def decorate(function: CaseFunction) -> CaseFunction:
-        doc = (function.__doc__ or "").strip().splitlines()
-        register(
-            Case(
-                id=case_id,
-                function=function,
-                clauses=clause_ids,
-                level=chosen,
-                kind=kind,
-                hazard=hazard,
-                fresh=fresh,
-                deadline=deadline,
-                summary=summary if summary is not None else (doc[0] if doc else ""),
-                module=function.__module__,
-                waits=waits,
+        ``summary`` defaults to the first line of the function's docstring."""
+        clause_ids = tuple(clauses)
+        chosen: Level = level if level is not None else strongest_level(clause_ids)
+        _validate(case_id, clause_ids, chosen, technique, hazard, deadline)
+
+        def decorate(function: CaseFunction) -> CaseFunction:
+            doc = (function.__doc__ or "").strip().splitlines()
+            register(
+                Case(
+                    id=case_id,
+                    function=function,
+                    clauses=clause_ids,
+                    level=chosen,
+                    technique=technique,
+                    hazard=hazard,
+                    deadline=deadline,
+                    summary=summary if summary is not None else (doc[0] if doc else ""),
+                    module=function.__module__,
+                    waits=waits,
+                )
             )
-        )
-        return function
+            return function
 
-    return decorate
+        return decorate
+
+    @staticmethod
+    def each(rows: Iterable[Row]) -> Callable[[Callable[[Row], None]], Callable[[Row], None]]:
+        """Declare a family of cases from a table: the decorated factory is called once per row and
+        declares that row's case (see the module docstring)."""
+
+        def declare_all(factory: Callable[[Row], None]) -> Callable[[Row], None]:
+            for row in rows:
+                factory(row)
+            return factory
+
+        return declare_all
+
+
+case: Final = Declare()
+"""Declare a case (``@case(...)``), or a family of them from a table (``@case.each(rows)``)."""
 
 
 def register(item: Case) -> Case:

@@ -19,11 +19,14 @@ from __future__ import annotations
 import enum
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Final, Literal
+from typing import TYPE_CHECKING, Final, Literal
 
 from manip.conformance.judge.packets import WirePacket
 from manip.conformance.judge.violation import Violation
 from manip.spec.model import Level
+
+if TYPE_CHECKING:
+    from manip.conformance.suite.case import Target
 
 __all__ = ["OUTCOMES", "CaseResult", "ExitCode", "LivenessCheck", "Outcome", "RunReport", "Violation"]
 
@@ -60,6 +63,8 @@ class CaseResult:
     packets: list[WirePacket] = field(default_factory=list)
     known_failing: bool = False
     reproduce: str = ""
+    target: Target = "server"
+    """What the case tests (the first component of a case id: server, cougar, client)."""
 
     @property
     def failure(self) -> Violation | None:

@@ -232,7 +232,7 @@ class Runner:
                 if self.events.case_finished:
                     self.events.case_finished(result)
                 if not dead and (
-                    result.outcome in ("fail", "error", "known-fail") or item.kind == "negative"
+                    result.outcome in ("fail", "error", "known-fail") or item.technique == "negative"
                 ):
                     check = await self.liveness(f"after:{item.id}")
                     if not check.alive:
@@ -271,7 +271,8 @@ class Runner:
             id=item.id,
             clauses=item.clauses,
             level=item.level,
-            kind=item.kind,
+            kind=item.technique,
+            target=item.target,
             hazard=item.hazard,
             summary=item.summary,
             outcome=outcome,

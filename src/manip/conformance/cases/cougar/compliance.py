@@ -69,7 +69,6 @@ async def _ntd(
 @case(
     "cougar.npr.gains",
     clauses=["cougar.npr.reply", "cougar.response.layout", "cougar.word-link"],
-    kind="cougar",
     hazard="config",
     deadline=8.0,
 )
@@ -133,7 +132,6 @@ async def npr_gains(ctx: CaseContext) -> None:
         "cougar.npr.reply",
         "cougar.response.layout",
     ],
-    kind="cougar",
     hazard="config",
 )
 async def rst_zeroes_velocities(ctx: CaseContext) -> None:

@@ -37,7 +37,6 @@ from manip.cougar.memory import region
         "cougar.exmn.reply",
         "cougar.response.layout",
     ],
-    kind="cougar",
     hazard="config",
 )
 async def adc8_integer_filter(ctx: CaseContext) -> None:
@@ -113,7 +112,6 @@ def _expected_voltmat(calmat: Sequence[float], fv_mm: Sequence[float]) -> np.nda
         "cougar.response.layout",
         "cougar.rraw.reply",
     ],
-    kind="cougar",
     hazard="config",
     deadline=8.0,
 )

@@ -24,7 +24,6 @@ from manip.conformance.suite.context import CaseContext
 @case(
     "cougar.guard.trips-once",
     clauses=["cougar.guards", "cougar.guard-trips-once"],
-    kind="cougar",
     hazard="config",
 )
 async def guard_trips_once(ctx: CaseContext) -> None:
@@ -61,7 +60,6 @@ async def guard_trips_once(ctx: CaseContext) -> None:
 @case(
     "cougar.guard.clear",
     clauses=["cougar.guardc", "cougar.guards"],
-    kind="cougar",
     hazard="config",
 )
 async def guard_clear(ctx: CaseContext) -> None:
@@ -83,7 +81,6 @@ async def guard_clear(ctx: CaseContext) -> None:
 @case(
     "cougar.guard.condition",
     clauses=["cougar.guards", "cougar.response.layout", "cougar.rfrc.reply"],
-    kind="cougar",
     hazard="config",
 )
 async def guard_condition(ctx: CaseContext) -> None:

@@ -23,7 +23,6 @@ from manip.cougar.memory import region
 @case(
     "cougar.jacob.front-buffer-complete",
     clauses=["cougar.jacob-double-buffer", "cougar.memory", "cougar.exmn.reply", "cougar.response.layout"],
-    kind="cougar",
     hazard="config",
 )
 async def jacob_front_buffer(ctx: CaseContext) -> None:
@@ -70,7 +69,7 @@ REENTRY_GAP_S: Final = 1e-6
 """A tick this soon after the previous one (the TICK frame's resolution) finds any GUTS still running."""
 
 
-@case("cougar.guts.no-nesting", clauses=["cougar.guts-reentry"], kind="cougar")
+@case("cougar.guts.no-nesting", clauses=["cougar.guts-reentry"])
 async def guts_no_nesting(ctx: CaseContext) -> None:
     """A tick one microsecond after the previous one finds GUTS still running, however fast Cougar is:
     it sends no words, and a command sent before it runs at the next tick."""
@@ -97,7 +96,6 @@ async def guts_no_nesting(ctx: CaseContext) -> None:
 @case(
     "cougar.guts.reentry",
     clauses=["cougar.guts-cost-model"],
-    kind="cougar",
 )
 async def guts_reentry(ctx: CaseContext) -> None:
     """A tick 0.5 ms after the previous one finds GUTS still running (erratum cougar-guts-reentry's

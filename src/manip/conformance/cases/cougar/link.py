@@ -28,7 +28,6 @@ from manip.spec import SPEC
 @case(
     "cougar.link.drv11j-framing",
     clauses=["link.drv11j.framing", "cougar.word-link"],
-    kind="cougar",
 )
 async def link_framing(ctx: CaseContext) -> None:
     """Cougar says HELLO (magic, version 1, role Cougar), answers every TICK with TICKED of the same
@@ -51,7 +50,6 @@ async def link_framing(ctx: CaseContext) -> None:
 @case(
     "cougar.comint.in-order",
     clauses=["cougar.comint.partial-waits", "cougar.word-link"],
-    kind="cougar",
 )
 async def comint_in_order(ctx: CaseContext) -> None:
     """Several complete commands sent together are all executed, in the order sent."""
@@ -86,7 +84,6 @@ async def comint_in_order(ctx: CaseContext) -> None:
         "cougar.exmn.reply",
         "cougar.response.layout",
     ],
-    kind="cougar",
     hazard="config",
 )
 async def comint_partial_waits(ctx: CaseContext) -> None:
@@ -139,7 +136,6 @@ def _unknown_codes() -> tuple[int, ...]:
 @case(
     "cougar.comint.unknown-code",
     clauses=["cougar.comint.unknown-code", "cougar.word-link", "cougar.response.layout"],
-    kind="cougar",
 )
 async def comint_unknown_code(ctx: CaseContext) -> None:
     """An unknown code dumps the input buffer (a VERS after it is not answered) and sends OUT-OF-SYNC

@@ -24,7 +24,6 @@ from manip.cougar.memory import region
 @case(
     "cougar.memory.deposit-examine",
     clauses=["cougar.memory", "cougar.exmn.reply", "cougar.vers.reply", "cougar.response.layout"],
-    kind="cougar",
     hazard="config",
 )
 async def memory_deposit_examine(ctx: CaseContext) -> None:
@@ -59,7 +58,6 @@ async def memory_deposit_examine(ctx: CaseContext) -> None:
 @case(
     "cougar.memory.parameters",
     clauses=["cougar.memory", "cougar.exmn.reply", "cougar.response.layout"],
-    kind="cougar",
     hazard="config",
 )
 async def memory_parameters(ctx: CaseContext) -> None:

@@ -28,7 +28,6 @@ from manip.cougar.memory import MEMORY_BYTES, region
 @case(
     "cougar.reply.ntd",
     clauses=["cougar.npr.reply", "cougar.response.layout"],
-    kind="cougar",
     hazard="config",
 )
 async def reply_ntd(ctx: CaseContext) -> None:
@@ -52,7 +51,6 @@ async def reply_ntd(ctx: CaseContext) -> None:
 @case(
     "cougar.reply.version",
     clauses=["cougar.vers.reply", "cougar.response.layout"],
-    kind="cougar",
 )
 async def reply_version(ctx: CaseContext) -> None:
     """VERS is answered with VERSION (code 8) and exactly one word, whatever the Puma's version word."""
@@ -67,7 +65,6 @@ async def reply_version(ctx: CaseContext) -> None:
 @case(
     "cougar.reply.forces",
     clauses=["cougar.rfrc.reply", "cougar.response.layout"],
-    kind="cougar",
 )
 async def reply_forces(ctx: CaseContext) -> None:
     """RFRC is answered with FORCES (code 5) and six finite floats, on consecutive ticks."""
@@ -81,7 +78,6 @@ async def reply_forces(ctx: CaseContext) -> None:
 @case(
     "cougar.reply.raw",
     clauses=["cougar.rraw.reply", "cougar.gauge-range", "cougar.response.layout"],
-    kind="cougar",
 )
 async def reply_raw(ctx: CaseContext) -> None:
     """RRAW is answered with RAW (code 9) and eight words, each a 12-bit reading in -2048..2047."""
@@ -103,7 +99,6 @@ async def reply_raw(ctx: CaseContext) -> None:
 @case(
     "cougar.reply.exmn",
     clauses=["cougar.exmn.reply", "cougar.memory", "cougar.response.layout"],
-    kind="cougar",
 )
 async def reply_exmn(ctx: CaseContext) -> None:
     """EXMN is answered with EXMN-DATA: the number of words asked for (0, 1, 2, 17, 200), then them."""
@@ -130,7 +125,6 @@ async def reply_exmn(ctx: CaseContext) -> None:
 @case(
     "cougar.exmn.bad-address",
     clauses=["cougar.exmn.reply", "cougar.memory", "cougar.response.layout", "cougar.word-link"],
-    kind="cougar",
 )
 async def exmn_bad_address(ctx: CaseContext) -> None:
     """EXMN at an odd address or past memory returns 0 words; one running off the end returns the

@@ -104,7 +104,8 @@ def _expect_sync(
     )
 
 
-def _make_table1_case(msg: CougarMessage) -> None:
+@case.each(SPEC.cougar_commands.values())
+def _table1_case(msg: CougarMessage) -> None:
     immediate = msg.response if msg.response and "|" not in msg.response else None
     clauses = ["cougar.word-link", "cougar.comint.partial-waits"]
 
@@ -125,18 +126,11 @@ def _make_table1_case(msg: CougarMessage) -> None:
     if immediate is not None:
         clauses += [_RESPONSE_CLAUSE[immediate], "cougar.response.layout"]
         table1 = table1_answered
-    table1.__doc__ = (
-        f"{msg.name} (code {msg.code}) with its {msg.data_words} data word(s) is accepted"
-        + (f" and answered with {immediate}" if immediate else "")
-        + "; a NOP and VERS after it still work (sync kept)."
-    )
     case(
         f"cougar.table1.{msg.name.lower()}",
         clauses=clauses,
-        kind="cougar",
+        summary=f"{msg.name} (code {msg.code}) with its {msg.data_words} data word(s) is accepted"
+        + (f" and answered with {immediate}" if immediate else "")
+        + "; a NOP and VERS after it still work (sync kept).",
         hazard="config",
     )(table1)
-
-
-for _msg in SPEC.cougar_commands.values():
-    _make_table1_case(_msg)

@@ -159,7 +159,24 @@ def _served(answer: Answer) -> bool | None:
     return error.error.code not in NOT_SERVED_CODES
 
 
-def _make_operations_case(case_id: str, hazards: tuple[Hazard, ...], summary: str) -> None:
+_OPERATIONS_CASES: Final[tuple[tuple[str, tuple[Hazard, ...], str], ...]] = (
+    (
+        "server.describe.operations-served",
+        ("read-only", "config"),
+        "Every read-only/config opcode listed under :operations is served, every one served is listed.",
+    ),
+    (
+        "server.describe.operations-motion",
+        ("motion", "power"),
+        "Every motion/power opcode listed under :operations is served, every one served is listed.",
+    ),
+)
+
+
+@case.each(_OPERATIONS_CASES)
+def _operations_case(row: tuple[str, tuple[Hazard, ...], str]) -> None:
+    case_id, hazards, summary = row
+
     async def operations(ctx: CaseContext) -> None:
         probe = await ctx.connect()
         entries = await _entries(ctx, probe)
@@ -191,25 +208,13 @@ def _make_operations_case(case_id: str, hazards: tuple[Hazard, ...], summary: st
             )
         ctx.note(f"served: {' '.join(f'{o:o}' for o in served)} ({len(served)} of {len(probed)} probed)")
 
-    operations.__doc__ = summary
     case(
         case_id,
         clauses=["describe.operations-answered", "describe.operations-complete"],
+        summary=summary,
         hazard=hazards[-1],
         deadline=10.0,
     )(operations)
-
-
-_make_operations_case(
-    "server.describe.operations-served",
-    ("read-only", "config"),
-    "Every read-only/config opcode listed under :operations is served, every one served is listed.",
-)
-_make_operations_case(
-    "server.describe.operations-motion",
-    ("motion", "power"),
-    "Every motion/power opcode listed under :operations is served, every one served is listed.",
-)
 
 
 async def _stated_dof(ctx: CaseContext, probe: Probe) -> int:

@@ -4,6 +4,7 @@ and asynchronous warnings in the error format when the arm produces any."""
 from __future__ import annotations
 
 from itertools import pairwise
+from typing import Final
 
 from manip.conformance.cases._support import UNASSIGNED_OPCODES
 from manip.conformance.judge.checks import check_error_packet
@@ -29,7 +30,18 @@ async def _exchange(probe: Probe) -> None:
     await probe.call_raw(UNASSIGNED_OPCODES[0])
 
 
-def _make_frames_case(scheme: str, clauses: tuple[str, ...]) -> None:
+_LINK_FRAMES: Final[tuple[tuple[str, tuple[str, ...]], ...]] = (
+    ("tcp", ("link.tcp.framing",)),
+    ("chudp", ("chudp.header", "chudp.length", "chudp.word-order", "chudp.trailer", "chudp.checksum")),
+    ("chaosd", ("link.chaosd.framing",)),
+)
+"""Each link framing a server may be reached on, and the clauses of its frames."""
+
+
+@case.each(_LINK_FRAMES)
+def _frames_case(row: tuple[str, tuple[str, ...]]) -> None:
+    scheme, clauses = row
+
     async def frames(ctx: CaseContext) -> None:
         if parse_address(ctx.options.address).framing != scheme:
             ctx.skip(f"the target is not on a {scheme} link")
@@ -43,15 +55,11 @@ def _make_frames_case(scheme: str, clauses: tuple[str, ...]) -> None:
             actual=f"{stats.bad_total} bad frame(s): {dict(stats.bad)}",
         )
 
-    frames.__doc__ = f"Every frame the server sends on a {scheme} link decodes (header, length, checksum)."
-    case(f"server.link.{scheme}-frames", clauses=[*clauses, *_FRAME_CLAUSES])(frames)
-
-
-_make_frames_case("tcp", ("link.tcp.framing",))
-_make_frames_case(
-    "chudp", ("chudp.header", "chudp.length", "chudp.word-order", "chudp.trailer", "chudp.checksum")
-)
-_make_frames_case("chaosd", ("link.chaosd.framing",))
+    case(
+        f"server.link.{scheme}-frames",
+        clauses=[*clauses, *_FRAME_CLAUSES],
+        summary=f"Every frame the server sends on a {scheme} link decodes (header, length, checksum).",
+    )(frames)
 
 
 @case("server.link.packet-numbers", clauses=["ncp.packet-numbers"])

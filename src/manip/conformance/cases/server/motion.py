@@ -394,7 +394,7 @@ async def free_joint_discard(ctx: CaseContext) -> None:
     await expect_here_served(ctx, probe, "Here served normally once the joint is un-freed")
 
 
-@case("server.free-joint.bad-joint", clauses=["free-joint.data"], kind="negative", hazard="motion")
+@case("server.free-joint.bad-joint", clauses=["free-joint.data"], technique="negative", hazard="motion")
 async def free_joint_bad(ctx: CaseContext) -> None:
     """Free joint 0 or 7 (outside 1..degrees of freedom) is a command error."""
     probe = await ctx.connect()

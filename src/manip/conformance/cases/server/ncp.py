@@ -148,7 +148,7 @@ def _request(conn: RawConnection, *, ack: int) -> Packet:
 # ------------------------------------------------------------------------------------------ LOS
 
 
-@case("server.ncp.los-unknown-connection", clauses=["ncp.los"], kind="negative", deadline=12.0)
+@case("server.ncp.los-unknown-connection", clauses=["ncp.los"], technique="negative", deadline=12.0)
 async def los_unknown_connection(ctx: CaseContext) -> None:
     """A data packet for a connection that does not exist draws a LOS; a LOS or CLS to one draws nothing."""
     async with await _open(ctx) as peer:
@@ -226,7 +226,7 @@ def _illegal_frame_check(
 @case(
     "server.ncp.los-illegal-opcode",
     clauses=["ncp.los", "chaos.opcode.legal"],
-    kind="negative",
+    technique="negative",
     deadline=20.0,
 )
 async def los_illegal_opcode(ctx: CaseContext) -> None:
@@ -250,7 +250,9 @@ async def los_illegal_opcode(ctx: CaseContext) -> None:
             _illegal_frame_check(ctx, answer, p, frame, f"opcode {opcode:o}")
 
 
-@case("server.ncp.los-oversize", clauses=["ncp.los", "chaos.data.max-488"], kind="negative", deadline=12.0)
+@case(
+    "server.ncp.los-oversize", clauses=["ncp.los", "chaos.data.max-488"], technique="negative", deadline=12.0
+)
 async def los_oversize(ctx: CaseContext) -> None:
     """A CHUDP packet with more than 488 data bytes draws a LOS (TCP frames cannot carry one)."""
     if parse_address(ctx.options.address).scheme != "chudp":
@@ -274,7 +276,7 @@ async def los_oversize(ctx: CaseContext) -> None:
 # ------------------------------------------------------------------------------------------ duplicate RFC
 
 
-@case("server.ncp.duplicate-rfc", clauses=["ncp.duplicate-rfc"], kind="scripted", deadline=20.0)
+@case("server.ncp.duplicate-rfc", clauses=["ncp.duplicate-rfc"], technique="scripted", deadline=20.0)
 async def duplicate_rfc(ctx: CaseContext) -> None:
     """A repeated RFC (same host, index and number) goes to the connection it opened, not a second one.
 
@@ -349,7 +351,7 @@ def _broken_wait(options: RunOptions) -> float:
 @case(
     "server.ncp.broken",
     clauses=["ncp.broken"],
-    kind="scripted",
+    technique="scripted",
     deadline=15.0,
     waits=_broken_wait,
 )
@@ -402,7 +404,7 @@ async def broken(ctx: CaseContext) -> None:
 # ------------------------------------------------------------------------------------------ retransmission
 
 
-@case("server.ncp.retransmission", clauses=["ncp.retransmission"], kind="scripted", deadline=20.0)
+@case("server.ncp.retransmission", clauses=["ncp.retransmission"], technique="scripted", deadline=20.0)
 async def retransmission(ctx: CaseContext) -> None:
     """An unreceipted reply is sent again with the same number; a repeated request is not answered
     twice; once receipted, the reply stops coming."""
@@ -519,7 +521,7 @@ class _WindowWatch:
         self.absorb([got], "after our acknowledgement")
 
 
-@case("server.ncp.window", clauses=["ncp.window"], kind="scripted", deadline=30.0)
+@case("server.ncp.window", clauses=["ncp.window"], technique="scripted", deadline=30.0)
 async def window(ctx: CaseContext) -> None:
     """With our window at 2 the target never has more than 2 packets beyond our last acknowledgement,
     a receipt alone does not open the window, and each acknowledgement lets the rest out."""

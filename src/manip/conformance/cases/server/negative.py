@@ -65,7 +65,9 @@ def _float_offsets(op: RequestOpcode) -> list[int]:
     return offsets
 
 
-@case("server.negative.unknown-opcodes", clauses=["request.unknown-opcode"], kind="negative", deadline=10.0)
+@case(
+    "server.negative.unknown-opcodes", clauses=["request.unknown-opcode"], technique="negative", deadline=10.0
+)
 async def unknown_opcodes(ctx: CaseContext) -> None:
     """Every data opcode the spec does not define is answered by a non-fatal error of severity C."""
     probe = await ctx.connect()
@@ -82,7 +84,14 @@ async def unknown_opcodes(ctx: CaseContext) -> None:
     )
 
 
-def _make_length_case(suffix: str, hazards: tuple[Hazard, ...]) -> None:
+_HAZARD_GROUPS: Final[tuple[tuple[str, tuple[Hazard, ...]], ...]] = (("safe", SAFE), ("motion", UNSAFE))
+"""The negative cases come in two: opcodes safe on hardware, and motion/power ones (id suffix)."""
+
+
+@case.each(_HAZARD_GROUPS)
+def _length_case(row: tuple[str, tuple[Hazard, ...]]) -> None:
+    suffix, hazards = row
+
     async def data_length(ctx: CaseContext) -> None:
         probe = await ctx.connect()
         for op in _ops(hazards):
@@ -97,17 +106,20 @@ def _make_length_case(suffix: str, hazards: tuple[Hazard, ...]) -> None:
                     what=f"{op.name} with {size} data bytes (layout: {op.request.fixed_size})",
                 )
 
-    data_length.__doc__ = f"Wrong data lengths for every {'/'.join(hazards)} opcode draw a C error."
     case(
         f"server.negative.data-length.{suffix}",
+        summary=f"Wrong data lengths for every {'/'.join(hazards)} opcode draw a C error.",
         clauses=["request.data-length"],
-        kind="negative",
+        technique="negative",
         hazard=hazards[-1],
         deadline=10.0,
     )(data_length)
 
 
-def _make_float_case(suffix: str, hazards: tuple[Hazard, ...]) -> None:
+@case.each(_HAZARD_GROUPS)
+def _float_case(row: tuple[str, tuple[Hazard, ...]]) -> None:
+    suffix, hazards = row
+
     async def reserved_float(ctx: CaseContext) -> None:
         probe = await ctx.connect()
         for op in _ops(hazards):
@@ -127,26 +139,20 @@ def _make_float_case(suffix: str, hazards: tuple[Hazard, ...]) -> None:
                 what=f"{op.name} with a reserved-operand float at data byte {at}",
             )
 
-    reserved_float.__doc__ = f"A reserved-operand float in any {'/'.join(hazards)} request draws a C error."
     case(
         f"server.negative.reserved-float.{suffix}",
+        summary=f"A reserved-operand float in any {'/'.join(hazards)} request draws a C error.",
         clauses=["request.reserved-float", "float.reserved-operand"],
-        kind="negative",
+        technique="negative",
         hazard=hazards[-1],
         deadline=10.0,
     )(reserved_float)
 
 
-_make_length_case("safe", SAFE)
-_make_length_case("motion", UNSAFE)
-_make_float_case("safe", SAFE)
-_make_float_case("motion", UNSAFE)
-
-
 @case(
     "server.negative.set-configuration-sizes",
     clauses=["set-configuration.data", "request.data-length"],
-    kind="negative",
+    technique="negative",
     hazard="config",
 )
 async def set_configuration_sizes(ctx: CaseContext) -> None:
@@ -164,7 +170,7 @@ async def set_configuration_sizes(ctx: CaseContext) -> None:
 @case(
     "server.negative.during-free-joint",
     clauses=["free-joint.awaits-next-packet", "free-joint.replies"],
-    kind="negative",
+    technique="negative",
     hazard="motion",
 )
 async def during_free_joint(ctx: CaseContext) -> None:
@@ -185,7 +191,7 @@ async def during_free_joint(ctx: CaseContext) -> None:
     await expect_here_served(ctx, probe, "Here served normally afterwards")
 
 
-@case("server.negative.oversize-frame", clauses=["chaos.data.max-488"], kind="negative", deadline=8.0)
+@case("server.negative.oversize-frame", clauses=["chaos.data.max-488"], technique="negative", deadline=8.0)
 async def oversize_frame(ctx: CaseContext) -> None:
     """A frame claiming more than 488 data bytes is not served; the server survives it."""
     if parse_address(ctx.options.address).framing != "tcp":

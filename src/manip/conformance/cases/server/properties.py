@@ -302,7 +302,7 @@ async def run_property(
         "error.fatal-then-close",
         "free-joint.replies",
     ],
-    kind="property",
+    technique="property",
     hazard="config",
     deadline=PROPERTY_DEADLINE,
 )
@@ -368,7 +368,7 @@ def _pose(values: Sequence[float], answer: Answer) -> Transform:
 @case(
     "property.kinematics.round-trip",
     clauses=["solve-backwards.data", "solve-forwards.data", "solve-forwards.errors"],
-    kind="property",
+    technique="property",
     hazard="read-only",
     deadline=PROPERTY_DEADLINE,
 )
@@ -487,7 +487,7 @@ async def _settle(
 @case(
     "property.floats.round-trip",
     clauses=["float.format", "joints.reply", "response.segment-number", "motion.no-power"],
-    kind="property",
+    technique="property",
     hazard="motion",
     deadline=PROPERTY_DEADLINE,
 )
@@ -548,7 +548,7 @@ async def floats_round_trip(ctx: CaseContext) -> None:
 @case(
     "property.segments.numbering",
     clauses=["segment.number-increases"],
-    kind="property",
+    technique="property",
     hazard="motion",
     deadline=PROPERTY_DEADLINE,
 )

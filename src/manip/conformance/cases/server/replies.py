@@ -71,7 +71,8 @@ _FOLLOW_UPS: Final[Mapping[str, tuple[FollowUp, tuple[str, ...]]]] = {
 """What an opcode's case does after a normal reply, and the clauses that adds."""
 
 
-def _make(op: RequestOpcode) -> None:
+@case.each(SPEC.requests.values())
+def _reply_case(op: RequestOpcode) -> None:
     follow_up, follow_clauses = _FOLLOW_UPS.get(op.name, (None, ()))
 
     async def reply_shape(ctx: CaseContext) -> None:
@@ -91,15 +92,10 @@ def _make(op: RequestOpcode) -> None:
             await follow_up(ctx, probe)
         ctx.note(f"{op.name}: {answer}")
 
-    reply_shape.__doc__ = f"{op.title} ({op.opcode:o}): one {op.response.kind} reply echoing the request."
-    reply_shape.__name__ = f"reply_{op.name.replace('-', '_')}"
     case(
         f"server.reply.{op.name}",
+        summary=f"{op.title} ({op.opcode:o}): one {op.response.kind} reply echoing the request.",
         clauses=(*opcode_clauses(op), *follow_clauses),
         hazard=op.hazard,
         deadline=10.0 + (op.answer_within or 0.0),
     )(reply_shape)
-
-
-for _op in SPEC.requests.values():
-    _make(_op)

@@ -649,7 +649,7 @@ def _counterexample(failure: MachineFailure, address: str) -> str:
             "request.reserved-float",
         }
     ),
-    kind="stateful",
+    technique="stateful",
     hazard="config",
     deadline=90.0,
 )
