@@ -367,9 +367,7 @@ async def _times_out(ctx: CaseContext) -> None:
 
 def test_the_runner_turns_an_undeclared_report_into_an_error() -> None:
     def item(case_id: str, body: Callable[[CaseContext], Awaitable[None]]) -> Case:
-        return Case(
-            case_id, body, ("here.transform",), "MUST", "scripted", "read-only", 2.0, "", __name__
-        )
+        return Case(case_id, body, ("here.transform",), "MUST", "scripted", "read-only", 2.0, "", __name__)
 
     cases = [item("t.raised", _raises_undeclared), item("t.expected", _expects_undeclared)]
     cases.append(item("t.probe", _times_out))

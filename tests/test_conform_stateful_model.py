@@ -214,4 +214,4 @@ def test_extensions_the_server_does_not_list_may_be_refused_as_unserved() -> Non
     assert listed.expect(op("request-notifications"), encode_request("request-notifications", mask=2)).command
     unknown = ProtocolModel()
     assert unknown.expect(op("reset-abort"), b"").command
-    assert not unknown.expect(op("enable-power"), b"").command  # the seed's opcodes are never optional
+    assert not unknown.expect(op("enable-power"), b"").command  # the 1985 guide's opcodes are never optional

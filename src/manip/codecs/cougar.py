@@ -1,4 +1,4 @@
-"""The Puma <-> Cougar word protocol (seed Table 1), driven by ``manip/spec/data/cougar.toml``.
+"""The Puma <-> Cougar word protocol (the 1985 guide, Table 1), driven by ``manip/spec/data/cougar.toml``.
 
 Messages are a code word then a fixed number of 16-bit data words (floats take two words, the
 sign/exponent word first; EXMN's reply carries its own count).  :class:`WordStream` is COMINT's input

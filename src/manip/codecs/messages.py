@@ -298,7 +298,8 @@ def decode_request(opcode: int, data: bytes) -> Request:
 
 
 def copy_request_data(items: object) -> bytes:
-    """The seed's copy-manipulator-request-data: ints as 16-bit words, floats as F floats, lists flattened.
+    """The 1985 guide's copy-manipulator-request-data: ints as 16-bit words, floats as F floats, lists
+    flattened.
 
     Integers may be -32768..65535 (negatives are sent in two's complement); any other type is an error.
     """

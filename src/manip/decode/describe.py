@@ -70,7 +70,7 @@ class Node:
 
 
 def octal(v: int) -> str:
-    """Chaosnet style: a leading 0, as the seed writes opcodes and addresses."""
+    """Chaosnet style: a leading 0, as the 1985 guide writes opcodes and addresses."""
     return f"0{v:o}" if v else "0"
 
 

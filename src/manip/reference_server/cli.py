@@ -178,7 +178,7 @@ def command_line(ctx: click.Context) -> list[str]:
     type=click.FloatRange(min=0.1),
     default=None,
     metavar="SECONDS",
-    help="Declare a connection broken when its client is silent this long (default 90, as the seed; "
+    help="Declare a connection broken when its client is silent this long (default 90, as in the 1985 guide; "
     "shorter to check a client's or the suite's handling quickly).",
 )
 @click.option(

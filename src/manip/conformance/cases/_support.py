@@ -184,7 +184,7 @@ def expect_refusal(
     what: str,
 ) -> ErrorReply | None:
     """The answer must be a non-fatal error with one of ``severities`` (and, when given, one of
-    ``codes``; the codes are the seed's where it names them)."""
+    ``codes``; the codes are the 1985 guide's where it names them)."""
     wanted = f"a non-fatal error (202) of severity {'/'.join(severities)}" + (
         f" and code {'/'.join(codes)}" if codes else ""
     )

@@ -626,7 +626,7 @@ def _scalar(value: LispValue) -> LispValue:
 
 
 def check_description(text: str, *, protocol_version: int = SPEC.protocol_version) -> list[Violation]:
-    """The describe-self alist: readable, and the seed's keys shaped as E.1 says."""
+    """The describe-self alist: readable, and the 1985 guide's keys shaped as E.1 says."""
     entries, out = parse_description(text)
     if entries is None:
         return out
@@ -636,7 +636,7 @@ def check_description(text: str, *, protocol_version: int = SPEC.protocol_versio
 def check_description_entries(
     entries: Mapping[str, LispValue], text: str = "", *, protocol_version: int = SPEC.protocol_version
 ) -> list[Violation]:
-    """The seed's keys of a read description (``text``: the raw text, kept as the finding's bytes)."""
+    """The 1985 guide's keys of a read description (``text``: the raw text, kept as the finding's bytes)."""
     out: list[Violation] = []
     data = text.encode("utf-8", "replace")
 

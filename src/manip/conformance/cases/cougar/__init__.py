@@ -9,7 +9,7 @@ would not set again (gauge offsets, frame vector, version word).
 
 What a case may rely on, so that it holds for any conforming Cougar and not just manip's simulator:
 
-* Table 1 (codes, data lengths) and the seed's GUTS order: ADC8, conversion, GRAVITY, guards, COMINT,
+* Table 1 (codes, data lengths) and the 1985 guide's GUTS order: ADC8, conversion, GRAVITY, guards, COMINT,
   one GUTS per Puma tick; a response may come up to :data:`DEFAULT_WITHIN` ticks after its command.
 * The errata: out-of-sync is response 2 carrying the bad word (``cougar-out-of-sync``); bit 15 of a
   guard's first word chooses its type (``guard-type-bit``); the memory map of ``cougar-memory-map``
