@@ -37,7 +37,7 @@ from manip.conformance.judge.model import Reply
 from manip.conformance.judge.violation import Violation
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.conformance.suite.invariants import TRANSCRIPT
-from manip.spec import SPEC, RequestOpcode
+from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import ServerOp
 
 UNASSIGNED_OPCODES: Final[tuple[int, ...]] = tuple(
@@ -73,7 +73,7 @@ def require_response(ctx: CaseContext, answer: Answer, what: str) -> None:
         ctx.skip(f"the case needs {what}, which the target refused: {answer}")
 
 
-async def read_floats(ctx: CaseContext, probe: Probe, op: str) -> tuple[float, ...]:
+async def read_floats(ctx: CaseContext, probe: Probe, op: RequestName) -> tuple[float, ...]:
     """Here or joint angles, as floats (the case skips when the target refuses them)."""
     answer = await probe.call(op)
     require_response(ctx, answer, f"a normal reply to {op}")

@@ -47,7 +47,7 @@ from manip.conformance.judge.checks import (
 from manip.conformance.replay.capture_report import capture_report, open_capture, select_sessions
 from manip.conformance.suite.case import LEVEL_ORDER
 from manip.conformance.suite.results import CaseResult, RunReport, Violation
-from manip.spec import SPEC
+from manip.spec import SPEC, RequestName
 from manip.spec.constants import ChaosOp, ServerOp
 from manip.spec.model import Hazard, Level
 
@@ -154,7 +154,7 @@ def _asks(kind: str) -> Callable[[Sequence[WirePacket], bool], bool]:
     return exercised
 
 
-def _asks_op(name: str) -> Callable[[Sequence[WirePacket], bool], bool]:
+def _asks_op(name: RequestName) -> Callable[[Sequence[WirePacket], bool], bool]:
     opcode = SPEC.request(name).opcode
     return lambda packets, _initial: any(p.opcode == opcode for p in _requests(packets))
 

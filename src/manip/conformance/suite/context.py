@@ -43,7 +43,7 @@ from dataclasses import dataclass, replace
 from typing import Any, Final, Literal, NoReturn
 
 from manip.codecs.errors import CodecError
-from manip.codecs.messages import encode_request, request_op
+from manip.codecs.messages import encode_request
 from manip.codecs.packet import Packet
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, describe, word
@@ -57,7 +57,7 @@ from manip.conformance.suite.case import (
 )
 from manip.conformance.suite.invariants import TRANSCRIPT, attribution_problem
 from manip.links import ChaosConnection, ChaosError, ConnectionClosed, ConnectionLost
-from manip.spec import SPEC
+from manip.spec import SPEC, RequestName
 from manip.spec.constants import ChaosOp, ServerOp
 from manip.spec.model import Hazard, Level
 
@@ -187,9 +187,9 @@ class Probe:
 
     # ------------------------------------------------------------------------------------- sending
 
-    async def request(self, opcode: int | str, data: bytes = b"") -> int:
+    async def request(self, opcode: int | RequestName, data: bytes = b"") -> int:
         """Send one request packet with exactly ``data``; return its Chaos packet number."""
-        code = request_op(opcode).opcode if isinstance(opcode, str) else opcode
+        code = SPEC.request(opcode).opcode if isinstance(opcode, str) else opcode
         number = await self.conn.send(bytes(data), code)
         ack = 0
         self._record("c2s", code, number, ack, data)
@@ -248,13 +248,13 @@ class Probe:
                 )
         return total, " + ".join(parts)
 
-    async def send(self, op: int | str, **values: Any) -> int:
+    async def send(self, op: int | RequestName, **values: Any) -> int:
         """Encode ``values`` by the spec layout of ``op`` and send the request."""
-        return await self.request(request_op(op).opcode, encode_request(op, **values))
+        return await self.request(SPEC.request(op).opcode, encode_request(op, **values))
 
-    async def call(self, op: int | str, *, timeout: float | None = None, **values: Any) -> Answer:
+    async def call(self, op: int | RequestName, *, timeout: float | None = None, **values: Any) -> Answer:
         """Send a well-formed request and wait for its answer (multi-packet replies in full)."""
-        spec_op = request_op(op)
+        spec_op = SPEC.request(op)
         number = await self.send(op, **values)
         if spec_op.response.kind == "multi":
             return await self.replies_until_empty(number, timeout=timeout)

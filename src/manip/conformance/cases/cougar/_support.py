@@ -18,7 +18,7 @@ from manip.conformance.cougar.probe import (
 )
 from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory import region
-from manip.spec import SPEC, CougarMessage
+from manip.spec.constants import CougarCommand, CougarResponse
 
 GUARDS: Final = 16
 STOP_BIT: Final = 0x8000
@@ -38,27 +38,14 @@ async def clean(probe: CougarProbe) -> None:
     """Disarm all 16 guards and drop whatever the previous user left in flight."""
     words: list[int] = []
     for index in range(GUARDS):
-        words += (command_code("GUARDC"), index)
+        words += (CougarCommand.GUARDC, index)
     await probe.send_words(words)
     await probe.run(2)
 
 
-def command_code(name: str) -> int:
-    return command_named(name).code
-
-
-def command_named(name: str) -> CougarMessage:
-    for msg in SPEC.cougar_commands.values():
-        if msg.name == name:
-            return msg
-    raise KeyError(name)
-
-
 def response_code(name: str) -> int:
-    for msg in SPEC.cougar_responses.values():
-        if msg.name == name:
-            return msg.code
-    raise KeyError(name)
+    """The code of a Table 1 response named as the spec names it (``EXMN-DATA``)."""
+    return CougarResponse[name.replace("-", "_")].value
 
 
 def expect_reply(ctx: CaseContext, reply: WordReply, name: str, clause: str, *, after: str = "") -> WordReply:

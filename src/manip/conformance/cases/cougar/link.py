@@ -7,7 +7,6 @@ from manip.arm import READY
 from manip.codecs.cougar import encode
 from manip.conformance.cases.cougar._support import (
     clean,
-    command_code,
     expect_none,
     expect_quiet,
     expect_reply,
@@ -22,6 +21,7 @@ from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory import region
 from manip.spec import SPEC
+from manip.spec.constants import CougarCommand
 
 
 # ------------------------------------------------------------------------------------------ the link
@@ -94,7 +94,7 @@ async def comint_partial_waits(ctx: CaseContext) -> None:
         await clean(probe)
         whole = expect_reply(ctx, await probe.examine(address, 3), "EXMN-DATA", "cougar.exmn.reply")
         await expect_quiet(ctx, probe, "cougar.word-link", "nothing was sent")
-        words = [command_code("EXMN"), address, 3]
+        words = [CougarCommand.EXMN, address, 3]
         for i, part in enumerate(([words[0]], [words[1]], [words[2]])):
             await probe.send_words(part)
             got = await probe.run(1)
@@ -130,7 +130,7 @@ async def comint_partial_waits(ctx: CaseContext) -> None:
 
 def _unknown_codes() -> tuple[int, ...]:
     known = set(SPEC.cougar_commands)
-    return (max(known) + 1, 0o100000 | command_code("VERS"), 0xFFFF)
+    return (max(known) + 1, 0o100000 | CougarCommand.VERS, 0xFFFF)
 
 
 @case(
@@ -143,7 +143,7 @@ async def comint_unknown_code(ctx: CaseContext) -> None:
     async with cougar_probe(ctx) as probe:
         await clean(probe)
         for bad in _unknown_codes():
-            await probe.send_words([bad, command_code("VERS"), 1])
+            await probe.send_words([bad, CougarCommand.VERS, 1])
             got = await probe.run(2)
             ctx.expect(
                 len(got) == 1 and got[0].name == "OUT-OF-SYNC",

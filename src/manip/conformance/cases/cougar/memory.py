@@ -5,7 +5,6 @@ from __future__ import annotations
 from manip.codecs.cougar import encode
 from manip.conformance.cases.cougar._support import (
     clean,
-    command_named,
     examine_region,
     expect_examine,
     expect_reply,
@@ -18,6 +17,8 @@ from manip.conformance.cougar.probe import (
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory import region
+from manip.spec import SPEC
+from manip.spec.constants import CougarCommand
 
 
 # ------------------------------------------------------------------------------------------ memory
@@ -82,8 +83,13 @@ async def memory_parameters(ctx: CaseContext) -> None:
                 actual=octal(stored),
                 data=words_bytes(stored),
             )
-        zero = {"NK": "k", "NB": "b", "NBJI": "bji", "NFC": "force"}
-        for name, field in zero.items():
-            count = command_named(name).data[0].count or 0
-            await probe.send(name, **{field: (0.0,) * count})
+        zero = {
+            CougarCommand.NK: "k",
+            CougarCommand.NB: "b",
+            CougarCommand.NBJI: "bji",
+            CougarCommand.NFC: "force",
+        }
+        for command, field in zero.items():
+            count = SPEC.cougar_commands[command].data[0].count or 0
+            await probe.send(command.name, **{field: (0.0,) * count})
         await probe.run(1)

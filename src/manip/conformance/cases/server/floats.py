@@ -26,7 +26,7 @@ def _dot(a: tuple[float, ...], b: tuple[float, ...]) -> float:
         "float.range",
         "float.not-finite",
         "here.transform",
-        "joints.reply",
+        "joint-angles.reply",
         "solve-backwards.data",
     ],
 )
@@ -58,7 +58,7 @@ async def here_consistent(ctx: CaseContext) -> None:
     )
     ctx.expect(
         all(abs(q) <= 720.0 for q in joints),
-        clause="joints.reply",
+        clause="joint-angles.reply",
         expected="six joint angles in degrees",
         actual=joints,
     )

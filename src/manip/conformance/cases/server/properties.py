@@ -54,7 +54,7 @@ from manip.conformance.suite.strategies import (
     requests_of,
     valid_requests,
 )
-from manip.spec import SPEC, RequestOpcode
+from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
 
 __all__ = ["FLOAT_TRIP_ULPS", "POSE_TOL_DEG", "POSE_TOL_MM"]
@@ -103,7 +103,7 @@ class _Session:
             self._probe = self.bridge.call(connect_fresh(self.ctx))
         return self._probe
 
-    def ask(self, opcode: int | str, data: bytes = b"") -> Answer:
+    def ask(self, opcode: int | RequestName, data: bytes = b"") -> Answer:
         """Send one request and take its whole answer; no answer at all is an :class:`Evidence`."""
         probe = self.probe
         try:
@@ -119,11 +119,11 @@ class _Session:
                 invariant=TRANSCRIPT.name,  # the probe's own failures (no answer, no connection)
             ) from None
 
-    def call(self, name: str, **values: Any) -> Answer:
+    def call(self, name: RequestName, **values: Any) -> Answer:
         return self.ask(name, encode_request(name, **values))
 
 
-async def _ask(probe: Probe, opcode: int | str, data: bytes) -> Answer:
+async def _ask(probe: Probe, opcode: int | RequestName, data: bytes) -> Answer:
     code = opcode if isinstance(opcode, int) else SPEC.request(opcode).opcode
     number = await probe.request(code, data)
     op = SPEC.requests.get(code)
@@ -486,7 +486,7 @@ async def _settle(
 
 @case(
     "property.floats.round-trip",
-    clauses=["float.format", "joints.reply", "response.segment-number", "motion.no-power"],
+    clauses=["float.format", "joint-angles.reply", "response.segment-number", "motion.no-power"],
     technique="property",
     hazard="motion",
     deadline=PROPERTY_DEADLINE,

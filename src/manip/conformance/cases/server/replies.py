@@ -30,27 +30,12 @@ _COMMON: Final = (
     "response.word-byte-order",
     "response.server-opcodes",
 )
-_ALIASES: Final[Mapping[str, str]] = {
-    "joint-angles": "joints",
-    "incremental-move": "incremental",
-    "incremental-straight-move": "incremental",
-}
-"""Opcode names whose clauses use a shorter prefix (``joints.reply``, ``incremental.data``)."""
-_SHAPE_SUFFIXES: Final = ("data", "done", "reply", "transform")
 
 
 def opcode_clauses(op: RequestOpcode) -> tuple[str, ...]:
     """The clauses a well-formed exchange of ``op`` exercises: the common ones, the response kind's,
-    and the opcode's own shape clauses (``here.transform``, ``calibrate.done``...)."""
-    prefix = _ALIASES.get(op.name, op.name)
-    own = tuple(
-        cid
-        for cid, clause in SPEC.clauses.items()
-        if cid.split(".", 1)[0] == prefix
-        and cid.rsplit(".", 1)[-1] in _SHAPE_SUFFIXES
-        and clause.party in ("server", "both")
-    )
-    return (*_COMMON, *_KIND_CLAUSES[op.response.kind], *own)
+    and the opcode's own reply clauses as the spec data states them (``reply_clauses``)."""
+    return (*_COMMON, *_KIND_CLAUSES[op.response.kind], *op.reply_clauses)
 
 
 async def _release_free_joint(ctx: CaseContext, probe: Probe) -> None:

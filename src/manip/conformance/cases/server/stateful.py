@@ -95,7 +95,7 @@ from manip.conformance.suite.strategies import (
     wrong_length_data,
 )
 from manip.links import open_connection
-from manip.spec import SPEC, RequestOpcode
+from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import ServerOp
 
 __all__ = ["STEPS_PER_EXAMPLE", "Step", "replay", "replay_async"]
@@ -388,7 +388,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
                 packets,
             )
 
-    def call(self, rule: str, name: str, **values: Any) -> Answer:
+    def call(self, rule: str, name: RequestName, **values: Any) -> Answer:
         return self.send(rule, SPEC.request(name).opcode, encode_request(name, **values))
 
     def pause(self, seconds: float) -> None:
@@ -534,7 +534,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         delta=st.tuples(*[f_floats_between(-5.0, 5.0)] * 3, *[f_floats_between(-2.0, 2.0)] * 3),
     )
     def incremental_move(self, straight: bool, delta: tuple[float, ...]) -> None:
-        name = "incremental-straight-move" if straight else "incremental-move"
+        name: RequestName = "incremental-straight-move" if straight else "incremental-move"
         self.call(name, name, delta=list(delta))
 
     @precondition(lambda self: self.env.motion)
