@@ -12,7 +12,7 @@ from manip.codecs.messages import encode_error, guard_hit
 from manip.decode.cli import main
 from manip.spec.constants import RequestOp, ServerOp
 
-RFC_PUMA = "01010000010000040120000001010a01000100005550414d012001015a1a"  # notes §8 vector 1
+RFC_PUMA = "01010000010000040120000001010a01000100005550414d012001015a1a"  # an RFC to contact PUMA
 
 
 def _run(*args: str, stdin: str | None = None) -> tuple[int, str, str]:

@@ -1,4 +1,4 @@
-"""ADC8 (seed B.4) and the strain-gauge wrist it reads (notes/puma-kinematics.md §6.2).
+"""ADC8 (the 1985 guide, B.4) and the strain-gauge wrist it reads (docs/kinematics.md §5).
 
 The filter
 ----------

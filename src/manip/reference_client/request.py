@@ -1,6 +1,6 @@
 """The request object: what the user wants sent, how its reply is read, and where it stands.
 
-This is the 1985 guide's request defstruct (Part I §2; notes §1.4: ``REQUEST-CODE``,
+This is the 1985 guide's request defstruct (Part I §2: ``REQUEST-CODE``,
 ``REQUEST-RESPONSE-TYPE``, ``REQUEST-RESPONSE-DATA-EXTRACTOR``, ``REQUEST-DATA``,
 ``REQUEST-PACKET-NUMBER``) as a Python object.  The data bytes are built when the request is made,
 not when it is sent, so a bad argument is reported in the caller's task (the 1985 guide's advice for a
