@@ -27,7 +27,7 @@ from collections.abc import AsyncIterator
 from types import TracebackType
 from typing import Final
 
-from manip.links import NcpOptions
+from manip.links import NcpConfig
 from manip.reference_server import ServerConfig
 from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import serve
@@ -52,7 +52,7 @@ async def simulated_server(
     The global ``random`` generator is part of the simulated world (connection indices are drawn from
     it): it is seeded from ``seed`` here, so both ends' indices repeat with the run."""
     random.seed(seed)
-    options = None if broken_after is None else NcpOptions.breaking_after(broken_after)
+    options = None if broken_after is None else NcpConfig.breaking_after(broken_after)
     wrist_factory = functools.partial(make_cougar_wrist, "sim", seed=seed) if wrist else None
     with tempfile.TemporaryDirectory(prefix="manip-sim-") as directory:
         path = os.path.join(directory, SOCKET_NAME)
@@ -83,7 +83,7 @@ class EmbeddedServer:
         """``wrist``: give the robot the simulated Cougar wrist, so the wrist opcodes are served (and
         checked) rather than refused with C UIM.  ``broken_after``: the server's broken-connection timer
         (default the NCP's 90 s)."""
-        self._ncp = None if broken_after is None else NcpOptions.breaking_after(broken_after)
+        self._ncp = None if broken_after is None else NcpConfig.breaking_after(broken_after)
         self._config = config or ServerConfig()
         self._wrist = functools.partial(make_cougar_wrist, "sim", seed=seed) if wrist else None
         self._time_scale = time_scale
