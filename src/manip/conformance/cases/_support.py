@@ -34,7 +34,7 @@ from manip.conformance.judge.checks import (
     word,
 )
 from manip.conformance.judge.model import Reply
-from manip.conformance.judge.violation import Violation
+from manip.conformance.judge.violation import CarriesViolation, Violation
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.conformance.suite.invariants import TRANSCRIPT
 from manip.spec import SPEC, RequestName, RequestOpcode
@@ -298,7 +298,7 @@ def must(findings: Iterable[Violation]) -> list[Violation]:
     return [f for f in findings if f.level == "MUST"]
 
 
-class Evidence(AssertionError):  # noqa: N818 - a failed example, not an error of the suite
+class Evidence(CarriesViolation, AssertionError):  # noqa: N818 - a failed example, not an error of the suite
     """A failed example: its :class:`~manip.conformance.judge.violation.Violation` (``.violation``), and
     the packets that showed it.
 
@@ -329,30 +329,6 @@ class Evidence(AssertionError):  # noqa: N818 - a failed example, not an error o
         are the ones among them that show the failure)."""
         self.drawn = drawn
         """What Hypothesis drew for that example, as the report shows it (set by the case's runner)."""
-
-    @property
-    def clause(self) -> str | None:
-        return self.violation.clause
-
-    @property
-    def message(self) -> str:
-        return self.violation.message
-
-    @property
-    def expected(self) -> str:
-        return self.violation.expected
-
-    @property
-    def actual(self) -> str:
-        return self.violation.actual
-
-    @property
-    def data(self) -> bytes:
-        return self.violation.data
-
-    @property
-    def invariant(self) -> str | None:
-        return self.violation.invariant
 
     @classmethod
     def of(cls, finding: Violation, packets: Iterable[WirePacket] = ()) -> Evidence:

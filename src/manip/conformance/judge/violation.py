@@ -24,7 +24,7 @@ from manip.conformance.judge.packets import WirePacket, describe
 from manip.spec import SPEC
 from manip.spec.model import Level
 
-__all__ = ["FAILURE_KINDS", "FailureKind", "Shown", "Violation", "evidence"]
+__all__ = ["FAILURE_KINDS", "CarriesViolation", "FailureKind", "Shown", "Violation", "evidence"]
 
 FailureKind = Literal[
     "wrong_value",
@@ -139,3 +139,42 @@ class Violation:
             "bytes": self.data.hex(),
             "kind": self.kind,
         }
+
+
+class CarriesViolation:
+    """For an outcome that carries a :class:`Violation` (``CaseFailure``, a failed example): its
+    fields, read through it (``exc.clause``...)."""
+
+    violation: Violation
+
+    @property
+    def message(self) -> str:
+        return self.violation.message
+
+    @property
+    def clause(self) -> str | None:
+        return self.violation.clause
+
+    @property
+    def expected(self) -> str:
+        return self.violation.expected
+
+    @property
+    def actual(self) -> str:
+        return self.violation.actual
+
+    @property
+    def data(self) -> bytes:
+        return self.violation.data
+
+    @property
+    def kind(self) -> FailureKind:
+        return self.violation.kind
+
+    @property
+    def invariant(self) -> str | None:
+        return self.violation.invariant
+
+    @property
+    def level(self) -> Level | None:
+        return self.violation.level

@@ -5,28 +5,7 @@ commands (``cli``) and the report of a capture that cannot be used (``capture_re
 The names of the old ``manip.conformance.replay`` module are re-exported here, so that import path keeps
 working."""
 
-from manip.conformance.replay.against import (
-    DEFAULT_ASYNC_TIMEOUT,
-    DEFAULT_SETTLE,
-    AnswerSorter,
-    Barrier,
-    ReplayOptions,
-    Script,
-    SessionReplay,
-    replay_capture,
-    replay_session,
-    script_of,
-)
+from manip.conformance.replay import against
+from manip.conformance.replay.against import *  # noqa: F403 - the old module's names, kept importable here
 
-__all__ = [
-    "DEFAULT_ASYNC_TIMEOUT",
-    "DEFAULT_SETTLE",
-    "AnswerSorter",
-    "Barrier",
-    "ReplayOptions",
-    "Script",
-    "SessionReplay",
-    "replay_capture",
-    "replay_session",
-    "script_of",
-]
+__all__ = against.__all__

@@ -63,7 +63,7 @@ from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final, Literal, TypeVar, get_args
 
-from manip.conformance.judge.violation import FailureKind, Violation
+from manip.conformance.judge.violation import CarriesViolation, FailureKind, Violation
 from manip.spec import SPEC
 from manip.spec.model import Hazard, Level
 
@@ -125,7 +125,7 @@ class UndeclaredClauseError(CaseError):
     """A case reported a clause it does not declare (``manip.conformance.suite.invariants``)."""
 
 
-class CaseFailure(Exception):  # noqa: N818 - an outcome, not an error of the suite
+class CaseFailure(CarriesViolation, Exception):  # noqa: N818 - an outcome, not an error of the suite
     """The target broke a clause: raised by ``ctx.expect``/``ctx.fail`` and the probes; ends the case as
     ``fail``.  It carries one :class:`~manip.conformance.judge.violation.Violation` (``.violation``),
     given whole or built from the same arguments (``CaseFailure("message", clause=..., ...)``)."""
@@ -156,39 +156,6 @@ class CaseFailure(Exception):  # noqa: N818 - an outcome, not an error of the su
         )
         super().__init__(violation.message)
         self.violation = violation
-
-    # The violation's fields, read through the failure (``exc.clause``...).
-    @property
-    def message(self) -> str:
-        return self.violation.message
-
-    @property
-    def clause(self) -> str | None:
-        return self.violation.clause
-
-    @property
-    def expected(self) -> str:
-        return self.violation.expected
-
-    @property
-    def actual(self) -> str:
-        return self.violation.actual
-
-    @property
-    def data(self) -> bytes:
-        return self.violation.data
-
-    @property
-    def kind(self) -> FailureKind:
-        return self.violation.kind
-
-    @property
-    def invariant(self) -> str | None:
-        return self.violation.invariant
-
-    @property
-    def level(self) -> Level | None:
-        return self.violation.level
 
 
 class CaseSkipped(Exception):  # noqa: N818 - an outcome
