@@ -31,7 +31,7 @@ from manip.arm.sim import MAX_LINE_CHECKS, MIN_SPEED_FACTOR
 from manip.arm.transform import Transform
 from manip.codecs.messages import ErrorReply, decode_server_packet, encode_request
 from manip.reference_server import ServerConfig, ServerSession
-from manip.spec import SPEC
+from manip.spec import SPEC, RequestName
 
 GOAL: Joints = (10.0, -80.0, 100.0, 20.0, 30.0, 40.0)
 SPEEDS = (1.0, 1e-6, MIN_SPEED_FACTOR)
@@ -74,7 +74,7 @@ class Client:
             self.session.tick(self.now)
         self.session.arm.set_speed(speed)
 
-    def request(self, op: str, values: Mapping[str, Any]) -> tuple[str, float]:
+    def request(self, op: RequestName, values: Mapping[str, Any]) -> tuple[str, float]:
         """Send one request: (the reply's error code or "done", seconds it took)."""
         self.number += 1
         data = encode_request(op, **values)
@@ -87,7 +87,7 @@ class Client:
 
 
 def measure(
-    counter: Counted, start: Joints, speed: float, op: str, values: Mapping[str, Any], repeat: int
+    counter: Counted, start: Joints, speed: float, op: RequestName, values: Mapping[str, Any], repeat: int
 ) -> tuple[str, int, float]:
     """(reply, solutions, best time in s) of ``op`` on a fresh session standing at ``start``."""
     best, solves, reply = math.inf, 0, ""
@@ -99,9 +99,9 @@ def measure(
     return reply, solves, best
 
 
-def cases() -> list[tuple[str, Joints, str, dict[str, Any]]]:
+def cases() -> list[tuple[str, Joints, RequestName, dict[str, Any]]]:
     far = _pose(READY, (0.0, 0.0, 5000.0))
-    out: list[tuple[str, Joints, str, dict[str, Any]]] = []
+    out: list[tuple[str, Joints, RequestName, dict[str, Any]]] = []
     for label, delta in (
         ("dX 10 mm", (10.0, 0.0, -10.0, 0.0, 0.0, 0.0)),
         ("dX 1e6", (1e6, 0.0, 0.0, 0.0, 0.0, 0.0)),

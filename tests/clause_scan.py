@@ -25,8 +25,8 @@ clause parameter counts too.
 ``something.clause`` whose ``something`` is not resolvable is a *relay*: a finding passed on from where
 it was made (``ctx.fail(clause=failure.clause, ...)``).  Relays are not counted: what they pass on is
 counted where it is built (an ``Evidence(...)`` in a case module), or comes from a closed set checked
-elsewhere (the checkers: :data:`manip.conformance.checks.TRANSCRIPT_CLAUSES`; the stateful model:
-:data:`manip.conformance.model.MODEL_CLAUSES`).  Any other expression (an f-string, a call) is
+elsewhere (the checkers: :data:`manip.conformance.judge.checks.TRANSCRIPT_CLAUSES`; the stateful model:
+:data:`manip.conformance.judge.model.MODEL_CLAUSES`).  Any other expression (an f-string, a call) is
 *unresolved* and reported, so the scan cannot silently miss a position.
 """
 
@@ -43,7 +43,7 @@ from types import FunctionType, ModuleType
 from typing import Any
 
 import manip.conformance.cases as cases_package
-from manip.conformance.case import Case
+from manip.conformance.suite.case import Case
 
 FunctionNode = ast.FunctionDef | ast.AsyncFunctionDef
 DefNode = FunctionNode | ast.ClassDef

@@ -9,11 +9,20 @@ deadline and no too-slow health check, whose verdicts would depend on the machin
 
 Tests' own ``@settings(...)`` objects are built at import, after the profile is loaded here, so they
 take everything they do not set (derandomize, database, ...) from it.
+
+Servers in tests, the shared ways (use these rather than a new one):
+
+* a synchronous test that needs a running reference server takes the module-scoped fixture
+  :func:`reference_server_url` (a default server on a free loopback port, in a thread of its own);
+* an ``async`` test starts one with ``manip.reference_server.driver.serve("tcp://127.0.0.1:0")`` (an
+  async context manager: ``server.address`` is where it listens), or a scripted fake with
+  ``tests.test_client_tcp.scripted_server``; ``tests.test_client_tcp.in_thread`` runs either in a thread.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 
 import pytest
 from hypothesis import HealthCheck, is_hypothesis_test, settings
@@ -91,3 +100,11 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
             "these tests' @settings undo the derandomized profile (set neither derandomize nor database): "
             + ", ".join(unsteady)
         )
+
+
+@pytest.fixture(scope="module")
+def reference_server_url() -> Iterator[str]:
+    """The URL of a default reference server running in a thread, for the tests of one module."""
+    from tests.client_cli_support import reference_url
+
+    yield from reference_url()

@@ -4,7 +4,6 @@ lines and exit statuses, and ``watch`` against a scripted server."""
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
 
 import pytest
 
@@ -16,7 +15,7 @@ from manip.reference_client.cli import (
     EXIT_TIMEOUT,
     EXIT_USAGE,
 )
-from tests.client_cli_support import invoke, reference_url, watch_until_ctrl_c
+from tests.client_cli_support import invoke, watch_until_ctrl_c
 from tests.test_client_tcp import (
     READY,
     TARGET,
@@ -29,8 +28,8 @@ from tests.test_client_tcp import (
 
 
 @pytest.fixture(scope="module")
-def url() -> Iterator[str]:
-    yield from reference_url()
+def url(reference_server_url: str) -> str:
+    return reference_server_url
 
 
 def ok(*args: str) -> str:

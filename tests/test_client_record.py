@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +17,7 @@ from manip.reference_client import ClientOptions, aconnect
 from manip.reference_client.cli import EXIT_CONNECTION, EXIT_SERVER_ERROR, EXIT_USAGE
 from manip.reference_client.ncp_transport import NcpTransport
 from manip.spec.constants import RequestOp, ServerOp
-from tests.client_cli_support import invoke, reference_url, watch_until_ctrl_c
+from tests.client_cli_support import invoke, watch_until_ctrl_c
 from tests.test_client_tcp import (
     TARGET,
     closed_port,
@@ -26,8 +25,8 @@ from tests.test_client_tcp import (
 
 
 @pytest.fixture(scope="module")
-def url() -> Iterator[str]:
-    yield from reference_url()
+def url(reference_server_url: str) -> str:
+    return reference_server_url
 
 
 def _opcodes(session: Session) -> list[int | None]:

@@ -24,17 +24,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import manip.conformance.checks as checks_module
-import manip.conformance.model as model_module
+import manip.conformance.judge.checks as checks_module
+import manip.conformance.judge.model as model_module
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_async, encode_error, encode_reply
-from manip.conformance.case import Case, CaseError, CaseFailure, UndeclaredClauseError, all_cases, case
-from manip.conformance.checks import TRANSCRIPT_CLAUSES, Finding, WirePacket, check_transcript
-from manip.conformance.context import CaseContext, RunOptions
-from manip.conformance.coverage import coverage
-from manip.conformance.invariants import COUGAR_LINK, INVARIANTS, TRANSCRIPT, attribution_problem
-from manip.conformance.model import MODEL_CLAUSES
-from manip.conformance.runner import RunConfig, Runner
+from manip.conformance.judge.checks import TRANSCRIPT_CLAUSES, WirePacket, check_transcript
+from manip.conformance.judge.model import MODEL_CLAUSES
+from manip.conformance.judge.violation import Violation
+from manip.conformance.output.coverage import coverage
+from manip.conformance.suite.case import Case, CaseError, CaseFailure, UndeclaredClauseError, all_cases, case
+from manip.conformance.suite.context import CaseContext, RunOptions
+from manip.conformance.suite.invariants import COUGAR_LINK, INVARIANTS, TRANSCRIPT, attribution_problem
+from manip.conformance.suite.runner import RunConfig, Runner
 from manip.links import ChaosConnection
 from manip.reference_server.driver import serve
 from manip.spec import SPEC
@@ -59,8 +60,8 @@ def test_no_case_can_report_a_clause_it_does_not_declare() -> None:
 
 
 _PLANTED = """
-from manip.conformance.case import CaseFailure
-from manip.conformance.cases._live import Evidence
+from manip.conformance.suite.case import CaseFailure
+from manip.conformance.cases._support import Evidence
 
 TABLE = {"a": "async.codes", "b": "async.layout"}
 
@@ -127,9 +128,8 @@ def _fake_case(function: Callable[..., Awaitable[None]], *clauses: str) -> Case:
         function=function,
         clauses=clauses or ("request.one-reply",),
         level="MUST",
-        kind="scripted",
+        technique="scripted",
         hazard="read-only",
-        fresh=True,
         deadline=1.0,
         summary="",
         module=function.__module__,
@@ -138,7 +138,7 @@ def _fake_case(function: Callable[..., Awaitable[None]], *clauses: str) -> Case:
 
 def test_the_scan_finds_what_a_case_reports(planted: Any) -> None:
     """The scan can fail: it finds clauses however they are passed, and flags what it cannot resolve."""
-    live = importlib.import_module("manip.conformance.cases._live")
+    live = importlib.import_module("manip.conformance.cases._support")
     scanner = Scanner(Index([planted, live]))
 
     def found(function: Callable[..., Awaitable[None]]) -> set[str]:
@@ -292,7 +292,7 @@ def test_the_stateful_case_declares_every_clause_of_the_model() -> None:
     stateful = next(c for c in CASES if c.id == "stateful.arm-model")
     assert set(MODEL_CLAUSES) <= set(stateful.clauses)
     with pytest.raises(ValueError, match="MODEL_CLAUSES"):
-        model_module.Finding("describe.brand-name", "x", "y")
+        model_module.finding("describe.brand-name", "x", "y")
 
 
 # ------------------------------------------------------------------------------- at run time
@@ -331,16 +331,16 @@ def test_expect_and_fail_refuse_an_undeclared_clause_even_when_it_holds() -> Non
 
 def test_check_attributes_the_checkers_findings_to_the_transcript_invariant() -> None:
     ctx = _context("describe.brand-name")
-    ctx.check([Finding("describe.brand-name", "m"), Finding("connect.initial-response-number", "m")])
+    ctx.check([Violation("m", "describe.brand-name"), Violation("m", "connect.initial-response-number")])
     assert [(s.clause, s.invariant) for s in ctx.soft_failures] == [
         ("describe.brand-name", None),
         ("connect.initial-response-number", "transcript"),
     ]
     with pytest.raises(CaseFailure) as raised:
-        ctx.check([Finding("response.echoes-request-number", "m")])
+        ctx.check([Violation("m", "response.echoes-request-number")])
     assert raised.value.invariant == "transcript"
     with pytest.raises(UndeclaredClauseError, match=r"here\.transform"):
-        ctx.check([Finding("here.transform", "m")])  # no checker names it: a bug of the suite
+        ctx.check([Violation("m", "here.transform")])  # no checker names it: a bug of the suite
 
 
 def test_attribution_problem_names_case_and_clause() -> None:
@@ -367,9 +367,7 @@ async def _times_out(ctx: CaseContext) -> None:
 
 def test_the_runner_turns_an_undeclared_report_into_an_error() -> None:
     def item(case_id: str, body: Callable[[CaseContext], Awaitable[None]]) -> Case:
-        return Case(
-            case_id, body, ("here.transform",), "MUST", "scripted", "read-only", True, 2.0, "", __name__
-        )
+        return Case(case_id, body, ("here.transform",), "MUST", "scripted", "read-only", 2.0, "", __name__)
 
     cases = [item("t.raised", _raises_undeclared), item("t.expected", _expects_undeclared)]
     cases.append(item("t.probe", _times_out))

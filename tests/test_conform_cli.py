@@ -21,16 +21,16 @@ from click.testing import CliRunner
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_error, encode_reply, encode_request, segment_completed
 from manip.codecs.packet import Packet
-from manip.conformance.case import all_cases
-from manip.conformance.checks import WirePacket, describe
 from manip.conformance.cli import main
-from manip.conformance.context import RunOptions
-from manip.conformance.packet_text import packet_listing
-from manip.conformance.rawchaos import RawError, RawPeer, format_packet
-from manip.conformance.report import by_clause, clause_lines, load_schema, report_json
-from manip.conformance.results import CaseResult, ExitCode, RunReport, Violation
-from manip.conformance.runner import RunConfig, Runner
-from manip.conformance.selection import PatternSet
+from manip.conformance.judge.checks import WirePacket, describe
+from manip.conformance.output.packet_text import packet_listing
+from manip.conformance.output.report import by_clause, clause_lines, load_schema, report_json
+from manip.conformance.suite.case import all_cases
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.rawchaos import RawError, RawPeer, format_packet
+from manip.conformance.suite.results import CaseResult, ExitCode, RunReport, Violation
+from manip.conformance.suite.runner import RunConfig, Runner
+from manip.conformance.suite.selection import PatternSet
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
 from tests.test_conform_framework import _validate

@@ -13,13 +13,13 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from manip.conformance.case import CaseFailure, all_cases
 from manip.conformance.cli import main as conform_main
-from manip.conformance.context import RunOptions
-from manip.conformance.cougar_probe import CougarProbe, TickClock, cougar_liveness
-from manip.conformance.cougar_target import CougarTarget, cougar_cases, run_cougar_suite, wait_idle
-from manip.conformance.coverage import coverage, gaps
-from manip.conformance.results import ExitCode, RunReport
+from manip.conformance.cougar.probe import CougarProbe, TickClock, cougar_liveness
+from manip.conformance.cougar.target import CougarTarget, cougar_cases, run_cougar_suite, wait_idle
+from manip.conformance.output.coverage import coverage, gaps
+from manip.conformance.suite.case import CaseFailure, all_cases
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.results import ExitCode, RunReport
 from manip.cougar import CougarConfig, CougarSim
 from manip.cougar.cli import main as cougar_main
 from manip.cougar.cli import serve_cougar
@@ -91,8 +91,8 @@ def test_server_runs_leave_out_cougar_cases() -> None:
     server = cougar_cases(cases, cougar=False)
     cougar = cougar_cases(cases, cougar=True)
     assert server and cougar
-    assert all(c.kind != "cougar" for c in server)
-    assert all(c.kind == "cougar" and c.id.startswith("cougar.") for c in cougar)
+    assert all(c.target == "server" for c in server)
+    assert all(c.target == "cougar" and c.id.startswith("cougar.") for c in cougar)
 
 
 def test_external_cougar_is_checked_over_its_url() -> None:

@@ -21,11 +21,11 @@ from collections.abc import Iterator, Sequence
 
 import pytest
 
-from manip.conformance import bridge
-from manip.conformance.case import Case, all_cases
-from manip.conformance.context import RunOptions
-from manip.conformance.results import RunReport
-from manip.conformance.runner import RunConfig, Runner
+from manip.conformance.suite import bridge
+from manip.conformance.suite.case import Case, all_cases
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.results import RunReport
+from manip.conformance.suite.runner import RunConfig, Runner
 from manip.reference_server.driver import serve
 from manip.reference_server.faults import FAULTS, Fault, FaultSet
 from manip.reference_server.session import ServerConfig

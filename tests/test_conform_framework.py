@@ -15,19 +15,19 @@ import pytest
 
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_error, encode_reply
-from manip.conformance.case import Case, CaseError, case
-from manip.conformance.checks import (
+from manip.conformance.judge.checks import (
     WirePacket,
     check_error_packet,
     check_reply,
     check_transcript,
     required_refusal,
 )
-from manip.conformance.context import CaseContext, RunOptions
-from manip.conformance.report import load_schema, report_json, report_junit
-from manip.conformance.results import ExitCode, RunReport
-from manip.conformance.runner import RunConfig, Runner, case_seed
-from manip.conformance.selection import PatternError, PatternSet, match_id
+from manip.conformance.output.report import load_schema, report_json, report_junit
+from manip.conformance.suite.case import Case, CaseError, case
+from manip.conformance.suite.context import CaseContext, RunOptions
+from manip.conformance.suite.results import ExitCode, RunReport
+from manip.conformance.suite.runner import RunConfig, Runner, case_seed
+from manip.conformance.suite.selection import PatternError, PatternSet, match_id
 from manip.reference_server.driver import serve
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
@@ -167,9 +167,8 @@ def _case(case_id: str, body: Callable[[CaseContext], Awaitable[None]], **kw: An
     defaults: dict[str, Any] = {
         "clauses": ("request.one-reply",),
         "level": "MUST",
-        "kind": "scripted",
+        "technique": "scripted",
         "hazard": "read-only",
-        "fresh": True,
         "deadline": 2.0,
         "summary": "",
         "module": __name__,

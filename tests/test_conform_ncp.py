@@ -1,4 +1,4 @@
-"""The raw-Chaos NCP cases (manip.conformance.cases.ncp): the reference server passes them, a small
+"""The raw-Chaos NCP cases (manip.conformance.cases.server.ncp): the reference server passes them, a small
 conforming fake NCP passes them, and a fake with one flaw at a time fails the case written for it.
 
 The fake is deliberately tiny (no manip layer: every data packet is answered by a RESPONSE quoting its
@@ -18,11 +18,11 @@ import pytest
 
 from manip.codecs.framing import CHUDP_HEADER, encode_chudp, encode_tcp
 from manip.codecs.packet import MAX_DATA, Packet
-from manip.conformance.case import all_cases
-from manip.conformance.context import RunOptions
-from manip.conformance.rawchaos import RawPeer, format_packet
-from manip.conformance.results import CaseResult
-from manip.conformance.runner import RunConfig, Runner
+from manip.conformance.suite.case import all_cases
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.rawchaos import RawPeer, format_packet
+from manip.conformance.suite.results import CaseResult
+from manip.conformance.suite.runner import RunConfig, Runner
 from manip.links import NcpOptions
 from manip.ncp.packets import is_data, is_legal_opcode, make_los, pack_status, unpack_status
 from manip.ncp.seq import seq_add, seq_gt, seq_le, seq_sub

@@ -12,12 +12,12 @@ from collections.abc import Sequence
 
 import pytest
 
-from manip.conformance import bridge
-from manip.conformance.bridge import Bridge, StopRun, run_in_worker
-from manip.conformance.case import all_cases
-from manip.conformance.context import RunOptions
-from manip.conformance.results import CaseResult, RunReport
-from manip.conformance.runner import RunConfig, Runner
+from manip.conformance.suite import bridge
+from manip.conformance.suite.bridge import Bridge, StopRun, run_in_worker
+from manip.conformance.suite.case import all_cases
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.results import CaseResult, RunReport
+from manip.conformance.suite.runner import RunConfig, Runner
 from manip.reference_server.driver import serve
 from manip.reference_server.faults import FaultSet
 from manip.reference_server.session import ServerConfig

@@ -14,7 +14,7 @@ from manip.arm.kinematics import PUMA600
 from manip.codecs.errors import DecodeError
 from manip.codecs.messages import decode_request
 from manip.codecs.pdp11float import f_to_u32, u32_to_f
-from manip.conformance.strategies import (
+from manip.conformance.suite.strategies import (
     ALL_HAZARDS,
     F_RELATIVE_ULP,
     SAFE_HAZARDS,

@@ -14,14 +14,14 @@ import pytest
 from click.testing import CliRunner
 
 from manip.captures import read_session
-from manip.conformance.checks import WirePacket
 from manip.conformance.cli import main
-from manip.conformance.embedded import EmbeddedServer
-from manip.conformance.masking import NumberMap, SegmentBase, compare_answer, floats_equal
-from manip.conformance.replay import AnswerSorter, ReplayOptions, replay_capture, script_of
-from manip.conformance.replay_serve import ServeOptions, serve_capture
-from manip.conformance.report import load_schema
-from manip.conformance.results import RunReport
+from manip.conformance.judge.checks import WirePacket
+from manip.conformance.output.report import load_schema
+from manip.conformance.replay.against import AnswerSorter, ReplayOptions, replay_capture, script_of
+from manip.conformance.replay.masking import NumberMap, SegmentBase, compare_answer, floats_equal
+from manip.conformance.replay.serve import ServeOptions, serve_capture
+from manip.conformance.suite.embedded import EmbeddedServer
+from manip.conformance.suite.results import RunReport
 from manip.reference_client import aconnect
 from manip.reference_client.errors import ResponseDataError
 from manip.reference_server import FaultSet, ServerConfig
@@ -190,7 +190,7 @@ def test_serve_cli_prints_the_real_address_and_stops_after_seconds() -> None:
 
 
 def test_embedded_replay_server_gets_a_wrist_only_when_the_recording_had_one(tmp_path: Path) -> None:
-    from manip.conformance.replay_cli import _capture_settings
+    from manip.conformance.replay.cli import _capture_settings
 
     assert _capture_settings(GOLDEN / "describe-self.mcap").wrist is False  # recorded without a wrist
     recorded = tmp_path / "wrist.mcap"

@@ -10,10 +10,10 @@ import pytest
 from click.testing import CliRunner
 from mcap.reader import make_reader
 
-from manip.conformance.checks import WirePacket
 from manip.conformance.cli import main
-from manip.conformance.results import CaseResult, ExitCode, RunReport
-from manip.conformance.stability import instability, repeat_seeds
+from manip.conformance.judge.checks import WirePacket
+from manip.conformance.suite.results import CaseResult, ExitCode, RunReport
+from manip.conformance.suite.stability import instability, repeat_seeds
 
 
 def _invoke(*args: str) -> tuple[int, str]:

@@ -11,12 +11,12 @@ from collections.abc import Sequence
 
 import pytest
 
-from manip.conformance import bridge
-from manip.conformance.case import all_cases
-from manip.conformance.cases.stateful import replay_async
-from manip.conformance.context import RunOptions
-from manip.conformance.results import CaseResult
-from manip.conformance.runner import RunConfig, Runner
+from manip.conformance.cases.server.stateful import replay_async
+from manip.conformance.suite import bridge
+from manip.conformance.suite.case import all_cases
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.results import CaseResult
+from manip.conformance.suite.runner import RunConfig, Runner
 from manip.reference_server.driver import serve
 from manip.reference_server.faults import FaultSet
 from manip.reference_server.session import ServerConfig

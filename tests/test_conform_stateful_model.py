@@ -10,7 +10,7 @@ import pytest
 
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_request
-from manip.conformance.model import Expectation, ProtocolModel, Reply
+from manip.conformance.judge.model import Expectation, ProtocolModel, Reply
 from manip.spec import SPEC
 
 READY = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
@@ -214,4 +214,4 @@ def test_extensions_the_server_does_not_list_may_be_refused_as_unserved() -> Non
     assert listed.expect(op("request-notifications"), encode_request("request-notifications", mask=2)).command
     unknown = ProtocolModel()
     assert unknown.expect(op("reset-abort"), b"").command
-    assert not unknown.expect(op("enable-power"), b"").command  # the seed's opcodes are never optional
+    assert not unknown.expect(op("enable-power"), b"").command  # the 1985 guide's opcodes are never optional

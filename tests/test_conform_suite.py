@@ -11,13 +11,13 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from manip.conformance.case import all_cases
 from manip.conformance.cli import main
-from manip.conformance.context import RunOptions
-from manip.conformance.coverage import coverage, gaps
-from manip.conformance.results import ExitCode, RunReport
-from manip.conformance.runner import RunConfig, Runner
-from manip.conformance.selection import PatternSet
+from manip.conformance.output.coverage import coverage, gaps
+from manip.conformance.suite.case import all_cases
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.results import ExitCode, RunReport
+from manip.conformance.suite.runner import RunConfig, Runner
+from manip.conformance.suite.selection import PatternSet
 from manip.reference_server import FaultSet, ServerConfig
 from manip.reference_server.driver import serve
 

@@ -12,15 +12,15 @@ from click.testing import CliRunner
 
 from manip.captures import read_session
 from manip.codecs.messages import encode_request
-from manip.conformance.case import all_cases
-from manip.conformance.checks import WirePacket, check_client_request
 from manip.conformance.cli import main
-from manip.conformance.coverage import coverage, gaps
-from manip.conformance.embedded import EmbeddedServer
-from manip.conformance.replay import ReplayOptions, replay_capture
-from manip.conformance.replay_cli import recording
-from manip.conformance.report import load_schema, report_json
-from manip.conformance.verify import fatal_close_findings, verify_capture, wire_packets
+from manip.conformance.judge.checks import WirePacket, check_client_request
+from manip.conformance.output.coverage import coverage, gaps
+from manip.conformance.output.report import load_schema, report_json
+from manip.conformance.replay.against import ReplayOptions, replay_capture
+from manip.conformance.replay.cli import recording
+from manip.conformance.replay.verify import fatal_close_findings, verify_capture, wire_packets
+from manip.conformance.suite.case import all_cases
+from manip.conformance.suite.embedded import EmbeddedServer
 from manip.reference_server import FaultSet, ServerConfig
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp

@@ -1,4 +1,5 @@
-"""COMINT (seed B.7) in the simulator: buffering, chunking, out-of-sync recovery, decodable output."""
+"""COMINT (the 1985 guide, B.7) in the simulator: buffering, chunking, out-of-sync recovery, decodable
+output."""
 
 from __future__ import annotations
 

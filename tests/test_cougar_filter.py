@@ -1,4 +1,5 @@
-"""ADC8's integer filter (seed B.4) and the output FILTER (B.10), measured from the implementations."""
+"""ADC8's integer filter (the 1985 guide, B.4) and the output FILTER (B.10), measured from the
+implementations."""
 
 from __future__ import annotations
 
@@ -98,7 +99,7 @@ def test_zero_at_nyquist() -> None:
 def test_minus_3db_point_measured_from_the_integer_filter(fs: float, expected: float) -> None:
     f3 = minus_3db(fs)
     assert f3 == pytest.approx(expected, abs=0.01)
-    # and it agrees with the closed form fs*acos(0.96)/2pi of notes §6.4
+    # and it agrees with the closed form fs*acos(0.96)/2pi (docs/kinematics.md §5.2)
     assert f3 == pytest.approx(fs * math.acos(0.96) / (2 * math.pi), abs=0.01)
 
 

@@ -1,4 +1,4 @@
-"""Cougar word codecs and COMINT's streaming semantics (seed B.7, Table 1)."""
+"""Cougar word codecs and COMINT's streaming semantics (the 1985 guide, B.7, Table 1)."""
 
 from __future__ import annotations
 

@@ -23,7 +23,7 @@ from manip.spec.constants import RequestOp, ServerOp
 
 ROOT = Path(__file__).resolve().parents[1]
 
-RFC_PUMA = "01010000010000040120000001010a01000100005550414d012001015a1a"  # notes §8 vector 1
+RFC_PUMA = "01010000010000040120000001010a01000100005550414d012001015a1a"  # an RFC to contact PUMA
 
 
 def _run(*args: str, stdin: str | None = None) -> tuple[int, str, str]:

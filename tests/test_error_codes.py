@@ -76,9 +76,9 @@ def test_the_table_gives_each_code_the_severities_it_is_sent_with() -> None:
     assert all(severity in SPEC.severities for severity, _ in pairs)
 
 
-def test_the_seed_codes_keep_the_1985_guide_meanings() -> None:
+def test_the_guide_codes_are_the_1985_guide_s() -> None:
     # NAP, AWA, JOR and TOR are the codes the 1985 guide defines (E.2); NZI is its example.
-    assert {c for c, e in SPEC.error_codes.items() if e.origin == "seed"} == {
+    assert {c for c, e in SPEC.error_codes.items() if e.origin == "guide"} == {
         "NAP",
         "AWA",
         "JOR",

@@ -128,12 +128,12 @@ def test_forward_matches_modified_dh(q: tuple[float, ...], g: PumaGeometry) -> N
 @FAST
 @given(st.tuples(*(st.floats(-360.0, 360.0) for _ in range(6))), st.sampled_from(GEOMETRIES))
 def test_rtb_convention_maps_exactly(q: tuple[float, ...], g: PumaGeometry) -> None:
-    """T_Lee(q + (0, 180, 180, 0, 0, 0)) = Rz(180)·T_RTB(q)·Rz(180)  (notes §1.5)."""
+    """T_Lee(q + (0, 180, 180, 0, 0, 0)) = Rz(180)·T_RTB(q)·Rz(180)  (docs/kinematics.md §1)."""
     lee = forward(np.array(q) + RTB_TO_LEE, g).matrix
     assert np.allclose(lee, _rz(180) @ rtb_fk(q, g) @ _rz(180), atol=1e-9)
 
 
-# ---------------------------------------------------------------------------- notes §4.3 vectors
+# ---------------------------------------------------------------------------- reference vectors
 # name: (q_RTB deg, T in metres with the pedestal (rows of [n o a p]), ikine_a solutions by config)
 VECTORS = {
     "TV1": (

@@ -326,7 +326,7 @@ def test_chudp_link_survives_random_datagrams(datagrams: list[bytes]) -> None:
 
 
 def test_breaking_after_shrinks_the_probe_interval_with_the_timer() -> None:
-    assert NcpOptions.breaking_after(90) == replace(NcpOptions(), broken_after=90)  # the seed's: unchanged
+    assert NcpOptions.breaking_after(90) == replace(NcpOptions(), broken_after=90)  # 90 s: unchanged
     short = NcpOptions.breaking_after(3)
     assert short.broken_after == 3 and short.probe_interval == 1.0  # three probes before giving up
     for bad in (0, -1, float("inf"), float("nan")):

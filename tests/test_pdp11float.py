@@ -69,7 +69,8 @@ def oracle_value(u: int) -> float:
 
 
 def oracle_bytes(x: float | Fraction, rounding: str, underflow: str = "zero") -> bytes | str:
-    """Encode with rationals (notes §2.4 method): the wire bytes, or the clause of the expected error."""
+    """Encode with exact fractions, independent of the codec: the wire bytes, or the clause of the expected
+    error."""
     if isinstance(x, float) and not math.isfinite(x):
         return "float.not-finite"
     if x == 0:
@@ -217,7 +218,7 @@ def test_golden_vector(op: str, vector: dict[str, Any], policy: dict[str, str]) 
 
 
 def test_vectors_cover_the_table() -> None:
-    """Every row of notes §2.4 (and the non-finite errors) is present."""
+    """Every row of the rounding table (and the non-finite errors) is present."""
     by_hex = {(v.get("hex"), v["direction"]) for v in VECTORS["vectors"]}
     for row in [
         "80400000",

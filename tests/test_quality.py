@@ -1,7 +1,9 @@
-"""Static gates as tests, so CI enforces them: ruff, mypy --strict and the import layers."""
+"""Static gates as tests, so CI enforces them: ruff (with its size and complexity rules), mypy --strict,
+the import layers, and a docstring on every module saying what it is for."""
 
 from __future__ import annotations
 
+import ast
 import shutil
 import subprocess
 import sys
@@ -50,3 +52,16 @@ def test_import_layers() -> None:
 
 def test_package_is_typed() -> None:
     assert (ROOT / "src" / "manip" / "py.typed").exists()
+
+
+MIN_DOCSTRING_WORDS = 6
+"""A module docstring says what the module is for: more than a title."""
+
+
+def test_every_module_says_what_it_is_for() -> None:
+    missing = []
+    for path in sorted((ROOT / "src").rglob("*.py")):
+        doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8")))
+        if doc is None or len(doc.split()) < MIN_DOCSTRING_WORDS:
+            missing.append(str(path.relative_to(ROOT)))
+    assert not missing, f"modules without a docstring saying what they are for: {missing}"

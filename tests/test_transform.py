@@ -150,7 +150,7 @@ def test_oat_zero_is_val_1977_hand_pointing_minus_y() -> None:
 
 
 def test_worked_example_h1() -> None:
-    """notes/puma-kinematics.md §2.3: O, A, T = 30, 45, 60."""
+    """docs/kinematics.md §2.3: O, A, T = 30, 45, 60."""
     expected = [
         [0.573223, 0.739199, 0.353553],
         [0.739199, -0.280330, -0.612372],

@@ -43,7 +43,7 @@ def test_request_vectors(vec: dict[str, Any]) -> None:
     data = bytes.fromhex(vec["hex"])
     assert dict(decode_request(opcode, data).values) == _tuples(vec["fields"])
     encoded = encode_request(opcode, **_tuples(vec["fields"]))
-    # `small` fields are encoded as a word; the vector shows the one-byte form the seed describes.
+    # `small` fields are encoded as a word; the vector shows the one-byte form the 1985 guide describes.
     assert encoded == data or (encoded[:1] == data and encoded[1:] == b"\0")
 
 

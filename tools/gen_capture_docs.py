@@ -1,8 +1,8 @@
 """Generate docs/captures.md (the capture file format, its schemas, recovery and replay masks) from the
 modules that define them, so the page cannot drift from the code.
 
-Run after changing manip.captures or manip.conformance.masking; tests/test_capture_golden.py fails while
-docs/captures.md is stale.
+Run after changing manip.captures or manip.conformance.replay.masking; tests/test_capture_golden.py
+fails while docs/captures.md is stale.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from manip.captures.format import (
     view_schema,
 )
 from manip.codecs.framing import FRAMINGS
-from manip.conformance import masking
+from manip.conformance.replay import masking
 
 TARGET = Path(__file__).resolve().parents[1] / "docs" / "captures.md"
 RECOVER: Final = importlib.import_module("manip.captures.recover")
@@ -79,8 +79,8 @@ def render() -> str:
     out = [
         "# manip capture files",
         "",
-        "Generated from `manip.captures` and `manip.conformance.masking` by `tools/gen_capture_docs.py`; "
-        "do not edit by hand.",
+        "Generated from `manip.captures` and `manip.conformance.replay.masking` by "
+        "`tools/gen_capture_docs.py`; do not edit by hand.",
         "",
         "## Layout",
         "",

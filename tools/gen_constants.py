@@ -18,6 +18,7 @@ DO NOT EDIT: regenerate with ``python tools/gen_constants.py``; a test checks th
 """
 
 from enum import IntEnum
+from typing import Literal
 '''
 
 
@@ -74,8 +75,21 @@ def _tables(spec: Spec) -> list[tuple[str, str, list[tuple[str, int]], bool]]:
     ]
 
 
+def _names(name: str, doc: str, names: list[str]) -> str:
+    lines = ["", "", f"{name} = Literal["]
+    lines += [f'    "{n}",' for n in names]
+    lines += ["]", f'"""{doc}"""']
+    return "\n".join(lines) + "\n"
+
+
 def render() -> str:
-    return HEADER + "".join(_enum(*table) for table in _tables(load_spec()))
+    spec = load_spec()
+    names = _names(
+        "RequestName",
+        "Every request opcode's name: a misspelt operation name is a type error.",
+        [r.name for r in spec.requests.values()],
+    )
+    return HEADER + "".join(_enum(*table) for table in _tables(spec)) + names
 
 
 def main() -> int:

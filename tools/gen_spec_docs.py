@@ -36,6 +36,13 @@ def render() -> str:
     out: list[str] = [
         "# The Chaos manipulator protocol and the Cougar word protocol, as manip specifies them",
         "",
+        "The source is the *Puma/Cougar Implementor's Guide* (MIT, 1985; called *the 1985 guide* here): "
+        "Part I, the Lisp Puma system (the Manip system of the Lisp Machine); Part II, the Puma PDP-11 "
+        "system; Part III, the Cougar PDP-11 system (the wrist computer); Appendices A to E: Cougar "
+        "hardware, Cougar software, its command protocol (Table 1), Puma hardware, and the Chaos "
+        "manipulator protocol. Section references in the tables below (the *1985 guide* column) are to "
+        "it.",
+        "",
         f"Generated from `src/manip/spec/data/*.toml` (revision `{SPEC.revision}`) by "
         "`tools/gen_spec_docs.py`; do not edit by hand.",
         "",
@@ -46,7 +53,7 @@ def render() -> str:
         "",
         "## Request opcodes",
         "",
-        "| opcode | name | hazard | request data | reply | seed |",
+        "| opcode | name | hazard | request data | reply | 1985 guide |",
         "|---|---|---|---|---|---|",
     ]
     for op in SPEC.requests.values():
@@ -122,7 +129,7 @@ def render() -> str:
         out += [
             f"### {group}",
             "",
-            "| id | level | binds | requirement | seed |",
+            "| id | level | binds | requirement | 1985 guide |",
             "|---|---|---|---|---|",
             *rows,
             "",

@@ -4,7 +4,7 @@ The protocol's "solve backwards" (joint angles to transform) is :func:`forward`;
 (transform to joint angles) is :func:`inverse_nearest`, built on the closed-form :func:`inverse_all`.
 
 Convention (errata ``joint-convention``): standard Denavit-Hartenberg, A_i = Rz(θ_i)·Tz(d_i)·Tx(a_i)·Rx(α_i),
-with the Lee & Ziegler / Fu-Gonzalez-Lee table (notes/puma-kinematics.md §1.3)::
+with the Lee & Ziegler / Fu-Gonzalez-Lee table (docs/kinematics.md §1)::
 
     joint   α     a      d
       1    −90    0      0
@@ -172,7 +172,7 @@ class JointLimits:
         return sorted((angle + 360.0 * k for k in range(k_min, k_max + 1)), key=lambda v: abs(v - angle))
 
 
-#: Unimation's ranges in the Lee/VAL convention (notes §1.6).
+#: Unimation's ranges in the Lee/VAL convention (docs/kinematics.md §1).
 UNIMATION_LIMITS = JointLimits(
     lower=(-160.0, -225.0, -45.0, -110.0, -100.0, -266.0),
     upper=(160.0, 45.0, 225.0, 170.0, 100.0, 266.0),

@@ -1,6 +1,6 @@
 """VAL's x, y, z, O, A, T pose description, as the incremental moves (opcodes 0211, 0212) use it.
 
-Model implemented: hypothesis **H1** of notes/puma-kinematics.md §2.2, built from the 1977 VAL manual's
+Model implemented: **H1** of docs/kinematics.md §2.2, built from the 1977 VAL manual's
 text.  With O = A = T = 0 the hand points along −Y (a = (0, −1, 0)), the fingers lie in a horizontal
 plane with the finger-to-finger vector along X (o = (1, 0, 0)), so n = o × a = (0, 0, −1).  O turns the
 hand about the world vertical (pre-multiply), A tilts the approach about the hand's o axis and T rolls
@@ -9,8 +9,8 @@ about the approach (post-multiply), all right-handed::
     R(O, A, T) = Rz(O) · R0 · Ry(A) · Rz(T) = Rz(O − 90°) · Ry(A + 90°) · Rz(T)      R0 = [n o a] above
 
 so A = +90° points the hand straight down and A = −90° straight up.  The signs of A and T are not
-confirmed by a primary source (notes §7 item 1); if VAL differs, negate A and/or T here and nothing else
-changes.
+confirmed by a primary source (docs/kinematics.md §2.4); if VAL differs, negate A and/or T here and
+nothing else changes.
 
 Singular cases: when the approach vector is vertical (A = ±90°) only one combination of O and T is
 defined: O + T when the hand points up, O − T when it points down.  :func:`xyzoat_from_transform` then

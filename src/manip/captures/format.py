@@ -32,12 +32,14 @@ from __future__ import annotations
 
 import json
 from functools import cache
-from typing import Any, Final, Literal
+from typing import Any, Final
 
+from manip.codecs import packet as _packet
 from manip.codecs.framing import FRAMINGS
 from manip.spec import SPEC, FieldType
 
-Direction = Literal["c2s", "s2c"]
+Direction = _packet.Direction
+"""The one definition (``manip.codecs.packet.Direction``), named here too for the capture modules."""
 DIRECTIONS: Final[tuple[Direction, Direction]] = ("c2s", "s2c")
 
 PROFILE: Final = "manip"

@@ -1,4 +1,4 @@
-"""The Puma <-> Cougar word protocol (seed Table 1), driven by ``manip/spec/data/cougar.toml``.
+"""The Puma <-> Cougar word protocol (the 1985 guide, Table 1), driven by ``manip/spec/data/cougar.toml``.
 
 Messages are a code word then a fixed number of 16-bit data words (floats take two words, the
 sign/exponent word first; EXMN's reply carries its own count).  :class:`WordStream` is COMINT's input
@@ -17,14 +17,18 @@ from manip.codecs.errors import CodecError, DecodeError, EncodeError
 from manip.codecs.pdp11float import f_to_words, words_to_f
 from manip.spec import SPEC, CougarMessage
 
-Direction = Literal["command", "response"]
+CougarDirection = Literal["command", "response"]
+"""Which way Cougar words travel: commands from the Puma, responses from Cougar."""
 CougarValue = float | int | tuple[float, ...] | tuple[int, ...]
 
-_TABLES: Mapping[Direction, Mapping[int, CougarMessage]] = {
+_TABLES: Mapping[CougarDirection, Mapping[int, CougarMessage]] = {
     "command": SPEC.cougar_commands,
     "response": SPEC.cougar_responses,
 }
-_CLAUSE: Mapping[Direction, str] = {"command": "cougar.command.layout", "response": "cougar.response.layout"}
+_CLAUSE: Mapping[CougarDirection, str] = {
+    "command": "cougar.command.layout",
+    "response": "cougar.response.layout",
+}
 
 
 @dataclass(frozen=True)
@@ -63,7 +67,7 @@ class Malformed:
 StreamItem = CougarMsg | OutOfSync | Malformed
 
 
-def lookup(direction: Direction, key: int | str) -> CougarMessage:
+def lookup(direction: CougarDirection, key: int | str) -> CougarMessage:
     table = _TABLES[direction]
     if isinstance(key, int):
         if key in table:
@@ -75,7 +79,7 @@ def lookup(direction: Direction, key: int | str) -> CougarMessage:
     raise KeyError(f"no Cougar {direction} {key!r} in Table 1")
 
 
-def message_length(direction: Direction, words: Sequence[int]) -> int | None:
+def message_length(direction: CougarDirection, words: Sequence[int]) -> int | None:
     """Total words (code included) of the message starting at ``words[0]``; None if not yet knowable.
 
     Raises KeyError for an unknown code.
@@ -90,7 +94,7 @@ def message_length(direction: Direction, words: Sequence[int]) -> int | None:
     return 2 + words[1]
 
 
-def encode(direction: Direction, key: int | str, **values: Any) -> list[int]:
+def encode(direction: CougarDirection, key: int | str, **values: Any) -> list[int]:
     """The words of a command or response, code word first."""
     msg = lookup(direction, key)
     words = [msg.code]
@@ -124,7 +128,7 @@ def encode(direction: Direction, key: int | str, **values: Any) -> list[int]:
     return words
 
 
-def _decode_body(msg: CougarMessage, words: Sequence[int], direction: Direction) -> CougarMsg:
+def _decode_body(msg: CougarMessage, words: Sequence[int], direction: CougarDirection) -> CougarMsg:
     values: dict[str, CougarValue] = {}
     pos = 1
     for f in msg.data:
@@ -154,7 +158,7 @@ def _decode_body(msg: CougarMessage, words: Sequence[int], direction: Direction)
     return CougarMsg(msg, values, tuple(words))
 
 
-def decode(direction: Direction, words: Sequence[int]) -> CougarMsg:
+def decode(direction: CougarDirection, words: Sequence[int]) -> CougarMsg:
     """Decode exactly one message.  Offsets in errors are byte offsets (2 per word)."""
     if not words:
         raise DecodeError("no code word", "code", 0, "cougar.word-link")
@@ -175,8 +179,8 @@ def decode(direction: Direction, words: Sequence[int]) -> CougarMsg:
 class WordStream:
     """COMINT's input buffer: words in, complete messages (or out-of-sync reports) out, in order."""
 
-    def __init__(self, direction: Direction) -> None:
-        self.direction: Direction = direction
+    def __init__(self, direction: CougarDirection) -> None:
+        self.direction: CougarDirection = direction
         self._buffer: list[int] = []
         self.out_of_sync_count = 0
 

@@ -1,7 +1,7 @@
 """The server error string of E.2: ``where: severity code message``, optionally a NUL and 16-bit numbers.
 
-Layout decided for manip (erratum ``error-arg-layout``; the seed's NZI example calls the NUL and the joint
-mask "single bytes", which we read as loose wording, since the format paragraph says 16-bit numbers):
+Layout decided for manip (erratum ``error-arg-layout``; the 1985 guide's NZI example calls the NUL and the
+joint mask "single bytes", which we read as loose wording, since the format paragraph says 16-bit numbers):
 
 * the text is Lisp Machine text (:mod:`manip.codecs.lispm_text`);
 * an optional NUL byte ends the text; only then are ``~`` and ``$`` in the message special;

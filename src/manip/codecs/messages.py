@@ -263,17 +263,15 @@ class Request:
         return self.op.opcode
 
 
-_REQUESTS_BY_KEY: dict[int | str, RequestOpcode] = {op.opcode: op for op in SPEC.requests.values()}
-_REQUESTS_BY_KEY.update({op.name: op for op in SPEC.requests.values()})
-
-
 def request_op(key: int | str) -> RequestOpcode:
-    """The spec entry for a request opcode given by number or name; KeyError names the unknown key."""
-    try:
-        return _REQUESTS_BY_KEY[key]
-    except KeyError:
+    """The spec entry (a :class:`~manip.spec.RequestOpcode`) for a request opcode given by number or by
+    a name known only at run time (a user's); KeyError names the unknown key.  Code that names an
+    opcode itself calls ``SPEC.request("here")``, where a misspelt name is a type error."""
+    op = SPEC.requests.get(key) if isinstance(key, int) else SPEC.requests_by_name.get(key)
+    if op is None:
         shown = f"0{key:o}" if isinstance(key, int) else repr(key)
-        raise KeyError(f"no request opcode {shown} in the spec") from None
+        raise KeyError(f"no request opcode {shown} in the spec")
+    return op
 
 
 def encode_request(op: int | str, **values: Any) -> bytes:
@@ -298,7 +296,8 @@ def decode_request(opcode: int, data: bytes) -> Request:
 
 
 def copy_request_data(items: object) -> bytes:
-    """The seed's copy-manipulator-request-data: ints as 16-bit words, floats as F floats, lists flattened.
+    """The 1985 guide's copy-manipulator-request-data: ints as 16-bit words, floats as F floats, lists
+    flattened.
 
     Integers may be -32768..65535 (negatives are sent in two's complement); any other type is an error.
     """

@@ -7,6 +7,11 @@ depends on the link (see :mod:`manip.codecs.framing`); this module knows nothing
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Literal
+
+Direction = Literal["c2s", "s2c"]
+"""Which way a packet travels: client to server, or server to client (the one name for it: captures,
+recorders and the conformance checkers all use this one)."""
 
 MAX_DATA = 488
 """Largest data field of a Chaos packet, in bytes (clause ``chaos.data.max-488``)."""

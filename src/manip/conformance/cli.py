@@ -39,13 +39,11 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from manip.conformance.case import Case, all_cases
-from manip.conformance.console import make_console
-from manip.conformance.context import DEFAULT_REPLY_TIMEOUT, RunOptions
-from manip.conformance.cougar_target import CougarTarget, cougar_cases, liveness_check
-from manip.conformance.coverage import DEFAULT_PARTIES, coverage, gaps
-from manip.conformance.embedded import EmbeddedServer, simulated_server
-from manip.conformance.replay_cli import (
+from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness_check
+from manip.conformance.output.console import make_console
+from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
+from manip.conformance.output.report import failure_text, write_json, write_junit
+from manip.conformance.replay.cli import (
     check_output_paths,
     given,
     json_option,
@@ -55,11 +53,13 @@ from manip.conformance.replay_cli import (
     replay_command,
     verify_command,
 )
-from manip.conformance.report import failure_text, write_json, write_junit
-from manip.conformance.results import CaseResult, ExitCode, LivenessCheck, RunReport
-from manip.conformance.runner import RunConfig, RunEvents, Runner
-from manip.conformance.selection import PatternError, PatternSet, match_id
-from manip.conformance.stability import instability, repeat_seeds
+from manip.conformance.suite.case import Case, all_cases
+from manip.conformance.suite.context import DEFAULT_REPLY_TIMEOUT, RunOptions
+from manip.conformance.suite.embedded import EmbeddedServer, simulated_server
+from manip.conformance.suite.results import CaseResult, ExitCode, LivenessCheck, RunReport
+from manip.conformance.suite.runner import RunConfig, RunEvents, Runner
+from manip.conformance.suite.selection import PatternError, PatternSet, match_id
+from manip.conformance.suite.stability import instability, repeat_seeds
 from manip.links import AddressError, parse_address, virtual_clock
 from manip.reference_server import FaultSet, ServerConfig
 
@@ -358,7 +358,7 @@ def _repeat(
     runs: int,
 ) -> tuple[RunReport | None, int | None]:
     """``--repeat``: the selection with ``runs`` seeds, then the first seed again; the first run's report
-    carries what changed between them (:mod:`manip.conformance.stability`)."""
+    carries what changed between them (:mod:`manip.conformance.suite.stability`)."""
     seeds = repeat_seeds(config.seed, runs)
     reports: list[RunReport] = []
     worst: int | None = None
@@ -642,7 +642,8 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
                 "id": c.id,
                 "clauses": list(c.clauses),
                 "level": c.level,
-                "kind": c.kind,
+                "kind": c.technique,
+                "target": c.target,
                 "hazard": c.hazard,
                 "deadline": c.deadline,
                 "summary": c.summary,
@@ -655,7 +656,7 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
     for column in ("id", "level", "kind", "hazard", "clauses"):
         table.add_column(column)
     for c in items:
-        table.add_row(c.id, c.level, c.kind, c.hazard, " ".join(c.clauses))
+        table.add_row(c.id, c.level, c.technique, c.hazard, " ".join(c.clauses))
     make_console(min_width=TABLE_WIDTH).print(table)
 
 

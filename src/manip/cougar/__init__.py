@@ -1,4 +1,5 @@
-"""Cougar, the wrist PDP-11, simulated behind its 16-bit word protocol (seed Part III, Appendices B, C).
+"""Cougar, the wrist PDP-11, simulated behind its 16-bit word protocol (the 1985 guide, Part III,
+Appendices B, C).
 
 :class:`CougarSim` is sans-I/O: ``receive(words)`` buffers words from the Puma, ``tick(now)`` runs one
 Puma clock tick (GUTS: ADC8, conversion, GRAVITY, guards, COMINT; then the background JACOB) and returns

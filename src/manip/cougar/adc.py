@@ -1,16 +1,16 @@
-"""ADC8 (seed B.4) and the strain-gauge wrist it reads (notes/puma-kinematics.md §6.2).
+"""ADC8 (the 1985 guide, B.4) and the strain-gauge wrist it reads (docs/kinematics.md §5).
 
 The filter
 ----------
 Each of the eight channels is smoothed with Y_k = (u_k + u_{k-1} + 6·Y_{k-1}) / 8 using only shifts and
-adds, as the seed says: ``s = u_k + u_{k-1} + (Y << 2) + (Y << 1)`` then ``Y_k = s >> 3``, an arithmetic
+adds, as the 1985 guide says: ``s = u_k + u_{k-1} + (Y << 2) + (Y << 1)`` then ``Y_k = s >> 3``, an arithmetic
 shift right (the PDP-11's ASR/ASH), which rounds toward minus infinity (errata ``cougar-filter-rounding``).
 No rounding constant is added and no fraction bits are kept between ticks.
 
 Consequences, all measured from this integer code by the tests:
 
 * Frequency response: H(z) = (1 + z⁻¹) / (8 − 6z⁻¹); unity DC gain, a zero at Nyquist, and the −3 dB
-  point at fs·acos(0.96)/2π: 2.710 Hz at 60 Hz ticks and 2.823 Hz at 62.5 Hz (the seed's "2.8 Hz").
+  point at fs·acos(0.96)/2π: 2.710 Hz at 60 Hz ticks and 2.823 Hz at 62.5 Hz (the 1985 guide's "2.8 Hz").
 * DC behaviour: for a constant input u the output settles inside [u − 3, u].  Coming down onto u it
   settles exactly on u (while Y > u the error shrinks by a quarter, rounded down, until it is 0); coming up
   onto u it stops short, 1 to 3 counts low, because floor(0.75·d) = d for d = −1, −2, −3.  A steady
@@ -27,7 +27,7 @@ A Maltese-cross sensor: four bars at 0°, 90°, 180°, 270° around a hub of rad
 and an out-of-plane half bridge, gauges ordered (t1, z1, t2, z2, t3, z3, t4, z4).  Equilibrium gives the
 wrench from the bar loads, W = E·loads; equal bars share a load by minimum norm, so the gauges read
 w = k·E⁺·W (+ cross-coupling, offsets and noise), rounded to the nearest count and saturated to 12 bits.
-Forces are in ounces, torques in ounce-inches (the seed's LIMIT units), r in inches.
+Forces are in ounces, torques in ounce-inches (the 1985 guide's LIMIT units), r in inches.
 """
 
 from __future__ import annotations
@@ -89,7 +89,8 @@ class GaugeModel:
     """The physical wrist: how a wrench on the hand becomes eight gauge counts.
 
     ``counts_per_oz``: gauge counts per ounce of bar load; the defaults put ±512 oz of force and ±512 oz-in
-    of torque inside the converter's range with 0.25 oz per count (the seed's wrist resolved about 0.5 oz).
+    of torque inside the converter's range with 0.25 oz per count (the 1985 guide's wrist resolved about
+    0.5 oz).
     ``cross_coupling``: relative size of a fixed random 6x6 coupling (drawn from ``coupling_seed``), as a
     real sensor has a few percent.  ``offsets``: the gauge offsets (counts) read with no load.
     ``noise``: standard deviation of the per-sample noise (counts), drawn from the simulator's seed.

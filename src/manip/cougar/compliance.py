@@ -1,7 +1,7 @@
 """The numbers Cougar computes: force conversion, GRAVITY, LIMIT, the compliance equation and FILTER.
 
 Pure functions on numpy arrays; the simulator reads their inputs from Cougar memory and stores the
-results back.  Units (errata ``cougar-units``): forces in ounces, torques in ounce-inches (the seed's
+results back.  Units (errata ``cougar-units``): forces in ounces, torques in ounce-inches (the 1985 guide's
 units for weights and LIMIT), lengths on the link in millimetres (errata ``units``; converted with 25.4
 mm/in where a torque needs them), joint angles in degrees.  Vectors are in hand coordinates (the end
 frame of the arm model, origin at the wrist centre) about the compliance centre, the point the frame
@@ -13,14 +13,14 @@ Conversion (§8.2)::
 
 where T(FV) moves a wrench from the wrist centre to the compliance centre: the force rows are unchanged,
 the torque rows become τ − r × f.  Only the three torque rows depend on FV, so NFV rewrites just those
-(:func:`voltmat_torque_rows`), as the seed describes.  The −1 makes the force the one the robot applies.
+(:func:`voltmat_torque_rows`), as the 1985 guide describes.  The −1 makes the force the one the robot applies.
 
 GRAVITY (B.8): hand and object are point masses; ``grav_weight`` is their total (oz) and ``grav_cg`` their
 common centre of gravity relative to the compliance centre.  The load gravity puts on the hand is
 f = Rᵀ·(0, 0, −weight), τ = cg × f; since the sensed force is the robot's (−1 times the load), the
 correction adds that load back: force = sensed + (f, τ).
 
-The compliance equation (B.13; the seed's "section 1" that describes it is lost, errata
+The compliance equation (B.13; the 1985 guide's "section 1" that describes it is lost, errata
 ``cougar-compliance-equation``) with the names of Table 1::
 
     Δx      = J · (θ_sensed − θ_commanded)                    position error at the compliance centre

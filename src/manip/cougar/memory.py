@@ -88,7 +88,7 @@ MAP: Final[tuple[Region, ...]] = _layout(
     (
         Region("version", "word", 1, "Cougar's version number, the VERS reply"),
         Region("puma_version", "word", 1, "the version word the Puma last sent with VERS"),
-        Region("flags", "word", 1, "bit 0: LIMIT on (off at start, as in the seed)"),
+        Region("flags", "word", 1, "bit 0: LIMIT on (off at start, as in the 1985 guide)"),
         Region("guts_busy", "word", 1, "non-zero while GUTS runs: the re-entry check (B.6)"),
         Region("jacob_front", "word", 1, "low bit: which Jacobian buffer (jbuf0/jbuf1) the foreground uses"),
         Region("guard_active", "word", 1, "bit i set: guard i is armed"),

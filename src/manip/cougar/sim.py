@@ -1,4 +1,5 @@
-"""The Cougar wrist computer, simulated behind its 16-bit word protocol (seed Part III, Appendices B and C).
+"""The Cougar wrist computer, simulated behind its 16-bit word protocol (the 1985 guide, Part III,
+Appendices B and C).
 
 Sans-I/O: :meth:`CougarSim.receive` buffers words from the Puma, :meth:`CougarSim.tick` is one Puma clock
 tick and returns the words Cougar sends back during it.  Time is only ever an argument; given a seed the
@@ -6,7 +7,7 @@ simulation is deterministic.
 
 Theory of operation (one tick = one GUTS interrupt, B.6, then background time):
 
-1. Re-entry check (errata ``cougar-guts-reentry``).  GUTS must never interrupt itself; the seed's GUTS
+1. Re-entry check (errata ``cougar-guts-reentry``).  GUTS must never interrupt itself; the 1985 guide's GUTS
    checks on entry and, if it finds itself already running, sends a character to the terminal and returns
    from the interrupt.  A sans-I/O simulator sees re-entry two ways: ``tick`` called while a ``tick`` is
    running (e.g. from an :class:`~manip.cougar.environment.Environment` callback), or a tick arriving

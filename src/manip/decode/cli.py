@@ -24,8 +24,8 @@ from manip.codecs.errors import DecodeError
 from manip.codecs.framing import FRAMINGS
 from manip.codecs.messages import request_op
 from manip.decode.describe import (
-    Direction,
     Node,
+    ReadAs,
     describe_body,
     describe_packet,
     describe_words,
@@ -276,7 +276,7 @@ def main(
     source: str | None,
     link: str,
     fmt: str,
-    direction: Direction,
+    direction: ReadAs,
     request: str | None,
     body: tuple[str, str] | None,
     cougar: str | None,
@@ -314,7 +314,7 @@ def _decode_packets(
     link: str,
     binary: bool | None,
     fmt: str,
-    direction: Direction,
+    direction: ReadAs,
     request: int | str | None,
     filters: Filters,
 ) -> int:
@@ -461,7 +461,7 @@ def _decode_capture(
                 continue
             if not filters.wants(item.packet.opcode, op=item.op, direction=direction):
                 continue
-            side: Direction = "request" if direction == "c2s" else "response"
+            side: ReadAs = "request" if direction == "c2s" else "response"
             request = item.op if direction == "s2c" and item.op is not None else None
             if request is not None:
                 try:

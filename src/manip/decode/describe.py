@@ -28,7 +28,8 @@ from manip.codecs.packet import Packet
 from manip.spec import SPEC, Layout, RequestOpcode
 from manip.spec.constants import ChaosOp, ServerOp
 
-Direction = Literal["auto", "request", "response"]
+ReadAs = Literal["auto", "request", "response"]
+"""How to read a manip packet's data (``manip-decode --direction``): guessed, as a request, as a reply."""
 
 
 @dataclass
@@ -69,7 +70,7 @@ class Node:
 
 
 def octal(v: int) -> str:
-    """Chaosnet style: a leading 0, as the seed writes opcodes and addresses."""
+    """Chaosnet style: a leading 0, as the 1985 guide writes opcodes and addresses."""
     return f"0{v:o}" if v else "0"
 
 
@@ -272,7 +273,7 @@ def describe_control(p: Packet) -> Node | None:
     return None
 
 
-def describe_packet(p: Packet, *, direction: Direction = "auto", request: int | str | None = None) -> Node:
+def describe_packet(p: Packet, *, direction: ReadAs = "auto", request: int | str | None = None) -> Node:
     """The whole tree for one packet; decode problems become a ``decode error`` node (never raised)."""
     root = Node("packet", f"{_chaos_opcode_name(p.opcode)} {octal(p.opcode)}, {p.nbytes} data bytes")
     root.children.append(describe_header(p))

@@ -10,6 +10,8 @@
 * :mod:`~manip.links.errors`: everything raised is a :class:`ChaosError`.
 """
 
+from manip.ncp import NcpConfig
+
 from .address import AddressError, LinkAddress, parse_address
 from .api import ChaosServer, Handler, open_connection, start_server
 from .base import Link, LinkStats
@@ -51,6 +53,7 @@ __all__ = [
     "LinkGuard",
     "LinkLimits",
     "LinkStats",
+    "NcpConfig",
     "NcpOptions",
     "Node",
     "NodeStats",

@@ -15,7 +15,7 @@ from dataclasses import replace
 from types import TracebackType
 from typing import Protocol
 
-from manip.ncp import ConnectionRequested
+from manip.ncp import ConnectionRequested, NcpConfig
 
 from .address import LinkAddress, parse_address
 from .base import Link
@@ -24,7 +24,7 @@ from .chudp import Endpoint, bind_chudp
 from .connection import CLOSE_TIMEOUT, ChaosConnection
 from .errors import ChaosError
 from .guard import AccessList, LinkGuard, LinkLimits
-from .node import BUSY, AcceptPolicy, NcpOptions, Node
+from .node import BUSY, AcceptPolicy, Node
 from .tcp import connect_tcp, connect_unix, serve_tcp, serve_unix
 
 log = logging.getLogger("manip.links")
@@ -89,7 +89,7 @@ async def open_connection(
     timeout: float | None = 10.0,
     contact: str | None = None,
     args: bytes | str = b"",
-    options: NcpOptions | None = None,
+    options: NcpConfig | None = None,
     learn_peers: bool = False,
     wrap_link: LinkWrapper | None = None,
 ) -> ChaosConnection:
@@ -216,7 +216,7 @@ async def start_server(
     max_connections: int | None = None,
     busy_reason: str = BUSY,
     policy: AcceptPolicy | None = None,
-    options: NcpOptions | None = None,
+    options: NcpConfig | None = None,
     learn_peers: bool = True,
     peers: Mapping[int, Endpoint] | None = None,
     wrap_link: LinkWrapper | None = None,

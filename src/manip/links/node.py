@@ -33,7 +33,7 @@ import logging
 import math
 import random
 from collections.abc import Callable, Iterable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Final
 
 from manip.codecs.packet import MAX_DATA, Packet
@@ -49,6 +49,7 @@ from manip.ncp import (
     Forwarded,
     Lost,
     Ncp,
+    NcpConfig,
     NcpError,
     Opened,
     UncontrolledReceived,
@@ -89,29 +90,8 @@ def _cls_text(reason: str) -> str:
     return reason.encode("latin-1", "replace")[:MAX_DATA].decode("latin-1")
 
 
-@dataclass(frozen=True, slots=True)
-class NcpOptions:
-    """The NCP's settings (see :class:`manip.ncp.Ncp`); ``auto_read`` is the driver's business.
-
-    The driver acknowledges a packet only when the user has taken it with ``receive()``, so the receive
-    window is what makes a sender wait."""
-
-    window: int = 15
-    retransmit_interval: float = 0.5
-    probe_interval: float = 5.0
-    broken_after: float = 90.0
-    rfc_timeout: float = 30.0
-    ack_delay: float = 0.1
-    first_packet_no: int = 1
-
-    @classmethod
-    def breaking_after(cls, seconds: float) -> NcpOptions:
-        """The defaults, but a connection whose peer is silent for ``seconds`` is broken.  The probe
-        interval shrinks with it (a third of it, at most the usual 5 s): a quiet but healthy peer must
-        be asked for news, and answer, well before its connection would be given up."""
-        if not (seconds > 0 and math.isfinite(seconds)):
-            raise ValueError(f"broken_after must be a positive number of seconds, not {seconds!r}")
-        return cls(broken_after=seconds, probe_interval=min(cls().probe_interval, seconds / 3))
+NcpOptions = NcpConfig
+"""Deprecated name of :class:`manip.ncp.NcpConfig` (the settings are defined once, in the core)."""
 
 
 @dataclass(slots=True)
@@ -149,19 +129,20 @@ class Node:
     def __init__(
         self,
         address: int,
-        options: NcpOptions | None = None,
+        options: NcpConfig | None = None,
         *,
         uniquizer: int | None = None,
         first_slot: int | None = None,
     ) -> None:
         self._loop = asyncio.get_running_loop()
-        self.options = options or NcpOptions()
+        self.options = options or NcpConfig()
+        # The driver acknowledges a packet only when the user has taken it with ``receive()``, so the
+        # receive window is what makes a sender wait.
         self.ncp = Ncp(
             address,
-            auto_read=False,
+            config=replace(self.options, auto_read=False),
             uniquizer=random.randrange(256) if uniquizer is None else uniquizer,
             first_slot=random.randrange(1, 256) if first_slot is None else first_slot,
-            **asdict(self.options),
         )
         self.address = address
         self.stats = NodeStats()
@@ -179,10 +160,7 @@ class Node:
         self._pumping = False
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at = 0.0
-        opts = self.options
-        self._min_interval = min(
-            opts.ack_delay, opts.retransmit_interval, opts.probe_interval, opts.broken_after, opts.rfc_timeout
-        )
+        self._min_interval = self.options.shortest_interval
         self._last_now = 0.0
         self._closed = False
 

@@ -7,6 +7,7 @@ NCPs against each other over a bad network on a simulated clock.
 
 from __future__ import annotations
 
+from .config import NcpConfig
 from .connection import ConnectionInfo, NcpStats
 from .errors import InvalidStateError, NcpError, NoFreeIndexError, UnknownConnectionError, WindowFullError
 from .events import (
@@ -43,6 +44,7 @@ __all__ = [
     "LossyChannel",
     "Lost",
     "Ncp",
+    "NcpConfig",
     "NcpError",
     "NcpStats",
     "NoFreeIndexError",

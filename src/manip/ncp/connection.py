@@ -43,6 +43,7 @@ from typing import Final, NamedTuple
 from manip.codecs.packet import Packet, make_packet
 from manip.spec.constants import ChaosOp
 
+from .config import MAX_WINDOW, NcpConfig
 from .errors import InvalidStateError, WindowFullError
 from .events import (
     Answered,
@@ -68,31 +69,8 @@ _OPEN: Final = ConnState.OPEN
 _RFC_SENT: Final = ConnState.RFC_SENT
 _RFC_RECEIVED: Final = ConnState.RFC_RECEIVED
 
-MAX_WINDOW: Final = 0x4000
-"""Largest window we accept from a peer (well inside the half of the sequence space that compares)."""
-
-
-@dataclass(frozen=True, slots=True)
-class Config:
-    """Per-NCP settings shared by its connections (see ``Ncp`` for their meaning)."""
-
-    window: int = 15
-    retransmit_interval: float = 0.5
-    probe_interval: float = 5.0
-    broken_after: float = 90.0
-    rfc_timeout: float = 30.0
-    ack_delay: float = 0.1
-    auto_read: bool = True
-
-    @property
-    def retransmit_guard(self) -> float:
-        """After an STS, packets sent less than this long ago are not sent again yet."""
-        return self.retransmit_interval / 5
-
-    @property
-    def idle_probe_after(self) -> float:
-        """An idle connection probes (SNS) once the peer has been silent this long."""
-        return self.broken_after * 2 / 3
+Config = NcpConfig
+"""The NCP's settings as a connection reads them (:class:`manip.ncp.config.NcpConfig`)."""
 
 
 @dataclass(slots=True)

@@ -25,15 +25,16 @@ is needed again; slots are handed out round-robin.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
+from dataclasses import replace
 from types import MappingProxyType
-from typing import Final
+from typing import Any, Final
 
 from manip.codecs.packet import MAX_DATA, Packet
 from manip.spec.constants import ChaosOp
 
-from .connection import Config, Connection, ConnectionInfo, NcpStats, Outbox, Trigger
+from .config import MAX_WINDOW, NcpConfig
+from .connection import Connection, ConnectionInfo, NcpStats, Outbox, Trigger
 from .errors import NoFreeIndexError, UnknownConnectionError
 from .events import Event
 from .packets import is_legal_opcode, make_los
@@ -81,22 +82,9 @@ def _contact_bytes(contact: str) -> bytes:
 class Ncp:
     """A Chaos NCP for one host address.
 
-    Parameters (times in seconds, on whatever clock the caller passes as ``now``):
+    ``config`` holds its settings (:class:`~manip.ncp.config.NcpConfig`, where each is described); a
+    setting given by keyword overrides the config's (``Ncp(0o401, window=4)``).  Besides:
 
-    ``window``               our receive window in packets (advertised in OPN and STS), 1..16384;
-    ``retransmit_interval``  unreceipted controlled packets are sent again after this long;
-    ``probe_interval``       SNS period while something is unacknowledged or the window is 0 (before the
-                             first STS after our OPN, the probe period is ``retransmit_interval``); an
-                             idle connection also probes once the peer has been silent for 2/3 of
-                             ``broken_after``;
-    ``broken_after``         no packet at all from the peer for this long: INCOMPLETE, event Broken;
-    ``rfc_timeout``          an RFC without reply: INCOMPLETE ("Host not responding"); a received RFC
-                             the user leaves unanswered: refused with CLS "Timeout", event Closed;
-    ``ack_delay``            how long news of received packets may wait for a packet to ride on before
-                             an STS carries it;
-    ``auto_read``            True: a packet counts as read (and is acknowledged) when it is delivered;
-                             False: only when the user calls :meth:`read_ack`;
-    ``first_packet_no``      default number of the first packet (RFC or OPN) of each connection;
     ``uniquizer``            the high byte of the first local index handed out;
     ``first_slot``           the low byte of the first one (1-255; later ones take the next free slot).
     """
@@ -105,45 +93,40 @@ class Ncp:
         self,
         address: int,
         *,
-        window: int = 15,
-        retransmit_interval: float = 0.5,
-        probe_interval: float = 5.0,
-        broken_after: float = 90.0,
-        rfc_timeout: float = 30.0,
-        ack_delay: float = 0.1,
-        auto_read: bool = True,
-        first_packet_no: int = 1,
+        config: NcpConfig | None = None,
+        window: int | None = None,
+        retransmit_interval: float | None = None,
+        probe_interval: float | None = None,
+        broken_after: float | None = None,
+        rfc_timeout: float | None = None,
+        ack_delay: float | None = None,
+        auto_read: bool | None = None,
+        first_packet_no: int | None = None,
         uniquizer: int = 1,
         first_slot: int = 1,
     ) -> None:
         _check_word("address", address, 1)
-        _check_word("first_packet_no", first_packet_no)
-        self._check_window(window)
-        for name, value in (
-            ("retransmit_interval", retransmit_interval),
-            ("probe_interval", probe_interval),
-            ("broken_after", broken_after),
-            ("rfc_timeout", rfc_timeout),
-        ):
-            if not (value > 0 and math.isfinite(value)):
-                raise ValueError(f"{name} must be a positive number of seconds, not {value!r}")
-        if not (ack_delay >= 0 and math.isfinite(ack_delay)):
-            raise ValueError(f"ack_delay must be >= 0, not {ack_delay!r}")
+        overrides: dict[str, Any] = {
+            name: value
+            for name, value in (
+                ("window", window),
+                ("retransmit_interval", retransmit_interval),
+                ("probe_interval", probe_interval),
+                ("broken_after", broken_after),
+                ("rfc_timeout", rfc_timeout),
+                ("ack_delay", ack_delay),
+                ("auto_read", auto_read),
+                ("first_packet_no", first_packet_no),
+            )
+            if value is not None
+        }
         if not 0 <= uniquizer <= 0xFF:
             raise ValueError(f"uniquizer must be a byte, not {uniquizer!r}")
         if not 1 <= first_slot <= _SLOTS:
             raise ValueError(f"first_slot must be 1-{_SLOTS}, not {first_slot!r}")
         self._address = address
-        self._config = Config(
-            window=window,
-            retransmit_interval=retransmit_interval,
-            probe_interval=probe_interval,
-            broken_after=broken_after,
-            rfc_timeout=rfc_timeout,
-            ack_delay=ack_delay,
-            auto_read=auto_read,
-        )
-        self._first_packet_no = first_packet_no
+        self._config = replace(config or NcpConfig(), **overrides)  # NcpConfig checks every value
+        self._first_packet_no = self._config.first_packet_no
         self._uniquizer = uniquizer
         self._next_slot = first_slot
         self._slots: list[Connection | None] = [None] * (_SLOTS + 1)
@@ -159,7 +142,7 @@ class Ncp:
         return self._address
 
     @property
-    def config(self) -> Config:
+    def config(self) -> NcpConfig:
         return self._config
 
     @property
@@ -345,7 +328,7 @@ class Ncp:
 
     @staticmethod
     def _check_window(window: int) -> None:
-        if not 1 <= window <= 0x4000:
+        if not 1 <= window <= MAX_WINDOW:
             raise ValueError(f"window must be in 1..16384, not {window!r}")
 
     def _first(self, first_packet_no: int | None) -> int:

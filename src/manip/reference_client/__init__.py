@@ -1,4 +1,4 @@
-"""The reference client: the seed's "Manip system" (Part I) as a typed asyncio library.
+"""The reference client: the 1985 guide's "Manip system" (Part I) as a typed asyncio library.
 
 Layers, bottom up (each module's docstring says more):
 

@@ -28,7 +28,7 @@ from manip.spec.constants import AsyncCondition
 JSONValue = Any
 GUARD_STOPS = 1
 OCTAL_KEYS = frozenset({"operations"})
-"""describe-self entries whose numbers are opcodes, shown in octal as the seed writes them."""
+"""describe-self entries whose numbers are opcodes, shown in octal as the 1985 guide writes them."""
 
 
 def dumps(record: Mapping[str, JSONValue]) -> str:

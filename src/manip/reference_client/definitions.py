@@ -1,4 +1,4 @@
-"""The definitions every manipulator starts with, and the seed's ``define-...`` forms on them.
+"""The definitions every manipulator starts with, and the 1985 guide's ``define-...`` forms on them.
 
 :func:`default_registry` builds a registry holding
 
@@ -7,7 +7,7 @@
   the default extractor follows the reply shape (done, segment number, one layout value, a transform
   for ``transform`` fields, the alist for describe-self);
 * the response codes of E.3: ``normal-response`` 0, ``fatal-error`` 1, ``non-fatal-error`` 2,
-  ``asynchronous-error`` 4 (the seed's generic four) and ``asynchronous-response`` 3,
+  ``asynchronous-error`` 4 (the 1985 guide's generic four) and ``asynchronous-response`` 3,
   ``asynchronous-warning`` 5;
 * the handler types and handlers of :mod:`~manip.reference_client.handlers`;
 * the extractors of :mod:`~manip.reference_client.extractors`.

@@ -120,7 +120,7 @@ class AsynchronousError(ServerError):
     """0204: an error outside any request; ``request_number`` is the last request the server processed."""
 
 
-class AsynchronousWarning(ServerError):  # noqa: N818 - the seed's name for opcode 0205
+class AsynchronousWarning(ServerError):  # noqa: N818 - the 1985 guide's name for opcode 0205
     """0205: a condition a human should hear about; it does not stop anything."""
 
 
@@ -141,10 +141,10 @@ class OutOfSequenceReason(enum.Enum):
     """A response handler raised (the exception is the ``__cause__``); the connection goes on."""
 
 
-class OutOfSequenceResponse(ManipError):  # noqa: N818 - the seed's name (signal-error-for-out-of-sequence-request)
+class OutOfSequenceResponse(ManipError):  # noqa: N818 - the 1985 guide's name (signal-error-for-out-of-sequence-request)
     """A packet from the server that answers nothing the client waits for.
 
-    Reported to the error listeners and the log, never raised into a request (the seed's
+    Reported to the error listeners and the log, never raised into a request (the 1985 guide's
     ``signal-error-for-out-of-sequence-request``).
     """
 

@@ -1,4 +1,4 @@
-"""The built-in data extractors (the seed's "useful data extractor functions" in BKGND).
+"""The built-in data extractors (the 1985 guide's "useful data extractor functions" in BKGND).
 
 Each follows the contract in :mod:`manip.reference_client.request`: ``(request, payloads) -> value``,
 raising on data that do not fit.  They are registered under the names in :data:`BUILTIN_EXTRACTORS`.
@@ -28,7 +28,7 @@ def _single(request: Request[Any], payloads: Sequence[bytes]) -> bytes:
 
 
 def extract_nothing(request: Request[Any], payloads: Sequence[bytes]) -> None:
-    """Ignore the data (the seed's NIL extractor, as a named one)."""
+    """Ignore the data (the 1985 guide's NIL extractor, as a named one)."""
     return None
 
 

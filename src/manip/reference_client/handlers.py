@@ -3,7 +3,7 @@
 =========================  ======  ===================================================================
 handler type               code    handler
 =========================  ======  ===================================================================
-``generic``                0       :func:`handle_normal_response` (the seed's four generic codes ...)
+``generic``                0       :func:`handle_normal_response` (the 1985 guide's four generic codes ...)
 ``generic``                1       :func:`handle_fatal_error`
 ``generic``                2       :func:`handle_non_fatal_error`
 ``generic``                4       :func:`handle_asynchronous_error`

@@ -1,8 +1,8 @@
 """The manipulator object: requests, operations, asynchronous responses and segments.
 
 :class:`Manipulator` is what :func:`~manip.reference_client.connect.aconnect` returns.  It has the
-seed's three request entry points (``make_request``, ``send_request``, ``request``), every operation of
-E.1 (:mod:`~manip.reference_client.generic`) and of manip's Puma extensions
+1985 guide's three request entry points (``make_request``, ``send_request``, ``request``), every
+operation of E.1 (:mod:`~manip.reference_client.generic`) and of manip's Puma extensions
 (:mod:`~manip.reference_client.puma`), and the asynchronous side of E.3.
 
 Free joint (0213, erratum ``free-joint-replies``): after the server frees a joint it discards the next

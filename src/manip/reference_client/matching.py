@@ -278,7 +278,7 @@ class ResponseContext:
 
     A handler reports outcomes with :meth:`emit` (or the helpers that emit), may hand the packet to
     the next handler type with :meth:`pass_on`, and may keep the packet from being returned to the
-    transport with :meth:`keep_packet` (the seed's ``dont-return-pkt!``).
+    transport with :meth:`keep_packet` (the 1985 guide's ``dont-return-pkt!``).
     """
 
     def __init__(

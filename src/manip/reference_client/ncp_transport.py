@@ -37,7 +37,7 @@ from manip.links import (
     ConnectionBroken,
     ConnectionClosed,
     LinkAddress,
-    NcpOptions,
+    NcpConfig,
     open_connection,
     parse_address,
 )
@@ -74,7 +74,7 @@ class NcpTransport:
         contact: str | None = None,
         connect_timeout: float | None = 10.0,
         close_timeout: float = DEFAULT_CLOSE_TIMEOUT,
-        ncp_options: NcpOptions | None = None,
+        ncp_options: NcpConfig | None = None,
         wrap_link: LinkWrapper | None = None,
     ) -> None:
         self.address = parse_address(address) if isinstance(address, str) else address

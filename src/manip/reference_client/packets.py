@@ -2,7 +2,7 @@
 
 A transport hands the background process :class:`ServerPacket` objects and says, through
 ``get_response_info``, what the matching core needs of each: the response code, the request number,
-and where the response data start (:class:`ResponseInfo`; the seed's four values of
+and where the response data start (:class:`ResponseInfo`; the 1985 guide's four values of
 ``:get-response-info``, with a byte offset in place of an ART-16B index).
 
 For the Chaos manipulator protocol :func:`chaos_response_info` is that function: the response code is

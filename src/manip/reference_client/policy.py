@@ -1,4 +1,5 @@
-"""Which non-fatal errors are "trivial" (the seed's notify-trivial-errors-mixin and ``:trivial-error?``).
+"""Which non-fatal errors are "trivial" (the 1985 guide's notify-trivial-errors-mixin and
+``:trivial-error?``).
 
 With ``notify_trivial_errors`` on, the handler type ``notify-trivial-errors`` goes first in the
 manipulator's handler-type list.  Its non-fatal-error handler asks the policy about each error; when the
@@ -23,7 +24,7 @@ TrivialErrorPolicy = Callable[[NonFatalError], bool]
 class TrivialErrors:
     """Trivial when the error code or the severity is listed.
 
-    The default lists ``UIM`` (operation not implemented on this arm): the seed notes that the Puma
+    The default lists ``UIM`` (operation not implemented on this arm): the 1985 guide notes that the Puma
     did not implement Set configuration, and a program written for several arms should be able to ask
     for it and carry on.
     """

@@ -1,6 +1,6 @@
 """Named request codes, response codes, response-handler types, handlers and data extractors (§3.2).
 
-A :class:`Registry` holds what the seed's ``define-manipulator-request-code``,
+A :class:`Registry` holds what the 1985 guide's ``define-manipulator-request-code``,
 ``define-manipulator-response-code``, ``define-response-handler-type``,
 ``define-manipulator-response-handler`` and the data-extractor keywords defined globally.  The module
 :mod:`manip.reference_client.definitions` fills one with the spec's codes and the built-in handlers and
@@ -9,7 +9,7 @@ offers the ``define_...`` functions on it; build your own (``default_registry()`
 
 Handler lookup: a response with code *c* goes to the first handler found by walking a manipulator's
 handler-type list in order and asking for (*c*, type).  A handler may pass the response on to the
-next type that has a handler for *c* (the seed's ``continue-manipulator-response-handler``).
+next type that has a handler for *c* (the 1985 guide's ``continue-manipulator-response-handler``).
 """
 
 from __future__ import annotations

@@ -1,16 +1,17 @@
 """The request object: what the user wants sent, how its reply is read, and where it stands.
 
-This is the seed's request defstruct (Part I §2; notes §1.4: ``REQUEST-CODE``, ``REQUEST-RESPONSE-TYPE``,
-``REQUEST-RESPONSE-DATA-EXTRACTOR``, ``REQUEST-DATA``, ``REQUEST-PACKET-NUMBER``) as a Python object.  The
-data bytes are built when the request is made, not when it is sent, so a bad argument is reported in
-the caller's task (the seed's advice for a ``:before :queue-request`` daemon).
+This is the 1985 guide's request defstruct (Part I §2: ``REQUEST-CODE``,
+``REQUEST-RESPONSE-TYPE``, ``REQUEST-RESPONSE-DATA-EXTRACTOR``, ``REQUEST-DATA``,
+``REQUEST-PACKET-NUMBER``) as a Python object.  The data bytes are built when the request is made,
+not when it is sent, so a bad argument is reported in the caller's task (the 1985 guide's advice for a
+``:before :queue-request`` daemon).
 
 Data extractor contract
     ``extractor(request, payloads) -> value``.  ``payloads`` are the response data after the request
     number: exactly one item for a single-packet response, the non-empty packets in order (terminator
     left out) for a multi-packet one.  Whatever the extractor returns is the request's result; whatever
     it raises fails the request with :class:`~manip.reference_client.errors.ResponseDataError`.  An
-    extractor of ``None`` means "the data do not matter": the result is ``None`` (the seed's ``NIL``).
+    extractor of ``None`` means "the data do not matter": the result is ``None`` (the 1985 guide's ``NIL``).
 """
 
 from __future__ import annotations
@@ -63,7 +64,7 @@ def normalise_name(name: str) -> str:
 
 
 def octal(opcode: int) -> str:
-    """An opcode as the seed writes it: ``0201``."""
+    """An opcode as the 1985 guide writes it: ``0201``."""
     return f"0{opcode:o}"
 
 

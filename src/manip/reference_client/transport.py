@@ -1,6 +1,6 @@
-"""The operations a communication protocol provides to the background process (seed Part I §3.1).
+"""The operations a communication protocol provides to the background process (the 1985 guide, Part I §3.1).
 
-The seed's methods were polled by a Lisp Machine process waiting on a predicate.  Here the same
+The 1985 guide's methods were polled by a Lisp Machine process waiting on a predicate.  Here the same
 operations are plain methods; the one addition, :meth:`ManipTransport.set_wakeup`, replaces the
 process wait: the transport calls the callback whenever a predicate may have changed (a packet
 arrived, the transmit window opened, the connection closed), and the background process re-checks.

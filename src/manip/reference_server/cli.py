@@ -47,7 +47,7 @@ from manip.links import (
     ChaosError,
     LinkAddress,
     LinkLimits,
-    NcpOptions,
+    NcpConfig,
     parse_address,
 )
 from manip.links.address import DEFAULT_CONTACT, DEFAULT_TCP_PORT, Scheme
@@ -335,7 +335,7 @@ def main(
         max_clients=max_clients,
         extra_addresses=extra,
         wrist_factory=None if cougar is None else functools.partial(make_cougar_wrist, cougar, seed=seed),
-        options=None if broken_after is None else NcpOptions.breaking_after(broken_after),
+        options=None if broken_after is None else NcpConfig.breaking_after(broken_after),
         limits=limits,
         allow=allow if allow.restricts_ip or allow.restricts_chaos else None,
     )

@@ -9,7 +9,7 @@ simulator or emulated DRV-11J), and time comes in as arguments.  It plays the tw
 Part II §5.3 and the move process's part in compliance (§5.2, §6.4):
 
 * **Output process.**  Each Puma clock tick (:meth:`CougarWrist.tick`, once per servo cycle the arm has
-  run) it sends, in the seed's priority order: the *New Position and Rate* command (NPR; a flag with the
+  run) it sends, in the 1985 guide's priority order: the *New Position and Rate* command (NPR; a flag with the
   latest data, set by the compliant interpolation), *Reset Wrist* (RST; a flag), the *interrupt queue*
   (wrist packets from the move process: the sensed angles, SEN, whenever the arm has moved and no NPR
   told Cougar where it is -- erratum ``wrist-sen``), then the *user queue* (commands from requests),
@@ -377,7 +377,7 @@ class CougarWrist:
         return pending
 
     def _output(self, arm: ArmSim) -> None:
-        """The output process: everything queued, in the seed's priority order."""
+        """The output process: everything queued, in the 1985 guide's priority order."""
         words: list[int] = []
         if self._npr is not None:
             words += self._npr

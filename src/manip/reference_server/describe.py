@@ -5,8 +5,8 @@ several text packets and then the empty terminator.  Numbers are printed octal (
 ``octal-numbers``): ``:degrees-of-freedom`` 6, opcodes ``200`` to ``221``; floats print in decimal with a
 point, as the Lisp reader expects.
 
-Besides the six descriptors of the seed the alist carries two the seed wished for ("things to describe
-the geometry"): ``:ready-position`` (six joint angles, degrees) and ``:joint-limits`` (a list of
+Besides the six descriptors of the 1985 guide the alist carries two the guide wished for ("things to
+describe the geometry"): ``:ready-position`` (six joint angles, degrees) and ``:joint-limits`` (a list of
 ``(lower upper)`` pairs, degrees, joint 1 first).  A client ignores keys it does not know.
 """
 

@@ -73,7 +73,7 @@ from manip.links import (
     GuardStats,
     LinkLimits,
     LinkStats,
-    NcpOptions,
+    NcpConfig,
     start_server,
 )
 from manip.links.api import LinkWrapper
@@ -476,7 +476,7 @@ class ReferenceServer:
     async def _start(
         self,
         addresses: Sequence[str],
-        options: NcpOptions | None,
+        options: NcpConfig | None,
         wrap_link: LinkWrapper | None,
         limits: LinkLimits | None = None,
         allow: AccessList | None = None,
@@ -545,7 +545,7 @@ async def serve(
     max_clients: int = 1,
     wrist_factory: Callable[[], Wrist] | None = None,
     extra_addresses: Sequence[str] = (),
-    options: NcpOptions | None = None,
+    options: NcpConfig | None = None,
     wrap_link: LinkWrapper | None = None,
     limits: LinkLimits | None = None,
     allow: AccessList | None = None,

@@ -1,4 +1,4 @@
-"""Error strings of the reference server, all in the seed's ``where: severity code message`` form.
+"""Error strings of the reference server, all in the 1985 guide's ``where: severity code message`` form.
 
 Handlers raise :class:`RequestError` with the :class:`~manip.codecs.error_string.ErrorMessage` to answer.
 Refusals of the simulated arm (:class:`~manip.arm.sim.Refused`, which knows only the error code) and
@@ -112,7 +112,7 @@ def internal_error(opcode: int) -> RequestError:
 
 
 def nzi_error(joints: tuple[int, ...]) -> RequestError:
-    """The seed's own example (E.2): calibration found no zero index; fatal."""
+    """The 1985 guide's own example (E.2): calibration found no zero index; fatal."""
     return RequestError(
         ErrorMessage(
             "During calibration", "F", "NZI", "No zero index found on joint(s) $.", (joint_mask(joints),)

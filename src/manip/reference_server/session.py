@@ -90,7 +90,7 @@ from manip.reference_server.describe import Description, describe_text
 from manip.reference_server.errors import RequestError
 from manip.reference_server.faults import Fault, FaultSet
 from manip.reference_server.wrist import GuardHit, NoWrist, Pending, Wrist, WristNotice
-from manip.spec import SPEC, RequestOpcode
+from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
 
 __all__ = [
@@ -109,7 +109,7 @@ __all__ = [
 log = logging.getLogger("manip.reference_server")
 
 WORD_MASK: Final = 0xFFFF
-MISSING_OPERATION: Final = "solve-backwards"
+MISSING_OPERATION: Final[RequestName] = "solve-backwards"
 """The served opcode describe self leaves out under the ``describe-missing-operation`` fault."""
 NARROWED_DEG: Final = 5.0
 """How much narrower than the arm's each joint range is stated under ``describe-narrow-limits``."""
@@ -635,7 +635,7 @@ TRANSITIONS: Final[Mapping[tuple[State, Input], Transition]] = {
 }
 """The state table.  A missing pair (open twice, a request before open) is a driver error."""
 
-HANDLERS: Final[Mapping[str, Handler]] = {
+HANDLERS: Final[Mapping[RequestName, Handler]] = {
     "describe-self": ServerSession._describe_self,
     "here": ServerSession._here,
     "joint-angles": ServerSession._joint_angles,
@@ -659,7 +659,7 @@ HANDLERS: Final[Mapping[str, Handler]] = {
 }
 """Request handlers by spec name: every opcode the session itself serves."""
 
-WRIST_OPERATIONS: Final = frozenset(
+WRIST_OPERATIONS: Final[frozenset[RequestName]] = frozenset(
     {
         "read-forces",
         "read-raw-gauges",

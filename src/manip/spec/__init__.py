@@ -3,6 +3,7 @@
 ``SPEC`` is the loaded, cross-checked specification; everything else in manip is driven from it.
 """
 
+from manip.spec.constants import RequestName
 from manip.spec.loader import Spec, SpecError, load_spec
 from manip.spec.model import (
     AsyncCode,
@@ -35,6 +36,7 @@ __all__ = [
     "Field",
     "FieldType",
     "Layout",
+    "RequestName",
     "RequestOpcode",
     "ResponseShape",
     "ServerOpcode",

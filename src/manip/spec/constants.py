@@ -4,6 +4,7 @@ DO NOT EDIT: regenerate with ``python tools/gen_constants.py``; a test checks th
 """
 
 from enum import IntEnum
+from typing import Literal
 
 
 class ChaosOp(IntEnum):
@@ -122,3 +123,44 @@ class CougarResponse(IntEnum):
     GUARD_CONTINUE = 7
     VERSION = 8
     RAW = 9
+
+
+RequestName = Literal[
+    "describe-self",
+    "here",
+    "joint-angles",
+    "calibrate",
+    "move",
+    "straight-move",
+    "kill-power",
+    "set-configuration",
+    "hand",
+    "incremental-move",
+    "incremental-straight-move",
+    "free-joint",
+    "ready",
+    "set-joint-angles",
+    "set-speed",
+    "enable-power",
+    "solve-forwards",
+    "solve-backwards",
+    "read-forces",
+    "read-raw-gauges",
+    "set-gauge-offsets",
+    "calibrate-wrist",
+    "set-spring",
+    "set-damping",
+    "set-joint-damping",
+    "set-frame-vector",
+    "set-weight",
+    "set-guard",
+    "clear-guard",
+    "compliant-move",
+    "examine-wrist",
+    "deposit-wrist",
+    "wrist-version",
+    "request-notifications",
+    "reset-abort",
+    "set-commanded-force",
+]
+"""Every request opcode's name: a misspelt operation name is a type error."""

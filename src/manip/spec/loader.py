@@ -15,6 +15,7 @@ from importlib import resources
 from types import MappingProxyType
 from typing import Any, TypeVar, cast
 
+from manip.spec.constants import RequestName
 from manip.spec.model import (
     AsyncCode,
     ChaosOpcode,
@@ -62,15 +63,17 @@ class Spec:
     chaos_opcodes: Mapping[str, ChaosOpcode]
     cougar_commands: Mapping[int, CougarMessage]
     cougar_responses: Mapping[int, CougarMessage]
+    requests_by_name: Mapping[str, RequestOpcode]
+    """The index of :attr:`requests` by name."""
 
-    def request(self, key: int | str) -> RequestOpcode:
-        """A request opcode by number or by name (``"here"``)."""
-        if isinstance(key, int):
-            return self.requests[key]
-        for op in self.requests.values():
-            if op.name == key:
-                return op
-        raise KeyError(key)
+    def request(self, key: int | RequestName) -> RequestOpcode:
+        """A request opcode by number or by name (``"here"``; a misspelt name is a type error, and at
+        run time a KeyError naming the key)."""
+        try:
+            return self.requests[key] if isinstance(key, int) else self.requests_by_name[key]
+        except KeyError:
+            shown = f"{key:#o}" if isinstance(key, int) else repr(key)
+            raise KeyError(f"no request opcode {shown} in the spec") from None
 
     def clause(self, clause_id: str) -> Clause:
         return self.clauses[clause_id]
@@ -144,6 +147,20 @@ def _check(spec: Spec) -> None:
             raise SpecError(f"request {req.name} names unknown Cougar command {req.cougar!r}")
         if req.response.kind in ("done", "segment") and req.response.data.fields:
             raise SpecError(f"request {req.name}: a {req.response.kind} response carries no layout")
+    _check_clause_links(spec)
+
+
+def _check_clause_links(spec: Spec) -> None:
+    """What the data states about clauses resolves: each opcode's reply clauses, each renamed clause's
+    successors."""
+    for req in spec.requests.values():
+        for cid in req.reply_clauses:
+            if cid not in spec.clauses or spec.clauses[cid].retired:
+                raise SpecError(f"request {req.name} names unknown or retired reply clause {cid!r}")
+    for c in spec.clauses.values():
+        for cid in c.replaced_by:
+            if not c.retired or cid not in spec.clauses or spec.clauses[cid].retired:
+                raise SpecError(f"clause {c.id}: replaced_by {cid!r} needs a retired clause and a live one")
 
 
 @cache
@@ -175,6 +192,7 @@ def load_spec() -> Spec:
             extension=r.get("extension", False),
             cougar=r.get("cougar"),
             answer_within=r.get("answer_within"),
+            reply_clauses=tuple(r.get("reply_clauses", ())),
         )
         requests.append((op.opcode, op))
 
@@ -183,7 +201,10 @@ def load_spec() -> Spec:
         protocol_version=manip["protocol_version"],
         segment_within=float(manip["segment_within"]),
         clauses=_unique(
-            [(c["id"], Clause(**c)) for c in clauses["clause"]],
+            [
+                (c["id"], Clause(**{**c, "replaced_by": tuple(c.get("replaced_by", ()))}))
+                for c in clauses["clause"]
+            ],
             "clause",
         ),
         errata=_unique(
@@ -213,6 +234,7 @@ def load_spec() -> Spec:
         chaos_opcodes=_unique([(o["name"], ChaosOpcode(**o)) for o in chaos["chaos_opcode"]], "Chaos opcode"),
         cougar_commands=_cougar(cougar["command"], "Cougar command"),
         cougar_responses=_cougar(cougar["response"], "Cougar response"),
+        requests_by_name=MappingProxyType({op.name: op for _, op in requests}),
     )
     _check(spec)
     return spec

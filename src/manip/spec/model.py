@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from manip.spec.constants import RequestName
+
 Level = Literal["MUST", "SHOULD", "MAY", "INFO"]
 Party = Literal["server", "client", "both", "cougar", "puma", "link"]
 Hazard = Literal["read-only", "config", "motion", "power"]
@@ -24,6 +26,8 @@ class Clause:
     text: str
     errata: str | None = None
     retired: bool = False
+    replaced_by: tuple[str, ...] = ()
+    """For a retired clause: the clause(s) that say it now (a renamed clause keeps its old id here)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,7 +81,7 @@ class ResponseShape:
 @dataclass(frozen=True, slots=True)
 class RequestOpcode:
     opcode: int
-    name: str
+    name: RequestName
     title: str
     hazard: Hazard
     request: Layout
@@ -89,6 +93,9 @@ class RequestOpcode:
     answer_within: float | None = None
     """Seconds a server may take to answer because the answer waits for the arm (None: no such wait,
     the answer comes as soon as the request is processed)."""
+    reply_clauses: tuple[str, ...] = ()
+    """The clauses of this opcode's own reply shape (``here.transform``...), as the spec data states
+    them: what a well-formed exchange of it exercises beyond the common reply clauses."""
 
     def answer_time(self, reply_timeout: float, scale: float = 1.0) -> float:
         """How long to wait for the answer: ``reply_timeout``, or ``answer_within`` (times ``scale``)

@@ -1,11 +1,13 @@
-"""Helpers shared by the scripted and negative cases (no cases are declared here).
+"""Helpers of the server cases (no cases are declared here); the one place they live.
 
 Valid request values are built from the spec's field types and from what the target itself reports
 (its current transform and joint angles), so a well-formed request is valid for any arm: a move to
-where the arm stands, a zero increment, the ready position.
+where the arm stands, a zero increment, the ready position.  For the property and stateful cases: what
+the target says about its arm (:func:`describe_target`), one request/answer exchange as the model sees
+it (:func:`reply_view`), and failures that carry their evidence (:class:`Evidence`).
 
-A case reports only the clauses it declares (``manip.conformance.invariants``), so the helpers that a
-case uses to *prepare* its check (read the angles, switch power on) judge nothing themselves:
+A case reports only the clauses it declares (``manip.conformance.suite.invariants``), so the helpers
+that a case uses to *prepare* its check (read the angles, switch power on) judge nothing themselves:
 :func:`require_response` passes a malformed answer to the transcript invariant and skips the case when
 the target refuses what the case needs (the case of that request reports the refusal).  The helpers that
 check take the clause from their caller.
@@ -13,13 +15,29 @@ check take the clause from their caller.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from dataclasses import dataclass, replace
 from typing import Any, Final
 
+from manip.arm.kinematics import PUMA600, JointLimits, Joints
 from manip.codecs.errors import CodecError
+from manip.codecs.lisp import LispValue
 from manip.codecs.messages import ErrorReply, decode_error, decode_reply
-from manip.conformance.checks import check_error_packet, check_reply
-from manip.conformance.context import Answer, CaseContext, Probe
-from manip.spec import SPEC, RequestOpcode
+from manip.conformance.judge.checks import (
+    ERROR_OPCODES,
+    WirePacket,
+    check_error_packet,
+    check_reply,
+    description_operations,
+    multi_text,
+    parse_description,
+    word,
+)
+from manip.conformance.judge.model import Reply
+from manip.conformance.judge.violation import CarriesViolation, Violation
+from manip.conformance.suite.context import Answer, CaseContext, Probe
+from manip.conformance.suite.invariants import TRANSCRIPT
+from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import ServerOp
 
 UNASSIGNED_OPCODES: Final[tuple[int, ...]] = tuple(
@@ -55,7 +73,7 @@ def require_response(ctx: CaseContext, answer: Answer, what: str) -> None:
         ctx.skip(f"the case needs {what}, which the target refused: {answer}")
 
 
-async def read_floats(ctx: CaseContext, probe: Probe, op: str) -> tuple[float, ...]:
+async def read_floats(ctx: CaseContext, probe: Probe, op: RequestName) -> tuple[float, ...]:
     """Here or joint angles, as floats (the case skips when the target refuses them)."""
     answer = await probe.call(op)
     require_response(ctx, answer, f"a normal reply to {op}")
@@ -85,13 +103,15 @@ async def valid_values(ctx: CaseContext, probe: Probe, op: RequestOpcode) -> dic
     return values
 
 
-def error_of(answer: Answer) -> ErrorReply | None:
-    """The decoded error of an error answer (None for a normal response or an undecodable string)."""
-    if answer.opcode not in (ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):
+def error_of(packet: Answer | WirePacket) -> ErrorReply | None:
+    """The decoded error string of an error packet or answer, its numbers aligned or else unaligned (a
+    misaligned argument list is the format checker's finding, not a reason to misjudge the error); None
+    for a packet that is no error, or whose string reads neither way."""
+    if packet.opcode not in ERROR_OPCODES:
         return None
     for align in (True, False):
         try:
-            return decode_error(answer.opcode, answer.data, align_args=align)
+            return decode_error(packet.opcode, packet.data, align_args=align)
         except CodecError:
             continue
     return None
@@ -116,8 +136,7 @@ def expect_response(
         answer.is_response and (size is None or len(answer.data) == size) and len(answer.data) >= min_size,
         clause=clause,
         expected=expected,
-        actual=str(answer),
-        data=answer.data,
+        seen=answer,
     )
 
 
@@ -165,7 +184,7 @@ def expect_refusal(
     what: str,
 ) -> ErrorReply | None:
     """The answer must be a non-fatal error with one of ``severities`` (and, when given, one of
-    ``codes``; the codes are the seed's where it names them)."""
+    ``codes``; the codes are the 1985 guide's where it names them)."""
     wanted = f"a non-fatal error (202) of severity {'/'.join(severities)}" + (
         f" and code {'/'.join(codes)}" if codes else ""
     )
@@ -173,8 +192,7 @@ def expect_refusal(
         answer.opcode == ServerOp.NON_FATAL_ERROR,
         clause=clause,
         expected=f"{wanted} for {what}",
-        actual=str(answer),
-        data=answer.data,
+        seen=answer,
     ):
         return None  # a weaker clause than MUST: recorded, and there is no error string to judge
     error = error_of(answer)
@@ -203,3 +221,119 @@ def expect_refusal(
             data=answer.data,
         )
     return error
+
+
+@dataclass(frozen=True)
+class TargetArm:
+    """What the cases assume about the target's arm: its joint limits (from describe self's
+    ``:joint-limits`` when it has them, else the PUMA 600's) and degrees of freedom."""
+
+    limits: JointLimits = PUMA600.limits
+    declared: bool = False
+    """The limits came from the target itself."""
+    dof: int = 6
+    ready: Joints = PUMA600.ready
+    operations: frozenset[int] | None = None
+    """The opcodes describe self lists under :operations (None: no usable list)."""
+
+
+def _number(value: LispValue) -> float | None:
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+
+
+def stated_limits(value: LispValue) -> JointLimits | None:
+    """The joint limits of a ``:joint-limits`` value (six (lower upper) pairs), or None."""
+    if not isinstance(value, list) or len(value) != 6:
+        return None
+    lower: list[float] = []
+    upper: list[float] = []
+    for pair in value:
+        if not isinstance(pair, list) or len(pair) != 2:
+            return None
+        lo, hi = _number(pair[0]), _number(pair[1])
+        if lo is None or hi is None:
+            return None
+        lower.append(lo)
+        upper.append(hi)
+    try:
+        return JointLimits(tuple(lower), tuple(upper))
+    except ValueError:
+        return None
+
+
+async def describe_target(ctx: CaseContext, probe: Probe) -> TargetArm:
+    """Ask describe self for the arm's limits; anything missing or odd falls back to the PUMA 600."""
+    answer = await probe.call("describe-self")
+    if not answer.is_response or not answer.terminated:
+        return TargetArm()
+    entries, _ = parse_description(multi_text(answer.packets))
+    if entries is None:
+        return TargetArm()
+    limits = stated_limits(entries["joint-limits"]) if "joint-limits" in entries else None
+    dof_value = entries.get("degrees-of-freedom")
+    dof = int(dof_value) if isinstance(dof_value, int) and dof_value > 0 else 6
+    listed = description_operations(entries)
+    operations = frozenset(listed) if listed else None
+    if limits is None:
+        ctx.note("describe self gives no usable :joint-limits; assuming the PUMA 600's")
+        return TargetArm(dof=dof, operations=operations)
+    return TargetArm(limits=limits, declared=True, dof=dof, operations=operations)
+
+
+def reply_view(answer: Answer) -> Reply:
+    """The model's view of an answer (a RESPONSE, or the decoded error string of an error)."""
+    first = answer.first
+    if first.opcode == ServerOp.RESPONSE:
+        op = SPEC.requests.get(answer.request.opcode)
+        segment = None
+        if op is not None and op.response.kind == "segment" and len(first.data) == 4:
+            segment = word(first.data, 2)
+        return Reply(True, empty=len(first.data) == 2, segment=segment)
+    decoded = error_of(first)
+    return Reply(False, error=None if decoded is None else decoded.error)
+
+
+def must(findings: Iterable[Violation]) -> list[Violation]:
+    """The findings that break a MUST clause."""
+    return [f for f in findings if f.level == "MUST"]
+
+
+class Evidence(CarriesViolation, AssertionError):  # noqa: N818 - a failed example, not an error of the suite
+    """A failed example: its :class:`~manip.conformance.judge.violation.Violation` (``.violation``), and
+    the packets that showed it.
+
+    ``invariant``: the suite invariant that found it (a checker's finding, a probe's failure), passed
+    on to ``ctx.fail_with`` so that a clause the case does not declare is attributed to it."""
+
+    # ``args`` is set instead of calling ``super().__init__``: tests/clause_scan.py binds the positional
+    # arguments of any ``__init__`` call here to this signature, whose first parameter is a clause.
+    def __init__(
+        self,
+        clause: str,
+        message: str,
+        expected: str,
+        actual: str,
+        data: bytes = b"",
+        packets: Iterable[WirePacket] = (),
+        example: Iterable[WirePacket] = (),
+        drawn: str = "",
+        invariant: str | None = None,
+    ) -> None:
+        self.violation = Violation(
+            message, clause, expected=expected, actual=actual, data=data, invariant=invariant
+        )
+        self.args = (str(self.violation),)  # the exception's message (no super() call: see below)
+        self.packets = list(packets)
+        self.example = list(example)
+        """Every packet of the example that failed, both ways (set by the case's runner; ``packets``
+        are the ones among them that show the failure)."""
+        self.drawn = drawn
+        """What Hypothesis drew for that example, as the report shows it (set by the case's runner)."""
+
+    @classmethod
+    def of(cls, finding: Violation, packets: Iterable[WirePacket] = ()) -> Evidence:
+        """A checker's finding (the transcript invariant's checkers)."""
+        evidence = cls("", "", "", "", packets=packets)
+        evidence.violation = replace(finding, invariant=TRANSCRIPT.name)
+        evidence.args = (str(evidence.violation),)
+        return evidence

@@ -1,0 +1,23 @@
+"""Cougar target cases (``manip-conform run --cougar URL``): Table 1 and Appendix B over the DRV-11J,
+one module per topic.
+
+Each case opens its own link (:func:`~manip.conformance.cougar.probe.cougar_probe`) and plays the Puma,
+tick by tick.  A Cougar keeps its state across links (as the real one did across Puma sessions), so a
+case never assumes a fresh one: it disarms every guard first (``_support.clean``), sets the parameters it
+relies on, lets the gauge filter settle when it reads forces, and puts back what it changed that a Puma
+would not set again (gauge offsets, frame vector, version word).
+
+What a case may rely on, so that it holds for any conforming Cougar and not just manip's simulator:
+
+* Table 1 (codes, data lengths) and the 1985 guide's GUTS order: ADC8, conversion, GRAVITY, guards, COMINT,
+  one GUTS per Puma tick; a response may come up to :data:`DEFAULT_WITHIN` ticks after its command.
+* The errata: out-of-sync is response 2 carrying the bad word (``cougar-out-of-sync``); bit 15 of a
+  guard's first word chooses its type (``guard-type-bit``); the memory map of ``cougar-memory-map``
+  (its addresses are taken from :mod:`manip.cougar.memory`, the erratum's parameter, never retyped);
+  ADC8's rounding (``cougar-filter-rounding``); the conversion and force sign (``cougar-units``); the
+  compliance equation (``cougar-compliance-equation``), used only through properties that any linear
+  spring/damper law has (zero gain gives zero, doubling a gain doubles its effect).
+* Never the simulator's numbers: no expected force, gauge or Δθ value is hard-coded; each check compares
+  Cougar with itself (before/after, split/unsplit) or with a formula of the spec applied to what Cougar
+  reports.
+"""

@@ -1,0 +1,166 @@
+"""Helpers of the Cougar cases (no cases are declared here): constants a case relies on, reading
+Cougar memory and forces, and the expectations every Cougar case shares (a well-formed response of a
+name, nothing more on the link)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from typing import Final
+
+from manip.arm import READY
+from manip.codecs.cougar import encode
+from manip.conformance.cougar.probe import (
+    CougarProbe,
+    WordReply,
+    floats_of,
+    words_bytes,
+)
+from manip.conformance.suite.context import CaseContext
+from manip.cougar.memory import region
+from manip.spec.constants import CougarCommand, CougarResponse
+
+GUARDS: Final = 16
+STOP_BIT: Final = 0x8000
+SETTLE_TICKS: Final = 40
+"""Ticks for the gauge filter (pole 0.75 per tick) to settle after the arm moves: 0.75**40 < 1e-5."""
+NEVER: Final = 1.0e30
+"""A guard tolerance no dot product reaches (a guard that must not trip)."""
+ALWAYS: Final = -1.0
+"""With a zero dvec the dot product is 0 > -1: a guard that trips at the first check."""
+POSE_B: Final = tuple(a + d for a, d in zip(READY, (15.0, 10.0, -10.0, 20.0, 30.0, 25.0), strict=True))
+
+GUARD_DVEC_ZERO: Final = (0.0,) * 6
+
+
+# ------------------------------------------------------------------------------------------ helpers
+async def clean(probe: CougarProbe) -> None:
+    """Disarm all 16 guards and drop whatever the previous user left in flight."""
+    words: list[int] = []
+    for index in range(GUARDS):
+        words += (CougarCommand.GUARDC, index)
+    await probe.send_words(words)
+    await probe.run(2)
+
+
+def response_code(name: str) -> int:
+    """The code of a Table 1 response named as the spec names it (``EXMN-DATA``)."""
+    return CougarResponse[name.replace("-", "_")].value
+
+
+def expect_reply(ctx: CaseContext, reply: WordReply, name: str, clause: str, *, after: str = "") -> WordReply:
+    """``reply`` is a well-formed ``name`` response (code and data length of Table 1)."""
+    code = response_code(name)
+    where = f" to {after}" if after else ""
+    ctx.expect(
+        not reply.problem,
+        clause="cougar.response.layout",
+        expected=f"a Table 1 response{where} ({name}, code {code})",
+        seen=reply,
+    )
+    ctx.expect(
+        reply.name == name,
+        clause=clause,
+        expected=f"{name} (code {code}){where}",
+        seen=reply,
+    )
+    return reply
+
+
+def expect_none(ctx: CaseContext, replies: Sequence[WordReply], clause: str, why: str) -> None:
+    ctx.expect(
+        not replies,
+        clause=clause,
+        expected=f"no response ({why})",
+        seen=replies,
+    )
+
+
+async def expect_quiet(ctx: CaseContext, probe: CougarProbe, clause: str, why: str, ticks: int = 2) -> None:
+    """Nothing more comes in the next ``ticks`` ticks (no extra words after a response)."""
+    expect_none(ctx, await probe.run(ticks), clause, why)
+
+
+async def expect_examine(ctx: CaseContext, probe: CougarProbe, address: int, count: int) -> tuple[int, ...]:
+    """EXMN that must return ``count`` words (an address inside memory)."""
+    reply = expect_reply(
+        ctx, await probe.examine(address, count), "EXMN-DATA", "cougar.exmn.reply", after="EXMN"
+    )
+    words = tuple(int(w) for w in reply.data_words[1:])
+    ctx.expect(
+        reply.data_words[:1] == (count,) and len(words) == count,
+        clause="cougar.exmn.reply",
+        expected=f"EXMN of {count} word(s) at {address:o}: count word {count}, then {count} words",
+        seen=reply,
+    )
+    return words
+
+
+async def examine_region(ctx: CaseContext, probe: CougarProbe, name: str) -> tuple[int, ...]:
+    r = region(name)
+    return await expect_examine(ctx, probe, r.address, r.words)
+
+
+async def region_floats(ctx: CaseContext, probe: CougarProbe, name: str) -> tuple[float, ...]:
+    return floats_of(await examine_region(ctx, probe, name))
+
+
+async def peek_region(ctx: CaseContext, probe: CougarProbe, name: str) -> tuple[int, ...]:
+    """A region's words for a case that only needs them (to send them back unchanged): judges nothing,
+    and skips the case when EXMN does not return them (``cougar.reply.exmn`` judges EXMN)."""
+    r = region(name)
+    reply = await probe.examine(r.address, r.words)
+    if reply.problem or reply.name != "EXMN-DATA" or reply.data_words[:1] != (r.words,):
+        ctx.skip(f"the case needs Cougar's {name} words, which EXMN did not return: {reply}")
+    return tuple(int(w) for w in reply.data_words[1:])
+
+
+def int16(words: Iterable[int]) -> list[int]:
+    return [w - 0x10000 if w & 0x8000 else w for w in words]
+
+
+async def settle(probe: CougarProbe, pose: Sequence[float] = READY) -> None:
+    """Tell Cougar where the arm is and let the gauge filter settle there."""
+    await probe.send("SEN", theta_sensed=tuple(pose))
+    await probe.run(SETTLE_TICKS)
+
+
+async def read_forces(ctx: CaseContext, probe: CougarProbe) -> tuple[float, ...]:
+    reply = expect_reply(ctx, await probe.call("RFRC"), "FORCES", "cougar.rfrc.reply", after="RFRC")
+    values = reply.floats()
+    ctx.expect(
+        len(values) == 6 and all(math.isfinite(v) for v in values),
+        clause="cougar.rfrc.reply",
+        expected="six finite floats",
+        actual=str(values),
+        data=words_bytes(reply.words),
+    )
+    return values
+
+
+def guard_words(index_word: int, dvec: Sequence[float] = GUARD_DVEC_ZERO, tol: float = ALWAYS) -> list[int]:
+    return encode("command", "GUARDS", type_index=index_word, dvec=tuple(dvec), tol=tol)
+
+
+def guard_trips(replies: Iterable[WordReply]) -> list[tuple[str, int]]:
+    """(response name, guard index) of every guard response."""
+    out: list[tuple[str, int]] = []
+    for r in replies:
+        if r.name in ("GUARD-STOP", "GUARD-CONTINUE"):
+            out.append((r.name, int(r.data_words[0]) if r.data_words else -1))
+    return out
+
+
+def others(replies: Iterable[WordReply]) -> list[WordReply]:
+    return [r for r in replies if r.name not in ("GUARD-STOP", "GUARD-CONTINUE")]
+
+
+def close_to(a: Sequence[float], b: Sequence[float], *, rel: float, floor: float) -> bool:
+    """Element-wise closeness with a tolerance relative to the larger vector's size."""
+    scale = max([abs(x) for x in (*a, *b)], default=0.0)
+    tol = rel * scale + floor
+    return len(a) == len(b) and all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
+
+
+def fmt(values: Iterable[float]) -> str:
+    return "(" + ", ".join(f"{v:.6g}" for v in values) + ")"

@@ -1,0 +1,170 @@
+"""NPR's compliance gains and RST (erratum cougar-compliance-equation), through properties any linear
+law has."""
+
+from __future__ import annotations
+
+import math
+from typing import Final
+
+from manip.arm import READY
+from manip.conformance.cases.cougar._support import (
+    clean,
+    close_to,
+    examine_region,
+    expect_none,
+    expect_reply,
+    fmt,
+    region_floats,
+    settle,
+)
+from manip.conformance.cougar.probe import (
+    CougarProbe,
+    cougar_probe,
+    floats_of,
+    words_bytes,
+)
+from manip.conformance.suite.case import case
+from manip.conformance.suite.context import CaseContext
+
+# ------------------------------------------------------------------------------------------ NPR, RST
+_THETA_ERROR: Final = (1.0, -1.0, 1.0, 2.0, -2.0, 2.0)
+GAIN: Final = 5.0
+"""K (oz/mm) and B (oz s/mm) steps: with the position error and rate difference used, their force
+terms are ~100 oz, so gauge noise of a fraction of an ounce stays far inside the 2 % tolerance."""
+
+
+async def _ntd(
+    ctx: CaseContext,
+    probe: CougarProbe,
+    *,
+    k: float,
+    b: float,
+    bji: float,
+    rate: float,
+) -> tuple[float, ...]:
+    """NTD for diagonal gains (K = k, B = b I, BJI = bji) at READY with a fixed position error,
+    after RST (so the output filter starts from rest whatever its constants)."""
+    await probe.send("NK", k=(k,) * 6)
+    await probe.send("NB", b=tuple(b if i % 7 == 0 else 0.0 for i in range(36)))
+    await probe.send("NBJI", bji=(bji,) * 6)
+    await probe.send("NFC", force=(0.0,) * 6)
+    await probe.send("RST")
+    expect_none(ctx, await probe.run(3), "cougar.word-link", "parameter commands have no response")
+    commanded = tuple(a + e for a, e in zip(READY, _THETA_ERROR, strict=True))
+    reply = await probe.call(
+        "NPR", theta_sensed=READY, theta_commanded=commanded, rate_difference=(rate,) * 6
+    )
+    expect_reply(ctx, reply, "NTD", "cougar.npr.reply", after="NPR")
+    values = reply.floats()
+    ctx.expect(
+        len(values) == 6 and all(math.isfinite(v) for v in values),
+        clause="cougar.npr.reply",
+        expected="six finite floats",
+        actual=fmt(values),
+        data=words_bytes(reply.words),
+    )
+    return values
+
+
+@case(
+    "cougar.npr.gains",
+    clauses=["cougar.npr.reply", "cougar.response.layout", "cougar.word-link"],
+    hazard="config",
+    deadline=8.0,
+)
+async def npr_gains(ctx: CaseContext) -> None:
+    """NTD answers the gains NK, NB and NBJI set: zero joint damping inverse gives zero; the part due
+    to K (position error) and to B (rate difference) is non-zero and doubles when the gain doubles;
+    doubling BJI doubles the whole answer (erratum cougar-compliance-equation)."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        await settle(probe)
+        try:
+            zero = await _ntd(ctx, probe, k=5.0, b=1.0, bji=0.0, rate=3.0)
+            ctx.expect(
+                all(abs(v) <= 1e-6 for v in zero),
+                clause="cougar.npr.reply",
+                expected="NTD all zero with BJI = 0",
+                actual=fmt(zero),
+            )
+            bji = 0.01
+            base = await _ntd(ctx, probe, k=0.0, b=0.0, bji=bji, rate=0.0)
+            for gain, kw in (("K", "k"), ("B", "b")):
+                rate = 3.0 if kw == "b" else 0.0
+                one = await _ntd(ctx, probe, **{"k": 0.0, "b": 0.0, kw: GAIN}, bji=bji, rate=rate)
+                two = await _ntd(ctx, probe, **{"k": 0.0, "b": 0.0, kw: 2 * GAIN}, bji=bji, rate=rate)
+                rest = base if kw == "k" else await _ntd(ctx, probe, k=0.0, b=0.0, bji=bji, rate=rate)
+                d1 = [x - y for x, y in zip(one, rest, strict=True)]
+                d2 = [x - y for x, y in zip(two, rest, strict=True)]
+                ctx.expect(
+                    max(abs(v) for v in d1) > 1e-4,
+                    clause="cougar.npr.reply",
+                    expected=f"NTD to change when {gain} goes from 0 to {GAIN:g} (with a "
+                    f"{'position error' if kw == 'k' else 'rate difference'})",
+                    actual=f"{fmt(rest)} -> {fmt(one)}",
+                )
+                ctx.expect(
+                    close_to(d2, [2 * v for v in d1], rel=0.02, floor=1e-6),
+                    clause="cougar.npr.reply",
+                    expected=f"doubling {gain} doubles its part of NTD: {fmt(2 * v for v in d1)}",
+                    actual=fmt(d2),
+                )
+            one = await _ntd(ctx, probe, k=GAIN, b=0.0, bji=bji, rate=0.0)
+            two = await _ntd(ctx, probe, k=GAIN, b=0.0, bji=2 * bji, rate=0.0)
+            ctx.expect(
+                close_to(two, [2 * v for v in one], rel=0.02, floor=1e-6),
+                clause="cougar.npr.reply",
+                expected=f"doubling BJI doubles NTD: {fmt(2 * v for v in one)}",
+                actual=fmt(two),
+            )
+        finally:
+            await probe.send("NBJI", bji=(0.0,) * 6)
+            await probe.send("RST")
+            await probe.run(1)
+
+
+@case(
+    "cougar.rst.zeroes-velocities",
+    clauses=[
+        "cougar.rst",
+        "cougar.memory",
+        "cougar.exmn.reply",
+        "cougar.npr.reply",
+        "cougar.response.layout",
+    ],
+    hazard="config",
+)
+async def rst_zeroes_velocities(ctx: CaseContext) -> None:
+    """After NPR with a rate difference, RST sets the rate difference, the filter state and the last
+    NTD in memory to zero."""
+    names = ("rate_difference", "dtheta_previous", "dtheta_filtered", "dtheta_out")
+    rate = (1.0, 2.0, 3.0, -1.0, -2.0, -3.0)
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        await probe.send("NK", k=(1.0,) * 6)
+        await probe.send("NBJI", bji=(0.01,) * 6)
+        await probe.run(2)
+        commanded = tuple(a + e for a, e in zip(READY, _THETA_ERROR, strict=True))
+        reply = await probe.call("NPR", theta_sensed=READY, theta_commanded=commanded, rate_difference=rate)
+        expect_reply(ctx, reply, "NTD", "cougar.npr.reply", after="NPR")
+        stored = await region_floats(ctx, probe, "rate_difference")
+        ctx.expect(
+            close_to(stored, rate, rel=1e-6, floor=0.0),
+            clause="cougar.memory",
+            expected=f"NPR's rate difference in memory before RST: {fmt(rate)}",
+            actual=fmt(stored),
+        )
+        await probe.send("RST")
+        await probe.run(1)
+        for name in names:
+            words = await examine_region(ctx, probe, name)
+            values = floats_of(words)
+            ctx.expect(
+                all(v == 0.0 for v in values),
+                clause="cougar.rst",
+                expected=f"{name} zero after RST",
+                actual=fmt(values),
+                data=words_bytes(words),
+            )
+        await probe.send("NBJI", bji=(0.0,) * 6)
+        await probe.run(1)

@@ -1,0 +1,114 @@
+"""Guards (GUARDS, GUARDC): a guard trips once, clears, and trips on its condition."""
+
+from __future__ import annotations
+
+from manip.conformance.cases.cougar._support import (
+    NEVER,
+    STOP_BIT,
+    clean,
+    expect_none,
+    guard_trips,
+    guard_words,
+    others,
+    read_forces,
+    settle,
+)
+from manip.conformance.cougar.probe import (
+    cougar_probe,
+)
+from manip.conformance.suite.case import case
+from manip.conformance.suite.context import CaseContext
+
+
+# ------------------------------------------------------------------------------------------ guards
+@case(
+    "cougar.guard.trips-once",
+    clauses=["cougar.guards", "cougar.guard-trips-once"],
+    hazard="config",
+)
+async def guard_trips_once(ctx: CaseContext) -> None:
+    """A guard whose condition always holds trips exactly once: response 6 with its index when bit 15
+    is set, 7 when clear (bits 4-14 ignored); a guard that cannot trip stays silent; re-armed, it trips
+    once more."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        await probe.send_words(guard_words(STOP_BIT | 0x0070 | 3))
+        await probe.send_words(guard_words(0x0FF0 | 12))
+        await probe.send_words(guard_words(7, tol=NEVER))
+        got = await probe.run(8)
+        trips = sorted(guard_trips(got))
+        ctx.expect(
+            trips == [("GUARD-CONTINUE", 12), ("GUARD-STOP", 3)],
+            clause="cougar.guard-trips-once",
+            expected="exactly one GUARD-STOP (6) for guard 3 and one GUARD-CONTINUE (7) for guard 12 "
+            "in 8 ticks, none for guard 7 (tolerance never reached)",
+            seen=got,
+        )
+        expect_none(ctx, others(got), "cougar.guards", "only guard responses")
+        await probe.send_words(guard_words(STOP_BIT | 3))
+        got = await probe.run(6)
+        ctx.expect(
+            guard_trips(got) == [("GUARD-STOP", 3)],
+            clause="cougar.guard-trips-once",
+            expected="guard 3, armed again, trips once more (one GUARD-STOP 3)",
+            seen=got,
+        )
+        await probe.send("GUARDC", index=7)
+        await probe.run(1)
+
+
+@case(
+    "cougar.guard.clear",
+    clauses=["cougar.guardc", "cougar.guards"],
+    hazard="config",
+)
+async def guard_clear(ctx: CaseContext) -> None:
+    """GUARDC disarms a guard before it trips; the guard armed with it and not cleared still trips."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        await probe.send_words(guard_words(5))
+        await probe.send_words(guard_words(9))
+        await probe.send("GUARDC", index=5)
+        got = await probe.run(8)
+        ctx.expect(
+            guard_trips(got) == [("GUARD-CONTINUE", 9)],
+            clause="cougar.guardc",
+            expected="guard 5 cleared in the same tick it was armed never trips; guard 9 trips once",
+            seen=got,
+        )
+
+
+@case(
+    "cougar.guard.condition",
+    clauses=["cougar.guards", "cougar.response.layout", "cougar.rfrc.reply"],
+    hazard="config",
+)
+async def guard_condition(ctx: CaseContext) -> None:
+    """A guard trips when the dot product of the force with its dvec exceeds tol, not otherwise (both
+    signs of dvec, tolerances just below and above the force Cougar reports)."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        await settle(probe)
+        force = await read_forces(ctx, probe)
+        axis = max(range(3), key=lambda i: abs(force[i]))
+        f = force[axis]
+        margin = max(2.0, 0.05 * abs(f))
+        unit = tuple(1.0 if i == axis else 0.0 for i in range(6))
+        minus = tuple(-x for x in unit)
+        guards = {  # index: (dvec, tol, trips)
+            1: (unit, f - margin, True),
+            2: (unit, f + margin, False),
+            3: (minus, -f - margin, True),
+            4: (minus, -f + margin, False),
+        }
+        for index, (dvec, tol, _) in guards.items():
+            await probe.send_words(guard_words(index, dvec, tol))
+        got = await probe.run(6)
+        expected = [("GUARD-CONTINUE", i) for i, (_, _, trips) in guards.items() if trips]
+        ctx.expect(
+            sorted(guard_trips(got)) == sorted(expected),
+            clause="cougar.guards",
+            expected=f"with force[{axis}] = {f:.4g}: guards 1 and 3 trip (dot > tol), 2 and 4 do not",
+            seen=got,
+        )
+        await clean(probe)

@@ -1,0 +1,124 @@
+"""JACOB's front buffer and GUTS, once per tick and never nested (cougar.guts-reentry)."""
+
+from __future__ import annotations
+
+from typing import Final
+
+from manip.arm import READY
+from manip.conformance.cases.cougar._support import (
+    POSE_B,
+    clean,
+    expect_examine,
+)
+from manip.conformance.cougar.probe import (
+    cougar_probe,
+    words_bytes,
+)
+from manip.conformance.suite.case import case
+from manip.conformance.suite.context import CaseContext
+from manip.cougar.memory import region
+
+
+# ------------------------------------------------------------------------------------------ JACOB, GUTS
+@case(
+    "cougar.jacob.front-buffer-complete",
+    clauses=["cougar.jacob-double-buffer", "cougar.memory", "cougar.exmn.reply", "cougar.response.layout"],
+    hazard="config",
+)
+async def jacob_front_buffer(ctx: CaseContext) -> None:
+    """After the arm moves, every tick's front Jacobian buffer is the old Jacobian or the new one,
+    never a mixture; the new one arrives within a few ticks."""
+    front, buffers = region("jacob_front"), (region("jbuf0"), region("jbuf1"))
+    j_words = 2 * 36
+
+    async def front_j() -> tuple[int, ...]:
+        (which,) = await expect_examine(ctx, probe, front.address, 1)
+        both = [await expect_examine(ctx, probe, b.address, j_words) for b in buffers]
+        return both[which & 1]
+
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        await probe.send("SEN", theta_sensed=READY)
+        await probe.run(5)
+        old = await front_j()
+        await probe.send("SEN", theta_sensed=POSE_B)
+        seen = []
+        for _ in range(12):
+            seen.append(await front_j())
+            await probe.run(1)
+        new = seen[-1]
+        ctx.expect(
+            new != old and seen[-3:] == [new] * 3,
+            clause="cougar.jacob-double-buffer",
+            expected="a new, steady Jacobian in the front buffer within 9 ticks of SEN to a new pose",
+            actual="unchanged" if new == old else "still changing after 9 ticks",
+        )
+        mixed = [i for i, j in enumerate(seen) if j not in (old, new)]
+        ctx.expect(
+            not mixed,
+            clause="cougar.jacob-double-buffer",
+            expected="the front buffer always the old or the new Jacobian",
+            actual=f"another one at tick(s) {mixed} after the move",
+            data=words_bytes(seen[mixed[0]]) if mixed else b"",
+        )
+        await probe.send("SEN", theta_sensed=READY)
+        await probe.run(1)
+
+
+REENTRY_GAP_S: Final = 1e-6
+"""A tick this soon after the previous one (the TICK frame's resolution) finds any GUTS still running."""
+
+
+@case("cougar.guts.no-nesting", clauses=["cougar.guts-reentry"])
+async def guts_no_nesting(ctx: CaseContext) -> None:
+    """A tick one microsecond after the previous one finds GUTS still running, however fast Cougar is:
+    it sends no words, and a command sent before it runs at the next tick."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        await probe.run(1)
+        await probe.send("VERS", version=1)
+        nested = await probe.run(1, gap=REENTRY_GAP_S)
+        ctx.expect(
+            not nested,
+            clause="cougar.guts-reentry",
+            expected=f"no words from a tick {REENTRY_GAP_S * 1e6:g} us after the previous one",
+            seen=nested,
+        )
+        late = await probe.run(1)
+        ctx.expect(
+            [r.name for r in late] == ["VERSION"],
+            clause="cougar.guts-reentry",
+            expected="the VERS waiting in the buffer answered at the next full tick",
+            seen=late,
+        )
+
+
+@case(
+    "cougar.guts.reentry",
+    clauses=["cougar.guts-cost-model"],
+)
+async def guts_reentry(ctx: CaseContext) -> None:
+    """A tick 0.5 ms after the previous one finds GUTS still running (erratum cougar-guts-reentry's
+    cost model): it returns at once, and a command sent before it runs at the next tick instead.
+
+    It checks clause cougar.guts-cost-model (SHOULD), not the MUST of cougar.guts-reentry (that is
+    cougar.guts.no-nesting's): it relies on the erratum's GUTS time, and a Cougar whose GUTS finishes in
+    under 0.5 ms breaks no MUST by running the command early."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        await probe.run(1)
+        await probe.send("VERS", version=1)
+        early = await probe.run(1, gap=0.0005)
+        ctx.expect(
+            not early,
+            clause="cougar.guts-cost-model",
+            expected="no words from a tick that re-entered GUTS",
+            seen=early,
+        )
+        late = await probe.run(1) if not early else []
+        ctx.expect(
+            [r.name for r in late] == ["VERSION"] or bool(early),
+            clause="cougar.guts-cost-model",
+            expected="the VERS waiting in the buffer answered at the next full tick",
+            seen=late,
+        )

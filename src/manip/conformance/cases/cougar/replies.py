@@ -1,0 +1,154 @@
+"""The responses of Table 1: NTD, VERSION, FORCES, RAW, EXMN-DATA and EXMN's refusal of a bad address."""
+
+from __future__ import annotations
+
+import math
+
+from manip.arm import READY
+from manip.conformance.cases.cougar._support import (
+    clean,
+    expect_examine,
+    expect_quiet,
+    expect_reply,
+    fmt,
+    int16,
+    read_forces,
+)
+from manip.conformance.cougar.probe import (
+    cougar_probe,
+    octal,
+    words_bytes,
+)
+from manip.conformance.suite.case import case
+from manip.conformance.suite.context import CaseContext
+from manip.cougar.memory import MEMORY_BYTES, region
+
+
+# ------------------------------------------------------------------------------------------ responses
+@case(
+    "cougar.reply.ntd",
+    clauses=["cougar.npr.reply", "cougar.response.layout"],
+    hazard="config",
+)
+async def reply_ntd(ctx: CaseContext) -> None:
+    """NPR is answered with NTD (code 1) carrying six finite floats, nothing more."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        target = tuple(a + 1.0 for a in READY)
+        for rate in ((0.0,) * 6, (1.0, -1.0, 0.5, 0.0, 2.0, -2.0)):
+            reply = await probe.call("NPR", theta_sensed=READY, theta_commanded=target, rate_difference=rate)
+            expect_reply(ctx, reply, "NTD", "cougar.npr.reply", after="NPR")
+            ctx.expect(
+                len(reply.floats()) == 6 and all(math.isfinite(v) for v in reply.floats()),
+                clause="cougar.npr.reply",
+                expected="six finite floats of joint-rate change",
+                actual=fmt(reply.floats()),
+                data=words_bytes(reply.words),
+            )
+            await expect_quiet(ctx, probe, "cougar.response.layout", "NPR has one response")
+
+
+@case(
+    "cougar.reply.version",
+    clauses=["cougar.vers.reply", "cougar.response.layout"],
+)
+async def reply_version(ctx: CaseContext) -> None:
+    """VERS is answered with VERSION (code 8) and exactly one word, whatever the Puma's version word."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        for puma_version in (0, 1, 0o105, 0xFFFF):
+            reply = await probe.call("VERS", version=puma_version)
+            expect_reply(ctx, reply, "VERSION", "cougar.vers.reply", after=f"VERS {puma_version:o}")
+            await expect_quiet(ctx, probe, "cougar.response.layout", "VERSION is one data word")
+
+
+@case(
+    "cougar.reply.forces",
+    clauses=["cougar.rfrc.reply", "cougar.response.layout"],
+)
+async def reply_forces(ctx: CaseContext) -> None:
+    """RFRC is answered with FORCES (code 5) and six finite floats, on consecutive ticks."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        for _ in range(3):
+            await read_forces(ctx, probe)
+            await expect_quiet(ctx, probe, "cougar.response.layout", "FORCES is six floats", ticks=1)
+
+
+@case(
+    "cougar.reply.raw",
+    clauses=["cougar.rraw.reply", "cougar.gauge-range", "cougar.response.layout"],
+)
+async def reply_raw(ctx: CaseContext) -> None:
+    """RRAW is answered with RAW (code 9) and eight words, each a 12-bit reading in -2048..2047."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        for _ in range(3):
+            reply = expect_reply(ctx, await probe.call("RRAW"), "RAW", "cougar.rraw.reply", after="RRAW")
+            gauges = int16(reply.data_words)
+            ctx.expect(
+                len(gauges) == 8 and all(-2048 <= g <= 2047 for g in gauges),
+                clause="cougar.gauge-range",
+                expected="eight readings in -2048..2047",
+                actual=str(gauges),
+                data=words_bytes(reply.words),
+            )
+            await expect_quiet(ctx, probe, "cougar.response.layout", "RAW is eight words", ticks=1)
+
+
+@case(
+    "cougar.reply.exmn",
+    clauses=["cougar.exmn.reply", "cougar.memory", "cougar.response.layout"],
+)
+async def reply_exmn(ctx: CaseContext) -> None:
+    """EXMN is answered with EXMN-DATA: the number of words asked for (0, 1, 2, 17, 200), then them."""
+    base = region("version").address
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        first: tuple[int, ...] = ()
+        for count in (0, 1, 2, 17, 200):
+            words = await expect_examine(ctx, probe, base, count)
+            await expect_quiet(
+                ctx, probe, "cougar.response.layout", "EXMN-DATA carries its own count", ticks=1
+            )
+            if count == 1:
+                first = words
+            if count > 1 and first:
+                ctx.expect(
+                    words[:1] == first,
+                    clause="cougar.memory",
+                    expected=f"the word at {base:o} the same in every examine ({octal(first)})",
+                    actual=octal(words[:1]),
+                )
+
+
+@case(
+    "cougar.exmn.bad-address",
+    clauses=["cougar.exmn.reply", "cougar.memory", "cougar.response.layout", "cougar.word-link"],
+)
+async def exmn_bad_address(ctx: CaseContext) -> None:
+    """EXMN at an odd address or past memory returns 0 words; one running off the end returns the
+    words that exist, and says how many (erratum cougar-memory-map)."""
+    cases = (
+        (region("version").address + 1, 3, 0, "an odd address"),
+        (MEMORY_BYTES, 2, 0, "the first address past memory"),
+        (MEMORY_BYTES - 4, 5, 2, "two words before the end of memory"),
+    )
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        for address, count, returned, what in cases:
+            reply = expect_reply(
+                ctx, await probe.examine(address, count), "EXMN-DATA", "cougar.exmn.reply", after="EXMN"
+            )
+            ctx.expect(
+                reply.data_words[:1] == (returned,) and len(reply.data_words) == 1 + returned,
+                clause="cougar.exmn.reply",
+                expected=f"EXMN of {count} at {address:o} ({what}): count word {returned}, {returned} words",
+                seen=reply,
+            )
+        ctx.expect(
+            (await probe.call("VERS", version=1)).name == "VERSION",
+            clause="cougar.word-link",
+            expected="VERSION after the bad addresses (Cougar still in sync)",
+            actual="another response",
+        )

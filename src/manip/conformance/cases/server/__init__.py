@@ -1,0 +1,1 @@
+"""Cases of the ``server.*`` ids: a Chaos manipulator server judged over Chaos, one module per area."""

@@ -1,0 +1,150 @@
+"""Error strings (E.2) and the error packets that carry them (E.3 Opcodes 201, 202)."""
+
+from __future__ import annotations
+
+from manip.conformance.cases._support import UNASSIGNED_OPCODES, error_of
+from manip.conformance.judge.checks import check_error_packet
+from manip.conformance.suite.case import case
+from manip.conformance.suite.context import Answer, CaseContext, Probe
+from manip.spec.constants import ServerOp
+
+
+async def _command_error(ctx: CaseContext, probe: Probe, clause: str | None = None) -> Answer:
+    """Provoke a non-fatal error: an opcode the spec does not define.  A target that does not refuse
+    it breaks ``clause`` when the case declares the refusal; otherwise the case has no error string to
+    judge and skips (``server.negative.unknown-opcodes`` fails the target)."""
+    answer = await probe.call_raw(UNASSIGNED_OPCODES[-1 - ctx.random.randrange(8)])
+    if clause is not None:
+        ctx.expect(
+            answer.opcode == ServerOp.NON_FATAL_ERROR,
+            clause=clause,
+            expected="a non-fatal error (202) for an unknown opcode",
+            seen=answer,
+        )
+    elif answer.opcode != ServerOp.NON_FATAL_ERROR:
+        ctx.skip(f"no non-fatal error to judge: an unknown opcode was answered with {answer}")
+    return answer
+
+
+@case(
+    "server.error.string-format",
+    clauses=[
+        "error-string.format",
+        "error-string.where-no-colon",
+        "error-string.severity",
+        "error-string.code",
+        "error-string.args",
+        "error-string.substitution",
+    ],
+)
+async def string_format(ctx: CaseContext) -> None:
+    """'where: severity code message', a known severity, a three-letter code, ~/$ matched by numbers."""
+    probe = await ctx.connect()
+    answer = await _command_error(ctx, probe)
+    ctx.check(f for f in check_error_packet(answer.first) if f.clause != "error-string.arg-alignment")
+    error = error_of(answer)
+    if error is not None:
+        ctx.note(f"error string: {error.error.render()!r}")
+
+
+@case("server.error.arg-alignment", clauses=["error-string.arg-alignment"])
+async def arg_alignment(ctx: CaseContext) -> None:
+    """Numbers after the NUL start at an even offset of the packet data (zero pad byte)."""
+    probe = await ctx.connect()
+    answer = await _command_error(ctx, probe)
+    data = answer.data
+    nul = data.find(0, 2)
+    if nul < 0 or nul + 1 >= len(data):
+        ctx.skip("the error string carries no numbers")
+    ctx.check(f for f in check_error_packet(answer.first) if f.clause == "error-string.arg-alignment")
+
+
+@case(
+    "server.error.severity-matches-opcode",
+    clauses=["error.severity-matches-opcode", "request.unknown-opcode"],
+)
+async def severity_matches(ctx: CaseContext) -> None:
+    """A non-fatal error (202) carries E, C or BE; a command error C."""
+    probe = await ctx.connect()
+    answer = await _command_error(ctx, probe, "request.unknown-opcode")
+    ctx.check(f for f in check_error_packet(answer.first) if f.clause == "error.severity-matches-opcode")
+    decoded = error_of(answer)
+    if decoded is None:
+        return  # the format case says what is wrong with the string
+    error = decoded.error
+    ctx.expect(
+        error.severity == "C",
+        clause="request.unknown-opcode",
+        expected="severity C for an unknown opcode",
+        actual=repr(error.render()),
+        data=answer.data,
+    )
+
+
+@case("server.error.non-fatal-is-reply", clauses=["error.non-fatal-is-reply", "request.one-reply"])
+async def non_fatal_is_reply(ctx: CaseContext) -> None:
+    """Nothing else answers a request after its non-fatal error."""
+    probe = await ctx.connect()
+    await _command_error(ctx, probe)
+    extra = [p for p in await probe.drain(0.2) if p.opcode in (ServerOp.RESPONSE, ServerOp.NON_FATAL_ERROR)]
+    ctx.expect(
+        not extra,
+        clause="error.non-fatal-is-reply",
+        expected="no other reply after the non-fatal error",
+        actual=f"{len(extra)} more packet(s)",
+        data=extra[0].data if extra else b"",
+    )
+    after = await probe.call("here")
+    ctx.expect(
+        after.number == after.request.packet_no,
+        clause="request.one-reply",
+        expected="the next reply answers the next request",
+        seen=after,
+    )
+
+
+@case(
+    "server.error.fatal-then-close",
+    clauses=["error.fatal-then-close", "error.fatal-request-number", "calibrate.nzi", "calibrate.done"],
+    hazard="motion",
+    deadline=8.0,
+)
+async def fatal_then_close(ctx: CaseContext) -> None:
+    """Calibrate: done, or (a calibration failure) a fatal error quoting it, then CLS."""
+    probe = await ctx.connect()
+    answer = await probe.call("enable-power")
+    answer = await probe.call("calibrate", timeout=5.0)
+    if answer.is_response:
+        ctx.expect(
+            len(answer.data) == 2,
+            clause="calibrate.done",
+            expected="an empty done",
+            seen=answer,
+        )
+        ctx.skip("calibrate succeeded: the target gave no fatal error to observe")
+    if answer.opcode != ServerOp.FATAL_ERROR:
+        ctx.skip(f"calibrate was refused with a non-fatal error: {answer}")
+    ctx.check(check_error_packet(answer.first))
+    ctx.expect(
+        answer.number == answer.request.packet_no,
+        clause="error.fatal-request-number",
+        expected=f"request number {answer.request.packet_no}, the packet last received",
+        seen=answer,
+    )
+    error = error_of(answer)
+    if error is not None and error.error.code == "NZI":
+        ctx.expect(
+            error.error.has_nul and len(error.error.args) == 1 and "$" in error.error.message,
+            clause="calibrate.nzi",
+            expected="NZI with the joints as one $ mask argument",
+            actual=repr(error.error.render()),
+            data=answer.data,
+        )
+    closed = await probe.wait_closed(ctx.options.reply_timeout)
+    ctx.expect(
+        closed,
+        clause="error.fatal-then-close",
+        expected=f"CLS within {ctx.options.reply_timeout:g} s of the fatal error",
+        actual="the connection still open",
+        data=answer.data,
+    )

@@ -1,0 +1,404 @@
+"""Motion and arm state (E.1, E.2, Part II §6.2): JOR, TOR, NAP, AWA and its reset, speed factor,
+segment numbers and asynchronous segment-completed responses, free joint."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from itertools import pairwise
+
+from manip.conformance.cases._support import (
+    expect_done,
+    expect_here_served,
+    expect_refusal,
+    expect_response,
+    power_on,
+    read_floats,
+    require_response,
+)
+from manip.conformance.judge.checks import check_async_packet, word
+from manip.conformance.suite.case import case
+from manip.conformance.suite.context import Answer, CaseContext, Probe
+from manip.spec.constants import AsyncCondition, ServerOp
+
+FAR_MM = 100_000.0
+"""A position 100 m away: no manipulator reaches it."""
+OUT_OF_RANGE_DEG = 1000.0
+"""A joint angle past any revolute joint's limit."""
+SMALL_STEP_DEG = 2.0
+SEGMENT_REPLY_SIZE = 4
+"""Data bytes of a segment-number reply: request number and segment number."""
+
+
+async def _wait_still(ctx: CaseContext, probe: Probe, limit: float = 5.0) -> None:
+    """Poll joint angles until two readings 0.1 s apart agree (the queued motion has ended)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + limit
+    last = await read_floats(ctx, probe, "joint-angles")
+    while loop.time() < deadline:
+        await asyncio.sleep(0.1)
+        now = await read_floats(ctx, probe, "joint-angles")
+        if max(abs(a - b) for a, b in zip(now, last, strict=True)) < 1e-4:
+            return
+        last = now
+
+
+def _shifted(joints: tuple[float, ...], joint: int, by: float) -> list[float]:
+    out = list(joints)
+    out[joint] += by
+    return out
+
+
+def _away_from_zero(joints: tuple[float, ...], by: float) -> list[float]:
+    """``joints`` with joint 1 moved ``by`` degrees, towards zero (so the move stays in range)."""
+    direction = -1.0 if joints[0] > 0 else 1.0
+    return _shifted(joints, 0, direction * by)
+
+
+def _expect_segment_reply(ctx: CaseContext, answer: Answer, expected: str) -> None:
+    expect_response(ctx, answer, clause="response.segment-number", expected=expected, size=SEGMENT_REPLY_SIZE)
+
+
+async def _small_move(
+    ctx: CaseContext, probe: Probe, by: float = SMALL_STEP_DEG, *, clause: str | None = None
+) -> int:
+    """A small joint move of joint 1; returns its segment number.  With ``clause`` the move being
+    accepted is what the case checks; without, the case needs the move and skips when it is refused."""
+    joints = await read_floats(ctx, probe, "joint-angles")
+    answer = await probe.call("set-joint-angles", joints=_away_from_zero(joints, by))
+    if clause is None:
+        require_response(ctx, answer, "a small move of joint 1 accepted")
+    else:
+        expect_response(
+            ctx,
+            answer,
+            clause=clause,
+            expected="a segment-number reply to set joint angles",
+            size=SEGMENT_REPLY_SIZE,
+        )
+    segment = word(answer.data, 2)
+    assert segment is not None
+    return segment
+
+
+async def _refused_stay(
+    ctx: CaseContext,
+    probe: Probe,
+    joints: tuple[float, ...],
+    *,
+    clause: str,
+    codes: tuple[str, ...],
+    what: str,
+) -> None:
+    """Ask the arm to move to ``joints`` (where it stands): the answer must be an E error of ``codes``."""
+    answer = await probe.call("set-joint-angles", joints=list(joints))
+    expect_refusal(ctx, answer, clause=clause, severities=("E",), codes=codes, what=what)
+
+
+@case("server.motion.jor", clauses=["motion.checked-before-queue"], hazard="motion")
+async def joint_out_of_range(ctx: CaseContext) -> None:
+    """Set joint angles past a joint limit: JOR at once, and the arm does not move."""
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    before = await read_floats(ctx, probe, "joint-angles")
+    answer = await probe.call("set-joint-angles", joints=_shifted(before, 0, OUT_OF_RANGE_DEG))
+    expect_refusal(
+        ctx,
+        answer,
+        clause="motion.checked-before-queue",
+        severities=("E", "C"),
+        codes=("JOR",),
+        what=f"joint 1 at {before[0] + OUT_OF_RANGE_DEG:g} degrees",
+    )
+    await asyncio.sleep(0.1)
+    after = await read_floats(ctx, probe, "joint-angles")
+    moved = max(abs(a - b) for a, b in zip(before, after, strict=True))
+    ctx.expect(
+        moved < 0.01,
+        clause="motion.checked-before-queue",
+        expected="the arm standing still",
+        actual=f"a joint moved by {moved:.3f} degrees",
+    )
+
+
+@case("server.motion.tor", clauses=["solve-forwards.errors", "motion.checked-before-queue"], hazard="motion")
+async def transform_out_of_reach(ctx: CaseContext) -> None:
+    """A transform 100 m away: solve forwards and move answer TOR."""
+    probe = await ctx.connect()
+    pose = list(await read_floats(ctx, probe, "here"))
+    joints = list(await read_floats(ctx, probe, "joint-angles"))
+    far = [*pose[:9], FAR_MM, 0.0, 0.0]
+    answer = await probe.call("solve-forwards", transform=far, current=joints)
+    expect_refusal(
+        ctx,
+        answer,
+        clause="solve-forwards.errors",
+        severities=("E", "C"),
+        codes=("TOR",),
+        what="solve forwards to a point 100 m away",
+    )
+    await power_on(ctx, probe)
+    answer = await probe.call("move", transform=far)
+    expect_refusal(
+        ctx,
+        answer,
+        clause="motion.checked-before-queue",
+        severities=("E", "C"),
+        codes=("TOR",),
+        what="a move to a point 100 m away",
+    )
+
+
+@case("server.motion.nap", clauses=["motion.no-power", "kill-power.done"], hazard="power")
+async def no_arm_power(ctx: CaseContext) -> None:
+    """After kill power, motion is refused with NAP; enable power makes it accepted again."""
+    probe = await ctx.connect()
+    answer = await probe.call("kill-power")
+    expect_done(ctx, answer, clause="kill-power.done", expected="an empty done")
+    joints = await read_floats(ctx, probe, "joint-angles")
+    await _refused_stay(
+        ctx, probe, joints, clause="motion.no-power", codes=("NAP",), what="a move without arm power"
+    )
+    await power_on(ctx, probe)
+    await _small_move(ctx, probe, 0.5, clause="motion.no-power")  # power back: motion accepted again
+
+
+async def _abort_by_power_loss(ctx: CaseContext, probe: Probe) -> None:
+    """Start a long move, kill power while it runs: the move process must report an abort."""
+    await power_on(ctx, probe)
+    joints = await read_floats(ctx, probe, "joint-angles")
+    answer = await probe.call("set-joint-angles", joints=_away_from_zero(joints, 30.0))
+    require_response(ctx, answer, "a 30-degree move accepted")
+    await asyncio.sleep(0.05)
+    await probe.call("kill-power")
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + ctx.options.reply_timeout
+    while not any(p.opcode == ServerOp.ASYNCHRONOUS_ERROR for p in probe.unsolicited):
+        packet = await probe.next_packet(max(0.0, deadline - loop.time()))
+        if packet is None:
+            break
+        probe.unsolicited.append(packet)
+    aborts = [p for p in probe.unsolicited if p.opcode == ServerOp.ASYNCHRONOUS_ERROR]
+    ctx.expect(
+        aborts,
+        clause="motion.abort",
+        expected="an asynchronous error (204) when power is lost during a move",
+        actual="no asynchronous error",
+    )
+
+
+@case(
+    "server.motion.awa-reset-by-power",
+    clauses=["motion.abort", "motion.reset", "async-error.request-number"],
+    hazard="power",
+)
+async def awa_reset_by_power(ctx: CaseContext) -> None:
+    """Power lost during a move aborts it; motion is then refused (AWA, or NAP) until enable power."""
+    probe = await ctx.connect()
+    await _abort_by_power_loss(ctx, probe)
+    last_request = max(p.packet_no for p in probe.packets if p.direction == "c2s")
+    for packet in (p for p in probe.unsolicited if p.opcode == ServerOp.ASYNCHRONOUS_ERROR):
+        ctx.expect(
+            (word(packet.data) or 0) <= last_request and len(packet.data) >= 2,
+            clause="async-error.request-number",
+            expected="the number of the last request processed",
+            actual=str(word(packet.data)),
+            data=packet.data,
+        )
+    joints = await read_floats(ctx, probe, "joint-angles")
+    await _refused_stay(
+        ctx, probe, joints, clause="motion.abort", codes=("AWA", "NAP"), what="a move after an abort"
+    )
+    await power_on(ctx, probe)
+    await _small_move(ctx, probe, 0.5, clause="motion.reset")  # enable power reset the abort
+
+
+@case("server.motion.awa-reset-abort", clauses=["motion.abort", "motion.reset"], hazard="power")
+async def awa_reset_abort(ctx: CaseContext) -> None:
+    """After an abort, Reset abort (260) clears AWA without restoring power: then NAP, not AWA."""
+    probe = await ctx.connect()
+    await _abort_by_power_loss(ctx, probe)
+    joints = await read_floats(ctx, probe, "joint-angles")
+    await _refused_stay(
+        ctx,
+        probe,
+        joints,
+        clause="motion.abort",
+        codes=("AWA",),
+        what="a move after an abort (the abort is reported before the missing power)",
+    )
+    reset = await probe.call("reset-abort")
+    if not reset.is_response:
+        ctx.skip(f"the target does not serve Reset abort (260): {reset}")
+    await _refused_stay(
+        ctx,
+        probe,
+        joints,
+        clause="motion.reset",
+        codes=("NAP",),
+        what="a move after Reset abort without power",
+    )
+
+
+@case(
+    "server.motion.reply-before-motion",
+    clauses=["motion.reply-before-motion", "response.segment-number"],
+    hazard="motion",
+)
+async def reply_before_motion(ctx: CaseContext) -> None:
+    """A 20-degree move is answered at once, while the arm is still on its way."""
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    before = await read_floats(ctx, probe, "joint-angles")
+    goal = _away_from_zero(before, 20.0)
+    start = time.monotonic()
+    answer = await probe.call("set-joint-angles", joints=goal)
+    took = time.monotonic() - start
+    _expect_segment_reply(ctx, answer, "a segment-number reply")
+    now = await read_floats(ctx, probe, "joint-angles")
+    ctx.expect(
+        abs(now[0] - goal[0]) > 0.5,
+        clause="motion.reply-before-motion",
+        expected="the reply before the arm reaches the goal",
+        actual=f"joint 1 already at {now[0]:.2f} (goal {goal[0]:.2f}) when the reply came after {took:.3f} s",
+    )
+    ctx.note(f"move answered in {took * 1000:.1f} ms")
+
+
+@case("server.motion.segment-numbers", clauses=["segment.number-increases"], hazard="motion")
+async def segment_numbers(ctx: CaseContext) -> None:
+    """Consecutive motion requests get segment numbers n, n+1, n+2."""
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    numbers = [await _small_move(ctx, probe, 0.5 * (-1) ** i) for i in range(3)]
+    ok = all(b == (a + 1) & 0xFFFF for a, b in pairwise(numbers))
+    ctx.expect(
+        ok,
+        clause="segment.number-increases",
+        expected="segment numbers increasing by one",
+        actual=f"segments {numbers}",
+    )
+
+
+@case("server.speed.bounds", clauses=["speed.range"], hazard="config")
+async def speed_bounds(ctx: CaseContext) -> None:
+    """Set speed factor: 0 < n <= 1 accepted; 0, negative and above 1 refused with C."""
+    probe = await ctx.connect()
+    for factor in (1.0, 0.5, 2.0**-20):
+        answer = await probe.call("set-speed", factor=factor)
+        expect_done(ctx, answer, clause="speed.range", expected=f"done for speed factor {factor!r}")
+    for factor in (0.0, -0.5, 1.0 + 2.0**-20, 2.0, 1e30):
+        answer = await probe.call("set-speed", factor=factor)
+        expect_refusal(ctx, answer, clause="speed.range", what=f"speed factor {factor!r}")
+
+
+async def _segment_time(ctx: CaseContext, probe: Probe, factor: float, by: float) -> float:
+    answer = await probe.call("set-speed", factor=factor)
+    require_response(ctx, answer, f"speed factor {factor!r} accepted")
+    start = time.monotonic()
+    segment = await _small_move(ctx, probe, by)
+    while True:
+        packet = await probe.next_packet(5.0)
+        if packet is None:  # server.async.segment-completed judges the missing report
+            ctx.skip(f"the case times moves by their segment-completed reports; none came for {segment}")
+        if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(packet.data, 6) == segment:
+            return time.monotonic() - start
+
+
+@case(
+    "server.async.segment-completed",
+    clauses=["async.layout", "async.codes", "async.only-when-requested"],
+    hazard="motion",
+    deadline=10.0,
+)
+async def segment_completed(ctx: CaseContext) -> None:
+    """Asked for (request-notifications bit 1), a finished segment is reported by 0203 code 2; not
+    asked for, nothing is reported."""
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    await _small_move(ctx, probe, 1.0)
+    await _wait_still(ctx, probe)
+    quiet = await probe.drain(0.3)
+    unrequested = [p for p in quiet if p.opcode == ServerOp.ASYNCHRONOUS_RESPONSE]
+    ctx.expect(
+        not unrequested,
+        clause="async.only-when-requested",
+        expected="no asynchronous response before any was asked for",
+        actual=f"{len(unrequested)} asynchronous response(s)",
+        data=unrequested[0].data if unrequested else b"",
+    )
+    answer = await probe.call("request-notifications", mask=1 << 1)
+    if not answer.is_response:
+        ctx.skip(f"the target does not serve request-notifications: {answer}")
+    segment = await _small_move(ctx, probe, 1.0)
+    seen: list[int | None] = []
+    while (packet := await probe.next_packet(3.0)) is not None:
+        if packet.opcode != ServerOp.ASYNCHRONOUS_RESPONSE:
+            continue
+        ctx.check(check_async_packet(packet, 1 << 1))
+        ctx.expect(
+            word(packet.data, 2) == AsyncCondition.SEGMENT_COMPLETED,
+            clause="async.layout",
+            expected="condition 2 (segment completed)",
+            actual=f"condition {word(packet.data, 2)}",
+            data=packet.data,
+        )
+        seen.append(word(packet.data, 6))
+        if seen[-1] == segment:
+            return
+    ctx.fail(
+        f"no segment-completed response for segment {segment}",
+        clause="async.layout",
+        expected=f"an asynchronous segment-completed response for segment {segment}",
+        actual=f"segments reported: {seen}",
+    )
+
+
+@case("server.speed.scales", clauses=["motion.speed-scales"], hazard="motion", deadline=12.0)
+async def speed_scales(ctx: CaseContext) -> None:
+    """A move at speed factor 0.25 takes longer than the same move at 1."""
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    answer = await probe.call("request-notifications", mask=1 << 1)
+    if not answer.is_response:
+        ctx.skip(f"the target does not serve request-notifications: {answer}")
+    fast = await _segment_time(ctx, probe, 1.0, 1.0)
+    slow = await _segment_time(ctx, probe, 0.25, -1.0)
+    ctx.note(f"1-degree move: {fast:.3f} s at 1.0, {slow:.3f} s at 0.25")
+    ctx.expect(
+        slow > fast * 1.3,
+        clause="motion.speed-scales",
+        expected="the slow move taking longer",
+        actual=f"{fast:.3f} s at speed 1, {slow:.3f} s at speed 0.25",
+    )
+
+
+@case(
+    "server.free-joint.discard",
+    clauses=["free-joint.awaits-next-packet", "free-joint.replies", "free-joint.data"],
+    hazard="motion",
+)
+async def free_joint_discard(ctx: CaseContext) -> None:
+    """Free joint 1: done; the next packet (Here) gets an empty done, not its data; then Here works."""
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    answer = await probe.call("free-joint", joint=1)
+    expect_done(ctx, answer, clause="free-joint.replies", expected="done once the joint is freed")
+    discarded = await probe.call("here")
+    expect_done(
+        ctx,
+        discarded,
+        clause="free-joint.awaits-next-packet",
+        expected="an empty done: the packet after free joint is not executed",
+    )
+    await expect_here_served(ctx, probe, "Here served normally once the joint is un-freed")
+
+
+@case("server.free-joint.bad-joint", clauses=["free-joint.data"], technique="negative", hazard="motion")
+async def free_joint_bad(ctx: CaseContext) -> None:
+    """Free joint 0 or 7 (outside 1..degrees of freedom) is a command error."""
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    for joint in (0, 7):
+        answer = await probe.call("free-joint", joint=joint)
+        expect_refusal(ctx, answer, clause="free-joint.data", what=f"free joint {joint}")

@@ -1,0 +1,86 @@
+"""Every request opcode of the spec: a well-formed request gets one reply of the shape the spec gives
+it (done, data, segment number, multi-packet text), echoing the request's packet number.
+
+The cases are generated from the spec table, one per opcode (``server.reply.<name>``); their hazard is
+the opcode's, so on hardware the motion and power ones are left out unless ``--allow-motion``.  A target
+that refuses the request (an extension it does not implement, say) is not judged on the shape: the
+case is skipped with the error it gave (the error string itself is still checked).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Awaitable, Callable, Mapping
+from typing import Final
+
+from manip.conformance.cases._support import error_of, power_on, valid_values
+from manip.conformance.judge.checks import check_reply
+from manip.conformance.suite.case import case
+from manip.conformance.suite.context import CaseContext, Probe
+from manip.spec import SPEC, RequestOpcode
+
+_KIND_CLAUSES: Final[Mapping[str, tuple[str, ...]]] = {
+    "done": ("response.done-empty",),
+    "data": ("response.data-layout",),
+    "segment": ("response.segment-number",),
+    "multi": ("describe.reply-shape", "multi.terminated-by-empty", "multi.same-request-number"),
+}
+_COMMON: Final = (
+    "request.one-reply",
+    "response.echoes-request-number",
+    "response.word-byte-order",
+    "response.server-opcodes",
+)
+
+
+def opcode_clauses(op: RequestOpcode) -> tuple[str, ...]:
+    """The clauses a well-formed exchange of ``op`` exercises: the common ones, the response kind's,
+    and the opcode's own reply clauses as the spec data states them (``reply_clauses``)."""
+    return (*_COMMON, *_KIND_CLAUSES[op.response.kind], *op.reply_clauses)
+
+
+async def _release_free_joint(ctx: CaseContext, probe: Probe) -> None:
+    """The packet after free joint is discarded with an empty done (it un-frees the joint)."""
+    follow = await probe.call("here")
+    ctx.expect(
+        follow.is_response and len(follow.data) == 2,
+        clause="free-joint.replies",
+        expected="an empty done for the packet after free joint",
+        seen=follow,
+    )
+
+
+FollowUp = Callable[[CaseContext, Probe], Awaitable[None]]
+_FOLLOW_UPS: Final[Mapping[str, tuple[FollowUp, tuple[str, ...]]]] = {
+    "free-joint": (_release_free_joint, ("free-joint.replies",)),
+}
+"""What an opcode's case does after a normal reply, and the clauses that adds."""
+
+
+@case.each(SPEC.requests.values())
+def _reply_case(op: RequestOpcode) -> None:
+    follow_up, follow_clauses = _FOLLOW_UPS.get(op.name, (None, ()))
+
+    async def reply_shape(ctx: CaseContext) -> None:
+        probe = await ctx.connect()
+        if op.hazard in ("motion", "power") or op.name == "hand":
+            await power_on(ctx, probe)
+        values = await valid_values(ctx, probe, op)
+        # a reply that waits for the arm gets the time the spec allows it
+        timeout = op.answer_time(ctx.options.reply_timeout, ctx.options.deadline_scale)
+        answer = await probe.call(op.name, timeout=timeout, **values)
+        error = error_of(answer)
+        if error is not None:
+            ctx.check(check_reply(answer.request, answer.packets))  # echo and error-string format
+            ctx.skip(f"the target refused a well-formed {op.name}: {error.error.render()!r}")
+        ctx.check(check_reply(answer.request, answer.packets))
+        if follow_up is not None:
+            await follow_up(ctx, probe)
+        ctx.note(f"{op.name}: {answer}")
+
+    case(
+        f"server.reply.{op.name}",
+        summary=f"{op.title} ({op.opcode:o}): one {op.response.kind} reply echoing the request.",
+        clauses=(*opcode_clauses(op), *follow_clauses),
+        hazard=op.hazard,
+        deadline=10.0 + (op.answer_within or 0.0),
+    )(reply_shape)

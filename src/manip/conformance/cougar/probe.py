@@ -1,0 +1,421 @@
+"""A word-level probe of a Cougar over the emulated DRV-11J, for the Cougar cases of ``manip-conform``.
+
+Theory of operation
+===================
+
+The probe plays the Puma's end of the link (``docs/drv11j.md``) in lock step, so a case knows exactly
+which words Cougar had when each of its clock ticks ran:
+
+* :meth:`CougarProbe.open` connects, exchanges HELLO and runs one empty tick; a Cougar that answers it
+  with BYE ``busy`` (still serving the previous case's link) is retried for a short while.
+* :meth:`CougarProbe.send` encodes a Table 1 command by name (``manip.codecs.cougar``) and sends its
+  words; :meth:`CougarProbe.send_words` sends any words at all (for split or unknown commands).
+* :meth:`CougarProbe.run` sends TICKs one at a time, waiting for each TICKED (``reply_timeout``), and
+  returns the responses that became complete: Cougar's words are reassembled across frames and ticks by
+  one response :class:`~manip.codecs.cougar.WordStream`, so each :class:`WordReply` carries its decoded
+  message, the raw words and the tick that completed it.  Words that do not make a Table 1 response
+  become a :class:`WordReply` with a ``problem`` (unknown response code, undecodable float).
+* :meth:`CougarProbe.reply` waits, ticking, for the next response (``within`` ticks); :meth:`call` is
+  send + reply; :meth:`examine` reads Cougar memory with EXMN.
+
+Tick times come from one clock per process (:data:`TICK_CLOCK`): the monotonic clock, but always at
+least one 60 Hz period after the previous tick sent, so a target that keeps its state across links (as
+``manip-cougar`` does) never sees time go backwards.  A failure of the link raises
+:class:`~manip.conformance.suite.case.CaseFailure` (``closed`` or ``timeout``, clause ``link.drv11j.framing``;
+no response in time: ``cougar.word-link``), attributed to the ``cougar-link`` invariant whatever the
+case declares.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections.abc import AsyncIterator, Sequence
+from dataclasses import dataclass
+from typing import Any, Final, Literal
+
+from manip.codecs.cougar import CougarMsg, CougarValue, Malformed, OutOfSync, WordStream, encode
+from manip.codecs.pdp11float import words_to_f
+from manip.conformance.suite.case import CaseFailure
+from manip.conformance.suite.context import CaseContext
+from manip.conformance.suite.invariants import COUGAR_LINK
+from manip.cougar.link import Drv11jError, PumaEnd, parse_address
+
+__all__ = [
+    "BUSY_WAIT",
+    "DEFAULT_WITHIN",
+    "TICK_CLOCK",
+    "CougarProbe",
+    "LinkEvent",
+    "TickClock",
+    "WordReply",
+    "cougar_liveness",
+    "cougar_probe",
+    "floats_of",
+    "octal",
+    "words_bytes",
+]
+
+DEFAULT_WITHIN: Final = 4
+"""Ticks a response may take: Cougar answers in the tick that runs the command; allow a slower one."""
+BUSY_WAIT: Final = 2.0
+"""Seconds to keep retrying a Cougar that says it is busy (the previous link still closing)."""
+_BUSY_DELAY: Final = 0.02
+_READ: Final = 1 << 16
+_TRANSCRIPT_NOTE: Final = 40
+
+
+def octal(words: Sequence[int]) -> str:
+    """Words as the PDP-11 people wrote them: octal, space separated."""
+    return " ".join(f"{w:o}" for w in words) if words else "(none)"
+
+
+def words_bytes(words: Sequence[int]) -> bytes:
+    """Words as they travel on the link (little-endian), for a failure's ``data``."""
+    return b"".join((w & 0xFFFF).to_bytes(2, "little") for w in words)
+
+
+class TickClock:
+    """Tick times: monotonic, never less than one period after the previous one (see module doc)."""
+
+    period: float = 1.0 / 60.0
+
+    def __init__(self) -> None:
+        self.last: float | None = None
+
+    def next(self, gap: float | None = None) -> float:
+        """The next tick's time; ``gap`` forces it that long after the previous tick (re-entry tests)."""
+        now = time.monotonic()
+        if self.last is None:
+            t = now
+        elif gap is not None:
+            t = self.last + gap
+        else:
+            t = max(now, self.last + self.period)
+        t = round(t * 1e6) / 1e6  # the TICK frame carries microseconds
+        self.last = t
+        return t
+
+
+TICK_CLOCK: Final = TickClock()
+
+
+@dataclass(frozen=True)
+class WordReply:
+    """One response from Cougar: decoded (``message``) or not (``problem`` says why)."""
+
+    tick: int
+    """The probe's tick number that completed it (0 is the empty tick of :meth:`CougarProbe.open`)."""
+    words: tuple[int, ...]
+    message: CougarMsg | None
+    problem: str = ""
+
+    @property
+    def code(self) -> int:
+        return self.words[0] if self.words else -1
+
+    @property
+    def name(self) -> str:
+        return self.message.name if self.message is not None else f"code {self.code}"
+
+    @property
+    def values(self) -> dict[str, CougarValue]:
+        return dict(self.message.values) if self.message is not None else {}
+
+    def floats(self) -> tuple[float, ...]:
+        """Every float of the response, in order (NTD, FORCES)."""
+        out: list[float] = []
+        for value in self.values.values():
+            items = value if isinstance(value, tuple) else (value,)
+            out += [float(v) for v in items if isinstance(v, float)]
+        return tuple(out)
+
+    @property
+    def data_words(self) -> tuple[int, ...]:
+        return self.words[1:]
+
+    @property
+    def data(self) -> bytes:
+        """The words as they travel on the link (a failure's bytes)."""
+        return words_bytes(self.words)
+
+    def __str__(self) -> str:
+        head = self.name if not self.problem else f"{self.name} ({self.problem})"
+        return f"{head}: {octal(self.words)}"
+
+
+@dataclass(frozen=True)
+class LinkEvent:
+    """What crossed the link: words either way, or a tick."""
+
+    direction: Literal["puma", "cougar", "tick"]
+    tick: int
+    words: tuple[int, ...] = ()
+    time: float = 0.0
+
+    def __str__(self) -> str:
+        if self.direction == "tick":
+            return f"TICK #{self.tick} at {self.time:.6f}"
+        arrow = "->" if self.direction == "puma" else "<-"
+        return f"{arrow} {octal(self.words)}"
+
+
+class CougarProbe:
+    """The Puma's end of one DRV-11J link, in lock step; see the module docstring."""
+
+    def __init__(
+        self,
+        reader: asyncio.StreamReader,
+        writer: asyncio.StreamWriter,
+        end: PumaEnd,
+        *,
+        address: str,
+        reply_timeout: float,
+        clock: TickClock = TICK_CLOCK,
+    ) -> None:
+        self.address = address
+        self.reply_timeout = reply_timeout
+        self.clock = clock
+        self.events: list[LinkEvent] = []
+        self.replies: list[WordReply] = []
+        """Every response received on this link, in order."""
+        self._reader = reader
+        self._writer = writer
+        self._end = end
+        self._stream = WordStream("response")
+        self._inbox: list[WordReply] = []
+        self._ticks = 0
+
+    # ------------------------------------------------------------------------------------ opening
+    @classmethod
+    async def open(
+        cls,
+        address: str,
+        *,
+        reply_timeout: float,
+        connect_timeout: float,
+        busy_wait: float = BUSY_WAIT,
+    ) -> CougarProbe:
+        """Connect, exchange HELLO, run one empty tick; a busy Cougar is retried for ``busy_wait`` s."""
+        host, port = parse_address(address)
+        loop = asyncio.get_running_loop()
+        give_up = loop.time() + busy_wait
+        while True:
+            try:
+                async with asyncio.timeout(connect_timeout):
+                    reader, writer = await asyncio.open_connection(host, port)
+            except (OSError, TimeoutError) as exc:
+                raise _link_failure(address, f"cannot connect: {exc or type(exc).__name__}") from exc
+            end = PumaEnd()
+            probe = cls(reader, writer, end, address=address, reply_timeout=reply_timeout)
+            writer.write(end.hello())
+            try:
+                await probe.run(1)
+            except CaseFailure:
+                await probe.close()
+                if "busy" in (end.closed or "") and loop.time() < give_up:
+                    await asyncio.sleep(_BUSY_DELAY)
+                    continue
+                raise
+            probe._inbox.clear()  # replies to the empty tick stay in probe.replies only
+            return probe
+
+    async def close(self) -> None:
+        """End the link with BYE (quietly: the target may be gone)."""
+        writer = self._writer
+        if writer.is_closing():
+            return
+        with contextlib.suppress(Exception):
+            writer.write(self._end.bye("conformance case done"))
+        writer.close()
+        with contextlib.suppress(Exception):
+            async with asyncio.timeout(1.0):
+                await writer.wait_closed()
+
+    # ------------------------------------------------------------------------------------ sending
+    async def send(self, name: str, **values: Any) -> tuple[int, ...]:
+        """Encode Table 1 command ``name`` with ``values`` and send its words; returns them."""
+        words = tuple(encode("command", name, **values))
+        await self.send_words(words)
+        return words
+
+    async def send_words(self, words: Sequence[int]) -> None:
+        """Send exactly these words (any split of any commands, known or not)."""
+        if not words:
+            return
+        self._check_open()
+        self.events.append(LinkEvent("puma", self._ticks, tuple(words)))
+        self._writer.write(self._end.send(words))
+
+    # ------------------------------------------------------------------------------------ ticking
+    @property
+    def ticks(self) -> int:
+        """Ticks run so far on this link (the next tick's number)."""
+        return self._ticks
+
+    async def run(self, ticks: int = 1, *, gap: float | None = None) -> list[WordReply]:
+        """Run ``ticks`` clock ticks; the responses completed by them (and any not taken before)."""
+        for _ in range(ticks):
+            await self._tick(gap)
+        return self.take()
+
+    def take(self) -> list[WordReply]:
+        """The responses received and not yet taken."""
+        out, self._inbox = self._inbox, []
+        return out
+
+    async def reply(self, what: str, *, within: int = DEFAULT_WITHIN) -> WordReply:
+        """The next response, ticking up to ``within`` times for it; CaseFailure (timeout) if none."""
+        for _ in range(within + 1):
+            if self._inbox:
+                return self._inbox.pop(0)
+            if _ == within:
+                break
+            await self._tick(None)
+        raise CaseFailure(
+            f"no response from Cougar to {what} within {within} ticks",
+            clause="cougar.word-link",
+            expected=f"a response to {what} within {within} ticks",
+            actual="nothing",
+            kind="timeout",
+            invariant=COUGAR_LINK.name,
+        )
+
+    async def call(self, name: str, *, within: int = DEFAULT_WITHIN, **values: Any) -> WordReply:
+        """Send command ``name`` and wait for the next response."""
+        words = await self.send(name, **values)
+        return await self.reply(f"{name} ({octal(words)})", within=within)
+
+    async def examine(self, address: int, count: int, *, within: int = DEFAULT_WITHIN) -> WordReply:
+        """EXMN ``count`` words at byte ``address``: the raw reply (the case judges it)."""
+        return await self.call("EXMN", address=address, count=count, within=within)
+
+    async def _tick(self, gap: float | None) -> None:
+        self._check_open()
+        index = self._ticks
+        now = self.clock.next(gap)
+        self.events.append(LinkEvent("tick", index, (), now))
+        self._writer.write(self._end.tick(now))
+        self._ticks += 1
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + self.reply_timeout
+        while self._end.ticks_done <= index:
+            remaining = deadline - loop.time()
+            if remaining <= 0:
+                raise CaseFailure(
+                    f"Cougar did not finish tick #{index} within {self.reply_timeout:g} s",
+                    clause="link.drv11j.framing",
+                    expected=f"TICKED #{index}",
+                    actual="nothing (timeout)",
+                    kind="timeout",
+                    invariant=COUGAR_LINK.name,
+                )
+            try:
+                async with asyncio.timeout(remaining):
+                    data = await self._reader.read(_READ)
+            except TimeoutError:
+                continue
+            except OSError as exc:
+                raise _link_failure(self.address, f"the link broke: {exc}") from exc
+            if not data:
+                raise _link_failure(self.address, self._end.closed or "Cougar closed the link")
+            try:
+                words = self._end.receive(data)
+            except Drv11jError as exc:
+                raise _link_failure(self.address, f"bad DRV-11J stream: {exc}") from exc
+            if words:
+                self.events.append(LinkEvent("cougar", index, tuple(words)))
+                self._decode(index, words)
+            if self._end.closed is not None and self._end.ticks_done <= index:
+                raise _link_failure(self.address, f"Cougar ended the link: {self._end.closed}")
+        if self._end.ticks_done != index + 1:
+            raise CaseFailure(
+                f"Cougar answered TICK #{index} with TICKED #{self._end.ticks_done - 1}",
+                clause="link.drv11j.framing",
+                expected=f"TICKED #{index}",
+                actual=f"TICKED #{self._end.ticks_done - 1}",
+                kind="wrong_value",
+                invariant=COUGAR_LINK.name,
+            )
+
+    def _decode(self, tick: int, words: Sequence[int]) -> None:
+        for item in self._stream.feed(words):
+            if isinstance(item, CougarMsg):
+                reply = WordReply(tick, item.words, item)
+            elif isinstance(item, OutOfSync):
+                reply = WordReply(tick, item.discarded, None, f"{item.code} is no Table 1 response code")
+            else:
+                assert isinstance(item, Malformed)
+                reply = WordReply(tick, item.words, None, str(item.error))
+            self.replies.append(reply)
+            self._inbox.append(reply)
+
+    def _check_open(self) -> None:
+        if self._end.closed is not None or self._writer.is_closing():
+            raise _link_failure(self.address, self._end.closed or "the link is closed")
+
+    # ------------------------------------------------------------------------------------ reporting
+    @property
+    def pending_words(self) -> tuple[int, ...]:
+        """Response words received that do not yet make a whole response."""
+        return self._stream.pending
+
+    def transcript(self, last: int = _TRANSCRIPT_NOTE) -> str:
+        """The last ``last`` link events, one a line."""
+        shown = self.events[-last:]
+        head = (
+            [f"... {len(self.events) - len(shown)} earlier events"] if len(shown) < len(self.events) else []
+        )
+        return "\n".join(head + [str(e) for e in shown])
+
+
+def floats_of(words: Sequence[int]) -> tuple[float, ...]:
+    """Pairs of words as F floats (sign/exponent word first); a reserved operand reads as NaN."""
+    out: list[float] = []
+    for i in range(0, len(words) - 1, 2):
+        try:
+            out.append(words_to_f(words[i], words[i + 1]))
+        except ValueError:
+            out.append(float("nan"))
+    return tuple(out)
+
+
+def _link_failure(address: str, why: str) -> CaseFailure:
+    return CaseFailure(
+        f"DRV-11J link to {address}: {why}",
+        clause="link.drv11j.framing",
+        expected="the link to stay up and every TICK answered with TICKED",
+        actual=why,
+        kind="closed",
+        invariant=COUGAR_LINK.name,
+    )
+
+
+@contextlib.asynccontextmanager
+async def cougar_probe(ctx: CaseContext) -> AsyncIterator[CougarProbe]:
+    """A probe on the run's Cougar (``ctx.options.address``) for the block; closed after it, and on a
+    failure the last link events are added to the case's notes."""
+    options = ctx.options
+    probe = await CougarProbe.open(
+        options.address, reply_timeout=options.reply_timeout, connect_timeout=options.connect_timeout
+    )
+    try:
+        yield probe
+    except CaseFailure:
+        ctx.note(
+            "DRV-11J exchange (-> Puma to Cougar, <- Cougar to Puma, octal words):\n" + probe.transcript()
+        )
+        raise
+    finally:
+        await probe.close()
+
+
+async def cougar_liveness(address: str, *, reply_timeout: float, connect_timeout: float) -> tuple[bool, str]:
+    """Whether a Cougar answers at ``address``: HELLO, then one tick answered with TICKED."""
+    try:
+        probe = await CougarProbe.open(address, reply_timeout=reply_timeout, connect_timeout=connect_timeout)
+    except CaseFailure as exc:
+        return False, exc.actual or exc.message
+    await probe.close()
+    return True, "HELLO exchanged and a tick answered"

@@ -1,0 +1,943 @@
+"""Pure checkers over manip packets: what a server sent, judged against the spec's clauses.
+
+Nothing here does I/O or reads a clock.  Every checker takes packets (:class:`WirePacket`: direction,
+Chaos opcode, packet and ack numbers, data bytes, time) and returns a list of
+:class:`~manip.conformance.judge.violation.Violation` (empty when everything conforms), each naming the
+clause it breaks with what was expected, what came, and the bytes.  Live cases call them on what their
+probe recorded; ``manip-conform verify`` calls them on a recording; the stateful machine uses
+:func:`check_transcript` as its invariant.
+
+Checkers, from the smallest up:
+
+* :func:`check_server_opcode`, :func:`check_echo`, :func:`check_error_packet`,
+  :func:`check_async_packet`, :func:`check_initial_response`: one packet;
+* :func:`check_reply`: the answer to one request (one packet, or a multi-packet reply), by the
+  response kind the spec gives the request's opcode (done, data, segment, multi), including the refusal
+  the spec demands for malformed requests (:func:`required_refusal`);
+* :func:`check_description`: the describe-self text (alist readable, shapes of the known keys);
+* :func:`check_transcript`: a whole connection in order: the initial RESPONSE, one answer per request
+  in request order, free joint's discarded packet, asynchronous responses only when asked for, segment
+  numbers increasing, nothing after a fatal error but the close.
+
+A close or EOF seen by the recorder is a :class:`WirePacket` with the Chaos opcode CLS / EOF / LOS.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Final
+
+from manip.codecs.error_string import SPECIALS, ErrorMessage
+from manip.codecs.errors import CodecError, DecodeError
+from manip.codecs.lisp import Cons, Keyword, LispValue, read_alist
+from manip.codecs.lispm_text import decode_lispm
+from manip.codecs.messages import decode_error, decode_reply, decode_request
+from manip.conformance.judge.packets import CLOSE_OPCODES, Direction, WirePacket, describe, opcode_name, word
+from manip.conformance.judge.violation import Violation
+from manip.spec import SPEC, RequestOpcode
+from manip.spec.constants import AsyncCondition, ChaosOp, ServerOp
+from manip.spec.model import Layout
+
+__all__ = [
+    "CLOSE_OPCODES",
+    "TRANSCRIPT_CLAUSES",
+    "Direction",
+    "Refusal",
+    "Violation",
+    "WirePacket",
+    "check_async_packet",
+    "check_client_request",
+    "check_description",
+    "check_description_entries",
+    "check_echo",
+    "check_error_packet",
+    "check_initial_response",
+    "check_reply",
+    "check_server_opcode",
+    "check_transcript",
+    "describe",
+    "description_operations",
+    "multi_text",
+    "parse_description",
+    "required_refusal",
+    "word",
+]
+
+ERROR_OPCODES: Final = frozenset(
+    {
+        ServerOp.FATAL_ERROR,
+        ServerOp.NON_FATAL_ERROR,
+        ServerOp.ASYNCHRONOUS_ERROR,
+        ServerOp.ASYNCHRONOUS_WARNING,
+    }
+)
+ANSWER_OPCODES: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
+UNSOLICITED_OPCODES: Final = frozenset(
+    {ServerOp.ASYNCHRONOUS_RESPONSE, ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING}
+)
+ARM_SPECIFIC_SERVER_OPCODES: Final = range(0o250, 0o300)
+TRANSCRIPT_CLAUSES: Final = frozenset(
+    {
+        "async.codes",
+        "async.layout",
+        "async.only-when-requested",
+        "connect.initial-response",
+        "connect.initial-response-number",
+        "describe.alist-readable",
+        "describe.alist-shape",
+        "describe.brand-name",
+        "describe.degrees-of-freedom",
+        "describe.operations",
+        "describe.protocol-version",
+        "describe.reply-shape",
+        "describe.software-version",
+        "describe.unique-name",
+        "error-string.arg-alignment",
+        "error-string.args",
+        "error-string.code",
+        "error-string.format",
+        "error-string.severity",
+        "error-string.substitution",
+        "error-string.where-no-colon",
+        "error.fatal-request-number",
+        "error.fatal-then-close",
+        "error.non-fatal-is-reply",
+        "error.severity-matches-opcode",
+        "float.dirty-zero",
+        "float.format",
+        "float.reserved-operand",
+        "free-joint.replies",
+        "multi.same-request-number",
+        "multi.terminated-by-empty",
+        "request.data-length",
+        "request.one-reply",
+        "request.reserved-float",
+        "request.unknown-opcode",
+        "response.data-layout",
+        "response.done-empty",
+        "response.echoes-request-number",
+        "response.segment-number",
+        "response.server-opcodes",
+        "segment.number-increases",
+        "text.lispm-charset",
+    }
+)
+"""Every clause :func:`check_transcript` (and the checkers it calls: :func:`check_reply`,
+:func:`check_error_packet`, :func:`check_async_packet`, :func:`check_initial_response`,
+:func:`check_description`...) may name.  A codec error naming another clause is reported under the
+checker's default clause, so the set is closed: the runner's transcript invariant is attributed these
+clauses whatever case it runs after (``manip.conformance.suite.invariants``)."""
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """What the spec requires for a request that must be refused: a non-fatal error of severity C."""
+
+    clause: str
+    reason: str
+    codes: tuple[str, ...] = ()
+    """The error codes manip's errata name for it (informational: only the severity is a MUST)."""
+
+
+# ------------------------------------------------------------------------------------- single packets
+
+
+def check_server_opcode(packet: WirePacket) -> list[Violation]:
+    """Server packets use 0200-0205 or the arm-specific 0250-0277."""
+    if packet.opcode in SPEC.server_opcodes or packet.opcode in ARM_SPECIFIC_SERVER_OPCODES:
+        return []
+    return [
+        Violation.at(
+            packet,
+            "response.server-opcodes",
+            f"server packet with opcode {packet.opcode:o}",
+            expected="a server opcode 200-205 (or 250-277)",
+            actual=f"opcode {packet.opcode:o}",
+        )
+    ]
+
+
+def check_echo(request: WirePacket, reply: WirePacket) -> list[Violation]:
+    """The reply's first data word is the request's packet number (a fatal error's: the last received)."""
+    clause = "error.fatal-request-number" if reply.opcode == ServerOp.FATAL_ERROR else None
+    clause = clause or "response.echoes-request-number"
+    number = word(reply.data)
+    if number == request.packet_no:
+        return []
+    actual = "no request-number word" if number is None else f"request number {number}"
+    return [
+        Violation.at(
+            reply,
+            clause,
+            f"reply to request #{request.packet_no} ({opcode_name(request)}) carries the wrong number",
+            expected=f"request number {request.packet_no} (the request's Chaos packet number)",
+            actual=actual
+            + (f" (the request's ack field is {request.ack_no})" if number == request.ack_no else ""),
+        )
+    ]
+
+
+def check_error_packet(packet: WirePacket) -> list[Violation]:
+    """The error string of an 0201, 0202, 0204 or 0205 packet (E.2), and its severity for the opcode."""
+    data = packet.data
+    if len(data) < 2:
+        return [
+            Violation.at(
+                packet,
+                "response.echoes-request-number",
+                "error packet without a request number",
+                expected="a request-number word then an error string",
+                actual=f"{len(data)} data bytes",
+            )
+        ]
+    out: list[Violation] = []
+    try:
+        error = decode_error(packet.opcode, data).error
+    except CodecError as exc:
+        if exc.clause != "error-string.arg-alignment":
+            return [
+                _codec_finding(
+                    exc, packet, "error-string.format", "an error string 'where: severity code message'"
+                )
+            ]
+        out.append(
+            Violation.at(
+                packet,
+                "error-string.arg-alignment",
+                "the numbers after the NUL do not start at an even offset",
+                expected="a zero pad byte so the numbers start at an even offset of the packet data",
+                actual=str(exc),
+            )
+        )
+        try:
+            error = decode_error(packet.opcode, data, align_args=False).error
+        except CodecError as inner:
+            out.append(_codec_finding(inner, packet, "error-string.format", "an error string"))
+            return out
+    out += _error_text_findings(error, packet)
+    return out
+
+
+def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Violation]:
+    out: list[Violation] = []
+    shown = repr(error.render())
+
+    def add(clause: str, message: str, expected: str, actual: str) -> None:
+        out.append(
+            Violation(message, clause, expected=expected, actual=actual, data=packet.data, packet=packet)
+        )
+
+    if ":" in error.where or not error.where:
+        add(
+            "error-string.where-no-colon",
+            f"where part {error.where!r} is empty or has a colon",
+            "a short where part without a colon",
+            shown,
+        )
+    severity = SPEC.severities.get(error.severity)
+    if severity is None:
+        add(
+            "error-string.severity",
+            f"unknown severity {error.severity!r}",
+            f"one of {', '.join(SPEC.severities)}",
+            shown,
+        )
+    elif packet.opcode not in severity.server_opcodes:
+        allowed = [s.letter for s in SPEC.severities.values() if packet.opcode in s.server_opcodes]
+        add(
+            "error.severity-matches-opcode",
+            f"severity {error.severity} in a {opcode_name(packet)} ({packet.opcode:o}) packet",
+            f"one of {', '.join(allowed)} in opcode {packet.opcode:o}",
+            shown,
+        )
+    if not (len(error.code) == 3 and error.code.isascii() and error.code.isalpha()):
+        add("error-string.code", f"error code {error.code!r} is not three letters", "three letters", shown)
+    if error.has_nul:
+        wanted = sum(error.message.count(ch) for ch in SPECIALS)
+        if wanted != len(error.args):
+            add(
+                "error-string.substitution",
+                f"{len(error.args)} number(s) after the NUL for {wanted} ~/$ in the message",
+                f"{wanted} number(s), one per ~ or $",
+                f"{len(error.args)} number(s): {list(error.args)}",
+            )
+    return out
+
+
+def _codec_finding(exc: CodecError, packet: WirePacket, default: str, expected: str) -> Violation:
+    clause = exc.clause if exc.clause in TRANSCRIPT_CLAUSES else default
+    return Violation(str(exc), clause, expected=expected, actual=str(exc), data=packet.data, packet=packet)
+
+
+def check_async_packet(packet: WirePacket, requested_mask: int | None = None) -> list[Violation]:
+    """An asynchronous response (0203): layout, condition code, and (given the mask asked for) that it
+    was requested.  ``requested_mask``: bit n = condition n+1 (request-notifications); None skips that."""
+    data = packet.data
+    if len(data) != 8:
+        return [
+            Violation.at(
+                packet,
+                "async.layout",
+                f"asynchronous response of {len(data)} data bytes",
+                expected="8 data bytes: request number, condition code, two words",
+                actual=f"{len(data)} bytes",
+            )
+        ]
+    condition = word(data, 2) or 0
+    word2 = word(data, 4) or 0
+    out: list[Violation] = []
+    code = SPEC.async_codes.get(condition)
+    if code is None:
+        out.append(
+            Violation.at(
+                packet,
+                "async.codes",
+                f"unknown condition code {condition}",
+                expected=f"one of {sorted(SPEC.async_codes)}",
+                actual=str(condition),
+            )
+        )
+        return out
+    if condition == AsyncCondition.GUARD_HIT and word2 not in (1, 2):
+        out.append(
+            Violation.at(
+                packet,
+                "async.layout",
+                f"guard hit with stop/continue word {word2}",
+                expected="1 (stop) or 2 (continue)",
+                actual=str(word2),
+            )
+        )
+    if condition == AsyncCondition.SEGMENT_COMPLETED and word2 != 0:
+        out.append(
+            Violation.at(
+                packet,
+                "async.layout",
+                f"segment completed with reserved word {word2}",
+                expected="0",
+                actual=str(word2),
+            )
+        )
+    if requested_mask is not None and not requested_mask >> code.notification_bit & 1:
+        out.append(
+            Violation.at(
+                packet,
+                "async.only-when-requested",
+                f"asynchronous {code.name} that was not asked for",
+                expected=f"no {code.name} responses (request-notifications mask {requested_mask:#o})",
+                actual=f"an asynchronous {code.name} response",
+            )
+        )
+    return out
+
+
+def check_initial_response(packet: WirePacket | None, rfc_packet_no: int | None = None) -> list[Violation]:
+    """The first server packet is a RESPONSE (0200) holding only the RFC's packet number."""
+    if packet is None or packet.is_close:
+        return [
+            Violation(
+                "no initial RESPONSE after the connection opened",
+                "connect.initial-response",
+                expected="a RESPONSE (200) packet first",
+                actual="nothing" if packet is None else describe(packet),
+                data=b"" if packet is None else packet.data,
+                packet=packet,
+            )
+        ]
+    if packet.opcode != ServerOp.RESPONSE:
+        return [
+            Violation.at(
+                packet,
+                "connect.initial-response",
+                "the first server packet is not a RESPONSE",
+                expected="a RESPONSE (200) packet first",
+            )
+        ]
+    number = word(packet.data)
+    if len(packet.data) != 2 or (rfc_packet_no is not None and number != rfc_packet_no):
+        expected = "only a request-number word" + (
+            f" holding {rfc_packet_no}, the RFC's packet number" if rfc_packet_no is not None else ""
+        )
+        return [
+            Violation.at(
+                packet,
+                "connect.initial-response-number",
+                "the initial RESPONSE carries the wrong data",
+                expected=expected,
+                actual=f"{len(packet.data)} data bytes, first word {number}",
+            )
+        ]
+    return []
+
+
+# ------------------------------------------------------------------------------------- requests
+
+
+def required_refusal(opcode: int, data: bytes) -> Refusal | None:
+    """The refusal the spec demands for this request, or None when it is well formed.
+
+    Unknown opcodes (request.unknown-opcode), data of the wrong length (request.data-length) and
+    reserved-operand floats (request.reserved-float) must be answered with a non-fatal error of severity
+    C.  Range errors (a speed of 2, say) are judged by the cases that know the ranges."""
+    op = SPEC.requests.get(opcode)
+    if op is None:
+        return Refusal("request.unknown-opcode", f"opcode {opcode:o} is not served by the spec", ("UOP",))
+    try:
+        decode_request(opcode, data)
+    except DecodeError as exc:
+        if exc.clause == "request.data-length":
+            return Refusal("request.data-length", f"{op.name}: {exc.message}", ("BDL",))
+        if exc.clause == "float.reserved-operand":
+            return Refusal(
+                "request.reserved-float", f"{op.name}: reserved-operand float at byte {exc.offset}", ("BFL",)
+            )
+        return Refusal("request.data-length", f"{op.name}: {exc.message}", ("BDL", "BVA"))
+    return None
+
+
+_MOVE_OPCODES: Final = frozenset(SPEC.request(name).opcode for name in ("move", "straight-move"))
+
+
+def check_client_request(request: WirePacket) -> list[Violation]:
+    """Judge one request as its client built it: a request opcode (0200-0277), and data laid out as the
+    opcode's layout says (words, PDP-11 floats, nothing else; a move's 12 floats).  An opcode the spec
+    does not define is the server's to refuse (request.unknown-opcode), not a client finding."""
+    opcode = request.opcode
+    if not ChaosOp.DAT <= opcode < ChaosOp.DWD:
+        return [
+            Violation.at(
+                request,
+                "request.opcode-range",
+                f"a data packet with opcode {opcode:o} is not a request (8-bit data, 0200-0277)",
+                expected="a request opcode, 0200-0277",
+            )
+        ]
+    op = SPEC.requests.get(opcode)
+    refusal = None if op is None else required_refusal(opcode, request.data)
+    if op is None or refusal is None:
+        return []
+    clause = "move.transform-data" if opcode in _MOVE_OPCODES else "request-data.types"
+    return [
+        Violation.at(
+            request,
+            clause,
+            f"request #{request.packet_no}: {refusal.reason}",
+            expected=f"{op.name} data as its layout says ({_layout_size(op.request)})",
+            actual=f"{len(request.data)} data bytes",
+        )
+    ]
+
+
+def _layout_size(layout: Layout) -> str:
+    size = layout.fixed_size
+    return "no data" if size == 0 else f"{size} bytes" if size is not None else "a variable length"
+
+
+def check_reply(request: WirePacket, answer: Sequence[WirePacket]) -> list[Violation]:
+    """Judge the answer to one request: ``answer`` is the reply packet, or every packet of a
+    multi-packet reply including its terminator (asynchronous packets already taken out)."""
+    if not answer:
+        return [
+            Violation.at(
+                request,
+                "request.one-reply",
+                f"no reply to request #{request.packet_no} ({opcode_name(request)})",
+                expected="one reply",
+                actual="nothing",
+            )
+        ]
+    first = answer[0]
+    out = check_server_opcode(first)
+    if first.is_close:
+        return [
+            Violation.at(
+                first,
+                "request.one-reply",
+                f"the connection ended before request #{request.packet_no} was answered",
+                expected="one reply",
+            )
+        ]
+    out += check_echo(request, first)
+    refusal = required_refusal(request.opcode, request.data)
+    if first.opcode in (ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):
+        out += check_error_packet(first)
+        if refusal is not None:
+            out += _check_refusal(refusal, first)
+        return out
+    if refusal is not None:
+        return [
+            *out,
+            Violation.at(
+                first,
+                refusal.clause,
+                f"{refusal.reason}, but the server answered {describe(first)}",
+                expected="a non-fatal error (202) of severity C",
+            ),
+        ]
+    if first.opcode != ServerOp.RESPONSE:
+        return [
+            *out,
+            Violation.at(
+                first,
+                "request.one-reply",
+                f"the answer to #{request.packet_no} is {describe(first)}",
+                expected="a RESPONSE or an error",
+            ),
+        ]
+    op = SPEC.requests[request.opcode]
+    if op.response.kind == "multi":
+        return out + _check_multi(op, request, answer)
+    return out + _check_single(op, first)
+
+
+def _check_refusal(refusal: Refusal, packet: WirePacket) -> list[Violation]:
+    try:
+        error = decode_error(packet.opcode, packet.data, align_args=False).error
+    except CodecError:
+        return []  # the format findings already say it
+    if packet.opcode == ServerOp.NON_FATAL_ERROR and error.severity == "C":
+        return []
+    return [
+        Violation.at(
+            packet,
+            refusal.clause,
+            f"{refusal.reason}: answered with severity {error.severity} in {packet.opcode:o}",
+            expected="a non-fatal error (202) of severity C",
+            actual=repr(error.render()),
+        )
+    ]
+
+
+_KIND_CLAUSE: Final[Mapping[str, str]] = {
+    "done": "response.done-empty",
+    "segment": "response.segment-number",
+    "data": "response.data-layout",
+}
+
+
+def _check_single(op: RequestOpcode, packet: WirePacket) -> list[Violation]:
+    kind = op.response.kind
+    try:
+        decode_reply(packet.data, op)
+    except CodecError as exc:
+        clause = exc.clause if exc.clause in TRANSCRIPT_CLAUSES else _KIND_CLAUSE[kind]
+        expected = {
+            "done": "the request number only (2 data bytes)",
+            "segment": "the request number and one segment-number word (4 data bytes)",
+        }.get(kind, f"the request number then {_layout_text(op)}")
+        return [
+            Violation.at(
+                packet,
+                clause,
+                f"{op.name} reply: {exc}",
+                expected=expected,
+                actual=f"{len(packet.data)} data bytes",
+            )
+        ]
+    return []
+
+
+def _layout_text(op: RequestOpcode) -> str:
+    size = op.response.data.fixed_size
+    names = ", ".join(f"{f.name} ({f.type.name})" for f in op.response.data.fields)
+    return f"{names}" + (f" = {size} bytes" if size is not None else "")
+
+
+def _check_multi(op: RequestOpcode, request: WirePacket, answer: Sequence[WirePacket]) -> list[Violation]:
+    out: list[Violation] = []
+    texts = 0
+    terminated = False
+    for packet in answer:
+        if packet.is_close or packet.opcode != ServerOp.RESPONSE:
+            break
+        number = word(packet.data)
+        if number != request.packet_no:
+            out.append(
+                Violation.at(
+                    packet,
+                    "multi.same-request-number",
+                    f"a packet of the {op.name} reply carries request number {number}",
+                    expected=f"request number {request.packet_no} in every packet",
+                    actual=f"request number {number}",
+                )
+            )
+        if len(packet.data) == 2:
+            terminated = True
+            break
+        texts += 1
+    if not terminated:
+        last = answer[-1]
+        out.append(
+            Violation.at(
+                last,
+                "multi.terminated-by-empty",
+                f"the {op.name} reply is not ended by an empty packet",
+                expected="an empty RESPONSE (request number only) after the text packets",
+                actual=f"{texts} text packet(s), then {describe(last)}"
+                if last.is_close or last.opcode != ServerOp.RESPONSE
+                else f"{texts} text packet(s), no terminator",
+            )
+        )
+    if texts == 0:
+        out.append(
+            Violation(
+                f"the {op.name} reply has no text packet",
+                "describe.reply-shape",
+                expected="one or more text packets, then an empty one",
+                actual="an empty reply",
+                data=answer[0].data,
+                packet=answer[0],
+            )
+        )
+    return out
+
+
+# ------------------------------------------------------------------------------------- describe self
+
+
+def parse_description(text: str) -> tuple[dict[str, LispValue] | None, list[Violation]]:
+    """Read the describe-self alist: the entries by keyword name, or None and the findings."""
+    try:
+        return read_alist(text), []
+    except DecodeError as exc:
+        clause = exc.clause if exc.clause in TRANSCRIPT_CLAUSES else "describe.alist-readable"
+        return None, [
+            Violation(
+                f"describe-self text: {exc}",
+                clause,
+                expected="one Lisp-readable alist",
+                actual=_excerpt(text, exc.offset),
+                data=text.encode("utf-8", "replace"),
+            )
+        ]
+
+
+def _excerpt(text: str, offset: int | None) -> str:
+    if offset is None:
+        return repr(text[:80])
+    return f"...{text[max(0, offset - 30) : offset + 30]!r}... (offset {offset})"
+
+
+def _scalar(value: LispValue) -> LispValue:
+    """``(:key . v)`` gives v, ``(:key v)`` gives [v]: both mean v."""
+    return value[0] if isinstance(value, list) and len(value) == 1 else value
+
+
+def check_description(text: str, *, protocol_version: int = SPEC.protocol_version) -> list[Violation]:
+    """The describe-self alist: readable, and the 1985 guide's keys shaped as E.1 says."""
+    entries, out = parse_description(text)
+    if entries is None:
+        return out
+    return check_description_entries(entries, text, protocol_version=protocol_version)
+
+
+def check_description_entries(
+    entries: Mapping[str, LispValue], text: str = "", *, protocol_version: int = SPEC.protocol_version
+) -> list[Violation]:
+    """The 1985 guide's keys of a read description (``text``: the raw text, kept as the finding's bytes)."""
+    out: list[Violation] = []
+    data = text.encode("utf-8", "replace")
+
+    def add(clause: str, message: str, expected: str, actual: object) -> None:
+        out.append(Violation(message, clause, expected=expected, actual=repr(actual), data=data))
+
+    if "protocol-version" not in entries:
+        add(
+            "describe.protocol-version",
+            "no :protocol-version in the description",
+            f":protocol-version {protocol_version}",
+            sorted(entries),
+        )
+    elif _scalar(entries["protocol-version"]) != protocol_version:
+        add(
+            "describe.protocol-version",
+            "wrong :protocol-version",
+            str(protocol_version),
+            entries["protocol-version"],
+        )
+    for key, clause in (("brand-name", "describe.brand-name"), ("unique-name", "describe.unique-name")):
+        value = _scalar(entries[key]) if key in entries else None
+        if not isinstance(value, str):
+            add(clause, f":{key} is missing or not a string", "a string", value)
+    dof = _scalar(entries["degrees-of-freedom"]) if "degrees-of-freedom" in entries else None
+    if not isinstance(dof, int) or dof <= 0:
+        add(
+            "describe.degrees-of-freedom",
+            ":degrees-of-freedom is missing or not a positive number",
+            "a number (6 for the Puma)",
+            dof,
+        )
+    ops = entries.get("operations")
+    if not isinstance(ops, list) or not all(_is_operation(o) for o in ops):
+        add(
+            "describe.operations",
+            ":operations is missing or not a list of opcodes",
+            "a list of numbers or (escape . code) pairs",
+            ops,
+        )
+    if "software-version" in entries and not _is_version(entries["software-version"]):
+        add(
+            "describe.software-version",
+            ":software-version has the wrong shape",
+            "a number, or alternating keywords and numbers",
+            entries["software-version"],
+        )
+    return out
+
+
+def _is_operation(value: LispValue) -> bool:
+    return (
+        isinstance(value, int)
+        or (isinstance(value, Cons) and isinstance(value.car, int) and isinstance(value.cdr, int))
+        or (isinstance(value, list) and len(value) == 2 and all(isinstance(v, int) for v in value))
+    )
+
+
+def _is_version(value: LispValue) -> bool:
+    value = _scalar(value)
+    if isinstance(value, (int, float)):
+        return True
+    if not isinstance(value, list) or len(value) % 2:
+        return False
+    return all(
+        isinstance(k, Keyword) and isinstance(v, (int, float))
+        for k, v in zip(value[::2], value[1::2], strict=True)
+    )
+
+
+def description_operations(entries: Mapping[str, LispValue]) -> tuple[int, ...]:
+    """The plain opcodes listed under :operations (escape pairs left out)."""
+    ops = entries.get("operations")
+    return tuple(o for o in ops if isinstance(o, int)) if isinstance(ops, list) else ()
+
+
+def multi_text(answer: Iterable[WirePacket]) -> str:
+    """The text of a multi-packet reply (the data after the request number of each text packet)."""
+    return "".join(
+        decode_lispm(p.data[2:]) for p in answer if p.opcode == ServerOp.RESPONSE and len(p.data) > 2
+    )
+
+
+# ------------------------------------------------------------------------------------- a whole connection
+
+
+@dataclass
+class _Pending:
+    request: WirePacket
+    discarded: bool = False
+    """Sent while free joint waited: the spec answers it with done without executing it."""
+
+
+@dataclass
+class _Session:
+    findings: list[Violation] = field(default_factory=list)
+    pending: deque[_Pending] = field(default_factory=deque)
+    multi: list[WirePacket] | None = None
+    mask: int = 0
+    mask_pending: dict[int, int] = field(default_factory=dict)
+    free_wait: bool = False
+    free_pending: int | None = None
+    last_segment: int | None = None
+    fatal: WirePacket | None = None
+    closed: bool = False
+    answered_with_error: set[int] = field(default_factory=set)
+
+
+def check_transcript(
+    packets: Sequence[WirePacket],
+    *,
+    rfc_packet_no: int | None = None,
+    expect_initial: bool = True,
+    complete: bool = False,
+) -> list[Violation]:
+    """Judge one connection's packets in order (both directions, closes included).
+
+    ``expect_initial``: the recording starts at the open, so the first server packet must be the
+    initial RESPONSE.  ``complete``: the recording ran to the end of the exchange, so a request still
+    unanswered at the end is a finding (leave it False for a case that stopped early)."""
+    s = _Session()
+    server = [p for p in packets if p.direction == "s2c"]
+    skip = -1
+    if expect_initial:
+        initial = server[0] if server else None
+        s.findings += check_initial_response(initial, rfc_packet_no)
+        if initial is not None and not initial.is_close and initial.opcode == ServerOp.RESPONSE:
+            skip = packets.index(initial)
+    for index, packet in enumerate(packets):
+        if index == skip:
+            continue  # the initial RESPONSE; requests sent before it came are still requests
+        if packet.direction == "c2s":
+            if not packet.is_close:
+                _on_request(s, packet)
+        elif packet.is_close:
+            _finish_multi(s)
+            s.closed = True
+        else:
+            _on_server_packet(s, packet)
+    _finish_multi(s)
+    if s.fatal is not None and not s.closed and complete:
+        s.findings.append(
+            Violation(
+                "the connection stayed open after a fatal error",
+                "error.fatal-then-close",
+                expected="CLS after the fatal error",
+                actual="the connection open",
+                data=s.fatal.data,
+                packet=s.fatal,
+            )
+        )
+    if complete and not s.closed:
+        for item in s.pending:
+            s.findings.append(
+                Violation(
+                    f"request #{item.request.packet_no} ({opcode_name(item.request)}) was never answered",
+                    "request.one-reply",
+                    expected="one reply",
+                    actual="nothing",
+                    data=item.request.data,
+                    packet=item.request,
+                )
+            )
+    return s.findings
+
+
+def _on_request(s: _Session, packet: WirePacket) -> None:
+    s.pending.append(_Pending(packet, discarded=s.free_wait))
+    if s.free_wait:
+        s.free_wait = False
+        return
+    if (
+        packet.opcode == SPEC.request("request-notifications").opcode
+        and required_refusal(packet.opcode, packet.data) is None
+    ):
+        mask = word(packet.data) or 0
+        s.mask_pending[packet.packet_no] = mask
+    if (
+        packet.opcode == SPEC.request("free-joint").opcode
+        and required_refusal(packet.opcode, packet.data) is None
+    ):
+        s.free_pending = packet.packet_no
+
+
+def _allowed_mask(s: _Session) -> int:
+    mask = s.mask
+    for pending in s.mask_pending.values():
+        mask |= pending  # sent, not yet answered: the server may already act on it
+    return mask
+
+
+def _on_server_packet(s: _Session, packet: WirePacket) -> None:
+    s.findings.extend(check_server_opcode(packet))
+    if s.fatal is not None:
+        s.findings.append(
+            Violation.at(
+                packet,
+                "error.fatal-then-close",
+                f"{describe(packet)} after a fatal error",
+                expected="nothing but the close after a fatal error",
+            )
+        )
+        return
+    if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE:
+        s.findings.extend(check_async_packet(packet, _allowed_mask(s)))
+        return
+    if packet.opcode in (ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING):
+        s.findings.extend(check_error_packet(packet))
+        return
+    if packet.opcode not in ANSWER_OPCODES:
+        return
+    if s.multi is not None:
+        if packet.opcode == ServerOp.RESPONSE:
+            s.multi.append(packet)
+            if len(packet.data) == 2:
+                _finish_multi(s)
+            return
+        _finish_multi(s)  # an error in the middle ends the multi reply (unterminated)
+    if not s.pending:
+        number = word(packet.data)
+        clause = "error.non-fatal-is-reply" if number in s.answered_with_error else "request.one-reply"
+        s.findings.append(
+            Violation.at(
+                packet,
+                clause,
+                f"{describe(packet)} answers no outstanding request",
+                expected="one reply per request",
+                actual=f"an extra {describe(packet)}",
+            )
+        )
+        return
+    item = s.pending.popleft()
+    request = item.request
+    if packet.opcode == ServerOp.FATAL_ERROR:
+        s.fatal = packet
+    if item.discarded:
+        _check_discarded(s, request, packet)
+        return
+    op = SPEC.requests.get(request.opcode)
+    if (
+        packet.opcode == ServerOp.RESPONSE
+        and op is not None
+        and op.response.kind == "multi"
+        and required_refusal(request.opcode, request.data) is None
+    ):
+        s.multi = [packet]
+        s.pending.appendleft(item)  # still being answered
+        if len(packet.data) == 2:
+            _finish_multi(s)
+        return
+    s.findings.extend(check_reply(request, [packet]))
+    _after_answer(s, request, packet)
+
+
+def _check_discarded(s: _Session, request: WirePacket, packet: WirePacket) -> None:
+    s.findings.extend(check_echo(request, packet))
+    if packet.opcode != ServerOp.RESPONSE or len(packet.data) != 2:
+        s.findings.append(
+            Violation.at(
+                packet,
+                "free-joint.replies",
+                f"the packet after free joint (#{request.packet_no}, "
+                f"{opcode_name(request)}) was answered with {describe(packet)}",
+                expected="an empty done: the packet is discarded, not executed",
+            )
+        )
+
+
+def _after_answer(s: _Session, request: WirePacket, packet: WirePacket) -> None:
+    ok = packet.opcode == ServerOp.RESPONSE
+    if not ok:
+        s.answered_with_error.add(request.packet_no)
+    mask = s.mask_pending.pop(request.packet_no, None)
+    if mask is not None and ok:
+        s.mask = mask
+    if s.free_pending == request.packet_no:
+        s.free_pending = None
+        s.free_wait = ok
+    op = SPEC.requests.get(request.opcode)
+    if ok and op is not None and op.response.kind == "segment" and len(packet.data) == 4:
+        segment = word(packet.data, 2)
+        assert segment is not None
+        if s.last_segment is not None and segment != (s.last_segment + 1) & 0xFFFF:
+            s.findings.append(
+                Violation.at(
+                    packet,
+                    "segment.number-increases",
+                    f"segment {segment} follows segment {s.last_segment}",
+                    expected=f"segment {(s.last_segment + 1) & 0xFFFF}",
+                    actual=f"segment {segment}",
+                )
+            )
+        s.last_segment = segment
+
+
+def _finish_multi(s: _Session) -> None:
+    if s.multi is None:
+        return
+    answer, s.multi = s.multi, None
+    item = s.pending.popleft()
+    s.findings.extend(check_reply(item.request, answer))
+    if answer and len(answer[-1].data) == 2:
+        s.findings.extend(check_description(multi_text(answer)))
+    _after_answer(s, item.request, answer[0])

@@ -1,0 +1,328 @@
+"""Reports of a run: the JSON report (its schema ships as ``report.schema.json``), JUnit XML, and the
+console summary.
+
+The JSON report is versioned (``schema_version``); per case it holds the id, clauses, level, outcome,
+the violations (expected / actual / bytes in hex), the duration against the deadline, the seed, the
+packets both ways, and a command that reproduces the case.  JUnit XML has one ``testsuite`` per
+top-level area (``server.reply``, ``server.motion``...), ``classname`` = the area and ``name`` = the case
+id; ``warn`` and ``known-fail`` cases pass with a property saying so, ``skip`` is ``<skipped>``.
+
+Failures grouped by clause (:func:`by_clause`): how many cases broke each clause, with the clause's text
+and section from the spec, so a report says first *what* is broken (``74 failures:
+response.echoes-request-number``) and then where.  The JSON report has them as ``by_clause``, the
+console prints one line per clause (:func:`clause_lines`), and each JUnit failure message names the
+clause's text and section.
+"""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+from collections import defaultdict
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any, Final
+
+from manip.conformance.suite.results import CaseResult, RunReport, Violation
+from manip.spec import SPEC
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "ClauseTally",
+    "by_clause",
+    "clause_lines",
+    "load_schema",
+    "report_json",
+    "report_junit",
+    "write_json",
+    "write_junit",
+]
+
+SCHEMA_VERSION: Final = 1
+MAX_PACKETS_IN_REPORT: Final = 200
+"""Packets kept per case in the JSON report (the first ones; a note says when more were cut)."""
+
+
+def load_schema() -> dict[str, Any]:
+    """The JSON Schema of the report."""
+    text = resources.files("manip.conformance").joinpath("report.schema.json").read_text(encoding="utf-8")
+    return dict(json.loads(text))
+
+
+_NO_CLAUSE_TEXT: Final = {
+    "deadline": "the case did not finish within its deadline",
+}
+
+
+@dataclass(frozen=True)
+class ClauseTally:
+    """The cases that broke one clause: counted as failures (they fail the run), warnings (SHOULD or MAY
+    clauses without ``--strict``, or in a ``warn`` case) and known failures (``--known-failing``)."""
+
+    clause: str | None
+    """None for violations that cite no clause (``kind`` says what they are)."""
+    kind: str
+    level: str
+    section: str
+    text: str
+    failures: int
+    warnings: int
+    known_failures: int
+    cases: tuple[str, ...]
+
+    @property
+    def total(self) -> int:
+        return self.failures + self.warnings + self.known_failures
+
+    @property
+    def name(self) -> str:
+        """The clause id, or what a violation without a clause is."""
+        return self.clause if self.clause is not None else f"(no clause: {self.kind})"
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "clause": self.clause,
+            "kind": self.kind,
+            "level": self.level,
+            "section": self.section,
+            "text": self.text,
+            "failures": self.failures,
+            "warnings": self.warnings,
+            "known_failures": self.known_failures,
+            "cases": list(self.cases),
+        }
+
+
+def _tally_key(violation: Violation) -> tuple[str | None, str]:
+    return (violation.clause, "clause") if violation.clause is not None else (None, violation.kind)
+
+
+def by_clause(report: RunReport) -> list[ClauseTally]:
+    """Every clause some case broke, the most failures first; a case counts once per clause."""
+    counted = {"MUST", "SHOULD"} if report.strict else {"MUST"}
+    buckets: dict[tuple[str | None, str], dict[str, set[str]]] = defaultdict(
+        lambda: {"failures": set(), "warnings": set(), "known_failures": set()}
+    )
+    levels: dict[tuple[str | None, str], str] = {}
+    for result in report.results:
+        for violation in result.violations:
+            key = _tally_key(violation)
+            if result.outcome == "known-fail":
+                bucket = "known_failures"
+            elif result.outcome == "fail" and violation.level in counted:
+                bucket = "failures"
+            elif result.outcome in ("fail", "warn"):
+                bucket = "warnings"
+            else:
+                continue
+            buckets[key][bucket].add(result.id)
+            levels.setdefault(key, violation.strength)
+    tallies = []
+    for (clause, kind), groups in buckets.items():
+        spec = SPEC.clauses.get(clause) if clause is not None else None
+        level: str = spec.level if spec is not None else levels[(clause, kind)]
+        section = spec.section if spec is not None else ""
+        if spec is not None:
+            text = spec.text
+        else:
+            text = _NO_CLAUSE_TEXT.get(kind, f"failures of kind {kind} that cite no clause")
+        tallies.append(
+            ClauseTally(
+                clause,
+                kind,
+                level,
+                section,
+                text,
+                len(groups["failures"]),
+                len(groups["warnings"]),
+                len(groups["known_failures"]),
+                tuple(sorted(set().union(*groups.values()))),
+            )
+        )
+    tallies.sort(key=lambda t: (-t.failures, -t.warnings, -t.known_failures, t.name))
+    return tallies
+
+
+def _plural(count: int, word: str) -> str:
+    return f"{count} {word}" if count == 1 else f"{count} {word}s"
+
+
+def clause_line(tally: ClauseTally) -> str:
+    """``74 failures: response.echoes-request-number — <the clause's text> (E.3 ...)``."""
+    counts = [
+        _plural(n, word)
+        for n, word in (
+            (tally.failures, "failure"),
+            (tally.warnings, "warning"),
+            (tally.known_failures, "known failure"),
+        )
+        if n
+    ]
+    section = f" ({tally.section})" if tally.section else ""
+    return f"{', '.join(counts)}: {tally.name} \u2014 {tally.text}{section}"
+
+
+def clause_lines(report: RunReport) -> list[str]:
+    """One line per broken clause (see :func:`clause_line`), the most failures first."""
+    return [clause_line(t) for t in by_clause(report)]
+
+
+def _case_json(result: CaseResult) -> dict[str, Any]:
+    failure = result.failure
+    return {
+        "id": result.id,
+        "summary": result.summary,
+        "clauses": list(result.clauses),
+        "level": result.level,
+        "kind": result.kind,
+        "target": result.target,
+        "hazard": result.hazard,
+        "outcome": result.outcome,
+        "known_failing": result.known_failing,
+        "expected": failure.expected if failure else "",
+        "actual": failure.actual if failure else "",
+        "bytes": failure.data.hex() if failure else "",
+        "violations": [v.to_json() for v in result.violations],
+        "reason": result.reason,
+        "traceback": result.traceback,
+        "notes": list(result.notes),
+        "duration": round(result.duration, 6),
+        "deadline": result.deadline,
+        "seed": result.seed,
+        "reproduce": result.reproduce,
+        "packets": [p.to_json() for p in result.packets[:MAX_PACKETS_IN_REPORT]],
+        "packets_total": len(result.packets),
+    }
+
+
+def report_json(report: RunReport) -> dict[str, Any]:
+    """The report as JSON-ready data (validates against :func:`load_schema`)."""
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "tool": "manip-conform",
+        "spec_revision": SPEC.revision,
+        "target": report.target,
+        "embedded": report.embedded,
+        "command": report.command,
+        "started": report.started,
+        "duration": round(report.duration, 6),
+        "seed": report.seed,
+        "strict": report.strict,
+        "options": report.options,
+        "verdict": report.verdict,
+        "exit_code": int(report.exit_code),
+        "counts": report.counts(),
+        "problems": list(report.problems),
+        "time": report.time,
+        "unstable": list(report.unstable),
+        "interrupted": report.interrupted,
+        "internal_error": report.internal_error,
+        "target_died_after": report.target_died_after,
+        "liveness": [
+            {"when": c.when, "alive": c.alive, "detail": c.detail, "duration": round(c.duration, 6)}
+            for c in report.liveness
+        ],
+        "by_clause": [t.to_json() for t in by_clause(report)],
+        "cases": [_case_json(r) for r in report.results],
+    }
+
+
+def write_json(report: RunReport, path: Path) -> None:
+    path.write_text(json.dumps(report_json(report), indent=2) + "\n", encoding="utf-8")
+
+
+def _area(case_id: str) -> str:
+    parts = case_id.split(".")
+    return ".".join(parts[:2]) if len(parts) > 2 else parts[0]
+
+
+def report_junit(report: RunReport) -> ET.Element:
+    """JUnit XML (``testsuites``), one suite per area."""
+    root = ET.Element("testsuites", name="manip-conform", time=f"{report.duration:.3f}")
+    groups: dict[str, list[CaseResult]] = defaultdict(list)
+    for result in report.results:
+        groups[_area(result.id)].append(result)
+    for area, results in sorted(groups.items()):
+        suite = ET.SubElement(
+            root,
+            "testsuite",
+            name=area,
+            tests=str(len(results)),
+            failures=str(sum(r.outcome in ("fail", "fixed") for r in results)),
+            errors=str(sum(r.outcome == "error" for r in results)),
+            skipped=str(sum(r.outcome == "skip" for r in results)),
+            time=f"{sum(r.duration for r in results):.3f}",
+        )
+        props = ET.SubElement(suite, "properties")
+        ET.SubElement(props, "property", name="seed", value=str(report.seed))
+        ET.SubElement(props, "property", name="target", value=report.target)
+        for result in results:
+            _junit_case(suite, area, result)
+    return root
+
+
+def _junit_case(suite: ET.Element, area: str, result: CaseResult) -> None:
+    node = ET.SubElement(suite, "testcase", classname=area, name=result.id, time=f"{result.duration:.3f}")
+    props = ET.SubElement(node, "properties")
+    ET.SubElement(props, "property", name="clauses", value=" ".join(result.clauses))
+    ET.SubElement(props, "property", name="level", value=result.level)
+    ET.SubElement(props, "property", name="outcome", value=result.outcome)
+    ET.SubElement(props, "property", name="seed", value=str(result.seed))
+    text = _failure_text(result, with_clause_text=True)
+    if result.outcome in ("fail", "fixed"):
+        failure = result.failure
+        message = _junit_message(failure) if failure else "listed as known failing but passed"
+        element = ET.SubElement(
+            node, "failure", message=message, type=failure.clause or "" if failure else "fixed"
+        )
+        element.text = text
+    elif result.outcome == "error":
+        element = ET.SubElement(node, "error", message=result.reason, type="error")
+        element.text = result.traceback
+    elif result.outcome == "skip":
+        ET.SubElement(node, "skipped", message=result.reason)
+    elif text:
+        ET.SubElement(node, "system-out").text = text
+
+
+def _clause_reference(clause: str | None) -> str:
+    """``the clause's text (its section)``, or "" for no clause or one the spec does not hold."""
+    spec = SPEC.clauses.get(clause) if clause is not None else None
+    return f"{spec.text} ({spec.section})" if spec is not None else ""
+
+
+def _junit_message(failure: Violation) -> str:
+    """The failure's message, then the clause it breaks: a CI page shows only this line."""
+    reference = _clause_reference(failure.clause)
+    if not reference:
+        return failure.message
+    return f"{failure.message} \u2014 {failure.clause}: {reference}"
+
+
+def _failure_text(result: CaseResult, *, with_clause_text: bool = False) -> str:
+    lines = []
+    for v in result.violations:
+        lines.append(f"[{v.clause or '-'}] ({v.level}) {v.message}")
+        if with_clause_text and (reference := _clause_reference(v.clause)):
+            lines.append(f"  clause:   {reference}")
+        if v.expected:
+            lines.append(f"  expected: {v.expected}")
+        if v.actual:
+            lines.append(f"  actual:   {v.actual}")
+        if v.data:
+            lines.append(f"  bytes:    {v.data.hex(' ')}")
+    if lines:
+        lines.append(f"reproduce: {result.reproduce}")
+    return "\n".join(lines)
+
+
+def write_junit(report: RunReport, path: Path) -> None:
+    tree = ET.ElementTree(report_junit(report))
+    ET.indent(tree)
+    tree.write(path, encoding="utf-8", xml_declaration=True)
+
+
+def failure_text(result: CaseResult) -> str:
+    """Expected / actual / bytes / reproduce lines of a case, for the console."""
+    return _failure_text(result)

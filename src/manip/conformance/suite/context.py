@@ -1,0 +1,619 @@
+"""What a case works with: :class:`CaseContext` (options, seed, expectations) and :class:`Probe` (a raw
+manip session over one fresh Chaos connection that records every packet both ways).
+
+A probe is deliberately *not* a client library: it sends exactly the bytes a case gives it, takes the
+server's packets in the order they come, and judges nothing by itself (the checks of
+:mod:`manip.conformance.judge.checks` do).  What it adds:
+
+* ``await ctx.connect()`` opens a connection (Chaos contact from the target address) and, unless
+  ``initial=False``, waits for the initial RESPONSE (``probe.initial``); no initial RESPONSE is a
+  failure of ``connect.initial-response``.
+* ``await probe.request(opcode, data=b"")`` sends a request packet (opcode as number or spec name) and
+  returns its Chaos packet number; ``await probe.send(name, **values)`` encodes the values with the
+  spec layout first.  ``await probe.call(name, **values)`` = send + :meth:`Probe.reply`.
+* ``await probe.reply(number, timeout=None)`` returns the next :class:`Answer` (the next RESPONSE,
+  non-fatal or fatal error; asynchronous packets are set aside in ``probe.unsolicited``).  Answers come
+  in request order, so the probe does not match them by number: ``number`` only labels the record (the
+  checks compare it).  No answer within the timeout (``ctx.options.reply_timeout`` by default), or the
+  connection ending first, raises :class:`CaseFailure` (``request.one-reply``).
+* ``await probe.replies_until_empty(number)``: every packet of a multi-packet reply up to and
+  including its empty terminator (or up to an error, a timeout or the close: ``answer.terminated``).
+* ``await probe.next_packet(timeout)``: the next server packet of any kind, or None on timeout or at
+  the end of the connection (``probe.closed``, ``probe.end_reason``).
+* ``probe.packets``: the recording (:class:`~manip.conformance.judge.checks.WirePacket`, both directions,
+  times from the start of the case; the end of the connection is a CLS/EOF/LOS pseudo-packet).
+
+``ctx.expect(cond, clause=..., expected=..., seen=answer)`` is the one way to state a check:
+false on a MUST clause raises :class:`CaseFailure`; false on a SHOULD/MAY/INFO clause is recorded
+(``ctx.soft_failures``) and the case goes on.  The clause must be one the case declares: any other is a
+bug of the suite (:class:`~manip.conformance.suite.case.UndeclaredClauseError`, raised at the call whether the
+condition holds or not), except a finding of the transcript invariant's checkers
+(:mod:`manip.conformance.suite.invariants`).  ``ctx.check(findings)`` applies the same rule to the
+findings of a checker; ``ctx.fail(...)`` fails outright; ``ctx.skip(reason)`` ends the case as skipped.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import random
+import time
+from collections.abc import Awaitable, Callable, Iterable, Sequence
+from dataclasses import dataclass, replace
+from typing import Any, Final, Literal, NoReturn
+
+from manip.codecs.errors import CodecError
+from manip.codecs.messages import encode_request
+from manip.codecs.packet import Packet
+from manip.codecs.pdp11float import unpack_f
+from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, describe, word
+from manip.conformance.judge.violation import Violation, evidence
+from manip.conformance.suite.case import (
+    LEVEL_ORDER,
+    CaseError,
+    CaseFailure,
+    CaseSkipped,
+    UndeclaredClauseError,
+)
+from manip.conformance.suite.invariants import TRANSCRIPT, attribution_problem
+from manip.links import ChaosConnection, ChaosError, ConnectionClosed, ConnectionLost
+from manip.spec import SPEC, RequestName
+from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.model import Hazard, Level
+
+__all__ = [
+    "Answer",
+    "CaseContext",
+    "Connector",
+    "Probe",
+    "RunOptions",
+]
+
+Target = Literal["sim", "hardware"]
+DEFAULT_REPLY_TIMEOUT: Final = 2.0
+DEFAULT_CONNECT_TIMEOUT: Final = 5.0
+
+Connector = Callable[[bool], Awaitable[ChaosConnection]]
+"""Opens one fresh Chaos connection to the target (the runner provides it); the argument says whether
+a refusal as busy (the previous case's connection still closing) is retried."""
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """The run's settings, as cases see them."""
+
+    target: Target = "sim"
+    allow_motion: bool = False
+    strict: bool = False
+    reply_timeout: float = DEFAULT_REPLY_TIMEOUT
+    connect_timeout: float = DEFAULT_CONNECT_TIMEOUT
+    deadline_scale: float = 1.0
+    max_examples: int = 25
+    address: str = ""
+    """The target's link address, as given (for messages and reproduce commands)."""
+    broken_after: float | None = None
+    """The target's broken-connection timer, when the run is to check it (``--broken-after``)."""
+
+    @property
+    def allowed_hazards(self) -> frozenset[Hazard]:
+        """Opcode hazard classes cases may send: all on a simulator; on hardware read-only and config
+        unless ``--allow-motion``."""
+        if self.target == "sim" or self.allow_motion:
+            return frozenset({"read-only", "config", "motion", "power"})
+        return frozenset({"read-only", "config"})
+
+
+@dataclass(frozen=True)
+class Answer:
+    """The server's answer to one request: one packet, or every packet of a multi-packet reply."""
+
+    request: WirePacket
+    packets: tuple[WirePacket, ...]
+    terminated: bool = True
+    """For multi-packet replies: whether the empty terminator came."""
+
+    @property
+    def first(self) -> WirePacket:
+        return self.packets[0]
+
+    @property
+    def opcode(self) -> int:
+        return self.first.opcode
+
+    @property
+    def number(self) -> int | None:
+        """The request number the (first) answer packet carries."""
+        return word(self.first.data)
+
+    @property
+    def data(self) -> bytes:
+        return self.first.data
+
+    @property
+    def payload(self) -> bytes:
+        """The first packet's data after the request number."""
+        return self.first.data[2:]
+
+    @property
+    def is_response(self) -> bool:
+        return self.opcode == ServerOp.RESPONSE
+
+    @property
+    def is_error(self) -> bool:
+        return self.opcode in (ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR)
+
+    @property
+    def all_data(self) -> bytes:
+        return b"".join(p.data for p in self.packets)
+
+    def __str__(self) -> str:
+        return describe(self.first) + (f" + {len(self.packets) - 1} more" if len(self.packets) > 1 else "")
+
+
+class Probe:
+    """A raw manip session over one Chaos connection; see the module docstring."""
+
+    def __init__(self, ctx: CaseContext, conn: ChaosConnection, index: int) -> None:
+        self._ctx = ctx
+        self.conn = conn
+        self.index = index
+        self.packets: list[WirePacket] = []
+        self.unsolicited: list[WirePacket] = []
+        """Asynchronous packets (0203, 0204, 0205) received while waiting for replies."""
+        self.initial: WirePacket | None = None
+        self.rfc_packet_no: int | None = None
+        self.end_reason: ChaosError | None = None
+        self._buffer: list[WirePacket] = []
+        self._unanswered: dict[int, tuple[int, float]] = {}
+        """Requests sent and not yet answered, in order: packet number -> (opcode, the seconds its answer
+        may wait for the arm, 0 for most)."""
+        self._speed = 1.0
+        """The speed factor this connection last set (accepted set-speed-factor)."""
+        self._motion_until = 0.0
+        """When (loop clock) the motion this connection queued may at the latest be done."""
+
+    @property
+    def closed(self) -> bool:
+        """The connection has ended (and every packet before the end has been taken)."""
+        return self.end_reason is not None and not self._buffer
+
+    def _record(
+        self, direction: Literal["c2s", "s2c"], opcode: int, number: int, ack: int, data: bytes
+    ) -> WirePacket:
+        packet = WirePacket(direction, opcode, number, ack, bytes(data), self._ctx.clock(), self.index)
+        self.packets.append(packet)
+        self._ctx.transcript.append(packet)
+        return packet
+
+    # ------------------------------------------------------------------------------------- sending
+
+    async def request(self, opcode: int | RequestName, data: bytes = b"") -> int:
+        """Send one request packet with exactly ``data``; return its Chaos packet number."""
+        code = SPEC.request(opcode).opcode if isinstance(opcode, str) else opcode
+        number = await self.conn.send(bytes(data), code)
+        ack = 0
+        self._record("c2s", code, number, ack, data)
+        self._unanswered[number] = (code, self.arm_wait(code))
+        return number
+
+    def arm_wait(self, code: int) -> float:
+        """Seconds the answer to request ``code`` sent now may wait for the arm (erratum
+        ``answer-allowance``): its own ``answer_within`` at the speed factor in force, after the motion
+        still queued before it; 0 for a request whose answer does not wait for the arm."""
+        op = SPEC.requests.get(code)
+        if op is None or op.answer_within is None:
+            return 0.0
+        queued = max(0.0, self._motion_until - self._ctx.clock())
+        return queued + op.answer_within * self._ctx.options.deadline_scale / self._speed
+
+    def _answered(self, number: int, answer: WirePacket) -> None:
+        """Note what an answer tells about the connection's motion queue and speed."""
+        code, _ = self._unanswered.pop(number, (None, 0.0))
+        op = SPEC.requests.get(code) if code is not None else None
+        if op is None or answer.opcode != ServerOp.RESPONSE:
+            return
+        if op.name == "set-speed":
+            sent = self._request(number).data
+            with contextlib.suppress(CodecError):
+                factor = unpack_f(sent[:4])
+                if 0.0 < factor <= 1.0:
+                    self._speed = factor
+        elif op.response.kind == "segment" or (op.hazard == "motion" and op.answer_within is not None):
+            # One more segment in the queue (calibrate-wrist leaves its move back queued).
+            segment = SPEC.segment_within * self._ctx.options.deadline_scale / self._speed
+            self._motion_until = max(self._motion_until, self._ctx.clock()) + segment
+
+    def allowance(self, number: int) -> tuple[float, str]:
+        """How long request ``number`` may wait for its answer, and why (for failure messages).
+
+        Each request gets the reply timeout or, when its answer waits for the arm, the time the arm may
+        take (:meth:`arm_wait`) if longer.  A server answers in order, so the arm waits of the
+        unanswered requests sent before it are added (erratum ``answer-allowance``)."""
+        options = self._ctx.options
+        code, wait = self._unanswered.get(number, (None, 0.0))
+        own = max(options.reply_timeout, wait)
+        name = SPEC.requests[code].name if code is not None and code in SPEC.requests else "the request"
+        parts = [
+            f"{own:g} s "
+            + (f"the arm may take for {name} #{number}" if wait > options.reply_timeout else "reply timeout")
+        ]
+        total = own
+        for earlier, (earlier_code, earlier_wait) in self._unanswered.items():
+            if earlier == number:
+                break
+            if earlier_wait > 0:
+                total += earlier_wait
+                parts.append(
+                    f"{earlier_wait:g} s for {SPEC.requests[earlier_code].name} #{earlier} before it"
+                )
+        return total, " + ".join(parts)
+
+    async def send(self, op: int | RequestName, **values: Any) -> int:
+        """Encode ``values`` by the spec layout of ``op`` and send the request."""
+        return await self.request(SPEC.request(op).opcode, encode_request(op, **values))
+
+    async def call(self, op: int | RequestName, *, timeout: float | None = None, **values: Any) -> Answer:
+        """Send a well-formed request and wait for its answer (multi-packet replies in full)."""
+        spec_op = SPEC.request(op)
+        number = await self.send(op, **values)
+        if spec_op.response.kind == "multi":
+            return await self.replies_until_empty(number, timeout=timeout)
+        return await self.reply(number, timeout=timeout)
+
+    async def call_raw(self, opcode: int, data: bytes = b"", *, timeout: float | None = None) -> Answer:
+        """Send raw bytes and wait for the single answer."""
+        number = await self.request(opcode, data)
+        return await self.reply(number, timeout=timeout)
+
+    # ------------------------------------------------------------------------------------- receiving
+
+    async def next_packet(self, timeout: float | None = None) -> WirePacket | None:
+        """The next server packet (any opcode), or None on timeout or once the connection has ended."""
+        if self._buffer:
+            return self._buffer.pop(0)
+        if self.end_reason is not None:
+            return None
+        wait = self._ctx.options.reply_timeout if timeout is None else timeout
+        try:
+            async with asyncio.timeout(wait):
+                packet: Packet = await self.conn.receive()
+        except TimeoutError:
+            return None
+        except ChaosError as exc:
+            self.end_reason = exc
+            kind = ChaosOp.LOS if isinstance(exc, ConnectionLost) else ChaosOp.CLS
+            if isinstance(exc, ConnectionClosed) and exc.reason == "EOF":
+                kind = ChaosOp.EOF
+            self._record("s2c", kind, 0, 0, str(exc).encode("ascii", "replace"))
+            return None
+        return self._record("s2c", packet.opcode, packet.packet_no, packet.ack_no, packet.data)
+
+    def push_back(self, packet: WirePacket) -> None:
+        """Return a packet so the next :meth:`next_packet` gives it again."""
+        self._buffer.insert(0, packet)
+
+    async def _next_answer_packet(self, number: int, timeout: float | None, what: str) -> WirePacket:
+        loop = asyncio.get_running_loop()
+        if timeout is None:
+            wait, budget = self.allowance(number)
+        else:
+            wait, budget = timeout, "the case's own wait"
+        deadline = loop.time() + wait
+        while True:
+            packet = await self.next_packet(max(0.0, deadline - loop.time()))
+            if packet is None:
+                if self.end_reason is not None:
+                    raise CaseFailure(
+                        f"the connection ended while waiting for {what}",
+                        clause="request.one-reply",
+                        expected=what,
+                        actual=f"connection ended: {self.end_reason}",
+                        kind="closed",
+                        invariant=TRANSCRIPT.name,
+                    )
+                raise CaseFailure(
+                    f"no {what} within {wait:g} s ({budget})",
+                    clause="request.one-reply",
+                    expected=f"{what} within {wait:g} s",
+                    actual="nothing (timeout)",
+                    kind="timeout",
+                    invariant=TRANSCRIPT.name,
+                )
+            if packet.opcode in ANSWER_OPCODES:
+                self._answered(number, packet)
+                return packet
+            self.unsolicited.append(packet)
+
+    async def reply(self, number: int, timeout: float | None = None) -> Answer:
+        """The next answer packet (RESPONSE, 0201 or 0202), taken as the answer to request ``number``."""
+        request = self._request(number)
+        packet = await self._next_answer_packet(number, timeout, f"a reply to request #{number}")
+        return Answer(request, (packet,))
+
+    async def replies_until_empty(self, number: int, timeout: float | None = None) -> Answer:
+        """Every packet of a multi-packet reply to ``number``, up to its empty terminator.
+
+        Stops early (``terminated=False``) at an error packet, a packet that is not a RESPONSE, a timeout
+        or the end of the connection; the first packet missing altogether raises like :meth:`reply`."""
+        request = self._request(number)
+        first = await self._next_answer_packet(number, timeout, f"a reply to request #{number}")
+        packets = [first]
+        if first.opcode != ServerOp.RESPONSE or len(first.data) <= 2:
+            return Answer(request, (first,), terminated=first.opcode == ServerOp.RESPONSE)
+        while True:
+            packet = await self.next_packet(timeout)
+            if packet is None:
+                return Answer(request, tuple(packets), terminated=False)
+            if packet.opcode in (
+                ServerOp.ASYNCHRONOUS_RESPONSE,
+                ServerOp.ASYNCHRONOUS_ERROR,
+                ServerOp.ASYNCHRONOUS_WARNING,
+            ):
+                self.unsolicited.append(packet)
+                continue
+            if packet.opcode != ServerOp.RESPONSE:
+                self.push_back(packet)
+                return Answer(request, tuple(packets), terminated=False)
+            packets.append(packet)
+            if len(packet.data) <= 2:
+                return Answer(request, tuple(packets), terminated=True)
+
+    async def drain(self, quiet: float = 0.2) -> list[WirePacket]:
+        """Take every packet that arrives until ``quiet`` seconds pass without one."""
+        out: list[WirePacket] = []
+        while (packet := await self.next_packet(quiet)) is not None:
+            out.append(packet)
+        return out
+
+    async def wait_closed(self, timeout: float | None = None) -> bool:
+        """Wait for the connection to end, taking (and recording) what arrives; True if it ended."""
+        loop = asyncio.get_running_loop()
+        wait = self._ctx.options.reply_timeout if timeout is None else timeout
+        deadline = loop.time() + wait
+        while self.end_reason is None:
+            remaining = deadline - loop.time()
+            if remaining <= 0:
+                return False
+            await self.next_packet(remaining)
+        return True
+
+    def _request(self, number: int) -> WirePacket:
+        for packet in reversed(self.packets):
+            if packet.direction == "c2s" and packet.packet_no == number:
+                return packet
+        raise ValueError(f"request #{number} was not sent on this probe")
+
+    async def close(self) -> None:
+        """Close the connection (abort after a short wait: the target may already be gone)."""
+        if self.end_reason is None:
+            self.end_reason = ConnectionClosed("closed by the case", by_peer=False)
+        with contextlib.suppress(ChaosError):
+            await self.conn.close(timeout=1.0)
+
+
+class CaseContext:
+    """Everything a running case may use; see the module docstring."""
+
+    def __init__(
+        self,
+        *,
+        case_id: str,
+        level: Level,
+        seed: int,
+        options: RunOptions,
+        connector: Connector,
+        clauses: Iterable[str] | None = None,
+    ) -> None:
+        self.case_id = case_id
+        self.level = level
+        self.clauses: frozenset[str] | None = None if clauses is None else frozenset(clauses)
+        """The clauses the case declares: the only ones it may report (None: any, for contexts that
+        run no registered case, such as the liveness probe)."""
+        self.seed = seed
+        """This case's seed: derived from the run's ``--seed`` and the case id, so it does not change
+        when other cases are selected or skipped."""
+        self.random = random.Random(seed)
+        self.options = options
+        self.transcript: list[WirePacket] = []
+        """Every packet of every probe of this case, in the order recorded."""
+        self.probes: list[Probe] = []
+        self.soft_failures: list[Violation] = []
+        """The SHOULD/MAY/INFO violations recorded on the way (the case went on)."""
+        self.notes: list[str] = []
+        self.auto_check = True
+        """After the case, the runner checks every probe's whole recording with
+        :func:`~manip.conformance.judge.checks.check_transcript`; a case that leaves the protocol on purpose
+        (it sends a raw packet the transcript checker would misjudge) sets this False."""
+        self._connector = connector
+        self._clock = _loop_clock()
+        self._t0 = self._clock()
+
+    @property
+    def max_examples(self) -> int:
+        return self.options.max_examples
+
+    def clock(self) -> float:
+        """Seconds since the case started, on the event loop's clock (virtual in a simulated run)."""
+        return self._clock() - self._t0
+
+    def note(self, text: str) -> None:
+        """A line of information for the report (what the case observed)."""
+        self.notes.append(text)
+
+    # ------------------------------------------------------------------------------------- connecting
+
+    async def connect(self, *, initial: bool = True, retry_busy: bool = True) -> Probe:
+        """A new probe over a fresh connection; with ``initial`` the initial RESPONSE is taken first.
+
+        ``retry_busy=False`` for a case that expects the refusal (one server per robot)."""
+        try:
+            conn = await self._connector(retry_busy)
+        except ChaosError as exc:
+            raise CaseFailure(
+                f"could not connect: {exc}",
+                expected="the connection to open",
+                actual=f"{type(exc).__name__}: {exc}",
+                kind="closed",
+            ) from exc
+        probe = Probe(self, conn, len(self.probes))
+        info = conn.info()
+        probe.rfc_packet_no = info.last_sent if info is not None else None
+        self.probes.append(probe)
+        if initial:
+            packet = await probe.next_packet(self.options.reply_timeout)
+            if packet is None or packet.opcode != ServerOp.RESPONSE:
+                if packet is not None:
+                    probe.push_back(packet)
+                raise CaseFailure(
+                    "no initial RESPONSE after the connection opened",
+                    clause="connect.initial-response",
+                    expected=f"a RESPONSE (200) within {self.options.reply_timeout:g} s of the open",
+                    actual="nothing" if packet is None else describe(packet),
+                    data=b"" if packet is None else packet.data,
+                    kind="missing_response",
+                    invariant=TRANSCRIPT.name,
+                )
+            probe.initial = packet
+        return probe
+
+    async def close_all(self) -> None:
+        for probe in self.probes:
+            await probe.close()
+
+    # ------------------------------------------------------------------------------------- verdicts
+
+    def _attribute(self, clause: str | None, invariant: str | None) -> str | None:
+        """The invariant a report of ``clause`` counts under (None: the case's own); a clause the case
+        does not declare, outside that invariant, is a bug of the suite and raises at once."""
+        if self.clauses is None or clause is None or clause in self.clauses:
+            return None
+        problem = attribution_problem(self.case_id, self.clauses, clause, invariant)
+        if problem is not None:
+            raise UndeclaredClauseError(problem)
+        return invariant
+
+    def _clause_level(self, clause: str | None, level: Level | None) -> Level:
+        if level is not None:
+            return level
+        if clause is not None:
+            if clause not in SPEC.clauses:
+                raise ValueError(f"unknown clause {clause!r}")
+            return SPEC.clauses[clause].level
+        return self.level
+
+    def expect(
+        self,
+        condition: object,
+        *,
+        clause: str | None = None,
+        expected: str = "",
+        seen: object = None,
+        actual: object = "",
+        data: bytes = b"",
+        message: str | None = None,
+        level: Level | None = None,
+        invariant: str | None = None,
+    ) -> bool:
+        """Check ``condition``; when false: MUST raises CaseFailure, weaker levels are recorded.
+
+        ``seen`` is the evidence (an answer, a packet, Cougar responses, a list of them...): the
+        violation's ``actual`` text and bytes are derived from it
+        (:func:`~manip.conformance.judge.violation.evidence`); ``actual``/``data`` say it in the case's
+        own words instead.  The level is ``level`` if given, else the clause's, else the case's.
+        Returns ``bool(condition)``.  ``clause`` must be one the case declares, or one of
+        ``invariant``'s when a suite invariant's finding is passed on: checked at every call, true or
+        not (UndeclaredClauseError).  ``clause`` and ``expected`` are keywords so that the clause scan of
+        ``tests/clause_scan.py`` sees every clause a case can report."""
+        attributed = self._attribute(clause, invariant)
+        if (
+            level is not None
+            and clause is not None
+            and clause in SPEC.clauses
+            and SPEC.clauses[clause].level != level
+        ):
+            raise CaseError(
+                f"case {self.case_id} checks clause {clause} as {level}; the spec says "
+                f"{SPEC.clauses[clause].level} (a weaker check needs a clause of its own)"
+            )
+        if condition:
+            return True
+        shown, shown_data = evidence(seen) if seen is not None else ("", b"")
+        self._report(
+            Violation(
+                message or (f"expected {expected}" if expected else "check failed"),
+                clause,
+                self._clause_level(clause, level),
+                expected,
+                str(actual) if actual != "" else shown,
+                bytes(data) if data else shown_data,
+                invariant=attributed,
+            )
+        )
+        return False
+
+    def _report(self, violation: Violation) -> None:
+        """A MUST violation ends the case; a weaker one is recorded and the case goes on."""
+        if violation.level == "MUST":
+            raise CaseFailure(violation)
+        self.soft_failures.append(violation)
+
+    def check(self, findings: Iterable[Violation]) -> bool:
+        """Report a checker's findings (MUST ones raise, the first first).  True when there were none.
+        The checkers are the transcript invariant's: a finding of a clause the case does not declare is
+        attributed to it."""
+        items = sorted(findings, key=lambda f: -LEVEL_ORDER[f.strength])
+        for finding in items:
+            attributed = self._attribute(finding.clause, TRANSCRIPT.name)
+            self._report(replace(finding, invariant=attributed))
+        return not items
+
+    def fail(
+        self,
+        message: str,
+        *,
+        clause: str | None = None,
+        expected: str = "",
+        seen: object = None,
+        actual: object = "",
+        data: bytes = b"",
+        invariant: str | None = None,
+    ) -> NoReturn:
+        """Fail outright; ``clause``, ``seen`` and ``invariant`` as for :meth:`expect`."""
+        attributed = self._attribute(clause, invariant)
+        shown, shown_data = evidence(seen) if seen is not None else ("", b"")
+        raise CaseFailure(
+            Violation(
+                message,
+                clause,
+                expected=expected,
+                actual=str(actual) if actual != "" else shown,
+                data=bytes(data) if data else shown_data,
+                invariant=attributed,
+            )
+        )
+
+    def fail_with(self, violation: Violation) -> NoReturn:
+        """Fail with a violation found elsewhere (a failed example's); attributed as for :meth:`expect`."""
+        attributed = self._attribute(violation.clause, violation.invariant)
+        raise CaseFailure(replace(violation, invariant=attributed))
+
+    def skip(self, reason: str) -> NoReturn:
+        raise CaseSkipped(reason)
+
+    def require_hazard(self, hazard: Hazard) -> None:
+        """Skip unless the run allows opcodes of ``hazard`` (for cases that decide at run time)."""
+        if hazard not in self.options.allowed_hazards:
+            self.skip(f"{hazard} requests are not allowed on {self.options.target} without --allow-motion")
+
+
+def request_packets(packets: Sequence[WirePacket]) -> list[WirePacket]:
+    """The client's requests of a recording."""
+    return [p for p in packets if p.direction == "c2s" and not p.is_close]
+
+
+def _loop_clock() -> Callable[[], float]:
+    """The running loop's clock (the one every deadline uses), or the monotonic clock outside a loop."""
+    try:
+        return asyncio.get_running_loop().time
+    except RuntimeError:
+        return time.monotonic

@@ -1,0 +1,144 @@
+"""The results of a run as values: one :class:`CaseResult` per case, one :class:`RunReport` per run.
+
+Outcomes (``Outcome``):
+
+* ``pass``: every clause the case checks held;
+* ``fail``: a MUST clause broke, or (with ``--strict``) a SHOULD clause;
+* ``warn``: only SHOULD/MAY/INFO clauses broke, without ``--strict`` (they do not fail the run);
+* ``error``: the suite itself failed (an exception in the case); the traceback is kept;
+* ``skip``: not applicable (hazard not allowed on hardware, a capability the target lacks...);
+* ``known-fail``: failed (or erred) and listed in ``--known-failing``; does not fail the run;
+* ``fixed``: listed in ``--known-failing`` but passed: the entry is stale and fails the run.
+
+Exit codes (:class:`ExitCode`): 0 conformant, 1 non-conformant (or a stale known-failing entry),
+2 usage error, 3 target unreachable or dead before any verdict, 4 interrupted or internal error.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Final, Literal
+
+from manip.conformance.judge.packets import WirePacket
+from manip.conformance.judge.violation import Violation
+from manip.spec.model import Level
+
+if TYPE_CHECKING:
+    from manip.conformance.suite.case import Target
+
+__all__ = ["OUTCOMES", "CaseResult", "ExitCode", "LivenessCheck", "Outcome", "RunReport", "Violation"]
+
+Outcome = Literal["pass", "fail", "warn", "error", "skip", "known-fail", "fixed"]
+OUTCOMES: Final[tuple[str, ...]] = ("pass", "fail", "warn", "error", "skip", "known-fail", "fixed")
+
+
+class ExitCode(enum.IntEnum):
+    CONFORMANT = 0
+    NON_CONFORMANT = 1
+    USAGE = 2
+    UNREACHABLE = 3
+    INTERNAL = 4
+
+
+@dataclass
+class CaseResult:
+    id: str
+    clauses: tuple[str, ...]
+    level: Level
+    kind: str
+    hazard: str
+    summary: str
+    outcome: Outcome
+    seed: int
+    deadline: float
+    duration: float = 0.0
+    violations: list[Violation] = field(default_factory=list)
+    """The failure that ended the case first (if any), then the soft failures recorded on the way."""
+    reason: str = ""
+    """Why the case was skipped, or what the error was."""
+    traceback: str = ""
+    notes: list[str] = field(default_factory=list)
+    packets: list[WirePacket] = field(default_factory=list)
+    known_failing: bool = False
+    reproduce: str = ""
+    target: Target = "server"
+    """What the case tests (the first component of a case id: server, cougar, client)."""
+
+    @property
+    def failure(self) -> Violation | None:
+        return self.violations[0] if self.violations else None
+
+
+@dataclass(frozen=True)
+class LivenessCheck:
+    """A liveness probe: connect, initial RESPONSE, one read-only request answered."""
+
+    when: str
+    """``before``, ``after:CASE_ID`` or ``end``."""
+    alive: bool
+    detail: str
+    duration: float
+
+
+@dataclass
+class RunReport:
+    target: str
+    embedded: bool
+    seed: int
+    strict: bool
+    options: dict[str, object]
+    command: str
+    started: str = ""
+    duration: float = 0.0
+    results: list[CaseResult] = field(default_factory=list)
+    liveness: list[LivenessCheck] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+    """Run-level failures: stale known-failing entries, the target dying, an interruption."""
+    interrupted: bool = False
+    internal_error: str = ""
+    target_died_after: str | None = None
+    unreachable: bool = False
+    capture_unusable: bool = False
+    """With ``unreachable``: what failed was the capture a replay or verify reads, not the target."""
+    time: str = "real"
+    """The clock the run used: ``real`` (wall clock) or ``virtual`` (the embedded server simulated on the
+    runner's loop; case durations and packet times are then simulated seconds)."""
+    unstable: list[str] = field(default_factory=list)
+    """Suite problems found by ``--repeat``: cases whose verdict changed between seeds or between two
+    runs of one seed (exit 4: a verdict that depends on the draw cannot be trusted)."""
+
+    def capture_problem(self, problem: str) -> None:
+        """The capture cannot be used (unreadable, or without the sessions asked for): exit 3."""
+        self.unreachable = self.capture_unusable = True
+        self.problems.append(problem)
+
+    def counts(self) -> dict[str, int]:
+        counter: Counter[str] = Counter(r.outcome for r in self.results)
+        return {name: counter[name] for name in OUTCOMES}
+
+    @property
+    def exit_code(self) -> ExitCode:
+        counts = self.counts()
+        if self.unreachable:
+            return ExitCode.UNREACHABLE
+        if self.interrupted or self.internal_error or self.unstable:
+            return ExitCode.INTERNAL
+        if counts["fail"] or counts["fixed"] or self.problems:
+            return ExitCode.NON_CONFORMANT
+        if counts["error"]:
+            return ExitCode.INTERNAL
+        return ExitCode.CONFORMANT
+
+    @property
+    def verdict(self) -> str:
+        return {
+            ExitCode.CONFORMANT: "conformant",
+            ExitCode.NON_CONFORMANT: "non-conformant",
+            ExitCode.USAGE: "usage error",
+            ExitCode.UNREACHABLE: "capture unusable" if self.capture_unusable else "target unreachable",
+            ExitCode.INTERNAL: "interrupted"
+            if self.interrupted
+            else ("unstable suite" if self.unstable and not self.internal_error else "internal error"),
+        }[self.exit_code]

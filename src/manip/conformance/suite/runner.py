@@ -1,0 +1,392 @@
+"""Running cases against a target: selection, deadlines, liveness probes, outcomes, the verdict.
+
+Theory of operation
+===================
+
+:class:`Runner` takes the registered cases and a :class:`RunConfig` and produces a
+:class:`~manip.conformance.suite.results.RunReport`:
+
+1. **Select**: cases matching ``--select`` (all when none given) and not ``--skip``, in id order.
+   ``--known-failing`` entries are matched against every registered case; one that matches none is
+   a problem of the run (a stale entry).
+2. **Liveness before**: connect, send one read-only request, wait for any answer.  A target that
+   fails it is *unreachable*: no case runs, exit code 3.
+3. **Each case**, one at a time, gets a :class:`~manip.conformance.suite.context.CaseContext` with its own
+   seed (derived from the run seed and the case id, so a case's seed does not depend on what else
+   runs) and its deadline (``case.deadline * deadline_scale``, plus any wait on a target's timer).  Its
+   connections are closed after it, whatever happened.  After the body, unless the case turned it off
+   (``ctx.auto_check = False``), every probe's recording goes through
+   :func:`~manip.conformance.judge.checks.check_transcript`, so each case also checks the invariants of the
+   whole exchange (one reply per request, echoes, error formats, asynchronous responses only when
+   asked for...).  An exception of the case never stops the
+   run: it becomes an ``error`` outcome with its traceback, and so does a violation of a clause the
+   case does not declare that no suite invariant reported (:mod:`manip.conformance.suite.invariants`).
+4. **Liveness after** every failure or error and after every negative case; if the target is dead
+   (after one retry) the remaining cases are skipped, the run records which case it died after, and
+   the run is non-conformant (or unreachable, exit 3, when no case had reached a verdict).
+5. **Liveness at the end**; then the verdict (:attr:`RunReport.exit_code`).
+
+Hazards: with ``target="hardware"`` cases whose hazard is above ``config`` are skipped unless
+``allow_motion``.  Interruption (Ctrl-C, cancellation) stops the run; the report so far is returned
+with ``interrupted`` set (exit code 4).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import shlex
+import time
+import traceback
+from collections.abc import Awaitable, Callable, Sequence
+from dataclasses import dataclass, field, replace
+from datetime import UTC, datetime
+
+from manip.conformance.judge.checks import check_transcript
+from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
+from manip.conformance.suite.context import CaseContext, RunOptions
+from manip.conformance.suite.invariants import attribution_problem
+from manip.conformance.suite.results import CaseResult, LivenessCheck, Outcome, RunReport
+from manip.conformance.suite.selection import PatternSet
+from manip.links import ChaosConnection, ConnectionRefused, open_connection
+from manip.links.api import LinkWrapper
+from manip.spec.constants import ServerOp
+
+__all__ = ["LIVENESS_RETRY_DELAY", "RunConfig", "RunEvents", "Runner", "case_seed"]
+
+LIVENESS_RETRY_DELAY = 0.5
+BUSY_RETRIES = 20
+"""How often a connect refused as busy is retried (the previous case's connection may still be closing)."""
+BUSY_DELAY = 0.05
+CLOSE_GRACE = 2.0
+
+
+def case_seed(run_seed: int, case_id: str) -> int:
+    """A case's seed: a 32-bit hash of the run seed and the case id."""
+    digest = hashlib.sha256(f"{run_seed}:{case_id}".encode()).digest()
+    return int.from_bytes(digest[:4], "big")
+
+
+@dataclass
+class RunConfig:
+    address: str
+    """The target's link address (``tcp://HOST:PORT``...)."""
+    options: RunOptions
+    seed: int
+    select: PatternSet = field(default_factory=PatternSet)
+    skip: PatternSet = field(default_factory=PatternSet)
+    known_failing: PatternSet = field(default_factory=PatternSet)
+    embedded: bool = False
+    virtual_time: bool = False
+    """The run's event loop is a :class:`~manip.links.virtual_clock.VirtualClockLoop` (the embedded
+    server simulated on the same loop)."""
+    reproduce_prefix: Sequence[str] = ("manip-conform", "run")
+    """The command a failing case's reproduce line starts with (target and options are appended)."""
+    reproduce_options: Sequence[str] = ()
+    command: str = ""
+    liveness_check: Callable[[RunOptions], Awaitable[tuple[bool, str]]] | None = None
+    """Replaces the Chaos liveness probe: (alive, detail) for targets that are not manip servers
+    (the Cougar target, :mod:`manip.conformance.cougar.target`)."""
+    wrap_link: LinkWrapper | None = None
+    """Given every link the run's connections make (``RecorderTap(recorder, "client").wrap`` records
+    the run: ``manip-conform run --record``)."""
+
+
+@dataclass
+class RunEvents:
+    """Callbacks for progress display (all optional)."""
+
+    started: Callable[[list[Case]], None] | None = None
+    case_started: Callable[[Case], None] | None = None
+    case_finished: Callable[[CaseResult], None] | None = None
+    liveness: Callable[[LivenessCheck], None] | None = None
+
+
+class Runner:
+    def __init__(self, config: RunConfig, cases: Sequence[Case], events: RunEvents | None = None) -> None:
+        self.config = config
+        self.all_cases = list(cases)
+        self.events = events or RunEvents()
+        self.report = RunReport(
+            target=config.address,
+            embedded=config.embedded,
+            seed=config.seed,
+            strict=config.options.strict,
+            options={
+                "target": config.options.target,
+                "allow_motion": config.options.allow_motion,
+                "max_examples": config.options.max_examples,
+                "reply_timeout": config.options.reply_timeout,
+                "deadline_scale": config.options.deadline_scale,
+                "select": [p.text for p in config.select.patterns],
+                "skip": [p.text for p in config.skip.patterns],
+                "known_failing": [p.text for p in config.known_failing.patterns],
+            },
+            command=config.command,
+            time="virtual" if config.virtual_time else "real",
+        )
+
+    # --------------------------------------------------------------------------------- selection
+
+    def selected(self) -> list[Case]:
+        config = self.config
+        out = []
+        for item in sorted(self.all_cases, key=lambda c: c.id):
+            if config.select and not config.select.matches(item.id):
+                continue
+            if config.skip.matches(item.id):
+                continue
+            out.append(item)
+        return out
+
+    # --------------------------------------------------------------------------------- connecting
+
+    async def connect(self, retry_busy: bool = True) -> ChaosConnection:
+        """A fresh connection to the target; a refusal as busy is retried briefly (``retry_busy``)."""
+        options = self.config.options
+        for attempt in range(BUSY_RETRIES + 1 if retry_busy else 1):
+            try:
+                return await open_connection(
+                    self.config.address, timeout=options.connect_timeout, wrap_link=self.config.wrap_link
+                )
+            except ConnectionRefused as exc:
+                if not retry_busy or attempt == BUSY_RETRIES or "busy" not in exc.reason.lower():
+                    raise
+                await asyncio.sleep(BUSY_DELAY)
+        raise AssertionError("unreachable")
+
+    async def liveness(self, when: str) -> LivenessCheck:
+        """Connect, send Here, wait for any answer; one retry after a short pause."""
+        start = time.monotonic()
+        alive, detail = await self._probe_once()
+        if not alive:
+            await asyncio.sleep(LIVENESS_RETRY_DELAY)
+            alive, detail = await self._probe_once()
+        check = LivenessCheck(when, alive, detail, time.monotonic() - start)
+        self.report.liveness.append(check)
+        if self.events.liveness:
+            self.events.liveness(check)
+        return check
+
+    async def _probe_once(self) -> tuple[bool, str]:
+        options = self.config.options
+        if self.config.liveness_check is not None:
+            return await self.config.liveness_check(options)
+        ctx = CaseContext(case_id="liveness", level="MUST", seed=0, options=options, connector=self.connect)
+        try:
+            async with asyncio.timeout(options.connect_timeout + 2 * options.reply_timeout + 1.0):
+                probe = await ctx.connect(initial=False)
+                number = await probe.request("here")
+                while True:
+                    packet = await probe.next_packet(options.reply_timeout)
+                    if packet is None:
+                        reason = probe.end_reason or f"no answer within {options.reply_timeout:g} s"
+                        return False, f"request sent, {reason}"
+                    if packet.opcode in (ServerOp.RESPONSE, ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):
+                        if (
+                            probe.initial is None
+                            and len(packet.data) == 2
+                            and packet.packet_no
+                            and not probe.unsolicited
+                        ):
+                            probe.initial = packet  # the initial RESPONSE; the answer comes next
+                            continue
+                        return True, f"answered request #{number} with opcode {packet.opcode:o}"
+        except CaseFailure as exc:
+            return False, exc.actual or exc.message
+        except TimeoutError:
+            return False, "timed out"
+        except OSError as exc:
+            return False, f"{type(exc).__name__}: {exc}"
+        finally:
+            await _quietly(ctx.close_all())
+
+    # --------------------------------------------------------------------------------- the run
+
+    async def run(self) -> RunReport:
+        report = self.report
+        report.started = datetime.now(UTC).isoformat(timespec="seconds")
+        t0 = time.monotonic()
+        cases = self.selected()
+        for item in self.all_cases:
+            self.config.known_failing.matches(item.id)
+        for stale in self.config.known_failing.unmatched():
+            report.problems.append(
+                f"known-failing entry {stale.text!r} ({stale.source}) matches no case: remove it"
+            )
+        if self.events.started:
+            self.events.started(cases)
+        try:
+            if not (await self.liveness("before")).alive:
+                report.unreachable = True
+                for item in cases:
+                    report.results.append(self._blank(item, "skip", "target unreachable before the run"))
+                return report
+            dead = False
+            for item in cases:
+                if dead:
+                    result = self._blank(item, "skip", f"target dead after {report.target_died_after}")
+                else:
+                    result = await self.run_case(item)
+                report.results.append(result)
+                if self.events.case_finished:
+                    self.events.case_finished(result)
+                if not dead and (
+                    result.outcome in ("fail", "error", "known-fail") or item.technique == "negative"
+                ):
+                    check = await self.liveness(f"after:{item.id}")
+                    if not check.alive:
+                        dead = True
+                        report.target_died_after = item.id
+                        report.problems.append(f"the target died during case {item.id}: {check.detail}")
+            if not dead:
+                end = await self.liveness("end")
+                if not end.alive:
+                    report.problems.append(f"the target was dead at the end of the run: {end.detail}")
+            if (
+                report.problems
+                and report.target_died_after is not None
+                and not any(
+                    r.outcome in ("pass", "fail", "warn", "known-fail", "fixed") for r in report.results
+                )
+            ):
+                report.unreachable = True
+        except (asyncio.CancelledError, KeyboardInterrupt):
+            report.interrupted = True
+            report.problems.append("the run was interrupted; this report is partial")
+        finally:
+            self._stale_known_failing()
+            report.duration = time.monotonic() - t0
+        return report
+
+    def _stale_known_failing(self) -> None:
+        for result in self.report.results:
+            if result.outcome == "fixed":
+                self.report.problems.append(
+                    f"case {result.id} is listed as known failing but passed: remove its entry"
+                )
+
+    def _blank(self, item: Case, outcome: Outcome, reason: str) -> CaseResult:
+        return CaseResult(
+            id=item.id,
+            clauses=item.clauses,
+            level=item.level,
+            kind=item.technique,
+            target=item.target,
+            hazard=item.hazard,
+            summary=item.summary,
+            outcome=outcome,
+            seed=case_seed(self.config.seed, item.id),
+            deadline=item.deadline_for(self.config.options),
+            reason=reason,
+            reproduce=self.reproduce(item),
+            known_failing=self.config.known_failing.matches(item.id),
+        )
+
+    def reproduce(self, item: Case) -> str:
+        config = self.config
+        words = [*config.reproduce_prefix]
+        if not config.embedded:
+            words.append(config.address)
+        words += ["--select", item.id, "--seed", str(config.seed), *config.reproduce_options]
+        return shlex.join(words)
+
+    async def run_case(self, item: Case) -> CaseResult:
+        """Run one case to its outcome (never raises, except on interruption)."""
+        options = self.config.options
+        result = self._blank(item, "pass", "")
+        if self.events.case_started:
+            self.events.case_started(item)
+        if item.hazard not in options.allowed_hazards:
+            result.outcome = "skip"
+            result.reason = f"{item.hazard} case on {options.target} target without --allow-motion"
+            return result
+        ctx = CaseContext(
+            case_id=item.id,
+            level=item.level,
+            seed=result.seed,
+            options=options,
+            connector=self.connect,
+            clauses=item.clauses,
+        )
+        failure: CaseFailure | None = None
+        clock = asyncio.get_running_loop().time  # the clock of every deadline (virtual when simulated)
+        start = clock()
+        scope: asyncio.Timeout | None = None
+        try:
+            async with asyncio.timeout(result.deadline) as scope:
+                await item.function(ctx)
+                if ctx.auto_check:
+                    for probe in ctx.probes:
+                        ctx.check(check_transcript(probe.packets, rfc_packet_no=probe.rfc_packet_no))
+        except CaseFailure as exc:
+            failure = exc
+        except CaseSkipped as exc:
+            result.outcome = "skip"
+            result.reason = exc.reason
+        except TimeoutError as exc:
+            if scope is None or not scope.expired():
+                result.outcome = "error"
+                result.reason = f"TimeoutError inside the case: {exc}"
+                result.traceback = traceback.format_exc()
+                failure = None
+            else:
+                elapsed = clock() - start
+                failure = CaseFailure(
+                    f"the case did not finish within its deadline of {result.deadline:g} s",
+                    expected=f"the exchange to finish within {result.deadline:g} s",
+                    actual=f"still running after {elapsed:.2f} s",
+                    kind="deadline",
+                )
+        except (asyncio.CancelledError, KeyboardInterrupt):
+            await _quietly(ctx.close_all())
+            raise
+        except Exception as exc:
+            result.outcome = "error"
+            result.reason = f"{type(exc).__name__}: {exc}"
+            result.traceback = traceback.format_exc()
+        finally:
+            result.duration = clock() - start
+        await _quietly(ctx.close_all())
+        result.notes = list(ctx.notes)
+        result.packets = list(ctx.transcript)
+        self._judge(result, ctx, failure)
+        self._check_attribution(result, ctx, failure)
+        return result
+
+    @staticmethod
+    def _check_attribution(result: CaseResult, ctx: CaseContext, failure: CaseFailure | None) -> None:
+        """A violation of a clause the case does not declare (and no invariant reported) is a bug of
+        the suite, whichever way it was raised: the case ends as ``error`` naming case and clause."""
+        reported = [(s.clause, s.invariant) for s in ctx.soft_failures]
+        if failure is not None:
+            reported.insert(0, (failure.clause, failure.invariant))
+        for clause, invariant in reported:
+            problem = attribution_problem(result.id, result.clauses, clause, invariant)
+            if problem is not None:
+                result.outcome = "error"
+                result.reason = f"bug of the suite: {problem}"
+                return
+
+    def _judge(self, result: CaseResult, ctx: CaseContext, failure: CaseFailure | None) -> None:
+        strict = self.config.options.strict
+        counted = {"MUST", "SHOULD"} if strict else {"MUST"}
+        if failure is not None:
+            result.violations.append(replace(failure.violation, level=failure.level or result.level))
+        result.violations += ctx.soft_failures
+        if result.outcome in ("pass",) and result.violations:
+            result.outcome = "fail" if any(v.level in counted for v in result.violations) else "warn"
+        if result.known_failing:
+            if result.outcome in ("fail", "error"):
+                result.outcome = "known-fail"
+            elif result.outcome in ("pass", "warn"):
+                result.outcome = "fixed"
+
+
+async def _quietly(awaitable: object) -> None:
+    """Await cleanup with a bound, swallowing what the dying target throws at it."""
+    try:
+        async with asyncio.timeout(CLOSE_GRACE):
+            await awaitable  # type: ignore[misc]
+    except Exception:
+        pass
