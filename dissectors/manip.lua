@@ -89,9 +89,9 @@ local SEVERITIES = {
 }
 
 local ERROR_CODES = {
-  ["NAP"] = "No arm power (a motion refused, or power lost while moving)",
-  ["AWA"] = "Arm motion was aborted; no further motion until a reset (W: the segments a guard dropped)",
-  ["JOR"] = "Joint out of range (a joint-angle request)",
+  ["NAP"] = "No arm power",
+  ["AWA"] = "Arm motion was aborted; no further motion until a reset",
+  ["JOR"] = "Joint out of range",
   ["TOR"] = "Solution of a transform gave out-of-range joints (or none)",
   ["NZI"] = "No zero index found on joint(s)",
   ["UOP"] = "Unknown opcode",
