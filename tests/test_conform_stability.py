@@ -136,3 +136,33 @@ def test_a_simulated_run_capture_replays_cleanly(tmp_path: Path) -> None:
     assert len(passed) > 200  # every session's exchange and checks
     skipped = [c["reason"] for c in report["cases"] if c["outcome"] == "skip"]
     assert all("never opened" in reason for reason in skipped)  # the refused second client only
+
+
+# The simulated world: everything that runs on the run's loop in virtual time.  Reading the wall clock
+# here makes a verdict depend on how busy the machine is (a case once timed a move with
+# time.monotonic and failed at random under load).
+SIMULATED = (
+    "conformance/cases",
+    "conformance/suite",
+    "conformance/judge",
+    "reference_server",
+    "arm",
+    "cougar",
+    "ncp",
+    "links",
+)
+# The run's own report: when it started and how long it took, in wall time, for people.
+WALL_CLOCK_ALLOWED = {"conformance/suite/runner.py": 3, "conformance/suite/context.py": 1}
+WALL_CLOCK = ("time.monotonic", "time.perf_counter", "time.time", "datetime.now", "from time import")
+
+
+def test_the_simulated_world_reads_time_only_from_the_loop() -> None:
+    src = Path(__file__).resolve().parent.parent / "src" / "manip"
+    found: dict[str, int] = {}
+    for area in SIMULATED:
+        for path in sorted((src / area).rglob("*.py")):
+            code = [line.split("#")[0] for line in path.read_text().splitlines()]
+            hits = sum(line.count(word) for line in code for word in WALL_CLOCK)
+            if hits:
+                found[str(path.relative_to(src))] = hits
+    assert found == WALL_CLOCK_ALLOWED

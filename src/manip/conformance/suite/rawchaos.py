@@ -26,7 +26,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import struct
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Final
@@ -313,7 +312,8 @@ class RawPeer:
     address: LinkAddress
     _transport: _Transport
     on_packet: PacketHook | None = None
-    clock: Callable[[], float] = time.monotonic
+    clock: Callable[[], float] | None = None
+    """Times of what arrives (default: the event loop's clock, virtual in a simulated run)."""
     inbox: list[Received] = field(default_factory=list)
     bad: list[tuple[bytes, DecodeError]] = field(default_factory=list)
     sent: list[tuple[Packet, bytes]] = field(default_factory=list)
@@ -322,6 +322,7 @@ class RawPeer:
     def __post_init__(self) -> None:
         self._arrived = asyncio.Event()
         self._transport.deliver = self._deliver
+        self._now: Callable[[], float] = self.clock or asyncio.get_running_loop().time
 
     @classmethod
     async def open(
@@ -329,7 +330,7 @@ class RawPeer:
         address: str | LinkAddress,
         *,
         on_packet: PacketHook | None = None,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] | None = None,
         timeout: float = 5.0,
     ) -> RawPeer:
         """Open the link to the target at ``address`` (tcp:// or chudp://); :class:`RawError` if not."""
@@ -409,7 +410,7 @@ class RawPeer:
         if isinstance(item, DecodeError):
             self.bad.append((raw, item))
         else:
-            self.inbox.append(Received(item, raw, self.clock()))
+            self.inbox.append(Received(item, raw, self._now()))
             if self.on_packet is not None:
                 self.on_packet("s2c", item, raw)
         self._arrived.set()

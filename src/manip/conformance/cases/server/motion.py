@@ -4,7 +4,6 @@ segment numbers and asynchronous segment-completed responses, free joint."""
 from __future__ import annotations
 
 import asyncio
-import time
 from itertools import pairwise
 
 from manip.conformance.cases._support import (
@@ -251,9 +250,9 @@ async def reply_before_motion(ctx: CaseContext) -> None:
     await power_on(ctx, probe)
     before = await read_floats(ctx, probe, "joint-angles")
     goal = _away_from_zero(before, 20.0)
-    start = time.monotonic()
+    start = ctx.clock()
     answer = await probe.call("set-joint-angles", joints=goal)
-    took = time.monotonic() - start
+    took = ctx.clock() - start
     _expect_segment_reply(ctx, answer, "a segment-number reply")
     now = await read_floats(ctx, probe, "joint-angles")
     ctx.expect(
@@ -295,14 +294,14 @@ async def speed_bounds(ctx: CaseContext) -> None:
 async def _segment_time(ctx: CaseContext, probe: Probe, factor: float, by: float) -> float:
     answer = await probe.call("set-speed", factor=factor)
     require_response(ctx, answer, f"speed factor {factor!r} accepted")
-    start = time.monotonic()
+    start = ctx.clock()  # the run's clock: simulated seconds in virtual time
     segment = await _small_move(ctx, probe, by)
     while True:
         packet = await probe.next_packet(5.0)
         if packet is None:  # server.async.segment-completed judges the missing report
             ctx.skip(f"the case times moves by their segment-completed reports; none came for {segment}")
         if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(packet.data, 6) == segment:
-            return time.monotonic() - start
+            return ctx.clock() - start
 
 
 @case(
