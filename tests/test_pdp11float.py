@@ -273,6 +273,46 @@ def test_encode_matches_rational_oracle(x: float, rounding: str, underflow: str)
         assert got == ("ok", want)
 
 
+# The scalar fast paths (default policies) against the oracles: the switch to the checked path sits at
+# 2^-128 and just below 2^126, so values straddling both are drawn on purpose.
+_FAST_EDGES = [
+    math.ldexp(1.0, 126) - math.ldexp(1.0, 101),
+    math.ldexp(1.0, 126) - math.ldexp(1.0, 102),
+    math.ldexp(1.0, 126),
+    math.ldexp(1.0, -126),
+    F_MIN_NORMAL,
+    F_MIN_NORMAL * (1 - 2**-25),
+    F_MIN_NORMAL * (1 - 2**-24),
+]
+fast_edges = st.tuples(st.sampled_from(_FAST_EDGES), st.integers(-3, 3), st.booleans()).map(
+    lambda t: -math.nextafter(t[0], math.inf * t[1]) if t[2] else math.nextafter(t[0], math.inf * t[1])
+)
+
+
+@settings(max_examples=400)
+@given(floats_any | fast_edges, underflows)
+def test_half_even_encode_matches_the_oracle_either_side_of_the_fast_path(x: float, underflow: str) -> None:
+    want = oracle_bytes(x, "half-even", underflow)
+    got = _outcome(pack_f, x, underflow=underflow)
+    assert got == ("ok", want) if isinstance(want, bytes) else got[:2] == (EncodeError, want)
+
+
+@settings(max_examples=400)
+@given(any_pattern, st.integers(0, 5))
+def test_default_decode_matches_the_oracle_at_any_offset(u: int, offset: int) -> None:
+    buf = bytes(range(offset)) + u.to_bytes(4, "little")
+    if _is_reserved(u):
+        with pytest.raises(DecodeError) as info:
+            unpack_f(buf, offset)
+        assert (info.value.clause, info.value.offset) == ("float.reserved-operand", offset)
+    else:
+        assert _same(unpack_f(buf, offset), oracle_value(u))
+    with pytest.raises(DecodeError):
+        unpack_f(buf[:-1], offset)  # one byte short
+    with pytest.raises(DecodeError):
+        unpack_f(buf, -4)  # never read from the end
+
+
 @settings(max_examples=200)
 @given(st.floats(width=32) | st.floats(width=16), roundings, underflows)
 def test_numpy_scalar_inputs_match_the_oracle(x: float, rounding: str, underflow: str) -> None:

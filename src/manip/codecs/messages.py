@@ -279,6 +279,11 @@ def request_op(key: int | str) -> RequestOpcode:
 def encode_request(op: int | str, **values: Any) -> bytes:
     """Data bytes of a request packet (its Chaos opcode is ``request_op(op).opcode``)."""
     spec_op = request_op(op)
+    fast = _codec(spec_op.request).fast
+    if fast is not None:
+        data = fast.build(values)
+        if data is not None:
+            return data
     return _build(spec_op.request, values, spec_op.name)
 
 
@@ -411,13 +416,19 @@ def response_layout(op: RequestOpcode) -> Layout:
 def encode_reply(op: int | str, request_number: int, **values: Any) -> bytes:
     """Data of a RESPONSE packet answering ``op`` (for a multi reply: one text chunk)."""
     spec_op = request_op(op)
+    layout = response_layout(spec_op)
+    fast = _codec(layout).fast_numbered
+    if fast is not None:  # (never a multi reply: text has no fast plan)
+        data = fast.build(values, request_number)
+        if data is not None:
+            return data
     if spec_op.response.kind == "multi" and not any(values.values()):
         raise EncodeError(
             f"{spec_op.name}.reply: an empty chunk would end the reply; use encode_terminator",
             path=f"{spec_op.name}.reply",
             clause="multi.terminated-by-empty",
         )
-    return _build(response_layout(spec_op), values, f"{spec_op.name}.reply", request_number)
+    return _build(layout, values, f"{spec_op.name}.reply", request_number)
 
 
 def encode_terminator(request_number: int) -> bytes:
