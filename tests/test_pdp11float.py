@@ -313,6 +313,37 @@ def test_default_decode_matches_the_oracle_at_any_offset(u: int, offset: int) ->
         unpack_f(buf, -4)  # never read from the end
 
 
+@settings(max_examples=300)
+@given(st.lists(any_pattern, max_size=20), st.sampled_from(["error", "zero"]))
+def test_array_decode_of_few_and_many_floats_matches_the_oracle(us: list[int], reserved: str) -> None:
+    """Up to 16 floats take the scalar tables, more the vectorised path: both against the oracle."""
+    raw = b"".join(u.to_bytes(4, "little") for u in us)
+    for copies in (1, 5):
+        reserved_at = next((i for i, u in enumerate(us * copies) if _is_reserved(u)), None)
+        if reserved_at is not None and reserved == "error":
+            with pytest.raises(DecodeError) as info:
+                unpack_f_array(raw * copies, reserved=reserved)  # type: ignore[arg-type]
+            assert info.value.offset == 4 * reserved_at
+            continue
+        got = unpack_f_array(raw * copies, reserved=reserved).tolist()  # type: ignore[arg-type]
+        assert all(_same(a, oracle_value(u)) for a, u in zip(got, us * copies, strict=True))
+
+
+@settings(max_examples=300)
+@given(st.lists(floats_any | fast_edges, max_size=20), underflows)
+def test_array_encode_of_few_and_many_floats_matches_the_oracle(xs: list[float], underflow: str) -> None:
+    for copies in (1, 5):
+        wants = [oracle_bytes(x, "half-even", underflow) for x in xs * copies]
+        bad = next((i for i, w in enumerate(wants) if isinstance(w, str)), None)
+        array = np.array(xs * copies, dtype=np.float64)
+        if bad is not None:
+            with pytest.raises(EncodeError) as info:
+                pack_f_array(array, underflow=underflow)  # type: ignore[arg-type]
+            assert (info.value.clause, info.value.offset) == (wants[bad], 4 * bad)
+            continue
+        assert pack_f_array(array, underflow=underflow) == b"".join(wants)  # type: ignore[arg-type, misc]
+
+
 @settings(max_examples=200)
 @given(st.floats(width=32) | st.floats(width=16), roundings, underflows)
 def test_numpy_scalar_inputs_match_the_oracle(x: float, rounding: str, underflow: str) -> None:

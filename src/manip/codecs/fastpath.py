@@ -34,6 +34,7 @@ from manip.spec import Layout
 _EDGE_EXPONENT = bytes(1 if b & 0x7F in (0, 0x7F) else 0 for b in range(256))
 _SIGN_ONLY = 0x80  # sign 1, exponent 0 or 1: the reserved operand (or a tiny negative number)
 _TIMES_4 = (4.0).__mul__
+_QUARTER = (0.25).__mul__
 _FLOAT_TYPE = frozenset((float,))
 
 
@@ -43,7 +44,7 @@ class FastLayout:
 
     size: int
     values: struct.Struct  # big-endian view of the word-swapped data: H/h words, f floats (x4)
-    high_bytes: Any  # slice (or itemgetter) of each float's w0 high byte in the raw data
+    high_bytes: Any  # data -> bytes: each float's w0 high byte in the raw data
     float_get: Any  # itemgetter of the float positions in the unpacked tuple (None: no floats)
     fields: tuple[tuple[str, slice, bool, bool], ...]  # name, slice of the unpacked tuple, is float, single
     numbered: bool
@@ -85,9 +86,7 @@ class FastLayout:
         packed.byteswap()
         data = packed.tobytes()
         if self.float_get is not None:
-            high = (
-                data[self.high_bytes] if isinstance(self.high_bytes, slice) else bytes(self.high_bytes(data))
-            )
+            high = self.high_bytes(data)
             flagged = high.translate(_EDGE_EXPONENT).count(1)
             if flagged and (flagged != self.float_get(args).count(0.0) or _SIGN_ONLY in high):
                 return None
@@ -104,9 +103,7 @@ class FastLayout:
             # The high byte of each float's sign/exponent word holds the sign and the top 7 exponent
             # bits: only 0 (exponent 0 or 1) or 0x7F (254 or 255) there can mean a float that the IEEE
             # reading gets wrong.  Such floats are accepted only if they are all clean zeros.
-            high = (
-                data[self.high_bytes] if isinstance(self.high_bytes, slice) else bytes(self.high_bytes(data))
-            )
+            high = self.high_bytes(data)
             flagged = high.translate(_EDGE_EXPONENT).count(1)
             if flagged and (flagged != self.float_get(vals).count(0.0) or _SIGN_ONLY in high):
                 return None
@@ -114,7 +111,7 @@ class FastLayout:
         for name, where, is_float, single in self.fields:
             chunk: Any = vals[where]
             if is_float:
-                chunk = tuple([v * 0.25 for v in chunk])
+                chunk = tuple(map(_QUARTER, chunk))
             out[name] = chunk[0] if single else chunk
         return (vals[0] if self.numbered else None), out
 
@@ -147,7 +144,7 @@ def plan(layout: Layout, *, numbered: bool) -> FastLayout | None:
         getter = itemgetter(*float_positions)
     if high:
         contiguous = high == list(range(high[0], high[-1] + 1, 4))
-        high_bytes = slice(high[0], high[-1] + 1, 4) if contiguous else _bytes_at(high)
+        high_bytes = itemgetter(slice(high[0], high[-1] + 1, 4)) if contiguous else _bytes_at(high)
     return FastLayout(
         size=values.size,
         values=values,

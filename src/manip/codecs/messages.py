@@ -444,8 +444,46 @@ def encode_multi_text(request_number: int, text: str) -> list[bytes]:
     return [*chunks, encode_terminator(request_number)]
 
 
+class _ReplyBuilder:
+    """A plain class with :class:`Reply`'s slots: building one and reassigning ``__class__`` skips the
+    frozen dataclass's ``__init__`` (see :func:`~manip.codecs.packet.make_packet`, the same trick)."""
+
+    __slots__ = Reply.__slots__
+
+    def __init__(
+        self, request_number: int, op: RequestOpcode, values: dict[str, Value], payload: bytes
+    ) -> None:
+        self.request_number = request_number
+        self.op = op
+        self.values = values
+        self.payload = payload
+
+
+_REPLY_PLANS: dict[int | str, tuple[RequestOpcode, FastLayout | None]] = {}
+"""Per request opcode (by number and by name): its spec entry and the fast plan of its reply, if any."""
+
+
+def _reply_plan(op: int | str | RequestOpcode) -> tuple[RequestOpcode, FastLayout | None]:
+    """The plan for ``op``, remembered when ``op`` is a number or a name (a spec entry is used as is)."""
+    if isinstance(op, RequestOpcode):
+        return op, _codec(response_layout(op)).fast_numbered
+    spec_op = request_op(op)
+    entry = _REPLY_PLANS[op] = (spec_op, _codec(response_layout(spec_op)).fast_numbered)
+    return entry
+
+
 def decode_reply(data: bytes, op: int | str | RequestOpcode | None = None) -> Reply:
     """Decode a RESPONSE packet's data; with ``op`` the payload is decoded by that request's layout."""
+    if op is not None:
+        plan = None if isinstance(op, RequestOpcode) else _REPLY_PLANS.get(op)
+        spec_op, fast = plan or _reply_plan(op)
+        if fast is not None:
+            parsed = fast.parse(data)
+            if parsed is not None:  # a numbered plan: the number is an int
+                number, values = parsed
+                reply = _ReplyBuilder(number, spec_op, values, bytes(data[REQUEST_NUMBER_BYTES:]))  # type: ignore[arg-type]
+                reply.__class__ = Reply  # type: ignore[assignment]
+                return reply  # type: ignore[return-value]
     if len(data) < REQUEST_NUMBER_BYTES:
         raise DecodeError(
             f"response has {len(data)} data bytes; the request number needs 2",

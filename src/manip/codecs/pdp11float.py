@@ -371,6 +371,10 @@ def unpack_f_array(
     The first offending element raises the scalar error with ``path="[i]"`` and ``offset=4*i``.
     """
     _check_decode(dirty_zero, reserved)
+    if not isinstance(buf, np.ndarray) and dirty_zero == "zero" and len(buf) <= _SMALL_BYTES:
+        small = _unpack_small(buf)
+        if small is not None:
+            return small
     u = _as_u32(buf)
     image = (u >> 16) | (u << 16)  # word swap (uint32 wraps): sign 31, exponent 30..23, fraction 22..0
     wide = image.astype(np.uint64)
@@ -396,6 +400,44 @@ def unpack_f_array(
             raise AssertionError("unreachable: bulk and scalar decoders disagree")  # pragma: no cover
         bits[zero] = 0
     return bits.view(np.float64)
+
+
+# A few floats at a time (the simulated Cougar's memory, a reply's transform): numpy's fixed cost per
+# call is many times the work, so these go through the scalar fast paths above and one array build.
+# Whatever those decline (a reserved operand, a value near the range ends, another policy) takes the
+# vectorised path below, which decides.
+
+_SMALL_BYTES: Final = 64
+_SMALL_WORDS: Final = [struct.Struct(f"<{n}H") for n in range(_SMALL_BYTES // 2 + 1)]
+
+
+def _unpack_small(buf: bytes | bytearray | memoryview) -> npt.NDArray[np.float64] | None:
+    """Default-dirty-zero decode of up to 16 floats, or None when the vectorised path must decide."""
+    size = len(buf)
+    if size & 3:
+        return None
+    words = _SMALL_WORDS[size >> 1].unpack(buf)
+    try:
+        values = [
+            _DECODE_BASE[w0] + _DECODE_SCALE[w0] * w1 for w0, w1 in zip(words[::2], words[1::2], strict=True)
+        ]
+    except TypeError:
+        return None  # a reserved operand
+    return np.array(values, dtype=np.float64)
+
+
+def _pack_small(x: npt.NDArray[np.float64]) -> bytes | None:
+    """Half-even encode of a few float64 values, or None when the vectorised path must decide."""
+    out = []
+    for v in x.tolist():
+        if _FAST_HIGH > v >= F_MIN_NORMAL or -_FAST_HIGH < v <= -F_MIN_NORMAL:
+            y = v * 4.0
+            out.append(_PACK_TWICE(y, y)[2:6])
+        elif v == 0.0:
+            out.append(_ZERO_BYTES)
+        else:
+            return None
+    return b"".join(out)
 
 
 def _float64_values(
@@ -441,6 +483,15 @@ def pack_f_array(
     offending element raises the scalar error with ``path="[i]"`` and ``offset=4*i``.
     """
     _check_encode(rounding, underflow)
+    if (
+        rounding == "half-even"
+        and isinstance(values, np.ndarray)
+        and values.dtype == np.float64
+        and values.size <= _SMALL_BYTES // 4
+    ):
+        small = _pack_small(values.reshape(-1))
+        if small is not None:
+            return small
     x, type_error = _float64_values(values)
     if isinstance(x, list):
         out = bytearray()
