@@ -316,7 +316,7 @@ def test_default_decode_matches_the_oracle_at_any_offset(u: int, offset: int) ->
 @settings(max_examples=300)
 @given(st.lists(any_pattern, max_size=20), st.sampled_from(["error", "zero"]))
 def test_array_decode_of_few_and_many_floats_matches_the_oracle(us: list[int], reserved: str) -> None:
-    """Up to 16 floats take the scalar tables, more the vectorised path: both against the oracle."""
+    """Up to 64 floats take the scalar tables, more the vectorised path: both against the oracle."""
     raw = b"".join(u.to_bytes(4, "little") for u in us)
     for copies in (1, 5):
         reserved_at = next((i for i, u in enumerate(us * copies) if _is_reserved(u)), None)

@@ -407,12 +407,12 @@ def unpack_f_array(
 # Whatever those decline (a reserved operand, a value near the range ends, another policy) takes the
 # vectorised path below, which decides.
 
-_SMALL_BYTES: Final = 64
+_SMALL_BYTES: Final = 256
 _SMALL_WORDS: Final = [struct.Struct(f"<{n}H") for n in range(_SMALL_BYTES // 2 + 1)]
 
 
 def _unpack_small(buf: bytes | bytearray | memoryview) -> npt.NDArray[np.float64] | None:
-    """Default-dirty-zero decode of up to 16 floats, or None when the vectorised path must decide."""
+    """Default-dirty-zero decode of up to 64 floats, or None when the vectorised path must decide."""
     size = len(buf)
     if size & 3:
         return None
