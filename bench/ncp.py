@@ -60,6 +60,33 @@ class _Echo(asyncio.Protocol):
             del buf[:size]
 
 
+class _HopEcho(_Echo):
+    """The raw echo, but each frame is answered by a task woken for it, as a server handler is: the
+    asyncio hop that any connection object with an ``await receive()`` puts on the server's path."""
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        super().connection_made(transport)
+        self.frames: asyncio.Queue[bytes] = asyncio.Queue()
+        self.task = asyncio.get_running_loop().create_task(self._answer())
+
+    async def _answer(self) -> None:
+        while True:
+            frame = await self.frames.get()
+            assert self.transport is not None
+            self.transport.write(frame)
+
+    def data_received(self, data: bytes) -> None:
+        buf = self.buf
+        buf += data
+        size = len(FRAME)
+        while len(buf) >= size:
+            self.frames.put_nowait(bytes(buf[:size]))
+            del buf[:size]
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.task.cancel()
+
+
 class _EchoClient(asyncio.Protocol):
     """Raw baseline client: one frame out, wait for one frame back."""
 
@@ -215,6 +242,30 @@ async def _throughput(ports: Servers, packets: int, options: NcpOptions) -> None
     print(f"  one-way, {packets} packets of 66 bytes, window {options.window}:")
     mb = rate * len(PAYLOAD) / 1e6
     print(f"    {rate:,.0f} packets/s ({mb:.2f} MB/s of data); the sender waited {waits} times")
+
+
+async def hop_bound(rounds: int) -> tuple[float, float]:
+    """p50 round trips (s) of the raw echo and of the same echo answering from a task, one event loop,
+    alternating: what one task hop per packet costs, before any protocol work."""
+    loop = asyncio.get_running_loop()
+    servers = [await loop.create_server(cls, "127.0.0.1", 0) for cls in (_Echo, _HopEcho)]
+    clients = []
+    for server in servers:
+        port = server.sockets[0].getsockname()[1]
+        clients.append(await loop.create_connection(_EchoClient, "127.0.0.1", port))
+    samples: list[list[float]] = [[], []]
+    clock = time.perf_counter
+    for i in range(rounds + rounds // 10):
+        for k in (0, 1) if i & 1 else (1, 0):
+            t0 = clock()
+            await clients[k][1].round_trip()
+            if i >= rounds // 10:  # after a warm-up
+                samples[k].append(clock() - t0)
+    for transport, _ in clients:
+        transport.close()
+    for server in servers:
+        server.close()
+    return statistics.median(samples[0]), statistics.median(samples[1])
 
 
 async def same_loop_round_trips(rounds: int, trials: int, options: NcpOptions) -> RoundTrips:

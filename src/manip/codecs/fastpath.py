@@ -38,7 +38,7 @@ _QUARTER = (0.25).__mul__
 _FLOAT_TYPE = frozenset((float,))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class FastLayout:
     """Precomputed struct formats and slices for one fixed-size numeric layout."""
 
