@@ -276,7 +276,7 @@ _DECODE_BASE, _DECODE_SCALE = _decode_tables()
 def pack_f(x: FloatLike, *, rounding: Rounding = "half-even", underflow: Underflow = "zero") -> bytes:
     """The four wire bytes of ``x``: ``[w0.lo, w0.hi, w1.lo, w1.hi]``."""
     if type(x) is float and rounding == "half-even":
-        if _FAST_HIGH > x >= F_MIN_NORMAL or -_FAST_HIGH < x <= -F_MIN_NORMAL:
+        if F_MIN_NORMAL <= abs(x) < _FAST_HIGH:
             y = x * 4.0
             return _PACK_TWICE(y, y)[2:6]
         if x == 0.0 and underflow in UNDERFLOW_POLICIES:
