@@ -34,7 +34,6 @@ from manip.spec import Layout
 _EDGE_EXPONENT = bytes(1 if b & 0x7F in (0, 0x7F) else 0 for b in range(256))
 _SIGN_ONLY = 0x80  # sign 1, exponent 0 or 1: the reserved operand (or a tiny negative number)
 _TIMES_4 = (4.0).__mul__
-_QUARTER = (0.25).__mul__
 _FLOAT_TYPE = frozenset((float,))
 
 
@@ -111,7 +110,7 @@ class FastLayout:
         for name, where, is_float, single in self.fields:
             chunk: Any = vals[where]
             if is_float:
-                chunk = tuple(map(_QUARTER, chunk))
+                chunk = tuple([v * 0.25 for v in chunk])
             out[name] = chunk[0] if single else chunk
         return (vals[0] if self.numbered else None), out
 
@@ -141,7 +140,9 @@ def plan(layout: Layout, *, numbered: bool) -> FastLayout | None:
     if len(float_positions) == 1:
         getter = _one(float_positions[0])  # a tuple even for one float, so the check can count it
     elif float_positions:
-        getter = itemgetter(*float_positions)
+        first, last = float_positions[0], float_positions[-1]
+        contiguous = float_positions == list(range(first, last + 1))
+        getter = itemgetter(slice(first, last + 1)) if contiguous else itemgetter(*float_positions)
     if high:
         contiguous = high == list(range(high[0], high[-1] + 1, 4))
         high_bytes = itemgetter(slice(high[0], high[-1] + 1, 4)) if contiguous else _bytes_at(high)

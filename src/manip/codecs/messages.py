@@ -445,20 +445,17 @@ def encode_multi_text(request_number: int, text: str) -> list[bytes]:
 
 
 class _ReplyBuilder:
-    """A plain class with :class:`Reply`'s slots: building one and reassigning ``__class__`` skips the
+    """A plain class with :class:`Reply`'s slots: filling one and reassigning ``__class__`` skips the
     frozen dataclass's ``__init__`` (see :func:`~manip.codecs.packet.make_packet`, the same trick)."""
 
     __slots__ = Reply.__slots__
-
-    def __init__(
-        self, request_number: int, op: RequestOpcode, values: dict[str, Value], payload: bytes
-    ) -> None:
-        self.request_number = request_number
-        self.op = op
-        self.values = values
-        self.payload = payload
+    request_number: int
+    op: RequestOpcode
+    values: dict[str, Value]
+    payload: bytes
 
 
+_new_reply = object.__new__
 _REPLY_PLANS: dict[int | str, tuple[RequestOpcode, FastLayout | None]] = {}
 """Per request opcode (by number and by name): its spec entry and the fast plan of its reply, if any."""
 
@@ -480,8 +477,10 @@ def decode_reply(data: bytes, op: int | str | RequestOpcode | None = None) -> Re
         if fast is not None:
             parsed = fast.parse(data)
             if parsed is not None:  # a numbered plan: the number is an int
-                number, values = parsed
-                reply = _ReplyBuilder(number, spec_op, values, bytes(data[REQUEST_NUMBER_BYTES:]))  # type: ignore[arg-type]
+                reply = _new_reply(_ReplyBuilder)
+                reply.request_number, reply.values = parsed  # type: ignore[assignment]
+                reply.op = spec_op
+                reply.payload = data[REQUEST_NUMBER_BYTES:] if type(data) is bytes else bytes(data[2:])
                 reply.__class__ = Reply  # type: ignore[assignment]
                 return reply  # type: ignore[return-value]
     if len(data) < REQUEST_NUMBER_BYTES:
