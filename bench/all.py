@@ -175,7 +175,7 @@ def session_here_seconds(count: int = 20000) -> float:
 
 
 def server_rows(requests: int, rounds: int) -> list[Row]:
-    async def measure() -> tuple[list[server_bench.Result], list[server_bench.Result]]:
+    async def measure() -> tuple[list[server_bench.Result], list[server_bench.Result], float]:
         child = server_bench.Child(False)
         ours: list[server_bench.Result] = []
         base: list[server_bench.Result] = []
@@ -186,11 +186,19 @@ def server_rows(requests: int, rounds: int) -> list[Row]:
                 pattern = server_bench.one_at_a_time
                 base.append(await server_bench.scenario(child, child.echo_url, False, clients, n, pattern))
                 ours.append(await server_bench.scenario(child, child.server_url, True, clients, n, pattern))
+            # The servo's CPU with one silent client: its spin before each tick, paid per second.
+            idle = await server_bench._connect(child.server_url, True)
+            before = child.mark()
+            started = time.perf_counter()
+            await asyncio.sleep(1.0)
+            servo = (child.mark()["cpu"] - before["cpu"]) / (time.perf_counter() - started)
+            await idle.close()
         finally:
             child.close()
-        return ours, base
+        return ours, base, servo
 
-    ours, base = asyncio.run(measure())
+    ours, base, servo = asyncio.run(measure())
+    rate = statistics.median(r.rate for r in ours)
     cpu = statistics.median(r.cpu_per_request for r in ours) * 1e6
     cpu_base = statistics.median(r.cpu_per_request for r in base) * 1e6
     session = session_here_seconds() * 1e6
@@ -205,7 +213,8 @@ def server_rows(requests: int, rounds: int) -> list[Row]:
             cpu / cpu_base,
             1.3,
             False,
-            f"{statistics.median(r.rate for r in ours):,.0f} Here/s through the whole path; {bound}",
+            f"{rate:,.0f} Here/s through the whole path; {bound}; the servo alone (its spin and ticks,"
+            f" one silent client) {servo * 1e3:.0f} ms CPU/s, {servo / rate * 1e6:.1f} us per Here here",
         )
     ]
 
