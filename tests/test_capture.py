@@ -223,7 +223,7 @@ def test_every_view_and_event_message_matches_its_json_schema(tmp_path: Path) ->
             assert schema is not None and schema.encoding == "jsonschema"
             _validate(json.loads(message.data), json.loads(schema.data))
             seen.add(channel.topic)
-    assert seen == {"/manip/c2s", "/manip/s2c", "/manip/events"}
+    assert seen == {"/manip/c2s", "/manip/s2c", "/manip/events", "/arm/hand", "/arm/joints"}
 
 
 def test_view_has_plottable_fields_with_the_frames_times(tmp_path: Path) -> None:

@@ -201,3 +201,17 @@ def test_a_recorder_killed_mid_session_loses_at_most_about_a_second(tmp_path: Pa
     assert must_have and must_have <= kept
     assert report.last_message_ns is not None and report.last_message_ns > killed_at - 1_250_000_000
     assert os.path.getsize(fixed) > 0
+
+
+def test_recover_writes_the_default_name_its_help_gives(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from manip.captures.cli import main as capture_main
+
+    source = tmp_path / "s.mcap"
+    source.write_bytes((Path(__file__).resolve().parents[1] / "captures" / "motion.mcap").read_bytes())
+    help_text = CliRunner().invoke(capture_main, ["recover", "--help"]).output
+    assert "s.mcap -> s.recovered.mcap" in " ".join(help_text.split())
+    result = CliRunner().invoke(capture_main, ["recover", str(source)])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "s.recovered.mcap").exists() and not (tmp_path / "s.mcap.recovered.mcap").exists()

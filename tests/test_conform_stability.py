@@ -22,6 +22,7 @@ def _invoke(*args: str) -> tuple[int, str]:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(900)  # 21 whole runs: about 75 s on an idle 2-core machine
 def test_twenty_seeds_are_conformant_and_each_seed_repeats_itself(tmp_path: Path) -> None:
     report_path = tmp_path / "repeat.json"
     code, output = _invoke("--repeat", "20", "-q", "--seed", "20261126", "--json", str(report_path))

@@ -2,15 +2,26 @@
 
 from __future__ import annotations
 
+import io
 import json
+import select
+import subprocess
+import sys
+from importlib.resources import files
+from pathlib import Path
+from typing import Any
 
+import pytest
 from click.testing import CliRunner
 
 from manip.codecs import ErrorMessage, Packet, encode_chudp, encode_reply, encode_request, encode_tcp
-from manip.codecs.framing import encode_chaosd
+from manip.codecs.framing import FRAMINGS, encode_chaosd
 from manip.codecs.messages import encode_error, guard_hit
 from manip.decode.cli import main
+from manip.spec import SPEC
 from manip.spec.constants import RequestOp, ServerOp
+
+ROOT = Path(__file__).resolve().parents[1]
 
 RFC_PUMA = "01010000010000040120000001010a01000100005550414d012001015a1a"  # notes §8 vector 1
 
@@ -68,7 +79,10 @@ def test_json_and_async() -> None:
 def test_hexdump_annotates_fields() -> None:
     code, out, _ = _run("--format", "hexdump", RFC_PUMA)
     assert code == 0
-    assert "0000  00 01 04 00 20 01" in out  # the packet in PDP-11 memory order
+    assert out.startswith("wire order (chudp: ")  # the header line says which order and from where
+    assert "0000  01 01 00 00 01 00 00 04 01 20" in out  # the datagram as it was on the wire
+    assert "  0004-0004  chaos header         opcode" in out  # opcode: high byte of word 0, sent first
+    assert "  0014-0017  rfc                  contact          PUMA" in out  # 'UPAM' on the wire
     assert "packet number" in out
 
 
@@ -109,3 +123,157 @@ def test_usage_errors_exit_2() -> None:
 def test_stdin() -> None:
     code, out, _ = _run("-", stdin=RFC_PUMA + "\n")
     assert code == 0 and "PUMA" in out
+
+
+# ---------------------------------------------------------------------------------------- issue 14
+
+
+def test_a_missing_file_is_called_that(tmp_path: Path) -> None:
+    for args in (["nosuch.bin"], ["--mcap", "nosuch.mcap"], ["--pcap", "nosuch.pcap"]):
+        code, _, err = _run(*args)
+        assert code == 2 and "no such file: nosuch." in err, (args, err)
+        assert "hexadecimal" not in err and "hex digit" not in err
+    code, _, err = _run(str(tmp_path))
+    assert code == 2 and "is a directory" in err
+
+
+def test_empty_input_is_handled_the_same_on_every_link() -> None:
+    for link in sorted(FRAMINGS):
+        code, out, err = _run("--link", link, "-", stdin="")
+        assert (code, out) == (1, ""), link
+        assert err == f"manip-decode: empty input: no {link} frame to decode\n"
+        assert _run("--link", link, "--format", "json", "-", stdin="")[1] == "[]\n"
+
+
+def _flat(node: dict[str, Any]) -> dict[str, Any]:
+    return {c["label"]: c.get("value") for c in node.get("children", [])}
+
+
+def test_body_decodes_the_golden_vectors() -> None:
+    vectors = json.loads((files("manip.vectors") / "manip.json").read_text())["vectors"]
+    seen = set()
+    for v in vectors:
+        kind = v["kind"]
+        if kind == "request":
+            args = ["--body", "request", v["opcode"]]
+        elif kind in ("reply", "terminator"):
+            args = ["--body", "response", v["request_opcode"]]
+        elif kind == "error":
+            args = ["--body", "response", SPEC.server_opcodes[int(v["opcode"], 8)].name]
+        elif kind == "async":
+            args = ["--body", "response", "asynchronous-response"]
+        else:
+            continue
+        code, out, err = _run(*args, "--format", "json", v["hex"] or "-", stdin="" if not v["hex"] else None)
+        assert code == 0, (v["name"], out, err)
+        (body,) = json.loads(out)
+        (manip,) = body["children"]
+        fields = _flat(manip)
+        for name, value in v.get("fields", {}).items():
+            assert fields[name] == pytest.approx(value), (v["name"], name)
+        if "request_number" in v:
+            assert fields["request number"] == v["request_number"]
+        if kind == "error":
+            assert fields["rendered"] == v["rendered"] and fields.get("arguments", []) == v["args"]
+        if kind == "async":
+            assert fields["condition"] == v["condition"]
+        seen.add(kind)
+    assert seen == {"request", "reply", "terminator", "error", "async"}
+    code, out, _ = _run("--body", "request", "move", "00" * 44)
+    assert code == 1 and "request.data-length" in out
+    assert _run("--body", "sideways", "move", "00")[0] == 2
+    assert _run("--body", "request", "nope", "00")[0] == 2
+
+
+def test_hexdump_of_a_stream_shows_wire_order_at_absolute_offsets() -> None:
+    first = encode_tcp(_pkt(0o201, b""))
+    second = encode_tcp(_pkt(RequestOp.SET_SPEED, encode_request("set-speed", factor=0.5)))
+    code, out, _ = _run("--link", "tcp", "--format", "hexdump", (first + second).hex())
+    assert code == 0
+    dumps = out.split("\n\n")
+    assert all(d.startswith("wire order (tcp: 2-byte big-endian length") for d in dumps[::2])
+    at = len(first)  # the second frame starts where the first ends
+    assert f"{at:04x}  {second[:16].hex(' ')}" in out
+    factor = at + 2 + 16  # its data: after the length and the Chaos header
+    assert f"  {factor:04x}-{factor + 3:04x}  manip request        factor           0.5" in out
+    # the float's four bytes on the wire are its two words, each most significant byte first
+    assert second[2 + 16 : 2 + 20] == bytes([0x40, 0x00, 0x00, 0x00])
+
+
+def test_filter_by_opcode_and_its_usage() -> None:
+    frames = b"".join(encode_tcp(_pkt(op, b"")) for op in (0o201, 0o202, 0o201, 0o214))
+    code, out, _ = _run("--link", "tcp", "--filter", "opcode=here", "--format", "json", frames.hex())
+    assert code == 0 and [p["children"][1]["value"]["name"] for p in json.loads(out)] == ["here", "here"]
+    code, out, _ = _run("--link", "tcp", "--filter", "opcode=0214", "--filter", "opcode=202", frames.hex())
+    assert code == 0 and "0214 ready" in out and "0202 joint-angles" in out and "0201 here" not in out
+    assert (
+        _run("--link", "tcp", "--filter", "conn=1", frames.hex())[0] == 2
+    )  # no connections outside captures
+    assert _run("--link", "tcp", "--filter", "opcode=nope", frames.hex())[0] == 2
+    assert _run("--link", "tcp", "--filter", "color=red", frames.hex())[0] == 2
+
+
+def test_filter_a_capture_by_request_name_takes_its_replies_too() -> None:
+    code, out, _ = _run("--mcap", str(ROOT / "captures" / "errors.mcap"), "--filter", "opcode=move")
+    assert code == 0, out
+    assert "request move" in out and "E NAP" in out and "joint-angles" not in out
+    code, out, _ = _run("--mcap", str(ROOT / "captures" / "errors.mcap"), "--filter", "conn=2")
+    assert code == 1 and out.count("\n") == 1  # the header line; the capture has one connection
+    assert (
+        "no packet matches --filter"
+        in _run("--mcap", str(ROOT / "captures" / "errors.mcap"), "--filter", "conn=2")[2]
+    )
+
+
+def test_output_starts_before_the_input_ends() -> None:
+    frame = encode_tcp(_pkt(0o201, b""))
+    proc = subprocess.Popen(
+        [str(Path(sys.executable).with_name("manip-decode")), "--link", "tcp", "--binary", "-"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )  # fmt: skip
+    assert proc.stdin is not None and proc.stdout is not None
+    try:
+        proc.stdin.write(frame * 4 + bytes(70_000))  # whole frames, then more than one read block
+        proc.stdin.flush()
+        ready, _, _ = select.select([proc.stdout], [], [], 20)
+        assert ready, "no output while the input is still open"
+        assert proc.stdout.readline().startswith(b"packet: DAT (8-bit data) 0201")
+    finally:
+        proc.kill()
+        proc.communicate(timeout=20)
+
+
+def test_a_bad_frame_in_a_stream_is_shown_in_place_and_the_stream_goes_on() -> None:
+    good = encode_tcp(_pkt(0o201, b""))
+    bad = bytearray(encode_tcp(_pkt(0o202, b"")))
+    bad[-1] ^= 0xFF
+    code, out, err = _run("--link", "tcp", "--format", "json", (good + bytes(bad) + good).hex())
+    assert code == 1 and "1 tcp frame(s) did not decode" in err
+    packets = json.loads(out)
+    assert len(packets) == 3 and packets[1]["label"] == "frame"
+    assert f"tcp frame at byte {len(good)}" in packets[1]["text"]
+    assert packets[1]["children"][0]["value"]["clause"] == "chudp.checksum"
+
+
+def test_hex_text_split_anywhere_decodes_the_same() -> None:
+    from manip.decode.source import Source, byte_blocks
+
+    text = b"0x01 0x01:00,00\n" + b"0101 0x0a01 00ff"
+    want = bytes.fromhex("0101000001010a0100ff")
+
+    class Trickle(io.BytesIO):
+        def read(self, size: int | None = -1) -> bytes:
+            return super().read(3)
+
+    assert b"".join(byte_blocks(Source("t", Trickle(text), True), None)) == want
+
+
+def test_no_python_octal_in_messages() -> None:
+    code, out, _ = _run("--direction", "request", encode_chudp(_pkt(0o277, b"")).hex())
+    assert code == 1 and "opcode 0277 is not a request opcode" in out and "0o" not in out
+
+
+def test_cougar_words_or_a_missing_file() -> None:
+    code, _, err = _run("--cougar", "command", "words.txt")
+    assert code == 2 and "no such file: words.txt" in err
+    assert _run("--cougar", "command", "000d 0003")[0] in (0, 1)  # words, not a file name

@@ -91,7 +91,6 @@ def test_problems() -> None:
         ErrorMessage("arm", "X", "NAP", "x"): "severity",
         ErrorMessage("arm", "E", "NA", "x"): "three letters",
         ErrorMessage("arm", "E", "N4P", "x"): "three letters",
-        ErrorMessage("arm", "E", "ZZZ", "x"): "not one of the spec",
         ErrorMessage("arm", "E", "JOR", "~ ~", (1,)): "fewer",
         ErrorMessage("arm", "E", "JOR", "~", (1, 2)): "more",
         ErrorMessage("arm", "E", "JOR", "~", has_nul=True): "fewer",
@@ -102,9 +101,15 @@ def test_problems() -> None:
     assert ErrorMessage("arm", "E", "JOR", "costs $5 ~").problems == ()
     assert ErrorMessage("arm", "E", "JOR", "costs $5 ~").render() == "arm: E JOR costs $5 ~"
     # the tables are parameters
-    m = parse_error(b"arm: Z QQQ x", severities={"Z"}, codes={"QQQ"})
+    m = parse_error(b"arm: Z QQQ x", severities={"Z"})
     assert m.problems == ()
     assert parse_error(b"arm: Z QQQ x") == m and parse_error(b"arm: Z QQQ x").problems != ()
+
+
+def test_a_code_of_the_servers_own_is_no_problem() -> None:
+    # E.2: "others may be used by specific manipulators"; only the three-letter shape is required.
+    assert ErrorMessage("arm", "E", "XYZ", "m").problems == ()
+    assert ErrorMessage("arm", "E", "XY1", "m").problems != ()
 
 
 def test_spec_tables_are_used() -> None:
@@ -224,3 +229,23 @@ def test_parse_never_crashes(data: bytes, align: bool) -> None:
     else:
         assert isinstance(m.problems, tuple)
         m.render()
+
+
+def test_parse_error_takes_either_form_of_body() -> None:
+    err = ErrorMessage("During calibration", "F", "NZI", "No zero index found on joint(s) $.", (6,))
+    string = err.encode()
+    packet = (3).to_bytes(2, "little") + string  # what a fatal-error packet's data hold
+    assert parse_error(string) == parse_error(packet) == err
+    assert parse_error(packet, body="packet") == parse_error(string, body="string") == err
+    assert parse_error(packet).render().endswith("No zero index found on joint(s) 2 and 3.")
+    with pytest.raises(DecodeError) as caught:
+        parse_error(packet, body="string")
+    assert caught.value.clause == "error-string.format"
+    with pytest.raises(DecodeError) as caught:  # neither reading works: the message says both were tried
+        parse_error((3).to_bytes(2, "little") + b"no separator here")
+    assert "read as an error string" in caught.value.message and "request number 3" in caught.value.message
+    with pytest.raises(DecodeError) as caught:  # offsets count from the start of the bytes given
+        parse_error((3).to_bytes(2, "little") + b"arm: E", body="packet")
+    assert caught.value.offset == 2 + len(b"arm: E") and caught.value.path == "error.code"
+    with pytest.raises(ValueError, match="body must be"):
+        parse_error(string, body="both")  # type: ignore[arg-type]

@@ -93,6 +93,8 @@ def _joint(j: int) -> st.SearchStrategy[float]:
 
 
 legal_q = st.tuples(*(_joint(j) for j in range(6)))
+#: Current angles anywhere, even out of range or a whole turn off (the ±360° choice then matters).
+_ANY = st.tuples(*(st.floats(-400.0, 400.0) for _ in range(6)))
 #: Legal angles with |J5| ≥ 1°, away from the wrist singularity.
 regular_q = st.tuples(
     *(_joint(j) for j in range(4)), st.one_of(st.floats(-100.0, -1.0), st.floats(1.0, 100.0)), _joint(5)
@@ -385,6 +387,51 @@ def test_wrist_singular_poses_are_solved_from_any_current_j4(
         assert got.q[3] == pytest.approx(held, abs=1e-9)
 
 
+@st.composite
+def _limits_and_singular_q(draw: st.DrawFn) -> tuple[JointLimits, tuple[float, ...]]:
+    """Unimation's limits with J4 and J6 ranges of 10° to 400° anywhere, and legal angles with J5 at or
+    near 0."""
+    lower, upper = list(UNIMATION_LIMITS.lower), list(UNIMATION_LIMITS.upper)
+    for j in (3, 5):
+        width, centre = draw(st.floats(10.0, 400.0)), draw(st.floats(-200.0, 200.0))
+        lower[j], upper[j] = centre - width / 2, centre + width / 2
+    q = [draw(st.floats(lower[j], upper[j])) for j in range(6)]
+    # Inside the singular band: just outside it, J4 itself is computed to ~1e-9° only, which a J4 drawn
+    # on its limit can overstep (by more than LIMIT_TOL_DEG) when J4's range is too narrow to flip.
+    q[4] = draw(st.just(0.0) | st.floats(-0.5 * WRIST_SINGULAR_DEG, 0.5 * WRIST_SINGULAR_DEG))
+    return JointLimits(tuple(lower), tuple(upper)), tuple(q)
+
+
+def _pinned(
+    lo4: float, hi4: float, lo6: float, hi6: float, q: Sequence[float]
+) -> tuple[JointLimits, tuple[float, ...]]:
+    lower, upper = list(UNIMATION_LIMITS.lower), list(UNIMATION_LIMITS.upper)
+    lower[3], upper[3], lower[5], upper[5] = lo4, hi4, lo6, hi6
+    return JointLimits(tuple(lower), tuple(upper)), tuple(q)
+
+
+@FAST
+@given(_limits_and_singular_q(), _ANY, st.sampled_from(GEOMETRIES))
+# J4's and J6's ranges leave J4 one angle (here −11 or −17, J4 + J6 = −3 or −13): a margin, or the
+# rounding of J4 + J6, lost it.  With J5 off 0 the fitted J4 + J6 drifts with the held J4 (by 1e-9° from
+# J4 = −0.5 to −107.5 at J5 = −5e-4).
+@example(_pinned(-11.0, -1.0, 8.0, 18.0, (0.0, 0.0, 0.0, -11.0, 0.0, 8.0)), (0.0,) * 6, PUMA560_LEE)
+@example(_pinned(-17.0, -7.0, 4.0, 14.0, (0.0, 0.0, 0.0, -17.0, 0.0, 4.0)), (0.0,) * 6, PUMA560_LEE)
+@example(_pinned(-89.0, -1.0, 174.0, 184.0, (0.0, 0.0, 0.0, -89.0, 1e-4, 174.0)), (0.0,) * 6, PUMA560_LEE)
+@example(_pinned(-107.5, -0.5, 5.0, 15.0, (0.0, 0.0, 0.0, -107.5, -5e-4, 5.0)), (0.0,) * 6, PUMA560_LEE)
+def test_wrist_singular_poses_are_solved_under_narrow_j4_and_j6_ranges(
+    limits_q: tuple[JointLimits, tuple[float, ...]], current: tuple[float, ...], g: PumaGeometry
+) -> None:
+    """The angles themselves are a legal solution, so the singular branch must find one: a J4 in range
+    that leaves J6 an angle in range, even when J6's range is under 360° and the two leave J4 one angle."""
+    limits, q = limits_q
+    pose = forward(q, g)
+    got = nearest_solution(pose, current, g, limits)
+    assert not limits.violations(got.q)
+    reached = forward(got.q, g).distance(pose)
+    assert reached.translation_mm < 1e-3 and reached.rotation_deg <= WRIST_SINGULAR_DEG + 1e-9
+
+
 def test_near_singular_tilt_in_the_held_j4_plane_is_exact() -> None:
     q = (20.0, -60.0, 120.0, 40.0, -0.5 * WRIST_SINGULAR_DEG, 15.0)
     got = nearest_solution(forward(q), (20.0, -60.0, 120.0, 40.0, 0.0, 0.0))
@@ -500,8 +547,6 @@ _WEIGHTS = st.one_of(
     st.tuples(*(st.sampled_from([0.0, 0.5, 1.0, 3.0]) for _ in range(6))),
     st.tuples(*(st.floats(-1.0, 2.0) for _ in range(6))),
 )
-#: Current angles anywhere, even out of range or a whole turn off (the ±360° choice then matters).
-_ANY = st.tuples(*(st.floats(-400.0, 400.0) for _ in range(6)))
 
 
 @settings(max_examples=300, deadline=None)

@@ -15,8 +15,16 @@ from pathlib import Path
 from types import ModuleType
 from typing import Final
 
+from manip.captures import arm_view, pcap, recorder, view
 from manip.captures import format as capture_format
-from manip.captures import recorder, view
+from manip.captures.arm_view import (
+    FRAME_TRANSFORM_SCHEMA,
+    HAND_TOPIC,
+    JOINTS_SCHEMA,
+    JOINTS_TOPIC,
+    frame_transform_schema,
+    joints_schema,
+)
 from manip.captures.format import (
     EVENT_SCHEMA_NAME,
     EVENT_TOPIC,
@@ -87,6 +95,8 @@ def render() -> str:
         out.append(f"| `{VIEW_TOPIC[direction]}` | `json` | `{VIEW_SCHEMA_NAME}` | `jsonschema` |")
     out += [
         f"| `{EVENT_TOPIC}` | `json` | `{EVENT_SCHEMA_NAME}` | `jsonschema` |",
+        f"| `{HAND_TOPIC}` | `json` | `{FRAME_TRANSFORM_SCHEMA}` | `jsonschema` |",
+        f"| `{JOINTS_TOPIC}` | `json` | `{JOINTS_SCHEMA}` | `jsonschema` |",
         "",
         "## Raw frame schemas",
         "",
@@ -108,6 +118,18 @@ def render() -> str:
         "",
         *_json_block(event_schema()),
         "",
+        "## Pictures of the arm",
+        "",
+        _body(arm_view),
+        "",
+        f"`{FRAME_TRANSFORM_SCHEMA}` as a capture registers it:",
+        "",
+        *_json_block(frame_transform_schema()),
+        "",
+        f"`{JOINTS_SCHEMA}`, the JSON Schema of `{JOINTS_TOPIC}`:",
+        "",
+        *_json_block(joints_schema()),
+        "",
         "## Writing",
         "",
         _body(recorder),
@@ -115,6 +137,10 @@ def render() -> str:
         "## Recovering a cut file",
         "",
         _body(RECOVER),
+        "",
+        "## pcap and pcapng",
+        "",
+        _body(pcap),
         "",
         "## What replay compares",
         "",

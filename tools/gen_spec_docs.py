@@ -70,9 +70,19 @@ def render() -> str:
     for sev in SPEC.severities.values():
         ops = ", ".join(f"{o:o}" for o in sev.server_opcodes)
         out.append(f"| {sev.letter} | {sev.meaning} | {ops} |")
-    out += ["", "## Error codes", "", "| code | meaning | arguments | defined by |", "|---|---|---|---|"]
+    out += [
+        "",
+        "## Error codes",
+        "",
+        "Exactly the codes the reference server can send, with the severities it sends them with (a test",
+        "scans the server's error paths and holds this table to them).",
+        "",
+        "| code | meaning | severities | arguments | defined by |",
+        "|---|---|---|---|---|",
+    ]
     for e in SPEC.error_codes.values():
-        out.append(f"| {e.code} | {e.meaning} | {_cell(e.args or '—')} | {e.origin} |")
+        severities = ", ".join(e.severities) or "—"
+        out.append(f"| {e.code} | {e.meaning} | {severities} | {_cell(e.args or '—')} | {e.origin} |")
     out += [
         "",
         "## Asynchronous conditions (0203)",

@@ -384,12 +384,16 @@ def _wrist(
             return [(q4_ref, *_held_wrist(r36, q4_ref))], True
         q4 = min(max(q4_ref, limits.lower[3]), limits.upper[3])
         fit5, fit6 = _held_wrist(r36, q4)
-        # J6 follows J4: J6 ≡ c + sign·J4 (mod 360), J4 + J6 kept near θ5 = 0, J4 − J6 near 180°.
+        # J6 follows J4: J6 ≡ c + sign·J4 (mod 360), J4 + J6 kept near θ5 = 0, J4 − J6 near 180°.  With
+        # θ5 off 0 the fitted c drifts with the held J4 (up to ~1e-8° for θ5 at the tolerance): the first
+        # search allows for that, the second measures c again at its J4, so that a J4 which J6's range
+        # pins to one angle is found to LIMIT_TOL_DEG.
         sign = -1.0 if t5 <= tol_deg else 1.0
-        better = _singular_j4(q4_ref, fit6 - sign * q4, sign, limits)
-        if better != q4:
-            q4 = better
-            fit5, fit6 = _held_wrist(r36, q4)
+        for slack in (_SINGULAR_DRIFT_DEG, LIMIT_TOL_DEG):
+            better = _singular_j4(q4_ref, fit6 - sign * q4, sign, limits, slack)
+            if better != q4:
+                q4 = better
+                fit5, fit6 = _held_wrist(r36, q4)
         return [(q4, fit5, fit6)], True
     t4 = math.degrees(math.atan2(r36[1][2], r36[0][2]))
     t6 = math.degrees(math.atan2(r36[2][1], -r36[2][0]))
@@ -411,18 +415,17 @@ def _held_wrist(r36: Rows, q4: float) -> tuple[float, float]:
     return math.degrees(fit5), math.degrees(fit6)
 
 
-#: How far inside J6's range (deg) a singular J4 keeps J6 when J6's range is what bounds J4: the fitted
-#: J6 moves with J4 by up to ~1e-8° more than the coupling says (θ5 up to the singular tolerance), which
-#: must not carry it past LIMIT_TOL_DEG.
-_SINGULAR_J6_MARGIN_DEG = 1e-6
+#: Slack (deg) of the first search for a singular J4 that leaves J6 in range: well above the drift of the
+#: fitted J4 ± J6 with the held J4 (see :func:`_wrist`).
+_SINGULAR_DRIFT_DEG = 1e-6
 
 
-def _singular_j4(q4_ref: float, c: float, sign: float, limits: JointLimits) -> float:
+def _singular_j4(q4_ref: float, c: float, sign: float, limits: JointLimits, slack: float) -> float:
     """J4 at the wrist singularity: the angle nearest ``q4_ref`` inside J4's range that leaves J6
-    (≡ ``c`` + ``sign``·J4 mod 360) an angle inside J6's range.  Holding J4 at the reference itself
-    would break J4's limit whenever the reference does (e.g. the current angles just past a limit),
-    though J6 can take up the difference.  With no such angle (J6's range under 360° and J4's too
-    narrow to help) J4's range alone decides, and J6's limit is reported."""
+    (≡ ``c`` + ``sign``·J4 mod 360) an angle inside J6's range, to within ``slack``.  Holding J4 at the
+    reference itself would break J4's limit whenever the reference does (e.g. the current angles just
+    past a limit), though J6 can take up the difference.  With no such angle (J6's range under 360° and
+    J4's too narrow to help) J4's range alone decides, and J6's limit is reported."""
     lo4, hi4 = limits.lower[3], limits.upper[3]
     clamped = min(max(q4_ref, lo4), hi4)
     lo6, hi6 = limits.lower[5], limits.upper[5]
@@ -431,15 +434,16 @@ def _singular_j4(q4_ref: float, c: float, sign: float, limits: JointLimits) -> f
         return clamped
     # lo6 ≤ c + sign·J4 + 360k ≤ hi6  ⇔  J4 ∈ [start + 360k, start + width + 360k]
     start = c - hi6 if sign < 0.0 else lo6 - c
-    margin = min(_SINGULAR_J6_MARGIN_DEG, width / 4.0)
     best: float | None = None
-    for k in range(math.ceil((lo4 - start - width) / 360.0), math.floor((hi4 - start) / 360.0) + 1):
-        low = max(lo4, start + 360.0 * k + margin)
-        high = min(hi4, start + width + 360.0 * k - margin)
-        if low <= high:
-            x = min(max(q4_ref, low), high)
-            if best is None or abs(x - q4_ref) < abs(best - q4_ref):
-                best = x
+    k_min = math.ceil((lo4 - slack - start - width) / 360.0)
+    k_max = math.floor((hi4 + slack - start) / 360.0)
+    for k in range(k_min, k_max + 1):
+        low, high = max(lo4, start + 360.0 * k), min(hi4, start + width + 360.0 * k)
+        if low > high + slack:  # with the slack, ranges that meet at one angle still do
+            continue
+        x = min(max(min(max(q4_ref, low), high), lo4), hi4)
+        if best is None or abs(x - q4_ref) < abs(best - q4_ref):
+            best = x
     return clamped if best is None else best
 
 

@@ -3,11 +3,13 @@
     manip-capture record --listen tcp://127.0.0.1:42086 --upstream tcp://127.0.0.1:42085 -o s.mcap
     manip-capture info s.mcap
     manip-capture recover s.mcap [-o fixed.mcap]
+    manip-capture import session.pcap -o session.mcap [--port 42042] [--server HOST:PORT]
+    manip-capture export s.mcap -o s.pcapng
 
 ``record`` prints ``manip-capture: recording tcp://HOST:PORT -> UPSTREAM into FILE`` on stdout once it
 listens (the real port when 0 was asked for) and runs until SIGINT/SIGTERM or ``--seconds``; the file
-is then finished.  Exit status: 0 done; 1 the file cannot be read, written or recovered, or the proxy
-cannot listen; 2 usage error.
+is then finished.  Exit status: 0 done; 1 the file cannot be read, written, recovered, imported or
+exported, or the proxy cannot listen; 2 usage error.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import sys
 import click
 
 from .listing import info_json, info_lines
+from .pcap import CHUDP_PORT, export_pcapng, import_pcap, parse_address
 from .proxy import Endpoint, parse_endpoint, start_proxy
 from .reader import read_capture
 from .recorder import COMPRESSIONS, DEFAULT_FLUSH_INTERVAL, CaptureError, Recorder
@@ -144,12 +147,75 @@ def info(capture: str, packets: bool, as_json: bool) -> None:
 @main.command()
 @click.argument("capture", type=click.Path(exists=True, dir_okay=False))
 @click.option(
-    "-o", "--output", type=click.Path(dir_okay=False), default=None, help="Default: CAPTURE.recovered.mcap."
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Default: the capture's name with .mcap replaced by .recovered.mcap (s.mcap -> s.recovered.mcap).",
 )
 def recover(capture: str, output: str | None) -> None:
     """Rebuild a valid capture from a truncated one (a killed recorder) and say what was lost."""
     try:
         report = recover_file(capture, output)
+    except CaptureError as exc:
+        click.echo(f"manip-capture: {exc}", err=True)
+        sys.exit(1)
+    click.echo(report.summary())
+
+
+def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[str, int] | None:
+    if value is None:
+        return None
+    try:
+        return parse_address(value)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc)) from None
+
+
+@main.command("import")
+@click.argument("pcap", metavar="FILE.pcap")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="The capture to write.")
+@click.option(
+    "--port",
+    "ports",
+    type=click.IntRange(0, 65535),
+    multiple=True,
+    help=f"Only UDP datagrams from or to this port (repeatable; CHUDP's is {CHUDP_PORT}). "
+    "Default: every UDP datagram that starts like CHUDP.",
+)
+@click.option(
+    "--server",
+    metavar="HOST:PORT",
+    callback=_address,
+    default=None,
+    help="The server's address (default: the side that receives the RFC).",
+)
+def import_(pcap: str, output: str, ports: tuple[int, ...], server: tuple[str, int] | None) -> None:
+    """Turn the CHUDP traffic of a tcpdump or Wireshark capture (pcap, pcapng) into a manip capture.
+
+    One UDP address pair is one link; manip-conform verify and replay accept the result.
+    """
+    try:
+        report = import_pcap(pcap, output, ports=ports, server=server)
+    except CaptureError as exc:
+        click.echo(f"manip-capture: {exc}", err=True)
+        sys.exit(1)
+    click.echo(report.summary())
+    if not report.frames:
+        click.echo(f"manip-capture: no CHUDP datagrams in {pcap}", err=True)
+        sys.exit(1)
+
+
+@main.command("export")
+@click.argument("capture", metavar="FILE.mcap")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="The pcapng to write.")
+def export(capture: str, output: str) -> None:
+    """Write a manip capture as CHUDP in UDP/IPv4 (pcapng), for Wireshark and tshark.
+
+    TCP-link sessions are re-framed as CHUDP; the file's comment says so.
+    """
+    try:
+        report = export_pcapng(capture, output)
     except CaptureError as exc:
         click.echo(f"manip-capture: {exc}", err=True)
         sys.exit(1)

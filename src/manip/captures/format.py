@@ -18,6 +18,10 @@ A capture is an MCAP file (profile ``manip``), chunked and zstd-compressed, with
 ``/manip/events`` (``json``, schema ``manip.Event``)
     Link and connection events: link opened or closed (with the reason), RFC, OPN, CLS and LOS with
     their texts, EOF, framing lost, recording started and stopped.
+``/arm/hand`` (``json``, schema ``foxglove.FrameTransform``), ``/arm/joints`` (``manip.JointAngles``)
+    The hand's pose after every ``here`` and ``joint-angles`` reply, world to hand in Foxglove's
+    well-known schema, and the joint angles of every ``joint-angles`` reply as six plottable numbers
+    (:mod:`manip.captures.arm_view`); written with the decoded view, on a capture's first such reply.
 
 ``c2s`` is client to server (requests), ``s2c`` server to client.  Times are Unix nanoseconds of the
 moment the recorder saw the frame.  Metadata record ``manip.capture``: tool and version, spec revision,

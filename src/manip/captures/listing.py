@@ -76,8 +76,10 @@ def packet_line(p: CapturedPacket, t0_ns: int) -> str:
     return f"{head} {body}".rstrip()
 
 
-def _iso(ns: int) -> str:
-    return time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(ns / 1e9)) + f".{ns % 1_000_000_000 // 1000:06d}Z"
+def when(ns: int) -> str:
+    """A capture time for people: UTC date and time to the microsecond (never a raw epoch)."""
+    seconds, rest = divmod(ns, 1_000_000_000)
+    return time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(seconds)) + f".{rest // 1000:06d}Z"
 
 
 def _session_events(events: list[CapturedEvent]) -> str:
@@ -127,6 +129,8 @@ def info_json(capture: Capture, *, packets: bool = True) -> dict[str, Any]:
         "metadata": capture.metadata,
         "start_ns": capture.start_ns,
         "end_ns": capture.end_ns,
+        "start": when(capture.start_ns),
+        "end": when(capture.end_ns),
         "channels": dict(sorted(capture.counts.items())),
         "links": [{"id": k.id, "framing": k.framing, "name": k.name} for k in capture.links.values()],
         "events": [_event_json(e) for e in capture.events],
@@ -147,7 +151,7 @@ def info_lines(capture: Capture, *, packets: bool = True) -> Iterator[str]:
         for key, value in meta.items():
             yield f"  {key}: {value}"
     start, end = capture.start_ns, capture.end_ns
-    yield f"time span: {_iso(start)} .. {_iso(end)} ({(end - start) / 1e9:.3f} s)"
+    yield f"time span: {when(start)} .. {when(end)} ({(end - start) / 1e9:.3f} s)"
     yield "channels:"
     for topic, count in sorted(capture.counts.items()):
         yield f"  {topic:<16} {count:>8} messages"

@@ -417,9 +417,14 @@ class _Stream:
         return CapturedEvent(log_time, name, body)
 
 
-def iter_packets(source: str | os.PathLike[str] | IO[bytes]) -> Iterator[CapturedPacket]:
-    """Every recorded frame in recording order, decoded and annotated (streaming, constant memory)."""
-    for item in _Stream(source, Capture(str(source))).items():
+def iter_packets(
+    source: str | os.PathLike[str] | IO[bytes], *, capture: Capture | None = None
+) -> Iterator[CapturedPacket]:
+    """Every recorded frame in recording order, decoded and annotated (streaming, constant memory).
+
+    ``capture``, if given, is filled in as the file is read (header, metadata, links: a packet's link
+    is known by the time the packet is yielded); its sessions stay empty."""
+    for item in _Stream(source, Capture(str(source)) if capture is None else capture).items():
         if isinstance(item, CapturedPacket):
             yield item
 

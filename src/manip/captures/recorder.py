@@ -59,6 +59,15 @@ from manip.codecs.packet import Packet
 from manip.spec import SPEC
 
 from .appender import message_adder
+from .arm_view import (
+    FRAME_TRANSFORM_SCHEMA,
+    HAND_TOPIC,
+    JOINTS_SCHEMA,
+    POSE_OPS,
+    arm_messages,
+    frame_transform_schema,
+    joints_schema,
+)
 from .format import (
     DIRECTIONS,
     EVENT_SCHEMA_NAME,
@@ -184,6 +193,7 @@ class Recorder:
         command_line: Sequence[str] | None = None,
         metadata: Mapping[str, str] | None = None,
         decoded_view: bool = True,
+        arm_view: bool = True,
         compression: str = "zstd",
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         flush_interval: float = DEFAULT_FLUSH_INTERVAL,
@@ -206,6 +216,11 @@ class Recorder:
             self._stream = output
             self._owns_stream = False
         self.decoded_view = decoded_view
+        self.arm_view = arm_view and decoded_view
+        """Write ``/arm/hand`` and ``/arm/joints`` (:mod:`~manip.captures.arm_view`); they come from the
+        decoded view's annotations, so only with it."""
+        self._arm_channels: dict[str, int] = {}
+        self._arm_seq = 0
         self.flush_interval = flush_interval
         self.clock_ns = clock_ns
         """Log times of what is recorded without a time of its own (Unix nanoseconds by default; a
@@ -374,6 +389,8 @@ class Recorder:
             add_pair(channel, frame, view_channels[direction], view, t, seq)
             for event in annotation.events:
                 self._event(event, t)
+            if annotation.op in POSE_OPS and self.arm_view:
+                self._arm(annotation, info.id, t)
         self._seq += len(batch)
         c2s = sum(1 for item in batch if item[1] == "c2s")
         counts = self._counts
@@ -447,6 +464,22 @@ class Recorder:
         return int(
             self._writer.register_channel(RAW_TOPIC[direction], RAW_MESSAGE_ENCODING, schema, metadata)
         )
+
+    def _arm(self, annotation: Annotation, link: int, t: int) -> None:
+        """The ``/arm/*`` messages of a pose-bearing reply (channels registered on first use)."""
+        for topic, data in arm_messages(annotation, link, t):
+            channel = self._arm_channels.get(topic)
+            if channel is None:
+                name, schema = (
+                    (FRAME_TRANSFORM_SCHEMA, frame_transform_schema())
+                    if topic == HAND_TOPIC
+                    else (JOINTS_SCHEMA, joints_schema())
+                )
+                schema_id = self._writer.register_schema(name, "jsonschema", json.dumps(schema).encode())
+                channel = self._arm_channels[topic] = self._writer.register_channel(topic, "json", schema_id)
+            self._arm_seq += 1
+            self._add(channel, t, data, self._arm_seq)
+            self._counts[topic] += 1
 
     # ------------------------------------------------------------------------------ events
 

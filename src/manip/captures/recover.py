@@ -26,6 +26,7 @@ from __future__ import annotations
 import io
 import os
 import struct
+import time
 from dataclasses import asdict, dataclass, field
 from typing import Any, Final
 
@@ -115,7 +116,9 @@ class RecoveryReport:
 
 
 def _t(ns: int) -> str:
-    return f"{ns / 1e9:.6f}"
+    """A log time for people: UTC date and time to the microsecond (never a raw epoch)."""
+    seconds, rest = divmod(ns, 1_000_000_000)
+    return time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(seconds)) + f".{rest // 1000:06d}Z"
 
 
 class _Rebuilder:

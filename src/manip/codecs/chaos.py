@@ -280,7 +280,7 @@ def check_header_split(word0: int, word1: int, at: WordLocator = CANONICAL) -> t
     nbytes = word1 & 0x0FFF
     if not is_legal_opcode(opcode):
         return nbytes, DecodeError(
-            f"opcode {opcode:#o} is not a Chaos opcode (001-016, 0200-0377)",
+            f"opcode 0{opcode:o} is not a Chaos opcode (001-016, 0200-0377)",
             path="header.opcode",
             offset=at.high_byte(0),
             clause="chaos.opcode.legal",

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Collection, Iterable
 from dataclasses import dataclass, field
+from typing import Literal
 
 from manip.codecs.errors import DecodeError, EncodeError
 from manip.codecs.lispm_text import decode_lispm, encode_lispm
@@ -42,11 +43,6 @@ SEPARATOR = ": "
 def known_severities() -> frozenset[str]:
     """The severities of the spec (F, E, C, W, BF, BE)."""
     return frozenset(SPEC.severities)
-
-
-def known_codes() -> frozenset[str]:
-    """The error codes of the spec (the seed's and manip's own)."""
-    return frozenset(SPEC.error_codes)
 
 
 def format_joint_mask(mask: int) -> str:
@@ -129,8 +125,9 @@ class ErrorMessage:
     """One error string.  ``message`` is the template, with ``~`` and ``$`` still in it.
 
     ``has_nul`` says whether a NUL follows the text (it makes ``~`` and ``$`` special); it is set
-    automatically when there are ``args``.  ``known_severities`` / ``known_codes`` are the sets
-    :attr:`problems` checks against (the spec's when None); they take no part in equality.
+    automatically when there are ``args``.  ``known_severities`` is the set
+    :attr:`problems` checks severities against (the spec's when None); it takes no part in equality.
+    Any three-letter code conforms: the spec's table lists the 1985 guide's and the reference server's.
     """
 
     where: str
@@ -140,7 +137,6 @@ class ErrorMessage:
     args: tuple[int, ...] = ()
     has_nul: bool = False
     known_severities: frozenset[str] | None = field(default=None, compare=False, repr=False)
-    known_codes: frozenset[str] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "args", tuple(self.args))
@@ -169,7 +165,6 @@ class ErrorMessage:
     def problems(self) -> tuple[str, ...]:
         """What is off about this error string, for a human; empty when it conforms."""
         severities = known_severities() if self.known_severities is None else self.known_severities
-        codes = known_codes() if self.known_codes is None else self.known_codes
         out: list[str] = []
         if not self.where:
             out.append("where is empty (error-string.where-no-colon)")
@@ -180,10 +175,9 @@ class ErrorMessage:
                 f"unknown severity {self.severity!r}; expected one of {', '.join(sorted(severities))}"
                 " (error-string.severity)"
             )
+        # Any three letters will do: the 1985 guide lets each manipulator add codes of its own (E.2).
         if not (len(self.code) == 3 and self.code.isascii() and self.code.isalpha()):
             out.append(f"error code {self.code!r} is not three letters (error-string.code)")
-        elif self.code not in codes:
-            out.append(f"error code {self.code!r} is not one of the spec's codes (error-string.code)")
         if self.has_nul:
             wanted = count_specials(self.message)
             if wanted != len(self.args):
@@ -231,12 +225,56 @@ def parse_error(
     *,
     align_args: bool = True,
     severities: Collection[str] | None = None,
-    codes: Collection[str] | None = None,
+    body: Literal["auto", "string", "packet"] = "auto",
 ) -> ErrorMessage:
-    """Decode an error string: the response data after the 2-byte request number.
+    """Decode an error string, from either form of the bytes that hold it.
 
-    ``severities`` and ``codes`` replace the spec's tables for :attr:`ErrorMessage.problems`.
+    ``body="string"``: ``data`` is the error string, the packet data after the 2-byte request number.
+    ``body="packet"``: ``data`` is the whole data of the error packet, request number first (the number
+    is skipped; :func:`manip.codecs.messages.decode_error` returns it).  ``body="auto"`` (the default)
+    reads ``data`` as the string, and when that fails and its first two bytes are not text (a request
+    number: a control byte, a NUL or a byte above 0177) as the packet form; an error that neither
+    reading explains says which forms were tried.  Offsets in errors count from the start of ``data``.
+
+    ``severities`` replaces the spec's table for :attr:`ErrorMessage.problems`.
     """
+    if body not in ("auto", "string", "packet"):
+        raise ValueError(f"body must be 'auto', 'string' or 'packet', not {body!r}")
+    if body == "packet":
+        return _parse_numbered(data, align_args, severities)
+    try:
+        return _parse_string(data, align_args, severities)
+    except DecodeError as exc:
+        numbered = len(data) >= 2 and any(b < 0x20 or b >= 0x80 for b in data[:2])
+        if body == "string" or not numbered:
+            raise
+        try:
+            return _parse_numbered(data, align_args, severities)
+        except DecodeError:
+            raise DecodeError(
+                f"{exc.message} (read as an error string; read as a whole error packet, request "
+                f"number {int.from_bytes(data[:2], 'little')} first, it does not parse either)",
+                exc.path,
+                exc.offset,
+                exc.clause,
+            ) from None
+
+
+def _parse_numbered(data: bytes, align_args: bool, severities: Collection[str] | None) -> ErrorMessage:
+    if len(data) < 2:
+        raise DecodeError(
+            f"{len(data)} bytes: an error packet's data begin with a 2-byte request number",
+            path="request_number",
+            offset=len(data),
+            clause="response.echoes-request-number",
+        )
+    try:
+        return _parse_string(data[2:], align_args, severities)
+    except DecodeError as exc:
+        raise exc.at("error", 2) from exc
+
+
+def _parse_string(data: bytes, align_args: bool, severities: Collection[str] | None) -> ErrorMessage:
     nul = data.find(0)
     raw_text = data if nul < 0 else data[:nul]
     text = decode_lispm(bytes(raw_text))
@@ -270,5 +308,4 @@ def parse_error(
         args,
         has_nul=nul >= 0,
         known_severities=None if severities is None else frozenset(severities),
-        known_codes=None if codes is None else frozenset(codes),
     )

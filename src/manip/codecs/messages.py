@@ -272,7 +272,7 @@ def request_op(key: int | str) -> RequestOpcode:
     try:
         return _REQUESTS_BY_KEY[key]
     except KeyError:
-        shown = f"{key:#o}" if isinstance(key, int) else repr(key)
+        shown = f"0{key:o}" if isinstance(key, int) else repr(key)
         raise KeyError(f"no request opcode {shown} in the spec") from None
 
 
@@ -293,7 +293,7 @@ def decode_request(opcode: int, data: bytes) -> Request:
         spec_op = SPEC.requests[opcode]
     except KeyError:
         raise DecodeError(
-            f"opcode {opcode:#o} is not a request opcode of the spec",
+            f"opcode 0{opcode:o} is not a request opcode of the spec",
             path="opcode",
             offset=0,
             clause="request.unknown-opcode",
@@ -516,7 +516,7 @@ def encode_error(opcode: int, request_number: int, error: ErrorMessage) -> bytes
         ServerOp.ASYNCHRONOUS_ERROR,
         ServerOp.ASYNCHRONOUS_WARNING,
     ):
-        raise EncodeError(f"opcode {opcode:#o} does not carry an error string", path="opcode")
+        raise EncodeError(f"opcode 0{opcode:o} does not carry an error string", path="opcode")
     return _WORD.pack(request_number) + error.encode()
 
 
@@ -530,7 +530,7 @@ def decode_error(opcode: int, data: bytes, *, align_args: bool = True) -> ErrorR
         )
     (number,) = _WORD.unpack_from(data, 0)
     try:
-        error = parse_error(data[REQUEST_NUMBER_BYTES:], align_args=align_args)
+        error = parse_error(data[REQUEST_NUMBER_BYTES:], align_args=align_args, body="string")
     except CodecError as exc:
         raise exc.at("error", REQUEST_NUMBER_BYTES) from exc
     return ErrorReply(opcode, number, error)
@@ -599,7 +599,7 @@ def decode_server_packet(
         ):
             return decode_error(opcode, data, align_args=align_args)
     raise DecodeError(
-        f"opcode {opcode:#o} is not a server opcode (0200-0205)",
+        f"opcode 0{opcode:o} is not a server opcode (0200-0205)",
         path="opcode",
         offset=0,
         clause="response.server-opcodes",

@@ -154,7 +154,8 @@ def main() -> None:
     type=click.FloatRange(min=0.1),
     default=None,
     metavar="SECONDS",
-    help="The target's broken-connection timer (the 1985 guide's is 90 s): server.ncp.broken goes silent "
+    help="The target's broken-connection timer (90 s by default, the ITS Chaos NCP's: the 1985 guide "
+    "gives none; erratum ncp-timers): server.ncp.broken goes silent "
     "that long and checks the connection was given up.  Without it that case is skipped.  With the embedded "
     "server, the server gets this timer too (below 5 s the other NCP cases, which keep quiet for up to "
     "3 s on purpose, may lose their connections).",
@@ -342,7 +343,7 @@ def run(
             write_json(report, json_path)
         if junit_path is not None:
             write_junit(report, junit_path)
-        _summary(console, report)
+        _summary(console, report, quiet)
         code = int(report.exit_code) if code is None else code
     sys.exit(int(code) if code is not None else int(ExitCode.INTERNAL))
 
@@ -553,17 +554,10 @@ async def _run_with(
         progress.update(task_id, description=item.id)
 
     def case_finished(result: CaseResult) -> None:
+        # One line as it happens; the details come after the run, below the broken clauses (_summary).
         progress.advance(task_id)
-        if result.outcome in ("fail", "error", "fixed") or (result.outcome == "warn" and not quiet):
-            style = _STYLE[result.outcome]
-            progress.console.print(
-                f"[{style}]{result.outcome.upper():>10}[/] {result.id} ({result.duration:.2f} s)"
-            )
-            body = failure_text(result) if result.outcome != "error" else result.traceback.rstrip()
-            if result.outcome == "fixed":
-                body = "listed in --known-failing but passed: remove the entry"
-            if body:
-                progress.console.print(body, markup=False, highlight=False)
+        if _shown(result, quiet):
+            _headline(progress.console, result)
 
     def liveness(check: LivenessCheck) -> None:
         if not check.alive:
@@ -577,10 +571,39 @@ async def _run_with(
         await runner.run()
 
 
-def _summary(console: Console, report: RunReport) -> None:
+def _shown(result: CaseResult, quiet: bool) -> bool:
+    return result.outcome in ("fail", "error", "fixed") or (result.outcome == "warn" and not quiet)
+
+
+def _headline(console: Console, result: CaseResult) -> None:
+    style = _STYLE[result.outcome]
+    clauses = sorted({v.clause for v in result.violations if v.clause})
+    broke = f" [{', '.join(clauses)}]" if clauses else ""
+    head = f"{escape(result.id)} ({result.duration:.2f} s){escape(broke)}"
+    console.print(f"[{style}]{result.outcome.upper():>10}[/] {head}")
+
+
+def _details(console: Console, report: RunReport, quiet: bool) -> None:
+    """Each failing (or warning, fixed, erring) case in full: what was expected, what came, the bytes,
+    the command that reproduces it."""
+    for result in report.results:
+        if not _shown(result, quiet):
+            continue
+        _headline(console, result)
+        body = failure_text(result) if result.outcome != "error" else result.traceback.rstrip()
+        if result.outcome == "fixed":
+            body = "listed in --known-failing but passed: remove the entry"
+        if body:
+            console.print(body, markup=False, highlight=False)
+
+
+def _summary(console: Console, report: RunReport, quiet: bool = False) -> None:
+    """After the run: the broken clauses (one line each), then every failure in full, then problems and
+    the verdict."""
     counts = report.counts()
     parts = [f"[{_STYLE[k]}]{v} {k}[/]" for k, v in counts.items() if v]
     print_by_clause(console, report)
+    _details(console, report, quiet)
     for problem in report.problems:
         console.print(f"[bold red]problem[/]: {escape(problem)}")
     for problem in report.unstable:

@@ -82,7 +82,7 @@ class EmbeddedServer:
     ) -> None:
         """``wrist``: give the robot the simulated Cougar wrist, so the wrist opcodes are served (and
         checked) rather than refused with C UIM.  ``broken_after``: the server's broken-connection timer
-        (default the NCP's 90 s)."""
+        (default 90 s, the ITS Chaos NCP's; erratum ``ncp-timers``)."""
         self._ncp = None if broken_after is None else NcpOptions.breaking_after(broken_after)
         self._config = config or ServerConfig()
         self._wrist = functools.partial(make_cougar_wrist, "sim", seed=seed) if wrist else None

@@ -191,7 +191,8 @@ def _describe_error(err: ErrorReply) -> Node:
     sev = SPEC.severities.get(e.severity)
     node.add("severity", f"{e.severity} ({sev.meaning if sev else 'unknown severity'})", e.severity)
     code = SPEC.error_codes.get(e.code)
-    node.add("code", f"{e.code} ({code.meaning if code else 'not a code of the spec'})", e.code)
+    meaning = code.meaning if code else "a code of this server's own"
+    node.add("code", f"{e.code} ({meaning})", e.code)
     node.add("message", repr(e.message), e.message)
     if e.args:
         node.add("arguments", ", ".join(str(a) for a in e.args), list(e.args))
@@ -319,3 +320,37 @@ def describe_words(items: Sequence[StreamItem], direction: str) -> Node:
         elif isinstance(item, Malformed):
             root.add("malformed", str(item.error), {"words": list(item.words)})
     return root
+
+
+def describe_body(side: Literal["request", "response"], key: int | str, data: bytes) -> Node:
+    """A bare body, the data of one packet without its Chaos header (the form the golden vectors use).
+
+    For a request ``key`` is its opcode (number or name).  For a response it is the request answered
+    (a RESPONSE, 0200, decoded by that request's layout) or the name of another server opcode
+    (``fatal-error``, ``non-fatal-error``, ``asynchronous-response``, ``asynchronous-error``,
+    ``asynchronous-warning``).  Decode problems become a ``decode error`` node, as in a packet.
+    """
+    root = Node("body", f"{side} body, {len(data)} bytes")
+    try:
+        if side == "request":
+            op = request_op(key)
+            node = describe_request(Packet(op.opcode, data=data))
+        else:
+            server = _SERVER_NAMES.get(key) if isinstance(key, str) else None
+            if server is not None:
+                node = describe_server_message(decode_server_packet(server, data))
+            else:
+                op = request_op(key)
+                node = describe_server_message(decode_server_packet(ServerOp.RESPONSE, data, op), op)
+    except CodecError as exc:
+        node = Node(
+            "decode error",
+            str(exc),
+            {"message": exc.message, "path": exc.path, "offset": exc.offset, "clause": exc.clause},
+        )
+    root.children.append(node)
+    return root
+
+
+_SERVER_NAMES: dict[str, int] = {s.name: s.opcode for s in SPEC.server_opcodes.values() if s.opcode != 0o200}
+"""Server opcodes by name, apart from RESPONSE (named by the request it answers)."""

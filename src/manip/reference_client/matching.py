@@ -343,7 +343,7 @@ class ResponseContext:
         """The payload read as an E.2 error string; a string that does not parse is kept as text."""
         payload = self.payload
         try:
-            return parse_error(payload, align_args=self.core.align_args)
+            return parse_error(payload, align_args=self.core.align_args, body="string")
         except CodecError as exc:
             nul = payload.find(0)
             text = decode_lispm(payload if nul < 0 else payload[:nul])

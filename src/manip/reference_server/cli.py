@@ -178,8 +178,9 @@ def command_line(ctx: click.Context) -> list[str]:
     type=click.FloatRange(min=0.1),
     default=None,
     metavar="SECONDS",
-    help="Declare a connection broken when its client is silent this long (default 90, as the seed; "
-    "shorter to check a client's or the suite's handling quickly).",
+    help="Declare a connection broken when its client is silent this long (default 90, the ITS Chaos "
+    "NCP's interval: the 1985 guide gives none; erratum ncp-timers; shorter to check a client's or the "
+    "suite's handling quickly).",
 )
 @click.option(
     "--fault",

@@ -202,7 +202,13 @@ def load_spec() -> Spec:
             ],
             "severity",
         ),
-        error_codes=_unique([(e["code"], ErrorCode(**e)) for e in manip["error_code"]], "error code"),
+        error_codes=_unique(
+            [
+                (e["code"], ErrorCode(**{**e, "severities": tuple(e.get("severities", ()))}))
+                for e in manip["error_code"]
+            ],
+            "error code",
+        ),
         async_codes=_unique([(a["code"], AsyncCode(**a)) for a in manip["async_code"]], "async code"),
         chaos_opcodes=_unique([(o["name"], ChaosOpcode(**o)) for o in chaos["chaos_opcode"]], "Chaos opcode"),
         cougar_commands=_cougar(cougar["command"], "Cougar command"),

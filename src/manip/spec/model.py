@@ -124,6 +124,9 @@ class ErrorCode:
     meaning: str
     origin: str
     args: str | None = None
+    severities: tuple[str, ...] = ()
+    """The severities the reference server sends this code with (a test holds the table to what the
+    server can emit)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,0 +1,169 @@
+"""Pictures of the arm for Foxglove: the hand's pose and the joint angles, from the replies that carry them.
+
+Two channels of a capture (written by the recorder with the decoded view):
+
+``/arm/hand`` (``json``, schema ``foxglove.FrameTransform``)
+    The hand's pose, world to hand, in Foxglove's well-known schema (metres and a unit quaternion), so
+    the 3D panel shows the hand moving.  One message after every ``here`` reply (its transform) and
+    every ``joint-angles`` reply (the forward kinematics of its angles: the reference arm's geometry,
+    :data:`manip.arm.PUMA600`).  A ``solve-backwards`` reply carries a transform too, but of angles the
+    client asked about, not of the hand: it is left out.  A transform whose N, O, A columns are not a
+    rotation is left out as well (the decoded view still shows it).
+``/arm/joints`` (``json``, schema ``manip.JointAngles``)
+    The six joint angles of every ``joint-angles`` reply as flat numbers ``j1`` .. ``j6`` (degrees, base
+    first), which the plot panel draws as curves (``/arm/joints.j2``).
+
+Both carry the log time of the reply they come from, also as ``timestamp``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from functools import cache
+from typing import Any, Final
+
+from manip.arm import PUMA600, Transform, forward
+from manip.arm.kinematics import ArmModel
+
+from .view import Annotation
+
+HAND_TOPIC: Final = "/arm/hand"
+JOINTS_TOPIC: Final = "/arm/joints"
+FRAME_TRANSFORM_SCHEMA: Final = "foxglove.FrameTransform"
+JOINTS_SCHEMA: Final = "manip.JointAngles"
+WORLD_FRAME: Final = "world"
+HAND_FRAME: Final = "hand"
+POSE_OPS: Final = frozenset({"here", "joint-angles"})
+"""The replies that say where the hand is."""
+
+_JSON: Final = json.JSONEncoder(separators=(",", ":"))
+
+
+def _time() -> dict[str, Any]:
+    return {
+        "type": "object",
+        "title": "time",
+        "properties": {
+            "sec": {"type": "integer", "minimum": 0},
+            "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999},
+        },
+    }
+
+
+def _numbers(title: str, names: str, description: str) -> dict[str, Any]:
+    return {
+        "title": title,
+        "description": description,
+        "type": "object",
+        "properties": {n: {"type": "number"} for n in names},
+    }
+
+
+@cache
+def frame_transform_schema() -> dict[str, Any]:
+    """Foxglove's ``foxglove.FrameTransform`` as JSON Schema: the fields of its documented message."""
+    return {
+        "title": FRAME_TRANSFORM_SCHEMA,
+        "description": "A transform between two reference frames in 3D space",
+        "type": "object",
+        "properties": {
+            "timestamp": {**_time(), "description": "Timestamp of transform"},
+            "parent_frame_id": {"type": "string", "description": "Name of the parent frame"},
+            "child_frame_id": {"type": "string", "description": "Name of the child frame"},
+            "translation": _numbers("foxglove.Vector3", "xyz", "Translation component of the transform"),
+            "rotation": _numbers("foxglove.Quaternion", "xyzw", "Rotation component of the transform"),
+        },
+    }
+
+
+@cache
+def joints_schema() -> dict[str, Any]:
+    """JSON Schema of ``/arm/joints``: flat, so each joint plots as a curve."""
+    joints = {f"j{i}": {"type": "number", "description": f"joint {i}, degrees"} for i in range(1, 7)}
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": JOINTS_SCHEMA,
+        "description": "Joint angles of a joint-angles reply, degrees, base first",
+        "type": "object",
+        "properties": {
+            "timestamp": _time(),
+            "link": {"type": "integer"},
+            "conn": {"type": "integer"},
+            "request_number": {"type": "integer"},
+            **joints,
+        },
+        "required": ["timestamp", "j1", "j2", "j3", "j4", "j5", "j6"],
+        "additionalProperties": False,
+    }
+
+
+def quaternion(rotation: Any) -> tuple[float, float, float, float]:
+    """The unit quaternion (x, y, z, w) of a 3x3 rotation matrix, with w >= 0 (Shepperd's method:
+    the largest of the four candidates is taken first, so no division is by a small number)."""
+    r = [[float(rotation[i][j]) for j in range(3)] for i in range(3)]
+    trace = r[0][0] + r[1][1] + r[2][2]
+    if trace > 0.0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        q = ((r[2][1] - r[1][2]) / s, (r[0][2] - r[2][0]) / s, (r[1][0] - r[0][1]) / s, 0.25 * s)
+    elif r[0][0] >= r[1][1] and r[0][0] >= r[2][2]:
+        s = 2.0 * math.sqrt(1.0 + r[0][0] - r[1][1] - r[2][2])
+        q = (0.25 * s, (r[0][1] + r[1][0]) / s, (r[0][2] + r[2][0]) / s, (r[2][1] - r[1][2]) / s)
+    elif r[1][1] >= r[2][2]:
+        s = 2.0 * math.sqrt(1.0 + r[1][1] - r[0][0] - r[2][2])
+        q = ((r[0][1] + r[1][0]) / s, 0.25 * s, (r[1][2] + r[2][1]) / s, (r[0][2] - r[2][0]) / s)
+    else:
+        s = 2.0 * math.sqrt(1.0 + r[2][2] - r[0][0] - r[1][1])
+        q = ((r[0][2] + r[2][0]) / s, (r[1][2] + r[2][1]) / s, 0.25 * s, (r[1][0] - r[0][1]) / s)
+    norm = math.sqrt(sum(c * c for c in q))
+    x, y, z, w = (c / norm for c in q)
+    return (-x, -y, -z, -w) if w < 0.0 else (x, y, z, w)
+
+
+def _stamp(t_ns: int) -> dict[str, int]:
+    sec, nsec = divmod(t_ns, 1_000_000_000)
+    return {"sec": sec, "nsec": nsec}
+
+
+def frame_transform(pose: Transform, t_ns: int) -> dict[str, Any]:
+    """The ``foxglove.FrameTransform`` message of a hand pose (mm in, metres out)."""
+    x, y, z = (float(v) / 1000.0 for v in pose.p)
+    qx, qy, qz, qw = quaternion(pose.rotation)
+    return {
+        "timestamp": _stamp(t_ns),
+        "parent_frame_id": WORLD_FRAME,
+        "child_frame_id": HAND_FRAME,
+        "translation": {"x": x, "y": y, "z": z},
+        "rotation": {"x": qx, "y": qy, "z": qz, "w": qw},
+    }
+
+
+def arm_messages(ann: Annotation, link: int, t_ns: int, model: ArmModel = PUMA600) -> list[tuple[str, bytes]]:
+    """The ``/arm/*`` messages of one annotated packet (none unless it is a pose-bearing reply)."""
+    fields = ann.fields
+    if ann.kind != "reply" or ann.op not in POSE_OPS or not fields:
+        return []
+    out: list[tuple[str, bytes]] = []
+    pose: Transform | None = None
+    if ann.op == "here":
+        values = fields.get("transform")
+        if isinstance(values, Sequence) and len(values) == 12:
+            try:
+                pose = Transform.from_floats(values, orthonormalise=True)
+            except ValueError:
+                pose = None
+    else:
+        joints = fields.get("joints")
+        if isinstance(joints, Sequence) and len(joints) == 6:
+            angles = [float(a) for a in joints]
+            if all(math.isfinite(a) for a in angles):
+                pose = forward(angles, model.geometry)
+                message: dict[str, Any] = {"timestamp": _stamp(t_ns), "link": link, "conn": ann.conn}
+                if ann.request_number is not None:
+                    message["request_number"] = ann.request_number
+                message.update({f"j{i}": a for i, a in enumerate(angles, 1)})
+                out.append((JOINTS_TOPIC, _JSON.encode(message).encode()))
+    if pose is not None:
+        out.insert(0, (HAND_TOPIC, _JSON.encode(frame_transform(pose, t_ns)).encode()))
+    return out

@@ -1,0 +1,129 @@
+"""Where ``manip-decode`` reads from: a file, standard input or the argument itself, as a stream of bytes.
+
+Nothing is read whole.  The first block says whether the input is hex text or binary (unless told);
+hex text is turned into bytes a block at a time (spaces, colons, commas and ``0x`` prefixes allowed
+anywhere), so a file of any size goes through in constant memory.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import IO, Final
+
+BLOCK: Final = 1 << 16
+_HEX_TEXT: Final = re.compile(rb"^[\s0-9a-fA-Fx:,]*$")
+_SEPARATORS: Final = re.compile(rb"0[xX]|[\s:,]")
+_HEX_ARGUMENT: Final = re.compile(r"^[\s0-9a-fA-Fx:,]+$")
+
+
+class SourceError(Exception):
+    """The input cannot be read as asked; ``usage`` is True when the command line is at fault."""
+
+    def __init__(self, message: str, *, usage: bool = False) -> None:
+        super().__init__(message)
+        self.usage = usage
+
+
+@dataclass(frozen=True, slots=True)
+class Source:
+    """An opened input: its name for messages and its byte stream."""
+
+    name: str
+    stream: IO[bytes]
+    owned: bool
+
+    def close(self) -> None:
+        if self.owned:
+            self.stream.close()
+
+
+def open_source(source: str | None) -> Source:
+    """``-`` or None: standard input; an existing path: that file; else the argument must be hex."""
+    if source is None or source == "-":
+        return Source("standard input", sys.stdin.buffer, False)
+    if os.path.isdir(source):
+        raise SourceError(f"{source} is a directory, not a file", usage=True)
+    if os.path.exists(source):
+        try:
+            return Source(source, open(source, "rb"), True)  # closed by Source.close
+        except OSError as exc:
+            raise SourceError(f"cannot read {source}: {exc.strerror}") from exc
+    if _HEX_ARGUMENT.match(source):
+        import io  # noqa: PLC0415
+
+        return Source("the argument", io.BytesIO(source.encode("ascii")), True)
+    raise SourceError(f"no such file: {source} (and it is not a hex string either)", usage=True)
+
+
+def require_file(path: str) -> str:
+    """``path`` if it is a readable file; SourceError (usage) saying what is wrong otherwise."""
+    if not os.path.exists(path):
+        raise SourceError(f"no such file: {path}", usage=True)
+    if os.path.isdir(path):
+        raise SourceError(f"{path} is a directory, not a file", usage=True)
+    return path
+
+
+class _HexDecoder:
+    """Hex text to bytes, fed in blocks; a digit pair or a ``0x`` split across blocks is carried over."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.held = b""
+
+    def feed(self, text: bytes, final: bool = False) -> bytes:
+        text = self.held + text
+        self.held = b""
+        if not final and text[-1:] == b"0":  # perhaps the start of a 0x
+            text, self.held = text[:-1], text[-1:]
+        cleaned = _SEPARATORS.sub(b"", text)
+        if not final and len(cleaned) % 2:
+            # The odd digit waits for its partner (never a separator: those are gone already).
+            cleaned, self.held = cleaned[:-1], cleaned[-1:] + self.held
+        try:
+            out = bytes.fromhex(cleaned.decode("ascii"))
+        except (ValueError, UnicodeDecodeError):
+            bad = next((c for c in cleaned if chr(c) not in "0123456789abcdefABCDEF"), None)
+            shown = repr(chr(bad)) if bad is not None else "?"
+            raise SourceError(f"{self.name} is not hex text: character {shown} is not a hex digit") from None
+        if final and len(cleaned) % 2:
+            raise SourceError(f"{self.name}: odd number of hex digits (the last one has no partner)")
+        return out
+
+
+def byte_blocks(src: Source, binary: bool | None) -> Iterator[bytes]:
+    """The input's bytes, a block at a time (hex text decoded); ``binary`` None guesses from the start."""
+    first = src.stream.read(BLOCK)
+    if binary is None:
+        binary = not _HEX_TEXT.match(first)
+    if binary:
+        block = first
+        while block:
+            yield block
+            block = src.stream.read(BLOCK)
+        return
+    hexes = _HexDecoder(src.name)
+    block = first
+    while block:
+        out = hexes.feed(block)
+        if out:
+            yield out
+        block = src.stream.read(BLOCK)
+    out = hexes.feed(b"", final=True)
+    if out:
+        yield out
+
+
+def read_text(source: str | None) -> str:
+    """The whole input as text (Cougar word streams are short)."""
+    if source is not None and source != "-" and not os.path.exists(source):
+        return source
+    src = open_source(source)
+    try:
+        return src.stream.read().decode("ascii", "replace")
+    finally:
+        src.close()

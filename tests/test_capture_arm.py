@@ -1,0 +1,154 @@
+"""Pictures of the arm in captures: /arm/hand holds foxglove.FrameTransform messages that Foxglove's own
+published schema accepts and that agree with the arm's forward kinematics; /arm/joints plots."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from manip.arm import PUMA600, Transform, forward
+from manip.captures import Recorder
+from manip.captures.arm_view import frame_transform_schema, joints_schema, quaternion
+from manip.codecs.messages import encode_reply
+from manip.spec.constants import ServerOp
+from tests.test_capture import JOINTS, record, s2c, session_packets
+from tests.test_capture import _validate as validate_shape
+
+ROOT = Path(__file__).resolve().parents[1]
+FOXGLOVE = json.loads((ROOT / "tests" / "data" / "foxglove" / "FrameTransform.json").read_text())
+
+
+def _validate(value: Any, schema: dict[str, Any], path: str = "$") -> None:
+    """The capture tests' checker, plus the bounds Foxglove's schema sets (nsec below 10^9)."""
+    validate_shape(value, schema, path)
+    if "minimum" in schema:
+        assert value >= schema["minimum"], f"{path}: {value} < {schema['minimum']}"
+    if "maximum" in schema:
+        assert value <= schema["maximum"], f"{path}: {value} > {schema['maximum']}"
+    for key, sub in schema.get("properties", {}).items():
+        if isinstance(value, dict) and key in value:
+            _validate(value[key], sub, f"{path}.{key}")
+
+
+def _messages(path: Path) -> dict[str, list[tuple[int, dict[str, Any], Any]]]:
+    out: dict[str, list[tuple[int, dict[str, Any], Any]]] = {}
+    with path.open("rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            if channel.topic.startswith("/arm/"):
+                out.setdefault(channel.topic, []).append((message.log_time, json.loads(message.data), schema))
+    return out
+
+
+def _pose(message: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+    """Translation (mm) and rotation matrix of a FrameTransform message."""
+    t, q = message["translation"], message["rotation"]
+    x, y, z, w = q["x"], q["y"], q["z"], q["w"]
+    rotation = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    return np.array([t["x"], t["y"], t["z"]]) * 1000.0, rotation
+
+
+HERE = (0.0, 1.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0, -150.5, 431.75, 20.25)
+
+
+def _session(tmp_path: Path) -> Path:
+    packets = session_packets()
+    # a here after the joint-angles reply: its transform is the second hand pose
+    packets.insert(5, ("c2s", packets[3][1].with_(opcode=0o201, packet_no=9)))
+    packets.insert(6, ("s2c", s2c(ServerOp.RESPONSE, 10, encode_reply("here", 9, transform=HERE))))
+    path = tmp_path / "s.mcap"
+    record(path, packets)
+    return path
+
+
+def test_our_schema_is_foxgloves() -> None:
+    ours = frame_transform_schema()
+    assert ours["title"] == FOXGLOVE["title"] == "foxglove.FrameTransform"
+
+    def shape(schema: dict[str, Any]) -> Any:
+        props = schema.get("properties")
+        if props is None:
+            return {k: schema[k] for k in ("type", "minimum", "maximum") if k in schema}
+        return {k: shape(v) for k, v in props.items()}
+
+    assert shape(ours) == shape(FOXGLOVE)
+
+
+def test_hand_and_joints_messages(tmp_path: Path) -> None:
+    messages = _messages(_session(tmp_path))
+    hands, joints = messages["/arm/hand"], messages["/arm/joints"]
+    assert len(hands) == 2 and len(joints) == 1
+    for t, message, schema in hands:
+        assert schema.name == "foxglove.FrameTransform" and schema.encoding == "jsonschema"
+        _validate(message, FOXGLOVE)
+        _validate(message, json.loads(schema.data))
+        assert message["timestamp"] == {"sec": t // 10**9, "nsec": t % 10**9}
+        assert (message["parent_frame_id"], message["child_frame_id"]) == ("world", "hand")
+        q = message["rotation"]
+        assert math.isclose(q["x"] ** 2 + q["y"] ** 2 + q["z"] ** 2 + q["w"] ** 2, 1.0, rel_tol=1e-12)
+    # the joint-angles reply: the hand where forward kinematics puts it, and each angle plottable
+    expected = forward(JOINTS, PUMA600.geometry)
+    p, r = _pose(hands[0][1])
+    assert np.allclose(p, expected.p, atol=1e-9) and np.allclose(r, expected.rotation, atol=1e-12)
+    t, flat, schema = joints[0]
+    _validate(flat, joints_schema())
+    assert schema.name == "manip.JointAngles" and t == hands[0][0]
+    assert [flat[f"j{i}"] for i in range(1, 7)] == pytest.approx(list(JOINTS))
+    # the here reply: its own transform, in metres
+    p, r = _pose(hands[1][1])
+    here = Transform.from_floats(HERE)
+    assert np.allclose(p, here.p, atol=1e-9) and np.allclose(r, here.rotation, atol=1e-12)
+
+
+def test_no_pictures_without_the_view_or_when_asked_not_to(tmp_path: Path) -> None:
+    for kw in ({"decoded_view": False}, {"arm_view": False}):
+        path = tmp_path / "s.mcap"
+        record(path, session_packets(), **kw)
+        assert _messages(path) == {}
+
+
+def test_a_transform_that_is_not_a_rotation_is_left_out(tmp_path: Path) -> None:
+    bad = (2.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 1.0, 2.0, 3.0)
+    packets = session_packets()[:3]
+    request = packets[0][1].with_(opcode=0o201, packet_no=2, src_index=0x1234, dest_index=0x5678, data=b"")
+    packets += [("c2s", request), ("s2c", s2c(ServerOp.RESPONSE, 3, encode_reply("here", 2, transform=bad)))]
+    path = tmp_path / "s.mcap"
+    with Recorder(path) as rec:
+        link = rec.open_link("tcp")
+        for direction, packet in packets:
+            rec.packet(link, direction, packet)  # type: ignore[arg-type]
+    assert "/arm/hand" not in _messages(path)
+
+
+@pytest.mark.parametrize("turn", [0.0, 90.0, 179.999, 180.0, -120.0])
+def test_quaternion_gives_the_rotation_back(turn: float) -> None:
+    for axis in (Transform.rot_x, Transform.rot_y, Transform.rot_z):
+        pose = axis(turn) @ Transform.rot_x(30.0) @ Transform.rot_z(-45.0)
+        x, y, z, w = quaternion(pose.rotation)
+        _, r = _pose({"translation": {"x": 0, "y": 0, "z": 0}, "rotation": {"x": x, "y": y, "z": z, "w": w}})
+        assert w >= 0.0 and np.allclose(r, pose.rotation, atol=1e-12)
+
+
+def test_golden_motion_capture_shows_the_hand_moving() -> None:
+    messages = _messages(ROOT / "captures" / "motion.mcap")
+    hands, joints = messages["/arm/hand"], messages["/arm/joints"]
+    assert len(joints) == 2 and len(hands) == 3  # joint-angles before and after the move, then here
+    for _, message, _ in hands:
+        _validate(message, FOXGLOVE)
+    before, after, here = (_pose(m) for _, m, _ in hands)
+    assert np.linalg.norm(after[0] - before[0]) > 10.0  # the hand moved more than a centimetre
+    # here, from the server, is where forward kinematics of the last joint angles puts the hand
+    assert np.allclose(here[0], after[0], atol=0.05) and np.allclose(here[1], after[1], atol=1e-5)
+    angles = [joints[1][1][f"j{i}"] for i in range(1, 7)]
+    assert np.allclose(_pose(hands[1][1])[0], forward(angles, PUMA600.geometry).p, atol=1e-9)
