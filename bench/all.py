@@ -221,13 +221,14 @@ def server_rows(requests: int, rounds: int) -> list[Row]:
 
 def capture_rows(packets: int, trials: int) -> list[Row]:
     frames = capture_bench.workload(packets)
-    views = capture_bench.views_of(capture_bench.manip_record(frames, True))
+    sample = capture_bench.manip_record(frames, True)
+    views, arms = capture_bench.views_of(sample), capture_bench.arm_of(sample)
     times = capture_bench.best(
         trials,
         {
             "manip": lambda: capture_bench.manip_record(frames, True),
-            "raw": lambda: capture_bench.raw_record(frames, views, True),
-            "appender": lambda: capture_bench.raw_record(frames, views, True, lean=True),
+            "raw": lambda: capture_bench.raw_record(frames, views, True, arms=arms),
+            "appender": lambda: capture_bench.raw_record(frames, views, True, lean=True, arms=arms),
         },
     )
     n = len(frames)
