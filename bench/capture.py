@@ -10,8 +10,9 @@ Recording, same file settings on both sides (zstd, 256 KiB chunks, CRCs, two sch
   write the raw frame and its JSON view.  Baseline ``raw view``: ``mcap.Writer.add_message`` writing
   the very same records: per frame the raw frame on its ``/chaos/*`` channel and the very JSON bytes
   manip wrote (taken from a manip file beforehand) on its ``/manip/*`` channel, with the same times and
-  sequence numbers.  The files come out the same size, so the ratio is the price of manip's decoding,
-  annotating and JSON, not of writing more.
+  sequence numbers, and after a pose-bearing reply the ``/arm/*`` messages manip wrote for it.  The
+  files come out the same size, so the ratio is the price of manip's decoding, annotating, JSON and
+  arm poses (kinematics), not of writing more.
 * ``manip raw``: the recorder with ``decoded_view=False`` (frames only, still decoded for the
   connection events).  Baseline ``raw frames``: ``mcap.Writer`` writing the frames only.
 * ``appender view`` (for information, no target): manip's recorder writes its messages with
@@ -97,6 +98,81 @@ def best(trials: int, fns: dict[str, Callable[[], object]]) -> dict[str, float]:
     return times
 
 
+T0 = 1_700_000_000_000_000_000
+"""Log time of the first frame (ns); frames follow 1 us apart."""
+
+
+def manip_record(frames: list[tuple[str, bytes]], view: bool) -> bytes:
+    """The frames through manip's :class:`Recorder` (the proxy's path), to an in-memory file."""
+    out = io.BytesIO()
+    rec = Recorder(out, decoded_view=view, command_line=["bench"])
+    link = rec.open_link("tcp")
+    record = rec.frame
+    for i, (direction, frame) in enumerate(frames):
+        record(link, direction, frame, T0 + i * 1000)  # type: ignore[arg-type]
+    rec.close()
+    return out.getvalue()
+
+
+def views_of(sample: bytes) -> dict[int, bytes]:
+    """The JSON view messages of a manip recording, by sequence number (the baseline writes them)."""
+    views: dict[int, bytes] = {}
+    for _, channel, message in make_reader(io.BytesIO(sample)).iter_messages(log_time_order=False):
+        if channel.topic.startswith("/manip/") and channel.topic != "/manip/events":
+            views[message.sequence] = message.data
+    return views
+
+
+def arm_of(sample: bytes) -> dict[int, list[tuple[str, bytes, int]]]:
+    """The ``/arm/*`` messages of a manip recording (Foxglove pictures of the hand and joints), by log
+    time (each frame has its own): the baseline writes them too, so both files hold the same records."""
+    arms: dict[int, list[tuple[str, bytes, int]]] = {}
+    for _, channel, message in make_reader(io.BytesIO(sample)).iter_messages(log_time_order=False):
+        if channel.topic.startswith("/arm/"):
+            arms.setdefault(message.log_time, []).append((channel.topic, message.data, message.sequence))
+    return arms
+
+
+def raw_record(
+    frames: list[tuple[str, bytes]],
+    views: dict[int, bytes],
+    view: bool,
+    lean: bool = False,
+    arms: dict[int, list[tuple[str, bytes, int]]] | None = None,
+) -> bytes:
+    """The same records through ``mcap.Writer`` (``lean``: through manip's appender instead); with
+    ``arms``, the ``/arm/*`` messages after the frames they come from, as the recorder writes them."""
+    out = io.BytesIO()
+    w = Writer(out, chunk_size=DEFAULT_CHUNK_SIZE, compression=CompressionType.ZSTD)
+    w.start(profile="manip", library="bench")
+    raw_schema = w.register_schema("frame", "x-manip-frame", b"{}")
+    raw = {d: w.register_channel(f"/chaos/{d}", "x-manip-chaos-frame", raw_schema) for d in ("c2s", "s2c")}
+    json_schema = w.register_schema("manip.Packet", "jsonschema", json.dumps({"type": "object"}).encode())
+    js = {d: w.register_channel(f"/manip/{d}", "json", json_schema) for d in ("c2s", "s2c")}
+    arm_schema = w.register_schema("arm", "jsonschema", json.dumps({"type": "object"}).encode())
+    arm = {topic: w.register_channel(topic, "json", arm_schema) for topic in ("/arm/hand", "/arm/joints")}
+    no_arms: dict[int, list[tuple[str, bytes, int]]] = {}
+    arms = arms or no_arms
+    if lean:
+        one, pair, _ = message_adder(w)
+        for i, (direction, frame) in enumerate(frames):
+            t = T0 + i * 1000
+            pair(raw[direction], frame, js[direction], views[i + 1], t, i + 1)
+            for topic, data, seq in arms.get(t, ()):
+                one(arm[topic], t, data, seq)
+    else:
+        add = w.add_message
+        for i, (direction, frame) in enumerate(frames):
+            t = T0 + i * 1000
+            add(raw[direction], t, frame, t, i + 1)
+            if view:
+                add(js[direction], t, views[i + 1], t, i + 1)
+                for topic, data, seq in arms.get(t, ()):
+                    add(arm[topic], t, data, t, seq)
+    w.finish()  # type: ignore[no-untyped-call]
+    return out.getvalue()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description="capture benchmark")
     parser.add_argument("--packets", type=int, default=20000)
@@ -104,68 +180,29 @@ def main() -> None:
     args = parser.parse_args()
     frames = workload(args.packets)
     frame_bytes = sum(len(f) for _, f in frames)
-    t0 = 1_700_000_000_000_000_000
-
-    def manip_record(view: bool) -> bytes:
-        out = io.BytesIO()
-        rec = Recorder(out, decoded_view=view, command_line=["bench"])
-        link = rec.open_link("tcp")
-        record = rec.frame
-        for i, (direction, frame) in enumerate(frames):
-            record(link, direction, frame, t0 + i * 1000)  # type: ignore[arg-type]
-        rec.close()
-        return out.getvalue()
-
-    sample = manip_record(True)
-    views: dict[int, bytes] = {}
-    for _, channel, message in make_reader(io.BytesIO(sample)).iter_messages(log_time_order=False):
-        if channel.topic.startswith("/manip/") and channel.topic != "/manip/events":
-            views[message.sequence] = message.data
-
-    def raw_record(view: bool, lean: bool = False) -> bytes:
-        out = io.BytesIO()
-        w = Writer(out, chunk_size=DEFAULT_CHUNK_SIZE, compression=CompressionType.ZSTD)
-        w.start(profile="manip", library="bench")
-        raw_schema = w.register_schema("frame", "x-manip-frame", b"{}")
-        raw = {
-            d: w.register_channel(f"/chaos/{d}", "x-manip-chaos-frame", raw_schema) for d in ("c2s", "s2c")
-        }
-        json_schema = w.register_schema("manip.Packet", "jsonschema", json.dumps({"type": "object"}).encode())
-        js = {d: w.register_channel(f"/manip/{d}", "json", json_schema) for d in ("c2s", "s2c")}
-        if lean:
-            _, pair, _ = message_adder(w)
-            for i, (direction, frame) in enumerate(frames):
-                t = t0 + i * 1000
-                pair(raw[direction], frame, js[direction], views[i + 1], t, i + 1)
-        else:
-            add = w.add_message
-            for i, (direction, frame) in enumerate(frames):
-                t = t0 + i * 1000
-                add(raw[direction], t, frame, t, i + 1)
-                if view:
-                    add(js[direction], t, views[i + 1], t, i + 1)
-        w.finish()  # type: ignore[no-untyped-call]
-        return out.getvalue()
+    sample = manip_record(frames, True)
+    views = views_of(sample)
+    arms = arm_of(sample)
 
     n = len(frames)
     print(f"capture benchmark: {n} frames ({frame_bytes / 1e6:.2f} MB of frames), best of {args.trials}")
     rec_times = best(
         args.trials,
         {
-            "manip view": lambda: manip_record(True),
-            "raw view": lambda: raw_record(True),
-            "manip raw": lambda: manip_record(False),
-            "raw frames": lambda: raw_record(False),
-            "appender view": lambda: raw_record(True, lean=True),
+            "manip view": lambda: manip_record(frames, True),
+            "raw view": lambda: raw_record(frames, views, True, arms=arms),
+            "manip raw": lambda: manip_record(frames, False),
+            "raw frames": lambda: raw_record(frames, views, False),
+            "appender view": lambda: raw_record(frames, views, True, lean=True, arms=arms),
         },
     )
     sizes = {
         "manip view": len(sample),
-        "raw view": len(raw_record(True)),
-        "manip raw": len(manip_record(False)),
+        "raw view": len(raw_record(frames, views, True, arms=arms)),
+        "manip raw": len(manip_record(frames, False)),
     }
-    sizes["raw frames"] = len(raw_record(False))
-    sizes["appender view"] = len(raw_record(True, lean=True))
+    sizes["raw frames"] = len(raw_record(frames, views, False))
+    sizes["appender view"] = len(raw_record(frames, views, True, lean=True, arms=arms))
     print("  record                 frames/s      MB/s   file MB")
     for name, seconds in rec_times.items():
         mb_s = frame_bytes / seconds / 1e6

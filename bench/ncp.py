@@ -60,6 +60,33 @@ class _Echo(asyncio.Protocol):
             del buf[:size]
 
 
+class _HopEcho(_Echo):
+    """The raw echo, but each frame is answered by a task woken for it, as a server handler is: the
+    asyncio hop that any connection object with an ``await receive()`` puts on the server's path."""
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        super().connection_made(transport)
+        self.frames: asyncio.Queue[bytes] = asyncio.Queue()
+        self.task = asyncio.get_running_loop().create_task(self._answer())
+
+    async def _answer(self) -> None:
+        while True:
+            frame = await self.frames.get()
+            assert self.transport is not None
+            self.transport.write(frame)
+
+    def data_received(self, data: bytes) -> None:
+        buf = self.buf
+        buf += data
+        size = len(FRAME)
+        while len(buf) >= size:
+            self.frames.put_nowait(bytes(buf[:size]))
+            del buf[:size]
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.task.cancel()
+
+
 class _EchoClient(asyncio.Protocol):
     """Raw baseline client: one frame out, wait for one frame back."""
 
@@ -131,7 +158,35 @@ def _percentile(samples: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
+@dataclass
+class RoundTrips:
+    """Round-trip samples in seconds, NCP and raw echo alternating, and the p50 ratio of each trial."""
+
+    ncp: list[float]
+    raw: list[float]
+    trial_ratios: list[float]
+
+    @property
+    def p50_ratio(self) -> float:
+        return _percentile(self.ncp, 0.5) / _percentile(self.raw, 0.5)
+
+
 async def _round_trips(ports: Servers, rounds: int, trials: int, options: NcpOptions) -> None:
+    result = await measure_round_trips(ports, rounds, trials, options)
+    ncp, base, trial_ratios = result.ncp, result.raw, result.trial_ratios
+    print(f"  round trip, 66-byte data packet each way, {len(ncp)} rounds in {trials} trials (microseconds)")
+    print(f"    {'':10} {'p50':>8} {'p99':>8} {'mean':>8}")
+    for name, samples in (("NCP/TCP", ncp), ("raw echo", base)):
+        p50, p99 = _percentile(samples, 0.5), _percentile(samples, 0.99)
+        print(f"    {name:10} {p50 * 1e6:8.1f} {p99 * 1e6:8.1f} {statistics.fmean(samples) * 1e6:8.1f}")
+    ratio99 = _percentile(ncp, 0.99) / _percentile(base, 0.99)
+    print(f"    ratio NCP/raw: p50 {result.p50_ratio:.2f}x, p99 {ratio99:.2f}x (target p50 <= 2x)")
+    spread = ", ".join(f"{r:.2f}" for r in sorted(trial_ratios))
+    print(f"    p50 ratio per trial: median {statistics.median(trial_ratios):.2f}x ({spread})")
+
+
+async def measure_round_trips(ports: Servers, rounds: int, trials: int, options: NcpOptions) -> RoundTrips:
+    """``rounds`` round trips of each kind against the servers at ``ports``, after a warm-up."""
     loop = asyncio.get_running_loop()
     transport, raw = await loop.create_connection(_EchoClient, "127.0.0.1", ports.raw_port)
     conn = await open_connection(f"tcp://127.0.0.1:{ports.echo_port}?contact=ECHO", options=options)
@@ -169,16 +224,7 @@ async def _round_trips(ports: Servers, rounds: int, trials: int, options: NcpOpt
             ncp += ncp_t
             base += base_t
     transport.close()
-    print(f"  round trip, 66-byte data packet each way, {len(ncp)} rounds in {trials} trials (microseconds)")
-    print(f"    {'':10} {'p50':>8} {'p99':>8} {'mean':>8}")
-    for name, samples in (("NCP/TCP", ncp), ("raw echo", base)):
-        p50, p99 = _percentile(samples, 0.5), _percentile(samples, 0.99)
-        print(f"    {name:10} {p50 * 1e6:8.1f} {p99 * 1e6:8.1f} {statistics.fmean(samples) * 1e6:8.1f}")
-    ratio50 = _percentile(ncp, 0.5) / _percentile(base, 0.5)
-    ratio99 = _percentile(ncp, 0.99) / _percentile(base, 0.99)
-    print(f"    ratio NCP/raw: p50 {ratio50:.2f}x, p99 {ratio99:.2f}x (target p50 <= 2x)")
-    spread = ", ".join(f"{r:.2f}" for r in sorted(trial_ratios))
-    print(f"    p50 ratio per trial: median {statistics.median(trial_ratios):.2f}x ({spread})")
+    return RoundTrips(ncp, base, trial_ratios)
 
 
 async def _throughput(ports: Servers, packets: int, options: NcpOptions) -> None:
@@ -198,6 +244,62 @@ async def _throughput(ports: Servers, packets: int, options: NcpOptions) -> None
     print(f"    {rate:,.0f} packets/s ({mb:.2f} MB/s of data); the sender waited {waits} times")
 
 
+async def hop_bound(rounds: int) -> tuple[float, float]:
+    """p50 round trips (s) of the raw echo and of the same echo answering from a task, one event loop,
+    alternating: what one task hop per packet costs, before any protocol work."""
+    loop = asyncio.get_running_loop()
+    servers = [await loop.create_server(cls, "127.0.0.1", 0) for cls in (_Echo, _HopEcho)]
+    clients = []
+    for server in servers:
+        port = server.sockets[0].getsockname()[1]
+        clients.append(await loop.create_connection(_EchoClient, "127.0.0.1", port))
+    samples: list[list[float]] = [[], []]
+    clock = time.perf_counter
+    for i in range(rounds + rounds // 10):
+        for k in (0, 1) if i & 1 else (1, 0):
+            t0 = clock()
+            await clients[k][1].round_trip()
+            if i >= rounds // 10:  # after a warm-up
+                samples[k].append(clock() - t0)
+    for transport, _ in clients:
+        transport.close()
+    for server in servers:
+        server.close()
+    return statistics.median(samples[0]), statistics.median(samples[1])
+
+
+async def same_loop_round_trips(rounds: int, trials: int, options: NcpOptions) -> RoundTrips:
+    """Round trips with client and servers on this event loop (for bench/all.py)."""
+    ports, raw, echo, sink = await _start_servers(options)
+    try:
+        return await measure_round_trips(ports, rounds, trials, options)
+    finally:
+        await echo.aclose()
+        await sink.aclose()
+        raw.close()
+
+
+async def split_round_trips(rounds: int, trials: int, options: NcpOptions) -> RoundTrips:
+    """Round trips against servers in a child process (for bench/all.py)."""
+    child = _serve_in_child(options)
+    assert child.stdin is not None and child.stdout is not None
+    try:
+        line = await asyncio.get_running_loop().run_in_executor(None, child.stdout.readline)
+        return await measure_round_trips(Servers(*map(int, line.split())), rounds, trials, options)
+    finally:
+        child.stdin.close()
+        child.wait(timeout=10)
+
+
+def _serve_in_child(options: NcpOptions) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, __file__, "--serve", "--window", str(options.window)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+
+
 async def _same(ns: argparse.Namespace, options: NcpOptions) -> None:
     ports, raw, echo, sink = await _start_servers(options)
     try:
@@ -210,12 +312,7 @@ async def _same(ns: argparse.Namespace, options: NcpOptions) -> None:
 
 
 async def _split(ns: argparse.Namespace, options: NcpOptions) -> None:
-    child = subprocess.Popen(
-        [sys.executable, __file__, "--serve", "--window", str(ns.window)],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    child = _serve_in_child(options)
     assert child.stdin is not None and child.stdout is not None
     try:
         line = await asyncio.get_running_loop().run_in_executor(None, child.stdout.readline)

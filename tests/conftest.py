@@ -79,8 +79,17 @@ def _settings_holder(item: pytest.Item) -> tuple[object, str] | None:
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """``manip``: refuse a test whose own settings turn derandomization or the database back on.
+    """Tests marked ``slow`` (whole simulated runs, CPU-bound) come first and, with ``--dist loadgroup``
+    (the README's command), go to two workers, one per core, taking turns: the longest then starts at
+    once instead of a third of the way in, no more of them than there are cores run at a time, and the
+    other workers take the rest, which mostly waits on real-time deadlines.
+
+    ``manip``: refuse a test whose own settings turn derandomization or the database back on.
     ``long``: raise a test's own smaller ``max_examples`` to the profile's."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)  # stable: the rest keep order
+    slow = [item for item in items if item.get_closest_marker("slow") is not None]
+    for k, item in enumerate(slow):
+        item.add_marker(pytest.mark.xdist_group(f"slow-{k % 2}"))
     profile = settings.get_current_profile_name()
     if profile not in ("manip", "long"):
         return

@@ -76,3 +76,64 @@ def test_fast_path_declines_wrong_sizes() -> None:
     assert fast.parse(b"\0" * 48) is None
     assert plan(SPEC.request("free-joint").request, numbered=False) is None  # a `small` field
     assert plan(SPEC.request("examine-wrist").response.data, numbered=True) is None  # counted words
+
+
+# Values for the encoder: exact types mixed with near misses (bools, ints for floats, floats for words),
+# words just out of range, and floats at the ends of the IEEE identity (both F range ends, exponents 1
+# and 254, subnormal singles, -0.0, infinities, NaN).
+_EDGE_FLOATS = [0.0, -0.0, 1.0, -2.5, 2.0**-128, 2.0**-127, 2.0**-129, 2.0**125, 2.0**126, 1.7e38, 1e-300]
+float_value = st.one_of(
+    st.floats(),
+    st.floats(min_value=-1e4, max_value=1e4),
+    st.sampled_from(_EDGE_FLOATS),
+    st.integers(-2, 2),
+    st.booleans(),
+)
+word_value = st.one_of(st.integers(0, 0xFFFF), st.integers(-0x8001, 0x10000), st.booleans(), st.just(1.0))
+
+
+@st.composite
+def build_case(draw: st.DrawFn) -> tuple[Layout, bool, dict[str, Any], int]:
+    layout, numbered = draw(st.sampled_from(PLANNED))
+    values: dict[str, Any] = {}
+    for f in layout.fields:
+        element = float_value if f.type.element == "float" else word_value
+        count = f.type.count
+        assert count is not None
+        if count == 1:
+            values[f.name] = draw(element)
+        else:
+            size = draw(st.sampled_from([count, count, count, count - 1]))
+            values[f.name] = draw(st.lists(element, min_size=size, max_size=size).map(tuple))
+    if layout.fields and draw(st.integers(0, 9)) == 0:
+        values.pop(layout.fields[0].name)
+    number = draw(st.integers(0, 0xFFFF) | st.just(0x10000) | st.just(True))
+    return layout, numbered, values, number
+
+
+@settings(max_examples=500)
+@given(build_case())
+def test_fast_build_agrees_with_construct(case: tuple[Layout, bool, dict[str, Any], int]) -> None:
+    layout, numbered, values, number = case
+    fast = plan(layout, numbered=numbered)
+    assert fast is not None
+    built = fast.build(values, number if numbered else None)
+    if built is None:
+        return  # declined: the reference decides (and reports)
+    codec = _codec(layout)
+    obj = {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
+    reference = (
+        codec.with_number.build({"request_number": number, **obj}) if numbered else codec.struct.build(obj)
+    )
+    assert built == reference
+
+
+def test_fast_build_takes_the_common_cases() -> None:
+    here = plan(SPEC.request("here").response.data, numbered=True)
+    assert here is not None
+    transform = (0.0, 1.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0, -150.5, 431.75, 20.25)
+    built = here.build({"transform": transform}, 7)
+    assert built is not None and here.parse(built) == (7, {"transform": transform})
+    assert here.build({"transform": (-0.0, *transform[1:])}, 7) is None  # -0.0: the reference cleans it
+    assert here.build({"transform": transform[:11]}, 7) is None
+    assert here.build({"transform": transform, "extra": 1}, 7) is None

@@ -579,3 +579,43 @@ def test_poller_wakeup() -> None:
             assert conn.ended
 
     run(main())
+
+
+def test_each_watched_connection_is_woken_when_its_own_window_opens() -> None:
+    """Two watched connections on one server node, both with full send windows: the peer's
+    acknowledgements on one wake that one's poller and only it (the node re-checks a window only where
+    it can have opened, so this holds the narrowing to what it must still do)."""
+
+    async def main() -> None:
+        accepted: list[ChaosConnection] = []
+        done = asyncio.Event()
+
+        async def hold(conn: ChaosConnection) -> None:
+            accepted.append(conn)
+            await done.wait()
+
+        server, url = await serve(hold)
+        clients = [await open_connection(url, options=NcpOptions(window=2, ack_delay=0.01)) for _ in range(2)]
+        async with server:
+            while len(accepted) < 2:
+                await asyncio.sleep(0.01)
+            woken = [asyncio.Event(), asyncio.Event()]
+            for conn, event in zip(accepted, woken, strict=True):
+                conn.set_wakeup(event.set)
+                await conn.send(b"1")
+                await conn.send(b"2")  # the client's window of 2 is full: nothing is read yet
+                assert not conn.can_send()
+            for event in woken:
+                event.clear()
+            for k in (1, 0):  # the second client reads first
+                for _ in range(2):
+                    await clients[k].receive()  # reading acknowledges
+                await asyncio.wait_for(woken[k].wait(), 2)  # promptly: a timer would be later
+                assert accepted[k].can_send()
+                if k == 1:
+                    assert not woken[0].is_set() and not accepted[0].can_send()
+            done.set()
+            for client in clients:
+                await client.close()
+
+    run(main())

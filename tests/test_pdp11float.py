@@ -274,6 +274,77 @@ def test_encode_matches_rational_oracle(x: float, rounding: str, underflow: str)
         assert got == ("ok", want)
 
 
+# The scalar fast paths (default policies) against the oracles: the switch to the checked path sits at
+# 2^-128 and just below 2^126, so values straddling both are drawn on purpose.
+_FAST_EDGES = [
+    math.ldexp(1.0, 126) - math.ldexp(1.0, 101),
+    math.ldexp(1.0, 126) - math.ldexp(1.0, 102),
+    math.ldexp(1.0, 126),
+    math.ldexp(1.0, -126),
+    F_MIN_NORMAL,
+    F_MIN_NORMAL * (1 - 2**-25),
+    F_MIN_NORMAL * (1 - 2**-24),
+]
+fast_edges = st.tuples(st.sampled_from(_FAST_EDGES), st.integers(-3, 3), st.booleans()).map(
+    lambda t: -math.nextafter(t[0], math.inf * t[1]) if t[2] else math.nextafter(t[0], math.inf * t[1])
+)
+
+
+@settings(max_examples=400)
+@given(floats_any | fast_edges, underflows)
+def test_half_even_encode_matches_the_oracle_either_side_of_the_fast_path(x: float, underflow: str) -> None:
+    want = oracle_bytes(x, "half-even", underflow)
+    got = _outcome(pack_f, x, underflow=underflow)
+    assert got == ("ok", want) if isinstance(want, bytes) else got[:2] == (EncodeError, want)
+
+
+@settings(max_examples=400)
+@given(any_pattern, st.integers(0, 5))
+def test_default_decode_matches_the_oracle_at_any_offset(u: int, offset: int) -> None:
+    buf = bytes(range(offset)) + u.to_bytes(4, "little")
+    if _is_reserved(u):
+        with pytest.raises(DecodeError) as info:
+            unpack_f(buf, offset)
+        assert (info.value.clause, info.value.offset) == ("float.reserved-operand", offset)
+    else:
+        assert _same(unpack_f(buf, offset), oracle_value(u))
+    with pytest.raises(DecodeError):
+        unpack_f(buf[:-1], offset)  # one byte short
+    with pytest.raises(DecodeError):
+        unpack_f(buf, -4)  # never read from the end
+
+
+@settings(max_examples=300)
+@given(st.lists(any_pattern, max_size=20), st.sampled_from(["error", "zero"]))
+def test_array_decode_of_few_and_many_floats_matches_the_oracle(us: list[int], reserved: str) -> None:
+    """Up to 64 floats take the scalar tables, more the vectorised path: both against the oracle."""
+    raw = b"".join(u.to_bytes(4, "little") for u in us)
+    for copies in (1, 5):
+        reserved_at = next((i for i, u in enumerate(us * copies) if _is_reserved(u)), None)
+        if reserved_at is not None and reserved == "error":
+            with pytest.raises(DecodeError) as info:
+                unpack_f_array(raw * copies, reserved=reserved)  # type: ignore[arg-type]
+            assert info.value.offset == 4 * reserved_at
+            continue
+        got = unpack_f_array(raw * copies, reserved=reserved).tolist()  # type: ignore[arg-type]
+        assert all(_same(a, oracle_value(u)) for a, u in zip(got, us * copies, strict=True))
+
+
+@settings(max_examples=300)
+@given(st.lists(floats_any | fast_edges, max_size=20), underflows)
+def test_array_encode_of_few_and_many_floats_matches_the_oracle(xs: list[float], underflow: str) -> None:
+    for copies in (1, 5):
+        wants = [oracle_bytes(x, "half-even", underflow) for x in xs * copies]
+        bad = next((i for i, w in enumerate(wants) if isinstance(w, str)), None)
+        array = np.array(xs * copies, dtype=np.float64)
+        if bad is not None:
+            with pytest.raises(EncodeError) as info:
+                pack_f_array(array, underflow=underflow)  # type: ignore[arg-type]
+            assert (info.value.clause, info.value.offset) == (wants[bad], 4 * bad)
+            continue
+        assert pack_f_array(array, underflow=underflow) == b"".join(wants)  # type: ignore[arg-type, misc]
+
+
 @settings(max_examples=200)
 @given(st.floats(width=32) | st.floats(width=16), roundings, underflows)
 def test_numpy_scalar_inputs_match_the_oracle(x: float, rounding: str, underflow: str) -> None:

@@ -382,6 +382,31 @@ def _short_header(b: bytes, at: WordLocator = CANONICAL) -> DecodeError:
 
 def encode_raw(p: Packet) -> bytes:
     """``p`` in canonical PDP-11 memory order, without a trailer."""
+    data = p.data
+    n = len(data)
+    opcode, fc = p.opcode, p.fc
+    dh, di, sh, si, pn, an = p.dest_host, p.dest_index, p.src_host, p.src_index, p.packet_no, p.ack_no
+    # The common case: ints (as check_encodable takes them) and bytes, packed at once: struct checks the
+    # 16-bit ranges, and a shifted opcode or fc out of range fails there too.  Anything else is checked
+    # field by field, for the precise error.
+    if (
+        n <= MAX_DATA
+        and type(data) is bytes
+        and isinstance(opcode, int)
+        and isinstance(fc, int)
+        and isinstance(dh, int)
+        and isinstance(di, int)
+        and isinstance(sh, int)
+        and isinstance(si, int)
+        and isinstance(pn, int)
+        and isinstance(an, int)
+    ):
+        try:
+            head = _HEADER_WORDS.pack(opcode << 8, fc << 12 | n, dh, di, sh, si, pn, an)
+        except struct.error:
+            pass
+        else:
+            return head + data + b"\0" if n & 1 else head + data
     check_encodable(p)
     pad = b"\0" if len(p.data) & 1 else b""
     return _HEADER_WORDS.pack(*header_words(p)) + bytes(p.data) + pad

@@ -277,6 +277,11 @@ def request_op(key: int | str) -> RequestOpcode:
 def encode_request(op: int | str, **values: Any) -> bytes:
     """Data bytes of a request packet (its Chaos opcode is ``request_op(op).opcode``)."""
     spec_op = request_op(op)
+    fast = _codec(spec_op.request).fast
+    if fast is not None:
+        data = fast.build(values)
+        if data is not None:
+            return data
     return _build(spec_op.request, values, spec_op.name)
 
 
@@ -410,13 +415,19 @@ def response_layout(op: RequestOpcode) -> Layout:
 def encode_reply(op: int | str, request_number: int, **values: Any) -> bytes:
     """Data of a RESPONSE packet answering ``op`` (for a multi reply: one text chunk)."""
     spec_op = request_op(op)
+    layout = response_layout(spec_op)
+    fast = _codec(layout).fast_numbered
+    if fast is not None:  # (never a multi reply: text has no fast plan)
+        data = fast.build(values, request_number)
+        if data is not None:
+            return data
     if spec_op.response.kind == "multi" and not any(values.values()):
         raise EncodeError(
             f"{spec_op.name}.reply: an empty chunk would end the reply; use encode_terminator",
             path=f"{spec_op.name}.reply",
             clause="multi.terminated-by-empty",
         )
-    return _build(response_layout(spec_op), values, f"{spec_op.name}.reply", request_number)
+    return _build(layout, values, f"{spec_op.name}.reply", request_number)
 
 
 def encode_terminator(request_number: int) -> bytes:
@@ -432,8 +443,45 @@ def encode_multi_text(request_number: int, text: str) -> list[bytes]:
     return [*chunks, encode_terminator(request_number)]
 
 
+class _ReplyBuilder:
+    """A plain class with :class:`Reply`'s slots: filling one and reassigning ``__class__`` skips the
+    frozen dataclass's ``__init__`` (see :func:`~manip.codecs.packet.make_packet`, the same trick)."""
+
+    __slots__ = Reply.__slots__
+    request_number: int
+    op: RequestOpcode
+    values: dict[str, Value]
+    payload: bytes
+
+
+_new_reply = object.__new__
+_REPLY_PLANS: dict[int | str, tuple[RequestOpcode, FastLayout | None]] = {}
+"""Per request opcode (by number and by name): its spec entry and the fast plan of its reply, if any."""
+
+
+def _reply_plan(op: int | str | RequestOpcode) -> tuple[RequestOpcode, FastLayout | None]:
+    """The plan for ``op``, remembered when ``op`` is a number or a name (a spec entry is used as is)."""
+    if isinstance(op, RequestOpcode):
+        return op, _codec(response_layout(op)).fast_numbered
+    spec_op = request_op(op)
+    entry = _REPLY_PLANS[op] = (spec_op, _codec(response_layout(spec_op)).fast_numbered)
+    return entry
+
+
 def decode_reply(data: bytes, op: int | str | RequestOpcode | None = None) -> Reply:
     """Decode a RESPONSE packet's data; with ``op`` the payload is decoded by that request's layout."""
+    if op is not None:
+        plan = None if isinstance(op, RequestOpcode) else _REPLY_PLANS.get(op)
+        spec_op, fast = plan or _reply_plan(op)
+        if fast is not None:
+            parsed = fast.parse(data)
+            if parsed is not None:  # a numbered plan: the number is an int
+                reply = _new_reply(_ReplyBuilder)
+                reply.request_number, reply.values = parsed  # type: ignore[assignment]
+                reply.op = spec_op
+                reply.payload = data[REQUEST_NUMBER_BYTES:] if type(data) is bytes else bytes(data[2:])
+                reply.__class__ = Reply  # type: ignore[assignment]
+                return reply  # type: ignore[return-value]
     if len(data) < REQUEST_NUMBER_BYTES:
         raise DecodeError(
             f"response has {len(data)} data bytes; the request number needs 2",

@@ -234,8 +234,53 @@ def _as_index(u: object) -> int:
     raise DecodeError(f"{type(u).__name__} {u!r} is not a 32-bit pattern", clause="float.format")
 
 
+# Scalar fast paths.  Both are exact and cover the common case only; anything else (other policies,
+# non-float inputs, values near the ends of the range, bad offsets, the reserved operand) goes down the
+# checked path above, which is the reference and raises the precise errors.
+#
+# Encoding: for |x| in [2^-128, _FAST_HIGH) the F pattern of x is the IEEE single of 4x with its words
+# swapped.  4x is then a normal single (>= 2^-126) that rounds (to nearest, ties to even: half-even, in
+# C) below 2^128, the two 24-bit roundings are the same, and F's exponent bias is IEEE's plus 2 (F is
+# 0.1f x 2^(e-128), IEEE 1.f x 2^(E-127)).  Packing 4x twice as "<ff" puts the high word of the single
+# (sign, exponent, top fraction: F's w0) at bytes 2-3 and its low word at bytes 4-5: bytes 2..6 are the
+# wire bytes, one C call and one slice.
+#
+# Decoding: a float is w0 (sign, exponent, 7 fraction bits) and w1 (16 fraction bits), and its value is
+# base[w0] + scale[w0] * w1 with base = +-(2^23 + top bits << 16) * 2^(e-152) and scale = +-2^(e-152).
+# Both terms are exact and so is their sum (a 24-bit integer times a power of two), so two lookups in
+# 65536-entry tables replace the bit work.  Exponent 0 reads as 0.0 (the default dirty-zero policy);
+# the reserved operand's base is None, so the addition raises TypeError and the checked path reports it.
+
+_FAST_HIGH: Final = math.ldexp(1.0, 126) - math.ldexp(1.0, 101)
+"""Below this, 4x rounds to at most the largest single under 2^128 (the first tie above rounds up)."""
+_PACK_TWICE: Final = struct.Struct("<ff").pack
+_WORDS_FROM: Final = struct.Struct("<HH").unpack_from
+_ZERO_BYTES: Final = bytes(4)
+
+
+def _decode_tables() -> tuple[list[float | None], list[float]]:
+    w0 = np.arange(0x10000, dtype=np.int64)
+    exponent = (w0 >> 7) & 0xFF
+    scale = np.ldexp(np.where(w0 & 0x8000, -1.0, 1.0), exponent - 152)
+    scale[exponent == 0] = 0.0
+    base = scale * (((w0 & 0x7F) << 16) | _HIDDEN)
+    bases: list[float | None] = base.tolist()
+    for reserved in range(0x8000, 0x8080):  # sign 1, exponent 0
+        bases[reserved] = None
+    return bases, scale.tolist()
+
+
+_DECODE_BASE, _DECODE_SCALE = _decode_tables()
+
+
 def pack_f(x: FloatLike, *, rounding: Rounding = "half-even", underflow: Underflow = "zero") -> bytes:
     """The four wire bytes of ``x``: ``[w0.lo, w0.hi, w1.lo, w1.hi]``."""
+    if type(x) is float and rounding == "half-even":
+        if F_MIN_NORMAL <= abs(x) < _FAST_HIGH:
+            y = x * 4.0
+            return _PACK_TWICE(y, y)[2:6]
+        if x == 0.0 and underflow in UNDERFLOW_POLICIES:
+            return _ZERO_BYTES
     return _U32.pack(f_to_u32(x, rounding=rounding, underflow=underflow))
 
 
@@ -247,6 +292,12 @@ def unpack_f(
     reserved: Reserved = "error",
 ) -> float:
     """Decode the float at ``b[offset:offset + 4]``; errors carry that byte offset."""
+    if dirty_zero == "zero" and reserved == "error" and offset >= 0:
+        try:
+            w0, w1 = _WORDS_FROM(b, offset)
+            return _DECODE_BASE[w0] + _DECODE_SCALE[w0] * w1  # type: ignore[no-any-return]
+        except (struct.error, TypeError):
+            pass  # too short, or the reserved operand: the checked path below says which
     if offset < 0 or len(b) - offset < 4:
         raise DecodeError(
             f"a float needs 4 bytes at offset {offset}, {max(0, len(b) - offset)} present",
@@ -320,6 +371,10 @@ def unpack_f_array(
     The first offending element raises the scalar error with ``path="[i]"`` and ``offset=4*i``.
     """
     _check_decode(dirty_zero, reserved)
+    if not isinstance(buf, np.ndarray) and dirty_zero == "zero" and len(buf) <= _SMALL_BYTES:
+        small = _unpack_small(buf)
+        if small is not None:
+            return small
     u = _as_u32(buf)
     image = (u >> 16) | (u << 16)  # word swap (uint32 wraps): sign 31, exponent 30..23, fraction 22..0
     wide = image.astype(np.uint64)
@@ -345,6 +400,44 @@ def unpack_f_array(
             raise AssertionError("unreachable: bulk and scalar decoders disagree")  # pragma: no cover
         bits[zero] = 0
     return bits.view(np.float64)
+
+
+# A few floats at a time (the simulated Cougar's memory, a reply's transform): numpy's fixed cost per
+# call is many times the work, so these go through the scalar fast paths above and one array build.
+# Whatever those decline (a reserved operand, a value near the range ends, another policy) takes the
+# vectorised path below, which decides.
+
+_SMALL_BYTES: Final = 256
+_SMALL_WORDS: Final = [struct.Struct(f"<{n}H") for n in range(_SMALL_BYTES // 2 + 1)]
+
+
+def _unpack_small(buf: bytes | bytearray | memoryview) -> npt.NDArray[np.float64] | None:
+    """Default-dirty-zero decode of up to 64 floats, or None when the vectorised path must decide."""
+    size = len(buf)
+    if size & 3:
+        return None
+    words = _SMALL_WORDS[size >> 1].unpack(buf)
+    try:
+        values = [
+            _DECODE_BASE[w0] + _DECODE_SCALE[w0] * w1 for w0, w1 in zip(words[::2], words[1::2], strict=True)
+        ]
+    except TypeError:
+        return None  # a reserved operand
+    return np.array(values, dtype=np.float64)
+
+
+def _pack_small(x: npt.NDArray[np.float64]) -> bytes | None:
+    """Half-even encode of a few float64 values, or None when the vectorised path must decide."""
+    out = []
+    for v in x.tolist():
+        if _FAST_HIGH > v >= F_MIN_NORMAL or -_FAST_HIGH < v <= -F_MIN_NORMAL:
+            y = v * 4.0
+            out.append(_PACK_TWICE(y, y)[2:6])
+        elif v == 0.0:
+            out.append(_ZERO_BYTES)
+        else:
+            return None
+    return b"".join(out)
 
 
 def _float64_values(
@@ -390,6 +483,15 @@ def pack_f_array(
     offending element raises the scalar error with ``path="[i]"`` and ``offset=4*i``.
     """
     _check_encode(rounding, underflow)
+    if (
+        rounding == "half-even"
+        and isinstance(values, np.ndarray)
+        and values.dtype == np.float64
+        and values.size <= _SMALL_BYTES // 4
+    ):
+        small = _pack_small(values.reshape(-1))
+        if small is not None:
+            return small
     x, type_error = _float64_values(values)
     if isinstance(x, list):
         out = bytearray()

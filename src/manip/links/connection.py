@@ -172,7 +172,9 @@ class ChaosConnection:
         stats = self.stats
         stats.packets_sent += 1
         stats.bytes_sent += len(data)
-        node._pump()
+        node._pump(windows=False)  # a send opens no window; only ours may have closed:
+        if self._wakeup is not None:
+            self._was_sendable = self.can_send()
         return number
 
     async def receive(self) -> Packet:

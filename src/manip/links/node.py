@@ -158,6 +158,7 @@ class Node:
         self._watching: set[ChaosConnection] = set()  # connections with a poller's wake-up callback
         self._rx: tuple[Link, int, int] | None = None  # link, source host and neighbour of the input
         self._pumping = False
+        self._windows_due = False
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at = 0.0
         self._min_interval = self.options.shortest_interval
@@ -312,10 +313,16 @@ class Node:
         self._last_now = now
         return now
 
-    def _pump(self) -> None:
-        """Drain the core: route its packets, dispatch its events (which may call it again), re-arm."""
+    def _pump(self, windows: bool = True, conn_id: int = 0) -> None:
+        """Drain the core: route its packets, dispatch its events (which may call it again), re-arm.
+
+        Then the watched connections' send windows are checked (:meth:`ChaosConnection.set_wakeup`),
+        unless ``windows`` is False: a pump after our own send or read, which cannot open a window (only
+        an acknowledgement from the peer, or a timer, can; the sender notes its own window itself).
+        With ``conn_id`` only that connection's: a pump after a packet for it, which touches no other."""
         if self._pumping:
-            return  # the outer pump drains whatever this call would have
+            self._windows_due = self._windows_due or windows
+            return  # the outer pump drains whatever this call would have (and checks the windows)
         self._pumping = True
         ncp = self.ncp
         route = self._route
@@ -333,9 +340,17 @@ class Node:
             self._arm_timer()  # (the test is _arm_timer's first one, inlined: it usually says "no")
         if self._send_waiting:
             self._wake_senders()
-        if self._watching:
-            for conn in self._watching:
+        watching = self._watching
+        if not watching or not (windows or self._windows_due):
+            return
+        if conn_id and not self._windows_due:
+            conn = self._conns.get(conn_id)
+            if conn is not None and conn in watching:
                 conn._check_window()
+            return
+        self._windows_due = False
+        for conn in watching:
+            conn._check_window()
 
     def _route(self, packet: Packet) -> None:
         rx = self._rx
@@ -410,7 +425,7 @@ class Node:
         self._rx = (link, packet.src_host, hop)
         try:
             self.ncp.receive(self._now(), packet)
-            self._pump()
+            self._pump(conn_id=index)
         except Exception:
             self.stats.core_errors += 1
             log.exception("node %o: processing %r failed", self.address, packet)
@@ -575,4 +590,4 @@ class Node:
             self.ncp.read_ack(self._now(), conn_id, packet_no)
         except NcpError:
             return  # the connection ended meanwhile: nothing left to acknowledge
-        self._pump()
+        self._pump(windows=False)
