@@ -159,11 +159,17 @@ GUARDS: Final = 16
 
 async def clear_guards(probe: Probe) -> None:
     """Clear every wrist guard, if the target serves clear-guard.  Guards live in the wrist, not in the
-    connection (erratum ``server-robot``): one an earlier session set would trip this case's moves."""
+    connection (erratum ``server-robot``): one an earlier session set would trip this case's moves.
+
+    Cougar checks its guards before it reads new commands in the same tick (GUTS: GUARDM, then COMINT,
+    Part III B.6), so a guard may still trip on the tick the clears arrive.  A request the wrist itself
+    answers (its version) comes back only after they were read; the caller's enable-power then clears
+    the abort such a last trip caused."""
     for index in range(GUARDS):
         answer = await probe.call("clear-guard", index=index)
         if not answer.is_response:
             return  # no wrist, or no such operation: nothing to clear
+    await probe.call("wrist-version")
 
 
 async def power_on(ctx: CaseContext, probe: Probe) -> None:
