@@ -45,6 +45,7 @@ from manip.conformance.context import DEFAULT_REPLY_TIMEOUT, RunOptions
 from manip.conformance.cougar_target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.coverage import DEFAULT_PARTIES, coverage, gaps
 from manip.conformance.embedded import EmbeddedServer, simulated_server
+from manip.conformance.fuzz.cli import fuzz_command
 from manip.conformance.replay_cli import (
     check_output_paths,
     given,
@@ -708,6 +709,7 @@ def coverage_command(fmt: str, parties: tuple[str, ...]) -> None:
 
 main.add_command(replay_command)
 main.add_command(verify_command)
+main.add_command(fuzz_command)
 
 if __name__ == "__main__":  # pragma: no cover
     main()
