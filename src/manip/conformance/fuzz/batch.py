@@ -185,15 +185,20 @@ class BatchRunner:
         finally:
             for c in run.connections:
                 c.close()
+                if not self.datagram:
+                    c.wire.close()  # after the CLS, which goes out first
             run.sent_requests = sum(c.requests for c in run.connections)
             run.duration = self._loop.time() - run.started
         return run
 
     async def _open(self, run: BatchRun) -> FuzzConnection | None:
+        wire: Wire | None = None
         try:
             wire = await self.wire()
             conn = await self.connect(wire)
         except (ConnectError, OSError, TimeoutError) as exc:
+            if wire is not None and not self.datagram:
+                wire.close()
             run.open_error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, ConnectError) else str(exc)
             return None
         run.connections.append(conn)
