@@ -233,6 +233,21 @@ def test_a_request_skipped_by_the_replies_is_a_silent_drop_not_a_wrong_number() 
     assert observations[0].number == 1  # the request never answered, not the one after it
 
 
+def test_a_reply_to_a_request_answered_already_is_a_second_reply() -> None:
+    unknown = 0o277
+    refusal = encode_error(ServerOp.NON_FATAL_ERROR, 2, bad_value("dispatch", "unknown").error)
+    packets = [
+        _s2c(ServerOp.RESPONSE, b"\x01\x00"),
+        _c2s(unknown, 2),
+        _c2s(unknown, 3),
+        _s2c(ServerOp.NON_FATAL_ERROR, refusal),
+        _s2c(ServerOp.RESPONSE, b"\x02\x00"),  # done for #2 again, where #3's answer was due
+    ]
+    observations = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
+    assert observations[0].clause == "error.non-fatal-is-reply"
+    assert observations[0].number == 1  # the request answered twice
+
+
 def test_after_a_reply_out_of_step_later_findings_are_only_counted() -> None:
     unknown = 0o277
     extra = _s2c(ServerOp.RESPONSE, b"\x02\x00")

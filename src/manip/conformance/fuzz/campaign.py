@@ -269,11 +269,22 @@ class Campaign:
         known = self._known.get(o.signature)
         if known is not None:
             report.findings[known].occurrences += 1
+            report.findings[known].followers += o.followers
             return
         kind = _class_of(o, inputs)
         counts = o.kind in ALWAYS or o.level == "MUST" or (self.config.strict and o.level == "SHOULD")
         finding = Finding(
-            o.kind, o.clause, o.level, o.message, o.expected, o.actual, o.data, kind, batch, counts=counts
+            o.kind,
+            o.clause,
+            o.level,
+            o.message,
+            o.expected,
+            o.actual,
+            o.data,
+            kind,
+            batch,
+            counts=counts,
+            followers=o.followers,
         )
         index = len(report.findings)
         report.findings.append(finding)

@@ -4,9 +4,11 @@ drops the target did not count, each with the clause it breaks and the input it 
 * The connection's packets are judged by :func:`manip.conformance.checks.check_transcript` (one reply
   per request, in order, echoing its number, the refusal the spec demands for an unknown opcode, a
   wrong length or a reserved-operand float, the shape of every reply, free joint's discarded packet,
-  asynchronous responses only when asked for), and by :mod:`.oracles` for what it does not know: a
-  set-speed factor outside 0 < n <= 1 accepted, a motion request accepted after kill power.  A
-  request never answered is a *silent drop*; anything else a *wrong answer*.
+  asynchronous responses only when asked for), and by :mod:`.oracles` for what it does not know (a
+  factor out of range, motion without power or after an abort, what describe self said).  A request
+  never answered is a *silent drop* (also when the replies skip it: a reply carrying the number of a
+  later request), anything else a *wrong answer*.  A connection is judged up to its first finding
+  that may put answers out of step with requests (:data:`DISRUPTIVE`); the rest are only counted.
 * Every stray packet and raw link has an :class:`~.batch.Expectation`: a LOS or an RFC answer that
   did not come is a silent drop; an answer to a packet that must be dropped, or a link kept after its
   framing was lost, a wrong answer.
@@ -65,11 +67,6 @@ another shape), so that later findings on the connection may be its consequence.
 ALWAYS: Final = frozenset({"crash", "hang", "traceback", "uncounted-drop"})
 """Kinds that are findings whatever the level: the target's health is no matter of degree."""
 _RFC_ANSWERS: Final = frozenset({ChaosOp.OPN, ChaosOp.CLS, ChaosOp.ANS, ChaosOp.FWD})
-_SET_SPEED: Final = SPEC.request("set-speed").opcode
-_KILL_POWER: Final = SPEC.request("kill-power").opcode
-_ENABLE_POWER: Final = SPEC.request("enable-power").opcode
-_FREE_JOINT: Final = SPEC.request("free-joint").opcode
-_MOTION: Final = frozenset(op.opcode for op in SPEC.requests.values() if op.response.kind == "segment")
 
 
 @dataclass(frozen=True)
@@ -244,8 +241,9 @@ def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[
 def _skipped(
     o: Observation, packets: Sequence[WirePacket], at: int, origin: dict[int, int], last: int
 ) -> Observation | None:
-    """A reply carrying the number of a later request than the one it should answer: the requests in
-    between were never answered (a silent drop, not a wrong number)."""
+    """A reply out of step with the requests, said as what it is rather than as a wrong number: one
+    carrying the number of a later request means the requests in between were never answered (a silent
+    drop); one carrying the number of a request already answered is a second reply to it."""
     if o.clause != "response.echoes-request-number" or not 0 <= at < len(packets):
         return None
     reply = packets[at]
@@ -254,25 +252,35 @@ def _skipped(
     numbers = [p.packet_no for p in sent]
     if number is None or number not in numbers:
         return None
-    answered = _answered_before(packets[:at])
-    skipped = sent[answered : numbers.index(number)]
+    done = list(answers(packets[:at]))
+    index = numbers.index(number)
+    if index < len(done):  # answered already: this is a second reply
+        earlier = done[index]
+        clause = (
+            "request.one-reply" if earlier.first.opcode == ServerOp.RESPONSE else "error.non-fatal-is-reply"
+        )
+        return Observation(
+            "wrong-answer",
+            clause,
+            f"a second reply to {describe(earlier.request)}, after {describe(earlier.first)}",
+            "one reply per request (a non-fatal error is the reply)",
+            describe(reply),
+            reply.data,
+            origin.get(id(earlier.request), last),
+        )
+    skipped = sent[len(done) : index]
     if not skipped:
         return None
     first = skipped[0]
-    name = describe(first)
     return Observation(
         "silent-drop",
         "request.one-reply",
-        f"{len(skipped)} request(s) never answered, from {name}: the next reply answers #{number}",
+        f"{len(skipped)} request(s) never answered, from {describe(first)}: the next reply answers #{number}",
         "one reply per request, in order",
         describe(reply),
         first.data,
         origin.get(id(first), last),
     )
-
-
-def _answered_before(packets: Sequence[WirePacket]) -> int:
-    return sum(1 for _ in answers(packets))
 
 
 def _busy(e: Expectation, when: float | None) -> bool:

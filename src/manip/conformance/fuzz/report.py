@@ -104,6 +104,8 @@ class Finding:
     reproduce: str = ""
     counts: bool = True
     """It fails the campaign (False: a warning)."""
+    followers: int = 0
+    """Findings that came after it on the same connections, not judged on their own (consequences?)."""
 
     @property
     def spec_text(self) -> str:
@@ -222,6 +224,7 @@ def finding_json(f: Finding) -> dict[str, Any]:
         "shrunk": f.shrunk,
         "shrink_note": f.shrink_note,
         "reproduce": f.reproduce,
+        "followers": f.followers,
     }
 
 
@@ -360,6 +363,10 @@ def finding_text(f: Finding) -> str:
         )
         lines.append(f"  actual:    {actual}")
     lines.append(f"  seen:      {f.occurrences} time(s), first in batch {f.first_batch}")
+    if f.followers:
+        lines.append(
+            f"  after it:  {f.followers} more finding(s) on its connections, not judged on their own"
+        )
     if f.minimal:
         state = "shrunk to" if f.shrunk else "not shrunk:"
         lines.append(
