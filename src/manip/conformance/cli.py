@@ -40,6 +40,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness_check
+from manip.conformance.fuzz.cli import fuzz_command
 from manip.conformance.output.console import make_console
 from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
 from manip.conformance.output.report import failure_text, write_json, write_junit
@@ -710,6 +711,7 @@ def coverage_command(fmt: str, parties: tuple[str, ...]) -> None:
 
 main.add_command(replay_command)
 main.add_command(verify_command)
+main.add_command(fuzz_command)
 
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -41,6 +41,15 @@ def _peer(addr: Any) -> Endpoint | None:
     return None
 
 
+def _no_delay(sock: socket.socket) -> None:
+    """Send small frames at once (TCP_NODELAY).  asyncio does this for the sockets it accepts, not for
+    ours (their ``proto`` is 0): without it a reply queued behind one not yet acknowledged waits for
+    the peer's delayed acknowledgement, some 40 ms, and a pipelining client crawls."""
+    if sock.family in (socket.AF_INET, socket.AF_INET6):
+        with contextlib.suppress(OSError):
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+
 def _reset(sock: socket.socket) -> None:
     """Close an accepted socket at once: a reset, no lingering state."""
     with contextlib.suppress(OSError):
@@ -148,6 +157,7 @@ class StreamListener:
             if not self.guard.admit(_peer(addr), opening=self._pending):
                 _reset(conn)
                 continue
+            _no_delay(conn)
             self._pending += 1
             task = self._loop.create_task(self._open(conn))
             self._opening.add(task)

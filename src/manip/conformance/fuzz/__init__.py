@@ -1,0 +1,1 @@
+"""``manip-conform fuzz``: a seeded, bounded fuzz campaign driven by the spec's tables."""

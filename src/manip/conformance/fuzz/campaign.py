@@ -1,0 +1,403 @@
+"""The campaign: inputs in batches, a liveness check after each, findings shrunk as they are found.
+
+Theory of operation:
+
+1. The target is started (or found) and must pass a liveness check: else the campaign ends at once,
+   unreachable (exit 3).
+2. Inputs are numbered from 0 and sent ``batch`` at a time (:mod:`.batch`) until ``inputs`` were
+   sent or ``seconds`` passed; with ``only`` exactly those inputs are sent, as one batch.  After each
+   batch: the liveness check, the target's new tracebacks, its count of bad frames, and the judgement
+   (:mod:`.judge`).
+3. Each observation is a finding, or one more occurrence of a finding already made (same kind and
+   clause).  A new finding is shrunk (:mod:`.shrink`): first the input it is attributed to alone,
+   then delta debugging over its batch, every trial a batch of its own on a fresh connection (and, for a
+   crash or hang, a restarted target).  The shrunk inputs are what the report shows, with the reproduce
+   line ``manip-conform fuzz ... --seed S --only N,M``.
+4. A target found dead is restarted when the fuzzer runs it; a remote one is waited for
+   (``restart_wait``); one that does not come back ends the campaign (a problem of the report).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import datetime
+import shlex
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Final
+
+from manip.conformance.fuzz.batch import BatchRun, BatchRunner, Liveness, liveness
+from manip.conformance.fuzz.generators import GenOptions, generate
+from manip.conformance.fuzz.judge import ALWAYS, Observation, judge
+from manip.conformance.fuzz.report import HEALTH, ClassTally, Finding, FuzzReport, MinimalInput
+from manip.conformance.fuzz.session import Allowance
+from manip.conformance.fuzz.shrink import Budget, BudgetError, ddmin
+from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, Request, Step, Stray
+from manip.conformance.fuzz.target import Target, TargetError
+from manip.spec import SPEC
+
+__all__ = ["Campaign", "CampaignConfig", "CampaignEvents", "describe_step"]
+
+COUNT_RETRIES: Final = 3
+COUNT_SETTLE: Final = 0.05
+"""Seconds to let the target's links catch up before its bad-frame count is taken again."""
+
+
+@dataclass
+class CampaignConfig:
+    seed: int
+    gen: GenOptions
+    inputs: int | None = 10_000
+    seconds: float | None = None
+    batch: int = 100
+    only: Sequence[int] = ()
+    allowance: Allowance = field(default_factory=Allowance)
+    strict: bool = False
+    shrink: bool = True
+    shrink_trials: int = 200
+    shrink_seconds: float = 60.0
+    restart_wait: float = 0.0
+    reproduce_prefix: Sequence[str] = ("manip-conform", "fuzz")
+    reproduce_options: Sequence[str] = ()
+    command: str = ""
+    options: dict[str, object] = field(default_factory=dict)
+
+
+@dataclass
+class CampaignEvents:
+    """Callbacks for a console: after each batch (inputs sent so far), at each new finding."""
+
+    batch_done: Callable[[FuzzReport], None] = lambda report: None
+    found: Callable[[Finding], None] = lambda finding: None
+    note: Callable[[str], None] = lambda text: None
+
+
+def describe_step(step: Step) -> str:
+    """One line per step for a report: what it is and its bytes."""
+    if isinstance(step, Request):
+        op = SPEC.requests.get(step.opcode)
+        name = op.name if op is not None else "unknown opcode"
+        how = f", written {step.chunk} byte(s) at a time" if step.chunk else ""
+        how += ", not read" if step.lazy else ""
+        return f"request 0{step.opcode:o} ({name}{how}), data: {step.data.hex(' ') or '(none)'}"
+    if isinstance(step, ConnPacket):
+        data = step.data.hex(" ") or "(none)"
+        return f"on the connection: {step.what} opcode 0{step.opcode:o} offset {step.offset}, data: {data}"
+    if isinstance(step, Stray):
+        p = step.packet
+        damage = f", damage: {step.damage}" if step.damage else ""
+        return (
+            f"stray opcode 0{p.opcode:o} to index {p.dest_index:#06x} from {p.src_index:#06x} "
+            f"#{p.packet_no}{damage}, expect {step.expect}, data: {p.data.hex(' ') or '(none)'}"
+        )
+    if isinstance(step, Pause):
+        return f"a pause of up to {step.seconds:g} s (ended by an asynchronous packet)"
+    assert isinstance(step, Raw)
+    held = " (left open)" if step.hold else ""
+    return f"raw bytes on a link of their own{held}: {step.data.hex(' ') or '(none)'}"
+
+
+class Campaign:
+    """One campaign against ``target`` (module docstring)."""
+
+    def __init__(self, config: CampaignConfig, target: Target, events: CampaignEvents | None = None) -> None:
+        self.config = config
+        self.target = target
+        self.events = events or CampaignEvents()
+        self.report = FuzzReport(
+            target="",
+            embedded=target.embedded,
+            seed=config.seed,
+            command=config.command,
+            options=dict(config.options),
+            strict=config.strict,
+        )
+        for c in config.gen.classes():
+            self.report.classes[c.id] = ClassTally(
+                c.id, c.layer, c.sends, c.expected, c.clauses, c.level, c.hazard
+            )
+        self._runner: BatchRunner | None = None
+        self._known: dict[tuple[str, str], int] = {}
+        self._bad_seen: int | None = None
+
+    # ------------------------------------------------------------------------------------ running
+
+    async def run(self) -> FuzzReport:
+        report = self.report
+        report.started = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+        started = time.monotonic()
+        try:
+            await self._run()
+        except (KeyboardInterrupt, asyncio.CancelledError):
+            report.interrupted = True
+            report.problems.append("the campaign was interrupted; this report is partial")
+        finally:
+            report.duration = time.monotonic() - started
+            if self._runner is not None:
+                self._runner.close()
+            with contextlib.suppress(Exception):
+                await self.target.stop()
+            report.tracebacks_seen = self.target.tracebacks_seen
+        return report
+
+    async def _run(self) -> None:
+        report = self.report
+        try:
+            await self.target.start()
+        except TargetError as exc:
+            report.unreachable = True
+            report.problems.append(str(exc))
+            return
+        report.target = self.target.label
+        self._runner = BatchRunner(self.target.address, self.config.allowance, seed=self.config.seed)
+        first = await self._await_alive(
+            self.config.allowance.connect if not self.target.can_restart else 30.0
+        )
+        if not first.alive:
+            report.unreachable = True
+            report.problems.append(f"the target is not alive: {first.detail}")
+            return
+        self.target.tracebacks()  # what it logged while starting is not the campaign's
+        self._bad_seen = await self.target.bad_frames()
+        deadline = None if self.config.seconds is None else time.monotonic() + self.config.seconds
+        for numbers in self._batches():
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+            inputs = [generate(self.config.seed, n, self.config.gen) for n in numbers]
+            observations, run, live = await self.trial(inputs)
+            report.batches += 1
+            report.inputs += len(inputs)
+            report.requests += run.sent_requests
+            report.bad_frames_sent += run.counted
+            for item in inputs:
+                tally = report.classes[item.kind]
+                tally.inputs += 1
+                tally.requests += item.requests
+            for observation in observations:
+                await self._record(observation, inputs, report.batches - 1)
+            self.events.batch_done(report)
+            if not live.alive and not await self._revive():
+                report.problems.append(
+                    f"the target did not come back after batch {report.batches - 1}: {live.detail}"
+                )
+                return
+
+    def _batches(self) -> list[list[int]] | _Numbers:
+        if self.config.only:
+            return [list(self.config.only)]
+        return _Numbers(self.config.inputs, self.config.batch)
+
+    async def _await_alive(self, timeout: float) -> Liveness:
+        assert self._runner is not None
+        deadline = time.monotonic() + timeout
+        while True:
+            live = await liveness(self._runner)
+            self._runner.finish()
+            if live.alive or time.monotonic() >= deadline:
+                return live
+            gone = self.target.gone()
+            if gone is not None:
+                return Liveness(False, "crash", gone, live.duration)
+            await asyncio.sleep(0.2)
+
+    async def _revive(self) -> bool:
+        """Bring a dead target back: restart it, or wait for it.  False if it stays dead."""
+        if self.target.can_restart:
+            try:
+                await self.target.restart()
+            except TargetError as exc:
+                self.report.problems.append(f"restarting the target failed: {exc}")
+                return False
+            self.report.restarts += 1
+            self._runner = self._new_runner()
+            live = await self._await_alive(30.0)
+            self.target.tracebacks()
+            self._bad_seen = await self.target.bad_frames()
+            return live.alive
+        if self.config.restart_wait <= 0:
+            return False
+        self.events.note(f"waiting up to {self.config.restart_wait:g} s for the target to come back")
+        return (await self._await_alive(self.config.restart_wait)).alive
+
+    def _new_runner(self) -> BatchRunner:
+        if self._runner is not None:
+            self._runner.close()
+        return BatchRunner(self.target.address, self.config.allowance, seed=self.config.seed)
+
+    async def trial(self, inputs: list[FuzzInput]) -> tuple[list[Observation], BatchRun, Liveness]:
+        """Send one batch, check liveness, collect what the target logged and counted; judge."""
+        runner = self._runner
+        assert runner is not None
+        run = await runner.run(inputs)
+        live = await liveness(runner)
+        self.report.liveness_checks += 1
+        gone = self.target.gone()
+        if gone is not None:
+            live = Liveness(False, "crash", gone, live.duration)
+        if not live.alive:
+            self.report.liveness_failures += 1
+        uncounted = await self._count(run) if live.alive else None
+        observations = judge(
+            run, runner.inbox, live, tracebacks=self.target.tracebacks(), uncounted=uncounted
+        )
+        runner.finish()
+        return observations, run, live
+
+    async def _count(self, run: BatchRun) -> tuple[int, int] | None:
+        """(bad frames sent, counted) for the batch, when the target counts them."""
+        if self._bad_seen is None:
+            return None
+        before = self._bad_seen
+        now = await self.target.bad_frames()
+        for _ in range(COUNT_RETRIES):
+            if now is None or now - before >= run.counted:
+                break
+            await asyncio.sleep(COUNT_SETTLE)
+            now = await self.target.bad_frames()
+        if now is None:
+            return None
+        self._bad_seen = now
+        self.report.bad_frames_counted = (self.report.bad_frames_counted or 0) + (now - before)
+        return run.counted, now - before
+
+    # ------------------------------------------------------------------------------------ findings
+
+    async def _record(self, o: Observation, inputs: list[FuzzInput], batch: int) -> None:
+        report = self.report
+        known = self._known.get(o.signature)
+        if known is not None:
+            report.findings[known].occurrences += 1
+            report.findings[known].followers += o.followers
+            return
+        kind = _class_of(o, inputs)
+        counts = o.kind in ALWAYS or o.level == "MUST" or (self.config.strict and o.level == "SHOULD")
+        finding = Finding(
+            o.kind,
+            o.clause,
+            o.level,
+            o.message,
+            o.expected,
+            o.actual,
+            o.data,
+            kind,
+            batch,
+            counts=counts,
+            followers=o.followers,
+        )
+        index = len(report.findings)
+        report.findings.append(finding)
+        self._known[o.signature] = index
+        numbers = [i.number for i in inputs]
+        if self.config.shrink and not self.config.only:
+            self.events.note(f"shrinking: {finding.title()}")
+            minimal, finding.shrunk, finding.shrink_note = await self._shrink(o, numbers)
+        else:
+            minimal = [o.number] if o.number is not None and not self.config.only else numbers
+            finding.shrink_note = "not shrunk" if not self.config.only else "the inputs given with --only"
+        by_number = {i.number: i for i in inputs}
+        finding.minimal = [
+            _minimal(by_number.get(n) or generate(self.config.seed, n, self.config.gen)) for n in minimal
+        ]
+        if finding.minimal and kind == HEALTH and finding.shrunk:
+            finding.input_class = finding.minimal[-1].kind
+        finding.reproduce = self._reproduce(minimal)
+        tally = report.classes.get(finding.input_class)
+        if tally is not None:
+            tally.findings.append(index)
+        self.events.found(finding)
+
+    async def _shrink(self, o: Observation, numbers: list[int]) -> tuple[list[int], bool, str]:
+        budget = Budget(self.config.shrink_trials, self.config.shrink_seconds)
+        wanted = o.signature
+
+        async def fails(candidate: list[int]) -> bool:
+            return await self.reproduces(candidate, wanted)
+
+        try:
+            if o.number is not None:
+                budget.spend()
+                if await fails([o.number]):
+                    return [o.number], True, "the input it was seen on, alone"
+            budget.spend()
+            if not await fails(numbers):
+                return numbers, False, "the batch did not cause it again: not shrunk"
+        except BudgetError:
+            return numbers, False, "no trial left to shrink it"
+        except TargetError as exc:
+            return numbers, False, f"not shrunk: {exc}"
+        try:
+            minimal, complete = await ddmin(numbers, fails, budget)
+        except TargetError as exc:
+            return numbers, False, f"not shrunk: {exc}"
+        finally:
+            self.report.shrink_trials += budget.used
+        note = f"{budget.used} trials" + ("" if complete else ", the budget ran out before it was minimal")
+        return minimal, complete, note
+
+    async def reproduces(self, numbers: list[int], signature: tuple[str, str]) -> bool:
+        """Send inputs ``numbers`` as a batch of their own: does ``signature`` show again?"""
+        if not await self._alive_for_trial():
+            raise TargetError("the target is not alive to try inputs on")
+        inputs = [generate(self.config.seed, n, self.config.gen) for n in numbers]
+        checks, failures = self.report.liveness_checks, self.report.liveness_failures
+        observations, _, live = await self.trial(inputs)
+        self.report.liveness_checks, self.report.liveness_failures = (
+            checks,
+            failures,
+        )  # trials are not the campaign's
+        if not live.alive and not await self._revive():
+            raise TargetError("the target did not come back")
+        return any(x.signature == signature for x in observations)
+
+    async def _alive_for_trial(self) -> bool:
+        assert self._runner is not None
+        if self.target.gone() is not None:
+            return await self._revive()
+        live = await liveness(self._runner)
+        self._runner.finish()
+        return live.alive or await self._revive()
+
+    def _reproduce(self, numbers: Sequence[int]) -> str:
+        words = [
+            *self.config.reproduce_prefix,
+            "--seed",
+            str(self.config.seed),
+            "--only",
+            ",".join(map(str, numbers)),
+        ]
+        return shlex.join([*words, *self.config.reproduce_options])
+
+
+class _Numbers:
+    """Batches of input numbers: ``batch`` at a time from 0, up to ``total`` (None: without end)."""
+
+    def __init__(self, total: int | None, batch: int) -> None:
+        self.total = total
+        self.batch = batch
+
+    def __iter__(self) -> _Numbers:
+        self._next = 0
+        return self
+
+    def __next__(self) -> list[int]:
+        start = self._next
+        end = start + self.batch if self.total is None else min(start + self.batch, self.total)
+        if end <= start:
+            raise StopIteration
+        self._next = end
+        return list(range(start, end))
+
+
+def _class_of(o: Observation, inputs: list[FuzzInput]) -> str:
+    if o.number is None:
+        return HEALTH
+    for item in inputs:
+        if item.number == o.number:
+            return item.kind
+    return HEALTH
+
+
+def _minimal(item: FuzzInput) -> MinimalInput:
+    return MinimalInput(item.number, item.kind, item.note, [describe_step(s) for s in item.steps])

@@ -1,0 +1,411 @@
+"""``manip-conform fuzz [HOST]``: a seeded, bounded fuzz campaign against a server.
+
+Without HOST the target is the reference server, started by the fuzzer on a free loopback port
+(``--server-fault`` switches a defect on, ``--link chudp`` fuzzes its CHUDP link, ``--wrist`` gives
+it the simulated Cougar wrist).  With HOST any server; ``--launch CMD`` lets the fuzzer start (and
+restart after a crash) the server itself and read its log for tracebacks, ``--server-log FILE``
+reads the log of a server started elsewhere.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import shlex
+import sys
+import traceback
+from pathlib import Path
+
+import click
+from rich.console import Console
+from rich.markup import escape
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from manip.conformance.fuzz.campaign import Campaign, CampaignConfig, CampaignEvents
+from manip.conformance.fuzz.generators import CLASSES, HAZARD_ORDER, GenOptions
+from manip.conformance.fuzz.report import Finding, FuzzReport, finding_text, write_json, write_junit
+from manip.conformance.fuzz.session import Allowance
+from manip.conformance.fuzz.target import ProcessTarget, RemoteTarget, Target, reference_server_argv
+from manip.conformance.output.console import make_console
+from manip.conformance.replay.cli import check_output_paths, given, json_option, junit_option
+from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REPLY_TIMEOUT
+from manip.conformance.suite.results import ExitCode
+from manip.conformance.suite.selection import match_id
+from manip.links import AddressError, parse_address
+from manip.reference_server import FaultSet
+from manip.spec.model import Hazard
+
+__all__ = ["fuzz_command"]
+
+EXIT_CODES_HELP = """\b
+Exit codes:
+  0  no finding
+  1  findings: a crash, hang, traceback, silent drop, wrong answer or uncounted drop (SHOULD-level
+     answers only with --strict)
+  2  usage error
+  3  target unreachable (no liveness check passed before the first batch)
+  4  interrupted, or an internal error of the fuzzer"""
+
+_STYLE = {"crash": "bold red", "hang": "bold red", "traceback": "bold magenta"}
+
+
+def _numbers(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[int, ...]:
+    if value is None:
+        return ()
+    try:
+        numbers = tuple(int(x) for x in value.replace(" ", "").split(",") if x)
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is not a list of input numbers (e.g. 12,40)") from None
+    if not numbers or any(n < 0 for n in numbers):
+        raise click.BadParameter("give input numbers 0 and up, comma separated")
+    return numbers
+
+
+def class_listing() -> str:
+    lines = []
+    for c in CLASSES.values():
+        links = "" if len(c.links) == 2 else f" ({', '.join(sorted(c.links))} links only)"
+        lines.append(f"{c.id}  [{c.level}, {c.hazard}]{links}")
+        lines.append(f"    sends:    {c.sends}")
+        lines.append(f"    expected: {c.expected}")
+        lines.append(f"    clauses:  {', '.join(c.clauses)}")
+    return "\n".join(lines)
+
+
+@click.command("fuzz", epilog=EXIT_CODES_HELP)
+@click.argument("host", required=False)
+@click.option(
+    "--seed",
+    type=click.IntRange(0, 2**63 - 1),
+    default=None,
+    help="Seed of every input (printed; the same seed sends the same inputs).",
+)
+@click.option(
+    "--inputs", "inputs", type=click.IntRange(1), default=10_000, show_default=True, help="Inputs to send."
+)
+@click.option(
+    "--seconds",
+    type=click.FloatRange(min=0.1),
+    default=None,
+    help="Stop after this long (after the batch under way), whatever --inputs says.",
+)
+@click.option(
+    "--batch",
+    type=click.IntRange(1, 1000),
+    default=100,
+    show_default=True,
+    help="Inputs per batch (one connection, then a liveness check).",
+)
+@click.option(
+    "--class",
+    "classes",
+    multiple=True,
+    metavar="PATTERN",
+    help="Only input classes matching PATTERN (manip.*, chaos.rfc-*); repeatable (--list-classes).",
+)
+@click.option(
+    "--list-classes",
+    is_flag=True,
+    help="List the input classes (what each sends, what the spec says the answer must be) and exit.",
+)
+@click.option(
+    "--only",
+    callback=_numbers,
+    default=None,
+    metavar="N[,N...]",
+    help="Send only these inputs of the seed's campaign, as one batch (a reproduce line does this).",
+)
+@click.option(
+    "--target",
+    "target_kind",
+    type=click.Choice(["sim", "hardware"]),
+    default="sim",
+    show_default=True,
+    help="hardware: no motion or power opcode is sent at all unless --allow-motion.",
+)
+@click.option(
+    "--allow-motion", is_flag=True, help="With --target hardware, send motion and power opcodes too."
+)
+@click.option(
+    "--reply-timeout",
+    type=click.FloatRange(0.01),
+    default=DEFAULT_REPLY_TIMEOUT,
+    show_default=True,
+    help="Seconds an answer may take (a wait for the arm gets the spec's allowance on top).",
+)
+@click.option(
+    "--connect-timeout",
+    type=click.FloatRange(0.01),
+    default=DEFAULT_CONNECT_TIMEOUT,
+    show_default=True,
+    help="Seconds a connection may take to open (a busy robot included).",
+)
+@click.option(
+    "--deadline-scale",
+    type=click.FloatRange(0.01),
+    default=1.0,
+    show_default=True,
+    help="Multiply every wait for the arm (slow links, real arms).",
+)
+@click.option(
+    "--server-fault",
+    "server_faults",
+    multiple=True,
+    metavar="NAME[=ARG]",
+    help="Without HOST: switch on a fault of the reference server (manip-server --list-faults).",
+)
+@click.option(
+    "--link",
+    "link",
+    type=click.Choice(["tcp", "chudp"]),
+    default="tcp",
+    show_default=True,
+    help="Without HOST: the reference server's link to fuzz.",
+)
+@click.option(
+    "--wrist",
+    is_flag=True,
+    help="Without HOST: give the reference server the simulated Cougar wrist (slower: its link runs in "
+    "real time).",
+)
+@click.option(
+    "--launch",
+    metavar="CMD",
+    default=None,
+    help="With HOST: start the server with CMD, restart it after a crash, read its output for tracebacks.",
+)
+@click.option(
+    "--server-log",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="With HOST: the server's log file; a traceback written to it is a finding.",
+)
+@click.option(
+    "--restart-wait",
+    type=click.FloatRange(min=0.0),
+    default=0.0,
+    show_default=True,
+    metavar="SECONDS",
+    help="With HOST (no --launch): after a crash, wait this long for the server to come back (to go on, "
+    "and to shrink the crash).",
+)
+@click.option("--no-shrink", is_flag=True, help="Report findings with their whole batch, unshrunk.")
+@click.option(
+    "--shrink-seconds",
+    type=click.FloatRange(min=1.0),
+    default=60.0,
+    show_default=True,
+    help="Most time spent shrinking one finding.",
+)
+@click.option(
+    "--strict", is_flag=True, help="Findings of SHOULD clauses count (without it they are warnings)."
+)
+@json_option
+@junit_option
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar; findings and the summary only.")
+def fuzz_command(
+    host: str | None,
+    seed: int | None,
+    inputs: int,
+    seconds: float | None,
+    batch: int,
+    classes: tuple[str, ...],
+    list_classes: bool,
+    only: tuple[int, ...],
+    target_kind: str,
+    allow_motion: bool,
+    reply_timeout: float,
+    connect_timeout: float,
+    deadline_scale: float,
+    server_faults: tuple[str, ...],
+    link: str,
+    wrist: bool,
+    launch: str | None,
+    server_log: Path | None,
+    restart_wait: float,
+    no_shrink: bool,
+    shrink_seconds: float,
+    strict: bool,
+    json_path: Path | None,
+    junit_path: Path | None,
+    quiet: bool,
+) -> None:
+    """Fuzz HOST (tcp://HOST:PORT, unix:///PATH or chudp://HOST:PORT?addr=OCTAL) with inputs made from
+    the spec's tables: malformed frames and datagrams, out-of-window and wrong-index Chaos packets,
+    RFC floods, every request opcode at every wrong length, reserved-operand and extreme floats,
+    pipelines that do not read.  Each answer is judged against the spec; after each batch a new
+    connection must be served.  Crashes, hangs, silent drops (no answer where one is due), wrong
+    answers and tracebacks are reported with the fewest inputs that cause them and a reproduce line.
+    Without HOST the reference server is started on a free loopback port and fuzzed."""
+    if list_classes:
+        click.echo(class_listing())
+        return
+    console = make_console()
+    if host is not None:
+        for name in ("server_faults", "link", "wrist"):
+            if given(name):
+                option = "--" + name.replace("_", "-").removesuffix("s")
+                raise click.UsageError(
+                    f"{option} applies to the reference server the fuzzer starts: omit HOST"
+                )
+    else:
+        for name in ("launch", "server_log", "restart_wait"):
+            if given(name):
+                raise click.UsageError(f"--{name.replace('_', '-')} applies to a HOST")
+    if launch is not None and (server_log is not None or given("restart_wait")):
+        raise click.UsageError(
+            "--launch reads the server's output and restarts it: not with --server-log or --restart-wait"
+        )
+    if allow_motion and target_kind != "hardware":
+        raise click.UsageError("--allow-motion applies to --target hardware (a simulator gets every opcode)")
+    if only and given("inputs"):
+        raise click.UsageError("--only sends the inputs it names: not with --inputs")
+    if server_faults:
+        try:
+            FaultSet.parse(server_faults)
+        except ValueError as exc:
+            raise click.UsageError(f"--server-fault: {exc}") from None
+    for pattern in classes:
+        if not any(match_id(pattern, c) for c in CLASSES):
+            raise click.UsageError(f"--class {pattern!r} matches no input class (--list-classes lists them)")
+    address = None
+    if host is not None:
+        try:
+            address = parse_address(host)
+        except AddressError as exc:
+            raise click.UsageError(str(exc)) from None
+        if address.scheme == "chaosd":
+            raise click.UsageError("the fuzzer speaks tcp://, unix:// and chudp:// links, not chaosd://")
+    check_output_paths(json=json_path, junit=junit_path)
+    hazards: frozenset[Hazard] = frozenset(HAZARD_ORDER)
+    if target_kind == "hardware" and not allow_motion:
+        hazards = frozenset({"read-only", "config"})
+    chudp = (address.scheme == "chudp") if address is not None else link == "chudp"
+    gen = GenOptions(
+        link="datagram" if chudp else "stream",
+        hazards=hazards,
+        select=classes,
+        contact=address.contact if address is not None else "PUMA",
+    )
+    if not gen.classes():
+        raise click.UsageError(
+            "--class and --target leave no input class to send on this link (--list-classes)"
+        )
+    if seed is None:
+        seed = int.from_bytes(os.urandom(4), "big")
+    target: Target
+    if address is None:
+        argv = reference_server_argv(link, faults=server_faults, wrist=wrist, seed=seed)
+        faults = f", faults: {', '.join(server_faults)}" if server_faults else ""
+        label = f"the reference server (manip-server, {link}{', simulated wrist' if wrist else ''}{faults})"
+        target = ProcessTarget(argv, label=label)
+    elif launch is not None:
+        target = ProcessTarget(shlex.split(launch), address, label=f"{address} (started with {launch})")
+    else:
+        target = RemoteTarget(address, server_log)
+    extra: list[str] = []
+    for pattern in classes:
+        extra += ["--class", pattern]
+    if target_kind == "hardware":
+        extra += ["--target", "hardware"] + (["--allow-motion"] if allow_motion else [])
+    if host is None:
+        extra += (["--link", link] if link != "tcp" else []) + (["--wrist"] if wrist else [])
+        for fault in server_faults:
+            extra += ["--server-fault", fault]
+    if launch is not None:
+        extra += ["--launch", launch]
+    if server_log is not None:
+        extra += ["--server-log", str(server_log)]
+    prefix = ["manip-conform", "fuzz", *([str(address)] if address is not None else [])]
+    config = CampaignConfig(
+        seed=seed,
+        gen=gen,
+        inputs=inputs,
+        seconds=seconds,
+        batch=batch,
+        only=only,
+        allowance=Allowance(reply_timeout, connect_timeout, deadline_scale),
+        strict=strict,
+        shrink=not no_shrink,
+        shrink_seconds=shrink_seconds,
+        restart_wait=restart_wait,
+        reproduce_prefix=prefix,
+        reproduce_options=extra,
+        command=shlex.join(["manip-conform", *sys.argv[1:]]),
+        options={
+            "inputs": len(only) if only else inputs,
+            "seconds": seconds,
+            "batch": batch,
+            "classes": list(classes),
+            "target": target_kind,
+            "allow_motion": allow_motion,
+            "reply_timeout": reply_timeout,
+            "deadline_scale": deadline_scale,
+            "server_faults": list(server_faults),
+            "link": "chudp" if chudp else "stream",
+            "wrist": wrist,
+            "only": list(only),
+        },
+    )
+    console.print(f"manip-conform fuzz: seed [bold]{seed}[/] (rerun with --seed {seed})")
+    report = _campaign(config, target, console, quiet, total=len(only) if only else inputs)
+    if json_path is not None:
+        write_json(report, json_path)
+    if junit_path is not None:
+        write_junit(report, junit_path)
+    _summary(console, report)
+    sys.exit(int(report.exit_code))
+
+
+def _campaign(
+    config: CampaignConfig, target: Target, console: Console, quiet: bool, *, total: int
+) -> FuzzReport:
+    progress = Progress(
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+        disable=quiet or not console.is_terminal,
+    )
+    task = progress.add_task("fuzz", total=total)
+
+    def batch_done(report: FuzzReport) -> None:
+        progress.update(task, completed=report.inputs, description=f"fuzz {report.rate:.0f}/s")
+
+    def found(finding: Finding) -> None:
+        style = _STYLE.get(finding.kind, "bold red" if finding.counts else "yellow")
+        progress.console.print(f"[{style}]{escape(finding.title())}[/]")
+
+    def note(text: str) -> None:
+        if not quiet:
+            progress.console.print(f"[dim]{escape(text)}[/]")
+
+    campaign = Campaign(config, target, CampaignEvents(batch_done, found, note))
+    with progress:
+        try:
+            report = asyncio.run(campaign.run())
+        except KeyboardInterrupt:
+            report = campaign.report
+            report.interrupted = True
+        except Exception as exc:  # an internal error of the fuzzer: keep what was done
+            report = campaign.report
+            report.internal_error = traceback.format_exc()
+            console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {escape(str(exc))}")
+    if not report.target:
+        report.target = target.label
+    return report
+
+
+def _summary(console: Console, report: FuzzReport) -> None:
+    for finding in report.findings:
+        console.print(finding_text(finding), markup=False, highlight=False)
+    for problem in report.problems:
+        console.print(f"[bold red]problem[/]: {escape(problem)}")
+    if report.internal_error:
+        console.print(report.internal_error, markup=False)
+    style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
+    console.print(f"target: {report.target}", markup=False)
+    console.print(report.summary_line(), markup=False)
+    console.print(f"[{style}]{report.verdict}[/] (exit {int(report.exit_code)}); seed {report.seed}")

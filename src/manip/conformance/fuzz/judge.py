@@ -1,0 +1,383 @@
+"""What a batch showed, as observations: crashes, hangs, silent drops, wrong answers, tracebacks and
+drops the target did not count, each with the clause it breaks and the input it is attributed to.
+
+* The connection's packets are judged by :func:`manip.conformance.checks.check_transcript` (one reply
+  per request, in order, echoing its number, the refusal the spec demands for an unknown opcode, a
+  wrong length or a reserved-operand float, the shape of every reply, free joint's discarded packet,
+  asynchronous responses only when asked for), and by :mod:`.oracles` for what it does not know (a
+  factor out of range, motion without power or after an abort, what describe self said).  A request
+  never answered is a *silent drop* (also when the replies skip it: a reply carrying the number of a
+  later request), anything else a *wrong answer*.  A connection is judged up to its first finding
+  that may put answers out of step with requests (:data:`DISRUPTIVE`); the rest are only counted.
+* Every stray packet and raw link has an :class:`~.batch.Expectation`: a LOS or an RFC answer that
+  did not come is a silent drop; an answer to a packet that must be dropped, or a link kept after its
+  framing was lost, a wrong answer.
+* The liveness check after the batch: a target gone is a *crash*, one that does not answer a *hang*.
+* The target's log (when the fuzzer can read it): every traceback.  Its count of bad frames (when it
+  reports one): fewer than the fuzzer sent is an *uncounted drop*.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Final, Literal
+
+from manip.conformance.fuzz.batch import BatchRun, Expectation, Liveness
+from manip.conformance.fuzz.oracles import answers, oracle_findings
+from manip.conformance.fuzz.session import FuzzConnection
+from manip.conformance.fuzz.wire import Inbox
+from manip.conformance.judge.checks import WirePacket, check_transcript, describe, word
+from manip.conformance.suite.rawchaos import format_packet
+from manip.spec import SPEC
+from manip.spec.constants import ChaosOp, ServerOp
+
+__all__ = ["KINDS", "Kind", "Observation", "judge"]
+
+Kind = Literal["crash", "hang", "traceback", "silent-drop", "wrong-answer", "uncounted-drop"]
+KINDS: Final[tuple[Kind, ...]] = (
+    "crash",
+    "hang",
+    "traceback",
+    "silent-drop",
+    "wrong-answer",
+    "uncounted-drop",
+)
+LEVELS: Final = ("MUST", "SHOULD", "MAY", "INFO")
+DISRUPTIVE: Final = frozenset(
+    {
+        "connect.initial-response",
+        "request.one-reply",
+        "error.non-fatal-is-reply",
+        "error.fatal-then-close",
+        "multi.terminated-by-empty",
+        "multi.same-request-number",
+        "describe.reply-shape",
+        "free-joint.replies",
+        "request.unknown-opcode",
+        "request.data-length",
+        "request.reserved-float",
+        "response.data-layout",
+        "response.done-empty",
+        "response.segment-number",
+    }
+)
+"""Clauses whose breach may pair later answers with the wrong requests (a reply missing, extra or of
+another shape), so that later findings on the connection may be its consequence."""
+ALWAYS: Final = frozenset({"crash", "hang", "traceback", "uncounted-drop"})
+"""Kinds that are findings whatever the level: the target's health is no matter of degree."""
+_RFC_ANSWERS: Final = frozenset({ChaosOp.OPN, ChaosOp.CLS, ChaosOp.ANS, ChaosOp.FWD})
+
+
+@dataclass(frozen=True)
+class Observation:
+    """One thing a batch showed that the spec does not allow."""
+
+    kind: Kind
+    clause: str | None
+    message: str
+    expected: str = ""
+    actual: str = ""
+    data: bytes = b""
+    number: int | None = None
+    """The input it is attributed to (None: the batch as a whole)."""
+    followers: int = 0
+    """Findings after it on the same connection (not judged on their own: they may be its consequence)."""
+
+    @property
+    def level(self) -> str:
+        if self.kind in ALWAYS or self.clause is None:
+            return "MUST"
+        return SPEC.clauses[self.clause].level
+
+    @property
+    def signature(self) -> tuple[str, str]:
+        """What makes two observations the same finding."""
+        return self.kind, self.clause or ""
+
+
+def judge(
+    run: BatchRun,
+    inbox: Inbox,
+    live: Liveness,
+    *,
+    tracebacks: Sequence[str] = (),
+    uncounted: tuple[int, int] | None = None,
+) -> list[Observation]:
+    """Everything wrong with one batch (module docstring).  ``uncounted``: (bad frames sent, bad frames
+    the target counted meanwhile), when the target reports a count."""
+    out: list[Observation] = []
+    last = run.last_number
+    if not live.alive:
+        kind: Kind = "crash" if live.kind == "crash" else "hang"
+        what = "the target is gone" if kind == "crash" else "the target does not answer"
+        out.append(
+            Observation(
+                kind,
+                None,
+                f"{what} after the batch: {live.detail}",
+                "a new connection and Here answered",
+                live.detail,
+            )
+        )
+    for conn in run.connections:
+        out += _connection(conn, last, report_drops=live.alive)
+    for e in run.expectations:
+        found = _expectation(e, inbox)
+        if found is not None:
+            out.append(found)
+    for raw, exc in inbox.bad:
+        out.append(
+            Observation(
+                "wrong-answer",
+                exc.clause if exc.clause in SPEC.clauses else None,
+                f"the target sent a frame that does not decode: {exc.message}",
+                "frames as the link framing says",
+                str(exc),
+                raw,
+                last,
+            )
+        )
+    for text in tracebacks:
+        lines = text.strip().splitlines()
+        out.append(
+            Observation(
+                "traceback",
+                None,
+                f"a traceback in the target's log: {lines[-1] if lines else ''}",
+                "no traceback for anything a peer can cause",
+                text,
+            )
+        )
+    if uncounted is not None and uncounted[1] < uncounted[0]:
+        sent, counted = uncounted
+        out.append(
+            Observation(
+                "uncounted-drop",
+                None,
+                f"the target counted {counted} of the {sent} bad frames it was sent",
+                "every bad frame dropped and counted (manip-server --stats: bad frames)",
+                f"{counted} counted",
+            )
+        )
+    if run.open_error is not None and live.alive:
+        first = run.inputs[0].number if run.inputs else None
+        out.append(
+            Observation(
+                "silent-drop",
+                None,
+                f"a link or connection of the batch could not be opened: {run.open_error}",
+                "the link accepted and the RFC answered",
+                run.open_error,
+                number=first,
+            )
+        )
+    return out
+
+
+def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[Observation]:
+    """What is wrong on one connection, in the order it showed, up to the first finding after which
+    answers may be paired with the wrong requests (:data:`DISRUPTIVE`): what follows may be its
+    consequence, so it is only counted (``followers``)."""
+    packets = conn.packets
+    position = {id(p): i for i, p in enumerate(packets)}
+    found: list[tuple[int, Observation]] = []
+    for f in check_transcript(packets, rfc_packet_no=conn.rfc_no, complete=True):
+        number = conn.origin.get(id(f.packet), last) if f.packet is not None else last
+        drop = f.clause == "request.one-reply" and f.actual == "nothing"
+        if drop and not report_drops:
+            continue  # the hang or crash is the finding
+        kind: Kind = "silent-drop" if drop else "wrong-answer"
+        # Where it shows: a request never answered at the end, a finding without a packet is about the
+        # opening (first) or a whole reply's text (last).
+        if drop or f.packet is None:
+            at = 0 if (f.clause or "").startswith("connect.") else len(packets)
+        else:
+            at = position.get(id(f.packet), 0)
+        found.append((at, Observation(kind, f.clause, f.message, f.expected, f.actual, f.data, number)))
+    fatal = any(p.opcode == ServerOp.FATAL_ERROR for p in packets if p.direction == "s2c")
+    requests = [p for p in packets if p.direction == "c2s"]
+    ended_by_target = conn.ended is not None and "from the target" in conn.ended
+    if ended_by_target and conn.unanswered and not fatal and report_drops and requests:
+        request = requests[-min(conn.unanswered, len(requests))]
+        message = (
+            f"the target ended the connection ({conn.ended}) with {conn.unanswered} request(s) unanswered"
+        )
+        ended = Observation(
+            "silent-drop",
+            "request.one-reply",
+            message,
+            "one reply per request (a connection ends after a fatal error only)",
+            str(conn.ended),
+            request.data,
+            conn.origin.get(id(request), last),
+        )
+        found.append((len(packets), ended))
+    for judged in oracle_findings(packets):
+        number = conn.origin.get(id(judged.request), last)
+        o = Observation(
+            "wrong-answer",
+            judged.clause,
+            judged.message,
+            judged.expected,
+            judged.actual,
+            judged.request.data,
+            number,
+        )
+        found.append((position.get(id(judged.at), len(packets)), o))
+    if not found:
+        return []
+    found.sort(key=lambda item: (item[0], LEVELS.index(item[1].level)))  # the strongest of one packet
+    out: list[Observation] = []
+    for index, (at, o) in enumerate(found):
+        o = _skipped(o, packets, at, conn.origin, last) or o
+        if o.clause in DISRUPTIVE or o.kind != "wrong-answer":
+            out.append(replace(o, followers=len(found) - index - 1))
+            break
+        out.append(o)
+    return out
+
+
+def _skipped(
+    o: Observation, packets: Sequence[WirePacket], at: int, origin: dict[int, int], last: int
+) -> Observation | None:
+    """A reply out of step with the requests, said as what it is rather than as a wrong number: one
+    carrying the number of a later request means the requests in between were never answered (a silent
+    drop); one carrying the number of a request already answered is a second reply to it."""
+    if o.clause != "response.echoes-request-number" or not 0 <= at < len(packets):
+        return None
+    reply = packets[at]
+    number = word(reply.data)
+    sent = [p for p in packets[:at] if p.direction == "c2s"]
+    numbers = [p.packet_no for p in sent]
+    if number is None or number not in numbers:
+        return None
+    done = list(answers(packets[:at]))
+    index = numbers.index(number)
+    if index < len(done):  # answered already: this is a second reply
+        earlier = done[index]
+        clause = (
+            "request.one-reply" if earlier.first.opcode == ServerOp.RESPONSE else "error.non-fatal-is-reply"
+        )
+        return Observation(
+            "wrong-answer",
+            clause,
+            f"a second reply to {describe(earlier.request)}, after {describe(earlier.first)}",
+            "one reply per request (a non-fatal error is the reply)",
+            describe(reply),
+            reply.data,
+            origin.get(id(earlier.request), last),
+        )
+    skipped = sent[len(done) : index]
+    if not skipped:
+        return None
+    first = skipped[0]
+    return Observation(
+        "silent-drop",
+        "request.one-reply",
+        f"{len(skipped)} request(s) never answered, from {describe(first)}: the next reply answers #{number}",
+        "one reply per request, in order",
+        describe(reply),
+        first.data,
+        origin.get(id(first), last),
+    )
+
+
+def _busy(e: Expectation, when: float | None) -> bool:
+    """Whether the batch's connection still held the robot when ``when`` (an OPN) came."""
+    conn = e.connection
+    if conn is None or when is None:
+        return False
+    return conn.ended_at is None or conn.ended_at > when
+
+
+def _expectation(e: Expectation, inbox: Inbox) -> Observation | None:
+    got = [p for p, _ in inbox.strays.get(e.key, ())]
+    if e.what == "los":
+        if any(p.opcode == ChaosOp.LOS for p in got):
+            return None
+        shown = "; ".join(format_packet(p) for p in got[:2]) or "nothing"
+        return Observation(
+            "silent-drop",
+            e.clause,
+            f"no LOS for {e.note}",
+            f"a LOS back to index {e.key:#06x}",
+            shown,
+            e.data,
+            e.number,
+        )
+    if e.what == "answer":
+        answers = [p for p in got if p.opcode in _RFC_ANSWERS]
+        if not answers:
+            return Observation(
+                "silent-drop",
+                e.clause,
+                f"no answer to {e.note}",
+                "OPN, CLS, ANS or FWD",
+                "nothing",
+                e.data,
+                e.number,
+            )
+        opened = {p.src_index for p in answers if p.opcode == ChaosOp.OPN}
+        opened_at = min((t for p, t in inbox.strays.get(e.key, ()) if p.opcode == ChaosOp.OPN), default=None)
+        if len(opened) > 1:
+            return Observation(
+                "wrong-answer",
+                "ncp.duplicate-rfc",
+                f"one RFC (index {e.key:#06x}) opened {len(opened)} connections",
+                "one connection for a retransmitted RFC",
+                f"OPN from indices {', '.join(f'{i:#06x}' for i in sorted(opened))}",
+                e.data,
+                e.number,
+            )
+        if opened and e.clause == "connect.one-server-per-robot" and _busy(e, opened_at):
+            return Observation(
+                "wrong-answer",
+                "connect.one-server-per-robot",
+                "a second connection was opened while the robot had its client",
+                'CLS ("busy")',
+                "OPN",
+                e.data,
+                e.number,
+            )
+        return None
+    if e.what == "silence":
+        if not got:
+            return None
+        return Observation(
+            "wrong-answer",
+            e.clause,
+            f"an answer to {e.note}",
+            "nothing: the packet is dropped",
+            format_packet(got[0]),
+            e.data,
+            e.number,
+        )
+    if e.what == "sts":
+        conn = e.connection
+        if conn is None or any(t >= e.since for t in conn.sts_times):
+            return None
+        if conn.ended is not None and "from the target" in conn.ended:
+            return None
+        return Observation(
+            "silent-drop",
+            e.clause,
+            "no STS in answer to SNS",
+            "an STS (the connection's receipt and window)",
+            "nothing",
+            e.data,
+            e.number,
+        )
+    if e.what == "close":
+        if e.link is None or e.link.ended is not None:
+            return None
+        return Observation(
+            "wrong-answer",
+            e.clause,
+            f"the link was kept open after {e.note}",
+            "the link dropped: its framing is lost",
+            "the link still open",
+            e.data,
+            e.number,
+        )
+    return None

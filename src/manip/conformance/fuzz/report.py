@@ -1,0 +1,398 @@
+"""The report of a campaign: one result per input class, every finding with its shrunk input, as the
+console shows it, as JSON (``fuzz.schema.json``, next to this module) and as JUnit XML.
+
+A *finding* is a kind of failure (crash, hang, traceback, silent drop, wrong answer, uncounted drop)
+with the clause it breaks; a campaign reports each once, with how often it was seen, the input class
+it came from, the fewest inputs found to cause it (numbers of the campaign, so ``--only`` sends them
+again), their bytes, what the spec says the answer should have been, and one reproduce line.
+
+Findings of a SHOULD, MAY or INFO clause are warnings (with ``--strict`` SHOULD ones count); crashes,
+hangs, tracebacks and uncounted drops always count.  Exit codes: 0 no finding, 1 findings, 2 usage,
+3 target unreachable (no liveness check ever passed), 4 interrupted or an internal error.
+
+JUnit: one test case per input class (``classname`` its layer: link, chaos, manip), failing with its
+findings; findings of the target as a whole (a crash or a traceback no input could be tied to) go to
+the case ``target.health``.  It is made with the conformance report's writer
+(:func:`manip.conformance.report.report_junit`), one :class:`~manip.conformance.results.CaseResult` per class.
+"""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Final, cast
+
+from manip.conformance.fuzz.judge import KINDS
+from manip.conformance.judge.violation import FailureKind
+from manip.conformance.output.report import report_junit
+from manip.conformance.suite.results import CaseResult, ExitCode, RunReport, Violation
+from manip.spec import SPEC
+from manip.spec.model import Level
+
+__all__ = [
+    "HEALTH",
+    "SCHEMA_VERSION",
+    "ClassTally",
+    "Finding",
+    "FuzzReport",
+    "MinimalInput",
+    "as_run_report",
+    "finding_json",
+    "finding_text",
+    "load_schema",
+    "report_json",
+    "write_json",
+    "write_junit",
+]
+
+SCHEMA_VERSION: Final = 1
+HEALTH: Final = "target.health"
+"""The result findings of the target as a whole are reported under."""
+
+
+def load_schema() -> dict[str, Any]:
+    text = resources.files("manip.conformance.fuzz").joinpath("fuzz.schema.json").read_text(encoding="utf-8")
+    return dict(json.loads(text))
+
+
+@dataclass
+class ClassTally:
+    """One input class in a campaign."""
+
+    id: str
+    layer: str
+    sends: str
+    expected: str
+    clauses: tuple[str, ...]
+    level: str
+    hazard: str
+    inputs: int = 0
+    requests: int = 0
+    findings: list[int] = field(default_factory=list)
+    """Indices into the report's findings."""
+
+
+@dataclass
+class MinimalInput:
+    """One input of a finding's shrunk example, as it was sent."""
+
+    number: int
+    kind: str
+    note: str
+    steps: list[str]
+    """One line per step: what it is and its bytes in hex."""
+
+
+@dataclass
+class Finding:
+    """One kind of failure, seen ``occurrences`` times (module docstring)."""
+
+    kind: str
+    clause: str | None
+    level: str
+    message: str
+    expected: str
+    actual: str
+    data: bytes
+    input_class: str
+    first_batch: int
+    occurrences: int = 1
+    minimal: list[MinimalInput] = field(default_factory=list)
+    shrunk: bool = False
+    shrink_note: str = ""
+    reproduce: str = ""
+    counts: bool = True
+    """It fails the campaign (False: a warning)."""
+    followers: int = 0
+    """Findings that came after it on the same connections, not judged on their own (consequences?)."""
+
+    @property
+    def spec_text(self) -> str:
+        spec = SPEC.clauses.get(self.clause) if self.clause else None
+        return f"{spec.text} ({spec.section})" if spec is not None else ""
+
+    def title(self) -> str:
+        where = f" [{self.clause}]" if self.clause else ""
+        return f"{self.kind.upper()}{where} {self.input_class}: {self.message}"
+
+
+@dataclass
+class FuzzReport:
+    """Everything a campaign did and found."""
+
+    target: str
+    embedded: bool
+    seed: int
+    command: str
+    options: dict[str, Any]
+    strict: bool = False
+    started: str = ""
+    duration: float = 0.0
+    inputs: int = 0
+    requests: int = 0
+    batches: int = 0
+    liveness_checks: int = 0
+    liveness_failures: int = 0
+    restarts: int = 0
+    shrink_trials: int = 0
+    tracebacks_seen: int | None = None
+    bad_frames_sent: int = 0
+    bad_frames_counted: int | None = None
+    classes: dict[str, ClassTally] = field(default_factory=dict)
+    findings: list[Finding] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+    interrupted: bool = False
+    internal_error: str = ""
+    unreachable: bool = False
+
+    def counts(self) -> dict[str, int]:
+        """Findings (not warnings) by kind, every kind present."""
+        out: dict[str, int] = dict.fromkeys(KINDS, 0)
+        for f in self.findings:
+            if f.counts:
+                out[f.kind] += 1
+        return out
+
+    @property
+    def warnings(self) -> int:
+        return sum(not f.counts for f in self.findings)
+
+    @property
+    def exit_code(self) -> ExitCode:
+        if self.unreachable:
+            return ExitCode.UNREACHABLE
+        if self.interrupted or self.internal_error:
+            return ExitCode.INTERNAL
+        if any(self.counts().values()) or self.problems:
+            return ExitCode.NON_CONFORMANT
+        return ExitCode.CONFORMANT
+
+    @property
+    def verdict(self) -> str:
+        return {
+            ExitCode.CONFORMANT: "no findings",
+            ExitCode.NON_CONFORMANT: "findings",
+            ExitCode.UNREACHABLE: "target unreachable",
+            ExitCode.INTERNAL: "interrupted" if self.interrupted else "internal error",
+            ExitCode.USAGE: "usage error",
+        }[self.exit_code]
+
+    @property
+    def rate(self) -> float:
+        return self.inputs / self.duration if self.duration > 0 else 0.0
+
+    def summary_line(self) -> str:
+        counts = self.counts()
+        kinds = ", ".join(f"{n} {_plural(kind.replace('-', ' '), n)}" for kind, n in counts.items())
+        logs = (
+            ""
+            if self.tracebacks_seen is None
+            else f"; {self.tracebacks_seen} traceback(s) in the target's log"
+        )
+        return (
+            f"{self.inputs} inputs ({self.requests} requests) in {self.duration:.1f} s "
+            f"({self.rate:.0f} inputs/s), {self.batches} batches, "
+            f"{self.liveness_checks - self.liveness_failures} of {self.liveness_checks} liveness checks "
+            f"passed{logs}; {kinds}" + (f"; {self.warnings} warning(s)" if self.warnings else "")
+        )
+
+
+def _plural(word: str, n: int) -> str:
+    if n == 1:
+        return word
+    return word + ("es" if word.endswith("sh") else "s")
+
+
+def finding_json(f: Finding) -> dict[str, Any]:
+    return {
+        "kind": f.kind,
+        "clause": f.clause,
+        "level": f.level,
+        "counts": f.counts,
+        "spec": f.spec_text,
+        "message": f.message,
+        "expected": f.expected,
+        "actual": f.actual,
+        "bytes": f.data.hex(),
+        "input_class": f.input_class,
+        "first_batch": f.first_batch,
+        "occurrences": f.occurrences,
+        "minimal": [
+            {"number": m.number, "class": m.kind, "note": m.note, "steps": list(m.steps)} for m in f.minimal
+        ],
+        "shrunk": f.shrunk,
+        "shrink_note": f.shrink_note,
+        "reproduce": f.reproduce,
+        "followers": f.followers,
+    }
+
+
+def report_json(report: FuzzReport) -> dict[str, Any]:
+    """The report as JSON-ready data (validates against :func:`load_schema`)."""
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "tool": "manip-conform fuzz",
+        "spec_revision": SPEC.revision,
+        "target": report.target,
+        "embedded": report.embedded,
+        "command": report.command,
+        "started": report.started,
+        "duration": round(report.duration, 6),
+        "seed": report.seed,
+        "strict": report.strict,
+        "options": report.options,
+        "verdict": report.verdict,
+        "exit_code": int(report.exit_code),
+        "inputs": report.inputs,
+        "requests": report.requests,
+        "batches": report.batches,
+        "rate": round(report.rate, 3),
+        "liveness": {"checks": report.liveness_checks, "failed": report.liveness_failures},
+        "restarts": report.restarts,
+        "shrink_trials": report.shrink_trials,
+        "tracebacks_seen": report.tracebacks_seen,
+        "bad_frames": {"sent": report.bad_frames_sent, "counted": report.bad_frames_counted},
+        "counts": report.counts(),
+        "warnings": report.warnings,
+        "problems": list(report.problems),
+        "interrupted": report.interrupted,
+        "internal_error": report.internal_error,
+        "classes": [
+            {
+                "id": c.id,
+                "layer": c.layer,
+                "sends": c.sends,
+                "expected": c.expected,
+                "clauses": list(c.clauses),
+                "level": c.level,
+                "hazard": c.hazard,
+                "inputs": c.inputs,
+                "requests": c.requests,
+                "outcome": _outcome(report, c),
+                "findings": list(c.findings),
+            }
+            for c in report.classes.values()
+        ],
+        "findings": [finding_json(f) for f in report.findings],
+    }
+
+
+def _outcome(report: FuzzReport, tally: ClassTally) -> str:
+    found = [report.findings[i] for i in tally.findings]
+    if any(f.counts for f in found):
+        return "fail"
+    if found:
+        return "warn"
+    return "pass" if tally.inputs else "skip"
+
+
+def write_json(report: FuzzReport, path: Path) -> None:
+    path.write_text(json.dumps(report_json(report), indent=2) + "\n", encoding="utf-8")
+
+
+# How each kind of finding reads as a conformance failure.
+_FAILURE_KINDS: Final[dict[str, FailureKind]] = {
+    "crash": "closed",
+    "hang": "timeout",
+    "silent-drop": "missing_response",
+    "traceback": "unexpected_message",
+}
+
+
+def _violation(f: Finding) -> Violation:
+    level = cast(Level, f.level if f.level in ("MUST", "SHOULD", "MAY", "INFO") else "MUST")
+    kind = _FAILURE_KINDS.get(f.kind, "wrong_value")
+    return Violation(f.message, f.clause, level, f.expected, f.actual, f.data, kind=kind)
+
+
+def as_run_report(report: FuzzReport) -> RunReport:
+    """The campaign in the conformance report's shape: one case per input class (and the target's health)."""
+    run = RunReport(
+        target=report.target,
+        embedded=report.embedded,
+        seed=report.seed,
+        strict=report.strict,
+        options=report.options,
+        command=report.command,
+        started=report.started,
+        duration=report.duration,
+    )
+    health = [i for i, f in enumerate(report.findings) if f.input_class == HEALTH]
+    tallies = list(report.classes.values())
+    if health:
+        tallies.append(
+            ClassTally(
+                HEALTH, "target", "", "alive and silent in its log", (), "MUST", "read-only", findings=health
+            )
+        )
+    for tally in tallies:
+        found = [report.findings[i] for i in tally.findings]
+        outcome = (
+            _outcome(report, tally)
+            if tally.id != HEALTH
+            else ("fail" if any(f.counts for f in found) else "warn")
+        )
+        result = CaseResult(
+            id=tally.id,
+            clauses=tally.clauses or ("request.one-reply",),
+            level=cast(Level, tally.level),
+            kind="fuzz",
+            hazard=tally.hazard,
+            summary=f"{tally.sends}; expected: {tally.expected}",
+            outcome=outcome,  # type: ignore[arg-type]
+            seed=report.seed,
+            deadline=max(report.duration, 1.0),
+            duration=0.0,
+            violations=[_violation(f) for f in found],
+            reason="no input of this class was sent" if outcome == "skip" else "",
+            notes=[f"{tally.inputs} inputs, {tally.requests} requests"],
+            reproduce=next((f.reproduce for f in found), ""),
+        )
+        run.results.append(result)
+    return run
+
+
+def write_junit(report: FuzzReport, path: Path) -> None:
+    tree = ET.ElementTree(report_junit(as_run_report(report)))
+    ET.indent(tree)
+    tree.write(path, encoding="utf-8", xml_declaration=True)
+
+
+def finding_text(f: Finding) -> str:
+    """A finding in full, for the console: what broke, the spec, expected and actual, the shrunk
+    input with its bytes, the reproduce line."""
+    lines = [f.title()]
+    if f.spec_text:
+        lines.append(f"  spec:      {f.clause} ({f.level}): {f.spec_text}")
+    if f.expected:
+        lines.append(f"  expected:  {f.expected}")
+    if f.actual:
+        actual = (
+            f.actual if "\n" not in f.actual else "\n" + "\n".join("    " + x for x in f.actual.splitlines())
+        )
+        lines.append(f"  actual:    {actual}")
+    lines.append(f"  seen:      {f.occurrences} time(s), first in batch {f.first_batch}")
+    if f.followers:
+        lines.append(
+            f"  after it:  {f.followers} more finding(s) on its connections, not judged on their own"
+        )
+    if f.minimal:
+        state = "shrunk to" if f.shrunk else "not shrunk:"
+        lines.append(
+            f"  input:     {state} {len(f.minimal)} input(s){f' ({f.shrink_note})' if f.shrink_note else ''}"
+        )
+        for m in f.minimal[:20]:
+            lines.append(f"    #{m.number} {m.kind}: {m.note}")
+            lines += [f"      {step}" for step in m.steps[:8]]
+            if len(m.steps) > 8:
+                lines.append(f"      ... {len(m.steps) - 8} more step(s)")
+        if len(f.minimal) > 20:
+            lines.append(f"    ... {len(f.minimal) - 20} more input(s)")
+    elif f.shrink_note:
+        lines.append(f"  input:     {f.shrink_note}")
+    if f.reproduce:
+        lines.append(f"  reproduce: {f.reproduce}")
+    return "\n".join(lines)

@@ -1,0 +1,515 @@
+"""One Chaos connection driven by hand, for a batch of fuzz inputs.
+
+The fuzzer cannot use an NCP of its own for the connection it fuzzes over: an NCP would renumber,
+retransmit and window for it.  :class:`FuzzConnection` does the least a peer must do and nothing else:
+
+* **Opening**: RFC from an index of ours (a CLS saying busy is retried: the previous batch's
+  connection may still be closing), OPN, an STS acknowledging it.
+* **Sending**: requests numbered in order, never more than the target's window ahead of its last
+  acknowledgement (a packet past the window would be dropped, and its request look unanswered).  A
+  stalled window is probed with SNS.  Packets placed wrongly on purpose (:class:`~.steps.ConnPacket`)
+  are sent by :meth:`send_relative` and never counted as requests.
+* **Receiving**: the target's controlled packets in order (duplicates of retransmissions dropped),
+  acknowledged by the ack field of our requests and by STS when half our window is used, or at once
+  while we wait.  A *lazy* request (a pipeline that does not read) acknowledges nothing until the
+  target's window stops us.
+* **Recording**: every request and every packet of the target, in order, as
+  :class:`~manip.conformance.checks.WirePacket` (CLS, EOF and LOS as close pseudo-packets), for the
+  transcript checks; ``origin`` says which input each one belongs to.
+* **Answers**: requests are matched to answers in order, as the spec says a server answers (the
+  packets of a describe-self reply up to its empty one; the packet after free joint with one done),
+  to know when everything sent was answered and how long an answer may take: the reply timeout or,
+  for an answer that waits for the arm, the allowance of the spec's ``answer_within`` after the
+  motion queued before it (erratum ``answer-allowance``).  A free joint the spec answers with done is
+  waited for before the next request, so that which packet it discards is not a race.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Final
+
+from manip.codecs.errors import CodecError
+from manip.codecs.packet import Packet
+from manip.codecs.pdp11float import unpack_f
+from manip.conformance.fuzz.steps import ConnPacket
+from manip.conformance.fuzz.wire import Inbox, Wire, frame
+from manip.conformance.judge.checks import WirePacket, required_refusal
+from manip.ncp.packets import is_data, pack_status, text, unpack_status
+from manip.ncp.seq import seq_add, seq_gt, seq_le, seq_sub
+from manip.spec import SPEC
+from manip.spec.constants import ChaosOp, ServerOp
+
+__all__ = ["Allowance", "ConnectError", "FuzzConnection", "RefusedError"]
+
+OUR_WINDOW: Final = 64
+"""The window we grant the target: packets it may send before we acknowledge."""
+BUSY_DELAY: Final = 0.05
+RFC_RETRY: Final = 1.0
+PROBE_AFTER: Final = 0.2
+"""Seconds of a stalled window before we send SNS to learn the target's acknowledgement."""
+LAZY_GRACE: Final = 0.001
+"""Seconds a lazy sender waits, its window full, before it reads (acknowledges) what came."""
+SETTLE_CAP: Final = 5
+"""A wait for answers ends after this many answer budgets even while answers keep coming."""
+_FREE_JOINT: Final = SPEC.request("free-joint").opcode
+_SET_SPEED: Final = SPEC.request("set-speed").opcode
+_ANSWERS: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
+
+
+class ConnectError(Exception):
+    """No connection: the message says why (no answer, refused, the link failed)."""
+
+
+class RefusedError(ConnectError):
+    """The RFC was answered with something other than OPN."""
+
+
+@dataclass(frozen=True)
+class Allowance:
+    """How long answers may take (seconds): the reply timeout, the connect timeout, and the factor on
+    every wait for the arm (``--deadline-scale``)."""
+
+    reply: float = 2.0
+    connect: float = 5.0
+    scale: float = 1.0
+
+
+@dataclass
+class _Pending:
+    request: WirePacket
+    number: int
+    """The input it belongs to."""
+    opcode: int
+    multi: bool
+    arm_wait: float
+    sent: float
+    discarded: bool = False
+
+
+class FuzzConnection:
+    """A connection to the target over ``wire`` from our ``index`` (see the module docstring)."""
+
+    def __init__(
+        self, wire: Wire, inbox: Inbox, index: int, allowance: Allowance, *, rfc_no: int = 0
+    ) -> None:
+        self.wire = wire
+        self.inbox = inbox
+        self.index = index
+        self.allowance = allowance
+        self.rfc_no = rfc_no & 0xFFFF
+        self._loop = asyncio.get_running_loop()
+        self.t0 = self._loop.time()
+        self.server_index = 0
+        self.packets: list[WirePacket] = []
+        self.origin: dict[int, int] = {}
+        """``id`` of each recorded packet -> the input it belongs to (answers: their request's)."""
+        self.current = -1
+        """The input whose steps are being sent."""
+        self.next_no = seq_add(self.rfc_no, 1)
+        self.server_ack = self.rfc_no
+        self.server_window = 1
+        self.received_upto = 0
+        self.acked_upto = 0
+        self.ended: str | None = None
+        self.ended_at: float | None = None
+        """When the connection began to end (EOF, CLS or LOS from the target, or our CLS), loop clock."""
+        self.stalled = False
+        """A wait for an answer or for the window ran out of its allowance."""
+        self.sts_times: list[float] = []
+        self.requests = 0
+        self.asynchronous = 0
+        """Data packets from the target that answer no request (asynchronous responses, errors, warnings)."""
+        self._pending: deque[_Pending] = deque()
+        self._in_multi = False
+        self._discard_next = False
+        self._last_request: tuple[int, bytes, int] | None = None
+        self._lazy = False
+        self._writing = False
+        self._sts_due = False
+        self._initial = True
+        self._progress = asyncio.Event()
+        self._acked_at = self._answered_at = self.t0
+        self._answer: asyncio.Future[Packet] | None = None
+        self._motion_until = 0.0
+        self._speed = 1.0
+
+    def __repr__(self) -> str:
+        return f"<FuzzConnection {self.index:#06x} -> {self.server_index:#06x} {self.ended or 'open'}>"
+
+    # ------------------------------------------------------------------------------------ opening
+
+    async def open(self, contact: str, *, initial: bool = True) -> None:
+        """RFC until OPN; :class:`RefusedError` on another answer, :class:`ConnectError` on none.
+        ``initial``: then wait (up to the reply timeout) for the initial RESPONSE."""
+        address = self.wire.address
+        deadline = self._loop.time() + self.allowance.connect
+        busy = ""
+        self.inbox.register(self.index, self)
+        try:
+            while True:
+                if self.wire.ended is not None:
+                    raise ConnectError(self.wire.ended)
+                self._answer = self._loop.create_future()
+                self._send(
+                    Packet(
+                        ChaosOp.RFC,
+                        address.peer_addr,
+                        0,
+                        address.my_addr,
+                        self.index,
+                        self.rfc_no,
+                        0,
+                        contact.encode("ascii"),
+                    )
+                )
+                remaining = deadline - self._loop.time()
+                if remaining <= 0:
+                    within = f"within {self.allowance.connect:g} s"
+                    if busy:
+                        raise RefusedError(f"the RFC was refused as busy ({busy!r}) for {within[7:]}")
+                    raise ConnectError(f"no answer to the RFC {within}")
+                try:
+                    async with asyncio.timeout(min(RFC_RETRY, remaining)):
+                        answer = await asyncio.shield(self._answer)
+                except TimeoutError:
+                    continue
+                if answer.opcode == ChaosOp.OPN:
+                    break
+                reason = text(answer.data)
+                if answer.opcode == ChaosOp.CLS and "busy" in reason.lower() and self._loop.time() < deadline:
+                    busy = reason
+                    await asyncio.sleep(BUSY_DELAY)
+                    continue
+                name = {op.value: op.name for op in ChaosOp}.get(answer.opcode, f"0{answer.opcode:o}")
+                raise RefusedError(f"the RFC was answered with {name} {reason!r}")
+        except BaseException:
+            self.inbox.unregister(self.index)
+            raise
+        finally:
+            self._answer = None
+        self.server_index = answer.src_index
+        self.received_upto = self.acked_upto = answer.packet_no
+        self._note_ack(answer.ack_no)
+        status = unpack_status(answer.data)
+        if status is not None:
+            self.server_window = max(1, status[1])
+        self._sts()
+        self.t0 = self._loop.time()
+        # The user waits for the initial RESPONSE before relying on replies (connect.initial-response).
+        deadline = self.t0 + (self.allowance.reply if initial else 0.0)
+        while self.received_upto == answer.packet_no and self.ended is None and self._loop.time() < deadline:
+            await self._wait(deadline - self._loop.time())
+
+    # ------------------------------------------------------------------------------------ sending
+
+    def _send(self, packet: Packet) -> None:
+        self.wire.send(frame(packet, self.wire.address, datagram=self.wire.datagram))
+
+    def _packet(
+        self, opcode: int, packet_no: int, ack_no: int, data: bytes = b"", src: int | None = None
+    ) -> Packet:
+        a = self.wire.address
+        index = self.index if src is None else src
+        return Packet(
+            opcode, a.peer_addr, self.server_index, a.my_addr, index, packet_no & 0xFFFF, ack_no, data
+        )
+
+    def _sts(self) -> None:
+        if self._writing:  # a frame is going out in pieces: nothing may come between them
+            self._sts_due = True
+            return
+        self.acked_upto = self.received_upto
+        self._send(
+            self._packet(
+                ChaosOp.STS, self.next_no, self.received_upto, pack_status(self.received_upto, OUR_WINDOW)
+            )
+        )
+
+    def _record(
+        self, direction: str, opcode: int, packet_no: int, ack_no: int, data: bytes, number: int
+    ) -> WirePacket:
+        wp = WirePacket(direction, opcode, packet_no, ack_no, data, self._loop.time() - self.t0)  # type: ignore[arg-type]
+        self.packets.append(wp)
+        self.origin[id(wp)] = number
+        return wp
+
+    def _arm_wait(self, opcode: int) -> float:
+        op = SPEC.requests.get(opcode)
+        if op is None or op.answer_within is None:
+            return 0.0
+        queued = max(0.0, self._motion_until - self._loop.time())
+        return queued + op.answer_within * self.allowance.scale / self._speed
+
+    async def request(self, opcode: int, data: bytes, *, chunk: int = 0, lazy: bool = False) -> None:
+        """Send one request (waiting for window space); False-free: a failure shows as ``ended`` or
+        ``stalled``, and the request is then not sent."""
+        self._lazy = lazy
+        if not await self._room():
+            return
+        number = self.next_no
+        self.next_no = seq_add(number, 1)
+        ack = self.acked_upto if lazy else self.received_upto
+        if not lazy:
+            self.acked_upto = ack
+        packet = self._packet(opcode, number, ack, data)
+        raw = frame(packet, self.wire.address, datagram=self.wire.datagram)
+        if chunk and not self.wire.datagram:
+            self._writing = True
+            try:
+                for at in range(0, len(raw), chunk):
+                    self.wire.send(raw[at : at + chunk])
+                    await asyncio.sleep(0)
+            finally:
+                self._writing = False
+            if self._sts_due:
+                self._sts_due = False
+                self._sts()
+        else:
+            self.wire.send(raw)
+        self.requests += 1
+        wp = self._record("c2s", opcode, number, ack, data, self.current)
+        well_formed = required_refusal(opcode, data) is None
+        op = SPEC.requests.get(opcode)
+        multi = well_formed and op is not None and op.response.kind == "multi"
+        pending = _Pending(wp, self.current, opcode, multi, self._arm_wait(opcode), self._loop.time())
+        if self._discard_next:
+            pending.discarded = True
+            pending.multi = False
+            self._discard_next = False
+        self._pending.append(pending)
+        self._last_request = (opcode, data, number)
+        if opcode == _FREE_JOINT and well_formed and not pending.discarded:
+            await self.settle()  # which packet free joint discards must not be a race
+
+    def send_relative(self, step: ConnPacket) -> int | None:
+        """Send a :class:`ConnPacket`; return the source index an answer (LOS) goes back to, if any."""
+        if self.ended is not None:
+            return None
+        opcode, data = step.opcode, step.data
+        ack = self.received_upto
+        if step.what == "ahead":
+            number = seq_add(self.next_no, self.server_window + step.offset - 1)
+        elif step.what == "behind":
+            number = seq_add(self.next_no, -step.offset)
+        elif step.what == "duplicate":
+            if self._last_request is None:
+                number = seq_add(self.next_no, -1)
+            else:
+                opcode, data, number = self._last_request
+        elif step.what == "wrong-source":
+            bogus = 0xFF00 | (((self.index & 0xFF) ^ (step.offset & 0xFF or 1)) & 0xFF)
+            self._send(self._packet(opcode, self.next_no, ack, data, src=bogus))
+            return bogus
+        else:  # sns, unc: uncontrolled, numbered like an STS
+            number = self.next_no
+        self._send(self._packet(opcode, number, ack, data))
+        return None
+
+    async def _room(self) -> bool:
+        """Wait until the target's window has room; False if the connection ended or stalled (no
+        acknowledgement within the budget: packets of other kinds do not count, so a target that
+        sends but never acknowledges cannot hold the batch)."""
+        probed = -math.inf
+        blocked = self._loop.time()
+        while True:
+            if self.ended is not None or self.stalled:
+                return False
+            outstanding = seq_sub(seq_add(self.next_no, -1), self.server_ack)
+            if outstanding < self.server_window:
+                return True
+            if self._lazy:  # a pipeline that does not read: it reads now, as its window is full
+                await self._wait(LAZY_GRACE)
+                self._lazy = False
+                if self.acked_upto != self.received_upto:
+                    self._sts()
+                continue
+            if self.acked_upto != self.received_upto:
+                self._sts()
+            since = self._loop.time() - max(self._acked_at, blocked)
+            if since >= self._budget():
+                self.stalled = True
+                return False
+            # Everything answered but not acknowledged: the target's ack waits for a timer of its own;
+            # an SNS has it in one round trip.  Otherwise probe when nothing came for a while.
+            due = 0.0 if not self._pending else PROBE_AFTER
+            if since >= due and probed <= self._loop.time() - PROBE_AFTER:
+                probed = self._loop.time()
+                self._send(self._packet(ChaosOp.SNS, self.next_no, self.received_upto))
+            await self._wait(min(PROBE_AFTER, self._budget() - since))
+
+    def _budget(self) -> float:
+        """Seconds without progress the head of the queue may take."""
+        head = self._pending[0] if self._pending else None
+        arm = head.arm_wait if head is not None else 0.0
+        return max(self.allowance.reply, arm)
+
+    async def _wait(self, timeout: float) -> None:
+        self._progress.clear()
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(max(0.0, timeout)):
+                await self._progress.wait()
+
+    async def settle(self) -> bool:
+        """Wait until every request sent is answered (True), or the connection ends or stalls (no
+        answer within the budget, or answers that never end: :data:`SETTLE_CAP` budgets in all)."""
+        self._lazy = False
+        cap = self._loop.time() + SETTLE_CAP * max(
+            self._budget(), self.allowance.reply * len(self._pending) / 16
+        )
+        while self._pending:
+            if self.ended is not None or self.stalled:
+                return False
+            if self._loop.time() >= cap:
+                self.stalled = True
+                return False
+            if self.acked_upto != self.received_upto:
+                self._sts()
+            head = self._pending[0]
+            since = self._loop.time() - max(self._answered_at, head.sent)
+            budget = self._budget()
+            if since >= budget:
+                self.stalled = True
+                return False
+            await self._wait(budget - since)
+        if self.acked_upto != self.received_upto:
+            self._sts()
+        return True
+
+    async def pause(self, seconds: float) -> None:
+        """Wait up to ``seconds`` for an asynchronous packet (acknowledging what comes meanwhile)."""
+        if self.ended is not None:
+            return
+        deadline = self._loop.time() + seconds
+        seen = self.asynchronous
+        while self.asynchronous == seen and self.ended is None and self._loop.time() < deadline:
+            if self.acked_upto != self.received_upto:
+                self._sts()
+            await self._wait(deadline - self._loop.time())
+
+    @property
+    def unanswered(self) -> int:
+        return len(self._pending)
+
+    def close(self, reason: str = "fuzz batch done") -> None:
+        """CLS (best effort, as Chaos closes are) unless the target closed it; over for us."""
+        closed = self.ended is not None and self.ended.startswith(("CLS", "LOS"))
+        if not closed and self.server_index:
+            self._send(self._packet(ChaosOp.CLS, self.next_no, self.received_upto, reason.encode("ascii")))
+        self.ended = self.ended or "closed by the fuzzer"
+        self.ended_at = self.ended_at or self._loop.time()
+        self.inbox.unregister(self.index)
+
+    # ------------------------------------------------------------------------------------ receiving
+
+    def _note_ack(self, ack: int) -> None:
+        if seq_gt(ack, self.server_ack) and seq_le(ack, seq_add(self.next_no, -1)):
+            self.server_ack = ack
+            self._acked_at = self._loop.time()
+
+    def on_packet(self, packet: Packet, now: float) -> None:
+        if self._answer is not None:  # opening: the answer to our RFC
+            if not self._answer.done() and packet.opcode in (
+                ChaosOp.OPN,
+                ChaosOp.CLS,
+                ChaosOp.ANS,
+                ChaosOp.FWD,
+                ChaosOp.LOS,
+            ):
+                self._answer.set_result(packet)
+            return
+        if packet.src_index != self.server_index and packet.opcode != ChaosOp.OPN:
+            self.inbox.strays[packet.dest_index].append((packet, now))
+            return
+        self._progress.set()
+        opcode = packet.opcode
+        if opcode not in (ChaosOp.LOS, ChaosOp.CLS):
+            self._note_ack(packet.ack_no)
+        if opcode == ChaosOp.STS:
+            self.sts_times.append(now)
+            status = unpack_status(packet.data)
+            if status is not None:  # its receipt is not an acknowledgement: only acks open the window
+                self.server_window = max(1, status[1])
+            return
+        if is_data(opcode) or opcode == ChaosOp.EOF:
+            expected = seq_add(self.received_upto, 1)
+            if packet.packet_no != expected:
+                if seq_le(packet.packet_no, self.received_upto) and not self._lazy:
+                    self._sts()  # a retransmission: our receipt was not seen
+                return
+            self.received_upto = expected
+            number = self._pending[0].number if self._pending else self.current
+            wp = self._record("s2c", opcode, packet.packet_no, packet.ack_no, packet.data, number)
+            if opcode == ChaosOp.EOF:  # acknowledged at once: the target's CLS waits for that
+                self.ended = "EOF from the target"
+                self.ended_at = now
+                self._sts()
+            elif opcode in _ANSWERS:
+                self._answered(packet, wp)
+            else:
+                self.asynchronous += 1
+            if not self._lazy and seq_sub(self.received_upto, self.acked_upto) >= OUR_WINDOW // 2:
+                self._sts()
+            return
+        if opcode in (ChaosOp.CLS, ChaosOp.LOS):
+            number = self._pending[0].number if self._pending else self.current
+            self._record("s2c", opcode, packet.packet_no, packet.ack_no, packet.data, number)
+            name = "CLS" if opcode == ChaosOp.CLS else "LOS"
+            self.ended = f"{name} from the target: {text(packet.data)!r}"
+            self.ended_at = self.ended_at or now
+            self.inbox.unregister(self.index)
+        elif opcode in (ChaosOp.OPN, ChaosOp.SNS):  # an OPN again: our STS was lost
+            self._sts()
+
+    def _answered(self, packet: Packet, wp: WirePacket) -> None:
+        """Match an answer to the oldest request still waiting (module docstring)."""
+        self._answered_at = self._loop.time()
+        if self._initial:  # the first packet is the initial RESPONSE, unless it answers a request
+            self._initial = False
+            number = int.from_bytes(packet.data[:2], "little") if len(packet.data) >= 2 else None
+            if packet.opcode == ServerOp.RESPONSE and all(
+                p.request.packet_no != number for p in self._pending
+            ):
+                return
+        if self._in_multi:
+            head = self._pending[0]
+            if packet.opcode == ServerOp.RESPONSE:
+                if len(packet.data) == 2:
+                    self._in_multi = False
+                    self._pending.popleft()
+                return
+            self._in_multi = False
+            self._pending.popleft()
+        if not self._pending:
+            return
+        head = self._pending[0]
+        self.origin[id(wp)] = head.number
+        if head.discarded:
+            self._pending.popleft()
+            return
+        if head.multi and packet.opcode == ServerOp.RESPONSE:
+            if len(packet.data) == 2:
+                self._pending.popleft()
+            else:
+                self._in_multi = True
+            return
+        self._pending.popleft()
+        if packet.opcode != ServerOp.RESPONSE:
+            return
+        op = SPEC.requests.get(head.opcode)
+        if op is None:
+            return
+        if head.opcode == _FREE_JOINT:
+            self._discard_next = True
+        elif head.opcode == _SET_SPEED:
+            with contextlib.suppress(CodecError):
+                factor = unpack_f(head.request.data[:4])
+                if 0.0 < factor <= 1.0:
+                    self._speed = factor
+        elif op.response.kind == "segment" or (op.hazard == "motion" and op.answer_within is not None):
+            segment = SPEC.segment_within * self.allowance.scale / self._speed
+            self._motion_until = max(self._motion_until, self._loop.time()) + segment

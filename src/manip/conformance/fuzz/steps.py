@@ -1,0 +1,126 @@
+"""What a fuzz input is: a numbered handful of steps, each sent to the target in one of four ways.
+
+An input is generated from the campaign seed and its number alone (:mod:`.generators`), so the same
+seed gives the same inputs and ``--only N,M`` sends exactly inputs N and M again.  Its steps:
+
+* :class:`Request`: a manip request on the batch's Chaos connection (opened by hand, see
+  :mod:`.session`).  Its answer is judged with the rest of the connection by the transcript checks
+  of :mod:`manip.conformance.judge.checks`, which know what the spec demands for each opcode and data.
+* :class:`ConnPacket`: a packet on the connection's link whose number or indices are wrong on purpose
+  (out of the window, a duplicate, a wrong source index) or that is no request (SNS, UNC).
+* :class:`Stray`: a packet on a side link that belongs to no connection (or is an RFC), possibly
+  damaged below the packet (checksum, byte count, header byte, CHUDP header and length).
+* :class:`Raw`: bytes on a link of their own (stream links: the link is opened, written and left to
+  the target), or one datagram of arbitrary bytes (CHUDP).
+* :class:`Pause`: time for the target's arm to move, so that what it reports of motion is seen.
+
+Each non-request step carries the answer the spec demands (``expect``) and the clause that demands it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from manip.codecs.packet import Packet
+
+__all__ = [
+    "ConnPacket",
+    "Damage",
+    "FuzzInput",
+    "Pause",
+    "Raw",
+    "Relative",
+    "Request",
+    "Step",
+    "Stray",
+    "StrayExpect",
+]
+
+Relative = Literal["ahead", "behind", "duplicate", "wrong-source", "sns", "unc"]
+"""How a :class:`ConnPacket` relates to the connection: numbered past the receive window, numbered
+before the next expected packet, the last request again, from a source index that is not the
+connection's, a sense-status request, uncontrolled data."""
+Damage = Literal["", "checksum", "nbytes", "header-byte", "version", "function", "short", "long"]
+"""What is broken below a :class:`Stray` packet: its checksum, its byte count, the unused header
+byte; on CHUDP the datagram header's version or function byte, or its length (cut or padded)."""
+StrayExpect = Literal["los", "answer", "silence"]
+"""A LOS back to the sender, an answer to an RFC (OPN, CLS, ANS or FWD), or nothing at all."""
+
+
+@dataclass(frozen=True, slots=True)
+class Request:
+    """A request on the batch's connection: ``opcode`` and ``data`` exactly as given.
+
+    ``chunk``: write the frame in pieces of this many bytes (0: in one write).  ``lazy``: part of a
+    pipeline that does not read: the server's packets are not acknowledged until its window stops us.
+    """
+
+    opcode: int
+    data: bytes
+    chunk: int = 0
+    lazy: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class ConnPacket:
+    """A packet on the connection's link, placed relative to the connection when it is sent."""
+
+    what: Relative
+    opcode: int
+    data: bytes = b""
+    offset: int = 0
+    """ahead: packets past the window; behind: packets before the next one; wrong-source: XORed into
+    our index to make the wrong one."""
+    clause: str = "ncp.window"
+
+
+@dataclass(frozen=True, slots=True)
+class Stray:
+    """A packet to no connection (or an RFC), on the side link.  In ``packet`` a destination host of
+    0 means the target's, a source host of 0 ours; the source index is the sender's key for the answer."""
+
+    packet: Packet
+    expect: StrayExpect
+    clause: str
+    damage: Damage = ""
+    counted: bool = False
+    """The target's link must count it as bad input (it is dropped below the NCP)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Raw:
+    """Bytes on a stream link of their own, or one datagram.  ``closes``: the target must drop the link
+    (stream framing lost); ``counted``: bad frames the target's link must count."""
+
+    data: bytes
+    clause: str
+    closes: bool = False
+    counted: int = 0
+    hold: bool = False
+    """Leave the link open until the end of the batch (a peer that stays after a partial frame)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Pause:
+    """Let the target's clock run: up to ``seconds``, less if an asynchronous packet comes first (motion
+    ending within a batch, so its completion responses are seen)."""
+
+    seconds: float
+
+
+Step = Request | ConnPacket | Stray | Raw | Pause
+
+
+@dataclass(frozen=True, slots=True)
+class FuzzInput:
+    """Input ``number`` of a campaign: its class, its steps, one line saying what it is."""
+
+    number: int
+    kind: str
+    steps: tuple[Step, ...]
+    note: str
+
+    @property
+    def requests(self) -> int:
+        return sum(isinstance(s, Request) for s in self.steps)
