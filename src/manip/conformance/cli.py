@@ -36,12 +36,11 @@ from typing import Any, TypeVar
 import click
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.fuzz.cli import fuzz_command
-from manip.conformance.output.console import make_console
+from manip.conformance.output.console import make_console, progress_bar
 from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
 from manip.conformance.output.report import failure_text, write_json, write_junit
 from manip.conformance.replay.cli import (
@@ -537,15 +536,7 @@ def _with_address(options: RunOptions, address: str) -> RunOptions:
 async def _run_with(
     config: RunConfig, cases: Sequence[Case], holder: dict[str, Runner], console: Console, quiet: bool
 ) -> None:
-    progress = Progress(
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-        disable=quiet or not console.is_terminal,
-    )
+    progress = progress_bar(console, quiet)
     task_id = progress.add_task("conformance", total=0)
 
     def started(selected: list[Case]) -> None:

@@ -19,14 +19,13 @@ from pathlib import Path
 import click
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from manip.conformance.fuzz.campaign import Campaign, CampaignConfig, CampaignEvents
 from manip.conformance.fuzz.generators import CLASSES, HAZARD_ORDER, GenOptions
 from manip.conformance.fuzz.report import Finding, FuzzReport, finding_text, write_json, write_junit
 from manip.conformance.fuzz.session import Allowance
 from manip.conformance.fuzz.target import ProcessTarget, RemoteTarget, Target, reference_server_argv
-from manip.conformance.output.console import make_console
+from manip.conformance.output.console import make_console, progress_bar
 from manip.conformance.replay.cli import check_output_paths, given, json_option, junit_option
 from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REPLY_TIMEOUT
 from manip.conformance.suite.results import ExitCode
@@ -360,15 +359,7 @@ def fuzz_command(
 def _campaign(
     config: CampaignConfig, target: Target, console: Console, quiet: bool, *, total: int
 ) -> FuzzReport:
-    progress = Progress(
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-        disable=quiet or not console.is_terminal,
-    )
+    progress = progress_bar(console, quiet)
     task = progress.add_task("fuzz", total=total)
 
     def batch_done(report: FuzzReport) -> None:

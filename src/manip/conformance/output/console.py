@@ -14,8 +14,9 @@ import sys
 from typing import Final, TextIO
 
 from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-__all__ = ["UNLIMITED_WIDTH", "make_console", "stream_is_terminal"]
+__all__ = ["UNLIMITED_WIDTH", "make_console", "progress_bar", "stream_is_terminal"]
 
 UNLIMITED_WIDTH: Final = 1_000_000
 """The width of a console whose stream is not a terminal: wider than any line or table we print."""
@@ -48,4 +49,18 @@ def make_console(*, stderr: bool = False, min_width: int = 0) -> Console:
         soft_wrap=True,
         width=UNLIMITED_WIDTH,
         emoji=False,
+    )
+
+
+def progress_bar(console: Console, quiet: bool) -> Progress:
+    """The progress bar of a long command (what runs, done of total, time so far): on a terminal only,
+    and gone once the command ends (its own lines stay)."""
+    return Progress(
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+        disable=quiet or not console.is_terminal,
     )
