@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import shlex
 import socket
+import subprocess
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -137,6 +138,36 @@ def test_a_defect_is_found_shrunk_to_its_input_and_reproduced(mode: str, kind: s
         assert report["restarts"] >= 1
     again = reproduce(finding["reproduce"], tmp_path)
     assert again["exit_code"] == 1 and any(f["kind"] == kind for f in again["findings"])
+
+
+@pytest.mark.timeout(90)
+def test_a_traceback_in_the_log_of_a_server_run_elsewhere_is_found(tmp_path: Path) -> None:
+    seed = 5
+    trigger = first_trigger(seed, GenOptions(select=("manip.unknown-opcode",)))
+    url = f"tcp://127.0.0.1:{free_port()}"
+    log = tmp_path / "server.log"
+    with log.open("w") as stderr:
+        server = subprocess.Popen(
+            [sys.executable, str(FAKE), "traceback", "--listen", url, "--log-level", "WARNING"],
+            stdout=subprocess.PIPE,
+            stderr=stderr,
+            text=True,
+        )
+    try:
+        assert server.stdout is not None and server.stdout.readline().startswith("manip-server: listening")
+        path = tmp_path / "fuzz.json"
+        args = ["--class", "manip.unknown-opcode", "--server-log", str(log), "--seed", str(seed)]
+        result = fuzz(url, *args, "--inputs", str(trigger + 20), "--batch", "50", "--json", str(path))
+        report = report_of(path)
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+    assert result.exit_code == 1, result.output
+    (finding,) = report["findings"]
+    assert finding["kind"] == "traceback" and "fake defect" in finding["actual"]
+    assert [m["number"] for m in finding["minimal"]] == [trigger]
+    assert f"--server-log {log}" in finding["reproduce"]
+    assert report["tracebacks_seen"] >= 1
 
 
 @pytest.mark.timeout(90)

@@ -225,6 +225,11 @@ class BatchRunner:
             run.open_error = run.open_error or f"the side link did not open: {exc}"
             return
         packet = step.packet
+        taken = {c.server_index for c in run.connections if c.ended is None}
+        while packet.dest_index and packet.dest_index in taken:
+            # By chance, the index of a connection of ours, on another link: the target may take it for
+            # that connection's (manip's drops it as from the wrong link), not as a stray.
+            packet = packet.with_(dest_index=(packet.dest_index * 7 + 1) & 0xFFFF or 1)
         raw = frame(packet, self.address, datagram=self.datagram, damage=step.damage)
         if packet.opcode == ChaosOp.RFC:
             self._rfc_wires[packet.src_index] = wire

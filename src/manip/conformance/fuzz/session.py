@@ -246,8 +246,8 @@ class FuzzConnection:
         return queued + op.answer_within * self.allowance.scale / self._speed
 
     async def request(self, opcode: int, data: bytes, *, chunk: int = 0, lazy: bool = False) -> None:
-        """Send one request (waiting for window space); False-free: a failure shows as ``ended`` or
-        ``stalled``, and the request is then not sent."""
+        """Send one request, waiting for room in the target's window; if the connection ends or stalls
+        meanwhile it is not sent (``ended``, ``stalled`` say why)."""
         self._lazy = lazy
         if not await self._room():
             return
@@ -258,6 +258,19 @@ class FuzzConnection:
             self.acked_upto = ack
         packet = self._packet(opcode, number, ack, data)
         raw = frame(packet, self.wire.address, datagram=self.wire.datagram)
+        # Recorded before it goes out: its answer may come while a frame in pieces is still being written.
+        self.requests += 1
+        wp = self._record("c2s", opcode, number, ack, data, self.current)
+        well_formed = required_refusal(opcode, data) is None
+        op = SPEC.requests.get(opcode)
+        multi = well_formed and op is not None and op.response.kind == "multi"
+        pending = _Pending(wp, self.current, opcode, multi, self._arm_wait(opcode), self._loop.time())
+        if self._discard_next:
+            pending.discarded = True
+            pending.multi = False
+            self._discard_next = False
+        self._pending.append(pending)
+        self._last_request = (opcode, data, number)
         if chunk and not self.wire.datagram:
             self._writing = True
             try:
@@ -271,18 +284,6 @@ class FuzzConnection:
                 self._sts()
         else:
             self.wire.send(raw)
-        self.requests += 1
-        wp = self._record("c2s", opcode, number, ack, data, self.current)
-        well_formed = required_refusal(opcode, data) is None
-        op = SPEC.requests.get(opcode)
-        multi = well_formed and op is not None and op.response.kind == "multi"
-        pending = _Pending(wp, self.current, opcode, multi, self._arm_wait(opcode), self._loop.time())
-        if self._discard_next:
-            pending.discarded = True
-            pending.multi = False
-            self._discard_next = False
-        self._pending.append(pending)
-        self._last_request = (opcode, data, number)
         if opcode == _FREE_JOINT and well_formed and not pending.discarded:
             await self.settle()  # which packet free joint discards must not be a race
 
