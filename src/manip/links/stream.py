@@ -108,7 +108,9 @@ class StreamLink(Link, asyncio.Protocol):
 
     def send(self, packet: Packet, next_hop: int | None = None) -> bool:
         transport = self._transport
-        if transport is None or self._closing_reason is not None:
+        # A transport closing after a socket error logs a warning for every write (a peer that resets
+        # while we send would fill the log): such packets are dropped and counted instead.
+        if transport is None or self._closing_reason is not None or transport.is_closing():
             return self._drop("closed", packet)
         if transport.get_write_buffer_size() > WRITE_BUFFER_LIMIT:
             return self._drop("congested", packet)
