@@ -2,7 +2,7 @@
 
 * :func:`open_connection`, :func:`start_server`, :class:`ChaosConnection`, :class:`ChaosServer`:
   what an application uses;
-* :class:`Node`: one NCP on one or more links (:mod:`~manip.links.node` explains the routing);
+* :class:`Node`: one NCP on one or more links (:mod:`~manip.links.ncp_driver` explains the routing);
 * links: :mod:`~manip.links.tcp` (manip's own, the default), :mod:`~manip.links.chudp`,
   :mod:`~manip.links.chaosd`, all :class:`Link`;
 * :mod:`~manip.links.guard`: a server's bounds on its links (:class:`LinkLimits`) and who may use it
@@ -15,7 +15,7 @@ from manip.ncp import NcpConfig
 from .address import AddressError, LinkAddress, parse_address
 from .api import ChaosServer, Handler, open_connection, start_server
 from .base import Link, LinkStats
-from .connection import ChaosConnection, ConnectionStats
+from .chaos_connection import ChaosConnection, ConnectionStats
 from .errors import (
     ChaosError,
     ConnectionAnswered,
@@ -28,7 +28,7 @@ from .errors import (
     LinkError,
 )
 from .guard import AccessError, AccessList, GuardStats, LinkGuard, LinkLimits
-from .node import NcpOptions, Node, NodeStats
+from .ncp_driver import NcpOptions, Node, NodeStats
 
 __all__ = [
     "AccessError",

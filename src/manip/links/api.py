@@ -19,12 +19,12 @@ from manip.ncp import ConnectionRequested, NcpConfig
 
 from .address import LinkAddress, parse_address
 from .base import Link
+from .chaos_connection import CLOSE_TIMEOUT, ChaosConnection
 from .chaosd import connect_chaosd
 from .chudp import Endpoint, bind_chudp
-from .connection import CLOSE_TIMEOUT, ChaosConnection
 from .errors import ChaosError
 from .guard import AccessList, LinkGuard, LinkLimits
-from .node import BUSY, AcceptPolicy, Node
+from .ncp_driver import BUSY, AcceptPolicy, Node
 from .tcp import connect_tcp, connect_unix, serve_tcp, serve_unix
 
 log = logging.getLogger("manip.links")

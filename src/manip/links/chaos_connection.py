@@ -23,7 +23,7 @@ from manip.spec.constants import ChaosOp
 from .errors import ChaosError, ConnectionClosed, fresh
 
 if TYPE_CHECKING:
-    from .node import Node, _Listener
+    from .ncp_driver import Node, _Listener
 
 UNCONTROLLED_KEPT: Final = 64
 """UNC packets kept per connection (oldest dropped); they are not sequenced or acknowledged."""

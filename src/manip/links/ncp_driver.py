@@ -57,7 +57,7 @@ from manip.ncp import (
 from manip.spec.constants import ChaosOp
 
 from .base import Link, LinkStats
-from .connection import ChaosConnection
+from .chaos_connection import ChaosConnection
 from .errors import (
     ChaosError,
     ConnectionAnswered,
