@@ -368,6 +368,11 @@ class ArmSim:
         """Refuse motion without arm power (NAP); False models a faulty server."""
         self.enforce_abort = True
         """Refuse motion after an abort (AWA); False models a faulty server."""
+        self.collision_test_compliant = False
+        """Run the collision test under compliance too; True models a faulty server (§5.2 inhibits it)."""
+        self.hold_compliant_end = True
+        """End a compliant episode where compliance left the arm; False (a faulty server) snaps back to
+        the nominal goal."""
 
         self._next_segment = 1
         self._interp = MoveInterpolator(here, limits, 1.0)
@@ -610,7 +615,8 @@ class ArmSim:
         if self.moving and not self.powered:
             self._abort(t, AbortCause.POWER_LOST, (), events)
             return
-        if self.moving and not (self._scheme_now is not None and self._scheme_now.compliant):
+        compliant = self._scheme_now is not None and self._scheme_now.compliant
+        if self.moving and (self.collision_test_compliant or not compliant):
             lagging = self._lagging(self.collision_tol_deg)
             if lagging:
                 self._abort(t, AbortCause.COLLISION, lagging, events)
@@ -647,6 +653,8 @@ class ArmSim:
             if self.compliance is not None:
                 q = _joints(self.compliance.adjust(t, nominal, self.actual))
             self._correction = _joints([a - b for a, b in zip(q, nominal, strict=True)])
+        elif self._correction is not None and not self.hold_compliant_end:
+            self._correction = None
         elif self._correction is not None:
             # The episode's last segment completed on this cycle: the arm stays where the contact let
             # it go (erratum compliant-segment-end), not on the nominal goal; never past a joint limit.

@@ -61,6 +61,17 @@ class Fault(enum.StrEnum):
     DESCRIBE_MISSING_OPERATION = "describe-missing-operation"
     DESCRIBE_WRONG_DOF = "describe-wrong-dof"
     DESCRIBE_NARROW_LIMITS = "describe-narrow-limits"
+    # protocol defects of the Puma's side of the wrist link (judged by manip-conform run --puma)
+    WRIST_FLOAT_WORDS_SWAPPED = "wrist-float-words-swapped"
+    WRIST_USER_FIRST = "wrist-user-first"
+    WRIST_NO_WAIT = "wrist-no-wait"
+    READ_FORCES_NO_ANGLES = "read-forces-no-angles"
+    NPR_SKIPPED = "npr-skipped"
+    COMPLIANT_COLLISION_TEST = "compliant-collision-test"
+    COMPLIANT_SNAP_BACK = "compliant-snap-back"
+    GUARD_IGNORED = "guard-ignored"
+    GUARD_UNREPORTED = "guard-unreported"
+    CALIBRATE_ONE_POSE = "calibrate-one-pose"
 
 
 Kind = Literal["environment", "protocol"]
@@ -283,6 +294,66 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "protocol",
                 "Describe self states every joint range 5 degrees narrower at each end than the arm's.",
                 "describe.joint-limits",
+            ),
+            _info(
+                Fault.WRIST_FLOAT_WORDS_SWAPPED,
+                "protocol",
+                "Floats in the commands the wrist processes queue for Cougar have their two words swapped.",
+                "cougar.command.layout",
+            ),
+            _info(
+                Fault.WRIST_USER_FIRST,
+                "protocol",
+                "The wrist output process sends the user's commands before New Position and Rate and Reset.",
+                "puma.wrist.priority",
+            ),
+            _info(
+                Fault.WRIST_NO_WAIT,
+                "protocol",
+                "Read forces is answered at once with the last forces seen, without waiting for Cougar.",
+                "puma.wrist.waits",
+            ),
+            _info(
+                Fault.READ_FORCES_NO_ANGLES,
+                "protocol",
+                "Read forces sends Report Forces without the current joint angles (SEN) before it.",
+                "puma.wrist.read-forces-angles",
+            ),
+            _info(
+                Fault.NPR_SKIPPED,
+                "protocol",
+                "A compliant segment sends New Position and Rate only every other servo cycle.",
+                "puma.compliance.npr-every-cycle",
+            ),
+            _info(
+                Fault.COMPLIANT_COLLISION_TEST,
+                "protocol",
+                "The collision test stays on under compliance.",
+                "puma.compliance.no-collision-test",
+            ),
+            _info(
+                Fault.COMPLIANT_SNAP_BACK,
+                "protocol",
+                "When a compliant episode ends the arm jumps back to the nominal goal.",
+                "puma.compliance.segment-end",
+            ),
+            _info(
+                Fault.GUARD_IGNORED,
+                "protocol",
+                "A stop-the-move guard trip is reported but the arm keeps moving.",
+                "puma.guard.stop",
+            ),
+            _info(
+                Fault.GUARD_UNREPORTED,
+                "protocol",
+                "Guard trips are never reported to the client.",
+                "puma.guard.report",
+            ),
+            _info(
+                Fault.CALIBRATE_ONE_POSE,
+                "protocol",
+                "Calibrate-wrist sets the mean of one pose's readings (gravity in them) as the offsets.",
+                "puma.calibrate-wrist",
             ),
         ]
     )

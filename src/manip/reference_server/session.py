@@ -207,6 +207,11 @@ class ServerSession:
         self.arm.enforce_abort = Fault.AWA_IGNORED not in faults
         if faults.obstacle is not None and Fault.OBSTACLE in faults:
             self.arm.place_obstacle(faults.obstacle)
+        self.arm.collision_test_compliant = Fault.COMPLIANT_COLLISION_TEST in faults
+        self.arm.hold_compliant_end = Fault.COMPLIANT_SNAP_BACK not in faults
+        use_faults = getattr(self.wrist, "use_faults", None)
+        if use_faults is not None:  # the wrist processes' own defects (a Wrist need have none)
+            use_faults(faults)
         self.state = State.AWAITING_INITIAL
         self.notifications = 0
         """The request-notifications mask in force (bit 0 guard hit, bit 1 segment completed)."""
@@ -290,6 +295,8 @@ class ServerSession:
             if isinstance(wev, GuardHit):
                 # The abort is the guard hit itself: report only the segments that ended before it.
                 self._report_arm(number, [e for e in wev.arm_events if not isinstance(e, MotionAborted)])
+                if Fault.GUARD_UNREPORTED in self.faults:
+                    continue
                 if self.notifications & _GUARD_BIT or Fault.UNREQUESTED_ASYNC in self.faults:
                     word2 = _GUARD_STOP if wev.stop else _GUARD_CONTINUE
                     self._emit_async(number, AsyncCondition.GUARD_HIT, word2, wev.index)

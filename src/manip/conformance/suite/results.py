@@ -64,7 +64,7 @@ class CaseResult:
     known_failing: bool = False
     reproduce: str = ""
     target: Target = "server"
-    """What the case tests (the first component of a case id: server, cougar, client)."""
+    """What the case tests (the first component of a case id: server, cougar, client, puma)."""
 
     @property
     def failure(self) -> Violation | None:
