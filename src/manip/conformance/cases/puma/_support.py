@@ -108,10 +108,11 @@ def is_async_error(p: WirePacket) -> bool:
 
 
 async def wait_async(
-    ctx: CaseContext, probe: Probe, match: Callable[[WirePacket], bool], timeout: float
+    ctx: CaseContext, probe: Probe, match: Callable[[WirePacket], bool], timeout: float, *, after: int = 0
 ) -> WirePacket | None:
-    """The first asynchronous packet (already set aside or arriving within ``timeout``) that matches."""
-    for packet in probe.unsolicited:
+    """The first asynchronous packet that matches: already set aside (from ``probe.unsolicited[after]``
+    on) or arriving within ``timeout``."""
+    for packet in probe.unsolicited[after:]:
         if match(packet):
             return packet
     end = ctx.clock() + timeout
