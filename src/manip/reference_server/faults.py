@@ -23,7 +23,7 @@ from typing import Final, Literal
 from manip.arm.sim import Obstacle
 from manip.spec import SPEC
 
-__all__ = ["FAULTS", "Fault", "FaultInfo", "FaultSet"]
+__all__ = ["FAULTS", "WRIST_SIDE", "Fault", "FaultInfo", "FaultSet"]
 
 
 class Fault(enum.StrEnum):
@@ -366,6 +366,12 @@ for _info_entry in FAULTS.values():
     for _clause in _info_entry.clauses:
         if _clause not in SPEC.clauses:
             raise RuntimeError(f"fault {_info_entry.name} names unknown clause {_clause!r}")
+
+WRIST_SIDE: Final[frozenset[Fault]] = frozenset(
+    info.fault for info in FAULTS.values() if all(SPEC.clauses[c].party == "puma" for c in info.clauses)
+)
+"""Defects of the Puma's side of the wrist link: the server cases cannot see them (they need the suite
+playing Cougar, ``manip-conform run --puma``)."""
 
 DEFAULT_PANIC_DELAY: Final = 1.0
 DEFAULT_NZI_JOINTS: Final = (2, 3)
