@@ -1,7 +1,7 @@
-"""The one reply-pairing rule (erratum capture-pairing): the capture view, the transcript checks and
-replay's answer sorter place every server packet alike, on the golden captures, on generated
-connections (wrong echoes, errors in the middle of a multi-packet reply, free joint, extras) and on a
-recording of a server that echoes wrong numbers."""
+"""The one reply-pairing rule (erratum capture-pairing): the capture view, the transcript checks,
+replay's answer sorter and the fuzz oracles place every server packet alike, on the golden captures,
+on generated connections (wrong echoes, errors in the middle of a multi-packet reply, free joint,
+extras) and on a recording of a server that echoes wrong numbers."""
 
 from __future__ import annotations
 
@@ -22,6 +22,7 @@ from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_error, encode_request
 from manip.codecs.packet import Packet
 from manip.codecs.pairing import ReplyPairing
+from manip.conformance.fuzz.oracles import answers
 from manip.conformance.judge.checks import WirePacket, check_transcript
 from manip.conformance.replay.against import AnswerSorter, ReplayOptions, replay_capture
 from manip.conformance.replay.cli import recording
@@ -137,6 +138,17 @@ def by_sorter(conn: Connection) -> list[Where]:
     return [place.get(id(p)) for p in server]
 
 
+def by_fuzz_oracles(conn: Connection) -> list[Where]:
+    """The fuzz oracles' requests-with-answers, as places (answers to requests only)."""
+    wire = conn.wire()
+    requests = [p for p in wire if p.direction == "c2s"]
+    place: dict[int, Where] = {}
+    for item in answers(wire):
+        for p in item.packets:
+            place[id(p)] = requests.index(item.request)
+    return [place.get(id(p)) for p in wire if p.direction == "s2c"]
+
+
 def check_findings_agree(conn: Connection, places: list[Where]) -> None:
     """The checker judges each answer against the request the other two pair it with: a wrong echo is
     a finding naming that request, a right one is none, an answer to nothing is an extra."""
@@ -220,6 +232,7 @@ def connections(draw: st.DrawFn) -> Connection:
 def test_view_sorter_and_checks_pair_generated_connections_alike(conn: Connection) -> None:
     view, sorter = by_view(conn), by_sorter(conn)
     assert view == sorter
+    assert by_fuzz_oracles(conn) == [p if isinstance(p, int) and p >= 0 else None for p in sorter]
     check_findings_agree(conn, sorter)
 
 
