@@ -46,12 +46,10 @@ from manip.codecs.messages import (
     decode_request,
     response_layout,
 )
-from manip.codecs.packet import Packet
+from manip.codecs.packet import Direction, Packet
 from manip.codecs.pairing import Placement, ReplyPairing
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import ChaosOp, ServerOp
-
-from .format import Direction
 
 SEEN_KEPT: Final = 2048
 """Packet numbers remembered per direction for spotting retransmissions (a window is at most 15)."""

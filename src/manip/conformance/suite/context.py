@@ -44,7 +44,7 @@ from typing import Any, Final, Literal, NoReturn
 
 from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request
-from manip.codecs.packet import Packet
+from manip.codecs.packet import Direction, Packet
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, describe, word
 from manip.conformance.judge.violation import Violation, evidence
@@ -177,9 +177,7 @@ class Probe:
         """The connection has ended (and every packet before the end has been taken)."""
         return self.end_reason is not None and not self._buffer
 
-    def _record(
-        self, direction: Literal["c2s", "s2c"], opcode: int, number: int, ack: int, data: bytes
-    ) -> WirePacket:
+    def _record(self, direction: Direction, opcode: int, number: int, ack: int, data: bytes) -> WirePacket:
         packet = WirePacket(direction, opcode, number, ack, bytes(data), self._ctx.clock(), self.index)
         self.packets.append(packet)
         self._ctx.transcript.append(packet)
