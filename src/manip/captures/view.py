@@ -99,7 +99,7 @@ def _request_plan(opcode: int) -> _RequestPlan:
     op = SPEC.requests.get(opcode)
     if op is None:
         return _RequestPlan(None, None, f"0{opcode:o}", None, None)
-    reply = None if op.response.kind == "multi" else plan(response_layout(op), numbered=True)
+    reply = None if op.response.form == "multi" else plan(response_layout(op), numbered=True)
     return _RequestPlan(op, op.name, op.name, plan(op.request, numbered=False), reply)
 
 
@@ -344,7 +344,7 @@ class Annotator:
                 ann.payload_hex = payload.hex()
             ann.final = pending is not None  # the initial RESPONSE answers the RFC
             return
-        if op.response.kind == "multi":
+        if op.response.form == "multi":
             ann.final = not payload
             if payload:
                 ann.text = decode_lispm(payload)

@@ -51,7 +51,7 @@ UNSOLICITED_OPCODES: Final = frozenset(
 )
 _RESPONSE: Final = int(ServerOp.RESPONSE)
 _FATAL: Final = int(ServerOp.FATAL_ERROR)
-_MULTI_OPCODES: Final = frozenset(op.opcode for op in SPEC.requests.values() if op.response.kind == "multi")
+_MULTI_OPCODES: Final = frozenset(op.opcode for op in SPEC.requests.values() if op.response.form == "multi")
 _FREE_JOINT: Final = SPEC.request("free-joint").opcode
 
 

@@ -58,7 +58,7 @@ _FREE_JOINT: Final = SPEC.request("free-joint").opcode
 _DESCRIBE: Final = SPEC.request("describe-self").opcode
 _SET_JOINTS: Final = SPEC.request("set-joint-angles").opcode
 _JOINT_REPLIES: Final = frozenset(SPEC.request(name).opcode for name in ("joint-angles", "solve-forwards"))
-_MOTION: Final = frozenset(op.opcode for op in SPEC.requests.values() if op.response.kind == "segment")
+_MOTION: Final = frozenset(op.opcode for op in SPEC.requests.values() if op.response.form == "segment")
 _REQUESTS: Final = range(0o200, 0o300)
 _RESETS: Final = frozenset(SPEC.request(name).opcode for name in ("enable-power", "reset-abort"))
 ABORTS: Final = ("COL", "PAN")

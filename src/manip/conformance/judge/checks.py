@@ -12,7 +12,7 @@ Checkers, from the smallest up:
 * :func:`check_server_opcode`, :func:`check_echo`, :func:`check_error_packet`,
   :func:`check_async_packet`, :func:`check_initial_response`: one packet;
 * :func:`check_reply`: the answer to one request (one packet, or a multi-packet reply), by the
-  response kind the spec gives the request's opcode (done, data, segment, multi), including the refusal
+  response form the spec gives the request's opcode (done, data, segment, multi), including the refusal
   the spec demands for malformed requests (:func:`required_refusal`);
 * :func:`check_description`: the describe-self text (alist readable, shapes of the known keys);
 * :func:`check_transcript`: a whole connection in order: the initial RESPONSE, one answer per request
@@ -485,7 +485,7 @@ def check_reply(request: WirePacket, answer: Sequence[WirePacket]) -> list[Viola
             ),
         ]
     op = SPEC.requests[request.opcode]
-    if op.response.kind == "multi":
+    if op.response.form == "multi":
         return out + _check_multi(op, request, answer)
     return out + _check_single(op, first)
 
@@ -516,7 +516,7 @@ _KIND_CLAUSE: Final[Mapping[str, str]] = {
 
 
 def _check_single(op: RequestOpcode, packet: WirePacket) -> list[Violation]:
-    kind = op.response.kind
+    kind = op.response.form
     try:
         decode_reply(packet.data, op)
     except CodecError as exc:
@@ -904,7 +904,7 @@ def _after_answer(s: _Session, request: WirePacket, answer: Sequence[WirePacket]
         s.mask = mask
     packet = answer[0]
     op = SPEC.requests.get(request.opcode)
-    if ok and op is not None and op.response.kind == "segment" and len(packet.data) == 4:
+    if ok and op is not None and op.response.form == "segment" and len(packet.data) == 4:
         segment = word(packet.data, 2)
         assert segment is not None
         if s.last_segment is not None and segment != (s.last_segment + 1) & 0xFFFF:

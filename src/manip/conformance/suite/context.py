@@ -216,7 +216,7 @@ class Probe:
                 factor = unpack_f(sent[:4])
                 if 0.0 < factor <= 1.0:
                     self._speed = factor
-        elif op.response.kind == "segment" or (op.hazard == "motion" and op.answer_within is not None):
+        elif op.response.form == "segment" or (op.hazard == "motion" and op.answer_within is not None):
             # One more segment in the queue (calibrate-wrist leaves its move back queued).
             segment = SPEC.segment_within * self._ctx.options.deadline_scale / self._speed
             self._motion_until = max(self._motion_until, self._ctx.clock()) + segment
@@ -254,7 +254,7 @@ class Probe:
         """Send a well-formed request and wait for its answer (multi-packet replies in full)."""
         spec_op = SPEC.request(op)
         number = await self.send(op, **values)
-        if spec_op.response.kind == "multi":
+        if spec_op.response.form == "multi":
             return await self.replies_until_empty(number, timeout=timeout)
         return await self.reply(number, timeout=timeout)
 
