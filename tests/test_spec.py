@@ -47,7 +47,7 @@ def test_request_table_covers_the_seed() -> None:
 
 def test_motion_replies_carry_segments() -> None:
     for opcode in (0o204, 0o205, 0o211, 0o212, 0o214, 0o215):
-        assert SPEC.requests[opcode].response.kind == "segment"
+        assert SPEC.requests[opcode].response.form == "segment"
 
 
 def test_layout_sizes() -> None:

@@ -440,12 +440,12 @@ class ServerSession:
             raise errors.bad_value(op.name, exc.message) from exc
 
     def _reply(self, op: RequestOpcode, number: int, values: dict[str, Any]) -> None:
-        if op.response.kind == "multi":
+        if op.response.form == "multi":
             self._reply_text(number, str(values["text"]))
             return
         data = _word(number) + self._payload(op, values)
         floats_only = all(f.type.element == "float" for f in op.response.data.fields)
-        if Fault.SWAPPED_FLOAT_WORDS in self.faults and op.response.kind == "data" and floats_only:
+        if Fault.SWAPPED_FLOAT_WORDS in self.faults and op.response.form == "data" and floats_only:
             body = data[2:]
             swapped = (body[i + 2 : i + 4] + body[i : i + 2] for i in range(0, len(body), 4))
             data = data[:2] + b"".join(swapped)

@@ -103,7 +103,7 @@ ROTATION_OK: Final = 1e-5
 NOT_ROTATION: Final = 1e-2
 #: Joints this far (deg) inside/outside a limit are certainly in/out of range for the model.
 LIMIT_SLACK: Final = 1e-3
-MOTION_NAMES: Final = frozenset(op.name for op in SPEC.requests.values() if op.response.kind == "segment")
+MOTION_NAMES: Final = frozenset(op.name for op in SPEC.requests.values() if op.response.form == "segment")
 _SEGMENT_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
 _GUARD_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.GUARD_HIT].notification_bit
 _DEFINED_MASK: Final = sum(1 << code.notification_bit for code in SPEC.async_codes.values())

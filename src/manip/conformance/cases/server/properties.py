@@ -127,7 +127,7 @@ async def _ask(probe: Probe, opcode: int | RequestName, data: bytes) -> Answer:
     code = opcode if isinstance(opcode, int) else SPEC.request(opcode).opcode
     number = await probe.request(code, data)
     op = SPEC.requests.get(code)
-    if op is not None and op.response.kind == "multi":
+    if op is not None and op.response.form == "multi":
         return await probe.replies_until_empty(number)
     return await probe.reply(number)
 

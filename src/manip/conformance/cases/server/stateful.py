@@ -162,7 +162,7 @@ async def _exchange(probe: Probe, opcode: int, data: bytes) -> tuple[int, Answer
     before = len(probe.unsolicited)
     number = await probe.request(opcode, data)
     op = SPEC.requests.get(opcode)
-    if op is not None and op.response.kind == "multi":
+    if op is not None and op.response.form == "multi":
         answer = await probe.replies_until_empty(number)
     else:
         answer = await probe.reply(number)
