@@ -82,7 +82,11 @@ def _header(report: Report) -> str:
         ("target", report["target"] + (" (embedded reference server)" if report.get("embedded") else "")),
         ("seed", report["seed"]),
         ("started", report.get("started", "") or "-"),
-        ("duration", f"{float(report.get('duration', 0.0)):.1f} s" + (" (virtual time)" if report.get("time") == "virtual" else "")),
+        (
+            "duration",
+            f"{float(report.get('duration', 0.0)):.1f} s"
+            + (" (virtual time)" if report.get("time") == "virtual" else ""),
+        ),
         ("cases", total),
         ("spec", report.get("spec_revision", "")),
     ]
@@ -115,7 +119,9 @@ def _summary(report: Report) -> str:
             continue
         tds = "".join(f'<td class="num{"" if n else " zero"}">{n}</td>' for n in cells)
         rows += f"<tr><th>{_level(level)}</th>{tds}<td class='num'>{sum(cells)}</td></tr>"
-    problems = "".join(f"<li>{_e(p)}</li>" for p in [*report.get("problems", []), *report.get("unstable", [])])
+    problems = "".join(
+        f"<li>{_e(p)}</li>" for p in [*report.get("problems", []), *report.get("unstable", [])]
+    )
     if report.get("internal_error"):
         problems += f"<li>internal error<pre>{_e(report['internal_error'])}</pre></li>"
     return (
@@ -139,7 +145,9 @@ def _first_message(case: Mapping[str, Any], clause: str | None) -> str:
 def _failures(report: Report) -> str:
     groups = failure_groups(report)
     if not groups:
-        return '<section id="failures"><h2>Failures by clause</h2><p class="none">No clause broke.</p></section>'
+        return (
+            '<section id="failures"><h2>Failures by clause</h2><p class="none">No clause broke.</p></section>'
+        )
     parts = []
     for tally, cases in groups:
         clause = tally["clause"] if tally is not None else None
@@ -168,8 +176,10 @@ def _failures(report: Report) -> str:
         more = len(cases) - len(shown)
         if more:
             filter_value = _e(clause or "")
-            items += f'<li class="more">and {more} more: <a href="#cases" data-filter="{filter_value}">' \
+            items += (
+                f'<li class="more">and {more} more: <a href="#cases" data-filter="{filter_value}">'
                 f"show them in the table</a></li>"
+            )
         kind = "bad" if tally is None or tally["failures"] else "soft"
         parts.append(
             f'<article class="group {kind}"><div class="ghead">{_level(level) if level else ""}'
@@ -194,7 +204,8 @@ def _case_table(report: Report) -> str:
         )
         rows.append(
             f'<tr data-verdict="{_e(c["outcome"])}" data-rank="{_RANK.get(c["outcome"], 99)}" '
-            f'data-id="{_e(c["id"])}" data-level="{_e(c["level"])}" data-duration="{float(c["duration"]):.6f}" '
+            f'data-id="{_e(c["id"])}" data-level="{_e(c["level"])}" '
+            f'data-duration="{float(c["duration"]):.6f}" '
             f'data-search="{_e(c["id"] + " " + clauses + " " + " ".join(sorted(broke)))}">'
             f"<td>{_badge(c['outcome'])}</td><td>{_case_link(c['id'])}</td>"
             f'<td class="clauses">{shown}</td><td>{_level(c["level"])}</td>'
@@ -214,7 +225,8 @@ def _case_table(report: Report) -> str:
         f'<option value="">every level</option>{levels}</select></div>'
         '<table id="case-table" class="cases"><thead><tr>'
         '<th data-sort="rank" aria-sort="ascending">verdict</th><th data-sort="id">case</th>'
-        '<th>clauses</th><th data-sort="level">level</th><th data-sort="duration" class="num">duration (s)</th>'
+        '<th>clauses</th><th data-sort="level">level</th>'
+        '<th data-sort="duration" class="num">duration (s)</th>'
         f"</tr></thead><tbody>{''.join(rows)}</tbody></table></section>"
     )
 
@@ -226,12 +238,12 @@ def _clause_table(report: Report) -> str:
             cited.setdefault(clause, Counter())[c["outcome"]] += 1
     broken: Mapping[str, Mapping[str, Any]] = {t["clause"]: t for t in report["by_clause"] if t["clause"]}
     rows = []
-    for clause in sorted(cited, key=lambda k: (-int(broken.get(k, {}).get("failures", 0)), k not in broken, k)):
+    for clause in sorted(
+        cited, key=lambda k: (-int(broken.get(k, {}).get("failures", 0)), k not in broken, k)
+    ):
         info = clause_info(report, clause)
         tally = broken.get(clause)
-        status = (
-            f"{int(tally['failures'])} failing, {int(tally['warnings'])} warning" if tally else "held"
-        )
+        status = f"{int(tally['failures'])} failing, {int(tally['warnings'])} warning" if tally else "held"
         outcomes = ", ".join(f"{n} {o}" for o, n in sorted(cited[clause].items(), key=lambda i: _RANK[i[0]]))
         rows.append(
             f'<tr class="{"broke" if tally and tally["failures"] else ""}"><td><code>{_e(clause)}</code></td>'
@@ -241,7 +253,7 @@ def _clause_table(report: Report) -> str:
         )
     return (
         f'<section id="clauses"><details><summary><h2>Clauses checked <small>{len(cited)}</small></h2>'
-        "</summary><table class=\"clause-table\"><thead><tr><th>clause</th><th>level</th>"
+        '</summary><table class="clause-table"><thead><tr><th>clause</th><th>level</th>'
         "<th>section of the 1985 guide</th><th>text</th><th>broken</th><th>cases citing it</th></tr></thead>"
         f"<tbody>{''.join(rows)}</tbody></table></details></section>"
     )
@@ -293,7 +305,11 @@ def _violation(report: Report, v: Mapping[str, Any]) -> str:
         else f'<div class="ghead">{_level(str(v.get("level", "")))}<code class="clause">'
         f"(no clause: {_e(v.get('kind', ''))})</code></div>"
     )
-    fields = [("message", v.get("message", "")), ("expected", v.get("expected", "")), ("actual", v.get("actual", ""))]
+    fields = [
+        ("message", v.get("message", "")),
+        ("expected", v.get("expected", "")),
+        ("actual", v.get("actual", "")),
+    ]
     if v.get("bytes"):
         fields.append(("bytes", bytes.fromhex(str(v["bytes"])).hex(" ") + "  (data, PDP-11 memory order)"))
     dl = "".join(f"<dt>{_e(k)}</dt><dd><pre>{_e(text)}</pre></dd>" for k, text in fields if text)
@@ -322,12 +338,14 @@ def _case_detail(report: Report, case: Mapping[str, Any], order: WireOrder) -> s
     if case.get("traceback"):
         parts.append(f'<pre class="traceback">{_e(case["traceback"])}</pre>')
     if case.get("notes"):
-        parts.append("<ul class=\"notes\">" + "".join(f"<li>{_e(n)}</li>" for n in case["notes"]) + "</ul>")
+        parts.append('<ul class="notes">' + "".join(f"<li>{_e(n)}</li>" for n in case["notes"]) + "</ul>")
     parts.append(f"<h4>Reproduce</h4>{_copy_line(str(case.get('reproduce', '')))}")
     parts.append(f"<h4>Clauses it checks</h4>{_clause_list(report, case['clauses'])}")
     parts.append(f"<h4>Packets</h4>{_packet_log(case, order)}")
-    meta = f"{_e(case['level'])} \u00b7 {_e(case['kind'])} \u00b7 {_e(case['hazard'])} \u00b7 " \
+    meta = (
+        f"{_e(case['level'])} \u00b7 {_e(case['kind'])} \u00b7 {_e(case['hazard'])} \u00b7 "
         f"{float(case['duration']):.3f} s of {float(case['deadline']):g} s \u00b7 seed {_e(case['seed'])}"
+    )
     return (
         f'<details class="case o-{_e(outcome)}" id="{_anchor(str(case["id"]))}"{is_open}>'
         f'<summary>{_badge(outcome)}<span class="cid">{_e(case["id"])}</span>'

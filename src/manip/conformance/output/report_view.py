@@ -57,7 +57,7 @@ def load_report(path: Path) -> dict[str, Any]:
     except json.JSONDecodeError as exc:
         raise ReportError(f"{path} is not JSON (line {exc.lineno}: {exc.msg})") from None
     if not isinstance(data, dict) or data.get("tool") != "manip-conform":
-        raise ReportError(f"{path} is JSON but not a manip-conform report (no \"tool\": \"manip-conform\")")
+        raise ReportError(f'{path} is JSON but not a manip-conform report (no "tool": "manip-conform")')
     version = data.get("schema_version")
     if not isinstance(version, int) or version > SCHEMA_VERSION:
         raise ReportError(
