@@ -340,8 +340,8 @@ def _case_detail(report: Report, case: Mapping[str, Any], order: WireOrder) -> s
     if case.get("notes"):
         parts.append('<ul class="notes">' + "".join(f"<li>{_e(n)}</li>" for n in case["notes"]) + "</ul>")
     parts.append(f"<h4>Reproduce</h4>{_copy_line(str(case.get('reproduce', '')))}")
-    parts.append(f"<h4>Clauses it checks</h4>{_clause_list(report, case['clauses'])}")
     parts.append(f"<h4>Packets</h4>{_packet_log(case, order)}")
+    parts.append(f"<h4>Clauses it checks</h4>{_clause_list(report, case['clauses'])}")
     meta = (
         f"{_e(case['level'])} \u00b7 {_e(case['kind'])} \u00b7 {_e(case['hazard'])} \u00b7 "
         f"{float(case['duration']):.3f} s of {float(case['deadline']):g} s \u00b7 seed {_e(case['seed'])}"
