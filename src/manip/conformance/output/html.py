@@ -111,10 +111,11 @@ def _summary(report: Report) -> str:
         for o in OUTCOME_ORDER
     )
     by_level: Counter[tuple[str, str]] = Counter((c["level"], c["outcome"]) for c in report["cases"])
-    head = "".join(f"<th>{_badge(o)}</th>" for o in OUTCOME_ORDER)
+    columns = [o for o in OUTCOME_ORDER if counts.get(o, 0)]
+    head = "".join(f"<th>{_badge(o)}</th>" for o in columns)
     rows = ""
     for level in LEVELS:
-        cells = [by_level[(level, o)] for o in OUTCOME_ORDER]
+        cells = [by_level[(level, o)] for o in columns]
         if not any(cells):
             continue
         tds = "".join(f'<td class="num{"" if n else " zero"}">{n}</td>' for n in cells)
@@ -125,11 +126,12 @@ def _summary(report: Report) -> str:
     if report.get("internal_error"):
         problems += f"<li>internal error<pre>{_e(report['internal_error'])}</pre></li>"
     return (
-        '<section id="summary"><h2>Summary</h2>'
+        '<section id="summary"><h2>Summary</h2><div class="overview">'
         f'<div class="cards">{cards}</div>'
+        '<table class="levels"><caption>cases by level</caption><thead><tr><th></th>'
+        f"{head}<th>total</th></tr></thead><tbody>{rows}</tbody></table></div>"
         + (f'<ul class="problems">{problems}</ul>' if problems else "")
-        + '<h3>By level of the case</h3><table class="levels"><thead><tr><th></th>'
-        f"{head}<th>total</th></tr></thead><tbody>{rows}</tbody></table></section>"
+        + "</section>"
     )
 
 
