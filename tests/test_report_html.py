@@ -357,3 +357,16 @@ def test_a_screenshot_of_the_report(failing_run: Run, browser: list[str], tmp_pa
     assert shot.stat().st_size > 50_000  # a page drawn, not a blank one
     ARTIFACT.parent.mkdir(exist_ok=True)
     shutil.copyfile(shot, ARTIFACT)
+
+
+def test_verify_writes_both_documents_of_a_golden_capture(tmp_path: Path) -> None:
+    """verify's report: its target is a file, not a link, so the bytes are said to be in memory order."""
+    html, md = tmp_path / "v.html", tmp_path / "v.md"
+    capture = ROOT / "captures" / "errors.mcap"
+    result = CliRunner().invoke(main, ["verify", str(capture), "--html", str(html), "--markdown", str(md)])
+    assert result.exit_code == 0, result.output
+    page = Page(html.read_text())
+    assert "PDP-11 memory order" in page.by_id("details").content
+    assert [e for e in page.elements if e.tag == "tr" and "prow" in e.classes]
+    summary = md.read_text()
+    assert summary.startswith("## manip-conform: conformant (exit 0)") and "seed" not in summary

@@ -31,6 +31,7 @@ from manip.conformance.output.report_view import (
     clause_info,
     failure_groups,
     packet_rows,
+    seeded,
     wire_order,
 )
 
@@ -80,7 +81,7 @@ def _header(report: Report) -> str:
     total = len(report["cases"])
     facts = [
         ("target", report["target"] + (" (embedded reference server)" if report.get("embedded") else "")),
-        ("seed", report["seed"]),
+        ("seed", report["seed"] if seeded(report) else "-"),
         ("started", report.get("started", "") or "-"),
         (
             "duration",
@@ -209,7 +210,7 @@ def _case_table(report: Report) -> str:
             f'data-id="{_e(c["id"])}" data-level="{_e(c["level"])}" '
             f'data-duration="{float(c["duration"]):.6f}" '
             f'data-search="{_e(c["id"] + " " + clauses + " " + " ".join(sorted(broke)))}">'
-            f"<td>{_badge(c['outcome'])}</td><td>{_case_link(c['id'])}</td>"
+            f'<td>{_badge(c["outcome"])}</td><td class="cid">{_case_link(c["id"])}</td>'
             f'<td class="clauses">{shown}</td><td>{_level(c["level"])}</td>'
             f'<td class="num">{float(c["duration"]):.3f}</td></tr>'
         )

@@ -14,7 +14,7 @@ import re
 from collections.abc import Mapping
 from typing import Any, Final
 
-from manip.conformance.output.report_view import FAILING, OUTCOME_ORDER, Report, failure_groups
+from manip.conformance.output.report_view import FAILING, OUTCOME_ORDER, Report, failure_groups, seeded
 
 __all__ = ["render_markdown"]
 
@@ -60,8 +60,9 @@ def render_markdown(report: Report) -> str:
     lines = [
         f"## manip-conform: {_text(report['verdict'])} (exit {int(report['exit_code'])})",
         "",
-        f"{len(report['cases'])} cases against {_code(report['target'])}, seed {int(report['seed'])}, "
-        f"{float(report.get('duration', 0.0)):.1f} s"
+        f"{len(report['cases'])} cases against {_code(report['target'])}, "
+        + (f"seed {int(report['seed'])}, " if seeded(report) else "")
+        + f"{float(report.get('duration', 0.0)):.1f} s"
         + (" of virtual time" if report.get("time") == "virtual" else ""),
         "",
         "| verdict | cases |",

@@ -32,6 +32,7 @@ __all__ = [
     "failure_groups",
     "load_report",
     "packet_rows",
+    "seeded",
     "wire_order",
 ]
 
@@ -68,6 +69,12 @@ def load_report(path: Path) -> dict[str, Any]:
     if missing:
         raise ReportError(f"{path} lacks the report field(s) {', '.join(missing)}")
     return data
+
+
+def seeded(report: Report) -> bool:
+    """Whether the run drew at random (a run of the suite); verify and replay draw nothing (seed 0)."""
+    options = report.get("options", {})
+    return not (isinstance(options, Mapping) and options.get("mode") in ("verify", "replay", "serve"))
 
 
 @dataclass(frozen=True)
