@@ -5,6 +5,7 @@ Commands::
     manip-conform run [HOST] [options]     run the suite (no HOST: against the embedded reference server)
     manip-conform cases [--format table|json] [--select P]...
     manip-conform coverage [--format table|json] [--party P]...
+    manip-conform report REPORT.json [--html FILE] [--markdown FILE]
 
 Exit codes of ``run`` (documented in ``--help``):
 
@@ -42,6 +43,7 @@ from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness
 from manip.conformance.fuzz.cli import fuzz_command
 from manip.conformance.output.console import make_console, progress_bar
 from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
+from manip.conformance.output.documents import ReportError, document_options, render_saved, write_documents
 from manip.conformance.output.report import failure_text, write_json, write_junit
 from manip.conformance.puma.target import (
     DEFAULT_WRIST_LISTEN,
@@ -169,6 +171,7 @@ def main() -> None:
 )
 @json_option
 @junit_option
+@document_options
 @click.option(
     "--server-fault",
     "server_faults",
@@ -260,6 +263,8 @@ def run(
     broken_after: float | None,
     json_path: Path | None,
     junit_path: Path | None,
+    html_path: Path | None,
+    markdown_path: Path | None,
     server_faults: tuple[str, ...],
     cougar: str | None,
     cougar_faults: tuple[str, ...],
@@ -345,7 +350,9 @@ def run(
             "another target keeps its own clock"
         )
     virtual = simulated and time_mode != "real"
-    check_output_paths(record=record, json=json_path, junit=junit_path)
+    check_output_paths(
+        record=record, json=json_path, junit=junit_path, html=html_path, markdown=markdown_path
+    )
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "big")
     if puma_target is not None:
@@ -409,6 +416,7 @@ def run(
             write_json(report, json_path)
         if junit_path is not None:
             write_junit(report, junit_path)
+        write_documents(report, html_path, markdown_path)
         _summary(console, report, quiet)
         code = int(report.exit_code) if code is None else code
     sys.exit(int(code) if code is not None else int(ExitCode.INTERNAL))
@@ -797,6 +805,27 @@ def coverage_command(fmt: str, parties: tuple[str, ...]) -> None:
             f"{covered} of {len(rows)} clauses have a case; {len(missing)} MUST clause(s) in scope have none"
         )
     sys.exit(1 if missing else 0)
+
+
+# ----------------------------------------------------------------------------------------------- report
+
+
+@main.command("report")
+@click.argument(
+    "report_file", metavar="REPORT.json", type=click.Path(exists=True, dir_okay=False, path_type=Path)
+)
+@document_options
+def report_command(report_file: Path, html_path: Path | None, markdown_path: Path | None) -> None:
+    """Render a saved JSON report (of run, verify or replay --json) as a one-file HTML report and/or a
+    Markdown summary.  Exit 0 when written, whatever the run's verdict; 2 on a usage error or a file
+    that is not a manip-conform JSON report."""
+    if html_path is None and markdown_path is None:
+        raise click.UsageError("give --html FILE, --markdown FILE or both")
+    check_output_paths(html=html_path, markdown=markdown_path)
+    try:
+        render_saved(report_file, html_path, markdown_path)
+    except ReportError as exc:
+        raise click.UsageError(str(exc)) from None
 
 
 main.add_command(replay_command)

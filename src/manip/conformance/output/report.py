@@ -31,6 +31,7 @@ __all__ = [
     "SCHEMA_VERSION",
     "ClauseTally",
     "by_clause",
+    "clause_catalog",
     "clause_lines",
     "load_schema",
     "report_json",
@@ -196,6 +197,19 @@ def _case_json(result: CaseResult) -> dict[str, Any]:
     }
 
 
+def clause_catalog(report: RunReport) -> dict[str, dict[str, str]]:
+    """Level, section and text of every clause a case of the run cites, so a saved report renders
+    (``manip-conform report``) with the clause texts of the spec it was judged by."""
+    cited = {c for r in report.results for c in r.clauses}
+    cited |= {v.clause for r in report.results for v in r.violations if v.clause is not None}
+    catalog = {}
+    for clause_id in sorted(cited):
+        spec = SPEC.clauses.get(clause_id)
+        if spec is not None:
+            catalog[clause_id] = {"level": spec.level, "section": spec.section, "text": spec.text}
+    return catalog
+
+
 def report_json(report: RunReport) -> dict[str, Any]:
     """The report as JSON-ready data (validates against :func:`load_schema`)."""
     return {
@@ -224,6 +238,7 @@ def report_json(report: RunReport) -> dict[str, Any]:
             for c in report.liveness
         ],
         "by_clause": [t.to_json() for t in by_clause(report)],
+        "clauses": clause_catalog(report),
         "cases": [_case_json(r) for r in report.results],
     }
 
