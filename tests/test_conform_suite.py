@@ -84,6 +84,8 @@ def test_clean_reference_server_passes_every_case() -> None:
             "request.data-length",
         ),
         ("no-jor", ["server.motion.jor"], "server.motion.jor", "motion.checked-before-queue"),
+        ("swap-tor-jor", ["server.motion.jor"], "server.motion.jor", "motion.checked-before-queue"),
+        ("swap-tor-jor", ["server.motion.tor-limits"], "server.motion.tor-limits", "solve-forwards.errors"),
         ("speed-unchecked", ["server.speed.bounds"], "server.speed.bounds", "speed.range"),
         (
             "free-joint-executes",

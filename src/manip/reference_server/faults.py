@@ -50,6 +50,7 @@ class Fault(enum.StrEnum):
     EXTRA_REPLY_AFTER_ERROR = "extra-reply-after-error"
     FATAL_WITHOUT_CLOSE = "fatal-without-close"
     NO_JOR = "no-jor"
+    SWAP_TOR_JOR = "swap-tor-jor"
     NO_NAP = "no-nap"
     AWA_IGNORED = "awa-ignored"
     SPEED_UNCHECKED = "speed-unchecked"
@@ -215,6 +216,14 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 Fault.NO_JOR,
                 "protocol",
                 "Set joint angles accepts out-of-range joints (clamped to the limits) instead of JOR.",
+                "motion.checked-before-queue",
+            ),
+            _info(
+                Fault.SWAP_TOR_JOR,
+                "protocol",
+                "TOR and JOR are swapped: a transform no in-range angles reach is refused with JOR, "
+                "out-of-range joint angles with TOR.",
+                "solve-forwards.errors",
                 "motion.checked-before-queue",
             ),
             _info(

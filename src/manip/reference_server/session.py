@@ -382,7 +382,8 @@ class ServerSession:
                 else:
                     result = handler(self, values, event.now)
             except Refused as refusal:
-                raise errors.refusal_error(op.name, refusal) from refusal
+                swap = Fault.SWAP_TOR_JOR in self.faults
+                raise errors.refusal_error(op.name, refusal, swap_tor_jor=swap) from refusal
         except RequestError as exc:
             return self._refuse(number, exc)
         except Exception:

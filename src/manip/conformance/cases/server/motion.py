@@ -7,10 +7,13 @@ import asyncio
 from itertools import pairwise
 
 from manip.conformance.cases._support import (
+    TargetArm,
+    describe_target,
     expect_done,
     expect_here_served,
     expect_refusal,
     expect_response,
+    floats,
     power_on,
     read_floats,
     require_response,
@@ -146,6 +149,64 @@ async def transform_out_of_reach(ctx: CaseContext) -> None:
         codes=("TOR",),
         what="a move to a point 100 m away",
     )
+
+
+LIMIT_OVERSHOOT_DEG = 10.0
+"""How far past a stated limit the tor-limits case puts a joint to make its transform."""
+LIMIT_JOINTS = (2, 3, 5)
+"""Joints whose range, not a second solution, decides reachability on a PUMA: past either limit of any
+of them, every solution of the transform breaks a limit (the other joints have a second solution)."""
+
+
+def _limit_candidates(arm: TargetArm, joints: tuple[float, ...]) -> list[tuple[int, list[float]]]:
+    """Joint vectors with one joint :data:`LIMIT_OVERSHOOT_DEG` past one of its stated limits."""
+    out: list[tuple[int, list[float]]] = []
+    for j in (j for j in LIMIT_JOINTS if j <= len(joints)):
+        lo, hi = arm.limits.lower[j - 1], arm.limits.upper[j - 1]
+        for bound in (hi + LIMIT_OVERSHOOT_DEG, lo - LIMIT_OVERSHOOT_DEG):
+            q = list(joints)
+            q[j - 1] = bound
+            out.append((j, q))
+    return out
+
+
+@case(
+    "server.motion.tor-limits",
+    clauses=["solve-forwards.errors", "motion.checked-before-queue"],
+    hazard="motion",
+    deadline=10.0,
+)
+async def transform_out_of_range(ctx: CaseContext) -> None:
+    """A transform whose every solution breaks a joint limit: solve forwards and move answer TOR, not JOR
+    (the 1985 guide's TOR; erratum transform-refusals).  The transform is the target's own solve
+    backwards of angles with one joint past a limit; one the target solves in range is passed over."""
+    probe = await ctx.connect()
+    arm = await describe_target(ctx, probe)
+    here = await read_floats(ctx, probe, "joint-angles")
+    for joint, q in _limit_candidates(arm, here):
+        back = await probe.call("solve-backwards", joints=q)
+        if not back.is_response:
+            continue
+        transform = list(floats(back))
+        answer = await probe.call("solve-forwards", transform=transform, current=list(here))
+        if answer.is_response:
+            continue  # another configuration reaches it within the limits: no verdict from this one
+        what = f"the transform of joint {joint} at {q[joint - 1]:g} degrees (every solution out of range)"
+        expect_refusal(
+            ctx, answer, clause="solve-forwards.errors", severities=("E", "C"), codes=("TOR",), what=what
+        )
+        await power_on(ctx, probe)
+        answer = await probe.call("move", transform=transform)
+        expect_refusal(
+            ctx,
+            answer,
+            clause="motion.checked-before-queue",
+            severities=("E", "C"),
+            codes=("TOR",),
+            what=f"a move to {what}",
+        )
+        return
+    ctx.skip("solve forwards found in-range angles for every transform tried (joints 2, 3, 5 past a limit)")
 
 
 @case("server.motion.nap", clauses=["motion.no-power", "kill-power.done"], hazard="power")
