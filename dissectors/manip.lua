@@ -90,7 +90,7 @@ local SEVERITIES = {
 
 local ERROR_CODES = {
   ["NAP"] = "No arm power",
-  ["AWA"] = "Arm motion was aborted; no further motion until a reset",
+  ["AWA"] = "Arm motion was aborted; no further motion until a reset (erratum awa-scope)",
   ["JOR"] = "Joint out of range (a request carrying joint angles)",
   ["TOR"] = "Solution of a transform resulted in out-of-range joints, or in none (out of reach)",
   ["NZI"] = "No zero index found on joint(s)",

@@ -109,6 +109,12 @@ def test_clean_reference_server_passes_every_case() -> None:
         ("no-nap", ["server.motion.nap"], "server.motion.nap", "motion.no-power"),
         ("awa-ignored", ["server.motion.awa-reset-abort"], "server.motion.awa-reset-abort", "motion.abort"),
         (
+            "awa-refuses-all",
+            ["server.motion.awa-reset-abort"],
+            "server.motion.awa-reset-abort",
+            "motion.abort",
+        ),
+        (
             "no-initial-response",
             ["server.connect.initial-response"],
             "server.connect.initial-response",

@@ -53,6 +53,7 @@ class Fault(enum.StrEnum):
     SWAP_TOR_JOR = "swap-tor-jor"
     NO_NAP = "no-nap"
     AWA_IGNORED = "awa-ignored"
+    AWA_REFUSES_ALL = "awa-refuses-all"
     SPEED_UNCHECKED = "speed-unchecked"
     SEGMENT_NUMBER_STUCK = "segment-number-stuck"
     UNREQUESTED_ASYNC = "unrequested-async"
@@ -236,6 +237,13 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 Fault.AWA_IGNORED,
                 "protocol",
                 "Motion requests are accepted after an abort instead of AWA.",
+                "motion.abort",
+            ),
+            _info(
+                Fault.AWA_REFUSES_ALL,
+                "protocol",
+                "After an abort every request but enable power and reset abort is refused with AWA, not only "
+                "motion (the E.2 table's reading; erratum awa-scope).",
                 "motion.abort",
             ),
             _info(

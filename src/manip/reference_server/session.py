@@ -375,6 +375,12 @@ class ServerSession:
             if handler is None and op.opcode not in self.wrist.served:
                 raise errors.not_served(op.opcode)
             values = self._decode(op, event.data)
+            if (
+                Fault.AWA_REFUSES_ALL in self.faults
+                and self.arm.aborted
+                and op.name not in ("enable-power", "reset-abort")
+            ):
+                raise errors.refusal_error(op.name, Refused("AWA", "motion aborted; reset first"))
             try:
                 result: dict[str, Any] | Pending
                 if handler is None:

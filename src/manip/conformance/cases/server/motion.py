@@ -275,10 +275,11 @@ async def awa_reset_by_power(ctx: CaseContext) -> None:
 
 @case("server.motion.awa-reset-abort", clauses=["motion.abort", "motion.reset"], hazard="power")
 async def awa_reset_abort(ctx: CaseContext) -> None:
-    """After an abort, Reset abort (260) clears AWA without restoring power: then NAP, not AWA."""
+    """After an abort, motion is refused with AWA while other requests are served (erratum awa-scope);
+    Reset abort (260) clears AWA without restoring power: then NAP, not AWA."""
     probe = await ctx.connect()
+    joints = await read_floats(ctx, probe, "joint-angles")  # in range: a refusal can only be the abort's
     await _abort_by_power_loss(ctx, probe)
-    joints = await read_floats(ctx, probe, "joint-angles")
     await _refused_stay(
         ctx,
         probe,
@@ -287,6 +288,16 @@ async def awa_reset_abort(ctx: CaseContext) -> None:
         codes=("AWA",),
         what="a move after an abort (the abort is reported before the missing power)",
     )
+    # only motion is refused: the client can still ask where the arm stands and set the speed
+    for op, values, what in (
+        ("here", {}, "the transform"),
+        ("joint-angles", {}, "the joint angles"),
+        ("set-speed", {"factor": 0.5}, "an empty done"),
+    ):
+        answer = await probe.call(op, **values)
+        expect_response(
+            ctx, answer, clause="motion.abort", expected=f"{op} answered with {what} while motion is aborted"
+        )
     reset = await probe.call("reset-abort")
     if not reset.is_response:
         ctx.skip(f"the target does not serve Reset abort (260): {reset}")
