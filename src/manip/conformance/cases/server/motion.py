@@ -21,6 +21,7 @@ from manip.conformance.cases._support import (
 from manip.conformance.judge.checks import check_async_packet, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
+from manip.spec import RequestName
 from manip.spec.constants import AsyncCondition, ServerOp
 
 FAR_MM = 100_000.0
@@ -289,11 +290,12 @@ async def awa_reset_abort(ctx: CaseContext) -> None:
         what="a move after an abort (the abort is reported before the missing power)",
     )
     # only motion is refused: the client can still ask where the arm stands and set the speed
-    for op, values, what in (
+    served: tuple[tuple[RequestName, dict[str, float], str], ...] = (
         ("here", {}, "the transform"),
         ("joint-angles", {}, "the joint angles"),
         ("set-speed", {"factor": 0.5}, "an empty done"),
-    ):
+    )
+    for op, values, what in served:
         answer = await probe.call(op, **values)
         expect_response(
             ctx, answer, clause="motion.abort", expected=f"{op} answered with {what} while motion is aborted"
