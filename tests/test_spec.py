@@ -37,7 +37,7 @@ def test_clause_ids_are_stable_slugs() -> None:
         assert clause.text.strip() and clause.section.strip()
 
 
-def test_request_table_covers_the_seed() -> None:
+def test_request_table_covers_the_guide() -> None:
     # E.1 defines 0200-0221; every one must be in the table, none twice, each with a hazard class.
     assert set(range(0o200, 0o222)) <= set(SPEC.requests)
     for op in SPEC.requests.values():

@@ -50,8 +50,10 @@ class Fault(enum.StrEnum):
     EXTRA_REPLY_AFTER_ERROR = "extra-reply-after-error"
     FATAL_WITHOUT_CLOSE = "fatal-without-close"
     NO_JOR = "no-jor"
+    SWAP_TOR_JOR = "swap-tor-jor"
     NO_NAP = "no-nap"
     AWA_IGNORED = "awa-ignored"
+    AWA_REFUSES_ALL = "awa-refuses-all"
     SPEED_UNCHECKED = "speed-unchecked"
     SEGMENT_NUMBER_STUCK = "segment-number-stuck"
     UNREQUESTED_ASYNC = "unrequested-async"
@@ -229,6 +231,14 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "motion.checked-before-queue",
             ),
             _info(
+                Fault.SWAP_TOR_JOR,
+                "protocol",
+                "TOR and JOR are swapped: a transform no in-range angles reach is refused with JOR, "
+                "out-of-range joint angles with TOR.",
+                "solve-forwards.errors",
+                "motion.checked-before-queue",
+            ),
+            _info(
                 Fault.NO_NAP,
                 "protocol",
                 "Motion requests are accepted without arm power instead of NAP.",
@@ -238,6 +248,13 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 Fault.AWA_IGNORED,
                 "protocol",
                 "Motion requests are accepted after an abort instead of AWA.",
+                "motion.abort",
+            ),
+            _info(
+                Fault.AWA_REFUSES_ALL,
+                "protocol",
+                "After an abort every request but enable power and reset abort is refused with AWA, not only "
+                "motion (the E.2 table's reading; erratum awa-scope).",
                 "motion.abort",
             ),
             _info(

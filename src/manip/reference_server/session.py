@@ -382,6 +382,12 @@ class ServerSession:
             if handler is None and op.opcode not in self.wrist.served:
                 raise errors.not_served(op.opcode)
             values = self._decode(op, event.data)
+            if (
+                Fault.AWA_REFUSES_ALL in self.faults
+                and self.arm.aborted
+                and op.name not in ("enable-power", "reset-abort")
+            ):
+                raise errors.refusal_error(op.name, Refused("AWA", "motion aborted; reset first"))
             try:
                 result: dict[str, Any] | Pending
                 if handler is None:
@@ -389,7 +395,8 @@ class ServerSession:
                 else:
                     result = handler(self, values, event.now)
             except Refused as refusal:
-                raise errors.refusal_error(op.name, refusal) from refusal
+                swap = Fault.SWAP_TOR_JOR in self.faults
+                raise errors.refusal_error(op.name, refusal, swap_tor_jor=swap) from refusal
         except RequestError as exc:
             return self._refuse(number, exc)
         except Exception:
