@@ -536,6 +536,7 @@ class Harness:
         deadline = time.monotonic() + timeout
         try:
             sock = socket.create_connection((url.hostname, url.port), timeout)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # small frames: no Nagle delay
         except OSError as exc:
             self.emit("state", op=op_id, state="refused", reason=f"the TCP connection failed: {exc}")
             return
