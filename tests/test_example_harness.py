@@ -8,9 +8,11 @@ import ast
 import importlib.util
 import json
 import math
+import socket
 import struct
 import subprocess
 import sys
+import time
 from importlib import resources
 from pathlib import Path
 from types import ModuleType
@@ -22,6 +24,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from manip.codecs.errors import CodecError
+from manip.codecs.framing import TcpFrameDecoder, encode_tcp
+from manip.codecs.packet import Packet
 from manip.codecs.pdp11float import F_MAX, F_MIN_NORMAL, f_to_u32, u32_to_f
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -197,6 +201,92 @@ def test_error_vectors_include_both_argument_layouts() -> None:
 )
 def test_joint_masks_in_english(mask: int, words: str) -> None:
     assert H.joint_list(mask) == words
+
+
+# ----------------------------------------------------------------------------- TCP link framing, NCP
+
+word = st.integers(0, 0xFFFF)
+packets = st.builds(
+    Packet, st.sampled_from([1, 2, 3, 7, 9, 0o14, 0o200, 0o203, 0o377]), word, word, word, word, word, word,
+    st.binary(max_size=488),
+)  # fmt: skip
+
+
+def _mine(p: Packet) -> Any:
+    return H.Packet(
+        p.opcode, p.dest_host, p.dest_index, p.src_host, p.src_index, p.packet_no, p.ack_no, p.data
+    )
+
+
+@given(packets, st.integers(0, 600))
+def test_tcp_frames_agree_with_manip_both_ways(p: Packet, cut: int) -> None:
+    frame = encode_tcp(p)
+    assert H.encode_frame(_mine(p)) == frame
+    reader = H.FrameReader()
+    got = reader.feed(frame[:cut]) + reader.feed(frame[cut:] + frame)  # in pieces, then a whole one
+    assert got == [_mine(p), _mine(p)]
+
+
+def test_a_garbled_frame_is_dropped_and_the_next_one_read() -> None:
+    p = Packet(0o200, 0o401, 7, 0o440, 9, 5, 4, b"abc")
+    garbled = bytearray(encode_tcp(p))
+    garbled[20] ^= 0x10  # a data bit: the checksum no longer holds
+    assert H.FrameReader().feed(bytes(garbled) + encode_tcp(p)) == [_mine(p)]
+
+
+def _frames(sock: socket.socket) -> list[Packet]:
+    """Every frame the harness wrote so far, decoded by manip's decoder."""
+    sock.settimeout(0.2)
+    decoder, out = TcpFrameDecoder(), []
+    try:
+        while chunk := sock.recv(65536):
+            out += [item for item in decoder.feed(chunk) if isinstance(item, Packet)]
+    except TimeoutError:
+        pass
+    return out
+
+
+def test_the_ncp_orders_receipts_and_stops_resending_across_the_wrap() -> None:
+    ours, theirs = socket.socketpair()
+    delivered: list[int] = []
+    ended: list[str] = []
+    conn = H.Connection(ours, 0o401, 0o440, lambda p: delivered.append(p.number), ended.append)
+    conn.next_number = conn.acked = 0xFFFE  # our numbers wrap too: RFC 0xFFFE, then 0xFFFF, 0x0000
+    try:
+        conn.send_controlled(H.RFC, b"PUMA")
+        (rfc,) = _frames(theirs)
+        assert (rfc.opcode, rfc.data, rfc.dest_host, rfc.src_host, rfc.packet_no) == (
+            1,
+            b"PUMA",
+            0o440,
+            0o401,
+            0xFFFE,
+        )
+
+        def send(opcode: int, number: int, ack: int, data: bytes = b"") -> None:
+            theirs.sendall(encode_tcp(Packet(opcode, 0o401, rfc.src_index, 0o440, 0o1234, number, ack, data)))
+            conn.poll(time.monotonic() + 0.2)
+
+        send(2, 0xFFFD, 0xFFFE, struct.pack("<HH", 0xFFFE, 5))  # OPN, the server's numbers about to wrap
+        assert conn.state == "open" and _frames(theirs)[-1].opcode == 7  # answered with STS
+        for number in (0xFFFE, 0x0000, 0x0001, 0xFFFF, 0xFFFE):  # out of order, then a duplicate
+            send(0o200, number, 0xFFFE, b"\0\0")
+        assert delivered == [0xFFFE, 0xFFFF, 0x0000, 0x0001]
+        last = _frames(theirs)[-1]
+        assert (last.opcode, last.ack_no, last.data) == (7, 0x0001, b"\1\0" + bytes([H.WINDOW, 0]))
+
+        sent = [conn.send_controlled(0o201, b""), conn.send_controlled(H.EOF, b"")]
+        assert sent == [0xFFFF, 0x0000] and [p.packet_no for p in _frames(theirs)] == sent
+        send(7, 0x0002, 0x0000, struct.pack("<HH", 0x0000, 5))  # STS: both receipted
+        assert not conn.unreceipted
+        time.sleep(H.RESEND_AFTER)
+        conn.poll(time.monotonic() + 0.1)
+        assert _frames(theirs) == []  # nothing resent
+        send(3, 0x0002, 0x0000, b"Puma going away")  # CLS
+        assert ended == ["closed by the server: Puma going away"] and conn.state == "ended"
+    finally:
+        conn.abort()
+        theirs.close()
 
 
 # ----------------------------------------------------------------------------- against the reference server
