@@ -13,6 +13,7 @@ import struct
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from importlib import resources
 from pathlib import Path
 from types import ModuleType
@@ -307,7 +308,19 @@ def _target(server_url: str) -> str:
     return urlunsplit((parts.scheme, parts.netloc, parts.path, query, ""))
 
 
-def test_a_session_with_the_reference_server(reference_server_url: str) -> None:
+@pytest.fixture(scope="module")
+def chudp_server_url() -> Iterator[str]:
+    """A default reference server on CHUDP, in a thread, for this module's tests."""
+    from manip.reference_server import ServerConfig
+    from tests.test_client_tcp import in_thread, reference_server
+
+    with in_thread(reference_server(ServerConfig(), address="chudp://127.0.0.1:0?addr=440")) as address:
+        yield address
+
+
+@pytest.mark.parametrize("server", ["reference_server_url", "chudp_server_url"], ids=["tcp", "chudp"])
+def test_a_session_with_the_reference_server(server: str, request: pytest.FixtureRequest) -> None:
+    reference_server_url = request.getfixturevalue(server)
     jor = {"joints": [0.0, -90.0, 300.0, 0.0, 0.0, 300.0]}  # joints 3 and 6 beyond their limits
     ops = [
         {"op": "connect"},
@@ -320,7 +333,8 @@ def test_a_session_with_the_reference_server(reference_server_url: str) -> None:
         {"op": "close"},
         {"op": "here"},
     ]
-    case = {"type": "case", "contract": 1, "case": "example.session", "seed": 1, "link": "tcp",
+    case = {"type": "case", "contract": 1, "case": "example.session", "seed": 1,
+            "link": urlsplit(reference_server_url).scheme,
             "target": _target(reference_server_url), "contact": "PUMA", "timeout": 5.0,
             "operations": [{"id": i, **op} for i, op in enumerate(ops)]}  # fmt: skip
     hello, *results = _run([case])
