@@ -245,7 +245,9 @@ class CougarWrist:
         """The latest New Theta Dot received (deg/s), None before the first."""
         self._stream = WordStream("response")
         self._arm: ArmSim | None = None
-        self._npr: list[int] | None = None
+        # One NPR per servo cycle run since the last output: a servo that wakes late catches up several
+        # cycles at once, and the wrist must still see each of them.
+        self._npr: list[list[int]] = []
         self._reset = False
         self._sen: list[int] | None = None
         self._sen_sent: Joints | None = None
@@ -320,12 +322,14 @@ class CougarWrist:
         )
         self._cycles += 1
         if Fault.NPR_SKIPPED not in self.faults or self._cycles % 2:
-            self._npr = encode(
-                "command",
-                CougarCommand.NPR,
-                theta_sensed=actual,
-                theta_commanded=nominal,
-                rate_difference=rate,
+            self._npr.append(
+                encode(
+                    "command",
+                    CougarCommand.NPR,
+                    theta_sensed=actual,
+                    theta_commanded=nominal,
+                    rate_difference=rate,
+                )
             )
         ntd = self.ntd or _ZERO6
         if scheme is Scheme.COMPLIANT_MOTION:
@@ -401,12 +405,13 @@ class CougarWrist:
             while self._user:
                 words += self._user.popleft()
                 self.stats.commands += 1
-        if self._npr is not None:
-            words += self._npr
-            self.stats.npr += 1
-            self.stats.commands += 1
+        if self._npr:
+            for npr in self._npr:
+                words += npr
+            self.stats.npr += len(self._npr)
+            self.stats.commands += len(self._npr)
             self._sen_sent = arm.actual  # NPR carries the sensed angles too
-            self._npr = None
+            self._npr.clear()
         if self._reset:
             words += encode("command", CougarCommand.RST)
             self.stats.commands += 1
@@ -568,9 +573,7 @@ class CougarWrist:
                 self._procedures.remove(proc)
 
     # ------------------------------------------------------------------------------ handlers
-    def _read_forces(
-        self, values: Mapping[str, Value], now: float, arm: ArmSim
-    ) -> Pending | dict[str, Any]:
+    def _read_forces(self, values: Mapping[str, Value], now: float, arm: ArmSim) -> Pending | dict[str, Any]:
         # §6.3: the current joint angles go first, so Cougar's gravity correction is up to date.
         if Fault.READ_FORCES_NO_ANGLES not in self.faults:
             self._interrupt.append(encode("command", CougarCommand.SEN, theta_sensed=arm.actual))

@@ -49,6 +49,7 @@ async def _arm_guard(ctx: CaseContext, probe: Probe, index: int, *, stop: bool) 
 
 async def _moving(ctx: CaseContext, judge: JudgingCougar, start: float) -> None:
     """Until the sensed angles the Puma sends show joint 6 on its way."""
+
     def on_the_way() -> bool:
         return judge.pose is not None and abs(judge.pose[5] - start) > MOVING_DEG
 
