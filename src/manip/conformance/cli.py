@@ -38,6 +38,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from manip.conformance.client.cli import client_command
 from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.fuzz.cli import fuzz_command
 from manip.conformance.output.console import make_console, progress_bar
@@ -93,6 +94,7 @@ _STYLE = {
     "skip": "dim",
     "known-fail": "cyan",
     "fixed": "bold red",
+    "unsupported": "blue",
 }
 
 
@@ -703,6 +705,7 @@ def coverage_command(fmt: str, parties: tuple[str, ...]) -> None:
 main.add_command(replay_command)
 main.add_command(verify_command)
 main.add_command(fuzz_command)
+main.add_command(client_command)
 
 if __name__ == "__main__":  # pragma: no cover
     main()
