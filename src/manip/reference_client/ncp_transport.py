@@ -30,7 +30,6 @@ import contextlib
 from collections.abc import Callable
 from typing import Any
 
-from manip.captures.tap import TappedLink
 from manip.codecs.packet import Packet
 from manip.links import (
     ChaosConnection,
@@ -211,36 +210,20 @@ class NcpTransport:
             self._wakeup()
 
 
-class _NullTap:
-    """A tap that records nothing (for the never-ack fault's link wrapper)."""
-
-    def clock_ns(self) -> int:
-        return 0
-
-    def link_opened(self, link: TappedLink) -> None:
-        pass
-
-    def packet_sent(self, link: TappedLink, packet: Packet, next_hop: int | None, t_ns: int) -> None:
-        pass
-
-    def packet_received(self, link: TappedLink, packet: Packet, t_ns: int) -> None:
-        pass
-
-    def link_closed(self, link: TappedLink, reason: str, t_ns: int) -> None:
-        pass
-
-
-class _NoAckLink(TappedLink):
-    """Fault never-ack: every packet goes out with ack 0 and no STS goes out at all."""
-
-    def send(self, packet: Packet, next_hop: int | None = None) -> bool:
-        if packet.opcode == ChaosOp.STS:
-            return True
-        return super().send(packet.with_(ack_no=0), next_hop)
-
 
 def _no_ack(inner: LinkWrapper | None) -> LinkWrapper:
+    """Fault never-ack: every packet goes out with ack 0 and no STS goes out at all."""
+
     def wrap(link: Link) -> Link:
-        return _NoAckLink(inner(link) if inner is not None else link, _NullTap())
+        wrapped = inner(link) if inner is not None else link
+        send = wrapped.send
+
+        def send_without_acks(packet: Packet, next_hop: int | None = None) -> bool:
+            if packet.opcode == ChaosOp.STS:
+                return True
+            return send(packet.with_(ack_no=0), next_hop)
+
+        wrapped.send = send_without_acks  # type: ignore[method-assign]
+        return wrapped
 
     return wrap
