@@ -348,9 +348,11 @@ class ResponseContext:
     def error_message(self) -> ErrorMessage:
         """The payload read as an E.2 error string; a string that does not parse is kept as text."""
         payload = self.payload
-        if faults.on(ClientFault.IGNORE_PAD):
+        if faults.on(ClientFault.IGNORE_PAD) and 0 in payload:
+            # the numbers read from right after the NUL, pad byte and all; an odd last byte dropped
+            rest = len(payload) - payload.index(0) - 1
             with contextlib.suppress(CodecError):
-                return parse_error(payload, align_args=False, body="string")
+                return parse_error(payload[: len(payload) - rest % 2], align_args=False, body="string")
         try:
             return parse_error(payload, align_args=self.core.align_args, body="string")
         except CodecError:

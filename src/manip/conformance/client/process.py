@@ -52,6 +52,8 @@ class CaseRun:
     """What the harness wrote for one case."""
 
     results: list[Result] = field(default_factory=list)
+    times: list[float] = field(default_factory=list)
+    """When each result line was read (the event loop's clock)."""
     problem: HarnessProblem | None = None
     stderr: list[str] = field(default_factory=list)
 
@@ -166,6 +168,7 @@ class HarnessProcess:
                 run.problem = HarnessProblem("garbage", f"line {line[:200]!r}: {exc}")
                 break
             run.results.append(result)
+            run.times.append(loop.time())
             if result.type == "done":
                 run.stderr = list(self._stderr)
                 return run
@@ -173,7 +176,7 @@ class HarnessProcess:
         return run
 
     async def _finish_bad(self, run: CaseRun) -> None:
-        await self.stop()
+        await self.kill()
         run.stderr = list(self._stderr)
 
     async def stop(self) -> None:

@@ -85,6 +85,16 @@ class Play:
     wire: list[WireRecord]
     sides: list[ServerSide]
     stderr: list[str] = field(default_factory=list)
+    times: list[float] = field(default_factory=list)
+    """When each result was read, in seconds on the wire's clock (``WireRecord.t``)."""
+    window: int = 15
+    """The receive window the judging server offered."""
+
+    def time_of(self, result: Result) -> float | None:
+        for r, t in zip(self.results, self.times, strict=False):
+            if r is result:
+                return t
+        return None
 
     def of(self, kind: str, op: int | None = None, *, any_op: bool = False) -> list[Result]:
         """Results of ``kind`` for op ``op`` (``any_op``: whatever op)."""
@@ -179,7 +189,15 @@ class ClientContext(CaseContext):
                     await listener.done.wait()
         finally:
             await listener.aclose()
-        play = Play(instruction, run.results, list(listener.wire.records), listener.sides, run.stderr)
+        play = Play(
+            instruction,
+            run.results,
+            list(listener.wire.records),
+            listener.sides,
+            run.stderr,
+            [listener.wire.since_start(t) for t in run.times],
+            (ncp or NcpConfig()).window,
+        )
         self.plays.append(play)
         self.transcript += [wire_packet(r) for r in play.wire if r.packet.opcode >= 0o200]
         for side in listener.sides:
@@ -213,9 +231,7 @@ class ClientContext(CaseContext):
                 + numbering_findings(play.wire)
                 + ack_findings(play.wire, settle=1.0)
             )
-            window = _window_of(play)
-            if window is not None:
-                findings += window_findings(play.wire, window)
+            findings += window_findings(play.wire, play.window)
             for finding in findings:
                 self.expect(
                     False,
@@ -226,10 +242,6 @@ class ClientContext(CaseContext):
                     message=finding.message,
                     invariant=CLIENT_WIRE.name,
                 )
-
-
-def _window_of(play: Play) -> int | None:
-    return None if not play.wire else 15
 
 
 class _suppress_timeout:  # noqa: N801 - used as a context manager

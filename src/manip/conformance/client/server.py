@@ -66,6 +66,10 @@ class Wire:
         self._loop = asyncio.get_running_loop()
         self._t0 = self._loop.time()
 
+    def since_start(self, loop_time: float) -> float:
+        """A time of the loop's clock as seconds on this wire's clock."""
+        return loop_time - self._t0
+
     def clock_ns(self) -> int:
         return int((self._loop.time() - self._t0) * 1e9)
 
