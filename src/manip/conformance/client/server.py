@@ -139,6 +139,11 @@ class ServerSide:
         """The last segment number given out."""
 
     @property
+    def rfc_number(self) -> int:
+        """The packet number of the RFC that opened the connection (what the initial RESPONSE carries)."""
+        return _rfc_number(self.wire)
+
+    @property
     def last_number(self) -> int:
         """The number of the last request received (what asynchronous packets carry)."""
         return self.requests[-1].packet_no if self.requests else 0
