@@ -125,7 +125,7 @@ def ack_findings(records: Sequence[WireRecord], *, settle: float = 0.0) -> list[
             best = acked
     for r in records:
         p = r.packet
-        if r.dir != "s2c" or not (p.opcode >= ChaosOp.DAT or p.opcode == ChaosOp.EOF):
+        if r.dir != "s2c" or not (p.opcode >= ChaosOp.DAT or p.opcode in (ChaosOp.OPN, ChaosOp.EOF)):
             continue
         if r.t > last_t - settle:
             break

@@ -56,11 +56,11 @@ async def play_description(ctx: ClientContext, chunks: list[bytes], **kw: object
     return await ctx.play([connect(0), request(1, "describe-self"), close(2)], script, **kw)  # type: ignore[arg-type]
 
 
-def expect_text(ctx: ClientContext, play: Play, raw: bytes) -> None:
+def expect_text(ctx: ClientContext, play: Play, raw: bytes, *, clause: str = "client.multi-packet") -> None:
     answer = play.answer(1)
     ctx.expect(
         answer is not None and answer.type == "reply",
-        clause="client.multi-packet",
+        clause=clause,
         expected="a reply to describe-self",
         actual=str(answer) if answer is not None else play.describe(),
     )
@@ -69,14 +69,14 @@ def expect_text(ctx: ClientContext, play: Play, raw: bytes) -> None:
     raw_seen = str((answer.get("raw") or {}).get("text", "")).upper()
     ctx.expect(
         values.get("text") == decode_lispm(raw),
-        clause="client.multi-packet",
+        clause=clause,
         expected=f"the whole text, {len(raw)} bytes: {decode_lispm(raw)!r}",
         actual=repr(values.get("text")),
         data=raw,
     )
     ctx.expect(
         raw_seen == raw.hex().upper(),
-        clause="client.multi-packet",
+        clause=clause,
         expected=f"raw text {raw.hex().upper()}",
         actual=raw_seen,
     )
