@@ -355,9 +355,9 @@ async def run_harness(lines: Callable[[], Any], emit: Emit) -> None:
         await CaseRun(instruction, emit).run()
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, *, prog: str = "python -m manip.reference_client.harness") -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m manip.reference_client.harness",
+        prog=prog,
         description="The reference client's harness for manip-conform client (docs/client-harness.md).",
     )
     parser.add_argument(

@@ -3,6 +3,7 @@ wrong (inside a keyword, a string, a number), and many packets at once."""
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 from typing import Final
 
@@ -43,7 +44,7 @@ SPLITS: Final = (
 
 def chunks_at(raw: bytes, cuts: list[int]) -> list[bytes]:
     edges = [0, *sorted(set(cuts)), len(raw)]
-    return [raw[a:b] for a, b in zip(edges, edges[1:], strict=False) if b > a]
+    return [raw[a:b] for a, b in itertools.pairwise(edges) if b > a]
 
 
 async def play_description(ctx: ClientContext, chunks: list[bytes], **kw: object) -> Play:
