@@ -64,14 +64,19 @@ def _version() -> str:
         return "0"
 
 
-def hello() -> dict[str, Any]:
+def hello(operations: Sequence[str] | None = None) -> dict[str, Any]:
+    """The hello line; ``operations`` limits what it declares (to see the suite report the rest
+    unsupported)."""
+    declared = [*CONTROL, *(op.name for op in SPEC.requests.values())]
+    if operations is not None:
+        declared = [op for op in declared if op in operations]
     return {
         "type": "hello",
         "contract": CONTRACT,
         "name": NAME,
         "version": _version(),
         "links": ["tcp", "chudp", "chaosd"],
-        "operations": [*CONTROL, *(op.name for op in SPEC.requests.values())],
+        "operations": declared,
         "features": ["pipeline"],
     }
 
@@ -334,9 +339,9 @@ def _writer(stream: Any) -> Emit:
     return emit
 
 
-async def run_harness(lines: Callable[[], Any], emit: Emit) -> None:
+async def run_harness(lines: Callable[[], Any], emit: Emit, operations: Sequence[str] | None = None) -> None:
     """Say hello, then run each case read from ``lines()`` (an awaitable of one line, "" at the end)."""
-    emit(hello())
+    emit(hello(operations))
     while True:
         line = await lines()
         if not line:
@@ -368,6 +373,12 @@ def main(argv: Sequence[str] | None = None, *, prog: str = "python -m manip.refe
         help="switch on a fault of the client (see --list-faults)",
     )
     parser.add_argument("--list-faults", action="store_true", help="list the client's fault switches")
+    parser.add_argument(
+        "--operations",
+        metavar="OP,OP",
+        default=None,
+        help="declare only these operations in the hello (the suite reports the others' cases unsupported)",
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log to stderr")
     args = parser.parse_args(argv)
     if args.list_faults:
@@ -384,7 +395,8 @@ def main(argv: Sequence[str] | None = None, *, prog: str = "python -m manip.refe
     async def read() -> str:
         return await asyncio.to_thread(sys.stdin.readline)
 
-    asyncio.run(run_harness(read, _writer(sys.stdout)))
+    operations = None if args.operations is None else [o.strip() for o in args.operations.split(",")]
+    asyncio.run(run_harness(read, _writer(sys.stdout), operations))
     return 0
 
 

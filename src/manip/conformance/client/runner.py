@@ -61,6 +61,8 @@ __all__ = [
 DEFAULT_CLIENT_TIMEOUT: Final = 2.0
 """Seconds the harness is told to wait for each reply (``--reply-timeout``)."""
 SCRIPT_GRACE: Final = 2.0
+HARNESS_SLACK: Final = 10.0
+"""Seconds a harness has beyond its ops' timeouts and waits to write ``done`` (docs/client-harness.md)."""
 OUTER_SLACK: Final = 30.0
 _PROBLEM_KIND: Final[dict[str, FailureKind]] = {
     "hung": "deadline",
@@ -136,6 +138,7 @@ class Session:
     link: str
     timeout: float
     deadline_scale: float = 1.0
+    slack: float = HARNESS_SLACK
 
 
 class ClientContext(CaseContext):
@@ -184,7 +187,8 @@ class ClientContext(CaseContext):
             missing = session.hello.missing(instruction, session.link)
             if missing:
                 raise CaseUnsupported(f"the harness does not declare {', '.join(missing)}")
-            run = await session.harness.run_case(instruction, instruction.deadline() * session.deadline_scale)
+            deadline = instruction.deadline(session.slack) * session.deadline_scale
+            run = await session.harness.run_case(instruction, deadline)
             with _suppress_timeout():
                 async with asyncio.timeout(SCRIPT_GRACE):
                     await listener.done.wait()
@@ -271,6 +275,7 @@ class ClientRunConfig:
     known_failing: PatternSet = field(default_factory=PatternSet)
     command: str = ""
     env: dict[str, str] | None = None
+    slack: float = HARNESS_SLACK
 
 
 @dataclass
@@ -328,7 +333,12 @@ async def run_client_suite(
                 report.results.append(_blank(config, item, "skip", "the harness could not be started"))
             return report
         session = Session(
-            harness, hello, config.link, config.options.reply_timeout, config.options.deadline_scale
+            harness,
+            hello,
+            config.link,
+            config.options.reply_timeout,
+            config.options.deadline_scale,
+            config.slack,
         )
         for item in chosen:
             result = await run_client_case(config, session, item)
