@@ -57,9 +57,12 @@ FAULTS: Final[dict[ClientFault, FaultInfo]] = {
         "an asynchronous response answers the oldest pending request", ("client.async-routing",)
     ),
     ClientFault.DOLLAR_AS_NUMBER: FaultInfo(
-        "$ in an error message is printed as the raw number, not the joints", ("client.error-report",)
+        "$ in an error message is printed as the raw number, not the joints",
+        ("client.error-report", "error-string.substitution"),
     ),
-    ClientFault.TILDE_OCTAL: FaultInfo("~ in an error message is printed in octal", ("client.error-report",)),
+    ClientFault.TILDE_OCTAL: FaultInfo(
+        "~ in an error message is printed in octal", ("client.error-report", "error-string.substitution")
+    ),
     ClientFault.FATAL_AS_NON_FATAL: FaultInfo(
         "a fatal error (0201) is taken as a non-fatal error of its request; the connection goes on",
         ("client.fatal-ends",),
@@ -81,7 +84,7 @@ FAULTS: Final[dict[ClientFault, FaultInfo]] = {
     ),
     ClientFault.IGNORE_PAD: FaultInfo(
         "the numbers of an error string are read right after the NUL, a pad byte included",
-        ("client.error-report", "client.error-args-layout"),
+        ("client.error-report", "client.error-args-layout", "error-string.substitution"),
     ),
     ClientFault.MULTI_FIRST_PACKET: FaultInfo(
         "a multi-packet reply ends at its first packet", ("client.multi-packet",)
