@@ -210,7 +210,6 @@ class NcpTransport:
             self._wakeup()
 
 
-
 def _no_ack(inner: LinkWrapper | None) -> LinkWrapper:
     """Fault never-ack: every packet goes out with ack 0 and no STS goes out at all."""
 
