@@ -189,6 +189,24 @@ class ServerSide:
         """End the connection at once with a CLS carrying ``reason``."""
         self.conn.abort(reason)
 
+    def send_los(self, reason: str) -> bool:
+        """Send the client a LOS for this connection, as an NCP that lost it would; False when the OPN
+        (which gives the indexes) was not recorded."""
+        opn = next(
+            (r.packet for r in self.wire.records if r.dir == "s2c" and r.packet.opcode == ChaosOp.OPN), None
+        )
+        if opn is None or not self.wire.links:
+            return False
+        los = Packet(
+            ChaosOp.LOS,
+            dest_host=opn.dest_host,
+            dest_index=opn.dest_index,
+            src_host=opn.src_host,
+            src_index=opn.src_index,
+            data=reason.encode("latin-1"),
+        )
+        return self.wire.links[0].send(los)
+
     def drop_link(self) -> None:
         """Drop the link under the connection (the client sees it lost, no CLS)."""
         for link in self.wire.links:

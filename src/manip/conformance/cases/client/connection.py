@@ -111,6 +111,21 @@ async def cls_mid_request(base: CaseContext) -> None:
     _lost(ctx, play, reason)
 
 
+@case("client.conn.los-mid-request", clauses=["client.connection-lost"])
+async def los_mid_request(base: CaseContext) -> None:
+    """The server's NCP sends a LOS (with a reason) while a request waits for its reply."""
+    ctx = client_context(base)
+    reason = f"Connection lost by the Puma {ctx.random.randint(100, 999)}"
+
+    async def script(side: ServerSide) -> None:
+        if await side.next_request() is not None:
+            await asyncio.sleep(0.05)
+            side.send_los(reason)
+
+    play = await ctx.play([connect(0), request(1, "here"), request(2, "here"), close(3)], script)
+    _lost(ctx, play, reason)
+
+
 @case("client.conn.lost-mid-request", clauses=["client.connection-lost"])
 async def lost_mid_request(base: CaseContext) -> None:
     """The link under the connection drops (no CLS) while a request waits for its reply."""
