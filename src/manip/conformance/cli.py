@@ -413,6 +413,8 @@ def check_selection(
         others = [c.id for c in all_cases() if c.id not in ids and match_id(pattern.text, c.id)]
         if others:
             mode = "--cougar" if not cougar else "a server run (without --cougar)"
+            if others[0].startswith("client."):
+                mode = "manip-conform client"
             message += f" of this run: it names {len(others)} case(s) of {mode}, such as {others[0]}"
         elif close := close_case_ids(pattern.text, ids):
             message += f"; close matches: {', '.join(close)}"

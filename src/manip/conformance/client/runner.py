@@ -19,6 +19,7 @@ Theory of operation
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import shlex
 import time
 import traceback
@@ -148,7 +149,6 @@ class ClientContext(CaseContext):
         super().__init__(**kwargs)
         self.session = session
         self.plays: list[Play] = []
-        self.auto_check = True
 
     @property
     def link(self) -> str:
@@ -189,7 +189,7 @@ class ClientContext(CaseContext):
                 raise CaseUnsupported(f"the harness does not declare {', '.join(missing)}")
             deadline = instruction.deadline(session.slack) * session.deadline_scale
             run = await session.harness.run_case(instruction, deadline)
-            with _suppress_timeout():
+            with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(SCRIPT_GRACE):
                     await listener.done.wait()
         finally:
@@ -247,14 +247,6 @@ class ClientContext(CaseContext):
                     message=finding.message,
                     invariant=CLIENT_WIRE.name,
                 )
-
-
-class _suppress_timeout:  # noqa: N801 - used as a context manager
-    def __enter__(self) -> None:
-        return None
-
-    def __exit__(self, exc_type: object, exc: object, tb: object) -> bool:
-        return exc_type is TimeoutError
 
 
 def client_context(ctx: CaseContext) -> ClientContext:

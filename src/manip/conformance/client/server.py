@@ -222,7 +222,7 @@ async def plain_answer(side: ServerSide, request: Packet) -> None:
     """A plain conformant answer: zeros of the right layout, segment numbers counting from 1."""
     try:
         op = request_op(request.opcode)
-    except Exception:
+    except KeyError:
         await side.error(
             ServerOp.NON_FATAL_ERROR,
             request.packet_no,
