@@ -72,7 +72,7 @@ async def segment_interleaved(base: CaseContext) -> None:
         connect(0),
         request(1, "request-notifications", NOTIFY_ALL),
         request(2, "set-joint-angles", _joints(ctx)),
-        wait(3, 0.2),
+        wait(3, 0.5),
         close(4),
     ]
     play = await ctx.play(ops, script)

@@ -12,16 +12,17 @@ from manip.conformance.client.server import ServerSide
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 
-TIMEOUT: Final = 1.0
+TIMEOUT: Final = 2.0
 LATE_SLACK: Final = 1.5
 """How long after its timeout a request may be reported timed out (a busy machine, a slow harness)."""
 
 
 @case("client.timing.reply-near-timeout", clauses=["client.reply-wait"])
 async def reply_near_timeout(base: CaseContext) -> None:
-    """A reply sent at 70-85 % of the request's timeout is delivered, not given up."""
+    """A reply sent at 60-70 % of the request's timeout is delivered, not given up (the rest is margin
+    for a loaded machine; a client that gives up at half its timeout fails)."""
     ctx = client_context(base)
-    delay = TIMEOUT * ctx.random.uniform(0.7, 0.85)
+    delay = TIMEOUT * ctx.random.uniform(0.6, 0.7)
     values = [float(ctx.random.randint(-180, 180)) for _ in range(6)]
 
     async def script(side: ServerSide) -> None:
