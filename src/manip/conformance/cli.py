@@ -39,6 +39,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from manip.conformance.client.cli import client_command
 from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.fuzz.cli import fuzz_command
 from manip.conformance.output.console import make_console, progress_bar
@@ -102,6 +103,7 @@ _STYLE = {
     "skip": "dim",
     "known-fail": "cyan",
     "fixed": "bold red",
+    "unsupported": "blue",
 }
 
 
@@ -485,6 +487,8 @@ def check_selection(
         others = [c.id for c in all_cases() if c.id not in ids and match_id(pattern.text, c.id)]
         if others:
             mode = "--cougar" if not cougar else "a server run (without --cougar)"
+            if others[0].startswith("client."):
+                mode = "manip-conform client"
             message += f" of this run: it names {len(others)} case(s) of {mode}, such as {others[0]}"
         elif close := close_case_ids(pattern.text, ids):
             message += f"; close matches: {', '.join(close)}"
@@ -831,6 +835,7 @@ def report_command(report_file: Path, html_path: Path | None, markdown_path: Pat
 main.add_command(replay_command)
 main.add_command(verify_command)
 main.add_command(fuzz_command)
+main.add_command(client_command)
 
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -3,7 +3,8 @@
 Scope (erratum ``conformance-scope``): a server run can observe what binds the server, what binds both
 parties, and the links it runs over, and ``run --puma`` what binds the server's wrist side, so a MUST
 clause of party ``server``, ``both``, ``link`` or ``puma`` with no case is a gap.  Clauses of party
-``client`` are judged from recordings of a client (``manip-conform verify --judge client``; listed as
+``client`` are judged live by the client cases (``client.*``, run by ``manip-conform client`` against a
+harness) and from recordings of a client (``manip-conform verify --judge client``; listed as
 ``verify:FAMILY``), and ``cougar`` ones by the Cougar target (``--cougar``); they are listed, and count as
 gaps only when their party is asked for.
 

@@ -266,7 +266,7 @@ def report_junit(report: RunReport) -> ET.Element:
             tests=str(len(results)),
             failures=str(sum(r.outcome in ("fail", "fixed") for r in results)),
             errors=str(sum(r.outcome == "error" for r in results)),
-            skipped=str(sum(r.outcome == "skip" for r in results)),
+            skipped=str(sum(r.outcome in ("skip", "unsupported") for r in results)),
             time=f"{sum(r.duration for r in results):.3f}",
         )
         props = ET.SubElement(suite, "properties")
@@ -297,6 +297,8 @@ def _junit_case(suite: ET.Element, area: str, result: CaseResult) -> None:
         element.text = result.traceback
     elif result.outcome == "skip":
         ET.SubElement(node, "skipped", message=result.reason)
+    elif result.outcome == "unsupported":
+        ET.SubElement(node, "skipped", message=f"unsupported: {result.reason}")
     elif text:
         ET.SubElement(node, "system-out").text = text
 
