@@ -17,6 +17,7 @@ from manip.conformance.client.runner import (
     run_client_suite,
 )
 from manip.conformance.output.console import make_console, progress_bar
+from manip.conformance.output.documents import document_options, write_documents
 from manip.conformance.output.report import write_json, write_junit
 from manip.conformance.replay.cli import check_output_paths, json_option, junit_option
 from manip.conformance.suite.case import Case, all_cases
@@ -96,6 +97,7 @@ def _by_clause(patterns: tuple[str, ...], cases: list[Case]) -> list[Case]:
 )
 @json_option
 @junit_option
+@document_options
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar; failures and the summary only.")
 def client_command(
     command: tuple[str, ...],
@@ -110,6 +112,8 @@ def client_command(
     deadline_scale: float,
     json_path: Path | None,
     junit_path: Path | None,
+    html_path: Path | None,
+    markdown_path: Path | None,
     quiet: bool,
 ) -> None:
     """Judge a client: start CMD (a harness speaking docs/client-harness.md), play a scripted Puma for
@@ -132,7 +136,7 @@ def client_command(
     check_selection(
         select_set, skip_set, cases, hint=" (manip-conform cases --select 'client.**' lists them)"
     )
-    check_output_paths(json=json_path, junit=junit_path)
+    check_output_paths(json=json_path, junit=junit_path, html=html_path, markdown=markdown_path)
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "big")
     options = RunOptions(strict=strict, reply_timeout=reply_timeout, deadline_scale=deadline_scale)
@@ -152,6 +156,7 @@ def client_command(
         write_json(report, json_path)
     if junit_path is not None:
         write_junit(report, junit_path)
+    write_documents(report, html_path, markdown_path)
     _summary(console, report, quiet)
     unsupported = [r for r in report.results if r.outcome == "unsupported"]
     if unsupported and not quiet:
