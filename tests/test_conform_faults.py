@@ -17,6 +17,7 @@ reference arm never sends a fatal error unless calibration fails.
 from __future__ import annotations
 
 import asyncio
+import functools
 from collections.abc import Iterator, Sequence
 
 import pytest
@@ -24,8 +25,10 @@ import pytest
 from manip.conformance.suite import bridge
 from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.embedded import ServerEnvironment
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.runner import RunConfig, Runner
+from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import serve
 from manip.reference_server.faults import FAULTS, Fault, FaultSet
 from manip.reference_server.session import ServerConfig
@@ -40,7 +43,13 @@ packet costs this much per wait."""
 SUITE_PREFIXES = ("server.", "property.", "stateful.")
 """The cases that judge a server over the default link (the Cougar cases need --cougar)."""
 GENERIC = ("stateful.arm-model",)
-CONDITIONS: dict[Fault, tuple[str, ...]] = {Fault.FATAL_WITHOUT_CLOSE: ("calibrate-nzi",)}
+CONDITIONS: dict[Fault, tuple[str, ...]] = {}
+PATHS = {
+    Fault.FATAL_WITHOUT_CLOSE: "server.error.fatal-then-close",
+    Fault.WARNING_INTERRUPTS: "server.async.warning-format",
+    Fault.GUARD_HIT_WORD_SWAPPED: "server.async.guard-hit",
+}
+"""The fault of each path the embedded target arranges, and the case that must catch it."""
 CAUGHT = ("fail", "warn")
 
 PROTOCOL_FAULTS = sorted((f for f, info in FAULTS.items() if info.kind == "protocol"), key=lambda f: f.value)
@@ -62,10 +71,21 @@ def cases_for(fault: Fault) -> list[Case]:
     return [c for c in suite() if broken & set(c.clauses) or c.id in GENERIC]
 
 
-async def run_suite(faults: FaultSet, cases: Sequence[Case]) -> RunReport:
-    async with serve("tcp://127.0.0.1:0", ServerConfig(faults=faults), time_scale=TIME_SCALE) as server:
+async def run_suite(faults: FaultSet, cases: Sequence[Case], *, wrist: bool = False) -> RunReport:
+    """``wrist``: the robot gets the simulated Cougar wrist, as the embedded target's has (a guard hit
+    needs one; the other cases run faster without)."""
+    factory = functools.partial(make_cougar_wrist, "sim", seed=SEED) if wrist else None
+    async with serve(
+        "tcp://127.0.0.1:0", ServerConfig(faults=faults), time_scale=TIME_SCALE, wrist_factory=factory
+    ) as server:
         options = RunOptions(max_examples=MAX_EXAMPLES, address=server.address, reply_timeout=REPLY_TIMEOUT)
-        config = RunConfig(address=server.address, options=options, seed=SEED, embedded=True)
+        config = RunConfig(
+            address=server.address,
+            options=options,
+            seed=SEED,
+            embedded=True,
+            environment=ServerEnvironment(server),
+        )
         return await Runner(config, cases).run()
 
 
@@ -92,7 +112,7 @@ def test_clean_server_passes_every_case() -> None:
 @pytest.mark.parametrize("fault", PROTOCOL_FAULTS, ids=lambda f: f.value)
 def test_protocol_fault_is_caught(fault: Fault) -> None:
     faults = FaultSet.parse([fault.value, *CONDITIONS.get(fault, ())])
-    report = asyncio.run(run_suite(faults, cases_for(fault)))
+    report = asyncio.run(run_suite(faults, cases_for(fault), wrist=fault is Fault.GUARD_HIT_WORD_SWAPPED))
     caught = [r for r in report.results if r.outcome in CAUGHT]
     errors = [(r.id, r.reason) for r in report.results if r.outcome == "error"]
     shown = ", ".join(
@@ -101,3 +121,11 @@ def test_protocol_fault_is_caught(fault: Fault) -> None:
     print(f"fault {fault.value}: caught by {shown or 'NO CASE'} [{report.duration:.1f} s]")
     assert not errors, errors
     assert caught, f"no case caught fault {fault.value} ({FAULTS[fault].description})"
+    if fault in PATHS:
+        assert PATHS[fault] in {r.id for r in report.results if r.outcome == "fail"}, shown
+
+
+def test_the_arranged_paths_run_against_the_clean_server() -> None:
+    """The fatal, warning and guard-hit cases pass (not skip) against the clean embedded server."""
+    report = asyncio.run(run_suite(FaultSet(), [c for c in suite() if c.id in PATHS.values()], wrist=True))
+    assert {r.id: r.outcome for r in report.results} == dict.fromkeys(PATHS.values(), "pass")

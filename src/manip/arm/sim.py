@@ -122,6 +122,7 @@ __all__ = [
     "Obstacle",
     "Refused",
     "SegmentCompleted",
+    "Sluggish",
 ]
 
 #: Default collision tolerance (deg): how far a joint may be from the angle commanded on the previous cycle.
@@ -235,6 +236,32 @@ class Obstacle:
             v[i] = max(v[i], self.lower)
         if self.upper is not None:
             v[i] = min(v[i], self.upper)
+        return _joints(v)
+
+
+@dataclass(frozen=True)
+class Sluggish:
+    """Joint ``joint`` (1-based) trails its command by ``lag`` degrees on every cycle its command moves
+    (at most by the step commanded) and reaches it once the command stands still: a joint that follows,
+    but late (a worn drive).  A lag above half the collision tolerance and within it draws a
+    :class:`FollowingWarning` and nothing more."""
+
+    joint: int
+    lag: float
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.joint <= 6:
+            raise ValueError(f"sluggish joint must be 1..6, got {self.joint}")
+        if not (math.isfinite(self.lag) and self.lag > 0.0):
+            raise ValueError("the lag must be a positive number of degrees")
+
+    def follow(self, previous: Joints, q: Joints) -> Joints:
+        """The angles reached when ``q`` is commanded after ``previous`` was."""
+        v = list(q)
+        i = self.joint - 1
+        step = v[i] - previous[i]
+        if step:
+            v[i] -= math.copysign(min(self.lag, abs(step)), step)
         return _joints(v)
 
 
@@ -364,6 +391,8 @@ class ArmSim:
         self.hand_open = True
         self.free_joint: int | None = None
         self.obstacle: Obstacle | None = None
+        self.sluggish: Sluggish | None = None
+        """A joint that trails its command (an environment condition of the fault switches)."""
         self.enforce_power = True
         """Refuse motion without arm power (NAP); False models a faulty server."""
         self.enforce_abort = True
@@ -620,8 +649,9 @@ class ArmSim:
                 events.append(FollowingWarning(t, warn))
             self._lag_warned = bool(warn)
         q = self._next_command(t, events)
+        reached = self.sluggish.follow(self.commanded, q) if self.sluggish is not None else q
         self.commanded = q
-        self.actual = self.obstacle.clamp(q) if self.obstacle is not None else q
+        self.actual = self.obstacle.clamp(reached) if self.obstacle is not None else reached
 
     def _lagging(self, tol: float) -> tuple[int, ...]:
         return tuple(

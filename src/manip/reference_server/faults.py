@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import Final, Literal
 
-from manip.arm.sim import Obstacle
+from manip.arm.sim import Obstacle, Sluggish
 from manip.spec import SPEC
 
 __all__ = ["FAULTS", "Fault", "FaultInfo", "FaultSet"]
@@ -33,6 +33,7 @@ class Fault(enum.StrEnum):
     PANIC_BUTTON = "panic-button"
     OBSTACLE = "obstacle"
     CALIBRATE_NZI = "calibrate-nzi"
+    SLUGGISH_JOINT = "sluggish-joint"
     # protocol defects
     WRONG_REQUEST_NUMBER = "wrong-request-number"
     ECHO_ACK_NUMBER = "echo-ack-number"
@@ -61,6 +62,8 @@ class Fault(enum.StrEnum):
     DESCRIBE_MISSING_OPERATION = "describe-missing-operation"
     DESCRIBE_WRONG_DOF = "describe-wrong-dof"
     DESCRIBE_NARROW_LIMITS = "describe-narrow-limits"
+    WARNING_INTERRUPTS = "warning-interrupts"
+    GUARD_HIT_WORD_SWAPPED = "guard-hit-word-swapped"
 
 
 Kind = Literal["environment", "protocol"]
@@ -117,6 +120,15 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "error.fatal-request-number",
                 "error.fatal-then-close",
                 argument="joint numbers, comma separated (default 2,3)",
+            ),
+            _info(
+                Fault.SLUGGISH_JOINT,
+                "environment",
+                "One joint trails its command while it moves, by more than half the collision tolerance "
+                "and within it: an asynchronous warning (W COL), and the motion goes on.",
+                "async-warning.format",
+                "async-error.request-number",
+                argument="JOINT:LAG, the joint and its lag in degrees (default 2:0.35)",
             ),
             _info(
                 Fault.WRONG_REQUEST_NUMBER,
@@ -284,6 +296,20 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "Describe self states every joint range 5 degrees narrower at each end than the arm's.",
                 "describe.joint-limits",
             ),
+            _info(
+                Fault.WARNING_INTERRUPTS,
+                "protocol",
+                "A joint lagging its command stops the arm and aborts the motion after the warning, as a "
+                "collision would.",
+                "async-warning.format",
+            ),
+            _info(
+                Fault.GUARD_HIT_WORD_SWAPPED,
+                "protocol",
+                "Guard-hit asynchronous responses say continue (2) for a guard that stopped the move and "
+                "stop (1) for one that did not.",
+                "async.layout",
+            ),
         ]
     )
 )
@@ -298,6 +324,7 @@ for _info_entry in FAULTS.values():
 
 DEFAULT_PANIC_DELAY: Final = 1.0
 DEFAULT_NZI_JOINTS: Final = (2, 3)
+DEFAULT_SLUGGISH: Final = Sluggish(2, 0.35)
 
 
 @dataclass(frozen=True)
@@ -309,6 +336,8 @@ class FaultSet:
     """Seconds after the connection opens at which the panic button is pressed."""
     obstacle: Obstacle | None = None
     nzi_joints: tuple[int, ...] = DEFAULT_NZI_JOINTS
+    sluggish: Sluggish = DEFAULT_SLUGGISH
+    """The joint that trails its command, and by how much."""
 
     def __post_init__(self) -> None:
         if Fault.OBSTACLE in self.active and self.obstacle is None:
@@ -320,6 +349,17 @@ class FaultSet:
 
     def __contains__(self, fault: object) -> bool:
         return fault in self.active
+
+    def merged(self, other: FaultSet) -> FaultSet:
+        """The switches of both; the arguments of a switch ``other`` turns on are ``other``'s."""
+        on = other.active
+        return FaultSet(
+            self.active | on,
+            panic_delay=other.panic_delay if Fault.PANIC_BUTTON in on else self.panic_delay,
+            obstacle=other.obstacle if Fault.OBSTACLE in on else self.obstacle,
+            nzi_joints=other.nzi_joints if Fault.CALIBRATE_NZI in on else self.nzi_joints,
+            sluggish=other.sluggish if Fault.SLUGGISH_JOINT in on else self.sluggish,
+        )
 
     @classmethod
     def of(cls, *faults: Fault, obstacle: Obstacle | None = None) -> FaultSet:
@@ -356,6 +396,13 @@ def _apply(faults: FaultSet, fault: Fault, arg: str | None) -> FaultSet:
     if fault is Fault.CALIBRATE_NZI:
         joints = DEFAULT_NZI_JOINTS if arg is None else tuple(int(j) for j in arg.split(","))
         return replace(faults, active=active, nzi_joints=joints)
+    if fault is Fault.SLUGGISH_JOINT:
+        if arg is None:
+            return replace(faults, active=active)
+        joint, sep, lag = arg.partition(":")
+        if not sep:
+            raise ValueError(f"{arg!r} is not JOINT:LAG")
+        return replace(faults, active=active, sluggish=Sluggish(int(joint), float(lag)))
     if fault is Fault.OBSTACLE:
         if arg is None:
             raise ValueError("needs an argument")

@@ -72,7 +72,15 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Final
 
 from manip.arm.kinematics import PUMA600, ArmModel, forward
-from manip.arm.sim import ArmEvent, ArmSim, FollowingWarning, MotionAborted, Refused, SegmentCompleted
+from manip.arm.sim import (
+    AbortCause,
+    ArmEvent,
+    ArmSim,
+    FollowingWarning,
+    MotionAborted,
+    Refused,
+    SegmentCompleted,
+)
 from manip.arm.transform import Transform
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.errors import DecodeError
@@ -207,6 +215,8 @@ class ServerSession:
         self.arm.enforce_abort = Fault.AWA_IGNORED not in faults
         if faults.obstacle is not None and Fault.OBSTACLE in faults:
             self.arm.place_obstacle(faults.obstacle)
+        if Fault.SLUGGISH_JOINT in faults:
+            self.arm.sluggish = faults.sluggish
         self.state = State.AWAITING_INITIAL
         self.notifications = 0
         """The request-notifications mask in force (bit 0 guard hit, bit 1 segment completed)."""
@@ -292,6 +302,8 @@ class ServerSession:
                 self._report_arm(number, [e for e in wev.arm_events if not isinstance(e, MotionAborted)])
                 if self.notifications & _GUARD_BIT or Fault.UNREQUESTED_ASYNC in self.faults:
                     word2 = _GUARD_STOP if wev.stop else _GUARD_CONTINUE
+                    if Fault.GUARD_HIT_WORD_SWAPPED in self.faults:
+                        word2 = _GUARD_STOP + _GUARD_CONTINUE - word2
                     self._emit_async(number, AsyncCondition.GUARD_HIT, word2, wev.index)
                 elif wev.stop:
                     self._emit_error(ServerOp.ASYNCHRONOUS_ERROR, number, errors.guard_stop_error(wev.index))
@@ -309,6 +321,8 @@ class ServerSession:
                 self._emit_error(ServerOp.ASYNCHRONOUS_ERROR, number, errors.abort_error(ev))
             elif isinstance(ev, FollowingWarning):
                 self._emit_error(ServerOp.ASYNCHRONOUS_WARNING, number, errors.warning_error(ev))
+                if Fault.WARNING_INTERRUPTS in self.faults:
+                    self._report_arm(number, self.arm.halt(AbortCause.COLLISION))
 
     # ---------------------------------------------------------------- waiting for the wrist
     def _hold(self, event: _Event) -> State | None:
