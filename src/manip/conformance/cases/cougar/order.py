@@ -9,7 +9,6 @@ from typing import Final
 from manip.conformance.cases.cougar._support import (
     ALWAYS,
     clean,
-    expect_none,
     expect_reply,
     guard_trips,
     guard_words,
@@ -81,7 +80,12 @@ async def gravity_corrected(ctx: CaseContext) -> None:
             await probe.run(2)
             await probe.send_words(guard_words(9, dvec, PHANTOM_OZ / 2))
             quiet = await probe.run(3)
-            expect_none(ctx, guard_trips(quiet), "cougar.guard-corrected-force", "the model matches the hand")
+            ctx.expect(
+                not guard_trips(quiet),
+                clause="cougar.guard-corrected-force",
+                expected="no trip while the gravity model matches the hand",
+                seen=quiet,
+            )
             await probe.send("NEWWC", weight=PHANTOM_OZ, cg=(0.0, 0.0, 0.0))
             tripped = await probe.run(3)
             ctx.expect(
