@@ -397,6 +397,8 @@ class ArmSim:
         """Refuse motion without arm power (NAP); False models a faulty server."""
         self.enforce_abort = True
         """Refuse motion after an abort (AWA); False models a faulty server."""
+        self.increment_from_actual = False
+        """Resolve incremental moves from where the arm stands, not where the queue ends (a faulty server)."""
 
         self._next_segment = 1
         self._interp = MoveInterpolator(here, limits, 1.0)
@@ -574,8 +576,9 @@ class ArmSim:
         self.check_motion(now)
         if len(delta) != 6:
             raise ValueError("an increment is dX dY dZ dO dA dT")
-        base = forward(self._planned, self.model.geometry)
-        oat = self._planned_oat
+        from_actual = self.increment_from_actual
+        base = forward(self.actual if from_actual else self._planned, self.model.geometry)
+        oat = None if from_actual else self._planned_oat
         if oat is None:
             _, _, _, o, a, t = xyzoat_from_transform(base)
             oat = (o, a, t)

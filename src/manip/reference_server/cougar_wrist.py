@@ -64,7 +64,7 @@ from manip.reference_server import errors
 from manip.reference_server.cougar_port import CougarPort, SimPort
 from manip.reference_server.errors import RequestError
 from manip.reference_server.session import WRIST_OPERATIONS
-from manip.reference_server.wrist import GuardHit, Pending, WristEvent, WristNotice
+from manip.reference_server.wrist import GuardHit, Pending, WristConditions, WristEvent, WristNotice
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import CougarCommand, CougarResponse
 
@@ -259,8 +259,13 @@ class CougarWrist:
         self._procedures: list[_Calibration] = []
         self._events: list[WristEvent] = []
         self._link_reported = False
+        self.conditions = WristConditions()
+        """Set by each connection as it opens (its fault switches)."""
 
     # ------------------------------------------------------------------------------ Wrist API
+    def condition(self, conditions: WristConditions) -> None:
+        self.conditions = conditions
+
     @property
     def served(self) -> frozenset[int]:
         return frozenset(SPEC.request(name).opcode for name in WRIST_OPERATIONS)
@@ -413,7 +418,7 @@ class CougarWrist:
     def _input(self, arm: ArmSim) -> None:
         """The input process: decode what Cougar sent and act on it."""
         words = self.port.receive()
-        if not words:
+        if not words or self.conditions.silent:
             return
         for item in self._stream.feed(words):
             if isinstance(item, CougarMsg):
@@ -514,7 +519,8 @@ class CougarWrist:
                 pass
             elif now >= waiter.deadline:
                 self.stats.timeouts += 1
-                waiter.on_fail(_timeout_error(waiter.command, self.reply_timeout))
+                if self.conditions.answer_timeouts:
+                    waiter.on_fail(_timeout_error(waiter.command, self.reply_timeout))
             else:
                 keep.append(waiter)
         self._waiters = keep

@@ -34,6 +34,7 @@ class Fault(enum.StrEnum):
     OBSTACLE = "obstacle"
     CALIBRATE_NZI = "calibrate-nzi"
     SLUGGISH_JOINT = "sluggish-joint"
+    WRIST_SILENT = "wrist-silent"
     # protocol defects
     WRONG_REQUEST_NUMBER = "wrong-request-number"
     ECHO_ACK_NUMBER = "echo-ack-number"
@@ -64,6 +65,15 @@ class Fault(enum.StrEnum):
     DESCRIBE_NARROW_LIMITS = "describe-narrow-limits"
     WARNING_INTERRUPTS = "warning-interrupts"
     GUARD_HIT_WORD_SWAPPED = "guard-hit-word-swapped"
+    STRAIGHT_AS_JOINT = "straight-as-joint"
+    INCREMENT_FROM_ACTUAL = "increment-from-actual"
+    READY_LEAVES_WRIST = "ready-leaves-wrist"
+    SEGMENT_REPORT_PREVIOUS = "segment-report-previous"
+    COLLISION_UNCHECKED = "collision-unchecked"
+    CLOSE_KEEPS_MOVING = "close-keeps-moving"
+    WRIST_TIMEOUT_SILENT = "wrist-timeout-silent"
+    UNDERFLOW_DIRTY_ZERO = "underflow-dirty-zero"
+    NOT_FINITE_RESERVED = "not-finite-reserved"
 
 
 Kind = Literal["environment", "protocol"]
@@ -129,6 +139,13 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "async-warning.format",
                 "async-error.request-number",
                 argument="JOINT:LAG, the joint and its lag in degrees (default 2:0.35)",
+            ),
+            _info(
+                Fault.WRIST_SILENT,
+                "environment",
+                "The wrist computer stops answering (hung, or its link cut): a request that needs its "
+                "data waits the wrist timeout and is answered E WNR.",
+                "wrist.no-answer",
             ),
             _info(
                 Fault.WRONG_REQUEST_NUMBER,
@@ -309,6 +326,68 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "Guard-hit asynchronous responses say continue (2) for a guard that stopped the move and "
                 "stop (1) for one that did not.",
                 "async.layout",
+            ),
+            _info(
+                Fault.STRAIGHT_AS_JOINT,
+                "protocol",
+                "Straight-line moves (205, 212) are interpolated in joint space: the hand strays off the "
+                "line.",
+                "straight-move.line",
+            ),
+            _info(
+                Fault.INCREMENT_FROM_ACTUAL,
+                "protocol",
+                "Incremental moves add to where the arm stands when they are queued, not to where the queue "
+                "ends.",
+                "incremental.relative",
+            ),
+            _info(
+                Fault.READY_LEAVES_WRIST,
+                "protocol",
+                "Move to ready moves joints 1-3 only: the wrist joints stay where they are.",
+                "ready.pose",
+            ),
+            _info(
+                Fault.SEGMENT_REPORT_PREVIOUS,
+                "protocol",
+                "Segment-completed reports name the segment queued before the one that completed.",
+                "segment.fifo-completion",
+            ),
+            _info(
+                Fault.COLLISION_UNCHECKED,
+                "protocol",
+                "The move process never compares the angles reached with those commanded: a blocked joint "
+                "draws no error and the motion goes on.",
+                "motion.collision",
+            ),
+            _info(
+                Fault.CLOSE_KEEPS_MOVING,
+                "protocol",
+                "A connection that closes leaves its queued segments running, and the next connection "
+                "continues its segment counter.",
+                "connect.close-stops-arm",
+                "connect.per-connection-state",
+            ),
+            _info(
+                Fault.WRIST_TIMEOUT_SILENT,
+                "protocol",
+                "A request whose wrist command Cougar never answers is never answered either (no E WNR); "
+                "the requests after it wait for ever.",
+                "wrist.no-answer",
+            ),
+            _info(
+                Fault.UNDERFLOW_DIRTY_ZERO,
+                "protocol",
+                "Reply floats below the smallest F magnitude (2^-128) are sent with exponent 0 and their "
+                "fraction bits (a dirty zero) instead of a clean zero.",
+                "float.range",
+            ),
+            _info(
+                Fault.NOT_FINITE_RESERVED,
+                "protocol",
+                "Solve forwards of a transform out of reach answers six angles that are not numbers, sent as "
+                "the reserved operand, instead of refusing.",
+                "float.not-finite",
             ),
         ]
     )
