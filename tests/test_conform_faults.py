@@ -49,8 +49,23 @@ PATHS = {
     Fault.FATAL_WITHOUT_CLOSE: "server.error.fatal-then-close",
     Fault.WARNING_INTERRUPTS: "server.async.warning-format",
     Fault.GUARD_HIT_WORD_SWAPPED: "server.async.guard-hit",
+    Fault.WRIST_TIMEOUT_SILENT: "server.wrist.no-answer",
 }
 """The fault of each path the embedded target arranges, and the case that must catch it."""
+CATCHERS = {
+    **PATHS,
+    Fault.STRAIGHT_AS_JOINT: "server.motion.straight-line",
+    Fault.INCREMENT_FROM_ACTUAL: "server.motion.incremental-reference",
+    Fault.READY_LEAVES_WRIST: "server.motion.ready",
+    Fault.SEGMENT_REPORT_PREVIOUS: "server.motion.queued-segments",
+    Fault.COLLISION_UNCHECKED: "server.motion.collision",
+    Fault.CLOSE_KEEPS_MOVING: "server.connect.close-stops-arm",
+    Fault.UNDERFLOW_DIRTY_ZERO: "server.float.extremes",
+    Fault.NOT_FINITE_RESERVED: "server.float.extremes",
+}
+"""Faults and the case written to catch each: it must fail (others may catch the fault too)."""
+WRIST_FAULTS = frozenset({Fault.GUARD_HIT_WORD_SWAPPED, Fault.WRIST_TIMEOUT_SILENT})
+"""Faults whose catching case needs the simulated Cougar wrist."""
 CAUGHT = ("fail", "warn")
 
 PROTOCOL_FAULTS = sorted((f for f, info in FAULTS.items() if info.kind == "protocol"), key=lambda f: f.value)
@@ -115,7 +130,7 @@ def test_clean_server_passes_every_case() -> None:
 @pytest.mark.parametrize("fault", PROTOCOL_FAULTS, ids=lambda f: f.value)
 def test_protocol_fault_is_caught(fault: Fault) -> None:
     faults = FaultSet.parse([fault.value, *CONDITIONS.get(fault, ())])
-    report = asyncio.run(run_suite(faults, cases_for(fault), wrist=fault is Fault.GUARD_HIT_WORD_SWAPPED))
+    report = asyncio.run(run_suite(faults, cases_for(fault), wrist=fault in WRIST_FAULTS))
     caught = [r for r in report.results if r.outcome in CAUGHT]
     errors = [(r.id, r.reason) for r in report.results if r.outcome == "error"]
     shown = ", ".join(
@@ -124,8 +139,8 @@ def test_protocol_fault_is_caught(fault: Fault) -> None:
     print(f"fault {fault.value}: caught by {shown or 'NO CASE'} [{report.duration:.1f} s]")
     assert not errors, errors
     assert caught, f"no case caught fault {fault.value} ({FAULTS[fault].description})"
-    if fault in PATHS:
-        assert PATHS[fault] in {r.id for r in report.results if r.outcome == "fail"}, shown
+    if fault in CATCHERS:
+        assert CATCHERS[fault] in {r.id for r in report.results if r.outcome == "fail"}, shown
 
 
 def test_the_arranged_paths_run_against_the_clean_server() -> None:

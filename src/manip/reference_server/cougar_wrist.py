@@ -512,7 +512,7 @@ class CougarWrist:
     def _expire(self, now: float) -> None:
         keep: list[_Waiter] = []
         for waiter in self._waiters:
-            if waiter.cancelled() or now >= waiter.deadline:
+            if (waiter.cancelled() or now >= waiter.deadline) and not self.conditions.silent:
                 # Its reply may still come (replies keep their order): drop it if it comes soon.
                 self._stale.setdefault(waiter.response, deque()).append(now + self.reply_timeout)
             if waiter.cancelled():

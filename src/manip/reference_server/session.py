@@ -610,7 +610,7 @@ class ServerSession:
 
     def _ready(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         if Fault.READY_LEAVES_WRIST in self.faults:
-            goal = self.arm.model.ready[:3] + self.arm.actual[3:]
+            goal = self.arm.model.ready[:3] + self.arm.planned[3:]
             return {"segment": self.arm.move_joints(goal, now)}
         return {"segment": self.arm.move_ready(now)}
 
