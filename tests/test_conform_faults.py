@@ -17,7 +17,6 @@ reference arm never sends a fatal error unless calibration fails.
 from __future__ import annotations
 
 import asyncio
-import functools
 from collections.abc import Iterator, Sequence
 
 import pytest
@@ -25,10 +24,10 @@ import pytest
 from manip.conformance.suite import bridge
 from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.context import RunOptions
-from manip.conformance.suite.embedded import ServerEnvironment
+from manip.conformance.suite.embedded import ServerEnvironment, simulated_environment
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.runner import RunConfig, Runner
-from manip.reference_server.cougar_wrist import make_cougar_wrist
+from manip.links import virtual_clock
 from manip.reference_server.driver import serve
 from manip.reference_server.faults import FAULTS, Fault, FaultSet
 from manip.reference_server.session import ServerConfig
@@ -40,7 +39,6 @@ SHRINK_BUDGET = 0.2
 REPLY_TIMEOUT = 1.0
 """Seconds to wait for an answer: loopback answers take well under a millisecond; a fault that drops a
 packet costs this much per wait."""
-WRIST_REPLY_TIMEOUT = 4.0
 SUITE_PREFIXES = ("server.", "property.", "stateful.")
 """The cases that judge a server over the default link (the Cougar cases need --cougar)."""
 GENERIC = ("stateful.arm-model",)
@@ -87,16 +85,9 @@ def cases_for(fault: Fault) -> list[Case]:
     return [c for c in suite() if broken & set(c.clauses) or c.id in GENERIC]
 
 
-async def run_suite(faults: FaultSet, cases: Sequence[Case], *, wrist: bool = False) -> RunReport:
-    """``wrist``: the robot gets the simulated Cougar wrist, as the embedded target's has (a guard hit
-    needs one; the other cases run faster without)."""
-    factory = functools.partial(make_cougar_wrist, "sim", seed=SEED) if wrist else None
-    async with serve(
-        "tcp://127.0.0.1:0", ServerConfig(faults=faults), time_scale=TIME_SCALE, wrist_factory=factory
-    ) as server:
-        # The wrist's answers wait for Cougar's ticks, which a loaded machine delays in real time.
-        timeout = WRIST_REPLY_TIMEOUT if wrist else REPLY_TIMEOUT
-        options = RunOptions(max_examples=MAX_EXAMPLES, address=server.address, reply_timeout=timeout)
+async def run_suite(faults: FaultSet, cases: Sequence[Case]) -> RunReport:
+    async with serve("tcp://127.0.0.1:0", ServerConfig(faults=faults), time_scale=TIME_SCALE) as server:
+        options = RunOptions(max_examples=MAX_EXAMPLES, address=server.address, reply_timeout=REPLY_TIMEOUT)
         config = RunConfig(
             address=server.address,
             options=options,
@@ -105,6 +96,28 @@ async def run_suite(faults: FaultSet, cases: Sequence[Case], *, wrist: bool = Fa
             environment=ServerEnvironment(server),
         )
         return await Runner(config, cases).run()
+
+
+def run_with_wrist(faults: FaultSet, cases: Sequence[Case]) -> RunReport:
+    """The cases against a robot with the simulated Cougar wrist, as the embedded target's is, in virtual
+    time: Cougar ticks with the servo, so its answers never depend on how loaded the machine is (in real
+    time a busy machine delays its ticks past any reply timeout)."""
+
+    async def main() -> RunReport:
+        async with simulated_environment(ServerConfig(faults=faults), seed=SEED, wrist=True) as environment:
+            address = environment.address
+            options = RunOptions(max_examples=MAX_EXAMPLES, address=address, reply_timeout=REPLY_TIMEOUT)
+            config = RunConfig(
+                address=address,
+                options=options,
+                seed=SEED,
+                embedded=True,
+                environment=environment,
+                virtual_time=True,
+            )
+            return await Runner(config, cases).run()
+
+    return virtual_clock.run(main(), virtual=True)
 
 
 def test_every_protocol_fault_has_a_case_citing_its_clauses() -> None:
@@ -130,7 +143,8 @@ def test_clean_server_passes_every_case() -> None:
 @pytest.mark.parametrize("fault", PROTOCOL_FAULTS, ids=lambda f: f.value)
 def test_protocol_fault_is_caught(fault: Fault) -> None:
     faults = FaultSet.parse([fault.value, *CONDITIONS.get(fault, ())])
-    report = asyncio.run(run_suite(faults, cases_for(fault), wrist=fault in WRIST_FAULTS))
+    cases = cases_for(fault)
+    report = run_with_wrist(faults, cases) if fault in WRIST_FAULTS else asyncio.run(run_suite(faults, cases))
     caught = [r for r in report.results if r.outcome in CAUGHT]
     errors = [(r.id, r.reason) for r in report.results if r.outcome == "error"]
     shown = ", ".join(
@@ -145,5 +159,5 @@ def test_protocol_fault_is_caught(fault: Fault) -> None:
 
 def test_the_arranged_paths_run_against_the_clean_server() -> None:
     """The fatal, warning and guard-hit cases pass (not skip) against the clean embedded server."""
-    report = asyncio.run(run_suite(FaultSet(), [c for c in suite() if c.id in PATHS.values()], wrist=True))
+    report = run_with_wrist(FaultSet(), [c for c in suite() if c.id in PATHS.values()])
     assert {r.id: r.outcome for r in report.results} == dict.fromkeys(PATHS.values(), "pass")
