@@ -100,9 +100,13 @@ async def straight_line(ctx: CaseContext) -> None:
 @case("server.motion.incremental-reference", clauses=["incremental.relative"], hazard="motion", deadline=15.0)
 async def incremental_reference(ctx: CaseContext) -> None:
     """Two incremental moves queued back to back (211 then 212) add to where the previous one ends: the
-    arm stands at the start plus both deltas, orientation unchanged."""
+    arm stands at the start plus both deltas, orientation unchanged.  They start from a pose well inside
+    the workspace (wherever the arm was left, a straight line may not be possible)."""
     probe = await ctx.connect()
     await power_on(ctx, probe)
+    before = await read_floats(ctx, probe, "joint-angles")
+    require_response(ctx, await probe.call("set-joint-angles", joints=list(LINE_POSE)), "a move to the start")
+    await settle(ctx, probe, LINE_POSE)
     start = await read_floats(ctx, probe, "here")
     moves: tuple[tuple[RequestName, list[float]], ...] = (
         ("incremental-move", [0.0, 0.0, -30.0]),
@@ -122,6 +126,8 @@ async def incremental_reference(ctx: CaseContext) -> None:
         expected=f"the hand at {[round(v, 3) for v in want]} (start plus both deltas), orientation unchanged",
         actual=f"at {[round(v, 3) for v in end[9:]]} ({off:.3f} mm off), rotation changed by {turn:.2g}",
     )
+    await probe.call("set-joint-angles", joints=list(before))
+    await settle(ctx, probe, before)
 
 
 @case("server.motion.ready", clauses=["ready.pose"], hazard="motion", deadline=15.0)
