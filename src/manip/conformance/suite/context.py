@@ -75,6 +75,7 @@ Target = Literal["sim", "hardware"]
 DEFAULT_REPLY_TIMEOUT: Final = 2.0
 DEFAULT_CONNECT_TIMEOUT: Final = 5.0
 
+
 class Environment(Protocol):
     """Conditions of the arm's world a case may switch on for the connections it opens (the embedded
     server's :class:`~manip.conformance.suite.embedded.ServerEnvironment`)."""
