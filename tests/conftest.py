@@ -27,7 +27,7 @@ Servers in tests, the shared ways (``tests/servers.py``; use these rather than a
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
 import pytest
@@ -36,7 +36,7 @@ from hypothesis.errors import InvalidArgument
 
 if TYPE_CHECKING:
     from manip.reference_server.driver import ReferenceServer
-    from tests.servers import ServerProcess
+    from tests.servers import ServerProcess, StartServer
 
 PROFILE_VARIABLE = "MANIP_HYPOTHESIS_PROFILE"
 EXAMPLES_VARIABLE = "MANIP_HYPOTHESIS_EXAMPLES"
@@ -153,7 +153,7 @@ def served(request: pytest.FixtureRequest) -> Iterator[ReferenceServer]:
 
 
 @pytest.fixture
-def manip_server() -> Iterator[Callable[..., ServerProcess]]:
+def manip_server() -> Iterator[StartServer]:
     """``manip_server(*args, **options)`` starts a server command as a process
     (:func:`tests.servers.start_process`); every one it started is stopped and reaped at teardown."""
     from tests.servers import start_process

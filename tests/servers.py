@@ -176,6 +176,10 @@ class ServerProcess:
         self.proc.communicate(timeout=5.0)
 
 
+StartServer = Callable[..., ServerProcess]
+"""The ``manip_server`` fixture: :func:`start_process`, with the stop at teardown."""
+
+
 def start_process(
     *args: str,
     command: Sequence[str] = MANIP_SERVER,
