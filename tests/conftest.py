@@ -14,7 +14,7 @@ Servers in tests, the shared ways (``tests/servers.py``; use these rather than a
 
 * a synchronous test that needs a running reference server takes the module-scoped fixture
   :func:`reference_server_url` (or :func:`chudp_server_url`), or :func:`served` for one of its own set up
-  by a :class:`tests.servers.ServerOptions` (faults, link kind, contact, Cougar wrist) given with
+  by a :class:`tests.servers.ServerOptions` (faults, link kind, contact) given with
   ``@pytest.mark.parametrize("served", [ServerOptions(...)], indirect=True)``: the server runs in a
   thread and the test's own event loop, if it has one, is the client's;
 * an ``async`` test that needs the server in its own loop uses ``tests.servers.running_server`` or

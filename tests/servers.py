@@ -14,7 +14,6 @@
 from __future__ import annotations
 
 import asyncio
-import functools
 import os
 import signal
 import socket
@@ -25,11 +24,10 @@ import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator, Sequence
 from contextlib import AbstractAsyncContextManager, asynccontextmanager, contextmanager
 from dataclasses import dataclass, field
-from typing import IO, Literal, TypeVar
+from typing import IO, Any, Literal, TypeVar
 
 from manip.links import ChaosConnection, start_server
 from manip.reference_server import Fault, FaultSet, ServerConfig
-from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import ReferenceServer, serve
 
 T = TypeVar("T")
@@ -52,26 +50,17 @@ async def running_server(
     address: str = LINK_ADDRESSES["tcp"],
     contact: str = "PUMA",
     time_scale: float = TIME_SCALE,
-    cougar: str | None = None,
 ) -> AsyncIterator[ReferenceServer]:
-    """A reference server in the running event loop; ``cougar`` (``"sim"``) gives the arm a wrist."""
-    wrist = None if cougar is None else functools.partial(make_cougar_wrist, cougar, seed=0)
-    async with serve(
-        address, config or ServerConfig(), contact=contact, time_scale=time_scale, wrist_factory=wrist
-    ) as server:
+    """A reference server in the running event loop."""
+    async with serve(address, config or ServerConfig(), contact=contact, time_scale=time_scale) as server:
         yield server
 
 
 @asynccontextmanager
-async def reference_server(
-    config: ServerConfig | None = None,
-    *,
-    address: str = LINK_ADDRESSES["tcp"],
-    contact: str = "PUMA",
-    time_scale: float = TIME_SCALE,
-) -> AsyncIterator[str]:
-    """:func:`running_server`, yielding its address (with ``?contact=`` unless the contact is PUMA)."""
-    async with running_server(config, address=address, contact=contact, time_scale=time_scale) as server:
+async def reference_server(config: ServerConfig | None = None, **options: Any) -> AsyncIterator[str]:
+    """:func:`running_server` (the same options), yielding its address (with ``?contact=`` unless the
+    contact is PUMA)."""
+    async with running_server(config, **options) as server:
         yield server.address
 
 
@@ -129,14 +118,10 @@ class ServerOptions:
     faults: tuple[Fault, ...] = ()
     link: Literal["tcp", "chudp"] = "tcp"
     contact: str = "PUMA"
-    cougar: str | None = None
-    """``"sim"``: the arm has the simulated Cougar wrist."""
 
     def start(self) -> AbstractAsyncContextManager[ReferenceServer]:
         config = ServerConfig(faults=FaultSet.of(*self.faults))
-        return running_server(
-            config, address=LINK_ADDRESSES[self.link], contact=self.contact, cougar=self.cougar
-        )
+        return running_server(config, address=LINK_ADDRESSES[self.link], contact=self.contact)
 
 
 def free_port() -> int:

@@ -252,13 +252,3 @@ def test_links_errors_read_as_who_ended_the_connection() -> None:
     assert describe_chaos_end(ConnectionClosed("bye", by_peer=False)) == "closed here (bye)"
     assert describe_chaos_end(Los("unknown connection")) == "lost (LOS: unknown connection)"
     assert describe_chaos_end(ConnectionBroken("silent for 90 s")) == "broken (silent for 90 s)"
-
-
-@pytest.mark.parametrize("served", [ServerOptions(cougar="sim")], indirect=True)
-def test_the_wrist_of_a_server_with_the_simulated_cougar(served: ReferenceServer) -> None:
-    async def main() -> None:
-        async with aconnect(served.address) as arm:
-            assert await arm.wrist_version() == 1
-            assert len(await arm.read_forces()) == 6
-
-    run(main())
