@@ -1,24 +1,17 @@
-"""Shared by the ``manip-client`` command tests (test_client_cli, test_client_record): the reference
-server in a thread, invoking the command in-process, and ``watch`` stopped by Ctrl-C in a subprocess."""
+"""Shared by the ``manip-client`` command tests (test_client_cli, test_client_record): invoking the
+command in-process, and ``watch`` stopped by Ctrl-C in a subprocess (servers: ``tests/servers.py``)."""
 
 from __future__ import annotations
 
 import signal
 import subprocess
 import sys
-from collections.abc import Iterator
 
 from click.testing import CliRunner, Result
 
 from manip.reference_client.cli import main
-from manip.reference_server import ServerConfig
-from tests.test_client_tcp import in_thread, reference_server, scripted_server, segment_reporter
-
-
-def reference_url() -> Iterator[str]:
-    """The URL of a default reference server running in a thread (for a module-scoped fixture)."""
-    with in_thread(reference_server(ServerConfig())) as address:
-        yield address
+from tests.servers import in_thread, scripted_server
+from tests.test_client_tcp import segment_reporter
 
 
 def invoke(*args: str) -> Result:
@@ -29,6 +22,7 @@ def watch_until_ctrl_c(*options: str) -> None:
     """Run ``manip-client ADDRESS watch OPTIONS`` in a subprocess against a server reporting segments 7
     and 8; after both lines, Ctrl-C must end it cleanly (exit 0, nothing on stderr)."""
     with in_thread(scripted_server(segment_reporter)) as address:
+        # A process of its own, on purpose: the Ctrl-C is a real SIGINT to the client command.
         command = [sys.executable, "-m", "manip.reference_client.cli", address, "watch", *options]
         # A shell starts background jobs with SIGINT ignored, and a child inherits an ignored signal
         # (a handled one is reset by exec): handle it while starting the command, so Ctrl-C reaches it

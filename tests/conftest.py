@@ -10,23 +10,33 @@ deadline and no too-slow health check, whose verdicts would depend on the machin
 Tests' own ``@settings(...)`` objects are built at import, after the profile is loaded here, so they
 take everything they do not set (derandomize, database, ...) from it.
 
-Servers in tests, the shared ways (use these rather than a new one):
+Servers in tests, the shared ways (``tests/servers.py``; use these rather than a new one):
 
 * a synchronous test that needs a running reference server takes the module-scoped fixture
-  :func:`reference_server_url` (a default server on a free loopback port, in a thread of its own);
-* an ``async`` test starts one with ``manip.reference_server.driver.serve("tcp://127.0.0.1:0")`` (an
-  async context manager: ``server.address`` is where it listens), or a scripted fake with
-  ``tests.test_client_tcp.scripted_server``; ``tests.test_client_tcp.in_thread`` runs either in a thread.
+  :func:`reference_server_url` (or :func:`chudp_server_url`), or :func:`served` for one of its own set up
+  by a :class:`tests.servers.ServerOptions` (faults, link kind, contact) given with
+  ``@pytest.mark.parametrize("served", [ServerOptions(...)], indirect=True)``: the server runs in a
+  thread and the test's own event loop, if it has one, is the client's;
+* an ``async`` test that needs the server in its own loop uses ``tests.servers.running_server`` or
+  ``reference_server``, or a scripted fake with ``tests.servers.scripted_server``;
+  ``tests.servers.in_thread`` runs any of them in a thread;
+* a test of a command itself (``manip-server``, ``manip-cougar``) takes :func:`manip_server`, which
+  starts the command as a process on a free port and stops and reaps it at teardown.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any
 
 import pytest
 from hypothesis import HealthCheck, is_hypothesis_test, settings
 from hypothesis.errors import InvalidArgument
+
+if TYPE_CHECKING:
+    from manip.reference_server.driver import ReferenceServer
+    from tests.servers import ServerProcess, StartServer
 
 PROFILE_VARIABLE = "MANIP_HYPOTHESIS_PROFILE"
 EXAMPLES_VARIABLE = "MANIP_HYPOTHESIS_EXAMPLES"
@@ -111,9 +121,50 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         )
 
 
+# The servers' modules are imported when a test first asks for one: collection stays light.
 @pytest.fixture(scope="module")
 def reference_server_url() -> Iterator[str]:
     """The URL of a default reference server running in a thread, for the tests of one module."""
-    from tests.client_cli_support import reference_url
+    from tests.servers import in_thread, reference_server
 
-    yield from reference_url()
+    with in_thread(reference_server()) as address:
+        yield address
+
+
+@pytest.fixture(scope="module")
+def chudp_server_url() -> Iterator[str]:
+    """The same on CHUDP."""
+    from tests.servers import LINK_ADDRESSES, in_thread, reference_server
+
+    with in_thread(reference_server(address=LINK_ADDRESSES["chudp"])) as address:
+        yield address
+
+
+@pytest.fixture
+def served(request: pytest.FixtureRequest) -> Iterator[ReferenceServer]:
+    """A reference server in a thread for one test, set up by the ``ServerOptions`` the test gives as
+    an indirect parameter (the defaults without one); ``served.address`` is where it listens."""
+    from tests.servers import ServerOptions, in_thread
+
+    options = getattr(request, "param", ServerOptions())
+    assert isinstance(options, ServerOptions), options
+    with in_thread(options.start()) as server:
+        yield server
+
+
+@pytest.fixture
+def manip_server() -> Iterator[StartServer]:
+    """``manip_server(*args, **options)`` starts a server command as a process
+    (:func:`tests.servers.start_process`); every one it started is stopped and reaped at teardown."""
+    from tests.servers import start_process
+
+    started: list[ServerProcess] = []
+
+    def start(*args: str, **options: Any) -> ServerProcess:
+        server = start_process(*args, **options)
+        started.append(server)
+        return server
+
+    yield start
+    for server in reversed(started):  # the last started may use the ones before it
+        server.end()

@@ -1,4 +1,8 @@
-"""Hypothesis strategies derived from the spec tables: one rule per field type, none per message."""
+"""Hypothesis strategies derived from the spec tables: one rule per field type, none per message.
+
+The rules are the conformance suite's (:mod:`manip.conformance.suite.strategies`); what is test-only is
+longer: counted word lists and LispM text that span several packets, text with newlines and tabs, and
+Cougar messages."""
 
 from __future__ import annotations
 
@@ -7,37 +11,33 @@ from typing import Any
 
 from hypothesis import strategies as st
 
+from manip.conformance.suite import strategies as suite
 from manip.conformance.suite.strategies import f_floats
 from manip.spec import SPEC, CougarMessage, FieldType, Layout, RequestOpcode
+from manip.spec.model import Element
 
 # Every F-representable value, generated from bit patterns so e=1 and e=255 are reached too: the suite's
 # own strategy (the same bit patterns, so the same examples, as the copy that stood here).
 f_values = f_floats
 words = st.integers(0, 0xFFFF)
-int16s = st.integers(-0x8000, 0x7FFF)
 lispm_text = st.text(
     alphabet=st.characters(min_codepoint=0x20, max_codepoint=0x7E) | st.sampled_from("\n\t"), max_size=600
 )
 
 
-def element_values(element: str) -> st.SearchStrategy[Any]:
-    return {
-        "float": f_values,
-        "word": words,
-        "int16": int16s,
-        "small": st.integers(0, 0xFF),
-    }[element]
+def element_values(element: Element) -> st.SearchStrategy[Any]:
+    """One value of a fixed-size element, by the suite's rule."""
+    return suite.field_values(FieldType(element, element, 1))
 
 
 def field_values(ft: FieldType) -> st.SearchStrategy[Any]:
+    """The suite's rule, but counted words and text reach past one packet, and text has control
+    characters."""
     if ft.element == "counted":
         return st.lists(words, max_size=200).map(tuple)
     if ft.element == "text":
         return lispm_text.filter(bool)  # an empty chunk is the terminator, not data
-    one = element_values(ft.element)
-    if ft.count == 1:
-        return one
-    return st.lists(one, min_size=ft.count, max_size=ft.count).map(tuple)
+    return suite.field_values(ft)
 
 
 def layout_values(layout: Layout) -> st.SearchStrategy[dict[str, Any]]:

@@ -16,15 +16,8 @@ from manip.reference_client.cli import (
     EXIT_USAGE,
 )
 from tests.client_cli_support import invoke, watch_until_ctrl_c
-from tests.test_client_tcp import (
-    READY,
-    TARGET,
-    closed_port,
-    in_thread,
-    never_answers,
-    scripted_server,
-    segment_reporter,
-)
+from tests.servers import free_port, in_thread, scripted_server
+from tests.test_client_tcp import READY, TARGET, never_answers, segment_reporter
 
 
 @pytest.fixture(scope="module")
@@ -122,7 +115,7 @@ def test_solve_backwards_then_forwards(url: str) -> None:
 
 
 def test_cannot_connect() -> None:
-    line = failed(EXIT_CONNECTION, f"tcp://127.0.0.1:{closed_port()}", "here", "--timeout", "2")
+    line = failed(EXIT_CONNECTION, f"tcp://127.0.0.1:{free_port()}", "here", "--timeout", "2")
     assert "cannot connect to tcp://127.0.0.1:" in line
 
 

@@ -18,10 +18,8 @@ from manip.reference_client.cli import EXIT_CONNECTION, EXIT_SERVER_ERROR, EXIT_
 from manip.reference_client.ncp_transport import NcpTransport
 from manip.spec.constants import RequestOp, ServerOp
 from tests.client_cli_support import invoke, watch_until_ctrl_c
-from tests.test_client_tcp import (
-    TARGET,
-    closed_port,
-)
+from tests.servers import free_port
+from tests.test_client_tcp import TARGET
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +95,7 @@ def test_a_server_error_is_recorded_and_the_file_closed(url: str, tmp_path: Path
 
 def test_no_connection_still_leaves_a_valid_file(tmp_path: Path) -> None:
     path = tmp_path / "nothing.mcap"
-    address = f"tcp://127.0.0.1:{closed_port()}"
+    address = f"tcp://127.0.0.1:{free_port()}"
     result = invoke(address, "--record", str(path), "--timeout", "2", "here")
     assert result.exit_code == EXIT_CONNECTION
     capture = read_capture(path)

@@ -1,17 +1,11 @@
 """The client over real Chaos connections (``manip.links``, loopback, ephemeral ports): the reference
-server's asyncio driver, and scripted links servers for the failures.
-
-:func:`in_thread` runs a server in its own event loop thread, for the blocking ``manip.connect`` and
-the command-line tests.
+server's asyncio driver (the ``served`` fixture, in a thread), and scripted links servers for the
+failures; the scripts here are shared with the command-line tests.
 """
 
 from __future__ import annotations
 
 import asyncio
-import socket
-import threading
-from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
-from contextlib import AbstractAsyncContextManager, asynccontextmanager, contextmanager
 
 import pytest
 
@@ -25,7 +19,6 @@ from manip.links import (
     ConnectionClosed,
     ConnectionRefused,
     LinkError,
-    start_server,
 )
 from manip.links import ConnectionLost as Los
 from manip.reference_client import (
@@ -38,33 +31,14 @@ from manip.reference_client import (
     aconnect,
 )
 from manip.reference_client.ncp_transport import describe_chaos_end
-from manip.reference_server import Fault, FaultSet, ServerConfig
-from manip.reference_server.driver import serve
+from manip.reference_server import Fault
+from manip.reference_server.driver import ReferenceServer
 from manip.spec.constants import AsyncCondition, ServerOp
+from tests.servers import ServerOptions, free_port, scripted_server
 from tests.test_client_fakes import run
 
 READY = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
 TARGET = (20.0, -70.0, 100.0, 10.0, 30.0, -15.0)
-TIME_SCALE = 50.0
-"""Simulated seconds per real second: motions of a few seconds take a few tens of milliseconds."""
-
-
-@asynccontextmanager
-async def reference_server(
-    config: ServerConfig | None = None, *, address: str = "tcp://127.0.0.1:0", contact: str = "PUMA"
-) -> AsyncIterator[str]:
-    async with serve(address, config or ServerConfig(), contact=contact, time_scale=TIME_SCALE) as server:
-        yield server.address
-
-
-Handler = Callable[[ChaosConnection], Awaitable[None]]
-
-
-@asynccontextmanager
-async def scripted_server(handler: Handler) -> AsyncIterator[str]:
-    server = await start_server("tcp://127.0.0.1:0", None, handler)
-    async with server:
-        yield str(server.address)
 
 
 async def send_initial(conn: ChaosConnection) -> None:
@@ -94,54 +68,12 @@ async def segment_reporter(conn: ChaosConnection) -> None:
         pass
 
 
-@contextmanager
-def in_thread(server: AbstractAsyncContextManager[str]) -> Iterator[str]:
-    """Run ``server`` in an event loop of its own thread; yields its address; stops it at the end."""
-    started = threading.Event()
-    loop: asyncio.AbstractEventLoop | None = None
-    stop: asyncio.Event | None = None
-    address: str | None = None
-    failure: BaseException | None = None
-
-    async def main() -> None:
-        nonlocal loop, stop, address, failure
-        stop = asyncio.Event()
-        loop = asyncio.get_running_loop()
-        try:
-            async with server as bound:
-                address = bound
-                started.set()
-                await stop.wait()
-        except BaseException as exc:
-            failure = exc
-            started.set()
-
-    thread = threading.Thread(target=asyncio.run, args=(main(),), name="test server", daemon=True)
-    thread.start()
-    assert started.wait(10), "the server did not start"
-    if failure is not None:
-        raise RuntimeError("the server failed to start") from failure
-    assert loop is not None and stop is not None and address is not None
-    try:
-        yield address
-    finally:
-        loop.call_soon_threadsafe(stop.set)
-        thread.join(10)
-        assert not thread.is_alive(), "the server did not stop"
-
-
-def closed_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 # ------------------------------------------------------------------ the reference server
 
 
-def test_async_with_aconnect_url() -> None:
+def test_async_with_aconnect_url(served: ReferenceServer) -> None:
     async def main() -> None:
-        async with reference_server() as url, manip.aconnect(url) as arm:
+        async with manip.aconnect(served.address) as arm:
             assert isinstance(arm.process.transport, NcpTransport)
             request = arm.make_request("joint-angles")
             joints = await arm.send_request(request)
@@ -165,8 +97,8 @@ def test_async_with_aconnect_url() -> None:
     run(main())
 
 
-def test_blocking_connect_url() -> None:
-    with in_thread(reference_server()) as url, manip.connect(url) as arm:
+def test_blocking_connect_url(served: ReferenceServer) -> None:
+    with manip.connect(served.address) as arm:
         assert arm.joint_angles() == pytest.approx(READY, abs=1e-3)
         arm.enable_power()
         arm.set_speed(0.5)
@@ -175,47 +107,48 @@ def test_blocking_connect_url() -> None:
     assert arm.closed
 
 
-def test_chudp_url() -> None:
+@pytest.mark.parametrize("served", [ServerOptions(link="chudp")], indirect=True)
+def test_chudp_url(served: ReferenceServer) -> None:
     async def main() -> None:
-        async with reference_server(address="chudp://127.0.0.1:0?addr=440") as url:
-            assert url.startswith("chudp://")
-            async with aconnect(url) as arm:
-                assert await arm.joint_angles() == pytest.approx(READY, abs=1e-3)
+        url = served.address
+        assert url.startswith("chudp://")
+        async with aconnect(url) as arm:
+            assert await arm.joint_angles() == pytest.approx(READY, abs=1e-3)
 
     run(main())
 
 
-def test_contact_option_and_url_parameter() -> None:
+@pytest.mark.parametrize("served", [ServerOptions(contact="ARM")], indirect=True)
+def test_contact_option_and_url_parameter(served: ReferenceServer) -> None:
     async def main() -> None:
-        async with reference_server(contact="ARM") as served:
-            assert served.endswith("?contact=ARM")  # the server's address names its contact
-            url = served.partition("?")[0]
-            with pytest.raises(ConnectionLost, match="contact PUMA") as info:
-                await aconnect(url)
-            assert isinstance(info.value.__cause__, ConnectionRefused)
-            async with aconnect(url, contact="ARM") as arm:
-                assert len(await arm.joint_angles()) == 6
-            async with aconnect(url, ClientOptions(contact="ARM")) as arm:
-                assert len(await arm.joint_angles()) == 6
-            async with aconnect(f"{url}?contact=ARM") as arm:
-                assert len(await arm.joint_angles()) == 6
+        assert served.address.endswith("?contact=ARM")  # the server's address names its contact
+        url = served.address.partition("?")[0]
+        with pytest.raises(ConnectionLost, match="contact PUMA") as info:
+            await aconnect(url)
+        assert isinstance(info.value.__cause__, ConnectionRefused)
+        async with aconnect(url, contact="ARM") as arm:
+            assert len(await arm.joint_angles()) == 6
+        async with aconnect(url, ClientOptions(contact="ARM")) as arm:
+            assert len(await arm.joint_angles()) == 6
+        async with aconnect(f"{url}?contact=ARM") as arm:
+            assert len(await arm.joint_angles()) == 6
 
     run(main())
 
 
-def test_cannot_connect_to_a_closed_port() -> None:
+def test_cannot_connect_to_a_free_port() -> None:
     async def main() -> None:
         with pytest.raises(ConnectionLost, match="cannot connect") as info:
-            await aconnect(f"tcp://127.0.0.1:{closed_port()}", ClientOptions(connect_timeout=2.0))
+            await aconnect(f"tcp://127.0.0.1:{free_port()}", ClientOptions(connect_timeout=2.0))
         assert isinstance(info.value.__cause__, LinkError)
 
     run(main())
 
 
-def test_a_fatal_error_fails_the_pipelined_requests_and_aborts() -> None:
+@pytest.mark.parametrize("served", [ServerOptions(faults=(Fault.CALIBRATE_NZI,))], indirect=True)
+def test_a_fatal_error_fails_the_pipelined_requests_and_aborts(served: ReferenceServer) -> None:
     async def main() -> None:
-        config = ServerConfig(faults=FaultSet.of(Fault.CALIBRATE_NZI))
-        async with reference_server(config) as url, aconnect(url) as arm:
+        async with aconnect(served.address) as arm:
             futures = [
                 arm.send_request(arm.make_request(name)) for name in ("calibrate", "here", "joint-angles")
             ]

@@ -227,6 +227,7 @@ def test_filter_a_capture_by_request_name_takes_its_replies_too() -> None:
 
 def test_output_starts_before_the_input_ends() -> None:
     frame = encode_tcp(_pkt(0o201, b""))
+    # A process on purpose (manip-decode, not a server): its output must come while its stdin is open.
     proc = subprocess.Popen(
         [str(Path(sys.executable).with_name("manip-decode")), "--link", "tcp", "--binary", "-"],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

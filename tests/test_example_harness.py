@@ -13,7 +13,6 @@ import struct
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from importlib import resources
 from pathlib import Path
 from types import ModuleType
@@ -306,16 +305,6 @@ def _target(server_url: str) -> str:
     parts = urlsplit(server_url)
     query = "&".join(q for q in [parts.query, "me=0401&addr=0440"] if q)
     return urlunsplit((parts.scheme, parts.netloc, parts.path, query, ""))
-
-
-@pytest.fixture(scope="module")
-def chudp_server_url() -> Iterator[str]:
-    """A default reference server on CHUDP, in a thread, for this module's tests."""
-    from manip.reference_server import ServerConfig
-    from tests.test_client_tcp import in_thread, reference_server
-
-    with in_thread(reference_server(ServerConfig(), address="chudp://127.0.0.1:0?addr=440")) as address:
-        yield address
 
 
 @pytest.mark.parametrize("server", ["reference_server_url", "chudp_server_url"], ids=["tcp", "chudp"])

@@ -13,8 +13,6 @@ from __future__ import annotations
 
 import json
 import shlex
-import socket
-import subprocess
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -27,6 +25,7 @@ from manip.conformance.cli import main
 from manip.conformance.fuzz.generators import GenOptions, generate
 from manip.conformance.fuzz.report import load_schema
 from manip.conformance.fuzz.steps import Request
+from tests.servers import StartServer, free_port
 from tests.test_conform_framework import _validate
 
 FAKE = Path(__file__).with_name("fuzz_fake_server.py")
@@ -43,12 +42,6 @@ def report_of(path: Path) -> dict[str, Any]:
     schema = load_schema()
     _validate(data, schema, schema)
     return data
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 def assert_clean(report: dict[str, Any], inputs: int) -> None:
@@ -117,7 +110,7 @@ def test_a_defect_is_found_shrunk_to_its_input_and_reproduced(mode: str, kind: s
     seed = 5
     classes = ("manip.unknown-opcode",)
     trigger = first_trigger(seed, GenOptions(select=classes))
-    port = free_port()
+    port = free_port()  # the fuzzer launches, and relaunches, the server itself: a fixed port
     url = f"tcp://127.0.0.1:{port}"
     launch = shlex.join([sys.executable, str(FAKE), mode, "--listen", url, "--log-level", "WARNING"])
     path = tmp_path / "fuzz.json"
@@ -141,27 +134,22 @@ def test_a_defect_is_found_shrunk_to_its_input_and_reproduced(mode: str, kind: s
 
 
 @pytest.mark.timeout(90)
-def test_a_traceback_in_the_log_of_a_server_run_elsewhere_is_found(tmp_path: Path) -> None:
+def test_a_traceback_in_the_log_of_a_server_run_elsewhere_is_found(
+    tmp_path: Path, manip_server: StartServer
+) -> None:
     seed = 5
     trigger = first_trigger(seed, GenOptions(select=("manip.unknown-opcode",)))
-    url = f"tcp://127.0.0.1:{free_port()}"
     log = tmp_path / "server.log"
-    with log.open("w") as stderr:
-        server = subprocess.Popen(
-            [sys.executable, str(FAKE), "traceback", "--listen", url, "--log-level", "WARNING"],
-            stdout=subprocess.PIPE,
-            stderr=stderr,
-            text=True,
+    with log.open("w") as stderr:  # a process on purpose: a defective server, its log in a file
+        server = manip_server(
+            "--log-level", "WARNING", command=[sys.executable, str(FAKE), "traceback"], stderr=stderr
         )
-    try:
-        assert server.stdout is not None and server.stdout.readline().startswith("manip-server: listening")
-        path = tmp_path / "fuzz.json"
-        args = ["--class", "manip.unknown-opcode", "--server-log", str(log), "--seed", str(seed)]
-        result = fuzz(url, *args, "--inputs", str(trigger + 20), "--batch", "50", "--json", str(path))
-        report = report_of(path)
-    finally:
-        server.terminate()
-        server.wait(timeout=10)
+    assert server.line.startswith("manip-server: listening")
+    url = server.url
+    path = tmp_path / "fuzz.json"
+    args = ["--class", "manip.unknown-opcode", "--server-log", str(log), "--seed", str(seed)]
+    result = fuzz(url, *args, "--inputs", str(trigger + 20), "--batch", "50", "--json", str(path))
+    report = report_of(path)
     assert result.exit_code == 1, result.output
     (finding,) = report["findings"]
     assert finding["kind"] == "traceback" and "fake defect" in finding["actual"]

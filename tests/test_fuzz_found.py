@@ -20,9 +20,9 @@ import pytest
 from manip.conformance.fuzz.batch import BatchRunner
 from manip.conformance.fuzz.session import Allowance
 from manip.links import open_connection, parse_address
-from manip.reference_server import ServerConfig
-from manip.reference_server.driver import ReferenceServer, serve
+from manip.reference_server.driver import ReferenceServer
 from manip.spec.constants import RequestOp
+from tests.servers import running_server
 
 
 def _server_sockets(server: ReferenceServer) -> list[socket.socket]:
@@ -35,15 +35,14 @@ def _server_sockets(server: ReferenceServer) -> list[socket.socket]:
     return socks
 
 
-def test_an_accepted_tcp_link_has_nodelay() -> None:
+def test_an_accepted_tcp_link_has_nodelay(served: ReferenceServer) -> None:
     async def main() -> list[int]:
-        async with serve("tcp://127.0.0.1:0", ServerConfig()) as server:
-            conn = await open_connection(server.address)
-            try:
-                socks = _server_sockets(server)
-                return [s.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) for s in socks]
-            finally:
-                await conn.close()
+        conn = await open_connection(served.address)
+        try:
+            socks = _server_sockets(served)
+            return [s.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) for s in socks]
+        finally:
+            await conn.close()
 
     flags = asyncio.run(main())
     assert flags, "no accepted TCP link found"
@@ -52,7 +51,8 @@ def test_an_accepted_tcp_link_has_nodelay() -> None:
 
 def test_a_client_resetting_while_replies_are_due_logs_nothing(caplog: pytest.LogCaptureFixture) -> None:
     async def main() -> int:
-        async with serve("tcp://127.0.0.1:0", ServerConfig()) as server:
+        # In the test's own loop, at its own pace: the server has stopped before the log is read.
+        async with running_server(time_scale=1.0) as server:
             runner = BatchRunner(parse_address(server.address), Allowance())
             for _ in range(10):
                 wire = await runner.wire()

@@ -61,18 +61,18 @@ def test_readme_command_line_parses(line: str, tmp_path: Path, monkeypatch: pyte
     assert len(ran) == 1
 
 
-def test_the_readme_client_example_runs(capsys: pytest.CaptureFixture[str]) -> None:
+def test_the_readme_client_example_runs(
+    reference_server_url: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     """The first Python example, as written, against a reference server (its address swapped in)."""
-    from tests.test_client_tcp import in_thread, reference_server
-
     text = (ROOT / "README.md").read_text()
     example = re.findall(r"```python\n(.*?)```", text, re.S)[0]
     assert "manip.connect(" in example and "async def main" in example
-    with in_thread(reference_server()) as address:
-        namespace: dict[str, object] = {}
-        exec(compile(example.replace("tcp://127.0.0.1:42085", address), "README.md", "exec"), namespace)
-        main = namespace["main"]
-        assert callable(main)
-        asyncio.run(main())
+    namespace: dict[str, object] = {}
+    source = example.replace("tcp://127.0.0.1:42085", reference_server_url)
+    exec(compile(source, "README.md", "exec"), namespace)
+    main = namespace["main"]
+    assert callable(main)
+    asyncio.run(main())
     shown = capsys.readouterr().out
     assert "Transform" in shown and ":" in shown  # here()'s transform, then describe()'s alist

@@ -3,11 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import os
-import signal
-import subprocess
-import sys
-import time
 
 import pytest
 from click.testing import CliRunner
@@ -17,6 +12,7 @@ from manip.links import NcpOptions, open_connection
 from manip.reference_server.cli import main
 from manip.reference_server.faults import FAULTS, Fault
 from manip.spec.constants import RequestOp
+from tests.servers import StartServer
 
 PORT_LINE = "manip-server: listening on "
 
@@ -78,31 +74,18 @@ async def _here(url: str) -> tuple[Reply, Reply, int]:
 
 
 @pytest.mark.timeout(30)
-def test_a_server_process_serves_and_stops_on_sigterm() -> None:
-    cmd = [sys.executable, "-m", "manip.reference_server.cli", "--listen", "tcp://127.0.0.1:0"]
-    cmd += ["--chudp", "chudp://127.0.0.1:0?addr=440"]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    try:
-        assert proc.stdout is not None
-        deadline = time.monotonic() + 20.0
-        line = ""
-        while not line.startswith(PORT_LINE):  # readline returns once the server has printed
-            assert time.monotonic() < deadline and proc.poll() is None, "no port line"
-            line = proc.stdout.readline()
-        url = line.removeprefix(PORT_LINE).split()[0]
-        assert url.startswith("tcp://127.0.0.1:") and not url.endswith(":0")
-        assert line.rstrip().endswith("(contact PUMA)")
-        second = proc.stdout.readline()  # one line per address
-        assert second.startswith(f"{PORT_LINE}chudp://127.0.0.1:") and ":0?" not in second
-        initial, here, number = asyncio.run(asyncio.wait_for(_here(url), 10.0))
-        assert initial.request_number == 0o500 and initial.is_empty
-        assert here.request_number == number and len(_tuple(here.values["transform"])) == 12
-        proc.send_signal(signal.SIGTERM)
-        assert proc.wait(timeout=10.0) == 0
-        _, err = proc.communicate(timeout=5.0)
-        assert "here (201)" in err  # the request's log line
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=5.0)
+def test_a_server_process_serves_and_stops_on_sigterm(manip_server: StartServer) -> None:
+    # A process on purpose: the command's own start-up lines, log and exit on SIGTERM are under test.
+    server = manip_server("--chudp", "chudp://127.0.0.1:0?addr=440")
+    line, url = server.line, server.url
+    assert line.startswith(PORT_LINE) and line.removeprefix(PORT_LINE).split()[0] == url
+    assert url.startswith("tcp://127.0.0.1:") and not url.endswith(":0")
+    assert line.rstrip().endswith("(contact PUMA)")
+    assert server.proc.stdout is not None
+    second = server.proc.stdout.readline()  # one line per address
+    assert second.startswith(f"{PORT_LINE}chudp://127.0.0.1:") and ":0?" not in second
+    initial, here, number = asyncio.run(asyncio.wait_for(_here(url), 10.0))
+    assert initial.request_number == 0o500 and initial.is_empty
+    assert here.request_number == number and len(_tuple(here.values["transform"])) == 12
+    _, err = server.stop(timeout=10.0)  # exit status 0
+    assert "here (201)" in err  # the request's log line

@@ -11,16 +11,12 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import os
 import re
 import resource
 import signal
 import socket
 import subprocess
-import sys
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import Any
 
 import pytest
@@ -29,10 +25,12 @@ from click.testing import CliRunner
 from manip.links import AccessList, parse_address
 from manip.reference_client import aconnect
 from manip.reference_server import cli
+from tests.servers import StartServer
 
-PORT_LINE = "manip-server: listening on "
 SERVER_FDS = 1024
 FLOOD = 1100
+# A process of its own on purpose: the server runs under its own descriptor limit, and the stats line
+# answers SIGUSR1 and comes at the exit on SIGTERM.
 STATS = re.compile(
     r"^manip-server: stats: links accepted (\d+), refused (.*), idle-closed (.*), over-limit (.*), "
     r"accept errors (\d+), bad frames (.*)$",
@@ -56,39 +54,6 @@ def _flood_size() -> int:
             pytest.skip(f"this process may open {room} sockets, not more than the server's {SERVER_FDS}")
         return room  # still enough to exhaust the server's descriptors
     return FLOOD
-
-
-@contextmanager
-def server_process(*args: str, limit_fds: bool = False) -> Iterator[tuple[subprocess.Popen[str], str]]:
-    cmd = [sys.executable, "-m", "manip.reference_server.cli", "--listen", "tcp://127.0.0.1:0", *args]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen(
-        cmd,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-        preexec_fn=_limit_descriptors if limit_fds else None,  # noqa: PLW1509 - only sets a limit
-    )
-    try:
-        assert proc.stdout is not None
-        deadline = time.monotonic() + 20.0
-        line = ""
-        while not line.startswith(PORT_LINE):
-            assert time.monotonic() < deadline and proc.poll() is None, "no port line"
-            line = proc.stdout.readline()
-        yield proc, line.removeprefix(PORT_LINE).split()[0]
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=5.0)
-
-
-def stop(proc: subprocess.Popen[str]) -> tuple[str, str]:
-    proc.send_signal(signal.SIGTERM)
-    out, err = proc.communicate(timeout=20.0)
-    assert proc.returncode == 0, err
-    return out, err
 
 
 def flood(proc: subprocess.Popen[str], port: int, count: int) -> list[socket.socket]:
@@ -141,18 +106,25 @@ def total(field: str) -> int:
 # ------------------------------------------------------------------------------ the soak scenario
 
 
-@pytest.mark.timeout(90)
-def test_idle_sockets_beyond_the_descriptor_limit_do_not_lock_a_client_out() -> None:
+def served_through_a_flood(manip_server: StartServer, *args: str) -> tuple[str, str, int]:
+    """Start the server under the descriptor limit, flood it, and a client must still be served within
+    2 s; returns what the server wrote to stdout and stderr when stopped, and the flood's size."""
     count = _flood_size()
-    with server_process("--stats", limit_fds=True) as (proc, url):
-        socks = flood(proc, int(url.rsplit(":", 1)[1]), count)
-        try:
-            took = asyncio.run(asyncio.wait_for(served_here(url), 10.0))
-            assert took < 2.0, f"served after {took:.2f} s"
-        finally:
-            for sock in socks:
-                sock.close()
-        out, err = stop(proc)
+    server = manip_server(*args, limit=_limit_descriptors)
+    socks = flood(server.proc, int(server.url.rsplit(":", 1)[1]), count)
+    try:
+        took = asyncio.run(asyncio.wait_for(served_here(server.url), 10.0))
+        assert took < 2.0, f"served after {took:.2f} s"
+    finally:
+        for sock in socks:
+            sock.close()
+    out, err = server.stop()
+    return out, err, count
+
+
+@pytest.mark.timeout(90)
+def test_idle_sockets_beyond_the_descriptor_limit_do_not_lock_a_client_out(manip_server: StartServer) -> None:
+    out, err, count = served_through_a_flood(manip_server, "--stats")
     assert "Traceback" not in err and "Errno 24" not in err
     assert len(err.splitlines()) < 40, err  # rate limited: no line per socket
     stats = parse_stats(out)
@@ -162,18 +134,9 @@ def test_idle_sockets_beyond_the_descriptor_limit_do_not_lock_a_client_out() -> 
 
 
 @pytest.mark.timeout(90)
-def test_out_of_descriptors_the_server_backs_off_without_tracebacks() -> None:
-    count = _flood_size()
+def test_out_of_descriptors_the_server_backs_off_without_tracebacks(manip_server: StartServer) -> None:
     args = ("--stats", "--max-links", "0", "--accept-backoff", "0.2")  # no limit but the descriptors
-    with server_process(*args, limit_fds=True) as (proc, url):
-        socks = flood(proc, int(url.rsplit(":", 1)[1]), count)
-        try:
-            took = asyncio.run(asyncio.wait_for(served_here(url), 10.0))
-            assert took < 2.0, f"served after {took:.2f} s"
-        finally:
-            for sock in socks:
-                sock.close()
-        out, err = stop(proc)
+    out, err, _ = served_through_a_flood(manip_server, *args)
     assert "Traceback" not in err
     failures = [line for line in err.splitlines() if "accepting a TCP connection failed" in line]
     assert 1 <= len(failures) <= 2, err  # at most once per 10 s interval (the test takes a few)
@@ -197,24 +160,26 @@ def _rfc_frame(me: int) -> bytes:
 
 
 @pytest.mark.timeout(60)
-def test_stats_line_on_sigusr1_and_at_exit_counts_every_refusal_and_close() -> None:
-    args = ("--stats", "--frame-timeout", "0.3", "--allow", "127.0.0.0/8", "--allow", "chaos:0401")
-    with server_process(*args) as (proc, url):
-        port = int(url.rsplit(":", 1)[1])
-        silent = socket.create_connection(("127.0.0.1", port))
-        stranger = socket.create_connection(("127.0.0.1", port))
-        stranger.sendall(_rfc_frame(0o402))  # refused by its Chaos address
-        garbage = socket.create_connection(("127.0.0.1", port))
-        garbage.sendall(b"\x00\x03garbage")  # framing lost
-        assert asyncio.run(asyncio.wait_for(served_here(url), 10.0)) < 5.0
-        time.sleep(0.8)
-        assert proc.stdout is not None
-        proc.send_signal(signal.SIGUSR1)
-        live = parse_stats(proc.stdout.readline())
-        assert proc.poll() is None  # SIGUSR1 prints, it does not stop the server
-        for sock in (silent, stranger, garbage):
-            sock.close()
-        out, err = stop(proc)
+def test_stats_line_on_sigusr1_and_at_exit_counts_every_refusal_and_close(manip_server: StartServer) -> None:
+    server = manip_server(
+        "--stats", "--frame-timeout", "0.3", "--allow", "127.0.0.0/8", "--allow", "chaos:0401"
+    )
+    proc, url = server.proc, server.url
+    port = int(url.rsplit(":", 1)[1])
+    silent = socket.create_connection(("127.0.0.1", port))
+    stranger = socket.create_connection(("127.0.0.1", port))
+    stranger.sendall(_rfc_frame(0o402))  # refused by its Chaos address
+    garbage = socket.create_connection(("127.0.0.1", port))
+    garbage.sendall(b"\x00\x03garbage")  # framing lost
+    assert asyncio.run(asyncio.wait_for(served_here(url), 10.0)) < 5.0
+    time.sleep(0.8)
+    assert proc.stdout is not None
+    proc.send_signal(signal.SIGUSR1)
+    live = parse_stats(proc.stdout.readline())
+    assert proc.poll() is None  # SIGUSR1 prints, it does not stop the server
+    for sock in (silent, stranger, garbage):
+        sock.close()
+    out, err = server.stop()
     assert live["refused"] == "1 (chaos-host 1)"
     assert live["idle-closed"].startswith("1 (no frame 1)")
     assert live["bad frames"] == "1 (framing 1)"
@@ -225,9 +190,8 @@ def test_stats_line_on_sigusr1_and_at_exit_counts_every_refusal_and_close() -> N
     assert "Traceback" not in err
 
 
-def test_without_stats_the_exit_prints_no_stats_line() -> None:
-    with server_process() as (proc, _url):
-        out, _err = stop(proc)
+def test_without_stats_the_exit_prints_no_stats_line(manip_server: StartServer) -> None:
+    out, _err = manip_server().stop()
     assert "stats:" not in out
 
 

@@ -4,11 +4,7 @@
 from __future__ import annotations
 
 import asyncio
-import os
 import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +18,7 @@ from manip.reference_client import ClientOptions, aconnect
 from manip.reference_server import ServerConfig, serve
 from manip.reference_server.cli import main
 from manip.spec.constants import ChaosOp, RequestOp, ServerOp
+from tests.servers import StartServer
 
 TARGET = (20.0, -70.0, 100.0, 10.0, 30.0, -15.0)
 PORT_LINE = "manip-server: listening on "
@@ -73,6 +70,7 @@ def _check_session(session: Session, segment: int, pose: Transform) -> None:
 
 
 def test_serve_with_a_tap_records_every_connection_on_every_address(tmp_path: Path) -> None:
+    # serve() itself, in the test's loop: its wrap_link= and extra_addresses= are what is tested.
     path = tmp_path / "server.mcap"
 
     async def run() -> list[tuple[int, Transform]]:
@@ -129,45 +127,28 @@ def test_an_unwritable_record_file_exits_1_before_listening(tmp_path: Path) -> N
     assert PORT_LINE not in result.output
 
 
-def _start_server(args: list[str]) -> tuple[subprocess.Popen[str], str]:
-    cmd = [sys.executable, "-m", "manip.reference_server.cli", "--listen", "tcp://127.0.0.1:0", *args]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    assert proc.stdout is not None
-    deadline = time.monotonic() + 20.0
-    line = ""
-    while not line.startswith(PORT_LINE):
-        if time.monotonic() > deadline or proc.poll() is not None:
-            proc.kill()
-            _, err = proc.communicate(timeout=5.0)
-            raise AssertionError(f"manip-server did not start: {err}")
-        line = proc.stdout.readline()
-    return proc, line.removeprefix(PORT_LINE).split()[0]
-
-
 @pytest.mark.timeout(40)
-def test_manip_server_record_survives_sigterm_with_a_client_connected(tmp_path: Path) -> None:
+def test_manip_server_record_survives_sigterm_with_a_client_connected(
+    tmp_path: Path, manip_server: StartServer
+) -> None:
+    # A process on purpose: the command's --record and its exit on SIGTERM are under test.
     path = tmp_path / "run.mcap"
     args = ["--record", str(path), "--seed", "5", "--time-scale", "50", "--log-level", "WARNING"]
-    proc, url = _start_server(args)
-    try:
+    server = manip_server(*args)
+    proc, url = server.proc, server.url
 
-        async def run() -> tuple[int, Transform]:
-            segment, pose = await _client_session(url)
-            # A second client is still connected when the server is stopped: its CLS must be recorded.
-            async with aconnect(url) as arm:
-                await arm.here()
-                proc.send_signal(signal.SIGTERM)
-                assert await asyncio.to_thread(proc.wait, 10.0) == 0
-            return segment, pose
+    async def run() -> tuple[int, Transform]:
+        segment, pose = await _client_session(url)
+        # A second client is still connected when the server is stopped: its CLS must be recorded.
+        async with aconnect(url) as arm:
+            await arm.here()
+            proc.send_signal(signal.SIGTERM)
+            assert await asyncio.to_thread(proc.wait, 10.0) == 0
+        return segment, pose
 
-        segment, pose = asyncio.run(asyncio.wait_for(run(), 30.0))
-        _, err = proc.communicate(timeout=5.0)
-        assert "Traceback" not in err
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=5.0)
+    segment, pose = asyncio.run(asyncio.wait_for(run(), 30.0))
+    _, err = proc.communicate(timeout=5.0)
+    assert "Traceback" not in err
 
     capture = read_capture(path)  # a truncated file would raise CaptureTruncatedError
     meta = capture.metadata["manip.capture"]

@@ -4,8 +4,6 @@ simulated surface, calibrate-wrist, and manip-cougar served over TCP to a manip-
 from __future__ import annotations
 
 import asyncio
-import subprocess
-import sys
 from typing import Any
 
 import numpy as np
@@ -21,6 +19,7 @@ from manip.reference_server.cougar_port import SimPort
 from manip.reference_server.cougar_wrist import CougarWrist
 from manip.spec.constants import AsyncCondition
 from tests.cougar_fake import WristClient
+from tests.servers import MANIP_COUGAR, StartServer
 
 START = PUMA600.ready
 GOAL = (0.0, -40.0, 90.0, 0.0, 0.0, 0.0)
@@ -184,60 +183,13 @@ def test_calibrate_wrist_recovers_the_gauge_offsets() -> None:
 
 
 # ------------------------------------------------------------------------- manip-cougar over TCP
-def _start(args: list[str], prefix: str) -> tuple[subprocess.Popen[str], str]:
-    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert proc.stdout is not None
-    line = proc.stdout.readline()
-    if not line.startswith(prefix):
-        proc.kill()
-        raise AssertionError(f"{args[0]}: {line!r} {proc.stderr.read() if proc.stderr else ''}")
-    return proc, line.split()[3]
-
-
-def _stop(proc: subprocess.Popen[str]) -> None:
-    proc.terminate()
-    try:
-        proc.wait(timeout=5)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(timeout=5)
-
-
-def test_manip_cougar_serves_a_manip_server() -> None:
-    cougar, address = _start(
-        [
-            sys.executable,
-            "-c",
-            "from manip.cougar.cli import main; main()",
-            "--listen",
-            "tcp://127.0.0.1:0",
-            "--seed",
-            "3",
-        ],
-        "manip-cougar: listening on",
-    )
-    try:
-        server, server_address = _start(
-            [
-                sys.executable,
-                "-c",
-                "from manip.reference_server.cli import main; main()",
-                "--listen",
-                "tcp://127.0.0.1:0",
-                "--powered",
-                "--cougar",
-                address,
-                "--log-level",
-                "WARNING",
-            ],
-            "manip-server: listening on",
-        )
-        try:
-            asyncio.run(_use_server(server_address))
-        finally:
-            _stop(server)
-    finally:
-        _stop(cougar)
+def test_manip_cougar_serves_a_manip_server(manip_server: StartServer) -> None:
+    # Processes on purpose: the two commands, manip-server --cougar linked to manip-cougar, are under test.
+    cougar = manip_server("--seed", "3", command=MANIP_COUGAR)
+    assert cougar.line.startswith("manip-cougar: listening on")
+    server = manip_server("--powered", "--cougar", cougar.url, "--log-level", "WARNING")
+    assert server.line.startswith("manip-server: listening on")
+    asyncio.run(_use_server(server.url))
 
 
 async def _use_server(address: str) -> None:
