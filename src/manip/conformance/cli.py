@@ -38,6 +38,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from manip.commandline import configure_logging, version_option
 from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.fuzz.cli import fuzz_command
 from manip.conformance.output.console import make_console, progress_bar
@@ -102,8 +103,10 @@ def _number_option(name: str, kind: click.ParamType[Any, Any], default: float, h
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@version_option("manip-conform")
 def main() -> None:
     """Conformance suite for servers of the Chaos manipulator protocol (MIT Puma/Cougar, 1985)."""
+    configure_logging()
 
 
 # ----------------------------------------------------------------------------------------------- run

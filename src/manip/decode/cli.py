@@ -23,6 +23,7 @@ from manip.codecs.cougar import WordStream
 from manip.codecs.errors import DecodeError
 from manip.codecs.framing import FRAMINGS
 from manip.codecs.messages import request_op
+from manip.commandline import configure_logging, version_option
 from manip.decode.describe import (
     Node,
     ReadAs,
@@ -271,7 +272,7 @@ def _error_node(frame: Frame, err: DecodeError, link: str) -> Node:
     help="Only packets with opcode=OP (octal, or a request, server or Chaos opcode name; in a capture a "
     "request name also selects its replies) or, in a capture, of connection conn=N. Repeatable.",
 )
-@click.version_option(package_name="manip")
+@version_option("manip-decode")
 def main(
     source: str | None,
     link: str,
@@ -287,6 +288,7 @@ def main(
     filter_terms: tuple[str, ...],
 ) -> None:
     """Decode SOURCE: a hex string, a file, or - for standard input (the default)."""
+    configure_logging()
     filters = _parse_filters(filter_terms)
     if ports and pcap is None:
         raise click.UsageError("--port goes with --pcap")

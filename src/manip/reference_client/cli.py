@@ -40,6 +40,7 @@ import click
 from manip.arm.oat import transform_from_xyzoat
 from manip.arm.transform import Transform
 from manip.codecs.messages import AsyncResponse
+from manip.commandline import configure_logging, version_option
 from manip.reference_client.cli_output import (
     async_record,
     async_text,
@@ -245,6 +246,7 @@ class _ClientGroup(click.Group):
 @click.group(cls=_ClientGroup, context_settings={"help_option_names": ["-h", "--help"]}, help=HELP)
 @click.argument("url")
 @_common_options
+@version_option(PROG)
 @click.pass_context
 def main(
     ctx: click.Context,
@@ -254,6 +256,7 @@ def main(
     contact: str | None,
     record: str | None,
 ) -> None:
+    configure_logging()
     ctx.obj = Settings(
         url,
         bool(as_json),
