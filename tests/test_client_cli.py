@@ -62,7 +62,7 @@ def failed(code: int, *args: str) -> str:
 def test_describe(url: str) -> None:
     text = ok(url, "describe")
     assert "degrees-of-freedom  6" in text
-    assert "200 201 202" in text  # opcodes in octal
+    assert "0200 0201 0202" in text  # opcodes in octal
     record = ok_json(url, "describe")
     assert record["degrees-of-freedom"] == 6
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -17,6 +18,8 @@ from manip.links import NcpOptions, open_connection
 from manip.reference_server.cli import main
 from manip.reference_server.faults import FAULTS, Fault
 from manip.spec.constants import RequestOp
+
+LOG_LINE = r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}[+-]\d\d:\d\d (DEBUG|INFO|WARNING|ERROR) manip[.\w]*: "
 
 PORT_LINE = "manip-server: listening on "
 
@@ -101,7 +104,9 @@ def test_a_server_process_serves_and_stops_on_sigterm() -> None:
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=10.0) == 0
         _, err = proc.communicate(timeout=5.0)
-        assert "here (201)" in err  # the request's log line
+        assert "here (0201)" in err  # the request's log line
+        for log_line in err.splitlines():  # the common log format: local ISO 8601 time, level, logger
+            assert re.match(LOG_LINE, log_line), log_line
     finally:
         if proc.poll() is None:
             proc.kill()

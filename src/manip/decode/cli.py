@@ -30,13 +30,13 @@ from manip.decode.describe import (
     describe_body,
     describe_packet,
     describe_words,
-    octal,
 )
 from manip.decode.frames import LAYOUTS, EmptyInputError, Frame, Layout, frames
 from manip.decode.render import render_hexdump, render_tree
 from manip.decode.source import SourceError, byte_blocks, open_source, read_text, require_file
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp
+from manip.spec.notation import octal
 
 _SERVER_NAMES: Final = {s.name: s.opcode for s in SPEC.server_opcodes.values()}
 _JSON: Final = json.JSONEncoder(separators=(",", ":")).encode

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import asyncio
 import functools
+import logging
 import sys
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -256,7 +257,7 @@ def main(
     contact: str | None,
     record: str | None,
 ) -> None:
-    configure_logging()
+    configure_logging(logging.ERROR)  # a failure is this command's one line: the library's warnings repeat it
     ctx.obj = Settings(
         url,
         bool(as_json),

@@ -23,6 +23,7 @@ from manip.reference_client.errors import (
     OutOfSequenceResponse,
     ServerError,
 )
+from manip.spec import notation
 from manip.spec.constants import AsyncCondition
 
 JSONValue = Any
@@ -101,7 +102,7 @@ def lisp_text(value: LispValue, *, octal: bool = False) -> str:
         case bool():
             return str(value)
         case int():
-            return f"{value:o}" if octal else str(value)
+            return notation.octal(value) if octal else str(value)
         case float():
             return f"{value:g}"
         case str():
@@ -156,7 +157,7 @@ def async_text(response: AsyncResponse) -> str:
         return f"guard {response.word3} hit ({effect})"
     return (
         f"asynchronous response, condition {response.condition}: "
-        f"words {response.word2:#o} {response.word3:#o}"
+        f"words {notation.octal_words((response.word2, response.word3))}"
     )
 
 

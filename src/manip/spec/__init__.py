@@ -21,6 +21,7 @@ from manip.spec.model import (
     ServerOpcode,
     Severity,
 )
+from manip.spec.notation import octal, octal_words
 
 SPEC: Spec = load_spec()
 
@@ -44,4 +45,6 @@ __all__ = [
     "Spec",
     "SpecError",
     "load_spec",
+    "octal",
+    "octal_words",
 ]

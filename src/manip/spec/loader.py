@@ -33,6 +33,7 @@ from manip.spec.model import (
     ServerOpcode,
     Severity,
 )
+from manip.spec.notation import octal
 
 K = TypeVar("K")
 V = TypeVar("V")
@@ -72,7 +73,7 @@ class Spec:
         try:
             return self.requests[key] if isinstance(key, int) else self.requests_by_name[key]
         except KeyError:
-            shown = f"{key:#o}" if isinstance(key, int) else repr(key)
+            shown = octal(key) if isinstance(key, int) else repr(key)
             raise KeyError(f"no request opcode {shown} in the spec") from None
 
     def clause(self, clause_id: str) -> Clause:
@@ -142,7 +143,7 @@ def _check(spec: Spec) -> None:
                 raise SpecError(f"Cougar command {cmd.name} names unknown response {resp!r}")
     for req in spec.requests.values():
         if not 0o200 <= req.opcode <= 0o277:
-            raise SpecError(f"request {req.name} opcode {req.opcode:o} outside 0200-0277")
+            raise SpecError(f"request {req.name} opcode {octal(req.opcode)} outside 0200-0277")
         if req.cougar and req.cougar not in {c.name for c in spec.cougar_commands.values()}:
             raise SpecError(f"request {req.name} names unknown Cougar command {req.cougar!r}")
         if req.response.kind in ("done", "segment") and req.response.data.fields:
