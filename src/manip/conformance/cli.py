@@ -63,6 +63,7 @@ from manip.conformance.suite.selection import PatternError, PatternSet, match_id
 from manip.conformance.suite.stability import instability, repeat_seeds
 from manip.links import AddressError, parse_address, virtual_clock
 from manip.reference_server import FaultSet, ServerConfig
+from manip.spec import SPEC, UnknownClauseError
 
 __all__ = ["main"]
 
@@ -122,6 +123,13 @@ def main() -> None:
     help="Run only cases matching PATTERN (glob per dot component, ** any depth; @FILE reads a list).",
 )
 @click.option("--skip", "skip", multiple=True, metavar="PATTERN", help="Leave out cases matching PATTERN.")
+@click.option(
+    "--clause",
+    "clauses",
+    multiple=True,
+    metavar="ID",
+    help="Run the cases that check clause ID (repeatable; with --select, a case either selects runs).",
+)
 @click.option(
     "--known-failing",
     "known_failing",
@@ -220,6 +228,7 @@ def run(
     host: str | None,
     select: tuple[str, ...],
     skip: tuple[str, ...],
+    clauses: tuple[str, ...],
     known_failing: tuple[str, ...],
     strict: bool,
     seed: int | None,
@@ -244,6 +253,7 @@ def run(
     on a free loopback port and the suite runs against it.  With --cougar the Cougar cases run against
     a Cougar over the emulated DRV-11J link instead."""
     console = make_console()
+    select = (*select, *cases_of_clauses(clauses, cougar=cougar is not None))
     try:
         select_set = PatternSet.of(select, "--select")
         skip_set = PatternSet.of(skip, "--skip")
@@ -426,6 +436,26 @@ def check_selection(
     options = [f"--select {p.text}" for p in select.patterns] + [f"--skip {p.text}" for p in skip.patterns]
     verb = "leave" if len(options) > 1 else "leaves"
     raise click.UsageError(f"{' '.join(options)} {verb} no case to run")
+
+
+def cases_of_clauses(clauses: Sequence[str], *, cougar: bool = False) -> list[str]:
+    """The ids of the cases (of a Cougar run, or of a server run) that check any of ``clauses``; a usage
+    error names an id the spec does not have, with close matches, or a clause no case checks."""
+    cases = cougar_cases(all_cases(), cougar=cougar)
+    ids: list[str] = []
+    for clause in clauses:
+        try:
+            SPEC.clause(clause)
+        except UnknownClauseError as exc:
+            raise click.UsageError(f"--clause: {exc}") from None
+        checking = [c.id for c in cases if clause in c.clauses]
+        if not checking:
+            run = "a Cougar run" if cougar else "a server run"
+            raise click.UsageError(
+                f"--clause {clause}: no case of {run} checks it (manip-conform coverage shows which do)"
+            )
+        ids += checking
+    return ids
 
 
 def close_case_ids(pattern: str, ids: Sequence[str], limit: int = 3) -> list[str]:

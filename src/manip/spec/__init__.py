@@ -4,7 +4,7 @@
 """
 
 from manip.spec.constants import RequestName
-from manip.spec.loader import Spec, SpecError, load_spec
+from manip.spec.loader import Spec, SpecError, UnknownClauseError, load_spec
 from manip.spec.model import (
     AsyncCode,
     ChaosOpcode,
@@ -44,6 +44,7 @@ __all__ = [
     "Severity",
     "Spec",
     "SpecError",
+    "UnknownClauseError",
     "load_spec",
     "octal",
     "octal_words",

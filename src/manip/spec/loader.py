@@ -7,8 +7,9 @@ makes loading fail with a message that says which file and entry are wrong.
 
 from __future__ import annotations
 
+import difflib
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from functools import cache
 from importlib import resources
@@ -45,6 +46,26 @@ class SpecError(Exception):
     """The spec data files are inconsistent."""
 
 
+class UnknownClauseError(KeyError):
+    """A clause id the spec does not have; ``close`` are the ids that look like it (closest first).
+
+    A :class:`KeyError`, as a missing mapping key is, but its text is the message itself."""
+
+    def __init__(self, clause_id: str, close: Iterable[str]) -> None:
+        self.clause_id = clause_id
+        self.close = tuple(close)
+        hint = f"; close matches: {', '.join(self.close)}" if self.close else " (docs/spec.md lists them)"
+        super().__init__(f"no clause {clause_id!r} in the spec{hint}")
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+def close_clause_ids(clause_id: str, known: Iterable[str], limit: int = 3) -> list[str]:
+    """Ids among ``known`` that look like ``clause_id`` (a typo, a word left out), the closest first."""
+    return difflib.get_close_matches(clause_id, list(known), n=limit, cutoff=0.6)
+
+
 @dataclass(frozen=True)
 class Spec:
     """Everything manip knows about the protocols, as read from ``manip/spec/data``."""
@@ -77,7 +98,16 @@ class Spec:
             raise KeyError(f"no request opcode {shown} in the spec") from None
 
     def clause(self, clause_id: str) -> Clause:
-        return self.clauses[clause_id]
+        """The clause ``clause_id``; :class:`UnknownClauseError` (a KeyError) naming close matches."""
+        try:
+            return self.clauses[clause_id]
+        except KeyError:
+            raise UnknownClauseError(clause_id, close_clause_ids(clause_id, self.clauses)) from None
+
+    def check_clause_ids(self, clause_ids: Iterable[str]) -> None:
+        """Raise :class:`UnknownClauseError` for the first id the spec does not have."""
+        for clause_id in clause_ids:
+            self.clause(clause_id)
 
 
 def _read(name: str) -> dict[str, Any]:
