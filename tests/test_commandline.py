@@ -127,5 +127,5 @@ def test_what_people_read_writes_octal_one_way(caplog: pytest.LogCaptureFixture,
     }
     for where, text in texts.items():
         assert "0277" in text or "0201" in text or "0200" in text, f"{where} shows no opcode: {text[:400]}"
-        assert not PYTHON_OCTAL.search(text), f"{where}: {text[max(0, text.find('0o') - 80):][:200]}"
+        assert not PYTHON_OCTAL.search(text), f"{where}: {text[max(0, text.find('0o') - 80) :][:200]}"
         assert not HEX_INDEX.search(text), where

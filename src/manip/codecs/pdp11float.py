@@ -360,6 +360,7 @@ _OVER_T: Final = (_F64_TO_F_BIAS + 256) << 23  # ... of 2^127, the first value p
 def _as_u32(buf: bytes | bytearray | memoryview | npt.NDArray[Any]) -> npt.NDArray[np.uint32]:
     """The wire ``uint32`` values of a byte buffer, a uint8 array, or a uint32 array taken as values."""
     import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+
     if isinstance(buf, np.ndarray):
         if buf.dtype.kind == "u" and buf.dtype.itemsize == 4:
             return buf.reshape(-1).astype(np.uint32, copy=False)
@@ -388,6 +389,7 @@ def unpack_f_array(
     The first offending element raises the scalar error with ``path="[i]"`` and ``offset=4*i``.
     """
     import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+
     _check_decode(dirty_zero, reserved)
     if not isinstance(buf, np.ndarray) and dirty_zero == "zero" and len(buf) <= _SMALL_BYTES:
         small = _unpack_small(buf)
@@ -432,6 +434,7 @@ _SMALL_WORDS: Final = [struct.Struct(f"<{n}H") for n in range(_SMALL_BYTES // 2 
 def _unpack_small(buf: bytes | bytearray | memoryview) -> npt.NDArray[np.float64] | None:
     """Default-dirty-zero decode of up to 64 floats, or None when the vectorised path must decide."""
     import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+
     size = len(buf)
     if size & 3:
         return None
@@ -469,6 +472,7 @@ def _float64_values(
     index exactly as the scalar encoder would, after any value error that comes before it.
     """
     import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+
     if isinstance(values, np.ndarray):
         flat = values.reshape(-1)
         if flat.dtype.kind != "f":
@@ -503,6 +507,7 @@ def pack_f_array(
     offending element raises the scalar error with ``path="[i]"`` and ``offset=4*i``.
     """
     import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+
     _check_encode(rounding, underflow)
     if (
         rounding == "half-even"
@@ -531,6 +536,7 @@ def pack_f_array(
 
 def _pack_float64(x: npt.NDArray[np.float64], rounding: str, underflow: str) -> bytes:
     import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+
     b = np.ascontiguousarray(x).view(np.uint64)
     mag = b & 0x7FFFFFFFFFFFFFFF
     if rounding == "half-even":
