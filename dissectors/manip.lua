@@ -90,9 +90,9 @@ local SEVERITIES = {
 
 local ERROR_CODES = {
   ["NAP"] = "No arm power",
-  ["AWA"] = "Arm motion was aborted; no further motion until a reset",
-  ["JOR"] = "Joint out of range",
-  ["TOR"] = "Solution of a transform gave out-of-range joints (or none)",
+  ["AWA"] = "Arm motion was aborted; no further motion until a reset (erratum awa-scope)",
+  ["JOR"] = "Joint out of range (a request carrying joint angles)",
+  ["TOR"] = "Solution of a transform resulted in out-of-range joints, or in none (out of reach)",
   ["NZI"] = "No zero index found on joint(s)",
   ["UOP"] = "Unknown opcode",
   ["BDL"] = "Bad data length for this opcode",

@@ -32,6 +32,7 @@ from manip.arm.trajectory import PUMA_LIMITS, TICK, Scheme
 from manip.arm.transform import Transform
 from manip.codecs.messages import ErrorReply, Reply, decode_server_packet, encode_request
 from manip.reference_server import ServerConfig, ServerSession
+from manip.reference_server.faults import FaultSet
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
 
@@ -268,6 +269,47 @@ def test_straight_line_out_of_the_workspace_is_refused_at_once() -> None:
     assert info.value.code == "TOR" and not arm.moving and arm.next_segment == 1
     with pytest.raises(Refused, match="TOR"):
         arm.move_to(far, 0.0)
+
+
+def test_transforms_beyond_the_limits_are_tor_and_joint_angles_jor() -> None:
+    """Erratum transform-refusals: a transform whose every solution breaks a limit (joint 3 past its
+    upper limit: no second configuration helps) is TOR with the joint, on the arm and on the wire, while
+    the same joint angles asked for directly are JOR; the fault swap-tor-jor exchanges the two codes."""
+    q = list(READY)
+    q[2] = PUMA600.limits.upper[2] + 10.0
+    pose = forward(q)
+    arm = _arm()
+    for refuse in (lambda: arm.solve(pose, READY), lambda: arm.move_to(pose, 0.0)):
+        with pytest.raises(Refused) as info:
+            refuse()
+        assert info.value.code == "TOR" and info.value.joints == (3,)
+    with pytest.raises(Refused) as info:
+        arm.move_joints(q, 0.0)
+    assert info.value.code == "JOR" and info.value.joints == (3,)
+    assert not arm.moving and arm.next_segment == 1
+
+    def codes(faults: FaultSet) -> list[tuple[str, str]]:
+        session = ServerSession(ServerConfig(powered_at_open=True, faults=faults))
+        session.on_open(0.0, 1)
+        out = []
+        for number, (op, values) in enumerate(
+            [
+                ("solve-forwards", {"transform": pose.to_floats(), "current": READY}),
+                ("set-joint-angles", {"joints": q}),
+            ],
+            start=2,
+        ):
+            (packet,) = session.on_request(
+                0.0, SPEC.request(op).opcode, number, encode_request(op, **values)
+            ).packets
+            reply = decode_server_packet(packet.opcode, packet.data, SPEC.request(op).opcode)
+            assert isinstance(reply, ErrorReply) and reply.error.args == (0b100,)
+            out.append((reply.error.code, reply.error.render()))
+        return out
+
+    (tor, tor_text), (jor, _) = codes(FaultSet())
+    assert (tor, jor) == ("TOR", "JOR") and tor_text.endswith("puts joint(s) 3 out of range")
+    assert [c for c, _ in codes(FaultSet.parse(["swap-tor-jor"]))] == ["JOR", "TOR"]
 
 
 def test_configuration_preference_picks_the_solution() -> None:
@@ -713,7 +755,7 @@ def test_a_line_through_a_singularity_is_refused_at_every_speed() -> None:
         arm.set_speed(speed)
         with pytest.raises(Refused) as info:
             arm.move_increment((0.0, 0.0, 0.0, 0.0, 0.0, 30.0), 0.0, straight=True)
-        assert info.value.code in ("TOR", "JOR")
+        assert info.value.code == "TOR"
 
 
 def test_a_fast_joint_near_the_elbow_singularity_is_followed_not_refused() -> None:

@@ -269,15 +269,24 @@ def test_a_fatal_error_ends_the_pair_of_the_packet_it_quotes() -> None:
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.sampled_from(sorted(o.name for o in SPEC.requests.values())), min_size=1, max_size=12))
-def test_every_request_pairs_with_its_reply_by_number(names: list[str]) -> None:
+@given(
+    st.lists(
+        st.tuples(st.sampled_from(sorted(o.name for o in SPEC.requests.values())), st.integers(0, 3)),
+        min_size=1,
+        max_size=12,
+    )
+)
+def test_every_request_pairs_with_its_answer_by_position(requests: list[tuple[str, int]]) -> None:
+    """Erratum capture-pairing: answers pair in request order; the echoed number is shown, never used to
+    re-pair (an echo of another outstanding request's number included)."""
     ann = Annotator()
     pairs = []
-    for i, name in enumerate(names):
+    for i, (name, _) in enumerate(requests):
         op = request_op(name)
         req = ann.annotate(1, "c2s", c2s(op.opcode, 10 + i, b""))
         pairs.append(req.pair)
-    for i in reversed(range(len(names))):  # answered in any order
+    for i, (_, skew) in enumerate(requests):
+        echoed = 10 + (i + skew) % len(requests)  # often another request's number
         reply = ann.annotate(
             1,
             "s2c",
@@ -285,12 +294,12 @@ def test_every_request_pairs_with_its_reply_by_number(names: list[str]) -> None:
                 ServerOp.NON_FATAL_ERROR,
                 100 + i,
                 encode_error(
-                    ServerOp.NON_FATAL_ERROR, 10 + i, ErrorMessage("x", "C", "BDL", "Bad data length")
+                    ServerOp.NON_FATAL_ERROR, echoed, ErrorMessage("x", "C", "BDL", "Bad data length")
                 ),
             ),
         )
-        assert reply.pair == pairs[i]
-    assert len(set(pairs)) == len(names)
+        assert reply.pair == pairs[i] and reply.request_number == echoed and reply.final
+    assert len(set(pairs)) == len(requests)
 
 
 # ------------------------------------------------------------------------------ durability

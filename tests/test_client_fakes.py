@@ -99,7 +99,7 @@ class FakeArm:
             )
             return
         op = decoded.op
-        kind = op.response.kind
+        kind = op.response.form
         if kind == "done":
             if op.opcode == RequestOp.FREE_JOINT:
                 joint = decoded.values["joint"]

@@ -272,7 +272,7 @@ def _values(op: Any) -> dict[str, Any]:
             values[f.name] = 0 if ft.count == 1 else [0] * (ft.count or 0)
         else:
             values[f.name] = "(:a 1)"
-    if op.response.kind == "segment":
+    if op.response.form == "segment":
         values = {"segment": 1}
     return values
 

@@ -79,6 +79,9 @@ def test_jor_only_for_joints_past_a_limit() -> None:
     assert s.expect("set-joint-angles", joints=READY).normal
     unpowered = Session(powered=False, aborted=False)
     assert unpowered.expect("set-joint-angles", joints=far).codes == frozenset({"NAP", "JOR"})
+    assert s.model.judge(e, refusal("TOR")) is not None  # joint angles are JOR, never TOR
+    increment = s.expect("incremental-move", delta=[1e4, 0.0, 0.0, 0.0, 0.0, 0.0])
+    assert increment.normal and increment.codes == frozenset({"TOR"})
 
 
 def test_awa_comes_before_nap_and_is_reset_by_reset_abort_or_power() -> None:
@@ -194,7 +197,8 @@ def test_a_transform_that_is_no_rotation_is_a_command_error() -> None:
     assert e.command and not e.normal
     identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 500.0]
     e = s.expect("move", transform=identity)
-    assert e.normal and {"TOR", "JOR"} <= e.codes  # the model cannot tell reachability
+    assert e.normal and e.codes == frozenset({"TOR"})  # the model cannot tell reachability; never JOR
+    assert s.model.judge(e, refusal("JOR")) is not None  # erratum transform-refusals
     s.model.reachable.add(tuple(identity))
     e = s.expect("move", transform=identity)
     assert e.normal and not e.codes  # the server's own transform of in-range angles

@@ -84,6 +84,8 @@ def test_clean_reference_server_passes_every_case() -> None:
             "request.data-length",
         ),
         ("no-jor", ["server.motion.jor"], "server.motion.jor", "motion.checked-before-queue"),
+        ("swap-tor-jor", ["server.motion.jor"], "server.motion.jor", "motion.checked-before-queue"),
+        ("swap-tor-jor", ["server.motion.tor-limits"], "server.motion.tor-limits", "solve-forwards.errors"),
         ("speed-unchecked", ["server.speed.bounds"], "server.speed.bounds", "speed.range"),
         (
             "free-joint-executes",
@@ -106,6 +108,12 @@ def test_clean_reference_server_passes_every_case() -> None:
         ),
         ("no-nap", ["server.motion.nap"], "server.motion.nap", "motion.no-power"),
         ("awa-ignored", ["server.motion.awa-reset-abort"], "server.motion.awa-reset-abort", "motion.abort"),
+        (
+            "awa-refuses-all",
+            ["server.motion.awa-reset-abort"],
+            "server.motion.awa-reset-abort",
+            "motion.abort",
+        ),
         (
             "no-initial-response",
             ["server.connect.initial-response"],

@@ -51,7 +51,7 @@ def minus_3db(fs: float) -> float:
     return (lo + hi) / 2
 
 
-def test_step_weights_are_the_seed_formula() -> None:
+def test_step_weights_are_the_guides_formula() -> None:
     # Step of 800 from rest: 800*(1/8, 11/32, ...) rounded down at each step by the ASR.
     out = run([800] * 4)
     assert out[0] == (800 + 0 + 0) >> 3 == 100
@@ -111,7 +111,7 @@ def test_gain_follows_the_transfer_function() -> None:
 
 
 # ---------------------------------------------------------------------------------------- B.10 FILTER
-def test_filter_constants_are_the_seeds() -> None:
+def test_filter_constants_are_the_guides() -> None:
     a, t = 2 * math.pi * 2.0, 1 / 60
     con = filter_constants(2.0, 60.0, 0.25, 0.75)
     assert con == pytest.approx((2 / (a * t + 2), (a * t - 2) / (a * t + 2), 0.25, 0.75))

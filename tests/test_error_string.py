@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from manip.codecs.error_string import ErrorMessage, format_joint_mask, parse_error, split_error_text
+from manip.codecs.error_string import READINGS, ErrorMessage, format_joint_mask, parse_error, split_error_text
 from manip.codecs.errors import DecodeError, EncodeError
 from manip.codecs.lispm_text import encode_lispm
 from manip.spec import SPEC
@@ -249,3 +249,29 @@ def test_parse_error_takes_either_form_of_body() -> None:
     assert caught.value.offset == 2 + len(b"arm: E") and caught.value.path == "error.code"
     with pytest.raises(ValueError, match="body must be"):
         parse_error(string, body="both")  # type: ignore[arg-type]
+
+
+def test_substitution_readings() -> None:
+    """Erratum error-substitution: one number per special character by default, with the surplus named
+    as a problem; reading='one-or-more' gives the surplus to the last special character."""
+    data = ErrorMessage("arm", "E", "JOR", "Joint(s) $ at ~", (0b110, 10, 20, 30)).encode()
+    strict = parse_error(data)
+    assert len(strict.problems) == 1 and "one-or-more" in strict.problems[0]
+    assert "more than the 2" in strict.problems[0]
+    assert strict.render() == "arm: E JOR Joint(s) 2 and 3 at 10"
+    lenient = parse_error(data, reading="one-or-more")
+    assert lenient == strict and lenient.problems == ()
+    assert lenient.render() == "arm: E JOR Joint(s) 2 and 3 at 10, 20, 30"
+    masks = parse_error(ErrorMessage("arm", "F", "NZI", "joint(s) $", (1, 6)).encode(), reading="one-or-more")
+    assert masks.problems == () and masks.render() == "arm: F NZI joint(s) 1; 2 and 3"
+    # fewer numbers than special characters, or numbers without any: a problem under both readings
+    for reading in READINGS:
+        few = parse_error(ErrorMessage("arm", "E", "XYZ", "~ ~", (1,)).encode(), reading=reading)
+        assert "fewer" in few.problems[0] and few.render() == "arm: E XYZ 1 ~"
+        none = parse_error(ErrorMessage("arm", "E", "XYZ", "no place", (1,)).encode(), reading=reading)
+        assert "more than the 0" in none.problems[0]
+    # one to one reads the same either way
+    exact = ErrorMessage("arm", "E", "JOR", "Joint(s) $ at ~", (2, 7)).encode()
+    assert parse_error(exact).render() == parse_error(exact, reading="one-or-more").render()
+    with pytest.raises(ValueError, match="reading"):
+        parse_error(exact, reading="several")  # type: ignore[arg-type]

@@ -478,13 +478,14 @@ def test_unreachable(pose: Transform, why: str) -> None:
 
 
 def test_every_solution_out_of_range() -> None:
-    """Notes §3.3's JOR example, q_RTB = (−154.649, −133.281, 161.398, 43.878, −47.162, 4.1)."""
+    """Notes §3.3's example, q_RTB = (−154.649, −133.281, 161.398, 43.878, −47.162, 4.1): a transform
+    whose every solution breaks a limit, TOR on the wire (erratum transform-refusals)."""
     q = np.array([-154.649, -133.281, 161.398, 43.878, -47.162, 4.1]) + RTB_TO_LEE
     pose = forward(q, PUMA560_CORKE)
     with pytest.raises(OutOfRange) as info:
         inverse_nearest(pose, READY, PUMA560_CORKE)
     err = info.value
-    assert err.error_code == "JOR" and err.joints and err.mask == joint_mask(err.joints)
+    assert err.error_code == "TOR" and err.joints and err.mask == joint_mask(err.joints)
     assert len(err.solutions) == 8 and all(s.out_of_range for s in err.solutions)
     loose = JointLimits((-180.0,) * 6, (180.0,) * 6)
     assert forward(inverse_nearest(pose, READY, PUMA560_CORKE, loose), PUMA560_CORKE).almost_equal(pose, 1e-9)

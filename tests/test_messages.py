@@ -186,5 +186,5 @@ def test_server_opcode_dispatch() -> None:
 def test_every_spec_request_has_a_reply_layout() -> None:
     for op in SPEC.requests.values():
         layout = response_layout(op)
-        if op.response.kind in ("done", "segment"):
-            assert layout.fixed_size == (0 if op.response.kind == "done" else 2)
+        if op.response.form in ("done", "segment"):
+            assert layout.fixed_size == (0 if op.response.form == "done" else 2)

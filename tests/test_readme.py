@@ -51,7 +51,7 @@ def test_readme_command_line_parses(line: str, tmp_path: Path, monkeypatch: pyte
     words = shlex.split(line)
     monkeypatch.chdir(tmp_path)
     for word in words:  # the files a line reads exist, empty (their content is not looked at)
-        if re.fullmatch(r"[\w.-]+\.(mcap|bin)", word):
+        if re.fullmatch(r"[\w.-]+\.(mcap|bin|json)", word):
             (tmp_path / word).touch()
     command = COMMANDS[words[0]].load()
     ran: list[str] = []

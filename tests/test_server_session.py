@@ -193,7 +193,7 @@ def test_reply_shape_and_request_number(name: str) -> None:
     assert client.packet_no == 0xFFFF
     assert all(isinstance(m, Reply) and m.request_number == client.packet_no for m in msgs), msgs
     replies = [_reply(m) for m in msgs]
-    match op.response.kind:
+    match op.response.form:
         case "done":
             assert len(replies) == 1 and replies[0].is_empty
         case "segment":

@@ -37,7 +37,7 @@ def test_clause_ids_are_stable_slugs() -> None:
         assert clause.text.strip() and clause.section.strip()
 
 
-def test_request_table_covers_the_seed() -> None:
+def test_request_table_covers_the_guide() -> None:
     # E.1 defines 0200-0221; every one must be in the table, none twice, each with a hazard class.
     assert set(range(0o200, 0o222)) <= set(SPEC.requests)
     for op in SPEC.requests.values():
@@ -47,7 +47,7 @@ def test_request_table_covers_the_seed() -> None:
 
 def test_motion_replies_carry_segments() -> None:
     for opcode in (0o204, 0o205, 0o211, 0o212, 0o214, 0o215):
-        assert SPEC.requests[opcode].response.kind == "segment"
+        assert SPEC.requests[opcode].response.form == "segment"
 
 
 def test_layout_sizes() -> None:

@@ -318,6 +318,21 @@ def test_under_compliance_the_arm_yields_to_the_contact() -> None:
     assert all(e.scheme is Scheme.COMPLIANT_MOTION for e in wrist.meter)
 
 
+def test_a_servo_that_wakes_late_sends_an_npr_for_every_cycle_it_catches_up() -> None:
+    """A loaded host wakes the servo late; it runs the cycles it missed at once, and the wrist still
+    hears one New Position and Rate for each of them (Part II: NPR every cycle of a compliant segment)."""
+    client, _, wrist = _setup(wall_at=J2_WALL)
+    client.call("compliant-move", joints=INTO_WALL, scheme=0)
+    client.run(0.2)
+    assert client.session.arm.current_scheme is not None
+    before, last = wrist.stats.npr, wrist.meter[-1].time
+    client.now += 5 * TICK  # the next tick comes with five more servo cycles overdue
+    client.tick()
+    ran = sum(1 for entry in wrist.meter if entry.time > last + 1e-9)  # compliant cycles run by that tick
+    assert ran == 6
+    assert wrist.stats.npr - before == ran
+
+
 def test_the_ntd_used_is_from_an_earlier_tick() -> None:
     client, _, wrist = _setup(wall_at=J2_WALL)
     client.call("compliant-move", joints=INTO_WALL, scheme=0)

@@ -73,6 +73,20 @@ def test_configuration_opcodes_land_in_cougar_memory() -> None:
     assert tuple(mem.get_int16s("gauge_offsets")) == (1, 2, 3, 4, -5, -6, -7, -8)
 
 
+def test_wrist_settings_take_effect_at_once_while_segments_are_queued() -> None:
+    """Erratum wrist-config-immediate: a setting sent behind queued motion reaches Cougar on the next
+    servo tick, while the segment queued before it still runs and another waits behind it -- not when
+    those segments end, as the 1985 guide's segment-synchronised wrist requests would."""
+    client, sim = _setup()
+    _reply(client.call("set-joint-angles", joints=GOAL))
+    _reply(client.call("set-joint-angles", joints=START))
+    _reply(client.call("set-spring", k=(7.0,) * 6))
+    client.tick()
+    arm = client.session.arm
+    assert tuple(sim.memory.get("k")) == pytest.approx((7.0,) * 6)
+    assert arm.moving and arm.queued >= 1  # the move before it runs, the one after it waits
+
+
 def test_data_opcodes_read_cougar() -> None:
     client, sim = _setup()
     client.run(0.5)  # let the filter settle on the hand's weight

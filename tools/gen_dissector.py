@@ -97,7 +97,7 @@ def tables() -> str:
             f"  [{op.opcode}] = {{name = {_lua_string(op.name)}, title = {_lua_string(op.title)}, "
             f"hazard = {_lua_string(op.hazard)}, extension = {str(op.extension).lower()}, "
             f"request = {_layout(op.request)}, "
-            f"kind = {_lua_string(op.response.kind)}, response = {_layout(op.response.data)}}},"
+            f"kind = {_lua_string(op.response.form)}, response = {_layout(op.response.data)}}},"
         )
     lines += ["}", "", "local SERVER_OPCODES = {"]
     lines += [f"  [{s.opcode}] = {_lua_string(s.name)}," for s in SPEC.server_opcodes.values()]

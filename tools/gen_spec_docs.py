@@ -61,7 +61,7 @@ def render() -> str:
         within = "" if op.answer_within is None else f" (within {op.answer_within:g} s)"
         out.append(
             f"| {op.opcode:o} | {name} | {op.hazard} | {_layout(op.request)} | "
-            f"{_reply(op.response.kind, op.response.data)}{within} | {_cell(op.section)} |"
+            f"{_reply(op.response.form, op.response.data)}{within} | {_cell(op.section)} |"
         )
     out += [
         "",

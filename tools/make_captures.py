@@ -56,7 +56,7 @@ class Client:
         """Send a request; return the packets that answer it, through its final reply."""
         spec_op = request_op(op)
         return await self.call_raw(
-            spec_op.opcode, encode_request(op, **values), multi=spec_op.response.kind == "multi"
+            spec_op.opcode, encode_request(op, **values), multi=spec_op.response.form == "multi"
         )
 
     async def call_raw(self, opcode: int, data: bytes, *, multi: bool = False) -> list[Packet]:

@@ -1,7 +1,7 @@
 """Write src/manip/vectors/manip.json and cougar.json: golden vectors for message bodies and Cougar words.
 
 Deliberately independent of manip's codecs: each vector spells its wire layout out item by item, read
-from the seed (E.1, E.3, Table 1), and bytes are produced here with ``struct`` and an exact
+from the 1985 guide (E.1, E.3, Table 1), and bytes are produced here with ``struct`` and an exact
 ``fractions``-based PDP-11 float encoder.  Tests then check manip's codecs against these files both ways.
 Values are exactly representable so a decode must give them back unchanged.
 """

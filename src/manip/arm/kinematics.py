@@ -201,7 +201,8 @@ class KinematicsError(ValueError):
 
 
 class Unreachable(KinematicsError):  # noqa: N818 -- the name the protocol layer uses
-    """No joint angles reach the transform at all, whatever the limits (protocol error TOR)."""
+    """No joint angles reach the transform at all, whatever the limits (protocol error TOR, erratum
+    ``transform-refusals``)."""
 
     error_code: ClassVar[str] = "TOR"
 
@@ -211,14 +212,15 @@ class Unreachable(KinematicsError):  # noqa: N818 -- the name the protocol layer
 
 
 class OutOfRange(KinematicsError):  # noqa: N818 -- the name the protocol layer uses
-    """The transform is reachable, but every solution breaks a joint limit (protocol error JOR).
+    """The transform is reachable, but every solution breaks a joint limit (protocol error TOR, the 1985
+    guide's "solution of a transform resulted in out-of-range joints"; erratum ``transform-refusals``).
 
     ``joints`` are the joints (1-based) the closest configuration breaks: the configuration with fewest
     offending joints, ties going to the one nearest the current angles.  ``mask`` is the same set as the
     error's ``$`` joint bit mask (bit 0 = joint 1).
     """
 
-    error_code: ClassVar[str] = "JOR"
+    error_code: ClassVar[str] = "TOR"
 
     def __init__(self, joints: Sequence[int], solutions: Sequence[Solution]) -> None:
         self.joints = tuple(joints)
@@ -721,7 +723,7 @@ def inverse_nearest(
     configuration whenever it can.  At the wrist singularity J4 stays at ``current[3]``, or moves to the
     nearest angle in its range when ``current[3]`` is outside it, and J6 keeps J4 + J6.
 
-    Raises :class:`Unreachable` (TOR) when no solution exists, :class:`OutOfRange` (JOR) when every
-    solution breaks a limit.
+    Raises :class:`Unreachable` when no solution exists, :class:`OutOfRange` when every solution breaks
+    a limit (both TOR on the wire).
     """
     return nearest_solution(pose, current, geometry, limits, weights=weights, wrist_tol_deg=wrist_tol_deg).q

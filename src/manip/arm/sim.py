@@ -27,7 +27,8 @@ packets* and answered with a segment number before any motion happened (§5.1, �
   whose nominal path is the blended one).  Straight-line moves
   (:class:`~manip.arm.trajectory.CartesianSegment`) are checked when queued at evenly spaced points of
   the line, each solved nearest the previous one, so a line that leaves the workspace, breaks a joint
-  limit or passes through a singularity is refused at once (TOR/JOR).  The points are a few millimetres
+  limit or passes through a singularity is refused at once (TOR: every refusal of a transform is TOR,
+  JOR is for joint angles; erratum ``transform-refusals``).  The points are a few millimetres
   apart, closer where a joint moves fast, and at most :data:`MAX_LINE_CHECKS`: the work is bounded
   whatever the distance and the speed factor (erratum ``motion-planning-bounds``).  The move process
   then solves the line's pose on every cycle as it runs, nearest the previous cycle's angles, and falls
@@ -158,7 +159,8 @@ _SAME_START_DEG: Final = 1e-6
 class Refused(Exception):  # noqa: N818 -- a refusal is an answer, not a failure of the simulator
     """A request the arm will not carry out; ``code`` is the protocol error code to answer with.
 
-    ``joints`` (1-based) go into the error's ``$`` mask (JOR); ``detail`` is for humans.
+    ``joints`` (1-based) go into the error's ``$`` mask (JOR, and TOR when a transform's solutions break
+    limits); ``detail`` is for humans.
     """
 
     def __init__(self, code: str, detail: str, joints: Sequence[int] = ()) -> None:
@@ -368,6 +370,11 @@ class ArmSim:
         """Refuse motion without arm power (NAP); False models a faulty server."""
         self.enforce_abort = True
         """Refuse motion after an abort (AWA); False models a faulty server."""
+        self.collision_test_compliant = False
+        """Run the collision test under compliance too; True models a faulty server (§5.2 inhibits it)."""
+        self.hold_compliant_end = True
+        """End a compliant episode where compliance left the arm; False (a faulty server) snaps back to
+        the nominal goal."""
 
         self._next_segment = 1
         self._interp = MoveInterpolator(here, limits, 1.0)
@@ -610,7 +617,8 @@ class ArmSim:
         if self.moving and not self.powered:
             self._abort(t, AbortCause.POWER_LOST, (), events)
             return
-        if self.moving and not (self._scheme_now is not None and self._scheme_now.compliant):
+        compliant = self._scheme_now is not None and self._scheme_now.compliant
+        if self.moving and (self.collision_test_compliant or not compliant):
             lagging = self._lagging(self.collision_tol_deg)
             if lagging:
                 self._abort(t, AbortCause.COLLISION, lagging, events)
@@ -647,6 +655,8 @@ class ArmSim:
             if self.compliance is not None:
                 q = _joints(self.compliance.adjust(t, nominal, self.actual))
             self._correction = _joints([a - b for a, b in zip(q, nominal, strict=True)])
+        elif self._correction is not None and not self.hold_compliant_end:
+            self._correction = None
         elif self._correction is not None:
             # The episode's last segment completed on this cycle: the arm stays where the contact let
             # it go (erratum compliant-segment-end), not on the nominal goal; never past a joint limit.
@@ -792,7 +802,8 @@ class ArmSim:
 
     def solve(self, pose: Transform, near: JointsLike) -> Joints:
         """Joint angles for ``pose`` nearest ``near``, in the preferred configuration when there is one
-        (Solve forwards); TOR when no angles reach it, JOR when every solution breaks a limit."""
+        (Solve forwards); TOR when no angles reach it or every solution breaks a limit (then with the
+        joints the nearest configuration breaks; erratum ``transform-refusals``)."""
         near = _joints(near)
         g, lim = self.model.geometry, self.model.limits
         try:
@@ -800,7 +811,7 @@ class ArmSim:
         except Unreachable as exc:
             raise Refused("TOR", exc.reason) from exc
         except OutOfRange as exc:
-            raise Refused("JOR", str(exc), exc.joints) from exc
+            raise Refused("TOR", str(exc), exc.joints) from exc
         if self.lefty is not None and best.lefty != self.lefty:
             alternatives = [
                 s
@@ -827,9 +838,9 @@ class ArmSim:
         :data:`STRAIGHT_JUMP_DEG` on a joint, the gap is halved until they do not -- a joint that still
         jumps across 1/2^:data:`REFINE_DEPTH` of the spacing means the line passes through a singularity
         (or must change configuration to keep within the limits).  TOR when a point is out of the
-        workspace, at a singularity, or when more than :data:`MAX_LINE_CHECKS` points would be needed;
-        JOR when every solution of a point breaks a joint limit.  The speed factor only times the line:
-        it changes neither the verdict nor the work.
+        workspace, at a singularity, when every solution of a point breaks a joint limit (with those
+        joints), or when more than :data:`MAX_LINE_CHECKS` points would be needed.  The speed factor
+        only times the line: it changes neither the verdict nor the work.
         """
         g, lim = self.model.geometry, self.model.limits
         try:
@@ -858,7 +869,7 @@ class ArmSim:
                 except Unreachable as exc:
                     raise Refused("TOR", f"the line leaves the workspace ({exc.reason})") from exc
                 except OutOfRange as exc:
-                    raise Refused("JOR", f"the line breaks a joint limit ({exc})", exc.joints) from exc
+                    raise Refused("TOR", f"the line breaks a joint limit ({exc})", exc.joints) from exc
                 if _deviation(q_b, q_a) <= STRAIGHT_JUMP_DEG:
                     at.append(pending.pop())
                     solved.append(q_b)

@@ -9,7 +9,8 @@
 * :func:`recover` rebuilds a valid file from a truncated one (a killed recorder).
 """
 
-from .format import Direction
+from manip.codecs.packet import Direction
+
 from .reader import (
     Capture,
     CapturedEvent,

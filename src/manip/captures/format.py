@@ -34,12 +34,10 @@ import json
 from functools import cache
 from typing import Any, Final
 
-from manip.codecs import packet as _packet
 from manip.codecs.framing import FRAMINGS
+from manip.codecs.packet import Direction
 from manip.spec import SPEC, FieldType
 
-Direction = _packet.Direction
-"""The one definition (``manip.codecs.packet.Direction``), named here too for the capture modules."""
 DIRECTIONS: Final[tuple[Direction, Direction]] = ("c2s", "s2c")
 
 PROFILE: Final = "manip"

@@ -50,7 +50,7 @@ def packet_line(p: CapturedPacket, t0_ns: int) -> str:
                 rest = f"data {a.payload_hex}"
             else:
                 spec_op = next((o for o in SPEC.requests.values() if o.name == a.op), None)
-                kind = spec_op.response.kind if spec_op is not None else None
+                kind = spec_op.response.form if spec_op is not None else None
                 rest = {"multi": "(end)", "done": "done"}.get(kind or "", "")
             body = f"reply to #{a.request_number} ({a.op or 'unknown request'}) {rest}"
         case "error":

@@ -35,10 +35,10 @@ from typing import IO, Any, Final
 from manip import __version__
 from manip.codecs.errors import CodecError, DecodeError
 from manip.codecs.framing import CHUDP_HEADER, decode_chudp, encode_chudp
-from manip.codecs.packet import Packet
+from manip.codecs.packet import Direction, Packet
 from manip.spec.constants import ChaosOp
 
-from .format import RAW_MESSAGE_ENCODING, Direction
+from .format import RAW_MESSAGE_ENCODING
 from .reader import CapturedPacket, iter_packets
 from .recorder import CaptureError, Recorder
 from .view import Annotator, bad_frame

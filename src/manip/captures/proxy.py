@@ -26,8 +26,8 @@ from typing import Any, Final, Literal
 from urllib.parse import urlsplit
 
 from manip.codecs.framing import MAX_BODY, MIN_BODY
+from manip.codecs.packet import Direction
 
-from .format import Direction
 from .recorder import CaptureError, Recorder
 
 log = logging.getLogger("manip.captures")

@@ -33,9 +33,9 @@ from mcap.records import Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 from manip.codecs.errors import DecodeError
-from manip.codecs.packet import Packet
+from manip.codecs.packet import Direction, Packet
 
-from .format import DIRECTIONS, EVENT_TOPIC, RAW_MESSAGE_ENCODING, Direction
+from .format import DIRECTIONS, EVENT_TOPIC, RAW_MESSAGE_ENCODING
 from .recorder import FRAME_DECODERS, CaptureError, frame_decoder
 from .view import Annotation, Annotator, bad_frame
 

@@ -55,7 +55,7 @@ from manip.codecs.framing import (
     encode_chudp,
     encode_tcp,
 )
-from manip.codecs.packet import Packet
+from manip.codecs.packet import Direction, Packet
 from manip.spec import SPEC
 
 from .appender import message_adder
@@ -80,7 +80,6 @@ from .format import (
     RAW_TOPIC,
     VIEW_SCHEMA_NAME,
     VIEW_TOPIC,
-    Direction,
     event_schema,
     raw_schema,
     view_schema,

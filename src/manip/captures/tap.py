@@ -22,11 +22,10 @@ import asyncio
 import logging
 from typing import Any, Literal, Protocol
 
-from manip.codecs.packet import Packet
+from manip.codecs.packet import Direction, Packet
 from manip.links import Link, LinkStats
 from manip.links.base import CloseCallback, Receiver
 
-from .format import Direction
 from .recorder import Recorder
 
 log = logging.getLogger("manip.captures")

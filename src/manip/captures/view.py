@@ -15,11 +15,12 @@ always agree and a file without the view can still be read.
 * **Retransmissions.**  A controlled packet (RFC, OPN, EOF, data) whose packet number was already seen
   in the same direction of the same connection is marked ``retransmission`` and pairs like the first.
 * **Pairs.**  Every request (and the RFC, answered by the initial RESPONSE) gets a new pair id; the
-  server packets that answer it carry the same id: RESPONSE and non-fatal error by their
-  request-number word (clause ``response.echoes-request-number``), a fatal error by the packet number it
-  quotes.  A multi-packet reply keeps its pair until the empty terminator, which is ``final``.
-  Asynchronous packets (0203-0205) quote the last request processed; they are not replies and carry
-  no pair.
+  server packets that answer it carry the same id.  Which request a packet answers is the shared rule
+  of :mod:`manip.codecs.pairing` (erratum ``capture-pairing``), the one ``manip-conform verify`` and
+  replay use: by position, answers in request order, the request-number word shown but never used to
+  re-pair (a wrong echo is verify's finding).  A multi-packet reply keeps its pair until the empty
+  terminator or an error, which is ``final``.  Asynchronous packets (0203-0205) quote the last request
+  processed; they are not replies and carry no pair.
 * **Meaning.**  Requests are decoded by their opcode's layout; a RESPONSE by the layout of the request
   it answers, when that request was seen (otherwise its payload is shown in hex); error strings are
   parsed; decode failures become a ``decode_error`` entry, never an exception.
@@ -45,11 +46,10 @@ from manip.codecs.messages import (
     decode_request,
     response_layout,
 )
-from manip.codecs.packet import Packet
+from manip.codecs.packet import Direction, Packet
+from manip.codecs.pairing import Placement, ReplyPairing
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import ChaosOp, ServerOp
-
-from .format import Direction
 
 SEEN_KEPT: Final = 2048
 """Packet numbers remembered per direction for spotting retransmissions (a window is at most 15)."""
@@ -99,7 +99,7 @@ def _request_plan(opcode: int) -> _RequestPlan:
     op = SPEC.requests.get(opcode)
     if op is None:
         return _RequestPlan(None, None, f"0{opcode:o}", None, None)
-    reply = None if op.response.kind == "multi" else plan(response_layout(op), numbered=True)
+    reply = None if op.response.form == "multi" else plan(response_layout(op), numbered=True)
     return _RequestPlan(op, op.name, op.name, plan(op.request, numbered=False), reply)
 
 
@@ -146,6 +146,10 @@ class _Pending:
     reply_fast: FastLayout | None = None
 
 
+_Seen = int | Placement[_Pending] | None
+"""What ``_Conn.seen`` keeps of a packet number: a request's pair id, a server packet's placement."""
+
+
 @dataclass(slots=True)
 class _Conn:
     id: int
@@ -154,8 +158,8 @@ class _Conn:
     rfc_no: int | None = None
     opened: bool = False
     ended: bool = False
-    pending: dict[int, _Pending] = field(default_factory=dict)
-    seen: dict[Direction, dict[int, int | None]] = field(default_factory=lambda: {"c2s": {}, "s2c": {}})
+    pairing: ReplyPairing[_Pending] = field(default_factory=ReplyPairing)
+    seen: dict[Direction, dict[int, _Seen]] = field(default_factory=lambda: {"c2s": {}, "s2c": {}})
     order: dict[Direction, deque[int]] = field(default_factory=lambda: {"c2s": deque(), "s2c": deque()})
     """The packet numbers of ``seen`` oldest first: dropping the oldest from a dict by iterating it
     would walk past every entry deleted before (the dict only compacts when it grows)."""
@@ -199,13 +203,13 @@ class Annotator:
             self._next_conn += 1
             self._conns[key] = conn
         retransmission = False
-        previous_pair: int | None = None
+        previous: _Seen = None
         if opcode >= _DAT or opcode in _CONTROLLED:
             seen = conn.seen[direction]
             number = packet.packet_no
             if number in seen:
                 retransmission = True
-                previous_pair = seen[number]
+                previous = seen[number]
             else:
                 order = conn.order[direction]
                 if len(seen) >= SEEN_KEPT:
@@ -214,9 +218,9 @@ class Annotator:
                 order.append(number)
         if opcode >= _DAT:
             if direction == "c2s":
-                ann = self._request(conn, packet, retransmission, previous_pair)
+                ann = self._request(conn, packet, retransmission, previous)
             else:
-                ann = self._server_packet(conn, packet, retransmission)
+                ann = self._server_packet(conn, packet, retransmission, previous)
         else:
             ann = self._control(conn, direction, packet, retransmission)
         ann.retransmission = retransmission
@@ -229,7 +233,7 @@ class Annotator:
         self._next_pair += 1
         return pair
 
-    def _request(self, conn: _Conn, packet: Packet, retransmission: bool, previous: int | None) -> Annotation:
+    def _request(self, conn: _Conn, packet: Packet, retransmission: bool, previous: _Seen) -> Annotation:
         number = packet.packet_no
         req = _REQUEST_PLANS[packet.opcode]
         ann = Annotation(conn.id, "request", op=req.name, request_number=number)
@@ -244,44 +248,48 @@ class Annotator:
                 ann.decode_error = decode_error_dict(exc)
                 if data:
                     ann.payload_hex = data.hex()
-        if retransmission and previous is not None:
-            ann.pair = previous
+        if retransmission:
+            if isinstance(previous, int):
+                ann.pair = previous
             return ann
         pair = ann.pair = self._next_pair
         self._next_pair = pair + 1
         conn.seen[_C2S_SEEN][number] = pair
-        conn.pending[number] = _Pending(pair, req.op, req.pending_name, req.reply_fast)
+        conn.pairing.request(_Pending(pair, req.op, req.pending_name, req.reply_fast), packet.opcode, data)
         return ann
 
     # ------------------------------------------------------------------------------ server packets
 
-    def _server_packet(self, conn: _Conn, packet: Packet, retransmission: bool) -> Annotation:
+    def _server_packet(
+        self, conn: _Conn, packet: Packet, retransmission: bool, previous: _Seen
+    ) -> Annotation:
         opcode, data = packet.opcode, packet.data
-        if opcode == _RESPONSE and len(data) >= 2:
+        if retransmission:  # pairs like the first copy, and moves the pairing on no further
+            place = previous if isinstance(previous, Placement) else None
+        else:
+            place = conn.pairing.server(opcode, data)
+            conn.seen["s2c"][packet.packet_no] = place
+        waiting = place.request if place is not None else None
+        if waiting is not None and opcode == _RESPONSE and waiting.reply_fast is not None:
             # The common case first: a well-formed reply of a fixed numeric layout to a request seen.
-            echoed = data[0] | data[1] << 8
-            waiting = conn.pending.get(echoed)
-            if waiting is not None and waiting.reply_fast is not None:
-                parsed = waiting.reply_fast.parse(data)
-                if parsed is not None:
-                    if not retransmission:
-                        del conn.pending[echoed]
-                    return Annotation(
-                        conn.id,
-                        "reply",
-                        op=waiting.name,
-                        request_number=echoed,
-                        pair=waiting.pair,
-                        final=True,
-                        fields=parsed[1] or None,
-                    )
+            parsed = waiting.reply_fast.parse(data)
+            if parsed is not None:
+                return Annotation(
+                    conn.id,
+                    "reply",
+                    op=waiting.name,
+                    request_number=data[0] | data[1] << 8,
+                    pair=waiting.pair,
+                    final=True,
+                    fields=parsed[1] or None,
+                )
         if opcode > _LAST_ERROR_OP:
             ann = Annotation(conn.id, "data")
             if data:
                 ann.payload_hex = data.hex()
             return ann
         number = int.from_bytes(data[:2], "little") if len(data) >= 2 else None
-        pending = conn.pending.get(number) if number is not None and opcode in _REPLY_OPS else None
+        pending = waiting
         if opcode == _ASYNC_RESPONSE:
             kind = "async"
         elif opcode in _ERROR_OPS:
@@ -322,8 +330,8 @@ class Annotator:
                 ann.payload_hex = data[2:].hex()
             if kind != "async":
                 ann.final = True
-        if ann.final and pending is not None and number is not None and not retransmission:
-            del conn.pending[number]
+        if pending is not None and place is not None:
+            ann.final = place.final  # the pairing rule decides where an answer ends, not the decoding
         return ann
 
     @staticmethod
@@ -336,7 +344,7 @@ class Annotator:
                 ann.payload_hex = payload.hex()
             ann.final = pending is not None  # the initial RESPONSE answers the RFC
             return
-        if op.response.kind == "multi":
+        if op.response.form == "multi":
             ann.final = not payload
             if payload:
                 ann.text = decode_lispm(payload)
@@ -362,7 +370,7 @@ class Annotator:
                 conn.rfc_no = packet.packet_no
                 ann.pair = self._new_pair()
                 conn.seen["c2s"][packet.packet_no] = ann.pair
-                conn.pending[packet.packet_no] = _Pending(ann.pair, None, RFC_NAME)
+                conn.pairing.rfc(_Pending(ann.pair, None, RFC_NAME))
             ann.events.append({**base, "event": "rfc", "contact": contact, "args": args})
         elif opcode == ChaosOp.OPN:
             conn.opened = True

@@ -12,8 +12,13 @@ joint mask "single bytes", which we read as loose wording, since the format para
   odd offset one pad byte follows, and it must be zero.  ``align_args=False`` reads the words right after
   the NUL.
 
-Substitutions (clause ``error-string.substitution``): each ``~`` takes one number, printed as an unsigned
-integer; each ``$`` takes one number as a joint bit mask (bit 0 = joint 1): 6 -> ``2 and 3``.
+Substitutions (clause ``error-string.substitution``, erratum ``error-substitution``): each ``~`` takes one
+number, printed as an unsigned integer; each ``$`` takes one number as a joint bit mask (bit 0 = joint 1):
+6 -> ``2 and 3``.  The 1985 guide calls each special character "a place where one or more numbers should
+be substituted" without saying how a reader tells how many; manip writes one number per character, and a
+reader chooses (``reading=``): ``"one-to-one"`` (the default) lists surplus numbers as a problem that names
+the other reading, ``"one-or-more"`` gives the surplus to the last special character, the only split a
+reader can make without knowing the message (``~`` prints them joined by ", ", ``$`` by "; ").
 
 Hard decode errors (:class:`DecodeError` with the byte offset in the error string): no ``": "`` separator,
 a missing severity or code (``error-string.format``), an odd number of argument bytes
@@ -25,8 +30,8 @@ characters that do not correspond) is listed in :attr:`ErrorMessage.problems`, s
 from __future__ import annotations
 
 from collections.abc import Collection, Iterable
-from dataclasses import dataclass, field
-from typing import Literal
+from dataclasses import dataclass, field, replace
+from typing import Final, Literal
 
 from manip.codecs.errors import DecodeError, EncodeError
 from manip.codecs.lispm_text import decode_lispm, encode_lispm
@@ -38,6 +43,8 @@ JOINT_MASK = "$"
 """Special character: one number read as a joint bit mask (bit 0 = joint 1)."""
 SPECIALS = RAW + JOINT_MASK
 SEPARATOR = ": "
+Reading = Literal["one-to-one", "one-or-more"]
+READINGS: Final[tuple[Reading, ...]] = ("one-to-one", "one-or-more")
 
 
 def known_severities() -> frozenset[str]:
@@ -79,15 +86,32 @@ def count_specials(message: str) -> int:
     return sum(message.count(ch) for ch in SPECIALS)
 
 
-def substitute(message: str, args: Iterable[int], *, radix: int = 10) -> str:
-    """Replace each ``~`` and ``$`` of ``message`` by the next number; specials beyond the numbers stay."""
-    it = iter(args)
+def assign(message: str, args: Iterable[int], reading: Reading = "one-to-one") -> list[tuple[int, ...]]:
+    """The numbers each special character of ``message`` takes, in order (an empty tuple when they ran
+    out).  ``"one-or-more"``: numbers left over after the last special character go to it as well."""
+    if reading not in READINGS:
+        raise ValueError(f"reading must be one of {', '.join(READINGS)}, not {reading!r}")
+    numbers = list(args)
+    wanted = count_specials(message)
+    groups = [tuple(numbers[i : i + 1]) for i in range(wanted)]
+    if reading == "one-or-more" and wanted and len(numbers) > wanted:
+        groups[-1] = tuple(numbers[wanted - 1 :])
+    return groups
+
+
+def substitute(message: str, args: Iterable[int], *, radix: int = 10, reading: Reading = "one-to-one") -> str:
+    """Replace each ``~`` and ``$`` of ``message`` by its numbers (:func:`assign`); specials beyond the
+    numbers stay."""
+    groups = iter(assign(message, args, reading))
     out: list[str] = []
     for ch in message:
         if ch in SPECIALS:
-            arg = next(it, None)
-            if arg is not None:
-                out.append(format_unsigned(arg, radix) if ch == RAW else format_joint_mask(arg))
+            numbers = next(groups)
+            if numbers:
+                if ch == RAW:
+                    out.append(", ".join(format_unsigned(n, radix) for n in numbers))
+                else:
+                    out.append("; ".join(format_joint_mask(n) for n in numbers))
                 continue
         out.append(ch)
     return "".join(out)
@@ -126,7 +150,9 @@ class ErrorMessage:
 
     ``has_nul`` says whether a NUL follows the text (it makes ``~`` and ``$`` special); it is set
     automatically when there are ``args``.  ``known_severities`` is the set
-    :attr:`problems` checks severities against (the spec's when None); it takes no part in equality.
+    :attr:`problems` checks severities against (the spec's when None); ``reading`` how numbers are
+    matched to special characters (:func:`assign`; erratum ``error-substitution``).  Neither takes part
+    in equality.
     Any three-letter code conforms: the spec's table lists the 1985 guide's and the reference server's.
     """
 
@@ -137,6 +163,7 @@ class ErrorMessage:
     args: tuple[int, ...] = ()
     has_nul: bool = False
     known_severities: frozenset[str] | None = field(default=None, compare=False, repr=False)
+    reading: Reading = field(default="one-to-one", compare=False, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "args", tuple(self.args))
@@ -153,7 +180,7 @@ class ErrorMessage:
         """The message with the numbers substituted (only when a NUL is present)."""
         if not self.has_nul:
             return self.message
-        return substitute(self.message, self.args, radix=radix)
+        return substitute(self.message, self.args, radix=radix, reading=self.reading)
 
     def render(self, *, radix: int = 10) -> str:
         """The whole line for a human: ``where: severity code`` and the substituted message."""
@@ -180,10 +207,19 @@ class ErrorMessage:
             out.append(f"error code {self.code!r} is not three letters (error-string.code)")
         if self.has_nul:
             wanted = count_specials(self.message)
-            if wanted != len(self.args):
-                more = "more" if len(self.args) > wanted else "fewer"
+            have = len(self.args)
+            surplus_ok = self.reading == "one-or-more" and wanted > 0
+            if have < wanted or (have > wanted and not surplus_ok):
+                more = "more" if have > wanted else "fewer"
+                why = ""
+                if have > wanted and wanted:
+                    why = (
+                        "; the 1985 guide's 'one or more numbers' per special character would give the"
+                        " extra ones to the last, but manip reads one number each (erratum"
+                        " error-substitution; reading='one-or-more' accepts it)"
+                    )
                 out.append(
-                    f"{len(self.args)} number(s) follow the NUL, {more} than the {wanted} ~/$ in the message"
+                    f"{have} number(s) follow the NUL, {more} than the {wanted} ~/$ in the message{why}"
                     " (error-string.substitution)"
                 )
         return tuple(out)
@@ -226,6 +262,7 @@ def parse_error(
     align_args: bool = True,
     severities: Collection[str] | None = None,
     body: Literal["auto", "string", "packet"] = "auto",
+    reading: Reading = "one-to-one",
 ) -> ErrorMessage:
     """Decode an error string, from either form of the bytes that hold it.
 
@@ -236,8 +273,22 @@ def parse_error(
     number: a control byte, a NUL or a byte above 0177) as the packet form; an error that neither
     reading explains says which forms were tried.  Offsets in errors count from the start of ``data``.
 
-    ``severities`` replaces the spec's table for :attr:`ErrorMessage.problems`.
+    ``severities`` replaces the spec's table for :attr:`ErrorMessage.problems`; ``reading`` is how
+    numbers go with special characters (:func:`assign`, erratum ``error-substitution``).
     """
+    if reading not in READINGS:
+        raise ValueError(f"reading must be one of {', '.join(READINGS)}, not {reading!r}")
+    message = _parse(data, align_args=align_args, severities=severities, body=body)
+    return message if reading == "one-to-one" else replace(message, reading=reading)
+
+
+def _parse(
+    data: bytes,
+    *,
+    align_args: bool,
+    severities: Collection[str] | None,
+    body: Literal["auto", "string", "packet"],
+) -> ErrorMessage:
     if body not in ("auto", "string", "packet"):
         raise ValueError(f"body must be 'auto', 'string' or 'packet', not {body!r}")
     if body == "packet":

@@ -403,7 +403,7 @@ _REPLY_CLAUSE: Final[Mapping[str, str]] = {
 
 def response_layout(op: RequestOpcode) -> Layout:
     """The data layout after the request number of a (non-terminator) RESPONSE to ``op``."""
-    match op.response.kind:
+    match op.response.form:
         case "done":
             return _EMPTY
         case "segment":
@@ -421,7 +421,7 @@ def encode_reply(op: int | str, request_number: int, **values: Any) -> bytes:
         data = fast.build(values, request_number)
         if data is not None:
             return data
-    if spec_op.response.kind == "multi" and not any(values.values()):
+    if spec_op.response.form == "multi" and not any(values.values()):
         raise EncodeError(
             f"{spec_op.name}.reply: an empty chunk would end the reply; use encode_terminator",
             path=f"{spec_op.name}.reply",
@@ -494,7 +494,7 @@ def decode_reply(data: bytes, op: int | str | RequestOpcode | None = None) -> Re
     if op is None:
         return Reply(number, None, {}, payload)
     spec_op = op if isinstance(op, RequestOpcode) else request_op(op)
-    kind = spec_op.response.kind
+    kind = spec_op.response.form
     if kind == "multi" and not payload:
         return Reply(number, spec_op, {}, payload)
     _, values = _parse(

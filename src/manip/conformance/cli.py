@@ -5,6 +5,7 @@ Commands::
     manip-conform run [HOST] [options]     run the suite (no HOST: against the embedded reference server)
     manip-conform cases [--format table|json] [--select P]...
     manip-conform coverage [--format table|json] [--party P]...
+    manip-conform report REPORT.json [--html FILE] [--markdown FILE]
 
 Exit codes of ``run`` (documented in ``--help``):
 
@@ -39,11 +40,20 @@ from rich.markup import escape
 from rich.table import Table
 
 from manip.commandline import configure_logging, version_option
+from manip.conformance.client.cli import client_command
 from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.fuzz.cli import fuzz_command
 from manip.conformance.output.console import make_console, progress_bar
 from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
+from manip.conformance.output.documents import ReportError, document_options, render_saved, write_documents
 from manip.conformance.output.report import failure_text, write_json, write_junit
+from manip.conformance.puma.target import (
+    DEFAULT_WRIST_LISTEN,
+    DEFAULT_WRIST_WAIT,
+    PumaTarget,
+    PumaUnreachableError,
+    puma_cases,
+)
 from manip.conformance.replay.cli import (
     check_output_paths,
     given,
@@ -95,6 +105,7 @@ _STYLE = {
     "skip": "dim",
     "known-fail": "cyan",
     "fixed": "bold red",
+    "unsupported": "blue",
 }
 
 
@@ -173,6 +184,7 @@ def main() -> None:
 )
 @json_option
 @junit_option
+@document_options
 @click.option(
     "--server-fault",
     "server_faults",
@@ -196,6 +208,31 @@ def main() -> None:
     multiple=True,
     metavar="NAME",
     help="With --cougar sim: switch on a defect of the simulated Cougar (see manip-cougar --help).",
+)
+@click.option(
+    "--puma",
+    "puma",
+    is_flag=True,
+    help="Judge the Puma's side of the wrist link: the suite plays Cougar on the emulated DRV-11J for the "
+    "Puma server at HOST (started with manip-server --cougar pointing at --wrist-listen, after the suite) "
+    "or, without HOST, for the embedded reference server.  Only puma cases run.",
+)
+@click.option(
+    "--wrist-listen",
+    "wrist_listen",
+    default=DEFAULT_WRIST_LISTEN,
+    show_default=True,
+    metavar="URL",
+    help="With --puma HOST: where the judging Cougar listens (tcp://HOST:PORT) for the Puma's wrist link.",
+)
+@click.option(
+    "--wrist-wait",
+    "wrist_wait",
+    type=click.FloatRange(min=0.1),
+    default=DEFAULT_WRIST_WAIT,
+    show_default=True,
+    metavar="SECONDS",
+    help="With --puma HOST: how long the judging Cougar waits for the Puma's wrist link.",
 )
 @click.option(
     "--record",
@@ -240,9 +277,14 @@ def run(
     broken_after: float | None,
     json_path: Path | None,
     junit_path: Path | None,
+    html_path: Path | None,
+    markdown_path: Path | None,
     server_faults: tuple[str, ...],
     cougar: str | None,
     cougar_faults: tuple[str, ...],
+    puma: bool,
+    wrist_listen: str,
+    wrist_wait: float,
     record: Path | None,
     time_mode: str | None,
     repeat: int,
@@ -251,7 +293,8 @@ def run(
     """Run the suite against HOST (a link address: tcp://HOST:PORT, chudp://HOST:PORT?addr=OCTAL,
     chaosd:///PATH, or HOST[:PORT] for tcp).  Without HOST the embedded reference server is started
     on a free loopback port and the suite runs against it.  With --cougar the Cougar cases run against
-    a Cougar over the emulated DRV-11J link instead."""
+    a Cougar over the emulated DRV-11J link instead; with --puma the puma cases judge the server's wrist
+    side, the suite playing Cougar."""
     console = make_console()
     select = (*select, *cases_of_clauses(clauses, cougar=cougar is not None))
     try:
@@ -290,6 +333,29 @@ def run(
         for name, why in _NOT_WITH_COUGAR.items():
             if given(name):
                 raise click.UsageError(f"--{name.replace('_', '-')} {why}, not with --cougar")
+    puma_target: PumaTarget | None = None
+    if puma:
+        if cougar is not None:
+            raise click.UsageError("--puma judges a Puma server, --cougar a Cougar: not both")
+        if record is not None:
+            raise click.UsageError("--record records Chaos connections of a server run, not with --puma")
+        if not host and (given("wrist_listen") or given("wrist_wait")):
+            raise click.UsageError(
+                "--wrist-listen and --wrist-wait are for --puma HOST (the embedded server's wrist is wired "
+                "to the judging Cougar by the suite)"
+            )
+        try:
+            puma_target = PumaTarget(
+                host=address or None,
+                wrist_listen=wrist_listen,
+                wrist_wait=wrist_wait,
+                faults=server_faults,
+                virtual=time_mode != "real",
+            )
+        except ValueError as exc:
+            raise click.UsageError(f"--puma: {exc}") from None
+    elif given("wrist_listen") or given("wrist_wait"):
+        raise click.UsageError("--wrist-listen and --wrist-wait apply to --puma")
     if record is not None and repeat > 1:
         raise click.UsageError("--record records one run: not with --repeat")
     simulated = not host and target is None
@@ -299,10 +365,15 @@ def run(
             "another target keeps its own clock"
         )
     virtual = simulated and time_mode != "real"
-    check_output_paths(record=record, json=json_path, junit=junit_path)
+    check_output_paths(
+        record=record, json=json_path, junit=junit_path, html=html_path, markdown=markdown_path
+    )
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "big")
-    cases = cougar_cases(all_cases(), cougar=target is not None)
+    if puma_target is not None:
+        cases = puma_cases(all_cases())
+    else:
+        cases = cougar_cases(all_cases(), cougar=target is not None)
     check_selection(select_set, skip_set, cases, cougar=target is not None)
     options = RunOptions(
         target="hardware" if target_kind == "hardware" else "sim",
@@ -342,12 +413,16 @@ def run(
     if target is not None:
         config.reproduce_prefix = target.reproduce_prefix()
         config.liveness_check = liveness_check
+    if puma_target is not None:
+        config.reproduce_prefix = puma_target.reproduce_prefix()
     console.print(f"manip-conform: seed [bold]{seed}[/] (rerun with --seed {seed})")
     if repeat > 1:
-        report, code = _repeat(config, cases, config_faults, console, quiet, target, repeat)
+        report, code = _repeat(config, cases, config_faults, console, quiet, target or puma_target, repeat)
     else:
         holder: dict[str, Runner] = {}
-        code = _execute(config, cases, config_faults, holder, console, quiet, cougar=target, record=record)
+        code = _execute(
+            config, cases, config_faults, holder, console, quiet, cougar=target or puma_target, record=record
+        )
         report = holder["runner"].report if "runner" in holder else None
     if report is not None:
         if code == ExitCode.INTERNAL and not report.interrupted and not report.internal_error:
@@ -356,6 +431,7 @@ def run(
             write_json(report, json_path)
         if junit_path is not None:
             write_junit(report, junit_path)
+        write_documents(report, html_path, markdown_path)
         _summary(console, report, quiet)
         code = int(report.exit_code) if code is None else code
     sys.exit(int(code) if code is not None else int(ExitCode.INTERNAL))
@@ -367,7 +443,7 @@ def _repeat(
     faults: Any,
     console: Console,
     quiet: bool,
-    cougar: CougarTarget | None,
+    cougar: CougarTarget | PumaTarget | None,
     runs: int,
 ) -> tuple[RunReport | None, int | None]:
     """``--repeat``: the selection with ``runs`` seeds, then the first seed again; the first run's report
@@ -424,6 +500,8 @@ def check_selection(
         others = [c.id for c in all_cases() if c.id not in ids and match_id(pattern.text, c.id)]
         if others:
             mode = "--cougar" if not cougar else "a server run (without --cougar)"
+            if others[0].startswith("client."):
+                mode = "manip-conform client"
             message += f" of this run: it names {len(others)} case(s) of {mode}, such as {others[0]}"
         elif close := close_case_ids(pattern.text, ids):
             message += f"; close matches: {', '.join(close)}"
@@ -477,7 +555,7 @@ def _execute(
     holder: dict[str, Runner],
     console: Console,
     quiet: bool,
-    cougar: CougarTarget | None = None,
+    cougar: CougarTarget | PumaTarget | None = None,
     record: Path | None = None,
 ) -> int | None:
     """Run; None means "use the report's exit code"."""
@@ -486,6 +564,9 @@ def _execute(
             _run_async(config, cases, faults, holder, console, quiet, cougar, record),
             virtual=config.virtual_time,
         )
+    except PumaUnreachableError as exc:
+        console.print(f"[bold red]target unreachable[/]: {escape(str(exc))}")
+        return int(ExitCode.UNREACHABLE)
     except KeyboardInterrupt:
         if "runner" in holder:
             holder["runner"].report.interrupted = True
@@ -512,7 +593,7 @@ async def _run_async(
     holder: dict[str, Runner],
     console: Console,
     quiet: bool,
-    cougar: CougarTarget | None,
+    cougar: CougarTarget | PumaTarget | None,
     record: Path | None,
 ) -> None:
     # The recording starts on the run's loop, so a simulated run records on its virtual clock.
@@ -529,8 +610,11 @@ async def _run_target(
     holder: dict[str, Runner],
     console: Console,
     quiet: bool,
-    cougar: CougarTarget | None,
+    cougar: CougarTarget | PumaTarget | None,
 ) -> None:
+    if isinstance(cougar, PumaTarget):  # --puma: the suite plays Cougar for the Puma
+        await _run_puma(config, cases, holder, console, quiet, cougar)
+        return
     if cougar is not None:  # --cougar: the Cougar target (embedded or not)
         async with cougar.running() as address:
             config.address = address
@@ -559,6 +643,33 @@ async def _run_target(
         console.print(
             f"embedded reference server at {address} (with the simulated Cougar wrist)", markup=False
         )
+        await _run_with(config, cases, holder, console, quiet)
+
+
+async def _run_puma(
+    config: RunConfig,
+    cases: Sequence[Case],
+    holder: dict[str, Runner],
+    console: Console,
+    quiet: bool,
+    puma: PumaTarget,
+) -> None:
+    if puma.host is not None:
+        console.print(
+            f"judging Cougar listening on {puma.wrist_listen}: waiting up to {puma.wrist_wait:g} s for the "
+            f"Puma's wrist link (manip-server --cougar {puma.wrist_listen})",
+            markup=False,
+        )
+    async with puma.running(config.seed) as address:
+        config.address = address
+        config.options = _with_address(config.options, address)
+        if puma.embedded:
+            how = "in virtual time" if config.virtual_time else f"at {address}"
+            console.print(
+                f"embedded reference server {how}, its wrist played by the judging Cougar", markup=False
+            )
+        else:
+            console.print(f"the Puma's wrist link is up; judging {address}", markup=False)
         await _run_with(config, cases, holder, console, quiet)
 
 
@@ -733,9 +844,31 @@ def coverage_command(fmt: str, parties: tuple[str, ...]) -> None:
     sys.exit(1 if missing else 0)
 
 
+# ----------------------------------------------------------------------------------------------- report
+
+
+@main.command("report")
+@click.argument(
+    "report_file", metavar="REPORT.json", type=click.Path(exists=True, dir_okay=False, path_type=Path)
+)
+@document_options
+def report_command(report_file: Path, html_path: Path | None, markdown_path: Path | None) -> None:
+    """Render a saved JSON report (of run, verify or replay --json) as a one-file HTML report and/or a
+    Markdown summary.  Exit 0 when written, whatever the run's verdict; 2 on a usage error or a file
+    that is not a manip-conform JSON report."""
+    if html_path is None and markdown_path is None:
+        raise click.UsageError("give --html FILE, --markdown FILE or both")
+    check_output_paths(html=html_path, markdown=markdown_path)
+    try:
+        render_saved(report_file, html_path, markdown_path)
+    except ReportError as exc:
+        raise click.UsageError(str(exc)) from None
+
+
 main.add_command(replay_command)
 main.add_command(verify_command)
 main.add_command(fuzz_command)
+main.add_command(client_command)
 
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -16,10 +16,11 @@ Consequences, all measured from this integer code by the tests:
   onto u it stops short, 1 to 3 counts low, because floor(0.75·d) = d for d = −1, −2, −3.  A steady
   reading can therefore be up to 3 counts (0.75 oz with the default gains) low, depending on history;
   noise of a count or more dithers it to an average bias of about −1.5 counts.
-* Subtracting an integer offset before or after the filter gives bit-identical results (the coefficients
-  sum to 8, and floor(x/8 − c) = floor(x/8) − c), so Cougar filters the raw readings and subtracts the
-  gauge offset vector afterwards, which is the same as subtracting it "prior to any other processing"
-  (§8.3) and lets RRAW report the filtered readings before offsets.
+* Cougar subtracts the gauge offset vector from each sample before the filter, "prior to any other
+  processing" (§8.3).  While the offsets stay constant that is bit-identical to subtracting them after
+  the filter (the coefficients sum to 8, and floor(x/8 − c) = floor(x/8) − c); a WGOV mid-run differs:
+  the step in the offsets passes through the filter like any other step of the input, so forces move to
+  their new value over a few ticks instead of jumping (erratum ``cougar-filter-rounding``).
 
 The wrist
 ---------

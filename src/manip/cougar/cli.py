@@ -72,6 +72,10 @@ class CougarServer:
                     await writer.drain()
         except (ConnectionError, OSError) as exc:
             log.info("link from %s broke: %s", peer, exc)
+        except asyncio.CancelledError:
+            # Shutdown with a Puma still linked.  Ending quietly: Python 3.11's stream server asks a
+            # cancelled handler task for its exception and logs the CancelledError as a traceback.
+            log.info("link from %s closed at shutdown", peer)
         finally:
             self.last_time = end.last_time
             self.busy = False

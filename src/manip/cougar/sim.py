@@ -17,8 +17,9 @@ Theory of operation (one tick = one GUTS interrupt, B.6, then background time):
    returns no words and its gauge sample is lost.
 2. ADC8 (B.4): the physical wrench on the hand (contact from the environment at the pose of the joint
    angles Cougar was last sent, plus gravity on the true hand and payload) becomes eight 12-bit gauge
-   counts through the wrist model; each channel is filtered in integers (:mod:`manip.cougar.adc`).
-3. Conversion (§8.2): force = voltmat · (Y − gauge offsets).
+   counts through the wrist model; the gauge offsets are subtracted from each sample (§8.3: "prior to
+   any other processing"), then each channel is filtered in integers (:mod:`manip.cougar.adc`).
+3. Conversion (§8.2): force = voltmat · Y.
 4. GRAVITY (B.8), then LIMIT (B.5) if bit 0 of ``flags`` is set (it is not, by default).
 5. GUARDM (B.9): every armed guard whose dot(force, dvec) exceeds tol trips: response 6 (stop the move,
    bit 15 of its type word set) or 7 (continue) with its index, and it is disarmed.
@@ -46,7 +47,7 @@ RFRC     14    answers 5 with the six force floats
 NEWWC    15    object weight and cg to memory; the GRAVITY model is redone
 GUARDS   16    arms guard (word & 15)
 GUARDC   17    disarms guard (word & 15)
-RRAW     18    answers 9 with the eight filtered gauge readings (before offsets)
+RRAW     18    answers 9 with the eight filtered gauge readings with the offsets added back
 WGOV     19    gauge offset vector to memory
 =======  ====  =========================================================================================
 
@@ -273,8 +274,9 @@ class CougarSim:
         mem.put("voltmat", voltmat(mem.get("calmat"), mem.get("fv")).reshape(-1))
         self._newwc()
         u = c.gauges.convert(c.gauges.analog(self._physical_load(), self._rng))
-        mem.put_int16s("gauge_raw", u)  # prime the filter with a first reading
-        mem.put_int16s("gauge_filtered", u)
+        corrected = _less(u, mem.get_int16s("gauge_offsets"))
+        mem.put_int16s("gauge_raw", corrected)  # prime the filter with a first reading
+        mem.put_int16s("gauge_filtered", corrected)
         self._jacob.run(mem, STEPS)
         if c.wake_message:
             self._terminal.append(c.wake_message.format(version=c.version))
@@ -297,7 +299,10 @@ class CougarSim:
 
     def _adc8(self) -> None:
         mem, gauges = self.memory, self.config.gauges
-        u = gauges.convert(gauges.analog(self._physical_load(), self._rng))
+        # The offsets go first, so a WGOV reaches the forces through the filter (erratum
+        # cougar-filter-rounding); the previous sample keeps the offsets it was taken with.
+        sample = gauges.convert(gauges.analog(self._physical_load(), self._rng))
+        u = _less(sample, mem.get_int16s("gauge_offsets"))
         u_previous = mem.get_int16s("gauge_raw")
         y_previous = mem.get_int16s("gauge_filtered")
         y = [adc8_filter(u[i], int(u_previous[i]), int(y_previous[i])) for i in range(GAUGES)]
@@ -308,7 +313,7 @@ class CougarSim:
 
     def _convert(self) -> None:
         mem = self.memory
-        counts = (mem.get_int16s("gauge_filtered") - mem.get_int16s("gauge_offsets")).astype(np.float64)
+        counts = mem.get_int16s("gauge_filtered").astype(np.float64)
         sign = -1.0 if "forces-wrong-sign" in self._faults else 1.0
         mem.put("force_sensed", sign * (mem.get("voltmat").reshape(6, 8) @ counts))
 
@@ -462,11 +467,26 @@ class CougarSim:
         self.memory.set_word("guard_active", self.memory.word("guard_active") & ~(1 << index) & 0xFFFF)
 
     def _reraw(self) -> None:
-        self._send(CougarResponse.RAW, self._region_words("gauge_filtered"))
+        # the gauges as the wrist reads them: the filtered readings with the offsets added back
+        raw = _plus(self.memory.get_int16s("gauge_filtered"), self.memory.get_int16s("gauge_offsets"))
+        self._send(CougarResponse.RAW, [v & 0xFFFF for v in raw])
 
     def _region_words(self, name: str) -> list[int]:
         r = region(name)
         return self.memory.read_words(r.address, r.words)
+
+
+def _wrap16(v: int) -> int:
+    """A PDP-11 ADD or SUB result: two's complement, 16 bits."""
+    return ((v + 0x8000) & 0xFFFF) - 0x8000
+
+
+def _less(values: Iterable[int], offsets: Iterable[int]) -> list[int]:
+    return [_wrap16(int(v) - int(o)) for v, o in zip(values, offsets, strict=True)]
+
+
+def _plus(values: Iterable[int], offsets: Iterable[int]) -> list[int]:
+    return [_wrap16(int(v) + int(o)) for v, o in zip(values, offsets, strict=True)]
 
 
 _HANDLERS: Final[dict[str, Callable[[CougarSim], None]]] = {

@@ -164,10 +164,10 @@ def _describe_reply(reply: Reply, op: RequestOpcode | None) -> Node:
         else:
             node.add("data", "none (a done reply, or the end of a multi-packet reply)")
         return node
-    node.text += f" ({op.name}, {op.response.kind} reply)"
-    if op.response.kind == "multi" and reply.is_empty:
+    node.text += f" ({op.name}, {op.response.form} reply)"
+    if op.response.form == "multi" and reply.is_empty:
         node.add("end", "empty packet: end of the multi-packet reply")
-    elif op.response.kind == "multi":
+    elif op.response.form == "multi":
         text = decode_lispm(reply.payload)
         node.add("text", repr(text), text, 2, len(reply.payload))
     else:

@@ -10,8 +10,9 @@ Times are in seconds, on whatever clock the caller passes the core as ``now``:
                          first STS after our OPN, the probe period is ``retransmit_interval``); an idle
                          connection also probes once the peer has been silent for 2/3 of
                          ``broken_after``;
-``broken_after``         no packet at all from the peer for this long: INCOMPLETE, event Broken (the
-                         1985 guide's hosts used 90 s);
+``broken_after``         no packet at all from the peer for this long: INCOMPLETE, event Broken (90 s
+                         by default, the ITS NCP's interval; the 1985 guide sets no Chaos timer,
+                         erratum ``ncp-timers``);
 ``rfc_timeout``          an RFC without reply: INCOMPLETE ("Host not responding"); a received RFC the
                          user leaves unanswered: refused with CLS "Timeout", event Closed;
 ``ack_delay``            how long news of received packets may wait for a packet to ride on before an

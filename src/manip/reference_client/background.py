@@ -35,6 +35,7 @@ from collections.abc import Callable
 from typing import Any, TypeVar
 
 from manip.codecs.messages import AsyncResponse
+from manip.reference_client import faults
 from manip.reference_client.errors import ConnectionLost, FatalError, ManipError, RequestTimeout
 from manip.reference_client.events import (
     AsyncErrorReceived,
@@ -50,6 +51,7 @@ from manip.reference_client.events import (
     TrivialErrorNotified,
     WarningReceived,
 )
+from manip.reference_client.faults import ClientFault
 from manip.reference_client.matching import MatchingCore
 from manip.reference_client.request import Request, RequestState
 from manip.reference_client.transport import ManipTransport
@@ -287,11 +289,16 @@ class BackgroundProcess:
                     self._report(logging.ERROR, error)
                     self._terminate(error)
                 case ConnectionClosed(reason, cause):
-                    lost = ConnectionLost(reason)
-                    lost.__cause__ = cause
-                    self._terminate(lost)
+                    self._closed_by(reason, cause)
                 case PacketKept():
                     pass
+
+    def _closed_by(self, reason: str, cause: BaseException | None) -> None:
+        if faults.on(ClientFault.SILENT_CLOSE):
+            return
+        lost = ConnectionLost(reason)
+        lost.__cause__ = cause
+        self._terminate(lost)
 
     def _report(self, level: int, error: ManipError) -> None:
         log.log(level, "%s: %s", self.name, error)

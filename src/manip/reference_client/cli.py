@@ -82,6 +82,7 @@ from manip.reference_client.cli_requests import (
 )
 from manip.reference_client.connect import aconnect
 from manip.reference_client.errors import ConnectionLost, ManipError, RequestTimeout
+from manip.reference_client.harness import main as harness_main
 from manip.reference_client.manipulator import NOTIFY_GUARD_HITS, NOTIFY_SEGMENTS, Manipulator
 from manip.reference_client.options import ClientOptions
 from manip.spec import RequestOpcode
@@ -238,7 +239,8 @@ def _run(settings: Settings, action: Action, *, interrupt_ends: bool = False) ->
 HELP: Final = """Talk to a manipulator server at URL (tcp://HOST:PORT, chudp://HOST:PORT?addr=OCTAL,
 chaosd:///PATH).  Text in mm and degrees by default, --json for scripts (failures too: one JSON object
 on stdout).  raw sends any opcode; the wrist opcodes 0240-0253 are commands; --no-check sends malformed
-requests.
+requests.  ``manip-client harness`` (no URL) is the client's harness for ``manip-conform client``
+(docs/client-harness.md).
 
 \b
 Exit status:
@@ -280,6 +282,8 @@ def _options_first(args: list[str]) -> list[str]:
 
 class _ClientGroup(click.Group):
     def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        if args[:1] == ["harness"]:  # ``manip-client harness``: no URL, the suite gives one per case
+            ctx.exit(harness_main(args[1:], prog=f"{PROG} harness"))
         ctx.meta["manip.argv"] = (PROG, *args)  # as given, for a capture's metadata
         return super().parse_args(ctx, _options_first(args))
 

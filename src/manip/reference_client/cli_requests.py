@@ -186,8 +186,8 @@ def wrist_help(op: RequestOpcode) -> str:
             count = f.type.count or 1
             kind = _ELEMENT_WORDS.get(f.type.element, f.type.element)
             lines.append(f"  {f.name.upper():<11} {count} {kind}{'s' if count > 1 else ''} ({f.type.name})")
-    reply = op.response.data.fields if op.response.kind == "data" else ()
-    answer = {"done": "done", "segment": "a segment number", "multi": "text"}.get(op.response.kind)
+    reply = op.response.data.fields if op.response.form == "data" else ()
+    answer = {"done": "done", "segment": "a segment number", "multi": "text"}.get(op.response.form)
     lines.append(f"Reply: {answer or ', '.join(f'{f.name} ({f.type.name})' for f in reply)}.")
     lines.append("")
     lines.append("Numbers: floats as usual; words in decimal, 0x hex or 0-prefixed octal.")
@@ -214,7 +214,7 @@ class RawReply:
 def raw_code(opcode: int, data: bytes) -> tuple[RequestCode, ResponseType]:
     """A request code for ``opcode`` (its spec entry when there is one) and how many packets answer it."""
     op = SPEC.requests.get(opcode)
-    multi = op is not None and op.response.kind == "multi"
+    multi = op is not None and op.response.form == "multi"
     name = op.name if op is not None else f"opcode-{octal(opcode)}"
     response = ResponseType.MULTI if multi else ResponseType.SINGLE
     return RequestCode(name, opcode, None, None, response, op), response
@@ -228,7 +228,7 @@ def extract_raw(request: Request[Any], payloads: Sequence[bytes]) -> RawReply:
     if op is None:
         return base
     try:
-        if op.response.kind == "multi":
+        if op.response.form == "multi":
             return RawReply(**{**base.__dict__, "values": {"text": decode_lispm(b"".join(payloads))}})
         if len(payloads) != 1:
             raise ValueError(f"{len(payloads)} packets answered a single-packet request")

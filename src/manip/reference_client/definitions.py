@@ -30,7 +30,7 @@ PUMA = "puma"
 
 
 def _default_extractor(op: RequestOpcode) -> str:
-    kind = op.response.kind
+    kind = op.response.form
     if kind in ("done", "segment"):
         return kind
     types = [f.type.name for f in op.response.data.fields]
@@ -59,7 +59,7 @@ def default_registry() -> Registry:
             op.opcode,
             PUMA if op.extension else None,
             _default_extractor(op),
-            response_type=ResponseType.MULTI if op.response.kind == "multi" else ResponseType.SINGLE,
+            response_type=ResponseType.MULTI if op.response.form == "multi" else ResponseType.SINGLE,
             spec=op,
         )
     for entry in sorted(SPEC.server_opcodes.values(), key=lambda e: e.generic_code):

@@ -27,6 +27,7 @@ import enum
 from typing import TYPE_CHECKING, Any
 
 from manip.codecs.error_string import ErrorMessage
+from manip.reference_client import faults
 from manip.spec import SPEC
 
 if TYPE_CHECKING:
@@ -79,12 +80,14 @@ class ServerError(ManipError):
     @property
     def message(self) -> str:
         """The message with the numbers substituted."""
-        return self.error.render_message()
+        faulty = faults.render_message(self.error.message, self.error.args, self.error.has_nul)
+        return self.error.render_message() if faulty is None else faulty
 
     @property
     def rendered(self) -> str:
         """The whole line: ``where: severity code message``."""
-        return self.error.render()
+        head = f"{self.where}: {self.severity} {self.code}"
+        return f"{head} {self.message}" if self.message else head
 
     @property
     def meaning(self) -> str | None:

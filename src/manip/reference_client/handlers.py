@@ -22,6 +22,7 @@ import struct
 from typing import Final
 
 from manip.codecs.messages import AsyncResponse
+from manip.reference_client import faults
 from manip.reference_client.errors import (
     AsynchronousError,
     AsynchronousWarning,
@@ -36,6 +37,7 @@ from manip.reference_client.events import (
     TrivialErrorNotified,
     WarningReceived,
 )
+from manip.reference_client.faults import ClientFault
 from manip.reference_client.matching import ResponseContext
 from manip.reference_client.request import ResponseType
 
@@ -55,7 +57,7 @@ def handle_normal_response(ctx: ResponseContext) -> None:
         ctx.out_of_sequence()
         return
     payload = ctx.payload
-    if request.response_type is ResponseType.MULTI:
+    if request.response_type is ResponseType.MULTI and not faults.on(ClientFault.MULTI_FIRST_PACKET):
         if payload:
             request.responses.append(payload)
             return
@@ -75,6 +77,9 @@ def handle_non_fatal_error(ctx: ResponseContext) -> None:
 
 def handle_fatal_error(ctx: ResponseContext) -> None:
     """Code 1: every pending request fails at once; the number is the last packet the server got."""
+    if faults.on(ClientFault.FATAL_AS_NON_FATAL):
+        handle_non_fatal_error(ctx)
+        return
     message = ctx.error_message()
     number = ctx.request_number
     ctx.emit(
@@ -102,6 +107,13 @@ def handle_asynchronous_response(ctx: ResponseContext) -> None:
             f"asynchronous response needs {_ASYNC_BODY.size} bytes after the request number, "
             f"got {len(payload)}",
         )
+        return
+    if faults.on(ClientFault.IGNORE_ASYNC):
+        return
+    if faults.on(ClientFault.ASYNC_AS_REPLY) and ctx.core.pending:
+        request = next(iter(ctx.core.pending.values()))
+        request.responses.append(payload)
+        ctx.extract(request)
         return
     condition, word2, word3 = _ASYNC_BODY.unpack(payload)
     ctx.emit(AsyncResponseReceived(AsyncResponse(ctx.request_number, condition, word2, word3)))

@@ -31,6 +31,7 @@ from typing import Any, Final, SupportsInt, TypeVar
 
 from manip.codecs.messages import AsyncResponse, copy_request_data, encode_request
 from manip.ncp.seq import seq_gt, seq_le
+from manip.reference_client import faults
 from manip.reference_client.arguments import word
 from manip.reference_client.background import AsyncListener, BackgroundProcess, CloseListener, ErrorListener
 from manip.reference_client.errors import (
@@ -43,6 +44,7 @@ from manip.reference_client.errors import (
     RequestTimeout,
 )
 from manip.reference_client.extractors import extract_done, extract_nothing
+from manip.reference_client.faults import ClientFault
 from manip.reference_client.generic import GenericOperations
 from manip.reference_client.handlers import NOTIFY_TRIVIAL_ERRORS
 from manip.reference_client.issuer import DEFAULT, Default, Timeout
@@ -148,6 +150,10 @@ class Manipulator(GenericOperations, PumaOperations):
             raise ValueError(f"{rc} has no spec layout for fields; pass data")
         else:
             payload = b""
+        if faults.on(ClientFault.SET_SPEED_LENGTH) and rc.spec is not None and rc.spec.name == "set-speed":
+            payload += bytes(4)
+        if faults.on(ClientFault.EARLY_TIMEOUT) and isinstance(timeout, int | float):
+            timeout = timeout / 2
         chosen = rc.default_extractor if isinstance(extractor, Default) else extractor
         function = self.registry.resolve_extractor(chosen)
         return Request(

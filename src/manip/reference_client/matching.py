@@ -42,6 +42,7 @@ every outcome is an event.
 
 from __future__ import annotations
 
+import contextlib
 import enum
 from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
@@ -50,6 +51,7 @@ from typing import Any, Final
 from manip.codecs.error_string import ErrorMessage, parse_error
 from manip.codecs.errors import CodecError
 from manip.codecs.lispm_text import decode_lispm
+from manip.reference_client import faults
 from manip.reference_client.errors import (
     ConnectionLost,
     ManipError,
@@ -67,6 +69,7 @@ from manip.reference_client.events import (
     RequestAnswered,
     RequestFailed,
 )
+from manip.reference_client.faults import ClientFault
 from manip.reference_client.packets import ResponseInfo, ServerPacket
 from manip.reference_client.registry import Registry
 from manip.reference_client.request import Request, RequestState, ResponseType
@@ -106,6 +109,7 @@ class MatchingCore:
         self.trivial_errors = trivial_errors
         """The policy the ``notify-trivial-errors`` handler consults (None: nothing is trivial)."""
         self.align_args = align_args
+        expect_initial_response = expect_initial_response and not faults.on(ClientFault.NO_INITIAL_WAIT)
         self.phase = Phase.AWAITING_INITIAL if expect_initial_response else Phase.OPEN
         self._pending: dict[int, Request[Any]] = {}
         self._finished: OrderedDict[int, _Finished] = OrderedDict()
@@ -209,6 +213,8 @@ class MatchingCore:
     # ------------------------------------------------------------------ primitives for handlers
 
     def find_matching_request(self, number: int) -> Request[Any] | None:
+        if faults.on(ClientFault.WRONG_REQUEST_NUMBER):
+            number = (number + 1) & 0xFFFF
         return self._pending.get(number)
 
     def why_unmatched(self, number: int) -> OutOfSequenceReason:
@@ -342,8 +348,17 @@ class ResponseContext:
     def error_message(self) -> ErrorMessage:
         """The payload read as an E.2 error string; a string that does not parse is kept as text."""
         payload = self.payload
+        if faults.on(ClientFault.IGNORE_PAD) and 0 in payload:
+            # the numbers read from right after the NUL, pad byte and all; an odd last byte dropped
+            rest = len(payload) - payload.index(0) - 1
+            with contextlib.suppress(CodecError):
+                return parse_error(payload[: len(payload) - rest % 2], align_args=False, body="string")
         try:
             return parse_error(payload, align_args=self.core.align_args, body="string")
+        except CodecError:
+            pass
+        try:  # a server that did not pad the numbers to a word (clause client.error-args-layout)
+            return parse_error(payload, align_args=not self.core.align_args, body="string")
         except CodecError as exc:
             nul = payload.find(0)
             text = decode_lispm(payload if nul < 0 else payload[:nul])

@@ -36,6 +36,7 @@ from manip.links import (
     ChaosError,
     ConnectionBroken,
     ConnectionClosed,
+    Link,
     LinkAddress,
     NcpConfig,
     open_connection,
@@ -43,10 +44,12 @@ from manip.links import (
 )
 from manip.links import ConnectionLost as ChaosConnectionLost
 from manip.links.api import LinkWrapper
+from manip.reference_client import faults
 from manip.reference_client.errors import ConnectionLost
+from manip.reference_client.faults import ClientFault
 from manip.reference_client.packets import ResponseInfo, ServerPacket, chaos_response_info
 from manip.reference_client.request import Request
-from manip.spec.constants import ServerOp
+from manip.spec.constants import ChaosOp, ServerOp
 
 DEFAULT_CLOSE_TIMEOUT = 2.0
 """Seconds a graceful close waits for the server to acknowledge our EOF before aborting."""
@@ -82,7 +85,7 @@ class NcpTransport:
         self.connect_timeout = connect_timeout
         self.close_timeout = close_timeout
         self.ncp_options = ncp_options
-        self.wrap_link = wrap_link
+        self.wrap_link = _no_ack(wrap_link) if faults.on(ClientFault.NEVER_ACK) else wrap_link
         self._conn: ChaosConnection | None = None
         self._ahead: Packet | None = None
         self._end: ChaosError | None = None
@@ -205,3 +208,21 @@ class NcpTransport:
     def _poke(self) -> None:
         if self._wakeup is not None:
             self._wakeup()
+
+
+def _no_ack(inner: LinkWrapper | None) -> LinkWrapper:
+    """Fault never-ack: every packet goes out with ack 0 and no STS goes out at all."""
+
+    def wrap(link: Link) -> Link:
+        wrapped = inner(link) if inner is not None else link
+        send = wrapped.send
+
+        def send_without_acks(packet: Packet, next_hop: int | None = None) -> bool:
+            if packet.opcode == ChaosOp.STS:
+                return True
+            return send(packet.with_(ack_no=0), next_hop)
+
+        wrapped.send = send_without_acks  # type: ignore[method-assign]
+        return wrapped
+
+    return wrap

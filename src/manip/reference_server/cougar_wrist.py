@@ -54,7 +54,7 @@ from typing import Any, Final
 from manip.arm.kinematics import Joints, forward
 from manip.arm.sim import AbortCause, ArmSim, MotionAborted
 from manip.arm.trajectory import Scheme
-from manip.codecs.cougar import CougarMsg, Malformed, OutOfSync, WordStream, encode
+from manip.codecs.cougar import CougarMsg, Malformed, OutOfSync, WordStream, encode, lookup
 from manip.codecs.error_string import SPECIALS, ErrorMessage
 from manip.codecs.messages import Value
 from manip.cougar.environment import Environment
@@ -63,6 +63,7 @@ from manip.links.drv11j import Drv11jPort
 from manip.reference_server import errors
 from manip.reference_server.cougar_port import CougarPort, SimPort
 from manip.reference_server.errors import RequestError
+from manip.reference_server.faults import Fault, FaultSet
 from manip.reference_server.session import WRIST_OPERATIONS
 from manip.reference_server.wrist import GuardHit, Pending, WristEvent, WristNotice
 from manip.spec import SPEC, RequestOpcode
@@ -244,7 +245,9 @@ class CougarWrist:
         """The latest New Theta Dot received (deg/s), None before the first."""
         self._stream = WordStream("response")
         self._arm: ArmSim | None = None
-        self._npr: list[int] | None = None
+        # One NPR per servo cycle run since the last output: a servo that wakes late catches up several
+        # cycles at once, and the wrist must still see each of them.
+        self._npr: list[list[int]] = []
         self._reset = False
         self._sen: list[int] | None = None
         self._sen_sent: Joints | None = None
@@ -259,8 +262,16 @@ class CougarWrist:
         self._procedures: list[_Calibration] = []
         self._events: list[WristEvent] = []
         self._link_reported = False
+        self.faults = FaultSet()
+        """Defects switched on for testing a judge of the Puma's wrist side (``use_faults``)."""
+        self._cycles = 0
+        self._forces: tuple[float, ...] = (0.0,) * 6
 
     # ------------------------------------------------------------------------------ Wrist API
+    def use_faults(self, faults: FaultSet) -> None:
+        """The server's fault switches (the session passes them on)."""
+        self.faults = faults
+
     @property
     def served(self) -> frozenset[int]:
         return frozenset(SPEC.request(name).opcode for name in WRIST_OPERATIONS)
@@ -309,9 +320,17 @@ class CougarWrist:
             ((s - ps) - (n - pn)) / dt
             for s, ps, n, pn in zip(actual, ep.prev_sensed, nominal, ep.prev_nominal, strict=True)
         )
-        self._npr = encode(
-            "command", CougarCommand.NPR, theta_sensed=actual, theta_commanded=nominal, rate_difference=rate
-        )
+        self._cycles += 1
+        if Fault.NPR_SKIPPED not in self.faults or self._cycles % 2:
+            self._npr.append(
+                encode(
+                    "command",
+                    CougarCommand.NPR,
+                    theta_sensed=actual,
+                    theta_commanded=nominal,
+                    rate_difference=rate,
+                )
+            )
         ntd = self.ntd or _ZERO6
         if scheme is Scheme.COMPLIANT_MOTION:
             for i in range(6):
@@ -337,7 +356,10 @@ class CougarWrist:
 
     def queue_command(self, name: str | int, **values: Any) -> None:
         """Put a command on the user queue (sent on the next tick)."""
-        self._user.append(encode("command", name, **values))
+        words = encode("command", name, **values)
+        if Fault.WRIST_FLOAT_WORDS_SWAPPED in self.faults:
+            words = _swap_float_words(words)
+        self._user.append(words)
 
     def _ask(
         self,
@@ -379,12 +401,17 @@ class CougarWrist:
     def _output(self, arm: ArmSim) -> None:
         """The output process: everything queued, in the 1985 guide's priority order."""
         words: list[int] = []
-        if self._npr is not None:
-            words += self._npr
-            self.stats.npr += 1
-            self.stats.commands += 1
+        if Fault.WRIST_USER_FIRST in self.faults:
+            while self._user:
+                words += self._user.popleft()
+                self.stats.commands += 1
+        if self._npr:
+            for npr in self._npr:
+                words += npr
+            self.stats.npr += len(self._npr)
+            self.stats.commands += len(self._npr)
             self._sen_sent = arm.actual  # NPR carries the sensed angles too
-            self._npr = None
+            self._npr.clear()
         if self._reset:
             words += encode("command", CougarCommand.RST)
             self.stats.commands += 1
@@ -475,8 +502,9 @@ class CougarWrist:
         index = word & GUARD_INDEX_MASK
         stop = msg.code == CougarResponse.GUARD_STOP
         self.stats.guard_hits += 1
-        arm_events = tuple(arm.halt(AbortCause.GUARD)) if stop else ()
-        if stop:
+        halts = stop and Fault.GUARD_IGNORED not in self.faults
+        arm_events = tuple(arm.halt(AbortCause.GUARD)) if halts else ()
+        if halts:
             self._reset = True
             self._episode = None
         self._events.append(GuardHit(index, stop, arm.time, arm_events))
@@ -545,17 +573,27 @@ class CougarWrist:
                 self._procedures.remove(proc)
 
     # ------------------------------------------------------------------------------ handlers
-    def _read_forces(self, values: Mapping[str, Value], now: float, arm: ArmSim) -> Pending:
+    def _read_forces(self, values: Mapping[str, Value], now: float, arm: ArmSim) -> Pending | dict[str, Any]:
         # §6.3: the current joint angles go first, so Cougar's gravity correction is up to date.
-        self._interrupt.append(encode("command", CougarCommand.SEN, theta_sensed=arm.actual))
-        self._sen_sent = arm.actual
+        if Fault.READ_FORCES_NO_ANGLES not in self.faults:
+            self._interrupt.append(encode("command", CougarCommand.SEN, theta_sensed=arm.actual))
+            self._sen_sent = arm.actual
+        if Fault.WRIST_NO_WAIT in self.faults:
+            self.queue_command(CougarCommand.RFRC)
+            return {"forces": self._forces}
         return self._request(
             now,
             "read-forces",
             CougarCommand.RFRC,
             CougarResponse.FORCES,
-            lambda msg: {"forces": msg.values["forces"]},
+            lambda msg: {"forces": self._keep_forces(msg)},
         )
+
+    def _keep_forces(self, msg: CougarMsg) -> tuple[float, ...]:
+        forces = msg.values["forces"]
+        assert isinstance(forces, tuple)
+        self._forces = tuple(float(f) for f in forces)
+        return self._forces
 
     def _read_raw(self, values: Mapping[str, Value], now: float, arm: ArmSim) -> Pending:
         return self._request(
@@ -620,6 +658,21 @@ class CougarWrist:
         proc = _Calibration(self, arm, pending, now)
         self._procedures.append(proc)
         return pending
+
+
+def _swap_float_words(words: list[int]) -> list[int]:
+    """``words`` (one command) with the two words of every float swapped (a faulty Puma's)."""
+    out = list(words)
+    pos = 1
+    for f in lookup("command", words[0]).data:
+        n = 1 if f.count is None else f.count
+        if f.element == "float":
+            for i in range(pos, pos + 2 * n, 2):
+                out[i], out[i + 1] = out[i + 1], out[i]
+            pos += 2 * n
+        else:
+            pos += n
+    return out
 
 
 def _int(value: Value) -> int:
@@ -776,14 +829,14 @@ class _Calibration:
             return False
         if len(self.readings[self.position]) < self.settings.samples:
             return False  # replies still to come (or a timeout, which fails us)
-        if self.position == 0:
+        if self.position == 0 and Fault.CALIBRATE_ONE_POSE not in self.wrist.faults:
             self.position, self.settled, self.asked = 1, 0, 0
             try:
                 arm.move_joints(self.poses[1], t)
             except Exception as exc:  # Refused: the arm will not move (power, abort)
                 return self._fail(_calibration_error(f"cannot move to the second pose ({exc})"))
             return False
-        samples = self.readings[0] + self.readings[1]
+        samples = self.readings[0] + self.readings[1]  # (only the first with calibrate-one-pose)
         offsets = tuple(round(sum(s[i] for s in samples) / len(samples)) for i in range(8))
         offsets = tuple(min(max(v, -0x8000), 0x7FFF) for v in offsets)
         self.wrist.queue_command(CougarCommand.WGOV, offsets=offsets)

@@ -526,7 +526,7 @@ def _outcome(op: RequestOpcode | None, answer: Outgoing, output: Output) -> str:
     body = answer.data[2:]
     if op is None or not body:
         return "done"
-    match op.response.kind:
+    match op.response.form:
         case "segment" if len(body) == 2:
             return f"segment {int.from_bytes(body, 'little')}"
         case "multi":

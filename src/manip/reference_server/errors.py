@@ -60,16 +60,24 @@ _REFUSALS: Final[dict[str, tuple[str, str]]] = {
     "JOR": ("E", "Joint(s) $ out of range"),
     "TOR": ("E", "Transform cannot be reached"),
 }
+#: TOR for a transform that is reachable but whose every solution breaks a limit (erratum
+#: ``transform-refusals``): the joints the nearest configuration breaks go in the mask.
+_TOR_LIMITS: Final = "Every solution of the transform puts joint(s) $ out of range"
 
 
-def refusal_error(where: str, refusal: Refused) -> RequestError:
-    """The non-fatal error answering a request the arm refused."""
+def refusal_error(where: str, refusal: Refused, *, swap_tor_jor: bool = False) -> RequestError:
+    """The non-fatal error answering a request the arm refused (``swap_tor_jor``: the fault switch
+    ``swap-tor-jor``, which answers TOR with JOR and JOR with TOR)."""
     if refusal.code in _REFUSALS:
+        code = refusal.code
+        if swap_tor_jor and code in ("TOR", "JOR"):
+            code = "JOR" if code == "TOR" else "TOR"
         severity, message = _REFUSALS[refusal.code]
-        args = (joint_mask(refusal.joints),) if "$" in message else ()
         if refusal.code == "TOR":
-            message = f"{message} ({_plain(refusal.detail).lower()})"
-        return RequestError(ErrorMessage(where, severity, refusal.code, message, args))
+            limits = bool(refusal.joints)
+            message = _TOR_LIMITS if limits else f"{message} ({_plain(refusal.detail).lower()})"
+        args = (joint_mask(refusal.joints),) if "$" in message else ()
+        return RequestError(ErrorMessage(where, severity, code, message, args))
     return RequestError(ErrorMessage(where, "C", refusal.code, _plain(refusal.detail)))
 
 

@@ -23,7 +23,7 @@ from typing import Final, Literal
 from manip.arm.sim import Obstacle
 from manip.spec import SPEC
 
-__all__ = ["FAULTS", "Fault", "FaultInfo", "FaultSet"]
+__all__ = ["FAULTS", "WRIST_SIDE", "Fault", "FaultInfo", "FaultSet"]
 
 
 class Fault(enum.StrEnum):
@@ -50,8 +50,10 @@ class Fault(enum.StrEnum):
     EXTRA_REPLY_AFTER_ERROR = "extra-reply-after-error"
     FATAL_WITHOUT_CLOSE = "fatal-without-close"
     NO_JOR = "no-jor"
+    SWAP_TOR_JOR = "swap-tor-jor"
     NO_NAP = "no-nap"
     AWA_IGNORED = "awa-ignored"
+    AWA_REFUSES_ALL = "awa-refuses-all"
     SPEED_UNCHECKED = "speed-unchecked"
     SEGMENT_NUMBER_STUCK = "segment-number-stuck"
     UNREQUESTED_ASYNC = "unrequested-async"
@@ -61,6 +63,17 @@ class Fault(enum.StrEnum):
     DESCRIBE_MISSING_OPERATION = "describe-missing-operation"
     DESCRIBE_WRONG_DOF = "describe-wrong-dof"
     DESCRIBE_NARROW_LIMITS = "describe-narrow-limits"
+    # protocol defects of the Puma's side of the wrist link (judged by manip-conform run --puma)
+    WRIST_FLOAT_WORDS_SWAPPED = "wrist-float-words-swapped"
+    WRIST_USER_FIRST = "wrist-user-first"
+    WRIST_NO_WAIT = "wrist-no-wait"
+    READ_FORCES_NO_ANGLES = "read-forces-no-angles"
+    NPR_SKIPPED = "npr-skipped"
+    COMPLIANT_COLLISION_TEST = "compliant-collision-test"
+    COMPLIANT_SNAP_BACK = "compliant-snap-back"
+    GUARD_IGNORED = "guard-ignored"
+    GUARD_UNREPORTED = "guard-unreported"
+    CALIBRATE_ONE_POSE = "calibrate-one-pose"
 
 
 Kind = Literal["environment", "protocol"]
@@ -218,6 +231,14 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "motion.checked-before-queue",
             ),
             _info(
+                Fault.SWAP_TOR_JOR,
+                "protocol",
+                "TOR and JOR are swapped: a transform no in-range angles reach is refused with JOR, "
+                "out-of-range joint angles with TOR.",
+                "solve-forwards.errors",
+                "motion.checked-before-queue",
+            ),
+            _info(
                 Fault.NO_NAP,
                 "protocol",
                 "Motion requests are accepted without arm power instead of NAP.",
@@ -227,6 +248,13 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 Fault.AWA_IGNORED,
                 "protocol",
                 "Motion requests are accepted after an abort instead of AWA.",
+                "motion.abort",
+            ),
+            _info(
+                Fault.AWA_REFUSES_ALL,
+                "protocol",
+                "After an abort every request but enable power and reset abort is refused with AWA, not only "
+                "motion (the E.2 table's reading; erratum awa-scope).",
                 "motion.abort",
             ),
             _info(
@@ -284,6 +312,66 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "Describe self states every joint range 5 degrees narrower at each end than the arm's.",
                 "describe.joint-limits",
             ),
+            _info(
+                Fault.WRIST_FLOAT_WORDS_SWAPPED,
+                "protocol",
+                "Floats in the commands the wrist processes queue for Cougar have their two words swapped.",
+                "cougar.command.layout",
+            ),
+            _info(
+                Fault.WRIST_USER_FIRST,
+                "protocol",
+                "The wrist output process sends the user's commands before New Position and Rate and Reset.",
+                "puma.wrist.priority",
+            ),
+            _info(
+                Fault.WRIST_NO_WAIT,
+                "protocol",
+                "Read forces is answered at once with the last forces seen, without waiting for Cougar.",
+                "puma.wrist.waits",
+            ),
+            _info(
+                Fault.READ_FORCES_NO_ANGLES,
+                "protocol",
+                "Read forces sends Report Forces without the current joint angles (SEN) before it.",
+                "puma.wrist.read-forces-angles",
+            ),
+            _info(
+                Fault.NPR_SKIPPED,
+                "protocol",
+                "A compliant segment sends New Position and Rate only every other servo cycle.",
+                "puma.compliance.npr-every-cycle",
+            ),
+            _info(
+                Fault.COMPLIANT_COLLISION_TEST,
+                "protocol",
+                "The collision test stays on under compliance.",
+                "puma.compliance.no-collision-test",
+            ),
+            _info(
+                Fault.COMPLIANT_SNAP_BACK,
+                "protocol",
+                "When a compliant episode ends the arm jumps back to the nominal goal.",
+                "puma.compliance.segment-end",
+            ),
+            _info(
+                Fault.GUARD_IGNORED,
+                "protocol",
+                "A stop-the-move guard trip is reported but the arm keeps moving.",
+                "puma.guard.stop",
+            ),
+            _info(
+                Fault.GUARD_UNREPORTED,
+                "protocol",
+                "Guard trips are never reported to the client.",
+                "puma.guard.report",
+            ),
+            _info(
+                Fault.CALIBRATE_ONE_POSE,
+                "protocol",
+                "Calibrate-wrist sets the mean of one pose's readings (gravity in them) as the offsets.",
+                "puma.calibrate-wrist",
+            ),
         ]
     )
 )
@@ -295,6 +383,12 @@ for _info_entry in FAULTS.values():
     for _clause in _info_entry.clauses:
         if _clause not in SPEC.clauses:
             raise RuntimeError(f"fault {_info_entry.name} names unknown clause {_clause!r}")
+
+WRIST_SIDE: Final[frozenset[Fault]] = frozenset(
+    info.fault for info in FAULTS.values() if all(SPEC.clauses[c].party == "puma" for c in info.clauses)
+)
+"""Defects of the Puma's side of the wrist link: the server cases cannot see them (they need the suite
+playing Cougar, ``manip-conform run --puma``)."""
 
 DEFAULT_PANIC_DELAY: Final = 1.0
 DEFAULT_NZI_JOINTS: Final = (2, 3)

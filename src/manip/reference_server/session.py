@@ -208,6 +208,11 @@ class ServerSession:
         self.arm.enforce_abort = Fault.AWA_IGNORED not in faults
         if faults.obstacle is not None and Fault.OBSTACLE in faults:
             self.arm.place_obstacle(faults.obstacle)
+        self.arm.collision_test_compliant = Fault.COMPLIANT_COLLISION_TEST in faults
+        self.arm.hold_compliant_end = Fault.COMPLIANT_SNAP_BACK not in faults
+        use_faults = getattr(self.wrist, "use_faults", None)
+        if use_faults is not None:  # the wrist processes' own defects (a Wrist need have none)
+            use_faults(faults)
         self.state = State.AWAITING_INITIAL
         self.notifications = 0
         """The request-notifications mask in force (bit 0 guard hit, bit 1 segment completed)."""
@@ -291,6 +296,8 @@ class ServerSession:
             if isinstance(wev, GuardHit):
                 # The abort is the guard hit itself: report only the segments that ended before it.
                 self._report_arm(number, [e for e in wev.arm_events if not isinstance(e, MotionAborted)])
+                if Fault.GUARD_UNREPORTED in self.faults:
+                    continue
                 if self.notifications & _GUARD_BIT or Fault.UNREQUESTED_ASYNC in self.faults:
                     word2 = _GUARD_STOP if wev.stop else _GUARD_CONTINUE
                     self._emit_async(number, AsyncCondition.GUARD_HIT, word2, wev.index)
@@ -376,6 +383,12 @@ class ServerSession:
             if handler is None and op.opcode not in self.wrist.served:
                 raise errors.not_served(op.opcode)
             values = self._decode(op, event.data)
+            if (
+                Fault.AWA_REFUSES_ALL in self.faults
+                and self.arm.aborted
+                and op.name not in ("enable-power", "reset-abort")
+            ):
+                raise errors.refusal_error(op.name, Refused("AWA", "motion aborted; reset first"))
             try:
                 result: dict[str, Any] | Pending
                 if handler is None:
@@ -383,7 +396,8 @@ class ServerSession:
                 else:
                     result = handler(self, values, event.now)
             except Refused as refusal:
-                raise errors.refusal_error(op.name, refusal) from refusal
+                swap = Fault.SWAP_TOR_JOR in self.faults
+                raise errors.refusal_error(op.name, refusal, swap_tor_jor=swap) from refusal
         except RequestError as exc:
             return self._refuse(number, exc)
         except Exception:
@@ -434,12 +448,12 @@ class ServerSession:
             raise errors.bad_value(op.name, exc.message) from exc
 
     def _reply(self, op: RequestOpcode, number: int, values: dict[str, Any]) -> None:
-        if op.response.kind == "multi":
+        if op.response.form == "multi":
             self._reply_text(number, str(values["text"]))
             return
         data = _word(number) + self._payload(op, values)
         floats_only = all(f.type.element == "float" for f in op.response.data.fields)
-        if Fault.SWAPPED_FLOAT_WORDS in self.faults and op.response.kind == "data" and floats_only:
+        if Fault.SWAPPED_FLOAT_WORDS in self.faults and op.response.form == "data" and floats_only:
             body = data[2:]
             swapped = (body[i + 2 : i + 4] + body[i : i + 2] for i in range(0, len(body), 4))
             data = data[:2] + b"".join(swapped)

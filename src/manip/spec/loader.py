@@ -176,8 +176,8 @@ def _check(spec: Spec) -> None:
             raise SpecError(f"request {req.name} opcode {octal(req.opcode)} outside 0200-0277")
         if req.cougar and req.cougar not in {c.name for c in spec.cougar_commands.values()}:
             raise SpecError(f"request {req.name} names unknown Cougar command {req.cougar!r}")
-        if req.response.kind in ("done", "segment") and req.response.data.fields:
-            raise SpecError(f"request {req.name}: a {req.response.kind} response carries no layout")
+        if req.response.form in ("done", "segment") and req.response.data.fields:
+            raise SpecError(f"request {req.name}: a {req.response.form} response carries no layout")
     _check_clause_links(spec)
 
 
@@ -210,7 +210,7 @@ def load_spec() -> Spec:
     requests = []
     for r in manip["request"]:
         where = f"request {r['name']}"
-        shape = ResponseShape(r["response"]["kind"], _layout(r["response"].get("data", []), types, where))
+        shape = ResponseShape(r["response"]["form"], _layout(r["response"].get("data", []), types, where))
         op = RequestOpcode(
             opcode=r["opcode"],
             name=r["name"],

@@ -10,7 +10,9 @@ from manip.spec.constants import RequestName
 Level = Literal["MUST", "SHOULD", "MAY", "INFO"]
 Party = Literal["server", "client", "both", "cougar", "puma", "link"]
 Hazard = Literal["read-only", "config", "motion", "power"]
-ResponseKind = Literal["done", "data", "segment", "multi"]
+ResponseForm = Literal["done", "data", "segment", "multi"]
+ResponseKind = ResponseForm
+"""Old name of :data:`ResponseForm` ("kind" now means only a failure kind)."""
 Element = Literal["float", "word", "int16", "small", "counted", "text"]
 
 ELEMENT_BYTES: dict[str, int] = {"float": 4, "word": 2, "int16": 2, "small": 2}
@@ -74,8 +76,14 @@ class Layout:
 
 @dataclass(frozen=True, slots=True)
 class ResponseShape:
-    kind: ResponseKind
+    form: ResponseForm
+    """done, data, segment or multi (``response = { form = ... }`` in manip.toml)."""
     data: Layout
+
+    @property
+    def kind(self) -> ResponseForm:
+        """Old name of :attr:`form`, kept for code written before the rename."""
+        return self.form
 
 
 @dataclass(frozen=True, slots=True)

@@ -292,7 +292,7 @@ def reply_view(answer: Answer) -> Reply:
     if first.opcode == ServerOp.RESPONSE:
         op = SPEC.requests.get(answer.request.opcode)
         segment = None
-        if op is not None and op.response.kind == "segment" and len(first.data) == 4:
+        if op is not None and op.response.form == "segment" and len(first.data) == 4:
             segment = word(first.data, 2)
         return Reply(True, empty=len(first.data) == 2, segment=segment)
     decoded = error_of(first)

@@ -53,7 +53,7 @@ READ_ONLY_PROBES: Final = tuple(
 HERE: Final = int(RequestOp.HERE)
 PAUSE: Final = 0.05
 """Seconds a sequence waits for its motion to end (less when the target reports something first)."""
-SEGMENT_OPS: Final = tuple(op.opcode for op in SPEC.requests.values() if op.response.kind == "segment")
+SEGMENT_OPS: Final = tuple(op.opcode for op in SPEC.requests.values() if op.response.form == "segment")
 
 
 @dataclass(frozen=True)

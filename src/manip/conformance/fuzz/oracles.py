@@ -28,6 +28,7 @@ from typing import Final
 from manip.codecs.errors import CodecError
 from manip.codecs.lisp import LispValue
 from manip.codecs.messages import decode_error
+from manip.codecs.pairing import ReplyPairing
 from manip.codecs.pdp11float import unpack_f, unpack_f_array
 from manip.conformance.judge.checks import (
     WirePacket,
@@ -43,7 +44,6 @@ from manip.spec.notation import octal
 
 __all__ = ["Answered", "OracleFinding", "answers", "oracle_findings"]
 
-_ANSWERS: Final = frozenset({ServerOp.RESPONSE, ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR})
 _ERRORS: Final = frozenset(
     {
         ServerOp.NON_FATAL_ERROR,
@@ -59,7 +59,7 @@ _FREE_JOINT: Final = SPEC.request("free-joint").opcode
 _DESCRIBE: Final = SPEC.request("describe-self").opcode
 _SET_JOINTS: Final = SPEC.request("set-joint-angles").opcode
 _JOINT_REPLIES: Final = frozenset(SPEC.request(name).opcode for name in ("joint-angles", "solve-forwards"))
-_MOTION: Final = frozenset(op.opcode for op in SPEC.requests.values() if op.response.kind == "segment")
+_MOTION: Final = frozenset(op.opcode for op in SPEC.requests.values() if op.response.form == "segment")
 _REQUESTS: Final = range(0o200, 0o300)
 _RESETS: Final = frozenset(SPEC.request(name).opcode for name in ("enable-power", "reset-abort"))
 ABORTS: Final = ("COL", "PAN")
@@ -92,41 +92,27 @@ class OracleFinding:
 
 
 def answers(packets: Sequence[WirePacket]) -> Iterator[Answered]:
-    """Requests with their answers in order, as a server answers (a well-formed describe self by its
-    text packets up to the empty one); the initial RESPONSE (before the first request), closes and
-    asynchronous packets are no answers."""
-    pending: list[WirePacket] = []
-    multi: list[WirePacket] | None = None
+    """Requests with their answers in order, by the shared pairing rule (:mod:`manip.codecs.pairing`:
+    a well-formed describe self by its text packets up to the empty one or an error); closes,
+    asynchronous packets and answers to nothing (the initial RESPONSE, which answers the RFC) are no
+    answers."""
+    pairing: ReplyPairing[WirePacket] = ReplyPairing()
+    parts: list[WirePacket] = []
     for p in packets:
+        if p.is_close:
+            continue
         if p.direction == "c2s":
-            pending.append(p)
+            pairing.request(p, p.opcode, p.data)
             continue
-        if (not pending and multi is None) or p.is_close or p.opcode not in _ANSWERS:
+        place = pairing.server(p.opcode, p.data)
+        if place.request is None:
             continue
-        if multi is not None:
-            if p.opcode == ServerOp.RESPONSE:
-                multi.append(p)
-                if len(p.data) == 2:
-                    yield Answered(pending.pop(0), tuple(multi))
-                    multi = None
-                continue
-            yield Answered(pending.pop(0), tuple(multi))  # an error ends it, unterminated
-            multi = None
-            if not pending:
-                continue
-        request = pending[0]
-        op = SPEC.requests.get(request.opcode)
-        wanted = (
-            op is not None
-            and op.response.kind == "multi"
-            and required_refusal(request.opcode, request.data) is None
-        )
-        if wanted and p.opcode == ServerOp.RESPONSE and len(p.data) != 2:
-            multi = [p]
-            continue
-        yield Answered(pending.pop(0), (p,))
-    if multi is not None and pending:
-        yield Answered(pending.pop(0), tuple(multi))
+        parts.append(p)
+        if place.final:
+            yield Answered(place.request, tuple(parts))
+            parts = []
+    if parts and (request := pairing.in_progress) is not None:
+        yield Answered(request, tuple(parts))
 
 
 def _error_code(packet: WirePacket) -> tuple[str, str] | None:

@@ -264,7 +264,7 @@ class FuzzConnection:
         wp = self._record("c2s", opcode, number, ack, data, self.current)
         well_formed = required_refusal(opcode, data) is None
         op = SPEC.requests.get(opcode)
-        multi = well_formed and op is not None and op.response.kind == "multi"
+        multi = well_formed and op is not None and op.response.form == "multi"
         pending = _Pending(wp, self.current, opcode, multi, self._arm_wait(opcode), self._loop.time())
         if self._discard_next:
             pending.discarded = True
@@ -512,6 +512,6 @@ class FuzzConnection:
                 factor = unpack_f(head.request.data[:4])
                 if 0.0 < factor <= 1.0:
                     self._speed = factor
-        elif op.response.kind == "segment" or (op.hazard == "motion" and op.answer_within is not None):
+        elif op.response.form == "segment" or (op.hazard == "motion" and op.answer_within is not None):
             segment = SPEC.segment_within * self.allowance.scale / self._speed
             self._motion_until = max(self._motion_until, self._loop.time()) + segment

@@ -12,7 +12,7 @@ Checkers, from the smallest up:
 * :func:`check_server_opcode`, :func:`check_echo`, :func:`check_error_packet`,
   :func:`check_async_packet`, :func:`check_initial_response`: one packet;
 * :func:`check_reply`: the answer to one request (one packet, or a multi-packet reply), by the
-  response kind the spec gives the request's opcode (done, data, segment, multi), including the refusal
+  response form the spec gives the request's opcode (done, data, segment, multi), including the refusal
   the spec demands for malformed requests (:func:`required_refusal`);
 * :func:`check_description`: the describe-self text (alist readable, shapes of the known keys);
 * :func:`check_transcript`: a whole connection in order: the initial RESPONSE, one answer per request
@@ -24,7 +24,6 @@ A close or EOF seen by the recorder is a :class:`WirePacket` with the Chaos opco
 
 from __future__ import annotations
 
-from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Final
@@ -34,6 +33,7 @@ from manip.codecs.errors import CodecError, DecodeError
 from manip.codecs.lisp import Cons, Keyword, LispValue, read_alist
 from manip.codecs.lispm_text import decode_lispm
 from manip.codecs.messages import decode_error, decode_reply, decode_request
+from manip.codecs.pairing import ANSWER_OPCODES, UNSOLICITED_OPCODES, ReplyPairing
 from manip.conformance.judge.packets import CLOSE_OPCODES, Direction, WirePacket, describe, opcode_name, word
 from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC, RequestOpcode
@@ -42,8 +42,10 @@ from manip.spec.model import Layout
 from manip.spec.notation import octal
 
 __all__ = [
+    "ANSWER_OPCODES",
     "CLOSE_OPCODES",
     "TRANSCRIPT_CLAUSES",
+    "UNSOLICITED_OPCODES",
     "Direction",
     "Refusal",
     "Violation",
@@ -73,10 +75,6 @@ ERROR_OPCODES: Final = frozenset(
         ServerOp.ASYNCHRONOUS_ERROR,
         ServerOp.ASYNCHRONOUS_WARNING,
     }
-)
-ANSWER_OPCODES: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
-UNSOLICITED_OPCODES: Final = frozenset(
-    {ServerOp.ASYNCHRONOUS_RESPONSE, ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING}
 )
 ARM_SPECIFIC_SERVER_OPCODES: Final = range(0o250, 0o300)
 TRANSCRIPT_CLAUSES: Final = frozenset(
@@ -489,7 +487,7 @@ def check_reply(request: WirePacket, answer: Sequence[WirePacket]) -> list[Viola
             ),
         ]
     op = SPEC.requests[request.opcode]
-    if op.response.kind == "multi":
+    if op.response.form == "multi":
         return out + _check_multi(op, request, answer)
     return out + _check_single(op, first)
 
@@ -520,7 +518,7 @@ _KIND_CLAUSE: Final[Mapping[str, str]] = {
 
 
 def _check_single(op: RequestOpcode, packet: WirePacket) -> list[Violation]:
-    kind = op.response.kind
+    kind = op.response.form
     try:
         decode_reply(packet.data, op)
     except CodecError as exc:
@@ -565,12 +563,14 @@ def _check_multi(op: RequestOpcode, request: WirePacket, answer: Sequence[WirePa
                     actual=f"request number {number}",
                 )
             )
-        if len(packet.data) == 2:
+        if len(packet.data) <= 2:
             terminated = True
             break
         texts += 1
+    last = answer[-1]
+    if last.opcode in (ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):  # it cut the reply short
+        out += check_echo(request, last) + check_error_packet(last)
     if not terminated:
-        last = answer[-1]
         out.append(
             Violation.at(
                 last,
@@ -727,7 +727,8 @@ def multi_text(answer: Iterable[WirePacket]) -> str:
 
 @dataclass
 class _Pending:
-    request: WirePacket
+    request: WirePacket | None
+    """None: the RFC, answered by the initial RESPONSE (judged by :func:`check_initial_response`)."""
     discarded: bool = False
     """Sent while free joint waited: the spec answers it with done without executing it."""
 
@@ -735,12 +736,11 @@ class _Pending:
 @dataclass
 class _Session:
     findings: list[Violation] = field(default_factory=list)
-    pending: deque[_Pending] = field(default_factory=deque)
-    multi: list[WirePacket] | None = None
+    pairing: ReplyPairing[_Pending] = field(default_factory=ReplyPairing)
+    answer: list[WirePacket] = field(default_factory=list)
+    """The packets so far of the answer being received (a multi-packet reply in progress)."""
     mask: int = 0
     mask_pending: dict[int, int] = field(default_factory=dict)
-    free_wait: bool = False
-    free_pending: int | None = None
     last_segment: int | None = None
     fatal: WirePacket | None = None
     closed: bool = False
@@ -756,29 +756,26 @@ def check_transcript(
 ) -> list[Violation]:
     """Judge one connection's packets in order (both directions, closes included).
 
-    ``expect_initial``: the recording starts at the open, so the first server packet must be the
-    initial RESPONSE.  ``complete``: the recording ran to the end of the exchange, so a request still
-    unanswered at the end is a finding (leave it False for a case that stopped early)."""
+    Server packets are tied to requests by :class:`~manip.codecs.pairing.ReplyPairing` (erratum
+    ``capture-pairing``), the rule the capture view and replay use too.  ``expect_initial``: the
+    recording starts at the open, so the first server packet must be the initial RESPONSE, and the
+    first answer is the RFC's.  ``complete``: the recording ran to the end of the exchange, so a request
+    still unanswered at the end is a finding (leave it False for a case that stopped early)."""
     s = _Session()
-    server = [p for p in packets if p.direction == "s2c"]
-    skip = -1
     if expect_initial:
-        initial = server[0] if server else None
-        s.findings += check_initial_response(initial, rfc_packet_no)
-        if initial is not None and not initial.is_close and initial.opcode == ServerOp.RESPONSE:
-            skip = packets.index(initial)
-    for index, packet in enumerate(packets):
-        if index == skip:
-            continue  # the initial RESPONSE; requests sent before it came are still requests
+        server = [p for p in packets if p.direction == "s2c"]
+        s.findings += check_initial_response(server[0] if server else None, rfc_packet_no)
+        s.pairing.rfc(_Pending(None))
+    for packet in packets:
         if packet.direction == "c2s":
             if not packet.is_close:
                 _on_request(s, packet)
         elif packet.is_close:
-            _finish_multi(s)
+            _finish_answer(s, s.pairing.close())
             s.closed = True
         else:
             _on_server_packet(s, packet)
-    _finish_multi(s)
+    _finish_answer(s, s.pairing.in_progress)
     if s.fatal is not None and not s.closed and complete:
         s.findings.append(
             Violation(
@@ -791,7 +788,9 @@ def check_transcript(
             )
         )
     if complete and not s.closed:
-        for item in s.pending:
+        for item in s.pairing.outstanding():
+            if item.request is None:
+                continue  # no initial RESPONSE: check_initial_response said so
             s.findings.append(
                 Violation(
                     f"request #{item.request.packet_no} ({opcode_name(item.request)}) was never answered",
@@ -806,21 +805,14 @@ def check_transcript(
 
 
 def _on_request(s: _Session, packet: WirePacket) -> None:
-    s.pending.append(_Pending(packet, discarded=s.free_wait))
-    if s.free_wait:
-        s.free_wait = False
-        return
+    item = _Pending(packet)
+    item.discarded = s.pairing.request(item, packet.opcode, packet.data)
     if (
-        packet.opcode == SPEC.request("request-notifications").opcode
+        not item.discarded
+        and packet.opcode == SPEC.request("request-notifications").opcode
         and required_refusal(packet.opcode, packet.data) is None
     ):
-        mask = word(packet.data) or 0
-        s.mask_pending[packet.packet_no] = mask
-    if (
-        packet.opcode == SPEC.request("free-joint").opcode
-        and required_refusal(packet.opcode, packet.data) is None
-    ):
-        s.free_pending = packet.packet_no
+        s.mask_pending[packet.packet_no] = word(packet.data) or 0
 
 
 def _allowed_mask(s: _Session) -> int:
@@ -832,6 +824,7 @@ def _allowed_mask(s: _Session) -> int:
 
 def _on_server_packet(s: _Session, packet: WirePacket) -> None:
     s.findings.extend(check_server_opcode(packet))
+    place = s.pairing.server(packet.opcode, packet.data)
     if s.fatal is not None:
         s.findings.append(
             Violation.at(
@@ -842,22 +835,13 @@ def _on_server_packet(s: _Session, packet: WirePacket) -> None:
             )
         )
         return
-    if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE:
-        s.findings.extend(check_async_packet(packet, _allowed_mask(s)))
+    if place.role == "async":
+        if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE:
+            s.findings.extend(check_async_packet(packet, _allowed_mask(s)))
+        else:
+            s.findings.extend(check_error_packet(packet))
         return
-    if packet.opcode in (ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING):
-        s.findings.extend(check_error_packet(packet))
-        return
-    if packet.opcode not in ANSWER_OPCODES:
-        return
-    if s.multi is not None:
-        if packet.opcode == ServerOp.RESPONSE:
-            s.multi.append(packet)
-            if len(packet.data) == 2:
-                _finish_multi(s)
-            return
-        _finish_multi(s)  # an error in the middle ends the multi reply (unterminated)
-    if not s.pending:
+    if place.role == "extra":
         number = word(packet.data)
         clause = "error.non-fatal-is-reply" if number in s.answered_with_error else "request.one-reply"
         s.findings.append(
@@ -870,27 +854,33 @@ def _on_server_packet(s: _Session, packet: WirePacket) -> None:
             )
         )
         return
-    item = s.pending.popleft()
-    request = item.request
+    if place.role != "answer":
+        return
     if packet.opcode == ServerOp.FATAL_ERROR:
         s.fatal = packet
+    s.answer.append(packet)
+    if place.final:
+        _finish_answer(s, place.request)
+
+
+def _finish_answer(s: _Session, item: _Pending | None) -> None:
+    """Judge the answer collected for ``item`` (complete, or cut off by the close or the end)."""
+    answer, s.answer = s.answer, []
+    if item is None or not answer:
+        return
+    request = item.request
+    if request is None:  # the RFC's: judged by check_initial_response, and an error string as such
+        if answer[0].opcode != ServerOp.RESPONSE:
+            s.findings.extend(check_error_packet(answer[0]))
+        return
     if item.discarded:
-        _check_discarded(s, request, packet)
+        _check_discarded(s, request, answer[0])
         return
-    op = SPEC.requests.get(request.opcode)
-    if (
-        packet.opcode == ServerOp.RESPONSE
-        and op is not None
-        and op.response.kind == "multi"
-        and required_refusal(request.opcode, request.data) is None
-    ):
-        s.multi = [packet]
-        s.pending.appendleft(item)  # still being answered
-        if len(packet.data) == 2:
-            _finish_multi(s)
-        return
-    s.findings.extend(check_reply(request, [packet]))
-    _after_answer(s, request, packet)
+    s.findings.extend(check_reply(request, answer))
+    last = answer[-1]
+    if len(answer) > 1 and last.opcode == ServerOp.RESPONSE and len(last.data) <= 2:
+        s.findings.extend(check_description(multi_text(answer)))
+    _after_answer(s, request, answer)
 
 
 def _check_discarded(s: _Session, request: WirePacket, packet: WirePacket) -> None:
@@ -907,18 +897,16 @@ def _check_discarded(s: _Session, request: WirePacket, packet: WirePacket) -> No
         )
 
 
-def _after_answer(s: _Session, request: WirePacket, packet: WirePacket) -> None:
-    ok = packet.opcode == ServerOp.RESPONSE
+def _after_answer(s: _Session, request: WirePacket, answer: Sequence[WirePacket]) -> None:
+    ok = answer[-1].opcode == ServerOp.RESPONSE
     if not ok:
         s.answered_with_error.add(request.packet_no)
     mask = s.mask_pending.pop(request.packet_no, None)
     if mask is not None and ok:
         s.mask = mask
-    if s.free_pending == request.packet_no:
-        s.free_pending = None
-        s.free_wait = ok
+    packet = answer[0]
     op = SPEC.requests.get(request.opcode)
-    if ok and op is not None and op.response.kind == "segment" and len(packet.data) == 4:
+    if ok and op is not None and op.response.form == "segment" and len(packet.data) == 4:
         segment = word(packet.data, 2)
         assert segment is not None
         if s.last_segment is not None and segment != (s.last_segment + 1) & 0xFFFF:
@@ -932,14 +920,3 @@ def _after_answer(s: _Session, request: WirePacket, packet: WirePacket) -> None:
                 )
             )
         s.last_segment = segment
-
-
-def _finish_multi(s: _Session) -> None:
-    if s.multi is None:
-        return
-    answer, s.multi = s.multi, None
-    item = s.pending.popleft()
-    s.findings.extend(check_reply(item.request, answer))
-    if answer and len(answer[-1].data) == 2:
-        s.findings.extend(check_description(multi_text(answer)))
-    _after_answer(s, item.request, answer[0])

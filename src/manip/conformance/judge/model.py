@@ -29,9 +29,11 @@ How a request is judged (:meth:`ProtocolModel.expect`), from its bytes alone:
 5. manip's extension opcodes (0240 and up) the server does not list under :operations may also be
    refused with a command error (an unserved opcode);
 6. motion requests go through the gate: aborted -> AWA only (erratum ``abort-before-power``: the abort
-   condition is reported before missing power); power off -> NAP; joints past a limit -> JOR; a
-   transform the model cannot vouch for -> TOR or JOR also allowed; when a state is unknown, both
-   outcomes are allowed and the reply that comes settles it (:meth:`observe`);
+   condition is reported before missing power); power off -> NAP; joint angles past a limit -> JOR; a
+   transform (or increment) the model cannot vouch for -> TOR also allowed, never JOR (erratum
+   ``transform-refusals``: JOR is for joint angles, TOR for every transform no in-range angles reach);
+   when a state is unknown, both outcomes are allowed and the reply that comes settles it
+   (:meth:`observe`);
 7. otherwise the normal reply of the opcode's shape.
 
 The model never allows a fatal error or a BE (bug) error; it allows SQF (queue full) only while
@@ -103,7 +105,7 @@ ROTATION_OK: Final = 1e-5
 NOT_ROTATION: Final = 1e-2
 #: Joints this far (deg) inside/outside a limit are certainly in/out of range for the model.
 LIMIT_SLACK: Final = 1e-3
-MOTION_NAMES: Final = frozenset(op.name for op in SPEC.requests.values() if op.response.kind == "segment")
+MOTION_NAMES: Final = frozenset(op.name for op in SPEC.requests.values() if op.response.form == "segment")
 _SEGMENT_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
 _GUARD_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.GUARD_HIT].notification_bit
 _DEFINED_MASK: Final = sum(1 << code.notification_bit for code in SPEC.async_codes.values())
@@ -281,7 +283,7 @@ class ProtocolModel:
 
     def _expect_motion(self, op: RequestOpcode, values: Mapping[str, Value]) -> Expectation:
         gate = self._gate(clause="motion.no-power")
-        if op.name == "set-joint-angles":
+        if op.name in ("set-joint-angles", "compliant-move"):
             joints = values["joints"]
             assert isinstance(joints, tuple)
             out = [j for j, q in enumerate(joints, 1) if not self._inside(j, float(q), -LIMIT_SLACK)]
@@ -301,8 +303,8 @@ class ProtocolModel:
             data = self._expect_transform(values, "motion.checked-before-queue", vouch=op.name == "move")
         elif op.name == "ready":
             data = Expectation(True, clause="response.segment-number")
-        else:  # incremental moves: the model does not know where they lead
-            data = Expectation(True, codes=frozenset({"TOR", "JOR"}), clause="response.segment-number")
+        else:  # incremental moves: the model does not know where they lead, but they lead to a transform
+            data = Expectation(True, codes=frozenset({"TOR"}), clause="response.segment-number")
         return _combine(gate, data)
 
     def _expect_transform(self, values: Mapping[str, Value], clause: str, *, vouch: bool) -> Expectation:
@@ -314,7 +316,7 @@ class ProtocolModel:
         command = deviation > ROTATION_OK
         if vouch and tuple(floats) in self.reachable:
             return Expectation(True, command=command, clause=clause, why="the server's own transform")
-        return Expectation(True, codes=frozenset({"TOR", "JOR"}), command=command, clause=clause)
+        return Expectation(True, codes=frozenset({"TOR"}), command=command, clause=clause)
 
     def _inside(self, joint: int, q: float, slack: float) -> bool:
         """``q`` is within joint ``joint``'s range shrunk by ``slack`` (grown when negative)."""

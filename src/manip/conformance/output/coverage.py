@@ -1,10 +1,12 @@
 """Clause coverage: which cases check each clause, and which MUST clauses no case checks.
 
 Scope (erratum ``conformance-scope``): a server run can observe what binds the server, what binds both
-parties, and the links it runs over, so a MUST clause of party ``server``, ``both`` or ``link`` with no
-case is a gap.  Clauses of party ``client`` are judged from recordings of a client
-(``manip-conform verify --judge client``; listed as ``verify:FAMILY``), and ``cougar``/``puma`` ones by
-the Cougar target (``--cougar``); they are listed, and count as gaps only when their party is asked for.
+parties, and the links it runs over, and ``run --puma`` what binds the server's wrist side, so a MUST
+clause of party ``server``, ``both``, ``link`` or ``puma`` with no case is a gap.  Clauses of party
+``client`` are judged live by the client cases (``client.*``, run by ``manip-conform client`` against a
+harness) and from recordings of a client (``manip-conform verify --judge client``; listed as
+``verify:FAMILY``), and ``cougar`` ones by the Cougar target (``--cougar``); they are listed, and count as
+gaps only when their party is asked for.
 
 Cases are listed by what they declare (``@case(clauses=...)``), which is exactly what they may report
 (:mod:`manip.conformance.suite.invariants`).  The suite's invariants, which judge every exchange of every
@@ -25,7 +27,7 @@ from manip.spec import SPEC
 
 __all__ = ["DEFAULT_PARTIES", "ClauseCoverage", "coverage", "gaps"]
 
-DEFAULT_PARTIES: Final = frozenset({"server", "both", "link"})
+DEFAULT_PARTIES: Final = frozenset({"server", "both", "link", "puma"})
 
 
 @dataclass(frozen=True)

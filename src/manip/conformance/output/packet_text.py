@@ -32,7 +32,7 @@ from manip.conformance.judge.checks import WirePacket, describe, word
 from manip.spec import SPEC, Layout
 from manip.spec.constants import ServerOp
 
-__all__ = ["MAX_LISTED", "decoded", "packet_listing", "show_value"]
+__all__ = ["MAX_LISTED", "annotated", "decoded", "packet_listing", "show_value"]
 
 MAX_LISTED: Final = 80
 """Lines of a listing; the earliest packets are left out beyond it (the failure is at the end)."""
@@ -123,6 +123,31 @@ def decoded(packet: WirePacket, request_opcode: int | None = None) -> str:
     return f"data {data.hex(' ') or '(none)'}"
 
 
+def annotated(packets: Sequence[WirePacket], *, from_open: bool = False) -> list[tuple[WirePacket, str]]:
+    """Each packet with what its data say (:func:`decoded`), answers decoded by the layout of the
+    request they name.  ``from_open``: the packets start where their connections opened, so an empty
+    RESPONSE before any request is the initial one."""
+    requests: dict[tuple[int, int], int] = {}
+    last: dict[int, int] = {}
+    rows = []
+    for packet in packets:
+        request_opcode = None
+        if packet.direction == "c2s" and not packet.is_close:
+            requests[(packet.connection, packet.packet_no)] = last[packet.connection] = packet.opcode
+        else:
+            # the request the answer names; else (a wrong number) the last one sent, as answers come in order
+            number = word(packet.data)
+            request_opcode = requests.get((packet.connection, number if number is not None else -1))
+            request_opcode = request_opcode or last.get(packet.connection)
+        initial = from_open and packet.direction == "s2c" and packet.connection not in last
+        if initial and packet.opcode == ServerOp.RESPONSE and len(packet.data) == 2:
+            text = "the initial RESPONSE (its number is the RFC's packet number)"
+        else:
+            text = decoded(packet, request_opcode)
+        rows.append((packet, text))
+    return rows
+
+
 def packet_listing(
     packets: Sequence[WirePacket],
     *,
@@ -134,24 +159,9 @@ def packet_listing(
     ``from_open``: the packets start where their connections opened, so an empty RESPONSE before any
     request is the initial one."""
     chosen = {id(p) for p in marked}
-    requests: dict[tuple[int, int], int] = {}
-    last: dict[int, int] = {}
     lines = []
-    for index, packet in enumerate(packets, 1):
-        request_opcode = None
-        if packet.direction == "c2s" and not packet.is_close:
-            requests[(packet.connection, packet.packet_no)] = last[packet.connection] = packet.opcode
-        else:
-            # the request the answer names; else (a wrong number) the last one sent, as answers come in order
-            number = word(packet.data)
-            request_opcode = requests.get((packet.connection, number if number is not None else -1))
-            request_opcode = request_opcode or last.get(packet.connection)
+    for index, (packet, text) in enumerate(annotated(packets, from_open=from_open), 1):
         mark = ">" if id(packet) in chosen else " "
-        initial = from_open and packet.direction == "s2c" and packet.connection not in last
-        if initial and packet.opcode == ServerOp.RESPONSE and len(packet.data) == 2:
-            text = "the initial RESPONSE (its number is the RFC's packet number)"
-        else:
-            text = decoded(packet, request_opcode)
         lines.append(f"  {mark} {index:>3}  {packet.direction} {describe(packet)}: {text}")
     if len(lines) > limit:
         left_out = len(lines) - limit

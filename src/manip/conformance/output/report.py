@@ -31,6 +31,7 @@ __all__ = [
     "SCHEMA_VERSION",
     "ClauseTally",
     "by_clause",
+    "clause_catalog",
     "clause_lines",
     "load_schema",
     "report_json",
@@ -196,6 +197,19 @@ def _case_json(result: CaseResult) -> dict[str, Any]:
     }
 
 
+def clause_catalog(report: RunReport) -> dict[str, dict[str, str]]:
+    """Level, section and text of every clause a case of the run cites, so a saved report renders
+    (``manip-conform report``) with the clause texts of the spec it was judged by."""
+    cited = {c for r in report.results for c in r.clauses}
+    cited |= {v.clause for r in report.results for v in r.violations if v.clause is not None}
+    catalog = {}
+    for clause_id in sorted(cited):
+        spec = SPEC.clauses.get(clause_id)
+        if spec is not None:
+            catalog[clause_id] = {"level": spec.level, "section": spec.section, "text": spec.text}
+    return catalog
+
+
 def report_json(report: RunReport) -> dict[str, Any]:
     """The report as JSON-ready data (validates against :func:`load_schema`)."""
     return {
@@ -224,6 +238,7 @@ def report_json(report: RunReport) -> dict[str, Any]:
             for c in report.liveness
         ],
         "by_clause": [t.to_json() for t in by_clause(report)],
+        "clauses": clause_catalog(report),
         "cases": [_case_json(r) for r in report.results],
     }
 
@@ -251,7 +266,7 @@ def report_junit(report: RunReport) -> ET.Element:
             tests=str(len(results)),
             failures=str(sum(r.outcome in ("fail", "fixed") for r in results)),
             errors=str(sum(r.outcome == "error" for r in results)),
-            skipped=str(sum(r.outcome == "skip" for r in results)),
+            skipped=str(sum(r.outcome in ("skip", "unsupported") for r in results)),
             time=f"{sum(r.duration for r in results):.3f}",
         )
         props = ET.SubElement(suite, "properties")
@@ -282,6 +297,8 @@ def _junit_case(suite: ET.Element, area: str, result: CaseResult) -> None:
         element.text = result.traceback
     elif result.outcome == "skip":
         ET.SubElement(node, "skipped", message=result.reason)
+    elif result.outcome == "unsupported":
+        ET.SubElement(node, "skipped", message=f"unsupported: {result.reason}")
     elif text:
         ET.SubElement(node, "system-out").text = text
 

@@ -5,12 +5,13 @@ Theory of operation
 ===================
 
 **Sorting answers.**  :class:`AnswerSorter` (sans-I/O) is fed one connection's packets in order, the
-requests sent and the server packets received, and sorts the server packets the way the checkers do
-(:func:`~manip.conformance.judge.checks.check_transcript`): answers (RESPONSE, 0201, 0202) belong to the
-oldest request not yet fully answered (the RFC first, answered by the initial RESPONSE); a multi-packet
-reply stays open until its empty terminator or an error; asynchronous packets (0203-0205) form their
-own sequence; an answer with no request outstanding is an *extra*.  Matching by order rather than by
-the request-number word keeps a wrong echo a *mismatch* instead of a lost answer.  The same sorter
+requests sent and the server packets received, and sorts the server packets by the pairing rule the
+checkers and the capture view use too (:mod:`manip.codecs.pairing`, erratum ``capture-pairing``):
+answers (RESPONSE, 0201, 0202) belong to the oldest request not yet fully answered (the RFC first,
+answered by the initial RESPONSE); a multi-packet reply stays open until its empty terminator or an
+error (which answers the same request); asynchronous packets (0203-0205) form their own sequence; an
+answer with no request outstanding, or after a fatal error, is an *extra*.  Matching by order rather
+than by the request-number word keeps a wrong echo a *mismatch* instead of a lost answer.  The same sorter
 reads the recording and the live connection, so both sides are cut into the same units.
 
 **The script.**  :func:`script_of` sorts the recorded session and notes, before each recorded request,
@@ -52,14 +53,8 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from manip.captures import Session
-from manip.conformance.judge.checks import (
-    ANSWER_OPCODES,
-    UNSOLICITED_OPCODES,
-    WirePacket,
-    check_transcript,
-    describe,
-    required_refusal,
-)
+from manip.codecs.pairing import ReplyPairing
+from manip.conformance.judge.checks import WirePacket, check_transcript, describe
 from manip.conformance.replay.capture_report import capture_report, read_sessions
 from manip.conformance.replay.masking import (
     Mismatch,
@@ -118,8 +113,8 @@ EXCHANGE_CLAUSES: Final = ("request.one-reply", "response.echoes-request-number"
 
 class AnswerSorter:
     """Sorts one connection's server packets into answers per request, asynchronous packets and
-    extras (see the module docstring).  Index 0 is the RFC when ``initial`` (its answer: the initial
-    RESPONSE)."""
+    extras, by the shared pairing rule (:class:`~manip.codecs.pairing.ReplyPairing`).  Index 0 is the
+    RFC when ``initial`` (its answer: the initial RESPONSE)."""
 
     def __init__(self, initial: bool) -> None:
         self.requests: list[WirePacket | None] = [None] if initial else []
@@ -127,46 +122,39 @@ class AnswerSorter:
         self.asyncs: list[WirePacket] = []
         self.extras: list[WirePacket] = []
         self.closed: WirePacket | None = None
-        self.completed = 0
+        self._pairing: ReplyPairing[int] = ReplyPairing()
+        if initial:
+            self._pairing.rfc(0)
+
+    @property
+    def completed(self) -> int:
         """How many requests (from the first) are fully answered."""
+        return self._pairing.completed
 
     def request(self, packet: WirePacket) -> int:
+        index = len(self.requests)
         self.requests.append(packet)
         self.answers.append([])
-        return len(self.requests) - 1
+        self._pairing.request(index, packet.opcode, packet.data)
+        return index
 
     def server(self, packet: WirePacket) -> None:
         if packet.is_close:
             if self.closed is None:
                 self.closed = packet
+                self._pairing.close()
             return
-        if packet.opcode in UNSOLICITED_OPCODES:
+        place = self._pairing.server(packet.opcode, packet.data)
+        if place.role == "async":
             self.asyncs.append(packet)
-            return
-        if packet.opcode not in ANSWER_OPCODES or self.completed >= len(self.requests):
+        elif place.request is not None:
+            self.answers[place.request].append(packet)
+        else:
             self.extras.append(packet)
-            return
-        index = self.completed
-        self.answers[index].append(packet)
-        if _final(self.requests[index], packet):
-            self.completed += 1
 
     @property
     def outstanding(self) -> int:
         return len(self.requests) - self.completed
-
-
-def _final(request: WirePacket | None, packet: WirePacket) -> bool:
-    """Whether ``packet`` ends the answer to ``request`` (None: the RFC)."""
-    if request is None or packet.opcode != ServerOp.RESPONSE:
-        return True
-    op = SPEC.requests.get(request.opcode)
-    multi = (
-        op is not None
-        and op.response.kind == "multi"
-        and required_refusal(request.opcode, request.data) is None
-    )
-    return not multi or len(packet.data) <= 2
 
 
 # ------------------------------------------------------------------------------------- the script

@@ -3,10 +3,11 @@ capture that ``run --record`` writes.
 
 Commands::
 
-    manip-conform verify FILE [--session N]... [--strict] [--json F] [--junit F]
+    manip-conform verify FILE [--session N]... [--strict] [--json F] [--junit F] [--html F] [--markdown F]
     manip-conform replay FILE [--against URL | --serve URL] [--session N]... [--ignore PATH]...
                               [--reply-timeout S] [--async-timeout S] [--settle S] [--seconds S]
                               [--server-fault NAME]... [--record OUT] [--strict] [--json F] [--junit F]
+                              [--html F] [--markdown F]
 
 ``replay`` without ``--against`` or ``--serve`` replays against the embedded reference server, started
 at the time scale and seed the capture's metadata name (the golden captures': 20 and 1985).
@@ -34,6 +35,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from manip.conformance.output.console import make_console
+from manip.conformance.output.documents import document_options, write_documents
 from manip.conformance.output.report import clause_lines, failure_text, write_json, write_junit
 from manip.conformance.suite.embedded import EmbeddedServer, simulated_server
 from manip.conformance.suite.results import ExitCode, RunReport
@@ -130,7 +132,13 @@ def check_output_paths(**paths: Path | None) -> None:
 
 
 def _finish(
-    report: RunReport, console: Console, quiet: bool, json_path: Path | None, junit_path: Path | None
+    report: RunReport,
+    console: Console,
+    quiet: bool,
+    json_path: Path | None,
+    junit_path: Path | None,
+    html_path: Path | None = None,
+    markdown_path: Path | None = None,
 ) -> None:
     for result in report.results:
         if result.outcome in ("fail", "error") or (result.outcome == "warn" and not quiet):
@@ -145,6 +153,7 @@ def _finish(
         write_json(report, json_path)
     if junit_path is not None:
         write_junit(report, junit_path)
+    write_documents(report, html_path, markdown_path)
     print_by_clause(console, report)
     for problem in report.problems:
         console.print(f"[bold red]problem[/]: {escape(problem)}")
@@ -212,6 +221,7 @@ _file_argument = click.argument("file", type=click.Path(exists=True, dir_okay=Fa
 )
 @json_option
 @junit_option
+@document_options
 @click.option("-q", "--quiet", is_flag=True, help="Failures and the summary only.")
 def verify_command(
     file: Path,
@@ -220,6 +230,8 @@ def verify_command(
     judge: Judge,
     json_path: Path | None,
     junit_path: Path | None,
+    html_path: Path | None,
+    markdown_path: Path | None,
     quiet: bool,
 ) -> None:
     """Judge a recorded capture FILE offline with the suite's checks (request-number echo, reply
@@ -227,7 +239,7 @@ def verify_command(
     the client's requests instead (opcodes, data layouts)."""
     from manip.conformance.replay.verify import verify_capture  # noqa: PLC0415
 
-    check_output_paths(json=json_path, junit=junit_path)
+    check_output_paths(json=json_path, junit=junit_path, html=html_path, markdown=markdown_path)
     console = make_console()
     command = shlex.join(["manip-conform", *sys.argv[1:]])
     try:
@@ -236,7 +248,7 @@ def verify_command(
         console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {escape(str(exc))}")
         console.print(traceback.format_exc(), markup=False, highlight=False)
         sys.exit(int(ExitCode.INTERNAL))
-    _finish(report, console, quiet, json_path, junit_path)
+    _finish(report, console, quiet, json_path, junit_path, html_path, markdown_path)
     sys.exit(int(report.exit_code))
 
 
@@ -320,6 +332,7 @@ def _capture_settings(file: Path) -> _Recorded:
 @click.option("--strict", is_flag=True, help="SHOULD failures of the live checks count.")
 @json_option
 @junit_option
+@document_options
 @click.option("-q", "--quiet", is_flag=True, help="Failures and the summary only.")
 def replay_command(
     file: Path,
@@ -336,6 +349,8 @@ def replay_command(
     strict: bool,
     json_path: Path | None,
     junit_path: Path | None,
+    html_path: Path | None,
+    markdown_path: Path | None,
     quiet: bool,
 ) -> None:
     """Replay a recorded capture FILE: its client side to a live server (--against URL; without it the
@@ -366,7 +381,9 @@ def replay_command(
         faults = FaultSet.parse(server_faults) if server_faults else None
     except ValueError as exc:
         raise click.UsageError(f"--server-fault: {exc}") from None
-    check_output_paths(record=record, json=json_path, junit=junit_path)
+    check_output_paths(
+        record=record, json=json_path, junit=junit_path, html=html_path, markdown=markdown_path
+    )
     command = shlex.join(["manip-conform", *sys.argv[1:]])
 
     if serve:
@@ -436,5 +453,5 @@ def replay_command(
         outcome = _run(replay_job, console, virtual=virtual)
     if isinstance(outcome, int):
         sys.exit(outcome)
-    _finish(outcome, console, quiet, json_path, junit_path)
+    _finish(outcome, console, quiet, json_path, junit_path, html_path, markdown_path)
     sys.exit(int(outcome.exit_code))

@@ -285,7 +285,7 @@ def compare_answer(
         c.out += _compare_error(first, live[0])
         return c.out
     op = SPEC.requests.get(request_opcode)
-    if op is not None and op.response.kind == "multi" and (len(first.data) > 2 or len(recorded) > 1):
+    if op is not None and op.response.form == "multi" and (len(first.data) > 2 or len(recorded) > 1):
         c.out += _compare_multi(recorded, live, numbers)
         return c.out
     c.out += _compare_reply(request_opcode, first, live[0], segments)

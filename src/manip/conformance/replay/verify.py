@@ -147,7 +147,7 @@ def _server(packets: Sequence[WirePacket], opcodes: Iterable[int]) -> bool:
 def _asks(kind: str) -> Callable[[Sequence[WirePacket], bool], bool]:
     def exercised(packets: Sequence[WirePacket], _initial: bool) -> bool:
         return any(
-            (op := SPEC.requests.get(p.opcode)) is not None and op.response.kind == kind
+            (op := SPEC.requests.get(p.opcode)) is not None and op.response.form == kind
             for p in _requests(packets)
         )
 
@@ -180,7 +180,7 @@ FAMILIES: Final[tuple[Family, ...]] = (
     ),
     Family(
         "reply-shapes",
-        "server opcodes and reply layouts by the request's response kind",
+        "server opcodes and reply layouts by the request's response form",
         ("response.server-opcodes", "response.done-empty", "response.segment-number", "response.data-layout"),
         lambda packets, _initial: bool(_requests(packets)),
     ),

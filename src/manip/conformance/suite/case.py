@@ -49,7 +49,8 @@ Rules a case follows:
   ``--allow-motion`` (property/stateful cases also read ``ctx.options.allowed_hazards`` to restrict
   what they generate).
 * Cases live in modules of :mod:`manip.conformance.cases` (any module there is imported by
-  :func:`load_cases`), under ``cases/server/`` or ``cases/cougar/`` as the id's target says.
+  :func:`load_cases`), under ``cases/server/``, ``cases/cougar/`` or ``cases/puma/`` as the id's
+  target says.
 
 Case ids are stable: never rename one that has shipped (known-failing files and reports name them).
 """
@@ -98,8 +99,9 @@ Technique = Literal["scripted", "negative", "property", "stateful"]
 """How a case tests: a scripted exchange, malformed input (``negative``: the target's liveness is
 checked after it), Hypothesis properties, or a Hypothesis state machine."""
 TECHNIQUES: Final[tuple[str, ...]] = get_args(Technique)
-Target = Literal["server", "cougar", "client"]
-"""What a case tests, from the first component of its id: a manip server, a Cougar, a client."""
+Target = Literal["server", "cougar", "client", "puma"]
+"""What a case tests, from the first component of its id: a manip server, a Cougar, a client, the
+Puma's side of the wrist link (a server judged by the suite playing Cougar)."""
 TARGETS: Final[tuple[str, ...]] = get_args(Target)
 Kind = Technique
 """Deprecated name of :data:`Technique`."""
@@ -206,13 +208,16 @@ _REGISTRY: dict[str, Case] = {}
 
 
 def target_of(case_id: str) -> Target:
-    """The target a case id names: ``cougar.*`` and ``client.*`` say so; every other id is a server's
-    (``server.*``, and the ``property.*``/``stateful.*`` ids that shipped before targets had names)."""
+    """The target a case id names: ``cougar.*``, ``client.*`` and ``puma.*`` say so; every other id is
+    a server's (``server.*``, and the ``property.*``/``stateful.*`` ids that shipped before targets had
+    names)."""
     first = case_id.split(".", 1)[0]
     if first == "cougar":
         return "cougar"
     if first == "client":
         return "client"
+    if first == "puma":
+        return "puma"
     return "server"
 
 

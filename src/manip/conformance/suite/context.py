@@ -44,7 +44,7 @@ from typing import Any, Final, Literal, NoReturn
 
 from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request
-from manip.codecs.packet import Packet
+from manip.codecs.packet import Direction, Packet
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, describe, word
 from manip.conformance.judge.violation import Violation, evidence
@@ -177,9 +177,7 @@ class Probe:
         """The connection has ended (and every packet before the end has been taken)."""
         return self.end_reason is not None and not self._buffer
 
-    def _record(
-        self, direction: Literal["c2s", "s2c"], opcode: int, number: int, ack: int, data: bytes
-    ) -> WirePacket:
+    def _record(self, direction: Direction, opcode: int, number: int, ack: int, data: bytes) -> WirePacket:
         packet = WirePacket(direction, opcode, number, ack, bytes(data), self._ctx.clock(), self.index)
         self.packets.append(packet)
         self._ctx.transcript.append(packet)
@@ -218,7 +216,7 @@ class Probe:
                 factor = unpack_f(sent[:4])
                 if 0.0 < factor <= 1.0:
                     self._speed = factor
-        elif op.response.kind == "segment" or (op.hazard == "motion" and op.answer_within is not None):
+        elif op.response.form == "segment" or (op.hazard == "motion" and op.answer_within is not None):
             # One more segment in the queue (calibrate-wrist leaves its move back queued).
             segment = SPEC.segment_within * self._ctx.options.deadline_scale / self._speed
             self._motion_until = max(self._motion_until, self._ctx.clock()) + segment
@@ -256,7 +254,7 @@ class Probe:
         """Send a well-formed request and wait for its answer (multi-packet replies in full)."""
         spec_op = SPEC.request(op)
         number = await self.send(op, **values)
-        if spec_op.response.kind == "multi":
+        if spec_op.response.form == "multi":
             return await self.replies_until_empty(number, timeout=timeout)
         return await self.reply(number, timeout=timeout)
 

@@ -79,13 +79,16 @@ class EmbeddedServer:
         seed: int | None = None,
         wrist: bool = False,
         broken_after: float | None = None,
+        cougar: str = "sim",
     ) -> None:
-        """``wrist``: give the robot the simulated Cougar wrist, so the wrist opcodes are served (and
-        checked) rather than refused with C UIM.  ``broken_after``: the server's broken-connection timer
-        (default 90 s, the ITS Chaos NCP's; erratum ``ncp-timers``)."""
+        """``wrist``: give the robot a Cougar wrist, so the wrist opcodes are served (and checked) rather
+        than refused with C UIM: ``cougar`` says which (``sim``, the simulated one in-process, or the
+        ``tcp://`` address of one on the emulated DRV-11J, such as the suite's judging Cougar).
+        ``broken_after``: the server's broken-connection timer (default 90 s, the ITS Chaos NCP's;
+        erratum ``ncp-timers``)."""
         self._ncp = None if broken_after is None else NcpConfig.breaking_after(broken_after)
         self._config = config or ServerConfig()
-        self._wrist = functools.partial(make_cougar_wrist, "sim", seed=seed) if wrist else None
+        self._wrist = functools.partial(make_cougar_wrist, cougar, seed=seed) if wrist else None
         self._time_scale = time_scale
         self._seed = seed
         self._bind = address

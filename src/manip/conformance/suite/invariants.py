@@ -13,6 +13,9 @@ the case declares.  Those checks are *invariants*, and what they find is attribu
   finding of a clause the case does not declare is the invariant's.
 * ``cougar-link``: the Cougar probe fails a case when the DRV-11J link breaks, a tick is not answered
   with its TICKED, or Cougar does not answer a command in time.
+* ``client-wire``: after each client case (``manip-conform client``) the packets the client sent are
+  judged (:mod:`manip.conformance.client.wire`): request layouts, no request before the initial
+  RESPONSE, consecutive packet numbers, acknowledgements, the window.
 
 So a violation is attributed to the case when it names a clause the case declares; to an invariant when
 it came from that invariant's machinery (``CaseFailure.invariant``, ``SoftFailure.invariant``) and names
@@ -32,7 +35,7 @@ from typing import Final
 from manip.conformance.judge.checks import TRANSCRIPT_CLAUSES
 from manip.spec import SPEC
 
-__all__ = ["COUGAR_LINK", "INVARIANTS", "TRANSCRIPT", "Invariant", "attribution_problem"]
+__all__ = ["CLIENT_WIRE", "COUGAR_LINK", "INVARIANTS", "TRANSCRIPT", "Invariant", "attribution_problem"]
 
 
 @dataclass(frozen=True)
@@ -59,7 +62,25 @@ COUGAR_LINK: Final = Invariant(
     frozenset({"link.drv11j.framing", "cougar.word-link"}),
     "the Cougar probe: the DRV-11J link stays up, each TICK gets its TICKED, commands are answered",
 )
-INVARIANTS: Final[Mapping[str, Invariant]] = MappingProxyType({i.name: i for i in (TRANSCRIPT, COUGAR_LINK)})
+CLIENT_WIRE: Final = Invariant(
+    "client-wire",
+    frozenset(
+        {
+            "request.opcode-range",
+            "request-data.types",
+            "move.transform-data",
+            "client.initial-response",
+            "ncp.packet-numbers",
+            "ncp.acknowledge",
+            "ncp.window",
+        }
+    ),
+    "every client case's wire (manip-conform client): request layouts, no request before the initial "
+    "RESPONSE, packet numbers, acknowledgements, the window",
+)
+INVARIANTS: Final[Mapping[str, Invariant]] = MappingProxyType(
+    {i.name: i for i in (TRANSCRIPT, COUGAR_LINK, CLIENT_WIRE)}
+)
 
 for _invariant in INVARIANTS.values():
     _unknown = sorted(c for c in _invariant.clauses if c not in SPEC.clauses)

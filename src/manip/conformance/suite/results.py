@@ -8,7 +8,9 @@ Outcomes (``Outcome``):
 * ``error``: the suite itself failed (an exception in the case); the traceback is kept;
 * ``skip``: not applicable (hazard not allowed on hardware, a capability the target lacks...);
 * ``known-fail``: failed (or erred) and listed in ``--known-failing``; does not fail the run;
-* ``fixed``: listed in ``--known-failing`` but passed: the entry is stale and fails the run.
+* ``fixed``: listed in ``--known-failing`` but passed: the entry is stale and fails the run;
+* ``unsupported``: a client case needing an operation, link or feature the harness does not declare
+  (``manip-conform client``); never a pass, and it does not fail the run.
 
 Exit codes (:class:`ExitCode`): 0 conformant, 1 non-conformant (or a stale known-failing entry),
 2 usage error, 3 target unreachable or dead before any verdict, 4 interrupted or internal error.
@@ -30,8 +32,17 @@ if TYPE_CHECKING:
 
 __all__ = ["OUTCOMES", "CaseResult", "ExitCode", "LivenessCheck", "Outcome", "RunReport", "Violation"]
 
-Outcome = Literal["pass", "fail", "warn", "error", "skip", "known-fail", "fixed"]
-OUTCOMES: Final[tuple[str, ...]] = ("pass", "fail", "warn", "error", "skip", "known-fail", "fixed")
+Outcome = Literal["pass", "fail", "warn", "error", "skip", "known-fail", "fixed", "unsupported"]
+OUTCOMES: Final[tuple[str, ...]] = (
+    "pass",
+    "fail",
+    "warn",
+    "error",
+    "skip",
+    "known-fail",
+    "fixed",
+    "unsupported",
+)
 
 
 class ExitCode(enum.IntEnum):
@@ -64,7 +75,7 @@ class CaseResult:
     known_failing: bool = False
     reproduce: str = ""
     target: Target = "server"
-    """What the case tests (the first component of a case id: server, cougar, client)."""
+    """What the case tests (the first component of a case id: server, cougar, client, puma)."""
 
     @property
     def failure(self) -> Violation | None:

@@ -7,10 +7,13 @@ import asyncio
 from itertools import pairwise
 
 from manip.conformance.cases._support import (
+    TargetArm,
+    describe_target,
     expect_done,
     expect_here_served,
     expect_refusal,
     expect_response,
+    floats,
     power_on,
     read_floats,
     require_response,
@@ -18,6 +21,7 @@ from manip.conformance.cases._support import (
 from manip.conformance.judge.checks import check_async_packet, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
+from manip.spec import RequestName
 from manip.spec.constants import AsyncCondition, ServerOp
 
 FAR_MM = 100_000.0
@@ -148,6 +152,64 @@ async def transform_out_of_reach(ctx: CaseContext) -> None:
     )
 
 
+LIMIT_OVERSHOOT_DEG = 10.0
+"""How far past a stated limit the tor-limits case puts a joint to make its transform."""
+LIMIT_JOINTS = (2, 3, 5)
+"""Joints whose range, not a second solution, decides reachability on a PUMA: past either limit of any
+of them, every solution of the transform breaks a limit (the other joints have a second solution)."""
+
+
+def _limit_candidates(arm: TargetArm, joints: tuple[float, ...]) -> list[tuple[int, list[float]]]:
+    """Joint vectors with one joint :data:`LIMIT_OVERSHOOT_DEG` past one of its stated limits."""
+    out: list[tuple[int, list[float]]] = []
+    for j in (j for j in LIMIT_JOINTS if j <= len(joints)):
+        lo, hi = arm.limits.lower[j - 1], arm.limits.upper[j - 1]
+        for bound in (hi + LIMIT_OVERSHOOT_DEG, lo - LIMIT_OVERSHOOT_DEG):
+            q = list(joints)
+            q[j - 1] = bound
+            out.append((j, q))
+    return out
+
+
+@case(
+    "server.motion.tor-limits",
+    clauses=["solve-forwards.errors", "motion.checked-before-queue"],
+    hazard="motion",
+    deadline=10.0,
+)
+async def transform_out_of_range(ctx: CaseContext) -> None:
+    """A transform whose every solution breaks a joint limit: solve forwards and move answer TOR, not JOR
+    (the 1985 guide's TOR; erratum transform-refusals).  The transform is the target's own solve
+    backwards of angles with one joint past a limit; one the target solves in range is passed over."""
+    probe = await ctx.connect()
+    arm = await describe_target(ctx, probe)
+    here = await read_floats(ctx, probe, "joint-angles")
+    for joint, q in _limit_candidates(arm, here):
+        back = await probe.call("solve-backwards", joints=q)
+        if not back.is_response:
+            continue
+        transform = list(floats(back))
+        answer = await probe.call("solve-forwards", transform=transform, current=list(here))
+        if answer.is_response:
+            continue  # another configuration reaches it within the limits: no verdict from this one
+        what = f"the transform of joint {joint} at {q[joint - 1]:g} degrees (every solution out of range)"
+        expect_refusal(
+            ctx, answer, clause="solve-forwards.errors", severities=("E", "C"), codes=("TOR",), what=what
+        )
+        await power_on(ctx, probe)
+        answer = await probe.call("move", transform=transform)
+        expect_refusal(
+            ctx,
+            answer,
+            clause="motion.checked-before-queue",
+            severities=("E", "C"),
+            codes=("TOR",),
+            what=f"a move to {what}",
+        )
+        return
+    ctx.skip("solve forwards found in-range angles for every transform tried (joints 2, 3, 5 past a limit)")
+
+
 @case("server.motion.nap", clauses=["motion.no-power", "kill-power.done"], hazard="power")
 async def no_arm_power(ctx: CaseContext) -> None:
     """After kill power, motion is refused with NAP; enable power makes it accepted again."""
@@ -214,10 +276,11 @@ async def awa_reset_by_power(ctx: CaseContext) -> None:
 
 @case("server.motion.awa-reset-abort", clauses=["motion.abort", "motion.reset"], hazard="power")
 async def awa_reset_abort(ctx: CaseContext) -> None:
-    """After an abort, Reset abort (260) clears AWA without restoring power: then NAP, not AWA."""
+    """After an abort, motion is refused with AWA while other requests are served (erratum awa-scope);
+    Reset abort (260) clears AWA without restoring power: then NAP, not AWA."""
     probe = await ctx.connect()
+    joints = await read_floats(ctx, probe, "joint-angles")  # in range: a refusal can only be the abort's
     await _abort_by_power_loss(ctx, probe)
-    joints = await read_floats(ctx, probe, "joint-angles")
     await _refused_stay(
         ctx,
         probe,
@@ -226,6 +289,17 @@ async def awa_reset_abort(ctx: CaseContext) -> None:
         codes=("AWA",),
         what="a move after an abort (the abort is reported before the missing power)",
     )
+    # only motion is refused: the client can still ask where the arm stands and set the speed
+    served: tuple[tuple[RequestName, dict[str, float], str], ...] = (
+        ("here", {}, "the transform"),
+        ("joint-angles", {}, "the joint angles"),
+        ("set-speed", {"factor": 0.5}, "an empty done"),
+    )
+    for op, values, what in served:
+        answer = await probe.call(op, **values)
+        expect_response(
+            ctx, answer, clause="motion.abort", expected=f"{op} answered with {what} while motion is aborted"
+        )
     reset = await probe.call("reset-abort")
     if not reset.is_response:
         ctx.skip(f"the target does not serve Reset abort (0260): {reset}")

@@ -360,8 +360,9 @@ async def broken(ctx: CaseContext) -> None:
     """A connection whose client falls silent is given up after the target's timer: a packet on it
     then draws a LOS, and the robot is free for a new connection.
 
-    Runs only with ``--broken-after SECONDS`` (the target's timer; the 1985 guide says 90), as it spends that
-    long in silence.  Our side answers nothing, not even the target's SNS probes."""
+    Runs only with ``--broken-after SECONDS`` (the target's timer: 90 on manip's NCP, the ITS NCP's
+    interval; the 1985 guide sets none, erratum ncp-timers), as it spends that long in silence.  Our side
+    answers nothing, not even the target's SNS probes."""
     after = ctx.options.broken_after
     if after is None:
         ctx.skip("it waits out the target's broken-connection timer: run with --broken-after SECONDS")

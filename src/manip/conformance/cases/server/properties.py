@@ -127,7 +127,7 @@ async def _ask(probe: Probe, opcode: int | RequestName, data: bytes) -> Answer:
     code = opcode if isinstance(opcode, int) else SPEC.request(opcode).opcode
     number = await probe.request(code, data)
     op = SPEC.requests.get(code)
-    if op is not None and op.response.kind == "multi":
+    if op is not None and op.response.form == "multi":
         return await probe.replies_until_empty(number)
     return await probe.reply(number)
 
@@ -385,7 +385,7 @@ async def kinematics_round_trip(ctx: CaseContext) -> None:
             t1 = _pose(_decode_floats(first, "solve backwards", "solve-backwards.data"), first)
             second = session.call("solve-forwards", transform=list(t1.to_floats()), current=list(near))
             if not second.is_response and not arm.declared:
-                return  # the target's own limits are unknown: a JOR may be right
+                return  # the target's own limits are unknown: a TOR may be right
             q2 = _decode_floats(
                 second, "solve forwards of a transform made from in-range joint angles", "solve-forwards.data"
             )
@@ -394,7 +394,7 @@ async def kinematics_round_trip(ctx: CaseContext) -> None:
                 raise Evidence(
                     "solve-forwards.errors",
                     f"solve forwards returned joint(s) {bad} out of range",
-                    "joint angles within the limits (JOR when there are none)",
+                    "joint angles within the limits (TOR when there are none)",
                     repr(q2),
                     second.data,
                     [second.request, second.first],

@@ -34,9 +34,9 @@ _COMMON: Final = (
 
 
 def opcode_clauses(op: RequestOpcode) -> tuple[str, ...]:
-    """The clauses a well-formed exchange of ``op`` exercises: the common ones, the response kind's,
+    """The clauses a well-formed exchange of ``op`` exercises: the common ones, the response form's,
     and the opcode's own reply clauses as the spec data states them (``reply_clauses``)."""
-    return (*_COMMON, *_KIND_CLAUSES[op.response.kind], *op.reply_clauses)
+    return (*_COMMON, *_KIND_CLAUSES[op.response.form], *op.reply_clauses)
 
 
 async def _release_free_joint(ctx: CaseContext, probe: Probe) -> None:
@@ -80,7 +80,7 @@ def _reply_case(op: RequestOpcode) -> None:
 
     case(
         f"server.reply.{op.name}",
-        summary=f"{op.title} ({octal(op.opcode)}): one {op.response.kind} reply echoing the request.",
+        summary=f"{op.title} ({octal(op.opcode)}): one {op.response.form} reply echoing the request.",
         clauses=(*opcode_clauses(op), *follow_clauses),
         hazard=op.hazard,
         deadline=10.0 + (op.answer_within or 0.0),

@@ -13,8 +13,9 @@ Invariants, checked at every step:
 
 * exactly one answer per request (a multi-packet reply counts as one), echoing its number, within the
   reply timeout; no answer arrives while nothing is outstanding;
-* the answer is one the model allows: the refusals NAP, AWA, JOR and command errors exactly when the
-  model says (see the model's docstring), and the normal reply of the opcode's shape otherwise;
+* the answer is one the model allows: the refusals NAP, AWA, JOR (joint angles), TOR (transforms) and
+  command errors exactly when the model says (see the model's docstring), and the normal reply of the
+  opcode's shape otherwise;
 * asynchronous responses only when asked for (the 0257 mask in force after the request they name),
   of a queued segment, each once, in queue order; asynchronous errors well-formed;
 * and at the end of each run the whole recording passes
@@ -163,7 +164,7 @@ async def _exchange(probe: Probe, opcode: int, data: bytes) -> tuple[int, Answer
     before = len(probe.unsolicited)
     number = await probe.request(opcode, data)
     op = SPEC.requests.get(opcode)
-    if op is not None and op.response.kind == "multi":
+    if op is not None and op.response.form == "multi":
         answer = await probe.replies_until_empty(number)
     else:
         answer = await probe.reply(number)

@@ -1,0 +1,1 @@
+"""Client cases (``client.*``): scenarios the judging server plays for ``manip-conform client``."""

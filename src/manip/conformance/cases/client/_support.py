@@ -1,0 +1,246 @@
+"""Helpers of the client cases: operations, exact values to send, and the checks of what the harness
+reported against what the judging server sent."""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Mapping, Sequence
+from typing import Any, Final
+
+from manip.codecs.error_string import ErrorMessage, format_joint_mask
+from manip.codecs.messages import decode_reply, response_layout
+from manip.codecs.packet import Packet
+from manip.codecs.pdp11float import f_to_u32, u32_to_f
+from manip.conformance.client.contract import Op, Result
+from manip.conformance.client.runner import ClientContext, Play
+from manip.spec import SPEC
+from manip.spec.model import FieldType, Layout, RequestOpcode
+
+__all__ = [
+    "close",
+    "connect",
+    "exact_float",
+    "expect_reply",
+    "expected_raw",
+    "request",
+    "wait",
+]
+
+LARGEST: Final = (1 - 2**-24) * 2.0**127
+SMALLEST: Final = 2.0**-128
+
+
+def connect(i: int = 0) -> Op:
+    return Op(i, "connect")
+
+
+def close(i: int) -> Op:
+    return Op(i, "close")
+
+
+def wait(i: int, seconds: float) -> Op:
+    return Op(i, "wait", seconds=seconds)
+
+
+def request(i: int, name: str, args: Mapping[str, Any] | None = None, **kw: Any) -> Op:
+    return Op(i, name, args=None if args is None else dict(args), **kw)
+
+
+def exact_float(rng: random.Random, *, low: int = 100, high: int = 160) -> float:
+    """A random PDP-11 F float (exponent in ``low..high``), exact in binary64 and in JSON."""
+    sign = rng.getrandbits(1) << 15
+    exponent = rng.randint(low, high)
+    fraction = rng.getrandbits(23)
+    w0 = sign | exponent << 7 | fraction >> 16
+    w1 = fraction & 0xFFFF
+    return u32_to_f(w0 | w1 << 16)
+
+
+def field_value(rng: random.Random, ft: FieldType) -> Any:
+    """A random value of a spec field type."""
+    count = ft.count or rng.randint(0, 6)
+    if ft.element == "float":
+        items: list[Any] = [exact_float(rng) for _ in range(count)]
+    elif ft.element == "int16":
+        items = [rng.randint(-32768, 32767) for _ in range(count)]
+    elif ft.element == "small":
+        items = [rng.randint(0, 255) for _ in range(count)]
+    else:
+        items = [rng.randint(0, 0xFFFF) for _ in range(count)]
+    return items if ft.count != 1 else items[0]
+
+
+def layout_values(rng: random.Random, layout: Layout) -> dict[str, Any]:
+    return {f.name: field_value(rng, f.type) for f in layout.fields}
+
+
+def expected_raw(layout: Layout, data: bytes) -> dict[str, list[str]]:
+    """The contract's ``raw`` of reply data: per element a hex string, a float's sign/exponent word
+    first."""
+    out: dict[str, list[str]] = {}
+    pos = 0
+    for f in layout.fields:
+        element, count = f.type.element, f.type.count
+        if element == "counted":
+            count, element = int.from_bytes(data[pos : pos + 2], "little"), "word"
+            pos += 2
+        items: list[str] = []
+        for _ in range(count or 0):
+            if element == "float":
+                w0 = int.from_bytes(data[pos : pos + 2], "little")
+                w1 = int.from_bytes(data[pos + 2 : pos + 4], "little")
+                items.append(f"{w0:04X}{w1:04X}")
+                pos += 4
+            else:
+                items.append(f"{int.from_bytes(data[pos : pos + 2], 'little'):04X}")
+                pos += 2
+        out[f.name] = items
+    return out
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, tuple | list):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Equal as the contract means it: numbers exactly (a float to the bit), lists element-wise."""
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, bool) or isinstance(b, bool):
+        return False
+    if isinstance(a, int | float) and isinstance(b, int | float):
+        return float(a) == float(b)
+    return bool(a == b)
+
+
+def _hex_list(items: Any) -> list[str] | None:
+    if not isinstance(items, list) or not all(isinstance(i, str) for i in items):
+        return None
+    return [i.upper() for i in items]
+
+
+def reply_expectation(
+    op: RequestOpcode, payload: bytes, number: int
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The ``values`` and ``raw`` a reply carrying ``payload`` must be reported with."""
+    kind = op.response.kind
+    if kind == "done":
+        return {}, {}
+    if kind == "segment":
+        segment = int.from_bytes(payload[:2], "little")
+        return {"segment": segment}, {"segment": f"{segment:04X}"}
+    reply = decode_reply(number.to_bytes(2, "little") + payload, op)
+    values = {k: _plain(v) for k, v in reply.values.items()}
+    return values, expected_raw(response_layout(op), payload)
+
+
+def expect_reply(
+    ctx: ClientContext,
+    play: Play,
+    op_id: int,
+    op: RequestOpcode,
+    payload: bytes,
+    number: int,
+    *,
+    clause: str,
+) -> Result:
+    """The op's result is a reply with exactly the values and raw words the judge sent."""
+    answer = play.answer(op_id)
+    ctx.expect(
+        answer is not None and answer.type == "reply",
+        clause=clause,
+        expected=f"a reply to op {op_id} ({op.name})",
+        actual=str(answer) if answer is not None else f"no result for op {op_id}:\n{play.describe()}",
+    )
+    assert answer is not None
+    values, raw = reply_expectation(op, payload, number)
+    got_values = answer.get("values") or {}
+    for name, value in values.items():
+        ctx.expect(
+            _same(_plain(got_values.get(name)), value),
+            clause=clause,
+            expected=f"{op.name} {name} = {value!r} (what the judge sent)",
+            actual=f"{got_values.get(name)!r}",
+            data=payload,
+        )
+    got_raw = answer.get("raw") or {}
+    for name, words in raw.items():
+        seen = got_raw.get(name)
+        shown = (
+            _hex_list(seen) if isinstance(seen, list) else (seen.upper() if isinstance(seen, str) else None)
+        )
+        want = [w.upper() for w in words] if isinstance(words, list) else words.upper()
+        ctx.expect(
+            shown == want,
+            clause=clause,
+            expected=f"{op.name} {name} raw words {want}",
+            actual=f"{seen!r}",
+            data=payload,
+        )
+    return answer
+
+
+def expect_error_parts(
+    ctx: ClientContext,
+    result: Result | None,
+    error: ErrorMessage,
+    origin: str,
+    *,
+    clause: str,
+) -> None:
+    """An ``error`` result with ``origin`` and the error string's parts, rendered as the contract says."""
+    ctx.expect(
+        result is not None and result.type == "error" and result.get("origin") == origin,
+        clause=clause,
+        expected=f"an error result of origin {origin}",
+        actual=str(result),
+    )
+    assert result is not None
+    message = render(error)
+    want = {
+        "where": error.where,
+        "severity": error.severity,
+        "code": error.code,
+        "template": error.message,
+        "arguments": list(error.args),
+        "message": message,
+        "rendered": f"{error.where}: {error.severity} {error.code}" + (f" {message}" if message else ""),
+    }
+    for key, value in want.items():
+        ctx.expect(
+            result.get(key) == value,
+            clause=clause,
+            expected=f"{key} = {value!r}",
+            actual=f"{key} = {result.get(key)!r} in {result}",
+        )
+
+
+def render(error: ErrorMessage) -> str:
+    """The message as the contract renders it (~ unsigned decimal, $ joints in English)."""
+    if not error.has_nul:
+        return error.message
+    it = iter(error.args)
+    out: list[str] = []
+    for ch in error.message:
+        if ch in "~$":
+            arg = next(it, None)
+            if arg is not None:
+                out.append(str(arg) if ch == "~" else format_joint_mask(arg))
+                continue
+        out.append(ch)
+    return "".join(out)
+
+
+def data_packets(packets: Sequence[Packet]) -> list[Packet]:
+    return [p for p in packets if p.opcode >= 0o200]
+
+
+def floats_words(values: Sequence[float]) -> bytes:
+    """Floats as wire bytes."""
+    return b"".join(f_to_u32(v).to_bytes(4, "little") for v in values)
+
+
+def spec_request(name: str) -> RequestOpcode:
+    return SPEC.requests_by_name[name]

@@ -1,0 +1,124 @@
+"""Replies read exactly: every request with a data reply, its values drawn from the seed, and every
+request's data as the client builds them."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from manip.codecs.messages import encode_reply, encode_request, response_layout
+from manip.conformance.cases.client._support import (
+    close,
+    connect,
+    expect_reply,
+    layout_values,
+    request,
+)
+from manip.conformance.client.runner import client_context
+from manip.conformance.client.server import ServerSide, plain_answer
+from manip.conformance.suite.case import case
+from manip.conformance.suite.context import CaseContext
+from manip.spec import SPEC
+from manip.spec.model import RequestOpcode
+from manip.spec.notation import octal
+
+DATA_REPLIES = [op for op in SPEC.requests.values() if op.response.kind == "data"]
+WITH_ARGS = [op for op in SPEC.requests.values() if op.request.fields]
+_MOVES = ("move", "straight-move")
+
+
+@case.each(DATA_REPLIES)
+def _reply_case(op: RequestOpcode) -> None:
+    has_floats = any(f.type.element == "float" for f in response_layout(op).fields)
+    clauses = ["client.reply-data", "client.reply-matching"] + (["float.format"] if has_floats else [])
+
+    async def reply_values(base: CaseContext) -> None:
+        ctx = client_context(base)
+        rng = ctx.random
+        args = layout_values(rng, op.request) if op.request.fields else None
+        if op.name == "examine-wrist" and args is not None:
+            args["count"] = rng.randint(1, 6)
+        values = layout_values(rng, response_layout(op))
+        if op.name == "examine-wrist" and args is not None:
+            values["words"] = [rng.randint(0, 0xFFFF) for _ in range(args["count"])]
+        sent: dict[str, Any] = {}
+
+        async def script(side: ServerSide) -> None:
+            req = await side.next_request()
+            if req is None:
+                return
+            sent["number"] = req.packet_no
+            sent["payload"] = encode_reply(op.opcode, req.packet_no, **values)[2:]
+            await side.reply(req, **values)
+            await side.serve_plainly()
+
+        play = await ctx.play([connect(0), request(1, op.name, args), close(2)], script)
+        ctx.expect(
+            "number" in sent,
+            clause="client.reply-matching",
+            expected=f"a {op.name} request",
+            actual="no request reached the judging server",
+        )
+        reply = expect_reply(ctx, play, 1, op, sent["payload"], sent["number"], clause="client.reply-data")
+        ctx.expect(
+            reply.get("request_number") in (None, sent["number"]),
+            clause="client.reply-matching",
+            expected=f"the reply reported for request #{sent['number']}",
+            actual=str(reply),
+        )
+
+    case(
+        f"client.reply.{op.name}",
+        clauses=clauses,
+        technique="property",
+        hazard=op.hazard,
+        summary=f"{op.title}: a reply with values drawn from the seed is reported exactly, floats to the bit",
+    )(reply_values)
+
+
+@case.each(WITH_ARGS)
+def _request_case(op: RequestOpcode) -> None:
+    clauses = ["request.opcode-range", "move.transform-data" if op.name in _MOVES else "request-data.types"]
+
+    async def request_data(base: CaseContext) -> None:
+        ctx = client_context(base)
+        args = layout_values(ctx.random, op.request)
+        got: list[Any] = []
+
+        async def script(side: ServerSide) -> None:
+            req = await side.next_request()
+            if req is None:
+                return
+            got.append(req)
+            await plain_answer(side, req)
+            await side.serve_plainly()
+
+        play = await ctx.play([connect(0), request(1, op.name, args), close(2)], script)
+        ctx.expect(
+            bool(got),
+            clause="request.opcode-range",
+            expected=f"a {op.name} request",
+            actual=f"no request reached the judging server:\n{play.describe()}",
+        )
+        req = got[0]
+        ctx.expect(
+            req.opcode == op.opcode,
+            clause="request.opcode-range",
+            expected=f"opcode {octal(op.opcode)}",
+            actual=f"opcode {octal(req.opcode)}",
+        )
+        want = encode_request(op.opcode, **args)
+        ctx.expect(
+            req.data == want,
+            clause=clauses[1],
+            expected=f"{op.name} data {want.hex()} ({len(want)} bytes) for {args}",
+            actual=f"{req.data.hex()} ({len(req.data)} bytes)",
+            data=req.data,
+        )
+
+    case(
+        f"client.request.{op.name}",
+        clauses=clauses,
+        technique="property",
+        hazard=op.hazard,
+        summary=f"{op.title}: arguments drawn from the seed go out in the opcode's layout, to the byte",
+    )(request_data)

@@ -1,0 +1,255 @@
+"""The wrist processes (Part II §5.1, §5.3, §6.3): what the Puma sends Cougar, in what order, and how
+its requests wait for Cougar's data."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any, Final
+
+from manip.codecs.messages import decode_reply
+from manip.conformance.cases._support import require_response
+from manip.conformance.cases.puma._support import (
+    SEGMENT_WITHIN,
+    TICK,
+    angles,
+    begin,
+    close,
+    f_float,
+    fmt,
+    is_completed,
+    move,
+    session,
+    wait_async,
+)
+from manip.conformance.puma.judge import SENSED, Heard, Script
+from manip.conformance.suite.case import case
+from manip.conformance.suite.context import CaseContext
+from manip.spec import SPEC, RequestName
+from manip.spec.constants import CougarCommand, ServerOp
+
+FORCES_DELAY: Final = 12
+"""Ticks the judge holds back the forces in ``puma.wrist.waits`` (0.19 s: well within any sensible
+give-up time, yet many servo cycles)."""
+GIVE_UP_WITHIN: Final = 5.0
+"""Seconds a Puma may take to give up on a silent Cougar (erratum wrist-timeout: the reference takes
+0.5 s; the 1985 guide says only 'a reasonable amount of time')."""
+SENSED_TOL: Final = 1e-3
+"""Degrees: the angles in SEN and in the joint-angles reply are the same F floats of the same angles."""
+
+
+# ------------------------------------------------------------------------------ command layout
+_FORWARDED: Final[Mapping[RequestName, tuple[str, Mapping[str, str]]]] = {
+    # request -> (Table 1 command, command field -> request field)
+    "set-spring": ("NK", {"k": "k"}),
+    "set-damping": ("NB", {"b": "b"}),
+    "set-joint-damping": ("NBJI", {"bji": "bji"}),
+    "set-frame-vector": ("NFV", {"offset": "offset"}),
+    "set-weight": ("NEWWC", {"weight": "weight", "cg": "cg"}),
+    "set-commanded-force": ("NFC", {"force": "force"}),
+    "set-guard": ("GUARDS", {"type_index": "type_index", "dvec": "dvec", "tol": "tol"}),
+    "clear-guard": ("GUARDC", {"index": "index"}),
+    "set-gauge-offsets": ("WGOV", {"offsets": "offsets"}),
+}
+
+
+def _values(ctx: CaseContext, op: RequestName) -> dict[str, Any]:
+    """Random valid values for a configuration request (seeded by the case)."""
+    r = ctx.random
+    out: dict[str, Any] = {}
+    for f in SPEC.request(op).request.fields:
+        ft = f.type
+        if f.name == "type_index":
+            out[f.name] = r.choice((0, 0x8000)) | r.randrange(16)
+        elif f.name == "index":
+            out[f.name] = r.randrange(16)
+        elif f.name == "tol":
+            out[f.name] = 1.0e30  # a guard that never trips
+        elif ft.element == "float":
+            items = [round(r.uniform(0.05, 40.0), 5) for _ in range(ft.count or 1)]
+            out[f.name] = items[0] if ft.count == 1 else items
+        else:
+            items_i = [r.randint(-900, 900) for _ in range(ft.count or 1)]
+            out[f.name] = items_i[0] if ft.count == 1 else items_i
+    return out
+
+
+def _as_sent(value: object) -> object:
+    """A request value as the Puma passes it on: floats through the F format, sequences as tuples."""
+    if isinstance(value, float):
+        return f_float(value)
+    if isinstance(value, (list, tuple)):
+        return tuple(_as_sent(v) for v in value)
+    return value
+
+
+@case(
+    "puma.wrist.command-layout",
+    clauses=["cougar.command.layout"],
+    hazard="config",
+    deadline=20.0,
+)
+async def command_layout(ctx: CaseContext) -> None:
+    """Each configuration request reaches Cougar as its Table 1 command, carrying exactly the values sent."""
+    probe = await session(ctx, power=False, notify=None)
+    judge, mark = begin(ctx)
+    expected: list[tuple[str, dict[str, object]]] = []
+    for op, (command, fields) in _FORWARDED.items():
+        values = _values(ctx, op)
+        answer = await probe.call(op, **values)
+        require_response(ctx, answer, f"{op} answered done")
+        expected.append((command, {cf: _as_sent(values[rf]) for cf, rf in fields.items()}))
+    await judge.wait_ticks(4, 4 * GIVE_UP_WITHIN)
+    heard = judge.since(mark)
+    unreadable = [h for h in heard if h.msg is None]
+    ctx.expect(
+        not unreadable,
+        clause="cougar.command.layout",
+        expected="only Table 1 commands of the right length (a code word, then its data words)",
+        actual="; ".join(str(h) for h in unreadable[:3]),
+    )
+    position = 0
+    for command, values in expected:
+        code = CougarCommand[command]
+        found = next((i for i in range(position, len(heard)) if heard[i].code == code), None)
+        ctx.expect(
+            found is not None,
+            clause="cougar.command.layout",
+            expected=f"{command} (code {int(code)}) sent for the request, in request order",
+            actual="; ".join(str(h) for h in heard[position:][:6]) or "nothing",
+        )
+        assert found is not None
+        msg = heard[found].msg
+        assert msg is not None
+        got = {name: msg.values[name] for name in values}
+        ctx.expect(
+            got == values,
+            clause="cougar.command.layout",
+            expected=f"{command} carrying {values} (floats two words each, sign/exponent word first)",
+            actual=f"{heard[found]} = {got}",
+        )
+        position = found + 1
+    ctx.note(f"{len(expected)} configuration commands judged, {len(heard)} commands heard")
+
+
+# ------------------------------------------------------------------------------ read forces
+def _first(heard: Sequence[Heard], code: int) -> int | None:
+    return next((i for i, h in enumerate(heard) if h.code == code), None)
+
+
+@case("puma.wrist.read-forces-angles", clauses=["puma.wrist.read-forces-angles"], deadline=15.0)
+async def read_forces_angles(ctx: CaseContext) -> None:
+    """Read forces sends Cougar the current joint angles (SEN) before Report Forces."""
+    probe = await session(ctx, power=False, notify=None)
+    here = await angles(ctx, probe)
+    judge, _ = begin(ctx)
+    await judge.wait_ticks(3, GIVE_UP_WITHIN)  # what the Puma sends when a connection opens goes first
+    mark = judge.mark()
+    answer = await probe.call("read-forces")
+    require_response(ctx, answer, "read forces answered")
+    await judge.wait_ticks(2, GIVE_UP_WITHIN)  # a Puma that answers first still sends RFRC
+    heard = judge.since(mark)
+    at = _first(heard, CougarCommand.RFRC)
+    ctx.expect(
+        at is not None,
+        clause="puma.wrist.read-forces-angles",
+        expected="Report Forces (RFRC) sent to Cougar for read forces",
+        actual="; ".join(str(h) for h in heard[:6]) or "nothing",
+    )
+    assert at is not None
+    before = [h for h in heard[:at] if h.code in SENSED]
+    sent = before[-1].msg.values["theta_sensed"] if before and before[-1].msg else None
+    ctx.expect(
+        isinstance(sent, tuple) and close(sent, here, SENSED_TOL),
+        clause="puma.wrist.read-forces-angles",
+        expected=f"SEN with the current joint angles {fmt(here)} sent after the request and before RFRC",
+        actual=str(before[-1]) if before else f"no SEN or NPR between the request and {heard[at]}",
+    )
+
+
+@case("puma.wrist.waits", clauses=["puma.wrist.waits"], deadline=30.0)
+async def waits(ctx: CaseContext) -> None:
+    """Read forces is answered with Cougar's data once they arrive, requests after it are served after
+    it, and a silent Cougar gets a non-fatal error in time."""
+    probe = await session(ctx, power=False, notify=None)
+    forces = tuple(f_float(round(ctx.random.uniform(-90.0, 90.0), 3)) for _ in range(6))
+    judge, _ = begin(ctx, Script(forces=forces, forces_delay=FORCES_DELAY))
+    first = await probe.send("read-forces")
+    second = await probe.send("joint-angles")
+    answer = await probe.reply(first, timeout=GIVE_UP_WITHIN + ctx.options.reply_timeout)
+    following = await probe.reply(second)
+    said = [s for s in judge.said if s.msg.name == "FORCES"]
+    got = (
+        decode_reply(answer.data, SPEC.request("read-forces")).values.get("forces")
+        if answer.is_response and answer.number == first
+        else None
+    )
+    ctx.expect(
+        got == forces,
+        clause="puma.wrist.waits",
+        expected=f"read forces #{first} answered with the forces Cougar sent {FORCES_DELAY} ticks "
+        f"({FORCES_DELAY * TICK:.2f} s) late: {fmt(forces)}",
+        actual=f"{answer} = {got}" + (f"; Cougar's FORCES went on tick {said[-1].tick}" if said else ""),
+    )
+    ctx.expect(
+        following.number == second,
+        clause="puma.wrist.waits",
+        expected=f"joint angles #{second}, sent behind read forces, answered after it",
+        seen=following,
+    )
+    # Cougar stays silent: the request fails in time and what follows is served.
+    judge.begin(Script(forces_omitted=True))
+    number = await probe.send("read-forces")
+    silent = await probe.reply(number, timeout=GIVE_UP_WITHIN + ctx.options.reply_timeout)
+    ctx.expect(
+        silent.opcode == ServerOp.NON_FATAL_ERROR and silent.number == number,
+        clause="puma.wrist.waits",
+        expected=f"a non-fatal error (202) for read forces #{number}: Cougar never answered",
+        seen=silent,
+    )
+    judge.begin()
+    after = await probe.call("joint-angles")
+    ctx.expect(
+        after.is_response,
+        clause="puma.wrist.waits",
+        expected="joint angles served normally after the failed read forces",
+        seen=after,
+    )
+
+
+# ------------------------------------------------------------------------------ priority
+_RANK: Final[Mapping[int, int]] = {CougarCommand.NPR: 0, CougarCommand.RST: 1}
+PRIORITY_MOVE_DEG: Final = 12.0
+USER_COMMANDS: Final = 6
+
+
+@case("puma.wrist.priority", clauses=["puma.wrist.priority"], hazard="motion", deadline=40.0)
+async def priority(ctx: CaseContext) -> None:
+    """On every tick the Puma sends New Position and Rate first, then Reset Wrist, then the rest: user
+    commands sent during a compliant move come after them."""
+    probe = await session(ctx)
+    here = await angles(ctx, probe)
+    judge, mark = begin(ctx, Script(ntd=(0.0,) * 6))
+    goal = [*here[:5], here[5] + PRIORITY_MOVE_DEG]
+    segment = await move(ctx, probe, "compliant-move", joints=goal, scheme=0)
+    await judge.wait_for(lambda: bool(judge.commands(mark, CougarCommand.NPR)), SEGMENT_WITHIN)
+    for _ in range(USER_COMMANDS):
+        answer = await probe.call("set-commanded-force", force=[0.0] * 6)
+        require_response(ctx, answer, "set commanded force answered done")
+        await judge.wait_ticks(1, SEGMENT_WITHIN)
+    await wait_async(ctx, probe, is_completed(segment), SEGMENT_WITHIN)
+    by_tick: dict[int, list[Heard]] = {}
+    for h in judge.since(mark):
+        by_tick.setdefault(h.tick, []).append(h)
+    mixed = 0
+    for tick, items in sorted(by_tick.items()):
+        ranks = [_RANK.get(h.code if h.code is not None else -1, 2) for h in items]
+        mixed += len(set(ranks)) > 1
+        ctx.expect(
+            ranks == sorted(ranks),
+            clause="puma.wrist.priority",
+            expected="New Position and Rate, then Reset Wrist, then other commands, within a tick",
+            actual=f"tick {tick}: " + ", ".join(h.msg.name if h.msg else "?" for h in items),
+        )
+    if not mixed:
+        ctx.skip("no tick carried New Position and Rate or Reset Wrist together with another command")
+    ctx.note(f"{mixed} ticks carried commands of two priorities")

@@ -1,0 +1,203 @@
+"""``manip-conform client [OPTIONS] -- CMD [ARGS...]``: judge a client implementation live."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import shlex
+import sys
+from pathlib import Path
+
+import click
+
+from manip.conformance.client.runner import (
+    DEFAULT_CLIENT_TIMEOUT,
+    ClientEvents,
+    ClientRunConfig,
+    run_client_suite,
+)
+from manip.conformance.output.console import make_console, progress_bar
+from manip.conformance.output.documents import document_options, write_documents
+from manip.conformance.output.report import write_json, write_junit
+from manip.conformance.replay.cli import check_output_paths, json_option, junit_option
+from manip.conformance.suite.case import Case, all_cases
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.results import CaseResult, RunReport
+from manip.conformance.suite.selection import PatternError, PatternSet, match_id
+
+__all__ = ["client_cases", "client_command"]
+
+EXIT_CODES_HELP = """\b
+Exit codes:
+  0  conformant (unsupported cases do not count)
+  1  non-conformant (a failure, a stale --known-failing entry)
+  2  usage error
+  3  the harness could not be started, or its hello was not the contract's
+  4  interrupted or internal error"""
+
+CHAOSD_WHY = (
+    "--link chaosd: the judge cannot play that role (a client dials a chaosd routing daemon, and the "
+    "judging server would have to be the daemon; it is not one): use tcp or chudp"
+)
+
+
+def client_cases(cases: list[Case] | None = None) -> list[Case]:
+    """The cases of a client run (target ``client``: ids ``client.*``)."""
+    return [c for c in (all_cases() if cases is None else cases) if c.target == "client"]
+
+
+def _by_clause(patterns: tuple[str, ...], cases: list[Case]) -> list[Case]:
+    if not patterns:
+        return cases
+    return [c for c in cases if any(match_id(p, clause) for p in patterns for clause in c.clauses)]
+
+
+@click.command("client", epilog=EXIT_CODES_HELP)
+@click.argument("command", nargs=-1, required=True, metavar="-- CMD [ARGS...]")
+@click.option(
+    "--link",
+    type=click.Choice(["tcp", "chudp", "chaosd"]),
+    default="tcp",
+    show_default=True,
+    help="The link the harness dials the judging server over.",
+)
+@click.option(
+    "--select", "--case", "select", multiple=True, metavar="PATTERN", help="Run only cases matching PATTERN."
+)
+@click.option("--skip", "skip", multiple=True, metavar="PATTERN", help="Leave out cases matching PATTERN.")
+@click.option(
+    "--clause",
+    "clauses",
+    multiple=True,
+    metavar="PATTERN",
+    help="Run only cases declaring a clause matching PATTERN.",
+)
+@click.option(
+    "--known-failing",
+    "known_failing",
+    multiple=True,
+    metavar="@FILE|PATTERN",
+    help="Cases expected to fail: they still run; entries matching nothing or now passing fail the run.",
+)
+@click.option("--strict", is_flag=True, help="SHOULD failures count (without it they are warnings).")
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=None, help="Seed of every random choice.")
+@click.option(
+    "--reply-timeout",
+    type=click.FloatRange(0.1),
+    default=DEFAULT_CLIENT_TIMEOUT,
+    show_default=True,
+    help="The timeout the harness is told to use for each reply.",
+)
+@click.option(
+    "--deadline-scale",
+    type=click.FloatRange(0.01),
+    default=1.0,
+    show_default=True,
+    help="Multiply every deadline.",
+)
+@json_option
+@junit_option
+@document_options
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar; failures and the summary only.")
+def client_command(
+    command: tuple[str, ...],
+    link: str,
+    select: tuple[str, ...],
+    skip: tuple[str, ...],
+    clauses: tuple[str, ...],
+    known_failing: tuple[str, ...],
+    strict: bool,
+    seed: int | None,
+    reply_timeout: float,
+    deadline_scale: float,
+    json_path: Path | None,
+    junit_path: Path | None,
+    html_path: Path | None,
+    markdown_path: Path | None,
+    quiet: bool,
+) -> None:
+    """Judge a client: start CMD (a harness speaking docs/client-harness.md), play a scripted Puma for
+    each case, and judge what the client sent and what the harness reports."""
+    # manip.conformance.cli registers this command, so its helpers are imported when it runs
+    from manip.conformance.cli import _summary, check_selection  # noqa: PLC0415
+
+    console = make_console()
+    if link == "chaosd":
+        raise click.UsageError(CHAOSD_WHY)
+    try:
+        select_set = PatternSet.of(select, "--select")
+        skip_set = PatternSet.of(skip, "--skip")
+        known_set = PatternSet.of(known_failing, "--known-failing")
+    except PatternError as exc:
+        raise click.UsageError(str(exc)) from None
+    cases = _by_clause(clauses, client_cases())
+    if not cases:
+        raise click.UsageError(f"--clause {' '.join(clauses)} matches no client case")
+    check_selection(
+        select_set, skip_set, cases, hint=" (manip-conform cases --select 'client.**' lists them)"
+    )
+    check_output_paths(json=json_path, junit=junit_path, html=html_path, markdown=markdown_path)
+    if seed is None:
+        seed = int.from_bytes(os.urandom(4), "big")
+    options = RunOptions(strict=strict, reply_timeout=reply_timeout, deadline_scale=deadline_scale)
+    config = ClientRunConfig(
+        argv=list(command),
+        link=link,
+        seed=seed,
+        options=options,
+        select=select_set,
+        skip=skip_set,
+        known_failing=known_set,
+        command=shlex.join(["manip-conform", *sys.argv[1:]]),
+    )
+    console.print(f"manip-conform client: seed [bold]{seed}[/] (rerun with --seed {seed})")
+    report = _run(config, cases, console, quiet)
+    if json_path is not None:
+        write_json(report, json_path)
+    if junit_path is not None:
+        write_junit(report, junit_path)
+    write_documents(report, html_path, markdown_path)
+    _summary(console, report, quiet)
+    unsupported = [r for r in report.results if r.outcome == "unsupported"]
+    if unsupported and not quiet:
+        console.print(f"{len(unsupported)} case(s) unsupported by the harness", markup=False)
+    sys.exit(int(report.exit_code))
+
+
+def _run(config: ClientRunConfig, cases: list[Case], console: object, quiet: bool) -> RunReport:
+    from manip.conformance.cli import _headline, _shown  # noqa: PLC0415 - see client_command
+
+    progress = progress_bar(console, quiet)  # type: ignore[arg-type]
+    task_id = progress.add_task("client", total=0)
+
+    def started(chosen: list[Case]) -> None:
+        progress.update(task_id, total=len(chosen))
+
+    def finished(result: CaseResult) -> None:
+        progress.advance(task_id)
+        progress.update(task_id, description=result.id)
+        if _shown(result, quiet):
+            _headline(progress.console, result)
+
+    events = ClientEvents(started=started, case_finished=finished)
+    holder: list[RunReport] = []
+
+    async def go() -> None:
+        holder.append(await run_client_suite(config, cases, events))
+
+    try:
+        with progress:
+            asyncio.run(go())
+    except KeyboardInterrupt:
+        report = RunReport(
+            target=" ".join(config.argv),
+            embedded=False,
+            seed=config.seed,
+            strict=False,
+            options={},
+            command=config.command,
+        )
+        report.interrupted = True
+        report.problems.append("the run was interrupted")
+        return report
+    return holder[0]

@@ -1,0 +1,243 @@
+"""The client harness contract (``docs/client-harness.md``, contract 1) as values: instructions out,
+results in.
+
+The suite writes one :class:`Instruction` per case (a ``case`` line) and reads the harness's JSON
+result lines back; :func:`parse_result` checks each against the contract, so a harness that writes
+something else gets a verdict naming the line, never a crash of the suite.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Final
+
+from manip.spec import SPEC
+
+__all__ = [
+    "CONTRACT",
+    "CONTROL_OPERATIONS",
+    "FEATURES",
+    "LINKS",
+    "REQUEST_OPERATIONS",
+    "RESULT_TYPES",
+    "ContractError",
+    "Hello",
+    "Instruction",
+    "Op",
+    "Result",
+    "parse_hello",
+    "parse_result",
+]
+
+CONTRACT: Final = 1
+CONTROL_OPERATIONS: Final[tuple[str, ...]] = ("connect", "close", "wait", "await-replies")
+REQUEST_OPERATIONS: Final[tuple[str, ...]] = tuple(op.name for op in SPEC.requests.values())
+"""Every request of the spec, by name: the operations that send a request."""
+LINKS: Final[tuple[str, ...]] = ("tcp", "chudp", "chaosd")
+FEATURES: Final[tuple[str, ...]] = ("pipeline",)
+RESULT_TYPES: Final[frozenset[str]] = frozenset({"state", "reply", "error", "async", "unsupported", "done"})
+STATES: Final[frozenset[str]] = frozenset({"connected", "closed", "lost", "refused"})
+ERROR_ORIGINS: Final[frozenset[str]] = frozenset(
+    {"non-fatal-error", "fatal-error", "asynchronous-error", "asynchronous-warning", "client"}
+)
+CLIENT_ERROR_KINDS: Final[frozenset[str]] = frozenset(
+    {"timeout", "bad-data", "not-connected", "refused-locally", "other"}
+)
+
+
+class ContractError(ValueError):
+    """A line from the harness that the contract does not allow; the message says what is wrong."""
+
+
+@dataclass(frozen=True)
+class Op:
+    """One operation of a case; ``args`` by the spec layout's field names (request operations)."""
+
+    id: int
+    op: str
+    args: Mapping[str, Any] | None = None
+    timeout: float | None = None
+    pipeline: bool = False
+    seconds: float | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"id": self.id, "op": self.op}
+        if self.args is not None:
+            out["args"] = dict(self.args)
+        if self.timeout is not None:
+            out["timeout"] = self.timeout
+        if self.pipeline:
+            out["pipeline"] = True
+        if self.seconds is not None:
+            out["seconds"] = self.seconds
+        return out
+
+    @property
+    def is_request(self) -> bool:
+        return self.op not in CONTROL_OPERATIONS
+
+    def budget(self, default_timeout: float) -> float:
+        """The longest this op may take: its wait, or its reply timeout."""
+        if self.op == "wait":
+            return self.seconds or 0.0
+        return self.timeout if self.timeout is not None else default_timeout
+
+
+@dataclass(frozen=True)
+class Instruction:
+    """A ``case`` line."""
+
+    case: str
+    seed: int
+    link: str
+    target: str
+    contact: str
+    timeout: float
+    operations: tuple[Op, ...]
+
+    def line(self) -> bytes:
+        data = {
+            "type": "case",
+            "contract": CONTRACT,
+            "case": self.case,
+            "seed": self.seed,
+            "link": self.link,
+            "target": self.target,
+            "contact": self.contact,
+            "timeout": self.timeout,
+            "operations": [op.to_json() for op in self.operations],
+        }
+        return (json.dumps(data, separators=(",", ":")) + "\n").encode()
+
+    def deadline(self, slack: float = 10.0) -> float:
+        """Seconds the harness has to write ``done`` (docs/client-harness.md section 5)."""
+        return sum(op.budget(self.timeout) for op in self.operations) + slack
+
+    @property
+    def needs(self) -> frozenset[str]:
+        return frozenset(op.op for op in self.operations)
+
+    @property
+    def pipelined(self) -> bool:
+        return any(op.pipeline for op in self.operations)
+
+
+@dataclass(frozen=True)
+class Hello:
+    name: str
+    version: str
+    links: frozenset[str]
+    operations: frozenset[str]
+    features: frozenset[str] = frozenset()
+
+    def missing(self, instruction: Instruction, link: str) -> list[str]:
+        """What the harness lacks for ``instruction`` (empty: it can run it)."""
+        out = [] if link in self.links else [f"link {link}"]
+        out += sorted(op for op in instruction.needs if op not in self.operations)
+        if instruction.pipelined and "pipeline" not in self.features:
+            out.append("feature pipeline")
+        return out
+
+
+@dataclass(frozen=True)
+class Result:
+    """One result line, checked: ``type``, ``op`` (or None) and the rest as given."""
+
+    type: str
+    op: int | None
+    data: Mapping[str, Any] = field(default_factory=dict)
+    line: str = ""
+
+    def get(self, key: str, default: Any = None) -> Any:
+        return self.data.get(key, default)
+
+    def __str__(self) -> str:
+        return self.line
+
+
+def _load(line: str) -> dict[str, Any]:
+    try:
+        data = json.loads(line)
+    except json.JSONDecodeError as exc:
+        raise ContractError(f"not JSON ({exc.msg} at column {exc.colno})") from None
+    if not isinstance(data, dict):
+        raise ContractError("not a JSON object")
+    return data
+
+
+def _strings(data: Mapping[str, Any], key: str) -> frozenset[str]:
+    value = data.get(key, [])
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ContractError(f"hello: {key!r} must be a list of strings")
+    return frozenset(value)
+
+
+def parse_hello(line: str) -> Hello:
+    data = _load(line)
+    if data.get("type") != "hello":
+        raise ContractError(f"the first line must be a hello, not type {data.get('type')!r}")
+    if data.get("contract") != CONTRACT:
+        raise ContractError(
+            f"hello: contract {data.get('contract')!r}; this suite speaks contract {CONTRACT}"
+        )
+    for key in ("name", "version"):
+        if not isinstance(data.get(key), str):
+            raise ContractError(f"hello: {key!r} must be a string")
+    if "links" not in data or "operations" not in data:
+        raise ContractError("hello: 'links' and 'operations' are required")
+    return Hello(
+        str(data["name"]),
+        str(data["version"]),
+        _strings(data, "links"),
+        _strings(data, "operations"),
+        _strings(data, "features"),
+    )
+
+
+def _check_fields(kind: str, data: Mapping[str, Any]) -> None:
+    if kind == "state":
+        if data.get("state") not in STATES:
+            raise ContractError(f"state {data.get('state')!r} is not one of {sorted(STATES)}")
+    elif kind == "reply":
+        if not isinstance(data.get("values"), dict) or not isinstance(data.get("raw"), dict):
+            raise ContractError("a reply needs 'values' and 'raw' objects")
+    elif kind == "error":
+        origin = data.get("origin")
+        if origin not in ERROR_ORIGINS:
+            raise ContractError(f"error origin {origin!r} is not one of {sorted(ERROR_ORIGINS)}")
+        if origin == "client" and data.get("kind") not in CLIENT_ERROR_KINDS:
+            raise ContractError(
+                f"client error kind {data.get('kind')!r} is not one of {sorted(CLIENT_ERROR_KINDS)}"
+            )
+    elif kind == "async":
+        for key in ("code", "word2", "word3"):
+            if not isinstance(data.get(key), int):
+                raise ContractError(f"an async result needs an integer {key!r}")
+
+
+def parse_result(line: str, case_id: str) -> Result:
+    """One result line of case ``case_id``; :class:`ContractError` when it breaks the contract."""
+    data = _load(line)
+    kind = data.get("type")
+    if kind not in RESULT_TYPES:
+        raise ContractError(f"unknown result type {kind!r}")
+    if data.get("case") != case_id:
+        raise ContractError(f"result for case {data.get('case')!r} while case {case_id} runs")
+    op = data.get("op")
+    if op is not None and not (isinstance(op, int) and not isinstance(op, bool)):
+        raise ContractError(f"'op' must be an operation id or null, not {op!r}")
+    _check_fields(str(kind), data)
+    return Result(str(kind), op, data, line)
+
+
+def ops(*items: Op | Sequence[Op]) -> tuple[Op, ...]:
+    """Flatten ops given singly or in lists (a convenience for scenarios)."""
+    out: list[Op] = []
+    for item in items:
+        if isinstance(item, Op):
+            out.append(item)
+        else:
+            out.extend(item)
+    return tuple(out)

@@ -1,0 +1,100 @@
+// manip-conform HTML report: sorting and filtering of the case table, copy buttons, opening the case a
+// link points at.  Inlined into the page; reads only the page's own attributes.  The query string can
+// preset the filter: report.html?verdict=fail,error&q=error-string
+(function () {
+  "use strict";
+  const table = document.getElementById("case-table");
+  const body = table.tBodies[0];
+  const rows = Array.from(body.rows);
+  const search = document.getElementById("filter");
+  const level = document.getElementById("level");
+  const boxes = Array.from(document.querySelectorAll('input[name="verdict"]'));
+  const shown = document.getElementById("shown");
+
+  function apply() {
+    const words = search.value.toLowerCase().split(/\s+/).filter(Boolean);
+    const verdicts = new Set(boxes.filter((b) => b.checked).map((b) => b.value));
+    let count = 0;
+    for (const row of rows) {
+      const text = row.dataset.search.toLowerCase();
+      const ok = verdicts.has(row.dataset.verdict) &&
+        (!level.value || row.dataset.level === level.value) &&
+        words.every((w) => text.includes(w));
+      row.hidden = !ok;
+      if (ok) count += 1;
+    }
+    shown.textContent = count + " of " + rows.length + " shown";
+    shown.dataset.count = String(count);
+  }
+
+  function sortBy(th) {
+    const key = th.dataset.sort;
+    const descending = th.getAttribute("aria-sort") === "ascending";
+    for (const other of table.tHead.querySelectorAll("th")) other.removeAttribute("aria-sort");
+    th.setAttribute("aria-sort", descending ? "descending" : "ascending");
+    const numeric = key === "rank" || key === "duration";
+    const value = (row) => (numeric ? parseFloat(row.dataset[key]) : row.dataset[key]);
+    rows.sort((a, b) => {
+      const x = value(a), y = value(b);
+      const order = x < y ? -1 : x > y ? 1 : a.dataset.id.localeCompare(b.dataset.id);
+      return descending ? -order : order;
+    });
+    for (const row of rows) body.appendChild(row);
+  }
+
+  function onlyVerdict(verdict) {
+    for (const box of boxes) box.checked = box.value === verdict;
+    apply();
+    document.getElementById("cases").scrollIntoView();
+  }
+
+  function copy(button) {
+    const text = button.dataset.copy;
+    const done = () => {
+      button.textContent = "Copied";
+      button.classList.add("done");
+      setTimeout(() => { button.textContent = "Copy"; button.classList.remove("done"); }, 1500);
+    };
+    const fallback = () => {
+      const area = document.createElement("textarea");
+      area.value = text;
+      document.body.appendChild(area);
+      area.select();
+      try { document.execCommand("copy"); done(); } finally { area.remove(); }
+    };
+    if (navigator.clipboard && window.isSecureContext) {
+      navigator.clipboard.writeText(text).then(done, fallback);
+    } else {
+      fallback();
+    }
+  }
+
+  function openTarget() {
+    const id = decodeURIComponent(location.hash.slice(1));
+    const target = id && document.getElementById(id);
+    if (target && target.tagName === "DETAILS") target.open = true;
+  }
+
+  for (const th of table.tHead.querySelectorAll("th[data-sort]")) th.addEventListener("click", () => sortBy(th));
+  search.addEventListener("input", apply);
+  level.addEventListener("change", apply);
+  for (const box of boxes) box.addEventListener("change", apply);
+  for (const card of document.querySelectorAll(".card[data-verdict]")) {
+    card.addEventListener("click", () => onlyVerdict(card.dataset.verdict));
+  }
+  for (const button of document.querySelectorAll("button.copy")) button.addEventListener("click", () => copy(button));
+  for (const link of document.querySelectorAll("a[data-filter]")) {
+    link.addEventListener("click", () => { search.value = link.dataset.filter; apply(); });
+  }
+  window.addEventListener("hashchange", openTarget);
+
+  const params = new URLSearchParams(location.search);
+  if (params.has("verdict")) {
+    const wanted = new Set(params.get("verdict").split(","));
+    for (const box of boxes) box.checked = wanted.has(box.value);
+  }
+  if (params.has("q")) search.value = params.get("q");
+  apply();
+  openTarget();
+  document.documentElement.dataset.ready = "yes";
+})();

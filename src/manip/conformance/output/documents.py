@@ -1,0 +1,69 @@
+"""The report documents people open: ``--html FILE`` and ``--markdown FILE`` on every command that
+judges (one decorator, :func:`document_options`); ``manip-conform report REPORT.json`` renders a saved
+JSON report the same way (:func:`render_saved`).
+
+A command adds both options with ``@document_options`` (its function then takes ``html_path`` and
+``markdown_path``), checks the paths with the other outputs before it runs, and ends with
+``write_documents(report, html_path, markdown_path)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+import click
+
+from manip.conformance.output.html import render_html
+from manip.conformance.output.markdown import render_markdown
+from manip.conformance.output.report import report_json
+from manip.conformance.output.report_view import ReportError, load_report
+from manip.conformance.suite.results import RunReport
+
+__all__ = ["ReportError", "document_options", "render_saved", "write_documents"]
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+_html_option = click.option(
+    "--html",
+    "html_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write a one-file HTML report (opens offline: summary, failures by clause, every case's packets).",
+)
+_markdown_option = click.option(
+    "--markdown",
+    "markdown_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write a Markdown summary (for CI step summaries: counts, failures by clause, reproduce lines).",
+)
+
+
+def document_options(function: F) -> F:
+    """``--html FILE`` and ``--markdown FILE`` (parameters ``html_path``, ``markdown_path``)."""
+    return _html_option(_markdown_option(function))
+
+
+def write_documents(
+    report: RunReport | Mapping[str, Any], html_path: Path | None, markdown_path: Path | None
+) -> None:
+    """Write the documents asked for, of a run's report or of a JSON report's data."""
+    if html_path is None and markdown_path is None:
+        return
+    data = report_json(report) if isinstance(report, RunReport) else report
+    if html_path is not None:
+        html_path.write_text(render_html(data), encoding="utf-8")
+    if markdown_path is not None:
+        markdown_path.write_text(render_markdown(data), encoding="utf-8")
+
+
+def render_saved(report_file: Path, html_path: Path | None, markdown_path: Path | None) -> None:
+    """Render the JSON report at ``report_file``; :class:`ReportError` says why a file cannot be."""
+    data = load_report(report_file)
+    try:
+        write_documents(data, html_path, markdown_path)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ReportError(
+            f"{report_file} does not hold what a report holds ({type(exc).__name__}: {exc}); "
+            "was it edited, or written by another tool?"
+        ) from None

@@ -1,0 +1,179 @@
+"""A JSON report (live or saved) as the HTML and Markdown documents read it.
+
+Both documents are rendered from the JSON report's data (:func:`~.report.report_json`), never from the
+run's objects, so ``manip-conform report REPORT.json`` renders a saved report exactly as ``run --html``
+renders a fresh one.  Reports written before the ``clauses`` catalogue existed take the clause texts
+from the spec data of this version instead.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final
+
+from manip.conformance.judge.packets import WirePacket, describe
+from manip.conformance.output.packet_text import annotated
+from manip.conformance.output.report import SCHEMA_VERSION
+from manip.links import AddressError, parse_address
+from manip.spec import SPEC
+
+__all__ = [
+    "FAILING",
+    "LEVELS",
+    "OUTCOME_ORDER",
+    "ClauseInfo",
+    "PacketRow",
+    "ReportError",
+    "WireOrder",
+    "clause_info",
+    "failure_groups",
+    "load_report",
+    "packet_rows",
+    "seeded",
+    "wire_order",
+]
+
+OUTCOME_ORDER: Final = ("fail", "error", "fixed", "warn", "known-fail", "skip", "pass")
+"""Outcomes, the ones needing attention first."""
+FAILING: Final = frozenset({"fail", "error", "fixed"})
+"""Outcomes that fail the run."""
+LEVELS: Final = ("MUST", "SHOULD", "MAY", "INFO")
+_REQUIRED: Final = ("verdict", "exit_code", "counts", "cases", "by_clause", "seed", "target")
+Report = Mapping[str, Any]
+
+
+class ReportError(Exception):
+    """A file that is not a JSON report manip-conform can render; the message says why."""
+
+
+def load_report(path: Path) -> dict[str, Any]:
+    """The data of the JSON report at ``path`` (``run``/``verify``/``replay --json``)."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise ReportError(f"{path} is not text (a JSON report is UTF-8)") from None
+    except json.JSONDecodeError as exc:
+        raise ReportError(f"{path} is not JSON (line {exc.lineno}: {exc.msg})") from None
+    if not isinstance(data, dict) or data.get("tool") != "manip-conform":
+        raise ReportError(f'{path} is JSON but not a manip-conform report (no "tool": "manip-conform")')
+    version = data.get("schema_version")
+    if not isinstance(version, int) or version > SCHEMA_VERSION:
+        raise ReportError(
+            f"{path} has schema_version {version!r}; this manip-conform reads reports up to "
+            f"version {SCHEMA_VERSION} (a newer manip-conform wrote it?)"
+        )
+    missing = [key for key in _REQUIRED if key not in data]
+    if missing:
+        raise ReportError(f"{path} lacks the report field(s) {', '.join(missing)}")
+    return data
+
+
+def seeded(report: Report) -> bool:
+    """Whether the run drew at random (a run of the suite); verify and replay draw nothing (seed 0)."""
+    options = report.get("options", {})
+    return not (isinstance(options, Mapping) and options.get("mode") in ("verify", "replay", "serve"))
+
+
+@dataclass(frozen=True)
+class ClauseInfo:
+    level: str
+    section: str
+    text: str
+
+
+def clause_info(report: Report, clause_id: str) -> ClauseInfo | None:
+    """A clause as the report's run judged it (its ``clauses`` catalogue), else as the spec has it now."""
+    saved = report.get("clauses", {}).get(clause_id)
+    if isinstance(saved, Mapping):
+        return ClauseInfo(str(saved["level"]), str(saved["section"]), str(saved["text"]))
+    spec = SPEC.clauses.get(clause_id)
+    return ClauseInfo(spec.level, spec.section, spec.text) if spec is not None else None
+
+
+def failure_groups(report: Report) -> list[tuple[Mapping[str, Any] | None, list[Mapping[str, Any]]]]:
+    """The report's broken clauses (``by_clause``, most failures first) with their cases, then (``None``)
+    the failing cases that broke no clause (errors of the suite, stale known-failing entries)."""
+    cases = {c["id"]: c for c in report["cases"]}
+    groups: list[tuple[Mapping[str, Any] | None, list[Mapping[str, Any]]]] = []
+    grouped: set[str] = set()
+    for tally in report["by_clause"]:
+        members = [cases[i] for i in tally["cases"] if i in cases]
+        groups.append((tally, members))
+        grouped.update(tally["cases"])
+    rest = [c for c in report["cases"] if c["outcome"] in FAILING and c["id"] not in grouped]
+    if rest:
+        groups.append((None, rest))
+    return groups
+
+
+@dataclass(frozen=True)
+class WireOrder:
+    """How a link puts a packet's data bytes on the wire (the report's data are PDP-11 memory order)."""
+
+    msb_first: bool
+    note: str
+
+
+def wire_order(report: Report) -> WireOrder:
+    """The byte order of the data on the report's link: MSB first on tcp/chudp/unix (pairs swapped),
+    as in memory on chaosd; unknown (``verify``: the target is a capture's path) leaves the memory
+    order, saying so."""
+    target = str(report["target"])
+    try:
+        framing = parse_address(target).framing if "://" in target else None
+    except (AddressError, ValueError):
+        framing = None
+    if framing is None:
+        return WireOrder(False, "PDP-11 memory order: the low byte of each word first (link unknown)")
+    if framing == "chaosd":
+        return WireOrder(False, "wire order of the chaosd link: each word low byte first, padded to a word")
+    return WireOrder(
+        True, f"wire order of the {framing} link: each word most significant byte first, padded to a word"
+    )
+
+
+def wire_bytes(data: bytes, order: WireOrder) -> bytes:
+    """``data`` as the link sends it: padded to a whole word, each pair swapped when MSB first."""
+    padded = data + b"\x00" * (len(data) % 2)
+    if not order.msb_first:
+        return padded
+    return b"".join(padded[i + 1 : i + 2] + padded[i : i + 1] for i in range(0, len(padded), 2))
+
+
+def _hex(data: bytes, order: WireOrder) -> str:
+    return wire_bytes(data, order).hex(" ")
+
+
+@dataclass(frozen=True)
+class PacketRow:
+    number: int
+    packet: WirePacket
+    head: str
+    """Opcode name and octal code, the number it carries, its size (:func:`describe`)."""
+    fields: str
+    """What its data say, decoded by the spec layouts."""
+    wire_hex: str
+
+
+def _packet(item: Mapping[str, Any]) -> WirePacket:
+    return WirePacket(
+        "c2s" if item["dir"] == "c2s" else "s2c",
+        int(item["opcode"], 8),
+        int(item["packet_no"]),
+        int(item["ack_no"]),
+        bytes.fromhex(item["data"]),
+        float(item.get("time", 0.0)),
+        int(item.get("connection", 0)),
+    )
+
+
+def packet_rows(case: Mapping[str, Any], order: WireOrder) -> list[PacketRow]:
+    """The case's packets (as many as the report kept), numbered, described, decoded, in wire order."""
+    packets: Sequence[WirePacket] = [_packet(p) for p in case.get("packets", [])]
+    return [
+        PacketRow(n, packet, describe(packet), text, "" if packet.is_close else _hex(packet.data, order))
+        for n, (packet, text) in enumerate(annotated(packets, from_open=True), 1)
+    ]

@@ -1,0 +1,151 @@
+"""Fault switches of the reference client: each makes it break one rule on purpose, so that
+``manip-conform client`` is shown to catch it (``tests/test_conform_client_faults.py``).
+
+They are process-wide (a client under test is one process): ``MANIP_CLIENT_FAULTS=name,name`` in the
+environment, or ``--fault NAME`` of the harness (``python -m manip.reference_client.harness --fault
+swapped-float-words``), switches them on; ``--list-faults`` lists them.  With none on, nothing changes.
+"""
+
+from __future__ import annotations
+
+import enum
+import os
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Final
+
+from manip.codecs.error_string import format_joint_mask
+
+__all__ = ["ENV", "FAULTS", "ClientFault", "FaultInfo", "activate", "active", "from_env", "on"]
+
+ENV: Final = "MANIP_CLIENT_FAULTS"
+
+
+class ClientFault(enum.Enum):
+    WRONG_REQUEST_NUMBER = "wrong-request-number"
+    IGNORE_ASYNC = "ignore-async"
+    ASYNC_AS_REPLY = "async-as-reply"
+    DOLLAR_AS_NUMBER = "dollar-as-number"
+    TILDE_OCTAL = "tilde-octal"
+    FATAL_AS_NON_FATAL = "fatal-as-non-fatal"
+    SWAPPED_FLOAT_WORDS = "swapped-float-words"
+    SET_SPEED_LENGTH = "set-speed-length"
+    NEVER_ACK = "never-ack"
+    RESERVED_AS_ZERO = "reserved-as-zero"
+    NO_INITIAL_WAIT = "no-initial-wait"
+    IGNORE_PAD = "ignore-pad"
+    MULTI_FIRST_PACKET = "multi-first-packet"
+    EARLY_TIMEOUT = "early-timeout"
+    SILENT_CLOSE = "silent-close"
+
+
+@dataclass(frozen=True)
+class FaultInfo:
+    what: str
+    clauses: tuple[str, ...]
+
+
+FAULTS: Final[dict[ClientFault, FaultInfo]] = {
+    ClientFault.WRONG_REQUEST_NUMBER: FaultInfo(
+        "a reply is matched to the request numbered one above the number it carries",
+        ("client.reply-matching",),
+    ),
+    ClientFault.IGNORE_ASYNC: FaultInfo(
+        "asynchronous responses (0203) are dropped", ("client.async-routing",)
+    ),
+    ClientFault.ASYNC_AS_REPLY: FaultInfo(
+        "an asynchronous response answers the oldest pending request", ("client.async-routing",)
+    ),
+    ClientFault.DOLLAR_AS_NUMBER: FaultInfo(
+        "$ in an error message is printed as the raw number, not the joints",
+        ("client.error-report", "error-string.substitution"),
+    ),
+    ClientFault.TILDE_OCTAL: FaultInfo(
+        "~ in an error message is printed in octal", ("client.error-report", "error-string.substitution")
+    ),
+    ClientFault.FATAL_AS_NON_FATAL: FaultInfo(
+        "a fatal error (0201) is taken as a non-fatal error of its request; the connection goes on",
+        ("client.fatal-ends",),
+    ),
+    ClientFault.SWAPPED_FLOAT_WORDS: FaultInfo(
+        "the two words of each float in a reply are read in the wrong order", ("client.reply-data",)
+    ),
+    ClientFault.SET_SPEED_LENGTH: FaultInfo(
+        "set-speed carries 8 data bytes instead of one float", ("request-data.types",)
+    ),
+    ClientFault.NEVER_ACK: FaultInfo(
+        "the client's NCP acknowledges nothing (ack field 0, no STS)", ("ncp.acknowledge",)
+    ),
+    ClientFault.RESERVED_AS_ZERO: FaultInfo(
+        "a reserved-operand float in a reply is read as 0.0", ("float.reserved-operand",)
+    ),
+    ClientFault.NO_INITIAL_WAIT: FaultInfo(
+        "requests go out without waiting for the initial RESPONSE", ("client.initial-response",)
+    ),
+    ClientFault.IGNORE_PAD: FaultInfo(
+        "the numbers of an error string are read right after the NUL, a pad byte included",
+        ("client.error-report", "client.error-args-layout", "error-string.substitution"),
+    ),
+    ClientFault.MULTI_FIRST_PACKET: FaultInfo(
+        "a multi-packet reply ends at its first packet", ("client.multi-packet",)
+    ),
+    ClientFault.EARLY_TIMEOUT: FaultInfo("a request times out at half its timeout", ("client.reply-wait",)),
+    ClientFault.SILENT_CLOSE: FaultInfo(
+        "the end of the connection is not reported; requests in flight wait for their timeout",
+        ("client.connection-lost",),
+    ),
+}
+
+_ACTIVE: set[ClientFault] = set()
+
+
+def parse(names: Iterable[str]) -> set[ClientFault]:
+    """Faults by name; ValueError naming the known ones for a name that is not."""
+    out: set[ClientFault] = set()
+    known = {f.value: f for f in ClientFault}
+    for name in names:
+        name = name.strip()
+        if not name:
+            continue
+        if name not in known:
+            raise ValueError(f"unknown client fault {name!r}; known: {', '.join(sorted(known))}")
+        out.add(known[name])
+    return out
+
+
+def activate(faults: Iterable[ClientFault]) -> None:
+    """Switch exactly ``faults`` on (the others off)."""
+    _ACTIVE.clear()
+    _ACTIVE.update(faults)
+
+
+def from_env() -> set[ClientFault]:
+    """The faults named in ``MANIP_CLIENT_FAULTS`` (comma separated)."""
+    return parse(os.environ.get(ENV, "").split(","))
+
+
+def on(fault: ClientFault) -> bool:
+    return fault in _ACTIVE
+
+
+def active() -> frozenset[ClientFault]:
+    return frozenset(_ACTIVE)
+
+
+def render_message(message: str, args: tuple[int, ...], has_nul: bool) -> str | None:
+    """The message as a faulty client renders it, or None when no rendering fault is on."""
+    if not (on(ClientFault.DOLLAR_AS_NUMBER) or on(ClientFault.TILDE_OCTAL)) or not has_nul:
+        return None
+    it = iter(args)
+    out: list[str] = []
+    for ch in message:
+        if ch in "~$":
+            arg = next(it, None)
+            if arg is not None:
+                if ch == "~":
+                    out.append(f"{arg:o}" if on(ClientFault.TILDE_OCTAL) else str(arg))
+                else:
+                    out.append(str(arg) if on(ClientFault.DOLLAR_AS_NUMBER) else format_joint_mask(arg))
+                continue
+        out.append(ch)
+    return "".join(out)

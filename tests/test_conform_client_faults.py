@@ -1,0 +1,81 @@
+"""Mutation testing of the client suite: every fault switch of the reference client is caught.
+
+Each fault of :data:`manip.reference_client.faults.FAULTS` is switched on alone in the reference client's
+harness (``--fault NAME``), and the cases named for it in :data:`CAUGHT_BY` run: each must fail, and at
+least one of them on a clause the fault says it breaks.  The clean client passes the same cases (and
+every case: ``tests/test_conform_client.py``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import sys
+
+import pytest
+
+from manip.conformance.client.cli import client_cases
+from manip.conformance.client.runner import ClientRunConfig, run_client_suite
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.results import RunReport
+from manip.conformance.suite.selection import PatternSet
+from manip.reference_client.faults import FAULTS, ClientFault
+
+HARNESS = [sys.executable, "-m", "manip.reference_client.harness"]
+SEED = 4242
+
+CAUGHT_BY: dict[ClientFault, tuple[str, ...]] = {
+    ClientFault.WRONG_REQUEST_NUMBER: ("client.connect.initial-response", "client.pipeline.replies-matched"),
+    ClientFault.IGNORE_ASYNC: ("client.async.segment-interleaved", "client.async.guard-hits"),
+    ClientFault.ASYNC_AS_REPLY: ("client.async.segment-interleaved", "client.async.guard-hits"),
+    ClientFault.DOLLAR_AS_NUMBER: ("client.error.args-padded", "client.error.async-error-between"),
+    ClientFault.TILDE_OCTAL: ("client.error.args-padded", "client.error.args-aligned"),
+    ClientFault.FATAL_AS_NON_FATAL: ("client.fatal.severity-f", "client.fatal.severity-bf"),
+    ClientFault.SWAPPED_FLOAT_WORDS: ("client.reply.here", "client.float.edges"),
+    ClientFault.SET_SPEED_LENGTH: ("client.request.set-speed",),
+    ClientFault.NEVER_ACK: ("client.ncp.acknowledge",),
+    ClientFault.RESERVED_AS_ZERO: ("client.float.reserved-operand",),
+    ClientFault.NO_INITIAL_WAIT: ("client.connect.initial-response",),
+    ClientFault.IGNORE_PAD: ("client.error.args-padded",),
+    ClientFault.MULTI_FIRST_PACKET: ("client.describe.split-mid-token", "client.describe.many-packets"),
+    ClientFault.EARLY_TIMEOUT: ("client.timing.reply-near-timeout", "client.timing.no-reply"),
+    ClientFault.SILENT_CLOSE: ("client.conn.cls-mid-request",),
+}
+
+
+def run(select: tuple[str, ...], *extra: str) -> RunReport:
+    config = ClientRunConfig(
+        argv=[*HARNESS, *extra],
+        link="tcp",
+        seed=SEED,
+        options=RunOptions(reply_timeout=1.0),
+        select=PatternSet.of(select, "--select"),
+        slack=3.0,
+    )
+    return asyncio.run(run_client_suite(config, client_cases()))
+
+
+def test_every_fault_is_named_and_at_least_twelve() -> None:
+    assert set(CAUGHT_BY) == set(ClientFault)
+    assert len(FAULTS) >= 12 and set(FAULTS) == set(ClientFault)
+    ids = {c.id for c in client_cases()}
+    for cases in CAUGHT_BY.values():
+        assert set(cases) <= ids
+
+
+@pytest.mark.parametrize("fault", list(ClientFault), ids=lambda f: f.value)
+def test_each_fault_is_caught_by_its_named_cases(fault: ClientFault) -> None:
+    report = run(CAUGHT_BY[fault], "--fault", fault.value)
+    got = {r.id: r for r in report.results}
+    assert set(got) == set(CAUGHT_BY[fault])
+    for case_id, result in got.items():
+        assert result.outcome == "fail", f"{fault.value}: {case_id} {result.outcome} {result.reason}"
+    clauses = {v.clause for r in got.values() for v in r.violations}
+    assert clauses & set(FAULTS[fault].clauses), (
+        f"{fault.value}: broke {clauses}, says {FAULTS[fault].clauses}"
+    )
+
+
+def test_the_clean_client_passes_the_named_cases() -> None:
+    named = tuple(sorted({c for cases in CAUGHT_BY.values() for c in cases}))
+    report = run(named)
+    assert {r.outcome for r in report.results} == {"pass"}, [(r.id, r.outcome) for r in report.results]
