@@ -9,7 +9,7 @@ plus a linear image of the gravity load of a point mass on the hand.  Every comm
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -159,8 +159,11 @@ class WristClient:
     """Drives a ServerSession with a wrist on a fake 16 ms clock; decodes every packet, deferred
     replies included (it remembers which opcode each packet number carried)."""
 
-    def __init__(self, wrist: Wrist, *, powered: bool = True, now: float = 10.0) -> None:
-        self.session = ServerSession(ServerConfig(powered_at_open=powered), wrist=wrist)
+    def __init__(
+        self, wrist: Wrist, *, powered: bool = True, now: float = 10.0, config: ServerConfig | None = None
+    ) -> None:
+        config = replace(config or ServerConfig(), powered_at_open=powered)
+        self.session = ServerSession(config, wrist=wrist)
         self.now = now
         self.packet_no = 0o100
         self.ops: dict[int, int] = {}

@@ -38,6 +38,7 @@ CATCHERS = {
     "ignores-guardc": "cougar.guard.clear",
     "rst-ignored": "cougar.rst.zeroes-velocities",
     "npr-ignores-k": "cougar.npr.gains",
+    "filter-con-swapped": "cougar.filter.output",
 }
 OPTIONS = RunOptions(reply_timeout=1.0, connect_timeout=2.0)
 

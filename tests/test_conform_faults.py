@@ -24,8 +24,10 @@ import pytest
 from manip.conformance.suite import bridge
 from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.embedded import ServerEnvironment, simulated_environment
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.runner import RunConfig, Runner
+from manip.links import virtual_clock
 from manip.reference_server.driver import serve
 from manip.reference_server.faults import FAULTS, WRIST_SIDE, Fault, FaultSet
 from manip.reference_server.session import ServerConfig
@@ -40,7 +42,28 @@ packet costs this much per wait."""
 SUITE_PREFIXES = ("server.", "property.", "stateful.")
 """The cases that judge a server over the default link (the Cougar cases need --cougar)."""
 GENERIC = ("stateful.arm-model",)
-CONDITIONS: dict[Fault, tuple[str, ...]] = {Fault.FATAL_WITHOUT_CLOSE: ("calibrate-nzi",)}
+CONDITIONS: dict[Fault, tuple[str, ...]] = {}
+PATHS = {
+    Fault.FATAL_WITHOUT_CLOSE: "server.error.fatal-then-close",
+    Fault.WARNING_INTERRUPTS: "server.async.warning-format",
+    Fault.GUARD_HIT_WORD_SWAPPED: "server.async.guard-hit",
+    Fault.WRIST_TIMEOUT_SILENT: "server.wrist.no-answer",
+}
+"""The fault of each path the embedded target arranges, and the case that must catch it."""
+CATCHERS = {
+    **PATHS,
+    Fault.STRAIGHT_AS_JOINT: "server.motion.straight-line",
+    Fault.INCREMENT_FROM_ACTUAL: "server.motion.incremental-reference",
+    Fault.READY_LEAVES_WRIST: "server.motion.ready",
+    Fault.SEGMENT_REPORT_PREVIOUS: "server.motion.queued-segments",
+    Fault.COLLISION_UNCHECKED: "server.motion.collision",
+    Fault.CLOSE_KEEPS_MOVING: "server.connect.close-stops-arm",
+    Fault.UNDERFLOW_DIRTY_ZERO: "server.float.extremes",
+    Fault.NOT_FINITE_RESERVED: "server.float.extremes",
+}
+"""Faults and the case written to catch each: it must fail (others may catch the fault too)."""
+WRIST_FAULTS = frozenset({Fault.GUARD_HIT_WORD_SWAPPED, Fault.WRIST_TIMEOUT_SILENT})
+"""Faults whose catching case needs the simulated Cougar wrist."""
 CAUGHT = ("fail", "warn")
 
 PROTOCOL_FAULTS = sorted(
@@ -69,8 +92,36 @@ def cases_for(fault: Fault) -> list[Case]:
 async def run_suite(faults: FaultSet, cases: Sequence[Case]) -> RunReport:
     async with serve("tcp://127.0.0.1:0", ServerConfig(faults=faults), time_scale=TIME_SCALE) as server:
         options = RunOptions(max_examples=MAX_EXAMPLES, address=server.address, reply_timeout=REPLY_TIMEOUT)
-        config = RunConfig(address=server.address, options=options, seed=SEED, embedded=True)
+        config = RunConfig(
+            address=server.address,
+            options=options,
+            seed=SEED,
+            embedded=True,
+            environment=ServerEnvironment(server),
+        )
         return await Runner(config, cases).run()
+
+
+def run_with_wrist(faults: FaultSet, cases: Sequence[Case]) -> RunReport:
+    """The cases against a robot with the simulated Cougar wrist, as the embedded target's is, in virtual
+    time: Cougar ticks with the servo, so its answers never depend on how loaded the machine is (in real
+    time a busy machine delays its ticks past any reply timeout)."""
+
+    async def main() -> RunReport:
+        async with simulated_environment(ServerConfig(faults=faults), seed=SEED, wrist=True) as environment:
+            address = environment.address
+            options = RunOptions(max_examples=MAX_EXAMPLES, address=address, reply_timeout=REPLY_TIMEOUT)
+            config = RunConfig(
+                address=address,
+                options=options,
+                seed=SEED,
+                embedded=True,
+                environment=environment,
+                virtual_time=True,
+            )
+            return await Runner(config, cases).run()
+
+    return virtual_clock.run(main(), virtual=True)
 
 
 def test_every_protocol_fault_has_a_case_citing_its_clauses() -> None:
@@ -96,7 +147,8 @@ def test_clean_server_passes_every_case() -> None:
 @pytest.mark.parametrize("fault", PROTOCOL_FAULTS, ids=lambda f: f.value)
 def test_protocol_fault_is_caught(fault: Fault) -> None:
     faults = FaultSet.parse([fault.value, *CONDITIONS.get(fault, ())])
-    report = asyncio.run(run_suite(faults, cases_for(fault)))
+    cases = cases_for(fault)
+    report = run_with_wrist(faults, cases) if fault in WRIST_FAULTS else asyncio.run(run_suite(faults, cases))
     caught = [r for r in report.results if r.outcome in CAUGHT]
     errors = [(r.id, r.reason) for r in report.results if r.outcome == "error"]
     shown = ", ".join(
@@ -105,3 +157,11 @@ def test_protocol_fault_is_caught(fault: Fault) -> None:
     print(f"fault {fault.value}: caught by {shown or 'NO CASE'} [{report.duration:.1f} s]")
     assert not errors, errors
     assert caught, f"no case caught fault {fault.value} ({FAULTS[fault].description})"
+    if fault in CATCHERS:
+        assert CATCHERS[fault] in {r.id for r in report.results if r.outcome == "fail"}, shown
+
+
+def test_the_arranged_paths_run_against_the_clean_server() -> None:
+    """The fatal, warning and guard-hit cases pass (not skip) against the clean embedded server."""
+    report = run_with_wrist(FaultSet(), [c for c in suite() if c.id in PATHS.values()])
+    assert {r.id: r.outcome for r in report.results} == dict.fromkeys(PATHS.values(), "pass")

@@ -121,10 +121,22 @@ def test_an_unstable_report_exits_4() -> None:
     assert report.verdict == "unstable suite"
 
 
+ARRANGED = (
+    "server.async.warning-format",
+    "server.error.fatal-then-close",
+    "server.motion.collision",
+    "server.wrist.no-answer",
+)
+"""Cases that switch a condition of the arm's world on for their connections (a lagging joint, a failing
+calibration, an obstacle, a silent Cougar): a capture does not record the switches, so the replay's plain
+server answers those sessions differently."""
+
+
 @pytest.mark.slow
 def test_a_simulated_run_capture_replays_cleanly(tmp_path: Path) -> None:
     capture = tmp_path / "run.mcap"
-    code, output = _invoke("--seed", "6", "-q", "--record", str(capture))
+    skips = [arg for case_id in ARRANGED for arg in ("--skip", case_id)]
+    code, output = _invoke("--seed", "6", "-q", "--record", str(capture), *skips)
     assert code == ExitCode.CONFORMANT, output
     report_path = tmp_path / "replay.json"
     result = CliRunner().invoke(main, ["replay", str(capture), "-q", "--json", str(report_path)])

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import struct
 from pathlib import Path
 
 import pytest
@@ -13,7 +14,7 @@ from click.testing import CliRunner
 from manip.captures import read_session
 from manip.codecs.messages import encode_request
 from manip.conformance.cli import main
-from manip.conformance.judge.checks import WirePacket, check_client_request
+from manip.conformance.judge.checks import WirePacket, check_client_guards, check_client_request
 from manip.conformance.output.coverage import coverage, gaps
 from manip.conformance.output.report import load_schema, report_json
 from manip.conformance.replay.against import ReplayOptions, replay_capture
@@ -23,7 +24,7 @@ from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.embedded import EmbeddedServer
 from manip.reference_server import FaultSet, ServerConfig
 from manip.spec import SPEC
-from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.constants import AsyncCondition, ChaosOp, ServerOp
 from tests.test_conform_framework import _validate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -158,7 +159,7 @@ def test_verify_judges_the_client_side_when_asked() -> None:
     server_only = verify_capture(GOLDEN / "errors.mcap")
     assert server_only.exit_code == 0  # the errors session's malformed requests are refused as they must be
     client = verify_capture(GOLDEN / "errors.mcap", judge="client")
-    [result] = client.results
+    [result] = [r for r in client.results if r.outcome != "skip"]  # the session arms no guard
     assert result.outcome == "fail" and client.exit_code == 1
     assert {v.clause for v in result.violations} == {"request-data.types"}
     assert "--judge client" in result.reproduce
@@ -170,3 +171,42 @@ def test_coverage_names_verify_for_the_client_clauses() -> None:
     cases = rows["request-data.types"].cases
     assert "verify:client-requests" in cases and any(c.startswith("client.request.") for c in cases)
     assert not gaps(rows.values())
+
+
+def _asked(op: str, number: int, **values: object) -> WirePacket:
+    return WirePacket("c2s", SPEC.request(op).opcode, number, 0, encode_request(op, **values))  # type: ignore[arg-type]
+
+
+def _guard_hit(index: int) -> WirePacket:
+    data = struct.pack("<HHHH", 0, AsyncCondition.GUARD_HIT, 2, index)
+    return WirePacket("s2c", ServerOp.ASYNCHRONOUS_RESPONSE, 90, 0, data)
+
+
+def test_client_guards_are_judged_over_the_connection() -> None:
+    guard = {"dvec": [0.0] * 6, "tol": 1.0}
+    notify = _asked("request-notifications", 1, mask=1)
+    fine = [
+        notify,
+        _asked("set-frame-vector", 2, offset=[0.0, 0.0, 50.0]),
+        _asked("set-weight", 3, weight=8.0, cg=[0.0, 0.0, 0.0]),
+        _asked("set-guard", 4, type_index=3, **guard),
+        _guard_hit(3),
+        _asked("set-guard", 5, type_index=3, **guard),
+        _asked("clear-guard", 6, index=3),
+        _asked("set-guard", 7, type_index=3, **guard),
+    ]
+    assert check_client_guards(fine) == []
+    reused = [
+        notify,
+        _asked("set-guard", 2, type_index=3, **guard),
+        _asked("set-guard", 3, type_index=3, **guard),
+    ]
+    assert [v.clause for v in check_client_guards(reused)] == ["client.guard-numbers"]
+    assert check_client_guards(reused[1:]) == []  # without guard-hit reports the client cannot know
+    weight_under_guard = [
+        _asked("set-guard", 2, type_index=1, **guard),
+        _asked("set-weight", 3, weight=1.0, cg=[0.0] * 3),
+    ]
+    assert [v.clause for v in check_client_guards(weight_under_guard)] == ["client.no-newwc-with-guard"]
+    stale_weight = [_asked("set-frame-vector", 2, offset=[0.0, 0.0, 50.0]), _asked("read-forces", 3)]
+    assert [v.clause for v in check_client_guards(stale_weight)] == ["client.newwc-on-load"]

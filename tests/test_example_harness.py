@@ -194,7 +194,7 @@ def test_error_string_vectors(vector: dict[str, Any]) -> None:
 
 def test_error_vectors_include_both_argument_layouts() -> None:
     names = {v["name"] for v in ERROR_VECTORS}
-    assert {"seed-nzi-example-aligned", "seed-nzi-example-unaligned", "mask-and-tilde"} <= names
+    assert {"guide-nzi-example-aligned", "guide-nzi-example-unaligned", "mask-and-tilde"} <= names
 
 
 @pytest.mark.parametrize(

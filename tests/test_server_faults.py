@@ -6,21 +6,29 @@ and checks that the clean one conforms and the faulted one differs in the claime
 
 from __future__ import annotations
 
+import math
+import struct
 from collections.abc import Callable
 from typing import TypeVar
 
 import pytest
+from click.testing import CliRunner
 
 from manip.arm.kinematics import READY, forward
 from manip.arm.sim import Obstacle
 from manip.codecs.errors import DecodeError
 from manip.codecs.lisp import read_alist
-from manip.codecs.messages import decode_async, decode_error, decode_reply, encode_request
+from manip.codecs.messages import ErrorReply, decode_async, decode_error, decode_reply, encode_request
 from manip.codecs.pdp11float import pack_f
+from manip.conformance.cli import main as conform_main
+from manip.cougar import CougarSim
 from manip.reference_server import FAULTS, Fault, FaultSet, Output, ServerConfig, State
+from manip.reference_server.cougar_port import SimPort
+from manip.reference_server.cougar_wrist import CougarWrist
 from manip.reference_server.faults import WRIST_SIDE
 from manip.spec import SPEC
 from manip.spec.constants import RequestOp, ServerOp
+from tests.cougar_fake import WristClient
 from tests.test_server_session import GOAL, OTHER, Client
 
 T = TypeVar("T")
@@ -478,3 +486,165 @@ def test_async_without_number() -> None:
         return response.condition, response.word3
 
     assert pair(Fault.ASYNC_WITHOUT_NUMBER, scenario) == ((2, 1), "async.layout")
+
+
+# ------------------------------------------------------------------ the move process, seen from the wire
+def _segments_reported(c: Client) -> list[int]:
+    c.one("request-notifications", mask=2)
+    for step in (10.0, 20.0):
+        c.one("set-joint-angles", joints=(READY[0] + step, *READY[1:]))
+    return [decode_async(d).word3 for op, d in _async(c, 4.0) if op == ServerOp.ASYNCHRONOUS_RESPONSE]
+
+
+@covers(Fault.SEGMENT_REPORT_PREVIOUS)
+def test_segment_report_previous() -> None:
+    assert pair(Fault.SEGMENT_REPORT_PREVIOUS, _segments_reported) == ([1, 2], [0, 1])
+
+
+@covers(Fault.READY_LEAVES_WRIST)
+def test_ready_leaves_wrist() -> None:
+    def scenario(c: Client) -> tuple[float, ...]:
+        c.one("set-joint-angles", joints=GOAL)
+        c.one("ready")
+        c.settle()
+        return tuple(round(q, 6) for q in c.session.arm.actual)
+
+    clean, faulty = pair(Fault.READY_LEAVES_WRIST, scenario)
+    assert clean == READY and faulty == (*READY[:3], *GOAL[3:])
+
+
+def _here(c: Client) -> tuple[float, ...]:
+    (packet,) = _raw(c, "here")
+    return tuple(decode_reply(packet[1], RequestOp.HERE).values["transform"])
+
+
+@covers(Fault.INCREMENT_FROM_ACTUAL)
+def test_increment_from_actual() -> None:
+    def scenario(c: Client) -> float:
+        start = _here(c)
+        c.one("incremental-move", delta=(0.0, 0.0, -30.0, 0.0, 0.0, 0.0))
+        c.one("incremental-move", delta=(25.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+        c.settle()
+        return round(_here(c)[11] - start[11], 3)
+
+    assert pair(Fault.INCREMENT_FROM_ACTUAL, scenario) == (-30.0, 0.0)
+
+
+@covers(Fault.STRAIGHT_AS_JOINT)
+def test_straight_as_joint() -> None:
+    def scenario(c: Client) -> float:
+        c.one("set-joint-angles", joints=(20.0, -60.0, 150.0, 0.0, -60.0, 0.0))
+        c.settle()
+        start = _here(c)
+        goal = list(start)
+        goal[9] += 80.0
+        goal[10] -= 90.0
+        c.one("straight-move", transform=goal)
+        worst = 0.0
+        while c.session.arm.moving:
+            c.run(0.016)
+            p = _here(c)[9:]
+            # distance from the line through start and goal (both at the same height)
+            a, b = start[9:11], goal[9:11]
+            cross = (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
+            worst = max(worst, abs(cross) / math.dist(a, b), abs(p[2] - start[11]))
+        return worst
+
+    clean, faulty = pair(Fault.STRAIGHT_AS_JOINT, scenario)
+    assert clean < 0.01 and faulty > 1.0  # the conformance case allows 1 mm
+
+
+@covers(Fault.COLLISION_UNCHECKED)
+def test_collision_unchecked() -> None:
+    def scenario(c: Client) -> list[int]:
+        c.one("set-joint-angles", joints=GOAL)
+        return [op for op, _ in _async(c, 3.0)]
+
+    clean, faulty = pair(Fault.COLLISION_UNCHECKED, scenario, base=FaultSet.parse(["obstacle=2::-85"]))
+    assert clean == [ServerOp.ASYNCHRONOUS_WARNING, ServerOp.ASYNCHRONOUS_ERROR] and faulty == []
+
+
+@covers(Fault.SLUGGISH_JOINT)
+def test_sluggish_joint() -> None:
+    def scenario(c: Client) -> list[str]:
+        c.one("set-joint-angles", joints=GOAL)
+        return [decode_error(op, d).error.code for op, d in _async(c, 3.0)]
+
+    assert pair(FaultSet.parse(["sluggish-joint=2:0.35"]), scenario) == ([], ["COL"])
+
+
+@covers(Fault.WARNING_INTERRUPTS)
+def test_warning_interrupts() -> None:
+    def scenario(c: Client) -> list[int]:
+        c.one("set-joint-angles", joints=GOAL)
+        return [op for op, _ in _async(c, 3.0)]
+
+    clean, faulty = pair(Fault.WARNING_INTERRUPTS, scenario, base=FaultSet.parse(["sluggish-joint"]))
+    assert clean == [ServerOp.ASYNCHRONOUS_WARNING]
+    assert faulty == [ServerOp.ASYNCHRONOUS_WARNING, ServerOp.ASYNCHRONOUS_ERROR]
+
+
+# --------------------------------------------------------------------------------------- floats
+def _solve_backwards_words(c: Client, joints: tuple[float, ...]) -> list[tuple[int, int]]:
+    ((_, data),) = _raw(c, "solve-backwards", joints=joints)
+    return [struct.unpack_from("<HH", data, i) for i in range(2, len(data), 4)]
+
+
+@covers(Fault.UNDERFLOW_DIRTY_ZERO)
+def test_underflow_dirty_zero() -> None:
+    def scenario(c: Client) -> int:
+        words = _solve_backwards_words(c, (0.0, 0.0, 0.0, 1e-38, 1e-38, 1e-38))
+        return sum(1 for w0, w1 in words if not w0 & 0x7F80 and (w0 or w1))
+
+    clean, faulty = pair(Fault.UNDERFLOW_DIRTY_ZERO, scenario)
+    assert clean == 0 and faulty > 0
+
+
+@covers(Fault.NOT_FINITE_RESERVED)
+def test_not_finite_reserved() -> None:
+    def scenario(c: Client) -> tuple[int, bytes]:
+        far = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 1e38, 1e38, 1e38)
+        ((opcode, data),) = _raw(c, "solve-forwards", transform=far, current=READY)
+        return opcode, data[2:6]
+
+    clean, faulty = pair(Fault.NOT_FINITE_RESERVED, scenario)
+    assert clean[0] == ServerOp.NON_FATAL_ERROR
+    assert faulty == (ServerOp.RESPONSE, bytes([0, 0x80, 0, 0]))
+
+
+# ------------------------------------------------------------------- the driver and the wrist
+@covers(Fault.WRIST_SILENT)
+@covers(Fault.WRIST_TIMEOUT_SILENT)
+def test_wrist_silent_and_timeout() -> None:
+    def read_forces(*faults: str) -> str:
+        sim = CougarSim(seed=1)
+        client = WristClient(CougarWrist(SimPort(sim)), config=ServerConfig(faults=FaultSet.parse(faults)))
+        client.run(0.1)
+        try:
+            answer = client.call("read-forces", limit=2.0)
+        except AssertionError:
+            return "no answer"
+        return answer.error.code if isinstance(answer, ErrorReply) else "forces"
+
+    assert read_forces() == "forces"
+    assert read_forces("wrist-silent") == "WNR"
+    assert read_forces("wrist-silent", "wrist-timeout-silent") == "no answer"
+
+
+def _conform(select: str, *faults: str) -> int:
+    args = ["run", "--select", select, "--seed", "7"]
+    for fault in faults:
+        args += ["--server-fault", fault]
+    return CliRunner().invoke(conform_main, args).exit_code
+
+
+@covers(Fault.CLOSE_KEEPS_MOVING)
+@covers(Fault.GUARD_HIT_WORD_SWAPPED)
+def test_driver_and_wrist_faults_against_their_cases() -> None:
+    """Faults of the driver (what outlives a connection) and of the wrist's reports: the embedded run
+    of their case passes clean and fails with the fault."""
+    for fault, select in (
+        ("close-keeps-moving", "server.connect.close-stops-arm"),
+        ("guard-hit-word-swapped", "server.async.guard-hit"),
+    ):
+        assert (_conform(select), _conform(select, fault)) == (0, 1), fault

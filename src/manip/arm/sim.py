@@ -123,6 +123,7 @@ __all__ = [
     "Obstacle",
     "Refused",
     "SegmentCompleted",
+    "Sluggish",
 ]
 
 #: Default collision tolerance (deg): how far a joint may be from the angle commanded on the previous cycle.
@@ -237,6 +238,32 @@ class Obstacle:
             v[i] = max(v[i], self.lower)
         if self.upper is not None:
             v[i] = min(v[i], self.upper)
+        return _joints(v)
+
+
+@dataclass(frozen=True)
+class Sluggish:
+    """Joint ``joint`` (1-based) trails its command by ``lag`` degrees on every cycle its command moves
+    (at most by the step commanded) and reaches it once the command stands still: a joint that follows,
+    but late (a worn drive).  A lag above half the collision tolerance and within it draws a
+    :class:`FollowingWarning` and nothing more."""
+
+    joint: int
+    lag: float
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.joint <= 6:
+            raise ValueError(f"sluggish joint must be 1..6, got {self.joint}")
+        if not (math.isfinite(self.lag) and self.lag > 0.0):
+            raise ValueError("the lag must be a positive number of degrees")
+
+    def follow(self, previous: Joints, q: Joints) -> Joints:
+        """The angles reached when ``q`` is commanded after ``previous`` was."""
+        v = list(q)
+        i = self.joint - 1
+        step = v[i] - previous[i]
+        if step:
+            v[i] -= math.copysign(min(self.lag, abs(step)), step)
         return _joints(v)
 
 
@@ -366,6 +393,8 @@ class ArmSim:
         self.hand_open = True
         self.free_joint: int | None = None
         self.obstacle: Obstacle | None = None
+        self.sluggish: Sluggish | None = None
+        """A joint that trails its command (an environment condition of the fault switches)."""
         self.enforce_power = True
         """Refuse motion without arm power (NAP); False models a faulty server."""
         self.enforce_abort = True
@@ -375,6 +404,8 @@ class ArmSim:
         self.hold_compliant_end = True
         """End a compliant episode where compliance left the arm; False (a faulty server) snaps back to
         the nominal goal."""
+        self.increment_from_actual = False
+        """Resolve incremental moves from where the arm stands, not where the queue ends (a faulty server)."""
 
         self._next_segment = 1
         self._interp = MoveInterpolator(here, limits, 1.0)
@@ -552,8 +583,9 @@ class ArmSim:
         self.check_motion(now)
         if len(delta) != 6:
             raise ValueError("an increment is dX dY dZ dO dA dT")
-        base = forward(self._planned, self.model.geometry)
-        oat = self._planned_oat
+        from_actual = self.increment_from_actual
+        base = forward(self.actual if from_actual else self._planned, self.model.geometry)
+        oat = None if from_actual else self._planned_oat
         if oat is None:
             _, _, _, o, a, t = xyzoat_from_transform(base)
             oat = (o, a, t)
@@ -628,8 +660,9 @@ class ArmSim:
                 events.append(FollowingWarning(t, warn))
             self._lag_warned = bool(warn)
         q = self._next_command(t, events)
+        reached = self.sluggish.follow(self.commanded, q) if self.sluggish is not None else q
         self.commanded = q
-        self.actual = self.obstacle.clamp(q) if self.obstacle is not None else q
+        self.actual = self.obstacle.clamp(reached) if self.obstacle is not None else reached
 
     def _lagging(self, tol: float) -> tuple[int, ...]:
         return tuple(

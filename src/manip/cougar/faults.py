@@ -29,6 +29,8 @@ FAULTS: Final[Mapping[str, str]] = {
     "ignores-guardc": "GUARDC leaves the guard armed (CougarSim._guardc)",
     "rst-ignored": "RST leaves the velocities as they were (CougarSim._resetw)",
     "npr-ignores-k": "the compliance equation leaves out the spring term K (CougarSim._newpr)",
+    "filter-con-swapped": "FILTER weighs the filtered value with con4 and the sample with con3 "
+    "(CougarSim._newpr)",
 }
 
 

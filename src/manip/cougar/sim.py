@@ -397,9 +397,10 @@ class CougarSim:
             theta_error=theta_error,
             rate_difference=mem.get("rate_difference"),
         )
-        filtered, output = output_filter(
-            sample, mem.get("dtheta_previous"), mem.get("dtheta_filtered"), mem.get("con")
-        )
+        con = mem.get("con")
+        if "filter-con-swapped" in self._faults:
+            con = con[[0, 1, 3, 2]]
+        filtered, output = output_filter(sample, mem.get("dtheta_previous"), mem.get("dtheta_filtered"), con)
         mem.put("dtheta_previous", sample)
         mem.put("dtheta_filtered", filtered)
         mem.put("dtheta_out", output)  # RATEO

@@ -58,6 +58,7 @@ from manip.codecs.cougar import CougarMsg, Malformed, OutOfSync, WordStream, enc
 from manip.codecs.error_string import SPECIALS, ErrorMessage
 from manip.codecs.messages import Value
 from manip.cougar.environment import Environment
+from manip.cougar.memory import region
 from manip.cougar.sim import CougarSim
 from manip.links.drv11j import Drv11jPort
 from manip.reference_server import errors
@@ -65,7 +66,7 @@ from manip.reference_server.cougar_port import CougarPort, SimPort
 from manip.reference_server.errors import RequestError
 from manip.reference_server.faults import Fault, FaultSet
 from manip.reference_server.session import WRIST_OPERATIONS
-from manip.reference_server.wrist import GuardHit, Pending, WristEvent, WristNotice
+from manip.reference_server.wrist import GuardHit, Pending, WristConditions, WristEvent, WristNotice
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import CougarCommand, CougarResponse
 
@@ -89,6 +90,9 @@ DEFAULT_REPLY_TIMEOUT: Final = 0.5
 """Seconds a request waits for Cougar's reply before it fails with E WNR (erratum ``wrist-timeout``)."""
 MAX_CATCH_UP: Final = 64
 """Most Cougar ticks run for one call of :meth:`CougarWrist.tick` when the driver fell behind."""
+IDLE_GRACE: Final = 8
+"""Servo cycles a lazily ticked Cougar (``CougarWrist(lazy=True)``) is still ticked once nothing is
+left for it to do, so that the last commands sent are read and answered before it sleeps."""
 METER_CYCLES: Final = 128
 """Compliance cycles kept in :attr:`CougarWrist.meter` (the Puma's meters kept the last 128)."""
 PUMA_WRIST_VERSION: Final = 1
@@ -99,6 +103,8 @@ MAX_EXAMINE: Final = 242
 """Most words one examine-wrist reply carries (a Chaos packet's 488 data bytes: number, count, words)."""
 
 _SCHEMES: Final[Mapping[int, Scheme]] = {0: Scheme.COMPLIANT_MOTION, 1: Scheme.COMPLIANT_DEBUG}
+_GUARD_ACTIVE: Final = region("guard_active").address
+"""Where Cougar keeps the bits of the armed guards (erratum cougar-memory-map)."""
 _ZERO6: Final[Joints] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 _ARRIVED_DEG: Final = 1e-6
 
@@ -231,6 +237,7 @@ class CougarWrist:
         reply_timeout: float = DEFAULT_REPLY_TIMEOUT,
         calibration: CalibrationSettings | None = None,
         version: int = PUMA_WRIST_VERSION,
+        lazy: bool = False,
     ) -> None:
         if not (math.isfinite(reply_timeout) and reply_timeout > 0.0):
             raise ValueError("reply_timeout must be finite and positive")
@@ -266,11 +273,22 @@ class CougarWrist:
         """Defects switched on for testing a judge of the Puma's wrist side (``use_faults``)."""
         self._cycles = 0
         self._forces: tuple[float, ...] = (0.0,) * 6
+        self.conditions = WristConditions()
+        """Set by each connection as it opens (its fault switches)."""
+        self.lazy = lazy
+        """Leave Cougar unticked while nothing can come of a tick (see :meth:`tick`)."""
+        self._armed: set[int] = set()
+        """Guards armed on Cougar (by set-guard; cleared, or tripped, since)."""
+        self._quiet = 0
+        self._asleep = False
 
     # ------------------------------------------------------------------------------ Wrist API
     def use_faults(self, faults: FaultSet) -> None:
         """The server's fault switches (the session passes them on)."""
         self.faults = faults
+
+    def condition(self, conditions: WristConditions) -> None:
+        self.conditions = conditions
 
     @property
     def served(self) -> frozenset[int]:
@@ -280,6 +298,11 @@ class CougarWrist:
         self, op: RequestOpcode, values: Mapping[str, Value], now: float, arm: ArmSim
     ) -> dict[str, Any] | Pending:
         self._bind(arm)
+        if op.name == "deposit-wrist" and values.get("address") == _GUARD_ACTIVE:
+            # A deposit there arms (or disarms) guards by hand: the only one a sleeping Cougar could act on.
+            active = values.get("value")
+            assert isinstance(active, int)
+            self._armed = {i for i in range(GUARD_INDEX_MASK + 1) if active >> i & 1}
         handler = _HANDLERS.get(op.name)
         if handler is None:
             raise RequestError(
@@ -291,13 +314,26 @@ class CougarWrist:
         return handler(self, values, now, arm)
 
     def tick(self, now: float, arm: ArmSim) -> list[WristEvent]:
+        """The wrist processes' turn: send what is queued, tick Cougar, take in what it sent.
+
+        A lazy wrist (a simulated Cougar, whose ticks cost CPU) leaves Cougar unticked once it has had
+        nothing to do for :data:`IDLE_GRACE` cycles: no request waiting, nothing queued, no compliance,
+        no guard armed.  Cougar then sends nothing however long it is ticked, so nothing the Puma sees
+        changes; when there is something to send again, Cougar is first told where the arm stands and
+        ticked up to :data:`MAX_CATCH_UP` cycles of the time it slept, so its filters have settled there."""
         self._bind(arm)
         self._now = now
         t = arm.time
         if math.isfinite(t) and (self._last_tick is None or t > self._last_tick + 1e-9):
             self._procedures_step(t, arm)
-            self._output(arm)
-            self._drive(t, arm.tick_period)
+            self._quiet = self._quiet + 1 if self._idle() else 0
+            if self._quiet > IDLE_GRACE:
+                self._asleep = True
+            else:
+                if self._asleep:
+                    self._wake(t, arm)
+                self._output(arm)
+                self._drive(t, arm.tick_period)
         self._input(arm)
         self._expire(now)
         self._check_link()
@@ -428,6 +464,33 @@ class CougarWrist:
         if words:
             self.port.send(words)
 
+    def _idle(self) -> bool:
+        return (
+            self.lazy
+            and not self._armed
+            and not self._waiters
+            and not self._procedures
+            and not self._user
+            and not self._interrupt
+            and self._npr is None
+            and not self._reset
+        )
+
+    def _wake(self, t: float, arm: ArmSim) -> None:
+        """Bring a sleeping Cougar up to ``t``: the arm's angles, then the ticks it missed but one."""
+        self._asleep = False
+        if arm.actual != self._sen_sent:
+            self.port.send(encode("command", CougarCommand.SEN, theta_sensed=arm.actual))
+            self.stats.commands += 1
+            self._sen_sent = arm.actual
+        h = arm.tick_period
+        last = self._last_tick
+        n = MAX_CATCH_UP if last is None else min(MAX_CATCH_UP, max(1, round((t - last) / h)))
+        for k in range(n - 1, 0, -1):
+            self.port.tick(t - k * h)
+            self.stats.ticks += 1
+        self._last_tick = t - h
+
     def _drive(self, t: float, h: float) -> None:
         """Tick Cougar for every servo cycle since the last one (the last ``MAX_CATCH_UP`` of them)."""
         last = self._last_tick
@@ -440,7 +503,7 @@ class CougarWrist:
     def _input(self, arm: ArmSim) -> None:
         """The input process: decode what Cougar sent and act on it."""
         words = self.port.receive()
-        if not words:
+        if not words or self.conditions.silent:
             return
         for item in self._stream.feed(words):
             if isinstance(item, CougarMsg):
@@ -502,6 +565,7 @@ class CougarWrist:
         index = word & GUARD_INDEX_MASK
         stop = msg.code == CougarResponse.GUARD_STOP
         self.stats.guard_hits += 1
+        self._armed.discard(index)
         halts = stop and Fault.GUARD_IGNORED not in self.faults
         arm_events = tuple(arm.halt(AbortCause.GUARD)) if halts else ()
         if halts:
@@ -535,14 +599,15 @@ class CougarWrist:
     def _expire(self, now: float) -> None:
         keep: list[_Waiter] = []
         for waiter in self._waiters:
-            if waiter.cancelled() or now >= waiter.deadline:
+            if (waiter.cancelled() or now >= waiter.deadline) and not self.conditions.silent:
                 # Its reply may still come (replies keep their order): drop it if it comes soon.
                 self._stale.setdefault(waiter.response, deque()).append(now + self.reply_timeout)
             if waiter.cancelled():
                 pass
             elif now >= waiter.deadline:
                 self.stats.timeouts += 1
-                waiter.on_fail(_timeout_error(waiter.command, self.reply_timeout))
+                if self.conditions.answer_timeouts:
+                    waiter.on_fail(_timeout_error(waiter.command, self.reply_timeout))
             else:
                 keep.append(waiter)
         self._waiters = keep
@@ -631,6 +696,7 @@ class CougarWrist:
     def _set_guard(self, values: Mapping[str, Value], now: float, arm: ArmSim) -> dict[str, Any]:
         # Erratum guard-type-bit: bit 15 and the index are meaningful; bits 4-14 are sent as 0.
         type_index = _int(values["type_index"]) & (GUARD_STOP_BIT | GUARD_INDEX_MASK)
+        self._armed.add(type_index & GUARD_INDEX_MASK)
         self.queue_command(
             CougarCommand.GUARDS, type_index=type_index, dvec=values["dvec"], tol=values["tol"]
         )
@@ -640,6 +706,7 @@ class CougarWrist:
         index = _int(values["index"])
         if index > GUARD_INDEX_MASK:
             raise errors.bad_value("clear-guard", f"guard {index} is not 0..15")
+        self._armed.discard(index)
         self.queue_command(CougarCommand.GUARDC, index=index)
         return {}
 
@@ -733,6 +800,8 @@ def make_cougar_wrist(
     a running event loop -- it connects in the background).  ``options`` go to :class:`CougarWrist`."""
     port: CougarPort
     port = SimPort(CougarSim(environment=environment, seed=seed)) if where == "sim" else Drv11jPort(where)
+    # A simulated Cougar sleeps while idle (its ticks cost CPU); an external one keeps the Puma's clock.
+    options.setdefault("lazy", where == "sim")
     return CougarWrist(port, **options)
 
 

@@ -79,6 +79,7 @@ from manip.links import (
 from manip.links.api import LinkWrapper
 from manip.links.virtual_clock import is_virtual
 from manip.ncp import ConnectionRequested
+from manip.reference_server.faults import Fault
 from manip.reference_server.session import Outgoing, Output, ServerConfig, ServerSession, State
 from manip.reference_server.wrist import Wrist
 from manip.spec import SPEC, RequestOpcode
@@ -204,6 +205,8 @@ class ReferenceServer:
         self.joints: Joints = config.model.ready
         """Where the robot stands (updated when a connection ends)."""
         self.hand_open = True
+        self._carried: ArmSim | None = None
+        """An arm a closed connection left moving (fault close-keeps-moving): the next session gets it."""
         self.servers: list[ChaosServer] = []
         self._loop = asyncio.get_running_loop()
         self._t0 = self._loop.time()
@@ -288,6 +291,8 @@ class ReferenceServer:
         config = self.config
         arm = ArmSim(config.model, start=self.joints, powered=config.powered_at_open)
         arm.hand_open = self.hand_open
+        if self._carried is not None:
+            arm, self._carried = self._carried, None
         return ServerSession(config, arm=arm, wrist=self.wrist)
 
     # --------------------------------------------------------------------------- a connection
@@ -404,6 +409,8 @@ class ReferenceServer:
         arm.unfree()
         self.joints = arm.actual
         self.hand_open = arm.hand_open
+        if Fault.CLOSE_KEEPS_MOVING in session.faults:
+            self._carried = arm
         with contextlib.suppress(Exception):
             session.on_close(self.now())
         self._clients.pop(conn, None)

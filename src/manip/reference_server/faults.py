@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import Final, Literal
 
-from manip.arm.sim import Obstacle
+from manip.arm.sim import Obstacle, Sluggish
 from manip.spec import SPEC
 
 __all__ = ["FAULTS", "WRIST_SIDE", "Fault", "FaultInfo", "FaultSet"]
@@ -33,6 +33,8 @@ class Fault(enum.StrEnum):
     PANIC_BUTTON = "panic-button"
     OBSTACLE = "obstacle"
     CALIBRATE_NZI = "calibrate-nzi"
+    SLUGGISH_JOINT = "sluggish-joint"
+    WRIST_SILENT = "wrist-silent"
     # protocol defects
     WRONG_REQUEST_NUMBER = "wrong-request-number"
     ECHO_ACK_NUMBER = "echo-ack-number"
@@ -63,6 +65,17 @@ class Fault(enum.StrEnum):
     DESCRIBE_MISSING_OPERATION = "describe-missing-operation"
     DESCRIBE_WRONG_DOF = "describe-wrong-dof"
     DESCRIBE_NARROW_LIMITS = "describe-narrow-limits"
+    WARNING_INTERRUPTS = "warning-interrupts"
+    GUARD_HIT_WORD_SWAPPED = "guard-hit-word-swapped"
+    STRAIGHT_AS_JOINT = "straight-as-joint"
+    INCREMENT_FROM_ACTUAL = "increment-from-actual"
+    READY_LEAVES_WRIST = "ready-leaves-wrist"
+    SEGMENT_REPORT_PREVIOUS = "segment-report-previous"
+    COLLISION_UNCHECKED = "collision-unchecked"
+    CLOSE_KEEPS_MOVING = "close-keeps-moving"
+    WRIST_TIMEOUT_SILENT = "wrist-timeout-silent"
+    UNDERFLOW_DIRTY_ZERO = "underflow-dirty-zero"
+    NOT_FINITE_RESERVED = "not-finite-reserved"
     # protocol defects of the Puma's side of the wrist link (judged by manip-conform run --puma)
     WRIST_FLOAT_WORDS_SWAPPED = "wrist-float-words-swapped"
     WRIST_USER_FIRST = "wrist-user-first"
@@ -130,6 +143,22 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "error.fatal-request-number",
                 "error.fatal-then-close",
                 argument="joint numbers, comma separated (default 2,3)",
+            ),
+            _info(
+                Fault.SLUGGISH_JOINT,
+                "environment",
+                "One joint trails its command while it moves, by more than half the collision tolerance "
+                "and within it: an asynchronous warning (W COL), and the motion goes on.",
+                "async-warning.format",
+                "async-error.request-number",
+                argument="JOINT:LAG, the joint and its lag in degrees (default 2:0.35)",
+            ),
+            _info(
+                Fault.WRIST_SILENT,
+                "environment",
+                "The wrist computer stops answering (hung, or its link cut): a request that needs its "
+                "data waits the wrist timeout and is answered E WNR.",
+                "wrist.no-answer",
             ),
             _info(
                 Fault.WRONG_REQUEST_NUMBER,
@@ -313,6 +342,82 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "describe.joint-limits",
             ),
             _info(
+                Fault.WARNING_INTERRUPTS,
+                "protocol",
+                "A joint lagging its command stops the arm and aborts the motion after the warning, as a "
+                "collision would.",
+                "async-warning.format",
+            ),
+            _info(
+                Fault.GUARD_HIT_WORD_SWAPPED,
+                "protocol",
+                "Guard-hit asynchronous responses say continue (2) for a guard that stopped the move and "
+                "stop (1) for one that did not.",
+                "async.layout",
+            ),
+            _info(
+                Fault.STRAIGHT_AS_JOINT,
+                "protocol",
+                "Straight-line moves (205, 212) are interpolated in joint space: the hand strays off the "
+                "line.",
+                "straight-move.line",
+            ),
+            _info(
+                Fault.INCREMENT_FROM_ACTUAL,
+                "protocol",
+                "Incremental moves add to where the arm stands when they are queued, not to where the queue "
+                "ends.",
+                "incremental.relative",
+            ),
+            _info(
+                Fault.READY_LEAVES_WRIST,
+                "protocol",
+                "Move to ready moves joints 1-3 only: the wrist joints stay where they are.",
+                "ready.pose",
+            ),
+            _info(
+                Fault.SEGMENT_REPORT_PREVIOUS,
+                "protocol",
+                "Segment-completed reports name the segment queued before the one that completed.",
+                "segment.fifo-completion",
+            ),
+            _info(
+                Fault.COLLISION_UNCHECKED,
+                "protocol",
+                "The move process never compares the angles reached with those commanded: a blocked joint "
+                "draws no error and the motion goes on.",
+                "motion.collision",
+            ),
+            _info(
+                Fault.CLOSE_KEEPS_MOVING,
+                "protocol",
+                "A connection that closes leaves its queued segments running, and the next connection "
+                "continues its segment counter.",
+                "connect.close-stops-arm",
+                "connect.per-connection-state",
+            ),
+            _info(
+                Fault.WRIST_TIMEOUT_SILENT,
+                "protocol",
+                "A request whose wrist command Cougar never answers is never answered either (no E WNR); "
+                "the requests after it wait for ever.",
+                "wrist.no-answer",
+            ),
+            _info(
+                Fault.UNDERFLOW_DIRTY_ZERO,
+                "protocol",
+                "Reply floats below the smallest F magnitude (2^-128) are sent with exponent 0 and their "
+                "fraction bits (a dirty zero) instead of a clean zero.",
+                "float.range",
+            ),
+            _info(
+                Fault.NOT_FINITE_RESERVED,
+                "protocol",
+                "Solve forwards of a transform out of reach answers six angles that are not numbers, sent as "
+                "the reserved operand, instead of refusing.",
+                "float.not-finite",
+            ),
+            _info(
                 Fault.WRIST_FLOAT_WORDS_SWAPPED,
                 "protocol",
                 "Floats in the commands the wrist processes queue for Cougar have their two words swapped.",
@@ -392,6 +497,7 @@ playing Cougar, ``manip-conform run --puma``)."""
 
 DEFAULT_PANIC_DELAY: Final = 1.0
 DEFAULT_NZI_JOINTS: Final = (2, 3)
+DEFAULT_SLUGGISH: Final = Sluggish(2, 0.35)
 
 
 @dataclass(frozen=True)
@@ -403,6 +509,8 @@ class FaultSet:
     """Seconds after the connection opens at which the panic button is pressed."""
     obstacle: Obstacle | None = None
     nzi_joints: tuple[int, ...] = DEFAULT_NZI_JOINTS
+    sluggish: Sluggish = DEFAULT_SLUGGISH
+    """The joint that trails its command, and by how much."""
 
     def __post_init__(self) -> None:
         if Fault.OBSTACLE in self.active and self.obstacle is None:
@@ -414,6 +522,17 @@ class FaultSet:
 
     def __contains__(self, fault: object) -> bool:
         return fault in self.active
+
+    def merged(self, other: FaultSet) -> FaultSet:
+        """The switches of both; the arguments of a switch ``other`` turns on are ``other``'s."""
+        on = other.active
+        return FaultSet(
+            self.active | on,
+            panic_delay=other.panic_delay if Fault.PANIC_BUTTON in on else self.panic_delay,
+            obstacle=other.obstacle if Fault.OBSTACLE in on else self.obstacle,
+            nzi_joints=other.nzi_joints if Fault.CALIBRATE_NZI in on else self.nzi_joints,
+            sluggish=other.sluggish if Fault.SLUGGISH_JOINT in on else self.sluggish,
+        )
 
     @classmethod
     def of(cls, *faults: Fault, obstacle: Obstacle | None = None) -> FaultSet:
@@ -450,6 +569,13 @@ def _apply(faults: FaultSet, fault: Fault, arg: str | None) -> FaultSet:
     if fault is Fault.CALIBRATE_NZI:
         joints = DEFAULT_NZI_JOINTS if arg is None else tuple(int(j) for j in arg.split(","))
         return replace(faults, active=active, nzi_joints=joints)
+    if fault is Fault.SLUGGISH_JOINT:
+        if arg is None:
+            return replace(faults, active=active)
+        joint, sep, lag = arg.partition(":")
+        if not sep:
+            raise ValueError(f"{arg!r} is not JOINT:LAG")
+        return replace(faults, active=active, sluggish=Sluggish(int(joint), float(lag)))
     if fault is Fault.OBSTACLE:
         if arg is None:
             raise ValueError("needs an argument")

@@ -66,13 +66,23 @@ from __future__ import annotations
 
 import enum
 import logging
+import math
+import struct
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, Final
 
 from manip.arm.kinematics import PUMA600, ArmModel, forward
-from manip.arm.sim import ArmEvent, ArmSim, FollowingWarning, MotionAborted, Refused, SegmentCompleted
+from manip.arm.sim import (
+    AbortCause,
+    ArmEvent,
+    ArmSim,
+    FollowingWarning,
+    MotionAborted,
+    Refused,
+    SegmentCompleted,
+)
 from manip.arm.transform import Transform
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.errors import DecodeError
@@ -85,11 +95,12 @@ from manip.codecs.messages import (
     encode_error,
     encode_reply,
 )
+from manip.codecs.pdp11float import F_MIN_NORMAL, pack_f
 from manip.reference_server import errors
 from manip.reference_server.describe import Description, describe_text
 from manip.reference_server.errors import RequestError
 from manip.reference_server.faults import Fault, FaultSet
-from manip.reference_server.wrist import GuardHit, NoWrist, Pending, Wrist, WristNotice
+from manip.reference_server.wrist import GuardHit, NoWrist, Pending, Wrist, WristConditions, WristNotice
 from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
 from manip.spec.notation import octal
@@ -179,6 +190,9 @@ class _Event:
 Handler = Callable[["ServerSession", Mapping[str, Value], float], dict[str, Any]]
 """A request handler: the decoded values and the time in, the reply's values out (``{}`` for done)."""
 
+_FLOAT_FAULTS: Final = frozenset({Fault.UNDERFLOW_DIRTY_ZERO, Fault.NOT_FINITE_RESERVED})
+_RESERVED_OPERAND: Final = 0x8000
+"""First word of a reserved-operand float: sign 1, exponent 0."""
 _SEGMENT_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
 _GUARD_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.GUARD_HIT].notification_bit
 _GUARD_STOP: Final = 1
@@ -202,12 +216,22 @@ class ServerSession:
         self.faults = faults
         self.arm = arm or ArmSim(self.config.model, powered=self.config.powered_at_open)
         self.wrist: Wrist = wrist or NoWrist()
+        self.wrist.condition(
+            WristConditions(
+                silent=Fault.WRIST_SILENT in faults, answer_timeouts=Fault.WRIST_TIMEOUT_SILENT not in faults
+            )
+        )
         if Fault.SEGMENT_NUMBER_STUCK in faults:
             self.arm.segment_step = 0
         self.arm.enforce_power = Fault.NO_NAP not in faults
         self.arm.enforce_abort = Fault.AWA_IGNORED not in faults
         if faults.obstacle is not None and Fault.OBSTACLE in faults:
             self.arm.place_obstacle(faults.obstacle)
+        if Fault.SLUGGISH_JOINT in faults:
+            self.arm.sluggish = faults.sluggish
+        if Fault.COLLISION_UNCHECKED in faults:
+            self.arm.collision_tol_deg = math.inf
+        self.arm.increment_from_actual = Fault.INCREMENT_FROM_ACTUAL in faults
         self.arm.collision_test_compliant = Fault.COMPLIANT_COLLISION_TEST in faults
         self.arm.hold_compliant_end = Fault.COMPLIANT_SNAP_BACK not in faults
         use_faults = getattr(self.wrist, "use_faults", None)
@@ -300,6 +324,8 @@ class ServerSession:
                     continue
                 if self.notifications & _GUARD_BIT or Fault.UNREQUESTED_ASYNC in self.faults:
                     word2 = _GUARD_STOP if wev.stop else _GUARD_CONTINUE
+                    if Fault.GUARD_HIT_WORD_SWAPPED in self.faults:
+                        word2 = _GUARD_STOP + _GUARD_CONTINUE - word2
                     self._emit_async(number, AsyncCondition.GUARD_HIT, word2, wev.index)
                 elif wev.stop:
                     self._emit_error(ServerOp.ASYNCHRONOUS_ERROR, number, errors.guard_stop_error(wev.index))
@@ -312,11 +338,16 @@ class ServerSession:
         for ev in events:
             if isinstance(ev, SegmentCompleted):
                 if self.notifications & _SEGMENT_BIT or Fault.UNREQUESTED_ASYNC in self.faults:
-                    self._emit_async(number, AsyncCondition.SEGMENT_COMPLETED, 0, ev.segment)
+                    segment = ev.segment
+                    if Fault.SEGMENT_REPORT_PREVIOUS in self.faults:
+                        segment = (segment - 1) & 0xFFFF
+                    self._emit_async(number, AsyncCondition.SEGMENT_COMPLETED, 0, segment)
             elif isinstance(ev, MotionAborted):
                 self._emit_error(ServerOp.ASYNCHRONOUS_ERROR, number, errors.abort_error(ev))
             elif isinstance(ev, FollowingWarning):
                 self._emit_error(ServerOp.ASYNCHRONOUS_WARNING, number, errors.warning_error(ev))
+                if Fault.WARNING_INTERRUPTS in self.faults:
+                    self._report_arm(number, self.arm.halt(AbortCause.COLLISION))
 
     # ---------------------------------------------------------------- waiting for the wrist
     def _hold(self, event: _Event) -> State | None:
@@ -460,6 +491,9 @@ class ServerSession:
         self._emit(ServerOp.RESPONSE, data)
 
     def _payload(self, op: RequestOpcode, values: dict[str, Any]) -> bytes:
+        fields = op.response.data.fields
+        if self.faults.active & _FLOAT_FAULTS and all(f.type.element == "float" for f in fields):
+            return b"".join(self._faulty_float(float(x)) for f in fields for x in values[f.name])
         key = tuple(values.values())  # equal values encode alike (-0.0 and 0.0 both as a clean zero)
         cached = self._payloads.get(op.opcode)
         if cached is not None and cached[0] == key:
@@ -467,6 +501,15 @@ class ServerSession:
         payload = encode_reply(op.opcode, 0, **values)[2:]
         self._payloads[op.opcode] = (key, payload)
         return payload
+
+    def _faulty_float(self, x: float) -> bytes:
+        """``x`` as a float encoder with the float faults switched on writes it."""
+        if not math.isfinite(x) and Fault.NOT_FINITE_RESERVED in self.faults:
+            return struct.pack("<HH", _RESERVED_OPERAND, 0)  # what an unchecked encoder makes of NaN
+        if 0.0 < abs(x) < F_MIN_NORMAL and Fault.UNDERFLOW_DIRTY_ZERO in self.faults:
+            fraction = max(1, int(abs(x) / F_MIN_NORMAL * (1 << 23)))  # exponent 0, the bits kept
+            return struct.pack("<HH", fraction >> 16 & 0x7F, fraction & 0xFFFF)
+        return pack_f(x)
 
     def _reply_text(self, number: int, text: str) -> None:
         """A multi-packet text reply: one packet per line (split further if a line is too long)."""
@@ -550,7 +593,8 @@ class ServerSession:
 
     def _straight_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         pose = self._transform("straight-move", values)
-        return {"segment": self.arm.move_to(pose, now, straight=True)}
+        straight = Fault.STRAIGHT_AS_JOINT not in self.faults
+        return {"segment": self.arm.move_to(pose, now, straight=straight)}
 
     def _kill_power(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         self.arm.kill_power()
@@ -571,7 +615,8 @@ class ServerSession:
         return {"segment": self.arm.move_increment(_floats(values["delta"]), now)}
 
     def _incremental_straight_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
-        return {"segment": self.arm.move_increment(_floats(values["delta"]), now, straight=True)}
+        straight = Fault.STRAIGHT_AS_JOINT not in self.faults
+        return {"segment": self.arm.move_increment(_floats(values["delta"]), now, straight=straight)}
 
     def _free_joint(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         self.arm.free(_int(values["joint"]) & 0xFF)  # the first byte is the joint number
@@ -579,6 +624,9 @@ class ServerSession:
         return {}
 
     def _ready(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
+        if Fault.READY_LEAVES_WRIST in self.faults:
+            goal = self.arm.model.ready[:3] + self.arm.planned[3:]
+            return {"segment": self.arm.move_joints(goal, now)}
         return {"segment": self.arm.move_ready(now)}
 
     def _set_joint_angles(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
@@ -601,7 +649,12 @@ class ServerSession:
 
     def _solve_forwards(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         pose = self._transform("solve-forwards", values)
-        return {"joints": self.arm.solve(pose, _floats(values["current"]))}
+        try:
+            return {"joints": self.arm.solve(pose, _floats(values["current"]))}
+        except Refused:
+            if Fault.NOT_FINITE_RESERVED not in self.faults:
+                raise
+            return {"joints": (math.nan,) * 6}
 
     def _solve_backwards(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         return {"transform": forward(_floats(values["joints"]), self.arm.model.geometry).to_floats()}

@@ -41,7 +41,7 @@ from manip.codecs.messages import Value
 from manip.reference_server.errors import RequestError, not_served
 from manip.spec import RequestOpcode
 
-__all__ = ["GuardHit", "NoWrist", "Pending", "Wrist", "WristEvent", "WristNotice"]
+__all__ = ["GuardHit", "NoWrist", "Pending", "Wrist", "WristConditions", "WristEvent", "WristNotice"]
 
 
 class Pending:
@@ -114,6 +114,16 @@ class WristNotice:
 WristEvent = GuardHit | WristNotice
 
 
+@dataclass(frozen=True)
+class WristConditions:
+    """What a connection's fault switches make of the wrist (it is shared: each connection sets them)."""
+
+    silent: bool = False
+    """Cougar's words never reach the Puma (a hung Cougar, a cut link): requests wait the wrist timeout."""
+    answer_timeouts: bool = True
+    """False: a request whose Cougar command timed out is never answered (a defect)."""
+
+
 class Wrist(Protocol):
     """What the session needs from a wrist computer model."""
 
@@ -132,6 +142,10 @@ class Wrist(Protocol):
         """The wrist processes' turn after the arm ran up to ``now``; returns what to report."""
         ...
 
+    def condition(self, conditions: WristConditions) -> None:
+        """Take the conditions of the connection that opens now."""
+        ...
+
 
 class NoWrist:
     """No wrist computer: every wrist opcode is refused with C UIM."""
@@ -147,3 +161,6 @@ class NoWrist:
 
     def tick(self, now: float, arm: ArmSim) -> list[WristEvent]:
         return []
+
+    def condition(self, conditions: WristConditions) -> None:
+        pass

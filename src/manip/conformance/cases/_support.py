@@ -117,6 +117,32 @@ def error_of(packet: Answer | WirePacket) -> ErrorReply | None:
     return None
 
 
+async def connect_arranged(ctx: CaseContext, *switches: str) -> Probe:
+    """A probe whose connection opens under the embedded server's environment ``switches`` (conditions
+    of the arm's world, :class:`~manip.conformance.suite.embedded.ServerEnvironment`); against another
+    target, a plain connection (the case then judges what the target does by itself)."""
+    if ctx.environment is None:
+        return await ctx.connect()
+    with ctx.environment.arrange(*switches):
+        return await ctx.connect()
+
+
+async def settle(
+    ctx: CaseContext, probe: Probe, goal: Iterable[float], *, within: float = 10.0, tol: float = 1e-3
+) -> tuple[float, ...] | None:
+    """Poll the joint angles every 0.1 s until they are all within ``tol`` degrees of ``goal``: the
+    angles then, or None when ``within`` seconds pass first."""
+    target = tuple(goal)
+    deadline = ctx.clock() + within
+    while True:
+        joints = await read_floats(ctx, probe, "joint-angles")
+        if max(abs(a - b) for a, b in zip(joints, target, strict=True)) <= tol:
+            return joints
+        if ctx.clock() >= deadline:
+            return None
+        await probe.drain(0.1)
+
+
 DONE_SIZE: Final = 2
 """Data bytes of an empty done: the request number alone."""
 

@@ -51,6 +51,7 @@ __all__ = [
     "Violation",
     "WirePacket",
     "check_async_packet",
+    "check_client_guards",
     "check_client_request",
     "check_description",
     "check_description_entries",
@@ -428,6 +429,79 @@ def check_client_request(request: WirePacket) -> list[Violation]:
             actual=f"{len(request.data)} data bytes",
         )
     ]
+
+
+_SET_GUARD: Final = SPEC.request("set-guard").opcode
+_CLEAR_GUARD: Final = SPEC.request("clear-guard").opcode
+_SET_WEIGHT: Final = SPEC.request("set-weight").opcode
+_SET_FRAME_VECTOR: Final = SPEC.request("set-frame-vector").opcode
+_NOTIFICATIONS: Final = SPEC.request("request-notifications").opcode
+_USES_GRAVITY_MODEL: Final = frozenset(
+    SPEC.request(name).opcode for name in ("read-forces", "set-guard", "compliant-move")
+)
+"""Requests whose effect depends on the gravity-corrected force, hence on the weight set after NEWFV."""
+_GUARD_HIT_BIT: Final = 1 << 0
+
+
+def check_client_guards(packets: Sequence[WirePacket]) -> list[Violation]:
+    """Judge how a client uses the wrist's guards and gravity model (B.8, B.9), over a whole connection:
+    a new guard gets a number not armed (armed by set-guard; free again once cleared or reported
+    tripped; reuse is judged only while guard hits are reported, as the client cannot know otherwise);
+    neither set weight nor set frame vector while a guard is armed; after set frame vector, set weight
+    before the next request that uses the gravity-corrected force."""
+    found: list[Violation] = []
+    armed: dict[int, WirePacket] = {}
+    mask = 0
+    frame_changed: WirePacket | None = None
+    for p in packets:
+        if p.direction == "s2c":
+            if p.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(p.data, 2) == AsyncCondition.GUARD_HIT:
+                armed.pop(word(p.data, 6) or 0, None)
+            continue
+        if p.opcode == _NOTIFICATIONS:
+            mask = word(p.data, 0) or 0
+        elif p.opcode == _CLEAR_GUARD:
+            armed.pop((word(p.data, 0) or 0) & 0xF, None)
+        elif p.opcode in (_SET_WEIGHT, _SET_FRAME_VECTOR) and armed:
+            numbers = ", ".join(str(i) for i in sorted(armed))
+            found.append(
+                Violation.at(
+                    p,
+                    "client.no-newwc-with-guard",
+                    f"request #{p.packet_no} changes the gravity model while guard(s) {numbers} are armed",
+                    expected="set weight and set frame vector only with no guard armed",
+                )
+            )
+        if p.opcode in _USES_GRAVITY_MODEL and frame_changed is not None:
+            found.append(
+                Violation.at(
+                    p,
+                    "client.newwc-on-load",
+                    f"request #{p.packet_no} relies on the gravity model after set frame vector "
+                    f"#{frame_changed.packet_no} with no set weight since",
+                    expected="set weight (NEWWC) after every set frame vector, before forces are used",
+                )
+            )
+            frame_changed = None
+        if p.opcode == _SET_FRAME_VECTOR:
+            frame_changed = p
+        elif p.opcode == _SET_WEIGHT:
+            frame_changed = None
+        elif p.opcode == _SET_GUARD:
+            index = (word(p.data, 0) or 0) & 0xF
+            earlier = armed.get(index)
+            if earlier is not None and mask & _GUARD_HIT_BIT:
+                found.append(
+                    Violation.at(
+                        p,
+                        "client.guard-numbers",
+                        f"request #{p.packet_no} arms guard {index}, armed by request #{earlier.packet_no} "
+                        "and neither cleared nor reported tripped since",
+                        expected="a new guard numbered with a guard not in use",
+                    )
+                )
+            armed[index] = p
+    return found
 
 
 def _layout_size(layout: Layout) -> str:

@@ -17,6 +17,7 @@ from typing import Any, Final
 from manip.conformance.judge.packets import WirePacket, describe
 from manip.conformance.output.packet_text import annotated
 from manip.conformance.output.report import SCHEMA_VERSION
+from manip.conformance.suite.results import OUTCOMES
 from manip.links import AddressError, parse_address
 from manip.spec import SPEC
 
@@ -36,7 +37,9 @@ __all__ = [
     "wire_order",
 ]
 
-OUTCOME_ORDER: Final = ("fail", "error", "fixed", "warn", "known-fail", "skip", "pass")
+OUTCOME_ORDER: Final = ("fail", "error", "fixed", "warn", "known-fail", "skip", "unsupported", "pass")
+if set(OUTCOME_ORDER) != set(OUTCOMES):  # a new outcome must get its place (and colour) in the documents
+    raise RuntimeError(f"OUTCOME_ORDER {OUTCOME_ORDER} does not list the outcomes {OUTCOMES}")
 """Outcomes, the ones needing attention first."""
 FAILING: Final = frozenset({"fail", "error", "fixed"})
 """Outcomes that fail the run."""

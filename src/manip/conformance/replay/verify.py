@@ -39,6 +39,7 @@ from manip.captures import Session
 from manip.conformance.judge.checks import (
     CLOSE_OPCODES,
     WirePacket,
+    check_client_guards,
     check_client_request,
     check_transcript,
     describe,
@@ -159,6 +160,11 @@ def _asks_op(name: RequestName) -> Callable[[Sequence[WirePacket], bool], bool]:
     return lambda packets, _initial: any(p.opcode == opcode for p in _requests(packets))
 
 
+def _asks_any(*names: RequestName) -> Callable[[Sequence[WirePacket], bool], bool]:
+    opcodes = {SPEC.request(name).opcode for name in names}
+    return lambda packets, _initial: any(p.opcode in opcodes for p in _requests(packets))
+
+
 FAMILIES: Final[tuple[Family, ...]] = (
     Family(
         "initial-response",
@@ -252,6 +258,12 @@ CLIENT_FAMILIES: Final[tuple[Family, ...]] = (
         ("request.opcode-range", "request-data.types", "move.transform-data"),
         lambda packets, _initial: bool(_requests(packets)),
     ),
+    Family(
+        "client-guards",
+        "guards numbered with free guards; the gravity model kept up to date and left alone under a guard",
+        ("client.guard-numbers", "client.no-newwc-with-guard", "client.newwc-on-load"),
+        _asks_any("set-guard", "set-frame-vector", "set-weight"),
+    ),
 )
 """What ``--judge client`` reports: the client's side of each session."""
 Judge = Literal["server", "client", "both"]
@@ -316,6 +328,7 @@ def judge_session(session: Session, connection: int = 0) -> tuple[list[WirePacke
         findings += fatal_close_findings(packets)
     for request in _requests(packets):
         findings += check_client_request(request)
+    findings += check_client_guards(packets)
     return packets, findings
 
 

@@ -39,8 +39,9 @@ import contextlib
 import random
 import time
 from collections.abc import Awaitable, Callable, Iterable, Sequence
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, replace
-from typing import Any, Final, Literal, NoReturn
+from typing import Any, Final, Literal, NoReturn, Protocol
 
 from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request
@@ -65,6 +66,7 @@ __all__ = [
     "Answer",
     "CaseContext",
     "Connector",
+    "Environment",
     "Probe",
     "RunOptions",
 ]
@@ -72,6 +74,16 @@ __all__ = [
 Target = Literal["sim", "hardware"]
 DEFAULT_REPLY_TIMEOUT: Final = 2.0
 DEFAULT_CONNECT_TIMEOUT: Final = 5.0
+
+
+class Environment(Protocol):
+    """Conditions of the arm's world a case may switch on for the connections it opens (the embedded
+    server's :class:`~manip.conformance.suite.embedded.ServerEnvironment`)."""
+
+    def arrange(self, *switches: str) -> AbstractContextManager[None]:
+        """Switch ``NAME[=ARG]`` environment conditions on inside the block."""
+        ...
+
 
 Connector = Callable[[bool], Awaitable[ChaosConnection]]
 """Opens one fresh Chaos connection to the target (the runner provides it); the argument says whether
@@ -401,8 +413,12 @@ class CaseContext:
         options: RunOptions,
         connector: Connector,
         clauses: Iterable[str] | None = None,
+        environment: Environment | None = None,
     ) -> None:
         self.case_id = case_id
+        self.environment = environment
+        """The target's switchable conditions of the arm's world: the embedded server's, None for
+        any other target (a case that needs one says how to make it run there)."""
         self.level = level
         self.clauses: frozenset[str] | None = None if clauses is None else frozenset(clauses)
         """The clauses the case declares: the only ones it may report (None: any, for contexts that

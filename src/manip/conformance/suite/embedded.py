@@ -12,6 +12,11 @@ Two ways to run it, one per time mode:
   loopback TCP port, so the suite judges it exactly as it judges a remote server: if the simulator
   spends seconds on one request, the runner keeps its clock (the GIL is handed over every few
   milliseconds) and a stuck server shows up as a failed deadline and a dead liveness probe.
+
+Either way the run gets a :class:`ServerEnvironment`: cases that need a condition of the arm's world (a
+calibration that fails, a joint that lags its command, an obstacle) switch it on for the connections
+they open (``with ctx.environment.arrange("calibrate-nzi"): ...``), so their paths run against the
+embedded server; against another target ``ctx.environment`` is None and they say how to make them run.
 """
 
 from __future__ import annotations
@@ -23,20 +28,52 @@ import os
 import random
 import tempfile
 import threading
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterator
+from dataclasses import replace
 from types import TracebackType
 from typing import Final
 
 from manip.links import NcpConfig
 from manip.reference_server import ServerConfig
 from manip.reference_server.cougar_wrist import make_cougar_wrist
-from manip.reference_server.driver import serve
+from manip.reference_server.driver import ReferenceServer, serve
+from manip.reference_server.faults import FAULTS, FaultSet
 
-__all__ = ["EmbeddedServer", "simulated_server"]
+__all__ = ["EmbeddedServer", "ServerEnvironment", "simulated_environment", "simulated_server"]
 
 START_TIMEOUT: Final = 10.0
 STOP_TIMEOUT: Final = 5.0
 SOCKET_NAME: Final = "puma.sock"
+
+
+class ServerEnvironment:
+    """The embedded server's conditions of the arm's world, switched by the cases that need them.
+
+    :meth:`arrange` switches environment faults (:data:`~manip.reference_server.faults.FAULTS` of kind
+    ``environment``) on, over whatever the server runs with, for the connections opened inside the
+    block: the server reads its configuration when a connection opens.  Protocol faults are refused:
+    a case arranges the world, never a defect of the server it judges."""
+
+    def __init__(self, server: ReferenceServer) -> None:
+        self._server = server
+
+    @property
+    def address(self) -> str:
+        return self._server.address
+
+    @contextlib.contextmanager
+    def arrange(self, *switches: str) -> Iterator[None]:
+        """``with environment.arrange("calibrate-nzi", "sluggish-joint=2:0.3"):`` (``NAME[=ARG]`` each)."""
+        extra = FaultSet.parse(switches)
+        defects = sorted(f.value for f in extra.active if FAULTS[f].kind != "environment")
+        if defects:
+            raise ValueError(f"not conditions of the arm's world: {', '.join(defects)}")
+        base = self._server.config
+        self._server.config = replace(base, faults=base.faults.merged(extra))
+        try:
+            yield
+        finally:
+            self._server.config = base
 
 
 @contextlib.asynccontextmanager
@@ -47,7 +84,21 @@ async def simulated_server(
     wrist: bool = False,
     broken_after: float | None = None,
 ) -> AsyncIterator[str]:
-    """``async with simulated_server(config, seed=...) as address:`` a reference server on this loop.
+    """``async with simulated_server(config, seed=...) as address:`` (:func:`simulated_environment`)."""
+    async with simulated_environment(config, seed=seed, wrist=wrist, broken_after=broken_after) as env:
+        yield env.address
+
+
+@contextlib.asynccontextmanager
+async def simulated_environment(
+    config: ServerConfig | None = None,
+    *,
+    seed: int,
+    wrist: bool = False,
+    broken_after: float | None = None,
+) -> AsyncIterator[ServerEnvironment]:
+    """``async with simulated_environment(config, seed=...) as env:`` a reference server on this loop,
+    at ``env.address``.
 
     The global ``random`` generator is part of the simulated world (connection indices are drawn from
     it): it is seeded from ``seed`` here, so both ends' indices repeat with the run."""
@@ -63,7 +114,7 @@ async def simulated_server(
             wrist_factory=wrist_factory,
             options=options,
         ) as server:
-            yield server.address
+            yield ServerEnvironment(server)
 
 
 class EmbeddedServer:
@@ -94,6 +145,8 @@ class EmbeddedServer:
         self._bind = address
         self._ready = threading.Event()
         self._address: str | None = None
+        self.environment: ServerEnvironment | None = None
+        """Set once the server runs (:class:`ServerEnvironment`)."""
         self._error: BaseException | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
@@ -118,6 +171,7 @@ class EmbeddedServer:
             options=self._ncp,
         ) as server:
             self._address = server.address
+            self.environment = ServerEnvironment(server)
             self._ready.set()
             await self._stop.wait()
 

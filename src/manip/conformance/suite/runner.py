@@ -44,7 +44,7 @@ from datetime import UTC, datetime
 
 from manip.conformance.judge.checks import check_transcript
 from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
-from manip.conformance.suite.context import CaseContext, RunOptions
+from manip.conformance.suite.context import CaseContext, Environment, RunOptions
 from manip.conformance.suite.invariants import attribution_problem
 from manip.conformance.suite.results import CaseResult, LivenessCheck, Outcome, RunReport
 from manip.conformance.suite.selection import PatternSet
@@ -88,6 +88,9 @@ class RunConfig:
     liveness_check: Callable[[RunOptions], Awaitable[tuple[bool, str]]] | None = None
     """Replaces the Chaos liveness probe: (alive, detail) for targets that are not manip servers
     (the Cougar target, :mod:`manip.conformance.cougar.target`)."""
+    environment: Environment | None = None
+    """The embedded server's conditions of the arm's world, for the cases that arrange one
+    (:class:`~manip.conformance.suite.embedded.ServerEnvironment`); None for other targets."""
     wrap_link: LinkWrapper | None = None
     """Given every link the run's connections make (``RecorderTap(recorder, "client").wrap`` records
     the run: ``manip-conform run --record``)."""
@@ -310,6 +313,7 @@ class Runner:
             options=options,
             connector=self.connect,
             clauses=item.clauses,
+            environment=self.config.environment,
         )
         failure: CaseFailure | None = None
         clock = asyncio.get_running_loop().time  # the clock of every deadline (virtual when simulated)

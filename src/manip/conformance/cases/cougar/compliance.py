@@ -7,6 +7,7 @@ import math
 from typing import Final
 
 from manip.arm import READY
+from manip.codecs.pdp11float import f_to_words
 from manip.conformance.cases.cougar._support import (
     clean,
     close_to,
@@ -14,6 +15,7 @@ from manip.conformance.cases.cougar._support import (
     expect_none,
     expect_reply,
     fmt,
+    peek_region,
     region_floats,
     settle,
 )
@@ -25,6 +27,7 @@ from manip.conformance.cougar.probe import (
 )
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
+from manip.cougar.memory import region
 
 # ------------------------------------------------------------------------------------------ NPR, RST
 _THETA_ERROR: Final = (1.0, -1.0, 1.0, 2.0, -2.0, 2.0)
@@ -168,3 +171,64 @@ async def rst_zeroes_velocities(ctx: CaseContext) -> None:
             )
         await probe.send("NBJI", bji=(0.0,) * 6)
         await probe.run(1)
+
+
+# ------------------------------------------------------------------------------------------ FILTER
+FILTER_CON: Final = (0.5, -0.5, 1.0, 0.25)
+"""con1..con4 deposited for the FILTER case: after RST the first NTD is (con1 con3 + con4) times the
+compliance sample and, the sample unchanged, the second is (-con2 con1 con3 + con4) times it: 0.75 and
+0.5 here, where a swap of con3 and con4 gives 1.125 and 1.0625."""
+
+
+@case(
+    "cougar.filter.output",
+    clauses=["cougar.filter", "cougar.npr.reply", "cougar.response.layout", "cougar.word-link"],
+    hazard="config",
+    deadline=8.0,
+)
+async def filter_output(ctx: CaseContext) -> None:
+    """FILTER (B.10) with constants deposited in Cougar's memory: with the defaults NTD is the compliance
+    sample itself; with con1..con4 = 0.5, -0.5, 1, 0.25 two NPRs of the same sample after RST answer 0.75
+    and then 0.5 times it (the filter's derivative term, then its decay)."""
+    con = region("con")
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        await settle(probe)
+        old = await peek_region(ctx, probe, "con")
+        try:
+            sample = await _ntd(ctx, probe, k=GAIN, b=0.0, bji=0.01, rate=0.0)
+            ctx.expect(
+                max(abs(v) for v in sample) > 1e-3,
+                clause="cougar.npr.reply",
+                expected="a non-zero NTD for a position error with K and BJI set",
+                actual=fmt(sample),
+            )
+            words = [w for c in FILTER_CON for w in f_to_words(c)]
+            for i, w in enumerate(words):
+                await probe.send("DPST", address=con.address + 2 * i, value=w)
+            c1, c2, c3, c4 = FILTER_CON
+            first = await _ntd(ctx, probe, k=GAIN, b=0.0, bji=0.01, rate=0.0)
+            commanded = tuple(a + e for a, e in zip(READY, _THETA_ERROR, strict=True))
+            reply = await probe.call(
+                "NPR", theta_sensed=READY, theta_commanded=commanded, rate_difference=(0.0,) * 6
+            )
+            expect_reply(ctx, reply, "NTD", "cougar.npr.reply", after="NPR")
+            second = reply.floats()
+            for label, got, factor in (
+                ("first", first, c1 * c3 + c4),
+                ("second", second, -c2 * c1 * c3 + c4),
+            ):
+                want = [factor * v for v in sample]
+                ctx.expect(
+                    close_to(got, want, rel=0.02, floor=1e-6),
+                    clause="cougar.filter",
+                    expected=f"the {label} NTD after RST with con = {FILTER_CON}: {factor:g} x the "
+                    f"sample, {fmt(want)}",
+                    actual=fmt(got),
+                )
+        finally:
+            for i, w in enumerate(old):
+                await probe.send("DPST", address=con.address + 2 * i, value=w)
+            await probe.send("NBJI", bji=(0.0,) * 6)
+            await probe.send("RST")
+            await probe.run(1)

@@ -8,6 +8,9 @@ from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.spec.constants import ServerOp
 
+CALIBRATION_FAILURE = "calibrate-nzi"
+"""The embedded server's condition under which calibration fails fatally (no zero index found)."""
+
 
 async def _command_error(ctx: CaseContext, probe: Probe, clause: str | None = None) -> Answer:
     """Provoke a non-fatal error: an opcode the spec does not define.  A target that does not refuse
@@ -110,8 +113,16 @@ async def non_fatal_is_reply(ctx: CaseContext) -> None:
     deadline=8.0,
 )
 async def fatal_then_close(ctx: CaseContext) -> None:
-    """Calibrate: done, or (a calibration failure) a fatal error quoting it, then CLS."""
-    probe = await ctx.connect()
+    """Calibrate: done, or (a calibration failure) a fatal error quoting it, then CLS.
+
+    Against the embedded server the case arranges a calibration that finds no zero index
+    (``calibrate-nzi``), so the fatal path always runs; another target is judged on what its
+    calibration does, and the case skips when it succeeds."""
+    if ctx.environment is not None:
+        with ctx.environment.arrange(CALIBRATION_FAILURE):
+            probe = await ctx.connect()
+    else:
+        probe = await ctx.connect()
     answer = await probe.call("enable-power")
     answer = await probe.call("calibrate", timeout=5.0)
     if answer.is_response:
@@ -121,7 +132,11 @@ async def fatal_then_close(ctx: CaseContext) -> None:
             expected="an empty done",
             seen=answer,
         )
-        ctx.skip("calibrate succeeded: the target gave no fatal error to observe")
+        ctx.skip(
+            "calibrate succeeded: the target gave no fatal error to observe (the fatal path runs against "
+            "the embedded server, manip-conform run without HOST, or a manip-server started with "
+            f"--fault {CALIBRATION_FAILURE})"
+        )
     if answer.opcode != ServerOp.FATAL_ERROR:
         ctx.skip(f"calibrate was refused with a non-fatal error: {answer}")
     ctx.check(check_error_packet(answer.first))

@@ -9,8 +9,15 @@ import struct
 from manip.conformance.cases._support import expect_response, floats, read_floats
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
+from manip.spec.constants import ServerOp
 
 ORTHO_TOL = 1e-3
+REACH_MM = 5000.0
+"""Far beyond any PUMA's reach: a position further out is no position Solve backwards can give."""
+TINY = 1e-38
+"""Degrees whose sines are below 2^-128: the transform's entries then underflow and must be clean zeros."""
+HUGE = 1.0e38
+"""Near the top of the F range (1.7e38)."""
 POSITION_TOL_MM = 0.05
 ANGLE_TOL_DEG = 0.05
 
@@ -23,8 +30,6 @@ def _dot(a: tuple[float, ...], b: tuple[float, ...]) -> float:
     "server.float.here-consistent",
     clauses=[
         "float.format",
-        "float.range",
-        "float.not-finite",
         "here.transform",
         "joint-angles.reply",
         "solve-backwards.data",
@@ -112,3 +117,68 @@ async def dirty_zero(ctx: CaseContext) -> None:
                 actual=f"float words {w0:04x} {w1:04x} in {op}",
                 data=answer.data,
             )
+
+
+def _bad_patterns(payload: bytes) -> tuple[list[str], list[str]]:
+    """(reserved operands, dirty zeros) among the floats of ``payload``, as hex words."""
+    reserved: list[str] = []
+    dirty: list[str] = []
+    for i in range(0, len(payload) - 3, 4):
+        w0, w1 = struct.unpack_from("<HH", payload, i)
+        if (w0 >> 7) & 0xFF == 0 and (w0 or w1):
+            (reserved if w0 & 0x8000 else dirty).append(f"{w0:04x} {w1:04x} at byte {i}")
+    return reserved, dirty
+
+
+@case(
+    "server.float.extremes",
+    clauses=["float.range", "float.not-finite", "solve-backwards.data"],
+)
+async def extremes(ctx: CaseContext) -> None:
+    """Solve backwards and forwards driven to the ends of the F range: angles whose sines underflow, angles
+    near 1.7e38, transforms out at 1e38 mm.  Every float answered is a representable F value (below
+    2^-128 a clean zero, never exponent 0 with fraction bits; never the reserved operand, which is what a
+    NaN or an infinity becomes), and a transform answered is a rotation and a position within reach."""
+    probe = await ctx.connect()
+    joints = await read_floats(ctx, probe, "joint-angles")
+    asks: list[tuple[str, dict[str, list[float]]]] = [
+        ("solve-backwards", {"joints": [0.0, 0.0, 0.0, TINY, TINY, TINY]}),
+        ("solve-backwards", {"joints": [TINY] * 6}),
+        ("solve-backwards", {"joints": [HUGE, -HUGE, 1e20, 3e37, -HUGE, TINY]}),
+    ]
+    for position in ([HUGE, HUGE, HUGE], [-HUGE, 0.0, TINY], [TINY, TINY, TINY]):
+        transform = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, *position]
+        asks.append(("solve-forwards", {"transform": transform, "current": list(joints)}))
+    for op, values in asks:
+        answer = await probe.call(op, **values)  # type: ignore[arg-type]
+        what = f"{op} of {values}"
+        if op == "solve-forwards" and answer.opcode == ServerOp.NON_FATAL_ERROR:
+            continue  # out of reach: refusing is the answer
+        clause = "solve-backwards.data" if op == "solve-backwards" else "float.not-finite"
+        expect_response(ctx, answer, clause=clause, expected=f"an answer or a refusal for {what}")
+        reserved, dirty = _bad_patterns(answer.payload)
+        ctx.expect(
+            not reserved,
+            clause="float.not-finite",
+            expected=f"finite floats only in the answer to {what}: never the reserved operand (sign 1, "
+            "exponent 0), which is what a NaN or an infinity becomes",
+            actual="; ".join(reserved),
+            data=answer.data,
+        )
+        ctx.expect(
+            not dirty,
+            clause="float.range",
+            expected=f"floats below 2^-128 in the answer to {what} sent as a clean zero",
+            actual="exponent 0 with fraction bits: " + "; ".join(dirty),
+            data=answer.data,
+        )
+        if op != "solve-backwards" or reserved:
+            continue
+        pose = floats(answer)
+        worst = max((abs(v) for v in pose[:9]), default=0.0)
+        ctx.expect(
+            len(pose) == 12 and worst <= 1.0 + ORTHO_TOL and math.hypot(*pose[9:]) <= REACH_MM,
+            clause="solve-backwards.data",
+            expected=f"a rotation and a position within {REACH_MM:g} mm for {what}",
+            actual=[f"{v:.4g}" for v in pose],
+        )

@@ -6,8 +6,16 @@ from __future__ import annotations
 from itertools import pairwise
 from typing import Final
 
-from manip.conformance.cases._support import UNASSIGNED_OPCODES
-from manip.conformance.judge.checks import check_error_packet
+from manip.conformance.cases._support import (
+    UNASSIGNED_OPCODES,
+    connect_arranged,
+    error_of,
+    power_on,
+    read_floats,
+    require_response,
+    settle,
+)
+from manip.conformance.judge.checks import check_error_packet, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
 from manip.links.address import parse_address
@@ -77,6 +85,12 @@ async def packet_numbers(ctx: CaseContext) -> None:
     )
 
 
+LAGGING_JOINT: Final = "sluggish-joint=2:0.35"
+"""The embedded server's condition for a warning: joint 2 trails its command by 0.35 degrees while it
+moves, over half the collision tolerance and within it (a following warning, no collision)."""
+WARNING_MOVE_DEG: Final = 20.0
+
+
 @case(
     "server.async.warning-format",
     clauses=["async-warning.format", "async-error.request-number"],
@@ -84,18 +98,55 @@ async def packet_numbers(ctx: CaseContext) -> None:
     deadline=8.0,
 )
 async def warning_format(ctx: CaseContext) -> None:
-    """Asynchronous warnings and errors seen during fast moves have the error format (W for 205).
+    """An asynchronous warning (205) has the error format, severity W and the number of the last request
+    processed, and does not interrupt work: the move it warns of ends at its goal and the next is taken.
 
-    Skipped when the target produces none (the reference arm warns only when a joint lags)."""
-    probe = await ctx.connect()
-    await probe.call("enable-power")
-    await probe.drain(0.3)
-    seen = [
-        p
-        for p in probe.packets
-        if p.direction == "s2c" and p.opcode in (ServerOp.ASYNCHRONOUS_WARNING, ServerOp.ASYNCHRONOUS_ERROR)
+    Against the embedded server a joint that lags its command is arranged (``sluggish-joint``); another
+    target is judged on the warnings a 20 degree move of joint 2 draws from it, and the case skips when
+    there are none."""
+    probe = await connect_arranged(ctx, LAGGING_JOINT)
+    await power_on(ctx, probe)
+    start = await read_floats(ctx, probe, "joint-angles")
+    goal = list(start)
+    goal[1] += WARNING_MOVE_DEG if goal[1] < 0 else -WARNING_MOVE_DEG
+    move = await probe.call("set-joint-angles", joints=goal)
+    require_response(ctx, move, "a move of joint 2 (set joint angles answered with a segment)")
+    reached = await settle(ctx, probe, goal, within=5.0)
+    warnings = [
+        p for p in probe.packets if p.direction == "s2c" and p.opcode == ServerOp.ASYNCHRONOUS_WARNING
     ]
-    if not seen:
-        ctx.skip("no asynchronous warning or error was produced")
-    for packet in seen:
+    if not warnings:
+        ctx.skip(
+            "no asynchronous warning was produced (against the embedded server, manip-conform run without "
+            f"HOST, a lagging joint is arranged; a manip-server warns with --fault {LAGGING_JOINT})"
+        )
+    for packet in warnings:
         ctx.check(check_error_packet(packet))
+        error = error_of(packet)
+        ctx.expect(
+            error is not None and error.error.severity == "W",
+            clause="async-warning.format",
+            expected="an error string of severity W",
+            seen=packet,
+        )
+        sent = [p.packet_no for p in probe.packets if p.direction == "c2s" and p.time <= packet.time]
+        ctx.expect(
+            word(packet.data) in sent[-2:],
+            clause="async-error.request-number",
+            expected=f"the number of the last request processed (one of {sent[-2:]})",
+            seen=packet,
+        )
+    ctx.expect(
+        reached is not None,
+        clause="async-warning.format",
+        expected=f"the move the warning is about to end at its goal {[round(v, 3) for v in goal]}",
+        actual="the arm stopped short of it (the warning interrupted the motion)",
+    )
+    back = await probe.call("set-joint-angles", joints=list(start))
+    ctx.expect(
+        back.is_response,
+        clause="async-warning.format",
+        expected="the next move taken after a warning (a warning does not abort motion)",
+        seen=back,
+    )
+    await settle(ctx, probe, start, within=5.0)

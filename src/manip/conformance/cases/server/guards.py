@@ -1,0 +1,213 @@
+"""A wrist guard hit end to end (E.3 Opcode 203; Part III B.9): the guard-hit response, what a stopping
+guard does to the motion, and nothing the client did not ask for.
+
+The guard is made to trip on the wrist's own gravity load: Cougar's guards test the gravity-corrected
+force (B.8, B.9), so telling it of an object the hand does not hold (set weight) leaves exactly that
+object's weight in the corrected force, pointing the way gravity does in hand coordinates.  A guard
+along that force with half its size as tolerance trips on the next tick, whatever the arm's pose, and
+rotating joint 1 (about the vertical) does not turn gravity in the hand's frame."""
+
+from __future__ import annotations
+
+import math
+from typing import Final
+
+from manip.conformance.cases._support import (
+    expect_refusal,
+    power_on,
+    read_floats,
+    require_response,
+    settle,
+)
+from manip.conformance.judge.checks import WirePacket, word
+from manip.conformance.suite.case import case
+from manip.conformance.suite.context import CaseContext, Probe
+from manip.spec.constants import AsyncCondition, ServerOp
+
+PHANTOM_OZ: Final = 64.0
+"""The weight of the object Cougar is told of, which the hand does not hold (ounces)."""
+STOP_BIT: Final = 0x8000
+GUARD_BIT: Final = 1 << 0
+"""request-notifications mask bit of guard hits (bit n = condition n+1)."""
+SWING_DEG: Final = 40.0
+"""How far joint 1 is asked to turn: long enough that a guard trips while the arm moves."""
+HIT_WAIT: Final = 2.0
+"""Seconds to wait for a guard hit after arming a guard that trips on the next tick."""
+QUIET: Final = 0.5
+"""Seconds to watch for unrequested packets."""
+
+
+async def _guard_hit(ctx: CaseContext, probe: Probe, wait: float) -> WirePacket | None:
+    """The next guard-hit response within ``wait`` seconds (other packets are kept in the recording)."""
+    deadline = ctx.clock() + wait
+    while (left := deadline - ctx.clock()) > 0:
+        packet = await probe.next_packet(left)
+        if packet is None:
+            return None
+        condition = word(packet.data, 2)
+        if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and condition == AsyncCondition.GUARD_HIT:
+            return packet
+    return None
+
+
+def _swing(start: tuple[float, ...]) -> list[float]:
+    goal = list(start)
+    goal[0] += SWING_DEG if goal[0] <= 0 else -SWING_DEG
+    return goal
+
+
+def _unrequested(probe: Probe, mask: int, since: float) -> list[WirePacket]:
+    """Asynchronous responses since ``since`` whose condition the mask did not ask for."""
+    return [
+        p
+        for p in probe.packets
+        if p.direction == "s2c"
+        and p.time >= since
+        and p.opcode == ServerOp.ASYNCHRONOUS_RESPONSE
+        and not mask >> ((word(p.data, 2) or 1) - 1) & 1
+    ]
+
+
+@case(
+    "server.async.guard-hit",
+    clauses=["async.layout", "async.codes", "async.only-when-requested", "motion.abort"],
+    hazard="motion",
+    deadline=20.0,
+)
+async def guard_hit(ctx: CaseContext) -> None:
+    """A guard that trips during a move is reported as asked: code 1, word 2 = 1 (stopped) or 2 (goes
+    on), word 3 = the guard; a stopping guard aborts the motion (AWA until reset), a continuing one does
+    not; with guard hits not asked for, nothing is sent.
+
+    It needs a wrist computer (the wrist opcodes served): against a server without one it skips (the
+    embedded server has the simulated Cougar; a manip-server gets one with --cougar sim)."""
+    probe = await ctx.connect()
+    version = await probe.call("wrist-version")
+    if not version.is_response:
+        ctx.skip(
+            f"the target serves no wrist ({version}): run against a server with a Cougar wrist (the "
+            "embedded server, manip-conform run without HOST, or manip-server --cougar sim)"
+        )
+    await power_on(ctx, probe)
+    start = await read_floats(ctx, probe, "joint-angles")
+    require_response(ctx, await probe.call("set-weight", weight=PHANTOM_OZ, cg=[0.0, 0.0, 0.0]), "set weight")
+    try:
+        await probe.call("wrist-version")  # the weight has reached Cougar (it answers after reading it)
+        forces = await read_floats(ctx, probe, "read-forces")
+        size = math.sqrt(sum(f * f for f in forces[:3]))
+        if size < PHANTOM_OZ / 4:
+            ctx.skip(
+                f"the wrist's corrected force did not follow set weight ({size:.1f} oz for a "
+                f"{PHANTOM_OZ:g} oz object the hand does not hold): no load to trip a guard on"
+            )
+        dvec = [f / size for f in forces[:3]] + [0.0, 0.0, 0.0]
+        tol = size / 2
+        await _stopping(ctx, probe, start, dvec, tol)
+        await _continuing(ctx, probe, start, dvec, tol)
+        await _unasked(ctx, probe, dvec, tol)
+    finally:
+        await probe.call("set-weight", weight=0.0, cg=[0.0, 0.0, 0.0])
+        await power_on(ctx, probe)
+        await probe.call("set-joint-angles", joints=list(start))
+        await settle(ctx, probe, start, within=5.0)
+
+
+async def _stopping(
+    ctx: CaseContext, probe: Probe, start: tuple[float, ...], dvec: list[float], tol: float
+) -> None:
+    """A stop-the-move guard: hit reported with word 2 = 1, the motion aborted, motion refused AWA."""
+    index = ctx.random.randrange(16)
+    since = ctx.clock()
+    require_response(ctx, await probe.call("request-notifications", mask=GUARD_BIT), "guard notifications")
+    require_response(ctx, await probe.call("set-joint-angles", joints=_swing(start)), "a move of joint 1")
+    require_response(ctx, await probe.call("set-joint-angles", joints=list(start)), "a move back")
+    require_response(
+        ctx,
+        await probe.call("set-guard", type_index=STOP_BIT | index, dvec=dvec, tol=tol),
+        "a stop-the-move guard",
+    )
+    hit = await _guard_hit(ctx, probe, HIT_WAIT)
+    if hit is None:
+        ctx.fail(
+            f"no guard-hit response within {HIT_WAIT:g} s of arming guard {index} across a "
+            f"{2 * tol:.1f} oz load",
+            clause="async.codes",
+            expected="an asynchronous response (203) with condition code 1 (guard hit)",
+            actual="nothing",
+        )
+    ctx.expect(
+        (word(hit.data, 4), word(hit.data, 6)) == (1, index),
+        clause="async.layout",
+        expected=f"word 2 = 1 (trajectory stopped), word 3 = {index} (the guard)",
+        seen=hit,
+    )
+    refused = await probe.call("set-joint-angles", joints=_swing(start))
+    expect_refusal(
+        ctx,
+        refused,
+        clause="motion.abort",
+        severities=("E",),
+        codes=("AWA",),
+        what="a move after a stop-the-move guard aborted the motion",
+    )
+    await probe.drain(QUIET)
+    extra = _unrequested(probe, GUARD_BIT, since)
+    ctx.expect(
+        not extra,
+        clause="async.only-when-requested",
+        expected="no segment-completed responses (only guard hits asked for)",
+        seen=extra,
+    )
+
+
+async def _continuing(
+    ctx: CaseContext, probe: Probe, start: tuple[float, ...], dvec: list[float], tol: float
+) -> None:
+    """A continue guard: hit reported with word 2 = 2, and the move goes on to its goal."""
+    require_response(ctx, await probe.call("reset-abort"), "reset abort")
+    here = await read_floats(ctx, probe, "joint-angles")
+    index = ctx.random.randrange(16)
+    goal = _swing(start) if abs(here[0] - start[0]) < SWING_DEG / 2 else list(start)
+    require_response(ctx, await probe.call("set-joint-angles", joints=goal), "a move of joint 1")
+    require_response(
+        ctx, await probe.call("set-guard", type_index=index, dvec=dvec, tol=tol), "a continue guard"
+    )
+    hit = await _guard_hit(ctx, probe, HIT_WAIT)
+    if hit is None:
+        ctx.fail(
+            f"no guard-hit response within {HIT_WAIT:g} s of arming continue guard {index}",
+            clause="async.codes",
+            expected="an asynchronous response (203) with condition code 1 (guard hit)",
+            actual="nothing",
+        )
+    ctx.expect(
+        (word(hit.data, 4), word(hit.data, 6)) == (2, index),
+        clause="async.layout",
+        expected=f"word 2 = 2 (trajectory continues), word 3 = {index} (the guard)",
+        seen=hit,
+    )
+    ctx.expect(
+        await settle(ctx, probe, goal, within=5.0) is not None,
+        clause="motion.abort",
+        expected="the move to end at its goal after a continue guard (nothing aborted)",
+        actual="the arm stopped short of it",
+    )
+
+
+async def _unasked(ctx: CaseContext, probe: Probe, dvec: list[float], tol: float) -> None:
+    """With guard hits not asked for, a continue guard's trip sends nothing."""
+    require_response(ctx, await probe.call("request-notifications", mask=0), "no notifications")
+    since = ctx.clock()
+    index = ctx.random.randrange(16)
+    require_response(
+        ctx, await probe.call("set-guard", type_index=index, dvec=dvec, tol=tol), "a continue guard"
+    )
+    await probe.call("wrist-version")
+    await probe.drain(QUIET)
+    extra = _unrequested(probe, 0, since)
+    ctx.expect(
+        not extra,
+        clause="async.only-when-requested",
+        expected="no asynchronous response for a guard hit not asked for",
+        seen=extra,
+    )

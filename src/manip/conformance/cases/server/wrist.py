@@ -1,0 +1,72 @@
+"""A Cougar that does not answer (Part II §6.3; erratum wrist-timeout): the main process gives up and
+answers a non-fatal error, and goes on serving.
+
+Against the embedded server the case silences its simulated Cougar for one connection (the environment
+switch ``wrist-silent``); another target's Cougar answers, so the case skips there (a manip-server with
+``--cougar sim --fault wrist-silent`` gets one that does not)."""
+
+from __future__ import annotations
+
+from typing import Final
+
+from manip.conformance.cases._support import connect_arranged
+from manip.conformance.judge.checks import WirePacket, word
+from manip.conformance.suite.case import case
+from manip.conformance.suite.context import CaseContext
+from manip.spec.constants import ServerOp
+
+GIVE_UP_S: Final = 5.0
+"""How long the case waits for the answers: the erratum's wrist timeout is 0.5 s, and the 1985 guide's
+'reasonable amount of time' is taken to be well within ten times that."""
+_ANSWERS: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
+
+
+@case(
+    "server.wrist.no-answer",
+    clauses=["wrist.no-answer"],
+    hazard="read-only",
+    deadline=15.0,
+)
+async def no_answer(ctx: CaseContext) -> None:
+    """Read forces while Cougar is silent is answered with a non-fatal error within a few seconds, and
+    the Joint angles request sent right after it is answered after it."""
+    probe = await ctx.connect()
+    version = await probe.call("wrist-version")
+    served = version.is_response
+    await probe.close()
+    if not served:
+        ctx.skip(
+            f"the target serves no wrist ({version}): run against a server with a Cougar wrist (the "
+            "embedded server, manip-conform run without HOST, or manip-server --cougar sim)"
+        )
+    if ctx.environment is None:
+        ctx.skip(
+            "the target's Cougar answers: the case runs against the embedded server (manip-conform run "
+            "without HOST), which silences its Cougar, or a manip-server --cougar sim --fault wrist-silent"
+        )
+    probe = await connect_arranged(ctx, "wrist-silent")
+    forces = await probe.send("read-forces")
+    angles = await probe.send("joint-angles")
+    answers: list[WirePacket] = []
+    deadline = ctx.clock() + GIVE_UP_S
+    while len(answers) < 2 and (left := deadline - ctx.clock()) > 0:
+        packet = await probe.next_packet(left)
+        if packet is None:
+            break
+        if packet.opcode in _ANSWERS:
+            answers.append(packet)
+    numbers = [word(p.data, 0) for p in answers]
+    seen = ", ".join(f"0{p.opcode:o} for #{n}" for p, n in zip(answers, numbers, strict=True)) or "nothing"
+    ctx.expect(
+        bool(answers) and answers[0].opcode == ServerOp.NON_FATAL_ERROR and numbers[0] == forces,
+        clause="wrist.no-answer",
+        expected=f"read forces (#{forces}) answered with a non-fatal error (202) within {GIVE_UP_S:g} s "
+        "while Cougar is silent",
+        actual=seen,
+    )
+    ctx.expect(
+        len(answers) == 2 and numbers[1] == angles and answers[1].opcode == ServerOp.RESPONSE,
+        clause="wrist.no-answer",
+        expected=f"joint angles (#{angles}), sent after it, answered after it",
+        actual=seen,
+    )
