@@ -643,8 +643,9 @@ class Harness:
             self.on_error(p.op, number, body)
         elif p.op == RESPONSE and self.pending is not None and self.pending.number == number:
             self.on_reply(self.pending, body)
-        else:
-            log(f"packet {p.op:o} for request {number}, which is not in flight: ignored")
+        else:  # answers nothing in flight: signalled as out of sequence, and no request fails
+            self.emit("error", op=None, origin="client", kind="out-of-sequence", request_number=number,
+                      detail=f"packet {p.op:o} for request {number}, which is not in flight")  # fmt: skip
 
     def finish(self, pending: Pending) -> None:
         pending.done = True
@@ -673,7 +674,8 @@ class Harness:
         pending = self.pending
         answers = pending is not None and pending.number == number and opcode in (FATAL, NON_FATAL)
         if opcode == NON_FATAL and not answers:
-            log(f"a non-fatal error for request {number}, which is not in flight: ignored")
+            self.emit("error", op=None, origin="client", kind="out-of-sequence", request_number=number,
+                      detail=f"a non-fatal error for request {number}, which is not in flight")  # fmt: skip
             return
         op_id = pending.op if answers and pending is not None else None
         if answers and pending is not None:

@@ -10,19 +10,19 @@ import pytest
 
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_request
-from manip.conformance.judge.model import Expectation, ProtocolModel, Reply
+from manip.conformance.judge.model import AnswerSummary, Expectation, ProtocolModel
 from manip.spec import SPEC
 
 READY = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
-DONE = Reply(True, empty=True)
+DONE = AnswerSummary(True, empty=True)
 
 
 def op(name: str) -> int:
     return SPEC.request(name).opcode
 
 
-def refusal(code: str, severity: str = "E") -> Reply:
-    return Reply(False, error=ErrorMessage("test", severity, code, "refused"))
+def refusal(code: str, severity: str = "E") -> AnswerSummary:
+    return AnswerSummary(False, error=ErrorMessage("test", severity, code, "refused"))
 
 
 class Session:
@@ -36,7 +36,7 @@ class Session:
     def expect(self, name: str, **values: object) -> Expectation:
         return self.model.expect(op(name), encode_request(name, **values))
 
-    def do(self, name: str, reply: Reply, **values: object) -> Expectation:
+    def do(self, name: str, reply: AnswerSummary, **values: object) -> Expectation:
         self.number += 1
         data = encode_request(name, **values)
         self.model.sent(self.number)
@@ -62,12 +62,12 @@ def test_nap_when_power_is_off_and_a_segment_when_on() -> None:
     s = Session(powered=False, aborted=False)
     e = s.expect("ready")
     assert not e.normal and e.codes == frozenset({"NAP"}) and e.clause == "motion.no-power"
-    assert s.model.judge(e, Reply(True, segment=1)) is not None
+    assert s.model.judge(e, AnswerSummary(True, segment=1)) is not None
     s.do("enable-power", DONE)
     e = s.expect("ready")
     assert e.normal and not e.codes
     assert s.model.judge(e, refusal("NAP")) is not None
-    s.do("ready", Reply(True, segment=1))
+    s.do("ready", AnswerSummary(True, segment=1))
     assert s.model.outstanding == [1]
 
 
@@ -98,7 +98,7 @@ def test_awa_comes_before_nap_and_is_reset_by_reset_abort_or_power() -> None:
 
 def test_kill_power_while_moving_then_async_error_is_an_abort() -> None:
     s = Session(powered=True, aborted=False)
-    s.do("set-joint-angles", Reply(True, segment=5), joints=READY)
+    s.do("set-joint-angles", AnswerSummary(True, segment=5), joints=READY)
     s.do("kill-power", DONE)
     assert s.model.aborted is None  # the move process may or may not have noticed yet
     assert s.expect("ready").codes >= {"AWA", "NAP"}
@@ -117,11 +117,11 @@ def test_kill_power_while_idle_is_no_abort() -> None:
 
 def test_segment_completed_only_when_asked_for_by_the_mask_after_that_request() -> None:
     s = Session(powered=True, aborted=False)
-    s.do("ready", Reply(True, segment=1))
+    s.do("ready", AnswerSummary(True, segment=1))
     finding = s.model.on_async_response(s.number, 2, 0, 1)
     assert finding is not None and finding.clause == "async.only-when-requested"
     s.do("request-notifications", DONE, mask=2)
-    s.do("ready", Reply(True, segment=2))
+    s.do("ready", AnswerSummary(True, segment=2))
     assert s.model.on_async_response(s.number, 2, 0, 2) is None
     assert s.model.outstanding == []  # segment 1 finished before 2, silently
     again = s.model.on_async_response(s.number, 2, 0, 2)
@@ -131,7 +131,7 @@ def test_segment_completed_only_when_asked_for_by_the_mask_after_that_request() 
 def test_async_response_must_name_a_request_not_older_than_the_last_answered() -> None:
     s = Session(powered=True, aborted=False)
     s.do("request-notifications", DONE, mask=3)
-    s.do("ready", Reply(True, segment=1))
+    s.do("ready", AnswerSummary(True, segment=1))
     stale = s.model.on_async_response(s.number - 1, 2, 0, 1)
     assert stale is not None and stale.clause == "async.layout"
     unknown = s.model.on_async_response(999, 2, 0, 1)
@@ -142,9 +142,9 @@ def test_async_response_must_name_a_request_not_older_than_the_last_answered() -
 
 def test_segment_numbers_that_do_not_increase_are_a_should_finding() -> None:
     s = Session(powered=True, aborted=False)
-    s.do("ready", Reply(True, segment=1))
-    s.do("ready", Reply(True, segment=1))
-    s.do("ready", Reply(True, segment=2))
+    s.do("ready", AnswerSummary(True, segment=1))
+    s.do("ready", AnswerSummary(True, segment=1))
+    s.do("ready", AnswerSummary(True, segment=2))
     assert [f.clause for f in s.model.segment_findings] == ["segment.number-increases"]
     assert SPEC.clauses["segment.number-increases"].level == "SHOULD"
 
@@ -155,7 +155,7 @@ def test_free_joint_discards_the_next_packet_whatever_it_is() -> None:
     assert s.model.free_wait
     e = s.expect("here")
     assert e.discard and e.clause == "free-joint.replies"
-    assert s.model.judge(e, Reply(True)) is not None  # a Here reply: the packet was executed
+    assert s.model.judge(e, AnswerSummary(True)) is not None  # a Here reply: the packet was executed
     s.do("kill-power", DONE)
     assert s.model.powered is True  # discarded, so not executed
     assert not s.model.free_wait
@@ -209,7 +209,7 @@ def test_fatal_and_bug_errors_are_never_allowed() -> None:
     e = m.expect(op("here"), b"")
     assert m.judge(e, refusal("BUG", "BE")) is not None
     assert m.judge(e, refusal("NZI", "F")) is not None
-    assert m.judge(e, Reply(True)) is None
+    assert m.judge(e, AnswerSummary(True)) is None
 
 
 def test_extensions_the_server_does_not_list_may_be_refused_as_unserved() -> None:

@@ -121,6 +121,8 @@ def render() -> str:
         if clause.retired:
             continue
         errata = f" (erratum `{clause.errata}`)" if clause.errata else ""
+        if clause.judged_from == "recording":
+            errata += " (judged from a recording: `verify --judge client`)"
         groups[clause.id.split(".")[0]].append(
             f"| `{clause.id}` | {clause.level} | {clause.party} | {_cell(clause.text)}{errata} | "
             f"{_cell(clause.section)} |"

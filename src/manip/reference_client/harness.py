@@ -30,6 +30,7 @@ from manip.reference_client.errors import (
     JointFreedError,
     ManipError,
     NonFatalError,
+    OutOfSequenceResponse,
     RequestTimeout,
     ResponseDataError,
     ServerError,
@@ -322,6 +323,15 @@ class CaseRun:
             return
         if isinstance(error, AsynchronousError | AsynchronousWarning):
             self.report_error(None, error)
+        elif isinstance(error, OutOfSequenceResponse):
+            self.emit(
+                "error",
+                None,
+                origin="client",
+                kind="out-of-sequence",
+                request_number=error.request_number,
+                detail=str(error),
+            )
         else:
             log.info("%s: %s", self.case, error)
 

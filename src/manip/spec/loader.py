@@ -189,6 +189,12 @@ def _check_clause_links(spec: Spec) -> None:
             if cid not in spec.clauses or spec.clauses[cid].retired:
                 raise SpecError(f"request {req.name} names unknown or retired reply clause {cid!r}")
     for c in spec.clauses.values():
+        if c.judged_from not in ("live", "recording") or (
+            c.judged_from == "recording" and c.party != "client"
+        ):
+            raise SpecError(
+                f"clause {c.id}: judged_from {c.judged_from!r} (only client clauses may be 'recording')"
+            )
         for cid in c.replaced_by:
             if not c.retired or cid not in spec.clauses or spec.clauses[cid].retired:
                 raise SpecError(f"clause {c.id}: replaced_by {cid!r} needs a retired clause and a live one")

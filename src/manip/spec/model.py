@@ -30,6 +30,10 @@ class Clause:
     retired: bool = False
     replaced_by: tuple[str, ...] = ()
     """For a retired clause: the clause(s) that say it now (a renamed clause keeps its old id here)."""
+    judged_from: Literal["live", "recording"] = "live"
+    """``recording`` for a client rule about what a client chooses to send of its own accord (which guard
+    number, when to send set-weight): a harness told what to send cannot show it, so it is judged from a
+    recording of the client at work (``manip-conform verify --judge client``), never by a live case."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -33,7 +33,7 @@ from manip.conformance.judge.checks import (
     parse_description,
     word,
 )
-from manip.conformance.judge.model import Reply
+from manip.conformance.judge.model import AnswerSummary
 from manip.conformance.judge.violation import CarriesViolation, Violation
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.conformance.suite.invariants import TRANSCRIPT
@@ -312,7 +312,7 @@ async def describe_target(ctx: CaseContext, probe: Probe) -> TargetArm:
     return TargetArm(limits=limits, declared=True, dof=dof, operations=operations)
 
 
-def reply_view(answer: Answer) -> Reply:
+def reply_view(answer: Answer) -> AnswerSummary:
     """The model's view of an answer (a RESPONSE, or the decoded error string of an error)."""
     first = answer.first
     if first.opcode == ServerOp.RESPONSE:
@@ -320,9 +320,9 @@ def reply_view(answer: Answer) -> Reply:
         segment = None
         if op is not None and op.response.form == "segment" and len(first.data) == 4:
             segment = word(first.data, 2)
-        return Reply(True, empty=len(first.data) == 2, segment=segment)
+        return AnswerSummary(True, empty=len(first.data) == 2, segment=segment)
     decoded = error_of(first)
-    return Reply(False, error=None if decoded is None else decoded.error)
+    return AnswerSummary(False, error=None if decoded is None else decoded.error)
 
 
 def must(findings: Iterable[Violation]) -> list[Violation]:

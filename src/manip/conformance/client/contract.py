@@ -43,7 +43,7 @@ ERROR_ORIGINS: Final[frozenset[str]] = frozenset(
     {"non-fatal-error", "fatal-error", "asynchronous-error", "asynchronous-warning", "client"}
 )
 CLIENT_ERROR_KINDS: Final[frozenset[str]] = frozenset(
-    {"timeout", "bad-data", "not-connected", "refused-locally", "other"}
+    {"timeout", "bad-data", "not-connected", "refused-locally", "out-of-sequence", "other"}
 )
 
 

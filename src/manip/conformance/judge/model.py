@@ -58,9 +58,9 @@ from manip.spec.constants import AsyncCondition
 
 __all__ = [
     "MODEL_CLAUSES",
+    "AnswerSummary",
     "Expectation",
     "ProtocolModel",
-    "Reply",
     "finding",
 ]
 
@@ -140,7 +140,7 @@ class Expectation:
 
 
 @dataclass(frozen=True)
-class Reply:
+class AnswerSummary:
     """What came back for one request, as the model needs it."""
 
     normal: bool
@@ -325,7 +325,7 @@ class ProtocolModel:
         return self.limits.lower[joint - 1] + slack <= q <= self.limits.upper[joint - 1] - slack
 
     # -------------------------------------------------------------------------------- replies
-    def judge(self, expectation: Expectation, reply: Reply) -> Violation | None:
+    def judge(self, expectation: Expectation, reply: AnswerSummary) -> Violation | None:
         """Whether ``reply`` is one ``expectation`` allows."""
         if expectation.discard:
             if reply.normal and reply.empty:
@@ -347,7 +347,7 @@ class ProtocolModel:
             return None
         return finding(expectation.clause, expectation.describe(), _show(reply))
 
-    def observe(self, number: int, opcode: int, data: bytes, reply: Reply) -> None:
+    def observe(self, number: int, opcode: int, data: bytes, reply: AnswerSummary) -> None:
         """Take the (already judged) reply to request ``number`` into the state."""
         index = self._order.get(number & WORD)
         if index is not None:
@@ -370,7 +370,7 @@ class ProtocolModel:
         finally:
             self._mask_after[number & WORD] = self.notifications
 
-    def _observe_refusal(self, reply: Reply) -> None:
+    def _observe_refusal(self, reply: AnswerSummary) -> None:
         assert reply.error is not None
         code = reply.error.code
         if code == "AWA":
@@ -380,7 +380,7 @@ class ProtocolModel:
             if self.aborted is None:
                 self.aborted = False  # AWA would have come first (erratum abort-before-power)
 
-    def _observe_normal(self, op: RequestOpcode, values: Mapping[str, Value], reply: Reply) -> None:
+    def _observe_normal(self, op: RequestOpcode, values: Mapping[str, Value], reply: AnswerSummary) -> None:
         name = op.name
         if name == "enable-power":
             self.powered, self.aborted = True, False
@@ -522,7 +522,7 @@ def _rotation_deviation(floats: Sequence[float]) -> float:
     return max(dev, abs(det - 1.0))
 
 
-def _show(reply: Reply) -> str:
+def _show(reply: AnswerSummary) -> str:
     if reply.normal:
         if reply.empty:
             return "an empty done"

@@ -18,6 +18,7 @@ from manip.conformance.client.server import ServerSide, plain_answer
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec import SPEC
+from manip.spec.constants import ServerOp
 from manip.spec.model import RequestOpcode
 from manip.spec.notation import octal
 
@@ -122,3 +123,48 @@ def _request_case(op: RequestOpcode) -> None:
         hazard=op.hazard,
         summary=f"{op.title}: arguments drawn from the seed go out in the opcode's layout, to the byte",
     )(request_data)
+
+
+@case(
+    "client.reply.out-of-sequence",
+    clauses=["client.out-of-sequence", "client.reply-matching"],
+    technique="scripted",
+    hazard="read-only",
+    summary="a RESPONSE numbered for no request is signalled as out of sequence and fails no request",
+)
+async def out_of_sequence(base: CaseContext) -> None:
+    """Before a here request's reply, the judge sends a RESPONSE whose number no request of the client's
+    has; the client reports it (an ``error`` of kind ``out-of-sequence``) and still reads the reply."""
+    ctx = client_context(base)
+    values = layout_values(ctx.random, response_layout(SPEC.request("here")))
+    sent: dict[str, Any] = {}
+
+    async def script(side: ServerSide) -> None:
+        req = await side.next_request()
+        if req is None:
+            return
+        stray = (req.packet_no + 0x4000) & 0xFFFF  # far from any number the client has used or will use
+        sent.update(number=req.packet_no, stray=stray)
+        sent["payload"] = encode_reply(SPEC.request("here").opcode, req.packet_no, **values)[2:]
+        await side.send(ServerOp.RESPONSE, stray.to_bytes(2, "little"))
+        await side.reply(req, **values)
+        await side.serve_plainly()
+
+    play = await ctx.play([connect(0), request(1, "here"), close(2)], script)
+    if "number" not in sent:
+        ctx.expect(False, clause="client.reply-matching", expected="a here request", actual="none came")
+        return
+    expect_reply(
+        ctx, play, 1, SPEC.request("here"), sent["payload"], sent["number"], clause="client.reply-matching"
+    )
+    signalled = [
+        r
+        for r in play.of("error", any_op=True)
+        if r.get("kind") == "out-of-sequence" and r.get("request_number") == sent["stray"]
+    ]
+    ctx.expect(
+        bool(signalled),
+        clause="client.out-of-sequence",
+        expected=f"an error of kind out-of-sequence for the RESPONSE numbered {sent['stray']}",
+        actual="; ".join(str(r) for r in play.of("error", any_op=True)) or "no error reported",
+    )
