@@ -145,7 +145,7 @@ def test_client_requests_are_judged_by_opcode_and_layout() -> None:
     assert check_client_request(_request(move, encode_request("move", transform=(0.0,) * 12))) == []
     assert check_client_request(_request(0o276, b"xy")) == []  # undefined: the server's to refuse
     [dwd] = check_client_request(_request(0o300))
-    assert dwd.clause == "request.opcode-range" and "opcode 300" in dwd.message
+    assert dwd.clause == "request.opcode-range" and "opcode 0300" in dwd.message
     [short] = check_client_request(_request(move, bytes(44)))
     assert short.clause == "move.transform-data" and "48 bytes" in short.expected
     [extra] = check_client_request(_request(here, b"\x01\x02"))

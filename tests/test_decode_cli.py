@@ -278,3 +278,24 @@ def test_cougar_words_or_a_missing_file() -> None:
     code, _, err = _run("--cougar", "command", "words.txt")
     assert code == 2 and "no such file: words.txt" in err
     assert _run("--cougar", "command", "000d 0003")[0] in (0, 1)  # words, not a file name
+
+
+def test_the_decoder_does_not_import_numpy() -> None:
+    """numpy takes a large part of a cold start: decoding (floats included) does not need it."""
+    frames = (
+        encode_tcp(_pkt(RequestOp.SET_JOINT_ANGLES, encode_request("set-joint-angles", joints=[0.5] * 6)))
+        + encode_tcp(_pkt(RequestOp.SET_SPEED, encode_request("set-speed", factor=0.25)))
+    ).hex()
+    script = (
+        "import sys\n"
+        "import manip.decode.cli\n"
+        "assert 'numpy' not in sys.modules, 'import manip.decode.cli loaded numpy'\n"
+        "from click.testing import CliRunner\n"
+        f"result = CliRunner().invoke(manip.decode.cli.main, ['--link', 'tcp', {frames!r}])\n"
+        "assert result.exit_code == 0 and 'factor: 0.25' in result.output, result.output\n"
+        "assert 'numpy' not in sys.modules, 'decoding floats loaded numpy'\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], check=False, capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0, done.stderr

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import re
 
 import pytest
 from click.testing import CliRunner
@@ -13,6 +14,8 @@ from manip.reference_server.cli import main
 from manip.reference_server.faults import FAULTS, Fault
 from manip.spec.constants import RequestOp
 from tests.servers import StartServer
+
+LOG_LINE = r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}[+-]\d\d:\d\d (DEBUG|INFO|WARNING|ERROR) manip[.\w]*: "
 
 PORT_LINE = "manip-server: listening on "
 
@@ -88,4 +91,6 @@ def test_a_server_process_serves_and_stops_on_sigterm(manip_server: StartServer)
     assert initial.request_number == 0o500 and initial.is_empty
     assert here.request_number == number and len(_tuple(here.values["transform"])) == 12
     _, err = server.stop(timeout=10.0)  # exit status 0
-    assert "here (201)" in err  # the request's log line
+    assert "here (0201)" in err  # the request's log line
+    for log_line in err.splitlines():  # the common log format: local ISO 8601 time, level, logger
+        assert re.match(LOG_LINE, log_line), log_line

@@ -471,9 +471,9 @@ def test_one_info_line_per_request(caplog: pytest.LogCaptureFixture) -> None:
             await client.close()
             await server.wait_idle()
             lines = [r.getMessage() for r in caplog.records if f"#{here_no} " in r.getMessage()]
-            assert len(lines) == 1 and lines[0].endswith("here (201): 48 data bytes")
+            assert len(lines) == 1 and lines[0].endswith("here (0201): 48 data bytes")
             lines = [r.getMessage() for r in caplog.records if f"#{bad_no} " in r.getMessage()]
-            assert len(lines) == 1 and "UOP" in lines[0] and "unknown (377)" in lines[0]
+            assert len(lines) == 1 and "UOP" in lines[0] and "unknown (0377)" in lines[0]
 
     run(main())
 

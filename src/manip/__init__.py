@@ -20,6 +20,24 @@ how a request goes through them):
 
     with manip.connect("tcp://127.0.0.1:42085") as arm:
         print(arm.here())
+
+The exceptions a user catches are here too, loaded on first use as well::
+
+    try:
+        arm.set_speed(0.5)
+    except manip.NonFatalError as err:      # the server refused: err.code, err.where, err.arguments
+        ...
+    except manip.ConnectionLost:            # the connection is gone
+        ...
+
+* from the client: :class:`ManipError` (the base of all below), :class:`ServerError` (an error string:
+  :class:`FatalError`, :class:`NonFatalError`, :class:`AsynchronousError`,
+  :class:`AsynchronousWarning`), :class:`ConnectionLost`, :class:`RequestTimeout` (also a
+  TimeoutError), :class:`ResponseDataError`, :class:`JointFreedError`, :class:`GuardTrippedError`;
+* from the codecs: :class:`CodecError` (a ValueError) and its :class:`DecodeError`, :class:`EncodeError`;
+* :class:`AddressError` (a link URL that does not parse), :class:`ChaosError` (the Chaos links),
+  :class:`CaptureError` (a capture that cannot be read or written), :class:`SpecError`,
+  :class:`UnknownClauseError` (a clause id the spec does not have; a KeyError naming close matches).
 """
 
 from __future__ import annotations
@@ -28,17 +46,89 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from manip.captures.recorder import CaptureError
+    from manip.codecs.errors import CodecError, DecodeError, EncodeError
+    from manip.links.address import AddressError
+    from manip.links.errors import ChaosError
     from manip.reference_client import aconnect, connect
+    from manip.reference_client.errors import (
+        AsynchronousError,
+        AsynchronousWarning,
+        ConnectionLost,
+        FatalError,
+        GuardTrippedError,
+        JointFreedError,
+        ManipError,
+        NonFatalError,
+        RequestTimeout,
+        ResponseDataError,
+        ServerError,
+    )
+    from manip.spec.loader import SpecError, UnknownClauseError
 
 __version__ = "0.1.0"
-__all__ = ["__version__", "aconnect", "connect"]
 
-_LAZY = frozenset({"aconnect", "connect"})
+_CLIENT_ERRORS = (
+    "AsynchronousError",
+    "AsynchronousWarning",
+    "ConnectionLost",
+    "FatalError",
+    "GuardTrippedError",
+    "JointFreedError",
+    "ManipError",
+    "NonFatalError",
+    "RequestTimeout",
+    "ResponseDataError",
+    "ServerError",
+)
+_LAZY: dict[str, str] = {
+    "aconnect": "manip.reference_client",
+    "connect": "manip.reference_client",
+    **dict.fromkeys(_CLIENT_ERRORS, "manip.reference_client.errors"),
+    **dict.fromkeys(("CodecError", "DecodeError", "EncodeError"), "manip.codecs.errors"),
+    "AddressError": "manip.links.address",
+    "ChaosError": "manip.links.errors",
+    "CaptureError": "manip.captures.recorder",
+    "SpecError": "manip.spec.loader",
+    "UnknownClauseError": "manip.spec.loader",
+}
+"""Name -> the module that defines it, imported when the name is first used (``import manip`` stays
+light: the client, numpy and the capture library load only when asked for)."""
+
+__all__ = [
+    "AddressError",
+    "AsynchronousError",
+    "AsynchronousWarning",
+    "CaptureError",
+    "ChaosError",
+    "CodecError",
+    "ConnectionLost",
+    "DecodeError",
+    "EncodeError",
+    "FatalError",
+    "GuardTrippedError",
+    "JointFreedError",
+    "ManipError",
+    "NonFatalError",
+    "RequestTimeout",
+    "ResponseDataError",
+    "ServerError",
+    "SpecError",
+    "UnknownClauseError",
+    "__version__",
+    "aconnect",
+    "connect",
+]
 
 
 def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        value = getattr(importlib.import_module("manip.reference_client"), name)
+    module = _LAZY.get(name)
+    if module is not None:
+        value = getattr(importlib.import_module(module), name)
         globals()[name] = value
         return value
     raise AttributeError(f"module 'manip' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_LAZY})

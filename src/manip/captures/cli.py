@@ -22,6 +22,8 @@ import sys
 
 import click
 
+from manip.commandline import configure_logging, version_option
+
 from .listing import info_json, info_lines
 from .pcap import CHUDP_PORT, export_pcapng, import_pcap, parse_address
 from .proxy import Endpoint, parse_endpoint, start_proxy
@@ -33,9 +35,10 @@ __all__ = ["main"]
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "show_default": True})
-@click.version_option(package_name="manip")
+@version_option("manip-capture")
 def main() -> None:
     """Record, list and recover manip session captures (MCAP; Foxglove opens them)."""
+    configure_logging()
 
 
 @main.command()

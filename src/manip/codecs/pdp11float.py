@@ -28,14 +28,21 @@ from __future__ import annotations
 
 import math
 import struct
+import sys
 from collections.abc import Iterable
-from typing import Any, Final, Literal, TypeAlias
+from typing import TYPE_CHECKING, Any, Final, Literal, TypeAlias
 
-import numpy as np
-import numpy.typing as npt
 from construct import Adapter, Int32ul, StreamError
 
 from manip.codecs.errors import CodecError, DecodeError, EncodeError
+
+if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
+
+# numpy (0.05-0.1 s to import) loads only when a bulk function runs: the scalar codecs, which decoding
+# and the protocol use, never need it.  A value can only be a numpy scalar once numpy is loaded, so the
+# scalar paths ask ``sys.modules`` rather than import it.
 
 __all__ = [
     "DIRTY_ZERO_POLICIES",
@@ -65,7 +72,7 @@ Rounding: TypeAlias = Literal["half-even", "half-away", "truncate"]
 Underflow: TypeAlias = Literal["zero", "error"]
 DirtyZero: TypeAlias = Literal["zero", "error"]
 Reserved: TypeAlias = Literal["error", "zero"]
-FloatLike: TypeAlias = float | np.floating[Any]
+FloatLike: TypeAlias = "float | np.floating[Any]"
 """What the encoders accept: Python floats and numpy floating scalars (never ints or bools)."""
 
 ROUNDINGS: Final[tuple[Rounding, ...]] = ("half-even", "half-away", "truncate")
@@ -121,9 +128,10 @@ def _round_general(x: object, rounding: str) -> tuple[int, int, int]:
     numpy float16/32 widen to float exactly; a long double keeps its 64-bit mantissa so it is not
     rounded twice.  Anything that is not a real float is refused (never converted silently).
     """
-    if not isinstance(x, np.floating):
+    numpy = sys.modules.get("numpy")
+    if numpy is None or not isinstance(x, numpy.floating):
         raise _not_a_float(x)
-    if not np.isfinite(x):
+    if not numpy.isfinite(x):
         raise _not_finite(x)
     num, den = x.as_integer_ratio()  # den is a power of two
     if num == 0:
@@ -229,7 +237,10 @@ def u32_to_f(u: int, *, dirty_zero: DirtyZero = "zero", reserved: Reserved = "er
 
 
 def _as_index(u: object) -> int:
-    if isinstance(u, (int, np.integer)) and not isinstance(u, (bool, np.bool_)):
+    if isinstance(u, int) and not isinstance(u, bool):
+        return int(u)
+    numpy = sys.modules.get("numpy")
+    if numpy is not None and isinstance(u, numpy.integer):
         return int(u)
     raise DecodeError(f"{type(u).__name__} {u!r} is not a 32-bit pattern", clause="float.format")
 
@@ -259,15 +270,20 @@ _ZERO_BYTES: Final = bytes(4)
 
 
 def _decode_tables() -> tuple[list[float | None], list[float]]:
-    w0 = np.arange(0x10000, dtype=np.int64)
-    exponent = (w0 >> 7) & 0xFF
-    scale = np.ldexp(np.where(w0 & 0x8000, -1.0, 1.0), exponent - 152)
-    scale[exponent == 0] = 0.0
-    base = scale * (((w0 & 0x7F) << 16) | _HIDDEN)
-    bases: list[float | None] = base.tolist()
-    for reserved in range(0x8000, 0x8080):  # sign 1, exponent 0
-        bases[reserved] = None
-    return bases, scale.tolist()
+    bases: list[float | None] = []
+    scales: list[float] = []
+    fractions = [float(top << 16 | _HIDDEN) for top in range(0x80)]  # exact: 24-bit integers
+    for high in range(0x200):  # w0 >> 7: the sign bit, then the exponent; w0 & 0x7F is the top fraction
+        exponent = high & 0xFF
+        negative = high & 0x100
+        if exponent == 0:  # clean or dirty zero reads 0.0; sign 1 is the reserved operand
+            scales += [0.0] * 0x80
+            bases += [None if negative else 0.0] * 0x80
+            continue
+        scale = math.ldexp(-1.0 if negative else 1.0, exponent - 152)
+        scales += [scale] * 0x80
+        bases += map(scale.__mul__, fractions)  # exact: times a power of two
+    return bases, scales
 
 
 _DECODE_BASE, _DECODE_SCALE = _decode_tables()
@@ -343,6 +359,8 @@ _OVER_T: Final = (_F64_TO_F_BIAS + 256) << 23  # ... of 2^127, the first value p
 
 def _as_u32(buf: bytes | bytearray | memoryview | npt.NDArray[Any]) -> npt.NDArray[np.uint32]:
     """The wire ``uint32`` values of a byte buffer, a uint8 array, or a uint32 array taken as values."""
+    import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+
     if isinstance(buf, np.ndarray):
         if buf.dtype.kind == "u" and buf.dtype.itemsize == 4:
             return buf.reshape(-1).astype(np.uint32, copy=False)
@@ -370,6 +388,8 @@ def unpack_f_array(
     ``buf`` is bytes-like, a uint8 array (raw bytes) or a uint32 array of wire values (``u`` as above).
     The first offending element raises the scalar error with ``path="[i]"`` and ``offset=4*i``.
     """
+    import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+
     _check_decode(dirty_zero, reserved)
     if not isinstance(buf, np.ndarray) and dirty_zero == "zero" and len(buf) <= _SMALL_BYTES:
         small = _unpack_small(buf)
@@ -413,6 +433,8 @@ _SMALL_WORDS: Final = [struct.Struct(f"<{n}H") for n in range(_SMALL_BYTES // 2 
 
 def _unpack_small(buf: bytes | bytearray | memoryview) -> npt.NDArray[np.float64] | None:
     """Default-dirty-zero decode of up to 64 floats, or None when the vectorised path must decide."""
+    import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+
     size = len(buf)
     if size & 3:
         return None
@@ -449,6 +471,8 @@ def _float64_values(
     Arrays are judged by dtype; other iterables element by element, so a stray int is reported at its
     index exactly as the scalar encoder would, after any value error that comes before it.
     """
+    import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+
     if isinstance(values, np.ndarray):
         flat = values.reshape(-1)
         if flat.dtype.kind != "f":
@@ -482,6 +506,8 @@ def pack_f_array(
     ``values``: a floating numpy array (any shape, taken flat) or an iterable of floats.  The first
     offending element raises the scalar error with ``path="[i]"`` and ``offset=4*i``.
     """
+    import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+
     _check_encode(rounding, underflow)
     if (
         rounding == "half-even"
@@ -509,6 +535,8 @@ def pack_f_array(
 
 
 def _pack_float64(x: npt.NDArray[np.float64], rounding: str, underflow: str) -> bytes:
+    import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+
     b = np.ascontiguousarray(x).view(np.uint64)
     mag = b & 0x7FFFFFFFFFFFFFFF
     if rounding == "half-even":

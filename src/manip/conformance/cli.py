@@ -39,6 +39,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from manip.commandline import configure_logging, version_option
 from manip.conformance.client.cli import client_command
 from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.fuzz.cli import fuzz_command
@@ -72,6 +73,7 @@ from manip.conformance.suite.selection import PatternError, PatternSet, match_id
 from manip.conformance.suite.stability import instability, repeat_seeds
 from manip.links import AddressError, parse_address, virtual_clock
 from manip.reference_server import FaultSet, ServerConfig
+from manip.spec import SPEC, UnknownClauseError
 
 __all__ = ["main"]
 
@@ -115,8 +117,10 @@ def _number_option(name: str, kind: click.ParamType[Any, Any], default: float, h
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@version_option("manip-conform")
 def main() -> None:
     """Conformance suite for servers of the Chaos manipulator protocol (MIT Puma/Cougar, 1985)."""
+    configure_logging()
 
 
 # ----------------------------------------------------------------------------------------------- run
@@ -132,6 +136,13 @@ def main() -> None:
     help="Run only cases matching PATTERN (glob per dot component, ** any depth; @FILE reads a list).",
 )
 @click.option("--skip", "skip", multiple=True, metavar="PATTERN", help="Leave out cases matching PATTERN.")
+@click.option(
+    "--clause",
+    "clauses",
+    multiple=True,
+    metavar="ID",
+    help="Run the cases that check clause ID (repeatable; with --select, a case either selects runs).",
+)
 @click.option(
     "--known-failing",
     "known_failing",
@@ -257,6 +268,7 @@ def run(
     host: str | None,
     select: tuple[str, ...],
     skip: tuple[str, ...],
+    clauses: tuple[str, ...],
     known_failing: tuple[str, ...],
     strict: bool,
     seed: int | None,
@@ -287,6 +299,7 @@ def run(
     a Cougar over the emulated DRV-11J link instead; with --puma the puma cases judge the server's wrist
     side, the suite playing Cougar."""
     console = make_console()
+    select = (*select, *cases_of_clauses(clauses, cougar=cougar is not None))
     try:
         select_set = PatternSet.of(select, "--select")
         skip_set = PatternSet.of(skip, "--skip")
@@ -509,6 +522,26 @@ def check_selection(
     options = [f"--select {p.text}" for p in select.patterns] + [f"--skip {p.text}" for p in skip.patterns]
     verb = "leave" if len(options) > 1 else "leaves"
     raise click.UsageError(f"{' '.join(options)} {verb} no case to run")
+
+
+def cases_of_clauses(clauses: Sequence[str], *, cougar: bool = False) -> list[str]:
+    """The ids of the cases (of a Cougar run, or of a server run) that check any of ``clauses``; a usage
+    error names an id the spec does not have, with close matches, or a clause no case checks."""
+    cases = cougar_cases(all_cases(), cougar=cougar)
+    ids: list[str] = []
+    for clause in clauses:
+        try:
+            SPEC.clause(clause)
+        except UnknownClauseError as exc:
+            raise click.UsageError(f"--clause: {exc}") from None
+        checking = [c.id for c in cases if clause in c.clauses]
+        if not checking:
+            run = "a Cougar run" if cougar else "a server run"
+            raise click.UsageError(
+                f"--clause {clause}: no case of {run} checks it (manip-conform coverage shows which do)"
+            )
+        ids += checking
+    return ids
 
 
 def close_case_ids(pattern: str, ids: Sequence[str], limit: int = 3) -> list[str]:

@@ -16,12 +16,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import sys
 from collections.abc import AsyncIterator
 from typing import Final
 
 import click
 
+from manip.commandline import configure_logging, version_option
 from manip.cougar.environment import Contacts, Spring, Surface
 from manip.cougar.faults import FAULTS, parse_faults
 from manip.cougar.link import CougarEnd, CougarModel, Drv11jError, parse_address
@@ -169,6 +169,7 @@ async def _serve_forever(model: CougarModel, address: str) -> None:
     help="Simulate a protocol defect (to check a conformance suite catches it); repeatable.",
 )
 @click.option("-v", "--verbose", is_flag=True, help="Log connections.")
+@version_option("manip-cougar")
 def main(
     address: str,
     seed: int | None,
@@ -178,7 +179,7 @@ def main(
     verbose: bool,
 ) -> None:
     """Serve a simulated Cougar wrist computer over the emulated DRV-11J link."""
-    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, stream=sys.stderr)
+    configure_logging(logging.INFO if verbose else logging.WARNING)
     try:
         parse_address(address)
     except ValueError as exc:

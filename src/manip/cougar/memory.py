@@ -25,6 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from manip.codecs.pdp11float import F_MAX, pack_f_array, unpack_f_array
+from manip.spec.notation import octal
 
 __all__ = [
     "MAP",
@@ -170,7 +171,7 @@ class Memory:
 
     def _check(self, address: int, words: int) -> int:
         if not self.valid(address, words):
-            raise ValueError(f"no {words} word(s) of Cougar memory at {address:o} (octal)")
+            raise ValueError(f"no {words} word(s) of Cougar memory at {octal(address)}")
         return address // 2
 
     # ------------------------------------------------------------------ words

@@ -23,19 +23,20 @@ from manip.codecs.cougar import WordStream
 from manip.codecs.errors import DecodeError
 from manip.codecs.framing import FRAMINGS
 from manip.codecs.messages import request_op
+from manip.commandline import configure_logging, version_option
 from manip.decode.describe import (
     Node,
     ReadAs,
     describe_body,
     describe_packet,
     describe_words,
-    octal,
 )
 from manip.decode.frames import LAYOUTS, EmptyInputError, Frame, Layout, frames
 from manip.decode.render import render_hexdump, render_tree
 from manip.decode.source import SourceError, byte_blocks, open_source, read_text, require_file
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp
+from manip.spec.notation import octal
 
 _SERVER_NAMES: Final = {s.name: s.opcode for s in SPEC.server_opcodes.values()}
 _JSON: Final = json.JSONEncoder(separators=(",", ":")).encode
@@ -271,7 +272,7 @@ def _error_node(frame: Frame, err: DecodeError, link: str) -> Node:
     help="Only packets with opcode=OP (octal, or a request, server or Chaos opcode name; in a capture a "
     "request name also selects its replies) or, in a capture, of connection conn=N. Repeatable.",
 )
-@click.version_option(package_name="manip")
+@version_option("manip-decode")
 def main(
     source: str | None,
     link: str,
@@ -287,6 +288,7 @@ def main(
     filter_terms: tuple[str, ...],
 ) -> None:
     """Decode SOURCE: a hex string, a file, or - for standard input (the default)."""
+    configure_logging()
     filters = _parse_filters(filter_terms)
     if ports and pcap is None:
         raise click.UsageError("--port goes with --pcap")

@@ -27,6 +27,7 @@ from manip.codecs.messages import (
 from manip.codecs.packet import Packet
 from manip.spec import SPEC, Layout, RequestOpcode
 from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.notation import octal
 
 ReadAs = Literal["auto", "request", "response"]
 """How to read a manip packet's data (``manip-decode --direction``): guessed, as a request, as a reply."""
@@ -67,11 +68,6 @@ class Node:
         if self.children:
             out["children"] = [c.to_json() for c in self.children]
         return out
-
-
-def octal(v: int) -> str:
-    """Chaosnet style: a leading 0, as the 1985 guide writes opcodes and addresses."""
-    return f"0{v:o}" if v else "0"
 
 
 def _chaos_opcode_name(op: int) -> str:

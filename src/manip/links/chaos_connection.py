@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Final
 from manip.codecs.packet import MAX_DATA, Packet
 from manip.ncp import ConnectionInfo, NcpError
 from manip.spec.constants import ChaosOp
+from manip.spec.notation import octal
 
 from .errors import ChaosError, ConnectionClosed, fresh
 
@@ -92,7 +93,8 @@ class ChaosConnection:
     def __repr__(self) -> str:
         host, index = self._peer
         state = "open" if self._end is None else f"ended: {self._end!r}"
-        return f"<ChaosConnection {self.conn_id:#06x} -> {host:o}/{index:#06x} {self.contact} {state}>"
+        peer = f"{octal(host)}/{octal(index)}"
+        return f"<ChaosConnection {octal(self.conn_id)} -> {peer} {self.contact} {state}>"
 
     # ---------------------------------------------------------------- state
 
@@ -155,7 +157,7 @@ class ChaosConnection:
         Waits while the peer's window is full.  Raises the connection's end (ConnectionClosed, ...)
         if it is over, and ConnectionClosed if we are closing it."""
         if not _DAT <= opcode <= 0o377:
-            raise ValueError(f"data opcodes are 0200-0377, not {opcode:#o}")
+            raise ValueError(f"data opcodes are 0200-0377, not {octal(opcode)}")
         if len(data) > MAX_DATA:
             raise ValueError(f"data is {len(data)} bytes, more than {MAX_DATA}")
         node = self._node

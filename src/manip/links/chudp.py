@@ -25,6 +25,7 @@ from manip.codecs.chaos import IllegalPacketError
 from manip.codecs.errors import DecodeError, EncodeError
 from manip.codecs.framing import decode_chudp, encode_chudp
 from manip.codecs.packet import Packet
+from manip.spec.notation import octal
 
 from .base import Link, bad_reason
 from .errors import LinkError
@@ -103,7 +104,7 @@ class ChudpLink(Link, asyncio.DatagramProtocol):
         known = self.peers.get(source)
         if known != sender and sender not in self._configured_endpoints:
             if not self._may_learn(source):
-                self._bad("unknown_peer", f"address {source:o} from {sender}")
+                self._bad("unknown_peer", f"address {octal(source)} from {sender}")
                 return
             self.peers[source] = sender
             self.peers_learned += 1

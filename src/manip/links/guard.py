@@ -39,6 +39,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final, cast
 
+from manip.spec.notation import octal
+
 from .base import Link
 
 if TYPE_CHECKING:
@@ -84,7 +86,7 @@ def _chaos_number(text: str, rule: str) -> int:
 
 def chaos_text(address: int) -> str:
     """A Chaos address as the project writes it: octal with a leading zero (0402)."""
-    return f"0{address:o}"
+    return octal(address)
 
 
 @dataclass(frozen=True)
@@ -444,11 +446,11 @@ class LinkGuard:
         self.log.log(
             "RFCs refused by Chaos address",
             logging.WARNING,
-            "%s: refused RFC for %s from %s/%#06x: %s",
+            "%s: refused RFC for %s from %s/%s: %s",
             self.name,
             request.contact,
             chaos_text(host),
-            request.peer_index,
+            octal(request.peer_index),
             reason,
         )
         return reason

@@ -55,6 +55,7 @@ from manip.ncp import (
     UncontrolledReceived,
 )
 from manip.spec.constants import ChaosOp
+from manip.spec.notation import octal
 
 from .base import Link, LinkStats
 from .chaos_connection import ChaosConnection
@@ -166,7 +167,7 @@ class Node:
         self._closed = False
 
     def __repr__(self) -> str:
-        return f"<Node {self.address:o} links={len(self.links)} connections={len(self._conns)}>"
+        return f"<Node {octal(self.address)} links={len(self.links)} connections={len(self._conns)}>"
 
     # ---------------------------------------------------------------- links and routes
 
@@ -363,7 +364,7 @@ class Node:
                 route = self._routes.get(packet.dest_host) or self._default
         if route is None or route[0].close_reason is not None:  # (no route, or its link is closed)
             self.stats.no_route += 1
-            log.debug("node %o: no route for %r", self.address, packet)
+            log.debug("node %s: no route for %r", octal(self.address), packet)
             return
         if route[0].send(packet, route[1]):
             self.stats.packets_out += 1
@@ -396,7 +397,7 @@ class Node:
             self._pump()
         except Exception:
             self.stats.core_errors += 1
-            log.exception("node %o: timer processing failed", self.address)
+            log.exception("node %s: timer processing failed", octal(self.address))
 
     def _wake_senders(self) -> None:
         ncp = self.ncp
@@ -428,7 +429,7 @@ class Node:
             self._pump(conn_id=index)
         except Exception:
             self.stats.core_errors += 1
-            log.exception("node %o: processing %r failed", self.address, packet)
+            log.exception("node %s: processing %r failed", octal(self.address), packet)
         finally:
             self._rx = None
 
@@ -439,7 +440,7 @@ class Node:
         if bound is None or bound[0] is link or bound[0].is_closed:
             return False
         self.stats.refused_conflicts += 1
-        reason = f"Chaos address {rfc.src_host:o} index {rfc.src_index:#06x} is in use on another link"
+        reason = f"Chaos address {octal(rfc.src_host)} index {octal(rfc.src_index)} is in use on another link"
         refusal = Packet(
             opcode=ChaosOp.CLS,
             dest_host=rfc.src_host,
@@ -489,7 +490,7 @@ class Node:
                 try:
                     listener.on_open(conn)
                 except Exception:
-                    log.exception("node %o: on_open for %s failed", self.address, listener.contact)
+                    log.exception("node %s: on_open for %s failed", octal(self.address), listener.contact)
         elif isinstance(event, EofReceived):
             conn._on_eof(event.packet)
         elif isinstance(event, UncontrolledReceived):
@@ -525,7 +526,7 @@ class Node:
                 try:
                     reason = listener.policy(event)
                 except Exception:
-                    log.exception("node %o: accept policy failed", self.address)
+                    log.exception("node %s: accept policy failed", octal(self.address))
                     reason = "Server error"
         if reason is not None or listener is None:
             self.ncp.refuse(now, event.conn_id, _cls_text(reason or NO_SERVER))

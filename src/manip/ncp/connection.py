@@ -42,6 +42,7 @@ from typing import Final, NamedTuple
 
 from manip.codecs.packet import Packet, make_packet
 from manip.spec.constants import ChaosOp
+from manip.spec.notation import octal
 
 from .config import MAX_WINDOW, NcpConfig
 from .errors import InvalidStateError, WindowFullError
@@ -205,7 +206,7 @@ class Connection:
         if plan is None:
             if inp.source is Source.USER:
                 raise InvalidStateError(
-                    f"connection {self.index:#06x}: {inp.name} is not allowed in {self.state.name}"
+                    f"connection {octal(self.index)}: {inp.name} is not allowed in {self.state.name}"
                 )
             return False
         actions, next_state = plan
@@ -601,10 +602,10 @@ class Connection:
     @_action
     def _a_send_data(self, t: Trigger) -> None:
         if self.closing:
-            raise InvalidStateError(f"connection {self.index:#06x} is closing: no more data")
+            raise InvalidStateError(f"connection {octal(self.index)} is closing: no more data")
         if not self.established or (self.tlast - self.tacked) & 0xFFFF >= self.twsize:  # outstanding
             raise WindowFullError(
-                f"connection {self.index:#06x}: {self.outstanding} packets unacknowledged, "
+                f"connection {octal(self.index)}: {self.outstanding} packets unacknowledged, "
                 f"peer window {self.twsize}"
             )
         self._send_controlled(t.now, t.opcode, t.data)
@@ -614,7 +615,7 @@ class Connection:
         number = t.packet_no & 0xFFFF
         if (self.rlast - number) & 0x8000:  # seq_gt(number, rlast)
             raise InvalidStateError(
-                f"connection {self.index:#06x}: packet {number} has not been delivered (last {self.rlast})"
+                f"connection {octal(self.index)}: packet {number} has not been delivered (last {self.rlast})"
             )
         rread = self.rread
         if number == rread or (number - rread) & 0x8000:  # seq_le(number, rread)

@@ -32,6 +32,7 @@ from typing import Any, Final
 
 from manip.codecs.packet import MAX_DATA, Packet
 from manip.spec.constants import ChaosOp
+from manip.spec.notation import octal
 
 from .config import MAX_WINDOW, NcpConfig
 from .connection import Connection, ConnectionInfo, NcpStats, Outbox, Trigger
@@ -215,7 +216,7 @@ class Ncp:
         Raises WindowFullError when the peer's window is full or not yet known (check :meth:`can_send`
         first) and InvalidStateError when the connection is not open or is closing."""
         if not _DAT <= opcode <= 0o377:
-            raise ValueError(f"data opcodes are 0200-0377, not {opcode:#o}")
+            raise ValueError(f"data opcodes are 0200-0377, not {octal(opcode)}")
         if len(data) > MAX_DATA:
             raise ValueError(f"data is {len(data)} bytes, more than {MAX_DATA}")
         conn = self._conn(conn_id)
@@ -260,6 +261,7 @@ class Ncp:
         data = _DAT <= opcode <= 0o377
         if not data:
             if not is_legal_opcode(opcode):
+                # The wire text of erratum illegal-packet-delivery: three octal digits.
                 self._los(packet, f"Illegal opcode {opcode:03o}")
                 return
             if opcode in _DROPPED:

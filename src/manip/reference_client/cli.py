@@ -2,7 +2,9 @@
 
 URL is a link address (``tcp://127.0.0.1:42085``, ``chudp://HOST:PORT?addr=440``, ``chaosd:///PATH``).
 Output is aligned text in millimetres and degrees; ``--json`` prints one JSON object per result (per
-event for ``watch``) instead.  Commands::
+event for ``watch``) instead, and a failure as one JSON object on stdout too (``error``, ``where``,
+``severity``, ``code``, ``message``, ``args``, ``exit``; see :func:`~.cli_output.failure_record`) with the
+same exit status.  Commands::
 
     describe                     what the server says about itself
     here                         where the hand is (x y z O A T, and the transform)
@@ -15,6 +17,14 @@ event for ``watch``) instead.  Commands::
                                  joint angles reaching a pose (near the current joints by default)
     solve-backwards Q1 .. Q6     the pose of joint angles
     watch [--count N] [--seconds S]  print asynchronous responses, errors and warnings as they come
+                                 (saying on stderr what it waits for)
+    raw OPCODE [HEX] [--no-check]  send any request: opcode in octal, data bytes in wire order (hex);
+                                 prints whatever comes back, decoded where the spec knows the opcode
+    read-forces, read-raw-gauges, set-gauge-offsets, calibrate-wrist, set-spring, set-damping,
+    set-joint-damping, set-frame-vector, set-weight, set-guard, clear-guard, compliant-move
+                                 the wrist opcodes 0240-0253, arguments and help from the spec's
+                                 layouts; ``--no-check`` sends malformed ones (wrong length, values
+                                 out of range) for testing a server
 
 ``--record FILE`` writes the session's packets, both ways, to an MCAP capture (:mod:`manip.captures`;
 ``manip-capture info FILE`` lists it) with the command line in its metadata.  The file is closed, and
@@ -30,6 +40,7 @@ from __future__ import annotations
 
 import asyncio
 import functools
+import logging
 import sys
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -40,6 +51,7 @@ import click
 from manip.arm.oat import transform_from_xyzoat
 from manip.arm.transform import Transform
 from manip.codecs.messages import AsyncResponse
+from manip.commandline import configure_logging, version_option
 from manip.reference_client.cli_output import (
     async_record,
     async_text,
@@ -47,6 +59,7 @@ from manip.reference_client.cli_output import (
     describe_text,
     dumps,
     error_line,
+    failure_record,
     joints_record,
     joints_text,
     report_record,
@@ -54,11 +67,25 @@ from manip.reference_client.cli_output import (
     transform_record,
     transform_text,
 )
+from manip.reference_client.cli_requests import (
+    WRIST_OPCODES,
+    check_raw_data,
+    encode_arguments,
+    extract_raw,
+    parse_hex,
+    parse_opcode,
+    raw_code,
+    reply_record,
+    reply_text,
+    wrist_help,
+    wrist_metavar,
+)
 from manip.reference_client.connect import aconnect
 from manip.reference_client.errors import ConnectionLost, ManipError, RequestTimeout
 from manip.reference_client.harness import main as harness_main
 from manip.reference_client.manipulator import NOTIFY_GUARD_HITS, NOTIFY_SEGMENTS, Manipulator
 from manip.reference_client.options import ClientOptions
+from manip.spec import RequestOpcode
 
 if TYPE_CHECKING:
     from manip.captures import Recorder
@@ -159,9 +186,22 @@ class RecordError(Exception):
     """The ``--record`` file cannot be created."""
 
 
-def _fail(error: BaseException, code: int) -> NoReturn:
-    click.echo(f"{PROG}: {error_line(error)}", err=True)
+def _fail(error: BaseException, code: int, as_json: bool = False) -> NoReturn:
+    """One line on stderr, or with ``--json`` one JSON object on stdout (where the results go), then
+    exit with ``code``."""
+    if as_json:
+        kind = {EXIT_USAGE: "usage", EXIT_INTERRUPTED: "interrupted"}.get(code)
+        click.echo(dumps(failure_record(error, code, kind=kind)))
+    else:
+        click.echo(f"{PROG}: {error_line(error)}", err=True)
     sys.exit(code)
+
+
+class InterruptError(Exception):
+    """Ctrl-C during a command that it does not end cleanly."""
+
+    def __str__(self) -> str:
+        return "interrupted"
 
 
 def _run(settings: Settings, action: Action, *, interrupt_ends: bool = False) -> None:
@@ -180,25 +220,26 @@ def _run(settings: Settings, action: Action, *, interrupt_ends: bool = False) ->
         finally:  # also on Ctrl-C: asyncio.run cancels this task before raising KeyboardInterrupt
             recorder.close()
 
+    as_json = settings.as_json
     try:
         asyncio.run(session())
     except KeyboardInterrupt:
         if not interrupt_ends:
-            click.echo(f"{PROG}: interrupted", err=True)
-            sys.exit(EXIT_INTERRUPTED)
+            _fail(InterruptError(), EXIT_INTERRUPTED, as_json)
     except RequestTimeout as exc:
-        _fail(exc, EXIT_TIMEOUT)
+        _fail(exc, EXIT_TIMEOUT, as_json)
     except ConnectionLost as exc:
-        _fail(exc, EXIT_CONNECTION)
+        _fail(exc, EXIT_CONNECTION, as_json)
     except ManipError as exc:
-        _fail(exc, EXIT_SERVER_ERROR)
+        _fail(exc, EXIT_SERVER_ERROR, as_json)
     except (ValueError, RecordError) as exc:  # argument checks, an unparsable URL (AddressError)
-        _fail(exc, EXIT_USAGE)
+        _fail(exc, EXIT_USAGE, as_json)
 
 
 HELP: Final = """Talk to a manipulator server at URL (tcp://HOST:PORT, chudp://HOST:PORT?addr=OCTAL,
-chaosd:///PATH).  Text in mm and degrees by default, --json for scripts.
-``manip-client harness`` (no URL) is the client's harness for ``manip-conform client``
+chaosd:///PATH).  Text in mm and degrees by default, --json for scripts (failures too: one JSON object
+on stdout).  raw sends any opcode; the wrist opcodes 0240-0253 are commands; --no-check sends malformed
+requests.  ``manip-client harness`` (no URL) is the client's harness for ``manip-conform client``
 (docs/client-harness.md).
 
 \b
@@ -250,6 +291,7 @@ class _ClientGroup(click.Group):
 @click.group(cls=_ClientGroup, context_settings={"help_option_names": ["-h", "--help"]}, help=HELP)
 @click.argument("url")
 @_common_options
+@version_option(PROG)
 @click.pass_context
 def main(
     ctx: click.Context,
@@ -259,6 +301,7 @@ def main(
     contact: str | None,
     record: str | None,
 ) -> None:
+    configure_logging(logging.ERROR)  # a failure is this command's one line: the library's warnings repeat it
     ctx.obj = Settings(
         url,
         bool(as_json),
@@ -462,6 +505,17 @@ def solve_backwards(settings: Settings, q: tuple[float, ...]) -> None:
 # ------------------------------------------------------------------ watch
 
 
+def _waiting_for(url: str, count: int | None, seconds: float | None, guards: bool) -> str:
+    """What ``watch`` says on stderr once it listens: what it waits for and what ends it."""
+    kinds = "segment completions" + (" and guard hits" if guards else "")
+    ends = ["Ctrl-C"]
+    if count is not None:
+        ends.append(f"{count} response{'s' if count != 1 else ''}")
+    if seconds is not None:
+        ends.append(f"{seconds:g} s")
+    return f"waiting for {kinds}, asynchronous errors and warnings from {url} (until {' or '.join(ends)})"
+
+
 @main.command()
 @click.option(
     "--count", type=click.IntRange(min=1), default=None, help="Stop after N asynchronous responses."
@@ -485,6 +539,7 @@ def watch(settings: Settings, count: int | None, seconds: float | None, guards: 
         deadline = None if seconds is None else loop.time() + seconds
         async with arm.async_responses() as stream:
             await arm.request_notifications(NOTIFY_SEGMENTS | (NOTIFY_GUARD_HITS if guards else 0))
+            click.echo(f"{PROG}: {_waiting_for(settings.url, count, seconds, guards)}", err=True)
             seen = 0
             while count is None or seen < count:
                 remaining = None if deadline is None else max(0.0, deadline - loop.time())
@@ -496,6 +551,73 @@ def watch(settings: Settings, count: int | None, seconds: float | None, guards: 
                 seen += 1
 
     _run(settings, action, interrupt_ends=True)
+
+
+# ------------------------------------------------------------------ by opcode: raw and the wrist
+
+_NO_CHECK = click.option(
+    "--no-check",
+    is_flag=True,
+    help="Send what was typed even if the request is malformed (wrong length, out-of-range values): "
+    "for testing a server.",
+)
+
+
+def _send_by_opcode(settings: Settings, opcode: int, data: bytes) -> None:
+    """Send ``data`` with ``opcode`` and show whatever comes back (an error reply is a failure)."""
+    code, response_type = raw_code(opcode, data)
+
+    async def action(arm: Manipulator) -> None:
+        request = arm.make_request(code, data, response_type=response_type, extractor=extract_raw)
+        reply = await arm.send_request(request)
+        settings.show(reply_record(reply), reply_text(reply))
+
+    _run(settings, action)
+
+
+@main.command(context_settings=NUMBERS)
+@click.argument("opcode")
+@click.argument("data", nargs=-1, metavar="[HEX]")
+@_NO_CHECK
+@pass_settings
+def raw(settings: Settings, opcode: str, data: tuple[str, ...], no_check: bool) -> None:
+    """Send a request by OPCODE (octal, 0200-0277) with HEX data bytes in wire order ("3f 80 00 00"
+    or 3f800000; none: no data), and show whatever comes back, decoded where the spec knows the opcode.
+
+    The data of an opcode the spec defines must fit its layout (length, floats) unless --no-check,
+    which also allows any data opcode up to 0377.
+    """
+    try:
+        number = parse_opcode(opcode, no_check=no_check)
+        payload = parse_hex(data)
+        if not no_check:
+            check_raw_data(number, payload)
+    except ValueError as exc:
+        _fail(exc, EXIT_USAGE, settings.as_json)
+    _send_by_opcode(settings, number, payload)
+
+
+def _wrist_command(op: RequestOpcode) -> None:
+    """Add ``op``'s command, its arguments and help taken from the spec."""
+
+    def command(settings: Settings, values: tuple[str, ...], no_check: bool) -> None:
+        try:
+            payload = encode_arguments(op, values, no_check=no_check)
+        except ValueError as exc:
+            _fail(exc, EXIT_USAGE, settings.as_json)
+        _send_by_opcode(settings, op.opcode, payload)
+
+    command.__name__ = op.name.replace("-", "_")
+    command.__doc__ = wrist_help(op)
+    decorated = pass_settings(_NO_CHECK(command))
+    # No fields: values are for --no-check only (a request that should carry no data).
+    metavar = wrist_metavar(op) or "[VALUES]"
+    decorated = click.argument("values", nargs=-1, metavar=metavar)(decorated)
+    main.command(op.name, context_settings=NUMBERS)(decorated)
+
+
+for _op in WRIST_OPCODES:
+    _wrist_command(_op)
 
 
 if __name__ == "__main__":  # pragma: no cover

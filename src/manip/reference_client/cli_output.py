@@ -20,9 +20,13 @@ from manip.reference_client.errors import (
     ConnectionLost,
     FatalError,
     ManipError,
+    NonFatalError,
     OutOfSequenceResponse,
+    RequestTimeout,
+    ResponseDataError,
     ServerError,
 )
+from manip.spec import notation
 from manip.spec.constants import AsyncCondition
 
 JSONValue = Any
@@ -101,7 +105,7 @@ def lisp_text(value: LispValue, *, octal: bool = False) -> str:
         case bool():
             return str(value)
         case int():
-            return f"{value:o}" if octal else str(value)
+            return notation.octal(value) if octal else str(value)
         case float():
             return f"{value:g}"
         case str():
@@ -156,7 +160,7 @@ def async_text(response: AsyncResponse) -> str:
         return f"guard {response.word3} hit ({effect})"
     return (
         f"asynchronous response, condition {response.condition}: "
-        f"words {response.word2:#o} {response.word3:#o}"
+        f"words {notation.octal_words((response.word2, response.word3))}"
     )
 
 
@@ -202,3 +206,49 @@ def error_line(error: BaseException) -> str:
     if isinstance(error, ConnectionLost):
         return error.reason if error.reason.startswith("cannot connect") else str(error)
     return str(error)
+
+
+def _failure_kind(error: BaseException) -> str:
+    kinds: tuple[tuple[type[BaseException], str], ...] = (
+        (FatalError, "fatal-error"),
+        (NonFatalError, "non-fatal-error"),
+        (AsynchronousWarning, "warning"),
+        (AsynchronousError, "asynchronous-error"),
+        (RequestTimeout, "timeout"),
+        (ConnectionLost, "connection-lost"),
+        (ResponseDataError, "bad-reply"),
+    )
+    for kind, name in kinds:
+        if isinstance(error, kind):
+            return name
+    return type(error).__name__
+
+
+def failure_record(
+    error: BaseException, exit_status: int, *, kind: str | None = None
+) -> dict[str, JSONValue]:
+    """A failure as ``--json`` writes it, on stdout like the results: the error string's parts (where,
+    severity, code, message with the numbers put in, args as sent) for a server error; for a failure of
+    the client's own (``kind``, else ``timeout``, ``connection-lost``...) the same keys, null where the
+    server said nothing, and always the exit status."""
+    if isinstance(error, ServerError):
+        return {
+            "error": kind or _failure_kind(error),
+            "where": error.where,
+            "severity": error.severity,
+            "code": error.code,
+            "message": error.message,
+            "args": list(error.arguments),
+            "meaning": error.meaning,
+            "request_number": error.request_number,
+            "exit": exit_status,
+        }
+    return {
+        "error": kind or _failure_kind(error),
+        "where": None,
+        "severity": None,
+        "code": None,
+        "message": error_line(error),
+        "args": [],
+        "exit": exit_status,
+    }

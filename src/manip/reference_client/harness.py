@@ -19,6 +19,7 @@ from importlib.metadata import PackageNotFoundError, version
 from typing import Any, Final
 
 from manip.codecs.messages import response_layout
+from manip.commandline import configure_logging
 from manip.reference_client import faults
 from manip.reference_client.connect import open_manipulator
 from manip.reference_client.errors import (
@@ -400,7 +401,7 @@ def main(argv: Sequence[str] | None = None, *, prog: str = "python -m manip.refe
     except ValueError as exc:
         parser.error(str(exc))
     faults.activate(chosen)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.ERROR, stream=sys.stderr)
+    configure_logging(logging.INFO if args.verbose else logging.ERROR)
 
     async def read() -> str:
         return await asyncio.to_thread(sys.stdin.readline)

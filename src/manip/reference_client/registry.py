@@ -23,9 +23,9 @@ from manip.reference_client.request import (
     RequestCode,
     ResponseType,
     normalise_name,
-    octal,
 )
 from manip.spec import RequestOpcode
+from manip.spec.notation import octal
 
 if TYPE_CHECKING:
     from manip.reference_client.matching import ResponseContext

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 from manip.spec import RequestOpcode
+from manip.spec.notation import octal
 
 if TYPE_CHECKING:
     from manip.reference_client.errors import ManipError
@@ -61,11 +62,6 @@ DataExtractor = Callable[["Request[Any]", Sequence[bytes]], T_co]
 def normalise_name(name: str) -> str:
     """Registry names are case-insensitive and ``_`` is the same as ``-``: ``SET_SPEED`` = ``set-speed``."""
     return name.strip().lower().replace("_", "-")
-
-
-def octal(opcode: int) -> str:
-    """An opcode as the 1985 guide writes it: ``0201``."""
-    return f"0{opcode:o}"
 
 
 @dataclass(frozen=True, slots=True)

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any, Final
 import click
 
 from manip.arm.kinematics import PUMA600, ArmModel
+from manip.commandline import configure_logging, version_option
 from manip.cougar.link import parse_address as parse_drv11j_address
 from manip.links import (
     AccessError,
@@ -274,6 +275,7 @@ def command_line(ctx: click.Context) -> list[str]:
     show_default=True,
     help="INFO logs one line per request.",
 )
+@version_option(PROG)
 def main(
     listen: str,
     chudp: tuple[str, ...],
@@ -319,11 +321,7 @@ def main(
         warning = exposure_warning(parse_address(url), allow)
         if warning is not None:
             click.echo(warning, err=True)
-    logging.basicConfig(
-        level=log_level.upper(),
-        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-        stream=sys.stderr,
-    )
+    configure_logging(log_level)
     config = ServerConfig(model=MODELS[model], powered_at_open=powered, faults=faults)
     server = functools.partial(
         serve,

@@ -84,6 +84,7 @@ from manip.reference_server.session import Outgoing, Output, ServerConfig, Serve
 from manip.reference_server.wrist import Wrist
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import ServerOp
+from manip.spec.notation import octal
 
 __all__ = [
     "BUSY_REASON",
@@ -158,7 +159,7 @@ class _Client:
         self.conn = conn
         self.session = session
         host, index = conn.peer
-        self.name = f"{host:o}/{index:#06x}"
+        self.name = f"{octal(host)}/{octal(index)}"
         self.out: deque[tuple[int, bytes]] = deque()
         self.waiter: asyncio.Future[None] | None = None
 
@@ -278,9 +279,9 @@ class ReferenceServer:
             return None
         self.stats.refused += 1
         log.info(
-            "refused %o/%#06x: %d client(s) connected (max %d)",
-            request.peer_host,
-            request.peer_index,
+            "refused %s/%s: %d client(s) connected (max %d)",
+            octal(request.peer_host),
+            octal(request.peer_index),
             live,
             self.max_clients,
         )
@@ -373,7 +374,7 @@ class ReferenceServer:
                 what = "discarded after free joint: done"
             else:
                 what = _outcome(op, answer, output)
-            log.info("%s #%d %s (%o): %s", client.name, packet_no, name, opcode, what)
+            log.info("%s #%d %s (%s): %s", client.name, packet_no, name, octal(opcode), what)
 
     def _queue(self, client: _Client, output: Output) -> Outgoing | None:
         """Queue ``output`` on ``client`` and count it; returns the first packet answering a request."""

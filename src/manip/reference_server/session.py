@@ -103,6 +103,7 @@ from manip.reference_server.faults import Fault, FaultSet
 from manip.reference_server.wrist import GuardHit, NoWrist, Pending, Wrist, WristConditions, WristNotice
 from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
+from manip.spec.notation import octal
 
 __all__ = [
     "HANDLERS",
@@ -431,7 +432,7 @@ class ServerSession:
         except RequestError as exc:
             return self._refuse(number, exc)
         except Exception:
-            log.exception("handler for opcode %#o failed", event.opcode)
+            log.exception("handler for opcode %s failed", octal(event.opcode))
             self._emit_error(ServerOp.NON_FATAL_ERROR, number, errors.internal_error(event.opcode).error)
             return None
         if isinstance(result, Pending):
@@ -661,7 +662,7 @@ class ServerSession:
     def _request_notifications(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         mask = _int(values["mask"])
         if mask & ~_NOTIFICATION_MASK:
-            raise errors.bad_value("request-notifications", f"mask {mask:#o} has undefined bits set")
+            raise errors.bad_value("request-notifications", f"mask {octal(mask)} has undefined bits set")
         self.notifications = mask
         return {}
 

@@ -4,7 +4,7 @@
 """
 
 from manip.spec.constants import RequestName
-from manip.spec.loader import Spec, SpecError, load_spec
+from manip.spec.loader import Spec, SpecError, UnknownClauseError, load_spec
 from manip.spec.model import (
     AsyncCode,
     ChaosOpcode,
@@ -21,6 +21,7 @@ from manip.spec.model import (
     ServerOpcode,
     Severity,
 )
+from manip.spec.notation import octal, octal_words
 
 SPEC: Spec = load_spec()
 
@@ -43,5 +44,8 @@ __all__ = [
     "Severity",
     "Spec",
     "SpecError",
+    "UnknownClauseError",
     "load_spec",
+    "octal",
+    "octal_words",
 ]

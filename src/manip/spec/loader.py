@@ -7,8 +7,9 @@ makes loading fail with a message that says which file and entry are wrong.
 
 from __future__ import annotations
 
+import difflib
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from functools import cache
 from importlib import resources
@@ -33,6 +34,7 @@ from manip.spec.model import (
     ServerOpcode,
     Severity,
 )
+from manip.spec.notation import octal
 
 K = TypeVar("K")
 V = TypeVar("V")
@@ -42,6 +44,26 @@ DATA_FILES = ("chaos.toml", "manip.toml", "cougar.toml", "clauses.toml", "errata
 
 class SpecError(Exception):
     """The spec data files are inconsistent."""
+
+
+class UnknownClauseError(KeyError):
+    """A clause id the spec does not have; ``close`` are the ids that look like it (closest first).
+
+    A :class:`KeyError`, as a missing mapping key is, but its text is the message itself."""
+
+    def __init__(self, clause_id: str, close: Iterable[str]) -> None:
+        self.clause_id = clause_id
+        self.close = tuple(close)
+        hint = f"; close matches: {', '.join(self.close)}" if self.close else " (docs/spec.md lists them)"
+        super().__init__(f"no clause {clause_id!r} in the spec{hint}")
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+def close_clause_ids(clause_id: str, known: Iterable[str], limit: int = 3) -> list[str]:
+    """Ids among ``known`` that look like ``clause_id`` (a typo, a word left out), the closest first."""
+    return difflib.get_close_matches(clause_id, list(known), n=limit, cutoff=0.6)
 
 
 @dataclass(frozen=True)
@@ -72,11 +94,20 @@ class Spec:
         try:
             return self.requests[key] if isinstance(key, int) else self.requests_by_name[key]
         except KeyError:
-            shown = f"{key:#o}" if isinstance(key, int) else repr(key)
+            shown = octal(key) if isinstance(key, int) else repr(key)
             raise KeyError(f"no request opcode {shown} in the spec") from None
 
     def clause(self, clause_id: str) -> Clause:
-        return self.clauses[clause_id]
+        """The clause ``clause_id``; :class:`UnknownClauseError` (a KeyError) naming close matches."""
+        try:
+            return self.clauses[clause_id]
+        except KeyError:
+            raise UnknownClauseError(clause_id, close_clause_ids(clause_id, self.clauses)) from None
+
+    def check_clause_ids(self, clause_ids: Iterable[str]) -> None:
+        """Raise :class:`UnknownClauseError` for the first id the spec does not have."""
+        for clause_id in clause_ids:
+            self.clause(clause_id)
 
 
 def _read(name: str) -> dict[str, Any]:
@@ -142,7 +173,7 @@ def _check(spec: Spec) -> None:
                 raise SpecError(f"Cougar command {cmd.name} names unknown response {resp!r}")
     for req in spec.requests.values():
         if not 0o200 <= req.opcode <= 0o277:
-            raise SpecError(f"request {req.name} opcode {req.opcode:o} outside 0200-0277")
+            raise SpecError(f"request {req.name} opcode {octal(req.opcode)} outside 0200-0277")
         if req.cougar and req.cougar not in {c.name for c in spec.cougar_commands.values()}:
             raise SpecError(f"request {req.name} names unknown Cougar command {req.cougar!r}")
         if req.response.form in ("done", "segment") and req.response.data.fields:

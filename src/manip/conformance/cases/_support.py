@@ -217,7 +217,7 @@ def expect_refusal(
 ) -> ErrorReply | None:
     """The answer must be a non-fatal error with one of ``severities`` (and, when given, one of
     ``codes``; the codes are the 1985 guide's where it names them)."""
-    wanted = f"a non-fatal error (202) of severity {'/'.join(severities)}" + (
+    wanted = f"a non-fatal error (0202) of severity {'/'.join(severities)}" + (
         f" and code {'/'.join(codes)}" if codes else ""
     )
     if not ctx.expect(

@@ -41,6 +41,7 @@ from manip.conformance.suite.case import CaseFailure
 from manip.conformance.suite.context import CaseContext
 from manip.conformance.suite.invariants import COUGAR_LINK
 from manip.cougar.link import Drv11jError, PumaEnd, parse_address
+from manip.spec.notation import octal_words
 
 __all__ = [
     "BUSY_WAIT",
@@ -53,7 +54,6 @@ __all__ = [
     "cougar_liveness",
     "cougar_probe",
     "floats_of",
-    "octal",
     "words_bytes",
 ]
 
@@ -64,11 +64,6 @@ BUSY_WAIT: Final = 2.0
 _BUSY_DELAY: Final = 0.02
 _READ: Final = 1 << 16
 _TRANSCRIPT_NOTE: Final = 40
-
-
-def octal(words: Sequence[int]) -> str:
-    """Words as the PDP-11 people wrote them: octal, space separated."""
-    return " ".join(f"{w:o}" for w in words) if words else "(none)"
 
 
 def words_bytes(words: Sequence[int]) -> bytes:
@@ -142,7 +137,7 @@ class WordReply:
 
     def __str__(self) -> str:
         head = self.name if not self.problem else f"{self.name} ({self.problem})"
-        return f"{head}: {octal(self.words)}"
+        return f"{head}: {octal_words(self.words)}"
 
 
 @dataclass(frozen=True)
@@ -158,7 +153,7 @@ class LinkEvent:
         if self.direction == "tick":
             return f"TICK #{self.tick} at {self.time:.6f}"
         arrow = "->" if self.direction == "puma" else "<-"
-        return f"{arrow} {octal(self.words)}"
+        return f"{arrow} {octal_words(self.words)}"
 
 
 class CougarProbe:
@@ -285,7 +280,7 @@ class CougarProbe:
     async def call(self, name: str, *, within: int = DEFAULT_WITHIN, **values: Any) -> WordReply:
         """Send command ``name`` and wait for the next response."""
         words = await self.send(name, **values)
-        return await self.reply(f"{name} ({octal(words)})", within=within)
+        return await self.reply(f"{name} ({octal_words(words)})", within=within)
 
     async def examine(self, address: int, count: int, *, within: int = DEFAULT_WITHIN) -> WordReply:
         """EXMN ``count`` words at byte ``address``: the raw reply (the case judges it)."""

@@ -37,6 +37,7 @@ from manip.conformance.fuzz.shrink import Budget, BudgetError, ddmin
 from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, Request, Step, Stray
 from manip.conformance.fuzz.target import Target, TargetError
 from manip.spec import SPEC
+from manip.spec.notation import octal
 
 __all__ = ["Campaign", "CampaignConfig", "CampaignEvents", "describe_step"]
 
@@ -89,7 +90,7 @@ def describe_step(step: Step) -> str:
         p = step.packet
         damage = f", damage: {step.damage}" if step.damage else ""
         return (
-            f"stray opcode 0{p.opcode:o} to index {p.dest_index:#06x} from {p.src_index:#06x} "
+            f"stray opcode 0{p.opcode:o} to index {octal(p.dest_index)} from {octal(p.src_index)} "
             f"#{p.packet_no}{damage}, expect {step.expect}, data: {p.data.hex(' ') or '(none)'}"
         )
     if isinstance(step, Pause):

@@ -27,6 +27,7 @@ from manip.conformance.suite.selection import match_id
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import ChaosOp, RequestOp
 from manip.spec.model import Field, Hazard
+from manip.spec.notation import octal
 
 __all__ = [
     "CLASSES",
@@ -408,7 +409,7 @@ def _no_connection(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[Ste
         opcode += rng.randrange(0o100)
     p = _stray(n, 0, opcode, data=rng.randbytes(rng.randrange(64)), dest_index=_nowhere(rng))
     p = p.with_(packet_no=rng.randrange(0x10000), ack_no=rng.randrange(0x10000))
-    return (Stray(p, "los", "ncp.los"),), f"opcode 0{opcode:o} to index {p.dest_index:#06x}, no connection"
+    return (Stray(p, "los", "ncp.los"),), f"opcode 0{opcode:o} to index {octal(p.dest_index)}, no connection"
 
 
 def _illegal_opcode(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[Step, ...], str]:
@@ -422,7 +423,7 @@ def _no_los_for_los(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[St
     p = _stray(n, 0, opcode, data=b"fuzz", dest_index=_nowhere(rng))
     return (
         Stray(p, "silence", "ncp.los"),
-    ), f"{ChaosOp(opcode).name} to index {p.dest_index:#06x}, no connection"
+    ), f"{ChaosOp(opcode).name} to index {octal(p.dest_index)}, no connection"
 
 
 def _ignored(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[Step, ...], str]:
@@ -430,7 +431,7 @@ def _ignored(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[Step, ...
     if rng.random() < 0.5:
         other = rng.randrange(1, 0x10000)
         p = _stray(n, 0, ChaosOp.DAT, data=b"\0\0", dest_index=_nowhere(rng), dest_host=other)
-        return (Stray(p, "silence", "ncp.los"),), f"a data packet for host {other:o}, not the target"
+        return (Stray(p, "silence", "ncp.los"),), f"a data packet for host {octal(other)}, not the target"
     opcode = int(rng.choice((ChaosOp.MNT, ChaosOp.RUT)))
     p = _stray(n, 0, opcode, data=rng.randbytes(rng.randrange(16)), dest_index=_nowhere(rng))
     return (Stray(p, "silence", "ncp.los"),), f"{ChaosOp(opcode).name}, which a host drops"

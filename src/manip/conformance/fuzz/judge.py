@@ -31,6 +31,7 @@ from manip.conformance.judge.checks import WirePacket, check_transcript, describ
 from manip.conformance.suite.rawchaos import format_packet
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.notation import octal
 
 __all__ = ["KINDS", "Kind", "Observation", "judge"]
 
@@ -301,7 +302,7 @@ def _expectation(e: Expectation, inbox: Inbox) -> Observation | None:
             "silent-drop",
             e.clause,
             f"no LOS for {e.note}",
-            f"a LOS back to index {e.key:#06x}",
+            f"a LOS back to index {octal(e.key)}",
             shown,
             e.data,
             e.number,
@@ -324,9 +325,9 @@ def _expectation(e: Expectation, inbox: Inbox) -> Observation | None:
             return Observation(
                 "wrong-answer",
                 "ncp.duplicate-rfc",
-                f"one RFC (index {e.key:#06x}) opened {len(opened)} connections",
+                f"one RFC (index {octal(e.key)}) opened {len(opened)} connections",
                 "one connection for a retransmitted RFC",
-                f"OPN from indices {', '.join(f'{i:#06x}' for i in sorted(opened))}",
+                f"OPN from indices {', '.join(f'{octal(i)}' for i in sorted(opened))}",
                 e.data,
                 e.number,
             )

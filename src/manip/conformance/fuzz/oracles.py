@@ -40,6 +40,7 @@ from manip.conformance.judge.checks import (
 )
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
+from manip.spec.notation import octal
 
 __all__ = ["Answered", "OracleFinding", "answers", "oracle_findings"]
 
@@ -231,14 +232,14 @@ def oracle_findings(packets: Sequence[WirePacket]) -> list[OracleFinding]:
                 if listed and unserved:
                     add(
                         "describe.operations-answered",
-                        f"opcode {opcode:o}, listed under :operations, was refused as unserved{code}",
+                        f"opcode {octal(opcode)}, listed under :operations, was refused as unserved{code}",
                         "the opcode served: describe self lists it",
                     )
                 elif not listed and not unserved:
                     add(
                         "describe.operations-complete",
-                        f"opcode {opcode:o} was served but describe self does not list it",
-                        f"opcode {opcode:o} listed under :operations, or refused as unserved (C UOP)",
+                        f"opcode {octal(opcode)} was served but describe self does not list it",
+                        f"opcode {octal(opcode)} listed under :operations, or refused as unserved (C UOP)",
                     )
             if said.dof is not None and opcode in _JOINT_REPLIES and accepted and well_formed:
                 floats = (len(answer.data) - 2) // 4

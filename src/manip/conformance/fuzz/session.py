@@ -43,6 +43,7 @@ from manip.ncp.packets import is_data, pack_status, text, unpack_status
 from manip.ncp.seq import seq_add, seq_gt, seq_le, seq_sub
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.notation import octal
 
 __all__ = ["Allowance", "ConnectError", "FuzzConnection", "RefusedError"]
 
@@ -139,7 +140,7 @@ class FuzzConnection:
         self._speed = 1.0
 
     def __repr__(self) -> str:
-        return f"<FuzzConnection {self.index:#06x} -> {self.server_index:#06x} {self.ended or 'open'}>"
+        return f"<FuzzConnection {octal(self.index)} -> {octal(self.server_index)} {self.ended or 'open'}>"
 
     # ------------------------------------------------------------------------------------ opening
 

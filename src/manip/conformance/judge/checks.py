@@ -39,6 +39,7 @@ from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import AsyncCondition, ChaosOp, ServerOp
 from manip.spec.model import Layout
+from manip.spec.notation import octal
 
 __all__ = [
     "ANSWER_OPCODES",
@@ -151,9 +152,9 @@ def check_server_opcode(packet: WirePacket) -> list[Violation]:
         Violation.at(
             packet,
             "response.server-opcodes",
-            f"server packet with opcode {packet.opcode:o}",
+            f"server packet with opcode {octal(packet.opcode)}",
             expected="a server opcode 200-205 (or 250-277)",
-            actual=f"opcode {packet.opcode:o}",
+            actual=f"opcode {octal(packet.opcode)}",
         )
     ]
 
@@ -247,8 +248,8 @@ def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Violat
         allowed = [s.letter for s in SPEC.severities.values() if packet.opcode in s.server_opcodes]
         add(
             "error.severity-matches-opcode",
-            f"severity {error.severity} in a {opcode_name(packet)} ({packet.opcode:o}) packet",
-            f"one of {', '.join(allowed)} in opcode {packet.opcode:o}",
+            f"severity {error.severity} in a {opcode_name(packet)} ({octal(packet.opcode)}) packet",
+            f"one of {', '.join(allowed)} in opcode {octal(packet.opcode)}",
             shown,
         )
     if not (len(error.code) == 3 and error.code.isascii() and error.code.isalpha()):
@@ -325,7 +326,7 @@ def check_async_packet(packet: WirePacket, requested_mask: int | None = None) ->
                 packet,
                 "async.only-when-requested",
                 f"asynchronous {code.name} that was not asked for",
-                expected=f"no {code.name} responses (request-notifications mask {requested_mask:#o})",
+                expected=f"no {code.name} responses (request-notifications mask {octal(requested_mask)})",
                 actual=f"an asynchronous {code.name} response",
             )
         )
@@ -382,7 +383,8 @@ def required_refusal(opcode: int, data: bytes) -> Refusal | None:
     C.  Range errors (a speed of 2, say) are judged by the cases that know the ranges."""
     op = SPEC.requests.get(opcode)
     if op is None:
-        return Refusal("request.unknown-opcode", f"opcode {opcode:o} is not served by the spec", ("UOP",))
+        reason = f"opcode {octal(opcode)} is not served by the spec"
+        return Refusal("request.unknown-opcode", reason, ("UOP",))
     try:
         decode_request(opcode, data)
     except DecodeError as exc:
@@ -409,7 +411,7 @@ def check_client_request(request: WirePacket) -> list[Violation]:
             Violation.at(
                 request,
                 "request.opcode-range",
-                f"a data packet with opcode {opcode:o} is not a request (8-bit data, 0200-0277)",
+                f"a data packet with opcode {octal(opcode)} is not a request (8-bit data, 0200-0277)",
                 expected="a request opcode, 0200-0277",
             )
         ]
@@ -575,7 +577,7 @@ def _check_refusal(refusal: Refusal, packet: WirePacket) -> list[Violation]:
         Violation.at(
             packet,
             refusal.clause,
-            f"{refusal.reason}: answered with severity {error.severity} in {packet.opcode:o}",
+            f"{refusal.reason}: answered with severity {error.severity} in {octal(packet.opcode)}",
             expected="a non-fatal error (202) of severity C",
             actual=repr(error.render()),
         )

@@ -85,6 +85,7 @@ from manip.links import (
 from manip.links.api import LinkWrapper
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.notation import octal
 
 __all__ = [
     "DEFAULT_ASYNC_TIMEOUT",
@@ -506,7 +507,7 @@ def _request_name(index: int, request: WirePacket | None) -> str:
     if request is None:
         return "initial RESPONSE"
     op = SPEC.requests.get(request.opcode)
-    name = op.name if op is not None else f"opcode {request.opcode:o}"
+    name = op.name if op is not None else f"opcode {octal(request.opcode)}"
     return f"request {index} ({name}, recorded #{request.packet_no})"
 
 

@@ -49,6 +49,7 @@ from manip.codecs.messages import decode_async, decode_error, decode_reply, deco
 from manip.conformance.judge.checks import WirePacket, describe, multi_text, parse_description, word
 from manip.spec import SPEC
 from manip.spec.constants import AsyncCondition, ServerOp
+from manip.spec.notation import octal
 
 __all__ = [
     "DESCRIBE_MASKED_KEYS",
@@ -268,7 +269,8 @@ def compare_answer(
         return c.out
     c = _Collector(first, live[0])
     if first.opcode != live[0].opcode:
-        c.add("opcode", f"{first.opcode:o} ({describe(first)})", f"{live[0].opcode:o} ({describe(live[0])})")
+        recorded_op, live_op = octal(first.opcode), octal(live[0].opcode)
+        c.add("opcode", f"{recorded_op} ({describe(first)})", f"{live_op} ({describe(live[0])})")
         return c.out
     if request_opcode is None:
         number_clause = "connect.initial-response-number"
@@ -394,7 +396,7 @@ def compare_async(
     place in the order of its kind)."""
     c = _Collector(recorded, live)
     if recorded.opcode != live.opcode:
-        c.add("opcode", f"{recorded.opcode:o}", f"{live.opcode:o}")
+        c.add("opcode", octal(recorded.opcode), octal(live.opcode))
         return c.out
     _number(c, "request_number", recorded, live, numbers)
     if recorded.opcode != ServerOp.ASYNCHRONOUS_RESPONSE:
@@ -438,7 +440,8 @@ def compare_request(recorded: WirePacket, live: WirePacket) -> list[Mismatch]:
     (floats with the tolerance), or the bytes when either does not decode."""
     c = _Collector(recorded, live)
     if recorded.opcode != live.opcode:
-        c.add("opcode", f"{recorded.opcode:o} ({describe(recorded)})", f"{live.opcode:o} ({describe(live)})")
+        recorded_op, live_op = octal(recorded.opcode), octal(live.opcode)
+        c.add("opcode", f"{recorded_op} ({describe(recorded)})", f"{live_op} ({describe(live)})")
         return c.out
     try:
         want = decode_request(recorded.opcode, recorded.data).values

@@ -47,6 +47,7 @@ from manip.links.errors import chaos_host, not_a_chaos_link
 from manip.ncp.packets import is_data, pack_status, text, unpack_status
 from manip.ncp.seq import seq_add
 from manip.spec.constants import ChaosOp
+from manip.spec.notation import octal
 
 __all__ = [
     "BUSY_RETRIES",
@@ -106,8 +107,8 @@ def _opname(opcode: int) -> str:
 
 def format_packet(p: Packet) -> str:
     """One line: opcode, addresses and indices (octal / hex), numbers, data length and a data preview."""
-    source = f"{chaos_host(p.src_host)} index {p.src_index:#06x}"
-    what = f"{_opname(p.opcode)} {source} -> {chaos_host(p.dest_host)} index {p.dest_index:#06x}"
+    source = f"{chaos_host(p.src_host)} index {octal(p.src_index)}"
+    what = f"{_opname(p.opcode)} {source} -> {chaos_host(p.dest_host)} index {octal(p.dest_index)}"
     numbers = f"pkt#{p.packet_no} ack#{p.ack_no}"
     if p.opcode in (ChaosOp.OPN, ChaosOp.STS) and (status := unpack_status(p.data)) is not None:
         return f"{what} {numbers} receipt {status[0]} window {status[1]}"

@@ -51,6 +51,7 @@ from manip.conformance.suite.selection import PatternSet
 from manip.links import ChaosConnection, ConnectionRefused, open_connection
 from manip.links.api import LinkWrapper
 from manip.spec.constants import ServerOp
+from manip.spec.notation import octal
 
 __all__ = ["LIVENESS_RETRY_DELAY", "RunConfig", "RunEvents", "Runner", "case_seed"]
 
@@ -195,7 +196,7 @@ class Runner:
                         ):
                             probe.initial = packet  # the initial RESPONSE; the answer comes next
                             continue
-                        return True, f"answered request #{number} with opcode {packet.opcode:o}"
+                        return True, f"answered request #{number} with opcode {octal(packet.opcode)}"
         except CaseFailure as exc:
             return False, exc.actual or exc.message
         except TimeoutError:

@@ -12,6 +12,7 @@ from manip.conformance.client.wire import initial_response_findings
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.notation import octal_words
 
 INITIAL_DELAY = 0.3
 
@@ -61,7 +62,7 @@ async def close_sequence(base: CaseContext) -> None:
         ChaosOp.CLS in ends,
         clause="client.close",
         expected="a CLS from the client after close",
-        actual=f"client control packets: {[f'{o:o}' for o in ends]}",
+        actual=f"client control packets: {octal_words(ends)}",
     )
     ctx.expect(
         play.one("state", 2) is not None and play.one("state", 2).get("state") == "closed",  # type: ignore[union-attr]

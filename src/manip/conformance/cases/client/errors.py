@@ -12,6 +12,7 @@ from manip.conformance.client.server import ServerSide, plain_answer
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec.constants import ServerOp
+from manip.spec.notation import octal_words
 
 
 def _message(ctx: ClientContext, *, even: bool) -> ErrorMessage:
@@ -205,7 +206,7 @@ def _fatal_case(row: tuple[str, str]) -> None:
             not after,
             clause="client.fatal-ends",
             expected="no request after the fatal error",
-            actual=f"request opcode(s) {[f'{o:o}' for o in after]} sent after it",
+            actual=f"request opcode(s) {octal_words(after)} sent after it",
         )
         ctx.expect(
             "lost" in play.states(),

@@ -20,6 +20,7 @@ from manip.conformance.suite.context import CaseContext
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
 from manip.spec.model import RequestOpcode
+from manip.spec.notation import octal
 
 DATA_REPLIES = [op for op in SPEC.requests.values() if op.response.kind == "data"]
 WITH_ARGS = [op for op in SPEC.requests.values() if op.request.fields]
@@ -103,8 +104,8 @@ def _request_case(op: RequestOpcode) -> None:
         ctx.expect(
             req.opcode == op.opcode,
             clause="request.opcode-range",
-            expected=f"opcode {op.opcode:o}",
-            actual=f"opcode {req.opcode:o}",
+            expected=f"opcode {octal(op.opcode)}",
+            actual=f"opcode {octal(req.opcode)}",
         )
         want = encode_request(op.opcode, **args)
         ctx.expect(

@@ -19,6 +19,7 @@ from manip.conformance.cougar.probe import (
 from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory import region
 from manip.spec.constants import CougarCommand, CougarResponse
+from manip.spec.notation import octal
 
 GUARDS: Final = 16
 STOP_BIT: Final = 0x8000
@@ -90,7 +91,7 @@ async def expect_examine(ctx: CaseContext, probe: CougarProbe, address: int, cou
     ctx.expect(
         reply.data_words[:1] == (count,) and len(words) == count,
         clause="cougar.exmn.reply",
-        expected=f"EXMN of {count} word(s) at {address:o}: count word {count}, then {count} words",
+        expected=f"EXMN of {count} word(s) at {octal(address)}: count word {count}, then {count} words",
         seen=reply,
     )
     return words

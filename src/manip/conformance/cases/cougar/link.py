@@ -14,7 +14,6 @@ from manip.conformance.cases.cougar._support import (
 from manip.conformance.cougar.probe import (
     WordReply,
     cougar_probe,
-    octal,
     words_bytes,
 )
 from manip.conformance.suite.case import case
@@ -22,6 +21,7 @@ from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory import region
 from manip.spec import SPEC
 from manip.spec.constants import CougarCommand
+from manip.spec.notation import octal, octal_words
 
 
 # ------------------------------------------------------------------------------------------ the link
@@ -105,7 +105,7 @@ async def comint_partial_waits(ctx: CaseContext) -> None:
                 ctx.expect(
                     [r.words for r in got] == [whole.words],
                     clause="cougar.comint.partial-waits",
-                    expected=f"the split EXMN answered as the whole one: {octal(whole.words)}",
+                    expected=f"the split EXMN answered as the whole one: {octal_words(whole.words)}",
                     seen=got,
                 )
         npr = encode("command", "NPR", theta_sensed=READY, theta_commanded=READY, rate_difference=(0.0,) * 6)
@@ -148,14 +148,14 @@ async def comint_unknown_code(ctx: CaseContext) -> None:
             ctx.expect(
                 len(got) == 1 and got[0].name == "OUT-OF-SYNC",
                 clause="cougar.comint.unknown-code",
-                expected=f"one OUT-OF-SYNC (code 2) for the unknown code {bad:o}, "
+                expected=f"one OUT-OF-SYNC (code 2) for the unknown code {octal(bad)}, "
                 "and the VERS after it dumped with the buffer",
                 seen=got,
             )
             ctx.expect(
                 got[0].data_words == (bad,),
                 clause="cougar.comint.unknown-code",
-                expected=f"OUT-OF-SYNC carrying the bad word {bad:o} (erratum cougar-out-of-sync)",
+                expected=f"OUT-OF-SYNC carrying the bad word {octal(bad)} (erratum cougar-out-of-sync)",
                 seen=got[0],
             )
             reply = await probe.call("VERS", version=1)

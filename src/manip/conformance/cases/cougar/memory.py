@@ -11,7 +11,6 @@ from manip.conformance.cases.cougar._support import (
 )
 from manip.conformance.cougar.probe import (
     cougar_probe,
-    octal,
     words_bytes,
 )
 from manip.conformance.suite.case import case
@@ -19,6 +18,7 @@ from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory import region
 from manip.spec import SPEC
 from manip.spec.constants import CougarCommand
+from manip.spec.notation import octal, octal_words
 
 
 # ------------------------------------------------------------------------------------------ memory
@@ -41,14 +41,14 @@ async def memory_deposit_examine(ctx: CaseContext) -> None:
             ctx.expect(
                 seen == new,
                 clause="cougar.memory",
-                expected=f"EXMN after DPST {new:o} at {address:o} reads {new:o}",
-                actual=f"{seen:o}",
+                expected=f"EXMN after DPST {octal(new)} at {octal(address)} reads {octal(new)}",
+                actual=octal(seen),
             )
             reply = expect_reply(ctx, await probe.call("VERS", version=1), "VERSION", "cougar.vers.reply")
             ctx.expect(
                 reply.data_words == (new,),
                 clause="cougar.memory",
-                expected=f"VERS reports the deposited version word {new:o}",
+                expected=f"VERS reports the deposited version word {octal(new)}",
                 seen=reply,
             )
         finally:
@@ -79,8 +79,9 @@ async def memory_parameters(ctx: CaseContext) -> None:
             ctx.expect(
                 stored == tuple(words[1:]),
                 clause="cougar.memory",
-                expected=f"{name}'s data words at {region(where).address:o} ({where}): {octal(words[1:])}",
-                actual=octal(stored),
+                expected=f"{name}'s data words at {octal(region(where).address)} ({where}): "
+                f"{octal_words(words[1:])}",
+                actual=octal_words(stored),
                 data=words_bytes(stored),
             )
         zero = {

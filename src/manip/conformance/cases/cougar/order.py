@@ -19,6 +19,7 @@ from manip.conformance.cougar.probe import cougar_probe
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec.constants import CougarCommand
+from manip.spec.notation import octal
 
 PHANTOM_OZ: Final = 64.0
 """Weight of an object Cougar is told of (NEWWC) that the hand does not hold."""
@@ -118,7 +119,7 @@ async def nop_resync(ctx: CaseContext) -> None:
         ctx.expect(
             [r.name for r in got] == ["OUT-OF-SYNC"],
             clause="cougar.comint.unknown-code",
-            expected=f"one OUT-OF-SYNC for the unknown code {UNKNOWN_CODE:o}",
+            expected=f"one OUT-OF-SYNC for the unknown code {octal(UNKNOWN_CODE)}",
             seen=got,
         )
         await probe.send_words([CougarCommand.NOP] * NOPS + [CougarCommand.VERS, 1])

@@ -16,12 +16,12 @@ from manip.conformance.cases.cougar._support import (
 )
 from manip.conformance.cougar.probe import (
     cougar_probe,
-    octal,
     words_bytes,
 )
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory import MEMORY_BYTES, region
+from manip.spec.notation import octal, octal_words
 
 
 # ------------------------------------------------------------------------------------------ responses
@@ -58,7 +58,7 @@ async def reply_version(ctx: CaseContext) -> None:
         await clean(probe)
         for puma_version in (0, 1, 0o105, 0xFFFF):
             reply = await probe.call("VERS", version=puma_version)
-            expect_reply(ctx, reply, "VERSION", "cougar.vers.reply", after=f"VERS {puma_version:o}")
+            expect_reply(ctx, reply, "VERSION", "cougar.vers.reply", after=f"VERS {octal(puma_version)}")
             await expect_quiet(ctx, probe, "cougar.response.layout", "VERSION is one data word")
 
 
@@ -117,8 +117,8 @@ async def reply_exmn(ctx: CaseContext) -> None:
                 ctx.expect(
                     words[:1] == first,
                     clause="cougar.memory",
-                    expected=f"the word at {base:o} the same in every examine ({octal(first)})",
-                    actual=octal(words[:1]),
+                    expected=f"the word at {octal(base)} the same in every examine ({octal_words(first)})",
+                    actual=octal_words(words[:1]),
                 )
 
 
@@ -143,7 +143,8 @@ async def exmn_bad_address(ctx: CaseContext) -> None:
             ctx.expect(
                 reply.data_words[:1] == (returned,) and len(reply.data_words) == 1 + returned,
                 clause="cougar.exmn.reply",
-                expected=f"EXMN of {count} at {address:o} ({what}): count word {returned}, {returned} words",
+                expected=f"EXMN of {count} at {octal(address)} ({what}): count word {returned}, "
+                f"{returned} words",
                 seen=reply,
             )
         ctx.expect(

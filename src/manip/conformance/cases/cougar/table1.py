@@ -20,12 +20,12 @@ from manip.conformance.cougar.probe import (
     WordReply,
     cougar_probe,
     floats_of,
-    octal,
 )
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory import region
 from manip.spec import SPEC, CougarMessage
+from manip.spec.notation import octal_words
 
 # ------------------------------------------------------------------------------------------ Table 1
 _RESPONSE_CLAUSE: Final = {
@@ -98,7 +98,7 @@ def _expect_sync(
     ctx.expect(
         [r.name for r in replies] == expected,
         clause="cougar.word-link",
-        expected=f"{msg.name} ({octal(sent)}), NOP, VERS answered by {', '.join(expected)}: "
+        expected=f"{msg.name} ({octal_words(sent)}), NOP, VERS answered by {', '.join(expected)}: "
         "the command taken with its Table 1 data length, sync kept",
         seen=replies,
     )

@@ -6,6 +6,7 @@ from manip.conformance.judge.checks import check_initial_response
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.links import ConnectionRefused
+from manip.spec.notation import octal
 
 
 @case(
@@ -40,6 +41,6 @@ async def one_server_per_robot(ctx: CaseContext) -> None:
         False,
         clause="connect.one-server-per-robot",
         expected="the second RFC refused with CLS while a client is connected",
-        actual=f"a second connection opened (peer index {second.conn.peer[1]:#06x})",
+        actual=f"a second connection opened (peer index {octal(second.conn.peer[1])})",
     )
-    ctx.note(f"first connection {first.conn.peer[1]:#06x} still open")
+    ctx.note(f"first connection {octal(first.conn.peer[1])} still open")

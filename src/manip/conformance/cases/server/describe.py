@@ -30,6 +30,7 @@ from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
 from manip.spec.model import Hazard
+from manip.spec.notation import octal, octal_words
 
 
 async def _describe(ctx: CaseContext, probe: Probe) -> Answer:
@@ -90,7 +91,7 @@ async def alist(ctx: CaseContext) -> None:
         not wrong,
         clause="describe.numbers-octal",
         expected=":operations opcodes in 200-377 read in octal",
-        actual=f"{[oct(o) for o in wrong]} (written in decimal?)",
+        actual=f"{octal_words(wrong)} (written in decimal?)",
     )
 
 
@@ -187,26 +188,27 @@ def _operations_case(row: tuple[str, tuple[Hazard, ...], str]) -> None:
             answer = await probe.call_raw(opcode, malformed(opcode))
             verdict = _served(answer)
             if verdict is None:
-                ctx.note(f"opcode {opcode:o}: the error string does not decode; not judged")
+                ctx.note(f"opcode {octal(opcode)}: the error string does not decode; not judged")
                 continue
             if verdict:
                 served.append(opcode)
-            shown = f":operations {' '.join(f'{o:o}' for o in sorted(listed))}"
+            shown = f":operations {' '.join(octal(o) for o in sorted(listed))}"
             ctx.expect(
                 verdict or opcode not in listed,
                 clause="describe.operations-answered",
-                expected=f"opcode {opcode:o}, listed under :operations, served",
+                expected=f"opcode {octal(opcode)}, listed under :operations, served",
                 actual=f"refused as unserved: {answer}",
                 data=answer.data,
             )
             ctx.expect(
                 not verdict or opcode in listed,
                 clause="describe.operations-complete",
-                expected=f"opcode {opcode:o} listed under :operations: it is served (not refused unserved)",
+                expected=f"opcode {octal(opcode)} listed under :operations: it is served "
+                "(not refused unserved)",
                 actual=f"answered with {answer}; {shown}",
                 data=answer.data,
             )
-        ctx.note(f"served: {' '.join(f'{o:o}' for o in served)} ({len(served)} of {len(probed)} probed)")
+        ctx.note(f"served: {' '.join(octal(o) for o in served)} ({len(served)} of {len(probed)} probed)")
 
     case(
         case_id,

@@ -21,7 +21,7 @@ async def _command_error(ctx: CaseContext, probe: Probe, clause: str | None = No
         ctx.expect(
             answer.opcode == ServerOp.NON_FATAL_ERROR,
             clause=clause,
-            expected="a non-fatal error (202) for an unknown opcode",
+            expected="a non-fatal error (0202) for an unknown opcode",
             seen=answer,
         )
     elif answer.opcode != ServerOp.NON_FATAL_ERROR:

@@ -243,7 +243,7 @@ async def _abort_by_power_loss(ctx: CaseContext, probe: Probe) -> None:
     ctx.expect(
         aborts,
         clause="motion.abort",
-        expected="an asynchronous error (204) when power is lost during a move",
+        expected="an asynchronous error (0204) when power is lost during a move",
         actual="no asynchronous error",
     )
 
@@ -302,7 +302,7 @@ async def awa_reset_abort(ctx: CaseContext) -> None:
         )
     reset = await probe.call("reset-abort")
     if not reset.is_response:
-        ctx.skip(f"the target does not serve Reset abort (260): {reset}")
+        ctx.skip(f"the target does not serve Reset abort (0260): {reset}")
     await _refused_stay(
         ctx,
         probe,

@@ -34,6 +34,7 @@ from manip.ncp.packets import is_data
 from manip.ncp.seq import seq_add, seq_gt, seq_sub
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp
+from manip.spec.notation import octal
 
 RETRANSMIT_BOUND: Final = 3.0
 """Seconds within which an unreceipted packet must come again (6x the erratum's 0.5 s, 3x UNIX's 1 s)."""
@@ -167,7 +168,7 @@ async def los_unknown_connection(ctx: CaseContext) -> None:
             ctx.fail(
                 "no LOS for a data packet to a connection that does not exist",
                 clause="ncp.los",
-                expected=f"LOS to index {index:#06x} within {wait:g} s",
+                expected=f"LOS to index {octal(index)} within {wait:g} s",
                 actual="nothing" + (f" ({peer.ended})" if peer.ended else ""),
                 data=frame,
             )
@@ -183,7 +184,7 @@ async def los_unknown_connection(ctx: CaseContext) -> None:
         if (los.packet_no, los.ack_no, los.src_index) != (number, ack, bogus):
             ctx.note(
                 "the LOS does not reflect the packet (AIM 628 keeps its packet and ack numbers and "
-                f"swaps the indices): sent pkt#{number} ack#{ack} to {bogus:#06x}"
+                f"swaps the indices): sent pkt#{number} ack#{ack} to {octal(bogus)}"
             )
 
         silent: list[tuple[str, bytes, int]] = []
@@ -209,7 +210,7 @@ def _illegal_frame_check(
         ctx.fail(
             f"no LOS for {why}",
             clause="ncp.los",
-            expected=f"LOS to index {sent.src_index:#06x} within {_scale(ctx, LOS_BOUND):g} s",
+            expected=f"LOS to index {octal(sent.src_index)} within {_scale(ctx, LOS_BOUND):g} s",
             actual="nothing",
             data=frame,
         )
@@ -247,7 +248,7 @@ async def los_illegal_opcode(ctx: CaseContext) -> None:
                 ),
                 _scale(ctx, LOS_BOUND),
             )
-            _illegal_frame_check(ctx, answer, p, frame, f"opcode {opcode:o}")
+            _illegal_frame_check(ctx, answer, p, frame, f"opcode {octal(opcode)}")
 
 
 @case(
@@ -309,7 +310,7 @@ async def duplicate_rfc(ctx: CaseContext) -> None:
                         f"the duplicate RFC {when} "
                         + ("opened a second connection" if second else "was treated as a new request"),
                         clause="ncp.duplicate-rfc",
-                        expected=f"nothing, or the OPN from index {conn.remote_index:#06x} again",
+                        expected=f"nothing, or the OPN from index {octal(conn.remote_index)} again",
                         actual=format_packet(p),
                         data=_frames(frame, r.raw),
                     )

@@ -29,6 +29,7 @@ from manip.links.address import parse_address
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import ServerOp
 from manip.spec.model import Hazard
+from manip.spec.notation import octal
 
 RESERVED_OPERAND: Final = struct.pack("<HH", 0x8000, 0)
 """Sign 1, exponent 0: the PDP-11 reserved operand (sign/exponent word first, low byte first)."""
@@ -74,7 +75,7 @@ async def unknown_opcodes(ctx: CaseContext) -> None:
     for opcode in UNASSIGNED_OPCODES:
         answer = await probe.call_raw(opcode, b"")
         ctx.check(check_reply(answer.request, answer.packets))
-        expect_refusal(ctx, answer, clause="request.unknown-opcode", what=f"unknown opcode {opcode:o}")
+        expect_refusal(ctx, answer, clause="request.unknown-opcode", what=f"unknown opcode {octal(opcode)}")
     answer = await probe.call("here")
     expect_response(
         ctx,

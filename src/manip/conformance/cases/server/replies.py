@@ -17,6 +17,7 @@ from manip.conformance.judge.checks import check_reply
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
 from manip.spec import SPEC, RequestOpcode
+from manip.spec.notation import octal
 
 _KIND_CLAUSES: Final[Mapping[str, tuple[str, ...]]] = {
     "done": ("response.done-empty",),
@@ -79,7 +80,7 @@ def _reply_case(op: RequestOpcode) -> None:
 
     case(
         f"server.reply.{op.name}",
-        summary=f"{op.title} ({op.opcode:o}): one {op.response.form} reply echoing the request.",
+        summary=f"{op.title} ({octal(op.opcode)}): one {op.response.form} reply echoing the request.",
         clauses=(*opcode_clauses(op), *follow_clauses),
         hazard=op.hazard,
         deadline=10.0 + (op.answer_within or 0.0),

@@ -98,6 +98,7 @@ from manip.conformance.suite.strategies import (
 from manip.links import open_connection
 from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import ServerOp
+from manip.spec.notation import octal
 
 __all__ = ["STEPS_PER_EXAMPLE", "Step", "replay", "replay_async"]
 
@@ -364,7 +365,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
                 invariant=TRANSCRIPT.name,  # what check_error_packet finds
             )
         op = SPEC.requests.get(opcode)
-        what = f"request #{number} ({op.name if op else f'opcode {opcode:o}'})"
+        what = f"request #{number} ({op.name if op else f'opcode {octal(opcode)}'})"
         self._finding(self.model.judge(expectation, view), packets, answer.data, what)
         self.model.observe(number, opcode, data, view)
         return answer
