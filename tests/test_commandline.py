@@ -90,7 +90,7 @@ def _decoder_output() -> str:
 def _client_and_server_output(caplog: pytest.LogCaptureFixture) -> str:
     from manip.reference_client.cli import main as client
     from manip.reference_server import ServerConfig
-    from tests.test_client_tcp import in_thread, reference_server
+    from tests.servers import in_thread, reference_server
 
     caplog.set_level(logging.INFO, logger="manip")
     out = []
