@@ -15,7 +15,7 @@ import manip
 from manip.conformance.cli import main as conform
 from manip.spec import SPEC, UnknownClauseError
 
-ERRORS = sorted(name for name in manip.__all__ if name[0].isupper())
+ERRORS = sorted(name for name in manip.__all__ if name[0].isupper() and not name.isupper())  # not the masks
 
 
 def test_the_exceptions_a_user_catches_are_importable_from_manip() -> None:
@@ -30,6 +30,12 @@ def test_the_exceptions_a_user_catches_are_importable_from_manip() -> None:
     assert NonFatalError is Defined and issubclass(NonFatalError, ServerError)
     with pytest.raises(AttributeError, match="no attribute 'NoSuchError'"):
         manip.NoSuchError  # noqa: B018
+
+
+def test_the_notification_masks_are_the_clients() -> None:
+    from manip.reference_client import NOTIFY_GUARD_HITS, NOTIFY_SEGMENTS
+
+    assert (manip.NOTIFY_SEGMENTS, manip.NOTIFY_GUARD_HITS) == (NOTIFY_SEGMENTS, NOTIFY_GUARD_HITS) == (2, 1)
 
 
 def test_import_manip_stays_light() -> None:

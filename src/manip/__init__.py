@@ -16,7 +16,8 @@ how a request goes through them):
 * ``manip.conformance``       ``manip-conform``: cases, runner, judges, replay and verify.
 
 ``manip.connect(url)`` and ``manip.aconnect(url)`` are the reference client's
-(:mod:`manip.reference_client`), loaded on first use so that ``import manip`` stays light::
+(:mod:`manip.reference_client`), loaded on first use so that ``import manip`` stays light, with the
+notification masks ``NOTIFY_SEGMENTS`` and ``NOTIFY_GUARD_HITS``::
 
     with manip.connect("tcp://127.0.0.1:42085") as arm:
         print(arm.here())
@@ -50,7 +51,7 @@ if TYPE_CHECKING:
     from manip.codecs.errors import CodecError, DecodeError, EncodeError
     from manip.links.address import AddressError
     from manip.links.errors import ChaosError
-    from manip.reference_client import aconnect, connect
+    from manip.reference_client import NOTIFY_GUARD_HITS, NOTIFY_SEGMENTS, aconnect, connect
     from manip.reference_client.errors import (
         AsynchronousError,
         AsynchronousWarning,
@@ -84,6 +85,8 @@ _CLIENT_ERRORS = (
 _LAZY: dict[str, str] = {
     "aconnect": "manip.reference_client",
     "connect": "manip.reference_client",
+    "NOTIFY_GUARD_HITS": "manip.reference_client",
+    "NOTIFY_SEGMENTS": "manip.reference_client",
     **dict.fromkeys(_CLIENT_ERRORS, "manip.reference_client.errors"),
     **dict.fromkeys(("CodecError", "DecodeError", "EncodeError"), "manip.codecs.errors"),
     "AddressError": "manip.links.address",
@@ -96,6 +99,8 @@ _LAZY: dict[str, str] = {
 light: the client, numpy and the capture library load only when asked for)."""
 
 __all__ = [
+    "NOTIFY_GUARD_HITS",
+    "NOTIFY_SEGMENTS",
     "AddressError",
     "AsynchronousError",
     "AsynchronousWarning",
