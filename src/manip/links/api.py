@@ -20,7 +20,7 @@ from manip.ncp import ConnectionRequested, NcpConfig
 from .address import LinkAddress, parse_address
 from .base import Link
 from .chaos_connection import CLOSE_TIMEOUT, ChaosConnection
-from .chaosd import connect_chaosd
+from .chaosd import connect_chaosd, serve_chaosd
 from .chudp import Endpoint, bind_chudp
 from .errors import ChaosError
 from .guard import AccessList, LinkGuard, LinkLimits
@@ -222,15 +222,17 @@ async def start_server(
     wrap_link: LinkWrapper | None = None,
     limits: LinkLimits | None = None,
     allow: AccessList | None = None,
+    chaosd_daemon: bool = False,
 ) -> ChaosServer:
     """Listen for ``contact`` (None: the address's) as Chaos host ``addr`` of ``address``.
 
     tcp:// listens on HOST:PORT (port 0: a free one, see ``ChaosServer.port``), unix:// on a socket
     file (which must not exist yet); chudp:// binds
     HOST:PORT and learns its clients (``learn_peers``) besides the configured ``peers``; chaosd://
-    connects to the daemon.  ``max_connections=1`` refuses a second client with ``busy_reason`` while
-    one is connected: one Puma server is one robot.  ``wrap_link`` wraps every link the node gets
-    (see :func:`open_connection`).
+    connects to the daemon, or with ``chaosd_daemon`` stands in for it: listens on its socket file
+    (which must not exist yet) for hosts that dial it.  ``max_connections=1`` refuses a second client
+    with ``busy_reason`` while one is connected: one Puma server is one robot.  ``wrap_link`` wraps
+    every link the node gets (see :func:`open_connection`).
 
     ``limits`` bound the TCP links (default :class:`LinkLimits`: idle and half-sent links are closed,
     at most 256 at once) and ``allow`` says who may connect (default: everyone), by IP address for TCP
@@ -281,6 +283,15 @@ async def start_server(
             )
             attach(link, hosts=list(link.peers))
             bound = replace(addr, port=link.local_address[1])
+        elif chaosd_daemon:
+            assert addr.path is not None
+            tcp = await serve_chaosd(
+                addr.path,
+                my_addr=addr.peer_addr,
+                on_link=lambda link: guard.track(link, attach(link)),
+                guard=guard,
+            )
+            bound = addr
         else:
             assert addr.path is not None
             attach(await connect_chaosd(addr.path, my_addr=addr.peer_addr), default=True)

@@ -1,17 +1,26 @@
-"""usim's chaosd unix-socket link (client side): a stream to the local chaosd daemon, which routes.
+"""usim's chaosd unix-socket link: a stream to the local chaosd daemon, which routes.
 
 The daemon is the only neighbour, so every packet goes to it with its final destination in the trailer;
 checksums are written but not verified on receipt, as usim neither checks nor computes them the way
 CHUDP does (erratum ``chaosd-checksum``).
+
+:func:`serve_chaosd` is the daemon's end of the same socket, for a program that stands in for the
+daemon towards hosts that dial it (the client judge plays a Puma behind it): each accepted stream is a
+link whose peer is the host that dialled, learnt from the first frame's trailer.
 """
 
 from __future__ import annotations
 
 import asyncio
+import socket
+from collections.abc import Callable
 
 from manip.codecs.framing import ChaosdFrameDecoder, encode_chaosd
 from manip.codecs.packet import Packet
 
+from .errors import LinkError
+from .guard import LinkGuard, LinkLimits
+from .listener import BACKLOG, StreamListener
 from .stream import StreamLink, dial
 
 
@@ -36,3 +45,34 @@ async def connect_chaosd(path: str, *, my_addr: int, timeout: float | None = 10.
     return await dial(
         link, lambda: loop.create_unix_connection(lambda: link, path), f"chaosd socket {path}", timeout
     )
+
+
+class ChaosdHostLink(StreamLink):
+    """The daemon's end of one host's chaosd socket: packets for that host go down it."""
+
+    kind = "chaosd"
+
+    def __init__(self, *, my_addr: int, name: str = "chaosd") -> None:
+        super().__init__(encode_chaosd, ChaosdFrameDecoder(), my_addr=my_addr, name=name)
+
+
+async def serve_chaosd(
+    path: str, *, my_addr: int, on_link: Callable[[ChaosdHostLink], None], guard: LinkGuard | None = None
+) -> StreamListener:
+    """Listen as a chaosd daemon on a socket file at ``path`` (which must not exist yet); ``on_link``
+    gets each host's link before any packet arrives on it."""
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        sock.bind(path)
+        sock.listen(BACKLOG)
+        sock.setblocking(False)
+    except OSError as exc:
+        sock.close()
+        raise LinkError(f"cannot listen as chaosd on {path}: {exc}") from exc
+
+    def factory() -> ChaosdHostLink:
+        link = ChaosdHostLink(my_addr=my_addr, name=f"chaosd:{path}")
+        on_link(link)
+        return link
+
+    return StreamListener([sock], factory, guard or LinkGuard(LinkLimits.unlimited()))

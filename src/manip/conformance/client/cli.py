@@ -35,11 +35,6 @@ Exit codes:
   3  the harness could not be started, or its hello was not the contract's
   4  interrupted or internal error"""
 
-CHAOSD_WHY = (
-    "--link chaosd: the judge cannot play that role (a client dials a chaosd routing daemon, and the "
-    "judging server would have to be the daemon; it is not one): use tcp or chudp"
-)
-
 
 def client_cases(cases: list[Case] | None = None) -> list[Case]:
     """The cases of a client run (target ``client``: ids ``client.*``)."""
@@ -122,8 +117,6 @@ def client_command(
     from manip.conformance.cli import _summary, check_selection  # noqa: PLC0415
 
     console = make_console()
-    if link == "chaosd":
-        raise click.UsageError(CHAOSD_WHY)
     try:
         select_set = PatternSet.of(select, "--select")
         skip_set = PatternSet.of(skip, "--skip")

@@ -14,6 +14,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import random
+import shutil
+import tempfile
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Final, Literal
@@ -261,11 +263,15 @@ class Listener:
     done: asyncio.Event
     script_error: list[BaseException]
     sides: list[ServerSide]
+    socket_dir: str | None = None
+    """The temporary directory of the chaosd socket (link chaosd), removed at close."""
 
     async def aclose(self) -> None:
         with contextlib.suppress(Exception):
             async with asyncio.timeout(2.0):
                 await self.server.aclose()
+        if self.socket_dir is not None:
+            shutil.rmtree(self.socket_dir, ignore_errors=True)
 
 
 async def serve_scenario(
@@ -304,12 +310,28 @@ async def serve_scenario(
             done.set()
         return refuse
 
-    address = f"{link}://127.0.0.1:0?addr={JUDGE_ADDR:o}&me={CLIENT_ADDR:o}"
-    server = await start_server(address, contact, handler, options=ncp, policy=policy, wrap_link=wire.wrap)
-    target = f"{link}://127.0.0.1:{server.port}?me={CLIENT_ADDR:04o}&addr={JUDGE_ADDR:04o}"
+    socket_dir = None
+    if link == "chaosd":  # the judge stands in for the chaosd daemon the client dials
+        socket_dir = tempfile.mkdtemp(prefix="manip-judge-")
+        where = f"{socket_dir}/chaosd.sock"
+    else:
+        where = "127.0.0.1:0"
+    address = f"{link}://{where}?addr={JUDGE_ADDR:o}&me={CLIENT_ADDR:o}"
+    server = await start_server(
+        address,
+        contact,
+        handler,
+        options=ncp,
+        policy=policy,
+        wrap_link=wire.wrap,
+        chaosd_daemon=socket_dir is not None,
+    )
+    if socket_dir is None:
+        where = f"127.0.0.1:{server.port}"
+    target = f"{link}://{where}?me={CLIENT_ADDR:04o}&addr={JUDGE_ADDR:04o}"
     if contact != "PUMA":
         target += f"&contact={contact}"
-    return Listener(server, wire, target, done, errors, sides)
+    return Listener(server, wire, target, done, errors, sides, socket_dir)
 
 
 def _rfc_number(wire: Wire) -> int:
