@@ -252,19 +252,41 @@ def capture_rows(packets: int, trials: int) -> list[Row]:
     ]
 
 
+# The child's peak RSS is read by a small launcher process, not here: Linux carries ru_maxrss across
+# execve, and subprocess starts children with vfork, so a child's own ru_maxrss starts at this process's
+# high-water mark (the workloads above, numpy, mcap: ~90 MB), whatever the child does.  The launcher is a
+# bare Python (~10 MB) that forks the command and reports the command's ru_maxrss on its stdout.
+_LAUNCHER = """
+import os, sys
+pid = os.fork()
+if pid == 0:
+    os.dup2(os.open(os.devnull, os.O_WRONLY), 1)
+    os.dup2(os.open(os.devnull, os.O_WRONLY), 2)
+    try:
+        os.execv(sys.argv[1], sys.argv[1:])
+    finally:
+        os._exit(127)
+_, status, usage = os.wait4(pid, 0)
+print(os.waitstatus_to_exitcode(status), usage.ru_maxrss * 1024)
+"""
+
+
 def _run_measured(
     cmd: list[str], *, stdin: Path | None = None, cwd: Path | None = None
 ) -> tuple[float, int, int]:
     """Wall seconds, exit status and peak RSS (bytes) of a child process (its output is discarded)."""
     with open(stdin or os.devnull, "rb") as source:
         start = time.perf_counter()
-        proc = subprocess.Popen(cmd, stdin=source, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=cwd)
-        _, status, usage = os.wait4(proc.pid, 0)
+        report = subprocess.run(
+            [sys.executable, "-S", "-c", _LAUNCHER, *cmd],
+            stdin=source,
+            stdout=subprocess.PIPE,
+            cwd=cwd,
+            check=True,
+        ).stdout
         elapsed = time.perf_counter() - start
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    assert proc.stderr is not None
-    proc.stderr.close()
-    return elapsed, proc.returncode, usage.ru_maxrss * 1024
+    code, rss = (int(x) for x in report.split())
+    return elapsed, code, rss
 
 
 def decode_rows(frames: int) -> list[Row]:
