@@ -17,7 +17,16 @@ from mcap.reader import make_reader
 from manip.arm import PUMA600, Transform, forward
 from manip.arm.transform import FLOAT_ROTATION_TOL
 from manip.captures import Recorder
-from manip.captures.arm_view import _here_hand, frame_transform_schema, joints_schema, quaternion
+from manip.captures.arm_view import (
+    _JSON,
+    _frame_transform,
+    _hand_json,
+    _here_hand,
+    _joints_json,
+    frame_transform_schema,
+    joints_schema,
+    quaternion,
+)
 from manip.codecs.messages import encode_reply
 from manip.spec.constants import ServerOp
 from tests.test_capture import JOINTS, record, s2c, session_packets
@@ -195,3 +204,36 @@ def test_here_hand_refuses_what_is_not_a_pose() -> None:
     assert _here_hand([*good[:11], "x"]) is None
     skewed = [good[0] + 2 * FLOAT_ROTATION_TOL, *good[1:]]
     assert _here_hand(skewed) is None
+
+
+_finite = st.floats(-1e6, 1e6, allow_nan=False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.tuples(*(st.floats(-180.0, 180.0, allow_nan=False) for _ in range(3))),
+    st.tuples(_finite, _finite, _finite),
+    st.integers(0, 2**63 - 1),
+    st.lists(_finite, min_size=6, max_size=6),
+    st.integers(0, 2**16),
+    st.integers(0, 2**16),
+    st.one_of(st.none(), st.integers(0, 0xFFFF)),
+)
+def test_arm_messages_are_written_as_the_encoder_would(
+    turns: tuple[float, float, float],
+    p: tuple[float, float, float],
+    t_ns: int,
+    angles: list[float],
+    link: int,
+    conn: int,
+    number: int | None,
+) -> None:
+    pose = Transform.rot_z(turns[0]) @ Transform.rot_y(turns[1]) @ Transform.rot_x(turns[2])
+    for rotation in (pose.rotation, pose.rotation.tolist()):
+        want = _JSON.encode(_frame_transform(rotation, p, t_ns)).encode()
+        assert _hand_json(rotation, p, t_ns) == want
+    message: dict[str, Any] = {"timestamp": {"sec": t_ns // 10**9, "nsec": t_ns % 10**9}}
+    message |= {"link": link, "conn": conn} | ({} if number is None else {"request_number": number})
+    message |= {f"j{i}": a for i, a in enumerate(angles, 1)}
+    assert _joints_json(angles, link, conn, number, t_ns) == _JSON.encode(message).encode()
+    assert json.loads(_hand_json(pose.rotation, (math.inf, 0.0, 0.0), t_ns))["translation"]["x"] == math.inf
