@@ -33,7 +33,7 @@ ReadAs = Literal["auto", "request", "response"]
 """How to read a manip packet's data (``manip-decode --direction``): guessed, as a request, as a reply."""
 
 
-@dataclass
+@dataclass(slots=True)
 class Node:
     """One labelled item of a decoded packet."""
 
@@ -52,7 +52,7 @@ class Node:
         offset: int | None = None,
         size: int | None = None,
     ) -> Node:
-        child = Node(label, text, value, offset, size)
+        child = Node(label, text, value, offset, size, [])
         self.children.append(child)
         return child
 
