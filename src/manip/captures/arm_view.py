@@ -169,8 +169,11 @@ def _hand_json(rotation: Any, p: Any, t_ns: int) -> bytes:
 
 def _joints_json(angles: list[float], link: int, conn: int, request_number: int | None, t_ns: int) -> bytes:
     """The ``/arm/joints`` message (finite angles) as JSON bytes."""
-    if type(t_ns) is not int or type(link) is not int or type(conn) is not int or (
-        request_number is not None and type(request_number) is not int
+    if (
+        type(t_ns) is not int
+        or type(link) is not int
+        or type(conn) is not int
+        or (request_number is not None and type(request_number) is not int)
     ):
         message: dict[str, Any] = {"timestamp": _stamp(t_ns), "link": link, "conn": conn}
         if request_number is not None:
