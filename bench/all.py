@@ -27,6 +27,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import timeit
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -37,7 +38,9 @@ import capture as capture_bench
 import codec_speed
 import ncp as ncp_bench
 import server as server_bench
+from manip.codecs.framing import decode_tcp
 from manip.codecs.pdp11float import pack_f, pack_f_array, unpack_f
+from manip.decode.describe import describe_packet, packet_json
 from manip.links import NcpOptions
 from manip.reference_server import ServerConfig
 from manip.reference_server.session import ServerSession
@@ -116,6 +119,17 @@ def scalar_float_rows(seconds: float) -> list[Row]:
         lambda: [f32.unpack_from(ieee, o)[0] for o in offsets],
         seconds,
     )
+    # The bound: pack_f's fast path with none of its checks (type, policy, range), one '<ff' pack and a
+    # slice in a Python function; it gives wrong bytes outside the range, so it is only a yardstick.
+    twice = struct.Struct("<ff").pack
+
+    def bare(x: float) -> bytes:
+        y = x * 4.0
+        return twice(y, y)[2:6]
+
+    bare_rate, base_bare = codec_speed.rates(
+        lambda: b"".join([bare(x) for x in xs]), lambda: b"".join([f32.pack(x) for x in xs]), seconds
+    )
     n = len(xs)
     return [
         Row(
@@ -127,6 +141,7 @@ def scalar_float_rows(seconds: float) -> list[Row]:
             pack / base_pack,
             0.3,
             True,
+            f"bound: the fast path alone, unchecked: {bare_rate / base_bare:.2f}x",
         ),
         Row(
             "unpack_f",
@@ -252,19 +267,41 @@ def capture_rows(packets: int, trials: int) -> list[Row]:
     ]
 
 
+# The child's peak RSS is read by a small launcher process, not here: Linux carries ru_maxrss across
+# execve, and subprocess starts children with vfork, so a child's own ru_maxrss starts at this process's
+# high-water mark (the workloads above, numpy, mcap: ~90 MB), whatever the child does.  The launcher is a
+# bare Python (~10 MB) that forks the command and reports the command's ru_maxrss on its stdout.
+_LAUNCHER = """
+import os, sys
+pid = os.fork()
+if pid == 0:
+    os.dup2(os.open(os.devnull, os.O_WRONLY), 1)
+    os.dup2(os.open(os.devnull, os.O_WRONLY), 2)
+    try:
+        os.execv(sys.argv[1], sys.argv[1:])
+    finally:
+        os._exit(127)
+_, status, usage = os.wait4(pid, 0)
+print(os.waitstatus_to_exitcode(status), usage.ru_maxrss * 1024)
+"""
+
+
 def _run_measured(
     cmd: list[str], *, stdin: Path | None = None, cwd: Path | None = None
 ) -> tuple[float, int, int]:
     """Wall seconds, exit status and peak RSS (bytes) of a child process (its output is discarded)."""
     with open(stdin or os.devnull, "rb") as source:
         start = time.perf_counter()
-        proc = subprocess.Popen(cmd, stdin=source, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=cwd)
-        _, status, usage = os.wait4(proc.pid, 0)
+        report = subprocess.run(
+            [sys.executable, "-S", "-c", _LAUNCHER, *cmd],
+            stdin=source,
+            stdout=subprocess.PIPE,
+            cwd=cwd,
+            check=True,
+        ).stdout
         elapsed = time.perf_counter() - start
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    assert proc.stderr is not None
-    proc.stderr.close()
-    return elapsed, proc.returncode, usage.ru_maxrss * 1024
+    code, rss = (int(x) for x in report.split())
+    return elapsed, code, rss
 
 
 def decode_rows(frames: int) -> list[Row]:
@@ -279,7 +316,21 @@ def decode_rows(frames: int) -> list[Row]:
             results.append((count, path.stat().st_size, elapsed, code, rss))
     small_rss = results[0][4]
     count, size, elapsed, code, rss = results[1]
-    note = f"{size / 1e6:.1f} MB in {elapsed:.1f} s, exit {code}; peak RSS {small_rss / 1e6:.0f} MB at 1/4"
+    # The bounds: starting Python and importing the decoder, and writing each frame's JSON alone.
+    startup = min(_run_measured([sys.executable, "-c", "import manip.decode.cli"])[0] for _ in range(3))
+    packets = [decode_tcp(frame) for _, frame in capture_bench.workload(frames)]
+    nodes = [describe_packet(p, header=False) for p in packets]
+    pairs = list(zip(nodes, packets, strict=True))
+    write = min(
+        timeit.Timer(lambda: [packet_json(n, p) for n, p in pairs], timer=time.process_time).repeat(3, 1)
+    ) / len(pairs)
+    note = (
+        f"{size / 1e6:.1f} MB in {elapsed:.1f} s, exit {code}; peak RSS {small_rss / 1e6:.0f} MB at 1/4;"
+        f" bound: starting Python and importing the decoder takes {startup:.2f} s"
+        f" ({count / max(elapsed - startup, 1e-9):,.0f} frames/s without it), and writing a frame's JSON"
+        f" alone (the header by hand, the rest by the C encoder) {write * 1e6:.1f} us CPU"
+        f" ({1 / write:,.0f} frames/s if reading and describing were free)"
+    )
     return [
         Row(
             "decode-rate",

@@ -10,11 +10,23 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from mcap.reader import make_reader
 
 from manip.arm import PUMA600, Transform, forward
+from manip.arm.transform import FLOAT_ROTATION_TOL
 from manip.captures import Recorder
-from manip.captures.arm_view import frame_transform_schema, joints_schema, quaternion
+from manip.captures.arm_view import (
+    _JSON,
+    _frame_transform,
+    _hand_json,
+    _here_hand,
+    _joints_json,
+    frame_transform_schema,
+    joints_schema,
+    quaternion,
+)
 from manip.codecs.messages import encode_reply
 from manip.spec.constants import ServerOp
 from tests.test_capture import JOINTS, record, s2c, session_packets
@@ -152,3 +164,76 @@ def test_golden_motion_capture_shows_the_hand_moving() -> None:
     assert np.allclose(here[0], after[0], atol=0.05) and np.allclose(here[1], after[1], atol=1e-5)
     angles = [joints[1][1][f"j{i}"] for i in range(1, 7)]
     assert np.allclose(_pose(hands[1][1])[0], forward(angles, PUMA600.geometry).p, atol=1e-9)
+
+
+_noise = st.floats(-3e-4, 3e-4, allow_nan=False)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.tuples(*(st.floats(-180.0, 180.0, allow_nan=False) for _ in range(3))),
+    st.tuples(*(_noise for _ in range(9))),
+    st.tuples(*(st.floats(-2000.0, 2000.0, allow_nan=False) for _ in range(3))),
+)
+def test_here_hand_is_from_floats_without_numpy(
+    turns: tuple[float, float, float], noise: tuple[float, ...], p: tuple[float, float, float]
+) -> None:
+    """The numpy-free here path accepts what Transform.from_floats accepts and gives its nearest rotation.
+
+    The noise reaches past the tolerance (1e-4), so both verdicts are drawn."""
+    pose = Transform.rot_z(turns[0]) @ Transform.rot_y(turns[1]) @ Transform.rot_x(turns[2])
+    values = [v + e for v, e in zip(pose.to_floats()[:9], noise, strict=True)] + list(p)
+    try:
+        want: Transform | None = Transform.from_floats(values, orthonormalise=True)
+    except ValueError:
+        want = None
+    got = _here_hand(values)
+    if want is None:
+        assert got is None
+        return
+    assert got is not None
+    rotation, position = got
+    assert np.array_equal(np.array(position), want.p)
+    assert np.allclose(np.array(rotation), want.rotation, rtol=0.0, atol=1e-13)
+
+
+def test_here_hand_refuses_what_is_not_a_pose() -> None:
+    good = Transform.rot_z(30.0).to_floats()
+    assert _here_hand(good) is not None
+    assert _here_hand([*good[:11], math.inf]) is None
+    assert _here_hand([*good[:11], "x"]) is None
+    skewed = [good[0] + 2 * FLOAT_ROTATION_TOL, *good[1:]]
+    assert _here_hand(skewed) is None
+
+
+_finite = st.floats(-1e6, 1e6, allow_nan=False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.tuples(*(st.floats(-180.0, 180.0, allow_nan=False) for _ in range(3))),
+    st.tuples(_finite, _finite, _finite),
+    st.integers(0, 2**63 - 1),
+    st.lists(_finite, min_size=6, max_size=6),
+    st.integers(0, 2**16),
+    st.integers(0, 2**16),
+    st.one_of(st.none(), st.integers(0, 0xFFFF)),
+)
+def test_arm_messages_are_written_as_the_encoder_would(
+    turns: tuple[float, float, float],
+    p: tuple[float, float, float],
+    t_ns: int,
+    angles: list[float],
+    link: int,
+    conn: int,
+    number: int | None,
+) -> None:
+    pose = Transform.rot_z(turns[0]) @ Transform.rot_y(turns[1]) @ Transform.rot_x(turns[2])
+    for rotation in (pose.rotation, pose.rotation.tolist()):
+        want = _JSON.encode(_frame_transform(rotation, p, t_ns)).encode()
+        assert _hand_json(rotation, p, t_ns) == want
+    message: dict[str, Any] = {"timestamp": {"sec": t_ns // 10**9, "nsec": t_ns % 10**9}}
+    message |= {"link": link, "conn": conn} | ({} if number is None else {"request_number": number})
+    message |= {f"j{i}": a for i, a in enumerate(angles, 1)}
+    assert _joints_json(angles, link, conn, number, t_ns) == _JSON.encode(message).encode()
+    assert json.loads(_hand_json(pose.rotation, (math.inf, 0.0, 0.0), t_ns))["translation"]["x"] == math.inf

@@ -9,15 +9,19 @@ import subprocess
 import sys
 from importlib.resources import files
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import pytest
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from manip.codecs import ErrorMessage, Packet, encode_chudp, encode_reply, encode_request, encode_tcp
-from manip.codecs.framing import FRAMINGS, encode_chaosd
+from manip.codecs.framing import FRAMINGS, decode_tcp, encode_chaosd
 from manip.codecs.messages import encode_error, guard_hit
+from manip.codecs.packet import Trailer
 from manip.decode.cli import main
+from manip.decode.describe import _ENCODE, describe_packet, packet_json
 from manip.spec import SPEC
 from manip.spec.constants import RequestOp, ServerOp
 
@@ -299,3 +303,50 @@ def test_the_decoder_does_not_import_numpy() -> None:
         [sys.executable, "-c", script], check=False, capture_output=True, text=True, timeout=60
     )
     assert done.returncode == 0, done.stderr
+
+
+_WORD = st.integers(0, 0xFFFF)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.integers(0, 0xFF),
+    st.tuples(_WORD, _WORD, _WORD, _WORD, _WORD, _WORD),
+    st.binary(max_size=64),
+    st.integers(0, 15),
+    st.one_of(st.none(), st.tuples(_WORD, _WORD, _WORD)),
+    st.sampled_from(["auto", "request", "response"]),
+)
+def test_packet_json_is_the_tree_encoded(
+    opcode: int,
+    words: tuple[int, int, int, int, int, int],
+    data: bytes,
+    fc: int,
+    trailer: tuple[int, int, int] | None,
+    direction: Literal["auto", "request", "response"],
+) -> None:
+    """--format json writes the Chaos header from the packet, not from its tree: the same bytes."""
+    dh, di, sh, si, pn, an = words
+    t = None if trailer is None else Trailer(*trailer)
+    p = Packet(opcode, dh, di, sh, si, pn, an, data, fc, t)
+    want = _ENCODE(describe_packet(p, direction=direction).to_json())
+    headless = describe_packet(p, direction=direction, header=False)
+    assert packet_json(headless, p) == want
+    headless.add("decode error", "added after describing, as the decoder does")
+    whole = describe_packet(p, direction=direction)
+    whole.add("decode error", "added after describing, as the decoder does")
+    assert packet_json(headless, p) == _ENCODE(whole.to_json())
+
+
+def test_packet_json_on_packets_read_from_the_tcp_link() -> None:
+    err = ErrorMessage("During calibration", "F", "NZI", "No zero index found on joint(s) $.", (6,))
+    packets = [
+        _pkt(RequestOp.HERE, b""),
+        _pkt(0o204, encode_request("move", transform=(1.5,) * 12)),
+        _pkt(ServerOp.RESPONSE, encode_reply("here", 7, transform=(0.25,) * 12)),
+        _pkt(ServerOp.FATAL_ERROR, encode_error(ServerOp.FATAL_ERROR, 7, err)),
+    ]
+    for sent in packets:
+        p = decode_tcp(encode_tcp(sent))
+        assert p.trailer is not None
+        assert packet_json(describe_packet(p, header=False), p) == _ENCODE(describe_packet(p).to_json())

@@ -61,6 +61,7 @@ __all__ = [
     "Unreachable",
     "configuration",
     "forward",
+    "forward_rows",
     "inverse_all",
     "inverse_nearest",
     "jacobian",
@@ -287,6 +288,52 @@ def _frames(q_deg: Sequence[float], geometry: PumaGeometry, upto: int = 6) -> li
 def forward(q_deg: JointsLike, geometry: PumaGeometry = PUMA560_LEE) -> Transform:
     """Joint angles (deg) to the end-frame transform (mm): the protocol's "solve backwards"."""
     return Transform(_frames(_as_joints(q_deg), geometry)[-1])
+
+
+#: The top three rows of a homogeneous transform as plain floats: (R | p).
+Rows34 = tuple[tuple[float, float, float, float], ...]
+
+
+def forward_rows(q_deg: Sequence[float], geometry: PumaGeometry = PUMA560_LEE) -> Rows34:
+    """:func:`forward` without numpy, for callers that need one pose fast and no :class:`Transform`
+    (a capture's hand picture): the same DH chain in plain floats.  The angles are not validated (pass
+    six finite floats).  It agrees with :func:`forward` to rounding (the products are summed in another
+    order than numpy's matmul), which a property test checks.
+    """
+    # Start from link 1 (the product with the identity is exact) and compose (R | p) <- (R | p)(Ra | pa).
+    r00, r01, r02, p0, r10, r11, r12, p1, r20, r21, r22, p2 = _link_rows(q_deg[0], *_DH1)
+    for qi, (alpha, a, d) in zip(q_deg[1:6], geometry.dh()[1:], strict=True):
+        a00, a01, a02, a03, a10, a11, a12, a13, a20, a21, a22, a23 = _link_rows(qi, alpha, a, d)
+        r00, r01, r02, p0 = (
+            r00 * a00 + r01 * a10 + r02 * a20,
+            r00 * a01 + r01 * a11 + r02 * a21,
+            r00 * a02 + r01 * a12 + r02 * a22,
+            r00 * a03 + r01 * a13 + r02 * a23 + p0,
+        )
+        r10, r11, r12, p1 = (
+            r10 * a00 + r11 * a10 + r12 * a20,
+            r10 * a01 + r11 * a11 + r12 * a21,
+            r10 * a02 + r11 * a12 + r12 * a22,
+            r10 * a03 + r11 * a13 + r12 * a23 + p1,
+        )
+        r20, r21, r22, p2 = (
+            r20 * a00 + r21 * a10 + r22 * a20,
+            r20 * a01 + r21 * a11 + r22 * a21,
+            r20 * a02 + r21 * a12 + r22 * a22,
+            r20 * a03 + r21 * a13 + r22 * a23 + p2,
+        )
+    return ((r00, r01, r02, p0), (r10, r11, r12, p1), (r20, r21, r22, p2))
+
+
+_DH1 = (-90.0, 0.0, 0.0)  # link 1's row of every PumaGeometry.dh()
+
+
+def _link_rows(theta_deg: float, alpha_deg: float, a: float, d: float) -> tuple[float, ...]:
+    """The top three rows of :func:`_link`, flat."""
+    theta = math.radians(theta_deg)
+    ct, st = math.cos(theta), math.sin(theta)
+    ca, sa = _TWIST[alpha_deg]
+    return (ct, -st * ca, st * sa, a * ct, st, ct * ca, -ct * sa, a * st, 0.0, sa, ca, d)
 
 
 def jacobian(

@@ -23,6 +23,7 @@ from manip.codecs.cougar import WordStream
 from manip.codecs.errors import DecodeError
 from manip.codecs.framing import FRAMINGS
 from manip.codecs.messages import request_op
+from manip.codecs.packet import Packet
 from manip.commandline import configure_logging, version_option
 from manip.decode.describe import (
     Node,
@@ -30,6 +31,7 @@ from manip.decode.describe import (
     describe_body,
     describe_packet,
     describe_words,
+    packet_json,
 )
 from manip.decode.frames import LAYOUTS, EmptyInputError, Frame, Layout, frames
 from manip.decode.render import render_hexdump, render_tree
@@ -164,11 +166,20 @@ class _Out:
         self.count = 0
         self.write = sys.stdout.write
 
-    def node(self, node: Node, *, hexdump: Callable[[], str] | None = None, line: str | None = None) -> None:
+    def node(
+        self,
+        node: Node,
+        *,
+        hexdump: Callable[[], str] | None = None,
+        line: str | None = None,
+        headless: Packet | None = None,
+    ) -> None:
+        """``headless``: ``node`` was described without its Chaos header, which is this packet's."""
         parts = []
         if self.fmt == "json":
             parts.append("[\n" if not self.count else ",\n")
-            parts.append(_JSON(node.to_json()))  # one packet a line: compact, and C-encoded
+            # one packet a line: compact, and C-encoded
+            parts.append(_JSON(node.to_json()) if headless is None else packet_json(node, headless))
         else:
             if self.count:
                 parts.append("\n")
@@ -322,6 +333,7 @@ def _decode_packets(
 ) -> int:
     src = open_source(source)
     out = _Out(fmt)
+    json_out = fmt == "json"
     layout = LAYOUTS[link]
     failed = False
     bad = 0
@@ -338,11 +350,15 @@ def _decode_packets(
                 bad += 1
                 out.node(_error_node(frame, frame.error, link))
                 continue
-            node = describe_packet(frame.packet, direction=direction, request=request)
+            packet = frame.packet
+            node = describe_packet(packet, direction=direction, request=request, header=not json_out)
             if frame.error is not None:
                 node.add("decode error", str(frame.error))
             failed = failed or _failed(node) or frame.error is not None
-            out.node(node, hexdump=_dump(frame.wire, node, frame.offset, link, layout))
+            if json_out:
+                out.node(node, headless=packet)
+            else:
+                out.node(node, hexdump=_dump(frame.wire, node, frame.offset, link, layout))
     except EmptyInputError as exc:
         out.close()
         click.echo(f"manip-decode: {exc.message}", err=True)
