@@ -289,9 +289,7 @@ def _decode_tables() -> tuple[list[float | None], list[float]]:
 _DECODE_BASE, _DECODE_SCALE = _decode_tables()
 
 
-# Not keyword-only, unlike its neighbours: CPython 3.11 specialises calls only to functions without
-# keyword-only parameters, and the generic call costs about a tenth of pack_f's time.
-def pack_f(x: FloatLike, rounding: Rounding = "half-even", underflow: Underflow = "zero") -> bytes:
+def pack_f(x: FloatLike, *, rounding: Rounding = "half-even", underflow: Underflow = "zero") -> bytes:
     """The four wire bytes of ``x``: ``[w0.lo, w0.hi, w1.lo, w1.hi]``."""
     if type(x) is float and rounding == "half-even":
         if F_MIN_NORMAL <= abs(x) < _FAST_HIGH:
