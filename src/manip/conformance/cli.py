@@ -40,6 +40,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from manip.commandline import configure_logging, version_option
+from manip.conformance.cli_options import known_failing_option, select_option, skip_option, strict_option
 from manip.conformance.client.cli import client_command
 from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.fuzz.cli import fuzz_command
@@ -119,7 +120,8 @@ def _number_option(name: str, kind: click.ParamType[Any, Any], default: float, h
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @version_option("manip-conform")
 def main() -> None:
-    """Conformance suite for servers of the Chaos manipulator protocol (MIT Puma/Cougar, 1985)."""
+    """Conformance suite for the Chaos manipulator protocol (MIT Puma/Cougar, 1985): its servers and
+    clients, and both ends of the Cougar wrist link."""
     configure_logging()
 
 
@@ -128,14 +130,8 @@ def main() -> None:
 
 @main.command(epilog=EXIT_CODES_HELP)
 @click.argument("host", required=False)
-@click.option(
-    "--select",
-    "select",
-    multiple=True,
-    metavar="PATTERN",
-    help="Run only cases matching PATTERN (glob per dot component, ** any depth; @FILE reads a list).",
-)
-@click.option("--skip", "skip", multiple=True, metavar="PATTERN", help="Leave out cases matching PATTERN.")
+@select_option
+@skip_option
 @click.option(
     "--clause",
     "clauses",
@@ -143,14 +139,8 @@ def main() -> None:
     metavar="ID",
     help="Run the cases that check clause ID (repeatable; with --select, a case either selects runs).",
 )
-@click.option(
-    "--known-failing",
-    "known_failing",
-    multiple=True,
-    metavar="@FILE|PATTERN",
-    help="Cases expected to fail: they still run; entries matching nothing or now passing fail the run.",
-)
-@click.option("--strict", is_flag=True, help="SHOULD failures count (without it they are warnings).")
+@known_failing_option
+@strict_option
 @click.option(
     "--seed",
     type=click.IntRange(0, 2**63 - 1),

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import click
 
+from manip.conformance.cli_options import known_failing_option, select_option, skip_option, strict_option
 from manip.conformance.client.runner import (
     DEFAULT_CLIENT_TIMEOUT,
     ClientEvents,
@@ -56,10 +57,8 @@ def _by_clause(patterns: tuple[str, ...], cases: list[Case]) -> list[Case]:
     show_default=True,
     help="The link the harness dials the judging server over.",
 )
-@click.option(
-    "--select", "--case", "select", multiple=True, metavar="PATTERN", help="Run only cases matching PATTERN."
-)
-@click.option("--skip", "skip", multiple=True, metavar="PATTERN", help="Leave out cases matching PATTERN.")
+@select_option
+@skip_option
 @click.option(
     "--clause",
     "clauses",
@@ -67,14 +66,8 @@ def _by_clause(patterns: tuple[str, ...], cases: list[Case]) -> list[Case]:
     metavar="PATTERN",
     help="Run only cases declaring a clause matching PATTERN.",
 )
-@click.option(
-    "--known-failing",
-    "known_failing",
-    multiple=True,
-    metavar="@FILE|PATTERN",
-    help="Cases expected to fail: they still run; entries matching nothing or now passing fail the run.",
-)
-@click.option("--strict", is_flag=True, help="SHOULD failures count (without it they are warnings).")
+@known_failing_option
+@strict_option
 @click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=None, help="Seed of every random choice.")
 @click.option(
     "--reply-timeout",

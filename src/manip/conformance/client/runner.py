@@ -45,7 +45,7 @@ from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
 from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.invariants import CLIENT_WIRE
 from manip.conformance.suite.results import CaseResult, LivenessCheck, RunReport
-from manip.conformance.suite.runner import case_seed
+from manip.conformance.suite.runner import blank_result
 from manip.conformance.suite.selection import PatternSet
 from manip.links import NcpConfig
 
@@ -369,34 +369,10 @@ async def _start(harness: HarnessProcess, report: RunReport, events: ClientEvent
 
 
 def _blank(config: ClientRunConfig, item: Case, outcome: Any, reason: str) -> CaseResult:
-    return CaseResult(
-        id=item.id,
-        clauses=item.clauses,
-        level=item.level,
-        kind=item.technique,
-        target=item.target,
-        hazard=item.hazard,
-        summary=item.summary,
-        outcome=outcome,
-        seed=case_seed(config.seed, item.id),
-        deadline=item.deadline_for(config.options),
-        reason=reason,
-        reproduce=shlex.join(
-            [
-                "manip-conform",
-                "client",
-                "--link",
-                config.link,
-                "--select",
-                item.id,
-                "--seed",
-                str(config.seed),
-                "--",
-                *config.argv,
-            ]
-        ),
-        known_failing=config.known_failing.matches(item.id),
-    )
+    selected = ["--link", config.link, "--select", item.id, "--seed", str(config.seed)]
+    reproduce = shlex.join(["manip-conform", "client", *selected, "--", *config.argv])
+    known = config.known_failing.matches(item.id)
+    return blank_result(item, outcome, reason, config.seed, config.options, reproduce, known)
 
 
 async def run_client_case(config: ClientRunConfig, session: Session, item: Case) -> CaseResult:

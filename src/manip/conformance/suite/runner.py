@@ -68,6 +68,33 @@ def case_seed(run_seed: int, case_id: str) -> int:
     return int.from_bytes(digest[:4], "big")
 
 
+def blank_result(
+    item: Case,
+    outcome: Outcome,
+    reason: str,
+    run_seed: int,
+    options: RunOptions,
+    reproduce: str,
+    known_failing: bool,
+) -> CaseResult:
+    """A case's result before it runs (or instead of running): what it is, its seed and deadline."""
+    return CaseResult(
+        id=item.id,
+        clauses=item.clauses,
+        level=item.level,
+        kind=item.technique,
+        target=item.target,
+        hazard=item.hazard,
+        summary=item.summary,
+        outcome=outcome,
+        seed=case_seed(run_seed, item.id),
+        deadline=item.deadline_for(options),
+        reason=reason,
+        reproduce=reproduce,
+        known_failing=known_failing,
+    )
+
+
 @dataclass
 class RunConfig:
     address: str
@@ -272,21 +299,9 @@ class Runner:
                 )
 
     def _blank(self, item: Case, outcome: Outcome, reason: str) -> CaseResult:
-        return CaseResult(
-            id=item.id,
-            clauses=item.clauses,
-            level=item.level,
-            kind=item.technique,
-            target=item.target,
-            hazard=item.hazard,
-            summary=item.summary,
-            outcome=outcome,
-            seed=case_seed(self.config.seed, item.id),
-            deadline=item.deadline_for(self.config.options),
-            reason=reason,
-            reproduce=self.reproduce(item),
-            known_failing=self.config.known_failing.matches(item.id),
-        )
+        config = self.config
+        known = config.known_failing.matches(item.id)
+        return blank_result(item, outcome, reason, config.seed, config.options, self.reproduce(item), known)
 
     def reproduce(self, item: Case) -> str:
         config = self.config
