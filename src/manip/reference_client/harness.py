@@ -221,7 +221,7 @@ class CaseRun:
             return
         spec = SPEC.requests_by_name[name]
         timeout = op.get("timeout")
-        kind = spec.response.kind
+        kind = spec.response.form
         extractor: Any = {"done": extract_done, "segment": extract_segment, "multi": extract_text}.get(
             kind, extract_values
         )
@@ -251,7 +251,7 @@ class CaseRun:
     def report_reply(self, ident: int | None, name: str, request: Request[Any], value: Any) -> None:
         spec = SPEC.requests_by_name[name]
         data = b"".join(request.responses)
-        kind = spec.response.kind
+        kind = spec.response.form
         values: dict[str, Any]
         raw: dict[str, Any]
         if kind == "done":

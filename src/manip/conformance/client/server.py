@@ -231,7 +231,7 @@ async def plain_answer(side: ServerSide, request: Packet) -> None:
             ErrorMessage("PUMA", "C", "UOP", "Unknown opcode ~", (request.opcode,)),
         )
         return
-    kind = op.response.kind
+    kind = op.response.form
     if kind == "done":
         await side.reply_payload(request, b"")
     elif kind == "segment":

@@ -125,7 +125,7 @@ def reply_expectation(
     op: RequestOpcode, payload: bytes, number: int
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The ``values`` and ``raw`` a reply carrying ``payload`` must be reported with."""
-    kind = op.response.kind
+    kind = op.response.form
     if kind == "done":
         return {}, {}
     if kind == "segment":

@@ -22,7 +22,7 @@ from manip.spec.constants import ServerOp
 from manip.spec.model import RequestOpcode
 from manip.spec.notation import octal
 
-DATA_REPLIES = [op for op in SPEC.requests.values() if op.response.kind == "data"]
+DATA_REPLIES = [op for op in SPEC.requests.values() if op.response.form == "data"]
 WITH_ARGS = [op for op in SPEC.requests.values() if op.request.fields]
 _MOVES = ("move", "straight-move")
 
