@@ -40,7 +40,14 @@ from rich.markup import escape
 from rich.table import Table
 
 from manip.commandline import configure_logging, version_option
-from manip.conformance.cli_options import known_failing_option, select_option, skip_option, strict_option
+from manip.conformance.cli_options import (
+    json_option,
+    junit_option,
+    known_failing_option,
+    select_option,
+    skip_option,
+    strict_option,
+)
 from manip.conformance.client.cli import client_command
 from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.fuzz.cli import fuzz_command
@@ -58,8 +65,6 @@ from manip.conformance.puma.target import (
 from manip.conformance.replay.cli import (
     check_output_paths,
     given,
-    json_option,
-    junit_option,
     print_by_clause,
     recording,
     replay_command,

@@ -1,11 +1,20 @@
-"""Command-line options the judging commands share (``run``, ``client``), defined once so that each
-means the same and reads the same in every ``--help``."""
+"""Command-line options the judging commands share (``run``, ``client``, ``verify``, ``replay``,
+``fuzz``), defined once so that each means the same and reads the same in every ``--help``."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
-__all__ = ["known_failing_option", "select_option", "skip_option", "strict_option"]
+__all__ = [
+    "json_option",
+    "junit_option",
+    "known_failing_option",
+    "select_option",
+    "skip_option",
+    "strict_option",
+]
 
 select_option = click.option(
     "--select",
@@ -27,4 +36,10 @@ known_failing_option = click.option(
 )
 strict_option = click.option(
     "--strict", is_flag=True, help="SHOULD failures count (without it they are warnings)."
+)
+json_option = click.option(
+    "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the JSON report."
+)
+junit_option = click.option(
+    "--junit", "junit_path", type=click.Path(dir_okay=False, path_type=Path), help="Write JUnit XML."
 )

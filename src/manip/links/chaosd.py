@@ -12,7 +12,6 @@ link whose peer is the host that dialled, learnt from the first frame's trailer.
 from __future__ import annotations
 
 import asyncio
-import socket
 from collections.abc import Callable
 
 from manip.codecs.framing import ChaosdFrameDecoder, encode_chaosd
@@ -20,7 +19,7 @@ from manip.codecs.packet import Packet
 
 from .errors import LinkError
 from .guard import LinkGuard, LinkLimits
-from .listener import BACKLOG, StreamListener
+from .listener import StreamListener, bind_unix
 from .stream import StreamLink, dial
 
 
@@ -61,13 +60,9 @@ async def serve_chaosd(
 ) -> StreamListener:
     """Listen as a chaosd daemon on a socket file at ``path`` (which must not exist yet); ``on_link``
     gets each host's link before any packet arrives on it."""
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     try:
-        sock.bind(path)
-        sock.listen(BACKLOG)
-        sock.setblocking(False)
+        sock = bind_unix(path)
     except OSError as exc:
-        sock.close()
         raise LinkError(f"cannot listen as chaosd on {path}: {exc}") from exc
 
     def factory() -> ChaosdHostLink:

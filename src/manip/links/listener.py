@@ -77,6 +77,19 @@ async def bind_stream(host: str, port: int, backlog: int = BACKLOG) -> list[sock
     return socks
 
 
+def bind_unix(path: str, backlog: int = BACKLOG) -> socket.socket:
+    """A listening Unix-domain stream socket at ``path`` (which must not exist yet).  Raises OSError."""
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        sock.bind(path)
+        sock.listen(backlog)
+        sock.setblocking(False)
+    except OSError:
+        sock.close()
+        raise
+    return sock
+
+
 class StreamListener:
     """Accepts connections on ``sockets`` and makes each a link with ``make_link`` (which gets the link
     to its driver before any byte is read), asking ``guard`` first.  Create it inside a running loop;

@@ -18,7 +18,7 @@ from manip.codecs.framing import TcpFrameDecoder, encode_tcp
 
 from .errors import LinkError
 from .guard import LinkGuard, LinkLimits
-from .listener import BACKLOG, StreamListener, bind_stream
+from .listener import StreamListener, bind_stream, bind_unix
 from .stream import StreamLink, dial
 
 
@@ -89,13 +89,9 @@ async def serve_unix(
 ) -> StreamListener:
     """Listen for links with the TCP link framing on a Unix-domain socket at ``path`` (which must not
     exist yet), under ``guard`` as :func:`serve_tcp` is."""
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     try:
-        sock.bind(path)
-        sock.listen(BACKLOG)
-        sock.setblocking(False)
+        sock = bind_unix(path)
     except OSError as exc:
-        sock.close()
         raise LinkError(f"cannot listen on unix://{path}: {exc}") from exc
     return _listener([sock], my_addr, on_link, guard)
 

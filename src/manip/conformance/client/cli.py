@@ -10,7 +10,14 @@ from pathlib import Path
 
 import click
 
-from manip.conformance.cli_options import known_failing_option, select_option, skip_option, strict_option
+from manip.conformance.cli_options import (
+    json_option,
+    junit_option,
+    known_failing_option,
+    select_option,
+    skip_option,
+    strict_option,
+)
 from manip.conformance.client.runner import (
     DEFAULT_CLIENT_TIMEOUT,
     ClientEvents,
@@ -20,7 +27,7 @@ from manip.conformance.client.runner import (
 from manip.conformance.output.console import make_console, progress_bar
 from manip.conformance.output.documents import document_options, write_documents
 from manip.conformance.output.report import write_json, write_junit
-from manip.conformance.replay.cli import check_output_paths, json_option, junit_option
+from manip.conformance.replay.cli import check_output_paths
 from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import CaseResult, RunReport

@@ -34,6 +34,7 @@ from click.core import ParameterSource
 from rich.console import Console
 from rich.markup import escape
 
+from manip.conformance.cli_options import json_option, junit_option, strict_option
 from manip.conformance.output.console import make_console
 from manip.conformance.output.documents import document_options, write_documents
 from manip.conformance.output.report import clause_lines, failure_text, write_json, write_junit
@@ -52,8 +53,6 @@ __all__ = [
     "EXIT_CODES_HELP",
     "check_output_paths",
     "given",
-    "json_option",
-    "junit_option",
     "print_by_clause",
     "recording",
     "replay_command",
@@ -188,12 +187,6 @@ def _run(
 
 
 # Shared with ``manip-conform run``.
-json_option = click.option(
-    "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the JSON report."
-)
-junit_option = click.option(
-    "--junit", "junit_path", type=click.Path(dir_okay=False, path_type=Path), help="Write JUnit XML."
-)
 _session_option = click.option(
     "--session",
     "sessions",
@@ -211,7 +204,7 @@ _file_argument = click.argument("file", type=click.Path(exists=True, dir_okay=Fa
 @click.command("verify", epilog=EXIT_CODES_HELP)
 @_file_argument
 @_session_option
-@click.option("--strict", is_flag=True, help="SHOULD failures count (without it they are warnings).")
+@strict_option
 @click.option(
     "--judge",
     type=click.Choice(["server", "client", "both"]),

@@ -94,11 +94,12 @@ async def npr_every_cycle(ctx: CaseContext) -> None:
         ctx.skip(f"the compliant segment {segment} was not reported complete within {SEGMENT_WITHIN:g} s")
     npr = _npr(judge, mark)
     ticks = [h.tick for h in npr]
+    wrong = _off_cycle(ticks, late_allowed=not is_virtual())
     ctx.expect(
-        len(npr) >= 3 and not _off_cycle(ticks, late_allowed=not is_virtual()),
+        len(npr) >= 3 and not wrong,
         clause="puma.compliance.npr-every-cycle",
         expected="one New Position and Rate for every servo cycle of the compliant segment",
-        actual=f"{len(npr)} NPR on ticks {ticks[:1]}..{ticks[-1:]}: {_off_cycle(ticks, not is_virtual())}",
+        actual=f"{len(npr)} NPR on ticks {ticks[:1]}..{ticks[-1:]}: {wrong}",
     )
     # The correction of cycle k (commanded_k - nominal_k) shows in the next NPR's sensed angles:
     # sensed_{k+1} - nominal_k.  It may use only NTDs sent before cycle k's NPR, and all but the last few.
