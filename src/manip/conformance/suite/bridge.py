@@ -183,6 +183,47 @@ async def run_in_worker(
         raise
 
 
+class _Workers:
+    """Daemon threads that run one job at a time and are kept for the next.
+
+    Hypothesis gives every thread its own generator and registers it with a full garbage collection
+    (``hypothesis.internal.entropy.register_random``): with a new thread for every case, that collection
+    cost a few milliseconds per case in a small process and tens of them in a large one.  A thread left
+    idle for ``idle_seconds`` ends; a job that never returns keeps only its own thread."""
+
+    def __init__(self, name: str, idle_seconds: float = 30.0) -> None:
+        self._name = name
+        self._idle_seconds = idle_seconds
+        self._lock = threading.Lock()
+        self._idle: list[queue.SimpleQueue[Callable[[], None]]] = []
+
+    def submit(self, job: Callable[[], None]) -> None:
+        """Run ``job`` on an idle thread, or on a new one if none is idle; ``job`` must not raise."""
+        with self._lock:
+            inbox = self._idle.pop() if self._idle else None
+        if inbox is None:
+            inbox = queue.SimpleQueue()
+            threading.Thread(target=self._serve, args=(inbox,), name=self._name, daemon=True).start()
+        inbox.put(job)
+
+    def _serve(self, inbox: queue.SimpleQueue[Callable[[], None]]) -> None:
+        while True:
+            try:
+                job = inbox.get(timeout=self._idle_seconds)
+            except queue.Empty:
+                with self._lock:
+                    if inbox in self._idle:  # else a job was handed over just now: take it
+                        self._idle.remove(inbox)
+                        return
+                continue
+            job()
+            with self._lock:
+                self._idle.append(inbox)
+
+
+_WORKERS = _Workers("manip-hypothesis")
+
+
 async def _lockstep(fn: Callable[[Bridge], T], bridge: Bridge) -> T:
     """Run ``fn(bridge)`` in a thread that takes turns with this one (see the module docstring)."""
     steps: queue.SimpleQueue[_Step[Any]] = queue.SimpleQueue()
@@ -194,10 +235,9 @@ async def _lockstep(fn: Callable[[Bridge], T], bridge: Bridge) -> T:
             outcome.settle(fn(bridge))
         except BaseException as exc:  # handed to the loop thread
             outcome.settle(error=exc)
-        steps.put(_Step(None))
+        steps.put(_Step(None))  # the end marker: the worker is done with this run
 
-    worker = threading.Thread(target=work, name="manip-hypothesis", daemon=True)
-    worker.start()
+    _WORKERS.submit(work)
     while True:
         try:  # blocks the loop on purpose: the simulated world waits for the worker
             step = steps.get(timeout=STEP_TIMEOUT)
@@ -213,24 +253,18 @@ async def _lockstep(fn: Callable[[Bridge], T], bridge: Bridge) -> T:
         except asyncio.CancelledError:
             bridge.stop()
             step.settle(error=StopRun("the loop cancelled the step"))
-            _drain(steps, worker)
+            _drain(steps)
             raise
         except BaseException as exc:
             step.settle(error=exc)
-    worker.join()
     return outcome.result(0)
 
 
-def _drain(steps: queue.SimpleQueue[_Step[Any]], worker: threading.Thread) -> None:
-    """After a cancellation: refuse the worker's remaining steps until it has ended."""
-    while worker.is_alive() or not steps.empty():
-        try:
-            step = steps.get(timeout=0.05)
-        except queue.Empty:
-            continue
-        if step.coro is not None:
-            step.coro.close()
-            step.settle(error=StopRun("cancelled"))
+def _drain(steps: queue.SimpleQueue[_Step[Any]]) -> None:
+    """After a cancellation: refuse the worker's remaining steps until its end marker."""
+    while (step := steps.get()).coro is not None:
+        step.coro.close()
+        step.settle(error=StopRun("cancelled"))
 
 
 async def connect_fresh(ctx: CaseContext) -> Probe:
