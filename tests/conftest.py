@@ -27,12 +27,41 @@ Servers in tests, the shared ways (``tests/servers.py``; use these rather than a
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Iterator
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import pytest
-from hypothesis import HealthCheck, is_hypothesis_test, settings
-from hypothesis.errors import InvalidArgument
+
+def _cache_bytecode_in_the_venv() -> None:
+    """Where the environment forbids bytecode files (``PYTHONDONTWRITEBYTECODE``, usually to keep
+    ``__pycache__`` out of source trees), keep them in the test run's virtualenv instead.
+
+    Without any cache every xdist worker rewrites and compiles all test modules (about 5 s of CPU each)
+    and every Python process a test starts compiles manip again (0.1 s or more); with it, the source
+    tree still gets no ``__pycache__``.  Set for this process and, through the environment, for the
+    workers and the commands the tests start.  Left alone where Python writes bytecode anyway, or where
+    the interpreter's prefix is not a writable virtualenv."""
+    if not sys.dont_write_bytecode or sys.prefix == sys.base_prefix:
+        return
+    prefix = Path(sys.prefix) / "pycache"
+    try:
+        prefix.mkdir(exist_ok=True)
+    except OSError:
+        return
+    if not os.access(prefix, os.W_OK):
+        return
+    sys.pycache_prefix = str(prefix)
+    sys.dont_write_bytecode = False
+    os.environ["PYTHONPYCACHEPREFIX"] = str(prefix)
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+
+
+_cache_bytecode_in_the_venv()
+
+import pytest  # noqa: E402  # after the bytecode setting, so that what follows is cached too
+from hypothesis import HealthCheck, is_hypothesis_test, settings  # noqa: E402
+from hypothesis.errors import InvalidArgument  # noqa: E402
 
 if TYPE_CHECKING:
     from manip.reference_server.driver import ReferenceServer
