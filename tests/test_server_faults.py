@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Callable
+from itertools import pairwise
 from typing import TypeVar
 
 import pytest
@@ -499,6 +500,40 @@ def _segments_reported(c: Client) -> list[int]:
 @covers(Fault.SEGMENT_REPORT_PREVIOUS)
 def test_segment_report_previous() -> None:
     assert pair(Fault.SEGMENT_REPORT_PREVIOUS, _segments_reported) == ([1, 2], [0, 1])
+
+
+def _joint_1_every_4_ms(c: Client) -> list[tuple[float, float]]:
+    """(time, joint 1) every 4 ms through three queued moves of joint 1, read as Joint angles would be."""
+    for step in (10.0, 20.0, 30.0):
+        c.one("set-joint-angles", joints=(READY[0] + step, *READY[1:]))
+    start, out = c.now, []
+    while c.session.arm.moving:
+        assert c.now - start < 30.0, "the arm never came to rest"
+        c.now += 0.004
+        c.session.tick(c.now)
+        out.append((c.now - start, c.session.arm.actual[0]))
+    return out
+
+
+@covers(Fault.SEGMENTS_STOP)
+def test_segments_stop() -> None:
+    def longest_rest(c: Client) -> float:
+        """Longest time joint 1 stays put between its first and its last change (ms)."""
+        changes = [t for (t, a), (_, b) in pairwise(_joint_1_every_4_ms(c)) if a != b]
+        return round(max(b - a for a, b in pairwise(changes)) * 1000)
+
+    clean, faulty = pair(Fault.SEGMENTS_STOP, longest_rest)
+    assert clean == 16 and faulty >= 100
+
+
+@covers(Fault.SERVO_DOUBLE_RATE)
+def test_servo_double_rate() -> None:
+    def shortest_change(c: Client) -> float:
+        """Shortest time between two changes of joint 1 (ms)."""
+        changes = [t for (t, a), (_, b) in pairwise(_joint_1_every_4_ms(c)) if a != b]
+        return round(min(b - a for a, b in pairwise(changes)) * 1000)
+
+    assert pair(Fault.SERVO_DOUBLE_RATE, shortest_change) == (16, 8)
 
 
 @covers(Fault.READY_LEAVES_WRIST)

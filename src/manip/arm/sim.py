@@ -406,6 +406,10 @@ class ArmSim:
         the nominal goal."""
         self.increment_from_actual = False
         """Resolve incremental moves from where the arm stands, not where the queue ends (a faulty server)."""
+        self.stop_between_segments: float | None = None
+        """Seconds a faulty server rests between queued joint segments instead of blending them (None:
+        they blend, Part II §5.1)."""
+        self._resting_since: float | None = None
 
         self._next_segment = 1
         self._interp = MoveInterpolator(here, limits, 1.0)
@@ -700,7 +704,9 @@ class ArmSim:
                     for a, b, lo, hi in zip(nominal, self._correction, lim.lower, lim.upper, strict=True)
                 ]
             )
-        if sample.done:
+        if sample.done and self.stop_between_segments is not None:
+            self._rest_then_resume(q, t)
+        elif sample.done:
             if self._compliant_tail:
                 self._restart(q, t)  # rebase what waits behind the episode
             if self._backlog and isinstance(self._backlog[0], _PathPacket):
@@ -709,6 +715,19 @@ class ArmSim:
                 self._playback = self._play(self._from(packet, q))
                 self._scheme_now = None
         return q
+
+    def _rest_then_resume(self, here: Joints, t: float) -> None:
+        """The faulty server of :attr:`stop_between_segments`: after each segment, rest that long, then
+        start what waits from where the arm stands."""
+        if self._resting_since is None:
+            self._resting_since = t
+        waiting = self._backlog and isinstance(self._backlog[0], _JointPacket)
+        if waiting and t - self._resting_since >= (self.stop_between_segments or 0.0):
+            self._resting_since = None
+            self._interp = MoveInterpolator(here, self.limits, self.speed)
+            packet = self._backlog.popleft()
+            assert isinstance(packet, _JointPacket)
+            self._interp.enqueue(packet.request, t)
 
     def _restart(self, here: Joints, t: float) -> None:
         """A fresh interpolator at rest on ``here`` (where the arm stands at ``t``), fed the joint packets
@@ -821,6 +840,7 @@ class ArmSim:
             and self._playback is None
             and not self._backlog
             and self._joins(packet)
+            and (self.stop_between_segments is None or not self._interp.queued)
         ):
             self._interp.enqueue(packet.request, now)
             self._compliant_tail = packet.request.scheme.compliant

@@ -168,6 +168,13 @@ def main() -> None:
 @_number_option(
     "--deadline-scale", click.FloatRange(0.01), 1.0, "Multiply every case deadline (slow links, real arms)."
 )
+@_number_option(
+    "--target-time-scale",
+    click.FloatRange(min=0.01),
+    1.0,
+    "HOST's arm runs this many times faster than real time (a simulated server started with --time-scale):"
+    " its 16 ms servo cycle is judged at that rate (erratum server-time-scale).",
+)
 @click.option(
     "--broken-after",
     type=click.FloatRange(min=0.1),
@@ -272,6 +279,7 @@ def run(
     allow_motion: bool,
     reply_timeout: float,
     deadline_scale: float,
+    target_time_scale: float,
     broken_after: float | None,
     json_path: Path | None,
     junit_path: Path | None,
@@ -304,6 +312,8 @@ def run(
         raise click.UsageError(str(exc)) from None
     if host and server_faults:
         raise click.UsageError("--server-fault applies to the embedded server only (omit HOST)")
+    if not host and target_time_scale != 1.0:
+        raise click.UsageError("--target-time-scale describes HOST's clock (the embedded server keeps its own)")
     config_faults = None
     if server_faults:
         try:
@@ -384,6 +394,7 @@ def run(
         strict=strict,
         reply_timeout=reply_timeout,
         deadline_scale=deadline_scale,
+        time_scale=target_time_scale,
         max_examples=max_examples,
         address=address,
         broken_after=broken_after,
@@ -395,6 +406,8 @@ def run(
         extra.append("--strict")
     if max_examples != 25:
         extra += ["--max-examples", str(max_examples)]
+    if target_time_scale != 1.0:
+        extra += ["--target-time-scale", f"{target_time_scale:g}"]
     if target_kind == "hardware":
         extra += ["--target", "hardware"] + (["--allow-motion"] if allow_motion else [])
     for fault in server_faults:

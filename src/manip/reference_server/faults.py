@@ -73,6 +73,8 @@ class Fault(enum.StrEnum):
     SEGMENT_REPORT_PREVIOUS = "segment-report-previous"
     COLLISION_UNCHECKED = "collision-unchecked"
     CLOSE_KEEPS_MOVING = "close-keeps-moving"
+    SEGMENTS_STOP = "segments-stop"
+    SERVO_DOUBLE_RATE = "servo-double-rate"
     WRIST_TIMEOUT_SILENT = "wrist-timeout-silent"
     UNDERFLOW_DIRTY_ZERO = "underflow-dirty-zero"
     NOT_FINITE_RESERVED = "not-finite-reserved"
@@ -395,6 +397,19 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "continues its segment counter.",
                 "connect.close-stops-arm",
                 "connect.per-connection-state",
+            ),
+            _info(
+                Fault.SEGMENTS_STOP,
+                "protocol",
+                "Queued joint segments do not blend: the arm comes to rest after each and waits 0.1 s "
+                "before the next.",
+                "motion.smooth-transitions",
+            ),
+            _info(
+                Fault.SERVO_DOUBLE_RATE,
+                "protocol",
+                "The move process runs every 8 ms instead of 16: the angles change twice per servo cycle.",
+                "motion.servo-period",
             ),
             _info(
                 Fault.WRIST_TIMEOUT_SILENT,

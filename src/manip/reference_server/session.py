@@ -191,6 +191,8 @@ Handler = Callable[["ServerSession", Mapping[str, Value], float], dict[str, Any]
 """A request handler: the decoded values and the time in, the reply's values out (``{}`` for done)."""
 
 _FLOAT_FAULTS: Final = frozenset({Fault.UNDERFLOW_DIRTY_ZERO, Fault.NOT_FINITE_RESERVED})
+SEGMENTS_STOP_REST_S: Final = 0.1
+"""How long the segments-stop fault rests between queued segments: clearly more than a blend's pause."""
 _RESERVED_OPERAND: Final = 0x8000
 """First word of a reserved-operand float: sign 1, exponent 0."""
 _SEGMENT_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
@@ -232,6 +234,10 @@ class ServerSession:
         if Fault.COLLISION_UNCHECKED in faults:
             self.arm.collision_tol_deg = math.inf
         self.arm.increment_from_actual = Fault.INCREMENT_FROM_ACTUAL in faults
+        if Fault.SEGMENTS_STOP in faults:
+            self.arm.stop_between_segments = SEGMENTS_STOP_REST_S
+        if Fault.SERVO_DOUBLE_RATE in faults:
+            self.arm.tick_period /= 2
         self.arm.collision_test_compliant = Fault.COMPLIANT_COLLISION_TEST in faults
         self.arm.hold_compliant_end = Fault.COMPLIANT_SNAP_BACK not in faults
         use_faults = getattr(self.wrist, "use_faults", None)

@@ -100,6 +100,9 @@ class RunOptions:
     reply_timeout: float = DEFAULT_REPLY_TIMEOUT
     connect_timeout: float = DEFAULT_CONNECT_TIMEOUT
     deadline_scale: float = 1.0
+    time_scale: float = 1.0
+    """How many times faster than real time the target's arm runs (a simulated server with a time scale):
+    the motion cases judge the servo cycle, and sample, at that rate."""
     max_examples: int = 25
     address: str = ""
     """The target's link address, as given (for messages and reproduce commands)."""

@@ -149,6 +149,7 @@ class Runner:
                 "max_examples": config.options.max_examples,
                 "reply_timeout": config.options.reply_timeout,
                 "deadline_scale": config.options.deadline_scale,
+                "time_scale": config.options.time_scale,
                 "select": [p.text for p in config.select.patterns],
                 "skip": [p.text for p in config.skip.patterns],
                 "known_failing": [p.text for p in config.known_failing.patterns],
