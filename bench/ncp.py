@@ -23,15 +23,20 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
+import json
 import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import Any
 
 from manip.codecs.framing import encode_tcp
 from manip.codecs.packet import Packet
 from manip.links import ChaosConnection, ChaosServer, NcpOptions, open_connection, start_server
+from manip.links.stream import StreamLink
 
 PAYLOAD = bytes(range(66))
 FRAME = encode_tcp(Packet(0o200, 0o440, 0x101, 0o401, 0x201, 2, 1, PAYLOAD))
@@ -132,25 +137,103 @@ class Servers:
     raw_port: int
     echo_port: int
     sink_port: int
+    hop_port: int
 
 
-async def _start_servers(options: NcpOptions) -> tuple[Servers, asyncio.Server, ChaosServer, ChaosServer]:
+@dataclass
+class Running:
+    """The servers of one placement: the raw and hop echoes, the NCP echo and the sink."""
+
+    ports: Servers
+    raw: list[asyncio.Server]
+    chaos: list[ChaosServer]
+
+    async def aclose(self) -> None:
+        for server in self.chaos:
+            await server.aclose()
+        for raw in self.raw:
+            raw.close()
+
+
+async def _start_servers(options: NcpOptions) -> Running:
     loop = asyncio.get_running_loop()
     raw = await loop.create_server(_Echo, "127.0.0.1", 0)
+    hop = await loop.create_server(_HopEcho, "127.0.0.1", 0)
     echo = await start_server("tcp://127.0.0.1:0", "ECHO", _echo_handler, options=options)
     sink = await start_server("tcp://127.0.0.1:0", "SINK", _sink_handler, options=options)
-    ports = Servers(raw.sockets[0].getsockname()[1], echo.port, sink.port)
-    return ports, raw, echo, sink
+    raw_port, hop_port = (server.sockets[0].getsockname()[1] for server in (raw, hop))
+    return Running(Servers(raw_port, echo.port, sink.port, hop_port), [raw, hop], [echo, sink])
 
 
-async def _serve_until_stdin_closes(options: NcpOptions) -> None:
-    """The child process of ``split`` mode: print the ports, serve until the parent closes stdin."""
-    ports, raw, echo, sink = await _start_servers(options)
-    print(ports.raw_port, ports.echo_port, ports.sink_port, flush=True)
-    await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)
-    await echo.aclose()
-    await sink.aclose()
-    raw.close()
+@contextlib.contextmanager
+def timed_server_work(server_ports: set[int]) -> Iterator[dict[str, list[float]]]:
+    """Time the servers' own work per packet in this process, in seconds: ``raw``, the raw echo's
+    ``data_received`` (read to written); ``ncp``, an NCP server link's ``data_received`` to the return of
+    the ``send`` that answers it (decode, NCP, the task hop to the handler, encode, write), on links whose
+    local port is in ``server_ports`` (filled in by the caller once the servers listen).  The same code
+    timed in one event loop and across processes tells what a process's wake-up does to it."""
+    work: dict[str, list[float]] = {"raw": [], "ncp": []}
+    clock = time.perf_counter
+    received, sent, raw_received = StreamLink.data_received, StreamLink.send, _Echo.data_received
+    started: dict[int, float] = {}
+
+    def data_received(link: StreamLink, data: bytes) -> None:
+        transport = link.transport
+        if transport is not None and transport.get_extra_info("sockname")[1] in server_ports:
+            started[id(link)] = clock()
+        received(link, data)
+
+    def send(link: StreamLink, packet: Packet, next_hop: int | None = None) -> bool:
+        ok = sent(link, packet, next_hop)
+        t0 = started.pop(id(link), None)
+        if t0 is not None and len(packet.data) == len(PAYLOAD):
+            work["ncp"].append(clock() - t0)
+        return ok
+
+    def echo_received(echo: _Echo, data: bytes) -> None:
+        t0 = clock()
+        raw_received(echo, data)
+        work["raw"].append(clock() - t0)
+
+    wrappers: dict[tuple[type, str], Callable[..., Any]] = {
+        (StreamLink, "data_received"): data_received,
+        (StreamLink, "send"): send,
+        (_Echo, "data_received"): echo_received,
+    }
+    for (cls, name), wrapper in wrappers.items():
+        setattr(cls, name, wrapper)
+    try:
+        yield work
+    finally:
+        for (cls, name), original in {
+            (StreamLink, "data_received"): received,
+            (StreamLink, "send"): sent,
+            (_Echo, "data_received"): raw_received,
+        }.items():
+            setattr(cls, name, original)
+
+
+def _timing(timed: bool, listening: set[int]) -> contextlib.AbstractContextManager[dict[str, list[float]]]:
+    return timed_server_work(listening) if timed else contextlib.nullcontext({})
+
+
+async def _serve_until_stdin_closes(options: NcpOptions, timed: bool) -> None:
+    """The child process of ``split`` mode: print the ports, serve until the parent closes stdin; with
+    ``timed``, then print the median server work per packet (:func:`timed_server_work`) as JSON."""
+    listening: set[int] = set()
+    with _timing(timed, listening) as work:
+        running = await _start_servers(options)
+        ports = running.ports
+        listening.add(ports.echo_port)
+        print(ports.raw_port, ports.echo_port, ports.sink_port, ports.hop_port, flush=True)
+        await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)
+        await running.aclose()
+    if timed:
+        print(json.dumps(_medians(work)), flush=True)
+
+
+def _medians(work: dict[str, list[float]]) -> dict[str, float]:
+    return {k: statistics.median(v) for k, v in work.items() if v}
 
 
 def _percentile(samples: list[float], q: float) -> float:
@@ -244,15 +327,16 @@ async def _throughput(ports: Servers, packets: int, options: NcpOptions) -> None
     print(f"    {rate:,.0f} packets/s ({mb:.2f} MB/s of data); the sender waited {waits} times")
 
 
-async def hop_bound(rounds: int) -> tuple[float, float]:
-    """p50 round trips (s) of the raw echo and of the same echo answering from a task, one event loop,
-    alternating: what one task hop per packet costs, before any protocol work."""
+async def hop_bound(rounds: int, ports: Servers | None = None) -> tuple[float, float]:
+    """p50 round trips (s) of the raw echo and of the same echo answering from a task, alternating: what
+    one task hop per packet costs, before any protocol work.  Servers on this loop, or at ``ports``."""
     loop = asyncio.get_running_loop()
-    servers = [await loop.create_server(cls, "127.0.0.1", 0) for cls in (_Echo, _HopEcho)]
-    clients = []
-    for server in servers:
-        port = server.sockets[0].getsockname()[1]
-        clients.append(await loop.create_connection(_EchoClient, "127.0.0.1", port))
+    running = await _start_servers(NcpOptions()) if ports is None else None
+    where = running.ports if running is not None else ports
+    assert where is not None
+    clients = [
+        await loop.create_connection(_EchoClient, "127.0.0.1", p) for p in (where.raw_port, where.hop_port)
+    ]
     samples: list[list[float]] = [[], []]
     clock = time.perf_counter
     for i in range(rounds + rounds // 10):
@@ -263,37 +347,58 @@ async def hop_bound(rounds: int) -> tuple[float, float]:
                 samples[k].append(clock() - t0)
     for transport, _ in clients:
         transport.close()
-    for server in servers:
-        server.close()
+    if running is not None:
+        await running.aclose()
     return statistics.median(samples[0]), statistics.median(samples[1])
 
 
-async def same_loop_round_trips(rounds: int, trials: int, options: NcpOptions) -> RoundTrips:
+@dataclass
+class Placement:
+    """One placement's round trips, the task-hop bound, and (when timed) the servers' work per packet."""
+
+    trips: RoundTrips
+    raw_p50: float
+    hop_p50: float
+    work: dict[str, float]
+
+
+async def same_loop_round_trips(
+    rounds: int, trials: int, options: NcpOptions, timed: bool = False
+) -> Placement:
     """Round trips with client and servers on this event loop (for bench/all.py)."""
-    ports, raw, echo, sink = await _start_servers(options)
-    try:
-        return await measure_round_trips(ports, rounds, trials, options)
-    finally:
-        await echo.aclose()
-        await sink.aclose()
-        raw.close()
+    listening: set[int] = set()
+    with _timing(timed, listening) as work:
+        running = await _start_servers(options)
+        listening.add(running.ports.echo_port)
+        try:
+            trips = await measure_round_trips(running.ports, rounds, trials, options)
+        finally:
+            await running.aclose()
+    raw_p50, hop_p50 = await hop_bound(rounds)
+    return Placement(trips, raw_p50, hop_p50, _medians(work))
 
 
-async def split_round_trips(rounds: int, trials: int, options: NcpOptions) -> RoundTrips:
+async def split_round_trips(rounds: int, trials: int, options: NcpOptions, timed: bool = False) -> Placement:
     """Round trips against servers in a child process (for bench/all.py)."""
-    child = _serve_in_child(options)
+    child = _serve_in_child(options, timed)
     assert child.stdin is not None and child.stdout is not None
+    loop = asyncio.get_running_loop()
     try:
-        line = await asyncio.get_running_loop().run_in_executor(None, child.stdout.readline)
-        return await measure_round_trips(Servers(*map(int, line.split())), rounds, trials, options)
+        line = await loop.run_in_executor(None, child.stdout.readline)
+        ports = Servers(*map(int, line.split()))
+        trips = await measure_round_trips(ports, rounds, trials, options)
+        raw_p50, hop_p50 = await hop_bound(rounds, ports)
     finally:
         child.stdin.close()
-        child.wait(timeout=10)
+    work = json.loads(await loop.run_in_executor(None, child.stdout.readline) or "{}") if timed else {}
+    child.wait(timeout=10)
+    return Placement(trips, raw_p50, hop_p50, work)
 
 
-def _serve_in_child(options: NcpOptions) -> subprocess.Popen[str]:
+def _serve_in_child(options: NcpOptions, timed: bool = False) -> subprocess.Popen[str]:
     return subprocess.Popen(
-        [sys.executable, __file__, "--serve", "--window", str(options.window)],
+        [sys.executable, __file__, "--serve", "--window", str(options.window)]
+        + (["--timed"] if timed else []),
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
@@ -301,14 +406,12 @@ def _serve_in_child(options: NcpOptions) -> subprocess.Popen[str]:
 
 
 async def _same(ns: argparse.Namespace, options: NcpOptions) -> None:
-    ports, raw, echo, sink = await _start_servers(options)
+    running = await _start_servers(options)
     try:
-        await _round_trips(ports, ns.rounds, ns.trials, options)
-        await _throughput(ports, ns.packets, options)
+        await _round_trips(running.ports, ns.rounds, ns.trials, options)
+        await _throughput(running.ports, ns.packets, options)
     finally:
-        await echo.aclose()
-        await sink.aclose()
-        raw.close()
+        await running.aclose()
 
 
 async def _split(ns: argparse.Namespace, options: NcpOptions) -> None:
@@ -334,10 +437,11 @@ def main() -> None:
     parser.add_argument("--packets", type=int, default=20000)
     parser.add_argument("--window", type=int, default=15)
     parser.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--timed", action="store_true", help=argparse.SUPPRESS)
     ns = parser.parse_args()
     options = NcpOptions(window=ns.window)
     if ns.serve:
-        asyncio.run(_serve_until_stdin_closes(options))
+        asyncio.run(_serve_until_stdin_closes(options, ns.timed))
         return
     print(f"Python {sys.version.split()[0]}, {sys.platform}")
     if ns.mode in ("same", "both"):
