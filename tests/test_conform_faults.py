@@ -159,7 +159,8 @@ def test_clean_server_passes_every_case() -> None:
 def test_protocol_fault_is_caught(fault: Fault) -> None:
     faults = FaultSet.parse([fault.value, *CONDITIONS.get(fault, ())])
     cases = cases_for(fault)
-    report = run_with_wrist(faults, cases) if fault in VIRTUAL_FAULTS else asyncio.run(run_suite(faults, cases))
+    virtual = fault in VIRTUAL_FAULTS
+    report = run_with_wrist(faults, cases) if virtual else asyncio.run(run_suite(faults, cases))
     caught = [r for r in report.results if r.outcome in CAUGHT]
     errors = [(r.id, r.reason) for r in report.results if r.outcome == "error"]
     shown = ", ".join(

@@ -313,7 +313,9 @@ def run(
     if host and server_faults:
         raise click.UsageError("--server-fault applies to the embedded server only (omit HOST)")
     if not host and target_time_scale != 1.0:
-        raise click.UsageError("--target-time-scale describes HOST's clock (the embedded server keeps its own)")
+        raise click.UsageError(
+            "--target-time-scale describes HOST's clock (the embedded server keeps its own)"
+        )
     config_faults = None
     if server_faults:
         try:

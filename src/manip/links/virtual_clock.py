@@ -93,9 +93,18 @@ class VirtualClockLoop(asyncio.SelectorEventLoop):
         return self._now
 
     def advance(self, seconds: float) -> None:
-        """Move the clock forward (the selector does this when the loop is idle)."""
+        """Move the clock forward (the selector does this when the loop is idle).
+
+        The clock lands on whole nanoseconds (the float of the first one at or after the instant asked
+        for, so whatever waits for that instant finds it has come): a capture's times are whole
+        nanoseconds, so a replay of it reaches exactly the instants of the run, and what happens at one
+        instant (a request and a servo tick) happens alike in both."""
         if seconds > 0:
-            self._now += seconds
+            target = self._now + seconds
+            ns = round(target * 1e9)
+            if ns / 1e9 < target:
+                ns += 1
+            self._now = ns / 1e9
             self.jumps += 1
 
     @contextlib.contextmanager
