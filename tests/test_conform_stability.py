@@ -150,6 +150,23 @@ def test_a_simulated_run_capture_replays_cleanly(tmp_path: Path) -> None:
     assert all("never opened" in reason for reason in skipped)  # the refused second client only
 
 
+@pytest.mark.parametrize("seed", [1, 2, 3, 6, 7])
+def test_captures_of_motion_replay_exactly(tmp_path: Path, seed: int) -> None:
+    # A segment ending on a servo tick once ended a tick later in the replay than in the run (the run's
+    # request instants carried sub-nanosecond noise that a capture's nanoseconds cannot keep), and the
+    # replay then failed the segment report's request number.
+    capture = tmp_path / "motion.mcap"
+    motion = ("server.motion.queued-segments", "server.motion.straight-line", "server.motion.ready")
+    code, output = _invoke("--seed", str(seed), "-q", "--record", str(capture), *_select(motion))
+    assert code == ExitCode.CONFORMANT, output
+    result = CliRunner().invoke(main, ["replay", str(capture), "-q"])
+    assert result.exit_code == ExitCode.CONFORMANT, result.output
+
+
+def _select(case_ids: tuple[str, ...]) -> list[str]:
+    return [arg for case_id in case_ids for arg in ("--select", case_id)]
+
+
 # The simulated world: everything that runs on the run's loop in virtual time.  Reading the wall clock
 # here makes a verdict depend on how busy the machine is (a case once timed a move with
 # time.monotonic and failed at random under load).

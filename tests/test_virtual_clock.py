@@ -8,6 +8,8 @@ import tempfile
 import time
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from manip.links import AddressError, open_connection, parse_address, start_server, virtual_clock
 from manip.links.virtual_clock import VirtualClockLoop, is_virtual
@@ -33,6 +35,26 @@ def test_idle_time_is_skipped_and_timers_keep_their_order() -> None:
     assert elapsed == pytest.approx(7200.0)
     assert [name for name, _ in fired] == ["a", "b", "c"]
     assert [t for _, t in fired] == pytest.approx([5.0, 3600.0, 7200.0])
+
+
+@given(st.lists(st.floats(1e-12, 5.0), min_size=1, max_size=40))
+def test_the_clock_lands_on_whole_nanoseconds_never_before_a_timer(delays: list[float]) -> None:
+    """Every instant the clock jumps to is the float of a whole nanosecond, at or after the timer it
+    jumped for: a capture's nanosecond times then name the run's instants exactly."""
+
+    async def main() -> list[tuple[float, float]]:
+        loop = asyncio.get_running_loop()
+        seen = []
+        for delay in delays:
+            due = loop.time() + delay
+            await asyncio.sleep(delay)
+            seen.append((due, loop.time()))
+        return seen
+
+    for due, now in virtual_clock.run(main(), virtual=True):
+        assert round(now * 1e9) / 1e9 == now
+        assert now >= due - 1e-9  # a timer within the loop's 1 ns resolution is due
+        assert now - due < 2e-9
 
 
 def test_the_clock_stands_still_while_a_thread_works() -> None:
