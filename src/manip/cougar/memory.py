@@ -17,6 +17,9 @@ error on the real machine: here EXMN retrieves no words and DPST changes nothing
 
 from __future__ import annotations
 
+import bisect
+import functools
+import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Final, Literal
@@ -154,12 +157,18 @@ class Memory:
     (EXMN/DPST) checks with :meth:`valid` first and reports instead.  Float writes round to the F format
     (half-even) and saturate at the largest F magnitude; float reads take the FP11's undefined variable
     (-0) as 0.0.  ``float_faults`` counts the stores that had to saturate.
+
+    The words are the truth.  A float region's decoded values are kept (:meth:`floats`, :meth:`array`)
+    until any store touches one of its words, whichever method stores it, so a routine that reads a
+    variable every tick decodes it only after it changed.
     """
 
     def __init__(self) -> None:
         self._bytes = bytearray(MEMORY_BYTES)
         self._words = memoryview(self._bytes).cast("H")
         self.float_faults = 0
+        self._floats: dict[str, tuple[float, ...]] = {}
+        self._arrays: dict[str, FloatArray] = {}
 
     def __len__(self) -> int:
         return MEMORY_BYTES
@@ -174,6 +183,14 @@ class Memory:
             raise ValueError(f"no {words} word(s) of Cougar memory at {octal(address)}")
         return address // 2
 
+    def _stored(self, index: int, words: int) -> None:
+        """Words ``index``.. (word indexes) were stored: forget the decoded regions they overlap."""
+        if not self._floats and not self._arrays:
+            return
+        for name in _float_regions_over(index, index + words):
+            self._floats.pop(name, None)
+            self._arrays.pop(name, None)
+
     # ------------------------------------------------------------------ words
     def read_word(self, address: int) -> int:
         return int(self._words[self._check(address, 1)])
@@ -181,7 +198,9 @@ class Memory:
     def write_word(self, address: int, value: int) -> None:
         if not 0 <= value <= 0xFFFF:
             raise ValueError(f"{value!r} is not a 16-bit word")
-        self._words[self._check(address, 1)] = value
+        i = self._check(address, 1)
+        self._words[i] = value
+        self._stored(i, 1)
 
     def read_words(self, address: int, count: int) -> list[int]:
         i = self._check(address, count)
@@ -189,15 +208,22 @@ class Memory:
 
     def write_words(self, address: int, values: Sequence[int]) -> None:
         i = self._check(address, len(values))
-        for j, v in enumerate(values):
-            if not 0 <= v <= 0xFFFF:
-                raise ValueError(f"{v!r} is not a 16-bit word")
-            self._words[i + j] = v
+        try:
+            for j, v in enumerate(values):
+                if not 0 <= v <= 0xFFFF:
+                    raise ValueError(f"{v!r} is not a 16-bit word")
+                self._words[i + j] = v
+        finally:  # the words before a bad one are stored, as they were
+            self._stored(i, len(values))
 
     # ------------------------------------------------------------------ int16
     def read_int16s(self, address: int, count: int) -> npt.NDArray[np.int64]:
+        return np.array(self.int16_list(address, count), dtype=np.int64)
+
+    def int16_list(self, address: int, count: int) -> list[int]:
+        """``count`` int16s from ``address``, as Python ints."""
         i = self._check(address, count)
-        return np.frombuffer(self._bytes, dtype="<i2", count=count, offset=2 * i).astype(np.int64)
+        return list(_int16s(count).unpack_from(self._bytes, 2 * i))
 
     def write_int16s(self, address: int, values: Iterable[int]) -> None:
         data = [int(v) for v in values]
@@ -213,21 +239,57 @@ class Memory:
         return values
 
     def write_floats(self, address: int, values: Iterable[float] | FloatArray) -> None:
+        self.store_encoded(address, *self.encode_floats(values))
+
+    @staticmethod
+    def encode_floats(values: Iterable[float] | FloatArray) -> tuple[bytes, bool]:
+        """The F words :meth:`write_floats` stores for ``values`` (wire byte order), and whether the store
+        saturates (a value not finite or beyond the F range): for a routine that stores the same values
+        again and again (:meth:`store_encoded`)."""
         x = np.array(values, dtype=np.float64).reshape(-1)
-        safe = x
-        if x.size and not (np.all(np.isfinite(x)) and np.abs(x).max() <= F_MAX):
-            safe = np.clip(np.nan_to_num(x, nan=0.0, posinf=F_MAX, neginf=-F_MAX), -F_MAX, F_MAX)
+        # one reduction: NaN and infinities fail the comparison too
+        if not x.size or np.abs(x).max() <= F_MAX:
+            return pack_f_array(x), False
+        safe = np.clip(np.nan_to_num(x, nan=0.0, posinf=F_MAX, neginf=-F_MAX), -F_MAX, F_MAX)
+        return pack_f_array(safe), True
+
+    def store_encoded(self, address: int, raw: bytes, saturated: bool = False) -> None:
+        """Store floats encoded by :meth:`encode_floats` (counting the saturation as a float fault)."""
+        if saturated:
             self.float_faults += 1
-        i = self._check(address, 2 * x.size)
-        self._bytes[2 * i : 2 * i + 4 * x.size] = pack_f_array(safe)
+        words = len(raw) // 2
+        i = self._check(address, words)
+        self._bytes[2 * i : 2 * i + len(raw)] = raw
+        self._stored(i, words)
 
     # ------------------------------------------------------------------ named regions
-    def get(self, name: str) -> FloatArray:
-        """A float region's values."""
+    def floats(self, name: str) -> tuple[float, ...]:
+        """A float region's values as Python floats (decoded once per change)."""
+        try:
+            return self._floats[name]
+        except KeyError:
+            pass
         r = _BY_NAME[name]
         if r.kind != "float":
             raise TypeError(f"{name} is not a float region")
-        return self.read_floats(r.address, r.count)
+        values = tuple(self.read_floats(r.address, r.count).tolist())
+        self._floats[name] = values
+        return values
+
+    def array(self, name: str) -> FloatArray:
+        """A float region's values as a read-only array (decoded once per change)."""
+        try:
+            return self._arrays[name]
+        except KeyError:
+            pass
+        values = np.array(self.floats(name), dtype=np.float64)
+        values.flags.writeable = False
+        self._arrays[name] = values
+        return values
+
+    def get(self, name: str) -> FloatArray:
+        """A float region's values (a new array)."""
+        return np.array(self.floats(name), dtype=np.float64)
 
     def put(self, name: str, values: Iterable[float] | FloatArray) -> None:
         """Store a float region's values (the whole region)."""
@@ -241,6 +303,11 @@ class Memory:
         r = _BY_NAME[name]
         return self.read_int16s(r.address, r.count)
 
+    def int16s(self, name: str) -> list[int]:
+        """An int16 region's values as Python ints."""
+        r = _BY_NAME[name]
+        return self.int16_list(r.address, r.count)
+
     def put_int16s(self, name: str, values: Iterable[int]) -> None:
         r = _BY_NAME[name]
         data = list(values)
@@ -253,3 +320,21 @@ class Memory:
 
     def set_word(self, name: str, value: int, index: int = 0) -> None:
         self.write_word(_BY_NAME[name].at(index), value)
+
+
+# Float regions by word index, for forgetting decoded values: the regions' first words, in order.
+_FLOAT_STARTS: Final = [r.address // 2 for r in MAP if r.kind == "float"]
+_FLOAT_ENDS: Final = [r.end // 2 for r in MAP if r.kind == "float"]
+_FLOAT_NAMES: Final = [r.name for r in MAP if r.kind == "float"]
+
+
+def _float_regions_over(start: int, end: int) -> list[str]:
+    """The float regions with a word in word indexes [start, end)."""
+    first = bisect.bisect_right(_FLOAT_ENDS, start)  # the first region ending after ``start``
+    last = bisect.bisect_left(_FLOAT_STARTS, end)  # regions from here on start at or after ``end``
+    return _FLOAT_NAMES[first:last]
+
+
+@functools.cache
+def _int16s(count: int) -> struct.Struct:
+    return struct.Struct(f"<{count}h")
