@@ -125,6 +125,47 @@ def ticks_per_second(ticks: int, rounds: int) -> list[float]:
     return rates
 
 
+#: GUTS's parts and JACOB, as CougarSim names them (private names: this is a bench, not a client).
+PARTS = {
+    "_adc8": "ADC8 (physical load, gauges, filter)",
+    "_convert": "conversion (voltmat · Y)",
+    "_gravity": "GRAVITY (and LIMIT)",
+    "_guardm": "GUARDM",
+    "_comint_run": "COMINT (the commands)",
+}
+
+
+def part_costs(ticks: int) -> None:
+    """Each part's own time per tick, measured around the part (no profiler)."""
+    sim = bench_sim()
+    setup(sim)
+    driver = puma_driver(random.Random(0))
+    run_ticks(sim, driver, 30)
+    spent: dict[str, float] = dict.fromkeys([*PARTS, "JACOB"], 0.0)
+
+    def timed(name: str, part: Callable[..., Any]) -> Callable[..., Any]:
+        def run(*args: Any) -> Any:
+            start = time.perf_counter()
+            try:
+                return part(*args)
+            finally:
+                spent[name] += time.perf_counter() - start
+
+        return run
+
+    for name in PARTS:
+        setattr(sim, name, timed(name, getattr(sim, name)))
+    jacob = sim._jacob
+    jacob.run = timed("JACOB", jacob.run)  # type: ignore[method-assign]
+    start = time.perf_counter()
+    run_ticks(sim, driver, ticks, 1.0)
+    whole = time.perf_counter() - start
+    print(f"\nper part, µs per tick over {ticks} ticks ({1e6 * whole / ticks:.0f} µs per tick in all):")
+    for name, label in [*PARTS.items(), ("JACOB", "JACOB (background, 4 steps)")]:
+        print(f"{1e6 * spent[name] / ticks:8.1f}  {label}")
+    print(f"{1e6 * (whole - sum(spent.values())) / ticks:8.1f}  the rest (tick, re-entry check, driver)")
+
+
 def profile(ticks: int, rows: int = 30) -> None:
     sim = bench_sim()
     setup(sim)
@@ -295,6 +336,7 @@ def main() -> None:
         f"CougarSim.tick: {best:,.0f} ticks/s, best of {args.rounds} ({1e6 / best:.0f} µs per tick); "
         f"all rounds: {', '.join(f'{r:,.0f}' for r in rates)}"
     )
+    part_costs(ticks)
     if not args.no_profile:
         profile(min(ticks, 2000))
 

@@ -44,6 +44,7 @@ The defaults con3 = 0, con4 = 1 pass the sample through unchanged.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Final
 
 import numpy as np
@@ -60,8 +61,10 @@ __all__ = [
     "filter_constants",
     "gravity_load",
     "gravity_model",
+    "gravity_wrench",
     "hand_rotation",
     "limit",
+    "limit_values",
     "output_filter",
     "skew",
     "voltmat",
@@ -112,7 +115,7 @@ def gravity_model(
     return total, moment / total
 
 
-def hand_rotation(theta_deg: Vector, geometry: PumaGeometry) -> Matrix:
+def hand_rotation(theta_deg: Vector | Sequence[float], geometry: PumaGeometry) -> Matrix:
     """Hand-to-world rotation at the given joint angles (identity if they are not usable angles)."""
     try:
         return np.array(forward(theta_deg, geometry).rotation)
@@ -122,14 +125,32 @@ def hand_rotation(theta_deg: Vector, geometry: PumaGeometry) -> Matrix:
 
 def gravity_load(rotation: Matrix, weight: float, cg_mm: Vector) -> Vector:
     """The wrench (oz, oz-in; hand axes) gravity puts on a weight at ``cg_mm`` from the reference point."""
-    f = rotation.T @ np.array([0.0, 0.0, -weight])
-    return np.concatenate([f, cross(np.asarray(cg_mm) / MM_PER_INCH, f)])
+    return np.array(gravity_wrench(np.asarray(rotation).tolist(), weight, np.asarray(cg_mm).tolist()))
+
+
+def gravity_wrench(rotation: Sequence[Sequence[float]], weight: float, cg_mm: Sequence[float]) -> list[float]:
+    """:func:`gravity_load` in plain floats (the simulator's every tick): f = Rᵀ·(0, 0, −weight), τ = cg × f.
+
+    f is the bottom row of R times −weight, the products Rᵀ·(0, 0, −w) has to make (the others are
+    exact zeros), + 0.0 so that a zero is +0.0 as numpy's matrix product gives it; τ is cross's
+    arithmetic.  Equal, bit for bit, to the numpy formulation (a test holds them to it).
+    """
+    w = -weight
+    r2 = rotation[2]
+    f0, f1, f2 = r2[0] * w + 0.0, r2[1] * w + 0.0, r2[2] * w + 0.0
+    a0, a1, a2 = cg_mm[0] / MM_PER_INCH, cg_mm[1] / MM_PER_INCH, cg_mm[2] / MM_PER_INCH
+    return [f0, f1, f2, a1 * f2 - a2 * f1, a2 * f0 - a0 * f2, a0 * f1 - a1 * f0]
 
 
 def limit(force: Vector, dead: float, clamp: float) -> Vector:
     """LIMIT (B.5): magnitudes below ``dead`` become 0, above ``clamp`` become ±``clamp``."""
-    out = np.where(np.abs(force) < dead, 0.0, force)
-    return np.clip(out, -clamp, clamp)
+    return np.array(limit_values(np.asarray(force, dtype=np.float64).tolist(), dead, clamp))
+
+
+def limit_values(force: Sequence[float], dead: float, clamp: float) -> list[float]:
+    """:func:`limit` in plain floats: each value through numpy's where(|f| < dead, 0, f), then clip."""
+    low = -clamp
+    return [min(max(0.0 if abs(f) < dead else f, low), clamp) for f in force]
 
 
 def centre_jacobian(theta_deg: Vector, fv_mm: Vector, geometry: PumaGeometry) -> Matrix:
