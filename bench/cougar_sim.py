@@ -4,8 +4,9 @@ A Puma-like driver moves the arm along smooth joint-space segments with pauses, 
 sensed angles every tick the arm moved (as the wrist output process does), RFRC every few ticks, RRAW
 now and then, and NPR instead of SEN on a quarter of the segments (compliant ones); the tool touches a
 surface and a spring, and the gauges have noise and cross-coupling.  Printed: CougarSim.tick calls per
-second (best of ``--rounds``; an absolute figure, there is no baseline to run beside it), then what one
-tick's parts cost, from a profile of the same loop.
+second of CPU time (process time, so that other work on the machine counts less; best of ``--rounds``;
+an absolute figure, there is no baseline to run beside it), then what one tick's parts cost, timed
+around each part and from a profile of the same loop.
 
     .venv/bin/python bench/cougar_sim.py [--ticks 3000] [--rounds 5] [--no-profile]
     .venv/bin/python bench/cougar_sim.py --digest [--ticks 600]
@@ -119,9 +120,9 @@ def ticks_per_second(ticks: int, rounds: int) -> list[float]:
         setup(sim)
         driver = puma_driver(random.Random(r))
         run_ticks(sim, driver, 30)  # warm up
-        start = time.perf_counter()
+        start = time.process_time()
         run_ticks(sim, driver, ticks, 1.0)
-        rates.append(ticks / (time.perf_counter() - start))
+        rates.append(ticks / (time.process_time() - start))
     return rates
 
 
@@ -145,11 +146,11 @@ def part_costs(ticks: int) -> None:
 
     def timed(name: str, part: Callable[..., Any]) -> Callable[..., Any]:
         def run(*args: Any) -> Any:
-            start = time.perf_counter()
+            start = time.process_time()
             try:
                 return part(*args)
             finally:
-                spent[name] += time.perf_counter() - start
+                spent[name] += time.process_time() - start
 
         return run
 
@@ -157,9 +158,9 @@ def part_costs(ticks: int) -> None:
         setattr(sim, name, timed(name, getattr(sim, name)))
     jacob = sim._jacob
     jacob.run = timed("JACOB", jacob.run)  # type: ignore[method-assign]
-    start = time.perf_counter()
+    start = time.process_time()
     run_ticks(sim, driver, ticks, 1.0)
-    whole = time.perf_counter() - start
+    whole = time.process_time() - start
     print(f"\nper part, µs per tick over {ticks} ticks ({1e6 * whole / ticks:.0f} µs per tick in all):")
     for name, label in [*PARTS.items(), ("JACOB", "JACOB (background, 4 steps)")]:
         print(f"{1e6 * spent[name] / ticks:8.1f}  {label}")

@@ -63,6 +63,7 @@ __all__ = [
     "gravity_model",
     "gravity_wrench",
     "hand_rotation",
+    "hand_rotation_rows",
     "limit",
     "limit_values",
     "output_filter",
@@ -117,10 +118,16 @@ def gravity_model(
 
 def hand_rotation(theta_deg: Vector | Sequence[float], geometry: PumaGeometry) -> Matrix:
     """Hand-to-world rotation at the given joint angles (identity if they are not usable angles)."""
+    return np.array(hand_rotation_rows(theta_deg, geometry))
+
+
+def hand_rotation_rows(theta_deg: Vector | Sequence[float], geometry: PumaGeometry) -> list[list[float]]:
+    """:func:`hand_rotation` as rows of plain floats."""
     try:
-        return np.array(forward(theta_deg, geometry).rotation)
+        rows: list[list[float]] = forward(theta_deg, geometry).rotation.tolist()
     except ValueError:
-        return np.eye(3)
+        return [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    return rows
 
 
 def gravity_load(rotation: Matrix, weight: float, cg_mm: Vector) -> Vector:

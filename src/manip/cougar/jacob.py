@@ -35,10 +35,12 @@ STEPS: Final = 4
 Matrix = npt.NDArray[np.float64]
 
 
+_BUFFERS: Final = (region("jbuf0").address, region("jbuf1").address)
+
+
 def _buffer_address(memory: Memory, front: bool) -> int:
     bit = memory.word("jacob_front") & 1
-    index = bit if front else bit ^ 1
-    return region(f"jbuf{index}").address
+    return _BUFFERS[bit if front else bit ^ 1]
 
 
 def front_buffer(memory: Memory) -> tuple[Matrix, Matrix, Matrix]:

@@ -19,15 +19,17 @@ from __future__ import annotations
 
 import bisect
 import functools
+import math
 import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Final, Literal
+from typing import Final, Literal, TypeGuard
 
 import numpy as np
 import numpy.typing as npt
 
-from manip.codecs.pdp11float import F_MAX, pack_f_array, unpack_f_array
+from manip.codecs.errors import DecodeError, EncodeError
+from manip.codecs.pdp11float import F_MAX, F_MIN_NORMAL, pack_f, pack_f_array, unpack_f, unpack_f_array
 from manip.spec.notation import octal
 
 __all__ = [
@@ -130,8 +132,13 @@ MAP: Final[tuple[Region, ...]] = _layout(
     )
 )
 _BY_NAME: Final = {r.name: r for r in MAP}
+_WORD_INDEX: Final = {r.name: r.address // 2 for r in MAP}
 #: Offsets (in floats) inside a Jacobian buffer.
 JBUF_J, JBUF_JT, JBUF_P = 0, 36, 72
+#: Up to this many floats, the scalar codecs beat numpy's fixed cost per call.
+_SMALL: Final = 12
+#: Up to this many floats, the encoder below beats numpy's.
+_FEW: Final = 64
 #: Words per guard table entry, and where its parts start (in words).
 GUARD_WORDS, GUARD_DVEC, GUARD_TOL = 15, 1, 13
 
@@ -185,7 +192,13 @@ class Memory:
 
     def _stored(self, index: int, words: int) -> None:
         """Words ``index``.. (word indexes) were stored: forget the decoded regions they overlap."""
-        if not self._floats and not self._arrays:
+        if not self._floats:  # (every region in _arrays is in _floats too)
+            return
+        if words == 1:  # most stores to a word are to a word variable, or outside the map
+            name = _FLOAT_OWNER[index] if index < len(_FLOAT_OWNER) else None
+            if name is not None:
+                self._floats.pop(name, None)
+                self._arrays.pop(name, None)
             return
         for name in _float_regions_over(index, index + words):
             self._floats.pop(name, None)
@@ -233,10 +246,17 @@ class Memory:
 
     # ------------------------------------------------------------------ floats
     def read_floats(self, address: int, count: int) -> FloatArray:
+        return np.array(self._decode(address, count), dtype=np.float64)
+
+    def _decode(self, address: int, count: int) -> list[float]:
         i = self._check(address, 2 * count)
-        raw = self._bytes[2 * i : 2 * i + 4 * count]
-        values = unpack_f_array(raw, reserved="zero")
-        return values
+        raw = bytes(self._bytes[2 * i : 2 * i + 4 * count])
+        if count <= _SMALL:
+            try:
+                return [unpack_f(raw, offset) for offset in range(0, 4 * count, 4)]
+            except DecodeError:
+                pass  # the reserved operand: the array decoder reads it as 0.0
+        return unpack_f_array(raw, reserved="zero").tolist()  # type: ignore[no-any-return]
 
     def write_floats(self, address: int, values: Iterable[float] | FloatArray) -> None:
         self.store_encoded(address, *self.encode_floats(values))
@@ -246,6 +266,16 @@ class Memory:
         """The F words :meth:`write_floats` stores for ``values`` (wire byte order), and whether the store
         saturates (a value not finite or beyond the F range): for a routine that stores the same values
         again and again (:meth:`store_encoded`)."""
+        few: Sequence[float] | None = None
+        if isinstance(values, np.ndarray):
+            if values.dtype == np.float64 and 0 < values.size <= _FEW:
+                few = values.reshape(-1).tolist()
+        elif isinstance(values, (list, tuple)) and 0 < len(values) <= _FEW:
+            few = values
+        if few is not None:
+            raw = _encode_few(few)
+            if raw is not None:
+                return raw, False
         x = np.array(values, dtype=np.float64).reshape(-1)
         # one reduction: NaN and infinities fail the comparison too
         if not x.size or np.abs(x).max() <= F_MAX:
@@ -272,7 +302,7 @@ class Memory:
         r = _BY_NAME[name]
         if r.kind != "float":
             raise TypeError(f"{name} is not a float region")
-        values = tuple(self.read_floats(r.address, r.count).tolist())
+        values = tuple(self._decode(r.address, r.count))
         self._floats[name] = values
         return values
 
@@ -294,6 +324,9 @@ class Memory:
     def put(self, name: str, values: Iterable[float] | FloatArray) -> None:
         """Store a float region's values (the whole region)."""
         r = _BY_NAME[name]
+        if _plain_floats(values, r.count) and r.kind == "float":
+            self.write_floats(r.address, values)
+            return
         x = np.array(values, dtype=np.float64).reshape(-1)
         if r.kind != "float" or x.size != r.count:
             raise ValueError(f"{name} holds {r.count} {r.kind} values, not {x.size} floats")
@@ -316,16 +349,35 @@ class Memory:
         self.write_int16s(r.address, data)
 
     def word(self, name: str, index: int = 0) -> int:
-        return self.read_word(_BY_NAME[name].at(index))
+        if index:
+            return self.read_word(_BY_NAME[name].at(index))
+        return int(self._words[_WORD_INDEX[name]])
 
     def set_word(self, name: str, value: int, index: int = 0) -> None:
-        self.write_word(_BY_NAME[name].at(index), value)
+        if index or not 0 <= value <= 0xFFFF:
+            self.write_word(_BY_NAME[name].at(index), value)
+            return
+        i = _WORD_INDEX[name]
+        self._words[i] = value
+        self._stored(i, 1)
 
 
 # Float regions by word index, for forgetting decoded values: the regions' first words, in order.
 _FLOAT_STARTS: Final = [r.address // 2 for r in MAP if r.kind == "float"]
 _FLOAT_ENDS: Final = [r.end // 2 for r in MAP if r.kind == "float"]
 _FLOAT_NAMES: Final = [r.name for r in MAP if r.kind == "float"]
+
+
+def _float_owners() -> list[str | None]:
+    """The float region each word of the map belongs to (None: not a float region), by word index."""
+    owners: list[str | None] = [None] * (MAP[-1].end // 2)
+    for r in MAP:
+        if r.kind == "float":
+            owners[r.address // 2 : r.end // 2] = [r.name] * r.words
+    return owners
+
+
+_FLOAT_OWNER: Final = _float_owners()
 
 
 def _float_regions_over(start: int, end: int) -> list[str]:
@@ -335,6 +387,51 @@ def _float_regions_over(start: int, end: int) -> list[str]:
     return _FLOAT_NAMES[first:last]
 
 
+def _plain_floats(values: object, count: int) -> TypeGuard[Sequence[float]]:
+    """Whether ``values`` is a list or tuple of ``count`` Python floats (no array needed)."""
+    if not isinstance(values, (list, tuple)) or len(values) != count:
+        return False
+    return all(type(v) is float for v in values)
+
+
 @functools.cache
 def _int16s(count: int) -> struct.Struct:
     return struct.Struct(f"<{count}h")
+
+
+# Encoding a few floats.  For |x| in [2^-128, _FAST_HIGH) the F pattern of x is the IEEE single of 4x
+# with its two words swapped: 4x is a normal single that rounds to nearest even (the F rounding, "half-
+# even") below 2^128, and F's exponent bias is the single's plus 2 (the reasoning of pdp11float's own
+# scalar fast path).  So one struct call packs them all and two slice copies swap the words.  Zeros
+# (+ 0.0 makes -0.0 a clean zero, never the reserved operand) come out as four zero bytes too.  Anything
+# else -- values that flush to zero or round near the top of the range -- goes through pack_f, the
+# scalar reference, one by one.
+_FAST_HIGH: Final = math.ldexp(1.0, 126) - math.ldexp(1.0, 101)
+
+
+@functools.cache
+def _singles(count: int) -> struct.Struct:
+    return struct.Struct(f"<{count}f")
+
+
+def _encode_few(values: Sequence[float]) -> bytes | None:
+    """F words of finite values within the F range, or None (NaN, infinities, beyond F_MAX, not
+    numbers): then the numpy encoder decides, saturation included."""
+    try:
+        magnitudes = list(map(abs, values))
+        top = max(magnitudes)  # may pass a NaN over; their sum may not
+        if not (top <= F_MAX and math.isfinite(sum(magnitudes))):
+            return None
+    except (TypeError, OverflowError):
+        return None
+    if top < _FAST_HIGH and min(filter(None, magnitudes), default=F_MIN_NORMAL) >= F_MIN_NORMAL:
+        singles = memoryview(_singles(len(values)).pack(*[v * 4.0 + 0.0 for v in values])).cast("H")
+        out = bytearray(2 * len(singles))
+        words = memoryview(out).cast("H")
+        words[0::2] = singles[1::2]
+        words[1::2] = singles[0::2]
+        return bytes(out)
+    try:
+        return b"".join([pack_f(v) for v in values])
+    except EncodeError:
+        return None  # not a float: numpy converts it first

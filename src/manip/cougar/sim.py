@@ -73,7 +73,7 @@ from manip.cougar.compliance import (
     filter_constants,
     gravity_model,
     gravity_wrench,
-    hand_rotation,
+    hand_rotation_rows,
     limit_values,
     output_filter,
     voltmat,
@@ -292,11 +292,11 @@ class CougarSim:
         t6 = forward(self._pose, c.geometry)
         tool = t6 @ c.tool
         contact = self.environment.wrench(tool)
-        r = np.array(t6.rotation)
-        rows = r.tolist()
+        rows = t6.rotation.tolist()
         hand = gravity_wrench(rows, c.hand_weight_oz, c.hand_cg_mm)
         payload = gravity_wrench(rows, c.payload_weight_oz, c.payload_cg_mm)
         if any(contact.force) or any(contact.torque):
+            r = np.array(t6.rotation)
             f = np.array(contact.force, dtype=np.float64)
             lever_in = (np.array(tool.p) - np.array(t6.p)) / MM_PER_INCH
             tau = np.array(contact.torque, dtype=np.float64) + cross(lever_in, f)
@@ -323,14 +323,15 @@ class CougarSim:
     def _convert(self) -> None:
         mem = self.memory
         counts = np.array(mem.int16s("gauge_filtered"), dtype=np.float64)
-        sign = -1.0 if "forces-wrong-sign" in self._faults else 1.0
-        mem.put("force_sensed", sign * (mem.array("voltmat").reshape(6, 8) @ counts))
+        force = (mem.array("voltmat").reshape(6, 8) @ counts).tolist()
+        if "forces-wrong-sign" in self._faults:
+            force = [-1.0 * f for f in force]
+        mem.put("force_sensed", force)
 
     def _gravity(self) -> None:
         mem = self.memory
-        r = hand_rotation(mem.floats("theta_sensed"), self.config.geometry)
-        weight = mem.floats("grav_weight")[0]
-        load = gravity_wrench(r.tolist(), weight, mem.floats("grav_cg"))
+        r = hand_rotation_rows(mem.floats("theta_sensed"), self.config.geometry)
+        load = gravity_wrench(r, mem.floats("grav_weight")[0], mem.floats("grav_cg"))
         force = [s + g for s, g in zip(mem.floats("force_sensed"), load, strict=True)]
         if mem.word("flags") & FLAG_LIMIT:
             force = limit_values(force, mem.floats("limit_dead")[0], mem.floats("limit_clamp")[0])
