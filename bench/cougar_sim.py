@@ -105,24 +105,37 @@ def bench_sim() -> CougarSim:
     return CougarSim(config, environment=environment(), seed=5)  # no re-entries: every tick works
 
 
-def run_ticks(sim: CougarSim, driver: Iterator[list[int]], ticks: int, t0: float = 0.0) -> None:
+def script(driver: Iterator[list[int]], ticks: int) -> list[list[int]]:
+    """The Puma's words for the next ``ticks`` ticks, made before any timing: only Cougar's work counts."""
+    return [next(driver) for _ in range(ticks)]
+
+
+def run_ticks(
+    sim: CougarSim, words: list[list[int]], t0: float = 0.0, clock: Callable[[], float] = time.process_time
+) -> float:
+    """Hand Cougar each tick's words and tick it; the seconds that took (CPU seconds by default)."""
     t = t0
-    for _ in range(ticks):
-        sim.receive(next(driver))
+    start = clock()
+    for w in words:
+        sim.receive(w)
         sim.tick(t)
         t += DT
+    return clock() - start
+
+
+def warmed_up(seed: int) -> tuple[CougarSim, Iterator[list[int]]]:
+    sim = bench_sim()
+    setup(sim)
+    driver = puma_driver(random.Random(seed))
+    run_ticks(sim, script(driver, 30))
+    return sim, driver
 
 
 def ticks_per_second(ticks: int, rounds: int) -> list[float]:
     rates = []
     for r in range(rounds):
-        sim = bench_sim()
-        setup(sim)
-        driver = puma_driver(random.Random(r))
-        run_ticks(sim, driver, 30)  # warm up
-        start = time.process_time()
-        run_ticks(sim, driver, ticks, 1.0)
-        rates.append(ticks / (time.process_time() - start))
+        sim, driver = warmed_up(r)
+        rates.append(ticks / run_ticks(sim, script(driver, ticks), 1.0))
     return rates
 
 
@@ -137,20 +150,18 @@ PARTS = {
 
 
 def part_costs(ticks: int) -> None:
-    """Each part's own time per tick, measured around the part (no profiler)."""
-    sim = bench_sim()
-    setup(sim)
-    driver = puma_driver(random.Random(0))
-    run_ticks(sim, driver, 30)
+    """Each part's own time per tick, measured around the part (no profiler; wall-clock time, which a
+    busy machine inflates)."""
+    sim, driver = warmed_up(0)
     spent: dict[str, float] = dict.fromkeys([*PARTS, "JACOB"], 0.0)
 
     def timed(name: str, part: Callable[..., Any]) -> Callable[..., Any]:
         def run(*args: Any) -> Any:
-            start = time.process_time()
+            start = time.perf_counter()
             try:
                 return part(*args)
             finally:
-                spent[name] += time.process_time() - start
+                spent[name] += time.perf_counter() - start
 
         return run
 
@@ -158,23 +169,19 @@ def part_costs(ticks: int) -> None:
         setattr(sim, name, timed(name, getattr(sim, name)))
     jacob = sim._jacob
     jacob.run = timed("JACOB", jacob.run)  # type: ignore[method-assign]
-    start = time.process_time()
-    run_ticks(sim, driver, ticks, 1.0)
-    whole = time.process_time() - start
+    whole = run_ticks(sim, script(driver, ticks), 1.0, time.perf_counter)
     print(f"\nper part, µs per tick over {ticks} ticks ({1e6 * whole / ticks:.0f} µs per tick in all):")
     for name, label in [*PARTS.items(), ("JACOB", "JACOB (background, 4 steps)")]:
         print(f"{1e6 * spent[name] / ticks:8.1f}  {label}")
-    print(f"{1e6 * (whole - sum(spent.values())) / ticks:8.1f}  the rest (tick, re-entry check, driver)")
+    print(f"{1e6 * (whole - sum(spent.values())) / ticks:8.1f}  the rest (receive, tick, re-entry check)")
 
 
 def profile(ticks: int, rows: int = 30) -> None:
-    sim = bench_sim()
-    setup(sim)
-    driver = puma_driver(random.Random(0))
-    run_ticks(sim, driver, 30)
+    sim, driver = warmed_up(0)
+    words = script(driver, ticks)
     profiler = cProfile.Profile()
     profiler.enable()
-    run_ticks(sim, driver, ticks, 1.0)
+    run_ticks(sim, words, 1.0)
     profiler.disable()
     stats: dict[tuple[str, int, str], tuple[int, int, float, float, object]] = pstats.Stats(profiler).stats  # type: ignore[attr-defined]
     scale = 1e6 / ticks

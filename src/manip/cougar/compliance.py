@@ -58,6 +58,7 @@ __all__ = [
     "centre_jacobian",
     "compliance_sample",
     "cross",
+    "cross_values",
     "filter_constants",
     "gravity_load",
     "gravity_model",
@@ -84,7 +85,12 @@ def skew(v: Vector) -> Matrix:
 
 def cross(a: Vector, b: Vector) -> Vector:
     """a × b for 3-vectors (numpy's general cross is slow for one pair)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    return np.array(cross_values(a, b), dtype=np.float64)
+
+
+def cross_values(a: Sequence[float] | Vector, b: Sequence[float] | Vector) -> list[float]:
+    """:func:`cross` in plain floats."""
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
 def voltmat(calmat: Matrix, fv_mm: Vector) -> Matrix:
@@ -146,7 +152,7 @@ def gravity_wrench(rotation: Sequence[Sequence[float]], weight: float, cg_mm: Se
     r2 = rotation[2]
     f0, f1, f2 = r2[0] * w + 0.0, r2[1] * w + 0.0, r2[2] * w + 0.0
     a0, a1, a2 = cg_mm[0] / MM_PER_INCH, cg_mm[1] / MM_PER_INCH, cg_mm[2] / MM_PER_INCH
-    return [f0, f1, f2, a1 * f2 - a2 * f1, a2 * f0 - a0 * f2, a0 * f1 - a1 * f0]
+    return [f0, f1, f2, *cross_values((a0, a1, a2), (f0, f1, f2))]
 
 
 def limit(force: Vector, dead: float, clamp: float) -> Vector:

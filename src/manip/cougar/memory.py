@@ -17,6 +17,7 @@ error on the real machine: here EXMN retrieves no words and DPST changes nothing
 
 from __future__ import annotations
 
+import array
 import bisect
 import functools
 import math
@@ -137,8 +138,8 @@ _WORD_INDEX: Final = {r.name: r.address // 2 for r in MAP}
 JBUF_J, JBUF_JT, JBUF_P = 0, 36, 72
 #: Up to this many floats, the scalar codecs beat numpy's fixed cost per call.
 _SMALL: Final = 12
-#: Up to this many floats, the encoder below beats numpy's.
-_FEW: Final = 64
+#: Up to this many floats (J, Jᵀ and P: 108), the codecs below beat numpy's.
+_FEW: Final = 128
 #: Words per guard table entry, and where its parts start (in words).
 GUARD_WORDS, GUARD_DVEC, GUARD_TOL = 15, 1, 13
 
@@ -240,9 +241,11 @@ class Memory:
 
     def write_int16s(self, address: int, values: Iterable[int]) -> None:
         data = [int(v) for v in values]
-        if any(not -0x8000 <= v <= 0x7FFF for v in data):
+        if data and not (min(data) >= -0x8000 and max(data) <= 0x7FFF):
             raise ValueError(f"{data} are not all 16-bit signed integers")
-        self.write_words(address, [v & 0xFFFF for v in data])
+        i = self._check(address, len(data))
+        _int16s(len(data)).pack_into(self._bytes, 2 * i, *data)
+        self._stored(i, len(data))
 
     # ------------------------------------------------------------------ floats
     def read_floats(self, address: int, count: int) -> FloatArray:
@@ -256,6 +259,10 @@ class Memory:
                 return [unpack_f(raw, offset) for offset in range(0, 4 * count, 4)]
             except DecodeError:
                 pass  # the reserved operand: the array decoder reads it as 0.0
+        elif count <= _FEW:
+            values = _decode_few(raw)
+            if values is not None:
+                return values
         return unpack_f_array(raw, reserved="zero").tolist()  # type: ignore[no-any-return]
 
     def write_floats(self, address: int, values: Iterable[float] | FloatArray) -> None:
@@ -402,16 +409,32 @@ def _int16s(count: int) -> struct.Struct:
 # Encoding a few floats.  For |x| in [2^-128, _FAST_HIGH) the F pattern of x is the IEEE single of 4x
 # with its two words swapped: 4x is a normal single that rounds to nearest even (the F rounding, "half-
 # even") below 2^128, and F's exponent bias is the single's plus 2 (the reasoning of pdp11float's own
-# scalar fast path).  So one struct call packs them all and two slice copies swap the words.  Zeros
-# (+ 0.0 makes -0.0 a clean zero, never the reserved operand) come out as four zero bytes too.  Anything
-# else -- values that flush to zero or round near the top of the range -- goes through pack_f, the
-# scalar reference, one by one.
+# scalar fast path).  A big-endian single is its bytes 3 2 1 0; the F words want 2 3 0 1, the same with
+# each 16-bit word's bytes swapped: one struct call and one byteswap for them all.  Zeros (+ 0.0 makes
+# -0.0 a clean zero, never the reserved operand) come out as four zero bytes too.  Anything else --
+# values that flush to zero or round near the top of the range -- goes through pack_f, the scalar
+# reference, one by one.
 _FAST_HIGH: Final = math.ldexp(1.0, 126) - math.ldexp(1.0, 101)
+_SINGLE_MIN: Final = math.ldexp(1.0, -126)
+"""The least normal single: below it (but 0) a single has exponent 0."""
 
 
 @functools.cache
 def _singles(count: int) -> struct.Struct:
-    return struct.Struct(f"<{count}f")
+    return struct.Struct(f">{count}f")
+
+
+def _decode_few(raw: bytes) -> list[float] | None:
+    """The values of F words (the encoding above backwards: F's value is the single's / 4), or None
+    when one has exponent 0 (a zero reads 0.0, but a dirty zero or the reserved operand would read as a
+    tiny single or -0.0) or 255 (a single's infinity or NaN): then the array decoder decides."""
+    words = array.array("H", raw)
+    words.byteswap()
+    singles = _singles(len(raw) // 4).unpack(words.tobytes())
+    magnitudes = list(map(abs, singles))
+    if not math.isfinite(sum(magnitudes)) or min(filter(None, magnitudes), default=1.0) < _SINGLE_MIN:
+        return None
+    return [v * 0.25 + 0.0 for v in singles]  # + 0.0: the reserved operand with fraction 0 is -0.0
 
 
 def _encode_few(values: Sequence[float]) -> bytes | None:
@@ -425,12 +448,9 @@ def _encode_few(values: Sequence[float]) -> bytes | None:
     except (TypeError, OverflowError):
         return None
     if top < _FAST_HIGH and min(filter(None, magnitudes), default=F_MIN_NORMAL) >= F_MIN_NORMAL:
-        singles = memoryview(_singles(len(values)).pack(*[v * 4.0 + 0.0 for v in values])).cast("H")
-        out = bytearray(2 * len(singles))
-        words = memoryview(out).cast("H")
-        words[0::2] = singles[1::2]
-        words[1::2] = singles[0::2]
-        return bytes(out)
+        words = array.array("H", _singles(len(values)).pack(*[v * 4.0 + 0.0 for v in values]))
+        words.byteswap()
+        return words.tobytes()
     try:
         return b"".join([pack_f(v) for v in values])
     except EncodeError:

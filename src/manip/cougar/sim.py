@@ -69,7 +69,7 @@ from manip.cougar.comint import Comint, Executable, OutOfSyncEvent
 from manip.cougar.compliance import (
     MM_PER_INCH,
     compliance_sample,
-    cross,
+    cross_values,
     filter_constants,
     gravity_model,
     gravity_wrench,
@@ -296,11 +296,11 @@ class CougarSim:
         hand = gravity_wrench(rows, c.hand_weight_oz, c.hand_cg_mm)
         payload = gravity_wrench(rows, c.payload_weight_oz, c.payload_cg_mm)
         if any(contact.force) or any(contact.torque):
-            r = np.array(t6.rotation)
-            f = np.array(contact.force, dtype=np.float64)
-            lever_in = (np.array(tool.p) - np.array(t6.p)) / MM_PER_INCH
-            tau = np.array(contact.torque, dtype=np.float64) + cross(lever_in, f)
-            touch = np.concatenate([r.T @ f, r.T @ tau]).tolist()
+            r = np.array(t6.rotation)  # C order, as the products below have always had it
+            f = [float(v) for v in contact.force]
+            lever_in = [(a - b) / MM_PER_INCH for a, b in zip(tool.p.tolist(), t6.p.tolist(), strict=True)]
+            tau = [float(t) + c for t, c in zip(contact.torque, cross_values(lever_in, f), strict=True)]
+            touch = (r.T @ np.array(f)).tolist() + (r.T @ np.array(tau)).tolist()
         else:  # no contact: Rᵀ·0 is +0.0 throughout
             touch = [0.0] * 6
         return np.array([(t + h) + p for t, h, p in zip(touch, hand, payload, strict=True)])
