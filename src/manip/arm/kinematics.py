@@ -256,10 +256,10 @@ def _as_joints(q: JointsLike) -> Joints:
     """Validate and copy joint angles: exactly six finite numbers."""
     if len(q) != 6:
         raise ValueError(f"expected 6 joint angles, got {len(q)}")
-    v = tuple(float(x) for x in q)
-    if not all(math.isfinite(x) for x in v):
+    v: Joints = tuple(map(float, q))  # type: ignore[assignment]  # six, checked above
+    if not all(map(math.isfinite, v)):
         raise ValueError(f"joint angles must be finite, got {v}")
-    return (v[0], v[1], v[2], v[3], v[4], v[5])
+    return v
 
 
 # Exact cos/sin of the table's twists, so that zero entries stay exactly zero.

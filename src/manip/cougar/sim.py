@@ -92,6 +92,7 @@ Vector = npt.NDArray[np.float64]
 GUARD_STOP_BIT: Final = 0x8000
 #: Bit 0 of the ``flags`` word: LIMIT is applied.
 FLAG_LIMIT: Final = 1
+_UNTOUCHED: Final = (0.0,) * 6
 
 
 @dataclass(frozen=True)
@@ -181,6 +182,8 @@ class CougarSim:
         self._faults = self.config.faults
         self._comint = Comint(execute_partial="comint-executes-partial" in self._faults)
         self._tripped_once: set[int] = set()  # fault guard-trips-twice
+        self._guard_values: dict[int, tuple[list[int], Vector, float]] = {}
+        """Guard i's table words, and its dvec and tol decoded from them."""
         self._jacob = Jacob(self.config.geometry)
         self._stats = CougarStats()
         self._pose: tuple[float, ...] = tuple(float(q) for q in self.config.initial_angles)
@@ -290,20 +293,25 @@ class CougarSim:
         """The wrench on the hand (oz, oz-in; hand axes, about the wrist centre): contact plus gravity."""
         c = self.config
         t6 = forward(self._pose, c.geometry)
-        tool = t6 @ c.tool
-        contact = self.environment.wrench(tool)
         rows = t6.rotation.tolist()
         hand = gravity_wrench(rows, c.hand_weight_oz, c.hand_cg_mm)
         payload = gravity_wrench(rows, c.payload_weight_oz, c.payload_cg_mm)
-        if any(contact.force) or any(contact.torque):
-            r = np.array(t6.rotation)  # C order, as the products below have always had it
-            f = [float(v) for v in contact.force]
-            lever_in = [(a - b) / MM_PER_INCH for a, b in zip(tool.p.tolist(), t6.p.tolist(), strict=True)]
-            tau = [float(t) + c for t, c in zip(contact.torque, cross_values(lever_in, f), strict=True)]
-            touch = (r.T @ np.array(f)).tolist() + (r.T @ np.array(tau)).tolist()
-        else:  # no contact: Rᵀ·0 is +0.0 throughout
-            touch = [0.0] * 6
+        # FreeSpace touches nothing anywhere: no tool pose needed
+        touch = _UNTOUCHED if type(self.environment) is FreeSpace else self._contact(t6)
         return np.array([(t + h) + p for t, h, p in zip(touch, hand, payload, strict=True)])
+
+    def _contact(self, t6: Transform) -> Sequence[float]:
+        """The environment's wrench on the tool, moved to the wrist centre in hand axes."""
+        tool = t6 @ self.config.tool
+        contact = self.environment.wrench(tool)
+        if not (any(contact.force) or any(contact.torque)):
+            return _UNTOUCHED  # Rᵀ·0 is +0.0 throughout
+        r = np.array(t6.rotation)  # C order, as the products below have always had it
+        f = [float(v) for v in contact.force]
+        lever_in = [(a - b) / MM_PER_INCH for a, b in zip(tool.p.tolist(), t6.p.tolist(), strict=True)]
+        tau = [float(t) + c for t, c in zip(contact.torque, cross_values(lever_in, f), strict=True)]
+        touch: list[float] = (r.T @ np.array(f)).tolist() + (r.T @ np.array(tau)).tolist()
+        return touch
 
     def _adc8(self) -> None:
         mem, gauges = self.memory, self.config.gauges
@@ -348,8 +356,12 @@ class CougarSim:
             if not active >> i & 1:
                 continue
             entry = base + 2 * GUARD_WORDS * i
-            dvec = mem.read_floats(entry + 2 * GUARD_DVEC, 6)
-            tol = float(mem.read_floats(entry + 2 * GUARD_TOL, 1)[0])
+            words = mem.read_words(entry, GUARD_WORDS)
+            kept = self._guard_values.get(i)
+            if kept is None or kept[0] != words:  # decoded again only when its words changed
+                tol = float(mem.read_floats(entry + 2 * GUARD_TOL, 1)[0])
+                kept = self._guard_values[i] = (words, mem.read_floats(entry + 2 * GUARD_DVEC, 6), tol)
+            _, dvec, tol = kept
             if float(np.dot(force, dvec)) > tol:
                 if "guard-trips-twice" in self._faults and i not in self._tripped_once:
                     self._tripped_once.add(i)
