@@ -32,6 +32,7 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
+from manip.arm import Transform, forward, jacobian
 from manip.codecs.cougar import encode
 from manip.cougar import Contacts, CougarConfig, CougarSim, GaugeModel, Spring, Surface
 from manip.cougar.memory import MAP, MEMORY_BYTES, region
@@ -39,6 +40,7 @@ from manip.cougar.memory import MAP, MEMORY_BYTES, region
 DT = 1 / 60
 READY = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
 TOOL_Z = 864.87 + 150.0  # the tool point's height at READY
+TOOL = Transform.trans(0.0, 0.0, 150.0)
 
 
 def command(name: str, **values: Any) -> list[int]:
@@ -174,6 +176,28 @@ def part_costs(ticks: int) -> None:
     for name, label in [*PARTS.items(), ("JACOB", "JACOB (background, 4 steps)")]:
         print(f"{1e6 * spent[name] / ticks:8.1f}  {label}")
     print(f"{1e6 * (whole - sum(spent.values())) / ticks:8.1f}  the rest (receive, tick, re-entry check)")
+
+
+def kinematics_costs(calls: int = 3000) -> None:
+    """µs per call of the kinematics the tick uses, for fresh angles and for angles asked again."""
+    rng = random.Random(1)
+    fresh = [tuple(rng.uniform(-170.0, 170.0) for _ in range(6)) for _ in range(calls)]
+    again = fresh[0]
+    print("\nkinematics, µs per call (CPU time):")
+    for label, call in (
+        ("forward, fresh angles", lambda q: forward(q)),
+        ("forward, the same angles again", lambda q: forward(again)),
+        ("jacobian (tool frame), fresh angles", lambda q: jacobian(q, frame="tool")),
+        ("jacobian (tool frame), the same angles again", lambda q: jacobian(again, frame="tool")),
+        ("Transform @ Transform", lambda q: TOOL @ TOOL),
+    ):
+        best = math.inf
+        for _ in range(3):
+            start = time.process_time()
+            for q in fresh:
+                call(q)
+            best = min(best, time.process_time() - start)
+        print(f"{1e6 * best / calls:8.2f}  {label}")
 
 
 def profile(ticks: int, rows: int = 30) -> None:
@@ -345,6 +369,7 @@ def main() -> None:
         f"all rounds: {', '.join(f'{r:,.0f}' for r in rates)}"
     )
     part_costs(ticks)
+    kinematics_costs()
     if not args.no_profile:
         profile(min(ticks, 2000))
 

@@ -291,13 +291,13 @@ def _frames_of(key: bytes, geometry: PumaGeometry) -> tuple[Matrix, ...]:
         ca, sa = _TWIST[alpha]
         entries += (ct, -st * ca, st * sa, a * ct, st, ct * ca, -ct * sa, a * st)
         entries += (0.0, sa, ca, d, 0.0, 0.0, 0.0, 1.0)
-    links = np.array(entries).reshape(6, 4, 4)
     out = [_EYE4]
     m = _EYE4
-    for k in range(6):
-        m = m @ links[k]
-        m.flags.writeable = False
+    for link in np.fromiter(entries, np.float64, 96).reshape(6, 4, 4):
+        m = m @ link
         out.append(m)
+    for m in out[1:]:
+        m.flags.writeable = False
     return tuple(out)
 
 
@@ -372,7 +372,7 @@ def jacobian(
         r0, r1, r2 = px - o0, py - o1, pz - o2
         linear = ((z1 * r2 - z2 * r1) * k, (z2 * r0 - z0 * r2) * k, (z0 * r1 - z1 * r0) * k)
         columns.append((*linear, z0, z1, z2))
-    jac = np.array(columns).T.copy()
+    jac = np.array(list(zip(*columns, strict=True)))
     if frame == "tool":
         rt = frames[-1][:3, :3].T
         jac[:3] = rt @ jac[:3]
