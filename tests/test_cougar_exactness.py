@@ -23,7 +23,7 @@ from manip.arm import PUMA560_LEE, Transform, forward
 from manip.codecs.pdp11float import F_MAX, F_MIN_NORMAL, pack_f_array, unpack_f_array
 from manip.cougar import Contacts, Spring, Surface, Wrench
 from manip.cougar.adc import ADC_MAX, ADC_MIN, GaugeModel
-from manip.cougar.compliance import MM_PER_INCH, centre_jacobian, cross, gravity_wrench, limit_values
+from manip.cougar.compliance import MM_PER_INCH, centre_jacobian, gravity_load, limit
 from manip.cougar.jacob import STEPS, Jacob
 from manip.cougar.memory import JBUF_J, JBUF_JT, JBUF_P, MAP, Memory, region
 
@@ -61,7 +61,7 @@ def bits(xs: Sequence[float]) -> bytes:
 # ------------------------------------------------------------------------------------ GUTS arithmetic
 def numpy_gravity_load(rotation: np.ndarray, weight: float, cg_mm: np.ndarray) -> np.ndarray:
     f = rotation.T @ np.array([0.0, 0.0, -weight])
-    return np.concatenate([f, cross(np.asarray(cg_mm) / MM_PER_INCH, f)])
+    return np.concatenate([f, np.cross(np.asarray(cg_mm) / MM_PER_INCH, f)])
 
 
 @settings(max_examples=300, deadline=None)
@@ -70,12 +70,12 @@ def numpy_gravity_load(rotation: np.ndarray, weight: float, cg_mm: np.ndarray) -
     st.one_of(st.floats(-200.0, 200.0), st.sampled_from([0.0, -0.0, F_MAX])),
     st.tuples(*(st.one_of(st.floats(-300.0, 300.0), st.sampled_from([0.0, -0.0, F_MAX])) for _ in range(3))),
 )
-def test_gravity_wrench_is_the_numpy_gravity_load(
+def test_gravity_load_is_the_numpy_formulation(
     q: tuple[float, ...], weight: float, cg: tuple[float, ...]
 ) -> None:
     r = np.array(forward(q).rotation)
     expected = numpy_gravity_load(r, weight, np.array(cg))
-    got = gravity_wrench(r.tolist(), weight, cg)
+    got = gravity_load(r.tolist(), weight, cg)
     # equal values; a zero's sign is BLAS's business (and no F float can show it)
     assert np.array_equal(np.array(got), expected)
     assert bits([v for v in got if v]) == bits([v for v in expected.tolist() if v])
@@ -87,11 +87,11 @@ def test_gravity_wrench_is_the_numpy_gravity_load(
     st.sampled_from([0.5, 0.0, -1.0, 1e30]),
     values.filter(lambda v: not math.isnan(v)),  # LIMIT's constants come from memory: F floats, never NaN
 )
-def test_limit_values_is_numpys_where_then_clip(force: list[float], dead: float, clamp: float) -> None:
+def test_limit_is_numpys_where_then_clip(force: list[float], dead: float, clamp: float) -> None:
     a = np.array(force)
     with np.errstate(invalid="ignore"):
         expected = np.clip(np.where(np.abs(a) < dead, 0.0, a), -clamp, clamp)
-    assert bits(limit_values(force, dead, clamp)) == bits(expected.tolist())
+    assert bits(limit(force, dead, clamp)) == bits(expected.tolist())
 
 
 @settings(max_examples=300, deadline=None)

@@ -1,11 +1,13 @@
 """The numbers Cougar computes: force conversion, GRAVITY, LIMIT, the compliance equation and FILTER.
 
-Pure functions on numpy arrays; the simulator reads their inputs from Cougar memory and stores the
-results back.  Units (errata ``cougar-units``): forces in ounces, torques in ounce-inches (the 1985 guide's
-units for weights and LIMIT), lengths on the link in millimetres (errata ``units``; converted with 25.4
-mm/in where a torque needs them), joint angles in degrees.  Vectors are in hand coordinates (the end
-frame of the arm model, origin at the wrist centre) about the compliance centre, the point the frame
-vector FV names (§8.2, B.14).
+Pure functions, on numpy arrays where a matrix product is involved and on plain floats where the work
+is elementwise (the simulator runs those every tick, and numpy's cost per call would be most of it);
+the simulator reads their inputs from Cougar memory and stores the results back.  Units (errata
+``cougar-units``): forces in ounces, torques in ounce-inches (the 1985 guide's units for weights and
+LIMIT), lengths on the link in millimetres (errata ``units``; converted with 25.4 mm/in where a torque
+needs them), joint angles in degrees.  Vectors are in hand coordinates (the end frame of the arm model,
+origin at the wrist centre) about the compliance centre, the point the frame vector FV names (§8.2,
+B.14).
 
 Conversion (§8.2)::
 
@@ -58,15 +60,11 @@ __all__ = [
     "centre_jacobian",
     "compliance_sample",
     "cross",
-    "cross_values",
     "filter_constants",
     "gravity_load",
     "gravity_model",
-    "gravity_wrench",
     "hand_rotation",
-    "hand_rotation_rows",
     "limit",
-    "limit_values",
     "output_filter",
     "skew",
     "voltmat",
@@ -83,13 +81,8 @@ def skew(v: Vector) -> Matrix:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-def cross(a: Vector, b: Vector) -> Vector:
-    """a × b for 3-vectors (numpy's general cross is slow for one pair)."""
-    return np.array(cross_values(a, b), dtype=np.float64)
-
-
-def cross_values(a: Sequence[float] | Vector, b: Sequence[float] | Vector) -> list[float]:
-    """:func:`cross` in plain floats."""
+def cross(a: Sequence[float] | Vector, b: Sequence[float] | Vector) -> list[float]:
+    """a × b for 3-vectors, in plain floats: numpy's arithmetic (so its bits) without its cost per call."""
     return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
@@ -122,13 +115,8 @@ def gravity_model(
     return total, moment / total
 
 
-def hand_rotation(theta_deg: Vector | Sequence[float], geometry: PumaGeometry) -> Matrix:
-    """Hand-to-world rotation at the given joint angles (identity if they are not usable angles)."""
-    return np.array(hand_rotation_rows(theta_deg, geometry))
-
-
-def hand_rotation_rows(theta_deg: Vector | Sequence[float], geometry: PumaGeometry) -> list[list[float]]:
-    """:func:`hand_rotation` as rows of plain floats."""
+def hand_rotation(theta_deg: Vector | Sequence[float], geometry: PumaGeometry) -> list[list[float]]:
+    """Hand-to-world rotation at the given joint angles, as rows (identity if they are not usable angles)."""
     try:
         rows: list[list[float]] = forward(theta_deg, geometry).rotation.tolist()
     except ValueError:
@@ -136,32 +124,24 @@ def hand_rotation_rows(theta_deg: Vector | Sequence[float], geometry: PumaGeomet
     return rows
 
 
-def gravity_load(rotation: Matrix, weight: float, cg_mm: Vector) -> Vector:
-    """The wrench (oz, oz-in; hand axes) gravity puts on a weight at ``cg_mm`` from the reference point."""
-    return np.array(gravity_wrench(np.asarray(rotation).tolist(), weight, np.asarray(cg_mm).tolist()))
+def gravity_load(rotation: Sequence[Sequence[float]], weight: float, cg_mm: Sequence[float]) -> list[float]:
+    """The wrench (oz, oz-in; hand axes) gravity puts on a weight at ``cg_mm`` from the reference point:
+    f = Rᵀ·(0, 0, −weight), τ = cg × f, with R the hand rotation's rows.
 
-
-def gravity_wrench(rotation: Sequence[Sequence[float]], weight: float, cg_mm: Sequence[float]) -> list[float]:
-    """:func:`gravity_load` in plain floats (the simulator's every tick): f = Rᵀ·(0, 0, −weight), τ = cg × f.
-
-    f is the bottom row of R times −weight, the products Rᵀ·(0, 0, −w) has to make (the others are
-    exact zeros), + 0.0 so that a zero is +0.0 as numpy's matrix product gives it; τ is cross's
-    arithmetic.  Equal, bit for bit, to the numpy formulation (a test holds them to it).
+    f is the bottom row of R times −weight: the only products of Rᵀ·(0, 0, −w) that are not exact zeros
+    (+ 0.0 makes a zero +0.0, as numpy's matrix product gives it).  Equal to that formulation (a test
+    holds them to it).
     """
     w = -weight
     r2 = rotation[2]
     f0, f1, f2 = r2[0] * w + 0.0, r2[1] * w + 0.0, r2[2] * w + 0.0
     a0, a1, a2 = cg_mm[0] / MM_PER_INCH, cg_mm[1] / MM_PER_INCH, cg_mm[2] / MM_PER_INCH
-    return [f0, f1, f2, *cross_values((a0, a1, a2), (f0, f1, f2))]
+    return [f0, f1, f2, *cross((a0, a1, a2), (f0, f1, f2))]
 
 
-def limit(force: Vector, dead: float, clamp: float) -> Vector:
-    """LIMIT (B.5): magnitudes below ``dead`` become 0, above ``clamp`` become ±``clamp``."""
-    return np.array(limit_values(np.asarray(force, dtype=np.float64).tolist(), dead, clamp))
-
-
-def limit_values(force: Sequence[float], dead: float, clamp: float) -> list[float]:
-    """:func:`limit` in plain floats: each value through numpy's where(|f| < dead, 0, f), then clip."""
+def limit(force: Sequence[float], dead: float, clamp: float) -> list[float]:
+    """LIMIT (B.5): magnitudes below ``dead`` become 0, above ``clamp`` become ±``clamp`` (numpy's
+    where(|f| < dead, 0, f) then clip, value by value)."""
     low = -clamp
     return [min(max(0.0 if abs(f) < dead else f, low), clamp) for f in force]
 

@@ -69,12 +69,12 @@ from manip.cougar.comint import Comint, Executable, OutOfSyncEvent
 from manip.cougar.compliance import (
     MM_PER_INCH,
     compliance_sample,
-    cross_values,
+    cross,
     filter_constants,
+    gravity_load,
     gravity_model,
-    gravity_wrench,
-    hand_rotation_rows,
-    limit_values,
+    hand_rotation,
+    limit,
     output_filter,
     voltmat,
     voltmat_torque_rows,
@@ -294,8 +294,8 @@ class CougarSim:
         c = self.config
         t6 = forward(self._pose, c.geometry)
         rows = t6.rotation.tolist()
-        hand = gravity_wrench(rows, c.hand_weight_oz, c.hand_cg_mm)
-        payload = gravity_wrench(rows, c.payload_weight_oz, c.payload_cg_mm)
+        hand = gravity_load(rows, c.hand_weight_oz, c.hand_cg_mm)
+        payload = gravity_load(rows, c.payload_weight_oz, c.payload_cg_mm)
         # FreeSpace touches nothing anywhere: no tool pose needed
         touch = _UNTOUCHED if type(self.environment) is FreeSpace else self._contact(t6)
         return np.array([(t + h) + p for t, h, p in zip(touch, hand, payload, strict=True)])
@@ -309,7 +309,7 @@ class CougarSim:
         r = np.array(t6.rotation)  # C order, as the products below have always had it
         f = [float(v) for v in contact.force]
         lever_in = [(a - b) / MM_PER_INCH for a, b in zip(tool.p.tolist(), t6.p.tolist(), strict=True)]
-        tau = [float(t) + c for t, c in zip(contact.torque, cross_values(lever_in, f), strict=True)]
+        tau = [float(t) + c for t, c in zip(contact.torque, cross(lever_in, f), strict=True)]
         touch: list[float] = (r.T @ np.array(f)).tolist() + (r.T @ np.array(tau)).tolist()
         return touch
 
@@ -338,11 +338,11 @@ class CougarSim:
 
     def _gravity(self) -> None:
         mem = self.memory
-        r = hand_rotation_rows(mem.floats("theta_sensed"), self.config.geometry)
-        load = gravity_wrench(r, mem.floats("grav_weight")[0], mem.floats("grav_cg"))
+        r = hand_rotation(mem.floats("theta_sensed"), self.config.geometry)
+        load = gravity_load(r, mem.floats("grav_weight")[0], mem.floats("grav_cg"))
         force = [s + g for s, g in zip(mem.floats("force_sensed"), load, strict=True)]
         if mem.word("flags") & FLAG_LIMIT:
-            force = limit_values(force, mem.floats("limit_dead")[0], mem.floats("limit_clamp")[0])
+            force = limit(force, mem.floats("limit_dead")[0], mem.floats("limit_clamp")[0])
         mem.put("force", force)
 
     def _guardm(self) -> None:
