@@ -423,8 +423,8 @@ class CougarSim:
         con = mem.array("con")
         if "filter-con-swapped" in self._faults:
             con = con[[0, 1, 3, 2]]
-        previous, filtered = mem.array("dtheta_previous"), mem.array("dtheta_filtered")
-        filtered, output = output_filter(sample, previous, filtered, con)
+        previous, last = mem.array("dtheta_previous"), mem.array("dtheta_filtered")
+        filtered, output = output_filter(sample, previous, last, con)
         mem.put("dtheta_previous", sample)
         mem.put("dtheta_filtered", filtered)
         mem.put("dtheta_out", output)  # RATEO
