@@ -193,15 +193,11 @@ class Memory:
 
     def _stored(self, index: int, words: int) -> None:
         """Words ``index``.. (word indexes) were stored: forget the decoded regions they overlap."""
-        if not self._floats:  # (every region in _arrays is in _floats too)
-            return
-        if words == 1:  # most stores to a word are to a word variable, or outside the map
-            name = _FLOAT_OWNER[index] if index < len(_FLOAT_OWNER) else None
-            if name is not None:
-                self._floats.pop(name, None)
-                self._arrays.pop(name, None)
-            return
-        for name in _float_regions_over(index, index + words):
+        end = index + words
+        # (every region in _arrays is in _floats too)
+        if not self._floats or index >= len(_NEXT_FLOAT_WORD) or _NEXT_FLOAT_WORD[index] >= end:
+            return  # nothing decoded, or no float among the words stored
+        for name in _float_regions_over(index, end):
             self._floats.pop(name, None)
             self._arrays.pop(name, None)
 
@@ -222,6 +218,13 @@ class Memory:
 
     def write_words(self, address: int, values: Sequence[int]) -> None:
         i = self._check(address, len(values))
+        try:
+            self._words[i : i + len(values)] = array.array("H", values)
+        except (OverflowError, TypeError):
+            pass  # not all 16-bit words: stored one by one below, up to the bad one
+        else:
+            self._stored(i, len(values))
+            return
         try:
             for j, v in enumerate(values):
                 if not 0 <= v <= 0xFFFF:
@@ -375,16 +378,23 @@ _FLOAT_ENDS: Final = [r.end // 2 for r in MAP if r.kind == "float"]
 _FLOAT_NAMES: Final = [r.name for r in MAP if r.kind == "float"]
 
 
-def _float_owners() -> list[str | None]:
-    """The float region each word of the map belongs to (None: not a float region), by word index."""
-    owners: list[str | None] = [None] * (MAP[-1].end // 2)
+def _next_float_words() -> list[int]:
+    """By word index, up to the end of the map: the first word of a float region at or after it."""
+    end = MAP[-1].end // 2
+    is_float = [False] * end
     for r in MAP:
         if r.kind == "float":
-            owners[r.address // 2 : r.end // 2] = [r.name] * r.words
-    return owners
+            is_float[r.address // 2 : r.end // 2] = [True] * r.words
+    after = [end] * end
+    following = end
+    for i in range(end - 1, -1, -1):
+        if is_float[i]:
+            following = i
+        after[i] = following
+    return after
 
 
-_FLOAT_OWNER: Final = _float_owners()
+_NEXT_FLOAT_WORD: Final = _next_float_words()
 
 
 def _float_regions_over(start: int, end: int) -> list[str]:
