@@ -3,10 +3,11 @@
 A Puma-like driver moves the arm along smooth joint-space segments with pauses, sending SEN with the
 sensed angles every tick the arm moved (as the wrist output process does), RFRC every few ticks, RRAW
 now and then, and NPR instead of SEN on a quarter of the segments (compliant ones); the tool touches a
-surface and a spring, and the gauges have noise and cross-coupling.  Printed: CougarSim.tick calls per
-second of CPU time (process time, so that other work on the machine counts less; best of ``--rounds``;
-an absolute figure, there is no baseline to run beside it), then what one tick's parts cost, timed
-around each part and from a profile of the same loop.
+surface and a spring, and the gauges have noise and cross-coupling (then again in free space with exact
+gauges, the reference server's default).  Printed: CougarSim.tick calls per second of CPU time (process
+time, so that other work on the machine counts less; best of ``--rounds``; an absolute figure, there is
+no baseline to run beside it), then what one tick's parts cost, timed around each part, the kinematics'
+cost per call, and a profile of the same loop.
 
     .venv/bin/python bench/cougar_sim.py [--ticks 3000] [--rounds 5] [--no-profile]
     .venv/bin/python bench/cougar_sim.py --digest [--ticks 600]
@@ -24,6 +25,7 @@ from __future__ import annotations
 import argparse
 import array
 import cProfile
+import dataclasses
 import hashlib
 import math
 import pstats
@@ -102,9 +104,13 @@ def setup(sim: CougarSim) -> None:
 NOISY = GaugeModel(noise=0.7, cross_coupling=0.02, offsets=(5, -3, 0, 2, 7, -1, 4, 0))
 
 
-def bench_sim() -> CougarSim:
-    config = CougarConfig(gauges=NOISY, guts_base_s=0.0, guts_per_command_s=0.0, guts_per_word_s=0.0)
-    return CougarSim(config, environment=environment(), seed=5)  # no re-entries: every tick works
+def bench_sim(touching: bool = True) -> CougarSim:
+    """The bench's Cougar: touching a surface and a spring with noisy gauges, or in free space with
+    exact ones (the reference server's default); no re-entries, so every tick works."""
+    no_reentry = CougarConfig(guts_base_s=0.0, guts_per_command_s=0.0, guts_per_word_s=0.0)
+    if not touching:
+        return CougarSim(no_reentry, seed=5)
+    return CougarSim(dataclasses.replace(no_reentry, gauges=NOISY), environment=environment(), seed=5)
 
 
 def script(driver: Iterator[list[int]], ticks: int) -> list[list[int]]:
@@ -125,18 +131,18 @@ def run_ticks(
     return clock() - start
 
 
-def warmed_up(seed: int) -> tuple[CougarSim, Iterator[list[int]]]:
-    sim = bench_sim()
+def warmed_up(seed: int, touching: bool = True) -> tuple[CougarSim, Iterator[list[int]]]:
+    sim = bench_sim(touching)
     setup(sim)
     driver = puma_driver(random.Random(seed))
     run_ticks(sim, script(driver, 30))
     return sim, driver
 
 
-def ticks_per_second(ticks: int, rounds: int) -> list[float]:
+def ticks_per_second(ticks: int, rounds: int, touching: bool = True) -> list[float]:
     rates = []
     for r in range(rounds):
-        sim, driver = warmed_up(r)
+        sim, driver = warmed_up(r, touching)
         rates.append(ticks / run_ticks(sim, script(driver, ticks), 1.0))
     return rates
 
@@ -185,7 +191,7 @@ def kinematics_costs(calls: int = 3000) -> None:
     again = fresh[0]
     print("\nkinematics, µs per call (CPU time):")
     for label, call in (
-        ("forward, fresh angles", lambda q: forward(q)),
+        ("forward, fresh angles", forward),
         ("forward, the same angles again", lambda q: forward(again)),
         ("jacobian (tool frame), fresh angles", lambda q: jacobian(q, frame="tool")),
         ("jacobian (tool frame), the same angles again", lambda q: jacobian(again, frame="tool")),
@@ -362,12 +368,13 @@ def main() -> None:
         print("all", digest(args.ticks or 600))
         return
     ticks = args.ticks or 3000
-    rates = ticks_per_second(ticks, args.rounds)
-    best = max(rates)
-    print(
-        f"CougarSim.tick: {best:,.0f} ticks/s, best of {args.rounds} ({1e6 / best:.0f} µs per tick); "
-        f"all rounds: {', '.join(f'{r:,.0f}' for r in rates)}"
-    )
+    for touching, where in ((True, "touching a surface and a spring"), (False, "in free space")):
+        rates = ticks_per_second(ticks, args.rounds, touching)
+        best = max(rates)
+        print(
+            f"CougarSim.tick, {where}: {best:,.0f} ticks/s, best of {args.rounds} ({1e6 / best:.0f} µs "
+            f"per tick); all rounds: {', '.join(f'{r:,.0f}' for r in rates)}"
+        )
     part_costs(ticks)
     kinematics_costs()
     if not args.no_profile:
