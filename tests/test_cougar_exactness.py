@@ -19,11 +19,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from manip.arm import PUMA560_LEE, Transform, forward
+from manip.arm import PUMA560_LEE, Transform, forward, jacobian
 from manip.codecs.pdp11float import F_MAX, F_MIN_NORMAL, pack_f_array, unpack_f_array
 from manip.cougar import Contacts, Spring, Surface, Wrench
 from manip.cougar.adc import ADC_MAX, ADC_MIN, GaugeModel
-from manip.cougar.compliance import MM_PER_INCH, centre_jacobian, gravity_load, limit
+from manip.cougar.compliance import MM_PER_INCH, centre_jacobian, gravity_load, limit, skew
 from manip.cougar.jacob import STEPS, Jacob
 from manip.cougar.memory import JBUF_J, JBUF_JT, JBUF_P, MAP, Memory, region
 
@@ -213,6 +213,13 @@ def test_encoded_floats_are_what_write_floats_stored_before(xs: list[float] | np
 
 
 # ------------------------------------------------------------------------------------ JACOB
+def numpy_centre_jacobian(theta: np.ndarray, fv: np.ndarray) -> np.ndarray:
+    """The centre Jacobian as first written: the correction made even when FV is zero."""
+    j = jacobian(theta, PUMA560_LEE, frame="tool")
+    j[:3] -= skew(fv) @ j[3:] * (math.pi / 180.0)
+    return j
+
+
 class ReferenceJacob:
     """JACOB as first written: every step computes and encodes from scratch."""
 
@@ -227,7 +234,7 @@ class ReferenceJacob:
         if self.step_index == 0:
             self.bji = memory.get("bji")
             with contextlib.suppress(ValueError):
-                self.j = centre_jacobian(memory.get("theta_sensed"), memory.get("fv"), PUMA560_LEE)
+                self.j = numpy_centre_jacobian(memory.get("theta_sensed"), memory.get("fv"))
             memory.write_floats(back + 4 * JBUF_J, self.j)
         elif self.step_index == 1:
             memory.write_floats(back + 4 * JBUF_JT, self.j.T)

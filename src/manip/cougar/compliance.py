@@ -146,10 +146,17 @@ def limit(force: Sequence[float], dead: float, clamp: float) -> list[float]:
     return [min(max(0.0 if abs(f) < dead else f, low), clamp) for f in force]
 
 
-def centre_jacobian(theta_deg: Vector, fv_mm: Vector, geometry: PumaGeometry) -> Matrix:
-    """J at the compliance centre in hand coordinates: rows mm/deg (translation) and deg/deg (rotation)."""
+def centre_jacobian(
+    theta_deg: Vector | Sequence[float], fv_mm: Vector | Sequence[float], geometry: PumaGeometry
+) -> Matrix:
+    """J at the compliance centre in hand coordinates: rows mm/deg (translation) and deg/deg (rotation).
+
+    With FV zero (the default) the centre is the wrist centre and J is the end frame's as it is: the
+    correction would subtract zeros (changing nothing but, at most, the sign of a zero).
+    """
     j = jacobian(theta_deg, geometry, frame="tool")
-    j[:3] -= skew(np.asarray(fv_mm)) @ j[3:] * (math.pi / 180.0)
+    if any(fv_mm):
+        j[:3] -= skew(np.asarray(fv_mm)) @ j[3:] * (math.pi / 180.0)
     return j
 
 

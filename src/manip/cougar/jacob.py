@@ -86,7 +86,7 @@ class Jacob:
                 if self._inputs is None or inputs[:2] != self._inputs[:2]:
                     # angles that are not angles (a bad deposit) keep the last Jacobian
                     with contextlib.suppress(ValueError):
-                        self._j = centre_jacobian(np.array(theta), np.array(fv), self.geometry)
+                        self._j = centre_jacobian(theta, fv, self.geometry)
                 self._inputs = inputs
                 self._words = self._encode()
             memory.store_encoded(back + 4 * JBUF_J, *self._stored_words()[0])
