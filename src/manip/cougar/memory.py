@@ -193,11 +193,10 @@ class Memory:
 
     def _stored(self, index: int, words: int) -> None:
         """Words ``index``.. (word indexes) were stored: forget the decoded regions they overlap."""
-        end = index + words
-        # (every region in _arrays is in _floats too)
-        if not self._floats or index >= len(_NEXT_FLOAT_WORD) or _NEXT_FLOAT_WORD[index] >= end:
-            return  # nothing decoded, or no float among the words stored
-        for name in _float_regions_over(index, end):
+        if not self._floats or index >= _MAP_WORDS:  # (every region in _arrays is in _floats too)
+            return
+        end = min(index + words, _MAP_WORDS)
+        for name in _FLOAT_NAMES[_FIRST_ENDING_AFTER[index] : _FIRST_STARTING_AT[end]]:
             self._floats.pop(name, None)
             self._arrays.pop(name, None)
 
@@ -372,36 +371,15 @@ class Memory:
         self._stored(i, 1)
 
 
-# Float regions by word index, for forgetting decoded values: the regions' first words, in order.
+# Float regions by word index, for forgetting decoded values.  A store to words [start, end) touches the
+# float regions _FLOAT_NAMES[_FIRST_ENDING_AFTER[start]:_FIRST_STARTING_AT[end]] (none when the slice is
+# empty); both tables are the bisections worked out once for every word of the map.
+_FLOAT_NAMES: Final = [r.name for r in MAP if r.kind == "float"]
 _FLOAT_STARTS: Final = [r.address // 2 for r in MAP if r.kind == "float"]
 _FLOAT_ENDS: Final = [r.end // 2 for r in MAP if r.kind == "float"]
-_FLOAT_NAMES: Final = [r.name for r in MAP if r.kind == "float"]
-
-
-def _next_float_words() -> list[int]:
-    """By word index, up to the end of the map: the first word of a float region at or after it."""
-    end = MAP[-1].end // 2
-    is_float = [False] * end
-    for r in MAP:
-        if r.kind == "float":
-            is_float[r.address // 2 : r.end // 2] = [True] * r.words
-    after = [end] * end
-    following = end
-    for i in range(end - 1, -1, -1):
-        if is_float[i]:
-            following = i
-        after[i] = following
-    return after
-
-
-_NEXT_FLOAT_WORD: Final = _next_float_words()
-
-
-def _float_regions_over(start: int, end: int) -> list[str]:
-    """The float regions with a word in word indexes [start, end)."""
-    first = bisect.bisect_right(_FLOAT_ENDS, start)  # the first region ending after ``start``
-    last = bisect.bisect_left(_FLOAT_STARTS, end)  # regions from here on start at or after ``end``
-    return _FLOAT_NAMES[first:last]
+_MAP_WORDS: Final = MAP[-1].end // 2
+_FIRST_ENDING_AFTER: Final = [bisect.bisect_right(_FLOAT_ENDS, i) for i in range(_MAP_WORDS)]
+_FIRST_STARTING_AT: Final = [bisect.bisect_left(_FLOAT_STARTS, i) for i in range(_MAP_WORDS + 1)]
 
 
 def _plain_floats(values: object, count: int) -> TypeGuard[Sequence[float]]:
