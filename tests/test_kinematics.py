@@ -143,6 +143,63 @@ def test_rtb_convention_maps_exactly(q: tuple[float, ...], g: PumaGeometry) -> N
     assert np.allclose(lee, _rz(180) @ rtb_fk(q, g) @ _rz(180), atol=1e-9)
 
 
+# The chain as first written, one numpy array per link multiplied from the identity, and the Jacobian
+# built on it: forward and jacobian must give the same bits (zeros' signs included), because the
+# simulated Cougar stores what they compute where the Puma reads it.
+def _numpy_link(theta: float, alpha_deg: float, a: float, d: float) -> np.ndarray:
+    ct, st = math.cos(theta), math.sin(theta)
+    ca, sa = {-90.0: (0.0, -1.0), 0.0: (1.0, 0.0), 90.0: (0.0, 1.0)}[alpha_deg]
+    top = [[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0.0, sa, ca, d]]
+    return np.array([*top, [0.0, 0.0, 0.0, 1.0]])
+
+
+def _numpy_frames(q: Sequence[float], g: PumaGeometry) -> list[np.ndarray]:
+    out = [np.eye(4)]
+    for qi, (alpha, a, d) in zip(q, g.dh(), strict=True):
+        out.append(out[-1] @ _numpy_link(math.radians(qi), alpha, a, d))
+    return out
+
+
+def _numpy_jacobian(q: Sequence[float], g: PumaGeometry, frame: str) -> np.ndarray:
+    frames = _numpy_frames(q, g)
+    p = frames[-1][:3, 3]
+    jac = np.empty((6, 6))
+    for i in range(6):
+        z = frames[i][:3, 2]
+        jac[:3, i] = np.cross(z, p - frames[i][:3, 3]) * (math.pi / 180.0)
+        jac[3:, i] = z
+    if frame == "tool":
+        rt = frames[-1][:3, :3].T
+        jac[:3] = rt @ jac[:3]
+        jac[3:] = rt @ jac[3:]
+    return jac
+
+
+_SPECIAL_ANGLES = st.sampled_from([0.0, -0.0, 90.0, -90.0, 180.0, -180.0, 45.0, 270.0, 1e-300, -1e-300])
+_ANY_ANGLE = st.one_of(st.floats(-720.0, 720.0), _SPECIAL_ANGLES, st.floats(-1e6, 1e6))
+
+
+@FAST
+@given(st.tuples(*(_ANY_ANGLE for _ in range(6))), st.sampled_from(GEOMETRIES))
+def test_forward_and_jacobian_are_bit_identical_to_the_numpy_chain(
+    q: tuple[float, ...], g: PumaGeometry
+) -> None:
+    reference = _numpy_frames(q, g)[-1]
+    assert forward(q, g).matrix.tobytes() == reference.tobytes()
+    assert forward(q, g).matrix.tobytes() == reference.tobytes()  # again: the kept answer
+    for frame in ("world", "tool"):
+        got = jacobian(q, g, frame=frame)  # type: ignore[arg-type]
+        assert got.tobytes() == _numpy_jacobian(q, g, frame).tobytes(), frame
+        assert got.flags.c_contiguous and got.flags.writeable
+
+
+def test_forward_keeps_the_sign_of_zero_angles_apart() -> None:
+    # -0.0 == 0.0, but their links' zeros differ in sign: the kept answers must not be mixed up
+    for q in ((0.0,) * 6, (-0.0,) * 6, (0.0,) * 6):
+        assert forward(q).matrix.tobytes() == _numpy_frames(q, PUMA560_LEE)[-1].tobytes()
+    assert not forward(READY).matrix.flags.writeable
+
+
 # ---------------------------------------------------------------------------- reference vectors
 # name: (q_RTB deg, T in metres with the pedestal (rows of [n o a p]), ikine_a solutions by config)
 VECTORS = {

@@ -28,8 +28,10 @@ of R03ᵀ·R, because with this table R36 = Rz(θ4)·Ry(θ5)·Rz(θ6) (two wrist
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
+import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import ClassVar, Literal, NamedTuple
@@ -254,40 +256,54 @@ def _as_joints(q: JointsLike) -> Joints:
     """Validate and copy joint angles: exactly six finite numbers."""
     if len(q) != 6:
         raise ValueError(f"expected 6 joint angles, got {len(q)}")
-    v = tuple(float(x) for x in q)
-    if not all(math.isfinite(x) for x in v):
+    v: Joints = tuple(map(float, q))  # type: ignore[assignment]  # six, checked above
+    if not all(map(math.isfinite, v)):
         raise ValueError(f"joint angles must be finite, got {v}")
-    return (v[0], v[1], v[2], v[3], v[4], v[5])
+    return v
 
 
 # Exact cos/sin of the table's twists, so that zero entries stay exactly zero.
 _TWIST = {-90.0: (0.0, -1.0), 0.0: (1.0, 0.0), 90.0: (0.0, 1.0)}
+_EYE4: Matrix = np.eye(4)
+_EYE4.flags.writeable = False
+_JOINT_BITS = struct.Struct("<6d")
 
 
-def _link(theta: float, alpha_deg: float, a: float, d: float) -> Matrix:
-    ct, st = math.cos(theta), math.sin(theta)
-    ca, sa = _TWIST[alpha_deg]
-    return np.array(
-        [
-            [ct, -st * ca, st * sa, a * ct],
-            [st, ct * ca, -ct * sa, a * st],
-            [0.0, sa, ca, d],
-            [0.0, 0.0, 0.0, 1.0],
-        ]
-    )
+def _frames(q_deg: Joints, geometry: PumaGeometry) -> tuple[Matrix, ...]:
+    """Base-to-frame-i transforms for i = 0..6, read-only.
+
+    The simulated Cougar asks for the same angles several times a tick (the physical load, GRAVITY's
+    hand rotation, JACOB's Jacobian), so the last few answers are kept.  The key is the angles' bits:
+    -0.0 and 0.0 are equal as floats but give links whose zeros differ in sign.
+    """
+    return _frames_of(_JOINT_BITS.pack(*q_deg), geometry)
 
 
-def _frames(q_deg: Sequence[float], geometry: PumaGeometry, upto: int = 6) -> list[Matrix]:
-    """Base-to-frame-i transforms for i = 0..upto."""
-    out = [np.eye(4)]
-    for qi, (alpha, a, d) in zip(q_deg[:upto], geometry.dh()[:upto], strict=False):
-        out.append(out[-1] @ _link(math.radians(qi), alpha, a, d))
-    return out
+@functools.lru_cache(maxsize=32)
+def _frames_of(key: bytes, geometry: PumaGeometry) -> tuple[Matrix, ...]:
+    # One array holds the six link matrices A_i = Rz(θ_i)·Tz(d_i)·Tx(a_i)·Rx(α_i); the chain is then
+    # multiplied from the identity one link at a time, the same matrix products (so the same bits) as
+    # building and multiplying one 4x4 array per link, for half the cost.
+    entries: list[float] = []
+    for qi, (alpha, a, d) in zip(_JOINT_BITS.unpack(key), geometry.dh(), strict=True):
+        theta = math.radians(qi)
+        ct, st = math.cos(theta), math.sin(theta)
+        ca, sa = _TWIST[alpha]
+        entries += (ct, -st * ca, st * sa, a * ct, st, ct * ca, -ct * sa, a * st)
+        entries += (0.0, sa, ca, d, 0.0, 0.0, 0.0, 1.0)
+    out = [_EYE4]
+    m = _EYE4
+    for link in np.fromiter(entries, np.float64, 96).reshape(6, 4, 4):
+        m = m @ link
+        out.append(m)
+    for m in out[1:]:
+        m.flags.writeable = False
+    return tuple(out)
 
 
 def forward(q_deg: JointsLike, geometry: PumaGeometry = PUMA560_LEE) -> Transform:
     """Joint angles (deg) to the end-frame transform (mm): the protocol's "solve backwards"."""
-    return Transform(_frames(_as_joints(q_deg), geometry)[-1])
+    return Transform._trusted(_frames(_as_joints(q_deg), geometry)[-1])
 
 
 #: The top three rows of a homogeneous transform as plain floats: (R | p).
@@ -329,7 +345,7 @@ _DH1 = (-90.0, 0.0, 0.0)  # link 1's row of every PumaGeometry.dh()
 
 
 def _link_rows(theta_deg: float, alpha_deg: float, a: float, d: float) -> tuple[float, ...]:
-    """The top three rows of :func:`_link`, flat."""
+    """The top three rows of link ``i``'s A_i (as in :func:`_frames_of`), flat."""
     theta = math.radians(theta_deg)
     ct, st = math.cos(theta), math.sin(theta)
     ca, sa = _TWIST[alpha_deg]
@@ -347,17 +363,16 @@ def jacobian(
     sensor sees).  The reference point is always the end-frame origin.
     """
     frames = _frames(_as_joints(q_deg), geometry)
-    p = frames[-1][:3, 3]
-    jac = np.empty((6, 6))
+    _, _, _, px, _, _, _, py, _, _, _, pz, *_ = frames[6].ravel().tolist()
     k = math.pi / 180.0
-    for i in range(6):
-        z = frames[i][:3, 2]
-        # z x r written out: numpy's general cross costs more than the arithmetic (same operations, so
-        # the same bits).
-        z0, z1, z2 = z.tolist()
-        r0, r1, r2 = (p - frames[i][:3, 3]).tolist()
-        jac[:3, i] = ((z1 * r2 - z2 * r1) * k, (z2 * r0 - z0 * r2) * k, (z0 * r1 - z1 * r0) * k)
-        jac[3:, i] = z
+    columns = []
+    for f in frames[:6]:
+        # z x r, r = p - o, in plain floats: the same operations (so the same bits) as numpy's
+        _, _, z0, o0, _, _, z1, o1, _, _, z2, o2, *_ = f.ravel().tolist()
+        r0, r1, r2 = px - o0, py - o1, pz - o2
+        linear = ((z1 * r2 - z2 * r1) * k, (z2 * r0 - z0 * r2) * k, (z0 * r1 - z1 * r0) * k)
+        columns.append((*linear, z0, z1, z2))
+    jac = np.array(list(zip(*columns, strict=True)))
     if frame == "tool":
         rt = frames[-1][:3, :3].T
         jac[:3] = rt @ jac[:3]

@@ -75,11 +75,21 @@ class Transform:
         m = np.array(matrix, dtype=np.float64)  # always a private copy
         if m.shape != (4, 4):
             raise ValueError(f"a transform is a 4x4 matrix, got shape {m.shape}")
-        if not np.all(np.isfinite(m)):
+        if not np.isfinite(m).all():
             raise ValueError("a transform must contain only finite numbers")
-        if not np.array_equal(m[3], [0.0, 0.0, 0.0, 1.0]):
+        if m[3].tolist() != [0.0, 0.0, 0.0, 1.0]:
             raise ValueError(f"the bottom row of a homogeneous transform is 0 0 0 1, got {m[3].tolist()}")
         object.__setattr__(self, "_m", _frozen(m))
+
+    @classmethod
+    def _trusted(cls, matrix: Matrix) -> Transform:
+        """A transform sharing ``matrix``, unchecked: for the arm model's own products, which are finite
+        with an exact bottom row by construction, and already read-only (this does not copy)."""
+        if matrix.flags.writeable:
+            raise ValueError("Transform._trusted needs a read-only matrix")
+        t = object.__new__(cls)
+        object.__setattr__(t, "_m", matrix)
+        return t
 
     def __setattr__(self, name: str, value: object) -> None:
         raise AttributeError("Transform is immutable")

@@ -33,6 +33,7 @@ Forces are in ounces, torques in ounce-inches (the 1985 guide's LIMIT units), r 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -104,6 +105,7 @@ class GaugeModel:
     offsets: tuple[int, ...] = (0,) * GAUGES
     noise: float = 0.0
     _c: FloatArray = field(init=False, repr=False, compare=False)
+    _offsets: FloatArray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if len(self.offsets) != GAUGES:
@@ -116,6 +118,9 @@ class GaugeModel:
             c = c @ (np.eye(6) + self.cross_coupling * n)
         c.setflags(write=False)
         object.__setattr__(self, "_c", c)
+        offsets = np.asarray(self.offsets, dtype=np.float64)
+        offsets.setflags(write=False)
+        object.__setattr__(self, "_offsets", offsets)
 
     @property
     def sensitivity(self) -> FloatArray:
@@ -129,12 +134,16 @@ class GaugeModel:
 
     def analog(self, wrench: FloatArray, rng: np.random.Generator | None = None) -> FloatArray:
         """Gauge outputs in counts before conversion: C·W + offsets (+ noise)."""
-        w = self._c @ wrench + np.asarray(self.offsets, dtype=np.float64)
+        w = self._c @ wrench + self._offsets
         if self.noise and rng is not None:
             w = w + rng.normal(0.0, self.noise, GAUGES)
         return w
 
     def convert(self, analog: FloatArray) -> list[int]:
-        """The A/D conversion: nearest count, saturated to −2048..2047."""
-        finite = np.nan_to_num(analog, nan=0.0, posinf=ADC_MAX, neginf=ADC_MIN)
-        return [int(v) for v in np.clip(np.rint(finite), ADC_MIN, ADC_MAX)]
+        """The A/D conversion: nearest count (ties to even), saturated to −2048..2047; NaN reads 0."""
+        # Python's round() of a float is numpy's rint (half-even), and clipping before or after rounding
+        # gives the same count for anything outside the range, infinities included.
+        return [
+            ADC_MAX if v > ADC_MAX else ADC_MIN if v < ADC_MIN else 0 if math.isnan(v) else round(v)
+            for v in np.asarray(analog, dtype=np.float64).tolist()
+        ]

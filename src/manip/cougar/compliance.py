@@ -1,11 +1,13 @@
 """The numbers Cougar computes: force conversion, GRAVITY, LIMIT, the compliance equation and FILTER.
 
-Pure functions on numpy arrays; the simulator reads their inputs from Cougar memory and stores the
-results back.  Units (errata ``cougar-units``): forces in ounces, torques in ounce-inches (the 1985 guide's
-units for weights and LIMIT), lengths on the link in millimetres (errata ``units``; converted with 25.4
-mm/in where a torque needs them), joint angles in degrees.  Vectors are in hand coordinates (the end
-frame of the arm model, origin at the wrist centre) about the compliance centre, the point the frame
-vector FV names (§8.2, B.14).
+Pure functions, on numpy arrays where a matrix product is involved and on plain floats where the work
+is elementwise (the simulator runs those every tick, and numpy's cost per call would be most of it);
+the simulator reads their inputs from Cougar memory and stores the results back.  Units (errata
+``cougar-units``): forces in ounces, torques in ounce-inches (the 1985 guide's units for weights and
+LIMIT), lengths on the link in millimetres (errata ``units``; converted with 25.4 mm/in where a torque
+needs them), joint angles in degrees.  Vectors are in hand coordinates (the end frame of the arm model,
+origin at the wrist centre) about the compliance centre, the point the frame vector FV names (§8.2,
+B.14).
 
 Conversion (§8.2)::
 
@@ -44,6 +46,7 @@ The defaults con3 = 0, con4 = 1 pass the sample through unchanged.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Final
 
 import numpy as np
@@ -78,9 +81,9 @@ def skew(v: Vector) -> Matrix:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-def cross(a: Vector, b: Vector) -> Vector:
-    """a × b for 3-vectors (numpy's general cross is slow for one pair)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+def cross(a: Sequence[float] | Vector, b: Sequence[float] | Vector) -> list[float]:
+    """a × b for 3-vectors, in plain floats: numpy's arithmetic (so its bits) without its cost per call."""
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
 def voltmat(calmat: Matrix, fv_mm: Vector) -> Matrix:
@@ -112,30 +115,48 @@ def gravity_model(
     return total, moment / total
 
 
-def hand_rotation(theta_deg: Vector, geometry: PumaGeometry) -> Matrix:
-    """Hand-to-world rotation at the given joint angles (identity if they are not usable angles)."""
+def hand_rotation(theta_deg: Vector | Sequence[float], geometry: PumaGeometry) -> list[list[float]]:
+    """Hand-to-world rotation at the given joint angles, as rows (identity if they are not usable angles)."""
     try:
-        return np.array(forward(theta_deg, geometry).rotation)
+        rows: list[list[float]] = forward(theta_deg, geometry).rotation.tolist()
     except ValueError:
-        return np.eye(3)
+        return [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    return rows
 
 
-def gravity_load(rotation: Matrix, weight: float, cg_mm: Vector) -> Vector:
-    """The wrench (oz, oz-in; hand axes) gravity puts on a weight at ``cg_mm`` from the reference point."""
-    f = rotation.T @ np.array([0.0, 0.0, -weight])
-    return np.concatenate([f, cross(np.asarray(cg_mm) / MM_PER_INCH, f)])
+def gravity_load(rotation: Sequence[Sequence[float]], weight: float, cg_mm: Sequence[float]) -> list[float]:
+    """The wrench (oz, oz-in; hand axes) gravity puts on a weight at ``cg_mm`` from the reference point:
+    f = Rᵀ·(0, 0, −weight), τ = cg × f, with R the hand rotation's rows.
+
+    f is the bottom row of R times −weight: the only products of Rᵀ·(0, 0, −w) that are not exact zeros
+    (+ 0.0 makes a zero +0.0, as numpy's matrix product gives it).  Equal to that formulation (a test
+    holds them to it).
+    """
+    w = -weight
+    r2 = rotation[2]
+    f0, f1, f2 = r2[0] * w + 0.0, r2[1] * w + 0.0, r2[2] * w + 0.0
+    a0, a1, a2 = cg_mm[0] / MM_PER_INCH, cg_mm[1] / MM_PER_INCH, cg_mm[2] / MM_PER_INCH
+    return [f0, f1, f2, *cross((a0, a1, a2), (f0, f1, f2))]
 
 
-def limit(force: Vector, dead: float, clamp: float) -> Vector:
-    """LIMIT (B.5): magnitudes below ``dead`` become 0, above ``clamp`` become ±``clamp``."""
-    out = np.where(np.abs(force) < dead, 0.0, force)
-    return np.clip(out, -clamp, clamp)
+def limit(force: Sequence[float], dead: float, clamp: float) -> list[float]:
+    """LIMIT (B.5): magnitudes below ``dead`` become 0, above ``clamp`` become ±``clamp`` (numpy's
+    where(|f| < dead, 0, f) then clip, value by value)."""
+    low = -clamp
+    return [min(max(0.0 if abs(f) < dead else f, low), clamp) for f in force]
 
 
-def centre_jacobian(theta_deg: Vector, fv_mm: Vector, geometry: PumaGeometry) -> Matrix:
-    """J at the compliance centre in hand coordinates: rows mm/deg (translation) and deg/deg (rotation)."""
+def centre_jacobian(
+    theta_deg: Vector | Sequence[float], fv_mm: Vector | Sequence[float], geometry: PumaGeometry
+) -> Matrix:
+    """J at the compliance centre in hand coordinates: rows mm/deg (translation) and deg/deg (rotation).
+
+    With FV zero (the default) the centre is the wrist centre and J is the end frame's as it is: the
+    correction would subtract zeros (changing nothing but, at most, the sign of a zero).
+    """
     j = jacobian(theta_deg, geometry, frame="tool")
-    j[:3] -= skew(np.asarray(fv_mm)) @ j[3:] * (math.pi / 180.0)
+    if any(fv_mm):
+        j[:3] -= skew(np.asarray(fv_mm)) @ j[3:] * (math.pi / 180.0)
     return j
 
 

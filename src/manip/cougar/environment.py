@@ -14,7 +14,7 @@ simulator adds gravity on the hand and payload itself, so environments model con
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -42,9 +42,11 @@ class Wrench:
         return cls(f, (float(torque[0]), float(torque[1]), float(torque[2])))
 
     def __add__(self, other: Wrench) -> Wrench:
-        return Wrench.of(
-            np.add(self.force, other.force),
-            np.add(self.torque, other.torque),
+        # float64 sums, as numpy's add would make them
+        f, g, t, u = self.force, other.force, self.torque, other.torque
+        return Wrench(
+            (float(f[0]) + float(g[0]), float(f[1]) + float(g[1]), float(f[2]) + float(g[2])),
+            (float(t[0]) + float(u[0]), float(t[1]) + float(u[1]), float(t[2]) + float(u[2])),
         )
 
 
@@ -82,29 +84,33 @@ class Surface:
     normal: Sequence[float] = (0.0, 0.0, 1.0)
     stiffness: float = 10.0
     """oz per mm of penetration."""
+    # Worked out once (the simulator asks every tick): the point, the normal, its length and direction.
+    _point: Vector = field(init=False, repr=False, compare=False)
+    _normal: Vector = field(init=False, repr=False, compare=False)
+    _length: np.float64 = field(init=False, repr=False, compare=False)
+    _unit: Vector = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         n = _vec3(self.normal, "Surface.normal")
-        length = float(np.linalg.norm(n))
-        if length == 0.0:
+        length = np.linalg.norm(n)
+        if float(length) == 0.0:
             raise ValueError("Surface.normal must not be zero")
-        _vec3(self.point, "Surface.point")
+        point = _vec3(self.point, "Surface.point")
         if not self.stiffness >= 0.0:
             raise ValueError("Surface.stiffness must be >= 0")
+        for name, value in (("_point", point), ("_normal", n), ("_length", length), ("_unit", n / length)):
+            object.__setattr__(self, name, value)
 
     def penetration(self, tool: Transform) -> float:
         """How far (mm) the tool point is inside the surface; 0 when outside."""
-        n = _vec3(self.normal, "normal")
-        n /= np.linalg.norm(n)
-        depth = -float(np.dot(tool.p - _vec3(self.point, "point"), n))
+        depth = -float(np.dot(tool.p - self._point, self._unit))
         return max(depth, 0.0)
 
     def wrench(self, tool: Transform) -> Wrench:
         depth = self.penetration(tool)
         if depth == 0.0:
             return Wrench()
-        n = _vec3(self.normal, "normal")
-        return Wrench.of(self.stiffness * depth * n / np.linalg.norm(n))
+        return Wrench.of(self.stiffness * depth * self._normal / self._length)
 
 
 @dataclass(frozen=True)
@@ -115,14 +121,15 @@ class Spring:
     stiffness: float = 1.0
     """oz per mm of stretch."""
     rest_length: float = 0.0
+    _anchor: Vector = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        _vec3(self.anchor, "Spring.anchor")
+        object.__setattr__(self, "_anchor", _vec3(self.anchor, "Spring.anchor"))
         if not self.stiffness >= 0.0 or not self.rest_length >= 0.0:
             raise ValueError("Spring.stiffness and Spring.rest_length must be >= 0")
 
     def wrench(self, tool: Transform) -> Wrench:
-        d = _vec3(self.anchor, "anchor") - tool.p
+        d = self._anchor - tool.p
         length = float(np.linalg.norm(d))
         if length == 0.0:
             return Wrench()

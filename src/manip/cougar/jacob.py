@@ -35,16 +35,17 @@ STEPS: Final = 4
 Matrix = npt.NDArray[np.float64]
 
 
+_BUFFERS: Final = (region("jbuf0").address, region("jbuf1").address)
+
+
 def _buffer_address(memory: Memory, front: bool) -> int:
     bit = memory.word("jacob_front") & 1
-    index = bit if front else bit ^ 1
-    return region(f"jbuf{index}").address
+    return _BUFFERS[bit if front else bit ^ 1]
 
 
 def front_buffer(memory: Memory) -> tuple[Matrix, Matrix, Matrix]:
-    """(J, Jᵀ, P) as the foreground sees them: from the buffer ``jacob_front`` points at."""
-    base = _buffer_address(memory, front=True)
-    values = memory.read_floats(base, 108)
+    """(J, Jᵀ, P) as the foreground sees them: from the buffer ``jacob_front`` points at (read-only)."""
+    values = memory.array(f"jbuf{memory.word('jacob_front') & 1}")
     return (
         values[JBUF_J : JBUF_J + 36].reshape(6, 6),
         values[JBUF_JT : JBUF_JT + 36].reshape(6, 6),
@@ -52,35 +53,64 @@ def front_buffer(memory: Memory) -> tuple[Matrix, Matrix, Matrix]:
     )
 
 
+Encoded = tuple[bytes, bool]
+"""Floats as :meth:`Memory.encode_floats` gives them: the words, and whether storing them saturates."""
+
+
 @dataclass
 class Jacob:
-    """The background task's registers: which step is next and the Jacobian being built."""
+    """The background task's registers: which step is next and the Jacobian being built.
+
+    The computation is the same whether or not its inputs changed (it "runs continuously"), so what it
+    stores is kept with the inputs it came from: while θ_sensed, FV and BJI stay the same the steps store
+    the kept words again (each store as the computation would have made it, float faults included).
+    """
 
     geometry: PumaGeometry
     step_index: int = 0
     cycles: int = 0
     _j: Matrix = field(default_factory=lambda: np.zeros((6, 6)))
-    _bji: Matrix = field(default_factory=lambda: np.zeros(6))
+    _bji: tuple[float, ...] = (0.0,) * 6
+    _inputs: tuple[tuple[float, ...], ...] | None = None
+    _words: tuple[Encoded, Encoded, Encoded] | None = None
+    """J, Jᵀ and P encoded for the inputs ``_inputs`` (θ_sensed, FV, BJI)."""
 
     def step(self, memory: Memory) -> None:
         """Run one step of the computation."""
         back = _buffer_address(memory, front=False)
         if self.step_index == 0:
-            theta = memory.get("theta_sensed")
-            fv = memory.get("fv")
-            self._bji = memory.get("bji")
-            # angles that are not angles (a bad deposit) keep the last Jacobian
-            with contextlib.suppress(ValueError):
-                self._j = centre_jacobian(theta, fv, self.geometry)
-            memory.write_floats(back + 4 * JBUF_J, self._j)
+            theta, fv = memory.floats("theta_sensed"), memory.floats("fv")
+            self._bji = memory.floats("bji")
+            inputs = (theta, fv, self._bji)
+            if inputs != self._inputs:  # decoded floats, never NaN: equal inputs, the same J and P
+                if self._inputs is None or inputs[:2] != self._inputs[:2]:
+                    # angles that are not angles (a bad deposit) keep the last Jacobian
+                    with contextlib.suppress(ValueError):
+                        self._j = centre_jacobian(theta, fv, self.geometry)
+                self._inputs = inputs
+                self._words = self._encode()
+            memory.store_encoded(back + 4 * JBUF_J, *self._stored_words()[0])
         elif self.step_index == 1:
-            memory.write_floats(back + 4 * JBUF_JT, self._j.T)
+            memory.store_encoded(back + 4 * JBUF_JT, *self._stored_words()[1])
         elif self.step_index == 2:
-            memory.write_floats(back + 4 * JBUF_P, self._bji[:, None] * self._j.T)
+            memory.store_encoded(back + 4 * JBUF_P, *self._stored_words()[2])
         else:
             memory.set_word("jacob_front", (memory.word("jacob_front") & 1) ^ 1)
             self.cycles += 1
         self.step_index = (self.step_index + 1) % STEPS
+
+    def _stored_words(self) -> tuple[Encoded, Encoded, Encoded]:
+        if self._words is None:  # steps 1 and 2 before any step 0 (a Jacob started mid-computation)
+            self._words = self._encode()
+        return self._words
+
+    def _encode(self) -> tuple[Encoded, Encoded, Encoded]:
+        """J, Jᵀ and P = BJI·Jᵀ as stored.  Jᵀ's words are J's, transposed (rounding is per element)."""
+        j_words, saturated = Memory.encode_floats(self._j)
+        j = memoryview(j_words).cast("I")
+        jt_words = b"".join(j[i::6].tobytes() for i in range(6))
+        p = (np.array(self._bji)[:, None]) * self._j.T
+        return (j_words, saturated), (jt_words, saturated), Memory.encode_floats(p)
 
     def run(self, memory: Memory, steps: int) -> None:
         for _ in range(steps):

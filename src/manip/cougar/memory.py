@@ -17,14 +17,20 @@ error on the real machine: here EXMN retrieves no words and DPST changes nothing
 
 from __future__ import annotations
 
+import array
+import bisect
+import functools
+import math
+import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Final, Literal
+from typing import Final, Literal, TypeGuard
 
 import numpy as np
 import numpy.typing as npt
 
-from manip.codecs.pdp11float import F_MAX, pack_f_array, unpack_f_array
+from manip.codecs.errors import DecodeError, EncodeError
+from manip.codecs.pdp11float import F_MAX, F_MIN_NORMAL, pack_f, pack_f_array, unpack_f, unpack_f_array
 from manip.spec.notation import octal
 
 __all__ = [
@@ -127,8 +133,13 @@ MAP: Final[tuple[Region, ...]] = _layout(
     )
 )
 _BY_NAME: Final = {r.name: r for r in MAP}
+_WORD_INDEX: Final = {r.name: r.address // 2 for r in MAP}
 #: Offsets (in floats) inside a Jacobian buffer.
 JBUF_J, JBUF_JT, JBUF_P = 0, 36, 72
+#: Up to this many floats, the scalar codecs beat numpy's fixed cost per call.
+_SMALL: Final = 12
+#: Up to this many floats (J, Jᵀ and P: 108), the codecs below beat numpy's.
+_FEW: Final = 128
 #: Words per guard table entry, and where its parts start (in words).
 GUARD_WORDS, GUARD_DVEC, GUARD_TOL = 15, 1, 13
 
@@ -154,12 +165,18 @@ class Memory:
     (EXMN/DPST) checks with :meth:`valid` first and reports instead.  Float writes round to the F format
     (half-even) and saturate at the largest F magnitude; float reads take the FP11's undefined variable
     (-0) as 0.0.  ``float_faults`` counts the stores that had to saturate.
+
+    The words are the truth.  A float region's decoded values are kept (:meth:`floats`, :meth:`array`)
+    until any store touches one of its words, whichever method stores it, so a routine that reads a
+    variable every tick decodes it only after it changed.
     """
 
     def __init__(self) -> None:
         self._bytes = bytearray(MEMORY_BYTES)
         self._words = memoryview(self._bytes).cast("H")
         self.float_faults = 0
+        self._floats: dict[str, tuple[float, ...]] = {}
+        self._arrays: dict[str, FloatArray] = {}
 
     def __len__(self) -> int:
         return MEMORY_BYTES
@@ -174,6 +191,15 @@ class Memory:
             raise ValueError(f"no {words} word(s) of Cougar memory at {octal(address)}")
         return address // 2
 
+    def _stored(self, index: int, words: int) -> None:
+        """Words ``index``.. (word indexes) were stored: forget the decoded regions they overlap."""
+        if not self._floats or index >= _MAP_WORDS:  # (every region in _arrays is in _floats too)
+            return
+        end = min(index + words, _MAP_WORDS)
+        for name in _FLOAT_NAMES[_FIRST_ENDING_AFTER[index] : _FIRST_STARTING_AT[end]]:
+            self._floats.pop(name, None)
+            self._arrays.pop(name, None)
+
     # ------------------------------------------------------------------ words
     def read_word(self, address: int) -> int:
         return int(self._words[self._check(address, 1)])
@@ -181,7 +207,9 @@ class Memory:
     def write_word(self, address: int, value: int) -> None:
         if not 0 <= value <= 0xFFFF:
             raise ValueError(f"{value!r} is not a 16-bit word")
-        self._words[self._check(address, 1)] = value
+        i = self._check(address, 1)
+        self._words[i] = value
+        self._stored(i, 1)
 
     def read_words(self, address: int, count: int) -> list[int]:
         i = self._check(address, count)
@@ -189,49 +217,125 @@ class Memory:
 
     def write_words(self, address: int, values: Sequence[int]) -> None:
         i = self._check(address, len(values))
-        for j, v in enumerate(values):
-            if not 0 <= v <= 0xFFFF:
-                raise ValueError(f"{v!r} is not a 16-bit word")
-            self._words[i + j] = v
+        try:
+            self._words[i : i + len(values)] = array.array("H", values)
+        except (OverflowError, TypeError):
+            pass  # not all 16-bit words: stored one by one below, up to the bad one
+        else:
+            self._stored(i, len(values))
+            return
+        try:
+            for j, v in enumerate(values):
+                if not 0 <= v <= 0xFFFF:
+                    raise ValueError(f"{v!r} is not a 16-bit word")
+                self._words[i + j] = v
+        finally:  # the words before a bad one are stored, as they were
+            self._stored(i, len(values))
 
     # ------------------------------------------------------------------ int16
     def read_int16s(self, address: int, count: int) -> npt.NDArray[np.int64]:
+        return np.array(self.int16_list(address, count), dtype=np.int64)
+
+    def int16_list(self, address: int, count: int) -> list[int]:
+        """``count`` int16s from ``address``, as Python ints."""
         i = self._check(address, count)
-        return np.frombuffer(self._bytes, dtype="<i2", count=count, offset=2 * i).astype(np.int64)
+        return list(_int16s(count).unpack_from(self._bytes, 2 * i))
 
     def write_int16s(self, address: int, values: Iterable[int]) -> None:
         data = [int(v) for v in values]
-        if any(not -0x8000 <= v <= 0x7FFF for v in data):
+        if data and not (min(data) >= -0x8000 and max(data) <= 0x7FFF):
             raise ValueError(f"{data} are not all 16-bit signed integers")
-        self.write_words(address, [v & 0xFFFF for v in data])
+        i = self._check(address, len(data))
+        _int16s(len(data)).pack_into(self._bytes, 2 * i, *data)
+        self._stored(i, len(data))
 
     # ------------------------------------------------------------------ floats
     def read_floats(self, address: int, count: int) -> FloatArray:
+        return np.array(self._decode(address, count), dtype=np.float64)
+
+    def _decode(self, address: int, count: int) -> list[float]:
         i = self._check(address, 2 * count)
-        raw = self._bytes[2 * i : 2 * i + 4 * count]
-        values = unpack_f_array(raw, reserved="zero")
-        return values
+        raw = bytes(self._bytes[2 * i : 2 * i + 4 * count])
+        if count <= _SMALL:
+            try:
+                return [unpack_f(raw, offset) for offset in range(0, 4 * count, 4)]
+            except DecodeError:
+                pass  # the reserved operand: the array decoder reads it as 0.0
+        elif count <= _FEW:
+            values = _decode_few(raw)
+            if values is not None:
+                return values
+        return unpack_f_array(raw, reserved="zero").tolist()  # type: ignore[no-any-return]
 
     def write_floats(self, address: int, values: Iterable[float] | FloatArray) -> None:
+        self.store_encoded(address, *self.encode_floats(values))
+
+    @staticmethod
+    def encode_floats(values: Iterable[float] | FloatArray) -> tuple[bytes, bool]:
+        """The F words :meth:`write_floats` stores for ``values`` (wire byte order), and whether the store
+        saturates (a value not finite or beyond the F range): for a routine that stores the same values
+        again and again (:meth:`store_encoded`)."""
+        few: Sequence[float] | None = None
+        if isinstance(values, np.ndarray):
+            if values.dtype == np.float64 and 0 < values.size <= _FEW:
+                few = values.reshape(-1).tolist()
+        elif isinstance(values, (list, tuple)) and 0 < len(values) <= _FEW:
+            few = values
+        if few is not None:
+            raw = _encode_few(few)
+            if raw is not None:
+                return raw, False
         x = np.array(values, dtype=np.float64).reshape(-1)
-        safe = x
-        if x.size and not (np.all(np.isfinite(x)) and np.abs(x).max() <= F_MAX):
-            safe = np.clip(np.nan_to_num(x, nan=0.0, posinf=F_MAX, neginf=-F_MAX), -F_MAX, F_MAX)
+        # one reduction: NaN and infinities fail the comparison too
+        if not x.size or np.abs(x).max() <= F_MAX:
+            return pack_f_array(x), False
+        safe = np.clip(np.nan_to_num(x, nan=0.0, posinf=F_MAX, neginf=-F_MAX), -F_MAX, F_MAX)
+        return pack_f_array(safe), True
+
+    def store_encoded(self, address: int, raw: bytes, saturated: bool = False) -> None:
+        """Store floats encoded by :meth:`encode_floats` (counting the saturation as a float fault)."""
+        if saturated:
             self.float_faults += 1
-        i = self._check(address, 2 * x.size)
-        self._bytes[2 * i : 2 * i + 4 * x.size] = pack_f_array(safe)
+        words = len(raw) // 2
+        i = self._check(address, words)
+        self._bytes[2 * i : 2 * i + len(raw)] = raw
+        self._stored(i, words)
 
     # ------------------------------------------------------------------ named regions
-    def get(self, name: str) -> FloatArray:
-        """A float region's values."""
+    def floats(self, name: str) -> tuple[float, ...]:
+        """A float region's values as Python floats (decoded once per change)."""
+        try:
+            return self._floats[name]
+        except KeyError:
+            pass
         r = _BY_NAME[name]
         if r.kind != "float":
             raise TypeError(f"{name} is not a float region")
-        return self.read_floats(r.address, r.count)
+        values = tuple(self._decode(r.address, r.count))
+        self._floats[name] = values
+        return values
+
+    def array(self, name: str) -> FloatArray:
+        """A float region's values as a read-only array (decoded once per change)."""
+        try:
+            return self._arrays[name]
+        except KeyError:
+            pass
+        values = np.array(self.floats(name), dtype=np.float64)
+        values.flags.writeable = False
+        self._arrays[name] = values
+        return values
+
+    def get(self, name: str) -> FloatArray:
+        """A float region's values (a new array)."""
+        return np.array(self.floats(name), dtype=np.float64)
 
     def put(self, name: str, values: Iterable[float] | FloatArray) -> None:
         """Store a float region's values (the whole region)."""
         r = _BY_NAME[name]
+        if _plain_floats(values, r.count) and r.kind == "float":
+            self.write_floats(r.address, values)
+            return
         x = np.array(values, dtype=np.float64).reshape(-1)
         if r.kind != "float" or x.size != r.count:
             raise ValueError(f"{name} holds {r.count} {r.kind} values, not {x.size} floats")
@@ -241,6 +345,11 @@ class Memory:
         r = _BY_NAME[name]
         return self.read_int16s(r.address, r.count)
 
+    def int16s(self, name: str) -> list[int]:
+        """An int16 region's values as Python ints."""
+        r = _BY_NAME[name]
+        return self.int16_list(r.address, r.count)
+
     def put_int16s(self, name: str, values: Iterable[int]) -> None:
         r = _BY_NAME[name]
         data = list(values)
@@ -249,7 +358,88 @@ class Memory:
         self.write_int16s(r.address, data)
 
     def word(self, name: str, index: int = 0) -> int:
-        return self.read_word(_BY_NAME[name].at(index))
+        if index:
+            return self.read_word(_BY_NAME[name].at(index))
+        return int(self._words[_WORD_INDEX[name]])
 
     def set_word(self, name: str, value: int, index: int = 0) -> None:
-        self.write_word(_BY_NAME[name].at(index), value)
+        if index or not 0 <= value <= 0xFFFF:
+            self.write_word(_BY_NAME[name].at(index), value)
+            return
+        i = _WORD_INDEX[name]
+        self._words[i] = value
+        self._stored(i, 1)
+
+
+# Float regions by word index, for forgetting decoded values.  A store to words [start, end) touches the
+# float regions _FLOAT_NAMES[_FIRST_ENDING_AFTER[start]:_FIRST_STARTING_AT[end]] (none when the slice is
+# empty); both tables are the bisections worked out once for every word of the map.
+_FLOAT_NAMES: Final = [r.name for r in MAP if r.kind == "float"]
+_FLOAT_STARTS: Final = [r.address // 2 for r in MAP if r.kind == "float"]
+_FLOAT_ENDS: Final = [r.end // 2 for r in MAP if r.kind == "float"]
+_MAP_WORDS: Final = MAP[-1].end // 2
+_FIRST_ENDING_AFTER: Final = [bisect.bisect_right(_FLOAT_ENDS, i) for i in range(_MAP_WORDS)]
+_FIRST_STARTING_AT: Final = [bisect.bisect_left(_FLOAT_STARTS, i) for i in range(_MAP_WORDS + 1)]
+
+
+def _plain_floats(values: object, count: int) -> TypeGuard[Sequence[float]]:
+    """Whether ``values`` is a list or tuple of ``count`` Python floats (no array needed)."""
+    if not isinstance(values, (list, tuple)) or len(values) != count:
+        return False
+    return all(type(v) is float for v in values)
+
+
+@functools.cache
+def _int16s(count: int) -> struct.Struct:
+    return struct.Struct(f"<{count}h")
+
+
+# Encoding a few floats.  For |x| in [2^-128, _FAST_HIGH) the F pattern of x is the IEEE single of 4x
+# with its two words swapped: 4x is a normal single that rounds to nearest even (the F rounding, "half-
+# even") below 2^128, and F's exponent bias is the single's plus 2 (the reasoning of pdp11float's own
+# scalar fast path).  A big-endian single is its bytes 3 2 1 0; the F words want 2 3 0 1, the same with
+# each 16-bit word's bytes swapped: one struct call and one byteswap for them all.  Zeros (+ 0.0 makes
+# -0.0 a clean zero, never the reserved operand) come out as four zero bytes too.  Anything else --
+# values that flush to zero or round near the top of the range -- goes through pack_f, the scalar
+# reference, one by one.
+_FAST_HIGH: Final = math.ldexp(1.0, 126) - math.ldexp(1.0, 101)
+_SINGLE_MIN: Final = math.ldexp(1.0, -126)
+"""The least normal single: below it (but 0) a single has exponent 0."""
+
+
+@functools.cache
+def _singles(count: int) -> struct.Struct:
+    return struct.Struct(f">{count}f")
+
+
+def _decode_few(raw: bytes) -> list[float] | None:
+    """The values of F words (the encoding above backwards: F's value is the single's / 4), or None
+    when one has exponent 0 (a zero reads 0.0, but a dirty zero or the reserved operand would read as a
+    tiny single or -0.0) or 255 (a single's infinity or NaN): then the array decoder decides."""
+    words = array.array("H", raw)
+    words.byteswap()
+    singles = _singles(len(raw) // 4).unpack(words.tobytes())
+    magnitudes = list(map(abs, singles))
+    if not math.isfinite(sum(magnitudes)) or min(filter(None, magnitudes), default=1.0) < _SINGLE_MIN:
+        return None
+    return [v * 0.25 + 0.0 for v in singles]  # + 0.0: the reserved operand with fraction 0 is -0.0
+
+
+def _encode_few(values: Sequence[float]) -> bytes | None:
+    """F words of finite values within the F range, or None (NaN, infinities, beyond F_MAX, not
+    numbers): then the numpy encoder decides, saturation included."""
+    try:
+        magnitudes = list(map(abs, values))
+        top = max(magnitudes)  # may pass a NaN over; their sum may not
+        if not (top <= F_MAX and math.isfinite(sum(magnitudes))):
+            return None
+    except (TypeError, OverflowError):
+        return None
+    if top < _FAST_HIGH and min(filter(None, magnitudes), default=F_MIN_NORMAL) >= F_MIN_NORMAL:
+        words = array.array("H", _singles(len(values)).pack(*[v * 4.0 + 0.0 for v in values]))
+        words.byteswap()
+        return words.tobytes()
+    try:
+        return b"".join([pack_f(v) for v in values])
+    except EncodeError:
+        return None  # not a float: numpy converts it first

@@ -67,6 +67,7 @@ from manip.arm import PUMA560_LEE, READY, PumaGeometry, Transform, forward
 from manip.cougar.adc import GAUGES, GaugeModel, adc8_filter
 from manip.cougar.comint import Comint, Executable, OutOfSyncEvent
 from manip.cougar.compliance import (
+    MM_PER_INCH,
     compliance_sample,
     cross,
     filter_constants,
@@ -91,6 +92,7 @@ Vector = npt.NDArray[np.float64]
 GUARD_STOP_BIT: Final = 0x8000
 #: Bit 0 of the ``flags`` word: LIMIT is applied.
 FLAG_LIMIT: Final = 1
+_UNTOUCHED: Final = (0.0,) * 6
 
 
 @dataclass(frozen=True)
@@ -180,9 +182,11 @@ class CougarSim:
         self._faults = self.config.faults
         self._comint = Comint(execute_partial="comint-executes-partial" in self._faults)
         self._tripped_once: set[int] = set()  # fault guard-trips-twice
+        self._guard_values: dict[int, tuple[list[int], Vector, float]] = {}
+        """Guard i's table words, and its dvec and tol decoded from them."""
         self._jacob = Jacob(self.config.geometry)
         self._stats = CougarStats()
-        self._pose = np.array(self.config.initial_angles, dtype=np.float64)
+        self._pose: tuple[float, ...] = tuple(float(q) for q in self.config.initial_angles)
         self._busy_until: float | None = None
         self._last_now: float | None = None
         self._terminal: list[str] = []
@@ -204,7 +208,7 @@ class CougarSim:
     @property
     def pose(self) -> tuple[float, ...]:
         """The simulated arm's joint angles (deg): the θ_sensed Cougar was last sent."""
-        return tuple(float(x) for x in self._pose)
+        return self._pose
 
     @property
     def pending(self) -> tuple[int, ...]:
@@ -274,7 +278,7 @@ class CougarSim:
         mem.put("voltmat", voltmat(mem.get("calmat"), mem.get("fv")).reshape(-1))
         self._newwc()
         u = c.gauges.convert(c.gauges.analog(self._physical_load(), self._rng))
-        corrected = _less(u, mem.get_int16s("gauge_offsets"))
+        corrected = _less(u, mem.int16s("gauge_offsets"))
         mem.put_int16s("gauge_raw", corrected)  # prime the filter with a first reading
         mem.put_int16s("gauge_filtered", corrected)
         self._jacob.run(mem, STEPS)
@@ -282,48 +286,63 @@ class CougarSim:
             self._terminal.append(c.wake_message.format(version=c.version))
 
     # ------------------------------------------------------------------ GUTS parts
+    # Plain floats wherever numpy would only add, multiply or compare elementwise (the same operations,
+    # so the same bits); numpy for the matrix products, whose rounding its BLAS decides.
+
     def _physical_load(self) -> Vector:
         """The wrench on the hand (oz, oz-in; hand axes, about the wrist centre): contact plus gravity."""
         c = self.config
         t6 = forward(self._pose, c.geometry)
-        tool = t6 @ c.tool
+        rows = t6.rotation.tolist()
+        hand = gravity_load(rows, c.hand_weight_oz, c.hand_cg_mm)
+        payload = gravity_load(rows, c.payload_weight_oz, c.payload_cg_mm)
+        # FreeSpace touches nothing anywhere: no tool pose needed
+        touch = _UNTOUCHED if type(self.environment) is FreeSpace else self._contact(t6)
+        return np.array([(t + h) + p for t, h, p in zip(touch, hand, payload, strict=True)])
+
+    def _contact(self, t6: Transform) -> Sequence[float]:
+        """The environment's wrench on the tool, moved to the wrist centre in hand axes."""
+        tool = t6 @ self.config.tool
         contact = self.environment.wrench(tool)
-        r = np.array(t6.rotation)
-        f = np.array(contact.force, dtype=np.float64)
-        lever_in = (np.array(tool.p) - np.array(t6.p)) / 25.4
-        tau = np.array(contact.torque, dtype=np.float64) + cross(lever_in, f)
-        load = np.concatenate([r.T @ f, r.T @ tau])
-        load += gravity_load(r, c.hand_weight_oz, np.array(c.hand_cg_mm))
-        load += gravity_load(r, c.payload_weight_oz, np.array(c.payload_cg_mm))
-        return load
+        if not (any(contact.force) or any(contact.torque)):
+            return _UNTOUCHED  # Rᵀ·0 is +0.0 throughout
+        r = np.array(t6.rotation)  # C order, as the products below have always had it
+        f = [float(v) for v in contact.force]
+        lever_in = [(a - b) / MM_PER_INCH for a, b in zip(tool.p.tolist(), t6.p.tolist(), strict=True)]
+        tau = [float(t) + c for t, c in zip(contact.torque, cross(lever_in, f), strict=True)]
+        touch: list[float] = (r.T @ np.array(f)).tolist() + (r.T @ np.array(tau)).tolist()
+        return touch
 
     def _adc8(self) -> None:
         mem, gauges = self.memory, self.config.gauges
         # The offsets go first, so a WGOV reaches the forces through the filter (erratum
         # cougar-filter-rounding); the previous sample keeps the offsets it was taken with.
         sample = gauges.convert(gauges.analog(self._physical_load(), self._rng))
-        u = _less(sample, mem.get_int16s("gauge_offsets"))
-        u_previous = mem.get_int16s("gauge_raw")
-        y_previous = mem.get_int16s("gauge_filtered")
-        y = [adc8_filter(u[i], int(u_previous[i]), int(y_previous[i])) for i in range(GAUGES)]
+        u = _less(sample, mem.int16s("gauge_offsets"))
+        u_previous = mem.int16s("gauge_raw")
+        y_previous = mem.int16s("gauge_filtered")
         if "filter-float-instead-of-integer" in self._faults:
-            y = [round((u[i] + int(u_previous[i]) + 6 * int(y_previous[i])) / 8) for i in range(GAUGES)]
+            y = [round((u[i] + u_previous[i] + 6 * y_previous[i]) / 8) for i in range(GAUGES)]
+        else:
+            y = [adc8_filter(u[i], u_previous[i], y_previous[i]) for i in range(GAUGES)]
         mem.put_int16s("gauge_raw", u)
         mem.put_int16s("gauge_filtered", y)
 
     def _convert(self) -> None:
         mem = self.memory
-        counts = mem.get_int16s("gauge_filtered").astype(np.float64)
-        sign = -1.0 if "forces-wrong-sign" in self._faults else 1.0
-        mem.put("force_sensed", sign * (mem.get("voltmat").reshape(6, 8) @ counts))
+        counts = np.array(mem.int16s("gauge_filtered"), dtype=np.float64)
+        force = (mem.array("voltmat").reshape(6, 8) @ counts).tolist()
+        if "forces-wrong-sign" in self._faults:
+            force = [-1.0 * f for f in force]
+        mem.put("force_sensed", force)
 
     def _gravity(self) -> None:
         mem = self.memory
-        r = hand_rotation(mem.get("theta_sensed"), self.config.geometry)
-        weight = float(mem.get("grav_weight")[0])
-        force = mem.get("force_sensed") + gravity_load(r, weight, mem.get("grav_cg"))
+        r = hand_rotation(mem.floats("theta_sensed"), self.config.geometry)
+        load = gravity_load(r, mem.floats("grav_weight")[0], mem.floats("grav_cg"))
+        force = [s + g for s, g in zip(mem.floats("force_sensed"), load, strict=True)]
         if mem.word("flags") & FLAG_LIMIT:
-            force = limit(force, float(mem.get("limit_dead")[0]), float(mem.get("limit_clamp")[0]))
+            force = limit(force, mem.floats("limit_dead")[0], mem.floats("limit_clamp")[0])
         mem.put("force", force)
 
     def _guardm(self) -> None:
@@ -331,14 +350,18 @@ class CougarSim:
         active = mem.word("guard_active")
         if not active:
             return
-        force = mem.get("force")
+        force = mem.array("force")
         base = region("guards").address
         for i in range(16):
             if not active >> i & 1:
                 continue
             entry = base + 2 * GUARD_WORDS * i
-            dvec = mem.read_floats(entry + 2 * GUARD_DVEC, 6)
-            tol = float(mem.read_floats(entry + 2 * GUARD_TOL, 1)[0])
+            words = mem.read_words(entry, GUARD_WORDS)
+            kept = self._guard_values.get(i)
+            if kept is None or kept[0] != words:  # decoded again only when its words changed
+                tol = float(mem.read_floats(entry + 2 * GUARD_TOL, 1)[0])
+                kept = self._guard_values[i] = (words, mem.read_floats(entry + 2 * GUARD_DVEC, 6), tol)
+            _, dvec, tol = kept
             if float(np.dot(force, dvec)) > tol:
                 if "guard-trips-twice" in self._faults and i not in self._tripped_once:
                     self._tripped_once.add(i)
@@ -380,27 +403,28 @@ class CougarSim:
 
     def _moved(self) -> None:
         """SEN, FINIT: the arm is where the Puma says (the simulated arm follows θ_sensed)."""
-        self._pose = self.memory.get("theta_sensed").copy()
+        self._pose = self.memory.floats("theta_sensed")
 
     def _newpr(self) -> None:
         self._moved()
         mem = self.memory
         j, _, p = front_buffer(mem)
-        theta_error = mem.get("theta_sensed") - mem.get("theta_commanded")
+        theta_error = mem.array("theta_sensed") - mem.array("theta_commanded")
         sample = compliance_sample(
             j,
             p,
-            k=np.zeros(6) if "npr-ignores-k" in self._faults else mem.get("k"),
-            b=mem.get("b").reshape(6, 6),
-            fc=mem.get("fc"),
-            force=mem.get("force"),
+            k=np.zeros(6) if "npr-ignores-k" in self._faults else mem.array("k"),
+            b=mem.array("b").reshape(6, 6),
+            fc=mem.array("fc"),
+            force=mem.array("force"),
             theta_error=theta_error,
-            rate_difference=mem.get("rate_difference"),
+            rate_difference=mem.array("rate_difference"),
         )
-        con = mem.get("con")
+        con = mem.array("con")
         if "filter-con-swapped" in self._faults:
             con = con[[0, 1, 3, 2]]
-        filtered, output = output_filter(sample, mem.get("dtheta_previous"), mem.get("dtheta_filtered"), con)
+        previous, last = mem.array("dtheta_previous"), mem.array("dtheta_filtered")
+        filtered, output = output_filter(sample, previous, last, con)
         mem.put("dtheta_previous", sample)
         mem.put("dtheta_filtered", filtered)
         mem.put("dtheta_out", output)  # RATEO
@@ -469,7 +493,7 @@ class CougarSim:
 
     def _reraw(self) -> None:
         # the gauges as the wrist reads them: the filtered readings with the offsets added back
-        raw = _plus(self.memory.get_int16s("gauge_filtered"), self.memory.get_int16s("gauge_offsets"))
+        raw = _plus(self.memory.int16s("gauge_filtered"), self.memory.int16s("gauge_offsets"))
         self._send(CougarResponse.RAW, [v & 0xFFFF for v in raw])
 
     def _region_words(self, name: str) -> list[int]:
