@@ -31,7 +31,7 @@ import timeit
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -39,7 +39,9 @@ import capture as capture_bench
 import codec_speed
 import ncp as ncp_bench
 import server as server_bench
+from manip.captures.view import Annotation, Annotator, view_bytes
 from manip.codecs.framing import decode_tcp
+from manip.codecs.packet import Direction
 from manip.codecs.pdp11float import pack_f, pack_f_array, unpack_f
 from manip.decode.describe import describe_packet, packet_json
 from manip.links import NcpOptions
@@ -274,13 +276,13 @@ def capture_rows(packets: int, trials: int) -> list[Row]:
     )
     n = len(frames)
     own, written, raw = (times["manip"] - times["appender"]) / n, times["appender"] / n, times["raw"] / n
-    wires = [frame for _, frame in frames]
-    decode = min(timeit.Timer(lambda: [decode_tcp(w) for w in wires]).repeat(3, 1)) / n
+    decode, annotate, view = _capture_parts(frames)
     note = (
         f"bound: manip's own work (decode, annotate, JSON view) {own * 1e6:.1f} us/frame + writing both"
         f" messages {written * 1e6:.1f} us vs the raw writer's {raw * 1e6:.1f} us: 1x leaves"
-        f" {(raw - written) * 1e6:.1f} us for the own work, of which decoding the frame alone takes"
-        f" {decode * 1e6:.1f} us"
+        f" {(raw - written) * 1e6:.1f} us for the own work, against {decode * 1e6:.1f} us to decode the"
+        f" frame, {annotate * 1e6:.1f} us to pair and annotate it and {view * 1e6:.1f} us to write its"
+        " view's JSON (each timed alone)"
     )
     return [
         Row(
@@ -295,6 +297,28 @@ def capture_rows(packets: int, trials: int) -> list[Row]:
             note,
         )
     ]
+
+
+def _capture_parts(frames: list[tuple[str, bytes]]) -> tuple[float, float, float]:
+    """CPU seconds per frame of the recorder's three steps, each alone: decode, annotate, view JSON."""
+    directions = [cast(Direction, direction) for direction, _ in frames]
+    wires = [frame for _, frame in frames]
+    packets = [decode_tcp(w) for w in wires]
+
+    def per_frame(work: Callable[[], object]) -> float:
+        return min(timeit.Timer(work, timer=time.process_time).repeat(3, 1)) / len(frames)
+
+    def annotate_all() -> list[Annotation]:
+        annotate = Annotator().annotate
+        return [annotate(1, d, p) for d, p in zip(directions, packets, strict=True)]
+
+    notes = annotate_all()
+    rows = list(zip(notes, directions, packets, strict=True))
+    return (
+        per_frame(lambda: [decode_tcp(w) for w in wires]),
+        per_frame(annotate_all),
+        per_frame(lambda: [view_bytes(a, 1, d, i, p, len(p.data)) for i, (a, d, p) in enumerate(rows)]),
+    )
 
 
 # The child's peak RSS is read by a small launcher process, not here: Linux carries ru_maxrss across
