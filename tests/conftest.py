@@ -129,11 +129,17 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Tests marked ``slow`` (whole simulated runs, CPU-bound) come first and, with ``--dist loadgroup``
     (the README's command), go to two workers, one per core, taking turns: the longest then starts at
     once instead of a third of the way in, no more of them than there are cores run at a time, and the
-    other workers take the rest, which mostly waits on real-time deadlines.
+    other workers take the rest.  Of the rest, those marked ``waits`` (real-time tests that mostly wait)
+    go first, so that their waiting overlaps the CPU-bound tests instead of ending the run alone (a
+    fuzzing test that waits out a hang once ran for the last 23 s with every other worker done).
 
     ``manip``: refuse a test whose own settings turn derandomization or the database back on.
     ``long``: raise a test's own smaller ``max_examples`` to the profile's."""
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)  # stable: the rest keep order
+
+    def rank(item: pytest.Item) -> int:
+        return 0 if item.get_closest_marker("slow") else 1 if item.get_closest_marker("waits") else 2
+
+    items.sort(key=rank)  # stable: within a rank the tests keep their order
     slow = [item for item in items if item.get_closest_marker("slow") is not None]
     for k, item in enumerate(slow):
         item.add_marker(pytest.mark.xdist_group(f"slow-{k % 2}"))

@@ -171,6 +171,7 @@ def _script(tmp_path: Path, body: str) -> list[str]:
     return [sys.executable, str(path)]
 
 
+@pytest.mark.waits
 @pytest.mark.parametrize(
     ("body", "words", "kind"),
     [

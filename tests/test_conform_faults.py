@@ -142,6 +142,7 @@ def test_every_protocol_fault_has_a_case_citing_its_clauses() -> None:
         assert specific, f"no case cites a clause of fault {fault.value}: {FAULTS[fault].clauses}"
 
 
+@pytest.mark.waits
 def test_clean_server_passes_every_case() -> None:
     report = asyncio.run(run_suite(FaultSet(), suite()))
     bad = [

@@ -385,6 +385,7 @@ def test_reference_server_gives_up_a_silent_connection() -> None:
     assert result.deadline > 1.0 + CASES["server.ncp.broken"].deadline  # the wait is on top
 
 
+@pytest.mark.waits
 def test_a_server_that_keeps_a_silent_connection_is_caught() -> None:
     result = _broken_against_reference(60.0, told=1.0)
     assert result.outcome == "warn", _why(result)  # a SHOULD clause

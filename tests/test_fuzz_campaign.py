@@ -58,6 +58,7 @@ def assert_clean(report: dict[str, Any], inputs: int) -> None:
 # ------------------------------------------------------------------------------------------ evidence
 
 
+@pytest.mark.waits
 @pytest.mark.timeout(150)
 def test_a_short_campaign_against_the_reference_server_finds_nothing(tmp_path: Path) -> None:
     """Tens of thousands of inputs (about half a minute here): no crash, hang, traceback, drop."""
@@ -71,6 +72,7 @@ def test_a_short_campaign_against_the_reference_server_finds_nothing(tmp_path: P
     print(f"fuzz campaign: {report['inputs']} inputs in {report['duration']:.1f} s ({report['rate']:.0f}/s)")
 
 
+@pytest.mark.waits
 @pytest.mark.timeout(90)
 def test_a_chudp_campaign_against_the_reference_server_finds_nothing(tmp_path: Path) -> None:
     path = tmp_path / "fuzz.json"
@@ -101,6 +103,7 @@ def reproduce(line: str, tmp_path: Path) -> dict[str, Any]:
     return report_of(path)
 
 
+@pytest.mark.waits
 @pytest.mark.timeout(120)
 @pytest.mark.parametrize(
     ("mode", "kind"),

@@ -49,6 +49,7 @@ def test_an_accepted_tcp_link_has_nodelay(served: ReferenceServer) -> None:
     assert all(flags), flags
 
 
+@pytest.mark.waits
 def test_a_client_resetting_while_replies_are_due_logs_nothing(caplog: pytest.LogCaptureFixture) -> None:
     async def main() -> int:
         # In the test's own loop, at its own pace: the server has stopped before the log is read.

@@ -122,6 +122,7 @@ def served_through_a_flood(manip_server: StartServer, *args: str) -> tuple[str, 
     return out, err, count
 
 
+@pytest.mark.waits
 @pytest.mark.timeout(90)
 def test_idle_sockets_beyond_the_descriptor_limit_do_not_lock_a_client_out(manip_server: StartServer) -> None:
     out, err, count = served_through_a_flood(manip_server, "--stats")
@@ -133,6 +134,7 @@ def test_idle_sockets_beyond_the_descriptor_limit_do_not_lock_a_client_out(manip
     assert "more idle TCP links displaced over the link limit" in err
 
 
+@pytest.mark.waits
 @pytest.mark.timeout(90)
 def test_out_of_descriptors_the_server_backs_off_without_tracebacks(manip_server: StartServer) -> None:
     args = ("--stats", "--max-links", "0", "--accept-backoff", "0.2")  # no limit but the descriptors
