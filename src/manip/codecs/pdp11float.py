@@ -26,10 +26,12 @@ sender meant).  ``-0.0`` and flushed negatives encode as a clean zero, never as 
 
 from __future__ import annotations
 
+import array
+import functools
 import math
 import struct
 import sys
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any, Final, Literal, TypeAlias
 
 from construct import Adapter, Int32ul, StreamError
@@ -62,9 +64,11 @@ __all__ = [
     "f_to_words",
     "pack_f",
     "pack_f_array",
+    "pack_f_few",
     "u32_to_f",
     "unpack_f",
     "unpack_f_array",
+    "unpack_f_few",
     "words_to_f",
 ]
 
@@ -392,9 +396,9 @@ def unpack_f_array(
 
     _check_decode(dirty_zero, reserved)
     if not isinstance(buf, np.ndarray) and dirty_zero == "zero" and len(buf) <= _SMALL_BYTES:
-        small = _unpack_small(buf)
+        small = unpack_f_few(bytes(buf))
         if small is not None:
-            return small
+            return np.array(small, dtype=np.float64)
     u = _as_u32(buf)
     image = (u >> 16) | (u << 16)  # word swap (uint32 wraps): sign 31, exponent 30..23, fraction 22..0
     wide = image.astype(np.uint64)
@@ -423,43 +427,58 @@ def unpack_f_array(
 
 
 # A few floats at a time (the simulated Cougar's memory, a reply's transform): numpy's fixed cost per
-# call is many times the work, so these go through the scalar fast paths above and one array build.
-# Whatever those decline (a reserved operand, a value near the range ends, another policy) takes the
-# vectorised path below, which decides.
+# call is many times the work, so these take one struct call for them all.  The encoding is the scalar
+# fast path's (above) for every value at once: a big-endian single is its bytes 3 2 1 0 and the F words
+# want 2 3 0 1, the same with each 16-bit word's bytes swapped, so one byteswap after the struct call.
+# Whatever they decline (a reserved operand or dirty zero, a value not finite or beyond the F range, a
+# non-float) goes to the vectorised path below, which decides and raises the precise errors.
 
-_SMALL_BYTES: Final = 256
-_SMALL_WORDS: Final = [struct.Struct(f"<{n}H") for n in range(_SMALL_BYTES // 2 + 1)]
+_SMALL_BYTES: Final = 512
+"""Up to this many bytes (128 floats: a Cougar Jacobian buffer's 108 fit), the few-float codecs."""
+_SINGLE_MIN: Final = math.ldexp(1.0, -126)
+"""The least normal single: below it (but 0) a single has exponent 0."""
+_RESERVED_ZERO: Final = b"\x00\x80\x00\x00"
+"""The reserved operand with a zero fraction, which reads as the single -0.0 (the others as tiny ones)."""
 
 
-def _unpack_small(buf: bytes | bytearray | memoryview) -> npt.NDArray[np.float64] | None:
-    """Default-dirty-zero decode of up to 64 floats, or None when the vectorised path must decide."""
-    import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+@functools.cache
+def _singles(count: int) -> struct.Struct:
+    return struct.Struct(f">{count}f")
 
-    size = len(buf)
-    if size & 3:
+
+def unpack_f_few(raw: bytes | bytearray) -> list[float] | None:
+    """The values of a few wire floats (default policies) as Python floats, or None when the vectorised
+    decoder must decide: a word with exponent 0 but not a clean zero (a dirty zero or the reserved
+    operand would read as a tiny single or -0.0) or exponent 255 (a single's infinity or NaN)."""
+    if len(raw) & 3 or _RESERVED_ZERO in raw:  # (a match across two floats only costs the slow path)
         return None
-    words = _SMALL_WORDS[size >> 1].unpack(buf)
+    words = array.array("H", raw)
+    words.byteswap()
+    singles = _singles(len(raw) // 4).unpack(words.tobytes())
+    magnitudes = list(map(abs, singles))
+    if not math.isfinite(sum(magnitudes)) or min(filter(None, magnitudes), default=1.0) < _SINGLE_MIN:
+        return None
+    return [v * 0.25 for v in singles]
+
+
+def pack_f_few(values: Sequence[float]) -> bytes | None:
+    """Half-even wire floats of a few finite values within the F range (tiny ones flush to zero), or None
+    (NaN, infinities, beyond F_MAX, not numbers): then the vectorised encoder decides."""
     try:
-        values = [
-            _DECODE_BASE[w0] + _DECODE_SCALE[w0] * w1 for w0, w1 in zip(words[::2], words[1::2], strict=True)
-        ]
-    except TypeError:
-        return None  # a reserved operand
-    return np.array(values, dtype=np.float64)
-
-
-def _pack_small(x: npt.NDArray[np.float64]) -> bytes | None:
-    """Half-even encode of a few float64 values, or None when the vectorised path must decide."""
-    out = []
-    for v in x.tolist():
-        if _FAST_HIGH > v >= F_MIN_NORMAL or -_FAST_HIGH < v <= -F_MIN_NORMAL:
-            y = v * 4.0
-            out.append(_PACK_TWICE(y, y)[2:6])
-        elif v == 0.0:
-            out.append(_ZERO_BYTES)
-        else:
+        magnitudes = list(map(abs, values))
+        top = max(magnitudes, default=0.0)  # may pass a NaN over; their sum may not
+        if not (top <= F_MAX and math.isfinite(sum(magnitudes))):
             return None
-    return b"".join(out)
+    except (TypeError, OverflowError):
+        return None
+    if top < _FAST_HIGH and min(filter(None, magnitudes), default=F_MIN_NORMAL) >= F_MIN_NORMAL:
+        words = array.array("H", _singles(len(values)).pack(*[v * 4.0 + 0.0 for v in values]))
+        words.byteswap()
+        return words.tobytes()
+    try:
+        return b"".join([pack_f(v) for v in values])
+    except EncodeError:
+        return None  # not a float: the vectorised path converts it first
 
 
 def _float64_values(
@@ -511,11 +530,12 @@ def pack_f_array(
     _check_encode(rounding, underflow)
     if (
         rounding == "half-even"
+        and underflow == "zero"
         and isinstance(values, np.ndarray)
         and values.dtype == np.float64
         and values.size <= _SMALL_BYTES // 4
     ):
-        small = _pack_small(values.reshape(-1))
+        small = pack_f_few(values.reshape(-1).tolist())
         if small is not None:
             return small
     x, type_error = _float64_values(values)

@@ -20,7 +20,6 @@ from __future__ import annotations
 import array
 import bisect
 import functools
-import math
 import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -29,8 +28,8 @@ from typing import Final, Literal, TypeGuard
 import numpy as np
 import numpy.typing as npt
 
-from manip.codecs.errors import DecodeError, EncodeError
-from manip.codecs.pdp11float import F_MAX, F_MIN_NORMAL, pack_f, pack_f_array, unpack_f, unpack_f_array
+from manip.codecs.errors import DecodeError
+from manip.codecs.pdp11float import F_MAX, pack_f_array, pack_f_few, unpack_f, unpack_f_array, unpack_f_few
 from manip.spec.notation import octal
 
 __all__ = [
@@ -138,7 +137,8 @@ _WORD_INDEX: Final = {r.name: r.address // 2 for r in MAP}
 JBUF_J, JBUF_JT, JBUF_P = 0, 36, 72
 #: Up to this many floats, the scalar codecs beat numpy's fixed cost per call.
 _SMALL: Final = 12
-#: Up to this many floats (J, Jᵀ and P: 108), the codecs below beat numpy's.
+#: Up to this many floats (J, Jᵀ and P: 108), the few-float codecs (``pack_f_few``, ``unpack_f_few``)
+#: beat numpy's.
 _FEW: Final = 128
 #: Words per guard table entry, and where its parts start (in words).
 GUARD_WORDS, GUARD_DVEC, GUARD_TOL = 15, 1, 13
@@ -262,7 +262,7 @@ class Memory:
             except DecodeError:
                 pass  # the reserved operand: the array decoder reads it as 0.0
         elif count <= _FEW:
-            values = _decode_few(raw)
+            values = unpack_f_few(raw)
             if values is not None:
                 return values
         return unpack_f_array(raw, reserved="zero").tolist()  # type: ignore[no-any-return]
@@ -282,7 +282,7 @@ class Memory:
         elif isinstance(values, (list, tuple)) and 0 < len(values) <= _FEW:
             few = values
         if few is not None:
-            raw = _encode_few(few)
+            raw = pack_f_few(few)
             if raw is not None:
                 return raw, False
         x = np.array(values, dtype=np.float64).reshape(-1)
@@ -392,54 +392,3 @@ def _plain_floats(values: object, count: int) -> TypeGuard[Sequence[float]]:
 @functools.cache
 def _int16s(count: int) -> struct.Struct:
     return struct.Struct(f"<{count}h")
-
-
-# Encoding a few floats.  For |x| in [2^-128, _FAST_HIGH) the F pattern of x is the IEEE single of 4x
-# with its two words swapped: 4x is a normal single that rounds to nearest even (the F rounding, "half-
-# even") below 2^128, and F's exponent bias is the single's plus 2 (the reasoning of pdp11float's own
-# scalar fast path).  A big-endian single is its bytes 3 2 1 0; the F words want 2 3 0 1, the same with
-# each 16-bit word's bytes swapped: one struct call and one byteswap for them all.  Zeros (+ 0.0 makes
-# -0.0 a clean zero, never the reserved operand) come out as four zero bytes too.  Anything else --
-# values that flush to zero or round near the top of the range -- goes through pack_f, the scalar
-# reference, one by one.
-_FAST_HIGH: Final = math.ldexp(1.0, 126) - math.ldexp(1.0, 101)
-_SINGLE_MIN: Final = math.ldexp(1.0, -126)
-"""The least normal single: below it (but 0) a single has exponent 0."""
-
-
-@functools.cache
-def _singles(count: int) -> struct.Struct:
-    return struct.Struct(f">{count}f")
-
-
-def _decode_few(raw: bytes) -> list[float] | None:
-    """The values of F words (the encoding above backwards: F's value is the single's / 4), or None
-    when one has exponent 0 (a zero reads 0.0, but a dirty zero or the reserved operand would read as a
-    tiny single or -0.0) or 255 (a single's infinity or NaN): then the array decoder decides."""
-    words = array.array("H", raw)
-    words.byteswap()
-    singles = _singles(len(raw) // 4).unpack(words.tobytes())
-    magnitudes = list(map(abs, singles))
-    if not math.isfinite(sum(magnitudes)) or min(filter(None, magnitudes), default=1.0) < _SINGLE_MIN:
-        return None
-    return [v * 0.25 + 0.0 for v in singles]  # + 0.0: the reserved operand with fraction 0 is -0.0
-
-
-def _encode_few(values: Sequence[float]) -> bytes | None:
-    """F words of finite values within the F range, or None (NaN, infinities, beyond F_MAX, not
-    numbers): then the numpy encoder decides, saturation included."""
-    try:
-        magnitudes = list(map(abs, values))
-        top = max(magnitudes)  # may pass a NaN over; their sum may not
-        if not (top <= F_MAX and math.isfinite(sum(magnitudes))):
-            return None
-    except (TypeError, OverflowError):
-        return None
-    if top < _FAST_HIGH and min(filter(None, magnitudes), default=F_MIN_NORMAL) >= F_MIN_NORMAL:
-        words = array.array("H", _singles(len(values)).pack(*[v * 4.0 + 0.0 for v in values]))
-        words.byteswap()
-        return words.tobytes()
-    try:
-        return b"".join([pack_f(v) for v in values])
-    except EncodeError:
-        return None  # not a float: numpy converts it first
