@@ -200,16 +200,13 @@ def timed_server_work(server_ports: set[int]) -> Iterator[dict[str, list[float]]
         (StreamLink, "send"): send,
         (_Echo, "data_received"): echo_received,
     }
+    originals = {(cls, name): getattr(cls, name) for cls, name in wrappers}
     for (cls, name), wrapper in wrappers.items():
         setattr(cls, name, wrapper)
     try:
         yield work
     finally:
-        for (cls, name), original in {
-            (StreamLink, "data_received"): received,
-            (StreamLink, "send"): sent,
-            (_Echo, "data_received"): raw_received,
-        }.items():
+        for (cls, name), original in originals.items():
             setattr(cls, name, original)
 
 

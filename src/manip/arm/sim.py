@@ -705,7 +705,7 @@ class ArmSim:
                 ]
             )
         if sample.done and self.stop_between_segments is not None:
-            self._rest_then_resume(q, t)
+            self._rest_then_resume(q, t, self.stop_between_segments)
         elif sample.done:
             if self._compliant_tail:
                 self._restart(q, t)  # rebase what waits behind the episode
@@ -716,13 +716,13 @@ class ArmSim:
                 self._scheme_now = None
         return q
 
-    def _rest_then_resume(self, here: Joints, t: float) -> None:
-        """The faulty server of :attr:`stop_between_segments`: after each segment, rest that long, then
-        start what waits from where the arm stands."""
+    def _rest_then_resume(self, here: Joints, t: float, rest: float) -> None:
+        """The faulty server of :attr:`stop_between_segments`: after each segment, ``rest`` seconds at
+        rest, then what waits starts from where the arm stands."""
         if self._resting_since is None:
             self._resting_since = t
         waiting = self._backlog and isinstance(self._backlog[0], _JointPacket)
-        if waiting and t - self._resting_since >= (self.stop_between_segments or 0.0):
+        if waiting and t - self._resting_since >= rest:
             self._resting_since = None
             self._interp = MoveInterpolator(here, self.limits, self.speed)
             packet = self._backlog.popleft()

@@ -191,7 +191,7 @@ Handler = Callable[["ServerSession", Mapping[str, Value], float], dict[str, Any]
 """A request handler: the decoded values and the time in, the reply's values out (``{}`` for done)."""
 
 _FLOAT_FAULTS: Final = frozenset({Fault.UNDERFLOW_DIRTY_ZERO, Fault.NOT_FINITE_RESERVED})
-SEGMENTS_STOP_REST_S: Final = 0.1
+_SEGMENTS_STOP_REST_S: Final = 0.1
 """How long the segments-stop fault rests between queued segments: clearly more than a blend's pause."""
 _RESERVED_OPERAND: Final = 0x8000
 """First word of a reserved-operand float: sign 1, exponent 0."""
@@ -235,7 +235,7 @@ class ServerSession:
             self.arm.collision_tol_deg = math.inf
         self.arm.increment_from_actual = Fault.INCREMENT_FROM_ACTUAL in faults
         if Fault.SEGMENTS_STOP in faults:
-            self.arm.stop_between_segments = SEGMENTS_STOP_REST_S
+            self.arm.stop_between_segments = _SEGMENTS_STOP_REST_S
         if Fault.SERVO_DOUBLE_RATE in faults:
             self.arm.tick_period /= 2
         self.arm.collision_test_compliant = Fault.COMPLIANT_COLLISION_TEST in faults
