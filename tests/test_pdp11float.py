@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 from construct import Array, Int16ul, StreamError, Struct
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from manip.codecs.errors import CodecError, DecodeError, EncodeError
@@ -28,9 +28,11 @@ from manip.codecs.pdp11float import (
     f_to_words,
     pack_f,
     pack_f_array,
+    pack_f_few,
     u32_to_f,
     unpack_f,
     unpack_f_array,
+    unpack_f_few,
     words_to_f,
 )
 
@@ -343,6 +345,25 @@ def test_array_encode_of_few_and_many_floats_matches_the_oracle(xs: list[float],
             assert (info.value.clause, info.value.offset) == (wants[bad], 4 * bad)
             continue
         assert pack_f_array(array, underflow=underflow) == b"".join(wants)  # type: ignore[arg-type, misc]
+
+
+@settings(max_examples=300)
+@given(st.lists(floats_any | fast_edges, max_size=130), st.lists(any_pattern, max_size=130))
+@example([], [0x0000_8000, 0x0000_4080])  # the reserved operand with a zero fraction reads as -0.0 in IEEE
+@example([], [0x0001_0000, 0x0000_0001])  # dirty zeros
+def test_the_few_float_codecs_match_the_oracle_or_decline(xs: list[float], us: list[int]) -> None:
+    """pack_f_few / unpack_f_few (plain floats, default policies): the oracle's bytes and values, or None
+    where the vectorised codecs must decide (an error, saturation, a reserved operand, a dirty zero)."""
+    packed = pack_f_few(xs)
+    wants = [oracle_bytes(x, "half-even", "zero") for x in xs]
+    if packed is not None:
+        assert packed == b"".join(wants)  # type: ignore[arg-type]
+    else:
+        assert any(isinstance(w, str) for w in wants)  # the vectorised encoder raises or saturates
+    values = unpack_f_few(b"".join(u.to_bytes(4, "little") for u in us))
+    if values is not None:
+        assert not any(_is_reserved(u) for u in us)
+        assert all(_same(a, oracle_value(u)) for a, u in zip(values, us, strict=True))
 
 
 @settings(max_examples=200)

@@ -396,9 +396,9 @@ def unpack_f_array(
 
     _check_decode(dirty_zero, reserved)
     if not isinstance(buf, np.ndarray) and dirty_zero == "zero" and len(buf) <= _SMALL_BYTES:
-        small = unpack_f_few(bytes(buf))
+        small = _unpack_small(buf)
         if small is not None:
-            return np.array(small, dtype=np.float64)
+            return small
     u = _as_u32(buf)
     image = (u >> 16) | (u << 16)  # word swap (uint32 wraps): sign 31, exponent 30..23, fraction 22..0
     wide = image.astype(np.uint64)
@@ -427,14 +427,52 @@ def unpack_f_array(
 
 
 # A few floats at a time (the simulated Cougar's memory, a reply's transform): numpy's fixed cost per
-# call is many times the work, so these take one struct call for them all.  The encoding is the scalar
-# fast path's (above) for every value at once: a big-endian single is its bytes 3 2 1 0 and the F words
-# want 2 3 0 1, the same with each 16-bit word's bytes swapped, so one byteswap after the struct call.
+# call is many times the work, so these go through the scalar fast paths above and one array build.
+# Whatever those decline (a reserved operand, a value near the range ends, another policy) takes the
+# vectorised path below, which decides.
+
+_SMALL_BYTES: Final = 256
+_SMALL_WORDS: Final = [struct.Struct(f"<{n}H") for n in range(_SMALL_BYTES // 2 + 1)]
+
+
+def _unpack_small(buf: bytes | bytearray | memoryview) -> npt.NDArray[np.float64] | None:
+    """Default-dirty-zero decode of up to 64 floats, or None when the vectorised path must decide."""
+    import numpy as np  # noqa: PLC0415  # bulk only: see the imports
+
+    size = len(buf)
+    if size & 3:
+        return None
+    words = _SMALL_WORDS[size >> 1].unpack(buf)
+    try:
+        values = [
+            _DECODE_BASE[w0] + _DECODE_SCALE[w0] * w1 for w0, w1 in zip(words[::2], words[1::2], strict=True)
+        ]
+    except TypeError:
+        return None  # a reserved operand
+    return np.array(values, dtype=np.float64)
+
+
+def _pack_small(x: npt.NDArray[np.float64]) -> bytes | None:
+    """Half-even encode of a few float64 values, or None when the vectorised path must decide."""
+    out = []
+    for v in x.tolist():
+        if _FAST_HIGH > v >= F_MIN_NORMAL or -_FAST_HIGH < v <= -F_MIN_NORMAL:
+            y = v * 4.0
+            out.append(_PACK_TWICE(y, y)[2:6])
+        elif v == 0.0:
+            out.append(_ZERO_BYTES)
+        else:
+            return None
+    return b"".join(out)
+
+
+# A few plain floats in, Python floats out, no array (the simulated Cougar's memory, whose routines
+# work in plain floats): one struct call for them all.  The encoding is the scalar fast path's (above)
+# for every value at once: a big-endian single is its bytes 3 2 1 0 and the F words want 2 3 0 1, the
+# same with each 16-bit word's bytes swapped, so one byteswap after the struct call.
 # Whatever they decline (a reserved operand or dirty zero, a value not finite or beyond the F range, a
 # non-float) goes to the vectorised path below, which decides and raises the precise errors.
 
-_SMALL_BYTES: Final = 512
-"""Up to this many bytes (128 floats: a Cougar Jacobian buffer's 108 fit), the few-float codecs."""
 _SINGLE_MIN: Final = math.ldexp(1.0, -126)
 """The least normal single: below it (but 0) a single has exponent 0."""
 _RESERVED_ZERO: Final = b"\x00\x80\x00\x00"
@@ -530,12 +568,11 @@ def pack_f_array(
     _check_encode(rounding, underflow)
     if (
         rounding == "half-even"
-        and underflow == "zero"
         and isinstance(values, np.ndarray)
         and values.dtype == np.float64
         and values.size <= _SMALL_BYTES // 4
     ):
-        small = pack_f_few(values.reshape(-1).tolist())
+        small = _pack_small(values.reshape(-1))
         if small is not None:
             return small
     x, type_error = _float64_values(values)
