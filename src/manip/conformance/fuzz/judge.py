@@ -1,7 +1,7 @@
 """What a batch showed, as observations: crashes, hangs, silent drops, wrong answers, tracebacks and
 drops the target did not count, each with the clause it breaks and the input it is attributed to.
 
-* The connection's packets are judged by :func:`manip.conformance.checks.check_transcript` (one reply
+* The connection's packets are judged by :func:`manip.conformance.judge.checks.check_transcript` (one reply
   per request, in order, echoing its number, the refusal the spec demands for an unknown opcode, a
   wrong length or a reserved-operand float, the shape of every reply, free joint's discarded packet,
   asynchronous responses only when asked for), and by :mod:`.oracles` for what it does not know (a

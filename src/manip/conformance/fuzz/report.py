@@ -13,7 +13,8 @@ hangs, tracebacks and uncounted drops always count.  Exit codes: 0 no finding, 1
 JUnit: one test case per input class (``classname`` its layer: link, chaos, manip), failing with its
 findings; findings of the target as a whole (a crash or a traceback no input could be tied to) go to
 the case ``target.health``.  It is made with the conformance report's writer
-(:func:`manip.conformance.report.report_junit`), one :class:`~manip.conformance.results.CaseResult` per class.
+(:func:`manip.conformance.output.report.report_junit`), one
+:class:`~manip.conformance.suite.results.CaseResult` per class.
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ retransmit and window for it.  :class:`FuzzConnection` does the least a peer mus
   while we wait.  A *lazy* request (a pipeline that does not read) acknowledges nothing until the
   target's window stops us.
 * **Recording**: every request and every packet of the target, in order, as
-  :class:`~manip.conformance.checks.WirePacket` (CLS, EOF and LOS as close pseudo-packets), for the
+  :class:`~manip.conformance.judge.packets.WirePacket` (CLS, EOF and LOS as close pseudo-packets), for the
   transcript checks; ``origin`` says which input each one belongs to.
 * **Answers**: requests are matched to answers in order, as the spec says a server answers (the
   packets of a describe-self reply up to its empty one; the packet after free joint with one done),
