@@ -44,7 +44,7 @@ from manip.codecs.framing import decode_tcp
 from manip.codecs.packet import Direction
 from manip.codecs.pdp11float import pack_f, pack_f_array, unpack_f
 from manip.decode.describe import describe_packet, packet_json
-from manip.links import NcpOptions
+from manip.links import NcpConfig
 from manip.reference_server import ServerConfig
 from manip.reference_server.session import ServerSession
 from manip.spec.constants import RequestOp
@@ -160,7 +160,7 @@ def scalar_float_rows(seconds: float) -> list[Row]:
 
 
 def ncp_rows(rounds: int) -> list[Row]:
-    options = NcpOptions()
+    options = NcpConfig()
     split = asyncio.run(ncp_bench.split_round_trips(rounds, 5, options))
     same = asyncio.run(ncp_bench.same_loop_round_trips(rounds, 5, options))
     # The bound: the servers' own work per packet, the same code timed in one loop and across processes

@@ -35,7 +35,7 @@ from typing import Any
 
 from manip.codecs.framing import encode_tcp
 from manip.codecs.packet import Packet
-from manip.links import ChaosConnection, ChaosServer, NcpOptions, open_connection, start_server
+from manip.links import ChaosConnection, ChaosServer, NcpConfig, open_connection, start_server
 from manip.links.stream import StreamLink
 
 PAYLOAD = bytes(range(66))
@@ -155,7 +155,7 @@ class Running:
             raw.close()
 
 
-async def _start_servers(options: NcpOptions) -> Running:
+async def _start_servers(options: NcpConfig) -> Running:
     loop = asyncio.get_running_loop()
     raw = await loop.create_server(_Echo, "127.0.0.1", 0)
     hop = await loop.create_server(_HopEcho, "127.0.0.1", 0)
@@ -214,7 +214,7 @@ def _timing(timed: bool, listening: set[int]) -> contextlib.AbstractContextManag
     return timed_server_work(listening) if timed else contextlib.nullcontext({})
 
 
-async def _serve_until_stdin_closes(options: NcpOptions, timed: bool) -> None:
+async def _serve_until_stdin_closes(options: NcpConfig, timed: bool) -> None:
     """The child process of ``split`` mode: print the ports, serve until the parent closes stdin; with
     ``timed``, then print the median server work per packet (:func:`timed_server_work`) as JSON."""
     listening: set[int] = set()
@@ -251,7 +251,7 @@ class RoundTrips:
         return _percentile(self.ncp, 0.5) / _percentile(self.raw, 0.5)
 
 
-async def _round_trips(ports: Servers, rounds: int, trials: int, options: NcpOptions) -> None:
+async def _round_trips(ports: Servers, rounds: int, trials: int, options: NcpConfig) -> None:
     result = await measure_round_trips(ports, rounds, trials, options)
     ncp, base, trial_ratios = result.ncp, result.raw, result.trial_ratios
     print(f"  round trip, 66-byte data packet each way, {len(ncp)} rounds in {trials} trials (microseconds)")
@@ -265,7 +265,7 @@ async def _round_trips(ports: Servers, rounds: int, trials: int, options: NcpOpt
     print(f"    p50 ratio per trial: median {statistics.median(trial_ratios):.2f}x ({spread})")
 
 
-async def measure_round_trips(ports: Servers, rounds: int, trials: int, options: NcpOptions) -> RoundTrips:
+async def measure_round_trips(ports: Servers, rounds: int, trials: int, options: NcpConfig) -> RoundTrips:
     """``rounds`` round trips of each kind against the servers at ``ports``, after a warm-up."""
     loop = asyncio.get_running_loop()
     transport, raw = await loop.create_connection(_EchoClient, "127.0.0.1", ports.raw_port)
@@ -307,7 +307,7 @@ async def measure_round_trips(ports: Servers, rounds: int, trials: int, options:
     return RoundTrips(ncp, base, trial_ratios)
 
 
-async def _throughput(ports: Servers, packets: int, options: NcpOptions) -> None:
+async def _throughput(ports: Servers, packets: int, options: NcpConfig) -> None:
     conn = await open_connection(f"tcp://127.0.0.1:{ports.sink_port}?contact=SINK", options=options)
     async with conn:
         t0 = time.perf_counter()
@@ -328,7 +328,7 @@ async def hop_bound(rounds: int, ports: Servers | None = None) -> tuple[float, f
     """p50 round trips (s) of the raw echo and of the same echo answering from a task, alternating: what
     one task hop per packet costs, before any protocol work.  Servers on this loop, or at ``ports``."""
     loop = asyncio.get_running_loop()
-    running = await _start_servers(NcpOptions()) if ports is None else None
+    running = await _start_servers(NcpConfig()) if ports is None else None
     where = running.ports if running is not None else ports
     assert where is not None
     clients = [
@@ -360,7 +360,7 @@ class Placement:
 
 
 async def same_loop_round_trips(
-    rounds: int, trials: int, options: NcpOptions, timed: bool = False
+    rounds: int, trials: int, options: NcpConfig, timed: bool = False
 ) -> Placement:
     """Round trips with client and servers on this event loop (for bench/all.py)."""
     listening: set[int] = set()
@@ -375,7 +375,7 @@ async def same_loop_round_trips(
     return Placement(trips, raw_p50, hop_p50, _medians(work))
 
 
-async def split_round_trips(rounds: int, trials: int, options: NcpOptions, timed: bool = False) -> Placement:
+async def split_round_trips(rounds: int, trials: int, options: NcpConfig, timed: bool = False) -> Placement:
     """Round trips against servers in a child process (for bench/all.py)."""
     child = _serve_in_child(options, timed)
     assert child.stdin is not None and child.stdout is not None
@@ -392,7 +392,7 @@ async def split_round_trips(rounds: int, trials: int, options: NcpOptions, timed
     return Placement(trips, raw_p50, hop_p50, work)
 
 
-def _serve_in_child(options: NcpOptions, timed: bool = False) -> subprocess.Popen[str]:
+def _serve_in_child(options: NcpConfig, timed: bool = False) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [sys.executable, __file__, "--serve", "--window", str(options.window)]
         + (["--timed"] if timed else []),
@@ -402,7 +402,7 @@ def _serve_in_child(options: NcpOptions, timed: bool = False) -> subprocess.Pope
     )
 
 
-async def _same(ns: argparse.Namespace, options: NcpOptions) -> None:
+async def _same(ns: argparse.Namespace, options: NcpConfig) -> None:
     running = await _start_servers(options)
     try:
         await _round_trips(running.ports, ns.rounds, ns.trials, options)
@@ -411,7 +411,7 @@ async def _same(ns: argparse.Namespace, options: NcpOptions) -> None:
         await running.aclose()
 
 
-async def _split(ns: argparse.Namespace, options: NcpOptions) -> None:
+async def _split(ns: argparse.Namespace, options: NcpConfig) -> None:
     child = _serve_in_child(options)
     assert child.stdin is not None and child.stdout is not None
     try:
@@ -436,7 +436,7 @@ def main() -> None:
     parser.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--timed", action="store_true", help=argparse.SUPPRESS)
     ns = parser.parse_args()
-    options = NcpOptions(window=ns.window)
+    options = NcpConfig(window=ns.window)
     if ns.serve:
         asyncio.run(_serve_until_stdin_closes(options, ns.timed))
         return

@@ -23,7 +23,7 @@ from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.rawchaos import RawPeer, format_packet
 from manip.conformance.suite.results import CaseResult
 from manip.conformance.suite.runner import RunConfig, Runner
-from manip.links import NcpOptions
+from manip.links import NcpConfig
 from manip.ncp.packets import is_data, is_legal_opcode, make_los, pack_status, unpack_status
 from manip.ncp.seq import seq_add, seq_gt, seq_le, seq_sub
 from manip.reference_server.driver import serve
@@ -372,7 +372,7 @@ def test_broken_is_skipped_unless_the_run_knows_the_timer() -> None:
 
 def _broken_against_reference(server_timer: float, told: float) -> CaseResult:
     async def go() -> CaseResult:
-        async with serve("tcp://127.0.0.1:0", options=NcpOptions.breaking_after(server_timer)) as server:
+        async with serve("tcp://127.0.0.1:0", options=NcpConfig.breaking_after(server_timer)) as server:
             return await _run_case(server.address, "server.ncp.broken", broken_after=told)
 
     return asyncio.run(go())

@@ -11,10 +11,10 @@ from typing import Any
 
 import pytest
 
-from manip.links import ChaosConnection, LinkError, NcpOptions, open_connection, start_server
+from manip.links import ChaosConnection, LinkError, NcpConfig, open_connection, start_server
 from manip.links.chaosd import ChaosdLink, connect_chaosd
 
-FAST = NcpOptions(retransmit_interval=0.1, ack_delay=0.01)
+FAST = NcpConfig(retransmit_interval=0.1, ack_delay=0.01)
 
 
 def run(coro: Coroutine[Any, Any, None], timeout: float = 10.0) -> None:

@@ -12,11 +12,11 @@ import pytest
 
 from manip.codecs.framing import decode_chudp, encode_chudp
 from manip.codecs.packet import Packet
-from manip.links import ChaosConnection, ChaosServer, NcpOptions, open_connection, start_server
+from manip.links import ChaosConnection, ChaosServer, NcpConfig, open_connection, start_server
 from manip.links.chudp import ChudpLink, bind_chudp
 from manip.spec.constants import ChaosOp
 
-FAST = NcpOptions(retransmit_interval=0.1, ack_delay=0.01)
+FAST = NcpConfig(retransmit_interval=0.1, ack_delay=0.01)
 
 # Notes section 8, vector 1: RFC "PUMA" from 0401 index 0A01 to 0440, packet 1.
 VECTOR_1 = bytes.fromhex("01010000 0100 0004 0120 0000 0101 0a01 0001 0000 5550 414d 0120 0101 5a1a")
@@ -125,7 +125,7 @@ def test_round_trip_between_two_drivers() -> None:
 
 def test_vector_1_draws_the_expected_opn() -> None:
     async def main() -> None:
-        options = NcpOptions(window=5, retransmit_interval=0.2, ack_delay=0.01)
+        options = NcpConfig(window=5, retransmit_interval=0.2, ack_delay=0.01)
         server = await start_server("chudp://127.0.0.1:0?addr=0440", "PUMA", echo, options=options)
         raw = RawUdp()
         try:

@@ -25,7 +25,7 @@ from manip.links import (
     ConnectTimeout,
     LinkGuard,
     LinkLimits,
-    NcpOptions,
+    NcpConfig,
     open_connection,
     start_server,
 )
@@ -36,7 +36,7 @@ from manip.links.stream import StreamLink
 from manip.links.tcp import TcpLink
 from manip.spec.constants import ChaosOp
 
-FAST = NcpOptions(retransmit_interval=0.1, ack_delay=0.01)
+FAST = NcpConfig(retransmit_interval=0.1, ack_delay=0.01)
 RFC_PUMA = Packet(ChaosOp.RFC, 0o440, 0, 0o401, 0x4242, 1, 0, b"PUMA")
 
 

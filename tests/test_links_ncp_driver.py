@@ -20,7 +20,7 @@ from manip.links import (
     ConnectionLost,
     Link,
     LinkError,
-    NcpOptions,
+    NcpConfig,
     Node,
     open_connection,
     start_server,
@@ -29,7 +29,7 @@ from manip.links.chudp import ChudpLink
 from manip.links.tcp import TcpLink
 from manip.spec.constants import ChaosOp
 
-FAST = NcpOptions(retransmit_interval=0.1, ack_delay=0.01)
+FAST = NcpConfig(retransmit_interval=0.1, ack_delay=0.01)
 CLIENT, SERVER = 0o401, 0o440
 
 
@@ -85,7 +85,7 @@ async def echo(conn: ChaosConnection) -> None:
         pass  # a LOS, a broken link: the tests look at the connection itself
 
 
-def pair(options: NcpOptions = FAST) -> tuple[Node, Node, PipeLink, PipeLink]:
+def pair(options: NcpConfig = FAST) -> tuple[Node, Node, PipeLink, PipeLink]:
     """A client node and a server node (listening on PUMA with ``echo``) joined by a pipe."""
     client, server = Node(CLIENT, options), Node(SERVER, options)
     c_link, s_link = PipeLink.pair(CLIENT, SERVER)
@@ -146,7 +146,7 @@ def test_timer_without_ack_delay() -> None:
     """With ack_delay 0 the timer cannot skip re-arming; everything still flows."""
 
     async def main() -> None:
-        client, server, _, _ = pair(NcpOptions(ack_delay=0.0, retransmit_interval=0.05))
+        client, server, _, _ = pair(NcpConfig(ack_delay=0.0, retransmit_interval=0.05))
         for i in range(20):
             await round_trip(client, b"%d" % i)
         client.close()
@@ -326,9 +326,9 @@ def test_chudp_link_survives_random_datagrams(datagrams: list[bytes]) -> None:
 
 
 def test_breaking_after_shrinks_the_probe_interval_with_the_timer() -> None:
-    assert NcpOptions.breaking_after(90) == replace(NcpOptions(), broken_after=90)  # 90 s: unchanged
-    short = NcpOptions.breaking_after(3)
+    assert NcpConfig.breaking_after(90) == replace(NcpConfig(), broken_after=90)  # 90 s: unchanged
+    short = NcpConfig.breaking_after(3)
     assert short.broken_after == 3 and short.probe_interval == 1.0  # three probes before giving up
     for bad in (0, -1, float("inf"), float("nan")):
         with pytest.raises(ValueError, match="broken_after"):
-            NcpOptions.breaking_after(bad)
+            NcpConfig.breaking_after(bad)

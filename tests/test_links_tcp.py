@@ -22,14 +22,14 @@ from manip.links import (
     ConnectionRefused,
     ConnectTimeout,
     LinkError,
-    NcpOptions,
+    NcpConfig,
     open_connection,
     start_server,
 )
 from manip.links.stream import StreamLink
 from manip.spec.constants import ChaosOp
 
-FAST = NcpOptions(retransmit_interval=0.1, ack_delay=0.01)
+FAST = NcpConfig(retransmit_interval=0.1, ack_delay=0.01)
 
 
 def run(coro: Coroutine[Any, Any, None], timeout: float = 10.0) -> None:
@@ -116,7 +116,7 @@ def test_window_back_pressure() -> None:
             async for packet in conn:
                 got.append(packet.data)
 
-        server, url = await serve(slow_reader, options=NcpOptions(window=4, ack_delay=0.01))
+        server, url = await serve(slow_reader, options=NcpConfig(window=4, ack_delay=0.01))
         async with server:
             async with await open_connection(url, options=FAST) as conn:
                 for i in range(4):
@@ -255,7 +255,7 @@ def test_close_fails_a_send_waiting_for_the_window() -> None:
         async def never_reads(conn: ChaosConnection) -> None:
             await asyncio.sleep(30)
 
-        server, url = await serve(never_reads, options=NcpOptions(window=2))
+        server, url = await serve(never_reads, options=NcpConfig(window=2))
         async with server:
             conn = await open_connection(url, options=FAST)
             await conn.send(b"1")
@@ -370,7 +370,7 @@ def test_silent_peer_is_broken() -> None:
 
         server, url = await serve(idle)
         async with server:
-            options = NcpOptions(broken_after=0.5, retransmit_interval=0.1, ack_delay=0.01)
+            options = NcpConfig(broken_after=0.5, retransmit_interval=0.1, ack_delay=0.01)
             conn = await open_connection(url, options=options)
             await started.wait()
             for link in server_links(server):
@@ -394,7 +394,7 @@ def test_killed_link_breaks_the_connection() -> None:
 
         server, url = await serve(idle)
         async with server:
-            conn = await open_connection(url, options=NcpOptions(broken_after=5.0))
+            conn = await open_connection(url, options=NcpConfig(broken_after=5.0))
             for link in server_links(server):
                 link.abort("test kills the link")
             with pytest.raises(ConnectionBroken, match="closed"):
@@ -558,7 +558,7 @@ def test_poller_wakeup() -> None:
             await go.wait()
             await echo(conn)
 
-        server, url = await serve(slow_echo, options=NcpOptions(window=2, ack_delay=0.01))
+        server, url = await serve(slow_echo, options=NcpConfig(window=2, ack_delay=0.01))
         async with server, await open_connection(url, options=FAST) as conn:
             woken = asyncio.Event()
             conn.set_wakeup(woken.set)
@@ -595,7 +595,7 @@ def test_each_watched_connection_is_woken_when_its_own_window_opens() -> None:
             await done.wait()
 
         server, url = await serve(hold)
-        clients = [await open_connection(url, options=NcpOptions(window=2, ack_delay=0.01)) for _ in range(2)]
+        clients = [await open_connection(url, options=NcpConfig(window=2, ack_delay=0.01)) for _ in range(2)]
         async with server:
             while len(accepted) < 2:
                 await asyncio.sleep(0.01)

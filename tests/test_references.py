@@ -4,9 +4,9 @@ Docstrings, comments, the spec data and the docs name modules (``manip.codecs.me
 them (``manip.codecs.messages.encode_async``) and files (``reference_server/session.py``).  A rename
 that forgets one leaves a reader looking for something that is not there, so each name is resolved
 here: a dotted name whose second component is one of manip's own modules must import (its longest
-importable prefix) and have the attributes that follow; a path must exist below the repository, ``src``,
-``src/manip``, ``src/manip/conformance`` or a folder above the file that names it.  Dotted names under other prefixes
-(``manip.ChaosFrame``, a capture schema; ``manip.capture``, a metadata key) are not module names.
+importable prefix) and have the attributes that follow; a path must exist below one of :data:`ROOTS` or
+a folder above the file that names it.  Dotted names under other prefixes (``manip.ChaosFrame``, a
+capture schema; ``manip.capture``, a metadata key) are not module names.
 """
 
 from __future__ import annotations
@@ -19,6 +19,8 @@ from pathlib import Path
 import manip
 
 ROOT = Path(__file__).resolve().parent.parent
+ROOTS = (ROOT, ROOT / "src", ROOT / "src" / "manip", ROOT / "src" / "manip" / "conformance")
+"""Where the texts' relative paths start from (the repository, the source tree, the package, the suite)."""
 MODULES = frozenset(info.name for info in pkgutil.iter_modules(manip.__path__))
 DOTTED = re.compile(r"(?<![\w./-])manip((?:\.[A-Za-z_]\w*)+)")
 PATH = re.compile(r"(?<![\w./])((?:[a-z_0-9]+/)+[a-z_0-9]+\.(?:py|toml|md|lua|json))")
@@ -27,11 +29,9 @@ EXAMPLE_PATHS = frozenset({"tests/test_x.py"})
 
 
 def _texts() -> list[Path]:
-    src = ROOT / "src"
-    return sorted(
-        [*src.rglob("*.py"), *src.rglob("*.toml"), *(ROOT / "docs").glob("*.md")]
-        + [ROOT / "README.md", ROOT / "CONTRIBUTING.md"]
-    )
+    src, docs = ROOT / "src", (ROOT / "docs").glob("*.md")
+    top = (ROOT / "README.md", ROOT / "CONTRIBUTING.md")
+    return sorted([*src.rglob("*.py"), *src.rglob("*.toml"), *docs, *top])
 
 
 def _resolves(dotted: str) -> bool:
@@ -63,7 +63,7 @@ def test_every_dotted_module_name_resolves() -> None:
 def test_every_file_path_named_exists() -> None:
     missing: list[str] = []
     for path in _texts():
-        roots = [ROOT, ROOT / "src", ROOT / "src" / "manip", ROOT / "src" / "manip" / "conformance", *path.parents]
+        roots = [*ROOTS, *path.parents]
         for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
             for match in PATH.finditer(line):
                 named = match.group(1)

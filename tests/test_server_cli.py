@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from manip.codecs.messages import Reply, decode_server_packet
-from manip.links import NcpOptions, open_connection
+from manip.links import NcpConfig, open_connection
 from manip.reference_server.cli import main
 from manip.reference_server.faults import FAULTS, Fault
 from manip.spec.constants import RequestOp
@@ -65,7 +65,7 @@ def _tuple(value: object) -> tuple[object, ...]:
 
 
 async def _here(url: str) -> tuple[Reply, Reply, int]:
-    conn = await open_connection(url, timeout=5.0, options=NcpOptions(first_packet_no=0o500))
+    conn = await open_connection(url, timeout=5.0, options=NcpConfig(first_packet_no=0o500))
     async with conn:
         first = await asyncio.wait_for(conn.receive(), 5.0)
         number = await conn.send(b"", RequestOp.HERE)

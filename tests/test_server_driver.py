@@ -30,7 +30,7 @@ from manip.links import (
     ChaosConnection,
     ConnectionClosed,
     ConnectionRefused,
-    NcpOptions,
+    NcpConfig,
     open_connection,
 )
 from manip.reference_server import FaultSet, ServerConfig
@@ -38,7 +38,7 @@ from manip.reference_server.driver import BUSY_REASON, ReferenceServer, serve
 from manip.spec import SPEC
 from manip.spec.constants import AsyncCondition, ServerOp
 
-FAST = NcpOptions(retransmit_interval=0.1, ack_delay=0.01)
+FAST = NcpConfig(retransmit_interval=0.1, ack_delay=0.01)
 POWERED = ServerConfig(powered_at_open=True)
 GOAL = (10.0, -80.0, 100.0, 20.0, 30.0, 40.0)
 MOVE_SECONDS = 1.2
@@ -73,7 +73,7 @@ class Raw:
 
     @classmethod
     async def open(cls, url: str, *, first_packet_no: int = 1) -> Raw:
-        options = NcpOptions(retransmit_interval=0.1, ack_delay=0.01, first_packet_no=first_packet_no)
+        options = NcpConfig(retransmit_interval=0.1, ack_delay=0.01, first_packet_no=first_packet_no)
         # Each client its own Chaos address: two clients on one address clash if their random
         # connection indices happen to be equal (the server then refuses the second one for that).
         cls._me = cls._me + 1 if cls._me < 0o477 else 0o402

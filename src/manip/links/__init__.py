@@ -28,7 +28,7 @@ from .errors import (
     LinkError,
 )
 from .guard import AccessError, AccessList, GuardStats, LinkGuard, LinkLimits
-from .ncp_driver import NcpOptions, Node, NodeStats
+from .ncp_driver import Node, NodeStats
 
 __all__ = [
     "AccessError",
@@ -54,7 +54,6 @@ __all__ = [
     "LinkLimits",
     "LinkStats",
     "NcpConfig",
-    "NcpOptions",
     "Node",
     "NodeStats",
     "open_connection",

@@ -91,10 +91,6 @@ def _cls_text(reason: str) -> str:
     return reason.encode("latin-1", "replace")[:MAX_DATA].decode("latin-1")
 
 
-NcpOptions = NcpConfig
-"""Deprecated name of :class:`manip.ncp.NcpConfig` (the settings are defined once, in the core)."""
-
-
 @dataclass(slots=True)
 class NodeStats:
     """Driver counters: packets moved, dropped for want of a route or from the wrong link."""

@@ -11,8 +11,6 @@ Level = Literal["MUST", "SHOULD", "MAY", "INFO"]
 Party = Literal["server", "client", "both", "cougar", "puma", "link"]
 Hazard = Literal["read-only", "config", "motion", "power"]
 ResponseForm = Literal["done", "data", "segment", "multi"]
-ResponseKind = ResponseForm
-"""Old name of :data:`ResponseForm` ("kind" now means only a failure kind)."""
 Element = Literal["float", "word", "int16", "small", "counted", "text"]
 
 ELEMENT_BYTES: dict[str, int] = {"float": 4, "word": 2, "int16": 2, "small": 2}
@@ -83,11 +81,6 @@ class ResponseShape:
     form: ResponseForm
     """done, data, segment or multi (``response = { form = ... }`` in manip.toml)."""
     data: Layout
-
-    @property
-    def kind(self) -> ResponseForm:
-        """Old name of :attr:`form`, kept for code written before the rename."""
-        return self.form
 
 
 @dataclass(frozen=True, slots=True)

@@ -73,7 +73,6 @@ if TYPE_CHECKING:
 
 __all__ = [
     "HAZARD_ORDER",
-    "KINDS",
     "LEVEL_ORDER",
     "TARGETS",
     "TECHNIQUES",
@@ -83,7 +82,6 @@ __all__ = [
     "CaseFunction",
     "CaseSkipped",
     "Declare",
-    "Kind",
     "Target",
     "Technique",
     "UndeclaredClauseError",
@@ -103,10 +101,6 @@ Target = Literal["server", "cougar", "client", "puma"]
 """What a case tests, from the first component of its id: a manip server, a Cougar, a client, the
 Puma's side of the wrist link (a server judged by the suite playing Cougar)."""
 TARGETS: Final[tuple[str, ...]] = get_args(Target)
-Kind = Technique
-"""Deprecated name of :data:`Technique`."""
-KINDS: Final = TECHNIQUES
-"""Deprecated name of :data:`TECHNIQUES`."""
 
 LEVEL_ORDER: Final[Mapping[str, int]] = {"MUST": 3, "SHOULD": 2, "MAY": 1, "INFO": 0}
 """Strength of a level; a case's default level is the strongest among its clauses."""
