@@ -242,7 +242,7 @@ def test_output_starts_before_the_input_ends() -> None:
         proc.stdin.flush()
         ready, _, _ = select.select([proc.stdout], [], [], 20)
         assert ready, "no output while the input is still open"
-        assert proc.stdout.readline().startswith(b"packet: DAT (8-bit data) 0201")
+        assert proc.stdout.readline().startswith(b"packet: DAT 0201")
     finally:
         proc.kill()
         proc.communicate(timeout=20)

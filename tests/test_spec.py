@@ -110,3 +110,20 @@ def test_generated_spec_docs_are_current() -> None:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     assert (ROOT / "docs" / "spec.md").read_text() == module.render(), "run: python tools/gen_spec_docs.py"
+
+
+def test_one_chaos_opcode_name_for_every_opcode() -> None:
+    """The spec's table names each assigned opcode as the generated enum does, every 8-bit data opcode
+    DAT, every 16-bit one DWD, and writes an unassigned one in octal."""
+    from manip.spec.constants import ChaosOp
+
+    for value in range(0o400):
+        name = SPEC.chaos_opcode_name(value)
+        if value >= ChaosOp.DWD:
+            assert name == "DWD"
+        elif value >= ChaosOp.DAT:
+            assert name == "DAT"
+        elif value in ChaosOp._value2member_map_:
+            assert name == ChaosOp(value).name
+        else:
+            assert name == f"0{value:o}" if value else name == "0"

@@ -12,7 +12,7 @@ from typing import Any
 from manip.spec import SPEC
 
 from .reader import Capture, CapturedEvent, CapturedPacket, Session
-from .view import opcode_name, view_bytes
+from .view import view_bytes
 
 
 def _value(v: Any) -> str:
@@ -37,7 +37,7 @@ def packet_line(p: CapturedPacket, t0_ns: int) -> str:
         message = (a.decode_error or {}).get("message", "?")
         return f"{head}  bad frame ({len(p.frame)} bytes): {message}"
     pk = p.packet
-    head += f"  #{pk.packet_no:<5d} {opcode_name(pk.opcode):<3}"
+    head += f"  #{pk.packet_no:<5d} {SPEC.chaos_opcode_name(pk.opcode):<3}"
     match a.kind:
         case "request":
             body = f"request {a.op or f'0{pk.opcode:o}'} {_fields(a.fields)}"

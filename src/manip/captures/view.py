@@ -106,18 +106,6 @@ def _request_plan(opcode: int) -> _RequestPlan:
 _REQUEST_PLANS: Final = {opcode: _request_plan(opcode) for opcode in range(_DAT, 0o400)}
 
 
-def opcode_name(opcode: int) -> str:
-    """Chaos opcode name: RFC, OPN, ... DAT for 0200-0277, DWD above."""
-    if opcode >= ChaosOp.DWD:
-        return "DWD"
-    if opcode >= ChaosOp.DAT:
-        return "DAT"
-    try:
-        return ChaosOp(opcode).name
-    except ValueError:
-        return f"0{opcode:o}"
-
-
 @dataclass(slots=True)
 class Annotation:
     """What the annotator made of one packet (the JSON view, minus the Chaos header)."""
@@ -403,7 +391,7 @@ def view_json(
     out: dict[str, Any] = {"link": link, "conn": ann.conn, "direction": direction, "seq": seq}
     if packet is not None:
         out["opcode"] = packet.opcode
-        out["opcode_name"] = opcode_name(packet.opcode)
+        out["opcode_name"] = SPEC.chaos_opcode_name(packet.opcode)
         out["src_host"] = packet.src_host
         out["src_index"] = packet.src_index
         out["dest_host"] = packet.dest_host
@@ -446,7 +434,7 @@ _HEADER: Final = (
     '"src_index":%d,"dest_host":%d,"dest_index":%d,"packet_no":%d,"ack_no":%d,"nbytes":%d,"kind":%s'
 )
 _NO_PACKET: Final = '{"link":%d,"conn":%d,"direction":"%s","seq":%d,"nbytes":%d,"kind":%s'
-_OPCODE_NAMES: Final = tuple(opcode_name(op) for op in range(256))
+_OPCODE_NAMES: Final = SPEC.chaos_opcode_names
 _FLOAT: Final = "%.9g"
 """How the view spells the floats of ``fields``: nine significant digits.  Every field float was a PDP-11
 single on the wire (a 24-bit significand, no subnormals), and nine digits name each one exactly (parsing

@@ -71,20 +71,9 @@ class Node:
         return out
 
 
-def _chaos_opcode_name(op: int) -> str:
-    if 0o200 <= op <= 0o277:
-        return "DAT (8-bit data)"
-    if op >= 0o300:
-        return "DWD (16-bit data)"
-    try:
-        return ChaosOp(op).name
-    except ValueError:
-        return "illegal"
-
-
 def describe_header(p: Packet) -> Node:
     node = Node("chaos header", offset=0, size=16)
-    node.add("opcode", f"{octal(p.opcode)} {_chaos_opcode_name(p.opcode)}", p.opcode, 1, 1)
+    node.add("opcode", f"{octal(p.opcode)} {SPEC.chaos_opcode_name(p.opcode)}", p.opcode, 1, 1)
     node.add("fc", str(p.fc), p.fc, 2, 2)
     node.add("nbytes", str(p.nbytes), p.nbytes, 2, 2)
     node.add(
@@ -128,7 +117,7 @@ def header_json(p: Packet) -> str:
     fc, nbytes, pn, an = int(p.fc), int(p.nbytes), int(p.packet_no), int(p.ack_no)
     out = (
         '{"label":"chaos header","offset":0,"size":16,"children":['
-        f'{{"label":"opcode","text":"{octal(op)} {_chaos_opcode_name(op)}",'
+        f'{{"label":"opcode","text":"{octal(op)} {SPEC.chaos_opcode_name(op)}",'
         f'"value":{op},"offset":1,"size":1}},'
         f'{{"label":"fc","text":"{fc}","value":{fc},"offset":2,"size":2}},'
         f'{{"label":"nbytes","text":"{nbytes}","value":{nbytes},"offset":2,"size":2}},'
@@ -307,13 +296,13 @@ def describe_control(p: Packet) -> Node | None:
             return node
         case ChaosOp.OPN | ChaosOp.STS if len(p.data) >= 4:
             receipt, window = struct.unpack_from("<HH", p.data)
-            node = Node(ChaosOp(p.opcode).name.lower(), f"receipt {receipt} window {window}")
+            node = Node(SPEC.chaos_opcode_name(p.opcode).lower(), f"receipt {receipt} window {window}")
             node.add("receipt", str(receipt), receipt, 0, 2)
             node.add("window", str(window), window, 2, 2)
             return node
         case ChaosOp.CLS | ChaosOp.LOS | ChaosOp.ANS | ChaosOp.FWD:
             text = decode_lispm(p.data)
-            node = Node(ChaosOp(p.opcode).name.lower(), repr(text), text)
+            node = Node(SPEC.chaos_opcode_name(p.opcode).lower(), repr(text), text)
             if p.opcode == ChaosOp.FWD:
                 node.add("new host", octal(p.ack_no), p.ack_no)
             return node
@@ -326,7 +315,7 @@ def describe_packet(
     """The whole tree for one packet; decode problems become a ``decode error`` node (never raised).
 
     ``header=False`` leaves out the Chaos header node, for :func:`packet_json` to write it."""
-    root = Node("packet", f"{_chaos_opcode_name(p.opcode)} {octal(p.opcode)}, {p.nbytes} data bytes")
+    root = Node("packet", f"{SPEC.chaos_opcode_name(p.opcode)} {octal(p.opcode)}, {p.nbytes} data bytes")
     if header:
         root.children.append(describe_header(p))
     control = describe_control(p)

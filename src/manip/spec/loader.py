@@ -97,6 +97,15 @@ class Spec:
             shown = octal(key) if isinstance(key, int) else repr(key)
             raise KeyError(f"no request opcode {shown} in the spec") from None
 
+    chaos_opcode_names: tuple[str, ...]
+    """The name of each Chaos opcode 0-0377, as :meth:`chaos_opcode_name` gives it."""
+
+    def chaos_opcode_name(self, opcode: int) -> str:
+        """The Chaos opcode's name from the spec's table: RFC, OPN, ...; DAT for every 8-bit data opcode
+        (0200-0277) and DWD for every 16-bit one (0300-0377); an opcode Chaos does not assign is written in
+        octal (``017``).  The one name every reader of a Chaos header shows."""
+        return self.chaos_opcode_names[opcode]
+
     def clause(self, clause_id: str) -> Clause:
         """The clause ``clause_id``; :class:`UnknownClauseError` (a KeyError) naming close matches."""
         try:
@@ -108,6 +117,13 @@ class Spec:
         """Raise :class:`UnknownClauseError` for the first id the spec does not have."""
         for clause_id in clause_ids:
             self.clause(clause_id)
+
+
+def _chaos_opcode_names(opcodes: Mapping[str, ChaosOpcode]) -> tuple[str, ...]:
+    by_value = {op.value: op.name for op in opcodes.values()}
+    dat, dwd = opcodes["DAT"], opcodes["DWD"]
+    names = [by_value.get(value, octal(value)) for value in range(dat.value)]
+    return (*names, *[dat.name] * (dwd.value - dat.value), *[dwd.name] * (0o400 - dwd.value))
 
 
 def _read(name: str) -> dict[str, Any]:
@@ -209,6 +225,7 @@ def load_spec() -> Spec:
     clauses = _read("clauses.toml")
     errata = _read("errata.toml")
 
+    chaos_opcodes = _unique([(o["name"], ChaosOpcode(**o)) for o in chaos["chaos_opcode"]], "Chaos opcode")
     types = _unique(
         [(t["name"], FieldType(t["name"], t["element"], t.get("count"))) for t in manip["field_type"]],
         "field type",
@@ -268,7 +285,8 @@ def load_spec() -> Spec:
             "error code",
         ),
         async_codes=_unique([(a["code"], AsyncCode(**a)) for a in manip["async_code"]], "async code"),
-        chaos_opcodes=_unique([(o["name"], ChaosOpcode(**o)) for o in chaos["chaos_opcode"]], "Chaos opcode"),
+        chaos_opcodes=chaos_opcodes,
+        chaos_opcode_names=_chaos_opcode_names(chaos_opcodes),
         cougar_commands=_cougar(cougar["command"], "Cougar command"),
         cougar_responses=_cougar(cougar["response"], "Cougar response"),
         requests_by_name=MappingProxyType({op.name: op for _, op in requests}),

@@ -62,7 +62,8 @@ def describe(packet: WirePacket) -> str:
     23, 50 data bytes)``."""
     if packet.is_close:
         reason = packet.data.decode("ascii", "replace")
-        return f"{ChaosOp(packet.opcode).name} ({reason})" if reason else ChaosOp(packet.opcode).name
+        close = SPEC.chaos_opcode_name(packet.opcode)
+        return f"{close} ({reason})" if reason else close
     name = opcode_name(packet)
     if packet.direction == "c2s":
         shown = f"packet number {packet.packet_no}"
