@@ -37,6 +37,7 @@ from typing import Any, Final, Literal
 
 from manip.codecs.cougar import CougarMsg, CougarValue, Malformed, OutOfSync, WordStream, encode
 from manip.codecs.pdp11float import words_to_f
+from manip.conformance.suite.busy import BUSY_DELAY, BUSY_PATIENCE, says_busy
 from manip.conformance.suite.case import CaseFailure
 from manip.conformance.suite.context import CaseContext
 from manip.conformance.suite.invariants import COUGAR_LINK
@@ -44,7 +45,6 @@ from manip.cougar.link import Drv11jError, PumaEnd, parse_address
 from manip.spec.notation import octal_words
 
 __all__ = [
-    "BUSY_WAIT",
     "DEFAULT_WITHIN",
     "TICK_CLOCK",
     "CougarProbe",
@@ -59,9 +59,6 @@ __all__ = [
 
 DEFAULT_WITHIN: Final = 4
 """Ticks a response may take: Cougar answers in the tick that runs the command; allow a slower one."""
-BUSY_WAIT: Final = 2.0
-"""Seconds to keep retrying a Cougar that says it is busy (the previous link still closing)."""
-_BUSY_DELAY: Final = 0.02
 _READ: Final = 1 << 16
 _TRANSCRIPT_NOTE: Final = 40
 
@@ -190,7 +187,7 @@ class CougarProbe:
         *,
         reply_timeout: float,
         connect_timeout: float,
-        busy_wait: float = BUSY_WAIT,
+        busy_wait: float = BUSY_PATIENCE,
     ) -> CougarProbe:
         """Connect, exchange HELLO, run one empty tick; a busy Cougar is retried for ``busy_wait`` s."""
         host, port = parse_address(address)
@@ -209,8 +206,8 @@ class CougarProbe:
                 await probe.run(1)
             except CaseFailure:
                 await probe.close()
-                if "busy" in (end.closed or "") and loop.time() < give_up:
-                    await asyncio.sleep(_BUSY_DELAY)
+                if says_busy(end.closed) and loop.time() < give_up:
+                    await asyncio.sleep(BUSY_DELAY)
                     continue
                 raise
             probe._inbox.clear()  # replies to the empty tick stay in probe.replies only

@@ -39,6 +39,7 @@ from manip.codecs.pdp11float import unpack_f
 from manip.conformance.fuzz.steps import ConnPacket
 from manip.conformance.fuzz.wire import Inbox, Wire, frame
 from manip.conformance.judge.checks import WirePacket, required_refusal
+from manip.conformance.suite.busy import BUSY_DELAY, BUSY_PATIENCE, says_busy
 from manip.ncp.packets import is_data, pack_status, text, unpack_status
 from manip.ncp.seq import seq_add, seq_gt, seq_le, seq_sub
 from manip.spec import SPEC
@@ -49,7 +50,6 @@ __all__ = ["Allowance", "ConnectError", "FuzzConnection", "RefusedError"]
 
 OUR_WINDOW: Final = 64
 """The window we grant the target: packets it may send before we acknowledge."""
-BUSY_DELAY: Final = 0.05
 RFC_RETRY: Final = 1.0
 PROBE_AFTER: Final = 0.2
 """Seconds of a stalled window before we send SNS to learn the target's acknowledgement."""
@@ -149,6 +149,7 @@ class FuzzConnection:
         ``initial``: then wait (up to the reply timeout) for the initial RESPONSE."""
         address = self.wire.address
         deadline = self._loop.time() + self.allowance.connect
+        busy_until = self._loop.time() + BUSY_PATIENCE
         busy = ""
         self.inbox.register(self.index, self)
         try:
@@ -182,11 +183,11 @@ class FuzzConnection:
                 if answer.opcode == ChaosOp.OPN:
                     break
                 reason = text(answer.data)
-                if answer.opcode == ChaosOp.CLS and "busy" in reason.lower() and self._loop.time() < deadline:
+                if answer.opcode == ChaosOp.CLS and says_busy(reason) and self._loop.time() < busy_until:
                     busy = reason
                     await asyncio.sleep(BUSY_DELAY)
                     continue
-                name = {op.value: op.name for op in ChaosOp}.get(answer.opcode, f"0{answer.opcode:o}")
+                name = SPEC.chaos_opcode_name(answer.opcode)
                 raise RefusedError(f"the RFC was answered with {name} {reason!r}")
         except BaseException:
             self.inbox.unregister(self.index)

@@ -72,6 +72,7 @@ from manip.conformance.replay.verify import (
     session_hazard,
     wire_packets,
 )
+from manip.conformance.suite.busy import open_retrying_busy
 from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REPLY_TIMEOUT
 from manip.conformance.suite.results import CaseResult, RunReport, Violation
 from manip.links import (
@@ -79,7 +80,6 @@ from manip.links import (
     ChaosError,
     ConnectionClosed,
     ConnectionLost,
-    ConnectionRefused,
     open_connection,
 )
 from manip.links.api import LinkWrapper
@@ -102,8 +102,6 @@ __all__ = [
 
 DEFAULT_ASYNC_TIMEOUT: Final = 10.0
 DEFAULT_SETTLE: Final = 0.2
-BUSY_RETRIES: Final = 40
-BUSY_DELAY: Final = 0.05
 CHECK_CLAUSES: Final = tuple(sorted({c for f in FAMILIES for c in f.clauses if c in SPEC.clauses}))
 EXCHANGE_CLAUSES: Final = ("request.one-reply", "response.echoes-request-number")
 
@@ -342,16 +340,9 @@ def _answer_time(request: WirePacket | None, options: ReplayOptions) -> float:
 
 
 async def _connect(address: str, options: ReplayOptions) -> ChaosConnection:
-    for attempt in range(BUSY_RETRIES + 1):
-        try:
-            return await open_connection(
-                address, timeout=options.connect_timeout, wrap_link=options.wrap_link
-            )
-        except ConnectionRefused as exc:
-            if attempt == BUSY_RETRIES or "busy" not in exc.reason.lower():
-                raise
-            await asyncio.sleep(BUSY_DELAY)
-    raise AssertionError("unreachable")
+    return await open_retrying_busy(
+        lambda: open_connection(address, timeout=options.connect_timeout, wrap_link=options.wrap_link)
+    )
 
 
 async def replay_session(script: Script, address: str, options: ReplayOptions) -> SessionReplay:

@@ -42,15 +42,16 @@ from manip.codecs.framing import (
 )
 from manip.codecs.packet import Packet
 from manip.conformance.judge.checks import Direction
+from manip.conformance.suite.busy import BUSY_DELAY, BUSY_RETRIES, says_busy
 from manip.links.address import LinkAddress, parse_address
 from manip.links.errors import chaos_host, not_a_chaos_link
-from manip.ncp.packets import is_data, pack_status, text, unpack_status
+from manip.ncp.packets import pack_status, text, unpack_status
 from manip.ncp.seq import seq_add
+from manip.spec import SPEC
 from manip.spec.constants import ChaosOp
 from manip.spec.notation import octal
 
 __all__ = [
-    "BUSY_RETRIES",
     "Direction",
     "RawConnection",
     "RawError",
@@ -63,8 +64,6 @@ __all__ = [
 PacketHook = Callable[[Direction, Packet, bytes], None]
 Match = Callable[[Packet], bool]
 
-BUSY_RETRIES: Final = 20
-BUSY_DELAY: Final = 0.25
 RFC_RETRY: Final = 1.0
 """Seconds between copies of an unanswered RFC during :meth:`RawPeer.handshake`."""
 FOREIGN_HEAD: Final = 78
@@ -96,19 +95,11 @@ class Received:
         return format_packet(self.packet)
 
 
-def _opname(opcode: int) -> str:
-    if is_data(opcode):
-        return f"DAT 0{opcode:o}"
-    try:
-        return ChaosOp(opcode).name
-    except ValueError:
-        return f"opcode 0{opcode:o}"
-
-
 def format_packet(p: Packet) -> str:
     """One line: opcode, addresses and indices (octal / hex), numbers, data length and a data preview."""
     source = f"{chaos_host(p.src_host)} index {octal(p.src_index)}"
-    what = f"{_opname(p.opcode)} {source} -> {chaos_host(p.dest_host)} index {octal(p.dest_index)}"
+    name = f"{SPEC.chaos_opcode_name(p.opcode)} {octal(p.opcode)}"
+    what = f"{name} {source} -> {chaos_host(p.dest_host)} index {octal(p.dest_index)}"
     numbers = f"pkt#{p.packet_no} ack#{p.ack_no}"
     if p.opcode in (ChaosOp.OPN, ChaosOp.STS) and (status := unpack_status(p.data)) is not None:
         return f"{what} {numbers} receipt {status[0]} window {status[1]}"
@@ -486,7 +477,7 @@ class RawPeer:
                 conn = RawConnection(self, index, rfc, answer, seq_add(packet_no, 1))
                 self.connections.append(conn)
                 return conn
-            busy = p.opcode == ChaosOp.CLS and "busy" in text(p.data).lower()
+            busy = p.opcode == ChaosOp.CLS and says_busy(text(p.data))
             if busy and retry_busy and tries < BUSY_RETRIES:
                 tries += 1
                 await asyncio.sleep(BUSY_DELAY)

@@ -43,12 +43,13 @@ from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 
 from manip.conformance.judge.checks import check_transcript
+from manip.conformance.suite.busy import open_retrying_busy
 from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
 from manip.conformance.suite.context import CaseContext, Environment, RunOptions
 from manip.conformance.suite.invariants import attribution_problem
 from manip.conformance.suite.results import CaseResult, LivenessCheck, Outcome, RunReport
 from manip.conformance.suite.selection import PatternSet
-from manip.links import ChaosConnection, ConnectionRefused, open_connection
+from manip.links import ChaosConnection, open_connection
 from manip.links.api import LinkWrapper
 from manip.spec.constants import ServerOp
 from manip.spec.notation import octal
@@ -56,9 +57,6 @@ from manip.spec.notation import octal
 __all__ = ["LIVENESS_RETRY_DELAY", "RunConfig", "RunEvents", "Runner", "case_seed"]
 
 LIVENESS_RETRY_DELAY = 0.5
-BUSY_RETRIES = 20
-"""How often a connect refused as busy is retried (the previous case's connection may still be closing)."""
-BUSY_DELAY = 0.05
 CLOSE_GRACE = 2.0
 
 
@@ -175,17 +173,13 @@ class Runner:
 
     async def connect(self, retry_busy: bool = True) -> ChaosConnection:
         """A fresh connection to the target; a refusal as busy is retried briefly (``retry_busy``)."""
-        options = self.config.options
-        for attempt in range(BUSY_RETRIES + 1 if retry_busy else 1):
-            try:
-                return await open_connection(
-                    self.config.address, timeout=options.connect_timeout, wrap_link=self.config.wrap_link
-                )
-            except ConnectionRefused as exc:
-                if not retry_busy or attempt == BUSY_RETRIES or "busy" not in exc.reason.lower():
-                    raise
-                await asyncio.sleep(BUSY_DELAY)
-        raise AssertionError("unreachable")
+        config = self.config
+        return await open_retrying_busy(
+            lambda: open_connection(
+                config.address, timeout=config.options.connect_timeout, wrap_link=config.wrap_link
+            ),
+            retry=retry_busy,
+        )
 
     async def liveness(self, when: str) -> LivenessCheck:
         """Connect, send Here, wait for any answer; one retry after a short pause."""
