@@ -62,6 +62,17 @@ CATCHERS = {
     Fault.CLOSE_KEEPS_MOVING: "server.connect.close-stops-arm",
     Fault.UNDERFLOW_DIRTY_ZERO: "server.float.extremes",
     Fault.NOT_FINITE_RESERVED: "server.float.extremes",
+    Fault.ERROR_PAD_MISPLACED: "server.error.arg-alignment",
+    Fault.UOP_OPCODE_SWAPPED: "server.negative.unknown-opcodes",
+    Fault.BDL_COUNTS_SWAPPED: "server.negative.data-length.safe",
+    Fault.JOINT_MASK_SWAPPED: "server.motion.jor",
+    Fault.DESCRIBE_LIMITS_SHORT: "server.describe.joint-limits",
+    Fault.DESCRIBE_READY_OFF: "server.motion.ready-position",
+    Fault.INCREMENT_O_T_SWAPPED: "server.motion.incremental-oat",
+    Fault.CONFIGURATION_IGNORED: "server.motion.configuration",
+    Fault.KEEPS_SPEED: "server.connect.fresh-state",
+    Fault.KEEPS_CONFIGURATION: "server.connect.fresh-state",
+    Fault.KEEPS_NOTIFICATIONS: "server.connect.fresh-state",
 }
 """Faults and the case written to catch each: it must fail, or warn for a SHOULD clause (others may catch
 the fault too)."""

@@ -50,7 +50,11 @@ def describe_text(
 
     ``degrees_of_freedom``, ``joint_limits`` and ``ready_position`` state other values than the model's
     (fault switches)."""
-    pairs = joint_limits if joint_limits is not None else list(zip(model.limits.lower, model.limits.upper, strict=True))
+    pairs = (
+        joint_limits
+        if joint_limits is not None
+        else list(zip(model.limits.lower, model.limits.upper, strict=True))
+    )
     limits: list[LispValue] = [[lo, hi] for lo, hi in pairs]
     version: list[LispValue] = []
     for module, number in description.software_version:

@@ -382,7 +382,8 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
             _info(
                 Fault.DESCRIBE_READY_OFF,
                 "protocol",
-                "Describe self states a :ready-position with joint 2 ten degrees from where move to ready goes.",
+                "Describe self states a :ready-position with joint 2 ten degrees from where move to ready "
+                "goes.",
                 "describe.ready-position",
             ),
             _info(
@@ -422,8 +423,8 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
             _info(
                 Fault.CONFIGURATION_IGNORED,
                 "protocol",
-                "Set configuration answers done and changes nothing: transforms are solved nearest the current "
-                "angles whatever configuration was asked for.",
+                "Set configuration answers done and changes nothing: transforms are solved nearest the "
+                "current angles whatever configuration was asked for.",
                 "set-configuration.effect",
             ),
             _info(
@@ -579,9 +580,9 @@ for _info_entry in FAULTS.values():
 
 RETIRED: Final[Mapping[str, str]] = MappingProxyType(
     {
-        "unaligned-error-args": "both layouts of an error string's numbers conform (erratum error-arg-layout): "
-        "manip-server --error-args packed writes them straight after the NUL; the defect switch is "
-        "error-pad-misplaced",
+        "unaligned-error-args": "both layouts of an error string's numbers conform (erratum "
+        "error-arg-layout): manip-server --error-args packed writes them straight after the NUL; the "
+        "defect switch is error-pad-misplaced",
     }
 )
 """Fault switches withdrawn, and what to use instead (:meth:`FaultSet.parse` says so)."""

@@ -109,10 +109,10 @@ __all__ = [
     "HANDLERS",
     "TRANSITIONS",
     "WRIST_OPERATIONS",
+    "ErrorArgs",
     "Input",
     "Outgoing",
     "Output",
-    "ErrorArgs",
     "ServerConfig",
     "ServerSession",
     "SessionUsageError",
@@ -558,7 +558,9 @@ class ServerSession:
         if Fault.WRONG_SEVERITY in faults:
             error = replace(error, severity="E" if opcode == ServerOp.FATAL_ERROR else "F")
         if any(fault in faults and error.code in codes for fault, codes in _SWAPPED_ARGS.items()):
-            error = replace(error, args=tuple(int.from_bytes(a.to_bytes(2, "little"), "big") for a in error.args))
+            error = replace(
+                error, args=tuple(int.from_bytes(a.to_bytes(2, "little"), "big") for a in error.args)
+            )
         aligned = self.config.error_args == "aligned"
         if aligned and Fault.ERROR_PAD_MISPLACED not in faults and Fault.ERROR_WITHOUT_COLON not in faults:
             self._emit(opcode, encode_error(opcode, number, error))
