@@ -38,6 +38,8 @@ READY_TOL_DEG: Final = 0.01
 """How far from the stated :ready-position a joint may end after move to ready."""
 OAT_DELTA: Final = (12.0, -9.0, 20.0)
 """dO dA dT of the incremental-oat case: distinct, so that angles added to the wrong one show."""
+OAT_DELTA_BACK: Final = (-7.0, 15.0, -4.0)
+"""dO dA dT of its incremental straight move, from where the first turn ended."""
 OAT_TOL: Final = 1e-3
 """Largest difference of a rotation matrix entry from the one computed (about 0.06 degrees)."""
 SEGMENT_BIT: Final = 1 << 1
@@ -236,39 +238,56 @@ def wrap180(deg: float) -> float:
     return (deg + 180.0) % 360.0 - 180.0
 
 
-@case(
-    "server.motion.incremental-oat",
-    clauses=["incremental.relative", "incremental-move.data"],
-    hazard="motion",
-    deadline=15.0,
-)
-async def incremental_oat(ctx: CaseContext) -> None:
-    """An incremental move (211) turning by dO dA dT only ends with the hand at R(O + dO, A + dA, T + dT),
-    O A T being VAL's angles of where it started (computed here from docs/kinematics.md's convention),
-    and the position unchanged."""
-    probe = await ctx.connect()
-    await power_on(ctx, probe)
-    before = await read_floats(ctx, probe, "joint-angles")
-    require_response(ctx, await probe.call("set-joint-angles", joints=list(LINE_POSE)), "a move to the start")
-    await settle(ctx, probe, LINE_POSE)
-    start = await read_floats(ctx, probe, "here")
+async def _turned(
+    ctx: CaseContext,
+    probe: Probe,
+    op: RequestName,
+    start: tuple[float, ...],
+    delta: tuple[float, float, float],
+) -> tuple[float, ...]:
+    """Turn the hand by ``delta`` (dO dA dT) with ``op``: it must end at R(O + dO, A + dA, T + dT) of
+    ``start``'s angles, where ``start`` stood; returns where it ended."""
     o, a, t = val_angles(start)
-    answer = await probe.call("incremental-move", delta=[0.0, 0.0, 0.0, *OAT_DELTA])
-    require_response(ctx, answer, "an incremental move turning the hand")
+    require_response(ctx, await probe.call(op, delta=[0.0, 0.0, 0.0, *delta]), f"{op} turning the hand")
     await _sample(ctx, probe, "here", 10.0)
     end = await read_floats(ctx, probe, "here")
-    want = val_rotation(o + OAT_DELTA[0], a + OAT_DELTA[1], t + OAT_DELTA[2])
+    want = val_rotation(o + delta[0], a + delta[1], t + delta[2])
     got = tuple(tuple(end[3 * j + i] for j in range(3)) for i in range(3))
     turn = max(abs(want[i][j] - got[i][j]) for i in range(3) for j in range(3))
     off = math.dist(end[9:], start[9:])
     ctx.expect(
         turn <= OAT_TOL and off <= POSE_TOL_MM,
         clause="incremental.relative",
-        expected=f"the hand at O A T {[round(v, 3) for v in (o, a, t)]} plus {list(OAT_DELTA)}, "
+        expected=f"{op}: the hand at O A T {[round(v, 3) for v in (o, a, t)]} plus {list(delta)}, "
         "position unchanged",
         actual=f"rotation off by {turn:.4f} (got O A T {[round(v, 3) for v in val_angles(end)]}), "
         f"position moved {off:.3f} mm",
     )
+    return end
+
+
+@case(
+    "server.motion.incremental-oat",
+    clauses=["incremental.relative", "incremental-move.data", "incremental-straight-move.data"],
+    hazard="motion",
+    deadline=15.0,
+)
+async def incremental_oat(ctx: CaseContext) -> None:
+    """An incremental move (211) turning by dO dA dT only, then an incremental straight move (212) turning
+    by others, each end with the hand at R(O + dO, A + dA, T + dT), O A T being VAL's angles of where it
+    started (computed here from docs/kinematics.md's convention), and the position unchanged."""
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    before = await read_floats(ctx, probe, "joint-angles")
+    require_response(ctx, await probe.call("set-joint-angles", joints=list(LINE_POSE)), "a move to the start")
+    await settle(ctx, probe, LINE_POSE)
+    start = await read_floats(ctx, probe, "here")
+    turns: tuple[tuple[RequestName, tuple[float, float, float]], ...] = (
+        ("incremental-move", OAT_DELTA),
+        ("incremental-straight-move", OAT_DELTA_BACK),
+    )
+    for op, delta in turns:
+        start = await _turned(ctx, probe, op, start, delta)
     await probe.call("set-joint-angles", joints=list(before))
     await settle(ctx, probe, before)
 
