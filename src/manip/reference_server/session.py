@@ -522,7 +522,7 @@ class ServerSession:
 
     def _payload(self, op: RequestOpcode, values: dict[str, Any]) -> bytes:
         fields = op.response.data.fields
-        if self.faults.active & _FLOAT_FAULTS and all(f.type.element == "float" for f in fields):
+        if self.faults.active & _FLOAT_FAULTS and fields and all(f.type.element == "float" for f in fields):
             return b"".join(self._faulty_float(float(x)) for f in fields for x in values[f.name])
         key = tuple(values.values())  # equal values encode alike (-0.0 and 0.0 both as a clean zero)
         cached = self._payloads.get(op.opcode)
