@@ -189,11 +189,10 @@ async def ready_position(ctx: CaseContext) -> None:
     away = list(start)
     away[1] += 15.0 if away[1] < 0 else -15.0
     require_response(ctx, await probe.call("set-joint-angles", joints=away), "a move away from ready")
+    await settle(ctx, probe, away)
     require_response(ctx, await probe.call("ready"), "move to ready accepted")
-    reached = await settle(ctx, probe, arm.stated_ready, within=10.0, tol=READY_TOL_DEG)
-    if reached is None:
-        await _sample(ctx, probe, "joint-angles", 5.0)
-        reached = await read_floats(ctx, probe, "joint-angles")
+    await _sample(ctx, probe, "joint-angles", 10.0)  # until the arm, seen to move, stands still
+    reached = await read_floats(ctx, probe, "joint-angles")
     off = max(abs(wrap180(a - b)) for a, b in zip(reached, arm.stated_ready, strict=True))
     ctx.expect(
         off <= READY_TOL_DEG,
