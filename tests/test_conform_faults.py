@@ -62,6 +62,17 @@ CATCHERS = {
     Fault.CLOSE_KEEPS_MOVING: "server.connect.close-stops-arm",
     Fault.UNDERFLOW_DIRTY_ZERO: "server.float.extremes",
     Fault.NOT_FINITE_RESERVED: "server.float.extremes",
+    Fault.ERROR_PAD_MISPLACED: "server.error.arg-alignment",
+    Fault.UOP_OPCODE_SWAPPED: "server.negative.unknown-opcodes",
+    Fault.BDL_COUNTS_SWAPPED: "server.negative.data-length.safe",
+    Fault.JOINT_MASK_SWAPPED: "server.motion.jor",
+    Fault.DESCRIBE_LIMITS_SHORT: "server.describe.joint-limits",
+    Fault.DESCRIBE_READY_OFF: "server.motion.ready-position",
+    Fault.INCREMENT_O_T_SWAPPED: "server.motion.incremental-oat",
+    Fault.CONFIGURATION_IGNORED: "server.motion.configuration",
+    Fault.KEEPS_SPEED: "server.connect.fresh-state",
+    Fault.KEEPS_CONFIGURATION: "server.connect.fresh-state",
+    Fault.KEEPS_NOTIFICATIONS: "server.connect.fresh-state",
 }
 """Faults and the case written to catch each: it must fail, or warn for a SHOULD clause (others may catch
 the fault too)."""
@@ -95,8 +106,9 @@ def cases_for(fault: Fault) -> list[Case]:
     return [c for c in suite() if broken & set(c.clauses) or c.id in GENERIC]
 
 
-async def run_suite(faults: FaultSet, cases: Sequence[Case]) -> RunReport:
-    async with serve("tcp://127.0.0.1:0", ServerConfig(faults=faults), time_scale=TIME_SCALE) as server:
+async def run_suite(faults: FaultSet, cases: Sequence[Case], config: ServerConfig | None = None) -> RunReport:
+    config = ServerConfig(faults=faults) if config is None else config
+    async with serve("tcp://127.0.0.1:0", config, time_scale=TIME_SCALE) as server:
         options = RunOptions(
             max_examples=MAX_EXAMPLES,
             address=server.address,
@@ -178,3 +190,15 @@ def test_the_arranged_paths_run_against_the_clean_server() -> None:
     """The fatal, warning and guard-hit cases pass (not skip) against the clean embedded server."""
     report = run_with_wrist(FaultSet(), [c for c in suite() if c.id in PATHS.values()])
     assert {r.id: r.outcome for r in report.results} == dict.fromkeys(PATHS.values(), "pass")
+
+
+def test_packed_error_args_conform() -> None:
+    """Erratum error-arg-layout: a server writing the numbers straight after the NUL, as the 1985 guide's
+    NZI example does (manip-server --error-args packed), passes every case that judges error strings."""
+    cases = [c for c in suite() if any(cl.startswith(("error-string.", "request.")) for cl in c.clauses)]
+    report = asyncio.run(run_suite(FaultSet(), cases, ServerConfig(error_args="packed")))
+    bad = [
+        (r.id, r.outcome, [v.message for v in r.violations]) for r in report.results if r.outcome in CAUGHT
+    ]
+    passed = {r.id for r in report.results if r.outcome == "pass"}
+    assert {"server.error.arg-alignment", "server.error.string-format"} <= passed and not bad, bad

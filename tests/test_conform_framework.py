@@ -117,6 +117,22 @@ def test_check_error_packet_severity_and_format() -> None:
     assert clauses == {"error-string.severity", "error-string.code"}
 
 
+@pytest.mark.parametrize("text", [b"x: C UOP ~", b"xy: C UOP ~"])
+def test_check_error_packet_layouts(text: bytes) -> None:
+    """Erratum error-arg-layout: the numbers packed after the NUL or aligned by one zero pad conform; a pad
+    where none is due, or a pad that is not zero, breaks error-string.arg-layout."""
+    number = struct.pack("<H", 1)
+    nul_end = 2 + len(text) + 1  # offset of the byte after the NUL in the packet data
+    packed = number + text + b"\0" + struct.pack("<H", 0o277)
+    pad = b"\0" if nul_end % 2 else b""
+    aligned = number + text + b"\0" + pad + struct.pack("<H", 0o277)
+    for data in (packed, aligned):
+        assert check_error_packet(_srv(ServerOp.NON_FATAL_ERROR, data)) == [], data
+    bad_pad = number + text + b"\0" + (b"\x07" if pad else b"\0") + struct.pack("<H", 0o277)
+    clauses = [f.clause for f in check_error_packet(_srv(ServerOp.NON_FATAL_ERROR, bad_pad))]
+    assert clauses[:1] == ["error-string.arg-layout"], (bad_pad, clauses)
+
+
 def test_transcript_async_only_when_requested_and_free_joint() -> None:
     initial = _srv(ServerOp.RESPONSE, struct.pack("<H", 1))
     seg = _srv(ServerOp.ASYNCHRONOUS_RESPONSE, struct.pack("<4H", 2, 2, 0, 1))

@@ -71,7 +71,8 @@ def test_clean_server_passes_the_property_cases() -> None:
             "property.requests.well-formed",
             "error-without-colon",
             "fail",
-            {"error-string.format", "error-string.args"},  # the lost ': ' also shifts the numbers
+            # the lost ': ' also shifts the numbers: half a word left, or a pad byte no longer due
+            {"error-string.format", "error-string.args", "error-string.arg-layout"},
         ),
         ("property.requests.well-formed", "wrong-request-number", "fail", {"response.echoes-request-number"}),
         (

@@ -289,10 +289,23 @@ def test_guard_below_tolerance_or_cleared_never_trips() -> None:
     assert d.run(ticks=20) == []  # armed and cleared in the same tick: the check ran before COMINT
 
 
-def test_guard_type_bits_4_to_14_are_ignored() -> None:
+@pytest.mark.parametrize(
+    ("type_index", "response"),
+    [(0x00F5, "GUARD-CONTINUE"), (0x7FF5, "GUARD-STOP"), (0x0105, "GUARD-STOP"), (0x8005, "GUARD-STOP")],
+)
+def test_guard_type_is_the_high_byte(type_index: int, response: str) -> None:
+    """Erratum guard-type-bit: any bit of the high byte makes a stop guard (the safe reading of 'hi bit'
+    and 'high byte'); bits 4-7 are ignored."""
     d = Driver(CougarSim(environment=ceiling(5.0)))
-    got = d.run(cmd("GUARDS", type_index=0x7FF5, dvec=(0, 0, 1, 0, 0, 0), tol=1.0), ticks=3)
-    assert [(m.name, m.values["index"]) for m in got] == [("GUARD-CONTINUE", 5)]
+    got = d.run(cmd("GUARDS", type_index=type_index, dvec=(0, 0, 1, 0, 0, 0), tol=1.0), ticks=3)
+    assert [(m.name, m.values["index"]) for m in got] == [(response, 5)]
+
+
+def test_guard_trips_at_equality() -> None:
+    """Erratum guard-trip-comparison: a dot product equal to tol trips (a zero dvec makes it exactly 0)."""
+    d = Driver(CougarSim(environment=ceiling(5.0)))
+    got = d.run(guard(2, False, (0.0,) * 6, 0.0), guard(6, False, (0.0,) * 6, 2.0**-127), ticks=3)
+    assert [(m.name, m.values["index"]) for m in got] == [("GUARD-CONTINUE", 2)]
 
 
 def test_several_guards_trip_in_index_order() -> None:

@@ -30,7 +30,7 @@ from manip.reference_server.faults import WRIST_SIDE
 from manip.spec import SPEC
 from manip.spec.constants import RequestOp, ServerOp
 from tests.cougar_fake import WristClient
-from tests.test_server_session import GOAL, OTHER, Client
+from tests.test_server_session import GOAL, OTHER, Client, _reply
 
 T = TypeVar("T")
 COVERED: set[Fault] = set()
@@ -317,25 +317,59 @@ def test_error_without_colon() -> None:
     assert pair(Fault.ERROR_WITHOUT_COLON, scenario) == (None, "error-string.format")
 
 
-@covers(Fault.UNALIGNED_ERROR_ARGS)
-def test_unaligned_error_args() -> None:
-    def scenario(c: Client) -> tuple[int, ...] | str:
-        try:
-            return decode_error(ServerOp.NON_FATAL_ERROR, _uop(c)).error.args
-        except DecodeError as exc:
-            return exc.clause or ""
+def _bdl(c: Client) -> bytes:
+    ((_, data),) = _raw(c, "set-speed", b"")
+    return data
 
-    clean, faulty = pair(Fault.UNALIGNED_ERROR_ARGS, scenario)
-    assert clean == (0o230,) and faulty != clean
 
-    def bdl(c: Client) -> bytes:
-        ((_, data),) = _raw(c, "set-speed", b"")
-        return data
-
-    clean_bdl, faulty_bdl = pair(Fault.UNALIGNED_ERROR_ARGS, bdl)
-    assert decode_error(ServerOp.NON_FATAL_ERROR, clean_bdl).error.args == (4, 0)
+@covers(Fault.ERROR_PAD_MISPLACED)
+def test_error_pad_misplaced() -> None:
+    """BDL's NUL ends at an even offset: no pad is due, and the fault puts one there anyway.  Parity still
+    reads it (a tolerant reader), an aligned-only reader does not."""
+    clean, faulty = pair(Fault.ERROR_PAD_MISPLACED, _bdl)
+    for data in (clean, faulty):
+        assert decode_error(ServerOp.NON_FATAL_ERROR, data).error.args == (4, 0)
+    nul = faulty.index(0, 2)
+    assert (nul + 1) % 2 == 0 and (len(faulty) - nul - 1) % 2 == 1 and faulty[nul + 1] == 0
+    assert (len(clean) - clean.index(0, 2) - 1) % 2 == 0
     with pytest.raises(DecodeError):
-        decode_error(ServerOp.NON_FATAL_ERROR, faulty_bdl)
+        decode_error(ServerOp.NON_FATAL_ERROR, faulty, align_args=True)
+
+
+def test_error_args_packed_layout() -> None:
+    """ServerConfig(error_args="packed") writes the numbers straight after the NUL (the 1985 guide's
+    layout); both read back alike."""
+    aligned = _uop(Client(ServerConfig()))
+    packed = _uop(Client(ServerConfig(error_args="packed")))
+    assert len(aligned) == len(packed) + 1  # UOP's NUL ends at an odd offset: the aligned layout pads
+    for data in (aligned, packed):
+        assert decode_error(ServerOp.NON_FATAL_ERROR, data).error.args == (0o230,)
+
+
+def test_withdrawn_fault_switch_says_what_replaced_it() -> None:
+    with pytest.raises(ValueError, match="--error-args packed"):
+        FaultSet.parse(["unaligned-error-args"])
+
+
+@covers(Fault.UOP_OPCODE_SWAPPED)
+@covers(Fault.BDL_COUNTS_SWAPPED)
+@covers(Fault.JOINT_MASK_SWAPPED)
+def test_error_numbers_byte_swapped() -> None:
+    def numbers(c: Client) -> tuple[tuple[int, ...], ...]:
+        jor = _raw(c, "set-joint-angles", joints=[1000.0, *READY[1:3], 1000.0, *READY[4:]])
+        return tuple(
+            decode_error(ServerOp.NON_FATAL_ERROR, data).error.args for data in (_uop(c), _bdl(c), jor[0][1])
+        )
+
+    clean = (((0o230,), (4, 0), (0b1001,)),) * 3
+    faulty = (((0x9800,), (4, 0), (0b1001,)), ((0o230,), (0x400, 0), (0b1001,)), ((0o230,), (4, 0), (0x900,)))
+    for fault, clean_numbers, faulty_numbers in zip(
+        (Fault.UOP_OPCODE_SWAPPED, Fault.BDL_COUNTS_SWAPPED, Fault.JOINT_MASK_SWAPPED),
+        clean,
+        faulty,
+        strict=True,
+    ):
+        assert pair(fault, numbers) == (clean_numbers, faulty_numbers), fault
 
 
 # ------------------------------------------------------------------------------ request handling
@@ -645,6 +679,82 @@ def test_not_finite_reserved() -> None:
     clean, faulty = pair(Fault.NOT_FINITE_RESERVED, scenario)
     assert clean[0] == ServerOp.NON_FATAL_ERROR
     assert faulty == (ServerOp.RESPONSE, bytes([0, 0x80, 0, 0]))
+
+
+@covers(Fault.DESCRIBE_LIMITS_SHORT)
+def test_describe_limits_short() -> None:
+    def scenario(c: Client) -> tuple[object, int]:
+        alist = _alist(c)
+        limits = alist["joint-limits"]
+        assert isinstance(limits, list)
+        return alist["degrees-of-freedom"], len(limits)
+
+    assert pair(Fault.DESCRIBE_LIMITS_SHORT, scenario) == ((6, 6), (6, 5))
+
+
+@covers(Fault.DESCRIBE_READY_OFF)
+def test_describe_ready_off() -> None:
+    def scenario(c: Client) -> tuple[float, ...]:
+        c.one("set-joint-angles", joints=GOAL)
+        c.settle()
+        c.one("ready")
+        c.settle()
+        stated = _alist(c)["ready-position"]
+        assert isinstance(stated, list)
+        return tuple(round(float(s) - a, 6) for s, a in zip(stated, c.session.arm.actual, strict=True))
+
+    assert pair(Fault.DESCRIBE_READY_OFF, scenario) == ((0.0,) * 6, (0.0, 10.0, 0.0, 0.0, 0.0, 0.0))
+
+
+@covers(Fault.INCREMENT_O_T_SWAPPED)
+def test_increment_o_t_swapped() -> None:
+    def scenario(c: Client) -> tuple[float, ...]:
+        c.one("set-joint-angles", joints=(20.0, -60.0, 150.0, 0.0, -60.0, 0.0))
+        c.settle()
+        c.one("incremental-move", delta=(0.0, 0.0, 0.0, 12.0, 0.0, 0.0))
+        c.settle()
+        return tuple(round(v, 3) for v in _here(c)[:9])
+
+    clean, faulty = pair(Fault.INCREMENT_O_T_SWAPPED, scenario)
+    assert clean != faulty
+
+
+@covers(Fault.CONFIGURATION_IGNORED)
+def test_configuration_ignored() -> None:
+    seed = (20.0, -60.0, 150.0, 0.0, -60.0, 0.0)
+    pose = forward(seed).to_floats()
+
+    def scenario(c: Client) -> bool:
+        solutions = []
+        for value in (1, 0):
+            c.one("set-configuration", configuration=value)
+            solutions.append(_reply(c.one("solve-forwards", transform=pose, current=seed)).values["joints"])
+        return solutions[0] != solutions[1]
+
+    assert pair(Fault.CONFIGURATION_IGNORED, scenario) == (True, False)
+
+
+@covers(Fault.KEEPS_SPEED)
+@covers(Fault.KEEPS_CONFIGURATION)
+@covers(Fault.KEEPS_NOTIFICATIONS)
+def test_connection_keeps_state() -> None:
+    """What a session takes over from the one before it: nothing, unless a connection-keeps-* fault is on
+    (the driver calls inherit for each new connection)."""
+
+    def carried(*faults: Fault) -> tuple[float, bool | None, int]:
+        config = ServerConfig(powered_at_open=True, faults=FaultSet.of(*faults))
+        first = Client(config)
+        first.one("set-speed", factor=0.25)
+        first.one("set-configuration", configuration=0)
+        first.one("request-notifications", mask=3)
+        second = Client(config)
+        second.session.inherit(first.session)
+        return second.session.arm.speed, second.session.arm.lefty, second.session.notifications
+
+    assert carried() == (1.0, None, 0)
+    assert carried(Fault.KEEPS_SPEED) == (0.25, None, 0)
+    assert carried(Fault.KEEPS_CONFIGURATION) == (1.0, False, 0)
+    assert carried(Fault.KEEPS_NOTIFICATIONS) == (1.0, None, 3)
 
 
 # ------------------------------------------------------------------- the driver and the wrist

@@ -14,7 +14,7 @@ from manip.arm.kinematics import PUMA600, forward
 from manip.arm.trajectory import PUMA_LIMITS, TICK
 from manip.codecs.messages import AsyncResponse, Reply
 from manip.cougar import CougarConfig, CougarSim, GaugeModel, Surface
-from manip.cougar.memory import region
+from manip.cougar.memory import GUARD_WORDS, region
 from manip.reference_server.cougar_port import SimPort
 from manip.reference_server.cougar_wrist import CougarWrist
 from manip.spec.constants import AsyncCondition
@@ -200,3 +200,14 @@ async def _use_server(address: str) -> None:
         assert version == 1
         forces = await puma.read_forces()
         assert len(forces) == 6
+
+
+@pytest.mark.parametrize(("type_index", "first_word"), [(0x0103, 0x8003), (0x80F3, 0x8003), (0x00F3, 0x0003)])
+def test_set_guard_sends_the_stop_bit_for_any_high_byte_bit(type_index: int, first_word: int) -> None:
+    """Erratum guard-type-bit: the Puma reads a client's type word as Cougar does (any high-byte bit:
+    stop) and sends Cougar bit 15 alone, bits 4-14 cleared."""
+    client, sim = _setup()
+    _reply(client.call("set-guard", type_index=type_index, dvec=(0.0,) * 6, tol=1.0e30))
+    client.tick()
+    client.tick()
+    assert sim.memory.read_words(region("guards").address + 2 * GUARD_WORDS * 3, 1)[0] == first_word

@@ -390,9 +390,9 @@ local function error_string(tree, data, dtvb)
   local args = {}
   if nul then
     local pos = nul + 1
-    if bit.band(pos, 1) == 1 and pos < n then
+    if bit.band(n - pos, 1) == 1 then  -- an odd count after the NUL: a pad byte first
       if data:get_index(pos) ~= 0 then return "pad byte before the numbers is not zero",
-                                              "error-string.arg-alignment" end
+                                              "error-string.arg-layout" end
       pos = pos + 1
     end
     if bit.band(n - pos, 1) == 1 then

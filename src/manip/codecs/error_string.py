@@ -5,12 +5,14 @@ joint mask "single bytes", which we read as loose wording, since the format para
 
 * the text is Lisp Machine text (:mod:`manip.codecs.lispm_text`);
 * an optional NUL byte ends the text; only then are ``~`` and ``$`` in the message special;
-* the numbers follow as 16-bit words, low byte first;
-* with ``align_args=True`` (the default) the words start at an even offset *of the error string as it sits in
-  the response data*.  The data begin with the 2-byte request number, so an even offset within the string is
-  an even offset in the packet: a PDP-11 cannot store a word at an odd address.  When the NUL ends at an
-  odd offset one pad byte follows, and it must be zero.  ``align_args=False`` reads the words right after
-  the NUL.
+* the numbers follow as 16-bit words, low byte first, in one of two layouts, both conformant
+  (clause ``error-string.arg-layout``): *packed*, straight after the NUL, as the 1985 guide's NZI example
+  writes them; or *aligned*, at an even offset *of the error string as it sits in the response data* (the
+  data begin with the 2-byte request number, so an even offset within the string is an even offset in the
+  packet, where a PDP-11 stores a word), with one zero pad byte after a NUL that ends at an odd offset;
+* a reader tells them apart by parity (``align_args=None``, the default): an odd count of bytes after the
+  NUL means the first is the pad, which must be zero.  ``align_args=True`` reads only the aligned layout,
+  ``align_args=False`` only the packed one; :meth:`ErrorMessage.encode` writes either.
 
 Substitutions (clause ``error-string.substitution``, erratum ``error-substitution``): each ``~`` takes one
 number, printed as an unsigned integer; each ``$`` takes one number as a joint bit mask (bit 0 = joint 1):
@@ -22,7 +24,7 @@ reader can make without knowing the message (``~`` prints them joined by ", ", `
 
 Hard decode errors (:class:`DecodeError` with the byte offset in the error string): no ``": "`` separator,
 a missing severity or code (``error-string.format``), an odd number of argument bytes
-(``error-string.args``), a non-zero pad byte (``error-string.arg-alignment``).  Everything else that is off
+(``error-string.args``), a non-zero pad byte (``error-string.arg-layout``).  Everything else that is off
 (unknown severity or code, a code that is not three letters, a colon in *where*, numbers and special
 characters that do not correspond) is listed in :attr:`ErrorMessage.problems`, so a decoder never fails on it.
 """
@@ -259,7 +261,7 @@ class ErrorMessage:
 def parse_error(
     data: bytes,
     *,
-    align_args: bool = True,
+    align_args: bool | None = None,
     severities: Collection[str] | None = None,
     body: Literal["auto", "string", "packet"] = "auto",
     reading: Reading = "one-to-one",
@@ -273,6 +275,8 @@ def parse_error(
     number: a control byte, a NUL or a byte above 0177) as the packet form; an error that neither
     reading explains says which forms were tried.  Offsets in errors count from the start of ``data``.
 
+    ``align_args``: which layout of the numbers to read (None, the default: either, told apart by the
+    parity of the bytes after the NUL; True: aligned only; False: packed only; erratum ``error-arg-layout``).
     ``severities`` replaces the spec's table for :attr:`ErrorMessage.problems`; ``reading`` is how
     numbers go with special characters (:func:`assign`, erratum ``error-substitution``).
     """
@@ -285,7 +289,7 @@ def parse_error(
 def _parse(
     data: bytes,
     *,
-    align_args: bool,
+    align_args: bool | None,
     severities: Collection[str] | None,
     body: Literal["auto", "string", "packet"],
 ) -> ErrorMessage:
@@ -311,7 +315,7 @@ def _parse(
             ) from None
 
 
-def _parse_numbered(data: bytes, align_args: bool, severities: Collection[str] | None) -> ErrorMessage:
+def _parse_numbered(data: bytes, align_args: bool | None, severities: Collection[str] | None) -> ErrorMessage:
     if len(data) < 2:
         raise DecodeError(
             f"{len(data)} bytes: an error packet's data begin with a 2-byte request number",
@@ -325,7 +329,17 @@ def _parse_numbered(data: bytes, align_args: bool, severities: Collection[str] |
         raise exc.at("error", 2) from exc
 
 
-def _parse_string(data: bytes, align_args: bool, severities: Collection[str] | None) -> ErrorMessage:
+def _padded(data: bytes, after_nul: int, align_args: bool | None) -> bool:
+    """Whether a pad byte sits at ``after_nul``: by the parity of the bytes left (``None``), where the
+    aligned layout puts one (``True``), never (``False``)."""
+    if after_nul >= len(data):
+        return False
+    if align_args is None:
+        return (len(data) - after_nul) % 2 == 1
+    return align_args and after_nul % 2 == 1
+
+
+def _parse_string(data: bytes, align_args: bool | None, severities: Collection[str] | None) -> ErrorMessage:
     nul = data.find(0)
     raw_text = data if nul < 0 else data[:nul]
     text = decode_lispm(bytes(raw_text))
@@ -333,13 +347,13 @@ def _parse_string(data: bytes, align_args: bool, severities: Collection[str] | N
     args: tuple[int, ...] = ()
     if nul >= 0:
         pos = nul + 1
-        if align_args and pos % 2 and pos < len(data):
+        if _padded(data, pos, align_args):
             if data[pos] != 0:
                 raise DecodeError(
                     f"pad byte before the numbers is {data[pos]:#04x}, not zero",
                     path="args",
                     offset=pos,
-                    clause="error-string.arg-alignment",
+                    clause="error-string.arg-layout",
                 )
             pos += 1
         rest = data[pos:]

@@ -519,7 +519,7 @@ def encode_error(opcode: int, request_number: int, error: ErrorMessage) -> bytes
     return _WORD.pack(request_number) + error.encode()
 
 
-def decode_error(opcode: int, data: bytes, *, align_args: bool = True) -> ErrorReply:
+def decode_error(opcode: int, data: bytes, *, align_args: bool | None = None) -> ErrorReply:
     if len(data) < REQUEST_NUMBER_BYTES:
         raise DecodeError(
             "error packet without a request number",
@@ -582,7 +582,7 @@ def segment_completed(request_number: int, segment: int) -> bytes:
 
 
 def decode_server_packet(
-    opcode: int, data: bytes, op: int | str | RequestOpcode | None = None, *, align_args: bool = True
+    opcode: int, data: bytes, op: int | str | RequestOpcode | None = None, *, align_args: bool | None = None
 ) -> ServerMessage:
     """Decode any packet a server sends, by its Chaos opcode."""
     match opcode:

@@ -21,8 +21,9 @@ Theory of operation (one tick = one GUTS interrupt, B.6, then background time):
    any other processing"), then each channel is filtered in integers (:mod:`manip.cougar.adc`).
 3. Conversion (§8.2): force = voltmat · Y.
 4. GRAVITY (B.8), then LIMIT (B.5) if bit 0 of ``flags`` is set (it is not, by default).
-5. GUARDM (B.9): every armed guard whose dot(force, dvec) exceeds tol trips: response 6 (stop the move,
-   bit 15 of its type word set) or 7 (continue) with its index, and it is disarmed.
+5. GUARDM (B.9): every armed guard whose dot(force, dvec) reaches tol (>=, erratum
+   ``guard-trip-comparison``) trips: response 6 (stop the move: a bit of its type word's high byte set,
+   erratum ``guard-type-bit``) or 7 (continue) with its index, and it is disarmed.
 6. COMINT (B.7, :mod:`manip.cougar.comint`): every complete command in the input buffer runs, in order.
 7. Background: JACOB (:mod:`manip.cougar.jacob`) runs ``jacob_steps_per_tick`` steps.
 
@@ -88,8 +89,11 @@ from manip.spec.constants import CougarResponse
 __all__ = ["CougarConfig", "CougarSim", "CougarStats"]
 
 Vector = npt.NDArray[np.float64]
-#: Bit 15 of a guard's type word: a trip stops the move (errata ``guard-type-bit``).
+#: Bit 15 of a guard's type word: what a sender sets for a guard whose trip stops the move.
 GUARD_STOP_BIT: Final = 0x8000
+#: The bits of the type word any of which makes a trip stop the move: the high byte (errata
+#: ``guard-type-bit``: Table 1's "hi bit" and B.9's "high byte" both read so; stop is the safe side).
+GUARD_STOP_MASK: Final = 0xFF00
 #: Bit 0 of the ``flags`` word: LIMIT is applied.
 FLAG_LIMIT: Final = 1
 _UNTOUCHED: Final = (0.0,) * 6
@@ -362,7 +366,10 @@ class CougarSim:
                 tol = float(mem.read_floats(entry + 2 * GUARD_TOL, 1)[0])
                 kept = self._guard_values[i] = (words, mem.read_floats(entry + 2 * GUARD_DVEC, 6), tol)
             _, dvec, tol = kept
-            if float(np.dot(force, dvec)) > tol:
+            dot = float(np.dot(force, dvec))
+            if (
+                dot > tol if "guard-trips-strictly" in self._faults else dot >= tol
+            ):  # erratum guard-trip-comparison
                 if "guard-trips-twice" in self._faults and i not in self._tripped_once:
                     self._tripped_once.add(i)
                 else:
@@ -481,7 +488,11 @@ class CougarSim:
         mem = self.memory
         data = mem.read_words(region("guard_in").address, GUARD_WORDS)
         index = data[0] & 0xF
-        data[0] &= GUARD_STOP_BIT | 0xF  # bits 4-14 are ignored (errata guard-type-bit)
+        mask = GUARD_STOP_BIT if "guard-hi-bit-only" in self._faults else GUARD_STOP_MASK
+        stop = GUARD_STOP_BIT if data[0] & mask else 0
+        data[0] = (
+            stop | data[0] & 0xF
+        )  # any high-byte bit stops; bits 4-7 are ignored (errata guard-type-bit)
         mem.write_words(region("guards").address + 2 * GUARD_WORDS * index, data)
         mem.set_word("guard_active", mem.word("guard_active") | 1 << index)
 

@@ -353,6 +353,10 @@ class ResponseContext:
             rest = len(payload) - payload.index(0) - 1
             with contextlib.suppress(CodecError):
                 return parse_error(payload[: len(payload) - rest % 2], align_args=False, body="string")
+        try:  # either layout, told apart by parity (erratum error-arg-layout)
+            return parse_error(payload, body="string")
+        except CodecError:
+            pass
         try:
             return parse_error(payload, align_args=self.core.align_args, body="string")
         except CodecError:

@@ -56,7 +56,7 @@ from manip.links.guard import DEFAULT_FRAME_TIMEOUT, DEFAULT_IDLE_TIMEOUT, DEFAU
 from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import DEFAULT_ADDRESS, ReferenceServer, serve
 from manip.reference_server.faults import FAULTS, FaultSet
-from manip.reference_server.session import ServerConfig
+from manip.reference_server.session import ErrorArgs, ServerConfig
 
 if TYPE_CHECKING:
     from manip.captures import Recorder
@@ -192,6 +192,15 @@ def command_line(ctx: click.Context) -> list[str]:
     help="Switch a fault on (see --list-faults); repeatable.",
 )
 @click.option("--list-faults", is_flag=True, help="List the fault switches and exit.")
+@click.option(
+    "--error-args",
+    type=click.Choice(["aligned", "packed"]),
+    default="aligned",
+    show_default=True,
+    help="Layout of the numbers after an error string's NUL, both conformant (erratum error-arg-layout): "
+    "aligned to an even offset by a zero pad byte, or packed straight after the NUL as in the 1985 "
+    "guide's NZI example.",
+)
 @click.option("--powered", is_flag=True, help="Arm power on at connection (default: off, as on the Puma).")
 @click.option(
     "--max-clients",
@@ -286,6 +295,7 @@ def main(
     broken_after: float | None,
     faults: FaultSet,
     list_faults: bool,
+    error_args: ErrorArgs,
     powered: bool,
     max_clients: int,
     cougar: str | None,
@@ -322,7 +332,7 @@ def main(
         if warning is not None:
             click.echo(warning, err=True)
     configure_logging(log_level)
-    config = ServerConfig(model=MODELS[model], powered_at_open=powered, faults=faults)
+    config = ServerConfig(model=MODELS[model], powered_at_open=powered, faults=faults, error_args=error_args)
     server = functools.partial(
         serve,
         address,

@@ -694,8 +694,10 @@ class CougarWrist:
         )
 
     def _set_guard(self, values: Mapping[str, Value], now: float, arm: ArmSim) -> dict[str, Any]:
-        # Erratum guard-type-bit: bit 15 and the index are meaningful; bits 4-14 are sent as 0.
-        type_index = _int(values["type_index"]) & (GUARD_STOP_BIT | GUARD_INDEX_MASK)
+        # Erratum guard-type-bit: any bit of the high byte asks for a stop guard, sent to Cougar as bit 15
+        # alone; bits 4-14 are sent as 0.
+        raw = _int(values["type_index"])
+        type_index = (GUARD_STOP_BIT if raw & 0xFF00 else 0) | raw & GUARD_INDEX_MASK
         self._armed.add(type_index & GUARD_INDEX_MASK)
         self.queue_command(
             CougarCommand.GUARDS, type_index=type_index, dvec=values["dvec"], tol=values["tol"]

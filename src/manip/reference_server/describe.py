@@ -44,16 +44,22 @@ def describe_text(
     with_protocol_version: bool = True,
     degrees_of_freedom: int | None = None,
     joint_limits: Sequence[tuple[float, float]] | None = None,
+    ready_position: Sequence[float] | None = None,
 ) -> str:
     """The alist, one entry per line, the first line opening and the last closing the list.
 
-    ``degrees_of_freedom`` and ``joint_limits`` state other values than the model's (fault switches)."""
-    pairs = joint_limits or list(zip(model.limits.lower, model.limits.upper, strict=True))
+    ``degrees_of_freedom``, ``joint_limits`` and ``ready_position`` state other values than the model's
+    (fault switches)."""
+    pairs = (
+        joint_limits
+        if joint_limits is not None
+        else list(zip(model.limits.lower, model.limits.upper, strict=True))
+    )
     limits: list[LispValue] = [[lo, hi] for lo, hi in pairs]
     version: list[LispValue] = []
     for module, number in description.software_version:
         version += [Keyword(module), number]
-    ready: Sequence[float] = model.ready
+    ready: Sequence[float] = model.ready if ready_position is None else ready_position
     entries = [
         _entry("brand-name", description.brand_name),
         _entry("unique-name", description.unique_name),

@@ -206,6 +206,8 @@ class ReferenceServer:
         """Where the robot stands (updated when a connection ends)."""
         self.hand_open = True
         self._carried: ArmSim | None = None
+        self._last_session: ServerSession | None = None
+        """The session of the connection opened last (the connection-keeps-* faults carry its state)."""
         """An arm a closed connection left moving (fault close-keeps-moving): the next session gets it."""
         self.servers: list[ChaosServer] = []
         self._loop = asyncio.get_running_loop()
@@ -293,7 +295,11 @@ class ReferenceServer:
         arm.hand_open = self.hand_open
         if self._carried is not None:
             arm, self._carried = self._carried, None
-        return ServerSession(config, arm=arm, wrist=self.wrist)
+        session = ServerSession(config, arm=arm, wrist=self.wrist)
+        if self._last_session is not None:
+            session.inherit(self._last_session)  # nothing, unless a connection-keeps-* fault is on
+        self._last_session = session
+        return session
 
     # --------------------------------------------------------------------------- a connection
     async def _handle(self, conn: ChaosConnection) -> None:

@@ -23,7 +23,7 @@ from typing import Final, Literal
 from manip.arm.sim import Obstacle, Sluggish
 from manip.spec import SPEC
 
-__all__ = ["FAULTS", "WRIST_SIDE", "Fault", "FaultInfo", "FaultSet"]
+__all__ = ["FAULTS", "RETIRED", "WRIST_SIDE", "Fault", "FaultInfo", "FaultSet"]
 
 
 class Fault(enum.StrEnum):
@@ -46,7 +46,10 @@ class Fault(enum.StrEnum):
     SWAPPED_FLOAT_WORDS = "swapped-float-words"
     WRONG_SEVERITY = "wrong-severity"
     ERROR_WITHOUT_COLON = "error-without-colon"
-    UNALIGNED_ERROR_ARGS = "unaligned-error-args"
+    ERROR_PAD_MISPLACED = "error-pad-misplaced"
+    UOP_OPCODE_SWAPPED = "uop-opcode-byte-swapped"
+    BDL_COUNTS_SWAPPED = "bdl-counts-byte-swapped"
+    JOINT_MASK_SWAPPED = "joint-mask-byte-swapped"
     UNKNOWN_OPCODE_ANSWERED = "unknown-opcode-answered"
     LENGTH_UNCHECKED = "length-unchecked"
     EXTRA_REPLY_AFTER_ERROR = "extra-reply-after-error"
@@ -65,10 +68,17 @@ class Fault(enum.StrEnum):
     DESCRIBE_MISSING_OPERATION = "describe-missing-operation"
     DESCRIBE_WRONG_DOF = "describe-wrong-dof"
     DESCRIBE_NARROW_LIMITS = "describe-narrow-limits"
+    DESCRIBE_LIMITS_SHORT = "describe-limits-short"
+    DESCRIBE_READY_OFF = "describe-ready-off"
     WARNING_INTERRUPTS = "warning-interrupts"
     GUARD_HIT_WORD_SWAPPED = "guard-hit-word-swapped"
     STRAIGHT_AS_JOINT = "straight-as-joint"
     INCREMENT_FROM_ACTUAL = "increment-from-actual"
+    INCREMENT_O_T_SWAPPED = "increment-o-t-swapped"
+    CONFIGURATION_IGNORED = "configuration-ignored"
+    KEEPS_SPEED = "connection-keeps-speed"
+    KEEPS_CONFIGURATION = "connection-keeps-configuration"
+    KEEPS_NOTIFICATIONS = "connection-keeps-notifications"
     READY_LEAVES_WRIST = "ready-leaves-wrist"
     SEGMENT_REPORT_PREVIOUS = "segment-report-previous"
     COLLISION_UNCHECKED = "collision-unchecked"
@@ -225,10 +235,29 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "error-string.format",
             ),
             _info(
-                Fault.UNALIGNED_ERROR_ARGS,
+                Fault.ERROR_PAD_MISPLACED,
                 "protocol",
-                "The numbers after the NUL of an error string start at an odd offset.",
-                "error-string.arg-alignment",
+                "Error strings put a pad byte after the NUL even where the NUL ends at an even offset, so "
+                "the numbers start at an odd one.",
+                "error-string.arg-layout",
+            ),
+            _info(
+                Fault.UOP_OPCODE_SWAPPED,
+                "protocol",
+                "The opcode in C UOP is sent high byte first.",
+                "error-string.arg-values",
+            ),
+            _info(
+                Fault.BDL_COUNTS_SWAPPED,
+                "protocol",
+                "The byte counts in C BDL are sent high byte first.",
+                "error-string.arg-values",
+            ),
+            _info(
+                Fault.JOINT_MASK_SWAPPED,
+                "protocol",
+                "The joint masks in JOR and TOR are sent high byte first.",
+                "error-string.arg-values",
             ),
             _info(
                 Fault.UNKNOWN_OPCODE_ANSWERED,
@@ -344,6 +373,20 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "describe.joint-limits",
             ),
             _info(
+                Fault.DESCRIBE_LIMITS_SHORT,
+                "protocol",
+                "Describe self's :joint-limits leaves out the last joint's pair (one fewer than "
+                ":degrees-of-freedom).",
+                "describe.joint-limits-count",
+            ),
+            _info(
+                Fault.DESCRIBE_READY_OFF,
+                "protocol",
+                "Describe self states a :ready-position with joint 2 ten degrees from where move to ready "
+                "goes.",
+                "describe.ready-position",
+            ),
+            _info(
                 Fault.WARNING_INTERRUPTS,
                 "protocol",
                 "A joint lagging its command stops the arm and aborts the motion after the warning, as a "
@@ -370,6 +413,37 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "Incremental moves add to where the arm stands when they are queued, not to where the queue "
                 "ends.",
                 "incremental.relative",
+            ),
+            _info(
+                Fault.INCREMENT_O_T_SWAPPED,
+                "protocol",
+                "Incremental moves add dO to the pose's T angle and dT to its O angle.",
+                "incremental.relative",
+            ),
+            _info(
+                Fault.CONFIGURATION_IGNORED,
+                "protocol",
+                "Set configuration answers done and changes nothing: transforms are solved nearest the "
+                "current angles whatever configuration was asked for.",
+                "set-configuration.effect",
+            ),
+            _info(
+                Fault.KEEPS_SPEED,
+                "protocol",
+                "A new connection keeps the speed factor the last one set.",
+                "connect.per-connection-state",
+            ),
+            _info(
+                Fault.KEEPS_CONFIGURATION,
+                "protocol",
+                "A new connection keeps the configuration (lefty or righty) the last one set.",
+                "connect.per-connection-state",
+            ),
+            _info(
+                Fault.KEEPS_NOTIFICATIONS,
+                "protocol",
+                "A new connection keeps the notification mask the last one asked for.",
+                "connect.per-connection-state",
             ),
             _info(
                 Fault.READY_LEAVES_WRIST,
@@ -423,7 +497,7 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "protocol",
                 "Reply floats below the smallest F magnitude (2^-128) are sent with exponent 0 and their "
                 "fraction bits (a dirty zero) instead of a clean zero.",
-                "float.range",
+                "float.dirty-zero",
             ),
             _info(
                 Fault.NOT_FINITE_RESERVED,
@@ -504,6 +578,15 @@ for _info_entry in FAULTS.values():
         if _clause not in SPEC.clauses:
             raise RuntimeError(f"fault {_info_entry.name} names unknown clause {_clause!r}")
 
+RETIRED: Final[Mapping[str, str]] = MappingProxyType(
+    {
+        "unaligned-error-args": "both layouts of an error string's numbers conform (erratum "
+        "error-arg-layout): manip-server --error-args packed writes them straight after the NUL; the "
+        "defect switch is error-pad-misplaced",
+    }
+)
+"""Fault switches withdrawn, and what to use instead (:meth:`FaultSet.parse` says so)."""
+
 WRIST_SIDE: Final[frozenset[Fault]] = frozenset(
     info.fault for info in FAULTS.values() if all(SPEC.clauses[c].party == "puma" for c in info.clauses)
 )
@@ -561,6 +644,8 @@ class FaultSet:
         out = cls()
         for spec in specs:
             name, sep, arg = spec.partition("=")
+            if name.strip() in RETIRED:
+                raise ValueError(f"fault {name.strip()} was withdrawn: {RETIRED[name.strip()]}")
             try:
                 fault = Fault(name.strip())
             except ValueError:

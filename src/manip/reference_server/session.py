@@ -71,7 +71,7 @@ import struct
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any, Final
+from typing import Any, Final, Literal
 
 from manip.arm.kinematics import PUMA600, ArmModel, forward
 from manip.arm.sim import (
@@ -109,6 +109,7 @@ __all__ = [
     "HANDLERS",
     "TRANSITIONS",
     "WRIST_OPERATIONS",
+    "ErrorArgs",
     "Input",
     "Outgoing",
     "Output",
@@ -125,6 +126,15 @@ MISSING_OPERATION: Final[RequestName] = "solve-backwards"
 """The served opcode describe self leaves out under the ``describe-missing-operation`` fault."""
 NARROWED_DEG: Final = 5.0
 """How much narrower than the arm's each joint range is stated under ``describe-narrow-limits``."""
+READY_OFF_DEG: Final = 10.0
+"""How far from where move to ready goes joint 2 of :ready-position is stated under ``describe-ready-off``."""
+_SWAPPED_ARGS: Final[dict[Fault, frozenset[str]]] = {
+    Fault.UOP_OPCODE_SWAPPED: frozenset({"UOP"}),
+    Fault.BDL_COUNTS_SWAPPED: frozenset({"BDL"}),
+    Fault.JOINT_MASK_SWAPPED: frozenset({"JOR", "TOR"}),
+}
+"""The error codes whose numbers each byte-swapping fault sends high byte first."""
+ErrorArgs = Literal["aligned", "packed"]
 
 
 class State(enum.Enum):
@@ -175,6 +185,10 @@ class ServerConfig:
     powered_at_open: bool = False
     """Arm power at the start (off: clients send Enable high power before moving)."""
     faults: FaultSet = field(default_factory=FaultSet)
+    error_args: ErrorArgs = "aligned"
+    """The layout of an error string's numbers (erratum error-arg-layout; both conform): ``aligned`` pads
+    them to an even offset of the packet data, ``packed`` writes them straight after the NUL, as the
+    1985 guide's NZI example does."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -262,6 +276,16 @@ class ServerSession:
         """The request whose answer waits for the wrist: spec entry, reply number, pending reply."""
         self._held: deque[_Event] = deque()
         """Requests that arrived while waiting for the wrist, in order."""
+
+    def inherit(self, previous: ServerSession) -> None:
+        """Take over what the connection before this one set, as the ``connection-keeps-*`` fault
+        switches say (a conforming session takes nothing: erratum server-robot)."""
+        if Fault.KEEPS_SPEED in self.faults:
+            self.arm.set_speed(previous.arm.speed)
+        if Fault.KEEPS_CONFIGURATION in self.faults and previous.arm.lefty is not None:
+            self.arm.set_configuration(previous.arm.lefty)
+        if Fault.KEEPS_NOTIFICATIONS in self.faults:
+            self.notifications = previous.notifications
 
     # ------------------------------------------------------------------------------ driver inputs
     def on_open(self, now: float, rfc_packet_no: int) -> Output:
@@ -498,7 +522,7 @@ class ServerSession:
 
     def _payload(self, op: RequestOpcode, values: dict[str, Any]) -> bytes:
         fields = op.response.data.fields
-        if self.faults.active & _FLOAT_FAULTS and all(f.type.element == "float" for f in fields):
+        if self.faults.active & _FLOAT_FAULTS and fields and all(f.type.element == "float" for f in fields):
             return b"".join(self._faulty_float(float(x)) for f in fields for x in values[f.name])
         key = tuple(values.values())  # equal values encode alike (-0.0 and 0.0 both as a clean zero)
         cached = self._payloads.get(op.opcode)
@@ -530,17 +554,23 @@ class ServerSession:
             self._emit(ServerOp.RESPONSE, _word(number))
 
     def _emit_error(self, opcode: int, number: int, error: ErrorMessage) -> None:
-        if Fault.WRONG_SEVERITY in self.faults:
+        faults = self.faults
+        if Fault.WRONG_SEVERITY in faults:
             error = replace(error, severity="E" if opcode == ServerOp.FATAL_ERROR else "F")
-        if Fault.UNALIGNED_ERROR_ARGS not in self.faults and Fault.ERROR_WITHOUT_COLON not in self.faults:
+        if any(fault in faults and error.code in codes for fault, codes in _SWAPPED_ARGS.items()):
+            error = replace(
+                error, args=tuple(int.from_bytes(a.to_bytes(2, "little"), "big") for a in error.args)
+            )
+        aligned = self.config.error_args == "aligned"
+        if aligned and Fault.ERROR_PAD_MISPLACED not in faults and Fault.ERROR_WITHOUT_COLON not in faults:
             self._emit(opcode, encode_error(opcode, number, error))
             return
-        body = error.encode(align_args=Fault.UNALIGNED_ERROR_ARGS not in self.faults)
-        if Fault.UNALIGNED_ERROR_ARGS in self.faults and error.args:
+        body = error.encode(align_args=aligned)
+        if Fault.ERROR_PAD_MISPLACED in faults and error.args:
             after_nul = body.index(0) + 1
-            if after_nul % 2 == 0:  # would be aligned by luck: push the numbers to an odd offset
+            if after_nul % 2 == 0:  # no pad is due: one here puts the numbers at an odd offset
                 body = body[:after_nul] + b"\0" + body[after_nul:]
-        if Fault.ERROR_WITHOUT_COLON in self.faults:
+        if Fault.ERROR_WITHOUT_COLON in faults:
             body = body.replace(b": ", b" ", 1)
         self._emit(opcode, _word(number) + body)
 
@@ -570,6 +600,11 @@ class ServerSession:
         limits = [(lo, hi) for lo, hi in zip(model.limits.lower, model.limits.upper, strict=True)]
         if Fault.DESCRIBE_NARROW_LIMITS in faults:
             limits = [(lo + NARROWED_DEG, hi - NARROWED_DEG) for lo, hi in limits]
+        if Fault.DESCRIBE_LIMITS_SHORT in faults:
+            limits = limits[:-1]
+        ready = list(model.ready)
+        if Fault.DESCRIBE_READY_OFF in faults:
+            ready[1] += READY_OFF_DEG
         text = describe_text(
             self.config.description,
             model,
@@ -577,6 +612,7 @@ class ServerSession:
             with_protocol_version=Fault.NO_PROTOCOL_VERSION not in faults,
             degrees_of_freedom=dof,
             joint_limits=limits,
+            ready_position=ready,
         )
         return {"text": text}
 
@@ -610,19 +646,27 @@ class ServerSession:
         low = _int(values["configuration"]) & 0xFF  # erratum set-configuration: the low byte counts
         if low & 0xFE:
             raise errors.bad_value("set-configuration", f"configuration {low} has bits other than bit 0 set")
-        self.arm.set_configuration(lefty=bool(low & 1))
+        if Fault.CONFIGURATION_IGNORED not in self.faults:
+            self.arm.set_configuration(lefty=bool(low & 1))
         return {}
 
     def _hand(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         self.arm.set_hand(_int(values["amount"]) != 0)
         return {}
 
+    def _delta(self, values: Mapping[str, Value]) -> tuple[float, ...]:
+        delta = _floats(values["delta"])
+        if Fault.INCREMENT_O_T_SWAPPED in self.faults:
+            dx, dy, dz, do, da, dt = delta
+            return (dx, dy, dz, dt, da, do)
+        return delta
+
     def _incremental_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
-        return {"segment": self.arm.move_increment(_floats(values["delta"]), now)}
+        return {"segment": self.arm.move_increment(self._delta(values), now)}
 
     def _incremental_straight_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         straight = Fault.STRAIGHT_AS_JOINT not in self.faults
-        return {"segment": self.arm.move_increment(_floats(values["delta"]), now, straight=straight)}
+        return {"segment": self.arm.move_increment(self._delta(values), now, straight=straight)}
 
     def _free_joint(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         self.arm.free(_int(values["joint"]) & 0xFF)  # the first byte is the joint number

@@ -104,12 +104,14 @@ async def valid_values(ctx: CaseContext, probe: Probe, op: RequestOpcode) -> dic
 
 
 def error_of(packet: Answer | WirePacket) -> ErrorReply | None:
-    """The decoded error string of an error packet or answer, its numbers aligned or else unaligned (a
-    misaligned argument list is the format checker's finding, not a reason to misjudge the error); None
-    for a packet that is no error, or whose string reads neither way."""
+    """The decoded error string of an error packet or answer, its numbers read in either layout (erratum
+    error-arg-layout), or else straight after the NUL (a bad pad byte is the format checker's finding, not
+    a reason to misjudge the error); None for a packet that is no error, or whose string reads neither
+    way."""
     if packet.opcode not in ERROR_OPCODES:
         return None
-    for align in (True, False):
+    align: bool | None
+    for align in (None, False):
         try:
             return decode_error(packet.opcode, packet.data, align_args=align)
         except CodecError:
@@ -255,6 +257,40 @@ def expect_refusal(
     return error
 
 
+def expect_error_numbers(
+    ctx: CaseContext,
+    answer: Answer,
+    error: ErrorReply | None,
+    wanted: Iterable[Iterable[int]],
+    *,
+    what: str,
+) -> None:
+    """Clause ``error-string.arg-values``: the numbers of ``error`` must be one of the ``wanted`` tuples
+    (erratum ``error-arg-values``: each is what the request provoked); an error without numbers is not
+    judged here."""
+    if error is None or not error.error.args:
+        return
+    choices = {tuple(w) for w in wanted}
+    args = error.error.args
+    shown = " or ".join(str(list(c)) for c in sorted(choices))
+    ctx.expect(
+        args in choices,
+        clause="error-string.arg-values",
+        expected=f"the numbers {shown} for {what}",
+        actual=f"{list(args)} in {error.error.render()!r}",
+        data=answer.data,
+    )
+
+
+def out_of_range_mask(angles: Iterable[float], limits: JointLimits) -> int:
+    """The joint mask (bit 0 = joint 1) of the ``angles`` outside ``limits``, as JOR's $ carries it."""
+    mask = 0
+    for i, (q, lo, hi) in enumerate(zip(angles, limits.lower, limits.upper, strict=True)):
+        if not lo <= q <= hi:
+            mask |= 1 << i
+    return mask
+
+
 @dataclass(frozen=True)
 class TargetArm:
     """What the cases assume about the target's arm: its joint limits (from describe self's
@@ -267,6 +303,9 @@ class TargetArm:
     ready: Joints = PUMA600.ready
     operations: frozenset[int] | None = None
     """The opcodes describe self lists under :operations (None: no usable list)."""
+    stated_ready: tuple[float, ...] | None = None
+    """The joint angles describe self states as :ready-position (None: none, or not one number per
+    degree of freedom)."""
 
 
 def _number(value: LispValue) -> float | None:
@@ -306,10 +345,19 @@ async def describe_target(ctx: CaseContext, probe: Probe) -> TargetArm:
     dof = int(dof_value) if isinstance(dof_value, int) and dof_value > 0 else 6
     listed = description_operations(entries)
     operations = frozenset(listed) if listed else None
+    ready = _stated_ready(entries.get("ready-position"), dof)
     if limits is None:
         ctx.note("describe self gives no usable :joint-limits; assuming the PUMA 600's")
-        return TargetArm(dof=dof, operations=operations)
-    return TargetArm(limits=limits, declared=True, dof=dof, operations=operations)
+        return TargetArm(dof=dof, operations=operations, stated_ready=ready)
+    return TargetArm(limits=limits, declared=True, dof=dof, operations=operations, stated_ready=ready)
+
+
+def _stated_ready(value: LispValue | None, dof: int) -> tuple[float, ...] | None:
+    """A :ready-position value as joint angles, when it is one number per degree of freedom."""
+    if not isinstance(value, list) or len(value) != dof:
+        return None
+    numbers = [_number(v) for v in value]
+    return tuple(v for v in numbers if v is not None) if None not in numbers else None
 
 
 def reply_view(answer: Answer) -> AnswerSummary:

@@ -119,7 +119,8 @@ def _error_code(packet: WirePacket) -> tuple[str, str] | None:
     """(severity, code) of an error packet, or None."""
     if packet.opcode not in _ERRORS:
         return None
-    for aligned in (True, False):  # the numbers after the NUL start at an even offset, or should
+    aligned: bool | None
+    for aligned in (None, False):  # either layout (erratum error-arg-layout), else a bad pad read as numbers
         with contextlib.suppress(CodecError):
             error = decode_error(packet.opcode, packet.data, align_args=aligned).error
             return error.severity, error.code

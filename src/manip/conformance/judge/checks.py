@@ -94,7 +94,7 @@ TRANSCRIPT_CLAUSES: Final = frozenset(
         "describe.reply-shape",
         "describe.software-version",
         "describe.unique-name",
-        "error-string.arg-alignment",
+        "error-string.arg-layout",
         "error-string.args",
         "error-string.code",
         "error-string.format",
@@ -196,28 +196,35 @@ def check_error_packet(packet: WirePacket) -> list[Violation]:
     try:
         error = decode_error(packet.opcode, data).error
     except CodecError as exc:
-        if exc.clause != "error-string.arg-alignment":
+        if exc.clause != "error-string.arg-layout":
             return [
                 _codec_finding(
                     exc, packet, "error-string.format", "an error string 'where: severity code message'"
                 )
             ]
-        out.append(
-            Violation.at(
-                packet,
-                "error-string.arg-alignment",
-                "the numbers after the NUL do not start at an even offset",
-                expected="a zero pad byte so the numbers start at an even offset of the packet data",
-                actual=str(exc),
-            )
-        )
+        out.append(_layout_finding(packet, str(exc)))
         try:
             error = decode_error(packet.opcode, data, align_args=False).error
         except CodecError as inner:
             out.append(_codec_finding(inner, packet, "error-string.format", "an error string"))
             return out
+    else:
+        nul = data.find(0, 2)
+        if nul >= 0 and (len(data) - nul - 1) % 2 and (nul + 1) % 2 == 0:
+            out.append(_layout_finding(packet, f"a pad byte at data byte {nul + 1}, an even offset"))
     out += _error_text_findings(error, packet)
     return out
+
+
+def _layout_finding(packet: WirePacket, actual: str) -> Violation:
+    return Violation.at(
+        packet,
+        "error-string.arg-layout",
+        "the numbers after the NUL are neither packed after it nor aligned by one zero pad byte",
+        expected="the numbers straight after the NUL, or after one zero pad byte when the NUL ends at an odd "
+        "offset of the packet data (erratum error-arg-layout)",
+        actual=actual,
+    )
 
 
 def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Violation]:

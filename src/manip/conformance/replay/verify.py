@@ -205,7 +205,7 @@ FAMILIES: Final[tuple[Family, ...]] = (
             "error-string.severity",
             "error-string.code",
             "error-string.substitution",
-            "error-string.arg-alignment",
+            "error-string.arg-layout",
             "error.severity-matches-opcode",
         ),
         lambda packets, _initial: _server(packets, _ERRORS),

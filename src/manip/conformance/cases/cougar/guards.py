@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Final
+
 from manip.conformance.cases.cougar._support import (
     NEVER,
     STOP_BIT,
@@ -19,6 +21,11 @@ from manip.conformance.cougar.probe import (
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 
+HIGH_BYTE_LOW_BIT: Final = 0x0100
+"""Bit 8 of a guard's type word: in the high byte (B.9) but not the 'hi bit' (Table 1); it stops."""
+TINY_TOL: Final = 2.0**-127
+"""A tolerance just above 0 that a PDP-11 float holds."""
+
 
 # ------------------------------------------------------------------------------------------ guards
 @case(
@@ -27,21 +34,23 @@ from manip.conformance.suite.context import CaseContext
     hazard="config",
 )
 async def guard_trips_once(ctx: CaseContext) -> None:
-    """A guard whose condition always holds trips exactly once: response 6 with its index when bit 15
-    is set, 7 when clear (bits 4-14 ignored); a guard that cannot trip stays silent; re-armed, it trips
-    once more."""
+    """A guard whose condition always holds trips exactly once: response 6 with its index when a bit of
+    the type word's high byte is set (bit 15, or bit 8 alone: erratum guard-type-bit), 7 when the high
+    byte is clear (bits 4-7 ignored); a guard that cannot trip stays silent; re-armed, it trips once
+    more."""
     async with cougar_probe(ctx) as probe:
         await clean(probe)
         await probe.send_words(guard_words(STOP_BIT | 0x0070 | 3))
-        await probe.send_words(guard_words(0x0FF0 | 12))
+        await probe.send_words(guard_words(0x00F0 | 12))
+        await probe.send_words(guard_words(HIGH_BYTE_LOW_BIT | 5))
         await probe.send_words(guard_words(7, tol=NEVER))
         got = await probe.run(8)
         trips = sorted(guard_trips(got))
         ctx.expect(
-            trips == [("GUARD-CONTINUE", 12), ("GUARD-STOP", 3)],
+            trips == [("GUARD-CONTINUE", 12), ("GUARD-STOP", 3), ("GUARD-STOP", 5)],
             clause="cougar.guard-trips-once",
-            expected="exactly one GUARD-STOP (6) for guard 3 and one GUARD-CONTINUE (7) for guard 12 "
-            "in 8 ticks, none for guard 7 (tolerance never reached)",
+            expected="exactly one GUARD-STOP (6) for guards 3 and 5 and one GUARD-CONTINUE (7) for guard "
+            "12 in 8 ticks, none for guard 7 (tolerance never reached)",
             seen=got,
         )
         expect_none(ctx, others(got), "cougar.guards", "only guard responses")
@@ -54,6 +63,26 @@ async def guard_trips_once(ctx: CaseContext) -> None:
             seen=got,
         )
         await probe.send("GUARDC", index=7)
+        await probe.run(1)
+
+
+@case("cougar.guard.threshold", clauses=["cougar.guard-trip-threshold"], hazard="config")
+async def guard_threshold(ctx: CaseContext) -> None:
+    """A guard trips when the dot product reaches tol exactly (erratum guard-trip-comparison): with a zero
+    dvec the dot product is exactly 0 whatever the force, so tol 0 trips and the smallest positive tol
+    does not."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        await probe.send_words(guard_words(2, tol=0.0))
+        await probe.send_words(guard_words(6, tol=TINY_TOL))
+        got = await probe.run(6)
+        ctx.expect(
+            guard_trips(got) == [("GUARD-CONTINUE", 2)],
+            clause="cougar.guard-trip-threshold",
+            expected="guard 2 (dot 0 >= tol 0) trips once; guard 6 (tol 2^-127 above the dot product) never",
+            seen=got,
+        )
+        await probe.send("GUARDC", index=6)
         await probe.run(1)
 
 

@@ -10,6 +10,7 @@ from manip.codecs.lisp import LispValue
 from manip.codecs.pdp11float import pack_f
 from manip.conformance.cases._support import (
     error_of,
+    expect_error_numbers,
     expect_refusal,
     floats,
     power_on,
@@ -291,17 +292,47 @@ async def dof_set_joint_angles(ctx: CaseContext) -> None:
         )
 
 
-@case("server.describe.joint-limits", clauses=["describe.joint-limits"], hazard="power", deadline=10.0)
+def _is_range(pair: LispValue) -> bool:
+    """A (lower upper) pair of numbers, lower not above upper."""
+    if not isinstance(pair, list) or len(pair) != 2:
+        return False
+    lo, hi = pair
+    numbers = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (lo, hi))
+    return numbers and float(lo) <= float(hi)  # type: ignore[arg-type]
+
+
+@case(
+    "server.describe.joint-limits",
+    clauses=["describe.joint-limits", "describe.joint-limits-count", "error-string.arg-values"],
+    hazard="power",
+    deadline=10.0,
+)
 async def joint_limits(ctx: CaseContext) -> None:
-    """A joint just beyond a limit stated under :joint-limits is refused with JOR (the others stay where
-    the arm stands); only the outer side is probed, so a conforming arm never moves."""
+    """:joint-limits holds one (lower upper) pair per degree of freedom, and a joint just beyond a stated
+    limit is refused with JOR naming that joint (the others stay where the arm stands); only the outer
+    side is probed, so a conforming arm never moves."""
     probe = await ctx.connect()
     entries = await _entries(ctx, probe)
     if "joint-limits" not in entries:
         ctx.skip("the description states no :joint-limits")
-    limits = stated_limits(entries["joint-limits"])
+    stated = entries["joint-limits"]
+    dof = await _stated_dof(ctx, probe)
+    count = len(stated) if isinstance(stated, list) else None
+    ctx.expect(
+        count == dof,
+        clause="describe.joint-limits-count",
+        expected=f":joint-limits with {dof} (lower upper) pairs, one per degree of freedom",
+        actual=f"{count} entries: {stated!r}" if count is not None else repr(stated),
+    )
+    ctx.expect(
+        isinstance(stated, list) and all(_is_range(pair) for pair in stated),
+        clause="describe.joint-limits-count",
+        expected="each entry a (lower upper) pair of numbers, lower not above upper",
+        actual=repr(stated),
+    )
+    limits = stated_limits(stated)
     if limits is None:
-        ctx.skip(f"no usable :joint-limits: {entries['joint-limits']!r}")
+        ctx.skip(f"JOR is probed on six-joint arms only: :joint-limits {stated!r}")
     await power_on(ctx, probe)  # without power, NAP may come first (erratum abort-before-power)
     here = await read_floats(ctx, probe, "joint-angles")
     for joint, (lower, upper) in enumerate(zip(limits.lower, limits.upper, strict=True)):
@@ -309,11 +340,13 @@ async def joint_limits(ctx: CaseContext) -> None:
             angles = list(here)
             angles[joint] = goal
             answer = await probe.call("set-joint-angles", joints=angles)
-            expect_refusal(
+            what = f"joint {joint + 1} at {goal:g} degrees, beyond its stated {side} limit"
+            error = expect_refusal(
                 ctx,
                 answer,
                 clause="describe.joint-limits",
                 severities=("E", "C"),
                 codes=("JOR",),
-                what=f"joint {joint + 1} at {goal:g} degrees, beyond its stated {side} limit",
+                what=what,
             )
+            expect_error_numbers(ctx, answer, error, [(1 << joint,)], what=what)

@@ -4,16 +4,21 @@ segment numbers and asynchronous segment-completed responses, free joint."""
 from __future__ import annotations
 
 import asyncio
+import math
 from itertools import pairwise
+from typing import Final
 
+from manip.codecs.messages import ErrorReply
 from manip.conformance.cases._support import (
     TargetArm,
     describe_target,
     expect_done,
+    expect_error_numbers,
     expect_here_served,
     expect_refusal,
     expect_response,
     floats,
+    out_of_range_mask,
     power_on,
     read_floats,
     require_response,
@@ -31,6 +36,12 @@ OUT_OF_RANGE_DEG = 1000.0
 SMALL_STEP_DEG = 2.0
 SEGMENT_REPLY_SIZE = 4
 """Data bytes of a segment-number reply: request number and segment number."""
+CONFIGURATION_SEED: Final = (20.0, -60.0, 150.0, 0.0, -60.0, 0.0)
+"""Joint angles whose transform a PUMA reaches within its limits lefty and righty (and is not singular)."""
+SLOW_FACTOR: Final = 0.25
+"""The speed factor the fresh-state case leaves behind on the connection it closes."""
+SPEED_MATCH: Final = 1.5
+"""How much longer than at factor 1 a fresh connection's move may take (at 0.25 it takes 4 times)."""
 
 
 async def _wait_still(ctx: CaseContext, probe: Probe, limit: float = 5.0) -> None:
@@ -98,20 +109,29 @@ async def _refused_stay(
     expect_refusal(ctx, answer, clause=clause, severities=("E",), codes=codes, what=what)
 
 
-@case("server.motion.jor", clauses=["motion.checked-before-queue"], hazard="motion")
+@case(
+    "server.motion.jor", clauses=["motion.checked-before-queue", "error-string.arg-values"], hazard="motion"
+)
 async def joint_out_of_range(ctx: CaseContext) -> None:
-    """Set joint angles past a joint limit: JOR at once, and the arm does not move."""
+    """Set joint angles with joints 1 and 4 past their limits: JOR at once, its $ mask naming those
+    joints (computed here from the request and the limits), and the arm does not move."""
     probe = await ctx.connect()
+    arm = await describe_target(ctx, probe)
     await power_on(ctx, probe)
     before = await read_floats(ctx, probe, "joint-angles")
-    answer = await probe.call("set-joint-angles", joints=_shifted(before, 0, OUT_OF_RANGE_DEG))
-    expect_refusal(
+    goal = _shifted(tuple(_shifted(before, 0, OUT_OF_RANGE_DEG)), 3, OUT_OF_RANGE_DEG)
+    answer = await probe.call("set-joint-angles", joints=goal)
+    error = expect_refusal(
         ctx,
         answer,
         clause="motion.checked-before-queue",
         severities=("E", "C"),
         codes=("JOR",),
-        what=f"joint 1 at {before[0] + OUT_OF_RANGE_DEG:g} degrees",
+        what=f"joints 1 and 4 at {goal[0]:g} and {goal[3]:g} degrees",
+    )
+    mask = out_of_range_mask(goal, arm.limits)
+    expect_error_numbers(
+        ctx, answer, error, [(mask,)], what=f"JOR of joints at {[round(q, 1) for q in goal]}"
     )
     await asyncio.sleep(0.1)
     after = await read_floats(ctx, probe, "joint-angles")
@@ -171,9 +191,26 @@ def _limit_candidates(arm: TargetArm, joints: tuple[float, ...]) -> list[tuple[i
     return out
 
 
+def _expect_tor_mask(
+    ctx: CaseContext, answer: Answer, error: ErrorReply | None, joint: int, dof: int
+) -> None:
+    """TOR's every-solution form names the joints out of range: the one put past its limit among them,
+    none beyond the arm's (erratum error-arg-values; other joints may break a limit in that solution)."""
+    if error is None or len(error.error.args) != 1:
+        return
+    mask = error.error.args[0]
+    ctx.expect(
+        bool(mask >> (joint - 1) & 1) and mask >> dof == 0,
+        clause="error-string.arg-values",
+        expected=f"a joint mask holding joint {joint} and no joint beyond {dof}",
+        actual=f"mask {mask:#06x} in {error.error.render()!r}",
+        data=answer.data,
+    )
+
+
 @case(
     "server.motion.tor-limits",
-    clauses=["solve-forwards.errors", "motion.checked-before-queue"],
+    clauses=["solve-forwards.errors", "motion.checked-before-queue", "error-string.arg-values"],
     hazard="motion",
     deadline=10.0,
 )
@@ -193,9 +230,10 @@ async def transform_out_of_range(ctx: CaseContext) -> None:
         if answer.is_response:
             continue  # another configuration reaches it within the limits: no verdict from this one
         what = f"the transform of joint {joint} at {q[joint - 1]:g} degrees (every solution out of range)"
-        expect_refusal(
+        error = expect_refusal(
             ctx, answer, clause="solve-forwards.errors", severities=("E", "C"), codes=("TOR",), what=what
         )
+        _expect_tor_mask(ctx, answer, error, joint, arm.dof)
         await power_on(ctx, probe)
         answer = await probe.call("move", transform=transform)
         expect_refusal(
@@ -475,3 +513,148 @@ async def free_joint_bad(ctx: CaseContext) -> None:
     for joint in (0, 7):
         answer = await probe.call("free-joint", joint=joint)
         expect_refusal(ctx, answer, clause="free-joint.data", what=f"free joint {joint}")
+
+
+# ------------------------------------------------------------------ configuration and per-connection state
+CONFIGURATIONS: Final = ((1, "lefty"), (0, "righty"))
+"""Set configuration's values (bit 0: 1 lefty, 0 righty)."""
+SOLUTION_TOL_DEG: Final = 0.01
+"""Two solve-forwards answers within this of each other, joint by joint, are the same solution."""
+REACH_TOL_MM: Final = 0.05
+
+
+def _same(a: tuple[float, ...], b: tuple[float, ...]) -> bool:
+    return max(abs(x - y) for x, y in zip(a, b, strict=True)) <= SOLUTION_TOL_DEG
+
+
+async def _solve(ctx: CaseContext, probe: Probe, pose: list[float]) -> tuple[float, ...] | None:
+    """Solve forwards of ``pose`` near :data:`CONFIGURATION_SEED` (None when refused)."""
+    answer = await probe.call("solve-forwards", transform=pose, current=list(CONFIGURATION_SEED))
+    return floats(answer) if answer.is_response else None
+
+
+async def _seed_pose(ctx: CaseContext, probe: Probe) -> list[float]:
+    """The transform of :data:`CONFIGURATION_SEED`, by the target's own solve backwards."""
+    back = await probe.call("solve-backwards", joints=list(CONFIGURATION_SEED))
+    require_response(ctx, back, "solve backwards of the seed angles")
+    return list(floats(back))
+
+
+@case("server.motion.configuration", clauses=["set-configuration.effect"], hazard="config")
+async def configuration(ctx: CaseContext) -> None:
+    """After set configuration lefty and righty, solve forwards of one transform near one joint vector
+    gives two different solutions, each reaching the transform (erratum set-configuration)."""
+    probe = await ctx.connect()
+    pose = await _seed_pose(ctx, probe)
+    solutions: dict[str, tuple[float, ...]] = {}
+    for value, name in CONFIGURATIONS:
+        answer = await probe.call("set-configuration", configuration=value)
+        require_response(ctx, answer, f"set configuration {name}")
+        solved = await _solve(ctx, probe, pose)
+        if solved is None:
+            ctx.skip(f"solve forwards of the seed's transform was refused after set configuration {name}")
+        back = await probe.call("solve-backwards", joints=list(solved))
+        require_response(ctx, back, "solve backwards of a solution")
+        off = math.dist(floats(back)[9:], pose[9:])
+        ctx.expect(
+            off <= REACH_TOL_MM,
+            clause="set-configuration.effect",
+            expected=f"the {name} solution reaching the transform",
+            actual=f"{[round(q, 2) for q in solved]}, {off:.3f} mm from it",
+        )
+        solutions[name] = solved
+    ctx.expect(
+        not _same(solutions["lefty"], solutions["righty"]),
+        clause="set-configuration.effect",
+        expected="different solutions for lefty and righty (the seed's transform has both in range)",
+        actual=f"both {[round(q, 2) for q in solutions['lefty']]}",
+    )
+
+
+async def _timed_move(ctx: CaseContext, probe: Probe, by: float) -> float:
+    """Seconds from a small move's request to its segment-completed report (notifications on)."""
+    start = ctx.clock()
+    segment = await _small_move(ctx, probe, by)
+    while (packet := await probe.next_packet(5.0)) is not None:
+        if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(packet.data, 6) == segment:
+            return ctx.clock() - start
+    ctx.skip(f"the case times moves by their segment-completed reports; none came for {segment}")
+
+
+async def _set_up_state(
+    ctx: CaseContext, probe: Probe, pose: list[float]
+) -> tuple[tuple[float, ...], int | None]:
+    """Set every per-connection setting away from a fresh connection's: a slow speed, both notifications,
+    the configuration whose solution differs from the fresh one.  Returns the fresh solution of the seed's
+    transform, and that configuration (None: none changes it)."""
+    fresh = await _solve(ctx, probe, pose)
+    if fresh is None:
+        ctx.skip("solve forwards of the seed's transform was refused")
+    flipped: int | None = None
+    for value, _ in CONFIGURATIONS:
+        if not (await probe.call("set-configuration", configuration=value)).is_response:
+            break
+        solved = await _solve(ctx, probe, pose)
+        if solved is not None and not _same(solved, fresh):
+            flipped = value
+            break
+    require_response(ctx, await probe.call("set-speed", factor=SLOW_FACTOR), "a slow speed factor")
+    require_response(
+        ctx, await probe.call("request-notifications", mask=0b11), "both notifications asked for"
+    )
+    return fresh, flipped
+
+
+@case(
+    "server.connect.fresh-state",
+    clauses=["connect.per-connection-state"],
+    hazard="motion",
+    deadline=20.0,
+)
+async def fresh_state(ctx: CaseContext) -> None:
+    """A connection that set a slow speed, both notifications and a configuration closes; the next one
+    has none of them: no asynchronous report of its move, moves at the speed an explicit factor 1 gives,
+    and solve forwards gives the solution a fresh connection gave (Part II §5: the main process sets these
+    up per connection; erratum server-robot)."""
+    first = await ctx.connect()
+    pose = await _seed_pose(ctx, first)
+    fresh, flipped = await _set_up_state(ctx, first, pose)
+    await first.close()
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    await _small_move(ctx, probe, 1.0)
+    await _wait_still(ctx, probe)
+    reports = [
+        p for p in [*probe.unsolicited, *await probe.drain(0.3)] if p.opcode == ServerOp.ASYNCHRONOUS_RESPONSE
+    ]
+    ctx.expect(
+        not reports,
+        clause="connect.per-connection-state",
+        expected="no asynchronous response: the notifications the last connection asked for are not in force",
+        actual=f"{len(reports)} asynchronous response(s)",
+        data=reports[0].data if reports else b"",
+    )
+    if flipped is None:
+        ctx.note("set configuration changed no solution: the configuration is not judged")
+    else:
+        solved = await _solve(ctx, probe, pose)
+        ctx.expect(
+            solved is not None and _same(solved, fresh),
+            clause="connect.per-connection-state",
+            expected=f"solve forwards giving {[round(q, 2) for q in fresh]}, as on a fresh connection "
+            "(no configuration set)",
+            actual=f"{[round(q, 2) for q in solved] if solved else None}: the last connection's "
+            "configuration",
+        )
+    require_response(ctx, await probe.call("request-notifications", mask=1 << 1), "segment notifications")
+    default = await _timed_move(ctx, probe, -1.0)
+    require_response(ctx, await probe.call("set-speed", factor=1.0), "speed factor 1")
+    full = await _timed_move(ctx, probe, 1.0)
+    ctx.note(f"1-degree move: {default:.3f} s at the fresh speed, {full:.3f} s at factor 1")
+    ctx.expect(
+        default <= full * SPEED_MATCH,
+        clause="connect.per-connection-state",
+        expected=f"the fresh connection moving at factor 1 (the move within {SPEED_MATCH:g} times the time "
+        "at an explicit factor 1)",
+        actual=f"{default:.3f} s against {full:.3f} s (the last connection left factor {SLOW_FACTOR:g})",
+    )

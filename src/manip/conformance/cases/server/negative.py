@@ -17,6 +17,7 @@ from manip.codecs.packet import Packet
 from manip.conformance.cases._support import (
     UNASSIGNED_OPCODES,
     expect_done,
+    expect_error_numbers,
     expect_here_served,
     expect_refusal,
     expect_response,
@@ -42,12 +43,25 @@ def _ops(hazards: Iterable[str]) -> list[RequestOpcode]:
     return [op for op in SPEC.requests.values() if op.hazard in wanted]
 
 
+def _accepted_sizes(op: RequestOpcode) -> set[int]:
+    """The data lengths the layout accepts (a ``small`` field also accepts one byte less)."""
+    size = op.request.fixed_size
+    if size is None:
+        return set()
+    return {size} | ({size - 1} if any(f.type.element == "small" for f in op.request.fields) else set())
+
+
+def _bdl_numbers(op: RequestOpcode, received: int) -> list[tuple[int, int]]:
+    """BDL's numbers for ``received`` bytes: an accepted size and the count received, in either order."""
+    return [pair for size in _accepted_sizes(op) for pair in ((size, received), (received, size))]
+
+
 def _wrong_sizes(op: RequestOpcode) -> list[int]:
-    """Two data lengths the layout does not accept (a ``small`` field also accepts one byte less)."""
+    """Two data lengths the layout does not accept."""
     size = op.request.fixed_size
     if size is None:
         return []
-    accepted = {size} | ({size - 1} if any(f.type.element == "small" for f in op.request.fields) else set())
+    accepted = _accepted_sizes(op)
     candidates = [size + 2, size + 1, size - 2, size - 3, 0, 4]
     out: list[int] = []
     for n in candidates:
@@ -67,7 +81,10 @@ def _float_offsets(op: RequestOpcode) -> list[int]:
 
 
 @case(
-    "server.negative.unknown-opcodes", clauses=["request.unknown-opcode"], technique="negative", deadline=10.0
+    "server.negative.unknown-opcodes",
+    clauses=["request.unknown-opcode", "error-string.arg-values"],
+    technique="negative",
+    deadline=10.0,
 )
 async def unknown_opcodes(ctx: CaseContext) -> None:
     """Every data opcode the spec does not define is answered by a non-fatal error of severity C."""
@@ -75,7 +92,9 @@ async def unknown_opcodes(ctx: CaseContext) -> None:
     for opcode in UNASSIGNED_OPCODES:
         answer = await probe.call_raw(opcode, b"")
         ctx.check(check_reply(answer.request, answer.packets))
-        expect_refusal(ctx, answer, clause="request.unknown-opcode", what=f"unknown opcode {octal(opcode)}")
+        what = f"unknown opcode {octal(opcode)}"
+        error = expect_refusal(ctx, answer, clause="request.unknown-opcode", what=what)
+        expect_error_numbers(ctx, answer, error, [(opcode,)], what=what)
     answer = await probe.call("here")
     expect_response(
         ctx,
@@ -100,17 +119,15 @@ def _length_case(row: tuple[str, tuple[Hazard, ...]]) -> None:
                 data = bytes(ctx.random.randrange(1, 256) & 0x3F for _ in range(size))
                 answer = await probe.call_raw(op.opcode, data)
                 ctx.check(check_reply(answer.request, answer.packets))
-                expect_refusal(
-                    ctx,
-                    answer,
-                    clause="request.data-length",
-                    what=f"{op.name} with {size} data bytes (layout: {op.request.fixed_size})",
-                )
+                what = f"{op.name} with {size} data bytes (layout: {op.request.fixed_size})"
+                error = expect_refusal(ctx, answer, clause="request.data-length", what=what)
+                if error is not None and error.error.code == "BDL":
+                    expect_error_numbers(ctx, answer, error, _bdl_numbers(op, size), what=what)
 
     case(
         f"server.negative.data-length.{suffix}",
         summary=f"Wrong data lengths for every {'/'.join(hazards)} opcode draw a C error.",
-        clauses=["request.data-length"],
+        clauses=["request.data-length", "error-string.arg-values"],
         technique="negative",
         hazard=hazards[-1],
         deadline=10.0,

@@ -12,6 +12,7 @@ from typing import Final, NamedTuple
 
 from manip.conformance.cases._support import (
     connect_arranged,
+    describe_target,
     expect_response,
     power_on,
     read_floats,
@@ -33,6 +34,14 @@ SAMPLE_S: Final = 0.006
 POSE_TOL_MM: Final = 0.05
 LINE_POSE: Final = (20.0, -60.0, 150.0, 0.0, -60.0, 0.0)
 """Where the straight lines start: well inside the workspace, away from the singular ready pose."""
+READY_TOL_DEG: Final = 0.01
+"""How far from the stated :ready-position a joint may end after move to ready."""
+OAT_DELTA: Final = (12.0, -9.0, 20.0)
+"""dO dA dT of the incremental-oat case: distinct, so that angles added to the wrong one show."""
+OAT_DELTA_BACK: Final = (-7.0, 15.0, -4.0)
+"""dO dA dT of its incremental straight move, from where the first turn ended."""
+OAT_TOL: Final = 1e-3
+"""Largest difference of a rotation matrix entry from the one computed (about 0.06 degrees)."""
 SEGMENT_BIT: Final = 1 << 1
 """request-notifications mask bit of segment completions."""
 
@@ -166,6 +175,120 @@ async def ready(ctx: CaseContext) -> None:
         expected="the approach vector A straight up, (0, 0, 1)",
         actual=f"A = {[round(v, 5) for v in approach]}",
     )
+
+
+@case("server.motion.ready-position", clauses=["describe.ready-position"], hazard="motion", deadline=15.0)
+async def ready_position(ctx: CaseContext) -> None:
+    """Move to ready (214) ends at the joint angles describe self states as :ready-position."""
+    probe = await ctx.connect()
+    arm = await describe_target(ctx, probe)
+    if arm.stated_ready is None:
+        ctx.skip("the description states no usable :ready-position (one number per joint)")
+    await power_on(ctx, probe)
+    start = await read_floats(ctx, probe, "joint-angles")
+    away = list(start)
+    away[1] += 15.0 if away[1] < 0 else -15.0
+    require_response(ctx, await probe.call("set-joint-angles", joints=away), "a move away from ready")
+    await settle(ctx, probe, away)
+    require_response(ctx, await probe.call("ready"), "move to ready accepted")
+    await _sample(ctx, probe, "joint-angles", 10.0)  # until the arm, seen to move, stands still
+    reached = await read_floats(ctx, probe, "joint-angles")
+    off = max(abs(wrap180(a - b)) for a, b in zip(reached, arm.stated_ready, strict=True))
+    ctx.expect(
+        off <= READY_TOL_DEG,
+        clause="describe.ready-position",
+        expected=f"the arm at the stated :ready-position {list(arm.stated_ready)}",
+        actual=f"at {[round(q, 3) for q in reached]} after move to ready ({off:.3f} degrees off)",
+    )
+
+
+# VAL's O, A, T angles, computed here from the convention of docs/kinematics.md (model H1) and not with
+# the server's own code: R(O, A, T) = Rz(O - 90) . Ry(A + 90) . Rz(T), A in [-90, 90].
+Matrix = tuple[tuple[float, ...], ...]
+
+
+def _rot(axis: str, deg: float) -> Matrix:
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+    if axis == "z":
+        return ((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0))
+    return ((c, 0.0, s), (0.0, 1.0, 0.0), (-s, 0.0, c))
+
+
+def _matmul(a: Matrix, b: Matrix) -> Matrix:
+    return tuple(tuple(sum(a[i][k] * b[k][j] for k in range(3)) for j in range(3)) for i in range(3))
+
+
+def val_rotation(o: float, a: float, t: float) -> Matrix:
+    """The hand rotation of VAL angles O, A, T (degrees)."""
+    return _matmul(_matmul(_rot("z", o - 90.0), _rot("y", a + 90.0)), _rot("z", t))
+
+
+def val_angles(pose: Sequence[float]) -> tuple[float, float, float]:
+    """O, A, T of a Here transform (12 floats, column-major: n, o, a, p); A in [-90, 90]."""
+    n, o, a = pose[0:3], pose[3:6], pose[6:9]
+    middle = math.degrees(math.atan2(math.hypot(a[0], a[1]), a[2]))
+    first = math.degrees(math.atan2(a[1], a[0]))
+    last = math.degrees(math.atan2(o[2], -n[2]))
+    return first + 90.0, middle - 90.0, last
+
+
+def wrap180(deg: float) -> float:
+    """``deg`` wrapped into [-180, 180)."""
+    return (deg + 180.0) % 360.0 - 180.0
+
+
+async def _turned(
+    ctx: CaseContext,
+    probe: Probe,
+    op: RequestName,
+    start: tuple[float, ...],
+    delta: tuple[float, float, float],
+) -> tuple[float, ...]:
+    """Turn the hand by ``delta`` (dO dA dT) with ``op``: it must end at R(O + dO, A + dA, T + dT) of
+    ``start``'s angles, where ``start`` stood; returns where it ended."""
+    o, a, t = val_angles(start)
+    require_response(ctx, await probe.call(op, delta=[0.0, 0.0, 0.0, *delta]), f"{op} turning the hand")
+    await _sample(ctx, probe, "here", 10.0)
+    end = await read_floats(ctx, probe, "here")
+    want = val_rotation(o + delta[0], a + delta[1], t + delta[2])
+    got = tuple(tuple(end[3 * j + i] for j in range(3)) for i in range(3))
+    turn = max(abs(want[i][j] - got[i][j]) for i in range(3) for j in range(3))
+    off = math.dist(end[9:], start[9:])
+    ctx.expect(
+        turn <= OAT_TOL and off <= POSE_TOL_MM,
+        clause="incremental.relative",
+        expected=f"{op}: the hand at O A T {[round(v, 3) for v in (o, a, t)]} plus {list(delta)}, "
+        "position unchanged",
+        actual=f"rotation off by {turn:.4f} (got O A T {[round(v, 3) for v in val_angles(end)]}), "
+        f"position moved {off:.3f} mm",
+    )
+    return end
+
+
+@case(
+    "server.motion.incremental-oat",
+    clauses=["incremental.relative", "incremental-move.data", "incremental-straight-move.data"],
+    hazard="motion",
+    deadline=15.0,
+)
+async def incremental_oat(ctx: CaseContext) -> None:
+    """An incremental move (211) turning by dO dA dT only, then an incremental straight move (212) turning
+    by others, each end with the hand at R(O + dO, A + dA, T + dT), O A T being VAL's angles of where it
+    started (computed here from docs/kinematics.md's convention), and the position unchanged."""
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    before = await read_floats(ctx, probe, "joint-angles")
+    require_response(ctx, await probe.call("set-joint-angles", joints=list(LINE_POSE)), "a move to the start")
+    await settle(ctx, probe, LINE_POSE)
+    start = await read_floats(ctx, probe, "here")
+    turns: tuple[tuple[RequestName, tuple[float, float, float]], ...] = (
+        ("incremental-move", OAT_DELTA),
+        ("incremental-straight-move", OAT_DELTA_BACK),
+    )
+    for op, delta in turns:
+        start = await _turned(ctx, probe, op, start, delta)
+    await probe.call("set-joint-angles", joints=list(before))
+    await settle(ctx, probe, before)
 
 
 @case(
