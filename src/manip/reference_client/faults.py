@@ -37,6 +37,7 @@ class ClientFault(enum.Enum):
     MULTI_FIRST_PACKET = "multi-first-packet"
     EARLY_TIMEOUT = "early-timeout"
     SILENT_CLOSE = "silent-close"
+    IGNORE_WINDOW = "ignore-window"
 
 
 @dataclass(frozen=True)
@@ -93,6 +94,10 @@ FAULTS: Final[dict[ClientFault, FaultInfo]] = {
     ClientFault.SILENT_CLOSE: FaultInfo(
         "the end of the connection is not reported; requests in flight wait for their timeout",
         ("client.connection-lost",),
+    ),
+    ClientFault.IGNORE_WINDOW: FaultInfo(
+        "the client's NCP ignores the window the server offers (OPN and STS read as the largest window)",
+        ("ncp.window",),
     ),
 }
 
