@@ -38,12 +38,14 @@ class ClientFault(enum.Enum):
     EARLY_TIMEOUT = "early-timeout"
     SILENT_CLOSE = "silent-close"
     IGNORE_WINDOW = "ignore-window"
+    LITERAL_EXAMPLES = "literal-examples"
 
 
 @dataclass(frozen=True)
 class FaultInfo:
     what: str
     clauses: tuple[str, ...]
+    """The clauses it breaks; none for a switch that picks another allowed reading of the contract."""
 
 
 FAULTS: Final[dict[ClientFault, FaultInfo]] = {
@@ -98,6 +100,12 @@ FAULTS: Final[dict[ClientFault, FaultInfo]] = {
     ClientFault.IGNORE_WINDOW: FaultInfo(
         "the client's NCP ignores the window the server offers (OPN and STS read as the largest window)",
         ("ncp.window",),
+    ),
+    ClientFault.LITERAL_EXAMPLES: FaultInfo(
+        "no fault: the harness takes every example of docs/client-harness.md literally where the contract "
+        "allows two readings (a one-element raw as a bare string, as the segment example; state lost "
+        "after the not-connected errors of the requests in flight); the suite must pass it",
+        (),
     ),
 }
 

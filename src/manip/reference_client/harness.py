@@ -133,6 +133,8 @@ class CaseRun:
         self.ended = False
         self.closing = False
         self.pending: list[asyncio.Task[None]] = []
+        self.in_flight: set[asyncio.Task[None]] = set()
+        self._late: list[asyncio.Task[None]] = []
         self._fatal_reported: set[int] = set()
 
     def emit(self, result_type: str, op: int | None, /, **fields: Any) -> None:
@@ -145,6 +147,7 @@ class CaseRun:
         if self.arm is not None and not self.ended:
             self.closing = True
             await self.arm.aclose()
+        await asyncio.gather(*self._late, return_exceptions=True)
         self.emit("done", None)
 
     async def perform(self, op: Mapping[str, Any]) -> None:
@@ -161,6 +164,8 @@ class CaseRun:
             await self.await_replies()
         elif name in SPEC.requests_by_name:
             task = asyncio.get_running_loop().create_task(self.request(ident, name, op))
+            self.in_flight.add(task)
+            task.add_done_callback(self.in_flight.discard)
             if op.get("pipeline"):
                 self.pending.append(task)
                 await asyncio.sleep(0)  # let it be queued before the next op
@@ -263,6 +268,9 @@ class CaseRun:
         else:
             values = {k: _json_value(v) for k, v in dict(value).items()}
             raw = raw_fields(response_layout(spec), data)
+            if faults.on(faults.ClientFault.LITERAL_EXAMPLES):  # one element as a bare string
+                counted = {f.name for f in response_layout(spec).fields if f.type.element == "counted"}
+                raw = {k: v[0] if len(v) == 1 and k not in counted else v for k, v in raw.items()}
         self.emit("reply", ident, request=name, request_number=request.packet_number, values=values, raw=raw)
 
     def report_client_error(self, ident: int | None, request: Request[Any], exc: ManipError) -> None:
@@ -301,7 +309,15 @@ class CaseRun:
     def lost(self, reason: str) -> None:
         if not self.ended and not self.closing:
             self.ended = True
+            if faults.on(faults.ClientFault.LITERAL_EXAMPLES):  # after the in-flight requests' errors
+                self._late.append(asyncio.get_running_loop().create_task(self._lost_after(reason)))
+                return
             self.emit("state", None, state="lost", reason=reason)
+
+    async def _lost_after(self, reason: str) -> None:
+        flying = [t for t in self.in_flight if t is not asyncio.current_task()]
+        await asyncio.gather(*flying, return_exceptions=True)
+        self.emit("state", None, state="lost", reason=reason)
 
     # ------------------------------------------------------------------ listeners
 

@@ -28,7 +28,9 @@ __all__ = [
     "Op",
     "Result",
     "parse_hello",
+    "parse_instruction",
     "parse_result",
+    "request_args",
 ]
 
 CONTRACT: Final = 1
@@ -194,6 +196,74 @@ def parse_hello(line: str) -> Hello:
         _strings(data, "operations"),
         _strings(data, "features"),
     )
+
+
+def _number(data: Mapping[str, Any], key: str, where: str) -> float | None:
+    value = data.get(key)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ContractError(f"{where}: {key!r} must be a number")
+    return float(value)
+
+
+def _op(item: Any) -> Op:
+    if not isinstance(item, dict):
+        raise ContractError("an operation must be a JSON object")
+    ident, name, args = item.get("id"), item.get("op"), item.get("args")
+    if not isinstance(ident, int) or isinstance(ident, bool) or not isinstance(name, str):
+        raise ContractError(f"an operation needs an integer 'id' and a string 'op': {item!r}")
+    if args is not None and not isinstance(args, dict):
+        raise ContractError(f"op {ident}: 'args' must be an object")
+    where = f"op {ident}"
+    return Op(
+        ident,
+        name,
+        args,
+        _number(item, "timeout", where),
+        bool(item.get("pipeline", False)),
+        _number(item, "seconds", where),
+    )
+
+
+def request_args(name: str, args: Mapping[str, Any] | None) -> dict[str, Any]:
+    """An op's ``args`` as the codec takes them (section 4.2): a JSON number of a float field is a float
+    (``1`` and ``1.0`` alike), integers stay integers; KeyError for an unknown request name."""
+    layout = SPEC.requests_by_name[name].request
+    out = dict(args or {})
+    for f in layout.fields:
+        value = out.get(f.name)
+        if f.type.element != "float" or value is None:
+            continue
+        if isinstance(value, list):
+            out[f.name] = [_as_float(v) for v in value]
+        else:
+            out[f.name] = _as_float(value)
+    return out
+
+
+def _as_float(value: Any) -> Any:
+    return float(value) if isinstance(value, int) and not isinstance(value, bool) else value
+
+
+def parse_instruction(line: str) -> Instruction:
+    """A ``case`` line as a harness reads it (the suite's own reading, for examples and harness tests)."""
+    data = _load(line)
+    if data.get("type") != "case":
+        raise ContractError(f"not a case instruction: type {data.get('type')!r}")
+    for key in ("case", "link", "target", "contact"):
+        if not isinstance(data.get(key), str):
+            raise ContractError(f"case: {key!r} must be a string")
+    operations = data.get("operations")
+    if not isinstance(operations, list):
+        raise ContractError("case: 'operations' must be a list")
+    ops_ = tuple(_op(item) for item in operations)
+    if len({op.id for op in ops_}) != len(ops_):
+        raise ContractError("case: operation ids must be unique")
+    seed, timeout = data.get("seed"), _number(data, "timeout", "case")
+    if not isinstance(seed, int) or timeout is None:
+        raise ContractError("case: 'seed' must be an integer and 'timeout' a number")
+    return Instruction(data["case"], seed, data["link"], data["target"], data["contact"], timeout, ops_)
 
 
 def _check_fields(kind: str, data: Mapping[str, Any]) -> None:

@@ -165,6 +165,7 @@ async def out_of_sequence(base: CaseContext) -> None:
     ctx.expect(
         bool(signalled),
         clause="client.out-of-sequence",
-        expected=f"an error of kind out-of-sequence for the RESPONSE numbered {sent['stray']}",
+        expected=f"an error of kind out-of-sequence with request_number {sent['stray']}: the request "
+        "number the stray RESPONSE carries in its first data word, not its Chaos packet number",
         actual="; ".join(str(r) for r in play.of("error", any_op=True)) or "no error reported",
     )
