@@ -39,6 +39,7 @@ CAUGHT_BY: dict[ClientFault, tuple[str, ...]] = {
     ClientFault.MULTI_FIRST_PACKET: ("client.describe.split-mid-token", "client.describe.many-packets"),
     ClientFault.EARLY_TIMEOUT: ("client.timing.reply-near-timeout", "client.timing.no-reply"),
     ClientFault.SILENT_CLOSE: ("client.conn.cls-mid-request",),
+    ClientFault.ARRIVAL_ORDER: ("client.pipeline.interleaved",),
     ClientFault.IGNORE_WINDOW: (
         "client.ncp.window",
         "client.ncp.window-opens-late",

@@ -39,6 +39,7 @@ class ClientFault(enum.Enum):
     SILENT_CLOSE = "silent-close"
     IGNORE_WINDOW = "ignore-window"
     LITERAL_EXAMPLES = "literal-examples"
+    ARRIVAL_ORDER = "arrival-order"
 
 
 @dataclass(frozen=True)
@@ -100,6 +101,10 @@ FAULTS: Final[dict[ClientFault, FaultInfo]] = {
     ClientFault.IGNORE_WINDOW: FaultInfo(
         "the client's NCP ignores the window the server offers (OPN and STS read as the largest window)",
         ("ncp.window",),
+    ),
+    ClientFault.ARRIVAL_ORDER: FaultInfo(
+        "a reply is matched to the oldest request waiting, whatever number it carries (by arrival order)",
+        ("client.reply-matching",),
     ),
     ClientFault.LITERAL_EXAMPLES: FaultInfo(
         "no fault: the harness takes every example of docs/client-harness.md literally where the contract "

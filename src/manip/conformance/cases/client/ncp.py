@@ -3,20 +3,25 @@ the server's window, pipelined requests, and (on CHUDP) duplicated and reordered
 
 from __future__ import annotations
 
+import random
 from collections.abc import Awaitable, Callable
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, Final
 
+from manip.codecs.error_string import ErrorMessage
 from manip.codecs.lispm_text import encode_lispm
 from manip.codecs.messages import encode_reply, response_layout
 from manip.codecs.packet import Packet
 from manip.conformance.cases.client._support import (
     close,
     connect,
+    expect_error_parts,
     expect_reply,
     layout_values,
     request,
     spec_request,
 )
+from manip.conformance.cases.client.asyncs import expect_async
 from manip.conformance.cases.client.describe import DESCRIPTION, chunks_at, expect_text, play_description
 from manip.conformance.client.contract import Op
 from manip.conformance.client.runner import ClientContext, Play, client_context
@@ -25,6 +30,8 @@ from manip.conformance.client.wire import ack_findings, numbering_findings, wind
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.links import NcpConfig
+from manip.spec import SPEC
+from manip.spec.constants import ServerOp
 
 PIPELINED = ("here", "joint-angles", "wrist-version", "read-forces", "read-raw-gauges", "here")
 
@@ -125,6 +132,113 @@ async def pipeline(base: CaseContext) -> None:
     )
     for i, (name, (number, payload)) in enumerate(zip(PIPELINED, sent, strict=True)):
         expect_reply(ctx, play, i + 1, spec_request(name), payload, number, clause="client.reply-matching")
+
+
+INTERLEAVED: Final = ("here", "joint-angles", "wrist-version", "read-raw-gauges", "set-joint-angles", "here")
+"""The pipelined requests of ``client.pipeline.interleaved`` (one of them answered by an error)."""
+WARNING: Final = ErrorMessage("PUMA", "W", "AWA", "Guard ~ stopped ~ segments", (3, 2))
+REFUSAL: Final = ErrorMessage("PUMA", "E", "NAP", "No arm power")
+
+
+@dataclass
+class _Interleaving:
+    """What the judging server sent in ``client.pipeline.interleaved``, for the judgement."""
+
+    answers: dict[int, tuple[int, bytes]] = field(default_factory=dict)
+    """Op id -> (request number, reply payload) of each request answered by a reply."""
+    refused: int = 0
+    """The op id answered by a non-fatal error."""
+    asyncs: list[tuple[int, int, int]] = field(default_factory=list)
+    order: list[int] = field(default_factory=list)
+    """Op ids in the order their answers went out."""
+
+
+def _answer_order(rng: random.Random, count: int) -> list[int]:
+    """A seed-drawn order of ``count`` answers that is never the order of the requests."""
+    order = list(range(count))
+    while order == sorted(order):
+        rng.shuffle(order)
+    return order
+
+
+async def _interleave(side: ServerSide, rng: random.Random, seen: _Interleaving) -> None:
+    req = await side.next_request()  # request-notifications, answered at once
+    if req is None:
+        return
+    await side.reply_payload(req, b"")
+    taken: list[Packet] = []
+    for _ in INTERLEAVED:
+        if (req := await side.next_request()) is None:
+            return
+        taken.append(req)
+    seen.refused = 2 + rng.randrange(len(INTERLEAVED))
+    extras = [
+        (ServerOp.ASYNCHRONOUS_RESPONSE, (2, 0, rng.randint(1, 0xFFF0))),
+        (ServerOp.ASYNCHRONOUS_RESPONSE, (1, rng.randint(1, 2), rng.randrange(16))),
+        (ServerOp.ASYNCHRONOUS_WARNING, None),
+    ]
+    slots = sorted(rng.sample(range(len(INTERLEAVED)), len(extras)))
+    for position, index in enumerate(_answer_order(rng, len(INTERLEAVED))):
+        if position in slots:
+            opcode, words = extras[slots.index(position)]
+            if words is None:
+                await side.error(opcode, side.last_number, WARNING)
+            else:
+                await side.async_response(*words, number=taken[index].packet_no)
+                seen.asyncs.append(words)
+        op_id, req = 2 + index, taken[index]
+        seen.order.append(op_id)
+        if op_id == seen.refused:
+            await side.error(ServerOp.NON_FATAL_ERROR, req.packet_no, REFUSAL)
+            continue
+        if req.opcode == SPEC.request("set-joint-angles").opcode:
+            side.segment = rng.randint(1, 0xFFF0)
+            payload = side.segment.to_bytes(2, "little")
+        else:
+            values = layout_values(rng, response_layout(spec_request(INTERLEAVED[index])))
+            payload = encode_reply(req.opcode, req.packet_no, **values)[2:]
+        seen.answers[op_id] = (req.packet_no, payload)
+        await side.reply_payload(req, payload)
+    await side.serve_plainly()
+
+
+@case(
+    "client.pipeline.interleaved",
+    clauses=["client.reply-matching", "client.async-routing", "client.error-report"],
+    hazard="motion",
+)
+async def interleaved(base: CaseContext) -> None:
+    """Six pipelined requests answered in an order drawn from the seed (never the order they were
+    sent), one of them by a non-fatal error, with asynchronous responses and a warning between the
+    answers: each answer reaches its own request by the number it carries (a client that matches by
+    arrival order is seen doing it), and the asynchronous packets answer none."""
+    ctx = client_context(base)
+    seen = _Interleaving()
+    rng = ctx.random
+    joints = {"joints": [float(rng.randint(-90, 90)) for _ in range(6)]}
+    ops: list[Op] = [connect(0), request(1, "request-notifications", {"mask": 3})]
+    for i, name in enumerate(INTERLEAVED):
+        ops.append(request(i + 2, name, joints if name == "set-joint-angles" else None, pipeline=True))
+    ops += [Op(len(ops), "await-replies"), close(len(ops) + 1)]
+    play = await ctx.play(ops, lambda side: _interleave(side, rng, seen))
+    ctx.note(f"answers went out for ops {seen.order}")
+    for op_id, (number, payload) in seen.answers.items():
+        name = INTERLEAVED[op_id - 2]
+        expect_reply(ctx, play, op_id, spec_request(name), payload, number, clause="client.reply-matching")
+    if seen.refused:
+        expect_error_parts(
+            ctx, play.answer(seen.refused), REFUSAL, "non-fatal-error", clause="client.error-report"
+        )
+    for code, word2, word3 in seen.asyncs:
+        handler = "guard-hit" if code == 1 else "segment-completed"
+        expect_async(ctx, play, code, word2, word3, handler)
+    warnings = [r for r in play.of("error", any_op=True) if r.get("origin") == "asynchronous-warning"]
+    ctx.expect(
+        len(warnings) == 1 and warnings[0].op is None,
+        clause="client.async-routing",
+        expected="one asynchronous-warning result, tied to no op",
+        actual="; ".join(str(r) for r in warnings) or play.describe(),
+    )
 
 
 def _expect_window(ctx: ClientContext, play: Play, window: int, sent: Answered, count: int) -> None:
