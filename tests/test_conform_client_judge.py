@@ -15,8 +15,10 @@ from manip.codecs.messages import encode_request, response_layout
 from manip.codecs.packet import Packet
 from manip.conformance.cases.client._support import error_parts, raw_words, reply_mismatches
 from manip.conformance.client.contract import (
+    CHOICE_OPERATIONS,
     REQUEST_OPERATIONS,
     Op,
+    choice_args,
     parse_hello,
     parse_instruction,
     parse_result,
@@ -141,11 +143,14 @@ def test_the_server_error_example_is_rendered_as_the_judge_renders_it() -> None:
 
 def test_the_inline_operation_examples_encode() -> None:
     ops = [obj for obj in _inline_objects() if "op" in obj]
-    assert len(ops) >= 3
+    assert len(ops) >= 4
     for obj in ops:
         op = Op(0, obj["op"], obj.get("args"))
-        assert op.op in REQUEST_OPERATIONS
-        encode_request(op.op, **request_args(op.op, op.args))
+        if op.op in CHOICE_OPERATIONS:
+            choice_args(op.op, op.args)
+        else:
+            assert op.op in REQUEST_OPERATIONS
+            encode_request(op.op, **request_args(op.op, op.args))
 
 
 @pytest.mark.parametrize("form", ["bare", "array"])

@@ -40,6 +40,9 @@ class ClientFault(enum.Enum):
     IGNORE_WINDOW = "ignore-window"
     LITERAL_EXAMPLES = "literal-examples"
     ARRIVAL_ORDER = "arrival-order"
+    GUARD_ZERO = "guard-zero"
+    NO_NEWWC = "no-newwc"
+    NEWWC_UNDER_GUARD = "newwc-under-guard"
 
 
 @dataclass(frozen=True)
@@ -105,6 +108,15 @@ FAULTS: Final[dict[ClientFault, FaultInfo]] = {
     ClientFault.ARRIVAL_ORDER: FaultInfo(
         "a reply is matched to the oldest request waiting, whatever number it carries (by arrival order)",
         ("client.reply-matching",),
+    ),
+    ClientFault.GUARD_ZERO: FaultInfo(
+        "a new guard always gets number 0, armed or not", ("client.guard-numbers",)
+    ),
+    ClientFault.NO_NEWWC: FaultInfo(
+        "a change of load sends set frame vector but never set weight (NEWWC)", ("client.newwc-on-load",)
+    ),
+    ClientFault.NEWWC_UNDER_GUARD: FaultInfo(
+        "a change of load sends set weight while guards are armed", ("client.no-newwc-with-guard",)
     ),
     ClientFault.LITERAL_EXAMPLES: FaultInfo(
         "no fault: the harness takes every example of docs/client-harness.md literally where the contract "

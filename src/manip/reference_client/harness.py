@@ -36,6 +36,7 @@ from manip.reference_client.errors import (
     ServerError,
 )
 from manip.reference_client.extractors import extract_done, extract_segment, extract_text, extract_values
+from manip.reference_client.guards import WristBook
 from manip.reference_client.manipulator import Manipulator
 from manip.reference_client.options import ClientOptions
 from manip.reference_client.request import Request
@@ -47,6 +48,8 @@ __all__ = ["CONTRACT", "main", "run_harness"]
 CONTRACT: Final = 1
 NAME: Final = "manip-reference-client"
 CONTROL: Final = ("connect", "close", "wait", "await-replies")
+CHOICES: Final = ("arm-guard", "change-load")
+"""The operations that leave a choice to the client (contract revision 2), done with :class:`WristBook`."""
 ASYNC_HANDLERS: Final = {1: "guard-hit", 2: "segment-completed"}
 ERROR_ORIGINS: Final[tuple[tuple[type[ServerError], str], ...]] = (
     (FatalError, "fatal-error"),
@@ -69,7 +72,7 @@ def _version() -> str:
 def hello(operations: Sequence[str] | None = None) -> dict[str, Any]:
     """The hello line; ``operations`` limits what it declares (to see the suite report the rest
     unsupported)."""
-    declared = [*CONTROL, *(op.name for op in SPEC.requests.values())]
+    declared = [*CONTROL, *CHOICES, *(op.name for op in SPEC.requests.values())]
     if operations is not None:
         declared = [op for op in declared if op in operations]
     return {
@@ -130,6 +133,7 @@ class CaseRun:
         self.operations: list[Mapping[str, Any]] = list(instruction.get("operations") or [])
         self._emit = emit
         self.arm: Manipulator | None = None
+        self.wrist: WristBook | None = None
         self.ended = False
         self.closing = False
         self.pending: list[asyncio.Task[None]] = []
@@ -162,8 +166,9 @@ class CaseRun:
             await asyncio.sleep(float(op.get("seconds") or 0.0))
         elif name == "await-replies":
             await self.await_replies()
-        elif name in SPEC.requests_by_name:
-            task = asyncio.get_running_loop().create_task(self.request(ident, name, op))
+        elif name in SPEC.requests_by_name or name in CHOICES:
+            perform = self.request if name in SPEC.requests_by_name else self.choose
+            task = asyncio.get_running_loop().create_task(perform(ident, name, op))
             self.in_flight.add(task)
             task.add_done_callback(self.in_flight.discard)
             if op.get("pipeline"):
@@ -191,6 +196,7 @@ class CaseRun:
             self.ended = True
             return
         self.arm = arm
+        self.wrist = WristBook(arm)
         arm.add_async_listener(self.on_async)
         arm.add_error_listener(self.on_error)
         arm.add_close_listener(self.on_close)
@@ -252,6 +258,41 @@ class CaseRun:
             self.report_client_error(ident, request, exc)
             return
         self.report_reply(ident, name, request, value)
+
+    async def choose(self, ident: int | None, name: str, op: Mapping[str, Any]) -> None:
+        """A choice operation: arm-guard (the client picks the number) or change-load."""
+        if self.wrist is None or self.ended or self.arm is None or self.arm.closed:
+            self.emit("error", ident, origin="client", kind="not-connected", request_number=None, detail="")
+            return
+        args = dict(op.get("args") or {})
+        timeout = float(op.get("timeout") or self.timeout)
+        values: dict[str, Any] = {}
+        try:
+            if name == "arm-guard":
+                values["guard"] = await self.wrist.arm_guard(
+                    args["dvec"], args["tol"], stop=bool(args.get("stop", True)), timeout=timeout
+                )
+            else:
+                await self.wrist.change_load(args["weight"], args["cg"], args.get("offset"), timeout=timeout)
+        except (ValueError, TypeError, KeyError) as exc:
+            self.emit(
+                "error", ident, origin="client", kind="refused-locally", request_number=None, detail=str(exc)
+            )
+            return
+        except ServerError as exc:
+            self.report_error(ident, exc)
+            return
+        except ManipError as exc:
+            kind = (
+                "timeout"
+                if isinstance(exc, RequestTimeout)
+                else "not-connected"
+                if isinstance(exc, ConnectionLost)
+                else "other"
+            )
+            self.emit("error", ident, origin="client", kind=kind, request_number=None, detail=str(exc))
+            return
+        self.emit("reply", ident, request=name, request_number=None, values=values, raw={})
 
     def report_reply(self, ident: int | None, name: str, request: Request[Any], value: Any) -> None:
         spec = SPEC.requests_by_name[name]

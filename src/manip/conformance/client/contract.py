@@ -16,17 +16,20 @@ from typing import Any, Final
 from manip.spec import SPEC
 
 __all__ = [
+    "CHOICE_OPERATIONS",
     "CONTRACT",
     "CONTROL_OPERATIONS",
     "FEATURES",
     "LINKS",
     "REQUEST_OPERATIONS",
     "RESULT_TYPES",
+    "REVISION",
     "ContractError",
     "Hello",
     "Instruction",
     "Op",
     "Result",
+    "choice_args",
     "parse_hello",
     "parse_instruction",
     "parse_result",
@@ -34,7 +37,12 @@ __all__ = [
 ]
 
 CONTRACT: Final = 1
+REVISION: Final = 2
+"""The contract's revision (docs/client-harness.md, "Versions"): 2 added the choice operations."""
 CONTROL_OPERATIONS: Final[tuple[str, ...]] = ("connect", "close", "wait", "await-replies")
+CHOICE_OPERATIONS: Final[tuple[str, ...]] = ("arm-guard", "change-load")
+"""Operations that leave a choice to the client (which guard number; what to send when the load
+changes), judged from what it sends (revision 2, optional)."""
 REQUEST_OPERATIONS: Final[tuple[str, ...]] = tuple(op.name for op in SPEC.requests.values())
 """Every request of the spec, by name: the operations that send a request."""
 LINKS: Final[tuple[str, ...]] = ("tcp", "chudp", "chaosd")
@@ -103,6 +111,7 @@ class Instruction:
         data = {
             "type": "case",
             "contract": CONTRACT,
+            "revision": REVISION,
             "case": self.case,
             "seed": self.seed,
             "link": self.link,
@@ -240,6 +249,38 @@ def request_args(name: str, args: Mapping[str, Any] | None) -> dict[str, Any]:
         else:
             out[f.name] = _as_float(value)
     return out
+
+
+CHOICE_FIELDS: Final[dict[str, dict[str, tuple[int, bool]]]] = {
+    "arm-guard": {"dvec": (6, True), "tol": (1, True), "stop": (0, False)},
+    "change-load": {"weight": (1, True), "cg": (3, True), "offset": (3, False)},
+}
+"""Each choice operation's args: name -> (how many numbers, 1 a single one, 0 a boolean; required)."""
+
+
+def choice_args(name: str, args: Mapping[str, Any] | None) -> dict[str, Any]:
+    """A choice operation's ``args`` checked (section 4.4), numbers as floats; ContractError if not."""
+    fields = CHOICE_FIELDS[name]
+    out = dict(args or {})
+    for key, (count, required) in fields.items():
+        value = out.get(key)
+        if value is None:
+            if required:
+                raise ContractError(f"{name}: {key!r} is required")
+            continue
+        if count == 0:
+            if not isinstance(value, bool):
+                raise ContractError(f"{name}: {key!r} must be true or false")
+            continue
+        items = value if count > 1 else [value]
+        if not isinstance(items, list) or len(items) != count or not all(_is_number(v) for v in items):
+            raise ContractError(f"{name}: {key!r} must be {count} number(s)")
+        out[key] = [float(v) for v in items] if count > 1 else float(value)
+    return out
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def _as_float(value: Any) -> Any:

@@ -25,6 +25,7 @@ __all__ = [
     "ack_findings",
     "client_requests",
     "initial_response_findings",
+    "judged_packets",
     "numbering_findings",
     "request_findings",
     "window_findings",
@@ -52,6 +53,18 @@ def client_requests(records: Sequence[WireRecord]) -> list[WireRecord]:
             seen.add(r.packet.packet_no)
             out.append(r)
     return out
+
+
+def judged_packets(records: Sequence[WireRecord]) -> list[WirePacket]:
+    """The data packets both ways as ``verify`` reads them from a recording: in order, the client's
+    first copies only (so a rule of :mod:`manip.conformance.judge.checks` judges a live play and a
+    recording alike)."""
+    first = {id(r) for r in client_requests(records)}
+    return [
+        wire_packet(r)
+        for r in records
+        if r.packet.opcode >= ChaosOp.DAT and (r.dir == "s2c" or id(r) in first)
+    ]
 
 
 def request_findings(records: Sequence[WireRecord]) -> list[Violation]:

@@ -76,9 +76,18 @@ def _reply_case(op: RequestOpcode) -> None:
     )(reply_values)
 
 
+def _data_clause(op: RequestOpcode) -> str:
+    """The clause a request's data are judged under: the opcode's own (``hand.data``...) when the spec
+    has one binding the client, else the general one."""
+    if op.name in _MOVES:
+        return "move.transform-data"
+    own = SPEC.clauses.get(f"{op.name}.data")
+    return own.id if own is not None and own.party in ("client", "both") else "request-data.types"
+
+
 @case.each(WITH_ARGS)
 def _request_case(op: RequestOpcode) -> None:
-    clauses = ["request.opcode-range", "move.transform-data" if op.name in _MOVES else "request-data.types"]
+    clauses = ["request.opcode-range", _data_clause(op)]
 
     async def request_data(base: CaseContext) -> None:
         ctx = client_context(base)
