@@ -299,9 +299,27 @@ class ServerSide:
             link.close()
 
     async def serve_plainly(self, until_end: float = END_WAIT) -> None:
-        """Answer whatever comes next as a conformant server would, until the client closes."""
+        """Answer whatever comes next as a conformant server would, until the client closes (after its
+        EOF, wait for its CLS: a server that closed first would keep the client from sending it)."""
         while (request := await self.next_request(until_end)) is not None:
             await plain_answer(self, request)
+        await self.until_ended(until_end)
+
+    async def until_ended(self, timeout: float) -> bool:
+        """Wait until the connection has ended (the client's CLS, a LOS, the link); False on timeout."""
+        conn = self.conn
+        event = asyncio.Event()
+        conn.set_wakeup(event.set)
+        try:
+            async with asyncio.timeout(timeout):
+                while not conn.ended:
+                    event.clear()
+                    await event.wait()
+        except TimeoutError:
+            return False
+        finally:
+            conn.set_wakeup(None)
+        return True
 
 
 async def plain_answer(side: ServerSide, request: Packet) -> None:

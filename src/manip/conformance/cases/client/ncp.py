@@ -134,8 +134,9 @@ async def pipeline(base: CaseContext) -> None:
         expect_reply(ctx, play, i + 1, spec_request(name), payload, number, clause="client.reply-matching")
 
 
-INTERLEAVED: Final = ("here", "joint-angles", "wrist-version", "read-raw-gauges", "set-joint-angles", "here")
-"""The pipelined requests of ``client.pipeline.interleaved`` (one of them answered by an error)."""
+INTERLEAVED: Final = ("here", "joint-angles", "set-joint-angles", "here", "joint-angles", "set-joint-angles")
+"""The pipelined requests of ``client.pipeline.interleaved`` (one of them answered by an error): three
+reply layouts, each twice, and only requests every client has (no wrist extension)."""
 WARNING: Final = ErrorMessage("PUMA", "W", "AWA", "Guard ~ stopped ~ segments", (3, 2))
 REFUSAL: Final = ErrorMessage("PUMA", "E", "NAP", "No arm power")
 
