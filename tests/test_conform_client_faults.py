@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import sys
+from types import SimpleNamespace
 
 import pytest
 
@@ -18,7 +19,9 @@ from manip.conformance.client.runner import ClientRunConfig, run_client_suite
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.selection import PatternSet
+from manip.reference_client import faults
 from manip.reference_client.faults import FAULTS, ClientFault
+from manip.reference_client.harness import CaseRun
 from manip.spec import SPEC
 
 HARNESS = [sys.executable, "-m", "manip.reference_client.harness"]
@@ -114,3 +117,18 @@ def test_a_harness_reading_the_contract_another_allowed_way_passes(switch: Clien
     """literal-examples: a harness following every example of docs/client-harness.md literally."""
     report = run(PASSED_BY[switch], "--fault", switch.value)
     assert {r.id: r.outcome for r in report.results} == dict.fromkeys(PASSED_BY[switch], "pass")
+
+
+def test_literal_examples_writes_a_one_element_raw_as_a_bare_string() -> None:
+    """The switch does change what the harness writes (so its passing run shows the judge takes it)."""
+    lines: list[dict[str, object]] = []
+    run = CaseRun({"case": "c", "target": "tcp://x"}, lines.append)
+    request = SimpleNamespace(responses=[b"\x8c\x02"], packet_number=5)
+    before = faults.active()
+    try:
+        for switch in (set(), {ClientFault.LITERAL_EXAMPLES}):
+            faults.activate(switch)
+            run.report_reply(1, "wrist-version", request, {"version": 0x28C})
+    finally:
+        faults.activate(before)
+    assert [line["raw"] for line in lines] == [{"version": ["028C"]}, {"version": "028C"}]
