@@ -17,6 +17,7 @@ from manip.conformance.cases.client._support import error_parts, raw_words, repl
 from manip.conformance.client.contract import (
     CHOICE_OPERATIONS,
     REQUEST_OPERATIONS,
+    REVISION,
     Op,
     choice_args,
     parse_hello,
@@ -114,6 +115,7 @@ def test_every_example_line_is_read_by_the_judges_parser() -> None:
         if obj["type"] == "hello":
             assert parse_hello(line).operations
         elif obj["type"] == "case":
+            assert obj["revision"] == REVISION  # the example shows the revision the suite sends
             instruction = parse_instruction(line)
             for op in instruction.operations:
                 if op.op in REQUEST_OPERATIONS and op.args:
