@@ -8,8 +8,9 @@ requests it declares and their replies, and error strings with their ``~`` and `
 imports nothing from manip on purpose, to show the contract needs nothing from that project.
 
 Not supported (declared so in ``hello``; the judge reports such cases ``unsupported``): the chaosd
-link, pipelined requests (one request is in flight at a time) and the Puma's wrist extensions
-(0240-0256 and 0261).  Logs go to stderr.
+link, the Puma's wrist extensions (0240-0256 and 0261) and the choice operations.  Pipelined requests
+are supported: each request in flight is matched by its number, and the NCP keeps them within the
+server's window.  Logs go to stderr.
 """
 
 from __future__ import annotations
@@ -517,12 +518,13 @@ def dial(scheme: str, host: str, port: int, timeout: float) -> socket.socket:
 
 @dataclass
 class Pending:
-    """The one request in flight."""
+    """A request in flight."""
 
     op: int
     name: str
     number: int
     reply: Fields | str
+    deadline: float
     text: bytearray = field(default_factory=bytearray)
     done: bool = False
 
@@ -533,18 +535,19 @@ class Harness:
         self.conn: Connection | None = None
         self.status = "idle"  # connecting, connected, closing, ended
         self.initial_seen = False
-        self.pending: Pending | None = None
+        self.pending: dict[int, Pending] = {}  # by request number
         self.end_reason = ""
 
     def emit(self, result: str, /, **fields: Any) -> None:
         print(json.dumps({"type": result, "case": self.case, **fields}), flush=True)
 
     def run_case(self, case: dict[str, Any]) -> None:
-        self.case, self.conn, self.status, self.pending = case["case"], None, "idle", None
+        self.case, self.conn, self.status, self.pending = case["case"], None, "idle", {}
         default_timeout = float(case.get("timeout", 5.0))
         try:
             for op in case["operations"]:
                 self.perform(case, op, float(op.get("timeout", default_timeout)))
+            self.await_replies()  # what is still due
         except Exception:  # a bug of ours must not leave the suite waiting: report the case over
             log(f"case {self.case}: {traceback.format_exc()}")
         if self.conn is not None:
@@ -556,6 +559,7 @@ class Harness:
         if name == "connect":
             self.connect(case, op_id, timeout)
         elif name == "close":
+            self.await_replies()
             if self.status == "connected" and self.conn is not None:
                 self.status = "closing"
                 self.conn.close(timeout)
@@ -564,9 +568,9 @@ class Harness:
         elif name == "wait":
             self.pump(time.monotonic() + float(op.get("seconds", 0)), lambda: False)
         elif name == "await-replies":
-            pass  # without pipelining no request is ever in flight between operations
+            self.await_replies()
         elif name in REQUESTS:
-            self.request(op_id, name, op.get("args") or {}, timeout)
+            self.request(op_id, name, op.get("args") or {}, timeout, bool(op.get("pipeline")))
         else:
             self.emit("unsupported", op=op_id, operation=name)
 
@@ -575,7 +579,23 @@ class Harness:
             if self.conn is None:
                 time.sleep(deadline - now)
             else:
-                self.conn.poll(deadline)
+                soonest = min((p.deadline for p in self.pending.values()), default=deadline)
+                self.conn.poll(min(deadline, soonest))
+            self.expire()
+        self.expire()
+
+    def expire(self) -> None:
+        """Fail each request whose timeout has passed without a reply."""
+        now = time.monotonic()
+        for pending in [p for p in self.pending.values() if p.deadline <= now]:
+            self.finish(pending)
+            self.emit("error", op=pending.op, origin="client", kind="timeout", request_number=pending.number,
+                      detail="no reply within its timeout")  # fmt: skip
+
+    def await_replies(self) -> None:
+        """Until no request is in flight (each ends by its reply, an error or its timeout)."""
+        deadline = max((p.deadline for p in self.pending.values()), default=0.0)
+        self.pump(deadline + 0.01, lambda: not self.pending)
 
     def connect(self, case: dict[str, Any], op_id: int, timeout: float) -> None:
         url = urlsplit(case["target"])
@@ -608,7 +628,7 @@ class Harness:
         if ended:  # the RESPONSE came, and the end right behind it
             self.on_end(self.end_reason)
 
-    def request(self, op_id: int, name: str, args: dict[str, Any], timeout: float) -> None:
+    def request(self, op_id: int, name: str, args: dict[str, Any], timeout: float, pipeline: bool) -> None:
         if self.status != "connected" or self.conn is None:
             self.emit("error", op=op_id, origin="client", kind="not-connected", request_number=None,
                       detail="the connection is not open")  # fmt: skip
@@ -621,12 +641,10 @@ class Harness:
                       detail=str(exc))  # fmt: skip
             return
         number = self.conn.send_controlled(opcode, data)  # the request number is its packet number
-        self.pending = pending = Pending(op_id, name, number, reply)
-        self.pump(time.monotonic() + timeout, lambda: pending.done)
-        if not pending.done:
-            self.pending = None
-            self.emit("error", op=op_id, origin="client", kind="timeout", request_number=number,
-                      detail=f"no reply within {timeout} s")  # fmt: skip
+        pending = Pending(op_id, name, number, reply, time.monotonic() + timeout)
+        self.pending[number] = pending  # the NCP sends it once the server's window has room
+        if not pipeline:
+            self.pump(pending.deadline + 0.01, lambda: pending.done)
 
     # --- what the server sends
     def on_data(self, p: Packet) -> None:
@@ -641,15 +659,15 @@ class Harness:
             self.on_async(number, body)
         elif p.op in ERROR_ORIGINS:
             self.on_error(p.op, number, body)
-        elif p.op == RESPONSE and self.pending is not None and self.pending.number == number:
-            self.on_reply(self.pending, body)
+        elif p.op == RESPONSE and number in self.pending:
+            self.on_reply(self.pending[number], body)
         else:  # answers nothing in flight: signalled as out of sequence, and no request fails
             self.emit("error", op=None, origin="client", kind="out-of-sequence", request_number=number,
                       detail=f"packet {p.op:o} for request {number}, which is not in flight")  # fmt: skip
 
     def finish(self, pending: Pending) -> None:
         pending.done = True
-        self.pending = None
+        self.pending.pop(pending.number, None)
 
     def on_reply(self, pending: Pending, body: bytes) -> None:
         base = {"op": pending.op, "request": pending.name, "request_number": pending.number}
@@ -671,8 +689,8 @@ class Harness:
         self.emit("reply", **base, values=values, raw=raw)
 
     def on_error(self, opcode: int, number: int, body: bytes) -> None:
-        pending = self.pending
-        answers = pending is not None and pending.number == number and opcode in (FATAL, NON_FATAL)
+        pending = self.pending.get(number)
+        answers = pending is not None and opcode in (FATAL, NON_FATAL)
         if opcode == NON_FATAL and not answers:
             self.emit("error", op=None, origin="client", kind="out-of-sequence", request_number=number,
                       detail=f"a non-fatal error for request {number}, which is not in flight")  # fmt: skip
@@ -702,8 +720,7 @@ class Harness:
             return  # refused while connecting, or our own close crossing the server's CLS
         self.status = "ended"
         self.emit("state", op=None, state="lost", reason=reason)
-        if self.pending is not None:
-            pending = self.pending
+        for pending in list(self.pending.values()):
             self.finish(pending)
             self.emit("error", op=pending.op, origin="client", kind="not-connected",
                       request_number=pending.number, detail=f"the connection ended: {reason}")  # fmt: skip
@@ -712,7 +729,8 @@ class Harness:
 def main() -> int:
     harness = Harness()
     print(json.dumps({"type": "hello", "contract": CONTRACT, "name": "stdlib-harness", "version": "1",
-                      "links": LINKS, "operations": CONTROL_OPS + list(REQUESTS), "features": []}),
+                      "links": LINKS, "operations": CONTROL_OPS + list(REQUESTS),
+                      "features": ["pipeline"]}),
           flush=True)  # fmt: skip
     for line in sys.stdin:
         try:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import sys
+from types import SimpleNamespace
 
 import pytest
 
@@ -18,7 +19,10 @@ from manip.conformance.client.runner import ClientRunConfig, run_client_suite
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.selection import PatternSet
+from manip.reference_client import faults
 from manip.reference_client.faults import FAULTS, ClientFault
+from manip.reference_client.harness import CaseRun
+from manip.spec import SPEC
 
 HARNESS = [sys.executable, "-m", "manip.reference_client.harness"]
 SEED = 4242
@@ -39,15 +43,40 @@ CAUGHT_BY: dict[ClientFault, tuple[str, ...]] = {
     ClientFault.MULTI_FIRST_PACKET: ("client.describe.split-mid-token", "client.describe.many-packets"),
     ClientFault.EARLY_TIMEOUT: ("client.timing.reply-near-timeout", "client.timing.no-reply"),
     ClientFault.SILENT_CLOSE: ("client.conn.cls-mid-request",),
+    ClientFault.ARRIVAL_ORDER: ("client.pipeline.interleaved",),
+    ClientFault.GUARD_ZERO: ("client.choice.guard-numbers",),
+    ClientFault.NO_NEWWC: ("client.choice.newwc-on-load",),
+    ClientFault.NEWWC_UNDER_GUARD: ("client.choice.no-newwc-with-guard",),
+    ClientFault.IGNORE_WINDOW: (
+        "client.ncp.window",
+        "client.ncp.window-opens-late",
+        "client.ncp.window-shrinks",
+    ),
 }
 
 
-def run(select: tuple[str, ...], *extra: str) -> RunReport:
+PASSED_BY: dict[ClientFault, tuple[str, ...]] = {
+    ClientFault.LITERAL_EXAMPLES: (
+        "client.reply.wrist-version",
+        "client.reply.here",
+        "client.reply.examine-wrist",
+        "client.pipeline.replies-matched",
+        "client.async.segment-interleaved",
+        "client.reply.out-of-sequence",
+        "client.conn.cls-mid-request",
+        "client.conn.los-mid-request",
+        "client.fatal.severity-f",
+    ),
+}
+"""Switches that break no clause (another reading the contract allows), and the cases they must pass."""
+
+
+def run(select: tuple[str, ...], *extra: str, strict: bool = False) -> RunReport:
     config = ClientRunConfig(
         argv=[*HARNESS, *extra],
         link="tcp",
         seed=SEED,
-        options=RunOptions(reply_timeout=1.0),
+        options=RunOptions(reply_timeout=1.0, strict=strict),
         select=PatternSet.of(select, "--select"),
         slack=3.0,
     )
@@ -55,16 +84,18 @@ def run(select: tuple[str, ...], *extra: str) -> RunReport:
 
 
 def test_every_fault_is_named_and_at_least_twelve() -> None:
-    assert set(CAUGHT_BY) == set(ClientFault)
-    assert len(FAULTS) >= 12 and set(FAULTS) == set(ClientFault)
+    assert set(CAUGHT_BY) == {f for f in ClientFault if FAULTS[f].clauses}
+    assert set(PASSED_BY) == {f for f in ClientFault if not FAULTS[f].clauses}
+    assert len(CAUGHT_BY) >= 12 and set(FAULTS) == set(ClientFault)
     ids = {c.id for c in client_cases()}
-    for cases in CAUGHT_BY.values():
+    for cases in (*CAUGHT_BY.values(), *PASSED_BY.values()):
         assert set(cases) <= ids
 
 
-@pytest.mark.parametrize("fault", list(ClientFault), ids=lambda f: f.value)
+@pytest.mark.parametrize("fault", list(CAUGHT_BY), ids=lambda f: f.value)
 def test_each_fault_is_caught_by_its_named_cases(fault: ClientFault) -> None:
-    report = run(CAUGHT_BY[fault], "--fault", fault.value)
+    should_only = all(SPEC.clauses[c].level == "SHOULD" for c in FAULTS[fault].clauses)
+    report = run(CAUGHT_BY[fault], "--fault", fault.value, strict=should_only)  # a SHOULD counts so
     got = {r.id: r for r in report.results}
     assert set(got) == set(CAUGHT_BY[fault])
     for case_id, result in got.items():
@@ -79,3 +110,25 @@ def test_the_clean_client_passes_the_named_cases() -> None:
     named = tuple(sorted({c for cases in CAUGHT_BY.values() for c in cases}))
     report = run(named)
     assert {r.outcome for r in report.results} == {"pass"}, [(r.id, r.outcome) for r in report.results]
+
+
+@pytest.mark.parametrize("switch", list(PASSED_BY), ids=lambda f: f.value)
+def test_a_harness_reading_the_contract_another_allowed_way_passes(switch: ClientFault) -> None:
+    """literal-examples: a harness following every example of docs/client-harness.md literally."""
+    report = run(PASSED_BY[switch], "--fault", switch.value)
+    assert {r.id: r.outcome for r in report.results} == dict.fromkeys(PASSED_BY[switch], "pass")
+
+
+def test_literal_examples_writes_a_one_element_raw_as_a_bare_string() -> None:
+    """The switch does change what the harness writes (so its passing run shows the judge takes it)."""
+    lines: list[dict[str, object]] = []
+    run = CaseRun({"case": "c", "target": "tcp://x"}, lines.append)
+    request = SimpleNamespace(responses=[b"\x8c\x02"], packet_number=5)
+    before = faults.active()
+    try:
+        for switch in (set(), {ClientFault.LITERAL_EXAMPLES}):
+            faults.activate(switch)
+            run.report_reply(1, "wrist-version", request, {"version": 0x28C})
+    finally:
+        faults.activate(before)
+    assert [line["raw"] for line in lines] == [{"version": ["028C"]}, {"version": "028C"}]

@@ -5,6 +5,7 @@ vectors and on drawn values, and it talks to the reference server through the ha
 from __future__ import annotations
 
 import ast
+import asyncio
 import importlib.util
 import json
 import math
@@ -27,6 +28,10 @@ from manip.codecs.errors import CodecError
 from manip.codecs.framing import TcpFrameDecoder, encode_tcp
 from manip.codecs.packet import Packet
 from manip.codecs.pdp11float import F_MAX, F_MIN_NORMAL, f_to_u32, u32_to_f
+from manip.conformance.client.cli import client_cases
+from manip.conformance.client.runner import ClientRunConfig, run_client_suite
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.results import ExitCode
 
 ROOT = Path(__file__).resolve().parents[1]
 HARNESS = ROOT / "examples" / "stdlib_harness.py"
@@ -370,3 +375,31 @@ def test_a_refused_connection_and_end_of_input(reference_server_url: str) -> Non
     assert (refused["state"], refused["op"]) == ("refused", 0) and refused["reason"]
     assert not_connected["kind"] == "not-connected"
     assert done == {"type": "done", "case": "example.refused"}
+
+
+# ----------------------------------------------------------------------------- judged by the suite
+
+NEW_CASES = (
+    "client.ncp.window",
+    "client.ncp.window-opens-late",
+    "client.ncp.window-shrinks",
+    "client.pipeline.interleaved",
+)
+"""The judge's window and interleaving cases: the example pipelines, so each runs and must pass."""
+
+
+@pytest.mark.waits
+@pytest.mark.parametrize("link", ["tcp", "chudp"])
+def test_the_judge_passes_the_example_on_each_link(link: str) -> None:
+    """``manip-conform client --link LINK -- python3 examples/stdlib_harness.py``, every case: none
+    fails, the new window and interleaving cases pass, and what it does not declare is unsupported."""
+    config = ClientRunConfig(
+        argv=[sys.executable, str(HARNESS)], link=link, seed=1985, options=RunOptions(reply_timeout=1.0)
+    )
+    report = asyncio.run(run_client_suite(config, client_cases()))
+    got = {r.id: r.outcome for r in report.results}
+    failed = {r.id: [str(v) for v in r.violations] or r.reason for r in report.results if r.outcome == "fail"}
+    assert report.exit_code == ExitCode.CONFORMANT and not failed, failed
+    assert {got[c] for c in NEW_CASES} == {"pass"}, {c: got[c] for c in NEW_CASES}
+    assert got["client.choice.guard-numbers"] == "unsupported"  # no wrist extensions
+    assert got["client.chudp.duplicate-reorder"] == ("pass" if link == "chudp" else "skip")

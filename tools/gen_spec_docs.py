@@ -122,7 +122,7 @@ def render() -> str:
             continue
         errata = f" (erratum `{clause.errata}`)" if clause.errata else ""
         if clause.judged_from == "recording":
-            errata += " (judged from a recording: `verify --judge client`)"
+            errata += " (judged from a recording, `verify --judge client`, and live by the choice operations)"
         groups[clause.id.split(".")[0]].append(
             f"| `{clause.id}` | {clause.level} | {clause.party} | {_cell(clause.text)}{errata} | "
             f"{_cell(clause.section)} |"

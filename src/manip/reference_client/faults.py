@@ -37,12 +37,19 @@ class ClientFault(enum.Enum):
     MULTI_FIRST_PACKET = "multi-first-packet"
     EARLY_TIMEOUT = "early-timeout"
     SILENT_CLOSE = "silent-close"
+    IGNORE_WINDOW = "ignore-window"
+    LITERAL_EXAMPLES = "literal-examples"
+    ARRIVAL_ORDER = "arrival-order"
+    GUARD_ZERO = "guard-zero"
+    NO_NEWWC = "no-newwc"
+    NEWWC_UNDER_GUARD = "newwc-under-guard"
 
 
 @dataclass(frozen=True)
 class FaultInfo:
     what: str
     clauses: tuple[str, ...]
+    """The clauses it breaks; none for a switch that picks another allowed reading of the contract."""
 
 
 FAULTS: Final[dict[ClientFault, FaultInfo]] = {
@@ -93,6 +100,29 @@ FAULTS: Final[dict[ClientFault, FaultInfo]] = {
     ClientFault.SILENT_CLOSE: FaultInfo(
         "the end of the connection is not reported; requests in flight wait for their timeout",
         ("client.connection-lost",),
+    ),
+    ClientFault.IGNORE_WINDOW: FaultInfo(
+        "the client's NCP ignores the window the server offers (OPN and STS read as the largest window)",
+        ("ncp.window",),
+    ),
+    ClientFault.ARRIVAL_ORDER: FaultInfo(
+        "a reply is matched to the oldest request waiting, whatever number it carries (by arrival order)",
+        ("client.reply-matching",),
+    ),
+    ClientFault.GUARD_ZERO: FaultInfo(
+        "a new guard always gets number 0, armed or not", ("client.guard-numbers",)
+    ),
+    ClientFault.NO_NEWWC: FaultInfo(
+        "a change of load sends set frame vector but never set weight (NEWWC)", ("client.newwc-on-load",)
+    ),
+    ClientFault.NEWWC_UNDER_GUARD: FaultInfo(
+        "a change of load sends set weight while guards are armed", ("client.no-newwc-with-guard",)
+    ),
+    ClientFault.LITERAL_EXAMPLES: FaultInfo(
+        "no fault: the harness takes every example of docs/client-harness.md literally where the contract "
+        "allows two readings (a one-element raw as a bare string, as the segment example; state lost "
+        "after the not-connected errors of the requests in flight); the suite must pass it",
+        (),
     ),
 }
 

@@ -36,6 +36,7 @@ from manip.reference_client.errors import (
     ServerError,
 )
 from manip.reference_client.extractors import extract_done, extract_segment, extract_text, extract_values
+from manip.reference_client.guards import WristBook
 from manip.reference_client.manipulator import Manipulator
 from manip.reference_client.options import ClientOptions
 from manip.reference_client.request import Request
@@ -47,6 +48,8 @@ __all__ = ["CONTRACT", "main", "run_harness"]
 CONTRACT: Final = 1
 NAME: Final = "manip-reference-client"
 CONTROL: Final = ("connect", "close", "wait", "await-replies")
+CHOICES: Final = ("arm-guard", "change-load")
+"""The operations that leave a choice to the client (contract revision 2), done with :class:`WristBook`."""
 ASYNC_HANDLERS: Final = {1: "guard-hit", 2: "segment-completed"}
 ERROR_ORIGINS: Final[tuple[tuple[type[ServerError], str], ...]] = (
     (FatalError, "fatal-error"),
@@ -69,7 +72,7 @@ def _version() -> str:
 def hello(operations: Sequence[str] | None = None) -> dict[str, Any]:
     """The hello line; ``operations`` limits what it declares (to see the suite report the rest
     unsupported)."""
-    declared = [*CONTROL, *(op.name for op in SPEC.requests.values())]
+    declared = [*CONTROL, *CHOICES, *(op.name for op in SPEC.requests.values())]
     if operations is not None:
         declared = [op for op in declared if op in operations]
     return {
@@ -130,9 +133,12 @@ class CaseRun:
         self.operations: list[Mapping[str, Any]] = list(instruction.get("operations") or [])
         self._emit = emit
         self.arm: Manipulator | None = None
+        self.wrist: WristBook | None = None
         self.ended = False
         self.closing = False
         self.pending: list[asyncio.Task[None]] = []
+        self.in_flight: set[asyncio.Task[None]] = set()
+        self._late: list[asyncio.Task[None]] = []
         self._fatal_reported: set[int] = set()
 
     def emit(self, result_type: str, op: int | None, /, **fields: Any) -> None:
@@ -145,6 +151,7 @@ class CaseRun:
         if self.arm is not None and not self.ended:
             self.closing = True
             await self.arm.aclose()
+        await asyncio.gather(*self._late, return_exceptions=True)
         self.emit("done", None)
 
     async def perform(self, op: Mapping[str, Any]) -> None:
@@ -159,8 +166,11 @@ class CaseRun:
             await asyncio.sleep(float(op.get("seconds") or 0.0))
         elif name == "await-replies":
             await self.await_replies()
-        elif name in SPEC.requests_by_name:
-            task = asyncio.get_running_loop().create_task(self.request(ident, name, op))
+        elif name in SPEC.requests_by_name or name in CHOICES:
+            perform = self.request if name in SPEC.requests_by_name else self.choose
+            task = asyncio.get_running_loop().create_task(perform(ident, name, op))
+            self.in_flight.add(task)
+            task.add_done_callback(self.in_flight.discard)
             if op.get("pipeline"):
                 self.pending.append(task)
                 await asyncio.sleep(0)  # let it be queued before the next op
@@ -186,6 +196,7 @@ class CaseRun:
             self.ended = True
             return
         self.arm = arm
+        self.wrist = WristBook(arm)
         arm.add_async_listener(self.on_async)
         arm.add_error_listener(self.on_error)
         arm.add_close_listener(self.on_close)
@@ -248,6 +259,41 @@ class CaseRun:
             return
         self.report_reply(ident, name, request, value)
 
+    async def choose(self, ident: int | None, name: str, op: Mapping[str, Any]) -> None:
+        """A choice operation: arm-guard (the client picks the number) or change-load."""
+        if self.wrist is None or self.ended or self.arm is None or self.arm.closed:
+            self.emit("error", ident, origin="client", kind="not-connected", request_number=None, detail="")
+            return
+        args = dict(op.get("args") or {})
+        timeout = float(op.get("timeout") or self.timeout)
+        values: dict[str, Any] = {}
+        try:
+            if name == "arm-guard":
+                values["guard"] = await self.wrist.arm_guard(
+                    args["dvec"], args["tol"], stop=bool(args.get("stop", True)), timeout=timeout
+                )
+            else:
+                await self.wrist.change_load(args["weight"], args["cg"], args.get("offset"), timeout=timeout)
+        except (ValueError, TypeError, KeyError) as exc:
+            self.emit(
+                "error", ident, origin="client", kind="refused-locally", request_number=None, detail=str(exc)
+            )
+            return
+        except ServerError as exc:
+            self.report_error(ident, exc)
+            return
+        except ManipError as exc:
+            kind = (
+                "timeout"
+                if isinstance(exc, RequestTimeout)
+                else "not-connected"
+                if isinstance(exc, ConnectionLost)
+                else "other"
+            )
+            self.emit("error", ident, origin="client", kind=kind, request_number=None, detail=str(exc))
+            return
+        self.emit("reply", ident, request=name, request_number=None, values=values, raw={})
+
     def report_reply(self, ident: int | None, name: str, request: Request[Any], value: Any) -> None:
         spec = SPEC.requests_by_name[name]
         data = b"".join(request.responses)
@@ -263,6 +309,9 @@ class CaseRun:
         else:
             values = {k: _json_value(v) for k, v in dict(value).items()}
             raw = raw_fields(response_layout(spec), data)
+            if faults.on(faults.ClientFault.LITERAL_EXAMPLES):  # one element as a bare string
+                counted = {f.name for f in response_layout(spec).fields if f.type.element == "counted"}
+                raw = {k: v[0] if len(v) == 1 and k not in counted else v for k, v in raw.items()}
         self.emit("reply", ident, request=name, request_number=request.packet_number, values=values, raw=raw)
 
     def report_client_error(self, ident: int | None, request: Request[Any], exc: ManipError) -> None:
@@ -301,7 +350,15 @@ class CaseRun:
     def lost(self, reason: str) -> None:
         if not self.ended and not self.closing:
             self.ended = True
+            if faults.on(faults.ClientFault.LITERAL_EXAMPLES):  # after the in-flight requests' errors
+                self._late.append(asyncio.get_running_loop().create_task(self._lost_after(reason)))
+                return
             self.emit("state", None, state="lost", reason=reason)
+
+    async def _lost_after(self, reason: str) -> None:
+        flying = [t for t in self.in_flight if t is not asyncio.current_task()]
+        await asyncio.gather(*flying, return_exceptions=True)
+        self.emit("state", None, state="lost", reason=reason)
 
     # ------------------------------------------------------------------ listeners
 

@@ -215,6 +215,8 @@ class MatchingCore:
     def find_matching_request(self, number: int) -> Request[Any] | None:
         if faults.on(ClientFault.WRONG_REQUEST_NUMBER):
             number = (number + 1) & 0xFFFF
+        if faults.on(ClientFault.ARRIVAL_ORDER) and self._pending:
+            return next(iter(self._pending.values()))  # the oldest waiting, whatever the number
         return self._pending.get(number)
 
     def why_unmatched(self, number: int) -> OutOfSequenceReason:

@@ -44,6 +44,8 @@ from manip.links import (
 )
 from manip.links import ConnectionLost as ChaosConnectionLost
 from manip.links.api import LinkWrapper
+from manip.ncp.config import MAX_WINDOW
+from manip.ncp.packets import pack_status, unpack_status
 from manip.reference_client import faults
 from manip.reference_client.errors import ConnectionLost
 from manip.reference_client.faults import ClientFault
@@ -86,6 +88,8 @@ class NcpTransport:
         self.close_timeout = close_timeout
         self.ncp_options = ncp_options
         self.wrap_link = _no_ack(wrap_link) if faults.on(ClientFault.NEVER_ACK) else wrap_link
+        if faults.on(ClientFault.IGNORE_WINDOW):
+            self.wrap_link = _wide_window(self.wrap_link)
         self._conn: ChaosConnection | None = None
         self._ahead: Packet | None = None
         self._end: ChaosError | None = None
@@ -223,6 +227,33 @@ def _no_ack(inner: LinkWrapper | None) -> LinkWrapper:
             return send(packet.with_(ack_no=0), next_hop)
 
         wrapped.send = send_without_acks  # type: ignore[method-assign]
+        return wrapped
+
+    return wrap
+
+
+def _wide_window(inner: LinkWrapper | None) -> LinkWrapper:
+    """Fault ignore-window: the window in every OPN and STS received reads as the largest there is, so
+    the NCP sends as if the server's window had no end."""
+
+    def wrap(link: Link) -> Link:
+        wrapped = inner(link) if inner is not None else link
+        set_receiver = wrapped.set_receiver
+
+        def set_widening_receiver(receiver: Any) -> None:
+            if receiver is None:
+                set_receiver(None)
+                return
+
+            def widened(source: Link, packet: Packet) -> None:
+                status = unpack_status(packet.data) if packet.opcode in (ChaosOp.OPN, ChaosOp.STS) else None
+                if status is not None:
+                    packet = packet.with_(data=pack_status(status[0], MAX_WINDOW) + packet.data[4:])
+                receiver(source, packet)
+
+            set_receiver(widened)
+
+        wrapped.set_receiver = set_widening_receiver  # type: ignore[method-assign]
         return wrapped
 
     return wrap

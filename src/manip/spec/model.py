@@ -30,8 +30,10 @@ class Clause:
     """For a retired clause: the clause(s) that say it now (a renamed clause keeps its old id here)."""
     judged_from: Literal["live", "recording"] = "live"
     """``recording`` for a client rule about what a client chooses to send of its own accord (which guard
-    number, when to send set-weight): a harness told what to send cannot show it, so it is judged from a
-    recording of the client at work (``manip-conform verify --judge client``), never by a live case."""
+    number, when to send set-weight): a request op tells a harness exactly what to send, so the rule is
+    judged from a recording of the client at work (``manip-conform verify --judge client``) and, live,
+    through the harness contract's choice operations (docs/client-harness.md section 4.4), by the same
+    rule code."""
 
 
 @dataclass(frozen=True, slots=True)

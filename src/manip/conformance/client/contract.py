@@ -16,23 +16,33 @@ from typing import Any, Final
 from manip.spec import SPEC
 
 __all__ = [
+    "CHOICE_OPERATIONS",
     "CONTRACT",
     "CONTROL_OPERATIONS",
     "FEATURES",
     "LINKS",
     "REQUEST_OPERATIONS",
     "RESULT_TYPES",
+    "REVISION",
     "ContractError",
     "Hello",
     "Instruction",
     "Op",
     "Result",
+    "choice_args",
     "parse_hello",
+    "parse_instruction",
     "parse_result",
+    "request_args",
 ]
 
 CONTRACT: Final = 1
+REVISION: Final = 2
+"""The contract's revision (docs/client-harness.md, "Versions"): 2 added the choice operations."""
 CONTROL_OPERATIONS: Final[tuple[str, ...]] = ("connect", "close", "wait", "await-replies")
+CHOICE_OPERATIONS: Final[tuple[str, ...]] = ("arm-guard", "change-load")
+"""Operations that leave a choice to the client (which guard number; what to send when the load
+changes), judged from what it sends (revision 2, optional)."""
 REQUEST_OPERATIONS: Final[tuple[str, ...]] = tuple(op.name for op in SPEC.requests.values())
 """Every request of the spec, by name: the operations that send a request."""
 LINKS: Final[tuple[str, ...]] = ("tcp", "chudp", "chaosd")
@@ -101,6 +111,7 @@ class Instruction:
         data = {
             "type": "case",
             "contract": CONTRACT,
+            "revision": REVISION,
             "case": self.case,
             "seed": self.seed,
             "link": self.link,
@@ -194,6 +205,106 @@ def parse_hello(line: str) -> Hello:
         _strings(data, "operations"),
         _strings(data, "features"),
     )
+
+
+def _number(data: Mapping[str, Any], key: str, where: str) -> float | None:
+    value = data.get(key)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ContractError(f"{where}: {key!r} must be a number")
+    return float(value)
+
+
+def _op(item: Any) -> Op:
+    if not isinstance(item, dict):
+        raise ContractError("an operation must be a JSON object")
+    ident, name, args = item.get("id"), item.get("op"), item.get("args")
+    if not isinstance(ident, int) or isinstance(ident, bool) or not isinstance(name, str):
+        raise ContractError(f"an operation needs an integer 'id' and a string 'op': {item!r}")
+    if args is not None and not isinstance(args, dict):
+        raise ContractError(f"op {ident}: 'args' must be an object")
+    where = f"op {ident}"
+    return Op(
+        ident,
+        name,
+        args,
+        _number(item, "timeout", where),
+        bool(item.get("pipeline", False)),
+        _number(item, "seconds", where),
+    )
+
+
+def request_args(name: str, args: Mapping[str, Any] | None) -> dict[str, Any]:
+    """An op's ``args`` as the codec takes them (section 4.2): a JSON number of a float field is a float
+    (``1`` and ``1.0`` alike), integers stay integers; KeyError for an unknown request name."""
+    layout = SPEC.requests_by_name[name].request
+    out = dict(args or {})
+    for f in layout.fields:
+        value = out.get(f.name)
+        if f.type.element != "float" or value is None:
+            continue
+        if isinstance(value, list):
+            out[f.name] = [_as_float(v) for v in value]
+        else:
+            out[f.name] = _as_float(value)
+    return out
+
+
+CHOICE_FIELDS: Final[dict[str, dict[str, tuple[int, bool]]]] = {
+    "arm-guard": {"dvec": (6, True), "tol": (1, True), "stop": (0, False)},
+    "change-load": {"weight": (1, True), "cg": (3, True), "offset": (3, False)},
+}
+"""Each choice operation's args: name -> (how many numbers, 1 a single one, 0 a boolean; required)."""
+
+
+def choice_args(name: str, args: Mapping[str, Any] | None) -> dict[str, Any]:
+    """A choice operation's ``args`` checked (section 4.4), numbers as floats; ContractError if not."""
+    fields = CHOICE_FIELDS[name]
+    out = dict(args or {})
+    for key, (count, required) in fields.items():
+        value = out.get(key)
+        if value is None:
+            if required:
+                raise ContractError(f"{name}: {key!r} is required")
+            continue
+        if count == 0:
+            if not isinstance(value, bool):
+                raise ContractError(f"{name}: {key!r} must be true or false")
+            continue
+        items = value if count > 1 else [value]
+        if not isinstance(items, list) or len(items) != count or not all(_is_number(v) for v in items):
+            raise ContractError(f"{name}: {key!r} must be {count} number(s)")
+        out[key] = [float(v) for v in items] if count > 1 else float(value)
+    return out
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _as_float(value: Any) -> Any:
+    return float(value) if isinstance(value, int) and not isinstance(value, bool) else value
+
+
+def parse_instruction(line: str) -> Instruction:
+    """A ``case`` line as a harness reads it (the suite's own reading, for examples and harness tests)."""
+    data = _load(line)
+    if data.get("type") != "case":
+        raise ContractError(f"not a case instruction: type {data.get('type')!r}")
+    for key in ("case", "link", "target", "contact"):
+        if not isinstance(data.get(key), str):
+            raise ContractError(f"case: {key!r} must be a string")
+    operations = data.get("operations")
+    if not isinstance(operations, list):
+        raise ContractError("case: 'operations' must be a list")
+    ops_ = tuple(_op(item) for item in operations)
+    if len({op.id for op in ops_}) != len(ops_):
+        raise ContractError("case: operation ids must be unique")
+    seed, timeout = data.get("seed"), _number(data, "timeout", "case")
+    if not isinstance(seed, int) or timeout is None:
+        raise ContractError("case: 'seed' must be an integer and 'timeout' a number")
+    return Instruction(data["case"], seed, data["link"], data["target"], data["contact"], timeout, ops_)
 
 
 def _check_fields(kind: str, data: Mapping[str, Any]) -> None:

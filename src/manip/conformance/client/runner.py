@@ -29,7 +29,7 @@ from datetime import UTC, datetime
 from typing import Any, Final
 
 from manip.conformance.client.contract import Hello, Instruction, Op, Result
-from manip.conformance.client.process import HarnessError, HarnessProblem, HarnessProcess
+from manip.conformance.client.process import HarnessError, HarnessProblem, HarnessProcess, Limits
 from manip.conformance.client.server import Mangle, Script, ServerSide, WireRecord, serve_scenario
 from manip.conformance.client.wire import (
     ack_findings,
@@ -69,6 +69,7 @@ _PROBLEM_KIND: Final[dict[str, FailureKind]] = {
     "hung": "deadline",
     "crashed": "closed",
     "garbage": "malformed",
+    "no-hello": "missing",
 }
 
 
@@ -268,6 +269,8 @@ class ClientRunConfig:
     command: str = ""
     env: dict[str, str] | None = None
     slack: float = HARNESS_SLACK
+    limits: Limits = field(default_factory=Limits)
+    """The time limits on the harness (hello, exit, kill, writing a case)."""
 
 
 @dataclass
@@ -317,7 +320,7 @@ async def run_client_suite(
         )
     if events.started:
         events.started(chosen)
-    harness = HarnessProcess(config.argv, env=config.env)
+    harness = HarnessProcess(config.argv, env=config.env, limits=config.limits)
     try:
         hello = await _start(harness, report, events)
         if hello is None:
@@ -332,16 +335,7 @@ async def run_client_suite(
             config.options.deadline_scale,
             config.slack,
         )
-        for item in chosen:
-            result = await run_client_case(config, session, item)
-            report.results.append(result)
-            if events.case_finished:
-                events.case_finished(result)
-        for result in report.results:
-            if result.outcome == "fixed":
-                report.problems.append(
-                    f"case {result.id} is listed as known failing but passed: remove its entry"
-                )
+        await _run_cases(config, session, chosen, report, events)
     except (asyncio.CancelledError, KeyboardInterrupt):
         report.interrupted = True
         report.problems.append("the run was interrupted; this report is partial")
@@ -349,6 +343,28 @@ async def run_client_suite(
         await harness.stop()
         report.duration = time.monotonic() - t0
     return report
+
+
+async def _run_cases(
+    config: ClientRunConfig, session: Session, chosen: Sequence[Case], report: RunReport, events: ClientEvents
+) -> None:
+    """Each case in turn; once the harness cannot be started again, the rest are skipped."""
+    harness = session.harness
+    for item in chosen:
+        if harness.unusable is not None:
+            result = _blank(config, item, "skip", "the harness could not be started again")
+        else:
+            result = await run_client_case(config, session, item)
+        report.results.append(result)
+        if events.case_finished:
+            events.case_finished(result)
+    if harness.unusable is not None:
+        report.problems.append(f"the harness could not be started again: {harness.unusable}")
+    for result in report.results:
+        if result.outcome == "fixed":
+            report.problems.append(
+                f"case {result.id} is listed as known failing but passed: remove its entry"
+            )
 
 
 async def _start(harness: HarnessProcess, report: RunReport, events: ClientEvents) -> Hello | None:

@@ -7,6 +7,12 @@ leaks into the next.  Every packet both ways is recorded by a tap between the no
 A scenario's script drives a :class:`ServerSide`: take the client's next request, answer it (whole, in
 pieces, late, with an error string, with asynchronous packets first), close or drop the connection.  The
 initial RESPONSE is sent before the script runs (its number: the RFC's packet number).
+
+Throttling, to judge the client's window (``ncp.window``): the server's driver acknowledges a request only
+when the script takes it (:meth:`ServerSide.next_request`), so a script that *holds* (takes nothing for a
+while) holds its acknowledgements and its replies; :meth:`ServerSide.delay_status` holds the STS packets
+that would open the window for a time; :meth:`ServerSide.offer_window` changes the window the server
+offers mid-case (every STS from then on carries it, and one goes out at once).
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ from manip.codecs.packet import Packet
 from manip.links import ChaosConnection, ChaosError, Link, NcpConfig, start_server
 from manip.links.api import ChaosServer
 from manip.ncp import ConnectionRequested
+from manip.ncp.packets import pack_status, unpack_status
 from manip.spec.constants import ChaosOp, ServerOp
 from manip.spec.model import FieldType
 
@@ -65,6 +72,10 @@ class Wire:
         self.records: list[WireRecord] = []
         self.mangle = mangle
         self.links: list[TappedLink] = []
+        self.window: int | None = None
+        """The window every OPN and STS the server sends carries instead of its NCP's (None: its NCP's)."""
+        self.status_held_until: float = 0.0
+        """STS packets sent before this time of the loop's clock go out only then."""
         self._loop = asyncio.get_running_loop()
         self._t0 = self._loop.time()
 
@@ -76,9 +87,12 @@ class Wire:
         return int((self._loop.time() - self._t0) * 1e9)
 
     def wrap(self, link: Link) -> Link:
-        tapped = _MangledLink(link, self) if self.mangle is not None else TappedLink(link, self)
+        tapped = _JudgeLink(link, self)
         self.links.append(tapped)
         return tapped
+
+    def loop_time(self) -> float:
+        return self._loop.time()
 
     def link_opened(self, link: TappedLink) -> None:
         pass
@@ -99,18 +113,30 @@ class Wire:
         return [r.packet for r in self.records if r.dir == "s2c"]
 
 
-class _MangledLink(TappedLink):
-    """Duplicates and reorders outgoing packets (the NCP above must still deliver them once, in order)."""
+class _JudgeLink(TappedLink):
+    """The server's link as the tap sees it: offers the scenario's window, holds STS packets while
+    told to, and on CHUDP duplicates and reorders outgoing data packets (the NCP above must still
+    deliver them once, in order)."""
 
     def __init__(self, inner: Link, tap: Wire) -> None:
         super().__init__(inner, tap)
         self.wire = tap
         self._held: tuple[Packet, int | None] | None = None
+        self._held_status: list[tuple[Packet, int | None]] = []
 
     def send(self, packet: Packet, next_hop: int | None = None) -> bool:
-        mangle = self.wire.mangle
-        assert mangle is not None
-        if packet.opcode < ChaosOp.DAT:  # control packets go straight through
+        wire = self.wire
+        if packet.opcode in (ChaosOp.STS, ChaosOp.OPN) and wire.window is not None:
+            status = unpack_status(packet.data)
+            if status is not None:
+                packet = packet.with_(data=pack_status(status[0], wire.window) + packet.data[4:])
+        if packet.opcode == ChaosOp.STS and wire.loop_time() < wire.status_held_until:
+            if not self._held_status:
+                asyncio.get_running_loop().call_at(wire.status_held_until, self._release_status)
+            self._held_status.append((packet, next_hop))
+            return True
+        mangle = wire.mangle
+        if mangle is None or packet.opcode < ChaosOp.DAT:  # control packets go straight through
             return super().send(packet, next_hop)
         if self._held is None and mangle.rng.random() < mangle.reorder:
             self._held = (packet, next_hop)
@@ -126,6 +152,12 @@ class _MangledLink(TappedLink):
         held, self._held = self._held, None
         if held is not None and not self.inner.is_closed:
             super().send(*held)
+
+    def _release_status(self) -> None:
+        held, self._held_status = self._held_status, []
+        for packet, next_hop in held:
+            if not self.inner.is_closed:
+                self.send(packet, next_hop)
 
 
 class ServerSide:
@@ -160,6 +192,23 @@ class ServerSide:
         self.requests.append(packet)
         return packet
 
+    async def arrived(self, timeout: float = 10.0) -> bool:
+        """Wait until a packet is there to take, without taking (so without acknowledging) it; False
+        when the connection ends or nothing comes in time."""
+        conn = self.conn
+        event = asyncio.Event()
+        conn.set_wakeup(event.set)
+        try:
+            async with asyncio.timeout(timeout):
+                while conn.pending == 0 and not conn.ended:
+                    event.clear()
+                    await event.wait()
+        except TimeoutError:
+            return False
+        finally:
+            conn.set_wakeup(None)
+        return conn.pending > 0
+
     async def send(self, opcode: int, data: bytes) -> int:
         return await self.conn.send(data, opcode)
 
@@ -191,12 +240,16 @@ class ServerSide:
         """End the connection at once with a CLS carrying ``reason``."""
         self.conn.abort(reason)
 
+    def _opn(self) -> Packet | None:
+        """The OPN the server sent (it gives the connection's hosts and indexes)."""
+        return next(
+            (r.packet for r in self.wire.records if r.dir == "s2c" and r.packet.opcode == ChaosOp.OPN), None
+        )
+
     def send_los(self, reason: str) -> bool:
         """Send the client a LOS for this connection, as an NCP that lost it would; False when the OPN
         (which gives the indexes) was not recorded."""
-        opn = next(
-            (r.packet for r in self.wire.records if r.dir == "s2c" and r.packet.opcode == ChaosOp.OPN), None
-        )
+        opn = self._opn()
         if opn is None or not self.wire.links:
             return False
         los = Packet(
@@ -209,15 +262,64 @@ class ServerSide:
         )
         return self.wire.links[0].send(los)
 
+    async def hold(self, seconds: float) -> None:
+        """Take nothing for ``seconds``: the client's requests stay unacknowledged and unanswered (the
+        server's driver acknowledges a packet when the script takes it)."""
+        await asyncio.sleep(seconds)
+
+    def delay_status(self, seconds: float) -> None:
+        """Hold every STS the server sends in the next ``seconds``; they go out, in order, after."""
+        self.wire.status_held_until = self.wire.loop_time() + seconds
+
+    def offer_window(self, window: int) -> bool:
+        """Offer the client ``window`` from now on: every STS carries it, and one goes out at once
+        (acknowledging what the server last acknowledged); False when there is no OPN to address it."""
+        self.wire.window = window
+        opn = self._opn()
+        if opn is None or not self.wire.links:
+            return False
+        sent = [r.packet for r in self.wire.records if r.dir == "s2c"]
+        ack = next((p.ack_no for p in reversed(sent) if _carries_ack(p)), opn.ack_no)
+        statuses = [unpack_status(p.data) for p in sent if p.opcode == ChaosOp.STS]
+        receipt = next((st[0] for st in reversed(statuses) if st is not None), ack)
+        sts = Packet(
+            ChaosOp.STS,
+            dest_host=opn.dest_host,
+            dest_index=opn.dest_index,
+            src_host=opn.src_host,
+            src_index=opn.src_index,
+            ack_no=ack,
+            data=pack_status(receipt, window),
+        )
+        return self.wire.links[0].send(sts)
+
     def drop_link(self) -> None:
         """Drop the link under the connection (the client sees it lost, no CLS)."""
         for link in self.wire.links:
             link.close()
 
     async def serve_plainly(self, until_end: float = END_WAIT) -> None:
-        """Answer whatever comes next as a conformant server would, until the client closes."""
+        """Answer whatever comes next as a conformant server would, until the client closes (after its
+        EOF, wait for its CLS: a server that closed first would keep the client from sending it)."""
         while (request := await self.next_request(until_end)) is not None:
             await plain_answer(self, request)
+        await self.until_ended(until_end)
+
+    async def until_ended(self, timeout: float) -> bool:
+        """Wait until the connection has ended (the client's CLS, a LOS, the link); False on timeout."""
+        conn = self.conn
+        event = asyncio.Event()
+        conn.set_wakeup(event.set)
+        try:
+            async with asyncio.timeout(timeout):
+                while not conn.ended:
+                    event.clear()
+                    await event.wait()
+        except TimeoutError:
+            return False
+        finally:
+            conn.set_wakeup(None)
+        return True
 
 
 async def plain_answer(side: ServerSide, request: Packet) -> None:
@@ -332,6 +434,10 @@ async def serve_scenario(
     if contact != "PUMA":
         target += f"&contact={contact}"
     return Listener(server, wire, target, done, errors, sides, socket_dir)
+
+
+def _carries_ack(packet: Packet) -> bool:
+    return packet.opcode in (ChaosOp.OPN, ChaosOp.STS) or packet.opcode >= ChaosOp.DAT
 
 
 def _rfc_number(wire: Wire) -> int:

@@ -16,6 +16,7 @@ from manip.conformance.judge.checks import check_client_request
 from manip.conformance.judge.packets import WirePacket
 from manip.conformance.judge.violation import Violation
 from manip.conformance.suite.invariants import CLIENT_WIRE
+from manip.ncp.packets import unpack_status
 from manip.ncp.seq import seq_gt, seq_lt
 from manip.spec.constants import ChaosOp, ServerOp
 
@@ -24,6 +25,7 @@ __all__ = [
     "ack_findings",
     "client_requests",
     "initial_response_findings",
+    "judged_packets",
     "numbering_findings",
     "request_findings",
     "window_findings",
@@ -51,6 +53,18 @@ def client_requests(records: Sequence[WireRecord]) -> list[WireRecord]:
             seen.add(r.packet.packet_no)
             out.append(r)
     return out
+
+
+def judged_packets(records: Sequence[WireRecord]) -> list[WirePacket]:
+    """The data packets both ways as ``verify`` reads them from a recording: in order, the client's
+    first copies only (so a rule of :mod:`manip.conformance.judge.checks` judges a live play and a
+    recording alike)."""
+    first = {id(r) for r in client_requests(records)}
+    return [
+        wire_packet(r)
+        for r in records
+        if r.packet.opcode >= ChaosOp.DAT and (r.dir == "s2c" or id(r) in first)
+    ]
 
 
 def request_findings(records: Sequence[WireRecord]) -> list[Violation]:
@@ -142,26 +156,32 @@ def ack_findings(records: Sequence[WireRecord], *, settle: float = 0.0) -> list[
 
 
 def window_findings(records: Sequence[WireRecord], window: int) -> list[Violation]:
-    """The client never had more than the server's ``window`` data packets unacknowledged."""
+    """The client never had more data packets unacknowledged than the window the server offered at the
+    time: ``window`` until the server's OPN or an STS says otherwise, then what the latest of them says
+    (a window shrunk mid-case binds the packets sent after it)."""
     acked: int | None = None
+    offered = window
     for r in records:
         p = r.packet
         if r.dir == "s2c":
             carries_ack = p.opcode in (ChaosOp.OPN, ChaosOp.STS) or p.opcode >= ChaosOp.DAT
             if carries_ack and (acked is None or seq_gt(p.ack_no, acked)):
                 acked = p.ack_no
+            status = unpack_status(p.data) if p.opcode in (ChaosOp.OPN, ChaosOp.STS) else None
+            if status is not None:
+                offered = status[1]
             continue
         if p.opcode < ChaosOp.DAT or acked is None:
             continue
         outstanding = (p.packet_no - acked) & 0xFFFF
-        if 0 < outstanding <= 0x8000 and outstanding > window:
+        if 0 < outstanding <= 0x8000 and outstanding > offered:
             return [
                 Violation.at(
                     wire_packet(r),
                     "ncp.window",
                     f"packet {p.packet_no} sent with {outstanding} unacknowledged; "
-                    f"the server's window is {window}",
-                    expected=f"at most {window} packets beyond the last acknowledged ({acked})",
+                    f"the server's window is {offered}",
+                    expected=f"at most {offered} packets beyond the last acknowledged ({acked})",
                 )
             ]
     return []

@@ -19,9 +19,12 @@ from manip.spec.model import FieldType, Layout, RequestOpcode
 __all__ = [
     "close",
     "connect",
+    "error_parts",
     "exact_float",
     "expect_reply",
     "expected_raw",
+    "raw_words",
+    "reply_mismatches",
     "request",
     "wait",
 ]
@@ -115,10 +118,15 @@ def _same(a: Any, b: Any) -> bool:
     return bool(a == b)
 
 
-def _hex_list(items: Any) -> list[str] | None:
-    if not isinstance(items, list) or not all(isinstance(i, str) for i in items):
+def raw_words(seen: Any) -> list[str] | None:
+    """A ``raw`` field as upper-case hex strings: an array of strings, or a bare string standing for an
+    array of one (docs/client-harness.md: a field of one element may be written either way, for every
+    opcode); None for anything else."""
+    if isinstance(seen, str):
+        return [seen.upper()]
+    if not isinstance(seen, list) or not all(isinstance(i, str) for i in seen):
         return None
-    return [i.upper() for i in items]
+    return [i.upper() for i in seen]
 
 
 def reply_expectation(
@@ -134,6 +142,25 @@ def reply_expectation(
     reply = decode_reply(number.to_bytes(2, "little") + payload, op)
     values = {k: _plain(v) for k, v in reply.values.items()}
     return values, expected_raw(response_layout(op), payload)
+
+
+def reply_mismatches(
+    op: RequestOpcode, payload: bytes, number: int, data: Mapping[str, Any]
+) -> list[tuple[str, str]]:
+    """How the ``values`` and ``raw`` of a reply result (``data``) differ from what ``payload`` says,
+    as (expected, seen) pairs: empty when the reply is reported exactly."""
+    out: list[tuple[str, str]] = []
+    values, raw = reply_expectation(op, payload, number)
+    got_values = data.get("values") or {}
+    for name, value in values.items():
+        if not _same(_plain(got_values.get(name)), value):
+            out.append((f"{op.name} {name} = {value!r} (what the judge sent)", f"{got_values.get(name)!r}"))
+    got_raw = data.get("raw") or {}
+    for name, words in raw.items():
+        want = raw_words(words)
+        if raw_words(got_raw.get(name)) != want:
+            out.append((f"{op.name} {name} raw words {want}", f"{got_raw.get(name)!r}"))
+    return out
 
 
 def expect_reply(
@@ -155,30 +182,8 @@ def expect_reply(
         actual=str(answer) if answer is not None else f"no result for op {op_id}:\n{play.describe()}",
     )
     assert answer is not None
-    values, raw = reply_expectation(op, payload, number)
-    got_values = answer.get("values") or {}
-    for name, value in values.items():
-        ctx.expect(
-            _same(_plain(got_values.get(name)), value),
-            clause=clause,
-            expected=f"{op.name} {name} = {value!r} (what the judge sent)",
-            actual=f"{got_values.get(name)!r}",
-            data=payload,
-        )
-    got_raw = answer.get("raw") or {}
-    for name, words in raw.items():
-        seen = got_raw.get(name)
-        shown = (
-            _hex_list(seen) if isinstance(seen, list) else (seen.upper() if isinstance(seen, str) else None)
-        )
-        want = [w.upper() for w in words] if isinstance(words, list) else words.upper()
-        ctx.expect(
-            shown == want,
-            clause=clause,
-            expected=f"{op.name} {name} raw words {want}",
-            actual=f"{seen!r}",
-            data=payload,
-        )
+    for expected, seen in reply_mismatches(op, payload, number, answer.data):
+        ctx.expect(False, clause=clause, expected=expected, actual=seen, data=payload)
     return answer
 
 
@@ -198,8 +203,19 @@ def expect_error_parts(
         actual=str(result),
     )
     assert result is not None
+    for key, value in error_parts(error).items():
+        ctx.expect(
+            result.get(key) == value,
+            clause=clause,
+            expected=f"{key} = {value!r}",
+            actual=f"{key} = {result.get(key)!r} in {result}",
+        )
+
+
+def error_parts(error: ErrorMessage) -> dict[str, Any]:
+    """The parts of an ``error`` result for a server's error string, as the contract reports them."""
     message = render(error)
-    want = {
+    return {
         "where": error.where,
         "severity": error.severity,
         "code": error.code,
@@ -208,13 +224,6 @@ def expect_error_parts(
         "message": message,
         "rendered": f"{error.where}: {error.severity} {error.code}" + (f" {message}" if message else ""),
     }
-    for key, value in want.items():
-        ctx.expect(
-            result.get(key) == value,
-            clause=clause,
-            expected=f"{key} = {value!r}",
-            actual=f"{key} = {result.get(key)!r} in {result}",
-        )
 
 
 def render(error: ErrorMessage) -> str:

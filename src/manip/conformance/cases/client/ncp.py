@@ -3,26 +3,35 @@ the server's window, pipelined requests, and (on CHUDP) duplicated and reordered
 
 from __future__ import annotations
 
-from typing import Any
+import random
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from typing import Any, Final
 
+from manip.codecs.error_string import ErrorMessage
 from manip.codecs.lispm_text import encode_lispm
 from manip.codecs.messages import encode_reply, response_layout
+from manip.codecs.packet import Packet
 from manip.conformance.cases.client._support import (
     close,
     connect,
+    expect_error_parts,
     expect_reply,
     layout_values,
     request,
     spec_request,
 )
+from manip.conformance.cases.client.asyncs import expect_async
 from manip.conformance.cases.client.describe import DESCRIPTION, chunks_at, expect_text, play_description
 from manip.conformance.client.contract import Op
-from manip.conformance.client.runner import client_context
+from manip.conformance.client.runner import ClientContext, Play, client_context
 from manip.conformance.client.server import Mangle, ServerSide, plain_answer
 from manip.conformance.client.wire import ack_findings, numbering_findings, window_findings
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.links import NcpConfig
+from manip.spec import SPEC
+from manip.spec.constants import ServerOp
 
 PIPELINED = ("here", "joint-angles", "wrist-version", "read-forces", "read-raw-gauges", "here")
 
@@ -54,26 +63,59 @@ async def acknowledge(base: CaseContext) -> None:
     expect_text(ctx, play, raw)
 
 
-async def _pipelined(ctx: Any, names: tuple[str, ...], ncp: NcpConfig | None = None) -> Any:
+Answered = list[tuple[int, bytes]]
+"""(request number, reply payload) of each request the judging server answered, in order."""
+Throttle = Callable[[ServerSide, int], Awaitable[None]]
+"""What the judging server does before it takes the request of index ``i`` (holds, delays, shrinks)."""
+
+
+async def _no_throttle(_side: ServerSide, _i: int) -> None:
+    return None
+
+
+async def _pipelined(
+    ctx: ClientContext,
+    names: tuple[str, ...],
+    ncp: NcpConfig | None = None,
+    *,
+    throttle: Throttle = _no_throttle,
+    read_all_first: bool = False,
+    slack: float = 0.0,
+) -> tuple[Play, Answered]:
+    """``names`` sent pipelined and answered in order, with values drawn from the seed; ``throttle``
+    runs before each request is taken; ``read_all_first`` takes every request before answering any (so
+    only STS packets acknowledge them); ``slack`` seconds are added to each request's timeout."""
     values = [layout_values(ctx.random, response_layout(spec_request(n))) for n in names]
-    sent: list[tuple[int, bytes]] = []
+    sent: Answered = []
 
     async def script(side: ServerSide) -> None:
+        taken: list[Packet] = []
         for i in range(len(names)):
+            await throttle(side, i)
             req = await side.next_request()
             if req is None:
                 return
-            payload = encode_reply(req.opcode, req.packet_no, **values[i])[2:]
-            sent.append((req.packet_no, payload))
-            await side.reply_payload(req, payload)
+            taken.append(req)
+            if not read_all_first:
+                await _answer(side, req, values[i], sent)
+        if read_all_first:
+            for req, value in zip(taken, values, strict=True):
+                await _answer(side, req, value, sent)
         while (req := await side.next_request(3.0)) is not None:
             await plain_answer(side, req)
 
+    timeout = ctx.timeout + slack if slack else None
     ops: list[Op] = [connect(0)]
-    ops += [request(i + 1, n, pipeline=True) for i, n in enumerate(names)]
+    ops += [request(i + 1, n, pipeline=True, timeout=timeout) for i, n in enumerate(names)]
     ops += [Op(len(names) + 1, "await-replies"), close(len(names) + 2)]
     play = await ctx.play(ops, script, ncp=ncp)
     return play, sent
+
+
+async def _answer(side: ServerSide, req: Packet, values: dict[str, Any], sent: Answered) -> None:
+    payload = encode_reply(req.opcode, req.packet_no, **values)[2:]
+    sent.append((req.packet_no, payload))
+    await side.reply_payload(req, payload)
 
 
 @case("client.pipeline.replies-matched", clauses=["client.reply-matching", "client.reply-data"])
@@ -92,23 +134,186 @@ async def pipeline(base: CaseContext) -> None:
         expect_reply(ctx, play, i + 1, spec_request(name), payload, number, clause="client.reply-matching")
 
 
-@case("client.ncp.window", clauses=["ncp.window", "client.reply-matching"])
-async def window(base: CaseContext) -> None:
-    """The judging server offers a window of 2: six pipelined requests never have more than 2
-    unacknowledged, and all are answered."""
+INTERLEAVED: Final = ("here", "joint-angles", "set-joint-angles", "here", "joint-angles", "set-joint-angles")
+"""The pipelined requests of ``client.pipeline.interleaved`` (one of them answered by an error): three
+reply layouts, each twice, and only requests every client has (no wrist extension)."""
+WARNING: Final = ErrorMessage("PUMA", "W", "AWA", "Guard ~ stopped ~ segments", (3, 2))
+REFUSAL: Final = ErrorMessage("PUMA", "E", "NAP", "No arm power")
+
+
+@dataclass
+class _Interleaving:
+    """What the judging server sent in ``client.pipeline.interleaved``, for the judgement."""
+
+    answers: dict[int, tuple[int, bytes]] = field(default_factory=dict)
+    """Op id -> (request number, reply payload) of each request answered by a reply."""
+    refused: int = 0
+    """The op id answered by a non-fatal error."""
+    asyncs: list[tuple[int, int, int]] = field(default_factory=list)
+    order: list[int] = field(default_factory=list)
+    """Op ids in the order their answers went out."""
+
+
+def _answer_order(rng: random.Random, count: int) -> list[int]:
+    """A seed-drawn order of ``count`` answers that is never the order of the requests."""
+    order = list(range(count))
+    while order == sorted(order):
+        rng.shuffle(order)
+    return order
+
+
+async def _interleave(side: ServerSide, rng: random.Random, seen: _Interleaving) -> None:
+    req = await side.next_request()  # request-notifications, answered at once
+    if req is None:
+        return
+    await side.reply_payload(req, b"")
+    taken: list[Packet] = []
+    for _ in INTERLEAVED:
+        if (req := await side.next_request()) is None:
+            return
+        taken.append(req)
+    seen.refused = 2 + rng.randrange(len(INTERLEAVED))
+    extras = [
+        (ServerOp.ASYNCHRONOUS_RESPONSE, (2, 0, rng.randint(1, 0xFFF0))),
+        (ServerOp.ASYNCHRONOUS_RESPONSE, (1, rng.randint(1, 2), rng.randrange(16))),
+        (ServerOp.ASYNCHRONOUS_WARNING, None),
+    ]
+    slots = sorted(rng.sample(range(len(INTERLEAVED)), len(extras)))
+    for position, index in enumerate(_answer_order(rng, len(INTERLEAVED))):
+        if position in slots:
+            opcode, words = extras[slots.index(position)]
+            if words is None:
+                await side.error(opcode, side.last_number, WARNING)
+            else:
+                await side.async_response(*words, number=taken[index].packet_no)
+                seen.asyncs.append(words)
+        op_id, req = 2 + index, taken[index]
+        seen.order.append(op_id)
+        if op_id == seen.refused:
+            await side.error(ServerOp.NON_FATAL_ERROR, req.packet_no, REFUSAL)
+            continue
+        if req.opcode == SPEC.request("set-joint-angles").opcode:
+            side.segment = rng.randint(1, 0xFFF0)
+            payload = side.segment.to_bytes(2, "little")
+        else:
+            values = layout_values(rng, response_layout(spec_request(INTERLEAVED[index])))
+            payload = encode_reply(req.opcode, req.packet_no, **values)[2:]
+        seen.answers[op_id] = (req.packet_no, payload)
+        await side.reply_payload(req, payload)
+    await side.serve_plainly()
+
+
+@case(
+    "client.pipeline.interleaved",
+    clauses=["client.reply-matching", "client.async-routing", "client.error-report"],
+    hazard="motion",
+)
+async def interleaved(base: CaseContext) -> None:
+    """Six pipelined requests answered in an order drawn from the seed (never the order they were
+    sent), one of them by a non-fatal error, with asynchronous responses and a warning between the
+    answers: each answer reaches its own request by the number it carries (a client that matches by
+    arrival order is seen doing it), and the asynchronous packets answer none."""
     ctx = client_context(base)
-    names = ("here",) * 6
-    play, sent = await _pipelined(ctx, names, NcpConfig(window=2))
-    for finding in window_findings(play.wire, 2):
+    seen = _Interleaving()
+    rng = ctx.random
+    joints = {"joints": [float(rng.randint(-90, 90)) for _ in range(6)]}
+    ops: list[Op] = [connect(0), request(1, "request-notifications", {"mask": 3})]
+    for i, name in enumerate(INTERLEAVED):
+        ops.append(request(i + 2, name, joints if name == "set-joint-angles" else None, pipeline=True))
+    ops += [Op(len(ops), "await-replies"), close(len(ops) + 1)]
+    play = await ctx.play(ops, lambda side: _interleave(side, rng, seen))
+    ctx.note(f"answers went out for ops {seen.order}")
+    for op_id, (number, payload) in seen.answers.items():
+        name = INTERLEAVED[op_id - 2]
+        expect_reply(ctx, play, op_id, spec_request(name), payload, number, clause="client.reply-matching")
+    if seen.refused:
+        expect_error_parts(
+            ctx, play.answer(seen.refused), REFUSAL, "non-fatal-error", clause="client.error-report"
+        )
+    for code, word2, word3 in seen.asyncs:
+        handler = "guard-hit" if code == 1 else "segment-completed"
+        expect_async(ctx, play, code, word2, word3, handler)
+    warnings = [r for r in play.of("error", any_op=True) if r.get("origin") == "asynchronous-warning"]
+    ctx.expect(
+        len(warnings) == 1 and warnings[0].op is None,
+        clause="client.async-routing",
+        expected="one asynchronous-warning result, tied to no op",
+        actual="; ".join(str(r) for r in warnings) or play.describe(),
+    )
+
+
+def _expect_window(ctx: ClientContext, play: Play, window: int, sent: Answered, count: int) -> None:
+    """The window held on the wire (as offered at each moment), and every request answered and matched."""
+    for finding in window_findings(play.wire, window):
         ctx.expect(False, clause="ncp.window", expected=finding.expected, actual=finding.actual)
     ctx.expect(
-        len(sent) == len(names),
+        len(sent) == count,
         clause="client.reply-matching",
-        expected=f"{len(names)} requests answered",
+        expected=f"{count} requests answered",
         actual=f"{len(sent)}",
     )
     for i, (number, payload) in enumerate(sent):
         expect_reply(ctx, play, i + 1, spec_request("here"), payload, number, clause="client.reply-matching")
+
+
+def _hold_time(ctx: ClientContext) -> float:
+    """How long the judging server holds its acknowledgements: long enough for a client that ignores
+    the window to send past it, short against the reply timeout (drawn from the seed)."""
+    return round(min(0.25 * ctx.timeout, ctx.random.uniform(0.2, 0.4)), 3)
+
+
+@case("client.ncp.window", clauses=["ncp.window", "client.reply-matching"])
+async def window(base: CaseContext) -> None:
+    """The judging server offers a window of 2 and holds its acknowledgements and replies before it
+    takes each pair of requests: six pipelined requests never have more than 2 unacknowledged (a client
+    that sends past the window is seen doing it), and all are answered."""
+    ctx = client_context(base)
+    names = ("here",) * 6
+    hold = _hold_time(ctx)
+
+    async def throttle(side: ServerSide, i: int) -> None:
+        if i % 2 == 0:
+            await side.hold(hold)
+
+    play, sent = await _pipelined(ctx, names, NcpConfig(window=2), throttle=throttle, slack=3 * hold)
+    _expect_window(ctx, play, 2, sent, len(names))
+
+
+@case("client.ncp.window-opens-late", clauses=["ncp.window", "client.reply-matching"])
+async def window_opens_late(base: CaseContext) -> None:
+    """The judging server (window 2) takes each request at once but answers none until all six are in,
+    so only its STS packets open the window, and it holds each STS a while: the client waits for the
+    late STS before it sends past the window."""
+    ctx = client_context(base)
+    names = ("here",) * 6
+    hold = _hold_time(ctx)
+
+    async def throttle(side: ServerSide, i: int) -> None:
+        if i % 2 == 0 and await side.arrived():  # the STS of the pair that fills the window is held
+            side.delay_status(hold)
+
+    play, sent = await _pipelined(
+        ctx, names, NcpConfig(window=2), throttle=throttle, read_all_first=True, slack=4 * hold
+    )
+    _expect_window(ctx, play, 2, sent, len(names))
+
+
+@case("client.ncp.window-shrinks", clauses=["ncp.window", "client.reply-matching"])
+async def window_shrinks(base: CaseContext) -> None:
+    """The judging server offers a window of 4, holds its acknowledgements until the client has filled
+    it, then shrinks the window to 1 (an STS saying so) and takes the requests one by one: from then on
+    the client has at most one request unacknowledged."""
+    ctx = client_context(base)
+    names = ("here",) * 8
+    hold = _hold_time(ctx)
+
+    async def throttle(side: ServerSide, i: int) -> None:
+        if i == 0:
+            await side.hold(hold)
+            side.offer_window(1)
+
+    play, sent = await _pipelined(ctx, names, NcpConfig(window=4), throttle=throttle, slack=2 * hold)
+    _expect_window(ctx, play, 4, sent, len(names))
 
 
 @case("client.chudp.duplicate-reorder", clauses=["ncp.retransmission", "client.multi-packet"])

@@ -76,9 +76,18 @@ def _reply_case(op: RequestOpcode) -> None:
     )(reply_values)
 
 
+def _data_clause(op: RequestOpcode) -> str:
+    """The clause a request's data are judged under: the opcode's own (``hand.data``...) when the spec
+    has one binding the client, else the general one."""
+    if op.name in _MOVES:
+        return "move.transform-data"
+    own = SPEC.clauses.get(f"{op.name}.data")
+    return own.id if own is not None and own.party in ("client", "both") else "request-data.types"
+
+
 @case.each(WITH_ARGS)
 def _request_case(op: RequestOpcode) -> None:
-    clauses = ["request.opcode-range", "move.transform-data" if op.name in _MOVES else "request-data.types"]
+    clauses = ["request.opcode-range", _data_clause(op)]
 
     async def request_data(base: CaseContext) -> None:
         ctx = client_context(base)
@@ -165,6 +174,7 @@ async def out_of_sequence(base: CaseContext) -> None:
     ctx.expect(
         bool(signalled),
         clause="client.out-of-sequence",
-        expected=f"an error of kind out-of-sequence for the RESPONSE numbered {sent['stray']}",
+        expected=f"an error of kind out-of-sequence with request_number {sent['stray']}: the request "
+        "number the stray RESPONSE carries in its first data word, not its Chaos packet number",
         actual="; ".join(str(r) for r in play.of("error", any_op=True)) or "no error reported",
     )

@@ -1,0 +1,89 @@
+"""What the client chooses for itself about the wrist's guards and load (Part II B.8 and B.9 of the
+1985 guide): which guard number a new guard gets, and what to send when the hand's load changes.
+
+:class:`WristBook` keeps the guards armed on one connection: a new guard takes the lowest number that
+is free (never armed, cleared, or reported tripped by a guard-hit asynchronous response); a change of
+load sends set frame vector (when the frame vector changes) then set weight (NEWWC) with the new
+object's weight and centre of gravity, and is refused while a guard is armed, since both change the
+forces the guard tests (``client.guard-numbers``, ``client.newwc-on-load``,
+``client.no-newwc-with-guard``).  Fault switches of :mod:`.faults` break each rule on purpose.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, SupportsFloat
+
+from manip.reference_client import faults
+from manip.reference_client.faults import ClientFault
+from manip.reference_client.puma import GUARDS
+from manip.spec.constants import AsyncCondition
+
+__all__ = ["GuardsBusyError", "LoadChangeRefusedError", "WristBook"]
+
+
+class GuardsBusyError(ValueError):
+    """Every guard number is armed: no new guard can be armed until one is cleared or trips."""
+
+
+class LoadChangeRefusedError(ValueError):
+    """A change of load while guards are armed: set weight would change the forces they test."""
+
+
+class WristBook:
+    """The guards armed on ``arm`` (a :class:`~manip.reference_client.Manipulator` of type puma)."""
+
+    def __init__(self, arm: Any) -> None:
+        self.arm = arm
+        self.armed: set[int] = set()
+        self._remove = arm.add_async_listener(self._on_async)
+
+    def close(self) -> None:
+        self._remove()
+
+    def _on_async(self, response: Any) -> None:
+        if response.condition == AsyncCondition.GUARD_HIT:
+            self.armed.discard(response.word3 & 0xF)
+
+    def free_number(self) -> int:
+        """The lowest guard number not armed (GuardsBusyError when all 16 are)."""
+        if faults.on(ClientFault.GUARD_ZERO):
+            return 0
+        for number in range(GUARDS):
+            if number not in self.armed:
+                return number
+        raise GuardsBusyError(f"all {GUARDS} guards are armed")
+
+    async def arm_guard(
+        self, dvec: Sequence[SupportsFloat], tol: float, *, stop: bool = True, timeout: Any = None
+    ) -> int:
+        """Arm a new guard with a free number; returns the number."""
+        number = self.free_number()
+        kw = {} if timeout is None else {"timeout": timeout}
+        await self.arm.set_guard(number, dvec, tol, stop=stop, **kw)
+        self.armed.add(number)
+        return number
+
+    async def clear_guard(self, number: int, *, timeout: Any = None) -> None:
+        kw = {} if timeout is None else {"timeout": timeout}
+        await self.arm.clear_guard(number, **kw)
+        self.armed.discard(number)
+
+    async def change_load(
+        self,
+        weight: float,
+        cg: Sequence[SupportsFloat],
+        offset: Sequence[SupportsFloat] | None = None,
+        *,
+        timeout: Any = None,
+    ) -> None:
+        """The hand holds a new object (and, with ``offset``, the frame vector moves): set frame
+        vector, then set weight (NEWWC).  Refused while a guard is armed."""
+        if self.armed and not faults.on(ClientFault.NEWWC_UNDER_GUARD):
+            numbers = ", ".join(str(n) for n in sorted(self.armed))
+            raise LoadChangeRefusedError(f"guard(s) {numbers} armed: clear them before the load changes")
+        kw = {} if timeout is None else {"timeout": timeout}
+        if offset is not None:
+            await self.arm.set_frame_vector(offset, **kw)
+        if not faults.on(ClientFault.NO_NEWWC):
+            await self.arm.set_weight(weight, cg, **kw)
