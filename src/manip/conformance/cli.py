@@ -653,7 +653,7 @@ async def _run_target(
             address = environment.address
             config.address = address
             config.environment = environment
-            config.options = replace(config.options, address=address)
+            config.options = replace(config.options, address=address, embedded=True)
             console.print("embedded reference server in virtual time (with the simulated Cougar wrist)")
             await _run_with(config, cases, holder, console, quiet)
         return
@@ -661,7 +661,7 @@ async def _run_target(
     with embedded as address:
         config.address = address
         config.environment = embedded.environment
-        config.options = replace(config.options, address=address)
+        config.options = replace(config.options, address=address, embedded=True)
         console.print(
             f"embedded reference server at {address} (with the simulated Cougar wrist)", markup=False
         )

@@ -543,11 +543,7 @@ def _results(replay: SessionReplay, path: str, reproduce: Sequence[str], strict:
         notes=list(replay.notes)
         + ([f"{replay.masked} mismatch(es) left out by --ignore"] if replay.masked else []),
     )
-    for m in replay.mismatches:
-        expected = m.recorded + (f" (recorded bytes {m.recorded_bytes.hex(' ')})" if m.recorded_bytes else "")
-        exchange.violations.append(
-            Violation(m.message, m.clause, "MUST", expected, m.live, m.live_bytes, "mismatch")
-        )
+    exchange.violations += [m.violation(m.clause) for m in replay.mismatches]
     if replay.stopped and not replay.mismatches:
         exchange.violations.append(
             Violation(

@@ -204,6 +204,15 @@ def _example_text(failure: Evidence) -> str:
     return text + "".join(f"\n{line}" for line in listing)
 
 
+def _example_packets(failure: Evidence) -> list[WirePacket]:
+    """The packets of the shrunk example for the case's packet log (with those of its setup before it);
+    the whole failing exchange when the example was not recorded apart."""
+    if not failure.example:
+        return list(failure.packets)
+    inside = {id(p) for p in failure.example}
+    return [*(p for p in failure.packets if id(p) not in inside), *failure.example]
+
+
 def _first_evidence(group: BaseException) -> Evidence | None:
     if isinstance(group, Evidence):
         return group
@@ -282,7 +291,9 @@ async def run_property(
         if notes:
             actual += f"\n{notes}"
         actual += _example_text(failure)
-        ctx.fail_with(replace(failure.violation, actual=actual))
+        ctx.show_packets(_example_packets(failure))
+        culprit = failure.packets[0] if failure.packets else failure.violation.packet
+        ctx.fail_with(replace(failure.violation, actual=actual, packet=culprit))
 
 
 # ------------------------------------------------------------------------------- well-formed replies
