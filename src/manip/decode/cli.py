@@ -36,6 +36,7 @@ from manip.decode.describe import (
 from manip.decode.frames import LAYOUTS, EmptyInputError, Frame, Layout, frames
 from manip.decode.render import render_hexdump, render_tree
 from manip.decode.source import SourceError, byte_blocks, open_source, read_text, require_file
+from manip.exit_status import epilog
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp
 from manip.spec.notation import octal
@@ -220,7 +221,10 @@ def _error_node(frame: Frame, err: DecodeError, link: str) -> Node:
 # ---------------------------------------------------------------------------------------- command
 
 
-@click.command(context_settings={"help_option_names": ["-h", "--help"], "show_default": True})
+@click.command(
+    context_settings={"help_option_names": ["-h", "--help"], "show_default": True},
+    epilog=epilog("manip-decode"),
+)
 @click.argument("source", required=False)
 @click.option(
     "--link", type=click.Choice(sorted(FRAMINGS)), default="chudp", help="Framing of the input bytes."

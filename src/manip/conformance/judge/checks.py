@@ -39,7 +39,7 @@ from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import AsyncCondition, ChaosOp, ServerOp
 from manip.spec.model import Layout
-from manip.spec.notation import octal
+from manip.spec.notation import a_or_an, octal
 
 __all__ = [
     "ANSWER_OPCODES",
@@ -248,7 +248,7 @@ def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Violat
         allowed = [s.letter for s in SPEC.severities.values() if packet.opcode in s.server_opcodes]
         add(
             "error.severity-matches-opcode",
-            f"severity {error.severity} in a {opcode_name(packet)} ({octal(packet.opcode)}) packet",
+            f"severity {error.severity} in {a_or_an(opcode_name(packet))} ({octal(packet.opcode)}) packet",
             f"one of {', '.join(allowed)} in opcode {octal(packet.opcode)}",
             shown,
         )

@@ -40,6 +40,7 @@ from manip.conformance.output.documents import document_options, write_documents
 from manip.conformance.output.report import clause_lines, failure_text, write_json, write_junit
 from manip.conformance.suite.embedded import EmbeddedServer, simulated_server
 from manip.conformance.suite.results import ExitCode, RunReport
+from manip.exit_status import epilog
 
 if TYPE_CHECKING:
     from manip.conformance.replay.verify import Judge
@@ -59,13 +60,7 @@ __all__ = [
     "verify_command",
 ]
 
-EXIT_CODES_HELP = """\b
-Exit codes:
-  0  conformant (replay: every answer as recorded)
-  1  non-conformant, or a replayed answer differs from the recording
-  2  usage error
-  3  the capture cannot be read or holds no session; the target unreachable
-  4  interrupted or internal error"""
+EXIT_CODES_HELP = epilog("manip-conform verify, replay")
 
 _STYLE = {"fail": "bold red", "warn": "yellow", "error": "bold magenta", "pass": "green", "skip": "dim"}
 
