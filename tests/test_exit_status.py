@@ -57,7 +57,7 @@ def test_the_readme_shows_the_table() -> None:
 
 def test_the_table_covers_every_command() -> None:
     assert set(COMMANDS) == set(EXIT_STATUSES)
-    scripts = re.findall(r'^(manip-[a-z]+) = ', (ROOT / "pyproject.toml").read_text(), re.M)
+    scripts = re.findall(r"^(manip-[a-z]+) = ", (ROOT / "pyproject.toml").read_text(), re.M)
     assert {row.split()[0] for row in EXIT_STATUSES} == set(scripts)
 
 
