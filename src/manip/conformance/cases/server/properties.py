@@ -33,6 +33,7 @@ from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request
 from manip.conformance.cases._support import Evidence, describe_target, floats, must, reply_view
 from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, check_reply, word
+from manip.conformance.judge.diagnosis import float_payload, floats_diagnosis
 from manip.conformance.output.packet_text import packet_listing, show_value
 from manip.conformance.suite.bridge import (
     DEFAULT_SHRINK_BUDGET,
@@ -540,9 +541,11 @@ async def floats_round_trip(ctx: CaseContext) -> None:
                 worst = (
                     max(range(len(goal)), key=lambda i: abs(got[i] - goal[i]) / f_ulp(goal[i])) if got else 0
                 )
+                cause = floats_diagnosis(float_payload(SPEC.request("joint-angles"), settled.data), goal)
                 raise Evidence(
                     "float.format",
-                    "joint angles read back differ from those set by more than the float precision",
+                    "joint angles read back differ from those set by more than the float precision"
+                    + (f"; {cause}" if cause else ""),
                     f"{list(goal)} (each within {FLOAT_TRIP_ULPS} units of the 24th bit)",
                     f"{list(got)}; joint {worst + 1}: sent {goal[worst]!r}, got "
                     f"{got[worst] if got else 'nothing'!r}",
