@@ -512,3 +512,45 @@ def test_a_full_suite_verify_page_is_small_and_opens_fast(browser: list[str], tm
     assert root.attrs.get("data-ready") == "yes"
     assert int(root.attrs["data-ready-ms"]) < FULL_PAGE_READY_MS, root.attrs["data-ready-ms"]
     assert page.by_id("shown").content == f"{cases} of {cases} shown"
+
+
+def _with_script(page: Path, script: str, out: Path) -> Path:
+    """The page with ``script`` run after its own (a user's actions, played in the browser)."""
+    text = page.read_text(encoding="utf-8")
+    out.write_text(text.replace("</body>", f"<script>{script}</script></body>"), encoding="utf-8")
+    return out
+
+
+def test_the_filter_state_is_kept_in_the_url(failing_run: Run, browser: list[str], tmp_path: Path) -> None:
+    """Typing in the filter, unticking a verdict and choosing a level write the query string, so a
+    reload or a shared link shows the same rows."""
+    script = """
+      const search = document.getElementById("filter");
+      search.value = "error-string"; search.dispatchEvent(new Event("input"));
+      const pass = document.querySelector('input[name="verdict"][value="pass"]');
+      pass.checked = false; pass.dispatchEvent(new Event("change"));
+      const level = document.getElementById("level");
+      level.value = "MUST"; level.dispatchEvent(new Event("change"));
+      document.documentElement.dataset.query = location.search;
+    """
+    page = _dump_dom(browser, _with_script(failing_run.html, script, tmp_path / "p.html").as_uri())
+    query = page.elements[0].attrs["data-query"]
+    assert "q=error-string" in query and "level=MUST" in query and "verdict=" in query, query
+    assert "pass" not in query.split("verdict=")[1].split("&")[0]
+
+
+def test_the_copy_fallback_says_when_copying_failed(
+    failing_run: Run, browser: list[str], tmp_path: Path
+) -> None:
+    """Without the clipboard API (an old browser, a page it does not trust) the fallback copies through a
+    text area; when the browser refuses that too, the button must not say "Copied"."""
+    script = """
+      Object.defineProperty(navigator, "clipboard", { value: undefined });
+      document.execCommand = () => false;
+      const button = document.querySelector("button.copy");
+      button.click();
+      document.documentElement.dataset.said = button.textContent;
+    """
+    page = _dump_dom(browser, _with_script(failing_run.html, script, tmp_path / "c.html").as_uri())
+    said = page.elements[0].attrs["data-said"]
+    assert said.startswith("Copy failed") and said != "Copied", said
