@@ -11,12 +11,21 @@
   const boxes = Array.from(document.querySelectorAll('input[name="verdict"]'));
   const shown = document.getElementById("shown");
 
+  const texts = new Map();
+  function searchText(row) {  // the case id and its clauses (and a broken clause it does not cite)
+    if (!texts.has(row)) {
+      const words = [row.cells[1].textContent, row.cells[2].textContent, row.dataset.search || ""];
+      texts.set(row, words.join(" ").toLowerCase());
+    }
+    return texts.get(row);
+  }
+
   function apply() {
     const words = search.value.toLowerCase().split(/\s+/).filter(Boolean);
     const verdicts = new Set(boxes.filter((b) => b.checked).map((b) => b.value));
     let count = 0;
     for (const row of rows) {
-      const text = row.dataset.search.toLowerCase();
+      const text = searchText(row);
       const ok = verdicts.has(row.dataset.verdict) &&
         (!level.value || row.dataset.level === level.value) &&
         words.every((w) => text.includes(w));
