@@ -83,6 +83,7 @@ def test_state_rule_defects_fail_with_a_replayable_counterexample(fault: str, cl
     assert "packets of the failing run" in violation.actual
     # the case's packet log is that failing run, and the violation names its culprit there
     assert violation.packet is not None and culprit_index(r.packets, violation) is not None
+    assert violation.packet.direction == "s2c"  # what the server got wrong, not the request before it
 
 
 def test_an_embedded_target_is_reproduced_by_the_command_not_its_socket() -> None:

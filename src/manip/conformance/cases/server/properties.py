@@ -293,7 +293,7 @@ async def run_property(
             actual += f"\n{notes}"
         actual += _example_text(failure)
         ctx.show_packets(_example_packets(failure))
-        culprit = failure.packets[0] if failure.packets else failure.violation.packet
+        culprit = failure.culprit
         ctx.fail_with(replace(failure.violation, actual=actual, packet=culprit))
 
 

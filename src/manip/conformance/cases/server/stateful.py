@@ -709,7 +709,7 @@ async def arm_model(ctx: CaseContext) -> None:
         reproduce = ctx.reproduce if ctx.options.embedded and ctx.reproduce else None
         shown = _counterexample(failure, ctx.options.address or "tcp://HOST:PORT", reproduce)
         ctx.show_packets(failure.example or failure.packets)
-        culprit = failure.packets[0] if failure.packets else failure.violation.packet
+        culprit = failure.culprit
         ctx.fail_with(replace(failure.violation, actual=shown, packet=culprit))
 
 
