@@ -430,6 +430,16 @@ def test_the_packet_log_keeps_the_culprit_of_a_failure_after_packet_250() -> Non
     assert not any("request number 132" in f.content for f in folds)
 
 
+def test_a_culprit_past_the_kept_packets_is_said_not_linked() -> None:
+    data = _planted_report()
+    case = next(c for c in data["cases"] if c["id"] == PLANTED_CASE)
+    kept = {p["n"] for p in case["packets"]}
+    case["violations"][0]["packet"] = next(n for n in range(300, 0, -1) if n not in kept)
+    page = Page(render_html(data))
+    assert not [e for e in page.elements if e.tag == "a" and "culprit-link" in e.classes]
+    assert "(not kept in the report)" in page.by_id(f"case-{PLANTED_CASE}").content
+
+
 def test_a_violation_finds_its_packet_by_its_evidence() -> None:
     from manip.conformance.judge.packets import WirePacket
     from manip.conformance.judge.violation import Violation

@@ -318,18 +318,20 @@ def _near(number: int, culprits: Iterable[int]) -> bool:
     return number <= OPENING or any(c - BEFORE <= number <= c + AFTER for c in culprits)
 
 
+def _span(first: int, last: int) -> str:
+    return f"#{first}" if first == last else f"#{first}\u2013#{last}"
+
+
 def _fold(rows: list[str], first: int, last: int) -> str:
-    count = f"{len(rows)} packet" + ("" if len(rows) == 1 else "s")
-    span = f"#{first}" if first == last else f"#{first}\u2013#{last}"
     return (
-        f'<tr class="fold"><td colspan="4"><details><summary>{count} ({span}), folded</summary>'
+        f'<tr class="fold"><td colspan="4"><details><summary>{plural(len(rows), "packet")} '
+        f"({_span(first, last)}), folded</summary>"
         f'<table class="packets">{"".join(rows)}</table></details></td></tr>'
     )
 
 
 def _gap(first: int, last: int) -> str:
-    count = last - first + 1
-    words = f"{count} packet{'' if count == 1 else 's'} (#{first}" + (f"\u2013#{last})" if count > 1 else ")")
+    words = f"{plural(last - first + 1, 'packet')} ({_span(first, last)})"
     return f'<tr class="gap"><td colspan="4">{words} not kept in the report</td></tr>'
 
 
@@ -387,7 +389,7 @@ def _packet_log(case: Mapping[str, Any], order: WireOrder) -> str:
     )
 
 
-def _violation(report: Report, case_id: str, v: Mapping[str, Any]) -> str:
+def _violation(report: Report, case_id: str, v: Mapping[str, Any], kept: frozenset[int]) -> str:
     clause = v.get("clause")
     info = clause_info(report, clause) if clause else None
     ref = (
@@ -408,11 +410,13 @@ def _violation(report: Report, case_id: str, v: Mapping[str, Any]) -> str:
         fields.append(("bytes", bytes.fromhex(str(v["bytes"])).hex(" ") + "  (data, PDP-11 memory order)"))
     dl = "".join(f"<dt>{_e(k)}</dt><dd><pre>{_e(text)}</pre></dd>" for k, text in fields if text)
     number = v.get("packet")
-    if isinstance(number, int):
+    if isinstance(number, int) and number in kept:
         dl += (
             f'<dt>packet</dt><dd><a class="culprit-link" href="#{_packet_anchor(case_id, number)}">'
             f"#{number} in the packets below</a></dd>"
         )
+    elif isinstance(number, int):  # past the report's bound on kept packets
+        dl += f"<dt>packet</dt><dd>#{number} (not kept in the report)</dd>"
     return f'<div class="violation">{ref}<dl class="ea">{dl}</dl></div>'
 
 
@@ -430,7 +434,8 @@ def _case_detail(report: Report, case: Mapping[str, Any], order: WireOrder) -> s
     outcome = str(case["outcome"])
     is_open = " open" if outcome in FAILING or outcome == "warn" else ""
     parts = [f'<p class="summary">{_e(case.get("summary", ""))}</p>']
-    parts += [_violation(report, str(case["id"]), v) for v in case.get("violations", [])]
+    kept = frozenset(int(p.get("n", i)) for i, p in enumerate(case.get("packets", []), 1))
+    parts += [_violation(report, str(case["id"]), v, kept) for v in case.get("violations", [])]
     if outcome == "fixed":
         parts.append('<p class="reason">Listed in --known-failing but passed: remove the entry.</p>')
     if case.get("reason"):
