@@ -7,10 +7,12 @@
 --   tshark -X lua_script:dissectors/manip.lua -r capture.pcapng -V
 --
 -- CHUDP datagrams are found on UDP port 42042 and, by their header, on any other port.  A packet
--- whose source sent an RFC is a request; the replies are decoded by the layout of the request they
--- answer (found by its packet number).  Floats are PDP-11 F floats shown as numbers; error strings
--- are split into where, severity, code and message with their arguments; describe-self text is
--- shown as text.  Field names follow manip-decode's (manip.request_number, manip.joints, ...).
+-- whose source sent an RFC is a request; in a capture that starts after the connection opened, the
+-- sides are told by the UDP ports and by the shape of the first data packet.  The replies are decoded
+-- by the layout of the request they answer (found by its packet number).  Floats are PDP-11 F floats
+-- shown as numbers; error strings are split into where, severity, code and message with their
+-- arguments; describe-self text is shown as text.  Field names follow manip-decode's
+-- (manip.request_number, manip.joints, ...).  It runs on Lua 5.2 to 5.4.
 
 local SPEC_REVISION = "manip-spec/1"
 
@@ -182,7 +184,14 @@ local MANIP_FIELD_TYPES = {
   ["words"] = {"uint16", "Words"},
 }
 
-local bit = bit32
+-- Bit operations by arithmetic, so that one file runs on every Lua Wireshark is built with: Lua 5.2
+-- (bit32, no bitwise operators: they would not even parse) and Lua 5.3/5.4 (operators, no bit32).
+-- Every value here is a non-negative integer below 2^32.
+local POW2 = {}
+do local p = 1 for i = 0, 32 do POW2[i] = p p = p * 2 end end
+local function shr(v, n) return math.floor(v / POW2[n]) end     -- v >> n
+local function low(v, n) return v % POW2[n] end                 -- v & (2^n - 1)
+local function has_bit(v, b) return shr(v, b) % 2 == 1 end      -- v & (1 << b) ~= 0
 
 -- ------------------------------------------------------------------------------ protocols and fields
 
@@ -259,10 +268,9 @@ end
 local function utf8(cp)
   if cp < 0x80 then return string.char(cp) end
   if cp < 0x800 then
-    return string.char(0xC0 + bit.rshift(cp, 6), 0x80 + bit.band(cp, 0x3F))
+    return string.char(0xC0 + shr(cp, 6), 0x80 + low(cp, 6))
   end
-  return string.char(0xE0 + bit.rshift(cp, 12), 0x80 + bit.band(bit.rshift(cp, 6), 0x3F),
-                     0x80 + bit.band(cp, 0x3F))
+  return string.char(0xE0 + shr(cp, 12), 0x80 + low(shr(cp, 6), 6), 0x80 + low(cp, 6))
 end
 
 local LISPM_FORMATTING = {[0x88] = "\b", [0x89] = "\t", [0x8A] = "\n", [0x8C] = "\f", [0x8D] = "\n"}
@@ -295,13 +303,13 @@ end
 
 local function pdp11_float(data, i)  -- a PDP-11 F float: nil and a reason for a reserved operand
   local w0, w1 = u16(data, i), u16(data, i + 2)
-  local exp = bit.band(bit.rshift(w0, 7), 0xFF)
-  local negative = bit.band(w0, 0x8000) ~= 0
+  local exp = low(shr(w0, 7), 8)
+  local negative = has_bit(w0, 15)
   if exp == 0 then
     if negative then return nil, "float.reserved-operand" end
     return 0.0
   end
-  local v = (bit.band(w0, 0x7F) * 65536 + w1 + 8388608) * 2 ^ (exp - 152)
+  local v = (low(w0, 7) * 65536 + w1 + 8388608) * 2 ^ (exp - 152)
   if negative then v = -v end
   return v
 end
@@ -314,7 +322,7 @@ end
 local function joint_mask(mask)
   local joints = {}
   for b = 0, 15 do
-    if bit.band(mask, bit.lshift(1, b)) ~= 0 then joints[#joints + 1] = tostring(b + 1) end
+    if has_bit(mask, b) then joints[#joints + 1] = tostring(b + 1) end
   end
   if #joints == 0 then return "none" end
   if #joints == 1 then return joints[1] end
@@ -436,12 +444,12 @@ local function error_string(tree, data, dtvb)
   local args = {}
   if nul then
     local pos = nul + 1
-    if bit.band(n - pos, 1) == 1 then  -- an odd count after the NUL: a pad byte first
+    if (n - pos) % 2 == 1 then  -- an odd count after the NUL: a pad byte first
       if data:get_index(pos) ~= 0 then return "pad byte before the numbers is not zero",
                                               "error-string.arg-layout" end
       pos = pos + 1
     end
-    if bit.band(n - pos, 1) == 1 then
+    if (n - pos) % 2 == 1 then
       return "numbers after the NUL are not whole words", "error-string.args"
     end
     for i = pos, n - 2, 2 do args[#args + 1] = {u16(data, i), i} end
@@ -556,15 +564,42 @@ end
 
 -- ------------------------------------------------------------------------------ conversations
 
-local clients = {}   -- "host:index" of every RFC sender: their data packets are requests
+-- Which side is the server: the one an RFC goes to; the one an OPN or ANS comes from; in a capture that
+-- starts after the connection opened, the one whose UDP port is CHUDP's when the other's is not, else
+-- the one the first data packet goes to when its shape is a request's (from when its shape is a server
+-- packet's), as manip-decode --pcap decides.  A side once known stays known.
+local clients = {}   -- "host:index" of each client: its data packets are requests
+local servers = {}   -- "host:index" of each server: its data packets are server packets
 local pending = {}   -- "host:index#packet" of a request -> its opcode
+local CHUDP_PORT = 42042
 
 local function key(host, index) return host .. ":" .. index end
 
-local function guess_is_request(opcode, data)
+local function looks_like_error(data)  -- a request number, then "where: SEVERITY CODE ..."
+  local n = data:len()
+  if n < 4 then return false end
+  local stop = n
+  for i = 2, n - 1 do if data:get_index(i) == 0 then stop = i break end end
+  return string.find(lispm(data, 2, stop - 2), "^[^:]*: %S+ %S") ~= nil
+end
+
+local function guess_is_request(opcode, data)  -- by shape, as manip-decode guesses
   if opcode > 0x85 or data:len() == 0 then return true end
   if opcode == 0x80 or opcode == 0x83 then return false end
-  return false
+  return not looks_like_error(data)
+end
+
+local function is_request(pinfo, opcode, data, sh, si, dh, di)
+  local src, dst = key(sh, si), key(dh, di)
+  if clients[src] or servers[dst] then return true end
+  if clients[dst] or servers[src] then return false end
+  local request
+  if pinfo.src_port == CHUDP_PORT and pinfo.dst_port ~= CHUDP_PORT then request = false
+  elseif pinfo.dst_port == CHUDP_PORT and pinfo.src_port ~= CHUDP_PORT then request = true
+  else request = guess_is_request(opcode, data) end
+  if request then clients[src], servers[dst] = true, true
+  else clients[dst], servers[src] = true, true end
+  return request
 end
 
 -- ------------------------------------------------------------------------------ the packet
@@ -611,8 +646,8 @@ function p_chudp.dissector(tvb, pinfo, tree)
 
   -- The Chaos header: eight words, most significant byte first.
   local w = function(i) return tvb(4 + 2 * i, 2):uint() end
-  local opcode = bit.rshift(w(0), 8)
-  local fc, nbytes = bit.rshift(w(1), 12), bit.band(w(1), 0x0FFF)
+  local opcode = shr(w(0), 8)
+  local fc, nbytes = shr(w(1), 12), low(w(1), 12)
   local dh, di, sh, si, pn, an = w(2), w(3), w(4), w(5), w(6), w(7)
   local padded = nbytes + nbytes % 2
   local t = tree:add(p_chaos, tvb(4, size - 4))
@@ -634,7 +669,7 @@ function p_chudp.dissector(tvb, pinfo, tree)
   t:add(f_chaos.trailer_source, tvb(tr + 2, 2))
   local sum = 0
   for i = 4, size - 2, 2 do sum = sum + tvb(i, 2):uint() end
-  while sum > 0xFFFF do sum = bit.band(sum, 0xFFFF) + bit.rshift(sum, 16) end
+  while sum > 0xFFFF do sum = low(sum, 16) + shr(sum, 16) end
   local ck = t:add(f_chaos.trailer_checksum, tvb(tr + 4, 2))
   if sum ~= 0xFFFF then ck:add_proto_expert_info(e_checksum) end
   t:append_text(string.format(", %s %s, host %s index %s -> host %s index %s, #%d", opcode_name(opcode),
@@ -654,6 +689,7 @@ function p_chudp.dissector(tvb, pinfo, tree)
   local info
   if opcode < 0x80 then
     if opcode == 1 then clients[key(sh, si)] = true end
+    if opcode == 2 or opcode == 5 then servers[key(sh, si)], clients[key(dh, di)] = true, true end
     info = control(t, opcode, data, dtvb, an)
     pinfo.cols.info = (CHAOS_OPCODES[opcode] or octal(opcode)) .. (info and (" " .. info) or "")
     return size
@@ -663,12 +699,8 @@ function p_chudp.dissector(tvb, pinfo, tree)
     return size
   end
   pinfo.cols.protocol = "manip"
-  local is_request
-  if clients[key(sh, si)] then is_request = true
-  elseif clients[key(dh, di)] then is_request = false
-  else is_request = guess_is_request(opcode, data) end
   local wire = tvb(4, size - 4)
-  if is_request then
+  if is_request(pinfo, opcode, data, sh, si, dh, di) then
     local op = request(tree, wire, opcode, data, dtvb)
     if op and not pinfo.visited then pending[key(sh, si) .. "#" .. pn] = op end
     pinfo.cols.info = "request " .. (op and op.name or octal(opcode)) .. " #" .. pn
@@ -690,7 +722,7 @@ local function heuristic(tvb, pinfo, tree)
   local size = tvb:len()
   if size < 26 or size > 514 or size % 2 == 1 then return false end
   if tvb(0, 1):uint() ~= 1 or tvb(1, 1):uint() ~= 1 then return false end
-  local nbytes = bit.band(tvb(6, 2):uint(), 0x0FFF)
+  local nbytes = low(tvb(6, 2):uint(), 12)
   if 20 + nbytes + nbytes % 2 + 6 ~= size then return false end
   p_chudp.dissector(tvb, pinfo, tree)
   return true
@@ -698,6 +730,7 @@ end
 
 function p_chudp.init()
   clients = {}
+  servers = {}
   pending = {}
 end
 

@@ -108,6 +108,9 @@ def test_check_error_packet_severity_and_format() -> None:
     assert [f.clause for f in check_error_packet(_srv(ServerOp.NON_FATAL_ERROR, fatal_in_202))] == [
         "error.severity-matches-opcode"
     ]
+    fatal_in_205 = encode_error(ServerOp.ASYNCHRONOUS_WARNING, 0, ErrorMessage("x", "F", "NZI", "bad"))
+    (finding,) = check_error_packet(_srv(ServerOp.ASYNCHRONOUS_WARNING, fatal_in_205))
+    assert "severity F in an asynchronous-warning (0205) packet" in finding.message  # not "a asynchronous"
     no_colon = struct.pack("<H", 1) + b"dispatch C UOP Unknown"
     assert [f.clause for f in check_error_packet(_srv(ServerOp.NON_FATAL_ERROR, no_colon))] == [
         "error-string.format"
@@ -334,7 +337,7 @@ def _validate(instance: Any, schema: dict[str, Any], root: dict[str, Any], path:
         assert instance == schema["const"], path
     if "enum" in schema:
         assert instance in schema["enum"], f"{path}: {instance!r} not in {schema['enum']}"
-    if "minimum" in schema:
+    if "minimum" in schema and isinstance(instance, int | float):  # as JSON Schema: numbers only
         assert instance >= schema["minimum"], path
     if "pattern" in schema:
         import re

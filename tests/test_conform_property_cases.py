@@ -119,6 +119,20 @@ def test_a_failure_shows_the_falsifying_example_and_the_same_seed_finds_it_again
     requests = [line for line in shown.splitlines() if re.match(r"  [ >] +\d+  c2s ", line)]
     assert requests and all(re.search(r" 0[0-7]{3} \(packet number \d+, ", line) for line in requests)
     assert first.violations[0].actual == again.violations[0].actual
+    # the case's packet log is the shrunk example's run, and the violation's culprit is in it
+    violation = first.violations[0]
+    assert violation.packet is not None and any(p is violation.packet for p in first.packets)
+    marked = [line for line in shown.splitlines() if re.match(r"  > +\d+  ", line)]
+    assert marked and len(first.packets) <= len(
+        [ln for ln in shown.splitlines() if re.match(r"  [ >] +\d+  ", ln)]
+    )
+
+
+def test_a_float_round_trip_names_the_swap() -> None:
+    r = result(run(["property.floats.round-trip"], ["swapped-float-words"]), "property.floats.round-trip")
+    assert r.outcome == "fail"
+    message = r.violations[0].message  # the read-back differs; the bytes swapped back are what was sent
+    assert "with the two words of each float swapped, the values expected" in message, message
 
 
 def test_hardware_target_without_motion_sends_no_motion_or_power_request() -> None:

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import pytest
 
 from manip.conformance.cases.server.stateful import replay_async
+from manip.conformance.output.culprit import culprit_index
 from manip.conformance.suite import bridge
 from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.context import RunOptions
@@ -80,6 +81,18 @@ def test_state_rule_defects_fail_with_a_replayable_counterexample(fault: str, cl
     sent = [line for line in violation.actual.splitlines() if re.match(r" +\d+\. #\d+ +0[0-7]{3} ", line)]
     assert len(sent) == sum(1 for s in steps if isinstance(s, tuple))  # each request with its number
     assert "packets of the failing run" in violation.actual
+    # the case's packet log is that failing run, and the violation names its culprit there
+    assert violation.packet is not None and culprit_index(r.packets, violation) is not None
+    assert violation.packet.direction == "s2c"  # what the server got wrong, not the request before it
+
+
+def test_an_embedded_target_is_reproduced_by_the_command_not_its_socket() -> None:
+    """The embedded server's socket is gone after the run: the counterexample says to run the case again
+    (the same seed draws it again), not to replay its requests at that address."""
+    r = run(["no-nap"], embedded=True)
+    actual = r.violations[0].actual
+    assert "replay(" not in actual and "reproduce with" in actual
+    assert f"--select {CASE} --seed 5" in actual
 
 
 def test_the_same_seed_finds_the_same_counterexample(monkeypatch: pytest.MonkeyPatch) -> None:

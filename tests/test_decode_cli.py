@@ -23,7 +23,7 @@ from manip.codecs.packet import Trailer
 from manip.decode.cli import main
 from manip.decode.describe import _ENCODE, describe_packet, packet_json
 from manip.spec import SPEC
-from manip.spec.constants import RequestOp, ServerOp
+from manip.spec.constants import ChaosOp, RequestOp, ServerOp
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -350,3 +350,70 @@ def test_packet_json_on_packets_read_from_the_tcp_link() -> None:
         p = decode_tcp(encode_tcp(sent))
         assert p.trailer is not None
         assert packet_json(describe_packet(p, header=False), p) == _ENCODE(describe_packet(p).to_json())
+
+
+TRANSFORM = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 500.0, 150.0, 400.0)
+CLIENT, SERVER = (0o401, 0x0A01), (0o440, 0x5E02)
+
+
+def _between(opcode: int, number: int, data: bytes, *, to_server: bool) -> Packet:
+    (dh, di), (sh, si) = (SERVER, CLIENT) if to_server else (CLIENT, SERVER)
+    return Packet(opcode, dh, di, sh, si, number, 0, data)
+
+
+def test_a_tcp_stream_pairs_each_reply_with_its_request() -> None:
+    """No --request-opcode: a stream holding both sides decodes each reply by its request's layout (the
+    server is the side the RFC went to), as --pcap and the Wireshark dissector do."""
+    rfc = Packet(ChaosOp.RFC, SERVER[0], 0, CLIENT[0], CLIENT[1], 1, 0, b"PUMA")
+    stream = [
+        rfc,
+        _between(ChaosOp.OPN, 1, b"\x01\x00\x0f\x00", to_server=False),
+        _between(ServerOp.RESPONSE, 2, (1).to_bytes(2, "little"), to_server=False),
+        _between(RequestOp.HERE, 2, b"", to_server=True),
+        _between(RequestOp.JOINT_ANGLES, 3, b"", to_server=True),
+        _between(ServerOp.RESPONSE, 3, encode_reply("here", 2, transform=TRANSFORM), to_server=False),
+        _between(ServerOp.RESPONSE, 4, encode_reply("joint-angles", 3, joints=(1.0,) * 6), to_server=False),
+    ]
+    code, out, err = _run("--link", "tcp", b"".join(encode_tcp(p) for p in stream).hex())
+    assert code == 0, out + err
+    assert "P=(500, 150, 400)" in out and "answers: request #2 (here 0201), paired by position" in out
+    assert "answers: request #3 (joint-angles 0202), paired by position" in out
+    assert "guessed" not in out.split("0201 here")[1]  # the sides come from the RFC, not a guess
+
+
+def test_a_stream_cut_mid_connection_pairs_by_the_number_a_reply_carries() -> None:
+    stream = [
+        _between(RequestOp.HERE, 7, b"", to_server=True),
+        _between(ServerOp.RESPONSE, 9, encode_reply("here", 7, transform=TRANSFORM), to_server=False),
+    ]
+    code, out, err = _run("--link", "tcp", b"".join(encode_tcp(p) for p in stream).hex())
+    assert code == 0, out + err
+    assert "P=(500, 150, 400)" in out and "request #7 (here 0201), paired by the number it carries" in out
+
+
+DECODE = [sys.executable, "-c", "from manip.decode.cli import main; main()"]
+
+
+def test_no_source_on_a_terminal_says_what_it_waits_for() -> None:
+    """Standard input is a terminal (a pseudo-terminal here): a prompt on stderr, then the hex typed."""
+    import os
+    import pty
+
+    master, slave = pty.openpty()
+    try:
+        proc = subprocess.Popen(
+            DECODE, stdin=slave, stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        os.close(slave)
+        slave = -1
+        os.write(master, RFC_PUMA.encode() + b"\n\x04")
+        out, err = proc.communicate(timeout=60)  # one Ctrl-D after the line ends the input
+    finally:
+        os.close(master)
+        if slave >= 0:
+            os.close(slave)
+    assert "reading standard input, a terminal: type or paste hex" in err and "Ctrl-D" in err
+    assert proc.returncode == 0 and "contact 'PUMA'" in out, out + err
+    piped = subprocess.run(DECODE, input=RFC_PUMA, capture_output=True, text=True, timeout=60, check=False)
+    assert piped.returncode == 0 and piped.stderr == ""  # a pipe gets no prompt

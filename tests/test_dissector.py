@@ -1,8 +1,13 @@
 """dissectors/manip.lua: generated from the spec data, and in real tshark it agrees with manip-decode
-field for field on every packet of the golden captures (exported to pcapng by manip-capture export).
+field for field on every packet of the golden captures (exported to pcapng by manip-capture export), and
+of a capture that starts after its connection opened (no RFC: the sides come from the packets' shape).
 
-tshark is Debian's package (.ci/run installs it).  Without it these tests are skipped, except in CI
-(``CI=true``), where a missing tshark is a failure: the dissector must never go untested there.
+The same captures go through the dissector in a plain Lua 5.4 interpreter (``tests/lua/wireshark_stub.lua``
+stands in for Wireshark's API), as Wireshark 4.4 and later run it, and in Lua 5.2 when it is there (what
+Debian's tshark runs it on): the dissector must not need ``bit32`` nor the bitwise operators.
+
+tshark and lua5.4 are Debian's packages (.ci/run installs them).  Without them these tests are skipped,
+except in CI (``CI=true``), where a missing one is a failure: the dissector must never go untested there.
 """
 
 from __future__ import annotations
@@ -11,6 +16,7 @@ import importlib.util
 import json
 import math
 import os
+import re
 import shutil
 import subprocess
 from collections import defaultdict
@@ -21,13 +27,15 @@ from typing import Any
 import pytest
 from click.testing import CliRunner
 
-from manip.captures.pcap import export_pcapng
+from manip.captures.pcap import export_pcapng, iter_datagrams
 from manip.decode.cli import main as decode_main
 
 ROOT = Path(__file__).resolve().parents[1]
 LUA = ROOT / "dissectors" / "manip.lua"
 GOLDEN = ("describe-self", "motion", "errors")
 TSHARK = shutil.which("tshark")
+STUB = ROOT / "tests" / "lua" / "wireshark_stub.lua"
+LUAS = ("lua5.4", "lua5.2")
 
 
 def _generator() -> ModuleType:
@@ -58,6 +66,15 @@ def _need_tshark() -> str:
             pytest.fail("tshark is not installed: .ci/run installs Debian's tshark package")
         pytest.skip("tshark is not installed (apt-get install tshark)")
     return TSHARK
+
+
+def _need_lua(name: str) -> str:
+    found = shutil.which(name)
+    if found is None:
+        if os.environ.get("CI") == "true" and name == "lua5.4":
+            pytest.fail("lua5.4 is not installed: .ci/run installs Debian's lua5.4 package")
+        pytest.skip(f"{name} is not installed (apt-get install {name})")
+    return found
 
 
 # ---------------------------------------------------------------------------------------- tshark side
@@ -93,6 +110,32 @@ def tshark_fields(pcapng: Path) -> list[dict[str, list[str]]]:
         _collect(packet["_source"]["layers"], fields)
         packets.append(dict(fields))
     return packets
+
+
+def lua_fields(lua: str, pcapng: Path, tmp_path: Path) -> list[dict[str, list[str]]]:
+    """Each packet's chaos.* and manip.* fields as the dissector adds them in a plain Lua interpreter."""
+    datagrams = tmp_path / f"{pcapng.stem}.datagrams"
+    datagrams.write_text(
+        "".join(f"{d.src[1]} {d.dst[1]} {d.payload.hex()}\n" for d in iter_datagrams(pcapng)),
+        encoding="ascii",
+    )
+    result = subprocess.run(
+        [lua, str(STUB), str(LUA), str(datagrams)], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert result.returncode == 0 and not result.stderr, result.stderr[-3000:]
+    packets: list[dict[str, list[str]]] = [defaultdict(list)]
+    for line in result.stdout.splitlines():
+        if line == "--":
+            packets.append(defaultdict(list))
+            continue
+        key, _, value = line.partition("\t")
+        packets[-1][key].append(_unescape(value))
+    assert not packets.pop(), "output after the last packet"
+    return [dict(p) for p in packets]
+
+
+def _unescape(text: str) -> str:
+    return re.sub(r"\\(.)", lambda m: {"t": "\t", "n": "\n", "r": "\r"}.get(m.group(1), m.group(1)), text)
 
 
 # ---------------------------------------------------------------------------------------- manip-decode side
@@ -188,14 +231,9 @@ def test_the_comparison_can_fail() -> None:
     assert compare(expected, False, {"chaos.opcode": ["1"], "manip.joints": ["1.5", "-90"], "manip.x": ["1"]})
 
 
-@pytest.mark.parametrize("name", GOLDEN)
-def test_tshark_agrees_with_manip_decode_on_golden_captures(tmp_path: Path, name: str) -> None:
-    _need_tshark()
-    pcapng = tmp_path / f"{name}.pcapng"
-    export_pcapng(ROOT / "captures" / f"{name}.mcap", pcapng)
-    decoded = _decoded(pcapng)
-    shown = tshark_fields(pcapng)
-    assert len(shown) == len(decoded) > 10
+def _agrees(name: str, decoded: list[dict[str, Any]], shown: list[dict[str, list[str]]]) -> None:
+    """The dissector's fields are manip-decode's, packet for packet, and the manip layer was there."""
+    assert len(shown) == len(decoded) > 5
     manip_fields = 0
     for number, (packet, fields) in enumerate(zip(decoded, shown, strict=True), 1):
         assert packet["label"] == f"packet {number}"
@@ -204,3 +242,88 @@ def test_tshark_agrees_with_manip_decode_on_golden_captures(tmp_path: Path, name
         assert not problems, f"{name} packet {number}:\n  " + "\n  ".join(problems)
         manip_fields += sum(len(v) for k, v in fields.items() if k.startswith("manip."))
     assert manip_fields > 20  # the manip layer was there to compare, not just Chaos headers
+
+
+def _golden(name: str, tmp_path: Path) -> Path:
+    pcapng = tmp_path / f"{name}.pcapng"
+    export_pcapng(ROOT / "captures" / f"{name}.mcap", pcapng)
+    return pcapng
+
+
+def mid_connection_capture(tmp_path: Path) -> Path:
+    """A capture that starts after the connection opened: no RFC, no OPN, a move request (0204, 48
+    bytes, which by opcode alone could be an asynchronous error) first, then replies, errors and more
+    requests between a client and a server on CHUDP's port."""
+    import socket
+
+    import dpkt
+
+    from manip.codecs import ErrorMessage, Packet, encode_chudp, encode_reply, encode_request
+    from manip.codecs.messages import encode_error
+    from manip.spec.constants import ServerOp
+
+    client, server = ("127.0.1.1", 42042), ("127.0.0.1", 42042)
+    pose = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 500.0, 150.0, 400.0]
+    nap = ErrorMessage("move", "E", "NAP", "No arm power", ())
+    exchange = [
+        (True, 0o204, 40, encode_request("move", transform=pose)),
+        (False, ServerOp.NON_FATAL_ERROR, 50, encode_error(ServerOp.NON_FATAL_ERROR, 40, nap)),
+        (True, 0o201, 41, b""),
+        (False, ServerOp.RESPONSE, 51, encode_reply("here", 41, transform=pose)),
+        (True, 0o202, 42, b""),
+        (
+            False,
+            ServerOp.RESPONSE,
+            52,
+            encode_reply("joint-angles", 42, joints=(5.0, -95.0, 92.5, 0.0, 4.0, -3.0)),
+        ),
+        (True, 0o204, 43, encode_request("move", transform=pose)),
+        (False, ServerOp.NON_FATAL_ERROR, 53, encode_error(ServerOp.NON_FATAL_ERROR, 43, nap)),
+    ]
+    path = tmp_path / "mid-connection.pcap"
+    with path.open("wb") as f:
+        writer = dpkt.pcap.Writer(f, linktype=dpkt.pcap.DLT_RAW)
+        for i, (to_server, opcode, number, data) in enumerate(exchange):
+            (dh, di), (sh, si) = (
+                ((0o440, 0x5E02), (0o401, 0x0A01)) if to_server else ((0o401, 0x0A01), (0o440, 0x5E02))
+            )
+            payload = encode_chudp(Packet(opcode, dh, di, sh, si, number, 0, data))
+            src, dst = (client, server) if to_server else (server, client)
+            udp = dpkt.udp.UDP(sport=src[1], dport=dst[1], data=payload, ulen=8 + len(payload))
+            ip = dpkt.ip.IP(
+                src=socket.inet_aton(src[0]), dst=socket.inet_aton(dst[0]), p=dpkt.ip.IP_PROTO_UDP,
+                ttl=64, id=i, data=udp, len=28 + len(payload),
+            )  # fmt: skip
+            writer.writepkt(bytes(ip), ts=1_700_000_000 + i / 100)
+    return path
+
+
+CAPTURES = (*GOLDEN, "mid-connection")
+
+
+def _capture(name: str, tmp_path: Path) -> Path:
+    return mid_connection_capture(tmp_path) if name == "mid-connection" else _golden(name, tmp_path)
+
+
+@pytest.mark.parametrize("name", CAPTURES)
+def test_tshark_agrees_with_manip_decode(tmp_path: Path, name: str) -> None:
+    _need_tshark()
+    capture = _capture(name, tmp_path)
+    _agrees(name, _decoded(capture), tshark_fields(capture))
+
+
+@pytest.mark.parametrize("lua", LUAS)
+@pytest.mark.parametrize("name", CAPTURES)
+def test_plain_lua_agrees_with_manip_decode(tmp_path: Path, name: str, lua: str) -> None:
+    """Lua 5.4 (Wireshark 4.4 and later) and 5.2 (Debian's tshark) run the one file alike."""
+    interpreter = _need_lua(lua)
+    capture = _capture(name, tmp_path)
+    _agrees(name, _decoded(capture), lua_fields(interpreter, capture, tmp_path))
+
+
+def test_a_move_request_without_its_rfc_is_a_request(tmp_path: Path) -> None:
+    """The case that once read a move (0204, 48 bytes) as an asynchronous error to #16504, malformed."""
+    interpreter = _need_lua("lua5.4")
+    first = lua_fields(interpreter, mid_connection_capture(tmp_path), tmp_path)[0]
+    assert first["manip.name"] == ["move"] and "manip.decode_error" not in first, first
+    assert [float(v) for v in first["manip.transform"]][-3:] == [500.0, 150.0, 400.0]

@@ -163,7 +163,7 @@ def test_unreadable_inputs_say_what_is_wrong(tmp_path: Path) -> None:
     result = runner.invoke(
         capture_main, ["import", str(tmp_path / "nope.pcap"), "-o", str(tmp_path / "o.mcap")]
     )
-    assert result.exit_code == 1 and "no such file" in result.stderr
+    assert result.exit_code == 2 and "does not exist" in result.stderr  # a usage error, as in manip-decode
     assert not (tmp_path / "o.mcap").exists()
     text = tmp_path / "notes.txt"
     text.write_text("hello, not a capture\n")

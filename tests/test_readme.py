@@ -51,7 +51,8 @@ def test_readme_command_line_parses(line: str, tmp_path: Path, monkeypatch: pyte
     words = shlex.split(line)
     monkeypatch.chdir(tmp_path)
     for word in words:  # the files a line reads exist, empty (their content is not looked at)
-        if re.fullmatch(r"[\w.-]+\.(mcap|bin|json)", word):
+        if re.fullmatch(r"[\w.-]+(/[\w.-]+)*\.(mcap|bin|json|pcap|pcapng)", word):
+            (tmp_path / word).parent.mkdir(parents=True, exist_ok=True)
             (tmp_path / word).touch()
     command = COMMANDS[words[0]].load()
     ran: list[str] = []

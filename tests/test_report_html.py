@@ -15,7 +15,7 @@ import shutil
 import subprocess
 import sys
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from html.parser import HTMLParser
 from pathlib import Path
 from typing import Any
@@ -370,3 +370,202 @@ def test_verify_writes_both_documents_of_a_golden_capture(tmp_path: Path) -> Non
     assert [e for e in page.elements if e.tag == "tr" and "prow" in e.classes]
     summary = md.read_text()
     assert summary.startswith("## manip-conform: conformant (exit 0)") and "seed" not in summary
+
+
+# ------------------------------------------------------------------------ packet logs centred on the failure
+
+PLANTED_CASE = "server.planted.late-failure"
+PLANTED_AT = 262
+"""The culprit of the planted failure: a reply after packet 250 of a 300-packet case (to request 131)."""
+
+
+def _planted_report() -> dict[str, Any]:
+    """A report of one case whose 300 packets are 150 requests and replies, failing at packet 262 (the
+    reply to request 131, which echoes 132), and one passing case."""
+    from manip.conformance.judge.packets import WirePacket
+    from manip.conformance.judge.violation import Violation
+    from manip.conformance.output.report import report_json
+    from manip.conformance.suite.results import CaseResult, RunReport
+
+    packets = []
+    for i in range(150):
+        number = i + 1
+        echoed = number + 1 if 2 * i + 2 == PLANTED_AT else number
+        packets.append(WirePacket("c2s", 0o201, number, 0, b"", time=i * 0.01))
+        packets.append(WirePacket("s2c", 0o200, 100 + i, number, echoed.to_bytes(2, "little") + bytes(48)))
+    culprit = packets[PLANTED_AT - 1]
+    failing = CaseResult(
+        id=PLANTED_CASE, clauses=("response.echoes-request-number",), level="MUST", kind="scripted",
+        hazard="read-only", summary="a long exchange", outcome="fail", seed=1, deadline=10.0, packets=packets,
+        violations=[Violation.at(culprit, "response.echoes-request-number",
+                                 "the reply echoes the wrong number", expected="request number 131")],
+        reproduce=f"manip-conform run --select {PLANTED_CASE} --seed 1",
+    )  # fmt: skip
+    passing = replace(failing, id="server.planted.short", outcome="pass", violations=[], packets=packets[:6])
+    run = RunReport("tcp://127.0.0.1:42085", False, 1, False, {}, "manip-conform run")
+    run.results += [failing, passing]
+    return report_json(run)
+
+
+def test_the_packet_log_keeps_the_culprit_of_a_failure_after_packet_250() -> None:
+    data = _planted_report()
+    schema = load_schema()
+    _validate(data, schema, schema)
+    case = next(c for c in data["cases"] if c["id"] == PLANTED_CASE)
+    assert case["packets_total"] == 300 and len(case["packets"]) <= 200
+    assert case["violations"][0]["packet"] == PLANTED_AT
+    kept = [p["n"] for p in case["packets"]]
+    assert PLANTED_AT in kept and kept[:4] == [1, 2, 3, 4] and kept == sorted(kept)
+    page = Page(render_html(data))
+    row = page.by_id(f"case-{PLANTED_CASE}-p{PLANTED_AT}")
+    assert row.tag == "tr" and "culprit" in row.classes and "request number 132" in row.content
+    links = [e for e in page.elements if e.tag == "a" and "culprit-link" in e.classes]
+    assert [a.attrs["href"] for a in links] == [f"#case-{PLANTED_CASE}-p{PLANTED_AT}"]
+    detail = page.by_id(f"case-{PLANTED_CASE}")
+    assert "300 packets; the report keeps" in detail.content
+    folds = [e for e in page.elements if e.tag == "tr" and "fold" in e.classes]
+    assert folds and all("folded" in f.content for f in folds)
+    assert any("not kept in the report" in e.content for e in page.by_class("gap", "tr"))
+    # the rows around the culprit are open: none of the folds holds it
+    assert not any("request number 132" in f.content for f in folds)
+
+
+def test_a_culprit_past_the_kept_packets_is_said_not_linked() -> None:
+    data = _planted_report()
+    case = next(c for c in data["cases"] if c["id"] == PLANTED_CASE)
+    kept = {p["n"] for p in case["packets"]}
+    case["violations"][0]["packet"] = next(n for n in range(300, 0, -1) if n not in kept)
+    page = Page(render_html(data))
+    assert not [e for e in page.elements if e.tag == "a" and "culprit-link" in e.classes]
+    assert "(not kept in the report)" in page.by_id(f"case-{PLANTED_CASE}").content
+
+
+def test_a_violation_finds_its_packet_by_its_evidence() -> None:
+    from manip.conformance.judge.packets import WirePacket
+    from manip.conformance.judge.violation import Violation
+    from manip.conformance.output.culprit import culprit_index, kept_indices
+
+    packets = [WirePacket("s2c", 0o200, i, 0, i.to_bytes(2, "little")) for i in range(1, 400)]
+    assert culprit_index(packets, Violation("x", data=packets[300].data + b"more")) == 300
+    assert culprit_index(packets, Violation("x", kind="deadline")) == len(packets) - 1
+    assert culprit_index(packets, Violation("x")) is None
+    kept = kept_indices(len(packets), [300, 10], 200)
+    assert {0, 1, 2, 3, 288, 300, 306, 10} <= set(kept) and len(kept) == 200
+
+
+def test_a_failure_group_without_a_clause_lists_its_own_violations() -> None:
+    """The replay report's "(no clause: mismatch)" group shows the mismatch it groups, not the case's first
+    violation (which cites a clause)."""
+    data = _planted_report()
+    case = next(c for c in data["cases"] if c["id"] == PLANTED_CASE)
+    mismatch = {**case["violations"][0], "clause": None, "kind": "mismatch", "message": "joints[2]: differs"}
+    case["violations"].append(mismatch)
+    data["by_clause"].append(
+        {"clause": None, "kind": "mismatch", "level": "MUST", "section": "", "text": "mismatches",
+         "failures": 1, "warnings": 0, "known_failures": 0, "cases": [PLANTED_CASE]}
+    )  # fmt: skip
+    page = Page(render_html(data))
+    group = next(g for g in page.by_class("group", "article") if "(no clause: mismatch)" in g.content)
+    assert "joints[2]: differs" in group.content and "echoes the wrong number" not in group.content
+    assert r"joints\[2\]: differs" in render_markdown(data).split("(no clause: mismatch)")[1]
+
+
+def test_an_embedded_run_is_named_by_its_seed_not_its_temporary_socket(failing_run: Run) -> None:
+    page = Page(failing_run.html.read_text())
+    title = next(e for e in page.elements if e.tag == "title").content
+    assert "embedded reference server, seed 7" in title and "unix://" not in title
+    assert "unix://" not in page.by_class("facts", "dl")[0].content
+    assert "unix://" not in failing_run.markdown.read_text()
+    assert all("unix://" not in c["reproduce"] for c in failing_run.data["cases"])
+
+
+def test_the_culprit_is_highlighted_and_opened_in_chromium(browser: list[str], tmp_path: Path) -> None:
+    """The violation's link leads to the culprit's row: opening the page at it opens the case (folded
+    rows stay folded), and the row is marked as the culprit."""
+    page_file = tmp_path / "planted.html"
+    page_file.write_text(render_html(_planted_report()), encoding="utf-8")
+    anchor = f"case-{PLANTED_CASE}-p{PLANTED_AT}"
+    page = _dump_dom(browser, f"{page_file.as_uri()}#{anchor}")
+    row = page.by_id(anchor)
+    assert "culprit" in row.classes and row.attrs.get("title") == "the packet of violation 1"
+    case = page.by_id(f"case-{PLANTED_CASE}")
+    assert "open" in case.attrs, "the case holding the culprit was not opened"
+    opened = [e for e in page.elements if e.tag == "details" and "open" in e.attrs]
+    assert opened == [case], "a fold of the packet log was opened too"
+    assert any(e.tag == "tr" and "fold" in e.classes for e in page.elements)
+
+
+FULL_PAGE_BYTES = 2_000_000
+FULL_PAGE_READY_MS = 2000
+
+
+@pytest.mark.slow
+def test_a_full_suite_verify_page_is_small_and_opens_fast(browser: list[str], tmp_path: Path) -> None:
+    """``verify`` of a recording of the whole suite (about 1,600 cases): the page stays under 2 MB and is
+    usable within 2 s in Chromium.  The time is the page's own: parsed up to the end of its script and the
+    script run (``performance.now()`` there, written to ``data-ready-ms``), not Chromium's start-up."""
+    capture = tmp_path / "run.mcap"
+    done = subprocess.run(
+        [sys.executable, "-m", "manip.conformance.cli", "run", "-q", "--seed", "11", "--record", "run.mcap"],
+        capture_output=True, text=True, timeout=300, check=False, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    html = tmp_path / "verify.html"
+    result = CliRunner().invoke(main, ["verify", str(capture), "--html", str(html)])
+    assert result.exit_code == 0, result.output
+    page_text = html.read_text(encoding="utf-8")
+    cases = page_text.count('<tr data-verdict="')
+    assert cases > 1000, cases  # the whole suite's checks, every one in the table
+    assert len(page_text.encode()) < FULL_PAGE_BYTES, len(page_text.encode())
+    times = []
+    for _ in range(3):  # the best of up to three loads: other tests share the machine's two cores
+        page = _dump_dom(browser, html.as_uri())
+        root = page.elements[0]
+        assert root.attrs.get("data-ready") == "yes"
+        assert page.by_id("shown").content == f"{cases} of {cases} shown"
+        times.append(int(root.attrs["data-ready-ms"]))
+        if times[-1] < FULL_PAGE_READY_MS:
+            break
+    assert min(times) < FULL_PAGE_READY_MS, times
+
+
+def _with_script(page: Path, script: str, out: Path) -> Path:
+    """The page with ``script`` run after its own (a user's actions, played in the browser)."""
+    text = page.read_text(encoding="utf-8")
+    out.write_text(text.replace("</body>", f"<script>{script}</script></body>"), encoding="utf-8")
+    return out
+
+
+def test_the_filter_state_is_kept_in_the_url(failing_run: Run, browser: list[str], tmp_path: Path) -> None:
+    """Typing in the filter, unticking a verdict and choosing a level write the query string, so a
+    reload or a shared link shows the same rows."""
+    script = """
+      const search = document.getElementById("filter");
+      search.value = "error-string"; search.dispatchEvent(new Event("input"));
+      const pass = document.querySelector('input[name="verdict"][value="pass"]');
+      pass.checked = false; pass.dispatchEvent(new Event("change"));
+      const level = document.getElementById("level");
+      level.value = "MUST"; level.dispatchEvent(new Event("change"));
+      document.documentElement.dataset.query = location.search;
+    """
+    page = _dump_dom(browser, _with_script(failing_run.html, script, tmp_path / "p.html").as_uri())
+    query = page.elements[0].attrs["data-query"]
+    assert "q=error-string" in query and "level=MUST" in query and "verdict=" in query, query
+    assert "pass" not in query.split("verdict=")[1].split("&")[0]
+
+
+def test_the_copy_fallback_says_when_copying_failed(
+    failing_run: Run, browser: list[str], tmp_path: Path
+) -> None:
+    """Without the clipboard API (an old browser, a page it does not trust) the fallback copies through a
+    text area; when the browser refuses that too, the button must not say "Copied"."""
+    script = """
+      Object.defineProperty(navigator, "clipboard", { value: undefined });
+      document.execCommand = () => false;
+      const button = document.querySelector("button.copy");
+      button.click();
+      document.documentElement.dataset.said = button.textContent;
+    """
+    page = _dump_dom(browser, _with_script(failing_run.html, script, tmp_path / "c.html").as_uri())
+    said = page.elements[0].attrs["data-said"]
+    assert said.startswith("Copy failed") and said != "Copied", said

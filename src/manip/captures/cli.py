@@ -8,8 +8,9 @@
 
 ``record`` prints ``manip-capture: recording tcp://HOST:PORT -> UPSTREAM into FILE`` on stdout once it
 listens (the real port when 0 was asked for) and runs until SIGINT/SIGTERM or ``--seconds``; the file
-is then finished.  Exit status: 0 done; 1 the file cannot be read, written, recovered, imported or
-exported, or the proxy cannot listen; 2 usage error.
+is then finished.  Exit status (:mod:`manip.exit_status`): 0 done; 1 the file cannot be read, written,
+recovered, imported or exported, or the proxy cannot listen; 2 usage error, a file to read that does not
+exist.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import sys
 import click
 
 from manip.commandline import configure_logging, version_option
+from manip.exit_status import epilog
 
 from .listing import info_json, info_lines
 from .pcap import CHUDP_PORT, export_pcapng, import_pcap, parse_address
@@ -34,7 +36,10 @@ from .recover import recover as recover_file
 __all__ = ["main"]
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "show_default": True})
+@click.group(
+    context_settings={"help_option_names": ["-h", "--help"], "show_default": True},
+    epilog=epilog("manip-capture"),
+)
 @version_option("manip-capture")
 def main() -> None:
     """Record, list and recover manip session captures (MCAP; Foxglove opens them)."""
@@ -176,7 +181,7 @@ def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> t
 
 
 @main.command("import")
-@click.argument("pcap", metavar="FILE.pcap")
+@click.argument("pcap", metavar="FILE.pcap", type=click.Path(exists=True, dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="The capture to write.")
 @click.option(
     "--port",
@@ -210,7 +215,7 @@ def import_(pcap: str, output: str, ports: tuple[int, ...], server: tuple[str, i
 
 
 @main.command("export")
-@click.argument("capture", metavar="FILE.mcap")
+@click.argument("capture", metavar="FILE.mcap", type=click.Path(exists=True, dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="The pcapng to write.")
 def export(capture: str, output: str) -> None:
     """Write a manip capture as CHUDP in UDP/IPv4 (pcapng), for Wireshark and tshark.

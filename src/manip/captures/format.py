@@ -24,8 +24,11 @@ A capture is an MCAP file (profile ``manip``), chunked and zstd-compressed, with
     (:mod:`manip.captures.arm_view`); written with the decoded view, on a capture's first such reply.
 
 ``c2s`` is client to server (requests), ``s2c`` server to client.  Times are Unix nanoseconds of the
-moment the recorder saw the frame.  Metadata record ``manip.capture``: tool and version, spec revision,
-seed, command line, how it was recorded.
+moment the recorder saw the frame; a simulated run (``manip-conform run --record``, ``time`` ``virtual``)
+records its virtual clock anchored at the wall-clock start of the recording, and keeps both origins
+(``wall_origin_ns``, ``virtual_origin_ns``) so that a replay puts each request at its virtual instant.
+Metadata record ``manip.capture``: tool and version, spec revision, seed, command line, how it was
+recorded.
 """
 
 from __future__ import annotations

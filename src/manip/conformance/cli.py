@@ -77,19 +77,14 @@ from manip.conformance.suite.results import CaseResult, ExitCode, LivenessCheck,
 from manip.conformance.suite.runner import RunConfig, RunEvents, Runner
 from manip.conformance.suite.selection import PatternError, PatternSet, match_id
 from manip.conformance.suite.stability import instability, repeat_seeds
+from manip.exit_status import epilog
 from manip.links import AddressError, parse_address, virtual_clock
 from manip.reference_server import FaultSet, ServerConfig
 from manip.spec import SPEC, UnknownClauseError
 
 __all__ = ["main"]
 
-EXIT_CODES_HELP = """\b
-Exit codes:
-  0  conformant
-  1  non-conformant (a failure, a stale --known-failing entry, the target died)
-  2  usage error
-  3  target unreachable, or dead before any verdict
-  4  interrupted, internal error, or an unstable suite (--repeat; a partial report is still written)"""
+EXIT_CODES_HELP = epilog("manip-conform run")
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -653,7 +648,7 @@ async def _run_target(
             address = environment.address
             config.address = address
             config.environment = environment
-            config.options = replace(config.options, address=address)
+            config.options = replace(config.options, address=address, embedded=True)
             console.print("embedded reference server in virtual time (with the simulated Cougar wrist)")
             await _run_with(config, cases, holder, console, quiet)
         return
@@ -661,7 +656,7 @@ async def _run_target(
     with embedded as address:
         config.address = address
         config.environment = embedded.environment
-        config.options = replace(config.options, address=address)
+        config.options = replace(config.options, address=address, embedded=True)
         console.print(
             f"embedded reference server at {address} (with the simulated Cougar wrist)", markup=False
         )
@@ -783,7 +778,7 @@ def _summary(console: Console, report: RunReport, quiet: bool = False) -> None:
 # ----------------------------------------------------------------------------------------------- cases
 
 
-@main.command("cases")
+@main.command("cases", epilog=epilog("manip-conform cases, report"))
 @click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table", show_default=True)
 @click.option("--select", "select", multiple=True, metavar="PATTERN", help="Only cases matching PATTERN.")
 def cases_command(fmt: str, select: tuple[str, ...]) -> None:
@@ -821,7 +816,7 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
 # ----------------------------------------------------------------------------------------------- coverage
 
 
-@main.command("coverage")
+@main.command("coverage", epilog=epilog("manip-conform coverage"))
 @click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table", show_default=True)
 @click.option(
     "--party",
@@ -869,7 +864,7 @@ def coverage_command(fmt: str, parties: tuple[str, ...]) -> None:
 # ----------------------------------------------------------------------------------------------- report
 
 
-@main.command("report")
+@main.command("report", epilog=epilog("manip-conform cases, report"))
 @click.argument(
     "report_file", metavar="REPORT.json", type=click.Path(exists=True, dir_okay=False, path_type=Path)
 )

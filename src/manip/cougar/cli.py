@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import sys
 from collections.abc import AsyncIterator
 from typing import Final
 
@@ -26,6 +27,7 @@ from manip.cougar.environment import Contacts, Spring, Surface
 from manip.cougar.faults import FAULTS, parse_faults
 from manip.cougar.link import CougarEnd, CougarModel, Drv11jError, parse_address
 from manip.cougar.sim import CougarConfig, CougarSim
+from manip.exit_status import epilog
 
 __all__ = ["CougarServer", "main", "parse_surface", "serve_cougar"]
 
@@ -142,7 +144,7 @@ async def _serve_forever(model: CougarModel, address: str) -> None:
         await asyncio.Event().wait()
 
 
-@click.command(context_settings={"help_option_names": ["-h", "--help"]})
+@click.command(context_settings={"help_option_names": ["-h", "--help"]}, epilog=epilog("manip-cougar"))
 @click.option(
     "--listen", "address", default="tcp://127.0.0.1:42011", show_default=True, help="Where to listen."
 )
@@ -185,5 +187,9 @@ def main(
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--listen") from None
     model = _make_model(seed, surfaces, springs, parse_faults(faults))
-    with contextlib.suppress(KeyboardInterrupt):
-        asyncio.run(_serve_forever(model, address))
+    try:
+        with contextlib.suppress(KeyboardInterrupt):
+            asyncio.run(_serve_forever(model, address))
+    except OSError as exc:  # the port is taken, the socket path cannot be made...
+        click.echo(f"manip-cougar: cannot listen on {address}: {exc.strerror or exc}", err=True)
+        sys.exit(1)

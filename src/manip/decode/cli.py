@@ -34,8 +34,17 @@ from manip.decode.describe import (
     packet_json,
 )
 from manip.decode.frames import LAYOUTS, EmptyInputError, Frame, Layout, frames
+from manip.decode.pairing import StreamPairing
 from manip.decode.render import render_hexdump, render_tree
-from manip.decode.source import SourceError, byte_blocks, open_source, read_text, require_file
+from manip.decode.source import (
+    SourceError,
+    byte_blocks,
+    open_source,
+    read_text,
+    require_file,
+    terminal_prompt,
+)
+from manip.exit_status import epilog
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp
 from manip.spec.notation import octal
@@ -220,7 +229,10 @@ def _error_node(frame: Frame, err: DecodeError, link: str) -> Node:
 # ---------------------------------------------------------------------------------------- command
 
 
-@click.command(context_settings={"help_option_names": ["-h", "--help"], "show_default": True})
+@click.command(
+    context_settings={"help_option_names": ["-h", "--help"], "show_default": True},
+    epilog=epilog("manip-decode"),
+)
 @click.argument("source", required=False)
 @click.option(
     "--link", type=click.Choice(sorted(FRAMINGS)), default="chudp", help="Framing of the input bytes."
@@ -312,6 +324,9 @@ def main(
             if source is not None:
                 raise click.UsageError(f"--{'mcap' if mcap else 'pcap'} takes no SOURCE")
             sys.exit(_decode_capture(mcap, pcap, ports, fmt, filters))
+        prompt = terminal_prompt(source)
+        if prompt is not None:
+            click.echo(prompt, err=True)
         if cougar is not None:
             sys.exit(_decode_cougar(source, cougar, fmt))
         if body is not None:
@@ -337,6 +352,7 @@ def _decode_packets(
     layout = LAYOUTS[link]
     failed = False
     bad = 0
+    pairing = StreamPairing() if request is None and link in _STREAMS else None
     try:
         for frame in frames(byte_blocks(src, binary), link):
             if frame.packet is not None and not filters.wants(frame.packet.opcode):
@@ -351,7 +367,7 @@ def _decode_packets(
                 out.node(_error_node(frame, frame.error, link))
                 continue
             packet = frame.packet
-            node = describe_packet(packet, direction=direction, request=request, header=not json_out)
+            node = _describe_paired(packet, direction, request, pairing, header=not json_out)
             if frame.error is not None:
                 node.add("decode error", str(frame.error))
             failed = failed or _failed(node) or frame.error is not None
@@ -375,6 +391,33 @@ def _decode_packets(
     if _nothing_matched(filters, out):
         return 1
     return 1 if failed or bad else 0
+
+
+_STREAMS: Final = frozenset({"tcp", "chaosd"})
+"""Framings whose input is a stream of frames, whose answers are paired with their requests."""
+
+
+def _describe_paired(
+    packet: Packet,
+    direction: ReadAs,
+    request: int | str | None,
+    pairing: StreamPairing | None,
+    *,
+    header: bool,
+) -> Node:
+    """The packet's tree; in a stream, its side and its request's layout from the pairing
+    (``--direction`` and ``--request-opcode`` win over it)."""
+    if pairing is None:
+        return describe_packet(packet, direction=direction, request=request, header=header)
+    placed = pairing.place(packet)
+    side = placed.side if direction == "auto" else direction
+    node = describe_packet(packet, direction=side, request=placed.request_opcode, header=header)
+    if placed.request_opcode is not None:
+        op = SPEC.requests.get(placed.request_opcode)
+        name = f"{op.name} {octal(placed.request_opcode)}" if op else octal(placed.request_opcode)
+        how = "by position" if placed.side != "auto" else "by the number it carries"
+        node.add("answers", f"request #{placed.request_no} ({name}), paired {how}")
+    return node
 
 
 def _dump(

@@ -270,7 +270,7 @@ def describe_server_message(msg: ServerMessage, op: RequestOpcode | None = None)
     return _describe_async(msg)
 
 
-def _guess_direction(p: Packet) -> Literal["request", "response"]:
+def guess_direction(p: Packet) -> Literal["request", "response"]:
     """Requests and server packets share opcodes 0200-0205; the data usually tell them apart."""
     if p.opcode > 0o205 or not p.data:
         return "request"
@@ -326,7 +326,7 @@ def describe_packet(
         if p.data:
             root.add("data", p.data.hex(" "), p.data.hex(), 0, len(p.data))
         return root
-    side = _guess_direction(p) if direction == "auto" else direction
+    side = guess_direction(p) if direction == "auto" else direction
     op = request_op(request) if request is not None else None
     try:
         if side == "request":

@@ -59,6 +59,23 @@ def open_source(source: str | None) -> Source:
     raise SourceError(f"no such file: {source} (and it is not a hex string either)", usage=True)
 
 
+TERMINAL_PROMPT: Final = (
+    "manip-decode: reading standard input, a terminal: type or paste hex (or give HEX, FILE or --mcap "
+    "FILE; --help says more), then Ctrl-D"
+)
+"""What is said on standard error before reading a terminal, which would otherwise wait in silence."""
+
+
+def terminal_prompt(source: str | None) -> str | None:
+    """:data:`TERMINAL_PROMPT` when ``source`` is standard input and that is a terminal, else None."""
+    if source not in (None, "-"):
+        return None
+    try:
+        return TERMINAL_PROMPT if sys.stdin.isatty() else None
+    except (AttributeError, ValueError):  # no standard input at all, or a closed one
+        return None
+
+
 def require_file(path: str) -> str:
     """``path`` if it is a readable file; SourceError (usage) saying what is wrong otherwise."""
     if not os.path.exists(path):
@@ -95,16 +112,25 @@ class _HexDecoder:
         return out
 
 
+def _is_terminal(stream: IO[bytes]) -> bool:
+    try:
+        return stream.isatty() and hasattr(stream, "read1")
+    except (AttributeError, ValueError):
+        return False
+
+
 def byte_blocks(src: Source, binary: bool | None) -> Iterator[bytes]:
-    """The input's bytes, a block at a time (hex text decoded); ``binary`` None guesses from the start."""
-    first = src.stream.read(BLOCK)
+    """The input's bytes, a block at a time (hex text decoded); ``binary`` None guesses from the start.
+    A terminal is read a line at a time, so that one Ctrl-D after the last line ends the input."""
+    read = src.stream.read1 if _is_terminal(src.stream) else src.stream.read  # type: ignore[attr-defined]
+    first = read(BLOCK)
     if binary is None:
         binary = not _HEX_TEXT.match(first)
     if binary:
         block = first
         while block:
             yield block
-            block = src.stream.read(BLOCK)
+            block = read(BLOCK)
         return
     hexes = _HexDecoder(src.name)
     block = first
@@ -112,7 +138,7 @@ def byte_blocks(src: Source, binary: bool | None) -> Iterator[bytes]:
         out = hexes.feed(block)
         if out:
             yield out
-        block = src.stream.read(BLOCK)
+        block = read(BLOCK)
     out = hexes.feed(b"", final=True)
     if out:
         yield out

@@ -52,6 +52,7 @@ from manip.arm.oat import transform_from_xyzoat
 from manip.arm.transform import Transform
 from manip.codecs.messages import AsyncResponse
 from manip.commandline import configure_logging, version_option
+from manip.exit_status import epilog
 from manip.reference_client.cli_output import (
     async_record,
     async_text,
@@ -242,15 +243,7 @@ on stdout).  raw sends any opcode; the wrist opcodes 0240-0253 are commands; --n
 requests.  ``manip-client harness`` (no URL) is the client's harness for ``manip-conform client``
 (docs/client-harness.md).
 
-\b
-Exit status:
-  0    success (watch: also when stopped with Ctrl-C)
-  1    the server answered with an error, or a reply that could not be read
-  2    usage: bad arguments or URL, a --record FILE that cannot be created
-  3    cannot connect, or the connection was lost
-  4    no reply within --timeout
-  130  interrupted
-"""
+""" + epilog("manip-client")
 
 
 _FLAGS: Final = frozenset({"--json", "-h", "--help"})

@@ -41,6 +41,7 @@ import click
 from manip.arm.kinematics import PUMA600, ArmModel
 from manip.commandline import configure_logging, version_option
 from manip.cougar.link import parse_address as parse_drv11j_address
+from manip.exit_status import epilog
 from manip.links import (
     AccessError,
     AccessList,
@@ -146,7 +147,9 @@ def command_line(ctx: click.Context) -> list[str]:
 
 
 @click.command(
-    cls=_Command, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100}
+    cls=_Command,
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+    epilog=epilog("manip-server"),
 )
 @click.option(
     "--listen",

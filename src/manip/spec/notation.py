@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-__all__ = ["octal", "octal_words"]
+__all__ = ["a_or_an", "octal", "octal_words"]
 
 
 def octal(value: int) -> str:
@@ -23,3 +23,9 @@ def octal(value: int) -> str:
 def octal_words(words: Iterable[int]) -> str:
     """Words in octal, space separated (``0277 0100``); ``(none)`` for no words."""
     return " ".join(octal(w) for w in words) or "(none)"
+
+
+def a_or_an(name: str) -> str:
+    """``name`` with its indefinite article, for the spec's lower-case names: ``an asynchronous-warning``,
+    ``a response``.  (Upper-case acronyms are read letter by letter and are left to the caller.)"""
+    return f"{'an' if name[:1] in ('a', 'e', 'i', 'o', 'u') else 'a'} {name}"

@@ -417,3 +417,13 @@ class Evidence(CarriesViolation, AssertionError):  # noqa: N818 - a failed examp
         evidence.violation = replace(finding, invariant=TRANSCRIPT.name)
         evidence.args = (str(evidence.violation),)
         return evidence
+
+    @property
+    def culprit(self) -> WirePacket | None:
+        """The packet the failure is about: the finding's own, else the first server packet among those
+        that show it (what the server got wrong), else the first of them."""
+        if self.violation.packet is not None:
+            return self.violation.packet
+        answers = [p for p in self.packets if p.direction == "s2c" and not p.is_close]
+        shown = answers or self.packets
+        return shown[0] if shown else None

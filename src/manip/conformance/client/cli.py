@@ -32,16 +32,11 @@ from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import CaseResult, RunReport
 from manip.conformance.suite.selection import PatternError, PatternSet, match_id
+from manip.exit_status import epilog
 
 __all__ = ["client_cases", "client_command"]
 
-EXIT_CODES_HELP = """\b
-Exit codes:
-  0  conformant (unsupported cases do not count)
-  1  non-conformant (a failure, a stale --known-failing entry)
-  2  usage error
-  3  the harness could not be started, or its hello was not the contract's
-  4  interrupted or internal error"""
+EXIT_CODES_HELP = epilog("manip-conform client")
 
 
 def client_cases(cases: list[Case] | None = None) -> list[Case]:

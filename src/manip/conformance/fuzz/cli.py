@@ -31,20 +31,14 @@ from manip.conformance.replay.cli import check_output_paths, given
 from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REPLY_TIMEOUT
 from manip.conformance.suite.results import ExitCode
 from manip.conformance.suite.selection import match_id
+from manip.exit_status import epilog
 from manip.links import AddressError, parse_address
 from manip.reference_server import FaultSet
 from manip.spec.model import Hazard
 
 __all__ = ["fuzz_command"]
 
-EXIT_CODES_HELP = """\b
-Exit codes:
-  0  no finding
-  1  findings: a crash, hang, traceback, silent drop, wrong answer or uncounted drop (SHOULD-level
-     answers only with --strict)
-  2  usage error
-  3  target unreachable (no liveness check passed before the first batch)
-  4  interrupted, or an internal error of the fuzzer"""
+EXIT_CODES_HELP = epilog("manip-conform fuzz")
 
 _STYLE = {"crash": "bold red", "hang": "bold red", "traceback": "bold magenta"}
 

@@ -34,12 +34,13 @@ from manip.codecs.lisp import Cons, Keyword, LispValue, read_alist
 from manip.codecs.lispm_text import decode_lispm
 from manip.codecs.messages import decode_error, decode_reply, decode_request
 from manip.codecs.pairing import ANSWER_OPCODES, UNSOLICITED_OPCODES, ReplyPairing
+from manip.conformance.judge.diagnosis import float_payload, floats_diagnosis, number_diagnosis
 from manip.conformance.judge.packets import CLOSE_OPCODES, Direction, WirePacket, describe, opcode_name, word
 from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import AsyncCondition, ChaosOp, ServerOp
 from manip.spec.model import Layout
-from manip.spec.notation import octal
+from manip.spec.notation import a_or_an, octal
 
 __all__ = [
     "ANSWER_OPCODES",
@@ -167,11 +168,13 @@ def check_echo(request: WirePacket, reply: WirePacket) -> list[Violation]:
     if number == request.packet_no:
         return []
     actual = "no request-number word" if number is None else f"request number {number}"
+    cause = None if number is None else number_diagnosis(number, request.packet_no, what="request number")
     return [
         Violation.at(
             reply,
             clause,
-            f"reply to request #{request.packet_no} ({opcode_name(request)}) carries the wrong number",
+            f"reply to request #{request.packet_no} ({opcode_name(request)}) carries the wrong number"
+            + (f": {cause}" if cause else ""),
             expected=f"request number {request.packet_no} (the request's Chaos packet number)",
             actual=actual
             + (f" (the request's ack field is {request.ack_no})" if number == request.ack_no else ""),
@@ -255,7 +258,7 @@ def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Violat
         allowed = [s.letter for s in SPEC.severities.values() if packet.opcode in s.server_opcodes]
         add(
             "error.severity-matches-opcode",
-            f"severity {error.severity} in a {opcode_name(packet)} ({octal(packet.opcode)}) packet",
+            f"severity {error.severity} in {a_or_an(opcode_name(packet))} ({octal(packet.opcode)}) packet",
             f"one of {', '.join(allowed)} in opcode {octal(packet.opcode)}",
             shown,
         )
@@ -608,22 +611,30 @@ def _check_single(op: RequestOpcode, packet: WirePacket) -> list[Violation]:
             "done": "the request number only (2 data bytes)",
             "segment": "the request number and one segment-number word (4 data bytes)",
         }.get(kind, f"the request number then {_layout_text(op)}")
+        # expected and actual describe the same thing: the whole data, its size and what is wrong in it
+        where = f"{exc.path.rsplit('.', 1)[-1]}: " if exc.path else ""
+        cause = floats_diagnosis(float_payload(op, packet.data)) if kind == "data" else None
         return [
             Violation.at(
                 packet,
                 clause,
-                f"{op.name} reply: {exc}",
+                f"{op.name} reply: {exc}" + (f"; {cause}" if cause else ""),
                 expected=expected,
-                actual=f"{len(packet.data)} data bytes",
+                actual=f"{len(packet.data)} data bytes; {where}{exc.message}",
             )
         ]
     return []
 
 
 def _layout_text(op: RequestOpcode) -> str:
+    """The reply's data after the request number, and the size of the whole data when fixed (as the
+    actual side counts it: ``joints (joints): 26 data bytes``)."""
     size = op.response.data.fixed_size
     names = ", ".join(f"{f.name} ({f.type.name})" for f in op.response.data.fields)
-    return f"{names}" + (f" = {size} bytes" if size is not None else "")
+    floats = (
+        ", every float a number" if any(f.type.element == "float" for f in op.response.data.fields) else ""
+    )
+    return f"{names}" + (f": {2 + size} data bytes{floats}" if size is not None else floats)
 
 
 def _check_multi(op: RequestOpcode, request: WirePacket, answer: Sequence[WirePacket]) -> list[Violation]:

@@ -24,7 +24,15 @@ from manip.conformance.judge.packets import WirePacket, describe
 from manip.spec import SPEC
 from manip.spec.model import Level
 
-__all__ = ["FAILURE_KINDS", "CarriesViolation", "FailureKind", "Shown", "Violation", "evidence"]
+__all__ = [
+    "FAILURE_KINDS",
+    "CarriesViolation",
+    "FailureKind",
+    "Shown",
+    "Violation",
+    "evidence",
+    "shown_packet",
+]
 
 FailureKind = Literal[
     "wrong_value",
@@ -72,6 +80,19 @@ def evidence(seen: object) -> tuple[str, bytes]:
     return str(seen), b""
 
 
+def shown_packet(seen: object) -> WirePacket | None:
+    """The packet the evidence ``seen`` is about: the packet itself, an answer's first packet (anything
+    with ``packets``), the first of a list of those; None for text, bytes or nothing."""
+    if isinstance(seen, WirePacket):
+        return seen
+    packets = getattr(seen, "packets", None)
+    if isinstance(packets, Sequence) and packets and isinstance(packets[0], WirePacket):
+        return packets[0]
+    if isinstance(seen, list | tuple) and seen:
+        return shown_packet(seen[0])
+    return None
+
+
 @dataclass(frozen=True)
 class Violation:
     """One clause broken: a one-line message, the clause (None for a failure of the exchange itself,
@@ -110,8 +131,7 @@ class Violation:
     ) -> Violation:
         """A violation whose ``actual`` and bytes come from the evidence ``seen`` (:func:`evidence`)."""
         actual, data = ("", b"") if seen is None else evidence(seen)
-        packet = seen if isinstance(seen, WirePacket) else None
-        return cls(message, clause, None, expected, actual, data, kind, invariant, packet)
+        return cls(message, clause, None, expected, actual, data, kind, invariant, shown_packet(seen))
 
     @classmethod
     def at(

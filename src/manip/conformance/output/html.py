@@ -21,7 +21,9 @@ from collections.abc import Iterable, Mapping
 from importlib import resources
 from typing import Any, Final
 
+from manip.conformance.output.culprit import AFTER, BEFORE, OPENING
 from manip.conformance.output.report_view import (
+    ATTENTION,
     FAILING,
     LEVELS,
     OUTCOME_ORDER,
@@ -30,8 +32,11 @@ from manip.conformance.output.report_view import (
     WireOrder,
     clause_info,
     failure_groups,
+    group_message,
     packet_rows,
+    plural,
     seeded,
+    target_label,
     wire_order,
 )
 
@@ -40,6 +45,10 @@ __all__ = ["render_html"]
 _RANK: Final = {outcome: n for n, outcome in enumerate(OUTCOME_ORDER)}
 _CASES_PER_GROUP: Final = 12
 """Cases listed under each broken clause at the top; the rest are in the table (filter by clause)."""
+DETAILS_FOR_EVERY_CASE: Final = 300
+"""Up to this many cases, every case has its details (packets included); a larger report (``verify`` of a
+long recording has thousands) details only the cases that need attention, so that the page stays small
+and opens fast: the table lists the rest, and the JSON report keeps their packets."""
 
 
 def _e(value: object) -> str:
@@ -80,7 +89,7 @@ def _header(report: Report) -> str:
     ok = int(report["exit_code"]) == 0
     total = len(report["cases"])
     facts = [
-        ("target", report["target"] + (" (embedded reference server)" if report.get("embedded") else "")),
+        ("target", target_label(report)),
         ("seed", report["seed"] if seeded(report) else "-"),
         ("started", report.get("started", "") or "-"),
         (
@@ -136,15 +145,6 @@ def _summary(report: Report) -> str:
     )
 
 
-def _first_message(case: Mapping[str, Any], clause: str | None) -> str:
-    for violation in case.get("violations", []):
-        if clause is None or violation.get("clause") == clause:
-            return str(violation.get("message", ""))
-    if case["outcome"] == "fixed":
-        return "listed in --known-failing but passed: remove the entry"
-    return str(case.get("reason", ""))
-
-
 def _failures(report: Report) -> str:
     groups = failure_groups(report)
     if not groups:
@@ -165,7 +165,7 @@ def _failures(report: Report) -> str:
                 f"{n} {word}"
                 for n, word in (
                     (tally["failures"], "failing"),
-                    (tally["warnings"], "warning"),
+                    (tally["warnings"], "warning" if tally["warnings"] == 1 else "warnings"),
                     (tally["known_failures"], "known failing"),
                 )
                 if n
@@ -173,7 +173,7 @@ def _failures(report: Report) -> str:
         shown = cases[:_CASES_PER_GROUP]
         items = "".join(
             f"<li>{_badge(c['outcome'])} {_case_link(c['id'])}"
-            f'<span class="msg">{_e(_first_message(c, clause))}</span></li>'
+            f'<span class="msg">{_e(group_message(c, tally))}</span></li>'
             for c in shown
         )
         more = len(cases) - len(shown)
@@ -197,20 +197,29 @@ def _failures(report: Report) -> str:
     )
 
 
+def _detailed(report: Report, case: Mapping[str, Any]) -> bool:
+    """Whether the page details ``case`` (see :data:`DETAILS_FOR_EVERY_CASE`)."""
+    return len(report["cases"]) <= DETAILS_FOR_EVERY_CASE or case["outcome"] in ATTENTION
+
+
 def _case_table(report: Report) -> str:
     rows = []
     for c in sorted(report["cases"], key=lambda c: (_RANK.get(c["outcome"], 99), c["id"])):
-        clauses = " ".join(c["clauses"])
         broke = {v["clause"] for v in c.get("violations", []) if v.get("clause")}
         shown = " ".join(
-            f'<code class="{"broke" if x in broke else ""}">{_e(x)}</code>' for x in c["clauses"]
+            f'<code class="broke">{_e(x)}</code>' if x in broke else f"<code>{_e(x)}</code>"
+            for x in c["clauses"]
         )
+        # the filter searches the id and clause cells; a broken clause the case does not cite (an
+        # invariant's) is added for it, the only text a row carries twice
+        extra = " ".join(sorted(broke - set(c["clauses"])))
+        search = f' data-search="{_e(extra)}"' if extra else ""
         rows.append(
             f'<tr data-verdict="{_e(c["outcome"])}" data-rank="{_RANK.get(c["outcome"], 99)}" '
             f'data-id="{_e(c["id"])}" data-level="{_e(c["level"])}" '
-            f'data-duration="{float(c["duration"]):.6f}" '
-            f'data-search="{_e(c["id"] + " " + clauses + " " + " ".join(sorted(broke)))}">'
-            f'<td>{_badge(c["outcome"])}</td><td class="cid">{_case_link(c["id"])}</td>'
+            f'data-duration="{float(c["duration"]):.6f}"{search}>'
+            f"<td>{_badge(c['outcome'])}</td>"
+            f'<td class="cid">{_case_link(c["id"]) if _detailed(report, c) else _e(c["id"])}</td>'
             f'<td class="clauses">{shown}</td><td>{_level(c["level"])}</td>'
             f'<td class="num">{float(c["duration"]):.3f}</td></tr>'
         )
@@ -246,7 +255,11 @@ def _clause_table(report: Report) -> str:
     ):
         info = clause_info(report, clause)
         tally = broken.get(clause)
-        status = f"{int(tally['failures'])} failing, {int(tally['warnings'])} warning" if tally else "held"
+        status = (
+            f"{int(tally['failures'])} failing, {plural(int(tally['warnings']), 'warning')}"
+            if tally
+            else "held"
+        )
         outcomes = ", ".join(f"{n} {o}" for o, n in sorted(cited[clause].items(), key=lambda i: _RANK[i[0]]))
         rows.append(
             f'<tr class="{"broke" if tally and tally["failures"] else ""}"><td><code>{_e(clause)}</code></td>'
@@ -271,32 +284,112 @@ def _bubble(row: PacketRow, connections: int) -> str:
     )
 
 
+def _packet_anchor(case_id: str, number: int) -> str:
+    return f"{_anchor(case_id)}-p{number}"
+
+
+def _culprits(case: Mapping[str, Any]) -> dict[int, int]:
+    """Packet number -> the number (from 1) of the first violation it is the culprit of."""
+    found: dict[int, int] = {}
+    for i, violation in enumerate(case.get("violations", []), 1):
+        number = violation.get("packet")
+        if isinstance(number, int):
+            found.setdefault(number, i)
+    return found
+
+
+def _packet_row(row: PacketRow, connections: int, case_id: str, culprits: Mapping[int, int]) -> str:
+    bubble = _bubble(row, connections)
+    cells = f"<td>{bubble}</td><td></td>" if row.packet.direction == "c2s" else f"<td></td><td>{bubble}</td>"
+    culprit = culprits.get(row.number)
+    mark = (
+        f' culprit" id="{_packet_anchor(case_id, row.number)}" title="the packet of violation {culprit}'
+        if culprit
+        else ""
+    )
+    return (
+        f'<tr class="prow {row.packet.direction}{mark}"><td class="num">{row.number}</td>'
+        f'<td class="num t">{row.packet.time:.3f}</td>{cells}</tr>'
+    )
+
+
+def _near(number: int, culprits: Iterable[int]) -> bool:
+    """Whether packet ``number`` is shown open: the connection's opening or the window of a culprit."""
+    return number <= OPENING or any(c - BEFORE <= number <= c + AFTER for c in culprits)
+
+
+def _span(first: int, last: int) -> str:
+    return f"#{first}" if first == last else f"#{first}\u2013#{last}"
+
+
+def _fold(rows: list[str], first: int, last: int) -> str:
+    return (
+        f'<tr class="fold"><td colspan="4"><details><summary>{plural(len(rows), "packet")} '
+        f"({_span(first, last)}), folded</summary>"
+        f'<table class="packets">{"".join(rows)}</table></details></td></tr>'
+    )
+
+
+def _gap(first: int, last: int) -> str:
+    words = f"{plural(last - first + 1, 'packet')} ({_span(first, last)})"
+    return f'<tr class="gap"><td colspan="4">{words} not kept in the report</td></tr>'
+
+
+def _packet_body(rows: list[PacketRow], case_id: str, culprits: Mapping[int, int]) -> str:
+    """The rows of a packet log: those near a culprit open, each run of the others folded, and a line
+    where the report kept no packets."""
+    connections = len({r.packet.connection for r in rows})
+    parts: list[str] = []
+    folded: list[PacketRow] = []
+
+    def flush() -> None:
+        if folded:
+            parts.append(
+                _fold(
+                    [_packet_row(r, connections, case_id, culprits) for r in folded],
+                    folded[0].number,
+                    folded[-1].number,
+                )
+            )
+            folded.clear()
+
+    previous = 0
+    for row in rows:
+        if row.number > previous + 1:
+            flush()
+            parts.append(_gap(previous + 1, row.number - 1))
+        previous = row.number
+        if culprits and not _near(row.number, culprits):
+            folded.append(row)
+            continue
+        flush()
+        parts.append(_packet_row(row, connections, case_id, culprits))
+    flush()
+    return "".join(parts)
+
+
 def _packet_log(case: Mapping[str, Any], order: WireOrder) -> str:
     rows = packet_rows(case, order)
     if not rows:
         return '<p class="none">No packets were recorded for this case.</p>'
-    connections = len({r.packet.connection for r in rows})
-    body = "".join(
-        f'<tr class="prow {r.packet.direction}"><td class="num">{r.number}</td>'
-        f'<td class="num t">{r.packet.time:.3f}</td>'
-        + (
-            f"<td>{_bubble(r, connections)}</td><td></td>"
-            if r.packet.direction == "c2s"
-            else f"<td></td><td>{_bubble(r, connections)}</td>"
-        )
-        + "</tr>"
-        for r in rows
-    )
+    culprits = _culprits(case)
     total = int(case.get("packets_total", len(rows)))
-    cut = f" (the first {len(rows)} of {total})" if total > len(rows) else ""
+    body = _packet_body(rows, str(case["id"]), culprits)
+    if total > rows[-1].number:
+        body += _gap(rows[-1].number + 1, total)
+    said = [plural(total, "packet")]
+    if total > len(rows):
+        said.append(f"the report keeps {len(rows)}")
+    if culprits:
+        said.append("the ones around each failure are open (the culprit marked), the rest folded")
     return (
-        f'<p class="wire">{len(rows)} packets{_e(cut)}; data bytes in {_e(order.note)}.</p>'
+        f'<p class="wire">{_e("; ".join(said))}; data bytes in {_e(order.note)}.</p>'
         '<table class="packets"><thead><tr><th>#</th><th>time (s)</th><th class="c">client \u2192</th>'
         f'<th class="s">\u2190 server</th></tr></thead><tbody>{body}</tbody></table>'
     )
 
 
-def _violation(report: Report, v: Mapping[str, Any]) -> str:
+def _violation(report: Report, case_id: str, v: Mapping[str, Any], kept: frozenset[int]) -> str:
     clause = v.get("clause")
     info = clause_info(report, clause) if clause else None
     ref = (
@@ -316,6 +409,14 @@ def _violation(report: Report, v: Mapping[str, Any]) -> str:
     if v.get("bytes"):
         fields.append(("bytes", bytes.fromhex(str(v["bytes"])).hex(" ") + "  (data, PDP-11 memory order)"))
     dl = "".join(f"<dt>{_e(k)}</dt><dd><pre>{_e(text)}</pre></dd>" for k, text in fields if text)
+    number = v.get("packet")
+    if isinstance(number, int) and number in kept:
+        dl += (
+            f'<dt>packet</dt><dd><a class="culprit-link" href="#{_packet_anchor(case_id, number)}">'
+            f"#{number} in the packets below</a></dd>"
+        )
+    elif isinstance(number, int):  # past the report's bound on kept packets
+        dl += f"<dt>packet</dt><dd>#{number} (not kept in the report)</dd>"
     return f'<div class="violation">{ref}<dl class="ea">{dl}</dl></div>'
 
 
@@ -333,7 +434,8 @@ def _case_detail(report: Report, case: Mapping[str, Any], order: WireOrder) -> s
     outcome = str(case["outcome"])
     is_open = " open" if outcome in FAILING or outcome == "warn" else ""
     parts = [f'<p class="summary">{_e(case.get("summary", ""))}</p>']
-    parts += [_violation(report, v) for v in case.get("violations", [])]
+    kept = frozenset(int(p.get("n", i)) for i, p in enumerate(case.get("packets", []), 1))
+    parts += [_violation(report, str(case["id"]), v, kept) for v in case.get("violations", [])]
     if outcome == "fixed":
         parts.append('<p class="reason">Listed in --known-failing but passed: remove the entry.</p>')
     if case.get("reason"):
@@ -360,8 +462,15 @@ def render_html(report: Report) -> str:
     """The whole page of the JSON report's data ``report``."""
     order = wire_order(report)
     cases = sorted(report["cases"], key=lambda c: (_RANK.get(c["outcome"], 99), c["id"]))
-    details = "".join(_case_detail(report, c, order) for c in cases)
-    title = f"manip-conform: {report['verdict']} \u2014 {report['target']}"
+    detailed = [c for c in cases if _detailed(report, c)]
+    details = "".join(_case_detail(report, c, order) for c in detailed)
+    if len(detailed) < len(cases):
+        details = (
+            f'<p class="quiet">{len(report["cases"])} cases: the details of the {len(detailed)} that need '
+            "attention are below; the table lists every case, and the JSON report (<code>--json</code>) "
+            f"keeps the packets of all.</p>{details}"
+        )
+    title = f"manip-conform: {report['verdict']} \u2014 {target_label(report)}"
     return (
         "<!DOCTYPE html>\n"
         '<html lang="en"><head><meta charset="utf-8">'

@@ -14,7 +14,15 @@ import re
 from collections.abc import Mapping
 from typing import Any, Final
 
-from manip.conformance.output.report_view import FAILING, OUTCOME_ORDER, Report, failure_groups, seeded
+from manip.conformance.output.report_view import (
+    FAILING,
+    OUTCOME_ORDER,
+    Report,
+    failure_groups,
+    group_message,
+    seeded,
+    target_label,
+)
 
 __all__ = ["render_markdown"]
 
@@ -44,14 +52,9 @@ def _block(lines: list[str]) -> list[str]:
     return [f"{fence}sh", *lines, fence]
 
 
-def _message(case: Mapping[str, Any], clause: str | None) -> str:
-    for violation in case.get("violations", []):
-        if clause is None or violation.get("clause") == clause:
-            text = " ".join(str(violation.get("message", "")).split())
-            return text if len(text) <= _MESSAGE_CHARS else text[: _MESSAGE_CHARS - 3] + "..."
-    if case["outcome"] == "fixed":
-        return "listed in --known-failing but passed: remove the entry"
-    return str(case.get("reason", ""))
+def _message(case: Mapping[str, Any], tally: Mapping[str, Any] | None) -> str:
+    text = " ".join(group_message(case, tally).split())
+    return text if len(text) <= _MESSAGE_CHARS else text[: _MESSAGE_CHARS - 3] + "..."
 
 
 def render_markdown(report: Report) -> str:
@@ -60,8 +63,9 @@ def render_markdown(report: Report) -> str:
     lines = [
         f"## manip-conform: {_text(report['verdict'])} (exit {int(report['exit_code'])})",
         "",
-        f"{len(report['cases'])} cases against {_code(report['target'])}, "
-        + (f"seed {int(report['seed'])}, " if seeded(report) else "")
+        f"{len(report['cases'])} cases against "
+        + (target_label(report) + ", " if report.get("embedded") else f"{_code(report['target'])}, ")
+        + (f"seed {int(report['seed'])}, " if seeded(report) and not report.get("embedded") else "")
         + f"{float(report.get('duration', 0.0)):.1f} s"
         + (" of virtual time" if report.get("time") == "virtual" else ""),
         "",
@@ -89,7 +93,7 @@ def render_markdown(report: Report) -> str:
                 f"{n} {word}"
                 for n, word in (
                     (tally["failures"], "failing"),
-                    (tally["warnings"], "warning"),
+                    (tally["warnings"], "warning" if tally["warnings"] == 1 else "warnings"),
                     (tally["known_failures"], "known failing"),
                 )
                 if n
@@ -101,7 +105,7 @@ def render_markdown(report: Report) -> str:
                 f"> {_text(tally['text'])}",
             ]
         lines.append("")
-        lines += [f"- **{c['outcome']}** {_code(c['id'])}: {_text(_message(c, clause))}" for c in cases]
+        lines += [f"- **{c['outcome']}** {_code(c['id'])}: {_text(_message(c, tally))}" for c in cases]
         reproduce = [" ".join(str(c["reproduce"]).split()) for c in cases if c.get("reproduce")]
         if reproduce:
             lines += ["", *_block(reproduce)]

@@ -24,6 +24,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Final
 
+from manip.conformance.output.culprit import culprit_index, kept_indices
 from manip.conformance.suite.results import CaseResult, RunReport, Violation
 from manip.spec import SPEC
 
@@ -42,7 +43,9 @@ __all__ = [
 
 SCHEMA_VERSION: Final = 1
 MAX_PACKETS_IN_REPORT: Final = 200
-"""Packets kept per case in the JSON report (the first ones; a note says when more were cut)."""
+"""Packets kept per case in the JSON report: the opening, those around each violation, then the first of
+the rest (:func:`~manip.conformance.output.culprit.kept_indices`); ``packets_total`` says how many there
+were, and each kept packet's ``n`` its place among them."""
 
 
 def load_schema() -> dict[str, Any]:
@@ -169,8 +172,19 @@ def clause_lines(report: RunReport) -> list[str]:
     return [clause_line(t) for t in by_clause(report)]
 
 
+def _packets_json(result: CaseResult) -> tuple[list[dict[str, Any]], list[int | None]]:
+    """The kept packets, each numbered by its place in the transcript (from 1), and the number of each
+    violation's culprit packet (None when no packet shows it)."""
+    packets = result.packets
+    culprits = [culprit_index(packets, v) for v in result.violations]
+    kept = kept_indices(len(packets), [c for c in culprits if c is not None], MAX_PACKETS_IN_REPORT)
+    shown = [{**packets[i].to_json(), "n": i + 1} for i in kept]
+    return shown, [None if c is None else c + 1 for c in culprits]
+
+
 def _case_json(result: CaseResult) -> dict[str, Any]:
     failure = result.failure
+    packets, culprits = _packets_json(result)
     return {
         "id": result.id,
         "summary": result.summary,
@@ -184,7 +198,9 @@ def _case_json(result: CaseResult) -> dict[str, Any]:
         "expected": failure.expected if failure else "",
         "actual": failure.actual if failure else "",
         "bytes": failure.data.hex() if failure else "",
-        "violations": [v.to_json() for v in result.violations],
+        "violations": [
+            {**v.to_json(), "packet": culprit} for v, culprit in zip(result.violations, culprits, strict=True)
+        ],
         "reason": result.reason,
         "traceback": result.traceback,
         "notes": list(result.notes),
@@ -192,7 +208,7 @@ def _case_json(result: CaseResult) -> dict[str, Any]:
         "deadline": result.deadline,
         "seed": result.seed,
         "reproduce": result.reproduce,
-        "packets": [p.to_json() for p in result.packets[:MAX_PACKETS_IN_REPORT]],
+        "packets": packets,
         "packets_total": len(result.packets),
     }
 

@@ -22,6 +22,7 @@ from manip.links import AddressError, parse_address
 from manip.spec import SPEC
 
 __all__ = [
+    "ATTENTION",
     "FAILING",
     "LEVELS",
     "OUTCOME_ORDER",
@@ -31,9 +32,13 @@ __all__ = [
     "WireOrder",
     "clause_info",
     "failure_groups",
+    "group_message",
+    "grouped",
     "load_report",
     "packet_rows",
+    "plural",
     "seeded",
+    "target_label",
     "wire_order",
 ]
 
@@ -43,6 +48,8 @@ if set(OUTCOME_ORDER) != set(OUTCOMES):  # a new outcome must get its place (and
 """Outcomes, the ones needing attention first."""
 FAILING: Final = frozenset({"fail", "error", "fixed"})
 """Outcomes that fail the run."""
+ATTENTION: Final = FAILING | {"warn", "known-fail"}
+"""Outcomes a reader needs to look at (the rest are quiet: passed, skipped, not run...)."""
 LEVELS: Final = ("MUST", "SHOULD", "MAY", "INFO")
 _REQUIRED: Final = ("verdict", "exit_code", "counts", "cases", "by_clause", "seed", "target")
 Report = Mapping[str, Any]
@@ -112,6 +119,42 @@ def failure_groups(report: Report) -> list[tuple[Mapping[str, Any] | None, list[
     return groups
 
 
+def grouped(violation: Mapping[str, Any], tally: Mapping[str, Any] | None) -> bool:
+    """Whether ``violation`` is one that the failure group of ``tally`` (a ``by_clause`` entry) counts:
+    of its clause, or, for a group of violations that cite no clause, of its kind.  The group of failing
+    cases that broke no clause (``None``) takes any."""
+    if tally is None:
+        return True
+    if tally["clause"] is not None:
+        return bool(violation.get("clause") == tally["clause"])
+    return violation.get("clause") is None and violation.get("kind") == tally["kind"]
+
+
+def group_message(case: Mapping[str, Any], tally: Mapping[str, Any] | None) -> str:
+    """What a case listed under a failure group says: the message of its first violation the group
+    counts (not merely its first violation), else why it failed without one."""
+    for violation in case.get("violations", []):
+        if grouped(violation, tally):
+            return str(violation.get("message", ""))
+    if case["outcome"] == "fixed":
+        return "listed in --known-failing but passed: remove the entry"
+    return str(case.get("reason", ""))
+
+
+def plural(count: int, word: str) -> str:
+    """``1 warning``, ``16 warnings``."""
+    return f"{count} {word}" if count == 1 else f"{count} {word}s"
+
+
+def target_label(report: Report) -> str:
+    """The target as a reader should know it: the embedded reference server by name and seed (its
+    temporary socket is gone once the run ends), any other by its address."""
+    if report.get("embedded"):
+        seed = f", seed {int(report['seed'])}" if seeded(report) else ""
+        return f"the embedded reference server{seed}"
+    return str(report["target"])
+
+
 @dataclass(frozen=True)
 class WireOrder:
     """How a link puts a packet's data bytes on the wire (the report's data are PDP-11 memory order)."""
@@ -174,9 +217,12 @@ def _packet(item: Mapping[str, Any]) -> WirePacket:
 
 
 def packet_rows(case: Mapping[str, Any], order: WireOrder) -> list[PacketRow]:
-    """The case's packets (as many as the report kept), numbered, described, decoded, in wire order."""
-    packets: Sequence[WirePacket] = [_packet(p) for p in case.get("packets", [])]
+    """The case's packets (those the report kept), numbered by their place in the case's transcript,
+    described, decoded, in wire order."""
+    items = case.get("packets", [])
+    packets: Sequence[WirePacket] = [_packet(p) for p in items]
+    numbers = [int(p.get("n", i)) for i, p in enumerate(items, 1)]  # older reports: the first ones
     return [
         PacketRow(n, packet, describe(packet), text, "" if packet.is_close else _hex(packet.data, order))
-        for n, (packet, text) in enumerate(annotated(packets, from_open=True), 1)
+        for n, (packet, text) in zip(numbers, annotated(packets, from_open=True), strict=True)
     ]

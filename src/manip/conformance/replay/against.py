@@ -226,6 +226,10 @@ class ReplayOptions:
     paced: bool = False
     """Open each session, send each request and end each session at its recorded time on the loop's
     clock (a simulated run's capture replayed in virtual time: same instants, same server states)."""
+    clock_offset_ns: int = 0
+    """What to take off a recorded log time to get the loop's clock at that instant (a simulated run's
+    capture is written anchored at its wall-clock start; metadata ``wall_origin_ns`` less
+    ``virtual_origin_ns``)."""
     """Put between the node and its link (``RecorderTap(recorder, "client").wrap`` records the replay)."""
 
 
@@ -350,7 +354,7 @@ async def replay_session(script: Script, address: str, options: ReplayOptions) -
     ChaosError: a failure to connect is ``stopped``)."""
     replay = SessionReplay(script, AnswerSorter(initial=script.rfc is not None))
     if options.paced:
-        await _until(script.session.start_ns)
+        await _until(script.session.start_ns - options.clock_offset_ns)
     t0 = time.monotonic()
     try:
         conn = await _connect(address, options)
@@ -388,7 +392,7 @@ async def _play(script: Script, live: _Live, options: ReplayOptions) -> None:
         if missing:
             replay.notes.append(f"before request {replay.sent + 1}: {missing}")
         if options.paced:
-            await _until(script.session.start_ns + round(packet.time * 1e9))
+            await _until(script.session.start_ns - options.clock_offset_ns + round(packet.time * 1e9))
         try:
             number = await live.conn.send(packet.data, packet.opcode)
         except ChaosError as exc:
@@ -407,7 +411,8 @@ async def _play(script: Script, live: _Live, options: ReplayOptions) -> None:
             while replay.live.closed is None and await live.take(deadline - loop.time()):
                 pass
         elif options.paced:
-            await live.quiet_until(script.session.start_ns + round(script.packets[-1].time * 1e9))
+            end = script.session.start_ns - options.clock_offset_ns + round(script.packets[-1].time * 1e9)
+            await live.quiet_until(end)
         else:
             await live.quiet(options.settle)
     if replay.stopped:
@@ -534,11 +539,7 @@ def _results(replay: SessionReplay, path: str, reproduce: Sequence[str], strict:
         notes=list(replay.notes)
         + ([f"{replay.masked} mismatch(es) left out by --ignore"] if replay.masked else []),
     )
-    for m in replay.mismatches:
-        expected = m.recorded + (f" (recorded bytes {m.recorded_bytes.hex(' ')})" if m.recorded_bytes else "")
-        exchange.violations.append(
-            Violation(m.message, m.clause, "MUST", expected, m.live, m.live_bytes, "mismatch")
-        )
+    exchange.violations += [m.violation(m.clause) for m in replay.mismatches]
     if replay.stopped and not replay.mismatches:
         exchange.violations.append(
             Violation(

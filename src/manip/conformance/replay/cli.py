@@ -40,6 +40,7 @@ from manip.conformance.output.documents import document_options, write_documents
 from manip.conformance.output.report import clause_lines, failure_text, write_json, write_junit
 from manip.conformance.suite.embedded import EmbeddedServer, simulated_server
 from manip.conformance.suite.results import ExitCode, RunReport
+from manip.exit_status import epilog
 
 if TYPE_CHECKING:
     from manip.conformance.replay.verify import Judge
@@ -59,13 +60,7 @@ __all__ = [
     "verify_command",
 ]
 
-EXIT_CODES_HELP = """\b
-Exit codes:
-  0  conformant (replay: every answer as recorded)
-  1  non-conformant, or a replayed answer differs from the recording
-  2  usage error
-  3  the capture cannot be read or holds no session; the target unreachable
-  4  interrupted or internal error"""
+EXIT_CODES_HELP = epilog("manip-conform verify, replay")
 
 _STYLE = {"fail": "bold red", "warn": "yellow", "error": "bold magenta", "pass": "green", "skip": "dim"}
 
@@ -83,20 +78,31 @@ def recording(
     (``client`` or ``server``) of the protocol; None (no wrapper) when ``path`` is None.  Enter it inside
     the running loop (the recorder's timer flushes it while the session is idle).  ``virtual``: the run
     is simulated; log times are its virtual clock (metadata ``time``: ``virtual``), so a replay can put
-    every request at its recorded instant."""
+    every request at its recorded instant.  Its log times are still dates: the virtual clock anchored at
+    the wall-clock start of the recording (metadata ``wall_origin_ns`` and ``virtual_origin_ns``, whose
+    difference a replay takes off), so a viewer such as Foxglove shows when the run was made."""
     if path is None:
         yield None
         return
     # Imported here: the capture library (mcap, zstd) loads only when recording.
     from manip.captures import Recorder, RecorderTap  # noqa: PLC0415
 
+    metadata = {"time": "virtual" if virtual else "real"}
+    clock_ns: Callable[[], int] = time.time_ns
+    if virtual:
+        wall_origin, virtual_origin = time.time_ns(), virtual_clock.loop_clock_ns()
+        metadata |= {"wall_origin_ns": str(wall_origin), "virtual_origin_ns": str(virtual_origin)}
+
+        def clock_ns() -> int:
+            return wall_origin + virtual_clock.loop_clock_ns() - virtual_origin
+
     with Recorder(
         path,
         how=how,
         seed=seed,
         command_line=["manip-conform", *sys.argv[1:]],
-        metadata={"time": "virtual" if virtual else "real"},
-        clock_ns=virtual_clock.loop_clock_ns if virtual else time.time_ns,
+        metadata=metadata,
+        clock_ns=clock_ns,
     ) as recorder:
         yield RecorderTap(recorder, "server" if side == "server" else "client").wrap
 
@@ -259,6 +265,8 @@ class _Recorded:
     virtual: bool = False
     """A simulated run recorded it on its virtual clock: replay it in virtual time, each request at its
     recorded instant, and the embedded server goes through the same states."""
+    clock_offset_ns: int = 0
+    """Its log times less the virtual clock's (the wall-clock anchor of :func:`recording`)."""
 
 
 def _capture_settings(file: Path) -> _Recorded:
@@ -284,7 +292,10 @@ def _capture_settings(file: Path) -> _Recorded:
         for pair in session.pairs.values()
     )
     seed = int(seed_text) if seed_text.isdigit() else None
-    return _Recorded(scale, seed, wrist, meta.get("time") == "virtual" and seed is not None)
+    virtual = meta.get("time") == "virtual" and seed is not None
+    origins = meta.get("wall_origin_ns", ""), meta.get("virtual_origin_ns", "")
+    offset = int(origins[0]) - int(origins[1]) if all(o.isdigit() for o in origins) else 0  # older: none
+    return _Recorded(scale, seed, wrist, virtual, offset)
 
 
 @click.command("replay", epilog=EXIT_CODES_HELP)
@@ -415,6 +426,7 @@ def replay_command(
                     sessions=sessions,
                     wrap_link=wrap,
                     paced=virtual,
+                    clock_offset_ns=recorded.clock_offset_ns,
                 )
                 if against:
                     return await replay_capture(file, against, options, command=command)

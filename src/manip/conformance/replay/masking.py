@@ -47,6 +47,7 @@ from manip.codecs.errors import CodecError
 from manip.codecs.lisp import Cons, Keyword, Symbol, print_lisp
 from manip.codecs.messages import decode_async, decode_error, decode_reply, decode_request
 from manip.conformance.judge.checks import WirePacket, describe, multi_text, parse_description, word
+from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC
 from manip.spec.constants import AsyncCondition, ServerOp
 from manip.spec.notation import octal
@@ -94,6 +95,22 @@ class Mismatch:
     recorded_bytes: bytes = b""
     live_bytes: bytes = b""
     clause: str | None = None
+
+    def violation(self, clause: str | None) -> Violation:
+        """The mismatch as a report's violation: expected and actual both name the field compared
+        (``number: 36``, never a bare value beside the bytes of a whole packet); the recorded packet's
+        data are said to be that."""
+        data = self.recorded_bytes.hex(" ")
+        recorded = f"; the recorded packet's data: {data}" if data else ""
+        return Violation(
+            self.message,
+            clause,
+            "MUST",
+            f"{self.path}: {self.recorded}, as recorded{recorded}",
+            f"{self.path}: {self.live}",
+            self.live_bytes,
+            "mismatch",
+        )
 
 
 @dataclass

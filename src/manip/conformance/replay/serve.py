@@ -313,11 +313,7 @@ def _result(served: ServedSession, path: str, reproduce: Sequence[str]) -> CaseR
             )
         )
     for m in served.mismatches:
-        clause = "request.opcode-range" if m.path == "opcode" else None
-        expected = m.recorded + (f" (recorded bytes {m.recorded_bytes.hex(' ')})" if m.recorded_bytes else "")
-        result.violations.append(
-            Violation(m.message, clause, "MUST", expected, m.live, m.live_bytes, "mismatch")
-        )
+        result.violations.append(m.violation("request.opcode-range" if m.path == "opcode" else None))
     if result.violations:
         result.outcome = "fail"
     return result

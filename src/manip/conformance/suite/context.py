@@ -48,7 +48,7 @@ from manip.codecs.messages import encode_request
 from manip.codecs.packet import Direction, Packet
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, describe, word
-from manip.conformance.judge.violation import Violation, evidence
+from manip.conformance.judge.violation import Violation, evidence, shown_packet
 from manip.conformance.suite.case import (
     LEVEL_ORDER,
     CaseError,
@@ -108,6 +108,9 @@ class RunOptions:
     """The target's link address, as given (for messages and reproduce commands)."""
     broken_after: float | None = None
     """The target's broken-connection timer, when the run is to check it (``--broken-after``)."""
+    embedded: bool = False
+    """The target is the embedded reference server: its address is a temporary socket, gone after the
+    run, so a case says how to run it again (:attr:`CaseContext.reproduce`), never that address."""
 
     @property
     def allowed_hazards(self) -> frozenset[Hazard]:
@@ -417,8 +420,11 @@ class CaseContext:
         connector: Connector,
         clauses: Iterable[str] | None = None,
         environment: Environment | None = None,
+        reproduce: str = "",
     ) -> None:
         self.case_id = case_id
+        self.reproduce = reproduce
+        """The command that runs this case again (the report's reproduce line)."""
         self.environment = environment
         """The target's switchable conditions of the arm's world: the embedded server's, None for
         any other target (a case that needs one says how to make it run there)."""
@@ -437,6 +443,8 @@ class CaseContext:
         self.soft_failures: list[Violation] = []
         """The SHOULD/MAY/INFO violations recorded on the way (the case went on)."""
         self.notes: list[str] = []
+        self.shown_packets: list[WirePacket] | None = None
+        """The packet log the report shows, when not the transcript (:meth:`show_packets`)."""
         self.auto_check = True
         """After the case, the runner checks every probe's whole recording with
         :func:`~manip.conformance.judge.checks.check_transcript`; a case that leaves the protocol on purpose
@@ -452,6 +460,11 @@ class CaseContext:
     def clock(self) -> float:
         """Seconds since the case started, on the event loop's clock (virtual in a simulated run)."""
         return self._clock() - self._t0
+
+    def show_packets(self, packets: Sequence[WirePacket]) -> None:
+        """Make ``packets`` the case's packet log in the report instead of its whole transcript: a property
+        or stateful case shows the run of its shrunk example, where the failure is."""
+        self.shown_packets = list(packets)
 
     def note(self, text: str) -> None:
         """A line of information for the report (what the case observed)."""
@@ -564,6 +577,7 @@ class CaseContext:
                 str(actual) if actual != "" else shown,
                 bytes(data) if data else shown_data,
                 invariant=attributed,
+                packet=shown_packet(seen),
             )
         )
         return False
@@ -606,6 +620,7 @@ class CaseContext:
                 actual=str(actual) if actual != "" else shown,
                 data=bytes(data) if data else shown_data,
                 invariant=attributed,
+                packet=shown_packet(seen),
             )
         )
 

@@ -324,6 +324,7 @@ class Runner:
             connector=self.connect,
             clauses=item.clauses,
             environment=self.config.environment,
+            reproduce=result.reproduce,
         )
         failure: CaseFailure | None = None
         clock = asyncio.get_running_loop().time  # the clock of every deadline (virtual when simulated)
@@ -365,7 +366,7 @@ class Runner:
             result.duration = clock() - start
         await _quietly(ctx.close_all())
         result.notes = list(ctx.notes)
-        result.packets = list(ctx.transcript)
+        result.packets = list(ctx.transcript if ctx.shown_packets is None else ctx.shown_packets)
         self._judge(result, ctx, failure)
         self._check_attribution(result, ctx, failure)
         return result

@@ -13,6 +13,7 @@ from manip.codecs.packet import Packet
 from manip.codecs.pdp11float import f_to_u32, u32_to_f
 from manip.conformance.client.contract import Op, Result
 from manip.conformance.client.runner import ClientContext, Play
+from manip.conformance.judge.diagnosis import number_diagnosis
 from manip.spec import SPEC
 from manip.spec.model import FieldType, Layout, RequestOpcode
 
@@ -204,11 +205,13 @@ def expect_error_parts(
     )
     assert result is not None
     for key, value in error_parts(error).items():
+        cause = _arguments_cause(result.get(key), list(error.args)) if key == "arguments" else None
         ctx.expect(
             result.get(key) == value,
             clause=clause,
             expected=f"{key} = {value!r}",
             actual=f"{key} = {result.get(key)!r} in {result}",
+            message=f"expected {key} = {value!r}; {cause}" if cause else None,
         )
 
 
@@ -224,6 +227,20 @@ def error_parts(error: ErrorMessage) -> dict[str, Any]:
         "message": message,
         "rendered": f"{error.where}: {error.severity} {error.code}" + (f" {message}" if message else ""),
     }
+
+
+def _arguments_cause(got: object, want: list[int]) -> str | None:
+    """Why the numbers reported differ from the error string's: each one off, or byte-swapped."""
+    if not isinstance(got, list) or len(got) != len(want) or not all(isinstance(g, int) for g in got):
+        return None
+    early = b"\0" + b"".join(w.to_bytes(2, "little") for w in want)  # the pad byte, then the numbers
+    if got == [int.from_bytes(early[i : i + 2], "little") for i in range(0, 2 * len(want), 2)]:
+        return "the numbers were read one byte early (the pad byte taken for the first number's low byte)"
+    causes = {number_diagnosis(g, w, what="argument") for g, w in zip(got, want, strict=True) if g != w}
+    if len(causes) != 1 or None in causes:
+        return None
+    (cause,) = causes
+    return f"each number read differs the same way: {cause}"
 
 
 def render(error: ErrorMessage) -> str:

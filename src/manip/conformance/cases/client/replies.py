@@ -20,7 +20,7 @@ from manip.conformance.suite.context import CaseContext
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
 from manip.spec.model import RequestOpcode
-from manip.spec.notation import octal
+from manip.spec.notation import a_or_an, octal
 
 DATA_REPLIES = [op for op in SPEC.requests.values() if op.response.form == "data"]
 WITH_ARGS = [op for op in SPEC.requests.values() if op.request.fields]
@@ -56,7 +56,7 @@ def _reply_case(op: RequestOpcode) -> None:
         ctx.expect(
             "number" in sent,
             clause="client.reply-matching",
-            expected=f"a {op.name} request",
+            expected=f"{a_or_an(op.name)} request",
             actual="no request reached the judging server",
         )
         reply = expect_reply(ctx, play, 1, op, sent["payload"], sent["number"], clause="client.reply-data")
@@ -106,7 +106,7 @@ def _request_case(op: RequestOpcode) -> None:
         ctx.expect(
             bool(got),
             clause="request.opcode-range",
-            expected=f"a {op.name} request",
+            expected=f"{a_or_an(op.name)} request",
             actual=f"no request reached the judging server:\n{play.describe()}",
         )
         req = got[0]

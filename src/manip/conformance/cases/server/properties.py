@@ -33,6 +33,7 @@ from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request
 from manip.conformance.cases._support import Evidence, describe_target, floats, must, reply_view
 from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, check_reply, word
+from manip.conformance.judge.diagnosis import float_payload, floats_diagnosis
 from manip.conformance.output.packet_text import packet_listing, show_value
 from manip.conformance.suite.bridge import (
     DEFAULT_SHRINK_BUDGET,
@@ -204,6 +205,15 @@ def _example_text(failure: Evidence) -> str:
     return text + "".join(f"\n{line}" for line in listing)
 
 
+def _example_packets(failure: Evidence) -> list[WirePacket]:
+    """The packets of the shrunk example for the case's packet log (with those of its setup before it);
+    the whole failing exchange when the example was not recorded apart."""
+    if not failure.example:
+        return list(failure.packets)
+    inside = {id(p) for p in failure.example}
+    return [*(p for p in failure.packets if id(p) not in inside), *failure.example]
+
+
 def _first_evidence(group: BaseException) -> Evidence | None:
     if isinstance(group, Evidence):
         return group
@@ -282,7 +292,9 @@ async def run_property(
         if notes:
             actual += f"\n{notes}"
         actual += _example_text(failure)
-        ctx.fail_with(replace(failure.violation, actual=actual))
+        ctx.show_packets(_example_packets(failure))
+        culprit = failure.culprit
+        ctx.fail_with(replace(failure.violation, actual=actual, packet=culprit))
 
 
 # ------------------------------------------------------------------------------- well-formed replies
@@ -529,9 +541,11 @@ async def floats_round_trip(ctx: CaseContext) -> None:
                 worst = (
                     max(range(len(goal)), key=lambda i: abs(got[i] - goal[i]) / f_ulp(goal[i])) if got else 0
                 )
+                cause = floats_diagnosis(float_payload(SPEC.request("joint-angles"), settled.data), goal)
                 raise Evidence(
                     "float.format",
-                    "joint angles read back differ from those set by more than the float precision",
+                    "joint angles read back differ from those set by more than the float precision"
+                    + (f"; {cause}" if cause else ""),
                     f"{list(goal)} (each within {FLOAT_TRIP_ULPS} units of the 24th bit)",
                     f"{list(got)}; joint {worst + 1}: sent {goal[worst]!r}, got "
                     f"{got[worst] if got else 'nothing'!r}",

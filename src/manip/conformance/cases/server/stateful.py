@@ -598,7 +598,10 @@ def _machine_class(env: _Env) -> type[ArmProtocolMachine]:
 
 
 # ------------------------------------------------------------------------------------- the case
-def _counterexample(failure: MachineFailure, address: str) -> str:
+def _counterexample(failure: MachineFailure, address: str, reproduce: str | None = None) -> str:
+    """The counterexample for the report: its requests, how to see it again, the failing run's packets.
+    ``reproduce``: the case's command, for a target that will be gone (the embedded server), in place
+    of the line that replays the requests against ``address``."""
     lines = [
         failure.actual,
         "",
@@ -607,11 +610,14 @@ def _counterexample(failure: MachineFailure, address: str) -> str:
     ]
     lines += [f"  {i:>3}. {step.show()}" for i, step in enumerate(failure.steps, 1)]
     shown = ", ".join(step.as_python() for step in failure.steps)
-    lines += [
-        "replay with:",
-        '  python -c "from manip.conformance.cases.server.stateful import replay; '
-        f'replay({address!r}, [{shown}])"',
-    ]
+    if reproduce:
+        lines += ["reproduce with (the same seed draws the same counterexample):", f"  {reproduce}"]
+    else:
+        lines += [
+            "replay with:",
+            '  python -c "from manip.conformance.cases.server.stateful import replay; '
+            f'replay({address!r}, [{shown}])"',
+        ]
     if failure.example:
         lines.append("packets of the failing run (> the ones that show the failure):")
         lines += packet_listing(failure.example, marked=failure.packets, from_open=True)
@@ -700,8 +706,11 @@ async def arm_model(ctx: CaseContext) -> None:
     if note:
         ctx.note(note)
     if failure is not None:
-        shown = _counterexample(failure, ctx.options.address or "tcp://HOST:PORT")
-        ctx.fail_with(replace(failure.violation, actual=shown))
+        reproduce = ctx.reproduce if ctx.options.embedded and ctx.reproduce else None
+        shown = _counterexample(failure, ctx.options.address or "tcp://HOST:PORT", reproduce)
+        ctx.show_packets(failure.example or failure.packets)
+        culprit = failure.culprit
+        ctx.fail_with(replace(failure.violation, actual=shown, packet=culprit))
 
 
 # ------------------------------------------------------------------------------------- replay
