@@ -3,11 +3,12 @@ field for field on every packet of the golden captures (exported to pcapng by ma
 of a capture that starts after its connection opened (no RFC: the sides come from the packets' shape).
 
 The same captures go through the dissector in a plain Lua 5.4 interpreter (``tests/lua/wireshark_stub.lua``
-stands in for Wireshark's API), as Wireshark 4.4 and later run it, and in Lua 5.2 when it is there (what
-Debian's tshark runs it on): the dissector must not need ``bit32`` nor the bitwise operators.
+stands in for Wireshark's API), as Wireshark 4.4 and later run it, and in Lua 5.2 (what Debian's tshark
+runs it on): the dissector must not need ``bit32`` nor the bitwise operators.
 
-tshark and lua5.4 are Debian's packages (.ci/run installs them).  Without them these tests are skipped,
-except in CI (``CI=true``), where a missing one is a failure: the dissector must never go untested there.
+tshark, lua5.4 and lua5.2 are Debian's packages (.ci/run installs them).  Without them these tests are
+skipped, except in CI (``CI=true``), where a missing one is a failure: the dissector must never go
+untested there.
 """
 
 from __future__ import annotations
@@ -71,8 +72,8 @@ def _need_tshark() -> str:
 def _need_lua(name: str) -> str:
     found = shutil.which(name)
     if found is None:
-        if os.environ.get("CI") == "true" and name == "lua5.4":
-            pytest.fail("lua5.4 is not installed: .ci/run installs Debian's lua5.4 package")
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"{name} is not installed: .ci/run installs Debian's {name} package")
         pytest.skip(f"{name} is not installed (apt-get install {name})")
     return found
 
