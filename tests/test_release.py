@@ -61,6 +61,7 @@ def test_the_built_wheel_installs_and_runs_in_a_fresh_environment(tmp_path: Path
     names = zipfile.ZipFile(wheel).namelist()
     for data in ("manip/spec/data/manip.toml", "manip/conformance/report.schema.json", "manip/py.typed"):
         assert data in names, data  # the spec data and assets ship in the wheel
+    assert f"manip-{VERSION}.dist-info/licenses/LICENSE" in names  # the licence travels with the wheel
 
     env = tmp_path / "fresh"
     assert _run(sys.executable, "-m", "venv", env).returncode == 0
