@@ -348,7 +348,7 @@ def test_packets_are_listed_numbered_and_decoded() -> None:
 def test_raw_packets_say_what_their_chaos_addresses_are() -> None:
     rfc = Packet(ChaosOp.RFC, dest_host=0o440, dest_index=0, src_host=0o401, src_index=0x0A01, packet_no=1)
     shown = format_packet(rfc)
-    assert shown.startswith("RFC Chaos host 0401 (the client's default address) index 05001 -> ")
+    assert shown.startswith("RFC 01 Chaos host 0401 (the client's default address) index 05001 -> ")
     assert "Chaos host 0440 (the robot's default address) index 0 pkt#1" in shown
     other = Packet(ChaosOp.LOS, dest_host=0o3001, dest_index=1, src_host=0o440, src_index=2)
     assert "-> Chaos host 03001 index 01" in format_packet(other)
