@@ -18,7 +18,7 @@ from manip.conformance.fuzz.generators import CLASSES, GenOptions, generate, str
 from manip.conformance.fuzz.judge import _connection
 from manip.conformance.fuzz.oracles import oracle_findings
 from manip.conformance.fuzz.shrink import Budget, ddmin
-from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Request, Stray
+from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, RequestStep, Stray
 from manip.conformance.fuzz.target import TracebackScanner
 from manip.conformance.fuzz.wire import frame
 from manip.conformance.judge.checks import WirePacket, required_refusal
@@ -36,8 +36,8 @@ def _inputs(options: GenOptions, count: int, seed: int = 1) -> list[FuzzInput]:
     return [generate(seed, n, options) for n in range(count)]
 
 
-def _requests(item: FuzzInput) -> list[Request]:
-    return [s for s in item.steps if isinstance(s, Request)]
+def _requests(item: FuzzInput) -> list[RequestStep]:
+    return [s for s in item.steps if isinstance(s, RequestStep)]
 
 
 # ------------------------------------------------------------------------------------------ generation
@@ -105,7 +105,7 @@ def test_hardware_without_motion_sends_no_motion_or_power_opcode() -> None:
     sent = 0
     for item in _inputs(options, 4000):
         for step in item.steps:
-            opcode = step.opcode if isinstance(step, (Request, ConnPacket)) else None
+            opcode = step.opcode if isinstance(step, (RequestStep, ConnPacket)) else None
             if opcode is not None and opcode in SPEC.requests:
                 assert SPEC.requests[opcode].hazard in ("read-only", "config"), item.note
                 sent += 1
@@ -228,9 +228,10 @@ def test_a_request_skipped_by_the_replies_is_a_silent_drop_not_a_wrong_number() 
         _c2s(here, 3),
         _s2c(ServerOp.RESPONSE, reply),
     ]
-    observations = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
-    assert observations[0].kind == "silent-drop" and observations[0].clause == "request.one-reply"
-    assert observations[0].number == 1  # the request never answered, not the one after it
+    sightings = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
+    first = sightings[0].violation
+    assert first.kind == "missing_response" and first.clause == "request.one-reply"
+    assert sightings[0].number == 1  # the request never answered, not the one after it
 
 
 def test_a_reply_to_a_request_answered_already_is_a_second_reply() -> None:
@@ -243,18 +244,18 @@ def test_a_reply_to_a_request_answered_already_is_a_second_reply() -> None:
         _s2c(ServerOp.NON_FATAL_ERROR, refusal),
         _s2c(ServerOp.RESPONSE, b"\x02\x00"),  # done for #2 again, where #3's answer was due
     ]
-    observations = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
-    assert observations[0].clause == "error.non-fatal-is-reply"
-    assert observations[0].number == 1  # the request answered twice
+    sightings = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
+    assert sightings[0].violation.clause == "error.non-fatal-is-reply"
+    assert sightings[0].number == 1  # the request answered twice
 
 
 def test_after_a_reply_out_of_step_later_findings_are_only_counted() -> None:
     unknown = 0o277
     extra = _s2c(ServerOp.RESPONSE, b"\x02\x00")
     packets = [_s2c(ServerOp.RESPONSE, b"\x01\x00"), _c2s(unknown, 2), extra, _c2s(unknown, 3), extra]
-    observations = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
-    assert [o.clause for o in observations] == ["request.unknown-opcode"]
-    assert observations[0].followers >= 1
+    sightings = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
+    assert [o.violation.clause for o in sightings] == ["request.unknown-opcode"]
+    assert sightings[0].followers >= 1
 
 
 def test_the_scanner_finds_each_traceback_with_the_line_before_it() -> None:

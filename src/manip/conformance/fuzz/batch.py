@@ -30,12 +30,12 @@ from typing import Final, Literal
 
 from manip.codecs.packet import Packet
 from manip.conformance.fuzz.session import Allowance, ConnectError, FuzzConnection
-from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, Request, Stray
+from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, RequestStep, Stray
 from manip.conformance.fuzz.wire import Inbox, Wire, frame, open_wire
 from manip.links.address import LinkAddress
 from manip.spec.constants import ChaosOp, RequestOp
 
-__all__ = ["BatchRun", "BatchRunner", "Expectation", "Liveness", "liveness"]
+__all__ = ["BatchRun", "BatchRunner", "DueAnswer", "Liveness", "liveness"]
 
 Expect = Literal["los", "answer", "silence", "sts", "close"]
 POLL: Final = 0.01
@@ -43,7 +43,7 @@ _ANSWERS: Final = frozenset({ChaosOp.OPN, ChaosOp.CLS, ChaosOp.ANS, ChaosOp.FWD}
 
 
 @dataclass
-class Expectation:
+class DueAnswer:
     """An answer a step is due (or must not get), judged after the batch."""
 
     number: int
@@ -65,7 +65,7 @@ class BatchRun:
 
     inputs: list[FuzzInput]
     connections: list[FuzzConnection] = field(default_factory=list)
-    expectations: list[Expectation] = field(default_factory=list)
+    due_answers: list[DueAnswer] = field(default_factory=list)
     counted: int = 0
     """Bad frames the target's links must have counted."""
     open_error: str | None = None
@@ -163,7 +163,7 @@ class BatchRunner:
                     break
                 conn.current = item.number
                 for index, step in enumerate(item.steps):
-                    if isinstance(step, Request):
+                    if isinstance(step, RequestStep):
                         if conn.ended is not None and not conn.stalled:
                             conn = await self._open(run)
                             if conn is None:
@@ -208,12 +208,12 @@ class BatchRunner:
         since = self._loop.time()
         bogus = conn.send_relative(step)
         if bogus is not None:
-            run.expectations.append(
-                Expectation(item.number, "los", step.clause, bogus, since, item.note, step.data, conn)
+            run.due_answers.append(
+                DueAnswer(item.number, "los", step.clause, bogus, since, item.note, step.data, conn)
             )
         elif step.what == "sns" and conn.ended is None:
-            run.expectations.append(
-                Expectation(item.number, "sts", step.clause, conn.index, since, item.note, step.data, conn)
+            run.due_answers.append(
+                DueAnswer(item.number, "sts", step.clause, conn.index, since, item.note, step.data, conn)
             )
 
     async def _stray(
@@ -235,8 +235,8 @@ class BatchRunner:
             self._rfc_wires[packet.src_index] = wire
         wire.send(raw)
         run.counted += int(step.counted)
-        run.expectations.append(
-            Expectation(
+        run.due_answers.append(
+            DueAnswer(
                 item.number,
                 step.expect,
                 step.clause,
@@ -260,8 +260,8 @@ class BatchRunner:
             return
         wire.send(step.data)
         if step.closes:
-            run.expectations.append(
-                Expectation(
+            run.due_answers.append(
+                DueAnswer(
                     item.number, "close", step.clause, 0, self._loop.time(), item.note, step.data, link=wire
                 )
             )
@@ -273,7 +273,7 @@ class BatchRunner:
 
     def _due(self, run: BatchRun) -> bool:
         """Whether some LOS, RFC answer or link drop is still due."""
-        for e in run.expectations:
+        for e in run.due_answers:
             if e.what == "los" and not _has(self.inbox, e.key, lambda p: p.opcode == ChaosOp.LOS):
                 return True
             if e.what == "answer" and not _has(self.inbox, e.key, lambda p: p.opcode in _ANSWERS):

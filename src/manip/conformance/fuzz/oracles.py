@@ -42,7 +42,7 @@ from manip.spec import SPEC
 from manip.spec.constants import ServerOp
 from manip.spec.notation import octal
 
-__all__ = ["Answered", "OracleFinding", "answers", "oracle_findings"]
+__all__ = ["AnsweredRequest", "OracleFinding", "answers", "oracle_findings"]
 
 _ERRORS: Final = frozenset(
     {
@@ -69,7 +69,7 @@ UNSERVED: Final = ("UOP", "UIM")
 
 
 @dataclass(frozen=True)
-class Answered:
+class AnsweredRequest:
     """A request and the packets that answer it (several for describe self's text)."""
 
     request: WirePacket
@@ -91,7 +91,7 @@ class OracleFinding:
     actual: str
 
 
-def answers(packets: Sequence[WirePacket]) -> Iterator[Answered]:
+def answers(packets: Sequence[WirePacket]) -> Iterator[AnsweredRequest]:
     """Requests with their answers in order, by the shared pairing rule (:mod:`manip.codecs.pairing`:
     a well-formed describe self by its text packets up to the empty one or an error); closes,
     asynchronous packets and answers to nothing (the initial RESPONSE, which answers the RFC) are no
@@ -109,10 +109,10 @@ def answers(packets: Sequence[WirePacket]) -> Iterator[Answered]:
             continue
         parts.append(p)
         if place.final:
-            yield Answered(place.request, tuple(parts))
+            yield AnsweredRequest(place.request, tuple(parts))
             parts = []
     if parts and (request := pairing.in_progress) is not None:
-        yield Answered(request, tuple(parts))
+        yield AnsweredRequest(request, tuple(parts))
 
 
 def _error_code(packet: WirePacket) -> tuple[str, str] | None:
@@ -137,7 +137,7 @@ def _number(value: LispValue) -> float | None:
     return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
 
 
-def _description(answer: Answered) -> _Description | None:
+def _description(answer: AnsweredRequest) -> _Description | None:
     entries, problems = parse_description(multi_text(answer.packets))
     if entries is None or problems:
         return None
@@ -275,7 +275,12 @@ def _aborts(packets: Sequence[WirePacket]) -> list[int]:
 
 
 def _add(
-    out: list[OracleFinding], item: Answered, clause: str, message: str, expected: str, actual: str = ""
+    out: list[OracleFinding],
+    item: AnsweredRequest,
+    clause: str,
+    message: str,
+    expected: str,
+    actual: str = "",
 ) -> None:
     out.append(
         OracleFinding(item.first, item.request, clause, message, expected, actual or describe(item.first))

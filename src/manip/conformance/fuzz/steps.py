@@ -3,7 +3,7 @@
 An input is generated from the campaign seed and its number alone (:mod:`.generators`), so the same
 seed gives the same inputs and ``--only N,M`` sends exactly inputs N and M again.  Its steps:
 
-* :class:`Request`: a manip request on the batch's Chaos connection (opened by hand, see
+* :class:`RequestStep`: a manip request on the batch's Chaos connection (opened by hand, see
   :mod:`.session`).  Its answer is judged with the rest of the connection by the transcript checks
   of :mod:`manip.conformance.judge.checks`, which know what the spec demands for each opcode and data.
 * :class:`ConnPacket`: a packet on the connection's link whose number or indices are wrong on purpose
@@ -31,7 +31,7 @@ __all__ = [
     "Pause",
     "Raw",
     "Relative",
-    "Request",
+    "RequestStep",
     "Step",
     "Stray",
     "StrayExpect",
@@ -49,7 +49,7 @@ StrayExpect = Literal["los", "answer", "silence"]
 
 
 @dataclass(frozen=True, slots=True)
-class Request:
+class RequestStep:
     """A request on the batch's connection: ``opcode`` and ``data`` exactly as given.
 
     ``chunk``: write the frame in pieces of this many bytes (0: in one write).  ``lazy``: part of a
@@ -109,7 +109,7 @@ class Pause:
     seconds: float
 
 
-Step = Request | ConnPacket | Stray | Raw | Pause
+Step = RequestStep | ConnPacket | Stray | Raw | Pause
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,4 +123,4 @@ class FuzzInput:
 
     @property
     def requests(self) -> int:
-        return sum(isinstance(s, Request) for s in self.steps)
+        return sum(isinstance(s, RequestStep) for s in self.steps)
