@@ -116,12 +116,12 @@ class BatchRunner:
         """An index for a connection of ours: 0xff01-0xffff (stray packets use 0x0100-0xfeff)."""
         return 0xFF00 | self._rng.randrange(1, 0x100)
 
-    async def connect(self, wire: Wire, *, initial: bool = True) -> FuzzConnection:
+    async def connect(self, wire: Wire) -> FuzzConnection:
         index = self.next_index()
         while index in self.inbox.connections:
             index = self.next_index()
         conn = FuzzConnection(wire, self.inbox, index, self.allowance, rfc_no=self._rng.randrange(0x10000))
-        await conn.open(self.address.contact, initial=initial)
+        await conn.open(self.address.contact)
         return conn
 
     def _on_stray(self, packet: Packet) -> None:
@@ -338,7 +338,7 @@ async def liveness(runner: BatchRunner) -> Liveness:
     conn: FuzzConnection | None = None
     try:
         try:
-            conn = await runner.connect(wire, initial=False)  # a live target answers Here, initial or not
+            conn = await runner.connect(wire)
         except ConnectError as exc:
             gone = wire.ended is not None and "target closed" in wire.ended
             return result(False, "crash" if gone else "hang", f"no connection: {exc}")

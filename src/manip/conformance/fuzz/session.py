@@ -16,9 +16,11 @@ retransmit and window for it.  :class:`FuzzConnection` does the least a peer mus
 * **Recording**: every request and every packet of the target, in order, as
   :class:`~manip.conformance.judge.packets.WirePacket` (CLS, EOF and LOS as close pseudo-packets), for the
   transcript checks; ``origin`` says which input each one belongs to.
-* **Answers**: requests are matched to answers in order, as the spec says a server answers (the
-  packets of a describe-self reply up to its empty one; the packet after free joint with one done),
-  to know when everything sent was answered and how long an answer may take: the reply timeout or,
+* **Answers**: requests are paired with answers by the suite's one rule,
+  :class:`~manip.codecs.pairing.ReplyPairing` (erratum ``capture-pairing``: by position, the initial
+  RESPONSE the RFC's, a describe-self reply up to its empty packet, the packet after free joint
+  answered by one packet; the echoed number is never used to pair), to know when everything sent was
+  answered and how long an answer may take: the reply timeout or,
   for an answer that waits for the arm, the allowance of the spec's ``answer_within`` after the
   motion queued before it (erratum ``answer-allowance``).  A free joint the spec answers with done is
   waited for before the next request, so that which packet it discards is not a race.
@@ -29,12 +31,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections import deque
 from dataclasses import dataclass
 from typing import Final
 
 from manip.codecs.errors import CodecError
 from manip.codecs.packet import Packet
+from manip.codecs.pairing import ReplyPairing
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.fuzz.steps import ConnPacket
 from manip.conformance.fuzz.wire import Inbox, Wire, frame
@@ -86,7 +88,6 @@ class _Pending:
     number: int
     """The input it belongs to."""
     opcode: int
-    multi: bool
     arm_wait: float
     sent: float
     discarded: bool = False
@@ -125,14 +126,12 @@ class FuzzConnection:
         self.requests = 0
         self.asynchronous = 0
         """Data packets from the target that answer no request (asynchronous responses, errors, warnings)."""
-        self._pending: deque[_Pending] = deque()
-        self._in_multi = False
-        self._discard_next = False
+        self._pairing: ReplyPairing[_Pending | None] = ReplyPairing()
+        """Which request each answer is (:mod:`manip.codecs.pairing`); the RFC's tag is None."""
         self._last_request: tuple[int, bytes, int] | None = None
         self._lazy = False
         self._writing = False
         self._sts_due = False
-        self._initial = True
         self._progress = asyncio.Event()
         self._acked_at = self._answered_at = self.t0
         self._answer: asyncio.Future[Packet] | None = None
@@ -144,9 +143,9 @@ class FuzzConnection:
 
     # ------------------------------------------------------------------------------------ opening
 
-    async def open(self, contact: str, *, initial: bool = True) -> None:
-        """RFC until OPN; :class:`RefusedError` on another answer, :class:`ConnectError` on none.
-        ``initial``: then wait (up to the reply timeout) for the initial RESPONSE."""
+    async def open(self, contact: str) -> None:
+        """RFC until OPN, then the initial RESPONSE (waited for up to the reply timeout);
+        :class:`RefusedError` on another answer, :class:`ConnectError` on none."""
         address = self.wire.address
         deadline = self._loop.time() + self.allowance.connect
         busy_until = self._loop.time() + BUSY_PATIENCE
@@ -202,10 +201,14 @@ class FuzzConnection:
             self.server_window = max(1, status[1])
         self._sts()
         self.t0 = self._loop.time()
-        # The user waits for the initial RESPONSE before relying on replies (connect.initial-response).
-        deadline = self.t0 + (self.allowance.reply if initial else 0.0)
-        while self.received_upto == answer.packet_no and self.ended is None and self._loop.time() < deadline:
+        # The user waits for the initial RESPONSE before relying on replies (connect.initial-response):
+        # the first answer is the RFC's, by position.  One that did not come answers nothing.
+        self._pairing.rfc(None)
+        deadline = self.t0 + self.allowance.reply
+        while self._pairing.completed == 0 and self.ended is None and self._loop.time() < deadline:
             await self._wait(deadline - self._loop.time())
+        if self._pairing.completed == 0:
+            self._pairing = ReplyPairing()
 
     # ------------------------------------------------------------------------------------ sending
 
@@ -264,14 +267,8 @@ class FuzzConnection:
         self.requests += 1
         wp = self._record("c2s", opcode, number, ack, data, self.current)
         well_formed = required_refusal(opcode, data) is None
-        op = SPEC.requests.get(opcode)
-        multi = well_formed and op is not None and op.response.form == "multi"
-        pending = _Pending(wp, self.current, opcode, multi, self._arm_wait(opcode), self._loop.time())
-        if self._discard_next:
-            pending.discarded = True
-            pending.multi = False
-            self._discard_next = False
-        self._pending.append(pending)
+        pending = _Pending(wp, self.current, opcode, self._arm_wait(opcode), self._loop.time())
+        pending.discarded = self._pairing.request(pending, opcode, data)
         self._last_request = (opcode, data, number)
         if chunk and not self.wire.datagram:
             self._writing = True
@@ -339,7 +336,7 @@ class FuzzConnection:
                 return False
             # Everything answered but not acknowledged: the target's ack waits for a timer of its own;
             # an SNS has it in one round trip.  Otherwise probe when nothing came for a while.
-            due = 0.0 if not self._pending else PROBE_AFTER
+            due = 0.0 if not self._outstanding() else PROBE_AFTER
             if since >= due and probed <= self._loop.time() - PROBE_AFTER:
                 probed = self._loop.time()
                 self._send(self._packet(ChaosOp.SNS, self.next_no, self.received_upto))
@@ -347,7 +344,7 @@ class FuzzConnection:
 
     def _budget(self) -> float:
         """Seconds without progress the head of the queue may take."""
-        head = self._pending[0] if self._pending else None
+        head = self._head()
         arm = head.arm_wait if head is not None else 0.0
         return max(self.allowance.reply, arm)
 
@@ -362,9 +359,9 @@ class FuzzConnection:
         answer within the budget, or answers that never end: :data:`SETTLE_CAP` budgets in all)."""
         self._lazy = False
         cap = self._loop.time() + SETTLE_CAP * max(
-            self._budget(), self.allowance.reply * len(self._pending) / 16
+            self._budget(), self.allowance.reply * len(self._outstanding()) / 16
         )
-        while self._pending:
+        while (head := self._head()) is not None:
             if self.ended is not None or self.stalled:
                 return False
             if self._loop.time() >= cap:
@@ -372,7 +369,6 @@ class FuzzConnection:
                 return False
             if self.acked_upto != self.received_upto:
                 self._sts()
-            head = self._pending[0]
             since = self._loop.time() - max(self._answered_at, head.sent)
             budget = self._budget()
             if since >= budget:
@@ -396,7 +392,20 @@ class FuzzConnection:
 
     @property
     def unanswered(self) -> int:
-        return len(self._pending)
+        return len(self._outstanding())
+
+    def _outstanding(self) -> list[_Pending]:
+        """The requests not yet fully answered, oldest first."""
+        return [p for p in self._pairing.outstanding() if p is not None]
+
+    def _head(self) -> _Pending | None:
+        """The oldest request not yet fully answered."""
+        return next(iter(self._outstanding()), None)
+
+    def _number(self) -> int:
+        """The input a packet from the target now belongs to: the request it would answer's."""
+        head = self._head()
+        return self.current if head is None else head.number
 
     def close(self, reason: str = "fuzz batch done") -> None:
         """CLS (best effort, as Chaos closes are) unless the target closed it; over for us."""
@@ -445,7 +454,7 @@ class FuzzConnection:
                     self._sts()  # a retransmission: our receipt was not seen
                 return
             self.received_upto = expected
-            number = self._pending[0].number if self._pending else self.current
+            number = self._number()
             wp = self._record("s2c", opcode, packet.packet_no, packet.ack_no, packet.data, number)
             if opcode == ChaosOp.EOF:  # acknowledged at once: the target's CLS waits for that
                 self.ended = "EOF from the target"
@@ -459,7 +468,7 @@ class FuzzConnection:
                 self._sts()
             return
         if opcode in (ChaosOp.CLS, ChaosOp.LOS):
-            number = self._pending[0].number if self._pending else self.current
+            number = self._number()
             self._record("s2c", opcode, packet.packet_no, packet.ack_no, packet.data, number)
             name = "CLS" if opcode == ChaosOp.CLS else "LOS"
             self.ended = f"{name} from the target: {text(packet.data)!r}"
@@ -469,46 +478,19 @@ class FuzzConnection:
             self._sts()
 
     def _answered(self, packet: Packet, wp: WirePacket) -> None:
-        """Match an answer to the oldest request still waiting (module docstring)."""
+        """Pair an answer with its request by the one pairing rule (module docstring)."""
         self._answered_at = self._loop.time()
-        if self._initial:  # the first packet is the initial RESPONSE, unless it answers a request
-            self._initial = False
-            number = int.from_bytes(packet.data[:2], "little") if len(packet.data) >= 2 else None
-            if packet.opcode == ServerOp.RESPONSE and all(
-                p.request.packet_no != number for p in self._pending
-            ):
-                return
-        if self._in_multi:
-            head = self._pending[0]
-            if packet.opcode == ServerOp.RESPONSE:
-                if len(packet.data) == 2:
-                    self._in_multi = False
-                    self._pending.popleft()
-                return
-            self._in_multi = False
-            self._pending.popleft()
-        if not self._pending:
+        place = self._pairing.server(packet.opcode, packet.data)
+        head = place.request
+        if head is None:  # the initial RESPONSE, or an answer to nothing
             return
-        head = self._pending[0]
         self.origin[id(wp)] = head.number
-        if head.discarded:
-            self._pending.popleft()
-            return
-        if head.multi and packet.opcode == ServerOp.RESPONSE:
-            if len(packet.data) == 2:
-                self._pending.popleft()
-            else:
-                self._in_multi = True
-            return
-        self._pending.popleft()
-        if packet.opcode != ServerOp.RESPONSE:
+        if not place.final or head.discarded or packet.opcode != ServerOp.RESPONSE:
             return
         op = SPEC.requests.get(head.opcode)
         if op is None:
             return
-        if head.opcode == _FREE_JOINT:
-            self._discard_next = True
-        elif head.opcode == _SET_SPEED:
+        if head.opcode == _SET_SPEED:
             with contextlib.suppress(CodecError):
                 factor = unpack_f(head.request.data[:4])
                 if 0.0 < factor <= 1.0:
