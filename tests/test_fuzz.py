@@ -9,6 +9,7 @@ from collections import Counter
 
 import pytest
 
+from manip.codecs.error_string import ErrorMessage
 from manip.codecs.errors import DecodeError
 from manip.codecs.framing import decode_chudp, decode_tcp, encode_tcp
 from manip.codecs.messages import encode_error, encode_reply
@@ -206,6 +207,19 @@ def test_a_move_accepted_after_kill_power_is_a_wrong_answer() -> None:
     enable = SPEC.request("enable-power").opcode
     powered = [_c2s(kill, 2), _done(2), _c2s(enable, 3), _done(3), _c2s(ready, 4), segment]
     assert not oracle_findings(powered)
+
+
+def test_a_move_accepted_after_an_abort_is_a_wrong_answer_until_a_reset() -> None:
+    ready, reset = SPEC.request("ready").opcode, SPEC.request("reset-abort").opcode
+    segment = _s2c(ServerOp.RESPONSE, struct.pack("<HH", 2, 1))
+    collision = ErrorMessage("arm", "E", "COL", "collision")
+    aborted = _s2c(ServerOp.ASYNCHRONOUS_ERROR, encode_error(ServerOp.ASYNCHRONOUS_ERROR, 2, collision))
+    again = _s2c(ServerOp.RESPONSE, struct.pack("<HH", 3, 2))
+    packets = [_c2s(ready, 2), segment, aborted, _c2s(ready, 3), again]
+    (found,) = oracle_findings(packets)
+    assert found.clause == "motion.abort" and found.packet is again and found.kind == "wrong_value"
+    after_reset = [*packets[:3], _c2s(reset, 3), _done(3), _c2s(ready, 4), again]
+    assert not oracle_findings(after_reset)
 
 
 class _Conn:

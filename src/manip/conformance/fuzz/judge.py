@@ -234,18 +234,9 @@ def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[
             conn.origin.get(id(request), last),
         )
         found.append((len(packets), ended))
-    for judged in oracle_findings(packets):
-        number = conn.origin.get(id(judged.request), last)
-        o = _seen(
-            "wrong_value",
-            judged.clause,
-            judged.message,
-            judged.expected,
-            judged.actual,
-            judged.request.data,
-            number,
-        )
-        found.append((position.get(id(judged.at), len(packets)), o))
+    for judged in oracle_findings(packets, rfc_packet_no=conn.rfc_no):
+        number = conn.origin.get(id(judged.packet), last)
+        found.append((position.get(id(judged.packet), len(packets)), Sighting(judged, number)))
     if not found:
         return []
     found.sort(key=lambda item: (item[0], LEVELS.index(item[1].level)))  # the strongest of one packet
