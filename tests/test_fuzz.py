@@ -11,7 +11,7 @@ import pytest
 
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.errors import DecodeError
-from manip.codecs.framing import decode_chudp, decode_tcp, encode_tcp
+from manip.codecs.framing import decode_chudp, decode_tcp, encode_chudp, encode_tcp
 from manip.codecs.messages import encode_error, encode_reply
 from manip.codecs.packet import Packet
 from manip.codecs.pdp11float import pack_f
@@ -21,8 +21,8 @@ from manip.conformance.fuzz.oracles import oracle_findings
 from manip.conformance.fuzz.shrink import Budget, ddmin
 from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, RequestStep, Stray
 from manip.conformance.fuzz.target import TracebackScanner
-from manip.conformance.fuzz.wire import frame
 from manip.conformance.judge.checks import WirePacket, required_refusal
+from manip.conformance.suite.rawchaos import frame
 from manip.links.address import parse_address
 from manip.reference_server.errors import bad_value
 from manip.spec import SPEC
@@ -138,18 +138,20 @@ def test_stray_indices_are_unique_within_a_batch_and_apart_from_the_connections(
     ],
 )
 def test_a_damaged_frame_breaks_exactly_its_clause(damage: str, datagram: bool, clause: str) -> None:
-    packet = Packet(ChaosOp.DAT, 0, 0x1234, 0, 0x0567, 17, 3, b"abcdefgh")
+    hop = (ADDRESS.peer_addr, ADDRESS.my_addr)
+    packet = Packet(ChaosOp.DAT, hop[0], 0x1234, hop[1], 0x0567, 17, 3, b"abcdefgh")
     decode = decode_chudp if datagram else decode_tcp
-    whole = decode(frame(packet, ADDRESS, datagram=datagram))
+    whole = decode(frame(packet, datagram=datagram, hop=hop))
     assert whole.data == b"abcdefgh" and whole.dest_host == ADDRESS.peer_addr
     with pytest.raises(DecodeError) as caught:
-        decode(frame(packet, ADDRESS, datagram=datagram, damage=damage))  # type: ignore[arg-type]
+        decode(frame(packet, datagram=datagram, hop=hop, damage=damage))  # type: ignore[arg-type]
     assert caught.value.clause == clause
 
 
 def test_an_undamaged_frame_is_the_codec_s_own() -> None:
     packet = Packet(ChaosOp.DAT + 1, 0o440, 9, 0o401, 8, 100, 99, b"xyz")
-    assert frame(packet, ADDRESS, datagram=False) == encode_tcp(packet)
+    assert frame(packet, datagram=False, hop=(0o440, 0o401)) == encode_tcp(packet)
+    assert frame(packet, datagram=True, hop=(0o440, 0o401)) == encode_chudp(packet)
 
 
 # ------------------------------------------------------------------------------------------ shrinking

@@ -29,9 +29,9 @@ from dataclasses import dataclass, field
 from typing import Final, Literal
 
 from manip.codecs.packet import Packet
-from manip.conformance.fuzz.session import Allowance, ConnectError, FuzzConnection
+from manip.conformance.fuzz.session import Allowance, FuzzConnection, Inbox
 from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, RequestStep, Stray
-from manip.conformance.fuzz.wire import Inbox, Wire, frame, open_wire
+from manip.conformance.suite.rawchaos import RawError, RawLink, frame, open_link
 from manip.links.address import LinkAddress
 from manip.spec.constants import ChaosOp, RequestOp
 
@@ -56,7 +56,7 @@ class DueAnswer:
     data: bytes
     connection: FuzzConnection | None = None
     """The batch's connection when it was sent (an RFC then finds the robot busy while it is open)."""
-    link: Wire | None = None
+    link: RawLink | None = None
 
 
 @dataclass
@@ -97,26 +97,26 @@ class BatchRunner:
         self.inbox = Inbox()
         self.inbox.on_stray = self._on_stray
         self.datagram = address.scheme == "chudp"
-        self._shared: Wire | None = None  # CHUDP: one socket for everything
-        self._side: Wire | None = None
-        self._held: list[Wire] = []
-        self._rfc_wires: dict[int, Wire] = {}
+        self._shared: RawLink | None = None  # CHUDP: one socket for everything
+        self._side: RawLink | None = None
+        self._held: list[RawLink] = []
+        self._rfc_wires: dict[int, RawLink] = {}
         self._rng = random.Random(seed)
         self._loop = asyncio.get_running_loop()
 
-    async def wire(self) -> Wire:
+    async def wire(self) -> RawLink:
         """A new link to the target (on CHUDP the campaign's one socket)."""
         if not self.datagram:
-            return await open_wire(self.address, self.inbox, self.allowance.connect)
+            return await open_link(self.address, self.inbox, self.allowance.connect)
         if self._shared is None or self._shared.ended is not None:
-            self._shared = await open_wire(self.address, self.inbox, self.allowance.connect)
+            self._shared = await open_link(self.address, self.inbox, self.allowance.connect)
         return self._shared
 
     def next_index(self) -> int:
         """An index for a connection of ours: 0xff01-0xffff (stray packets use 0x0100-0xfeff)."""
         return 0xFF00 | self._rng.randrange(1, 0x100)
 
-    async def connect(self, wire: Wire) -> FuzzConnection:
+    async def connect(self, wire: RawLink) -> FuzzConnection:
         index = self.next_index()
         while index in self.inbox.connections:
             index = self.next_index()
@@ -139,13 +139,13 @@ class BatchRunner:
                 packet.packet_no,
                 b"fuzz: RFC flood",
             )
-            wire.send(frame(cls, self.address, datagram=self.datagram))
+            wire.send(wire.forge(cls))
 
-    async def _side_wire(self) -> Wire:
+    async def _side_wire(self) -> RawLink:
         if self.datagram:
             return await self.wire()
         if self._side is None or self._side.ended is not None:
-            self._side = await open_wire(self.address, self.inbox, self.allowance.connect)
+            self._side = await open_link(self.address, self.inbox, self.allowance.connect)
         return self._side
 
     # ------------------------------------------------------------------------------------ a batch
@@ -192,14 +192,14 @@ class BatchRunner:
         return run
 
     async def _open(self, run: BatchRun) -> FuzzConnection | None:
-        wire: Wire | None = None
+        wire: RawLink | None = None
         try:
             wire = await self.wire()
             conn = await self.connect(wire)
-        except (ConnectError, OSError, TimeoutError) as exc:
+        except (RawError, OSError, TimeoutError) as exc:
             if wire is not None and not self.datagram:
                 wire.close()
-            run.open_error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, ConnectError) else str(exc)
+            run.open_error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, RawError) else str(exc)
             return None
         run.connections.append(conn)
         return conn
@@ -230,7 +230,9 @@ class BatchRunner:
             # By chance, the index of a connection of ours, on another link: the target may take it for
             # that connection's (manip's drops it as from the wrong link), not as a stray.
             packet = packet.with_(dest_index=(packet.dest_index * 7 + 1) & 0xFFFF or 1)
-        raw = frame(packet, self.address, datagram=self.datagram, damage=step.damage)
+        dest, source = packet.dest_host or self.address.peer_addr, packet.src_host or self.address.my_addr
+        packet = packet.with_(dest_host=dest, src_host=source)
+        raw = frame(packet, datagram=self.datagram, hop=(dest, source), damage=step.damage)
         if packet.opcode == ChaosOp.RFC:
             self._rfc_wires[packet.src_index] = wire
         wire.send(raw)
@@ -254,7 +256,7 @@ class BatchRunner:
             (await self.wire()).send(step.data)
             return
         try:
-            wire = await open_wire(self.address, self.inbox, self.allowance.connect)
+            wire = await open_link(self.address, self.inbox, self.allowance.connect)
         except (OSError, TimeoutError) as exc:
             run.open_error = run.open_error or f"a link did not open: {exc}"
             return
@@ -339,7 +341,7 @@ async def liveness(runner: BatchRunner) -> Liveness:
     try:
         try:
             conn = await runner.connect(wire)
-        except ConnectError as exc:
+        except RawError as exc:
             gone = wire.ended is not None and "target closed" in wire.ended
             return result(False, "crash" if gone else "hang", f"no connection: {exc}")
         await conn.request(RequestOp.HERE, b"")

@@ -26,8 +26,7 @@ from typing import Final
 
 from manip.conformance.fuzz.batch import BatchRun, DueAnswer, Liveness
 from manip.conformance.fuzz.oracles import answers, oracle_findings
-from manip.conformance.fuzz.session import FuzzConnection
-from manip.conformance.fuzz.wire import Inbox
+from manip.conformance.fuzz.session import FuzzConnection, Inbox
 from manip.conformance.judge.checks import WirePacket, check_transcript, describe, word
 from manip.conformance.judge.violation import FailureKind, Violation
 from manip.conformance.suite.rawchaos import format_packet

@@ -31,24 +31,26 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from dataclasses import dataclass
-from typing import Final
+from collections import defaultdict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Final, Protocol
 
-from manip.codecs.errors import CodecError
+from manip.codecs.errors import CodecError, DecodeError
 from manip.codecs.packet import Packet
 from manip.codecs.pairing import ReplyPairing
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.fuzz.steps import ConnPacket
-from manip.conformance.fuzz.wire import Inbox, Wire, frame
 from manip.conformance.judge.checks import WirePacket, required_refusal
 from manip.conformance.suite.busy import BUSY_DELAY, BUSY_PATIENCE, says_busy
+from manip.conformance.suite.rawchaos import KEPT_BAD, RawError, RawLink, Received, RefusedError
 from manip.ncp.packets import is_data, pack_status, text, unpack_status
 from manip.ncp.seq import seq_add, seq_gt, seq_le, seq_sub
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
 from manip.spec.notation import octal
 
-__all__ = ["Allowance", "ConnectError", "FuzzConnection", "RefusedError"]
+__all__ = ["Allowance", "FuzzConnection", "Inbox", "Receiver"]
 
 OUR_WINDOW: Final = 64
 """The window we grant the target: packets it may send before we acknowledge."""
@@ -64,12 +66,54 @@ _SET_SPEED: Final = SPEC.request("set-speed").opcode
 _ANSWERS: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
 
 
-class ConnectError(Exception):
-    """No connection: the message says why (no answer, refused, the link failed)."""
+class Receiver(Protocol):
+    """A connection the inbox hands its packets to."""
+
+    def on_packet(self, packet: Packet, raw: bytes, now: float) -> None: ...
 
 
-class RefusedError(ConnectError):
-    """The RFC was answered with something other than OPN."""
+@dataclass
+class Inbox:
+    """Every packet from the target, on any of the batch's links (the :class:`PacketSink` of each): to
+    the connection it names (:meth:`register`), else kept by destination index (the fuzzer gives every
+    stray packet a source index of its own, so the answer names it).  Frames that do not decode are
+    kept in ``bad``: a target must not send them."""
+
+    connections: dict[int, Receiver] = field(default_factory=dict)
+    strays: defaultdict[int, list[tuple[Packet, float]]] = field(default_factory=lambda: defaultdict(list))
+    bad: list[tuple[bytes, DecodeError]] = field(default_factory=list)
+    on_stray: Callable[[Packet], None] | None = None
+
+    def __post_init__(self) -> None:
+        self.arrived = asyncio.Event()
+
+    def register(self, index: int, connection: Receiver) -> None:
+        self.connections[index] = connection
+
+    def unregister(self, index: int) -> None:
+        self.connections.pop(index, None)
+
+    def deliver(self, packet: Packet, raw: bytes, now: float) -> None:
+        conn = self.connections.get(packet.dest_index)
+        if conn is not None:
+            conn.on_packet(packet, raw, now)
+        else:
+            self.strays[packet.dest_index].append((packet, now))
+            if self.on_stray is not None:
+                self.on_stray(packet)
+        self.arrived.set()
+
+    def reject(self, raw: bytes, exc: DecodeError) -> None:
+        if len(self.bad) < KEPT_BAD:
+            self.bad.append((raw[:64], exc))
+        self.arrived.set()
+
+    def link_ended(self, link: RawLink) -> None:
+        self.arrived.set()
+
+    def clear_strays(self) -> None:
+        self.strays.clear()
+        self.bad.clear()
 
 
 @dataclass(frozen=True)
@@ -97,7 +141,7 @@ class FuzzConnection:
     """A connection to the target over ``wire`` from our ``index`` (see the module docstring)."""
 
     def __init__(
-        self, wire: Wire, inbox: Inbox, index: int, allowance: Allowance, *, rfc_no: int = 0
+        self, wire: RawLink, inbox: Inbox, index: int, allowance: Allowance, *, rfc_no: int = 0
     ) -> None:
         self.wire = wire
         self.inbox = inbox
@@ -134,7 +178,7 @@ class FuzzConnection:
         self._sts_due = False
         self._progress = asyncio.Event()
         self._acked_at = self._answered_at = self.t0
-        self._answer: asyncio.Future[Packet] | None = None
+        self._answer: asyncio.Future[Received] | None = None
         self._motion_until = 0.0
         self._speed = 1.0
 
@@ -145,16 +189,17 @@ class FuzzConnection:
 
     async def open(self, contact: str) -> None:
         """RFC until OPN, then the initial RESPONSE (waited for up to the reply timeout);
-        :class:`RefusedError` on another answer, :class:`ConnectError` on none."""
+        :class:`~manip.conformance.suite.rawchaos.RefusedError` on another answer,
+        :class:`~manip.conformance.suite.rawchaos.RawError` on none."""
         address = self.wire.address
         deadline = self._loop.time() + self.allowance.connect
         busy_until = self._loop.time() + BUSY_PATIENCE
-        busy = ""
+        busy: Received | None = None
         self.inbox.register(self.index, self)
         try:
             while True:
                 if self.wire.ended is not None:
-                    raise ConnectError(self.wire.ended)
+                    raise RawError(self.wire.ended)
                 self._answer = self._loop.create_future()
                 self._send(
                     Packet(
@@ -171,23 +216,25 @@ class FuzzConnection:
                 remaining = deadline - self._loop.time()
                 if remaining <= 0:
                     within = f"within {self.allowance.connect:g} s"
-                    if busy:
-                        raise RefusedError(f"the RFC was refused as busy ({busy!r}) for {within[7:]}")
-                    raise ConnectError(f"no answer to the RFC {within}")
+                    if busy is not None:
+                        reason = text(busy.packet.data)
+                        raise RefusedError(f"the RFC was refused as busy ({reason!r}) for {within[7:]}", busy)
+                    raise RawError(f"no answer to the RFC {within}")
                 try:
                     async with asyncio.timeout(min(RFC_RETRY, remaining)):
-                        answer = await asyncio.shield(self._answer)
+                        received = await asyncio.shield(self._answer)
                 except TimeoutError:
                     continue
+                answer = received.packet
                 if answer.opcode == ChaosOp.OPN:
                     break
                 reason = text(answer.data)
                 if answer.opcode == ChaosOp.CLS and says_busy(reason) and self._loop.time() < busy_until:
-                    busy = reason
+                    busy = received
                     await asyncio.sleep(BUSY_DELAY)
                     continue
                 name = SPEC.chaos_opcode_name(answer.opcode)
-                raise RefusedError(f"the RFC was answered with {name} {reason!r}")
+                raise RefusedError(f"the RFC was answered with {name} {reason!r}", received)
         except BaseException:
             self.inbox.unregister(self.index)
             raise
@@ -213,7 +260,7 @@ class FuzzConnection:
     # ------------------------------------------------------------------------------------ sending
 
     def _send(self, packet: Packet) -> None:
-        self.wire.send(frame(packet, self.wire.address, datagram=self.wire.datagram))
+        self.wire.send(self.wire.forge(packet))
 
     def _packet(
         self, opcode: int, packet_no: int, ack_no: int, data: bytes = b"", src: int | None = None
@@ -262,7 +309,7 @@ class FuzzConnection:
         if not lazy:
             self.acked_upto = ack
         packet = self._packet(opcode, number, ack, data)
-        raw = frame(packet, self.wire.address, datagram=self.wire.datagram)
+        raw = self.wire.forge(packet)
         # Recorded before it goes out: its answer may come while a frame in pieces is still being written.
         self.requests += 1
         wp = self._record("c2s", opcode, number, ack, data, self.current)
@@ -423,7 +470,7 @@ class FuzzConnection:
             self.server_ack = ack
             self._acked_at = self._loop.time()
 
-    def on_packet(self, packet: Packet, now: float) -> None:
+    def on_packet(self, packet: Packet, raw: bytes, now: float) -> None:
         if self._answer is not None:  # opening: the answer to our RFC
             if not self._answer.done() and packet.opcode in (
                 ChaosOp.OPN,
@@ -432,7 +479,7 @@ class FuzzConnection:
                 ChaosOp.FWD,
                 ChaosOp.LOS,
             ):
-                self._answer.set_result(packet)
+                self._answer.set_result(Received(packet, raw, now))
             return
         if packet.src_index != self.server_index and packet.opcode != ChaosOp.OPN:
             self.inbox.strays[packet.dest_index].append((packet, now))

@@ -23,10 +23,10 @@ from dataclasses import dataclass
 from typing import Literal
 
 from manip.codecs.packet import Packet
+from manip.conformance.suite.rawchaos import Damage
 
 __all__ = [
     "ConnPacket",
-    "Damage",
     "FuzzInput",
     "Pause",
     "Raw",
@@ -41,9 +41,6 @@ Relative = Literal["ahead", "behind", "duplicate", "wrong-source", "sns", "unc"]
 """How a :class:`ConnPacket` relates to the connection: numbered past the receive window, numbered
 before the next expected packet, the last request again, from a source index that is not the
 connection's, a sense-status request, uncontrolled data."""
-Damage = Literal["", "checksum", "nbytes", "header-byte", "version", "function", "short", "long"]
-"""What is broken below a :class:`Stray` packet: its checksum, its byte count, the unused header
-byte; on CHUDP the datagram header's version or function byte, or its length (cut or padded)."""
 StrayExpect = Literal["los", "answer", "silence"]
 """A LOS back to the sender, an answer to an RFC (OPN, CLS, ANS or FWD), or nothing at all."""
 
