@@ -9,8 +9,8 @@ peer must and nothing else).
 
 Theory of operation:
 
-* **Links.**  :func:`open_link` opens a :class:`RawLink` to the target: a :class:`StreamLink` (``tcp://``,
-  ``unix://``: manip's TCP link framing, :mod:`manip.codecs.framing`) or a :class:`DatagramLink`
+* **Links.**  :func:`open_link` opens a :class:`RawLink` to the target: a :class:`RawStreamLink` (``tcp://``,
+  ``unix://``: manip's TCP link framing, :mod:`manip.codecs.framing`) or a :class:`RawDatagramLink`
   (``chudp://``).  Every frame that arrives goes to the link's :class:`PacketSink`, decoded with its
   bytes (``deliver``) or refused (``reject``, with why); a stream whose framing is lost (a frame length
   no frame can have) is closed, and when that happens before any frame the link says what the peer is
@@ -65,16 +65,16 @@ from manip.spec.notation import octal
 
 __all__ = [
     "Damage",
-    "DatagramLink",
     "Direction",
     "PacketSink",
     "RawConnection",
+    "RawDatagramLink",
     "RawError",
     "RawLink",
     "RawPeer",
+    "RawStreamLink",
     "Received",
     "RefusedError",
-    "StreamLink",
     "format_packet",
     "frame",
     "open_link",
@@ -159,7 +159,7 @@ class RawLink:
         self.sink.link_ended(self)
 
 
-class StreamLink(RawLink, asyncio.Protocol):
+class RawStreamLink(RawLink, asyncio.Protocol):
     """A connection carrying manip's TCP link frames."""
 
     def __init__(self, address: LinkAddress, sink: PacketSink) -> None:
@@ -227,7 +227,7 @@ class StreamLink(RawLink, asyncio.Protocol):
             self._transport.close()
 
 
-class DatagramLink(RawLink, asyncio.DatagramProtocol):
+class RawDatagramLink(RawLink, asyncio.DatagramProtocol):
     """A UDP socket speaking CHUDP to the target."""
 
     datagram = True
@@ -269,17 +269,17 @@ async def open_link(address: LinkAddress, sink: PacketSink, timeout: float) -> R
     async with asyncio.timeout(timeout):
         if address.scheme == "tcp":
             _, stream = await loop.create_connection(
-                lambda: StreamLink(address, sink), address.host, address.port
+                lambda: RawStreamLink(address, sink), address.host, address.port
             )
             return stream
         if address.scheme == "unix":
             assert address.path is not None
-            _, stream = await loop.create_unix_connection(lambda: StreamLink(address, sink), address.path)
+            _, stream = await loop.create_unix_connection(lambda: RawStreamLink(address, sink), address.path)
             return stream
         if address.scheme == "chudp":
             local = address.local or ("::1" if ":" in address.host else "127.0.0.1", 0)
             _, datagram = await loop.create_datagram_endpoint(
-                lambda: DatagramLink(address, sink),
+                lambda: RawDatagramLink(address, sink),
                 local_addr=local,
                 remote_addr=(address.host, address.port),
             )
