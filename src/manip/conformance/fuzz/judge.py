@@ -20,7 +20,7 @@ with the input it is attributed to, as a :class:`Sighting`.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Final
 
@@ -303,92 +303,114 @@ def _busy(e: DueAnswer, when: float | None) -> bool:
 
 
 def _judge_due(e: DueAnswer, inbox: Inbox) -> Sighting | None:
+    """Whether what a step was due came (or what must not come did not)."""
+    return _DUE_JUDGES[e.what](e, inbox)
+
+
+def _due_los(e: DueAnswer, inbox: Inbox) -> Sighting | None:
     got = [p for p, _ in inbox.strays.get(e.key, ())]
-    if e.what == "los":
-        if any(p.opcode == ChaosOp.LOS for p in got):
-            return None
-        shown = "; ".join(format_packet(p) for p in got[:2]) or "nothing"
-        return _seen(
-            "missing_response",
-            e.clause,
-            f"no LOS for {e.note}",
-            f"a LOS back to index {octal(e.key)}",
-            shown,
-            e.data,
-            e.number,
-        )
-    if e.what == "answer":
-        answers = [p for p in got if p.opcode in _RFC_ANSWERS]
-        if not answers:
-            return _seen(
-                "missing_response",
-                e.clause,
-                f"no answer to {e.note}",
-                "OPN, CLS, ANS or FWD",
-                "nothing",
-                e.data,
-                e.number,
-            )
-        opened = {p.src_index for p in answers if p.opcode == ChaosOp.OPN}
-        opened_at = min((t for p, t in inbox.strays.get(e.key, ()) if p.opcode == ChaosOp.OPN), default=None)
-        if len(opened) > 1:
-            return _seen(
-                "wrong_value",
-                "ncp.duplicate-rfc",
-                f"one RFC (index {octal(e.key)}) opened {len(opened)} connections",
-                "one connection for a retransmitted RFC",
-                f"OPN from indices {', '.join(f'{octal(i)}' for i in sorted(opened))}",
-                e.data,
-                e.number,
-            )
-        if opened and e.clause == "connect.one-server-per-robot" and _busy(e, opened_at):
-            return _seen(
-                "wrong_value",
-                "connect.one-server-per-robot",
-                "a second connection was opened while the robot had its client",
-                'CLS ("busy")',
-                "OPN",
-                e.data,
-                e.number,
-            )
+    if any(p.opcode == ChaosOp.LOS for p in got):
         return None
-    if e.what == "silence":
-        if not got:
-            return None
-        return _seen(
-            "wrong_value",
-            e.clause,
-            f"an answer to {e.note}",
-            "nothing: the packet is dropped",
-            format_packet(got[0]),
-            e.data,
-            e.number,
-        )
-    if e.what == "sts":
-        conn = e.connection
-        if conn is None or any(t >= e.since for t in conn.sts_times):
-            return None
-        if conn.ended is not None and "from the target" in conn.ended:
-            return None
+    shown = "; ".join(format_packet(p) for p in got[:2]) or "nothing"
+    return _seen(
+        "missing_response",
+        e.clause,
+        f"no LOS for {e.note}",
+        f"a LOS back to index {octal(e.key)}",
+        shown,
+        e.data,
+        e.number,
+    )
+
+
+def _due_answer(e: DueAnswer, inbox: Inbox) -> Sighting | None:
+    got = [p for p, _ in inbox.strays.get(e.key, ())]
+    answers = [p for p in got if p.opcode in _RFC_ANSWERS]
+    if not answers:
         return _seen(
             "missing_response",
             e.clause,
-            "no STS in answer to SNS",
-            "an STS (the connection's receipt and window)",
+            f"no answer to {e.note}",
+            "OPN, CLS, ANS or FWD",
             "nothing",
             e.data,
             e.number,
         )
-    if e.what == "close":
-        if e.link is None or e.link.ended is not None:
-            return None
+    opened = {p.src_index for p in answers if p.opcode == ChaosOp.OPN}
+    opened_at = min((t for p, t in inbox.strays.get(e.key, ()) if p.opcode == ChaosOp.OPN), default=None)
+    if len(opened) > 1:
         return _seen(
             "wrong_value",
-            e.clause,
-            f"the link was kept open after {e.note}",
-            "the link dropped: its framing is lost",
-            "the link still open",
+            "ncp.duplicate-rfc",
+            f"one RFC (index {octal(e.key)}) opened {len(opened)} connections",
+            "one connection for a retransmitted RFC",
+            f"OPN from indices {', '.join(f'{octal(i)}' for i in sorted(opened))}",
+            e.data,
+            e.number,
+        )
+    if opened and e.clause == "connect.one-server-per-robot" and _busy(e, opened_at):
+        return _seen(
+            "wrong_value",
+            "connect.one-server-per-robot",
+            "a second connection was opened while the robot had its client",
+            'CLS ("busy")',
+            "OPN",
             e.data,
             e.number,
         )
     return None
+
+
+def _due_silence(e: DueAnswer, inbox: Inbox) -> Sighting | None:
+    got = [p for p, _ in inbox.strays.get(e.key, ())]
+    if not got:
+        return None
+    return _seen(
+        "wrong_value",
+        e.clause,
+        f"an answer to {e.note}",
+        "nothing: the packet is dropped",
+        format_packet(got[0]),
+        e.data,
+        e.number,
+    )
+
+
+def _due_sts(e: DueAnswer, inbox: Inbox) -> Sighting | None:
+    conn = e.connection
+    if conn is None or any(t >= e.since for t in conn.sts_times):
+        return None
+    if conn.ended is not None and "from the target" in conn.ended:
+        return None
+    return _seen(
+        "missing_response",
+        e.clause,
+        "no STS in answer to SNS",
+        "an STS (the connection's receipt and window)",
+        "nothing",
+        e.data,
+        e.number,
+    )
+
+
+def _due_close(e: DueAnswer, inbox: Inbox) -> Sighting | None:
+    if e.link is None or e.link.ended is not None:
+        return None
+    return _seen(
+        "wrong_value",
+        e.clause,
+        f"the link was kept open after {e.note}",
+        "the link dropped: its framing is lost",
+        "the link still open",
+        e.data,
+        e.number,
+    )
+
+
+_DUE_JUDGES: Final[dict[str, Callable[[DueAnswer, Inbox], Sighting | None]]] = {
+    "los": _due_los,
+    "answer": _due_answer,
+    "silence": _due_silence,
+    "sts": _due_sts,
+    "close": _due_close,
+}
