@@ -100,11 +100,11 @@ class BatchRunner:
         self._shared: RawLink | None = None  # CHUDP: one socket for everything
         self._side: RawLink | None = None
         self._held: list[RawLink] = []
-        self._rfc_wires: dict[int, RawLink] = {}
+        self._rfc_links: dict[int, RawLink] = {}
         self._rng = random.Random(seed)
         self._loop = asyncio.get_running_loop()
 
-    async def wire(self) -> RawLink:
+    async def link(self) -> RawLink:
         """A new link to the target (on CHUDP the campaign's one socket)."""
         if not self.datagram:
             return await open_link(self.address, self.inbox, self.allowance.connect)
@@ -116,19 +116,19 @@ class BatchRunner:
         """An index for a connection of ours: 0xff01-0xffff (stray packets use 0x0100-0xfeff)."""
         return 0xFF00 | self._rng.randrange(1, 0x100)
 
-    async def connect(self, wire: RawLink) -> FuzzConnection:
+    async def connect(self, link: RawLink) -> FuzzConnection:
         index = self.next_index()
         while index in self.inbox.connections:
             index = self.next_index()
-        conn = FuzzConnection(wire, self.inbox, index, self.allowance, rfc_no=self._rng.randrange(0x10000))
+        conn = FuzzConnection(link, self.inbox, index, self.allowance, rfc_no=self._rng.randrange(0x10000))
         await conn.open(self.address.contact)
         return conn
 
     def _on_stray(self, packet: Packet) -> None:
         """An OPN answering one of our stray RFCs: close that connection at once (the robot is busy
         with our batch, so a server that opened it serves two clients)."""
-        wire = self._rfc_wires.get(packet.dest_index)
-        if packet.opcode == ChaosOp.OPN and wire is not None:
+        link = self._rfc_links.get(packet.dest_index)
+        if packet.opcode == ChaosOp.OPN and link is not None:
             cls = Packet(
                 ChaosOp.CLS,
                 self.address.peer_addr,
@@ -139,11 +139,11 @@ class BatchRunner:
                 packet.packet_no,
                 b"fuzz: RFC flood",
             )
-            wire.send(wire.forge(cls))
+            link.send(link.forge(cls))
 
-    async def _side_wire(self) -> RawLink:
+    async def _side_link(self) -> RawLink:
         if self.datagram:
-            return await self.wire()
+            return await self.link()
         if self._side is None or self._side.ended is not None:
             self._side = await open_link(self.address, self.inbox, self.allowance.connect)
         return self._side
@@ -154,7 +154,7 @@ class BatchRunner:
         """Send ``inputs`` in order (module docstring) and wait for what is due."""
         run = BatchRun(list(inputs), started=self._loop.time())
         self.inbox.clear_strays()
-        self._rfc_wires.clear()
+        self._rfc_links.clear()
         conn: FuzzConnection | None = None
         try:
             conn = await self._open(run)
@@ -186,19 +186,19 @@ class BatchRunner:
             for c in run.connections:
                 c.close()
                 if not self.datagram:
-                    c.wire.close()  # after the CLS, which goes out first
+                    c.link.close()  # after the CLS, which goes out first
             run.sent_requests = sum(c.requests for c in run.connections)
             run.duration = self._loop.time() - run.started
         return run
 
     async def _open(self, run: BatchRun) -> FuzzConnection | None:
-        wire: RawLink | None = None
+        link: RawLink | None = None
         try:
-            wire = await self.wire()
-            conn = await self.connect(wire)
+            link = await self.link()
+            conn = await self.connect(link)
         except (RawError, OSError, TimeoutError) as exc:
-            if wire is not None and not self.datagram:
-                wire.close()
+            if link is not None and not self.datagram:
+                link.close()
             run.open_error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, RawError) else str(exc)
             return None
         run.connections.append(conn)
@@ -220,7 +220,7 @@ class BatchRunner:
         self, run: BatchRun, item: FuzzInput, index: int, step: Stray, conn: FuzzConnection
     ) -> None:
         try:
-            wire = await self._side_wire()
+            link = await self._side_link()
         except (OSError, TimeoutError) as exc:
             run.open_error = run.open_error or f"the side link did not open: {exc}"
             return
@@ -234,8 +234,8 @@ class BatchRunner:
         packet = packet.with_(dest_host=dest, src_host=source)
         raw = frame(packet, datagram=self.datagram, hop=(dest, source), damage=step.damage)
         if packet.opcode == ChaosOp.RFC:
-            self._rfc_wires[packet.src_index] = wire
-        wire.send(raw)
+            self._rfc_links[packet.src_index] = link
+        link.send(raw)
         run.counted += int(step.counted)
         run.due_answers.append(
             DueAnswer(
@@ -253,25 +253,25 @@ class BatchRunner:
     async def _raw(self, run: BatchRun, item: FuzzInput, step: Raw) -> None:
         run.counted += step.counted
         if self.datagram:
-            (await self.wire()).send(step.data)
+            (await self.link()).send(step.data)
             return
         try:
-            wire = await open_link(self.address, self.inbox, self.allowance.connect)
+            link = await open_link(self.address, self.inbox, self.allowance.connect)
         except (OSError, TimeoutError) as exc:
             run.open_error = run.open_error or f"a link did not open: {exc}"
             return
-        wire.send(step.data)
+        link.send(step.data)
         if step.closes:
             run.due_answers.append(
                 DueAnswer(
-                    item.number, "close", step.clause, 0, self._loop.time(), item.note, step.data, link=wire
+                    item.number, "close", step.clause, 0, self._loop.time(), item.note, step.data, link=link
                 )
             )
-            self._held.append(wire)
+            self._held.append(link)
         elif step.hold:
-            self._held.append(wire)
+            self._held.append(link)
         else:
-            wire.close()
+            link.close()
 
     def _due(self, run: BatchRun) -> bool:
         """Whether some LOS, RFC answer or link drop is still due."""
@@ -300,8 +300,8 @@ class BatchRunner:
 
     def finish(self) -> None:
         """Close the side link and the links left open (after the liveness check: late packets count)."""
-        for wire in self._held:
-            wire.close(reset=True)
+        for link in self._held:
+            link.close(reset=True)
         self._held.clear()
         if self._side is not None:
             self._side.close()
@@ -332,7 +332,7 @@ async def liveness(runner: BatchRunner) -> Liveness:
         return Liveness(alive, kind, detail, loop.time() - started)
 
     try:
-        wire = await runner.wire()
+        link = await runner.link()
     except TimeoutError:
         return result(False, "hang", f"the link did not open within {runner.allowance.connect:g} s")
     except OSError as exc:
@@ -340,9 +340,9 @@ async def liveness(runner: BatchRunner) -> Liveness:
     conn: FuzzConnection | None = None
     try:
         try:
-            conn = await runner.connect(wire)
+            conn = await runner.connect(link)
         except RawError as exc:
-            gone = wire.ended is not None and "target closed" in wire.ended
+            gone = link.ended is not None and "target closed" in link.ended
             return result(False, "crash" if gone else "hang", f"no connection: {exc}")
         await conn.request(RequestOp.HERE, b"")
         if not await conn.settle() and conn.unanswered:
@@ -353,4 +353,4 @@ async def liveness(runner: BatchRunner) -> Liveness:
         if conn is not None:
             conn.close("fuzz liveness check done")
         if not runner.datagram:
-            wire.close()
+            link.close()

@@ -138,12 +138,12 @@ class _Pending:
 
 
 class FuzzConnection:
-    """A connection to the target over ``wire`` from our ``index`` (see the module docstring)."""
+    """A connection to the target over ``link`` from our ``index`` (see the module docstring)."""
 
     def __init__(
-        self, wire: RawLink, inbox: Inbox, index: int, allowance: Allowance, *, rfc_no: int = 0
+        self, link: RawLink, inbox: Inbox, index: int, allowance: Allowance, *, rfc_no: int = 0
     ) -> None:
-        self.wire = wire
+        self.link = link
         self.inbox = inbox
         self.index = index
         self.allowance = allowance
@@ -191,15 +191,15 @@ class FuzzConnection:
         """RFC until OPN, then the initial RESPONSE (waited for up to the reply timeout);
         :class:`~manip.conformance.suite.rawchaos.RefusedError` on another answer,
         :class:`~manip.conformance.suite.rawchaos.RawError` on none."""
-        address = self.wire.address
+        address = self.link.address
         deadline = self._loop.time() + self.allowance.connect
         busy_until = self._loop.time() + BUSY_PATIENCE
         busy: Received | None = None
         self.inbox.register(self.index, self)
         try:
             while True:
-                if self.wire.ended is not None:
-                    raise RawError(self.wire.ended)
+                if self.link.ended is not None:
+                    raise RawError(self.link.ended)
                 self._answer = self._loop.create_future()
                 self._send(
                     Packet(
@@ -260,12 +260,12 @@ class FuzzConnection:
     # ------------------------------------------------------------------------------------ sending
 
     def _send(self, packet: Packet) -> None:
-        self.wire.send(self.wire.forge(packet))
+        self.link.send(self.link.forge(packet))
 
     def _packet(
         self, opcode: int, packet_no: int, ack_no: int, data: bytes = b"", src: int | None = None
     ) -> Packet:
-        a = self.wire.address
+        a = self.link.address
         index = self.index if src is None else src
         return Packet(
             opcode, a.peer_addr, self.server_index, a.my_addr, index, packet_no & 0xFFFF, ack_no, data
@@ -309,7 +309,7 @@ class FuzzConnection:
         if not lazy:
             self.acked_upto = ack
         packet = self._packet(opcode, number, ack, data)
-        raw = self.wire.forge(packet)
+        raw = self.link.forge(packet)
         # Recorded before it goes out: its answer may come while a frame in pieces is still being written.
         self.requests += 1
         wp = self._record("c2s", opcode, number, ack, data, self.current)
@@ -317,11 +317,11 @@ class FuzzConnection:
         pending = _Pending(wp, self.current, opcode, self._arm_wait(opcode), self._loop.time())
         pending.discarded = self._pairing.request(pending, opcode, data)
         self._last_request = (opcode, data, number)
-        if chunk and not self.wire.datagram:
+        if chunk and not self.link.datagram:
             self._writing = True
             try:
                 for at in range(0, len(raw), chunk):
-                    self.wire.send(raw[at : at + chunk])
+                    self.link.send(raw[at : at + chunk])
                     await asyncio.sleep(0)
             finally:
                 self._writing = False
@@ -329,7 +329,7 @@ class FuzzConnection:
                 self._sts_due = False
                 self._sts()
         else:
-            self.wire.send(raw)
+            self.link.send(raw)
         if opcode == _FREE_JOINT and well_formed and not pending.discarded:
             await self.settle()  # which packet free joint discards must not be a race
 
