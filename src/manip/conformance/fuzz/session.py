@@ -3,8 +3,9 @@
 The fuzzer cannot use an NCP of its own for the connection it fuzzes over: an NCP would renumber,
 retransmit and window for it.  :class:`FuzzConnection` does the least a peer must do and nothing else:
 
-* **Opening**: RFC from an index of ours (a CLS saying busy is retried: the previous batch's
-  connection may still be closing), OPN, an STS acknowledging it.
+* **Opening**: RFC from an index of ours until OPN, as the NCP cases open
+  (:func:`~manip.conformance.suite.rawchaos.rfc_until_open`: a CLS saying busy is retried, the
+  previous batch's connection may still be closing), an STS acknowledging it, and the initial RESPONSE.
 * **Sending**: requests numbered in order, never more than the target's window ahead of its last
   acknowledgement (a packet past the window would be dropped, and its request look unanswered).  A
   stalled window is probed with SNS.  Packets placed wrongly on purpose (:class:`~.steps.ConnPacket`)
@@ -42,8 +43,7 @@ from manip.codecs.pairing import ReplyPairing
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.fuzz.steps import ConnPacket
 from manip.conformance.judge.checks import WirePacket, required_refusal
-from manip.conformance.suite.busy import BUSY_DELAY, BUSY_PATIENCE, says_busy
-from manip.conformance.suite.rawchaos import KEPT_BAD, RawError, RawLink, Received, RefusedError
+from manip.conformance.suite.rawchaos import KEPT_BAD, RawLink, Received, rfc_until_open
 from manip.ncp.packets import is_data, pack_status, text, unpack_status
 from manip.ncp.seq import seq_add, seq_gt, seq_le, seq_sub
 from manip.spec import SPEC
@@ -54,7 +54,6 @@ __all__ = ["Allowance", "FuzzConnection", "Inbox", "Receiver"]
 
 OUR_WINDOW: Final = 64
 """The window we grant the target: packets it may send before we acknowledge."""
-RFC_RETRY: Final = 1.0
 PROBE_AFTER: Final = 0.2
 """Seconds of a stalled window before we send SNS to learn the target's acknowledgement."""
 LAZY_GRACE: Final = 0.001
@@ -192,54 +191,31 @@ class FuzzConnection:
         :class:`~manip.conformance.suite.rawchaos.RefusedError` on another answer,
         :class:`~manip.conformance.suite.rawchaos.RawError` on none."""
         address = self.link.address
-        deadline = self._loop.time() + self.allowance.connect
-        busy_until = self._loop.time() + BUSY_PATIENCE
-        busy: Received | None = None
+        rfc = Packet(
+            ChaosOp.RFC,
+            address.peer_addr,
+            0,
+            address.my_addr,
+            self.index,
+            self.rfc_no,
+            0,
+            contact.encode("ascii"),
+        )
         self.inbox.register(self.index, self)
         try:
-            while True:
-                if self.link.ended is not None:
-                    raise RawError(self.link.ended)
-                self._answer = self._loop.create_future()
-                self._send(
-                    Packet(
-                        ChaosOp.RFC,
-                        address.peer_addr,
-                        0,
-                        address.my_addr,
-                        self.index,
-                        self.rfc_no,
-                        0,
-                        contact.encode("ascii"),
-                    )
-                )
-                remaining = deadline - self._loop.time()
-                if remaining <= 0:
-                    within = f"within {self.allowance.connect:g} s"
-                    if busy is not None:
-                        reason = text(busy.packet.data)
-                        raise RefusedError(f"the RFC was refused as busy ({reason!r}) for {within[7:]}", busy)
-                    raise RawError(f"no answer to the RFC {within}")
-                try:
-                    async with asyncio.timeout(min(RFC_RETRY, remaining)):
-                        received = await asyncio.shield(self._answer)
-                except TimeoutError:
-                    continue
-                answer = received.packet
-                if answer.opcode == ChaosOp.OPN:
-                    break
-                reason = text(answer.data)
-                if answer.opcode == ChaosOp.CLS and says_busy(reason) and self._loop.time() < busy_until:
-                    busy = received
-                    await asyncio.sleep(BUSY_DELAY)
-                    continue
-                name = SPEC.chaos_opcode_name(answer.opcode)
-                raise RefusedError(f"the RFC was answered with {name} {reason!r}", received)
+            received = await rfc_until_open(
+                lambda: self._send(rfc),
+                self._rfc_answer,
+                contact=contact,
+                timeout=self.allowance.connect,
+                ended=lambda: self.link.ended,
+            )
         except BaseException:
             self.inbox.unregister(self.index)
             raise
         finally:
             self._answer = None
+        answer = received.packet
         self.server_index = answer.src_index
         self.received_upto = self.acked_upto = answer.packet_no
         self._note_ack(answer.ack_no)
@@ -256,6 +232,17 @@ class FuzzConnection:
             await self._wait(deadline - self._loop.time())
         if self._pairing.completed == 0:
             self._pairing = ReplyPairing()
+
+    async def _rfc_answer(self, wait: float) -> Received | None:
+        """The target's answer to our RFC within ``wait`` seconds (:meth:`on_packet` gives it), else None."""
+        if self.link.ended is not None:
+            return None
+        self._answer = self._loop.create_future()
+        try:
+            async with asyncio.timeout(wait):
+                return await self._answer
+        except TimeoutError:
+            return None
 
     # ------------------------------------------------------------------------------------ sending
 

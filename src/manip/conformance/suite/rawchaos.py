@@ -23,11 +23,12 @@ Theory of operation:
   ways to ``on_packet`` (cases record them).  :meth:`RawPeer.receive` takes the first inbox packet a
   predicate accepts, waiting up to a timeout; :meth:`RawPeer.collect` takes every accepted packet for a
   given time (for "nothing else came").
-* :meth:`RawPeer.handshake` drives the opening by hand: RFC with a chosen source index and packet
-  number, wait for OPN (an RFC refused as busy is retried, :mod:`~manip.conformance.suite.busy`), and
-  the connection (:class:`RawConnection`) is then OPEN on our side.  The STS answering the OPN is the
-  case's to send (:meth:`RawConnection.sts`), with whatever window it wants; :meth:`RawConnection.data`
-  sends data with a chosen number and ack.
+* :meth:`RawPeer.handshake` drives the opening by hand (:func:`rfc_until_open`, which the fuzzer's
+  connection uses too): RFC with a chosen source index and packet number, wait for OPN (an RFC
+  refused as busy is retried, :mod:`~manip.conformance.suite.busy`), and the connection
+  (:class:`RawConnection`) is then OPEN on our side.  The STS answering the OPN is the case's to send
+  (:meth:`RawConnection.sts`), with whatever window it wants; :meth:`RawConnection.data` sends data
+  with a chosen number and ack.
 * :meth:`RawPeer.close` sends CLS on every connection it opened (so the server frees its robot at once)
   and closes the link.
 """
@@ -38,7 +39,7 @@ import asyncio
 import contextlib
 import socket
 import struct
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Final, Literal, Protocol, cast
 
@@ -54,7 +55,7 @@ from manip.codecs.framing import (
 )
 from manip.codecs.packet import Packet
 from manip.conformance.judge.checks import Direction
-from manip.conformance.suite.busy import BUSY_DELAY, BUSY_RETRIES, says_busy
+from manip.conformance.suite.busy import BUSY_DELAY, BUSY_PATIENCE, says_busy
 from manip.links.address import LinkAddress, parse_address
 from manip.links.errors import chaos_host, not_a_chaos_link
 from manip.ncp.packets import pack_status, text, unpack_status
@@ -78,6 +79,7 @@ __all__ = [
     "format_packet",
     "frame",
     "open_link",
+    "rfc_until_open",
 ]
 
 PacketHook = Callable[[Direction, Packet, bytes], None]
@@ -341,6 +343,49 @@ def format_packet(p: Packet) -> str:
     return f"{what} {numbers} {len(p.data)} data bytes"
 
 
+async def rfc_until_open(
+    send_rfc: Callable[[], object],
+    answer: Callable[[float], Awaitable[Received | None]],
+    *,
+    contact: str,
+    timeout: float,
+    ended: Callable[[], str | None],
+    retry_busy: bool = True,
+) -> Received:
+    """The opening of a connection by hand, for both users of the raw links: ``send_rfc`` (again every
+    :data:`RFC_RETRY` seconds while unanswered) until ``answer`` (the target's next answer to it, or
+    None after the seconds it is given) is OPN, which is returned.
+
+    Raises :class:`RefusedError` on CLS, ANS, FWD or LOS (a CLS saying busy is retried first by the
+    suite's one rule, :mod:`~manip.conformance.suite.busy`: the previous connection may still be
+    closing) and :class:`RawError` when nothing answers within ``timeout`` or the link ``ended``."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    busy_until = loop.time() + BUSY_PATIENCE
+    busy: Received | None = None
+    while True:
+        send_rfc()
+        got = await answer(min(RFC_RETRY, max(0.0, deadline - loop.time())))
+        if got is None:
+            gone = ended()
+            if loop.time() < deadline and gone is None:
+                continue
+            if busy is not None:
+                reason = text(busy.packet.data)
+                raise RefusedError(f"the RFC was refused as busy ({reason!r}) for {timeout:g} s", busy)
+            raise RawError(
+                f"no answer to RFC {contact!r} within {timeout:g} s" + (f" ({gone})" if gone else "")
+            )
+        p = got.packet
+        if p.opcode == ChaosOp.OPN:
+            return got
+        if retry_busy and p.opcode == ChaosOp.CLS and says_busy(text(p.data)) and loop.time() < busy_until:
+            busy = got
+            await asyncio.sleep(BUSY_DELAY)
+            continue
+        raise RefusedError(f"the RFC was answered by {format_packet(p)}", got)
+
+
 @dataclass
 class RawConnection:
     """A connection we opened by hand; numbers are ours to choose, defaults follow the usual rules."""
@@ -552,37 +597,21 @@ class RawPeer:
     async def handshake(
         self, index: int, packet_no: int, *, timeout: float = 5.0, retry_busy: bool = True
     ) -> RawConnection:
-        """Open a connection by hand: RFC (copies every second while unanswered) until OPN.
-
-        Raises :class:`RefusedError` on CLS/ANS/FWD/LOS (a CLS saying "busy" is retried first, the
-        previous case's connection may still be closing) and :class:`RawError` on no answer."""
-        loop = asyncio.get_running_loop()
-        deadline = loop.time() + timeout
-        tries = 0
-        while True:
-            rfc = self.rfc(index, packet_no)
-            answer = await self.receive(
-                lambda p: p.dest_index == index and p.opcode != ChaosOp.SNS,
-                min(RFC_RETRY, max(0.0, deadline - loop.time())),
-            )
-            if answer is None:
-                if loop.time() >= deadline or self.ended is not None:
-                    raise RawError(
-                        f"no answer to RFC {self.address.contact!r} within {timeout:g} s"
-                        + (f" ({self.ended})" if self.ended else "")
-                    )
-                continue
-            p = answer.packet
-            if p.opcode == ChaosOp.OPN:
-                conn = RawConnection(self, index, rfc, answer, seq_add(packet_no, 1))
-                self.connections.append(conn)
-                return conn
-            busy = p.opcode == ChaosOp.CLS and says_busy(text(p.data))
-            if busy and retry_busy and tries < BUSY_RETRIES:
-                tries += 1
-                await asyncio.sleep(BUSY_DELAY)
-                continue
-            raise RefusedError(f"the RFC was answered by {format_packet(p)}", answer)
+        """Open a connection by hand from our ``index``, the RFC numbered ``packet_no``
+        (:func:`rfc_until_open`)."""
+        contact = self.address.contact
+        rfc = self.packet(ChaosOp.RFC, src_index=index, packet_no=packet_no, data=contact.encode("ascii"))
+        answer = await rfc_until_open(
+            lambda: self.send(rfc),
+            lambda wait: self.receive(lambda p: p.dest_index == index and p.opcode != ChaosOp.SNS, wait),
+            contact=contact,
+            timeout=timeout,
+            ended=lambda: self.ended,
+            retry_busy=retry_busy,
+        )
+        conn = RawConnection(self, index, rfc, answer, seq_add(packet_no, 1))
+        self.connections.append(conn)
+        return conn
 
     async def close(self) -> None:
         """CLS on every open connection, then close the link."""
