@@ -25,6 +25,8 @@ from manip.conformance.cli import main
 from manip.conformance.fuzz.generators import GenOptions, generate
 from manip.conformance.fuzz.report import load_schema
 from manip.conformance.fuzz.steps import RequestStep
+from manip.conformance.judge.violation import FAILURE_KINDS
+from manip.conformance.output.report import load_schema as load_run_schema
 from tests.servers import StartServer, free_port
 from tests.test_conform_framework import _validate
 
@@ -38,9 +40,16 @@ def fuzz(*args: str) -> Result:
 
 
 def report_of(path: Path) -> dict[str, Any]:
-    data = json.loads(path.read_text())
+    """The campaign's JSON report, valid for fuzz.schema.json, each finding a violation as the run
+    report has it (report.schema.json) with the suite's kinds."""
+    data: dict[str, Any] = json.loads(path.read_text())
     schema = load_schema()
     _validate(data, schema, schema)
+    run = load_run_schema()
+    violation = run["$defs"]["violation"]
+    for finding in data["findings"]:
+        _validate({key: finding[key] for key in violation["required"]}, violation, run)
+        assert finding["kind"] in FAILURE_KINDS
     return data
 
 
