@@ -126,12 +126,6 @@ def _error(packet: WirePacket) -> ErrorReply | None:
     return None
 
 
-def _error_code(packet: WirePacket) -> tuple[str, str] | None:
-    """(severity, code) of an error packet, or None."""
-    decoded = _error(packet)
-    return None if decoded is None else (decoded.error.severity, decoded.error.code)
-
-
 @dataclass
 class _Description:
     operations: frozenset[int] | None
@@ -189,7 +183,8 @@ def oracle_findings(packets: Sequence[WirePacket], *, rfc_packet_no: int | None 
             elif item.opcode == ServerOp.ASYNCHRONOUS_ERROR and (error := _error(item)) is not None:
                 model.on_async_error(error.request_number, error.error)
             continue
-        stateful = _stateful(model, item)
+        error = _error(item.first)
+        stateful = _stateful(model, item, error)
         if stateful is not None:
             out.append(stateful)
         if discard:  # the packet after free joint: answered done, never executed
@@ -197,30 +192,28 @@ def oracle_findings(packets: Sequence[WirePacket], *, rfc_packet_no: int | None 
             continue
         discard = item.request.opcode == _FREE_JOINT and item.first.opcode == ServerOp.RESPONSE
         if said is not None:
-            out += _described(said, item)
+            out += _described(said, item, error)
         request = item.request
         accepted = item.first.opcode == ServerOp.RESPONSE
-        well_formed = required_refusal(request.opcode, request.data) is None
-        if request.opcode == _DESCRIBE and accepted and well_formed and len(item.packets) > 1:
+        if request.opcode == _DESCRIBE and accepted and len(item.packets) > 1 and _well_formed(request):
             said = _description(item) or said
     return out
 
 
-def _view(answer: WirePacket) -> AnswerSummary | None:
-    """The model's view of an answer; None for an error whose string does not decode (the transcript
-    checks' finding)."""
+def _view(answer: WirePacket, error: ErrorReply | None) -> AnswerSummary | None:
+    """The model's view of an answer (``error``: its decoded error string); None for an error whose
+    string does not decode (the transcript checks' finding)."""
     if answer.opcode == ServerOp.RESPONSE:
         segment = word(answer.data, 2) if len(answer.data) == 4 else None
         return AnswerSummary(True, empty=len(answer.data) == 2, segment=segment)
-    decoded = _error(answer)
-    return None if decoded is None else AnswerSummary(False, error=decoded.error)
+    return None if error is None else AnswerSummary(False, error=error.error)
 
 
-def _stateful(model: ProtocolModel, item: AnsweredRequest) -> Violation | None:
+def _stateful(model: ProtocolModel, item: AnsweredRequest, error: ErrorReply | None) -> Violation | None:
     """The model's judgement of one answer (the state its earlier answers and asynchronous errors left),
     then its state updated: a violation of :data:`STATEFUL`, or None."""
     request, answer = item.request, item.first
-    view = _view(answer)
+    view = _view(answer, error)
     if view is None:
         return None
     expectation = model.expect(request.opcode, request.data)
@@ -233,16 +226,16 @@ def _stateful(model: ProtocolModel, item: AnsweredRequest) -> Violation | None:
     return replace(found, message=f"{name} was answered {describe(answer)}", data=request.data, packet=answer)
 
 
-def _described(said: _Description, item: AnsweredRequest) -> list[Violation]:
-    """What describe self said, held against one answer (module docstring)."""
+def _described(said: _Description, item: AnsweredRequest, decoded: ErrorReply | None) -> list[Violation]:
+    """What describe self said, held against one answer (``decoded``: its error string), module
+    docstring."""
     out: list[Violation] = []
     request, answer = item.request, item.first
     opcode = request.opcode
-    error = _error_code(answer)
+    error = None if decoded is None else (decoded.error.severity, decoded.error.code)
     if opcode not in _REQUESTS or (error is None and answer.opcode != ServerOp.RESPONSE):
         return out  # an error that does not decode is its own finding already
     accepted = answer.opcode == ServerOp.RESPONSE
-    well_formed = required_refusal(opcode, request.data) is None
     add = functools.partial(_add, out, item)
     if said.operations is not None:
         unserved = error is not None and error[1] in UNSERVED
@@ -260,7 +253,7 @@ def _described(said: _Description, item: AnsweredRequest) -> list[Violation]:
                 f"opcode {octal(opcode)} was served but describe self does not list it",
                 f"opcode {octal(opcode)} listed under :operations, or refused as unserved (C UOP)",
             )
-    if said.dof is not None and opcode in _JOINT_REPLIES and accepted and well_formed:
+    if said.dof is not None and opcode in _JOINT_REPLIES and accepted and _well_formed(request):
         floats = (len(answer.data) - 2) // 4
         if floats != said.dof:
             add(
@@ -269,7 +262,7 @@ def _described(said: _Description, item: AnsweredRequest) -> list[Violation]:
                 f"{said.dof} joint angles (:degrees-of-freedom {said.dof})",
                 f"{len(answer.data) - 2} data bytes after the request number",
             )
-    if said.limits is not None and opcode == _SET_JOINTS and accepted and well_formed:
+    if said.limits is not None and opcode == _SET_JOINTS and accepted and _well_formed(request):
         beyond = _beyond(request.data, said.limits)
         if beyond is not None:
             add(
@@ -278,6 +271,10 @@ def _described(said: _Description, item: AnsweredRequest) -> list[Violation]:
                 "JOR: a joint beyond its stated limit",
             )
     return out
+
+
+def _well_formed(request: WirePacket) -> bool:
+    return required_refusal(request.opcode, request.data) is None
 
 
 def _add(
