@@ -161,23 +161,7 @@ class BatchRunner:
             for item in inputs:
                 if conn is None:
                     break
-                conn.current = item.number
-                for index, step in enumerate(item.steps):
-                    if isinstance(step, RequestStep):
-                        if conn.ended is not None and not conn.stalled:
-                            conn = await self._open(run)
-                            if conn is None:
-                                break
-                            conn.current = item.number
-                        await conn.request(step.opcode, step.data, chunk=step.chunk, lazy=step.lazy)
-                    elif isinstance(step, ConnPacket):
-                        self._relative(run, conn, item, step)
-                    elif isinstance(step, Stray):
-                        await self._stray(run, item, index, step, conn)
-                    elif isinstance(step, Pause):
-                        await conn.pause(step.seconds)
-                    else:
-                        await self._raw(run, item, step)
+                conn = await self._input(run, conn, item)
                 if conn is not None and conn.stalled:
                     run.stalled = True
                     break
@@ -190,6 +174,29 @@ class BatchRunner:
             run.sent_requests = sum(c.requests for c in run.connections)
             run.duration = self._loop.time() - run.started
         return run
+
+    async def _input(self, run: BatchRun, conn: FuzzConnection, item: FuzzInput) -> FuzzConnection | None:
+        """Send the steps of one input; the connection it leaves (a new one after the target closed the
+        last, None if none could be opened)."""
+        conn.current = item.number
+        for index, step in enumerate(item.steps):
+            if isinstance(step, RequestStep):
+                if conn.ended is not None and not conn.stalled:
+                    reopened = await self._open(run)
+                    if reopened is None:
+                        return None
+                    conn = reopened
+                    conn.current = item.number
+                await conn.request(step.opcode, step.data, chunk=step.chunk, lazy=step.lazy)
+            elif isinstance(step, ConnPacket):
+                self._relative(run, conn, item, step)
+            elif isinstance(step, Stray):
+                await self._stray(run, item, index, step, conn)
+            elif isinstance(step, Pause):
+                await conn.pause(step.seconds)
+            else:
+                await self._raw(run, item, step)
+        return conn
 
     async def _open(self, run: BatchRun) -> FuzzConnection | None:
         link: RawLink | None = None
