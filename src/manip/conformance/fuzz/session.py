@@ -482,24 +482,7 @@ class FuzzConnection:
                 self.server_window = max(1, status[1])
             return
         if is_data(opcode) or opcode == ChaosOp.EOF:
-            expected = seq_add(self.received_upto, 1)
-            if packet.packet_no != expected:
-                if seq_le(packet.packet_no, self.received_upto) and not self._lazy:
-                    self._sts()  # a retransmission: our receipt was not seen
-                return
-            self.received_upto = expected
-            number = self._number()
-            wp = self._record("s2c", opcode, packet.packet_no, packet.ack_no, packet.data, number)
-            if opcode == ChaosOp.EOF:  # acknowledged at once: the target's CLS waits for that
-                self.ended = "EOF from the target"
-                self.ended_at = now
-                self._sts()
-            elif opcode in _ANSWERS:
-                self._answered(packet, wp)
-            else:
-                self.asynchronous += 1
-            if not self._lazy and seq_sub(self.received_upto, self.acked_upto) >= OUR_WINDOW // 2:
-                self._sts()
+            self._on_controlled(packet, now)
             return
         if opcode in (ChaosOp.CLS, ChaosOp.LOS):
             number = self._number()
@@ -509,6 +492,28 @@ class FuzzConnection:
             self.ended_at = self.ended_at or now
             self.inbox.unregister(self.index)
         elif opcode in (ChaosOp.OPN, ChaosOp.SNS):  # an OPN again: our STS was lost
+            self._sts()
+
+    def _on_controlled(self, packet: Packet, now: float) -> None:
+        """A data packet or EOF: taken in order (a duplicate of one taken is acknowledged again)."""
+        opcode = packet.opcode
+        expected = seq_add(self.received_upto, 1)
+        if packet.packet_no != expected:
+            if seq_le(packet.packet_no, self.received_upto) and not self._lazy:
+                self._sts()  # a retransmission: our receipt was not seen
+            return
+        self.received_upto = expected
+        number = self._number()
+        wp = self._record("s2c", opcode, packet.packet_no, packet.ack_no, packet.data, number)
+        if opcode == ChaosOp.EOF:  # acknowledged at once: the target's CLS waits for that
+            self.ended = "EOF from the target"
+            self.ended_at = now
+            self._sts()
+        elif opcode in _ANSWERS:
+            self._answered(packet, wp)
+        else:
+            self.asynchronous += 1
+        if not self._lazy and seq_sub(self.received_upto, self.acked_upto) >= OUR_WINDOW // 2:
             self._sts()
 
     def _answered(self, packet: Packet, wp: WirePacket) -> None:
