@@ -5,8 +5,9 @@ with the input it is attributed to, as a :class:`Sighting`.
 * The connection's packets are judged by :func:`manip.conformance.judge.checks.check_transcript` (one reply
   per request, in order, echoing its number, the refusal the spec demands for an unknown opcode, a
   wrong length or a reserved-operand float, the shape of every reply, free joint's discarded packet,
-  asynchronous responses only when asked for), and by :mod:`.oracles` for what it does not know (a
-  factor out of range, motion without power or after an abort, what describe self said).  A request
+  asynchronous responses only when asked for), and by :mod:`.oracles` for what it does not know: the
+  suite's stateful model (a factor out of range, motion without power or after an abort) and what
+  describe self said.  A request
   never answered is a *silent drop* (also when the replies skip it: a reply carrying the number of a
   later request), anything else a *wrong answer*.  A connection is judged up to its first finding
   that may put answers out of step with requests (:data:`DISRUPTIVE`); the rest are only counted.
