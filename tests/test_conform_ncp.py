@@ -18,12 +18,21 @@ import pytest
 
 from manip.codecs.framing import CHUDP_HEADER, encode_chudp, encode_tcp
 from manip.codecs.packet import MAX_DATA, Packet
+from manip.conformance.suite.busy import BUSY_RETRIES
 from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.context import RunOptions
-from manip.conformance.suite.rawchaos import RawPeer, format_packet
+from manip.conformance.suite.rawchaos import (
+    RawError,
+    RawPeer,
+    Received,
+    RefusedError,
+    format_packet,
+    rfc_until_open,
+)
 from manip.conformance.suite.results import CaseResult
 from manip.conformance.suite.runner import RunConfig, Runner
 from manip.links import NcpConfig
+from manip.links.virtual_clock import run as run_loop
 from manip.ncp.packets import is_data, is_legal_opcode, make_los, pack_status, unpack_status
 from manip.ncp.seq import seq_add, seq_gt, seq_le, seq_sub
 from manip.reference_server.driver import serve
@@ -410,3 +419,49 @@ def test_raw_peer_handshake_and_forged_frames() -> None:
             assert "LOS" in format_packet(los.packet)
 
     asyncio.run(go())
+
+
+# ------------------------------------------------------------------------------------ opening by hand
+
+
+def _opening(answers: list[Packet | None], *, ended: str | None = None) -> tuple[int, Received | Exception]:
+    """``rfc_until_open`` against scripted answers (None: nothing within the wait), in virtual time: how
+    many RFCs went out, and what it returned or raised."""
+    sent: list[int] = []
+
+    async def answer(wait: float) -> Received | None:
+        packet = answers.pop(0) if answers else None
+        if packet is None:
+            await asyncio.sleep(wait)
+            return None
+        return Received(packet, b"", 0.0)
+
+    async def go() -> Received | Exception:
+        try:
+            return await rfc_until_open(
+                lambda: sent.append(1), answer, contact="PUMA", timeout=5.0, ended=lambda: ended
+            )
+        except RawError as exc:
+            return exc
+
+    outcome = run_loop(go(), virtual=True)
+    return len(sent), outcome
+
+
+def _answer(opcode: int, text: bytes = b"") -> Packet:
+    return Packet(opcode, 0o401, 0x0A01, 0o440, 1, 7, 0, text)
+
+
+def test_both_raw_openers_retry_busy_and_refuse_the_rest_alike() -> None:
+    tries, got = _opening(
+        [_answer(ChaosOp.CLS, b"Busy"), _answer(ChaosOp.CLS, b"busy"), _answer(ChaosOp.OPN)]
+    )
+    assert tries == 3 and isinstance(got, Received) and got.packet.opcode == ChaosOp.OPN
+    tries, got = _opening([None, _answer(ChaosOp.OPN)])  # an RFC lost: sent again after RFC_RETRY
+    assert tries == 2 and isinstance(got, Received)
+    tries, got = _opening([_answer(ChaosOp.CLS, b"no such contact")])
+    assert tries == 1 and isinstance(got, RefusedError) and "no such contact" in str(got)
+    tries, got = _opening([_answer(ChaosOp.CLS, b"Busy")] * 1000)  # busy past the patience: refused
+    assert isinstance(got, RefusedError) and "'Busy'" in str(got) and tries == 1 + BUSY_RETRIES
+    tries, got = _opening([], ended="the target closed the link")
+    assert tries == 1 and isinstance(got, RawError) and "the target closed the link" in str(got)

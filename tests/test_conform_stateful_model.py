@@ -219,3 +219,14 @@ def test_extensions_the_server_does_not_list_may_be_refused_as_unserved() -> Non
     unknown = ProtocolModel()
     assert unknown.expect(op("reset-abort"), b"").command
     assert not unknown.expect(op("enable-power"), b"").command  # the 1985 guide's opcodes are never optional
+
+
+def test_an_unlisted_extension_may_be_refused_as_unserved_whatever_the_arm_s_state() -> None:
+    m = ProtocolModel(powered=False, aborted=True)
+    move = encode_request("compliant-move", joints=(0.0,) * 6, scheme=0)
+    e = m.expect(op("compliant-move"), move)
+    assert not e.normal and e.codes == {"AWA"}
+    assert m.judge(e, refusal("UIM", "C")) is None  # not served at all: not refused for the abort
+    assert m.judge(e, AnswerSummary(True, segment=1)) is not None
+    listed = ProtocolModel(powered=False, aborted=True, served=frozenset({op("compliant-move")}))
+    assert listed.judge(listed.expect(op("compliant-move"), move), refusal("UIM", "C")) is not None

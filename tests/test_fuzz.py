@@ -9,8 +9,9 @@ from collections import Counter
 
 import pytest
 
+from manip.codecs.error_string import ErrorMessage
 from manip.codecs.errors import DecodeError
-from manip.codecs.framing import decode_chudp, decode_tcp, encode_tcp
+from manip.codecs.framing import decode_chudp, decode_tcp, encode_chudp, encode_tcp
 from manip.codecs.messages import encode_error, encode_reply
 from manip.codecs.packet import Packet
 from manip.codecs.pdp11float import pack_f
@@ -18,10 +19,10 @@ from manip.conformance.fuzz.generators import CLASSES, GenOptions, generate, str
 from manip.conformance.fuzz.judge import _connection
 from manip.conformance.fuzz.oracles import oracle_findings
 from manip.conformance.fuzz.shrink import Budget, ddmin
-from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Request, Stray
+from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, RequestStep, Stray
 from manip.conformance.fuzz.target import TracebackScanner
-from manip.conformance.fuzz.wire import frame
 from manip.conformance.judge.checks import WirePacket, required_refusal
+from manip.conformance.suite.rawchaos import frame
 from manip.links.address import parse_address
 from manip.reference_server.errors import bad_value
 from manip.spec import SPEC
@@ -36,8 +37,8 @@ def _inputs(options: GenOptions, count: int, seed: int = 1) -> list[FuzzInput]:
     return [generate(seed, n, options) for n in range(count)]
 
 
-def _requests(item: FuzzInput) -> list[Request]:
-    return [s for s in item.steps if isinstance(s, Request)]
+def _requests(item: FuzzInput) -> list[RequestStep]:
+    return [s for s in item.steps if isinstance(s, RequestStep)]
 
 
 # ------------------------------------------------------------------------------------------ generation
@@ -105,7 +106,7 @@ def test_hardware_without_motion_sends_no_motion_or_power_opcode() -> None:
     sent = 0
     for item in _inputs(options, 4000):
         for step in item.steps:
-            opcode = step.opcode if isinstance(step, (Request, ConnPacket)) else None
+            opcode = step.opcode if isinstance(step, (RequestStep, ConnPacket)) else None
             if opcode is not None and opcode in SPEC.requests:
                 assert SPEC.requests[opcode].hazard in ("read-only", "config"), item.note
                 sent += 1
@@ -137,18 +138,20 @@ def test_stray_indices_are_unique_within_a_batch_and_apart_from_the_connections(
     ],
 )
 def test_a_damaged_frame_breaks_exactly_its_clause(damage: str, datagram: bool, clause: str) -> None:
-    packet = Packet(ChaosOp.DAT, 0, 0x1234, 0, 0x0567, 17, 3, b"abcdefgh")
+    hop = (ADDRESS.peer_addr, ADDRESS.my_addr)
+    packet = Packet(ChaosOp.DAT, hop[0], 0x1234, hop[1], 0x0567, 17, 3, b"abcdefgh")
     decode = decode_chudp if datagram else decode_tcp
-    whole = decode(frame(packet, ADDRESS, datagram=datagram))
+    whole = decode(frame(packet, datagram=datagram, hop=hop))
     assert whole.data == b"abcdefgh" and whole.dest_host == ADDRESS.peer_addr
     with pytest.raises(DecodeError) as caught:
-        decode(frame(packet, ADDRESS, datagram=datagram, damage=damage))  # type: ignore[arg-type]
+        decode(frame(packet, datagram=datagram, hop=hop, damage=damage))  # type: ignore[arg-type]
     assert caught.value.clause == clause
 
 
 def test_an_undamaged_frame_is_the_codec_s_own() -> None:
     packet = Packet(ChaosOp.DAT + 1, 0o440, 9, 0o401, 8, 100, 99, b"xyz")
-    assert frame(packet, ADDRESS, datagram=False) == encode_tcp(packet)
+    assert frame(packet, datagram=False, hop=(0o440, 0o401)) == encode_tcp(packet)
+    assert frame(packet, datagram=True, hop=(0o440, 0o401)) == encode_chudp(packet)
 
 
 # ------------------------------------------------------------------------------------------ shrinking
@@ -208,6 +211,19 @@ def test_a_move_accepted_after_kill_power_is_a_wrong_answer() -> None:
     assert not oracle_findings(powered)
 
 
+def test_a_move_accepted_after_an_abort_is_a_wrong_answer_until_a_reset() -> None:
+    ready, reset = SPEC.request("ready").opcode, SPEC.request("reset-abort").opcode
+    segment = _s2c(ServerOp.RESPONSE, struct.pack("<HH", 2, 1))
+    collision = ErrorMessage("arm", "E", "COL", "collision")
+    aborted = _s2c(ServerOp.ASYNCHRONOUS_ERROR, encode_error(ServerOp.ASYNCHRONOUS_ERROR, 2, collision))
+    again = _s2c(ServerOp.RESPONSE, struct.pack("<HH", 3, 2))
+    packets = [_c2s(ready, 2), segment, aborted, _c2s(ready, 3), again]
+    (found,) = oracle_findings(packets)
+    assert found.clause == "motion.abort" and found.packet is again and found.kind == "wrong_value"
+    after_reset = [*packets[:3], _c2s(reset, 3), _done(3), _c2s(ready, 4), again]
+    assert not oracle_findings(after_reset)
+
+
 class _Conn:
     """What the judgement reads of a connection."""
 
@@ -228,9 +244,10 @@ def test_a_request_skipped_by_the_replies_is_a_silent_drop_not_a_wrong_number() 
         _c2s(here, 3),
         _s2c(ServerOp.RESPONSE, reply),
     ]
-    observations = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
-    assert observations[0].kind == "silent-drop" and observations[0].clause == "request.one-reply"
-    assert observations[0].number == 1  # the request never answered, not the one after it
+    sightings = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
+    first = sightings[0].violation
+    assert first.kind == "missing_response" and first.clause == "request.one-reply"
+    assert sightings[0].number == 1  # the request never answered, not the one after it
 
 
 def test_a_reply_to_a_request_answered_already_is_a_second_reply() -> None:
@@ -243,18 +260,18 @@ def test_a_reply_to_a_request_answered_already_is_a_second_reply() -> None:
         _s2c(ServerOp.NON_FATAL_ERROR, refusal),
         _s2c(ServerOp.RESPONSE, b"\x02\x00"),  # done for #2 again, where #3's answer was due
     ]
-    observations = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
-    assert observations[0].clause == "error.non-fatal-is-reply"
-    assert observations[0].number == 1  # the request answered twice
+    sightings = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
+    assert sightings[0].violation.clause == "error.non-fatal-is-reply"
+    assert sightings[0].number == 1  # the request answered twice
 
 
 def test_after_a_reply_out_of_step_later_findings_are_only_counted() -> None:
     unknown = 0o277
     extra = _s2c(ServerOp.RESPONSE, b"\x02\x00")
     packets = [_s2c(ServerOp.RESPONSE, b"\x01\x00"), _c2s(unknown, 2), extra, _c2s(unknown, 3), extra]
-    observations = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
-    assert [o.clause for o in observations] == ["request.unknown-opcode"]
-    assert observations[0].followers >= 1
+    sightings = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
+    assert [o.violation.clause for o in sightings] == ["request.unknown-opcode"]
+    assert sightings[0].followers >= 1
 
 
 def test_the_scanner_finds_each_traceback_with_the_line_before_it() -> None:

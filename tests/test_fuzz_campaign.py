@@ -24,13 +24,15 @@ from click.testing import CliRunner, Result
 from manip.conformance.cli import main
 from manip.conformance.fuzz.generators import GenOptions, generate
 from manip.conformance.fuzz.report import load_schema
-from manip.conformance.fuzz.steps import Request
+from manip.conformance.fuzz.steps import RequestStep
+from manip.conformance.judge.violation import FAILURE_KINDS
+from manip.conformance.output.report import load_schema as load_run_schema
 from tests.servers import StartServer, free_port
 from tests.test_conform_framework import _validate
 
 FAKE = Path(__file__).with_name("fuzz_fake_server.py")
 TRIGGER = 0o277
-KINDS = ("crash", "hang", "traceback", "silent-drop", "wrong-answer", "uncounted-drop")
+KINDS = ("crash", "timeout", "traceback", "missing_response", "wrong_value", "uncounted_drop")
 
 
 def fuzz(*args: str) -> Result:
@@ -38,9 +40,16 @@ def fuzz(*args: str) -> Result:
 
 
 def report_of(path: Path) -> dict[str, Any]:
-    data = json.loads(path.read_text())
+    """The campaign's JSON report, valid for fuzz.schema.json, each finding a violation as the run
+    report has it (report.schema.json) with the suite's kinds."""
+    data: dict[str, Any] = json.loads(path.read_text())
     schema = load_schema()
     _validate(data, schema, schema)
+    run = load_run_schema()
+    violation = run["$defs"]["violation"]
+    for finding in data["findings"]:
+        _validate({key: finding[key] for key in violation["required"]}, violation, run)
+        assert finding["kind"] in FAILURE_KINDS
     return data
 
 
@@ -90,7 +99,7 @@ def first_trigger(seed: int, options: GenOptions) -> int:
     """The first input of the campaign that sends opcode 0277 (the fake server's trigger)."""
     for number in range(5000):
         item = generate(seed, number, options)
-        if any(isinstance(s, Request) and s.opcode == TRIGGER for s in item.steps):
+        if any(isinstance(s, RequestStep) and s.opcode == TRIGGER for s in item.steps):
             return number
     raise AssertionError("no input sends the trigger")
 
@@ -107,7 +116,7 @@ def reproduce(line: str, tmp_path: Path) -> dict[str, Any]:
 @pytest.mark.timeout(120)
 @pytest.mark.parametrize(
     ("mode", "kind"),
-    [("crash", "crash"), ("hang", "hang"), ("traceback", "traceback"), ("drop", "silent-drop")],
+    [("crash", "crash"), ("hang", "timeout"), ("traceback", "traceback"), ("drop", "missing_response")],
 )
 def test_a_defect_is_found_shrunk_to_its_input_and_reproduced(mode: str, kind: str, tmp_path: Path) -> None:
     seed = 5
@@ -130,7 +139,7 @@ def test_a_defect_is_found_shrunk_to_its_input_and_reproduced(mode: str, kind: s
     assert "request 0277" in finding["minimal"][0]["steps"][0]
     assert f"--only {trigger}" in finding["reproduce"] and "--launch" in finding["reproduce"]
     assert finding["input_class"] == "manip.unknown-opcode"
-    if kind in ("crash", "hang"):
+    if kind in ("crash", "timeout"):
         assert report["restarts"] >= 1
     again = reproduce(finding["reproduce"], tmp_path)
     assert again["exit_code"] == 1 and any(f["kind"] == kind for f in again["findings"])
@@ -180,7 +189,7 @@ def test_a_fault_switch_is_found_and_its_reproduce_line_needs_the_fault(tmp_path
     report = report_of(path)
     assert result.exit_code == 1
     (finding,) = [f for f in report["findings"] if f["clause"] == "request.data-length"]
-    assert finding["kind"] == "wrong-answer" and finding["counts"] and finding["level"] == "MUST"
+    assert finding["kind"] == "wrong_value" and finding["counts"] and finding["level"] == "MUST"
     assert finding["shrunk"] and len(finding["minimal"]) == 1
     assert finding["spec"].startswith("A request whose data length does not fit")
     assert "--server-fault length-unchecked" in finding["reproduce"]

@@ -56,11 +56,11 @@ def test_a_client_resetting_while_replies_are_due_logs_nothing(caplog: pytest.Lo
         async with running_server(time_scale=1.0) as server:
             runner = BatchRunner(parse_address(server.address), Allowance())
             for _ in range(10):
-                wire = await runner.wire()
-                conn = await runner.connect(wire)
+                link = await runner.link()
+                conn = await runner.connect(link)
                 for _ in range(300):  # describe self: nine packets each, so the replies pile up
                     await conn.request(RequestOp.DESCRIBE_SELF, b"", lazy=True)
-                wire.close(reset=True)
+                link.close(reset=True)
                 await asyncio.sleep(0.2)
                 conn.close()
             served = server.stats.requests

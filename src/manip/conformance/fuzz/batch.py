@@ -29,13 +29,13 @@ from dataclasses import dataclass, field
 from typing import Final, Literal
 
 from manip.codecs.packet import Packet
-from manip.conformance.fuzz.session import Allowance, ConnectError, FuzzConnection
-from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, Request, Stray
-from manip.conformance.fuzz.wire import Inbox, Wire, frame, open_wire
+from manip.conformance.fuzz.session import Allowance, FuzzConnection, Inbox
+from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, RequestStep, Stray
+from manip.conformance.suite.rawchaos import RawError, RawLink, frame, open_link
 from manip.links.address import LinkAddress
 from manip.spec.constants import ChaosOp, RequestOp
 
-__all__ = ["BatchRun", "BatchRunner", "Expectation", "Liveness", "liveness"]
+__all__ = ["BatchRun", "BatchRunner", "DueAnswer", "Liveness", "liveness"]
 
 Expect = Literal["los", "answer", "silence", "sts", "close"]
 POLL: Final = 0.01
@@ -43,7 +43,7 @@ _ANSWERS: Final = frozenset({ChaosOp.OPN, ChaosOp.CLS, ChaosOp.ANS, ChaosOp.FWD}
 
 
 @dataclass
-class Expectation:
+class DueAnswer:
     """An answer a step is due (or must not get), judged after the batch."""
 
     number: int
@@ -56,7 +56,7 @@ class Expectation:
     data: bytes
     connection: FuzzConnection | None = None
     """The batch's connection when it was sent (an RFC then finds the robot busy while it is open)."""
-    link: Wire | None = None
+    link: RawLink | None = None
 
 
 @dataclass
@@ -65,7 +65,7 @@ class BatchRun:
 
     inputs: list[FuzzInput]
     connections: list[FuzzConnection] = field(default_factory=list)
-    expectations: list[Expectation] = field(default_factory=list)
+    due_answers: list[DueAnswer] = field(default_factory=list)
     counted: int = 0
     """Bad frames the target's links must have counted."""
     open_error: str | None = None
@@ -97,38 +97,38 @@ class BatchRunner:
         self.inbox = Inbox()
         self.inbox.on_stray = self._on_stray
         self.datagram = address.scheme == "chudp"
-        self._shared: Wire | None = None  # CHUDP: one socket for everything
-        self._side: Wire | None = None
-        self._held: list[Wire] = []
-        self._rfc_wires: dict[int, Wire] = {}
+        self._shared: RawLink | None = None  # CHUDP: one socket for everything
+        self._side: RawLink | None = None
+        self._held: list[RawLink] = []
+        self._rfc_links: dict[int, RawLink] = {}
         self._rng = random.Random(seed)
         self._loop = asyncio.get_running_loop()
 
-    async def wire(self) -> Wire:
+    async def link(self) -> RawLink:
         """A new link to the target (on CHUDP the campaign's one socket)."""
         if not self.datagram:
-            return await open_wire(self.address, self.inbox, self.allowance.connect)
+            return await open_link(self.address, self.inbox, self.allowance.connect)
         if self._shared is None or self._shared.ended is not None:
-            self._shared = await open_wire(self.address, self.inbox, self.allowance.connect)
+            self._shared = await open_link(self.address, self.inbox, self.allowance.connect)
         return self._shared
 
     def next_index(self) -> int:
         """An index for a connection of ours: 0xff01-0xffff (stray packets use 0x0100-0xfeff)."""
         return 0xFF00 | self._rng.randrange(1, 0x100)
 
-    async def connect(self, wire: Wire, *, initial: bool = True) -> FuzzConnection:
+    async def connect(self, link: RawLink) -> FuzzConnection:
         index = self.next_index()
         while index in self.inbox.connections:
             index = self.next_index()
-        conn = FuzzConnection(wire, self.inbox, index, self.allowance, rfc_no=self._rng.randrange(0x10000))
-        await conn.open(self.address.contact, initial=initial)
+        conn = FuzzConnection(link, self.inbox, index, self.allowance, rfc_no=self._rng.randrange(0x10000))
+        await conn.open(self.address.contact)
         return conn
 
     def _on_stray(self, packet: Packet) -> None:
         """An OPN answering one of our stray RFCs: close that connection at once (the robot is busy
         with our batch, so a server that opened it serves two clients)."""
-        wire = self._rfc_wires.get(packet.dest_index)
-        if packet.opcode == ChaosOp.OPN and wire is not None:
+        link = self._rfc_links.get(packet.dest_index)
+        if packet.opcode == ChaosOp.OPN and link is not None:
             cls = Packet(
                 ChaosOp.CLS,
                 self.address.peer_addr,
@@ -139,13 +139,13 @@ class BatchRunner:
                 packet.packet_no,
                 b"fuzz: RFC flood",
             )
-            wire.send(frame(cls, self.address, datagram=self.datagram))
+            link.send(link.forge(cls))
 
-    async def _side_wire(self) -> Wire:
+    async def _side_link(self) -> RawLink:
         if self.datagram:
-            return await self.wire()
+            return await self.link()
         if self._side is None or self._side.ended is not None:
-            self._side = await open_wire(self.address, self.inbox, self.allowance.connect)
+            self._side = await open_link(self.address, self.inbox, self.allowance.connect)
         return self._side
 
     # ------------------------------------------------------------------------------------ a batch
@@ -154,30 +154,14 @@ class BatchRunner:
         """Send ``inputs`` in order (module docstring) and wait for what is due."""
         run = BatchRun(list(inputs), started=self._loop.time())
         self.inbox.clear_strays()
-        self._rfc_wires.clear()
+        self._rfc_links.clear()
         conn: FuzzConnection | None = None
         try:
             conn = await self._open(run)
             for item in inputs:
                 if conn is None:
                     break
-                conn.current = item.number
-                for index, step in enumerate(item.steps):
-                    if isinstance(step, Request):
-                        if conn.ended is not None and not conn.stalled:
-                            conn = await self._open(run)
-                            if conn is None:
-                                break
-                            conn.current = item.number
-                        await conn.request(step.opcode, step.data, chunk=step.chunk, lazy=step.lazy)
-                    elif isinstance(step, ConnPacket):
-                        self._relative(run, conn, item, step)
-                    elif isinstance(step, Stray):
-                        await self._stray(run, item, index, step, conn)
-                    elif isinstance(step, Pause):
-                        await conn.pause(step.seconds)
-                    else:
-                        await self._raw(run, item, step)
+                conn = await self._input(run, conn, item)
                 if conn is not None and conn.stalled:
                     run.stalled = True
                     break
@@ -186,20 +170,43 @@ class BatchRunner:
             for c in run.connections:
                 c.close()
                 if not self.datagram:
-                    c.wire.close()  # after the CLS, which goes out first
+                    c.link.close()  # after the CLS, which goes out first
             run.sent_requests = sum(c.requests for c in run.connections)
             run.duration = self._loop.time() - run.started
         return run
 
+    async def _input(self, run: BatchRun, conn: FuzzConnection, item: FuzzInput) -> FuzzConnection | None:
+        """Send the steps of one input; the connection it leaves (a new one after the target closed the
+        last, None if none could be opened)."""
+        conn.current = item.number
+        for index, step in enumerate(item.steps):
+            if isinstance(step, RequestStep):
+                if conn.ended is not None and not conn.stalled:
+                    reopened = await self._open(run)
+                    if reopened is None:
+                        return None
+                    conn = reopened
+                    conn.current = item.number
+                await conn.request(step.opcode, step.data, chunk=step.chunk, lazy=step.lazy)
+            elif isinstance(step, ConnPacket):
+                self._relative(run, conn, item, step)
+            elif isinstance(step, Stray):
+                await self._stray(run, item, index, step, conn)
+            elif isinstance(step, Pause):
+                await conn.pause(step.seconds)
+            else:
+                await self._raw(run, item, step)
+        return conn
+
     async def _open(self, run: BatchRun) -> FuzzConnection | None:
-        wire: Wire | None = None
+        link: RawLink | None = None
         try:
-            wire = await self.wire()
-            conn = await self.connect(wire)
-        except (ConnectError, OSError, TimeoutError) as exc:
-            if wire is not None and not self.datagram:
-                wire.close()
-            run.open_error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, ConnectError) else str(exc)
+            link = await self.link()
+            conn = await self.connect(link)
+        except (RawError, OSError, TimeoutError) as exc:
+            if link is not None and not self.datagram:
+                link.close()
+            run.open_error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, RawError) else str(exc)
             return None
         run.connections.append(conn)
         return conn
@@ -208,19 +215,19 @@ class BatchRunner:
         since = self._loop.time()
         bogus = conn.send_relative(step)
         if bogus is not None:
-            run.expectations.append(
-                Expectation(item.number, "los", step.clause, bogus, since, item.note, step.data, conn)
+            run.due_answers.append(
+                DueAnswer(item.number, "los", step.clause, bogus, since, item.note, step.data, conn)
             )
         elif step.what == "sns" and conn.ended is None:
-            run.expectations.append(
-                Expectation(item.number, "sts", step.clause, conn.index, since, item.note, step.data, conn)
+            run.due_answers.append(
+                DueAnswer(item.number, "sts", step.clause, conn.index, since, item.note, step.data, conn)
             )
 
     async def _stray(
         self, run: BatchRun, item: FuzzInput, index: int, step: Stray, conn: FuzzConnection
     ) -> None:
         try:
-            wire = await self._side_wire()
+            link = await self._side_link()
         except (OSError, TimeoutError) as exc:
             run.open_error = run.open_error or f"the side link did not open: {exc}"
             return
@@ -230,13 +237,15 @@ class BatchRunner:
             # By chance, the index of a connection of ours, on another link: the target may take it for
             # that connection's (manip's drops it as from the wrong link), not as a stray.
             packet = packet.with_(dest_index=(packet.dest_index * 7 + 1) & 0xFFFF or 1)
-        raw = frame(packet, self.address, datagram=self.datagram, damage=step.damage)
+        dest, source = packet.dest_host or self.address.peer_addr, packet.src_host or self.address.my_addr
+        packet = packet.with_(dest_host=dest, src_host=source)
+        raw = frame(packet, datagram=self.datagram, hop=(dest, source), damage=step.damage)
         if packet.opcode == ChaosOp.RFC:
-            self._rfc_wires[packet.src_index] = wire
-        wire.send(raw)
+            self._rfc_links[packet.src_index] = link
+        link.send(raw)
         run.counted += int(step.counted)
-        run.expectations.append(
-            Expectation(
+        run.due_answers.append(
+            DueAnswer(
                 item.number,
                 step.expect,
                 step.clause,
@@ -251,29 +260,29 @@ class BatchRunner:
     async def _raw(self, run: BatchRun, item: FuzzInput, step: Raw) -> None:
         run.counted += step.counted
         if self.datagram:
-            (await self.wire()).send(step.data)
+            (await self.link()).send(step.data)
             return
         try:
-            wire = await open_wire(self.address, self.inbox, self.allowance.connect)
+            link = await open_link(self.address, self.inbox, self.allowance.connect)
         except (OSError, TimeoutError) as exc:
             run.open_error = run.open_error or f"a link did not open: {exc}"
             return
-        wire.send(step.data)
+        link.send(step.data)
         if step.closes:
-            run.expectations.append(
-                Expectation(
-                    item.number, "close", step.clause, 0, self._loop.time(), item.note, step.data, link=wire
+            run.due_answers.append(
+                DueAnswer(
+                    item.number, "close", step.clause, 0, self._loop.time(), item.note, step.data, link=link
                 )
             )
-            self._held.append(wire)
+            self._held.append(link)
         elif step.hold:
-            self._held.append(wire)
+            self._held.append(link)
         else:
-            wire.close()
+            link.close()
 
     def _due(self, run: BatchRun) -> bool:
         """Whether some LOS, RFC answer or link drop is still due."""
-        for e in run.expectations:
+        for e in run.due_answers:
             if e.what == "los" and not _has(self.inbox, e.key, lambda p: p.opcode == ChaosOp.LOS):
                 return True
             if e.what == "answer" and not _has(self.inbox, e.key, lambda p: p.opcode in _ANSWERS):
@@ -298,8 +307,8 @@ class BatchRunner:
 
     def finish(self) -> None:
         """Close the side link and the links left open (after the liveness check: late packets count)."""
-        for wire in self._held:
-            wire.close(reset=True)
+        for link in self._held:
+            link.close(reset=True)
         self._held.clear()
         if self._side is not None:
             self._side.close()
@@ -330,7 +339,7 @@ async def liveness(runner: BatchRunner) -> Liveness:
         return Liveness(alive, kind, detail, loop.time() - started)
 
     try:
-        wire = await runner.wire()
+        link = await runner.link()
     except TimeoutError:
         return result(False, "hang", f"the link did not open within {runner.allowance.connect:g} s")
     except OSError as exc:
@@ -338,9 +347,9 @@ async def liveness(runner: BatchRunner) -> Liveness:
     conn: FuzzConnection | None = None
     try:
         try:
-            conn = await runner.connect(wire, initial=False)  # a live target answers Here, initial or not
-        except ConnectError as exc:
-            gone = wire.ended is not None and "target closed" in wire.ended
+            conn = await runner.connect(link)
+        except RawError as exc:
+            gone = link.ended is not None and "target closed" in link.ended
             return result(False, "crash" if gone else "hang", f"no connection: {exc}")
         await conn.request(RequestOp.HERE, b"")
         if not await conn.settle() and conn.unanswered:
@@ -351,4 +360,4 @@ async def liveness(runner: BatchRunner) -> Liveness:
         if conn is not None:
             conn.close("fuzz liveness check done")
         if not runner.datagram:
-            wire.close()
+            link.close()

@@ -8,11 +8,11 @@ Theory of operation:
    sent or ``seconds`` passed; with ``only`` exactly those inputs are sent, as one batch.  After each
    batch: the liveness check, the target's new tracebacks, its count of bad frames, and the judgement
    (:mod:`.judge`).
-3. Each observation is a finding, or one more occurrence of a finding already made (same kind and
-   clause).  A new finding is shrunk (:mod:`.shrink`): first the input it is attributed to alone,
-   then delta debugging over its batch, every trial a batch of its own on a fresh connection (and, for a
-   crash or hang, a restarted target).  The shrunk inputs are what the report shows, with the reproduce
-   line ``manip-conform fuzz ... --seed S --only N,M``.
+3. Each violation a batch shows (a :class:`~.judge.Sighting`) is a finding, or one more occurrence of
+   a finding already made (same kind and clause).  A new finding is shrunk (:mod:`.shrink`): first the
+   input it is attributed to alone, then delta debugging over its batch, every trial a batch of its own
+   on a fresh connection (and, for a crash or hang, a restarted target).  The shrunk inputs are what
+   the report shows, with the reproduce line ``manip-conform fuzz ... --seed S --only N,M``.
 4. A target found dead is restarted when the fuzzer runs it; a remote one is waited for
    (``restart_wait``); one that does not come back ends the campaign (a problem of the report).
 """
@@ -30,12 +30,12 @@ from typing import Final
 
 from manip.conformance.fuzz.batch import BatchRun, BatchRunner, Liveness, liveness
 from manip.conformance.fuzz.generators import GenOptions, generate
-from manip.conformance.fuzz.judge import ALWAYS, Observation, judge
-from manip.conformance.fuzz.report import HEALTH, ClassTally, Finding, FuzzReport, MinimalInput
+from manip.conformance.fuzz.judge import ALWAYS, Sighting, judge
+from manip.conformance.fuzz.report import HEALTH, CampaignViolation, ClassTally, FuzzReport, MinimalInput
 from manip.conformance.fuzz.session import Allowance
 from manip.conformance.fuzz.shrink import Budget, BudgetError, ddmin
-from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, Request, Step, Stray
-from manip.conformance.fuzz.target import Target, TargetError
+from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, RequestStep, Step, Stray
+from manip.conformance.fuzz.target import FuzzedServer, UnreachableError
 from manip.spec import SPEC
 from manip.spec.notation import octal
 
@@ -71,13 +71,13 @@ class CampaignEvents:
     """Callbacks for a console: after each batch (inputs sent so far), at each new finding."""
 
     batch_done: Callable[[FuzzReport], None] = lambda report: None
-    found: Callable[[Finding], None] = lambda finding: None
+    found: Callable[[CampaignViolation], None] = lambda finding: None
     note: Callable[[str], None] = lambda text: None
 
 
 def describe_step(step: Step) -> str:
     """One line per step for a report: what it is and its bytes."""
-    if isinstance(step, Request):
+    if isinstance(step, RequestStep):
         op = SPEC.requests.get(step.opcode)
         name = op.name if op is not None else "unknown opcode"
         how = f", written {step.chunk} byte(s) at a time" if step.chunk else ""
@@ -103,7 +103,9 @@ def describe_step(step: Step) -> str:
 class Campaign:
     """One campaign against ``target`` (module docstring)."""
 
-    def __init__(self, config: CampaignConfig, target: Target, events: CampaignEvents | None = None) -> None:
+    def __init__(
+        self, config: CampaignConfig, target: FuzzedServer, events: CampaignEvents | None = None
+    ) -> None:
         self.config = config
         self.target = target
         self.events = events or CampaignEvents()
@@ -147,7 +149,7 @@ class Campaign:
         report = self.report
         try:
             await self.target.start()
-        except TargetError as exc:
+        except UnreachableError as exc:
             report.unreachable = True
             report.problems.append(str(exc))
             return
@@ -167,7 +169,7 @@ class Campaign:
             if deadline is not None and time.monotonic() >= deadline:
                 break
             inputs = [generate(self.config.seed, n, self.config.gen) for n in numbers]
-            observations, run, live = await self.trial(inputs)
+            sightings, run, live = await self.trial(inputs)
             report.batches += 1
             report.inputs += len(inputs)
             report.requests += run.sent_requests
@@ -176,8 +178,8 @@ class Campaign:
                 tally = report.classes[item.kind]
                 tally.inputs += 1
                 tally.requests += item.requests
-            for observation in observations:
-                await self._record(observation, inputs, report.batches - 1)
+            for sighting in sightings:
+                await self._record(sighting, inputs, report.batches - 1)
             self.events.batch_done(report)
             if not live.alive and not await self._revive():
                 report.problems.append(
@@ -208,7 +210,7 @@ class Campaign:
         if self.target.can_restart:
             try:
                 await self.target.restart()
-            except TargetError as exc:
+            except UnreachableError as exc:
                 self.report.problems.append(f"restarting the target failed: {exc}")
                 return False
             self.report.restarts += 1
@@ -227,7 +229,7 @@ class Campaign:
             self._runner.close()
         return BatchRunner(self.target.address, self.config.allowance, seed=self.config.seed)
 
-    async def trial(self, inputs: list[FuzzInput]) -> tuple[list[Observation], BatchRun, Liveness]:
+    async def trial(self, inputs: list[FuzzInput]) -> tuple[list[Sighting], BatchRun, Liveness]:
         """Send one batch, check liveness, collect what the target logged and counted; judge."""
         runner = self._runner
         assert runner is not None
@@ -240,11 +242,9 @@ class Campaign:
         if not live.alive:
             self.report.liveness_failures += 1
         uncounted = await self._count(run) if live.alive else None
-        observations = judge(
-            run, runner.inbox, live, tracebacks=self.target.tracebacks(), uncounted=uncounted
-        )
+        sightings = judge(run, runner.inbox, live, tracebacks=self.target.tracebacks(), uncounted=uncounted)
         runner.finish()
-        return observations, run, live
+        return sightings, run, live
 
     async def _count(self, run: BatchRun) -> tuple[int, int] | None:
         """(bad frames sent, counted) for the batch, when the target counts them."""
@@ -265,7 +265,7 @@ class Campaign:
 
     # ------------------------------------------------------------------------------------ findings
 
-    async def _record(self, o: Observation, inputs: list[FuzzInput], batch: int) -> None:
+    async def _record(self, o: Sighting, inputs: list[FuzzInput], batch: int) -> None:
         report = self.report
         known = self._known.get(o.signature)
         if known is not None:
@@ -273,20 +273,9 @@ class Campaign:
             report.findings[known].followers += o.followers
             return
         kind = _class_of(o, inputs)
-        counts = o.kind in ALWAYS or o.level == "MUST" or (self.config.strict and o.level == "SHOULD")
-        finding = Finding(
-            o.kind,
-            o.clause,
-            o.level,
-            o.message,
-            o.expected,
-            o.actual,
-            o.data,
-            kind,
-            batch,
-            counts=counts,
-            followers=o.followers,
-        )
+        level = o.level
+        counts = o.violation.kind in ALWAYS or level == "MUST" or (self.config.strict and level == "SHOULD")
+        finding = CampaignViolation(o.violation, kind, batch, counts=counts, followers=o.followers)
         index = len(report.findings)
         report.findings.append(finding)
         self._known[o.signature] = index
@@ -309,7 +298,7 @@ class Campaign:
             tally.findings.append(index)
         self.events.found(finding)
 
-    async def _shrink(self, o: Observation, numbers: list[int]) -> tuple[list[int], bool, str]:
+    async def _shrink(self, o: Sighting, numbers: list[int]) -> tuple[list[int], bool, str]:
         budget = Budget(self.config.shrink_trials, self.config.shrink_seconds)
         wanted = o.signature
 
@@ -326,11 +315,11 @@ class Campaign:
                 return numbers, False, "the batch did not cause it again: not shrunk"
         except BudgetError:
             return numbers, False, "no trial left to shrink it"
-        except TargetError as exc:
+        except UnreachableError as exc:
             return numbers, False, f"not shrunk: {exc}"
         try:
             minimal, complete = await ddmin(numbers, fails, budget)
-        except TargetError as exc:
+        except UnreachableError as exc:
             return numbers, False, f"not shrunk: {exc}"
         finally:
             self.report.shrink_trials += budget.used
@@ -340,17 +329,17 @@ class Campaign:
     async def reproduces(self, numbers: list[int], signature: tuple[str, str]) -> bool:
         """Send inputs ``numbers`` as a batch of their own: does ``signature`` show again?"""
         if not await self._alive_for_trial():
-            raise TargetError("the target is not alive to try inputs on")
+            raise UnreachableError("the target is not alive to try inputs on")
         inputs = [generate(self.config.seed, n, self.config.gen) for n in numbers]
         checks, failures = self.report.liveness_checks, self.report.liveness_failures
-        observations, _, live = await self.trial(inputs)
+        sightings, _, live = await self.trial(inputs)
         self.report.liveness_checks, self.report.liveness_failures = (
             checks,
             failures,
         )  # trials are not the campaign's
         if not live.alive and not await self._revive():
-            raise TargetError("the target did not come back")
-        return any(x.signature == signature for x in observations)
+            raise UnreachableError("the target did not come back")
+        return any(x.signature == signature for x in sightings)
 
     async def _alive_for_trial(self) -> bool:
         assert self._runner is not None
@@ -391,7 +380,7 @@ class _Numbers:
         return list(range(start, end))
 
 
-def _class_of(o: Observation, inputs: list[FuzzInput]) -> str:
+def _class_of(o: Sighting, inputs: list[FuzzInput]) -> str:
     if o.number is None:
         return HEALTH
     for item in inputs:

@@ -23,9 +23,9 @@ from rich.markup import escape
 from manip.conformance.cli_options import json_option, junit_option
 from manip.conformance.fuzz.campaign import Campaign, CampaignConfig, CampaignEvents
 from manip.conformance.fuzz.generators import CLASSES, HAZARD_ORDER, GenOptions
-from manip.conformance.fuzz.report import Finding, FuzzReport, finding_text, write_json, write_junit
+from manip.conformance.fuzz.report import CampaignViolation, FuzzReport, finding_text, write_json, write_junit
 from manip.conformance.fuzz.session import Allowance
-from manip.conformance.fuzz.target import ProcessTarget, RemoteTarget, Target, reference_server_argv
+from manip.conformance.fuzz.target import FuzzedServer, LaunchedServer, RemoteServer, reference_server_argv
 from manip.conformance.output.console import make_console, progress_bar
 from manip.conformance.replay.cli import check_output_paths, given
 from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REPLY_TIMEOUT
@@ -40,7 +40,7 @@ __all__ = ["fuzz_command"]
 
 EXIT_CODES_HELP = epilog("manip-conform fuzz")
 
-_STYLE = {"crash": "bold red", "hang": "bold red", "traceback": "bold magenta"}
+_STYLE = {"crash": "bold red", "timeout": "bold red", "traceback": "bold magenta"}
 
 
 def _numbers(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[int, ...]:
@@ -287,16 +287,16 @@ def fuzz_command(
         )
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "big")
-    target: Target
+    target: FuzzedServer
     if address is None:
         argv = reference_server_argv(link, faults=server_faults, wrist=wrist, seed=seed)
         faults = f", faults: {', '.join(server_faults)}" if server_faults else ""
         label = f"the reference server (manip-server, {link}{', simulated wrist' if wrist else ''}{faults})"
-        target = ProcessTarget(argv, label=label)
+        target = LaunchedServer(argv, label=label)
     elif launch is not None:
-        target = ProcessTarget(shlex.split(launch), address, label=f"{address} (started with {launch})")
+        target = LaunchedServer(shlex.split(launch), address, label=f"{address} (started with {launch})")
     else:
-        target = RemoteTarget(address, server_log)
+        target = RemoteServer(address, server_log)
     extra: list[str] = []
     for pattern in classes:
         extra += ["--class", pattern]
@@ -352,7 +352,7 @@ def fuzz_command(
 
 
 def _campaign(
-    config: CampaignConfig, target: Target, console: Console, quiet: bool, *, total: int
+    config: CampaignConfig, target: FuzzedServer, console: Console, quiet: bool, *, total: int
 ) -> FuzzReport:
     progress = progress_bar(console, quiet)
     task = progress.add_task("fuzz", total=total)
@@ -360,7 +360,7 @@ def _campaign(
     def batch_done(report: FuzzReport) -> None:
         progress.update(task, completed=report.inputs, description=f"fuzz {report.rate:.0f}/s")
 
-    def found(finding: Finding) -> None:
+    def found(finding: CampaignViolation) -> None:
         style = _STYLE.get(finding.kind, "bold red" if finding.counts else "yellow")
         progress.console.print(f"[{style}]{escape(finding.title())}[/]")
 

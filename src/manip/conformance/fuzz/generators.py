@@ -22,7 +22,7 @@ from typing import Final, Literal
 from manip.codecs.messages import request_op
 from manip.codecs.packet import MAX_DATA, Packet
 from manip.codecs.pdp11float import F_MAX, F_MIN_NORMAL, pack_f
-from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, Request, Step, Stray
+from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, RequestStep, Step, Stray
 from manip.conformance.suite.selection import match_id
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import ChaosOp, RequestOp
@@ -226,15 +226,15 @@ def _valid(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[Step, ...],
     data = valid_data(rng, op)
     note = f"{op.name} with {len(data)} data bytes laid out as its layout says"
     if op.name == "enable-power":  # power off again: the rest of the batch is not to drive the arm about
-        return (Request(op.opcode, data), Request(_op("kill-power"), b"")), f"{note}, then kill power"
-    return (Request(op.opcode, data),), note
+        return (RequestStep(op.opcode, data), RequestStep(_op("kill-power"), b"")), f"{note}, then kill power"
+    return (RequestStep(op.opcode, data),), note
 
 
 def _unknown(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[Step, ...], str]:
     opcode = UNKNOWN_OPCODES[rng.randrange(len(UNKNOWN_OPCODES))]
     size = rng.choice((0, 0, 1, 2, 4, rng.randrange(64), rng.randrange(MAX_DATA + 1)))
     data = rng.randbytes(size)
-    return (Request(opcode, data),), f"unknown opcode 0{opcode:o} with {size} data bytes"
+    return (RequestStep(opcode, data),), f"unknown opcode 0{opcode:o} with {size} data bytes"
 
 
 def _wrong_sizes(op: RequestOpcode) -> tuple[int, set[int]]:
@@ -266,7 +266,7 @@ def _wrong_length(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[Step
             break
     # Valid values cut or padded with zero bytes (clean zeros): executed anyway, they would be served.
     data = valid_data(rng, op)[:wanted].ljust(wanted, b"\0")
-    return (Request(op.opcode, data),), f"{op.name} with {wanted} data bytes (its layout: {size})"
+    return (RequestStep(op.opcode, data),), f"{op.name} with {wanted} data bytes (its layout: {size})"
 
 
 def _reserved_float(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[Step, ...], str]:
@@ -277,7 +277,7 @@ def _reserved_float(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[St
     for at in hits:
         data[at : at + 4] = _reserved_operand(rng)
     where = ", ".join(str(at) for at in sorted(hits))
-    return (Request(op.opcode, bytes(data)),), f"{op.name} with a reserved-operand float at byte {where}"
+    return (RequestStep(op.opcode, bytes(data)),), f"{op.name} with a reserved-operand float at byte {where}"
 
 
 def _extreme(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[Step, ...], str]:
@@ -287,15 +287,15 @@ def _extreme(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[Step, ...
     hits = rng.sample(offsets, rng.randint(1, len(offsets)))
     for at in hits:
         data[at : at + 4] = _extreme_float(rng, op)
-    return (Request(op.opcode, bytes(data)),), f"{op.name} with {len(hits)} extreme float(s)"
+    return (RequestStep(op.opcode, bytes(data)),), f"{op.name} with {len(hits)} extreme float(s)"
 
 
-def _any_request(rng: random.Random, g: GenOptions, n: int) -> Request:
+def _any_request(rng: random.Random, g: GenOptions, n: int) -> RequestStep:
     """A request of a random manip class (no pipelines, no sequences)."""
     maker = rng.choice((_valid, _valid, _valid, _unknown, _wrong_length, _reserved_float, _extreme))
     steps, _ = maker(rng, g, n)
     first = steps[0]
-    assert isinstance(first, Request)
+    assert isinstance(first, RequestStep)
     return first
 
 
@@ -305,7 +305,7 @@ def _pipeline(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[Step, ..
     steps: list[Step] = []
     for _ in range(count):
         request = _any_request(rng, safe, n)
-        steps.append(Request(request.opcode, request.data, lazy=True))
+        steps.append(RequestStep(request.opcode, request.data, lazy=True))
     return tuple(steps), f"{count} read-only requests sent without reading a reply"
 
 
@@ -313,59 +313,62 @@ def _op(name: str) -> int:
     return request_op(name).opcode
 
 
-def _small_move(rng: random.Random) -> Request:
+def _small_move(rng: random.Random) -> RequestStep:
     op = SPEC.request(rng.choice(("incremental-move", "incremental-straight-move")))
     deltas = [rng.uniform(-2.0, 2.0) for _ in range(3)] + [0.0, 0.0, 0.0]
-    return Request(op.opcode, b"".join(pack_f(d) for d in deltas))
+    return RequestStep(op.opcode, b"".join(pack_f(d) for d in deltas))
 
 
 def _sequence(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[Step, ...], str]:
     """Short scripts the spec says how to answer step by step."""
     script = rng.randrange(6)
     if script == 0:  # a motion request without power: NAP (motion.no-power)
-        steps: list[Step] = [Request(_op("kill-power"), b""), _small_move(rng)]
+        steps: list[Step] = [RequestStep(_op("kill-power"), b""), _small_move(rng)]
         return tuple(steps), "kill power, then a small incremental move"
     if script == 1:  # segments (ready is always reachable): their numbers, their completion responses
         mask = rng.choice((2, 3, 1, 0))
-        notify = Request(_op("request-notifications"), struct.pack("<H", mask))
+        notify = RequestStep(_op("request-notifications"), struct.pack("<H", mask))
         steps = [
-            Request(_op("enable-power"), b""),
+            RequestStep(_op("enable-power"), b""),
             notify,
-            Request(_op("ready"), b""),
-            Request(_op("ready"), b""),
+            RequestStep(_op("ready"), b""),
+            RequestStep(_op("ready"), b""),
         ]
-        steps += [Pause(PAUSE), Request(HERE, b"")]
+        steps += [Pause(PAUSE), RequestStep(HERE, b"")]
         note = f"enable power, notifications mask {mask}, ready twice, a pause, here (power left on)"
         return tuple(steps), note
     if script == 2:  # free joint: the next packet is discarded with done (free-joint.replies)
         joint = rng.randint(1, 6)
-        steps = [Request(_op("enable-power"), b""), Request(_op("free-joint"), struct.pack("<H", joint))]
-        steps += [_any_request(rng, g, n), Request(HERE, b""), Request(_op("kill-power"), b"")]
+        steps = [
+            RequestStep(_op("enable-power"), b""),
+            RequestStep(_op("free-joint"), struct.pack("<H", joint)),
+        ]
+        steps += [_any_request(rng, g, n), RequestStep(HERE, b""), RequestStep(_op("kill-power"), b"")]
         return tuple(steps), f"enable power, free joint {joint}, a request (discarded), here, kill power"
     if script == 3:  # a speed, then a move at it
         factor = rng.uniform(0.2, 1.0)
         steps = [
-            Request(_op("enable-power"), b""),
-            Request(_op("set-speed"), pack_f(factor)),
+            RequestStep(_op("enable-power"), b""),
+            RequestStep(_op("set-speed"), pack_f(factor)),
             _small_move(rng),
         ]
-        steps.append(Request(_op("kill-power"), b""))
+        steps.append(RequestStep(_op("kill-power"), b""))
         return tuple(steps), f"enable power, speed {factor:.2f}, a small move, kill power"
     if script == 4:  # what describe self says of the operations and the joint vectors, then a request
         steps = [
-            Request(_op("describe-self"), b""),
+            RequestStep(_op("describe-self"), b""),
             _any_request(rng, g, n),
-            Request(_op("joint-angles"), b""),
+            RequestStep(_op("joint-angles"), b""),
         ]
         return tuple(steps), "describe self, a request, joint angles"
     # One joint anywhere within +-200 degrees, the others near 0: beyond a stated limit it must be
     # refused (describe.joint-limits), so an arm that states narrower limits than it has shows.
-    steps = [Request(_op("describe-self"), b""), Request(_op("enable-power"), b"")]
+    steps = [RequestStep(_op("describe-self"), b""), RequestStep(_op("enable-power"), b"")]
     for _ in range(4):
         angles = [rng.uniform(-20.0, 20.0) for _ in range(6)]
         angles[rng.randrange(6)] = rng.uniform(-200.0, 200.0)
-        steps.append(Request(_op("set-joint-angles"), b"".join(pack_f(a) for a in angles)))
-    steps.append(Request(_op("kill-power"), b""))
+        steps.append(RequestStep(_op("set-joint-angles"), b"".join(pack_f(a) for a in angles)))
+    steps.append(RequestStep(_op("kill-power"), b""))
     return tuple(
         steps
     ), "describe self, enable power, set joint angles four times (one joint far out), kill power"
@@ -375,7 +378,9 @@ def _fragmented(rng: random.Random, g: GenOptions, n: int) -> tuple[tuple[Step, 
     chunk = rng.choice((1, 1, 2, 3, 5, 7))
     request = _any_request(rng, GenOptions(g.link, frozenset({"read-only"}), g.select, g.contact), n)
     name = SPEC.requests[request.opcode].name if request.opcode in SPEC.requests else f"0{request.opcode:o}"
-    return (Request(request.opcode, request.data, chunk=chunk),), f"{name} written {chunk} byte(s) at a time"
+    return (
+        RequestStep(request.opcode, request.data, chunk=chunk),
+    ), f"{name} written {chunk} byte(s) at a time"
 
 
 # --------------------------------------------------------------------------------------- Chaos classes

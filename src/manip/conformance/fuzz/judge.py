@@ -1,15 +1,17 @@
-"""What a batch showed, as observations: crashes, hangs, silent drops, wrong answers, tracebacks and
-drops the target did not count, each with the clause it breaks and the input it is attributed to.
+"""What a batch showed: each :class:`~manip.conformance.judge.violation.Violation` (a crash, a hang,
+a silent drop, a wrong answer, a traceback, a drop the target did not count: see :data:`KIND_NAMES`)
+with the input it is attributed to, as a :class:`Sighting`.
 
 * The connection's packets are judged by :func:`manip.conformance.judge.checks.check_transcript` (one reply
   per request, in order, echoing its number, the refusal the spec demands for an unknown opcode, a
   wrong length or a reserved-operand float, the shape of every reply, free joint's discarded packet,
-  asynchronous responses only when asked for), and by :mod:`.oracles` for what it does not know (a
-  factor out of range, motion without power or after an abort, what describe self said).  A request
+  asynchronous responses only when asked for), and by :mod:`.oracles` for what it does not know: the
+  suite's stateful model (a factor out of range, motion without power or after an abort) and what
+  describe self said.  A request
   never answered is a *silent drop* (also when the replies skip it: a reply carrying the number of a
   later request), anything else a *wrong answer*.  A connection is judged up to its first finding
   that may put answers out of step with requests (:data:`DISRUPTIVE`); the rest are only counted.
-* Every stray packet and raw link has an :class:`~.batch.Expectation`: a LOS or an RFC answer that
+* Every stray packet and raw link has an :class:`~.batch.DueAnswer`: a LOS or an RFC answer that
   did not come is a silent drop; an answer to a packet that must be dropped, or a link kept after its
   framing was lost, a wrong answer.
 * The liveness check after the batch: a target gone is a *crash*, one that does not answer a *hang*.
@@ -19,31 +21,42 @@ drops the target did not count, each with the clause it breaks and the input it 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Final, Literal
+from typing import Final
 
-from manip.conformance.fuzz.batch import BatchRun, Expectation, Liveness
+from manip.conformance.fuzz.batch import BatchRun, DueAnswer, Liveness
 from manip.conformance.fuzz.oracles import answers, oracle_findings
-from manip.conformance.fuzz.session import FuzzConnection
-from manip.conformance.fuzz.wire import Inbox
+from manip.conformance.fuzz.session import FuzzConnection, Inbox
 from manip.conformance.judge.checks import WirePacket, check_transcript, describe, word
+from manip.conformance.judge.violation import FailureKind, Violation
 from manip.conformance.suite.rawchaos import format_packet
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.model import Level
 from manip.spec.notation import octal
 
-__all__ = ["KINDS", "Kind", "Observation", "judge"]
+__all__ = ["ALWAYS", "FUZZ_KINDS", "KIND_NAMES", "Sighting", "judge"]
 
-Kind = Literal["crash", "hang", "traceback", "silent-drop", "wrong-answer", "uncounted-drop"]
-KINDS: Final[tuple[Kind, ...]] = (
+FUZZ_KINDS: Final[tuple[FailureKind, ...]] = (
     "crash",
-    "hang",
+    "timeout",
     "traceback",
-    "silent-drop",
-    "wrong-answer",
-    "uncounted-drop",
+    "missing_response",
+    "wrong_value",
+    "uncounted_drop",
 )
+"""The kinds of violation a campaign finds, in the order its counts list them."""
+KIND_NAMES: Final[dict[FailureKind, str]] = {
+    "crash": "crash",
+    "timeout": "hang",
+    "traceback": "traceback",
+    "missing_response": "silent drop",
+    "wrong_value": "wrong answer",
+    "uncounted_drop": "uncounted drop",
+}
+"""How the console names each kind: a target that does not answer *hangs*, a request never answered
+is *dropped silently*."""
 LEVELS: Final = ("MUST", "SHOULD", "MAY", "INFO")
 DISRUPTIVE: Final = frozenset(
     {
@@ -65,36 +78,43 @@ DISRUPTIVE: Final = frozenset(
 )
 """Clauses whose breach may pair later answers with the wrong requests (a reply missing, extra or of
 another shape), so that later findings on the connection may be its consequence."""
-ALWAYS: Final = frozenset({"crash", "hang", "traceback", "uncounted-drop"})
+ALWAYS: Final[frozenset[FailureKind]] = frozenset({"crash", "timeout", "traceback", "uncounted_drop"})
 """Kinds that are findings whatever the level: the target's health is no matter of degree."""
 _RFC_ANSWERS: Final = frozenset({ChaosOp.OPN, ChaosOp.CLS, ChaosOp.ANS, ChaosOp.FWD})
 
 
 @dataclass(frozen=True)
-class Observation:
-    """One thing a batch showed that the spec does not allow."""
+class Sighting:
+    """A :class:`~manip.conformance.judge.violation.Violation` one batch showed, with the input it is
+    attributed to (None: the batch as a whole) and how many findings came after it on the same
+    connection (not judged on their own: they may be its consequence)."""
 
-    kind: Kind
-    clause: str | None
-    message: str
-    expected: str = ""
-    actual: str = ""
-    data: bytes = b""
+    violation: Violation
     number: int | None = None
-    """The input it is attributed to (None: the batch as a whole)."""
     followers: int = 0
-    """Findings after it on the same connection (not judged on their own: they may be its consequence)."""
 
     @property
-    def level(self) -> str:
-        if self.kind in ALWAYS or self.clause is None:
-            return "MUST"
-        return SPEC.clauses[self.clause].level
+    def level(self) -> Level:
+        return self.violation.strength
 
     @property
     def signature(self) -> tuple[str, str]:
-        """What makes two observations the same finding."""
-        return self.kind, self.clause or ""
+        """What makes two sightings the same finding: the kind and the clause."""
+        return self.violation.kind, self.violation.clause or ""
+
+
+def _seen(
+    kind: FailureKind,
+    clause: str | None,
+    message: str,
+    expected: str = "",
+    actual: str = "",
+    data: bytes = b"",
+    number: int | None = None,
+) -> Sighting:
+    """A sighting of a violation (one without a clause, or of the target's health, is a MUST)."""
+    level: Level | None = "MUST" if clause is None or kind in ALWAYS else None
+    return Sighting(Violation(message, clause, level, expected, actual, data, kind), number)
 
 
 def judge(
@@ -104,16 +124,16 @@ def judge(
     *,
     tracebacks: Sequence[str] = (),
     uncounted: tuple[int, int] | None = None,
-) -> list[Observation]:
+) -> list[Sighting]:
     """Everything wrong with one batch (module docstring).  ``uncounted``: (bad frames sent, bad frames
     the target counted meanwhile), when the target reports a count."""
-    out: list[Observation] = []
+    out: list[Sighting] = []
     last = run.last_number
     if not live.alive:
-        kind: Kind = "crash" if live.kind == "crash" else "hang"
+        kind: FailureKind = "crash" if live.kind == "crash" else "timeout"
         what = "the target is gone" if kind == "crash" else "the target does not answer"
         out.append(
-            Observation(
+            _seen(
                 kind,
                 None,
                 f"{what} after the batch: {live.detail}",
@@ -123,14 +143,14 @@ def judge(
         )
     for conn in run.connections:
         out += _connection(conn, last, report_drops=live.alive)
-    for e in run.expectations:
-        found = _expectation(e, inbox)
+    for e in run.due_answers:
+        found = _judge_due(e, inbox)
         if found is not None:
             out.append(found)
     for raw, exc in inbox.bad:
         out.append(
-            Observation(
-                "wrong-answer",
+            _seen(
+                "wrong_value",
                 exc.clause if exc.clause in SPEC.clauses else None,
                 f"the target sent a frame that does not decode: {exc.message}",
                 "frames as the link framing says",
@@ -142,7 +162,7 @@ def judge(
     for text in tracebacks:
         lines = text.strip().splitlines()
         out.append(
-            Observation(
+            _seen(
                 "traceback",
                 None,
                 f"a traceback in the target's log: {lines[-1] if lines else ''}",
@@ -153,8 +173,8 @@ def judge(
     if uncounted is not None and uncounted[1] < uncounted[0]:
         sent, counted = uncounted
         out.append(
-            Observation(
-                "uncounted-drop",
+            _seen(
+                "uncounted_drop",
                 None,
                 f"the target counted {counted} of the {sent} bad frames it was sent",
                 "every bad frame dropped and counted (manip-server --stats: bad frames)",
@@ -164,8 +184,8 @@ def judge(
     if run.open_error is not None and live.alive:
         first = run.inputs[0].number if run.inputs else None
         out.append(
-            Observation(
-                "silent-drop",
+            _seen(
+                "missing_response",
                 None,
                 f"a link or connection of the batch could not be opened: {run.open_error}",
                 "the link accepted and the RFC answered",
@@ -176,26 +196,26 @@ def judge(
     return out
 
 
-def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[Observation]:
+def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[Sighting]:
     """What is wrong on one connection, in the order it showed, up to the first finding after which
     answers may be paired with the wrong requests (:data:`DISRUPTIVE`): what follows may be its
     consequence, so it is only counted (``followers``)."""
     packets = conn.packets
     position = {id(p): i for i, p in enumerate(packets)}
-    found: list[tuple[int, Observation]] = []
+    found: list[tuple[int, Sighting]] = []
     for f in check_transcript(packets, rfc_packet_no=conn.rfc_no, complete=True):
         number = conn.origin.get(id(f.packet), last) if f.packet is not None else last
         drop = f.clause == "request.one-reply" and f.actual == "nothing"
         if drop and not report_drops:
             continue  # the hang or crash is the finding
-        kind: Kind = "silent-drop" if drop else "wrong-answer"
+        kind: FailureKind = "missing_response" if drop else "wrong_value"
         # Where it shows: a request never answered at the end, a finding without a packet is about the
         # opening (first) or a whole reply's text (last).
         if drop or f.packet is None:
             at = 0 if (f.clause or "").startswith("connect.") else len(packets)
         else:
             at = position.get(id(f.packet), 0)
-        found.append((at, Observation(kind, f.clause, f.message, f.expected, f.actual, f.data, number)))
+        found.append((at, Sighting(replace(f, kind=kind), number)))
     fatal = any(p.opcode == ServerOp.FATAL_ERROR for p in packets if p.direction == "s2c")
     requests = [p for p in packets if p.direction == "c2s"]
     ended_by_target = conn.ended is not None and "from the target" in conn.ended
@@ -204,8 +224,8 @@ def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[
         message = (
             f"the target ended the connection ({conn.ended}) with {conn.unanswered} request(s) unanswered"
         )
-        ended = Observation(
-            "silent-drop",
+        ended = _seen(
+            "missing_response",
             "request.one-reply",
             message,
             "one reply per request (a connection ends after a fatal error only)",
@@ -214,25 +234,16 @@ def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[
             conn.origin.get(id(request), last),
         )
         found.append((len(packets), ended))
-    for judged in oracle_findings(packets):
-        number = conn.origin.get(id(judged.request), last)
-        o = Observation(
-            "wrong-answer",
-            judged.clause,
-            judged.message,
-            judged.expected,
-            judged.actual,
-            judged.request.data,
-            number,
-        )
-        found.append((position.get(id(judged.at), len(packets)), o))
+    for judged in oracle_findings(packets, rfc_packet_no=conn.rfc_no):
+        number = conn.origin.get(id(judged.packet), last)
+        found.append((position.get(id(judged.packet), len(packets)), Sighting(judged, number)))
     if not found:
         return []
     found.sort(key=lambda item: (item[0], LEVELS.index(item[1].level)))  # the strongest of one packet
-    out: list[Observation] = []
+    out: list[Sighting] = []
     for index, (at, o) in enumerate(found):
         o = _skipped(o, packets, at, conn.origin, last) or o
-        if o.clause in DISRUPTIVE or o.kind != "wrong-answer":
+        if o.violation.clause in DISRUPTIVE or o.violation.kind != "wrong_value":
             out.append(replace(o, followers=len(found) - index - 1))
             break
         out.append(o)
@@ -240,12 +251,12 @@ def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[
 
 
 def _skipped(
-    o: Observation, packets: Sequence[WirePacket], at: int, origin: dict[int, int], last: int
-) -> Observation | None:
+    o: Sighting, packets: Sequence[WirePacket], at: int, origin: dict[int, int], last: int
+) -> Sighting | None:
     """A reply out of step with the requests, said as what it is rather than as a wrong number: one
     carrying the number of a later request means the requests in between were never answered (a silent
     drop); one carrying the number of a request already answered is a second reply to it."""
-    if o.clause != "response.echoes-request-number" or not 0 <= at < len(packets):
+    if o.violation.clause != "response.echoes-request-number" or not 0 <= at < len(packets):
         return None
     reply = packets[at]
     number = word(reply.data)
@@ -260,8 +271,8 @@ def _skipped(
         clause = (
             "request.one-reply" if earlier.first.opcode == ServerOp.RESPONSE else "error.non-fatal-is-reply"
         )
-        return Observation(
-            "wrong-answer",
+        return _seen(
+            "wrong_value",
             clause,
             f"a second reply to {describe(earlier.request)}, after {describe(earlier.first)}",
             "one reply per request (a non-fatal error is the reply)",
@@ -273,8 +284,8 @@ def _skipped(
     if not skipped:
         return None
     first = skipped[0]
-    return Observation(
-        "silent-drop",
+    return _seen(
+        "missing_response",
         "request.one-reply",
         f"{len(skipped)} request(s) never answered, from {describe(first)}: the next reply answers #{number}",
         "one reply per request, in order",
@@ -284,7 +295,7 @@ def _skipped(
     )
 
 
-def _busy(e: Expectation, when: float | None) -> bool:
+def _busy(e: DueAnswer, when: float | None) -> bool:
     """Whether the batch's connection still held the robot when ``when`` (an OPN) came."""
     conn = e.connection
     if conn is None or when is None:
@@ -292,93 +303,115 @@ def _busy(e: Expectation, when: float | None) -> bool:
     return conn.ended_at is None or conn.ended_at > when
 
 
-def _expectation(e: Expectation, inbox: Inbox) -> Observation | None:
+def _judge_due(e: DueAnswer, inbox: Inbox) -> Sighting | None:
+    """Whether what a step was due came (or what must not come did not)."""
+    return _DUE_JUDGES[e.what](e, inbox)
+
+
+def _due_los(e: DueAnswer, inbox: Inbox) -> Sighting | None:
     got = [p for p, _ in inbox.strays.get(e.key, ())]
-    if e.what == "los":
-        if any(p.opcode == ChaosOp.LOS for p in got):
-            return None
-        shown = "; ".join(format_packet(p) for p in got[:2]) or "nothing"
-        return Observation(
-            "silent-drop",
-            e.clause,
-            f"no LOS for {e.note}",
-            f"a LOS back to index {octal(e.key)}",
-            shown,
-            e.data,
-            e.number,
-        )
-    if e.what == "answer":
-        answers = [p for p in got if p.opcode in _RFC_ANSWERS]
-        if not answers:
-            return Observation(
-                "silent-drop",
-                e.clause,
-                f"no answer to {e.note}",
-                "OPN, CLS, ANS or FWD",
-                "nothing",
-                e.data,
-                e.number,
-            )
-        opened = {p.src_index for p in answers if p.opcode == ChaosOp.OPN}
-        opened_at = min((t for p, t in inbox.strays.get(e.key, ()) if p.opcode == ChaosOp.OPN), default=None)
-        if len(opened) > 1:
-            return Observation(
-                "wrong-answer",
-                "ncp.duplicate-rfc",
-                f"one RFC (index {octal(e.key)}) opened {len(opened)} connections",
-                "one connection for a retransmitted RFC",
-                f"OPN from indices {', '.join(f'{octal(i)}' for i in sorted(opened))}",
-                e.data,
-                e.number,
-            )
-        if opened and e.clause == "connect.one-server-per-robot" and _busy(e, opened_at):
-            return Observation(
-                "wrong-answer",
-                "connect.one-server-per-robot",
-                "a second connection was opened while the robot had its client",
-                'CLS ("busy")',
-                "OPN",
-                e.data,
-                e.number,
-            )
+    if any(p.opcode == ChaosOp.LOS for p in got):
         return None
-    if e.what == "silence":
-        if not got:
-            return None
-        return Observation(
-            "wrong-answer",
+    shown = "; ".join(format_packet(p) for p in got[:2]) or "nothing"
+    return _seen(
+        "missing_response",
+        e.clause,
+        f"no LOS for {e.note}",
+        f"a LOS back to index {octal(e.key)}",
+        shown,
+        e.data,
+        e.number,
+    )
+
+
+def _due_answer(e: DueAnswer, inbox: Inbox) -> Sighting | None:
+    got = [p for p, _ in inbox.strays.get(e.key, ())]
+    answers = [p for p in got if p.opcode in _RFC_ANSWERS]
+    if not answers:
+        return _seen(
+            "missing_response",
             e.clause,
-            f"an answer to {e.note}",
-            "nothing: the packet is dropped",
-            format_packet(got[0]),
-            e.data,
-            e.number,
-        )
-    if e.what == "sts":
-        conn = e.connection
-        if conn is None or any(t >= e.since for t in conn.sts_times):
-            return None
-        if conn.ended is not None and "from the target" in conn.ended:
-            return None
-        return Observation(
-            "silent-drop",
-            e.clause,
-            "no STS in answer to SNS",
-            "an STS (the connection's receipt and window)",
+            f"no answer to {e.note}",
+            "OPN, CLS, ANS or FWD",
             "nothing",
             e.data,
             e.number,
         )
-    if e.what == "close":
-        if e.link is None or e.link.ended is not None:
-            return None
-        return Observation(
-            "wrong-answer",
-            e.clause,
-            f"the link was kept open after {e.note}",
-            "the link dropped: its framing is lost",
-            "the link still open",
+    opened = {p.src_index for p in answers if p.opcode == ChaosOp.OPN}
+    opened_at = min((t for p, t in inbox.strays.get(e.key, ()) if p.opcode == ChaosOp.OPN), default=None)
+    if len(opened) > 1:
+        return _seen(
+            "wrong_value",
+            "ncp.duplicate-rfc",
+            f"one RFC (index {octal(e.key)}) opened {len(opened)} connections",
+            "one connection for a retransmitted RFC",
+            f"OPN from indices {', '.join(f'{octal(i)}' for i in sorted(opened))}",
+            e.data,
+            e.number,
+        )
+    if opened and e.clause == "connect.one-server-per-robot" and _busy(e, opened_at):
+        return _seen(
+            "wrong_value",
+            "connect.one-server-per-robot",
+            "a second connection was opened while the robot had its client",
+            'CLS ("busy")',
+            "OPN",
             e.data,
             e.number,
         )
     return None
+
+
+def _due_silence(e: DueAnswer, inbox: Inbox) -> Sighting | None:
+    got = [p for p, _ in inbox.strays.get(e.key, ())]
+    if not got:
+        return None
+    return _seen(
+        "wrong_value",
+        e.clause,
+        f"an answer to {e.note}",
+        "nothing: the packet is dropped",
+        format_packet(got[0]),
+        e.data,
+        e.number,
+    )
+
+
+def _due_sts(e: DueAnswer, inbox: Inbox) -> Sighting | None:
+    conn = e.connection
+    if conn is None or any(t >= e.since for t in conn.sts_times):
+        return None
+    if conn.ended is not None and "from the target" in conn.ended:
+        return None
+    return _seen(
+        "missing_response",
+        e.clause,
+        "no STS in answer to SNS",
+        "an STS (the connection's receipt and window)",
+        "nothing",
+        e.data,
+        e.number,
+    )
+
+
+def _due_close(e: DueAnswer, inbox: Inbox) -> Sighting | None:
+    if e.link is None or e.link.ended is not None:
+        return None
+    return _seen(
+        "wrong_value",
+        e.clause,
+        f"the link was kept open after {e.note}",
+        "the link dropped: its framing is lost",
+        "the link still open",
+        e.data,
+        e.number,
+    )
+
+
+_DUE_JUDGES: Final[dict[str, Callable[[DueAnswer, Inbox], Sighting | None]]] = {
+    "los": _due_los,
+    "answer": _due_answer,
+    "silence": _due_silence,
+    "sts": _due_sts,
+    "close": _due_close,
+}

@@ -1,10 +1,13 @@
 """The report of a campaign: one result per input class, every finding with its shrunk input, as the
 console shows it, as JSON (``fuzz.schema.json``, next to this module) and as JUnit XML.
 
-A *finding* is a kind of failure (crash, hang, traceback, silent drop, wrong answer, uncounted drop)
-with the clause it breaks; a campaign reports each once, with how often it was seen, the input class
-it came from, the fewest inputs found to cause it (numbers of the campaign, so ``--only`` sends them
-again), their bytes, what the spec says the answer should have been, and one reproduce line.
+A *finding* is a :class:`~manip.conformance.judge.violation.Violation`, the suite's one record of a
+broken clause, of one of the fuzzer's kinds (:data:`~.judge.KIND_NAMES`: crash, hang, traceback,
+silent drop, wrong answer, uncounted drop); a campaign reports each kind and clause once, as a
+:class:`CampaignViolation`: the violation first seen, how often it was seen, the input class it came
+from, the fewest inputs found to cause it (numbers of the campaign, so ``--only`` sends them again),
+their bytes, and one reproduce line.  In the JSON report a finding is the violation's JSON
+(:meth:`Violation.to_json`, as in the conformance report) with those fields added.
 
 Findings of a SHOULD, MAY or INFO clause are warnings (with ``--strict`` SHOULD ones count); crashes,
 hangs, tracebacks and uncounted drops always count.  Exit codes: 0 no finding, 1 findings, 2 usage,
@@ -26,7 +29,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Final, cast
 
-from manip.conformance.fuzz.judge import KINDS
+from manip.conformance.fuzz.judge import FUZZ_KINDS, KIND_NAMES
 from manip.conformance.judge.violation import FailureKind
 from manip.conformance.output.report import report_junit
 from manip.conformance.suite.results import CaseResult, ExitCode, RunReport, Violation
@@ -36,8 +39,8 @@ from manip.spec.model import Level
 __all__ = [
     "HEALTH",
     "SCHEMA_VERSION",
+    "CampaignViolation",
     "ClassTally",
-    "Finding",
     "FuzzReport",
     "MinimalInput",
     "as_run_report",
@@ -88,16 +91,11 @@ class MinimalInput:
 
 
 @dataclass
-class Finding:
-    """One kind of failure, seen ``occurrences`` times (module docstring)."""
+class CampaignViolation:
+    """One kind of failure on one clause, seen ``occurrences`` times (module docstring)."""
 
-    kind: str
-    clause: str | None
-    level: str
-    message: str
-    expected: str
-    actual: str
-    data: bytes
+    violation: Violation
+    """As it was first seen."""
     input_class: str
     first_batch: int
     occurrences: int = 1
@@ -111,13 +109,24 @@ class Finding:
     """Findings that came after it on the same connections, not judged on their own (consequences?)."""
 
     @property
+    def kind(self) -> FailureKind:
+        return self.violation.kind
+
+    @property
+    def level(self) -> Level:
+        return self.violation.strength
+
+    @property
     def spec_text(self) -> str:
-        spec = SPEC.clauses.get(self.clause) if self.clause else None
+        clause = self.violation.clause
+        spec = SPEC.clauses.get(clause) if clause else None
         return f"{spec.text} ({spec.section})" if spec is not None else ""
 
     def title(self) -> str:
-        where = f" [{self.clause}]" if self.clause else ""
-        return f"{self.kind.upper()}{where} {self.input_class}: {self.message}"
+        v = self.violation
+        where = f" [{v.clause}]" if v.clause else ""
+        name = KIND_NAMES.get(v.kind, v.kind).replace(" ", "-").upper()
+        return f"{name}{where} {self.input_class}: {v.message}"
 
 
 @dataclass
@@ -143,15 +152,15 @@ class FuzzReport:
     bad_frames_sent: int = 0
     bad_frames_counted: int | None = None
     classes: dict[str, ClassTally] = field(default_factory=dict)
-    findings: list[Finding] = field(default_factory=list)
+    findings: list[CampaignViolation] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
     interrupted: bool = False
     internal_error: str = ""
     unreachable: bool = False
 
-    def counts(self) -> dict[str, int]:
+    def counts(self) -> dict[FailureKind, int]:
         """Findings (not warnings) by kind, every kind present."""
-        out: dict[str, int] = dict.fromkeys(KINDS, 0)
+        out: dict[FailureKind, int] = dict.fromkeys(FUZZ_KINDS, 0)
         for f in self.findings:
             if f.counts:
                 out[f.kind] += 1
@@ -187,7 +196,7 @@ class FuzzReport:
 
     def summary_line(self) -> str:
         counts = self.counts()
-        kinds = ", ".join(f"{n} {_plural(kind.replace('-', ' '), n)}" for kind, n in counts.items())
+        kinds = ", ".join(f"{n} {_plural(KIND_NAMES[kind], n)}" for kind, n in counts.items())
         logs = (
             ""
             if self.tracebacks_seen is None
@@ -207,17 +216,13 @@ def _plural(word: str, n: int) -> str:
     return word + ("es" if word.endswith("sh") else "s")
 
 
-def finding_json(f: Finding) -> dict[str, Any]:
+def finding_json(f: CampaignViolation) -> dict[str, Any]:
+    """The violation's JSON, as the conformance report has it, and what the campaign adds."""
     return {
-        "kind": f.kind,
-        "clause": f.clause,
+        **f.violation.to_json(),
         "level": f.level,
         "counts": f.counts,
         "spec": f.spec_text,
-        "message": f.message,
-        "expected": f.expected,
-        "actual": f.actual,
-        "bytes": f.data.hex(),
         "input_class": f.input_class,
         "first_batch": f.first_batch,
         "occurrences": f.occurrences,
@@ -294,21 +299,6 @@ def write_json(report: FuzzReport, path: Path) -> None:
     path.write_text(json.dumps(report_json(report), indent=2) + "\n", encoding="utf-8")
 
 
-# How each kind of finding reads as a conformance failure.
-_FAILURE_KINDS: Final[dict[str, FailureKind]] = {
-    "crash": "closed",
-    "hang": "timeout",
-    "silent-drop": "missing_response",
-    "traceback": "unexpected_message",
-}
-
-
-def _violation(f: Finding) -> Violation:
-    level = cast(Level, f.level if f.level in ("MUST", "SHOULD", "MAY", "INFO") else "MUST")
-    kind = _FAILURE_KINDS.get(f.kind, "wrong_value")
-    return Violation(f.message, f.clause, level, f.expected, f.actual, f.data, kind=kind)
-
-
 def as_run_report(report: FuzzReport) -> RunReport:
     """The campaign in the conformance report's shape: one case per input class (and the target's health)."""
     run = RunReport(
@@ -347,7 +337,7 @@ def as_run_report(report: FuzzReport) -> RunReport:
             seed=report.seed,
             deadline=max(report.duration, 1.0),
             duration=0.0,
-            violations=[_violation(f) for f in found],
+            violations=[f.violation for f in found],
             reason="no input of this class was sent" if outcome == "skip" else "",
             notes=[f"{tally.inputs} inputs, {tally.requests} requests"],
             reproduce=next((f.reproduce for f in found), ""),
@@ -362,17 +352,18 @@ def write_junit(report: FuzzReport, path: Path) -> None:
     tree.write(path, encoding="utf-8", xml_declaration=True)
 
 
-def finding_text(f: Finding) -> str:
+def finding_text(f: CampaignViolation) -> str:
     """A finding in full, for the console: what broke, the spec, expected and actual, the shrunk
     input with its bytes, the reproduce line."""
     lines = [f.title()]
+    v = f.violation
     if f.spec_text:
-        lines.append(f"  spec:      {f.clause} ({f.level}): {f.spec_text}")
-    if f.expected:
-        lines.append(f"  expected:  {f.expected}")
-    if f.actual:
+        lines.append(f"  spec:      {v.clause} ({f.level}): {f.spec_text}")
+    if v.expected:
+        lines.append(f"  expected:  {v.expected}")
+    if v.actual:
         actual = (
-            f.actual if "\n" not in f.actual else "\n" + "\n".join("    " + x for x in f.actual.splitlines())
+            v.actual if "\n" not in v.actual else "\n" + "\n".join("    " + x for x in v.actual.splitlines())
         )
         lines.append(f"  actual:    {actual}")
     lines.append(f"  seen:      {f.occurrences} time(s), first in batch {f.first_batch}")

@@ -3,8 +3,9 @@
 The fuzzer cannot use an NCP of its own for the connection it fuzzes over: an NCP would renumber,
 retransmit and window for it.  :class:`FuzzConnection` does the least a peer must do and nothing else:
 
-* **Opening**: RFC from an index of ours (a CLS saying busy is retried: the previous batch's
-  connection may still be closing), OPN, an STS acknowledging it.
+* **Opening**: RFC from an index of ours until OPN, as the NCP cases open
+  (:func:`~manip.conformance.suite.rawchaos.rfc_until_open`: a CLS saying busy is retried, the
+  previous batch's connection may still be closing), an STS acknowledging it, and the initial RESPONSE.
 * **Sending**: requests numbered in order, never more than the target's window ahead of its last
   acknowledgement (a packet past the window would be dropped, and its request look unanswered).  A
   stalled window is probed with SNS.  Packets placed wrongly on purpose (:class:`~.steps.ConnPacket`)
@@ -16,9 +17,11 @@ retransmit and window for it.  :class:`FuzzConnection` does the least a peer mus
 * **Recording**: every request and every packet of the target, in order, as
   :class:`~manip.conformance.judge.packets.WirePacket` (CLS, EOF and LOS as close pseudo-packets), for the
   transcript checks; ``origin`` says which input each one belongs to.
-* **Answers**: requests are matched to answers in order, as the spec says a server answers (the
-  packets of a describe-self reply up to its empty one; the packet after free joint with one done),
-  to know when everything sent was answered and how long an answer may take: the reply timeout or,
+* **Answers**: requests are paired with answers by the suite's one rule,
+  :class:`~manip.codecs.pairing.ReplyPairing` (erratum ``capture-pairing``: by position, the initial
+  RESPONSE the RFC's, a describe-self reply up to its empty packet, the packet after free joint
+  answered by one packet; the echoed number is never used to pair), to know when everything sent was
+  answered and how long an answer may take: the reply timeout or,
   for an answer that waits for the arm, the allowance of the spec's ``answer_within`` after the
   motion queued before it (erratum ``answer-allowance``).  A free joint the spec answers with done is
   waited for before the next request, so that which packet it discards is not a race.
@@ -29,28 +32,28 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections import deque
-from dataclasses import dataclass
-from typing import Final
+from collections import defaultdict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Final, Protocol
 
-from manip.codecs.errors import CodecError
+from manip.codecs.errors import CodecError, DecodeError
 from manip.codecs.packet import Packet
+from manip.codecs.pairing import ReplyPairing
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.fuzz.steps import ConnPacket
-from manip.conformance.fuzz.wire import Inbox, Wire, frame
 from manip.conformance.judge.checks import WirePacket, required_refusal
-from manip.conformance.suite.busy import BUSY_DELAY, BUSY_PATIENCE, says_busy
+from manip.conformance.suite.rawchaos import KEPT_BAD, RawLink, Received, rfc_until_open
 from manip.ncp.packets import is_data, pack_status, text, unpack_status
 from manip.ncp.seq import seq_add, seq_gt, seq_le, seq_sub
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
 from manip.spec.notation import octal
 
-__all__ = ["Allowance", "ConnectError", "FuzzConnection", "RefusedError"]
+__all__ = ["Allowance", "FuzzConnection", "Inbox", "Receiver"]
 
 OUR_WINDOW: Final = 64
 """The window we grant the target: packets it may send before we acknowledge."""
-RFC_RETRY: Final = 1.0
 PROBE_AFTER: Final = 0.2
 """Seconds of a stalled window before we send SNS to learn the target's acknowledgement."""
 LAZY_GRACE: Final = 0.001
@@ -62,12 +65,54 @@ _SET_SPEED: Final = SPEC.request("set-speed").opcode
 _ANSWERS: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
 
 
-class ConnectError(Exception):
-    """No connection: the message says why (no answer, refused, the link failed)."""
+class Receiver(Protocol):
+    """A connection the inbox hands its packets to."""
+
+    def on_packet(self, packet: Packet, raw: bytes, now: float) -> None: ...
 
 
-class RefusedError(ConnectError):
-    """The RFC was answered with something other than OPN."""
+@dataclass
+class Inbox:
+    """Every packet from the target, on any of the batch's links (the :class:`PacketSink` of each): to
+    the connection it names (:meth:`register`), else kept by destination index (the fuzzer gives every
+    stray packet a source index of its own, so the answer names it).  Frames that do not decode are
+    kept in ``bad``: a target must not send them."""
+
+    connections: dict[int, Receiver] = field(default_factory=dict)
+    strays: defaultdict[int, list[tuple[Packet, float]]] = field(default_factory=lambda: defaultdict(list))
+    bad: list[tuple[bytes, DecodeError]] = field(default_factory=list)
+    on_stray: Callable[[Packet], None] | None = None
+
+    def __post_init__(self) -> None:
+        self.arrived = asyncio.Event()
+
+    def register(self, index: int, connection: Receiver) -> None:
+        self.connections[index] = connection
+
+    def unregister(self, index: int) -> None:
+        self.connections.pop(index, None)
+
+    def deliver(self, packet: Packet, raw: bytes, now: float) -> None:
+        conn = self.connections.get(packet.dest_index)
+        if conn is not None:
+            conn.on_packet(packet, raw, now)
+        else:
+            self.strays[packet.dest_index].append((packet, now))
+            if self.on_stray is not None:
+                self.on_stray(packet)
+        self.arrived.set()
+
+    def reject(self, raw: bytes, exc: DecodeError) -> None:
+        if len(self.bad) < KEPT_BAD:
+            self.bad.append((raw[:64], exc))
+        self.arrived.set()
+
+    def link_ended(self, link: RawLink) -> None:
+        self.arrived.set()
+
+    def clear_strays(self) -> None:
+        self.strays.clear()
+        self.bad.clear()
 
 
 @dataclass(frozen=True)
@@ -86,19 +131,18 @@ class _Pending:
     number: int
     """The input it belongs to."""
     opcode: int
-    multi: bool
     arm_wait: float
     sent: float
     discarded: bool = False
 
 
 class FuzzConnection:
-    """A connection to the target over ``wire`` from our ``index`` (see the module docstring)."""
+    """A connection to the target over ``link`` from our ``index`` (see the module docstring)."""
 
     def __init__(
-        self, wire: Wire, inbox: Inbox, index: int, allowance: Allowance, *, rfc_no: int = 0
+        self, link: RawLink, inbox: Inbox, index: int, allowance: Allowance, *, rfc_no: int = 0
     ) -> None:
-        self.wire = wire
+        self.link = link
         self.inbox = inbox
         self.index = index
         self.allowance = allowance
@@ -125,17 +169,15 @@ class FuzzConnection:
         self.requests = 0
         self.asynchronous = 0
         """Data packets from the target that answer no request (asynchronous responses, errors, warnings)."""
-        self._pending: deque[_Pending] = deque()
-        self._in_multi = False
-        self._discard_next = False
+        self._pairing: ReplyPairing[_Pending | None] = ReplyPairing()
+        """Which request each answer is (:mod:`manip.codecs.pairing`); the RFC's tag is None."""
         self._last_request: tuple[int, bytes, int] | None = None
         self._lazy = False
         self._writing = False
         self._sts_due = False
-        self._initial = True
         self._progress = asyncio.Event()
         self._acked_at = self._answered_at = self.t0
-        self._answer: asyncio.Future[Packet] | None = None
+        self._answer: asyncio.Future[Received] | None = None
         self._motion_until = 0.0
         self._speed = 1.0
 
@@ -144,56 +186,36 @@ class FuzzConnection:
 
     # ------------------------------------------------------------------------------------ opening
 
-    async def open(self, contact: str, *, initial: bool = True) -> None:
-        """RFC until OPN; :class:`RefusedError` on another answer, :class:`ConnectError` on none.
-        ``initial``: then wait (up to the reply timeout) for the initial RESPONSE."""
-        address = self.wire.address
-        deadline = self._loop.time() + self.allowance.connect
-        busy_until = self._loop.time() + BUSY_PATIENCE
-        busy = ""
+    async def open(self, contact: str) -> None:
+        """RFC until OPN, then the initial RESPONSE (waited for up to the reply timeout);
+        :class:`~manip.conformance.suite.rawchaos.RefusedError` on another answer,
+        :class:`~manip.conformance.suite.rawchaos.RawError` on none."""
+        address = self.link.address
+        rfc = Packet(
+            ChaosOp.RFC,
+            address.peer_addr,
+            0,
+            address.my_addr,
+            self.index,
+            self.rfc_no,
+            0,
+            contact.encode("ascii"),
+        )
         self.inbox.register(self.index, self)
         try:
-            while True:
-                if self.wire.ended is not None:
-                    raise ConnectError(self.wire.ended)
-                self._answer = self._loop.create_future()
-                self._send(
-                    Packet(
-                        ChaosOp.RFC,
-                        address.peer_addr,
-                        0,
-                        address.my_addr,
-                        self.index,
-                        self.rfc_no,
-                        0,
-                        contact.encode("ascii"),
-                    )
-                )
-                remaining = deadline - self._loop.time()
-                if remaining <= 0:
-                    within = f"within {self.allowance.connect:g} s"
-                    if busy:
-                        raise RefusedError(f"the RFC was refused as busy ({busy!r}) for {within[7:]}")
-                    raise ConnectError(f"no answer to the RFC {within}")
-                try:
-                    async with asyncio.timeout(min(RFC_RETRY, remaining)):
-                        answer = await asyncio.shield(self._answer)
-                except TimeoutError:
-                    continue
-                if answer.opcode == ChaosOp.OPN:
-                    break
-                reason = text(answer.data)
-                if answer.opcode == ChaosOp.CLS and says_busy(reason) and self._loop.time() < busy_until:
-                    busy = reason
-                    await asyncio.sleep(BUSY_DELAY)
-                    continue
-                name = SPEC.chaos_opcode_name(answer.opcode)
-                raise RefusedError(f"the RFC was answered with {name} {reason!r}")
+            received = await rfc_until_open(
+                lambda: self._send(rfc),
+                self._rfc_answer,
+                contact=contact,
+                timeout=self.allowance.connect,
+                ended=lambda: self.link.ended,
+            )
         except BaseException:
             self.inbox.unregister(self.index)
             raise
         finally:
             self._answer = None
+        answer = received.packet
         self.server_index = answer.src_index
         self.received_upto = self.acked_upto = answer.packet_no
         self._note_ack(answer.ack_no)
@@ -202,20 +224,35 @@ class FuzzConnection:
             self.server_window = max(1, status[1])
         self._sts()
         self.t0 = self._loop.time()
-        # The user waits for the initial RESPONSE before relying on replies (connect.initial-response).
-        deadline = self.t0 + (self.allowance.reply if initial else 0.0)
-        while self.received_upto == answer.packet_no and self.ended is None and self._loop.time() < deadline:
+        # The user waits for the initial RESPONSE before relying on replies (connect.initial-response):
+        # the first answer is the RFC's, by position.  One that did not come answers nothing.
+        self._pairing.rfc(None)
+        deadline = self.t0 + self.allowance.reply
+        while self._pairing.completed == 0 and self.ended is None and self._loop.time() < deadline:
             await self._wait(deadline - self._loop.time())
+        if self._pairing.completed == 0:
+            self._pairing = ReplyPairing()
+
+    async def _rfc_answer(self, wait: float) -> Received | None:
+        """The target's answer to our RFC within ``wait`` seconds (:meth:`on_packet` gives it), else None."""
+        if self.link.ended is not None:
+            return None
+        self._answer = self._loop.create_future()
+        try:
+            async with asyncio.timeout(wait):
+                return await self._answer
+        except TimeoutError:
+            return None
 
     # ------------------------------------------------------------------------------------ sending
 
     def _send(self, packet: Packet) -> None:
-        self.wire.send(frame(packet, self.wire.address, datagram=self.wire.datagram))
+        self.link.send(self.link.forge(packet))
 
     def _packet(
         self, opcode: int, packet_no: int, ack_no: int, data: bytes = b"", src: int | None = None
     ) -> Packet:
-        a = self.wire.address
+        a = self.link.address
         index = self.index if src is None else src
         return Packet(
             opcode, a.peer_addr, self.server_index, a.my_addr, index, packet_no & 0xFFFF, ack_no, data
@@ -259,25 +296,19 @@ class FuzzConnection:
         if not lazy:
             self.acked_upto = ack
         packet = self._packet(opcode, number, ack, data)
-        raw = frame(packet, self.wire.address, datagram=self.wire.datagram)
+        raw = self.link.forge(packet)
         # Recorded before it goes out: its answer may come while a frame in pieces is still being written.
         self.requests += 1
         wp = self._record("c2s", opcode, number, ack, data, self.current)
         well_formed = required_refusal(opcode, data) is None
-        op = SPEC.requests.get(opcode)
-        multi = well_formed and op is not None and op.response.form == "multi"
-        pending = _Pending(wp, self.current, opcode, multi, self._arm_wait(opcode), self._loop.time())
-        if self._discard_next:
-            pending.discarded = True
-            pending.multi = False
-            self._discard_next = False
-        self._pending.append(pending)
+        pending = _Pending(wp, self.current, opcode, self._arm_wait(opcode), self._loop.time())
+        pending.discarded = self._pairing.request(pending, opcode, data)
         self._last_request = (opcode, data, number)
-        if chunk and not self.wire.datagram:
+        if chunk and not self.link.datagram:
             self._writing = True
             try:
                 for at in range(0, len(raw), chunk):
-                    self.wire.send(raw[at : at + chunk])
+                    self.link.send(raw[at : at + chunk])
                     await asyncio.sleep(0)
             finally:
                 self._writing = False
@@ -285,7 +316,7 @@ class FuzzConnection:
                 self._sts_due = False
                 self._sts()
         else:
-            self.wire.send(raw)
+            self.link.send(raw)
         if opcode == _FREE_JOINT and well_formed and not pending.discarded:
             await self.settle()  # which packet free joint discards must not be a race
 
@@ -339,7 +370,7 @@ class FuzzConnection:
                 return False
             # Everything answered but not acknowledged: the target's ack waits for a timer of its own;
             # an SNS has it in one round trip.  Otherwise probe when nothing came for a while.
-            due = 0.0 if not self._pending else PROBE_AFTER
+            due = 0.0 if not self._outstanding() else PROBE_AFTER
             if since >= due and probed <= self._loop.time() - PROBE_AFTER:
                 probed = self._loop.time()
                 self._send(self._packet(ChaosOp.SNS, self.next_no, self.received_upto))
@@ -347,7 +378,7 @@ class FuzzConnection:
 
     def _budget(self) -> float:
         """Seconds without progress the head of the queue may take."""
-        head = self._pending[0] if self._pending else None
+        head = self._head()
         arm = head.arm_wait if head is not None else 0.0
         return max(self.allowance.reply, arm)
 
@@ -362,9 +393,9 @@ class FuzzConnection:
         answer within the budget, or answers that never end: :data:`SETTLE_CAP` budgets in all)."""
         self._lazy = False
         cap = self._loop.time() + SETTLE_CAP * max(
-            self._budget(), self.allowance.reply * len(self._pending) / 16
+            self._budget(), self.allowance.reply * len(self._outstanding()) / 16
         )
-        while self._pending:
+        while (head := self._head()) is not None:
             if self.ended is not None or self.stalled:
                 return False
             if self._loop.time() >= cap:
@@ -372,7 +403,6 @@ class FuzzConnection:
                 return False
             if self.acked_upto != self.received_upto:
                 self._sts()
-            head = self._pending[0]
             since = self._loop.time() - max(self._answered_at, head.sent)
             budget = self._budget()
             if since >= budget:
@@ -396,7 +426,20 @@ class FuzzConnection:
 
     @property
     def unanswered(self) -> int:
-        return len(self._pending)
+        return len(self._outstanding())
+
+    def _outstanding(self) -> list[_Pending]:
+        """The requests not yet fully answered, oldest first."""
+        return [p for p in self._pairing.outstanding() if p is not None]
+
+    def _head(self) -> _Pending | None:
+        """The oldest request not yet fully answered."""
+        return next(iter(self._outstanding()), None)
+
+    def _number(self) -> int:
+        """The input a packet from the target now belongs to: the request it would answer's."""
+        head = self._head()
+        return self.current if head is None else head.number
 
     def close(self, reason: str = "fuzz batch done") -> None:
         """CLS (best effort, as Chaos closes are) unless the target closed it; over for us."""
@@ -414,7 +457,7 @@ class FuzzConnection:
             self.server_ack = ack
             self._acked_at = self._loop.time()
 
-    def on_packet(self, packet: Packet, now: float) -> None:
+    def on_packet(self, packet: Packet, raw: bytes, now: float) -> None:
         if self._answer is not None:  # opening: the answer to our RFC
             if not self._answer.done() and packet.opcode in (
                 ChaosOp.OPN,
@@ -423,7 +466,7 @@ class FuzzConnection:
                 ChaosOp.FWD,
                 ChaosOp.LOS,
             ):
-                self._answer.set_result(packet)
+                self._answer.set_result(Received(packet, raw, now))
             return
         if packet.src_index != self.server_index and packet.opcode != ChaosOp.OPN:
             self.inbox.strays[packet.dest_index].append((packet, now))
@@ -439,27 +482,10 @@ class FuzzConnection:
                 self.server_window = max(1, status[1])
             return
         if is_data(opcode) or opcode == ChaosOp.EOF:
-            expected = seq_add(self.received_upto, 1)
-            if packet.packet_no != expected:
-                if seq_le(packet.packet_no, self.received_upto) and not self._lazy:
-                    self._sts()  # a retransmission: our receipt was not seen
-                return
-            self.received_upto = expected
-            number = self._pending[0].number if self._pending else self.current
-            wp = self._record("s2c", opcode, packet.packet_no, packet.ack_no, packet.data, number)
-            if opcode == ChaosOp.EOF:  # acknowledged at once: the target's CLS waits for that
-                self.ended = "EOF from the target"
-                self.ended_at = now
-                self._sts()
-            elif opcode in _ANSWERS:
-                self._answered(packet, wp)
-            else:
-                self.asynchronous += 1
-            if not self._lazy and seq_sub(self.received_upto, self.acked_upto) >= OUR_WINDOW // 2:
-                self._sts()
+            self._on_controlled(packet, now)
             return
         if opcode in (ChaosOp.CLS, ChaosOp.LOS):
-            number = self._pending[0].number if self._pending else self.current
+            number = self._number()
             self._record("s2c", opcode, packet.packet_no, packet.ack_no, packet.data, number)
             name = "CLS" if opcode == ChaosOp.CLS else "LOS"
             self.ended = f"{name} from the target: {text(packet.data)!r}"
@@ -468,47 +494,42 @@ class FuzzConnection:
         elif opcode in (ChaosOp.OPN, ChaosOp.SNS):  # an OPN again: our STS was lost
             self._sts()
 
+    def _on_controlled(self, packet: Packet, now: float) -> None:
+        """A data packet or EOF: taken in order (a duplicate of one taken is acknowledged again)."""
+        opcode = packet.opcode
+        expected = seq_add(self.received_upto, 1)
+        if packet.packet_no != expected:
+            if seq_le(packet.packet_no, self.received_upto) and not self._lazy:
+                self._sts()  # a retransmission: our receipt was not seen
+            return
+        self.received_upto = expected
+        number = self._number()
+        wp = self._record("s2c", opcode, packet.packet_no, packet.ack_no, packet.data, number)
+        if opcode == ChaosOp.EOF:  # acknowledged at once: the target's CLS waits for that
+            self.ended = "EOF from the target"
+            self.ended_at = now
+            self._sts()
+        elif opcode in _ANSWERS:
+            self._answered(packet, wp)
+        else:
+            self.asynchronous += 1
+        if not self._lazy and seq_sub(self.received_upto, self.acked_upto) >= OUR_WINDOW // 2:
+            self._sts()
+
     def _answered(self, packet: Packet, wp: WirePacket) -> None:
-        """Match an answer to the oldest request still waiting (module docstring)."""
+        """Pair an answer with its request by the one pairing rule (module docstring)."""
         self._answered_at = self._loop.time()
-        if self._initial:  # the first packet is the initial RESPONSE, unless it answers a request
-            self._initial = False
-            number = int.from_bytes(packet.data[:2], "little") if len(packet.data) >= 2 else None
-            if packet.opcode == ServerOp.RESPONSE and all(
-                p.request.packet_no != number for p in self._pending
-            ):
-                return
-        if self._in_multi:
-            head = self._pending[0]
-            if packet.opcode == ServerOp.RESPONSE:
-                if len(packet.data) == 2:
-                    self._in_multi = False
-                    self._pending.popleft()
-                return
-            self._in_multi = False
-            self._pending.popleft()
-        if not self._pending:
+        place = self._pairing.server(packet.opcode, packet.data)
+        head = place.request
+        if head is None:  # the initial RESPONSE, or an answer to nothing
             return
-        head = self._pending[0]
         self.origin[id(wp)] = head.number
-        if head.discarded:
-            self._pending.popleft()
-            return
-        if head.multi and packet.opcode == ServerOp.RESPONSE:
-            if len(packet.data) == 2:
-                self._pending.popleft()
-            else:
-                self._in_multi = True
-            return
-        self._pending.popleft()
-        if packet.opcode != ServerOp.RESPONSE:
+        if not place.final or head.discarded or packet.opcode != ServerOp.RESPONSE:
             return
         op = SPEC.requests.get(head.opcode)
         if op is None:
             return
-        if head.opcode == _FREE_JOINT:
-            self._discard_next = True
-        elif head.opcode == _SET_SPEED:
+        if head.opcode == _SET_SPEED:
             with contextlib.suppress(CodecError):
                 factor = unpack_f(head.request.data[:4])
                 if 0.0 < factor <= 1.0:

@@ -3,7 +3,7 @@
 An input is generated from the campaign seed and its number alone (:mod:`.generators`), so the same
 seed gives the same inputs and ``--only N,M`` sends exactly inputs N and M again.  Its steps:
 
-* :class:`Request`: a manip request on the batch's Chaos connection (opened by hand, see
+* :class:`RequestStep`: a manip request on the batch's Chaos connection (opened by hand, see
   :mod:`.session`).  Its answer is judged with the rest of the connection by the transcript checks
   of :mod:`manip.conformance.judge.checks`, which know what the spec demands for each opcode and data.
 * :class:`ConnPacket`: a packet on the connection's link whose number or indices are wrong on purpose
@@ -23,15 +23,15 @@ from dataclasses import dataclass
 from typing import Literal
 
 from manip.codecs.packet import Packet
+from manip.conformance.suite.rawchaos import Damage
 
 __all__ = [
     "ConnPacket",
-    "Damage",
     "FuzzInput",
     "Pause",
     "Raw",
     "Relative",
-    "Request",
+    "RequestStep",
     "Step",
     "Stray",
     "StrayExpect",
@@ -41,15 +41,12 @@ Relative = Literal["ahead", "behind", "duplicate", "wrong-source", "sns", "unc"]
 """How a :class:`ConnPacket` relates to the connection: numbered past the receive window, numbered
 before the next expected packet, the last request again, from a source index that is not the
 connection's, a sense-status request, uncontrolled data."""
-Damage = Literal["", "checksum", "nbytes", "header-byte", "version", "function", "short", "long"]
-"""What is broken below a :class:`Stray` packet: its checksum, its byte count, the unused header
-byte; on CHUDP the datagram header's version or function byte, or its length (cut or padded)."""
 StrayExpect = Literal["los", "answer", "silence"]
 """A LOS back to the sender, an answer to an RFC (OPN, CLS, ANS or FWD), or nothing at all."""
 
 
 @dataclass(frozen=True, slots=True)
-class Request:
+class RequestStep:
     """A request on the batch's connection: ``opcode`` and ``data`` exactly as given.
 
     ``chunk``: write the frame in pieces of this many bytes (0: in one write).  ``lazy``: part of a
@@ -109,7 +106,7 @@ class Pause:
     seconds: float
 
 
-Step = Request | ConnPacket | Stray | Raw | Pause
+Step = RequestStep | ConnPacket | Stray | Raw | Pause
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,4 +120,4 @@ class FuzzInput:
 
     @property
     def requests(self) -> int:
-        return sum(isinstance(s, Request) for s in self.steps)
+        return sum(isinstance(s, RequestStep) for s in self.steps)

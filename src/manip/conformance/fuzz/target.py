@@ -1,9 +1,9 @@
 """The target of a campaign, and what the fuzzer can see of it besides its answers.
 
-* :class:`RemoteTarget`: a server someone else runs (``manip-conform fuzz HOST``).  Its answers are
+* :class:`RemoteServer`: a server someone else runs (``manip-conform fuzz HOST``).  Its answers are
   all there is, unless ``--server-log FILE`` names its log: every traceback written there during the
   campaign is then a finding.  A crash ends the campaign unless the server comes back (``--restart-wait``).
-* :class:`ProcessTarget`: a server the fuzzer starts itself and restarts after a crash, reading its
+* :class:`LaunchedServer`: a server the fuzzer starts itself and restarts after a crash, reading its
   standard error (and output) for tracebacks: the embedded reference server (no HOST: ``manip-server``
   on a free loopback port, with ``--server-fault`` switches), or an implementer's own (``--launch
   CMD`` with HOST).  The reference server also reports its count of bad frames (SIGUSR1, the
@@ -29,11 +29,11 @@ from typing import Final
 from manip.links.address import LinkAddress, parse_address
 
 __all__ = [
-    "ProcessTarget",
-    "RemoteTarget",
-    "Target",
-    "TargetError",
+    "FuzzedServer",
+    "LaunchedServer",
+    "RemoteServer",
     "TracebackScanner",
+    "UnreachableError",
     "reference_server_argv",
 ]
 
@@ -46,7 +46,7 @@ _LISTENING: Final = re.compile(r"^manip-server: listening on (\S+)")
 _BAD_FRAMES: Final = re.compile(r"bad frames (\d+)")
 
 
-class TargetError(Exception):
+class UnreachableError(Exception):
     """The target could not be started or reached; the message says why."""
 
 
@@ -78,7 +78,7 @@ class TracebackScanner:
         return out
 
 
-class Target:
+class FuzzedServer:
     """What the campaign asks of a target (module docstring)."""
 
     address: LinkAddress
@@ -87,7 +87,7 @@ class Target:
     label = ""
 
     async def start(self) -> None:
-        """Start (or find) the target; :class:`TargetError` if it cannot be had."""
+        """Start (or find) the target; :class:`UnreachableError` if it cannot be had."""
 
     async def stop(self) -> None:
         """Stop what :meth:`start` started."""
@@ -110,10 +110,10 @@ class Target:
         return None
 
     async def restart(self) -> None:
-        raise TargetError("the fuzzer did not start this target, so it cannot restart it")
+        raise UnreachableError("the fuzzer did not start this target, so it cannot restart it")
 
 
-class RemoteTarget(Target):
+class RemoteServer(FuzzedServer):
     """A server at ``address``, its log optionally at ``log``."""
 
     def __init__(self, address: LinkAddress, log: Path | None = None) -> None:
@@ -129,7 +129,7 @@ class RemoteTarget(Target):
             try:
                 self._offset = self._log.stat().st_size
             except OSError as exc:
-                raise TargetError(f"--server-log {self._log}: {exc.strerror or exc}") from exc
+                raise UnreachableError(f"--server-log {self._log}: {exc.strerror or exc}") from exc
 
     def tracebacks(self) -> list[str]:
         if self._log is None:
@@ -170,7 +170,7 @@ def reference_server_argv(
     return argv
 
 
-class ProcessTarget(Target):
+class LaunchedServer(FuzzedServer):
     """A server the fuzzer runs: ``argv``; ``address`` where it listens, or None for the reference
     server, which prints it (``manip-server: listening on URL``)."""
 
@@ -202,7 +202,7 @@ class ProcessTarget(Target):
                 start_new_session=True,
             )
         except OSError as exc:
-            raise TargetError(f"cannot start {self.argv[0]}: {exc.strerror or exc}") from exc
+            raise UnreachableError(f"cannot start {self.argv[0]}: {exc.strerror or exc}") from exc
         self.starts += 1
         assert self._proc.stdout is not None and self._proc.stderr is not None
         self._readers = [
@@ -217,7 +217,9 @@ class ProcessTarget(Target):
                 url = await self._listening
         except (TimeoutError, EOFError) as exc:
             await self.stop()
-            raise TargetError(f"the server did not say where it listens within {START_TIMEOUT:g} s") from exc
+            raise UnreachableError(
+                f"the server did not say where it listens within {START_TIMEOUT:g} s"
+            ) from exc
         self.address = parse_address(url)
 
     async def _read(self, stream: asyncio.StreamReader, *, stdout: bool) -> None:

@@ -209,8 +209,9 @@ class ProtocolModel:
         except CodecError as exc:
             return Expectation(False, command=True, clause="request.data-length", why=exc.message)
         expectation = self._expect_valid(op, values)
-        if op.extension and expectation.normal and (self.served is None or opcode not in self.served):
-            # manip's Puma extensions are optional: a server that does not list one may refuse it (C)
+        if op.extension and (self.served is None or opcode not in self.served):
+            # manip's Puma extensions are optional: a server that does not list one may refuse it (C),
+            # whatever the arm's state (an opcode it does not serve is not refused for power or abort)
             why = "; ".join(w for w in (expectation.why, "an extension the server does not list") if w)
             expectation = replace(expectation, command=True, why=why)
         return expectation

@@ -45,11 +45,17 @@ FailureKind = Literal[
     "mismatch",
     "missing",
     "stopped",
+    "crash",
+    "traceback",
+    "uncounted_drop",
 ]
 """What went wrong, for a violation (the report's ``kind``): a wrong value (the default), a malformed
 packet, no answer in time, the connection closed, a missing or unexpected message, the case's deadline;
 ``mismatch``, ``missing`` and ``stopped`` are replay's (a live answer that differs from the recorded
-one, a session no client played, a replay that could not go on)."""
+one, a session no client played, a replay that could not go on); ``crash``, ``traceback`` and
+``uncounted_drop`` are the fuzzer's (the target gone, a traceback in its log, bad frames it dropped
+without counting them; a target that stops answering is a ``timeout``, a request it never answers a
+``missing_response``)."""
 FAILURE_KINDS: Final[tuple[str, ...]] = get_args(FailureKind)
 
 NOTHING: Final = "nothing"

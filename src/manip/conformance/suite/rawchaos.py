@@ -1,22 +1,34 @@
-"""A raw Chaos peer for conformance cases that test the target's NCP itself.
+"""The suite's raw Chaos peer: links to the target that send exactly the bytes they are given and hand
+over, decoded, every frame the target sends, with the bytes it came in.
 
 The NCP clauses (retransmission, window, LOS, duplicate RFC) cannot be tested through manip's own NCP:
-it would retransmit, acknowledge and window for us.  :class:`RawPeer` instead opens the target's link
-directly (``tcp://`` frames or ``chudp://`` datagrams, :mod:`manip.codecs.framing`), sends exactly the
-packets a case forges and hands back what arrives, decoded, with the bytes as they came.  Nothing is
-sent that the case did not ask for: no acknowledgement, no STS, no retransmission.
+it would retransmit, acknowledge and window for us.  Two users drive these links by hand instead: the
+NCP cases (:class:`RawPeer`, which sends nothing a case did not ask for: no acknowledgement, no STS, no
+retransmission) and the fuzzer (:mod:`manip.conformance.fuzz.session`, whose connection does the least a
+peer must and nothing else).
 
 Theory of operation:
 
-* :func:`RawPeer.open` connects (TCP) or binds a UDP socket (CHUDP); a reader task decodes every frame
-  into a :class:`Received` (packet, bytes, time) and appends it to ``inbox``; frames that do not decode
-  are kept in ``bad``.  Every packet both ways is also given to ``on_packet`` (cases record them).
-* :meth:`RawPeer.receive` takes the first inbox packet a predicate accepts, waiting up to a timeout;
-  :meth:`RawPeer.collect` takes every accepted packet for a given time (for "nothing else came").
-* :meth:`RawPeer.handshake` drives the opening by hand: RFC with a chosen source index and packet
-  number, wait for OPN (an RFC refused as busy is retried), and the connection (:class:`RawConnection`)
-  is then OPEN on our side.  The STS answering the OPN is the case's to send (:meth:`RawConnection.sts`),
-  with whatever window it wants; :meth:`RawConnection.data` sends data with a chosen number and ack.
+* **Links.**  :func:`open_link` opens a :class:`RawLink` to the target: a :class:`RawStreamLink` (``tcp://``,
+  ``unix://``: manip's TCP link framing, :mod:`manip.codecs.framing`) or a :class:`RawDatagramLink`
+  (``chudp://``).  Every frame that arrives goes to the link's :class:`PacketSink`, decoded with its
+  bytes (``deliver``) or refused (``reject``, with why); a stream whose framing is lost (a frame length
+  no frame can have) is closed, and when that happens before any frame the link says what the peer is
+  instead (:func:`~manip.links.errors.not_a_chaos_link`).  :meth:`RawLink.encode` frames a packet as
+  the codecs do (they refuse what is illegal); :func:`frame` lays out any packet at all, with the damage
+  a fuzz input asks for (:data:`Damage`) and the checksum recomputed after it (unless the checksum is
+  the damage), so exactly one thing is wrong with it.
+* **The NCP cases' peer.**  :meth:`RawPeer.open` opens one link and is its sink: every packet goes to
+  ``inbox`` as a :class:`Received` (packet, bytes, time), frames that do not decode to ``bad``, and both
+  ways to ``on_packet`` (cases record them).  :meth:`RawPeer.receive` takes the first inbox packet a
+  predicate accepts, waiting up to a timeout; :meth:`RawPeer.collect` takes every accepted packet for a
+  given time (for "nothing else came").
+* :meth:`RawPeer.handshake` drives the opening by hand (:func:`rfc_until_open`, which the fuzzer's
+  connection uses too): RFC with a chosen source index and packet number, wait for OPN (an RFC
+  refused as busy is retried, :mod:`~manip.conformance.suite.busy`), and the connection
+  (:class:`RawConnection`) is then OPEN on our side.  The STS answering the OPN is the case's to send
+  (:meth:`RawConnection.sts`), with whatever window it wants; :meth:`RawConnection.data` sends data
+  with a chosen number and ack.
 * :meth:`RawPeer.close` sends CLS on every connection it opened (so the server frees its robot at once)
   and closes the link.
 """
@@ -25,24 +37,25 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import socket
 import struct
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
-from typing import Final
+from typing import Final, Literal, Protocol, cast
 
-from manip.codecs.chaos import make_trailer, packet_words
+from manip.codecs.chaos import chaos_checksum, packet_words
 from manip.codecs.errors import DecodeError
 from manip.codecs.framing import (
     CHUDP_HEADER,
-    MAX_BODY,
+    FrameSyncError,
+    TcpFrameDecoder,
     decode_chudp,
-    decode_tcp,
     encode_chudp,
     encode_tcp,
 )
 from manip.codecs.packet import Packet
 from manip.conformance.judge.checks import Direction
-from manip.conformance.suite.busy import BUSY_DELAY, BUSY_RETRIES, says_busy
+from manip.conformance.suite.busy import BUSY_DELAY, BUSY_PATIENCE, says_busy
 from manip.links.address import LinkAddress, parse_address
 from manip.links.errors import chaos_host, not_a_chaos_link
 from manip.ncp.packets import pack_status, text, unpack_status
@@ -52,23 +65,36 @@ from manip.spec.constants import ChaosOp
 from manip.spec.notation import octal
 
 __all__ = [
+    "Damage",
     "Direction",
+    "PacketSink",
     "RawConnection",
+    "RawDatagramLink",
     "RawError",
+    "RawLink",
     "RawPeer",
+    "RawStreamLink",
     "Received",
     "RefusedError",
     "format_packet",
+    "frame",
+    "open_link",
+    "rfc_until_open",
 ]
 
 PacketHook = Callable[[Direction, Packet, bytes], None]
 Match = Callable[[Packet], bool]
+Damage = Literal["", "checksum", "nbytes", "header-byte", "version", "function", "short", "long"]
+"""What :func:`frame` breaks below a packet: its checksum, its byte count, the unused header byte; on
+CHUDP the datagram header's version or function byte, or its length (cut or padded)."""
 
 RFC_RETRY: Final = 1.0
 """Seconds between copies of an unanswered RFC during :meth:`RawPeer.handshake`."""
-FOREIGN_HEAD: Final = 78
-"""Bytes read after a first frame length no frame can have, to show what the peer is."""
-FOREIGN_WAIT: Final = 0.5
+FOREIGN_HEAD: Final = 80
+"""Bytes of a peer's first data kept, to say what it is when its first frame length is no frame's."""
+KEPT_BAD: Final = 100
+"""Frames that do not decode a :class:`RawPeer` keeps (the first ones)."""
+_RESET: Final = struct.pack("ii", 1, 0)
 
 
 class RawError(Exception):
@@ -81,6 +107,215 @@ class RefusedError(RawError):
     def __init__(self, message: str, answer: Received) -> None:
         super().__init__(message)
         self.answer = answer
+
+
+class PacketSink(Protocol):
+    """Where a link puts what the target sends."""
+
+    def deliver(self, packet: Packet, raw: bytes, now: float) -> None:
+        """A frame that decoded, with its bytes and the event loop's time."""
+
+    def reject(self, raw: bytes, exc: DecodeError) -> None:
+        """A frame that did not decode (or the bytes after which a stream's framing was lost)."""
+
+    def link_ended(self, link: RawLink) -> None:
+        """The link closed (``link.ended`` says why)."""
+
+
+class RawLink:
+    """One link to the target (see the module docstring)."""
+
+    datagram = False
+
+    def __init__(self, address: LinkAddress, sink: PacketSink) -> None:
+        self.address = address
+        self.sink = sink
+        self.ended: str | None = None
+        """Why the link ended, or None while it is up."""
+        self._loop = asyncio.get_running_loop()
+        self.closed: asyncio.Future[None] = self._loop.create_future()
+
+    def send(self, data: bytes) -> None:
+        """Write ``data`` (a frame, part of one, or any bytes) as it is."""
+        raise NotImplementedError
+
+    def close(self, *, reset: bool = False) -> None:
+        """Close the link (``reset``: a stream is reset, not closed in order)."""
+        raise NotImplementedError
+
+    def encode(self, p: Packet) -> bytes:
+        """``p`` framed by the codecs, the trailer naming the target as the next hop and us as the last."""
+        hop = {"hw_dest": self.address.peer_addr, "hw_src": self.address.my_addr}
+        return encode_chudp(p, **hop) if self.datagram else encode_tcp(p, **hop)
+
+    def forge(self, p: Packet, *, damage: Damage = "") -> bytes:
+        """``p`` framed with no checks at all (an illegal opcode, more than 488 data bytes...)."""
+        hop = (self.address.peer_addr, self.address.my_addr)
+        return frame(p, datagram=self.datagram, hop=hop, damage=damage)
+
+    def _end(self, reason: str) -> None:
+        if self.ended is None:
+            self.ended = reason
+        if not self.closed.done():
+            self.closed.set_result(None)
+        self.sink.link_ended(self)
+
+
+class RawStreamLink(RawLink, asyncio.Protocol):
+    """A connection carrying manip's TCP link frames."""
+
+    def __init__(self, address: LinkAddress, sink: PacketSink) -> None:
+        super().__init__(address, sink)
+        self._transport: asyncio.Transport | None = None
+        self._decoder = TcpFrameDecoder()
+        self._buffer = bytearray()
+        """The bytes of the frames the decoder has not returned yet."""
+        self._head = b""
+        self._frames = 0
+        self._closing: str | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self._transport = cast("asyncio.Transport", transport)
+
+    def data_received(self, data: bytes) -> None:
+        now = self._loop.time()
+        if len(self._head) < FOREIGN_HEAD:
+            self._head += data[: FOREIGN_HEAD - len(self._head)]
+        self._buffer += data
+        lost: FrameSyncError | None = None
+        try:
+            items = self._decoder.feed(data)
+        except FrameSyncError as exc:
+            items, lost = list(exc.items), exc
+        for item in items:
+            size = 2 + int.from_bytes(self._buffer[:2], "big")
+            raw = bytes(self._buffer[:size])
+            del self._buffer[:size]
+            self._frames += 1
+            if isinstance(item, Packet):
+                self.sink.deliver(item, raw, now)
+            else:
+                self.sink.reject(raw, item)
+        if lost is not None:
+            self.sink.reject(bytes(self._buffer[:64]), lost)
+            foreign = self._frames == 0
+            self._closing = not_a_chaos_link(self._head) if foreign else f"framing lost: {lost}"
+            self.close()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._closing is not None:
+            self._end(self._closing)
+        elif exc is None:
+            self._end("the target closed the link")
+        else:
+            self._end(f"the link failed: {exc}")
+
+    def send(self, data: bytes) -> None:
+        if self._transport is not None and self.ended is None and not self._transport.is_closing():
+            self._transport.write(data)
+
+    def close(self, *, reset: bool = False) -> None:
+        if self._transport is None or self._transport.is_closing():
+            return
+        if self._closing is None:
+            self._closing = "closed by us"
+        if reset:
+            sock = self._transport.get_extra_info("socket")
+            if sock is not None:
+                with contextlib.suppress(OSError):
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, _RESET)
+            self._transport.abort()
+        else:
+            self._transport.close()
+
+
+class RawDatagramLink(RawLink, asyncio.DatagramProtocol):
+    """A UDP socket speaking CHUDP to the target."""
+
+    datagram = True
+
+    def __init__(self, address: LinkAddress, sink: PacketSink) -> None:
+        super().__init__(address, sink)
+        self._transport: asyncio.DatagramTransport | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self._transport = cast("asyncio.DatagramTransport", transport)
+
+    def datagram_received(self, data: bytes, addr: object) -> None:
+        try:
+            packet = decode_chudp(data)
+        except DecodeError as exc:
+            self.sink.reject(data, exc)
+            return
+        self.sink.deliver(packet, data, self._loop.time())
+
+    def error_received(self, exc: Exception) -> None:
+        pass  # ICMP unreachable from a target that is gone: no answer says so
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._end("closed")
+
+    def send(self, data: bytes) -> None:
+        if self._transport is not None and not self._transport.is_closing():
+            self._transport.sendto(data)
+
+    def close(self, *, reset: bool = False) -> None:
+        if self._transport is not None:
+            self._transport.close()
+
+
+async def open_link(address: LinkAddress, sink: PacketSink, timeout: float) -> RawLink:
+    """A new link to the target; OSError (refused, unreachable) or TimeoutError if it cannot be had,
+    :class:`RawError` for a scheme that carries no raw Chaos packets."""
+    loop = asyncio.get_running_loop()
+    async with asyncio.timeout(timeout):
+        if address.scheme == "tcp":
+            _, stream = await loop.create_connection(
+                lambda: RawStreamLink(address, sink), address.host, address.port
+            )
+            return stream
+        if address.scheme == "unix":
+            assert address.path is not None
+            _, stream = await loop.create_unix_connection(lambda: RawStreamLink(address, sink), address.path)
+            return stream
+        if address.scheme == "chudp":
+            local = address.local or ("::1" if ":" in address.host else "127.0.0.1", 0)
+            _, datagram = await loop.create_datagram_endpoint(
+                lambda: RawDatagramLink(address, sink),
+                local_addr=local,
+                remote_addr=(address.host, address.port),
+            )
+            return datagram
+    raise RawError(f"raw Chaos packets are not supported on {address.scheme}:// links")
+
+
+def frame(packet: Packet, *, datagram: bool, hop: tuple[int, int], damage: Damage = "") -> bytes:
+    """``packet`` laid out for a link as it is (no check), its trailer naming ``hop`` (next hop, last
+    hop), with ``damage`` done to it (:data:`Damage`)."""
+    dest, source = hop
+    words = packet_words(packet)
+    if damage == "header-byte":
+        words[0] |= 1 + (packet.packet_no % 255)
+    elif damage == "nbytes":
+        nbytes = len(packet.data)
+        wrong = nbytes + 2 if nbytes < 4 or packet.packet_no & 1 else nbytes - 2  # a different padded size
+        words[1] = (words[1] & 0xF000) | wrong
+    checksum = chaos_checksum([*words, dest, source])
+    if damage == "checksum":
+        checksum ^= 1 + (packet.packet_no % 0xFFFE)
+    body = struct.pack(f">{len(words) + 3}H", *words, dest, source, checksum)
+    if not datagram:
+        return len(body).to_bytes(2, "big") + body
+    head = CHUDP_HEADER
+    if damage == "version":
+        head = bytes([2 + packet.packet_no % 200]) + head[1:]
+    elif damage == "function":
+        head = head[:1] + bytes([2 + packet.packet_no % 200]) + head[2:]
+    if damage == "short":
+        body = body[: len(body) - 2 - 2 * (packet.packet_no % 4)]
+    elif damage == "long":
+        body += bytes(2 + 2 * (packet.packet_no % 4))
+    return head + body
 
 
 @dataclass(frozen=True)
@@ -108,129 +343,47 @@ def format_packet(p: Packet) -> str:
     return f"{what} {numbers} {len(p.data)} data bytes"
 
 
-class _Transport:
-    """The link below a raw peer: whole frames out, decoded frames in (subclasses per scheme)."""
+async def rfc_until_open(
+    send_rfc: Callable[[], object],
+    answer: Callable[[float], Awaitable[Received | None]],
+    *,
+    contact: str,
+    timeout: float,
+    ended: Callable[[], str | None],
+    retry_busy: bool = True,
+) -> Received:
+    """The opening of a connection by hand, for both users of the raw links: ``send_rfc`` (again every
+    :data:`RFC_RETRY` seconds while unanswered) until ``answer`` (the target's next answer to it, or
+    None after the seconds it is given) is OPN, which is returned.
 
-    def __init__(self, address: LinkAddress) -> None:
-        self.address = address
-        self.deliver: Callable[[bytes, Packet | DecodeError], None] = lambda raw, item: None
-        self.ended: str | None = None
-
-    def encode(self, p: Packet) -> bytes:
-        raise NotImplementedError
-
-    def forge(self, p: Packet) -> bytes:
-        """``p`` framed with no checks at all (an illegal opcode, more than 488 data bytes...)."""
-        trailer = make_trailer(p, self.address.peer_addr, self.address.my_addr)
-        words = [*packet_words(p), trailer.dest, trailer.source, trailer.checksum]
-        return self.wrap(struct.pack(f">{len(words)}H", *words))
-
-    def wrap(self, body: bytes) -> bytes:
-        """The framing around a packet-plus-trailer body."""
-        raise NotImplementedError
-
-    def write(self, frame: bytes) -> None:
-        raise NotImplementedError
-
-    async def close(self) -> None:
-        raise NotImplementedError
-
-
-class _TcpTransport(_Transport):
-    def __init__(
-        self, address: LinkAddress, reader: asyncio.StreamReader, writer: asyncio.StreamWriter
-    ) -> None:
-        super().__init__(address)
-        self._reader = reader
-        self._writer = writer
-        self._task = asyncio.get_running_loop().create_task(self._read())
-
-    def encode(self, p: Packet) -> bytes:
-        return encode_tcp(p, hw_dest=self.address.peer_addr, hw_src=self.address.my_addr)
-
-    def wrap(self, body: bytes) -> bytes:
-        return len(body).to_bytes(2, "big") + body
-
-    def write(self, frame: bytes) -> None:
-        if self.ended is None:
-            self._writer.write(frame)
-
-    async def _read(self) -> None:
-        try:
-            first = True
-            while True:
-                head = await self._reader.readexactly(2)
-                length = int.from_bytes(head, "big")
-                if first and length > MAX_BODY:
-                    # no frame is that long (text is: b"HT" reads as 18516): say what the peer is
-                    with contextlib.suppress(TimeoutError):
-                        head += await asyncio.wait_for(self._reader.read(FOREIGN_HEAD), FOREIGN_WAIT)
-                    self.ended = not_a_chaos_link(head)
-                    return
-                first = False
-                body = await self._reader.readexactly(length)
-                frame = head + body
-                try:
-                    self.deliver(frame, decode_tcp(frame))
-                except DecodeError as exc:
-                    self.deliver(frame, exc)
-        except asyncio.IncompleteReadError:
-            self.ended = "the target closed the TCP link"
-        except OSError as exc:
-            self.ended = f"TCP link error: {exc}"
-
-    async def close(self) -> None:
-        self.ended = self.ended or "closed by the case"
-        self._task.cancel()
-        with contextlib.suppress(asyncio.CancelledError, OSError):
-            await self._task
-        self._writer.close()
-        with contextlib.suppress(OSError):
-            await self._writer.wait_closed()
-
-
-class _UdpProtocol(asyncio.DatagramProtocol):
-    def __init__(self, owner: _ChudpTransport) -> None:
-        self.owner = owner
-
-    def datagram_received(self, data: bytes, addr: object) -> None:
-        try:
-            self.owner.deliver(data, decode_chudp(data))
-        except DecodeError as exc:
-            self.owner.deliver(data, exc)
-
-    def error_received(self, exc: Exception) -> None:
-        self.owner.errors += 1
-
-
-class _ChudpTransport(_Transport):
-    def __init__(self, address: LinkAddress) -> None:
-        super().__init__(address)
-        self.errors = 0
-        self._udp: asyncio.DatagramTransport | None = None
-
-    async def start(self) -> None:
-        udp, _ = await asyncio.get_running_loop().create_datagram_endpoint(
-            lambda: _UdpProtocol(self),
-            local_addr=self.address.local,
-            remote_addr=(self.address.host, self.address.port),
-        )
-        self._udp = udp
-
-    def encode(self, p: Packet) -> bytes:
-        return encode_chudp(p, hw_dest=self.address.peer_addr, hw_src=self.address.my_addr)
-
-    def wrap(self, body: bytes) -> bytes:
-        return CHUDP_HEADER + body
-
-    def write(self, frame: bytes) -> None:
-        if self._udp is not None and self.ended is None:
-            self._udp.sendto(frame)
-
-    async def close(self) -> None:
-        self.ended = self.ended or "closed by the case"
-        if self._udp is not None:
-            self._udp.close()
+    Raises :class:`RefusedError` on CLS, ANS, FWD or LOS (a CLS saying busy is retried first by the
+    suite's one rule, :mod:`~manip.conformance.suite.busy`: the previous connection may still be
+    closing) and :class:`RawError` when nothing answers within ``timeout`` or the link ``ended``."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    busy_until = loop.time() + BUSY_PATIENCE
+    busy: Received | None = None
+    while True:
+        send_rfc()
+        got = await answer(min(RFC_RETRY, max(0.0, deadline - loop.time())))
+        if got is None:
+            gone = ended()
+            if loop.time() < deadline and gone is None:
+                continue
+            if busy is not None:
+                reason = text(busy.packet.data)
+                raise RefusedError(f"the RFC was refused as busy ({reason!r}) for {timeout:g} s", busy)
+            raise RawError(
+                f"no answer to RFC {contact!r} within {timeout:g} s" + (f" ({gone})" if gone else "")
+            )
+        p = got.packet
+        if p.opcode == ChaosOp.OPN:
+            return got
+        if retry_busy and p.opcode == ChaosOp.CLS and says_busy(text(p.data)) and loop.time() < busy_until:
+            busy = got
+            await asyncio.sleep(BUSY_DELAY)
+            continue
+        raise RefusedError(f"the RFC was answered by {format_packet(p)}", got)
 
 
 @dataclass
@@ -302,7 +455,6 @@ class RawPeer:
     """A raw Chaos peer on one link to the target; see the module docstring."""
 
     address: LinkAddress
-    _transport: _Transport
     on_packet: PacketHook | None = None
     clock: Callable[[], float] | None = None
     """Times of what arrives (default: the event loop's clock, virtual in a simulated run)."""
@@ -310,10 +462,10 @@ class RawPeer:
     bad: list[tuple[bytes, DecodeError]] = field(default_factory=list)
     sent: list[tuple[Packet, bytes]] = field(default_factory=list)
     connections: list[RawConnection] = field(default_factory=list)
+    _link: RawLink = field(init=False)
 
     def __post_init__(self) -> None:
         self._arrived = asyncio.Event()
-        self._transport.deliver = self._deliver
         self._now: Callable[[], float] = self.clock or asyncio.get_running_loop().time
 
     @classmethod
@@ -325,27 +477,14 @@ class RawPeer:
         clock: Callable[[], float] | None = None,
         timeout: float = 5.0,
     ) -> RawPeer:
-        """Open the link to the target at ``address`` (tcp:// or chudp://); :class:`RawError` if not."""
+        """Open the link to the target at ``address`` (tcp://, unix://, chudp://); else :class:`RawError`."""
         addr = parse_address(address) if isinstance(address, str) else address
-        transport: _Transport
+        peer = cls(addr, on_packet, clock)
         try:
-            async with asyncio.timeout(timeout):
-                if addr.scheme == "tcp":
-                    reader, writer = await asyncio.open_connection(addr.host, addr.port)
-                    transport = _TcpTransport(addr, reader, writer)
-                elif addr.scheme == "unix":
-                    assert addr.path is not None
-                    reader, writer = await asyncio.open_unix_connection(addr.path)
-                    transport = _TcpTransport(addr, reader, writer)
-                elif addr.scheme == "chudp":
-                    udp = _ChudpTransport(addr)
-                    await udp.start()
-                    transport = udp
-                else:
-                    raise RawError(f"raw Chaos packets are not supported on {addr.scheme}:// links")
+            peer._link = await open_link(addr, peer, timeout)
         except (OSError, TimeoutError) as exc:
             raise RawError(f"could not open {addr}: {type(exc).__name__}: {exc}") from exc
-        return cls(addr, transport, on_packet, clock)
+        return peer
 
     # ------------------------------------------------------------------------------- sending
 
@@ -373,38 +512,44 @@ class RawPeer:
         )
 
     def send(self, p: Packet) -> bytes:
-        """Send ``p`` as it is; return the frame bytes written."""
-        frame = self._transport.encode(p)
-        self.send_frame(frame, p)
-        return frame
+        """Send ``p`` as the codecs frame it; return the frame bytes written."""
+        raw = self._link.encode(p)
+        self.send_frame(raw, p)
+        return raw
 
     def send_forged(self, p: Packet) -> bytes:
-        """Send ``p`` framed without any check (see :meth:`_Transport.forge`); return the frame."""
-        frame = self._transport.forge(p)
-        self.send_frame(frame, p)
-        return frame
+        """Send ``p`` framed without any check (see :meth:`RawLink.forge`); return the frame."""
+        raw = self._link.forge(p)
+        self.send_frame(raw, p)
+        return raw
 
-    def send_frame(self, frame: bytes, p: Packet) -> None:
-        """Write ``frame`` (which may be forged beyond what :meth:`send` encodes); ``p`` is what it says."""
-        self._transport.write(frame)
-        self.sent.append((p, frame))
+    def send_frame(self, raw: bytes, p: Packet) -> None:
+        """Write ``raw`` (which may be forged beyond what :meth:`send` encodes); ``p`` is what it says."""
+        self._link.send(raw)
+        self.sent.append((p, raw))
         if self.on_packet is not None:
-            self.on_packet("c2s", p, frame)
+            self.on_packet("c2s", p, raw)
 
     # ------------------------------------------------------------------------------- receiving
 
     @property
     def ended(self) -> str | None:
         """Why the link ended (TCP closed by the target), or None while it is up."""
-        return self._transport.ended
+        return self._link.ended
 
-    def _deliver(self, raw: bytes, item: Packet | DecodeError) -> None:
-        if isinstance(item, DecodeError):
-            self.bad.append((raw, item))
-        else:
-            self.inbox.append(Received(item, raw, self._now()))
-            if self.on_packet is not None:
-                self.on_packet("s2c", item, raw)
+    def deliver(self, packet: Packet, raw: bytes, now: float) -> None:
+        """The link's :class:`PacketSink`: into the inbox, timed by the peer's clock."""
+        self.inbox.append(Received(packet, raw, self._now()))
+        if self.on_packet is not None:
+            self.on_packet("s2c", packet, raw)
+        self._arrived.set()
+
+    def reject(self, raw: bytes, exc: DecodeError) -> None:
+        if len(self.bad) < KEPT_BAD:
+            self.bad.append((raw, exc))
+        self._arrived.set()
+
+    def link_ended(self, link: RawLink) -> None:
         self._arrived.set()
 
     def _take(self, match: Match) -> Received | None:
@@ -452,46 +597,31 @@ class RawPeer:
     async def handshake(
         self, index: int, packet_no: int, *, timeout: float = 5.0, retry_busy: bool = True
     ) -> RawConnection:
-        """Open a connection by hand: RFC (copies every second while unanswered) until OPN.
-
-        Raises :class:`RefusedError` on CLS/ANS/FWD/LOS (a CLS saying "busy" is retried first, the
-        previous case's connection may still be closing) and :class:`RawError` on no answer."""
-        loop = asyncio.get_running_loop()
-        deadline = loop.time() + timeout
-        tries = 0
-        while True:
-            rfc = self.rfc(index, packet_no)
-            answer = await self.receive(
-                lambda p: p.dest_index == index and p.opcode != ChaosOp.SNS,
-                min(RFC_RETRY, max(0.0, deadline - loop.time())),
-            )
-            if answer is None:
-                if loop.time() >= deadline or self.ended is not None:
-                    raise RawError(
-                        f"no answer to RFC {self.address.contact!r} within {timeout:g} s"
-                        + (f" ({self.ended})" if self.ended else "")
-                    )
-                continue
-            p = answer.packet
-            if p.opcode == ChaosOp.OPN:
-                conn = RawConnection(self, index, rfc, answer, seq_add(packet_no, 1))
-                self.connections.append(conn)
-                return conn
-            busy = p.opcode == ChaosOp.CLS and says_busy(text(p.data))
-            if busy and retry_busy and tries < BUSY_RETRIES:
-                tries += 1
-                await asyncio.sleep(BUSY_DELAY)
-                continue
-            raise RefusedError(f"the RFC was answered by {format_packet(p)}", answer)
+        """Open a connection by hand from our ``index``, the RFC numbered ``packet_no``
+        (:func:`rfc_until_open`)."""
+        contact = self.address.contact
+        rfc = self.packet(ChaosOp.RFC, src_index=index, packet_no=packet_no, data=contact.encode("ascii"))
+        answer = await rfc_until_open(
+            lambda: self.send(rfc),
+            lambda wait: self.receive(lambda p: p.dest_index == index and p.opcode != ChaosOp.SNS, wait),
+            contact=contact,
+            timeout=timeout,
+            ended=lambda: self.ended,
+            retry_busy=retry_busy,
+        )
+        conn = RawConnection(self, index, rfc, answer, seq_add(packet_no, 1))
+        self.connections.append(conn)
+        return conn
 
     async def close(self) -> None:
         """CLS on every open connection, then close the link."""
         for conn in self.connections:
             if self.ended is None:
                 conn.close()
-        if isinstance(self._transport, _TcpTransport) and self.ended is None:
-            await asyncio.sleep(0)  # let the CLS frames reach the socket before it closes
-        await self._transport.close()
+        self._link.close()  # a stream sends what it holds (the CLS frames) before it closes
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(RFC_RETRY):
+                await asyncio.shield(self._link.closed)
 
     async def __aenter__(self) -> RawPeer:
         return self
