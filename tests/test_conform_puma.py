@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from manip.codecs.cougar import OutOfSync, encode
 from manip.conformance.cli import main as conform_main
 from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
-from manip.conformance.puma.judge import FramedPort, JudgingCougar, NoJudgeError, Script, current_judge
+from manip.conformance.puma.judge import CougarScript, FramedPort, JudgingCougar, NoJudgeError, current_judge
 from manip.conformance.puma.target import PumaTarget, puma_cases, run_puma_suite
 from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.context import RunOptions
@@ -53,7 +53,7 @@ def outcomes(report: RunReport) -> dict[str, str]:
 def test_judge_records_commands_by_tick_and_scripts_answers() -> None:
     judge = JudgingCougar(seed=1)
     port = FramedPort(judge)
-    judge.begin(Script(forces=(1.0, 2.0, 3.0, 4.0, 5.0, 6.0), forces_delay=2))
+    judge.begin(CougarScript(forces=(1.0, 2.0, 3.0, 4.0, 5.0, 6.0), forces_delay=2))
     port.send(encode("command", "SEN", theta_sensed=(0.0, -90.0, 90.0, 0.0, 0.0, 0.0)))
     port.send(encode("command", "RFRC"))
     port.tick(1.0)

@@ -13,9 +13,9 @@ from manip.ncp.states import (
     ACTION_DOCS,
     FINAL_STATES,
     TRANSITIONS,
+    ConnInput,
     ConnState,
-    Input,
-    Source,
+    InputSource,
     all_actions,
     transition,
 )
@@ -55,13 +55,15 @@ def test_every_state_is_reachable_from_closed() -> None:
 
 
 def test_every_input_is_used() -> None:
-    assert {inp for (_s, inp) in TRANSITIONS} == set(Input)
+    assert {inp for (_s, inp) in TRANSITIONS} == set(ConnInput)
 
 
 def test_final_states_only_answer_close_and_abort() -> None:
     for (state, inp), tr in TRANSITIONS.items():
-        if state in FINAL_STATES and not (state is ConnState.CLOSED and inp in (Input.CONNECT, Input.LISTEN)):
-            assert inp in (Input.CLOSE, Input.ABORT), (state, inp)
+        if state in FINAL_STATES and not (
+            state is ConnState.CLOSED and inp in (ConnInput.CONNECT, ConnInput.LISTEN)
+        ):
+            assert inp in (ConnInput.CLOSE, ConnInput.ABORT), (state, inp)
             assert tr.next_state is state and tr.actions == ()
 
 
@@ -75,34 +77,34 @@ def test_only_packets_deliver_packet_events() -> None:
     packet_events = {"deliver_request", "deliver_answer", "deliver_forward", "deliver_lost", "deliver_unc"}
     for (_state, inp), tr in TRANSITIONS.items():
         if packet_events & set(tr.actions):
-            assert inp.source is Source.PACKET, inp
+            assert inp.source is InputSource.PACKET, inp
 
 
 @pytest.mark.parametrize(
     ("state", "inp", "next_state"),
     [
-        (ConnState.CLOSED, Input.CONNECT, ConnState.RFC_SENT),
-        (ConnState.RFC_SENT, Input.OPN, ConnState.OPEN),
-        (ConnState.RFC_SENT, Input.CLS, ConnState.CLOSED),
-        (ConnState.RFC_SENT, Input.LOS, ConnState.LOST),
-        (ConnState.RFC_SENT, Input.RFC_TIMEOUT, ConnState.INCOMPLETE),
-        (ConnState.LISTEN, Input.RFC, ConnState.RFC_RECEIVED),
-        (ConnState.RFC_RECEIVED, Input.ACCEPT, ConnState.OPEN),
-        (ConnState.RFC_RECEIVED, Input.ANSWER, ConnState.CLOSED),
-        (ConnState.OPEN, Input.DATA, ConnState.OPEN),
-        (ConnState.OPEN, Input.EOF_ACKED, ConnState.CLOSED),
-        (ConnState.OPEN, Input.LOS, ConnState.LOST),
-        (ConnState.OPEN, Input.SILENCE, ConnState.INCOMPLETE),
+        (ConnState.CLOSED, ConnInput.CONNECT, ConnState.RFC_SENT),
+        (ConnState.RFC_SENT, ConnInput.OPN, ConnState.OPEN),
+        (ConnState.RFC_SENT, ConnInput.CLS, ConnState.CLOSED),
+        (ConnState.RFC_SENT, ConnInput.LOS, ConnState.LOST),
+        (ConnState.RFC_SENT, ConnInput.RFC_TIMEOUT, ConnState.INCOMPLETE),
+        (ConnState.LISTEN, ConnInput.RFC, ConnState.RFC_RECEIVED),
+        (ConnState.RFC_RECEIVED, ConnInput.ACCEPT, ConnState.OPEN),
+        (ConnState.RFC_RECEIVED, ConnInput.ANSWER, ConnState.CLOSED),
+        (ConnState.OPEN, ConnInput.DATA, ConnState.OPEN),
+        (ConnState.OPEN, ConnInput.EOF_ACKED, ConnState.CLOSED),
+        (ConnState.OPEN, ConnInput.LOS, ConnState.LOST),
+        (ConnState.OPEN, ConnInput.SILENCE, ConnState.INCOMPLETE),
     ],
 )
-def test_key_transitions(state: ConnState, inp: Input, next_state: ConnState) -> None:
+def test_key_transitions(state: ConnState, inp: ConnInput, next_state: ConnState) -> None:
     tr = transition(state, inp)
     assert tr is not None and tr.next_state is next_state
 
 
 def test_missing_entries_are_none() -> None:
-    assert transition(ConnState.OPEN, Input.ACCEPT) is None
-    assert transition(ConnState.LOST, Input.DATA) is None
+    assert transition(ConnState.OPEN, ConnInput.ACCEPT) is None
+    assert transition(ConnState.LOST, ConnInput.DATA) is None
 
 
 def test_resolved_plan_is_the_table() -> None:
@@ -116,8 +118,8 @@ def test_resolved_plan_is_the_table() -> None:
 
 def test_enum_members_hash_by_identity_and_still_compare_as_before() -> None:
     # The table is keyed by (state, input); identity hashing keeps lookups in C and must not merge members.
-    assert len({*ConnState, *Input}) == len(ConnState) + len(Input)
-    assert all(hash(m) == object.__hash__(m) for m in (*ConnState, *Input))
+    assert len({*ConnState, *ConnInput}) == len(ConnState) + len(ConnInput)
+    assert all(hash(m) == object.__hash__(m) for m in (*ConnState, *ConnInput))
     assert all(ConnState[m.name] is m and ConnState(m.value) is m for m in ConnState)
-    assert all(Input[m.name] is m for m in Input)
-    assert ConnState.OPEN.value == "OPEN" and Input.SEND.source is Source.USER
+    assert all(ConnInput[m.name] is m for m in ConnInput)
+    assert ConnState.OPEN.value == "OPEN" and ConnInput.SEND.source is InputSource.USER

@@ -22,7 +22,7 @@ from typing import Final
 
 from manip.conformance.client.contract import (
     ContractError,
-    Hello,
+    HarnessHello,
     Instruction,
     Result,
     parse_hello,
@@ -100,7 +100,7 @@ class HarnessProcess:
         self.argv = list(argv)
         self.env = env
         self.limits = limits or Limits()
-        self.hello: Hello | None = None
+        self.hello: HarnessHello | None = None
         self.starts = 0
         self.unusable: str | None = None
         """Why a restart failed (no hello, bad hello): the run stops using the harness."""
@@ -108,7 +108,7 @@ class HarnessProcess:
         self._stderr: deque[str] = deque(maxlen=STDERR_LINES)
         self._stderr_task: asyncio.Task[None] | None = None
 
-    async def start(self) -> Hello:
+    async def start(self) -> HarnessHello:
         """Start the harness and read its hello (:class:`HarnessError` if either fails)."""
         await self.stop()
         self.starts += 1

@@ -22,7 +22,7 @@ from manip.conformance.cases.puma._support import (
     session,
     wait_async,
 )
-from manip.conformance.puma.judge import Heard, JudgingCougar, Said, Script
+from manip.conformance.puma.judge import CougarScript, Heard, JudgingCougar, Said
 from manip.conformance.puma.target import OBSTACLE_FROM, OBSTACLE_JOINT
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
@@ -85,7 +85,7 @@ async def npr_every_cycle(ctx: CaseContext) -> None:
     New Theta Dot received on earlier cycles."""
     probe = await session(ctx)
     here = await angles(ctx, probe)
-    judge, mark = begin(ctx, Script(ntd=(0.0, 0.0, 0.0, 0.0, 0.0, NTD_RATE)))
+    judge, mark = begin(ctx, CougarScript(ntd=(0.0, 0.0, 0.0, 0.0, 0.0, NTD_RATE)))
     said_before = len(judge.said)
     goal = [*here[:5], here[5] + MOVE_DEG]
     segment = await move(ctx, probe, "compliant-move", joints=goal, scheme=0)
@@ -130,13 +130,13 @@ async def segment_end(ctx: CaseContext) -> None:
     the next segment starts from there and reaches its goal."""
     probe = await session(ctx)
     here = await angles(ctx, probe)
-    judge, mark = begin(ctx, Script(ntd=(0.0, 0.0, 0.0, 0.0, 0.0, NTD_RATE)))
+    judge, mark = begin(ctx, CougarScript(ntd=(0.0, 0.0, 0.0, 0.0, 0.0, NTD_RATE)))
     goal = [*here[:5], here[5] + MOVE_DEG]
     segment = await move(ctx, probe, "compliant-move", joints=goal, scheme=0)
     done = await wait_async(ctx, probe, is_completed(segment), SEGMENT_WITHIN)
     if done is None:
         ctx.skip(f"the compliant segment {segment} was not reported complete within {SEGMENT_WITHIN:g} s")
-    judge.begin(Script(ntd=(0.0,) * 6))
+    judge.begin(CougarScript(ntd=(0.0,) * 6))
     await judge.wait_ticks(3, SEGMENT_WITHIN)
     rest = await angles(ctx, probe)
     npr = _npr(judge, mark)
@@ -176,7 +176,7 @@ async def no_collision_test(ctx: CaseContext) -> None:
     j = OBSTACLE_JOINT - 1
     if here[j] >= OBSTACLE_FROM:
         ctx.skip(f"joint {OBSTACLE_JOINT} stands at {here[j]:g}, past where the obstacle would be")
-    judge, _ = begin(ctx, Script(ntd=(0.0,) * 6))  # compliance changes nothing: only the test differs
+    judge, _ = begin(ctx, CougarScript(ntd=(0.0,) * 6))  # compliance changes nothing: only the test differs
     into = list(here)
     into[j] = OBSTACLE_FROM + 10.0
     plain = await move(ctx, probe, "set-joint-angles", joints=into)
