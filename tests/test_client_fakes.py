@@ -14,8 +14,7 @@ from typing import Any, TypeVar
 
 from manip.arm.transform import Transform
 from manip.codecs.error_string import ErrorMessage
-from manip.codecs.messages import Request as DecodedRequest
-from manip.codecs.messages import decode_request, encode_reply
+from manip.codecs.messages import DecodedRequest, decode_request, encode_reply
 from manip.reference_client import (
     ClientOptions,
     Manipulator,

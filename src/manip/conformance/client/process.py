@@ -32,7 +32,7 @@ from manip.conformance.client.contract import (
 __all__ = [
     "HELLO_TIMEOUT",
     "LINE_LIMIT",
-    "CaseRun",
+    "CaseTranscript",
     "HarnessError",
     "HarnessProblem",
     "HarnessProcess",
@@ -79,7 +79,7 @@ class HarnessProblem:
 
 
 @dataclass
-class CaseRun:
+class CaseTranscript:
     """What the harness wrote for one case."""
 
     results: list[Result] = field(default_factory=list)
@@ -177,9 +177,9 @@ class HarnessProcess:
             return None
         return raw.decode(errors="replace").rstrip("\r\n")
 
-    async def run_case(self, instruction: Instruction, deadline: float) -> CaseRun:
+    async def run_case(self, instruction: Instruction, deadline: float) -> CaseTranscript:
         """Send the case and read its results until ``done`` (or a problem) within ``deadline`` s."""
-        run = CaseRun()
+        run = CaseTranscript()
         if self._proc is None or self._proc.returncode is not None:
             try:
                 await self.start()
@@ -236,7 +236,7 @@ class HarnessProcess:
         await self._finish_bad(run)
         return run
 
-    async def _finish_bad(self, run: CaseRun) -> None:
+    async def _finish_bad(self, run: CaseTranscript) -> None:
         await self.kill()
         run.stderr = list(self._stderr)
 
