@@ -77,6 +77,7 @@ from manip.conformance.suite.results import CaseResult, ExitCode, LivenessCheck,
 from manip.conformance.suite.runner import RunConfig, RunEvents, Runner
 from manip.conformance.suite.selection import PatternError, PatternSet, match_id
 from manip.conformance.suite.stability import instability, repeat_seeds
+from manip.conformance.suite.world import WITHOUT_WORLD
 from manip.links import AddressError, parse_address, virtual_clock
 from manip.reference_server import FaultSet, ServerConfig
 from manip.spec import SPEC, UnknownClauseError
@@ -114,6 +115,7 @@ _STYLE = {
     "known-fail": "cyan",
     "fixed": "bold red",
     "unsupported": "blue",
+    "not-judged": "bold blue",
 }
 
 
@@ -652,7 +654,7 @@ async def _run_target(
         ) as environment:
             address = environment.address
             config.address = address
-            config.environment = environment
+            config.world = environment.world
             config.options = replace(config.options, address=address)
             console.print("embedded reference server in virtual time (with the simulated Cougar wrist)")
             await _run_with(config, cases, holder, console, quiet)
@@ -660,7 +662,7 @@ async def _run_target(
     embedded = EmbeddedServer(server_config, wrist=True, broken_after=config.options.broken_after)
     with embedded as address:
         config.address = address
-        config.environment = embedded.environment
+        config.world = embedded.environment.world if embedded.environment is not None else None
         config.options = replace(config.options, address=address)
         console.print(
             f"embedded reference server at {address} (with the simulated Cougar wrist)", markup=False
@@ -768,11 +770,22 @@ def _summary(console: Console, report: RunReport, quiet: bool = False) -> None:
         console.print(f"[bold magenta]unstable[/]: {escape(problem)}")
     verdict_style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
     shown = ", ".join(parts) or "no cases"
+    unjudged = report.not_judged_clauses()
     console.print(
         f"[{verdict_style}]{report.verdict}[/] (exit {int(report.exit_code)}): {shown}"
         f" in {report.duration:.1f} s; seed {report.seed}"
         + ("; virtual time" if report.time == "virtual" else "")
+        + (
+            f"; {len(unjudged)} MUST clause(s) not judged on this target (--world judges them)"
+            if unjudged
+            else ""
+        )
     )
+    if unjudged:
+        console.print(
+            f"[{_STYLE['not-judged']}]not judged[/]: {escape(', '.join(unjudged))} (they need a condition of "
+            f"the arm's world; {escape(WITHOUT_WORLD)})"
+        )
     slow = [r for r in report.results if r.deadline and r.duration > 0.8 * r.deadline]
     for r in slow:
         console.print(

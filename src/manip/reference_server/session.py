@@ -234,6 +234,7 @@ class ServerSession:
         if Fault.COLLISION_UNCHECKED in faults:
             self.arm.collision_tol_deg = math.inf
         self.arm.increment_from_actual = Fault.INCREMENT_FROM_ACTUAL in faults
+        self.arm.keep_queue_on_abort = Fault.ABORT_KEEPS_QUEUE in faults
         if Fault.SEGMENTS_STOP in faults:
             self.arm.stop_between_segments = _SEGMENTS_STOP_REST_S
         if Fault.SERVO_DOUBLE_RATE in faults:
@@ -248,6 +249,8 @@ class ServerSession:
         """The request-notifications mask in force (bit 0 guard hit, bit 1 segment completed)."""
         self.last_processed: int | None = None
         """Packet number of the last request processed (the RFC's until the first request)."""
+        self._processed_before: int | None = None
+        """The one processed before it (fault warning-number-previous)."""
         self.last_received: int | None = None
         self._now = float("-inf")
         self._out: list[Outgoing] = []
@@ -351,6 +354,8 @@ class ServerSession:
             elif isinstance(ev, MotionAborted):
                 self._emit_error(ServerOp.ASYNCHRONOUS_ERROR, number, errors.abort_error(ev))
             elif isinstance(ev, FollowingWarning):
+                if Fault.WARNING_NUMBER_PREVIOUS in self.faults and self._processed_before is not None:
+                    number = self._processed_before
                 self._emit_error(ServerOp.ASYNCHRONOUS_WARNING, number, errors.warning_error(ev))
                 if Fault.WARNING_INTERRUPTS in self.faults:
                     self._report_arm(number, self.arm.halt(AbortCause.COLLISION))
@@ -377,7 +382,10 @@ class ServerSession:
         try:
             values = pending.outcome()
         except RequestError as exc:
-            state = self._refuse(number, exc)
+            if Fault.WRIST_ERROR_FATAL in self.faults:
+                state = self._fatal(number, replace(exc.error, severity="F"))
+            else:
+                state = self._refuse(number, exc)
         else:
             self._reply(op, number, values)
         state = state or State.READY
@@ -406,6 +414,7 @@ class ServerSession:
 
     def _serve(self, event: _Event) -> State | None:
         self._run_arm(event)
+        self._processed_before = self.last_processed
         self.last_received = self.last_processed = event.packet_no
         number = self._echo(event)
         self._next_state = None
@@ -456,6 +465,10 @@ class ServerSession:
         return None
 
     def _fatal(self, number: int, error: ErrorMessage) -> State | None:
+        if Fault.FATAL_NUMBER_PREVIOUS in self.faults:
+            number = (number - 1) & WORD_MASK
+        if Fault.FATAL_SEVERITY_E in self.faults:
+            error = replace(error, severity="E")
         self._emit_error(ServerOp.FATAL_ERROR, number, error)
         if Fault.FATAL_WITHOUT_CLOSE in self.faults:
             return None

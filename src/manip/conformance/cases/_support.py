@@ -117,16 +117,6 @@ def error_of(packet: Answer | WirePacket) -> ErrorReply | None:
     return None
 
 
-async def connect_arranged(ctx: CaseContext, *switches: str) -> Probe:
-    """A probe whose connection opens under the embedded server's environment ``switches`` (conditions
-    of the arm's world, :class:`~manip.conformance.suite.embedded.ServerEnvironment`); against another
-    target, a plain connection (the case then judges what the target does by itself)."""
-    if ctx.environment is None:
-        return await ctx.connect()
-    with ctx.environment.arrange(*switches):
-        return await ctx.connect()
-
-
 async def settle(
     ctx: CaseContext, probe: Probe, goal: Iterable[float], *, within: float = 10.0, tol: float = 1e-3
 ) -> tuple[float, ...] | None:

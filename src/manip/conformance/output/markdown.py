@@ -14,7 +14,14 @@ import re
 from collections.abc import Mapping
 from typing import Any, Final
 
-from manip.conformance.output.report_view import FAILING, OUTCOME_ORDER, Report, failure_groups, seeded
+from manip.conformance.output.report_view import (
+    FAILING,
+    OUTCOME_ORDER,
+    Report,
+    failure_groups,
+    not_judged_line,
+    seeded,
+)
 
 __all__ = ["render_markdown"]
 
@@ -72,7 +79,9 @@ def render_markdown(report: Report) -> str:
     ]
     for problem in [*report.get("problems", []), *report.get("unstable", [])]:
         lines.append(f"- **problem**: {_text(problem)}")
-    if report.get("problems") or report.get("unstable"):
+    if unjudged := not_judged_line(report):
+        lines.append(f"- **not judged**: {_text(unjudged)}")
+    if report.get("problems") or report.get("unstable") or unjudged:
         lines.append("")
     groups = failure_groups(report)
     if not groups:

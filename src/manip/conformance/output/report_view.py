@@ -18,6 +18,7 @@ from manip.conformance.judge.packets import WirePacket, describe
 from manip.conformance.output.packet_text import annotated
 from manip.conformance.output.report import SCHEMA_VERSION
 from manip.conformance.suite.results import OUTCOMES
+from manip.conformance.suite.world import WITHOUT_WORLD
 from manip.links import AddressError, parse_address
 from manip.spec import SPEC
 
@@ -32,12 +33,23 @@ __all__ = [
     "clause_info",
     "failure_groups",
     "load_report",
+    "not_judged_line",
     "packet_rows",
     "seeded",
     "wire_order",
 ]
 
-OUTCOME_ORDER: Final = ("fail", "error", "fixed", "warn", "known-fail", "skip", "unsupported", "pass")
+OUTCOME_ORDER: Final = (
+    "fail",
+    "error",
+    "fixed",
+    "warn",
+    "known-fail",
+    "not-judged",
+    "skip",
+    "unsupported",
+    "pass",
+)
 if set(OUTCOME_ORDER) != set(OUTCOMES):  # a new outcome must get its place (and colour) in the documents
     raise RuntimeError(f"OUTCOME_ORDER {OUTCOME_ORDER} does not list the outcomes {OUTCOMES}")
 """Outcomes, the ones needing attention first."""
@@ -72,6 +84,17 @@ def load_report(path: Path) -> dict[str, Any]:
     if missing:
         raise ReportError(f"{path} lacks the report field(s) {', '.join(missing)}")
     return data
+
+
+def not_judged_line(report: Report) -> str:
+    """The sentence on the MUST clauses no case could judge on the target ("" when there are none)."""
+    clauses = [str(c) for c in report.get("not_judged", [])]
+    if not clauses:
+        return ""
+    return (
+        f"{len(clauses)} MUST clause(s) not judged on this target: {', '.join(clauses)} (they need a "
+        f"condition of the arm's world; {WITHOUT_WORLD})"
+    )
 
 
 def seeded(report: Report) -> bool:

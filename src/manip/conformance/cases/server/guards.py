@@ -22,6 +22,7 @@ from manip.conformance.cases._support import (
 from manip.conformance.judge.checks import WirePacket, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
+from manip.conformance.suite.world import WristForce
 from manip.spec.constants import AsyncCondition, ServerOp
 
 PHANTOM_OZ: Final = 64.0
@@ -211,3 +212,81 @@ async def _unasked(ctx: CaseContext, probe: Probe, dvec: list[float], tol: float
         expected="no asynchronous response for a guard hit not asked for",
         seen=extra,
     )
+
+
+PUSH_OZ: Final = 48.0
+"""The force the world puts on the hand to trip the live guard (ounces, along the hand's x axis)."""
+PUSH_TOL_OZ: Final = 24.0
+"""The live guard's tolerance: half the push, and well above what the hand feels at rest."""
+
+
+@case(
+    "server.async.guard-trip-live",
+    clauses=["async.layout", "async.codes", "motion.abort"],
+    hazard="motion",
+    deadline=20.0,
+)
+async def guard_trip_live(ctx: CaseContext) -> None:
+    """A stop-the-move guard armed across the hand's x axis does not trip at rest, and trips when the
+    world pushes the hand along it: a guard-hit response (code 1, word 2 = 1, word 3 = the guard), and
+    the motion aborted (AWA until reset).
+
+    The target's world puts the force on the hand (``wrist-force``: the embedded server's world always,
+    another target's with ``--world``); without a world the case is not judged.  A target that serves no
+    wrist skips it."""
+    probe = await ctx.connect()
+    version = await probe.call("wrist-version")
+    if not version.is_response:
+        ctx.skip(f"the target serves no wrist ({version}): the case needs a Cougar wrist")
+    await power_on(ctx, probe)
+    start = await read_floats(ctx, probe, "joint-angles")
+    forces = await read_floats(ctx, probe, "read-forces")
+    if abs(forces[0]) >= PUSH_TOL_OZ / 2:
+        ctx.skip(f"the hand already feels {forces[0]:.1f} oz along x at rest: no margin for the live guard")
+    index = ctx.random.randrange(16)
+    require_response(ctx, await probe.call("request-notifications", mask=GUARD_BIT), "guard notifications")
+    require_response(ctx, await probe.call("set-joint-angles", joints=_swing(start)), "a move of joint 1")
+    dvec = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    require_response(
+        ctx,
+        await probe.call("set-guard", type_index=STOP_BIT | index, dvec=dvec, tol=PUSH_TOL_OZ),
+        "a stop-the-move guard",
+    )
+    early = await _guard_hit(ctx, probe, QUIET)
+    ctx.expect(
+        early is None,
+        clause="async.codes",
+        expected=f"no guard hit while nothing pushes the hand (guard {index}, {PUSH_TOL_OZ:g} oz)",
+        seen=early,
+    )
+    try:
+        async with ctx.arranged(WristForce((PUSH_OZ, 0.0, 0.0))):
+            hit = await _guard_hit(ctx, probe, HIT_WAIT)
+            if hit is None:
+                ctx.fail(
+                    f"no guard-hit response within {HIT_WAIT:g} s of a {PUSH_OZ:g} oz push across guard "
+                    f"{index}",
+                    clause="async.codes",
+                    expected="an asynchronous response (203) with condition code 1 (guard hit)",
+                    actual="nothing",
+                )
+            ctx.expect(
+                (word(hit.data, 4), word(hit.data, 6)) == (1, index),
+                clause="async.layout",
+                expected=f"word 2 = 1 (trajectory stopped), word 3 = {index} (the guard)",
+                seen=hit,
+            )
+            refused = await probe.call("set-joint-angles", joints=list(start))
+            expect_refusal(
+                ctx,
+                refused,
+                clause="motion.abort",
+                severities=("E",),
+                codes=("AWA",),
+                what="a move after the pushed guard stopped the motion",
+            )
+    finally:
+        await probe.call("clear-guard", index=index)
+        await power_on(ctx, probe)
+        await probe.call("set-joint-angles", joints=list(start))
+        await settle(ctx, probe, start, within=5.0)
