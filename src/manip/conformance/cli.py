@@ -30,7 +30,7 @@ import shlex
 import sys
 import traceback
 from collections.abc import Callable, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -77,7 +77,9 @@ from manip.conformance.suite.results import CaseResult, ExitCode, LivenessCheck,
 from manip.conformance.suite.runner import RunConfig, RunEvents, Runner
 from manip.conformance.suite.selection import PatternError, PatternSet, match_id
 from manip.conformance.suite.stability import instability, repeat_seeds
-from manip.conformance.suite.world import WITHOUT_WORLD
+from manip.conformance.suite.world import WITHOUT_WORLD, WorldError
+from manip.conformance.suite.world_link import DEFAULT_ANSWER_TIMEOUT, open_world
+from manip.conformance.suite.world_prompt import PROMPT_TIMEOUT, check_terminal
 from manip.links import AddressError, parse_address, virtual_clock
 from manip.reference_server import FaultSet, ServerConfig
 from manip.spec import SPEC, UnknownClauseError
@@ -267,6 +269,25 @@ def main() -> None:
     "and once more with the first; a case whose verdict changes between seeds, or between the two runs "
     "of one seed (in virtual time: whose packets change), is a problem of the suite: exit 4.",
 )
+@click.option(
+    "--world",
+    "world",
+    default=None,
+    metavar="CMD_OR_URL",
+    help="HOST's world, which arranges what the protocol cannot provoke (an obstacle, a calibration "
+    "failure, a silent wrist...; contract 2, docs/world-harness.md): tcp://HOST:PORT of a world that "
+    "listens (manip-server --world tcp://127.0.0.1:0), a command line the suite starts, or 'prompt' (an "
+    "operator at a terminal arranges each condition by hand).  Without it the cases that need one end "
+    "not-judged.  The embedded server has its own.",
+)
+@click.option(
+    "--world-timeout",
+    "world_timeout",
+    type=click.FloatRange(min=0.1),
+    default=None,
+    metavar="SECONDS",
+    help="How long the world has to arrange or clear a condition (default 30 s; 300 s with --world prompt).",
+)
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar; failures and the summary only.")
 def run(
     host: str | None,
@@ -296,6 +317,8 @@ def run(
     record: Path | None,
     time_mode: str | None,
     repeat: int,
+    world: str | None,
+    world_timeout: float | None,
     quiet: bool,
 ) -> None:
     """Run the suite against HOST (a link address: tcp://HOST:PORT, chudp://HOST:PORT?addr=OCTAL,
@@ -368,6 +391,7 @@ def run(
             raise click.UsageError(f"--puma: {exc}") from None
     elif given("wrist_listen") or given("wrist_wait"):
         raise click.UsageError("--wrist-listen and --wrist-wait apply to --puma")
+    _check_world(world, world_timeout, host=host, cougar=cougar, puma=puma)
     if record is not None and repeat > 1:
         raise click.UsageError("--record records one run: not with --repeat")
     simulated = not host and target is None
@@ -418,6 +442,8 @@ def run(
         extra += ["--server-fault", fault]
     if simulated and not virtual:
         extra += ["--time", "real"]
+    if world is not None:
+        extra += ["--world", world]
     config = RunConfig(
         address=address,
         options=options,
@@ -437,11 +463,28 @@ def run(
         config.reproduce_prefix = puma_target.reproduce_prefix()
     console.print(f"manip-conform: seed [bold]{seed}[/] (rerun with --seed {seed})")
     if repeat > 1:
-        report, code = _repeat(config, cases, config_faults, console, quiet, target or puma_target, repeat)
+        report, code = _repeat(
+            config,
+            cases,
+            config_faults,
+            console,
+            quiet,
+            target or puma_target,
+            repeat,
+            _world_of(world, world_timeout),
+        )
     else:
         holder: dict[str, Runner] = {}
         code = _execute(
-            config, cases, config_faults, holder, console, quiet, cougar=target or puma_target, record=record
+            config,
+            cases,
+            config_faults,
+            holder,
+            console,
+            quiet,
+            cougar=target or puma_target,
+            record=record,
+            world=_world_of(world, world_timeout),
         )
         report = holder["runner"].report if "runner" in holder else None
     if report is not None:
@@ -465,6 +508,7 @@ def _repeat(
     quiet: bool,
     cougar: CougarTarget | PumaTarget | None,
     runs: int,
+    world: WorldSpec | None = None,
 ) -> tuple[RunReport | None, int | None]:
     """``--repeat``: the selection with ``runs`` seeds, then the first seed again; the first run's report
     carries what changed between them (:mod:`manip.conformance.suite.stability`)."""
@@ -474,7 +518,7 @@ def _repeat(
     for number, seed in enumerate([*seeds, seeds[0]], start=1):
         holder: dict[str, Runner] = {}
         run_config = replace(config, seed=seed, options=replace(config.options))
-        code = _execute(run_config, cases, faults, holder, console, True, cougar=cougar)
+        code = _execute(run_config, cases, faults, holder, console, True, cougar=cougar, world=world)
         if "runner" not in holder:
             return None, code
         report = holder["runner"].report
@@ -495,6 +539,41 @@ def _repeat(
     if not quiet:
         console.print(f"{len(reports)} runs, {len(first.unstable)} stability problem(s)", markup=False)
     return first, None
+
+
+@dataclass(frozen=True)
+class WorldSpec:
+    """``--world`` and ``--world-timeout`` as given."""
+
+    spec: str
+    timeout: float
+
+
+def _world_of(world: str | None, timeout: float | None) -> WorldSpec | None:
+    if world is None:
+        return None
+    default = PROMPT_TIMEOUT if world == "prompt" else DEFAULT_ANSWER_TIMEOUT
+    return WorldSpec(world, default if timeout is None else timeout)
+
+
+def _check_world(
+    world: str | None, timeout: float | None, *, host: str | None, cougar: str | None, puma: bool
+) -> None:
+    """Usage errors of ``--world``: it is HOST's world, and ``prompt`` needs a terminal."""
+    if world is None:
+        if timeout is not None:
+            raise click.UsageError("--world-timeout applies to --world")
+        return
+    if cougar is not None or puma:
+        raise click.UsageError("--world arranges a server's world: not with --cougar or --puma")
+    if not host:
+        raise click.UsageError(
+            "--world is HOST's world: the embedded server (no HOST) has its own, in-process"
+        )
+    if world == "prompt" and (problem := check_terminal()) is not None:
+        raise click.UsageError(problem)
+    if not world.strip():
+        raise click.UsageError("--world names nothing: give tcp://HOST:PORT, a command line or prompt")
 
 
 def _counts_text(report: RunReport) -> str:
@@ -577,13 +656,17 @@ def _execute(
     quiet: bool,
     cougar: CougarTarget | PumaTarget | None = None,
     record: Path | None = None,
+    world: WorldSpec | None = None,
 ) -> int | None:
     """Run; None means "use the report's exit code"."""
     try:
         virtual_clock.run(
-            _run_async(config, cases, faults, holder, console, quiet, cougar, record),
+            _run_async(config, cases, faults, holder, console, quiet, cougar, record, world),
             virtual=config.virtual_time,
         )
+    except WorldError as exc:
+        console.print(f"[bold red]world unusable[/]: {escape(str(exc))}")
+        return int(ExitCode.UNREACHABLE)
     except PumaUnreachableError as exc:
         console.print(f"[bold red]target unreachable[/]: {escape(str(exc))}")
         return int(ExitCode.UNREACHABLE)
@@ -615,12 +698,19 @@ async def _run_async(
     quiet: bool,
     cougar: CougarTarget | PumaTarget | None,
     record: Path | None,
+    world: WorldSpec | None,
 ) -> None:
     # The recording starts on the run's loop, so a simulated run records on its virtual clock.
     how = "manip-conform run (client side)"
     with recording(record, how=how, seed=config.seed, virtual=config.virtual_time) as wrap:
         config.wrap_link = wrap
-        await _run_target(config, cases, faults, holder, console, quiet, cougar)
+        if world is None:
+            await _run_target(config, cases, faults, holder, console, quiet, cougar)
+            return
+        async with open_world(world.spec, answer_timeout=world.timeout) as opened:
+            config.world = opened
+            console.print(f"world: {opened.description}", markup=False)
+            await _run_target(config, cases, faults, holder, console, quiet, cougar)
 
 
 async def _run_target(
