@@ -106,7 +106,7 @@ class ContractWorld:
                 await self._writer.drain()
             except (OSError, RuntimeError) as exc:
                 raise self._break(f"it cannot be written to: {exc}") from None
-            answer = await self._read(self._timeout, f"the answer to {message['type']} #{ident}")
+            answer = await self._read(self._timeout, f"answer to {message['type']} #{ident}")
             kinds = {wanted, "failed"} | ({"unsupported"} if wanted == "arranged" else set())
             if answer.get("id") != ident or answer.get("type") not in kinds:
                 raise self._break(f"it answered {message['type']} #{ident} with {_shown(answer)}")
