@@ -15,6 +15,7 @@ from manip.conformance.cli import main
 from manip.conformance.output.coverage import coverage, gaps
 from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.embedded import ServerEnvironment
 from manip.conformance.suite.results import ExitCode, RunReport
 from manip.conformance.suite.runner import RunConfig, Runner
 from manip.conformance.suite.selection import PatternSet
@@ -32,6 +33,7 @@ def _run(faults: list[str], select: list[str], *, strict: bool = False) -> RunRe
                 seed=11,
                 select=PatternSet.of(select, "--select"),
                 embedded=True,
+                world=ServerEnvironment(server).world,
             )
             return await Runner(config, all_cases()).run()
 

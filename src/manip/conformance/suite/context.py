@@ -631,21 +631,34 @@ class CaseContext:
     async def _held(self, world: World, condition: Condition) -> AsyncIterator[None]:
         """The world's arrangement, the time it takes to arrange and to clear kept off the case's
         deadline (an operator may take minutes)."""
-        start = self._clock()
-        async with world.arranged(condition):
-            self._extend_deadline(self._clock() - start)
-            self.note(f"arranged by {world.description}: {condition.describe()}")
-            try:
-                yield
-            finally:
-                start = self._clock()
-        self._extend_deadline(self._clock() - start)
+        manager = world.arranged(condition)
+        async with self._off_deadline():
+            await manager.__aenter__()
+        self.note(f"arranged by {world.description}: {condition.describe()}")
+        try:
+            yield
+        except BaseException as exc:
+            async with self._off_deadline():
+                if not await manager.__aexit__(type(exc), exc, exc.__traceback__):
+                    raise
+        else:
+            async with self._off_deadline():
+                await manager.__aexit__(None, None, None)
 
-    def _extend_deadline(self, seconds: float) -> None:
+    @contextlib.asynccontextmanager
+    async def _off_deadline(self) -> AsyncIterator[None]:
+        """The block's time is not counted against the case's deadline."""
         scope = self.deadline_scope
         when = None if scope is None else scope.when()
-        if scope is not None and when is not None and seconds > 0.0:
-            scope.reschedule(when + seconds)
+        if scope is None or when is None:
+            yield
+            return
+        start = self._clock()
+        scope.reschedule(None)
+        try:
+            yield
+        finally:
+            scope.reschedule(when + (self._clock() - start))
 
     def require_hazard(self, hazard: Hazard) -> None:
         """Skip unless the run allows opcodes of ``hazard`` (for cases that decide at run time)."""

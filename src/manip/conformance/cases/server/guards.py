@@ -245,7 +245,6 @@ async def guard_trip_live(ctx: CaseContext) -> None:
         ctx.skip(f"the hand already feels {forces[0]:.1f} oz along x at rest: no margin for the live guard")
     index = ctx.random.randrange(16)
     require_response(ctx, await probe.call("request-notifications", mask=GUARD_BIT), "guard notifications")
-    require_response(ctx, await probe.call("set-joint-angles", joints=_swing(start)), "a move of joint 1")
     dvec = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
     require_response(
         ctx,
@@ -259,6 +258,8 @@ async def guard_trip_live(ctx: CaseContext) -> None:
         expected=f"no guard hit while nothing pushes the hand (guard {index}, {PUSH_TOL_OZ:g} oz)",
         seen=early,
     )
+    for goal in (_swing(start), list(start), _swing(start), list(start)):  # moving when the push comes
+        require_response(ctx, await probe.call("set-joint-angles", joints=goal), "a move of joint 1")
     try:
         async with ctx.arranged(WristForce((PUSH_OZ, 0.0, 0.0))):
             hit = await _guard_hit(ctx, probe, HIT_WAIT)

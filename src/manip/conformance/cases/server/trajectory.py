@@ -351,7 +351,6 @@ async def abort_drops_queue(ctx: CaseContext) -> None:
         move = await probe.call("set-joint-angles", joints=goal)
         require_response(ctx, move, "a queued move of joint 1")
         segments.append(word(move.data, 2) or 0)
-    await probe.drain(0.3)
     async with ctx.arranged(PanicButton()):
         aborted = await _next_of(ctx, probe, ServerOp.ASYNCHRONOUS_ERROR, 3.0)
         ctx.expect(
@@ -361,6 +360,8 @@ async def abort_drops_queue(ctx: CaseContext) -> None:
             actual="none within 3 s",
         )
     done_before = _completed(probe.packets)
+    if set(segments) <= set(done_before):
+        ctx.not_judged("every queued segment had completed before the panic button aborted the motion")
     await power_on(ctx, probe)
     before = await read_floats(ctx, probe, "joint-angles")
     after_packets = await _watch_after(ctx, probe, ABORT_WATCH_S)
