@@ -860,22 +860,20 @@ def _summary(console: Console, report: RunReport, quiet: bool = False) -> None:
         console.print(f"[bold magenta]unstable[/]: {escape(problem)}")
     verdict_style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
     shown = ", ".join(parts) or "no cases"
-    unjudged = report.not_judged_clauses()
+    unjudged = report.not_judged_hints()
     console.print(
         f"[{verdict_style}]{report.verdict}[/] (exit {int(report.exit_code)}): {shown}"
         f" in {report.duration:.1f} s; seed {report.seed}"
         + ("; virtual time" if report.time == "virtual" else "")
-        + (
-            f"; {len(unjudged)} MUST clause(s) not judged on this target (--world judges them)"
-            if unjudged
-            else ""
-        )
+        + (f"; {len(unjudged)} MUST clause(s) not judged on this target" if unjudged else "")
     )
     if unjudged:
+        listed = ", ".join(f"{clause} ({hint})" for clause, hint in unjudged.items())
         console.print(
-            f"[{_STYLE['not-judged']}]not judged[/]: {escape(', '.join(unjudged))} (they need a condition of "
-            f"the arm's world; {escape(WITHOUT_WORLD)})"
+            f"[{_STYLE['not-judged']}]not judged[/]: {escape(listed)}; what would judge each is in brackets"
         )
+        if "--world" in unjudged.values():
+            console.print(f"--world: {escape(WITHOUT_WORLD)}")
     slow = [r for r in report.results if r.deadline and r.duration > 0.8 * r.deadline]
     for r in slow:
         console.print(

@@ -17,7 +17,7 @@ from typing import Any, Final
 from manip.conformance.judge.packets import WirePacket, describe
 from manip.conformance.output.packet_text import annotated
 from manip.conformance.output.report import SCHEMA_VERSION
-from manip.conformance.suite.results import OUTCOMES
+from manip.conformance.suite.results import OUTCOMES, judging_hint
 from manip.conformance.suite.world import WITHOUT_WORLD
 from manip.links import AddressError, parse_address
 from manip.spec import SPEC
@@ -91,9 +91,16 @@ def not_judged_line(report: Report) -> str:
     clauses = [str(c) for c in report.get("not_judged", [])]
     if not clauses:
         return ""
+    hints: dict[str, str] = {}
+    for case in report.get("cases", []):
+        if case.get("outcome") == "not-judged":
+            for clause in case.get("clauses", []):
+                hints.setdefault(str(clause), judging_hint(str(case.get("reason", ""))))
+    listed = ", ".join(f"{c} ({hints.get(c, 'see its case')})" for c in clauses)
+    world = f"; --world: {WITHOUT_WORLD}" if "--world" in hints.values() else ""
     return (
-        f"{len(clauses)} MUST clause(s) not judged on this target: {', '.join(clauses)} (they need a "
-        f"condition of the arm's world; {WITHOUT_WORLD})"
+        f"{len(clauses)} MUST clause(s) not judged on this target: {listed}; what would judge each is in "
+        f"brackets{world}"
     )
 
 

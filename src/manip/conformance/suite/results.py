@@ -23,6 +23,7 @@ Exit codes (:class:`ExitCode`): 0 conformant, 1 non-conformant (or a stale known
 from __future__ import annotations
 
 import enum
+import re
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final, Literal
@@ -44,6 +45,7 @@ __all__ = [
     "Outcome",
     "RunReport",
     "Violation",
+    "judging_hint",
 ]
 
 Outcome = Literal["pass", "fail", "warn", "error", "skip", "known-fail", "fixed", "unsupported", "not-judged"]
@@ -60,6 +62,16 @@ OUTCOMES: Final[tuple[str, ...]] = (
 )
 JUDGED: Final = frozenset({"pass", "fail", "warn", "known-fail", "fixed"})
 """Outcomes of a case that ran to a verdict on its clauses."""
+
+
+_OPTION = re.compile(r"--[a-z][a-z-]+")
+
+
+def judging_hint(reason: str) -> str:
+    """What would judge a not-judged case, in a word: the first option its reason names (``--world``,
+    ``--broken-after``), else "see its reason"."""
+    found = _OPTION.search(reason)
+    return found.group(0) if found else "see its reason"
 
 
 class ExitCode(enum.IntEnum):
@@ -155,6 +167,17 @@ class RunReport:
                 if c not in judged and c in SPEC.clauses and SPEC.clauses[c].level == "MUST"
             }
         )
+
+    def not_judged_hints(self) -> dict[str, str]:
+        """Each MUST clause left unjudged (:meth:`not_judged_clauses`) with what would judge it."""
+        clauses = set(self.not_judged_clauses())
+        hints: dict[str, str] = {}
+        for result in self.results:
+            if result.outcome == "not-judged":
+                for clause in result.clauses:
+                    if clause in clauses:
+                        hints.setdefault(clause, judging_hint(result.reason))
+        return dict(sorted(hints.items()))
 
     def counts(self) -> dict[str, int]:
         counter: Counter[str] = Counter(r.outcome for r in self.results)

@@ -212,3 +212,7 @@ async def _command_world(command: str, answer_timeout: float) -> AsyncIterator[C
         except TimeoutError:
             process.kill()
             await process.wait()
+        # What it wrote and nobody read (a dead process writes no more): the pipe then closes.
+        with contextlib.suppress(OSError, ValueError, TimeoutError, asyncio.LimitOverrunError):
+            while await asyncio.wait_for(process.stdout.read(MAX_LINE), EXIT_GRACE):
+                pass
