@@ -23,13 +23,14 @@ subcommands (``replay``, ``verify``) added by other modules: they register on :d
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import json
 import os
 import shlex
 import sys
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, TypeVar
@@ -391,7 +392,7 @@ def run(
             raise click.UsageError(f"--puma: {exc}") from None
     elif given("wrist_listen") or given("wrist_wait"):
         raise click.UsageError("--wrist-listen and --wrist-wait apply to --puma")
-    _check_world(world, world_timeout, host=host, cougar=cougar, puma=puma)
+    _check_world(world, world_timeout, host=host, cougar=cougar)
     if record is not None and repeat > 1:
         raise click.UsageError("--record records one run: not with --repeat")
     simulated = not host and target is None
@@ -556,16 +557,14 @@ def _world_of(world: str | None, timeout: float | None) -> WorldSpec | None:
     return WorldSpec(world, default if timeout is None else timeout)
 
 
-def _check_world(
-    world: str | None, timeout: float | None, *, host: str | None, cougar: str | None, puma: bool
-) -> None:
+def _check_world(world: str | None, timeout: float | None, *, host: str | None, cougar: str | None) -> None:
     """Usage errors of ``--world``: it is HOST's world, and ``prompt`` needs a terminal."""
     if world is None:
         if timeout is not None:
             raise click.UsageError("--world-timeout applies to --world")
         return
-    if cougar is not None or puma:
-        raise click.UsageError("--world arranges a server's world: not with --cougar or --puma")
+    if cougar is not None:
+        raise click.UsageError("--world arranges a server's world: not with --cougar")
     if not host:
         raise click.UsageError(
             "--world is HOST's world: the embedded server (no HOST) has its own, in-process"
@@ -704,13 +703,19 @@ async def _run_async(
     how = "manip-conform run (client side)"
     with recording(record, how=how, seed=config.seed, virtual=config.virtual_time) as wrap:
         config.wrap_link = wrap
-        if world is None:
-            await _run_target(config, cases, faults, holder, console, quiet, cougar)
-            return
-        async with open_world(world.spec, answer_timeout=world.timeout) as opened:
-            config.world = opened
-            console.print(f"world: {opened.description}", markup=False)
-            await _run_target(config, cases, faults, holder, console, quiet, cougar)
+        await _run_target(config, cases, faults, holder, console, quiet, cougar, world)
+
+
+@contextlib.asynccontextmanager
+async def _opened_world(config: RunConfig, world: WorldSpec | None, console: Console) -> AsyncIterator[None]:
+    """HOST's world (``--world``) for the block, as the run's (nothing without one)."""
+    if world is None:
+        yield
+        return
+    async with open_world(world.spec, answer_timeout=world.timeout) as opened:
+        config.world = opened
+        console.print(f"world: {opened.description}", markup=False)
+        yield
 
 
 async def _run_target(
@@ -721,9 +726,10 @@ async def _run_target(
     console: Console,
     quiet: bool,
     cougar: CougarTarget | PumaTarget | None,
+    world: WorldSpec | None = None,
 ) -> None:
     if isinstance(cougar, PumaTarget):  # --puma: the suite plays Cougar for the Puma
-        await _run_puma(config, cases, holder, console, quiet, cougar)
+        await _run_puma(config, cases, holder, console, quiet, cougar, world)
         return
     if cougar is not None:  # --cougar: the Cougar target (embedded or not)
         async with cougar.running() as address:
@@ -734,7 +740,8 @@ async def _run_target(
             await _run_with(config, cases, holder, console, quiet)
         return
     if not config.embedded:
-        await _run_with(config, cases, holder, console, quiet)
+        async with _opened_world(config, world, console):
+            await _run_with(config, cases, holder, console, quiet)
         return
     server_config = ServerConfig() if faults is None else ServerConfig(faults=faults)
     # The embedded robot has the simulated Cougar wrist, so the wrist opcodes are checked too.
@@ -767,6 +774,7 @@ async def _run_puma(
     console: Console,
     quiet: bool,
     puma: PumaTarget,
+    world: WorldSpec | None = None,
 ) -> None:
     if puma.host is not None:
         console.print(
@@ -774,8 +782,9 @@ async def _run_puma(
             f"Puma's wrist link (manip-server --cougar {puma.wrist_listen})",
             markup=False,
         )
-    async with puma.running(config.seed) as address:
+    async with puma.running_with_world(config.seed) as (address, own_world):
         config.address = address
+        config.world = own_world or config.world
         config.options = _with_address(config.options, address)
         if puma.embedded:
             how = "in virtual time" if config.virtual_time else f"at {address}"
@@ -784,7 +793,8 @@ async def _run_puma(
             )
         else:
             console.print(f"the Puma's wrist link is up; judging {address}", markup=False)
-        await _run_with(config, cases, holder, console, quiet)
+        async with _opened_world(config, world, console):  # HOST's, once it is up
+            await _run_with(config, cases, holder, console, quiet)
 
 
 def _with_address(options: RunOptions, address: str) -> RunOptions:
