@@ -21,6 +21,7 @@ import pytest
 from click.testing import CliRunner
 
 from manip.conformance.cli import main
+from manip.conformance.output.html import render_html
 from manip.conformance.output.markdown import render_markdown
 from manip.conformance.output.report import load_schema, report_json, report_junit
 from manip.conformance.suite import world_link
@@ -244,25 +245,44 @@ def test_without_a_world_the_world_cases_are_not_judged_and_every_report_says_so
     skipped = [e.get("message", "") for e in report_junit(report).iter("skipped")]
     assert len(skipped) == len(WORLD_CASES) and all(m.startswith("not judged:") for m in skipped)
     markdown = render_markdown(data)
-    assert (
-        "| not-judged | 6 |" in markdown and "**not judged**" in markdown and "motion.collision" in markdown
-    )
+    assert "| not-judged | 6 |" in markdown and "**not judged**" in markdown
+    assert "motion.collision (--world)" in markdown
+    page = render_html(data)
+    assert 'class="card o-not-judged' in page and "MUST clause(s) not judged on this target" in page
 
 
-def test_a_world_that_cannot_arrange_leaves_the_case_not_judged() -> None:
-    """A world without the condition (an external Cougar: no force on the hand) is asked nothing."""
+REFUSING = (
+    "import json, sys\n"
+    "print(json.dumps({'type': 'hello', 'contract': 2, 'name': 'refusing', 'version': '1', "
+    "'conditions': ['obstacle']}), flush=True)\n"
+    "for line in sys.stdin:\n"
+    "    m = json.loads(line)\n"
+    "    answer = {'type': 'unsupported', 'id': m['id'], 'reason': 'no block at hand'}\n"
+    "    print(json.dumps(answer), flush=True)\n"
+)
+
+
+@pytest.mark.parametrize(
+    ("code", "reason"),
+    [
+        (REFUSING, "no block at hand"),
+        (REFUSING.replace("['obstacle']", "[]"), "does not list it in its hello"),
+    ],
+    ids=["answers unsupported", "lists nothing"],
+)
+def test_a_world_that_cannot_arrange_leaves_the_case_not_judged(
+    code: str, reason: str, tmp_path: Path
+) -> None:
+    script = tmp_path / "world.py"
+    script.write_text(code)
+    command = f"{sys.executable} {script}"
 
     async def go() -> RunReport:
-        async with world_server() as (server, url):
-            server.wrist = None  # as if the server had no wrist: its world has no wrist conditions
-            async with open_world(url) as world:
-                assert "silent-wrist" not in world.conditions
-                return await run_cases(
-                    server.address, ["server.error.fatal-then-close"], world, time_scale=8.0
-                )
+        async with world_server() as (server, _), open_world(command) as world:
+            return await run_cases(server.address, ["server.motion.collision"], world, time_scale=8.0)
 
-    report = asyncio.run(go())
-    assert report.results[0].outcome == "pass"
+    (result,) = asyncio.run(go()).results
+    assert result.outcome == "not-judged" and reason in result.reason, (result.outcome, result.reason)
 
 
 def test_the_world_cases_judge_through_a_world_over_tcp() -> None:
