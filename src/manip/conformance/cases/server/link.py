@@ -141,8 +141,8 @@ async def warning_format(ctx: CaseContext) -> None:
 
 def last_processed(packets: Sequence[WirePacket], before: WirePacket) -> int | None:
     """The request number of the last answer the server sent before ``before`` (erratum
-    ``async-last-processed``): the server answers in
-    order, so that request is the last it had processed when it sent ``before``."""
+    ``async-last-processed``): the server answers in order, so that request is the last it had
+    processed when it sent ``before``."""
     number = None
     for packet in packets:
         if packet is before:
