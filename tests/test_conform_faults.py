@@ -49,7 +49,7 @@ PATHS = {
     Fault.FATAL_SEVERITY_E: "server.error.fatal-then-close",
     Fault.FATAL_DROPS_LINK: "server.error.fatal-then-close",
     Fault.WARNING_INTERRUPTS: "server.async.warning-format",
-    Fault.WARNING_NUMBER_PREVIOUS: "server.async.warning-format",
+    Fault.ASYNC_NUMBER_PREVIOUS: "server.async.warning-format",
     Fault.GUARD_HIT_WORD_SWAPPED: "server.async.guard-hit",
     Fault.WRIST_TIMEOUT_SILENT: "server.wrist.no-answer",
     Fault.WRIST_ERROR_FATAL: "server.wrist.no-answer",

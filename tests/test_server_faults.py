@@ -703,7 +703,7 @@ def test_fatal_error_number_and_severity() -> None:
     assert severity_e == (clean[0], "E")
 
 
-@covers(Fault.WARNING_NUMBER_PREVIOUS)
+@covers(Fault.ASYNC_NUMBER_PREVIOUS)
 def test_warning_number_previous() -> None:
     def scenario(c: Client) -> tuple[int, int]:
         c.one("enable-power")
@@ -713,7 +713,7 @@ def test_warning_number_previous() -> None:
         return int.from_bytes(data[:2], "little"), processed
 
     base = FaultSet.parse(["sluggish-joint"])
-    (clean, processed), (faulty, _) = pair(Fault.WARNING_NUMBER_PREVIOUS, scenario, base=base)
+    (clean, processed), (faulty, _) = pair(Fault.ASYNC_NUMBER_PREVIOUS, scenario, base=base)
     assert clean == processed and faulty == processed - 1
 
 

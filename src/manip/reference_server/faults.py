@@ -81,7 +81,7 @@ class Fault(enum.StrEnum):
     FATAL_NUMBER_PREVIOUS = "fatal-number-previous"
     FATAL_SEVERITY_E = "fatal-severity-e"
     FATAL_DROPS_LINK = "fatal-drops-link"
-    WARNING_NUMBER_PREVIOUS = "warning-number-previous"
+    ASYNC_NUMBER_PREVIOUS = "async-number-previous"
     WRIST_ERROR_FATAL = "wrist-error-fatal"
     ABORT_KEEPS_QUEUE = "abort-keeps-queue"
     # protocol defects of the Puma's side of the wrist link (judged by manip-conform run --puma)
@@ -457,9 +457,10 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "error.fatal-then-close",
             ),
             _info(
-                Fault.WARNING_NUMBER_PREVIOUS,
+                Fault.ASYNC_NUMBER_PREVIOUS,
                 "protocol",
-                "Asynchronous warnings carry the number of the request processed before the last one.",
+                "Asynchronous errors and warnings carry the number of the request processed before the last "
+                "one.",
                 "async-error.request-number",
             ),
             _info(

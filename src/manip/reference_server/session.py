@@ -200,6 +200,7 @@ _GUARD_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.GUARD_HIT].notification
 _GUARD_STOP: Final = 1
 """Word 2 of a guard-hit response: 1 = the trajectory was stopped, 2 = it continues (E.3)."""
 _GUARD_CONTINUE: Final = 2
+_ASYNC_ERRORS: Final = frozenset({ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING})
 _NOTIFICATION_MASK: Final = sum(1 << code.notification_bit for code in SPEC.async_codes.values())
 
 
@@ -250,7 +251,7 @@ class ServerSession:
         self.last_processed: int | None = None
         """Packet number of the last request processed (the RFC's until the first request)."""
         self._processed_before: int | None = None
-        """The one processed before it (fault warning-number-previous)."""
+        """The one processed before it (fault async-number-previous)."""
         self.last_received: int | None = None
         self._now = float("-inf")
         self._out: list[Outgoing] = []
@@ -354,8 +355,6 @@ class ServerSession:
             elif isinstance(ev, MotionAborted):
                 self._emit_error(ServerOp.ASYNCHRONOUS_ERROR, number, errors.abort_error(ev))
             elif isinstance(ev, FollowingWarning):
-                if Fault.WARNING_NUMBER_PREVIOUS in self.faults and self._processed_before is not None:
-                    number = self._processed_before
                 self._emit_error(ServerOp.ASYNCHRONOUS_WARNING, number, errors.warning_error(ev))
                 if Fault.WARNING_INTERRUPTS in self.faults:
                     self._report_arm(number, self.arm.halt(AbortCause.COLLISION))
@@ -543,6 +542,8 @@ class ServerSession:
             self._emit(ServerOp.RESPONSE, _word(number))
 
     def _emit_error(self, opcode: int, number: int, error: ErrorMessage) -> None:
+        if Fault.ASYNC_NUMBER_PREVIOUS in self.faults and opcode in _ASYNC_ERRORS:
+            number = self._processed_before if self._processed_before is not None else number
         if Fault.WRONG_SEVERITY in self.faults:
             error = replace(error, severity="E" if opcode == ServerOp.FATAL_ERROR else "F")
         if Fault.UNALIGNED_ERROR_ARGS not in self.faults and Fault.ERROR_WITHOUT_COLON not in self.faults:

@@ -3,19 +3,19 @@ and asynchronous warnings in the error format when the arm produces any."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from itertools import pairwise
 from typing import Final
 
 from manip.conformance.cases._support import (
     UNASSIGNED_OPCODES,
     error_of,
+    last_processed,
     power_on,
     read_floats,
     require_response,
     settle,
 )
-from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, check_error_packet, word
+from manip.conformance.judge.checks import WirePacket, check_error_packet, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
 from manip.conformance.suite.world import SluggishJoint
@@ -137,19 +137,6 @@ async def warning_format(ctx: CaseContext) -> None:
         seen=back,
     )
     await settle(ctx, probe, start, within=5.0)
-
-
-def last_processed(packets: Sequence[WirePacket], before: WirePacket) -> int | None:
-    """The request number of the last answer the server sent before ``before`` (erratum
-    ``async-last-processed``): the server answers in order, so that request is the last it had
-    processed when it sent ``before``."""
-    number = None
-    for packet in packets:
-        if packet is before:
-            return number
-        if packet.direction == "s2c" and packet.opcode in ANSWER_OPCODES and len(packet.data) >= 2:
-            number = word(packet.data)
-    return number
 
 
 def _judge_warning(ctx: CaseContext, probe: Probe, packet: WirePacket) -> None:

@@ -12,6 +12,7 @@ from typing import Final, NamedTuple
 
 from manip.conformance.cases._support import (
     expect_response,
+    last_processed,
     power_on,
     read_floats,
     require_response,
@@ -287,6 +288,13 @@ async def collision(ctx: CaseContext) -> None:
             expected=f"an asynchronous error (204) when joint 1 meets the obstacle at {wall:.2f} deg",
             actual="none",
         )
+        processed = last_processed(probe.packets, errors[0])
+        ctx.expect(
+            processed is not None and word(errors[0].data) == processed,
+            clause="async-error.request-number",
+            expected=f"the number of the last request processed, #{processed} (the last answered before it)",
+            seen=errors[0],
+        )
         here = await read_floats(ctx, probe, "joint-angles")
         ctx.expect(
             sign * (here[0] - wall) <= 1.0,
@@ -326,7 +334,7 @@ async def _watch_after(ctx: CaseContext, probe: Probe, seconds: float) -> list[W
 
 @case(
     "server.motion.abort-drops-queue",
-    clauses=["motion.abort", "motion.reset"],
+    clauses=["motion.abort", "motion.reset", "async-error.request-number"],
     hazard="power",
     deadline=20.0,
 )
@@ -353,11 +361,19 @@ async def abort_drops_queue(ctx: CaseContext) -> None:
         segments.append(word(move.data, 2) or 0)
     async with ctx.arranged(PanicButton()):
         aborted = await _next_of(ctx, probe, ServerOp.ASYNCHRONOUS_ERROR, 3.0)
+        if aborted is None:
+            ctx.fail(
+                "no asynchronous error within 3 s of the panic button",
+                clause="motion.abort",
+                expected="an asynchronous error (204) when the panic button aborts the motion",
+                actual="none",
+            )
+        processed = last_processed(probe.packets, aborted)
         ctx.expect(
-            aborted is not None,
-            clause="motion.abort",
-            expected="an asynchronous error (204) when the panic button aborts the motion",
-            actual="none within 3 s",
+            processed is not None and word(aborted.data) == processed,
+            clause="async-error.request-number",
+            expected=f"the number of the last request processed, #{processed} (the last answered before it)",
+            seen=aborted,
         )
     done_before = _completed(probe.packets)
     if set(segments) <= set(done_before):
