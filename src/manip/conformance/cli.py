@@ -80,7 +80,7 @@ from manip.conformance.suite.selection import PatternError, PatternSet, match_id
 from manip.conformance.suite.stability import instability, repeat_seeds
 from manip.conformance.suite.world import WITHOUT_WORLD, WorldError
 from manip.conformance.suite.world_link import DEFAULT_ANSWER_TIMEOUT, open_world
-from manip.conformance.suite.world_prompt import PROMPT_TIMEOUT, check_terminal
+from manip.conformance.suite.world_prompt import PROMPT_TIMEOUT, PromptWorld, check_terminal
 from manip.links import AddressError, parse_address, virtual_clock
 from manip.reference_server import FaultSet, ServerConfig
 from manip.spec import SPEC, UnknownClauseError
@@ -804,7 +804,9 @@ def _with_address(options: RunOptions, address: str) -> RunOptions:
 async def _run_with(
     config: RunConfig, cases: Sequence[Case], holder: dict[str, Runner], console: Console, quiet: bool
 ) -> None:
-    progress = progress_bar(console, quiet)
+    progress = progress_bar(
+        console, quiet or isinstance(config.world, PromptWorld)
+    )  # it would hide the questions
     task_id = progress.add_task("conformance", total=0)
 
     def started(selected: list[Case]) -> None:
