@@ -22,6 +22,7 @@ from collections.abc import AsyncIterator
 from typing import Any, Final
 
 from manip.conformance.suite.world import Condition, ConditionUnsupported, WorldError
+from manip.conformance.suite.world_prompt import PromptWorld
 from manip.links.address import AddressError, parse_address
 
 __all__ = ["CONTRACT", "HELLO_TIMEOUT", "MAX_LINE", "ContractWorld", "open_world"]
@@ -151,12 +152,12 @@ def _shown(message: object) -> str:
 
 
 @contextlib.asynccontextmanager
-async def open_world(spec: str, *, answer_timeout: float = DEFAULT_ANSWER_TIMEOUT) -> AsyncIterator[Any]:
+async def open_world(
+    spec: str, *, answer_timeout: float = DEFAULT_ANSWER_TIMEOUT
+) -> AsyncIterator[ContractWorld | PromptWorld]:
     """``async with open_world(spec) as world:`` the world ``--world spec`` names, its hello read.
     WorldError when it cannot be reached or breaks the contract at once."""
     if spec == "prompt":
-        from manip.conformance.suite.world_prompt import PromptWorld  # noqa: PLC0415 - terminal only
-
         yield PromptWorld(answer_timeout=answer_timeout)
         return
     if spec.startswith("tcp://"):
