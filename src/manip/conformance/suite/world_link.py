@@ -89,10 +89,15 @@ class ContractWorld:
         )
         if answer.get("type") == "unsupported":
             raise ConditionUnsupported(condition, str(answer.get("reason", "no reason given")))
+        clear = {"type": "clear", "arrangement": ident}
         try:
             yield
-        finally:
-            await self._ask({"type": "clear", "arrangement": ident}, "cleared")
+        except BaseException:
+            # The case's own end comes first; a world that cannot clear is reported by the next case.
+            with contextlib.suppress(WorldError):
+                await self._ask(clear, "cleared")
+            raise
+        await self._ask(clear, "cleared")
 
     async def _ask(self, message: dict[str, Any], wanted: str) -> tuple[dict[str, Any], int]:
         """Send ``message`` with a fresh id; its answer (``wanted``, or ``unsupported`` for an arrange)."""
