@@ -117,7 +117,10 @@ class ContractWorld:
             if answer.get("id") != ident or answer.get("type") not in kinds:
                 raise self._break(f"it answered {message['type']} #{ident} with {_shown(answer)}")
             if answer.get("type") == "failed":
-                raise WorldError(f"{self.where} could not {message['type']}: {answer.get('reason', '')}")
+                problem = f"it could not {message['type']}: {answer.get('reason', '')}"
+                if message["type"] == "clear":  # the condition may still hold: ask it nothing more
+                    raise self._break(problem)
+                raise WorldError(f"{self.where}: {problem}")
             return answer, ident
 
     async def _read(self, timeout: float, what: str) -> dict[str, Any]:
