@@ -141,6 +141,12 @@ FAKES = {
         'print(\'{"type": "arranged", "id": 99}\', flush=True)',
         "answered arrange #1 with",
     ),
+    "cannot clear": (
+        f"import sys; print({json.dumps(json.dumps(HELLO))}, flush=True); sys.stdin.readline(); "
+        'print(\'{"type": "arranged", "id": 1}\', flush=True); sys.stdin.readline(); '
+        'print(\'{"type": "failed", "id": 2, "reason": "stuck"}\', flush=True)',
+        "it could not clear: stuck",
+    ),
     "silent answer": (
         f"import sys, time; print({json.dumps(json.dumps(HELLO))}, flush=True); sys.stdin.readline(); "
         "time.sleep(30)",
