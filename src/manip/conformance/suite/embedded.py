@@ -27,7 +27,7 @@ import os
 import random
 import tempfile
 import threading
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator
 from types import TracebackType
 from typing import Final
 
@@ -36,7 +36,6 @@ from manip.links import NcpConfig
 from manip.reference_server import ServerConfig
 from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import ReferenceServer, serve
-from manip.reference_server.faults import FAULTS, FaultSet
 from manip.reference_server.world import ReferenceWorld, WorldRefusal
 
 __all__ = [
@@ -56,11 +55,9 @@ class ServerEnvironment:
     """The embedded server's conditions of the arm's world, switched by the cases that need them.
 
     :attr:`world` is the run's :class:`~manip.conformance.suite.world.World` (:class:`EmbeddedWorld`):
-    cases arrange conditions through it, as they do through any target's world.  :meth:`arrange`
-    switches environment faults (:data:`~manip.reference_server.faults.FAULTS` of kind ``environment``)
-    on by name, for the connections opened inside the block (the server reads its configuration when a
-    connection opens), for tests that run the server with a condition.  Protocol faults are refused: a
-    case arranges the world, never a defect of the server it judges."""
+    cases arrange conditions through it, as they do through any target's world; :attr:`reference` is
+    the reference server's own :class:`~manip.reference_server.world.ReferenceWorld` under it.  A world
+    arranges conditions, never a defect of the server it judges (those are ``--server-fault``)."""
 
     def __init__(self, server: ReferenceServer) -> None:
         self._server = server
@@ -70,19 +67,6 @@ class ServerEnvironment:
     @property
     def address(self) -> str:
         return self._server.address
-
-    @contextlib.contextmanager
-    def arrange(self, *switches: str) -> Iterator[None]:
-        """``with environment.arrange("calibrate-nzi", "sluggish-joint=2:0.3"):`` (``NAME[=ARG]`` each)."""
-        extra = FaultSet.parse(switches)
-        defects = sorted(f.value for f in extra.active if FAULTS[f].kind != "environment")
-        if defects:
-            raise ValueError(f"not conditions of the arm's world: {', '.join(defects)}")
-        token = self.reference.hold(extra)
-        try:
-            yield
-        finally:
-            self.reference.clear(token)
 
 
 class EmbeddedWorld:
