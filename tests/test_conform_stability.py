@@ -135,14 +135,16 @@ def test_an_unstable_report_exits_4() -> None:
 
 
 ARRANGED = (
+    "server.async.guard-trip-live",
     "server.async.warning-format",
     "server.error.fatal-then-close",
+    "server.motion.abort-drops-queue",
     "server.motion.collision",
     "server.wrist.no-answer",
 )
-"""Cases that switch a condition of the arm's world on for their connections (a lagging joint, a failing
-calibration, an obstacle, a silent Cougar): a capture does not record the switches, so the replay's plain
-server answers those sessions differently."""
+"""Cases that have the world arrange a condition for their connections (a lagging joint, a failing
+calibration, an obstacle, a silent Cougar, the panic button, a push on the hand): a capture does not
+record the world, so the replay's plain server answers those sessions differently."""
 
 
 @pytest.mark.slow

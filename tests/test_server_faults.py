@@ -793,3 +793,73 @@ def test_driver_and_wrist_faults_against_their_cases() -> None:
         ("guard-hit-word-swapped", "server.async.guard-hit"),
     ):
         assert (_conform(select), _conform(select, fault)) == (0, 1), fault
+
+
+# ------------------------------------------------------------------- defects on the world's paths
+def _fatal_of_calibrate(c: Client) -> tuple[int, str]:
+    c.one("enable-power")
+    out = c.raw(RequestOp.CALIBRATE, b"")
+    error = decode_error(out.packets[0].opcode, out.packets[0].data)
+    return error.request_number, error.error.severity
+
+
+@covers(Fault.FATAL_NUMBER_PREVIOUS)
+@covers(Fault.FATAL_SEVERITY_E)
+def test_fatal_error_number_and_severity() -> None:
+    nzi = FaultSet.parse(["calibrate-nzi"])
+    clean, previous = pair(Fault.FATAL_NUMBER_PREVIOUS, _fatal_of_calibrate, base=nzi)
+    assert previous == (clean[0] - 1, "F") and clean[1] == "F"
+    _, severity_e = pair(Fault.FATAL_SEVERITY_E, _fatal_of_calibrate, base=nzi)
+    assert severity_e == (clean[0], "E")
+
+
+@covers(Fault.ASYNC_NUMBER_PREVIOUS)
+def test_warning_number_previous() -> None:
+    def scenario(c: Client) -> tuple[int, int]:
+        c.one("enable-power")
+        c.one("set-joint-angles", joints=GOAL)
+        processed = c.session.last_processed or 0
+        ((_, data),) = [p for p in _async(c, 3.0) if p[0] == ServerOp.ASYNCHRONOUS_WARNING][:1]
+        return int.from_bytes(data[:2], "little"), processed
+
+    base = FaultSet.parse(["sluggish-joint"])
+    (clean, processed), (faulty, _) = pair(Fault.ASYNC_NUMBER_PREVIOUS, scenario, base=base)
+    assert clean == processed and faulty == processed - 1
+
+
+@covers(Fault.WRIST_ERROR_FATAL)
+def test_wrist_error_fatal() -> None:
+    def read_forces(*faults: str) -> tuple[int, str]:
+        client = WristClient(
+            CougarWrist(SimPort(CougarSim(seed=1))), config=ServerConfig(faults=FaultSet.parse(faults))
+        )
+        client.run(0.1)
+        answer = client.call("read-forces", limit=2.0)
+        assert isinstance(answer, ErrorReply)
+        return answer.opcode, answer.error.severity
+
+    assert read_forces("wrist-silent") == (ServerOp.NON_FATAL_ERROR, "E")
+    assert read_forces("wrist-silent", "wrist-error-fatal") == (ServerOp.FATAL_ERROR, "F")
+
+
+@covers(Fault.ABORT_KEEPS_QUEUE)
+def test_abort_keeps_queue() -> None:
+    def scenario(c: Client) -> bool:
+        c.one("enable-power")
+        for goal in (GOAL, OTHER, GOAL):
+            c.one("set-joint-angles", joints=goal)
+        c.run(0.2)
+        c.session.arm.press_panic(at=c.now)
+        c.run(0.1)
+        c.one("enable-power")
+        c.run(0.5)
+        return c.session.arm.moving
+
+    assert pair(Fault.ABORT_KEEPS_QUEUE, scenario) == (False, True)
+
+
+@covers(Fault.FATAL_DROPS_LINK)
+def test_fatal_drops_link_against_its_case() -> None:
+    """A fault of the driver: the embedded run of the fatal-error case passes clean and fails with it."""
+    select = "server.error.fatal-then-close"
+    assert (_conform(select), _conform(select, "fatal-drops-link")) == (0, 1)

@@ -214,6 +214,7 @@ _GUARD_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.GUARD_HIT].notification
 _GUARD_STOP: Final = 1
 """Word 2 of a guard-hit response: 1 = the trajectory was stopped, 2 = it continues (E.3)."""
 _GUARD_CONTINUE: Final = 2
+_ASYNC_ERRORS: Final = frozenset({ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING})
 _NOTIFICATION_MASK: Final = sum(1 << code.notification_bit for code in SPEC.async_codes.values())
 
 
@@ -248,6 +249,7 @@ class ServerSession:
         if Fault.COLLISION_UNCHECKED in faults:
             self.arm.collision_tol_deg = math.inf
         self.arm.increment_from_actual = Fault.INCREMENT_FROM_ACTUAL in faults
+        self.arm.keep_queue_on_abort = Fault.ABORT_KEEPS_QUEUE in faults
         if Fault.SEGMENTS_STOP in faults:
             self.arm.stop_between_segments = _SEGMENTS_STOP_REST_S
         if Fault.SERVO_DOUBLE_RATE in faults:
@@ -262,6 +264,8 @@ class ServerSession:
         """The request-notifications mask in force (bit 0 guard hit, bit 1 segment completed)."""
         self.last_processed: int | None = None
         """Packet number of the last request processed (the RFC's until the first request)."""
+        self._processed_before: int | None = None
+        """The one processed before it (fault async-number-previous)."""
         self.last_received: int | None = None
         self._now = float("-inf")
         self._out: list[Outgoing] = []
@@ -401,7 +405,10 @@ class ServerSession:
         try:
             values = pending.outcome()
         except RequestError as exc:
-            state = self._refuse(number, exc)
+            if Fault.WRIST_ERROR_FATAL in self.faults:
+                state = self._fatal(number, replace(exc.error, severity="F"))
+            else:
+                state = self._refuse(number, exc)
         else:
             self._reply(op, number, values)
         state = state or State.READY
@@ -430,6 +437,7 @@ class ServerSession:
 
     def _serve(self, event: _Event) -> State | None:
         self._run_arm(event)
+        self._processed_before = self.last_processed
         self.last_received = self.last_processed = event.packet_no
         number = self._echo(event)
         self._next_state = None
@@ -480,6 +488,10 @@ class ServerSession:
         return None
 
     def _fatal(self, number: int, error: ErrorMessage) -> State | None:
+        if Fault.FATAL_NUMBER_PREVIOUS in self.faults:
+            number = (number - 1) & WORD_MASK
+        if Fault.FATAL_SEVERITY_E in self.faults:
+            error = replace(error, severity="E")
         self._emit_error(ServerOp.FATAL_ERROR, number, error)
         if Fault.FATAL_WITHOUT_CLOSE in self.faults:
             return None
@@ -555,6 +567,8 @@ class ServerSession:
 
     def _emit_error(self, opcode: int, number: int, error: ErrorMessage) -> None:
         faults = self.faults
+        if Fault.ASYNC_NUMBER_PREVIOUS in faults and opcode in _ASYNC_ERRORS:
+            number = self._processed_before if self._processed_before is not None else number
         if Fault.WRONG_SEVERITY in faults:
             error = replace(error, severity="E" if opcode == ServerOp.FATAL_ERROR else "F")
         if any(fault in faults and error.code in codes for fault, codes in _SWAPPED_ARGS.items()):

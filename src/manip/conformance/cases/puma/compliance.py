@@ -26,6 +26,7 @@ from manip.conformance.puma.judge import CougarScript, Heard, JudgingCougar, Sai
 from manip.conformance.puma.target import OBSTACLE_FROM, OBSTACLE_JOINT
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
+from manip.conformance.suite.world import Obstacle
 from manip.links.virtual_clock import is_virtual
 from manip.spec.constants import CougarCommand
 
@@ -170,7 +171,14 @@ async def segment_end(ctx: CaseContext) -> None:
 )
 async def no_collision_test(ctx: CaseContext) -> None:
     """A compliant move pushing into an obstacle is not stopped by the collision test (a plain move
-    into it is: the case's precondition, met by the embedded Puma's obstacle)."""
+    into it is: the case's precondition).  The target's world puts the obstacle in joint 1's way (the
+    embedded Puma's world always, another Puma's with ``--world``); without a world the case is not
+    judged."""
+    async with ctx.arranged(Obstacle(OBSTACLE_JOINT, upper=OBSTACLE_FROM)):
+        await _no_collision_test(ctx)
+
+
+async def _no_collision_test(ctx: CaseContext) -> None:
     probe = await session(ctx)
     here = await angles(ctx, probe)
     j = OBSTACLE_JOINT - 1
@@ -182,10 +190,9 @@ async def no_collision_test(ctx: CaseContext) -> None:
     plain = await move(ctx, probe, "set-joint-angles", joints=into)
     hit = await wait_async(ctx, probe, lambda p: is_async_error(p) or is_completed(plain)(p), SEGMENT_WITHIN)
     if hit is None or not is_async_error(hit):
-        ctx.skip(
-            f"a plain move of joint {OBSTACLE_JOINT} past {OBSTACLE_FROM:g} deg did not collide: the case "
-            f"needs an obstacle there (the embedded Puma has one; --server-fault "
-            f"obstacle={OBSTACLE_JOINT}::{OBSTACLE_FROM:g})"
+        ctx.not_judged(
+            f"a plain move of joint {OBSTACLE_JOINT} past {OBSTACLE_FROM:g} deg did not collide although the "
+            "world arranged an obstacle there: no collision test to judge"
         )
     require_response(ctx, await probe.call("reset-abort"), "reset abort after the collision")
     start = await move(ctx, probe, "set-joint-angles", joints=list(here))
