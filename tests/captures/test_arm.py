@@ -29,23 +29,11 @@ from manip.captures.arm_view import (
 )
 from manip.codecs.messages import encode_reply
 from manip.spec.constants import ServerOp
-from tests.test_capture import JOINTS, record, s2c, session_packets
-from tests.test_capture import _validate as validate_shape
+from tests.support.captures import JOINTS, record, s2c, session_packets
+from tests.support.json_schema import validate as _validate
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
-FOXGLOVE = json.loads((ROOT / "tests" / "data" / "foxglove" / "FrameTransform.json").read_text())
-
-
-def _validate(value: Any, schema: dict[str, Any], path: str = "$") -> None:
-    """The capture tests' checker, plus the bounds Foxglove's schema sets (nsec below 10^9)."""
-    validate_shape(value, schema, path)
-    if "minimum" in schema:
-        assert value >= schema["minimum"], f"{path}: {value} < {schema['minimum']}"
-    if "maximum" in schema:
-        assert value <= schema["maximum"], f"{path}: {value} > {schema['maximum']}"
-    for key, sub in schema.get("properties", {}).items():
-        if isinstance(value, dict) and key in value:
-            _validate(value[key], sub, f"{path}.{key}")
+FOXGLOVE = json.loads((Path(__file__).parent / "data" / "foxglove" / "FrameTransform.json").read_text())
 
 
 def _messages(path: Path) -> dict[str, list[tuple[int, dict[str, Any], Any]]]:

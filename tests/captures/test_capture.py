@@ -6,10 +6,8 @@ import asyncio
 import itertools
 import json
 import shutil
-import struct
 import time
 from pathlib import Path
-from typing import Any
 
 import pytest
 from hypothesis import given, settings
@@ -20,58 +18,11 @@ from manip.captures import Annotator, CaptureError, Recorder, read_capture, read
 from manip.captures.format import RAW_TOPIC, VIEW_TOPIC, field_schemas, view_schema
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.framing import encode_tcp
-from manip.codecs.messages import encode_async, encode_error, encode_reply, encode_request, request_op
-from manip.codecs.packet import Packet
+from manip.codecs.messages import encode_error, request_op
 from manip.spec import SPEC
-from manip.spec.constants import ChaosOp, RequestOp, ServerOp
-
-CLIENT = (0o401, 0x1234)
-SERVER = (0o440, 0x5678)
-
-
-def c2s(opcode: int, number: int, data: bytes = b"") -> Packet:
-    return Packet(opcode, SERVER[0], SERVER[1], CLIENT[0], CLIENT[1], number, 0, data)
-
-
-def s2c(opcode: int, number: int, data: bytes = b"") -> Packet:
-    return Packet(opcode, CLIENT[0], CLIENT[1], SERVER[0], SERVER[1], number, 0, data)
-
-
-def word(n: int) -> bytes:
-    return struct.pack("<H", n)
-
-
-JOINTS = (1.5, -90.0, 90.0, 0.25, 10.0, -3.0)
-
-
-def session_packets() -> list[tuple[str, Packet]]:
-    """A session: RFC, OPN, initial RESPONSE, a here, a multi reply, an error, an async, a retransmission."""
-    rfc = Packet(ChaosOp.RFC, SERVER[0], 0, CLIENT[0], CLIENT[1], 1, 0, b"PUMA")
-    err = ErrorMessage("move", "E", "NAP", "No arm power")
-    return [
-        ("c2s", rfc),
-        ("s2c", s2c(ChaosOp.OPN, 1, struct.pack("<HH", 1, 15))),
-        ("s2c", s2c(ServerOp.RESPONSE, 2, word(1))),
-        ("c2s", c2s(RequestOp.JOINT_ANGLES, 2)),
-        ("s2c", s2c(ServerOp.RESPONSE, 3, encode_reply("joint-angles", 2, joints=JOINTS))),
-        ("c2s", c2s(RequestOp.DESCRIBE_SELF, 3)),
-        ("s2c", s2c(ServerOp.RESPONSE, 4, word(3) + b"((:A . 1))")),
-        ("s2c", s2c(ServerOp.RESPONSE, 5, word(3))),
-        ("c2s", c2s(RequestOp.MOVE, 4, encode_request("move", transform=tuple(float(i) for i in range(12))))),
-        ("c2s", c2s(RequestOp.MOVE, 4, encode_request("move", transform=tuple(float(i) for i in range(12))))),
-        ("s2c", s2c(ServerOp.NON_FATAL_ERROR, 6, encode_error(ServerOp.NON_FATAL_ERROR, 4, err))),
-        ("s2c", s2c(ServerOp.ASYNCHRONOUS_RESPONSE, 7, encode_async(4, 2, 0, 7))),
-        ("c2s", Packet(ChaosOp.EOF, SERVER[0], SERVER[1], CLIENT[0], CLIENT[1], 5, 0)),
-        ("s2c", s2c(ChaosOp.CLS, 0, b"Bye")),
-    ]
-
-
-def record(path: Path, packets: list[tuple[str, Packet]], **kw: Any) -> None:
-    with Recorder(path, how="test", seed=7, command_line=["test", "x"], **kw) as rec:
-        link = rec.open_link("tcp", name="test link")
-        for i, (direction, packet) in enumerate(packets):
-            rec.packet(link, direction, packet, t_ns=1_000_000_000 + i * 1000)  # type: ignore[arg-type]
-
+from manip.spec.constants import RequestOp, ServerOp
+from tests.support.captures import JOINTS, c2s, record, s2c, session_packets, word
+from tests.support.json_schema import validate as _validate
 
 # ------------------------------------------------------------------------------ round trip
 
@@ -169,39 +120,6 @@ def test_frames_that_do_not_decode_are_kept_as_bad_frames(tmp_path: Path) -> Non
 
 
 # ------------------------------------------------------------------------------ JSON schema
-
-
-def _validate(value: Any, schema: dict[str, Any], path: str = "$") -> None:
-    """A small JSON Schema checker for the keywords the capture schemas use."""
-    types: dict[str, type | tuple[type, ...]] = {
-        "object": dict,
-        "array": list,
-        "string": str,
-        "boolean": bool,
-        "integer": int,
-        "number": (int, float),
-    }
-    kind = schema.get("type")
-    if kind is not None:
-        assert isinstance(value, types[kind]), f"{path}: {value!r} is not {kind}"
-        if kind in ("integer", "number"):
-            assert not isinstance(value, bool), path
-    if "enum" in schema:
-        assert value in schema["enum"], f"{path}: {value!r} not in {schema['enum']}"
-    if isinstance(value, dict):
-        props = schema.get("properties", {})
-        for key in schema.get("required", []):
-            assert key in value, f"{path}: {key} missing"
-        for key, item in value.items():
-            if key in props:
-                _validate(item, props[key], f"{path}.{key}")
-            else:
-                assert schema.get("additionalProperties", True) is not False, f"{path}: unexpected {key}"
-    if isinstance(value, list):
-        assert len(value) >= schema.get("minItems", 0), path
-        assert len(value) <= schema.get("maxItems", len(value)), path
-        for i, item in enumerate(value):
-            _validate(item, schema.get("items", {}), f"{path}[{i}]")
 
 
 def test_the_checker_can_fail() -> None:

@@ -45,8 +45,8 @@ from manip.codecs.packet import Packet
 from manip.codecs.pdp11float import pack_f, unpack_f, words_to_f
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 CLIENT = (0o401, 0x1234)
 SERVER = (0o440, 0x5678)
 _JSON = json.JSONEncoder(separators=(",", ":"))

@@ -16,8 +16,8 @@ from manip.captures import read_capture, read_session
 from manip.captures.cli import main as capture_main
 from manip.decode.cli import main as decode_main
 from manip.spec import SPEC
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "captures"
 NAMES = ("describe-self", "motion", "errors")
 

@@ -30,8 +30,8 @@ from manip.codecs.framing import CHUDP_HEADER
 from manip.conformance.cli import main as conform_main
 from manip.decode.cli import main as decode_main
 from manip.spec.constants import ChaosOp, RequestOp, ServerOp
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ("describe-self", "motion", "errors")
 CLIENT = ("192.0.2.7", 5000)  # TEST-NET addresses: only ever written into files here
 SERVER = ("192.0.2.1", CHUDP_PORT)

@@ -23,6 +23,7 @@ from manip.codecs.packet import Packet
 from manip.links import open_connection
 from manip.reference_server.driver import serve
 from manip.spec.constants import RequestOp
+from tests.support.paths import ROOT
 
 Msg = tuple[str, int, int, bytes]
 
@@ -209,7 +210,7 @@ def test_recover_writes_the_default_name_its_help_gives(tmp_path: Path) -> None:
     from manip.captures.cli import main as capture_main
 
     source = tmp_path / "s.mcap"
-    source.write_bytes((Path(__file__).resolve().parents[1] / "captures" / "motion.mcap").read_bytes())
+    source.write_bytes((ROOT / "captures" / "motion.mcap").read_bytes())
     help_text = CliRunner().invoke(capture_main, ["recover", "--help"]).output
     assert "s.mcap -> s.recovered.mcap" in " ".join(help_text.split())
     result = CliRunner().invoke(capture_main, ["recover", str(source)])

@@ -20,7 +20,7 @@ from manip.codecs.cougar import (
 )
 from manip.codecs.errors import DecodeError, EncodeError
 from manip.spec import SPEC, CougarMessage
-from tests.strategies import cougar_values
+from tests.support.strategies import cougar_values
 
 commands = st.sampled_from(sorted(SPEC.cougar_commands.values(), key=lambda m: m.code))
 responses = st.sampled_from(sorted(SPEC.cougar_responses.values(), key=lambda m: m.code))

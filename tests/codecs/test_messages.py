@@ -27,7 +27,7 @@ from manip.codecs.messages import (
 )
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import RequestOp, ServerOp
-from tests.strategies import f_bytes, f_values, layout_values, request_and_values, requests
+from tests.support.strategies import f_bytes, f_values, layout_values, request_and_values, requests
 
 
 def _same(a: Any, b: Any) -> bool:

@@ -31,8 +31,8 @@ from manip.conformance.suite.embedded import EmbeddedServer
 from manip.reference_server import FaultSet, ServerConfig
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "captures"
 CLIENT = (0o401, 0x1234)
 SERVER = (0o440, 0x5678)

@@ -1,6 +1,6 @@
 """Cases report only the clauses they declare, at the clauses' levels.
 
-The proof over every registered case is static (``tests/clause_scan.py`` reads the code each case can
+The proof over every registered case is static (``tests/support/clause_scan.py`` reads the code each case can
 reach, and resolves every clause it can name): running each case against the reference server with every
 fault switch would reach only the branches some fault drives, and take minutes.  What the scan leaves to
 other code it checks here too: the checkers' clauses are the transcript invariant's closed set, and the
@@ -40,7 +40,7 @@ from manip.links import ChaosConnection
 from manip.reference_server.driver import serve
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
-from tests.clause_scan import Index, Scanner, scan_all
+from tests.support.clause_scan import Index, Scanner, scan_all
 
 CASES = all_cases()
 

@@ -33,9 +33,9 @@ from manip.conformance.suite.runner import RunConfig, Runner
 from manip.conformance.suite.selection import PatternSet
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
-from tests.test_conform_framework import _validate
+from tests.support.json_schema import validate as _validate
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "captures"
 ECHO = "response.echoes-request-number"
 

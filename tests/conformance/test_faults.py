@@ -87,7 +87,7 @@ PROTOCOL_FAULTS = sorted(
     (f for f, info in FAULTS.items() if info.kind == "protocol" and f not in WRIST_SIDE),
     key=lambda f: f.value,
 )
-"""The wrist side's defects are caught by the puma cases (tests/test_conform_puma.py)."""
+"""The wrist side's defects are caught by the puma cases (tests/conformance/puma/test_puma.py)."""
 
 
 @pytest.fixture(autouse=True)

@@ -31,6 +31,7 @@ from manip.conformance.suite.selection import PatternError, PatternSet, match_id
 from manip.reference_server.driver import serve
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
+from tests.support.json_schema import validate as _validate
 
 HERE = SPEC.request("here").opcode
 
@@ -312,50 +313,6 @@ def test_hardware_target_skips_motion_and_unreachable_target() -> None:
 
 
 # ------------------------------------------------------------------------------------------- reports
-
-
-def _validate(instance: Any, schema: dict[str, Any], root: dict[str, Any], path: str = "$") -> None:
-    """A small structural validator for the subset of JSON Schema the report schema uses."""
-    if "$ref" in schema:
-        name = schema["$ref"].rsplit("/", 1)[-1]
-        _validate(instance, root["$defs"][name], root, path)
-        return
-    kinds = schema.get("type")
-    if kinds is not None:
-        names = kinds if isinstance(kinds, list) else [kinds]
-        py = {"object": dict, "array": list, "string": str, "boolean": bool, "null": type(None)}
-        ok = any(
-            (isinstance(instance, (int, float)) and not isinstance(instance, bool))
-            if k == "number"
-            else (isinstance(instance, int) and not isinstance(instance, bool))
-            if k == "integer"
-            else isinstance(instance, py[k])
-            for k in names
-        )
-        assert ok, f"{path}: {instance!r} is not {names}"
-    if "const" in schema:
-        assert instance == schema["const"], path
-    if "enum" in schema:
-        assert instance in schema["enum"], f"{path}: {instance!r} not in {schema['enum']}"
-    if "minimum" in schema and isinstance(instance, int | float):  # as JSON Schema: numbers only
-        assert instance >= schema["minimum"], path
-    if "pattern" in schema:
-        import re
-
-        assert re.search(schema["pattern"], instance), f"{path}: {instance!r} !~ {schema['pattern']}"
-    if isinstance(instance, dict):
-        for key in schema.get("required", []):
-            assert key in instance, f"{path}: missing {key}"
-        props = schema.get("properties", {})
-        if schema.get("additionalProperties") is False and "patternProperties" not in schema:
-            extra = set(instance) - set(props)
-            assert not extra, f"{path}: unexpected {extra}"
-        for key, value in instance.items():
-            if key in props:
-                _validate(value, props[key], root, f"{path}.{key}")
-    if isinstance(instance, list) and "items" in schema:
-        for i, item in enumerate(instance):
-            _validate(item, schema["items"], root, f"{path}[{i}]")
 
 
 def test_json_report_matches_schema_and_junit_parses() -> None:

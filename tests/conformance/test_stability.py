@@ -14,6 +14,7 @@ from manip.conformance.cli import main
 from manip.conformance.judge.checks import WirePacket
 from manip.conformance.suite.results import CaseResult, ExitCode, RunReport
 from manip.conformance.suite.stability import instability, repeat_seeds
+from tests.support.paths import ROOT
 
 
 def _invoke(*args: str) -> tuple[int, str]:
@@ -199,7 +200,7 @@ WALL_CLOCK = ("time.monotonic", "time.perf_counter", "time.time", "datetime.now"
 
 
 def test_the_simulated_world_reads_time_only_from_the_loop() -> None:
-    src = Path(__file__).resolve().parent.parent / "src" / "manip"
+    src = ROOT / "src" / "manip"
     found: dict[str, int] = {}
     for area in SIMULATED:
         for path in sorted((src / area).rglob("*.py")):

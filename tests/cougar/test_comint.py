@@ -14,7 +14,7 @@ from manip.cougar import CougarConfig, CougarSim
 from manip.cougar.comint import COMMANDS, Comint, Executable, OutOfSyncEvent
 from manip.cougar.memory import region
 from manip.spec import SPEC
-from tests.strategies import cougar_values
+from tests.support.strategies import cougar_values
 
 # No gravity on the hand and no gauge offsets: every force reads zero, so answers do not depend on time.
 QUIET = CougarConfig(hand_weight_oz=0.0)

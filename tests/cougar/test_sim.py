@@ -28,7 +28,7 @@ from manip.cougar.compliance import centre_jacobian, voltmat
 from manip.cougar.jacob import STEPS, front_buffer
 from manip.cougar.memory import MAP, MEMORY_BYTES, Memory, region
 from manip.spec import SPEC
-from tests.strategies import cougar_values
+from tests.support.strategies import cougar_values
 
 DT = 1 / 60
 TOOL_Z = 864.87 + 150.0  # tool point height at READY (wrist centre + default 150 mm tool)

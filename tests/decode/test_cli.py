@@ -24,8 +24,7 @@ from manip.decode.cli import main
 from manip.decode.describe import _ENCODE, describe_packet, packet_json
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, RequestOp, ServerOp
-
-ROOT = Path(__file__).resolve().parents[1]
+from tests.support.paths import ROOT
 
 RFC_PUMA = "01010000010000040120000001010a01000100005550414d012001015a1a"  # an RFC to contact PUMA
 

@@ -2,9 +2,10 @@
 field for field on every packet of the golden captures (exported to pcapng by manip-capture export), and
 of a capture that starts after its connection opened (no RFC: the sides come from the packets' shape).
 
-The same captures go through the dissector in a plain Lua 5.4 interpreter (``tests/lua/wireshark_stub.lua``
-stands in for Wireshark's API), as Wireshark 4.4 and later run it, and in Lua 5.2 (what Debian's tshark
-runs it on): the dissector must not need ``bit32`` nor the bitwise operators.
+The same captures go through the dissector in a plain Lua 5.4 interpreter
+(``tests/decode/lua/wireshark_stub.lua`` stands in for Wireshark's API), as Wireshark 4.4 and later run
+it, and in Lua 5.2 (what Debian's tshark runs it on): the dissector must not need ``bit32`` nor the
+bitwise operators.
 
 tshark, lua5.4 and lua5.2 are Debian's packages (.ci/run installs them).  Without them these tests are
 skipped, except in CI (``CI=true``), where a missing one is a failure: the dissector must never go
@@ -30,12 +31,12 @@ from click.testing import CliRunner
 
 from manip.captures.pcap import export_pcapng, iter_datagrams
 from manip.decode.cli import main as decode_main
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 LUA = ROOT / "dissectors" / "manip.lua"
 GOLDEN = ("describe-self", "motion", "errors")
 TSHARK = shutil.which("tshark")
-STUB = ROOT / "tests" / "lua" / "wireshark_stub.lua"
+STUB = Path(__file__).parent / "lua" / "wireshark_stub.lua"
 LUAS = ("lua5.4", "lua5.2")
 
 

@@ -30,7 +30,7 @@ from manip.cougar.link import (
 from manip.links.drv11j import Drv11jPort
 from manip.reference_server.cougar_wrist import CougarWrist
 from manip.spec.constants import CougarCommand
-from tests.cougar_fake import FakeCougar, WristClient
+from tests.support.cougar_fake import FakeCougar, WristClient
 
 words16 = st.integers(0, 0xFFFF)
 frames = st.one_of(

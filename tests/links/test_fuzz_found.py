@@ -22,7 +22,7 @@ from manip.conformance.fuzz.session import Allowance
 from manip.links import open_connection, parse_address
 from manip.reference_server.driver import ReferenceServer
 from manip.spec.constants import RequestOp
-from tests.servers import running_server
+from tests.support.servers import running_server
 
 
 def _server_sockets(server: ReferenceServer) -> list[socket.socket]:

@@ -16,8 +16,8 @@ from click.testing import CliRunner
 
 import manip
 from manip.commandline import LogFormatter, configure_logging
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 SCRIPTS: dict[str, str] = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
 ISO_MS = r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}[+-]\d\d:\d\d"
 
@@ -90,7 +90,7 @@ def _decoder_output() -> str:
 def _client_and_server_output(caplog: pytest.LogCaptureFixture) -> str:
     from manip.reference_client.cli import main as client
     from manip.reference_server import ServerConfig
-    from tests.servers import in_thread, reference_server
+    from tests.support.servers import in_thread, reference_server
 
     caplog.set_level(logging.INFO, logger="manip")
     out = []

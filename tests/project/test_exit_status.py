@@ -20,8 +20,8 @@ from manip.decode.cli import main as decode_main
 from manip.exit_status import EXIT_STATUSES, epilog, markdown_table
 from manip.reference_client.cli import main as client_main
 from manip.reference_server.cli import main as server_main
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "captures" / "motion.mcap"
 ERRORS = ROOT / "captures" / "errors.mcap"
 """A golden capture with a deliberately malformed request in it (manip-decode reads it as one)."""

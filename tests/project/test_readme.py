@@ -14,7 +14,8 @@ from pathlib import Path
 import click
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.support.paths import ROOT
+
 COMMANDS = {e.name: e for e in entry_points(group="console_scripts") if e.name.startswith("manip-")}
 
 

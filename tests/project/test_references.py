@@ -17,8 +17,8 @@ import re
 from pathlib import Path
 
 import manip
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parent.parent
 ROOTS = (ROOT, ROOT / "src", ROOT / "src" / "manip", ROOT / "src" / "manip" / "conformance")
 """Where the texts' relative paths start from (the repository, the source tree, the package, the suite)."""
 MODULES = frozenset(info.name for info in pkgutil.iter_modules(manip.__path__))

@@ -32,7 +32,7 @@ from manip.reference_client import (
 )
 from manip.reference_client.memory import MemoryPeer, SentRequest
 from manip.spec.constants import RequestOp, ServerOp
-from tests.test_client_fakes import FORCES, JOINTS, FakeArm, error, manual, run, session
+from tests.support.fake_arm import FORCES, JOINTS, FakeArm, error, manual, run, session
 
 TARGET = Transform.trans(300.0, 100.0, -50.0)
 

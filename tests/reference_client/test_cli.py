@@ -15,9 +15,9 @@ from manip.reference_client.cli import (
     EXIT_TIMEOUT,
     EXIT_USAGE,
 )
-from tests.client_cli_support import invoke, watch_until_ctrl_c
-from tests.servers import free_port, in_thread, scripted_server
-from tests.test_client_tcp import READY, TARGET, never_answers, segment_reporter
+from tests.support.client_cli import invoke, watch_until_ctrl_c
+from tests.support.scripted import READY, TARGET, never_answers, segment_reporter
+from tests.support.servers import free_port, in_thread, scripted_server
 
 
 @pytest.fixture(scope="module")

@@ -20,7 +20,7 @@ from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import serve
 from manip.spec import SPEC
 from manip.spec.notation import octal
-from tests.servers import in_thread
+from tests.support.servers import in_thread
 
 
 @asynccontextmanager

@@ -17,7 +17,7 @@ from manip.codecs.messages import encode_reply
 from manip.reference_client import JointFreedError, Manipulator, ResponseType
 from manip.spec import SPEC
 from manip.spec.constants import RequestOp
-from tests.test_client_fakes import FORCES, GAUGES, HERE, JOINTS, run, session
+from tests.support.fake_arm import FORCES, GAUGES, HERE, JOINTS, run, session
 
 TARGET = Transform.trans(300.0, 100.0, -50.0) @ Transform.rot_y(90.0)
 Call = Callable[[Manipulator], Coroutine[Any, Any, Any]]

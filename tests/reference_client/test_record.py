@@ -17,9 +17,9 @@ from manip.reference_client import ClientOptions, aconnect
 from manip.reference_client.cli import EXIT_CONNECTION, EXIT_SERVER_ERROR, EXIT_USAGE
 from manip.reference_client.ncp_transport import NcpTransport
 from manip.spec.constants import RequestOp, ServerOp
-from tests.client_cli_support import invoke, watch_until_ctrl_c
-from tests.servers import free_port
-from tests.test_client_tcp import TARGET
+from tests.support.client_cli import invoke, watch_until_ctrl_c
+from tests.support.scripted import TARGET
+from tests.support.servers import free_port
 
 
 @pytest.fixture(scope="module")

@@ -29,7 +29,7 @@ from manip.reference_client import (
 )
 from manip.reference_server import Fault, FaultSet, ServerConfig, ServerSession, State
 from manip.spec.constants import AsyncCondition, RequestOp, ServerOp
-from tests.test_client_fakes import run
+from tests.support.fake_arm import run
 
 READY = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
 TARGET = (20.0, -70.0, 100.0, 10.0, 30.0, -15.0)

@@ -21,7 +21,7 @@ from manip.reference_client import (
 )
 from manip.reference_client.memory import SentRequest
 from manip.spec.constants import RequestOp, ServerOp
-from tests.test_client_fakes import GAUGES, HERE, JOINTS, FakeArm, error
+from tests.support.fake_arm import GAUGES, HERE, JOINTS, FakeArm, error
 
 
 def factory(

@@ -11,7 +11,7 @@ import pytest
 
 import manip
 from manip.codecs.error_string import ErrorMessage
-from manip.codecs.messages import encode_async, encode_error
+from manip.codecs.messages import encode_error
 from manip.links import (
     ChaosConnection,
     ChaosError,
@@ -33,40 +33,10 @@ from manip.reference_client import (
 from manip.reference_client.ncp_transport import describe_chaos_end
 from manip.reference_server import Fault
 from manip.reference_server.driver import ReferenceServer
-from manip.spec.constants import AsyncCondition, ServerOp
-from tests.servers import ServerOptions, free_port, scripted_server
-from tests.test_client_fakes import run
-
-READY = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
-TARGET = (20.0, -70.0, 100.0, 10.0, 30.0, -15.0)
-
-
-async def send_initial(conn: ChaosConnection) -> None:
-    assert conn.rfc is not None
-    await conn.send(conn.rfc.packet_no.to_bytes(2, "little"), ServerOp.RESPONSE)
-
-
-async def reply_done(conn: ChaosConnection, number: int) -> None:
-    await conn.send(number.to_bytes(2, "little"), ServerOp.RESPONSE)
-
-
-async def never_answers(conn: ChaosConnection) -> None:
-    await send_initial(conn)
-    async for _ in conn:
-        pass
-
-
-async def segment_reporter(conn: ChaosConnection) -> None:
-    """Answers request-notifications, then reports segments 7 and 8 completed."""
-    await send_initial(conn)
-    request = await conn.receive()
-    await reply_done(conn, request.packet_no)
-    for segment in (7, 8):
-        data = encode_async(request.packet_no, AsyncCondition.SEGMENT_COMPLETED, 0, segment)
-        await conn.send(data, ServerOp.ASYNCHRONOUS_RESPONSE)
-    async for _ in conn:
-        pass
-
+from manip.spec.constants import ServerOp
+from tests.support.fake_arm import run
+from tests.support.scripted import READY, TARGET, never_answers, reply_done, segment_reporter, send_initial
+from tests.support.servers import ServerOptions, free_port, scripted_server
 
 # ------------------------------------------------------------------ the reference server
 

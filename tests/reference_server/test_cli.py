@@ -13,7 +13,7 @@ from manip.links import NcpConfig, open_connection
 from manip.reference_server.cli import main
 from manip.reference_server.faults import FAULTS, Fault
 from manip.spec.constants import RequestOp
-from tests.servers import StartServer
+from tests.support.servers import StartServer
 
 LOG_LINE = r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}[+-]\d\d:\d\d (DEBUG|INFO|WARNING|ERROR) manip[.\w]*: "
 

@@ -29,8 +29,9 @@ from manip.reference_server.cougar_wrist import CougarWrist
 from manip.reference_server.faults import WRIST_SIDE
 from manip.spec import SPEC
 from manip.spec.constants import RequestOp, ServerOp
-from tests.cougar_fake import WristClient
-from tests.test_server_session import GOAL, OTHER, Client, _reply
+from tests.support.cougar_fake import WristClient
+from tests.support.session_client import GOAL, OTHER, Client
+from tests.support.session_client import reply as _reply
 
 T = TypeVar("T")
 COVERED: set[Fault] = set()
@@ -101,7 +102,8 @@ def test_parse() -> None:
 
 
 def test_every_fault_has_a_test() -> None:
-    # The wrist side's defects show only to the suite playing Cougar: tests/test_conform_puma.py has them.
+    # The wrist side's defects show only to the suite playing Cougar: tests/conformance/puma/test_puma.py
+    # has them.
     assert set(Fault) - WRIST_SIDE == COVERED
 
 

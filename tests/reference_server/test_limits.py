@@ -25,7 +25,7 @@ from click.testing import CliRunner
 from manip.links import AccessList, parse_address
 from manip.reference_client import aconnect
 from manip.reference_server import cli
-from tests.servers import StartServer
+from tests.support.servers import StartServer
 
 SERVER_FDS = 1024
 FLOOD = 1100

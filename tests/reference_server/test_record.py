@@ -18,7 +18,7 @@ from manip.reference_client import ClientOptions, aconnect
 from manip.reference_server import ServerConfig, serve
 from manip.reference_server.cli import main
 from manip.spec.constants import ChaosOp, RequestOp, ServerOp
-from tests.servers import StartServer
+from tests.support.servers import StartServer
 
 TARGET = (20.0, -70.0, 100.0, 10.0, 30.0, -15.0)
 PORT_LINE = "manip-server: listening on "

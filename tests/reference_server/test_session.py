@@ -39,61 +39,11 @@ from manip.reference_server import (
 )
 from manip.spec import SPEC
 from manip.spec.constants import AsyncCondition, RequestOp, ServerOp
+from tests.support.session_client import GOAL, OTHER, Client
+from tests.support.session_client import reply as _reply
 
-GOAL = (10.0, -80.0, 100.0, 20.0, 30.0, 40.0)
-OTHER = (-20.0, -100.0, 80.0, -10.0, 20.0, -30.0)
 POWERED = ServerConfig(powered_at_open=True)
 SERVED = frozenset(SPEC.request(name).opcode for name in HANDLERS)
-
-
-class Client:
-    """A fake client: numbers its packets, keeps the clock, decodes what the session sends."""
-
-    def __init__(self, config: ServerConfig | None = None, *, rfc: int = 0o1000, now: float = 100.0) -> None:
-        self.session = ServerSession(config)
-        self.now = now
-        self.packet_no = rfc
-        self.initial = self.session.on_open(now, rfc)
-        self.closed = False
-
-    def _decode(self, out: Output, op: int | None) -> list[ServerMessage]:
-        self.closed = self.closed or out.close
-        return [
-            decode_server_packet(p.opcode, p.data, op if p.opcode == ServerOp.RESPONSE else None)
-            for p in out.packets
-        ]
-
-    def raw(self, opcode: int, data: bytes, *, ack_no: int | None = None) -> Output:
-        self.packet_no = (self.packet_no + 1) & 0xFFFF
-        return self.session.on_request(self.now, opcode, self.packet_no, data, ack_no)
-
-    def send(self, op: str, data: bytes | None = None, **values: Any) -> list[ServerMessage]:
-        """Send a request by spec name; returns every packet the session answered with, decoded."""
-        spec_op = SPEC.request(op)
-        out = self.raw(spec_op.opcode, encode_request(op, **values) if data is None else data)
-        return self._decode(out, spec_op.opcode)
-
-    def one(self, op: str, data: bytes | None = None, **values: Any) -> ServerMessage:
-        (msg,) = self.send(op, data, **values)
-        return msg
-
-    def run(self, seconds: float) -> list[ServerMessage]:
-        """Tick every 16 ms for ``seconds``; the asynchronous packets sent meanwhile."""
-        out: list[ServerMessage] = []
-        end = self.now + seconds
-        while self.now < end - 1e-9:
-            self.now = min(end, self.now + TICK)
-            out += self._decode(self.session.tick(self.now), None)
-        return out
-
-    def settle(self, limit: float = 30.0) -> list[ServerMessage]:
-        """Tick until the arm is at rest."""
-        out: list[ServerMessage] = []
-        start = self.now
-        while self.session.arm.moving:
-            assert self.now - start < limit, "the arm never came to rest"
-            out += self.run(TICK)
-        return out
 
 
 def _error(msg: ServerMessage, opcode: int = ServerOp.NON_FATAL_ERROR) -> ErrorMessage:
@@ -101,11 +51,6 @@ def _error(msg: ServerMessage, opcode: int = ServerOp.NON_FATAL_ERROR) -> ErrorM
     assert msg.opcode == opcode
     assert not msg.error.problems, msg.error.problems
     return msg.error
-
-
-def _reply(msg: ServerMessage) -> Reply:
-    assert isinstance(msg, Reply), msg
-    return msg
 
 
 def _floats(n: int, value: float = 0.0) -> tuple[float, ...]:

@@ -1,7 +1,7 @@
 """The Puma side of Cougar on its own: CougarWrist in a ServerSession, against a scripted Cougar.
 
-The fake (tests/cougar_fake.py) only speaks Table 1 words; these tests check what the Puma sends, when,
-in which order, and what the client gets back.
+The fake (tests/support/cougar_fake.py) only speaks Table 1 words; these tests check what the Puma sends,
+when, in which order, and what the client gets back.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from manip.reference_server.cougar_wrist import CougarWrist
 from manip.reference_server.session import WRIST_OPERATIONS
 from manip.spec import SPEC
 from manip.spec.constants import AsyncCondition, CougarCommand, ServerOp
-from tests.cougar_fake import FakeCougar, WristClient
+from tests.support.cougar_fake import FakeCougar, WristClient
 
 J2_WALL = -70.0
 INTO_WALL = (0.0, -40.0, 90.0, 0.0, 0.0, 0.0)

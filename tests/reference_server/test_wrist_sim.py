@@ -18,8 +18,8 @@ from manip.cougar.memory import GUARD_WORDS, region
 from manip.reference_server.cougar_port import SimPort
 from manip.reference_server.cougar_wrist import CougarWrist
 from manip.spec.constants import AsyncCondition
-from tests.cougar_fake import WristClient
-from tests.servers import MANIP_COUGAR, StartServer
+from tests.support.cougar_fake import WristClient
+from tests.support.servers import MANIP_COUGAR, StartServer
 
 START = PUMA600.ready
 GOAL = (0.0, -40.0, 90.0, 0.0, 0.0, 0.0)

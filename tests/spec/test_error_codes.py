@@ -12,12 +12,12 @@ deliberately wrong strings and are left out.
 from __future__ import annotations
 
 import ast
-from pathlib import Path
 
 from manip.reference_server import errors
 from manip.spec import SPEC
+from tests.support.paths import ROOT
 
-SRC = Path(__file__).resolve().parent.parent / "src" / "manip"
+SRC = ROOT / "src" / "manip"
 SCANNED = sorted(
     [*(SRC / "reference_server").glob("*.py"), *(SRC / "arm").glob("*.py")],
 )

@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import importlib.util
 import re
-from pathlib import Path
 
 import pytest
 
 from manip.spec import SPEC, SpecError, load_spec
 from manip.spec import loader as spec_loader
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 SLUG = re.compile(r"^[a-z0-9]+(?:[.-][a-z0-9]+)*$")
 
 

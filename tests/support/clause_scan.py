@@ -1,6 +1,6 @@
 """A source scan of the conformance cases: every clause a registered case can report, found statically.
 
-Used by ``tests/test_conform_clauses.py``.  Running every case against the reference server with each of
+Used by ``tests/conformance/test_clauses.py``.  Running every case against the reference server with each of
 its faults would reach every reporting line only if some fault drove each branch, and takes minutes; the
 scan reads the code instead, so it also sees the branches no run takes.
 

@@ -1,5 +1,6 @@
-"""Shared by the ``manip-client`` command tests (test_client_cli, test_client_record): invoking the
-command in-process, and ``watch`` stopped by Ctrl-C in a subprocess (servers: ``tests/servers.py``)."""
+"""Shared by the ``manip-client`` command tests (``tests/reference_client/test_cli.py`` and
+``test_record.py``): invoking the command in-process, and ``watch`` stopped by Ctrl-C in a subprocess
+(servers: ``tests/support/servers.py``)."""
 
 from __future__ import annotations
 
@@ -10,8 +11,8 @@ import sys
 from click.testing import CliRunner, Result
 
 from manip.reference_client.cli import main
-from tests.servers import in_thread, scripted_server
-from tests.test_client_tcp import segment_reporter
+from tests.support.scripted import segment_reporter
+from tests.support.servers import in_thread, scripted_server
 
 
 def invoke(*args: str) -> Result:

@@ -2,7 +2,7 @@
 
 :class:`FakeArm` answers every spec opcode with canned, spec-conforming data (or runs a per-opcode
 script); with ``auto_reply=False`` it only sends the initial RESPONSE and leaves the peer to the test.
-The tests at the bottom check the fake itself.
+``tests/reference_client/test_fake_arm.py`` checks the fake itself.
 """
 
 from __future__ import annotations
@@ -186,32 +186,3 @@ def run(coro: Coroutine[Any, Any, T], limit: float = 5.0) -> T:
 def manual(peer: MemoryPeer) -> FakeArm:
     """A fake that sends the initial RESPONSE and leaves the rest to the test."""
     return FakeArm(peer, auto_reply=False)
-
-
-# ------------------------------------------------------------------------------- the fake itself
-
-
-def test_fake_answers_here_with_the_canned_transform() -> None:
-    async def main() -> None:
-        async with session() as (arm, fake):
-            assert (await arm.here()).almost_equal(HERE, 1e-3)
-            assert fake.peer.received[0].opcode == RequestOp.HERE
-
-    run(main())
-
-
-def test_fake_reports_unknown_opcodes_as_command_errors() -> None:
-    async def main() -> None:
-        async with session() as (arm, _):
-            from manip.reference_client import NonFatalError
-
-            arm.registry = arm.registry.copy()
-            arm.registry.define_request_code("mystery", 0o230)
-            try:
-                await arm.request("mystery")
-            except NonFatalError as err:
-                assert (err.severity, err.code, err.message) == ("C", "UOP", "Unknown opcode 152")
-            else:
-                raise AssertionError("no error")
-
-    run(main())

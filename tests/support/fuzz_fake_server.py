@@ -1,6 +1,6 @@
 """A reference server with one defect the fuzz tests must find, switched on by the first argument:
 
-    python tests/fuzz_fake_server.py crash|hang|traceback|drop [manip-server options...]
+    python tests/support/fuzz_fake_server.py crash|hang|traceback|drop [manip-server options...]
 
 On a request with opcode 0277 (an unassigned opcode, so the fuzzer's unknown-opcode class sends it
 now and then) it exits (crash), blocks its event loop (hang), logs a traceback and then answers as

@@ -15,7 +15,6 @@ import subprocess
 import sys
 import time
 from importlib import resources
-from pathlib import Path
 from types import ModuleType
 from typing import Any
 from urllib.parse import urlsplit, urlunsplit
@@ -32,8 +31,8 @@ from manip.conformance.client.cli import client_cases
 from manip.conformance.client.runner import ClientRunConfig, run_client_suite
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import ExitCode
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 HARNESS = ROOT / "examples" / "stdlib_harness.py"
 DEFAULT_POLICY = {"underflow": "zero", "dirty_zero": "zero", "reserved": "error"}
 

@@ -3,7 +3,7 @@
 Each fault of :data:`manip.reference_client.faults.FAULTS` is switched on alone in the reference client's
 harness (``--fault NAME``), and the cases named for it in :data:`CAUGHT_BY` run: each must fail, and at
 least one of them on a clause the fault says it breaks.  The clean client passes the same cases (and
-every case: ``tests/test_conform_client.py``).
+every case: ``tests/conformance/client/test_client.py``).
 """
 
 from __future__ import annotations

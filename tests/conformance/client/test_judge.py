@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import re
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -31,6 +30,7 @@ from manip.ncp.packets import pack_status
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp
 from manip.spec.model import RequestOpcode
+from tests.support.paths import ROOT
 
 
 def _c2s(t: float, number: int) -> WireRecord:
@@ -61,7 +61,7 @@ def test_past_the_offered_window_is_found_before_any_status() -> None:
 
 # ------------------------------------------------------------------------ the document's examples
 
-DOC = Path(__file__).parent.parent / "docs" / "client-harness.md"
+DOC = ROOT / "docs" / "client-harness.md"
 
 
 def _blocks(language: str) -> list[str]:

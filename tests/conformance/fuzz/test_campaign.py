@@ -3,7 +3,7 @@
 * The reference server takes tens of thousands of inputs (and a CHUDP campaign) with no crash, hang,
   traceback or any other finding.
 * Each kind of defect is found, shrunk to the one input that causes it, and its reproduce line
-  causes it again: a crash, a hang, a traceback and a silent drop (``tests/fuzz_fake_server.py``,
+  causes it again: a crash, a hang, a traceback and a silent drop (``tests/support/fuzz_fake_server.py``,
   started by the fuzzer with ``--launch``), and a protocol fault switch of the reference server
   (which the same inputs do not trip without the fault).
 * Reports follow their schema; usage errors exit 2, an unreachable target 3.
@@ -27,10 +27,11 @@ from manip.conformance.fuzz.report import load_schema
 from manip.conformance.fuzz.steps import RequestStep
 from manip.conformance.judge.violation import FAILURE_KINDS
 from manip.conformance.output.report import load_schema as load_run_schema
-from tests.servers import StartServer, free_port
-from tests.test_conform_framework import _validate
+from tests.support.json_schema import validate as _validate
+from tests.support.paths import SUPPORT
+from tests.support.servers import StartServer, free_port
 
-FAKE = Path(__file__).with_name("fuzz_fake_server.py")
+FAKE = SUPPORT / "fuzz_fake_server.py"
 TRIGGER = 0o277
 KINDS = ("crash", "timeout", "traceback", "missing_response", "wrong_value", "uncounted_drop")
 

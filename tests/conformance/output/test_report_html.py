@@ -29,9 +29,9 @@ from manip.conformance.output.markdown import render_markdown
 from manip.conformance.output.report import load_schema
 from manip.conformance.output.report_view import wire_bytes, wire_order
 from manip.spec import SPEC
-from tests.test_conform_framework import _validate
+from tests.support.json_schema import validate as _validate
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 ARTIFACT = ROOT / "test-artifacts" / "report-html.png"
 FAULT = "error-without-colon"
 BROKEN = "error-string.format"

@@ -26,9 +26,9 @@ from manip.reference_client import aconnect
 from manip.reference_client.errors import ResponseDataError
 from manip.reference_server import FaultSet, ServerConfig
 from manip.spec.constants import ServerOp
-from tests.test_conform_framework import _validate
+from tests.support.json_schema import validate as _validate
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "captures"
 NAMES = ("describe-self", "motion", "errors")
 FAST = ReplayOptions(reply_timeout=0.5, async_timeout=2.0, settle=0.05)

@@ -25,9 +25,9 @@ from manip.conformance.suite.embedded import EmbeddedServer
 from manip.reference_server import FaultSet, ServerConfig
 from manip.spec import SPEC
 from manip.spec.constants import AsyncCondition, ChaosOp, ServerOp
-from tests.test_conform_framework import _validate
+from tests.support.json_schema import validate as _validate
+from tests.support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "captures"
 NAMES = ("describe-self", "motion", "errors")
 

@@ -1,8 +1,8 @@
 -- The part of Wireshark's Lua API that dissectors/manip.lua uses, for a plain Lua interpreter (5.2 to
 -- 5.4): a dissector runs here as in tshark, and every field it adds is printed, so the test can hold it
--- to manip-decode as it holds tshark (tests/test_dissector.py).
+-- to manip-decode as it holds tshark (tests/decode/test_dissector.py).
 --
---   lua5.4 tests/lua/wireshark_stub.lua dissectors/manip.lua DATAGRAMS
+--   lua5.4 tests/decode/lua/wireshark_stub.lua dissectors/manip.lua DATAGRAMS
 --
 -- DATAGRAMS has one UDP datagram a line: "source-port destination-port hex-payload".  The output is
 -- one line per field, "abbrev<TAB>value" (a string value with \, tab and newline escaped), and a line
