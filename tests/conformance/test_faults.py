@@ -24,13 +24,13 @@ import pytest
 from manip.conformance.suite import bridge
 from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.context import RunOptions
-from manip.conformance.suite.embedded import ServerEnvironment, simulated_environment
+from manip.conformance.suite.embedded import simulated_environment
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.runner import RunConfig, Runner
 from manip.links import virtual_clock
-from manip.reference_server.driver import serve
 from manip.reference_server.faults import FAULTS, WRIST_SIDE, Fault, FaultSet
 from manip.reference_server.session import ServerConfig
+from tests.support.suite import run_on_reference_server
 
 SEED = 20260
 MAX_EXAMPLES = 10
@@ -108,21 +108,10 @@ def cases_for(fault: Fault) -> list[Case]:
 
 async def run_suite(faults: FaultSet, cases: Sequence[Case], config: ServerConfig | None = None) -> RunReport:
     config = ServerConfig(faults=faults) if config is None else config
-    async with serve("tcp://127.0.0.1:0", config, time_scale=TIME_SCALE) as server:
-        options = RunOptions(
-            max_examples=MAX_EXAMPLES,
-            address=server.address,
-            reply_timeout=REPLY_TIMEOUT,
-            time_scale=TIME_SCALE,
-        )
-        config = RunConfig(
-            address=server.address,
-            options=options,
-            seed=SEED,
-            embedded=True,
-            environment=ServerEnvironment(server),
-        )
-        return await Runner(config, cases).run()
+    options = {"max_examples": MAX_EXAMPLES, "reply_timeout": REPLY_TIMEOUT, "time_scale": TIME_SCALE}
+    return await run_on_reference_server(
+        cases, config, seed=SEED, time_scale=TIME_SCALE, options=options, embedded=True, environment=True
+    )
 
 
 def run_with_wrist(faults: FaultSet, cases: Sequence[Case]) -> RunReport:

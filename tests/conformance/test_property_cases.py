@@ -15,13 +15,11 @@ import pytest
 from manip.conformance.suite import bridge
 from manip.conformance.suite.bridge import Bridge, StopRun, run_in_worker
 from manip.conformance.suite.case import all_cases
-from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import CaseResult, RunReport
-from manip.conformance.suite.runner import RunConfig, Runner
-from manip.reference_server.driver import serve
 from manip.reference_server.faults import FaultSet
 from manip.reference_server.session import ServerConfig
 from manip.spec import SPEC
+from tests.support.suite import run_suite
 
 TIME_SCALE = 8.0
 
@@ -34,15 +32,11 @@ def short_shrinking(monkeypatch: pytest.MonkeyPatch) -> None:
 def run(
     ids: Sequence[str], faults: Sequence[str] = (), *, seed: int = 5, examples: int = 10, **options: object
 ) -> RunReport:
-    async def go() -> RunReport:
-        config = ServerConfig(faults=FaultSet.parse(faults))
-        async with serve("tcp://127.0.0.1:0", config, time_scale=TIME_SCALE) as server:
-            opts = RunOptions(max_examples=examples, address=server.address, **options)  # type: ignore[arg-type]
-            cases = [c for c in all_cases() if c.id in ids]
-            assert len(cases) == len(ids)
-            return await Runner(RunConfig(address=server.address, options=opts, seed=seed), cases).run()
-
-    return asyncio.run(go())
+    config = ServerConfig(faults=FaultSet.parse(faults))
+    cases = [c for c in all_cases() if c.id in ids]
+    assert len(cases) == len(ids)
+    opts = {"max_examples": examples, **options}
+    return run_suite(cases, config, seed=seed, time_scale=TIME_SCALE, options=opts)
 
 
 def result(report: RunReport, case_id: str) -> CaseResult:

@@ -15,13 +15,12 @@ from manip.conformance.cases.server.stateful import replay_async
 from manip.conformance.output.culprit import culprit_index
 from manip.conformance.suite import bridge
 from manip.conformance.suite.case import all_cases
-from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import CaseResult
-from manip.conformance.suite.runner import RunConfig, Runner
 from manip.reference_server.driver import serve
 from manip.reference_server.faults import FaultSet
 from manip.reference_server.session import ServerConfig
 from manip.spec import SPEC
+from tests.support.suite import run_suite
 
 CASE = "stateful.arm-model"
 TIME_SCALE = 8.0
@@ -33,15 +32,10 @@ def short_shrinking(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def run(faults: Sequence[str] = (), *, seed: int = 5, examples: int = 10, **options: object) -> CaseResult:
-    async def go() -> CaseResult:
-        config = ServerConfig(faults=FaultSet.parse(faults))
-        async with serve("tcp://127.0.0.1:0", config, time_scale=TIME_SCALE) as server:
-            opts = RunOptions(max_examples=examples, address=server.address, **options)  # type: ignore[arg-type]
-            cases = [c for c in all_cases() if c.id == CASE]
-            report = await Runner(RunConfig(address=server.address, options=opts, seed=seed), cases).run()
-            return report.results[0]
-
-    return asyncio.run(go())
+    config = ServerConfig(faults=FaultSet.parse(faults))
+    cases = [c for c in all_cases() if c.id == CASE]
+    opts = {"max_examples": examples, **options}
+    return run_suite(cases, config, seed=seed, time_scale=TIME_SCALE, options=opts).results[0]
 
 
 def replay_steps(actual: str) -> list[object]:

@@ -3,7 +3,6 @@ caught by the cases named for them, the CLI's exit codes and reports, and clause
 
 from __future__ import annotations
 
-import asyncio
 import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -14,28 +13,17 @@ from click.testing import CliRunner
 from manip.conformance.cli import main
 from manip.conformance.output.coverage import coverage, gaps
 from manip.conformance.suite.case import all_cases
-from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import ExitCode, RunReport
-from manip.conformance.suite.runner import RunConfig, Runner
 from manip.conformance.suite.selection import PatternSet
 from manip.reference_server import FaultSet, ServerConfig
-from manip.reference_server.driver import serve
+from tests.support.suite import run_suite
 
 
 def _run(faults: list[str], select: list[str], *, strict: bool = False) -> RunReport:
-    async def go() -> RunReport:
-        config_server = ServerConfig(faults=FaultSet.parse(faults))
-        async with serve("tcp://127.0.0.1:0", config_server) as server:
-            config = RunConfig(
-                address=server.address,
-                options=RunOptions(strict=strict, address=server.address),
-                seed=11,
-                select=PatternSet.of(select, "--select"),
-                embedded=True,
-            )
-            return await Runner(config, all_cases()).run()
-
-    return asyncio.run(go())
+    config_server = ServerConfig(faults=FaultSet.parse(faults))
+    select_cases = PatternSet.of(select, "--select")
+    options = {"strict": strict}
+    return run_suite(all_cases(), config_server, seed=11, options=options, select=select_cases, embedded=True)
 
 
 @pytest.mark.slow

@@ -20,11 +20,6 @@ from tests.support.scripted import READY, TARGET, never_answers, segment_reporte
 from tests.support.servers import free_port, in_thread, scripted_server
 
 
-@pytest.fixture(scope="module")
-def url(reference_server_url: str) -> str:
-    return reference_server_url
-
-
 def ok(*args: str) -> str:
     result = invoke(*args)
     assert result.exit_code == 0, (result.exit_code, result.output)

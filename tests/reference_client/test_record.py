@@ -22,11 +22,6 @@ from tests.support.scripted import TARGET
 from tests.support.servers import free_port
 
 
-@pytest.fixture(scope="module")
-def url(reference_server_url: str) -> str:
-    return reference_server_url
-
-
 def _opcodes(session: Session) -> list[int | None]:
     return [p.opcode for p in session.requests]
 
