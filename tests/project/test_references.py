@@ -25,7 +25,7 @@ MODULES = frozenset(info.name for info in pkgutil.iter_modules(manip.__path__))
 DOTTED = re.compile(r"(?<![\w./-])manip((?:\.[A-Za-z_]\w*)+)")
 PATH = re.compile(r"(?<![\w./])((?:[a-z_0-9]+/)+[a-z_0-9]+\.(?:py|toml|md|lua|json))")
 # Paths a text gives as an example of a name to choose, not as a file that exists.
-EXAMPLE_PATHS = frozenset({"tests/test_x.py"})
+EXAMPLE_PATHS: frozenset[str] = frozenset()
 
 
 def _texts() -> list[Path]:
