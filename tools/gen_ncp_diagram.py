@@ -1,6 +1,6 @@
 """Generate docs/ncp-states.md (a Mermaid state diagram and a table) from src/manip/ncp/states.py.
 
-Run after changing the transition table; tests/test_ncp_states.py fails while the file is stale.
+Run after changing the transition table; tests/ncp/test_states.py fails while the file is stale.
 """
 
 from __future__ import annotations

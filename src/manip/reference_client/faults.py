@@ -1,5 +1,5 @@
 """Fault switches of the reference client: each makes it break one rule on purpose, so that
-``manip-conform client`` is shown to catch it (``tests/test_conform_client_faults.py``).
+``manip-conform client`` is shown to catch it (``tests/conformance/client/test_faults.py``).
 
 They are process-wide (a client under test is one process): ``MANIP_CLIENT_FAULTS=name,name`` in the
 environment, or ``--fault NAME`` of the harness (``python -m manip.reference_client.harness --fault

@@ -11,8 +11,9 @@ button, a force on the hand.  :class:`ReferenceWorld` arranges each on a running
   held reads when it opens;
 * the panic button is pressed at once for the connections open now (their arm loses power, its motion
   is aborted), and stays pressed for the connections opened while it is held;
-* a force on the hand is put on an in-process Cougar's hand at once (:class:`~manip.cougar.environment.HandLoad`),
-  pushing so that the wrist reads the force asked for (plus the moment of a push at the tool point).
+* a force on the hand is put on an in-process Cougar's hand at once
+  (:class:`~manip.cougar.environment.HandLoad`), pushing so that the wrist reads the force asked for
+  (plus the moment of a push at the tool point).
 
 Clearing an arrangement takes it out again; the arrangements of one suite are cleared when it leaves.
 

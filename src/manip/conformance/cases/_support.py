@@ -389,8 +389,8 @@ class Evidence(CarriesViolation, AssertionError):  # noqa: N818 - a failed examp
     ``invariant``: the suite invariant that found it (a checker's finding, a probe's failure), passed
     on to ``ctx.fail_with`` so that a clause the case does not declare is attributed to it."""
 
-    # ``args`` is set instead of calling ``super().__init__``: tests/clause_scan.py binds the positional
-    # arguments of any ``__init__`` call here to this signature, whose first parameter is a clause.
+    # ``args`` is set instead of calling ``super().__init__``: tests/support/clause_scan.py binds the
+    # positional arguments of any ``__init__`` call here to this signature, whose first parameter is a clause.
     def __init__(
         self,
         clause: str,

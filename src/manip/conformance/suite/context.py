@@ -550,7 +550,7 @@ class CaseContext:
         Returns ``bool(condition)``.  ``clause`` must be one the case declares, or one of
         ``invariant``'s when a suite invariant's finding is passed on: checked at every call, true or
         not (UndeclaredClauseError).  ``clause`` and ``expected`` are keywords so that the clause scan of
-        ``tests/clause_scan.py`` sees every clause a case can report."""
+        ``tests/support/clause_scan.py`` sees every clause a case can report."""
         attributed = self._attribute(clause, invariant)
         if (
             level is not None
