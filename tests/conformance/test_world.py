@@ -174,15 +174,13 @@ def test_a_misbehaving_world_is_a_clear_error_never_a_hang(
             return str(exc)
         return "no error"
 
-    start = time.monotonic()
-    message = asyncio.run(go())
+    message = asyncio.run(go())  # a hang is caught by the test's time limit, not by a clock here
     assert wanted in message, message
     assert "Traceback" not in message
-    assert time.monotonic() - start < 15.0
 
 
 def test_an_unreachable_world_stops_the_run_with_exit_3(tmp_path: Path) -> None:
-    from tests.servers import free_port
+    from tests.support.servers import free_port
 
     async def go() -> None:
         async with serve("tcp://127.0.0.1:0") as server:
