@@ -23,25 +23,24 @@ subcommands (``replay``, ``verify``) added by other modules: they register on :d
 
 from __future__ import annotations
 
-import contextlib
-import difflib
 import json
 import os
 import shlex
 import sys
-import traceback
-from collections.abc import AsyncIterator, Callable, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
 import click
 from rich.console import Console
-from rich.markup import escape
 from rich.table import Table
 
 from manip.commandline import configure_logging, version_option
 from manip.conformance.cli_options import (
+    cases_of_clauses,
+    check_output_paths,
+    check_selection,
+    given,
     json_option,
     junit_option,
     known_failing_option,
@@ -52,39 +51,28 @@ from manip.conformance.cli_options import (
 from manip.conformance.client.cli import client_command
 from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.fuzz.cli import fuzz_command
-from manip.conformance.output.console import make_console, progress_bar
+from manip.conformance.output.console import make_console
 from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
 from manip.conformance.output.documents import ReportError, document_options, render_saved, write_documents
-from manip.conformance.output.report import failure_text, write_json, write_junit
+from manip.conformance.output.report import write_json, write_junit
+from manip.conformance.output.run_console import summary
 from manip.conformance.puma.target import (
     DEFAULT_WRIST_LISTEN,
     DEFAULT_WRIST_WAIT,
     PumaTarget,
-    PumaUnreachableError,
     puma_cases,
 )
-from manip.conformance.replay.cli import (
-    check_output_paths,
-    given,
-    print_by_clause,
-    recording,
-    replay_command,
-    verify_command,
-)
-from manip.conformance.suite.case import Case, all_cases
+from manip.conformance.replay.cli import replay_command, verify_command
+from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.context import DEFAULT_REPLY_TIMEOUT, RunOptions
-from manip.conformance.suite.embedded import EmbeddedServer, simulated_environment
-from manip.conformance.suite.results import CaseResult, ExitCode, LivenessCheck, RunReport
-from manip.conformance.suite.runner import RunConfig, RunEvents, Runner
-from manip.conformance.suite.selection import PatternError, PatternSet, match_id
-from manip.conformance.suite.stability import instability, repeat_seeds
-from manip.conformance.suite.world import WITHOUT_WORLD, WorldError
-from manip.conformance.suite.world_link import DEFAULT_ANSWER_TIMEOUT, open_world
-from manip.conformance.suite.world_prompt import PROMPT_TIMEOUT, PromptWorld, check_terminal
+from manip.conformance.suite.results import ExitCode, RunReport
+from manip.conformance.suite.runner import RunConfig, Runner
+from manip.conformance.suite.selection import PatternError, PatternSet
+from manip.conformance.suite.world_prompt import check_terminal
+from manip.conformance.targets import execute, repeat_run, world_of
 from manip.exit_status import epilog
-from manip.links import AddressError, parse_address, virtual_clock
-from manip.reference_server import FaultSet, ServerConfig
-from manip.spec import SPEC, UnknownClauseError
+from manip.links import AddressError, parse_address
+from manip.reference_server import FaultSet
 
 __all__ = ["main"]
 
@@ -100,21 +88,9 @@ _NOT_WITH_COUGAR = {
 """Options of ``run`` that mean nothing for a Cougar target: giving one with ``--cougar`` is an error."""
 
 TABLE_WIDTH = 160
+"""On a terminal, the ``cases`` and ``coverage`` tables are laid out at least this wide."""
 VIRTUAL_BROKEN_AFTER = 10.0
 """The embedded server's broken-connection timer in a virtual-time run without --broken-after (s)."""
-"""On a terminal, the ``cases`` and ``coverage`` tables are laid out at least this wide."""
-
-_STYLE = {
-    "pass": "green",
-    "fail": "bold red",
-    "warn": "yellow",
-    "error": "bold magenta",
-    "skip": "dim",
-    "known-fail": "cyan",
-    "fixed": "bold red",
-    "unsupported": "blue",
-    "not-judged": "bold blue",
-}
 
 
 def _number_option(name: str, kind: click.ParamType[Any, Any], default: float, help: str) -> Callable[[F], F]:
@@ -331,62 +307,16 @@ def run(
         address = str(parse_address(host)) if host else ""
     except (PatternError, AddressError) as exc:
         raise click.UsageError(str(exc)) from None
-    if host and server_faults:
-        raise click.UsageError("--server-fault applies to the embedded server only (omit HOST)")
-    if not host and target_time_scale != 1.0:
-        raise click.UsageError(
-            "--target-time-scale describes HOST's clock (the embedded server keeps its own)"
-        )
-    config_faults = None
-    if server_faults:
-        try:
-            config_faults = FaultSet.parse(server_faults)
-        except ValueError as exc:
-            raise click.UsageError(f"--server-fault: {exc}") from None
-    if cougar_faults and cougar is None:
-        raise click.UsageError(
-            "--cougar-fault switches on a defect of the simulated Cougar: add --cougar sim "
-            "(without --cougar the suite checks a manip server)"
-        )
-    if allow_motion and target_kind != "hardware":
-        raise click.UsageError(
-            "--allow-motion applies to --target hardware (the simulated arm always gets the motion cases)"
-        )
-    target: CougarTarget | None = None
-    if cougar is not None:
-        if host or server_faults:
-            raise click.UsageError("--cougar checks a Cougar: give no HOST and no --server-fault")
-        try:
-            target = CougarTarget.parse(cougar, cougar_faults)
-        except ValueError as exc:
-            raise click.UsageError(f"--cougar: {exc}") from None
+    config_faults = _check_server_options(
+        host, server_faults, target_time_scale, cougar, cougar_faults, allow_motion, target_kind
+    )
+    target = _cougar_target(cougar, cougar_faults, host=host, server_faults=server_faults)
+    if target is not None:
         address = "" if target.embedded else target.url
-        for name, why in _NOT_WITH_COUGAR.items():
-            if given(name):
-                raise click.UsageError(f"--{name.replace('_', '-')} {why}, not with --cougar")
-    puma_target: PumaTarget | None = None
-    if puma:
-        if cougar is not None:
-            raise click.UsageError("--puma judges a Puma server, --cougar a Cougar: not both")
-        if record is not None:
-            raise click.UsageError("--record records Chaos connections of a server run, not with --puma")
-        if not host and (given("wrist_listen") or given("wrist_wait")):
-            raise click.UsageError(
-                "--wrist-listen and --wrist-wait are for --puma HOST (the embedded server's wrist is wired "
-                "to the judging Cougar by the suite)"
-            )
-        try:
-            puma_target = PumaTarget(
-                host=address or None,
-                wrist_listen=wrist_listen,
-                wrist_wait=wrist_wait,
-                faults=server_faults,
-                virtual=time_mode != "real",
-            )
-        except ValueError as exc:
-            raise click.UsageError(f"--puma: {exc}") from None
-    elif given("wrist_listen") or given("wrist_wait"):
-        raise click.UsageError("--wrist-listen and --wrist-wait apply to --puma")
+    puma_target = _puma_target(
+        puma, host=address or None, cougar=cougar, record=record, wrist=(wrist_listen, wrist_wait),
+        faults=server_faults, virtual=time_mode != "real",
+    )  # fmt: skip
     _check_world(world, world_timeout, host=host, cougar=cougar)
     if record is not None and repeat > 1:
         raise click.UsageError("--record records one run: not with --repeat")
@@ -423,23 +353,6 @@ def run(
         address=address,
         broken_after=broken_after,
     )
-    extra: list[str] = []
-    if broken_after is not None:
-        extra += ["--broken-after", f"{broken_after:g}"]
-    if strict:
-        extra.append("--strict")
-    if max_examples != 25:
-        extra += ["--max-examples", str(max_examples)]
-    if target_time_scale != 1.0:
-        extra += ["--target-time-scale", f"{target_time_scale:g}"]
-    if target_kind == "hardware":
-        extra += ["--target", "hardware"] + (["--allow-motion"] if allow_motion else [])
-    for fault in server_faults:
-        extra += ["--server-fault", fault]
-    if simulated and not virtual:
-        extra += ["--time", "real"]
-    if world is not None:
-        extra += ["--world", world]
     config = RunConfig(
         address=address,
         options=options,
@@ -449,7 +362,9 @@ def run(
         known_failing=known_set,
         embedded=not host if target is None else target.embedded,
         virtual_time=virtual,
-        reproduce_options=extra,
+        reproduce_options=_reproduce_options(
+            options, server_faults, simulated=simulated, virtual=virtual, world=world
+        ),
         command=shlex.join(["manip-conform", *sys.argv[1:]]),
     )
     if target is not None:
@@ -458,98 +373,148 @@ def run(
     if puma_target is not None:
         config.reproduce_prefix = puma_target.reproduce_prefix()
     console.print(f"manip-conform: seed [bold]{seed}[/] (rerun with --seed {seed})")
+    world_spec = world_of(world, world_timeout)
     if repeat > 1:
-        report, code = _repeat(
-            config,
-            cases,
-            config_faults,
-            console,
-            quiet,
-            target or puma_target,
-            repeat,
-            _world_of(world, world_timeout),
+        report, code = repeat_run(
+            config, cases, config_faults, console, quiet, target or puma_target, repeat, world_spec
         )
     else:
         holder: dict[str, Runner] = {}
-        code = _execute(
-            config,
-            cases,
-            config_faults,
-            holder,
-            console,
-            quiet,
-            cougar=target or puma_target,
-            record=record,
-            world=_world_of(world, world_timeout),
-        )
+        code = execute(
+            config, cases, config_faults, holder, console, quiet,
+            cougar=target or puma_target, record=record, world=world_spec,
+        )  # fmt: skip
         report = holder["runner"].report if "runner" in holder else None
-    if report is not None:
-        if code == ExitCode.INTERNAL and not report.interrupted and not report.internal_error:
-            report.internal_error = "internal error"
-        if json_path is not None:
-            write_json(report, json_path)
-        if junit_path is not None:
-            write_junit(report, junit_path)
-        write_documents(report, html_path, markdown_path)
-        _summary(console, report, quiet)
-        code = int(report.exit_code) if code is None else code
-    sys.exit(int(code) if code is not None else int(ExitCode.INTERNAL))
+    sys.exit(_finish(report, code, console, quiet, json=json_path, junit=junit_path, html=html_path,
+                     markdown=markdown_path))  # fmt: skip
 
 
-def _repeat(
-    config: RunConfig,
-    cases: Sequence[Case],
-    faults: Any,
-    console: Console,
-    quiet: bool,
-    cougar: CougarTarget | PumaTarget | None,
-    runs: int,
-    world: WorldSpec | None = None,
-) -> tuple[RunReport | None, int | None]:
-    """``--repeat``: the selection with ``runs`` seeds, then the first seed again; the first run's report
-    carries what changed between them (:mod:`manip.conformance.suite.stability`)."""
-    seeds = repeat_seeds(config.seed, runs)
-    reports: list[RunReport] = []
-    worst: int | None = None
-    for number, seed in enumerate([*seeds, seeds[0]], start=1):
-        holder: dict[str, Runner] = {}
-        run_config = replace(config, seed=seed, options=replace(config.options))
-        code = _execute(run_config, cases, faults, holder, console, True, cougar=cougar, world=world)
-        if "runner" not in holder:
-            return None, code
-        report = holder["runner"].report
-        reports.append(report)
-        if code is not None or report.interrupted:
-            return reports[0], code
-        again = " (its seed again)" if number == len(seeds) + 1 else ""
-        console.print(
-            f"run {number}/{len(seeds) + 1}{again}: {report.verdict}, {_counts_text(report)}"
-            f" in {report.duration:.1f} s; seed {seed}",
-            markup=False,
+def _check_server_options(
+    host: str | None,
+    server_faults: tuple[str, ...],
+    target_time_scale: float,
+    cougar: str | None,
+    cougar_faults: tuple[str, ...],
+    allow_motion: bool,
+    target_kind: str,
+) -> FaultSet | None:
+    """Usage errors of the options that describe the server (or its absence); the embedded server's
+    fault set, if any."""
+    if host and server_faults:
+        raise click.UsageError("--server-fault applies to the embedded server only (omit HOST)")
+    if not host and target_time_scale != 1.0:
+        raise click.UsageError(
+            "--target-time-scale describes HOST's clock (the embedded server keeps its own)"
         )
-        worst = max(worst or 0, int(report.exit_code))
-    first = reports[0]
-    first.unstable = instability(reports, compare_packets=config.virtual_time)
-    if not first.unstable and worst and worst > int(first.exit_code):
-        first.problems.append(f"a repeated run was {ExitCode(worst).name.lower().replace('_', '-')}")
-    if not quiet:
-        console.print(f"{len(reports)} runs, {len(first.unstable)} stability problem(s)", markup=False)
-    return first, None
-
-
-@dataclass(frozen=True)
-class WorldSpec:
-    """``--world`` and ``--world-timeout`` as given."""
-
-    spec: str
-    timeout: float
-
-
-def _world_of(world: str | None, timeout: float | None) -> WorldSpec | None:
-    if world is None:
+    if cougar_faults and cougar is None:
+        raise click.UsageError(
+            "--cougar-fault switches on a defect of the simulated Cougar: add --cougar sim "
+            "(without --cougar the suite checks a manip server)"
+        )
+    if allow_motion and target_kind != "hardware":
+        raise click.UsageError(
+            "--allow-motion applies to --target hardware (the simulated arm always gets the motion cases)"
+        )
+    if not server_faults:
         return None
-    default = PROMPT_TIMEOUT if world == "prompt" else DEFAULT_ANSWER_TIMEOUT
-    return WorldSpec(world, default if timeout is None else timeout)
+    try:
+        return FaultSet.parse(server_faults)
+    except ValueError as exc:
+        raise click.UsageError(f"--server-fault: {exc}") from None
+
+
+def _cougar_target(
+    cougar: str | None, cougar_faults: tuple[str, ...], *, host: str | None, server_faults: tuple[str, ...]
+) -> CougarTarget | None:
+    """``--cougar``: the Cougar to judge instead of a server, and the options that cannot go with it."""
+    if cougar is None:
+        return None
+    if host or server_faults:
+        raise click.UsageError("--cougar checks a Cougar: give no HOST and no --server-fault")
+    try:
+        target = CougarTarget.parse(cougar, cougar_faults)
+    except ValueError as exc:
+        raise click.UsageError(f"--cougar: {exc}") from None
+    for name, why in _NOT_WITH_COUGAR.items():
+        if given(name):
+            raise click.UsageError(f"--{name.replace('_', '-')} {why}, not with --cougar")
+    return target
+
+
+def _puma_target(
+    puma: bool,
+    *,
+    host: str | None,
+    cougar: str | None,
+    record: Path | None,
+    wrist: tuple[str, float],
+    faults: tuple[str, ...],
+    virtual: bool,
+) -> PumaTarget | None:
+    """``--puma``: the Puma whose wrist side the suite judges, playing Cougar at ``wrist`` (where it
+    listens, how long it waits); the wrist options without it are an error."""
+    if not puma:
+        if given("wrist_listen") or given("wrist_wait"):
+            raise click.UsageError("--wrist-listen and --wrist-wait apply to --puma")
+        return None
+    if cougar is not None:
+        raise click.UsageError("--puma judges a Puma server, --cougar a Cougar: not both")
+    if record is not None:
+        raise click.UsageError("--record records Chaos connections of a server run, not with --puma")
+    if not host and (given("wrist_listen") or given("wrist_wait")):
+        raise click.UsageError(
+            "--wrist-listen and --wrist-wait are for --puma HOST (the embedded server's wrist is wired "
+            "to the judging Cougar by the suite)"
+        )
+    try:
+        return PumaTarget(
+            host=host, wrist_listen=wrist[0], wrist_wait=wrist[1], faults=faults, virtual=virtual
+        )
+    except ValueError as exc:
+        raise click.UsageError(f"--puma: {exc}") from None
+
+
+def _reproduce_options(
+    options: RunOptions, server_faults: tuple[str, ...], *, simulated: bool, virtual: bool, world: str | None
+) -> list[str]:
+    """The options a case's reproduce line repeats: those that change what the case does or how it is
+    judged (not the selection, the reports or the seed, which the line gives itself)."""
+    extra: list[str] = []
+    if options.broken_after is not None:
+        extra += ["--broken-after", f"{options.broken_after:g}"]
+    if options.strict:
+        extra.append("--strict")
+    if options.max_examples != 25:
+        extra += ["--max-examples", str(options.max_examples)]
+    if options.time_scale != 1.0:
+        extra += ["--target-time-scale", f"{options.time_scale:g}"]
+    if options.target == "hardware":
+        extra += ["--target", "hardware"] + (["--allow-motion"] if options.allow_motion else [])
+    for fault in server_faults:
+        extra += ["--server-fault", fault]
+    if simulated and not virtual:
+        extra += ["--time", "real"]
+    if world is not None:
+        extra += ["--world", world]
+    return extra
+
+
+def _finish(
+    report: RunReport | None, code: int | None, console: Console, quiet: bool, **paths: Path | None
+) -> int:
+    """The reports written (``paths``: json, junit, html, markdown), the summary printed; the exit
+    status (``code``, else the report's)."""
+    if report is None:
+        return int(code) if code is not None else int(ExitCode.INTERNAL)
+    if code == ExitCode.INTERNAL and not report.interrupted and not report.internal_error:
+        report.internal_error = "internal error"
+    if paths["json"] is not None:
+        write_json(report, paths["json"])
+    if paths["junit"] is not None:
+        write_junit(report, paths["junit"])
+    write_documents(report, paths["html"], paths["markdown"])
+    summary(console, report, quiet)
+    return int(report.exit_code) if code is None else int(code)
 
 
 def _check_world(world: str | None, timeout: float | None, *, host: str | None, cougar: str | None) -> None:
@@ -568,324 +533,6 @@ def _check_world(world: str | None, timeout: float | None, *, host: str | None, 
         raise click.UsageError(problem)
     if not world.strip():
         raise click.UsageError("--world names nothing: give tcp://HOST:PORT, a command line or prompt")
-
-
-def _counts_text(report: RunReport) -> str:
-    return ", ".join(f"{v} {k}" for k, v in report.counts().items() if v) or "no cases"
-
-
-def check_selection(
-    select: PatternSet,
-    skip: PatternSet,
-    cases: Sequence[Case],
-    *,
-    cougar: bool = False,
-    hint: str = " (manip-conform cases lists every case)",
-) -> None:
-    """A usage error when a ``--select`` pattern matches none of ``cases``, or when ``--select`` and
-    ``--skip`` together leave no case: a run of nothing would pass, and say nothing of the typo."""
-    ids = sorted(c.id for c in cases)
-    for pattern in select.patterns:
-        if any(match_id(pattern.text, case_id) for case_id in ids):
-            continue
-        where = "" if pattern.source == "--select" else f" ({pattern.source})"
-        message = f"--select {pattern.text!r}{where} matches no case"
-        others = [c.id for c in all_cases() if c.id not in ids and match_id(pattern.text, c.id)]
-        if others:
-            mode = "--cougar" if not cougar else "a server run (without --cougar)"
-            if others[0].startswith("client."):
-                mode = "manip-conform client"
-            message += f" of this run: it names {len(others)} case(s) of {mode}, such as {others[0]}"
-        elif close := close_case_ids(pattern.text, ids):
-            message += f"; close matches: {', '.join(close)}"
-        else:
-            areas = sorted({case_id.split(".")[0] + ".*" for case_id in ids})
-            message += f"; the case ids are under {', '.join(areas)}"
-        raise click.UsageError(message + hint)
-    if any((not select or select.matches(i)) and not skip.matches(i) for i in ids):
-        return
-    options = [f"--select {p.text}" for p in select.patterns] + [f"--skip {p.text}" for p in skip.patterns]
-    verb = "leave" if len(options) > 1 else "leaves"
-    raise click.UsageError(f"{' '.join(options)} {verb} no case to run")
-
-
-def cases_of_clauses(clauses: Sequence[str], *, cougar: bool = False) -> list[str]:
-    """The ids of the cases (of a Cougar run, or of a server run) that check any of ``clauses``; a usage
-    error names an id the spec does not have, with close matches, or a clause no case checks."""
-    cases = cougar_cases(all_cases(), cougar=cougar)
-    ids: list[str] = []
-    for clause in clauses:
-        try:
-            SPEC.clause(clause)
-        except UnknownClauseError as exc:
-            raise click.UsageError(f"--clause: {exc}") from None
-        checking = [c.id for c in cases if clause in c.clauses]
-        if not checking:
-            run = "a Cougar run" if cougar else "a server run"
-            raise click.UsageError(
-                f"--clause {clause}: no case of {run} checks it (manip-conform coverage shows which do)"
-            )
-        ids += checking
-    return ids
-
-
-def close_case_ids(pattern: str, ids: Sequence[str], limit: int = 3) -> list[str]:
-    """Case ids (or the areas above them: ``server.reply``) that look like ``pattern``, its wildcards
-    left out, the closest first."""
-    names = set(ids)
-    for case_id in ids:
-        parts = case_id.split(".")
-        names.update(".".join(parts[:n]) for n in range(1, len(parts)))
-    stem = ".".join(p for p in pattern.split(".") if not any(ch in p for ch in "*?["))
-    close = difflib.get_close_matches(stem or pattern, sorted(names), n=limit, cutoff=0.6)
-    return close
-
-
-def _execute(
-    config: RunConfig,
-    cases: Sequence[Case],
-    faults: Any,
-    holder: dict[str, Runner],
-    console: Console,
-    quiet: bool,
-    cougar: CougarTarget | PumaTarget | None = None,
-    record: Path | None = None,
-    world: WorldSpec | None = None,
-) -> int | None:
-    """Run; None means "use the report's exit code"."""
-    try:
-        virtual_clock.run(
-            _run_async(config, cases, faults, holder, console, quiet, cougar, record, world),
-            virtual=config.virtual_time,
-        )
-    except WorldError as exc:
-        console.print(f"[bold red]world unusable[/]: {escape(str(exc))}")
-        return int(ExitCode.UNREACHABLE)
-    except PumaUnreachableError as exc:
-        console.print(f"[bold red]target unreachable[/]: {escape(str(exc))}")
-        return int(ExitCode.UNREACHABLE)
-    except KeyboardInterrupt:
-        if "runner" in holder:
-            holder["runner"].report.interrupted = True
-            problems = holder["runner"].report.problems
-            if not any("interrupted" in p for p in problems):
-                problems.append("the run was interrupted; this report is partial")
-        console.print("[bold]interrupted[/]: the report is partial")
-        return int(ExitCode.INTERNAL)
-    except Exception as exc:  # an internal error of the suite: keep what was done
-        text = traceback.format_exc()
-        console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {escape(str(exc))}")
-        if "runner" in holder:
-            holder["runner"].report.internal_error = text
-        else:
-            console.print(text, markup=False)
-        return int(ExitCode.INTERNAL)
-    return None
-
-
-async def _run_async(
-    config: RunConfig,
-    cases: Sequence[Case],
-    faults: Any,
-    holder: dict[str, Runner],
-    console: Console,
-    quiet: bool,
-    cougar: CougarTarget | PumaTarget | None,
-    record: Path | None,
-    world: WorldSpec | None,
-) -> None:
-    # The recording starts on the run's loop, so a simulated run records on its virtual clock.
-    how = "manip-conform run (client side)"
-    with recording(record, how=how, seed=config.seed, virtual=config.virtual_time) as wrap:
-        config.wrap_link = wrap
-        await _run_target(config, cases, faults, holder, console, quiet, cougar, world)
-
-
-@contextlib.asynccontextmanager
-async def _opened_world(config: RunConfig, world: WorldSpec | None, console: Console) -> AsyncIterator[None]:
-    """HOST's world (``--world``) for the block, as the run's (nothing without one)."""
-    if world is None:
-        yield
-        return
-    async with open_world(world.spec, answer_timeout=world.timeout) as opened:
-        config.world = opened
-        console.print(f"world: {opened.description}", markup=False)
-        yield
-
-
-async def _run_target(
-    config: RunConfig,
-    cases: Sequence[Case],
-    faults: Any,
-    holder: dict[str, Runner],
-    console: Console,
-    quiet: bool,
-    cougar: CougarTarget | PumaTarget | None,
-    world: WorldSpec | None = None,
-) -> None:
-    if isinstance(cougar, PumaTarget):  # --puma: the suite plays Cougar for the Puma
-        await _run_puma(config, cases, holder, console, quiet, cougar, world)
-        return
-    if cougar is not None:  # --cougar: the Cougar target (embedded or not)
-        async with cougar.running() as address:
-            config.address = address
-            config.options = _with_address(config.options, address)
-            if cougar.embedded:
-                console.print(f"embedded simulated Cougar at {address}", markup=False)
-            await _run_with(config, cases, holder, console, quiet)
-        return
-    if not config.embedded:
-        async with _opened_world(config, world, console):
-            await _run_with(config, cases, holder, console, quiet)
-        return
-    server_config = ServerConfig() if faults is None else ServerConfig(faults=faults)
-    # The embedded robot has the simulated Cougar wrist, so the wrist opcodes are checked too.
-    if config.virtual_time:
-        async with simulated_environment(
-            server_config, seed=config.seed, wrist=True, broken_after=config.options.broken_after
-        ) as environment:
-            address = environment.address
-            config.address = address
-            config.world = environment.world
-            config.options = replace(config.options, address=address, embedded=True)
-            console.print("embedded reference server in virtual time (with the simulated Cougar wrist)")
-            await _run_with(config, cases, holder, console, quiet)
-        return
-    embedded = EmbeddedServer(server_config, wrist=True, broken_after=config.options.broken_after)
-    with embedded as address:
-        config.address = address
-        config.world = embedded.environment.world if embedded.environment is not None else None
-        config.options = replace(config.options, address=address, embedded=True)
-        console.print(
-            f"embedded reference server at {address} (with the simulated Cougar wrist)", markup=False
-        )
-        await _run_with(config, cases, holder, console, quiet)
-
-
-async def _run_puma(
-    config: RunConfig,
-    cases: Sequence[Case],
-    holder: dict[str, Runner],
-    console: Console,
-    quiet: bool,
-    puma: PumaTarget,
-    world: WorldSpec | None = None,
-) -> None:
-    if puma.host is not None:
-        console.print(
-            f"judging Cougar listening on {puma.wrist_listen}: waiting up to {puma.wrist_wait:g} s for the "
-            f"Puma's wrist link (manip-server --cougar {puma.wrist_listen})",
-            markup=False,
-        )
-    async with puma.running_with_world(config.seed) as (address, own_world):
-        config.address = address
-        config.world = own_world or config.world
-        config.options = _with_address(config.options, address)
-        if puma.embedded:
-            how = "in virtual time" if config.virtual_time else f"at {address}"
-            console.print(
-                f"embedded reference server {how}, its wrist played by the judging Cougar", markup=False
-            )
-        else:
-            console.print(f"the Puma's wrist link is up; judging {address}", markup=False)
-        async with _opened_world(config, world, console):  # HOST's, once it is up
-            await _run_with(config, cases, holder, console, quiet)
-
-
-def _with_address(options: RunOptions, address: str) -> RunOptions:
-    return replace(options, address=address)
-
-
-async def _run_with(
-    config: RunConfig, cases: Sequence[Case], holder: dict[str, Runner], console: Console, quiet: bool
-) -> None:
-    progress = progress_bar(
-        console, quiet or isinstance(config.world, PromptWorld)
-    )  # it would hide the questions
-    task_id = progress.add_task("conformance", total=0)
-
-    def started(selected: list[Case]) -> None:
-        progress.update(task_id, total=len(selected))
-
-    def case_started(item: Case) -> None:
-        progress.update(task_id, description=item.id)
-
-    def case_finished(result: CaseResult) -> None:
-        # One line as it happens; the details come after the run, below the broken clauses (_summary).
-        progress.advance(task_id)
-        if _shown(result, quiet):
-            _headline(progress.console, result)
-
-    def liveness(check: LivenessCheck) -> None:
-        if not check.alive:
-            progress.console.print(
-                f"[bold red]target not alive[/] ({escape(check.when)}): {escape(check.detail)}"
-            )
-
-    runner = Runner(config, cases, RunEvents(started, case_started, case_finished, liveness))
-    holder["runner"] = runner
-    with progress:
-        await runner.run()
-
-
-def _shown(result: CaseResult, quiet: bool) -> bool:
-    return result.outcome in ("fail", "error", "fixed") or (result.outcome == "warn" and not quiet)
-
-
-def _headline(console: Console, result: CaseResult) -> None:
-    style = _STYLE[result.outcome]
-    clauses = sorted({v.clause for v in result.violations if v.clause})
-    broke = f" [{', '.join(clauses)}]" if clauses else ""
-    head = f"{escape(result.id)} ({result.duration:.2f} s){escape(broke)}"
-    console.print(f"[{style}]{result.outcome.upper():>10}[/] {head}")
-
-
-def _details(console: Console, report: RunReport, quiet: bool) -> None:
-    """Each failing (or warning, fixed, erring) case in full: what was expected, what came, the bytes,
-    the command that reproduces it."""
-    for result in report.results:
-        if not _shown(result, quiet):
-            continue
-        _headline(console, result)
-        body = failure_text(result) if result.outcome != "error" else result.traceback.rstrip()
-        if result.outcome == "fixed":
-            body = "listed in --known-failing but passed: remove the entry"
-        if body:
-            console.print(body, markup=False, highlight=False)
-
-
-def _summary(console: Console, report: RunReport, quiet: bool = False) -> None:
-    """After the run: the broken clauses (one line each), then every failure in full, then problems and
-    the verdict."""
-    counts = report.counts()
-    parts = [f"[{_STYLE[k]}]{v} {k}[/]" for k, v in counts.items() if v]
-    print_by_clause(console, report)
-    _details(console, report, quiet)
-    for problem in report.problems:
-        console.print(f"[bold red]problem[/]: {escape(problem)}")
-    for problem in report.unstable:
-        console.print(f"[bold magenta]unstable[/]: {escape(problem)}")
-    verdict_style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
-    shown = ", ".join(parts) or "no cases"
-    unjudged = report.not_judged_hints()
-    console.print(
-        f"[{verdict_style}]{report.verdict}[/] (exit {int(report.exit_code)}): {shown}"
-        f" in {report.duration:.1f} s; seed {report.seed}"
-        + ("; virtual time" if report.time == "virtual" else "")
-        + (f"; {len(unjudged)} MUST clause(s) not judged on this target" if unjudged else "")
-    )
-    if unjudged:
-        listed = ", ".join(f"{clause} ({hint})" for clause, hint in unjudged.items())
-        console.print(
-            f"[{_STYLE['not-judged']}]not judged[/]: {escape(listed)}; what would judge each is in brackets"
-        )
-        if "--world" in unjudged.values():
-            console.print(f"--world: {escape(WITHOUT_WORLD)}")
-    slow = [r for r in report.results if r.deadline and r.duration > 0.8 * r.deadline]
-    for r in slow:
-        console.print(
-            f"[yellow]slow[/]: {escape(r.id)} took {r.duration:.2f} s of its {r.deadline:g} s deadline"
-        )
 
 
 # ----------------------------------------------------------------------------------------------- cases

@@ -11,6 +11,8 @@ from pathlib import Path
 import click
 
 from manip.conformance.cli_options import (
+    check_output_paths,
+    check_selection,
     json_option,
     junit_option,
     known_failing_option,
@@ -27,7 +29,7 @@ from manip.conformance.client.runner import (
 from manip.conformance.output.console import make_console, progress_bar
 from manip.conformance.output.documents import document_options, write_documents
 from manip.conformance.output.report import write_json, write_junit
-from manip.conformance.replay.cli import check_output_paths
+from manip.conformance.output.run_console import headline, shown, summary
 from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import CaseResult, RunReport
@@ -108,8 +110,6 @@ def client_command(
 ) -> None:
     """Judge a client: start CMD (a harness speaking docs/client-harness.md), play a scripted Puma for
     each case, and judge what the client sent and what the harness reports."""
-    # manip.conformance.cli registers this command, so its helpers are imported when it runs
-    from manip.conformance.cli import _summary, check_selection  # noqa: PLC0415
 
     console = make_console()
     try:
@@ -145,7 +145,7 @@ def client_command(
     if junit_path is not None:
         write_junit(report, junit_path)
     write_documents(report, html_path, markdown_path)
-    _summary(console, report, quiet)
+    summary(console, report, quiet)
     unsupported = [r for r in report.results if r.outcome == "unsupported"]
     if unsupported and not quiet:
         console.print(f"{len(unsupported)} case(s) unsupported by the harness", markup=False)
@@ -153,7 +153,6 @@ def client_command(
 
 
 def _run(config: ClientRunConfig, cases: list[Case], console: object, quiet: bool) -> RunReport:
-    from manip.conformance.cli import _headline, _shown  # noqa: PLC0415 - see client_command
 
     progress = progress_bar(console, quiet)  # type: ignore[arg-type]
     task_id = progress.add_task("client", total=0)
@@ -164,8 +163,8 @@ def _run(config: ClientRunConfig, cases: list[Case], console: object, quiet: boo
     def finished(result: CaseResult) -> None:
         progress.advance(task_id)
         progress.update(task_id, description=result.id)
-        if _shown(result, quiet):
-            _headline(progress.console, result)
+        if shown(result, quiet):
+            headline(progress.console, result)
 
     events = ClientEvents(started=started, case_finished=finished)
     holder: list[RunReport] = []

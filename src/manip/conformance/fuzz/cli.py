@@ -20,14 +20,13 @@ import click
 from rich.console import Console
 from rich.markup import escape
 
-from manip.conformance.cli_options import json_option, junit_option
+from manip.conformance.cli_options import check_output_paths, given, json_option, junit_option
 from manip.conformance.fuzz.campaign import Campaign, CampaignConfig, CampaignEvents
 from manip.conformance.fuzz.generators import CLASSES, HAZARD_ORDER, GenOptions
 from manip.conformance.fuzz.report import CampaignViolation, FuzzReport, finding_text, write_json, write_junit
 from manip.conformance.fuzz.session import Allowance
 from manip.conformance.fuzz.target import FuzzedServer, LaunchedServer, RemoteServer, reference_server_argv
 from manip.conformance.output.console import make_console, progress_bar
-from manip.conformance.replay.cli import check_output_paths, given
 from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REPLY_TIMEOUT
 from manip.conformance.suite.results import ExitCode
 from manip.conformance.suite.selection import match_id

@@ -30,14 +30,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
-from click.core import ParameterSource
 from rich.console import Console
 from rich.markup import escape
 
-from manip.conformance.cli_options import json_option, junit_option, strict_option
+from manip.conformance.cli_options import check_output_paths, given, json_option, junit_option, strict_option
 from manip.conformance.output.console import make_console
 from manip.conformance.output.documents import document_options, write_documents
-from manip.conformance.output.report import clause_lines, failure_text, write_json, write_junit
+from manip.conformance.output.report import failure_text, write_json, write_junit
+from manip.conformance.output.run_console import OUTCOME_STYLE, print_by_clause
 from manip.conformance.suite.embedded import EmbeddedServer, simulated_server
 from manip.conformance.suite.results import ExitCode, RunReport
 from manip.exit_status import epilog
@@ -61,8 +61,6 @@ __all__ = [
 ]
 
 EXIT_CODES_HELP = epilog("manip-conform verify, replay")
-
-_STYLE = {"fail": "bold red", "warn": "yellow", "error": "bold magenta", "pass": "green", "skip": "dim"}
 
 
 @contextlib.contextmanager
@@ -107,35 +105,6 @@ def recording(
         yield RecorderTap(recorder, "server" if side == "server" else "client").wrap
 
 
-def given(name: str) -> bool:
-    """Whether the current command's parameter ``name`` was given (command line or environment), not
-    left at its default."""
-    source = click.get_current_context().get_parameter_source(name)
-    return source is not None and source not in (ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP)
-
-
-def check_output_paths(**paths: Path | None) -> None:
-    """Fail early (usage error) when a file an option names cannot be written, before the run starts
-    rather than with a traceback at its end.  Keywords name the options: ``json=``, ``junit=``,
-    ``record=`` check ``--json``, ``--junit``, ``--record``."""
-    for name, path in paths.items():
-        if path is None:
-            continue
-        option = "--" + name.replace("_", "-")
-        resolved = path.resolve()
-        parent = resolved.parent
-        if resolved.is_dir():
-            raise click.UsageError(f"{option}: {path} is a directory (give a file name)")
-        if not parent.exists():
-            raise click.UsageError(f"{option}: the directory {parent} of {path} does not exist")
-        if not parent.is_dir():
-            raise click.UsageError(f"{option}: {parent} (the directory of {path}) is not a directory")
-        if resolved.exists() and not os.access(resolved, os.W_OK):
-            raise click.UsageError(f"{option}: {path} exists and is not writable")
-        if not resolved.exists() and not os.access(parent, os.W_OK | os.X_OK):
-            raise click.UsageError(f"{option}: cannot create files in {parent} (permission denied)")
-
-
 def _finish(
     report: RunReport,
     console: Console,
@@ -147,7 +116,7 @@ def _finish(
 ) -> None:
     for result in report.results:
         if result.outcome in ("fail", "error") or (result.outcome == "warn" and not quiet):
-            style = _STYLE.get(result.outcome, "")
+            style = OUTCOME_STYLE.get(result.outcome, "")
             console.print(f"[{style}]{result.outcome.upper():>10}[/] {result.id}")
             body = failure_text(result) if result.outcome != "error" else result.traceback.rstrip()
             if body:
@@ -167,15 +136,6 @@ def _finish(
     console.print(
         f"[{style}]{report.verdict}[/] (exit {int(report.exit_code)}): {counts} in {report.duration:.1f} s"
     )
-
-
-def print_by_clause(console: Console, report: RunReport) -> None:
-    """One line per broken clause (count, id, text, section), under a heading; nothing if none broke."""
-    lines = clause_lines(report)
-    if lines:
-        console.print("[bold]broken clauses[/]:")
-        for line in lines:
-            console.print(f"  {line}", markup=False)
 
 
 def _run(
