@@ -236,11 +236,11 @@ def _run(
     *,
     known: list[str] = (),
     strict: bool = False,  # type: ignore[assignment]
-    target: str = "sim",
+    robot: str = "sim",
     address: str | None = None,
 ) -> RunReport:
     async def go() -> RunReport:
-        options = RunOptions(strict=strict, target=target, reply_timeout=0.5, connect_timeout=1.0)  # type: ignore[arg-type]
+        options = RunOptions(strict=strict, robot=robot, reply_timeout=0.5, connect_timeout=1.0)  # type: ignore[arg-type]
         if address is not None:
             config = RunConfig(
                 address=address,
@@ -305,7 +305,7 @@ def test_known_failing_semantics() -> None:
 
 
 def test_hardware_target_skips_motion_and_unreachable_target() -> None:
-    report = _run(["t.motion"], target="hardware")
+    report = _run(["t.motion"], robot="hardware")
     assert _outcomes(report) == {"t.motion": "skip"}
     dead = _run(["t.pass"], address="tcp://127.0.0.1:1")
     assert dead.exit_code == ExitCode.UNREACHABLE

@@ -130,7 +130,7 @@ def test_a_float_round_trip_names_the_swap() -> None:
 
 
 def test_hardware_target_without_motion_sends_no_motion_or_power_request() -> None:
-    report = run(PROPERTY_CASES, target="hardware")
+    report = run(PROPERTY_CASES, robot="hardware")
     assert result(report, "property.floats.round-trip").outcome == "skip"
     assert result(report, "property.segments.numbering").outcome == "skip"
     sent = [p.opcode for r in report.results for p in r.packets if p.direction == "c2s" and not p.is_close]

@@ -113,7 +113,7 @@ def test_replay_sends_the_counterexample_again() -> None:
 
 
 def test_hardware_target_without_motion_keeps_to_read_only_and_config() -> None:
-    r = run(target="hardware", examples=8)
+    r = run(robot="hardware", examples=8)
     assert r.outcome == "pass", (r.reason, [v.actual for v in r.violations], r.traceback)
     assert any("motion and power rules off" in n for n in r.notes)
     sent = [p.opcode for p in r.packets if p.direction == "c2s" and not p.is_close]

@@ -343,7 +343,7 @@ def run(
         cases = cougar_cases(all_cases(), cougar=target is not None)
     check_selection(select_set, skip_set, cases, cougar=target is not None)
     options = RunOptions(
-        target="hardware" if target_kind == "hardware" else "sim",
+        robot="hardware" if target_kind == "hardware" else "sim",
         allow_motion=allow_motion,
         strict=strict,
         reply_timeout=reply_timeout,
@@ -488,7 +488,7 @@ def _reproduce_options(
         extra += ["--max-examples", str(options.max_examples)]
     if options.time_scale != 1.0:
         extra += ["--target-time-scale", f"{options.time_scale:g}"]
-    if options.target == "hardware":
+    if options.robot == "hardware":
         extra += ["--target", "hardware"] + (["--allow-motion"] if options.allow_motion else [])
     for fault in server_faults:
         extra += ["--server-fault", fault]

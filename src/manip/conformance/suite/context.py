@@ -75,7 +75,9 @@ __all__ = [
     "RunOptions",
 ]
 
-Target = Literal["sim", "hardware"]
+Robot = Literal["sim", "hardware"]
+"""What is behind the target: a simulated arm, or real hardware (``--target``), where the motion and
+power cases wait for ``--allow-motion``."""
 DEFAULT_REPLY_TIMEOUT: Final = 2.0
 DEFAULT_CONNECT_TIMEOUT: Final = 5.0
 
@@ -89,7 +91,7 @@ a refusal as busy (the previous case's connection still closing) is retried."""
 class RunOptions:
     """The run's settings, as cases see them."""
 
-    target: Target = "sim"
+    robot: Robot = "sim"
     allow_motion: bool = False
     strict: bool = False
     reply_timeout: float = DEFAULT_REPLY_TIMEOUT
@@ -111,7 +113,7 @@ class RunOptions:
     def allowed_hazards(self) -> frozenset[Hazard]:
         """Opcode hazard classes cases may send: all on a simulator; on hardware read-only and config
         unless ``--allow-motion``."""
-        if self.target == "sim" or self.allow_motion:
+        if self.robot == "sim" or self.allow_motion:
             return frozenset({"read-only", "config", "motion", "power"})
         return frozenset({"read-only", "config"})
 
@@ -678,7 +680,7 @@ class CaseContext:
     def require_hazard(self, hazard: Hazard) -> None:
         """Skip unless the run allows opcodes of ``hazard`` (for cases that decide at run time)."""
         if hazard not in self.options.allowed_hazards:
-            self.skip(f"{hazard} requests are not allowed on {self.options.target} without --allow-motion")
+            self.skip(f"{hazard} requests are not allowed on {self.options.robot} without --allow-motion")
 
 
 def request_packets(packets: Sequence[WirePacket]) -> list[WirePacket]:

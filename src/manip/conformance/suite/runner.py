@@ -26,9 +26,9 @@ Theory of operation
    the run is non-conformant (or unreachable, exit 3, when no case had reached a verdict).
 5. **Liveness at the end**; then the verdict (:attr:`RunReport.exit_code`).
 
-Hazards: with ``target="hardware"`` cases whose hazard is above ``config`` are skipped unless
-``allow_motion``.  Interruption (Ctrl-C, cancellation) stops the run; the report so far is returned
-with ``interrupted`` set (exit code 4).
+Hazards: with ``robot="hardware"`` (``--target hardware``) cases whose hazard is above ``config`` are
+skipped unless ``allow_motion``.  Interruption (Ctrl-C, cancellation) stops the run; the report so far
+is returned with ``interrupted`` set (exit code 4).
 """
 
 from __future__ import annotations
@@ -144,7 +144,7 @@ class Runner:
             seed=config.seed,
             strict=config.options.strict,
             options={
-                "target": config.options.target,
+                "target": config.options.robot,
                 "allow_motion": config.options.allow_motion,
                 "max_examples": config.options.max_examples,
                 "reply_timeout": config.options.reply_timeout,
@@ -316,7 +316,7 @@ class Runner:
             self.events.case_started(item)
         if item.hazard not in options.allowed_hazards:
             result.outcome = "skip"
-            result.reason = f"{item.hazard} case on {options.target} target without --allow-motion"
+            result.reason = f"{item.hazard} case on {options.robot} target without --allow-motion"
             return result
         ctx = CaseContext(
             case_id=item.id,
