@@ -14,6 +14,7 @@ import os
 import shlex
 import sys
 import traceback
+from dataclasses import dataclass
 from pathlib import Path
 
 import click
@@ -31,7 +32,7 @@ from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REP
 from manip.conformance.suite.results import ExitCode
 from manip.conformance.suite.selection import match_id
 from manip.exit_status import epilog
-from manip.links import AddressError, parse_address
+from manip.links import AddressError, LinkAddress, parse_address
 from manip.reference_server import FaultSet
 from manip.spec.model import Hazard
 
@@ -234,41 +235,8 @@ def fuzz_command(
         click.echo(class_listing())
         return
     console = make_console()
-    if host is not None:
-        for name in ("server_faults", "link", "wrist"):
-            if given(name):
-                option = "--" + name.replace("_", "-").removesuffix("s")
-                raise click.UsageError(
-                    f"{option} applies to the reference server the fuzzer starts: omit HOST"
-                )
-    else:
-        for name in ("launch", "server_log", "restart_wait"):
-            if given(name):
-                raise click.UsageError(f"--{name.replace('_', '-')} applies to a HOST")
-    if launch is not None and (server_log is not None or given("restart_wait")):
-        raise click.UsageError(
-            "--launch reads the server's output and restarts it: not with --server-log or --restart-wait"
-        )
-    if allow_motion and target_kind != "hardware":
-        raise click.UsageError("--allow-motion applies to --target hardware (a simulator gets every opcode)")
-    if only and given("inputs"):
-        raise click.UsageError("--only sends the inputs it names: not with --inputs")
-    if server_faults:
-        try:
-            FaultSet.parse(server_faults)
-        except ValueError as exc:
-            raise click.UsageError(f"--server-fault: {exc}") from None
-    for pattern in classes:
-        if not any(match_id(pattern, c) for c in CLASSES):
-            raise click.UsageError(f"--class {pattern!r} matches no input class (--list-classes lists them)")
-    address = None
-    if host is not None:
-        try:
-            address = parse_address(host)
-        except AddressError as exc:
-            raise click.UsageError(str(exc)) from None
-        if address.scheme == "chaosd":
-            raise click.UsageError("the fuzzer speaks tcp://, unix:// and chudp:// links, not chaosd://")
+    _check_options(host, launch, server_log, target_kind, allow_motion, only, server_faults, classes)
+    address = _address(host)
     check_output_paths(json=json_path, junit=junit_path)
     hazards: frozenset[Hazard] = frozenset(HAZARD_ORDER)
     if target_kind == "hardware" and not allow_motion:
@@ -286,30 +254,7 @@ def fuzz_command(
         )
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "big")
-    target: FuzzedServer
-    if address is None:
-        argv = reference_server_argv(link, faults=server_faults, wrist=wrist, seed=seed)
-        faults = f", faults: {', '.join(server_faults)}" if server_faults else ""
-        label = f"the reference server (manip-server, {link}{', simulated wrist' if wrist else ''}{faults})"
-        target = LaunchedServer(argv, label=label)
-    elif launch is not None:
-        target = LaunchedServer(shlex.split(launch), address, label=f"{address} (started with {launch})")
-    else:
-        target = RemoteServer(address, server_log)
-    extra: list[str] = []
-    for pattern in classes:
-        extra += ["--class", pattern]
-    if target_kind == "hardware":
-        extra += ["--target", "hardware"] + (["--allow-motion"] if allow_motion else [])
-    if host is None:
-        extra += (["--link", link] if link != "tcp" else []) + (["--wrist"] if wrist else [])
-        for fault in server_faults:
-            extra += ["--server-fault", fault]
-    if launch is not None:
-        extra += ["--launch", launch]
-    if server_log is not None:
-        extra += ["--server-log", str(server_log)]
-    prefix = ["manip-conform", "fuzz", *([str(address)] if address is not None else [])]
+    server = _Server(address, link, server_faults, wrist, launch, server_log)
     config = CampaignConfig(
         seed=seed,
         gen=gen,
@@ -322,8 +267,8 @@ def fuzz_command(
         shrink=not no_shrink,
         shrink_seconds=shrink_seconds,
         restart_wait=restart_wait,
-        reproduce_prefix=prefix,
-        reproduce_options=extra,
+        reproduce_prefix=["manip-conform", "fuzz", *([str(address)] if address is not None else [])],
+        reproduce_options=_reproduce_options(classes, target_kind, allow_motion, server),
         command=shlex.join(["manip-conform", *sys.argv[1:]]),
         options={
             "inputs": len(only) if only else inputs,
@@ -341,13 +286,122 @@ def fuzz_command(
         },
     )
     console.print(f"manip-conform fuzz: seed [bold]{seed}[/] (rerun with --seed {seed})")
-    report = _campaign(config, target, console, quiet, total=len(only) if only else inputs)
+    report = _campaign(config, server.fuzzed(seed), console, quiet, total=len(only) if only else inputs)
     if json_path is not None:
         write_json(report, json_path)
     if junit_path is not None:
         write_junit(report, junit_path)
     _summary(console, report)
     sys.exit(int(report.exit_code))
+
+
+def _reproduce_options(
+    classes: tuple[str, ...], target_kind: str, allow_motion: bool, server: _Server
+) -> list[str]:
+    """The options of a finding's reproduce line: the classes, the target kind, the same server."""
+    extra = [word for pattern in classes for word in ("--class", pattern)]
+    if target_kind == "hardware":
+        extra += ["--target", "hardware"] + (["--allow-motion"] if allow_motion else [])
+    return extra + server.reproduce_options()
+
+
+def _check_options(
+    host: str | None,
+    launch: str | None,
+    server_log: Path | None,
+    target_kind: str,
+    allow_motion: bool,
+    only: tuple[int, ...],
+    server_faults: tuple[str, ...],
+    classes: tuple[str, ...],
+) -> None:
+    """Usage errors of options that do not go together, or name what does not exist."""
+    _check_server_choice(host)
+    if launch is not None and (server_log is not None or given("restart_wait")):
+        raise click.UsageError(
+            "--launch reads the server's output and restarts it: not with --server-log or --restart-wait"
+        )
+    if allow_motion and target_kind != "hardware":
+        raise click.UsageError("--allow-motion applies to --target hardware (a simulator gets every opcode)")
+    if only and given("inputs"):
+        raise click.UsageError("--only sends the inputs it names: not with --inputs")
+    if server_faults:
+        try:
+            FaultSet.parse(server_faults)
+        except ValueError as exc:
+            raise click.UsageError(f"--server-fault: {exc}") from None
+    for pattern in classes:
+        if not any(match_id(pattern, c) for c in CLASSES):
+            raise click.UsageError(f"--class {pattern!r} matches no input class (--list-classes lists them)")
+
+
+def _check_server_choice(host: str | None) -> None:
+    """The options of the reference server the fuzzer starts go without HOST, those of HOST with it."""
+    if host is not None:
+        for name in ("server_faults", "link", "wrist"):
+            if given(name):
+                option = "--" + name.replace("_", "-").removesuffix("s")
+                raise click.UsageError(
+                    f"{option} applies to the reference server the fuzzer starts: omit HOST"
+                )
+        return
+    for name in ("launch", "server_log", "restart_wait"):
+        if given(name):
+            raise click.UsageError(f"--{name.replace('_', '-')} applies to a HOST")
+
+
+def _address(host: str | None) -> LinkAddress | None:
+    """HOST's link address (None: the reference server the fuzzer starts); the fuzzer has no chaosd link."""
+    if host is None:
+        return None
+    try:
+        address = parse_address(host)
+    except AddressError as exc:
+        raise click.UsageError(str(exc)) from None
+    if address.scheme == "chaosd":
+        raise click.UsageError("the fuzzer speaks tcp://, unix:// and chudp:// links, not chaosd://")
+    return address
+
+
+@dataclass(frozen=True)
+class _Server:
+    """The server fuzzed, as the options name it: HOST (started by ``--launch``, or someone else's), or
+    the reference server the fuzzer starts (its link, faults and wrist)."""
+
+    address: LinkAddress | None
+    link: str
+    faults: tuple[str, ...]
+    wrist: bool
+    launch: str | None
+    log: Path | None
+
+    def fuzzed(self, seed: int) -> FuzzedServer:
+        if self.address is None:
+            argv = reference_server_argv(self.link, faults=self.faults, wrist=self.wrist, seed=seed)
+            faults = f", faults: {', '.join(self.faults)}" if self.faults else ""
+            wrist = ", simulated wrist" if self.wrist else ""
+            return LaunchedServer(
+                argv, label=f"the reference server (manip-server, {self.link}{wrist}{faults})"
+            )
+        if self.launch is not None:
+            label = f"{self.address} (started with {self.launch})"
+            return LaunchedServer(shlex.split(self.launch), self.address, label=label)
+        return RemoteServer(self.address, self.log)
+
+    def reproduce_options(self) -> list[str]:
+        """The options of a reproduce line that start or find the same server."""
+        extra: list[str] = []
+        if self.address is None:
+            extra += (["--link", self.link] if self.link != "tcp" else []) + (
+                ["--wrist"] if self.wrist else []
+            )
+            for fault in self.faults:
+                extra += ["--server-fault", fault]
+        if self.launch is not None:
+            extra += ["--launch", self.launch]
+        if self.log is not None:
+            extra += ["--server-log", str(self.log)]
+        return extra
 
 
 def _campaign(
