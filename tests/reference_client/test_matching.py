@@ -32,7 +32,7 @@ from manip.reference_client import (
 from manip.reference_client.events import (
     AsyncErrorReceived,
     AsyncResponseReceived,
-    ConnectionClosed,
+    ConnectionEnded,
     Event,
     FatalErrorReceived,
     InitialResponse,
@@ -347,7 +347,7 @@ def test_connection_lost_fails_pending_requests() -> None:
     request = send(core, "here", 2)
     events = core.connection_lost("peer went away")
     assert isinstance(events[0], RequestFailed) and isinstance(events[0].error, ConnectionLost)
-    assert events[-1] == ConnectionClosed("peer went away")
+    assert events[-1] == ConnectionEnded("peer went away")
     assert request.state is RequestState.FAILED and core.phase is Phase.CLOSED
 
 

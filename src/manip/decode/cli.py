@@ -26,14 +26,14 @@ from manip.codecs.messages import request_op
 from manip.codecs.packet import Packet
 from manip.commandline import configure_logging, version_option
 from manip.decode.describe import (
-    Node,
     ReadAs,
+    TreeNode,
     describe_body,
     describe_packet,
     describe_words,
     packet_json,
 )
-from manip.decode.frames import LAYOUTS, EmptyInputError, Frame, Layout, frames
+from manip.decode.frames import LAYOUTS, EmptyInputError, Frame, FrameLayout, frames
 from manip.decode.pairing import StreamPairing
 from manip.decode.render import render_hexdump, render_tree
 from manip.decode.source import (
@@ -177,7 +177,7 @@ class _Out:
 
     def node(
         self,
-        node: Node,
+        node: TreeNode,
         *,
         hexdump: Callable[[], str] | None = None,
         line: str | None = None,
@@ -212,12 +212,12 @@ class _Out:
         sys.stdout.flush()
 
 
-def _failed(node: Node) -> bool:
+def _failed(node: TreeNode) -> bool:
     return any(c.label == "decode error" for c in node.children)
 
 
-def _error_node(frame: Frame, err: DecodeError, link: str) -> Node:
-    node = Node("frame", f"{link} frame at byte {frame.offset}, {len(frame.wire)} bytes, does not decode")
+def _error_node(frame: Frame, err: DecodeError, link: str) -> TreeNode:
+    node = TreeNode("frame", f"{link} frame at byte {frame.offset}, {len(frame.wire)} bytes, does not decode")
     node.add(
         "decode error",
         str(err),
@@ -404,7 +404,7 @@ def _describe_paired(
     pairing: StreamPairing | None,
     *,
     header: bool,
-) -> Node:
+) -> TreeNode:
     """The packet's tree; in a stream, its side and its request's layout from the pairing
     (``--direction`` and ``--request-opcode`` win over it)."""
     if pairing is None:
@@ -421,7 +421,12 @@ def _describe_paired(
 
 
 def _dump(
-    wire: bytes, node: Node, start: int, framing: str, layout: Layout, origin: str = "the start of the input"
+    wire: bytes,
+    node: TreeNode,
+    start: int,
+    framing: str,
+    layout: FrameLayout,
+    origin: str = "the start of the input",
 ) -> Callable[[], str]:
     """The hexdump of one frame, made only if the format asks for it."""
     return lambda: render_hexdump(
@@ -515,7 +520,7 @@ def _decode_capture(
             if item.packet is None:
                 failed = True
                 if not filters.ops:
-                    node = Node(f"packet {item.seq}", packet_line(item, start))
+                    node = TreeNode(f"packet {item.seq}", packet_line(item, start))
                     err = item.annotation.decode_error or {}
                     node.add("decode error", str(err.get("message", "?")), err)
                     out.node(node, line=packet_line(item, start) if fmt != "json" else None)

@@ -35,7 +35,7 @@ ReadAs = Literal["auto", "request", "response"]
 
 
 @dataclass(slots=True)
-class Node:
+class TreeNode:
     """One labelled item of a decoded packet."""
 
     label: str
@@ -43,7 +43,7 @@ class Node:
     value: Any = None
     offset: int | None = None
     size: int | None = None
-    children: list[Node] = field(default_factory=list)
+    children: list[TreeNode] = field(default_factory=list)
 
     def add(
         self,
@@ -52,8 +52,8 @@ class Node:
         value: Any = None,
         offset: int | None = None,
         size: int | None = None,
-    ) -> Node:
-        child = Node(label, text, value, offset, size, [])
+    ) -> TreeNode:
+        child = TreeNode(label, text, value, offset, size, [])
         self.children.append(child)
         return child
 
@@ -71,8 +71,8 @@ class Node:
         return out
 
 
-def describe_header(p: Packet) -> Node:
-    node = Node("chaos header", offset=0, size=16)
+def describe_header(p: Packet) -> TreeNode:
+    node = TreeNode("chaos header", offset=0, size=16)
     node.add("opcode", f"{octal(p.opcode)} {SPEC.chaos_opcode_name(p.opcode)}", p.opcode, 1, 1)
     node.add("fc", str(p.fc), p.fc, 2, 2)
     node.add("nbytes", str(p.nbytes), p.nbytes, 2, 2)
@@ -103,7 +103,7 @@ def describe_header(p: Packet) -> Node:
 
 
 # manip-decode --format json writes a packet a line, and the Chaos header is more than half of each line:
-# built as a Node tree and run through the JSON encoder it cost half the decoder's time.  header_json
+# built as a TreeNode tree and run through the JSON encoder it cost half the decoder's time.  header_json
 # writes the same bytes straight from the packet (a test checks them against the tree for many packets);
 # its strings are digits and opcode names, which need no escaping.
 
@@ -138,11 +138,11 @@ def header_json(p: Packet) -> str:
     return out + "]}"
 
 
-def packet_json(root: Node, p: Packet) -> str:
+def packet_json(root: TreeNode, p: Packet) -> str:
     """The compact JSON of ``describe_packet(p, header=False)`` (``root``, maybe with nodes added since)
     as if it had been made with the header: the header from :func:`header_json`, the rest encoded."""
     if root.label != "packet" or not root.text or root.value is not None or root.offset is not None:
-        return _ENCODE(Node(root.label, root.text, root.value, root.offset, root.size,
+        return _ENCODE(TreeNode(root.label, root.text, root.value, root.offset, root.size,
                             [describe_header(p), *root.children]).to_json())  # fmt: skip
     parts = ['{"label":"packet","text":', _ENCODE(root.text), ',"children":[', header_json(p)]
     for child in root.children:
@@ -162,7 +162,7 @@ def _format_value(v: Any) -> str:
     return str(v)
 
 
-def _fields(node: Node, layout: Layout, values: dict[str, Any] | Any, start: int) -> None:
+def _fields(node: TreeNode, layout: Layout, values: dict[str, Any] | Any, start: int) -> None:
     offset: int | None = start
     for f in layout.fields:
         size = f.type.fixed_size
@@ -177,10 +177,10 @@ def _fields(node: Node, layout: Layout, values: dict[str, Any] | Any, start: int
         offset = None if size is None or offset is None else offset + size
 
 
-def describe_request(p: Packet) -> Node:
+def describe_request(p: Packet) -> TreeNode:
     request = decode_request(p.opcode, p.data)
     op = request.op
-    node = Node(
+    node = TreeNode(
         "manip request", f"{octal(op.opcode)} {op.name}: {op.title}", {"opcode": op.opcode, "name": op.name}
     )
     node.add("hazard", op.hazard, op.hazard)
@@ -190,8 +190,8 @@ def describe_request(p: Packet) -> Node:
     return node
 
 
-def _describe_reply(reply: Reply, op: RequestOpcode | None) -> Node:
-    node = Node(
+def _describe_reply(reply: Reply, op: RequestOpcode | None) -> TreeNode:
+    node = TreeNode(
         "manip response",
         f"0200 response to request {reply.request_number}",
         {"opcode": ServerOp.RESPONSE, "request_number": reply.request_number},
@@ -215,10 +215,10 @@ def _describe_reply(reply: Reply, op: RequestOpcode | None) -> Node:
     return node
 
 
-def _describe_error(err: ErrorReply) -> Node:
+def _describe_error(err: ErrorReply) -> TreeNode:
     name = ServerOp(err.opcode).name.lower().replace("_", "-")
     e = err.error
-    node = Node(
+    node = TreeNode(
         "manip error",
         f"{octal(err.opcode)} {name}: {e.render()}",
         {"opcode": err.opcode, "request_number": err.request_number},
@@ -239,8 +239,8 @@ def _describe_error(err: ErrorReply) -> Node:
     return node
 
 
-def _describe_async(a: AsyncResponse) -> Node:
-    node = Node(
+def _describe_async(a: AsyncResponse) -> TreeNode:
+    node = TreeNode(
         "manip asynchronous response",
         f"0203 {a.condition_name}",
         {"opcode": ServerOp.ASYNCHRONOUS_RESPONSE, "condition": a.condition},
@@ -262,7 +262,7 @@ def _describe_async(a: AsyncResponse) -> Node:
     return node
 
 
-def describe_server_message(msg: ServerMessage, op: RequestOpcode | None = None) -> Node:
+def describe_server_message(msg: ServerMessage, op: RequestOpcode | None = None) -> TreeNode:
     if isinstance(msg, Reply):
         return _describe_reply(msg, op)
     if isinstance(msg, ErrorReply):
@@ -283,26 +283,26 @@ def guess_direction(p: Packet) -> Literal["request", "response"]:
     return "response"
 
 
-def describe_control(p: Packet) -> Node | None:
+def describe_control(p: Packet) -> TreeNode | None:
     """The meaning of the data of Chaos control packets."""
     match p.opcode:
         case ChaosOp.RFC:
             text = p.data.decode("ascii", "replace")
             contact, _, args = text.partition(" ")
-            node = Node("rfc", f"contact {contact!r}" + (f" args {args!r}" if args else ""))
+            node = TreeNode("rfc", f"contact {contact!r}" + (f" args {args!r}" if args else ""))
             node.add("contact", contact, contact, 0, len(contact))
             if args:
                 node.add("arguments", args, args, len(contact) + 1, len(args))
             return node
         case ChaosOp.OPN | ChaosOp.STS if len(p.data) >= 4:
             receipt, window = struct.unpack_from("<HH", p.data)
-            node = Node(SPEC.chaos_opcode_name(p.opcode).lower(), f"receipt {receipt} window {window}")
+            node = TreeNode(SPEC.chaos_opcode_name(p.opcode).lower(), f"receipt {receipt} window {window}")
             node.add("receipt", str(receipt), receipt, 0, 2)
             node.add("window", str(window), window, 2, 2)
             return node
         case ChaosOp.CLS | ChaosOp.LOS | ChaosOp.ANS | ChaosOp.FWD:
             text = decode_lispm(p.data)
-            node = Node(SPEC.chaos_opcode_name(p.opcode).lower(), repr(text), text)
+            node = TreeNode(SPEC.chaos_opcode_name(p.opcode).lower(), repr(text), text)
             if p.opcode == ChaosOp.FWD:
                 node.add("new host", octal(p.ack_no), p.ack_no)
             return node
@@ -311,11 +311,11 @@ def describe_control(p: Packet) -> Node | None:
 
 def describe_packet(
     p: Packet, *, direction: ReadAs = "auto", request: int | str | None = None, header: bool = True
-) -> Node:
+) -> TreeNode:
     """The whole tree for one packet; decode problems become a ``decode error`` node (never raised).
 
     ``header=False`` leaves out the Chaos header node, for :func:`packet_json` to write it."""
-    root = Node("packet", f"{SPEC.chaos_opcode_name(p.opcode)} {octal(p.opcode)}, {p.nbytes} data bytes")
+    root = TreeNode("packet", f"{SPEC.chaos_opcode_name(p.opcode)} {octal(p.opcode)}, {p.nbytes} data bytes")
     if header:
         root.children.append(describe_header(p))
     control = describe_control(p)
@@ -334,7 +334,7 @@ def describe_packet(
         else:
             node = describe_server_message(decode_server_packet(p.opcode, p.data, op), op)
     except CodecError as exc:
-        node = Node(
+        node = TreeNode(
             "decode error",
             str(exc),
             {"message": exc.message, "path": exc.path, "offset": exc.offset, "clause": exc.clause},
@@ -345,9 +345,9 @@ def describe_packet(
     return root
 
 
-def describe_words(items: Sequence[StreamItem], direction: str) -> Node:
+def describe_words(items: Sequence[StreamItem], direction: str) -> TreeNode:
     """A Cougar word stream, message by message."""
-    root = Node(f"cougar {direction} stream", f"{len(items)} item(s)")
+    root = TreeNode(f"cougar {direction} stream", f"{len(items)} item(s)")
     for item in items:
         if isinstance(item, CougarMsg):
             node = root.add(item.name, f"code {item.code}: {item.spec.remarks}", {"code": item.code})
@@ -364,7 +364,7 @@ def describe_words(items: Sequence[StreamItem], direction: str) -> Node:
     return root
 
 
-def describe_body(side: Literal["request", "response"], key: int | str, data: bytes) -> Node:
+def describe_body(side: Literal["request", "response"], key: int | str, data: bytes) -> TreeNode:
     """A bare body, the data of one packet without its Chaos header (the form the golden vectors use).
 
     For a request ``key`` is its opcode (number or name).  For a response it is the request answered
@@ -372,7 +372,7 @@ def describe_body(side: Literal["request", "response"], key: int | str, data: by
     (``fatal-error``, ``non-fatal-error``, ``asynchronous-response``, ``asynchronous-error``,
     ``asynchronous-warning``).  Decode problems become a ``decode error`` node, as in a packet.
     """
-    root = Node("body", f"{side} body, {len(data)} bytes")
+    root = TreeNode("body", f"{side} body, {len(data)} bytes")
     try:
         if side == "request":
             op = request_op(key)
@@ -385,7 +385,7 @@ def describe_body(side: Literal["request", "response"], key: int | str, data: by
                 op = request_op(key)
                 node = describe_server_message(decode_server_packet(ServerOp.RESPONSE, data, op), op)
     except CodecError as exc:
-        node = Node(
+        node = TreeNode(
             "decode error",
             str(exc),
             {"message": exc.message, "path": exc.path, "offset": exc.offset, "clause": exc.clause},

@@ -43,7 +43,7 @@ class Frame:
 
 
 @dataclass(frozen=True, slots=True)
-class Layout:
+class FrameLayout:
     """How a framing lays a packet out: the header before the words, their byte order."""
 
     prefix: int
@@ -53,10 +53,16 @@ class Layout:
 
 
 LAYOUTS: Final = {
-    "chudp": Layout(4, True, True, "CHUDP header 01 01 00 00, then 16-bit words most significant byte first"),
-    "tcp": Layout(2, True, True, "2-byte big-endian length, then 16-bit words most significant byte first"),
-    "chaosd": Layout(4, False, True, "4-byte chaosd header, then 16-bit words least significant byte first"),
-    "raw": Layout(0, False, False, "PDP-11 memory order: 16-bit words least significant byte first"),
+    "chudp": FrameLayout(
+        4, True, True, "CHUDP header 01 01 00 00, then 16-bit words most significant byte first"
+    ),
+    "tcp": FrameLayout(
+        2, True, True, "2-byte big-endian length, then 16-bit words most significant byte first"
+    ),
+    "chaosd": FrameLayout(
+        4, False, True, "4-byte chaosd header, then 16-bit words least significant byte first"
+    ),
+    "raw": FrameLayout(0, False, False, "PDP-11 memory order: 16-bit words least significant byte first"),
 }
 
 
@@ -148,7 +154,7 @@ __all__ = [
     "LAYOUTS",
     "EmptyInputError",
     "Frame",
+    "FrameLayout",
     "FramingLostError",
-    "Layout",
     "frames",
 ]

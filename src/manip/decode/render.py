@@ -5,18 +5,18 @@ from __future__ import annotations
 import json
 from collections.abc import Iterator
 
-from manip.decode.describe import Node
+from manip.decode.describe import TreeNode
 
 HEADER_BYTES = 16
 
 
-def render_tree(node: Node, indent: int = 0) -> str:
+def render_tree(node: TreeNode, indent: int = 0) -> str:
     lines: list[str] = []
     _tree_lines(node, indent, lines)
     return "\n".join(lines)
 
 
-def _tree_lines(node: Node, indent: int, lines: list[str]) -> None:
+def _tree_lines(node: TreeNode, indent: int, lines: list[str]) -> None:
     # Appends to one list (no generator per level): this runs for every node of every packet.
     pad = "  " * indent
     where = f"  @{node.offset}+{node.size}" if node.offset is not None and node.size else ""
@@ -25,7 +25,7 @@ def _tree_lines(node: Node, indent: int, lines: list[str]) -> None:
         _tree_lines(child, indent + 1, lines)
 
 
-def render_json(nodes: list[Node]) -> str:
+def render_json(nodes: list[TreeNode]) -> str:
     return json.dumps([n.to_json() for n in nodes], indent=2)
 
 
@@ -38,7 +38,7 @@ def _span(first: int, size: int, region: int, msb_first: bool) -> tuple[int, int
 
 def render_hexdump(
     wire: bytes,
-    node: Node,
+    node: TreeNode,
     *,
     start: int = 0,
     base: int = 0,
@@ -81,7 +81,7 @@ def render_hexdump(
     return "\n".join(lines + [text for _, _, text in sorted(fields)])
 
 
-def _leaves(node: Node) -> Iterator[Node]:
+def _leaves(node: TreeNode) -> Iterator[TreeNode]:
     if not node.children:
         yield node
     for child in node.children:

@@ -40,7 +40,7 @@ from manip.reference_client.errors import ConnectionLost, FatalError, ManipError
 from manip.reference_client.events import (
     AsyncErrorReceived,
     AsyncResponseReceived,
-    ConnectionClosed,
+    ConnectionEnded,
     Event,
     FatalErrorReceived,
     InitialResponse,
@@ -288,7 +288,7 @@ class BackgroundProcess:
                 case FatalErrorReceived(error):
                     self._report(logging.ERROR, error)
                     self._terminate(error)
-                case ConnectionClosed(reason, cause):
+                case ConnectionEnded(reason, cause):
                     self._closed_by(reason, cause)
                 case PacketKept():
                     pass

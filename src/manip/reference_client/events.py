@@ -12,7 +12,7 @@ WarningReceived          logs it and calls the error listeners
 TrivialErrorNotified     logs it and calls the error listeners (the request itself succeeded)
 FatalErrorReceived       logs it, calls the error listeners, then ends the connection
 OutOfSequence            logs it and calls the error listeners
-ConnectionClosed         ends the connection
+ConnectionEnded         ends the connection
 PacketKept               does not return the packet to the transport (a handler kept it)
 =======================  ===========================================================================
 """
@@ -87,7 +87,9 @@ class OutOfSequence:
 
 
 @dataclass(frozen=True, slots=True)
-class ConnectionClosed:
+class ConnectionEnded:
+    """The connection ended (closed, or lost: then ``cause`` is the transport's error)."""
+
     reason: str
     cause: BaseException | None = None
     """The transport's error that ended the connection, if it has one (chained to ConnectionLost)."""
@@ -108,6 +110,6 @@ Event = (
     | TrivialErrorNotified
     | FatalErrorReceived
     | OutOfSequence
-    | ConnectionClosed
+    | ConnectionEnded
     | PacketKept
 )

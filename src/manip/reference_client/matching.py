@@ -61,7 +61,7 @@ from manip.reference_client.errors import (
     ResponseDataError,
 )
 from manip.reference_client.events import (
-    ConnectionClosed,
+    ConnectionEnded,
     Event,
     InitialResponse,
     OutOfSequence,
@@ -207,7 +207,7 @@ class MatchingCore:
             error.__cause__ = cause
             events.append(self._failed(request, error))
         self.phase = Phase.CLOSED
-        events.append(ConnectionClosed(reason, cause))
+        events.append(ConnectionEnded(reason, cause))
         return events
 
     # ------------------------------------------------------------------ primitives for handlers
