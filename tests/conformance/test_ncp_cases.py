@@ -58,6 +58,7 @@ class Flaws:
     los_answers_los: bool = False
     los_illegal: bool = True
     dup_rfc: DupRfc = "same"
+    acknowledge: bool = True
 
 
 # ------------------------------------------------------------------------------------- the fake NCP
@@ -102,9 +103,13 @@ class FakeNcp:
         self.conns: dict[int, FakeConn] = {}
         self.next_index = 0x2001
 
+    def _acked(self, conn: FakeConn) -> int:
+        """What the fake acknowledges: all it received, or (flawed) never beyond the RFC."""
+        return conn.rlast if self.flaws.acknowledge else conn.rfc_no
+
     def _out(self, conn: FakeConn, opcode: int, number: int, data: bytes) -> Packet:
         return Packet(
-            opcode, conn.peer_host, conn.peer_index, SERVER_ADDR, conn.index, number, conn.rlast, data
+            opcode, conn.peer_host, conn.peer_index, SERVER_ADDR, conn.index, number, self._acked(conn), data
         )
 
     def _open(self, p: Packet, send: Send) -> None:
@@ -179,7 +184,7 @@ class FakeNcp:
                 del conn.queue[number]
 
     def _sts(self, conn: FakeConn) -> None:
-        conn.send(self._out(conn, ChaosOp.STS, seq_add(conn.tlast, 1), pack_status(conn.rlast, 15)))
+        conn.send(self._out(conn, ChaosOp.STS, seq_add(conn.tlast, 1), pack_status(self._acked(conn), 15)))
 
     def _flush(self, conn: FakeConn) -> None:
         while conn.pending and (not self.flaws.window or seq_sub(conn.tlast, conn.tacked) < conn.twsize):
@@ -197,7 +202,7 @@ class FakeNcp:
                 assert isinstance(packet, Packet) and isinstance(sent_at, float)
                 if now - sent_at >= RETRANSMIT:
                     entry[1] = now
-                    conn.send(replace(packet, ack_no=conn.rlast))
+                    conn.send(replace(packet, ack_no=self._acked(conn)))
 
 
 @contextlib.asynccontextmanager
@@ -296,12 +301,13 @@ CONFORMING_CASES = [
     "server.ncp.duplicate-rfc",
     "server.ncp.retransmission",
     "server.ncp.window",
+    "server.ncp.acknowledge",
 ]
 
 
 def test_the_cases_cover_the_ncp_clauses() -> None:
     clauses = {c for item in CASES.values() for c in item.clauses}
-    assert {"ncp.los", "ncp.window", "ncp.retransmission", "ncp.duplicate-rfc"} <= clauses
+    assert {"ncp.los", "ncp.window", "ncp.retransmission", "ncp.duplicate-rfc", "ncp.acknowledge"} <= clauses
     assert {item.kind for item in CASES.values()} <= {"negative", "scripted"}
     assert all(item.hazard == "read-only" for item in CASES.values())
 
@@ -350,6 +356,7 @@ def test_conforming_fake_passes(case_id: str, scheme: str) -> None:
         ),
         ("server.ncp.window", Flaws(window=False), "ncp.window", "nothing acknowledged yet"),
         ("server.ncp.window", Flaws(receipt_opens_window=True), "ncp.window", "receipt"),
+        ("server.ncp.acknowledge", Flaws(acknowledge=False), "ncp.acknowledge", "never acknowledged"),
     ],
 )
 def test_flawed_fake_fails(case_id: str, flaws: Flaws, clause: str, says: str) -> None:

@@ -30,8 +30,8 @@ from manip.conformance.suite.rawchaos import (
     format_packet,
 )
 from manip.links.address import parse_address
-from manip.ncp.packets import is_data
-from manip.ncp.seq import seq_add, seq_gt, seq_sub
+from manip.ncp.packets import is_data, unpack_status
+from manip.ncp.seq import seq_add, seq_ge, seq_gt, seq_sub
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp
 from manip.spec.notation import octal
@@ -477,6 +477,36 @@ async def retransmission(ctx: CaseContext) -> None:
                 actual=_lines(twice),
                 data=_frames(repeat, twice[0].raw),
             )
+
+
+@case("server.ncp.acknowledge", clauses=["ncp.acknowledge"], technique="scripted", deadline=12.0)
+async def acknowledge(ctx: CaseContext) -> None:
+    """A request we send once, and never again, is acknowledged: in the ack field of a packet the target
+    sends on the connection, or in the receipt of an STS (else a client would retransmit it forever)."""
+    async with await _open(ctx) as peer:
+        conn = await _handshake(ctx, peer, _index(ctx), ctx.random.randrange(0x10000))
+        conn.sts(ack=conn.opn_no, window=5)
+        initial = await _next_data(ctx, peer, conn, conn.opn_no, "initial RESPONSE after our STS")
+        request = _request(conn, ack=initial.packet.packet_no)
+        number = request.packet_no
+
+        def acknowledges(p: Packet) -> bool:
+            if not conn.mine(p):
+                return False
+            status = unpack_status(p.data) if p.opcode == ChaosOp.STS else None
+            return seq_ge(p.ack_no, number) or (status is not None and seq_ge(status[0], number))
+
+        bound = _scale(ctx, RETRANSMIT_BOUND)
+        got = await peer.receive(acknowledges, bound)
+        if got is None:
+            ctx.fail(
+                f"the request #{number} was never acknowledged within {bound:g} s",
+                clause="ncp.acknowledge",
+                expected=f"a packet of the connection whose ack field (or STS receipt) reaches #{number}",
+                actual=f"none: its ack fields stayed below it (initial RESPONSE: #{initial.packet.ack_no})",
+                data=initial.raw,
+            )
+        ctx.note(f"acknowledged by {format_packet(got.packet)}")
 
 
 # ------------------------------------------------------------------------------------------ window
