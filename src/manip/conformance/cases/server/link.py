@@ -53,7 +53,10 @@ def _frames_case(row: tuple[str, tuple[str, ...]]) -> None:
 
     async def frames(ctx: CaseContext) -> None:
         if parse_address(ctx.options.address).framing != scheme:
-            ctx.skip(f"the target is not on a {scheme} link")
+            ctx.skip(
+                f"the target is not on a {scheme} link, so it cannot break {', '.join(clauses)} here"
+                f" (a run against its {scheme}:// address judges it)"
+            )
         probe = await ctx.connect()
         await _exchange(probe)
         stats = probe.conn.node.link_stats()
