@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from typing import IO, Final
 
 BLOCK: Final = 1 << 16
+MAX_TEXT: Final = 4 << 20
+"""The most a Cougar word stream may hold (read whole): 4 MiB of text, about 800,000 words."""
 _HEX_TEXT: Final = re.compile(rb"^[\s0-9a-fA-Fx:,]*$")
 _SEPARATORS: Final = re.compile(rb"0[xX]|[\s:,]")
 _HEX_ARGUMENT: Final = re.compile(r"^[\s0-9a-fA-Fx:,]+$")
@@ -119,11 +121,17 @@ def byte_blocks(src: Source, binary: bool | None) -> Iterator[bytes]:
 
 
 def read_text(source: str | None) -> str:
-    """The whole input as text (Cougar word streams are short)."""
+    """The whole input as text (Cougar word streams are short: at most :data:`MAX_TEXT` bytes are
+    read, so an endless input such as ``/dev/zero`` is refused rather than read without end)."""
     if source is not None and source != "-" and not os.path.exists(source):
         return source
     src = open_source(source)
     try:
-        return src.stream.read().decode("ascii", "replace")
+        text = src.stream.read(MAX_TEXT + 1)
     finally:
         src.close()
+    if len(text) > MAX_TEXT:
+        raise SourceError(
+            f"{src.name} holds more than {MAX_TEXT >> 20} MiB: too long for a Cougar word stream"
+        )
+    return text.decode("ascii", "replace")
