@@ -22,7 +22,7 @@ import sys
 
 import click
 
-from manip.commandline import configure_logging, version_option
+from manip.commandline import FiniteFloat, check_host, configure_logging, version_option
 
 from .listing import info_json, info_lines
 from .pcap import CHUDP_PORT, export_pcapng, import_pcap, parse_address
@@ -48,16 +48,21 @@ def main() -> None:
     metavar="URL",
     help="Where clients connect: tcp://HOST:PORT or chudp://HOST:PORT.",
 )
-@click.option("--upstream", required=True, metavar="URL", help="The server, same scheme as --listen.")
+@click.option(
+    "--upstream",
+    required=True,
+    metavar="URL",
+    help="The server, same scheme as --listen.",
+)
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="The capture to write.")
-@click.option("--seconds", type=click.FloatRange(min=0.0), default=None, help="Stop after S seconds.")
+@click.option("--seconds", type=FiniteFloat(min=0.0), default=None, help="Stop after S seconds.")
 @click.option(
     "--seed", type=int, default=None, help="Seed to note in the metadata (of the session recorded)."
 )
 @click.option("--compression", type=click.Choice(sorted(COMPRESSIONS)), default="zstd")
 @click.option(
     "--flush-interval",
-    type=click.FloatRange(min=0.01),
+    type=FiniteFloat(min=0.01),
     default=DEFAULT_FLUSH_INTERVAL,
     help="Seconds between chunk flushes.",
 )
@@ -77,6 +82,10 @@ def record(
         listen_end, upstream_end = parse_endpoint(listen), parse_endpoint(upstream)
     except CaptureError as exc:
         raise click.BadParameter(str(exc)) from None
+    for option, end in (("--listen", listen_end), ("--upstream", upstream_end)):
+        why = check_host(end.host)
+        if why is not None:
+            raise click.BadParameter(why, param_hint=option)
     if listen_end.scheme != upstream_end.scheme:  # refuse before the capture file is created
         schemes = f"{listen_end.scheme}:// to {upstream_end.scheme}://"
         raise click.UsageError(f"cannot proxy {schemes}: use the same link on both sides")

@@ -39,7 +39,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from manip.commandline import configure_logging, version_option
+from manip.commandline import FiniteFloat, configure_logging, version_option
 from manip.conformance.cli_options import (
     json_option,
     junit_option,
@@ -163,21 +163,21 @@ def main() -> None:
 )
 @click.option("--allow-motion", is_flag=True, help="With --target hardware, run motion and power cases too.")
 @_number_option(
-    "--reply-timeout", click.FloatRange(0.01), DEFAULT_REPLY_TIMEOUT, "Seconds to wait for each reply."
+    "--reply-timeout", FiniteFloat(0.01), DEFAULT_REPLY_TIMEOUT, "Seconds to wait for each reply."
 )
 @_number_option(
-    "--deadline-scale", click.FloatRange(0.01), 1.0, "Multiply every case deadline (slow links, real arms)."
+    "--deadline-scale", FiniteFloat(0.01), 1.0, "Multiply every case deadline (slow links, real arms)."
 )
 @_number_option(
     "--target-time-scale",
-    click.FloatRange(min=0.01),
+    FiniteFloat(min=0.01),
     1.0,
     "HOST's arm runs this many times faster than real time (a simulated server started with --time-scale):"
     " its 16 ms servo cycle is judged at that rate (erratum server-time-scale).",
 )
 @click.option(
     "--broken-after",
-    type=click.FloatRange(min=0.1),
+    type=FiniteFloat(min=0.1),
     default=None,
     metavar="SECONDS",
     help="The target's broken-connection timer (90 s by default, the ITS Chaos NCP's: the 1985 guide "
@@ -233,7 +233,7 @@ def main() -> None:
 @click.option(
     "--wrist-wait",
     "wrist_wait",
-    type=click.FloatRange(min=0.1),
+    type=FiniteFloat(min=0.1),
     default=DEFAULT_WRIST_WAIT,
     show_default=True,
     metavar="SECONDS",

@@ -16,12 +16,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 from collections.abc import AsyncIterator
 from typing import Final
 
 import click
 
-from manip.commandline import configure_logging, version_option
+from manip.commandline import LinkAddressType, configure_logging, version_option
 from manip.cougar.environment import Contacts, Spring, Surface
 from manip.cougar.faults import FAULTS, parse_faults
 from manip.cougar.link import CougarEnd, CougarModel, Drv11jError, parse_address
@@ -112,6 +113,8 @@ def parse_surface(text: str) -> tuple[tuple[float, float, float], tuple[float, f
         v = [float(x) for x in text.split(",")]
     except ValueError:
         raise click.BadParameter(f"{text!r}: numbers separated by commas expected") from None
+    if not all(math.isfinite(x) for x in v):
+        raise click.BadParameter(f"{text!r}: every number must be finite")
     if len(v) not in (3, 6, 7):
         raise click.BadParameter(f"{text!r}: 3, 6 or 7 numbers expected (point, normal, stiffness)")
     normal = (v[3], v[4], v[5]) if len(v) >= 6 else (0.0, 0.0, 1.0)
@@ -144,7 +147,12 @@ async def _serve_forever(model: CougarModel, address: str) -> None:
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.option(
-    "--listen", "address", default="tcp://127.0.0.1:42011", show_default=True, help="Where to listen."
+    "--listen",
+    "address",
+    default="tcp://127.0.0.1:42011",
+    show_default=True,
+    type=LinkAddressType("tcp", ("tcp",)),
+    help="Where to listen.",
 )
 @click.option("--seed", type=int, default=None, help="Seed of the simulator's noise.")
 @click.option(

@@ -51,7 +51,7 @@ import click
 from manip.arm.oat import transform_from_xyzoat
 from manip.arm.transform import Transform
 from manip.codecs.messages import AsyncResponse
-from manip.commandline import configure_logging, version_option
+from manip.commandline import FINITE, FiniteFloat, configure_logging, version_option
 from manip.reference_client.cli_output import (
     async_record,
     async_text,
@@ -84,7 +84,7 @@ from manip.reference_client.connect import aconnect
 from manip.reference_client.errors import ConnectionLost, ManipError, RequestTimeout
 from manip.reference_client.harness import main as harness_main
 from manip.reference_client.manipulator import NOTIFY_GUARD_HITS, NOTIFY_SEGMENTS, Manipulator
-from manip.reference_client.options import ClientOptions
+from manip.reference_client.options import DEFAULT_MAX_REPLY_BYTES, ClientOptions
 from manip.spec import RequestOpcode
 
 if TYPE_CHECKING:
@@ -117,8 +117,16 @@ def _common_options(command: Callable[..., None]) -> Callable[..., None]:
         "--contact", default=None, help="Chaos contact name (default: the URL's, else PUMA)."
     )(command)
     command = click.option(
+        "--max-reply",
+        type=click.IntRange(min=1),
+        default=None,
+        metavar="BYTES",
+        help="Give up a reply (and the connection) past this many data bytes "
+        f"(default {DEFAULT_MAX_REPLY_BYTES}).",
+    )(command)
+    command = click.option(
         "--timeout",
-        type=click.FloatRange(min=0.0, min_open=True),
+        type=FiniteFloat(min=0.0, min_open=True),
         default=None,
         help=f"Seconds to wait for the connection and for each reply (default {DEFAULT_TIMEOUT:g}).",
     )(command)
@@ -136,9 +144,15 @@ class Settings:
     record: str | None = None
     command_line: tuple[str, ...] = ()
     """What the capture's metadata says was run."""
+    max_reply: int = DEFAULT_MAX_REPLY_BYTES
 
     def overridden(
-        self, as_json: bool | None, timeout: float | None, contact: str | None, record: str | None
+        self,
+        as_json: bool | None,
+        timeout: float | None,
+        contact: str | None,
+        record: str | None,
+        max_reply: int | None = None,
     ) -> Settings:
         return replace(
             self,
@@ -146,6 +160,7 @@ class Settings:
             timeout=self.timeout if timeout is None else timeout,
             contact=self.contact if contact is None else contact,
             record=self.record if record is None else record,
+            max_reply=self.max_reply if max_reply is None else max_reply,
         )
 
     def options(self, wrap_link: LinkWrapper | None = None) -> ClientOptions:
@@ -155,6 +170,7 @@ class Settings:
             contact=self.contact,
             name=PROG,
             wrap_link=wrap_link,
+            max_reply_bytes=self.max_reply,
         )
 
     def recorder(self) -> tuple[Recorder, LinkWrapper] | None:
@@ -254,7 +270,7 @@ Exit status:
 
 
 _FLAGS: Final = frozenset({"--json", "-h", "--help"})
-_VALUED: Final = frozenset({"--timeout", "--contact", "--record"})
+_VALUED: Final = frozenset({"--timeout", "--contact", "--record", "--max-reply"})
 
 
 def _options_first(args: list[str]) -> list[str]:
@@ -300,6 +316,7 @@ def main(
     timeout: float | None,
     contact: str | None,
     record: str | None,
+    max_reply: int | None,
 ) -> None:
     configure_logging(logging.ERROR)  # a failure is this command's one line: the library's warnings repeat it
     ctx.obj = Settings(
@@ -309,6 +326,7 @@ def main(
         contact,
         record,
         tuple(ctx.meta.get("manip.argv", (PROG, *sys.argv[1:]))),
+        DEFAULT_MAX_REPLY_BYTES if max_reply is None else max_reply,
     )
 
 
@@ -322,11 +340,12 @@ def pass_settings(command: Callable[..., None]) -> Callable[..., None]:
         timeout: float | None,
         contact: str | None,
         record: str | None,
+        max_reply: int | None,
         **kwargs: Any,
     ) -> None:
         settings = ctx.find_object(Settings)
         assert settings is not None
-        settings = settings.overridden(as_json, timeout, contact, record)
+        settings = settings.overridden(as_json, timeout, contact, record, max_reply)
         command(settings, *args, **kwargs)
 
     functools.update_wrapper(wrapper, command)  # the docstring is the command's help
@@ -398,7 +417,7 @@ _POWER = click.option(
 
 
 @main.command("move-joints", context_settings=NUMBERS)
-@click.argument("q", nargs=6, type=float, metavar="Q1 Q2 Q3 Q4 Q5 Q6")
+@click.argument("q", nargs=6, type=FINITE, metavar="Q1 Q2 Q3 Q4 Q5 Q6")
 @_WAIT
 @_POWER
 @pass_settings
@@ -438,7 +457,7 @@ def power(settings: Settings, state: str) -> None:
 
 
 @main.command()
-@click.argument("factor", type=float)
+@click.argument("factor", type=FINITE)
 @pass_settings
 def speed(settings: Settings, factor: float) -> None:
     """Set the speed factor, 0 < FACTOR <= 1 (0216)."""
@@ -467,11 +486,11 @@ def _pose(values: Sequence[float]) -> Transform:
 
 
 @main.command("solve-forwards", context_settings=NUMBERS)
-@click.argument("pose", nargs=-1, type=float, metavar="X Y Z O A T | N1 N2 N3 O1 O2 O3 A1 A2 A3 P1 P2 P3")
+@click.argument("pose", nargs=-1, type=FINITE, metavar="X Y Z O A T | N1 N2 N3 O1 O2 O3 A1 A2 A3 P1 P2 P3")
 @click.option(
     "--current",
     nargs=6,
-    type=float,
+    type=FINITE,
     default=None,
     metavar="Q1 .. Q6",
     help="Joint angles to choose the solution near (default: where the arm is).",
@@ -490,7 +509,7 @@ def solve_forwards(settings: Settings, pose: tuple[float, ...], current: tuple[f
 
 
 @main.command("solve-backwards", context_settings=NUMBERS)
-@click.argument("q", nargs=6, type=float, metavar="Q1 Q2 Q3 Q4 Q5 Q6")
+@click.argument("q", nargs=6, type=FINITE, metavar="Q1 Q2 Q3 Q4 Q5 Q6")
 @pass_settings
 def solve_backwards(settings: Settings, q: tuple[float, ...]) -> None:
     """The pose of joint angles (solve backwards, 0221)."""
@@ -520,7 +539,7 @@ def _waiting_for(url: str, count: int | None, seconds: float | None, guards: boo
 @click.option(
     "--count", type=click.IntRange(min=1), default=None, help="Stop after N asynchronous responses."
 )
-@click.option("--seconds", type=click.FloatRange(min=0.0), default=None, help="Stop after S seconds.")
+@click.option("--seconds", type=FiniteFloat(min=0.0), default=None, help="Stop after S seconds.")
 @click.option("--guards/--no-guards", default=True, show_default=True, help="Ask for guard hits too.")
 @pass_settings
 def watch(settings: Settings, count: int | None, seconds: float | None, guards: bool) -> None:

@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Any, Final
 import click
 
 from manip.arm.kinematics import PUMA600, ArmModel
-from manip.commandline import configure_logging, version_option
+from manip.commandline import FINITE, FiniteFloat, LinkAddressType, configure_logging, version_option
 from manip.cougar.link import parse_address as parse_drv11j_address
 from manip.links import (
     AccessError,
@@ -153,6 +153,7 @@ def command_line(ctx: click.Context) -> list[str]:
     default=DEFAULT_ADDRESS,
     show_default=True,
     metavar="URL",
+    type=LinkAddressType(),
     help=f"Link address to listen on: tcp://HOST:PORT (manip's TCP link; {DEFAULT_TCP_PORT} is its "
     "port, 0 picks a free one), chudp://HOST:PORT?addr=OCTAL or chaosd:///PATH.",
 )
@@ -160,6 +161,7 @@ def command_line(ctx: click.Context) -> list[str]:
     "--chudp",
     multiple=True,
     metavar="URL",
+    type=LinkAddressType("chudp", ("chudp",)),
     help="Also listen on CHUDP (chudp://HOST:PORT?addr=OCTAL, the robot host's Chaos address); repeatable.",
 )
 @click.option("--contact", default=DEFAULT_CONTACT, show_default=True, help="Chaos contact name.")
@@ -168,7 +170,7 @@ def command_line(ctx: click.Context) -> list[str]:
 )
 @click.option(
     "--time-scale",
-    type=float,
+    type=FINITE,
     default=1.0,
     show_default=True,
     help="Simulated seconds per real second (e.g. 10: moves finish ten times sooner).",
@@ -176,7 +178,7 @@ def command_line(ctx: click.Context) -> list[str]:
 @click.option("--seed", type=int, default=None, help="Seed of the server's random generator.")
 @click.option(
     "--broken-after",
-    type=click.FloatRange(min=0.1),
+    type=FiniteFloat(min=0.1),
     default=None,
     metavar="SECONDS",
     help="Declare a connection broken when its client is silent this long (default 90, the ITS Chaos "
@@ -227,7 +229,7 @@ def command_line(ctx: click.Context) -> list[str]:
 )
 @click.option(
     "--frame-timeout",
-    type=click.FloatRange(min=0.0),
+    type=FiniteFloat(min=0.0),
     default=DEFAULT_FRAME_TIMEOUT,
     show_default=True,
     metavar="SECONDS",
@@ -236,7 +238,7 @@ def command_line(ctx: click.Context) -> list[str]:
 )
 @click.option(
     "--link-idle-timeout",
-    type=click.FloatRange(min=0.0),
+    type=FiniteFloat(min=0.0),
     default=DEFAULT_IDLE_TIMEOUT,
     show_default=True,
     metavar="SECONDS",
@@ -254,7 +256,7 @@ def command_line(ctx: click.Context) -> list[str]:
 )
 @click.option(
     "--accept-backoff",
-    type=click.FloatRange(min=0.001),
+    type=FiniteFloat(min=0.001),
     default=1.0,
     show_default=True,
     metavar="SECONDS",

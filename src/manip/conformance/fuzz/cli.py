@@ -20,6 +20,7 @@ import click
 from rich.console import Console
 from rich.markup import escape
 
+from manip.commandline import CommandLine, FiniteFloat
 from manip.conformance.cli_options import json_option, junit_option
 from manip.conformance.fuzz.campaign import Campaign, CampaignConfig, CampaignEvents
 from manip.conformance.fuzz.generators import CLASSES, HAZARD_ORDER, GenOptions
@@ -85,7 +86,7 @@ def class_listing() -> str:
 )
 @click.option(
     "--seconds",
-    type=click.FloatRange(min=0.1),
+    type=FiniteFloat(min=0.1),
     default=None,
     help="Stop after this long (after the batch under way), whatever --inputs says.",
 )
@@ -128,21 +129,21 @@ def class_listing() -> str:
 )
 @click.option(
     "--reply-timeout",
-    type=click.FloatRange(0.01),
+    type=FiniteFloat(0.01),
     default=DEFAULT_REPLY_TIMEOUT,
     show_default=True,
     help="Seconds an answer may take (a wait for the arm gets the spec's allowance on top).",
 )
 @click.option(
     "--connect-timeout",
-    type=click.FloatRange(0.01),
+    type=FiniteFloat(0.01),
     default=DEFAULT_CONNECT_TIMEOUT,
     show_default=True,
     help="Seconds a connection may take to open (a busy robot included).",
 )
 @click.option(
     "--deadline-scale",
-    type=click.FloatRange(0.01),
+    type=FiniteFloat(0.01),
     default=1.0,
     show_default=True,
     help="Multiply every wait for the arm (slow links, real arms).",
@@ -171,6 +172,7 @@ def class_listing() -> str:
 @click.option(
     "--launch",
     metavar="CMD",
+    type=CommandLine(),
     default=None,
     help="With HOST: start the server with CMD, restart it after a crash, read its output for tracebacks.",
 )
@@ -182,7 +184,7 @@ def class_listing() -> str:
 )
 @click.option(
     "--restart-wait",
-    type=click.FloatRange(min=0.0),
+    type=FiniteFloat(min=0.0),
     default=0.0,
     show_default=True,
     metavar="SECONDS",
@@ -192,7 +194,7 @@ def class_listing() -> str:
 @click.option("--no-shrink", is_flag=True, help="Report findings with their whole batch, unshrunk.")
 @click.option(
     "--shrink-seconds",
-    type=click.FloatRange(min=1.0),
+    type=FiniteFloat(min=1.0),
     default=60.0,
     show_default=True,
     help="Most time spent shrinking one finding.",

@@ -34,6 +34,7 @@ from click.core import ParameterSource
 from rich.console import Console
 from rich.markup import escape
 
+from manip.commandline import FiniteFloat, LinkAddressType
 from manip.conformance.cli_options import json_option, junit_option, strict_option
 from manip.conformance.output.console import make_console
 from manip.conformance.output.documents import document_options, write_documents
@@ -289,9 +290,19 @@ def _capture_settings(file: Path) -> _Recorded:
 
 @click.command("replay", epilog=EXIT_CODES_HELP)
 @_file_argument
-@click.option("--against", "against", metavar="URL", help="Replay the client side to the server at URL.")
 @click.option(
-    "--serve", "serve", metavar="URL", help="Play the server side to clients at URL (port 0: a free one)."
+    "--against",
+    "against",
+    metavar="URL",
+    type=LinkAddressType(),
+    help="Replay the client side to the server at URL.",
+)
+@click.option(
+    "--serve",
+    "serve",
+    metavar="URL",
+    type=LinkAddressType(),
+    help="Play the server side to clients at URL (port 0: a free one).",
 )
 @_session_option
 @click.option(
@@ -301,13 +312,13 @@ def _capture_settings(file: Path) -> _Recorded:
     metavar="PATH",
     help="Leave out mismatches whose field path matches PATH (glob: error.message, describe.*).",
 )
-@click.option("--reply-timeout", type=click.FloatRange(0.01), default=2.0, show_default=True,
+@click.option("--reply-timeout", type=FiniteFloat(0.01), default=2.0, show_default=True,
               help="Seconds to wait for each live answer.")  # fmt: skip
-@click.option("--async-timeout", type=click.FloatRange(0.01), default=10.0, show_default=True,
+@click.option("--async-timeout", type=FiniteFloat(0.01), default=10.0, show_default=True,
               help="Seconds to wait for each recorded asynchronous packet's counterpart.")  # fmt: skip
-@click.option("--settle", type=click.FloatRange(0.0), default=0.2, show_default=True,
+@click.option("--settle", type=FiniteFloat(0.0), default=0.2, show_default=True,
               help="Seconds of quiet listened for after each session (extra packets).")  # fmt: skip
-@click.option("--seconds", type=click.FloatRange(0.01), default=None,
+@click.option("--seconds", type=FiniteFloat(0.01), default=None,
               help="--serve: stop after this many seconds even if sessions are left.")  # fmt: skip
 @click.option(
     "--server-fault",
