@@ -53,8 +53,8 @@ from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness
 from manip.conformance.fuzz.cli import fuzz_command
 from manip.conformance.output.console import make_console, progress_bar
 from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
-from manip.conformance.output.documents import ReportError, document_options, render_saved, write_documents
-from manip.conformance.output.report import failure_text, write_json, write_junit
+from manip.conformance.output.documents import ReportError, document_options, render_saved
+from manip.conformance.output.report import failure_text, write_reports
 from manip.conformance.puma.target import (
     DEFAULT_WRIST_LISTEN,
     DEFAULT_WRIST_WAIT,
@@ -445,13 +445,11 @@ def run(
     if report is not None:
         if code == ExitCode.INTERNAL and not report.interrupted and not report.internal_error:
             report.internal_error = "internal error"
-        if json_path is not None:
-            write_json(report, json_path)
-        if junit_path is not None:
-            write_junit(report, junit_path)
-        write_documents(report, html_path, markdown_path)
+        report.unwritten.extend(write_reports(report, json_path, junit_path, html_path, markdown_path))
+        for problem in report.unwritten:  # a report path that cannot be written is a usage error, found late
+            click.echo(f"manip-conform: {problem}", err=True)
         _summary(console, report, quiet)
-        code = int(report.exit_code) if code is None else code
+        code = int(report.exit_code) if code is None or report.unwritten else code
     sys.exit(int(code) if code is not None else int(ExitCode.INTERNAL))
 
 

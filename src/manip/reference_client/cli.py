@@ -230,15 +230,25 @@ def _run(settings: Settings, action: Action, *, interrupt_ends: bool = False) ->
                 await action(arm)
             return
         recorder, wrap_link = recording
+        done = False
         try:
             async with aconnect(settings.url, settings.options(wrap_link)) as arm:
                 await action(arm)
+            done = True
         finally:  # also on Ctrl-C: asyncio.run cancels this task before raising KeyboardInterrupt
-            recorder.close()
+            try:
+                recorder.close()
+            except Exception as exc:  # CaptureError: the file could not be written (a full disk)
+                unwritten.append(RecordError(str(exc)))
+                if not done:  # the command's own failure is said next; say this one too
+                    click.echo(f"{PROG}: {exc}", err=True)
 
     as_json = settings.as_json
+    unwritten: list[RecordError] = []
     try:
         asyncio.run(session())
+        if unwritten:  # the command did its work, but its recording is lost: a --record problem
+            _fail(unwritten[0], EXIT_USAGE, as_json)
     except KeyboardInterrupt:
         if not interrupt_ends:
             _fail(InterruptError(), EXIT_INTERRUPTED, as_json)

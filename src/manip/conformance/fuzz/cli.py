@@ -351,12 +351,17 @@ def fuzz_command(
     )
     console.print(f"manip-conform fuzz: seed [bold]{seed}[/] (rerun with --seed {seed})")
     report = _campaign(config, target, console, quiet, total=len(only) if only else inputs)
-    if json_path is not None:
-        write_json(report, json_path)
-    if junit_path is not None:
-        write_junit(report, junit_path)
+    unwritten = []
+    for path, write in ((json_path, write_json), (junit_path, write_junit)):
+        if path is not None:
+            try:
+                write(report, path)
+            except OSError as exc:
+                unwritten.append(str(exc))
     _summary(console, report)
-    sys.exit(int(report.exit_code))
+    for problem in unwritten:  # a report path that cannot be written is a usage error, found late
+        click.echo(f"manip-conform: {problem}", err=True)
+    sys.exit(2 if unwritten else int(report.exit_code))
 
 
 def _campaign(

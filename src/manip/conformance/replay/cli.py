@@ -37,8 +37,8 @@ from rich.markup import escape
 from manip.commandline import FiniteFloat, LinkAddressType
 from manip.conformance.cli_options import json_option, junit_option, strict_option
 from manip.conformance.output.console import make_console
-from manip.conformance.output.documents import document_options, write_documents
-from manip.conformance.output.report import clause_lines, failure_text, write_json, write_junit
+from manip.conformance.output.documents import document_options
+from manip.conformance.output.report import clause_lines, failure_text, write_reports
 from manip.conformance.suite.embedded import EmbeddedServer, simulated_server
 from manip.conformance.suite.results import ExitCode, RunReport
 
@@ -149,13 +149,9 @@ def _finish(
                 console.print(body, markup=False, highlight=False)
             for note in result.notes:
                 console.print(f"           note: {note}", markup=False, highlight=False)
-    if json_path is not None:
-        write_json(report, json_path)
-    if junit_path is not None:
-        write_junit(report, junit_path)
-    write_documents(report, html_path, markdown_path)
+    report.unwritten.extend(write_reports(report, json_path, junit_path, html_path, markdown_path))
     print_by_clause(console, report)
-    for problem in report.problems:
+    for problem in [*report.problems, *report.unwritten]:
         console.print(f"[bold red]problem[/]: {escape(problem)}")
     counts = ", ".join(f"{v} {k}" for k, v in report.counts().items() if v) or "no results"
     style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
