@@ -20,6 +20,7 @@ MAX_TEXT: Final = 4 << 20
 _HEX_TEXT: Final = re.compile(rb"^[\s0-9a-fA-Fx:,]*$")
 _SEPARATORS: Final = re.compile(rb"0[xX]|[\s:,]")
 _HEX_ARGUMENT: Final = re.compile(r"^[\s0-9a-fA-Fx:,]+$")
+_HEX_CHARACTERS: Final = frozenset("0123456789abcdefABCDEFxX:, \t\n\r\v\f")
 
 
 class SourceError(Exception):
@@ -76,8 +77,12 @@ class _HexDecoder:
     def __init__(self, name: str) -> None:
         self.name = name
         self.held = b""
+        self.fed = 0
+        """Bytes of text fed so far (for the offset of a bad character)."""
 
     def feed(self, text: bytes, final: bool = False) -> bytes:
+        start = self.fed - len(self.held)
+        self.fed += len(text)
         text = self.held + text
         self.held = b""
         if not final and text[-1:] == b"0":  # perhaps the start of a 0x
@@ -89,9 +94,12 @@ class _HexDecoder:
         try:
             out = bytes.fromhex(cleaned.decode("ascii"))
         except (ValueError, UnicodeDecodeError):
-            bad = next((c for c in cleaned if chr(c) not in "0123456789abcdefABCDEF"), None)
-            shown = repr(chr(bad)) if bad is not None else "?"
-            raise SourceError(f"{self.name} is not hex text: character {shown} is not a hex digit") from None
+            at = next((i for i, c in enumerate(text) if chr(c) not in _HEX_CHARACTERS), None)
+            shown = repr(chr(text[at])) if at is not None else "?"
+            where = f" at byte {start + at}" if at is not None else ""
+            raise SourceError(
+                f"{self.name} is not hex text: character {shown}{where} is not a hex digit"
+            ) from None
         if final and len(cleaned) % 2:
             raise SourceError(f"{self.name}: odd number of hex digits (the last one has no partner)")
         return out
