@@ -6,7 +6,10 @@ meanings are exactly those of the JSON view (which the reader does not need, and
 its messages: chunks are unpacked here rather than by ``mcap``'s record classes).  The file is
 read as a stream in the order it was written, so a capture without its summary section can be read up
 to where it breaks (:class:`CaptureTruncatedError` then says how far it got; ``manip-capture recover`` makes
-it whole).
+it whole).  Damage stops the reading with :class:`~manip.captures.bounds.CaptureDamagedError`, which names
+the byte offset and what was wrong: a chunk that does not decompress, whose records do not match its
+CRC or its declared size, a record that runs past its chunk or the file, or one longer than the bounds
+of :mod:`~manip.captures.bounds` (which no reader goes past, whatever a length field claims).
 
 The replay and offline-verify commands of :mod:`manip.conformance` use :func:`read_sessions`:
 ``session.requests`` are the client's requests in order (retransmissions left out), ``session.pairs``
