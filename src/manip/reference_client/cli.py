@@ -28,11 +28,12 @@ same exit status.  Commands::
 
 ``--record FILE`` writes the session's packets, both ways, to an MCAP capture (:mod:`manip.captures`;
 ``manip-capture info FILE`` lists it) with the command line in its metadata.  The file is closed, and
-valid, however the command ends: success, an error, a lost connection or Ctrl-C.
+valid, however the command ends: success, an error, a lost connection or Ctrl-C; if it cannot be written
+(a full disk), the command says so and exits 2.
 
 Exit status: 0 success (``watch`` also when stopped with Ctrl-C); 1 the server answered with an error
-(or a reply the client could not read); 2 usage (bad arguments, bad URL, a ``--record`` file that cannot
-be created); 3 cannot connect, or the connection was lost; 4 no reply within ``--timeout``; 130
+(or a reply the client could not read, or one past ``--max-reply``); 2 usage (bad arguments, bad URL, a
+``--record`` file that cannot be created or written); 3 cannot connect, or the connection was lost; 4 no reply within ``--timeout``; 130
 interrupted.
 """
 
@@ -199,7 +200,7 @@ Action = Callable[[Manipulator], Awaitable[None]]
 
 
 class RecordError(Exception):
-    """The ``--record`` file cannot be created."""
+    """The ``--record`` file cannot be created, or could not be written (a full disk)."""
 
 
 def _fail(error: BaseException, code: int, as_json: bool = False) -> NoReturn:
@@ -272,7 +273,7 @@ requests.  ``manip-client harness`` (no URL) is the client's harness for ``manip
 Exit status:
   0    success (watch: also when stopped with Ctrl-C)
   1    the server answered with an error, or a reply that could not be read
-  2    usage: bad arguments or URL, a --record FILE that cannot be created
+  2    usage: bad arguments or URL, a --record FILE that cannot be created or written
   3    cannot connect, or the connection was lost
   4    no reply within --timeout
   130  interrupted
