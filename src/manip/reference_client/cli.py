@@ -33,8 +33,8 @@ valid, however the command ends: success, an error, a lost connection or Ctrl-C;
 
 Exit status: 0 success (``watch`` also when stopped with Ctrl-C); 1 the server answered with an error
 (or a reply the client could not read, or one past ``--max-reply``); 2 usage (bad arguments, bad URL, a
-``--record`` file that cannot be created or written); 3 cannot connect, or the connection was lost; 4 no reply within ``--timeout``; 130
-interrupted.
+``--record`` file that cannot be created or written); 3 cannot connect, or the connection was lost; 4 no
+reply within ``--timeout``; 130 interrupted.
 """
 
 from __future__ import annotations
