@@ -15,6 +15,7 @@ from manip.commandline import CommandLine, FiniteFloat, LinkAddressType, check_h
 from manip.conformance.cli import main as conform_main
 from manip.cougar.cli import main as cougar_main
 from manip.decode.cli import main as decode_main
+from manip.links import parse_address
 from manip.reference_client.cli import main as client_main
 from manip.reference_server.cli import main as server_main
 
@@ -69,6 +70,7 @@ def test_a_non_finite_number_is_refused(name: str, param: click.Parameter, text:
         (server_main, ["--broken-after", "inf"], "not a finite number"),
         (server_main, ["--listen", "tcp://300.1.1.1:0"], "not an IP address"),
         (cougar_main, ["--surface", "nan,nan,nan"], "finite"),
+        (cougar_main, ["--listen", "tcp://300.1.1.1:1"], "not an IP address"),
         (conform_main, ["fuzz", "--launch", ""], "the command is empty"),
         (conform_main, ["fuzz", "--launch", "'unclosed"], "not a command line"),
         (
@@ -99,9 +101,9 @@ def test_the_shared_types() -> None:
     assert FiniteFloat(min=0.0).convert("1.5", None, None) == 1.5
     with pytest.raises(click.BadParameter):
         FiniteFloat(min=0.0).convert("-1", None, None)
-    assert LinkAddressType().convert("tcp://127.0.0.1:0", None, None) == "tcp://127.0.0.1:0"
+    assert LinkAddressType(parse_address).convert("tcp://127.0.0.1:0", None, None) == "tcp://127.0.0.1:0"
     with pytest.raises(click.BadParameter, match="chudp://"):
-        LinkAddressType("chudp", ("chudp",)).convert("tcp://127.0.0.1:0", None, None)
+        LinkAddressType(parse_address, "chudp", ("chudp",)).convert("tcp://127.0.0.1:0", None, None)
     with pytest.raises(click.BadParameter, match="empty"):
         CommandLine().convert("   ", None, None)
     assert check_host("127.0.0.1") is None and check_host("::1") is None

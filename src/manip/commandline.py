@@ -15,9 +15,8 @@ exit 2, with a message), a link address is a :class:`LinkAddressType` (parsed, a
 before the command starts; ``tcp://300.1.1.1:0`` is a usage error, not a traceback when binding), and a
 command line to run is a :class:`CommandLine` (never empty).
 
-This module sits outside the layers (it imports only click and the standard library at import time;
-:class:`LinkAddressType` loads ``manip.links.address`` when it parses), so the command of any layer can
-use it.
+This module sits outside the layers (it imports only click and the standard library; the command
+gives :class:`LinkAddressType` its parser), so the command of any layer can use it.
 """
 
 from __future__ import annotations
@@ -143,22 +142,22 @@ def check_host(host: str) -> str | None:
 
 class LinkAddressType(click.ParamType[Any, Any]):
     """A link address (``tcp://HOST:PORT``, ``chudp://...``, ``chaosd:///PATH``, ``unix:///PATH``), parsed
-    and its host resolved; the value is the address as given (``scheme``: the scheme a bare
-    ``HOST:PORT`` means; ``schemes``: the ones allowed, all by default)."""
+    by ``parse`` (``manip.links.parse_address``, given by the command: this module stays below the
+    layers) and its host resolved; the value is the address as given.  ``scheme``: the scheme a bare
+    ``HOST:PORT`` means; ``schemes``: the ones allowed (all by default)."""
 
     name = "url"
 
-    def __init__(self, scheme: str = "tcp", schemes: tuple[str, ...] = ()) -> None:
+    def __init__(self, parse: Callable[..., Any], scheme: str = "tcp", schemes: tuple[str, ...] = ()) -> None:
+        self.parse = parse
         self.scheme = scheme
         self.schemes = schemes
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
-        from manip.links.address import AddressError, parse_address  # noqa: PLC0415
-
         text = str(value)
         try:
-            address = parse_address(text, default_scheme=self.scheme)  # type: ignore[arg-type]
-        except AddressError as exc:
+            address = self.parse(text, default_scheme=self.scheme)
+        except ValueError as exc:  # manip.links.AddressError
             self.fail(str(exc), param, ctx)
         if self.schemes and address.scheme not in self.schemes:
             allowed = " or ".join(f"{s}://" for s in self.schemes)

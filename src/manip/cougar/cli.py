@@ -22,7 +22,7 @@ from typing import Final
 
 import click
 
-from manip.commandline import LinkAddressType, configure_logging, version_option
+from manip.commandline import check_host, configure_logging, version_option
 from manip.cougar.environment import Contacts, Spring, Surface
 from manip.cougar.faults import FAULTS, parse_faults
 from manip.cougar.link import CougarEnd, CougarModel, Drv11jError, parse_address
@@ -151,7 +151,6 @@ async def _serve_forever(model: CougarModel, address: str) -> None:
     "address",
     default="tcp://127.0.0.1:42011",
     show_default=True,
-    type=LinkAddressType("tcp", ("tcp",)),
     help="Where to listen.",
 )
 @click.option("--seed", type=int, default=None, help="Seed of the simulator's noise.")
@@ -189,9 +188,12 @@ def main(
     """Serve a simulated Cougar wrist computer over the emulated DRV-11J link."""
     configure_logging(logging.INFO if verbose else logging.WARNING)
     try:
-        parse_address(address)
+        host, _port = parse_address(address)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--listen") from None
+    why = check_host(host)
+    if why is not None:
+        raise click.BadParameter(why, param_hint="--listen")
     model = _make_model(seed, surfaces, springs, parse_faults(faults))
     with contextlib.suppress(KeyboardInterrupt):
         asyncio.run(_serve_forever(model, address))

@@ -153,7 +153,7 @@ def command_line(ctx: click.Context) -> list[str]:
     default=DEFAULT_ADDRESS,
     show_default=True,
     metavar="URL",
-    type=LinkAddressType(),
+    type=LinkAddressType(parse_address),
     help=f"Link address to listen on: tcp://HOST:PORT (manip's TCP link; {DEFAULT_TCP_PORT} is its "
     "port, 0 picks a free one), chudp://HOST:PORT?addr=OCTAL or chaosd:///PATH.",
 )
@@ -161,7 +161,7 @@ def command_line(ctx: click.Context) -> list[str]:
     "--chudp",
     multiple=True,
     metavar="URL",
-    type=LinkAddressType("chudp", ("chudp",)),
+    type=LinkAddressType(parse_address, "chudp", ("chudp",)),
     help="Also listen on CHUDP (chudp://HOST:PORT?addr=OCTAL, the robot host's Chaos address); repeatable.",
 )
 @click.option("--contact", default=DEFAULT_CONTACT, show_default=True, help="Chaos contact name.")

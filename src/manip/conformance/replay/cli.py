@@ -290,14 +290,14 @@ def _capture_settings(file: Path) -> _Recorded:
     "--against",
     "against",
     metavar="URL",
-    type=LinkAddressType(),
+    type=LinkAddressType(parse_address),
     help="Replay the client side to the server at URL.",
 )
 @click.option(
     "--serve",
     "serve",
     metavar="URL",
-    type=LinkAddressType(),
+    type=LinkAddressType(parse_address),
     help="Play the server side to clients at URL (port 0: a free one).",
 )
 @_session_option
