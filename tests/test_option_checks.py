@@ -69,6 +69,7 @@ def test_a_non_finite_number_is_refused(name: str, param: click.Parameter, text:
         (server_main, ["--frame-timeout", "nan"], "not a finite number"),
         (server_main, ["--broken-after", "inf"], "not a finite number"),
         (server_main, ["--listen", "tcp://300.1.1.1:0"], "not an IP address"),
+        (server_main, ["--cougar", "tcp://300.1.1.1:1"], "not an IP address"),
         (cougar_main, ["--surface", "nan,nan,nan"], "finite"),
         (cougar_main, ["--listen", "tcp://300.1.1.1:1"], "not an IP address"),
         (conform_main, ["fuzz", "--launch", ""], "the command is empty"),

@@ -39,7 +39,14 @@ from typing import TYPE_CHECKING, Any, Final
 import click
 
 from manip.arm.kinematics import PUMA600, ArmModel
-from manip.commandline import FINITE, FiniteFloat, LinkAddressType, configure_logging, version_option
+from manip.commandline import (
+    FINITE,
+    FiniteFloat,
+    LinkAddressType,
+    check_host,
+    configure_logging,
+    version_option,
+)
 from manip.cougar.link import parse_address as parse_drv11j_address
 from manip.links import (
     AccessError,
@@ -309,9 +316,12 @@ def main(
     address = _address(listen, "--listen", "tcp")
     if cougar is not None and cougar != "sim":
         try:
-            parse_drv11j_address(cougar)
+            cougar_host, _ = parse_drv11j_address(cougar)
         except ValueError as exc:
             raise click.BadParameter(str(exc), param_hint="--cougar") from None
+        why = check_host(cougar_host)
+        if why is not None:
+            raise click.BadParameter(why, param_hint="--cougar")
     extra = [_address(url, "--chudp", "chudp") for url in chudp]
     limits = LinkLimits(
         frame_timeout=_off_if_zero(frame_timeout),
