@@ -12,6 +12,8 @@ Each scenario is a scripted bad Puma on a fresh loopback port (the client judge'
 * ``random-opcodes``: packets of random server opcodes (0200-0377) with random data;
 * ``bad-errors``: error packets (0201, 0202, 0204, 0205) with random or truncated error strings;
 * ``illegal-chaos``: Chaos packets of illegal opcodes (the client answers with LOS and gives up);
+* ``illegal-deaf``: the same from a server deaf to the client's LOS (nothing but the client's own LOS
+  can tell it the connection is gone);
 * ``async-flood``: 3,000 asynchronous responses, then the reply;
 * ``stall``: the request is never answered;
 * ``close-mid``: half a describe-self, then a CLS; ``drop-mid``: the link dropped instead;
@@ -168,6 +170,24 @@ async def _illegal_chaos(side: ServerSide) -> None:
     await side.next_request(30.0)
 
 
+async def _illegal_deaf(side: ServerSide) -> None:
+    """Illegal packets, then deaf to the client's LOS (as a server without a real NCP would be): the
+    client learns nothing more from the server, so only its own LOS can tell it the connection is gone."""
+    if await side.next_request(30.0) is None:
+        return
+    link = side.wire.links[0]
+    hear = link._receiver  # the tap's hook into the server's node (a scenario may reach into it)
+
+    def deaf(on: Any, packet: Packet) -> None:
+        if packet.opcode != ChaosOp.LOS and hear is not None:
+            hear(on, packet)
+
+    link._receiver = deaf
+    for opcode in (0o17, 0o77, 0o150):
+        _chaos(side, opcode, b"hostile")
+    await side.next_request(30.0)
+
+
 async def _async_flood(side: ServerSide) -> None:
     async def answer(request: Packet) -> None:
         for i in range(3000):
@@ -220,6 +240,7 @@ def scenarios(seed: int) -> dict[str, Script]:
         "random-opcodes": _random_replies(seed + 1, tuple(range(0o200, 0o400))),
         "bad-errors": _bad_errors(seed + 2),
         "illegal-chaos": _illegal_chaos,
+        "illegal-deaf": _illegal_deaf,
         "async-flood": _async_flood,
         "stall": _stall,
         "close-mid": _mid("close"),
@@ -230,7 +251,7 @@ def scenarios(seed: int) -> dict[str, Script]:
 
 WAITS: Final = frozenset({"stall", "huge-packets"})
 """Scenarios whose server never finishes its answer: without a timeout the library waits, as asked."""
-EXPECTED: Final = {"illegal-chaos": "illegal packet"}
+EXPECTED: Final = {"illegal-chaos": "illegal packet", "illegal-deaf": "illegal packet"}
 """What a scenario's error must say (any error will do for the others)."""
 
 
