@@ -126,7 +126,7 @@ class RecoveryReport:
             )
         if self.orphan_messages:
             lines.append(f"  {self.orphan_messages} messages dropped: their channel record was lost")
-        if self.last_message_ns is not None:
+        if self.last_message_ns is not None and not self.complete:
             lines.append(
                 f"  last message kept: {_t(self.last_message_ns)}; anything recorded after it is lost"
             )
