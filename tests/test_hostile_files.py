@@ -237,6 +237,11 @@ def test_a_full_disk_is_an_error_naming_the_path(tmp_path: Path) -> None:
         result = runner.invoke(conform_main, ["verify", str(MOTION), "-q", option, "/dev/full"])
         _no_traceback(result)
         assert result.exit_code == 2 and "cannot write /dev/full" in result.output, option
+    saved = tmp_path / "report.json"
+    assert runner.invoke(conform_main, ["verify", str(MOTION), "-q", "--json", str(saved)]).exit_code == 0
+    result = runner.invoke(conform_main, ["report", str(saved), "--html", "/dev/full"])
+    _no_traceback(result)
+    assert result.exit_code == 2 and "cannot write /dev/full" in result.output
 
 
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full")

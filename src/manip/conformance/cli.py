@@ -881,7 +881,7 @@ def report_command(report_file: Path, html_path: Path | None, markdown_path: Pat
     check_output_paths(html=html_path, markdown=markdown_path)
     try:
         render_saved(report_file, html_path, markdown_path)
-    except ReportError as exc:
+    except (ReportError, OSError) as exc:  # OSError: manip.outfile.OutputError, naming the path
         raise click.UsageError(str(exc)) from None
 
 
