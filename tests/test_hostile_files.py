@@ -245,15 +245,28 @@ def test_a_full_disk_is_an_error_naming_the_path(tmp_path: Path) -> None:
 
 
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full")
-def test_a_recorder_on_a_full_disk_raises_from_close_only() -> None:
+def test_a_recorder_on_a_full_disk_keeps_the_error_and_never_raises_mid_session(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
     recorder = Recorder("/dev/full")
     link = recorder.open_link("tcp")
     for i in range(2000):  # past the write buffer: the error happens mid-session, and is held
         recorder.packet(link, "c2s", Packet(0o201, 0o440, 1, 0o401, 2, i, 0, bytes(40)), t_ns=10**9 + i)
     recorder.flush()
+    recorder.close()
     assert recorder.write_error is not None
-    with pytest.raises(CaptureError, match="cannot write the capture /dev/full"):
-        recorder.close()
+    assert "cannot write the capture /dev/full" in str(recorder.write_error)
+    said = [r.getMessage() for r in caplog.records if "cannot write the capture" in r.getMessage()]
+    assert len(said) == 1  # once, not once a packet
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full")
+def test_capture_record_on_a_full_disk_exits_1_naming_the_file() -> None:
+    upstream = "tcp://127.0.0.1:9"  # nothing connects: the recording holds its own events only
+    args = ["record", "--listen", "tcp://127.0.0.1:0", "--upstream", upstream, "-o", "/dev/full"]
+    result = CliRunner().invoke(capture_main, [*args, "--seconds", "0.1"])
+    _no_traceback(result)
+    assert result.exit_code == 1 and "cannot write the capture /dev/full" in result.stderr
 
 
 # ---------------------------------------------------------------------------------------- campaign

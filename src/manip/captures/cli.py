@@ -136,6 +136,8 @@ async def _record(
             f"manip-capture: {recorder.counts['/chaos/c2s'] + recorder.counts['/chaos/s2c']} frames, "
             f"{recorder.connections} connection(s) recorded"
         )
+    if recorder.write_error is not None:  # a full disk: the file is cut short, and says so when read
+        raise recorder.write_error
 
 
 @main.command()

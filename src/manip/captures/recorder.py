@@ -167,9 +167,9 @@ class CaptureError(Exception):
 
 class _GuardedFile:
     """The recorder's file: the first write error (a full disk) is kept and what follows is dropped, so
-    a failing disk never raises in the middle of a session (in a link's callback); the recorder says
-    so, and :meth:`Recorder.close` raises it.  Offsets count what was handed over, as the writer
-    expects."""
+    a failing disk never raises in the middle of a session (in a link's callback); the recorder logs
+    it once and keeps it as :attr:`Recorder.write_error`.  Offsets count what was handed over, as the
+    writer expects."""
 
     def __init__(self, raw: IO[bytes]) -> None:
         self.raw = raw
@@ -579,7 +579,8 @@ class Recorder:
     @property
     def write_error(self) -> CaptureError | None:
         """Why the file could not be written (a full disk...), once a write failed: what is recorded
-        after it is dropped, and :meth:`close` raises this."""
+        after it is dropped, the recorder logs it once, and a command checks it after :meth:`close`
+        (which does not raise it: closing must not fail a session whose recording failed)."""
         error = None if self._file is None else self._file.error
         if error is None:
             return None
@@ -605,9 +606,7 @@ class Recorder:
         finally:
             if self._owns_stream:
                 self._stream.close()
-        error = self.write_error
-        if error is not None:  # the file has no summary: readers call it truncated, never complete
-            raise error
+        self._warn_once()  # the file then has no summary: readers call it truncated, never complete
 
     @property
     def closed(self) -> bool:

@@ -237,12 +237,12 @@ def _run(settings: Settings, action: Action, *, interrupt_ends: bool = False) ->
                 await action(arm)
             done = True
         finally:  # also on Ctrl-C: asyncio.run cancels this task before raising KeyboardInterrupt
-            try:
-                recorder.close()
-            except Exception as exc:  # CaptureError: the file could not be written (a full disk)
-                unwritten.append(RecordError(str(exc)))
+            recorder.close()
+            error = recorder.write_error  # the file could not be written (a full disk)
+            if error is not None:
+                unwritten.append(RecordError(str(error)))
                 if not done:  # the command's own failure is said next; say this one too
-                    click.echo(f"{PROG}: {exc}", err=True)
+                    click.echo(f"{PROG}: {error}", err=True)
 
     as_json = settings.as_json
     unwritten: list[RecordError] = []

@@ -411,6 +411,8 @@ async def _run(
         if recorder is not None:
             recorder.close()
             _report_recording(recorder)
+    if recorder is not None and recorder.write_error is not None:  # logged when it happened
+        raise click.ClickException(str(recorder.write_error))
 
 
 def _counts(counter: Counter[str]) -> str:
