@@ -16,7 +16,8 @@ seeded draw of one kind:
 * ``endless``: ``/dev/zero``, a file that never ends.
 
 Each input goes to each reader that takes its kind of file (``manip-capture info``, ``info --json``,
-``export``, ``recover``, ``manip-decode --mcap``, ``manip-conform verify``; ``manip-capture import`` and
+``export``, ``recover``, ``manip-decode --mcap``, ``manip-conform verify`` and ``replay`` (against the
+embedded server); ``manip-capture import`` and
 ``manip-decode --pcap``; ``manip-decode`` with each link framing and as hex text), in this process by
 click's test runner (a wall-clock alarm catches a hang; the address space is limited, so a runaway
 allocation becomes a MemoryError rather than a swapping machine), or with ``--processes`` as real
@@ -114,6 +115,7 @@ READERS: Final = (
     ),
     Reader("decode-mcap", "mcap", "manip-decode", lambda f, d: ["--mcap", f]),
     Reader("verify", "mcap", "manip-conform", lambda f, d: ["verify", f, "-q"]),
+    Reader("replay", "mcap", "manip-conform", lambda f, d: ["replay", f, "-q"]),
     Reader(
         "capture-import", "pcap", "manip-capture", lambda f, d: ["import", f, "-o", f"{d}/in.mcap"], False
     ),
