@@ -47,6 +47,7 @@ import os
 import random
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections import Counter
@@ -371,23 +372,28 @@ def run_command_process(
     """One command of ``manip-client`` as a real process; its peak resident memory is sampled."""
     exe = Path(sys.executable).parent / "manip-client"
     name = f"process {command}"
-    with hostile_server(script, seed) as server:
+    # Output goes to files, not pipes: a pipe nobody reads while the process runs would fill and stall it.
+    with (
+        hostile_server(script, seed) as server,
+        tempfile.TemporaryFile() as out,
+        tempfile.TemporaryFile() as err,
+    ):
         args = [str(exe), server.target, *COMMANDS[command], "--timeout", str(min(timeout / 2, 5.0))]
-        proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        proc = subprocess.Popen(args, stdout=out, stderr=err)
         peak, deadline = 0.0, time.monotonic() + timeout
         while proc.poll() is None and time.monotonic() < deadline:
             peak = max(peak, _peak_rss_mb(proc.pid))
             time.sleep(0.05)
         if proc.poll() is None:
             proc.kill()
-            proc.communicate()
+            proc.wait()
             return Outcome(scenario, name, "hang", f"killed after {timeout} s", peak)
-        out, err = proc.communicate()
+        out.seek(0)
+        err.seek(0)
+        text_out, text_err = out.read().decode(errors="replace"), err.read().decode(errors="replace")
     if peak > rss_mb:
         return Outcome(scenario, name, "memory", f"peak RSS {peak:.0f} MB", peak)
-    outcome, detail = judge(
-        scenario, command, proc.returncode, out.decode(errors="replace"), err.decode(errors="replace")
-    )
+    outcome, detail = judge(scenario, command, proc.returncode, text_out, text_err)
     return Outcome(scenario, name, outcome, detail, peak)
 
 
