@@ -20,6 +20,7 @@ from manip.conformance.client.server import serve_scenario
 from manip.reference_client import ClientOptions, ConnectionLost, ReplyTooLargeError, aconnect
 from manip.reference_client.cli import main as client_main
 
+pytestmark = pytest.mark.waits  # real sockets and the client's real close: mostly waiting
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -100,7 +101,6 @@ def test_raw_data_no_packet_can_hold_is_a_usage_error_before_connecting() -> Non
     )
 
 
-@pytest.mark.waits
 def test_a_short_hostile_campaign_finds_nothing_bad() -> None:
     """Every scenario but the stalls against the library (with and without a timeout) and the CLI's
     describe: no traceback, no hang, and the error each scenario calls for."""
