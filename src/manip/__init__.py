@@ -34,7 +34,8 @@ The exceptions a user catches are here too, loaded on first use as well::
 * from the client: :class:`ManipError` (the base of all below), :class:`ServerError` (an error string:
   :class:`FatalError`, :class:`NonFatalError`, :class:`AsynchronousError`,
   :class:`AsynchronousWarning`), :class:`ConnectionLost`, :class:`RequestTimeout` (also a
-  TimeoutError), :class:`ResponseDataError`, :class:`JointFreedError`, :class:`GuardTrippedError`;
+  TimeoutError), :class:`ResponseDataError`, :class:`ReplyTooLargeError`, :class:`JointFreedError`,
+  :class:`GuardTrippedError`;
 * from the codecs: :class:`CodecError` (a ValueError) and its :class:`DecodeError`, :class:`EncodeError`;
 * :class:`AddressError` (a link URL that does not parse), :class:`ChaosError` (the Chaos links),
   :class:`CaptureError` (a capture that cannot be read or written), :class:`SpecError`,
@@ -61,6 +62,7 @@ if TYPE_CHECKING:
         JointFreedError,
         ManipError,
         NonFatalError,
+        ReplyTooLargeError,
         RequestTimeout,
         ResponseDataError,
         ServerError,
@@ -78,6 +80,7 @@ _CLIENT_ERRORS = (
     "JointFreedError",
     "ManipError",
     "NonFatalError",
+    "ReplyTooLargeError",
     "RequestTimeout",
     "ResponseDataError",
     "ServerError",
@@ -115,6 +118,7 @@ __all__ = [
     "JointFreedError",
     "ManipError",
     "NonFatalError",
+    "ReplyTooLargeError",
     "RequestTimeout",
     "ResponseDataError",
     "ServerError",

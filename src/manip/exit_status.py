@@ -18,7 +18,9 @@ __all__ = ["EXIT_STATUSES", "epilog", "markdown_table"]
 
 Row = tuple[tuple[int, str], ...]
 
-_USAGE: Final = "usage error: a bad option or value, an input file that does not exist"
+_USAGE: Final = (
+    "usage error: a bad option or value, an input file that does not exist, a report that cannot be written"
+)
 
 EXIT_STATUSES: Final[Mapping[str, Row]] = {
     "manip-conform run": (
@@ -32,7 +34,7 @@ EXIT_STATUSES: Final[Mapping[str, Row]] = {
         (0, "conformant (replay: every answer as recorded)"),
         (1, "non-conformant, or a replayed answer differs from the recording"),
         (2, _USAGE),
-        (3, "the capture cannot be read or holds no session; the target unreachable"),
+        (3, "the capture cannot be read, is damaged or holds no session; the target unreachable"),
         (4, "interrupted or internal error"),
     ),
     "manip-conform client": (
@@ -61,14 +63,14 @@ EXIT_STATUSES: Final[Mapping[str, Row]] = {
     "manip-client": (
         (0, "success (watch: also when stopped with Ctrl-C)"),
         (1, "the server answered with an error, or a reply that could not be read"),
-        (2, "usage error: bad arguments or URL, a --record FILE that cannot be created"),
+        (2, "usage error: bad arguments or URL, a --record FILE that cannot be created or written"),
         (3, "cannot connect, or the connection was lost"),
         (4, "no reply within --timeout"),
         (130, "interrupted"),
     ),
     "manip-server": (
         (0, "stopped by SIGINT or SIGTERM"),
-        (1, "cannot listen, or cannot create the --record file"),
+        (1, "cannot listen, or cannot create or write the --record file"),
         (2, "usage error: a bad option, an unknown fault, a bad address"),
     ),
     "manip-cougar": (

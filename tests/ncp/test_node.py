@@ -22,6 +22,7 @@ from manip.ncp import (
     InvalidStateError,
     Lost,
     Ncp,
+    NcpConfig,
     Opened,
     UncontrolledReceived,
     UnknownConnectionError,
@@ -313,6 +314,25 @@ def test_illegal_packet_on_an_open_connection_draws_los_and_leaves_it_open(
     assert b.state(cb) is ConnState.OPEN and b.events() == []
     a.receive(0.0, los)  # the sender of the illegal packet loses its connection, as AIM 628 says
     assert a.state(ca) is ConnState.LOST
+
+
+@pytest.mark.parametrize(
+    ("opcode", "data", "says"),
+    [(0o177, b"xy", "Illegal opcode 177"), (ChaosOp.DAT, bytes(490), "Illegal byte count 490 (at most 488)")],
+)
+def test_with_lose_on_illegal_the_answering_side_gives_its_connection_up(
+    opcode: int, data: bytes, says: str
+) -> None:
+    """Erratum illegal-packet-gives-up: the client's NCP gives up the connection it answered with LOS."""
+    _a, b, ca, cb = open_pair(config=NcpConfig(lose_on_illegal=True))
+    b.receive(0.0, Packet(opcode, B, cb, A, ca, 2, 1, data))
+    [los] = b.packets_to_send()
+    assert los.opcode == ChaosOp.LOS and los.data.startswith(says.encode())
+    assert b.state(cb) is ConnState.LOST
+    [lost] = of_type(b.events(), Lost)
+    assert lost.reason == f"given up: the peer sent an illegal packet ({says})"
+    b.receive(0.0, Packet(0o177, B, cb, A, ca, 3, 1, b""))  # after that: no connection, LOS as for any
+    assert b.state(cb) is ConnState.LOST and of_type(b.events(), Lost) == []
 
 
 def test_illegal_packet_for_another_host_is_dropped_not_answered() -> None:

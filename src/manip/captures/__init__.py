@@ -11,6 +11,7 @@
 
 from manip.codecs.packet import Direction
 
+from .bounds import CaptureDamagedError
 from .reader import (
     Capture,
     CapturedEvent,
@@ -33,6 +34,7 @@ __all__ = [
     "Annotation",
     "Annotator",
     "Capture",
+    "CaptureDamagedError",
     "CaptureError",
     "CaptureTruncatedError",
     "CapturedEvent",

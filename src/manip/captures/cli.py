@@ -23,7 +23,7 @@ import sys
 
 import click
 
-from manip.commandline import configure_logging, version_option
+from manip.commandline import FiniteFloat, check_host, configure_logging, version_option
 from manip.exit_status import epilog
 
 from .listing import info_json, info_lines
@@ -53,16 +53,21 @@ def main() -> None:
     metavar="URL",
     help="Where clients connect: tcp://HOST:PORT or chudp://HOST:PORT.",
 )
-@click.option("--upstream", required=True, metavar="URL", help="The server, same scheme as --listen.")
+@click.option(
+    "--upstream",
+    required=True,
+    metavar="URL",
+    help="The server, same scheme as --listen.",
+)
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="The capture to write.")
-@click.option("--seconds", type=click.FloatRange(min=0.0), default=None, help="Stop after S seconds.")
+@click.option("--seconds", type=FiniteFloat(min=0.0), default=None, help="Stop after S seconds.")
 @click.option(
     "--seed", type=int, default=None, help="Seed to note in the metadata (of the session recorded)."
 )
 @click.option("--compression", type=click.Choice(sorted(COMPRESSIONS)), default="zstd")
 @click.option(
     "--flush-interval",
-    type=click.FloatRange(min=0.01),
+    type=FiniteFloat(min=0.01),
     default=DEFAULT_FLUSH_INTERVAL,
     help="Seconds between chunk flushes.",
 )
@@ -82,6 +87,10 @@ def record(
         listen_end, upstream_end = parse_endpoint(listen), parse_endpoint(upstream)
     except CaptureError as exc:
         raise click.BadParameter(str(exc)) from None
+    for option, end in (("--listen", listen_end), ("--upstream", upstream_end)):
+        why = check_host(end.host)
+        if why is not None:
+            raise click.BadParameter(why, param_hint=option)
     if listen_end.scheme != upstream_end.scheme:  # refuse before the capture file is created
         schemes = f"{listen_end.scheme}:// to {upstream_end.scheme}://"
         raise click.UsageError(f"cannot proxy {schemes}: use the same link on both sides")
@@ -132,6 +141,8 @@ async def _record(
             f"manip-capture: {recorder.counts['/chaos/c2s'] + recorder.counts['/chaos/s2c']} frames, "
             f"{recorder.connections} connection(s) recorded"
         )
+    if recorder.write_error is not None:  # a full disk: the file is cut short, and says so when read
+        raise recorder.write_error
 
 
 @main.command()

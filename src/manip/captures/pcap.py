@@ -36,10 +36,10 @@ from manip import __version__
 from manip.codecs.errors import CodecError, DecodeError
 from manip.codecs.framing import CHUDP_HEADER, decode_chudp, encode_chudp
 from manip.codecs.packet import Direction, Packet
+from manip.outfile import OutputError, atomic_output
 from manip.spec.constants import ChaosOp
 
-from .format import RAW_MESSAGE_ENCODING
-from .reader import CapturedPacket, iter_packets
+from .reader import Capture, CapturedPacket, iter_packets
 from .recorder import CaptureError, Recorder
 from .view import Annotator, bad_frame
 
@@ -159,6 +159,36 @@ def _time_ns(ts: float | Decimal) -> int:
     return round(ts * 1_000_000) * 1000  # the float holds microseconds exactly, no more
 
 
+MAX_PCAP_RECORD: Final = 1 << 20
+"""The longest packet record or block read from a pcap or pcapng file: 1 MiB.  A UDP datagram is at
+most 64 KiB and tcpdump's largest snap length 256 KiB; a longer length field is damage (and reading it
+would allocate whatever it claims)."""
+
+
+class _RecordTooLongError(Exception):
+    def __init__(self, offset: int, length: int) -> None:
+        super().__init__(
+            f"damaged at byte {offset}: a packet record claims {length} bytes "
+            f"(at most {MAX_PCAP_RECORD} are read)"
+        )
+
+
+class _Bounded:
+    """The file as dpkt reads it, refusing a read longer than :data:`MAX_PCAP_RECORD` (a length field
+    that lies) before anything is allocated."""
+
+    def __init__(self, stream: IO[bytes]) -> None:
+        self._stream = stream
+
+    def read(self, size: int = -1) -> bytes:
+        if size < 0 or size > MAX_PCAP_RECORD:
+            raise _RecordTooLongError(self._stream.tell(), size)
+        return self._stream.read(size)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
 def _open_reader(stream: IO[bytes], name: str) -> Any:
     import dpkt  # noqa: PLC0415
 
@@ -168,12 +198,32 @@ def _open_reader(stream: IO[bytes], name: str) -> Any:
         raise CaptureError(f"{name} is empty: not a pcap or pcapng file")
     try:
         if magic == _PCAPNG_MAGIC:
-            return dpkt.pcapng.Reader(stream)
+            return dpkt.pcapng.Reader(_Bounded(stream))
         if magic in _PCAP_MAGICS:
-            return dpkt.pcap.Reader(stream)
-    except (ValueError, dpkt.Error) as exc:
+            return dpkt.pcap.Reader(_Bounded(stream))
+    except _RecordTooLongError as exc:
+        raise CaptureError(f"{name}: {exc}") from None
+    except (ValueError, dpkt.Error, struct.error) as exc:
         raise CaptureError(f"{name}: damaged pcap header: {exc}") from exc
     raise CaptureError(f"{name} is not a pcap or pcapng file (it starts with {magic.hex(' ')})")
+
+
+def _records(reader: Any, name: str) -> Iterator[tuple[float | Decimal, bytes]]:
+    """(time, frame) of each packet record; a file cut inside one ends there, a length that lies is an
+    error."""
+    import dpkt  # noqa: PLC0415
+
+    packets = iter(reader)
+    while True:
+        try:
+            ts, frame = next(packets)
+        except StopIteration:
+            return
+        except _RecordTooLongError as exc:
+            raise CaptureError(f"{name}: {exc}") from None
+        except (dpkt.Error, struct.error, ValueError):
+            return  # cut inside a packet record
+        yield ts, frame
 
 
 def iter_datagrams(
@@ -203,14 +253,7 @@ def iter_datagrams(
     try:
         reader = _open_reader(stream, str(name))
         linktype = int(reader.datalink())
-        packets = iter(reader)
-        while True:
-            try:
-                ts, frame = next(packets)
-            except StopIteration:
-                return
-            except (dpkt.Error, struct.error, ValueError):
-                return  # cut inside a packet record
+        for ts, frame in _records(reader, str(name)):
             stats.frames += 1
             try:
                 found = _udp(_ip_of(frame, linktype))
@@ -227,7 +270,12 @@ def iter_datagrams(
             if wanted and src[1] not in wanted and dst[1] not in wanted:
                 continue
             stats.selected += 1
-            yield Datagram(stats.frames, _time_ns(ts), src, dst, payload)
+            t_ns = _time_ns(ts)
+            if not 0 <= t_ns < 1 << 63:
+                raise CaptureError(
+                    f"{name}: damaged at frame {stats.frames}: time stamp {ts} is out of range"
+                )
+            yield Datagram(stats.frames, t_ns, src, dst, payload)
     finally:
         if stream is not source:
             stream.close()
@@ -464,28 +512,14 @@ def _as_chudp(framing: str, frame: bytes, packet: Any) -> bytes | None:
 
 
 def _link_framings(source: str) -> dict[int, tuple[str, str]]:
-    """Link id -> (framing, name) of a capture's raw channels, from its summary section."""
-    from mcap.exceptions import McapError  # noqa: PLC0415
-    from mcap.reader import make_reader  # noqa: PLC0415
-
-    try:
-        with open(source, "rb") as f:
-            summary = make_reader(f).get_summary()
-    except FileNotFoundError:
-        raise CaptureError(f"no such file: {source}") from None
-    except (McapError, OSError, ValueError, EOFError) as exc:
-        raise CaptureError(f"{source} is not a readable capture: {exc}") from exc
-    if summary is None:
-        raise CaptureError(
-            f"{source} has no summary section (a recorder was killed?); "
-            f"rebuild it first: manip-capture recover {source}"
-        )
-    links: dict[int, tuple[str, str]] = {}
-    for channel in summary.channels.values():
-        if channel.message_encoding == RAW_MESSAGE_ENCODING:
-            meta = channel.metadata
-            links[int(meta.get("link", "0"))] = (meta.get("framing", ""), meta.get("name", ""))
-    return links
+    """Link id -> (framing, name) of a capture's raw channels, from a first pass over the file (which
+    also finds any damage before the output is begun)."""
+    if not os.path.exists(source):
+        raise CaptureError(f"no such file: {source}")
+    capture = Capture(source)
+    for _ in iter_packets(source, capture=capture):
+        pass
+    return {link: (info.framing, info.name) for link, info in capture.links.items()}
 
 
 def export_comment(source: str, links: dict[int, tuple[str, str]]) -> str:
@@ -508,6 +542,29 @@ def export_comment(source: str, links: dict[int, tuple[str, str]]) -> str:
             how = f"{framing} frames re-encoded as CHUDP (checksum computed afresh)"
         lines.append(f"Link {link}{shown}: {how}.")
     return "\n".join(lines)
+
+
+def _write_pcapng(
+    stream: IO[bytes], src: str, links: dict[int, tuple[str, str]], shb: Any, idb: Any, report: ExportReport
+) -> None:
+    import dpkt  # noqa: PLC0415
+
+    dpkt.pcapng.Writer(stream, shb=shb, idb=idb)  # writes the section and interface blocks
+    for item in iter_packets(src):
+        framing = links.get(item.link, ("raw", ""))[0]
+        payload = _as_chudp(framing, item.frame, item.packet)
+        if payload is None:
+            report.skipped[f"{framing} frames that do not decode (cannot be re-framed)"] += 1
+            continue
+        client = _client_address(item.link)
+        ends = (client, SERVER_ADDRESS) if item.direction == "c2s" else (SERVER_ADDRESS, client)
+        frame = _udp_ipv4(*ends, payload, item.seq)
+        # Nanosecond times (if_tsresol 9): the writer's own packing is in microseconds.
+        t = item.time_ns
+        stream.write(
+            bytes(dpkt.pcapng.EnhancedPacketBlockLE(ts_high=t >> 32, ts_low=t & 0xFFFFFFFF, pkt_data=frame))
+        )
+        report.datagrams += 1
 
 
 def export_pcapng(source: str | os.PathLike[str], output: str | os.PathLike[str] | IO[bytes]) -> ExportReport:
@@ -535,32 +592,14 @@ def export_pcapng(source: str | os.PathLike[str], output: str | os.PathLike[str]
             end,
         ],
     )
-    try:
-        stream: IO[bytes] = open(output, "wb") if isinstance(output, (str, os.PathLike)) else output  # noqa: SIM115
-    except OSError as exc:
-        raise CaptureError(f"cannot write {report.output}: {exc.strerror}") from exc
-    try:
-        dpkt.pcapng.Writer(stream, shb=shb, idb=idb)  # writes the section and interface blocks
-        for item in iter_packets(src):
-            framing = links.get(item.link, ("raw", ""))[0]
-            payload = _as_chudp(framing, item.frame, item.packet)
-            if payload is None:
-                report.skipped[f"{framing} frames that do not decode (cannot be re-framed)"] += 1
-                continue
-            client = _client_address(item.link)
-            ends = (client, SERVER_ADDRESS) if item.direction == "c2s" else (SERVER_ADDRESS, client)
-            frame = _udp_ipv4(*ends, payload, item.seq)
-            # Nanosecond times (if_tsresol 9): the writer's own packing is in microseconds.
-            t = item.time_ns
-            stream.write(
-                bytes(
-                    dpkt.pcapng.EnhancedPacketBlockLE(ts_high=t >> 32, ts_low=t & 0xFFFFFFFF, pkt_data=frame)
-                )
-            )
-            report.datagrams += 1
-    finally:
-        if stream is not output:
-            stream.close()
+    if isinstance(output, (str, os.PathLike)):
+        try:
+            with atomic_output(output, "wb") as stream:
+                _write_pcapng(stream, src, links, shb, idb, report)
+        except OutputError as exc:
+            raise CaptureError(str(exc)) from exc
+    else:
+        _write_pcapng(output, src, links, shb, idb, report)
     return report
 
 

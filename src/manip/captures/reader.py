@@ -6,7 +6,10 @@ meanings are exactly those of the JSON view (which the reader does not need, and
 its messages: chunks are unpacked here rather than by ``mcap``'s record classes).  The file is
 read as a stream in the order it was written, so a capture without its summary section can be read up
 to where it breaks (:class:`CaptureTruncatedError` then says how far it got; ``manip-capture recover`` makes
-it whole).
+it whole).  Damage stops the reading with :class:`~manip.captures.bounds.CaptureDamagedError`, which names
+the byte offset and what was wrong: a chunk that does not decompress, whose records do not match its
+CRC or its declared size, a record that runs past its chunk or the file, or one longer than the bounds
+of :mod:`~manip.captures.bounds` (which no reader goes past, whatever a length field claims).
 
 The replay and offline-verify commands of :mod:`manip.conformance` use :func:`read_sessions`:
 ``session.requests`` are the client's requests in order (retransmissions left out), ``session.pairs``
@@ -18,14 +21,13 @@ from __future__ import annotations
 import io
 import json
 import os
+import stat
 import struct
 from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import IO, Any, Final
 
-import lz4.frame  # type: ignore[import-untyped]
-import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import InvalidMagic, McapError
 from mcap.opcode import Opcode
@@ -35,6 +37,7 @@ from mcap.stream_reader import StreamReader
 from manip.codecs.errors import DecodeError
 from manip.codecs.packet import Direction, Packet
 
+from .bounds import MAX_RECORD_BYTES, CaptureDamagedError, unpack_chunk
 from .format import DIRECTIONS, EVENT_TOPIC, RAW_MESSAGE_ENCODING
 from .recorder import FRAME_DECODERS, CaptureError, frame_decoder
 from .view import Annotation, Annotator, bad_frame
@@ -285,6 +288,7 @@ class _Stream:
 
     def __init__(self, source: str | os.PathLike[str] | IO[bytes], capture: Capture) -> None:
         self.source = source
+        self.path = "<stream>"
         self.capture = capture
         self.annotator = Annotator()
         self.raw: dict[int, _Raw] = {}
@@ -299,38 +303,49 @@ class _Stream:
             if isinstance(source, (str, os.PathLike))
             else getattr(source, "name", "<stream>")
         )
+        self.path = str(path)
         try:
             stream: IO[bytes] = open(source, "rb") if isinstance(source, (str, os.PathLike)) else source  # noqa: SIM115
         except OSError as exc:
             raise CaptureError(f"cannot read the capture {path}: {exc}") from exc
         records = 0
         try:
-            for record in StreamReader(stream, emit_chunks=True, record_size_limit=1 << 32).records:
+            limit = min(MAX_RECORD_BYTES, _size_of(stream))
+            for record in StreamReader(stream, emit_chunks=True, record_size_limit=limit).records:
                 records += 1
                 if isinstance(record, Chunk):
-                    yield from self._chunk(record)
+                    yield from self._chunk(record, _tell(stream))
                 elif isinstance(record, Message):
                     item = self._message(record.channel_id, record.sequence, record.log_time, record.data)
                     if item is not None:
                         yield item
-                elif isinstance(record, Channel):
-                    self._channel(record)
-                elif isinstance(record, Schema):
-                    self.schemas[record.id] = record
-                elif isinstance(record, Metadata):
-                    self.capture.metadata[record.name] = dict(record.metadata)
-                elif isinstance(record, Header):
-                    self.capture.profile = record.profile
-                    self.capture.library = record.library
+                else:
+                    self._other(record)
         except InvalidMagic as exc:
             raise CaptureError(f"{path} is not an MCAP file (it does not start with the MCAP magic)") from exc
-        except (McapError, EOFError, struct.error, ValueError) as exc:
+        except (McapError, EOFError, struct.error, ValueError, MemoryError) as exc:
             if records == 0:  # not even a header: nothing a recovery could start from
                 raise CaptureError(f"{path} is not a capture: it ends before an MCAP header") from exc
-            raise CaptureTruncatedError(path, records, f"{type(exc).__name__}: {exc}") from exc
+            offset = _tell(stream)
+            if offset is not None and offset >= _size_of(stream):
+                raise CaptureTruncatedError(path, records, f"{type(exc).__name__}: {exc}") from exc
+            what = str(exc) or type(exc).__name__
+            raise CaptureDamagedError(str(path), offset, what, records=records) from exc
         finally:
             if stream is not source:
                 stream.close()
+
+    def _other(self, record: object) -> None:
+        """A record outside a chunk that is not a message: what it says about the capture."""
+        if isinstance(record, Channel):
+            self._channel(record)
+        elif isinstance(record, Schema):
+            self.schemas[record.id] = record
+        elif isinstance(record, Metadata):
+            self.capture.metadata[record.name] = dict(record.metadata)
+        elif isinstance(record, Header):
+            self.capture.profile = record.profile
+            self.capture.library = record.library
 
     def _channel(self, channel: Channel) -> None:
         self.topics[channel.id] = channel.topic
@@ -346,19 +361,17 @@ class _Stream:
         elif channel.topic == EVENT_TOPIC:
             self.events.add(channel.id)
 
-    def _chunk(self, chunk: Chunk) -> Iterator[CapturedPacket | CapturedEvent]:
+    def _chunk(self, chunk: Chunk, end: int | None) -> Iterator[CapturedPacket | CapturedEvent]:
         """The records of a chunk, read here rather than by ``breakup_chunk`` so that messages nobody
-        wants (the JSON view) are counted and skipped without being built."""
-        if chunk.compression == "zstd":
-            data = zstandard.decompress(chunk.data, max_output_size=chunk.uncompressed_size)
-        elif chunk.compression == "lz4":
-            data = lz4.frame.decompress(chunk.data)
-        elif chunk.compression == "":
-            data = chunk.data
-        else:
-            raise CaptureError(f"chunk compression {chunk.compression!r} is not supported")
-        if type(data) is not bytes:  # frames handed out are bytes
-            data = bytes(data)
+        wants (the JSON view) are counted and skipped without being built.  ``end`` is the file offset
+        just after the chunk (for messages about it)."""
+        at = None if end is None else end - 9 - 40 - len(chunk.compression) - len(chunk.data)
+        try:
+            data = unpack_chunk(
+                chunk.compression, chunk.data, chunk.uncompressed_size, chunk.uncompressed_crc
+            )
+        except ValueError as exc:
+            raise CaptureDamagedError(self.path, at, f"the chunk record there is damaged: {exc}") from None
         pos, size = 0, len(data)
         head, message_head = _RECORD_HEAD.unpack_from, _MESSAGE_HEAD.unpack_from
         message_at = _RECORD_HEAD.size + _MESSAGE_HEAD.size
@@ -366,9 +379,17 @@ class _Stream:
         seen: Counter[int] = Counter()  # messages per channel id, added to the topic counts at the end
         try:
             while pos < size:
+                if pos + 9 > size:
+                    raise CaptureDamagedError(self.path, at, "a chunk ends inside a record header")
                 opcode, length = head(data, pos)
                 start = pos
                 pos += 9 + length
+                if pos > size:
+                    raise CaptureDamagedError(
+                        self.path,
+                        at,
+                        f"a record in the chunk there claims {length} bytes, past the chunk's end",
+                    )
                 if opcode == _MESSAGE:
                     cid, sequence, log_time, _ = message_head(data, start + 9)
                     seen[cid] += 1
@@ -412,9 +433,30 @@ class _Stream:
 
     @staticmethod
     def _event(log_time: int, data: bytes) -> CapturedEvent:
-        body = json.loads(data)
+        try:
+            body = json.loads(data)
+        except RecursionError:
+            raise ValueError("an event is JSON nested too deep to read") from None
+        if not isinstance(body, dict):
+            raise ValueError("an event is not a JSON object")
         name = str(body.pop("event", "?"))
         return CapturedEvent(log_time, name, body)
+
+
+def _size_of(stream: IO[bytes]) -> int:
+    """The size of a regular file (no record can be longer); a bound of records otherwise."""
+    try:
+        info = os.fstat(stream.fileno())
+    except (OSError, AttributeError, io.UnsupportedOperation):
+        return MAX_RECORD_BYTES
+    return info.st_size if stat.S_ISREG(info.st_mode) else MAX_RECORD_BYTES
+
+
+def _tell(stream: IO[bytes]) -> int | None:
+    try:
+        return stream.tell()
+    except (OSError, AttributeError, ValueError):
+        return None
 
 
 def iter_packets(

@@ -36,7 +36,7 @@ from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import TracebackType
-from typing import IO, Any, Final
+from typing import IO, Any, Final, cast
 
 import mcap
 from mcap.writer import CompressionType, Writer
@@ -165,6 +165,44 @@ class CaptureError(Exception):
     """A capture cannot be written or read; the message says what to do."""
 
 
+class _GuardedFile:
+    """The recorder's file: the first write error (a full disk) is kept and what follows is dropped, so
+    a failing disk never raises in the middle of a session (in a link's callback); the recorder logs
+    it once and keeps it as :attr:`Recorder.write_error`.  Offsets count what was handed over, as the
+    writer expects."""
+
+    def __init__(self, raw: IO[bytes]) -> None:
+        self.raw = raw
+        self.error: OSError | None = None
+        self.position = 0
+
+    def write(self, data: bytes) -> int:
+        if self.error is None:
+            try:
+                self.raw.write(data)
+            except OSError as exc:
+                self.error = exc
+        self.position += len(data)
+        return len(data)
+
+    def tell(self) -> int:
+        return self.position
+
+    def flush(self) -> None:
+        if self.error is None:
+            try:
+                self.raw.flush()
+            except OSError as exc:
+                self.error = exc
+
+    def close(self) -> None:
+        try:
+            self.raw.close()
+        except OSError as exc:
+            if self.error is None:
+                self.error = exc
+
+
 @dataclass(slots=True)
 class _Link:
     id: int
@@ -203,15 +241,18 @@ class Recorder:
         if not flush_interval > 0:
             raise CaptureError(f"flush_interval must be positive, not {flush_interval}")
         self._stream: IO[bytes]
+        self._file: _GuardedFile | None
         if isinstance(output, (str, os.PathLike)):
             self.path: str | None = os.fspath(output)
             try:
-                self._stream = open(self.path, "wb")  # noqa: SIM115  # closed by close()
+                self._file = _GuardedFile(open(self.path, "wb"))  # noqa: SIM115  # closed by close()
             except OSError as exc:
                 raise CaptureError(f"cannot write the capture {self.path}: {exc}") from exc
+            self._stream = cast(IO[bytes], self._file)
             self._owns_stream = True
         else:
             self.path = None
+            self._file = None
             self._stream = output
             self._owns_stream = False
         self.decoded_view = decoded_view
@@ -262,6 +303,7 @@ class Recorder:
         self._seq = 0
         self._event_seq = 0
         self._pending = False
+        self._warned = False
         self._due = time.monotonic() + flush_interval
         self._closed = False
         self._timer: asyncio.TimerHandle | None = None
@@ -513,6 +555,7 @@ class Recorder:
             self._pending = False
             self.flushes += 1
             self._writer.flush()  # type: ignore[no-untyped-call]
+            self._warn_once()
 
     def _arm_timer(self) -> None:
         """Wake up when the next flush is due (the due time moves whenever a write flushes)."""
@@ -527,10 +570,27 @@ class Recorder:
         if time.monotonic() >= self._due:
             try:
                 self.flush()
-            except Exception:  # a full disk must not take the session down with it
-                log.exception("capture flush failed")
+            except Exception as exc:  # a full disk must not take the session down with it
+                log.error("capture flush failed: %s", exc)
                 self._due = time.monotonic() + self.flush_interval
         self._arm_timer()
+        self._warn_once()
+
+    @property
+    def write_error(self) -> CaptureError | None:
+        """Why the file could not be written (a full disk...), once a write failed: what is recorded
+        after it is dropped, the recorder logs it once, and a command checks it after :meth:`close`
+        (which does not raise it: closing must not fail a session whose recording failed)."""
+        error = None if self._file is None else self._file.error
+        if error is None:
+            return None
+        return CaptureError(f"cannot write the capture {self.path}: {error.strerror or error}")
+
+    def _warn_once(self) -> None:
+        error = self.write_error
+        if error is not None and not self._warned:
+            self._warned = True
+            log.error("%s; the rest of the session is not recorded", error)
 
     def close(self) -> None:
         """Write the summary (indexes, statistics) and close the file; later calls do nothing."""
@@ -546,6 +606,7 @@ class Recorder:
         finally:
             if self._owns_stream:
                 self._stream.close()
+        self._warn_once()  # the file then has no summary: readers call it truncated, never complete
 
     @property
     def closed(self) -> bool:

@@ -23,7 +23,8 @@ Reading (traditional Lisp Machine syntax, clause ``describe.alist-readable``, er
   :func:`manip.codecs.lispm_text.decode_lispm` gives for raw ASCII tab, line feed, page and return (so a
   reply written by an ASCII peer still reads);
 * not supported (a :class:`DecodeError`): escaped or ``|quoted|`` symbols, package prefixes, other ``#``
-  syntax, backquote and comma.
+  syntax, backquote and comma; in a description (:func:`read_alist`), lists nested deeper than
+  :data:`MAX_DEPTH` (64; erratum ``lisp-nesting-depth``).
 
 Printing follows ``prin1`` with ``base`` 8 and ``*nopoint`` nil: octal integers without a marker; in base 10
 a trailing dot unless ``nopoint``; symbols and keywords in upper case unless ``upper=False``; floats in the
@@ -42,6 +43,11 @@ from typing import TypeAlias
 from manip.codecs.errors import DecodeError, EncodeError
 
 READ_CLAUSE = "describe.alist-readable"
+MAX_DEPTH = 64
+"""A description's lists (and quotes) nested deeper than this are refused by :func:`read_alist`
+(erratum ``lisp-nesting-depth``): a description is an association list a few levels deep, and whatever
+walks a value recursively (the client's text and JSON output, ``json``) stays far from Python's
+recursion limit.  :func:`read_lisp` itself reads any depth unless given ``max_depth``."""
 SHAPE_CLAUSE = "describe.alist-shape"
 
 
@@ -187,8 +193,9 @@ def _build(frame: _Frame) -> LispValue:
 
 
 class _Reader:
-    def __init__(self, text: str, base: int, escape: str) -> None:
+    def __init__(self, text: str, base: int, escape: str, max_depth: int | None = None) -> None:
         _check_base(base)
+        self.max_depth = max_depth
         if len(escape) != 1 or escape in _TERMINATORS or escape.isalnum():
             raise ValueError(f"bad escape character {escape!r}")
         self.text = text
@@ -249,6 +256,8 @@ class _Reader:
             start = self.pos
             ch = self.text[start]
             value: LispValue
+            if ch in "('" and self.max_depth is not None and len(stack) >= self.max_depth:
+                raise _error(f"lists nested deeper than {self.max_depth} (manip reads no deeper)", start)
             if ch == "(":
                 stack.append(_Frame(start, items=[]))
                 self.pos += 1
@@ -298,18 +307,20 @@ class _Reader:
                 return value
 
 
-def read_all(text: str, *, base: int = 8, escape: str = "/") -> list[LispValue]:
-    """Every datum of ``text`` in order (an empty or blank text gives ``[]``)."""
-    reader = _Reader(text, base, escape)
+def read_all(text: str, *, base: int = 8, escape: str = "/", max_depth: int | None = None) -> list[LispValue]:
+    """Every datum of ``text`` in order (an empty or blank text gives ``[]``); ``max_depth``: see
+    :func:`read_lisp`."""
+    reader = _Reader(text, base, escape, max_depth)
     out: list[LispValue] = []
     while not isinstance(value := reader.read(), _Missing):
         out.append(value)
     return out
 
 
-def read_lisp(text: str, *, base: int = 8, escape: str = "/") -> LispValue:
-    """Exactly one datum, optionally surrounded by whitespace and comments."""
-    reader = _Reader(text, base, escape)
+def read_lisp(text: str, *, base: int = 8, escape: str = "/", max_depth: int | None = None) -> LispValue:
+    """Exactly one datum, optionally surrounded by whitespace and comments.  The reader itself is not
+    recursive and reads any depth; ``max_depth`` refuses lists nested deeper (a DecodeError)."""
+    reader = _Reader(text, base, escape, max_depth)
     value = reader.read()
     if isinstance(value, _Missing):
         raise _error("no datum in the text", len(text))
@@ -456,6 +467,9 @@ def dict_to_alist(d: Mapping[str, LispValue]) -> list[LispValue]:
     return [cons(Keyword(k), v) for k, v in d.items()]
 
 
-def read_alist(text: str, *, base: int = 8, escape: str = "/") -> dict[str, LispValue]:
-    """:func:`read_lisp` then :func:`alist_to_dict`: the describe-self text as a dict."""
-    return alist_to_dict(read_lisp(text, base=base, escape=escape))
+def read_alist(
+    text: str, *, base: int = 8, escape: str = "/", max_depth: int | None = MAX_DEPTH
+) -> dict[str, LispValue]:
+    """:func:`read_lisp` then :func:`alist_to_dict`: the describe-self text as a dict, its lists nested
+    at most ``max_depth`` deep (:data:`MAX_DEPTH`, erratum ``lisp-nesting-depth``)."""
+    return alist_to_dict(read_lisp(text, base=base, escape=escape, max_depth=max_depth))

@@ -35,7 +35,7 @@ import click
 from rich.console import Console
 from rich.table import Table
 
-from manip.commandline import configure_logging, version_option
+from manip.commandline import FiniteFloat, configure_logging, version_option
 from manip.conformance.cli_options import (
     cases_of_clauses,
     check_output_paths,
@@ -53,8 +53,8 @@ from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness
 from manip.conformance.fuzz.cli import fuzz_command
 from manip.conformance.output.console import make_console
 from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
-from manip.conformance.output.documents import ReportError, document_options, render_saved, write_documents
-from manip.conformance.output.report import write_json, write_junit
+from manip.conformance.output.documents import ReportError, document_options, render_saved
+from manip.conformance.output.report import write_reports
 from manip.conformance.output.run_console import summary
 from manip.conformance.puma.target import (
     DEFAULT_WRIST_LISTEN,
@@ -139,21 +139,21 @@ def main() -> None:
 )
 @click.option("--allow-motion", is_flag=True, help="With --target hardware, run motion and power cases too.")
 @_number_option(
-    "--reply-timeout", click.FloatRange(0.01), DEFAULT_REPLY_TIMEOUT, "Seconds to wait for each reply."
+    "--reply-timeout", FiniteFloat(0.01), DEFAULT_REPLY_TIMEOUT, "Seconds to wait for each reply."
 )
 @_number_option(
-    "--deadline-scale", click.FloatRange(0.01), 1.0, "Multiply every case deadline (slow links, real arms)."
+    "--deadline-scale", FiniteFloat(0.01), 1.0, "Multiply every case deadline (slow links, real arms)."
 )
 @_number_option(
     "--target-time-scale",
-    click.FloatRange(min=0.01),
+    FiniteFloat(min=0.01),
     1.0,
     "HOST's arm runs this many times faster than real time (a simulated server started with --time-scale):"
     " its 16 ms servo cycle is judged at that rate (erratum server-time-scale).",
 )
 @click.option(
     "--broken-after",
-    type=click.FloatRange(min=0.1),
+    type=FiniteFloat(min=0.1),
     default=None,
     metavar="SECONDS",
     help="The target's broken-connection timer (90 s by default, the ITS Chaos NCP's: the 1985 guide "
@@ -209,7 +209,7 @@ def main() -> None:
 @click.option(
     "--wrist-wait",
     "wrist_wait",
-    type=click.FloatRange(min=0.1),
+    type=FiniteFloat(min=0.1),
     default=DEFAULT_WRIST_WAIT,
     show_default=True,
     metavar="SECONDS",
@@ -508,13 +508,13 @@ def _finish(
         return int(code) if code is not None else int(ExitCode.INTERNAL)
     if code == ExitCode.INTERNAL and not report.interrupted and not report.internal_error:
         report.internal_error = "internal error"
-    if paths["json"] is not None:
-        write_json(report, paths["json"])
-    if paths["junit"] is not None:
-        write_junit(report, paths["junit"])
-    write_documents(report, paths["html"], paths["markdown"])
+    report.unwritten.extend(
+        write_reports(report, paths["json"], paths["junit"], paths["html"], paths["markdown"])
+    )
+    for problem in report.unwritten:  # a report path that cannot be written is a usage error, found late
+        click.echo(f"manip-conform: {problem}", err=True)
     summary(console, report, quiet)
-    return int(report.exit_code) if code is None else int(code)
+    return int(report.exit_code) if code is None or report.unwritten else int(code)
 
 
 def _check_world(world: str | None, timeout: float | None, *, host: str | None, cougar: str | None) -> None:
@@ -638,7 +638,7 @@ def report_command(report_file: Path, html_path: Path | None, markdown_path: Pat
     check_output_paths(html=html_path, markdown=markdown_path)
     try:
         render_saved(report_file, html_path, markdown_path)
-    except ReportError as exc:
+    except (ReportError, OSError) as exc:  # OSError: manip.outfile.OutputError, naming the path
         raise click.UsageError(str(exc)) from None
 
 

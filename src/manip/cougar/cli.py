@@ -16,13 +16,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import sys
 from collections.abc import AsyncIterator
 from typing import Final
 
 import click
 
-from manip.commandline import configure_logging, version_option
+from manip.commandline import check_host, configure_logging, version_option
 from manip.cougar.environment import Contacts, Spring, Surface
 from manip.cougar.faults import FAULTS, parse_faults
 from manip.cougar.link import CougarEnd, CougarModel, Drv11jError, parse_address
@@ -114,6 +115,8 @@ def parse_surface(text: str) -> tuple[tuple[float, float, float], tuple[float, f
         v = [float(x) for x in text.split(",")]
     except ValueError:
         raise click.BadParameter(f"{text!r}: numbers separated by commas expected") from None
+    if not all(math.isfinite(x) for x in v):
+        raise click.BadParameter(f"{text!r}: every number must be finite")
     if len(v) not in (3, 6, 7):
         raise click.BadParameter(f"{text!r}: 3, 6 or 7 numbers expected (point, normal, stiffness)")
     normal = (v[3], v[4], v[5]) if len(v) >= 6 else (0.0, 0.0, 1.0)
@@ -146,7 +149,11 @@ async def _serve_forever(model: CougarModel, address: str) -> None:
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]}, epilog=epilog("manip-cougar"))
 @click.option(
-    "--listen", "address", default="tcp://127.0.0.1:42011", show_default=True, help="Where to listen."
+    "--listen",
+    "address",
+    default="tcp://127.0.0.1:42011",
+    show_default=True,
+    help="Where to listen.",
 )
 @click.option("--seed", type=int, default=None, help="Seed of the simulator's noise.")
 @click.option(
@@ -183,9 +190,12 @@ def main(
     """Serve a simulated Cougar wrist computer over the emulated DRV-11J link."""
     configure_logging(logging.INFO if verbose else logging.WARNING)
     try:
-        parse_address(address)
+        host, _port = parse_address(address)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--listen") from None
+    why = check_host(host)
+    if why is not None:
+        raise click.BadParameter(why, param_hint="--listen")
     model = _make_model(seed, surfaces, springs, parse_faults(faults))
     try:
         with contextlib.suppress(KeyboardInterrupt):

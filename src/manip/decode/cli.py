@@ -350,7 +350,7 @@ def _decode_packets(
     out = _Out(fmt)
     json_out = fmt == "json"
     layout = LAYOUTS[link]
-    failed = False
+    failed = 0
     bad = 0
     pairing = StreamPairing() if request is None and link in _STREAMS else None
     try:
@@ -370,7 +370,7 @@ def _decode_packets(
             node = _describe_paired(packet, direction, request, pairing, header=not json_out)
             if frame.error is not None:
                 node.add("decode error", str(frame.error))
-            failed = failed or _failed(node) or frame.error is not None
+            failed += _failed(node) or frame.error is not None
             if json_out:
                 out.node(node, headless=packet)
             else:
@@ -388,6 +388,11 @@ def _decode_packets(
     out.close()
     if bad:
         click.echo(f"manip-decode: {bad} {link} frame(s) did not decode (shown in place)", err=True)
+    if failed:
+        click.echo(
+            f"manip-decode: {failed} packet(s) are malformed (their decode errors are shown in place)",
+            err=True,
+        )
     if _nothing_matched(filters, out):
         return 1
     return 1 if failed or bad else 0
@@ -482,7 +487,16 @@ def _decode_cougar(source: str | None, cougar: str, fmt: str) -> int:
     out = _Out("json" if fmt == "json" else "tree")
     out.node(node)
     out.close()
-    return 1 if stream.pending or any(c.label in ("out of sync", "malformed") for c in node.children) else 0
+    bad = sum(c.label in ("out of sync", "malformed") for c in node.children)
+    if bad:
+        click.echo(
+            f"manip-decode: {bad} Cougar message(s) out of sync or malformed (shown in place)", err=True
+        )
+    elif stream.pending:
+        click.echo(
+            f"manip-decode: the stream ends inside a message ({len(stream.pending)} word(s) of it)", err=True
+        )
+    return 1 if bad or stream.pending else 0
 
 
 # ---------------------------------------------------------------------------------------- captures
@@ -507,7 +521,7 @@ def _decode_capture(
         items = iter_pcap_packets(path, ports=ports)
         origin = "the start of the UDP payload"
     out = _Out(fmt)
-    failed = False
+    failed = 0
     start: int | None = None
     try:
         for item in items:
@@ -518,7 +532,7 @@ def _decode_capture(
                 continue
             direction = item.direction
             if item.packet is None:
-                failed = True
+                failed += 1
                 if not filters.ops:
                     node = TreeNode(f"packet {item.seq}", packet_line(item, start))
                     err = item.annotation.decode_error or {}
@@ -535,7 +549,7 @@ def _decode_capture(
                 except KeyError:  # the initial RESPONSE (to the RFC), or a reply to an unknown opcode
                     request = None
             node = describe_packet(item.packet, direction=side, request=request)
-            failed = failed or _failed(node)
+            failed += _failed(node)
             line = packet_line(item, start)
             if fmt == "json":
                 node.label = f"packet {item.seq}"
@@ -550,12 +564,24 @@ def _decode_capture(
         click.echo(f"manip-decode: {exc}", err=True)
         return 1
     out.close()
-    if start is None:
+    return _capture_status(path, start is not None, failed, filters, out)
+
+
+def _capture_status(path: str, any_packet: bool, failed: int, filters: Filters, out: _Out) -> int:
+    """The exit status of a capture's decoding, said on stderr when it is not 0."""
+    if not any_packet:
         click.echo(f"manip-decode: {path} holds no packets", err=True)
         return 1
     if _nothing_matched(filters, out):
         return 1
-    return 1 if failed else 0
+    if failed:
+        click.echo(
+            f"manip-decode: {failed} packet(s) of {path} did not decode or are malformed (shown in place); "
+            "a recording of negative tests holds such packets on purpose",
+            err=True,
+        )
+        return 1
+    return 0
 
 
 def _nothing_matched(filters: Filters, out: _Out) -> bool:

@@ -15,9 +15,12 @@ from dataclasses import dataclass
 from typing import IO, Final
 
 BLOCK: Final = 1 << 16
+MAX_TEXT: Final = 4 << 20
+"""The most a Cougar word stream may hold (read whole): 4 MiB of text, about 800,000 words."""
 _HEX_TEXT: Final = re.compile(rb"^[\s0-9a-fA-Fx:,]*$")
 _SEPARATORS: Final = re.compile(rb"0[xX]|[\s:,]")
 _HEX_ARGUMENT: Final = re.compile(r"^[\s0-9a-fA-Fx:,]+$")
+_HEX_CHARACTERS: Final = frozenset("0123456789abcdefABCDEFxX:, \t\n\r\v\f")
 
 
 class SourceError(Exception):
@@ -91,8 +94,12 @@ class _HexDecoder:
     def __init__(self, name: str) -> None:
         self.name = name
         self.held = b""
+        self.fed = 0
+        """Bytes of text fed so far (for the offset of a bad character)."""
 
     def feed(self, text: bytes, final: bool = False) -> bytes:
+        start = self.fed - len(self.held)
+        self.fed += len(text)
         text = self.held + text
         self.held = b""
         if not final and text[-1:] == b"0":  # perhaps the start of a 0x
@@ -104,9 +111,12 @@ class _HexDecoder:
         try:
             out = bytes.fromhex(cleaned.decode("ascii"))
         except (ValueError, UnicodeDecodeError):
-            bad = next((c for c in cleaned if chr(c) not in "0123456789abcdefABCDEF"), None)
-            shown = repr(chr(bad)) if bad is not None else "?"
-            raise SourceError(f"{self.name} is not hex text: character {shown} is not a hex digit") from None
+            at = next((i for i, c in enumerate(text) if chr(c) not in _HEX_CHARACTERS), None)
+            shown = repr(chr(text[at])) if at is not None else "?"
+            where = f" at byte {start + at}" if at is not None else ""
+            raise SourceError(
+                f"{self.name} is not hex text: character {shown}{where} is not a hex digit"
+            ) from None
         if final and len(cleaned) % 2:
             raise SourceError(f"{self.name}: odd number of hex digits (the last one has no partner)")
         return out
@@ -145,11 +155,17 @@ def byte_blocks(src: Source, binary: bool | None) -> Iterator[bytes]:
 
 
 def read_text(source: str | None) -> str:
-    """The whole input as text (Cougar word streams are short)."""
+    """The whole input as text (Cougar word streams are short: at most :data:`MAX_TEXT` bytes are
+    read, so an endless input such as ``/dev/zero`` is refused rather than read without end)."""
     if source is not None and source != "-" and not os.path.exists(source):
         return source
     src = open_source(source)
     try:
-        return src.stream.read().decode("ascii", "replace")
+        text = src.stream.read(MAX_TEXT + 1)
     finally:
         src.close()
+    if len(text) > MAX_TEXT:
+        raise SourceError(
+            f"{src.name} holds more than {MAX_TEXT >> 20} MiB: too long for a Cougar word stream"
+        )
+    return text.decode("ascii", "replace")

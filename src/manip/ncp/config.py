@@ -21,6 +21,11 @@ Times are in seconds, on whatever clock the caller passes the core as ``now``:
 ``auto_read``            True: a packet counts as read (and is acknowledged) when it is delivered;
                          False: only when the user reads it (the asyncio driver's choice, so that the
                          receive window is what makes a sender wait).
+``lose_on_illegal``      True: a connection whose peer sends it an illegal packet (an illegal opcode,
+                         more than 488 data bytes), answered with LOS, is given up at once: LOST, event
+                         Lost (the peer takes our LOS as the end of the connection, so nothing more
+                         will come).  False (the default, the server's): only the LOS is sent.
+                         Erratum ``illegal-packet-gives-up``.
 """
 
 from __future__ import annotations
@@ -47,6 +52,7 @@ class NcpConfig:
     ack_delay: float = 0.1
     first_packet_no: int = 1
     auto_read: bool = True
+    lose_on_illegal: bool = False
 
     def __post_init__(self) -> None:
         if not 1 <= self.window <= MAX_WINDOW:

@@ -256,13 +256,13 @@ class Ncp:
             return
         opcode = packet.opcode
         if len(packet.data) > MAX_DATA:
-            self._los(packet, f"Illegal byte count {len(packet.data)} (at most {MAX_DATA})")
+            self._illegal(now, packet, f"Illegal byte count {len(packet.data)} (at most {MAX_DATA})")
             return
         data = _DAT <= opcode <= 0o377
         if not data:
             if not is_legal_opcode(opcode):
                 # The wire text of erratum illegal-packet-delivery: three octal digits.
-                self._los(packet, f"Illegal opcode {opcode:03o}")
+                self._illegal(now, packet, f"Illegal opcode {opcode:03o}")
                 return
             if opcode in _DROPPED:
                 out.stats.dropped += 1
@@ -410,6 +410,19 @@ class Ncp:
                 data=_reason(reason),
             )
         )
+
+    def _illegal(self, now: float, packet: Packet, reason: str) -> None:
+        """An illegal packet: LOS; and with ``lose_on_illegal``, the connection it names is given up."""
+        self._los(packet, reason)
+        if not self._config.lose_on_illegal or packet.opcode in _NO_LOS_FOR:
+            return
+        conn = self._live.get(packet.dest_index)
+        if conn is None or packet.src_host != conn.peer_host or packet.src_index != conn.peer_index:
+            return
+        gave_up = replace(
+            packet, opcode=ChaosOp.LOS, data=_reason(f"given up: the peer sent an illegal packet ({reason})")
+        )
+        self._handle(conn, ConnInput.LOS, Trigger(now, gave_up))
 
     def _los(self, packet: Packet, reason: str) -> None:
         if packet.opcode in _NO_LOS_FOR:

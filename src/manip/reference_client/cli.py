@@ -28,12 +28,13 @@ same exit status.  Commands::
 
 ``--record FILE`` writes the session's packets, both ways, to an MCAP capture (:mod:`manip.captures`;
 ``manip-capture info FILE`` lists it) with the command line in its metadata.  The file is closed, and
-valid, however the command ends: success, an error, a lost connection or Ctrl-C.
+valid, however the command ends: success, an error, a lost connection or Ctrl-C; if it cannot be written
+(a full disk), the command says so and exits 2.
 
 Exit status: 0 success (``watch`` also when stopped with Ctrl-C); 1 the server answered with an error
-(or a reply the client could not read); 2 usage (bad arguments, bad URL, a ``--record`` file that cannot
-be created); 3 cannot connect, or the connection was lost; 4 no reply within ``--timeout``; 130
-interrupted.
+(or a reply the client could not read, or one past ``--max-reply``); 2 usage (bad arguments, bad URL, a
+``--record`` file that cannot be created or written); 3 cannot connect, or the connection was lost; 4 no
+reply within ``--timeout``; 130 interrupted.
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ import click
 from manip.arm.oat import transform_from_xyzoat
 from manip.arm.transform import Transform
 from manip.codecs.messages import AsyncResponse
-from manip.commandline import configure_logging, version_option
+from manip.commandline import FINITE, FiniteFloat, configure_logging, version_option
 from manip.exit_status import epilog
 from manip.reference_client.cli_output import (
     async_record,
@@ -85,7 +86,7 @@ from manip.reference_client.connect import aconnect
 from manip.reference_client.errors import ConnectionLost, ManipError, RequestTimeout
 from manip.reference_client.harness import main as harness_main
 from manip.reference_client.manipulator import NOTIFY_GUARD_HITS, NOTIFY_SEGMENTS, Manipulator
-from manip.reference_client.options import ClientOptions
+from manip.reference_client.options import DEFAULT_MAX_REPLY_BYTES, ClientOptions
 from manip.spec import RequestOpcode
 
 if TYPE_CHECKING:
@@ -118,8 +119,16 @@ def _common_options(command: Callable[..., None]) -> Callable[..., None]:
         "--contact", default=None, help="Chaos contact name (default: the URL's, else PUMA)."
     )(command)
     command = click.option(
+        "--max-reply",
+        type=click.IntRange(min=1),
+        default=None,
+        metavar="BYTES",
+        help="Give up a reply (and the connection) past this many data bytes "
+        f"(default {DEFAULT_MAX_REPLY_BYTES}).",
+    )(command)
+    command = click.option(
         "--timeout",
-        type=click.FloatRange(min=0.0, min_open=True),
+        type=FiniteFloat(min=0.0, min_open=True),
         default=None,
         help=f"Seconds to wait for the connection and for each reply (default {DEFAULT_TIMEOUT:g}).",
     )(command)
@@ -137,9 +146,15 @@ class Settings:
     record: str | None = None
     command_line: tuple[str, ...] = ()
     """What the capture's metadata says was run."""
+    max_reply: int = DEFAULT_MAX_REPLY_BYTES
 
     def overridden(
-        self, as_json: bool | None, timeout: float | None, contact: str | None, record: str | None
+        self,
+        as_json: bool | None,
+        timeout: float | None,
+        contact: str | None,
+        record: str | None,
+        max_reply: int | None = None,
     ) -> Settings:
         return replace(
             self,
@@ -147,6 +162,7 @@ class Settings:
             timeout=self.timeout if timeout is None else timeout,
             contact=self.contact if contact is None else contact,
             record=self.record if record is None else record,
+            max_reply=self.max_reply if max_reply is None else max_reply,
         )
 
     def options(self, wrap_link: LinkWrapper | None = None) -> ClientOptions:
@@ -156,6 +172,7 @@ class Settings:
             contact=self.contact,
             name=PROG,
             wrap_link=wrap_link,
+            max_reply_bytes=self.max_reply,
         )
 
     def recorder(self) -> tuple[Recorder, LinkWrapper] | None:
@@ -184,7 +201,7 @@ Action = Callable[[Manipulator], Awaitable[None]]
 
 
 class RecordError(Exception):
-    """The ``--record`` file cannot be created."""
+    """The ``--record`` file cannot be created, or could not be written (a full disk)."""
 
 
 def _fail(error: BaseException, code: int, as_json: bool = False) -> NoReturn:
@@ -215,15 +232,25 @@ def _run(settings: Settings, action: Action, *, interrupt_ends: bool = False) ->
                 await action(arm)
             return
         recorder, wrap_link = recording
+        done = False
         try:
             async with aconnect(settings.url, settings.options(wrap_link)) as arm:
                 await action(arm)
+            done = True
         finally:  # also on Ctrl-C: asyncio.run cancels this task before raising KeyboardInterrupt
             recorder.close()
+            error = recorder.write_error  # the file could not be written (a full disk)
+            if error is not None:
+                unwritten.append(RecordError(str(error)))
+                if not done:  # the command's own failure is said next; say this one too
+                    click.echo(f"{PROG}: {error}", err=True)
 
     as_json = settings.as_json
+    unwritten: list[RecordError] = []
     try:
         asyncio.run(session())
+        if unwritten:  # the command did its work, but its recording is lost: a --record problem
+            _fail(unwritten[0], EXIT_USAGE, as_json)
     except KeyboardInterrupt:
         if not interrupt_ends:
             _fail(InterruptError(), EXIT_INTERRUPTED, as_json)
@@ -247,7 +274,7 @@ requests.  ``manip-client harness`` (no URL) is the client's harness for ``manip
 
 
 _FLAGS: Final = frozenset({"--json", "-h", "--help"})
-_VALUED: Final = frozenset({"--timeout", "--contact", "--record"})
+_VALUED: Final = frozenset({"--timeout", "--contact", "--record", "--max-reply"})
 
 
 def _options_first(args: list[str]) -> list[str]:
@@ -293,6 +320,7 @@ def main(
     timeout: float | None,
     contact: str | None,
     record: str | None,
+    max_reply: int | None,
 ) -> None:
     configure_logging(logging.ERROR)  # a failure is this command's one line: the library's warnings repeat it
     ctx.obj = Settings(
@@ -302,6 +330,7 @@ def main(
         contact,
         record,
         tuple(ctx.meta.get("manip.argv", (PROG, *sys.argv[1:]))),
+        DEFAULT_MAX_REPLY_BYTES if max_reply is None else max_reply,
     )
 
 
@@ -315,11 +344,12 @@ def pass_settings(command: Callable[..., None]) -> Callable[..., None]:
         timeout: float | None,
         contact: str | None,
         record: str | None,
+        max_reply: int | None,
         **kwargs: Any,
     ) -> None:
         settings = ctx.find_object(Settings)
         assert settings is not None
-        settings = settings.overridden(as_json, timeout, contact, record)
+        settings = settings.overridden(as_json, timeout, contact, record, max_reply)
         command(settings, *args, **kwargs)
 
     functools.update_wrapper(wrapper, command)  # the docstring is the command's help
@@ -391,7 +421,7 @@ _POWER = click.option(
 
 
 @main.command("move-joints", context_settings=NUMBERS)
-@click.argument("q", nargs=6, type=float, metavar="Q1 Q2 Q3 Q4 Q5 Q6")
+@click.argument("q", nargs=6, type=FINITE, metavar="Q1 Q2 Q3 Q4 Q5 Q6")
 @_WAIT
 @_POWER
 @pass_settings
@@ -431,7 +461,7 @@ def power(settings: Settings, state: str) -> None:
 
 
 @main.command()
-@click.argument("factor", type=float)
+@click.argument("factor", type=FINITE)
 @pass_settings
 def speed(settings: Settings, factor: float) -> None:
     """Set the speed factor, 0 < FACTOR <= 1 (0216)."""
@@ -460,11 +490,11 @@ def _pose(values: Sequence[float]) -> Transform:
 
 
 @main.command("solve-forwards", context_settings=NUMBERS)
-@click.argument("pose", nargs=-1, type=float, metavar="X Y Z O A T | N1 N2 N3 O1 O2 O3 A1 A2 A3 P1 P2 P3")
+@click.argument("pose", nargs=-1, type=FINITE, metavar="X Y Z O A T | N1 N2 N3 O1 O2 O3 A1 A2 A3 P1 P2 P3")
 @click.option(
     "--current",
     nargs=6,
-    type=float,
+    type=FINITE,
     default=None,
     metavar="Q1 .. Q6",
     help="Joint angles to choose the solution near (default: where the arm is).",
@@ -483,7 +513,7 @@ def solve_forwards(settings: Settings, pose: tuple[float, ...], current: tuple[f
 
 
 @main.command("solve-backwards", context_settings=NUMBERS)
-@click.argument("q", nargs=6, type=float, metavar="Q1 Q2 Q3 Q4 Q5 Q6")
+@click.argument("q", nargs=6, type=FINITE, metavar="Q1 Q2 Q3 Q4 Q5 Q6")
 @pass_settings
 def solve_backwards(settings: Settings, q: tuple[float, ...]) -> None:
     """The pose of joint angles (solve backwards, 0221)."""
@@ -513,7 +543,7 @@ def _waiting_for(url: str, count: int | None, seconds: float | None, guards: boo
 @click.option(
     "--count", type=click.IntRange(min=1), default=None, help="Stop after N asynchronous responses."
 )
-@click.option("--seconds", type=click.FloatRange(min=0.0), default=None, help="Stop after S seconds.")
+@click.option("--seconds", type=FiniteFloat(min=0.0), default=None, help="Stop after S seconds.")
 @click.option("--guards/--no-guards", default=True, show_default=True, help="Ask for guard hits too.")
 @pass_settings
 def watch(settings: Settings, count: int | None, seconds: float | None, guards: bool) -> None:

@@ -22,6 +22,7 @@ from manip.reference_client.errors import (
     ManipError,
     NonFatalError,
     OutOfSequenceResponse,
+    ReplyTooLargeError,
     RequestTimeout,
     ResponseDataError,
     ServerError,
@@ -217,6 +218,7 @@ def _failure_kind(error: BaseException) -> str:
         (RequestTimeout, "timeout"),
         (ConnectionLost, "connection-lost"),
         (ResponseDataError, "bad-reply"),
+        (ReplyTooLargeError, "reply-too-large"),
     )
     for kind, name in kinds:
         if isinstance(error, kind):

@@ -13,6 +13,7 @@ besides; a reply that does not decode is shown with what is wrong with it instea
 
 from __future__ import annotations
 
+import math
 import re
 import struct
 from collections.abc import Mapping, Sequence
@@ -22,6 +23,7 @@ from typing import Any, Final
 from manip.codecs.errors import CodecError
 from manip.codecs.lispm_text import decode_lispm
 from manip.codecs.messages import decode_reply, decode_request, encode_request
+from manip.codecs.packet import MAX_DATA
 from manip.codecs.pdp11float import pack_f
 from manip.reference_client.request import Request, RequestCode, ResponseType
 from manip.spec import SPEC, RequestOpcode
@@ -77,9 +79,12 @@ def parse_hex(parts: Sequence[str]) -> bytes:
     """Data bytes in wire order from hex (``"3f 80"``, ``3f80``, ``0x3f,0x80``); nothing is no data."""
     digits = _HEX_JUNK.sub("", "".join(parts))
     try:
-        return bytes.fromhex(digits)
+        data = bytes.fromhex(digits)
     except ValueError:
         raise ValueError(f"data {' '.join(parts)!r} is not hexadecimal bytes (two digits a byte)") from None
+    if len(data) > MAX_DATA:  # not even --no-check can send it: no packet holds it
+        raise ValueError(f"data is {len(data)} bytes; a Chaos packet holds at most {MAX_DATA}")
+    return data
 
 
 def check_raw_data(opcode: int, data: bytes) -> None:
@@ -107,10 +112,13 @@ def _integer(token: str) -> int:
 
 def _number(token: str, element: str) -> int | float:
     try:
-        return float(token) if element == "float" else _integer(token)
+        value = float(token) if element == "float" else _integer(token)
     except ValueError:
         kind = _ELEMENT_WORDS.get(element, element)
         raise ValueError(f"{token!r} is not a {kind}") from None
+    if not math.isfinite(value):
+        raise ValueError(f"{token!r} is not a finite number")
+    return value
 
 
 def _elements(op: RequestOpcode) -> list[tuple[str, str]]:

@@ -75,6 +75,7 @@ async def open_manipulator(source: TransportSource, options: ClientOptions | Non
         trivial_errors=options.trivial_errors,
         history=options.history,
         align_args=options.align_args,
+        max_reply_bytes=options.max_reply_bytes,
     )
     process = BackgroundProcess(transport, core, name=options.name)
     arm = Manipulator(process, options)  # listens before any packet can arrive

@@ -201,6 +201,18 @@ class ResponseDataError(ManipError):
         super().__init__(f"{request.describe()}: bad reply data: {detail}")
 
 
+class ReplyTooLargeError(ManipError):
+    """A reply brought more data than ``ClientOptions.max_reply_bytes``; the client gave up the connection."""
+
+    def __init__(self, request: Request[Any], limit: int) -> None:
+        self.request = request
+        self.limit = limit
+        super().__init__(
+            f"{request.describe()}: the reply goes past {limit} data bytes (ClientOptions.max_reply_bytes, "
+            "--max-reply); the connection was given up"
+        )
+
+
 class JointFreedError(ManipError):
     """A joint is free: the server discards the next packet, so only ``release_joint`` may be sent."""
 

@@ -19,7 +19,7 @@ A manipulator's handler-type list is ``("chaos-manipulator", "generic")``, with
 from __future__ import annotations
 
 import struct
-from typing import Final
+from typing import Any, Final
 
 from manip.codecs.messages import AsyncResponse
 from manip.reference_client import faults
@@ -29,6 +29,7 @@ from manip.reference_client.errors import (
     FatalError,
     NonFatalError,
     OutOfSequenceReason,
+    ReplyTooLargeError,
 )
 from manip.reference_client.events import (
     AsyncErrorReceived,
@@ -39,7 +40,7 @@ from manip.reference_client.events import (
 )
 from manip.reference_client.faults import ClientFault
 from manip.reference_client.matching import ResponseContext
-from manip.reference_client.request import ResponseType
+from manip.reference_client.request import Request, ResponseType
 
 GENERIC: Final = "generic"
 CHAOS_MANIPULATOR: Final = "chaos-manipulator"
@@ -60,10 +61,25 @@ def handle_normal_response(ctx: ResponseContext) -> None:
     if request.response_type is ResponseType.MULTI and not faults.on(ClientFault.MULTI_FIRST_PACKET):
         if payload:
             request.responses.append(payload)
+            request.reply_bytes += len(payload)
+            _hold_to_limit(ctx, request)
             return
     else:
         request.responses.append(payload)
     ctx.extract(request)
+
+
+def _hold_to_limit(ctx: ResponseContext, request: Request[Any]) -> None:
+    """A reply past the size limit fails its request, and the connection is given up: the server would
+    go on sending (an endless describe-self), and each packet would be out of sequence."""
+    limit = ctx.core.max_reply_bytes
+    if limit is None or request.reply_bytes <= limit:
+        return
+    request.responses.clear()
+    error = ReplyTooLargeError(request, limit)
+    ctx.fail(request, error)
+    for event in ctx.core.connection_lost(f"given up: a reply went past {limit} data bytes"):
+        ctx.emit(event)
 
 
 def handle_non_fatal_error(ctx: ResponseContext) -> None:

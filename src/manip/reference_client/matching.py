@@ -103,8 +103,11 @@ class MatchingCore:
         trivial_errors: Callable[[NonFatalError], bool] | None = None,
         history: int = DEFAULT_HISTORY,
         align_args: bool = True,
+        max_reply_bytes: int | None = None,
     ) -> None:
         self.registry = registry
+        self.max_reply_bytes = max_reply_bytes
+        """The most data one reply may bring (None: no limit); see ``ClientOptions.max_reply_bytes``."""
         self._handler_types = registry.check_handler_types(handler_types)
         self.trivial_errors = trivial_errors
         """The policy the ``notify-trivial-errors`` handler consults (None: nothing is trivial)."""

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 from manip.codecs.packet import Packet
@@ -86,7 +87,9 @@ class NcpTransport:
         self.contact = contact or self.address.contact
         self.connect_timeout = connect_timeout
         self.close_timeout = close_timeout
-        self.ncp_options = ncp_options
+        # A server that sends an illegal packet is answered with LOS, which ends the connection for it:
+        # the client gives the connection up at once rather than wait for replies that cannot come.
+        self.ncp_options = replace(ncp_options or NcpConfig(), lose_on_illegal=True)
         self.wrap_link = _no_ack(wrap_link) if faults.on(ClientFault.NEVER_ACK) else wrap_link
         if faults.on(ClientFault.IGNORE_WINDOW):
             self.wrap_link = _wide_window(self.wrap_link)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Final
 
 from manip.links.api import LinkWrapper
 from manip.reference_client.definitions import DEFAULT_REGISTRY, PUMA
@@ -12,6 +13,10 @@ from manip.reference_client.handlers import DEFAULT_HANDLER_TYPES, NOTIFY_TRIVIA
 from manip.reference_client.matching import DEFAULT_HISTORY
 from manip.reference_client.policy import TrivialErrors
 from manip.reference_client.registry import Registry
+
+DEFAULT_MAX_REPLY_BYTES: Final = 1 << 20
+"""The most data one reply may bring (1 MiB; erratum ``reply-size-limit``): a describe-self text is a
+few hundred bytes, and 1 MiB is over 2,000 packets of it."""
 
 
 @dataclass(frozen=True)
@@ -43,6 +48,11 @@ class ClientOptions:
     """Used in log messages."""
     contact: str | None = None
     """The Chaos contact name to connect to when connecting by URL (None: the URL's, default PUMA)."""
+    max_reply_bytes: int | None = DEFAULT_MAX_REPLY_BYTES
+    """The most data bytes one reply (all the packets of a multi-packet reply) may bring.  A reply that
+    goes past it fails with :class:`~manip.reference_client.errors.ReplyTooLargeError` and the client
+    gives up the connection (the server would go on sending); None: no limit.  The bound holds with
+    ``timeout=None`` too, so an endless describe-self always ends."""
     close_timeout: float = 2.0
     """Seconds a graceful close of a Chaos connection waits for the server before aborting."""
     wrap_link: LinkWrapper | None = None

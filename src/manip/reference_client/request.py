@@ -102,6 +102,8 @@ class Request(Generic[T]):
     error: ManipError | None = None
     responses: list[bytes] = field(default_factory=list)
     """Response payloads received so far (one for single responses, the chunks of a multi response)."""
+    reply_bytes: int = 0
+    """Data bytes of the response payloads so far (held to ``ClientOptions.max_reply_bytes``)."""
 
     @property
     def opcode(self) -> int:

@@ -41,7 +41,14 @@ from typing import TYPE_CHECKING, Any, Final
 import click
 
 from manip.arm.kinematics import PUMA600, ArmModel
-from manip.commandline import configure_logging, version_option
+from manip.commandline import (
+    FINITE,
+    FiniteFloat,
+    LinkAddressType,
+    check_host,
+    configure_logging,
+    version_option,
+)
 from manip.cougar.link import parse_address as parse_drv11j_address
 from manip.exit_status import epilog
 from manip.links import (
@@ -159,6 +166,7 @@ def command_line(ctx: click.Context) -> list[str]:
     default=DEFAULT_ADDRESS,
     show_default=True,
     metavar="URL",
+    type=LinkAddressType(parse_address),
     help=f"Link address to listen on: tcp://HOST:PORT (manip's TCP link; {DEFAULT_TCP_PORT} is its "
     "port, 0 picks a free one), chudp://HOST:PORT?addr=OCTAL or chaosd:///PATH.",
 )
@@ -166,6 +174,7 @@ def command_line(ctx: click.Context) -> list[str]:
     "--chudp",
     multiple=True,
     metavar="URL",
+    type=LinkAddressType(parse_address, "chudp", ("chudp",)),
     help="Also listen on CHUDP (chudp://HOST:PORT?addr=OCTAL, the robot host's Chaos address); repeatable.",
 )
 @click.option("--contact", default=DEFAULT_CONTACT, show_default=True, help="Chaos contact name.")
@@ -174,7 +183,7 @@ def command_line(ctx: click.Context) -> list[str]:
 )
 @click.option(
     "--time-scale",
-    type=float,
+    type=FINITE,
     default=1.0,
     show_default=True,
     help="Simulated seconds per real second (e.g. 10: moves finish ten times sooner).",
@@ -182,7 +191,7 @@ def command_line(ctx: click.Context) -> list[str]:
 @click.option("--seed", type=int, default=None, help="Seed of the server's random generator.")
 @click.option(
     "--broken-after",
-    type=click.FloatRange(min=0.1),
+    type=FiniteFloat(min=0.1),
     default=None,
     metavar="SECONDS",
     help="Declare a connection broken when its client is silent this long (default 90, the ITS Chaos "
@@ -242,7 +251,7 @@ def command_line(ctx: click.Context) -> list[str]:
 )
 @click.option(
     "--frame-timeout",
-    type=click.FloatRange(min=0.0),
+    type=FiniteFloat(min=0.0),
     default=DEFAULT_FRAME_TIMEOUT,
     show_default=True,
     metavar="SECONDS",
@@ -251,7 +260,7 @@ def command_line(ctx: click.Context) -> list[str]:
 )
 @click.option(
     "--link-idle-timeout",
-    type=click.FloatRange(min=0.0),
+    type=FiniteFloat(min=0.0),
     default=DEFAULT_IDLE_TIMEOUT,
     show_default=True,
     metavar="SECONDS",
@@ -269,7 +278,7 @@ def command_line(ctx: click.Context) -> list[str]:
 )
 @click.option(
     "--accept-backoff",
-    type=click.FloatRange(min=0.001),
+    type=FiniteFloat(min=0.001),
     default=1.0,
     show_default=True,
     metavar="SECONDS",
@@ -334,9 +343,12 @@ def main(
     address = _address(listen, "--listen", "tcp")
     if cougar is not None and cougar != "sim":
         try:
-            parse_drv11j_address(cougar)
+            cougar_host, _ = parse_drv11j_address(cougar)
         except ValueError as exc:
             raise click.BadParameter(str(exc), param_hint="--cougar") from None
+        why = check_host(cougar_host)
+        if why is not None:
+            raise click.BadParameter(why, param_hint="--cougar")
     extra = [_address(url, "--chudp", "chudp") for url in chudp]
     if world is not None and not _address(world, "--world", "tcp").startswith("tcp://"):
         raise click.BadParameter(f"{world!r}: the world listens on tcp://HOST:PORT", param_hint="--world")
@@ -430,6 +442,8 @@ async def _run(
         if recorder is not None:
             recorder.close()
             _report_recording(recorder)
+    if recorder is not None and recorder.write_error is not None:  # logged when it happened
+        raise click.ClickException(str(recorder.write_error))
 
 
 @contextlib.asynccontextmanager

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import click
 
+from manip.commandline import FiniteFloat
 from manip.conformance.cli_options import (
     check_output_paths,
     check_selection,
@@ -75,14 +76,14 @@ def _by_clause(patterns: tuple[str, ...], cases: list[Case]) -> list[Case]:
 @click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=None, help="Seed of every random choice.")
 @click.option(
     "--reply-timeout",
-    type=click.FloatRange(0.1),
+    type=FiniteFloat(0.1),
     default=DEFAULT_CLIENT_TIMEOUT,
     show_default=True,
     help="The timeout the harness is told to use for each reply.",
 )
 @click.option(
     "--deadline-scale",
-    type=click.FloatRange(0.01),
+    type=FiniteFloat(0.01),
     default=1.0,
     show_default=True,
     help="Multiply every deadline.",

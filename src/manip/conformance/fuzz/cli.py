@@ -21,6 +21,7 @@ import click
 from rich.console import Console
 from rich.markup import escape
 
+from manip.commandline import CommandLine, FiniteFloat
 from manip.conformance.cli_options import check_output_paths, given, json_option, junit_option
 from manip.conformance.fuzz.campaign import Campaign, CampaignConfig, CampaignEvents
 from manip.conformance.fuzz.generators import CLASSES, HAZARD_ORDER, GenOptions
@@ -79,7 +80,7 @@ def class_listing() -> str:
 )
 @click.option(
     "--seconds",
-    type=click.FloatRange(min=0.1),
+    type=FiniteFloat(min=0.1),
     default=None,
     help="Stop after this long (after the batch under way), whatever --inputs says.",
 )
@@ -122,21 +123,21 @@ def class_listing() -> str:
 )
 @click.option(
     "--reply-timeout",
-    type=click.FloatRange(0.01),
+    type=FiniteFloat(0.01),
     default=DEFAULT_REPLY_TIMEOUT,
     show_default=True,
     help="Seconds an answer may take (a wait for the arm gets the spec's allowance on top).",
 )
 @click.option(
     "--connect-timeout",
-    type=click.FloatRange(0.01),
+    type=FiniteFloat(0.01),
     default=DEFAULT_CONNECT_TIMEOUT,
     show_default=True,
     help="Seconds a connection may take to open (a busy robot included).",
 )
 @click.option(
     "--deadline-scale",
-    type=click.FloatRange(0.01),
+    type=FiniteFloat(0.01),
     default=1.0,
     show_default=True,
     help="Multiply every wait for the arm (slow links, real arms).",
@@ -165,6 +166,7 @@ def class_listing() -> str:
 @click.option(
     "--launch",
     metavar="CMD",
+    type=CommandLine(),
     default=None,
     help="With HOST: start the server with CMD, restart it after a crash, read its output for tracebacks.",
 )
@@ -176,7 +178,7 @@ def class_listing() -> str:
 )
 @click.option(
     "--restart-wait",
-    type=click.FloatRange(min=0.0),
+    type=FiniteFloat(min=0.0),
     default=0.0,
     show_default=True,
     metavar="SECONDS",
@@ -186,7 +188,7 @@ def class_listing() -> str:
 @click.option("--no-shrink", is_flag=True, help="Report findings with their whole batch, unshrunk.")
 @click.option(
     "--shrink-seconds",
-    type=click.FloatRange(min=1.0),
+    type=FiniteFloat(min=1.0),
     default=60.0,
     show_default=True,
     help="Most time spent shrinking one finding.",
@@ -287,12 +289,17 @@ def fuzz_command(
     )
     console.print(f"manip-conform fuzz: seed [bold]{seed}[/] (rerun with --seed {seed})")
     report = _campaign(config, server.fuzzed(seed), console, quiet, total=len(only) if only else inputs)
-    if json_path is not None:
-        write_json(report, json_path)
-    if junit_path is not None:
-        write_junit(report, junit_path)
+    unwritten = []
+    for path, write in ((json_path, write_json), (junit_path, write_junit)):
+        if path is not None:
+            try:
+                write(report, path)
+            except OSError as exc:
+                unwritten.append(str(exc))
     _summary(console, report)
-    sys.exit(int(report.exit_code))
+    for problem in unwritten:  # a report path that cannot be written is a usage error, found late
+        click.echo(f"manip-conform: {problem}", err=True)
+    sys.exit(2 if unwritten else int(report.exit_code))
 
 
 def _reproduce_options(

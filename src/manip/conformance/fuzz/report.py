@@ -23,7 +23,6 @@ the case ``target.health``.  It is made with the conformance report's writer
 from __future__ import annotations
 
 import json
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -31,8 +30,9 @@ from typing import Any, Final, cast
 
 from manip.conformance.fuzz.judge import FUZZ_KINDS, KIND_NAMES
 from manip.conformance.judge.violation import FailureKind
-from manip.conformance.output.report import report_junit
+from manip.conformance.output.report import report_junit, write_xml
 from manip.conformance.suite.results import CaseResult, ExitCode, RunReport, Violation
+from manip.outfile import atomic_output
 from manip.spec import SPEC
 from manip.spec.model import Level
 
@@ -296,7 +296,9 @@ def _outcome(report: FuzzReport, tally: ClassTally) -> str:
 
 
 def write_json(report: FuzzReport, path: Path) -> None:
-    path.write_text(json.dumps(report_json(report), indent=2) + "\n", encoding="utf-8")
+    """The JSON report, written whole or not at all (``OutputError`` names the path and the reason)."""
+    with atomic_output(path) as f:
+        f.write(json.dumps(report_json(report), indent=2) + "\n")
 
 
 def as_run_report(report: FuzzReport) -> RunReport:
@@ -347,9 +349,8 @@ def as_run_report(report: FuzzReport) -> RunReport:
 
 
 def write_junit(report: FuzzReport, path: Path) -> None:
-    tree = ET.ElementTree(report_junit(as_run_report(report)))
-    ET.indent(tree)
-    tree.write(path, encoding="utf-8", xml_declaration=True)
+    """The JUnit XML, written whole or not at all (``OutputError`` names the path and the reason)."""
+    write_xml(report_junit(as_run_report(report)), path)
 
 
 def finding_text(f: CampaignViolation) -> str:

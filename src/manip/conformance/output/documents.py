@@ -20,6 +20,7 @@ from manip.conformance.output.markdown import render_markdown
 from manip.conformance.output.report import report_json
 from manip.conformance.output.report_view import ReportError, load_report
 from manip.conformance.suite.results import RunReport
+from manip.outfile import atomic_output
 
 __all__ = ["ReportError", "document_options", "render_saved", "write_documents"]
 
@@ -52,9 +53,11 @@ def write_documents(
         return
     data = report_json(report) if isinstance(report, RunReport) else report
     if html_path is not None:
-        html_path.write_text(render_html(data), encoding="utf-8")
+        with atomic_output(html_path) as f:  # whole or not at all; OutputError names the path
+            f.write(render_html(data))
     if markdown_path is not None:
-        markdown_path.write_text(render_markdown(data), encoding="utf-8")
+        with atomic_output(markdown_path) as f:
+            f.write(render_markdown(data))
 
 
 def render_saved(report_file: Path, html_path: Path | None, markdown_path: Path | None) -> None:

@@ -33,10 +33,11 @@ import click
 from rich.console import Console
 from rich.markup import escape
 
+from manip.commandline import FiniteFloat, LinkAddressType
 from manip.conformance.cli_options import check_output_paths, given, json_option, junit_option, strict_option
 from manip.conformance.output.console import make_console
-from manip.conformance.output.documents import document_options, write_documents
-from manip.conformance.output.report import failure_text, write_json, write_junit
+from manip.conformance.output.documents import document_options
+from manip.conformance.output.report import failure_text, write_reports
 from manip.conformance.output.run_console import OUTCOME_STYLE, print_by_clause
 from manip.conformance.suite.embedded import EmbeddedServer, simulated_server
 from manip.conformance.suite.results import ExitCode, RunReport
@@ -123,13 +124,9 @@ def _finish(
                 console.print(body, markup=False, highlight=False)
             for note in result.notes:
                 console.print(f"           note: {note}", markup=False, highlight=False)
-    if json_path is not None:
-        write_json(report, json_path)
-    if junit_path is not None:
-        write_junit(report, junit_path)
-    write_documents(report, html_path, markdown_path)
+    report.unwritten.extend(write_reports(report, json_path, junit_path, html_path, markdown_path))
     print_by_clause(console, report)
-    for problem in report.problems:
+    for problem in [*report.problems, *report.unwritten]:
         console.print(f"[bold red]problem[/]: {escape(problem)}")
     counts = ", ".join(f"{v} {k}" for k, v in report.counts().items() if v) or "no results"
     style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
@@ -260,9 +257,19 @@ def _capture_settings(file: Path) -> _Recorded:
 
 @click.command("replay", epilog=EXIT_CODES_HELP)
 @_file_argument
-@click.option("--against", "against", metavar="URL", help="Replay the client side to the server at URL.")
 @click.option(
-    "--serve", "serve", metavar="URL", help="Play the server side to clients at URL (port 0: a free one)."
+    "--against",
+    "against",
+    metavar="URL",
+    type=LinkAddressType(parse_address),
+    help="Replay the client side to the server at URL.",
+)
+@click.option(
+    "--serve",
+    "serve",
+    metavar="URL",
+    type=LinkAddressType(parse_address),
+    help="Play the server side to clients at URL (port 0: a free one).",
 )
 @_session_option
 @click.option(
@@ -272,13 +279,13 @@ def _capture_settings(file: Path) -> _Recorded:
     metavar="PATH",
     help="Leave out mismatches whose field path matches PATH (glob: error.message, describe.*).",
 )
-@click.option("--reply-timeout", type=click.FloatRange(0.01), default=2.0, show_default=True,
+@click.option("--reply-timeout", type=FiniteFloat(0.01), default=2.0, show_default=True,
               help="Seconds to wait for each live answer.")  # fmt: skip
-@click.option("--async-timeout", type=click.FloatRange(0.01), default=10.0, show_default=True,
+@click.option("--async-timeout", type=FiniteFloat(0.01), default=10.0, show_default=True,
               help="Seconds to wait for each recorded asynchronous packet's counterpart.")  # fmt: skip
-@click.option("--settle", type=click.FloatRange(0.0), default=0.2, show_default=True,
+@click.option("--settle", type=FiniteFloat(0.0), default=0.2, show_default=True,
               help="Seconds of quiet listened for after each session (extra packets).")  # fmt: skip
-@click.option("--seconds", type=click.FloatRange(0.01), default=None,
+@click.option("--seconds", type=FiniteFloat(0.01), default=None,
               help="--serve: stop after this many seconds even if sessions are left.")  # fmt: skip
 @click.option(
     "--server-fault",

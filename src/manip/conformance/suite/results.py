@@ -136,6 +136,8 @@ class RunReport:
     liveness: list[LivenessCheck] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
     """Run-level failures: stale known-failing entries, the target dying, an interruption."""
+    unwritten: list[str] = field(default_factory=list)
+    """Reports asked for that could not be written (a message each: the path and why): exit 2."""
     interrupted: bool = False
     internal_error: str = ""
     target_died_after: str | None = None
@@ -186,6 +188,8 @@ class RunReport:
     @property
     def exit_code(self) -> ExitCode:
         counts = self.counts()
+        if self.unwritten:  # a report path that cannot be written is a usage error, found late
+            return ExitCode.USAGE
         if self.unreachable:
             return ExitCode.UNREACHABLE
         if self.interrupted or self.internal_error or self.unstable:
