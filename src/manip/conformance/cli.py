@@ -255,7 +255,7 @@ def main() -> None:
 @click.option(
     "--world-timeout",
     "world_timeout",
-    type=click.FloatRange(min=0.1),
+    type=FiniteFloat(min=0.1),
     default=None,
     metavar="SECONDS",
     help="How long the world has to arrange or clear a condition (default 30 s; 300 s with --world prompt).",
