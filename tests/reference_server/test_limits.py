@@ -234,7 +234,7 @@ def test_the_command_warns_before_serving(monkeypatch: pytest.MonkeyPatch) -> No
     result = CliRunner().invoke(cli.main, ["--listen", "tcp://0.0.0.0:0", "--stats"])
     assert result.exit_code == 0, result.output
     assert "warning: tcp://0.0.0.0:0 is not loopback" in result.output
-    assert ran == [{"show_stats": True}]
+    assert ran == [{"show_stats": True, "world": None}]
     quiet = CliRunner().invoke(cli.main, ["--listen", "tcp://0.0.0.0:0", "--allow", "192.0.2.0/24"])
     assert quiet.exit_code == 0 and "warning" not in quiet.output
 
