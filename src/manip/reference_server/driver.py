@@ -79,7 +79,6 @@ from manip.links import (
 from manip.links.api import LinkWrapper
 from manip.links.virtual_clock import is_virtual
 from manip.ncp import ConnectionRequested
-from manip.reference_server.faults import Fault
 from manip.reference_server.session import Outgoing, Output, ServerConfig, ServerSession, State
 from manip.reference_server.wrist import Wrist
 from manip.spec import SPEC, RequestOpcode
@@ -415,7 +414,7 @@ class ReferenceServer:
         arm.unfree()
         self.joints = arm.actual
         self.hand_open = arm.hand_open
-        if Fault.CLOSE_KEEPS_MOVING in session.faults:
+        if session.defects.keeps_arm_after_close:
             self._carried = arm
         with contextlib.suppress(Exception):
             session.on_close(self.now())
