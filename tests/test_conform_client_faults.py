@@ -19,8 +19,7 @@ from manip.conformance.client.runner import ClientRunConfig, run_client_suite
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.selection import PatternSet
-from manip.reference_client import faults
-from manip.reference_client.faults import FAULTS, ClientFault
+from manip.reference_client.faults import FAULTS, ClientFault, ClientFaults
 from manip.reference_client.harness import CaseRun
 from manip.spec import SPEC
 
@@ -122,13 +121,8 @@ def test_a_harness_reading_the_contract_another_allowed_way_passes(switch: Clien
 def test_literal_examples_writes_a_one_element_raw_as_a_bare_string() -> None:
     """The switch does change what the harness writes (so its passing run shows the judge takes it)."""
     lines: list[dict[str, object]] = []
-    run = CaseRun({"case": "c", "target": "tcp://x"}, lines.append)
     request = SimpleNamespace(responses=[b"\x8c\x02"], packet_number=5)
-    before = faults.active()
-    try:
-        for switch in (set(), {ClientFault.LITERAL_EXAMPLES}):
-            faults.activate(switch)
-            run.report_reply(1, "wrist-version", request, {"version": 0x28C})
-    finally:
-        faults.activate(before)
+    for switch in (ClientFaults(), ClientFaults({ClientFault.LITERAL_EXAMPLES})):
+        run = CaseRun({"case": "c", "target": "tcp://x"}, lines.append, switch)
+        run.report_reply(1, "wrist-version", request, {"version": 0x28C})
     assert [line["raw"] for line in lines] == [{"version": ["028C"]}, {"version": "028C"}]
