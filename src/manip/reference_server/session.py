@@ -208,8 +208,7 @@ class ServerSession:
         self, config: ServerConfig | None = None, *, arm: ArmSim | None = None, wrist: Wrist | None = None
     ) -> None:
         self.config = config or ServerConfig()
-        self.faults: FaultSet = self.config.faults
-        self.defects: Defects = defects_for(self.faults)
+        self.defects: Defects = defects_for(self.config.faults)
         """The hook points the fault switches bend (chosen once, here)."""
         self.arm = arm or ArmSim(self.config.model, powered=self.config.powered_at_open)
         self.wrist: Wrist = wrist or NoWrist()
