@@ -103,6 +103,7 @@ class Defects:
     applies_configuration: bool = True
     """Set configuration changes the configuration transforms are solved in."""
     after_fatal: AfterFatal = "close"
+    """What follows a fatal error: the connection closes (clause error.fatal-then-close)."""
 
     # ---------------------------------------------------------------------------- the connection
     def condition(self, arm: ArmSim, wrist: Wrist) -> None:
