@@ -10,16 +10,16 @@ deadline and no too-slow health check, whose verdicts would depend on the machin
 Tests' own ``@settings(...)`` objects are built at import, after the profile is loaded here, so they
 take everything they do not set (derandomize, database, ...) from it.
 
-Servers in tests, the shared ways (``tests/servers.py``; use these rather than a new one):
+Servers in tests, the shared ways (``tests/support/servers.py``; use these rather than a new one):
 
 * a synchronous test that needs a running reference server takes the module-scoped fixture
   :func:`reference_server_url` (or :func:`chudp_server_url`), or :func:`served` for one of its own set up
-  by a :class:`tests.servers.ServerOptions` (faults, link kind, contact) given with
+  by a :class:`tests.support.servers.ServerOptions` (faults, link kind, contact) given with
   ``@pytest.mark.parametrize("served", [ServerOptions(...)], indirect=True)``: the server runs in a
   thread and the test's own event loop, if it has one, is the client's;
-* an ``async`` test that needs the server in its own loop uses ``tests.servers.running_server`` or
-  ``reference_server``, or a scripted fake with ``tests.servers.scripted_server``;
-  ``tests.servers.in_thread`` runs any of them in a thread;
+* an ``async`` test that needs the server in its own loop uses ``tests.support.servers.running_server`` or
+  ``reference_server``, or a scripted fake with ``tests.support.servers.scripted_server``;
+  ``tests.support.servers.in_thread`` runs any of them in a thread;
 * a test of a command itself (``manip-server``, ``manip-cougar``) takes :func:`manip_server`, which
   starts the command as a process on a free port and stops and reaps it at teardown.
 """
@@ -66,7 +66,7 @@ from hypothesis.errors import InvalidArgument  # noqa: E402
 
 if TYPE_CHECKING:
     from manip.reference_server.driver import ReferenceServer
-    from tests.servers import ServerProcess, StartServer
+    from tests.support.servers import ServerProcess, StartServer
 
 PROFILE_VARIABLE = "MANIP_HYPOTHESIS_PROFILE"
 EXAMPLES_VARIABLE = "MANIP_HYPOTHESIS_EXAMPLES"
@@ -168,7 +168,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 @pytest.fixture(scope="module")
 def reference_server_url() -> Iterator[str]:
     """The URL of a default reference server running in a thread, for the tests of one module."""
-    from tests.servers import in_thread, reference_server
+    from tests.support.servers import in_thread, reference_server
 
     with in_thread(reference_server()) as address:
         yield address
@@ -177,7 +177,7 @@ def reference_server_url() -> Iterator[str]:
 @pytest.fixture(scope="module")
 def chudp_server_url() -> Iterator[str]:
     """The same on CHUDP."""
-    from tests.servers import LINK_ADDRESSES, in_thread, reference_server
+    from tests.support.servers import LINK_ADDRESSES, in_thread, reference_server
 
     with in_thread(reference_server(address=LINK_ADDRESSES["chudp"])) as address:
         yield address
@@ -187,7 +187,7 @@ def chudp_server_url() -> Iterator[str]:
 def served(request: pytest.FixtureRequest) -> Iterator[ReferenceServer]:
     """A reference server in a thread for one test, set up by the ``ServerOptions`` the test gives as
     an indirect parameter (the defaults without one); ``served.address`` is where it listens."""
-    from tests.servers import ServerOptions, in_thread
+    from tests.support.servers import ServerOptions, in_thread
 
     options = getattr(request, "param", ServerOptions())
     assert isinstance(options, ServerOptions), options
@@ -198,8 +198,8 @@ def served(request: pytest.FixtureRequest) -> Iterator[ReferenceServer]:
 @pytest.fixture
 def manip_server() -> Iterator[StartServer]:
     """``manip_server(*args, **options)`` starts a server command as a process
-    (:func:`tests.servers.start_process`); every one it started is stopped and reaped at teardown."""
-    from tests.servers import start_process
+    (:func:`tests.support.servers.start_process`); every one it started is stopped and reaped at teardown."""
+    from tests.support.servers import start_process
 
     started: list[ServerProcess] = []
 

@@ -1,7 +1,7 @@
 """Generate docs/captures.md (the capture file format, its schemas, recovery and replay masks) from the
 modules that define them, so the page cannot drift from the code.
 
-Run after changing manip.captures or manip.conformance.replay.masking; tests/test_capture_golden.py
+Run after changing manip.captures or manip.conformance.replay.masking; tests/captures/test_golden.py
 fails while docs/captures.md is stale.
 """
 

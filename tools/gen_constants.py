@@ -1,6 +1,6 @@
 """Generate src/manip/spec/constants.py (typed IntEnums) from the spec data files.
 
-Run after editing src/manip/spec/data/*.toml; tests/test_spec.py fails while the file is stale.
+Run after editing src/manip/spec/data/*.toml; tests/spec/test_spec.py fails while the file is stale.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ Everything the protocol says is taken from the spec data (opcodes, names, layout
 severities, error codes, asynchronous conditions, Chaos opcodes) and from the Lisp Machine character
 set of :mod:`manip.codecs.lispm_text`; the Lua below is only the machinery that walks them.  Field
 names follow ``manip-decode``'s tree (a label ``request number`` is ``manip.request_number``), so the
-test that runs tshark compares the two field for field (tests/test_dissector.py).
+test that runs tshark compares the two field for field (tests/decode/test_dissector.py).
 """
 
 from __future__ import annotations

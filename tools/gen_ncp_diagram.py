@@ -1,6 +1,6 @@
 """Generate docs/ncp-states.md (a Mermaid state diagram and a table) from src/manip/ncp/states.py.
 
-Run after changing the transition table; tests/test_ncp_states.py fails while the file is stale.
+Run after changing the transition table; tests/ncp/test_states.py fails while the file is stale.
 """
 
 from __future__ import annotations
@@ -9,13 +9,13 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-from manip.ncp.states import ACTION_DOCS, FINAL_STATES, TRANSITIONS, ConnState, Input
+from manip.ncp.states import ACTION_DOCS, FINAL_STATES, TRANSITIONS, ConnInput, ConnState
 
 TARGET = Path(__file__).resolve().parents[1] / "docs" / "ncp-states.md"
 
 
-def _edges() -> dict[tuple[ConnState, ConnState], list[Input]]:
-    edges: dict[tuple[ConnState, ConnState], list[Input]] = defaultdict(list)
+def _edges() -> dict[tuple[ConnState, ConnState], list[ConnInput]]:
+    edges: dict[tuple[ConnState, ConnState], list[ConnInput]] = defaultdict(list)
     for (state, inp), tr in TRANSITIONS.items():
         edges[(state, tr.next_state)].append(inp)
     return edges
@@ -62,7 +62,7 @@ def render() -> str:
         nxt = "(same)" if tr.next_state is state else tr.next_state.name
         out.append(f"| {state.name} | {inp.name} | {inp.source.value} | {actions} | {nxt} |")
     out += ["", "## Inputs", "", "| Input | Source | Meaning |", "|---|---|---|"]
-    for inp in Input:
+    for inp in ConnInput:
         out.append(f"| {inp.name} | {inp.source.value} | {inp.description} |")
     out += ["", "## Actions", "", "| Action | What it does |", "|---|---|"]
     for name in sorted(ACTION_DOCS):

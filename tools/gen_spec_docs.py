@@ -1,6 +1,6 @@
 """Generate docs/spec.md (opcode tables, clauses, errata) from the spec data files.
 
-Run after editing src/manip/spec/data/*.toml; tests/test_spec_docs.py fails while docs/spec.md is stale.
+Run after editing src/manip/spec/data/*.toml; tests/spec/test_spec.py fails while docs/spec.md is stale.
 """
 
 from __future__ import annotations

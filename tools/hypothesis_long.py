@@ -6,7 +6,7 @@ failure is printed as the ``@example(...)`` line to pin on the test after fixing
 ordinary test run checks it from then on.  Exit status: 0 when nothing failed, else pytest's.
 
     .venv/bin/python tools/hypothesis_long.py                      # the numeric cores' property tests
-    .venv/bin/python tools/hypothesis_long.py --examples 5000 tests/test_kinematics.py
+    .venv/bin/python tools/hypothesis_long.py --examples 5000 tests/arm/test_kinematics.py
     .venv/bin/python tools/hypothesis_long.py --seed 123 -- -k nearest   # after --: more pytest options
 """
 
@@ -27,10 +27,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 #: The property tests of the pure numeric code: quick per example, so many examples fit in minutes.
 DEFAULT_TESTS = (
-    "tests/test_kinematics.py",
-    "tests/test_trajectory.py",
-    "tests/test_transform.py",
-    "tests/test_pdp11float.py",
+    "tests/arm/test_kinematics.py",
+    "tests/arm/test_trajectory.py",
+    "tests/arm/test_transform.py",
+    "tests/codecs/test_pdp11float.py",
 )
 # Hypothesis's note on a failure: "Failing test case: name(\n    arg=value,\n)" (older versions say
 # "Falsifying example"); "explicit" when an @example already pinned fails.

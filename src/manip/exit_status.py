@@ -1,7 +1,7 @@
 """The exit statuses of every manip command, in one table.
 
 Each command's ``--help`` shows its row (:func:`epilog`), the README's table is this table
-(:func:`markdown_table`; ``tests/test_exit_status.py`` holds the README, each ``--help`` and each
+(:func:`markdown_table`; ``tests/project/test_exit_status.py`` holds the README, each ``--help`` and each
 command's behaviour to it).  The numbers mean the same thing everywhere: 0 the command did what was
 asked and found nothing wrong, 1 it found something wrong (a failure, a malformed input, a file it could
 not use), 2 the command line was wrong (a bad option or value, an input file that does not exist), 3 the

@@ -71,7 +71,7 @@ import enum
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Final, Protocol
 
 import numpy as np
@@ -341,6 +341,16 @@ def _sq_distance(a: Sequence[float], b: Sequence[float]) -> float:
 
 
 # --------------------------------------------------------------------------------------------- arm
+@dataclass
+class _KeptQueue:
+    """The joint segments a faulty server keeps through an abort (``keep_queue_on_abort``)."""
+
+    queued: dict[int, MoveRequest] = field(default_factory=dict)
+    """Joint segments queued, by id."""
+    kept: list[MoveRequest] = field(default_factory=list)
+    """Those an abort kept, to run once motion is allowed again."""
+
+
 class ArmSim:
     """One connection's simulated arm and move process.  See the module docstring.
 
@@ -410,6 +420,10 @@ class ArmSim:
         """Seconds a faulty server rests between queued joint segments instead of blending them (None:
         they blend, Part II §5.1)."""
         self._resting_since: float | None = None
+        # keep_queue_on_abort: an abort drops only the segment in execution, and the queued ones run
+        # once motion is allowed again (a faulty server: Part II §6.2 drops them all).
+        self.keep_queue_on_abort = False
+        self._kept = _KeptQueue()
 
         self._next_segment = 1
         self._interp = MoveInterpolator(here, limits, 1.0)
@@ -473,6 +487,9 @@ class ArmSim:
         """Accept motion requests again after an abort."""
         self.aborted = False
         self.abort_cause = None
+        kept, self._kept.kept = self._kept.kept, []
+        for request in kept:  # only with keep_queue_on_abort (a faulty server)
+            self._enqueue(_JointPacket(request), self._clock)
 
     def press_panic(self, at: float | None = None) -> None:
         """The panic button: cuts arm power and aborts motion on the first servo cycle at or after ``at``
@@ -810,6 +827,11 @@ class ArmSim:
 
     def _abort(self, t: float, cause: AbortCause, joints: tuple[int, ...], events: list[ArmEvent]) -> None:
         dropped = list(self._interp.abort(t))
+        if self.keep_queue_on_abort:  # the segments behind the one in execution are kept
+            queued = self._kept.queued
+            kept = [queued.pop(sid) for sid in dropped[1:] if sid in queued]
+            self._kept.kept += kept
+            dropped = [sid for sid in dropped if sid not in {r.segment_id for r in kept}]
         finished = self._interp.sample(t).completed  # segments that ended just before the abort
         events.extend(SegmentCompleted(sid, t) for sid in finished)
         if self._playback is not None:
@@ -849,6 +871,8 @@ class ArmSim:
 
     def _queue_joints(self, goal: Joints, now: float, scheme: Scheme | None) -> int:
         request = MoveRequest.to(self._allocate(), goal, scheme or self.scheme, self.speed)
+        if self.keep_queue_on_abort:
+            self._kept.queued[request.segment_id] = request
         self._enqueue(_JointPacket(request), now)
         self._planned, self._planned_oat = goal, None
         return request.segment_id

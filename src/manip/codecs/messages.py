@@ -252,7 +252,7 @@ def _check_types(ft: FieldType, value: Any, path: str) -> None:
 
 
 @dataclass(frozen=True)
-class Request:
+class DecodedRequest:
     """A decoded request: its opcode entry in the spec and its field values."""
 
     op: RequestOpcode
@@ -285,7 +285,7 @@ def encode_request(op: int | str, **values: Any) -> bytes:
     return _build(spec_op.request, values, spec_op.name)
 
 
-def decode_request(opcode: int, data: bytes) -> Request:
+def decode_request(opcode: int, data: bytes) -> DecodedRequest:
     """Decode a request's data.  Unknown opcodes raise DecodeError (clause request.unknown-opcode)."""
     try:
         spec_op = SPEC.requests[opcode]
@@ -297,7 +297,7 @@ def decode_request(opcode: int, data: bytes) -> Request:
             clause="request.unknown-opcode",
         ) from None
     _, values = _parse(spec_op.request, data, numbered=False, what=spec_op.name, clause="request.data-length")
-    return Request(spec_op, values)
+    return DecodedRequest(spec_op, values)
 
 
 def copy_request_data(items: object) -> bytes:

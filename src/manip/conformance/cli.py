@@ -23,14 +23,15 @@ subcommands (``replay``, ``verify``) added by other modules: they register on :d
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import json
 import os
 import shlex
 import sys
 import traceback
-from collections.abc import Callable, Sequence
-from dataclasses import replace
+from collections.abc import AsyncIterator, Callable, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -77,6 +78,9 @@ from manip.conformance.suite.results import CaseResult, ExitCode, LivenessCheck,
 from manip.conformance.suite.runner import RunConfig, RunEvents, Runner
 from manip.conformance.suite.selection import PatternError, PatternSet, match_id
 from manip.conformance.suite.stability import instability, repeat_seeds
+from manip.conformance.suite.world import WITHOUT_WORLD, WorldError
+from manip.conformance.suite.world_link import DEFAULT_ANSWER_TIMEOUT, open_world
+from manip.conformance.suite.world_prompt import PROMPT_TIMEOUT, PromptWorld, check_terminal
 from manip.exit_status import epilog
 from manip.links import AddressError, parse_address, virtual_clock
 from manip.reference_server import FaultSet, ServerConfig
@@ -109,6 +113,7 @@ _STYLE = {
     "known-fail": "cyan",
     "fixed": "bold red",
     "unsupported": "blue",
+    "not-judged": "bold blue",
 }
 
 
@@ -260,6 +265,25 @@ def main() -> None:
     "and once more with the first; a case whose verdict changes between seeds, or between the two runs "
     "of one seed (in virtual time: whose packets change), is a problem of the suite: exit 4.",
 )
+@click.option(
+    "--world",
+    "world",
+    default=None,
+    metavar="CMD_OR_URL",
+    help="HOST's world, which arranges what the protocol cannot provoke (an obstacle, a calibration "
+    "failure, a silent wrist...; contract 2, docs/world-harness.md): tcp://HOST:PORT of a world that "
+    "listens (manip-server --world tcp://127.0.0.1:0), a command line the suite starts, or 'prompt' (an "
+    "operator at a terminal arranges each condition by hand).  Without it the cases that need one end "
+    "not-judged.  The embedded server has its own.",
+)
+@click.option(
+    "--world-timeout",
+    "world_timeout",
+    type=click.FloatRange(min=0.1),
+    default=None,
+    metavar="SECONDS",
+    help="How long the world has to arrange or clear a condition (default 30 s; 300 s with --world prompt).",
+)
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar; failures and the summary only.")
 def run(
     host: str | None,
@@ -289,6 +313,8 @@ def run(
     record: Path | None,
     time_mode: str | None,
     repeat: int,
+    world: str | None,
+    world_timeout: float | None,
     quiet: bool,
 ) -> None:
     """Run the suite against HOST (a link address: tcp://HOST:PORT, chudp://HOST:PORT?addr=OCTAL,
@@ -361,6 +387,7 @@ def run(
             raise click.UsageError(f"--puma: {exc}") from None
     elif given("wrist_listen") or given("wrist_wait"):
         raise click.UsageError("--wrist-listen and --wrist-wait apply to --puma")
+    _check_world(world, world_timeout, host=host, cougar=cougar)
     if record is not None and repeat > 1:
         raise click.UsageError("--record records one run: not with --repeat")
     simulated = not host and target is None
@@ -411,6 +438,8 @@ def run(
         extra += ["--server-fault", fault]
     if simulated and not virtual:
         extra += ["--time", "real"]
+    if world is not None:
+        extra += ["--world", world]
     config = RunConfig(
         address=address,
         options=options,
@@ -430,11 +459,28 @@ def run(
         config.reproduce_prefix = puma_target.reproduce_prefix()
     console.print(f"manip-conform: seed [bold]{seed}[/] (rerun with --seed {seed})")
     if repeat > 1:
-        report, code = _repeat(config, cases, config_faults, console, quiet, target or puma_target, repeat)
+        report, code = _repeat(
+            config,
+            cases,
+            config_faults,
+            console,
+            quiet,
+            target or puma_target,
+            repeat,
+            _world_of(world, world_timeout),
+        )
     else:
         holder: dict[str, Runner] = {}
         code = _execute(
-            config, cases, config_faults, holder, console, quiet, cougar=target or puma_target, record=record
+            config,
+            cases,
+            config_faults,
+            holder,
+            console,
+            quiet,
+            cougar=target or puma_target,
+            record=record,
+            world=_world_of(world, world_timeout),
         )
         report = holder["runner"].report if "runner" in holder else None
     if report is not None:
@@ -458,6 +504,7 @@ def _repeat(
     quiet: bool,
     cougar: CougarTarget | PumaTarget | None,
     runs: int,
+    world: WorldSpec | None = None,
 ) -> tuple[RunReport | None, int | None]:
     """``--repeat``: the selection with ``runs`` seeds, then the first seed again; the first run's report
     carries what changed between them (:mod:`manip.conformance.suite.stability`)."""
@@ -467,7 +514,7 @@ def _repeat(
     for number, seed in enumerate([*seeds, seeds[0]], start=1):
         holder: dict[str, Runner] = {}
         run_config = replace(config, seed=seed, options=replace(config.options))
-        code = _execute(run_config, cases, faults, holder, console, True, cougar=cougar)
+        code = _execute(run_config, cases, faults, holder, console, True, cougar=cougar, world=world)
         if "runner" not in holder:
             return None, code
         report = holder["runner"].report
@@ -488,6 +535,39 @@ def _repeat(
     if not quiet:
         console.print(f"{len(reports)} runs, {len(first.unstable)} stability problem(s)", markup=False)
     return first, None
+
+
+@dataclass(frozen=True)
+class WorldSpec:
+    """``--world`` and ``--world-timeout`` as given."""
+
+    spec: str
+    timeout: float
+
+
+def _world_of(world: str | None, timeout: float | None) -> WorldSpec | None:
+    if world is None:
+        return None
+    default = PROMPT_TIMEOUT if world == "prompt" else DEFAULT_ANSWER_TIMEOUT
+    return WorldSpec(world, default if timeout is None else timeout)
+
+
+def _check_world(world: str | None, timeout: float | None, *, host: str | None, cougar: str | None) -> None:
+    """Usage errors of ``--world``: it is HOST's world, and ``prompt`` needs a terminal."""
+    if world is None:
+        if timeout is not None:
+            raise click.UsageError("--world-timeout applies to --world")
+        return
+    if cougar is not None:
+        raise click.UsageError("--world arranges a server's world: not with --cougar")
+    if not host:
+        raise click.UsageError(
+            "--world is HOST's world: the embedded server (no HOST) has its own, in-process"
+        )
+    if world == "prompt" and (problem := check_terminal()) is not None:
+        raise click.UsageError(problem)
+    if not world.strip():
+        raise click.UsageError("--world names nothing: give tcp://HOST:PORT, a command line or prompt")
 
 
 def _counts_text(report: RunReport) -> str:
@@ -570,13 +650,17 @@ def _execute(
     quiet: bool,
     cougar: CougarTarget | PumaTarget | None = None,
     record: Path | None = None,
+    world: WorldSpec | None = None,
 ) -> int | None:
     """Run; None means "use the report's exit code"."""
     try:
         virtual_clock.run(
-            _run_async(config, cases, faults, holder, console, quiet, cougar, record),
+            _run_async(config, cases, faults, holder, console, quiet, cougar, record, world),
             virtual=config.virtual_time,
         )
+    except WorldError as exc:
+        console.print(f"[bold red]world unusable[/]: {escape(str(exc))}")
+        return int(ExitCode.UNREACHABLE)
     except PumaUnreachableError as exc:
         console.print(f"[bold red]target unreachable[/]: {escape(str(exc))}")
         return int(ExitCode.UNREACHABLE)
@@ -608,12 +692,25 @@ async def _run_async(
     quiet: bool,
     cougar: CougarTarget | PumaTarget | None,
     record: Path | None,
+    world: WorldSpec | None,
 ) -> None:
     # The recording starts on the run's loop, so a simulated run records on its virtual clock.
     how = "manip-conform run (client side)"
     with recording(record, how=how, seed=config.seed, virtual=config.virtual_time) as wrap:
         config.wrap_link = wrap
-        await _run_target(config, cases, faults, holder, console, quiet, cougar)
+        await _run_target(config, cases, faults, holder, console, quiet, cougar, world)
+
+
+@contextlib.asynccontextmanager
+async def _opened_world(config: RunConfig, world: WorldSpec | None, console: Console) -> AsyncIterator[None]:
+    """HOST's world (``--world``) for the block, as the run's (nothing without one)."""
+    if world is None:
+        yield
+        return
+    async with open_world(world.spec, answer_timeout=world.timeout) as opened:
+        config.world = opened
+        console.print(f"world: {opened.description}", markup=False)
+        yield
 
 
 async def _run_target(
@@ -624,9 +721,10 @@ async def _run_target(
     console: Console,
     quiet: bool,
     cougar: CougarTarget | PumaTarget | None,
+    world: WorldSpec | None = None,
 ) -> None:
     if isinstance(cougar, PumaTarget):  # --puma: the suite plays Cougar for the Puma
-        await _run_puma(config, cases, holder, console, quiet, cougar)
+        await _run_puma(config, cases, holder, console, quiet, cougar, world)
         return
     if cougar is not None:  # --cougar: the Cougar target (embedded or not)
         async with cougar.running() as address:
@@ -637,7 +735,8 @@ async def _run_target(
             await _run_with(config, cases, holder, console, quiet)
         return
     if not config.embedded:
-        await _run_with(config, cases, holder, console, quiet)
+        async with _opened_world(config, world, console):
+            await _run_with(config, cases, holder, console, quiet)
         return
     server_config = ServerConfig() if faults is None else ServerConfig(faults=faults)
     # The embedded robot has the simulated Cougar wrist, so the wrist opcodes are checked too.
@@ -647,7 +746,7 @@ async def _run_target(
         ) as environment:
             address = environment.address
             config.address = address
-            config.environment = environment
+            config.world = environment.world
             config.options = replace(config.options, address=address, embedded=True)
             console.print("embedded reference server in virtual time (with the simulated Cougar wrist)")
             await _run_with(config, cases, holder, console, quiet)
@@ -655,7 +754,7 @@ async def _run_target(
     embedded = EmbeddedServer(server_config, wrist=True, broken_after=config.options.broken_after)
     with embedded as address:
         config.address = address
-        config.environment = embedded.environment
+        config.world = embedded.environment.world if embedded.environment is not None else None
         config.options = replace(config.options, address=address, embedded=True)
         console.print(
             f"embedded reference server at {address} (with the simulated Cougar wrist)", markup=False
@@ -670,6 +769,7 @@ async def _run_puma(
     console: Console,
     quiet: bool,
     puma: PumaTarget,
+    world: WorldSpec | None = None,
 ) -> None:
     if puma.host is not None:
         console.print(
@@ -677,8 +777,9 @@ async def _run_puma(
             f"Puma's wrist link (manip-server --cougar {puma.wrist_listen})",
             markup=False,
         )
-    async with puma.running(config.seed) as address:
+    async with puma.running_with_world(config.seed) as (address, own_world):
         config.address = address
+        config.world = own_world or config.world
         config.options = _with_address(config.options, address)
         if puma.embedded:
             how = "in virtual time" if config.virtual_time else f"at {address}"
@@ -687,7 +788,8 @@ async def _run_puma(
             )
         else:
             console.print(f"the Puma's wrist link is up; judging {address}", markup=False)
-        await _run_with(config, cases, holder, console, quiet)
+        async with _opened_world(config, world, console):  # HOST's, once it is up
+            await _run_with(config, cases, holder, console, quiet)
 
 
 def _with_address(options: RunOptions, address: str) -> RunOptions:
@@ -697,7 +799,9 @@ def _with_address(options: RunOptions, address: str) -> RunOptions:
 async def _run_with(
     config: RunConfig, cases: Sequence[Case], holder: dict[str, Runner], console: Console, quiet: bool
 ) -> None:
-    progress = progress_bar(console, quiet)
+    progress = progress_bar(
+        console, quiet or isinstance(config.world, PromptWorld)
+    )  # it would hide the questions
     task_id = progress.add_task("conformance", total=0)
 
     def started(selected: list[Case]) -> None:
@@ -763,11 +867,20 @@ def _summary(console: Console, report: RunReport, quiet: bool = False) -> None:
         console.print(f"[bold magenta]unstable[/]: {escape(problem)}")
     verdict_style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
     shown = ", ".join(parts) or "no cases"
+    unjudged = report.not_judged_hints()
     console.print(
         f"[{verdict_style}]{report.verdict}[/] (exit {int(report.exit_code)}): {shown}"
         f" in {report.duration:.1f} s; seed {report.seed}"
         + ("; virtual time" if report.time == "virtual" else "")
+        + (f"; {len(unjudged)} MUST clause(s) not judged on this target" if unjudged else "")
     )
+    if unjudged:
+        listed = ", ".join(f"{clause} ({hint})" for clause, hint in unjudged.items())
+        console.print(
+            f"[{_STYLE['not-judged']}]not judged[/]: {escape(listed)}; what would judge each is in brackets"
+        )
+        if "--world" in unjudged.values():
+            console.print(f"--world: {escape(WITHOUT_WORLD)}")
     slow = [r for r in report.results if r.deadline and r.duration > 0.8 * r.deadline]
     for r in slow:
         console.print(

@@ -9,6 +9,8 @@ simulator adds gravity on the hand and payload itself, so environments model con
 * :class:`Surface`: a rigid-ish plane (a table top); penetration times stiffness along its normal.
 * :class:`Spring`: a spring from the tool point to an anchor (a compliant fixture, or a person's hand).
 * :class:`Contacts`: several of the above at once; their wrenches add.
+* :class:`HandLoad`: a steady wrench given in the tool's own axes (a push on the hand that turns with
+  it; the reference server's world arranges one to trip a guard).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy.typing as npt
 
 from manip.arm import Transform
 
-__all__ = ["Contacts", "Environment", "FreeSpace", "Spring", "Surface", "Wrench"]
+__all__ = ["Contacts", "Environment", "FreeSpace", "HandLoad", "Spring", "Surface", "Wrench"]
 
 Vector = npt.NDArray[np.float64]
 
@@ -147,3 +149,22 @@ class Contacts:
         for part in self.parts:
             total = total + part.wrench(tool)
         return total
+
+
+@dataclass(frozen=True)
+class HandLoad:
+    """A steady force (oz) and torque (oz-in, about the tool point) given in the tool's axes: whatever
+    the pose, the hand feels the same push."""
+
+    force: Sequence[float] = (0.0, 0.0, 0.0)
+    torque: Sequence[float] = (0.0, 0.0, 0.0)
+    _force: Vector = field(init=False, repr=False, compare=False)
+    _torque: Vector = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_force", _vec3(self.force, "HandLoad.force"))
+        object.__setattr__(self, "_torque", _vec3(self.torque, "HandLoad.torque"))
+
+    def wrench(self, tool: Transform) -> Wrench:
+        r = np.array(tool.rotation)
+        return Wrench.of(r @ self._force, r @ self._torque)

@@ -2,8 +2,9 @@
 
 Each fault is a name in :attr:`manip.cougar.CougarConfig.faults` (``manip-cougar --cougar-fault NAME``,
 ``manip-conform run --cougar sim --cougar-fault NAME``) and is honoured at exactly one place of the
-simulator, named below.  A clean Cougar has none; the mutation test (``tests/test_conform_cougar.py``)
-runs the Cougar cases against each fault and requires at least one case to fail.
+simulator, named below.  A clean Cougar has none; the mutation test
+(``tests/conformance/cougar/test_cougar.py``) runs the Cougar cases against each fault and requires at
+least one case to fail.
 """
 
 from __future__ import annotations

@@ -265,6 +265,11 @@ class Node:
         """The live connections (requested, opening or open)."""
         return list(self._conns.values())
 
+    def link_of(self, conn: ChaosConnection) -> Link | None:
+        """The link that carries ``conn`` (None once it has ended)."""
+        route = self._by_conn.get(conn.conn_id)
+        return None if route is None else route[0]
+
     def links_in_use(self) -> set[Link]:
         """The links that carry at least one live connection (a server's guard closes idle others)."""
         return {route[0] for route in self._by_conn.values()}

@@ -61,7 +61,7 @@ from .events import (
 )
 from .packets import make_los, pack_status, text, unpack_status
 from .seq import seq_add, seq_le, seq_lt, seq_sub
-from .states import FINAL_STATES, TRANSITIONS, ConnState, Input, Source
+from .states import FINAL_STATES, TRANSITIONS, ConnInput, ConnState, InputSource
 
 # Module-level aliases: reading an attribute of an enum class is several times slower than reading a
 # global, and these are read on every packet's path.
@@ -200,11 +200,11 @@ class Connection:
 
     # ------------------------------------------------------------------ driving
 
-    def handle(self, inp: Input, trig: Trigger) -> bool:
+    def handle(self, inp: ConnInput, trig: Trigger) -> bool:
         """Run the table's transition for ``inp``.  False if the table has none (packet ignored)."""
         plan = _PLAN.get((self.state, inp))
         if plan is None:
-            if inp.source is Source.USER:
+            if inp.source is InputSource.USER:
                 raise InvalidStateError(
                     f"connection {octal(self.index)}: {inp.name} is not allowed in {self.state.name}"
                 )
@@ -223,16 +223,16 @@ class Connection:
         state = self.state
         if state is _RFC_SENT:
             if now >= self.started_at + cfg.rfc_timeout:
-                self.handle(Input.RFC_TIMEOUT, Trigger(now, data=b"Host not responding"))
+                self.handle(ConnInput.RFC_TIMEOUT, Trigger(now, data=b"Host not responding"))
                 return
             self._retransmit(now, cfg.retransmit_interval)
         elif state is _RFC_RECEIVED:
             if now >= self.started_at + cfg.rfc_timeout:
-                self.handle(Input.UNANSWERED, Trigger(now, data=b"Timeout"))
+                self.handle(ConnInput.UNANSWERED, Trigger(now, data=b"Timeout"))
         elif state is _OPEN:
             if now >= self.last_heard + cfg.broken_after:
                 reason = f"No packet from the peer for {cfg.broken_after:g} s"
-                self.handle(Input.SILENCE, Trigger(now, data=reason.encode()))
+                self.handle(ConnInput.SILENCE, Trigger(now, data=reason.encode()))
                 return
             self._retransmit(now, cfg.retransmit_interval)
             if self.ack_due is not None and now >= self.ack_due:
@@ -391,11 +391,11 @@ class Connection:
         if self.eof_no is None:
             if self.peer_eof is not None:  # the peer closes too: no EOF of ours (see states.py)
                 if self.outstanding == 0:
-                    self.handle(Input.PEER_FINISHED, Trigger(now))
+                    self.handle(ConnInput.PEER_FINISHED, Trigger(now))
             elif self.established and self.outstanding < self.twsize:
                 self.eof_no = self._send_controlled(now, ChaosOp.EOF, b"")
         elif self.tacked == self.eof_no:
-            self.handle(Input.EOF_ACKED, Trigger(now))
+            self.handle(ConnInput.EOF_ACKED, Trigger(now))
 
     # ------------------------------------------------------------------ receive bookkeeping
 
@@ -635,7 +635,7 @@ class Connection:
         return self.state in FINAL_STATES
 
 
-_PLAN: Final[dict[tuple[ConnState, Input], tuple[tuple[_ActionFn, ...], ConnState]]] = {
+_PLAN: Final[dict[tuple[ConnState, ConnInput], tuple[tuple[_ActionFn, ...], ConnState]]] = {
     key: (tuple(_ACTIONS[name] for name in tr.actions), tr.next_state) for key, tr in TRANSITIONS.items()
 }
 """The table with each action name resolved to its method, so running a transition does no name lookups."""

@@ -39,31 +39,31 @@ from .connection import Connection, ConnectionInfo, NcpStats, Outbox, Trigger
 from .errors import NoFreeIndexError, UnknownConnectionError
 from .events import Event
 from .packets import is_legal_opcode, make_los
-from .states import FINAL_STATES, ConnState, Input
+from .states import FINAL_STATES, ConnInput, ConnState
 
 _SLOTS: Final = 255
 
-_PACKET_INPUTS: Final[Mapping[int, Input]] = MappingProxyType(
+_PACKET_INPUTS: Final[Mapping[int, ConnInput]] = MappingProxyType(
     {
-        ChaosOp.RFC: Input.RFC,
-        ChaosOp.OPN: Input.OPN,
-        ChaosOp.CLS: Input.CLS,
-        ChaosOp.ANS: Input.ANS,
-        ChaosOp.FWD: Input.FWD,
-        ChaosOp.SNS: Input.SNS,
-        ChaosOp.STS: Input.STS,
-        ChaosOp.LOS: Input.LOS,
-        ChaosOp.EOF: Input.EOF,
-        ChaosOp.UNC: Input.UNC,
+        ChaosOp.RFC: ConnInput.RFC,
+        ChaosOp.OPN: ConnInput.OPN,
+        ChaosOp.CLS: ConnInput.CLS,
+        ChaosOp.ANS: ConnInput.ANS,
+        ChaosOp.FWD: ConnInput.FWD,
+        ChaosOp.SNS: ConnInput.SNS,
+        ChaosOp.STS: ConnInput.STS,
+        ChaosOp.LOS: ConnInput.LOS,
+        ChaosOp.EOF: ConnInput.EOF,
+        ChaosOp.UNC: ConnInput.UNC,
     }
 )
 _NO_LOS_FOR: Final = frozenset({ChaosOp.LOS, ChaosOp.CLS})
 _SILENT_IF_UNKNOWN: Final = frozenset({ChaosOp.LOS, ChaosOp.CLS, ChaosOp.ANS, ChaosOp.FWD})
 _DROPPED: Final = frozenset({ChaosOp.MNT, ChaosOp.RUT, ChaosOp.BRD})
 _RFC_SENT: Final = ConnState.RFC_SENT
-_DATA: Final = Input.DATA
-_SEND: Final = Input.SEND
-_READ: Final = Input.READ
+_DATA: Final = ConnInput.DATA
+_SEND: Final = ConnInput.SEND
+_READ: Final = ConnInput.READ
 _RFC: Final = int(ChaosOp.RFC)  # plain ints for the per-packet path (enum attribute reads are slow)
 _DAT: Final = int(ChaosOp.DAT)
 
@@ -178,7 +178,7 @@ class Ncp:
             raise ValueError(f"RFC data is {len(data)} bytes, more than {MAX_DATA}")
         first = self._first(first_packet_no)
         conn = self._allocate(now, window)
-        self._handle(conn, Input.CONNECT, Trigger(now, data=data, host=host, packet_no=first))
+        self._handle(conn, ConnInput.CONNECT, Trigger(now, data=data, host=host, packet_no=first))
         return conn.index
 
     def accept(
@@ -190,23 +190,23 @@ class Ncp:
         if window is not None and conn.state is ConnState.RFC_RECEIVED:
             self._check_window(window)
             conn.rwsize = window
-        self._handle(conn, Input.ACCEPT, Trigger(now, packet_no=first))
+        self._handle(conn, ConnInput.ACCEPT, Trigger(now, packet_no=first))
 
     def refuse(self, now: float, conn_id: int, reason: str = "") -> None:
         """Refuse a requested connection with CLS."""
-        self._handle(self._conn(conn_id), Input.REFUSE, Trigger(now, data=_reason(reason)))
+        self._handle(self._conn(conn_id), ConnInput.REFUSE, Trigger(now, data=_reason(reason)))
 
     def answer(self, now: float, conn_id: int, data: bytes) -> None:
         """Answer a requested connection with one ANS packet instead of opening it."""
         if len(data) > MAX_DATA:
             raise ValueError(f"ANS data is {len(data)} bytes, more than {MAX_DATA}")
-        self._handle(self._conn(conn_id), Input.ANSWER, Trigger(now, data=bytes(data)))
+        self._handle(self._conn(conn_id), ConnInput.ANSWER, Trigger(now, data=bytes(data)))
 
     def forward(self, now: float, conn_id: int, host: int, contact: str) -> None:
         """Tell the requester to try ``contact`` at ``host`` instead (FWD)."""
         _check_word("host", host, 1)
         data = _contact_bytes(contact)
-        self._handle(self._conn(conn_id), Input.FORWARD, Trigger(now, data=data, host=host))
+        self._handle(self._conn(conn_id), ConnInput.FORWARD, Trigger(now, data=data, host=host))
 
     # ------------------------------------------------------------------ data
 
@@ -239,11 +239,11 @@ class Ncp:
         """Close gracefully: EOF after the data; CLS once the peer acknowledges the EOF; event Closed.
 
         On a connection that is not open yet this refuses (received RFC) or forgets it (sent RFC)."""
-        self._handle(self._conn(conn_id), Input.CLOSE, Trigger(now))
+        self._handle(self._conn(conn_id), ConnInput.CLOSE, Trigger(now))
 
     def abort(self, now: float, conn_id: int, reason: str = "") -> None:
         """Close at once with CLS ``reason``; unacknowledged data may be lost.  No event follows."""
-        self._handle(self._conn(conn_id), Input.ABORT, Trigger(now, data=_reason(reason)))
+        self._handle(self._conn(conn_id), ConnInput.ABORT, Trigger(now, data=_reason(reason)))
 
     # ------------------------------------------------------------------ the network side
 
@@ -365,7 +365,7 @@ class Ncp:
                 return conn
         raise NoFreeIndexError(f"all {_SLOTS} connection slots are in use")
 
-    def _handle(self, conn: Connection, inp: Input, trig: Trigger) -> None:
+    def _handle(self, conn: Connection, inp: ConnInput, trig: Trigger) -> None:
         try:
             conn.handle(inp, trig)
         finally:
@@ -384,7 +384,7 @@ class Ncp:
         existing = self._by_peer.get(key)
         if existing is not None and not existing.finished:
             existing.last_heard = now
-            self._handle(existing, Input.RFC, Trigger(now, packet))
+            self._handle(existing, ConnInput.RFC, Trigger(now, packet))
             return
         contact = packet.data.partition(b" ")[0]
         if contact not in self._listeners:
@@ -395,8 +395,8 @@ class Ncp:
         except NoFreeIndexError:
             self._refuse_unknown(packet, "No free connection")
             return
-        self._handle(conn, Input.LISTEN, Trigger(now))
-        self._handle(conn, Input.RFC, Trigger(now, packet))
+        self._handle(conn, ConnInput.LISTEN, Trigger(now))
+        self._handle(conn, ConnInput.RFC, Trigger(now, packet))
         self._by_peer[key] = conn
 
     def _refuse_unknown(self, rfc: Packet, reason: str) -> None:

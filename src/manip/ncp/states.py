@@ -5,7 +5,7 @@ Theory of operation
 
 A Chaos connection is in one of seven states.  Things happen to it from three directions: the local
 user calls the NCP (connect, accept, send, close ...), a packet arrives from the peer, or time passes.
-Each of those is an :class:`Input`.  The table :data:`TRANSITIONS` maps ``(state, input)`` to a
+Each of those is a :class:`ConnInput`.  The table :data:`TRANSITIONS` maps ``(state, input)`` to a
 :class:`Transition`: the names of the actions to run, in order, and the state that follows.  The table
 is the whole of the state logic; :mod:`manip.ncp.connection` implements each action name as a small
 method and :mod:`manip.ncp.node` only decides *which* connection an input belongs to.  The diagram in
@@ -68,7 +68,7 @@ FINAL_STATES: Final = frozenset({ConnState.CLOSED, ConnState.LOST, ConnState.INC
 """States a connection never leaves once it got there after being used."""
 
 
-class Source(enum.Enum):
+class InputSource(enum.Enum):
     """Where an input comes from: the user, a packet, or the passing of time and internal conditions."""
 
     USER = "user"
@@ -76,44 +76,44 @@ class Source(enum.Enum):
     INTERNAL = "internal"
 
 
-class Input(enum.Enum):
+class ConnInput(enum.Enum):
     """Everything that can happen to a connection.  The value is (source, description)."""
 
     # The local user.
-    CONNECT = (Source.USER, "connect(): send an RFC")
-    LISTEN = (Source.USER, "a listener takes the connection")
-    ACCEPT = (Source.USER, "accept() a received RFC")
-    REFUSE = (Source.USER, "refuse() a received RFC")
-    ANSWER = (Source.USER, "answer() a received RFC with ANS")
-    FORWARD = (Source.USER, "forward() a received RFC with FWD")
-    SEND = (Source.USER, "send() a data packet")
-    READ = (Source.USER, "read_ack(): the user has read up to a packet")
-    CLOSE = (Source.USER, "close(): graceful close")
-    ABORT = (Source.USER, "abort(): CLS now")
+    CONNECT = (InputSource.USER, "connect(): send an RFC")
+    LISTEN = (InputSource.USER, "a listener takes the connection")
+    ACCEPT = (InputSource.USER, "accept() a received RFC")
+    REFUSE = (InputSource.USER, "refuse() a received RFC")
+    ANSWER = (InputSource.USER, "answer() a received RFC with ANS")
+    FORWARD = (InputSource.USER, "forward() a received RFC with FWD")
+    SEND = (InputSource.USER, "send() a data packet")
+    READ = (InputSource.USER, "read_ack(): the user has read up to a packet")
+    CLOSE = (InputSource.USER, "close(): graceful close")
+    ABORT = (InputSource.USER, "abort(): CLS now")
     # Packets from the peer (DATA is any opcode 0200-0377).
-    RFC = (Source.PACKET, "RFC received")
-    OPN = (Source.PACKET, "OPN received")
-    CLS = (Source.PACKET, "CLS received")
-    ANS = (Source.PACKET, "ANS received")
-    FWD = (Source.PACKET, "FWD received")
-    SNS = (Source.PACKET, "SNS received")
-    STS = (Source.PACKET, "STS received")
-    LOS = (Source.PACKET, "LOS received")
-    EOF = (Source.PACKET, "EOF received")
-    UNC = (Source.PACKET, "UNC received")
-    DATA = (Source.PACKET, "data packet (0200-0377) received")
+    RFC = (InputSource.PACKET, "RFC received")
+    OPN = (InputSource.PACKET, "OPN received")
+    CLS = (InputSource.PACKET, "CLS received")
+    ANS = (InputSource.PACKET, "ANS received")
+    FWD = (InputSource.PACKET, "FWD received")
+    SNS = (InputSource.PACKET, "SNS received")
+    STS = (InputSource.PACKET, "STS received")
+    LOS = (InputSource.PACKET, "LOS received")
+    EOF = (InputSource.PACKET, "EOF received")
+    UNC = (InputSource.PACKET, "UNC received")
+    DATA = (InputSource.PACKET, "data packet (0200-0377) received")
     # Time and internal conditions.
-    EOF_ACKED = (Source.INTERNAL, "our EOF was acknowledged after close()")
-    PEER_FINISHED = (Source.INTERNAL, "close() after the peer's EOF, everything we sent acknowledged")
-    RFC_TIMEOUT = (Source.INTERNAL, "no reply to our RFC within rfc_timeout")
-    UNANSWERED = (Source.INTERNAL, "the user left a received RFC unanswered for rfc_timeout")
-    SILENCE = (Source.INTERNAL, "no packet from the peer for broken_after")
+    EOF_ACKED = (InputSource.INTERNAL, "our EOF was acknowledged after close()")
+    PEER_FINISHED = (InputSource.INTERNAL, "close() after the peer's EOF, everything we sent acknowledged")
+    RFC_TIMEOUT = (InputSource.INTERNAL, "no reply to our RFC within rfc_timeout")
+    UNANSWERED = (InputSource.INTERNAL, "the user left a received RFC unanswered for rfc_timeout")
+    SILENCE = (InputSource.INTERNAL, "no packet from the peer for broken_after")
 
     __hash__ = object.__hash__  # see ConnState
 
     @property
-    def source(self) -> Source:
-        src: Source = self.value[0]
+    def source(self) -> InputSource:
+        src: InputSource = self.value[0]
         return src
 
     @property
@@ -131,14 +131,14 @@ class Transition:
 
 
 _S = ConnState
-_I = Input  # short aliases keep the table readable
+_I = ConnInput  # short aliases keep the table readable
 
 
 def _t(next_state: ConnState, *actions: str) -> Transition:
     return Transition(actions, next_state)
 
 
-_TABLE: dict[tuple[ConnState, Input], Transition] = {
+_TABLE: dict[tuple[ConnState, ConnInput], Transition] = {
     # --- CLOSED: the start of every connection, and the end of most.
     (_S.CLOSED, _I.CONNECT): _t(_S.RFC_SENT, "send_rfc"),
     (_S.CLOSED, _I.LISTEN): _t(_S.LISTEN),
@@ -195,7 +195,7 @@ _TABLE: dict[tuple[ConnState, Input], Transition] = {
     (_S.INCOMPLETE, _I.ABORT): _t(_S.INCOMPLETE),
 }
 
-TRANSITIONS: Final[Mapping[tuple[ConnState, Input], Transition]] = MappingProxyType(_TABLE)
+TRANSITIONS: Final[Mapping[tuple[ConnState, ConnInput], Transition]] = MappingProxyType(_TABLE)
 """The transition table, read-only."""
 
 ACTION_DOCS: Final[Mapping[str, str]] = MappingProxyType(
@@ -231,7 +231,7 @@ ACTION_DOCS: Final[Mapping[str, str]] = MappingProxyType(
 """One line per action name, for the generated documentation."""
 
 
-def transition(state: ConnState, inp: Input) -> Transition | None:
+def transition(state: ConnState, inp: ConnInput) -> Transition | None:
     """The table entry for ``(state, inp)``, or None when the table has none."""
     return _TABLE.get((state, inp))
 

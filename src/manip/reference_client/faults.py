@@ -1,5 +1,5 @@
 """Fault switches of the reference client: each makes it break one rule on purpose, so that
-``manip-conform client`` is shown to catch it (``tests/test_conform_client_faults.py``).
+``manip-conform client`` is shown to catch it (``tests/conformance/client/test_faults.py``).
 
 A client runs with a :class:`ClientFaults` value (a frozen set; none by default), given in its options
 (:attr:`ClientOptions.faults <manip.reference_client.options.ClientOptions.faults>`) and passed down to

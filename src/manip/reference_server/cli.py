@@ -4,7 +4,9 @@ Once every address is bound it prints one line per address on stdout, flushed, e
 
     manip-server: listening on tcp://127.0.0.1:42085 (contact PUMA)
 
-so a script that asked for port 0 can read the real one.  SIGINT or SIGTERM stops it cleanly (exit 0);
+so a script that asked for port 0 can read the real one; with ``--world`` the next line says where the
+robot's world listens (``manip-server: world on tcp://127.0.0.1:PORT``,
+:mod:`manip.reference_server.world`).  SIGINT or SIGTERM stops it cleanly (exit 0);
 a usage error (unknown fault, bad address) exits 2; a failure to bind, or to create the ``--record``
 file, exits 1.
 
@@ -32,7 +34,7 @@ import logging
 import signal
 import sys
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
 from contextlib import AbstractAsyncContextManager
 from typing import TYPE_CHECKING, Any, Final
 
@@ -58,6 +60,7 @@ from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import DEFAULT_ADDRESS, ReferenceServer, serve
 from manip.reference_server.faults import FAULTS, FaultSet
 from manip.reference_server.session import ErrorArgs, ServerConfig
+from manip.reference_server.world import ReferenceWorld, serve_world
 
 if TYPE_CHECKING:
     from manip.captures import Recorder
@@ -287,6 +290,16 @@ def command_line(ctx: click.Context) -> list[str]:
     show_default=True,
     help="INFO logs one line per request.",
 )
+@click.option(
+    "--world",
+    "world",
+    default=None,
+    metavar="tcp://HOST:PORT",
+    help="Also serve the robot's world (contract 2, docs/world-harness.md) on this address, so that "
+    "manip-conform run HOST --world URL can arrange an obstacle, a calibration failure, a sluggish joint, "
+    "the panic button and, with --cougar sim, a silent wrist or a force on the hand.  Port 0 picks a free "
+    "one; the line 'manip-server: world on URL' says which.",
+)
 @version_option(PROG)
 def main(
     listen: str,
@@ -310,6 +323,7 @@ def main(
     accept_backoff: float,
     show_stats: bool,
     log_level: str,
+    world: str | None,
 ) -> None:
     """Run the manip reference Puma server: a simulated PUMA 600 speaking the Chaos manipulator protocol."""
     if list_faults:
@@ -324,6 +338,8 @@ def main(
         except ValueError as exc:
             raise click.BadParameter(str(exc), param_hint="--cougar") from None
     extra = [_address(url, "--chudp", "chudp") for url in chudp]
+    if world is not None and not _address(world, "--world", "tcp").startswith("tcp://"):
+        raise click.BadParameter(f"{world!r}: the world listens on tcp://HOST:PORT", param_hint="--world")
     limits = LinkLimits(
         frame_timeout=_off_if_zero(frame_timeout),
         idle_timeout=_off_if_zero(link_idle_timeout),
@@ -356,7 +372,7 @@ def main(
             _recording, record, seed=seed, command_line=command_line(click.get_current_context())
         )
     try:
-        asyncio.run(_run(server, contact, recording, show_stats=show_stats))
+        asyncio.run(_run(server, contact, recording, show_stats=show_stats, world=world))
     except (OSError, ChaosError) as exc:
         raise click.ClickException(f"cannot listen: {exc}") from exc
 
@@ -380,9 +396,10 @@ async def _run(
     recording: Callable[[], tuple[Recorder, LinkWrapper]] | None = None,
     *,
     show_stats: bool = False,
+    world: str | None = None,
 ) -> None:
     """Run ``server()`` until SIGINT or SIGTERM, recording it with what ``recording()`` makes; print the
-    stats line on SIGUSR1 and, with ``show_stats``, at exit."""
+    stats line on SIGUSR1 and, with ``show_stats``, at exit; serve its world on ``world``."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -400,7 +417,8 @@ async def _run(
                 with contextlib.suppress(NotImplementedError):
                     loop.add_signal_handler(signal.SIGUSR1, lambda: print(stats_line(running), flush=True))
             try:
-                await stop.wait()
+                async with _world(running, world):
+                    await stop.wait()
             finally:
                 if hasattr(signal, "SIGUSR1"):
                     loop.remove_signal_handler(signal.SIGUSR1)
@@ -412,6 +430,17 @@ async def _run(
         if recorder is not None:
             recorder.close()
             _report_recording(recorder)
+
+
+@contextlib.asynccontextmanager
+async def _world(running: ReferenceServer, address: str | None) -> AsyncIterator[None]:
+    """Serve the server's world on ``address`` (nothing when None), printing where."""
+    if address is None:
+        yield
+        return
+    async with serve_world(ReferenceWorld(running), address) as world:
+        print(f"{PROG}: world on {world.address}", flush=True)
+        yield
 
 
 def _counts(counter: Counter[str]) -> str:

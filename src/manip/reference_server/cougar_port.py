@@ -14,10 +14,12 @@ returns at once; words from Cougar are collected as they arrive and handed over 
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from typing import Protocol
 
-__all__ = ["CougarModel", "CougarPort", "SimPort"]
+from manip.cougar.link import CougarModel
+
+__all__ = ["CougarPort", "SimPort"]
 
 
 class CougarPort(Protocol):
@@ -43,14 +45,6 @@ class CougarPort(Protocol):
     def close(self) -> None:
         """Release the link."""
         ...
-
-
-class CougarModel(Protocol):
-    """The contract of an in-process Cougar (one call per Puma clock tick)."""
-
-    def receive(self, words: Iterable[int]) -> None: ...
-
-    def tick(self, now: float) -> list[int]: ...
 
 
 class SimPort:

@@ -278,10 +278,23 @@ class CougarWrist:
         """Guards armed on Cougar (by set-guard; cleared, or tripped, since)."""
         self._quiet = 0
         self._asleep = False
+        self._own_environment: Environment | None = None
+        """An in-process Cougar's environment before :meth:`load_hand` first changed it."""
 
     # ------------------------------------------------------------------------------ Wrist API
     def condition(self, conditions: WristConditions) -> None:
         self.conditions = conditions
+
+    def load_hand(self, environment: Environment | None) -> bool:
+        """Put ``environment`` on the hand of an in-process Cougar from now on (None: what it had before
+        the first call); False, and nothing changed, for a Cougar elsewhere, whose world is its own."""
+        cougar = getattr(self.port, "cougar", None)
+        if cougar is None or not hasattr(cougar, "environment"):
+            return False
+        if self._own_environment is None:
+            self._own_environment = cougar.environment
+        cougar.environment = self._own_environment if environment is None else environment
+        return True
 
     @property
     def served(self) -> frozenset[int]:

@@ -15,13 +15,13 @@ The hook points, by what they decide:
   world does once it is open), :attr:`~Defects.keeps_arm_after_close` (the driver's);
 * request numbers: :meth:`~Defects.initial_numbers`, :meth:`~Defects.reply_number`;
 * serving a request: :meth:`~Defects.decode`, :meth:`~Defects.check`, :meth:`~Defects.refused`,
-  :attr:`~Defects.discards_after_free_joint`;
+  :meth:`~Defects.wrist_failure`, :attr:`~Defects.discards_after_free_joint`;
 * what a request does: :meth:`~Defects.describe`, :meth:`~Defects.increment`, :meth:`~Defects.move_ready`,
   :attr:`~Defects.straight_lines`, :attr:`~Defects.checks_joint_limits`,
   :attr:`~Defects.applies_configuration`;
 * replies: :meth:`~Defects.payload`, :meth:`~Defects.reply`;
-* errors: :meth:`~Defects.error`, :meth:`~Defects.error_string`, :meth:`~Defects.after_error`,
-  :attr:`~Defects.after_fatal`;
+* errors: :meth:`~Defects.error_number`, :meth:`~Defects.error`, :meth:`~Defects.error_string`,
+  :meth:`~Defects.after_error`, :attr:`~Defects.after_fatal` (the driver's too);
 * asynchronous packets: :meth:`~Defects.notifications`, :meth:`~Defects.async_response`,
   :meth:`~Defects.reports_guard`, :meth:`~Defects.after_warning`.
 
@@ -55,8 +55,9 @@ if TYPE_CHECKING:
 
 __all__ = ["AfterFatal", "Defects", "SwitchedDefects", "defects_for"]
 
-AfterFatal = Literal["close", "stay-open"]
-"""What follows a fatal error: the connection closes (the protocol), or it stays open."""
+AfterFatal = Literal["close", "stay-open", "drop-link"]
+"""What follows a fatal error: the connection closes (the protocol), it stays open, or the driver drops
+the link under it without closing it."""
 Encoder = Callable[[RequestOpcode, Mapping[str, Any]], bytes]
 """The session's encoder of a reply's values (after the request number)."""
 
@@ -83,6 +84,7 @@ _SWAPPED_ARGS: Final[Mapping[Fault, frozenset[str]]] = {
 """The error codes whose numbers each byte-swapping fault sends high byte first."""
 _FLOAT_FAULTS: Final = frozenset({Fault.UNDERFLOW_DIRTY_ZERO, Fault.NOT_FINITE_RESERVED})
 _SWAPPED_CODES: Final = {"TOR": "JOR", "JOR": "TOR"}
+_ASYNC_ERRORS: Final = frozenset({ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING})
 
 
 def _word(n: int) -> bytes:
@@ -141,6 +143,10 @@ class Defects:
         a normal reply to send instead."""
         return error
 
+    def wrist_failure(self, error: RequestError) -> RequestError:
+        """The error that answers a wrist request Cougar failed (silent, its link down): non-fatal."""
+        return error
+
     # ---------------------------------------------------------------------------- what requests do
     def describe(self, statement: Statement) -> Statement:
         """What describe self states (the truth about the arm)."""
@@ -165,6 +171,12 @@ class Defects:
         return packets
 
     # ---------------------------------------------------------------------------- errors
+    def error_number(self, opcode: int, number: int, before: int | None) -> int:
+        """The request number an error packet of ``opcode`` carries: ``number``, the protocol's (for a
+        fatal error the packet last received, for an asynchronous one the last request processed;
+        ``before`` is the request processed before that one)."""
+        return number
+
     def error(self, opcode: int, error: ErrorMessage) -> ErrorMessage:
         """What an error packet of ``opcode`` (0201, 0202, 0204, 0205) says."""
         return error
@@ -206,7 +218,13 @@ class SwitchedDefects(Defects):
         self.straight_lines = Fault.STRAIGHT_AS_JOINT not in on
         self.checks_joint_limits = Fault.NO_JOR not in on
         self.applies_configuration = Fault.CONFIGURATION_IGNORED not in on
-        self.after_fatal = "stay-open" if Fault.FATAL_WITHOUT_CLOSE in on else "close"
+        self.after_fatal = (
+            "stay-open"
+            if Fault.FATAL_WITHOUT_CLOSE in on
+            else "drop-link"
+            if Fault.FATAL_DROPS_LINK in on
+            else "close"
+        )
 
     def _on(self, fault: Fault) -> bool:
         return fault in self.faults.active
@@ -238,6 +256,7 @@ class SwitchedDefects(Defects):
         if on(Fault.COLLISION_UNCHECKED):
             arm.collision_tol_deg = math.inf
         arm.increment_from_actual = on(Fault.INCREMENT_FROM_ACTUAL)
+        arm.keep_queue_on_abort = on(Fault.ABORT_KEEPS_QUEUE)
         if on(Fault.SEGMENTS_STOP):
             arm.stop_between_segments = SEGMENTS_STOP_REST_S
         if on(Fault.SERVO_DOUBLE_RATE):
@@ -296,6 +315,11 @@ class SwitchedDefects(Defects):
             return {"joints": (math.nan,) * 6}
         if code in _SWAPPED_CODES and op is not None and self._on(Fault.SWAP_TOR_JOR):
             return RequestError(replace(error.error, code=_SWAPPED_CODES[code]), fatal=error.fatal)
+        return error
+
+    def wrist_failure(self, error: RequestError) -> RequestError:
+        if self._on(Fault.WRIST_ERROR_FATAL):
+            return RequestError(replace(error.error, severity="F"), fatal=True)
         return error
 
     # ---------------------------------------------------------------------------- what requests do
@@ -364,7 +388,16 @@ class SwitchedDefects(Defects):
         return packets
 
     # ---------------------------------------------------------------------------- errors
+    def error_number(self, opcode: int, number: int, before: int | None) -> int:
+        if opcode == ServerOp.FATAL_ERROR and self._on(Fault.FATAL_NUMBER_PREVIOUS):
+            return (number - 1) & WORD_MASK
+        if opcode in _ASYNC_ERRORS and self._on(Fault.ASYNC_NUMBER_PREVIOUS) and before is not None:
+            return before
+        return number
+
     def error(self, opcode: int, error: ErrorMessage) -> ErrorMessage:
+        if opcode == ServerOp.FATAL_ERROR and self._on(Fault.FATAL_SEVERITY_E):
+            error = replace(error, severity="E")
         if self._on(Fault.WRONG_SEVERITY):
             error = replace(error, severity="E" if opcode == ServerOp.FATAL_ERROR else "F")
         if any(self._on(fault) and error.code in codes for fault, codes in _SWAPPED_ARGS.items()):

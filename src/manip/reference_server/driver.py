@@ -77,6 +77,7 @@ from manip.links import (
     start_server,
 )
 from manip.links.api import LinkWrapper
+from manip.links.stream import StreamLink
 from manip.links.virtual_clock import is_virtual
 from manip.ncp import ConnectionRequested
 from manip.reference_server.session import Outgoing, Output, ServerConfig, ServerSession, State
@@ -106,6 +107,8 @@ SERVO_SPIN: Final = 0.0011
 when the real servo period is at least eight times as long, i.e. at time scales up to about 1.8)."""
 BATCH: Final = 4
 """Requests served from one connection before yielding to the other tasks (the servo among them)."""
+DROP_LINK_DELAY: Final = 0.05
+"""Seconds the fault fatal-drops-link lets the fatal error travel before it drops the link."""
 LATENESS_KEPT: Final = 1 << 16
 
 _ERROR_OPS: Final = frozenset({ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
@@ -336,6 +339,8 @@ class ReferenceServer:
                     self.stats.packets_sent += 1
                 if session.state is State.CLOSED:
                     if not out:
+                        if session.defects.after_fatal == "drop-link":
+                            return await self._drop_link(conn)
                         await conn.close()
                         return "closed after a fatal error"
                     break
@@ -360,6 +365,15 @@ class ReferenceServer:
             finally:
                 client.waiter = None
                 conn.set_wakeup(None)
+
+    async def _drop_link(self, conn: ChaosConnection) -> str:
+        """Fault fatal-drops-link: give the last packets a moment, then close the stream link under
+        ``conn`` (no CLS); a shared datagram link is left alone and the connection just forgotten."""
+        await asyncio.sleep(DROP_LINK_DELAY)
+        link = conn.node.link_of(conn)
+        if isinstance(link, StreamLink):
+            link.close()
+        return "link dropped after a fatal error (fault fatal-drops-link)"
 
     def _serve(self, client: _Client, opcode: int, packet_no: int, data: bytes, ack_no: int) -> None:
         session = client.session

@@ -88,6 +88,12 @@ class Fault(enum.StrEnum):
     WRIST_TIMEOUT_SILENT = "wrist-timeout-silent"
     UNDERFLOW_DIRTY_ZERO = "underflow-dirty-zero"
     NOT_FINITE_RESERVED = "not-finite-reserved"
+    FATAL_NUMBER_PREVIOUS = "fatal-number-previous"
+    FATAL_SEVERITY_E = "fatal-severity-e"
+    FATAL_DROPS_LINK = "fatal-drops-link"
+    ASYNC_NUMBER_PREVIOUS = "async-number-previous"
+    WRIST_ERROR_FATAL = "wrist-error-fatal"
+    ABORT_KEEPS_QUEUE = "abort-keeps-queue"
     # protocol defects of the Puma's side of the wrist link (judged by manip-conform run --puma)
     WRIST_FLOAT_WORDS_SWAPPED = "wrist-float-words-swapped"
     WRIST_USER_FIRST = "wrist-user-first"
@@ -505,6 +511,45 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "Solve forwards of a transform out of reach answers six angles that are not numbers, sent as "
                 "the reserved operand, instead of refusing.",
                 "float.not-finite",
+            ),
+            _info(
+                Fault.FATAL_NUMBER_PREVIOUS,
+                "protocol",
+                "A fatal error carries the number of the request before the packet last received.",
+                "error.fatal-request-number",
+            ),
+            _info(
+                Fault.FATAL_SEVERITY_E,
+                "protocol",
+                "Fatal errors carry severity E (the other errors keep theirs).",
+                "error.severity-matches-opcode",
+            ),
+            _info(
+                Fault.FATAL_DROPS_LINK,
+                "protocol",
+                "After a fatal error the server drops the link under the connection instead of sending CLS.",
+                "error.fatal-then-close",
+            ),
+            _info(
+                Fault.ASYNC_NUMBER_PREVIOUS,
+                "protocol",
+                "Asynchronous errors and warnings carry the number of the request processed before the last "
+                "one.",
+                "async-error.request-number",
+            ),
+            _info(
+                Fault.WRIST_ERROR_FATAL,
+                "protocol",
+                "A wrist request that fails (Cougar silent, its link down) is answered with a fatal error "
+                "(severity F) and the connection closed, instead of a non-fatal E error.",
+                "wrist.no-answer",
+            ),
+            _info(
+                Fault.ABORT_KEEPS_QUEUE,
+                "protocol",
+                "An abort drops only the segment in execution: the queued ones run once motion is allowed "
+                "again.",
+                "motion.abort",
             ),
             _info(
                 Fault.WRIST_FLOAT_WORDS_SWAPPED,

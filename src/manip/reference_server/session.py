@@ -218,6 +218,8 @@ class ServerSession:
         """The request-notifications mask in force (bit 0 guard hit, bit 1 segment completed)."""
         self.last_processed: int | None = None
         """Packet number of the last request processed (the RFC's until the first request)."""
+        self._processed_before: int | None = None
+        """The one processed before it (the error-number hook point may use it)."""
         self.last_received: int | None = None
         self._now = float("-inf")
         self._out: list[Outgoing] = []
@@ -349,7 +351,7 @@ class ServerSession:
         try:
             values = pending.outcome()
         except RequestError as exc:
-            state = self._refuse(number, exc)
+            state = self._refuse(number, self.defects.wrist_failure(exc))
         else:
             self._reply(op, number, values)
         state = state or State.READY
@@ -378,6 +380,7 @@ class ServerSession:
 
     def _serve(self, event: _Event) -> State | None:
         self._run_arm(event)
+        self._processed_before = self.last_processed
         self.last_received = self.last_processed = event.packet_no
         number = self._echo(event)
         self._next_state = None
@@ -481,6 +484,7 @@ class ServerSession:
         return [*packets, _word(number)]
 
     def _emit_error(self, opcode: int, number: int, error: ErrorMessage) -> None:
+        number = self.defects.error_number(opcode, number, self._processed_before)
         error = self.defects.error(opcode, error)
         encoded = error.encode(align_args=self.config.error_args == "aligned")
         self._emit(opcode, _word(number) + self.defects.error_string(error, encoded))

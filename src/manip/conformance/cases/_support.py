@@ -15,7 +15,7 @@ check take the clause from their caller.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Final
 
@@ -24,6 +24,7 @@ from manip.codecs.errors import CodecError
 from manip.codecs.lisp import LispValue
 from manip.codecs.messages import ErrorReply, decode_error, decode_reply
 from manip.conformance.judge.checks import (
+    ANSWER_OPCODES,
     ERROR_OPCODES,
     WirePacket,
     check_error_packet,
@@ -119,14 +120,17 @@ def error_of(packet: Answer | WirePacket) -> ErrorReply | None:
     return None
 
 
-async def connect_arranged(ctx: CaseContext, *switches: str) -> Probe:
-    """A probe whose connection opens under the embedded server's environment ``switches`` (conditions
-    of the arm's world, :class:`~manip.conformance.suite.embedded.ServerEnvironment`); against another
-    target, a plain connection (the case then judges what the target does by itself)."""
-    if ctx.environment is None:
-        return await ctx.connect()
-    with ctx.environment.arrange(*switches):
-        return await ctx.connect()
+def last_processed(packets: Sequence[WirePacket], before: WirePacket) -> int | None:
+    """The request number of the last answer the server sent before ``before`` (erratum
+    ``async-last-processed``): the server answers in order, so that request is the last it had
+    processed when it sent ``before``."""
+    number = None
+    for packet in packets:
+        if packet is before:
+            return number
+        if packet.direction == "s2c" and packet.opcode in ANSWER_OPCODES and len(packet.data) >= 2:
+            number = word(packet.data)
+    return number
 
 
 async def settle(
@@ -385,8 +389,8 @@ class Evidence(CarriesViolation, AssertionError):  # noqa: N818 - a failed examp
     ``invariant``: the suite invariant that found it (a checker's finding, a probe's failure), passed
     on to ``ctx.fail_with`` so that a clause the case does not declare is attributed to it."""
 
-    # ``args`` is set instead of calling ``super().__init__``: tests/clause_scan.py binds the positional
-    # arguments of any ``__init__`` call here to this signature, whose first parameter is a clause.
+    # ``args`` is set instead of calling ``super().__init__``: tests/support/clause_scan.py binds the
+    # positional arguments of any ``__init__`` call here to this signature, whose first parameter is a clause.
     def __init__(
         self,
         clause: str,

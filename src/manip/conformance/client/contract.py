@@ -25,7 +25,7 @@ __all__ = [
     "RESULT_TYPES",
     "REVISION",
     "ContractError",
-    "Hello",
+    "HarnessHello",
     "Instruction",
     "Op",
     "Result",
@@ -136,7 +136,7 @@ class Instruction:
 
 
 @dataclass(frozen=True)
-class Hello:
+class HarnessHello:
     name: str
     version: str
     links: frozenset[str]
@@ -185,7 +185,7 @@ def _strings(data: Mapping[str, Any], key: str) -> frozenset[str]:
     return frozenset(value)
 
 
-def parse_hello(line: str) -> Hello:
+def parse_hello(line: str) -> HarnessHello:
     data = _load(line)
     if data.get("type") != "hello":
         raise ContractError(f"the first line must be a hello, not type {data.get('type')!r}")
@@ -198,7 +198,7 @@ def parse_hello(line: str) -> Hello:
             raise ContractError(f"hello: {key!r} must be a string")
     if "links" not in data or "operations" not in data:
         raise ContractError("hello: 'links' and 'operations' are required")
-    return Hello(
+    return HarnessHello(
         str(data["name"]),
         str(data["version"]),
         _strings(data, "links"),

@@ -22,7 +22,7 @@ from typing import Final
 
 from manip.conformance.client.contract import (
     ContractError,
-    Hello,
+    HarnessHello,
     Instruction,
     Result,
     parse_hello,
@@ -32,7 +32,7 @@ from manip.conformance.client.contract import (
 __all__ = [
     "HELLO_TIMEOUT",
     "LINE_LIMIT",
-    "CaseRun",
+    "CaseTranscript",
     "HarnessError",
     "HarnessProblem",
     "HarnessProcess",
@@ -79,7 +79,7 @@ class HarnessProblem:
 
 
 @dataclass
-class CaseRun:
+class CaseTranscript:
     """What the harness wrote for one case."""
 
     results: list[Result] = field(default_factory=list)
@@ -100,7 +100,7 @@ class HarnessProcess:
         self.argv = list(argv)
         self.env = env
         self.limits = limits or Limits()
-        self.hello: Hello | None = None
+        self.hello: HarnessHello | None = None
         self.starts = 0
         self.unusable: str | None = None
         """Why a restart failed (no hello, bad hello): the run stops using the harness."""
@@ -108,7 +108,7 @@ class HarnessProcess:
         self._stderr: deque[str] = deque(maxlen=STDERR_LINES)
         self._stderr_task: asyncio.Task[None] | None = None
 
-    async def start(self) -> Hello:
+    async def start(self) -> HarnessHello:
         """Start the harness and read its hello (:class:`HarnessError` if either fails)."""
         await self.stop()
         self.starts += 1
@@ -177,9 +177,9 @@ class HarnessProcess:
             return None
         return raw.decode(errors="replace").rstrip("\r\n")
 
-    async def run_case(self, instruction: Instruction, deadline: float) -> CaseRun:
+    async def run_case(self, instruction: Instruction, deadline: float) -> CaseTranscript:
         """Send the case and read its results until ``done`` (or a problem) within ``deadline`` s."""
-        run = CaseRun()
+        run = CaseTranscript()
         if self._proc is None or self._proc.returncode is not None:
             try:
                 await self.start()
@@ -236,7 +236,7 @@ class HarnessProcess:
         await self._finish_bad(run)
         return run
 
-    async def _finish_bad(self, run: CaseRun) -> None:
+    async def _finish_bad(self, run: CaseTranscript) -> None:
         await self.kill()
         run.stderr = list(self._stderr)
 

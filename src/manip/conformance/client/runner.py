@@ -28,7 +28,7 @@ from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from typing import Any, Final
 
-from manip.conformance.client.contract import Hello, Instruction, Op, Result
+from manip.conformance.client.contract import HarnessHello, Instruction, Op, Result
 from manip.conformance.client.process import HarnessError, HarnessProblem, HarnessProcess, Limits
 from manip.conformance.client.server import Mangle, Script, ServerSide, WireRecord, serve_scenario
 from manip.conformance.client.wire import (
@@ -132,11 +132,11 @@ class Play:
 
 
 @dataclass
-class Session:
+class ClientRun:
     """The run's harness and settings, shared by the cases."""
 
     harness: HarnessProcess
-    hello: Hello
+    hello: HarnessHello
     link: str
     timeout: float
     deadline_scale: float = 1.0
@@ -146,7 +146,7 @@ class Session:
 class ClientContext(CaseContext):
     """A :class:`CaseContext` that can play scenarios against the harness (see the module docstring)."""
 
-    def __init__(self, session: Session, **kwargs: Any) -> None:
+    def __init__(self, session: ClientRun, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.session = session
         self.plays: list[Play] = []
@@ -327,7 +327,7 @@ async def run_client_suite(
             for item in chosen:
                 report.results.append(_blank(config, item, "skip", "the harness could not be started"))
             return report
-        session = Session(
+        session = ClientRun(
             harness,
             hello,
             config.link,
@@ -346,7 +346,11 @@ async def run_client_suite(
 
 
 async def _run_cases(
-    config: ClientRunConfig, session: Session, chosen: Sequence[Case], report: RunReport, events: ClientEvents
+    config: ClientRunConfig,
+    session: ClientRun,
+    chosen: Sequence[Case],
+    report: RunReport,
+    events: ClientEvents,
 ) -> None:
     """Each case in turn; once the harness cannot be started again, the rest are skipped."""
     harness = session.harness
@@ -367,7 +371,7 @@ async def _run_cases(
             )
 
 
-async def _start(harness: HarnessProcess, report: RunReport, events: ClientEvents) -> Hello | None:
+async def _start(harness: HarnessProcess, report: RunReport, events: ClientEvents) -> HarnessHello | None:
     t = time.monotonic()
     try:
         hello = await harness.start()
@@ -391,7 +395,7 @@ def _blank(config: ClientRunConfig, item: Case, outcome: Any, reason: str) -> Ca
     return blank_result(item, outcome, reason, config.seed, config.options, reproduce, known)
 
 
-async def run_client_case(config: ClientRunConfig, session: Session, item: Case) -> CaseResult:
+async def run_client_case(config: ClientRunConfig, session: ClientRun, item: Case) -> CaseResult:
     """Run one client case to its outcome (never raises, but on interruption)."""
     result = _blank(config, item, "pass", "")
     ctx = ClientContext(

@@ -33,6 +33,7 @@ from manip.conformance.output.report_view import (
     clause_info,
     failure_groups,
     group_message,
+    not_judged_line,
     packet_rows,
     plural,
     seeded,
@@ -133,6 +134,9 @@ def _summary(report: Report) -> str:
     problems = "".join(
         f"<li>{_e(p)}</li>" for p in [*report.get("problems", []), *report.get("unstable", [])]
     )
+    if unjudged := not_judged_line(report):
+        problems += f'<li class="o-not-judged">{_e(unjudged)}</li>'
+
     if report.get("internal_error"):
         problems += f"<li>internal error<pre>{_e(report['internal_error'])}</pre></li>"
     return (

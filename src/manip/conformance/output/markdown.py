@@ -20,6 +20,7 @@ from manip.conformance.output.report_view import (
     Report,
     failure_groups,
     group_message,
+    not_judged_line,
     seeded,
     target_label,
 )
@@ -76,7 +77,9 @@ def render_markdown(report: Report) -> str:
     ]
     for problem in [*report.get("problems", []), *report.get("unstable", [])]:
         lines.append(f"- **problem**: {_text(problem)}")
-    if report.get("problems") or report.get("unstable"):
+    if unjudged := not_judged_line(report):
+        lines.append(f"- **not judged**: {_text(unjudged)}")
+    if report.get("problems") or report.get("unstable") or unjudged:
         lines.append("")
     groups = failure_groups(report)
     if not groups:

@@ -5,7 +5,9 @@ The JSON report is versioned (``schema_version``); per case it holds the id, cla
 the violations (expected / actual / bytes in hex), the duration against the deadline, the seed, the
 packets both ways, and a command that reproduces the case.  JUnit XML has one ``testsuite`` per
 top-level area (``server.reply``, ``server.motion``...), ``classname`` = the area and ``name`` = the case
-id; ``warn`` and ``known-fail`` cases pass with a property saying so, ``skip`` is ``<skipped>``.
+id; ``warn`` and ``known-fail`` cases pass with a property saying so, ``skip``, ``unsupported`` and
+``not-judged`` are ``<skipped>`` (the message says which).  The JSON report's ``not_judged`` lists the
+MUST clauses no case could judge on the target.
 
 Failures grouped by clause (:func:`by_clause`): how many cases broke each clause, with the clause's text
 and section from the spec, so a report says first *what* is broken (``74 failures:
@@ -254,6 +256,7 @@ def report_json(report: RunReport) -> dict[str, Any]:
             for c in report.liveness
         ],
         "by_clause": [t.to_json() for t in by_clause(report)],
+        "not_judged": report.not_judged_clauses(),
         "clauses": clause_catalog(report),
         "cases": [_case_json(r) for r in report.results],
     }
@@ -282,7 +285,7 @@ def report_junit(report: RunReport) -> ET.Element:
             tests=str(len(results)),
             failures=str(sum(r.outcome in ("fail", "fixed") for r in results)),
             errors=str(sum(r.outcome == "error" for r in results)),
-            skipped=str(sum(r.outcome in ("skip", "unsupported") for r in results)),
+            skipped=str(sum(r.outcome in ("skip", "unsupported", "not-judged") for r in results)),
             time=f"{sum(r.duration for r in results):.3f}",
         )
         props = ET.SubElement(suite, "properties")
@@ -315,6 +318,8 @@ def _junit_case(suite: ET.Element, area: str, result: CaseResult) -> None:
         ET.SubElement(node, "skipped", message=result.reason)
     elif result.outcome == "unsupported":
         ET.SubElement(node, "skipped", message=f"unsupported: {result.reason}")
+    elif result.outcome == "not-judged":
+        ET.SubElement(node, "skipped", message=f"not judged: {result.reason}")
     elif text:
         ET.SubElement(node, "system-out").text = text
 

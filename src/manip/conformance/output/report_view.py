@@ -17,7 +17,8 @@ from typing import Any, Final
 from manip.conformance.judge.packets import WirePacket, describe
 from manip.conformance.output.packet_text import annotated
 from manip.conformance.output.report import SCHEMA_VERSION
-from manip.conformance.suite.results import OUTCOMES
+from manip.conformance.suite.results import OUTCOMES, judging_hint
+from manip.conformance.suite.world import WITHOUT_WORLD
 from manip.links import AddressError, parse_address
 from manip.spec import SPEC
 
@@ -35,6 +36,7 @@ __all__ = [
     "group_message",
     "grouped",
     "load_report",
+    "not_judged_line",
     "packet_rows",
     "plural",
     "seeded",
@@ -42,7 +44,17 @@ __all__ = [
     "wire_order",
 ]
 
-OUTCOME_ORDER: Final = ("fail", "error", "fixed", "warn", "known-fail", "skip", "unsupported", "pass")
+OUTCOME_ORDER: Final = (
+    "fail",
+    "error",
+    "fixed",
+    "warn",
+    "known-fail",
+    "not-judged",
+    "skip",
+    "unsupported",
+    "pass",
+)
 if set(OUTCOME_ORDER) != set(OUTCOMES):  # a new outcome must get its place (and colour) in the documents
     raise RuntimeError(f"OUTCOME_ORDER {OUTCOME_ORDER} does not list the outcomes {OUTCOMES}")
 """Outcomes, the ones needing attention first."""
@@ -79,6 +91,24 @@ def load_report(path: Path) -> dict[str, Any]:
     if missing:
         raise ReportError(f"{path} lacks the report field(s) {', '.join(missing)}")
     return data
+
+
+def not_judged_line(report: Report) -> str:
+    """The sentence on the MUST clauses no case could judge on the target ("" when there are none)."""
+    clauses = [str(c) for c in report.get("not_judged", [])]
+    if not clauses:
+        return ""
+    hints: dict[str, str] = {}
+    for case in report.get("cases", []):
+        if case.get("outcome") == "not-judged":
+            for clause in case.get("clauses", []):
+                hints.setdefault(str(clause), judging_hint(str(case.get("reason", ""))))
+    listed = ", ".join(f"{c} ({hints.get(c, 'see its case')})" for c in clauses)
+    world = f"; --world: {WITHOUT_WORLD}" if "--world" in hints.values() else ""
+    return (
+        f"{len(clauses)} MUST clause(s) not judged on this target: {listed}; what would judge each is in "
+        f"brackets{world}"
+    )
 
 
 def seeded(report: Report) -> bool:

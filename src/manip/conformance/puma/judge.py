@@ -13,7 +13,7 @@ would; the judge sits between the Puma and it and
 * **records** every command the Puma sends, decoded by Table 1 (:class:`Heard`: the tick it came
   before, the message, or the out-of-sync run or undecodable message it was), and every response it
   gives (:class:`Said`);
-* **scripts** the answers per case (:class:`Script`): chosen forces, raw gauge readings computed from
+* **scripts** the answers per case (:class:`CougarScript`): chosen forces, raw gauge readings computed from
   the pose the Puma last reported, New Theta Dot values, a response held back some ticks or never sent,
   guard trips at chosen ticks (:meth:`JudgingCougar.inject`).  Guard commands are kept from the
   simulator so that only the trips a case asks for happen.
@@ -37,12 +37,12 @@ from manip.cougar.sim import CougarSim
 from manip.spec.constants import CougarCommand, CougarResponse
 
 __all__ = [
+    "CougarScript",
     "FramedPort",
     "Heard",
     "JudgingCougar",
     "NoJudgeError",
     "Said",
-    "Script",
     "current_judge",
     "judging",
 ]
@@ -90,7 +90,7 @@ Gauges = Callable[[Sequence[float]], Sequence[int]]
 
 
 @dataclass
-class Script:
+class CougarScript:
     """How the judge answers during one case (the defaults: as the simulator does)."""
 
     forces: Sequence[float] | None = None
@@ -110,7 +110,7 @@ class JudgingCougar:
 
     def __init__(self, seed: int = 0) -> None:
         self.sim = CougarSim(seed=seed)
-        self.script = Script()
+        self.script = CougarScript()
         self.heard: list[Heard] = []
         self.said: list[Said] = []
         self.ticks = 0
@@ -127,10 +127,10 @@ class JudgingCougar:
         """(tick due, words): responses held back or injected, in order."""
 
     # ------------------------------------------------------------------------------ cases' side
-    def begin(self, script: Script | None = None) -> int:
+    def begin(self, script: CougarScript | None = None) -> int:
         """Start a case: its script, nothing held over from the last one; returns the record's mark
         (an index into :attr:`heard`)."""
-        self.script = script or Script()
+        self.script = script or CougarScript()
         self._held.clear()
         return len(self.heard)
 

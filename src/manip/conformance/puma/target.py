@@ -13,9 +13,10 @@ its Chaos side; only cases of target ``puma`` (ids ``puma.*``) run.  Three set-u
   with its wrist pointed there (``manip-server --cougar tcp://127.0.0.1:42011``); HOST is its Chaos
   address.
 
-The embedded server runs with an obstacle in joint 1's way above :data:`OBSTACLE_FROM` degrees (the
-environment fault ``obstacle``), which ``puma.compliance.no-collision-test`` needs: a compliant move
-may push into it, a plain one collides.
+The embedded server's world (:class:`~manip.conformance.suite.embedded.EmbeddedWorld`) arranges what
+the cases ask of it: ``puma.compliance.no-collision-test`` needs an obstacle in joint 1's way above
+:data:`OBSTACLE_FROM` degrees, into which a compliant move may push while a plain one collides.  Against
+HOST the run's ``--world`` arranges it (contract 2, ``docs/world-harness.md``).
 """
 
 from __future__ import annotations
@@ -32,10 +33,11 @@ from typing import Final
 from manip.conformance.puma.judge import FramedPort, JudgingCougar, judging
 from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.context import RunOptions
-from manip.conformance.suite.embedded import EmbeddedServer
+from manip.conformance.suite.embedded import EmbeddedServer, ServerEnvironment
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.runner import RunConfig, RunEvents, Runner
 from manip.conformance.suite.selection import PatternSet
+from manip.conformance.suite.world import World
 from manip.cougar.cli import serve_cougar
 from manip.cougar.link import DEFAULT_PORT, parse_address
 from manip.reference_server import FaultSet, ServerConfig
@@ -73,7 +75,7 @@ class PumaTarget:
     wrist_listen: str = DEFAULT_WRIST_LISTEN
     wrist_wait: float = DEFAULT_WRIST_WAIT
     faults: tuple[str, ...] = ()
-    """The embedded server's fault switches (``NAME[=ARG]``), besides the obstacle."""
+    """The embedded server's fault switches (``NAME[=ARG]``)."""
     virtual: bool = True
 
     def __post_init__(self) -> None:
@@ -87,30 +89,38 @@ class PumaTarget:
         return self.host is None
 
     def server_config(self) -> ServerConfig:
-        """The embedded server's configuration: the faults asked for, and the obstacle."""
-        given = [f for f in self.faults if f.partition("=")[0].strip() != "obstacle"]
-        obstacle = f"obstacle={OBSTACLE_JOINT}::{OBSTACLE_FROM:g}"
-        return ServerConfig(faults=FaultSet.parse([*given, obstacle]))
+        """The embedded server's configuration: the faults asked for."""
+        return ServerConfig(faults=FaultSet.parse(self.faults))
 
     @contextlib.asynccontextmanager
     async def running(self, seed: int, judge: JudgingCougar | None = None) -> AsyncIterator[str]:
         """The Puma's Chaos address for the block, with the judge serving its wrist."""
+        async with self.running_with_world(seed, judge) as (address, _):
+            yield address
+
+    @contextlib.asynccontextmanager
+    async def running_with_world(
+        self, seed: int, judge: JudgingCougar | None = None
+    ) -> AsyncIterator[tuple[str, World | None]]:
+        """:meth:`running`, with the embedded server's world (None for HOST, whose world is the run's)."""
         judge = judge or JudgingCougar(seed)
         with judging(judge):
             if self.host is None and self.virtual:
-                async with _virtual_server(self.server_config(), judge, seed) as address:
-                    yield address
+                async with _virtual_server(self.server_config(), judge, seed) as served:
+                    yield served
                 return
             listen = self.wrist_listen if self.host is not None else "tcp://127.0.0.1:0"
             async with serve_cougar(judge, listen) as cougar:
                 if self.host is None:
                     config = self.server_config()
-                    with EmbeddedServer(config, wrist=True, cougar=cougar.address, seed=seed) as address:
+                    embedded = EmbeddedServer(config, wrist=True, cougar=cougar.address, seed=seed)
+                    with embedded as address:
                         await _wait_link(lambda: cougar.connections, self.wrist_wait)
-                        yield address
+                        assert embedded.environment is not None
+                        yield address, embedded.environment.world
                     return
                 await _wait_link(lambda: cougar.connections, self.wrist_wait)
-                yield self.host
+                yield self.host, None
 
     def reproduce_prefix(self) -> tuple[str, ...]:
         if self.host is None:
@@ -131,8 +141,11 @@ async def _wait_link(links: Callable[[], int], timeout: float) -> None:
 
 
 @contextlib.asynccontextmanager
-async def _virtual_server(config: ServerConfig, judge: JudgingCougar, seed: int) -> AsyncIterator[str]:
-    """The reference server on this (virtual-clock) loop, its wrist wired to ``judge`` in-process."""
+async def _virtual_server(
+    config: ServerConfig, judge: JudgingCougar, seed: int
+) -> AsyncIterator[tuple[str, World]]:
+    """The reference server on this (virtual-clock) loop, its wrist wired to ``judge`` in-process; its
+    address and its world."""
     random.seed(seed)  # connection indices come from it: part of the simulated world
 
     def wrist() -> CougarWrist:
@@ -141,7 +154,7 @@ async def _virtual_server(config: ServerConfig, judge: JudgingCougar, seed: int)
     with tempfile.TemporaryDirectory(prefix="manip-puma-") as directory:
         path = os.path.join(directory, "puma.sock")
         async with serve(f"unix://{path}", config, seed=seed, wrist_factory=wrist) as server:
-            yield server.address
+            yield server.address, ServerEnvironment(server).world
 
 
 def puma_cases(cases: Sequence[Case]) -> list[Case]:
@@ -160,7 +173,7 @@ async def run_puma_suite(
     """Run the Puma cases (those matching ``select``, all when empty) against ``target``: what
     ``manip-conform run --puma`` does, without the console and the files (call it on a virtual-clock
     loop for a virtual-time target)."""
-    async with target.running(seed) as address:
+    async with target.running_with_world(seed) as (address, world):
         config = RunConfig(
             address=address,
             options=replace(options or RunOptions(), address=address),
@@ -169,5 +182,6 @@ async def run_puma_suite(
             embedded=target.embedded,
             virtual_time=target.embedded and target.virtual,
             reproduce_prefix=target.reproduce_prefix(),
+            world=world,
         )
         return await Runner(config, puma_cases(all_cases()), events).run()

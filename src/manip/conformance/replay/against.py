@@ -93,7 +93,7 @@ __all__ = [
     "AnswerSorter",
     "Barrier",
     "ReplayOptions",
-    "Script",
+    "ReplayScript",
     "SessionReplay",
     "replay_capture",
     "replay_session",
@@ -168,7 +168,7 @@ class Barrier:
 
 
 @dataclass
-class Script:
+class ReplayScript:
     """One recorded session, ready to replay."""
 
     number: int
@@ -182,7 +182,7 @@ class Script:
     """The recorded server ended the connection before the client did (after a fatal error, say)."""
 
 
-def script_of(session: Session, number: int = 1) -> Script:
+def script_of(session: Session, number: int = 1) -> ReplayScript:
     """The replay script of a recorded session (see the module docstring)."""
     packets = wire_packets(session, number - 1)
     rfc = rfc_number(session)
@@ -202,7 +202,7 @@ def script_of(session: Session, number: int = 1) -> Script:
                 server_closes = True
             recorded.server(p)
     end = Barrier(recorded.completed, len(recorded.asyncs))
-    return Script(number, session, packets, recorded, sends, end, rfc, server_closes)
+    return ReplayScript(number, session, packets, recorded, sends, end, rfc, server_closes)
 
 
 # ------------------------------------------------------------------------------------- options
@@ -240,7 +240,7 @@ class ReplayOptions:
 class SessionReplay:
     """What replaying one session gave."""
 
-    script: Script
+    script: ReplayScript
     live: AnswerSorter
     packets: list[WirePacket] = field(default_factory=list)
     numbers: NumberMap = field(default_factory=NumberMap)
@@ -349,7 +349,7 @@ async def _connect(address: str, options: ReplayOptions) -> ChaosConnection:
     )
 
 
-async def replay_session(script: Script, address: str, options: ReplayOptions) -> SessionReplay:
+async def replay_session(script: ReplayScript, address: str, options: ReplayOptions) -> SessionReplay:
     """Replay one recorded session against the server at ``address`` and compare (never raises a
     ChaosError: a failure to connect is ``stopped``)."""
     replay = SessionReplay(script, AnswerSorter(initial=script.rfc is not None))
@@ -381,7 +381,7 @@ async def replay_session(script: Script, address: str, options: ReplayOptions) -
     return replay
 
 
-async def _play(script: Script, live: _Live, options: ReplayOptions) -> None:
+async def _play(script: ReplayScript, live: _Live, options: ReplayOptions) -> None:
     replay = live.replay
     for packet, barrier in script.sends:
         missing = await live.reach(barrier, options)

@@ -35,7 +35,7 @@ decorated factory is called for every row and declares that row's case, giving i
 Rules a case follows:
 
 * It reports only the clauses it declares (checked at every ``ctx.expect``/``ctx.fail``, and by
-  ``tests/test_conform_clauses.py`` over the source of every case); what the suite's own machinery
+  ``tests/conformance/test_clauses.py`` over the source of every case); what the suite's own machinery
   finds on every exchange is attributed to an invariant instead (:mod:`manip.conformance.suite.invariants`).
   Its level is the strongest of its clauses' levels, and a check never overrides a clause's level.
 * It says what it checks through ``ctx.expect`` / ``ctx.check`` / ``ctx.fail``: a violated MUST clause

@@ -29,7 +29,11 @@ false on a MUST clause raises :class:`CaseFailure`; false on a SHOULD/MAY/INFO c
 bug of the suite (:class:`~manip.conformance.suite.case.UndeclaredClauseError`, raised at the call whether the
 condition holds or not), except a finding of the transcript invariant's checkers
 (:mod:`manip.conformance.suite.invariants`).  ``ctx.check(findings)`` applies the same rule to the
-findings of a checker; ``ctx.fail(...)`` fails outright; ``ctx.skip(reason)`` ends the case as skipped.
+findings of a checker; ``ctx.fail(...)`` fails outright; ``ctx.skip(reason)`` ends the case as
+skipped (not applicable), and ``ctx.not_judged(reason)`` as not judged (applicable, but this target
+cannot be judged on it; the reason says what would judge it).  ``async with ctx.arranged(condition):``
+has the target's world hold a condition of the arm's world (:mod:`manip.conformance.suite.world`) for
+the block.
 """
 
 from __future__ import annotations
@@ -38,10 +42,10 @@ import asyncio
 import contextlib
 import random
 import time
-from collections.abc import Awaitable, Callable, Iterable, Sequence
-from contextlib import AbstractContextManager
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterable, Sequence
+from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass, replace
-from typing import Any, Final, Literal, NoReturn, Protocol
+from typing import Any, Final, Literal, NoReturn
 
 from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request
@@ -57,6 +61,7 @@ from manip.conformance.suite.case import (
     UndeclaredClauseError,
 )
 from manip.conformance.suite.invariants import TRANSCRIPT, attribution_problem
+from manip.conformance.suite.world import CaseNotJudged, Condition, World, no_world
 from manip.links import ChaosConnection, ChaosError, ConnectionClosed, ConnectionLost
 from manip.spec import SPEC, RequestName
 from manip.spec.constants import ChaosOp, ServerOp
@@ -66,7 +71,6 @@ __all__ = [
     "Answer",
     "CaseContext",
     "Connector",
-    "Environment",
     "Probe",
     "RunOptions",
 ]
@@ -74,15 +78,6 @@ __all__ = [
 Target = Literal["sim", "hardware"]
 DEFAULT_REPLY_TIMEOUT: Final = 2.0
 DEFAULT_CONNECT_TIMEOUT: Final = 5.0
-
-
-class Environment(Protocol):
-    """Conditions of the arm's world a case may switch on for the connections it opens (the embedded
-    server's :class:`~manip.conformance.suite.embedded.ServerEnvironment`)."""
-
-    def arrange(self, *switches: str) -> AbstractContextManager[None]:
-        """Switch ``NAME[=ARG]`` environment conditions on inside the block."""
-        ...
 
 
 Connector = Callable[[bool], Awaitable[ChaosConnection]]
@@ -419,15 +414,15 @@ class CaseContext:
         options: RunOptions,
         connector: Connector,
         clauses: Iterable[str] | None = None,
-        environment: Environment | None = None,
+        world: World | None = None,
         reproduce: str = "",
     ) -> None:
         self.case_id = case_id
         self.reproduce = reproduce
         """The command that runs this case again (the report's reproduce line)."""
-        self.environment = environment
-        """The target's switchable conditions of the arm's world: the embedded server's, None for
-        any other target (a case that needs one says how to make it run there)."""
+        self.world = world
+        """The target's world, which arranges the conditions the protocol cannot provoke
+        (:meth:`arranged`); None when the run has none (the embedded server always has one)."""
         self.level = level
         self.clauses: frozenset[str] | None = None if clauses is None else frozenset(clauses)
         """The clauses the case declares: the only ones it may report (None: any, for contexts that
@@ -449,6 +444,8 @@ class CaseContext:
         """After the case, the runner checks every probe's whole recording with
         :func:`~manip.conformance.judge.checks.check_transcript`; a case that leaves the protocol on purpose
         (it sends a raw packet the transcript checker would misjudge) sets this False."""
+        self.deadline_scope: asyncio.Timeout | None = None
+        """The case's deadline (set by the runner); time spent waiting on the world is added to it."""
         self._connector = connector
         self._clock = _loop_clock()
         self._t0 = self._clock()
@@ -553,7 +550,7 @@ class CaseContext:
         Returns ``bool(condition)``.  ``clause`` must be one the case declares, or one of
         ``invariant``'s when a suite invariant's finding is passed on: checked at every call, true or
         not (UndeclaredClauseError).  ``clause`` and ``expected`` are keywords so that the clause scan of
-        ``tests/clause_scan.py`` sees every clause a case can report."""
+        ``tests/support/clause_scan.py`` sees every clause a case can report."""
         attributed = self._attribute(clause, invariant)
         if (
             level is not None
@@ -631,6 +628,52 @@ class CaseContext:
 
     def skip(self, reason: str) -> NoReturn:
         raise CaseSkipped(reason)
+
+    def not_judged(self, reason: str) -> NoReturn:
+        """End the case ``not-judged``: it cannot judge its clauses on this target; ``reason`` says why
+        and what would judge them (never a pass, never a skip)."""
+        raise CaseNotJudged(reason)
+
+    def arranged(self, condition: Condition) -> AbstractAsyncContextManager[None]:
+        """``async with ctx.arranged(condition):`` the target's world holds ``condition`` in the block
+        (connections that are to meet it open inside).  Without a world, or when the world cannot
+        arrange it, the case ends ``not-judged`` saying what would judge it."""
+        if self.world is None:
+            return no_world(condition)
+        return self._held(self.world, condition)
+
+    @contextlib.asynccontextmanager
+    async def _held(self, world: World, condition: Condition) -> AsyncIterator[None]:
+        """The world's arrangement, the time it takes to arrange and to clear kept off the case's
+        deadline (an operator may take minutes)."""
+        manager = world.arranged(condition)
+        async with self._off_deadline():
+            await manager.__aenter__()
+        self.note(f"arranged by {world.description}: {condition.describe()}")
+        try:
+            yield
+        except BaseException as exc:
+            async with self._off_deadline():
+                if not await manager.__aexit__(type(exc), exc, exc.__traceback__):
+                    raise
+        else:
+            async with self._off_deadline():
+                await manager.__aexit__(None, None, None)
+
+    @contextlib.asynccontextmanager
+    async def _off_deadline(self) -> AsyncIterator[None]:
+        """The block's time is not counted against the case's deadline."""
+        scope = self.deadline_scope
+        when = None if scope is None else scope.when()
+        if scope is None or when is None:
+            yield
+            return
+        start = self._clock()
+        scope.reschedule(None)
+        try:
+            yield
+        finally:
+            scope.reschedule(when + (self._clock() - start))
 
     def require_hazard(self, hazard: Hazard) -> None:
         """Skip unless the run allows opcodes of ``hazard`` (for cases that decide at run time)."""

@@ -13,10 +13,9 @@ Two ways to run it, one per time mode:
   spends seconds on one request, the runner keeps its clock (the GIL is handed over every few
   milliseconds) and a stuck server shows up as a failed deadline and a dead liveness probe.
 
-Either way the run gets a :class:`ServerEnvironment`: cases that need a condition of the arm's world (a
-calibration that fails, a joint that lags its command, an obstacle) switch it on for the connections
-they open (``with ctx.environment.arrange("calibrate-nzi"): ...``), so their paths run against the
-embedded server; against another target ``ctx.environment`` is None and they say how to make them run.
+Either way the run gets a :class:`ServerEnvironment`, whose :class:`EmbeddedWorld` arranges the
+conditions of the arm's world that cases ask for (``async with ctx.arranged(CalibrationFailure()):``;
+:mod:`manip.conformance.suite.world`), as another target's world does over contract 2.
 """
 
 from __future__ import annotations
@@ -28,18 +27,24 @@ import os
 import random
 import tempfile
 import threading
-from collections.abc import AsyncIterator, Iterator
-from dataclasses import replace
+from collections.abc import AsyncIterator
 from types import TracebackType
 from typing import Final
 
+from manip.conformance.suite.world import Condition, ConditionUnsupported
 from manip.links import NcpConfig
 from manip.reference_server import ServerConfig
 from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import ReferenceServer, serve
-from manip.reference_server.faults import FAULTS, FaultSet
+from manip.reference_server.world import ReferenceWorld, WorldRefusal
 
-__all__ = ["EmbeddedServer", "ServerEnvironment", "simulated_environment", "simulated_server"]
+__all__ = [
+    "EmbeddedServer",
+    "EmbeddedWorld",
+    "ServerEnvironment",
+    "simulated_environment",
+    "simulated_server",
+]
 
 START_TIMEOUT: Final = 10.0
 STOP_TIMEOUT: Final = 5.0
@@ -49,31 +54,40 @@ SOCKET_NAME: Final = "puma.sock"
 class ServerEnvironment:
     """The embedded server's conditions of the arm's world, switched by the cases that need them.
 
-    :meth:`arrange` switches environment faults (:data:`~manip.reference_server.faults.FAULTS` of kind
-    ``environment``) on, over whatever the server runs with, for the connections opened inside the
-    block: the server reads its configuration when a connection opens.  Protocol faults are refused:
-    a case arranges the world, never a defect of the server it judges."""
+    :attr:`world` is the run's :class:`~manip.conformance.suite.world.World` (:class:`EmbeddedWorld`):
+    cases arrange conditions through it, as they do through any target's world; :attr:`reference` is
+    the reference server's own :class:`~manip.reference_server.world.ReferenceWorld` under it.  A world
+    arranges conditions, never a defect of the server it judges (those are ``--server-fault``)."""
 
     def __init__(self, server: ReferenceServer) -> None:
         self._server = server
+        self.reference = ReferenceWorld(server)
+        self.world = EmbeddedWorld(self.reference)
 
     @property
     def address(self) -> str:
         return self._server.address
 
-    @contextlib.contextmanager
-    def arrange(self, *switches: str) -> Iterator[None]:
-        """``with environment.arrange("calibrate-nzi", "sluggish-joint=2:0.3"):`` (``NAME[=ARG]`` each)."""
-        extra = FaultSet.parse(switches)
-        defects = sorted(f.value for f in extra.active if FAULTS[f].kind != "environment")
-        if defects:
-            raise ValueError(f"not conditions of the arm's world: {', '.join(defects)}")
-        base = self._server.config
-        self._server.config = replace(base, faults=base.faults.merged(extra))
+
+class EmbeddedWorld:
+    """The embedded server's world (a :class:`~manip.conformance.suite.world.World`): the reference
+    server's :class:`~manip.reference_server.world.ReferenceWorld`, in-process, at once."""
+
+    description = "the embedded server's world"
+
+    def __init__(self, reference: ReferenceWorld) -> None:
+        self._reference = reference
+
+    @contextlib.asynccontextmanager
+    async def arranged(self, condition: Condition) -> AsyncIterator[None]:
+        try:
+            token = self._reference.arrange(condition.name, condition.args())
+        except WorldRefusal as exc:
+            raise ConditionUnsupported(condition, str(exc)) from None
         try:
             yield
         finally:
-            self._server.config = base
+            self._reference.clear(token)
 
 
 @contextlib.asynccontextmanager

@@ -10,7 +10,11 @@ Outcomes (``Outcome``):
 * ``known-fail``: failed (or erred) and listed in ``--known-failing``; does not fail the run;
 * ``fixed``: listed in ``--known-failing`` but passed: the entry is stale and fails the run;
 * ``unsupported``: a client case needing an operation, link or feature the harness does not declare
-  (``manip-conform client``); never a pass, and it does not fail the run.
+  (``manip-conform client``); never a pass, and it does not fail the run;
+* ``not-judged``: the case applies, but cannot judge its clauses on this target: it needs a condition of
+  the arm's world and the run has no world that arranges it (``--world``).  Its reason says what would
+  judge it; never a pass, and it does not fail the run, but the verdict line counts the MUST clauses
+  left unjudged (:meth:`RunReport.not_judged_clauses`).
 
 Exit codes (:class:`ExitCode`): 0 conformant, 1 non-conformant (or a stale known-failing entry),
 2 usage error, 3 target unreachable or dead before any verdict, 4 interrupted or internal error.
@@ -19,20 +23,32 @@ Exit codes (:class:`ExitCode`): 0 conformant, 1 non-conformant (or a stale known
 from __future__ import annotations
 
 import enum
+import re
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final, Literal
 
 from manip.conformance.judge.packets import WirePacket
 from manip.conformance.judge.violation import Violation
+from manip.spec import SPEC
 from manip.spec.model import Level
 
 if TYPE_CHECKING:
     from manip.conformance.suite.case import Target
 
-__all__ = ["OUTCOMES", "CaseResult", "ExitCode", "LivenessCheck", "Outcome", "RunReport", "Violation"]
+__all__ = [
+    "JUDGED",
+    "OUTCOMES",
+    "CaseResult",
+    "ExitCode",
+    "LivenessCheck",
+    "Outcome",
+    "RunReport",
+    "Violation",
+    "judging_hint",
+]
 
-Outcome = Literal["pass", "fail", "warn", "error", "skip", "known-fail", "fixed", "unsupported"]
+Outcome = Literal["pass", "fail", "warn", "error", "skip", "known-fail", "fixed", "unsupported", "not-judged"]
 OUTCOMES: Final[tuple[str, ...]] = (
     "pass",
     "fail",
@@ -42,7 +58,20 @@ OUTCOMES: Final[tuple[str, ...]] = (
     "known-fail",
     "fixed",
     "unsupported",
+    "not-judged",
 )
+JUDGED: Final = frozenset({"pass", "fail", "warn", "known-fail", "fixed"})
+"""Outcomes of a case that ran to a verdict on its clauses."""
+
+
+_OPTION = re.compile(r"--[a-z][a-z-]+")
+
+
+def judging_hint(reason: str) -> str:
+    """What would judge a not-judged case, in a word: the first option its reason names (``--world``,
+    ``--broken-after``), else "see its reason"."""
+    found = _OPTION.search(reason)
+    return found.group(0) if found else "see its reason"
 
 
 class ExitCode(enum.IntEnum):
@@ -124,6 +153,31 @@ class RunReport:
         """The capture cannot be used (unreadable, or without the sessions asked for): exit 3."""
         self.unreachable = self.capture_unusable = True
         self.problems.append(problem)
+
+    def not_judged_clauses(self) -> list[str]:
+        """The MUST clauses this run left unjudged: cited by a ``not-judged`` case and by no case that
+        reached a verdict."""
+        judged = {c for r in self.results if r.outcome in JUDGED for c in r.clauses}
+        return sorted(
+            {
+                c
+                for r in self.results
+                if r.outcome == "not-judged"
+                for c in r.clauses
+                if c not in judged and c in SPEC.clauses and SPEC.clauses[c].level == "MUST"
+            }
+        )
+
+    def not_judged_hints(self) -> dict[str, str]:
+        """Each MUST clause left unjudged (:meth:`not_judged_clauses`) with what would judge it."""
+        clauses = set(self.not_judged_clauses())
+        hints: dict[str, str] = {}
+        for result in self.results:
+            if result.outcome == "not-judged":
+                for clause in result.clauses:
+                    if clause in clauses:
+                        hints.setdefault(clause, judging_hint(result.reason))
+        return dict(sorted(hints.items()))
 
     def counts(self) -> dict[str, int]:
         counter: Counter[str] = Counter(r.outcome for r in self.results)

@@ -45,10 +45,11 @@ from datetime import UTC, datetime
 from manip.conformance.judge.checks import check_transcript
 from manip.conformance.suite.busy import open_retrying_busy
 from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
-from manip.conformance.suite.context import CaseContext, Environment, RunOptions
+from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.invariants import attribution_problem
 from manip.conformance.suite.results import CaseResult, LivenessCheck, Outcome, RunReport
 from manip.conformance.suite.selection import PatternSet
+from manip.conformance.suite.world import CaseNotJudged, ConditionUnsupported, World, WorldError
 from manip.links import ChaosConnection, open_connection
 from manip.links.api import LinkWrapper
 from manip.spec.constants import ServerOp
@@ -113,9 +114,10 @@ class RunConfig:
     liveness_check: Callable[[RunOptions], Awaitable[tuple[bool, str]]] | None = None
     """Replaces the Chaos liveness probe: (alive, detail) for targets that are not manip servers
     (the Cougar target, :mod:`manip.conformance.cougar.target`)."""
-    environment: Environment | None = None
-    """The embedded server's conditions of the arm's world, for the cases that arrange one
-    (:class:`~manip.conformance.suite.embedded.ServerEnvironment`); None for other targets."""
+    world: World | None = None
+    """The target's world, for the cases that arrange a condition of it
+    (:mod:`manip.conformance.suite.world`): the embedded server's, or ``--world``'s; None without one
+    (those cases end not-judged)."""
     wrap_link: LinkWrapper | None = None
     """Given every link the run's connections make (``RecorderTap(recorder, "client").wrap`` records
     the run: ``manip-conform run --record``)."""
@@ -323,7 +325,7 @@ class Runner:
             options=options,
             connector=self.connect,
             clauses=item.clauses,
-            environment=self.config.environment,
+            world=self.config.world,
             reproduce=result.reproduce,
         )
         failure: CaseFailure | None = None
@@ -332,6 +334,7 @@ class Runner:
         scope: asyncio.Timeout | None = None
         try:
             async with asyncio.timeout(result.deadline) as scope:
+                ctx.deadline_scope = scope
                 await item.function(ctx)
                 if ctx.auto_check:
                     for probe in ctx.probes:
@@ -341,6 +344,15 @@ class Runner:
         except CaseSkipped as exc:
             result.outcome = "skip"
             result.reason = exc.reason
+        except CaseNotJudged as exc:
+            result.outcome = "not-judged"
+            result.reason = exc.reason
+        except ConditionUnsupported as exc:
+            result.outcome = "not-judged"
+            result.reason = f"{exc}; a world that can would judge it"
+        except WorldError as exc:
+            result.outcome = "error"
+            result.reason = f"the world failed: {exc}"
         except TimeoutError as exc:
             if scope is None or not scope.expired():
                 result.outcome = "error"

@@ -14,7 +14,7 @@ from manip.codecs.messages import decode_reply
 from manip.codecs.pdp11float import f_to_words, words_to_f
 from manip.conformance.cases._support import power_on, read_floats, require_response
 from manip.conformance.judge.checks import WirePacket
-from manip.conformance.puma.judge import JudgingCougar, NoJudgeError, Script, current_judge
+from manip.conformance.puma.judge import CougarScript, JudgingCougar, NoJudgeError, current_judge
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.spec import SPEC, RequestName
 from manip.spec.constants import AsyncCondition, ServerOp
@@ -51,7 +51,7 @@ async def session(
     return probe
 
 
-def begin(ctx: CaseContext, script: Script | None = None) -> tuple[JudgingCougar, int]:
+def begin(ctx: CaseContext, script: CougarScript | None = None) -> tuple[JudgingCougar, int]:
     """The judge with this case's script, and the mark its record starts from."""
     judge = judge_of(ctx)
     return judge, judge.begin(script)

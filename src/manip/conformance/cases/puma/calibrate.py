@@ -13,7 +13,7 @@ from manip.arm.kinematics import PUMA600, forward
 from manip.codecs.messages import decode_reply
 from manip.conformance.cases._support import require_response
 from manip.conformance.cases.puma._support import begin, session
-from manip.conformance.puma.judge import SENSED, Heard, Script
+from manip.conformance.puma.judge import SENSED, CougarScript, Heard
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec import SPEC
@@ -62,7 +62,7 @@ async def calibrate_wrist(ctx: CaseContext) -> None:
         reading = np.asarray(offsets) + load @ gravity_in_hand(pose)
         return [round(float(v)) for v in reading]
 
-    judge, mark = begin(ctx, Script(gauges=gauges))
+    judge, mark = begin(ctx, CougarScript(gauges=gauges))
     answer = await probe.call("calibrate-wrist")
     require_response(ctx, answer, "calibrate-wrist answered")
     await judge.wait_ticks(3, 5.0)

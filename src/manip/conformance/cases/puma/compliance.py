@@ -22,10 +22,11 @@ from manip.conformance.cases.puma._support import (
     session,
     wait_async,
 )
-from manip.conformance.puma.judge import Heard, JudgingCougar, Said, Script
+from manip.conformance.puma.judge import CougarScript, Heard, JudgingCougar, Said
 from manip.conformance.puma.target import OBSTACLE_FROM, OBSTACLE_JOINT
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
+from manip.conformance.suite.world import Obstacle
 from manip.links.virtual_clock import is_virtual
 from manip.spec.constants import CougarCommand
 
@@ -85,7 +86,7 @@ async def npr_every_cycle(ctx: CaseContext) -> None:
     New Theta Dot received on earlier cycles."""
     probe = await session(ctx)
     here = await angles(ctx, probe)
-    judge, mark = begin(ctx, Script(ntd=(0.0, 0.0, 0.0, 0.0, 0.0, NTD_RATE)))
+    judge, mark = begin(ctx, CougarScript(ntd=(0.0, 0.0, 0.0, 0.0, 0.0, NTD_RATE)))
     said_before = len(judge.said)
     goal = [*here[:5], here[5] + MOVE_DEG]
     segment = await move(ctx, probe, "compliant-move", joints=goal, scheme=0)
@@ -130,13 +131,13 @@ async def segment_end(ctx: CaseContext) -> None:
     the next segment starts from there and reaches its goal."""
     probe = await session(ctx)
     here = await angles(ctx, probe)
-    judge, mark = begin(ctx, Script(ntd=(0.0, 0.0, 0.0, 0.0, 0.0, NTD_RATE)))
+    judge, mark = begin(ctx, CougarScript(ntd=(0.0, 0.0, 0.0, 0.0, 0.0, NTD_RATE)))
     goal = [*here[:5], here[5] + MOVE_DEG]
     segment = await move(ctx, probe, "compliant-move", joints=goal, scheme=0)
     done = await wait_async(ctx, probe, is_completed(segment), SEGMENT_WITHIN)
     if done is None:
         ctx.skip(f"the compliant segment {segment} was not reported complete within {SEGMENT_WITHIN:g} s")
-    judge.begin(Script(ntd=(0.0,) * 6))
+    judge.begin(CougarScript(ntd=(0.0,) * 6))
     await judge.wait_ticks(3, SEGMENT_WITHIN)
     rest = await angles(ctx, probe)
     npr = _npr(judge, mark)
@@ -170,22 +171,28 @@ async def segment_end(ctx: CaseContext) -> None:
 )
 async def no_collision_test(ctx: CaseContext) -> None:
     """A compliant move pushing into an obstacle is not stopped by the collision test (a plain move
-    into it is: the case's precondition, met by the embedded Puma's obstacle)."""
+    into it is: the case's precondition).  The target's world puts the obstacle in joint 1's way (the
+    embedded Puma's world always, another Puma's with ``--world``); without a world the case is not
+    judged."""
+    async with ctx.arranged(Obstacle(OBSTACLE_JOINT, upper=OBSTACLE_FROM)):
+        await _no_collision_test(ctx)
+
+
+async def _no_collision_test(ctx: CaseContext) -> None:
     probe = await session(ctx)
     here = await angles(ctx, probe)
     j = OBSTACLE_JOINT - 1
     if here[j] >= OBSTACLE_FROM:
         ctx.skip(f"joint {OBSTACLE_JOINT} stands at {here[j]:g}, past where the obstacle would be")
-    judge, _ = begin(ctx, Script(ntd=(0.0,) * 6))  # compliance changes nothing: only the test differs
+    judge, _ = begin(ctx, CougarScript(ntd=(0.0,) * 6))  # compliance changes nothing: only the test differs
     into = list(here)
     into[j] = OBSTACLE_FROM + 10.0
     plain = await move(ctx, probe, "set-joint-angles", joints=into)
     hit = await wait_async(ctx, probe, lambda p: is_async_error(p) or is_completed(plain)(p), SEGMENT_WITHIN)
     if hit is None or not is_async_error(hit):
-        ctx.skip(
-            f"a plain move of joint {OBSTACLE_JOINT} past {OBSTACLE_FROM:g} deg did not collide: the case "
-            f"needs an obstacle there (the embedded Puma has one; --server-fault "
-            f"obstacle={OBSTACLE_JOINT}::{OBSTACLE_FROM:g})"
+        ctx.not_judged(
+            f"a plain move of joint {OBSTACLE_JOINT} past {OBSTACLE_FROM:g} deg did not collide although the "
+            "world arranged an obstacle there: no collision test to judge"
         )
     require_response(ctx, await probe.call("reset-abort"), "reset abort after the collision")
     start = await move(ctx, probe, "set-joint-angles", joints=list(here))

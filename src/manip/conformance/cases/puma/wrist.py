@@ -21,7 +21,7 @@ from manip.conformance.cases.puma._support import (
     session,
     wait_async,
 )
-from manip.conformance.puma.judge import SENSED, Heard, Script
+from manip.conformance.puma.judge import SENSED, CougarScript, Heard
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec import SPEC, RequestName
@@ -172,7 +172,7 @@ async def waits(ctx: CaseContext) -> None:
     it, and a silent Cougar gets a non-fatal error in time."""
     probe = await session(ctx, power=False, notify=None)
     forces = tuple(f_float(round(ctx.random.uniform(-90.0, 90.0), 3)) for _ in range(6))
-    judge, _ = begin(ctx, Script(forces=forces, forces_delay=FORCES_DELAY))
+    judge, _ = begin(ctx, CougarScript(forces=forces, forces_delay=FORCES_DELAY))
     first = await probe.send("read-forces")
     second = await probe.send("joint-angles")
     answer = await probe.reply(first, timeout=GIVE_UP_WITHIN + ctx.options.reply_timeout)
@@ -197,7 +197,7 @@ async def waits(ctx: CaseContext) -> None:
         seen=following,
     )
     # Cougar stays silent: the request fails in time and what follows is served.
-    judge.begin(Script(forces_omitted=True))
+    judge.begin(CougarScript(forces_omitted=True))
     number = await probe.send("read-forces")
     silent = await probe.reply(number, timeout=GIVE_UP_WITHIN + ctx.options.reply_timeout)
     ctx.expect(
@@ -228,7 +228,7 @@ async def priority(ctx: CaseContext) -> None:
     commands sent during a compliant move come after them."""
     probe = await session(ctx)
     here = await angles(ctx, probe)
-    judge, mark = begin(ctx, Script(ntd=(0.0,) * 6))
+    judge, mark = begin(ctx, CougarScript(ntd=(0.0,) * 6))
     goal = [*here[:5], here[5] + PRIORITY_MOVE_DEG]
     segment = await move(ctx, probe, "compliant-move", joints=goal, scheme=0)
     await judge.wait_for(lambda: bool(judge.commands(mark, CougarCommand.NPR)), SEGMENT_WITHIN)

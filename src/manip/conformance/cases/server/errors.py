@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+from typing import Final
+
 from manip.conformance.cases._support import UNASSIGNED_OPCODES, error_of
 from manip.conformance.judge.checks import check_error_packet
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
+from manip.conformance.suite.world import CalibrationFailure
+from manip.links import ConnectionClosed
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
 
-CALIBRATION_FAILURE = "calibrate-nzi"
-"""The embedded server's condition under which calibration fails fatally (no zero index found)."""
+CALIBRATION_FAILURE: Final = CalibrationFailure((2, 3))
+"""The world's condition under which calibration fails fatally (no zero index found)."""
 
 
 async def _command_error(ctx: CaseContext, probe: Probe, clause: str | None = None) -> Answer:
@@ -119,37 +123,40 @@ async def non_fatal_is_reply(ctx: CaseContext) -> None:
 
 @case(
     "server.error.fatal-then-close",
-    clauses=["error.fatal-then-close", "error.fatal-request-number", "calibrate.nzi", "calibrate.done"],
+    clauses=[
+        "error.fatal-then-close",
+        "error.fatal-request-number",
+        "error.severity-matches-opcode",
+        "calibrate.nzi",
+        "calibrate.done",
+    ],
     hazard="motion",
     deadline=8.0,
 )
 async def fatal_then_close(ctx: CaseContext) -> None:
-    """Calibrate: done, or (a calibration failure) a fatal error quoting it, then CLS.
+    """Calibrate while the world fails it (no zero index): a fatal error quoting the packet last
+    received, of severity F, then CLS.
 
-    Against the embedded server the case arranges a calibration that finds no zero index
-    (``calibrate-nzi``), so the fatal path always runs; another target is judged on what its
-    calibration does, and the case skips when it succeeds."""
-    if ctx.environment is not None:
-        with ctx.environment.arrange(CALIBRATION_FAILURE):
-            probe = await ctx.connect()
-    else:
+    The target's world arranges the calibration failure (the embedded server's always; another target's
+    with ``--world``); without a world the case is not judged."""
+    async with ctx.arranged(CALIBRATION_FAILURE):
         probe = await ctx.connect()
-    answer = await probe.call("enable-power")
-    answer = await probe.call("calibrate", timeout=5.0)
-    if answer.is_response:
-        ctx.expect(
-            len(answer.data) == 2,
-            clause="calibrate.done",
-            expected="an empty done",
-            seen=answer,
-        )
-        ctx.skip(
-            "calibrate succeeded: the target gave no fatal error to observe (the fatal path runs against "
-            "the embedded server, manip-conform run without HOST, or a manip-server started with "
-            f"--fault {CALIBRATION_FAILURE})"
-        )
-    if answer.opcode != ServerOp.FATAL_ERROR:
-        ctx.skip(f"calibrate was refused with a non-fatal error: {answer}")
+        answer = await probe.call("enable-power")
+        answer = await probe.call("calibrate", timeout=5.0)
+        if answer.is_response:
+            ctx.expect(len(answer.data) == 2, clause="calibrate.done", expected="an empty done", seen=answer)
+            ctx.not_judged(
+                f"calibrate succeeded although the world arranged {CALIBRATION_FAILURE.describe()}: no "
+                "fatal error to judge"
+            )
+        if answer.opcode != ServerOp.FATAL_ERROR:
+            ctx.not_judged(f"calibrate was refused with a non-fatal error, not failed: {answer}")
+        await _judge_fatal(ctx, probe, answer)
+
+
+async def _judge_fatal(ctx: CaseContext, probe: Probe, answer: Answer) -> None:
+    """A fatal error: its request number, its severity, its NZI form, then CLS (a dropped link or a LOS
+    is not the CLS the clause asks for)."""
     ctx.check(check_error_packet(answer.first))
     ctx.expect(
         answer.number == answer.request.packet_no,
@@ -158,6 +165,12 @@ async def fatal_then_close(ctx: CaseContext) -> None:
         seen=answer,
     )
     error = error_of(answer)
+    ctx.expect(
+        error is not None and error.error.severity in ("F", "BF"),
+        clause="error.severity-matches-opcode",
+        expected="severity F (or BF) in a fatal error",
+        seen=answer,
+    )
     if error is not None and error.error.code == "NZI":
         ctx.expect(
             error.error.has_nul and len(error.error.args) == 1 and "$" in error.error.message,
@@ -172,5 +185,13 @@ async def fatal_then_close(ctx: CaseContext) -> None:
         clause="error.fatal-then-close",
         expected=f"CLS within {ctx.options.reply_timeout:g} s of the fatal error",
         actual="the connection still open",
+        data=answer.data,
+    )
+    end = probe.end_reason
+    ctx.expect(
+        isinstance(end, ConnectionClosed) and end.by_peer,
+        clause="error.fatal-then-close",
+        expected="the server to end the connection with CLS after the fatal error",
+        actual=f"the connection ended otherwise: {end}",
         data=answer.data,
     )

@@ -22,6 +22,7 @@ from manip.conformance.cases._support import (
 from manip.conformance.judge.checks import WirePacket, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
+from manip.conformance.suite.world import WristForce
 from manip.spec.constants import AsyncCondition, ServerOp
 
 PHANTOM_OZ: Final = 64.0
@@ -211,3 +212,105 @@ async def _unasked(ctx: CaseContext, probe: Probe, dvec: list[float], tol: float
         expected="no asynchronous response for a guard hit not asked for",
         seen=extra,
     )
+
+
+PUSH_OZ: Final = 48.0
+"""The force the world puts on the hand to trip the live guard (ounces, along the hand's x axis)."""
+SETTLE_S: Final = 5.0
+STEADY_OZ: Final = 1.0
+"""The wrist's reading at rest is steady once it moves less than this in a quarter second (ounces)."""
+PUSH_TOL_OZ: Final = 24.0
+"""The live guard's tolerance above what the wrist reads at rest: half the push."""
+
+
+async def _steady_x(ctx: CaseContext, probe: Probe) -> float:
+    """The force the wrist reads along the hand's x axis at rest, once it holds still (a gauge offset
+    another case set reaches the forces through Cougar's filter, over a few ticks)."""
+    last = (await read_floats(ctx, probe, "read-forces"))[0]
+    deadline = ctx.clock() + SETTLE_S
+    while ctx.clock() < deadline:
+        await probe.drain(0.25)
+        now = (await read_floats(ctx, probe, "read-forces"))[0]
+        if abs(now - last) < STEADY_OZ:
+            return now
+        last = now
+    ctx.not_judged(f"the wrist's reading along x did not hold still at rest within {SETTLE_S:g} s")
+
+
+@case(
+    "server.async.guard-trip-live",
+    clauses=["async.layout", "async.codes", "motion.abort"],
+    hazard="motion",
+    deadline=20.0,
+)
+async def guard_trip_live(ctx: CaseContext) -> None:
+    """A stop-the-move guard armed across the hand's x axis does not trip at rest, and trips when the
+    world pushes the hand along it: a guard-hit response (code 1, word 2 = 1, word 3 = the guard), and
+    the motion aborted (AWA until reset).
+
+    The target's world puts the force on the hand (``wrist-force``: the embedded server's world always,
+    another target's with ``--world``); without a world the case is not judged.  A target that serves no
+    wrist skips it."""
+    probe = await ctx.connect()
+    version = await probe.call("wrist-version")
+    if not version.is_response:
+        ctx.skip(f"the target serves no wrist ({version}): the case needs a Cougar wrist")
+    await power_on(ctx, probe)
+    for other in range(16):  # guards other cases left armed would trip too
+        await probe.call("clear-guard", index=other)
+    # Offsets, frame vector and weight other cases left (property cases send any) can push the
+    # gauges' 16-bit arithmetic past where a push shows: start from none.
+    require_response(ctx, await probe.call("set-gauge-offsets", offsets=[0] * 8), "zero gauge offsets")
+    require_response(ctx, await probe.call("set-frame-vector", offset=[0.0] * 3), "no frame vector")
+    require_response(ctx, await probe.call("set-weight", weight=0.0, cg=[0.0] * 3), "no weight")
+    start = await read_floats(ctx, probe, "joint-angles")
+    rest = await _steady_x(ctx, probe)
+    tol = rest + PUSH_TOL_OZ  # what the wrist reads at rest (offsets other cases left) and a margin
+    index = ctx.random.randrange(16)
+    require_response(ctx, await probe.call("request-notifications", mask=GUARD_BIT), "guard notifications")
+    dvec = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    require_response(
+        ctx,
+        await probe.call("set-guard", type_index=STOP_BIT | index, dvec=dvec, tol=tol),
+        "a stop-the-move guard",
+    )
+    early = await _guard_hit(ctx, probe, QUIET)
+    ctx.expect(
+        early is None,
+        clause="async.codes",
+        expected=f"no guard hit while nothing pushes the hand (guard {index}, {PUSH_TOL_OZ:g} oz above rest)",
+        seen=early,
+    )
+    for goal in (_swing(start), list(start), _swing(start), list(start)):  # moving when the push comes
+        require_response(ctx, await probe.call("set-joint-angles", joints=goal), "a move of joint 1")
+    try:
+        async with ctx.arranged(WristForce((PUSH_OZ, 0.0, 0.0))):
+            hit = await _guard_hit(ctx, probe, HIT_WAIT)
+            if hit is None:
+                ctx.fail(
+                    f"no guard-hit response within {HIT_WAIT:g} s of a {PUSH_OZ:g} oz push across guard "
+                    f"{index}",
+                    clause="async.codes",
+                    expected="an asynchronous response (203) with condition code 1 (guard hit)",
+                    actual="nothing",
+                )
+            ctx.expect(
+                (word(hit.data, 4), word(hit.data, 6)) == (1, index),
+                clause="async.layout",
+                expected=f"word 2 = 1 (trajectory stopped), word 3 = {index} (the guard)",
+                seen=hit,
+            )
+            refused = await probe.call("set-joint-angles", joints=list(start))
+            expect_refusal(
+                ctx,
+                refused,
+                clause="motion.abort",
+                severities=("E",),
+                codes=("AWA",),
+                what="a move after the pushed guard stopped the motion",
+            )
+    finally:
+        await probe.call("clear-guard", index=index)
+        await power_on(ctx, probe)
+        await probe.call("set-joint-angles", joints=list(start))
+        await settle(ctx, probe, start, within=5.0)

@@ -81,7 +81,10 @@ async def _open(ctx: CaseContext) -> RawPeer:
     """A raw peer on the target's link, recording into the case's transcript."""
     address = parse_address(ctx.options.address)
     if address.framing not in ("tcp", "chudp"):
-        ctx.skip(f"raw Chaos packets are sent on tcp://, unix:// and chudp:// links, not {address.scheme}://")
+        ctx.not_judged(
+            f"the case sends raw Chaos packets, on tcp://, unix:// and chudp:// links, not "
+            f"{address.scheme}://: the same server reached over one of those would be judged"
+        )
     ctx.auto_check = False  # the transcript holds Chaos control packets, not a manip session
 
     def record(direction: Direction, p: Packet, raw: bytes) -> None:
@@ -365,7 +368,7 @@ async def broken(ctx: CaseContext) -> None:
     answers nothing, not even the target's SNS probes."""
     after = ctx.options.broken_after
     if after is None:
-        ctx.skip("it waits out the target's broken-connection timer: run with --broken-after SECONDS")
+        ctx.not_judged("it waits out the target's broken-connection timer: run with --broken-after SECONDS")
     async with await _open(ctx) as peer:
         index = _index(ctx)
         conn = await _handshake(ctx, peer, index, ctx.random.randrange(0x10000))

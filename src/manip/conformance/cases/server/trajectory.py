@@ -11,17 +11,18 @@ from itertools import pairwise
 from typing import Final, NamedTuple
 
 from manip.conformance.cases._support import (
-    connect_arranged,
     describe_target,
     expect_response,
+    last_processed,
     power_on,
     read_floats,
     require_response,
     settle,
 )
-from manip.conformance.judge.checks import word
+from manip.conformance.judge.checks import WirePacket, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
+from manip.conformance.suite.world import Obstacle, PanicButton
 from manip.spec import RequestName
 from manip.spec.constants import AsyncCondition, ServerOp
 
@@ -385,50 +386,164 @@ async def collision(ctx: CaseContext) -> None:
     """A joint blocked on its way (an obstacle) stops the arm where it is, with an asynchronous error, and
     motion is refused with AWA until reset.
 
-    Against the embedded server an obstacle 5 degrees along joint 1's way is arranged; another target
-    has none, so the case skips there (a manip-server gets one with --fault obstacle=1:LOWER:UPPER)."""
-    if ctx.environment is None:
-        ctx.skip(
-            "no obstacle to collide with: it runs against the embedded server (manip-conform run without "
-            "HOST), which arranges one"
-        )
+    The target's world puts an obstacle 5 degrees along joint 1's way (the embedded server's world
+    always, another target's with ``--world``); without a world the case is not judged."""
     probe = await ctx.connect()
     await power_on(ctx, probe)
     start = await read_floats(ctx, probe, "joint-angles")
     await probe.close()
     sign = 1.0 if start[0] <= 0 else -1.0
     wall = start[0] + sign * OBSTACLE_DEG
-    bounds = f"{wall:g}:" if sign < 0 else f":{wall:g}"
-    probe = await connect_arranged(ctx, f"obstacle=1:{bounds}")
-    await power_on(ctx, probe)
-    goal = list(start)
-    goal[0] += sign * 20.0
-    require_response(ctx, await probe.call("set-joint-angles", joints=goal), "a move of joint 1")
-    await _sample(ctx, probe, "joint-angles", 5.0)
-    errors = [p for p in probe.packets if p.direction == "s2c" and p.opcode == ServerOp.ASYNCHRONOUS_ERROR]
-    ctx.expect(
-        bool(errors),
-        clause="motion.collision",
-        expected=f"an asynchronous error (204) when joint 1 meets the obstacle at {wall:.2f} deg",
-        actual="none",
-    )
-    here = await read_floats(ctx, probe, "joint-angles")
-    ctx.expect(
-        sign * (here[0] - wall) <= 1.0,
-        clause="motion.collision",
-        expected=f"the arm stopped where it was, at the obstacle ({wall:.2f} deg)",
-        actual=f"joint 1 at {here[0]:.3f} deg",
-    )
-    refused = await probe.call("set-joint-angles", joints=list(start))
-    ctx.expect(
-        refused.opcode == ServerOp.NON_FATAL_ERROR,
-        clause="motion.abort",
-        expected="motion refused (AWA) after the collision",
-        seen=refused,
-    )
+    obstacle = Obstacle(1, lower=wall) if sign < 0 else Obstacle(1, upper=wall)
+    async with ctx.arranged(obstacle):
+        probe = await ctx.connect()
+        await power_on(ctx, probe)
+        goal = list(start)
+        goal[0] += sign * 20.0
+        require_response(ctx, await probe.call("set-joint-angles", joints=goal), "a move of joint 1")
+        await _sample(ctx, probe, "joint-angles", 5.0)
+        errors = [
+            p for p in probe.packets if p.direction == "s2c" and p.opcode == ServerOp.ASYNCHRONOUS_ERROR
+        ]
+        ctx.expect(
+            bool(errors),
+            clause="motion.collision",
+            expected=f"an asynchronous error (204) when joint 1 meets the obstacle at {wall:.2f} deg",
+            actual="none",
+        )
+        processed = last_processed(probe.packets, errors[0])
+        ctx.expect(
+            processed is not None and word(errors[0].data) == processed,
+            clause="async-error.request-number",
+            expected=f"the number of the last request processed, #{processed} (the last answered before it)",
+            seen=errors[0],
+        )
+        here = await read_floats(ctx, probe, "joint-angles")
+        ctx.expect(
+            sign * (here[0] - wall) <= 1.0,
+            clause="motion.collision",
+            expected=f"the arm stopped where it was, at the obstacle ({wall:.2f} deg)",
+            actual=f"joint 1 at {here[0]:.3f} deg",
+        )
+        refused = await probe.call("set-joint-angles", joints=list(start))
+        ctx.expect(
+            refused.opcode == ServerOp.NON_FATAL_ERROR,
+            clause="motion.abort",
+            expected="motion refused (AWA) after the collision",
+            seen=refused,
+        )
     await probe.call("enable-power")
     await probe.call("set-joint-angles", joints=list(start))
     await settle(ctx, probe, start, within=5.0)
+
+
+ABORT_SWING_DEG: Final = 30.0
+"""Each queued move of the abort case turns joint 1 this far: long enough to be moving when the world
+presses the panic button."""
+ABORT_SEGMENTS: Final = 3
+ABORT_WATCH_S: Final = 1.5
+"""Seconds the abort case watches, after motion is allowed again, for a dropped segment that runs."""
+
+
+async def _watch_after(ctx: CaseContext, probe: Probe, seconds: float) -> list[WirePacket]:
+    """Every packet within ``seconds`` (joint angles polled meanwhile, so a moving arm shows)."""
+    since = len(probe.packets)
+    deadline = ctx.clock() + seconds
+    while ctx.clock() < deadline:
+        await read_floats(ctx, probe, "joint-angles")
+        await probe.drain(0.1)
+    return probe.packets[since:]
+
+
+@case(
+    "server.motion.abort-drops-queue",
+    clauses=["motion.abort", "motion.reset", "async-error.request-number"],
+    hazard="power",
+    deadline=20.0,
+)
+async def abort_drops_queue(ctx: CaseContext) -> None:
+    """The panic button pressed while segments are queued: an asynchronous error, and the segment in
+    execution and the queued ones never run nor complete, not even once motion is allowed again
+    (enable high power).
+
+    The target's world presses the panic button (the embedded server's world always, another target's
+    with ``--world``); without a world the case is not judged."""
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    answer = await probe.call("request-notifications", mask=SEGMENT_BIT)
+    if not answer.is_response:
+        ctx.skip(f"the case watches segment-completed reports, and the target does not serve them: {answer}")
+    start = await read_floats(ctx, probe, "joint-angles")
+    sign = 1.0 if start[0] <= 0 else -1.0
+    segments = []
+    for n in range(ABORT_SEGMENTS):
+        goal = list(start)
+        goal[0] += sign * ABORT_SWING_DEG * (1 if n % 2 == 0 else 0)
+        move = await probe.call("set-joint-angles", joints=goal)
+        require_response(ctx, move, "a queued move of joint 1")
+        segments.append(word(move.data, 2) or 0)
+    async with ctx.arranged(PanicButton()):
+        aborted = await _next_of(ctx, probe, ServerOp.ASYNCHRONOUS_ERROR, 3.0)
+        if aborted is None:
+            ctx.fail(
+                "no asynchronous error within 3 s of the panic button",
+                clause="motion.abort",
+                expected="an asynchronous error (204) when the panic button aborts the motion",
+                actual="none",
+            )
+        processed = last_processed(probe.packets, aborted)
+        ctx.expect(
+            processed is not None and word(aborted.data) == processed,
+            clause="async-error.request-number",
+            expected=f"the number of the last request processed, #{processed} (the last answered before it)",
+            seen=aborted,
+        )
+    done_before = _completed(probe.packets)
+    if set(segments) <= set(done_before):
+        ctx.not_judged("every queued segment had completed before the panic button aborted the motion")
+    await power_on(ctx, probe)
+    before = await read_floats(ctx, probe, "joint-angles")
+    after_packets = await _watch_after(ctx, probe, ABORT_WATCH_S)
+    ran = sorted(set(_completed(after_packets)) & (set(segments) - set(done_before)))
+    after = await read_floats(ctx, probe, "joint-angles")
+    ctx.expect(
+        not ran and max(abs(a - b) for a, b in zip(before, after, strict=True)) < 1e-3,
+        clause="motion.abort",
+        expected=f"segments {sorted(set(segments) - set(done_before))}, dropped by the abort, never run nor "
+        "complete once motion is allowed again",
+        actual=f"completed afterwards: {ran or 'none'}; joint angles {before} then {after}",
+    )
+    refused = await probe.call("set-joint-angles", joints=list(start))
+    ctx.expect(
+        refused.is_response,
+        clause="motion.reset",
+        expected="motion accepted again after enable high power cleared the abort",
+        seen=refused,
+    )
+    await settle(ctx, probe, start, within=5.0)
+
+
+async def _next_of(ctx: CaseContext, probe: Probe, opcode: int, within: float) -> WirePacket | None:
+    """The first server packet of ``opcode`` recorded on ``probe`` (waiting up to ``within`` s)."""
+    deadline = ctx.clock() + within
+    while True:
+        for packet in probe.packets:
+            if packet.direction == "s2c" and packet.opcode == opcode:
+                return packet
+        left = deadline - ctx.clock()
+        if left <= 0 or await probe.next_packet(left) is None:
+            return None
+
+
+def _completed(packets: Sequence[WirePacket]) -> list[int]:
+    """The segments reported completed (0203 code 2) among ``packets``."""
+    return [
+        word(p.data, 6) or 0
+        for p in packets
+        if p.direction == "s2c"
+        and p.opcode == ServerOp.ASYNCHRONOUS_RESPONSE
+        and word(p.data, 2) == AsyncCondition.SEGMENT_COMPLETED
+    ]
 
 
 @case(

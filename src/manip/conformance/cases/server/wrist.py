@@ -1,18 +1,19 @@
 """A Cougar that does not answer (Part II §6.3; erratum wrist-timeout): the main process gives up and
 answers a non-fatal error, and goes on serving.
 
-Against the embedded server the case silences its simulated Cougar for one connection (the environment
-switch ``wrist-silent``); another target's Cougar answers, so the case skips there (a manip-server with
-``--cougar sim --fault wrist-silent`` gets one that does not)."""
+The target's world silences the Cougar (condition ``silent-wrist``: the embedded server's world always,
+another target's with ``--world``); without a world the case is not judged.  A target that serves no
+wrist at all skips it."""
 
 from __future__ import annotations
 
 from typing import Final
 
-from manip.conformance.cases._support import connect_arranged
+from manip.conformance.cases._support import error_of
 from manip.conformance.judge.checks import WirePacket, word
 from manip.conformance.suite.case import case
-from manip.conformance.suite.context import CaseContext
+from manip.conformance.suite.context import CaseContext, Probe
+from manip.conformance.suite.world import SilentWrist
 from manip.spec.constants import ServerOp
 
 GIVE_UP_S: Final = 5.0
@@ -39,12 +40,13 @@ async def no_answer(ctx: CaseContext) -> None:
             f"the target serves no wrist ({version}): run against a server with a Cougar wrist (the "
             "embedded server, manip-conform run without HOST, or manip-server --cougar sim)"
         )
-    if ctx.environment is None:
-        ctx.skip(
-            "the target's Cougar answers: the case runs against the embedded server (manip-conform run "
-            "without HOST), which silences its Cougar, or a manip-server --cougar sim --fault wrist-silent"
-        )
-    probe = await connect_arranged(ctx, "wrist-silent")
+    async with ctx.arranged(SilentWrist()):
+        probe = await ctx.connect()
+        await _judge_silence(ctx, probe)
+
+
+async def _judge_silence(ctx: CaseContext, probe: Probe) -> None:
+    """Read forces, then joint angles, while Cougar is silent: a non-fatal E error, then the answer."""
     forces = await probe.send("read-forces")
     angles = await probe.send("joint-angles")
     answers: list[WirePacket] = []
@@ -63,6 +65,13 @@ async def no_answer(ctx: CaseContext) -> None:
         expected=f"read forces (#{forces}) answered with a non-fatal error (202) within {GIVE_UP_S:g} s "
         "while Cougar is silent",
         actual=seen,
+    )
+    error = error_of(answers[0])
+    ctx.expect(
+        error is not None and error.error.severity in ("E", "BE"),
+        clause="wrist.no-answer",
+        expected="a non-fatal error of severity E (the connection goes on)",
+        seen=answers[0],
     )
     ctx.expect(
         len(answers) == 2 and numbers[1] == angles and answers[1].opcode == ServerOp.RESPONSE,

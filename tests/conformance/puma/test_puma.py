@@ -1,0 +1,195 @@
+"""The Puma target of manip-conform (``run --puma``): the judging Cougar, the puma cases against the
+reference server (clean: all pass; each wrist-side fault switch: caught by its named case), the same over
+TCP in real time, coverage of the puma clauses, and the CLI."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from manip.codecs.cougar import OutOfSync, encode
+from manip.conformance.cli import main as conform_main
+from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
+from manip.conformance.puma.judge import CougarScript, FramedPort, JudgingCougar, NoJudgeError, current_judge
+from manip.conformance.puma.target import PumaTarget, puma_cases, run_puma_suite
+from manip.conformance.suite.case import all_cases
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.results import ExitCode, RunReport
+from manip.links import virtual_clock
+from manip.reference_server.faults import FAULTS, WRIST_SIDE, Fault
+from manip.spec import SPEC
+
+SEED = 5
+#: The case written to catch each wrist-side fault (others may catch it too).
+CATCHERS: dict[Fault, str] = {
+    Fault.WRIST_FLOAT_WORDS_SWAPPED: "puma.wrist.command-layout",
+    Fault.WRIST_USER_FIRST: "puma.wrist.priority",
+    Fault.WRIST_NO_WAIT: "puma.wrist.waits",
+    Fault.READ_FORCES_NO_ANGLES: "puma.wrist.read-forces-angles",
+    Fault.NPR_SKIPPED: "puma.compliance.npr-every-cycle",
+    Fault.COMPLIANT_COLLISION_TEST: "puma.compliance.no-collision-test",
+    Fault.COMPLIANT_SNAP_BACK: "puma.compliance.segment-end",
+    Fault.GUARD_IGNORED: "puma.guard.stop",
+    Fault.GUARD_UNREPORTED: "puma.guard.report",
+    Fault.CALIBRATE_ONE_POSE: "puma.calibrate-wrist",
+}
+
+
+def run(target: PumaTarget, select: tuple[str, ...] = ()) -> RunReport:
+    return virtual_clock.run(
+        run_puma_suite(target, seed=SEED, select=select, options=RunOptions(reply_timeout=1.0)),
+        virtual=target.virtual and target.embedded,
+    )
+
+
+def outcomes(report: RunReport) -> dict[str, str]:
+    return {r.id: r.outcome for r in report.results}
+
+
+# ------------------------------------------------------------------------------------------ the judge
+def test_judge_records_commands_by_tick_and_scripts_answers() -> None:
+    judge = JudgingCougar(seed=1)
+    port = FramedPort(judge)
+    judge.begin(CougarScript(forces=(1.0, 2.0, 3.0, 4.0, 5.0, 6.0), forces_delay=2))
+    port.send(encode("command", "SEN", theta_sensed=(0.0, -90.0, 90.0, 0.0, 0.0, 0.0)))
+    port.send(encode("command", "RFRC"))
+    port.tick(1.0)
+    assert [h.msg.name for h in judge.heard if h.msg] == ["SEN", "RFRC"]
+    assert all(h.tick == 0 for h in judge.heard)
+    assert judge.pose == (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
+    assert port.receive() == []  # held back two ticks
+    port.tick(1.016)
+    port.tick(1.032)
+    words = port.receive()
+    assert words == encode("response", "FORCES", forces=(1.0, 2.0, 3.0, 4.0, 5.0, 6.0))
+    assert [(s.tick, s.msg.name) for s in judge.said] == [(2, "FORCES")]
+    judge.inject("GUARD-STOP", after=1, index=3)
+    port.tick(1.048)
+    assert port.receive() == []
+    port.tick(1.064)
+    assert port.receive() == encode("response", "GUARD-STOP", index=3)
+
+
+def test_judge_keeps_guards_from_its_simulator_and_reports_unreadable_words() -> None:
+    judge = JudgingCougar(seed=1)
+    port = FramedPort(judge)
+    port.send(encode("command", "GUARDS", type_index=0x8002, dvec=(0.0,) * 6, tol=-1.0))  # trips at once
+    for k in range(5):
+        port.tick(1.0 + k * 0.016)
+    assert port.receive() == []  # the simulator never saw the guard
+    port.send([0o777, 1, 2])
+    assert isinstance(judge.heard[-1].item, OutOfSync)
+
+
+def test_cases_need_a_judge() -> None:
+    with pytest.raises(NoJudgeError):
+        current_judge()
+
+
+# ------------------------------------------------------------------------------------------ the suite
+def test_clean_reference_server_passes_every_puma_case() -> None:
+    report = run(PumaTarget())
+    expected = {c.id for c in puma_cases(all_cases())}
+    assert set(outcomes(report)) == expected
+    assert len(expected) >= 10
+    bad = [(r.id, r.outcome, r.violations, r.reason) for r in report.results if r.outcome != "pass"]
+    assert not bad, bad
+    assert report.exit_code == ExitCode.CONFORMANT
+    assert report.time == "virtual"
+
+
+def test_every_wrist_side_fault_has_a_catcher() -> None:
+    assert set(CATCHERS) == set(WRIST_SIDE)
+    for fault, case_id in CATCHERS.items():
+        assert set(FAULTS[fault].clauses) & set(next(c for c in all_cases() if c.id == case_id).clauses)
+
+
+@pytest.mark.parametrize("fault", sorted(CATCHERS, key=lambda f: f.value), ids=lambda f: f.value)
+def test_wrist_side_fault_is_caught_by_its_case(fault: Fault) -> None:
+    report = run(PumaTarget(faults=(fault.value,)))
+    got = outcomes(report)
+    errors = [(r.id, r.traceback) for r in report.results if r.outcome == "error"]
+    assert not errors, errors
+    assert got[CATCHERS[fault]] == "fail", got
+    assert report.exit_code == ExitCode.NON_CONFORMANT
+
+
+@pytest.mark.slow
+def test_real_time_over_tcp_passes_and_catches_a_fault() -> None:
+    """The judge on a tcp:// port, the reference server on its own thread with --cougar pointed at it.
+
+    The clean run leaves the compliance cases out: they hold the Puma to its 16 ms servo, which a heavily
+    loaded test machine cannot keep in wall-clock time (virtual time holds them, above).  A fault that
+    halves the New Position and Rate commands is still caught in real time."""
+    clean = run(PumaTarget(virtual=False), select=("puma.wrist.*", "puma.guard.*", "puma.calibrate-wrist"))
+    assert {r.outcome for r in clean.results} == {"pass"}, [(r.id, r.violations) for r in clean.results]
+    faulty = run(
+        PumaTarget(virtual=False, faults=("guard-ignored", "npr-skipped")),
+        select=("puma.guard.*", "puma.compliance.npr-every-cycle"),
+    )
+    assert outcomes(faulty)["puma.guard.stop"] == "fail"
+    assert outcomes(faulty)["puma.compliance.npr-every-cycle"] == "fail"  # half the NPRs, even late
+
+
+def test_external_puma_that_never_links_is_unreachable() -> None:
+    result = CliRunner().invoke(
+        conform_main,
+        ["run", "--puma", "tcp://127.0.0.1:9", "--wrist-listen", "tcp://127.0.0.1:0", "--wrist-wait", "0.3"],
+    )
+    assert result.exit_code == ExitCode.UNREACHABLE, result.output
+    assert "no wrist link" in result.output
+
+
+# ------------------------------------------------------------------------------------------ coverage
+def test_default_coverage_includes_puma_with_no_gap() -> None:
+    assert "puma" in DEFAULT_PARTIES
+    rows = coverage(all_cases())
+    puma = [r for r in rows if r.party == "puma"]
+    assert puma and all(r.in_scope for r in puma)
+    assert not gaps(rows), [r.clause for r in gaps(rows)]
+    must = {cid for cid, c in SPEC.clauses.items() if c.party == "puma" and c.level == "MUST"}
+    covered = {c for case in puma_cases(all_cases()) for c in case.clauses}
+    assert must <= covered
+
+
+# ------------------------------------------------------------------------------------------ the CLI
+def test_cli_run_puma_json(tmp_path: Path) -> None:
+    out = tmp_path / "report.json"
+    result = CliRunner().invoke(conform_main, ["run", "--puma", "--seed", "3", "-q", "--json", str(out)])
+    assert result.exit_code == 0, result.output
+    report = json.loads(out.read_text())
+    assert {c["target"] for c in report["cases"]} == {"puma"}
+    assert len(report["cases"]) == len(puma_cases(all_cases()))
+
+
+def test_cli_run_puma_with_a_fault_fails_and_names_the_clause() -> None:
+    result = CliRunner().invoke(
+        conform_main, ["run", "--puma", "--seed", "3", "-q", "--server-fault", "guard-unreported"]
+    )
+    assert result.exit_code == 1, result.output
+    assert "puma.guard.report" in result.output
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--puma", "--cougar", "sim"], "not both"),
+        (["--puma", "--wrist-listen", "tcp://127.0.0.1:1"], "--puma HOST"),
+        (["--wrist-wait", "3"], "apply to --puma"),
+        (["--puma", "tcp://127.0.0.1:1", "--wrist-listen", "udp://x"], "--puma"),
+        (["--puma", "--server-fault", "no-such"], "unknown fault"),
+    ],
+)
+def test_cli_usage_errors(args: list[str], message: str) -> None:
+    result = CliRunner().invoke(conform_main, ["run", *args])
+    assert result.exit_code == 2, result.output
+    assert message in result.output
+
+
+def test_repeat_gives_stable_verdicts() -> None:
+    result = CliRunner().invoke(conform_main, ["run", "--puma", "--seed", "11", "--repeat", "3"])
+    assert result.exit_code == 0, result.output
+    assert "0 stability problem(s)" in result.output

@@ -1,0 +1,945 @@
+"""Fault switches: each one changes the observable behaviour it claims to, and nothing is left untested.
+
+Every test runs the same scenario against a clean session and against one with the fault switched on,
+and checks that the clean one conforms and the faulted one differs in the claimed way.
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+import struct
+from collections.abc import Callable
+from itertools import pairwise
+from pathlib import Path
+from typing import TypeVar
+
+import pytest
+from click.testing import CliRunner
+
+from manip import reference_server
+from manip.arm.kinematics import READY, forward
+from manip.arm.sim import Obstacle
+from manip.arm.trajectory import TICK
+from manip.codecs.errors import DecodeError
+from manip.codecs.lisp import read_alist
+from manip.codecs.messages import ErrorReply, decode_async, decode_error, decode_reply, encode_request
+from manip.codecs.pdp11float import pack_f
+from manip.conformance.cli import main as conform_main
+from manip.cougar import CougarSim
+from manip.reference_server import FAULTS, Fault, FaultSet, Output, ServerConfig, State
+from manip.reference_server import session as session_module
+from manip.reference_server.cougar_port import SimPort
+from manip.reference_server.cougar_wrist import CougarWrist
+from manip.reference_server.defects import Defects, SwitchedDefects
+from manip.reference_server.faults import WRIST_SIDE
+from manip.spec import SPEC
+from manip.spec.constants import RequestOp, ServerOp
+from tests.support.cougar_fake import WristClient
+from tests.support.session_client import GOAL, OTHER, Client
+from tests.support.session_client import reply as _reply
+
+T = TypeVar("T")
+COVERED: set[Fault] = set()
+
+
+def covers(fault: Fault) -> Callable[[Callable[[], None]], Callable[[], None]]:
+    def mark(test: Callable[[], None]) -> Callable[[], None]:
+        COVERED.add(fault)
+        return test
+
+    return mark
+
+
+def pair(
+    fault: Fault | FaultSet,
+    scenario: Callable[[Client], T],
+    *,
+    base: FaultSet | None = None,
+    powered: bool = True,
+) -> tuple[T, T]:
+    """The scenario's result on a clean session (``base`` faults only) and on one with ``fault`` added."""
+    clean = base or FaultSet()
+    if isinstance(fault, FaultSet):
+        faulty = FaultSet(clean.active | fault.active, fault.panic_delay, fault.obstacle, fault.nzi_joints)
+    else:
+        faulty = FaultSet(clean.active | {fault}, clean.panic_delay, clean.obstacle, clean.nzi_joints)
+    results = [scenario(Client(ServerConfig(powered_at_open=powered, faults=f))) for f in (clean, faulty)]
+    return results[0], results[1]
+
+
+def _packets(out: Output) -> list[tuple[int, bytes]]:
+    return [(p.opcode, p.data) for p in out.packets]
+
+
+def _raw(client: Client, op: str, data: bytes | None = None, **values: object) -> list[tuple[int, bytes]]:
+    spec_op = SPEC.request(op)
+    return _packets(client.raw(spec_op.opcode, encode_request(op, **values) if data is None else data))
+
+
+# ------------------------------------------------------------------------------- the registry
+def test_registry_describes_every_fault() -> None:
+    assert set(FAULTS) == set(Fault)
+    for info in FAULTS.values():
+        assert info.name == info.fault.value and info.description.endswith(".")
+        assert info.clauses and all(c in SPEC.clauses for c in info.clauses)
+        if info.kind == "protocol":
+            assert any(SPEC.clauses[c].level in ("MUST", "SHOULD") for c in info.clauses)
+
+
+def test_parse() -> None:
+    faults = FaultSet.parse(["panic-button=2.5", "obstacle=2::-60", "calibrate-nzi=1,6", "no-jor"])
+    assert faults.active == {Fault.PANIC_BUTTON, Fault.OBSTACLE, Fault.CALIBRATE_NZI, Fault.NO_JOR}
+    assert faults.panic_delay == 2.5 and faults.nzi_joints == (1, 6)
+    assert faults.obstacle == Obstacle(2, None, -60.0)
+    assert Fault.NO_JOR in faults and Fault.NO_NAP not in faults
+    assert FaultSet.parse(["panic-button", "calibrate-nzi"]).nzi_joints == (2, 3)
+    for bad, message in [
+        (["no-such-fault"], "unknown fault"),
+        (["no-jor=1"], "takes no argument"),
+        (["obstacle"], "needs an argument"),
+        (["obstacle=2:1"], "JOINT:LOWER:UPPER"),
+        (["obstacle=9::1"], "1..6"),
+        (["calibrate-nzi=0"], "1..6"),
+        (["panic-button=soon"], "panic-button"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            FaultSet.parse(bad)
+
+
+def test_every_fault_has_a_test() -> None:
+    # The wrist side's defects show only to the suite playing Cougar: tests/conformance/puma/test_puma.py
+    # has them.
+    assert set(Fault) - WRIST_SIDE == COVERED
+
+
+# ---------------------------------------------------------------------------- environment
+@covers(Fault.PANIC_BUTTON)
+def test_panic_button() -> None:
+    def scenario(c: Client) -> list[str]:
+        c.one("set-joint-angles", joints=GOAL)
+        return [decode_error(ServerOp.ASYNCHRONOUS_ERROR, d).error.code for _, d in _async(c, 3.0)]
+
+    assert pair(FaultSet.parse(["panic-button=0.5"]), scenario) == ([], ["PAN"])
+
+
+@covers(Fault.OBSTACLE)
+def test_obstacle() -> None:
+    def scenario(c: Client) -> list[int]:
+        c.one("set-joint-angles", joints=GOAL)
+        return [op for op, _ in _async(c, 3.0)]
+
+    clean, faulty = pair(FaultSet.parse(["obstacle=2::-85"]), scenario)
+    assert clean == [] and faulty == [ServerOp.ASYNCHRONOUS_WARNING, ServerOp.ASYNCHRONOUS_ERROR]
+
+
+@covers(Fault.CALIBRATE_NZI)
+def test_calibrate_nzi() -> None:
+    def scenario(c: Client) -> tuple[list[int], bool]:
+        out = c.raw(RequestOp.CALIBRATE, b"")
+        return [p.opcode for p in out.packets], out.close
+
+    assert pair(FaultSet.parse(["calibrate-nzi"]), scenario) == (
+        ([ServerOp.RESPONSE], False),
+        ([ServerOp.FATAL_ERROR], True),
+    )
+
+
+def _async(c: Client, seconds: float) -> list[tuple[int, bytes]]:
+    out: list[tuple[int, bytes]] = []
+    end = c.now + seconds
+    while c.now < end:
+        c.now += 0.016
+        out += _packets(c.session.tick(c.now))
+    return out
+
+
+# ---------------------------------------------------------------------------- request numbers
+@covers(Fault.WRONG_REQUEST_NUMBER)
+def test_wrong_request_number() -> None:
+    def scenario(c: Client) -> int:
+        (packet,) = _raw(c, "here")
+        return decode_reply(packet[1]).request_number - c.packet_no
+
+    assert pair(Fault.WRONG_REQUEST_NUMBER, scenario) == (0, 1)
+
+
+@covers(Fault.ECHO_ACK_NUMBER)
+def test_echo_ack_number() -> None:
+    def scenario(c: Client) -> tuple[int, int]:
+        (packet,) = _packets(c.raw(RequestOp.HERE, b"", ack_no=0o777))
+        return decode_reply(packet[1]).request_number, c.packet_no
+
+    (clean, sent), (faulty, _) = pair(Fault.ECHO_ACK_NUMBER, scenario)
+    assert clean == sent and faulty == 0o777
+
+
+@covers(Fault.NO_INITIAL_RESPONSE)
+def test_no_initial_response() -> None:
+    assert pair(Fault.NO_INITIAL_RESPONSE, lambda c: len(c.initial.packets)) == (1, 0)
+
+
+@covers(Fault.INITIAL_RESPONSE_NUMBER)
+def test_initial_response_number() -> None:
+    def scenario(c: Client) -> int:
+        return decode_reply(c.initial.packets[0].data).request_number - c.packet_no
+
+    assert pair(Fault.INITIAL_RESPONSE_NUMBER, scenario) == (0, 1)
+
+
+# ------------------------------------------------------------------------------ describe self
+def _describe(c: Client) -> list[bytes]:
+    return [d for _, d in _raw(c, "describe-self")]
+
+
+@covers(Fault.NO_DESCRIBE_TERMINATOR)
+def test_no_describe_terminator() -> None:
+    def scenario(c: Client) -> tuple[bool, int]:
+        packets = _describe(c)
+        return decode_reply(packets[-1]).is_empty, len(packets)
+
+    (clean_ends, n), (faulty_ends, m) = pair(Fault.NO_DESCRIBE_TERMINATOR, scenario)
+    assert clean_ends and not faulty_ends and m == n - 1
+
+
+@covers(Fault.MULTI_WRONG_NUMBER)
+def test_multi_wrong_number() -> None:
+    def scenario(c: Client) -> set[int]:
+        return {decode_reply(d).request_number - c.packet_no for d in _describe(c)}
+
+    clean, faulty = pair(Fault.MULTI_WRONG_NUMBER, scenario)
+    assert clean == {0} and faulty == {0, 1}
+
+
+@covers(Fault.NO_PROTOCOL_VERSION)
+def test_no_protocol_version() -> None:
+    def scenario(c: Client) -> bool:
+        text = "".join(str(decode_reply(d, "describe-self").values.get("text", "")) for d in _describe(c))
+        return "protocol-version" in read_alist(text)
+
+    assert pair(Fault.NO_PROTOCOL_VERSION, scenario) == (True, False)
+
+
+def _alist(c: Client) -> dict[str, object]:
+    text = "".join(str(decode_reply(d, "describe-self").values.get("text", "")) for d in _describe(c))
+    return dict(read_alist(text))
+
+
+def _refusal_code(c: Client, opcode: int, data: bytes) -> str | None:
+    """The code of the non-fatal error answering the request (None: not one)."""
+    ((op, answer),) = _packets(c.raw(opcode, data))
+    return decode_error(op, answer).error.code if op == ServerOp.NON_FATAL_ERROR else None
+
+
+@covers(Fault.DESCRIBE_EXTRA_OPERATION)
+def test_describe_extra_operation() -> None:
+    def scenario(c: Client) -> tuple[bool, str | None]:
+        listed = _alist(c)["operations"]
+        assert isinstance(listed, list)
+        return 0o222 in listed, _refusal_code(c, 0o222, b"")
+
+    assert pair(Fault.DESCRIBE_EXTRA_OPERATION, scenario) == ((False, "UOP"), (True, "UOP"))
+
+
+@covers(Fault.DESCRIBE_MISSING_OPERATION)
+def test_describe_missing_operation() -> None:
+    def scenario(c: Client) -> tuple[bool, str | None]:
+        listed = _alist(c)["operations"]
+        assert isinstance(listed, list)
+        return RequestOp.SOLVE_BACKWARDS in listed, _refusal_code(c, RequestOp.SOLVE_BACKWARDS, b"")
+
+    assert pair(Fault.DESCRIBE_MISSING_OPERATION, scenario) == ((True, "BDL"), (False, "BDL"))
+
+
+@covers(Fault.DESCRIBE_WRONG_DOF)
+def test_describe_wrong_dof() -> None:
+    def scenario(c: Client) -> tuple[object, int]:
+        ((_, data),) = _raw(c, "joint-angles")
+        return _alist(c)["degrees-of-freedom"], (len(data) - 2) // 4
+
+    assert pair(Fault.DESCRIBE_WRONG_DOF, scenario) == ((6, 6), (7, 6))
+
+
+@covers(Fault.DESCRIBE_NARROW_LIMITS)
+def test_describe_narrow_limits() -> None:
+    def scenario(c: Client) -> tuple[object, str | None]:
+        limits = _alist(c)["joint-limits"]
+        assert isinstance(limits, list) and isinstance(limits[0], list)
+        upper = float(limits[0][1])
+        beyond = [upper + 0.5, *READY[1:]]  # just beyond the stated upper limit of joint 1
+        ((op, data),) = _raw(c, "set-joint-angles", joints=beyond)
+        return limits[0], decode_error(op, data).error.code if op == ServerOp.NON_FATAL_ERROR else None
+
+    clean, faulty = pair(Fault.DESCRIBE_NARROW_LIMITS, scenario)
+    assert clean == ([-160.0, 160.0], "JOR")
+    assert faulty == ([-155.0, 155.0], None)  # accepted: the arm's range is wider than stated
+
+
+# ------------------------------------------------------------------------------ data replies
+@covers(Fault.SWAPPED_FLOAT_WORDS)
+def test_swapped_float_words() -> None:
+    def scenario(c: Client) -> bytes:
+        ((_, data),) = _raw(c, "joint-angles")
+        return data[2:]
+
+    clean, faulty = pair(Fault.SWAPPED_FLOAT_WORDS, scenario)
+    assert decode_reply(b"\0\0" + clean, "joint-angles").values["joints"] == READY
+    assert faulty != clean
+    assert faulty == b"".join(clean[i + 2 : i + 4] + clean[i : i + 2] for i in range(0, len(clean), 4))
+
+
+@covers(Fault.SEGMENT_NUMBER_STUCK)
+def test_segment_number_stuck() -> None:
+    def scenario(c: Client) -> list[int]:
+        replies = [_raw(c, "set-joint-angles", joints=g)[0][1] for g in (GOAL, OTHER, READY)]
+        return [decode_reply(data, "set-joint-angles").segment for data in replies]
+
+    assert pair(Fault.SEGMENT_NUMBER_STUCK, scenario) == ([1, 2, 3], [1, 1, 1])
+
+
+# ------------------------------------------------------------------------------ error strings
+def _uop(c: Client) -> bytes:
+    ((opcode, data),) = _packets(c.raw(0o230, b""))
+    assert opcode == ServerOp.NON_FATAL_ERROR
+    return data
+
+
+@covers(Fault.WRONG_SEVERITY)
+def test_wrong_severity() -> None:
+    def scenario(c: Client) -> tuple[str, bool]:
+        error = decode_error(ServerOp.NON_FATAL_ERROR, _uop(c)).error
+        return error.severity, ServerOp.NON_FATAL_ERROR in SPEC.severities[error.severity].server_opcodes
+
+    assert pair(Fault.WRONG_SEVERITY, scenario) == (("C", True), ("F", False))
+
+
+@covers(Fault.ERROR_WITHOUT_COLON)
+def test_error_without_colon() -> None:
+    def scenario(c: Client) -> str | None:
+        try:
+            decode_error(ServerOp.NON_FATAL_ERROR, _uop(c))
+        except DecodeError as exc:
+            return exc.clause
+        return None
+
+    assert pair(Fault.ERROR_WITHOUT_COLON, scenario) == (None, "error-string.format")
+
+
+def _bdl(c: Client) -> bytes:
+    ((_, data),) = _raw(c, "set-speed", b"")
+    return data
+
+
+@covers(Fault.ERROR_PAD_MISPLACED)
+def test_error_pad_misplaced() -> None:
+    """BDL's NUL ends at an even offset: no pad is due, and the fault puts one there anyway.  Parity still
+    reads it (a tolerant reader), an aligned-only reader does not."""
+    clean, faulty = pair(Fault.ERROR_PAD_MISPLACED, _bdl)
+    for data in (clean, faulty):
+        assert decode_error(ServerOp.NON_FATAL_ERROR, data).error.args == (4, 0)
+    nul = faulty.index(0, 2)
+    assert (nul + 1) % 2 == 0 and (len(faulty) - nul - 1) % 2 == 1 and faulty[nul + 1] == 0
+    assert (len(clean) - clean.index(0, 2) - 1) % 2 == 0
+    with pytest.raises(DecodeError):
+        decode_error(ServerOp.NON_FATAL_ERROR, faulty, align_args=True)
+
+
+def test_error_args_packed_layout() -> None:
+    """ServerConfig(error_args="packed") writes the numbers straight after the NUL (the 1985 guide's
+    layout); both read back alike."""
+    aligned = _uop(Client(ServerConfig()))
+    packed = _uop(Client(ServerConfig(error_args="packed")))
+    assert len(aligned) == len(packed) + 1  # UOP's NUL ends at an odd offset: the aligned layout pads
+    for data in (aligned, packed):
+        assert decode_error(ServerOp.NON_FATAL_ERROR, data).error.args == (0o230,)
+
+
+def test_withdrawn_fault_switch_says_what_replaced_it() -> None:
+    with pytest.raises(ValueError, match="--error-args packed"):
+        FaultSet.parse(["unaligned-error-args"])
+
+
+@covers(Fault.UOP_OPCODE_SWAPPED)
+@covers(Fault.BDL_COUNTS_SWAPPED)
+@covers(Fault.JOINT_MASK_SWAPPED)
+def test_error_numbers_byte_swapped() -> None:
+    def numbers(c: Client) -> tuple[tuple[int, ...], ...]:
+        jor = _raw(c, "set-joint-angles", joints=[1000.0, *READY[1:3], 1000.0, *READY[4:]])
+        return tuple(
+            decode_error(ServerOp.NON_FATAL_ERROR, data).error.args for data in (_uop(c), _bdl(c), jor[0][1])
+        )
+
+    clean = (((0o230,), (4, 0), (0b1001,)),) * 3
+    faulty = (((0x9800,), (4, 0), (0b1001,)), ((0o230,), (0x400, 0), (0b1001,)), ((0o230,), (4, 0), (0x900,)))
+    for fault, clean_numbers, faulty_numbers in zip(
+        (Fault.UOP_OPCODE_SWAPPED, Fault.BDL_COUNTS_SWAPPED, Fault.JOINT_MASK_SWAPPED),
+        clean,
+        faulty,
+        strict=True,
+    ):
+        assert pair(fault, numbers) == (clean_numbers, faulty_numbers), fault
+
+
+# ------------------------------------------------------------------------------ request handling
+@covers(Fault.UNKNOWN_OPCODE_ANSWERED)
+def test_unknown_opcode_answered() -> None:
+    assert pair(Fault.UNKNOWN_OPCODE_ANSWERED, lambda c: [op for op, _ in _packets(c.raw(0o230, b""))]) == (
+        [ServerOp.NON_FATAL_ERROR],
+        [ServerOp.RESPONSE],
+    )
+
+
+@covers(Fault.LENGTH_UNCHECKED)
+def test_length_unchecked() -> None:
+    def scenario(c: Client) -> tuple[int, float]:
+        ((opcode, _),) = _raw(c, "set-speed", pack_f(0.5) + b"\0\0")
+        return opcode, c.session.arm.speed
+
+    assert pair(Fault.LENGTH_UNCHECKED, scenario) == (
+        (ServerOp.NON_FATAL_ERROR, 1.0),
+        (ServerOp.RESPONSE, 0.5),
+    )
+
+
+@covers(Fault.EXTRA_REPLY_AFTER_ERROR)
+def test_extra_reply_after_error() -> None:
+    def scenario(c: Client) -> list[int]:
+        return [op for op, _ in _raw(c, "set-joint-angles", joints=(0.0, 0.0, 0.0, 0.0, 0.0, 500.0))]
+
+    assert pair(Fault.EXTRA_REPLY_AFTER_ERROR, scenario) == (
+        [ServerOp.NON_FATAL_ERROR],
+        [ServerOp.NON_FATAL_ERROR, ServerOp.RESPONSE],
+    )
+
+
+@covers(Fault.FATAL_WITHOUT_CLOSE)
+def test_fatal_without_close() -> None:
+    def scenario(c: Client) -> tuple[int, bool, State]:
+        out = c.raw(RequestOp.CALIBRATE, b"")
+        return out.packets[0].opcode, out.close, c.session.state
+
+    clean, faulty = pair(Fault.FATAL_WITHOUT_CLOSE, scenario, base=FaultSet.parse(["calibrate-nzi"]))
+    assert clean == (ServerOp.FATAL_ERROR, True, State.CLOSED)
+    assert faulty == (ServerOp.FATAL_ERROR, False, State.READY)
+
+
+@covers(Fault.FREE_JOINT_EXECUTES)
+def test_free_joint_executes() -> None:
+    def scenario(c: Client) -> tuple[bytes, bool]:
+        c.one("free-joint", joint=1)
+        ((_, data),) = _raw(c, "set-joint-angles", joints=GOAL)
+        return data[2:], c.session.arm.moving
+
+    assert pair(Fault.FREE_JOINT_EXECUTES, scenario) == ((b"", False), (b"\x01\x00", True))
+
+
+# ------------------------------------------------------------------------------------ motion
+def _motion_reply(c: Client, joints: tuple[float, ...] = GOAL) -> str:
+    ((opcode, data),) = _raw(c, "set-joint-angles", joints=joints)
+    if opcode == ServerOp.NON_FATAL_ERROR:
+        return decode_error(opcode, data).error.code
+    return f"segment {decode_reply(data, 'set-joint-angles').segment}"
+
+
+@covers(Fault.NO_JOR)
+def test_no_jor() -> None:
+    assert pair(Fault.NO_JOR, lambda c: _motion_reply(c, (200.0, -90.0, 90.0, 0.0, 0.0, 0.0))) == (
+        "JOR",
+        "segment 1",
+    )
+
+
+@covers(Fault.SWAP_TOR_JOR)
+def test_swap_tor_jor() -> None:
+    beyond = (0.0, -90.0, 235.0, 0.0, 0.0, 0.0)  # joint 3 past its upper limit: no solution helps
+
+    def scenario(c: Client) -> tuple[str, str]:
+        ((opcode, data),) = _raw(
+            c,
+            "solve-forwards",
+            transform=forward(beyond).to_floats(),
+            current=(0.0, -90.0, 90.0, 0.0, 0.0, 0.0),
+        )
+        return decode_error(opcode, data).error.code, _motion_reply(c, beyond)
+
+    assert pair(Fault.SWAP_TOR_JOR, scenario) == (("TOR", "JOR"), ("JOR", "TOR"))
+
+
+@covers(Fault.NO_NAP)
+def test_no_nap() -> None:
+    assert pair(Fault.NO_NAP, _motion_reply, powered=False) == ("NAP", "segment 1")
+
+
+@covers(Fault.AWA_IGNORED)
+def test_awa_ignored() -> None:
+    def scenario(c: Client) -> str:
+        c.one("set-joint-angles", joints=GOAL)
+        c.run(3.0)  # collides with the obstacle
+        return _motion_reply(c, READY)
+
+    assert pair(Fault.AWA_IGNORED, scenario, base=FaultSet.parse(["obstacle=2::-85"])) == ("AWA", "segment 2")
+
+
+@covers(Fault.AWA_REFUSES_ALL)
+def test_awa_refuses_all() -> None:
+    def scenario(c: Client) -> tuple[str, int]:
+        c.one("set-joint-angles", joints=GOAL)
+        c.run(3.0)  # collides with the obstacle: motion aborted
+        ((opcode, _),) = _raw(c, "joint-angles")
+        return _motion_reply(c, READY), opcode
+
+    assert pair(Fault.AWA_REFUSES_ALL, scenario, base=FaultSet.parse(["obstacle=2::-85"])) == (
+        ("AWA", ServerOp.RESPONSE),
+        ("AWA", ServerOp.NON_FATAL_ERROR),
+    )
+
+
+@covers(Fault.SPEED_UNCHECKED)
+def test_speed_unchecked() -> None:
+    def scenario(c: Client) -> tuple[int, float]:
+        ((opcode, _),) = _raw(c, "set-speed", factor=2.0)
+        return opcode, c.session.arm.speed
+
+    assert pair(Fault.SPEED_UNCHECKED, scenario) == (
+        (ServerOp.NON_FATAL_ERROR, 1.0),
+        (ServerOp.RESPONSE, 1.0),
+    )
+
+
+# ------------------------------------------------------------------------------ asynchronous
+@covers(Fault.UNREQUESTED_ASYNC)
+def test_unrequested_async() -> None:
+    def scenario(c: Client) -> list[int]:
+        c.one("set-joint-angles", joints=GOAL)
+        return [op for op, _ in _async(c, 3.0)]
+
+    assert pair(Fault.UNREQUESTED_ASYNC, scenario) == ([], [ServerOp.ASYNCHRONOUS_RESPONSE])
+
+
+@covers(Fault.ASYNC_WITHOUT_NUMBER)
+def test_async_without_number() -> None:
+    def scenario(c: Client) -> tuple[int, int] | str:
+        c.one("request-notifications", mask=2)
+        c.one("set-joint-angles", joints=GOAL)
+        ((_, data),) = _async(c, 3.0)
+        try:
+            response = decode_async(data)
+        except DecodeError as exc:
+            return exc.clause or ""
+        return response.condition, response.word3
+
+    assert pair(Fault.ASYNC_WITHOUT_NUMBER, scenario) == ((2, 1), "async.layout")
+
+
+# ------------------------------------------------------------------ the move process, seen from the wire
+def _segments_reported(c: Client) -> list[int]:
+    c.one("request-notifications", mask=2)
+    for step in (10.0, 20.0):
+        c.one("set-joint-angles", joints=(READY[0] + step, *READY[1:]))
+    return [decode_async(d).word3 for op, d in _async(c, 4.0) if op == ServerOp.ASYNCHRONOUS_RESPONSE]
+
+
+@covers(Fault.SEGMENT_REPORT_PREVIOUS)
+def test_segment_report_previous() -> None:
+    assert pair(Fault.SEGMENT_REPORT_PREVIOUS, _segments_reported) == ([1, 2], [0, 1])
+
+
+def _joint_1_every_4_ms(c: Client) -> list[tuple[float, float]]:
+    """(time, joint 1) every 4 ms through three queued moves of joint 1, read as Joint angles would be."""
+    for step in (10.0, 20.0, 30.0):
+        c.one("set-joint-angles", joints=(READY[0] + step, *READY[1:]))
+    start, out = c.now, []
+    while c.session.arm.moving:
+        assert c.now - start < 30.0, "the arm never came to rest"
+        c.now += 0.004
+        c.session.tick(c.now)
+        out.append((c.now - start, c.session.arm.actual[0]))
+    return out
+
+
+@covers(Fault.SEGMENTS_STOP)
+def test_segments_stop() -> None:
+    def longest_rest(c: Client) -> float:
+        """Longest time joint 1 stays put between its first and its last change (ms)."""
+        changes = [t for (t, a), (_, b) in pairwise(_joint_1_every_4_ms(c)) if a != b]
+        return round(max(b - a for a, b in pairwise(changes)) * 1000)
+
+    clean, faulty = pair(Fault.SEGMENTS_STOP, longest_rest)
+    assert clean == 16 and faulty >= 100
+
+
+@covers(Fault.SERVO_DOUBLE_RATE)
+def test_servo_double_rate() -> None:
+    def shortest_change(c: Client) -> float:
+        """Shortest time between two changes of joint 1 (ms)."""
+        changes = [t for (t, a), (_, b) in pairwise(_joint_1_every_4_ms(c)) if a != b]
+        return round(min(b - a for a, b in pairwise(changes)) * 1000)
+
+    assert pair(Fault.SERVO_DOUBLE_RATE, shortest_change) == (16, 8)
+
+
+@covers(Fault.READY_LEAVES_WRIST)
+def test_ready_leaves_wrist() -> None:
+    def scenario(c: Client) -> tuple[float, ...]:
+        c.one("set-joint-angles", joints=GOAL)
+        c.one("ready")
+        c.settle()
+        return tuple(round(q, 6) for q in c.session.arm.actual)
+
+    clean, faulty = pair(Fault.READY_LEAVES_WRIST, scenario)
+    assert clean == READY and faulty == (*READY[:3], *GOAL[3:])
+
+
+def _here(c: Client) -> tuple[float, ...]:
+    (packet,) = _raw(c, "here")
+    return tuple(decode_reply(packet[1], RequestOp.HERE).values["transform"])
+
+
+@covers(Fault.INCREMENT_FROM_ACTUAL)
+def test_increment_from_actual() -> None:
+    def scenario(c: Client) -> float:
+        start = _here(c)
+        c.one("incremental-move", delta=(0.0, 0.0, -30.0, 0.0, 0.0, 0.0))
+        c.one("incremental-move", delta=(25.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+        c.settle()
+        return round(_here(c)[11] - start[11], 3)
+
+    assert pair(Fault.INCREMENT_FROM_ACTUAL, scenario) == (-30.0, 0.0)
+
+
+@covers(Fault.STRAIGHT_AS_JOINT)
+def test_straight_as_joint() -> None:
+    def scenario(c: Client) -> float:
+        c.one("set-joint-angles", joints=(20.0, -60.0, 150.0, 0.0, -60.0, 0.0))
+        c.settle()
+        start = _here(c)
+        goal = list(start)
+        goal[9] += 80.0
+        goal[10] -= 90.0
+        c.one("straight-move", transform=goal)
+        worst = 0.0
+        while c.session.arm.moving:
+            c.run(0.016)
+            p = _here(c)[9:]
+            # distance from the line through start and goal (both at the same height)
+            a, b = start[9:11], goal[9:11]
+            cross = (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
+            worst = max(worst, abs(cross) / math.dist(a, b), abs(p[2] - start[11]))
+        return worst
+
+    clean, faulty = pair(Fault.STRAIGHT_AS_JOINT, scenario)
+    assert clean < 0.01 and faulty > 1.0  # the conformance case allows 1 mm
+
+
+@covers(Fault.COLLISION_UNCHECKED)
+def test_collision_unchecked() -> None:
+    def scenario(c: Client) -> list[int]:
+        c.one("set-joint-angles", joints=GOAL)
+        return [op for op, _ in _async(c, 3.0)]
+
+    clean, faulty = pair(Fault.COLLISION_UNCHECKED, scenario, base=FaultSet.parse(["obstacle=2::-85"]))
+    assert clean == [ServerOp.ASYNCHRONOUS_WARNING, ServerOp.ASYNCHRONOUS_ERROR] and faulty == []
+
+
+@covers(Fault.SLUGGISH_JOINT)
+def test_sluggish_joint() -> None:
+    def scenario(c: Client) -> list[str]:
+        c.one("set-joint-angles", joints=GOAL)
+        return [decode_error(op, d).error.code for op, d in _async(c, 3.0)]
+
+    assert pair(FaultSet.parse(["sluggish-joint=2:0.35"]), scenario) == ([], ["COL"])
+
+
+@covers(Fault.WARNING_INTERRUPTS)
+def test_warning_interrupts() -> None:
+    def scenario(c: Client) -> list[int]:
+        c.one("set-joint-angles", joints=GOAL)
+        return [op for op, _ in _async(c, 3.0)]
+
+    clean, faulty = pair(Fault.WARNING_INTERRUPTS, scenario, base=FaultSet.parse(["sluggish-joint"]))
+    assert clean == [ServerOp.ASYNCHRONOUS_WARNING]
+    assert faulty == [ServerOp.ASYNCHRONOUS_WARNING, ServerOp.ASYNCHRONOUS_ERROR]
+
+
+# --------------------------------------------------------------------------------------- floats
+def _solve_backwards_words(c: Client, joints: tuple[float, ...]) -> list[tuple[int, int]]:
+    ((_, data),) = _raw(c, "solve-backwards", joints=joints)
+    return [struct.unpack_from("<HH", data, i) for i in range(2, len(data), 4)]
+
+
+@covers(Fault.UNDERFLOW_DIRTY_ZERO)
+def test_underflow_dirty_zero() -> None:
+    def scenario(c: Client) -> int:
+        words = _solve_backwards_words(c, (0.0, 0.0, 0.0, 1e-38, 1e-38, 1e-38))
+        return sum(1 for w0, w1 in words if not w0 & 0x7F80 and (w0 or w1))
+
+    clean, faulty = pair(Fault.UNDERFLOW_DIRTY_ZERO, scenario)
+    assert clean == 0 and faulty > 0
+
+
+@covers(Fault.NOT_FINITE_RESERVED)
+def test_not_finite_reserved() -> None:
+    def scenario(c: Client) -> tuple[int, bytes]:
+        far = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 1e38, 1e38, 1e38)
+        ((opcode, data),) = _raw(c, "solve-forwards", transform=far, current=READY)
+        return opcode, data[2:6]
+
+    clean, faulty = pair(Fault.NOT_FINITE_RESERVED, scenario)
+    assert clean[0] == ServerOp.NON_FATAL_ERROR
+    assert faulty == (ServerOp.RESPONSE, bytes([0, 0x80, 0, 0]))
+
+
+@covers(Fault.DESCRIBE_LIMITS_SHORT)
+def test_describe_limits_short() -> None:
+    def scenario(c: Client) -> tuple[object, int]:
+        alist = _alist(c)
+        limits = alist["joint-limits"]
+        assert isinstance(limits, list)
+        return alist["degrees-of-freedom"], len(limits)
+
+    assert pair(Fault.DESCRIBE_LIMITS_SHORT, scenario) == ((6, 6), (6, 5))
+
+
+@covers(Fault.DESCRIBE_READY_OFF)
+def test_describe_ready_off() -> None:
+    def scenario(c: Client) -> tuple[float, ...]:
+        c.one("set-joint-angles", joints=GOAL)
+        c.settle()
+        c.one("ready")
+        c.settle()
+        stated = _alist(c)["ready-position"]
+        assert isinstance(stated, list)
+        return tuple(round(float(s) - a, 6) for s, a in zip(stated, c.session.arm.actual, strict=True))
+
+    assert pair(Fault.DESCRIBE_READY_OFF, scenario) == ((0.0,) * 6, (0.0, 10.0, 0.0, 0.0, 0.0, 0.0))
+
+
+@covers(Fault.INCREMENT_O_T_SWAPPED)
+def test_increment_o_t_swapped() -> None:
+    def scenario(c: Client) -> tuple[float, ...]:
+        c.one("set-joint-angles", joints=(20.0, -60.0, 150.0, 0.0, -60.0, 0.0))
+        c.settle()
+        c.one("incremental-move", delta=(0.0, 0.0, 0.0, 12.0, 0.0, 0.0))
+        c.settle()
+        return tuple(round(v, 3) for v in _here(c)[:9])
+
+    clean, faulty = pair(Fault.INCREMENT_O_T_SWAPPED, scenario)
+    assert clean != faulty
+
+
+@covers(Fault.CONFIGURATION_IGNORED)
+def test_configuration_ignored() -> None:
+    seed = (20.0, -60.0, 150.0, 0.0, -60.0, 0.0)
+    pose = forward(seed).to_floats()
+
+    def scenario(c: Client) -> bool:
+        solutions = []
+        for value in (1, 0):
+            c.one("set-configuration", configuration=value)
+            solutions.append(_reply(c.one("solve-forwards", transform=pose, current=seed)).values["joints"])
+        return solutions[0] != solutions[1]
+
+    assert pair(Fault.CONFIGURATION_IGNORED, scenario) == (True, False)
+
+
+@covers(Fault.KEEPS_SPEED)
+@covers(Fault.KEEPS_CONFIGURATION)
+@covers(Fault.KEEPS_NOTIFICATIONS)
+def test_connection_keeps_state() -> None:
+    """What a session takes over from the one before it: nothing, unless a connection-keeps-* fault is on
+    (the driver calls inherit for each new connection)."""
+
+    def carried(*faults: Fault) -> tuple[float, bool | None, int]:
+        config = ServerConfig(powered_at_open=True, faults=FaultSet.of(*faults))
+        first = Client(config)
+        first.one("set-speed", factor=0.25)
+        first.one("set-configuration", configuration=0)
+        first.one("request-notifications", mask=3)
+        second = Client(config)
+        second.session.inherit(first.session)
+        return second.session.arm.speed, second.session.arm.lefty, second.session.notifications
+
+    assert carried() == (1.0, None, 0)
+    assert carried(Fault.KEEPS_SPEED) == (0.25, None, 0)
+    assert carried(Fault.KEEPS_CONFIGURATION) == (1.0, False, 0)
+    assert carried(Fault.KEEPS_NOTIFICATIONS) == (1.0, None, 3)
+
+
+# ------------------------------------------------------------------- the driver and the wrist
+@covers(Fault.WRIST_SILENT)
+@covers(Fault.WRIST_TIMEOUT_SILENT)
+def test_wrist_silent_and_timeout() -> None:
+    def read_forces(*faults: str) -> str:
+        sim = CougarSim(seed=1)
+        client = WristClient(CougarWrist(SimPort(sim)), config=ServerConfig(faults=FaultSet.parse(faults)))
+        client.run(0.1)
+        try:
+            answer = client.call("read-forces", limit=2.0)
+        except AssertionError:
+            return "no answer"
+        return answer.error.code if isinstance(answer, ErrorReply) else "forces"
+
+    assert read_forces() == "forces"
+    assert read_forces("wrist-silent") == "WNR"
+    assert read_forces("wrist-silent", "wrist-timeout-silent") == "no answer"
+
+
+def _conform(select: str, *faults: str) -> int:
+    args = ["run", "--select", select, "--seed", "7"]
+    for fault in faults:
+        args += ["--server-fault", fault]
+    return CliRunner().invoke(conform_main, args).exit_code
+
+
+@covers(Fault.CLOSE_KEEPS_MOVING)
+@covers(Fault.GUARD_HIT_WORD_SWAPPED)
+def test_driver_and_wrist_faults_against_their_cases() -> None:
+    """Faults of the driver (what outlives a connection) and of the wrist's reports: the embedded run
+    of their case passes clean and fails with the fault."""
+    for fault, select in (
+        ("close-keeps-moving", "server.connect.close-stops-arm"),
+        ("guard-hit-word-swapped", "server.async.guard-hit"),
+    ):
+        assert (_conform(select), _conform(select, fault)) == (0, 1), fault
+
+
+def test_no_module_but_defects_tests_a_fault() -> None:
+    """The protocol code reads as the protocol: no module of the reference server tests a fault switch
+    (``Fault.X in ...``, ``is``, ``==``) but :mod:`~manip.reference_server.faults`, which defines them,
+    and :mod:`~manip.reference_server.defects`, which bends the session's hook points by them (the
+    world may still name the conditions it switches on); the session names none at all."""
+    package = Path(reference_server.__file__).parent
+    tests = [
+        f"{path.name}:{node.lineno}"
+        for path in sorted(package.glob("*.py"))
+        if path.name not in ("faults.py", "defects.py")
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if isinstance(node, ast.Compare) and any(_names_a_fault(n) for n in (node.left, *node.comparators))
+    ]
+    assert not tests, tests
+    assert "Fault." not in (package / "session.py").read_text(encoding="utf-8")
+
+
+def _names_a_fault(node: ast.expr) -> bool:
+    return isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "Fault"
+
+
+def _tour(client: Client) -> list[tuple[int, bytes]]:
+    """A session's every packet through a tour of its paths: initial response, describe self, replies
+    of each form, refusals (unknown opcode, bad length, bad value, JOR, TOR), motion with segment
+    reports, free joint and the packet after it, calibrate."""
+    out = [(p.opcode, p.data) for p in client.initial.packets]
+    steps: list[tuple[str, bytes | None, dict[str, object]]] = [
+        ("describe-self", None, {}),
+        ("request-notifications", None, {"mask": 3}),
+        ("set-speed", None, {"factor": 0.5}),
+        ("set-speed", None, {"factor": 2.0}),
+        ("set-configuration", None, {"configuration": 1}),
+        ("set-joint-angles", None, {"joints": GOAL}),
+        ("incremental-move", None, {"delta": (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)}),
+        ("set-joint-angles", None, {"joints": (400.0, 0.0, 0.0, 0.0, 0.0, 0.0)}),
+        (
+            "solve-forwards",
+            None,
+            {"transform": (*forward(GOAL).to_floats()[:9], 9e3, 9e3, 9e3), "current": READY},
+        ),
+        ("here", b"\0\0", {}),
+        ("ready", None, {}),
+        ("free-joint", None, {"joint": 2}),
+        ("here", None, {}),
+        ("joint-angles", None, {}),
+    ]
+    for name, data, values in steps:
+        out += _packets(
+            client.raw(SPEC.request(name).opcode, encode_request(name, **values) if data is None else data)
+        )
+        for _ in range(40):
+            client.now += TICK
+            out += _packets(client.session.tick(client.now))
+    out += _packets(client.raw(0o277, b""))
+    out += _packets(client.raw(SPEC.request("calibrate").opcode, b""))
+    return out
+
+
+def test_switched_defects_with_nothing_on_bend_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every hook of SwitchedDefects passes the protocol through unchanged while its faults are off: a
+    session made to use it with an empty fault set sends what a conforming one (plain Defects) sends;
+    and one switch does change the tour (so the comparison can fail)."""
+    clean = _tour(Client(ServerConfig(powered_at_open=True)))
+    assert type(Client().session.defects) is Defects
+    monkeypatch.setattr(session_module, "defects_for", SwitchedDefects)
+    switched = Client(ServerConfig(powered_at_open=True))
+    assert type(switched.session.defects) is SwitchedDefects
+    assert _tour(switched) == clean
+    bent = Client(ServerConfig(powered_at_open=True, faults=FaultSet.of(Fault.SEGMENT_REPORT_PREVIOUS)))
+    assert _tour(bent) != clean
+
+
+# ------------------------------------------------------------------- defects on the world's paths
+def _fatal_of_calibrate(c: Client) -> tuple[int, str]:
+    c.one("enable-power")
+    out = c.raw(RequestOp.CALIBRATE, b"")
+    error = decode_error(out.packets[0].opcode, out.packets[0].data)
+    return error.request_number, error.error.severity
+
+
+@covers(Fault.FATAL_NUMBER_PREVIOUS)
+@covers(Fault.FATAL_SEVERITY_E)
+def test_fatal_error_number_and_severity() -> None:
+    nzi = FaultSet.parse(["calibrate-nzi"])
+    clean, previous = pair(Fault.FATAL_NUMBER_PREVIOUS, _fatal_of_calibrate, base=nzi)
+    assert previous == (clean[0] - 1, "F") and clean[1] == "F"
+    _, severity_e = pair(Fault.FATAL_SEVERITY_E, _fatal_of_calibrate, base=nzi)
+    assert severity_e == (clean[0], "E")
+
+
+@covers(Fault.ASYNC_NUMBER_PREVIOUS)
+def test_warning_number_previous() -> None:
+    def scenario(c: Client) -> tuple[int, int]:
+        c.one("enable-power")
+        c.one("set-joint-angles", joints=GOAL)
+        processed = c.session.last_processed or 0
+        ((_, data),) = [p for p in _async(c, 3.0) if p[0] == ServerOp.ASYNCHRONOUS_WARNING][:1]
+        return int.from_bytes(data[:2], "little"), processed
+
+    base = FaultSet.parse(["sluggish-joint"])
+    (clean, processed), (faulty, _) = pair(Fault.ASYNC_NUMBER_PREVIOUS, scenario, base=base)
+    assert clean == processed and faulty == processed - 1
+
+
+@covers(Fault.WRIST_ERROR_FATAL)
+def test_wrist_error_fatal() -> None:
+    def read_forces(*faults: str) -> tuple[int, str]:
+        client = WristClient(
+            CougarWrist(SimPort(CougarSim(seed=1))), config=ServerConfig(faults=FaultSet.parse(faults))
+        )
+        client.run(0.1)
+        answer = client.call("read-forces", limit=2.0)
+        assert isinstance(answer, ErrorReply)
+        return answer.opcode, answer.error.severity
+
+    assert read_forces("wrist-silent") == (ServerOp.NON_FATAL_ERROR, "E")
+    assert read_forces("wrist-silent", "wrist-error-fatal") == (ServerOp.FATAL_ERROR, "F")
+
+
+@covers(Fault.ABORT_KEEPS_QUEUE)
+def test_abort_keeps_queue() -> None:
+    def scenario(c: Client) -> bool:
+        c.one("enable-power")
+        for goal in (GOAL, OTHER, GOAL):
+            c.one("set-joint-angles", joints=goal)
+        c.run(0.2)
+        c.session.arm.press_panic(at=c.now)
+        c.run(0.1)
+        c.one("enable-power")
+        c.run(0.5)
+        return c.session.arm.moving
+
+    assert pair(Fault.ABORT_KEEPS_QUEUE, scenario) == (False, True)
+
+
+@covers(Fault.FATAL_DROPS_LINK)
+def test_fatal_drops_link_against_its_case() -> None:
+    """A fault of the driver: the embedded run of the fatal-error case passes clean and fails with it."""
+    select = "server.error.fatal-then-close"
+    assert (_conform(select), _conform(select, "fatal-drops-link")) == (0, 1)

@@ -1,0 +1,51 @@
+"""The conformance suite run against a reference server in the same event loop: the one shared way for
+tests of cases and of the runner (a server started on a free loopback port, the run, the server
+stopped), rather than a ``serve`` and ``Runner`` of their own in every module.
+
+:func:`run_on_reference_server` is the ``async`` form; :func:`run_suite` runs it in a fresh event loop,
+and the ``reference_run`` fixture (``tests/conformance/conftest.py``) hands :func:`run_suite` to a test.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from manip.conformance.suite.case import Case
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.embedded import ServerEnvironment
+from manip.conformance.suite.results import RunReport
+from manip.conformance.suite.runner import RunConfig, Runner
+from manip.reference_server import ServerConfig
+from manip.reference_server.driver import serve
+from tests.support.servers import LINK_ADDRESSES
+
+
+async def run_on_reference_server(
+    cases: Sequence[Case],
+    server: ServerConfig | None = None,
+    *,
+    seed: int,
+    time_scale: float = 1.0,
+    options: Mapping[str, Any] | None = None,
+    world: bool = False,
+    **config: Any,
+) -> RunReport:
+    """Run ``cases`` against a reference server set up by ``server`` (faults, power...), started for the
+    run on a free TCP port with ``time_scale`` and stopped after it.
+
+    ``options`` are the :class:`RunOptions` besides the address (which is the server's); ``world``
+    gives the run the server's world (its :class:`ServerEnvironment`'s), as the embedded target has; the other
+    keywords are :class:`RunConfig` fields (``select``, ``embedded``...)."""
+    async with serve(LINK_ADDRESSES["tcp"], server, time_scale=time_scale) as reference:
+        run_options = RunOptions(address=reference.address, **(options or {}))
+        if world:
+            config["world"] = ServerEnvironment(reference).world
+        run_config = RunConfig(address=reference.address, options=run_options, seed=seed, **config)
+        return await Runner(run_config, cases).run()
+
+
+def run_suite(cases: Sequence[Case], server: ServerConfig | None = None, **keywords: Any) -> RunReport:
+    """:func:`run_on_reference_server` in an event loop of its own, for a synchronous test."""
+    return asyncio.run(run_on_reference_server(cases, server, **keywords))
