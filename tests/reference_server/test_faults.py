@@ -6,17 +6,21 @@ and checks that the clean one conforms and the faulted one differs in the claime
 
 from __future__ import annotations
 
+import ast
 import math
 import struct
 from collections.abc import Callable
 from itertools import pairwise
+from pathlib import Path
 from typing import TypeVar
 
 import pytest
 from click.testing import CliRunner
 
+from manip import reference_server
 from manip.arm.kinematics import READY, forward
 from manip.arm.sim import Obstacle
+from manip.arm.trajectory import TICK
 from manip.codecs.errors import DecodeError
 from manip.codecs.lisp import read_alist
 from manip.codecs.messages import ErrorReply, decode_async, decode_error, decode_reply, encode_request
@@ -24,8 +28,10 @@ from manip.codecs.pdp11float import pack_f
 from manip.conformance.cli import main as conform_main
 from manip.cougar import CougarSim
 from manip.reference_server import FAULTS, Fault, FaultSet, Output, ServerConfig, State
+from manip.reference_server import session as session_module
 from manip.reference_server.cougar_port import SimPort
 from manip.reference_server.cougar_wrist import CougarWrist
+from manip.reference_server.defects import Defects, SwitchedDefects
 from manip.reference_server.faults import WRIST_SIDE
 from manip.spec import SPEC
 from manip.spec.constants import RequestOp, ServerOp
@@ -795,6 +801,78 @@ def test_driver_and_wrist_faults_against_their_cases() -> None:
         ("guard-hit-word-swapped", "server.async.guard-hit"),
     ):
         assert (_conform(select), _conform(select, fault)) == (0, 1), fault
+
+
+def test_no_module_but_defects_tests_a_fault() -> None:
+    """The protocol code reads as the protocol: no module of the reference server tests a fault switch
+    (``Fault.X in ...``, ``is``, ``==``) but :mod:`~manip.reference_server.faults`, which defines them,
+    and :mod:`~manip.reference_server.defects`, which bends the session's hook points by them (the
+    world may still name the conditions it switches on); the session names none at all."""
+    package = Path(reference_server.__file__).parent
+    tests = [
+        f"{path.name}:{node.lineno}"
+        for path in sorted(package.glob("*.py"))
+        if path.name not in ("faults.py", "defects.py")
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if isinstance(node, ast.Compare) and any(_names_a_fault(n) for n in (node.left, *node.comparators))
+    ]
+    assert not tests, tests
+    assert "Fault." not in (package / "session.py").read_text(encoding="utf-8")
+
+
+def _names_a_fault(node: ast.expr) -> bool:
+    return isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "Fault"
+
+
+def _tour(client: Client) -> list[tuple[int, bytes]]:
+    """A session's every packet through a tour of its paths: initial response, describe self, replies
+    of each form, refusals (unknown opcode, bad length, bad value, JOR, TOR), motion with segment
+    reports, free joint and the packet after it, calibrate."""
+    out = [(p.opcode, p.data) for p in client.initial.packets]
+    steps: list[tuple[str, bytes | None, dict[str, object]]] = [
+        ("describe-self", None, {}),
+        ("request-notifications", None, {"mask": 3}),
+        ("set-speed", None, {"factor": 0.5}),
+        ("set-speed", None, {"factor": 2.0}),
+        ("set-configuration", None, {"configuration": 1}),
+        ("set-joint-angles", None, {"joints": GOAL}),
+        ("incremental-move", None, {"delta": (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)}),
+        ("set-joint-angles", None, {"joints": (400.0, 0.0, 0.0, 0.0, 0.0, 0.0)}),
+        (
+            "solve-forwards",
+            None,
+            {"transform": (*forward(GOAL).to_floats()[:9], 9e3, 9e3, 9e3), "current": READY},
+        ),
+        ("here", b"\0\0", {}),
+        ("ready", None, {}),
+        ("free-joint", None, {"joint": 2}),
+        ("here", None, {}),
+        ("joint-angles", None, {}),
+    ]
+    for name, data, values in steps:
+        out += _packets(
+            client.raw(SPEC.request(name).opcode, encode_request(name, **values) if data is None else data)
+        )
+        for _ in range(40):
+            client.now += TICK
+            out += _packets(client.session.tick(client.now))
+    out += _packets(client.raw(0o277, b""))
+    out += _packets(client.raw(SPEC.request("calibrate").opcode, b""))
+    return out
+
+
+def test_switched_defects_with_nothing_on_bend_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every hook of SwitchedDefects passes the protocol through unchanged while its faults are off: a
+    session made to use it with an empty fault set sends what a conforming one (plain Defects) sends;
+    and one switch does change the tour (so the comparison can fail)."""
+    clean = _tour(Client(ServerConfig(powered_at_open=True)))
+    assert type(Client().session.defects) is Defects
+    monkeypatch.setattr(session_module, "defects_for", SwitchedDefects)
+    switched = Client(ServerConfig(powered_at_open=True))
+    assert type(switched.session.defects) is SwitchedDefects
+    assert _tour(switched) == clean
+    bent = Client(ServerConfig(powered_at_open=True, faults=FaultSet.of(Fault.SEGMENT_REPORT_PREVIOUS)))
+    assert _tour(bent) != clean
 
 
 # ------------------------------------------------------------------- defects on the world's paths

@@ -35,7 +35,6 @@ from collections.abc import Callable
 from typing import Any, TypeVar
 
 from manip.codecs.messages import AsyncResponse
-from manip.reference_client import faults
 from manip.reference_client.errors import ConnectionLost, FatalError, ManipError, RequestTimeout
 from manip.reference_client.events import (
     AsyncErrorReceived,
@@ -51,7 +50,7 @@ from manip.reference_client.events import (
     TrivialErrorNotified,
     WarningReceived,
 )
-from manip.reference_client.faults import ClientFault
+from manip.reference_client.faults import NO_FAULTS, ClientFault, ClientFaults
 from manip.reference_client.matching import MatchingCore
 from manip.reference_client.request import Request, RequestState
 from manip.reference_client.transport import ManipTransport
@@ -75,7 +74,9 @@ def _remover(items: list[Any], item: Any) -> Callable[[], None]:
 def _error_for(error: ManipError, request: Request[Any]) -> ManipError:
     """The error a still-queued request fails with when the process ends with ``error``."""
     if isinstance(error, FatalError):
-        return FatalError(error.error, request_number=error.request_number, request=request)
+        return FatalError(
+            error.error, request_number=error.request_number, request=request, faults=error.faults
+        )
     if isinstance(error, ConnectionLost):
         lost = ConnectionLost(error.reason)
         lost.__cause__ = error.__cause__
@@ -86,10 +87,18 @@ def _error_for(error: ManipError, request: Request[Any]) -> ManipError:
 class BackgroundProcess:
     """Runs one connection; see the module docstring."""
 
-    def __init__(self, transport: ManipTransport, core: MatchingCore, *, name: str = "manipulator") -> None:
+    def __init__(
+        self,
+        transport: ManipTransport,
+        core: MatchingCore,
+        *,
+        name: str = "manipulator",
+        faults: ClientFaults = NO_FAULTS,
+    ) -> None:
         self.transport = transport
         self.core = core
         self.name = name
+        self.faults = faults
         self._queue: deque[Request[Any]] = deque()
         self._futures: dict[Request[Any], asyncio.Future[Any]] = {}
         self._timers: dict[Request[Any], asyncio.TimerHandle] = {}
@@ -294,7 +303,7 @@ class BackgroundProcess:
                     pass
 
     def _closed_by(self, reason: str, cause: BaseException | None) -> None:
-        if faults.on(ClientFault.SILENT_CLOSE):
+        if ClientFault.SILENT_CLOSE in self.faults:
             return
         lost = ConnectionLost(reason)
         lost.__cause__ = cause

@@ -39,6 +39,7 @@ def _transport(source: TransportSource, options: ClientOptions) -> ManipTranspor
             connect_timeout=options.connect_timeout,
             close_timeout=options.close_timeout,
             wrap_link=options.wrap_link,
+            faults=options.faults,
         )
     if options.wrap_link is not None:
         raise ValueError(
@@ -76,8 +77,9 @@ async def open_manipulator(source: TransportSource, options: ClientOptions | Non
         history=options.history,
         align_args=options.align_args,
         max_reply_bytes=options.max_reply_bytes,
+        faults=options.faults,
     )
-    process = BackgroundProcess(transport, core, name=options.name)
+    process = BackgroundProcess(transport, core, name=options.name, faults=options.faults)
     arm = Manipulator(process, options)  # listens before any packet can arrive
     await process.start(options.connect_timeout)
     return arm

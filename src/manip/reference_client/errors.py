@@ -27,7 +27,7 @@ import enum
 from typing import TYPE_CHECKING, Any
 
 from manip.codecs.error_string import ErrorMessage
-from manip.reference_client import faults
+from manip.reference_client.faults import NO_FAULTS, ClientFaults
 from manip.spec import SPEC
 
 if TYPE_CHECKING:
@@ -49,10 +49,13 @@ class ServerError(ManipError):
         *,
         request_number: int,
         request: Request[Any] | None = None,
+        faults: ClientFaults = NO_FAULTS,
     ) -> None:
         self.error = error
         self.request_number = request_number
         self.request = request
+        self.faults = faults
+        """The fault switches of the client that read it (they may bend :attr:`message`)."""
         super().__init__(self._text())
 
     @property
@@ -80,7 +83,7 @@ class ServerError(ManipError):
     @property
     def message(self) -> str:
         """The message with the numbers substituted."""
-        faulty = faults.render_message(self.error.message, self.error.args, self.error.has_nul)
+        faulty = self.faults.render_message(self.error.message, self.error.args, self.error.has_nul)
         return self.error.render_message() if faulty is None else faulty
 
     @property

@@ -16,10 +16,7 @@ from manip.arm.transform import Transform
 from manip.codecs.lisp import LispValue, read_alist
 from manip.codecs.lispm_text import decode_lispm
 from manip.codecs.messages import Value, decode_reply
-from manip.reference_client import faults
-from manip.reference_client.faults import ClientFault
 from manip.reference_client.request import Request
-from manip.spec.model import Layout
 
 _WORD = struct.Struct("<H")
 
@@ -58,30 +55,7 @@ def extract_values(request: Request[Any], payloads: Sequence[bytes]) -> Mapping[
         raise ValueError(f"{request.code} has no spec layout; give the request an extractor")
     number = _WORD.pack((request.packet_number or 0) & 0xFFFF)
     data = _single(request, payloads)
-    if faults.on(ClientFault.SWAPPED_FLOAT_WORDS) or faults.on(ClientFault.RESERVED_AS_ZERO):
-        data = _faulty_floats(op.response.data, data)
     return decode_reply(number + data, op).values
-
-
-def _faulty_floats(layout: Layout, data: bytes) -> bytes:
-    """The reply data as a faulty client reads them (fault switches; see :mod:`.faults`)."""
-    out = bytearray(data)
-    pos = 0
-    for f in layout.fields:
-        size = 4 if f.type.element == "float" else 2
-        count = f.type.count
-        if count is None:  # variable-length fields come last and hold no floats
-            break
-        for _ in range(count):
-            if size == 4 and pos + 4 <= len(out):
-                high, low = out[pos + 1], out[pos]  # the sign/exponent word, low byte first
-                reserved = high & 0x80 and not high & 0x7F and not low & 0x80
-                if faults.on(ClientFault.RESERVED_AS_ZERO) and reserved:
-                    out[pos : pos + 4] = bytes(4)
-                if faults.on(ClientFault.SWAPPED_FLOAT_WORDS):
-                    out[pos : pos + 4] = out[pos + 2 : pos + 4] + out[pos : pos + 2]
-            pos += size
-    return bytes(out)
 
 
 def extract_value(request: Request[Any], payloads: Sequence[bytes]) -> Value:

@@ -1,24 +1,25 @@
 """Fault switches of the reference client: each makes it break one rule on purpose, so that
 ``manip-conform client`` is shown to catch it (``tests/conformance/client/test_faults.py``).
 
-They are process-wide (a client under test is one process): ``MANIP_CLIENT_FAULTS=name,name`` in the
-environment, or ``--fault NAME`` of the harness (``python -m manip.reference_client.harness --fault
-swapped-float-words``), switches them on; ``--list-faults`` lists them.  With none on, nothing changes.
+A client runs with a :class:`ClientFaults` value (a frozen set; none by default), given in its options
+(:attr:`ClientOptions.faults <manip.reference_client.options.ClientOptions.faults>`) and passed down to
+the parts that misbehave; nothing reads process-wide state.  The harness's ``--fault NAME``
+(``python -m manip.reference_client.harness --fault swapped-float-words``) is where a process under test
+gets them, and ``manip-conform client`` passes them on in the harness command it is given;
+``--list-faults`` lists them.  With none on, nothing changes.
 """
 
 from __future__ import annotations
 
 import enum
-import os
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Final
 
 from manip.codecs.error_string import format_joint_mask
+from manip.spec.model import Layout
 
-__all__ = ["ENV", "FAULTS", "ClientFault", "FaultInfo", "activate", "active", "from_env", "on"]
-
-ENV: Final = "MANIP_CLIENT_FAULTS"
+__all__ = ["FAULTS", "NO_FAULTS", "ClientFault", "ClientFaults", "FaultInfo"]
 
 
 class ClientFault(enum.Enum):
@@ -126,56 +127,66 @@ FAULTS: Final[dict[ClientFault, FaultInfo]] = {
     ),
 }
 
-_ACTIVE: set[ClientFault] = set()
 
+class ClientFaults(frozenset[ClientFault]):
+    """The faults a reference client runs with: a frozen set of :class:`ClientFault`."""
 
-def parse(names: Iterable[str]) -> set[ClientFault]:
-    """Faults by name; ValueError naming the known ones for a name that is not."""
-    out: set[ClientFault] = set()
-    known = {f.value: f for f in ClientFault}
-    for name in names:
-        name = name.strip()
-        if not name:
-            continue
-        if name not in known:
-            raise ValueError(f"unknown client fault {name!r}; known: {', '.join(sorted(known))}")
-        out.add(known[name])
-    return out
-
-
-def activate(faults: Iterable[ClientFault]) -> None:
-    """Switch exactly ``faults`` on (the others off)."""
-    _ACTIVE.clear()
-    _ACTIVE.update(faults)
-
-
-def from_env() -> set[ClientFault]:
-    """The faults named in ``MANIP_CLIENT_FAULTS`` (comma separated)."""
-    return parse(os.environ.get(ENV, "").split(","))
-
-
-def on(fault: ClientFault) -> bool:
-    return fault in _ACTIVE
-
-
-def active() -> frozenset[ClientFault]:
-    return frozenset(_ACTIVE)
-
-
-def render_message(message: str, args: tuple[int, ...], has_nul: bool) -> str | None:
-    """The message as a faulty client renders it, or None when no rendering fault is on."""
-    if not (on(ClientFault.DOLLAR_AS_NUMBER) or on(ClientFault.TILDE_OCTAL)) or not has_nul:
-        return None
-    it = iter(args)
-    out: list[str] = []
-    for ch in message:
-        if ch in "~$":
-            arg = next(it, None)
-            if arg is not None:
-                if ch == "~":
-                    out.append(f"{arg:o}" if on(ClientFault.TILDE_OCTAL) else str(arg))
-                else:
-                    out.append(str(arg) if on(ClientFault.DOLLAR_AS_NUMBER) else format_joint_mask(arg))
+    @classmethod
+    def parse(cls, names: Iterable[str]) -> ClientFaults:
+        """Faults by name (blank names skipped); ValueError naming the known ones for a name that is not."""
+        known = {f.value: f for f in ClientFault}
+        out: set[ClientFault] = set()
+        for name in (n.strip() for n in names):
+            if not name:
                 continue
-        out.append(ch)
-    return "".join(out)
+            if name not in known:
+                raise ValueError(f"unknown client fault {name!r}; known: {', '.join(sorted(known))}")
+            out.add(known[name])
+        return cls(out)
+
+    def render_message(self, message: str, args: tuple[int, ...], has_nul: bool) -> str | None:
+        """The message as a faulty client renders it, or None when no rendering fault is on."""
+        dollar, tilde = ClientFault.DOLLAR_AS_NUMBER in self, ClientFault.TILDE_OCTAL in self
+        if not (dollar or tilde) or not has_nul:
+            return None
+        it = iter(args)
+        out: list[str] = []
+        for ch in message:
+            arg = next(it, None) if ch in "~$" else None
+            if arg is None:
+                out.append(ch)
+            elif ch == "~":
+                out.append(f"{arg:o}" if tilde else str(arg))
+            else:
+                out.append(str(arg) if dollar else format_joint_mask(arg))
+        return "".join(out)
+
+    def read_floats(self, layout: Layout, data: bytes) -> bytes:
+        """Reply data (after the request number) as a client with the float faults on reads them."""
+        reserved_as_zero, swapped = (
+            ClientFault.RESERVED_AS_ZERO in self,
+            ClientFault.SWAPPED_FLOAT_WORDS in self,
+        )
+        if not (reserved_as_zero or swapped):
+            return data
+        out = bytearray(data)
+        pos = 0
+        for f in layout.fields:
+            size = 4 if f.type.element == "float" else 2
+            count = f.type.count
+            if count is None:  # variable-length fields come last and hold no floats
+                break
+            for _ in range(count):
+                if size == 4 and pos + 4 <= len(out):
+                    high, low = out[pos + 1], out[pos]  # the sign/exponent word, low byte first
+                    reserved = high & 0x80 and not high & 0x7F and not low & 0x80
+                    if reserved_as_zero and reserved:
+                        out[pos : pos + 4] = bytes(4)
+                    if swapped:
+                        out[pos : pos + 4] = out[pos + 2 : pos + 4] + out[pos : pos + 2]
+                pos += size
+        return bytes(out)
+
+
+NO_FAULTS: Final = ClientFaults()
+"""A conforming client."""

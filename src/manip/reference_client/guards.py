@@ -14,8 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, SupportsFloat
 
-from manip.reference_client import faults
-from manip.reference_client.faults import ClientFault
+from manip.reference_client.faults import NO_FAULTS, ClientFault, ClientFaults
 from manip.reference_client.puma import GUARDS
 from manip.spec.constants import AsyncCondition
 
@@ -33,8 +32,10 @@ class LoadChangeRefusedError(ValueError):
 class WristBook:
     """The guards armed on ``arm`` (a :class:`~manip.reference_client.Manipulator` of type puma)."""
 
-    def __init__(self, arm: Any) -> None:
+    def __init__(self, arm: Any, *, faults: ClientFaults = NO_FAULTS) -> None:
         self.arm = arm
+        self.faults = faults
+        """The client's fault switches (:mod:`.faults`), which break the guard and load rules."""
         self.armed: set[int] = set()
         self._remove = arm.add_async_listener(self._on_async)
 
@@ -47,7 +48,7 @@ class WristBook:
 
     def free_number(self) -> int:
         """The lowest guard number not armed (GuardsBusyError when all 16 are)."""
-        if faults.on(ClientFault.GUARD_ZERO):
+        if ClientFault.GUARD_ZERO in self.faults:
             return 0
         for number in range(GUARDS):
             if number not in self.armed:
@@ -79,11 +80,11 @@ class WristBook:
     ) -> None:
         """The hand holds a new object (and, with ``offset``, the frame vector moves): set frame
         vector, then set weight (NEWWC).  Refused while a guard is armed."""
-        if self.armed and not faults.on(ClientFault.NEWWC_UNDER_GUARD):
+        if self.armed and ClientFault.NEWWC_UNDER_GUARD not in self.faults:
             numbers = ", ".join(str(n) for n in sorted(self.armed))
             raise LoadChangeRefusedError(f"guard(s) {numbers} armed: clear them before the load changes")
         kw = {} if timeout is None else {"timeout": timeout}
         if offset is not None:
             await self.arm.set_frame_vector(offset, **kw)
-        if not faults.on(ClientFault.NO_NEWWC):
+        if ClientFault.NO_NEWWC not in self.faults:
             await self.arm.set_weight(weight, cg, **kw)

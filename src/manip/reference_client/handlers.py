@@ -22,7 +22,6 @@ import struct
 from typing import Any, Final
 
 from manip.codecs.messages import AsyncResponse
-from manip.reference_client import faults
 from manip.reference_client.errors import (
     AsynchronousError,
     AsynchronousWarning,
@@ -58,7 +57,7 @@ def handle_normal_response(ctx: ResponseContext) -> None:
         ctx.out_of_sequence()
         return
     payload = ctx.payload
-    if request.response_type is ResponseType.MULTI and not faults.on(ClientFault.MULTI_FIRST_PACKET):
+    if request.response_type is ResponseType.MULTI and ClientFault.MULTI_FIRST_PACKET not in ctx.core.faults:
         if payload:
             request.responses.append(payload)
             request.reply_bytes += len(payload)
@@ -88,30 +87,37 @@ def handle_non_fatal_error(ctx: ResponseContext) -> None:
     if request is None:
         ctx.out_of_sequence(detail=f"non-fatal error {ctx.error_message().render()!r}")
         return
-    ctx.fail(request, NonFatalError(ctx.error_message(), request_number=ctx.request_number, request=request))
+    error = NonFatalError(
+        ctx.error_message(), request_number=ctx.request_number, request=request, faults=ctx.core.faults
+    )
+    ctx.fail(request, error)
 
 
 def handle_fatal_error(ctx: ResponseContext) -> None:
     """Code 1: every pending request fails at once; the number is the last packet the server got."""
-    if faults.on(ClientFault.FATAL_AS_NON_FATAL):
+    faults = ctx.core.faults
+    if ClientFault.FATAL_AS_NON_FATAL in faults:
         handle_non_fatal_error(ctx)
         return
     message = ctx.error_message()
     number = ctx.request_number
-    ctx.emit(
-        FatalErrorReceived(FatalError(message, request_number=number, request=ctx.find_matching_request()))
-    )
-    ctx.fail_all(lambda request: FatalError(message, request_number=number, request=request))
+    first = FatalError(message, request_number=number, request=ctx.find_matching_request(), faults=faults)
+    ctx.emit(FatalErrorReceived(first))
+    ctx.fail_all(lambda request: FatalError(message, request_number=number, request=request, faults=faults))
 
 
 def handle_asynchronous_error(ctx: ResponseContext) -> None:
     """Code 4: an error outside any request."""
-    ctx.emit(AsyncErrorReceived(AsynchronousError(ctx.error_message(), request_number=ctx.request_number)))
+    error = AsynchronousError(ctx.error_message(), request_number=ctx.request_number, faults=ctx.core.faults)
+    ctx.emit(AsyncErrorReceived(error))
 
 
 def handle_asynchronous_warning(ctx: ResponseContext) -> None:
     """Code 5: a warning for the human."""
-    ctx.emit(WarningReceived(AsynchronousWarning(ctx.error_message(), request_number=ctx.request_number)))
+    warning = AsynchronousWarning(
+        ctx.error_message(), request_number=ctx.request_number, faults=ctx.core.faults
+    )
+    ctx.emit(WarningReceived(warning))
 
 
 def handle_asynchronous_response(ctx: ResponseContext) -> None:
@@ -124,9 +130,9 @@ def handle_asynchronous_response(ctx: ResponseContext) -> None:
             f"got {len(payload)}",
         )
         return
-    if faults.on(ClientFault.IGNORE_ASYNC):
+    if ClientFault.IGNORE_ASYNC in ctx.core.faults:
         return
-    if faults.on(ClientFault.ASYNC_AS_REPLY) and ctx.core.pending:
+    if ClientFault.ASYNC_AS_REPLY in ctx.core.faults and ctx.core.pending:
         request = next(iter(ctx.core.pending.values()))
         request.responses.append(payload)
         ctx.extract(request)
@@ -142,7 +148,9 @@ def notify_trivial_error(ctx: ResponseContext) -> None:
     if request is None or policy is None or not request.value_optional:
         ctx.pass_on()
         return
-    error = NonFatalError(ctx.error_message(), request_number=ctx.request_number, request=request)
+    error = NonFatalError(
+        ctx.error_message(), request_number=ctx.request_number, request=request, faults=ctx.core.faults
+    )
     if not policy(error):
         ctx.pass_on()
         return

@@ -2,9 +2,11 @@
 
 ``python -m manip.reference_client.harness [--fault NAME]...`` (also ``manip-client harness``) reads
 case instructions on stdin and performs them with the reference client's public API, writing what the
-client saw as JSON result lines on stdout; logs go to stderr.  ``--fault NAME`` (or
-``MANIP_CLIENT_FAULTS``) switches on a fault of the client (:mod:`.faults`) so the suite is shown to
-catch it; ``--list-faults`` lists them.
+client saw as JSON result lines on stdout; logs go to stderr.  ``--fault NAME`` switches on a fault of
+the client (:mod:`.faults`) so the suite is shown to catch it; ``--list-faults`` lists them.  The faults
+are read here, at the entry point, into one :class:`~manip.reference_client.faults.ClientFaults` value
+that every case's client gets in its options (``manip-conform client -- python -m
+manip.reference_client.harness --fault NAME`` passes them through).
 """
 
 from __future__ import annotations
@@ -20,7 +22,6 @@ from typing import Any, Final
 
 from manip.codecs.messages import response_layout
 from manip.commandline import configure_logging
-from manip.reference_client import faults
 from manip.reference_client.connect import open_manipulator
 from manip.reference_client.errors import (
     AsynchronousError,
@@ -36,6 +37,7 @@ from manip.reference_client.errors import (
     ServerError,
 )
 from manip.reference_client.extractors import extract_done, extract_segment, extract_text, extract_values
+from manip.reference_client.faults import FAULTS, NO_FAULTS, ClientFault, ClientFaults
 from manip.reference_client.guards import WristBook
 from manip.reference_client.manipulator import Manipulator
 from manip.reference_client.options import ClientOptions
@@ -125,7 +127,8 @@ def raw_fields(layout: Layout, data: bytes) -> dict[str, list[str]]:
 class CaseRun:
     """One case: its operations performed in order with the reference client."""
 
-    def __init__(self, instruction: Mapping[str, Any], emit: Emit) -> None:
+    def __init__(self, instruction: Mapping[str, Any], emit: Emit, faults: ClientFaults = NO_FAULTS) -> None:
+        self.faults = faults
         self.case = str(instruction.get("case"))
         self.target = str(instruction.get("target"))
         self.contact = str(instruction.get("contact") or "PUMA")
@@ -181,7 +184,11 @@ class CaseRun:
 
     async def connect(self, ident: int | None) -> None:
         options = ClientOptions(
-            timeout=self.timeout, connect_timeout=self.timeout, contact=self.contact, close_timeout=1.0
+            timeout=self.timeout,
+            connect_timeout=self.timeout,
+            contact=self.contact,
+            close_timeout=1.0,
+            faults=self.faults,
         )
         try:
             arm = await open_manipulator(self.target, options)
@@ -196,7 +203,7 @@ class CaseRun:
             self.ended = True
             return
         self.arm = arm
-        self.wrist = WristBook(arm)
+        self.wrist = WristBook(arm, faults=self.faults)
         arm.add_async_listener(self.on_async)
         arm.add_error_listener(self.on_error)
         arm.add_close_listener(self.on_close)
@@ -309,7 +316,7 @@ class CaseRun:
         else:
             values = {k: _json_value(v) for k, v in dict(value).items()}
             raw = raw_fields(response_layout(spec), data)
-            if faults.on(faults.ClientFault.LITERAL_EXAMPLES):  # one element as a bare string
+            if ClientFault.LITERAL_EXAMPLES in self.faults:  # one element as a bare string
                 counted = {f.name for f in response_layout(spec).fields if f.type.element == "counted"}
                 raw = {k: v[0] if len(v) == 1 and k not in counted else v for k, v in raw.items()}
         self.emit("reply", ident, request=name, request_number=request.packet_number, values=values, raw=raw)
@@ -350,7 +357,7 @@ class CaseRun:
     def lost(self, reason: str) -> None:
         if not self.ended and not self.closing:
             self.ended = True
-            if faults.on(faults.ClientFault.LITERAL_EXAMPLES):  # after the in-flight requests' errors
+            if ClientFault.LITERAL_EXAMPLES in self.faults:  # after the in-flight requests' errors
                 self._late.append(asyncio.get_running_loop().create_task(self._lost_after(reason)))
                 return
             self.emit("state", None, state="lost", reason=reason)
@@ -407,8 +414,14 @@ def _writer(stream: Any) -> Emit:
     return emit
 
 
-async def run_harness(lines: Callable[[], Any], emit: Emit, operations: Sequence[str] | None = None) -> None:
-    """Say hello, then run each case read from ``lines()`` (an awaitable of one line, "" at the end)."""
+async def run_harness(
+    lines: Callable[[], Any],
+    emit: Emit,
+    operations: Sequence[str] | None = None,
+    faults: ClientFaults = NO_FAULTS,
+) -> None:
+    """Say hello, then run each case read from ``lines()`` (an awaitable of one line, "" at the end)
+    with a client that has ``faults``."""
     emit(hello(operations))
     while True:
         line = await lines()
@@ -425,7 +438,7 @@ async def run_harness(lines: Callable[[], Any], emit: Emit, operations: Sequence
         if not isinstance(instruction, dict) or instruction.get("type") != "case":
             log.error("not a case instruction: %.200s", line)
             continue
-        await CaseRun(instruction, emit).run()
+        await CaseRun(instruction, emit, faults).run()
 
 
 def main(argv: Sequence[str] | None = None, *, prog: str = "python -m manip.reference_client.harness") -> int:
@@ -450,21 +463,20 @@ def main(argv: Sequence[str] | None = None, *, prog: str = "python -m manip.refe
     parser.add_argument("-v", "--verbose", action="store_true", help="log to stderr")
     args = parser.parse_args(argv)
     if args.list_faults:
-        for fault, info in faults.FAULTS.items():
+        for fault, info in FAULTS.items():
             print(f"{fault.value:24} {info.what} [{', '.join(info.clauses)}]")
         return 0
     try:
-        chosen = faults.from_env() | faults.parse(args.fault)
+        faults = ClientFaults.parse(args.fault)
     except ValueError as exc:
         parser.error(str(exc))
-    faults.activate(chosen)
     configure_logging(logging.INFO if args.verbose else logging.ERROR)
 
     async def read() -> str:
         return await asyncio.to_thread(sys.stdin.readline)
 
     operations = None if args.operations is None else [o.strip() for o in args.operations.split(",")]
-    asyncio.run(run_harness(read, _writer(sys.stdout), operations))
+    asyncio.run(run_harness(read, _writer(sys.stdout), operations, faults))
     return 0
 
 

@@ -32,7 +32,6 @@ from typing import Any, Final, SupportsInt, TypeVar
 from manip.codecs.messages import AsyncResponse, copy_request_data, encode_request
 from manip.codecs.packet import MAX_DATA
 from manip.ncp.seq import seq_gt, seq_le
-from manip.reference_client import faults
 from manip.reference_client.arguments import word
 from manip.reference_client.background import AsyncListener, BackgroundProcess, CloseListener, ErrorListener
 from manip.reference_client.errors import (
@@ -151,11 +150,12 @@ class Manipulator(GenericOperations, PumaOperations):
             raise ValueError(f"{rc} has no spec layout for fields; pass data")
         else:
             payload = b""
-        if faults.on(ClientFault.SET_SPEED_LENGTH) and rc.spec is not None and rc.spec.name == "set-speed":
+        faults = self.options.faults
+        if ClientFault.SET_SPEED_LENGTH in faults and rc.spec is not None and rc.spec.name == "set-speed":
             payload += bytes(4)
         if len(payload) > MAX_DATA:  # a Chaos packet cannot carry it: refused here, not by the link later
             raise ValueError(f"{rc}: {len(payload)} data bytes, more than a Chaos packet holds ({MAX_DATA})")
-        if faults.on(ClientFault.EARLY_TIMEOUT) and isinstance(timeout, int | float):
+        if ClientFault.EARLY_TIMEOUT in faults and isinstance(timeout, int | float):
             timeout = timeout / 2
         chosen = rc.default_extractor if isinstance(extractor, Default) else extractor
         function = self.registry.resolve_extractor(chosen)

@@ -51,7 +51,6 @@ from typing import Any, Final
 from manip.codecs.error_string import ErrorMessage, parse_error
 from manip.codecs.errors import CodecError
 from manip.codecs.lispm_text import decode_lispm
-from manip.reference_client import faults
 from manip.reference_client.errors import (
     ConnectionLost,
     ManipError,
@@ -69,7 +68,7 @@ from manip.reference_client.events import (
     RequestAnswered,
     RequestFailed,
 )
-from manip.reference_client.faults import ClientFault
+from manip.reference_client.faults import NO_FAULTS, ClientFault, ClientFaults
 from manip.reference_client.packets import ResponseInfo, ServerPacket
 from manip.reference_client.registry import Registry
 from manip.reference_client.request import Request, RequestState, ResponseType
@@ -104,6 +103,7 @@ class MatchingCore:
         history: int = DEFAULT_HISTORY,
         align_args: bool = True,
         max_reply_bytes: int | None = None,
+        faults: ClientFaults = NO_FAULTS,
     ) -> None:
         self.registry = registry
         self.max_reply_bytes = max_reply_bytes
@@ -112,7 +112,9 @@ class MatchingCore:
         self.trivial_errors = trivial_errors
         """The policy the ``notify-trivial-errors`` handler consults (None: nothing is trivial)."""
         self.align_args = align_args
-        expect_initial_response = expect_initial_response and not faults.on(ClientFault.NO_INITIAL_WAIT)
+        self.faults = faults
+        """The client's fault switches (the handlers read them too)."""
+        expect_initial_response = expect_initial_response and ClientFault.NO_INITIAL_WAIT not in faults
         self.phase = Phase.AWAITING_INITIAL if expect_initial_response else Phase.OPEN
         self._pending: dict[int, Request[Any]] = {}
         self._finished: OrderedDict[int, _Finished] = OrderedDict()
@@ -216,9 +218,9 @@ class MatchingCore:
     # ------------------------------------------------------------------ primitives for handlers
 
     def find_matching_request(self, number: int) -> Request[Any] | None:
-        if faults.on(ClientFault.WRONG_REQUEST_NUMBER):
+        if ClientFault.WRONG_REQUEST_NUMBER in self.faults:
             number = (number + 1) & 0xFFFF
-        if faults.on(ClientFault.ARRIVAL_ORDER) and self._pending:
+        if ClientFault.ARRIVAL_ORDER in self.faults and self._pending:
             return next(iter(self._pending.values()))  # the oldest waiting, whatever the number
         return self._pending.get(number)
 
@@ -242,7 +244,11 @@ class MatchingCore:
         if request.extractor is None:
             return self.answer(request, None)
         try:
-            value = request.extractor(request, tuple(request.responses))
+            payloads = tuple(request.responses)
+            if request.code.spec is not None:  # the float faults read the data by the layout
+                layout = request.code.spec.response.data
+                payloads = tuple(self.faults.read_floats(layout, p) for p in payloads)
+            value = request.extractor(request, payloads)
         except Exception as exc:
             error = ResponseDataError(request, str(exc) or type(exc).__name__)
             error.__cause__ = exc
@@ -353,7 +359,7 @@ class ResponseContext:
     def error_message(self) -> ErrorMessage:
         """The payload read as an E.2 error string; a string that does not parse is kept as text."""
         payload = self.payload
-        if faults.on(ClientFault.IGNORE_PAD) and 0 in payload:
+        if ClientFault.IGNORE_PAD in self.core.faults and 0 in payload:
             # the numbers read from right after the NUL, pad byte and all; an odd last byte dropped
             rest = len(payload) - payload.index(0) - 1
             with contextlib.suppress(CodecError):

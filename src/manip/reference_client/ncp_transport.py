@@ -47,9 +47,8 @@ from manip.links import ConnectionLost as ChaosConnectionLost
 from manip.links.api import LinkWrapper
 from manip.ncp.config import MAX_WINDOW
 from manip.ncp.packets import pack_status, unpack_status
-from manip.reference_client import faults
 from manip.reference_client.errors import ConnectionLost
-from manip.reference_client.faults import ClientFault
+from manip.reference_client.faults import NO_FAULTS, ClientFault, ClientFaults
 from manip.reference_client.packets import ResponseInfo, ServerPacket, chaos_response_info
 from manip.reference_client.request import Request
 from manip.spec.constants import ChaosOp, ServerOp
@@ -82,6 +81,7 @@ class NcpTransport:
         close_timeout: float = DEFAULT_CLOSE_TIMEOUT,
         ncp_options: NcpConfig | None = None,
         wrap_link: LinkWrapper | None = None,
+        faults: ClientFaults = NO_FAULTS,
     ) -> None:
         self.address = parse_address(address) if isinstance(address, str) else address
         self.contact = contact or self.address.contact
@@ -90,8 +90,8 @@ class NcpTransport:
         # A server that sends an illegal packet is answered with LOS, which ends the connection for it:
         # the client gives the connection up at once rather than wait for replies that cannot come.
         self.ncp_options = replace(ncp_options or NcpConfig(), lose_on_illegal=True)
-        self.wrap_link = _no_ack(wrap_link) if faults.on(ClientFault.NEVER_ACK) else wrap_link
-        if faults.on(ClientFault.IGNORE_WINDOW):
+        self.wrap_link = _no_ack(wrap_link) if ClientFault.NEVER_ACK in faults else wrap_link
+        if ClientFault.IGNORE_WINDOW in faults:
             self.wrap_link = _wide_window(self.wrap_link)
         self._conn: ChaosConnection | None = None
         self._ahead: Packet | None = None

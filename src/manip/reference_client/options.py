@@ -9,6 +9,7 @@ from typing import Final
 from manip.links.api import LinkWrapper
 from manip.reference_client.definitions import DEFAULT_REGISTRY, PUMA
 from manip.reference_client.errors import NonFatalError
+from manip.reference_client.faults import NO_FAULTS, ClientFaults
 from manip.reference_client.handlers import DEFAULT_HANDLER_TYPES, NOTIFY_TRIVIAL_ERRORS
 from manip.reference_client.matching import DEFAULT_HISTORY
 from manip.reference_client.policy import TrivialErrors
@@ -59,6 +60,9 @@ class ClientOptions:
     """Put between the Chaos node and its link when connecting by URL (:func:`manip.links.open_connection`):
     ``RecorderTap(recorder, "client").wrap`` (:mod:`manip.captures`) records the session.  A transport
     given ready-made takes its own (``NcpTransport(..., wrap_link=)``)."""
+    faults: ClientFaults = NO_FAULTS
+    """Fault switches that make the client break one rule on purpose (:mod:`.faults`; none: a
+    conforming client).  A transport given ready-made takes its own (``NcpTransport(..., faults=)``)."""
 
     def effective_handler_types(self, notify_trivial_errors: bool | None = None) -> tuple[str, ...]:
         notify = self.notify_trivial_errors if notify_trivial_errors is None else notify_trivial_errors

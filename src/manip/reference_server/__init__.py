@@ -2,7 +2,8 @@
 
 This package is the sans-I/O core: :class:`ServerSession` (one connection's protocol state machine, fed
 packets and time, returning packets to send), the fault switches that bend it for testing conformance
-suites (:mod:`~manip.reference_server.faults`), the describe-self text and the seam for the Cougar wrist.
+suites (:mod:`~manip.reference_server.faults`) at the hook points of :mod:`~manip.reference_server.defects`,
+the describe-self text and the seam for the Cougar wrist.
 The simulated arm itself is :class:`manip.arm.sim.ArmSim`.  :func:`serve` (:mod:`~.driver`) runs it over
 Chaos links with asyncio; ``manip-server`` (:mod:`~.cli`) is the command.
 """

@@ -64,7 +64,6 @@ from manip.links.drv11j import Drv11jPort
 from manip.reference_server import errors
 from manip.reference_server.cougar_port import CougarPort, SimPort
 from manip.reference_server.errors import RequestError
-from manip.reference_server.faults import Fault, FaultSet
 from manip.reference_server.session import WRIST_OPERATIONS
 from manip.reference_server.wrist import GuardHit, Pending, WristConditions, WristEvent, WristNotice
 from manip.spec import SPEC, RequestOpcode
@@ -269,8 +268,6 @@ class CougarWrist:
         self._procedures: list[_Calibration] = []
         self._events: list[WristEvent] = []
         self._link_reported = False
-        self.faults = FaultSet()
-        """Defects switched on for testing a judge of the Puma's wrist side (``use_faults``)."""
         self._cycles = 0
         self._forces: tuple[float, ...] = (0.0,) * 6
         self.conditions = WristConditions()
@@ -285,10 +282,6 @@ class CougarWrist:
         """An in-process Cougar's environment before :meth:`load_hand` first changed it."""
 
     # ------------------------------------------------------------------------------ Wrist API
-    def use_faults(self, faults: FaultSet) -> None:
-        """The server's fault switches (the session passes them on)."""
-        self.faults = faults
-
     def condition(self, conditions: WristConditions) -> None:
         self.conditions = conditions
 
@@ -370,7 +363,7 @@ class CougarWrist:
             for s, ps, n, pn in zip(actual, ep.prev_sensed, nominal, ep.prev_nominal, strict=True)
         )
         self._cycles += 1
-        if Fault.NPR_SKIPPED not in self.faults or self._cycles % 2:
+        if self.conditions.npr_every_cycle or self._cycles % 2:
             self._npr.append(
                 encode(
                     "command",
@@ -406,7 +399,7 @@ class CougarWrist:
     def queue_command(self, name: str | int, **values: Any) -> None:
         """Put a command on the user queue (sent on the next tick)."""
         words = encode("command", name, **values)
-        if Fault.WRIST_FLOAT_WORDS_SWAPPED in self.faults:
+        if self.conditions.command_floats_swapped:
             words = _swap_float_words(words)
         self._user.append(words)
 
@@ -450,7 +443,7 @@ class CougarWrist:
     def _output(self, arm: ArmSim) -> None:
         """The output process: everything queued, in the 1985 guide's priority order."""
         words: list[int] = []
-        if Fault.WRIST_USER_FIRST in self.faults:
+        if self.conditions.user_commands_first:
             while self._user:
                 words += self._user.popleft()
                 self.stats.commands += 1
@@ -579,7 +572,7 @@ class CougarWrist:
         stop = msg.code == CougarResponse.GUARD_STOP
         self.stats.guard_hits += 1
         self._armed.discard(index)
-        halts = stop and Fault.GUARD_IGNORED not in self.faults
+        halts = stop and self.conditions.guard_stops_arm
         arm_events = tuple(arm.halt(AbortCause.GUARD)) if halts else ()
         if halts:
             self._reset = True
@@ -653,10 +646,10 @@ class CougarWrist:
     # ------------------------------------------------------------------------------ handlers
     def _read_forces(self, values: Mapping[str, Value], now: float, arm: ArmSim) -> Pending | dict[str, Any]:
         # §6.3: the current joint angles go first, so Cougar's gravity correction is up to date.
-        if Fault.READ_FORCES_NO_ANGLES not in self.faults:
+        if self.conditions.read_forces_sends_angles:
             self._interrupt.append(encode("command", CougarCommand.SEN, theta_sensed=arm.actual))
             self._sen_sent = arm.actual
-        if Fault.WRIST_NO_WAIT in self.faults:
+        if not self.conditions.read_forces_waits:
             self.queue_command(CougarCommand.RFRC)
             return {"forces": self._forces}
         return self._request(
@@ -913,7 +906,7 @@ class _Calibration:
             return False
         if len(self.readings[self.position]) < self.settings.samples:
             return False  # replies still to come (or a timeout, which fails us)
-        if self.position == 0 and Fault.CALIBRATE_ONE_POSE not in self.wrist.faults:
+        if self.position == 0 and self.wrist.conditions.calibrate_two_poses:
             self.position, self.settled, self.asked = 1, 0, 0
             try:
                 arm.move_joints(self.poses[1], t)

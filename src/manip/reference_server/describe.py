@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from manip.arm.kinematics import ArmModel
 from manip.codecs.lisp import Keyword, LispValue, cons, print_lisp
 
-__all__ = ["Description", "describe_text"]
+__all__ = ["Description", "Statement", "describe_text"]
 
 
 @dataclass(frozen=True)
@@ -30,6 +30,24 @@ class Description:
     software_version: tuple[tuple[str, int], ...] = (("server", 1), ("move-process", 1))
     """Module names and version numbers: printed as alternating keywords and numbers."""
     protocol_version: int = 1
+
+
+@dataclass(frozen=True)
+class Statement:
+    """What describe self states about the arm: the opcodes it lists and the geometry it gives."""
+
+    operations: frozenset[int]
+    degrees_of_freedom: int
+    joint_limits: tuple[tuple[float, float], ...]
+    ready_position: tuple[float, ...]
+    protocol_version: bool = True
+    """Whether the alist carries :protocol-version."""
+
+    @classmethod
+    def of(cls, model: ArmModel, operations: Iterable[int]) -> Statement:
+        """The truth about ``model``, serving ``operations``."""
+        limits = tuple(zip(model.limits.lower, model.limits.upper, strict=True))
+        return cls(frozenset(operations), len(model.ready), limits, tuple(model.ready))
 
 
 def _entry(key: str, value: LispValue) -> str:

@@ -80,7 +80,6 @@ from manip.links.api import LinkWrapper
 from manip.links.stream import StreamLink
 from manip.links.virtual_clock import is_virtual
 from manip.ncp import ConnectionRequested
-from manip.reference_server.faults import Fault
 from manip.reference_server.session import Outgoing, Output, ServerConfig, ServerSession, State
 from manip.reference_server.wrist import Wrist
 from manip.spec import SPEC, RequestOpcode
@@ -340,7 +339,7 @@ class ReferenceServer:
                     self.stats.packets_sent += 1
                 if session.state is State.CLOSED:
                     if not out:
-                        if Fault.FATAL_DROPS_LINK in session.faults:
+                        if session.defects.after_fatal == "drop-link":
                             return await self._drop_link(conn)
                         await conn.close()
                         return "closed after a fatal error"
@@ -429,7 +428,7 @@ class ReferenceServer:
         arm.unfree()
         self.joints = arm.actual
         self.hand_open = arm.hand_open
-        if Fault.CLOSE_KEEPS_MOVING in session.faults:
+        if session.defects.keeps_arm_after_close:
             self._carried = arm
         with contextlib.suppress(Exception):
             session.on_close(self.now())

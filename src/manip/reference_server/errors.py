@@ -65,13 +65,10 @@ _REFUSALS: Final[dict[str, tuple[str, str]]] = {
 _TOR_LIMITS: Final = "Every solution of the transform puts joint(s) $ out of range"
 
 
-def refusal_error(where: str, refusal: Refused, *, swap_tor_jor: bool = False) -> RequestError:
-    """The non-fatal error answering a request the arm refused (``swap_tor_jor``: the fault switch
-    ``swap-tor-jor``, which answers TOR with JOR and JOR with TOR)."""
+def refusal_error(where: str, refusal: Refused) -> RequestError:
+    """The non-fatal error answering a request the arm refused."""
     if refusal.code in _REFUSALS:
         code = refusal.code
-        if swap_tor_jor and code in ("TOR", "JOR"):
-            code = "JOR" if code == "TOR" else "TOR"
         severity, message = _REFUSALS[refusal.code]
         if refusal.code == "TOR":
             limits = bool(refusal.joints)

@@ -59,15 +59,16 @@ segment completed (0203, code 2) only while the client has asked for it with req
 (0204); a joint lagging its command as an asynchronous warning (0205).
 
 Fault switches (:mod:`manip.reference_server.faults`) bend single behaviours for testing conformance
-suites; each place that consults one names it.
+suites.  The session never tests one: at a few named points (the number a reply carries, the packets of
+a reply, what an error says, what follows a fatal error ...) it hands what it is about to do to its
+:class:`~manip.reference_server.defects.Defects` and does what comes back; a conforming session's
+hooks change nothing (:mod:`manip.reference_server.defects` lists them).
 """
 
 from __future__ import annotations
 
 import enum
 import logging
-import math
-import struct
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
@@ -75,7 +76,6 @@ from typing import Any, Final, Literal
 
 from manip.arm.kinematics import PUMA600, ArmModel, forward
 from manip.arm.sim import (
-    AbortCause,
     ArmEvent,
     ArmSim,
     FollowingWarning,
@@ -90,17 +90,14 @@ from manip.codecs.lispm_text import encode_lispm
 from manip.codecs.messages import (
     MAX_TEXT_PER_PACKET,
     Value,
-    decode_request,
-    encode_async,
-    encode_error,
     encode_reply,
 )
-from manip.codecs.pdp11float import F_MIN_NORMAL, pack_f
 from manip.reference_server import errors
-from manip.reference_server.describe import Description, describe_text
+from manip.reference_server.defects import Defects, defects_for
+from manip.reference_server.describe import Description, Statement, describe_text
 from manip.reference_server.errors import RequestError
-from manip.reference_server.faults import Fault, FaultSet
-from manip.reference_server.wrist import GuardHit, NoWrist, Pending, Wrist, WristConditions, WristNotice
+from manip.reference_server.faults import FaultSet
+from manip.reference_server.wrist import GuardHit, NoWrist, Pending, Wrist, WristNotice
 from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
 from manip.spec.notation import octal
@@ -122,18 +119,6 @@ __all__ = [
 log = logging.getLogger("manip.reference_server")
 
 WORD_MASK: Final = 0xFFFF
-MISSING_OPERATION: Final[RequestName] = "solve-backwards"
-"""The served opcode describe self leaves out under the ``describe-missing-operation`` fault."""
-NARROWED_DEG: Final = 5.0
-"""How much narrower than the arm's each joint range is stated under ``describe-narrow-limits``."""
-READY_OFF_DEG: Final = 10.0
-"""How far from where move to ready goes joint 2 of :ready-position is stated under ``describe-ready-off``."""
-_SWAPPED_ARGS: Final[dict[Fault, frozenset[str]]] = {
-    Fault.UOP_OPCODE_SWAPPED: frozenset({"UOP"}),
-    Fault.BDL_COUNTS_SWAPPED: frozenset({"BDL"}),
-    Fault.JOINT_MASK_SWAPPED: frozenset({"JOR", "TOR"}),
-}
-"""The error codes whose numbers each byte-swapping fault sends high byte first."""
 ErrorArgs = Literal["aligned", "packed"]
 
 
@@ -204,17 +189,11 @@ class _Event:
 Handler = Callable[["ServerSession", Mapping[str, Value], float], dict[str, Any]]
 """A request handler: the decoded values and the time in, the reply's values out (``{}`` for done)."""
 
-_FLOAT_FAULTS: Final = frozenset({Fault.UNDERFLOW_DIRTY_ZERO, Fault.NOT_FINITE_RESERVED})
-_SEGMENTS_STOP_REST_S: Final = 0.1
-"""How long the segments-stop fault rests between queued segments: clearly more than a blend's pause."""
-_RESERVED_OPERAND: Final = 0x8000
-"""First word of a reserved-operand float: sign 1, exponent 0."""
 _SEGMENT_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
 _GUARD_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.GUARD_HIT].notification_bit
 _GUARD_STOP: Final = 1
 """Word 2 of a guard-hit response: 1 = the trajectory was stopped, 2 = it continues (E.3)."""
 _GUARD_CONTINUE: Final = 2
-_ASYNC_ERRORS: Final = frozenset({ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING})
 _NOTIFICATION_MASK: Final = sum(1 << code.notification_bit for code in SPEC.async_codes.values())
 
 
@@ -229,43 +208,18 @@ class ServerSession:
         self, config: ServerConfig | None = None, *, arm: ArmSim | None = None, wrist: Wrist | None = None
     ) -> None:
         self.config = config or ServerConfig()
-        faults = self.config.faults
-        self.faults = faults
+        self.defects: Defects = defects_for(self.config.faults)
+        """The hook points the fault switches bend (chosen once, here)."""
         self.arm = arm or ArmSim(self.config.model, powered=self.config.powered_at_open)
         self.wrist: Wrist = wrist or NoWrist()
-        self.wrist.condition(
-            WristConditions(
-                silent=Fault.WRIST_SILENT in faults, answer_timeouts=Fault.WRIST_TIMEOUT_SILENT not in faults
-            )
-        )
-        if Fault.SEGMENT_NUMBER_STUCK in faults:
-            self.arm.segment_step = 0
-        self.arm.enforce_power = Fault.NO_NAP not in faults
-        self.arm.enforce_abort = Fault.AWA_IGNORED not in faults
-        if faults.obstacle is not None and Fault.OBSTACLE in faults:
-            self.arm.place_obstacle(faults.obstacle)
-        if Fault.SLUGGISH_JOINT in faults:
-            self.arm.sluggish = faults.sluggish
-        if Fault.COLLISION_UNCHECKED in faults:
-            self.arm.collision_tol_deg = math.inf
-        self.arm.increment_from_actual = Fault.INCREMENT_FROM_ACTUAL in faults
-        self.arm.keep_queue_on_abort = Fault.ABORT_KEEPS_QUEUE in faults
-        if Fault.SEGMENTS_STOP in faults:
-            self.arm.stop_between_segments = _SEGMENTS_STOP_REST_S
-        if Fault.SERVO_DOUBLE_RATE in faults:
-            self.arm.tick_period /= 2
-        self.arm.collision_test_compliant = Fault.COMPLIANT_COLLISION_TEST in faults
-        self.arm.hold_compliant_end = Fault.COMPLIANT_SNAP_BACK not in faults
-        use_faults = getattr(self.wrist, "use_faults", None)
-        if use_faults is not None:  # the wrist processes' own defects (a Wrist need have none)
-            use_faults(faults)
+        self.defects.condition(self.arm, self.wrist)
         self.state = State.AWAITING_INITIAL
         self.notifications = 0
         """The request-notifications mask in force (bit 0 guard hit, bit 1 segment completed)."""
         self.last_processed: int | None = None
         """Packet number of the last request processed (the RFC's until the first request)."""
         self._processed_before: int | None = None
-        """The one processed before it (fault async-number-previous)."""
+        """The one processed before it (the error-number hook point may use it)."""
         self.last_received: int | None = None
         self._now = float("-inf")
         self._out: list[Outgoing] = []
@@ -284,12 +238,7 @@ class ServerSession:
     def inherit(self, previous: ServerSession) -> None:
         """Take over what the connection before this one set, as the ``connection-keeps-*`` fault
         switches say (a conforming session takes nothing: erratum server-robot)."""
-        if Fault.KEEPS_SPEED in self.faults:
-            self.arm.set_speed(previous.arm.speed)
-        if Fault.KEEPS_CONFIGURATION in self.faults and previous.arm.lefty is not None:
-            self.arm.set_configuration(previous.arm.lefty)
-        if Fault.KEEPS_NOTIFICATIONS in self.faults:
-            self.notifications = previous.notifications
+        self.defects.inherit(self, previous)
 
     # ------------------------------------------------------------------------------ driver inputs
     def on_open(self, now: float, rfc_packet_no: int) -> Output:
@@ -339,10 +288,8 @@ class ServerSession:
     def _send_initial(self, event: _Event) -> State | None:
         self.last_processed = event.packet_no
         self.arm.tick(event.now)  # the move process starts with the connection
-        if Fault.PANIC_BUTTON in self.faults:
-            self.arm.press_panic(at=event.now + self.faults.panic_delay)
-        if Fault.NO_INITIAL_RESPONSE not in self.faults:
-            number = event.packet_no + (1 if Fault.INITIAL_RESPONSE_NUMBER in self.faults else 0)
+        self.defects.opened(self.arm, event.now)
+        for number in self.defects.initial_numbers(event.packet_no):
             self._emit(ServerOp.RESPONSE, _word(number))
         return None
 
@@ -354,34 +301,33 @@ class ServerSession:
             if isinstance(wev, GuardHit):
                 # The abort is the guard hit itself: report only the segments that ended before it.
                 self._report_arm(number, [e for e in wev.arm_events if not isinstance(e, MotionAborted)])
-                if Fault.GUARD_UNREPORTED in self.faults:
-                    continue
-                if self.notifications & _GUARD_BIT or Fault.UNREQUESTED_ASYNC in self.faults:
-                    word2 = _GUARD_STOP if wev.stop else _GUARD_CONTINUE
-                    if Fault.GUARD_HIT_WORD_SWAPPED in self.faults:
-                        word2 = _GUARD_STOP + _GUARD_CONTINUE - word2
-                    self._emit_async(number, AsyncCondition.GUARD_HIT, word2, wev.index)
-                elif wev.stop:
-                    self._emit_error(ServerOp.ASYNCHRONOUS_ERROR, number, errors.guard_stop_error(wev.index))
+                self._report_guard(number, wev)
             elif isinstance(wev, WristNotice):
                 opcode = ServerOp.ASYNCHRONOUS_ERROR if wev.error else ServerOp.ASYNCHRONOUS_WARNING
                 self._emit_error(opcode, number, wev.message)
         return None
 
+    def _report_guard(self, number: int, hit: GuardHit) -> None:
+        """A guard-hit response when the client asked for them, else an asynchronous error when the
+        guard stopped the move (erratum ``guard-stop``)."""
+        if not self.defects.reports_guard(hit):
+            return
+        if self.defects.notifications(self.notifications) & _GUARD_BIT:
+            word2 = _GUARD_STOP if hit.stop else _GUARD_CONTINUE
+            self._emit_async(number, AsyncCondition.GUARD_HIT, word2, hit.index)
+        elif hit.stop:
+            self._emit_error(ServerOp.ASYNCHRONOUS_ERROR, number, errors.guard_stop_error(hit.index))
+
     def _report_arm(self, number: int, events: list[ArmEvent]) -> None:
         for ev in events:
             if isinstance(ev, SegmentCompleted):
-                if self.notifications & _SEGMENT_BIT or Fault.UNREQUESTED_ASYNC in self.faults:
-                    segment = ev.segment
-                    if Fault.SEGMENT_REPORT_PREVIOUS in self.faults:
-                        segment = (segment - 1) & 0xFFFF
-                    self._emit_async(number, AsyncCondition.SEGMENT_COMPLETED, 0, segment)
+                if self.defects.notifications(self.notifications) & _SEGMENT_BIT:
+                    self._emit_async(number, AsyncCondition.SEGMENT_COMPLETED, 0, ev.segment)
             elif isinstance(ev, MotionAborted):
                 self._emit_error(ServerOp.ASYNCHRONOUS_ERROR, number, errors.abort_error(ev))
             elif isinstance(ev, FollowingWarning):
                 self._emit_error(ServerOp.ASYNCHRONOUS_WARNING, number, errors.warning_error(ev))
-                if Fault.WARNING_INTERRUPTS in self.faults:
-                    self._report_arm(number, self.arm.halt(AbortCause.COLLISION))
+                self._report_arm(number, self.defects.after_warning(self.arm))
 
     # ---------------------------------------------------------------- waiting for the wrist
     def _hold(self, event: _Event) -> State | None:
@@ -405,10 +351,7 @@ class ServerSession:
         try:
             values = pending.outcome()
         except RequestError as exc:
-            if Fault.WRIST_ERROR_FATAL in self.faults:
-                state = self._fatal(number, replace(exc.error, severity="F"))
-            else:
-                state = self._refuse(number, exc)
+            state = self._refuse(number, self.defects.wrist_failure(exc))
         else:
             self._reply(op, number, values)
         state = state or State.READY
@@ -429,7 +372,7 @@ class ServerSession:
         """The packet after free joint: un-free the joint, answer done, do not execute it."""
         self._run_arm(event)
         self.arm.unfree()
-        if Fault.FREE_JOINT_EXECUTES in self.faults:
+        if not self.defects.discards_after_free_joint:
             return self._serve(event)
         self.last_received = self.last_processed = event.packet_no
         self._emit(ServerOp.RESPONSE, _word(self._echo(event)))
@@ -443,57 +386,51 @@ class ServerSession:
         self._next_state = None
         op = SPEC.requests.get(event.opcode)
         try:
-            if op is None:
-                if Fault.UNKNOWN_OPCODE_ANSWERED in self.faults:
-                    self._emit(ServerOp.RESPONSE, _word(number))
-                    return None
-                raise errors.unknown_opcode(event.opcode)
-            handler = HANDLERS.get(op.name)
-            if handler is None and op.opcode not in self.wrist.served:
-                raise errors.not_served(op.opcode)
-            values = self._decode(op, event.data)
-            if (
-                Fault.AWA_REFUSES_ALL in self.faults
-                and self.arm.aborted
-                and op.name not in ("enable-power", "reset-abort")
-            ):
-                raise errors.refusal_error(op.name, Refused("AWA", "motion aborted; reset first"))
-            try:
-                result: dict[str, Any] | Pending
-                if handler is None:
-                    result = self.wrist.handle(op, values, event.now, self.arm)
-                else:
-                    result = handler(self, values, event.now)
-            except Refused as refusal:
-                swap = Fault.SWAP_TOR_JOR in self.faults
-                raise errors.refusal_error(op.name, refusal, swap_tor_jor=swap) from refusal
+            result = self._execute(op, event)
         except RequestError as exc:
-            return self._refuse(number, exc)
+            outcome = self.defects.refused(op, exc)
+            if isinstance(outcome, RequestError):
+                return self._refuse(number, outcome)
+            result = outcome  # a defect answers it anyway
         except Exception:
             log.exception("handler for opcode %s failed", octal(event.opcode))
             self._emit_error(ServerOp.NON_FATAL_ERROR, number, errors.internal_error(event.opcode).error)
             return None
         if isinstance(result, Pending):
+            assert op is not None
             self._waiting = (op, number, result)
             return self._settle(event.now) or State.WRIST_WAIT  # already failed: answer at once
         self._reply(op, number, result)
         return self._next_state
 
+    def _execute(self, op: RequestOpcode | None, event: _Event) -> dict[str, Any] | Pending:
+        """Look the request up, decode it and run its handler (or the wrist's): its reply's values, a
+        :class:`Pending`, or RequestError."""
+        if op is None:
+            raise errors.unknown_opcode(event.opcode)
+        handler = HANDLERS.get(op.name)
+        if handler is None and op.opcode not in self.wrist.served:
+            raise errors.not_served(op.opcode)
+        values = self._decode(op, event.data)
+        self.defects.check(op, self.arm)
+        try:
+            if handler is None:
+                return self.wrist.handle(op, values, event.now, self.arm)
+            return handler(self, values, event.now)
+        except Refused as refusal:
+            raise errors.refusal_error(op.name, refusal) from refusal
+
     def _refuse(self, number: int, exc: RequestError) -> State | None:
         if exc.fatal:
             return self._fatal(number, exc.error)
         self._emit_error(ServerOp.NON_FATAL_ERROR, number, exc.error)
-        if Fault.EXTRA_REPLY_AFTER_ERROR in self.faults:
-            self._emit(ServerOp.RESPONSE, _word(number))
+        for data in self.defects.after_error(number):
+            self._emit(ServerOp.RESPONSE, data)
         return None
 
     def _fatal(self, number: int, error: ErrorMessage) -> State | None:
-        if Fault.FATAL_NUMBER_PREVIOUS in self.faults:
-            number = (number - 1) & WORD_MASK
-        if Fault.FATAL_SEVERITY_E in self.faults:
-            error = replace(error, severity="E")
         self._emit_error(ServerOp.FATAL_ERROR, number, error)
-        if Fault.FATAL_WITHOUT_CLOSE in self.faults:
+        if self.defects.after_fatal == "stay-open":
             return None
         self._close = True
         return State.CLOSED
@@ -501,41 +438,33 @@ class ServerSession:
     # ------------------------------------------------------------------------------- encoding
     def _echo(self, event: _Event) -> int:
         """The request number a reply to ``event`` carries."""
-        if Fault.ECHO_ACK_NUMBER in self.faults:
-            return event.ack_no if event.ack_no is not None else 0
-        if Fault.WRONG_REQUEST_NUMBER in self.faults:
-            return (event.packet_no + 1) & WORD_MASK
-        return event.packet_no
+        return self.defects.reply_number(event.packet_no, event.ack_no)
 
     def _decode(self, op: RequestOpcode, data: bytes) -> Mapping[str, Value]:
         try:
-            return decode_request(op.opcode, data).values
+            return self.defects.decode(op, data)
         except DecodeError as exc:
             expected = op.request.fixed_size or 0
             if exc.clause == "request.data-length":
-                if Fault.LENGTH_UNCHECKED in self.faults:
-                    return decode_request(op.opcode, data[:expected].ljust(expected, b"\0")).values
                 raise errors.bad_length(expected, len(data)) from exc
             if exc.clause == "float.reserved-operand":
                 raise errors.bad_float((exc.offset or 0) // 2) from exc
             raise errors.bad_value(op.name, exc.message) from exc
 
-    def _reply(self, op: RequestOpcode, number: int, values: dict[str, Any]) -> None:
-        if op.response.form == "multi":
-            self._reply_text(number, str(values["text"]))
-            return
-        data = _word(number) + self._payload(op, values)
-        floats_only = all(f.type.element == "float" for f in op.response.data.fields)
-        if Fault.SWAPPED_FLOAT_WORDS in self.faults and op.response.form == "data" and floats_only:
-            body = data[2:]
-            swapped = (body[i + 2 : i + 4] + body[i : i + 2] for i in range(0, len(body), 4))
-            data = data[:2] + b"".join(swapped)
-        self._emit(ServerOp.RESPONSE, data)
+    def _reply(self, op: RequestOpcode | None, number: int, values: dict[str, Any]) -> None:
+        """The reply in the form the spec gives the opcode (``op`` None, an unknown opcode: a bare
+        RESPONSE, which only a defect answers with)."""
+        if op is None:
+            packets = [_word(number)]
+        elif op.response.form == "multi":
+            packets = self._text_packets(number, str(values["text"]))
+        else:
+            packets = [_word(number) + self.defects.payload(op, values, self._payload)]
+        for data in self.defects.reply(op, packets):
+            self._emit(ServerOp.RESPONSE, data)
 
-    def _payload(self, op: RequestOpcode, values: dict[str, Any]) -> bytes:
-        fields = op.response.data.fields
-        if self.faults.active & _FLOAT_FAULTS and fields and all(f.type.element == "float" for f in fields):
-            return b"".join(self._faulty_float(float(x)) for f in fields for x in values[f.name])
+    def _payload(self, op: RequestOpcode, values: Mapping[str, Any]) -> bytes:
+        """A reply's data after the request number, by the spec codec."""
         key = tuple(values.values())  # equal values encode alike (-0.0 and 0.0 both as a clean zero)
         cached = self._payloads.get(op.opcode)
         if cached is not None and cached[0] == key:
@@ -544,54 +473,26 @@ class ServerSession:
         self._payloads[op.opcode] = (key, payload)
         return payload
 
-    def _faulty_float(self, x: float) -> bytes:
-        """``x`` as a float encoder with the float faults switched on writes it."""
-        if not math.isfinite(x) and Fault.NOT_FINITE_RESERVED in self.faults:
-            return struct.pack("<HH", _RESERVED_OPERAND, 0)  # what an unchecked encoder makes of NaN
-        if 0.0 < abs(x) < F_MIN_NORMAL and Fault.UNDERFLOW_DIRTY_ZERO in self.faults:
-            fraction = max(1, int(abs(x) / F_MIN_NORMAL * (1 << 23)))  # exponent 0, the bits kept
-            return struct.pack("<HH", fraction >> 16 & 0x7F, fraction & 0xFFFF)
-        return pack_f(x)
-
-    def _reply_text(self, number: int, text: str) -> None:
-        """A multi-packet text reply: one packet per line (split further if a line is too long)."""
-        first = True
+    def _text_packets(self, number: int, text: str) -> list[bytes]:
+        """A multi-packet text reply: one packet per line (split further if a line is too long), then
+        the empty terminator."""
+        packets = []
         for line in text.splitlines(keepends=True):
             raw = encode_lispm(line)
             for i in range(0, len(raw), MAX_TEXT_PER_PACKET):
-                n = number if first or Fault.MULTI_WRONG_NUMBER not in self.faults else number + 1
-                self._emit(ServerOp.RESPONSE, _word(n) + raw[i : i + MAX_TEXT_PER_PACKET])
-                first = False
-        if Fault.NO_DESCRIBE_TERMINATOR not in self.faults:
-            self._emit(ServerOp.RESPONSE, _word(number))
+                packets.append(_word(number) + raw[i : i + MAX_TEXT_PER_PACKET])
+        return [*packets, _word(number)]
 
     def _emit_error(self, opcode: int, number: int, error: ErrorMessage) -> None:
-        faults = self.faults
-        if Fault.ASYNC_NUMBER_PREVIOUS in faults and opcode in _ASYNC_ERRORS:
-            number = self._processed_before if self._processed_before is not None else number
-        if Fault.WRONG_SEVERITY in faults:
-            error = replace(error, severity="E" if opcode == ServerOp.FATAL_ERROR else "F")
-        if any(fault in faults and error.code in codes for fault, codes in _SWAPPED_ARGS.items()):
-            error = replace(
-                error, args=tuple(int.from_bytes(a.to_bytes(2, "little"), "big") for a in error.args)
-            )
-        aligned = self.config.error_args == "aligned"
-        if aligned and Fault.ERROR_PAD_MISPLACED not in faults and Fault.ERROR_WITHOUT_COLON not in faults:
-            self._emit(opcode, encode_error(opcode, number, error))
-            return
-        body = error.encode(align_args=aligned)
-        if Fault.ERROR_PAD_MISPLACED in faults and error.args:
-            after_nul = body.index(0) + 1
-            if after_nul % 2 == 0:  # no pad is due: one here puts the numbers at an odd offset
-                body = body[:after_nul] + b"\0" + body[after_nul:]
-        if Fault.ERROR_WITHOUT_COLON in faults:
-            body = body.replace(b": ", b" ", 1)
-        self._emit(opcode, _word(number) + body)
+        number = self.defects.error_number(opcode, number, self._processed_before)
+        error = self.defects.error(opcode, error)
+        encoded = error.encode(align_args=self.config.error_args == "aligned")
+        self._emit(opcode, _word(number) + self.defects.error_string(error, encoded))
 
     def _emit_async(self, number: int, condition: int, word2: int, word3: int) -> None:
-        with_number = Fault.ASYNC_WITHOUT_NUMBER not in self.faults
-        data = encode_async(number, condition, word2, word3, async_has_request_number=with_number)
-        self._emit(ServerOp.ASYNCHRONOUS_RESPONSE, data)
+        self._emit(
+            ServerOp.ASYNCHRONOUS_RESPONSE, self.defects.async_response(number, condition, word2, word3)
+        )
 
     # ------------------------------------------------------------------------------- handlers
     def _transform(self, op: str, values: Mapping[str, Value]) -> Transform:
@@ -603,30 +504,16 @@ class ServerSession:
             raise errors.bad_value(op, "N, O and A are not a rotation") from exc
 
     def _describe_self(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
-        faults = self.faults
-        operations = set(self.operations)
-        if Fault.DESCRIBE_EXTRA_OPERATION in faults:
-            operations.add(min(set(range(0o200, 0o300)) - operations))  # listed, answered C UOP
-        if Fault.DESCRIBE_MISSING_OPERATION in faults:
-            operations.discard(SPEC.request(MISSING_OPERATION).opcode)  # answered, not listed
         model = self.arm.model
-        dof = len(model.ready) + (1 if Fault.DESCRIBE_WRONG_DOF in faults else 0)
-        limits = [(lo, hi) for lo, hi in zip(model.limits.lower, model.limits.upper, strict=True)]
-        if Fault.DESCRIBE_NARROW_LIMITS in faults:
-            limits = [(lo + NARROWED_DEG, hi - NARROWED_DEG) for lo, hi in limits]
-        if Fault.DESCRIBE_LIMITS_SHORT in faults:
-            limits = limits[:-1]
-        ready = list(model.ready)
-        if Fault.DESCRIBE_READY_OFF in faults:
-            ready[1] += READY_OFF_DEG
+        stated = self.defects.describe(Statement.of(model, self.operations))
         text = describe_text(
             self.config.description,
             model,
-            operations,
-            with_protocol_version=Fault.NO_PROTOCOL_VERSION not in faults,
-            degrees_of_freedom=dof,
-            joint_limits=limits,
-            ready_position=ready,
+            stated.operations,
+            with_protocol_version=stated.protocol_version,
+            degrees_of_freedom=stated.degrees_of_freedom,
+            joint_limits=stated.joint_limits,
+            ready_position=stated.ready_position,
         )
         return {"text": text}
 
@@ -640,8 +527,6 @@ class ServerSession:
         return {"joints": self.arm.actual}
 
     def _calibrate(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
-        if Fault.CALIBRATE_NZI in self.faults:
-            raise errors.nzi_error(self.faults.nzi_joints)
         return {}  # the simulated arm needs no calibration
 
     def _move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
@@ -649,8 +534,7 @@ class ServerSession:
 
     def _straight_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         pose = self._transform("straight-move", values)
-        straight = Fault.STRAIGHT_AS_JOINT not in self.faults
-        return {"segment": self.arm.move_to(pose, now, straight=straight)}
+        return {"segment": self.arm.move_to(pose, now, straight=self.defects.straight_lines)}
 
     def _kill_power(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         self.arm.kill_power()
@@ -660,7 +544,7 @@ class ServerSession:
         low = _int(values["configuration"]) & 0xFF  # erratum set-configuration: the low byte counts
         if low & 0xFE:
             raise errors.bad_value("set-configuration", f"configuration {low} has bits other than bit 0 set")
-        if Fault.CONFIGURATION_IGNORED not in self.faults:
+        if self.defects.applies_configuration:
             self.arm.set_configuration(lefty=bool(low & 1))
         return {}
 
@@ -669,17 +553,13 @@ class ServerSession:
         return {}
 
     def _delta(self, values: Mapping[str, Value]) -> tuple[float, ...]:
-        delta = _floats(values["delta"])
-        if Fault.INCREMENT_O_T_SWAPPED in self.faults:
-            dx, dy, dz, do, da, dt = delta
-            return (dx, dy, dz, dt, da, do)
-        return delta
+        return self.defects.increment(_floats(values["delta"]))
 
     def _incremental_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         return {"segment": self.arm.move_increment(self._delta(values), now)}
 
     def _incremental_straight_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
-        straight = Fault.STRAIGHT_AS_JOINT not in self.faults
+        straight = self.defects.straight_lines
         return {"segment": self.arm.move_increment(self._delta(values), now, straight=straight)}
 
     def _free_joint(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
@@ -688,23 +568,16 @@ class ServerSession:
         return {}
 
     def _ready(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
-        if Fault.READY_LEAVES_WRIST in self.faults:
-            goal = self.arm.model.ready[:3] + self.arm.planned[3:]
-            return {"segment": self.arm.move_joints(goal, now)}
-        return {"segment": self.arm.move_ready(now)}
+        return {"segment": self.defects.move_ready(self.arm, now)}
 
     def _set_joint_angles(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         goal = _floats(values["joints"])
-        return {"segment": self.arm.move_joints(goal, now, check_limits=Fault.NO_JOR not in self.faults)}
+        return {"segment": self.arm.move_joints(goal, now, check_limits=self.defects.checks_joint_limits)}
 
     def _set_speed(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         factor = values["factor"]
         assert isinstance(factor, float)
-        try:
-            self.arm.set_speed(factor)
-        except Refused:
-            if Fault.SPEED_UNCHECKED not in self.faults:
-                raise
+        self.arm.set_speed(factor)
         return {}
 
     def _enable_power(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
@@ -713,12 +586,7 @@ class ServerSession:
 
     def _solve_forwards(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         pose = self._transform("solve-forwards", values)
-        try:
-            return {"joints": self.arm.solve(pose, _floats(values["current"]))}
-        except Refused:
-            if Fault.NOT_FINITE_RESERVED not in self.faults:
-                raise
-            return {"joints": (math.nan,) * 6}
+        return {"joints": self.arm.solve(pose, _floats(values["current"]))}
 
     def _solve_backwards(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         return {"transform": forward(_floats(values["joints"]), self.arm.model.geometry).to_floats()}

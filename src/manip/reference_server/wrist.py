@@ -122,6 +122,22 @@ class WristConditions:
     """Cougar's words never reach the Puma (a hung Cougar, a cut link): requests wait the wrist timeout."""
     answer_timeouts: bool = True
     """False: a request whose Cougar command timed out is never answered (a defect)."""
+    # The Puma's wrist processes as the 1985 guide has them; the other value of each is a defect, for
+    # showing that a judge of the Puma's wrist side (manip-conform run --puma) catches it.
+    npr_every_cycle: bool = True
+    """A compliant segment sends New Position and Rate every servo cycle (not every other one)."""
+    command_floats_swapped: bool = False
+    """The floats of the commands queued for Cougar have their two words swapped."""
+    user_commands_first: bool = False
+    """The output process sends the user's commands before New Position and Rate and Reset."""
+    guard_stops_arm: bool = True
+    """A stop-the-move guard trip stops the arm."""
+    read_forces_sends_angles: bool = True
+    """Read forces sends the current joint angles (SEN) before Report Forces."""
+    read_forces_waits: bool = True
+    """Read forces waits for Cougar's answer (not the last forces seen)."""
+    calibrate_two_poses: bool = True
+    """Calibrate-wrist takes its readings in two poses (not one, gravity in them)."""
 
 
 class Wrist(Protocol):

@@ -8,21 +8,37 @@ every case: ``tests/conformance/client/test_client.py``).
 
 from __future__ import annotations
 
+import ast
 import asyncio
 import sys
+from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import pytest
 
+from manip import reference_client
+from manip.codecs.messages import encode_terminator
 from manip.conformance.client.cli import client_cases
 from manip.conformance.client.runner import ClientRunConfig, run_client_suite
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.selection import PatternSet
-from manip.reference_client import faults
-from manip.reference_client.faults import FAULTS, ClientFault
+from manip.reference_client import (
+    CHAOS_MANIPULATOR,
+    GENERIC,
+    MatchingCore,
+    Request,
+    ServerPacket,
+    chaos_response_info,
+    default_registry,
+)
+from manip.reference_client import faults as client_faults
+from manip.reference_client.events import RequestAnswered
+from manip.reference_client.faults import FAULTS, ClientFault, ClientFaults
 from manip.reference_client.harness import CaseRun
 from manip.spec import SPEC
+from manip.spec.constants import ServerOp
 
 HARNESS = [sys.executable, "-m", "manip.reference_client.harness"]
 SEED = 4242
@@ -122,13 +138,49 @@ def test_a_harness_reading_the_contract_another_allowed_way_passes(switch: Clien
 def test_literal_examples_writes_a_one_element_raw_as_a_bare_string() -> None:
     """The switch does change what the harness writes (so its passing run shows the judge takes it)."""
     lines: list[dict[str, object]] = []
-    run = CaseRun({"case": "c", "target": "tcp://x"}, lines.append)
     request = SimpleNamespace(responses=[b"\x8c\x02"], packet_number=5)
-    before = faults.active()
-    try:
-        for switch in (set(), {ClientFault.LITERAL_EXAMPLES}):
-            faults.activate(switch)
-            run.report_reply(1, "wrist-version", request, {"version": 0x28C})
-    finally:
-        faults.activate(before)
+    for switch in (ClientFaults(), ClientFaults({ClientFault.LITERAL_EXAMPLES})):
+        run = CaseRun({"case": "c", "target": "tcp://x"}, lines.append, switch)
+        run.report_reply(1, "wrist-version", request, {"version": 0x28C})
     assert [line["raw"] for line in lines] == [{"version": ["028C"]}, {"version": "028C"}]
+
+
+def test_client_faults_are_a_value_passed_in_not_process_state() -> None:
+    """No module of the reference client reads the environment (the harness takes its faults from its
+    command line, at its entry point) or keeps switches in module state; two clients in one process
+    with different ClientFaults each keep their own (a reply numbered 2 answers request 2 on the clean
+    core, request 3 on the one with wrong-request-number)."""
+    package = Path(reference_client.__file__).parent
+    reads = [
+        f"{path.name}:{node.lineno}"
+        for path in sorted(package.glob("*.py"))
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if (isinstance(node, ast.Attribute) and node.attr in ("environ", "getenv"))
+        or (isinstance(node, ast.alias) and node.name in ("environ", "getenv"))
+    ]
+    assert not reads, reads
+    assert not {"ENV", "activate", "on", "from_env"} & set(vars(client_faults))
+    assert [
+        _answered_by_reply_2(ClientFaults()),
+        _answered_by_reply_2(ClientFaults({ClientFault.WRONG_REQUEST_NUMBER})),
+    ] == [2, 3]
+
+
+def _answered_by_reply_2(faults: ClientFaults) -> int:
+    """The request (of two waiting, numbered 2 and 3) a matching core with ``faults`` gives the reply
+    numbered 2 to."""
+    registry = default_registry()
+    core = MatchingCore(registry, (CHAOS_MANIPULATOR, GENERIC), faults=faults)
+    code = registry.request_code("calibrate")
+    requests = {}
+    for number in (2, 3):
+        request: Request[Any] = Request(code, b"", code.response_type, None)
+        request.packet_number = number
+        core.sent(request)
+        requests[number] = request
+    for data in (encode_terminator(1), encode_terminator(2)):  # the initial response, then the reply
+        packet = ServerPacket(ServerOp.RESPONSE, data)
+        events = core.receive(packet, chaos_response_info(packet))
+    (event,) = events
+    assert isinstance(event, RequestAnswered)
+    return next(n for n, r in requests.items() if r is event.request)

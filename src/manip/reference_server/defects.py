@@ -1,0 +1,452 @@
+"""Where the reference server's fault switches bend the protocol: the session's hook points.
+
+The session (:mod:`manip.reference_server.session`) is written as the protocol reads.  At a few named
+points it hands what it is about to do to its :class:`Defects` and does what comes back: the number a
+reply carries, the packets of a reply, the error an error packet says, what follows a fatal error...
+:class:`Defects` itself is the conforming server: every hook is the identity (or does nothing).
+:class:`SwitchedDefects` overrides each hook as the fault switches of a
+:class:`~manip.reference_server.faults.FaultSet` say, and :func:`defects_for` chooses one of the two once,
+when a session is made.  The protocol code never tests a fault; only this module does.
+
+The hook points, by what they decide:
+
+* the connection: :meth:`~Defects.condition` (the move process and the wrist a connection runs with),
+  :meth:`~Defects.inherit` (what a new connection keeps of the last), :meth:`~Defects.opened` (what the
+  world does once it is open), :attr:`~Defects.keeps_arm_after_close` (the driver's);
+* request numbers: :meth:`~Defects.initial_numbers`, :meth:`~Defects.reply_number`;
+* serving a request: :meth:`~Defects.decode`, :meth:`~Defects.check`, :meth:`~Defects.refused`,
+  :meth:`~Defects.wrist_failure`, :attr:`~Defects.discards_after_free_joint`;
+* what a request does: :meth:`~Defects.describe`, :meth:`~Defects.increment`, :meth:`~Defects.move_ready`,
+  :attr:`~Defects.straight_lines`, :attr:`~Defects.checks_joint_limits`,
+  :attr:`~Defects.applies_configuration`;
+* replies: :meth:`~Defects.payload`, :meth:`~Defects.reply`;
+* errors: :meth:`~Defects.error_number`, :meth:`~Defects.error`, :meth:`~Defects.error_string`,
+  :meth:`~Defects.after_error`, :attr:`~Defects.after_fatal` (the driver's too);
+* asynchronous packets: :meth:`~Defects.notifications`, :meth:`~Defects.async_response`,
+  :meth:`~Defects.reports_guard`, :meth:`~Defects.after_warning`.
+
+The environment faults (the panic button, an obstacle, a calibration failure, a sluggish joint, a silent
+wrist) are conditions of the arm's world, not defects, but they enter through the same points.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any, Final, Literal
+
+from manip.arm.sim import AbortCause, ArmEvent, ArmSim, Refused
+from manip.codecs.error_string import ErrorMessage
+from manip.codecs.errors import DecodeError
+from manip.codecs.messages import Value, decode_request, encode_async
+from manip.codecs.pdp11float import F_MIN_NORMAL, pack_f
+from manip.reference_server import errors
+from manip.reference_server.describe import Statement
+from manip.reference_server.errors import RequestError
+from manip.reference_server.faults import Fault, FaultSet
+from manip.reference_server.wrist import GuardHit, Wrist, WristConditions
+from manip.spec import SPEC, RequestName, RequestOpcode
+from manip.spec.constants import AsyncCondition, ServerOp
+
+if TYPE_CHECKING:
+    from manip.reference_server.session import ServerSession
+
+__all__ = ["AfterFatal", "Defects", "SwitchedDefects", "defects_for"]
+
+AfterFatal = Literal["close", "stay-open", "drop-link"]
+"""What follows a fatal error: the connection closes (the protocol), it stays open, or the driver drops
+the link under it without closing it."""
+Encoder = Callable[[RequestOpcode, Mapping[str, Any]], bytes]
+"""The session's encoder of a reply's values (after the request number)."""
+
+WORD_MASK: Final = 0xFFFF
+MISSING_OPERATION: Final[RequestName] = "solve-backwards"
+"""The served opcode describe self leaves out under the ``describe-missing-operation`` fault."""
+NARROWED_DEG: Final = 5.0
+"""How much narrower than the arm's each joint range is stated under ``describe-narrow-limits``."""
+READY_OFF_DEG: Final = 10.0
+"""How far from where move to ready goes joint 2 of :ready-position is stated under ``describe-ready-off``."""
+SEGMENTS_STOP_REST_S: Final = 0.1
+"""How long the segments-stop fault rests between queued segments: clearly more than a blend's pause."""
+RESERVED_OPERAND: Final = 0x8000
+"""First word of a reserved-operand float: sign 1, exponent 0."""
+GUARD_STOP: Final = 1
+"""Word 2 of a guard-hit response: 1 = the trajectory was stopped, 2 = it continues (E.3)."""
+GUARD_CONTINUE: Final = 2
+_ALL_NOTIFICATIONS: Final = sum(1 << code.notification_bit for code in SPEC.async_codes.values())
+_SWAPPED_ARGS: Final[Mapping[Fault, frozenset[str]]] = {
+    Fault.UOP_OPCODE_SWAPPED: frozenset({"UOP"}),
+    Fault.BDL_COUNTS_SWAPPED: frozenset({"BDL"}),
+    Fault.JOINT_MASK_SWAPPED: frozenset({"JOR", "TOR"}),
+}
+"""The error codes whose numbers each byte-swapping fault sends high byte first."""
+_FLOAT_FAULTS: Final = frozenset({Fault.UNDERFLOW_DIRTY_ZERO, Fault.NOT_FINITE_RESERVED})
+_SWAPPED_CODES: Final = {"TOR": "JOR", "JOR": "TOR"}
+_ASYNC_ERRORS: Final = frozenset({ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING})
+
+
+def _word(n: int) -> bytes:
+    return (n & WORD_MASK).to_bytes(2, "little")
+
+
+class Defects:
+    """The hook points of a session, as a conforming server has them: nothing is bent."""
+
+    keeps_arm_after_close: bool = False
+    """The driver hands the arm of a closed connection, still moving, to the next one."""
+    discards_after_free_joint: bool = True
+    """The packet after free joint is answered done without being executed."""
+    straight_lines: bool = True
+    """Straight-line moves are interpolated in Cartesian space."""
+    checks_joint_limits: bool = True
+    """Set joint angles refuses out-of-range joints with JOR."""
+    applies_configuration: bool = True
+    """Set configuration changes the configuration transforms are solved in."""
+    after_fatal: AfterFatal = "close"
+    """What follows a fatal error: the connection closes (clause error.fatal-then-close)."""
+
+    # ---------------------------------------------------------------------------- the connection
+    def condition(self, arm: ArmSim, wrist: Wrist) -> None:
+        """Set up the move process and the (shared) wrist for the connection being made."""
+        wrist.condition(WristConditions())
+
+    def inherit(self, session: ServerSession, previous: ServerSession) -> None:
+        """Take over what ``previous``, the connection before, set (a conforming session takes nothing:
+        erratum server-robot)."""
+
+    def opened(self, arm: ArmSim, now: float) -> None:
+        """The connection opened at ``now``."""
+
+    # ---------------------------------------------------------------------------- request numbers
+    def initial_numbers(self, rfc_packet_no: int) -> tuple[int, ...]:
+        """The numbers of the RESPONSE packets sent when the connection opens (erratum
+        ``initial-response``: one, the RFC's packet number)."""
+        return (rfc_packet_no,)
+
+    def reply_number(self, packet_no: int, ack_no: int | None) -> int:
+        """The request number the answers to a request carry: its packet number."""
+        return packet_no
+
+    # ---------------------------------------------------------------------------- serving a request
+    def decode(self, op: RequestOpcode, data: bytes) -> Mapping[str, Value]:
+        """The request's values by the spec layout (DecodeError when the data do not fit it)."""
+        return decode_request(op.opcode, data).values
+
+    def check(self, op: RequestOpcode, arm: ArmSim) -> None:
+        """Refuse the request (raise RequestError) before it is served; a conforming server leaves every
+        refusal to the request's handler."""
+
+    def refused(self, op: RequestOpcode | None, error: RequestError) -> RequestError | dict[str, Any]:
+        """The error that answers a refused request (``op`` None: an unknown opcode), or the values of
+        a normal reply to send instead."""
+        return error
+
+    def wrist_failure(self, error: RequestError) -> RequestError:
+        """The error that answers a wrist request Cougar failed (silent, its link down): non-fatal."""
+        return error
+
+    # ---------------------------------------------------------------------------- what requests do
+    def describe(self, statement: Statement) -> Statement:
+        """What describe self states (the truth about the arm)."""
+        return statement
+
+    def increment(self, delta: tuple[float, ...]) -> tuple[float, ...]:
+        """The dX dY dZ dO dA dT an incremental move adds to the pose."""
+        return delta
+
+    def move_ready(self, arm: ArmSim, now: float) -> int:
+        """Queue the move to the ready position; its segment number."""
+        return arm.move_ready(now)
+
+    # ---------------------------------------------------------------------------- replies
+    def payload(self, op: RequestOpcode, values: Mapping[str, Any], encode: Encoder) -> bytes:
+        """A reply's data after the request number, as ``encode`` (the spec codec) writes them."""
+        return encode(op, values)
+
+    def reply(self, op: RequestOpcode | None, packets: list[bytes]) -> Sequence[bytes]:
+        """The RESPONSE packets (data) that answer a request, the terminator of a multi-packet reply
+        included."""
+        return packets
+
+    # ---------------------------------------------------------------------------- errors
+    def error_number(self, opcode: int, number: int, before: int | None) -> int:
+        """The request number an error packet of ``opcode`` carries: ``number``, the protocol's (for a
+        fatal error the packet last received, for an asynchronous one the last request processed;
+        ``before`` is the request processed before that one)."""
+        return number
+
+    def error(self, opcode: int, error: ErrorMessage) -> ErrorMessage:
+        """What an error packet of ``opcode`` (0201, 0202, 0204, 0205) says."""
+        return error
+
+    def error_string(self, error: ErrorMessage, encoded: bytes) -> bytes:
+        """The error string's bytes as sent (``encoded``: as the codec lays them out)."""
+        return encoded
+
+    def after_error(self, number: int) -> tuple[bytes, ...]:
+        """RESPONSE packets (data) sent after a non-fatal error, which is the reply: none."""
+        return ()
+
+    # ---------------------------------------------------------------------------- asynchronous packets
+    def notifications(self, mask: int) -> int:
+        """The request-notifications mask the asynchronous responses are sent by: the client's."""
+        return mask
+
+    def async_response(self, number: int, condition: int, word2: int, word3: int) -> bytes:
+        """The data of an asynchronous response (0203)."""
+        return encode_async(number, condition, word2, word3)
+
+    def reports_guard(self, hit: GuardHit) -> bool:
+        """Whether a guard hit is told to the client at all (as a guard-hit response, or an error)."""
+        return True
+
+    def after_warning(self, arm: ArmSim) -> list[ArmEvent]:
+        """What the move process does after warning of a joint lagging its command: it goes on."""
+        return []
+
+
+class SwitchedDefects(Defects):
+    """The hook points bent as the fault switches of ``faults`` say."""
+
+    def __init__(self, faults: FaultSet) -> None:
+        self.faults = faults
+        on = faults.active
+        self.keeps_arm_after_close = Fault.CLOSE_KEEPS_MOVING in on
+        self.discards_after_free_joint = Fault.FREE_JOINT_EXECUTES not in on
+        self.straight_lines = Fault.STRAIGHT_AS_JOINT not in on
+        self.checks_joint_limits = Fault.NO_JOR not in on
+        self.applies_configuration = Fault.CONFIGURATION_IGNORED not in on
+        self.after_fatal = (
+            "stay-open"
+            if Fault.FATAL_WITHOUT_CLOSE in on
+            else "drop-link"
+            if Fault.FATAL_DROPS_LINK in on
+            else "close"
+        )
+
+    def _on(self, fault: Fault) -> bool:
+        return fault in self.faults.active
+
+    # ---------------------------------------------------------------------------- the connection
+    def condition(self, arm: ArmSim, wrist: Wrist) -> None:
+        faults, on = self.faults, self._on
+        wrist.condition(
+            WristConditions(
+                silent=on(Fault.WRIST_SILENT),
+                answer_timeouts=not on(Fault.WRIST_TIMEOUT_SILENT),
+                npr_every_cycle=not on(Fault.NPR_SKIPPED),
+                command_floats_swapped=on(Fault.WRIST_FLOAT_WORDS_SWAPPED),
+                user_commands_first=on(Fault.WRIST_USER_FIRST),
+                guard_stops_arm=not on(Fault.GUARD_IGNORED),
+                read_forces_sends_angles=not on(Fault.READ_FORCES_NO_ANGLES),
+                read_forces_waits=not on(Fault.WRIST_NO_WAIT),
+                calibrate_two_poses=not on(Fault.CALIBRATE_ONE_POSE),
+            )
+        )
+        if on(Fault.SEGMENT_NUMBER_STUCK):
+            arm.segment_step = 0
+        arm.enforce_power = not on(Fault.NO_NAP)
+        arm.enforce_abort = not on(Fault.AWA_IGNORED)
+        if faults.obstacle is not None and on(Fault.OBSTACLE):
+            arm.place_obstacle(faults.obstacle)
+        if on(Fault.SLUGGISH_JOINT):
+            arm.sluggish = faults.sluggish
+        if on(Fault.COLLISION_UNCHECKED):
+            arm.collision_tol_deg = math.inf
+        arm.increment_from_actual = on(Fault.INCREMENT_FROM_ACTUAL)
+        arm.keep_queue_on_abort = on(Fault.ABORT_KEEPS_QUEUE)
+        if on(Fault.SEGMENTS_STOP):
+            arm.stop_between_segments = SEGMENTS_STOP_REST_S
+        if on(Fault.SERVO_DOUBLE_RATE):
+            arm.tick_period /= 2
+        arm.collision_test_compliant = on(Fault.COMPLIANT_COLLISION_TEST)
+        arm.hold_compliant_end = not on(Fault.COMPLIANT_SNAP_BACK)
+
+    def inherit(self, session: ServerSession, previous: ServerSession) -> None:
+        if self._on(Fault.KEEPS_SPEED):
+            session.arm.set_speed(previous.arm.speed)
+        if self._on(Fault.KEEPS_CONFIGURATION) and previous.arm.lefty is not None:
+            session.arm.set_configuration(previous.arm.lefty)
+        if self._on(Fault.KEEPS_NOTIFICATIONS):
+            session.notifications = previous.notifications
+
+    def opened(self, arm: ArmSim, now: float) -> None:
+        if self._on(Fault.PANIC_BUTTON):
+            arm.press_panic(at=now + self.faults.panic_delay)
+
+    # ---------------------------------------------------------------------------- request numbers
+    def initial_numbers(self, rfc_packet_no: int) -> tuple[int, ...]:
+        if self._on(Fault.NO_INITIAL_RESPONSE):
+            return ()
+        return (rfc_packet_no + (1 if self._on(Fault.INITIAL_RESPONSE_NUMBER) else 0),)
+
+    def reply_number(self, packet_no: int, ack_no: int | None) -> int:
+        if self._on(Fault.ECHO_ACK_NUMBER):
+            return ack_no if ack_no is not None else 0
+        if self._on(Fault.WRONG_REQUEST_NUMBER):
+            return (packet_no + 1) & WORD_MASK
+        return packet_no
+
+    # ---------------------------------------------------------------------------- serving a request
+    def decode(self, op: RequestOpcode, data: bytes) -> Mapping[str, Value]:
+        try:
+            return super().decode(op, data)
+        except DecodeError as exc:
+            if exc.clause != "request.data-length" or not self._on(Fault.LENGTH_UNCHECKED):
+                raise
+            expected = op.request.fixed_size or 0
+            return super().decode(op, data[:expected].ljust(expected, b"\0"))
+
+    def check(self, op: RequestOpcode, arm: ArmSim) -> None:
+        if self._on(Fault.AWA_REFUSES_ALL) and arm.aborted and op.name not in ("enable-power", "reset-abort"):
+            raise errors.refusal_error(op.name, Refused("AWA", "motion aborted; reset first"))
+        if self._on(Fault.CALIBRATE_NZI) and op.name == "calibrate":
+            raise errors.nzi_error(self.faults.nzi_joints)
+
+    def refused(self, op: RequestOpcode | None, error: RequestError) -> RequestError | dict[str, Any]:
+        code, name = error.error.code, op.name if op is not None else None
+        if op is None and self._on(Fault.UNKNOWN_OPCODE_ANSWERED):
+            return {}
+        if name == "set-speed" and code == "BVA" and self._on(Fault.SPEED_UNCHECKED):
+            return {}  # the factor ignored
+        if name == "solve-forwards" and code == "TOR" and self._on(Fault.NOT_FINITE_RESERVED):
+            return {"joints": (math.nan,) * 6}
+        if code in _SWAPPED_CODES and op is not None and self._on(Fault.SWAP_TOR_JOR):
+            return RequestError(replace(error.error, code=_SWAPPED_CODES[code]), fatal=error.fatal)
+        return error
+
+    def wrist_failure(self, error: RequestError) -> RequestError:
+        if self._on(Fault.WRIST_ERROR_FATAL):
+            return RequestError(replace(error.error, severity="F"), fatal=True)
+        return error
+
+    # ---------------------------------------------------------------------------- what requests do
+    def describe(self, statement: Statement) -> Statement:
+        on = self._on
+        operations = set(statement.operations)
+        if on(Fault.DESCRIBE_EXTRA_OPERATION):
+            operations.add(min(set(range(0o200, 0o300)) - operations))  # listed, answered C UOP
+        if on(Fault.DESCRIBE_MISSING_OPERATION):
+            operations.discard(SPEC.request(MISSING_OPERATION).opcode)  # answered, not listed
+        limits = statement.joint_limits
+        if on(Fault.DESCRIBE_NARROW_LIMITS):
+            limits = tuple((lo + NARROWED_DEG, hi - NARROWED_DEG) for lo, hi in limits)
+        if on(Fault.DESCRIBE_LIMITS_SHORT):
+            limits = limits[:-1]
+        ready = list(statement.ready_position)
+        if on(Fault.DESCRIBE_READY_OFF):
+            ready[1] += READY_OFF_DEG
+        return Statement(
+            frozenset(operations),
+            statement.degrees_of_freedom + (1 if on(Fault.DESCRIBE_WRONG_DOF) else 0),
+            limits,
+            tuple(ready),
+            protocol_version=statement.protocol_version and not on(Fault.NO_PROTOCOL_VERSION),
+        )
+
+    def increment(self, delta: tuple[float, ...]) -> tuple[float, ...]:
+        if self._on(Fault.INCREMENT_O_T_SWAPPED):
+            dx, dy, dz, do, da, dt = delta
+            return (dx, dy, dz, dt, da, do)
+        return delta
+
+    def move_ready(self, arm: ArmSim, now: float) -> int:
+        if self._on(Fault.READY_LEAVES_WRIST):
+            return arm.move_joints(arm.model.ready[:3] + arm.planned[3:], now)
+        return arm.move_ready(now)
+
+    # ---------------------------------------------------------------------------- replies
+    def payload(self, op: RequestOpcode, values: Mapping[str, Any], encode: Encoder) -> bytes:
+        fields = op.response.data.fields
+        if self.faults.active & _FLOAT_FAULTS and fields and all(f.type.element == "float" for f in fields):
+            return b"".join(self._float(float(x)) for f in fields for x in values[f.name])
+        return encode(op, values)
+
+    def _float(self, x: float) -> bytes:
+        """``x`` as a float encoder with the float faults switched on writes it."""
+        if not math.isfinite(x) and self._on(Fault.NOT_FINITE_RESERVED):
+            return struct.pack("<HH", RESERVED_OPERAND, 0)  # what an unchecked encoder makes of NaN
+        if 0.0 < abs(x) < F_MIN_NORMAL and self._on(Fault.UNDERFLOW_DIRTY_ZERO):
+            fraction = max(1, int(abs(x) / F_MIN_NORMAL * (1 << 23)))  # exponent 0, the bits kept
+            return struct.pack("<HH", fraction >> 16 & 0x7F, fraction & 0xFFFF)
+        return pack_f(x)
+
+    def reply(self, op: RequestOpcode | None, packets: list[bytes]) -> Sequence[bytes]:
+        if op is None:
+            return packets
+        if op.response.form == "multi":
+            if self._on(Fault.MULTI_WRONG_NUMBER) and len(packets) > 1:  # the terminator keeps its own
+                packets = [packets[0], *(_renumbered(p, 1) for p in packets[1:-1]), packets[-1]]
+            if self._on(Fault.NO_DESCRIBE_TERMINATOR):
+                packets = packets[:-1]
+            return packets
+        floats_only = all(f.type.element == "float" for f in op.response.data.fields)
+        if self._on(Fault.SWAPPED_FLOAT_WORDS) and op.response.form == "data" and floats_only:
+            return [_float_words_swapped(p) for p in packets]
+        return packets
+
+    # ---------------------------------------------------------------------------- errors
+    def error_number(self, opcode: int, number: int, before: int | None) -> int:
+        if opcode == ServerOp.FATAL_ERROR and self._on(Fault.FATAL_NUMBER_PREVIOUS):
+            return (number - 1) & WORD_MASK
+        if opcode in _ASYNC_ERRORS and self._on(Fault.ASYNC_NUMBER_PREVIOUS) and before is not None:
+            return before
+        return number
+
+    def error(self, opcode: int, error: ErrorMessage) -> ErrorMessage:
+        if opcode == ServerOp.FATAL_ERROR and self._on(Fault.FATAL_SEVERITY_E):
+            error = replace(error, severity="E")
+        if self._on(Fault.WRONG_SEVERITY):
+            error = replace(error, severity="E" if opcode == ServerOp.FATAL_ERROR else "F")
+        if any(self._on(fault) and error.code in codes for fault, codes in _SWAPPED_ARGS.items()):
+            error = replace(
+                error, args=tuple(int.from_bytes(a.to_bytes(2, "little"), "big") for a in error.args)
+            )
+        return error
+
+    def error_string(self, error: ErrorMessage, encoded: bytes) -> bytes:
+        if self._on(Fault.ERROR_PAD_MISPLACED) and error.args:
+            after_nul = encoded.index(0) + 1
+            if after_nul % 2 == 0:  # no pad is due: one here puts the numbers at an odd offset
+                encoded = encoded[:after_nul] + b"\0" + encoded[after_nul:]
+        if self._on(Fault.ERROR_WITHOUT_COLON):
+            encoded = encoded.replace(b": ", b" ", 1)
+        return encoded
+
+    def after_error(self, number: int) -> tuple[bytes, ...]:
+        return (_word(number),) if self._on(Fault.EXTRA_REPLY_AFTER_ERROR) else ()
+
+    # ---------------------------------------------------------------------------- asynchronous packets
+    def notifications(self, mask: int) -> int:
+        return _ALL_NOTIFICATIONS if self._on(Fault.UNREQUESTED_ASYNC) else mask
+
+    def async_response(self, number: int, condition: int, word2: int, word3: int) -> bytes:
+        if condition == AsyncCondition.GUARD_HIT and self._on(Fault.GUARD_HIT_WORD_SWAPPED):
+            word2 = GUARD_STOP + GUARD_CONTINUE - word2
+        if condition == AsyncCondition.SEGMENT_COMPLETED and self._on(Fault.SEGMENT_REPORT_PREVIOUS):
+            word3 = (word3 - 1) & WORD_MASK
+        with_number = not self._on(Fault.ASYNC_WITHOUT_NUMBER)
+        return encode_async(number, condition, word2, word3, async_has_request_number=with_number)
+
+    def reports_guard(self, hit: GuardHit) -> bool:
+        return not self._on(Fault.GUARD_UNREPORTED)
+
+    def after_warning(self, arm: ArmSim) -> list[ArmEvent]:
+        return arm.halt(AbortCause.COLLISION) if self._on(Fault.WARNING_INTERRUPTS) else []
+
+
+def _renumbered(packet: bytes, by: int) -> bytes:
+    number = int.from_bytes(packet[:2], "little")
+    return _word(number + by) + packet[2:]
+
+
+def _float_words_swapped(packet: bytes) -> bytes:
+    body = packet[2:]
+    return packet[:2] + b"".join(body[i + 2 : i + 4] + body[i : i + 2] for i in range(0, len(body), 4))
+
+
+def defects_for(faults: FaultSet) -> Defects:
+    """The hook points of a session with ``faults`` switched on (none: a conforming server)."""
+    return SwitchedDefects(faults) if faults.active else Defects()
