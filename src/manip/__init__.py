@@ -28,12 +28,12 @@ The exceptions a user catches are here too, loaded on first use as well::
         arm.set_speed(0.5)
     except manip.NonFatalError as err:      # the server refused: err.code, err.where, err.arguments
         ...
-    except manip.ConnectionLost:            # the connection is gone
+    except manip.ConnectionLostError:       # the connection is gone
         ...
 
 * from the client: :class:`ManipError` (the base of all below), :class:`ServerError` (an error string:
   :class:`FatalError`, :class:`NonFatalError`, :class:`AsynchronousError`,
-  :class:`AsynchronousWarning`), :class:`ConnectionLost`, :class:`RequestTimeout` (also a
+  :class:`AsynchronousWarning`), :class:`ConnectionLostError`, :class:`RequestTimeout` (also a
   TimeoutError), :class:`ResponseDataError`, :class:`ReplyTooLargeError`, :class:`JointFreedError`,
   :class:`GuardTrippedError`;
 * from the codecs: :class:`CodecError` (a ValueError) and its :class:`DecodeError`, :class:`EncodeError`;
@@ -56,7 +56,7 @@ if TYPE_CHECKING:
     from manip.reference_client.errors import (
         AsynchronousError,
         AsynchronousWarning,
-        ConnectionLost,
+        ConnectionLostError,
         FatalError,
         GuardTrippedError,
         JointFreedError,
@@ -74,7 +74,7 @@ __version__ = "0.1.0"
 _CLIENT_ERRORS = (
     "AsynchronousError",
     "AsynchronousWarning",
-    "ConnectionLost",
+    "ConnectionLostError",
     "FatalError",
     "GuardTrippedError",
     "JointFreedError",
@@ -110,7 +110,7 @@ __all__ = [
     "CaptureError",
     "ChaosError",
     "CodecError",
-    "ConnectionLost",
+    "ConnectionLostError",
     "DecodeError",
     "EncodeError",
     "FatalError",

@@ -19,7 +19,8 @@ ERRORS = sorted(name for name in manip.__all__ if name[0].isupper() and not name
 
 
 def test_the_exceptions_a_user_catches_are_importable_from_manip() -> None:
-    assert {"ManipError", "NonFatalError", "ConnectionLost", "RequestTimeout", "DecodeError"} <= set(ERRORS)
+    caught = {"ManipError", "NonFatalError", "ConnectionLostError", "RequestTimeout", "DecodeError"}
+    assert caught <= set(ERRORS)
     for name in ERRORS:
         value = getattr(manip, name)
         assert isinstance(value, type) and issubclass(value, Exception), name

@@ -18,7 +18,7 @@ from manip.reference_client import (
     AsynchronousWarning,
     AsyncResponseStream,
     ClientOptions,
-    ConnectionLost,
+    ConnectionLostError,
     FatalError,
     GuardTrippedError,
     ManipError,
@@ -193,7 +193,7 @@ def test_fatal_error_fails_pending_and_queued_requests_at_once() -> None:
                 RequestState.FAILED
             }
             assert [type(e) for e in reported] == [FatalError] and closed == reported
-            with pytest.raises(ConnectionLost) as later:
+            with pytest.raises(ConnectionLostError) as later:
                 await arm.here()
             assert isinstance(later.value.__cause__, FatalError)
             assert arm.closed
@@ -211,9 +211,9 @@ def test_connection_dropped_mid_request() -> None:
             peer.reply(first.number)  # arrives before the close: still delivered
             peer.close("network went down")
             assert await answered is None
-            with pytest.raises(ConnectionLost, match="network went down"):
+            with pytest.raises(ConnectionLostError, match="network went down"):
                 await dropped
-            with pytest.raises(ConnectionLost, match="network went down"):
+            with pytest.raises(ConnectionLostError, match="network went down"):
                 await arm.here()
 
     run(main())
@@ -420,9 +420,9 @@ def test_segment_waiters_fail_on_abort_guard_stop_close_and_timeout() -> None:
             lost = asyncio.create_task(arm.wait_for_segment(8))
             await settle()
             fake.peer.close("gone")
-            with pytest.raises(ConnectionLost, match="gone"):
+            with pytest.raises(ConnectionLostError, match="gone"):
                 await lost
-            with pytest.raises(ConnectionLost):
+            with pytest.raises(ConnectionLostError):
                 await arm.wait_for_segment(9)
 
     run(main())
@@ -438,7 +438,7 @@ def test_async_response_stream_ends_on_close_and_raises_on_loss() -> None:
             fake.peer.segment_completed(1, 1)
             fake.peer.close("link down")
             got = [r async for r in _until_error(stream)]
-            assert [r.word3 for r in got[:-1]] == [1] and isinstance(got[-1], ConnectionLost)
+            assert [r.word3 for r in got[:-1]] == [1] and isinstance(got[-1], ConnectionLostError)
 
         async with session(manual) as (arm, fake):
             stream = arm.async_responses()
@@ -464,7 +464,7 @@ def test_user_close_fails_waiting_requests() -> None:
             task = asyncio.create_task(arm.here(timeout=None))
             await take(fake.peer, 1)
             await arm.aclose()
-            with pytest.raises(ConnectionLost, match="closed by the user"):
+            with pytest.raises(ConnectionLostError, match="closed by the user"):
                 await task
             assert arm.process.closed_by_user
             assert await fake.peer.receive() is None  # the peer saw the disconnect
@@ -477,11 +477,11 @@ def test_user_close_fails_waiting_requests() -> None:
 
 def test_connect_failures() -> None:
     async def refused() -> None:
-        with pytest.raises(ConnectionLost, match="refused: busy"):
+        with pytest.raises(ConnectionLostError, match="refused: busy"):
             await aconnect(MemoryTransport(refuse="busy"))
 
     async def silent() -> None:
-        with pytest.raises(ConnectionLost, match="no initial RESPONSE"):
+        with pytest.raises(ConnectionLostError, match="no initial RESPONSE"):
             await aconnect(MemoryTransport, ClientOptions(connect_timeout=0.02))
 
     async def fatal() -> None:
@@ -505,7 +505,7 @@ def test_connect_failures() -> None:
             transport.peer.close("no robot here")
 
         task = asyncio.create_task(server())
-        with pytest.raises(ConnectionLost, match="no robot here"):
+        with pytest.raises(ConnectionLostError, match="no robot here"):
             await aconnect(transport)
         await task
 
@@ -549,7 +549,7 @@ def test_a_failing_transport_fails_every_request_instead_of_hanging(caplog: pyte
         first = asyncio.create_task(arm.here(timeout=None))
         second = asyncio.create_task(arm.calibrate(timeout=None))
         results = await asyncio.gather(first, second, return_exceptions=True)
-        assert all(isinstance(r, ConnectionLost) and "driver bug" in str(r) for r in results)
+        assert all(isinstance(r, ConnectionLostError) and "driver bug" in str(r) for r in results)
         assert arm.closed and not transport.connection_open()
         await server
 
@@ -566,7 +566,7 @@ def test_cancelling_the_background_task_fails_waiting_requests() -> None:
             background = [t for t in asyncio.all_tasks() if t.get_name().startswith("manip background")]
             assert len(background) == 1
             background[0].cancel()
-            with pytest.raises(ConnectionLost, match="cancelled"):
+            with pytest.raises(ConnectionLostError, match="cancelled"):
                 await waiting
 
     run(main())

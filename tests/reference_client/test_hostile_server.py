@@ -16,7 +16,7 @@ import pytest
 from click.testing import CliRunner
 
 from manip.conformance.client.server import serve_scenario
-from manip.reference_client import ClientOptions, ConnectionLost, ReplyTooLargeError, aconnect
+from manip.reference_client import ClientOptions, ConnectionLostError, ReplyTooLargeError, aconnect
 from manip.reference_client.cli import main as client_main
 from tests.support.paths import ROOT
 
@@ -65,7 +65,7 @@ def test_a_connection_given_up_with_los_is_lost_at_once_not_timed_out(scenario: 
     the client answers LOS and reports the connection lost at once, although it was told to wait for
     ever (it used to wait: 'no reply within N s' with a timeout, for ever without)."""
     started = time.monotonic()
-    with pytest.raises(ConnectionLost, match="illegal packet"):
+    with pytest.raises(ConnectionLostError, match="illegal packet"):
         asyncio.run(_describe(scenario, ClientOptions(timeout=None)))
     assert time.monotonic() - started < 20
 

@@ -13,7 +13,7 @@ from manip.reference_client import (
     CHAOS_MANIPULATOR,
     GENERIC,
     NOTIFY_TRIVIAL_ERRORS,
-    ConnectionLost,
+    ConnectionLostError,
     FatalError,
     MatchingCore,
     NonFatalError,
@@ -188,10 +188,10 @@ def test_malformed_asynchronous_response_is_reported() -> None:
 def test_reply_after_abandon_is_late() -> None:
     core = make_core()
     request = send(core, "calibrate", 2)
-    failed = one(core.abandon(request, ConnectionLost("test")))
+    failed = one(core.abandon(request, ConnectionLostError("test")))
     assert isinstance(failed, RequestFailed) and request.state is RequestState.FAILED
     assert reason(one(feed(core, ServerOp.RESPONSE, encode_terminator(2)))) is OutOfSequenceReason.LATE
-    assert core.abandon(request, ConnectionLost("again")) == []
+    assert core.abandon(request, ConnectionLostError("again")) == []
 
 
 def test_response_type_none_is_answered_when_sent_and_a_reply_is_unexpected() -> None:
@@ -330,7 +330,7 @@ def test_fatal_error_fails_every_pending_request_at_once() -> None:
     assert all(r.state is RequestState.FAILED for r in requests)
     assert core.phase is Phase.FAILED and not core.pending
     code = REGISTRY.request_code("calibrate")
-    with pytest.raises(ConnectionLost):
+    with pytest.raises(ConnectionLostError):
         core.sent(Request(code, packet_number=9))
 
 
@@ -346,7 +346,7 @@ def test_connection_lost_fails_pending_requests() -> None:
     core = make_core()
     request = send(core, "here", 2)
     events = core.connection_lost("peer went away")
-    assert isinstance(events[0], RequestFailed) and isinstance(events[0].error, ConnectionLost)
+    assert isinstance(events[0], RequestFailed) and isinstance(events[0].error, ConnectionLostError)
     assert events[-1] == ConnectionEnded("peer went away")
     assert request.state is RequestState.FAILED and core.phase is Phase.CLOSED
 

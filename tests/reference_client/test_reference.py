@@ -18,7 +18,7 @@ from manip.codecs.messages import AsyncResponse
 from manip.reference_client import (
     NOTIFY_SEGMENTS,
     ClientOptions,
-    ConnectionLost,
+    ConnectionLostError,
     CoreTransport,
     FatalError,
     JointFreedError,
@@ -318,7 +318,7 @@ def test_a_fatal_error_fails_every_pending_request_at_once() -> None:
             assert fatal.request_number == transport.sent[0].number
             assert any(isinstance(e, FatalError) for e in errors)
             assert arm.closed
-            with pytest.raises(ConnectionLost) as info:
+            with pytest.raises(ConnectionLostError) as info:
                 await arm.here()
             assert isinstance(info.value.__cause__, FatalError)
 
@@ -334,9 +334,9 @@ def test_connection_dropped_mid_request() -> None:
                 await asyncio.sleep(0)
             assert transport.held
             transport.drop("link went down")
-            with pytest.raises(ConnectionLost, match="link went down"):
+            with pytest.raises(ConnectionLostError, match="link went down"):
                 await pending
-            with pytest.raises(ConnectionLost):
+            with pytest.raises(ConnectionLostError):
                 await anext(stream)
             assert arm.closed
 

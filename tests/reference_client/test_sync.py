@@ -13,7 +13,7 @@ from manip.arm.transform import Transform
 from manip.reference_client import (
     NOTIFY_SEGMENTS,
     ClientOptions,
-    ConnectionLost,
+    ConnectionLostError,
     MemoryTransport,
     NonFatalError,
     RequestTimeout,
@@ -108,7 +108,7 @@ def test_listeners_run_in_the_loop_thread_and_may_not_block(caplog: pytest.LogCa
 
 def test_failed_connect_stops_the_thread() -> None:
     before = threading.active_count()
-    with pytest.raises(ConnectionLost, match="refused"):
+    with pytest.raises(ConnectionLostError, match="refused"):
         connect(lambda: MemoryTransport(refuse="no"))
     assert threading.active_count() == before
 
@@ -120,8 +120,8 @@ def test_calls_after_the_server_closed() -> None:
         fake.scripts[RequestOp.KILL_POWER] = lambda f, s, _: f.peer.close("operator hung up")
 
     with connect(factory(fakes, hang_up)) as arm:
-        with pytest.raises(ConnectionLost, match="operator hung up"):
+        with pytest.raises(ConnectionLostError, match="operator hung up"):
             arm.kill_power()
-        with pytest.raises(ConnectionLost):
+        with pytest.raises(ConnectionLostError):
             arm.here()
         assert arm.closed

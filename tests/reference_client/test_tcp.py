@@ -24,7 +24,7 @@ from manip.links import ConnectionLost as Los
 from manip.reference_client import (
     NOTIFY_SEGMENTS,
     ClientOptions,
-    ConnectionLost,
+    ConnectionLostError,
     FatalError,
     NcpTransport,
     RequestTimeout,
@@ -93,7 +93,7 @@ def test_contact_option_and_url_parameter(served: ReferenceServer) -> None:
     async def main() -> None:
         assert served.address.endswith("?contact=ARM")  # the server's address names its contact
         url = served.address.partition("?")[0]
-        with pytest.raises(ConnectionLost, match="contact PUMA") as info:
+        with pytest.raises(ConnectionLostError, match="contact PUMA") as info:
             await aconnect(url)
         assert isinstance(info.value.__cause__, ConnectionRefused)
         async with aconnect(url, contact="ARM") as arm:
@@ -108,7 +108,7 @@ def test_contact_option_and_url_parameter(served: ReferenceServer) -> None:
 
 def test_cannot_connect_to_a_free_port() -> None:
     async def main() -> None:
-        with pytest.raises(ConnectionLost, match="cannot connect") as info:
+        with pytest.raises(ConnectionLostError, match="cannot connect") as info:
             await aconnect(f"tcp://127.0.0.1:{free_port()}", ClientOptions(connect_timeout=2.0))
         assert isinstance(info.value.__cause__, LinkError)
 
@@ -126,7 +126,7 @@ def test_a_fatal_error_fails_the_pipelined_requests_and_aborts(served: Reference
             assert all(isinstance(o, FatalError) for o in outcomes), outcomes
             assert {o.code for o in outcomes if isinstance(o, FatalError)} == {"NZI"}
             assert arm.closed
-            with pytest.raises(ConnectionLost):
+            with pytest.raises(ConnectionLostError):
                 await arm.here()
 
     run(main())
@@ -143,7 +143,7 @@ def test_connection_dropped_mid_request() -> None:
 
     async def main() -> None:
         async with scripted_server(unplugged) as url, aconnect(url) as arm:
-            with pytest.raises(ConnectionLost, match="robot unplugged") as info:
+            with pytest.raises(ConnectionLostError, match="robot unplugged") as info:
                 await arm.here()
             assert isinstance(info.value.__cause__, ChaosError)
             assert arm.closed

@@ -47,7 +47,7 @@ from manip.reference_client.definitions import (
 from manip.reference_client.errors import (
     AsynchronousError,
     AsynchronousWarning,
-    ConnectionLost,
+    ConnectionLostError,
     FatalError,
     GuardTrippedError,
     JointFreedError,
@@ -88,7 +88,7 @@ __all__ = [
     "AsynchronousWarning",
     "BackgroundProcess",
     "ClientOptions",
-    "ConnectionLost",
+    "ConnectionLostError",
     "Connector",
     "CoreTransport",
     "FatalError",

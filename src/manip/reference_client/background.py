@@ -6,7 +6,7 @@ The user side calls :meth:`BackgroundProcess.submit`, which puts the request on 
 and returns a future.  The task loops::
 
     read every available packet -> matching core -> events -> futures, listeners, log
-    connection closed?          -> fail everything with ConnectionLost, stop
+    connection closed?          -> fail everything with ConnectionLostError, stop
     while the queue is not empty, the initial RESPONSE came and may_transmit():
         send_user_request(request) -> matching core knows the packet number
     sleep until the transport or a new request wakes us
@@ -16,8 +16,8 @@ States of the process::
     starting --initial RESPONSE--> running --fatal error / connection lost / close()--> terminated
 
 In ``terminated`` every queued and pending request has failed (FatalError after a fatal error,
-ConnectionLost otherwise), close listeners have been called (async iterators end, segment waiters
-fail) and new requests are refused at once with ConnectionLost, chained to the cause.  Nothing waits
+ConnectionLostError otherwise), close listeners have been called (async iterators end, segment waiters
+fail) and new requests are refused at once with ConnectionLostError, chained to the cause.  Nothing waits
 for ever: per-request timers fail a request with RequestTimeout, a fatal error or a lost connection
 fails all of them.  A reply that comes after a timeout is reported as a late out-of-sequence response.
 
@@ -35,7 +35,7 @@ from collections.abc import Callable
 from typing import Any, TypeVar
 
 from manip.codecs.messages import AsyncResponse
-from manip.reference_client.errors import ConnectionLost, FatalError, ManipError, RequestTimeout
+from manip.reference_client.errors import ConnectionLostError, FatalError, ManipError, RequestTimeout
 from manip.reference_client.events import (
     AsyncErrorReceived,
     AsyncResponseReceived,
@@ -77,8 +77,8 @@ def _error_for(error: ManipError, request: Request[Any]) -> ManipError:
         return FatalError(
             error.error, request_number=error.request_number, request=request, faults=error.faults
         )
-    if isinstance(error, ConnectionLost):
-        lost = ConnectionLost(error.reason)
+    if isinstance(error, ConnectionLostError):
+        lost = ConnectionLostError(error.reason)
         lost.__cause__ = error.__cause__
         return lost
     return error
@@ -139,7 +139,7 @@ class BackgroundProcess:
         except ManipError:
             raise
         except Exception as exc:
-            raise ConnectionLost(f"cannot connect: {exc}") from exc
+            raise ConnectionLostError(f"cannot connect: {exc}") from exc
         self._task = asyncio.create_task(self._run(), name=f"manip background ({self.name})")
         if self.core.ready:
             return
@@ -147,7 +147,7 @@ class BackgroundProcess:
             await asyncio.wait_for(asyncio.shield(self._initial), connect_timeout)
         except TimeoutError:
             await self.close(f"no initial RESPONSE within {connect_timeout:g} s")
-            raise ConnectionLost(f"no initial RESPONSE within {connect_timeout:g} s") from None
+            raise ConnectionLostError(f"no initial RESPONSE within {connect_timeout:g} s") from None
 
     def submit(self, request: Request[T]) -> asyncio.Future[T]:
         """Queue ``request``; the future completes with its result or fails with a ManipError."""
@@ -166,7 +166,7 @@ class BackgroundProcess:
         return future
 
     async def close(self, reason: str = "closed by the user") -> None:
-        """Fail everything still waiting with ConnectionLost(reason), disconnect, stop the task."""
+        """Fail everything still waiting with ConnectionLostError(reason), disconnect, stop the task."""
         if self._terminal is None:
             self._closed_by_user = True
             self._handle(self.core.connection_lost(reason))
@@ -220,7 +220,7 @@ class BackgroundProcess:
                 self._handle(self.core.connection_lost("background process cancelled"))
             raise
         except Exception as exc:
-            if isinstance(exc, ConnectionLost):
+            if isinstance(exc, ConnectionLostError):
                 reason = exc.reason
                 log.info("%s: %s", self.name, exc)
             else:
@@ -305,7 +305,7 @@ class BackgroundProcess:
     def _closed_by(self, reason: str, cause: BaseException | None) -> None:
         if ClientFault.SILENT_CLOSE in self.faults:
             return
-        lost = ConnectionLost(reason)
+        lost = ConnectionLostError(reason)
         lost.__cause__ = cause
         self._terminate(lost)
 
@@ -350,10 +350,10 @@ class BackgroundProcess:
             self._call(listener, error)
         self._wake.set()
 
-    def _refusal(self, request: Request[Any]) -> ConnectionLost:
+    def _refusal(self, request: Request[Any]) -> ConnectionLostError:
         cause = self._terminal
-        reason = cause.reason if isinstance(cause, ConnectionLost) else f"closed after {cause}"
-        error = ConnectionLost(f"cannot send {request.describe()}: {reason}")
+        reason = cause.reason if isinstance(cause, ConnectionLostError) else f"closed after {cause}"
+        error = ConnectionLostError(f"cannot send {request.describe()}: {reason}")
         error.__cause__ = cause
         return error
 

@@ -83,7 +83,7 @@ from manip.reference_client.cli_requests import (
     wrist_metavar,
 )
 from manip.reference_client.connect import aconnect
-from manip.reference_client.errors import ConnectionLost, ManipError, RequestTimeout
+from manip.reference_client.errors import ConnectionLostError, ManipError, RequestTimeout
 from manip.reference_client.harness import main as harness_main
 from manip.reference_client.manipulator import NOTIFY_GUARD_HITS, NOTIFY_SEGMENTS, Manipulator
 from manip.reference_client.options import DEFAULT_MAX_REPLY_BYTES, ClientOptions
@@ -256,7 +256,7 @@ def _run(settings: Settings, action: Action, *, interrupt_ends: bool = False) ->
             _fail(InterruptError(), EXIT_INTERRUPTED, as_json)
     except RequestTimeout as exc:
         _fail(exc, EXIT_TIMEOUT, as_json)
-    except ConnectionLost as exc:
+    except ConnectionLostError as exc:
         _fail(exc, EXIT_CONNECTION, as_json)
     except ManipError as exc:
         _fail(exc, EXIT_SERVER_ERROR, as_json)

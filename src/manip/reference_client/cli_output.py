@@ -17,7 +17,7 @@ from manip.codecs.messages import AsyncResponse
 from manip.reference_client.errors import (
     AsynchronousError,
     AsynchronousWarning,
-    ConnectionLost,
+    ConnectionLostError,
     FatalError,
     ManipError,
     NonFatalError,
@@ -204,7 +204,7 @@ def error_line(error: BaseException) -> str:
         meaning = error.meaning or error.message
         fatal = "fatal error " if isinstance(error, FatalError) else ""
         return f"{fatal}{error.code}: {meaning} ({error.rendered})"
-    if isinstance(error, ConnectionLost):
+    if isinstance(error, ConnectionLostError):
         return error.reason if error.reason.startswith("cannot connect") else str(error)
     return str(error)
 
@@ -216,7 +216,7 @@ def _failure_kind(error: BaseException) -> str:
         (AsynchronousWarning, "warning"),
         (AsynchronousError, "asynchronous-error"),
         (RequestTimeout, "timeout"),
-        (ConnectionLost, "connection-lost"),
+        (ConnectionLostError, "connection-lost"),
         (ResponseDataError, "bad-reply"),
         (ReplyTooLargeError, "reply-too-large"),
     )

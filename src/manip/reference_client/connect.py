@@ -64,7 +64,7 @@ def with_contact(options: ClientOptions | None, contact: str | None) -> ClientOp
 async def open_manipulator(source: TransportSource, options: ClientOptions | None = None) -> Manipulator:
     """Connect, start the background process, wait for the initial RESPONSE; return the manipulator.
 
-    Raises ConnectionLost (or FatalError, when the server sends one instead of its initial RESPONSE);
+    Raises ConnectionLostError (or FatalError, when the server sends one instead of its initial RESPONSE);
     ``manip.links.AddressError`` (a ValueError) for a URL that cannot be parsed.
     """
     options = options or ClientOptions()

@@ -14,7 +14,7 @@ Server errors (E.2) keep the parts of the error string a program can act on (``w
 * :class:`AsynchronousError`: 0204, something went wrong outside any request (motion aborted, ...);
 * :class:`AsynchronousWarning`: 0205, worth telling a human, not an error;
 * :class:`OutOfSequenceResponse`: a packet that answers nothing we wait for (reported, never raised);
-* :class:`ConnectionLost`: the connection closed or was closed; pending requests fail with it;
+* :class:`ConnectionLostError`: the connection closed or was closed; pending requests fail with it;
 * :class:`RequestTimeout`: no reply within the request's timeout (also a :class:`TimeoutError`);
 * :class:`ResponseDataError`: a reply whose data do not fit the request;
 * :class:`JointFreedError`: a request while a joint is free (the server would discard it);
@@ -173,7 +173,7 @@ class OutOfSequenceResponse(ManipError):  # noqa: N818 - the 1985 guide's name (
         )
 
 
-class ConnectionLost(ManipError):  # noqa: N818 - names the event, like manip.links.ConnectionLost
+class ConnectionLostError(ManipError):
     """The connection is gone (closed by either end, broken, or failed before it opened)."""
 
     def __init__(self, reason: str) -> None:

@@ -92,7 +92,7 @@ class ConnectionEnded:
 
     reason: str
     cause: BaseException | None = None
-    """The transport's error that ended the connection, if it has one (chained to ConnectionLost)."""
+    """The transport's error that ended the connection, if it has one (chained to ConnectionLostError)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,7 +19,7 @@ from typing import Final
 from manip.codecs.error_string import format_joint_mask
 from manip.spec.model import Layout
 
-__all__ = ["FAULTS", "NO_FAULTS", "ClientFault", "ClientFaults", "FaultInfo"]
+__all__ = ["FAULTS", "NO_FAULTS", "ClientFault", "ClientFaultInfo", "ClientFaults"]
 
 
 class ClientFault(enum.Enum):
@@ -47,79 +47,81 @@ class ClientFault(enum.Enum):
 
 
 @dataclass(frozen=True)
-class FaultInfo:
+class ClientFaultInfo:
     what: str
     clauses: tuple[str, ...]
     """The clauses it breaks; none for a switch that picks another allowed reading of the contract."""
 
 
-FAULTS: Final[dict[ClientFault, FaultInfo]] = {
-    ClientFault.WRONG_REQUEST_NUMBER: FaultInfo(
+FAULTS: Final[dict[ClientFault, ClientFaultInfo]] = {
+    ClientFault.WRONG_REQUEST_NUMBER: ClientFaultInfo(
         "a reply is matched to the request numbered one above the number it carries",
         ("client.reply-matching",),
     ),
-    ClientFault.IGNORE_ASYNC: FaultInfo(
+    ClientFault.IGNORE_ASYNC: ClientFaultInfo(
         "asynchronous responses (0203) are dropped", ("client.async-routing",)
     ),
-    ClientFault.ASYNC_AS_REPLY: FaultInfo(
+    ClientFault.ASYNC_AS_REPLY: ClientFaultInfo(
         "an asynchronous response answers the oldest pending request", ("client.async-routing",)
     ),
-    ClientFault.DOLLAR_AS_NUMBER: FaultInfo(
+    ClientFault.DOLLAR_AS_NUMBER: ClientFaultInfo(
         "$ in an error message is printed as the raw number, not the joints",
         ("client.error-report", "error-string.substitution"),
     ),
-    ClientFault.TILDE_OCTAL: FaultInfo(
+    ClientFault.TILDE_OCTAL: ClientFaultInfo(
         "~ in an error message is printed in octal", ("client.error-report", "error-string.substitution")
     ),
-    ClientFault.FATAL_AS_NON_FATAL: FaultInfo(
+    ClientFault.FATAL_AS_NON_FATAL: ClientFaultInfo(
         "a fatal error (0201) is taken as a non-fatal error of its request; the connection goes on",
         ("client.fatal-ends",),
     ),
-    ClientFault.SWAPPED_FLOAT_WORDS: FaultInfo(
+    ClientFault.SWAPPED_FLOAT_WORDS: ClientFaultInfo(
         "the two words of each float in a reply are read in the wrong order", ("client.reply-data",)
     ),
-    ClientFault.SET_SPEED_LENGTH: FaultInfo(
+    ClientFault.SET_SPEED_LENGTH: ClientFaultInfo(
         "set-speed carries 8 data bytes instead of one float", ("request-data.types",)
     ),
-    ClientFault.NEVER_ACK: FaultInfo(
+    ClientFault.NEVER_ACK: ClientFaultInfo(
         "the client's NCP acknowledges nothing (ack field 0, no STS)", ("ncp.acknowledge",)
     ),
-    ClientFault.RESERVED_AS_ZERO: FaultInfo(
+    ClientFault.RESERVED_AS_ZERO: ClientFaultInfo(
         "a reserved-operand float in a reply is read as 0.0", ("float.reserved-operand",)
     ),
-    ClientFault.NO_INITIAL_WAIT: FaultInfo(
+    ClientFault.NO_INITIAL_WAIT: ClientFaultInfo(
         "requests go out without waiting for the initial RESPONSE", ("client.initial-response",)
     ),
-    ClientFault.IGNORE_PAD: FaultInfo(
+    ClientFault.IGNORE_PAD: ClientFaultInfo(
         "the numbers of an error string are read right after the NUL, a pad byte included",
         ("client.error-report", "client.error-args-layout", "error-string.substitution"),
     ),
-    ClientFault.MULTI_FIRST_PACKET: FaultInfo(
+    ClientFault.MULTI_FIRST_PACKET: ClientFaultInfo(
         "a multi-packet reply ends at its first packet", ("client.multi-packet",)
     ),
-    ClientFault.EARLY_TIMEOUT: FaultInfo("a request times out at half its timeout", ("client.reply-wait",)),
-    ClientFault.SILENT_CLOSE: FaultInfo(
+    ClientFault.EARLY_TIMEOUT: ClientFaultInfo(
+        "a request times out at half its timeout", ("client.reply-wait",)
+    ),
+    ClientFault.SILENT_CLOSE: ClientFaultInfo(
         "the end of the connection is not reported; requests in flight wait for their timeout",
         ("client.connection-lost",),
     ),
-    ClientFault.IGNORE_WINDOW: FaultInfo(
+    ClientFault.IGNORE_WINDOW: ClientFaultInfo(
         "the client's NCP ignores the window the server offers (OPN and STS read as the largest window)",
         ("ncp.window",),
     ),
-    ClientFault.ARRIVAL_ORDER: FaultInfo(
+    ClientFault.ARRIVAL_ORDER: ClientFaultInfo(
         "a reply is matched to the oldest request waiting, whatever number it carries (by arrival order)",
         ("client.reply-matching",),
     ),
-    ClientFault.GUARD_ZERO: FaultInfo(
+    ClientFault.GUARD_ZERO: ClientFaultInfo(
         "a new guard always gets number 0, armed or not", ("client.guard-numbers",)
     ),
-    ClientFault.NO_NEWWC: FaultInfo(
+    ClientFault.NO_NEWWC: ClientFaultInfo(
         "a change of load sends set frame vector but never set weight (NEWWC)", ("client.newwc-on-load",)
     ),
-    ClientFault.NEWWC_UNDER_GUARD: FaultInfo(
+    ClientFault.NEWWC_UNDER_GUARD: ClientFaultInfo(
         "a change of load sends set weight while guards are armed", ("client.no-newwc-with-guard",)
     ),
-    ClientFault.LITERAL_EXAMPLES: FaultInfo(
+    ClientFault.LITERAL_EXAMPLES: ClientFaultInfo(
         "no fault: the harness takes every example of docs/client-harness.md literally where the contract "
         "allows two readings (a one-element raw as a bare string, as the segment example; state lost "
         "after the not-connected errors of the requests in flight); the suite must pass it",

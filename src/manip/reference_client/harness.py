@@ -26,7 +26,7 @@ from manip.reference_client.connect import open_manipulator
 from manip.reference_client.errors import (
     AsynchronousError,
     AsynchronousWarning,
-    ConnectionLost,
+    ConnectionLostError,
     FatalError,
     JointFreedError,
     ManipError,
@@ -198,7 +198,7 @@ class CaseRun:
             self.ended = True
             return
         except (ManipError, OSError, ValueError) as exc:
-            reason = exc.reason if isinstance(exc, ConnectionLost) else str(exc)
+            reason = exc.reason if isinstance(exc, ConnectionLostError) else str(exc)
             self.emit("state", ident, state="refused", reason=reason)
             self.ended = True
             return
@@ -294,7 +294,7 @@ class CaseRun:
                 "timeout"
                 if isinstance(exc, RequestTimeout)
                 else "not-connected"
-                if isinstance(exc, ConnectionLost)
+                if isinstance(exc, ConnectionLostError)
                 else "other"
             )
             self.emit("error", ident, origin="client", kind=kind, request_number=None, detail=str(exc))
@@ -326,7 +326,7 @@ class CaseRun:
             kind = "timeout"
         elif isinstance(exc, ResponseDataError):
             kind = "bad-data"
-        elif isinstance(exc, ConnectionLost):
+        elif isinstance(exc, ConnectionLostError):
             kind = "not-connected"
         else:
             kind = "other"
@@ -403,7 +403,7 @@ class CaseRun:
         if isinstance(error, FatalError):
             self.lost(f"fatal error: {error.rendered}")
         else:
-            self.lost(error.reason if isinstance(error, ConnectionLost) else str(error))
+            self.lost(error.reason if isinstance(error, ConnectionLostError) else str(error))
 
 
 def _writer(stream: Any) -> Emit:

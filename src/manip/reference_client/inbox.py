@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable
 
-from manip.reference_client.errors import ConnectionLost
+from manip.reference_client.errors import ConnectionLostError
 from manip.reference_client.packets import ResponseInfo, ServerPacket, chaos_response_info
 from manip.reference_client.request import Request
 
@@ -50,16 +50,16 @@ class InboxTransport:
         self._wakeup = callback
 
     def _number(self, request: Request[object]) -> int:
-        """Give ``request`` the next packet number (ConnectionLost when closed)."""
+        """Give ``request`` the next packet number (ConnectionLostError when closed)."""
         if not self._open:
-            raise ConnectionLost(self._close_reason or "not connected")
+            raise ConnectionLostError(self._close_reason or "not connected")
         self._next_number = (self._next_number + 1) % MOD
         request.packet_number = self._next_number
         return self._next_number
 
     def _opening(self, kind: str) -> None:
         if self._ever_opened:
-            raise ConnectionLost(f"a {kind} transport opens only once")
+            raise ConnectionLostError(f"a {kind} transport opens only once")
         self._open = self._ever_opened = True
 
     def _wake(self) -> None:

@@ -36,7 +36,7 @@ from manip.reference_client.arguments import word
 from manip.reference_client.background import AsyncListener, BackgroundProcess, CloseListener, ErrorListener
 from manip.reference_client.errors import (
     AsynchronousError,
-    ConnectionLost,
+    ConnectionLostError,
     GuardTrippedError,
     JointFreedError,
     ManipError,
@@ -268,7 +268,7 @@ class Manipulator(GenericOperations, PumaOperations):
         if self._segment_done(number):
             return
         if self._process.closed:
-            raise ConnectionLost(f"cannot wait for segment {number}: the connection is closed")
+            raise ConnectionLostError(f"cannot wait for segment {number}: the connection is closed")
         future: asyncio.Future[None] = asyncio.get_running_loop().create_future()
         entry = (number, future)
         self._segment_waiters.append(entry)
@@ -313,7 +313,7 @@ class Manipulator(GenericOperations, PumaOperations):
     # ------------------------------------------------------------------ lifecycle
 
     async def aclose(self) -> None:
-        """Disconnect; requests still waiting fail with ConnectionLost("closed by the user")."""
+        """Disconnect; requests still waiting fail with ConnectionLostError("closed by the user")."""
         await self._process.close()
 
     async def __aenter__(self) -> Manipulator:

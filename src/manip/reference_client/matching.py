@@ -19,7 +19,7 @@ Phases::
   usual (a fatal error here is a refusal).  With ``expect_initial_response=False`` the core starts OPEN.
 * ``OPEN``: packets are dispatched to response handlers (below).
 * ``FAILED``: a fatal error (0201) failed every pending request at once; no more requests may be sent.
-* ``CLOSED``: :meth:`MatchingCore.connection_lost` failed every pending request with ConnectionLost.
+* ``CLOSED``: :meth:`MatchingCore.connection_lost` failed every pending request with ConnectionLostError.
 
 Dispatch: the response code selects a handler through the registry and the handler-type list
 (:mod:`~manip.reference_client.registry`).  The built-in handlers (:mod:`~manip.reference_client.handlers`)
@@ -52,7 +52,7 @@ from manip.codecs.error_string import ErrorMessage, parse_error
 from manip.codecs.errors import CodecError
 from manip.codecs.lispm_text import decode_lispm
 from manip.reference_client.errors import (
-    ConnectionLost,
+    ConnectionLostError,
     ManipError,
     NonFatalError,
     OutOfSequenceReason,
@@ -145,7 +145,9 @@ class MatchingCore:
         """``request`` went out with ``request.packet_number``; a response-type-none request is
         answered at once."""
         if self.phase in (Phase.FAILED, Phase.CLOSED):
-            raise ConnectionLost(f"cannot send {request.describe()}: the connection is {self.phase.value}")
+            raise ConnectionLostError(
+                f"cannot send {request.describe()}: the connection is {self.phase.value}"
+            )
         number = request.packet_number
         if number is None:
             raise ValueError(f"{request.describe()}: the transport did not set the packet number")
@@ -205,10 +207,11 @@ class MatchingCore:
         return [self._failed(request, error)]
 
     def connection_lost(self, reason: str, cause: BaseException | None = None) -> list[Event]:
-        """The connection is gone: every pending request fails with ConnectionLost (``cause`` chained)."""
+        """The connection is gone: every pending request fails with ConnectionLostError (``cause``
+        chained)."""
         events: list[Event] = []
         for request in self._take_all():
-            error = ConnectionLost(reason)
+            error = ConnectionLostError(reason)
             error.__cause__ = cause
             events.append(self._failed(request, error))
         self.phase = Phase.CLOSED

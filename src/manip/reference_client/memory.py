@@ -23,7 +23,7 @@ from typing import Any
 
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_async, encode_error, encode_terminator
-from manip.reference_client.errors import ConnectionLost
+from manip.reference_client.errors import ConnectionLostError
 from manip.reference_client.inbox import InboxTransport
 from manip.reference_client.packets import ServerPacket
 from manip.reference_client.request import Request
@@ -68,7 +68,7 @@ class MemoryTransport(InboxTransport):
 
     async def set_up_communications(self) -> None:
         if self.refuse is not None:
-            raise ConnectionLost(f"refused: {self.refuse}")
+            raise ConnectionLostError(f"refused: {self.refuse}")
         self._opening("memory")
         self._connected.set()
 

@@ -5,7 +5,7 @@ Theory of operation
 -------------------
 * ``set_up_communications`` opens the connection (RFC to the address's contact, or ``contact``),
   with ``wrap_link`` (a recording tap, :class:`manip.captures.RecorderTap`) between node and link;
-  a refusal, a timeout or a link failure becomes :class:`~manip.reference_client.errors.ConnectionLost`
+  a refusal, a timeout or a link failure becomes :class:`~manip.reference_client.errors.ConnectionLostError`
   with the links' :class:`~manip.links.ChaosError` as its ``__cause__``.
 * ``send_user_request`` sends the request's opcode and data as one data packet and sets
   ``request.packet_number`` to the number the NCP gave it (the number the reply will carry).
@@ -47,7 +47,7 @@ from manip.links import ConnectionLost as ChaosConnectionLost
 from manip.links.api import LinkWrapper
 from manip.ncp.config import MAX_WINDOW
 from manip.ncp.packets import pack_status, unpack_status
-from manip.reference_client.errors import ConnectionLost
+from manip.reference_client.errors import ConnectionLostError
 from manip.reference_client.faults import NO_FAULTS, ClientFault, ClientFaults
 from manip.reference_client.packets import ResponseInfo, ServerPacket, chaos_response_info
 from manip.reference_client.request import Request
@@ -58,7 +58,7 @@ DEFAULT_CLOSE_TIMEOUT = 2.0
 
 
 def describe_chaos_end(error: ChaosError) -> str:
-    """How a links error reads in a ConnectionLost: who ended the connection and why."""
+    """How a links error reads in a ConnectionLostError: who ended the connection and why."""
     reason = error.reason or type(error).__name__
     if isinstance(error, ConnectionClosed):
         return f"closed by the server ({reason})" if error.by_peer else f"closed here ({reason})"
@@ -152,11 +152,11 @@ class NcpTransport:
     async def send_user_request(self, request: Request[Any]) -> None:
         conn = self._conn
         if conn is None or not self.connection_open():
-            raise ConnectionLost(self.handle_closed_connection())
+            raise ConnectionLostError(self.handle_closed_connection())
         try:
             number = await conn.send(bytes(request.data), request.opcode)
         except ChaosError as exc:
-            raise ConnectionLost(describe_chaos_end(exc)) from exc
+            raise ConnectionLostError(describe_chaos_end(exc)) from exc
         request.packet_number = number
 
     def get_response_info(self, packet: ServerPacket) -> ResponseInfo:
@@ -164,7 +164,7 @@ class NcpTransport:
 
     async def set_up_communications(self) -> None:
         if self._conn is not None or self._disconnected:
-            raise ConnectionLost("an NCP transport opens only once")
+            raise ConnectionLostError("an NCP transport opens only once")
         try:
             conn = await open_connection(
                 self.address,
@@ -174,7 +174,9 @@ class NcpTransport:
                 wrap_link=self.wrap_link,
             )
         except (ChaosError, OSError) as exc:
-            raise ConnectionLost(f"cannot connect to {self.address} (contact {self.contact}): {exc}") from exc
+            raise ConnectionLostError(
+                f"cannot connect to {self.address} (contact {self.contact}): {exc}"
+            ) from exc
         self._conn = conn
         conn.set_wakeup(self._poke)
 

@@ -17,7 +17,7 @@ Rules every transport keeps (the background process relies on them):
 * ``handle_closed_connection`` is called once, after the last packet was read, and returns why the
   connection closed (CLS text, LOS reason, "broken", ...).  A transport may also have a
   ``close_cause`` attribute (an exception or None): it becomes the ``__cause__`` of the
-  ConnectionLost errors.
+  ConnectionLostError errors.
 
 Implementations: :class:`~manip.reference_client.ncp_transport.NcpTransport` (Chaos over
 ``manip.links``), :class:`~manip.reference_client.core_transport.CoreTransport` (a sans-I/O server core
@@ -71,7 +71,7 @@ class ManipTransport(Protocol):
         ...
 
     async def set_up_communications(self) -> None:
-        """Open the connection; raise ``ConnectionLost`` when it cannot be opened."""
+        """Open the connection; raise ``ConnectionLostError`` when it cannot be opened."""
         ...
 
     async def disconnect(self) -> None:
