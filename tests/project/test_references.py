@@ -76,3 +76,22 @@ def test_the_checks_find_a_name_that_is_gone() -> None:
     assert _resolves("manip.codecs.messages.encode_async")
     assert not _resolves("manip.codecs.manip")
     assert not _resolves("manip.conformance.checks.check_transcript")
+
+
+def test_the_architecture_map_names_every_package_and_top_level_module() -> None:
+    """docs/architecture.md is the map a maintainer starts from: every package of ``src/manip`` (by its
+    dotted name or its folder) and every module at the top of ``manip`` is on it."""
+    text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    package_dir = ROOT / "src" / "manip"
+    missing = []
+    for init in sorted(package_dir.rglob("__init__.py")):
+        folder = init.parent.relative_to(package_dir)
+        if folder == Path("."):
+            continue
+        dotted = "manip." + ".".join(folder.parts)
+        if dotted not in text and f"`{folder.as_posix()}/`" not in text and f"`{folder.name}/`" not in text:
+            missing.append(dotted)
+    for module in sorted(package_dir.glob("*.py")):
+        if module.stem != "__init__" and f"manip.{module.stem}" not in text:
+            missing.append(f"manip.{module.stem}")
+    assert not missing, f"docs/architecture.md does not mention: {missing}"
