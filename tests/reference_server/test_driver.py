@@ -309,7 +309,7 @@ def test_chudp_address_serves_the_same_robot() -> None:
     async def main() -> None:
         async with local(extra_addresses=["chudp://127.0.0.1:0?addr=440"]) as server:
             tcp, chudp = server.addresses
-            assert chudp.startswith("chudp://127.0.0.1:") and "addr=440" in chudp
+            assert chudp.startswith("chudp://127.0.0.1:") and "addr=0440" in chudp  # octal, as written
             client = await Raw.open(tcp)
             with pytest.raises(ConnectionRefused):  # one robot over every link
                 await Raw.open(chudp)

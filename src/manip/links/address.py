@@ -16,6 +16,8 @@ from dataclasses import dataclass, replace
 from typing import Final, Literal
 from urllib.parse import parse_qs, urlencode, urlsplit
 
+from manip.spec.notation import octal
+
 Scheme = Literal["tcp", "chudp", "chaosd", "unix"]
 
 DEFAULT_TCP_PORT: Final = 42085
@@ -58,9 +60,9 @@ class LinkAddress:
         if self.contact != DEFAULT_CONTACT:
             params["contact"] = self.contact
         if self.my_addr != DEFAULT_CLIENT_ADDR:
-            params["me"] = f"{self.my_addr:o}"
+            params["me"] = octal(self.my_addr)
         if self.peer_addr != DEFAULT_SERVER_ADDR or self.scheme == "chudp":
-            params["addr"] = f"{self.peer_addr:o}"
+            params["addr"] = octal(self.peer_addr)
         if self.local is not None:
             params["local"] = f"{_host(self.local[0])}:{self.local[1]}"
         query = f"?{urlencode(params, safe=':[]')}" if params else ""
