@@ -66,10 +66,10 @@ from manip.conformance.replay.cli import replay_command, verify_command
 from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.context import DEFAULT_REPLY_TIMEOUT, RunOptions
 from manip.conformance.suite.results import ExitCode, RunReport
-from manip.conformance.suite.runner import RunConfig, Runner
+from manip.conformance.suite.runner import RunConfig
 from manip.conformance.suite.selection import PatternError, PatternSet
 from manip.conformance.suite.world_prompt import check_terminal
-from manip.conformance.targets import execute, repeat_run, world_of
+from manip.conformance.targets import Job, execute, repeat_run, world_of
 from manip.exit_status import epilog
 from manip.links import AddressError, parse_address
 from manip.reference_server import FaultSet
@@ -373,18 +373,15 @@ def run(
     if puma_target is not None:
         config.reproduce_prefix = puma_target.reproduce_prefix()
     console.print(f"manip-conform: seed [bold]{seed}[/] (rerun with --seed {seed})")
-    world_spec = world_of(world, world_timeout)
+    job = Job(
+        config, cases, console, quiet, faults=config_faults, target=target or puma_target,
+        world=world_of(world, world_timeout),
+    )  # fmt: skip
     if repeat > 1:
-        report, code = repeat_run(
-            config, cases, config_faults, console, quiet, target or puma_target, repeat, world_spec
-        )
+        report, code = repeat_run(job, repeat)
     else:
-        holder: dict[str, Runner] = {}
-        code = execute(
-            config, cases, config_faults, holder, console, quiet,
-            cougar=target or puma_target, record=record, world=world_spec,
-        )  # fmt: skip
-        report = holder["runner"].report if "runner" in holder else None
+        code = execute(job, record)
+        report = job.report
     sys.exit(_finish(report, code, console, quiet, json=json_path, junit=junit_path, html=html_path,
                      markdown=markdown_path))  # fmt: skip
 

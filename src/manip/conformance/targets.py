@@ -15,7 +15,6 @@ import traceback
 from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 from rich.console import Console
 from rich.markup import escape
@@ -26,7 +25,6 @@ from manip.conformance.output.run_console import counts_text, headline, shown
 from manip.conformance.puma.target import PumaTarget, PumaUnreachableError
 from manip.conformance.replay.cli import recording
 from manip.conformance.suite.case import Case
-from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.embedded import EmbeddedServer, simulated_environment
 from manip.conformance.suite.results import CaseResult, ExitCode, LivenessCheck, RunReport
 from manip.conformance.suite.runner import RunConfig, RunEvents, Runner
@@ -35,9 +33,9 @@ from manip.conformance.suite.world import WorldError
 from manip.conformance.suite.world_link import DEFAULT_ANSWER_TIMEOUT, open_world
 from manip.conformance.suite.world_prompt import PROMPT_TIMEOUT, PromptWorld
 from manip.links import virtual_clock
-from manip.reference_server import ServerConfig
+from manip.reference_server import FaultSet, ServerConfig
 
-__all__ = ["WorldSpec", "execute", "repeat_run", "world_of"]
+__all__ = ["Job", "WorldSpec", "execute", "repeat_run", "world_of"]
 
 
 @dataclass(frozen=True)
@@ -55,23 +53,32 @@ def world_of(world: str | None, timeout: float | None) -> WorldSpec | None:
     return WorldSpec(world, default if timeout is None else timeout)
 
 
-def execute(
-    config: RunConfig,
-    cases: Sequence[Case],
-    faults: Any,
-    holder: dict[str, Runner],
-    console: Console,
-    quiet: bool,
-    cougar: CougarTarget | PumaTarget | None = None,
-    record: Path | None = None,
-    world: WorldSpec | None = None,
-) -> int | None:
-    """Run; None means "use the report's exit code"."""
+@dataclass
+class Job:
+    """One run as the dispatch carries it: its configuration and cases, the embedded server's faults,
+    where it prints, the target it goes to (a Cougar, the Puma's wrist side, else the server), HOST's
+    world, and its runner once it has one (whose report survives an interruption)."""
+
+    config: RunConfig
+    cases: Sequence[Case]
+    console: Console
+    quiet: bool = False
+    faults: FaultSet | None = None
+    target: CougarTarget | PumaTarget | None = None
+    world: WorldSpec | None = None
+    runner: Runner | None = None
+
+    @property
+    def report(self) -> RunReport | None:
+        return self.runner.report if self.runner is not None else None
+
+
+def execute(job: Job, record: Path | None = None) -> int | None:
+    """Run ``job`` to its end (recorded to ``record``); an exit status when something around the run
+    failed, None to use the report's."""
+    console = job.console
     try:
-        virtual_clock.run(
-            _run_async(config, cases, faults, holder, console, quiet, cougar, record, world),
-            virtual=config.virtual_time,
-        )
+        virtual_clock.run(_run_recorded(job, record), virtual=job.config.virtual_time)
     except WorldError as exc:
         console.print(f"[bold red]world unusable[/]: {escape(str(exc))}")
         return int(ExitCode.UNREACHABLE)
@@ -79,46 +86,37 @@ def execute(
         console.print(f"[bold red]target unreachable[/]: {escape(str(exc))}")
         return int(ExitCode.UNREACHABLE)
     except KeyboardInterrupt:
-        if "runner" in holder:
-            holder["runner"].report.interrupted = True
-            problems = holder["runner"].report.problems
-            if not any("interrupted" in p for p in problems):
-                problems.append("the run was interrupted; this report is partial")
+        if job.report is not None:
+            job.report.interrupted = True
+            if not any("interrupted" in p for p in job.report.problems):
+                job.report.problems.append("the run was interrupted; this report is partial")
         console.print("[bold]interrupted[/]: the report is partial")
         return int(ExitCode.INTERNAL)
     except Exception as exc:  # an internal error of the suite: keep what was done
         text = traceback.format_exc()
         console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {escape(str(exc))}")
-        if "runner" in holder:
-            holder["runner"].report.internal_error = text
+        if job.report is not None:
+            job.report.internal_error = text
         else:
             console.print(text, markup=False)
         return int(ExitCode.INTERNAL)
     return None
 
 
-def repeat_run(
-    config: RunConfig,
-    cases: Sequence[Case],
-    faults: Any,
-    console: Console,
-    quiet: bool,
-    cougar: CougarTarget | PumaTarget | None,
-    runs: int,
-    world: WorldSpec | None = None,
-) -> tuple[RunReport | None, int | None]:
+def repeat_run(job: Job, runs: int) -> tuple[RunReport | None, int | None]:
     """``--repeat``: the selection with ``runs`` seeds, then the first seed again; the first run's report
     carries what changed between them (:mod:`manip.conformance.suite.stability`)."""
+    config, console = job.config, job.console
     seeds = repeat_seeds(config.seed, runs)
     reports: list[RunReport] = []
     worst: int | None = None
     for number, seed in enumerate([*seeds, seeds[0]], start=1):
-        holder: dict[str, Runner] = {}
         run_config = replace(config, seed=seed, options=replace(config.options))
-        code = execute(run_config, cases, faults, holder, console, True, cougar=cougar, world=world)
-        if "runner" not in holder:
+        one = replace(job, config=run_config, quiet=True, runner=None)
+        code = execute(one)
+        if one.report is None:
             return None, code
-        report = holder["runner"].report
+        report = one.report
         reports.append(report)
         if code is not None or report.interrupted:
             return reports[0], code
@@ -133,99 +131,66 @@ def repeat_run(
     first.unstable = instability(reports, compare_packets=config.virtual_time)
     if not first.unstable and worst and worst > int(first.exit_code):
         first.problems.append(f"a repeated run was {ExitCode(worst).name.lower().replace('_', '-')}")
-    if not quiet:
+    if not job.quiet:
         console.print(f"{len(reports)} runs, {len(first.unstable)} stability problem(s)", markup=False)
     return first, None
 
 
-async def _run_async(
-    config: RunConfig,
-    cases: Sequence[Case],
-    faults: Any,
-    holder: dict[str, Runner],
-    console: Console,
-    quiet: bool,
-    cougar: CougarTarget | PumaTarget | None,
-    record: Path | None,
-    world: WorldSpec | None,
-) -> None:
+async def _run_recorded(job: Job, record: Path | None) -> None:
     # The recording starts on the run's loop, so a simulated run records on its virtual clock.
+    config = job.config
     how = "manip-conform run (client side)"
     with recording(record, how=how, seed=config.seed, virtual=config.virtual_time) as wrap:
         config.wrap_link = wrap
-        await _run_target(config, cases, faults, holder, console, quiet, cougar, world)
+        await _run_target(job)
 
 
 @contextlib.asynccontextmanager
-async def _opened_world(config: RunConfig, world: WorldSpec | None, console: Console) -> AsyncIterator[None]:
+async def _opened_world(job: Job) -> AsyncIterator[None]:
     """HOST's world (``--world``) for the block, as the run's (nothing without one)."""
-    if world is None:
+    if job.world is None:
         yield
         return
-    async with open_world(world.spec, answer_timeout=world.timeout) as opened:
-        config.world = opened
-        console.print(f"world: {opened.description}", markup=False)
+    async with open_world(job.world.spec, answer_timeout=job.world.timeout) as opened:
+        job.config.world = opened
+        job.console.print(f"world: {opened.description}", markup=False)
         yield
 
 
-async def _run_target(
-    config: RunConfig,
-    cases: Sequence[Case],
-    faults: Any,
-    holder: dict[str, Runner],
-    console: Console,
-    quiet: bool,
-    cougar: CougarTarget | PumaTarget | None,
-    world: WorldSpec | None = None,
-) -> None:
-    if isinstance(cougar, PumaTarget):  # --puma: the suite plays Cougar for the Puma
-        await _run_puma(config, cases, holder, console, quiet, cougar, world)
+async def _run_target(job: Job) -> None:
+    config, target = job.config, job.target
+    if isinstance(target, PumaTarget):  # --puma: the suite plays Cougar for the Puma
+        await _run_puma(job, target)
         return
-    if cougar is not None:  # --cougar: the Cougar target (embedded or not)
-        async with cougar.running() as address:
-            config.address = address
-            config.options = _with_address(config.options, address)
-            if cougar.embedded:
-                console.print(f"embedded simulated Cougar at {address}", markup=False)
-            await _run_with(config, cases, holder, console, quiet)
+    if target is not None:  # --cougar: the Cougar target (embedded or not)
+        async with target.running() as address:
+            said = f"embedded simulated Cougar at {address}" if target.embedded else ""
+            await _run_at(job, address, said)
         return
     if not config.embedded:
-        async with _opened_world(config, world, console):
-            await _run_with(config, cases, holder, console, quiet)
+        async with _opened_world(job):
+            await _run_with(job)
         return
-    server_config = ServerConfig() if faults is None else ServerConfig(faults=faults)
+    server_config = ServerConfig() if job.faults is None else ServerConfig(faults=job.faults)
     # The embedded robot has the simulated Cougar wrist, so the wrist opcodes are checked too.
+    broken_after = config.options.broken_after
     if config.virtual_time:
         async with simulated_environment(
-            server_config, seed=config.seed, wrist=True, broken_after=config.options.broken_after
+            server_config, seed=config.seed, wrist=True, broken_after=broken_after
         ) as environment:
-            address = environment.address
-            config.address = address
             config.world = environment.world
-            config.options = replace(config.options, address=address, embedded=True)
-            console.print("embedded reference server in virtual time (with the simulated Cougar wrist)")
-            await _run_with(config, cases, holder, console, quiet)
+            said = "embedded reference server in virtual time (with the simulated Cougar wrist)"
+            await _run_at(job, environment.address, said, embedded=True)
         return
-    embedded = EmbeddedServer(server_config, wrist=True, broken_after=config.options.broken_after)
+    embedded = EmbeddedServer(server_config, wrist=True, broken_after=broken_after)
     with embedded as address:
-        config.address = address
         config.world = embedded.environment.world if embedded.environment is not None else None
-        config.options = replace(config.options, address=address, embedded=True)
-        console.print(
-            f"embedded reference server at {address} (with the simulated Cougar wrist)", markup=False
-        )
-        await _run_with(config, cases, holder, console, quiet)
+        said = f"embedded reference server at {address} (with the simulated Cougar wrist)"
+        await _run_at(job, address, said, embedded=True)
 
 
-async def _run_puma(
-    config: RunConfig,
-    cases: Sequence[Case],
-    holder: dict[str, Runner],
-    console: Console,
-    quiet: bool,
-    puma: PumaTarget,
-    world: WorldSpec | None = None,
-) -> None:
+async def _run_puma(job: Job, puma: PumaTarget) -> None:
+    config, console = job.config, job.console
     if puma.host is not None:
         console.print(
             f"judging Cougar listening on {puma.wrist_listen}: waiting up to {puma.wrist_wait:g} s for the "
@@ -233,29 +198,32 @@ async def _run_puma(
             markup=False,
         )
     async with puma.running_with_world(config.seed) as (address, own_world):
-        config.address = address
         config.world = own_world or config.world
-        config.options = _with_address(config.options, address)
         if puma.embedded:
             how = "in virtual time" if config.virtual_time else f"at {address}"
-            console.print(
-                f"embedded reference server {how}, its wrist played by the judging Cougar", markup=False
-            )
+            said = f"embedded reference server {how}, its wrist played by the judging Cougar"
         else:
-            console.print(f"the Puma's wrist link is up; judging {address}", markup=False)
-        async with _opened_world(config, world, console):  # HOST's, once it is up
-            await _run_with(config, cases, holder, console, quiet)
+            said = f"the Puma's wrist link is up; judging {address}"
+        async with _opened_world(job):  # HOST's, once it is up
+            await _run_at(job, address, said)
 
 
-def _with_address(options: RunOptions, address: str) -> RunOptions:
-    return replace(options, address=address)
+async def _run_at(job: Job, address: str, said: str, *, embedded: bool = False) -> None:
+    """The run against the target now listening at ``address`` (an embedded one marked so in the
+    options), once ``said`` (if anything) is printed."""
+    config = job.config
+    config.address = address
+    options = replace(config.options, address=address)
+    config.options = replace(options, embedded=True) if embedded else options
+    if said:
+        job.console.print(said, markup=False)
+    await _run_with(job)
 
 
-async def _run_with(
-    config: RunConfig, cases: Sequence[Case], holder: dict[str, Runner], console: Console, quiet: bool
-) -> None:
+async def _run_with(job: Job) -> None:
+    config, quiet = job.config, job.quiet
     progress = progress_bar(
-        console, quiet or isinstance(config.world, PromptWorld)
+        job.console, quiet or isinstance(config.world, PromptWorld)
     )  # it would hide the questions
     task_id = progress.add_task("conformance", total=0)
 
@@ -277,7 +245,6 @@ async def _run_with(
                 f"[bold red]target not alive[/] ({escape(check.when)}): {escape(check.detail)}"
             )
 
-    runner = Runner(config, cases, RunEvents(started, case_started, case_finished, liveness))
-    holder["runner"] = runner
+    job.runner = Runner(config, job.cases, RunEvents(started, case_started, case_finished, liveness))
     with progress:
-        await runner.run()
+        await job.runner.run()

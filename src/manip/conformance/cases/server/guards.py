@@ -127,28 +127,12 @@ async def _stopping(
         await probe.call("set-guard", type_index=STOP_BIT | index, dvec=dvec, tol=tol),
         "a stop-the-move guard",
     )
-    hit = await _guard_hit(ctx, probe, HIT_WAIT)
-    if hit is None:
-        ctx.fail(
-            f"no guard-hit response within {HIT_WAIT:g} s of arming guard {index} across a "
-            f"{2 * tol:.1f} oz load",
-            clause="async.codes",
-            expected="an asynchronous response (203) with condition code 1 (guard hit)",
-            actual="nothing",
-        )
-    ctx.expect(
-        (word(hit.data, 4), word(hit.data, 6)) == (1, index),
-        clause="async.layout",
-        expected=f"word 2 = 1 (trajectory stopped), word 3 = {index} (the guard)",
-        seen=hit,
-    )
-    refused = await probe.call("set-joint-angles", joints=_swing(start))
-    expect_refusal(
+    await _expect_stop(
         ctx,
-        refused,
-        clause="motion.abort",
-        severities=("E",),
-        codes=("AWA",),
+        probe,
+        index,
+        after=f"arming guard {index} across a {2 * tol:.1f} oz load",
+        then=_swing(start),
         what="a move after a stop-the-move guard aborted the motion",
     )
     await probe.drain(QUIET)
@@ -285,28 +269,12 @@ async def guard_trip_live(ctx: CaseContext) -> None:
         require_response(ctx, await probe.call("set-joint-angles", joints=goal), "a move of joint 1")
     try:
         async with ctx.arranged(WristForce((PUSH_OZ, 0.0, 0.0))):
-            hit = await _guard_hit(ctx, probe, HIT_WAIT)
-            if hit is None:
-                ctx.fail(
-                    f"no guard-hit response within {HIT_WAIT:g} s of a {PUSH_OZ:g} oz push across guard "
-                    f"{index}",
-                    clause="async.codes",
-                    expected="an asynchronous response (203) with condition code 1 (guard hit)",
-                    actual="nothing",
-                )
-            ctx.expect(
-                (word(hit.data, 4), word(hit.data, 6)) == (1, index),
-                clause="async.layout",
-                expected=f"word 2 = 1 (trajectory stopped), word 3 = {index} (the guard)",
-                seen=hit,
-            )
-            refused = await probe.call("set-joint-angles", joints=list(start))
-            expect_refusal(
+            await _expect_stop(
                 ctx,
-                refused,
-                clause="motion.abort",
-                severities=("E",),
-                codes=("AWA",),
+                probe,
+                index,
+                after=f"a {PUSH_OZ:g} oz push across guard {index}",
+                then=list(start),
                 what="a move after the pushed guard stopped the motion",
             )
     finally:
@@ -314,3 +282,26 @@ async def guard_trip_live(ctx: CaseContext) -> None:
         await power_on(ctx, probe)
         await probe.call("set-joint-angles", joints=list(start))
         await settle(ctx, probe, start, within=5.0)
+
+
+async def _expect_stop(
+    ctx: CaseContext, probe: Probe, index: int, *, after: str, then: list[float], what: str
+) -> None:
+    """Guard ``index`` (a stop-the-move guard) is reported tripped with its number (``after``: what
+    should trip it), and the move ``then`` is refused as aborted (``what``)."""
+    hit = await _guard_hit(ctx, probe, HIT_WAIT)
+    if hit is None:
+        ctx.fail(
+            f"no guard-hit response within {HIT_WAIT:g} s of {after}",
+            clause="async.codes",
+            expected="an asynchronous response (203) with condition code 1 (guard hit)",
+            actual="nothing",
+        )
+    ctx.expect(
+        (word(hit.data, 4), word(hit.data, 6)) == (1, index),
+        clause="async.layout",
+        expected=f"word 2 = 1 (trajectory stopped), word 3 = {index} (the guard)",
+        seen=hit,
+    )
+    refused = await probe.call("set-joint-angles", joints=then)
+    expect_refusal(ctx, refused, clause="motion.abort", severities=("E",), codes=("AWA",), what=what)
