@@ -99,28 +99,38 @@ class ReplyPairing(Generic[T]):
     """One connection's pairing state (see the module docstring).  Feed :meth:`request` (and
     :meth:`rfc`) and :meth:`server` in the order the packets were seen; :meth:`close` at the end."""
 
-    __slots__ = ("_fatal", "_free_wait", "_pending", "completed")
+    __slots__ = ("_fatal", "_free_wait", "_max_pending", "_pending", "completed", "forgotten")
 
-    def __init__(self) -> None:
+    def __init__(self, max_pending: int | None = None) -> None:
         self._pending: deque[_Entry[T]] = deque()
+        self._max_pending = max_pending
         self._free_wait = False
         self._fatal = False
         self.completed = 0
         """How many requests (the RFC included) are fully answered."""
+        self.forgotten = 0
+        """How many unanswered requests were let go to keep at most ``max_pending`` outstanding (a
+        reader of an endless stream keeps a bound; a server answers long before that many wait)."""
+
+    def _append(self, entry: _Entry[T]) -> None:
+        self._pending.append(entry)
+        if self._max_pending is not None and len(self._pending) > self._max_pending:
+            self._pending.popleft()
+            self.forgotten += 1
 
     def rfc(self, tag: T) -> None:
         """The RFC was seen: the next answer (the initial RESPONSE) is its."""
-        self._pending.append(_Entry(tag))
+        self._append(_Entry(tag))
 
     def request(self, tag: T, opcode: int, data: bytes) -> bool:
         """A request was seen.  Returns True when the server discards it (sent after free joint was
         granted): it is then answered by one packet, an empty done, without being executed."""
         if self._free_wait:
             self._free_wait = False
-            self._pending.append(_Entry(tag))
+            self._append(_Entry(tag))
             return True
         free = opcode == _FREE_JOINT and _well_formed(opcode, data)
-        self._pending.append(_Entry(tag, opens_multi(opcode, data), free))
+        self._append(_Entry(tag, opens_multi(opcode, data), free))
         return False
 
     def server(self, opcode: int, data: bytes) -> Placement[T]:

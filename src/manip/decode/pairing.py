@@ -13,13 +13,20 @@ number its first word carries, if that request is in the stream.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Final
 
 from manip.codecs.packet import Packet
 from manip.codecs.pairing import ReplyPairing
 from manip.decode.describe import ReadAs, guess_direction
 from manip.spec.constants import ChaosOp
 
-__all__ = ["Paired", "StreamPairing"]
+__all__ = ["MAX_CONNECTIONS", "MAX_PENDING", "Paired", "StreamPairing"]
+
+MAX_PENDING: Final = 4096
+"""Unanswered requests kept per connection: a stream of requests nobody answers is read in bounded
+memory (a Chaos window is far smaller, so a live exchange never comes near it)."""
+MAX_CONNECTIONS: Final = 4096
+"""Connections whose pairing is kept; the one seen least recently is let go first."""
 
 Endpoint = tuple[int, int]
 """A Chaos host address and connection index."""
@@ -49,11 +56,18 @@ class StreamPairing:
 
     def _pairing(self, packet: Packet) -> ReplyPairing[tuple[int, int]]:
         key = frozenset({(packet.src_host, packet.src_index), (packet.dest_host, packet.dest_index)})
+        connections = self._connections
         if packet.opcode == ChaosOp.OPN:  # the server's OPN names its own index: the RFC's entry moves
             rfc_key = frozenset({(packet.src_host, 0), (packet.dest_host, packet.dest_index)})
-            if rfc_key in self._connections and key not in self._connections:
-                self._connections[key] = self._connections.pop(rfc_key)
-        return self._connections.setdefault(key, ReplyPairing())
+            if rfc_key in connections and key not in connections:
+                connections[key] = connections.pop(rfc_key)
+        pairing = connections.pop(key, None)  # re-inserted last: the dict's order is the last seen
+        if pairing is None:
+            pairing = ReplyPairing(MAX_PENDING)
+            if len(connections) >= MAX_CONNECTIONS:
+                del connections[next(iter(connections))]
+        connections[key] = pairing
+        return pairing
 
     def place(self, packet: Packet) -> Paired:
         """Feed one packet; returns its side and, for an answer, the request it answers."""
@@ -77,7 +91,8 @@ class StreamPairing:
         return Paired("response")
 
     def _guessed(self, packet: Packet) -> Paired:
-        """No RFC seen (or one host both ways): the side by opcode and length, an answer by its number."""
+        """No RFC seen (or one host both ways): the side by opcode and length, an answer by its number
+        (at most one request per 16-bit packet number is kept)."""
         if guess_direction(packet) == "request":
             self._numbered[packet.packet_no] = packet.opcode
             return Paired("auto")
