@@ -196,18 +196,8 @@ class ServerSide:
         """Wait until a packet is there to take, without taking (so without acknowledging) it; False
         when the connection ends or nothing comes in time."""
         conn = self.conn
-        event = asyncio.Event()
-        conn.set_wakeup(event.set)
-        try:
-            async with asyncio.timeout(timeout):
-                while conn.pending == 0 and not conn.ended:
-                    event.clear()
-                    await event.wait()
-        except TimeoutError:
-            return False
-        finally:
-            conn.set_wakeup(None)
-        return conn.pending > 0
+        arrived = await self._until(lambda: conn.pending > 0 or conn.ended, timeout)
+        return arrived and conn.pending > 0
 
     async def send(self, opcode: int, data: bytes) -> int:
         return await self.conn.send(data, opcode)
@@ -308,17 +298,21 @@ class ServerSide:
     async def until_ended(self, timeout: float) -> bool:
         """Wait until the connection has ended (the client's CLS, a LOS, the link); False on timeout."""
         conn = self.conn
+        return await self._until(lambda: conn.ended, timeout)
+
+    async def _until(self, condition: Callable[[], bool], timeout: float) -> bool:
+        """Wait, woken by the connection at each change, until ``condition()`` holds; False on timeout."""
         event = asyncio.Event()
-        conn.set_wakeup(event.set)
+        self.conn.set_wakeup(event.set)
         try:
             async with asyncio.timeout(timeout):
-                while not conn.ended:
+                while not condition():
                     event.clear()
                     await event.wait()
         except TimeoutError:
             return False
         finally:
-            conn.set_wakeup(None)
+            self.conn.set_wakeup(None)
         return True
 
 

@@ -157,20 +157,7 @@ async def _continuing(
     require_response(
         ctx, await probe.call("set-guard", type_index=index, dvec=dvec, tol=tol), "a continue guard"
     )
-    hit = await _guard_hit(ctx, probe, HIT_WAIT)
-    if hit is None:
-        ctx.fail(
-            f"no guard-hit response within {HIT_WAIT:g} s of arming continue guard {index}",
-            clause="async.codes",
-            expected="an asynchronous response (203) with condition code 1 (guard hit)",
-            actual="nothing",
-        )
-    ctx.expect(
-        (word(hit.data, 4), word(hit.data, 6)) == (2, index),
-        clause="async.layout",
-        expected=f"word 2 = 2 (trajectory continues), word 3 = {index} (the guard)",
-        seen=hit,
-    )
+    await _expect_hit(ctx, probe, index, after=f"arming continue guard {index}", stops=False)
     ctx.expect(
         await settle(ctx, probe, goal, within=5.0) is not None,
         clause="motion.abort",
@@ -289,6 +276,14 @@ async def _expect_stop(
 ) -> None:
     """Guard ``index`` (a stop-the-move guard) is reported tripped with its number (``after``: what
     should trip it), and the move ``then`` is refused as aborted (``what``)."""
+    await _expect_hit(ctx, probe, index, after=after, stops=True)
+    refused = await probe.call("set-joint-angles", joints=then)
+    expect_refusal(ctx, refused, clause="motion.abort", severities=("E",), codes=("AWA",), what=what)
+
+
+async def _expect_hit(ctx: CaseContext, probe: Probe, index: int, *, after: str, stops: bool) -> None:
+    """A guard-hit response for guard ``index`` within :data:`HIT_WAIT` of ``after``, saying the
+    trajectory stopped (``stops``) or continues."""
     hit = await _guard_hit(ctx, probe, HIT_WAIT)
     if hit is None:
         ctx.fail(
@@ -297,11 +292,10 @@ async def _expect_stop(
             expected="an asynchronous response (203) with condition code 1 (guard hit)",
             actual="nothing",
         )
+    kind, said = (1, "trajectory stopped") if stops else (2, "trajectory continues")
     ctx.expect(
-        (word(hit.data, 4), word(hit.data, 6)) == (1, index),
+        (word(hit.data, 4), word(hit.data, 6)) == (kind, index),
         clause="async.layout",
-        expected=f"word 2 = 1 (trajectory stopped), word 3 = {index} (the guard)",
+        expected=f"word 2 = {kind} ({said}), word 3 = {index} (the guard)",
         seen=hit,
     )
-    refused = await probe.call("set-joint-angles", joints=then)
-    expect_refusal(ctx, refused, clause="motion.abort", severities=("E",), codes=("AWA",), what=what)

@@ -91,16 +91,22 @@ def _distance_to_segment(p: Sequence[float], a: Sequence[float], b: Sequence[flo
     return math.dist(p, [x + t * v for x, v in zip(a, ab, strict=True)])
 
 
+async def _at_line_pose(ctx: CaseContext, probe: Probe) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Power on and move to :data:`LINE_POSE`; the joint angles before the move, and the transform the
+    arm stands at after it."""
+    await power_on(ctx, probe)
+    before = await read_floats(ctx, probe, "joint-angles")
+    require_response(ctx, await probe.call("set-joint-angles", joints=list(LINE_POSE)), "a move to the start")
+    await settle(ctx, probe, LINE_POSE)
+    return before, await read_floats(ctx, probe, "here")
+
+
 @case("server.motion.straight-line", clauses=["straight-move.line"], hazard="motion", deadline=15.0)
 async def straight_line(ctx: CaseContext) -> None:
     """Straight-line move (205) 120 mm across and back (212): every Here sampled on the way lies within
     1 mm of the line between where the move starts and its goal."""
     probe = await ctx.connect()
-    await power_on(ctx, probe)
-    before = await read_floats(ctx, probe, "joint-angles")
-    require_response(ctx, await probe.call("set-joint-angles", joints=list(LINE_POSE)), "a move to the start")
-    await settle(ctx, probe, LINE_POSE)
-    start = await read_floats(ctx, probe, "here")
+    before, start = await _at_line_pose(ctx, probe)
     goal = list(start)
     goal[9] += 80.0
     goal[10] -= 90.0
@@ -129,11 +135,7 @@ async def incremental_reference(ctx: CaseContext) -> None:
     arm stands at the start plus both deltas, orientation unchanged.  They start from a pose well inside
     the workspace (wherever the arm was left, a straight line may not be possible)."""
     probe = await ctx.connect()
-    await power_on(ctx, probe)
-    before = await read_floats(ctx, probe, "joint-angles")
-    require_response(ctx, await probe.call("set-joint-angles", joints=list(LINE_POSE)), "a move to the start")
-    await settle(ctx, probe, LINE_POSE)
-    start = await read_floats(ctx, probe, "here")
+    before, start = await _at_line_pose(ctx, probe)
     moves: tuple[tuple[RequestName, list[float]], ...] = (
         ("incremental-move", [0.0, 0.0, -30.0]),
         ("incremental-straight-move", [25.0, 0.0, 0.0]),
@@ -277,11 +279,7 @@ async def incremental_oat(ctx: CaseContext) -> None:
     by others, each end with the hand at R(O + dO, A + dA, T + dT), O A T being VAL's angles of where it
     started (computed here from docs/kinematics.md's convention), and the position unchanged."""
     probe = await ctx.connect()
-    await power_on(ctx, probe)
-    before = await read_floats(ctx, probe, "joint-angles")
-    require_response(ctx, await probe.call("set-joint-angles", joints=list(LINE_POSE)), "a move to the start")
-    await settle(ctx, probe, LINE_POSE)
-    start = await read_floats(ctx, probe, "here")
+    before, start = await _at_line_pose(ctx, probe)
     turns: tuple[tuple[RequestName, tuple[float, float, float]], ...] = (
         ("incremental-move", OAT_DELTA),
         ("incremental-straight-move", OAT_DELTA_BACK),
