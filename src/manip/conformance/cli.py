@@ -53,8 +53,7 @@ from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness
 from manip.conformance.fuzz.cli import fuzz_command
 from manip.conformance.output.console import make_console
 from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
-from manip.conformance.output.documents import ReportError, document_options, render_saved
-from manip.conformance.output.report import write_reports
+from manip.conformance.output.documents import ReportError, document_options, render_saved, write_reports
 from manip.conformance.output.run_console import summary
 from manip.conformance.puma.target import (
     DEFAULT_WRIST_LISTEN,

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import sys
 import textwrap
 from pathlib import Path
@@ -235,6 +236,18 @@ def test_the_command_runs_selects_and_writes_reports(tmp_path: Path) -> None:
     assert [c["id"] for c in data["cases"]] == ["client.reply.here"]
     assert data["counts"]["pass"] == 1 and "unsupported" in data["counts"]
     assert "client.reply.here" in junit.read_text()
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full")
+def test_a_report_that_cannot_be_written_is_a_usage_error_naming_it(tmp_path: Path) -> None:
+    """A disk found full at the end of the run: one line naming the path, exit 2, the other report
+    still written, never a traceback."""
+    out = tmp_path / "r.json"
+    args = ["client", "--seed", "7", "--select", "client.reply.here", "--junit", "/dev/full"]
+    result = CliRunner().invoke(main, [*args, "--json", str(out), "--", *HARNESS])
+    assert result.exit_code == 2, result.output
+    assert "cannot write /dev/full" in result.output and "Traceback" not in result.output
+    assert json.loads(out.read_text())["cases"][0]["id"] == "client.reply.here"
 
 
 def test_the_command_refuses_selections_of_nothing() -> None:

@@ -28,8 +28,7 @@ from manip.conformance.client.runner import (
     run_client_suite,
 )
 from manip.conformance.output.console import make_console, progress_bar
-from manip.conformance.output.documents import document_options, write_documents
-from manip.conformance.output.report import write_json, write_junit
+from manip.conformance.output.documents import document_options, write_reports
 from manip.conformance.output.run_console import headline, shown, summary
 from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.context import RunOptions
@@ -141,11 +140,9 @@ def client_command(
     )
     console.print(f"manip-conform client: seed [bold]{seed}[/] (rerun with --seed {seed})")
     report = _run(config, cases, console, quiet)
-    if json_path is not None:
-        write_json(report, json_path)
-    if junit_path is not None:
-        write_junit(report, junit_path)
-    write_documents(report, html_path, markdown_path)
+    report.unwritten.extend(write_reports(report, json_path, junit_path, html_path, markdown_path))
+    for problem in report.unwritten:  # a report path that cannot be written is a usage error, found late
+        click.echo(f"manip-conform: {problem}", err=True)
     summary(console, report, quiet)
     unsupported = [r for r in report.results if r.outcome == "unsupported"]
     if unsupported and not quiet:

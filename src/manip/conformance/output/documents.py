@@ -17,12 +17,12 @@ import click
 
 from manip.conformance.output.html import render_html
 from manip.conformance.output.markdown import render_markdown
-from manip.conformance.output.report import report_json
+from manip.conformance.output.report import report_json, write_json, write_junit
 from manip.conformance.output.report_view import ReportError, load_report
 from manip.conformance.suite.results import RunReport
-from manip.outfile import atomic_output
+from manip.outfile import OutputError, atomic_output
 
-__all__ = ["ReportError", "document_options", "render_saved", "write_documents"]
+__all__ = ["ReportError", "document_options", "render_saved", "write_documents", "write_reports"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -70,3 +70,30 @@ def render_saved(report_file: Path, html_path: Path | None, markdown_path: Path 
             f"{report_file} does not hold what a report holds ({type(exc).__name__}: {exc}); "
             "was it edited, or written by another tool?"
         ) from None
+
+
+def write_reports(
+    report: RunReport,
+    json_path: Path | None,
+    junit_path: Path | None,
+    html_path: Path | None = None,
+    markdown_path: Path | None = None,
+) -> list[str]:
+    """Every report asked for; what could not be written, one message each (the path and why).  A
+    report is written whole or not at all, and one that fails does not keep the others from being
+    written."""
+    writers: tuple[tuple[Path | None, Callable[[RunReport, Path], None]], ...] = (
+        (json_path, write_json),
+        (junit_path, write_junit),
+        (html_path, lambda r, path: write_documents(r, path, None)),
+        (markdown_path, lambda r, path: write_documents(r, None, path)),
+    )
+    problems = []
+    for path, write in writers:
+        if path is None:
+            continue
+        try:
+            write(report, path)
+        except OSError as exc:
+            problems.append(str(exc) if isinstance(exc, OutputError) else f"cannot write {path}: {exc}")
+    return problems

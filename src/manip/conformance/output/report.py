@@ -28,7 +28,7 @@ from typing import Any, Final
 
 from manip.conformance.output.culprit import culprit_index, kept_indices
 from manip.conformance.suite.results import CaseResult, RunReport, Violation
-from manip.outfile import OutputError, atomic_output
+from manip.outfile import atomic_output
 from manip.spec import SPEC
 
 __all__ = [
@@ -368,39 +368,6 @@ def write_xml(root: ET.Element, path: Path) -> None:
     ET.indent(tree)
     with atomic_output(path, "wb") as f:
         tree.write(f, encoding="utf-8", xml_declaration=True)
-
-
-def write_reports(
-    report: RunReport,
-    json_path: Path | None,
-    junit_path: Path | None,
-    html_path: Path | None = None,
-    markdown_path: Path | None = None,
-) -> list[str]:
-    """Every report asked for; what could not be written, one message each (the path and why).  A
-    report is written whole or not at all, and one that fails does not keep the others from being
-    written."""
-    from manip.conformance.output.documents import write_documents  # noqa: PLC0415  # it imports this
-
-    problems = []
-    for kind, path in (
-        ("json", json_path),
-        ("junit", junit_path),
-        ("html", html_path),
-        ("md", markdown_path),
-    ):
-        if path is None:
-            continue
-        try:
-            if kind == "json":
-                write_json(report, path)
-            elif kind == "junit":
-                write_junit(report, path)
-            else:
-                write_documents(report, path if kind == "html" else None, path if kind == "md" else None)
-        except OSError as exc:
-            problems.append(str(exc) if isinstance(exc, OutputError) else f"cannot write {path}: {exc}")
-    return problems
 
 
 def failure_text(result: CaseResult) -> str:

@@ -36,8 +36,8 @@ from rich.markup import escape
 from manip.commandline import FiniteFloat, LinkAddressType
 from manip.conformance.cli_options import check_output_paths, given, json_option, junit_option, strict_option
 from manip.conformance.output.console import make_console
-from manip.conformance.output.documents import document_options
-from manip.conformance.output.report import failure_text, write_reports
+from manip.conformance.output.documents import document_options, write_reports
+from manip.conformance.output.report import failure_text
 from manip.conformance.output.run_console import OUTCOME_STYLE, print_by_clause
 from manip.conformance.suite.embedded import EmbeddedServer, simulated_server
 from manip.conformance.suite.results import ExitCode, RunReport
