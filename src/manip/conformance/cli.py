@@ -29,7 +29,7 @@ import shlex
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 import click
 from rich.console import Console
@@ -63,12 +63,13 @@ from manip.conformance.puma.target import (
 )
 from manip.conformance.replay.cli import replay_command, verify_command
 from manip.conformance.suite.case import all_cases
-from manip.conformance.suite.context import DEFAULT_REPLY_TIMEOUT, RunOptions
+from manip.conformance.suite.context import DEFAULT_REPLY_TIMEOUT, LengthUnit, RunOptions
 from manip.conformance.suite.results import ExitCode, RunReport
 from manip.conformance.suite.runner import RunConfig
 from manip.conformance.suite.selection import PatternError, PatternSet
 from manip.conformance.suite.world_prompt import check_terminal
 from manip.conformance.targets import Job, execute, repeat_run, world_of
+from manip.cougar.memory_map import MemoryMapError
 from manip.exit_status import epilog
 from manip.links import AddressError, parse_address
 from manip.reference_server import FaultSet
@@ -190,6 +191,31 @@ def main() -> None:
     help="With --cougar sim: switch on a defect of the simulated Cougar (see manip-cougar --help).",
 )
 @click.option(
+    "--cougar-reading",
+    "cougar_readings",
+    multiple=True,
+    metavar="NAME",
+    help="With --cougar sim: the simulated Cougar takes another reading of the 1985 guide, one the suite "
+    "must accept (see manip-cougar --help).",
+)
+@click.option(
+    "--memory-map",
+    "memory_map",
+    type=click.Path(path_type=Path, dir_okay=False),
+    default=None,
+    metavar="FILE",
+    help="With --cougar: the Cougar's memory map (TOML, docs/drv11j.md), for the cases that read or write "
+    "its memory; without one they are not judged (--cougar sim declares its own).",
+)
+@click.option(
+    "--length-unit",
+    "length_unit",
+    type=click.Choice(["mm", "cm", "inch"]),
+    default="mm",
+    show_default=True,
+    help="The unit of the lengths the target takes: a Cougar's frame vector and centre of gravity.",
+)
+@click.option(
     "--puma",
     "puma",
     is_flag=True,
@@ -282,6 +308,9 @@ def run(
     server_faults: tuple[str, ...],
     cougar: str | None,
     cougar_faults: tuple[str, ...],
+    cougar_readings: tuple[str, ...],
+    memory_map: Path | None,
+    length_unit: str,
     puma: bool,
     wrist_listen: str,
     wrist_wait: float,
@@ -309,7 +338,9 @@ def run(
     config_faults = _check_server_options(
         host, server_faults, target_time_scale, cougar, cougar_faults, allow_motion, target_kind
     )
-    target = _cougar_target(cougar, cougar_faults, host=host, server_faults=server_faults)
+    target = _cougar_target(
+        cougar, (cougar_faults, cougar_readings), memory_map, host=host, server_faults=server_faults
+    )
     if target is not None:
         address = "" if target.embedded else target.url
     puma_target = _puma_target(
@@ -351,6 +382,8 @@ def run(
         max_examples=max_examples,
         address=address,
         broken_after=broken_after,
+        cougar_map=target.declared_map() if target is not None else None,
+        length_unit=cast(LengthUnit, length_unit),
     )
     config = RunConfig(
         address=address,
@@ -420,15 +453,27 @@ def _check_server_options(
 
 
 def _cougar_target(
-    cougar: str | None, cougar_faults: tuple[str, ...], *, host: str | None, server_faults: tuple[str, ...]
+    cougar: str | None,
+    switches: tuple[tuple[str, ...], tuple[str, ...]],
+    memory_map: Path | None,
+    *,
+    host: str | None,
+    server_faults: tuple[str, ...],
 ) -> CougarTarget | None:
-    """``--cougar``: the Cougar to judge instead of a server, and the options that cannot go with it."""
+    """``--cougar``: the Cougar to judge instead of a server (its faults and readings, its memory map),
+    and the options that cannot go with it."""
     if cougar is None:
+        for option in ("cougar_readings", "memory_map", "length_unit"):
+            if given(option):
+                name = option.replace("_", "-").removesuffix("s")
+                raise click.UsageError(f"--{name} describes a Cougar: add --cougar")
         return None
     if host or server_faults:
         raise click.UsageError("--cougar checks a Cougar: give no HOST and no --server-fault")
     try:
-        target = CougarTarget.parse(cougar, cougar_faults)
+        target = CougarTarget.parse(cougar, *switches, memory_map=memory_map)
+    except MemoryMapError as exc:
+        raise click.UsageError(f"--memory-map: {exc}") from None
     except ValueError as exc:
         raise click.UsageError(f"--cougar: {exc}") from None
     for name, why in _NOT_WITH_COUGAR.items():
@@ -480,6 +525,8 @@ def _reproduce_options(
         extra += ["--broken-after", f"{options.broken_after:g}"]
     if options.strict:
         extra.append("--strict")
+    if options.length_unit != "mm":
+        extra += ["--length-unit", options.length_unit]
     if options.max_examples != 25:
         extra += ["--max-examples", str(options.max_examples)]
     if options.time_scale != 1.0:

@@ -1,6 +1,7 @@
 """``manip-cougar``: serve a simulated Cougar over the emulated DRV-11J (``docs/drv11j.md``).
 
     manip-cougar --listen tcp://127.0.0.1:42011 [--seed N] [--surface PX,PY,PZ[,NX,NY,NZ[,K]]] ...
+    manip-cougar --print-memory-map [--cougar-reading relocated-map]
 
 Once listening it prints ``manip-cougar: listening on tcp://HOST:PORT`` (the real port when 0 was asked
 for) and serves until interrupted.  One Cougar serves one Puma at a time, as the cable allowed: a second
@@ -27,6 +28,8 @@ from manip.commandline import check_host, configure_logging, version_option
 from manip.cougar.environment import Contacts, Spring, Surface
 from manip.cougar.faults import FAULTS, parse_faults
 from manip.cougar.link import CougarEnd, CougarModel, Drv11jError, parse_address
+from manip.cougar.memory_map import memory_map_toml
+from manip.cougar.readings import READINGS, parse_readings
 from manip.cougar.sim import CougarConfig, CougarSim
 from manip.exit_status import epilog
 
@@ -128,6 +131,7 @@ def _make_model(
     surfaces: tuple[str, ...],
     springs: tuple[str, ...],
     faults: frozenset[str] = frozenset(),
+    readings: frozenset[str] = frozenset(),
 ) -> CougarModel:
     parts: list[Surface | Spring] = []
     for text in surfaces:
@@ -137,7 +141,8 @@ def _make_model(
         point, _, stiffness = parse_surface(text)
         parts.append(Spring(point) if stiffness is None else Spring(point, stiffness))
     environment = Contacts(tuple(parts)) if parts else None
-    sim: CougarModel = CougarSim(CougarConfig(faults=faults), environment=environment, seed=seed)
+    config = CougarConfig(faults=faults, readings=readings)
+    sim: CougarModel = CougarSim(config, environment=environment, seed=seed)
     return sim
 
 
@@ -177,6 +182,20 @@ async def _serve_forever(model: CougarModel, address: str) -> None:
     type=click.Choice(sorted(FAULTS)),
     help="Simulate a protocol defect (to check a conformance suite catches it); repeatable.",
 )
+@click.option(
+    "--cougar-reading",
+    "readings",
+    multiple=True,
+    type=click.Choice(sorted(READINGS)),
+    help="Take another reading of the 1985 guide, one a conformance suite must accept (docs/drv11j.md); "
+    "repeatable.",
+)
+@click.option(
+    "--print-memory-map",
+    is_flag=True,
+    help="Print this Cougar's memory map (with the readings given) in the format of manip-conform's "
+    "--memory-map, and exit.",
+)
 @click.option("-v", "--verbose", is_flag=True, help="Log connections.")
 @version_option("manip-cougar")
 def main(
@@ -185,9 +204,15 @@ def main(
     surfaces: tuple[str, ...],
     springs: tuple[str, ...],
     faults: tuple[str, ...],
+    readings: tuple[str, ...],
+    print_memory_map: bool,
     verbose: bool,
 ) -> None:
     """Serve a simulated Cougar wrist computer over the emulated DRV-11J link."""
+    if print_memory_map:
+        shift = CougarConfig(readings=parse_readings(readings)).map_shift
+        click.echo(memory_map_toml(shift), nl=False)
+        return
     configure_logging(logging.INFO if verbose else logging.WARNING)
     try:
         host, _port = parse_address(address)
@@ -196,7 +221,7 @@ def main(
     why = check_host(host)
     if why is not None:
         raise click.BadParameter(why, param_hint="--listen")
-    model = _make_model(seed, surfaces, springs, parse_faults(faults))
+    model = _make_model(seed, surfaces, springs, parse_faults(faults), parse_readings(readings))
     try:
         with contextlib.suppress(KeyboardInterrupt):
             asyncio.run(_serve_forever(model, address))

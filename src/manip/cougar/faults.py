@@ -28,10 +28,6 @@ FAULTS: Final[Mapping[str, str]] = {
     "comint-executes-partial": "COMINT runs a command whose data words have not all arrived, the missing "
     "ones taken as 0 (Comint.take)",
     "ignores-guardc": "GUARDC leaves the guard armed (CougarSim._guardc)",
-    "guard-trips-strictly": "a guard trips only when the dot product exceeds tol, not when it equals it "
-    "(CougarSim._guardm)",
-    "guard-hi-bit-only": "only bit 15 of the type word makes a stop guard; another high-byte bit alone "
-    "makes it continue (CougarSim._guards)",
     "rst-ignored": "RST leaves the velocities as they were (CougarSim._resetw)",
     "npr-ignores-k": "the compliance equation leaves out the spring term K (CougarSim._newpr)",
     "filter-con-swapped": "FILTER weighs the filtered value with con4 and the sample with con3 "

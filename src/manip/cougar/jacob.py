@@ -67,6 +67,9 @@ class Jacob:
     """
 
     geometry: PumaGeometry
+    mm_per_unit: float = 1.0
+    """Millimetres per length unit of the frame vector in memory and of J's translational rows (25.4 for
+    a Cougar in inches: reading ``lengths-in-inches``)."""
     step_index: int = 0
     cycles: int = 0
     _j: Matrix = field(default_factory=lambda: np.zeros((6, 6)))
@@ -86,7 +89,7 @@ class Jacob:
                 if self._inputs is None or inputs[:2] != self._inputs[:2]:
                     # angles that are not angles (a bad deposit) keep the last Jacobian
                     with contextlib.suppress(ValueError):
-                        self._j = centre_jacobian(theta, fv, self.geometry)
+                        self._j = self._jacobian(theta, fv)
                 self._inputs = inputs
                 self._words = self._encode()
             memory.store_encoded(back + 4 * JBUF_J, *self._stored_words()[0])
@@ -98,6 +101,14 @@ class Jacob:
             memory.set_word("jacob_front", (memory.word("jacob_front") & 1) ^ 1)
             self.cycles += 1
         self.step_index = (self.step_index + 1) % STEPS
+
+    def _jacobian(self, theta: tuple[float, ...], fv: tuple[float, ...]) -> Matrix:
+        """J at the compliance centre, in the Cougar's length unit."""
+        if self.mm_per_unit == 1.0:
+            return centre_jacobian(theta, fv, self.geometry)
+        j = centre_jacobian(theta, [v * self.mm_per_unit for v in fv], self.geometry)
+        j[:3] /= self.mm_per_unit
+        return j
 
     def _stored_words(self) -> tuple[Encoded, Encoded, Encoded]:
         if self._words is None:  # steps 1 and 2 before any step 0 (a Jacob started mid-computation)

@@ -83,7 +83,8 @@ from manip.cougar.compliance import (
 from manip.cougar.environment import Environment, FreeSpace
 from manip.cougar.faults import parse_faults
 from manip.cougar.jacob import STEPS, Jacob, front_buffer
-from manip.cougar.memory import GUARD_DVEC, GUARD_TOL, GUARD_WORDS, MEMORY_BYTES, Memory, region
+from manip.cougar.memory import GUARD_DVEC, GUARD_TOL, GUARD_WORDS, MAP_BASE, MEMORY_BYTES, Memory, region
+from manip.cougar.readings import MAP_SHIFT, parse_readings
 from manip.spec.constants import CougarResponse
 
 __all__ = ["CougarConfig", "CougarSim", "CougarStats"]
@@ -135,6 +136,8 @@ class CougarConfig:
     wake_message: str = "Cougar {version}\r\n"
     faults: frozenset[str] = frozenset()
     """Defects to simulate (:data:`manip.cougar.faults.FAULTS`), for testing conformance suites."""
+    readings: frozenset[str] = frozenset()
+    """Other readings of the 1985 guide to take (:data:`manip.cougar.readings.READINGS`): conforming."""
 
     def __post_init__(self) -> None:
         if len(self.initial_angles) != 6:
@@ -146,6 +149,17 @@ class CougarConfig:
         if self.jacob_steps_per_tick < 0 or self.tick_hz <= 0:
             raise ValueError("CougarConfig needs jacob_steps_per_tick >= 0 and tick_hz > 0")
         object.__setattr__(self, "faults", parse_faults(self.faults))
+        object.__setattr__(self, "readings", parse_readings(self.readings))
+
+    @property
+    def map_shift(self) -> int:
+        """How far the memory map sits above manip's own on the link (reading ``relocated-map``)."""
+        return MAP_SHIFT if "relocated-map" in self.readings else 0
+
+    @property
+    def mm_per_unit(self) -> float:
+        """Millimetres per unit of the lengths the Puma sends (reading ``lengths-in-inches``)."""
+        return MM_PER_INCH if "lengths-in-inches" in self.readings else 1.0
 
 
 @dataclass
@@ -184,11 +198,12 @@ class CougarSim:
         self.memory = Memory()
         self._rng = np.random.default_rng(seed)
         self._faults = self.config.faults
+        self._readings = self.config.readings
         self._comint = Comint(execute_partial="comint-executes-partial" in self._faults)
         self._tripped_once: set[int] = set()  # fault guard-trips-twice
         self._guard_values: dict[int, tuple[list[int], Vector, float]] = {}
         """Guard i's table words, and its dvec and tol decoded from them."""
-        self._jacob = Jacob(self.config.geometry)
+        self._jacob = Jacob(self.config.geometry, mm_per_unit=self.config.mm_per_unit)
         self._stats = CougarStats()
         self._pose: tuple[float, ...] = tuple(float(q) for q in self.config.initial_angles)
         self._busy_until: float | None = None
@@ -250,6 +265,8 @@ class CougarSim:
             mem.set_word("guts_busy", 0)
         c = self.config
         cost = c.guts_base_s + c.guts_per_command_s * commands + c.guts_per_word_s * words
+        if "guts-every-tick" in self._readings:
+            cost = 0.0
         self._busy_until = now + cost if cost > 0 else None
         self._stats.ticks += 1
         self._jacob.run(mem, c.jacob_steps_per_tick)
@@ -282,7 +299,7 @@ class CougarSim:
         mem.put("voltmat", voltmat(mem.get("calmat"), mem.get("fv")).reshape(-1))
         self._newwc()
         u = c.gauges.convert(c.gauges.analog(self._physical_load(), self._rng))
-        corrected = _less(u, mem.int16s("gauge_offsets"))
+        corrected = self._corrected(u)
         mem.put_int16s("gauge_raw", corrected)  # prime the filter with a first reading
         mem.put_int16s("gauge_filtered", corrected)
         self._jacob.run(mem, STEPS)
@@ -322,7 +339,7 @@ class CougarSim:
         # The offsets go first, so a WGOV reaches the forces through the filter (erratum
         # cougar-filter-rounding); the previous sample keeps the offsets it was taken with.
         sample = gauges.convert(gauges.analog(self._physical_load(), self._rng))
-        u = _less(sample, mem.int16s("gauge_offsets"))
+        u = self._corrected(sample)
         u_previous = mem.int16s("gauge_raw")
         y_previous = mem.int16s("gauge_filtered")
         if "filter-float-instead-of-integer" in self._faults:
@@ -332,9 +349,19 @@ class CougarSim:
         mem.put_int16s("gauge_raw", u)
         mem.put_int16s("gauge_filtered", y)
 
+    def _corrected(self, sample: list[int]) -> list[int]:
+        """A sample less the gauge offsets (§8.3: before the filter), or as it is when the offsets are
+        subtracted after the filter (reading ``offsets-after-filter``)."""
+        if "offsets-after-filter" in self._readings:
+            return list(sample)
+        return _less(sample, self.memory.int16s("gauge_offsets"))
+
     def _convert(self) -> None:
         mem = self.memory
-        counts = np.array(mem.int16s("gauge_filtered"), dtype=np.float64)
+        filtered = mem.int16s("gauge_filtered")
+        if "offsets-after-filter" in self._readings:
+            filtered = _less(filtered, mem.int16s("gauge_offsets"))
+        counts = np.array(filtered, dtype=np.float64)
         force = (mem.array("voltmat").reshape(6, 8) @ counts).tolist()
         if "forces-wrong-sign" in self._faults:
             force = [-1.0 * f for f in force]
@@ -368,7 +395,7 @@ class CougarSim:
             _, dvec, tol = kept
             dot = float(np.dot(force, dvec))
             if (
-                dot > tol if "guard-trips-strictly" in self._faults else dot >= tol
+                dot > tol if "guard-trips-above-tol" in self._readings else dot >= tol
             ):  # erratum guard-trip-comparison
                 if "guard-trips-twice" in self._faults and i not in self._tripped_once:
                     self._tripped_once.add(i)
@@ -388,7 +415,8 @@ class CougarSim:
                 self._stats.out_of_sync += 1
                 self._stats.discarded_words += len(item.discarded)
                 if "no-out-of-sync" not in self._faults:
-                    self._send(CougarResponse.OUT_OF_SYNC, [item.code])
+                    bare = "out-of-sync-bare" in self._readings
+                    self._send(CougarResponse.OUT_OF_SYNC, [] if bare else [item.code])
                 continue
             self._execute(item)
             commands += 1
@@ -437,9 +465,16 @@ class CougarSim:
         mem.put("dtheta_out", output)  # RATEO
         self._send(CougarResponse.NTD, self._region_words("dtheta_out"))
 
+    def _lengths_mm(self, name: str) -> Vector:
+        """A length vector the Puma sent (``fv``, or ``object``'s cg), in millimetres."""
+        values = self.memory.get(name)
+        if name == "object":
+            values = values[1:]
+        return values * self.config.mm_per_unit if "lengths-in-inches" in self._readings else values
+
     def _newfv(self) -> None:
         mem = self.memory
-        rows = voltmat_torque_rows(mem.get("calmat"), mem.get("fv"))
+        rows = voltmat_torque_rows(mem.get("calmat"), self._lengths_mm("fv"))
         mem.write_floats(region("voltmat").at(24), rows.reshape(-1))  # rows 4-6 only
         self._newwc()
 
@@ -447,7 +482,11 @@ class CougarSim:
         mem = self.memory
         obj = mem.get("object")
         weight, cg = gravity_model(
-            float(mem.get("hand_weight")[0]), mem.get("hand_cg"), float(obj[0]), obj[1:], mem.get("fv")
+            float(mem.get("hand_weight")[0]),
+            mem.get("hand_cg"),
+            float(obj[0]),
+            self._lengths_mm("object"),
+            self._lengths_mm("fv"),
         )
         mem.put("grav_weight", [weight])
         mem.put("grav_cg", cg)
@@ -458,15 +497,34 @@ class CougarSim:
         for name in ("dtheta_previous", "dtheta_filtered", "dtheta_out", "rate_difference"):
             self.memory.put(name, np.zeros(6))
 
+    def _inside(self, address: int) -> int:
+        """The simulated memory's address of an even DPST or EXMN address inside memory.  They are the
+        same but for reading ``relocated-map``, under which the memory above the PDP-11's vectors
+        (MAP_BASE up) is rotated by the shift on the link: the map sits that much higher, the vectors
+        stay at 0 and every address of memory is still one word."""
+        shift = self.config.map_shift
+        if not shift or not MAP_BASE <= address < MEMORY_BYTES:
+            return address
+        return MAP_BASE + (address - MAP_BASE - shift) % (MEMORY_BYTES - MAP_BASE)
+
+    def _read(self, address: int, count: int) -> list[int]:
+        """``count`` words of memory from link address ``address`` (all inside memory)."""
+        if not self.config.map_shift:
+            return self.memory.read_words(address, count)
+        return [self.memory.read_word(self._inside(a)) for a in range(address, address + 2 * count, 2)]
+
     def _dep(self) -> None:
         address, value = self.memory.read_words(region("args").address, 2)
         if Memory.valid(address):
-            self.memory.write_word(address, value)
+            self.memory.write_word(self._inside(address), value)
         else:
             self._stats.bad_addresses += 1
 
     def _exp(self) -> None:
         address, count = self.memory.read_words(region("args").address, 2)
+        if "exmn-always-full" in self._readings:
+            self._send(CougarResponse.EXMN_DATA, [count, *self._examine_full(address, count)])
+            return
         if Memory.valid(address):
             n = min(count, (MEMORY_BYTES - address) // 2)
             if "exmn-wrong-count" in self._faults and n > 0:
@@ -474,8 +532,15 @@ class CougarSim:
         else:
             n = 0
             self._stats.bad_addresses += 1
-        words = self.memory.read_words(address, n) if n else []
+        words = self._read(address, n) if n else []
         self._send(CougarResponse.EXMN_DATA, [n, *words])
+
+    def _examine_full(self, address: int, count: int) -> list[int]:
+        """``count`` words from ``address`` (made even), 0 for each one outside memory."""
+        start = address & ~1
+        if start != address or not Memory.valid(start, count):
+            self._stats.bad_addresses += 1
+        return [self._read(a, 1)[0] if Memory.valid(a) else 0 for a in range(start, start + 2 * count, 2)]
 
     def _version(self) -> None:
         code = 3 if "wrong-version-code" in self._faults else CougarResponse.VERSION
@@ -488,7 +553,7 @@ class CougarSim:
         mem = self.memory
         data = mem.read_words(region("guard_in").address, GUARD_WORDS)
         index = data[0] & 0xF
-        mask = GUARD_STOP_BIT if "guard-hi-bit-only" in self._faults else GUARD_STOP_MASK
+        mask = GUARD_STOP_BIT if "guard-hi-bit-only" in self._readings else GUARD_STOP_MASK
         stop = GUARD_STOP_BIT if data[0] & mask else 0
         data[0] = (
             stop | data[0] & 0xF
@@ -504,7 +569,10 @@ class CougarSim:
 
     def _reraw(self) -> None:
         # the gauges as the wrist reads them: the filtered readings with the offsets added back
-        raw = _plus(self.memory.int16s("gauge_filtered"), self.memory.int16s("gauge_offsets"))
+        unfiltered = "rraw-unfiltered" in self._readings
+        raw = self.memory.int16s("gauge_raw" if unfiltered else "gauge_filtered")
+        if "offsets-after-filter" not in self._readings:  # there, the readings have them
+            raw = _plus(raw, self.memory.int16s("gauge_offsets"))
         self._send(CougarResponse.RAW, [v & 0xFFFF for v in raw])
 
     def _region_words(self, name: str) -> list[int]:

@@ -36,8 +36,6 @@ CATCHERS = {
     "exmn-wrong-count": "cougar.reply.exmn",
     "comint-executes-partial": "cougar.comint.partial-waits",
     "ignores-guardc": "cougar.guard.clear",
-    "guard-trips-strictly": "cougar.guard.threshold",
-    "guard-hi-bit-only": "cougar.guard.trips-once",
     "rst-ignored": "cougar.rst.zeroes-velocities",
     "npr-ignores-k": "cougar.npr.gains",
     "filter-con-swapped": "cougar.filter.output",

@@ -42,6 +42,7 @@ from manip.conformance.suite.case import CaseFailure
 from manip.conformance.suite.context import CaseContext
 from manip.conformance.suite.invariants import COUGAR_LINK
 from manip.cougar.link import Drv11jError, PumaEnd, parse_address
+from manip.spec.constants import CougarResponse
 from manip.spec.notation import octal_words
 
 __all__ = [
@@ -102,6 +103,8 @@ class WordReply:
     words: tuple[int, ...]
     message: CougarMsg | None
     problem: str = ""
+    bare: str = ""
+    """The name of a response recognised without its data (a lone out-of-sync code word)."""
 
     @property
     def code(self) -> int:
@@ -109,6 +112,8 @@ class WordReply:
 
     @property
     def name(self) -> str:
+        if self.bare:
+            return self.bare
         return self.message.name if self.message is not None else f"code {self.code}"
 
     @property
@@ -321,6 +326,7 @@ class CougarProbe:
                 self._decode(index, words)
             if self._end.closed is not None and self._end.ticks_done <= index:
                 raise _link_failure(self.address, f"Cougar ended the link: {self._end.closed}")
+        self._bare_out_of_sync(index)
         if self._end.ticks_done != index + 1:
             raise CaseFailure(
                 f"Cougar answered TICK #{index} with TICKED #{self._end.ticks_done - 1}",
@@ -342,6 +348,18 @@ class CougarProbe:
                 reply = WordReply(tick, item.words, None, str(item.error))
             self.replies.append(reply)
             self._inbox.append(reply)
+
+    def _bare_out_of_sync(self, tick: int) -> None:
+        """A lone out-of-sync code word left at the end of a tick is the whole message (B.7 gives the
+        message no layout; Table 1's code 2 with the offending word is manip's, erratum
+        cougar-out-of-sync): everything a tick produced comes before its TICKED, and nothing follows the
+        dump of the input buffer in that tick."""
+        if self._stream.pending != (CougarResponse.OUT_OF_SYNC,):
+            return
+        self._stream = WordStream("response")
+        reply = WordReply(tick, (int(CougarResponse.OUT_OF_SYNC),), None, bare="OUT-OF-SYNC")
+        self.replies.append(reply)
+        self._inbox.append(reply)
 
     def _check_open(self) -> None:
         if self._end.closed is not None or self._writer.is_closing():

@@ -14,6 +14,7 @@ import asyncio
 import contextlib
 from collections.abc import AsyncIterator, Iterable, Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 from manip.conformance.cougar.probe import cougar_liveness
 from manip.conformance.suite.case import Case, all_cases
@@ -24,6 +25,8 @@ from manip.conformance.suite.selection import PatternSet
 from manip.cougar.cli import CougarServer, serve_cougar
 from manip.cougar.faults import parse_faults
 from manip.cougar.link import parse_address
+from manip.cougar.memory_map import CougarMemoryMap, load_memory_map, own_map
+from manip.cougar.readings import parse_readings
 from manip.cougar.sim import CougarConfig, CougarSim
 
 __all__ = ["EMBEDDED", "CougarTarget", "cougar_cases", "liveness_check", "run_cougar_suite", "wait_idle"]
@@ -34,22 +37,48 @@ EMBEDDED = "sim"
 
 @dataclass(frozen=True)
 class CougarTarget:
-    """Where the Cougar is (``sim`` or ``tcp://HOST:PORT``) and, for ``sim``, the faults it has."""
+    """Where the Cougar is (``sim`` or ``tcp://HOST:PORT``), for ``sim`` the faults it has and the
+    readings it takes, and the memory map declared for it (``--memory-map``)."""
 
     url: str = EMBEDDED
     faults: frozenset[str] = field(default_factory=frozenset)
+    readings: frozenset[str] = field(default_factory=frozenset)
+    memory_map: CougarMemoryMap | None = None
+    map_path: Path | None = None
 
     @classmethod
-    def parse(cls, url: str | None, faults: Iterable[str] = ()) -> CougarTarget:
+    def parse(
+        cls,
+        url: str | None,
+        faults: Iterable[str] = (),
+        readings: Iterable[str] = (),
+        memory_map: Path | None = None,
+    ) -> CougarTarget:
         """ValueError for an address that is not ``sim`` or ``tcp://HOST[:PORT]``, for an unknown
-        fault, or for faults asked of an external Cougar."""
+        fault or reading, for either asked of an external Cougar, or for a memory map file that cannot
+        be used (:class:`~manip.cougar.memory_map.MemoryMapError` says why)."""
         text = (url or EMBEDDED).strip()
         chosen = parse_faults(faults)
+        taken = parse_readings(readings)
         if text != EMBEDDED:
             parse_address(text)
             if chosen:
                 raise ValueError("--cougar-fault applies to the embedded Cougar only (--cougar sim)")
-        return cls(text, chosen)
+            if taken:
+                raise ValueError("--cougar-reading applies to the embedded Cougar only (--cougar sim)")
+        declared = load_memory_map(memory_map) if memory_map is not None else None
+        return cls(text, chosen, taken, declared, memory_map)
+
+    def declared_map(self) -> CougarMemoryMap | None:
+        """The map the cases use: the one declared (``--memory-map``); for the embedded Cougar without
+        one, its own (relocated with it); for another Cougar without one, none."""
+        if self.memory_map is not None or not self.embedded:
+            return self.memory_map
+        return own_map(self.config().map_shift)
+
+    def config(self) -> CougarConfig:
+        """The embedded Cougar's configuration."""
+        return CougarConfig(faults=self.faults, readings=self.readings)
 
     @property
     def embedded(self) -> bool:
@@ -61,7 +90,7 @@ class CougarTarget:
         if not self.embedded:
             yield self.url
             return
-        sim = CougarSim(CougarConfig(faults=self.faults), seed=0)
+        sim = CougarSim(self.config(), seed=0)
         async with serve_cougar(sim, "tcp://127.0.0.1:0") as server:
             yield server.address
             await wait_idle(server)
@@ -69,9 +98,11 @@ class CougarTarget:
     def reproduce_prefix(self) -> tuple[str, ...]:
         """The start of a reproduce command (an external target's address is appended by the runner)."""
         faults = [w for f in sorted(self.faults) for w in ("--cougar-fault", f)]
+        faults += [w for r in sorted(self.readings) for w in ("--cougar-reading", r)]
+        faults += ["--memory-map", str(self.map_path)] if self.map_path is not None else []
         if self.embedded:
             return ("manip-conform", "run", "--cougar", EMBEDDED, *faults)
-        return ("manip-conform", "run", "--cougar")
+        return ("manip-conform", "run", *faults, "--cougar")
 
 
 async def wait_idle(server: CougarServer, timeout: float = 1.0) -> None:
@@ -107,9 +138,10 @@ async def run_cougar_suite(
     """Run the Cougar cases (those matching ``select``, all when empty) against ``target``: what
     ``manip-conform run --cougar`` does, without the console and the files."""
     async with target.running() as address:
+        options = options or RunOptions()
         config = RunConfig(
             address=address,
-            options=replace(options or RunOptions(), address=address),
+            options=replace(options, address=address, cougar_map=options.cougar_map or target.declared_map()),
             seed=seed,
             select=PatternSet.of(select, "select"),
             embedded=target.embedded,

@@ -62,6 +62,7 @@ from manip.conformance.suite.case import (
 )
 from manip.conformance.suite.invariants import TRANSCRIPT, attribution_problem
 from manip.conformance.suite.world import CaseNotJudged, Condition, World, no_world
+from manip.cougar.memory_map import CougarMemoryMap
 from manip.links import ChaosConnection, ChaosError, ConnectionClosed, ConnectionLost
 from manip.spec import SPEC, RequestName
 from manip.spec.constants import ChaosOp, ServerOp
@@ -87,6 +88,11 @@ Connector = Callable[[bool], Awaitable[ChaosConnection]]
 a refusal as busy (the previous case's connection still closing) is retried."""
 
 
+LengthUnit = Literal["mm", "cm", "inch"]
+"""A length unit a target may take (``--length-unit``; erratum ``cougar-length-unit`` for a Cougar)."""
+MM_PER_UNIT: Final[dict[str, float]] = {"mm": 1.0, "cm": 10.0, "inch": 25.4}
+
+
 @dataclass(frozen=True)
 class RunOptions:
     """The run's settings, as cases see them."""
@@ -108,6 +114,12 @@ class RunOptions:
     embedded: bool = False
     """The target is the embedded reference server: its address is a temporary socket, gone after the
     run, so a case says how to run it again (:attr:`CaseContext.reproduce`), never that address."""
+    cougar_map: CougarMemoryMap | None = None
+    """A Cougar target's memory map (``--memory-map``; the simulator's own for ``--cougar sim``): without
+    one the cases that read or write Cougar memory are not judged."""
+    length_unit: LengthUnit = "mm"
+    """The unit of the lengths the target takes (``--length-unit``): a Cougar's frame vector and centre of
+    gravity."""
 
     @property
     def allowed_hazards(self) -> frozenset[Hazard]:

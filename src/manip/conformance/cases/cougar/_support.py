@@ -16,8 +16,8 @@ from manip.conformance.cougar.probe import (
     floats_of,
     words_bytes,
 )
-from manip.conformance.suite.context import CaseContext
-from manip.cougar.memory import region
+from manip.conformance.suite.context import MM_PER_UNIT, CaseContext
+from manip.cougar.memory_map import MapObject
 from manip.spec.constants import CougarCommand, CougarResponse
 from manip.spec.notation import octal
 
@@ -32,6 +32,40 @@ ALWAYS: Final = -1.0
 POSE_B: Final = tuple(a + d for a, d in zip(READY, (15.0, 10.0, -10.0, 20.0, 30.0, 25.0), strict=True))
 
 GUARD_DVEC_ZERO: Final = (0.0,) * 6
+NO_MAP: Final = "declare the Cougar's memory map with --memory-map FILE (its format is in docs/drv11j.md)"
+
+
+# ------------------------------------------------------------------------------------------ the memory map
+def mapped(ctx: CaseContext, *names: str) -> list[MapObject]:
+    """The objects ``names`` of the run's memory map; the case is not judged without a map, or when the
+    map does not name them (the 1985 guide gives no map: erratum cougar-memory-map)."""
+    memory_map = ctx.options.cougar_map
+    if memory_map is None:
+        ctx.not_judged(
+            f"the case reads or writes Cougar memory ({', '.join(names)}) and no map says where: {NO_MAP}"
+        )
+    missing = [n for n in names if memory_map.get(n) is None]
+    if missing:
+        ctx.not_judged(
+            f"the memory map ({memory_map.source}) does not name {', '.join(missing)}: "
+            "add them to judge the case"
+        )
+    return [memory_map.objects[n] for n in names]
+
+
+def any_address(ctx: CaseContext) -> int:
+    """An even address any Cougar can examine (a case that needs some memory words, whichever): the
+    version word of the map, or 0 without one (the PDP-11's first word is always memory)."""
+    memory_map = ctx.options.cougar_map
+    version = memory_map.get("version") if memory_map is not None else None
+    return version.address if version is not None else 0
+
+
+def in_unit(ctx: CaseContext, mm: Sequence[float]) -> tuple[float, ...]:
+    """Lengths given in millimetres, in the run's length unit (``--length-unit``, erratum
+    cougar-length-unit)."""
+    scale = MM_PER_UNIT[ctx.options.length_unit]
+    return tuple(v / scale for v in mm)
 
 
 # ------------------------------------------------------------------------------------------ helpers
@@ -89,31 +123,42 @@ async def expect_examine(ctx: CaseContext, probe: CougarProbe, address: int, cou
     )
     words = tuple(int(w) for w in reply.data_words[1:])
     ctx.expect(
-        reply.data_words[:1] == (count,) and len(words) == count,
+        reply.data_words[:1] == (count,),
         clause="cougar.exmn.reply",
-        expected=f"EXMN of {count} word(s) at {octal(address)}: count word {count}, then {count} words",
+        expected=f"EXMN of {count} word(s) at {octal(address)}: count word {count}",
+        seen=reply,
+    )
+    ctx.expect(
+        len(words) == count,
+        clause="cougar.exmn.reply",
+        expected=f"EXMN of {count} word(s) at {octal(address)}: {count} words after the count word",
         seen=reply,
     )
     return words
 
 
-async def examine_region(ctx: CaseContext, probe: CougarProbe, name: str) -> tuple[int, ...]:
-    r = region(name)
-    return await expect_examine(ctx, probe, r.address, r.words)
+async def examine_region(ctx: CaseContext, probe: CougarProbe, obj: MapObject) -> tuple[int, ...]:
+    return await expect_examine(ctx, probe, obj.address, obj.words)
 
 
-async def region_floats(ctx: CaseContext, probe: CougarProbe, name: str) -> tuple[float, ...]:
-    return floats_of(await examine_region(ctx, probe, name))
+async def region_floats(ctx: CaseContext, probe: CougarProbe, obj: MapObject) -> tuple[float, ...]:
+    return floats_of(await examine_region(ctx, probe, obj))
 
 
-async def peek_region(ctx: CaseContext, probe: CougarProbe, name: str) -> tuple[int, ...]:
-    """A region's words for a case that only needs them (to send them back unchanged): judges nothing,
-    and skips the case when EXMN does not return them (``cougar.reply.exmn`` judges EXMN)."""
-    r = region(name)
-    reply = await probe.examine(r.address, r.words)
-    if reply.problem or reply.name != "EXMN-DATA" or reply.data_words[:1] != (r.words,):
+async def peek_words(
+    ctx: CaseContext, probe: CougarProbe, address: int, words: int, name: str
+) -> tuple[int, ...]:
+    """Memory words for a case that only needs them (to send them back unchanged): judges nothing, and
+    skips the case when EXMN does not return them (``cougar.reply.exmn`` judges EXMN)."""
+    reply = await probe.examine(address, words)
+    if reply.problem or reply.name != "EXMN-DATA" or reply.data_words[:1] != (words,):
         ctx.skip(f"the case needs Cougar's {name} words, which EXMN did not return: {reply}")
     return tuple(int(w) for w in reply.data_words[1:])
+
+
+async def peek_region(ctx: CaseContext, probe: CougarProbe, obj: MapObject) -> tuple[int, ...]:
+    """An object's words, as :func:`peek_words`."""
+    return await peek_words(ctx, probe, obj.address, obj.words, obj.name)
 
 
 def int16(words: Iterable[int]) -> list[int]:

@@ -15,6 +15,7 @@ from manip.conformance.cases.cougar._support import (
     expect_none,
     expect_reply,
     fmt,
+    mapped,
     peek_region,
     region_floats,
     settle,
@@ -27,7 +28,6 @@ from manip.conformance.cougar.probe import (
 )
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
-from manip.cougar.memory import region
 
 # ------------------------------------------------------------------------------------------ NPR, RST
 _THETA_ERROR: Final = (1.0, -1.0, 1.0, 2.0, -2.0, 2.0)
@@ -141,6 +141,7 @@ async def rst_zeroes_velocities(ctx: CaseContext) -> None:
     """After NPR with a rate difference, RST sets the rate difference, the filter state and the last
     NTD in memory to zero."""
     names = ("rate_difference", "dtheta_previous", "dtheta_filtered", "dtheta_out")
+    objects = mapped(ctx, *names)
     rate = (1.0, 2.0, 3.0, -1.0, -2.0, -3.0)
     async with cougar_probe(ctx) as probe:
         await clean(probe)
@@ -150,7 +151,7 @@ async def rst_zeroes_velocities(ctx: CaseContext) -> None:
         commanded = tuple(a + e for a, e in zip(READY, _THETA_ERROR, strict=True))
         reply = await probe.call("NPR", theta_sensed=READY, theta_commanded=commanded, rate_difference=rate)
         expect_reply(ctx, reply, "NTD", "cougar.npr.reply", after="NPR")
-        stored = await region_floats(ctx, probe, "rate_difference")
+        stored = await region_floats(ctx, probe, objects[0])
         ctx.expect(
             close_to(stored, rate, rel=1e-6, floor=0.0),
             clause="cougar.memory",
@@ -159,8 +160,8 @@ async def rst_zeroes_velocities(ctx: CaseContext) -> None:
         )
         await probe.send("RST")
         await probe.run(1)
-        for name in names:
-            words = await examine_region(ctx, probe, name)
+        for name, obj in zip(names, objects, strict=True):
+            words = await examine_region(ctx, probe, obj)
             values = floats_of(words)
             ctx.expect(
                 all(v == 0.0 for v in values),
@@ -190,11 +191,11 @@ async def filter_output(ctx: CaseContext) -> None:
     """FILTER (B.10) with constants deposited in Cougar's memory: with the defaults NTD is the compliance
     sample itself; with con1..con4 = 0.5, -0.5, 1, 0.25 two NPRs of the same sample after RST answer 0.75
     and then 0.5 times it (the filter's derivative term, then its decay)."""
-    con = region("con")
+    (con,) = mapped(ctx, "con")
     async with cougar_probe(ctx) as probe:
         await clean(probe)
         await settle(probe)
-        old = await peek_region(ctx, probe, "con")
+        old = await peek_region(ctx, probe, con)
         try:
             sample = await _ntd(ctx, probe, k=GAIN, b=0.0, bji=0.01, rate=0.0)
             ctx.expect(

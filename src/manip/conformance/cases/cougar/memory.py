@@ -8,6 +8,7 @@ from manip.conformance.cases.cougar._support import (
     examine_region,
     expect_examine,
     expect_reply,
+    mapped,
 )
 from manip.conformance.cougar.probe import (
     cougar_probe,
@@ -15,7 +16,6 @@ from manip.conformance.cougar.probe import (
 )
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
-from manip.cougar.memory import region
 from manip.spec import SPEC
 from manip.spec.constants import CougarCommand
 from manip.spec.notation import octal, octal_words
@@ -30,7 +30,8 @@ from manip.spec.notation import octal, octal_words
 async def memory_deposit_examine(ctx: CaseContext) -> None:
     """DPST then EXMN reads the word back, and the deposit changes what Cougar does: a new version
     word is what VERS reports (the old one is put back)."""
-    address = region("version").address
+    (version,) = mapped(ctx, "version")
+    address = version.address
     async with cougar_probe(ctx) as probe:
         await clean(probe)
         (old,) = await expect_examine(ctx, probe, address, 1)
@@ -62,24 +63,26 @@ async def memory_deposit_examine(ctx: CaseContext) -> None:
     hazard="config",
 )
 async def memory_parameters(ctx: CaseContext) -> None:
-    """The data of NK, NB, NBJI and NFC are in memory where the map puts them, exactly as sent."""
+    """The data of NK, NB, NBJI and NFC are in memory where the map puts them, exactly as sent (each
+    command its own check)."""
     values: dict[str, tuple[str, dict[str, tuple[float, ...]]]] = {
         "NK": ("k", {"k": (1.5, -2.25, 3.0, 0.125, 1024.0, -0.5)}),
         "NB": ("b", {"b": tuple(float(i) / 8.0 - 2.0 for i in range(36))}),
         "NBJI": ("bji", {"bji": (0.01, 0.02, 0.03, 0.5, 0.25, 0.125)}),
         "NFC": ("fc", {"force": (-3.0, 0.0, 7.5, 1.0, -1.0, 2.0)}),
     }
+    objects = dict(zip(("k", "b", "bji", "fc"), mapped(ctx, "k", "b", "bji", "fc"), strict=True))
     async with cougar_probe(ctx) as probe:
         await clean(probe)
         for name, (where, data) in values.items():
             words = encode("command", name, **data)
             await probe.send_words(words)
             await probe.run(1)
-            stored = await examine_region(ctx, probe, where)
+            stored = await examine_region(ctx, probe, objects[where])
             ctx.expect(
                 stored == tuple(words[1:]),
                 clause="cougar.memory",
-                expected=f"{name}'s data words at {octal(region(where).address)} ({where}): "
+                expected=f"{name}'s data words at {octal(objects[where].address)} ({where}): "
                 f"{octal_words(words[1:])}",
                 actual=octal_words(stored),
                 data=words_bytes(stored),

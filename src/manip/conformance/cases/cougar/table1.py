@@ -10,10 +10,12 @@ from manip.arm import READY
 from manip.conformance.cases.cougar._support import (
     GUARDS,
     NEVER,
+    any_address,
     clean,
     expect_reply,
     int16,
     peek_region,
+    peek_words,
 )
 from manip.conformance.cougar.probe import (
     CougarProbe,
@@ -23,7 +25,6 @@ from manip.conformance.cougar.probe import (
 )
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
-from manip.cougar.memory import region
 from manip.spec import SPEC, CougarMessage
 from manip.spec.notation import octal_words
 
@@ -37,8 +38,18 @@ _RESPONSE_CLAUSE: Final = {
 }
 
 
+async def _current(ctx: CaseContext, probe: CougarProbe, name: str, words: int) -> tuple[int, ...]:
+    """The words of object ``name`` where the run's memory map puts it; zeros without a map, or when the
+    map does not name it (the values a Cougar starts with, as manip's does)."""
+    memory_map = ctx.options.cougar_map
+    obj = memory_map.get(name) if memory_map is not None else None
+    return await peek_region(ctx, probe, obj) if obj is not None else (0,) * words
+
+
 async def _valid_values(ctx: CaseContext, probe: CougarProbe, msg: CougarMessage) -> dict[str, Any]:
-    """Values that are valid for any Cougar and leave it as it was where a Puma would not reset them."""
+    """Values that are valid for any Cougar and leave it as it was where a Puma would not reset them
+    (with a memory map; without one NFV, NEWWC and WGOV send zeros, and DPST writes the word at address
+    0 back unchanged)."""
     values: dict[str, Any] = {}
     for f in msg.data:
         zero: Any = 0.0 if f.element == "float" else 0
@@ -48,10 +59,12 @@ async def _valid_values(ctx: CaseContext, probe: CougarProbe, msg: CougarMessage
             values["theta_sensed"] = READY
         case "NPR":
             values.update(theta_sensed=READY, theta_commanded=READY)
-        case "DPST":  # an odd address is no word: it changes nothing (erratum cougar-memory-map)
-            values.update(address=region("version").address + 1, value=0)
+        case "DPST":  # a word written back as it was
+            address = any_address(ctx)
+            (value,) = await peek_words(ctx, probe, address, 1, "DPST's")
+            values.update(address=address, value=value)
         case "EXMN":
-            values.update(address=region("version").address, count=1)
+            values.update(address=any_address(ctx), count=1)
         case "VERS":
             values["version"] = 1
         case "GUARDS":
@@ -59,12 +72,12 @@ async def _valid_values(ctx: CaseContext, probe: CougarProbe, msg: CougarMessage
         case "GUARDC":
             values["index"] = GUARDS - 1
         case "NFV":
-            values["offset"] = floats_of(await peek_region(ctx, probe, "fv"))
+            values["offset"] = floats_of(await _current(ctx, probe, "fv", 6))
         case "NEWWC":
-            weight, *cg = floats_of(await peek_region(ctx, probe, "object"))
+            weight, *cg = floats_of(await _current(ctx, probe, "object", 8))
             values.update(weight=weight, cg=tuple(cg))
         case "WGOV":
-            values["offsets"] = tuple(int16(await peek_region(ctx, probe, "gauge_offsets")))
+            values["offsets"] = tuple(int16(await _current(ctx, probe, "gauge_offsets", 8)))
     return values
 
 
