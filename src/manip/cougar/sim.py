@@ -28,7 +28,10 @@ Theory of operation (one tick = one GUTS interrupt, B.6, then background time):
 7. Background: JACOB (:mod:`manip.cougar.jacob`) runs ``jacob_steps_per_tick`` steps.
 
 Everything Cougar keeps is in its simulated memory (:mod:`manip.cougar.memory`), so EXMN and DPST see
-and change what the routines use.  The commands (Table 1):
+and change what the routines use.  ``CougarConfig.readings`` (:mod:`manip.cougar.readings`) switches to
+other readings of the 1985 guide the conformance suite must accept: EXMN's count at a bad address, a
+bare out-of-sync, a guard at tol, the guard type bit, no GUTS cost model, lengths in inches, offsets
+after the filter, RRAW unfiltered, and the memory map moved on the link.  The commands (Table 1):
 
 =======  ====  =========================================================================================
 NOP      0     nothing

@@ -14,7 +14,9 @@ which words Cougar had when each of its clock ticks ran:
   returns the responses that became complete: Cougar's words are reassembled across frames and ticks by
   one response :class:`~manip.codecs.cougar.WordStream`, so each :class:`WordReply` carries its decoded
   message, the raw words and the tick that completed it.  Words that do not make a Table 1 response
-  become a :class:`WordReply` with a ``problem`` (unknown response code, undecodable float).
+  become a :class:`WordReply` with a ``problem`` (unknown response code, undecodable float).  A lone
+  out-of-sync code word (2) left at the end of a tick is the whole message (erratum
+  cougar-out-of-sync): a :class:`WordReply` named OUT-OF-SYNC with no data.
 * :meth:`CougarProbe.reply` waits, ticking, for the next response (``within`` ticks); :meth:`call` is
   send + reply; :meth:`examine` reads Cougar memory with EXMN.
 

@@ -11,12 +11,18 @@ What a case may rely on, so that it holds for any conforming Cougar and not just
 
 * Table 1 (codes, data lengths) and the 1985 guide's GUTS order: ADC8, conversion, GRAVITY, guards, COMINT,
   one GUTS per Puma tick; a response may come up to :data:`DEFAULT_WITHIN` ticks after its command.
-* The errata: out-of-sync is response 2 carrying the bad word (``cougar-out-of-sync``); bit 15 of a
-  guard's first word chooses its type (``guard-type-bit``); the memory map of ``cougar-memory-map``
-  (its addresses are taken from :mod:`manip.cougar.memory`, the erratum's parameter, never retyped);
-  ADC8's rounding (``cougar-filter-rounding``); the conversion and force sign (``cougar-units``); the
+* Only what every reading of the 1985 guide gives; where it allows more than one behaviour, each is
+  accepted (the simulator's readings, :mod:`manip.cougar.readings`, prove it): out-of-sync is response 2,
+  alone or with the bad word (``cougar-out-of-sync``); bit 15 of a guard's first word makes it stop and
+  a clear high byte continue (``guard-type-bit``); a guard trips above tol and not below it
+  (``guard-trip-comparison``); one GUTS per TICK or a dropped TICK (``cougar-guts-reentry``).
+* Memory addresses only from the run's memory map (``--memory-map``, ``ctx.options.cougar_map``;
+  erratum ``cougar-memory-map``): a case that needs an object the map does not give is not judged
+  (``_support.mapped``); lengths in the run's unit (``--length-unit``, ``cougar-length-unit``).
+* ADC8's rounding (``cougar-filter-rounding``); the conversion and force sign (``cougar-units``); the
   compliance equation (``cougar-compliance-equation``), used only through properties that any linear
   spring/damper law has (zero gain gives zero, doubling a gain doubles its effect).
+* Each value checked on its own (a gauge, a guard, a row block), so a case reports every violation.
 * Never the simulator's numbers: no expected force, gauge or Δθ value is hard-coded; each check compares
   Cougar with itself (before/after, split/unsplit) or with a formula of the spec applied to what Cougar
   reports.
