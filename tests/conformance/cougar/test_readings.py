@@ -18,6 +18,7 @@ from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import ExitCode, RunReport
 from manip.cougar import CougarConfig, CougarSim
+from manip.cougar.cli import main as cougar_main
 from manip.cougar.cli import serve_cougar
 from manip.cougar.memory_map import memory_map_toml
 from manip.cougar.readings import MAP_SHIFT, READINGS
@@ -179,3 +180,22 @@ def test_cli_map_and_reading_usage_errors(tmp_path: Path, args: list[str], says:
     assert result.exit_code == 2, result.output
     assert says in result.output
     assert "Traceback" not in result.output
+
+
+def test_manip_cougar_prints_its_map_and_offers_the_readings() -> None:
+    assert CliRunner().invoke(cougar_main, ["--print-memory-map"]).output == memory_map_toml()
+    moved = CliRunner().invoke(cougar_main, ["--print-memory-map", "--cougar-reading", "relocated-map"])
+    assert moved.output == memory_map_toml(MAP_SHIFT)
+    assert "--cougar-reading" in CliRunner().invoke(cougar_main, ["--help"]).output
+    assert CliRunner().invoke(cougar_main, ["--cougar-reading", "nope", "--print-memory-map"]).exit_code == 2
+
+
+def test_a_reproduce_line_repeats_the_readings_and_the_unit() -> None:
+    args = ["run", "--cougar", "sim", "--cougar-reading", "lengths-in-inches", "--length-unit", "cm"]
+    result = CliRunner().invoke(conform_main, [*args, "--select", "cougar.forces.conversion", "-q"])
+    assert result.exit_code == 1, result.output
+    assert (
+        "manip-conform run --cougar sim --cougar-reading lengths-in-inches --select cougar.forces.conversion"
+        in result.output
+    )
+    assert "--length-unit cm" in result.output
