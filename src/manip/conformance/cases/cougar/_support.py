@@ -142,7 +142,16 @@ async def examine_region(ctx: CaseContext, probe: CougarProbe, obj: MapObject) -
 
 
 async def region_floats(ctx: CaseContext, probe: CougarProbe, obj: MapObject) -> tuple[float, ...]:
-    return floats_of(await examine_region(ctx, probe, obj))
+    """An object's floats; the case cannot go on without all of them (``ctx.fail``)."""
+    words = await examine_region(ctx, probe, obj)
+    if len(words) != obj.words:
+        ctx.fail(
+            f"EXMN did not return the {obj.words} words of {obj.name}: the case cannot go on",
+            clause="cougar.exmn.reply",
+            expected=f"{obj.words} words at {octal(obj.address)}",
+            actual=f"{len(words)} words",
+        )
+    return floats_of(words)
 
 
 async def peek_words(
