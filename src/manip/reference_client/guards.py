@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, SupportsFloat
 
+from manip.reference_client.errors import ServerError
 from manip.reference_client.faults import NO_FAULTS, ClientFault, ClientFaults
 from manip.reference_client.puma import GUARDS
 from manip.spec.constants import AsyncCondition
@@ -61,9 +62,24 @@ class WristBook:
         """Arm a new guard with a free number; returns the number."""
         number = self.free_number()
         kw = {} if timeout is None else {"timeout": timeout}
-        await self.arm.set_guard(number, dvec, tol, stop=stop, **kw)
-        self.armed.add(number)
+        stop = stop and ClientFault.GUARD_ALWAYS_CONTINUE not in self.faults
+        self.armed.add(number)  # armed from the moment it is sent: it may trip before the done comes
+        try:
+            await self.arm.set_guard(number, dvec, tol, stop=stop, **kw)
+        except ServerError:
+            self.armed.discard(number)  # refused by the server: nothing armed
+            raise
         return number
+
+    def note_set_guard(self, type_index: int) -> None:
+        """A plain set guard request was answered: its guard (the low 4 bits) is armed."""
+        if ClientFault.PLAIN_GUARDS_UNTRACKED not in self.faults:
+            self.armed.add(type_index & 0xF)
+
+    def note_clear_guard(self, index: int) -> None:
+        """A plain clear guard request was sent: its guard is no longer armed."""
+        if ClientFault.PLAIN_GUARDS_UNTRACKED not in self.faults:
+            self.armed.discard(index & 0xF)
 
     async def clear_guard(self, number: int, *, timeout: Any = None) -> None:
         kw = {} if timeout is None else {"timeout": timeout}
@@ -86,5 +102,7 @@ class WristBook:
         kw = {} if timeout is None else {"timeout": timeout}
         if offset is not None:
             await self.arm.set_frame_vector(offset, **kw)
+        if offset is None and ClientFault.NO_NEWWC_WITHOUT_OFFSET in self.faults:
+            return
         if ClientFault.NO_NEWWC not in self.faults:
             await self.arm.set_weight(weight, cg, **kw)

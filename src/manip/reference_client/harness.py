@@ -143,6 +143,8 @@ class CaseRun:
         self.in_flight: set[asyncio.Task[None]] = set()
         self._late: list[asyncio.Task[None]] = []
         self._fatal_reported: set[int] = set()
+        self.waiting: list[tuple[int | None, Request[Any]]] = []
+        """(op id, request) of each request op waiting for its answer, oldest first."""
 
     def emit(self, result_type: str, op: int | None, /, **fields: Any) -> None:
         self._emit({"type": result_type, "case": self.case, "op": op, **fields})
@@ -256,15 +258,34 @@ class CaseRun:
                 "error", ident, origin="client", kind="refused-locally", request_number=None, detail=str(exc)
             )
             return
+        self.note_guard(name, op.get("args"), armed=True)
+        waiting = (ident, request)
+        self.waiting.append(waiting)
         try:
             value = await future
         except ServerError as exc:
+            self.note_guard(name, op.get("args"), armed=False)  # a set guard refused arms nothing
             self.report_error(ident, exc)
             return
         except ManipError as exc:
             self.report_client_error(ident, request, exc)
             return
+        finally:
+            self.waiting.remove(waiting)
         self.report_reply(ident, name, request, value)
+
+    def note_guard(self, name: str, args: Any, *, armed: bool) -> None:
+        """Tell the wrist book of a guard armed or cleared by a plain set guard or clear guard request
+        (armed from the moment it is sent; a set guard answered by an error arms nothing)."""
+        if self.wrist is None or not isinstance(args, dict):
+            return
+        if name == "set-guard" and isinstance(args.get("type_index"), int):
+            if armed:
+                self.wrist.note_set_guard(args["type_index"])
+            else:
+                self.wrist.note_clear_guard(args["type_index"])
+        elif name == "clear-guard" and armed and isinstance(args.get("index"), int):
+            self.wrist.note_clear_guard(args["index"])
 
     async def choose(self, ident: int | None, name: str, op: Mapping[str, Any]) -> None:
         """A choice operation: arm-guard (the client picks the number) or change-load."""
@@ -370,10 +391,14 @@ class CaseRun:
     # ------------------------------------------------------------------ listeners
 
     def on_async(self, response: Any) -> None:
+        op, number = None, response.request_number
+        if ClientFault.ASYNC_TO_WAITING in self.faults and self.waiting:
+            op, request = self.waiting[0]  # handed to the waiting request's handler
+            number = request.packet_number
         self.emit(
             "async",
-            None,
-            request_number=response.request_number,
+            op,
+            request_number=number,
             code=response.condition,
             word2=response.word2,
             word3=response.word3,

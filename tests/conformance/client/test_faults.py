@@ -68,6 +68,16 @@ CAUGHT_BY: dict[ClientFault, tuple[str, ...]] = {
         "client.ncp.window-opens-late",
         "client.ncp.window-shrinks",
     ),
+    ClientFault.IGNORE_WINDOW_SHRINK: ("client.ncp.window-shrinks",),
+    ClientFault.WINDOW_ON_NEW_ACK_ONLY: ("client.ncp.window-shrinks", "client.ncp.window-opens-by-status"),
+    ClientFault.GUARD_ALWAYS_CONTINUE: ("client.choice.guard-numbers",),
+    ClientFault.NO_NEWWC_WITHOUT_OFFSET: ("client.choice.newwc-without-offset", "client.choice.plain-guards"),
+    ClientFault.PLAIN_GUARDS_UNTRACKED: ("client.choice.plain-guards",),
+    ClientFault.ASYNC_TO_WAITING: (
+        "client.async.segment-interleaved",
+        "client.async.guard-hits",
+        "client.pipeline.interleaved",
+    ),
 }
 
 
@@ -87,10 +97,14 @@ PASSED_BY: dict[ClientFault, tuple[str, ...]] = {
 """Switches that break no clause (another reading the contract allows), and the cases they must pass."""
 
 
-def run(select: tuple[str, ...], *extra: str, strict: bool = False) -> RunReport:
+LINKS = ("tcp", "chudp")
+"""The fault matrix runs on both links the harnesses of the project dial."""
+
+
+def run(select: tuple[str, ...], *extra: str, strict: bool = False, link: str = "tcp") -> RunReport:
     config = ClientRunConfig(
         argv=[*HARNESS, *extra],
-        link="tcp",
+        link=link,
         seed=SEED,
         options=RunOptions(reply_timeout=1.0, strict=strict),
         select=PatternSet.of(select, "--select"),
@@ -108,10 +122,11 @@ def test_every_fault_is_named_and_at_least_twelve() -> None:
         assert set(cases) <= ids
 
 
+@pytest.mark.parametrize("link", LINKS)
 @pytest.mark.parametrize("fault", list(CAUGHT_BY), ids=lambda f: f.value)
-def test_each_fault_is_caught_by_its_named_cases(fault: ClientFault) -> None:
+def test_each_fault_is_caught_by_its_named_cases(fault: ClientFault, link: str) -> None:
     should_only = all(SPEC.clauses[c].level == "SHOULD" for c in FAULTS[fault].clauses)
-    report = run(CAUGHT_BY[fault], "--fault", fault.value, strict=should_only)  # a SHOULD counts so
+    report = run(CAUGHT_BY[fault], "--fault", fault.value, strict=should_only, link=link)  # SHOULD counts
     got = {r.id: r for r in report.results}
     assert set(got) == set(CAUGHT_BY[fault])
     for case_id, result in got.items():
@@ -122,9 +137,10 @@ def test_each_fault_is_caught_by_its_named_cases(fault: ClientFault) -> None:
     )
 
 
-def test_the_clean_client_passes_the_named_cases() -> None:
+@pytest.mark.parametrize("link", LINKS)
+def test_the_clean_client_passes_the_named_cases(link: str) -> None:
     named = tuple(sorted({c for cases in CAUGHT_BY.values() for c in cases}))
-    report = run(named)
+    report = run(named, link=link)
     assert {r.outcome for r in report.results} == {"pass"}, [(r.id, r.outcome) for r in report.results]
 
 
