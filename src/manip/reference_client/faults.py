@@ -50,6 +50,7 @@ class ClientFault(enum.Enum):
     NO_NEWWC_WITHOUT_OFFSET = "no-newwc-without-offset"
     PLAIN_GUARDS_UNTRACKED = "plain-guards-untracked"
     ASYNC_TO_WAITING = "async-to-waiting-request"
+    CHOICE_ERROR_UNNUMBERED = "choice-error-unnumbered"
 
 
 @dataclass(frozen=True)
@@ -153,6 +154,11 @@ FAULTS: Final[dict[ClientFault, ClientFaultInfo]] = {
         "an asynchronous response (0203) arriving while a request waits is handed to that request's "
         "handler: reported with that request's op and request number",
         ("client.async-routing",),
+    ),
+    ClientFault.CHOICE_ERROR_UNNUMBERED: ClientFaultInfo(
+        "a choice operation's server error is reported with request_number null, as its reply is, not "
+        "the number the error carries",
+        ("client.error-report",),
     ),
     ClientFault.LITERAL_EXAMPLES: ClientFaultInfo(
         "no fault: the harness takes every example of docs/client-harness.md literally where the contract "

@@ -308,7 +308,8 @@ class CaseRun:
             )
             return
         except ServerError as exc:
-            self.report_error(ident, exc)
+            unnumbered = ClientFault.CHOICE_ERROR_UNNUMBERED in self.faults
+            self.report_error(ident, exc, unnumbered=unnumbered)
             return
         except ManipError as exc:
             kind = (
@@ -355,7 +356,8 @@ class CaseRun:
             "error", ident, origin="client", kind=kind, request_number=request.packet_number, detail=str(exc)
         )
 
-    def report_error(self, ident: int | None, exc: ServerError) -> None:
+    def report_error(self, ident: int | None, exc: ServerError, *, unnumbered: bool = False) -> None:
+        """A server's error; ``unnumbered`` (fault choice-error-unnumbered) leaves its number out."""
         origin = next((o for cls, o in ERROR_ORIGINS if isinstance(exc, cls)), "non-fatal-error")
         if isinstance(exc, FatalError):
             self._fatal_reported.add(id(exc.error))
@@ -363,7 +365,7 @@ class CaseRun:
             "error",
             ident,
             origin=origin,
-            request_number=exc.request_number,
+            request_number=None if unnumbered else exc.request_number,
             where=exc.where,
             severity=exc.severity,
             code=exc.code,

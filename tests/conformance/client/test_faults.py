@@ -73,6 +73,7 @@ CAUGHT_BY: dict[ClientFault, tuple[str, ...]] = {
     ClientFault.GUARD_ALWAYS_CONTINUE: ("client.choice.guard-numbers",),
     ClientFault.NO_NEWWC_WITHOUT_OFFSET: ("client.choice.newwc-without-offset", "client.choice.plain-guards"),
     ClientFault.PLAIN_GUARDS_UNTRACKED: ("client.choice.plain-guards",),
+    ClientFault.CHOICE_ERROR_UNNUMBERED: ("client.choice.errors",),
     ClientFault.ASYNC_TO_WAITING: (
         "client.async.segment-interleaved",
         "client.async.guard-hits",

@@ -12,8 +12,9 @@ from __future__ import annotations
 
 from typing import Any, Final
 
+from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_request
-from manip.conformance.cases.client._support import close, connect, request, wait
+from manip.conformance.cases.client._support import close, connect, expect_error_parts, request, wait
 from manip.conformance.client.contract import Op
 from manip.conformance.client.runner import ClientContext, Play, client_context
 from manip.conformance.client.server import ServerSide, WireRecord, plain_answer
@@ -22,6 +23,7 @@ from manip.conformance.judge.checks import check_client_guards
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec import SPEC
+from manip.spec.constants import ServerOp
 
 GUARDS: Final = 16
 SET_GUARD: Final = SPEC.request("set-guard").opcode
@@ -302,3 +304,56 @@ def _before_clear(play: Play, record: WireRecord) -> bool:
     """The request went out before the client's last clear guard."""
     clears = [r.t for r in client_requests(play.wire) if r.packet.opcode == CLEAR_GUARD]
     return bool(clears) and record.t < clears[-1]
+
+
+REFUSED_GUARD: Final = ErrorMessage("PUMA", "E", "BVA", "Guard ~ refused", (0,))
+REFUSED_FRAME: Final = ErrorMessage("PUMA", "E", "BVA", "Frame vector refused")
+
+
+@case("client.choice.errors", clauses=["client.error-report", "client.guard-numbers"], hazard="config")
+async def choice_errors(base: CaseContext) -> None:
+    """The judging server answers the first set guard and every set frame vector with a non-fatal
+    error: arm-guard and change-load each report that error, with their own op and the number of the
+    request it answered (docs/client-harness.md section 4.4); a refused guard is not armed, so its
+    number may be given again; whether change-load still sends set weight is the client's choice."""
+    ctx = client_context(base)
+    refused: list[int] = []
+
+    async def script(side: ServerSide) -> None:
+        while (req := await side.next_request()) is not None:
+            if req.opcode == SET_GUARD and not refused:
+                refused.append(req.packet_no)
+                await side.error(ServerOp.NON_FATAL_ERROR, req.packet_no, REFUSED_GUARD)
+            elif req.opcode == SET_FRAME_VECTOR:
+                await side.error(ServerOp.NON_FATAL_ERROR, req.packet_no, REFUSED_FRAME)
+            else:
+                await plain_answer(side, req)
+        await side.until_ended(3.0)
+
+    ops: list[Op] = [
+        connect(0),
+        request(1, "request-notifications", {"mask": 1}),
+        Op(2, "arm-guard", args=_guard_args(ctx)),
+        Op(3, "change-load", args=_load(ctx, offset=True)),
+        Op(4, "arm-guard", args=_guard_args(ctx)),
+        close(5),
+    ]
+    play = await ctx.play(ops, script)
+    _expect_rule(ctx, play, "client.guard-numbers")
+    for op_id, error in ((2, REFUSED_GUARD), (3, REFUSED_FRAME)):
+        expect_error_parts(
+            ctx,
+            play.answer(op_id),
+            error,
+            "non-fatal-error",
+            clause="client.error-report",
+            play=play,
+            ops=(op_id,),
+        )
+    answer = play.answer(4)
+    ctx.expect(
+        answer is not None and answer.type == "reply",
+        clause="client.guard-numbers",
+        expected="the arm-guard after a refused one done",
+        actual=str(answer),
+    )
