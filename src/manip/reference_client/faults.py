@@ -51,6 +51,7 @@ class ClientFault(enum.Enum):
     PLAIN_GUARDS_UNTRACKED = "plain-guards-untracked"
     ASYNC_TO_WAITING = "async-to-waiting-request"
     CHOICE_ERROR_UNNUMBERED = "choice-error-unnumbered"
+    CLEAR_GUARDS_FIRST = "clear-guards-first"
 
 
 @dataclass(frozen=True)
@@ -159,6 +160,12 @@ FAULTS: Final[dict[ClientFault, ClientFaultInfo]] = {
         "a choice operation's server error is reported with request_number null, as its reply is, not "
         "the number the error carries",
         ("client.error-report",),
+    ),
+    ClientFault.CLEAR_GUARDS_FIRST: ClientFaultInfo(
+        "no fault: a change of load with guards armed clears them first (a clear guard each), then sends "
+        "the load's requests, instead of refusing; docs/client-harness.md allows both, so the suite must "
+        "pass it",
+        (),
     ),
     ClientFault.LITERAL_EXAMPLES: ClientFaultInfo(
         "no fault: the harness takes every example of docs/client-harness.md literally where the contract "

@@ -96,10 +96,13 @@ class WristBook:
     ) -> None:
         """The hand holds a new object (and, with ``offset``, the frame vector moves): set frame
         vector, then set weight (NEWWC).  Refused while a guard is armed."""
+        kw = {} if timeout is None else {"timeout": timeout}
+        if self.armed and ClientFault.CLEAR_GUARDS_FIRST in self.faults:
+            for number in sorted(self.armed):
+                await self.clear_guard(number, **kw)
         if self.armed and ClientFault.NEWWC_UNDER_GUARD not in self.faults:
             numbers = ", ".join(str(n) for n in sorted(self.armed))
             raise LoadChangeRefusedError(f"guard(s) {numbers} armed: clear them before the load changes")
-        kw = {} if timeout is None else {"timeout": timeout}
         if offset is not None:
             await self.arm.set_frame_vector(offset, **kw)
         if offset is None and ClientFault.NO_NEWWC_WITHOUT_OFFSET in self.faults:

@@ -83,6 +83,11 @@ CAUGHT_BY: dict[ClientFault, tuple[str, ...]] = {
 
 
 PASSED_BY: dict[ClientFault, tuple[str, ...]] = {
+    ClientFault.CLEAR_GUARDS_FIRST: (
+        "client.choice.no-newwc-with-guard",
+        "client.choice.plain-guards",
+        "client.choice.guard-numbers",
+    ),
     ClientFault.LITERAL_EXAMPLES: (
         "client.reply.wrist-version",
         "client.reply.here",
@@ -150,6 +155,15 @@ def test_a_harness_reading_the_contract_another_allowed_way_passes(switch: Clien
     """literal-examples: a harness following every example of docs/client-harness.md literally."""
     report = run(PASSED_BY[switch], "--fault", switch.value)
     assert {r.id: r.outcome for r in report.results} == dict.fromkeys(PASSED_BY[switch], "pass")
+
+
+def test_clear_guards_first_does_clear_then_sends_the_load() -> None:
+    """The switch does take the other allowed path (so its passing run shows the judge accepts it)."""
+    report = run(("client.choice.no-newwc-with-guard",), "--fault", "clear-guards-first")
+    (result,) = report.results
+    sent = [p.opcode for p in result.packets if p.direction == "c2s"]
+    clear, weight = SPEC.request("clear-guard").opcode, SPEC.request("set-weight").opcode
+    assert clear in sent and weight in sent and sent.index(clear) < sent.index(weight), sent
 
 
 def test_literal_examples_writes_a_one_element_raw_as_a_bare_string() -> None:
