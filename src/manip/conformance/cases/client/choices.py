@@ -85,7 +85,12 @@ def _expect_guard_words(ctx: ClientContext, play: Play, arms: list[tuple[int, di
         )
 
 
-@case("client.choice.guard-numbers", clauses=["client.guard-numbers", "client.guard-word"], hazard="config")
+@case(
+    "client.choice.guard-numbers",
+    clauses=["client.guard-numbers", "client.guard-word"],
+    hazard="config",
+    summary="arm-guard gives no number that is armed, and puts the number in bits 0-3 and stop in bit 15",
+)
 async def guard_numbers(base: CaseContext) -> None:
     """With guard hits reported, the harness arms sixteen guards, some to stop the move on a trip and
     some to let it continue (drawn from the seed), leaving the numbers to the client; one of them trips
@@ -130,7 +135,12 @@ async def guard_numbers(base: CaseContext) -> None:
     )
 
 
-@case("client.choice.newwc-on-load", clauses=["client.newwc-on-load"], hazard="config")
+@case(
+    "client.choice.newwc-on-load",
+    clauses=["client.newwc-on-load"],
+    hazard="config",
+    summary="change-load with an offset: set frame vector, then set weight (NEWWC), before forces are read",
+)
 async def newwc_on_load(base: CaseContext) -> None:
     """The hand takes a new object and the frame vector moves (change-load with an offset), then the
     forces are read: the client sends set frame vector, then set weight (NEWWC) with the object's
@@ -160,7 +170,12 @@ async def newwc_on_load(base: CaseContext) -> None:
     )
 
 
-@case("client.choice.no-newwc-with-guard", clauses=["client.no-newwc-with-guard"], hazard="config")
+@case(
+    "client.choice.no-newwc-with-guard",
+    clauses=["client.no-newwc-with-guard"],
+    hazard="config",
+    summary="change-load under an armed guard is refused, or clears the guards first: no NEWWC while armed",
+)
 async def no_newwc_with_guard(base: CaseContext) -> None:
     """The load changes while a guard is armed: the client sends neither set weight nor set frame
     vector while the guard is armed (it may refuse the change, or clear the guard first)."""
@@ -202,7 +217,12 @@ def _expect_newwc(ctx: ClientContext, play: Play, load: dict[str, Any], *, after
     )
 
 
-@case("client.choice.newwc-without-offset", clauses=["client.newwc-on-load"], hazard="config")
+@case(
+    "client.choice.newwc-without-offset",
+    clauses=["client.newwc-on-load"],
+    hazard="config",
+    summary="change-load without an offset, no guard armed: set weight (NEWWC) is still sent",
+)
 async def newwc_without_offset(base: CaseContext) -> None:
     """The hand takes a new object and the frame vector stays (change-load without an offset), no
     guard armed, then the forces are read: the client sends set weight (NEWWC) with the object's
@@ -230,6 +250,7 @@ async def newwc_without_offset(base: CaseContext) -> None:
     "client.choice.plain-guards",
     clauses=["client.guard-numbers", "client.no-newwc-with-guard", "client.newwc-on-load"],
     hazard="config",
+    summary="guards of plain set guard and clear guard requests count for new guard numbers and for the load",
 )
 async def plain_guards(base: CaseContext) -> None:
     """Guards armed by plain set guard requests count as the client's own: with guard 0 and one drawn
@@ -310,7 +331,12 @@ REFUSED_GUARD: Final = ErrorMessage("PUMA", "E", "BVA", "Guard ~ refused", (0,))
 REFUSED_FRAME: Final = ErrorMessage("PUMA", "E", "BVA", "Frame vector refused")
 
 
-@case("client.choice.errors", clauses=["client.error-report", "client.guard-numbers"], hazard="config")
+@case(
+    "client.choice.errors",
+    clauses=["client.error-report", "client.guard-numbers"],
+    hazard="config",
+    summary="a choice operation's error names its op and the failed request; a refused guard is free",
+)
 async def choice_errors(base: CaseContext) -> None:
     """The judging server answers the first set guard and every set frame vector with a non-fatal
     error: arm-guard and change-load each report that error, with their own op and the number of the

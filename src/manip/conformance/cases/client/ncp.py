@@ -314,7 +314,11 @@ async def window_opens_late(base: CaseContext) -> None:
     _expect_window(ctx, play, 2, sent, len(names))
 
 
-@case("client.ncp.window-shrinks", clauses=["ncp.window", "client.reply-matching"])
+@case(
+    "client.ncp.window-shrinks",
+    clauses=["ncp.window", "client.reply-matching"],
+    summary="an STS acknowledging nothing new shrinks the window to 1: 1 request unacknowledged at most",
+)
 async def window_shrinks(base: CaseContext) -> None:
     """The judging server offers a window of 4, holds its acknowledgements until the client has filled
     it, then shrinks the window to 1 (an STS that acknowledges nothing new) and takes the requests one
@@ -340,7 +344,11 @@ OPENED: Final = 4
 """The window ``client.ncp.window-opens-by-status`` opens to."""
 
 
-@case("client.ncp.window-opens-by-status", clauses=["ncp.window", "client.reply-matching"])
+@case(
+    "client.ncp.window-opens-by-status",
+    clauses=["ncp.window", "client.reply-matching"],
+    summary="an STS acknowledging nothing new opens the window from 1 to 4: the client sends into it",
+)
 async def window_opens_by_status(base: CaseContext) -> None:
     """The judging server offers a window of 1 and takes nothing; once the client's first request is in,
     it opens the window to 4 by an STS that acknowledges nothing new: the client sends three more
