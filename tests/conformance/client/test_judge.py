@@ -117,6 +117,17 @@ def test_every_level_the_contract_states_is_the_judges() -> None:
         assert actual == level, f"the contract says {ident} is {level}; the judge has {actual}"
 
 
+def test_the_deadline_counts_a_timeout_per_request_a_choice_operation_may_send() -> None:
+    """Section 4.4: the timeout applies to each request; the deadline counts arm-guard as one request
+    and change-load as four (section 5: the ops' timeouts and waits, plus the slack)."""
+    assert Op(1, "here").budget(2.0) == 2.0
+    assert Op(1, "arm-guard").budget(2.0) == 2.0
+    assert Op(1, "change-load", timeout=3.0).budget(2.0) == 12.0
+    assert Op(1, "wait", seconds=0.5).budget(2.0) == 0.5
+    text = " ".join(DOC.read_text().split())
+    assert "counts `arm-guard` as one request and `change-load` as four" in text
+
+
 def test_the_out_of_sequence_case_is_a_should_case() -> None:
     (case,) = [c for c in client_cases() if c.id == "client.reply.out-of-sequence"]
     assert case.level == "SHOULD"
