@@ -51,6 +51,7 @@ class ClientFault(enum.Enum):
     PLAIN_GUARDS_UNTRACKED = "plain-guards-untracked"
     ASYNC_TO_WAITING = "async-to-waiting-request"
     CHOICE_ERROR_UNNUMBERED = "choice-error-unnumbered"
+    ASYNC_ERROR_TO_WAITING = "async-error-to-waiting-request"
     CLEAR_GUARDS_FIRST = "clear-guards-first"
 
 
@@ -160,6 +161,11 @@ FAULTS: Final[dict[ClientFault, ClientFaultInfo]] = {
         "a choice operation's server error is reported with request_number null, as its reply is, not "
         "the number the error carries",
         ("client.error-report",),
+    ),
+    ClientFault.ASYNC_ERROR_TO_WAITING: ClientFaultInfo(
+        "an asynchronous error or warning (0204, 0205) arriving while a request waits is reported with "
+        "that request's op and request number",
+        ("client.async-routing", "client.error-report"),
     ),
     ClientFault.CLEAR_GUARDS_FIRST: ClientFaultInfo(
         "no fault: a change of load with guards armed clears them first (a clear guard each), then sends "

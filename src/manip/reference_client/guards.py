@@ -1,12 +1,15 @@
 """What the client chooses for itself about the wrist's guards and load (Part II B.8 and B.9 of the
 1985 guide): which guard number a new guard gets, and what to send when the hand's load changes.
 
-:class:`WristBook` keeps the guards armed on one connection: a new guard takes the lowest number that
-is free (never armed, cleared, or reported tripped by a guard-hit asynchronous response); a change of
-load sends set frame vector (when the frame vector changes) then set weight (NEWWC) with the new
-object's weight and centre of gravity, and is refused while a guard is armed, since both change the
-forces the guard tests (``client.guard-numbers``, ``client.newwc-on-load``,
-``client.no-newwc-with-guard``).  Fault switches of :mod:`.faults` break each rule on purpose.
+:class:`WristBook` keeps the guards armed on one connection, from the moment each set guard is sent,
+its own and those of plain set guard requests it is told of: a new guard takes the lowest number that
+is free (never armed, cleared, refused by the server, or reported tripped by a guard-hit asynchronous
+response), and its set guard says in bit 15 whether a trip stops the move; a change of load sends set
+frame vector (when the frame vector changes) then set weight (NEWWC) with the new object's weight and
+centre of gravity, with or without a new frame vector, and is refused while a guard is armed, since
+both change the forces the guard tests (``client.guard-numbers``, ``client.guard-word``,
+``client.newwc-on-load``, ``client.no-newwc-with-guard``).  Fault switches of :mod:`.faults` break
+each rule on purpose.
 """
 
 from __future__ import annotations
@@ -72,7 +75,8 @@ class WristBook:
         return number
 
     def note_set_guard(self, type_index: int) -> None:
-        """A plain set guard request was answered: its guard (the low 4 bits) is armed."""
+        """A plain set guard request was sent: its guard (the low 4 bits) is armed from now on (a
+        refusal by the server is undone with :meth:`note_clear_guard`)."""
         if ClientFault.PLAIN_GUARDS_UNTRACKED not in self.faults:
             self.armed.add(type_index & 0xF)
 

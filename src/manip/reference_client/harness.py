@@ -356,8 +356,11 @@ class CaseRun:
             "error", ident, origin="client", kind=kind, request_number=request.packet_number, detail=str(exc)
         )
 
-    def report_error(self, ident: int | None, exc: ServerError, *, unnumbered: bool = False) -> None:
-        """A server's error; ``unnumbered`` (fault choice-error-unnumbered) leaves its number out."""
+    def report_error(
+        self, ident: int | None, exc: ServerError, *, unnumbered: bool = False, number: int | None = None
+    ) -> None:
+        """A server's error; ``unnumbered`` (fault choice-error-unnumbered) leaves its number out,
+        ``number`` (fault async-error-to-waiting-request) puts another in its place."""
         origin = next((o for cls, o in ERROR_ORIGINS if isinstance(exc, cls)), "non-fatal-error")
         if isinstance(exc, FatalError):
             self._fatal_reported.add(id(exc.error))
@@ -365,7 +368,7 @@ class CaseRun:
             "error",
             ident,
             origin=origin,
-            request_number=None if unnumbered else exc.request_number,
+            request_number=None if unnumbered else exc.request_number if number is None else number,
             where=exc.where,
             severity=exc.severity,
             code=exc.code,
@@ -413,6 +416,10 @@ class CaseRun:
                 self.report_error(None, error)
             return
         if isinstance(error, AsynchronousError | AsynchronousWarning):
+            if ClientFault.ASYNC_ERROR_TO_WAITING in self.faults and self.waiting:
+                op, request = self.waiting[0]  # taken for the waiting request's
+                self.report_error(op, error, number=request.packet_number)
+                return
             self.report_error(None, error)
         elif isinstance(error, OutOfSequenceResponse):
             self.emit(

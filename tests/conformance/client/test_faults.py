@@ -74,6 +74,11 @@ CAUGHT_BY: dict[ClientFault, tuple[str, ...]] = {
     ClientFault.NO_NEWWC_WITHOUT_OFFSET: ("client.choice.newwc-without-offset", "client.choice.plain-guards"),
     ClientFault.PLAIN_GUARDS_UNTRACKED: ("client.choice.plain-guards",),
     ClientFault.CHOICE_ERROR_UNNUMBERED: ("client.choice.errors",),
+    ClientFault.ASYNC_ERROR_TO_WAITING: (
+        "client.error.async-error-between",
+        "client.error.warning-between",
+        "client.pipeline.interleaved",
+    ),
     ClientFault.ASYNC_TO_WAITING: (
         "client.async.segment-interleaved",
         "client.async.guard-hits",
