@@ -1,9 +1,9 @@
 """Mutation testing of the client suite: every fault switch of the reference client is caught.
 
 Each fault of :data:`manip.reference_client.faults.FAULTS` is switched on alone in the reference client's
-harness (``--fault NAME``), and the cases named for it in :data:`CAUGHT_BY` run: each must fail, and at
-least one of them on a clause the fault says it breaks.  The clean client passes the same cases (and
-every case: ``tests/conformance/client/test_client.py``).
+harness (``--fault NAME``), and the cases named for it in :data:`CAUGHT_BY` run, on TCP and on CHUDP:
+each must fail, and at least one of them on a clause the fault says it breaks.  The clean client passes
+the same cases on both links (and every case: ``tests/conformance/client/test_client.py``).
 """
 
 from __future__ import annotations
