@@ -44,6 +44,15 @@ class ClientFault(enum.Enum):
     GUARD_ZERO = "guard-zero"
     NO_NEWWC = "no-newwc"
     NEWWC_UNDER_GUARD = "newwc-under-guard"
+    IGNORE_WINDOW_SHRINK = "ignore-window-shrink"
+    WINDOW_ON_NEW_ACK_ONLY = "window-on-new-ack-only"
+    GUARD_ALWAYS_CONTINUE = "guard-always-continue"
+    NO_NEWWC_WITHOUT_OFFSET = "no-newwc-without-offset"
+    PLAIN_GUARDS_UNTRACKED = "plain-guards-untracked"
+    ASYNC_TO_WAITING = "async-to-waiting-request"
+    CHOICE_ERROR_UNNUMBERED = "choice-error-unnumbered"
+    ASYNC_ERROR_TO_WAITING = "async-error-to-waiting-request"
+    CLEAR_GUARDS_FIRST = "clear-guards-first"
 
 
 @dataclass(frozen=True)
@@ -120,6 +129,49 @@ FAULTS: Final[dict[ClientFault, ClientFaultInfo]] = {
     ),
     ClientFault.NEWWC_UNDER_GUARD: ClientFaultInfo(
         "a change of load sends set weight while guards are armed", ("client.no-newwc-with-guard",)
+    ),
+    ClientFault.IGNORE_WINDOW_SHRINK: ClientFaultInfo(
+        "the client's NCP keeps the widest window the server offered: a window shrunk by an STS is ignored",
+        ("ncp.window",),
+    ),
+    ClientFault.WINDOW_ON_NEW_ACK_ONLY: ClientFaultInfo(
+        "the client's NCP reads an STS's window only when the STS acknowledges something new",
+        ("ncp.window",),
+    ),
+    ClientFault.GUARD_ALWAYS_CONTINUE: ClientFaultInfo(
+        "arm-guard arms every guard as one that lets the move continue (bit 15 of set guard's first word "
+        "clear even when the guard should stop the move)",
+        ("client.guard-word",),
+    ),
+    ClientFault.NO_NEWWC_WITHOUT_OFFSET: ClientFaultInfo(
+        "a change of load without a new frame vector sends nothing (no set weight, NEWWC)",
+        ("client.newwc-on-load",),
+    ),
+    ClientFault.PLAIN_GUARDS_UNTRACKED: ClientFaultInfo(
+        "guards armed and cleared by plain set guard and clear guard requests are not tracked: arm-guard "
+        "may reuse their numbers, and a change of load ignores them",
+        ("client.guard-numbers", "client.no-newwc-with-guard", "client.newwc-on-load"),
+    ),
+    ClientFault.ASYNC_TO_WAITING: ClientFaultInfo(
+        "an asynchronous response (0203) arriving while a request waits is handed to that request's "
+        "handler: reported with that request's op and request number",
+        ("client.async-routing",),
+    ),
+    ClientFault.CHOICE_ERROR_UNNUMBERED: ClientFaultInfo(
+        "a choice operation's server error is reported with request_number null, as its reply is, not "
+        "the number the error carries",
+        ("client.error-report",),
+    ),
+    ClientFault.ASYNC_ERROR_TO_WAITING: ClientFaultInfo(
+        "an asynchronous error or warning (0204, 0205) arriving while a request waits is reported with "
+        "that request's op and request number",
+        ("client.async-routing", "client.error-report"),
+    ),
+    ClientFault.CLEAR_GUARDS_FIRST: ClientFaultInfo(
+        "no fault: a change of load with guards armed clears them first (a clear guard each), then sends "
+        "the load's requests, instead of refusing; docs/client-harness.md allows both, so the suite must "
+        "pass it",
+        (),
     ),
     ClientFault.LITERAL_EXAMPLES: ClientFaultInfo(
         "no fault: the harness takes every example of docs/client-harness.md literally where the contract "

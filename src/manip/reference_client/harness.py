@@ -143,6 +143,8 @@ class CaseRun:
         self.in_flight: set[asyncio.Task[None]] = set()
         self._late: list[asyncio.Task[None]] = []
         self._fatal_reported: set[int] = set()
+        self.waiting: list[tuple[int | None, Request[Any]]] = []
+        """(op id, request) of each request op waiting for its answer, oldest first."""
 
     def emit(self, result_type: str, op: int | None, /, **fields: Any) -> None:
         self._emit({"type": result_type, "case": self.case, "op": op, **fields})
@@ -256,15 +258,34 @@ class CaseRun:
                 "error", ident, origin="client", kind="refused-locally", request_number=None, detail=str(exc)
             )
             return
+        self.note_guard(name, op.get("args"), armed=True)
+        waiting = (ident, request)
+        self.waiting.append(waiting)
         try:
             value = await future
         except ServerError as exc:
+            self.note_guard(name, op.get("args"), armed=False)  # a set guard refused arms nothing
             self.report_error(ident, exc)
             return
         except ManipError as exc:
             self.report_client_error(ident, request, exc)
             return
+        finally:
+            self.waiting.remove(waiting)
         self.report_reply(ident, name, request, value)
+
+    def note_guard(self, name: str, args: Any, *, armed: bool) -> None:
+        """Tell the wrist book of a guard armed or cleared by a plain set guard or clear guard request
+        (armed from the moment it is sent; a set guard answered by an error arms nothing)."""
+        if self.wrist is None or not isinstance(args, dict):
+            return
+        if name == "set-guard" and isinstance(args.get("type_index"), int):
+            if armed:
+                self.wrist.note_set_guard(args["type_index"])
+            else:
+                self.wrist.note_clear_guard(args["type_index"])
+        elif name == "clear-guard" and armed and isinstance(args.get("index"), int):
+            self.wrist.note_clear_guard(args["index"])
 
     async def choose(self, ident: int | None, name: str, op: Mapping[str, Any]) -> None:
         """A choice operation: arm-guard (the client picks the number) or change-load."""
@@ -287,7 +308,8 @@ class CaseRun:
             )
             return
         except ServerError as exc:
-            self.report_error(ident, exc)
+            unnumbered = ClientFault.CHOICE_ERROR_UNNUMBERED in self.faults
+            self.report_error(ident, exc, unnumbered=unnumbered)
             return
         except ManipError as exc:
             kind = (
@@ -334,7 +356,11 @@ class CaseRun:
             "error", ident, origin="client", kind=kind, request_number=request.packet_number, detail=str(exc)
         )
 
-    def report_error(self, ident: int | None, exc: ServerError) -> None:
+    def report_error(
+        self, ident: int | None, exc: ServerError, *, unnumbered: bool = False, number: int | None = None
+    ) -> None:
+        """A server's error; ``unnumbered`` (fault choice-error-unnumbered) leaves its number out,
+        ``number`` (fault async-error-to-waiting-request) puts another in its place."""
         origin = next((o for cls, o in ERROR_ORIGINS if isinstance(exc, cls)), "non-fatal-error")
         if isinstance(exc, FatalError):
             self._fatal_reported.add(id(exc.error))
@@ -342,7 +368,7 @@ class CaseRun:
             "error",
             ident,
             origin=origin,
-            request_number=exc.request_number,
+            request_number=None if unnumbered else exc.request_number if number is None else number,
             where=exc.where,
             severity=exc.severity,
             code=exc.code,
@@ -370,10 +396,14 @@ class CaseRun:
     # ------------------------------------------------------------------ listeners
 
     def on_async(self, response: Any) -> None:
+        op, number = None, response.request_number
+        if ClientFault.ASYNC_TO_WAITING in self.faults and self.waiting:
+            op, request = self.waiting[0]  # handed to the waiting request's handler
+            number = request.packet_number
         self.emit(
             "async",
-            None,
-            request_number=response.request_number,
+            op,
+            request_number=number,
             code=response.condition,
             word2=response.word2,
             word3=response.word3,
@@ -386,6 +416,10 @@ class CaseRun:
                 self.report_error(None, error)
             return
         if isinstance(error, AsynchronousError | AsynchronousWarning):
+            if ClientFault.ASYNC_ERROR_TO_WAITING in self.faults and self.waiting:
+                op, request = self.waiting[0]  # taken for the waiting request's
+                self.report_error(op, error, number=request.packet_number)
+                return
             self.report_error(None, error)
         elif isinstance(error, OutOfSequenceResponse):
             self.emit(

@@ -47,6 +47,7 @@ from manip.links import ConnectionLost as ChaosConnectionLost
 from manip.links.api import LinkWrapper
 from manip.ncp.config import MAX_WINDOW
 from manip.ncp.packets import pack_status, unpack_status
+from manip.ncp.seq import seq_gt
 from manip.reference_client.errors import ConnectionLostError
 from manip.reference_client.faults import NO_FAULTS, ClientFault, ClientFaults
 from manip.reference_client.packets import ResponseInfo, ServerPacket, chaos_response_info
@@ -91,8 +92,8 @@ class NcpTransport:
         # the client gives the connection up at once rather than wait for replies that cannot come.
         self.ncp_options = replace(ncp_options or NcpConfig(), lose_on_illegal=True)
         self.wrap_link = _no_ack(wrap_link) if ClientFault.NEVER_ACK in faults else wrap_link
-        if ClientFault.IGNORE_WINDOW in faults:
-            self.wrap_link = _wide_window(self.wrap_link)
+        if faults & _WINDOW_FAULTS:
+            self.wrap_link = _bent_window(self.wrap_link, _WindowBend(faults))
         self._conn: ChaosConnection | None = None
         self._ahead: Packet | None = None
         self._end: ChaosError | None = None
@@ -237,28 +238,59 @@ def _no_ack(inner: LinkWrapper | None) -> LinkWrapper:
     return wrap
 
 
-def _wide_window(inner: LinkWrapper | None) -> LinkWrapper:
-    """Fault ignore-window: the window in every OPN and STS received reads as the largest there is, so
-    the NCP sends as if the server's window had no end."""
+_WINDOW_FAULTS = frozenset(
+    {ClientFault.IGNORE_WINDOW, ClientFault.IGNORE_WINDOW_SHRINK, ClientFault.WINDOW_ON_NEW_ACK_ONLY}
+)
+
+
+class _WindowBend:
+    """What the window faults make of the window each OPN and STS received offers: ignore-window reads
+    the largest there is; ignore-window-shrink the widest offered so far; window-on-new-ack-only keeps
+    the window it had when an STS acknowledges nothing new."""
+
+    def __init__(self, faults: ClientFaults) -> None:
+        self.faults = faults
+        self.widest = 0
+        self.window: int | None = None
+        self.acked: int | None = None
+
+    def __call__(self, packet: Packet) -> Packet:
+        carries_ack = packet.opcode in (ChaosOp.OPN, ChaosOp.STS, ChaosOp.EOF) or packet.opcode >= ChaosOp.DAT
+        new_ack = carries_ack and (self.acked is None or seq_gt(packet.ack_no, self.acked))
+        if new_ack:
+            self.acked = packet.ack_no
+        status = unpack_status(packet.data) if packet.opcode in (ChaosOp.OPN, ChaosOp.STS) else None
+        if status is None:
+            return packet
+        window = status[1]
+        if ClientFault.IGNORE_WINDOW in self.faults:
+            window = MAX_WINDOW
+        if ClientFault.WINDOW_ON_NEW_ACK_ONLY in self.faults and packet.opcode == ChaosOp.STS and not new_ack:
+            window = self.window if self.window is not None else window
+        if ClientFault.IGNORE_WINDOW_SHRINK in self.faults:
+            window = max(window, self.widest)
+        self.widest, self.window = max(self.widest, window), window
+        return packet.with_(data=pack_status(status[0], window) + packet.data[4:])
+
+
+def _bent_window(inner: LinkWrapper | None, bend: _WindowBend) -> LinkWrapper:
+    """The window faults: every packet received goes through ``bend`` before the NCP reads it."""
 
     def wrap(link: Link) -> Link:
         wrapped = inner(link) if inner is not None else link
         set_receiver = wrapped.set_receiver
 
-        def set_widening_receiver(receiver: Any) -> None:
+        def set_bending_receiver(receiver: Any) -> None:
             if receiver is None:
                 set_receiver(None)
                 return
 
-            def widened(source: Link, packet: Packet) -> None:
-                status = unpack_status(packet.data) if packet.opcode in (ChaosOp.OPN, ChaosOp.STS) else None
-                if status is not None:
-                    packet = packet.with_(data=pack_status(status[0], MAX_WINDOW) + packet.data[4:])
-                receiver(source, packet)
+            def bent(source: Link, packet: Packet) -> None:
+                receiver(source, bend(packet))
 
-            set_receiver(widened)
+            set_receiver(bent)
 
-        wrapped.set_receiver = set_widening_receiver  # type: ignore[method-assign]
+        wrapped.set_receiver = set_bending_receiver  # type: ignore[method-assign]
         return wrapped
 
     return wrap

@@ -17,9 +17,9 @@ from click.testing import CliRunner
 from manip.conformance.cli import main
 from manip.conformance.client.cli import client_cases
 from manip.conformance.client.contract import ContractError, parse_hello, parse_result
-from manip.conformance.client.runner import ClientRunConfig, run_client_suite
+from manip.conformance.client.runner import DEFAULT_CLIENT_TIMEOUT, ClientRunConfig, run_client_suite
 from manip.conformance.suite.context import RunOptions
-from manip.conformance.suite.results import ExitCode, RunReport
+from manip.conformance.suite.results import CaseResult, ExitCode, RunReport
 from manip.conformance.suite.selection import PatternSet
 from manip.spec import SPEC
 
@@ -236,6 +236,22 @@ def test_the_command_runs_selects_and_writes_reports(tmp_path: Path) -> None:
     assert [c["id"] for c in data["cases"]] == ["client.reply.here"]
     assert data["counts"]["pass"] == 1 and "unsupported" in data["counts"]
     assert "client.reply.here" in junit.read_text()
+    (case,) = data["cases"]
+    instruction_ops = 3  # connect, here, close: the contract's deadline is their timeouts plus 10 s
+    assert case["harness_deadline"] == pytest.approx(instruction_ops * DEFAULT_CLIENT_TIMEOUT + 10.0)
+
+
+def test_a_client_case_tells_its_time_budget_from_the_contracts_deadline() -> None:
+    """ "took 13.22 s of its 5 s deadline" read as if the harness had overrun the contract's deadline;
+    a client case names both, a server case only its own."""
+    result = CaseResult(
+        "client.x.y", (), "MUST", "scripted", "read-only", "", "pass", 1, 5.0, 13.22, harness_deadline=30.0
+    )
+    assert result.timing() == (
+        "took 13.22 s of its 5 s time budget; the contract's deadline for the harness was 30 s"
+    )
+    result.harness_deadline = None
+    assert result.timing() == "took 13.22 s of its 5 s time budget"
 
 
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full")

@@ -13,6 +13,7 @@ from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_request, response_layout
 from manip.codecs.packet import Packet
 from manip.conformance.cases.client._support import error_parts, raw_words, reply_mismatches
+from manip.conformance.client.cli import client_cases
 from manip.conformance.client.contract import (
     CHOICE_OPERATIONS,
     REQUEST_OPERATIONS,
@@ -26,9 +27,11 @@ from manip.conformance.client.contract import (
 )
 from manip.conformance.client.server import WireRecord
 from manip.conformance.client.wire import window_findings
+from manip.conformance.judge.checks import check_client_guards
+from manip.conformance.judge.packets import Direction, WirePacket
 from manip.ncp.packets import pack_status
 from manip.spec import SPEC
-from manip.spec.constants import ChaosOp
+from manip.spec.constants import ChaosOp, ServerOp
 from manip.spec.model import RequestOpcode
 from tests.support.paths import ROOT
 
@@ -57,6 +60,77 @@ def test_the_window_is_the_one_offered_when_the_packet_went_out() -> None:
 def test_past_the_offered_window_is_found_before_any_status() -> None:
     wire = [OPN, *(_c2s(0.1, n) for n in range(2, 7))]  # 5 unacknowledged, window 4
     assert [f.clause for f in window_findings(wire, 15)] == ["ncp.window"]
+
+
+def test_an_eof_counts_against_the_window_and_a_retransmission_is_judged_when_first_sent() -> None:
+    filled = [OPN, *(_c2s(0.1, n) for n in range(2, 6))]  # 4 unacknowledged: the window of 4, full
+    eof = WireRecord(0.2, "c2s", Packet(ChaosOp.EOF, packet_no=6, ack_no=1))
+    assert [f.clause for f in window_findings([*filled, eof], 15)] == ["ncp.window"]
+    assert "EOF 6" in window_findings([*filled, eof], 15)[0].message
+    resent = [*filled, _sts(0.2, 2, 1), _c2s(0.3, 3)]  # packet 3 again, sent first under the window of 4
+    assert window_findings(resent, 15) == []
+
+
+def test_an_sts_that_acknowledges_nothing_new_still_sets_the_window() -> None:
+    filled = [OPN, *(_c2s(0.1, n) for n in range(2, 4))]  # 2 unacknowledged
+    shrunk = [*filled, _sts(0.2, 1, 1), _c2s(0.3, 4)]  # the same ack, window 1: packet 4 is past it
+    assert [f.clause for f in window_findings(shrunk, 15)] == ["ncp.window"]
+    opened = [
+        WireRecord(0.0, "s2c", Packet(ChaosOp.OPN, packet_no=1, ack_no=1, data=pack_status(1, 1))),
+        _c2s(0.1, 2),
+        _sts(0.2, 1, 4),  # nothing new acknowledged, window 4
+        *(_c2s(0.3, n) for n in range(3, 6)),
+    ]
+    assert window_findings(opened, 15) == []
+
+
+def _guard_packet(direction: Direction, opcode: int, number: int, data: bytes) -> WirePacket:
+    return WirePacket(direction, opcode, number, 0, data, 0.0)
+
+
+def test_a_set_guard_answered_by_an_error_arms_nothing() -> None:
+    set_guard = SPEC.request("set-guard").opcode
+    word = (0x8003).to_bytes(2, "little") + bytes(28)
+    notify = _guard_packet("c2s", SPEC.request("request-notifications").opcode, 2, b"\x01\x00")
+    first = _guard_packet("c2s", set_guard, 3, word)
+    again = _guard_packet("c2s", set_guard, 4, word)
+    refused = _guard_packet("s2c", ServerOp.NON_FATAL_ERROR, 5, (3).to_bytes(2, "little") + b"PUMA: E X\0")
+    assert [f.clause for f in check_client_guards([notify, first, again])] == ["client.guard-numbers"]
+    assert check_client_guards([notify, first, refused, again]) == []
+
+
+# ------------------------------------------------------------------------ the document's levels
+
+LEVELLED = re.compile(r"`([a-z][a-z0-9-]*(?:\.[a-z0-9-]+)+)`\s+\((MUST|SHOULD|MAY|INFO)\)")
+"""An id in backticks followed by its level in brackets, as the contract names levels."""
+
+
+def test_every_level_the_contract_states_is_the_judges() -> None:
+    """Each case or clause the contract names with a level has that level: a case's as
+    ``manip-conform cases`` lists it, a clause's as the spec says."""
+    cases = {c.id: c.level for c in client_cases()}
+    stated = LEVELLED.findall(" ".join(DOC.read_text().split()))
+    assert len(stated) >= 8
+    for ident, level in stated:
+        assert ident in cases or ident in SPEC.clauses, f"{ident} is neither a client case nor a clause"
+        actual = cases[ident] if ident in cases else SPEC.clauses[ident].level
+        assert actual == level, f"the contract says {ident} is {level}; the judge has {actual}"
+
+
+def test_the_deadline_counts_a_timeout_per_request_a_choice_operation_may_send() -> None:
+    """Section 4.4: the timeout applies to each request; the deadline counts arm-guard as one request
+    and change-load as four (section 5: the ops' timeouts and waits, plus the slack)."""
+    assert Op(1, "here").budget(2.0) == 2.0
+    assert Op(1, "arm-guard").budget(2.0) == 2.0
+    assert Op(1, "change-load", timeout=3.0).budget(2.0) == 12.0
+    assert Op(1, "wait", seconds=0.5).budget(2.0) == 0.5
+    text = " ".join(DOC.read_text().split())
+    assert "counts `arm-guard` as one request and `change-load` as four" in text
+
+
+def test_the_out_of_sequence_case_is_a_should_case() -> None:
+    (case,) = [c for c in client_cases() if c.id == "client.reply.out-of-sequence"]
+    assert case.level == "SHOULD"
 
 
 # ------------------------------------------------------------------------ the document's examples

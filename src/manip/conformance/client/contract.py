@@ -17,6 +17,7 @@ from manip.spec import SPEC
 
 __all__ = [
     "CHOICE_OPERATIONS",
+    "CHOICE_REQUESTS",
     "CONTRACT",
     "CONTROL_OPERATIONS",
     "FEATURES",
@@ -37,10 +38,16 @@ __all__ = [
 ]
 
 CONTRACT: Final = 1
-REVISION: Final = 2
-"""The contract's revision (docs/client-harness.md, "Versions"): 2 added the choice operations."""
+REVISION: Final = 3
+"""The contract's revision (docs/client-harness.md, "Versions"): 2 added the choice operations; 3 states
+what revision 2 left unsaid (the guard word, when a guard is armed, errors of choice operations, dirty
+zeros, the window when the client sends) without changing a message."""
 CONTROL_OPERATIONS: Final[tuple[str, ...]] = ("connect", "close", "wait", "await-replies")
 CHOICE_OPERATIONS: Final[tuple[str, ...]] = ("arm-guard", "change-load")
+CHOICE_REQUESTS: Final[dict[str, int]] = {"arm-guard": 1, "change-load": 4}
+"""How many request timeouts the deadline allows each choice operation (docs/client-harness.md section
+4.4: the timeout applies to each request an operation sends; change-load may send set frame vector, set
+weight, and clear guard requests first)."""
 """Operations that leave a choice to the client (which guard number; what to send when the load
 changes), judged from what it sends (revision 2, optional)."""
 REQUEST_OPERATIONS: Final[tuple[str, ...]] = tuple(op.name for op in SPEC.requests.values())
@@ -92,7 +99,8 @@ class Op:
         """The longest this op may take: its wait, or its reply timeout."""
         if self.op == "wait":
             return self.seconds or 0.0
-        return self.timeout if self.timeout is not None else default_timeout
+        timeout = self.timeout if self.timeout is not None else default_timeout
+        return timeout * CHOICE_REQUESTS.get(self.op, 1)
 
 
 @dataclass(frozen=True)

@@ -169,11 +169,20 @@ class ClientContext(CaseContext):
         mangle: Mangle | None = None,
         initial: bool = True,
         timeout: float | None = None,
+        offer: int | None = None,
     ) -> Play:
-        """Play one scenario: the judging server runs ``script``, the harness ``operations``."""
+        """Play one scenario: the judging server runs ``script``, the harness ``operations``; ``offer``
+        is the window offered from the start when it is not the NCP's (``ncp.window``)."""
         session = self.session
         listener = await serve_scenario(
-            session.link, script, rng=self.random, ncp=ncp, refuse=refuse, mangle=mangle, initial=initial
+            session.link,
+            script,
+            rng=self.random,
+            ncp=ncp,
+            refuse=refuse,
+            mangle=mangle,
+            initial=initial,
+            offer=offer,
         )
         try:
             instruction = Instruction(
@@ -202,7 +211,7 @@ class ClientContext(CaseContext):
             listener.sides,
             run.stderr,
             [listener.wire.since_start(t) for t in run.times],
-            (ncp or NcpConfig()).window,
+            (ncp or NcpConfig()).window if offer is None else offer,
         )
         self.plays.append(play)
         self.transcript += [wire_packet(r) for r in play.wire if r.packet.opcode >= 0o200]
@@ -439,6 +448,10 @@ async def run_client_case(config: ClientRunConfig, session: ClientRun, item: Cas
         result.reason = f"{type(exc).__name__}: {exc}"
         result.traceback = traceback.format_exc()
     result.duration = time.monotonic() - start
+    if ctx.plays:
+        result.harness_deadline = round(
+            sum(p.instruction.deadline(session.slack) for p in ctx.plays) * session.deadline_scale, 3
+        )
     result.notes = list(ctx.notes)
     result.packets = list(ctx.transcript)
     _judge(config, result, ctx, failure)

@@ -192,12 +192,12 @@ class ServerSide:
         self.requests.append(packet)
         return packet
 
-    async def arrived(self, timeout: float = 10.0) -> bool:
-        """Wait until a packet is there to take, without taking (so without acknowledging) it; False
-        when the connection ends or nothing comes in time."""
+    async def arrived(self, timeout: float = 10.0, count: int = 1) -> bool:
+        """Wait until ``count`` packets are there to take, without taking (so without acknowledging)
+        them; False when the connection ends or they do not all come in time."""
         conn = self.conn
-        arrived = await self._until(lambda: conn.pending > 0 or conn.ended, timeout)
-        return arrived and conn.pending > 0
+        arrived = await self._until(lambda: conn.pending >= count or conn.ended, timeout)
+        return arrived and conn.pending >= count
 
     async def send(self, opcode: int, data: bytes) -> int:
         return await self.conn.send(data, opcode)
@@ -380,9 +380,13 @@ async def serve_scenario(
     refuse: str | None = None,
     mangle: Mangle | None = None,
     initial: bool = True,
+    offer: int | None = None,
 ) -> Listener:
-    """Listen on a fresh loopback port for one case; the first connection runs ``script``."""
+    """Listen on a fresh loopback port for one case; the first connection runs ``script``.  ``offer``:
+    the window the server's OPN and STS packets offer from the start, when it differs from the receive
+    window of its NCP (``ncp.window``, what it really accepts)."""
     wire = Wire(mangle)
+    wire.window = offer
     done = asyncio.Event()
     errors: list[BaseException] = []
     sides: list[ServerSide] = []

@@ -156,32 +156,48 @@ def ack_findings(records: Sequence[WireRecord], *, settle: float = 0.0) -> list[
 
 
 def window_findings(records: Sequence[WireRecord], window: int) -> list[Violation]:
-    """The client never had more data packets unacknowledged than the window the server offered at the
-    time: ``window`` until the server's OPN or an STS says otherwise, then what the latest of them says
-    (a window shrunk mid-case binds the packets sent after it)."""
+    """The client never had more controlled packets unacknowledged than the window in force when it sent
+    one: ``window`` until the server's OPN or an STS says otherwise, then what the latest of them says
+    (read from every STS, whether or not it acknowledges anything new; a window shrunk mid-case binds
+    the packets sent after it).  What the client may count as acknowledged is what the judging server
+    had sent by then (the ack field of its OPN, STS, data and EOF packets).  Data packets and EOF count,
+    as the Chaosnet NCP counts controlled packets; a retransmission (a number seen before) is judged
+    when first sent."""
     acked: int | None = None
     offered = window
+    seen: set[int] = set()
     for r in records:
         p = r.packet
         if r.dir == "s2c":
-            carries_ack = p.opcode in (ChaosOp.OPN, ChaosOp.STS) or p.opcode >= ChaosOp.DAT
-            if carries_ack and (acked is None or seq_gt(p.ack_no, acked)):
+            if _carries_ack(p) and (acked is None or seq_gt(p.ack_no, acked)):
                 acked = p.ack_no
             status = unpack_status(p.data) if p.opcode in (ChaosOp.OPN, ChaosOp.STS) else None
             if status is not None:
                 offered = status[1]
             continue
-        if p.opcode < ChaosOp.DAT or acked is None:
+        if not _counted(p) or acked is None or p.packet_no in seen:
             continue
+        seen.add(p.packet_no)
         outstanding = (p.packet_no - acked) & 0xFFFF
         if 0 < outstanding <= 0x8000 and outstanding > offered:
+            what = "EOF" if p.opcode == ChaosOp.EOF else "packet"
             return [
                 Violation.at(
                     wire_packet(r),
                     "ncp.window",
-                    f"packet {p.packet_no} sent with {outstanding} unacknowledged; "
+                    f"{what} {p.packet_no} sent with {outstanding} unacknowledged; "
                     f"the server's window is {offered}",
                     expected=f"at most {offered} packets beyond the last acknowledged ({acked})",
                 )
             ]
     return []
+
+
+def _carries_ack(packet: Packet) -> bool:
+    """A server packet whose ack field the client may read: OPN, STS, data and EOF."""
+    return packet.opcode in (ChaosOp.OPN, ChaosOp.STS, ChaosOp.EOF) or packet.opcode >= ChaosOp.DAT
+
+
+def _counted(packet: Packet) -> bool:
+    """A client packet the window counts: data and EOF (RFC goes out before any window is known)."""
+    return packet.opcode >= ChaosOp.DAT or packet.opcode == ChaosOp.EOF

@@ -455,18 +455,18 @@ _GUARD_HIT_BIT: Final = 1 << 0
 
 def check_client_guards(packets: Sequence[WirePacket]) -> list[Violation]:
     """Judge how a client uses the wrist's guards and gravity model (B.8, B.9), over a whole connection:
-    a new guard gets a number not armed (armed by set-guard; free again once cleared or reported
-    tripped; reuse is judged only while guard hits are reported, as the client cannot know otherwise);
-    neither set weight nor set frame vector while a guard is armed; after set frame vector, set weight
-    before the next request that uses the gravity-corrected force."""
+    a new guard gets a number not armed (armed from the moment its set guard is sent; free again once
+    clear guard is sent, a guard-hit asynchronous response reports it tripped, or the server answers
+    its set guard with an error; reuse is judged only while guard hits are reported, as the client
+    cannot know otherwise); neither set weight nor set frame vector while a guard is armed; after set
+    frame vector, set weight before the next request that uses the gravity-corrected force."""
     found: list[Violation] = []
     armed: dict[int, WirePacket] = {}
     mask = 0
     frame_changed: WirePacket | None = None
     for p in packets:
         if p.direction == "s2c":
-            if p.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(p.data, 2) == AsyncCondition.GUARD_HIT:
-                armed.pop(word(p.data, 6) or 0, None)
+            _server_frees(p, armed)
             continue
         if p.opcode == _NOTIFICATIONS:
             mask = word(p.data, 0) or 0
@@ -512,6 +512,18 @@ def check_client_guards(packets: Sequence[WirePacket]) -> list[Violation]:
                 )
             armed[index] = p
     return found
+
+
+def _server_frees(packet: WirePacket, armed: dict[int, WirePacket]) -> None:
+    """The guards a server packet frees: the one a guard hit reports tripped, or the one whose set guard
+    an error (0201, 0202) answers."""
+    if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(packet.data, 2) == AsyncCondition.GUARD_HIT:
+        armed.pop((word(packet.data, 6) or 0) & 0xF, None)
+    elif packet.opcode in (ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):
+        number = word(packet.data, 0)
+        for index, request in list(armed.items()):
+            if request.packet_no == number:
+                del armed[index]
 
 
 def _layout_size(layout: Layout) -> str:

@@ -453,7 +453,13 @@ def _case_detail(report: Report, case: Mapping[str, Any], order: WireOrder) -> s
     parts.append(f"<h4>Clauses it checks</h4>{_clause_list(report, case['clauses'])}")
     meta = (
         f"{_e(case['level'])} \u00b7 {_e(case['kind'])} \u00b7 {_e(case['hazard'])} \u00b7 "
-        f"{float(case['duration']):.3f} s of {float(case['deadline']):g} s \u00b7 seed {_e(case['seed'])}"
+        f"{float(case['duration']):.3f} s of its {float(case['deadline']):g} s time budget"
+        + (
+            f" (the contract's deadline for the harness: {float(case['harness_deadline']):g} s)"
+            if "harness_deadline" in case
+            else ""
+        )
+        + f" \u00b7 seed {_e(case['seed'])}"
     )
     return (
         f'<details class="case o-{_e(outcome)}" id="{_anchor(str(case["id"]))}"{is_open}>'

@@ -209,6 +209,7 @@ def _case_json(result: CaseResult) -> dict[str, Any]:
         "notes": list(result.notes),
         "duration": round(result.duration, 6),
         "deadline": result.deadline,
+        **({} if result.harness_deadline is None else {"harness_deadline": result.harness_deadline}),
         "seed": result.seed,
         "reproduce": result.reproduce,
         "packets": packets,

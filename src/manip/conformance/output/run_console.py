@@ -97,6 +97,4 @@ def summary(console: Console, report: RunReport, quiet: bool = False) -> None:
             console.print(f"--world: {escape(WITHOUT_WORLD)}")
     slow = [r for r in report.results if r.deadline and r.duration > 0.8 * r.deadline]
     for r in slow:
-        console.print(
-            f"[yellow]slow[/]: {escape(r.id)} took {r.duration:.2f} s of its {r.deadline:g} s deadline"
-        )
+        console.print(f"[yellow]slow[/]: {escape(r.id)} {escape(r.timing())}")

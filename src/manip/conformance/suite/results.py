@@ -105,10 +105,21 @@ class CaseResult:
     reproduce: str = ""
     target: Target = "server"
     """What the case tests (the first component of a case id: server, cougar, client, puma)."""
+    harness_deadline: float | None = None
+    """Client cases: the contract's deadline for the harness (docs/client-harness.md section 5, the sum
+    over the case's plays), apart from :attr:`deadline`, the case's own time budget; None elsewhere."""
 
     @property
     def failure(self) -> Violation | None:
         return self.violations[0] if self.violations else None
+
+    def timing(self) -> str:
+        """How long the case took against its time budget, and, for a client case, the contract's
+        deadline for the harness told apart from it."""
+        text = f"took {self.duration:.2f} s of its {self.deadline:g} s time budget"
+        if self.harness_deadline is not None:
+            text += f"; the contract's deadline for the harness was {self.harness_deadline:g} s"
+        return text
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ from manip.conformance.client.contract import Op, Result
 from manip.conformance.client.runner import ClientContext, Play
 from manip.conformance.judge.diagnosis import number_diagnosis
 from manip.spec import SPEC
+from manip.spec.constants import ServerOp
 from manip.spec.model import FieldType, Layout, RequestOpcode
 
 __all__ = [
@@ -188,6 +189,24 @@ def expect_reply(
     return answer
 
 
+ORIGIN_OPCODES: Final = {
+    "fatal-error": ServerOp.FATAL_ERROR,
+    "non-fatal-error": ServerOp.NON_FATAL_ERROR,
+    "asynchronous-error": ServerOp.ASYNCHRONOUS_ERROR,
+    "asynchronous-warning": ServerOp.ASYNCHRONOUS_WARNING,
+}
+"""The server opcode of each ``origin`` of an error result the server caused."""
+
+
+def sent_numbers(play: Play, opcode: int, text: bytes) -> set[int]:
+    """The request numbers (first data word) of the server's packets of ``opcode`` carrying ``text``."""
+    return {
+        int.from_bytes(r.packet.data[:2], "little")
+        for r in play.wire
+        if r.dir == "s2c" and r.packet.opcode == opcode and text in r.packet.data[2:]
+    }
+
+
 def expect_error_parts(
     ctx: ClientContext,
     result: Result | None,
@@ -195,8 +214,12 @@ def expect_error_parts(
     origin: str,
     *,
     clause: str,
+    play: Play,
+    ops: tuple[int | None, ...],
 ) -> None:
-    """An ``error`` result with ``origin`` and the error string's parts, rendered as the contract says."""
+    """An ``error`` result with ``origin`` and the error string's parts, rendered as the contract says;
+    its ``op`` one of ``ops`` and its ``request_number`` the first data word of the error packet the
+    judging server sent (docs/client-harness.md section 5)."""
     ctx.expect(
         result is not None and result.type == "error" and result.get("origin") == origin,
         clause=clause,
@@ -204,6 +227,20 @@ def expect_error_parts(
         actual=str(result),
     )
     assert result is not None
+    ctx.expect(
+        result.op in ops,
+        clause=clause,
+        expected=f"op {' or '.join('null' if o is None else str(o) for o in ops)}",
+        actual=f"op {result.op!r} in {result}",
+    )
+    numbers = sent_numbers(play, ORIGIN_OPCODES[origin], error.message.encode("latin-1"))
+    ctx.expect(
+        result.get("request_number") in numbers,
+        clause=clause,
+        expected=f"request_number {' or '.join(str(n) for n in sorted(numbers))}: the first data word "
+        "of the error packet",
+        actual=f"request_number {result.get('request_number')!r} in {result}",
+    )
     for key, value in error_parts(error).items():
         cause = _arguments_cause(result.get(key), list(error.args)) if key == "arguments" else None
         ctx.expect(

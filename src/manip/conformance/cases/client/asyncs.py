@@ -3,11 +3,13 @@ segments queued earlier, delivered apart from the replies."""
 
 from __future__ import annotations
 
+from manip.codecs.messages import encode_async
 from manip.conformance.cases.client._support import close, connect, request, wait
 from manip.conformance.client.runner import ClientContext, Play, client_context
 from manip.conformance.client.server import ServerSide
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
+from manip.spec.constants import ServerOp
 
 NOTIFY_ALL = {"mask": 3}
 
@@ -32,6 +34,20 @@ def expect_async(ctx: ClientContext, play: Play, code: int, word2: int, word3: i
         found[0].get("handler") == handler,
         clause="client.async-routing",
         expected=f"handled as {handler}",
+        actual=str(found[0]),
+    )
+    numbers = {
+        int.from_bytes(r.packet.data[:2], "little")
+        for r in play.wire
+        if r.dir == "s2c"
+        and r.packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE
+        and r.packet.data[2:8] == encode_async(0, code, word2, word3)[2:8]
+    }
+    ctx.expect(
+        found[0].op is None and found[0].get("request_number") in numbers,
+        clause="client.async-routing",
+        expected=f"op null and request_number {' or '.join(str(n) for n in sorted(numbers))} (the async "
+        "packet's first word): an asynchronous response belongs to no op",
         actual=str(found[0]),
     )
 

@@ -53,7 +53,15 @@ def _arg_case(row: tuple[str, bool, bool, str]) -> None:
         ctx = client_context(base)
         error = _message(ctx, even=even)
         play = await _one_error(ctx, error, align=align)
-        expect_error_parts(ctx, play.answer(1), error, "non-fatal-error", clause="error-string.substitution")
+        expect_error_parts(
+            ctx,
+            play.answer(1),
+            error,
+            "non-fatal-error",
+            clause="error-string.substitution",
+            play=play,
+            ops=(1,),
+        )
         later = play.answer(2)
         ctx.expect(
             later is not None and later.type == "reply",
@@ -75,7 +83,9 @@ async def args_unpadded(base: CaseContext) -> None:
     ctx = client_context(base)
     error = _message(ctx, even=True)
     play = await _one_error(ctx, error, align=False)
-    expect_error_parts(ctx, play.answer(1), error, "non-fatal-error", clause="client.error-args-layout")
+    expect_error_parts(
+        ctx, play.answer(1), error, "non-fatal-error", clause="client.error-args-layout", play=play, ops=(1,)
+    )
 
 
 @case("client.error.severities", clauses=["client.error-report"])
@@ -100,7 +110,15 @@ async def severities(base: CaseContext) -> None:
     ops = [connect(0), *(request(i + 1, "here") for i in range(3)), close(4)]
     play = await ctx.play(ops, script)
     for i, error in enumerate(errors):
-        expect_error_parts(ctx, play.answer(i + 1), error, "non-fatal-error", clause="client.error-report")
+        expect_error_parts(
+            ctx,
+            play.answer(i + 1),
+            error,
+            "non-fatal-error",
+            clause="client.error-report",
+            play=play,
+            ops=(i + 1,),
+        )
 
 
 ASYNC_ERRORS: Final = (
@@ -143,7 +161,7 @@ def _async_error_case(row: tuple[str, int, ErrorMessage, str]) -> None:
             expected=f"an error result of origin {origin}",
             actual=play.describe(),
         )
-        expect_error_parts(ctx, found[0], error, origin, clause="client.error-report")
+        expect_error_parts(ctx, found[0], error, origin, clause="client.error-report", play=play, ops=(None,))
         ctx.expect(
             found[0].op is None,
             clause="client.async-routing",
@@ -201,7 +219,15 @@ def _fatal_case(row: tuple[str, str]) -> None:
             expected="an error result of origin fatal-error",
             actual=play.describe(),
         )
-        expect_error_parts(ctx, fatal_results[0], error, "fatal-error", clause="client.error-report")
+        expect_error_parts(
+            ctx,
+            fatal_results[0],
+            error,
+            "fatal-error",
+            clause="client.error-report",
+            play=play,
+            ops=(1, None),
+        )
         ctx.expect(
             not after,
             clause="client.fatal-ends",

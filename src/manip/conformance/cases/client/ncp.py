@@ -228,7 +228,23 @@ async def interleaved(base: CaseContext) -> None:
         expect_reply(ctx, play, op_id, spec_request(name), payload, number, clause="client.reply-matching")
     if seen.refused:
         expect_error_parts(
-            ctx, play.answer(seen.refused), REFUSAL, "non-fatal-error", clause="client.error-report"
+            ctx,
+            play.answer(seen.refused),
+            REFUSAL,
+            "non-fatal-error",
+            clause="client.error-report",
+            play=play,
+            ops=(seen.refused,),
+        )
+    for warning in [r for r in play.of("error", any_op=True) if r.get("origin") == "asynchronous-warning"]:
+        expect_error_parts(
+            ctx,
+            warning,
+            WARNING,
+            "asynchronous-warning",
+            clause="client.async-routing",
+            play=play,
+            ops=(None,),
         )
     for code, word2, word3 in seen.asyncs:
         handler = "guard-hit" if code == 1 else "segment-completed"
@@ -298,11 +314,17 @@ async def window_opens_late(base: CaseContext) -> None:
     _expect_window(ctx, play, 2, sent, len(names))
 
 
-@case("client.ncp.window-shrinks", clauses=["ncp.window", "client.reply-matching"])
+@case(
+    "client.ncp.window-shrinks",
+    clauses=["ncp.window", "client.reply-matching"],
+    summary="an STS acknowledging nothing new shrinks the window to 1: 1 request unacknowledged at most",
+)
 async def window_shrinks(base: CaseContext) -> None:
     """The judging server offers a window of 4, holds its acknowledgements until the client has filled
-    it, then shrinks the window to 1 (an STS saying so) and takes the requests one by one: from then on
-    the client has at most one request unacknowledged."""
+    it, then shrinks the window to 1 (an STS that acknowledges nothing new) and takes the requests one
+    by one, holding its acknowledgements and replies before every other one: from the shrink on, the
+    client never has more than one request unacknowledged when it sends (a client that keeps the wider
+    window, or reads an STS's window only when it acknowledges something new, sends during a hold)."""
     ctx = client_context(base)
     names = ("here",) * 8
     hold = _hold_time(ctx)
@@ -311,9 +333,63 @@ async def window_shrinks(base: CaseContext) -> None:
         if i == 0:
             await side.hold(hold)
             side.offer_window(1)
+        elif i % 2 == 1:
+            await side.hold(hold)
 
-    play, sent = await _pipelined(ctx, names, NcpConfig(window=4), throttle=throttle, slack=2 * hold)
+    play, sent = await _pipelined(ctx, names, NcpConfig(window=4), throttle=throttle, slack=6 * hold)
     _expect_window(ctx, play, 4, sent, len(names))
+
+
+OPENED: Final = 4
+"""The window ``client.ncp.window-opens-by-status`` opens to."""
+
+
+@case(
+    "client.ncp.window-opens-by-status",
+    clauses=["ncp.window", "client.reply-matching"],
+    summary="an STS acknowledging nothing new opens the window from 1 to 4: the client sends into it",
+)
+async def window_opens_by_status(base: CaseContext) -> None:
+    """The judging server offers a window of 1 and takes nothing; once the client's first request is in,
+    it opens the window to 4 by an STS that acknowledges nothing new: the client sends three more
+    requests into it before anything is acknowledged (a client that reads an STS's window only when
+    it acknowledges something new waits for an acknowledgement that does not come), and all four are
+    answered."""
+    ctx = client_context(base)
+    names = ("here",) * OPENED
+    hold = _hold_time(ctx)
+    wait_for = max(1.0, ctx.timeout / 2)
+    values = [layout_values(ctx.random, response_layout(spec_request(n))) for n in names]
+    sent: Answered = []
+    filled: list[bool] = []
+
+    async def script(side: ServerSide) -> None:
+        if not await side.arrived():
+            return
+        await side.hold(hold)
+        side.offer_window(OPENED)
+        filled.append(await side.arrived(wait_for, count=OPENED))
+        for value in values:
+            if (req := await side.next_request()) is None:
+                return
+            await _answer(side, req, value, sent)
+        await side.serve_plainly()
+
+    timeout = ctx.timeout + hold + wait_for
+    ops: list[Op] = [connect(0)]
+    ops += [request(i + 1, n, pipeline=True, timeout=timeout) for i, n in enumerate(names)]
+    ops += [Op(len(names) + 1, "await-replies"), close(len(names) + 2)]
+    play = await ctx.play(ops, script, ncp=NcpConfig(window=OPENED), offer=1)
+    ctx.expect(
+        bool(filled) and filled[0],
+        clause="ncp.window",
+        expected=f"{OPENED} requests sent once an STS acknowledging nothing new opened the window to "
+        f"{OPENED} (every STS sets the window)",
+        actual=f"fewer than {OPENED} had arrived {wait_for:g} s after the STS"
+        if filled
+        else "no request came",
+    )
+    _expect_window(ctx, play, 1, sent, len(names))
 
 
 @case("client.chudp.duplicate-reorder", clauses=["ncp.retransmission", "client.multi-packet"])
