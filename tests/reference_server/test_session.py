@@ -335,6 +335,42 @@ def test_unknown_opcode() -> None:
     assert msg.request_number == client.packet_no and client.session.state is State.READY
 
 
+GUIDE_ONLY = ServerConfig(powered_at_open=True, extensions=False)
+EXTENSIONS = frozenset(op.opcode for op in SPEC.requests.values() if op.extension)
+
+
+@pytest.mark.parametrize("opcode", sorted(EXTENSIONS))
+def test_without_extensions_an_extension_opcode_is_refused_as_unknown(opcode: int) -> None:
+    size = SPEC.requests[opcode].request.fixed_size or 0
+    answers = []
+    for config in (GUIDE_ONLY, POWERED):
+        client = Client(config)
+        for code in (opcode, 0o230):  # an extension opcode, then one no spec assigns
+            out = client.raw(code, b"\0" * size)
+            answers.append([decode_server_packet(p.opcode, p.data) for p in out.packets])
+    refused, unknown, served, _ = answers
+    assert len(refused) == 1 and _error(refused[0]).text == "dispatch: C UOP Unknown opcode ~"
+    assert _error(refused[0]).args == (opcode,)
+    assert [type(m) for m in refused] == [type(m) for m in unknown]
+    assert not (len(served) == 1 and isinstance(served[0], ErrorReply) and served[0].error.code == "UOP")
+
+
+def test_without_extensions_describe_self_lists_the_guide_opcodes_only() -> None:
+    client = Client(GUIDE_ONLY)
+    replies = [_reply(m) for m in client.send("describe-self")]
+    alist = read_alist("".join(str(r.values["text"]) for r in replies[:-1]))
+    assert set(alist["operations"]) == SERVED - EXTENSIONS  # type: ignore[arg-type]
+    assert set(range(0o200, 0o222)) <= set(alist["operations"])  # type: ignore[arg-type]
+    assert not EXTENSIONS & set(alist["operations"])  # type: ignore[arg-type]
+
+
+def test_without_extensions_the_guide_requests_still_move_the_arm() -> None:
+    client = Client(GUIDE_ONLY)
+    assert _reply(client.one("set-joint-angles", joints=GOAL)).segment == 1
+    client.run(5.0)
+    assert _reply(client.one("joint-angles")).values["joints"] == pytest.approx(GOAL, abs=1e-3)
+
+
 @pytest.mark.parametrize(
     ("op", "data", "expected"),
     [

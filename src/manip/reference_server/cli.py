@@ -218,6 +218,13 @@ def command_line(ctx: click.Context) -> list[str]:
 )
 @click.option("--powered", is_flag=True, help="Arm power on at connection (default: off, as on the Puma).")
 @click.option(
+    "--no-extensions",
+    is_flag=True,
+    help="Behave as a server written from the 1985 guide alone: refuse manip's Puma extension opcodes "
+    "(0240 and up: the wrist, request notifications, reset abort) as unknown (C UOP) and leave them out "
+    "of describe self.",
+)
+@click.option(
     "--max-clients",
     type=click.IntRange(min=1),
     default=1,
@@ -322,6 +329,7 @@ def main(
     list_faults: bool,
     error_args: ErrorArgs,
     powered: bool,
+    no_extensions: bool,
     max_clients: int,
     cougar: str | None,
     record: str | None,
@@ -363,7 +371,13 @@ def main(
         if warning is not None:
             click.echo(warning, err=True)
     configure_logging(log_level)
-    config = ServerConfig(model=MODELS[model], powered_at_open=powered, faults=faults, error_args=error_args)
+    config = ServerConfig(
+        model=MODELS[model],
+        powered_at_open=powered,
+        faults=faults,
+        error_args=error_args,
+        extensions=not no_extensions,
+    )
     server = functools.partial(
         serve,
         address,

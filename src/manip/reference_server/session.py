@@ -174,6 +174,10 @@ class ServerConfig:
     """The layout of an error string's numbers (erratum error-arg-layout; both conform): ``aligned`` pads
     them to an even offset of the packet data, ``packed`` writes them straight after the NUL, as the
     1985 guide's NZI example does."""
+    extensions: bool = True
+    """Serve manip's Puma extension opcodes (0240 and up: the wrist, request notifications, reset abort).
+    Off, the server is one written from the 1985 guide alone: it serves Appendix E's opcodes only, refuses
+    every extension opcode exactly as an unknown one (C UOP), and describe self does not list them."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -262,8 +266,15 @@ class ServerSession:
     @property
     def operations(self) -> tuple[int, ...]:
         """The opcodes this session answers normally, as describe self lists them."""
-        served = {SPEC.request(name).opcode for name in HANDLERS}
-        return tuple(sorted(served | self.wrist.served))
+        served = {SPEC.request(name).opcode for name in HANDLERS} | self.wrist.served
+        return tuple(sorted(code for code in served if self._offered(SPEC.requests.get(code)) is not None))
+
+    def _offered(self, op: RequestOpcode | None) -> RequestOpcode | None:
+        """``op`` as this server knows it: None (an unknown opcode) for an extension opcode when the
+        extensions are off."""
+        if op is not None and op.extension and not self.config.extensions:
+            return None
+        return op
 
     # ---------------------------------------------------------------------------- the machine
     def _step(self, event: _Event) -> Output:
@@ -384,7 +395,7 @@ class ServerSession:
         self.last_received = self.last_processed = event.packet_no
         number = self._echo(event)
         self._next_state = None
-        op = SPEC.requests.get(event.opcode)
+        op = self._offered(SPEC.requests.get(event.opcode))
         try:
             result = self._execute(op, event)
         except RequestError as exc:
