@@ -60,7 +60,7 @@ def test_golden_capture_replays_cleanly(name: str) -> None:
         ("motion", "swapped-float-words", "joints["),
         ("describe-self", "no-describe-terminator", "terminator"),
         ("errors", "wrong-severity", "error.severity"),
-        ("motion", "async-without-request-number", "asynchronous packet 1"),
+        ("motion", "async-stray-byte", "asynchronous packet 1"),
     ],
 )
 def test_a_changed_server_is_caught_with_the_field(name: str, fault: str, path: str) -> None:

@@ -25,7 +25,8 @@ How a request is judged (:meth:`ProtocolModel.expect`), from its bytes alone:
 1. while ``free_wait``: only an empty done echoing its number (``free-joint.replies``);
 2. an opcode the spec does not define: a command error (C), never a normal reply;
 3. data that do not decode by the layout: wrong length or a reserved-operand float, a command error;
-4. values outside what the spec allows (speed factor, free-joint joint number, configuration bits): C;
+4. values outside what the spec allows (speed factor, free-joint joint number): C; configuration bits
+   besides bit 0: done (the 1985 guide's answer) or C (erratum ``set-configuration``);
 5. manip's extension opcodes (0240 and up) the server does not list under :operations may also be
    refused with a command error (an unserved opcode);
 6. motion requests go through the gate: aborted -> AWA only (erratum ``abort-before-power``: the abort
@@ -36,9 +37,10 @@ How a request is judged (:meth:`ProtocolModel.expect`), from its bytes alone:
    (:meth:`observe`);
 7. otherwise the normal reply of the opcode's shape.
 
-The model never allows a fatal error or a BE (bug) error; it allows SQF (queue full) only while
-segments are outstanding.  Segment numbers that do not increase by one are recorded in
-:attr:`ProtocolModel.segment_findings` rather than refused, because that clause is a SHOULD.
+The model never allows a fatal error or a BE (bug) error.  While segments are outstanding it allows a
+non-fatal error of any code to a motion request or free joint (queue full, joint busy: the 1985 guide
+names no code for either; manip's server says SQF).  Segment numbers that do not increase by one are
+recorded in :attr:`ProtocolModel.segment_findings` rather than refused, because that clause is a SHOULD.
 """
 
 from __future__ import annotations
@@ -123,6 +125,9 @@ class Expectation:
     """A command error (severity C, any code) is allowed."""
     discard: bool = False
     """Only an empty done is allowed: the packet after free joint."""
+    any_code: bool = False
+    """A non-fatal error with any code is allowed: the condition is one the 1985 guide names no code for
+    (E.2: "others may be used by specific manipulators")."""
     clause: str = "request.one-reply"
     """The clause a reply outside the allowed ones breaks."""
     why: str = ""
@@ -135,6 +140,8 @@ class Expectation:
         if self.command:
             parts.append("a command error (severity C)")
         parts += [f"a non-fatal error {code}" for code in sorted(self.codes)]
+        if self.any_code:
+            parts.append("a non-fatal error with any code")
         text = " or ".join(parts) if parts else "nothing"
         return f"{text} ({self.why})" if self.why else text
 
@@ -234,9 +241,9 @@ class ProtocolModel:
             return Expectation(True, clause="response.done-empty")
         if name == "set-configuration":
             low = _int(values["configuration"]) & 0xFF  # erratum set-configuration: the low byte
-            if low & 0xFE:
+            if low & 0xFE:  # the 1985 guide answers done; refusing bits it does not define is allowed too
                 return Expectation(
-                    False, command=True, clause="set-configuration.data", why="bits besides bit 0"
+                    True, command=True, clause="set-configuration.data", why="bits besides bit 0"
                 )
             return Expectation(True, clause="set-configuration.data")
         if name == "free-joint":
@@ -279,7 +286,12 @@ class ProtocolModel:
             codes.add("NAP")
             why.append("arm power unknown")
         if self.outstanding:
-            codes.add("SQF")
+            # queue full, or no freeing a joint while the arm moves: the 1985 guide names no code for
+            # either, so any non-fatal error may say it (E.2: "others may be used"); manip's is SQF
+            why.append("segments may be running")
+            return Expectation(
+                normal, codes=frozenset(codes), any_code=True, clause=clause, why="; ".join(why)
+            )
         return Expectation(normal, codes=frozenset(codes), clause=clause, why="; ".join(why))
 
     def _expect_motion(self, op: RequestOpcode, values: Mapping[str, Value]) -> Expectation:
@@ -344,7 +356,11 @@ class ProtocolModel:
                 expectation.describe(),
                 _show(reply),
             )
-        if err.code in expectation.codes or (expectation.command and err.severity == "C"):
+        if (
+            err.code in expectation.codes
+            or expectation.any_code
+            or (expectation.command and err.severity == "C")
+        ):
             return None
         return finding(expectation.clause, expectation.describe(), _show(reply))
 
@@ -427,15 +443,20 @@ class ProtocolModel:
         index = self._order.get(number & WORD)
         return index is not None and index >= self._answered
 
-    def on_async_response(self, number: int, condition: int, word2: int, word3: int) -> Violation | None:
-        """An asynchronous response (0203) arrived carrying request number ``number``."""
-        if not self.last_processed_ok(number):
+    def on_async_response(
+        self, number: int | None, condition: int, word2: int, word3: int
+    ) -> Violation | None:
+        """An asynchronous response (0203) arrived carrying request number ``number`` (None: the 1985
+        guide's layout, which carries none; the mask in force now is the one that counts)."""
+        if number is not None and not self.last_processed_ok(number):
             return finding(
                 "async.layout",
                 "the number of the last request processed (one sent and not older than the last answered)",
                 f"request number {number}",
             )
-        mask = self._mask_after.get(number & WORD, self.notifications)
+        mask = (
+            self.notifications if number is None else self._mask_after.get(number & WORD, self.notifications)
+        )
         if condition == AsyncCondition.SEGMENT_COMPLETED:
             if not mask & _SEGMENT_BIT:
                 return finding(
@@ -496,10 +517,11 @@ def _combine(gate: Expectation, data: Expectation) -> Expectation:
         clause = data.clause if not data.normal else gate.clause if not gate.normal else data.clause
     else:
         clause = gate.clause
+    any_code = gate.any_code or data.any_code
     if not gate.normal and gate.codes == frozenset({"AWA"}):
         codes, clause = frozenset({"AWA"}), "motion.abort"  # the abort is reported first
     why = "; ".join(w for w in (gate.why, data.why) if w)
-    return Expectation(normal, codes, gate.command or data.command, clause=clause, why=why)
+    return Expectation(normal, codes, gate.command or data.command, any_code=any_code, clause=clause, why=why)
 
 
 def _int(value: Value) -> int:

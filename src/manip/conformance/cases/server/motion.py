@@ -23,7 +23,7 @@ from manip.conformance.cases._support import (
     read_floats,
     require_response,
 )
-from manip.conformance.judge.checks import check_async_packet, word
+from manip.conformance.judge.checks import async_of, check_async_packet, completed_segment, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.spec import RequestName
@@ -412,7 +412,7 @@ async def _segment_time(ctx: CaseContext, probe: Probe, factor: float, by: float
         packet = await probe.next_packet(5.0)
         if packet is None:  # server.async.segment-completed judges the missing report
             ctx.skip(f"the case times moves by their segment-completed reports; none came for {segment}")
-        if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(packet.data, 6) == segment:
+        if completed_segment(packet) == segment:
             return ctx.clock() - start
 
 
@@ -447,14 +447,15 @@ async def segment_completed(ctx: CaseContext) -> None:
         if packet.opcode != ServerOp.ASYNCHRONOUS_RESPONSE:
             continue
         ctx.check(check_async_packet(packet, 1 << 1))
+        message = async_of(packet)
         ctx.expect(
-            word(packet.data, 2) == AsyncCondition.SEGMENT_COMPLETED,
+            message is not None and message.condition == AsyncCondition.SEGMENT_COMPLETED,
             clause="async.layout",
             expected="condition 2 (segment completed)",
-            actual=f"condition {word(packet.data, 2)}",
+            actual=f"condition {message.condition if message else None}",
             data=packet.data,
         )
-        seen.append(word(packet.data, 6))
+        seen.append(message.word3 if message else None)
         if seen[-1] == segment:
             return
     ctx.fail(
@@ -576,7 +577,7 @@ async def _timed_move(ctx: CaseContext, probe: Probe, by: float) -> float:
     start = ctx.clock()
     segment = await _small_move(ctx, probe, by)
     while (packet := await probe.next_packet(5.0)) is not None:
-        if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(packet.data, 6) == segment:
+        if completed_segment(packet) == segment:
             return ctx.clock() - start
     ctx.skip(f"the case times moves by their segment-completed reports; none came for {segment}")
 
