@@ -103,12 +103,6 @@ def test_clean_reference_server_passes_every_case() -> None:
         ("no-nap", ["server.motion.nap"], "server.motion.nap", "motion.no-power"),
         ("awa-ignored", ["server.motion.awa-reset-abort"], "server.motion.awa-reset-abort", "motion.abort"),
         (
-            "awa-refuses-all",
-            ["server.motion.awa-reset-abort"],
-            "server.motion.awa-reset-abort",
-            "motion.abort",
-        ),
-        (
             "no-initial-response",
             ["server.connect.initial-response"],
             "server.connect.initial-response",
@@ -129,6 +123,15 @@ def test_fault_is_caught_by_its_case(fault: str, select: list[str], case_id: str
     if clause is not None:
         assert result.failure is not None and result.failure.clause == clause, result.failure
     assert report.exit_code == ExitCode.NON_CONFORMANT
+
+
+def test_refusing_everything_after_an_abort_warns_only() -> None:
+    # E.2: "no further commands will be processed until a reset operation is requested" (erratum awa-scope)
+    report = _run(["awa-refuses-all"], ["server.motion.awa-reset-abort"])
+    (result,) = report.results
+    assert result.outcome == "warn", (result.outcome, result.reason, result.violations)
+    assert {v.clause for v in result.violations} == {"motion.abort-serves-others"}
+    assert report.exit_code == 0
 
 
 def test_fatal_without_close_is_caught_with_a_calibration_failure() -> None:

@@ -320,8 +320,8 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 Fault.AWA_REFUSES_ALL,
                 "protocol",
                 "After an abort every request but enable power and reset abort is refused with AWA, not only "
-                "motion (the E.2 table's reading; erratum awa-scope).",
-                "motion.abort",
+                "motion (the E.2 table's reading, which conforms but warns; erratum awa-scope).",
+                "motion.abort-serves-others",
             ),
             _info(
                 Fault.SPEED_UNCHECKED,

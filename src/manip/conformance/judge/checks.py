@@ -268,11 +268,14 @@ def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Violat
         add("error-string.code", f"error code {error.code!r} is not three letters", "three letters", shown)
     if error.has_nul:
         wanted = sum(error.message.count(ch) for ch in SPECIALS)
-        if wanted != len(error.args):
+        # one or more numbers per special character (E.2; erratum error-substitution), none without one
+        if len(error.args) < wanted or (error.args and not wanted):
             add(
                 "error-string.substitution",
                 f"{len(error.args)} number(s) after the NUL for {wanted} ~/$ in the message",
-                f"{wanted} number(s), one per ~ or $",
+                f"{wanted} number(s) or more, at least one per ~ or $"
+                if wanted
+                else "no number without a ~ or $",
                 f"{len(error.args)} number(s): {list(error.args)}",
             )
     return out

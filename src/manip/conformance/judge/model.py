@@ -110,6 +110,8 @@ LIMIT_SLACK: Final = 1e-3
 MOTION_NAMES: Final = frozenset(op.name for op in SPEC.requests.values() if op.response.form == "segment")
 _SEGMENT_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
 _GUARD_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.GUARD_HIT].notification_bit
+_RESETS: Final = frozenset({"enable-power", "reset-abort"})
+"""The requests that reset an abort (erratum abort-reset): never refused for it."""
 _DEFINED_MASK: Final = sum(1 << code.notification_bit for code in SPEC.async_codes.values())
 
 
@@ -127,7 +129,9 @@ class Expectation:
     """Only an empty done is allowed: the packet after free joint."""
     any_code: bool = False
     """A non-fatal error with any code is allowed: the condition is one the 1985 guide names no code for
-    (E.2: "others may be used by specific manipulators")."""
+    (E.2: "others may be used by specific manipulators"; erratum ``unnamed-error-codes``)."""
+    excluded: frozenset[str] = frozenset()
+    """Codes ``any_code`` still does not allow (JOR for a transform: erratum ``transform-refusals``)."""
     clause: str = "request.one-reply"
     """The clause a reply outside the allowed ones breaks."""
     why: str = ""
@@ -141,7 +145,8 @@ class Expectation:
             parts.append("a command error (severity C)")
         parts += [f"a non-fatal error {code}" for code in sorted(self.codes)]
         if self.any_code:
-            parts.append("a non-fatal error with any code")
+            but = f" but {', '.join(sorted(self.excluded))}" if self.excluded else ""
+            parts.append(f"a non-fatal error with any code{but}")
         text = " or ".join(parts) if parts else "nothing"
         return f"{text} ({self.why})" if self.why else text
 
@@ -216,6 +221,10 @@ class ProtocolModel:
         except CodecError as exc:
             return Expectation(False, command=True, clause="request.data-length", why=exc.message)
         expectation = self._expect_valid(op, values)
+        if self.aborted is not False and op.name not in MOTION_NAMES and op.name not in _RESETS:
+            # E.2: "no further commands will be processed until a reset": the others may get AWA too
+            # (erratum awa-scope; server.motion.awa-reset-abort warns of it under a SHOULD clause)
+            expectation = replace(expectation, codes=expectation.codes | {"AWA"})
         if op.extension and (self.served is None or opcode not in self.served):
             # manip's Puma extensions are optional: a server that does not list one may refuse it (C),
             # whatever the arm's state (an opcode it does not serve is not refused for power or abort)
@@ -329,7 +338,16 @@ class ProtocolModel:
         command = deviation > ROTATION_OK
         if vouch and tuple(floats) in self.reachable:
             return Expectation(True, command=command, clause=clause, why="the server's own transform")
-        return Expectation(True, codes=frozenset({"TOR"}), command=command, clause=clause)
+        # TOR, or for a transform no joint angles reach any code but JOR (erratum unnamed-error-codes)
+        return Expectation(
+            True,
+            codes=frozenset({"TOR"}),
+            any_code=True,
+            excluded=frozenset({"JOR"}),
+            command=command,
+            clause=clause,
+            why="perhaps out of reach",
+        )
 
     def _inside(self, joint: int, q: float, slack: float) -> bool:
         """``q`` is within joint ``joint``'s range shrunk by ``slack`` (grown when negative)."""
@@ -356,11 +374,9 @@ class ProtocolModel:
                 expectation.describe(),
                 _show(reply),
             )
-        if (
-            err.code in expectation.codes
-            or expectation.any_code
-            or (expectation.command and err.severity == "C")
-        ):
+        if err.code in expectation.codes or (expectation.command and err.severity == "C"):
+            return None
+        if expectation.any_code and err.code not in expectation.excluded:
             return None
         return finding(expectation.clause, expectation.describe(), _show(reply))
 
@@ -518,10 +534,20 @@ def _combine(gate: Expectation, data: Expectation) -> Expectation:
     else:
         clause = gate.clause
     any_code = gate.any_code or data.any_code
+    excluded = (gate.excluded | data.excluded) if any_code else frozenset()
     if not gate.normal and gate.codes == frozenset({"AWA"}):
         codes, clause = frozenset({"AWA"}), "motion.abort"  # the abort is reported first
+        any_code, excluded = False, frozenset()
     why = "; ".join(w for w in (gate.why, data.why) if w)
-    return Expectation(normal, codes, gate.command or data.command, any_code=any_code, clause=clause, why=why)
+    return Expectation(
+        normal,
+        codes,
+        gate.command or data.command,
+        any_code=any_code,
+        excluded=excluded,
+        clause=clause,
+        why=why,
+    )
 
 
 def _int(value: Value) -> int:
