@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import functools
 import re
 
 import pytest
@@ -10,8 +11,10 @@ from click.testing import CliRunner
 
 from manip.codecs.messages import Reply, decode_server_packet
 from manip.links import NcpConfig, open_connection
+from manip.reference_server import cli
 from manip.reference_server.cli import main
 from manip.reference_server.faults import FAULTS, Fault
+from manip.reference_server.session import ServerConfig
 from manip.spec.constants import RequestOp
 from tests.support.servers import StartServer
 
@@ -57,6 +60,48 @@ def test_help_documents_the_default_port() -> None:
     result = CliRunner().invoke(main, ["--help"])
     assert result.exit_code == 0
     assert "42085" in result.output
+
+
+@pytest.mark.parametrize(("args", "extensions"), [([], True), (["--no-extensions"], False)])
+def test_no_extensions_configures_a_guide_only_server(
+    monkeypatch: pytest.MonkeyPatch, args: list[str], extensions: bool
+) -> None:
+    configs: list[ServerConfig] = []
+
+    async def run(server: functools.partial[object], *rest: object, **options: object) -> None:
+        configs.append(server.args[1])
+
+    monkeypatch.setattr(cli, "_run", run)
+    result = CliRunner().invoke(main, ["--listen", "tcp://127.0.0.1:0", *args])
+    assert result.exit_code == 0, result.output
+    assert [config.extensions for config in configs] == [extensions]
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        ([], ServerConfig()),
+        (["--profile", "guide"], ServerConfig.guide_profile()),
+        (["--profile", "guide", "--length-unit", "mm"], ServerConfig.guide_profile(length_unit="mm")),
+        (
+            ["--async-layout", "guide", "--length-unit", "cm", "--configuration-bits", "done"],
+            ServerConfig(async_layout="guide", length_unit="cm", configuration_bits="done"),
+        ),
+        (["--profile", "guide", "--error-args", "packed"], ServerConfig.guide_profile(error_args="packed")),
+    ],
+)
+def test_profile_and_single_choices(
+    monkeypatch: pytest.MonkeyPatch, args: list[str], expected: ServerConfig
+) -> None:
+    configs: list[ServerConfig] = []
+
+    async def run(server: functools.partial[object], *rest: object, **options: object) -> None:
+        configs.append(server.args[1])
+
+    monkeypatch.setattr(cli, "_run", run)
+    result = CliRunner().invoke(main, ["--listen", "tcp://127.0.0.1:0", *args])
+    assert result.exit_code == 0, result.output
+    assert configs == [expected]
 
 
 def _tuple(value: object) -> tuple[object, ...]:
