@@ -32,6 +32,18 @@ FAULTS: Final[Mapping[str, str]] = {
     "npr-ignores-k": "the compliance equation leaves out the spring term K (CougarSim._newpr)",
     "filter-con-swapped": "FILTER weighs the filtered value with con4 and the sample with con3 "
     "(CougarSim._newpr)",
+    "gravity-fixed-orientation": "GRAVITY takes the hand to be at READY whatever angles SEN or NPR sent "
+    "(CougarSim._gravity)",
+    "gravity-ignores-cg": "GRAVITY corrects the force of the weight but not its torque about the centre "
+    "of gravity (CougarSim._gravity)",
+    "nfv-keeps-gravity": "NFV rewrites the conversion matrix but leaves the gravity model about the old "
+    "compliance centre (CougarSim._newfv)",
+    "nb-transposed": "NPR reads NB's 36 elements column after column instead of row after row "
+    "(CougarSim._newpr)",
+    "jacobian-transpose-not-stored": "JACOB stores J again where its transpose belongs, after J "
+    "(Jacob._encode)",
+    "filter-truncates-terms": "ADC8 shifts each term of the sum right by 3 before adding, so a constant "
+    "input settles up to 7 counts low (CougarSim._adc8)",
 }
 
 

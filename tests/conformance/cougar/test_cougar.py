@@ -39,6 +39,12 @@ CATCHERS = {
     "rst-ignored": "cougar.rst.zeroes-velocities",
     "npr-ignores-k": "cougar.npr.gains",
     "filter-con-swapped": "cougar.filter.output",
+    "gravity-fixed-orientation": "cougar.gravity.point-mass",
+    "gravity-ignores-cg": "cougar.gravity.point-mass",
+    "nfv-keeps-gravity": "cougar.gravity.nfv-redoes-model",
+    "nb-transposed": "cougar.npr.damping-matrix",
+    "jacobian-transpose-not-stored": "cougar.jacob.transpose-stored",
+    "filter-truncates-terms": "cougar.adc8.integer-filter",
 }
 OPTIONS = RunOptions(reply_timeout=1.0, connect_timeout=2.0)
 

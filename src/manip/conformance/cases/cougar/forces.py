@@ -8,7 +8,9 @@ from typing import Any, Final
 
 import numpy as np
 
+from manip.arm import READY
 from manip.conformance.cases.cougar._support import (
+    POSE_B,
     SETTLE_TICKS,
     clean,
     examine_region,
@@ -70,7 +72,7 @@ async def adc8_integer_filter(ctx: CaseContext) -> None:
 
     async with cougar_probe(ctx) as probe:
         await clean(probe)
-        await settle(probe)
+        await settle(probe, POSE_B)  # a load whose counts are not multiples of 8
         _, y0 = await sample()
         for i, reading in enumerate(y0):
             await probe.send("DPST", address=filtered.at(i), value=(reading - 100) & 0xFFFF)
@@ -94,6 +96,36 @@ async def adc8_integer_filter(ctx: CaseContext) -> None:
                     actual=f"Y = {y[i]}",
                 )
             u_prev, y_prev = u, y
+        await probe.run(SETTLE_TICKS)
+        await _settles_below(ctx, sample)
+        await probe.send("SEN", theta_sensed=READY)
+        await probe.run(1)
+
+
+SETTLE_SAMPLES: Final = 8
+"""Ticks the settled filter is watched for its standing error."""
+FLOOR_BIAS: Final = 3
+"""Counts a settled reading may stand below a constant input: floor((6 d) / 8) = d for d = -1, -2, -3,
+so the shift's rounding stops short by up to 3 (erratum cougar-filter-rounding)."""
+
+
+async def _settles_below(ctx: CaseContext, sample: Any) -> None:
+    """Once settled on a constant input, each gauge's filtered reading stands 0 to 3 counts below its
+    sample, averaged over a few ticks (a count of noise either way allowed): the filter's unity DC gain
+    but for the shift's rounding."""
+    errors = [[0] * 8 for _ in range(SETTLE_SAMPLES)]
+    for k in range(SETTLE_SAMPLES):
+        u, y = await sample()
+        errors[k] = [y[i] - u[i] for i in range(8)]
+    for i in range(8):
+        mean = sum(row[i] for row in errors) / SETTLE_SAMPLES
+        ctx.expect(
+            -FLOOR_BIAS - 1 <= mean <= 1,
+            clause="cougar.adc8-filter",
+            expected=f"gauge {i} settled: the filtered reading 0 to {FLOOR_BIAS} counts below the sample "
+            "(unity DC gain but for the shift's rounding; a count of noise allowed)",
+            actual=f"Y - u = {[row[i] for row in errors]} (mean {mean:.3g})",
+        )
 
 
 def _expected_voltmat(calmat: Sequence[float], fv_inch: Sequence[float]) -> np.ndarray[Any, Any]:
