@@ -2,9 +2,10 @@
 
 Each fault is a name in :attr:`manip.cougar.CougarConfig.faults` (``manip-cougar --cougar-fault NAME``,
 ``manip-conform run --cougar sim --cougar-fault NAME``) and is honoured at exactly one place of the
-simulator, named below.  A clean Cougar has none; the mutation test
-(``tests/conformance/cougar/test_cougar.py``) runs the Cougar cases against each fault and requires at
-least one case to fail.
+simulator, or of its end of the DRV-11J link for the ``link-*`` ones (:class:`manip.cougar.link.CougarEnd`
+and ``manip-cougar``'s server, given the faults by ``serve_cougar``), named below.  A clean Cougar has
+none; the mutation test (``tests/conformance/cougar/test_cougar.py``) runs the Cougar cases against each
+fault and requires at least one case to fail.
 """
 
 from __future__ import annotations
@@ -44,6 +45,15 @@ FAULTS: Final[Mapping[str, str]] = {
     "(Jacob._encode)",
     "filter-truncates-terms": "ADC8 shifts each term of the sum right by 3 before adding, so a constant "
     "input settles up to 7 counts low (CougarSim._adc8)",
+    "link-skips-bad-frames": "the DRV-11J link drops a frame it cannot decode (a bad HELLO, an unknown "
+    "type, a TICK of the wrong length) and carries on (FrameDecoder.feed, for CougarEnd)",
+    "link-ignores-wrong-side": "the link takes a HELLO naming the Cougar's own role and ignores frames "
+    "only Cougar sends (COUGAR, TICKED) instead of ending (CougarEnd)",
+    "link-tick-backwards-runs": "a TICK earlier than the one before it runs at the earlier tick's time "
+    "instead of ending the link (CougarEnd._model_time)",
+    "link-ignores-bye": "the link carries on after the Puma's BYE (CougarEnd, _End._frames)",
+    "link-busy-serves-second": "a second Puma connecting while one is linked is served too, not sent "
+    "BYE 'busy' (CougarServer._handle)",
 }
 
 

@@ -45,6 +45,11 @@ CATCHERS = {
     "nb-transposed": "cougar.npr.damping-matrix",
     "jacobian-transpose-not-stored": "cougar.jacob.transpose-stored",
     "filter-truncates-terms": "cougar.adc8.integer-filter",
+    "link-skips-bad-frames": "cougar.link.unknown-type",
+    "link-ignores-wrong-side": "cougar.link.wrong-side",
+    "link-tick-backwards-runs": "cougar.link.tick-backwards",
+    "link-ignores-bye": "cougar.link.bye",
+    "link-busy-serves-second": "cougar.link.busy",
 }
 OPTIONS = RunOptions(reply_timeout=1.0, connect_timeout=2.0)
 
