@@ -54,7 +54,7 @@ def _carry_on(index: int, time: float) -> bytes:
 
 
 @dataclass
-class Link:
+class CougarLinkSeen:
     """What Cougar sent on one raw link: its frames, whether it closed, and a stream it sent that did not
     decode."""
 
@@ -73,7 +73,11 @@ class Link:
 
 
 async def _read_until(
-    reader: asyncio.StreamReader, decoder: FrameDecoder, link: Link, done: type | None, timeout: float
+    reader: asyncio.StreamReader,
+    decoder: FrameDecoder,
+    link: CougarLinkSeen,
+    done: type | None,
+    timeout: float,
 ) -> None:
     """Read Cougar's frames into ``link`` until one of type ``done`` is among them (None: until it closes)
     or ``timeout`` seconds pass."""
@@ -99,14 +103,14 @@ async def _read_until(
             return
 
 
-async def _once(ctx: CaseContext, first: bytes | None, bad: bytes) -> Link:
+async def _once(ctx: CaseContext, first: bytes | None, bad: bytes) -> CougarLinkSeen:
     """One raw link: Cougar's HELLO, then ``first`` (a good HELLO and a tick whose TICKED is awaited) or
     nothing, then ``bad``; Cougar's frames until it closes or the reply timeout passes."""
     host, port = parse_address(ctx.options.address)
     timeout = ctx.options.reply_timeout
     async with asyncio.timeout(ctx.options.connect_timeout):
         reader, writer = await asyncio.open_connection(host, port)
-    link, decoder = Link(), FrameDecoder()
+    link, decoder = CougarLinkSeen(), FrameDecoder()
     try:
         await _read_until(reader, decoder, link, Hello, timeout)
         if first is not None:
@@ -124,7 +128,7 @@ async def _once(ctx: CaseContext, first: bytes | None, bad: bytes) -> Link:
     return link
 
 
-async def run_link(ctx: CaseContext, first: bytes | None, bad: bytes) -> Link:
+async def run_link(ctx: CaseContext, first: bytes | None, bad: bytes) -> CougarLinkSeen:
     """:func:`_once`, again while Cougar says busy (a previous link still ending) for a while."""
     loop = asyncio.get_running_loop()
     give_up = loop.time() + BUSY_PATIENCE
@@ -228,7 +232,7 @@ def _bad_frame_case(row: BadFrame) -> None:
     )(ends)
 
 
-def judge_ending(ctx: CaseContext, link: Link, clause: str, what: str) -> None:
+def judge_ending(ctx: CaseContext, link: CougarLinkSeen, clause: str, what: str) -> None:
     """Cougar said a good HELLO, sent nothing but BYE after the frame under test, and closed."""
     ctx.expect(
         not link.garbage,
