@@ -45,6 +45,8 @@ FAULTS: Final[Mapping[str, str]] = {
     "(Jacob._encode)",
     "filter-truncates-terms": "ADC8 shifts each term of the sum right by 3 before adding, so a constant "
     "input settles up to 7 counts low (CougarSim._adc8)",
+    "rraw-less-offsets": "RRAW reports the readings with the gauge offsets subtracted, not the gauges as "
+    "read (CougarSim._reraw)",
     "link-skips-bad-frames": "the DRV-11J link drops a frame it cannot decode (a bad HELLO, an unknown "
     "type, a TICK of the wrong length) and carries on (FrameDecoder.feed, for CougarEnd)",
     "link-ignores-wrong-side": "the link takes a HELLO naming the Cougar's own role and ignores frames "

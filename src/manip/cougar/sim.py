@@ -584,7 +584,10 @@ class CougarSim:
         # the gauges as the wrist reads them: the filtered readings with the offsets added back
         unfiltered = "rraw-unfiltered" in self._readings
         raw = self.memory.int16s("gauge_raw" if unfiltered else "gauge_filtered")
-        if "offsets-after-filter" not in self._readings:  # there, the readings have them
+        if "rraw-less-offsets" in self._faults:  # the readings as corrected, offsets subtracted
+            if "offsets-after-filter" in self._readings:
+                raw = _less(raw, self.memory.int16s("gauge_offsets"))
+        elif "offsets-after-filter" not in self._readings:  # there, the readings have them
             raw = _plus(raw, self.memory.int16s("gauge_offsets"))
         self._send(CougarResponse.RAW, [v & 0xFFFF for v in raw])
 

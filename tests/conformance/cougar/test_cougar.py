@@ -45,6 +45,7 @@ CATCHERS = {
     "nb-transposed": "cougar.npr.damping-matrix",
     "jacobian-transpose-not-stored": "cougar.jacob.transpose-stored",
     "filter-truncates-terms": "cougar.adc8.integer-filter",
+    "rraw-less-offsets": "cougar.rraw.before-offsets",
     "link-skips-bad-frames": "cougar.link.unknown-type",
     "link-ignores-wrong-side": "cougar.link.wrong-side",
     "link-tick-backwards-runs": "cougar.link.tick-backwards",

@@ -238,3 +238,52 @@ async def _offset_step(
             f"{OFFSET_STEP} = {want[i]:.4g} (within {slack[i]:.3g}: {COUNTS_SLACK} counts)",
             actual=f"{change:.4g} ({before[i]:.4g} -> {after[i]:.4g})",
         )
+
+
+RRAW_SLACK: Final = 4
+"""Counts a settled RRAW reading may move by when nothing physical changed: the filter's rounding (up to
+3, erratum cougar-filter-rounding) and a count of noise."""
+
+
+async def _raw_gauges(ctx: CaseContext, probe: CougarProbe) -> list[int]:
+    reply = expect_reply(ctx, await probe.call("RRAW"), "RAW", "cougar.rraw.reply", after="RRAW")
+    return int16(reply.data_words)
+
+
+@case(
+    "cougar.rraw.before-offsets",
+    clauses=[
+        "cougar.rraw.before-offsets",
+        "cougar.rraw.reply",
+        "cougar.exmn.reply",
+        "cougar.response.layout",
+    ],
+    hazard="config",
+    deadline=8.0,
+)
+async def rraw_before_offsets(ctx: CaseContext) -> None:
+    """RRAW reports the gauges as read, before WGOV's offsets are subtracted: once settled, raising every
+    offset by 100 counts leaves each of the eight readings where it was, whether RRAW reports the
+    samples or the filtered readings."""
+    (offsets_obj,) = mapped(ctx, "gauge_offsets")
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        offsets0 = tuple(int16(await examine_region(ctx, probe, offsets_obj)))
+        try:
+            await settle(probe, POSE_B)
+            before = await _raw_gauges(ctx, probe)
+            await probe.send("WGOV", offsets=tuple(o + OFFSET_STEP for o in offsets0))
+            await probe.run(SETTLE_TICKS)
+            after = await _raw_gauges(ctx, probe)
+            for i, (b, a) in enumerate(zip(before, after, strict=True)):
+                ctx.expect(
+                    abs(a - b) <= RRAW_SLACK,
+                    clause="cougar.rraw.before-offsets",
+                    expected=f"gauge {i}: the same raw reading after every offset rose by {OFFSET_STEP} "
+                    f"(within {RRAW_SLACK} counts; WGOV's vector is subtracted from the raw readings)",
+                    actual=f"{b} -> {a}",
+                )
+        finally:
+            await probe.send("WGOV", offsets=offsets0)
+            await probe.send("SEN", theta_sensed=READY)
+            await probe.run(1)
