@@ -21,8 +21,6 @@ FAULTS: Final[Mapping[str, str]] = {
     "no-out-of-sync": "an unknown command code dumps the buffer but sends no out-of-sync message "
     "(CougarSim._comint_run)",
     "guard-trips-twice": "a tripped guard stays armed for one more trip (CougarSim._guardm)",
-    "filter-float-instead-of-integer": "ADC8 filters in floating point and rounds to nearest instead of "
-    "shifting (CougarSim._adc8)",
     "forces-wrong-sign": "the conversion drops the -1: forces are the load on the hand, not the force the "
     "robot applies (CougarSim._convert)",
     "exmn-wrong-count": "EXMN retrieves one word fewer than asked (CougarSim._exp)",

@@ -30,8 +30,9 @@ Theory of operation (one tick = one GUTS interrupt, B.6, then background time):
 Everything Cougar keeps is in its simulated memory (:mod:`manip.cougar.memory`), so EXMN and DPST see
 and change what the routines use.  ``CougarConfig.readings`` (:mod:`manip.cougar.readings`) switches to
 other readings of the 1985 guide the conformance suite must accept: EXMN's count at a bad address, a
-bare out-of-sync, a guard at tol, the guard type bit, no GUTS cost model, lengths in inches, offsets
-after the filter, RRAW unfiltered, and the memory map moved on the link.  The commands (Table 1):
+bare out-of-sync, a guard at tol, the guard type bit, no GUTS cost model, ADC8 rounding to nearest,
+lengths in inches, offsets after the filter, RRAW unfiltered, and the memory map moved on the link.  The
+commands (Table 1):
 
 =======  ====  =========================================================================================
 NOP      0     nothing
@@ -349,7 +350,7 @@ class CougarSim:
         u = self._corrected(sample)
         u_previous = mem.int16s("gauge_raw")
         y_previous = mem.int16s("gauge_filtered")
-        if "filter-float-instead-of-integer" in self._faults:
+        if "filter-rounds-to-nearest" in self._readings:
             y = [round((u[i] + u_previous[i] + 6 * y_previous[i]) / 8) for i in range(GAUGES)]
         elif "filter-truncates-terms" in self._faults:
             y = [(u[i] >> 3) + (u_previous[i] >> 3) + (6 * y_previous[i] >> 3) for i in range(GAUGES)]

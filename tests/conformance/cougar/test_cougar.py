@@ -31,7 +31,6 @@ CATCHERS = {
     "wrong-version-code": "cougar.reply.version",
     "no-out-of-sync": "cougar.comint.unknown-code",
     "guard-trips-twice": "cougar.guard.trips-once",
-    "filter-float-instead-of-integer": "cougar.adc8.integer-filter",
     "forces-wrong-sign": "cougar.forces.conversion",
     "exmn-wrong-count": "cougar.reply.exmn",
     "comint-executes-partial": "cougar.comint.partial-waits",
