@@ -108,8 +108,16 @@ async def _once(ctx: CaseContext, first: bytes | None, bad: bytes) -> CougarLink
     nothing, then ``bad``; Cougar's frames until it closes or the reply timeout passes."""
     host, port = parse_address(ctx.options.address)
     timeout = ctx.options.reply_timeout
-    async with asyncio.timeout(ctx.options.connect_timeout):
-        reader, writer = await asyncio.open_connection(host, port)
+    try:
+        async with asyncio.timeout(ctx.options.connect_timeout):
+            reader, writer = await asyncio.open_connection(host, port)
+    except (OSError, TimeoutError) as exc:
+        ctx.fail(
+            f"DRV-11J link to {ctx.options.address}: cannot connect",
+            clause="link.drv11j.framing",
+            expected="Cougar accepting a link",
+            actual=str(exc) or type(exc).__name__,
+        )
     link, decoder = CougarLinkSeen(), FrameDecoder()
     try:
         await _read_until(reader, decoder, link, Hello, timeout)
