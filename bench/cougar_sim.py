@@ -274,8 +274,10 @@ _RANDOM: dict[str, Callable[[random.Random], dict[str, Any]]] = {
 }
 
 
-def _with_faults(*faults: str) -> CougarSim:
-    return CougarSim(CougarConfig(faults=frozenset(faults)), environment=environment(), seed=7)
+def _with_faults(*faults: str, readings: frozenset[str] = frozenset()) -> CougarSim:
+    return CougarSim(
+        CougarConfig(faults=frozenset(faults), readings=readings), environment=environment(), seed=7
+    )
 
 
 #: (name, the simulator, seed); seed 0: the Puma driver alone, no random commands or early ticks.
@@ -303,11 +305,11 @@ SESSIONS: list[tuple[str, Callable[[], CougarSim], int]] = [
     (
         "faults",
         lambda: _with_faults(
-            "filter-float-instead-of-integer",
             "forces-wrong-sign",
             "npr-ignores-k",
             "filter-con-swapped",
             "guard-trips-twice",
+            readings=frozenset({"filter-rounds-to-nearest"}),  # was the fault filter-float-instead-of-integer
         ),
         6,
     ),

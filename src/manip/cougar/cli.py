@@ -43,8 +43,10 @@ _READ: Final = 1 << 16
 class CougarServer:
     """A listening Cougar (from :func:`serve_cougar`); ``address`` has the real port."""
 
-    def __init__(self, model: CougarModel) -> None:
+    def __init__(self, model: CougarModel, faults: frozenset[str] = frozenset()) -> None:
         self.model = model
+        self.faults = faults
+        """The link's defects (:mod:`manip.cougar.faults`, ``link-*``), for testing conformance suites."""
         self.connections = 0
         self.busy = False
         self.server: asyncio.Server | None = None
@@ -53,9 +55,9 @@ class CougarServer:
         """The model's time at the last tick of any link: the next link's clock continues from it."""
 
     async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        end = CougarEnd(self.model, resume_after=self.last_time)
+        end = CougarEnd(self.model, resume_after=self.last_time, faults=self.faults)
         writer.write(end.hello())
-        if self.busy:
+        if self.busy and "link-busy-serves-second" not in self.faults:
             writer.write(end.bye(BUSY))
             await _close(writer)
             return
@@ -96,10 +98,13 @@ async def _close(writer: asyncio.StreamWriter) -> None:
 
 
 @contextlib.asynccontextmanager
-async def serve_cougar(model: CougarModel, address: str) -> AsyncIterator[CougarServer]:
-    """Serve ``model`` on ``address`` (``tcp://HOST:PORT``, port 0 for a free one) for the block."""
+async def serve_cougar(
+    model: CougarModel, address: str, *, faults: frozenset[str] = frozenset()
+) -> AsyncIterator[CougarServer]:
+    """Serve ``model`` on ``address`` (``tcp://HOST:PORT``, port 0 for a free one) for the block; the
+    link has the defects ``faults`` names (``link-*`` of :mod:`manip.cougar.faults`; none by default)."""
     host, port = parse_address(address)
-    cougar = CougarServer(model)
+    cougar = CougarServer(model, faults)
     server = await asyncio.start_server(cougar._handle, host, port)
     cougar.server = server
     sock_host, sock_port = server.sockets[0].getsockname()[:2]
@@ -146,8 +151,8 @@ def _make_model(
     return sim
 
 
-async def _serve_forever(model: CougarModel, address: str) -> None:
-    async with serve_cougar(model, address) as cougar:
+async def _serve_forever(model: CougarModel, address: str, faults: frozenset[str]) -> None:
+    async with serve_cougar(model, address, faults=faults) as cougar:
         print(f"manip-cougar: listening on {cougar.address}", flush=True)
         await asyncio.Event().wait()
 
@@ -224,7 +229,7 @@ def main(
     model = _make_model(seed, surfaces, springs, parse_faults(faults), parse_readings(readings))
     try:
         with contextlib.suppress(KeyboardInterrupt):
-            asyncio.run(_serve_forever(model, address))
+            asyncio.run(_serve_forever(model, address, parse_faults(faults)))
     except OSError as exc:  # the port is taken, the socket path cannot be made...
         click.echo(f"manip-cougar: cannot listen on {address}: {exc.strerror or exc}", err=True)
         sys.exit(1)

@@ -2,9 +2,10 @@
 
 Each fault is a name in :attr:`manip.cougar.CougarConfig.faults` (``manip-cougar --cougar-fault NAME``,
 ``manip-conform run --cougar sim --cougar-fault NAME``) and is honoured at exactly one place of the
-simulator, named below.  A clean Cougar has none; the mutation test
-(``tests/conformance/cougar/test_cougar.py``) runs the Cougar cases against each fault and requires at
-least one case to fail.
+simulator, or of its end of the DRV-11J link for the ``link-*`` ones (:class:`manip.cougar.link.CougarEnd`
+and ``manip-cougar``'s server, given the faults by ``serve_cougar``), named below.  A clean Cougar has
+none; the mutation test (``tests/conformance/cougar/test_cougar.py``) runs the Cougar cases against each
+fault and requires at least one case to fail.
 """
 
 from __future__ import annotations
@@ -20,8 +21,6 @@ FAULTS: Final[Mapping[str, str]] = {
     "no-out-of-sync": "an unknown command code dumps the buffer but sends no out-of-sync message "
     "(CougarSim._comint_run)",
     "guard-trips-twice": "a tripped guard stays armed for one more trip (CougarSim._guardm)",
-    "filter-float-instead-of-integer": "ADC8 filters in floating point and rounds to nearest instead of "
-    "shifting (CougarSim._adc8)",
     "forces-wrong-sign": "the conversion drops the -1: forces are the load on the hand, not the force the "
     "robot applies (CougarSim._convert)",
     "exmn-wrong-count": "EXMN retrieves one word fewer than asked (CougarSim._exp)",
@@ -32,6 +31,29 @@ FAULTS: Final[Mapping[str, str]] = {
     "npr-ignores-k": "the compliance equation leaves out the spring term K (CougarSim._newpr)",
     "filter-con-swapped": "FILTER weighs the filtered value with con4 and the sample with con3 "
     "(CougarSim._newpr)",
+    "gravity-fixed-orientation": "GRAVITY takes the hand to be at READY whatever angles SEN or NPR sent "
+    "(CougarSim._gravity)",
+    "gravity-ignores-cg": "GRAVITY corrects the force of the weight but not its torque about the centre "
+    "of gravity (CougarSim._gravity)",
+    "nfv-keeps-gravity": "NFV rewrites the conversion matrix but leaves the gravity model about the old "
+    "compliance centre (CougarSim._newfv)",
+    "nb-transposed": "NPR reads NB's 36 elements column after column instead of row after row "
+    "(CougarSim._newpr)",
+    "jacobian-transpose-not-stored": "JACOB stores J again where its transpose belongs, after J "
+    "(Jacob._encode)",
+    "filter-truncates-terms": "ADC8 shifts each term of the sum right by 3 before adding, so a constant "
+    "input settles up to 7 counts low (CougarSim._adc8)",
+    "rraw-less-offsets": "RRAW reports the readings with the gauge offsets subtracted, not the gauges as "
+    "read (CougarSim._reraw)",
+    "link-skips-bad-frames": "the DRV-11J link drops a frame it cannot decode (a bad HELLO, an unknown "
+    "type, a TICK of the wrong length) and carries on (FrameDecoder.feed, for CougarEnd)",
+    "link-ignores-wrong-side": "the link takes a HELLO naming the Cougar's own role and ignores frames "
+    "only Cougar sends (COUGAR, TICKED) instead of ending (CougarEnd)",
+    "link-tick-backwards-runs": "a TICK earlier than the one before it runs at the earlier tick's time "
+    "instead of ending the link (CougarEnd._model_time)",
+    "link-ignores-bye": "the link carries on after the Puma's BYE (CougarEnd, _End._frames)",
+    "link-busy-serves-second": "a second Puma connecting while one is linked is served too, not sent "
+    "BYE 'busy' (CougarServer._handle)",
 }
 
 

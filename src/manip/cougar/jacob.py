@@ -70,6 +70,8 @@ class Jacob:
     mm_per_unit: float = 1.0
     """Millimetres per length unit of the frame vector in memory and of J's translational rows (25.4 for
     a Cougar in inches: reading ``lengths-in-inches``)."""
+    transpose_stored: bool = True
+    """False only for the fault ``jacobian-transpose-not-stored``: J's words stored again where Jᵀ goes."""
     step_index: int = 0
     cycles: int = 0
     _j: Matrix = field(default_factory=lambda: np.zeros((6, 6)))
@@ -119,7 +121,7 @@ class Jacob:
         """J, Jᵀ and P = BJI·Jᵀ as stored.  Jᵀ's words are J's, transposed (rounding is per element)."""
         j_words, saturated = Memory.encode_floats(self._j)
         j = memoryview(j_words).cast("I")
-        jt_words = b"".join(j[i::6].tobytes() for i in range(6))
+        jt_words = b"".join(j[i::6].tobytes() for i in range(6)) if self.transpose_stored else j_words
         p = (np.array(self._bji)[:, None]) * self._j.T
         return (j_words, saturated), (jt_words, saturated), Memory.encode_floats(p)
 

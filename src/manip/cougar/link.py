@@ -213,8 +213,10 @@ def _decode(kind: int, payload: list[int]) -> Frame:
 class FrameDecoder:
     """Bytes in, in any chunks; complete frames out, in order.  A bad frame raises Drv11jError."""
 
-    def __init__(self) -> None:
+    def __init__(self, *, skip_bad: bool = False) -> None:
         self._buf = bytearray()
+        self._skip_bad = skip_bad
+        """Drop a frame that cannot be decoded and go on (only for the fault ``link-skips-bad-frames``)."""
 
     @property
     def pending(self) -> int:
@@ -234,7 +236,11 @@ class FrameDecoder:
                 break
             payload = [int.from_bytes(buf[i : i + 2], "little") for i in range(pos + 4, end, 2)]
             pos = end
-            out.append(_decode(kind, payload))
+            try:
+                out.append(_decode(kind, payload))
+            except Drv11jError:
+                if not self._skip_bad:
+                    raise
         del buf[:pos]
         return out
 
@@ -251,8 +257,10 @@ class CougarModel(Protocol):
 class _End:
     role: Role
 
-    def __init__(self) -> None:
-        self._decoder = FrameDecoder()
+    def __init__(self, faults: frozenset[str] = frozenset()) -> None:
+        self._faults = faults
+        """Defects of the link (:mod:`manip.cougar.faults`, ``link-*``): only a Cougar's end has any."""
+        self._decoder = FrameDecoder(skip_bad="link-skips-bad-frames" in faults)
         self.peer_ready = False
         """The peer's HELLO has arrived."""
         self.closed: str | None = None
@@ -276,10 +284,13 @@ class _End:
                 if not isinstance(frame, Hello):
                     self.closed = "the peer did not start with HELLO"
                     raise Drv11jError(self.closed)
-                if frame.version != VERSION or frame.role is self.role:
+                wrong_side = frame.role is self.role and "link-ignores-wrong-side" not in self._faults
+                if frame.version != VERSION or wrong_side:
                     self.closed = f"incompatible peer (role {frame.role.name}, version {frame.version})"
                     raise Drv11jError(self.closed)
                 self.peer_ready = True
+                continue
+            if isinstance(frame, Bye) and "link-ignores-bye" in self._faults:
                 continue
             if isinstance(frame, Bye):
                 self.closed = frame.reason or "closed by the peer"
@@ -331,8 +342,10 @@ class CougarEnd(_End):
 
     role = Role.COUGAR
 
-    def __init__(self, cougar: CougarModel, *, resume_after: float | None = None) -> None:
-        super().__init__()
+    def __init__(
+        self, cougar: CougarModel, *, resume_after: float | None = None, faults: frozenset[str] = frozenset()
+    ) -> None:
+        super().__init__(faults)
         self.cougar = cougar
         self.ticks = 0
         self.last_time: float | None = resume_after
@@ -347,6 +360,8 @@ class CougarEnd(_End):
         if self.ticks == 0 and last is not None and time <= last:
             self._shift = last + RESUME_GAP - time
         now = time + self._shift
+        if last is not None and now < last and "link-tick-backwards-runs" in self._faults:
+            return last
         if last is not None and now < last:
             self.closed = f"tick time went backwards ({time} s after {last - self._shift} s)"
             raise Drv11jError(self.closed)
@@ -365,6 +380,8 @@ class CougarEnd(_End):
                 if words:
                     out.append(encode_frame(Words(Role.COUGAR, tuple(words))))
                 out.append(encode_frame(Ticked(frame.index)))
+            elif "link-ignores-wrong-side" in self._faults:
+                continue
             else:
                 self.closed = f"unexpected {type(frame).__name__} frame from the Puma"
                 raise Drv11jError(self.closed)

@@ -33,6 +33,8 @@ READINGS: Final[Mapping[str, str]] = {
     "cost model (CougarSim.tick)",
     "lengths-in-inches": "the frame vector (NFV) and the centre of gravity (NEWWC) are in inches, as the "
     "guide's ounce-inch torques suggest, not millimetres (CougarSim._lengths_mm)",
+    "filter-rounds-to-nearest": "ADC8 rounds its division by 8 to the nearest count (ties to even) "
+    "instead of flooring it with an arithmetic shift (CougarSim._adc8)",
     "offsets-after-filter": "the gauge offsets are subtracted from the filtered readings, after ADC8's "
     "filter; RRAW reports the filtered readings (CougarSim._adc8)",
     "rraw-unfiltered": "RRAW reports the latest gauge samples as read, before the filter and the "

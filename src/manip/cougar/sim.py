@@ -30,8 +30,9 @@ Theory of operation (one tick = one GUTS interrupt, B.6, then background time):
 Everything Cougar keeps is in its simulated memory (:mod:`manip.cougar.memory`), so EXMN and DPST see
 and change what the routines use.  ``CougarConfig.readings`` (:mod:`manip.cougar.readings`) switches to
 other readings of the 1985 guide the conformance suite must accept: EXMN's count at a bad address, a
-bare out-of-sync, a guard at tol, the guard type bit, no GUTS cost model, lengths in inches, offsets
-after the filter, RRAW unfiltered, and the memory map moved on the link.  The commands (Table 1):
+bare out-of-sync, a guard at tol, the guard type bit, no GUTS cost model, ADC8 rounding to nearest,
+lengths in inches, offsets after the filter, RRAW unfiltered, and the memory map moved on the link.  The
+commands (Table 1):
 
 =======  ====  =========================================================================================
 NOP      0     nothing
@@ -206,7 +207,11 @@ class CougarSim:
         self._tripped_once: set[int] = set()  # fault guard-trips-twice
         self._guard_values: dict[int, tuple[list[int], Vector, float]] = {}
         """Guard i's table words, and its dvec and tol decoded from them."""
-        self._jacob = Jacob(self.config.geometry, mm_per_unit=self.config.mm_per_unit)
+        self._jacob = Jacob(
+            self.config.geometry,
+            mm_per_unit=self.config.mm_per_unit,
+            transpose_stored="jacobian-transpose-not-stored" not in self._faults,
+        )
         self._stats = CougarStats()
         self._pose: tuple[float, ...] = tuple(float(q) for q in self.config.initial_angles)
         self._busy_until: float | None = None
@@ -345,8 +350,10 @@ class CougarSim:
         u = self._corrected(sample)
         u_previous = mem.int16s("gauge_raw")
         y_previous = mem.int16s("gauge_filtered")
-        if "filter-float-instead-of-integer" in self._faults:
+        if "filter-rounds-to-nearest" in self._readings:
             y = [round((u[i] + u_previous[i] + 6 * y_previous[i]) / 8) for i in range(GAUGES)]
+        elif "filter-truncates-terms" in self._faults:
+            y = [(u[i] >> 3) + (u_previous[i] >> 3) + (6 * y_previous[i] >> 3) for i in range(GAUGES)]
         else:
             y = [adc8_filter(u[i], u_previous[i], y_previous[i]) for i in range(GAUGES)]
         mem.put_int16s("gauge_raw", u)
@@ -372,8 +379,10 @@ class CougarSim:
 
     def _gravity(self) -> None:
         mem = self.memory
-        r = hand_rotation(mem.floats("theta_sensed"), self.config.geometry)
-        load = gravity_load(r, mem.floats("grav_weight")[0], mem.floats("grav_cg"))
+        theta = READY if "gravity-fixed-orientation" in self._faults else mem.floats("theta_sensed")
+        r = hand_rotation(theta, self.config.geometry)
+        cg = _UNTOUCHED[:3] if "gravity-ignores-cg" in self._faults else mem.floats("grav_cg")
+        load = gravity_load(r, mem.floats("grav_weight")[0], cg)
         force = [s + g for s, g in zip(mem.floats("force_sensed"), load, strict=True)]
         if mem.word("flags") & FLAG_LIMIT:
             force = limit(force, mem.floats("limit_dead")[0], mem.floats("limit_clamp")[0])
@@ -448,11 +457,12 @@ class CougarSim:
         mem = self.memory
         j, _, p = front_buffer(mem)
         theta_error = mem.array("theta_sensed") - mem.array("theta_commanded")
+        b = mem.array("b").reshape(6, 6)
         sample = compliance_sample(
             j,
             p,
             k=np.zeros(6) if "npr-ignores-k" in self._faults else mem.array("k"),
-            b=mem.array("b").reshape(6, 6),
+            b=b.T if "nb-transposed" in self._faults else b,
             fc=mem.array("fc"),
             force=mem.array("force"),
             theta_error=theta_error,
@@ -479,7 +489,8 @@ class CougarSim:
         mem = self.memory
         rows = voltmat_torque_rows(mem.get("calmat"), self._lengths_mm("fv"))
         mem.write_floats(region("voltmat").at(24), rows.reshape(-1))  # rows 4-6 only
-        self._newwc()
+        if "nfv-keeps-gravity" not in self._faults:
+            self._newwc()
 
     def _newwc(self) -> None:
         mem = self.memory
@@ -574,7 +585,10 @@ class CougarSim:
         # the gauges as the wrist reads them: the filtered readings with the offsets added back
         unfiltered = "rraw-unfiltered" in self._readings
         raw = self.memory.int16s("gauge_raw" if unfiltered else "gauge_filtered")
-        if "offsets-after-filter" not in self._readings:  # there, the readings have them
+        if "rraw-less-offsets" in self._faults:  # the readings as corrected, offsets subtracted
+            if "offsets-after-filter" in self._readings:
+                raw = _less(raw, self.memory.int16s("gauge_offsets"))
+        elif "offsets-after-filter" not in self._readings:  # there, the readings have them
             raw = _plus(raw, self.memory.int16s("gauge_offsets"))
         self._send(CougarResponse.RAW, [v & 0xFFFF for v in raw])
 

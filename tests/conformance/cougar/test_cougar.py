@@ -31,7 +31,6 @@ CATCHERS = {
     "wrong-version-code": "cougar.reply.version",
     "no-out-of-sync": "cougar.comint.unknown-code",
     "guard-trips-twice": "cougar.guard.trips-once",
-    "filter-float-instead-of-integer": "cougar.adc8.integer-filter",
     "forces-wrong-sign": "cougar.forces.conversion",
     "exmn-wrong-count": "cougar.reply.exmn",
     "comint-executes-partial": "cougar.comint.partial-waits",
@@ -39,6 +38,18 @@ CATCHERS = {
     "rst-ignored": "cougar.rst.zeroes-velocities",
     "npr-ignores-k": "cougar.npr.gains",
     "filter-con-swapped": "cougar.filter.output",
+    "gravity-fixed-orientation": "cougar.gravity.point-mass",
+    "gravity-ignores-cg": "cougar.gravity.point-mass",
+    "nfv-keeps-gravity": "cougar.gravity.nfv-redoes-model",
+    "nb-transposed": "cougar.npr.damping-matrix",
+    "jacobian-transpose-not-stored": "cougar.jacob.transpose-stored",
+    "filter-truncates-terms": "cougar.adc8.integer-filter",
+    "rraw-less-offsets": "cougar.rraw.before-offsets",
+    "link-skips-bad-frames": "cougar.link.unknown-type",
+    "link-ignores-wrong-side": "cougar.link.wrong-side",
+    "link-tick-backwards-runs": "cougar.link.tick-backwards",
+    "link-ignores-bye": "cougar.link.bye",
+    "link-busy-serves-second": "cougar.link.busy",
 }
 OPTIONS = RunOptions(reply_timeout=1.0, connect_timeout=2.0)
 

@@ -35,6 +35,10 @@ MEMORY_CASES = {
     "cougar.rst.zeroes-velocities",
     "cougar.filter.output",
     "cougar.jacob.front-buffer-complete",
+    "cougar.jacob.transpose-stored",
+    "cougar.npr.damping-matrix",
+    "cougar.gravity.nfv-redoes-model",
+    "cougar.rraw.before-offsets",
 }
 #: A reading whose clause is judged only on a Cougar that does what the other reading does not: the case
 #: that cannot apply to it, and is skipped.

@@ -91,7 +91,7 @@ class CougarTarget:
             yield self.url
             return
         sim = CougarSim(self.config(), seed=0)
-        async with serve_cougar(sim, "tcp://127.0.0.1:0") as server:
+        async with serve_cougar(sim, "tcp://127.0.0.1:0", faults=sim.config.faults) as server:
             yield server.address
             await wait_idle(server)
 

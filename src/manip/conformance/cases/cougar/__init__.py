@@ -19,11 +19,16 @@ What a case may rely on, so that it holds for any conforming Cougar and not just
 * Memory addresses only from the run's memory map (``--memory-map``, ``ctx.options.cougar_map``;
   erratum ``cougar-memory-map``): a case that needs an object the map does not give is not judged
   (``_support.mapped``); lengths in the run's unit (``--length-unit``, ``cougar-length-unit``).
-* ADC8's rounding (``cougar-filter-rounding``); the conversion and force sign (``cougar-units``); the
-  compliance equation (``cougar-compliance-equation``), used only through properties that any linear
-  spring/damper law has (zero gain gives zero, doubling a gain doubles its effect).
+* ADC8's rounding (``cougar-filter-rounding``: any rounding of the division, a settled reading within 3
+  counts); the conversion and force sign (``cougar-units``); the compliance equation
+  (``cougar-compliance-equation``), used through properties that any linear spring/damper law has (zero
+  gain gives zero, doubling a gain doubles its effect), and for NB's row order through the Jacobian the
+  Cougar itself holds; GRAVITY's point-mass model with the hand's orientation from the Puma 560's
+  kinematics (``manip.arm``), the frame the Cougar's forces are in.
 * Each value checked on its own (a gauge, a guard, a row block), so a case reports every violation.
 * Never the simulator's numbers: no expected force, gauge or Δθ value is hard-coded; each check compares
   Cougar with itself (before/after, split/unsplit) or with a formula of the spec applied to what Cougar
-  reports.
+  reports (or, for gravity, to the weight and centre of gravity the case sends).
+* The DRV-11J link's error paths (``link_errors``) on raw connections, the link being manip's own
+  contract (``docs/drv11j.md``).
 """

@@ -4,14 +4,18 @@ law has."""
 from __future__ import annotations
 
 import math
-from typing import Final
+from typing import Any, Final
+
+import numpy as np
 
 from manip.arm import READY
 from manip.codecs.pdp11float import f_to_words
 from manip.conformance.cases.cougar._support import (
+    POSE_B,
     clean,
     close_to,
     examine_region,
+    expect_examine,
     expect_none,
     expect_reply,
     fmt,
@@ -28,6 +32,7 @@ from manip.conformance.cougar.probe import (
 )
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
+from manip.cougar.memory_map import MapObject
 
 # ------------------------------------------------------------------------------------------ NPR, RST
 _THETA_ERROR: Final = (1.0, -1.0, 1.0, 2.0, -2.0, 2.0)
@@ -233,3 +238,129 @@ async def filter_output(ctx: CaseContext) -> None:
             await probe.send("NBJI", bji=(0.0,) * 6)
             await probe.send("RST")
             await probe.run(1)
+
+
+# ------------------------------------------------------------------------------------------ NB, Jᵀ
+JT_FLOATS: Final = 72
+"""J then Jᵀ: the floats a Jacobian buffer holds from its start when Jᵀ follows J (B.2)."""
+DAMPING: Final = tuple(
+    1.0 if i == j else 0.8 if j == (i + 1) % 6 else -0.5 if j == (i + 3) % 6 else 0.0
+    for i in range(6)
+    for j in range(6)
+)
+"""A damping matrix far from its transpose (row after row): ones on the diagonal, 0.8 just right of it
+and -0.5 three columns on, each row turned."""
+NB_RATE: Final = (3.0, -2.0, 1.5, 4.0, -3.0, 2.5)
+NB_BJI: Final = 0.001
+
+
+async def _front_jacobian(ctx: CaseContext, probe: CougarProbe) -> tuple[np.ndarray[Any, Any], MapObject]:
+    """J (6x6) of the front buffer, and the buffer's map object."""
+    front, *buffers = mapped(ctx, "jacob_front", "jbuf0", "jbuf1")
+    (which,) = await expect_examine(ctx, probe, front.address, 1)
+    buffer = buffers[which & 1]
+    j = await expect_examine(ctx, probe, buffer.address, 72)
+    if len(j) != 72:
+        ctx.fail(
+            "EXMN did not return the Jacobian: the case cannot go on",
+            clause="cougar.exmn.reply",
+            expected=f"72 words at {buffer.address:#o}",
+            actual=f"{len(j)} words",
+        )
+    return np.array(floats_of(j)).reshape(6, 6), buffer
+
+
+async def _ntd_at(ctx: CaseContext, probe: CougarProbe, damping: tuple[float, ...]) -> np.ndarray[Any, Any]:
+    """NTD at POSE_B with no position error, the rate difference NB_RATE, K = 0 and B = ``damping``."""
+    await probe.send("NK", k=(0.0,) * 6)
+    await probe.send("NB", b=damping)
+    await probe.send("NBJI", bji=(NB_BJI,) * 6)
+    await probe.send("NFC", force=(0.0,) * 6)
+    await probe.send("RST")
+    await probe.run(2)
+    reply = await probe.call("NPR", theta_sensed=POSE_B, theta_commanded=POSE_B, rate_difference=NB_RATE)
+    expect_reply(ctx, reply, "NTD", "cougar.npr.reply", after="NPR")
+    return np.array(reply.floats() or (0.0,) * 6)
+
+
+@case(
+    "cougar.npr.damping-matrix",
+    clauses=[
+        "cougar.nb-row-order",
+        "cougar.npr.reply",
+        "cougar.memory",
+        "cougar.exmn.reply",
+        "cougar.response.layout",
+    ],
+    hazard="config",
+    deadline=8.0,
+)
+async def npr_damping_matrix(ctx: CaseContext) -> None:
+    """NB's 36 elements are B row after row (erratum cougar-compliance-equation): with a B far from
+    symmetric, the damping part of NTD is -BJI Jᵀ B J (rate difference), worked out here from the
+    Jacobian Cougar holds (its front buffer)."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        await settle(probe, POSE_B)
+        try:
+            j, _ = await _front_jacobian(ctx, probe)
+            rest = await _ntd_at(ctx, probe, (0.0,) * 36)
+            damped = await _ntd_at(ctx, probe, DAMPING)
+            b = np.array(DAMPING).reshape(6, 6)
+            want = -NB_BJI * (j.T @ (b @ (j @ np.array(NB_RATE))))
+            got = damped - rest
+            scale = float(np.abs(want).max())
+            for i in range(6):
+                ctx.expect(
+                    abs(got[i] - want[i]) <= 0.01 * scale + 1e-6,
+                    clause="cougar.nb-row-order",
+                    expected=f"joint {i + 1}: NB's part of NTD = -BJI (Jᵀ B J rate)[{i}] = {want[i]:.5g} "
+                    f"for B row after row (within 1 % of {scale:.3g})",
+                    actual=f"{got[i]:.5g} (B transposed would give "
+                    f"{float(-NB_BJI * (j.T @ (b.T @ (j @ np.array(NB_RATE))))[i]):.5g})",
+                )
+        finally:
+            await probe.send("NB", b=(0.0,) * 36)
+            await probe.send("NBJI", bji=(0.0,) * 6)
+            await probe.send("RST")
+            await probe.send("SEN", theta_sensed=READY)
+            await probe.run(1)
+
+
+@case(
+    "cougar.jacob.transpose-stored",
+    clauses=["cougar.jacob-transpose", "cougar.memory", "cougar.exmn.reply", "cougar.response.layout"],
+    hazard="config",
+)
+async def jacob_transpose_stored(ctx: CaseContext) -> None:
+    """The 36 floats after the Jacobian in its buffer are its transpose, stored explicitly (B.2), each
+    row its own check; not judged where the map declares the buffer with J alone."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        await settle(probe, POSE_B)
+        try:
+            j, buffer = await _front_jacobian(ctx, probe)
+            if buffer.count < JT_FLOATS:
+                ctx.not_judged(
+                    f"the memory map declares {buffer.name} with {buffer.count} floats, and Jᵀ follows J "
+                    f"in the {JT_FLOATS} from its start (B.2): declare the buffer's size to judge it"
+                )
+            await _transpose_follows(ctx, probe, j, buffer)
+        finally:
+            await probe.send("SEN", theta_sensed=READY)
+            await probe.run(1)
+
+
+async def _transpose_follows(
+    ctx: CaseContext, probe: CougarProbe, j: np.ndarray[Any, Any], buffer: MapObject
+) -> None:
+    words = await expect_examine(ctx, probe, buffer.at(36), 72)
+    jt = np.array(floats_of(words) if len(words) == 72 else (float("nan"),) * 36).reshape(6, 6)
+    for row in range(6):
+        ctx.expect(
+            bool(np.allclose(jt[row], j.T[row], rtol=1e-6, atol=1e-9)),
+            clause="cougar.jacob-transpose",
+            expected=f"row {row + 1} of the floats after J ({buffer.name}, from {buffer.at(36):#o}) = "
+            f"column {row + 1} of J: {fmt(j.T[row])}",
+            actual=fmt(jt[row]),
+        )
