@@ -39,6 +39,10 @@ How a request is judged (:meth:`ProtocolModel.expect`), from its bytes alone:
 The model never allows a fatal error or a BE (bug) error; it allows SQF (queue full) only while
 segments are outstanding.  Segment numbers that do not increase by one are recorded in
 :attr:`ProtocolModel.segment_findings` rather than refused, because that clause is a SHOULD.
+
+A run goes on after the server disagrees with the model: :meth:`ProtocolModel.observe` takes the reply
+that came into the state (a NAP where power was expected means the arm is unpowered, an AWA that it is
+aborted), and :class:`DistinctFindings` keeps each distinct disagreement once, up to a bound.
 """
 
 from __future__ import annotations
@@ -46,7 +50,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Final
+from typing import Final, Generic, TypeVar
 
 from manip.arm.kinematics import PUMA600, JointLimits
 from manip.codecs.error_string import ErrorMessage
@@ -57,8 +61,10 @@ from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import AsyncCondition
 
 __all__ = [
+    "MAX_DISTINCT_FINDINGS",
     "MODEL_CLAUSES",
     "AnswerSummary",
+    "DistinctFindings",
     "Expectation",
     "ProtocolModel",
     "finding",
@@ -106,6 +112,7 @@ NOT_ROTATION: Final = 1e-2
 #: Joints this far (deg) inside/outside a limit are certainly in/out of range for the model.
 LIMIT_SLACK: Final = 1e-3
 MOTION_NAMES: Final = frozenset(op.name for op in SPEC.requests.values() if op.response.form == "segment")
+Kept = TypeVar("Kept")
 _SEGMENT_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
 _GUARD_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.GUARD_HIT].notification_bit
 _DEFINED_MASK: Final = sum(1 << code.notification_bit for code in SPEC.async_codes.values())
@@ -151,6 +158,37 @@ class AnswerSummary:
     """The segment number of a motion reply."""
     error: ErrorMessage | None = None
     """The error string of a non-fatal error."""
+
+
+MAX_DISTINCT_FINDINGS: Final = 20
+"""How many distinct disagreements with the model one stateful run reports (the rest are counted)."""
+
+
+@dataclass
+class DistinctFindings(Generic[Kept]):
+    """The distinct disagreements a run found, the first of each kind kept (a kind: the clause and what
+    the model allowed), up to ``bound``.  The run goes on after each: the model takes the state the
+    server showed (:meth:`ProtocolModel.observe` takes the reply that came, not the one expected), so
+    one disputed answer does not hide what follows it."""
+
+    bound: int = MAX_DISTINCT_FINDINGS
+    kept: dict[tuple[str | None, str], Kept] = field(default_factory=dict)
+    dropped: int = 0
+    """Distinct findings past the bound, counted only."""
+
+    def add(self, violation: Violation, item: Kept) -> bool:
+        """Keep ``item`` for ``violation`` if it is a new kind and the bound allows; True if kept."""
+        key = (violation.clause, violation.expected)
+        if key in self.kept:
+            return False
+        if len(self.kept) >= self.bound:
+            self.dropped += 1
+            return False
+        self.kept[key] = item
+        return True
+
+    def __len__(self) -> int:
+        return len(self.kept)
 
 
 def finding(clause: str, expected: str, actual: str) -> Violation:

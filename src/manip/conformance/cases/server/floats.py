@@ -157,6 +157,7 @@ async def extremes(ctx: CaseContext) -> None:
         clause = "solve-backwards.data" if op == "solve-backwards" else "float.not-finite"
         expect_response(ctx, answer, clause=clause, expected=f"an answer or a refusal for {what}")
         reserved, dirty = _bad_patterns(answer.payload)
+        ctx.exercised("float.range")  # every float of the answer read as an F value
         ctx.expect(
             not reserved,
             clause="float.not-finite",

@@ -286,6 +286,7 @@ async def incremental_oat(ctx: CaseContext) -> None:
     )
     for op, delta in turns:
         start = await _turned(ctx, probe, op, start, delta)
+        ctx.exercised(f"{op}.data")  # the turn it made is the one its data asked for
     await probe.call("set-joint-angles", joints=list(before))
     await settle(ctx, probe, before)
 
