@@ -166,19 +166,18 @@ MAX_DISTINCT_FINDINGS: Final = 20
 
 @dataclass
 class DistinctFindings(Generic[Kept]):
-    """The distinct disagreements a run found, the first of each kind kept (a kind: the clause and what
-    the model allowed), up to ``bound``.  The run goes on after each: the model takes the state the
-    server showed (:meth:`ProtocolModel.observe` takes the reply that came, not the one expected), so
-    one disputed answer does not hide what follows it."""
+    """The distinct disagreements a run found, the first of each kind kept (a kind: the clause and the
+    request it was found on, as the caller names them), up to ``bound``.  The run goes on after each:
+    the model takes the state the server showed (:meth:`ProtocolModel.observe` takes the reply that
+    came, not the one expected), so one disputed answer does not hide what follows it."""
 
     bound: int = MAX_DISTINCT_FINDINGS
-    kept: dict[tuple[str | None, str], Kept] = field(default_factory=dict)
+    kept: dict[tuple[str, ...], Kept] = field(default_factory=dict)
     dropped: int = 0
     """Distinct findings past the bound, counted only."""
 
-    def add(self, violation: Violation, item: Kept) -> bool:
-        """Keep ``item`` for ``violation`` if it is a new kind and the bound allows; True if kept."""
-        key = (violation.clause, violation.expected)
+    def add(self, key: tuple[str, ...], item: Kept) -> bool:
+        """Keep ``item`` if ``key`` is a new kind and the bound allows; True if kept."""
         if key in self.kept:
             return False
         if len(self.kept) >= self.bound:

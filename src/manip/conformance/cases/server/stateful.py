@@ -207,6 +207,8 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         self.probe: Probe | None = None
         self.position: Joints = self.env.arm.ready
         self.failed = False
+        self.disagreed: list[MachineFailure] = []
+        """This run's disagreements with the model, in order (the run went on after each)."""
 
     # ------------------------------------------------------------------------------- plumbing
     @property
@@ -263,7 +265,8 @@ class ArmProtocolMachine(RuleBasedStateMachine):
             run,
             steps=list(self.steps),
         )
-        self.env.found.add(found.violation, found)
+        self.env.found.add(_kind(found), found)
+        self.disagreed.append(found)
 
     def _findings(self, findings: Sequence[Any]) -> None:
         """Raise the first MUST finding of a checker."""
@@ -437,6 +440,14 @@ class ArmProtocolMachine(RuleBasedStateMachine):
             if not self.failed:
                 self.pause(END_QUIET)
                 self._findings(check_transcript(probe.packets, rfc_packet_no=probe.rfc_packet_no))
+            if not self.failed and self.disagreed:
+                # The run went on after its disagreements; at its end the first fails it, so that
+                # Hypothesis shrinks a run that shows one (the others are reported unshrunk).
+                first = self.disagreed[0]
+                self.failed = True
+                self.env.log.add(first, len(first.steps))
+                self.bridge.failure_seen()
+                raise first
         finally:
             self.bridge.call(probe.close())  # the next run needs the robot: one client at a time
 
@@ -745,7 +756,7 @@ async def arm_model(ctx: CaseContext) -> None:
         ctx.note(note)
     reproduce = ctx.reproduce if ctx.options.embedded and ctx.reproduce else None
     address = ctx.options.address or "tcp://HOST:PORT"
-    _record_disagreements(ctx, disagreements, address, reproduce, shown=failure is not None)
+    _record_disagreements(ctx, disagreements, address, reproduce, failure)
     if failure is not None:
         shown = _counterexample(failure, address, reproduce)
         ctx.show_packets(failure.example or failure.packets)
@@ -753,22 +764,26 @@ async def arm_model(ctx: CaseContext) -> None:
         ctx.fail_with(replace(failure.violation, actual=shown, packet=culprit))
 
 
+def _kind(failure: MachineFailure) -> tuple[str, ...]:
+    """What makes two disagreements the same: the clause, and the rule of the step it was found on."""
+    rule = failure.steps[-1].rule if failure.steps else ""
+    return (failure.violation.clause or "", rule)
+
+
 def _record_disagreements(
     ctx: CaseContext,
     found: DistinctFindings[MachineFailure],
     address: str,
     reproduce: str | None,
-    *,
-    shown: bool,
+    stopped: MachineFailure | None,
 ) -> None:
-    """Report every distinct disagreement with the model the runs went on after (``shown``: another
-    failure's packets are the case's packet log already)."""
+    """Report every distinct disagreement with the model the runs went on after, but the one the case
+    stops with (``stopped``, shrunk; its packets are the case's packet log)."""
     for item in found.kept.values():
+        if stopped is not None and _kind(item) == _kind(stopped):
+            continue  # the one the case stops with, shrunk
         text = _counterexample(item, address, reproduce, shrunk=False)
         ctx.record(replace(item.violation, actual=text, packet=item.culprit))
-    if found.kept and not shown:
-        first = next(iter(found.kept.values()))
-        ctx.show_packets(first.example or first.packets)
     if found.dropped:
         ctx.note(
             f"{found.dropped} more distinct disagreement(s) with the model not reported "
