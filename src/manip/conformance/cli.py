@@ -303,7 +303,9 @@ def run(
         select_set = PatternSet.of(select, "--select")
         skip_set = PatternSet.of(skip, "--skip")
         known_set = PatternSet.of(known_failing, "--known-failing")
-        address = str(parse_address(host)) if host else ""
+        if host:
+            parse_address(host)  # checked; kept as given, so a reproduce line names it as the user did
+        address = host or ""
     except (PatternError, AddressError) as exc:
         raise click.UsageError(str(exc)) from None
     config_faults = _check_server_options(
