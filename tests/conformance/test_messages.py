@@ -63,3 +63,50 @@ class _SilentConnection:
 
     def info(self) -> None:
         return None
+
+
+def test_cases_and_coverage_piped_are_one_record_per_line_never_padded() -> None:
+    from click.testing import CliRunner
+
+    from manip.conformance.cli import main
+
+    for command, header in (
+        (["cases"], "id\tlevel\tkind\thazard\tclauses"),
+        (["coverage"], "clause\tlevel\tparty\tcases"),
+    ):
+        lines = CliRunner().invoke(main, command).output.splitlines()
+        assert lines[0] == header
+        records = [line.split("\t") for line in lines[1:] if "\t" in line]
+        assert len(records) > 100 and all(len(r) == len(header.split("\t")) for r in records)
+        assert not any(cell != cell.strip() or "  " in cell for r in records for cell in r)  # no padding
+        assert not any(ch in "".join(lines) for ch in "┃│━")  # no table drawing
+    ids = {
+        r[0] for r in (line.split("\t") for line in CliRunner().invoke(main, ["cases"]).output.splitlines())
+    }
+    assert "server.describe.pipelined" in ids
+
+
+def test_a_fuzz_finding_cuts_a_long_input_on_the_console_and_keeps_it_whole_in_the_report() -> None:
+    from manip.conformance.fuzz.report import (
+        CONSOLE_CUT,
+        CampaignViolation,
+        MinimalInput,
+        finding_json,
+        finding_text,
+    )
+    from manip.conformance.judge.violation import Violation
+
+    data = bytes(range(256)) + bytes(232)  # a 488-byte input
+    step = f"request 0201, {len(data)} data bytes: {data.hex(' ')}"
+    finding = CampaignViolation(
+        Violation("wrong answer", "request.data-length", expected="a C error", actual="done"),
+        input_class="wrong-length",
+        first_batch=1,
+        minimal=[MinimalInput(7, "wrong-length", "488 bytes", [step])],
+        reproduce="manip-conform fuzz --seed 1 --only 7 " + "x" * 300,
+    )
+    text = finding_text(finding)
+    assert max(len(line) for line in text.splitlines() if "reproduce:" not in line) < CONSOLE_CUT + 80
+    assert f"{len(step) + 6 - CONSOLE_CUT} more characters; whole in the JSON report" in text
+    assert finding.reproduce in text  # a reproduce line is never cut
+    assert step in str(finding_json(finding))
