@@ -110,3 +110,23 @@ def test_a_fuzz_finding_cuts_a_long_input_on_the_console_and_keeps_it_whole_in_t
     assert f"{len(step) + 6 - CONSOLE_CUT} more characters; whole in the JSON report" in text
     assert finding.reproduce in text  # a reproduce line is never cut
     assert step in str(finding_json(finding))
+
+
+def test_a_case_summary_is_whole_sentences_never_its_first_line_cut() -> None:
+    from manip.conformance.suite.case import summary_of
+
+    doc = """Three moves queued back to back, sampled every 8 ms: they complete in order, the arm
+    does not stop between them.
+
+    More detail that is not the summary."""
+    assert summary_of(doc) == (
+        "Three moves queued back to back, sampled every 8 ms: they complete in order, the arm does not "
+        "stop between them."
+    )
+    from_docstrings = [
+        c for c in all_cases() if c.function.__doc__ and c.summary == summary_of(c.function.__doc__)
+    ]
+    assert len(from_docstrings) > 50
+    assert all(c.summary.endswith((".", ")", "?")) for c in from_docstrings), [
+        c.id for c in from_docstrings if not c.summary.endswith((".", ")", "?"))
+    ]

@@ -16,7 +16,7 @@ A case is an ``async`` function of a :class:`~manip.conformance.suite.context.Ca
         waits=None,                                  # or: options -> seconds spent on a target's timer
     )
     async def describe_terminator(ctx: CaseContext) -> None:
-        # (a docstring here: its first line is the case's summary)
+        # (a docstring here: its first paragraph is the case's summary)
         probe = await ctx.connect()                  # fresh Chaos connection, initial RESPONSE consumed
         answer = await probe.call("describe-self")   # every packet up to the empty terminator
         ctx.check(check_reply(answer.request, answer.packets))   # findings of the pure checkers
@@ -90,6 +90,7 @@ __all__ = [
     "load_cases",
     "register",
     "strongest_level",
+    "summary_of",
     "target_of",
 ]
 
@@ -268,13 +269,12 @@ class Declare:
     ) -> Callable[[CaseFunction], CaseFunction]:
         """Declare a case; the decorated function is returned unchanged (and registered).
 
-        ``summary`` defaults to the first line of the function's docstring."""
+        ``summary`` defaults to the first paragraph of the function's docstring (:func:`summary_of`)."""
         clause_ids = tuple(clauses)
         chosen: Level = level if level is not None else strongest_level(clause_ids)
         _validate(case_id, clause_ids, chosen, technique, hazard, deadline)
 
         def decorate(function: CaseFunction) -> CaseFunction:
-            doc = (function.__doc__ or "").strip().splitlines()
             register(
                 Case(
                     id=case_id,
@@ -284,7 +284,7 @@ class Declare:
                     technique=technique,
                     hazard=hazard,
                     deadline=deadline,
-                    summary=summary if summary is not None else (doc[0] if doc else ""),
+                    summary=summary if summary is not None else summary_of(function.__doc__),
                     module=function.__module__,
                     waits=waits,
                 )
@@ -308,6 +308,13 @@ class Declare:
 
 case: Final = Declare()
 """Declare a case (``@case(...)``), or a family of them from a table (``@case.each(rows)``)."""
+
+
+def summary_of(doc: str | None) -> str:
+    """A docstring's first paragraph on one line: whole sentences, never its first line cut where the
+    source wrapped it."""
+    paragraph = (doc or "").strip().split("\n\n", 1)[0]
+    return " ".join(paragraph.split())
 
 
 def register(item: Case) -> Case:
