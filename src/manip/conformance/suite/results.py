@@ -143,12 +143,21 @@ def clause_statuses(results: Iterable[CaseResult]) -> dict[str, ClauseVerdict]:
         if clause in broken:
             verdicts[clause] = ClauseVerdict(clause, level, "broken", tuple(sorted(set(broken[clause]))))
             continue
-        reached = [r.id for r in citing if r.outcome in JUDGED and clause in r.reached]
+        reached = [r.id for r in citing if r.outcome in JUDGED and clause in _reached(r)]
         if reached:
             verdicts[clause] = ClauseVerdict(clause, level, "held", tuple(reached))
             continue
         verdicts[clause] = _unjudged(clause, level, citing)
     return verdicts
+
+
+_WHOLE_RECORDING: Final = frozenset({"replay", "verify"})
+"""Results judged from a recording (``verify``, ``replay``): their checks run over all of it, so every
+clause they cite was evaluated."""
+
+
+def _reached(result: CaseResult) -> Iterable[str]:
+    return result.clauses if result.kind in _WHOLE_RECORDING else result.reached
 
 
 def _unjudged(clause: str, level: Level, citing: list[CaseResult]) -> ClauseVerdict:
@@ -164,7 +173,12 @@ def _unjudged(clause: str, level: Level, citing: list[CaseResult]) -> ClauseVerd
     if ran:
         why = f"{', '.join(r.id for r in ran)} ran without a check reaching it"
         return ClauseVerdict(
-            clause, level, "not-exercised", cases, why, "another seed or more --max-examples"
+            clause,
+            level,
+            "not-exercised",
+            cases,
+            why,
+            "more examples (--max-examples) or another random draw",
         )
     reasons = sorted({r.reason for r in citing if r.reason})
     why = "its cases did not run" + (f" ({'; '.join(reasons)})" if reasons else "")
