@@ -5,6 +5,8 @@ first."""
 from __future__ import annotations
 
 import asyncio
+import json
+from pathlib import Path
 
 from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.context import CaseContext, Probe, RunOptions
@@ -130,3 +132,26 @@ def test_a_case_summary_is_whole_sentences_never_its_first_line_cut() -> None:
     assert all(c.summary.endswith((".", ")", "?")) for c in from_docstrings), [
         c.id for c in from_docstrings if not c.summary.endswith((".", ")", "?"))
     ]
+
+
+def test_a_cougar_response_layout_is_stated_in_words() -> None:
+    from manip.conformance.cougar.probe import layout_words
+    from manip.spec import SPEC
+
+    by_name = {m.name: m for m in SPEC.cougar_responses.values()}
+    assert layout_words(by_name["OUT-OF-SYNC"]) == "words: 2, code"
+    assert layout_words(by_name["EXMN-DATA"]) == "words: 4, count, words..."
+
+
+def test_a_passing_cougar_case_keeps_its_exchange_in_the_report(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from manip.conformance.cli import main
+
+    report = tmp_path / "c.json"
+    args = ["run", "--cougar", "--seed", "1", "--select", "cougar.link.*", "--json", str(report)]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    cases = json.loads(report.read_text())["cases"]
+    assert cases and all(c["outcome"] == "pass" for c in cases)
+    assert all(any(n.startswith("DRV-11J exchange") and "<- " in n for n in c["notes"]) for c in cases)
