@@ -38,10 +38,12 @@ Rules a case follows:
   ``tests/conformance/test_clauses.py`` over the source of every case); what the suite's own machinery
   finds on every exchange is attributed to an invariant instead (:mod:`manip.conformance.suite.invariants`).
   Its level is the strongest of its clauses' levels, and a check never overrides a clause's level.
-* It says what it checks through ``ctx.expect`` / ``ctx.check`` / ``ctx.fail``: a violated MUST clause
-  raises :class:`CaseFailure` (the case stops there); a violated SHOULD/MAY clause is recorded and the
-  case goes on (it becomes ``warn``, or ``fail`` under ``--strict``).  ``ctx.skip(reason)`` ends it as
-  not applicable.  Any other exception is an ``error`` of the suite, reported with its traceback.
+* It says what it checks through ``ctx.expect`` / ``ctx.check`` / ``ctx.fail``: a violated clause is
+  recorded and the case goes on, so that it reports every violation (a MUST fails it; a SHOULD/MAY
+  makes it ``warn``, or ``fail`` under ``--strict``); ``ctx.require`` and ``ctx.fail`` stop it, for what
+  the rest of the case depends on.  A clause counts as held only when one of its checks ran
+  (``ctx.reached``; ``ctx.exercised`` for checks made outside ``ctx.expect``).  ``ctx.skip(reason)``
+  ends it as not applicable.  Any other exception is an ``error`` of the suite, reported with its traceback.
 * It never assumes state left by another case: each gets a fresh connection, which starts the
   per-connection state afresh (power, speed, segments; erratum ``server-robot``), but the arm stands
   wherever the last case left it.

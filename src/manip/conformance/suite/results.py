@@ -16,6 +16,10 @@ Outcomes (``Outcome``):
   judge it; never a pass, and it does not fail the run, but the verdict line counts the MUST clauses
   left unjudged (:meth:`RunReport.not_judged_clauses`).
 
+Clauses (:func:`clause_statuses`, the one rule every report uses): each clause the run's cases cite is
+held (a check reached it), broken, not judged (why, what would judge it) or not exercised; the verdict
+line says "N of M MUST clauses judged" (:func:`completeness_text`).
+
 Exit codes (:class:`ExitCode`): 0 conformant, 1 non-conformant (or a stale known-failing entry),
 2 usage error, 3 target unreachable or dead before any verdict, 4 interrupted or internal error.
 """
