@@ -88,6 +88,7 @@ def judging_hint(reason: str) -> str:
 
 ClauseStatus = Literal["held", "broken", "not-judged", "not-exercised"]
 CLAUSE_STATUSES: Final[tuple[str, ...]] = ("held", "broken", "not-judged", "not-exercised")
+_STRENGTH: Final = {"MUST": 3, "SHOULD": 2, "MAY": 1, "INFO": 0}
 _VERDICT_OUTCOMES: Final = frozenset({"fail", "warn", "known-fail"})
 """Outcomes whose violations break their clauses (an ``error`` is the suite's, not the target's)."""
 _UNJUDGING_OUTCOMES: Final = frozenset({"not-judged", "unsupported", "error"})
@@ -342,14 +343,15 @@ def conclude(
     result: CaseResult, failure: Violation | None, recorded: Sequence[Violation], strict: bool
 ) -> None:
     """A case's outcome from how it ended (``result.outcome`` so far) and what it found: the violation
-    that stopped it (if any) first, then every one recorded on the way.  A counted violation (MUST, and
-    SHOULD with ``strict``) fails the case even when it went on to skip, to be not judged, or to
-    stumble on what the violation left (an exception after it is noted, not an error of the suite);
-    weaker ones make a passing case ``warn``.  The one rule of every runner."""
+    that stopped it (if any) first, then every one recorded on the way, the strongest first.  A counted
+    violation (MUST, and SHOULD with ``strict``) fails the case even when it went on to skip, to be
+    not judged, or to stumble on what the violation left (an exception after it is noted, not an
+    error of the suite); weaker ones make a passing case ``warn``.  The one rule of every runner."""
     counted = {"MUST", "SHOULD"} if strict else {"MUST"}
     if failure is not None:
         result.violations.append(failure)
-    result.violations += recorded
+    # the strongest first (stable): the case's failure is its first MUST violation, wherever it came
+    result.violations += sorted(recorded, key=lambda v: -_STRENGTH.get(v.strength, 0))
     fails = any(v.level in counted for v in result.violations)
     if result.outcome == "error" and fails and not result.reason.startswith("bug of the suite"):
         result.notes.append(f"the case could not go on after its violations: {result.reason}")
