@@ -156,9 +156,9 @@ def clause_statuses(results: Iterable[CaseResult]) -> dict[str, ClauseVerdict]:
     return verdicts
 
 
-_WHOLE_RECORDING: Final = frozenset({"replay", "verify"})
-"""Results judged from a recording (``verify``, ``replay``): their checks run over all of it, so every
-clause they cite was evaluated."""
+_WHOLE_RECORDING: Final = frozenset({"replay", "verify", "fuzz"})
+"""Results judged whole, not by a case's checks (``verify``, ``replay``: a recording; ``fuzz``: every
+exchange of an input class): their checks run over all of it, so every clause they cite was evaluated."""
 
 
 def _reached(result: CaseResult) -> Iterable[str]:
