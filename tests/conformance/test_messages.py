@@ -155,3 +155,14 @@ def test_a_passing_cougar_case_keeps_its_exchange_in_the_report(tmp_path: Path) 
     cases = json.loads(report.read_text())["cases"]
     assert cases and all(c["outcome"] == "pass" for c in cases)
     assert all(any(n.startswith("DRV-11J exchange") and "<- " in n for n in c["notes"]) for c in cases)
+
+
+def test_the_verify_verdict_line_says_how_many_clauses_it_judged() -> None:
+    from click.testing import CliRunner
+
+    from manip.conformance.cli import main
+    from tests.support.paths import ROOT
+
+    result = CliRunner().invoke(main, ["verify", str(ROOT / "captures" / "errors.mcap")])
+    last = result.output.strip().splitlines()[-1]
+    assert last.startswith("conformant (exit 0)") and " MUST clauses judged" in last, last
