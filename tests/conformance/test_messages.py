@@ -166,3 +166,25 @@ def test_the_verify_verdict_line_says_how_many_clauses_it_judged() -> None:
     result = CliRunner().invoke(main, ["verify", str(ROOT / "captures" / "errors.mcap")])
     last = result.output.strip().splitlines()[-1]
     assert last.startswith("conformant (exit 0)") and " MUST clauses judged" in last, last
+
+
+def test_a_cougar_response_that_never_completes_shows_the_words_that_came() -> None:
+    """A bare 2 (an OUT-OF-SYNC without its word) is not "nothing": the words received are shown."""
+    from types import SimpleNamespace
+
+    import pytest
+
+    from manip.conformance.cougar.probe import CougarProbe
+    from manip.conformance.suite.case import CaseFailure
+
+    probe = CougarProbe.__new__(CougarProbe)  # no link: the ticks do nothing, one word waits
+    probe._inbox = []  # type: ignore[attr-defined]
+    probe._stream = SimpleNamespace(pending=(2,))  # type: ignore[attr-defined]
+
+    async def tick(_gap: object) -> None:
+        return None
+
+    probe._tick = tick  # type: ignore[method-assign]
+    with pytest.raises(CaseFailure) as failed:
+        asyncio.run(probe.reply("NOP", within=2))
+    assert failed.value.actual == "no whole response: 1 word(s) came that make no Table 1 response yet: 02"

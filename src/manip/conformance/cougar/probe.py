@@ -272,7 +272,7 @@ class CougarProbe:
             f"no response from Cougar to {what} within {within} ticks",
             clause="cougar.word-link",
             expected=f"a response to {what} within {within} ticks",
-            actual=f"no whole response; {len(pending)} word(s) that begin none Table 1 completes: "
+            actual=f"no whole response: {len(pending)} word(s) came that make no Table 1 response yet: "
             f"{octal_words(pending)}"
             if pending
             else "nothing",
