@@ -326,18 +326,23 @@ def test_expect_and_fail_refuse_an_undeclared_clause_even_when_it_holds() -> Non
         ctx.fail("x", clause="response.echoes-request-number", invariant=TRANSCRIPT.name)
     assert raised.value.invariant == "transcript"
     assert not ctx.expect(False, clause="segment.number-increases")
-    assert [s.invariant for s in ctx.soft_failures] == [None]
+    assert [s.invariant for s in ctx.recorded] == [None]
 
 
 def test_check_attributes_the_checkers_findings_to_the_transcript_invariant() -> None:
     ctx = _context("describe.brand-name")
     ctx.check([Violation("m", "describe.brand-name"), Violation("m", "connect.initial-response-number")])
-    assert [(s.clause, s.invariant) for s in ctx.soft_failures] == [
+    assert [(s.clause, s.invariant) for s in ctx.recorded] == [
         ("describe.brand-name", None),
         ("connect.initial-response-number", "transcript"),
     ]
+    assert not ctx.check([Violation("m", "response.echoes-request-number")])  # recorded, the case goes on
+    assert (ctx.recorded[-1].clause, ctx.recorded[-1].invariant) == (
+        "response.echoes-request-number",
+        "transcript",
+    )
     with pytest.raises(CaseFailure) as raised:
-        ctx.check([Violation("m", "response.echoes-request-number")])
+        ctx.check([Violation("m", "response.echoes-request-number")], stop=True)
     assert raised.value.invariant == "transcript"
     with pytest.raises(UndeclaredClauseError, match=r"here\.transform"):
         ctx.check([Violation("m", "here.transform")])  # no checker names it: a bug of the suite

@@ -146,7 +146,8 @@ def test_run_groups_failures_by_clause_in_console_json_and_junit(tmp_path: Path)
     assert lines.index(line) < next(i for i, t in enumerate(lines) if t.startswith("non-conformant"))
     data = json.loads(json_path.read_text())
     assert [(t["clause"], t["failures"], t["cases"]) for t in data["by_clause"]] == [(ECHO, 2, selected)]
-    failures = list(ET.parse(junit_path).getroot().iter("failure"))
+    suites = [s for s in ET.parse(junit_path).getroot().iter("testsuite") if s.get("name") != "clauses"]
+    failures = [f for s in suites for f in s.iter("failure")]
     assert len(failures) == 2
     for failure in failures:
         assert clause.text in failure.get("message", "") and clause.section in failure.get("message", "")
@@ -366,3 +367,15 @@ def test_raw_packets_say_what_their_chaos_addresses_are() -> None:
     assert "Chaos host 0440 (the robot's default address) index 0 pkt#1" in shown
     other = Packet(ChaosOp.LOS, dest_host=0o3001, dest_index=1, src_host=0o440, src_index=2)
     assert "-> Chaos host 03001 index 01" in format_packet(other)
+
+
+def test_a_reproduce_line_names_the_target_as_it_was_given(reference_server_url: str, tmp_path: Path) -> None:
+    """Every query parameter the user wrote stays, even one that only repeats a default (me=0401)."""
+    given = f"{reference_server_url}?me=0401&contact=PUMA"
+    report = tmp_path / "r.json"
+    result = CliRunner().invoke(
+        main, ["run", given, "--select", "server.describe.alist", "--json", str(report)]
+    )
+    assert result.exit_code == 0, result.output
+    (case,) = json.loads(report.read_text())["cases"]
+    assert shlex.split(case["reproduce"])[:3] == ["manip-conform", "run", given]

@@ -79,6 +79,7 @@ CATCHERS = {
     Fault.KEEPS_SPEED: "server.connect.fresh-state",
     Fault.KEEPS_CONFIGURATION: "server.connect.fresh-state",
     Fault.KEEPS_NOTIFICATIONS: "server.connect.fresh-state",
+    Fault.DESCRIBE_TERMINATOR_OVERTAKEN: "server.describe.pipelined",
 }
 """Faults and the case written to catch each: it must fail, or warn for a SHOULD clause (others may catch
 the fault too)."""
@@ -213,3 +214,16 @@ def test_the_guides_async_layout_conforms() -> None:
     ]
     assert {"server.async.segment-completed", "server.async.guard-hit"} <= {r.id for r in report.results}
     assert not bad, bad
+
+
+def test_only_requests_pipelined_behind_describe_self_see_its_terminator_overtaken() -> None:
+    """describe-terminator-overtaken is the re-entering request loop: a case that waits for each answer
+    never sees it (the terminator comes two servo ticks late), the pipelined case does."""
+    fault = FaultSet.parse([Fault.DESCRIBE_TERMINATOR_OVERTAKEN.value])
+    cases = [c for c in suite() if c.id.startswith("server.describe.")]
+    report = asyncio.run(run_suite(fault, cases))
+    outcomes = {r.id: r.outcome for r in report.results}
+    assert outcomes.pop("server.describe.pipelined") == "fail"
+    assert set(outcomes.values()) == {"pass"}, outcomes
+    clean = asyncio.run(run_suite(FaultSet(), [c for c in cases if c.id == "server.describe.pipelined"]))
+    assert [r.outcome for r in clean.results] == ["pass"]

@@ -231,6 +231,46 @@ CASES = [
 ]
 
 
+async def _fails_twice(ctx: CaseContext) -> None:
+    probe = await ctx.connect()
+    answer = await probe.call("here")
+    ctx.expect(False, clause="response.echoes-request-number", expected="first", actual="a")
+    ctx.expect(answer.is_response, clause="request.one-reply", expected="a reply")
+    ctx.expect(False, clause="here.transform", expected="second", actual="b")
+
+
+async def _stumbles(ctx: CaseContext) -> None:
+    ctx.expect(False, clause="here.transform", expected="a transform", actual="garbage")
+    raise KeyError("what the violation left")  # e.g. decoding what was not there
+
+
+async def _requires(ctx: CaseContext) -> None:
+    ctx.require(False, clause="here.transform", expected="a transform", actual="nothing")
+    ctx.expect(False, clause="request.one-reply", expected="never checked")
+
+
+async def _silent(ctx: CaseContext) -> None:
+    await ctx.connect()
+
+
+async def _unjudged(ctx: CaseContext) -> None:
+    ctx.not_judged("needs a world that can arrange it (--world)")
+
+
+MANY = [
+    _case(
+        "u.twice",
+        _fails_twice,
+        clauses=("response.echoes-request-number", "request.one-reply", "here.transform"),
+    ),
+    _case("u.stumbles", _stumbles, clauses=("here.transform",)),
+    _case("u.requires", _requires, clauses=("here.transform", "request.one-reply")),
+    _case("u.silent", _silent, clauses=("joint-angles.reply",)),
+    _case("u.unjudged", _unjudged, clauses=("motion.abort",)),
+    _case("u.skipped", _passes, clauses=("request.one-reply", "kill-power.done"), hazard="motion"),
+]
+
+
 def _run(
     select: list[str],
     *,
@@ -238,6 +278,7 @@ def _run(
     strict: bool = False,  # type: ignore[assignment]
     robot: str = "sim",
     address: str | None = None,
+    cases: list[Case] = CASES,
 ) -> RunReport:
     async def go() -> RunReport:
         options = RunOptions(strict=strict, robot=robot, reply_timeout=0.5, connect_timeout=1.0)  # type: ignore[arg-type]
@@ -249,7 +290,7 @@ def _run(
                 select=PatternSet.of(select, "--select"),
                 known_failing=PatternSet.of(known, "--known-failing"),
             )
-            return await Runner(config, CASES).run()
+            return await Runner(config, cases).run()
         async with serve("tcp://127.0.0.1:0") as server:
             config = RunConfig(
                 address=server.address,
@@ -258,7 +299,7 @@ def _run(
                 select=PatternSet.of(select, "--select"),
                 known_failing=PatternSet.of(known, "--known-failing"),
             )
-            return await Runner(config, CASES).run()
+            return await Runner(config, cases).run()
 
     return asyncio.run(go())
 
@@ -310,6 +351,53 @@ def test_hardware_target_skips_motion_and_unreachable_target() -> None:
     dead = _run(["t.pass"], address="tcp://127.0.0.1:1")
     assert dead.exit_code == ExitCode.UNREACHABLE
     assert _outcomes(dead) == {"t.pass": "skip"}
+
+
+def test_a_case_reports_every_violation_and_goes_on_until_it_cannot() -> None:
+    report = _run(["u"], robot="hardware", cases=MANY)
+    results = {r.id: r for r in report.results}
+    twice = results["u.twice"]
+    assert twice.outcome == "fail"
+    assert [v.clause for v in twice.violations] == ["response.echoes-request-number", "here.transform"]
+    assert set(twice.reached) == {"response.echoes-request-number", "request.one-reply", "here.transform"}
+    stumbled = results["u.stumbles"]  # an exception after a violation follows it: a fail, not an error
+    assert stumbled.outcome == "fail" and not stumbled.traceback
+    assert any("could not go on" in n and "what the violation left" in n for n in stumbled.notes)
+    required = results["u.requires"]  # require stops the case: the check after it never ran
+    assert [v.clause for v in required.violations] == ["here.transform"]
+    assert "request.one-reply" not in required.reached
+
+
+def test_every_clause_has_one_status_and_the_verdict_says_how_many_were_judged() -> None:
+    report = _run(["u", "t.pass"], robot="hardware", cases=[*MANY, *CASES])
+    statuses = report.clause_statuses()
+    got = {c: v.status for c, v in statuses.items()}
+    assert got == {
+        "response.echoes-request-number": "broken",
+        "here.transform": "broken",
+        "request.one-reply": "held",  # reached by t.pass and u.twice
+        "joint-angles.reply": "not-exercised",  # u.silent passed without a check reaching it
+        "kill-power.done": "not-exercised",  # its one case was skipped
+        "motion.abort": "not-judged",
+    }
+    assert statuses["motion.abort"].hint == "--world" and "u.unjudged" in statuses["motion.abort"].why
+    assert "u.silent" in statuses["joint-angles.reply"].why
+    assert report.not_judged_clauses() == ["motion.abort"]
+    data = json.loads(json.dumps(report_json(report)))
+    must = data["completeness"]["levels"]["MUST"]
+    assert (must["judged"], must["total"], must["not-exercised"]) == (3, 6, 2)
+    assert data["completeness"]["text"] == "3 of 6 MUST clauses judged"
+    assert {c["clause"]: c["status"] for c in data["clause_status"]} == got
+    root = ET.fromstring(ET.tostring(report_junit(report)))
+    clauses = next(s for s in root.iter("testsuite") if s.get("name") == "clauses")
+    rows = {tc.get("name"): tc for tc in clauses.iter("testcase")}
+    assert rows["here.transform"].find("failure") is not None
+    assert (
+        rows["request.one-reply"].find("failure") is None
+        and rows["request.one-reply"].find("skipped") is None
+    )
+    skipped = rows["motion.abort"].find("skipped")
+    assert skipped is not None and "not-judged" in (skipped.get("message") or "")
 
 
 # ------------------------------------------------------------------------------------------- reports

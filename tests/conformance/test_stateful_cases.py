@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import pytest
 
 from manip.conformance.cases.server.stateful import replay_async
+from manip.conformance.judge.model import MAX_DISTINCT_FINDINGS, DistinctFindings
 from manip.conformance.output.culprit import culprit_index
 from manip.conformance.suite import bridge
 from manip.conformance.suite.case import all_cases
@@ -130,3 +131,28 @@ def test_hardware_target_without_motion_keeps_to_read_only_and_config() -> None:
     sent = [p.opcode for p in r.packets if p.direction == "c2s" and not p.is_close]
     hazards = {SPEC.requests[o].hazard for o in sent if o in SPEC.requests}
     assert hazards <= {"read-only", "config"}
+
+
+def test_the_model_goes_on_after_a_disagreement_and_reports_each_distinct_one(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Two defects of the state rules in one server: the run does not stop at the first, so both show,
+    the first shrunk, the others with the run up to them; each kind once."""
+    monkeypatch.setattr(bridge, "DEFAULT_SHRINK_BUDGET", 0.0)  # what generation finds, not timing
+    r = run(["no-nap", "speed-unchecked"], seed=7)
+    assert r.outcome == "fail", (r.reason, r.traceback)
+    clauses = [v.clause for v in r.violations]
+    assert {"motion.no-power", "speed.range"} <= set(clauses), clauses
+    assert "requests of the shrunk counterexample" in r.violations[0].actual
+    assert any("requests of the run up to it (not shrunk)" in v.actual for v in r.violations[1:])
+    assert len(r.violations) <= MAX_DISTINCT_FINDINGS + 1
+    assert "motion.no-power" in r.reached and "speed.range" in r.reached
+
+
+def test_distinct_findings_keep_each_kind_once_up_to_the_bound() -> None:
+    found: DistinctFindings[int] = DistinctFindings(bound=2)
+    assert found.add(("speed.range", "set_speed"), 1)
+    assert not found.add(("speed.range", "set_speed"), 2)  # the same kind again
+    assert found.add(("motion.no-power", "move"), 3)
+    assert not found.add(("motion.abort", "move"), 4)  # past the bound: counted
+    assert list(found.kept.values()) == [1, 3] and found.dropped == 1

@@ -246,8 +246,12 @@ def test_without_a_world_the_world_cases_are_not_judged_and_every_report_says_so
     data = report_json(report)
     _validate(data, load_schema(), load_schema())
     assert data["not_judged"] == unjudged and data["counts"]["not-judged"] == len(WORLD_CASES)
-    skipped = [e.get("message", "") for e in report_junit(report).iter("skipped")]
+    suites = report_junit(report).iter("testsuite")
+    cases = [s for s in suites if s.get("name") != "clauses"]  # the clauses suite: one testcase a clause
+    skipped = [e.get("message", "") for s in cases for e in s.iter("skipped")]
     assert len(skipped) == len(WORLD_CASES) and all(m.startswith("not judged:") for m in skipped)
+    statuses = report.clause_statuses()
+    assert all(statuses[c].status == "not-judged" and statuses[c].hint == "--world" for c in unjudged)
     markdown = render_markdown(data)
     assert "| not-judged | 6 |" in markdown and "**not judged**" in markdown
     assert "motion.collision (--world)" in markdown

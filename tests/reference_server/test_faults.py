@@ -26,12 +26,13 @@ from manip.codecs.lisp import read_alist
 from manip.codecs.messages import ErrorReply, decode_async, decode_error, decode_reply, encode_request
 from manip.codecs.pdp11float import pack_f
 from manip.conformance.cli import main as conform_main
+from manip.conformance.judge.checks import word
 from manip.cougar import CougarSim
 from manip.reference_server import FAULTS, Fault, FaultSet, Output, ServerConfig, State
 from manip.reference_server import session as session_module
 from manip.reference_server.cougar_port import SimPort
 from manip.reference_server.cougar_wrist import CougarWrist
-from manip.reference_server.defects import Defects, SwitchedDefects
+from manip.reference_server.defects import HELD_TICKS, Defects, SwitchedDefects
 from manip.reference_server.faults import WRIST_SIDE
 from manip.spec import SPEC
 from manip.spec.constants import RequestOp, ServerOp
@@ -200,6 +201,36 @@ def test_no_describe_terminator() -> None:
 
     (clean_ends, n), (faulty_ends, m) = pair(Fault.NO_DESCRIBE_TERMINATOR, scenario)
     assert clean_ends and not faulty_ends and m == n - 1
+
+
+@covers(Fault.DESCRIBE_TERMINATOR_OVERTAKEN)
+def test_describe_terminator_overtaken() -> None:
+    """The terminator is held back: a request sent at once is answered before it (the terminator right
+    after); to a client that waits, it comes some servo ticks late, alone."""
+
+    def scenario(c: Client) -> tuple[list[int], list[int]]:
+        first = c.packet_no + 1
+        numbers = [word(d) for d in _describe(c)]
+        numbers += [word(d) for _, d in _raw(c, "here")]
+        late = []
+        for _ in range(HELD_TICKS):
+            c.now += 0.016
+            late += [word(p.data) for p in c.session.tick(c.now).packets if p.opcode == ServerOp.RESPONSE]
+        return [n - first for n in numbers], [n - first for n in late]
+
+    clean, faulty = pair(Fault.DESCRIBE_TERMINATOR_OVERTAKEN, scenario)
+    assert clean[0][-2:] == [0, 1] and not clean[1]  # the terminator, then the reply to here
+    assert faulty[0][-2:] == [1, 0] and sorted(faulty[0]) == sorted(clean[0]) and faulty[1] == []
+
+    def waiting(c: Client) -> list[int]:
+        _describe(c)
+        late = []
+        for _ in range(HELD_TICKS):
+            c.now += 0.016
+            late += [len(p.data) for p in c.session.tick(c.now).packets if p.opcode == ServerOp.RESPONSE]
+        return late
+
+    assert pair(Fault.DESCRIBE_TERMINATOR_OVERTAKEN, waiting) == ([], [2])  # the bare terminator, late
 
 
 @covers(Fault.MULTI_WRONG_NUMBER)

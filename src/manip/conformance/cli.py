@@ -33,7 +33,6 @@ from typing import Any, TypeVar, cast
 
 import click
 from rich.console import Console
-from rich.table import Table
 
 from manip.commandline import FiniteFloat, configure_logging, version_option
 from manip.conformance.cli_options import (
@@ -51,7 +50,7 @@ from manip.conformance.cli_options import (
 from manip.conformance.client.cli import client_command
 from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness_check
 from manip.conformance.fuzz.cli import fuzz_command
-from manip.conformance.output.console import make_console
+from manip.conformance.output.console import make_console, print_table
 from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
 from manip.conformance.output.documents import ReportError, document_options, render_saved, write_reports
 from manip.conformance.output.run_console import summary
@@ -343,16 +342,15 @@ def run(
         select_set = PatternSet.of(select, "--select")
         skip_set = PatternSet.of(skip, "--skip")
         known_set = PatternSet.of(known_failing, "--known-failing")
-        address = str(parse_address(host)) if host else ""
+        if host:
+            parse_address(host)  # checked; kept as given, so a reproduce line names it as the user did
+        address = host or ""
     except (PatternError, AddressError) as exc:
         raise click.UsageError(str(exc)) from None
     config_faults = _check_server_options(
         host, server_faults, target_time_scale, cougar, cougar_faults, allow_motion, target_kind
     )
-    if server_profile != "manip" and (host or cougar is not None):
-        raise click.UsageError(
-            "--server-profile applies to the embedded server only (omit HOST and --cougar)"
-        )
+    _check_profile(server_profile, host=host, cougar=cougar)
     target = _cougar_target(
         cougar, (cougar_faults, cougar_readings), memory_map, host=host, server_faults=server_faults
     )
@@ -431,6 +429,14 @@ def run(
         report = job.report
     sys.exit(_finish(report, code, console, quiet, json=json_path, junit=junit_path, html=html_path,
                      markdown=markdown_path))  # fmt: skip
+
+
+def _check_profile(server_profile: str, *, host: str | None, cougar: str | None) -> None:
+    """A server profile other than manip's own chooses how the embedded server behaves: no other target."""
+    if server_profile != "manip" and (host or cougar is not None):
+        raise click.UsageError(
+            "--server-profile applies to the embedded server only (omit HOST and --cougar)"
+        )
 
 
 def _check_server_options(
@@ -631,12 +637,9 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
         ]
         click.echo(json.dumps(data, indent=2))
         return
-    table = Table(title=f"{len(items)} cases", show_lines=False)
-    for column in ("id", "level", "kind", "hazard", "clauses"):
-        table.add_column(column)
-    for c in items:
-        table.add_row(c.id, c.level, c.technique, c.hazard, " ".join(c.clauses))
-    make_console(min_width=TABLE_WIDTH).print(table)
+    rows = [(c.id, c.level, c.technique, c.hazard, " ".join(c.clauses)) for c in items]
+    columns = ("id", "level", "kind", "hazard", "clauses")
+    print_table(make_console(min_width=TABLE_WIDTH), f"{len(items)} cases", columns, rows)
 
 
 # ----------------------------------------------------------------------------------------------- coverage
@@ -672,14 +675,17 @@ def coverage_command(fmt: str, parties: tuple[str, ...]) -> None:
         }
         click.echo(json.dumps(data, indent=2))
     else:
-        table = Table(title="clause coverage")
-        for column in ("clause", "level", "party", "cases"):
-            table.add_column(column)
-        for r in rows:
-            cases_text = ", ".join(r.cases) if r.cases else ("[bold red]NONE[/]" if r.gap else "[dim]-[/]")
-            table.add_row(r.clause, r.level, r.party + ("" if r.in_scope else " (out of scope)"), cases_text)
+        lines = [
+            (
+                r.clause,
+                r.level,
+                r.party + ("" if r.in_scope else " (out of scope)"),
+                ", ".join(r.cases) if r.cases else ("[bold red]NONE[/]" if r.gap else "[dim]-[/]"),
+            )
+            for r in rows
+        ]
         console = make_console(min_width=TABLE_WIDTH)
-        console.print(table)
+        print_table(console, "clause coverage", ("clause", "level", "party", "cases"), lines)
         covered = sum(1 for r in rows if r.cases)
         console.print(
             f"{covered} of {len(rows)} clauses have a case; {len(missing)} MUST clause(s) in scope have none"

@@ -14,6 +14,7 @@ The hook points, by what they decide:
   :meth:`~Defects.inherit` (what a new connection keeps of the last), :meth:`~Defects.opened` (what the
   world does once it is open), :attr:`~Defects.keeps_arm_after_close` (the driver's);
 * request numbers: :meth:`~Defects.initial_numbers`, :meth:`~Defects.reply_number`;
+* when a held-back reply packet goes out: :meth:`~Defects.held_back` (at the servo tick);
 * serving a request: :meth:`~Defects.decode`, :meth:`~Defects.check`, :meth:`~Defects.refused`,
   :meth:`~Defects.wrist_failure`, :attr:`~Defects.discards_after_free_joint`;
 * what a request does: :meth:`~Defects.describe`, :meth:`~Defects.increment`, :meth:`~Defects.move_ready`,
@@ -85,6 +86,11 @@ _SWAPPED_ARGS: Final[Mapping[Fault, frozenset[str]]] = {
 _FLOAT_FAULTS: Final = frozenset({Fault.UNDERFLOW_DIRTY_ZERO, Fault.NOT_FINITE_RESERVED})
 _SWAPPED_CODES: Final = {"TOR": "JOR", "JOR": "TOR"}
 _ASYNC_ERRORS: Final = frozenset({ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING})
+
+
+HELD_TICKS: Final = 25
+"""Servo ticks describe self's terminator waits with describe-terminator-overtaken: a client that waits
+for it gets it 0.4 s late (well within any reply timeout), a request sent behind it is answered first."""
 
 
 def _word(n: int) -> bytes:
@@ -170,6 +176,11 @@ class Defects:
         included."""
         return packets
 
+    def held_back(self) -> tuple[bytes, ...]:
+        """Reply packets held back from an earlier request, sent at the servo tick (none: a reply
+        goes out whole, at once)."""
+        return ()
+
     # ---------------------------------------------------------------------------- errors
     def error_number(self, opcode: int, number: int, before: int | None) -> int:
         """The request number an error packet of ``opcode`` carries: ``number``, the protocol's (for a
@@ -215,6 +226,9 @@ class SwitchedDefects(Defects):
 
     def __init__(self, faults: FaultSet) -> None:
         self.faults = faults
+        self._held_terminator: bytes | None = None
+        """Describe self's terminator, held back until the next reply (describe-terminator-overtaken)."""
+        self._held_ticks = 0
         on = faults.active
         self.keeps_arm_after_close = Fault.CLOSE_KEEPS_MOVING in on
         self.discards_after_free_joint = Fault.FREE_JOINT_EXECUTES not in on
@@ -377,6 +391,7 @@ class SwitchedDefects(Defects):
         return pack_f(x)
 
     def reply(self, op: RequestOpcode | None, packets: list[bytes]) -> Sequence[bytes]:
+        packets = self._overtaking(op, packets)
         if op is None:
             return packets
         if op.response.form == "multi":
@@ -440,6 +455,27 @@ class SwitchedDefects(Defects):
 
     def after_warning(self, arm: ArmSim) -> list[ArmEvent]:
         return arm.halt(AbortCause.COLLISION) if self._on(Fault.WARNING_INTERRUPTS) else []
+
+    def held_back(self) -> tuple[bytes, ...]:
+        if self._held_terminator is None:
+            return ()
+        self._held_ticks += 1
+        if self._held_ticks < HELD_TICKS:
+            return ()
+        held, self._held_terminator = self._held_terminator, None
+        return (held,)
+
+    def _overtaking(self, op: RequestOpcode | None, packets: list[bytes]) -> list[bytes]:
+        """describe-terminator-overtaken: a multi-packet reply's terminator waits :data:`HELD_TICKS` servo
+        ticks; a request already there by then is answered before it (a request loop that re-enters
+        itself)."""
+        if not self._on(Fault.DESCRIBE_TERMINATOR_OVERTAKEN):
+            return packets
+        held, self._held_terminator = self._held_terminator, None
+        if op is not None and op.response.form == "multi" and len(packets) > 1:
+            self._held_terminator, self._held_ticks = packets[-1], 0
+            packets = packets[:-1]
+        return packets if held is None else [*packets, held]
 
 
 def _renumbered(packet: bytes, by: int) -> bytes:

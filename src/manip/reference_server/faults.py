@@ -41,6 +41,7 @@ class Fault(enum.StrEnum):
     NO_INITIAL_RESPONSE = "no-initial-response"
     INITIAL_RESPONSE_NUMBER = "initial-response-wrong-number"
     NO_DESCRIBE_TERMINATOR = "no-describe-terminator"
+    DESCRIBE_TERMINATOR_OVERTAKEN = "describe-terminator-overtaken"
     MULTI_WRONG_NUMBER = "multi-wrong-number"
     NO_PROTOCOL_VERSION = "no-protocol-version"
     SWAPPED_FLOAT_WORDS = "swapped-float-words"
@@ -208,6 +209,13 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "Describe self is not ended by an empty response packet.",
                 "multi.terminated-by-empty",
                 "describe.reply-shape",
+            ),
+            _info(
+                Fault.DESCRIBE_TERMINATOR_OVERTAKEN,
+                "protocol",
+                "Describe self's empty terminator waits 25 servo ticks (0.4 s): a request pipelined "
+                "behind describe self is answered before its reply ends.",
+                "request.one-reply",
             ),
             _info(
                 Fault.MULTI_WRONG_NUMBER,

@@ -350,6 +350,8 @@ class ServerSession:
 
     def _run_arm(self, event: _Event) -> State | None:
         """Run the move process up to ``now``, then the wrist processes, and report what they did."""
+        for data in self.defects.held_back():
+            self._emit(ServerOp.RESPONSE, data)
         number = self.last_processed or 0
         self._report_arm(number, self.arm.tick(event.now))
         for wev in self.wrist.tick(event.now, self.arm):

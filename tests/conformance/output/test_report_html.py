@@ -233,6 +233,19 @@ def test_markdown_counts_failures_by_clause_and_one_line_per_reproduce_command(f
     assert len(fences) % 2 == 0 and fences
 
 
+def test_both_documents_say_how_completely_the_run_judged_and_each_clauses_status(failing_run: Run) -> None:
+    judged = failing_run.data["completeness"]["text"]
+    assert judged.startswith(f"{failing_run.data['completeness']['levels']['MUST']['judged']} of ")
+    statuses = {s["clause"]: s["status"] for s in failing_run.data["clause_status"]}
+    assert statuses[BROKEN] == "broken"
+    lines = failing_run.markdown.read_text().splitlines()
+    assert f"**{judged}**" in lines
+    assert any(line.startswith(f"| `{BROKEN}` | MUST | broken |") for line in lines)
+    page = Page(failing_run.html.read_text())
+    assert judged in page.by_id("summary").content
+    assert "broken" in page.by_id("clauses").content and "status" in page.by_id("clauses").content
+
+
 def test_report_renders_a_saved_report_as_the_run_did(failing_run: Run, tmp_path: Path) -> None:
     html, md = tmp_path / "again.html", tmp_path / "again.md"
     result = CliRunner().invoke(

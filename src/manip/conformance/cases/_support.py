@@ -67,9 +67,9 @@ def floats(answer: Answer) -> tuple[float, ...]:
 
 def require_response(ctx: CaseContext, answer: Answer, what: str) -> None:
     """The case needs ``answer`` to be a normal response: a malformed answer is the transcript
-    invariant's finding (reported here, since the case may stop before the runner's check), and a
+    invariant's finding (reported here, and the case stops: what follows reads the answer), and a
     refusal skips the case."""
-    ctx.check(check_reply(answer.request, answer.packets))
+    ctx.check(check_reply(answer.request, answer.packets), stop=True)
     if not answer.is_response:
         ctx.skip(f"the case needs {what}, which the target refused: {answer}")
 

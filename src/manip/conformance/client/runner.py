@@ -44,7 +44,7 @@ from manip.conformance.judge.violation import FailureKind, Violation
 from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
 from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.invariants import CLIENT_WIRE
-from manip.conformance.suite.results import CaseResult, LivenessCheck, RunReport
+from manip.conformance.suite.results import CaseResult, LivenessCheck, RunReport, conclude
 from manip.conformance.suite.runner import blank_result
 from manip.conformance.suite.selection import PatternSet
 from manip.links import NcpConfig
@@ -461,18 +461,9 @@ async def run_client_case(config: ClientRunConfig, session: ClientRun, item: Cas
 def _judge(
     config: ClientRunConfig, result: CaseResult, ctx: ClientContext, failure: CaseFailure | None
 ) -> None:
-    strict = config.options.strict
-    counted = {"MUST", "SHOULD"} if strict else {"MUST"}
-    if failure is not None:
-        result.violations.append(replace(failure.violation, level=failure.level or result.level))
-    result.violations += ctx.soft_failures
-    if result.outcome == "pass" and result.violations:
-        result.outcome = "fail" if any(v.level in counted for v in result.violations) else "warn"
-    if result.known_failing:
-        if result.outcome in ("fail", "error"):
-            result.outcome = "known-fail"
-        elif result.outcome in ("pass", "warn"):
-            result.outcome = "fixed"
+    stopped = None if failure is None else replace(failure.violation, level=failure.level or result.level)
+    result.reached = tuple(sorted(ctx.reached))
+    conclude(result, stopped, ctx.recorded, config.options.strict)
 
 
 async def _no_connector(_retry_busy: bool) -> Any:

@@ -45,6 +45,7 @@ from manip.conformance.suite.context import CaseContext
 from manip.conformance.suite.invariants import COUGAR_LINK
 from manip.cougar.link import Drv11jError, PumaEnd, parse_address
 from manip.spec.constants import CougarResponse
+from manip.spec.model import CougarMessage
 from manip.spec.notation import octal_words
 
 __all__ = [
@@ -57,6 +58,7 @@ __all__ = [
     "cougar_liveness",
     "cougar_probe",
     "floats_of",
+    "layout_words",
     "words_bytes",
 ]
 
@@ -272,11 +274,15 @@ class CougarProbe:
             if _ == within:
                 break
             await self._tick(None)
+        pending = self.pending_words
         raise CaseFailure(
             f"no response from Cougar to {what} within {within} ticks",
             clause="cougar.word-link",
             expected=f"a response to {what} within {within} ticks",
-            actual="nothing",
+            actual=f"no whole response: {len(pending)} word(s) came that make no Table 1 response yet: "
+            f"{octal_words(pending)}"
+            if pending
+            else "nothing",
             kind="timeout",
             invariant=COUGAR_LINK.name,
         )
@@ -382,6 +388,20 @@ class CougarProbe:
         return "\n".join(head + [str(e) for e in shown])
 
 
+def layout_words(message: CougarMessage) -> str:
+    """A Table 1 message's words as a failure states them: ``words: 2, code`` (the code word's value,
+    then each field, a float counting two words, counted words their count first)."""
+    parts = [str(message.code)]
+    for f in message.data:
+        if f.count is None:
+            parts.append(f"count, {f.name}...")
+        elif f.words == 1:
+            parts.append(f.name)
+        else:
+            parts.append(f"{f.name} ({f.words} words)")
+    return "words: " + ", ".join(parts)
+
+
 def floats_of(words: Sequence[int]) -> tuple[float, ...]:
     """Pairs of words as F floats (sign/exponent word first); a reserved operand reads as NaN."""
     out: list[float] = []
@@ -406,20 +426,19 @@ def _link_failure(address: str, why: str) -> CaseFailure:
 
 @contextlib.asynccontextmanager
 async def cougar_probe(ctx: CaseContext) -> AsyncIterator[CougarProbe]:
-    """A probe on the run's Cougar (``ctx.options.address``) for the block; closed after it, and on a
-    failure the last link events are added to the case's notes."""
+    """A probe on the run's Cougar (``ctx.options.address``) for the block; closed after it.  The last
+    link events go to the case's notes whatever its outcome (a passing case's, so that what it checked
+    can be audited; within the same bound as a failing one's)."""
     options = ctx.options
     probe = await CougarProbe.open(
         options.address, reply_timeout=options.reply_timeout, connect_timeout=options.connect_timeout
     )
     try:
         yield probe
-    except CaseFailure:
+    finally:
         ctx.note(
             "DRV-11J exchange (-> Puma to Cougar, <- Cougar to Puma, octal words):\n" + probe.transcript()
         )
-        raise
-    finally:
         await probe.close()
 
 

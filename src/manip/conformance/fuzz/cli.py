@@ -269,7 +269,7 @@ def fuzz_command(
         shrink=not no_shrink,
         shrink_seconds=shrink_seconds,
         restart_wait=restart_wait,
-        reproduce_prefix=["manip-conform", "fuzz", *([str(address)] if address is not None else [])],
+        reproduce_prefix=["manip-conform", "fuzz", *([host] if host else [])],  # as given, every parameter
         reproduce_options=_reproduce_options(classes, target_kind, allow_motion, server),
         command=shlex.join(["manip-conform", *sys.argv[1:]]),
         options={

@@ -37,6 +37,7 @@ from manip.spec import SPEC
 from manip.spec.model import Level
 
 __all__ = [
+    "CONSOLE_CUT",
     "HEALTH",
     "SCHEMA_VERSION",
     "CampaignViolation",
@@ -44,6 +45,7 @@ __all__ = [
     "FuzzReport",
     "MinimalInput",
     "as_run_report",
+    "cut",
     "finding_json",
     "finding_text",
     "load_schema",
@@ -353,9 +355,21 @@ def write_junit(report: FuzzReport, path: Path) -> None:
     write_xml(report_junit(as_run_report(report)), path)
 
 
+CONSOLE_CUT: Final = 200
+"""Characters of one line of a finding the console shows (an input of 488 bytes is some 1,500 as hex);
+the rest is counted, and the JSON report keeps it whole."""
+
+
+def cut(line: str, limit: int = CONSOLE_CUT) -> str:
+    """``line`` up to ``limit`` characters, and how many more there are (the JSON report has them)."""
+    if len(line) <= limit:
+        return line
+    return f"{line[:limit]} ... ({len(line) - limit} more characters; whole in the JSON report)"
+
+
 def finding_text(f: CampaignViolation) -> str:
-    """A finding in full, for the console: what broke, the spec, expected and actual, the shrunk
-    input with its bytes, the reproduce line."""
+    """A finding for the console: what broke, the spec, expected and actual, the shrunk input with its
+    bytes, the reproduce line; a long line is cut with a count (:func:`cut`), never the reproduce line."""
     lines = [f.title()]
     v = f.violation
     if f.spec_text:
@@ -364,7 +378,9 @@ def finding_text(f: CampaignViolation) -> str:
         lines.append(f"  expected:  {v.expected}")
     if v.actual:
         actual = (
-            v.actual if "\n" not in v.actual else "\n" + "\n".join("    " + x for x in v.actual.splitlines())
+            cut(v.actual)
+            if "\n" not in v.actual
+            else "\n" + "\n".join("    " + cut(x) for x in v.actual.splitlines())
         )
         lines.append(f"  actual:    {actual}")
     lines.append(f"  seen:      {f.occurrences} time(s), first in batch {f.first_batch}")
@@ -378,8 +394,8 @@ def finding_text(f: CampaignViolation) -> str:
             f"  input:     {state} {len(f.minimal)} input(s){f' ({f.shrink_note})' if f.shrink_note else ''}"
         )
         for m in f.minimal[:20]:
-            lines.append(f"    #{m.number} {m.kind}: {m.note}")
-            lines += [f"      {step}" for step in m.steps[:8]]
+            lines.append(cut(f"    #{m.number} {m.kind}: {m.note}"))
+            lines += [cut(f"      {step}") for step in m.steps[:8]]
             if len(m.steps) > 8:
                 lines.append(f"      ... {len(m.steps) - 8} more step(s)")
         if len(f.minimal) > 20:

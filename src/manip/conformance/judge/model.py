@@ -41,6 +41,10 @@ The model never allows a fatal error or a BE (bug) error.  While segments are ou
 non-fatal error of any code to a motion request or free joint (queue full, joint busy: the 1985 guide
 names no code for either; manip's server says SQF).  Segment numbers that do not increase by one are
 recorded in :attr:`ProtocolModel.segment_findings` rather than refused, because that clause is a SHOULD.
+
+A run goes on after the server disagrees with the model: :meth:`ProtocolModel.observe` takes the reply
+that came into the state (a NAP where power was expected means the arm is unpowered, an AWA that it is
+aborted), and :class:`DistinctFindings` keeps each distinct disagreement once, up to a bound.
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Final
+from typing import Final, Generic, TypeVar
 
 from manip.arm.kinematics import PUMA600, JointLimits
 from manip.codecs.error_string import ErrorMessage
@@ -59,8 +63,10 @@ from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import AsyncCondition
 
 __all__ = [
+    "MAX_DISTINCT_FINDINGS",
     "MODEL_CLAUSES",
     "AnswerSummary",
+    "DistinctFindings",
     "Expectation",
     "ProtocolModel",
     "finding",
@@ -108,6 +114,7 @@ NOT_ROTATION: Final = 1e-2
 #: Joints this far (deg) inside/outside a limit are certainly in/out of range for the model.
 LIMIT_SLACK: Final = 1e-3
 MOTION_NAMES: Final = frozenset(op.name for op in SPEC.requests.values() if op.response.form == "segment")
+Kept = TypeVar("Kept")
 _SEGMENT_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
 _GUARD_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.GUARD_HIT].notification_bit
 _RESETS: Final = frozenset({"enable-power", "reset-abort"})
@@ -163,6 +170,36 @@ class AnswerSummary:
     """The segment number of a motion reply."""
     error: ErrorMessage | None = None
     """The error string of a non-fatal error."""
+
+
+MAX_DISTINCT_FINDINGS: Final = 20
+"""How many distinct disagreements with the model one stateful run reports (the rest are counted)."""
+
+
+@dataclass
+class DistinctFindings(Generic[Kept]):
+    """The distinct disagreements a run found, the first of each kind kept (a kind: the clause and the
+    request it was found on, as the caller names them), up to ``bound``.  The run goes on after each:
+    the model takes the state the server showed (:meth:`ProtocolModel.observe` takes the reply that
+    came, not the one expected), so one disputed answer does not hide what follows it."""
+
+    bound: int = MAX_DISTINCT_FINDINGS
+    kept: dict[tuple[str, ...], Kept] = field(default_factory=dict)
+    dropped: int = 0
+    """Distinct findings past the bound, counted only."""
+
+    def add(self, key: tuple[str, ...], item: Kept) -> bool:
+        """Keep ``item`` if ``key`` is a new kind and the bound allows; True if kept."""
+        if key in self.kept:
+            return False
+        if len(self.kept) >= self.bound:
+            self.dropped += 1
+            return False
+        self.kept[key] = item
+        return True
+
+    def __len__(self) -> int:
+        return len(self.kept)
 
 
 def finding(clause: str, expected: str, actual: str) -> Violation:

@@ -5,18 +5,23 @@ columns: a ``reproduce:`` line, a hex dump or a path written to a pipe or a CI l
 broken in two.  So a console made here never wraps a printed line (``soft_wrap``: a terminal folds a
 long line for display, but it stays one line when copied), and when its stream is not a terminal it
 has no width limit and writes no colour or style codes, whatever the environment asks (``FORCE_COLOR``,
-``TTY_COMPATIBLE``): a line of output is a line of the file.
+``TTY_COMPATIBLE``): a line of output is a line of the file.  A table (:func:`print_table`) is drawn
+only on a terminal; anywhere else it is one record per line, its fields separated by tabs, under a
+header line of the column names, never padded.
 """
 
 from __future__ import annotations
 
 import sys
+from collections.abc import Iterable, Sequence
 from typing import Final, TextIO
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+from rich.text import Text
 
-__all__ = ["UNLIMITED_WIDTH", "make_console", "progress_bar", "stream_is_terminal"]
+__all__ = ["UNLIMITED_WIDTH", "make_console", "print_table", "progress_bar", "stream_is_terminal"]
 
 UNLIMITED_WIDTH: Final = 1_000_000
 """The width of a console whose stream is not a terminal: wider than any line or table we print."""
@@ -64,3 +69,20 @@ def progress_bar(console: Console, quiet: bool) -> Progress:
         transient=True,
         disable=quiet or not console.is_terminal,
     )
+
+
+def print_table(console: Console, title: str, columns: Sequence[str], rows: Iterable[Sequence[str]]) -> None:
+    """A table on a terminal; elsewhere the column names, then one record per line, tab-separated, with
+    no padding and no markup (cells may hold console markup, shown on a terminal only)."""
+    if console.is_terminal:
+        table = Table(title=title, show_lines=False)
+        for column in columns:
+            table.add_column(column)
+        for row in rows:
+            table.add_row(*row)
+        console.print(table)
+        return
+    out = console.file  # written as is: the console would expand the tabs into padding
+    out.write("\t".join(columns) + "\n")
+    for row in rows:
+        out.write("\t".join(Text.from_markup(cell).plain.replace("\t", " ") for cell in row) + "\n")

@@ -31,6 +31,8 @@ from manip.conformance.output.report_view import (
     Report,
     WireOrder,
     clause_info,
+    clause_statuses,
+    completeness_line,
     failure_groups,
     group_message,
     not_judged_line,
@@ -136,6 +138,7 @@ def _summary(report: Report) -> str:
     )
     if unjudged := not_judged_line(report):
         problems += f'<li class="o-not-judged">{_e(unjudged)}</li>'
+    judged = completeness_line(report)
 
     if report.get("internal_error"):
         problems += f"<li>internal error<pre>{_e(report['internal_error'])}</pre></li>"
@@ -144,6 +147,11 @@ def _summary(report: Report) -> str:
         f'<div class="cards">{cards}</div>'
         '<table class="levels"><caption>cases by level</caption><thead><tr><th></th>'
         f"{head}<th>total</th></tr></thead><tbody>{rows}</tbody></table></div>"
+        + (
+            f'<p class="judged">{_e(judged)} (each clause\'s status: <a href="#clauses">clauses</a>)</p>'
+            if judged
+            else ""
+        )
         + (f'<ul class="problems">{problems}</ul>' if problems else "")
         + "</section>"
     )
@@ -253,6 +261,7 @@ def _clause_table(report: Report) -> str:
         for clause in c["clauses"]:
             cited.setdefault(clause, Counter())[c["outcome"]] += 1
     broken: Mapping[str, Mapping[str, Any]] = {t["clause"]: t for t in report["by_clause"] if t["clause"]}
+    statuses = clause_statuses(report)
     rows = []
     for clause in sorted(
         cited, key=lambda k: (-int(broken.get(k, {}).get("failures", 0)), k not in broken, k)
@@ -269,14 +278,24 @@ def _clause_table(report: Report) -> str:
             f'<tr class="{"broke" if tally and tally["failures"] else ""}"><td><code>{_e(clause)}</code></td>'
             f"<td>{_level(info.level) if info else ''}</td><td>{_e(info.section if info else '')}</td>"
             f"<td>{_e(info.text if info else '(not in this version of the spec)')}</td>"
-            f"<td>{_e(status)}</td><td>{_e(outcomes)}</td></tr>"
+            f"<td>{_e(status)}</td><td>{_e(outcomes)}</td><td>{_status_cell(statuses.get(clause))}</td></tr>"
         )
     return (
         f'<section id="clauses"><details><summary><h2>Clauses checked <small>{len(cited)}</small></h2>'
         '</summary><table class="clause-table"><thead><tr><th>clause</th><th>level</th>'
-        "<th>section of the 1985 guide</th><th>text</th><th>broken</th><th>cases citing it</th></tr></thead>"
+        "<th>section of the 1985 guide</th><th>text</th><th>broken</th><th>cases citing it</th>"
+        "<th>status</th></tr></thead>"
         f"<tbody>{''.join(rows)}</tbody></table></details></section>"
     )
+
+
+def _status_cell(entry: Mapping[str, Any] | None) -> str:
+    """A clause's status in the run (held, broken, not judged, not exercised), with why and what would
+    judge it; empty for a report written before statuses existed."""
+    if entry is None:
+        return ""
+    why = f" — {entry['why']}; what would judge it: {entry['hint']}" if entry.get("why") else ""
+    return f'<span class="status">{_e(entry["status"])}</span>{_e(why)}'
 
 
 def _bubble(row: PacketRow, connections: int) -> str:

@@ -1,7 +1,8 @@
 """The Markdown summary of a run, for CI step summaries (``$GITHUB_STEP_SUMMARY``):
 ``manip-conform run|verify|replay --markdown FILE`` and ``manip-conform report REPORT.json --markdown FILE``.
 
-The verdict, the counts by verdict, then the failures grouped by the clause they break (its level,
+The verdict, the counts by verdict, how many clauses were judged and each clause's status (folded),
+then the failures grouped by the clause they break (its level,
 section and text), each case with its first message, and the commands that reproduce them in a code
 block, one command a line.  Text from the report is escaped for Markdown and for the HTML a renderer
 lets through (case output holds ``<``, ``&``, ``|``, backticks).
@@ -18,6 +19,8 @@ from manip.conformance.output.report_view import (
     FAILING,
     OUTCOME_ORDER,
     Report,
+    clause_statuses,
+    completeness_line,
     failure_groups,
     group_message,
     not_judged_line,
@@ -58,6 +61,36 @@ def _message(case: Mapping[str, Any], tally: Mapping[str, Any] | None) -> str:
     return text if len(text) <= _MESSAGE_CHARS else text[: _MESSAGE_CHARS - 3] + "..."
 
 
+def _status_table(report: Report) -> list[str]:
+    """Every clause of the run with its status, folded (held and broken first, then what was not
+    judged or not exercised, with why and what would judge it)."""
+    statuses = sorted(
+        clause_statuses(report).values(),
+        key=lambda s: (
+            ("broken", "not-judged", "not-exercised", "held").index(str(s["status"])),
+            s["clause"],
+        ),
+    )
+    if not statuses:
+        return []
+    rows = [
+        f"| {_code(s['clause'])} | {_text(s['level'])} | {_text(s['status'])} | "
+        + (_text(f"{s['why']}; what would judge it: {s['hint']}") if s.get("why") else "")
+        + " |"
+        for s in statuses
+    ]
+    return [
+        "<details><summary>Each clause's status</summary>",
+        "",
+        "| clause | level | status | why not judged |",
+        "| --- | --- | --- | --- |",
+        *rows,
+        "",
+        "</details>",
+        "",
+    ]
+
+
 def render_markdown(report: Report) -> str:
     """The Markdown summary of the JSON report's data ``report``."""
     counts: Mapping[str, int] = report["counts"]
@@ -75,6 +108,8 @@ def render_markdown(report: Report) -> str:
         *(f"| {o} | {int(counts.get(o, 0))} |" for o in OUTCOME_ORDER if counts.get(o, 0)),
         "",
     ]
+    if judged := completeness_line(report):
+        lines += [f"**{_text(judged)}**", "", *_status_table(report)]
     for problem in [*report.get("problems", []), *report.get("unstable", [])]:
         lines.append(f"- **problem**: {_text(problem)}")
     if unjudged := not_judged_line(report):
@@ -86,6 +121,7 @@ def render_markdown(report: Report) -> str:
         lines += ["No clause broke.", ""]
         return "\n".join(lines)
     lines += ["### Failures by clause", ""]
+    shown: set[str] = set()  # cases whose reproduce command is listed (under the first clause they broke)
     for tally, cases in groups:
         clause = tally["clause"] if tally is not None else None
         if tally is None:
@@ -109,7 +145,12 @@ def render_markdown(report: Report) -> str:
             ]
         lines.append("")
         lines += [f"- **{c['outcome']}** {_code(c['id'])}: {_text(_message(c, tally))}" for c in cases]
-        reproduce = [" ".join(str(c["reproduce"]).split()) for c in cases if c.get("reproduce")]
+        reproduce = [
+            " ".join(str(c["reproduce"]).split())
+            for c in cases
+            if c.get("reproduce") and c["id"] not in shown
+        ]
+        shown.update(c["id"] for c in cases)
         if reproduce:
             lines += ["", *_block(reproduce)]
         lines.append("")

@@ -1,6 +1,11 @@
 """Reports of a run: the JSON report (its schema ships as ``report.schema.json``), JUnit XML, and the
 console summary.
 
+Every report says how completely the run judged the target: each clause its cases cite has one status
+(held, broken, not judged, not exercised: :func:`~manip.conformance.suite.results.clause_statuses`,
+the one rule), the JSON report as ``clause_status`` and ``completeness`` ("N of M MUST clauses
+judged"), JUnit as a ``clauses`` suite of one testcase per clause.
+
 The JSON report is versioned (``schema_version``); per case it holds the id, clauses, level, outcome,
 the violations (expected / actual / bytes in hex), the duration against the deadline, the seed, the
 packets both ways, and a command that reproduces the case.  JUnit XML has one ``testsuite`` per
@@ -21,13 +26,22 @@ from __future__ import annotations
 import json
 import xml.etree.ElementTree as ET
 from collections import defaultdict
+from collections.abc import Mapping
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any, Final
 
 from manip.conformance.output.culprit import culprit_index, kept_indices
-from manip.conformance.suite.results import CaseResult, RunReport, Violation
+from manip.conformance.suite.results import (
+    CLAUSE_STATUSES,
+    CaseResult,
+    ClauseVerdict,
+    RunReport,
+    Violation,
+    completeness_text,
+    judged_counts,
+)
 from manip.outfile import atomic_output
 from manip.spec import SPEC
 
@@ -37,6 +51,7 @@ __all__ = [
     "by_clause",
     "clause_catalog",
     "clause_lines",
+    "completeness_json",
     "load_schema",
     "report_json",
     "report_junit",
@@ -214,6 +229,7 @@ def _case_json(result: CaseResult) -> dict[str, Any]:
         "reproduce": result.reproduce,
         "packets": packets,
         "packets_total": len(result.packets),
+        "reached": list(result.reached),
     }
 
 
@@ -232,6 +248,7 @@ def clause_catalog(report: RunReport) -> dict[str, dict[str, str]]:
 
 def report_json(report: RunReport) -> dict[str, Any]:
     """The report as JSON-ready data (validates against :func:`load_schema`)."""
+    statuses = report.clause_statuses()
     return {
         "schema_version": SCHEMA_VERSION,
         "tool": "manip-conform",
@@ -258,10 +275,25 @@ def report_json(report: RunReport) -> dict[str, Any]:
             for c in report.liveness
         ],
         "by_clause": [t.to_json() for t in by_clause(report)],
+        "completeness": completeness_json(statuses),
+        "clause_status": [v.to_json() for v in statuses.values()],
         "not_judged": report.not_judged_clauses(),
         "clauses": clause_catalog(report),
         "cases": [_case_json(r) for r in report.results],
     }
+
+
+def completeness_json(statuses: Mapping[str, ClauseVerdict]) -> dict[str, Any]:
+    """Per level, how many of the run's clauses were judged (held or broken) and how many each status
+    has, and the line the verdict shows (:func:`~manip.conformance.suite.results.completeness_text`)."""
+    levels: dict[str, Any] = {}
+    for level in ("MUST", "SHOULD", "MAY", "INFO"):
+        judged, total = judged_counts(statuses, level)
+        counts = {
+            s: sum(v.level == level and v.status == s for v in statuses.values()) for s in CLAUSE_STATUSES
+        }
+        levels[level] = {"judged": judged, "total": total, **counts}
+    return {"text": completeness_text(statuses), "levels": levels}
 
 
 def write_json(report: RunReport, path: Path) -> None:
@@ -297,7 +329,39 @@ def report_junit(report: RunReport) -> ET.Element:
         ET.SubElement(props, "property", name="target", value=report.target)
         for result in results:
             _junit_case(suite, area, result)
+    _junit_clauses(root, report.clause_statuses())
     return root
+
+
+def _junit_clauses(root: ET.Element, statuses: Mapping[str, ClauseVerdict]) -> None:
+    """One testcase per clause of the run in a suite of its own (``clauses``): held passes, broken
+    fails, not judged and not exercised are skipped saying why; the suite's properties carry the
+    "N of M MUST clauses judged" line."""
+    values = list(statuses.values())
+    suite = ET.SubElement(
+        root,
+        "testsuite",
+        name="clauses",
+        tests=str(len(values)),
+        failures=str(sum(v.status == "broken" for v in values)),
+        errors="0",
+        skipped=str(sum(v.status in ("not-judged", "not-exercised") for v in values)),
+        time="0",
+    )
+    props = ET.SubElement(suite, "properties")
+    ET.SubElement(props, "property", name="completeness", value=completeness_text(statuses))
+    for verdict in values:
+        node = ET.SubElement(
+            suite, "testcase", classname=f"clauses.{verdict.level}", name=verdict.clause, time="0"
+        )
+        cases = ", ".join(verdict.cases)
+        if verdict.status == "broken":
+            ET.SubElement(node, "failure", message=f"broken by {cases}", type=verdict.clause)
+        elif verdict.status != "held":
+            message = f"{verdict.status}: {verdict.why}; what would judge it: {verdict.hint}"
+            ET.SubElement(node, "skipped", message=message)
+        else:
+            ET.SubElement(node, "system-out").text = f"held in {cases}"
 
 
 def _junit_case(suite: ET.Element, area: str, result: CaseResult) -> None:

@@ -32,6 +32,8 @@ __all__ = [
     "ReportError",
     "WireOrder",
     "clause_info",
+    "clause_statuses",
+    "completeness_line",
     "failure_groups",
     "group_message",
     "grouped",
@@ -109,6 +111,17 @@ def not_judged_line(report: Report) -> str:
         f"{len(clauses)} MUST clause(s) not judged on this target: {listed}; what would judge each is in "
         f"brackets{world}"
     )
+
+
+def completeness_line(report: Report) -> str:
+    """ "N of M MUST clauses judged, ..." ("" for a report written before clause statuses existed)."""
+    completeness = report.get("completeness")
+    return str(completeness.get("text", "")) if isinstance(completeness, Mapping) else ""
+
+
+def clause_statuses(report: Report) -> dict[str, Mapping[str, Any]]:
+    """Each clause's status entry (``clause_status``: status, why, hint, cases), by clause id."""
+    return {str(s["clause"]): s for s in report.get("clause_status", []) if isinstance(s, Mapping)}
 
 
 def seeded(report: Report) -> bool:

@@ -8,7 +8,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from manip.conformance.output.report import clause_lines, failure_text
-from manip.conformance.suite.results import CaseResult, ExitCode, RunReport
+from manip.conformance.suite.results import CaseResult, ExitCode, RunReport, completeness_text
 from manip.conformance.suite.world import WITHOUT_WORLD
 
 __all__ = ["OUTCOME_STYLE", "counts_text", "details", "headline", "print_by_clause", "shown", "summary"]
@@ -69,7 +69,8 @@ def print_by_clause(console: Console, report: RunReport) -> None:
 
 def summary(console: Console, report: RunReport, quiet: bool = False) -> None:
     """After the run: the broken clauses (one line each), then every failure in full, then problems and
-    the verdict."""
+    the verdict with how completely it judged ("N of M MUST clauses judged"), then the MUST clauses
+    not judged (with what would judge each) and not exercised."""
     counts = report.counts()
     parts = [f"[{OUTCOME_STYLE[k]}]{v} {k}[/]" for k, v in counts.items() if v]
     print_by_clause(console, report)
@@ -80,13 +81,20 @@ def summary(console: Console, report: RunReport, quiet: bool = False) -> None:
         console.print(f"[bold magenta]unstable[/]: {escape(problem)}")
     verdict_style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
     shown = ", ".join(parts) or "no cases"
+    statuses = report.clause_statuses()
     unjudged = report.not_judged_hints()
     console.print(
         f"[{verdict_style}]{report.verdict}[/] (exit {int(report.exit_code)}): {shown}"
         f" in {report.duration:.1f} s; seed {report.seed}"
         + ("; virtual time" if report.time == "virtual" else "")
-        + (f"; {len(unjudged)} MUST clause(s) not judged on this target" if unjudged else "")
+        + (f"; {completeness_text(statuses)}" if statuses else "")
     )
+    unexercised = [v.clause for v in statuses.values() if v.status == "not-exercised" and v.level == "MUST"]
+    if unexercised:
+        console.print(
+            f"[{OUTCOME_STYLE['skip']}]not exercised[/] (no check of the run reached them): "
+            + escape(", ".join(unexercised))
+        )
     if unjudged:
         listed = ", ".join(f"{clause} ({hint})" for clause, hint in unjudged.items())
         console.print(

@@ -40,7 +40,7 @@ from manip.conformance.output.documents import document_options, write_reports
 from manip.conformance.output.report import failure_text
 from manip.conformance.output.run_console import OUTCOME_STYLE, print_by_clause
 from manip.conformance.suite.embedded import EmbeddedServer, simulated_server
-from manip.conformance.suite.results import ExitCode, RunReport
+from manip.conformance.suite.results import ExitCode, RunReport, completeness_text
 from manip.exit_status import epilog
 
 if TYPE_CHECKING:
@@ -130,8 +130,10 @@ def _finish(
         console.print(f"[bold red]problem[/]: {escape(problem)}")
     counts = ", ".join(f"{v} {k}" for k, v in report.counts().items() if v) or "no results"
     style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
+    statuses = report.clause_statuses()
     console.print(
         f"[{style}]{report.verdict}[/] (exit {int(report.exit_code)}): {counts} in {report.duration:.1f} s"
+        + (f"; {completeness_text(statuses)}" if statuses else "")
     )
 
 

@@ -16,7 +16,7 @@ A case is an ``async`` function of a :class:`~manip.conformance.suite.context.Ca
         waits=None,                                  # or: options -> seconds spent on a target's timer
     )
     async def describe_terminator(ctx: CaseContext) -> None:
-        # (a docstring here: its first line is the case's summary)
+        # (a docstring here: its first paragraph is the case's summary)
         probe = await ctx.connect()                  # fresh Chaos connection, initial RESPONSE consumed
         answer = await probe.call("describe-self")   # every packet up to the empty terminator
         ctx.check(check_reply(answer.request, answer.packets))   # findings of the pure checkers
@@ -38,10 +38,12 @@ Rules a case follows:
   ``tests/conformance/test_clauses.py`` over the source of every case); what the suite's own machinery
   finds on every exchange is attributed to an invariant instead (:mod:`manip.conformance.suite.invariants`).
   Its level is the strongest of its clauses' levels, and a check never overrides a clause's level.
-* It says what it checks through ``ctx.expect`` / ``ctx.check`` / ``ctx.fail``: a violated MUST clause
-  raises :class:`CaseFailure` (the case stops there); a violated SHOULD/MAY clause is recorded and the
-  case goes on (it becomes ``warn``, or ``fail`` under ``--strict``).  ``ctx.skip(reason)`` ends it as
-  not applicable.  Any other exception is an ``error`` of the suite, reported with its traceback.
+* It says what it checks through ``ctx.expect`` / ``ctx.check`` / ``ctx.fail``: a violated clause is
+  recorded and the case goes on, so that it reports every violation (a MUST fails it; a SHOULD/MAY
+  makes it ``warn``, or ``fail`` under ``--strict``); ``ctx.require`` and ``ctx.fail`` stop it, for what
+  the rest of the case depends on.  A clause counts as held only when one of its checks ran
+  (``ctx.reached``; ``ctx.exercised`` for checks made outside ``ctx.expect``).  ``ctx.skip(reason)``
+  ends it as not applicable.  Any other exception is an ``error`` of the suite, reported with its traceback.
 * It never assumes state left by another case: each gets a fresh connection, which starts the
   per-connection state afresh (power, speed, segments; erratum ``server-robot``), but the arm stands
   wherever the last case left it.
@@ -90,6 +92,7 @@ __all__ = [
     "load_cases",
     "register",
     "strongest_level",
+    "summary_of",
     "target_of",
 ]
 
@@ -268,13 +271,12 @@ class Declare:
     ) -> Callable[[CaseFunction], CaseFunction]:
         """Declare a case; the decorated function is returned unchanged (and registered).
 
-        ``summary`` defaults to the first line of the function's docstring."""
+        ``summary`` defaults to the first paragraph of the function's docstring (:func:`summary_of`)."""
         clause_ids = tuple(clauses)
         chosen: Level = level if level is not None else strongest_level(clause_ids)
         _validate(case_id, clause_ids, chosen, technique, hazard, deadline)
 
         def decorate(function: CaseFunction) -> CaseFunction:
-            doc = (function.__doc__ or "").strip().splitlines()
             register(
                 Case(
                     id=case_id,
@@ -284,7 +286,7 @@ class Declare:
                     technique=technique,
                     hazard=hazard,
                     deadline=deadline,
-                    summary=summary if summary is not None else (doc[0] if doc else ""),
+                    summary=summary if summary is not None else summary_of(function.__doc__),
                     module=function.__module__,
                     waits=waits,
                 )
@@ -308,6 +310,13 @@ class Declare:
 
 case: Final = Declare()
 """Declare a case (``@case(...)``), or a family of them from a table (``@case.each(rows)``)."""
+
+
+def summary_of(doc: str | None) -> str:
+    """A docstring's first paragraph on one line: whole sentences, never its first line cut where the
+    source wrapped it."""
+    paragraph = (doc or "").strip().split("\n\n", 1)[0]
+    return " ".join(paragraph.split())
 
 
 def register(item: Case) -> Case:

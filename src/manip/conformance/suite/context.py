@@ -23,9 +23,12 @@ server's packets in the order they come, and judges nothing by itself (the check
 * ``probe.packets``: the recording (:class:`~manip.conformance.judge.checks.WirePacket`, both directions,
   times from the start of the case; the end of the connection is a CLS/EOF/LOS pseudo-packet).
 
-``ctx.expect(cond, clause=..., expected=..., seen=answer)`` is the one way to state a check:
-false on a MUST clause raises :class:`CaseFailure`; false on a SHOULD/MAY/INFO clause is recorded
-(``ctx.soft_failures``) and the case goes on.  The clause must be one the case declares: any other is a
+``ctx.expect(cond, clause=..., expected=..., seen=answer)`` is the one way to state a check: false,
+on a clause of any level, is recorded (``ctx.recorded``) and the case goes on, so its report lists every
+violation; ``ctx.require(...)`` is the same check for what the rest of the case depends on, and stops
+the case when false, as the probe does when an answer never comes.  Every clause a check evaluated,
+true or false, is *reached* (``ctx.reached``): only a reached clause can count as held.  The clause
+must be one the case declares: any other is a
 bug of the suite (:class:`~manip.conformance.suite.case.UndeclaredClauseError`, raised at the call whether the
 condition holds or not), except a finding of the transcript invariant's checkers
 (:mod:`manip.conformance.suite.invariants`).  ``ctx.check(findings)`` applies the same rule to the
@@ -79,6 +82,13 @@ __all__ = [
 Robot = Literal["sim", "hardware"]
 """What is behind the target: a simulated arm, or real hardware (``--target``), where the motion and
 power cases wait for ``--allow-motion``."""
+_CHECKER_CLAUSES: Final = (
+    TRANSCRIPT.clauses
+    | {"response.word-byte-order"}
+    | {clause for op in SPEC.requests.values() for clause in op.reply_clauses}
+)
+"""What a checker run on one answer evaluates (:meth:`CaseContext.check`): the transcript's clauses,
+the byte order its decoding relies on, and the reply clauses of the opcodes, whose layouts it decodes."""
 DEFAULT_REPLY_TIMEOUT: Final = 2.0
 DEFAULT_CONNECT_TIMEOUT: Final = 5.0
 
@@ -337,7 +347,7 @@ class Probe:
                         invariant=TRANSCRIPT.name,
                     )
                 raise CaseFailure(
-                    f"no {what} within {wait:g} s ({budget})",
+                    f"{what} did not come within {wait:g} s ({budget})",
                     clause="request.one-reply",
                     expected=f"{what} within {wait:g} s",
                     actual="nothing (timeout)",
@@ -449,8 +459,12 @@ class CaseContext:
         self.transcript: list[WirePacket] = []
         """Every packet of every probe of this case, in the order recorded."""
         self.probes: list[Probe] = []
-        self.soft_failures: list[Violation] = []
-        """The SHOULD/MAY/INFO violations recorded on the way (the case went on)."""
+        self.recorded: list[Violation] = []
+        """The violations recorded on the way, of every level (the case went on after each)."""
+        self.reached: set[str] = set()
+        """The declared clauses a check of this case actually evaluated (:meth:`expect`, :meth:`check`,
+        :meth:`exercised`): only these can count as held
+        (:func:`~manip.conformance.suite.results.clause_statuses`)."""
         self.notes: list[str] = []
         self.shown_packets: list[WirePacket] | None = None
         """The packet log the report shows, when not the transcript (:meth:`show_packets`)."""
@@ -564,8 +578,13 @@ class CaseContext:
         Returns ``bool(condition)``.  ``clause`` must be one the case declares, or one of
         ``invariant``'s when a suite invariant's finding is passed on: checked at every call, true or
         not (UndeclaredClauseError).  ``clause`` and ``expected`` are keywords so that the clause scan of
-        ``tests/support/clause_scan.py`` sees every clause a case can report."""
+        ``tests/support/clause_scan.py`` sees every clause a case can report.
+
+        A false check of any level is recorded and the case goes on, so that its report lists every
+        violation; a check the rest of the case depends on is :meth:`require`.  Either way the clause
+        counts as reached (:attr:`reached`)."""
         attributed = self._attribute(clause, invariant)
+        self._reach(clause, attributed)
         if (
             level is not None
             and clause is not None
@@ -593,20 +612,63 @@ class CaseContext:
         )
         return False
 
-    def _report(self, violation: Violation) -> None:
-        """A MUST violation ends the case; a weaker one is recorded and the case goes on."""
-        if violation.level == "MUST":
-            raise CaseFailure(violation)
-        self.soft_failures.append(violation)
+    def require(
+        self,
+        condition: object,
+        *,
+        clause: str | None = None,
+        expected: str = "",
+        seen: object = None,
+        actual: object = "",
+        data: bytes = b"",
+        message: str | None = None,
+    ) -> None:
+        """:meth:`expect` for a check the rest of the case depends on: when false, the violation is
+        recorded and the case stops there (whatever the clause's level)."""
+        if not self.expect(
+            condition, clause=clause, expected=expected, seen=seen, actual=actual, data=data, message=message
+        ):
+            raise CaseFailure(self.recorded.pop())
 
-    def check(self, findings: Iterable[Violation]) -> bool:
-        """Report a checker's findings (MUST ones raise, the first first).  True when there were none.
-        The checkers are the transcript invariant's: a finding of a clause the case does not declare is
-        attributed to it."""
+    def _reach(self, clause: str | None, attributed: str | None) -> None:
+        """A check of ``clause`` ran: mark it reached when it is one of the case's own."""
+        if clause is not None and attributed is None and (self.clauses is None or clause in self.clauses):
+            self.reached.add(clause)
+
+    def exercised(self, *clauses: str) -> None:
+        """Mark clauses as reached by a check the case made itself (a property's example, a step of
+        the stateful model), for cases that judge without :meth:`expect`.  Clauses the case does not
+        declare are ignored; callable from a worker thread."""
+        declared = self.clauses
+        self.reached.update(c for c in clauses if declared is None or c in declared)
+
+    def _report(self, violation: Violation) -> None:
+        """Record a violation; the case goes on (every violation is reported, not only the first)."""
+        self.recorded.append(violation)
+
+    def check(
+        self, findings: Iterable[Violation], *, clauses: Iterable[str] | None = None, stop: bool = False
+    ) -> bool:
+        """Report a checker's findings, the strongest first; the case goes on.  True when there were
+        none.  The checkers are the transcript invariant's: a finding of a clause the case does not
+        declare is attributed to it.  ``clauses``: the clauses the checker evaluated, marked reached
+        (default: the case's own clauses among those a checker run on one answer judges, which is an
+        approximation; the runner's check of the whole recording passes none).  ``stop``: a MUST
+        finding stops the case (what follows needs the answer well formed)."""
         items = sorted(findings, key=lambda f: -LEVEL_ORDER[f.strength])
+        if clauses is None:
+            clauses = (c for c in self.clauses or () if c in _CHECKER_CLAUSES)
+        self.exercised(*clauses)
+        stopping: Violation | None = None
         for finding in items:
             attributed = self._attribute(finding.clause, TRANSCRIPT.name)
-            self._report(replace(finding, invariant=attributed))
+            violation = replace(finding, invariant=attributed)
+            if stop and stopping is None and violation.level == "MUST":
+                stopping = violation
+            else:
+                self._report(violation)
+        if stopping is not None:
+            raise CaseFailure(stopping)
         return not items
 
     def fail(
@@ -620,8 +682,9 @@ class CaseContext:
         data: bytes = b"",
         invariant: str | None = None,
     ) -> NoReturn:
-        """Fail outright; ``clause``, ``seen`` and ``invariant`` as for :meth:`expect`."""
+        """Fail outright, the case stops; ``clause``, ``seen`` and ``invariant`` as for :meth:`expect`."""
         attributed = self._attribute(clause, invariant)
+        self._reach(clause, attributed)
         shown, shown_data = evidence(seen) if seen is not None else ("", b"")
         raise CaseFailure(
             Violation(
@@ -638,7 +701,15 @@ class CaseContext:
     def fail_with(self, violation: Violation) -> NoReturn:
         """Fail with a violation found elsewhere (a failed example's); attributed as for :meth:`expect`."""
         attributed = self._attribute(violation.clause, violation.invariant)
+        self._reach(violation.clause, attributed)
         raise CaseFailure(replace(violation, invariant=attributed))
+
+    def record(self, violation: Violation) -> None:
+        """Record a violation found elsewhere (one of several a stateful run found) and go on;
+        attributed as for :meth:`expect`."""
+        attributed = self._attribute(violation.clause, violation.invariant)
+        self._reach(violation.clause, attributed)
+        self._report(replace(violation, invariant=attributed))
 
     def skip(self, reason: str) -> NoReturn:
         raise CaseSkipped(reason)

@@ -18,8 +18,10 @@ Theory of operation
    (``ctx.auto_check = False``), every probe's recording goes through
    :func:`~manip.conformance.judge.checks.check_transcript`, so each case also checks the invariants of the
    whole exchange (one reply per request, echoes, error formats, asynchronous responses only when
-   asked for...).  An exception of the case never stops the
-   run: it becomes an ``error`` outcome with its traceback, and so does a violation of a clause the
+   asked for...).  A case goes on after a violation its ``ctx.expect`` recorded, and its result lists
+   them all (:func:`~manip.conformance.suite.results.conclude`).  An exception of the case never stops the
+   run: it becomes an ``error`` outcome with its traceback (unless it came after a violation, which
+   it then merely follows), and so does a violation of a clause the
    case does not declare that no suite invariant reported (:mod:`manip.conformance.suite.invariants`).
 4. **Liveness after** every failure or error and after every negative case; if the target is dead
    (after one retry) the remaining cases are skipped, the run records which case it died after, and
@@ -47,7 +49,7 @@ from manip.conformance.suite.busy import open_retrying_busy
 from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
 from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.invariants import attribution_problem
-from manip.conformance.suite.results import CaseResult, LivenessCheck, Outcome, RunReport
+from manip.conformance.suite.results import CaseResult, LivenessCheck, Outcome, RunReport, conclude
 from manip.conformance.suite.selection import PatternSet
 from manip.conformance.suite.world import CaseNotJudged, ConditionUnsupported, World, WorldError
 from manip.links import ChaosConnection, open_connection
@@ -338,7 +340,9 @@ class Runner:
                 await item.function(ctx)
                 if ctx.auto_check:
                     for probe in ctx.probes:
-                        ctx.check(check_transcript(probe.packets, rfc_packet_no=probe.rfc_packet_no))
+                        ctx.check(
+                            check_transcript(probe.packets, rfc_packet_no=probe.rfc_packet_no), clauses=()
+                        )
         except CaseFailure as exc:
             failure = exc
         except CaseSkipped as exc:
@@ -387,7 +391,7 @@ class Runner:
     def _check_attribution(result: CaseResult, ctx: CaseContext, failure: CaseFailure | None) -> None:
         """A violation of a clause the case does not declare (and no invariant reported) is a bug of
         the suite, whichever way it was raised: the case ends as ``error`` naming case and clause."""
-        reported = [(s.clause, s.invariant) for s in ctx.soft_failures]
+        reported = [(s.clause, s.invariant) for s in ctx.recorded]
         if failure is not None:
             reported.insert(0, (failure.clause, failure.invariant))
         for clause, invariant in reported:
@@ -398,18 +402,9 @@ class Runner:
                 return
 
     def _judge(self, result: CaseResult, ctx: CaseContext, failure: CaseFailure | None) -> None:
-        strict = self.config.options.strict
-        counted = {"MUST", "SHOULD"} if strict else {"MUST"}
-        if failure is not None:
-            result.violations.append(replace(failure.violation, level=failure.level or result.level))
-        result.violations += ctx.soft_failures
-        if result.outcome in ("pass",) and result.violations:
-            result.outcome = "fail" if any(v.level in counted for v in result.violations) else "warn"
-        if result.known_failing:
-            if result.outcome in ("fail", "error"):
-                result.outcome = "known-fail"
-            elif result.outcome in ("pass", "warn"):
-                result.outcome = "fixed"
+        stopped = None if failure is None else replace(failure.violation, level=failure.level or result.level)
+        result.reached = tuple(sorted(ctx.reached))
+        conclude(result, stopped, ctx.recorded, self.config.options.strict)
 
 
 async def _quietly(awaitable: object) -> None:

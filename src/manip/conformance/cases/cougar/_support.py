@@ -14,10 +14,12 @@ from manip.conformance.cougar.probe import (
     CougarProbe,
     WordReply,
     floats_of,
+    layout_words,
     words_bytes,
 )
 from manip.conformance.suite.context import MM_PER_UNIT, CaseContext
 from manip.cougar.memory_map import MapObject
+from manip.spec import SPEC
 from manip.spec.constants import CougarCommand, CougarResponse
 from manip.spec.notation import octal
 
@@ -84,13 +86,13 @@ def response_code(name: str) -> int:
 
 
 def expect_reply(ctx: CaseContext, reply: WordReply, name: str, clause: str, *, after: str = "") -> WordReply:
-    """``reply`` is a well-formed ``name`` response (code and data length of Table 1)."""
+    """``reply`` is a well-formed ``name`` response (code and data length of Table 1, stated)."""
     code = response_code(name)
     where = f" to {after}" if after else ""
     ctx.expect(
         not reply.problem,
         clause="cougar.response.layout",
-        expected=f"a Table 1 response{where} ({name}, code {code})",
+        expected=f"a Table 1 response{where} ({name}, {layout_words(SPEC.cougar_responses[code])})",
         seen=reply,
     )
     ctx.expect(

@@ -34,6 +34,7 @@ async def one_server_per_robot(ctx: CaseContext) -> None:
     except Exception as exc:  # the probe turns link errors into a CaseFailure
         cause = exc.__cause__
         if isinstance(cause, ConnectionRefused):
+            ctx.exercised("connect.one-server-per-robot")
             ctx.note(f"second connection refused: {cause.reason}")
             return
         raise

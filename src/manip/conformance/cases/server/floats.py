@@ -92,11 +92,13 @@ async def solve_round_trip(ctx: CaseContext) -> None:
     expect_response(ctx, back, clause="solve-backwards.data", expected="a transform")
     again = floats(back)
     err = max(abs(x - y) for x, y in zip(again, pose, strict=True))
+    rotation = max((abs(x - y) for x, y in zip(again[:9], pose[:9], strict=True)), default=0.0)
+    position = max((abs(x - y) for x, y in zip(again[9:], pose[9:], strict=True)), default=0.0)
     ctx.expect(
         err < POSITION_TOL_MM,
         clause="solve-forwards.data",
-        expected="the solved angles reaching the transform",
-        actual=f"off by {err:.4f}",
+        expected=f"the solved angles reaching the transform (every float within {POSITION_TOL_MM:g})",
+        actual=f"position off by {position:.4f} mm, rotation matrix by {rotation:.4f} (a unitless cosine)",
     )
 
 
@@ -157,6 +159,7 @@ async def extremes(ctx: CaseContext) -> None:
         clause = "solve-backwards.data" if op == "solve-backwards" else "float.not-finite"
         expect_response(ctx, answer, clause=clause, expected=f"an answer or a refusal for {what}")
         reserved, dirty = _bad_patterns(answer.payload)
+        ctx.exercised("float.range")  # every float of the answer read as an F value
         ctx.expect(
             not reserved,
             clause="float.not-finite",

@@ -506,6 +506,7 @@ async def acknowledge(ctx: CaseContext) -> None:
                 actual=f"none: its ack fields stayed below it (initial RESPONSE: #{initial.packet.ack_no})",
                 data=initial.raw,
             )
+        ctx.exercised("ncp.acknowledge")
         ctx.note(f"acknowledged by {format_packet(got.packet)}")
 
 
@@ -579,4 +580,5 @@ async def window(ctx: CaseContext) -> None:
             watch.acked = following
             conn.sts(ack=following, window=WINDOW)
             await watch.watch(peer, 0.2, f"after acknowledging #{following}")
+        ctx.exercised("ncp.window")
         ctx.note(f"{len(watch.seen)} data packets through a window of {WINDOW}")

@@ -298,6 +298,23 @@ async def run_property(
 
 
 # ------------------------------------------------------------------------------- well-formed replies
+_FORM_CLAUSES: Final = {
+    "done": "response.done-empty",
+    "data": "response.data-layout",
+    "segment": "response.segment-number",
+    "multi": "multi.terminated-by-empty",
+}
+
+
+def _answer_clauses(op: RequestOpcode, answer: Answer) -> tuple[str, ...]:
+    """The clauses the reply checker judged on ``answer`` to a request of ``op``: those of every answer,
+    and those of its form (a normal reply of the opcode's shape, or an error string)."""
+    common = ("request.one-reply", "response.echoes-request-number", "response.server-opcodes")
+    if answer.is_error:
+        return (*common, "error-string.format", "error-string.severity", "error-string.code")
+    return (*common, _FORM_CLAUSES[op.response.form])
+
+
 @case(
     "property.requests.well-formed",
     clauses=[
@@ -332,6 +349,7 @@ async def well_formed_replies(ctx: CaseContext) -> None:
                 reject()
             answer = session.ask(op.opcode, data)
             _check_answer(answer)
+            ctx.exercised(*_answer_clauses(op, answer))
             if answer.opcode == ServerOp.FATAL_ERROR:
                 closed = session.bridge.call(session.probe.wait_closed())
                 if not closed:
@@ -343,6 +361,7 @@ async def well_formed_replies(ctx: CaseContext) -> None:
                         answer.data,
                         [answer.request, *answer.packets],
                     )
+                ctx.exercised("error.fatal-then-close")
                 return
             if op.opcode == free_joint and answer.is_response:
                 # the joint is free until the next packet, which is discarded and answered with done
@@ -356,6 +375,7 @@ async def well_formed_replies(ctx: CaseContext) -> None:
                         release.data,
                         [answer.request, answer.first, release.request, *release.packets],
                     )
+                ctx.exercised("free-joint.replies")
 
         return body, [valid_requests(ops)]
 
@@ -395,6 +415,7 @@ async def kinematics_round_trip(ctx: CaseContext) -> None:
         def body(q: Joints, near: Joints) -> None:
             first = session.call("solve-backwards", joints=list(q))
             t1 = _pose(_decode_floats(first, "solve backwards", "solve-backwards.data"), first)
+            ctx.exercised("solve-backwards.data")
             second = session.call("solve-forwards", transform=list(t1.to_floats()), current=list(near))
             if not second.is_response and not arm.declared:
                 return  # the target's own limits are unknown: a TOR may be right
@@ -402,6 +423,7 @@ async def kinematics_round_trip(ctx: CaseContext) -> None:
                 second, "solve forwards of a transform made from in-range joint angles", "solve-forwards.data"
             )
             bad = arm.limits.violations(q2, tol=1e-3)
+            ctx.exercised("solve-forwards.errors")
             if bad:
                 raise Evidence(
                     "solve-forwards.errors",
@@ -414,6 +436,7 @@ async def kinematics_round_trip(ctx: CaseContext) -> None:
             third = session.call("solve-backwards", joints=list(q2))
             t2 = _pose(_decode_floats(third, "solve backwards", "solve-backwards.data"), third)
             distance = t1.distance(t2)
+            ctx.exercised("solve-forwards.data")
             if distance.translation_mm > POSE_TOL_MM or distance.rotation_deg > POSE_TOL_DEG:
                 raise Evidence(
                     "solve-forwards.data",
@@ -530,9 +553,11 @@ async def floats_round_trip(ctx: CaseContext) -> None:
                     answer.data,
                     [answer.request, answer.first],
                 )
+            ctx.exercised("motion.no-power", "response.segment-number")
             segment = reply_view(answer).segment if notified.is_response else None
             settled, got = session.bridge.call(_settle(session.probe, goal, segment, seen))
             _check_answer(settled)
+            ctx.exercised("float.format", "joint-angles.reply")
             if not got or not _close_enough(got, goal):
                 worst = (
                     max(range(len(goal)), key=lambda i: abs(got[i] - goal[i]) / f_ulp(goal[i])) if got else 0
@@ -589,6 +614,7 @@ async def segment_numbering(ctx: CaseContext) -> None:
                 if last:
                     before = reply_view(last[-1]).segment
                     assert before is not None
+                    ctx.exercised("segment.number-increases")
                     if view.segment != (before + 1) & 0xFFFF:
                         raise Evidence(
                             "segment.number-increases",

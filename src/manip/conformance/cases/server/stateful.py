@@ -67,7 +67,13 @@ from manip.conformance.judge.checks import (
     describe,
     word,
 )
-from manip.conformance.judge.model import MODEL_CLAUSES, ProtocolModel
+from manip.conformance.judge.model import (
+    MODEL_CLAUSES,
+    AnswerSummary,
+    DistinctFindings,
+    Expectation,
+    ProtocolModel,
+)
 from manip.conformance.judge.violation import Violation
 from manip.conformance.output.packet_text import packet_listing
 from manip.conformance.suite.bridge import (
@@ -157,6 +163,8 @@ class _Env:
     """Opcodes malformed requests may be built on."""
     log: FailureLog[MachineFailure]
     runs: dict[str, int]
+    found: DistinctFindings[MachineFailure]
+    """The model's disagreements with the server: each distinct one kept, and the run goes on."""
 
 
 async def _exchange(probe: Probe, opcode: int, data: bytes) -> tuple[int, Answer, list[WirePacket]]:
@@ -199,6 +207,8 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         self.probe: Probe | None = None
         self.position: Joints = self.env.arm.ready
         self.failed = False
+        self.disagreed: list[MachineFailure] = []
+        """This run's disagreements with the model, in order (the run went on after each)."""
 
     # ------------------------------------------------------------------------------- plumbing
     @property
@@ -239,16 +249,24 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         data: bytes = b"",
         what: str = "an asynchronous packet",
     ) -> None:
-        if finding is not None:
-            assert finding.clause is not None  # the model's findings always name one
-            raise self._fail(
-                finding.clause,
-                f"{what}: the arm model does not allow {finding.actual}",
-                finding.expected,
-                finding.actual,
-                data,
-                packets,
-            )
+        """A disagreement with the model is kept (once per kind) and the run goes on: the caller's model
+        then takes the state the server showed."""
+        if finding is None:
+            return
+        assert finding.clause is not None  # the model's findings always name one
+        run = list(self.probe.packets) if self.probe is not None else []
+        found = MachineFailure(
+            finding.clause,
+            f"{what}: the arm model does not allow {finding.actual}",
+            finding.expected,
+            finding.actual,
+            data,
+            list(packets),
+            run,
+            steps=list(self.steps),
+        )
+        self.env.found.add(_kind(found), found)
+        self.disagreed.append(found)
 
     def _findings(self, findings: Sequence[Any]) -> None:
         """Raise the first MUST finding of a checker."""
@@ -290,6 +308,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
                     [packet],
                 )
             if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE:
+                self.env.ctx.exercised("async.layout", "async.only-when-requested", "async.codes")
                 self._findings(check_async_packet(packet, None))
                 message = decode_async(packet.data)
                 self._finding(
@@ -300,6 +319,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
                     packet.data,
                 )
             elif packet.opcode in (ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING):
+                self.env.ctx.exercised("async-error.request-number", "error.severity-matches-opcode")
                 self._findings(check_error_packet(packet))
                 if packet.opcode == ServerOp.ASYNCHRONOUS_ERROR:
                     error = error_of(packet)
@@ -367,6 +387,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         op = SPEC.requests.get(opcode)
         what = f"request #{number} ({op.name if op else f'opcode {octal(opcode)}'})"
         self._finding(self.model.judge(expectation, view), packets, answer.data, what)
+        self.env.ctx.exercised(*_judged_clauses(op, expectation, view))
         self.model.observe(number, opcode, data, view)
         return answer
 
@@ -419,6 +440,14 @@ class ArmProtocolMachine(RuleBasedStateMachine):
             if not self.failed:
                 self.pause(END_QUIET)
                 self._findings(check_transcript(probe.packets, rfc_packet_no=probe.rfc_packet_no))
+            if not self.failed and self.disagreed:
+                # The run went on after its disagreements; at its end the first fails it, so that
+                # Hypothesis shrinks a run that shows one (the others are reported unshrunk).
+                first = self.disagreed[0]
+                self.failed = True
+                self.env.log.add(first, len(first.steps))
+                self.bridge.failure_seen()
+                raise first
         finally:
             self.bridge.call(probe.close())  # the next run needs the robot: one client at a time
 
@@ -593,20 +622,39 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         self.send("reserved-float", op.opcode, body)
 
 
+def _judged_clauses(
+    op: RequestOpcode | None, expectation: Expectation, view: AnswerSummary
+) -> tuple[str, ...]:
+    """The clauses one judged answer exercised: one reply echoing its request, the clause a reply outside
+    the allowed ones breaks, and, for a normal reply, its opcode's reply clauses (an error: that it is
+    the reply)."""
+    clauses = ["request.one-reply", "response.echoes-request-number", expectation.clause]
+    if op is None:
+        clauses.append("request.unknown-opcode")
+    elif view.normal:
+        clauses += op.reply_clauses
+    else:
+        clauses.append("error.non-fatal-is-reply")
+    return tuple(clauses)
+
+
 def _machine_class(env: _Env) -> type[ArmProtocolMachine]:
     return type("ArmProtocolMachine", (ArmProtocolMachine,), {"env": env})
 
 
 # ------------------------------------------------------------------------------------- the case
-def _counterexample(failure: MachineFailure, address: str, reproduce: str | None = None) -> str:
+def _counterexample(
+    failure: MachineFailure, address: str, reproduce: str | None = None, *, shrunk: bool = True
+) -> str:
     """The counterexample for the report: its requests, how to see it again, the failing run's packets.
     ``reproduce``: the case's command, for a target that will be gone (the embedded server), in place
-    of the line that replays the requests against ``address``."""
+    of the line that replays the requests against ``address``.  ``shrunk``: Hypothesis shrank it (a
+    disagreement the run went on after was not shrunk: its steps are the run's up to it)."""
+    which = "the shrunk counterexample" if shrunk else "the run up to it (not shrunk)"
     lines = [
         failure.actual,
         "",
-        f"requests of the shrunk counterexample ({len(failure.steps)} steps, "
-        "on a fresh connection; the last one failed):",
+        f"requests of {which} ({len(failure.steps)} steps, on a fresh connection; the last one failed):",
     ]
     lines += [f"  {i:>3}. {step.show()}" for i, step in enumerate(failure.steps, 1)]
     shown = ", ".join(step.as_python() for step in failure.steps)
@@ -672,9 +720,10 @@ async def arm_model(ctx: CaseContext) -> None:
     safe = [op for op in safe if op.request.fixed_size is not None]
     log: FailureLog[MachineFailure] = FailureLog()
     runs = {"examples": 0}
+    disagreements: DistinctFindings[MachineFailure] = DistinctFindings()
 
     def work(bridge: Bridge) -> tuple[MachineFailure | None, str]:
-        env = _Env(ctx, bridge, arm, motion, safe, log, runs)
+        env = _Env(ctx, bridge, arm, motion, safe, log, runs, disagreements)
         machine = _machine_class(env)
         settings = hypothesis_settings(ctx.max_examples, stateful_step_count=STEPS_PER_EXAMPLE)
         try:
@@ -705,12 +754,41 @@ async def arm_model(ctx: CaseContext) -> None:
     )
     if note:
         ctx.note(note)
+    reproduce = ctx.reproduce if ctx.options.embedded and ctx.reproduce else None
+    address = ctx.options.address or "tcp://HOST:PORT"
+    _record_disagreements(ctx, disagreements, address, reproduce, failure)
     if failure is not None:
-        reproduce = ctx.reproduce if ctx.options.embedded and ctx.reproduce else None
-        shown = _counterexample(failure, ctx.options.address or "tcp://HOST:PORT", reproduce)
+        shown = _counterexample(failure, address, reproduce)
         ctx.show_packets(failure.example or failure.packets)
         culprit = failure.culprit
         ctx.fail_with(replace(failure.violation, actual=shown, packet=culprit))
+
+
+def _kind(failure: MachineFailure) -> tuple[str, ...]:
+    """What makes two disagreements the same: the clause, and the rule of the step it was found on."""
+    rule = failure.steps[-1].rule if failure.steps else ""
+    return (failure.violation.clause or "", rule)
+
+
+def _record_disagreements(
+    ctx: CaseContext,
+    found: DistinctFindings[MachineFailure],
+    address: str,
+    reproduce: str | None,
+    stopped: MachineFailure | None,
+) -> None:
+    """Report every distinct disagreement with the model the runs went on after, but the one the case
+    stops with (``stopped``, shrunk; its packets are the case's packet log)."""
+    for item in found.kept.values():
+        if stopped is not None and _kind(item) == _kind(stopped):
+            continue  # the one the case stops with, shrunk
+        text = _counterexample(item, address, reproduce, shrunk=False)
+        ctx.record(replace(item.violation, actual=text, packet=item.culprit))
+    if found.dropped:
+        ctx.note(
+            f"{found.dropped} more distinct disagreement(s) with the model not reported "
+            f"(at most {found.bound} per case)"
+        )
 
 
 # ------------------------------------------------------------------------------------- replay

@@ -152,7 +152,8 @@ async def incremental_reference(ctx: CaseContext) -> None:
         off <= POSE_TOL_MM and turn <= 1e-3,
         clause="incremental.relative",
         expected=f"the hand at {[round(v, 3) for v in want]} (start plus both deltas), orientation unchanged",
-        actual=f"at {[round(v, 3) for v in end[9:]]} ({off:.3f} mm off), rotation changed by {turn:.2g}",
+        actual=f"at {[round(v, 3) for v in end[9:]]} mm ({off:.3f} mm off), rotation changed by "
+        f"{turn_deg(end[:9], start[:9]):.3g} deg (its matrix by {turn:.2g} at most, a unitless cosine)",
     )
     await probe.call("set-joint-angles", joints=list(before))
     await settle(ctx, probe, before)
@@ -240,6 +241,12 @@ def wrap180(deg: float) -> float:
     return (deg + 180.0) % 360.0 - 180.0
 
 
+def turn_deg(a: Sequence[float], b: Sequence[float]) -> float:
+    """The angle in degrees between two rotations, each the first 9 floats of a transform (N O A columns)."""
+    trace = sum(a[3 * j + i] * b[3 * j + i] for i in range(3) for j in range(3))
+    return math.degrees(math.acos(max(-1.0, min(1.0, (trace - 1.0) / 2.0))))
+
+
 async def _turned(
     ctx: CaseContext,
     probe: Probe,
@@ -256,14 +263,15 @@ async def _turned(
     want = val_rotation(o + delta[0], a + delta[1], t + delta[2])
     got = tuple(tuple(end[3 * j + i] for j in range(3)) for i in range(3))
     turn = max(abs(want[i][j] - got[i][j]) for i in range(3) for j in range(3))
+    angle = turn_deg([want[i][j] for j in range(3) for i in range(3)], end[:9])
     off = math.dist(end[9:], start[9:])
     ctx.expect(
         turn <= OAT_TOL and off <= POSE_TOL_MM,
         clause="incremental.relative",
         expected=f"{op}: the hand at O A T {[round(v, 3) for v in (o, a, t)]} plus {list(delta)}, "
         "position unchanged",
-        actual=f"rotation off by {turn:.4f} (got O A T {[round(v, 3) for v in val_angles(end)]}), "
-        f"position moved {off:.3f} mm",
+        actual=f"rotation off by {angle:.3g} deg (its matrix by {turn:.4f} at most, a unitless cosine; "
+        f"got O A T {[round(v, 3) for v in val_angles(end)]} deg), position moved {off:.3f} mm",
     )
     return end
 
@@ -286,6 +294,7 @@ async def incremental_oat(ctx: CaseContext) -> None:
     )
     for op, delta in turns:
         start = await _turned(ctx, probe, op, start, delta)
+        ctx.exercised(f"{op}.data")  # the turn it made is the one its data asked for
     await probe.call("set-joint-angles", joints=list(before))
     await settle(ctx, probe, before)
 
