@@ -10,7 +10,9 @@ Theory of operation
    ``--known-failing`` entries are matched against every registered case; one that matches none is
    a problem of the run (a stale entry).
 2. **Liveness before**: connect, send one read-only request, wait for any answer.  A target that
-   fails it is *unreachable*: no case runs, exit code 3.
+   fails it without having sent a single manip packet is *unreachable*: no case runs, exit code 3.  A
+   target that sent something (the initial RESPONSE, a partial reply) and then broke the exchange was
+   reached: the cases run, and the first one's failure says what it did.
 3. **Each case**, one at a time, gets a :class:`~manip.conformance.suite.context.CaseContext` with its own
    seed (derived from the run seed and the case id, so a case's seed does not depend on what else
    runs) and its deadline (``case.deadline * deadline_scale``, plus any wait on a target's timer).  Its
@@ -22,8 +24,12 @@ Theory of operation
    run: it becomes an ``error`` outcome with its traceback, and so does a violation of a clause the
    case does not declare that no suite invariant reported (:mod:`manip.conformance.suite.invariants`).
 4. **Liveness after** every failure or error and after every negative case; if the target is dead
-   (after one retry) the remaining cases are skipped, the run records which case it died after, and
-   the run is non-conformant (or unreachable, exit 3, when no case had reached a verdict).
+   (after one retry), or a case failed for want of the initial RESPONSE and the liveness check got none
+   either, the run notices it once: the remaining cases end at once ``not-judged`` (a live target would
+   judge them), the run records which case it died after, and the run is non-conformant (or
+   unreachable, exit 3, when nothing the target sent reached any case).  So a run against any target
+   ends within the sum of its cases' deadlines plus :data:`CASE_MARGIN` per case and the liveness
+   checks (:data:`LIVENESS_BOUND` each).
 5. **Liveness at the end**; then the verdict (:attr:`RunReport.exit_code`).
 
 Hazards: with ``robot="hardware"`` (``--target hardware``) cases whose hazard is above ``config`` are
@@ -55,10 +61,26 @@ from manip.links.api import LinkWrapper
 from manip.spec.constants import ServerOp
 from manip.spec.notation import octal
 
-__all__ = ["LIVENESS_RETRY_DELAY", "RunConfig", "RunEvents", "Runner", "case_seed"]
+__all__ = [
+    "CASE_MARGIN",
+    "LIVENESS_RETRY_DELAY",
+    "RunConfig",
+    "RunEvents",
+    "Runner",
+    "case_seed",
+    "liveness_bound",
+]
 
 LIVENESS_RETRY_DELAY = 0.5
 CLOSE_GRACE = 2.0
+CASE_MARGIN = CLOSE_GRACE
+"""How long a case may run past its deadline, whatever the target does: the closing of its connections."""
+
+
+def liveness_bound(options: RunOptions) -> float:
+    """The longest one liveness check takes (two probes, each bounded, and the pause between them)."""
+    once = options.connect_timeout + 2 * options.reply_timeout + 1.0 + CLOSE_GRACE
+    return 2 * once + LIVENESS_RETRY_DELAY
 
 
 def case_seed(run_seed: int, case_id: str) -> int:
@@ -157,6 +179,10 @@ class Runner:
             command=config.command,
             time="virtual" if config.virtual_time else "real",
         )
+        self._reached = False
+        """Whether anything the target sent (a manip packet, not only the Chaos opening) reached the run."""
+        self._initial_seen = True
+        """Whether the last liveness probe got its initial RESPONSE."""
 
     # --------------------------------------------------------------------------------- selection
 
@@ -228,7 +254,14 @@ class Runner:
         except OSError as exc:
             return False, f"{type(exc).__name__}: {exc}"
         finally:
+            self._initial_seen = bool(ctx.probes) and ctx.probes[0].initial is not None
+            self._note_reached(ctx)
             await _quietly(ctx.close_all())
+
+    def _note_reached(self, ctx: CaseContext) -> None:
+        """Remember whether the target sent anything a manip session carries."""
+        if not self._reached:
+            self._reached = any(p.direction == "s2c" and not p.is_close for p in ctx.transcript)
 
     # --------------------------------------------------------------------------------- the run
 
@@ -246,7 +279,8 @@ class Runner:
         if self.events.started:
             self.events.started(cases)
         try:
-            if not (await self.liveness("before")).alive:
+            before = await self.liveness("before")
+            if not before.alive and not self._reached:
                 report.unreachable = True
                 for item in cases:
                     report.results.append(self._blank(item, "skip", "target unreachable before the run"))
@@ -254,7 +288,12 @@ class Runner:
             dead = False
             for item in cases:
                 if dead:
-                    result = self._blank(item, "skip", f"target dead after {report.target_died_after}")
+                    result = self._blank(
+                        item,
+                        "not-judged",
+                        f"the target stopped answering during case {report.target_died_after}; "
+                        "a target that answers would judge it",
+                    )
                 else:
                     result = await self.run_case(item)
                 report.results.append(result)
@@ -263,22 +302,12 @@ class Runner:
                 if not dead and (
                     result.outcome in ("fail", "error", "known-fail") or item.technique == "negative"
                 ):
-                    check = await self.liveness(f"after:{item.id}")
-                    if not check.alive:
-                        dead = True
-                        report.target_died_after = item.id
-                        report.problems.append(f"the target died during case {item.id}: {check.detail}")
+                    dead = await self._dead_after(item, result)
             if not dead:
                 end = await self.liveness("end")
                 if not end.alive:
                     report.problems.append(f"the target was dead at the end of the run: {end.detail}")
-            if (
-                report.problems
-                and report.target_died_after is not None
-                and not any(
-                    r.outcome in ("pass", "fail", "warn", "known-fail", "fixed") for r in report.results
-                )
-            ):
+            if report.target_died_after is not None and not self._reached:
                 report.unreachable = True
         except (asyncio.CancelledError, KeyboardInterrupt):
             report.interrupted = True
@@ -287,6 +316,23 @@ class Runner:
             self._stale_known_failing()
             report.duration = time.monotonic() - t0
         return report
+
+    async def _dead_after(self, item: Case, result: CaseResult) -> bool:
+        """The liveness check after a case; True (and recorded once) when the target is found dead: it
+        does not answer, or it sends no initial RESPONSE, which the case failed for, on a fresh
+        connection either."""
+        check = await self.liveness(f"after:{item.id}")
+        no_initial = (
+            check.alive
+            and not self._initial_seen
+            and any(v.clause == "connect.initial-response" for v in result.violations)
+        )
+        if check.alive and not no_initial:
+            return False
+        self.report.target_died_after = item.id
+        detail = "it sends no initial RESPONSE on a fresh connection" if check.alive else check.detail
+        self.report.problems.append(f"the target died during case {item.id}: {detail}")
+        return True
 
     def _stale_known_failing(self) -> None:
         for result in self.report.results:
@@ -360,11 +406,10 @@ class Runner:
                 result.traceback = traceback.format_exc()
                 failure = None
             else:
-                elapsed = clock() - start
-                failure = CaseFailure(
+                failure = _found_by_then(ctx) or CaseFailure(
                     f"the case did not finish within its deadline of {result.deadline:g} s",
                     expected=f"the exchange to finish within {result.deadline:g} s",
-                    actual=f"still running after {elapsed:.2f} s",
+                    actual=f"still running after {clock() - start:.2f} s",
                     kind="deadline",
                 )
         except (asyncio.CancelledError, KeyboardInterrupt):
@@ -377,6 +422,7 @@ class Runner:
         finally:
             result.duration = clock() - start
         await _quietly(ctx.close_all())
+        self._note_reached(ctx)
         result.notes = list(ctx.notes)
         result.packets = list(ctx.transcript if ctx.shown_packets is None else ctx.shown_packets)
         self._judge(result, ctx, failure)
@@ -410,6 +456,19 @@ class Runner:
                 result.outcome = "known-fail"
             elif result.outcome in ("pass", "warn"):
                 result.outcome = "fixed"
+
+
+def _found_by_then(ctx: CaseContext) -> CaseFailure | None:
+    """At a case's deadline: the first MUST finding of what was recorded by then (a target that floods
+    the case with extra replies broke a clause the transcript shows), else None."""
+    if not ctx.auto_check:
+        return None
+    try:
+        for probe in ctx.probes:
+            ctx.check(check_transcript(probe.packets, rfc_packet_no=probe.rfc_packet_no))
+    except CaseFailure as exc:
+        return exc
+    return None
 
 
 async def _quietly(awaitable: object) -> None:
