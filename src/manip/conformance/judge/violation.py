@@ -62,7 +62,7 @@ FAILURE_KINDS: Final[tuple[str, ...]] = get_args(FailureKind)
 
 MAX_EVIDENCE_BYTES: Final = 4096
 """The most bytes a violation keeps as evidence (a runaway reply's text is cut, and the text says so)."""
-MAX_TEXT: Final = 2000
+MAX_TEXT: Final = 16_000
 """The most characters a violation's message, expected and actual texts keep."""
 
 NOTHING: Final = "nothing"

@@ -235,8 +235,20 @@ class Probe:
     async def request(self, opcode: int | RequestName, data: bytes = b"") -> int:
         """Send one request packet with exactly ``data``; return its Chaos packet number."""
         code = SPEC.request(opcode).opcode if isinstance(opcode, str) else opcode
+        wait = self._send_wait()
         try:
-            number = await self.conn.send(bytes(data), code)
+            async with asyncio.timeout(wait):
+                number = await self.conn.send(bytes(data), code)
+        except TimeoutError:
+            self._ctx.auto_check = False
+            self._ctx.check(check_transcript(self.packets, rfc_packet_no=self.rfc_packet_no))
+            raise CaseFailure(
+                f"the target did not take request {_request_name(code)} within {wait:g} s: the window it "
+                "offers stayed full (it acknowledged none of the requests before it)",
+                expected=f"room in the target's window within {wait:g} s",
+                actual="the window full",
+                kind="timeout",
+            ) from None
         except ChaosError as exc:
             self._ended(exc)
             raise CaseFailure(
@@ -252,6 +264,13 @@ class Probe:
         self._record("c2s", code, number, ack, data)
         self._unanswered[number] = (code, self.arm_wait(code))
         return number
+
+    def _send_wait(self) -> float:
+        """How long a request may wait for room in the target's window: the reply timeout, or the
+        allowance of the oldest unanswered request if longer (the target acknowledges as it takes them)."""
+        oldest = next(iter(self._unanswered), None)
+        allowed = self.allowance(oldest)[0] if oldest is not None else 0.0
+        return max(self._ctx.options.reply_timeout, allowed)
 
     def arm_wait(self, code: int) -> float:
         """Seconds the answer to request ``code`` sent now may wait for the arm (erratum

@@ -25,11 +25,12 @@ Theory of operation
    case does not declare that no suite invariant reported (:mod:`manip.conformance.suite.invariants`).
 4. **Liveness after** every failure or error and after every negative case; if the target is dead
    (after one retry), or a case failed for want of the initial RESPONSE and the liveness check got none
-   either, the run notices it once: the remaining cases end at once ``not-judged`` (a live target would
-   judge them), the run records which case it died after, and the run is non-conformant (or
+   either, or a case failed under a flood of :data:`RUNAWAY_PACKETS` packets or more (a runaway target),
+   the run notices it once: the remaining cases end at once ``not-judged`` (a live target would judge
+   them), the run records which case it died after, and the run is non-conformant (or
    unreachable, exit 3, when nothing the target sent reached any case).  So a run against any target
    ends within the sum of its cases' deadlines plus :data:`CASE_MARGIN` per case and the liveness
-   checks (:data:`LIVENESS_BOUND` each).
+   checks (:func:`liveness_bound` each).
 5. **Liveness at the end**; then the verdict (:attr:`RunReport.exit_code`).
 
 Hazards: with ``robot="hardware"`` (``--target hardware``) cases whose hazard is above ``config`` are
@@ -64,6 +65,7 @@ from manip.spec.notation import octal
 __all__ = [
     "CASE_MARGIN",
     "LIVENESS_RETRY_DELAY",
+    "RUNAWAY_PACKETS",
     "RunConfig",
     "RunEvents",
     "Runner",
@@ -74,6 +76,9 @@ __all__ = [
 LIVENESS_RETRY_DELAY = 0.5
 CLOSE_GRACE = 2.0
 CASE_MARGIN = CLOSE_GRACE
+RUNAWAY_PACKETS = 5_000
+"""A case that fails having taken this many packets from the target (a case needs a few dozen, a property
+case a few hundred) shows a runaway target: the run gives it up, as it does a dead one."""
 """How long a case may run past its deadline, whatever the target does: the closing of its connections."""
 
 
@@ -183,6 +188,9 @@ class Runner:
         """Whether anything the target sent (a manip packet, not only the Chaos opening) reached the run."""
         self._initial_seen = True
         """Whether the last liveness probe got its initial RESPONSE."""
+        self._runaway = ""
+        """Set when a case could not finish under a flood from the target (:data:`RUNAWAY_PACKETS`)."""
+        self._dead_reason = ""
 
     # --------------------------------------------------------------------------------- selection
 
@@ -288,12 +296,7 @@ class Runner:
             dead = False
             for item in cases:
                 if dead:
-                    result = self._blank(
-                        item,
-                        "not-judged",
-                        f"the target stopped answering during case {report.target_died_after}; "
-                        "a target that answers would judge it",
-                    )
+                    result = self._blank(item, "not-judged", self._dead_reason)
                 else:
                     result = await self.run_case(item)
                 report.results.append(result)
@@ -303,6 +306,8 @@ class Runner:
                     result.outcome in ("fail", "error", "known-fail") or item.technique == "negative"
                 ):
                     dead = await self._dead_after(item, result)
+                if not dead and self._runaway:
+                    dead = self._given_up(item, self._runaway)
             if not dead:
                 end = await self.liveness("end")
                 if not end.alive:
@@ -329,9 +334,14 @@ class Runner:
         )
         if check.alive and not no_initial:
             return False
-        self.report.target_died_after = item.id
         detail = "it sends no initial RESPONSE on a fresh connection" if check.alive else check.detail
-        self.report.problems.append(f"the target died during case {item.id}: {detail}")
+        return self._given_up(item, f"the target died during case {item.id}: {detail}")
+
+    def _given_up(self, item: Case, problem: str) -> bool:
+        """The target is found dead or runaway after ``item``: recorded once; the rest is not judged."""
+        self.report.target_died_after = item.id
+        self.report.problems.append(problem)
+        self._dead_reason = f"{problem}; a target that answers as the protocol says would judge this case"
         return True
 
     def _stale_known_failing(self) -> None:
@@ -423,11 +433,22 @@ class Runner:
             result.duration = clock() - start
         await _quietly(ctx.close_all())
         self._note_reached(ctx)
+        self._watch_runaway(item, ctx, result, failed=failure is not None)
         result.notes = list(ctx.notes)
         result.packets = list(ctx.transcript if ctx.shown_packets is None else ctx.shown_packets)
         self._judge(result, ctx, failure)
         self._check_attribution(result, ctx, failure)
         return result
+
+    def _watch_runaway(self, item: Case, ctx: CaseContext, result: CaseResult, *, failed: bool) -> None:
+        """Note a case that failed under a flood of :data:`RUNAWAY_PACKETS` or more (the run then gives
+        the target up)."""
+        if ctx.received >= RUNAWAY_PACKETS and (failed or result.outcome == "error"):
+            ctx.note(f"the target sent {ctx.received:,} packets in this case")
+            self._runaway = (
+                f"the target ran away during case {item.id}: {ctx.received:,} packets "
+                f"in {result.duration:.1f} s, and the case could not finish"
+            )
 
     @staticmethod
     def _check_attribution(result: CaseResult, ctx: CaseContext, failure: CaseFailure | None) -> None:
