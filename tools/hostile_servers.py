@@ -368,6 +368,8 @@ class Figures:
     report_bytes: int
     verdict: str
     traceback: bool
+    failed_clauses: frozenset[str] = frozenset()
+    """The clauses the report's violations name."""
 
     @property
     def bad(self) -> bool:
@@ -434,20 +436,24 @@ def run_scenario(
         out.seek(0)
         text = out.read().decode(errors="replace")
         size = report.stat().st_size if report.exists() else 0
-        verdict = _verdict(report, text)
-    return Figures(name, command, code, took, peak, size, verdict, "Traceback" in text)
+        verdict, clauses = _verdict(report, text)
+    return Figures(name, command, code, took, peak, size, verdict, "Traceback" in text, clauses)
 
 
-def _verdict(report: Path, text: str) -> str:
-    with contextlib.suppress(OSError, ValueError):
+def _verdict(report: Path, text: str) -> tuple[str, frozenset[str]]:
+    """The report's verdict (else the output's last line) and the clauses its violations name."""
+    with contextlib.suppress(OSError, ValueError, AttributeError, TypeError):
         data = json.loads(report.read_text())
-        summary = data.get("summary", {})
-        if isinstance(summary, dict) and summary.get("verdict"):
-            return str(summary["verdict"])
+        clauses = frozenset(
+            str(v["clause"])
+            for case in data.get("cases", [])
+            for v in case.get("violations", [])
+            if v.get("clause")
+        )
         if data.get("verdict"):
-            return str(data["verdict"])
+            return str(data["verdict"]), clauses
     lines = [line for line in text.strip().splitlines() if line.strip()]
-    return lines[-1][:80] if lines else ""
+    return (lines[-1][:80] if lines else ""), frozenset()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
