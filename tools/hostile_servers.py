@@ -370,6 +370,8 @@ class Figures:
     traceback: bool
     failed_clauses: frozenset[str] = frozenset()
     """The clauses the report's violations name."""
+    counts: tuple[tuple[str, int], ...] = ()
+    """The report's outcome counts."""
 
     @property
     def bad(self) -> bool:
@@ -381,7 +383,8 @@ def command_line(command: str, target: str, report: Path, extra: Sequence[str]) 
     if command == "run":
         return [str(bindir / "manip-conform"), "run", target, "--json", str(report), *extra]
     if command == "fuzz":
-        return [str(bindir / "manip-conform"), "fuzz", target, "--json", str(report), *extra]
+        cheap = ["--inputs", "500", "--shrink-seconds", "5"]  # the campaign's point is the end, not the finds
+        return [str(bindir / "manip-conform"), "fuzz", target, "--json", str(report), *cheap, *extra]
     if command == "replay":
         capture = Path(__file__).resolve().parents[1] / "captures" / "describe-self.mcap"
         return [
@@ -436,12 +439,12 @@ def run_scenario(
         out.seek(0)
         text = out.read().decode(errors="replace")
         size = report.stat().st_size if report.exists() else 0
-        verdict, clauses = _verdict(report, text)
-    return Figures(name, command, code, took, peak, size, verdict, "Traceback" in text, clauses)
+        verdict, clauses, counts = _verdict(report, text)
+    return Figures(name, command, code, took, peak, size, verdict, "Traceback" in text, clauses, counts)
 
 
-def _verdict(report: Path, text: str) -> tuple[str, frozenset[str]]:
-    """The report's verdict (else the output's last line) and the clauses its violations name."""
+def _verdict(report: Path, text: str) -> tuple[str, frozenset[str], tuple[tuple[str, int], ...]]:
+    """The report's verdict (else the output's last line), the clauses its violations name, its counts."""
     with contextlib.suppress(OSError, ValueError, AttributeError, TypeError):
         data = json.loads(report.read_text())
         clauses = frozenset(
@@ -450,10 +453,11 @@ def _verdict(report: Path, text: str) -> tuple[str, frozenset[str]]:
             for v in case.get("violations", [])
             if v.get("clause")
         )
+        counts = tuple((str(k), int(n)) for k, n in dict(data.get("counts", {})).items())
         if data.get("verdict"):
-            return str(data["verdict"]), clauses
+            return str(data["verdict"]), clauses, counts
     lines = [line for line in text.strip().splitlines() if line.strip()]
-    return (lines[-1][:80] if lines else ""), frozenset()
+    return (lines[-1][:80] if lines else ""), frozenset(), ()
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -73,6 +73,14 @@ def test_a_silent_target_is_noticed_once_not_paid_for_per_property_example() -> 
     assert figures.seconds < 4 * 77 / 2, figures
 
 
+@pytest.mark.timeout(300)
+def test_a_target_that_answers_one_request_a_connection_is_given_up_once() -> None:
+    # Each case used to pay the reply timeout again: the liveness probe (one request) found it alive.
+    figures = _run("silent-after-one", "server.reply.*")
+    counts = dict(figures.counts)
+    assert figures.exit == 1 and counts["fail"] == 1 and counts["not-judged"] > 10, figures
+
+
 def test_a_violation_keeps_bounded_evidence_and_says_what_it_cut() -> None:
     v = Violation("m" * (MAX_TEXT + 10), actual="short", data=bytes(MAX_EVIDENCE_BYTES + 100))
     assert len(v.data) == MAX_EVIDENCE_BYTES

@@ -9,7 +9,8 @@ Theory of operation
 1. **Select**: cases matching ``--select`` (all when none given) and not ``--skip``, in id order.
    ``--known-failing`` entries are matched against every registered case; one that matches none is
    a problem of the run (a stale entry).
-2. **Liveness before**: connect, send one read-only request, wait for any answer.  A target that
+2. **Liveness before**: connect, send a read-only request, wait for any answer, and again on the same
+   connection.  A target that
    fails it without having sent a single manip packet is *unreachable*: no case runs, exit code 3.  A
    target that sent something (the initial RESPONSE, a partial reply) and then broke the exchange was
    reached: the cases run, and the first one's failure says what it did.
@@ -52,7 +53,7 @@ from datetime import UTC, datetime
 from manip.conformance.judge.checks import check_transcript
 from manip.conformance.suite.busy import open_retrying_busy
 from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
-from manip.conformance.suite.context import CaseContext, RunOptions
+from manip.conformance.suite.context import CaseContext, Probe, RunOptions
 from manip.conformance.suite.invariants import attribution_problem
 from manip.conformance.suite.results import CaseResult, LivenessCheck, Outcome, RunReport
 from manip.conformance.suite.selection import PatternSet
@@ -74,6 +75,8 @@ __all__ = [
 ]
 
 LIVENESS_RETRY_DELAY = 0.5
+LIVENESS_REQUESTS = 2
+"""Requests a liveness probe sends on its connection, one after the other, each to be answered."""
 CLOSE_GRACE = 2.0
 CASE_MARGIN = CLOSE_GRACE
 RUNAWAY_PACKETS = 5_000
@@ -84,7 +87,7 @@ case a few hundred) shows a runaway target: the run gives it up, as it does a de
 
 def liveness_bound(options: RunOptions) -> float:
     """The longest one liveness check takes (two probes, each bounded, and the pause between them)."""
-    once = options.connect_timeout + 2 * options.reply_timeout + 1.0 + CLOSE_GRACE
+    once = options.connect_timeout + LIVENESS_REQUESTS * options.reply_timeout + 1.0 + CLOSE_GRACE
     return 2 * once + LIVENESS_RETRY_DELAY
 
 
@@ -232,29 +235,23 @@ class Runner:
         return check
 
     async def _probe_once(self) -> tuple[bool, str]:
+        """One liveness probe: a fresh connection, Here answered, then Here again on it (a target that
+        answers the first request of each connection and nothing after is not alive)."""
         options = self.config.options
         if self.config.liveness_check is not None:
             return await self.config.liveness_check(options)
         ctx = CaseContext(case_id="liveness", level="MUST", seed=0, options=options, connector=self.connect)
         try:
-            async with asyncio.timeout(options.connect_timeout + 2 * options.reply_timeout + 1.0):
+            async with asyncio.timeout(
+                options.connect_timeout + LIVENESS_REQUESTS * options.reply_timeout + 1.0
+            ):
                 probe = await ctx.connect(initial=False)
-                number = await probe.request("here")
-                while True:
-                    packet = await probe.next_packet(options.reply_timeout)
-                    if packet is None:
-                        reason = probe.end_reason or f"no answer within {options.reply_timeout:g} s"
-                        return False, f"request sent, {reason}"
-                    if packet.opcode in (ServerOp.RESPONSE, ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):
-                        if (
-                            probe.initial is None
-                            and len(packet.data) == 2
-                            and packet.packet_no
-                            and not probe.unsolicited
-                        ):
-                            probe.initial = packet  # the initial RESPONSE; the answer comes next
-                            continue
-                        return True, f"answered request #{number} with opcode {octal(packet.opcode)}"
+                detail = ""
+                for _ in range(LIVENESS_REQUESTS):
+                    answered, detail, fatal = await self._answer_to_here(probe)
+                    if not answered or fatal:
+                        return answered, detail
+                return True, detail
         except CaseFailure as exc:
             return False, exc.actual or exc.message
         except TimeoutError:
@@ -265,6 +262,27 @@ class Runner:
             self._initial_seen = bool(ctx.probes) and ctx.probes[0].initial is not None
             self._note_reached(ctx)
             await _quietly(ctx.close_all())
+
+    async def _answer_to_here(self, probe: Probe) -> tuple[bool, str, bool]:
+        """Send Here and wait for any answer: (answered, what happened, the answer was a fatal error)."""
+        timeout = self.config.options.reply_timeout
+        number = await probe.request("here")
+        while True:
+            packet = await probe.next_packet(timeout)
+            if packet is None:
+                reason = probe.end_reason or f"no answer within {timeout:g} s"
+                return False, f"request #{number} sent, {reason}", False
+            if packet.opcode in (ServerOp.RESPONSE, ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):
+                if (
+                    probe.initial is None
+                    and len(packet.data) == 2
+                    and packet.packet_no
+                    and not probe.unsolicited
+                ):
+                    probe.initial = packet  # the initial RESPONSE; the answer comes next
+                    continue
+                detail = f"answered request #{number} with opcode {octal(packet.opcode)}"
+                return True, detail, packet.opcode == ServerOp.FATAL_ERROR
 
     def _note_reached(self, ctx: CaseContext) -> None:
         """Remember whether the target sent anything a manip session carries."""
