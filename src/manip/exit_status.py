@@ -25,9 +25,12 @@ _USAGE: Final = (
 EXIT_STATUSES: Final[Mapping[str, Row]] = {
     "manip-conform run": (
         (0, "conformant"),
-        (1, "non-conformant: a failure, a stale --known-failing entry, the target died"),
+        (
+            1,
+            "non-conformant: a failure, a stale --known-failing entry, the target died or broke the exchange",
+        ),
         (2, _USAGE),
-        (3, "target unreachable, or dead before any verdict"),
+        (3, "target unreachable: nothing it sent reached the run"),
         (4, "interrupted, internal error, or an unstable suite (--repeat); a partial report is written"),
     ),
     "manip-conform verify, replay": (

@@ -10,10 +10,10 @@ Commands::
 Exit codes of ``run`` (documented in ``--help``):
 
     0  conformant: no MUST failure (nor SHOULD failure with --strict), no stale known-failing entry
-    1  non-conformant: a failure, a stale known-failing entry, or the target died during the run
+    1  non-conformant: a failure, a stale known-failing entry, or the target died or broke the exchange
     2  usage error (bad option, pattern, address or pattern file; a --select matching no case; an
        option of a target not chosen; a report or capture path that cannot be written)
-    3  target unreachable, or dead before any case reached a verdict
+    3  target unreachable: nothing it sent (not even an initial RESPONSE) reached the run
     4  interrupted, an internal error of the suite, or a verdict that changed with the seed (``--repeat``;
        a partial report is still written)
 

@@ -43,7 +43,7 @@ from manip.codecs.pairing import ReplyPairing
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.fuzz.steps import ConnPacket
 from manip.conformance.judge.checks import WirePacket, required_refusal
-from manip.conformance.suite.rawchaos import KEPT_BAD, RawLink, Received, rfc_until_open
+from manip.conformance.suite.rawchaos import KEPT_BAD, MAX_RECEIVED, RawLink, Received, rfc_until_open
 from manip.ncp.packets import is_data, pack_status, text, unpack_status
 from manip.ncp.seq import seq_add, seq_gt, seq_le, seq_sub
 from manip.spec import SPEC
@@ -97,7 +97,9 @@ class Inbox:
         if conn is not None:
             conn.on_packet(packet, raw, now)
         else:
-            self.strays[packet.dest_index].append((packet, now))
+            kept = self.strays[packet.dest_index]
+            if len(kept) < MAX_RECEIVED:  # a flood to an index of ours is judged by what came first
+                kept.append((packet, now))
             if self.on_stray is not None:
                 self.on_stray(packet)
         self.arrived.set()

@@ -26,6 +26,8 @@ from manip.spec.model import Level
 
 __all__ = [
     "FAILURE_KINDS",
+    "MAX_EVIDENCE_BYTES",
+    "MAX_TEXT",
     "CarriesViolation",
     "FailureKind",
     "Shown",
@@ -57,6 +59,11 @@ one, a session no client played, a replay that could not go on); ``crash``, ``tr
 without counting them; a target that stops answering is a ``timeout``, a request it never answers a
 ``missing_response``)."""
 FAILURE_KINDS: Final[tuple[str, ...]] = get_args(FailureKind)
+
+MAX_EVIDENCE_BYTES: Final = 4096
+"""The most bytes a violation keeps as evidence (a runaway reply's text is cut, and the text says so)."""
+MAX_TEXT: Final = 16_000
+"""The most characters a violation's message, expected and actual texts keep."""
 
 NOTHING: Final = "nothing"
 """What an empty list of evidence reads as."""
@@ -122,7 +129,18 @@ class Violation:
     def __post_init__(self) -> None:
         if self.level is None and self.clause is not None and self.clause in SPEC.clauses:
             object.__setattr__(self, "level", SPEC.clauses[self.clause].level)
-        object.__setattr__(self, "data", bytes(self.data))
+        for name in ("message", "expected", "actual"):
+            text = getattr(self, name)
+            if len(text) > MAX_TEXT:
+                object.__setattr__(
+                    self, name, f"{text[:MAX_TEXT]}... ({len(text) - MAX_TEXT:,} more characters)"
+                )
+        data = bytes(self.data)
+        if len(data) > MAX_EVIDENCE_BYTES:
+            cut = f" [the first {MAX_EVIDENCE_BYTES:,} of {len(data):,} bytes shown]"
+            object.__setattr__(self, "actual", self.actual + cut)
+            data = data[:MAX_EVIDENCE_BYTES]
+        object.__setattr__(self, "data", data)
 
     @classmethod
     def of(

@@ -23,6 +23,14 @@ server's packets in the order they come, and judges nothing by itself (the check
 * ``probe.packets``: the recording (:class:`~manip.conformance.judge.checks.WirePacket`, both directions,
   times from the start of the case; the end of the connection is a CLS/EOF/LOS pseudo-packet).
 
+What a probe reads from the target is bounded, as in ``manip-client``: a multi-packet reply that brings
+more than :data:`~manip.reference_client.options.DEFAULT_MAX_REPLY_BYTES` without its terminator fails
+``request.one-reply`` (erratum ``reply-size-limit``), and a case that receives more than
+:data:`MAX_CASE_PACKETS` packets from the target ends failed with the first MUST finding of its recording
+(a flood of extra replies or asynchronous packets is one), or without a clause when there is none.  A
+request the case cannot send because the target ended the connection fails like a reply that never
+came.
+
 ``ctx.expect(cond, clause=..., expected=..., seen=answer)`` is the one way to state a check: false,
 on a clause of any level, is recorded (``ctx.recorded``) and the case goes on, so its report lists every
 violation; ``ctx.require(...)`` is the same check for what the rest of the case depends on, and stops
@@ -54,7 +62,7 @@ from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request
 from manip.codecs.packet import Direction, Packet
 from manip.codecs.pdp11float import unpack_f
-from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, describe, word
+from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, check_transcript, describe, word
 from manip.conformance.judge.violation import Violation, evidence, shown_packet
 from manip.conformance.suite.case import (
     LEVEL_ORDER,
@@ -67,11 +75,14 @@ from manip.conformance.suite.invariants import TRANSCRIPT, attribution_problem
 from manip.conformance.suite.world import CaseNotJudged, Condition, World, no_world
 from manip.cougar.memory_map import CougarMemoryMap
 from manip.links import ChaosConnection, ChaosError, ConnectionClosed, ConnectionLost
+from manip.reference_client.options import DEFAULT_MAX_REPLY_BYTES
 from manip.spec import SPEC, RequestName
 from manip.spec.constants import ChaosOp, ServerOp
 from manip.spec.model import Hazard, Level
+from manip.spec.notation import octal
 
 __all__ = [
+    "MAX_CASE_PACKETS",
     "Answer",
     "CaseContext",
     "Connector",
@@ -91,6 +102,9 @@ _CHECKER_CLAUSES: Final = (
 the byte order its decoding relies on, and the reply clauses of the opcodes, whose layouts it decodes."""
 DEFAULT_REPLY_TIMEOUT: Final = 2.0
 DEFAULT_CONNECT_TIMEOUT: Final = 5.0
+MAX_CASE_PACKETS: Final = 20_000
+"""The most packets one case takes from the target (all its connections): about 14 MB of recording.
+A case needs a few dozen, a property case a few thousand; a describe-self at the reply bound is 2,160."""
 
 
 Connector = Callable[[bool], Awaitable[ChaosConnection]]
@@ -218,18 +232,67 @@ class Probe:
         packet = WirePacket(direction, opcode, number, ack, bytes(data), self._ctx.clock(), self.index)
         self.packets.append(packet)
         self._ctx.transcript.append(packet)
+        if direction == "s2c":
+            self._ctx.received += 1
+            if self._ctx.received > MAX_CASE_PACKETS:
+                self._flooded()
         return packet
+
+    def _flooded(self) -> NoReturn:
+        """The case took :data:`MAX_CASE_PACKETS` from the target: it reads no more.  The recording's
+        first MUST finding is the failure (what the flood broke); without one, a failure of its own."""
+        self.end_reason = self.end_reason or ConnectionClosed("the case stopped reading", by_peer=False)
+        self._ctx.auto_check = False
+        self._ctx.check(check_transcript(self.packets, rfc_packet_no=self.rfc_packet_no))
+        raise CaseFailure(
+            f"the target sent more than {MAX_CASE_PACKETS:,} packets within one case; "
+            "the suite reads no more",
+            expected=f"at most {MAX_CASE_PACKETS:,} packets for one case's requests",
+            actual=f"{self._ctx.received - 1:,} packets, and more coming",
+            kind="unexpected_message",
+        )
 
     # ------------------------------------------------------------------------------------- sending
 
     async def request(self, opcode: int | RequestName, data: bytes = b"") -> int:
         """Send one request packet with exactly ``data``; return its Chaos packet number."""
         code = SPEC.request(opcode).opcode if isinstance(opcode, str) else opcode
-        number = await self.conn.send(bytes(data), code)
+        wait = self._send_wait()
+        try:
+            async with asyncio.timeout(wait):
+                number = await self.conn.send(bytes(data), code)
+        except TimeoutError:
+            self._ctx.auto_check = False
+            self._ctx.check(check_transcript(self.packets, rfc_packet_no=self.rfc_packet_no))
+            raise CaseFailure(
+                f"the target did not take request {_request_name(code)} within {wait:g} s: the window it "
+                "offers stayed full (it acknowledged none of the requests before it)",
+                expected=f"room in the target's window within {wait:g} s",
+                actual="the window full",
+                kind="timeout",
+            ) from None
+        except ChaosError as exc:
+            self._ended(exc)
+            raise CaseFailure(
+                f"the target ended the connection before request {_request_name(code)} could be sent",
+                clause="request.one-reply" if self._unanswered else None,
+                expected="the connection open until the case closes it"
+                + (", and a reply to every request sent" if self._unanswered else ""),
+                actual=f"connection ended: {exc}",
+                kind="closed",
+                invariant=TRANSCRIPT.name if self._unanswered else None,
+            ) from exc
         ack = 0
         self._record("c2s", code, number, ack, data)
         self._unanswered[number] = (code, self.arm_wait(code))
         return number
+
+    def _send_wait(self) -> float:
+        """How long a request may wait for room in the target's window: the reply timeout, or the
+        allowance of the oldest unanswered request if longer (the target acknowledges as it takes them)."""
+        oldest = next(iter(self._unanswered), None)
+        allowed = self.allowance(oldest)[0] if oldest is not None else 0.0
+        return max(self._ctx.options.reply_timeout, allowed)
 
     def arm_wait(self, code: int) -> float:
         """Seconds the answer to request ``code`` sent now may wait for the arm (erratum
@@ -315,13 +378,19 @@ class Probe:
         except TimeoutError:
             return None
         except ChaosError as exc:
-            self.end_reason = exc
-            kind = ChaosOp.LOS if isinstance(exc, ConnectionLost) else ChaosOp.CLS
-            if isinstance(exc, ConnectionClosed) and exc.reason == "EOF":
-                kind = ChaosOp.EOF
-            self._record("s2c", kind, 0, 0, str(exc).encode("ascii", "replace"))
+            self._ended(exc)
             return None
         return self._record("s2c", packet.opcode, packet.packet_no, packet.ack_no, packet.data)
+
+    def _ended(self, exc: ChaosError) -> None:
+        """The connection ended (``exc`` says how): recorded once, as a CLS/EOF/LOS pseudo-packet."""
+        if self.end_reason is not None:
+            return
+        self.end_reason = exc
+        kind = ChaosOp.LOS if isinstance(exc, ConnectionLost) else ChaosOp.CLS
+        if isinstance(exc, ConnectionClosed) and exc.reason == "EOF":
+            kind = ChaosOp.EOF
+        self._record("s2c", kind, 0, 0, str(exc).encode("ascii", "replace"))
 
     def push_back(self, packet: WirePacket) -> None:
         """Return a packet so the next :meth:`next_packet` gives it again."""
@@ -369,13 +438,18 @@ class Probe:
         """Every packet of a multi-packet reply to ``number``, up to its empty terminator.
 
         Stops early (``terminated=False``) at an error packet, a packet that is not a RESPONSE, a timeout
-        or the end of the connection; the first packet missing altogether raises like :meth:`reply`."""
+        or the end of the connection; the first packet missing altogether raises like :meth:`reply`.
+        A reply that brings more than ``DEFAULT_MAX_REPLY_BYTES`` of text without its terminator fails
+        ``request.one-reply`` (erratum ``reply-size-limit``: the bound of ``manip-client``)."""
         request = self._request(number)
         first = await self._next_answer_packet(number, timeout, f"a reply to request #{number}")
         packets = [first]
         if first.opcode != ServerOp.RESPONSE or len(first.data) <= 2:
             return Answer(request, (first,), terminated=first.opcode == ServerOp.RESPONSE)
+        size = len(first.data) - 2
         while True:
+            if size > DEFAULT_MAX_REPLY_BYTES:
+                self._too_large(number, packets, size)
             packet = await self.next_packet(timeout)
             if packet is None:
                 return Answer(request, tuple(packets), terminated=False)
@@ -390,8 +464,22 @@ class Probe:
                 self.push_back(packet)
                 return Answer(request, tuple(packets), terminated=False)
             packets.append(packet)
+            size += max(0, len(packet.data) - 2)
             if len(packet.data) <= 2:
                 return Answer(request, tuple(packets), terminated=True)
+
+    def _too_large(self, number: int, packets: Sequence[WirePacket], size: int) -> NoReturn:
+        raise CaseFailure(
+            f"the multi-packet reply to request #{number} goes past {DEFAULT_MAX_REPLY_BYTES:,} data bytes "
+            "without its terminator; the suite reads no more of it (erratum reply-size-limit)",
+            clause="request.one-reply",
+            expected=f"the empty terminator within {DEFAULT_MAX_REPLY_BYTES:,} data bytes "
+            "(manip-client's bound)",
+            actual=f"{len(packets):,} packets, {size:,} data bytes, no terminator",
+            data=packets[-1].data,
+            kind="unexpected_message",
+            invariant=TRANSCRIPT.name,
+        )
 
     async def drain(self, quiet: float = 0.2) -> list[WirePacket]:
         """Take every packet that arrives until ``quiet`` seconds pass without one."""
@@ -474,6 +562,8 @@ class CaseContext:
         (it sends a raw packet the transcript checker would misjudge) sets this False."""
         self.deadline_scope: asyncio.Timeout | None = None
         """The case's deadline (set by the runner); time spent waiting on the world is added to it."""
+        self.received = 0
+        """Packets taken from the target so far, all connections (bounded: :data:`MAX_CASE_PACKETS`)."""
         self._connector = connector
         self._clock = _loop_clock()
         self._t0 = self._clock()
@@ -764,6 +854,11 @@ class CaseContext:
         """Skip unless the run allows opcodes of ``hazard`` (for cases that decide at run time)."""
         if hazard not in self.options.allowed_hazards:
             self.skip(f"{hazard} requests are not allowed on {self.options.robot} without --allow-motion")
+
+
+def _request_name(code: int) -> str:
+    op = SPEC.requests.get(code)
+    return op.name if op is not None else octal(code)
 
 
 def request_packets(packets: Sequence[WirePacket]) -> list[WirePacket]:

@@ -93,6 +93,10 @@ RFC_RETRY: Final = 1.0
 FOREIGN_HEAD: Final = 80
 """Bytes of a peer's first data kept, to say what it is when its first frame length is no frame's."""
 KEPT_BAD: Final = 100
+MAX_RECEIVED: Final = 20_000
+"""The most packets a :class:`RawPeer` takes from the target (a case needs a few dozen: the target's
+NCP stops at the window, since the peer acknowledges nothing it is not told to); past it a flood is
+counted (``RawPeer.dropped``), not kept."""
 """Frames that do not decode a :class:`RawPeer` keeps (the first ones)."""
 _RESET: Final = struct.pack("ii", 1, 0)
 
@@ -462,6 +466,9 @@ class RawPeer:
     bad: list[tuple[bytes, DecodeError]] = field(default_factory=list)
     sent: list[tuple[Packet, bytes]] = field(default_factory=list)
     connections: list[RawConnection] = field(default_factory=list)
+    received: int = 0
+    dropped: int = 0
+    """Packets past :data:`MAX_RECEIVED`: counted, neither kept nor passed to ``on_packet``."""
     _link: RawLink = field(init=False)
 
     def __post_init__(self) -> None:
@@ -538,7 +545,12 @@ class RawPeer:
         return self._link.ended
 
     def deliver(self, packet: Packet, raw: bytes, now: float) -> None:
-        """The link's :class:`PacketSink`: into the inbox, timed by the peer's clock."""
+        """The link's :class:`PacketSink`: into the inbox, timed by the peer's clock (at most
+        :data:`MAX_RECEIVED` packets; the rest are counted)."""
+        self.received += 1
+        if self.received > MAX_RECEIVED:
+            self.dropped += 1
+            return
         self.inbox.append(Received(packet, raw, self._now()))
         if self.on_packet is not None:
             self.on_packet("s2c", packet, raw)

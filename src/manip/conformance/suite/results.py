@@ -21,7 +21,7 @@ held (a check reached it), broken, not judged (why, what would judge it) or not 
 line says "N of M MUST clauses judged" (:func:`completeness_text`).
 
 Exit codes (:class:`ExitCode`): 0 conformant, 1 non-conformant (or a stale known-failing entry),
-2 usage error, 3 target unreachable or dead before any verdict, 4 interrupted or internal error.
+2 usage error, 3 target unreachable (nothing it sent reached the run), 4 interrupted or internal error.
 """
 
 from __future__ import annotations

@@ -9,8 +9,11 @@ Theory of operation
 1. **Select**: cases matching ``--select`` (all when none given) and not ``--skip``, in id order.
    ``--known-failing`` entries are matched against every registered case; one that matches none is
    a problem of the run (a stale entry).
-2. **Liveness before**: connect, send one read-only request, wait for any answer.  A target that
-   fails it is *unreachable*: no case runs, exit code 3.
+2. **Liveness before**: connect, send a read-only request, wait for any answer, and again on the same
+   connection.  A target that
+   fails it without having sent a single manip packet is *unreachable*: no case runs, exit code 3.  A
+   target that sent something (the initial RESPONSE, a partial reply) and then broke the exchange was
+   reached: the cases run, and the first one's failure says what it did.
 3. **Each case**, one at a time, gets a :class:`~manip.conformance.suite.context.CaseContext` with its own
    seed (derived from the run seed and the case id, so a case's seed does not depend on what else
    runs) and its deadline (``case.deadline * deadline_scale``, plus any wait on a target's timer).  Its
@@ -24,8 +27,13 @@ Theory of operation
    it then merely follows), and so does a violation of a clause the
    case does not declare that no suite invariant reported (:mod:`manip.conformance.suite.invariants`).
 4. **Liveness after** every failure or error and after every negative case; if the target is dead
-   (after one retry) the remaining cases are skipped, the run records which case it died after, and
-   the run is non-conformant (or unreachable, exit 3, when no case had reached a verdict).
+   (after one retry), or a case failed for want of the initial RESPONSE and the liveness check got none
+   either, or a case failed under a flood of :data:`RUNAWAY_PACKETS` packets or more (a runaway target),
+   the run notices it once: the remaining cases end at once ``not-judged`` (a live target would judge
+   them), the run records which case it died after, and the run is non-conformant (or
+   unreachable, exit 3, when nothing the target sent reached any case).  So a run against any target
+   ends within the sum of its cases' deadlines plus :data:`CASE_MARGIN` per case and the liveness
+   checks (:func:`liveness_bound` each).
 5. **Liveness at the end**; then the verdict (:attr:`RunReport.exit_code`).
 
 Hazards: with ``robot="hardware"`` (``--target hardware``) cases whose hazard is above ``config`` are
@@ -47,7 +55,7 @@ from datetime import UTC, datetime
 from manip.conformance.judge.checks import check_transcript
 from manip.conformance.suite.busy import open_retrying_busy
 from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
-from manip.conformance.suite.context import CaseContext, RunOptions
+from manip.conformance.suite.context import CaseContext, Probe, RunOptions
 from manip.conformance.suite.invariants import attribution_problem
 from manip.conformance.suite.results import CaseResult, LivenessCheck, Outcome, RunReport, conclude
 from manip.conformance.suite.selection import PatternSet
@@ -57,10 +65,32 @@ from manip.links.api import LinkWrapper
 from manip.spec.constants import ServerOp
 from manip.spec.notation import octal
 
-__all__ = ["LIVENESS_RETRY_DELAY", "RunConfig", "RunEvents", "Runner", "case_seed"]
+__all__ = [
+    "CASE_MARGIN",
+    "LIVENESS_RETRY_DELAY",
+    "RUNAWAY_PACKETS",
+    "RunConfig",
+    "RunEvents",
+    "Runner",
+    "case_seed",
+    "liveness_bound",
+]
 
 LIVENESS_RETRY_DELAY = 0.5
+LIVENESS_REQUESTS = 2
+"""Requests a liveness probe sends on its connection, one after the other, each to be answered."""
 CLOSE_GRACE = 2.0
+CASE_MARGIN = CLOSE_GRACE
+RUNAWAY_PACKETS = 5_000
+"""A case that fails having taken this many packets from the target (a case needs a few dozen, a property
+case a few hundred) shows a runaway target: the run gives it up, as it does a dead one."""
+"""How long a case may run past its deadline, whatever the target does: the closing of its connections."""
+
+
+def liveness_bound(options: RunOptions) -> float:
+    """The longest one liveness check takes (two probes, each bounded, and the pause between them)."""
+    once = options.connect_timeout + LIVENESS_REQUESTS * options.reply_timeout + 1.0 + CLOSE_GRACE
+    return 2 * once + LIVENESS_RETRY_DELAY
 
 
 def case_seed(run_seed: int, case_id: str) -> int:
@@ -159,6 +189,13 @@ class Runner:
             command=config.command,
             time="virtual" if config.virtual_time else "real",
         )
+        self._reached = False
+        """Whether anything the target sent (a manip packet, not only the Chaos opening) reached the run."""
+        self._initial_seen = True
+        """Whether the last liveness probe got its initial RESPONSE."""
+        self._runaway = ""
+        """Set when a case could not finish under a flood from the target (:data:`RUNAWAY_PACKETS`)."""
+        self._dead_reason = ""
 
     # --------------------------------------------------------------------------------- selection
 
@@ -200,29 +237,23 @@ class Runner:
         return check
 
     async def _probe_once(self) -> tuple[bool, str]:
+        """One liveness probe: a fresh connection, Here answered, then Here again on it (a target that
+        answers the first request of each connection and nothing after is not alive)."""
         options = self.config.options
         if self.config.liveness_check is not None:
             return await self.config.liveness_check(options)
         ctx = CaseContext(case_id="liveness", level="MUST", seed=0, options=options, connector=self.connect)
         try:
-            async with asyncio.timeout(options.connect_timeout + 2 * options.reply_timeout + 1.0):
+            async with asyncio.timeout(
+                options.connect_timeout + LIVENESS_REQUESTS * options.reply_timeout + 1.0
+            ):
                 probe = await ctx.connect(initial=False)
-                number = await probe.request("here")
-                while True:
-                    packet = await probe.next_packet(options.reply_timeout)
-                    if packet is None:
-                        reason = probe.end_reason or f"no answer within {options.reply_timeout:g} s"
-                        return False, f"request sent, {reason}"
-                    if packet.opcode in (ServerOp.RESPONSE, ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):
-                        if (
-                            probe.initial is None
-                            and len(packet.data) == 2
-                            and packet.packet_no
-                            and not probe.unsolicited
-                        ):
-                            probe.initial = packet  # the initial RESPONSE; the answer comes next
-                            continue
-                        return True, f"answered request #{number} with opcode {octal(packet.opcode)}"
+                detail = ""
+                for _ in range(LIVENESS_REQUESTS):
+                    answered, detail, fatal = await self._answer_to_here(probe)
+                    if not answered or fatal:
+                        return answered, detail
+                return True, detail
         except CaseFailure as exc:
             return False, exc.actual or exc.message
         except TimeoutError:
@@ -230,7 +261,35 @@ class Runner:
         except OSError as exc:
             return False, f"{type(exc).__name__}: {exc}"
         finally:
+            self._initial_seen = bool(ctx.probes) and ctx.probes[0].initial is not None
+            self._note_reached(ctx)
             await _quietly(ctx.close_all())
+
+    async def _answer_to_here(self, probe: Probe) -> tuple[bool, str, bool]:
+        """Send Here and wait for any answer: (answered, what happened, the answer was a fatal error)."""
+        timeout = self.config.options.reply_timeout
+        number = await probe.request("here")
+        while True:
+            packet = await probe.next_packet(timeout)
+            if packet is None:
+                reason = probe.end_reason or f"no answer within {timeout:g} s"
+                return False, f"request #{number} sent, {reason}", False
+            if packet.opcode in (ServerOp.RESPONSE, ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):
+                if (
+                    probe.initial is None
+                    and len(packet.data) == 2
+                    and packet.packet_no
+                    and not probe.unsolicited
+                ):
+                    probe.initial = packet  # the initial RESPONSE; the answer comes next
+                    continue
+                detail = f"answered request #{number} with opcode {octal(packet.opcode)}"
+                return True, detail, packet.opcode == ServerOp.FATAL_ERROR
+
+    def _note_reached(self, ctx: CaseContext) -> None:
+        """Remember whether the target sent anything a manip session carries."""
+        if not self._reached:
+            self._reached = any(p.direction == "s2c" and not p.is_close for p in ctx.transcript)
 
     # --------------------------------------------------------------------------------- the run
 
@@ -248,7 +307,8 @@ class Runner:
         if self.events.started:
             self.events.started(cases)
         try:
-            if not (await self.liveness("before")).alive:
+            before = await self.liveness("before")
+            if not before.alive and not self._reached:
                 report.unreachable = True
                 for item in cases:
                     report.results.append(self._blank(item, "skip", "target unreachable before the run"))
@@ -256,7 +316,7 @@ class Runner:
             dead = False
             for item in cases:
                 if dead:
-                    result = self._blank(item, "skip", f"target dead after {report.target_died_after}")
+                    result = self._blank(item, "not-judged", self._dead_reason)
                 else:
                     result = await self.run_case(item)
                 report.results.append(result)
@@ -265,22 +325,14 @@ class Runner:
                 if not dead and (
                     result.outcome in ("fail", "error", "known-fail") or item.technique == "negative"
                 ):
-                    check = await self.liveness(f"after:{item.id}")
-                    if not check.alive:
-                        dead = True
-                        report.target_died_after = item.id
-                        report.problems.append(f"the target died during case {item.id}: {check.detail}")
+                    dead = await self._dead_after(item, result)
+                if not dead and self._runaway:
+                    dead = self._given_up(item, self._runaway)
             if not dead:
                 end = await self.liveness("end")
                 if not end.alive:
                     report.problems.append(f"the target was dead at the end of the run: {end.detail}")
-            if (
-                report.problems
-                and report.target_died_after is not None
-                and not any(
-                    r.outcome in ("pass", "fail", "warn", "known-fail", "fixed") for r in report.results
-                )
-            ):
+            if report.target_died_after is not None and not self._reached:
                 report.unreachable = True
         except (asyncio.CancelledError, KeyboardInterrupt):
             report.interrupted = True
@@ -289,6 +341,28 @@ class Runner:
             self._stale_known_failing()
             report.duration = time.monotonic() - t0
         return report
+
+    async def _dead_after(self, item: Case, result: CaseResult) -> bool:
+        """The liveness check after a case; True (and recorded once) when the target is found dead: it
+        does not answer, or it sends no initial RESPONSE, which the case failed for, on a fresh
+        connection either."""
+        check = await self.liveness(f"after:{item.id}")
+        no_initial = (
+            check.alive
+            and not self._initial_seen
+            and any(v.clause == "connect.initial-response" for v in result.violations)
+        )
+        if check.alive and not no_initial:
+            return False
+        detail = "it sends no initial RESPONSE on a fresh connection" if check.alive else check.detail
+        return self._given_up(item, f"the target died during case {item.id}: {detail}")
+
+    def _given_up(self, item: Case, problem: str) -> bool:
+        """The target is found dead or runaway after ``item``: recorded once; the rest is not judged."""
+        self.report.target_died_after = item.id
+        self.report.problems.append(problem)
+        self._dead_reason = f"{problem}; a target that answers as the protocol says would judge this case"
+        return True
 
     def _stale_known_failing(self) -> None:
         for result in self.report.results:
@@ -364,11 +438,10 @@ class Runner:
                 result.traceback = traceback.format_exc()
                 failure = None
             else:
-                elapsed = clock() - start
-                failure = CaseFailure(
+                failure = _found_by_then(ctx) or CaseFailure(
                     f"the case did not finish within its deadline of {result.deadline:g} s",
                     expected=f"the exchange to finish within {result.deadline:g} s",
-                    actual=f"still running after {elapsed:.2f} s",
+                    actual=f"still running after {clock() - start:.2f} s",
                     kind="deadline",
                 )
         except (asyncio.CancelledError, KeyboardInterrupt):
@@ -381,11 +454,23 @@ class Runner:
         finally:
             result.duration = clock() - start
         await _quietly(ctx.close_all())
+        self._note_reached(ctx)
+        self._watch_runaway(item, ctx, result, failed=failure is not None)
         result.notes = list(ctx.notes)
         result.packets = list(ctx.transcript if ctx.shown_packets is None else ctx.shown_packets)
         self._judge(result, ctx, failure)
         self._check_attribution(result, ctx, failure)
         return result
+
+    def _watch_runaway(self, item: Case, ctx: CaseContext, result: CaseResult, *, failed: bool) -> None:
+        """Note a case that failed under a flood of :data:`RUNAWAY_PACKETS` or more (the run then gives
+        the target up)."""
+        if ctx.received >= RUNAWAY_PACKETS and (failed or result.outcome == "error"):
+            ctx.note(f"the target sent {ctx.received:,} packets in this case")
+            self._runaway = (
+                f"the target ran away during case {item.id}: {ctx.received:,} packets "
+                f"in {result.duration:.1f} s, and the case could not finish"
+            )
 
     @staticmethod
     def _check_attribution(result: CaseResult, ctx: CaseContext, failure: CaseFailure | None) -> None:
@@ -405,6 +490,19 @@ class Runner:
         stopped = None if failure is None else replace(failure.violation, level=failure.level or result.level)
         result.reached = tuple(sorted(ctx.reached))
         conclude(result, stopped, ctx.recorded, self.config.options.strict)
+
+
+def _found_by_then(ctx: CaseContext) -> CaseFailure | None:
+    """At a case's deadline: the first MUST finding of what was recorded by then (a target that floods
+    the case with extra replies broke a clause the transcript shows), else None."""
+    if not ctx.auto_check:
+        return None
+    try:
+        for probe in ctx.probes:
+            ctx.check(check_transcript(probe.packets, rfc_packet_no=probe.rfc_packet_no))
+    except CaseFailure as exc:
+        return exc
+    return None
 
 
 async def _quietly(awaitable: object) -> None:
