@@ -54,6 +54,8 @@ PATHS = {
     Fault.WRIST_TIMEOUT_SILENT: "server.wrist.no-answer",
     Fault.WRIST_ERROR_FATAL: "server.wrist.no-answer",
     Fault.ABORT_KEEPS_QUEUE: "server.motion.abort-drops-queue",
+    Fault.FATAL_EOF_WITHOUT_CLS: "server.error.fatal-then-close",
+    Fault.NZI_MASK_SHIFTED: "server.error.fatal-then-close",
 }
 """The fault of each path the target's world arranges, and the case that must catch it."""
 CATCHERS = {
@@ -79,6 +81,9 @@ CATCHERS = {
     Fault.KEEPS_SPEED: "server.connect.fresh-state",
     Fault.KEEPS_CONFIGURATION: "server.connect.fresh-state",
     Fault.KEEPS_NOTIFICATIONS: "server.connect.fresh-state",
+    Fault.KEEPS_ABORT: "server.connect.abort-not-carried",
+    Fault.CONFIGURATION_SWAPPED: "server.motion.configuration-side",
+    Fault.JOINTS_REVERSED: "server.motion.joint-order",
 }
 """Faults and the case written to catch each: it must fail, or warn for a SHOULD clause (others may catch
 the fault too)."""

@@ -356,6 +356,8 @@ WORLD_FAULTS = (
     Fault.WRIST_TIMEOUT_SILENT,
     Fault.ABORT_KEEPS_QUEUE,
     Fault.GUARD_HIT_WORD_SWAPPED,
+    Fault.FATAL_EOF_WITHOUT_CLS,
+    Fault.NZI_MASK_SHIFTED,
 )
 """Defects that show only under a condition of the world (every protocol fault on a world case's
 path), each caught through the world of a manip-server process by the case in :data:`CATCHER`."""
@@ -371,6 +373,8 @@ CATCHER = {
     Fault.WRIST_TIMEOUT_SILENT: "server.wrist.no-answer",
     Fault.GUARD_HIT_WORD_SWAPPED: "server.async.guard-trip-live",
     Fault.ABORT_KEEPS_QUEUE: "server.motion.abort-drops-queue",
+    Fault.FATAL_EOF_WITHOUT_CLS: "server.error.fatal-then-close",
+    Fault.NZI_MASK_SHIFTED: "server.error.fatal-then-close",
 }
 
 

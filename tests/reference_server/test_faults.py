@@ -943,3 +943,63 @@ def test_fatal_drops_link_against_its_case() -> None:
     """A fault of the driver: the embedded run of the fatal-error case passes clean and fails with it."""
     select = "server.error.fatal-then-close"
     assert (_conform(select), _conform(select, "fatal-drops-link")) == (0, 1)
+
+
+# ------------------------------------------------------------------------- found from outside (issue 32)
+@covers(Fault.FATAL_EOF_WITHOUT_CLS)
+def test_fatal_eof_without_cls_against_its_case() -> None:
+    """A fault of the driver: EOF then the link dropped; the fatal-error case passes clean and fails
+    with it (the EOF alone was taken for the CLS before)."""
+    select = "server.error.fatal-then-close"
+    assert (_conform(select), _conform(select, "fatal-eof-without-cls")) == (0, 1)
+
+
+@covers(Fault.KEEPS_ABORT)
+def test_connection_keeps_abort() -> None:
+    def carried(*faults: Fault) -> str:
+        config = ServerConfig(powered_at_open=True, faults=FaultSet.of(*faults))
+        first = Client(config)
+        first.one("set-joint-angles", joints=GOAL)
+        first.one("kill-power")
+        first.run(0.1)
+        assert _motion_reply(first) == "AWA"
+        second = Client(config)
+        second.session.inherit(first.session)
+        return _motion_reply(second)
+
+    assert (carried(), carried(Fault.KEEPS_ABORT)) == ("segment 1", "AWA")
+
+
+@covers(Fault.NZI_MASK_SHIFTED)
+def test_nzi_mask_shifted() -> None:
+    def scenario(c: Client) -> tuple[int, ...]:
+        ((opcode, data),) = _packets(c.raw(RequestOp.CALIBRATE, b""))
+        return decode_error(opcode, data).error.args
+
+    assert pair(Fault.NZI_MASK_SHIFTED, scenario, base=FaultSet.parse(["calibrate-nzi=2,3"])) == ((6,), (12,))
+
+
+@covers(Fault.CONFIGURATION_SWAPPED)
+def test_configuration_swapped() -> None:
+    seed = (20.0, -60.0, 150.0, 0.0, -60.0, 0.0)  # a lefty solution
+    pose = forward(seed).to_floats()
+
+    def scenario(c: Client) -> float:
+        c.one("set-configuration", configuration=1)
+        return float(_reply(c.one("solve-forwards", transform=pose, current=seed)).values["joints"][0])
+
+    clean, faulty = pair(Fault.CONFIGURATION_SWAPPED, scenario)
+    assert round(clean, 3) == 20.0 and round(faulty, 3) != 20.0
+
+
+@covers(Fault.JOINTS_REVERSED)
+def test_joints_reversed() -> None:
+    def scenario(c: Client) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        c.one("set-joint-angles", joints=GOAL)
+        c.settle()
+        (packet,) = _raw(c, "joint-angles")
+        return tuple(decode_reply(packet[1], RequestOp.JOINT_ANGLES).values["joints"]), c.session.arm.actual
+
+    (said, actual), (said_faulty, actual_faulty) = pair(Fault.JOINTS_REVERSED, scenario)
+    assert said == actual == tuple(GOAL)
+    assert actual_faulty == tuple(reversed(GOAL)) and said_faulty == tuple(GOAL)  # consistent on the wire

@@ -17,6 +17,7 @@ The hook points, by what they decide:
 * serving a request: :meth:`~Defects.decode`, :meth:`~Defects.check`, :meth:`~Defects.refused`,
   :meth:`~Defects.wrist_failure`, :attr:`~Defects.discards_after_free_joint`;
 * what a request does: :meth:`~Defects.describe`, :meth:`~Defects.increment`, :meth:`~Defects.move_ready`,
+  :meth:`~Defects.configuration`,
   :attr:`~Defects.straight_lines`, :attr:`~Defects.checks_joint_limits`,
   :attr:`~Defects.applies_configuration`;
 * replies: :meth:`~Defects.payload`, :meth:`~Defects.reply`;
@@ -47,7 +48,7 @@ from manip.reference_server.describe import Statement
 from manip.reference_server.errors import RequestError
 from manip.reference_server.faults import Fault, FaultSet
 from manip.reference_server.wrist import GuardHit, Wrist, WristConditions
-from manip.spec import SPEC, RequestName, RequestOpcode
+from manip.spec import SPEC, Field, RequestName, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
 
 if TYPE_CHECKING:
@@ -55,9 +56,9 @@ if TYPE_CHECKING:
 
 __all__ = ["AfterFatal", "Defects", "SwitchedDefects", "defects_for"]
 
-AfterFatal = Literal["close", "stay-open", "drop-link"]
-"""What follows a fatal error: the connection closes (the protocol), it stays open, or the driver drops
-the link under it without closing it."""
+AfterFatal = Literal["close", "stay-open", "drop-link", "eof-drop-link"]
+"""What follows a fatal error: the connection closes (the protocol), it stays open, the driver drops
+the link under it without closing it, or the driver sends EOF and drops the link before the CLS."""
 Encoder = Callable[[RequestOpcode, Mapping[str, Any]], bytes]
 """The session's encoder of a reply's values (after the request number)."""
 
@@ -160,6 +161,10 @@ class Defects:
         """Queue the move to the ready position; its segment number."""
         return arm.move_ready(now)
 
+    def configuration(self, lefty: bool) -> bool:
+        """The configuration set configuration puts in force when asked for ``lefty`` (or righty)."""
+        return lefty
+
     # ---------------------------------------------------------------------------- replies
     def payload(self, op: RequestOpcode, values: Mapping[str, Any], encode: Encoder) -> bytes:
         """A reply's data after the request number, as ``encode`` (the spec codec) writes them."""
@@ -223,6 +228,8 @@ class SwitchedDefects(Defects):
             if Fault.FATAL_WITHOUT_CLOSE in on
             else "drop-link"
             if Fault.FATAL_DROPS_LINK in on
+            else "eof-drop-link"
+            if Fault.FATAL_EOF_WITHOUT_CLS in on
             else "close"
         )
 
@@ -271,6 +278,8 @@ class SwitchedDefects(Defects):
             session.arm.set_configuration(previous.arm.lefty)
         if self._on(Fault.KEEPS_NOTIFICATIONS):
             session.notifications = previous.notifications
+        if self._on(Fault.KEEPS_ABORT):
+            session.arm.aborted, session.arm.abort_cause = previous.arm.aborted, previous.arm.abort_cause
 
     def opened(self, arm: ArmSim, now: float) -> None:
         if self._on(Fault.PANIC_BUTTON):
@@ -292,12 +301,13 @@ class SwitchedDefects(Defects):
     # ---------------------------------------------------------------------------- serving a request
     def decode(self, op: RequestOpcode, data: bytes) -> Mapping[str, Value]:
         try:
-            return super().decode(op, data)
+            values = super().decode(op, data)
         except DecodeError as exc:
             if exc.clause != "request.data-length" or not self._on(Fault.LENGTH_UNCHECKED):
                 raise
             expected = op.request.fixed_size or 0
-            return super().decode(op, data[:expected].ljust(expected, b"\0"))
+            values = super().decode(op, data[:expected].ljust(expected, b"\0"))
+        return _joints_reversed(op.request.fields, values) if self._on(Fault.JOINTS_REVERSED) else values
 
     def check(self, op: RequestOpcode, arm: ArmSim) -> None:
         if self._on(Fault.AWA_REFUSES_ALL) and arm.aborted and op.name not in ("enable-power", "reset-abort"):
@@ -338,6 +348,8 @@ class SwitchedDefects(Defects):
         ready = list(statement.ready_position)
         if on(Fault.DESCRIBE_READY_OFF):
             ready[1] += READY_OFF_DEG
+        if on(Fault.JOINTS_REVERSED):
+            limits, ready = limits[::-1], ready[::-1]
         return Statement(
             frozenset(operations),
             statement.degrees_of_freedom + (1 if on(Fault.DESCRIBE_WRONG_DOF) else 0),
@@ -352,6 +364,9 @@ class SwitchedDefects(Defects):
             return (dx, dy, dz, dt, da, do)
         return delta
 
+    def configuration(self, lefty: bool) -> bool:
+        return not lefty if self._on(Fault.CONFIGURATION_SWAPPED) else lefty
+
     def move_ready(self, arm: ArmSim, now: float) -> int:
         if self._on(Fault.READY_LEAVES_WRIST):
             return arm.move_joints(arm.model.ready[:3] + arm.planned[3:], now)
@@ -360,6 +375,8 @@ class SwitchedDefects(Defects):
     # ---------------------------------------------------------------------------- replies
     def payload(self, op: RequestOpcode, values: Mapping[str, Any], encode: Encoder) -> bytes:
         fields = op.response.data.fields
+        if self._on(Fault.JOINTS_REVERSED):
+            values = _joints_reversed(fields, values)
         if self.faults.active & _FLOAT_FAULTS and fields and all(f.type.element == "float" for f in fields):
             return b"".join(self._float(float(x)) for f in fields for x in values[f.name])
         return encode(op, values)
@@ -400,6 +417,8 @@ class SwitchedDefects(Defects):
             error = replace(error, severity="E")
         if self._on(Fault.WRONG_SEVERITY):
             error = replace(error, severity="E" if opcode == ServerOp.FATAL_ERROR else "F")
+        if error.code == "NZI" and error.args and self._on(Fault.NZI_MASK_SHIFTED):
+            error = replace(error, args=(error.args[0] << 1 & WORD_MASK, *error.args[1:]))
         if any(self._on(fault) and error.code in codes for fault, codes in _SWAPPED_ARGS.items()):
             error = replace(
                 error, args=tuple(int.from_bytes(a.to_bytes(2, "little"), "big") for a in error.args)
@@ -435,6 +454,12 @@ class SwitchedDefects(Defects):
 
     def after_warning(self, arm: ArmSim) -> list[ArmEvent]:
         return arm.halt(AbortCause.COLLISION) if self._on(Fault.WARNING_INTERRUPTS) else []
+
+
+def _joints_reversed(fields: Sequence[Field], values: Mapping[str, Any]) -> dict[str, Any]:
+    """``values`` with every joint vector among ``fields`` in the reverse order (fault joints-reversed)."""
+    joints = {f.name for f in fields if f.type.name == "joints"}
+    return {name: tuple(value)[::-1] if name in joints else value for name, value in values.items()}
 
 
 def _renumbered(packet: bytes, by: int) -> bytes:

@@ -105,6 +105,12 @@ class Fault(enum.StrEnum):
     GUARD_IGNORED = "guard-ignored"
     GUARD_UNREPORTED = "guard-unreported"
     CALIBRATE_ONE_POSE = "calibrate-one-pose"
+    # protocol defects found from outside (issue 32)
+    FATAL_EOF_WITHOUT_CLS = "fatal-eof-without-cls"
+    KEEPS_ABORT = "connection-keeps-abort"
+    NZI_MASK_SHIFTED = "nzi-mask-shifted"
+    CONFIGURATION_SWAPPED = "configuration-swapped"
+    JOINTS_REVERSED = "joints-reversed"
 
 
 Kind = Literal["environment", "protocol"]
@@ -610,6 +616,42 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "protocol",
                 "Calibrate-wrist sets the mean of one pose's readings (gravity in them) as the offsets.",
                 "puma.calibrate-wrist",
+            ),
+            _info(
+                Fault.FATAL_EOF_WITHOUT_CLS,
+                "protocol",
+                "After a fatal error the server sends EOF and then drops the link under the connection "
+                "before the peer's acknowledgement can draw its CLS: the connection ends with EOF, never "
+                "CLS.",
+                "error.fatal-then-close",
+            ),
+            _info(
+                Fault.KEEPS_ABORT,
+                "protocol",
+                "A new connection keeps the abort condition the last one closed with: its first move is "
+                "refused AWA.",
+                "connect.per-connection-state",
+            ),
+            _info(
+                Fault.NZI_MASK_SHIFTED,
+                "protocol",
+                "The joint mask of F NZI counts joints from 0 (joint n as bit n): it names the joint after "
+                "each one that failed.",
+                "calibrate.nzi-mask",
+            ),
+            _info(
+                Fault.CONFIGURATION_SWAPPED,
+                "protocol",
+                "Set configuration reads bit 0 the wrong way round: 1 gives the righty solutions, 0 the "
+                "lefty ones.",
+                "set-configuration.lefty-side",
+            ),
+            _info(
+                Fault.JOINTS_REVERSED,
+                "protocol",
+                "Every joint vector on the wire starts at the hand, not the base (requests, replies and "
+                "describe self's limits and ready position alike): element 1 is joint 6.",
+                "joint-angles.reply",
             ),
         ]
     )

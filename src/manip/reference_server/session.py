@@ -545,7 +545,7 @@ class ServerSession:
         if low & 0xFE:
             raise errors.bad_value("set-configuration", f"configuration {low} has bits other than bit 0 set")
         if self.defects.applies_configuration:
-            self.arm.set_configuration(lefty=bool(low & 1))
+            self.arm.set_configuration(lefty=self.defects.configuration(bool(low & 1)))
         return {}
 
     def _hand(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
