@@ -56,6 +56,7 @@ PATHS = {
     Fault.ABORT_KEEPS_QUEUE: "server.motion.abort-drops-queue",
     Fault.FATAL_EOF_WITHOUT_CLS: "server.error.fatal-then-close",
     Fault.NZI_MASK_SHIFTED: "server.error.fatal-then-close",
+    Fault.FORCES_STALE: "server.wrist.force-push",
 }
 """The fault of each path the target's world arranges, and the case that must catch it."""
 CATCHERS = {
@@ -84,10 +85,19 @@ CATCHERS = {
     Fault.KEEPS_ABORT: "server.connect.abort-not-carried",
     Fault.CONFIGURATION_SWAPPED: "server.motion.configuration-side",
     Fault.JOINTS_REVERSED: "server.motion.joint-order",
+    Fault.FORCES_IN_POUNDS: "server.async.guard-hit",
 }
 """Faults and the case written to catch each: it must fail, or warn for a SHOULD clause (others may catch
 the fault too)."""
-WRIST_FAULTS = frozenset({Fault.GUARD_HIT_WORD_SWAPPED, Fault.WRIST_TIMEOUT_SILENT, Fault.WRIST_ERROR_FATAL})
+WRIST_FAULTS = frozenset(
+    {
+        Fault.GUARD_HIT_WORD_SWAPPED,
+        Fault.WRIST_TIMEOUT_SILENT,
+        Fault.WRIST_ERROR_FATAL,
+        Fault.FORCES_IN_POUNDS,
+        Fault.FORCES_STALE,
+    }
+)
 """Faults whose catching case needs the simulated Cougar wrist."""
 VIRTUAL_FAULTS = WRIST_FAULTS | {Fault.SERVO_DOUBLE_RATE}
 """Faults caught in virtual time (:func:`run_with_wrist`): those needing the wrist, and the 8 ms servo,

@@ -1003,3 +1003,28 @@ def test_joints_reversed() -> None:
     (said, actual), (said_faulty, actual_faulty) = pair(Fault.JOINTS_REVERSED, scenario)
     assert said == actual == tuple(GOAL)
     assert actual_faulty == tuple(reversed(GOAL)) and said_faulty == tuple(GOAL)  # consistent on the wire
+
+
+def _forces(*faults: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Read forces at rest, then again after set weight of a 64 oz object the hand does not hold."""
+    client = WristClient(
+        CougarWrist(SimPort(CougarSim(seed=1))), config=ServerConfig(faults=FaultSet.parse(faults))
+    )
+    client.run(0.1)
+    rest = client.call("read-forces", limit=2.0)
+    client.call("set-weight", weight=64.0, cg=(0.0, 0.0, 0.0))
+    client.run(0.1)
+    loaded = client.call("read-forces", limit=2.0)
+    assert not isinstance(rest, ErrorReply) and not isinstance(loaded, ErrorReply)
+    return tuple(rest.values["forces"]), tuple(loaded.values["forces"])
+
+
+@covers(Fault.FORCES_IN_POUNDS)
+@covers(Fault.FORCES_STALE)
+def test_forces_in_pounds_and_stale() -> None:
+    rest, loaded = _forces()
+    assert round(math.dist(rest[:3], loaded[:3])) == 64
+    rest, loaded = _forces("forces-in-pounds")
+    assert round(math.dist(rest[:3], loaded[:3])) == 4
+    rest, loaded = _forces("forces-stale")
+    assert rest == loaded

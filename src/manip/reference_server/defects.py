@@ -71,6 +71,8 @@ READY_OFF_DEG: Final = 10.0
 """How far from where move to ready goes joint 2 of :ready-position is stated under ``describe-ready-off``."""
 SEGMENTS_STOP_REST_S: Final = 0.1
 """How long the segments-stop fault rests between queued segments: clearly more than a blend's pause."""
+OUNCES_PER_POUND: Final = 16.0
+"""What the forces-in-pounds fault divides read forces' answer by."""
 RESERVED_OPERAND: Final = 0x8000
 """First word of a reserved-operand float: sign 1, exponent 0."""
 GUARD_STOP: Final = 1
@@ -217,6 +219,8 @@ class SwitchedDefects(Defects):
 
     def __init__(self, faults: FaultSet) -> None:
         self.faults = faults
+        self._first_forces: tuple[float, ...] | None = None
+        """The connection's first read forces answer (fault forces-stale)."""
         on = faults.active
         self.keeps_arm_after_close = Fault.CLOSE_KEEPS_MOVING in on
         self.discards_after_free_joint = Fault.FREE_JOINT_EXECUTES not in on
@@ -377,9 +381,22 @@ class SwitchedDefects(Defects):
         fields = op.response.data.fields
         if self._on(Fault.JOINTS_REVERSED):
             values = _joints_reversed(fields, values)
+        if op.name == "read-forces":
+            values = self._forces(values)
         if self.faults.active & _FLOAT_FAULTS and fields and all(f.type.element == "float" for f in fields):
             return b"".join(self._float(float(x)) for f in fields for x in values[f.name])
         return encode(op, values)
+
+    def _forces(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
+        """Read forces' answer as the force faults bend it."""
+        forces = tuple(values["forces"])
+        if self._on(Fault.FORCES_STALE):
+            if self._first_forces is None:
+                self._first_forces = forces
+            forces = self._first_forces
+        if self._on(Fault.FORCES_IN_POUNDS):
+            forces = tuple(f / OUNCES_PER_POUND for f in forces)
+        return {**values, "forces": forces}
 
     def _float(self, x: float) -> bytes:
         """``x`` as a float encoder with the float faults switched on writes it."""

@@ -111,6 +111,8 @@ class Fault(enum.StrEnum):
     NZI_MASK_SHIFTED = "nzi-mask-shifted"
     CONFIGURATION_SWAPPED = "configuration-swapped"
     JOINTS_REVERSED = "joints-reversed"
+    FORCES_IN_POUNDS = "forces-in-pounds"
+    FORCES_STALE = "forces-stale"
 
 
 Kind = Literal["environment", "protocol"]
@@ -652,6 +654,19 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "Every joint vector on the wire starts at the hand, not the base (requests, replies and "
                 "describe self's limits and ready position alike): element 1 is joint 6.",
                 "joint-angles.reply",
+            ),
+            _info(
+                Fault.FORCES_IN_POUNDS,
+                "protocol",
+                "Read forces answers pounds and pound-inches, not ounces and ounce-inches: every component "
+                "16 times too small.",
+                "read-forces.units",
+            ),
+            _info(
+                Fault.FORCES_STALE,
+                "protocol",
+                "Every read forces on a connection answers that connection's first reading again.",
+                "read-forces.current",
             ),
         ]
     )
