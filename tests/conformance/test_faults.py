@@ -86,6 +86,7 @@ CATCHERS = {
     Fault.CONFIGURATION_SWAPPED: "server.motion.configuration-side",
     Fault.JOINTS_REVERSED: "server.motion.joint-order",
     Fault.FORCES_IN_POUNDS: "server.async.guard-hit",
+    Fault.ASYNC_SPLITS_MULTI: "server.describe.not-split",
 }
 """Faults and the case written to catch each: it must fail, or warn for a SHOULD clause (others may catch
 the fault too)."""

@@ -1028,3 +1028,17 @@ def test_forces_in_pounds_and_stale() -> None:
     assert round(math.dist(rest[:3], loaded[:3])) == 4
     rest, loaded = _forces("forces-stale")
     assert rest == loaded
+
+
+@covers(Fault.ASYNC_SPLITS_MULTI)
+def test_async_splits_multi() -> None:
+    def scenario(c: Client) -> tuple[int, list[int]]:
+        c.one("request-notifications", mask=2)
+        c.one("set-joint-angles", joints=GOAL)
+        during = len(c.run(8.0))  # the segment completes: its report goes out, or waits
+        return during, [op for op, _ in _raw(c, "describe-self")]
+
+    (clean_during, clean), (faulty_during, faulty) = pair(Fault.ASYNC_SPLITS_MULTI, scenario)
+    assert clean_during == 1 and set(clean) == {ServerOp.RESPONSE}
+    assert faulty_during == 0 and faulty[0] == faulty[-1] == ServerOp.RESPONSE
+    assert ServerOp.ASYNCHRONOUS_RESPONSE in faulty[1:-1]

@@ -24,7 +24,8 @@ The hook points, by what they decide:
 * errors: :meth:`~Defects.error_number`, :meth:`~Defects.error`, :meth:`~Defects.error_string`,
   :meth:`~Defects.after_error`, :attr:`~Defects.after_fatal` (the driver's too);
 * asynchronous packets: :meth:`~Defects.notifications`, :meth:`~Defects.async_response`,
-  :meth:`~Defects.reports_guard`, :meth:`~Defects.after_warning`.
+  :meth:`~Defects.reports_guard`, :meth:`~Defects.after_warning`;
+* the packets sent: :meth:`~Defects.sent` (their order, one step of the session at a time).
 
 The environment faults (the panic button, an obstacle, a calibration failure, a sluggish joint, a silent
 wrist) are conditions of the arm's world, not defects, but they enter through the same points.
@@ -52,7 +53,7 @@ from manip.spec import SPEC, Field, RequestName, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
 
 if TYPE_CHECKING:
-    from manip.reference_server.session import ServerSession
+    from manip.reference_server.session import Outgoing, ServerSession
 
 __all__ = ["AfterFatal", "Defects", "SwitchedDefects", "defects_for"]
 
@@ -88,6 +89,7 @@ _SWAPPED_ARGS: Final[Mapping[Fault, frozenset[str]]] = {
 _FLOAT_FAULTS: Final = frozenset({Fault.UNDERFLOW_DIRTY_ZERO, Fault.NOT_FINITE_RESERVED})
 _SWAPPED_CODES: Final = {"TOR": "JOR", "JOR": "TOR"}
 _ASYNC_ERRORS: Final = frozenset({ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING})
+_ASYNC_OPS: Final = _ASYNC_ERRORS | {ServerOp.ASYNCHRONOUS_RESPONSE}
 
 
 def _word(n: int) -> bytes:
@@ -213,6 +215,12 @@ class Defects:
         """What the move process does after warning of a joint lagging its command: it goes on."""
         return []
 
+    # ---------------------------------------------------------------------------- the packets sent
+    def sent(self, request: bool, packets: list[Outgoing]) -> list[Outgoing]:
+        """The packets of one step of the session, in the order they go out (``request``: the step served
+        a request; otherwise it ran the move and wrist processes): as they were made."""
+        return packets
+
 
 class SwitchedDefects(Defects):
     """The hook points bent as the fault switches of ``faults`` say."""
@@ -221,6 +229,8 @@ class SwitchedDefects(Defects):
         self.faults = faults
         self._first_forces: tuple[float, ...] | None = None
         """The connection's first read forces answer (fault forces-stale)."""
+        self._held_async: list[Outgoing] = []
+        """Asynchronous packets waiting for the next request (fault async-splits-multi)."""
         on = faults.active
         self.keeps_arm_after_close = Fault.CLOSE_KEEPS_MOVING in on
         self.discards_after_free_joint = Fault.FREE_JOINT_EXECUTES not in on
@@ -471,6 +481,18 @@ class SwitchedDefects(Defects):
 
     def after_warning(self, arm: ArmSim) -> list[ArmEvent]:
         return arm.halt(AbortCause.COLLISION) if self._on(Fault.WARNING_INTERRUPTS) else []
+
+    # ---------------------------------------------------------------------------- the packets sent
+    def sent(self, request: bool, packets: list[Outgoing]) -> list[Outgoing]:
+        if not self._on(Fault.ASYNC_SPLITS_MULTI):
+            return packets
+        if not request:  # the other processes' reports wait for the main process
+            self._held_async += [p for p in packets if p.opcode in _ASYNC_OPS]
+            return [p for p in packets if p.opcode not in _ASYNC_OPS]
+        held, self._held_async = self._held_async, []
+        replies = [i for i, p in enumerate(packets) if p.opcode == ServerOp.RESPONSE]
+        at = replies[0] + 1 if len(replies) > 1 else 0  # after a multi-packet reply's first packet
+        return [*packets[:at], *held, *packets[at:]]
 
 
 def _joints_reversed(fields: Sequence[Field], values: Mapping[str, Any]) -> dict[str, Any]:

@@ -113,6 +113,7 @@ class Fault(enum.StrEnum):
     JOINTS_REVERSED = "joints-reversed"
     FORCES_IN_POUNDS = "forces-in-pounds"
     FORCES_STALE = "forces-stale"
+    ASYNC_SPLITS_MULTI = "async-splits-multi"
 
 
 Kind = Literal["environment", "protocol"]
@@ -667,6 +668,14 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "protocol",
                 "Every read forces on a connection answers that connection's first reading again.",
                 "read-forces.current",
+            ),
+            _info(
+                Fault.ASYNC_SPLITS_MULTI,
+                "protocol",
+                "The asynchronous packets of the move and wrist processes wait for the main process's next "
+                "request, and it sends them after the first packet of a multi-packet reply: describe self is "
+                "split by them.",
+                "multi.not-split",
             ),
         ]
     )

@@ -277,7 +277,7 @@ class ServerSession:
         action, fixed = transition
         decided = action(self, event)
         self.state = decided or fixed or self.state
-        return Output(tuple(self._out), self._close)
+        return Output(tuple(self.defects.sent(event.kind is Input.REQUEST, self._out)), self._close)
 
     def _emit(self, opcode: int, data: bytes) -> None:
         self._out.append(Outgoing(opcode, data))
