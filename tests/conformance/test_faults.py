@@ -12,6 +12,10 @@ simulated arm running :data:`TIME_SCALE` times faster than real time (moves end 
 cases compare durations, which scale alike).  A fault whose defect can only show under a condition of
 the arm's world runs with the environment fault that creates the condition (:data:`CONDITIONS`): the
 reference arm never sends a fatal error unless calibration fails.
+
+No fault may make a case skip that passes on the conforming server: a skip is for a target that cannot
+offer what the case needs, and a wrong answer fails (or leaves the case not judged, naming the case that
+judges the answer).
 """
 
 from __future__ import annotations
@@ -195,6 +199,13 @@ def test_protocol_fault_is_caught(fault: Fault) -> None:
     assert caught, f"no case caught fault {fault.value} ({FAULTS[fault].description})"
     if fault in CATCHERS:
         assert CATCHERS[fault] in {r.id for r in caught}, shown
+    skipped = [c for c in cases if c.id in {r.id for r in report.results if r.outcome == "skip"}]
+    if skipped:  # a skip is for a target that cannot offer the condition, never for a wrong answer
+        clean = (
+            run_with_wrist(FaultSet(), skipped) if virtual else asyncio.run(run_suite(FaultSet(), skipped))
+        )
+        passing = [r.id for r in clean.results if r.outcome == "pass"]
+        assert not passing, f"fault {fault.value} makes {passing} skip, which pass on the conforming server"
 
 
 def test_the_arranged_paths_run_against_the_clean_server() -> None:

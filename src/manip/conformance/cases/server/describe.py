@@ -227,7 +227,7 @@ async def _stated_dof(ctx: CaseContext, probe: Probe) -> int:
     value = entries.get("degrees-of-freedom")
     value = value[0] if isinstance(value, list) and len(value) == 1 else value
     if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
-        ctx.skip(f"no usable :degrees-of-freedom ({value!r}; server.describe.keys judges it)")
+        ctx.not_judged(f"no usable :degrees-of-freedom ({value!r}; server.describe.keys judges it)")
     return value
 
 

@@ -31,7 +31,10 @@ async def _command_error(ctx: CaseContext, probe: Probe, clause: str | None = No
             seen=answer,
         )
     elif answer.opcode != ServerOp.NON_FATAL_ERROR:
-        ctx.skip(f"no non-fatal error to judge: an unknown opcode was answered with {answer}")
+        ctx.not_judged(
+            f"no non-fatal error to judge: an unknown opcode was answered with {answer} "
+            "(server.negative.unknown-opcodes judges that answer)"
+        )
     return answer
 
 
@@ -75,7 +78,10 @@ async def arg_alignment(ctx: CaseContext) -> None:
         numbered += 1
         ctx.check(f for f in check_error_packet(answer.first) if f.clause == "error-string.arg-layout")
     if not numbered:
-        ctx.skip("no error string carried numbers")
+        ctx.not_judged(
+            "no error string carried numbers: C UOP carries the opcode and C BDL the byte counts "
+            "(server.negative.unknown-opcodes and server.negative.data-length judge them)"
+        )
 
 
 @case(

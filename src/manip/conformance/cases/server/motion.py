@@ -412,7 +412,10 @@ async def _segment_time(ctx: CaseContext, probe: Probe, factor: float, by: float
     while True:
         packet = await probe.next_packet(5.0)
         if packet is None:  # server.async.segment-completed judges the missing report
-            ctx.skip(f"the case times moves by their segment-completed reports; none came for {segment}")
+            ctx.not_judged(
+                f"the case times moves by their segment-completed reports; none came for {segment} "
+                "(server.async.segment-completed judges that)"
+            )
         if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(packet.data, 6) == segment:
             return ctx.clock() - start
 
@@ -553,7 +556,10 @@ async def configuration(ctx: CaseContext) -> None:
         require_response(ctx, answer, f"set configuration {name}")
         solved = await _solve(ctx, probe, pose)
         if solved is None:
-            ctx.skip(f"solve forwards of the seed's transform was refused after set configuration {name}")
+            ctx.not_judged(
+                f"solve forwards of the seed's transform was refused after set configuration {name} "
+                "(server.reply.solve-forwards judges it: the seed's angles are in range)"
+            )
         back = await probe.call("solve-backwards", joints=list(solved))
         require_response(ctx, back, "solve backwards of a solution")
         off = math.dist(floats(back)[9:], pose[9:])
@@ -672,7 +678,10 @@ async def _timed_move(ctx: CaseContext, probe: Probe, by: float) -> float:
     while (packet := await probe.next_packet(5.0)) is not None:
         if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(packet.data, 6) == segment:
             return ctx.clock() - start
-    ctx.skip(f"the case times moves by their segment-completed reports; none came for {segment}")
+    ctx.not_judged(
+        f"the case times moves by their segment-completed reports; none came for {segment} "
+        "(server.async.segment-completed judges that)"
+    )
 
 
 async def _set_up_state(
@@ -683,7 +692,10 @@ async def _set_up_state(
     transform, and that configuration (None: none changes it)."""
     fresh = await _solve(ctx, probe, pose)
     if fresh is None:
-        ctx.skip("solve forwards of the seed's transform was refused")
+        ctx.not_judged(
+            "solve forwards of the seed's transform was refused (server.reply.solve-forwards judges it: "
+            "the seed's angles are in range)"
+        )
     flipped: int | None = None
     for value, _ in CONFIGURATIONS:
         if not (await probe.call("set-configuration", configuration=value)).is_response:
