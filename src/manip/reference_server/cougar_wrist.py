@@ -443,7 +443,11 @@ class CougarWrist:
     def _output(self, arm: ArmSim) -> None:
         """The output process: everything queued, in the 1985 guide's priority order."""
         words: list[int] = []
-        if self.conditions.user_commands_first:
+        conditions = self.conditions
+        held = (not conditions.user_while_moving and arm.moving) or (
+            not conditions.user_while_compliant and bool(self._npr)
+        )  # a defect either way: the user's commands wait
+        if conditions.user_commands_first and not held:
             while self._user:
                 words += self._user.popleft()
                 self.stats.commands += 1
@@ -464,7 +468,7 @@ class CougarWrist:
         while self._interrupt:
             words += self._interrupt.popleft()
             self.stats.commands += 1
-        while self._user:
+        while self._user and not held:
             words += self._user.popleft()
             self.stats.commands += 1
         if words:
@@ -545,7 +549,8 @@ class CougarWrist:
             self._guard(msg, arm)
             return
         if code == CougarResponse.OUT_OF_SYNC:
-            self._lost_sync(msg)
+            if self.conditions.handles_out_of_sync:
+                self._lost_sync(msg)
             return
         stale = self._stale.get(code)
         while stale and stale[0] < self._now:

@@ -264,6 +264,9 @@ class SwitchedDefects(Defects):
                 read_forces_sends_angles=not on(Fault.READ_FORCES_NO_ANGLES),
                 read_forces_waits=not on(Fault.WRIST_NO_WAIT),
                 calibrate_two_poses=not on(Fault.CALIBRATE_ONE_POSE),
+                user_while_moving=not on(Fault.WRIST_CONFIG_AFTER_MOTION),
+                user_while_compliant=not on(Fault.WRIST_USER_HELD_COMPLIANT),
+                handles_out_of_sync=not on(Fault.OUT_OF_SYNC_IGNORED),
             )
         )
         if on(Fault.SEGMENT_NUMBER_STUCK):

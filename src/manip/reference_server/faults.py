@@ -114,6 +114,9 @@ class Fault(enum.StrEnum):
     FORCES_IN_POUNDS = "forces-in-pounds"
     FORCES_STALE = "forces-stale"
     ASYNC_SPLITS_MULTI = "async-splits-multi"
+    WRIST_CONFIG_AFTER_MOTION = "wrist-config-after-motion"
+    WRIST_USER_HELD_COMPLIANT = "wrist-user-held-compliant"
+    OUT_OF_SYNC_IGNORED = "out-of-sync-ignored"
 
 
 Kind = Literal["environment", "protocol"]
@@ -676,6 +679,27 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "request, and it sends them after the first packet of a multi-packet reply: describe self is "
                 "split by them.",
                 "multi.not-split",
+            ),
+            _info(
+                Fault.WRIST_CONFIG_AFTER_MOTION,
+                "protocol",
+                "The wrist output process holds the user's commands while the arm moves: a setting reaches "
+                "Cougar only once the queued segments are done.",
+                "puma.wrist.config-at-once",
+            ),
+            _info(
+                Fault.WRIST_USER_HELD_COMPLIANT,
+                "protocol",
+                "The wrist output process holds the user's commands during a compliant segment: read forces "
+                "then times out and settings wait for the segment's end.",
+                "puma.wrist.user-during-compliance",
+            ),
+            _info(
+                Fault.OUT_OF_SYNC_IGNORED,
+                "protocol",
+                "Cougar's out-of-sync message is dropped: the requests waiting for Cougar wait out the wrist "
+                "timeout, and the client is not warned.",
+                "puma.wrist.out-of-sync",
             ),
         ]
     )
