@@ -283,7 +283,13 @@ class CougarWrist:
 
     # ------------------------------------------------------------------------------ Wrist API
     def condition(self, conditions: WristConditions) -> None:
+        """A connection opens: its conditions, and no guard an earlier connection left armed (erratum
+        cougar-connection-state: Cougar's settings stay, its guards are cleared)."""
         self.conditions = conditions
+        if conditions.clears_old_guards:
+            for index in sorted(self._armed):
+                self.queue_command(CougarCommand.GUARDC, index=index)
+            self._armed.clear()
 
     def load_hand(self, environment: Environment | None) -> bool:
         """Put ``environment`` on the hand of an in-process Cougar from now on (None: what it had before

@@ -267,6 +267,7 @@ class SwitchedDefects(Defects):
                 user_while_moving=not on(Fault.WRIST_CONFIG_AFTER_MOTION),
                 user_while_compliant=not on(Fault.WRIST_USER_HELD_COMPLIANT),
                 handles_out_of_sync=not on(Fault.OUT_OF_SYNC_IGNORED),
+                clears_old_guards=not on(Fault.GUARDS_OUTLIVE_CONNECTION),
             )
         )
         if on(Fault.SEGMENT_NUMBER_STUCK):

@@ -117,6 +117,7 @@ class Fault(enum.StrEnum):
     WRIST_CONFIG_AFTER_MOTION = "wrist-config-after-motion"
     WRIST_USER_HELD_COMPLIANT = "wrist-user-held-compliant"
     OUT_OF_SYNC_IGNORED = "out-of-sync-ignored"
+    GUARDS_OUTLIVE_CONNECTION = "guards-outlive-connection"
 
 
 Kind = Literal["environment", "protocol"]
@@ -700,6 +701,12 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "Cougar's out-of-sync message is dropped: the requests waiting for Cougar wait out the wrist "
                 "timeout, and the client is not warned.",
                 "puma.wrist.out-of-sync",
+            ),
+            _info(
+                Fault.GUARDS_OUTLIVE_CONNECTION,
+                "protocol",
+                "The guards a connection left armed on Cougar stay armed for the next connection.",
+                "puma.wrist.connection-state",
             ),
         ]
     )

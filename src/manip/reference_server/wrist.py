@@ -144,6 +144,8 @@ class WristConditions:
     """The user's commands go out on the next tick during a compliant segment too."""
     handles_out_of_sync: bool = True
     """Cougar's out-of-sync message fails the waiting requests at once and is reported as a warning."""
+    clears_old_guards: bool = True
+    """A new connection starts with no guard armed: those an earlier one left are cleared on Cougar."""
 
 
 class Wrist(Protocol):

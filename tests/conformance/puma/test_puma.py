@@ -38,6 +38,7 @@ CATCHERS: dict[Fault, str] = {
     Fault.WRIST_CONFIG_AFTER_MOTION: "puma.wrist.config-at-once",
     Fault.WRIST_USER_HELD_COMPLIANT: "puma.wrist.user-during-compliance",
     Fault.OUT_OF_SYNC_IGNORED: "puma.wrist.out-of-sync",
+    Fault.GUARDS_OUTLIVE_CONNECTION: "puma.wrist.connection-state",
 }
 
 

@@ -389,3 +389,66 @@ async def out_of_sync(ctx: CaseContext) -> None:
         expected="joint angles served normally after the out-of-sync message",
         seen=after,
     )
+
+
+_SETTINGS: Final = frozenset(
+    {
+        CougarCommand.NK,
+        CougarCommand.NB,
+        CougarCommand.NBJI,
+        CougarCommand.NFV,
+        CougarCommand.NEWWC,
+        CougarCommand.NFC,
+        CougarCommand.WGOV,
+    }
+)
+"""Cougar's settings: a new connection does not send them again (erratum cougar-connection-state)."""
+NEWWC: Final = CougarCommand.NEWWC
+CONNECTION_WEIGHT: Final = 8.0
+"""The weight (oz) the first connection of ``puma.wrist.connection-state`` sets: exact in an F float."""
+
+
+@case("puma.wrist.connection-state", clauses=["puma.wrist.connection-state"], hazard="config", deadline=30.0)
+async def connection_state(ctx: CaseContext) -> None:
+    """A connection arms a guard (one that never trips) and sets a weight, then closes; when the next
+    connection opens the Puma clears that guard on Cougar (GUARDC) and sends none of Cougar's settings
+    again (erratum cougar-connection-state)."""
+    first = await session(ctx, power=False, notify=None)
+    judge, mark = begin(ctx)
+    index = ctx.random.randrange(16)
+    require_response(
+        ctx,
+        await first.call("set-guard", type_index=index, dvec=[0.0, 0.0, 1.0, 0.0, 0.0, 0.0], tol=1.0e30),
+        "a continue guard that never trips",
+    )
+    require_response(
+        ctx, await first.call("set-weight", weight=CONNECTION_WEIGHT, cg=[0.0] * 3), "set weight"
+    )
+
+    def weighed() -> bool:  # this connection's weight has reached Cougar (not an earlier case's)
+        return any(h.msg and h.msg.values["weight"] == CONNECTION_WEIGHT for h in judge.commands(mark, NEWWC))
+
+    await judge.wait_for(weighed, GIVE_UP_WITHIN)
+    await first.close()
+    opened = judge.mark()
+    second = await session(ctx, power=False, notify=None)
+    await second.call("joint-angles")
+    await judge.wait_ticks(AT_ONCE_TICKS, GIVE_UP_WITHIN)
+    heard = judge.since(opened)
+    cleared = [
+        h for h in heard if h.code == CougarCommand.GUARDC and h.msg and h.msg.values["index"] == index
+    ]
+    ctx.expect(
+        bool(cleared),
+        clause="puma.wrist.connection-state",
+        expected=f"GUARDC for guard {index}, which the last connection left armed, once the next one opens",
+        actual="; ".join(str(h) for h in heard[:6]) or "nothing sent to Cougar",
+    )
+    resent = [h for h in heard if h.code in _SETTINGS]
+    ctx.expect(
+        not resent,
+        clause="puma.wrist.connection-state",
+        expected="none of Cougar's settings sent again when a connection opens",
+        actual="; ".join(str(h) for h in resent[:6]),
+    )
+    await second.call("set-weight", weight=0.0, cg=[0.0] * 3)
