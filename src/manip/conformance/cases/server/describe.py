@@ -401,19 +401,14 @@ async def not_split(ctx: CaseContext) -> None:
 
 
 def _inside_replies(probe: Probe, opcode: int) -> list[list[WirePacket]]:
-    """For each request of ``opcode`` on ``probe``, the other server packets that came between the first
-    packet of its reply and the last."""
+    """For each request of ``opcode`` on ``probe`` (sent one at a time), the packets other than responses
+    that came between the first packet of its reply and the last (a response numbered wrongly is
+    multi.same-request-number's finding, not an intruder)."""
     out: list[list[WirePacket]] = []
     numbers = {p.packet_no for p in probe.packets if p.direction == "c2s" and p.opcode == opcode}
     sent = [p for p in probe.packets if p.direction == "s2c"]
     for number in sorted(numbers):
         mine = [i for i, p in enumerate(sent) if p.opcode == ServerOp.RESPONSE and word(p.data) == number]
         if mine:
-            out.append(
-                [
-                    p
-                    for p in sent[mine[0] : mine[-1] + 1]
-                    if not (p.opcode == ServerOp.RESPONSE and word(p.data) == number)
-                ]
-            )
+            out.append([p for p in sent[mine[0] : mine[-1] + 1] if p.opcode != ServerOp.RESPONSE])
     return out
