@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from typing import Final
 
-from manip.conformance.cases._support import error_of, read_floats, require_response
+from manip.conformance.cases._support import error_of, floats, require_response
 from manip.conformance.judge.checks import WirePacket, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
@@ -111,15 +111,23 @@ async def _quiet_wrist(ctx: CaseContext, probe: Probe) -> None:
 async def _steady(ctx: CaseContext, probe: Probe, what: str) -> tuple[float, ...]:
     """Read forces until the reading holds still (Cougar's filter takes a few ticks to follow a change);
     not judged when it never does within :data:`STEADY_S`."""
-    last = await read_floats(ctx, probe, "read-forces")
+    last = await _read_forces(ctx, probe)
     deadline = ctx.clock() + STEADY_S
     while ctx.clock() < deadline:
         await probe.drain(0.25)
-        now = await read_floats(ctx, probe, "read-forces")
+        now = await _read_forces(ctx, probe)
         if max(abs(a - b) for a, b in zip(now, last, strict=True)) < STEADY_TOL:
             return now
         last = now
     ctx.not_judged(f"the wrist's reading {what} did not hold still within {STEADY_S:g} s")
+
+
+async def _read_forces(ctx: CaseContext, probe: Probe) -> tuple[float, ...]:
+    """Read forces, waiting as long as a silent Cougar may take to be given up on (a Cougar that slept
+    while nothing needed it catches up first)."""
+    answer = await probe.call("read-forces", timeout=max(GIVE_UP_S, ctx.options.reply_timeout))
+    require_response(ctx, answer, "a normal reply to read forces")
+    return floats(answer)
 
 
 def _near(seen: float, wanted: float) -> bool:
