@@ -108,7 +108,7 @@ async def _quiet_wrist(ctx: CaseContext, probe: Probe) -> None:
     require_response(ctx, await probe.call("set-weight", weight=0.0, cg=[0.0] * 3), "no weight")
 
 
-async def _steady(ctx: CaseContext, probe: Probe, what: str) -> tuple[float, ...]:
+async def steady_forces(ctx: CaseContext, probe: Probe, what: str) -> tuple[float, ...]:
     """Read forces until the reading holds still (Cougar's filter takes a few ticks to follow a change);
     not judged when it never does within :data:`STEADY_S`."""
     last = await _read_forces(ctx, probe)
@@ -147,9 +147,9 @@ async def force_weight(ctx: CaseContext) -> None:
     await _require_wrist(ctx, probe)
     await _quiet_wrist(ctx, probe)
     try:
-        rest = await _steady(ctx, probe, "at rest")
+        rest = await steady_forces(ctx, probe, "at rest")
         require_response(ctx, await probe.call("set-weight", weight=WEIGHT_OZ, cg=[0.0] * 3), "set weight")
-        loaded = await _steady(ctx, probe, "after set weight")
+        loaded = await steady_forces(ctx, probe, "after set weight")
     finally:
         await probe.call("set-weight", weight=0.0, cg=[0.0] * 3)
     change = [b - a for a, b in zip(rest[:3], loaded[:3], strict=True)]
@@ -180,10 +180,10 @@ async def force_push(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     await _require_wrist(ctx, probe)
     await _quiet_wrist(ctx, probe)
-    rest = await _steady(ctx, probe, "at rest")
+    rest = await steady_forces(ctx, probe, "at rest")
     async with ctx.arranged(WristForce((0.0, 0.0, PUSH_OZ), (0.0, 0.0, TWIST_OZ_IN))):
-        pushed = await _steady(ctx, probe, "while the world pushed the hand")
-    released = await _steady(ctx, probe, "once the world let go")
+        pushed = await steady_forces(ctx, probe, "while the world pushed the hand")
+    released = await steady_forces(ctx, probe, "once the world let go")
     ctx.expect(
         pushed not in (rest, released),
         clause="read-forces.current",
