@@ -142,6 +142,7 @@ ARRANGED = (
     "server.motion.abort-drops-queue",
     "server.motion.collision",
     "server.wrist.no-answer",
+    "server.wrist.force-push",
 )
 """Cases that have the world arrange a condition for their connections (a lagging joint, a failing
 calibration, an obstacle, a silent Cougar, the panic button, a push on the hand): a capture does not

@@ -8,6 +8,7 @@ import asyncio
 import json
 import os
 import pty
+import re
 import select
 import subprocess
 import sys
@@ -49,6 +50,7 @@ WORLD_CASES = (
     "server.motion.abort-drops-queue",
     "server.motion.collision",
     "server.wrist.no-answer",
+    "server.wrist.force-push",
 )
 """Every case that asks the world for a condition."""
 OTHERS = ("server.reply.here", "server.describe.reply-shape", "server.motion.queued-segments")
@@ -253,7 +255,7 @@ def test_without_a_world_the_world_cases_are_not_judged_and_every_report_says_so
     statuses = report.clause_statuses()
     assert all(statuses[c].status == "not-judged" and statuses[c].hint == "--world" for c in unjudged)
     markdown = render_markdown(data)
-    assert "| not-judged | 6 |" in markdown and "**not judged**" in markdown
+    assert f"| not-judged | {len(WORLD_CASES)} |" in markdown and "**not judged**" in markdown
     assert "motion.collision (--world)" in markdown
     page = render_html(data)
     assert 'class="card o-not-judged' in page and "MUST clause(s) not judged on this target" in page
@@ -360,6 +362,10 @@ WORLD_FAULTS = (
     Fault.WRIST_TIMEOUT_SILENT,
     Fault.ABORT_KEEPS_QUEUE,
     Fault.GUARD_HIT_WORD_SWAPPED,
+    Fault.FATAL_EOF_WITHOUT_CLS,
+    Fault.NZI_MASK_SHIFTED,
+    Fault.FORCES_IN_POUNDS,
+    Fault.FORCES_STALE,
 )
 """Defects that show only under a condition of the world (every protocol fault on a world case's
 path), each caught through the world of a manip-server process by the case in :data:`CATCHER`."""
@@ -375,6 +381,10 @@ CATCHER = {
     Fault.WRIST_TIMEOUT_SILENT: "server.wrist.no-answer",
     Fault.GUARD_HIT_WORD_SWAPPED: "server.async.guard-trip-live",
     Fault.ABORT_KEEPS_QUEUE: "server.motion.abort-drops-queue",
+    Fault.FATAL_EOF_WITHOUT_CLS: "server.error.fatal-then-close",
+    Fault.NZI_MASK_SHIFTED: "server.error.fatal-then-close",
+    Fault.FORCES_IN_POUNDS: "server.wrist.force-push",
+    Fault.FORCES_STALE: "server.wrist.force-push",
 }
 
 
@@ -424,9 +434,12 @@ def test_an_operator_at_a_terminal_arranges_the_condition(manip_server: StartSer
     os.close(child)
     try:
         prompt = _read_until(parent, "if you cannot")
-        assert "ARRANGE a calibration that finds no zero index on joint(s) 2, 3" in prompt, prompt
+        wanted = r"ARRANGE a calibration that finds no zero index on joint\(s\) (\d), (\d)\."
+        asked = re.search(wanted, prompt)
+        assert asked is not None, prompt
+        joints = [int(j) for j in asked.groups()]  # the two joints the case's seed picked
         # the operator arranges it (a connection held open keeps the arrangement), then presses Enter
-        held = HeldArrangement(url, {"condition": CalibrationFailure().name, "args": {"joints": [2, 3]}})
+        held = HeldArrangement(url, {"condition": CalibrationFailure().name, "args": {"joints": joints}})
         os.write(parent, b"\n")
         _read_until(parent, "CLEAR")
         held.release()

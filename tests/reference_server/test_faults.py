@@ -974,3 +974,102 @@ def test_fatal_drops_link_against_its_case() -> None:
     """A fault of the driver: the embedded run of the fatal-error case passes clean and fails with it."""
     select = "server.error.fatal-then-close"
     assert (_conform(select), _conform(select, "fatal-drops-link")) == (0, 1)
+
+
+# ------------------------------------------------------------------------- found from outside (issue 32)
+@covers(Fault.FATAL_EOF_WITHOUT_CLS)
+def test_fatal_eof_without_cls_against_its_case() -> None:
+    """A fault of the driver: EOF then the link dropped; the fatal-error case passes clean and fails
+    with it (the EOF alone was taken for the CLS before)."""
+    select = "server.error.fatal-then-close"
+    assert (_conform(select), _conform(select, "fatal-eof-without-cls")) == (0, 1)
+
+
+@covers(Fault.KEEPS_ABORT)
+def test_connection_keeps_abort() -> None:
+    def carried(*faults: Fault) -> str:
+        config = ServerConfig(powered_at_open=True, faults=FaultSet.of(*faults))
+        first = Client(config)
+        first.one("set-joint-angles", joints=GOAL)
+        first.one("kill-power")
+        first.run(0.1)
+        assert _motion_reply(first) == "AWA"
+        second = Client(config)
+        second.session.inherit(first.session)
+        return _motion_reply(second)
+
+    assert (carried(), carried(Fault.KEEPS_ABORT)) == ("segment 1", "AWA")
+
+
+@covers(Fault.NZI_MASK_SHIFTED)
+def test_nzi_mask_shifted() -> None:
+    def scenario(c: Client) -> tuple[int, ...]:
+        ((opcode, data),) = _packets(c.raw(RequestOp.CALIBRATE, b""))
+        return decode_error(opcode, data).error.args
+
+    assert pair(Fault.NZI_MASK_SHIFTED, scenario, base=FaultSet.parse(["calibrate-nzi=2,3"])) == ((6,), (12,))
+
+
+@covers(Fault.CONFIGURATION_SWAPPED)
+def test_configuration_swapped() -> None:
+    seed = (20.0, -60.0, 150.0, 0.0, -60.0, 0.0)  # a lefty solution
+    pose = forward(seed).to_floats()
+
+    def scenario(c: Client) -> float:
+        c.one("set-configuration", configuration=1)
+        return float(_reply(c.one("solve-forwards", transform=pose, current=seed)).values["joints"][0])
+
+    clean, faulty = pair(Fault.CONFIGURATION_SWAPPED, scenario)
+    assert round(clean, 3) == 20.0 and round(faulty, 3) != 20.0
+
+
+@covers(Fault.JOINTS_REVERSED)
+def test_joints_reversed() -> None:
+    def scenario(c: Client) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        c.one("set-joint-angles", joints=GOAL)
+        c.settle()
+        (packet,) = _raw(c, "joint-angles")
+        return tuple(decode_reply(packet[1], RequestOp.JOINT_ANGLES).values["joints"]), c.session.arm.actual
+
+    (said, actual), (said_faulty, actual_faulty) = pair(Fault.JOINTS_REVERSED, scenario)
+    assert said == actual == tuple(GOAL)
+    assert actual_faulty == tuple(reversed(GOAL)) and said_faulty == tuple(GOAL)  # consistent on the wire
+
+
+def _forces(*faults: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Read forces at rest, then again after set weight of a 64 oz object the hand does not hold."""
+    client = WristClient(
+        CougarWrist(SimPort(CougarSim(seed=1))), config=ServerConfig(faults=FaultSet.parse(faults))
+    )
+    client.run(0.1)
+    rest = client.call("read-forces", limit=2.0)
+    client.call("set-weight", weight=64.0, cg=(0.0, 0.0, 0.0))
+    client.run(0.1)
+    loaded = client.call("read-forces", limit=2.0)
+    assert not isinstance(rest, ErrorReply) and not isinstance(loaded, ErrorReply)
+    return tuple(rest.values["forces"]), tuple(loaded.values["forces"])
+
+
+@covers(Fault.FORCES_IN_POUNDS)
+@covers(Fault.FORCES_STALE)
+def test_forces_in_pounds_and_stale() -> None:
+    rest, loaded = _forces()
+    assert round(math.dist(rest[:3], loaded[:3])) == 64
+    rest, loaded = _forces("forces-in-pounds")
+    assert round(math.dist(rest[:3], loaded[:3])) == 4
+    rest, loaded = _forces("forces-stale")
+    assert rest == loaded
+
+
+@covers(Fault.ASYNC_SPLITS_MULTI)
+def test_async_splits_multi() -> None:
+    def scenario(c: Client) -> tuple[int, list[int]]:
+        c.one("request-notifications", mask=2)
+        c.one("set-joint-angles", joints=GOAL)
+        during = len(c.run(8.0))  # the segment completes: its report goes out, or waits
+        return during, [op for op, _ in _raw(c, "describe-self")]
+
+    (clean_during, clean), (faulty_during, faulty) = pair(Fault.ASYNC_SPLITS_MULTI, scenario)
+    assert clean_during == 1 and set(clean) == {ServerOp.RESPONSE}
+    assert faulty_during == 0 and faulty[0] == faulty[-1] == ServerOp.RESPONSE
+    assert ServerOp.ASYNCHRONOUS_RESPONSE in faulty[1:-1]

@@ -83,6 +83,13 @@ def test_every_erratum_is_cited_by_its_clauses() -> None:
             assert cid in SPEC.clauses
 
 
+def test_every_erratum_gives_its_reason() -> None:
+    """An erratum is a decision where the 1985 guide is silent or ambiguous; without its reason a reader
+    cannot tell whether a peer that decided otherwise is wrong."""
+    bare = [e.id for e in SPEC.errata.values() if not (e.reason or "").strip()]
+    assert not bare, f"errata with no reason: {bare}"
+
+
 def test_inconsistent_data_is_rejected(monkeypatch: pytest.MonkeyPatch) -> None:
     real = spec_loader._read
 

@@ -283,7 +283,13 @@ class CougarWrist:
 
     # ------------------------------------------------------------------------------ Wrist API
     def condition(self, conditions: WristConditions) -> None:
+        """A connection opens: its conditions, and no guard an earlier connection left armed (erratum
+        cougar-connection-state: Cougar's settings stay, its guards are cleared)."""
         self.conditions = conditions
+        if conditions.clears_old_guards:
+            for index in sorted(self._armed):
+                self.queue_command(CougarCommand.GUARDC, index=index)
+            self._armed.clear()
 
     def load_hand(self, environment: Environment | None) -> bool:
         """Put ``environment`` on the hand of an in-process Cougar from now on (None: what it had before
@@ -443,7 +449,11 @@ class CougarWrist:
     def _output(self, arm: ArmSim) -> None:
         """The output process: everything queued, in the 1985 guide's priority order."""
         words: list[int] = []
-        if self.conditions.user_commands_first:
+        conditions = self.conditions
+        held = (not conditions.user_while_moving and arm.moving) or (
+            not conditions.user_while_compliant and bool(self._npr)
+        )  # a defect either way: the user's commands wait
+        if conditions.user_commands_first and not held:
             while self._user:
                 words += self._user.popleft()
                 self.stats.commands += 1
@@ -464,7 +474,7 @@ class CougarWrist:
         while self._interrupt:
             words += self._interrupt.popleft()
             self.stats.commands += 1
-        while self._user:
+        while self._user and not held:
             words += self._user.popleft()
             self.stats.commands += 1
         if words:
@@ -545,7 +555,8 @@ class CougarWrist:
             self._guard(msg, arm)
             return
         if code == CougarResponse.OUT_OF_SYNC:
-            self._lost_sync(msg)
+            if self.conditions.handles_out_of_sync:
+                self._lost_sync(msg)
             return
         stale = self._stale.get(code)
         while stale and stale[0] < self._now:

@@ -18,13 +18,15 @@ The hook points, by what they decide:
 * serving a request: :meth:`~Defects.decode`, :meth:`~Defects.check`, :meth:`~Defects.refused`,
   :meth:`~Defects.wrist_failure`, :attr:`~Defects.discards_after_free_joint`;
 * what a request does: :meth:`~Defects.describe`, :meth:`~Defects.increment`, :meth:`~Defects.move_ready`,
+  :meth:`~Defects.configuration`,
   :attr:`~Defects.straight_lines`, :attr:`~Defects.checks_joint_limits`,
   :attr:`~Defects.applies_configuration`;
 * replies: :meth:`~Defects.payload`, :meth:`~Defects.reply`;
 * errors: :meth:`~Defects.error_number`, :meth:`~Defects.error`, :meth:`~Defects.error_string`,
   :meth:`~Defects.after_error`, :attr:`~Defects.after_fatal` (the driver's too);
 * asynchronous packets: :meth:`~Defects.notifications`, :meth:`~Defects.async_response`,
-  :meth:`~Defects.reports_guard`, :meth:`~Defects.after_warning`.
+  :meth:`~Defects.reports_guard`, :meth:`~Defects.after_warning`;
+* the packets sent: :meth:`~Defects.sent` (their order, one step of the session at a time).
 
 The environment faults (the panic button, an obstacle, a calibration failure, a sluggish joint, a silent
 wrist) are conditions of the arm's world, not defects, but they enter through the same points.
@@ -48,17 +50,17 @@ from manip.reference_server.describe import Statement
 from manip.reference_server.errors import RequestError
 from manip.reference_server.faults import Fault, FaultSet
 from manip.reference_server.wrist import GuardHit, Wrist, WristConditions
-from manip.spec import SPEC, RequestName, RequestOpcode
+from manip.spec import SPEC, Field, RequestName, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
 
 if TYPE_CHECKING:
-    from manip.reference_server.session import ServerSession
+    from manip.reference_server.session import Outgoing, ServerSession
 
 __all__ = ["AfterFatal", "Defects", "SwitchedDefects", "defects_for"]
 
-AfterFatal = Literal["close", "stay-open", "drop-link"]
-"""What follows a fatal error: the connection closes (the protocol), it stays open, or the driver drops
-the link under it without closing it."""
+AfterFatal = Literal["close", "stay-open", "drop-link", "eof-drop-link"]
+"""What follows a fatal error: the connection closes (the protocol), it stays open, the driver drops
+the link under it without closing it, or the driver sends EOF and drops the link before the CLS."""
 Encoder = Callable[[RequestOpcode, Mapping[str, Any]], bytes]
 """The session's encoder of a reply's values (after the request number)."""
 
@@ -71,6 +73,8 @@ READY_OFF_DEG: Final = 10.0
 """How far from where move to ready goes joint 2 of :ready-position is stated under ``describe-ready-off``."""
 SEGMENTS_STOP_REST_S: Final = 0.1
 """How long the segments-stop fault rests between queued segments: clearly more than a blend's pause."""
+OUNCES_PER_POUND: Final = 16.0
+"""What the forces-in-pounds fault divides read forces' answer by."""
 RESERVED_OPERAND: Final = 0x8000
 """First word of a reserved-operand float: sign 1, exponent 0."""
 GUARD_STOP: Final = 1
@@ -86,6 +90,7 @@ _SWAPPED_ARGS: Final[Mapping[Fault, frozenset[str]]] = {
 _FLOAT_FAULTS: Final = frozenset({Fault.UNDERFLOW_DIRTY_ZERO, Fault.NOT_FINITE_RESERVED})
 _SWAPPED_CODES: Final = {"TOR": "JOR", "JOR": "TOR"}
 _ASYNC_ERRORS: Final = frozenset({ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING})
+_ASYNC_OPS: Final = _ASYNC_ERRORS | {ServerOp.ASYNCHRONOUS_RESPONSE}
 
 
 HELD_TICKS: Final = 25
@@ -166,6 +171,10 @@ class Defects:
         """Queue the move to the ready position; its segment number."""
         return arm.move_ready(now)
 
+    def configuration(self, lefty: bool) -> bool:
+        """The configuration set configuration puts in force when asked for ``lefty`` (or righty)."""
+        return lefty
+
     # ---------------------------------------------------------------------------- replies
     def payload(self, op: RequestOpcode, values: Mapping[str, Any], encode: Encoder) -> bytes:
         """A reply's data after the request number, as ``encode`` (the spec codec) writes them."""
@@ -220,6 +229,12 @@ class Defects:
         """What the move process does after warning of a joint lagging its command: it goes on."""
         return []
 
+    # ---------------------------------------------------------------------------- the packets sent
+    def sent(self, request: bool, packets: list[Outgoing]) -> list[Outgoing]:
+        """The packets of one step of the session, in the order they go out (``request``: the step served
+        a request; otherwise it ran the move and wrist processes): as they were made."""
+        return packets
+
 
 class SwitchedDefects(Defects):
     """The hook points bent as the fault switches of ``faults`` say."""
@@ -229,6 +244,10 @@ class SwitchedDefects(Defects):
         self._held_terminator: bytes | None = None
         """Describe self's terminator, held back until the next reply (describe-terminator-overtaken)."""
         self._held_ticks = 0
+        self._first_forces: tuple[float, ...] | None = None
+        """The connection's first read forces answer (fault forces-stale)."""
+        self._held_async: list[Outgoing] = []
+        """Asynchronous packets waiting for the next request (fault async-splits-multi)."""
         on = faults.active
         self.keeps_arm_after_close = Fault.CLOSE_KEEPS_MOVING in on
         self.discards_after_free_joint = Fault.FREE_JOINT_EXECUTES not in on
@@ -240,6 +259,8 @@ class SwitchedDefects(Defects):
             if Fault.FATAL_WITHOUT_CLOSE in on
             else "drop-link"
             if Fault.FATAL_DROPS_LINK in on
+            else "eof-drop-link"
+            if Fault.FATAL_EOF_WITHOUT_CLS in on
             else "close"
         )
 
@@ -260,6 +281,10 @@ class SwitchedDefects(Defects):
                 read_forces_sends_angles=not on(Fault.READ_FORCES_NO_ANGLES),
                 read_forces_waits=not on(Fault.WRIST_NO_WAIT),
                 calibrate_two_poses=not on(Fault.CALIBRATE_ONE_POSE),
+                user_while_moving=not on(Fault.WRIST_CONFIG_AFTER_MOTION),
+                user_while_compliant=not on(Fault.WRIST_USER_HELD_COMPLIANT),
+                handles_out_of_sync=not on(Fault.OUT_OF_SYNC_IGNORED),
+                clears_old_guards=not on(Fault.GUARDS_OUTLIVE_CONNECTION),
             )
         )
         if on(Fault.SEGMENT_NUMBER_STUCK):
@@ -288,6 +313,8 @@ class SwitchedDefects(Defects):
             session.arm.set_configuration(previous.arm.lefty)
         if self._on(Fault.KEEPS_NOTIFICATIONS):
             session.notifications = previous.notifications
+        if self._on(Fault.KEEPS_ABORT):
+            session.arm.aborted, session.arm.abort_cause = previous.arm.aborted, previous.arm.abort_cause
 
     def opened(self, arm: ArmSim, now: float) -> None:
         if self._on(Fault.PANIC_BUTTON):
@@ -309,12 +336,13 @@ class SwitchedDefects(Defects):
     # ---------------------------------------------------------------------------- serving a request
     def decode(self, op: RequestOpcode, data: bytes) -> Mapping[str, Value]:
         try:
-            return super().decode(op, data)
+            values = super().decode(op, data)
         except DecodeError as exc:
             if exc.clause != "request.data-length" or not self._on(Fault.LENGTH_UNCHECKED):
                 raise
             expected = op.request.fixed_size or 0
-            return super().decode(op, data[:expected].ljust(expected, b"\0"))
+            values = super().decode(op, data[:expected].ljust(expected, b"\0"))
+        return _joints_reversed(op.request.fields, values) if self._on(Fault.JOINTS_REVERSED) else values
 
     def check(self, op: RequestOpcode, arm: ArmSim) -> None:
         if self._on(Fault.AWA_REFUSES_ALL) and arm.aborted and op.name not in ("enable-power", "reset-abort"):
@@ -355,6 +383,8 @@ class SwitchedDefects(Defects):
         ready = list(statement.ready_position)
         if on(Fault.DESCRIBE_READY_OFF):
             ready[1] += READY_OFF_DEG
+        if on(Fault.JOINTS_REVERSED):
+            limits, ready = limits[::-1], ready[::-1]
         return Statement(
             frozenset(operations),
             statement.degrees_of_freedom + (1 if on(Fault.DESCRIBE_WRONG_DOF) else 0),
@@ -369,6 +399,9 @@ class SwitchedDefects(Defects):
             return (dx, dy, dz, dt, da, do)
         return delta
 
+    def configuration(self, lefty: bool) -> bool:
+        return not lefty if self._on(Fault.CONFIGURATION_SWAPPED) else lefty
+
     def move_ready(self, arm: ArmSim, now: float) -> int:
         if self._on(Fault.READY_LEAVES_WRIST):
             return arm.move_joints(arm.model.ready[:3] + arm.planned[3:], now)
@@ -377,9 +410,24 @@ class SwitchedDefects(Defects):
     # ---------------------------------------------------------------------------- replies
     def payload(self, op: RequestOpcode, values: Mapping[str, Any], encode: Encoder) -> bytes:
         fields = op.response.data.fields
+        if self._on(Fault.JOINTS_REVERSED):
+            values = _joints_reversed(fields, values)
+        if op.name == "read-forces":
+            values = self._forces(values)
         if self.faults.active & _FLOAT_FAULTS and fields and all(f.type.element == "float" for f in fields):
             return b"".join(self._float(float(x)) for f in fields for x in values[f.name])
         return encode(op, values)
+
+    def _forces(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
+        """Read forces' answer as the force faults bend it."""
+        forces = tuple(values["forces"])
+        if self._on(Fault.FORCES_STALE):
+            if self._first_forces is None:
+                self._first_forces = forces
+            forces = self._first_forces
+        if self._on(Fault.FORCES_IN_POUNDS):
+            forces = tuple(f / OUNCES_PER_POUND for f in forces)
+        return {**values, "forces": forces}
 
     def _float(self, x: float) -> bytes:
         """``x`` as a float encoder with the float faults switched on writes it."""
@@ -418,6 +466,8 @@ class SwitchedDefects(Defects):
             error = replace(error, severity="E")
         if self._on(Fault.WRONG_SEVERITY):
             error = replace(error, severity="E" if opcode == ServerOp.FATAL_ERROR else "F")
+        if error.code == "NZI" and error.args and self._on(Fault.NZI_MASK_SHIFTED):
+            error = replace(error, args=(error.args[0] << 1 & WORD_MASK, *error.args[1:]))
         if any(self._on(fault) and error.code in codes for fault, codes in _SWAPPED_ARGS.items()):
             error = replace(
                 error, args=tuple(int.from_bytes(a.to_bytes(2, "little"), "big") for a in error.args)
@@ -476,6 +526,24 @@ class SwitchedDefects(Defects):
             self._held_terminator, self._held_ticks = packets[-1], 0
             packets = packets[:-1]
         return packets if held is None else [*packets, held]
+
+    # ---------------------------------------------------------------------------- the packets sent
+    def sent(self, request: bool, packets: list[Outgoing]) -> list[Outgoing]:
+        if not self._on(Fault.ASYNC_SPLITS_MULTI):
+            return packets
+        if not request:  # the other processes' reports wait for the main process
+            self._held_async += [p for p in packets if p.opcode in _ASYNC_OPS]
+            return [p for p in packets if p.opcode not in _ASYNC_OPS]
+        held, self._held_async = self._held_async, []
+        replies = [i for i, p in enumerate(packets) if p.opcode == ServerOp.RESPONSE]
+        at = replies[0] + 1 if len(replies) > 1 else 0  # after a multi-packet reply's first packet
+        return [*packets[:at], *held, *packets[at:]]
+
+
+def _joints_reversed(fields: Sequence[Field], values: Mapping[str, Any]) -> dict[str, Any]:
+    """``values`` with every joint vector among ``fields`` in the reverse order (fault joints-reversed)."""
+    joints = {f.name for f in fields if f.type.name == "joints"}
+    return {name: tuple(value)[::-1] if name in joints else value for name, value in values.items()}
 
 
 def _renumbered(packet: bytes, by: int) -> bytes:

@@ -341,6 +341,8 @@ class ReferenceServer:
                     if not out:
                         if session.defects.after_fatal == "drop-link":
                             return await self._drop_link(conn)
+                        if session.defects.after_fatal == "eof-drop-link":
+                            return await self._eof_drop_link(conn)
                         await conn.close()
                         return "closed after a fatal error"
                     break
@@ -374,6 +376,20 @@ class ReferenceServer:
         if isinstance(link, StreamLink):
             link.close()
         return "link dropped after a fatal error (fault fatal-drops-link)"
+
+    async def _eof_drop_link(self, conn: ChaosConnection) -> str:
+        """Fault fatal-eof-without-cls: start the close (the EOF goes out after the last packets), then
+        close the stream link under ``conn`` before the peer's acknowledgement of the EOF can arrive and
+        draw the CLS.  A shared datagram link is not dropped, so there the close completes with its CLS:
+        the fault shows on stream links (tcp://, unix://)."""
+        link = conn.node.link_of(conn)
+        closing = asyncio.ensure_future(conn.close(timeout=DROP_LINK_DELAY))
+        await asyncio.sleep(0)  # the close runs up to its first wait: the EOF is written, no reply read yet
+        if isinstance(link, StreamLink):
+            link.close()
+        with contextlib.suppress(ChaosError):
+            await closing
+        return "EOF sent and the link dropped after a fatal error (fault fatal-eof-without-cls)"
 
     def _serve(self, client: _Client, opcode: int, packet_no: int, data: bytes, ack_no: int) -> None:
         session = client.session

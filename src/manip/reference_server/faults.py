@@ -106,6 +106,19 @@ class Fault(enum.StrEnum):
     GUARD_IGNORED = "guard-ignored"
     GUARD_UNREPORTED = "guard-unreported"
     CALIBRATE_ONE_POSE = "calibrate-one-pose"
+    # protocol defects found from outside (issue 32)
+    FATAL_EOF_WITHOUT_CLS = "fatal-eof-without-cls"
+    KEEPS_ABORT = "connection-keeps-abort"
+    NZI_MASK_SHIFTED = "nzi-mask-shifted"
+    CONFIGURATION_SWAPPED = "configuration-swapped"
+    JOINTS_REVERSED = "joints-reversed"
+    FORCES_IN_POUNDS = "forces-in-pounds"
+    FORCES_STALE = "forces-stale"
+    ASYNC_SPLITS_MULTI = "async-splits-multi"
+    WRIST_CONFIG_AFTER_MOTION = "wrist-config-after-motion"
+    WRIST_USER_HELD_COMPLIANT = "wrist-user-held-compliant"
+    OUT_OF_SYNC_IGNORED = "out-of-sync-ignored"
+    GUARDS_OUTLIVE_CONNECTION = "guards-outlive-connection"
 
 
 Kind = Literal["environment", "protocol"]
@@ -619,6 +632,90 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "protocol",
                 "Calibrate-wrist sets the mean of one pose's readings (gravity in them) as the offsets.",
                 "puma.calibrate-wrist",
+            ),
+            _info(
+                Fault.FATAL_EOF_WITHOUT_CLS,
+                "protocol",
+                "After a fatal error the server sends EOF and then drops the link under the connection "
+                "before the peer's acknowledgement can draw its CLS: the connection ends with EOF, never "
+                "CLS.",
+                "error.fatal-then-close",
+            ),
+            _info(
+                Fault.KEEPS_ABORT,
+                "protocol",
+                "A new connection keeps the abort condition the last one closed with: its first move is "
+                "refused AWA.",
+                "connect.per-connection-state",
+            ),
+            _info(
+                Fault.NZI_MASK_SHIFTED,
+                "protocol",
+                "The joint mask of F NZI counts joints from 0 (joint n as bit n): it names the joint after "
+                "each one that failed.",
+                "calibrate.nzi-mask",
+            ),
+            _info(
+                Fault.CONFIGURATION_SWAPPED,
+                "protocol",
+                "Set configuration reads bit 0 the wrong way round: 1 gives the righty solutions, 0 the "
+                "lefty ones.",
+                "set-configuration.lefty-side",
+            ),
+            _info(
+                Fault.JOINTS_REVERSED,
+                "protocol",
+                "Every joint vector on the wire starts at the hand, not the base (requests, replies and "
+                "describe self's limits and ready position alike): element 1 is joint 6.",
+                "joint-angles.reply",
+            ),
+            _info(
+                Fault.FORCES_IN_POUNDS,
+                "protocol",
+                "Read forces answers pounds and pound-inches, not ounces and ounce-inches: every component "
+                "16 times too small.",
+                "read-forces.units",
+            ),
+            _info(
+                Fault.FORCES_STALE,
+                "protocol",
+                "Every read forces on a connection answers that connection's first reading again.",
+                "read-forces.current",
+            ),
+            _info(
+                Fault.ASYNC_SPLITS_MULTI,
+                "protocol",
+                "The asynchronous packets of the move and wrist processes wait for the main process's next "
+                "request, and it sends them after the first packet of a multi-packet reply: describe self is "
+                "split by them.",
+                "multi.not-split",
+            ),
+            _info(
+                Fault.WRIST_CONFIG_AFTER_MOTION,
+                "protocol",
+                "The wrist output process holds the user's commands while the arm moves: a setting reaches "
+                "Cougar only once the queued segments are done.",
+                "puma.wrist.config-at-once",
+            ),
+            _info(
+                Fault.WRIST_USER_HELD_COMPLIANT,
+                "protocol",
+                "The wrist output process holds the user's commands during a compliant segment: read forces "
+                "then times out and settings wait for the segment's end.",
+                "puma.wrist.user-during-compliance",
+            ),
+            _info(
+                Fault.OUT_OF_SYNC_IGNORED,
+                "protocol",
+                "Cougar's out-of-sync message is dropped: the requests waiting for Cougar wait out the wrist "
+                "timeout, and the client is not warned.",
+                "puma.wrist.out-of-sync",
+            ),
+            _info(
+                Fault.GUARDS_OUTLIVE_CONNECTION,
+                "protocol",
+                "The guards a connection left armed on Cougar stay armed for the next connection.",
+                "puma.wrist.connection-state",
             ),
         ]
     )

@@ -332,7 +332,7 @@ class ServerSession:
         action, fixed = transition
         decided = action(self, event)
         self.state = decided or fixed or self.state
-        return Output(tuple(self._out), self._close)
+        return Output(tuple(self.defects.sent(event.kind is Input.REQUEST, self._out)), self._close)
 
     def _emit(self, opcode: int, data: bytes) -> None:
         self._out.append(Outgoing(opcode, data))
@@ -605,7 +605,7 @@ class ServerSession:
         if low & 0xFE and self.config.configuration_bits == "refuse":
             raise errors.bad_value("set-configuration", f"configuration {low} has bits other than bit 0 set")
         if self.defects.applies_configuration:
-            self.arm.set_configuration(lefty=bool(low & 1))
+            self.arm.set_configuration(lefty=self.defects.configuration(bool(low & 1)))
         return {}
 
     def _hand(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:

@@ -138,6 +138,14 @@ class WristConditions:
     """Read forces waits for Cougar's answer (not the last forces seen)."""
     calibrate_two_poses: bool = True
     """Calibrate-wrist takes its readings in two poses (not one, gravity in them)."""
+    user_while_moving: bool = True
+    """The user's commands go out on the next tick while the arm moves (not once the queue is done)."""
+    user_while_compliant: bool = True
+    """The user's commands go out on the next tick during a compliant segment too."""
+    handles_out_of_sync: bool = True
+    """Cougar's out-of-sync message fails the waiting requests at once and is reported as a warning."""
+    clears_old_guards: bool = True
+    """A new connection starts with no guard armed: those an earlier one left are cleared on Cougar."""
 
 
 class Wrist(Protocol):

@@ -8,16 +8,17 @@ it (:func:`reply_view`), and failures that carry their evidence (:class:`Evidenc
 
 A case reports only the clauses it declares (``manip.conformance.suite.invariants``), so the helpers
 that a case uses to *prepare* its check (read the angles, switch power on) judge nothing themselves:
-:func:`require_response` passes a malformed answer to the transcript invariant and skips the case when
-the target refuses what the case needs (the case of that request reports the refusal).  The helpers that
-check take the clause from their caller.
+:func:`require_response` passes a malformed answer to the transcript invariant and, when the target
+refuses what the case needs, skips the case if the target does not serve the opcode and leaves it not
+judged otherwise (the case of that request reports the refusal): a wrong answer is never a skip.  The
+helpers that check take the clause from their caller.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Final
+from typing import Any, Final, NoReturn
 
 from manip.arm.kinematics import PUMA600, JointLimits, Joints
 from manip.codecs.errors import CodecError
@@ -40,12 +41,16 @@ from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.conformance.suite.invariants import TRANSCRIPT
 from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import ServerOp
+from manip.spec.notation import octal
 
 UNASSIGNED_OPCODES: Final[tuple[int, ...]] = tuple(
     code for code in range(0o200, 0o400) if code not in SPEC.requests
 )
 """Data opcodes the spec gives no request (0222-0237, 0262-0377)."""
 
+NOT_SERVED: Final = frozenset({"UOP", "UIM"})
+"""The error codes of a request the target does not serve: an unknown opcode (request.unknown-opcode)
+and an operation this arm does not implement (a wrist opcode without a wrist computer)."""
 SMALL_DEFAULT: Final = 1
 """A valid ``small`` value for every opcode that has one (joint 1; configuration lefty)."""
 FLOAT_DEFAULT: Final = 0.5
@@ -68,10 +73,23 @@ def floats(answer: Answer) -> tuple[float, ...]:
 def require_response(ctx: CaseContext, answer: Answer, what: str) -> None:
     """The case needs ``answer`` to be a normal response: a malformed answer is the transcript
     invariant's finding (reported here, and the case stops: what follows reads the answer), and a
-    refusal skips the case."""
+    refusal ends the case (:func:`refused`)."""
     ctx.check(check_reply(answer.request, answer.packets), stop=True)
     if not answer.is_response:
-        ctx.skip(f"the case needs {what}, which the target refused: {answer}")
+        refused(ctx, answer, f"the case needs {what}")
+
+
+def refused(ctx: CaseContext, answer: Answer, needed: str) -> NoReturn:
+    """End a case whose request was refused: skipped when the target does not serve the opcode (C UOP or
+    C UIM: a capability it lacks), else not judged (the target refused what it serves; the opcode's own case
+    judges that answer).  A wrong answer is never a skip."""
+    error = error_of(answer)
+    op = SPEC.requests.get(answer.request.opcode)
+    name = op.name if op is not None else f"opcode {octal(answer.request.opcode)}"
+    said = repr(error.error.render()) if error is not None else str(answer)
+    if error is not None and error.error.code in NOT_SERVED:
+        ctx.skip(f"{needed}, and the target does not serve {name}: {said}")
+    ctx.not_judged(f"{needed}, and the target refused {name}: {said} (server.reply.{name} judges the answer)")
 
 
 async def read_floats(ctx: CaseContext, probe: Probe, op: RequestName) -> tuple[float, ...]:

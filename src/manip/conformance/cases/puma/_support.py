@@ -77,7 +77,7 @@ async def move(ctx: CaseContext, probe: Probe, op: RequestName, **values: Any) -
     require_response(ctx, answer, f"{op} accepted")
     segment = segment_of(answer)
     if segment is None:
-        ctx.skip(f"{op} was answered without a segment number: {answer}")
+        ctx.not_judged(f"{op} was answered without a segment number: {answer} (server.reply.{op} judges it)")
     return segment
 
 

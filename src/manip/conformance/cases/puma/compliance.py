@@ -92,7 +92,10 @@ async def npr_every_cycle(ctx: CaseContext) -> None:
     segment = await move(ctx, probe, "compliant-move", joints=goal, scheme=0)
     done = await wait_async(ctx, probe, is_completed(segment), SEGMENT_WITHIN)
     if done is None:
-        ctx.skip(f"the compliant segment {segment} was not reported complete within {SEGMENT_WITHIN:g} s")
+        ctx.not_judged(
+            f"the compliant segment {segment} was not reported complete within {SEGMENT_WITHIN:g} s "
+            "(puma.compliance.segment-end judges that)"
+        )
     npr = _npr(judge, mark)
     ticks = [h.tick for h in npr]
     wrong = _off_cycle(ticks, late_allowed=not is_virtual())
@@ -135,14 +138,21 @@ async def segment_end(ctx: CaseContext) -> None:
     goal = [*here[:5], here[5] + MOVE_DEG]
     segment = await move(ctx, probe, "compliant-move", joints=goal, scheme=0)
     done = await wait_async(ctx, probe, is_completed(segment), SEGMENT_WITHIN)
-    if done is None:
-        ctx.skip(f"the compliant segment {segment} was not reported complete within {SEGMENT_WITHIN:g} s")
+    ctx.expect(
+        done is not None,
+        clause="puma.compliance.segment-end",
+        expected=f"the compliant segment {segment} reported complete within {SEGMENT_WITHIN:g} s (its "
+        "clean-up done, as for any segment)",
+        actual="no segment-completed report",
+    )
     judge.begin(CougarScript(ntd=(0.0,) * 6))
     await judge.wait_ticks(3, SEGMENT_WITHIN)
     rest = await angles(ctx, probe)
     npr = _npr(judge, mark)
     if len(npr) < 2:
-        ctx.skip("the Puma sent fewer than two New Position and Rate commands (npr-every-cycle judges that)")
+        ctx.not_judged(
+            "the Puma sent fewer than two New Position and Rate commands (npr-every-cycle judges that)"
+        )
     last = npr[-1]
     held = _joint6(last, "theta_sensed") - _joint6(npr[-2], "theta_commanded")
     ctx.expect(

@@ -253,3 +253,202 @@ async def priority(ctx: CaseContext) -> None:
     if not mixed:
         ctx.skip("no tick carried New Position and Rate or Reset Wrist together with another command")
     ctx.note(f"{mixed} ticks carried commands of two priorities")
+
+
+# ------------------------------------------------------------------------------ at once, during compliance
+AT_ONCE_MOVE_DEG: Final = 30.0
+"""How far joint 1 moves while the configuration request is sent: many servo cycles."""
+AT_ONCE_TICKS: Final = 3
+"""Servo cycles within which a configuration request's command reaches Cougar."""
+
+
+def _first_after(heard: Sequence[Heard], code: int, tick: int) -> Heard | None:
+    return next((h for h in heard if h.code == code and h.tick >= tick), None)
+
+
+@case("puma.wrist.config-at-once", clauses=["puma.wrist.config-at-once"], hazard="motion", deadline=40.0)
+async def config_at_once(ctx: CaseContext) -> None:
+    """Set weight sent while a long move runs is answered done and reaches Cougar (NEWWC) within a few
+    servo cycles, before the move ends: not held for the queued segments (erratum
+    wrist-config-immediate)."""
+    probe = await session(ctx)
+    here = await angles(ctx, probe)
+    judge, mark = begin(ctx)
+    goal = list(here)
+    goal[0] += AT_ONCE_MOVE_DEG if here[0] <= 0 else -AT_ONCE_MOVE_DEG
+    segment = await move(ctx, probe, "set-joint-angles", joints=goal)
+    await judge.wait_ticks(2, SEGMENT_WITHIN)
+    asked = judge.ticks
+    weight = round(ctx.random.uniform(1.0, 20.0), 3)
+    answer = await probe.call("set-weight", weight=weight, cg=[0.0] * 3)
+    ctx.expect(
+        answer.is_response,
+        clause="puma.wrist.config-at-once",
+        expected="set weight answered done while the move runs",
+        seen=answer,
+    )
+    await judge.wait_ticks(AT_ONCE_TICKS, SEGMENT_WITHIN)
+    sent = _first_after(judge.since(mark), CougarCommand.NEWWC, asked)
+    ctx.expect(
+        sent is not None and sent.tick - asked <= AT_ONCE_TICKS,
+        clause="puma.wrist.config-at-once",
+        expected=f"NEWWC sent to Cougar within {AT_ONCE_TICKS} servo cycles of set weight (tick {asked}), "
+        f"while segment {segment} still runs",
+        actual=str(sent) if sent is not None else f"nothing by tick {judge.ticks}",
+    )
+    await wait_async(ctx, probe, is_completed(segment), 2 * SEGMENT_WITHIN)
+    await probe.call("set-weight", weight=0.0, cg=[0.0] * 3)
+
+
+DURING_MOVE_DEG: Final = 12.0
+
+
+@case(
+    "puma.wrist.user-during-compliance",
+    clauses=["puma.wrist.user-during-compliance"],
+    hazard="motion",
+    deadline=40.0,
+)
+async def user_during_compliance(ctx: CaseContext) -> None:
+    """Read forces during a compliant segment is answered with the forces Cougar sends, a setting sent
+    then reaches Cougar within a few servo cycles, and the segment goes on to its end."""
+    probe = await session(ctx)
+    here = await angles(ctx, probe)
+    forces = tuple(f_float(round(ctx.random.uniform(-90.0, 90.0), 3)) for _ in range(6))
+    judge, mark = begin(ctx, CougarScript(forces=forces, ntd=(0.0,) * 6))
+    goal = [*here[:5], here[5] + DURING_MOVE_DEG]
+    segment = await move(ctx, probe, "compliant-move", joints=goal, scheme=0)
+    await judge.wait_for(lambda: bool(judge.commands(mark, CougarCommand.NPR)), SEGMENT_WITHIN)
+    answer = await probe.call("read-forces", timeout=GIVE_UP_WITHIN)
+    got = (
+        decode_reply(answer.data, SPEC.request("read-forces")).values.get("forces")
+        if answer.is_response
+        else None
+    )
+    ctx.expect(
+        got == forces,
+        clause="puma.wrist.user-during-compliance",
+        expected=f"read forces during the compliant segment answered with Cougar's forces {fmt(forces)}",
+        actual=f"{answer} = {got}",
+    )
+    asked = judge.ticks
+    require_response(ctx, await probe.call("set-commanded-force", force=[0.0] * 6), "set commanded force")
+    await judge.wait_ticks(AT_ONCE_TICKS, SEGMENT_WITHIN)
+    sent = _first_after(judge.since(mark), CougarCommand.NFC, asked)
+    ctx.expect(
+        sent is not None and sent.tick - asked <= AT_ONCE_TICKS,
+        clause="puma.wrist.user-during-compliance",
+        expected=f"NFC sent to Cougar within {AT_ONCE_TICKS} servo cycles of set commanded force",
+        actual=str(sent) if sent is not None else f"nothing by tick {judge.ticks}",
+    )
+    done = await wait_async(ctx, probe, is_completed(segment), SEGMENT_WITHIN)
+    ctx.expect(
+        done is not None,
+        clause="puma.wrist.user-during-compliance",
+        expected=f"the compliant segment {segment} going on to its end (reported complete)",
+        actual="no segment-completed report",
+    )
+
+
+OOS_WORD: Final = 0o177
+"""The unknown word the judging Cougar says it met (any word that is no command code)."""
+
+
+@case("puma.wrist.out-of-sync", clauses=["puma.wrist.out-of-sync"], deadline=30.0)
+async def out_of_sync(ctx: CaseContext) -> None:
+    """Cougar says it lost sync while read forces waits for it: the request is answered with a non-fatal
+    error at once (well before the wrist timeout), an asynchronous warning tells the client, and the next
+    request is served (erratum wrist-timeout)."""
+    probe = await session(ctx, power=False, notify=None)
+    judge, mark = begin(ctx, CougarScript(forces_omitted=True))
+    number = await probe.send("read-forces")
+    await judge.wait_for(lambda: bool(judge.commands(mark, CougarCommand.RFRC)), GIVE_UP_WITHIN)
+    judge.inject("OUT-OF-SYNC", after=1, code=OOS_WORD)
+    injected = judge.ticks
+    answer = await probe.reply(number, timeout=GIVE_UP_WITHIN + ctx.options.reply_timeout)
+    late = judge.ticks - injected
+    ctx.expect(
+        answer.opcode == ServerOp.NON_FATAL_ERROR and late <= AT_ONCE_TICKS + 1,
+        clause="puma.wrist.out-of-sync",
+        expected=f"read forces #{number} answered with a non-fatal error (202) within {AT_ONCE_TICKS + 1} "
+        "servo cycles of Cougar's out-of-sync message",
+        actual=f"{answer}, {late} servo cycles after it",
+    )
+    warning = await wait_async(ctx, probe, lambda p: p.opcode == ServerOp.ASYNCHRONOUS_WARNING, 1.0)
+    ctx.expect(
+        warning is not None,
+        clause="puma.wrist.out-of-sync",
+        expected="an asynchronous warning (205) telling the client that the wrist computer lost sync",
+        actual="none",
+    )
+    judge.begin()
+    after = await probe.call("joint-angles")
+    ctx.expect(
+        after.is_response,
+        clause="puma.wrist.out-of-sync",
+        expected="joint angles served normally after the out-of-sync message",
+        seen=after,
+    )
+
+
+_SETTINGS: Final = frozenset(
+    {
+        CougarCommand.NK,
+        CougarCommand.NB,
+        CougarCommand.NBJI,
+        CougarCommand.NFV,
+        CougarCommand.NEWWC,
+        CougarCommand.NFC,
+        CougarCommand.WGOV,
+    }
+)
+"""Cougar's settings: a new connection does not send them again (erratum cougar-connection-state)."""
+NEWWC: Final = CougarCommand.NEWWC
+CONNECTION_WEIGHT: Final = 8.0
+"""The weight (oz) the first connection of ``puma.wrist.connection-state`` sets: exact in an F float."""
+
+
+@case("puma.wrist.connection-state", clauses=["puma.wrist.connection-state"], hazard="config", deadline=30.0)
+async def connection_state(ctx: CaseContext) -> None:
+    """A connection arms a guard (one that never trips) and sets a weight, then closes; when the next
+    connection opens the Puma clears that guard on Cougar (GUARDC) and sends none of Cougar's settings
+    again (erratum cougar-connection-state)."""
+    first = await session(ctx, power=False, notify=None)
+    judge, mark = begin(ctx)
+    index = ctx.random.randrange(16)
+    require_response(
+        ctx,
+        await first.call("set-guard", type_index=index, dvec=[0.0, 0.0, 1.0, 0.0, 0.0, 0.0], tol=1.0e30),
+        "a continue guard that never trips",
+    )
+    require_response(
+        ctx, await first.call("set-weight", weight=CONNECTION_WEIGHT, cg=[0.0] * 3), "set weight"
+    )
+
+    def weighed() -> bool:  # this connection's weight has reached Cougar (not an earlier case's)
+        return any(h.msg and h.msg.values["weight"] == CONNECTION_WEIGHT for h in judge.commands(mark, NEWWC))
+
+    await judge.wait_for(weighed, GIVE_UP_WITHIN)
+    await first.close()
+    opened = judge.mark()
+    second = await session(ctx, power=False, notify=None)
+    await second.call("joint-angles")
+    await judge.wait_ticks(AT_ONCE_TICKS, GIVE_UP_WITHIN)
+    heard = judge.since(opened)
+    cleared = [
+        h for h in heard if h.code == CougarCommand.GUARDC and h.msg and h.msg.values["index"] == index
+    ]
+    ctx.expect(
+        bool(cleared),
+        clause="puma.wrist.connection-state",
+        expected=f"GUARDC for guard {index}, which the last connection left armed, once the next one opens",
+        actual="; ".join(str(h) for h in heard[:6]) or "nothing sent to Cougar",
+    )
+    resent = [h for h in heard if h.code in _SETTINGS]
+    ctx.expect(
+        not resent,
+        clause="puma.wrist.connection-state",
+        expected="none of Cougar's settings sent again when a connection opens",
+        actual="; ".join(str(h) for h in resent[:6]),
+    )
+    await second.call("set-weight", weight=0.0, cg=[0.0] * 3)

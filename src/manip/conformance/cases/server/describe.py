@@ -19,12 +19,14 @@ from manip.conformance.cases._support import (
     stated_limits,
 )
 from manip.conformance.judge.checks import (
+    WirePacket,
     check_description_entries,
     check_reply,
     description_operations,
     multi_text,
     parse_description,
     required_refusal,
+    word,
 )
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
@@ -238,7 +240,7 @@ async def _stated_dof(ctx: CaseContext, probe: Probe) -> int:
     value = entries.get("degrees-of-freedom")
     value = value[0] if isinstance(value, list) and len(value) == 1 else value
     if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
-        ctx.skip(f"no usable :degrees-of-freedom ({value!r}; server.describe.keys judges it)")
+        ctx.not_judged(f"no usable :degrees-of-freedom ({value!r}; server.describe.keys judges it)")
     return value
 
 
@@ -363,3 +365,63 @@ async def joint_limits(ctx: CaseContext) -> None:
                 what=what,
             )
             expect_error_numbers(ctx, answer, error, [(1 << joint,)], what=what)
+
+
+SPLIT_MOVES: Final = 4
+"""Short moves queued so that segment-completed reports fall due around the describe-self requests."""
+SPLIT_STEP_DEG: Final = 0.5
+SPLIT_DESCRIBES: Final = 6
+"""Describe-self requests sent while the moves run."""
+SPLIT_IDLE_S: Final = 3.0
+"""Seconds the case sends nothing once the moves are queued, so their reports fall due between requests."""
+
+
+@case("server.describe.not-split", clauses=["multi.not-split"], hazard="motion", deadline=30.0)
+async def not_split(ctx: CaseContext) -> None:
+    """No asynchronous packet comes between the packets of a describe-self reply: with segment-completed
+    reports asked for, describe self is asked while short moves complete, and again right after the case
+    has sent nothing while they all completed (a server that holds the other processes' reports for its
+    next request must still send them before or after the whole reply)."""
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    require_response(ctx, await probe.call("request-notifications", mask=1 << 1), "segment notifications")
+    start = await read_floats(ctx, probe, "joint-angles")
+    sign = 1.0 if start[0] <= 0 else -1.0
+    try:
+        for n in range(1, SPLIT_MOVES + 1):
+            goal = list(start)
+            goal[0] += sign * SPLIT_STEP_DEG * n
+            require_response(
+                ctx, await probe.call("set-joint-angles", joints=goal), "a short move of joint 1"
+            )
+        for _ in range(SPLIT_DESCRIBES):
+            await probe.call("describe-self")
+        for n in range(SPLIT_MOVES - 1, -1, -1):
+            goal = list(start)
+            goal[0] += sign * SPLIT_STEP_DEG * n
+            require_response(ctx, await probe.call("set-joint-angles", joints=goal), "a short move back")
+        await probe.drain(SPLIT_IDLE_S)
+        await probe.call("describe-self")
+    finally:
+        await probe.call("request-notifications", mask=0)
+    for inside in _inside_replies(probe, SPEC.request("describe-self").opcode):
+        ctx.expect(
+            not inside,
+            clause="multi.not-split",
+            expected="the packets of a describe-self reply one after the other, up to its terminator",
+            seen=inside,
+        )
+
+
+def _inside_replies(probe: Probe, opcode: int) -> list[list[WirePacket]]:
+    """For each request of ``opcode`` on ``probe`` (sent one at a time), the packets other than responses
+    that came between the first packet of its reply and the last (a response numbered wrongly is
+    multi.same-request-number's finding, not an intruder)."""
+    out: list[list[WirePacket]] = []
+    numbers = {p.packet_no for p in probe.packets if p.direction == "c2s" and p.opcode == opcode}
+    sent = [p for p in probe.packets if p.direction == "s2c"]
+    for number in sorted(numbers):
+        mine = [i for i, p in enumerate(sent) if p.opcode == ServerOp.RESPONSE and word(p.data) == number]
+        if mine:
+            out.append([p for p in sent[mine[0] : mine[-1] + 1] if p.opcode != ServerOp.RESPONSE])
+    return out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 from typing import Final
 
 from manip.conformance.cases._support import UNASSIGNED_OPCODES, error_of
@@ -9,12 +10,12 @@ from manip.conformance.judge.checks import check_error_packet
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.conformance.suite.world import CalibrationFailure
-from manip.links import ConnectionClosed
+from manip.links import ChaosError, ConnectionClosed
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
 
-CALIBRATION_FAILURE: Final = CalibrationFailure((2, 3))
-"""The world's condition under which calibration fails fatally (no zero index found)."""
+EOF_POLL_S: Final = 0.01
+"""How often the case looks whether the CLS has followed the server's EOF (seconds)."""
 
 
 async def _command_error(ctx: CaseContext, probe: Probe, clause: str | None = None) -> Answer:
@@ -30,7 +31,10 @@ async def _command_error(ctx: CaseContext, probe: Probe, clause: str | None = No
             seen=answer,
         )
     elif answer.opcode != ServerOp.NON_FATAL_ERROR:
-        ctx.skip(f"no non-fatal error to judge: an unknown opcode was answered with {answer}")
+        ctx.not_judged(
+            f"no non-fatal error to judge: an unknown opcode was answered with {answer} "
+            "(server.negative.unknown-opcodes judges that answer)"
+        )
     return answer
 
 
@@ -74,7 +78,10 @@ async def arg_alignment(ctx: CaseContext) -> None:
         numbered += 1
         ctx.check(f for f in check_error_packet(answer.first) if f.clause == "error-string.arg-layout")
     if not numbered:
-        ctx.skip("no error string carried numbers")
+        ctx.not_judged(
+            "no error string carried numbers: C UOP carries the opcode and C BDL the byte counts "
+            "(server.negative.unknown-opcodes and server.negative.data-length judge them)"
+        )
 
 
 @case(
@@ -128,33 +135,35 @@ async def non_fatal_is_reply(ctx: CaseContext) -> None:
         "error.fatal-request-number",
         "error.severity-matches-opcode",
         "calibrate.nzi",
+        "calibrate.nzi-mask",
         "calibrate.done",
     ],
     hazard="motion",
     deadline=8.0,
 )
 async def fatal_then_close(ctx: CaseContext) -> None:
-    """Calibrate while the world fails it (no zero index): a fatal error quoting the packet last
-    received, of severity F, then CLS.
+    """Calibrate while the world fails it (no zero index on two joints the seed picks): a fatal error
+    quoting the packet last received, of severity F, an NZI mask naming those joints, then CLS.
 
     The target's world arranges the calibration failure (the embedded server's always; another target's
     with ``--world``); without a world the case is not judged."""
-    async with ctx.arranged(CALIBRATION_FAILURE):
+    failure = CalibrationFailure(tuple(sorted(ctx.random.sample(range(1, 7), 2))))
+    async with ctx.arranged(failure):
         probe = await ctx.connect()
         answer = await probe.call("enable-power")
         answer = await probe.call("calibrate", timeout=5.0)
         if answer.is_response:
             ctx.expect(len(answer.data) == 2, clause="calibrate.done", expected="an empty done", seen=answer)
             ctx.not_judged(
-                f"calibrate succeeded although the world arranged {CALIBRATION_FAILURE.describe()}: no "
+                f"calibrate succeeded although the world arranged {failure.describe()}: no "
                 "fatal error to judge"
             )
         if answer.opcode != ServerOp.FATAL_ERROR:
             ctx.not_judged(f"calibrate was refused with a non-fatal error, not failed: {answer}")
-        await _judge_fatal(ctx, probe, answer)
+        await _judge_fatal(ctx, probe, answer, failure.joints)
 
 
-async def _judge_fatal(ctx: CaseContext, probe: Probe, answer: Answer) -> None:
+async def _judge_fatal(ctx: CaseContext, probe: Probe, answer: Answer, failed: tuple[int, ...]) -> None:
     """A fatal error: its request number, its severity, its NZI form, then CLS (a dropped link or a LOS
     is not the CLS the clause asks for)."""
     ctx.check(check_error_packet(answer.first))
@@ -179,6 +188,7 @@ async def _judge_fatal(ctx: CaseContext, probe: Probe, answer: Answer) -> None:
             actual=repr(error.error.render()),
             data=answer.data,
         )
+        _judge_mask(ctx, answer, error.error.args, failed)
     closed = await probe.wait_closed(ctx.options.reply_timeout)
     ctx.expect(
         closed,
@@ -188,10 +198,36 @@ async def _judge_fatal(ctx: CaseContext, probe: Probe, answer: Answer) -> None:
         data=answer.data,
     )
     end = probe.end_reason
+    if isinstance(end, ConnectionClosed) and end.reason == "EOF":
+        end = await _after_eof(ctx, probe)
     ctx.expect(
-        isinstance(end, ConnectionClosed) and end.by_peer,
+        isinstance(end, ConnectionClosed) and end.by_peer and end.reason != "EOF",
         clause="error.fatal-then-close",
-        expected="the server to end the connection with CLS after the fatal error",
-        actual=f"the connection ended otherwise: {end}",
+        expected="the server to end the connection with CLS after the fatal error (EOF first or not)",
+        actual=f"the connection ended otherwise: {end or 'EOF, and no CLS followed it'}",
         data=answer.data,
     )
+
+
+def _judge_mask(ctx: CaseContext, answer: Answer, args: tuple[int, ...], failed: tuple[int, ...]) -> None:
+    """The NZI mask names exactly the joints the world made fail (joint n is bit n-1: E.2's example)."""
+    wanted = sum(1 << (joint - 1) for joint in failed)
+    named = [j for j in range(1, 17) if args and args[0] >> (j - 1) & 1]
+    ctx.expect(
+        bool(args) and args[0] == wanted,
+        clause="calibrate.nzi-mask",
+        expected=f"mask {wanted} (joints {', '.join(map(str, failed))}, whose zero index the world hid)",
+        actual=f"mask {args[0] if args else None} (joints {named})",
+        data=answer.data,
+    )
+
+
+async def _after_eof(ctx: CaseContext, probe: Probe) -> ChaosError | None:
+    """How the connection ended after the server's EOF: the CLS that should follow (the EOF read is
+    acknowledged, which lets the server close), a LOS, a broken link, or None when nothing came within
+    the reply timeout.  An EOF alone is a half-close, not the CLS the clause asks for."""
+    conn = probe.conn
+    deadline = ctx.clock() + ctx.options.reply_timeout
+    while not conn.ended and ctx.clock() < deadline:
+        await asyncio.sleep(EOF_POLL_S)
+    return conn.end_reason

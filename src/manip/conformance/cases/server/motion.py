@@ -22,6 +22,7 @@ from manip.conformance.cases._support import (
     power_on,
     read_floats,
     require_response,
+    settle,
 )
 from manip.conformance.judge.checks import async_of, check_async_packet, completed_segment, word
 from manip.conformance.suite.case import case
@@ -418,7 +419,10 @@ async def _segment_time(ctx: CaseContext, probe: Probe, factor: float, by: float
     while True:
         packet = await probe.next_packet(5.0)
         if packet is None:  # server.async.segment-completed judges the missing report
-            ctx.skip(f"the case times moves by their segment-completed reports; none came for {segment}")
+            ctx.not_judged(
+                f"the case times moves by their segment-completed reports; none came for {segment} "
+                "(server.async.segment-completed judges that)"
+            )
         if completed_segment(packet) == segment:
             return ctx.clock() - start
 
@@ -560,7 +564,10 @@ async def configuration(ctx: CaseContext) -> None:
         require_response(ctx, answer, f"set configuration {name}")
         solved = await _solve(ctx, probe, pose)
         if solved is None:
-            ctx.skip(f"solve forwards of the seed's transform was refused after set configuration {name}")
+            ctx.not_judged(
+                f"solve forwards of the seed's transform was refused after set configuration {name} "
+                "(server.reply.solve-forwards judges it: the seed's angles are in range)"
+            )
         back = await probe.call("solve-backwards", joints=list(solved))
         require_response(ctx, back, "solve backwards of a solution")
         off = math.dist(floats(back)[9:], pose[9:])
@@ -579,6 +586,99 @@ async def configuration(ctx: CaseContext) -> None:
     )
 
 
+RAISE_DEG: Final = 1.0
+"""How far the configuration-side case raises joint 2 alone to see which way the hand goes."""
+HAND_Z: Final = 11
+"""Index of the hand's z in a transform's twelve floats (three columns of rotation, then position)."""
+
+
+@case("server.motion.configuration-side", clauses=["set-configuration.lefty-side"], hazard="config")
+async def configuration_side(ctx: CaseContext) -> None:
+    """The solution solve forwards gives after set configuration lefty is lefty by geometry, and after
+    righty righty: raising joint 2 alone by a degree (the target's solve backwards) lowers the hand in
+    the lefty one and raises it in the righty one.  A target whose solutions do not differ is judged by
+    server.motion.configuration."""
+    probe = await ctx.connect()
+    pose = await _seed_pose(ctx, probe)
+    for value, name in CONFIGURATIONS:
+        require_response(ctx, await probe.call("set-configuration", configuration=value), f"set {name}")
+        solved = await _solve(ctx, probe, pose)
+        if solved is None:
+            ctx.not_judged(
+                f"solve forwards of the seed's transform was refused after set configuration {name} "
+                "(server.motion.configuration judges it)"
+            )
+        raised = list(solved)
+        raised[1] += RAISE_DEG
+        before = await probe.call("solve-backwards", joints=list(solved))
+        after = await probe.call("solve-backwards", joints=raised)
+        require_response(ctx, before, "solve backwards of the solution")
+        require_response(ctx, after, "solve backwards of the solution with joint 2 raised")
+        drop = floats(before)[HAND_Z] - floats(after)[HAND_Z]
+        side = "lefty" if drop > 0 else "righty"
+        ctx.expect(
+            side == name,
+            clause="set-configuration.lefty-side",
+            expected=f"a {name} solution after set configuration {value} (raising joint 2 "
+            f"{'lowers' if name == 'lefty' else 'raises'} the hand)",
+            actual=f"{[round(q, 2) for q in solved]}: raising joint 2 by {RAISE_DEG:g} deg moves the hand "
+            f"{-drop:+.2f} mm in z, a {side} solution",
+        )
+
+
+WAIST_TURN_DEG: Final = 15.0
+"""How far the joint-order case turns element 1 of the joint vector alone."""
+TURN_TOL_DEG: Final = 0.5
+HAND_TOL_MM: Final = 0.5
+
+
+@case("server.motion.joint-order", clauses=["joint-angles.reply"], hazard="motion", deadline=20.0)
+async def joint_order(ctx: CaseContext) -> None:
+    """Joint vectors start at the base: set joint angles with element 1 alone changed by 15 degrees turns
+    the hand about the base's vertical axis (Here's position keeps its height and its distance from the
+    axis and turns by 15 degrees), and joint angles then answers the changed element 1.  A server that
+    reverses every joint vector consistently passes every check against its own solver, and fails here:
+    its element 1 is the hand's joint."""
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    start = await read_floats(ctx, probe, "joint-angles")
+    before = await read_floats(ctx, probe, "here")
+    goal = list(start)
+    goal[0] += WAIST_TURN_DEG if start[0] <= 0 else -WAIST_TURN_DEG
+    require_response(ctx, await probe.call("set-joint-angles", joints=goal), "a move of element 1 alone")
+    try:
+        reached = await settle(ctx, probe, goal, within=10.0, tol=0.01)
+        ctx.expect(
+            reached is not None,
+            clause="joint-angles.reply",
+            expected=f"joint angles answering {[round(q, 2) for q in goal]} once the move ends",
+            actual=f"{[round(q, 2) for q in await read_floats(ctx, probe, 'joint-angles')]}",
+        )
+        after = await read_floats(ctx, probe, "here")
+        _judge_waist_turn(ctx, before[9:], after[9:], goal[0] - start[0])
+    finally:
+        await probe.call("set-joint-angles", joints=list(start))
+        await settle(ctx, probe, start, within=10.0)
+
+
+def _judge_waist_turn(ctx: CaseContext, p0: tuple[float, ...], p1: tuple[float, ...], turn: float) -> None:
+    """The hand moved from ``p0`` to ``p1`` (mm) as a turn of ``turn`` degrees about the base's z axis."""
+    radius0, radius1 = math.hypot(p0[0], p0[1]), math.hypot(p1[0], p1[1])
+    turned = math.degrees(math.atan2(p1[1], p1[0]) - math.atan2(p0[1], p0[0]))
+    turned = (turned + 180.0) % 360.0 - 180.0
+    ctx.expect(
+        abs(p1[2] - p0[2]) <= HAND_TOL_MM
+        and abs(radius1 - radius0) <= HAND_TOL_MM
+        and abs(abs(turned) - abs(turn)) <= TURN_TOL_DEG,
+        clause="joint-angles.reply",
+        expected=f"element 1 the waist: the hand turned {abs(turn):g} deg about the base's z axis, at the "
+        "same height and distance from it",
+        actual=f"hand from {[round(x, 1) for x in p0]} to {[round(x, 1) for x in p1]} mm: turned "
+        f"{turned:+.2f} deg, height {p1[2] - p0[2]:+.2f} mm, distance from the axis "
+        f"{radius1 - radius0:+.2f} mm",
+    )
+
+
 async def _timed_move(ctx: CaseContext, probe: Probe, by: float) -> float:
     """Seconds from a small move's request to its segment-completed report (notifications on)."""
     start = ctx.clock()
@@ -586,7 +686,10 @@ async def _timed_move(ctx: CaseContext, probe: Probe, by: float) -> float:
     while (packet := await probe.next_packet(5.0)) is not None:
         if completed_segment(packet) == segment:
             return ctx.clock() - start
-    ctx.skip(f"the case times moves by their segment-completed reports; none came for {segment}")
+    ctx.not_judged(
+        f"the case times moves by their segment-completed reports; none came for {segment} "
+        "(server.async.segment-completed judges that)"
+    )
 
 
 async def _set_up_state(
@@ -597,7 +700,10 @@ async def _set_up_state(
     transform, and that configuration (None: none changes it)."""
     fresh = await _solve(ctx, probe, pose)
     if fresh is None:
-        ctx.skip("solve forwards of the seed's transform was refused")
+        ctx.not_judged(
+            "solve forwards of the seed's transform was refused (server.reply.solve-forwards judges it: "
+            "the seed's angles are in range)"
+        )
     flipped: int | None = None
     for value, _ in CONFIGURATIONS:
         if not (await probe.call("set-configuration", configuration=value)).is_response:

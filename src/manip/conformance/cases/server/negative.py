@@ -21,6 +21,7 @@ from manip.conformance.cases._support import (
     expect_here_served,
     expect_refusal,
     expect_response,
+    refused,
     valid_values,
 )
 from manip.conformance.judge.checks import check_reply
@@ -197,7 +198,7 @@ async def during_free_joint(ctx: CaseContext) -> None:
     answer = await probe.call("enable-power")
     answer = await probe.call("free-joint", joint=2)
     if not answer.is_response:
-        ctx.skip(f"free joint was refused: {answer}")
+        refused(ctx, answer, "the case needs free joint of joint 2")
     discarded = await probe.call_raw(UNASSIGNED_OPCODES[0], b"\x01\x02\x03")
     expect_done(
         ctx,

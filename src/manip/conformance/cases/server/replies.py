@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable, Mapping
 from typing import Final
 
-from manip.conformance.cases._support import error_of, power_on, valid_values
+from manip.conformance.cases._support import NOT_SERVED, error_of, power_on, valid_values
 from manip.conformance.judge.checks import check_reply
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
@@ -72,7 +72,13 @@ def _reply_case(op: RequestOpcode) -> None:
         error = error_of(answer)
         if error is not None:
             ctx.check(check_reply(answer.request, answer.packets))  # echo and error-string format
-            ctx.skip(f"the target refused a well-formed {op.name}: {error.error.render()!r}")
+            said = repr(error.error.render())
+            if error.error.code in NOT_SERVED:
+                ctx.skip(f"the target does not serve {op.name}: {said}")
+            ctx.not_judged(
+                f"the target refused a well-formed {op.name} ({said}): its reply's shape shows only in a "
+                "normal reply (a target in the state a normal reply needs would judge it)"
+            )
         ctx.check(check_reply(answer.request, answer.packets))
         if follow_up is not None:
             await follow_up(ctx, probe)
