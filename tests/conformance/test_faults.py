@@ -29,13 +29,12 @@ import pytest
 from manip.conformance.suite import bridge
 from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.context import RunOptions
-from manip.conformance.suite.embedded import simulated_environment
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.runner import RunConfig, Runner
-from manip.links import virtual_clock
 from manip.reference_server.faults import FAULTS, WRIST_SIDE, Fault, FaultSet
 from manip.reference_server.session import ServerConfig
 from tests.support.servers import StartServer
+from tests.support.suite import run_simulated
 
 SEED = 20260
 MAX_EXAMPLES = 10
@@ -112,25 +111,11 @@ def cases_for(fault: Fault) -> list[Case]:
 
 
 def run_suite(faults: FaultSet, cases: Sequence[Case], config: ServerConfig | None = None) -> RunReport:
-    """The cases against the embedded target (the reference server with the simulated Cougar wrist) set
-    up by ``config`` (``faults`` without one), in virtual time."""
+    """The cases against the embedded target set up by ``config`` (``faults`` without one), in virtual
+    time."""
     config = ServerConfig(faults=faults) if config is None else config
-
-    async def main() -> RunReport:
-        async with simulated_environment(config, seed=SEED, wrist=True) as environment:
-            address = environment.address
-            options = RunOptions(max_examples=MAX_EXAMPLES, address=address, reply_timeout=REPLY_TIMEOUT)
-            run = RunConfig(
-                address=address,
-                options=options,
-                seed=SEED,
-                embedded=True,
-                world=environment.world,
-                virtual_time=True,
-            )
-            return await Runner(run, cases).run()
-
-    return virtual_clock.run(main(), virtual=True)
+    options = {"max_examples": MAX_EXAMPLES, "reply_timeout": REPLY_TIMEOUT}
+    return run_simulated(cases, config, seed=SEED, options=options)
 
 
 def test_every_protocol_fault_has_a_case_citing_its_clauses() -> None:

@@ -16,16 +16,16 @@ from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.results import ExitCode, RunReport
 from manip.conformance.suite.selection import PatternSet
 from manip.reference_server import FaultSet, ServerConfig
-from tests.support.suite import run_suite
+from tests.support.suite import run_simulated
 
 
 def _run(faults: list[str], select: list[str], *, strict: bool = False) -> RunReport:
+    """The selected cases against the embedded target, in virtual time (the timing cases' verdicts then
+    never depend on how busy the machine is)."""
     config_server = ServerConfig(faults=FaultSet.parse(faults))
     select_cases = PatternSet.of(select, "--select")
     options = {"strict": strict}
-    return run_suite(
-        all_cases(), config_server, seed=11, options=options, select=select_cases, embedded=True, world=True
-    )
+    return run_simulated(all_cases(), config_server, seed=11, options=options, select=select_cases)
 
 
 @pytest.mark.slow

@@ -14,6 +14,7 @@ from manip.conformance.cases._support import (
     describe_target,
     expect_response,
     last_processed,
+    not_judged_for_load,
     power_on,
     read_floats,
     require_response,
@@ -32,6 +33,9 @@ SERVO_S: Final = 0.016
 SAMPLE_S: Final = 0.006
 """Sampling interval: shorter than half a servo cycle, so a move process running twice as often shows
 (two changes a sample apart), and a 16 ms one never seems to (erratum server-time-scale)."""
+STILL_LIMIT_S: Final = 3 * SERVO_S - SAMPLE_S
+"""The longest stillness the samples may show between queued moves: what a stop of three servo cycles
+shows at least, sampled every :data:`SAMPLE_S` (queued moves blend, and never stop that long)."""
 POSE_TOL_MM: Final = 0.05
 LINE_POSE: Final = (20.0, -60.0, 150.0, 0.0, -60.0, 0.0)
 """Where the straight lines start: well inside the workspace, away from the singular ready pose."""
@@ -359,10 +363,8 @@ async def queued_segments(ctx: CaseContext) -> None:
     # Times on the target's clock: a simulated arm with a time scale (--target-time-scale) runs faster.
     timing = _Timing(samples, ctx.options.time_scale, max(lateness, default=0.0) * ctx.options.time_scale)
     unjudged = [reason for reason in (_servo_period(ctx, timing), _blending(ctx, timing)) if reason]
-    if unjudged and not ctx.soft_failures:
-        ctx.not_judged("; ".join(unjudged))
-    for reason in unjudged:
-        ctx.note(f"not judged: {reason}")
+    if unjudged:
+        not_judged_for_load(ctx, "; ".join(unjudged))
 
 
 class _Timing:
@@ -432,7 +434,7 @@ def _blending(ctx: CaseContext, timing: _Timing) -> str | None:
     scale = timing.scale
     stills = [(samples[b - 1].sent - samples[a].received) * scale for a, b in pairwise(changed) if b - 1 > a]
     longest = max(stills, default=0.0)
-    allowed = 3 * SERVO_S - SAMPLE_S + timing.late
+    allowed = STILL_LIMIT_S + timing.late
     seen = ctx.expect(
         longest <= allowed + 1e-6,
         clause="motion.smooth-transitions",
