@@ -126,6 +126,7 @@ def test_every_protocol_fault_has_a_case_citing_its_clauses() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(600)  # the whole suite in virtual time: about 30 s of CPU, longer on a loaded host
 def test_clean_server_passes_every_case() -> None:
     report = run_suite(FaultSet(), suite())
     bad = [

@@ -29,6 +29,7 @@ def _run(faults: list[str], select: list[str], *, strict: bool = False) -> RunRe
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(600)  # the whole suite in virtual time: about 30 s of CPU, longer on a loaded host
 def test_clean_reference_server_passes_every_case() -> None:
     report = _run([], ["server", "property"], strict=True)  # the stateful cases are tested by their module
     bad = {
