@@ -211,3 +211,26 @@ def manip_server() -> Iterator[StartServer]:
     yield start
     for server in reversed(started):  # the last started may use the ones before it
         server.end()
+
+
+def _skip_reason(report: pytest.TestReport) -> str:
+    """A skip's reason: pytest keeps it as (path, line, reason), and so does a report from an xdist worker."""
+    longrepr = report.longrepr
+    if isinstance(longrepr, tuple | list) and len(longrepr) == 3:
+        return str(longrepr[2])
+    return str(longrepr)
+
+
+@pytest.hookimpl(wrapper=True, tryfirst=True)
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> Iterator[None]:
+    """The run ends with one line naming what was not checked for want of a real program and how to
+    install it (``tests/support/programs.py``), after every other summary (the outermost wrapper: after
+    ``-ra``'s list of skips too), just before the count of tests.  It reads the skips the terminal
+    reporter collected, which on the xdist controller are the workers' reports, and shows with ``-q``."""
+    from tests.support.programs import missing_from, summary_line
+
+    yield
+    skipped = terminalreporter.stats.get("skipped", [])
+    line = summary_line(missing_from(_skip_reason(report) for report in skipped))
+    if line is not None:
+        terminalreporter.write_line(line, yellow=True, bold=True)

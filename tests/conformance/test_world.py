@@ -55,6 +55,8 @@ WORLD_CASES = (
 """Every case that asks the world for a condition."""
 OTHERS = ("server.reply.here", "server.describe.reply-shape", "server.motion.queued-segments")
 """A few cases that need no world, for the comparison of verdicts."""
+TIMED = frozenset({"server.motion.queued-segments"})
+"""Cases that time the arm: in real time on a loaded host they may be not judged."""
 
 
 def cases(ids: Sequence[str]) -> list[Case]:
@@ -345,8 +347,15 @@ def test_a_server_process_with_its_world_is_judged_as_the_embedded_server(manip_
             return await run_cases(process.url, selection, world)
 
     outside = asyncio.run(external())
-    assert verdicts(outside) == verdicts(inside)
-    assert all(r.outcome == "pass" for r in outside.results), verdicts(outside)
+    # In real time a loaded host may leave the timing of queued segments unjudged (never judged wrong):
+    # then the case says so with the delays it measured, and the other cases still agree.
+    timed = {r.id for r in outside.results if r.outcome == "not-judged" and r.id in TIMED}
+    for result in outside.results:
+        if result.id in timed:
+            assert re.search(r"timers up to \d+\.\d ms late", result.reason), result.reason
+    judged = {k: v for k, v in verdicts(outside).items() if k not in timed}
+    assert judged == {k: v for k, v in verdicts(inside).items() if k not in timed}
+    assert all(outcome == "pass" for outcome, _ in judged.values()), judged
     print(f"embedded {inside.duration:.1f} s, manip-server with its world {outside.duration:.1f} s")
 
 

@@ -8,8 +8,9 @@ it, and in Lua 5.2 (what Debian's tshark runs it on): the dissector must not nee
 bitwise operators.
 
 tshark, lua5.4 and lua5.2 are Debian's packages (.ci/run installs them).  Without them these tests are
-skipped, except in CI (``CI=true``), where a missing one is a failure: the dissector must never go
-untested there.
+skipped, and the run's last line says so, except under ``MANIP_REQUIRE_PROGRAMS=1`` (set by .ci/run),
+where a missing one is a failure: the dissector must never go untested there (the one rule of
+``tests/support/programs.py``).
 """
 
 from __future__ import annotations
@@ -17,9 +18,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
-import os
 import re
-import shutil
 import subprocess
 from collections import defaultdict
 from pathlib import Path
@@ -32,10 +31,10 @@ from click.testing import CliRunner
 from manip.captures.pcap import export_pcapng, iter_datagrams
 from manip.decode.cli import main as decode_main
 from tests.support.paths import ROOT
+from tests.support.programs import need_program
 
 LUA = ROOT / "dissectors" / "manip.lua"
 GOLDEN = ("describe-self", "motion", "errors")
-TSHARK = shutil.which("tshark")
 STUB = Path(__file__).parent / "lua" / "wireshark_stub.lua"
 LUAS = ("lua5.4", "lua5.2")
 
@@ -62,23 +61,6 @@ def test_dissector_tables_come_from_the_spec() -> None:
         assert f'["{code}"] = ' in text
 
 
-def _need_tshark() -> str:
-    if TSHARK is None:
-        if os.environ.get("CI") == "true":
-            pytest.fail("tshark is not installed: .ci/run installs Debian's tshark package")
-        pytest.skip("tshark is not installed (apt-get install tshark)")
-    return TSHARK
-
-
-def _need_lua(name: str) -> str:
-    found = shutil.which(name)
-    if found is None:
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"{name} is not installed: .ci/run installs Debian's {name} package")
-        pytest.skip(f"{name} is not installed (apt-get install {name})")
-    return found
-
-
 # ---------------------------------------------------------------------------------------- tshark side
 
 
@@ -100,8 +82,9 @@ def _collect(node: Any, out: dict[str, list[str]]) -> None:
 
 def tshark_fields(pcapng: Path) -> list[dict[str, list[str]]]:
     """Each packet's chaos.* and manip.* fields as tshark with the dissector shows them."""
+    tshark = need_program("tshark")
     result = subprocess.run(
-        [_need_tshark(), "-X", f"lua_script:{LUA}", "-r", str(pcapng), "-T", "json", "--no-duplicate-keys"],
+        [tshark, "-X", f"lua_script:{LUA}", "-r", str(pcapng), "-T", "json", "--no-duplicate-keys"],
         capture_output=True, text=True, timeout=60, check=False,
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
@@ -309,7 +292,7 @@ def _capture(name: str, tmp_path: Path) -> Path:
 
 @pytest.mark.parametrize("name", CAPTURES)
 def test_tshark_agrees_with_manip_decode(tmp_path: Path, name: str) -> None:
-    _need_tshark()
+    need_program("tshark")
     capture = _capture(name, tmp_path)
     _agrees(name, _decoded(capture), tshark_fields(capture))
 
@@ -318,14 +301,14 @@ def test_tshark_agrees_with_manip_decode(tmp_path: Path, name: str) -> None:
 @pytest.mark.parametrize("name", CAPTURES)
 def test_plain_lua_agrees_with_manip_decode(tmp_path: Path, name: str, lua: str) -> None:
     """Lua 5.4 (Wireshark 4.4 and later) and 5.2 (Debian's tshark) run the one file alike."""
-    interpreter = _need_lua(lua)
+    interpreter = need_program(lua)
     capture = _capture(name, tmp_path)
     _agrees(name, _decoded(capture), lua_fields(interpreter, capture, tmp_path))
 
 
 def test_a_move_request_without_its_rfc_is_a_request(tmp_path: Path) -> None:
     """The case that once read a move (0204, 48 bytes) as an asynchronous error to #16504, malformed."""
-    interpreter = _need_lua("lua5.4")
+    interpreter = need_program("lua5.4")
     first = lua_fields(interpreter, mid_connection_capture(tmp_path), tmp_path)[0]
     assert first["manip.name"] == ["move"] and "manip.decode_error" not in first, first
     assert [float(v) for v in first["manip.transform"]][-3:] == [500.0, 150.0, 400.0]

@@ -4,6 +4,8 @@ stopped), rather than a ``serve`` and ``Runner`` of their own in every module.
 
 :func:`run_on_reference_server` is the ``async`` form; :func:`run_suite` runs it in a fresh event loop,
 and the ``reference_run`` fixture (``tests/conformance/conftest.py``) hands :func:`run_suite` to a test.
+:func:`run_simulated` runs the cases as the embedded target is run (the simulated Cougar wrist and the
+world included) in virtual time: a verdict that times the arm then never depends on the machine's load.
 """
 
 from __future__ import annotations
@@ -14,9 +16,10 @@ from typing import Any
 
 from manip.conformance.suite.case import Case
 from manip.conformance.suite.context import RunOptions
-from manip.conformance.suite.embedded import ServerEnvironment
+from manip.conformance.suite.embedded import ServerEnvironment, simulated_environment
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.runner import RunConfig, Runner
+from manip.links import virtual_clock
 from manip.reference_server import ServerConfig
 from manip.reference_server.driver import serve
 from tests.support.servers import LINK_ADDRESSES
@@ -49,3 +52,34 @@ async def run_on_reference_server(
 def run_suite(cases: Sequence[Case], server: ServerConfig | None = None, **keywords: Any) -> RunReport:
     """:func:`run_on_reference_server` in an event loop of its own, for a synchronous test."""
     return asyncio.run(run_on_reference_server(cases, server, **keywords))
+
+
+def run_simulated(
+    cases: Sequence[Case],
+    server: ServerConfig | None = None,
+    *,
+    seed: int,
+    options: Mapping[str, Any] | None = None,
+    **config: Any,
+) -> RunReport:
+    """Run ``cases`` against the embedded target set up by ``server``, in virtual time, as
+    ``manip-conform run`` does without a target: the reference server with the simulated Cougar wrist, on
+    a Unix-domain socket in this loop, and its world.  ``options`` and the other keywords as for
+    :func:`run_on_reference_server`."""
+
+    async def main() -> RunReport:
+        async with simulated_environment(server, seed=seed, wrist=True) as environment:
+            address = environment.address
+            run_options = RunOptions(address=address, **(options or {}))
+            run_config = RunConfig(
+                address=address,
+                options=run_options,
+                seed=seed,
+                embedded=True,
+                world=environment.world,
+                virtual_time=True,
+                **config,
+            )
+            return await Runner(run_config, cases).run()
+
+    return virtual_clock.run(main(), virtual=True)

@@ -1,15 +1,15 @@
 """The HTML and Markdown reports of manip-conform: the report of a failing run (the embedded server with a
 fault switched on) opened in a real browser, and the documents checked without one.
 
-The browser is Debian's ``chromium`` (``.ci/run`` installs it).  Without it the browser tests fail with
-a message saying so, unless ``MANIP_ALLOW_NO_BROWSER=1`` (then they are skipped): CI must never pass
-without having opened the page.  The screenshot is kept in ``test-artifacts/report-html.png``.
+The browser is Debian's ``chromium`` (``.ci/run`` installs it).  Without it the browser tests are skipped
+and the run's last line says so, except under ``MANIP_REQUIRE_PROGRAMS=1`` (set by ``.ci/run``), where
+they fail: CI must never pass without having opened the page (the one rule of
+``tests/support/programs.py``).  The screenshot is kept in ``test-artifacts/report-html.png``.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import re
 import shutil
 import subprocess
@@ -31,6 +31,7 @@ from manip.conformance.output.report_view import wire_bytes, wire_order
 from manip.spec import SPEC
 from tests.support.json_schema import validate as _validate
 from tests.support.paths import ROOT
+from tests.support.programs import need_program
 
 ARTIFACT = ROOT / "test-artifacts" / "report-html.png"
 FAULT = "error-without-colon"
@@ -293,23 +294,11 @@ def test_report_needs_an_output(failing_run: Run) -> None:
 # ------------------------------------------------------------------------------------------- in a browser
 
 
-def _browser() -> str:
-    found = shutil.which("chromium")
-    if found is None:
-        if os.environ.get("MANIP_ALLOW_NO_BROWSER") == "1":
-            pytest.skip("chromium is not installed (MANIP_ALLOW_NO_BROWSER=1)")
-        pytest.fail(
-            "chromium is not installed: the HTML report must be checked in a real browser "
-            "(apt-get install chromium, as .ci/run does; MANIP_ALLOW_NO_BROWSER=1 skips this test)"
-        )
-    return found
-
-
 @pytest.fixture
 def browser(tmp_path: Path) -> Iterator[list[str]]:
     """The headless Chromium command line, with a profile of its own (tests may run side by side)."""
     yield [
-        _browser(),
+        need_program("chromium"),
         "--headless=new",
         "--no-sandbox",
         "--disable-gpu",

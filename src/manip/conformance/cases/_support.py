@@ -16,6 +16,7 @@ helpers that check take the clause from their caller.
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Final, NoReturn
@@ -149,6 +150,34 @@ def last_processed(packets: Sequence[WirePacket], before: WirePacket) -> int | N
         if packet.direction == "s2c" and packet.opcode in ANSWER_OPCODES and len(packet.data) >= 2:
             number = word(packet.data)
     return number
+
+
+HOST_PROBES: Final = 8
+HOST_PAUSE: Final = 0.002
+""":func:`host_delay` sleeps this many times this long (16 ms in all, nothing in virtual time)."""
+
+
+async def host_delay(ctx: CaseContext) -> float:
+    """How late the case's own timers end now: the largest overshoot of a few short sleeps, in seconds
+    on the run's clock (0 in virtual time).  A busy host delays a real-time target's answers and the
+    case's readings alike; a check that times something allows this much for it, and says not-judged
+    (:func:`not_judged_for_load`) when it cannot tell through it."""
+    worst = 0.0
+    for _ in range(HOST_PROBES):
+        began = ctx.clock()
+        await asyncio.sleep(HOST_PAUSE)
+        worst = max(worst, ctx.clock() - began - HOST_PAUSE)
+    return worst
+
+
+def not_judged_for_load(ctx: CaseContext, reason: str) -> None:
+    """A timing check that the host's delays left undecided: the case ends not-judged for ``reason``
+    (which names the delays measured), unless it already found a violation, which stands (the reason
+    is then a note)."""
+    if ctx.soft_failures:
+        ctx.note(f"not judged: {reason}")
+    else:
+        ctx.not_judged(reason)
 
 
 async def settle(
