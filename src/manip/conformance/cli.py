@@ -538,7 +538,7 @@ def _check_world(world: str | None, timeout: float | None, *, host: str | None, 
 @click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table", show_default=True)
 @click.option("--select", "select", multiple=True, metavar="PATTERN", help="Only cases matching PATTERN.")
 def cases_command(fmt: str, select: tuple[str, ...]) -> None:
-    """List every case: id, clauses, level, kind, hazard."""
+    """List every case: id, clauses, level, kind, hazard, the Puma extension opcodes it uses."""
     try:
         patterns = PatternSet.of(select, "--select")
     except PatternError as exc:
@@ -554,6 +554,7 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
                 "kind": c.technique,
                 "target": c.target,
                 "hazard": c.hazard,
+                "extensions": list(c.extensions),
                 "deadline": c.deadline,
                 "summary": c.summary,
             }
@@ -562,10 +563,10 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
         click.echo(json.dumps(data, indent=2))
         return
     table = Table(title=f"{len(items)} cases", show_lines=False)
-    for column in ("id", "level", "kind", "hazard", "clauses"):
+    for column in ("id", "level", "kind", "hazard", "extensions", "clauses"):
         table.add_column(column)
     for c in items:
-        table.add_row(c.id, c.level, c.technique, c.hazard, " ".join(c.clauses))
+        table.add_row(c.id, c.level, c.technique, c.hazard, " ".join(c.extensions), " ".join(c.clauses))
     make_console(min_width=TABLE_WIDTH).print(table)
 
 

@@ -17,6 +17,7 @@ The hook points, by what they decide:
 * serving a request: :meth:`~Defects.decode`, :meth:`~Defects.check`, :meth:`~Defects.refused`,
   :meth:`~Defects.wrist_failure`, :attr:`~Defects.discards_after_free_joint`;
 * what a request does: :meth:`~Defects.describe`, :meth:`~Defects.increment`, :meth:`~Defects.move_ready`,
+  :meth:`~Defects.set_speed`,
   :attr:`~Defects.straight_lines`, :attr:`~Defects.checks_joint_limits`,
   :attr:`~Defects.applies_configuration`;
 * replies: :meth:`~Defects.payload`, :meth:`~Defects.reply`;
@@ -160,6 +161,10 @@ class Defects:
         """Queue the move to the ready position; its segment number."""
         return arm.move_ready(now)
 
+    def set_speed(self, arm: ArmSim, factor: float) -> None:
+        """Set the speed factor of the segments queued from now on (BVA out of range)."""
+        arm.set_speed(factor)
+
     # ---------------------------------------------------------------------------- replies
     def payload(self, op: RequestOpcode, values: Mapping[str, Any], encode: Encoder) -> bytes:
         """A reply's data after the request number, as ``encode`` (the spec codec) writes them."""
@@ -259,6 +264,9 @@ class SwitchedDefects(Defects):
         arm.keep_queue_on_abort = on(Fault.ABORT_KEEPS_QUEUE)
         if on(Fault.SEGMENTS_STOP):
             arm.stop_between_segments = SEGMENTS_STOP_REST_S
+        if on(Fault.QUEUE_REVERSED):
+            arm.stop_between_segments = arm.stop_between_segments or 0.0
+            arm.reverse_waiting = True
         if on(Fault.SERVO_DOUBLE_RATE):
             arm.tick_period /= 2
         arm.collision_test_compliant = on(Fault.COMPLIANT_COLLISION_TEST)
@@ -351,6 +359,11 @@ class SwitchedDefects(Defects):
             dx, dy, dz, do, da, dt = delta
             return (dx, dy, dz, dt, da, do)
         return delta
+
+    def set_speed(self, arm: ArmSim, factor: float) -> None:
+        arm.set_speed(factor)  # refused out of range, as the protocol says
+        if self._on(Fault.SPEED_IGNORED):
+            arm.set_speed(1.0)
 
     def move_ready(self, arm: ArmSim, now: float) -> int:
         if self._on(Fault.READY_LEAVES_WRIST):

@@ -11,13 +11,20 @@ that a case uses to *prepare* its check (read the angles, switch power on) judge
 :func:`require_response` passes a malformed answer to the transcript invariant and skips the case when
 the target refuses what the case needs (the case of that request reports the refusal).  The helpers that
 check take the clause from their caller.
+
+The guide's own route (issue: a server written from the 1985 guide alone has none of manip's Puma
+extension opcodes): :func:`ask_notifications` says whether the target serves request notifications (0257),
+and when it does not, a case learns what the notifications would have told it by polling Joint angles
+(0202) in the run's clock: :func:`poll_joints`, :func:`arrival` (the end of a motion) and
+:func:`timed_move` (a move's duration, either way).  :func:`extension_name` names an extension opcode the
+way every message does.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Final
+from typing import Any, Final, NamedTuple
 
 from manip.arm.kinematics import PUMA600, JointLimits, Joints
 from manip.codecs.errors import CodecError
@@ -39,7 +46,8 @@ from manip.conformance.judge.violation import CarriesViolation, Violation
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.conformance.suite.invariants import TRANSCRIPT
 from manip.spec import SPEC, RequestName, RequestOpcode
-from manip.spec.constants import ServerOp
+from manip.spec.constants import AsyncCondition, ServerOp
+from manip.spec.notation import octal
 
 UNASSIGNED_OPCODES: Final[tuple[int, ...]] = tuple(
     code for code in range(0o200, 0o400) if code not in SPEC.requests
@@ -147,6 +155,109 @@ async def settle(
         if ctx.clock() >= deadline:
             return None
         await probe.drain(0.1)
+
+
+# ------------------------------------------------------------------------------ the guide's own route
+POLL_S: Final = 0.01
+"""Seconds between two readings of the guide's own route (in the target's time: divided by the time
+scale of a faster-than-real simulated arm)."""
+SEGMENT_MASK: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
+"""request-notifications mask bit of segment completions."""
+
+
+def extension_name(name: RequestName) -> str:
+    """An extension opcode as messages name it: ``0257, request notifications, a Puma extension``."""
+    op = SPEC.request(name)
+    return f"{octal(op.opcode)}, {op.title[:1].lower()}{op.title[1:]}, a Puma extension"
+
+
+async def ask_notifications(ctx: CaseContext, probe: Probe, mask: int = SEGMENT_MASK) -> bool:
+    """Ask for the asynchronous responses of ``mask`` (request notifications, a Puma extension); whether
+    the target serves it.  A refusal is no finding: the 1985 guide gives no opcode to ask for them, so
+    the case goes the guide's own way (a note says so); a malformed answer is the invariant's finding."""
+    answer = await probe.call("request-notifications", mask=mask)
+    ctx.check(check_reply(answer.request, answer.packets))
+    if answer.is_response:
+        return True
+    ctx.note(
+        f"the target refused {extension_name('request-notifications')} ({answer}): judged with the 1985 "
+        "guide's own requests, polling Joint angles (0202)"
+    )
+    return False
+
+
+def no_wrist(answer: Answer) -> str:
+    """Why a case of the wrist is not judged on a target that refused wrist version: what would judge it."""
+    return (
+        f"the target serves no wrist (it refused {extension_name('wrist-version')}: {answer}), and the 1985 "
+        "guide gives no opcode to reach one: a server with a Cougar wrist judges it (the embedded server, "
+        "manip-conform run without HOST, or manip-server --cougar sim)"
+    )
+
+
+class Reading(NamedTuple):
+    """One reading of the joint angles, at ``at`` seconds of the case's clock."""
+
+    at: float
+    joints: tuple[float, ...]
+
+
+async def poll_joints(
+    ctx: CaseContext,
+    probe: Probe,
+    *,
+    within: float,
+    until: Callable[[Sequence[Reading]], bool],
+    every: float = POLL_S,
+) -> list[Reading]:
+    """Read the joint angles every ``every`` seconds until ``until`` says the readings so far are
+    enough, or ``within`` seconds pass (the last reading is then the one after the limit)."""
+    out: list[Reading] = []
+    deadline = ctx.clock() + within
+    while True:
+        out.append(Reading(ctx.clock(), await read_floats(ctx, probe, "joint-angles")))
+        if until(out) or out[-1].at >= deadline:
+            return out
+        await probe.drain(every / ctx.options.time_scale)
+
+
+def near(joints: Sequence[float], goal: Sequence[float], tol: float = 1e-3) -> bool:
+    """Every joint within ``tol`` degrees of ``goal``."""
+    return max(abs(a - b) for a, b in zip(joints, goal, strict=True)) <= tol
+
+
+async def arrival(
+    ctx: CaseContext, probe: Probe, goal: Sequence[float], *, within: float = 10.0, tol: float = 1e-3
+) -> float | None:
+    """The end of a motion by the 1985 guide's own requests: the case's clock at the first reading of
+    the joint angles within ``tol`` of ``goal``, or None when ``within`` seconds pass first."""
+    readings = await poll_joints(ctx, probe, within=within, until=lambda r: near(r[-1].joints, goal, tol))
+    return readings[-1].at if near(readings[-1].joints, goal, tol) else None
+
+
+async def timed_move(
+    ctx: CaseContext, probe: Probe, goal: Sequence[float], *, notified: bool, within: float = 10.0
+) -> float:
+    """Seconds from a move to ``goal`` (set joint angles) to its end: its segment-completed response
+    when notifications are on (``notified``), else its arrival seen by polling the joint angles.  The
+    case skips when the move is refused, and ends not-judged when no end is seen within ``within``
+    seconds (the cases of segment completion and of motion judge a missing one)."""
+    start = ctx.clock()
+    answer = await probe.call("set-joint-angles", joints=list(goal))
+    require_response(ctx, answer, "a small move accepted")
+    segment = word(answer.data, 2)
+    if not notified:
+        end = await arrival(ctx, probe, goal, within=within)
+        if end is None:
+            ctx.not_judged(f"the arm did not reach {list(goal)} within {within:g} s, so no move was timed")
+        return end - start
+    while (packet := await probe.next_packet(within)) is not None:
+        if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(packet.data, 6) == segment:
+            return ctx.clock() - start
+    ctx.not_judged(
+        f"the case times moves by their segment-completed reports; none came for segment {segment} "
+        "(server.async.segment-completed judges that)"
+    )
 
 
 DONE_SIZE: Final = 2

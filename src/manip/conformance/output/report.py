@@ -196,6 +196,7 @@ def _case_json(result: CaseResult) -> dict[str, Any]:
         "kind": result.kind,
         "target": result.target,
         "hazard": result.hazard,
+        "extensions": list(result.extensions),
         "outcome": result.outcome,
         "known_failing": result.known_failing,
         "expected": failure.expected if failure else "",

@@ -105,6 +105,8 @@ class CaseResult:
     reproduce: str = ""
     target: Target = "server"
     """What the case tests (the first component of a case id: server, cougar, client, puma)."""
+    extensions: tuple[str, ...] = ()
+    """The Puma extension opcodes the case uses where the target offers them (its declaration's)."""
 
     @property
     def failure(self) -> Violation | None:

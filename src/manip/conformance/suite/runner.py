@@ -84,6 +84,7 @@ def blank_result(
         kind=item.technique,
         target=item.target,
         hazard=item.hazard,
+        extensions=item.extensions,
         summary=item.summary,
         outcome=outcome,
         seed=case_seed(run_seed, item.id),

@@ -10,18 +10,22 @@ from typing import Final
 
 from manip.codecs.messages import ErrorReply
 from manip.conformance.cases._support import (
+    SEGMENT_MASK,
     TargetArm,
+    ask_notifications,
     describe_target,
     expect_done,
     expect_error_numbers,
     expect_here_served,
     expect_refusal,
     expect_response,
+    extension_name,
     floats,
     out_of_range_mask,
     power_on,
     read_floats,
     require_response,
+    timed_move,
 )
 from manip.conformance.judge.checks import check_async_packet, word
 from manip.conformance.suite.case import case
@@ -312,10 +316,16 @@ async def awa_reset_by_power(ctx: CaseContext) -> None:
     await _small_move(ctx, probe, 0.5, clause="motion.reset")  # enable power reset the abort
 
 
-@case("server.motion.awa-reset-abort", clauses=["motion.abort", "motion.reset"], hazard="power")
+@case(
+    "server.motion.awa-reset-abort",
+    clauses=["motion.abort", "motion.reset"],
+    hazard="power",
+    extensions=["reset-abort"],
+)
 async def awa_reset_abort(ctx: CaseContext) -> None:
     """After an abort, motion is refused with AWA while other requests are served (erratum awa-scope);
-    Reset abort (260) clears AWA without restoring power: then NAP, not AWA."""
+    Reset abort (260) clears AWA without restoring power: then NAP, not AWA.  A target without Reset
+    abort (a Puma extension) has the abort reset the 1985 guide's way, by enable high power (217)."""
     probe = await ctx.connect()
     joints = await read_floats(ctx, probe, "joint-angles")  # in range: a refusal can only be the abort's
     await _abort_by_power_loss(ctx, probe)
@@ -340,7 +350,13 @@ async def awa_reset_abort(ctx: CaseContext) -> None:
         )
     reset = await probe.call("reset-abort")
     if not reset.is_response:
-        ctx.skip(f"the target does not serve Reset abort (0260): {reset}")
+        ctx.note(
+            f"the target refused {extension_name('reset-abort')} ({reset}): the abort is reset by enable "
+            "high power (0217), as Part II §6.2 allows"
+        )
+        await power_on(ctx, probe)
+        await _small_move(ctx, probe, 0.5, clause="motion.reset")
+        return
     await _refused_stay(
         ctx,
         probe,
@@ -403,17 +419,17 @@ async def speed_bounds(ctx: CaseContext) -> None:
         expect_refusal(ctx, answer, clause="speed.range", what=f"speed factor {factor!r}")
 
 
-async def _segment_time(ctx: CaseContext, probe: Probe, factor: float, by: float) -> float:
+async def _segment_time(ctx: CaseContext, probe: Probe, factor: float, by: float, *, notified: bool) -> float:
     answer = await probe.call("set-speed", factor=factor)
     require_response(ctx, answer, f"speed factor {factor!r} accepted")
-    start = ctx.clock()  # the run's clock: simulated seconds in virtual time
-    segment = await _small_move(ctx, probe, by)
-    while True:
-        packet = await probe.next_packet(5.0)
-        if packet is None:  # server.async.segment-completed judges the missing report
-            ctx.skip(f"the case times moves by their segment-completed reports; none came for {segment}")
-        if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(packet.data, 6) == segment:
-            return ctx.clock() - start
+    return await _timed_small_move(ctx, probe, by, notified=notified)
+
+
+async def _timed_small_move(ctx: CaseContext, probe: Probe, by: float, *, notified: bool) -> float:
+    """Seconds a move of joint 1 by ``by`` degrees (towards zero) takes, on the run's clock (simulated
+    seconds in virtual time): by its segment-completed report, or by polling (:func:`timed_move`)."""
+    joints = await read_floats(ctx, probe, "joint-angles")
+    return await timed_move(ctx, probe, _away_from_zero(joints, by), notified=notified)
 
 
 @case(
@@ -421,6 +437,7 @@ async def _segment_time(ctx: CaseContext, probe: Probe, factor: float, by: float
     clauses=["async.layout", "async.codes", "async.only-when-requested"],
     hazard="motion",
     deadline=10.0,
+    extensions=["request-notifications"],
 )
 async def segment_completed(ctx: CaseContext) -> None:
     """Asked for (request-notifications bit 1), a finished segment is reported by 0203 code 2; not
@@ -438,9 +455,12 @@ async def segment_completed(ctx: CaseContext) -> None:
         actual=f"{len(unrequested)} asynchronous response(s)",
         data=unrequested[0].data if unrequested else b"",
     )
-    answer = await probe.call("request-notifications", mask=1 << 1)
-    if not answer.is_response:
-        ctx.skip(f"the target does not serve request-notifications: {answer}")
+    if not await ask_notifications(ctx, probe):
+        ctx.not_judged(
+            "no asynchronous response came unasked (async.only-when-requested held), but the 1985 guide "
+            "gives no request to ask for segment-completed responses; the layout of one (async.layout, "
+            f"async.codes) is judged on a target that serves {extension_name('request-notifications')}"
+        )
     segment = await _small_move(ctx, probe, 1.0)
     seen: list[int | None] = []
     while (packet := await probe.next_packet(3.0)) is not None:
@@ -465,16 +485,21 @@ async def segment_completed(ctx: CaseContext) -> None:
     )
 
 
-@case("server.speed.scales", clauses=["motion.speed-scales"], hazard="motion", deadline=12.0)
+@case(
+    "server.speed.scales",
+    clauses=["motion.speed-scales"],
+    hazard="motion",
+    deadline=12.0,
+    extensions=["request-notifications"],
+)
 async def speed_scales(ctx: CaseContext) -> None:
-    """A move at speed factor 0.25 takes longer than the same move at 1."""
+    """A move at speed factor 0.25 takes longer than the same move at 1 (timed by its segment-completed
+    report, or, on a target without request notifications, by polling the joint angles until it ends)."""
     probe = await ctx.connect()
     await power_on(ctx, probe)
-    answer = await probe.call("request-notifications", mask=1 << 1)
-    if not answer.is_response:
-        ctx.skip(f"the target does not serve request-notifications: {answer}")
-    fast = await _segment_time(ctx, probe, 1.0, 1.0)
-    slow = await _segment_time(ctx, probe, 0.25, -1.0)
+    notified = await ask_notifications(ctx, probe, SEGMENT_MASK)
+    fast = await _segment_time(ctx, probe, 1.0, 1.0, notified=notified)
+    slow = await _segment_time(ctx, probe, 0.25, -1.0, notified=notified)
     ctx.note(f"1-degree move: {fast:.3f} s at 1.0, {slow:.3f} s at 0.25")
     ctx.expect(
         slow > fast * 1.3,
@@ -571,16 +596,6 @@ async def configuration(ctx: CaseContext) -> None:
     )
 
 
-async def _timed_move(ctx: CaseContext, probe: Probe, by: float) -> float:
-    """Seconds from a small move's request to its segment-completed report (notifications on)."""
-    start = ctx.clock()
-    segment = await _small_move(ctx, probe, by)
-    while (packet := await probe.next_packet(5.0)) is not None:
-        if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(packet.data, 6) == segment:
-            return ctx.clock() - start
-    ctx.skip(f"the case times moves by their segment-completed reports; none came for {segment}")
-
-
 async def _set_up_state(
     ctx: CaseContext, probe: Probe, pose: list[float]
 ) -> tuple[tuple[float, ...], int | None]:
@@ -599,9 +614,7 @@ async def _set_up_state(
             flipped = value
             break
     require_response(ctx, await probe.call("set-speed", factor=SLOW_FACTOR), "a slow speed factor")
-    require_response(
-        ctx, await probe.call("request-notifications", mask=0b11), "both notifications asked for"
-    )
+    await ask_notifications(ctx, probe, 0b11)  # refused: there are none to keep
     return fresh, flipped
 
 
@@ -610,6 +623,7 @@ async def _set_up_state(
     clauses=["connect.per-connection-state"],
     hazard="motion",
     deadline=20.0,
+    extensions=["request-notifications"],
 )
 async def fresh_state(ctx: CaseContext) -> None:
     """A connection that set a slow speed, both notifications and a configuration closes; the next one
@@ -646,10 +660,10 @@ async def fresh_state(ctx: CaseContext) -> None:
             actual=f"{[round(q, 2) for q in solved] if solved else None}: the last connection's "
             "configuration",
         )
-    require_response(ctx, await probe.call("request-notifications", mask=1 << 1), "segment notifications")
-    default = await _timed_move(ctx, probe, -1.0)
+    notified = await ask_notifications(ctx, probe, SEGMENT_MASK)
+    default = await _timed_small_move(ctx, probe, -1.0, notified=notified)
     require_response(ctx, await probe.call("set-speed", factor=1.0), "speed factor 1")
-    full = await _timed_move(ctx, probe, 1.0)
+    full = await _timed_small_move(ctx, probe, 1.0, notified=notified)
     ctx.note(f"1-degree move: {default:.3f} s at the fresh speed, {full:.3f} s at factor 1")
     ctx.expect(
         default <= full * SPEED_MATCH,

@@ -502,6 +502,7 @@ async def _settle(
     technique="property",
     hazard="motion",
     deadline=PROPERTY_DEADLINE,
+    extensions=["request-notifications"],
 )
 async def floats_round_trip(ctx: CaseContext) -> None:
     """Set joint angles, read them back when the arm stands: each float survives the trip within

@@ -3,8 +3,8 @@ it (done, data, segment number, multi-packet text), echoing the request's packet
 
 The cases are generated from the spec table, one per opcode (``server.reply.<name>``); their hazard is
 the opcode's, so on hardware the motion and power ones are left out unless ``--allow-motion``.  A target
-that refuses the request (an extension it does not implement, say) is not judged on the shape: the
-case is skipped with the error it gave (the error string itself is still checked).
+that refuses the request (a Puma extension it does not implement, say) is not judged on the shape: the
+case ends not-judged with the error it gave (the error string itself is still checked).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable, Mapping
 from typing import Final
 
-from manip.conformance.cases._support import error_of, power_on, valid_values
+from manip.conformance.cases._support import error_of, extension_name, power_on, valid_values
 from manip.conformance.judge.checks import check_reply
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
@@ -72,7 +72,15 @@ def _reply_case(op: RequestOpcode) -> None:
         error = error_of(answer)
         if error is not None:
             ctx.check(check_reply(answer.request, answer.packets))  # echo and error-string format
-            ctx.skip(f"the target refused a well-formed {op.name}: {error.error.render()!r}")
+            if op.extension:
+                ctx.not_judged(
+                    f"the target refused {extension_name(op.name)} ({error.error.render()!r}): its reply is "
+                    "judged on a target that serves it"
+                )
+            ctx.not_judged(
+                f"the target refused a well-formed {op.name} ({error.error.render()!r}), so its reply's "
+                "shape cannot be seen: a target that carries it out judges it"
+            )
         ctx.check(check_reply(answer.request, answer.packets))
         if follow_up is not None:
             await follow_up(ctx, probe)
@@ -84,4 +92,5 @@ def _reply_case(op: RequestOpcode) -> None:
         clauses=(*opcode_clauses(op), *follow_clauses),
         hazard=op.hazard,
         deadline=10.0 + (op.answer_within or 0.0),
+        extensions=[op.name] if op.extension else [],
     )(reply_shape)

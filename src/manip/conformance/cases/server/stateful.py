@@ -660,6 +660,7 @@ def _counterexample(failure: MachineFailure, address: str, reproduce: str | None
     technique="stateful",
     hazard="config",
     deadline=90.0,
+    extensions=["request-notifications", "reset-abort"],
 )
 async def arm_model(ctx: CaseContext) -> None:
     """Random request sequences against a model of the arm's protocol state (power, abort, segments,

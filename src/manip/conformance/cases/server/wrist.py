@@ -2,14 +2,14 @@
 answers a non-fatal error, and goes on serving.
 
 The target's world silences the Cougar (condition ``silent-wrist``: the embedded server's world always,
-another target's with ``--world``); without a world the case is not judged.  A target that serves no
-wrist at all skips it."""
+another target's with ``--world``); without a world the case is not judged, nor on a target that serves
+no wrist (the wrist opcodes are Puma extensions)."""
 
 from __future__ import annotations
 
 from typing import Final
 
-from manip.conformance.cases._support import error_of
+from manip.conformance.cases._support import error_of, no_wrist
 from manip.conformance.judge.checks import WirePacket, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
@@ -27,6 +27,7 @@ _ANSWERS: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.N
     clauses=["wrist.no-answer"],
     hazard="read-only",
     deadline=15.0,
+    extensions=["wrist-version", "read-forces"],
 )
 async def no_answer(ctx: CaseContext) -> None:
     """Read forces while Cougar is silent is answered with a non-fatal error within a few seconds, and
@@ -36,10 +37,7 @@ async def no_answer(ctx: CaseContext) -> None:
     served = version.is_response
     await probe.close()
     if not served:
-        ctx.skip(
-            f"the target serves no wrist ({version}): run against a server with a Cougar wrist (the "
-            "embedded server, manip-conform run without HOST, or manip-server --cougar sim)"
-        )
+        ctx.not_judged(no_wrist(version))
     async with ctx.arranged(SilentWrist()):
         probe = await ctx.connect()
         await _judge_silence(ctx, probe)
