@@ -154,10 +154,14 @@ def test_every_protocol_fault_has_a_case_citing_its_clauses() -> None:
 @pytest.mark.waits
 def test_clean_server_passes_every_case() -> None:
     report = asyncio.run(run_suite(FaultSet(), suite()))
+    # this server has no wrist: the cases that use the wrist's opcodes are not judged
+    wrist = {c.id for c in suite() if set(c.extensions) - {"request-notifications", "reset-abort"}}
     bad = [
         (r.id, r.outcome, r.reason or [v.message for v in r.violations])
         for r in report.results
-        if r.outcome not in ("pass", "skip") and r.id != "server.ncp.broken"  # it needs --broken-after
+        if r.outcome not in ("pass", "skip")
+        and not (r.outcome == "not-judged" and r.id in wrist)
+        and r.id != "server.ncp.broken"  # it needs --broken-after
     ]
     print(f"clean server: {len(report.results)} cases in {report.duration:.1f} s")
     assert not bad, bad

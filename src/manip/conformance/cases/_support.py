@@ -8,9 +8,9 @@ it (:func:`reply_view`), and failures that carry their evidence (:class:`Evidenc
 
 A case reports only the clauses it declares (``manip.conformance.suite.invariants``), so the helpers
 that a case uses to *prepare* its check (read the angles, switch power on) judge nothing themselves:
-:func:`require_response` passes a malformed answer to the transcript invariant and skips the case when
-the target refuses what the case needs (the case of that request reports the refusal).  The helpers that
-check take the clause from their caller.
+:func:`require_response` passes a malformed answer to the transcript invariant and ends the case
+not-judged when the target refuses what the case needs (the case of that request reports the
+refusal).  The helpers that check take the clause from their caller.
 
 The guide's own route (issue: a server written from the 1985 guide alone has none of manip's Puma
 extension opcodes): :func:`ask_notifications` says whether the target serves request notifications (0257),
@@ -76,14 +76,17 @@ def floats(answer: Answer) -> tuple[float, ...]:
 def require_response(ctx: CaseContext, answer: Answer, what: str) -> None:
     """The case needs ``answer`` to be a normal response: a malformed answer is the transcript
     invariant's finding (reported here, since the case may stop before the runner's check), and a
-    refusal skips the case."""
+    refusal ends the case not-judged (it applies, but cannot be judged without what was refused)."""
     ctx.check(check_reply(answer.request, answer.packets))
     if not answer.is_response:
-        ctx.skip(f"the case needs {what}, which the target refused: {answer}")
+        ctx.not_judged(
+            f"the case needs {what}, which the target refused: {answer}; a target that grants it judges "
+            "the case's clauses"
+        )
 
 
 async def read_floats(ctx: CaseContext, probe: Probe, op: RequestName) -> tuple[float, ...]:
-    """Here or joint angles, as floats (the case skips when the target refuses them)."""
+    """Here or joint angles, as floats (the case is not judged when the target refuses them)."""
     answer = await probe.call(op)
     require_response(ctx, answer, f"a normal reply to {op}")
     try:
@@ -316,8 +319,8 @@ async def clear_guards(probe: Probe) -> None:
 
 
 async def power_on(ctx: CaseContext, probe: Probe) -> None:
-    """Clear leftover wrist guards, then enable high power (it also clears an abort); the case skips
-    when the target refuses (``server.reply.enable-power`` judges the answer)."""
+    """Clear leftover wrist guards, then enable high power (it also clears an abort); the case is not
+    judged when the target refuses (``server.reply.enable-power`` judges the answer)."""
     await clear_guards(probe)
     answer = await probe.call("enable-power")
     require_response(ctx, answer, "arm power (enable high power answered with done)")

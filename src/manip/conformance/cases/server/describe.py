@@ -225,7 +225,7 @@ async def _stated_dof(ctx: CaseContext, probe: Probe) -> int:
     value = entries.get("degrees-of-freedom")
     value = value[0] if isinstance(value, list) and len(value) == 1 else value
     if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
-        ctx.skip(f"no usable :degrees-of-freedom ({value!r}; server.describe.keys judges it)")
+        ctx.not_judged(f"no usable :degrees-of-freedom ({value!r}; server.describe.keys judges it)")
     return value
 
 
@@ -241,7 +241,7 @@ async def degrees_of_freedom(ctx: CaseContext) -> None:
     dof = await _stated_dof(ctx, probe)
     joints = await probe.call("joint-angles")
     if not joints.is_response:
-        require_response(ctx, joints, "joint angles")  # refused: the case skips
+        require_response(ctx, joints, "joint angles")  # refused: not judged
     ctx.expect(
         _float_count(joints) == dof,
         clause="describe.dof-joint-vectors",

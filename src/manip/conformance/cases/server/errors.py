@@ -20,7 +20,7 @@ CALIBRATION_FAILURE: Final = CalibrationFailure((2, 3))
 async def _command_error(ctx: CaseContext, probe: Probe, clause: str | None = None) -> Answer:
     """Provoke a non-fatal error: an opcode the spec does not define.  A target that does not refuse
     it breaks ``clause`` when the case declares the refusal; otherwise the case has no error string to
-    judge and skips (``server.negative.unknown-opcodes`` fails the target)."""
+    judge and is not judged (``server.negative.unknown-opcodes`` fails the target)."""
     answer = await probe.call_raw(UNASSIGNED_OPCODES[-1 - ctx.random.randrange(8)])
     if clause is not None:
         ctx.expect(
@@ -30,7 +30,10 @@ async def _command_error(ctx: CaseContext, probe: Probe, clause: str | None = No
             seen=answer,
         )
     elif answer.opcode != ServerOp.NON_FATAL_ERROR:
-        ctx.skip(f"no non-fatal error to judge: an unknown opcode was answered with {answer}")
+        ctx.not_judged(
+            f"no non-fatal error to judge: an unknown opcode was answered with {answer} "
+            "(server.negative.unknown-opcodes judges that)"
+        )
     return answer
 
 
@@ -74,7 +77,10 @@ async def arg_alignment(ctx: CaseContext) -> None:
         numbered += 1
         ctx.check(f for f in check_error_packet(answer.first) if f.clause == "error-string.arg-layout")
     if not numbered:
-        ctx.skip("no error string carried numbers")
+        ctx.not_judged(
+            "no error string of the target carried numbers after a NUL (an unknown opcode, a bad length), "
+            "so their layout was not seen"
+        )
 
 
 @case(

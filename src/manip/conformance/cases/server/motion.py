@@ -81,7 +81,8 @@ async def _small_move(
     ctx: CaseContext, probe: Probe, by: float = SMALL_STEP_DEG, *, clause: str | None = None
 ) -> int:
     """A small joint move of joint 1; returns its segment number.  With ``clause`` the move being
-    accepted is what the case checks; without, the case needs the move and skips when it is refused."""
+    accepted is what the case checks; without, the case needs the move and is not judged when it is
+    refused."""
     joints = await read_floats(ctx, probe, "joint-angles")
     answer = await probe.call("set-joint-angles", joints=_away_from_zero(joints, by))
     if clause is None:
@@ -249,7 +250,10 @@ async def transform_out_of_range(ctx: CaseContext) -> None:
             what=f"a move to {what}",
         )
         return
-    ctx.skip("solve forwards found in-range angles for every transform tried (joints 2, 3, 5 past a limit)")
+    ctx.not_judged(
+        "solve forwards found in-range angles for every transform tried (joints 2, 3, 5 past a limit), so no "
+        "TOR was provoked"
+    )
 
 
 @case("server.motion.nap", clauses=["motion.no-power", "kill-power.done"], hazard="power")
@@ -577,7 +581,9 @@ async def configuration(ctx: CaseContext) -> None:
         require_response(ctx, answer, f"set configuration {name}")
         solved = await _solve(ctx, probe, pose)
         if solved is None:
-            ctx.skip(f"solve forwards of the seed's transform was refused after set configuration {name}")
+            ctx.not_judged(
+                f"solve forwards of the seed's transform was refused after set configuration {name}"
+            )
         back = await probe.call("solve-backwards", joints=list(solved))
         require_response(ctx, back, "solve backwards of a solution")
         off = math.dist(floats(back)[9:], pose[9:])
@@ -604,7 +610,7 @@ async def _set_up_state(
     transform, and that configuration (None: none changes it)."""
     fresh = await _solve(ctx, probe, pose)
     if fresh is None:
-        ctx.skip("solve forwards of the seed's transform was refused")
+        ctx.not_judged("solve forwards of the seed's transform was refused")
     flipped: int | None = None
     for value, _ in CONFIGURATIONS:
         if not (await probe.call("set-configuration", configuration=value)).is_response:

@@ -44,7 +44,7 @@ from manip.conformance.suite.bridge import (
     hypothesis_settings,
     run_in_worker,
 )
-from manip.conformance.suite.case import CaseFailure, CaseSkipped, case
+from manip.conformance.suite.case import CaseFailure, case
 from manip.conformance.suite.context import DEFAULT_REPLY_TIMEOUT, Answer, CaseContext, Probe
 from manip.conformance.suite.invariants import TRANSCRIPT
 from manip.conformance.suite.strategies import (
@@ -55,6 +55,7 @@ from manip.conformance.suite.strategies import (
     requests_of,
     valid_requests,
 )
+from manip.conformance.suite.world import CaseNotJudged
 from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
 
@@ -142,11 +143,11 @@ def _check_answer(answer: Answer) -> None:
 
 def _decode_floats(answer: Answer, what: str, clause: str | None) -> tuple[float, ...]:
     """The floats of a data reply.  A malformed reply is the transcript invariant's evidence; a refusal
-    breaks ``clause``, or skips the case when it only needs the values (``clause`` None)."""
+    breaks ``clause``, or leaves the case not judged when it only needs the values (``clause`` None)."""
     _check_answer(answer)
     if not answer.is_response:
         if clause is None:
-            raise CaseSkipped(f"the case needs {what}, which the target refused: {answer}")
+            raise CaseNotJudged(f"the case needs {what}, which the target refused: {answer}")
         raise Evidence(
             clause,
             f"{what} was refused",
