@@ -497,22 +497,28 @@ local function server_packet(tree, wire, opcode, data, dtvb, op)
     return
   end
   local number = u16(data, 0)
-  if opcode == 0x83 then  -- asynchronous response
-    if n ~= 8 then
-      decode_error(root, string.format("asynchronous response needs 8 data bytes, got %d", n),
-                   "async.layout")
+  if opcode == 0x83 then  -- asynchronous response: 8 bytes (number first) or the 1985 guide's 6
+    if n ~= 8 and n ~= 6 then
+      decode_error(root, string.format(
+        "asynchronous response needs 8 data bytes (or the 1985 guide's 6), got %d", n), "async.layout")
       return
     end
-    local condition, w2, w3 = u16(data, 2), u16(data, 4), u16(data, 6)
-    root:add(f_manip.request_number, dtvb(0, 2), number)
-    root:add(f_manip.condition, dtvb(2, 2), condition):append_text(
+    local at = 0
+    if n == 8 then
+      root:add(f_manip.request_number, dtvb(0, 2), number)
+      at = 2
+    else
+      root:append_text(" (the 1985 guide's layout: no request number)")
+    end
+    local condition, w2, w3 = u16(data, at), u16(data, at + 2), u16(data, at + 4)
+    root:add(f_manip.condition, dtvb(at, 2), condition):append_text(
       " (" .. (ASYNC_CONDITIONS[condition] or ("unknown-" .. condition)) .. ")")
     if condition == 1 then
-      root:add(f_manip.action, dtvb(4, 2), w2)
-      root:add(f_manip.guard, dtvb(6, 2), w3)
+      root:add(f_manip.action, dtvb(at + 2, 2), w2)
+      root:add(f_manip.guard, dtvb(at + 4, 2), w3)
     else
-      root:add(f_manip.reserved, dtvb(4, 2), w2)
-      root:add(condition == 2 and f_manip.segment or f_manip.word_3, dtvb(6, 2), w3)
+      root:add(f_manip.reserved, dtvb(at + 2, 2), w2)
+      root:add(condition == 2 and f_manip.segment or f_manip.word_3, dtvb(at + 4, 2), w3)
     end
     root:append_text(": " .. (ASYNC_CONDITIONS[condition] or ("unknown-" .. condition)))
     return

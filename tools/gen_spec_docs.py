@@ -28,6 +28,17 @@ def _reply(kind: str, layout: Layout) -> str:
     }.get(kind, _layout(layout))
 
 
+ORIGINS = {"guide": "guide", "manip": "**manip**", "chaosnet": "Chaosnet"}
+"""How the *whose* column shows a clause's origin."""
+CLAUSE_LEGEND = (
+    "*Whose*: **guide**, the 1985 guide states it (in manip's words; an erratum may settle a detail of its "
+    "reading); **manip**, manip's decision where the guide is silent or ambiguous, its erratum saying why "
+    "(where a server written from the guide alone could do otherwise, the clause is a SHOULD or a MAY, or "
+    "the suite accepts both readings); **Chaosnet**, the Chaosnet documents and link conventions the "
+    "section names.",
+)
+
+
 def _cell(text: str) -> str:
     return text.replace("|", "\\|")
 
@@ -115,7 +126,7 @@ def render() -> str:
         words = "count + words" if c.data_words is None else str(c.data_words)
         out.append(f"| {c.code} | {c.name} | {words} | {c.remarks} |")
 
-    out += ["", "## Clauses", ""]
+    out += ["", "## Clauses", "", *CLAUSE_LEGEND, ""]
     groups: dict[str, list[str]] = defaultdict(list)
     for clause in SPEC.clauses.values():
         if clause.retired:
@@ -124,15 +135,15 @@ def render() -> str:
         if clause.judged_from == "recording":
             errata += " (judged from a recording, `verify --judge client`, and live by the choice operations)"
         groups[clause.id.split(".")[0]].append(
-            f"| `{clause.id}` | {clause.level} | {clause.party} | {_cell(clause.text)}{errata} | "
-            f"{_cell(clause.section)} |"
+            f"| `{clause.id}` | {clause.level} | {clause.party} | {ORIGINS[clause.origin]} | "
+            f"{_cell(clause.text)}{errata} | {_cell(clause.section)} |"
         )
     for group, rows in groups.items():
         out += [
             f"### {group}",
             "",
-            "| id | level | binds | requirement | 1985 guide |",
-            "|---|---|---|---|---|",
+            "| id | level | binds | whose | requirement | 1985 guide |",
+            "|---|---|---|---|---|---|",
             *rows,
             "",
         ]

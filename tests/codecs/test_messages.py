@@ -169,12 +169,24 @@ def test_async_responses(number: int, guard: int, stop: bool, segment: int) -> N
     assert seg == decode_async(struct.pack("<4H", number, 2, 0, segment))
     bare = encode_async(number, 2, 0, segment, async_has_request_number=False)
     assert decode_async(bare, async_has_request_number=False).word3 == segment
+    guide = decode_async(bare)  # told apart by length: 6 bytes are the 1985 guide's layout
+    assert (guide.request_number, guide.condition, guide.word3, guide.layout) == (None, 2, segment, "guide")
+    assert decode_async(segment_completed(number, segment)).layout == "numbered"
 
 
-def test_async_wrong_length() -> None:
+@pytest.mark.parametrize("size", [0, 4, 5, 7, 9, 10])
+def test_async_wrong_length(size: int) -> None:
     with pytest.raises(DecodeError) as err:
-        decode_async(b"\0" * 6)
+        decode_async(b"\0" * size)
     assert err.value.clause == "async.layout"
+    assert "8 or 6 data bytes" in err.value.message
+
+
+def test_async_layout_insisted_on() -> None:
+    with pytest.raises(DecodeError):
+        decode_async(b"\0" * 6, async_has_request_number=True)
+    with pytest.raises(DecodeError):
+        decode_async(b"\0" * 8, async_has_request_number=False)
 
 
 def test_server_opcode_dispatch() -> None:

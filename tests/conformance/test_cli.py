@@ -153,6 +153,19 @@ def test_run_groups_failures_by_clause_in_console_json_and_junit(tmp_path: Path)
         assert f"clause:   {clause.text} ({clause.section})" in (failure.text or "")
 
 
+def test_the_embedded_server_runs_with_the_guide_profile(tmp_path: Path) -> None:
+    json_path = tmp_path / "r.json"
+    result = CliRunner().invoke(
+        main,
+        ["run", "-q", "--seed", "3", "--server-profile", "guide", "--select", "server.reply.here",
+         "--select", "server.negative.set-configuration-sizes", "--json", str(json_path)],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    cases = json.loads(json_path.read_text())["cases"]
+    assert {c["outcome"] for c in cases} == {"pass"}
+    assert all("--server-profile guide" in c["reproduce"] for c in cases)
+
+
 # ------------------------------------------------------------------------------------------- usage errors
 
 
@@ -186,6 +199,7 @@ def test_a_selection_that_matches_nothing_is_a_usage_error(tmp_path: Path) -> No
 def test_an_option_of_a_target_not_chosen_is_a_usage_error() -> None:
     assert "add --cougar sim" in _usage(["run", "--cougar-fault", "no-out-of-sync"])
     assert "--target hardware" in _usage(["run", "--allow-motion"])
+    assert "embedded server only" in _usage(["run", "tcp://127.0.0.1:1", "--server-profile", "guide"])
     for option in (["--broken-after", "3"], ["--max-examples", "3"], ["--record", "x.mcap"]):
         assert "not with --cougar" in _usage(["run", "--cougar", "sim", *option])
     for option in (["--settle", "1"], ["--reply-timeout", "1"], ["--async-timeout", "1"]):

@@ -122,16 +122,17 @@ async def run_suite(faults: FaultSet, cases: Sequence[Case], config: ServerConfi
     )
 
 
-def run_with_wrist(faults: FaultSet, cases: Sequence[Case]) -> RunReport:
+def run_with_wrist(faults: FaultSet, cases: Sequence[Case], server: ServerConfig | None = None) -> RunReport:
     """The cases against a robot with the simulated Cougar wrist, as the embedded target's is, in virtual
     time: Cougar ticks with the servo, so its answers never depend on how loaded the machine is (in real
     time a busy machine delays its ticks past any reply timeout)."""
 
     async def main() -> RunReport:
-        async with simulated_environment(ServerConfig(faults=faults), seed=SEED, wrist=True) as environment:
+        config = ServerConfig(faults=faults) if server is None else server
+        async with simulated_environment(config, seed=SEED, wrist=True) as environment:
             address = environment.address
             options = RunOptions(max_examples=MAX_EXAMPLES, address=address, reply_timeout=REPLY_TIMEOUT)
-            config = RunConfig(
+            run = RunConfig(
                 address=address,
                 options=options,
                 seed=SEED,
@@ -139,7 +140,7 @@ def run_with_wrist(faults: FaultSet, cases: Sequence[Case]) -> RunReport:
                 world=environment.world,
                 virtual_time=True,
             )
-            return await Runner(config, cases).run()
+            return await Runner(run, cases).run()
 
     return virtual_clock.run(main(), virtual=True)
 
@@ -245,3 +246,17 @@ def test_packed_error_args_conform() -> None:
     ]
     passed = {r.id for r in report.results if r.outcome == "pass"}
     assert {"server.error.arg-alignment", "server.error.string-format"} <= passed and not bad, bad
+
+
+def test_the_guides_async_layout_conforms() -> None:
+    """Erratum async-request-number: a server writing asynchronous responses as E.3 lays them out (the
+    condition code first, 6 bytes; manip-server --async-layout guide) passes every case that reads them."""
+    cases = [c for c in suite() if "async.layout" in c.clauses or c.id in GENERIC]
+    report = run_with_wrist(FaultSet(), cases, ServerConfig(async_layout="guide"))
+    bad = [
+        (r.id, r.outcome, r.reason, [v.message for v in r.violations])
+        for r in report.results
+        if r.outcome != "pass"
+    ]
+    assert {"server.async.segment-completed", "server.async.guard-hit"} <= {r.id for r in report.results}
+    assert not bad, bad

@@ -57,6 +57,17 @@ def test_clean_server_passes() -> None:
     assert any(o not in SPEC.requests for o in sent)  # and sends malformed requests too
 
 
+def test_a_server_written_from_the_guide_alone_passes() -> None:
+    # the guide profile: no extensions, inches, the 6-byte 0203, configuration bits answered done
+    cases = [c for c in all_cases() if c.id == CASE]
+    config = ServerConfig.guide_profile()
+    report = run_suite(cases, config, seed=5, time_scale=TIME_SCALE, options={"max_examples": 10})
+    (r,) = report.results
+    assert r.outcome == "pass", (r.reason, [v.actual for v in r.violations], r.traceback)
+    sent = {p.opcode for p in r.packets if p.direction == "c2s" and not p.is_close}
+    assert {"enable-power", "set-joint-angles"} <= {SPEC.requests[o].name for o in sent if o in SPEC.requests}
+
+
 @pytest.mark.parametrize(
     ("fault", "clauses"),
     [

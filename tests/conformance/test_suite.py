@@ -10,12 +10,14 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
+from manip.codecs.error_string import ErrorMessage
 from manip.conformance.cli import main
 from manip.conformance.output.coverage import coverage, gaps
 from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.results import ExitCode, RunReport
 from manip.conformance.suite.selection import PatternSet
-from manip.reference_server import FaultSet, ServerConfig
+from manip.reference_server import FaultSet, ServerConfig, errors
+from manip.reference_server.errors import RequestError
 from tests.support.suite import run_suite
 
 NOT_WRIST = frozenset({"request-notifications", "reset-abort"})
@@ -109,12 +111,6 @@ def test_clean_reference_server_passes_every_case() -> None:
         ("no-nap", ["server.motion.nap"], "server.motion.nap", "motion.no-power"),
         ("awa-ignored", ["server.motion.awa-reset-abort"], "server.motion.awa-reset-abort", "motion.abort"),
         (
-            "awa-refuses-all",
-            ["server.motion.awa-reset-abort"],
-            "server.motion.awa-reset-abort",
-            "motion.abort",
-        ),
-        (
             "no-initial-response",
             ["server.connect.initial-response"],
             "server.connect.initial-response",
@@ -135,6 +131,31 @@ def test_fault_is_caught_by_its_case(fault: str, select: list[str], case_id: str
     if clause is not None:
         assert result.failure is not None and result.failure.clause == clause, result.failure
     assert report.exit_code == ExitCode.NON_CONFORMANT
+
+
+def test_refusing_everything_after_an_abort_warns_only() -> None:
+    # E.2: "no further commands will be processed until a reset operation is requested" (erratum awa-scope)
+    report = _run(["awa-refuses-all"], ["server.motion.awa-reset-abort"])
+    (result,) = report.results
+    assert result.outcome == "warn", (result.outcome, result.reason, result.violations)
+    assert {v.clause for v in result.violations} == {"motion.abort-serves-others"}
+    assert report.exit_code == 0
+
+
+def test_a_server_with_its_own_code_for_unknown_opcodes_is_judged_by_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # E.2 names no code for an unknown opcode: a server written from the guide picks its own
+    def own_code(opcode: int) -> RequestError:
+        return RequestError(ErrorMessage("cmd", "C", "UNK", "No such command ~", (opcode,)))
+
+    monkeypatch.setattr(errors, "unknown_opcode", own_code)
+    selected = ["server.describe.operations-served", "server.negative.unknown-opcodes"]
+    report = _run([], selected)
+    outcomes = {r.id: (r.outcome, [v.message for v in r.violations]) for r in report.results}
+    assert {o for o, _ in outcomes.values()} == {"pass"}, outcomes
+    served = next(r for r in report.results if r.id == "server.describe.operations-served")
+    assert any("with C UNK" in n for n in served.notes)
 
 
 def test_fatal_without_close_is_caught_with_a_calibration_failure() -> None:

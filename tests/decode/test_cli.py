@@ -18,12 +18,12 @@ from hypothesis import strategies as st
 
 from manip.codecs import ErrorMessage, Packet, encode_chudp, encode_reply, encode_request, encode_tcp
 from manip.codecs.framing import FRAMINGS, decode_tcp, encode_chaosd
-from manip.codecs.messages import encode_error, guard_hit
+from manip.codecs.messages import encode_async, encode_error, guard_hit
 from manip.codecs.packet import Trailer
 from manip.decode.cli import main
 from manip.decode.describe import _ENCODE, describe_packet, packet_json
 from manip.spec import SPEC
-from manip.spec.constants import ChaosOp, RequestOp, ServerOp
+from manip.spec.constants import AsyncCondition, ChaosOp, RequestOp, ServerOp
 from tests.support.paths import ROOT
 
 RFC_PUMA = "01010000010000040120000001010a01000100005550414d012001015a1a"  # an RFC to contact PUMA
@@ -77,6 +77,22 @@ def test_json_and_async() -> None:
     manip = tree[0]["children"][1]
     assert manip["text"] == "0203 guard-hit"
     assert {c["label"]: c.get("value") for c in manip["children"]}["guard"] == 3
+
+
+def test_async_in_the_guides_layout_is_told_apart_by_length() -> None:
+    data = encode_async(0, AsyncCondition.SEGMENT_COMPLETED, 0, 0o17, async_has_request_number=False)
+    wire = encode_chudp(_pkt(ServerOp.ASYNCHRONOUS_RESPONSE, data)).hex()
+    code, out, _ = _run("--format", "json", wire)
+    assert code == 0
+    manip = json.loads(out)[0]["children"][1]
+    assert manip["text"] == "0203 segment-completed (the 1985 guide's layout)"
+    fields = {c["label"]: (c.get("value"), c.get("offset")) for c in manip["children"]}
+    assert "request number" not in fields
+    assert fields["condition"][0] == 2 and fields["segment"][0] == 0o17
+    assert (fields["condition"][1], fields["segment"][1]) == (0, 4)  # no request number before them
+    short = encode_chudp(_pkt(ServerOp.ASYNCHRONOUS_RESPONSE, data[:4])).hex()
+    code, out, _ = _run(short)
+    assert "8 or 6 data bytes" in out
 
 
 def test_hexdump_annotates_fields() -> None:

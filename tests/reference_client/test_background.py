@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from manip.arm.transform import Transform
-from manip.codecs.messages import AsyncResponse, encode_reply
+from manip.codecs.messages import AsyncResponse, encode_async, encode_reply
 from manip.reference_client import (
     NOTIFY_SEGMENTS,
     AsynchronousError,
@@ -390,6 +390,27 @@ def test_a_later_segment_completes_earlier_ones_modulo_2_16() -> None:
             fake.peer.segment_completed(1, 1)
             await asyncio.gather(*waiters)
             assert [r.opcode for r in fake.peer.received] == [RequestOp.REQUEST_NOTIFICATIONS]
+
+    run(main())
+
+
+def test_the_guides_asynchronous_layout_is_read_by_its_length() -> None:
+    # E.3: "The first word of the response is a code indicating the condition", then two words
+    async def main() -> None:
+        async with session() as (arm, fake):
+            await arm.request_notifications(NOTIFY_SEGMENTS)
+            seen: list[AsyncResponse] = []
+            arm.add_async_listener(seen.append)
+            waiter = asyncio.create_task(arm.wait_for_segment(9))
+            await settle()
+            fake.peer.send(
+                ServerOp.ASYNCHRONOUS_RESPONSE, encode_async(0, 2, 0, 9, async_has_request_number=False)
+            )
+            await waiter
+            fake.peer.guard_hit(3, 4, stop=False)  # manip's layout on the same connection
+            await settle()
+            assert seen == [AsyncResponse(None, 2, 0, 9), AsyncResponse(3, 1, 2, 4)]
+            assert seen[0].layout == "guide" and seen[1].layout == "numbered"
 
     run(main())
 

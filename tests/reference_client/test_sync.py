@@ -11,7 +11,6 @@ import pytest
 
 from manip.arm.transform import Transform
 from manip.reference_client import (
-    NOTIFY_SEGMENTS,
     ClientOptions,
     ConnectionLostError,
     MemoryTransport,
@@ -60,7 +59,10 @@ def test_blocking_calls() -> None:
         assert arm.describe()["unique-name"] == "Trurl"
         segment = arm.move(Transform.trans(1.0, 2.0, 3.0))
         arm.wait_for_segment(segment, timeout=2.0)
-        assert arm.arm.notifications == NOTIFY_SEGMENTS
+        # the fake's description lists no 0257: the wait polled Joint angles (which stand still) instead
+        assert arm.arm.waits_by_polling and arm.arm.notifications == 0
+        arm.prepare_segment_wait()  # nothing more to ask for
+        assert arm.arm.notifications == 0
         assert arm.request("wrist-version") == 0o17
         request = arm.make_request("hand", [0])
         assert arm.perform(request) is None

@@ -77,6 +77,33 @@ def test_no_extensions_configures_a_guide_only_server(
     assert [config.extensions for config in configs] == [extensions]
 
 
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        ([], ServerConfig()),
+        (["--profile", "guide"], ServerConfig.guide_profile()),
+        (["--profile", "guide", "--length-unit", "mm"], ServerConfig.guide_profile(length_unit="mm")),
+        (
+            ["--async-layout", "guide", "--length-unit", "cm", "--configuration-bits", "done"],
+            ServerConfig(async_layout="guide", length_unit="cm", configuration_bits="done"),
+        ),
+        (["--profile", "guide", "--error-args", "packed"], ServerConfig.guide_profile(error_args="packed")),
+    ],
+)
+def test_profile_and_single_choices(
+    monkeypatch: pytest.MonkeyPatch, args: list[str], expected: ServerConfig
+) -> None:
+    configs: list[ServerConfig] = []
+
+    async def run(server: functools.partial[object], *rest: object, **options: object) -> None:
+        configs.append(server.args[1])
+
+    monkeypatch.setattr(cli, "_run", run)
+    result = CliRunner().invoke(main, ["--listen", "tcp://127.0.0.1:0", *args])
+    assert result.exit_code == 0, result.output
+    assert configs == [expected]
+
+
 def _tuple(value: object) -> tuple[object, ...]:
     assert isinstance(value, tuple)
     return value

@@ -516,8 +516,8 @@ def test_unrequested_async() -> None:
     assert pair(Fault.UNREQUESTED_ASYNC, scenario) == ([], [ServerOp.ASYNCHRONOUS_RESPONSE])
 
 
-@covers(Fault.ASYNC_WITHOUT_NUMBER)
-def test_async_without_number() -> None:
+@covers(Fault.ASYNC_STRAY_BYTE)
+def test_async_stray_byte() -> None:
     def scenario(c: Client) -> tuple[int, int] | str:
         c.one("request-notifications", mask=2)
         c.one("set-joint-angles", joints=GOAL)
@@ -528,7 +528,7 @@ def test_async_without_number() -> None:
             return exc.clause or ""
         return response.condition, response.word3
 
-    assert pair(Fault.ASYNC_WITHOUT_NUMBER, scenario) == ((2, 1), "async.layout")
+    assert pair(Fault.ASYNC_STRAY_BYTE, scenario) == ((2, 1), "async.layout")
 
 
 # ------------------------------------------------------------------ the move process, seen from the wire

@@ -37,6 +37,7 @@ from manip.reference_server import (
     SessionUsageError,
     State,
 )
+from manip.reference_server.session import server_config
 from manip.spec import SPEC
 from manip.spec.constants import AsyncCondition, RequestOp, ServerOp
 from tests.support.session_client import GOAL, OTHER, Client
@@ -307,6 +308,78 @@ def test_set_configuration_byte_or_word_and_bad_bits() -> None:
     assert client.session.arm.lefty is False
     error = _error(client.one("set-configuration", configuration=2))
     assert (error.severity, error.code) == ("C", "BVA")
+
+
+def test_set_configuration_other_bits_answered_done_when_chosen() -> None:
+    client = Client(ServerConfig(configuration_bits="done"))
+    assert _reply(client.one("set-configuration", configuration=3)).is_empty  # the 1985 guide: "done"
+    assert client.session.arm.lefty is True  # bit 0 still chooses
+    assert _reply(client.one("set-configuration", configuration=0o376)).is_empty
+    assert client.session.arm.lefty is False
+
+
+def test_async_in_the_guides_layout_when_chosen() -> None:
+    client = Client(ServerConfig(powered_at_open=True, async_layout="guide"))
+    client.one("request-notifications", mask=2)
+    segment = _reply(client.one("set-joint-angles", joints=GOAL)).segment
+    out = []
+    while client.now < 140.0 and not out:
+        out = [
+            p for p in client.session.tick(client.now).packets if p.opcode == ServerOp.ASYNCHRONOUS_RESPONSE
+        ]
+        client.now += TICK
+    (packet,) = out
+    assert packet.data == bytes([2, 0, 0, 0, segment or 0, 0])  # condition, reserved, segment: 6 bytes
+
+
+def test_lengths_in_inches_at_the_boundary_only() -> None:
+    inches = Client(ServerConfig(powered_at_open=True, length_unit="inch"))
+    mm = Client(POWERED)
+    here_in = _reply(inches.one("here")).values["transform"]
+    here_mm = _reply(mm.one("here")).values["transform"]
+    assert isinstance(here_in, tuple) and isinstance(here_mm, tuple)
+    assert np.allclose(np.array(here_in[9:]) * 25.4, here_mm[9:], atol=1e-3)
+    assert np.allclose(here_in[:9], here_mm[:9])  # the rotation has no unit
+    backwards = _reply(inches.one("solve-backwards", joints=GOAL)).values["transform"]
+    assert Transform.from_floats(
+        list(backwards)
+    ).almost_equal(  # type: ignore[arg-type]
+        Transform.from_floats(list(forward(GOAL).to_floats()[:9]) + [x / 25.4 for x in forward(GOAL).p]), 1e-4
+    )
+    joints = _reply(inches.one("solve-forwards", transform=backwards, current=GOAL)).values["joints"]
+    assert np.allclose(joints, GOAL, atol=1e-3)
+    inches.one("set-joint-angles", joints=GOAL)
+    inches.settle()
+    start = forward(inches.session.arm.actual)
+    inches.one("incremental-straight-move", delta=(1.0, 0.0, -1.0, 0.0, 0.0, 0.0))  # inches
+    inches.settle()
+    assert np.allclose(
+        forward(inches.session.arm.actual).p, np.array(start.p) + np.array([25.4, 0.0, -25.4]), atol=1e-2
+    )
+    goal = Transform.trans(0.0, 0.0, -20.0) @ start  # millimetres inside
+    wire = list(goal.to_floats()[:9]) + [x / 25.4 for x in goal.p]
+    inches.one("straight-move", transform=tuple(wire))
+    inches.settle()
+    assert forward(inches.session.arm.actual).almost_equal(goal, 1e-2)
+
+
+def test_guide_profile() -> None:
+    config = ServerConfig.guide_profile(powered_at_open=True)
+    assert (config.extensions, config.length_unit, config.async_layout, config.configuration_bits) == (
+        False,
+        "inch",
+        "guide",
+        "done",
+    )
+    assert config.powered_at_open
+    assert server_config("guide") == ServerConfig.guide_profile()
+    assert server_config("manip") == ServerConfig()
+    with pytest.raises(ValueError, match="unknown server profile"):
+        server_config("val")
+    client = Client(config)
+    assert _reply(client.one("set-configuration", configuration=2)).is_empty
+    error = _error(client.one("request-notifications", mask=2))
+    assert (error.severity, error.code) == ("C", "UOP")
 
 
 def test_hand_and_power() -> None:

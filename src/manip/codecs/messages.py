@@ -14,7 +14,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Final
+from typing import Any, Final, Literal
 
 from construct import (
     Array,
@@ -374,11 +374,21 @@ class ErrorReply:
         return self.opcode == ServerOp.FATAL_ERROR
 
 
+AsyncLayout = Literal["numbered", "guide"]
+"""The two layouts of an asynchronous response (erratum ``async-request-number``): ``numbered``, manip's
+8 bytes (request number, condition, two words), and ``guide``, the 1985 guide's 6 bytes (condition, two
+words).  A reader tells them apart by length."""
+
+
 @dataclass(frozen=True)
 class AsyncResponse:
-    """An asynchronous response (0203): a guard hit or a completed segment."""
+    """An asynchronous response (0203): a guard hit or a completed segment.
 
-    request_number: int
+    ``request_number`` is None for the 1985 guide's own layout (6 data bytes: the condition code is the
+    first word); manip's layout (8 bytes) puts the number of the last request processed first (erratum
+    ``async-request-number``)."""
+
+    request_number: int | None
     condition: int
     word2: int
     word3: int
@@ -387,6 +397,11 @@ class AsyncResponse:
     def condition_name(self) -> str:
         entry = SPEC.async_codes.get(self.condition)
         return entry.name if entry else f"unknown-{self.condition}"
+
+    @property
+    def layout(self) -> AsyncLayout:
+        """``numbered`` (manip's 8 bytes) or ``guide`` (the 1985 guide's 6 bytes)."""
+        return "guide" if self.request_number is None else "numbered"
 
 
 ServerMessage = Reply | ErrorReply | AsyncResponse
@@ -537,12 +552,14 @@ def decode_error(opcode: int, data: bytes, *, align_args: bool | None = None) ->
 
 _ASYNC = struct.Struct("<4H")
 _ASYNC_NO_NUMBER = struct.Struct("<3H")
+ASYNC_SIZES: Final[Mapping[AsyncLayout, int]] = {"numbered": _ASYNC.size, "guide": _ASYNC_NO_NUMBER.size}
 
 
 def encode_async(
     request_number: int, condition: int, word2: int, word3: int, *, async_has_request_number: bool = True
 ) -> bytes:
-    """Data of an asynchronous response (0203); see erratum ``async-request-number``."""
+    """Data of an asynchronous response (0203): manip's numbered layout, or without the request number
+    the 1985 guide's own (erratum ``async-request-number``)."""
     for name, v in (
         ("request_number", request_number),
         ("condition", condition),
@@ -556,21 +573,29 @@ def encode_async(
     return _ASYNC_NO_NUMBER.pack(condition, word2, word3)
 
 
-def decode_async(data: bytes, *, async_has_request_number: bool = True) -> AsyncResponse:
-    codec = _ASYNC if async_has_request_number else _ASYNC_NO_NUMBER
-    if len(data) != codec.size:
+def decode_async(data: bytes, *, async_has_request_number: bool | None = None) -> AsyncResponse:
+    """An asynchronous response's data in either layout, told apart by length (8 bytes: numbered, 6: the
+    1985 guide's); ``async_has_request_number`` insists on one of them."""
+    sizes = {True: _ASYNC.size, False: _ASYNC_NO_NUMBER.size}
+    allowed = (
+        sizes
+        if async_has_request_number is None
+        else {async_has_request_number: sizes[async_has_request_number]}
+    )
+    numbered = next((k for k, size in allowed.items() if size == len(data)), None)
+    if numbered is None:
+        wanted = " or ".join(str(size) for size in sorted(allowed.values(), reverse=True))
         raise DecodeError(
-            f"asynchronous response needs {codec.size} data bytes, got {len(data)}",
+            f"asynchronous response needs {wanted} data bytes, got {len(data)}",
             path="async",
-            offset=min(len(data), codec.size),
+            offset=min(len(data), _ASYNC_NO_NUMBER.size),
             clause="async.layout",
         )
-    if async_has_request_number:
-        number, condition, w2, w3 = codec.unpack(data)
-    else:
-        number = 0
-        condition, w2, w3 = codec.unpack(data)
-    return AsyncResponse(number, condition, w2, w3)
+    if numbered:
+        number, condition, w2, w3 = _ASYNC.unpack(data)
+        return AsyncResponse(number, condition, w2, w3)
+    condition, w2, w3 = _ASYNC_NO_NUMBER.unpack(data)
+    return AsyncResponse(None, condition, w2, w3)
 
 
 def guard_hit(request_number: int, guard: int, *, stop: bool) -> bytes:

@@ -72,6 +72,7 @@ from manip.conformance.targets import Job, execute, repeat_run, world_of
 from manip.exit_status import epilog
 from manip.links import AddressError, parse_address
 from manip.reference_server import FaultSet
+from manip.reference_server.session import PROFILES
 
 __all__ = ["main"]
 
@@ -165,6 +166,15 @@ def main() -> None:
 @json_option
 @junit_option
 @document_options
+@click.option(
+    "--server-profile",
+    type=click.Choice(PROFILES),
+    default="manip",
+    show_default=True,
+    help="Embedded server only: run the reference server as manip documents it, or as a server written "
+    "from the 1985 guide alone (guide: no extension opcodes, lengths in inches, asynchronous responses "
+    "in the guide's 6-byte layout; manip-server --profile guide).",
+)
 @click.option(
     "--server-fault",
     "server_faults",
@@ -279,6 +289,7 @@ def run(
     junit_path: Path | None,
     html_path: Path | None,
     markdown_path: Path | None,
+    server_profile: str,
     server_faults: tuple[str, ...],
     cougar: str | None,
     cougar_faults: tuple[str, ...],
@@ -309,6 +320,10 @@ def run(
     config_faults = _check_server_options(
         host, server_faults, target_time_scale, cougar, cougar_faults, allow_motion, target_kind
     )
+    if server_profile != "manip" and (host or cougar is not None):
+        raise click.UsageError(
+            "--server-profile applies to the embedded server only (omit HOST and --cougar)"
+        )
     target = _cougar_target(cougar, cougar_faults, host=host, server_faults=server_faults)
     if target is not None:
         address = "" if target.embedded else target.url
@@ -362,7 +377,7 @@ def run(
         embedded=not host if target is None else target.embedded,
         virtual_time=virtual,
         reproduce_options=_reproduce_options(
-            options, server_faults, simulated=simulated, virtual=virtual, world=world
+            options, server_faults, simulated=simulated, virtual=virtual, world=world, profile=server_profile
         ),
         command=shlex.join(["manip-conform", *sys.argv[1:]]),
     )
@@ -374,7 +389,7 @@ def run(
     console.print(f"manip-conform: seed [bold]{seed}[/] (rerun with --seed {seed})")
     job = Job(
         config, cases, console, quiet, faults=config_faults, target=target or puma_target,
-        world=world_of(world, world_timeout),
+        world=world_of(world, world_timeout), server_profile=server_profile,
     )  # fmt: skip
     if repeat > 1:
         report, code = repeat_run(job, repeat)
@@ -471,7 +486,13 @@ def _puma_target(
 
 
 def _reproduce_options(
-    options: RunOptions, server_faults: tuple[str, ...], *, simulated: bool, virtual: bool, world: str | None
+    options: RunOptions,
+    server_faults: tuple[str, ...],
+    *,
+    simulated: bool,
+    virtual: bool,
+    world: str | None,
+    profile: str = "manip",
 ) -> list[str]:
     """The options a case's reproduce line repeats: those that change what the case does or how it is
     judged (not the selection, the reports or the seed, which the line gives itself)."""
@@ -486,6 +507,8 @@ def _reproduce_options(
         extra += ["--target-time-scale", f"{options.time_scale:g}"]
     if options.robot == "hardware":
         extra += ["--target", "hardware"] + (["--allow-motion"] if options.allow_motion else [])
+    if profile != "manip":
+        extra += ["--server-profile", profile]
     for fault in server_faults:
         extra += ["--server-fault", fault]
     if simulated and not virtual:

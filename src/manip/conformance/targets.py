@@ -33,7 +33,8 @@ from manip.conformance.suite.world import WorldError
 from manip.conformance.suite.world_link import DEFAULT_ANSWER_TIMEOUT, open_world
 from manip.conformance.suite.world_prompt import PROMPT_TIMEOUT, PromptWorld
 from manip.links import virtual_clock
-from manip.reference_server import FaultSet, ServerConfig
+from manip.reference_server import FaultSet
+from manip.reference_server.session import server_config as profile_config
 
 __all__ = ["Job", "WorldSpec", "execute", "repeat_run", "world_of"]
 
@@ -65,6 +66,9 @@ class Job:
     quiet: bool = False
     faults: FaultSet | None = None
     target: CougarTarget | PumaTarget | None = None
+    server_profile: str = "manip"
+    """The embedded server's profile, ``manip`` or ``guide``
+    (:func:`~manip.reference_server.session.server_config`)."""
     world: WorldSpec | None = None
     runner: Runner | None = None
 
@@ -171,7 +175,9 @@ async def _run_target(job: Job) -> None:
         async with _opened_world(job):
             await _run_with(job)
         return
-    server_config = ServerConfig() if job.faults is None else ServerConfig(faults=job.faults)
+    server_config = profile_config(
+        job.server_profile, **({} if job.faults is None else {"faults": job.faults})
+    )
     # The embedded robot has the simulated Cougar wrist, so the wrist opcodes are checked too.
     broken_after = config.options.broken_after
     if config.virtual_time:

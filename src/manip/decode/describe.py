@@ -240,25 +240,30 @@ def _describe_error(err: ErrorReply) -> TreeNode:
 
 
 def _describe_async(a: AsyncResponse) -> TreeNode:
+    """Either layout (erratum ``async-request-number``): the 1985 guide's has no request-number word,
+    so its fields start two bytes earlier."""
     node = TreeNode(
         "manip asynchronous response",
-        f"0203 {a.condition_name}",
-        {"opcode": ServerOp.ASYNCHRONOUS_RESPONSE, "condition": a.condition},
+        f"0203 {a.condition_name}" + (" (the 1985 guide's layout)" if a.request_number is None else ""),
+        {"opcode": ServerOp.ASYNCHRONOUS_RESPONSE, "condition": a.condition, "layout": a.layout},
     )
-    node.add("request number", str(a.request_number), a.request_number, 0, 2)
-    node.add("condition", f"{a.condition} {a.condition_name}", a.condition, 2, 2)
+    at = 0
+    if a.request_number is not None:
+        node.add("request number", str(a.request_number), a.request_number, 0, 2)
+        at = 2
+    node.add("condition", f"{a.condition} {a.condition_name}", a.condition, at, 2)
     if a.condition == 1:
         node.add(
             "action",
             {1: "1 stop trajectory", 2: "2 continue"}.get(a.word2, f"{a.word2} (undefined)"),
             a.word2,
-            4,
+            at + 2,
             2,
         )
-        node.add("guard", str(a.word3), a.word3, 6, 2)
+        node.add("guard", str(a.word3), a.word3, at + 4, 2)
     else:
-        node.add("reserved", str(a.word2), a.word2, 4, 2)
-        node.add("segment" if a.condition == 2 else "word 3", str(a.word3), a.word3, 6, 2)
+        node.add("reserved", str(a.word2), a.word2, at + 2, 2)
+        node.add("segment" if a.condition == 2 else "word 3", str(a.word3), a.word3, at + 4, 2)
     return node
 
 

@@ -403,8 +403,8 @@ async def _motion(
 ) -> None:
     if power:
         await arm.enable_power()
-    if wait and not arm.notifications & NOTIFY_SEGMENTS:
-        await arm.request_notifications(arm.notifications | NOTIFY_SEGMENTS)
+    if wait:
+        await arm.prepare_segment_wait()  # notifications, or polling on a server without them
     segment = await start()
     if wait:
         await arm.wait_for_segment(segment)

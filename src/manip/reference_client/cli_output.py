@@ -203,7 +203,9 @@ def error_line(error: BaseException) -> str:
     if isinstance(error, ServerError):
         meaning = error.meaning or error.message
         fatal = "fatal error " if isinstance(error, FatalError) else ""
-        return f"{fatal}{error.code}: {meaning} ({error.rendered})"
+        extension = error.unserved_extension
+        note = f"; {extension} that this server does not serve" if extension else ""
+        return f"{fatal}{error.code}: {meaning} ({error.rendered}){note}"
     if isinstance(error, ConnectionLostError):
         return error.reason if error.reason.startswith("cannot connect") else str(error)
     return str(error)

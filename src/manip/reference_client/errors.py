@@ -36,6 +36,10 @@ if TYPE_CHECKING:
     from manip.reference_client.request import Request
 
 
+UNSERVED_CODES = frozenset({"UOP", "UIM"})
+"""The codes of a refusal for an opcode the server does not serve (unknown, or not on this robot)."""
+
+
 class ManipError(Exception):
     """Base class of the client's errors."""
 
@@ -108,9 +112,26 @@ class ServerError(ManipError):
         """Severity C: the request's format or data were wrong."""
         return self.severity == "C"
 
+    @property
+    def unserved_extension(self) -> str | None:
+        """When the server refused a request as unserved (UOP, UIM) and its opcode is one of manip's
+        Puma extensions, which the 1985 guide does not define: that opcode, named (``0257, request
+        notifications, a Puma extension``); else None."""
+        if self.code not in UNSERVED_CODES:
+            return None
+        opcode = self.request.opcode if self.request is not None else None
+        if opcode is None and self.code == "UOP" and self.arguments:
+            opcode = self.arguments[0]
+        op = SPEC.requests.get(opcode) if opcode is not None else None
+        if op is None or not op.extension:
+            return None
+        return f"{op.opcode:04o}, {op.name.replace('-', ' ')}, a Puma extension"
+
     def _text(self) -> str:
         about = f"{self.request.describe()}: " if self.request is not None else ""
-        return f"{about}{self.error.render()}"
+        extension = self.unserved_extension
+        note = f" [{extension} the 1985 guide does not define]" if extension else ""
+        return f"{about}{self.error.render()}{note}"
 
 
 class FatalError(ServerError):

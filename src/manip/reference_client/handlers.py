@@ -48,6 +48,8 @@ NOTIFY_TRIVIAL_ERRORS: Final = "notify-trivial-errors"
 DEFAULT_HANDLER_TYPES: Final = (CHAOS_MANIPULATOR, GENERIC)
 
 _ASYNC_BODY = struct.Struct("<3H")
+_GUIDE_ASYNC_BODY = struct.Struct("<2H")
+"""What follows the first word of the 1985 guide's asynchronous response (the condition code)."""
 
 
 def handle_normal_response(ctx: ResponseContext) -> None:
@@ -121,13 +123,15 @@ def handle_asynchronous_warning(ctx: ResponseContext) -> None:
 
 
 def handle_asynchronous_response(ctx: ResponseContext) -> None:
-    """Code 3: condition code and two words after the request number (erratum async-request-number)."""
+    """Code 3: condition code and two words, after the request number (manip's layout, 8 bytes) or with
+    none (the 1985 guide's, 6 bytes: what was read as the request number is the condition); erratum
+    async-request-number.  The two are told apart by length."""
     payload = ctx.payload
-    if len(payload) != _ASYNC_BODY.size:
+    if len(payload) not in (_ASYNC_BODY.size, _GUIDE_ASYNC_BODY.size):
         ctx.out_of_sequence(
             OutOfSequenceReason.MALFORMED,
-            f"asynchronous response needs {_ASYNC_BODY.size} bytes after the request number, "
-            f"got {len(payload)}",
+            f"asynchronous response needs {_ASYNC_BODY.size} bytes after the request number "
+            f"(or {_GUIDE_ASYNC_BODY.size} in the 1985 guide's layout, which has none), got {len(payload)}",
         )
         return
     if ClientFault.IGNORE_ASYNC in ctx.core.faults:
@@ -137,8 +141,14 @@ def handle_asynchronous_response(ctx: ResponseContext) -> None:
         request.responses.append(payload)
         ctx.extract(request)
         return
-    condition, word2, word3 = _ASYNC_BODY.unpack(payload)
-    ctx.emit(AsyncResponseReceived(AsyncResponse(ctx.request_number, condition, word2, word3)))
+    response: AsyncResponse
+    if len(payload) == _GUIDE_ASYNC_BODY.size:
+        word2, word3 = _GUIDE_ASYNC_BODY.unpack(payload)
+        response = AsyncResponse(None, ctx.request_number, word2, word3)
+    else:
+        condition, word2, word3 = _ASYNC_BODY.unpack(payload)
+        response = AsyncResponse(ctx.request_number, condition, word2, word3)
+    ctx.emit(AsyncResponseReceived(response))
 
 
 def notify_trivial_error(ctx: ResponseContext) -> None:

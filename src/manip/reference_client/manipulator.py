@@ -13,7 +13,15 @@ server were to execute it).  ``async with arm.joint_freed(3): ...`` does both.
 
 Segments: :meth:`Manipulator.wait_for_segment` waits for the segment-completed asynchronous response
 (E.3 code 2) of a segment number a motion request returned.  It asks for segment notifications first
-if they are not on (request-notifications, 0257).  Segments complete in order, so a completion of a
+if they are not on (request-notifications, 0257).  That opcode is one of manip's Puma extensions: a
+server written from the 1985 guide alone refuses it (or describe self does not list it), and then the
+wait falls back to the guide's own requests: it polls Joint angles (0202) in the client's own time,
+every :data:`POLL_INTERVAL` seconds, until the arm has stood still for :data:`STILL_POLLS` readings
+(at the goal of the segment, when it was a set joint angles whose goal the client knows), bounded by
+the timeout (:data:`POLL_TIMEOUT` without one).  The arm standing still means every segment queued so
+far has ended.  Readings are PDP-11 floats: an arm starting a move at a very low speed factor may read
+still for a moment, so a wait whose goal the client does not know (a transform, an increment) can end
+early then; with notifications there is no such doubt.  Segments complete in order, so a completion of a
 later segment also completes the ones before it (numbers compare modulo 2^16).  A segment that
 completed while notifications were off was never reported: turn them on (``request_notifications``)
 before the motion you will wait for.  An asynchronous error (motion aborted) fails every segment
@@ -61,6 +69,18 @@ NOTIFY_GUARD_HITS: Final = 1 << SPEC.async_codes[AsyncCondition.GUARD_HIT].notif
 NOTIFY_SEGMENTS: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
 GUARD_STOPS: Final = 1
 """Word 2 of a guard-hit response when the trip stopped the trajectory."""
+POLL_INTERVAL: Final = 0.05
+"""Seconds between the Joint angles polls of a wait without segment notifications (3 servo cycles)."""
+STILL_POLLS: Final = 3
+"""Equal readings in a row that mean the arm stands still."""
+POLL_TIMEOUT: Final = 120.0
+"""The bound of a wait by polling when the caller gave no timeout."""
+AT_GOAL_DEG: Final = 0.01
+"""How close (degrees, each joint) a still arm must be to a known goal for its segment to count as ended."""
+_NOTIFICATIONS_OPCODE: Final = SPEC.request("request-notifications").opcode
+_SEGMENT_OPERATIONS: Final = frozenset(
+    op.name for op in SPEC.requests.values() if op.response.form == "segment"
+)
 
 RequestData = bytes | bytearray | int | float | Iterable[Any]
 """Request data for ``copy-manipulator-request-data``: integers are words, floats PDP-11 floats,
@@ -84,6 +104,11 @@ class Manipulator(GenericOperations, PumaOperations):
         self._notifications = 0
         self._last_segment: int | None = None
         self._segment_waiters: list[tuple[int, asyncio.Future[None]]] = []
+        self._polling = False
+        """Segments are waited for by polling: the server does not serve segment notifications."""
+        self._last_queued: int | None = None
+        self._goals: dict[int, tuple[float, ...]] = {}
+        """The joint goals of the set-joint-angles segments queued (the latest few)."""
         process.add_async_listener(self._on_async_response)
         process.add_error_listener(self._on_error)
         process.add_close_listener(self._on_close)
@@ -200,7 +225,22 @@ class Manipulator(GenericOperations, PumaOperations):
     ) -> T:
         request = self.make_request(code, fields=fields, extractor=extractor, timeout=timeout)
         result: T = await self.send_request(request)
+        self._took(code, fields, result)
         return result
+
+    def _took(self, code: str, fields: Mapping[str, Any] | None, result: object) -> None:
+        """What a wait by polling needs to know of a request that succeeded: the segments queued and
+        their joint goals, and whether describe self lists segment notifications."""
+        if code in _SEGMENT_OPERATIONS and isinstance(result, int):
+            self._last_queued = result
+            if code == "set-joint-angles" and fields is not None:
+                self._goals[result] = tuple(float(q) for q in fields["joints"])
+                while len(self._goals) > 64:
+                    del self._goals[next(iter(self._goals))]
+        elif code == "describe-self" and isinstance(result, Mapping):
+            operations = result.get("operations")
+            if isinstance(operations, list | tuple) and _NOTIFICATIONS_OPCODE not in operations:
+                self._polling = True
 
     # ------------------------------------------------------------------ free joint
 
@@ -273,8 +313,11 @@ class Manipulator(GenericOperations, PumaOperations):
         entry = (number, future)
         self._segment_waiters.append(entry)
         try:
-            if not self._notifications & NOTIFY_SEGMENTS:
-                await self.request_notifications(self._notifications | NOTIFY_SEGMENTS)
+            await self.prepare_segment_wait()
+            if self._polling:
+                future.cancel()
+                await self._poll_for_segment(number, timeout)
+                return
             try:
                 await asyncio.wait_for(future, timeout)
             except TimeoutError as exc:
@@ -284,6 +327,58 @@ class Manipulator(GenericOperations, PumaOperations):
         finally:
             if entry in self._segment_waiters:
                 self._segment_waiters.remove(entry)
+
+    @property
+    def waits_by_polling(self) -> bool:
+        """Segments are waited for by polling Joint angles: the server does not serve segment
+        notifications (it refused request-notifications, or describe self does not list it)."""
+        return self._polling
+
+    async def prepare_segment_wait(self) -> None:
+        """Ask for segment notifications (0257) unless they are on, before a motion you will wait for;
+        a server that does not serve them (a command error: a server written from the 1985 guide alone
+        answers it as an unknown opcode) sends the waits to polling instead."""
+        if self._polling or self._notifications & NOTIFY_SEGMENTS:
+            return
+        try:
+            await self.request_notifications(self._notifications | NOTIFY_SEGMENTS)
+        except NonFatalError as exc:
+            if not exc.is_command_error:
+                raise
+            self._polling = True
+
+    async def _poll_for_segment(self, number: int, timeout: float | None) -> None:
+        """Wait for segment ``number`` with the 1985 guide's own requests (the module docstring)."""
+        bound = POLL_TIMEOUT if timeout is None else timeout
+        loop = asyncio.get_running_loop()
+        end = loop.time() + bound
+        goal = self._goals.get(number) if number == self._last_queued else None  # else it ended on the way
+        last: tuple[float, ...] | None = None
+        still = 0
+        while True:
+            if self._segment_done(number):
+                return
+            angles = tuple(await self.joint_angles())
+            still = still + 1 if angles == last else 1
+            last = angles
+            at_goal = goal is None or all(
+                abs(a - g) <= AT_GOAL_DEG for a, g in zip(angles, goal, strict=False)
+            )
+            if still >= STILL_POLLS and at_goal:
+                self._arm_stood_still()
+                return
+            if loop.time() >= end:
+                where = "stands still away from its goal" if still >= STILL_POLLS else "is still moving"
+                raise RequestTimeout(
+                    None, bound, f"segment {number} did not complete (polled joint angles: the arm {where})"
+                )
+            await asyncio.sleep(POLL_INTERVAL)
+
+    def _arm_stood_still(self) -> None:
+        """Polling found the arm still: every segment queued so far has ended."""
+        queued = self._last_queued
+        if queued is not None and (self._last_segment is None or seq_gt(queued, self._last_segment)):
+            self._last_segment = queued
 
     def _segment_done(self, number: int) -> bool:
         return self._last_segment is not None and seq_le(number, self._last_segment)

@@ -179,6 +179,7 @@ class SyncManipulator:
     add_close_listener = _delegated(Manipulator.add_close_listener)
     request_notifications = _blocking(Manipulator.request_notifications)
     wait_for_segment = _blocking(Manipulator.wait_for_segment)
+    prepare_segment_wait = _blocking(Manipulator.prepare_segment_wait)
     free_joint = _blocking(Manipulator.free_joint)
     release_joint = _blocking(Manipulator.release_joint)
 

@@ -41,6 +41,8 @@ from typing import TYPE_CHECKING, Any, Final
 import click
 
 from manip.arm.kinematics import PUMA600, ArmModel
+from manip.arm.units import LENGTH_UNITS, LengthUnit
+from manip.codecs.messages import AsyncLayout
 from manip.commandline import (
     FINITE,
     FiniteFloat,
@@ -66,7 +68,12 @@ from manip.links.guard import DEFAULT_FRAME_TIMEOUT, DEFAULT_IDLE_TIMEOUT, DEFAU
 from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import DEFAULT_ADDRESS, ReferenceServer, serve
 from manip.reference_server.faults import FAULTS, FaultSet
-from manip.reference_server.session import ErrorArgs, ServerConfig
+from manip.reference_server.session import (
+    PROFILES,
+    ConfigurationBits,
+    ErrorArgs,
+    server_config,
+)
 from manip.reference_server.world import ReferenceWorld, serve_world
 
 if TYPE_CHECKING:
@@ -208,13 +215,44 @@ def command_line(ctx: click.Context) -> list[str]:
 )
 @click.option("--list-faults", is_flag=True, help="List the fault switches and exit.")
 @click.option(
+    "--profile",
+    type=click.Choice(PROFILES),
+    default="manip",
+    show_default=True,
+    help="manip: the reference server as manip documents it. guide: as a server written from the 1985 "
+    "guide alone would be (no extension opcodes, lengths in inches, asynchronous responses in the "
+    "guide's 6-byte layout, configuration bits besides bit 0 answered with done); the options below "
+    "change single choices of either.",
+)
+@click.option(
     "--error-args",
     type=click.Choice(["aligned", "packed"]),
-    default="aligned",
-    show_default=True,
+    default=None,
     help="Layout of the numbers after an error string's NUL, both conformant (erratum error-arg-layout): "
-    "aligned to an even offset by a zero pad byte, or packed straight after the NUL as in the 1985 "
-    "guide's NZI example.",
+    "aligned to an even offset by a zero pad byte (the default), or packed straight after the NUL as in "
+    "the 1985 guide's NZI example.",
+)
+@click.option(
+    "--async-layout",
+    type=click.Choice(["numbered", "guide"]),
+    default=None,
+    help="Layout of an asynchronous response (0203), both conformant (erratum async-request-number): "
+    "numbered, the last request's number first (8 bytes, profile manip), or the 1985 guide's condition "
+    "code and two words (6 bytes, profile guide).",
+)
+@click.option(
+    "--length-unit",
+    type=click.Choice(LENGTH_UNITS),
+    default=None,
+    help="Unit of lengths on the wire (erratum units): transforms' positions and incremental moves' dX "
+    "dY dZ (mm for profile manip, inch for profile guide); the arm model stays in millimetres.",
+)
+@click.option(
+    "--configuration-bits",
+    type=click.Choice(["refuse", "done"]),
+    default=None,
+    help="Set configuration with bits besides bit 0 (erratum set-configuration): refuse with C BVA "
+    "(profile manip) or answer done and use bit 0 (profile guide), both conformant.",
 )
 @click.option("--powered", is_flag=True, help="Arm power on at connection (default: off, as on the Puma).")
 @click.option(
@@ -327,7 +365,11 @@ def main(
     broken_after: float | None,
     faults: FaultSet,
     list_faults: bool,
-    error_args: ErrorArgs,
+    profile: str,
+    error_args: ErrorArgs | None,
+    async_layout: AsyncLayout | None,
+    length_unit: LengthUnit | None,
+    configuration_bits: ConfigurationBits | None,
     powered: bool,
     no_extensions: bool,
     max_clients: int,
@@ -371,12 +413,19 @@ def main(
         if warning is not None:
             click.echo(warning, err=True)
     configure_logging(log_level)
-    config = ServerConfig(
+    chosen = {
+        "error_args": error_args,
+        "async_layout": async_layout,
+        "length_unit": length_unit,
+        "configuration_bits": configuration_bits,
+        "extensions": False if no_extensions else None,
+    }
+    config = server_config(
+        profile,
         model=MODELS[model],
         powered_at_open=powered,
         faults=faults,
-        error_args=error_args,
-        extensions=not no_extensions,
+        **{name: value for name, value in chosen.items() if value is not None},
     )
     server = functools.partial(
         serve,

@@ -199,9 +199,12 @@ class Defects:
         """The request-notifications mask the asynchronous responses are sent by: the client's."""
         return mask
 
-    def async_response(self, number: int, condition: int, word2: int, word3: int) -> bytes:
-        """The data of an asynchronous response (0203)."""
-        return encode_async(number, condition, word2, word3)
+    def async_response(
+        self, number: int, condition: int, word2: int, word3: int, *, numbered: bool = True
+    ) -> bytes:
+        """The data of an asynchronous response (0203), with the request number first (``numbered``,
+        manip's layout) or without (the 1985 guide's): erratum ``async-request-number``."""
+        return encode_async(number, condition, word2, word3, async_has_request_number=numbered)
 
     def reports_guard(self, hit: GuardHit) -> bool:
         """Whether a guard hit is told to the client at all (as a guard-hit response, or an error)."""
@@ -435,13 +438,15 @@ class SwitchedDefects(Defects):
     def notifications(self, mask: int) -> int:
         return _ALL_NOTIFICATIONS if self._on(Fault.UNREQUESTED_ASYNC) else mask
 
-    def async_response(self, number: int, condition: int, word2: int, word3: int) -> bytes:
+    def async_response(
+        self, number: int, condition: int, word2: int, word3: int, *, numbered: bool = True
+    ) -> bytes:
         if condition == AsyncCondition.GUARD_HIT and self._on(Fault.GUARD_HIT_WORD_SWAPPED):
             word2 = GUARD_STOP + GUARD_CONTINUE - word2
         if condition == AsyncCondition.SEGMENT_COMPLETED and self._on(Fault.SEGMENT_REPORT_PREVIOUS):
             word3 = (word3 - 1) & WORD_MASK
-        with_number = not self._on(Fault.ASYNC_WITHOUT_NUMBER)
-        return encode_async(number, condition, word2, word3, async_has_request_number=with_number)
+        data = encode_async(number, condition, word2, word3, async_has_request_number=numbered)
+        return data + b"\0" if self._on(Fault.ASYNC_STRAY_BYTE) else data
 
     def reports_guard(self, hit: GuardHit) -> bool:
         return not self._on(Fault.GUARD_UNREPORTED)

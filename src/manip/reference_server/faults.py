@@ -62,7 +62,7 @@ class Fault(enum.StrEnum):
     SPEED_UNCHECKED = "speed-unchecked"
     SEGMENT_NUMBER_STUCK = "segment-number-stuck"
     UNREQUESTED_ASYNC = "unrequested-async"
-    ASYNC_WITHOUT_NUMBER = "async-without-request-number"
+    ASYNC_STRAY_BYTE = "async-stray-byte"
     FREE_JOINT_EXECUTES = "free-joint-executes"
     DESCRIBE_EXTRA_OPERATION = "describe-extra-operation"
     DESCRIBE_MISSING_OPERATION = "describe-missing-operation"
@@ -322,8 +322,8 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 Fault.AWA_REFUSES_ALL,
                 "protocol",
                 "After an abort every request but enable power and reset abort is refused with AWA, not only "
-                "motion (the E.2 table's reading; erratum awa-scope).",
-                "motion.abort",
+                "motion (the E.2 table's reading, which conforms but warns; erratum awa-scope).",
+                "motion.abort-serves-others",
             ),
             _info(
                 Fault.SPEED_UNCHECKED,
@@ -344,9 +344,10 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "async.only-when-requested",
             ),
             _info(
-                Fault.ASYNC_WITHOUT_NUMBER,
+                Fault.ASYNC_STRAY_BYTE,
                 "protocol",
-                "Asynchronous responses lack the leading request-number word.",
+                "Asynchronous responses carry a stray zero byte after their data: 9 bytes (7 in the 1985 "
+                "guide's layout), a length neither layout has.",
                 "async.layout",
             ),
             _info(

@@ -1,8 +1,7 @@
 """One connection of the reference Puma server, as a sans-I/O state machine.
 
 Theory of operation
-===================
-
+============
 A driver (not here: it owns the Chaos connection, the clock and the timers) feeds the session what
 happens and sends what the session returns:
 
@@ -84,11 +83,13 @@ from manip.arm.sim import (
     SegmentCompleted,
 )
 from manip.arm.transform import Transform
+from manip.arm.units import LengthUnit, WireLengths
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.errors import DecodeError
 from manip.codecs.lispm_text import encode_lispm
 from manip.codecs.messages import (
     MAX_TEXT_PER_PACKET,
+    AsyncLayout,
     Value,
     encode_reply,
 )
@@ -104,8 +105,10 @@ from manip.spec.notation import octal
 
 __all__ = [
     "HANDLERS",
+    "PROFILES",
     "TRANSITIONS",
     "WRIST_OPERATIONS",
+    "ConfigurationBits",
     "ErrorArgs",
     "Input",
     "Outgoing",
@@ -114,12 +117,14 @@ __all__ = [
     "ServerSession",
     "SessionUsageError",
     "State",
+    "server_config",
 ]
 
 log = logging.getLogger("manip.reference_server")
 
 WORD_MASK: Final = 0xFFFF
 ErrorArgs = Literal["aligned", "packed"]
+ConfigurationBits = Literal["refuse", "done"]
 
 
 class State(enum.Enum):
@@ -178,6 +183,43 @@ class ServerConfig:
     """Serve manip's Puma extension opcodes (0240 and up: the wrist, request notifications, reset abort).
     Off, the server is one written from the 1985 guide alone: it serves Appendix E's opcodes only, refuses
     every extension opcode exactly as an unknown one (C UOP), and describe self does not list them."""
+    async_layout: AsyncLayout = "numbered"
+    """The layout of an asynchronous response (erratum async-request-number; both conform):
+    ``numbered`` puts the number of the last request processed first (8 bytes), ``guide`` writes the
+    1985 guide's condition code and two words (6 bytes)."""
+    length_unit: LengthUnit = "mm"
+    """The unit of lengths on the wire (erratum units): the arm model stays in millimetres and the
+    session converts transforms' positions and incremental moves' dX dY dZ at its boundary."""
+    configuration_bits: ConfigurationBits = "refuse"
+    """Set configuration with bits other than bit 0 (erratum set-configuration; both conform): ``refuse``
+    answers C BVA, ``done`` answers done, as the 1985 guide says of set configuration, and uses bit 0."""
+
+    @classmethod
+    def guide_profile(cls, **changes: Any) -> ServerConfig:
+        """A server as one written from the 1985 guide alone would be (``manip-server --profile guide``):
+        no extension opcodes, lengths in inches, asynchronous responses in the guide's 6-byte layout,
+        configuration bits besides bit 0 answered with done.  ``changes`` set other fields."""
+        profile: dict[str, Any] = {
+            "extensions": False,
+            "length_unit": "inch",
+            "async_layout": "guide",
+            "configuration_bits": "done",
+        }
+        return cls(**{**profile, **changes})
+
+
+PROFILES: Final = ("manip", "guide")
+"""The reference server's profiles: ``manip`` (:class:`ServerConfig`'s defaults) and ``guide``
+(:meth:`ServerConfig.guide_profile`)."""
+
+
+def server_config(profile: str = "manip", **changes: Any) -> ServerConfig:
+    """The configuration of ``profile`` (one of :data:`PROFILES`), with ``changes`` to single fields."""
+    if profile == "guide":
+        return ServerConfig.guide_profile(**changes)
+    if profile != "manip":
+        raise ValueError(f"unknown server profile {profile!r} (known: {', '.join(PROFILES)})")
+    return ServerConfig(**changes)
 
 
 @dataclass(frozen=True, slots=True)
@@ -212,6 +254,8 @@ class ServerSession:
         self, config: ServerConfig | None = None, *, arm: ArmSim | None = None, wrist: Wrist | None = None
     ) -> None:
         self.config = config or ServerConfig()
+        self.lengths = WireLengths(self.config.length_unit)
+        """Where wire lengths become the arm model's millimetres and back (the one place)."""
         self.defects: Defects = defects_for(self.config.faults)
         """The hook points the fault switches bend (chosen once, here)."""
         self.arm = arm or ArmSim(self.config.model, powered=self.config.powered_at_open)
@@ -502,7 +546,10 @@ class ServerSession:
 
     def _emit_async(self, number: int, condition: int, word2: int, word3: int) -> None:
         self._emit(
-            ServerOp.ASYNCHRONOUS_RESPONSE, self.defects.async_response(number, condition, word2, word3)
+            ServerOp.ASYNCHRONOUS_RESPONSE,
+            self.defects.async_response(
+                number, condition, word2, word3, numbered=self.config.async_layout == "numbered"
+            ),
         )
 
     # ------------------------------------------------------------------------------- handlers
@@ -510,7 +557,7 @@ class ServerSession:
         floats = values["transform"]
         assert isinstance(floats, tuple)
         try:
-            return Transform.from_floats([float(x) for x in floats], orthonormalise=True)
+            return Transform.from_floats(list(self.lengths.transform_in(floats)), orthonormalise=True)
         except ValueError as exc:
             raise errors.bad_value(op, "N, O and A are not a rotation") from exc
 
@@ -531,7 +578,7 @@ class ServerSession:
     def _here(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         actual = self.arm.actual
         if self._pose is None or self._pose[0] != actual:
-            self._pose = (actual, self.arm.pose().to_floats())
+            self._pose = (actual, self.lengths.transform_out(self.arm.pose().to_floats()))
         return {"transform": self._pose[1]}
 
     def _joint_angles(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
@@ -553,7 +600,7 @@ class ServerSession:
 
     def _set_configuration(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         low = _int(values["configuration"]) & 0xFF  # erratum set-configuration: the low byte counts
-        if low & 0xFE:
+        if low & 0xFE and self.config.configuration_bits == "refuse":
             raise errors.bad_value("set-configuration", f"configuration {low} has bits other than bit 0 set")
         if self.defects.applies_configuration:
             self.arm.set_configuration(lefty=bool(low & 1))
@@ -564,7 +611,7 @@ class ServerSession:
         return {}
 
     def _delta(self, values: Mapping[str, Value]) -> tuple[float, ...]:
-        return self.defects.increment(_floats(values["delta"]))
+        return self.defects.increment(self.lengths.increment_in(_floats(values["delta"])))
 
     def _incremental_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         return {"segment": self.arm.move_increment(self._delta(values), now)}
@@ -600,7 +647,8 @@ class ServerSession:
         return {"joints": self.arm.solve(pose, _floats(values["current"]))}
 
     def _solve_backwards(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
-        return {"transform": forward(_floats(values["joints"]), self.arm.model.geometry).to_floats()}
+        pose = forward(_floats(values["joints"]), self.arm.model.geometry)
+        return {"transform": self.lengths.transform_out(pose.to_floats())}
 
     def _request_notifications(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         mask = _int(values["mask"])

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from functools import cache
 from importlib import resources
 from types import MappingProxyType
-from typing import Any, TypeVar, cast
+from typing import Any, TypeVar, cast, get_args
 
 from manip.spec.constants import RequestName
 from manip.spec.model import (
@@ -29,6 +29,7 @@ from manip.spec.model import (
     Field,
     FieldType,
     Layout,
+    Origin,
     RequestOpcode,
     ResponseShape,
     ServerOpcode,
@@ -178,6 +179,10 @@ def _check(spec: Spec) -> None:
     for c in spec.clauses.values():
         if c.errata is not None and c.errata not in spec.errata:
             raise SpecError(f"clause {c.id} names unknown erratum {c.errata!r}")
+        if c.origin not in get_args(Origin):
+            raise SpecError(f"clause {c.id}: origin {c.origin!r} is not one of {', '.join(get_args(Origin))}")
+        if c.origin == "manip" and c.errata is None and c.section != "manip":
+            raise SpecError(f"clause {c.id} is manip's decision but names no erratum saying why")
     for e in spec.errata.values():
         for cid in e.clauses:
             if cid not in spec.clauses:

@@ -9,6 +9,9 @@ from manip.spec.constants import RequestName
 
 Level = Literal["MUST", "SHOULD", "MAY", "INFO"]
 Party = Literal["server", "client", "both", "cougar", "puma", "link"]
+Origin = Literal["guide", "manip", "chaosnet"]
+"""Whose statement a clause is: the 1985 guide's, manip's decision where the guide is silent or
+ambiguous (an erratum says why), or the Chaosnet documents' (AIM 628, CHUDP, the chaosd socket)."""
 Hazard = Literal["read-only", "config", "motion", "power"]
 ResponseForm = Literal["done", "data", "segment", "multi"]
 Element = Literal["float", "word", "int16", "small", "counted", "text"]
@@ -24,6 +27,8 @@ class Clause:
     party: Party
     section: str
     text: str
+    origin: Origin
+    """``guide``, ``manip`` or ``chaosnet`` (:data:`Origin`); every clause states it."""
     errata: str | None = None
     retired: bool = False
     replaced_by: tuple[str, ...] = ()

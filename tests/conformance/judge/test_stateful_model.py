@@ -230,3 +230,39 @@ def test_an_unlisted_extension_may_be_refused_as_unserved_whatever_the_arm_s_sta
     assert m.judge(e, AnswerSummary(True, segment=1)) is not None
     listed = ProtocolModel(powered=False, aborted=True, served=frozenset({op("compliant-move")}))
     assert listed.judge(listed.expect(op("compliant-move"), move), refusal("UIM", "C")) is not None
+
+
+def test_configuration_bits_besides_bit_0_may_be_done_or_refused() -> None:
+    # the 1985 guide: "one byte long, with the low bit a 1 for lefty ... The response is a 'done'"
+    s = Session()
+    e = s.expect("set-configuration", configuration=3)
+    assert e.normal and e.command and e.clause == "set-configuration.data"
+    assert s.model.judge(e, DONE) is None
+    assert s.model.judge(e, refusal("BVA", "C")) is None
+    assert s.model.judge(e, refusal("BVA", "E")) is not None
+
+
+def test_while_segments_run_any_error_code_may_refuse_motion_or_free_joint() -> None:
+    # E.2: "others may be used by specific manipulators"; the guide names no code for either condition
+    s = Session(powered=True, aborted=False)
+    s.do("set-joint-angles", AnswerSummary(True, segment=1), joints=READY)
+    for name, values in (("free-joint", {"joint": 2}), ("set-joint-angles", {"joints": READY})):
+        e = s.expect(name, **values)
+        assert e.normal and e.any_code and "any code" in e.describe()
+        for code in ("SQF", "JNF", "BSY"):
+            assert s.model.judge(e, refusal(code)) is None
+        assert s.model.judge(e, refusal("BUG", "BE")) is not None
+    idle = Session(powered=True, aborted=False)
+    e = idle.expect("free-joint", joint=2)
+    assert not e.any_code and idle.model.judge(e, refusal("JNF")) is not None
+
+
+def test_an_async_response_in_the_guides_layout_has_no_number_to_judge() -> None:
+    s = Session(powered=True, aborted=False)
+    s.do("request-notifications", DONE, mask=2)
+    s.do("set-joint-angles", AnswerSummary(True, segment=1), joints=READY)
+    assert s.model.on_async_response(None, 2, 0, 1) is None
+    assert s.model.outstanding == []
+    s.do("request-notifications", DONE, mask=0)
+    finding = s.model.on_async_response(None, 2, 0, 2)
+    assert finding is not None and finding.clause == "async.only-when-requested"

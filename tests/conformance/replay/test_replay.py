@@ -18,7 +18,13 @@ from manip.conformance.cli import main
 from manip.conformance.judge.checks import WirePacket
 from manip.conformance.output.report import load_schema
 from manip.conformance.replay.against import AnswerSorter, ReplayOptions, replay_capture, script_of
-from manip.conformance.replay.masking import NumberMap, SegmentBase, compare_answer, floats_equal
+from manip.conformance.replay.masking import (
+    NumberMap,
+    SegmentBase,
+    compare_answer,
+    compare_async,
+    floats_equal,
+)
 from manip.conformance.replay.serve import ServeOptions, serve_capture
 from manip.conformance.suite.embedded import EmbeddedServer
 from manip.conformance.suite.results import RunReport
@@ -60,7 +66,7 @@ def test_golden_capture_replays_cleanly(name: str) -> None:
         ("motion", "swapped-float-words", "joints["),
         ("describe-self", "no-describe-terminator", "terminator"),
         ("errors", "wrong-severity", "error.severity"),
-        ("motion", "async-without-request-number", "asynchronous packet 1"),
+        ("motion", "async-stray-byte", "asynchronous packet 1"),
     ],
 )
 def test_a_changed_server_is_caught_with_the_field(name: str, fault: str, path: str) -> None:
@@ -85,6 +91,18 @@ def test_ignore_drops_mismatches_by_path() -> None:
     exchange = report.results[0]
     assert exchange.outcome == "pass" and any("left out by --ignore" in n for n in exchange.notes)
     assert report.results[1].outcome == "fail"  # the live checks still see the wrong severity letter
+
+
+def test_an_async_in_the_guides_layout_is_compared_without_a_request_number() -> None:
+    def guide(condition: int, word2: int = 1) -> WirePacket:
+        return WirePacket("s2c", ServerOp.ASYNCHRONOUS_RESPONSE, 9, 7, bytes([condition, 0, word2, 0, 3, 0]))
+
+    numbers = NumberMap({7: 40})  # the condition code 2 is no request number to renumber
+    assert compare_async(guide(1), guide(1), numbers, SegmentBase()) == []
+    (m,) = compare_async(guide(1), guide(1, word2=2), numbers, SegmentBase())
+    assert m.path == "async.word2"
+    numbered = WirePacket("s2c", ServerOp.ASYNCHRONOUS_RESPONSE, 9, 7, bytes([7, 0, 2, 0, 0, 0, 3, 0]))
+    assert compare_async(guide(2, 0), numbered, numbers, SegmentBase())  # the layout changed: a mismatch
 
 
 def test_masks_renumber_requests_and_segments_and_tolerate_float_noise() -> None:

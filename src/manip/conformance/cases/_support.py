@@ -36,6 +36,7 @@ from manip.conformance.judge.checks import (
     WirePacket,
     check_error_packet,
     check_reply,
+    completed_segment,
     description_operations,
     multi_text,
     parse_description,
@@ -255,7 +256,7 @@ async def timed_move(
             ctx.not_judged(f"the arm did not reach {list(goal)} within {within:g} s, so no move was timed")
         return end - start
     while (packet := await probe.next_packet(within)) is not None:
-        if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(packet.data, 6) == segment:
+        if completed_segment(packet) == segment:
             return ctx.clock() - start
     ctx.not_judged(
         f"the case times moves by their segment-completed reports; none came for segment {segment} "

@@ -32,7 +32,7 @@ from manip.codecs.error_string import SPECIALS, ErrorMessage
 from manip.codecs.errors import CodecError, DecodeError
 from manip.codecs.lisp import Cons, Keyword, LispValue, read_alist
 from manip.codecs.lispm_text import decode_lispm
-from manip.codecs.messages import decode_error, decode_reply, decode_request
+from manip.codecs.messages import AsyncResponse, decode_async, decode_error, decode_reply, decode_request
 from manip.codecs.pairing import ANSWER_OPCODES, UNSOLICITED_OPCODES, ReplyPairing
 from manip.conformance.judge.diagnosis import float_payload, floats_diagnosis, number_diagnosis
 from manip.conformance.judge.packets import CLOSE_OPCODES, Direction, WirePacket, describe, opcode_name, word
@@ -51,6 +51,7 @@ __all__ = [
     "Refusal",
     "Violation",
     "WirePacket",
+    "async_of",
     "check_async_packet",
     "check_client_guards",
     "check_client_request",
@@ -62,6 +63,7 @@ __all__ = [
     "check_reply",
     "check_server_opcode",
     "check_transcript",
+    "completed_segment",
     "describe",
     "description_operations",
     "multi_text",
@@ -266,11 +268,14 @@ def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Violat
         add("error-string.code", f"error code {error.code!r} is not three letters", "three letters", shown)
     if error.has_nul:
         wanted = sum(error.message.count(ch) for ch in SPECIALS)
-        if wanted != len(error.args):
+        # one or more numbers per special character (E.2; erratum error-substitution), none without one
+        if len(error.args) < wanted or (error.args and not wanted):
             add(
                 "error-string.substitution",
                 f"{len(error.args)} number(s) after the NUL for {wanted} ~/$ in the message",
-                f"{wanted} number(s), one per ~ or $",
+                f"{wanted} number(s) or more, at least one per ~ or $"
+                if wanted
+                else "no number without a ~ or $",
                 f"{len(error.args)} number(s): {list(error.args)}",
             )
     return out
@@ -281,22 +286,41 @@ def _codec_finding(exc: CodecError, packet: WirePacket, default: str, expected: 
     return Violation(str(exc), clause, expected=expected, actual=str(exc), data=packet.data, packet=packet)
 
 
+def async_of(packet: WirePacket) -> AsyncResponse | None:
+    """An asynchronous response's fields in either layout, told apart by length (manip's 8 bytes with
+    the request number first, the 1985 guide's 6 without: erratum ``async-request-number``); None when
+    its length is neither."""
+    try:
+        return decode_async(packet.data)
+    except CodecError:
+        return None
+
+
+def completed_segment(packet: WirePacket) -> int | None:
+    """The segment a segment-completed response (0203, condition 2, either layout) reports; None for
+    any other packet."""
+    message = async_of(packet) if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE else None
+    if message is None or message.condition != AsyncCondition.SEGMENT_COMPLETED:
+        return None
+    return message.word3
+
+
 def check_async_packet(packet: WirePacket, requested_mask: int | None = None) -> list[Violation]:
     """An asynchronous response (0203): layout, condition code, and (given the mask asked for) that it
     was requested.  ``requested_mask``: bit n = condition n+1 (request-notifications); None skips that."""
-    data = packet.data
-    if len(data) != 8:
+    message = async_of(packet)
+    if message is None:
         return [
             Violation.at(
                 packet,
                 "async.layout",
-                f"asynchronous response of {len(data)} data bytes",
-                expected="8 data bytes: request number, condition code, two words",
-                actual=f"{len(data)} bytes",
+                f"asynchronous response of {len(packet.data)} data bytes",
+                expected="8 data bytes (request number, condition code, two words) or the 1985 guide's 6 "
+                "(condition code, two words)",
+                actual=f"{len(packet.data)} bytes",
             )
         ]
-    condition = word(data, 2) or 0
-    word2 = word(data, 4) or 0
+    condition, word2 = message.condition, message.word2
     out: list[Violation] = []
     code = SPEC.async_codes.get(condition)
     if code is None:
@@ -465,8 +489,9 @@ def check_client_guards(packets: Sequence[WirePacket]) -> list[Violation]:
     frame_changed: WirePacket | None = None
     for p in packets:
         if p.direction == "s2c":
-            if p.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and word(p.data, 2) == AsyncCondition.GUARD_HIT:
-                armed.pop(word(p.data, 6) or 0, None)
+            hit = async_of(p) if p.opcode == ServerOp.ASYNCHRONOUS_RESPONSE else None
+            if hit is not None and hit.condition == AsyncCondition.GUARD_HIT:
+                armed.pop(hit.word3, None)
             continue
         if p.opcode == _NOTIFICATIONS:
             mask = word(p.data, 0) or 0

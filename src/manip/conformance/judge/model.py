@@ -25,7 +25,8 @@ How a request is judged (:meth:`ProtocolModel.expect`), from its bytes alone:
 1. while ``free_wait``: only an empty done echoing its number (``free-joint.replies``);
 2. an opcode the spec does not define: a command error (C), never a normal reply;
 3. data that do not decode by the layout: wrong length or a reserved-operand float, a command error;
-4. values outside what the spec allows (speed factor, free-joint joint number, configuration bits): C;
+4. values outside what the spec allows (speed factor, free-joint joint number): C; configuration bits
+   besides bit 0: done (the 1985 guide's answer) or C (erratum ``set-configuration``);
 5. manip's extension opcodes (0240 and up) the server does not list under :operations may also be
    refused with a command error (an unserved opcode);
 6. motion requests go through the gate: aborted -> AWA only (erratum ``abort-before-power``: the abort
@@ -36,9 +37,10 @@ How a request is judged (:meth:`ProtocolModel.expect`), from its bytes alone:
    (:meth:`observe`);
 7. otherwise the normal reply of the opcode's shape.
 
-The model never allows a fatal error or a BE (bug) error; it allows SQF (queue full) only while
-segments are outstanding.  Segment numbers that do not increase by one are recorded in
-:attr:`ProtocolModel.segment_findings` rather than refused, because that clause is a SHOULD.
+The model never allows a fatal error or a BE (bug) error.  While segments are outstanding it allows a
+non-fatal error of any code to a motion request or free joint (queue full, joint busy: the 1985 guide
+names no code for either; manip's server says SQF).  Segment numbers that do not increase by one are
+recorded in :attr:`ProtocolModel.segment_findings` rather than refused, because that clause is a SHOULD.
 """
 
 from __future__ import annotations
@@ -108,6 +110,8 @@ LIMIT_SLACK: Final = 1e-3
 MOTION_NAMES: Final = frozenset(op.name for op in SPEC.requests.values() if op.response.form == "segment")
 _SEGMENT_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
 _GUARD_BIT: Final = 1 << SPEC.async_codes[AsyncCondition.GUARD_HIT].notification_bit
+_RESETS: Final = frozenset({"enable-power", "reset-abort"})
+"""The requests that reset an abort (erratum abort-reset): never refused for it."""
 _DEFINED_MASK: Final = sum(1 << code.notification_bit for code in SPEC.async_codes.values())
 
 
@@ -123,6 +127,11 @@ class Expectation:
     """A command error (severity C, any code) is allowed."""
     discard: bool = False
     """Only an empty done is allowed: the packet after free joint."""
+    any_code: bool = False
+    """A non-fatal error with any code is allowed: the condition is one the 1985 guide names no code for
+    (E.2: "others may be used by specific manipulators"; erratum ``unnamed-error-codes``)."""
+    excluded: frozenset[str] = frozenset()
+    """Codes ``any_code`` still does not allow (JOR for a transform: erratum ``transform-refusals``)."""
     clause: str = "request.one-reply"
     """The clause a reply outside the allowed ones breaks."""
     why: str = ""
@@ -135,6 +144,9 @@ class Expectation:
         if self.command:
             parts.append("a command error (severity C)")
         parts += [f"a non-fatal error {code}" for code in sorted(self.codes)]
+        if self.any_code:
+            but = f" but {', '.join(sorted(self.excluded))}" if self.excluded else ""
+            parts.append(f"a non-fatal error with any code{but}")
         text = " or ".join(parts) if parts else "nothing"
         return f"{text} ({self.why})" if self.why else text
 
@@ -209,6 +221,10 @@ class ProtocolModel:
         except CodecError as exc:
             return Expectation(False, command=True, clause="request.data-length", why=exc.message)
         expectation = self._expect_valid(op, values)
+        if self.aborted is not False and op.name not in MOTION_NAMES and op.name not in _RESETS:
+            # E.2: "no further commands will be processed until a reset": the others may get AWA too
+            # (erratum awa-scope; server.motion.awa-reset-abort warns of it under a SHOULD clause)
+            expectation = replace(expectation, codes=expectation.codes | {"AWA"})
         if op.extension and (self.served is None or opcode not in self.served):
             # manip's Puma extensions are optional: a server that does not list one may refuse it (C),
             # whatever the arm's state (an opcode it does not serve is not refused for power or abort)
@@ -234,9 +250,9 @@ class ProtocolModel:
             return Expectation(True, clause="response.done-empty")
         if name == "set-configuration":
             low = _int(values["configuration"]) & 0xFF  # erratum set-configuration: the low byte
-            if low & 0xFE:
+            if low & 0xFE:  # the 1985 guide answers done; refusing bits it does not define is allowed too
                 return Expectation(
-                    False, command=True, clause="set-configuration.data", why="bits besides bit 0"
+                    True, command=True, clause="set-configuration.data", why="bits besides bit 0"
                 )
             return Expectation(True, clause="set-configuration.data")
         if name == "free-joint":
@@ -279,7 +295,12 @@ class ProtocolModel:
             codes.add("NAP")
             why.append("arm power unknown")
         if self.outstanding:
-            codes.add("SQF")
+            # queue full, or no freeing a joint while the arm moves: the 1985 guide names no code for
+            # either, so any non-fatal error may say it (E.2: "others may be used"); manip's is SQF
+            why.append("segments may be running")
+            return Expectation(
+                normal, codes=frozenset(codes), any_code=True, clause=clause, why="; ".join(why)
+            )
         return Expectation(normal, codes=frozenset(codes), clause=clause, why="; ".join(why))
 
     def _expect_motion(self, op: RequestOpcode, values: Mapping[str, Value]) -> Expectation:
@@ -317,7 +338,16 @@ class ProtocolModel:
         command = deviation > ROTATION_OK
         if vouch and tuple(floats) in self.reachable:
             return Expectation(True, command=command, clause=clause, why="the server's own transform")
-        return Expectation(True, codes=frozenset({"TOR"}), command=command, clause=clause)
+        # TOR, or for a transform no joint angles reach any code but JOR (erratum unnamed-error-codes)
+        return Expectation(
+            True,
+            codes=frozenset({"TOR"}),
+            any_code=True,
+            excluded=frozenset({"JOR"}),
+            command=command,
+            clause=clause,
+            why="perhaps out of reach",
+        )
 
     def _inside(self, joint: int, q: float, slack: float) -> bool:
         """``q`` is within joint ``joint``'s range shrunk by ``slack`` (grown when negative)."""
@@ -345,6 +375,8 @@ class ProtocolModel:
                 _show(reply),
             )
         if err.code in expectation.codes or (expectation.command and err.severity == "C"):
+            return None
+        if expectation.any_code and err.code not in expectation.excluded:
             return None
         return finding(expectation.clause, expectation.describe(), _show(reply))
 
@@ -427,15 +459,20 @@ class ProtocolModel:
         index = self._order.get(number & WORD)
         return index is not None and index >= self._answered
 
-    def on_async_response(self, number: int, condition: int, word2: int, word3: int) -> Violation | None:
-        """An asynchronous response (0203) arrived carrying request number ``number``."""
-        if not self.last_processed_ok(number):
+    def on_async_response(
+        self, number: int | None, condition: int, word2: int, word3: int
+    ) -> Violation | None:
+        """An asynchronous response (0203) arrived carrying request number ``number`` (None: the 1985
+        guide's layout, which carries none; the mask in force now is the one that counts)."""
+        if number is not None and not self.last_processed_ok(number):
             return finding(
                 "async.layout",
                 "the number of the last request processed (one sent and not older than the last answered)",
                 f"request number {number}",
             )
-        mask = self._mask_after.get(number & WORD, self.notifications)
+        mask = (
+            self.notifications if number is None else self._mask_after.get(number & WORD, self.notifications)
+        )
         if condition == AsyncCondition.SEGMENT_COMPLETED:
             if not mask & _SEGMENT_BIT:
                 return finding(
@@ -496,10 +533,21 @@ def _combine(gate: Expectation, data: Expectation) -> Expectation:
         clause = data.clause if not data.normal else gate.clause if not gate.normal else data.clause
     else:
         clause = gate.clause
+    any_code = gate.any_code or data.any_code
+    excluded = (gate.excluded | data.excluded) if any_code else frozenset()
     if not gate.normal and gate.codes == frozenset({"AWA"}):
         codes, clause = frozenset({"AWA"}), "motion.abort"  # the abort is reported first
+        any_code, excluded = False, frozenset()
     why = "; ".join(w for w in (gate.why, data.why) if w)
-    return Expectation(normal, codes, gate.command or data.command, clause=clause, why=why)
+    return Expectation(
+        normal,
+        codes,
+        gate.command or data.command,
+        any_code=any_code,
+        excluded=excluded,
+        clause=clause,
+        why=why,
+    )
 
 
 def _int(value: Value) -> int:

@@ -108,9 +108,11 @@ def decoded(packet: WirePacket, request_opcode: int | None = None) -> str:
             return _fields(reply.values, response_layout(op))
         if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE:
             message = decode_async(data)
-            return (
-                f"{message.condition_name} (condition {message.condition}), words {message.word2} "
-                f"and {message.word3}, for request number {message.request_number}"
+            number = message.request_number
+            return f"{message.condition_name} (condition {message.condition}), words {message.word2} " + (
+                f"and {message.word3}, for request number {number}"
+                if number is not None
+                else f"and {message.word3} (the 1985 guide's layout: no request number)"
             )
         if packet.opcode in _ERRORS:
             try:

@@ -13,7 +13,7 @@ from typing import Any, Final
 from manip.codecs.messages import decode_reply
 from manip.codecs.pdp11float import f_to_words, words_to_f
 from manip.conformance.cases._support import power_on, read_floats, require_response
-from manip.conformance.judge.checks import WirePacket
+from manip.conformance.judge.checks import WirePacket, async_of
 from manip.conformance.puma.judge import CougarScript, JudgingCougar, NoJudgeError, current_judge
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.spec import SPEC, RequestName
@@ -82,9 +82,10 @@ async def move(ctx: CaseContext, probe: Probe, op: RequestName, **values: Any) -
 
 
 def async_words(packet: WirePacket) -> tuple[int, ...]:
-    """The words of an asynchronous response after its request number."""
-    data = packet.data[2:]
-    return tuple(int.from_bytes(data[i : i + 2], "little") for i in range(0, len(data) - 1, 2))
+    """The words of an asynchronous response after its request number (condition, word 2, word 3), in
+    either layout (erratum ``async-request-number``); none when its length is neither."""
+    message = async_of(packet)
+    return () if message is None else (message.condition, message.word2, message.word3)
 
 
 def is_completed(segment: int) -> Callable[[WirePacket], bool]:

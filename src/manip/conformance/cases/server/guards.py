@@ -20,7 +20,7 @@ from manip.conformance.cases._support import (
     require_response,
     settle,
 )
-from manip.conformance.judge.checks import WirePacket, word
+from manip.conformance.judge.checks import WirePacket, async_of
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
 from manip.conformance.suite.world import WristForce
@@ -46,8 +46,8 @@ async def _guard_hit(ctx: CaseContext, probe: Probe, wait: float) -> WirePacket 
         packet = await probe.next_packet(left)
         if packet is None:
             return None
-        condition = word(packet.data, 2)
-        if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE and condition == AsyncCondition.GUARD_HIT:
+        message = async_of(packet) if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE else None
+        if message is not None and message.condition == AsyncCondition.GUARD_HIT:
             return packet
     return None
 
@@ -66,8 +66,13 @@ def _unrequested(probe: Probe, mask: int, since: float) -> list[WirePacket]:
         if p.direction == "s2c"
         and p.time >= since
         and p.opcode == ServerOp.ASYNCHRONOUS_RESPONSE
-        and not mask >> ((word(p.data, 2) or 1) - 1) & 1
+        and not mask >> ((_condition(p) or 1) - 1) & 1
     ]
+
+
+def _condition(packet: WirePacket) -> int | None:
+    message = async_of(packet)
+    return None if message is None else message.condition
 
 
 @case(
@@ -310,8 +315,9 @@ async def _expect_hit(ctx: CaseContext, probe: Probe, index: int, *, after: str,
             actual="nothing",
         )
     kind, said = (1, "trajectory stopped") if stops else (2, "trajectory continues")
+    message = async_of(hit)
     ctx.expect(
-        (word(hit.data, 4), word(hit.data, 6)) == (kind, index),
+        message is not None and (message.word2, message.word3) == (kind, index),
         clause="async.layout",
         expected=f"word 2 = {kind} ({said}), word 3 = {index} (the guard)",
         seen=hit,

@@ -32,7 +32,7 @@ from manip.arm.transform import FLOAT_ROTATION_TOL, Transform
 from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request
 from manip.conformance.cases._support import Evidence, describe_target, floats, must, reply_view
-from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, check_reply, word
+from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, check_reply, completed_segment
 from manip.conformance.judge.diagnosis import float_payload, floats_diagnosis
 from manip.conformance.output.packet_text import packet_listing, show_value
 from manip.conformance.suite.bridge import (
@@ -443,11 +443,7 @@ async def _segment_done(probe: Probe, segment: int, seen: int) -> bool:
     unsolicited packets from index ``seen`` on are looked at first."""
 
     def done(packet: WirePacket) -> bool:
-        return (
-            packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE
-            and word(packet.data, 2) == AsyncCondition.SEGMENT_COMPLETED
-            and word(packet.data, 6) == segment
-        )
+        return completed_segment(packet) == segment
 
     if any(done(p) for p in probe.unsolicited[seen:]):
         return True

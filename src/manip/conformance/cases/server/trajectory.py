@@ -22,12 +22,12 @@ from manip.conformance.cases._support import (
     require_response,
     settle,
 )
-from manip.conformance.judge.checks import WirePacket, word
+from manip.conformance.judge.checks import WirePacket, completed_segment, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
 from manip.conformance.suite.world import CaseNotJudged, ConditionUnsupported, Obstacle, PanicButton
 from manip.spec import RequestName
-from manip.spec.constants import AsyncCondition, ServerOp
+from manip.spec.constants import ServerOp
 
 LINE_TOL_MM: Final = 1.0
 """How far from the straight line a sampled position may be (erratum straight-line-tolerance)."""
@@ -332,13 +332,7 @@ async def queued_segments(ctx: CaseContext) -> None:
     await probe.drain(0.1)
     angle = [sample.values[0] for sample in samples]
     if notified:
-        done = [
-            word(p.data, 6)
-            for p in probe.packets
-            if p.direction == "s2c"
-            and p.opcode == ServerOp.ASYNCHRONOUS_RESPONSE
-            and word(p.data, 2) == AsyncCondition.SEGMENT_COMPLETED
-        ]
+        done = [s for p in probe.packets if p.direction == "s2c" and (s := completed_segment(p)) is not None]
         ctx.expect(
             done == segments,
             clause="segment.fifo-completion",
@@ -634,13 +628,7 @@ async def _next_of(ctx: CaseContext, probe: Probe, opcode: int, within: float) -
 
 def _completed(packets: Sequence[WirePacket]) -> list[int]:
     """The segments reported completed (0203 code 2) among ``packets``."""
-    return [
-        word(p.data, 6) or 0
-        for p in packets
-        if p.direction == "s2c"
-        and p.opcode == ServerOp.ASYNCHRONOUS_RESPONSE
-        and word(p.data, 2) == AsyncCondition.SEGMENT_COMPLETED
-    ]
+    return [s for p in packets if p.direction == "s2c" and (s := completed_segment(p)) is not None]
 
 
 @case(
