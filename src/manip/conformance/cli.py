@@ -35,6 +35,7 @@ import click
 from rich.console import Console
 from rich.table import Table
 
+from manip.arm.units import LENGTH_UNITS, LengthUnit
 from manip.commandline import FiniteFloat, configure_logging, version_option
 from manip.conformance.cli_options import (
     cases_of_clauses,
@@ -167,6 +168,15 @@ def main() -> None:
 @junit_option
 @document_options
 @click.option(
+    "--length-unit",
+    type=click.Choice(LENGTH_UNITS),
+    default="mm",
+    show_default=True,
+    help="The unit of the target's lengths, which the 1985 guide does not give (erratum units): every "
+    "Cartesian move the suite makes (straight-line, incremental, move to a transform) and every position "
+    "tolerance is sized in it.  A move refused as out of reach is not judged, and says to try another.",
+)
+@click.option(
     "--server-profile",
     type=click.Choice(PROFILES),
     default="manip",
@@ -289,6 +299,7 @@ def run(
     junit_path: Path | None,
     html_path: Path | None,
     markdown_path: Path | None,
+    length_unit: LengthUnit,
     server_profile: str,
     server_faults: tuple[str, ...],
     cougar: str | None,
@@ -366,6 +377,7 @@ def run(
         max_examples=max_examples,
         address=address,
         broken_after=broken_after,
+        length_unit=length_unit,
     )
     config = RunConfig(
         address=address,
@@ -387,6 +399,10 @@ def run(
     if puma_target is not None:
         config.reproduce_prefix = puma_target.reproduce_prefix()
     console.print(f"manip-conform: seed [bold]{seed}[/] (rerun with --seed {seed})")
+    console.print(
+        f"lengths taken in {length_unit} (--length-unit; the 1985 guide gives no unit: erratum units)",
+        markup=False,
+    )
     job = Job(
         config, cases, console, quiet, faults=config_faults, target=target or puma_target,
         world=world_of(world, world_timeout), server_profile=server_profile,
@@ -505,6 +521,8 @@ def _reproduce_options(
         extra += ["--max-examples", str(options.max_examples)]
     if options.time_scale != 1.0:
         extra += ["--target-time-scale", f"{options.time_scale:g}"]
+    if options.length_unit != "mm":
+        extra += ["--length-unit", options.length_unit]
     if options.robot == "hardware":
         extra += ["--target", "hardware"] + (["--allow-motion"] if options.allow_motion else [])
     if profile != "manip":

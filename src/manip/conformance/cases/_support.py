@@ -27,6 +27,7 @@ from dataclasses import dataclass, replace
 from typing import Any, Final, NamedTuple
 
 from manip.arm.kinematics import PUMA600, JointLimits, Joints
+from manip.arm.units import MM_PER_UNIT
 from manip.codecs.errors import CodecError
 from manip.codecs.lisp import LispValue
 from manip.codecs.messages import ErrorReply, decode_error, decode_reply
@@ -197,6 +198,37 @@ def no_wrist(answer: Answer) -> str:
         "guide gives no opcode to reach one: a server with a Cougar wrist judges it (the embedded server, "
         "manip-conform run without HOST, or manip-server --cougar sim)"
     )
+
+
+def length(ctx: CaseContext, mm: float) -> float:
+    """A length the suite chose in millimetres, in the unit the run takes the target's lengths in
+    (``--length-unit``; the 1985 guide gives none: erratum ``units``)."""
+    return mm / ctx.options.mm_per_unit
+
+
+UNIT_FREE_REFUSALS: Final = frozenset({"NAP", "AWA"})
+"""Refusal codes that cannot be a length unit's doing (no power, motion aborted)."""
+
+
+def require_reach(ctx: CaseContext, answer: Answer, what: str) -> None:
+    """Like :func:`require_response`, for a Cartesian request (a transform or an increment) the case
+    sized in the run's length unit: a refusal that may be the unit's (TOR, out of reach: any code but no
+    power or an abort) ends the case not-judged with a message that names ``--length-unit``."""
+    ctx.check(check_reply(answer.request, answer.packets))
+    if answer.is_response:
+        return
+    error = error_of(answer)
+    code = error.error.code if error is not None else ""
+    if code not in UNIT_FREE_REFUSALS:
+        unit = ctx.options.length_unit
+        others = "|".join(u for u in MM_PER_UNIT if u != unit)
+        ctx.not_judged(
+            f"the target refused {what}, sized in {unit} ({answer}"
+            + (f", {code}" if code else "")
+            + "): out of reach if its lengths are in another unit, which the 1985 guide does not give "
+            f"(erratum units); run with --length-unit {others} to size the moves in it"
+        )
+    require_response(ctx, answer, what)
 
 
 class Reading(NamedTuple):

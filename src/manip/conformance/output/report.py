@@ -249,6 +249,7 @@ def report_json(report: RunReport) -> dict[str, Any]:
         "counts": report.counts(),
         "problems": list(report.problems),
         "time": report.time,
+        "length_unit": report.length_unit,
         "unstable": list(report.unstable),
         "interrupted": report.interrupted,
         "internal_error": report.internal_error,

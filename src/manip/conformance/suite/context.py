@@ -47,6 +47,7 @@ from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass, replace
 from typing import Any, Final, Literal, NoReturn
 
+from manip.arm.units import MM_PER_UNIT, LengthUnit
 from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request
 from manip.codecs.packet import Direction, Packet
@@ -108,6 +109,14 @@ class RunOptions:
     embedded: bool = False
     """The target is the embedded reference server: its address is a temporary socket, gone after the
     run, so a case says how to run it again (:attr:`CaseContext.reproduce`), never that address."""
+    length_unit: LengthUnit = "mm"
+    """The unit the target's lengths are taken to be in (``--length-unit``; the 1985 guide gives none,
+    erratum ``units``): every Cartesian move and position tolerance of the cases is sized in it."""
+
+    @property
+    def mm_per_unit(self) -> float:
+        """Millimetres in one unit of the target's lengths."""
+        return MM_PER_UNIT[self.length_unit]
 
     @property
     def allowed_hazards(self) -> frozenset[Hazard]:

@@ -151,12 +151,14 @@ class Runner:
                 "reply_timeout": config.options.reply_timeout,
                 "deadline_scale": config.options.deadline_scale,
                 "time_scale": config.options.time_scale,
+                "length_unit": config.options.length_unit,
                 "select": [p.text for p in config.select.patterns],
                 "skip": [p.text for p in config.skip.patterns],
                 "known_failing": [p.text for p in config.known_failing.patterns],
             },
             command=config.command,
             time="virtual" if config.virtual_time else "real",
+            length_unit=config.options.length_unit,
         )
 
     # --------------------------------------------------------------------------------- selection

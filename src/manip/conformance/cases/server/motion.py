@@ -21,6 +21,7 @@ from manip.conformance.cases._support import (
     expect_response,
     extension_name,
     floats,
+    length,
     out_of_range_mask,
     power_on,
     read_floats,
@@ -156,7 +157,7 @@ async def transform_out_of_reach(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     pose = list(await read_floats(ctx, probe, "here"))
     joints = list(await read_floats(ctx, probe, "joint-angles"))
-    far = [*pose[:9], FAR_MM, 0.0, 0.0]
+    far = [*pose[:9], length(ctx, FAR_MM), 0.0, 0.0]
     answer = await probe.call("solve-forwards", transform=far, current=joints)
     expect_refusal(  # any code: the 1985 guide names none for a place out of reach (manip's is TOR)
         ctx,
@@ -592,10 +593,10 @@ async def configuration(ctx: CaseContext) -> None:
         require_response(ctx, back, "solve backwards of a solution")
         off = math.dist(floats(back)[9:], pose[9:])
         ctx.expect(
-            off <= REACH_TOL_MM,
+            off <= length(ctx, REACH_TOL_MM),
             clause="set-configuration.effect",
             expected=f"the {name} solution reaching the transform",
-            actual=f"{[round(q, 2) for q in solved]}, {off:.3f} mm from it",
+            actual=f"{[round(q, 2) for q in solved]}, {off:.4g} {ctx.options.length_unit} from it",
         )
         solutions[name] = solved
     ctx.expect(

@@ -391,6 +391,8 @@ async def kinematics_round_trip(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     arm = await describe_target(ctx, probe)
     await probe.close()
+    unit = ctx.options.length_unit
+    tol = POSE_TOL_MM / ctx.options.mm_per_unit  # the target's lengths are in --length-unit
 
     def build(session: _Session) -> tuple[Example, Sequence[st.SearchStrategy[Any]]]:
         def body(q: Joints, near: Joints) -> None:
@@ -415,12 +417,12 @@ async def kinematics_round_trip(ctx: CaseContext) -> None:
             third = session.call("solve-backwards", joints=list(q2))
             t2 = _pose(_decode_floats(third, "solve backwards", "solve-backwards.data"), third)
             distance = t1.distance(t2)
-            if distance.translation_mm > POSE_TOL_MM or distance.rotation_deg > POSE_TOL_DEG:
+            if distance.translation_mm > tol or distance.rotation_deg > POSE_TOL_DEG:
                 raise Evidence(
                     "solve-forwards.data",
                     "solve forwards returned angles that do not reach the transform",
-                    f"the same pose within {POSE_TOL_MM} mm and {POSE_TOL_DEG} deg",
-                    f"off by {distance.translation_mm:.4g} mm and {distance.rotation_deg:.4g} deg: "
+                    f"the same pose within {tol:.4g} {unit} and {POSE_TOL_DEG} deg",
+                    f"off by {distance.translation_mm:.4g} {unit} and {distance.rotation_deg:.4g} deg: "
                     f"angles {q} gave {t1!r}; solve forwards from {near} gave {q2}, "
                     f"whose transform is {t2!r}",
                     second.data,

@@ -16,9 +16,11 @@ from manip.conformance.cases._support import (
     describe_target,
     expect_response,
     last_processed,
+    length,
     near,
     power_on,
     read_floats,
+    require_reach,
     require_response,
     settle,
 )
@@ -30,7 +32,8 @@ from manip.spec import RequestName
 from manip.spec.constants import ServerOp
 
 LINE_TOL_MM: Final = 1.0
-"""How far from the straight line a sampled position may be (erratum straight-line-tolerance)."""
+"""How far from the straight line a sampled position may be (erratum straight-line-tolerance), in
+millimetres (every length below is converted to the run's --length-unit: erratum units)."""
 SERVO_S: Final = 0.016
 SAMPLE_S: Final = 0.006
 """Sampling interval: shorter than half a servo cycle, so a move process running twice as often shows
@@ -110,26 +113,32 @@ async def _at_line_pose(ctx: CaseContext, probe: Probe) -> tuple[tuple[float, ..
 @case("server.motion.straight-line", clauses=["straight-move.line"], hazard="motion", deadline=15.0)
 async def straight_line(ctx: CaseContext) -> None:
     """Straight-line move (205) 120 mm across and back (212): every Here sampled on the way lies within
-    1 mm of the line between where the move starts and its goal."""
+    1 mm of the line between where the move starts and its goal (sizes in the run's --length-unit)."""
     probe = await ctx.connect()
     before, start = await _at_line_pose(ctx, probe)
+    dx, dy, tol, unit = (
+        length(ctx, 80.0),
+        length(ctx, 90.0),
+        length(ctx, LINE_TOL_MM),
+        ctx.options.length_unit,
+    )
     goal = list(start)
-    goal[9] += 80.0
-    goal[10] -= 90.0
+    goal[9] += dx
+    goal[10] -= dy
     for op, values, a, b in (
         ("straight-move", {"transform": goal}, start[9:], goal[9:]),
-        ("incremental-straight-move", {"delta": [-80.0, 90.0, 0.0, 0.0, 0.0, 0.0]}, goal[9:], start[9:]),
+        ("incremental-straight-move", {"delta": [-dx, dy, 0.0, 0.0, 0.0, 0.0]}, goal[9:], start[9:]),
     ):
         answer = await probe.call(op, **values)  # type: ignore[arg-type]
-        require_response(ctx, answer, f"a straight-line move ({op})")
+        require_reach(ctx, answer, f"a straight-line move ({op})")
         samples = await _sample(ctx, probe, "here", 10.0)
         worst = max(_distance_to_segment(sample.values[9:], a, b) for sample in samples)
-        ctx.note(f"{op}: {len(samples)} samples, at most {worst:.4f} mm off the line")
+        ctx.note(f"{op}: {len(samples)} samples, at most {worst:.4f} {unit} off the line")
         ctx.expect(
-            worst <= LINE_TOL_MM,
+            worst <= tol,
             clause="straight-move.line",
-            expected=f"every position within {LINE_TOL_MM:g} mm of the line {list(a)} -> {list(b)}",
-            actual=f"a sample {worst:.3f} mm off it",
+            expected=f"every position within {tol:.4g} {unit} of the line {list(a)} -> {list(b)}",
+            actual=f"a sample {worst:.4g} {unit} off it",
         )
     await probe.call("set-joint-angles", joints=list(before))
     await settle(ctx, probe, before)
@@ -142,23 +151,24 @@ async def incremental_reference(ctx: CaseContext) -> None:
     the workspace (wherever the arm was left, a straight line may not be possible)."""
     probe = await ctx.connect()
     before, start = await _at_line_pose(ctx, probe)
+    down, across, unit = length(ctx, 30.0), length(ctx, 25.0), ctx.options.length_unit
     moves: tuple[tuple[RequestName, list[float]], ...] = (
-        ("incremental-move", [0.0, 0.0, -30.0]),
-        ("incremental-straight-move", [25.0, 0.0, 0.0]),
+        ("incremental-move", [0.0, 0.0, -down]),
+        ("incremental-straight-move", [across, 0.0, 0.0]),
     )
     for op, delta in moves:
         answer = await probe.call(op, delta=[*delta, 0.0, 0.0, 0.0])
-        require_response(ctx, answer, f"an incremental move ({op})")
+        require_reach(ctx, answer, f"an incremental move ({op})")
     await _sample(ctx, probe, "here", 10.0)
     end = await read_floats(ctx, probe, "here")
-    want = [start[9] + 25.0, start[10], start[11] - 30.0]
+    want = [start[9] + across, start[10], start[11] - down]
     off = math.dist(end[9:], want)
     turn = max(abs(x - y) for x, y in zip(end[:9], start[:9], strict=True))
     ctx.expect(
-        off <= POSE_TOL_MM and turn <= 1e-3,
+        off <= length(ctx, POSE_TOL_MM) and turn <= 1e-3,
         clause="incremental.relative",
         expected=f"the hand at {[round(v, 3) for v in want]} (start plus both deltas), orientation unchanged",
-        actual=f"at {[round(v, 3) for v in end[9:]]} ({off:.3f} mm off), rotation changed by {turn:.2g}",
+        actual=f"at {[round(v, 3) for v in end[9:]]} ({off:.4g} {unit} off), rotation changed by {turn:.2g}",
     )
     await probe.call("set-joint-angles", joints=list(before))
     await settle(ctx, probe, before)
@@ -256,7 +266,7 @@ async def _turned(
     """Turn the hand by ``delta`` (dO dA dT) with ``op``: it must end at R(O + dO, A + dA, T + dT) of
     ``start``'s angles, where ``start`` stood; returns where it ended."""
     o, a, t = val_angles(start)
-    require_response(ctx, await probe.call(op, delta=[0.0, 0.0, 0.0, *delta]), f"{op} turning the hand")
+    require_reach(ctx, await probe.call(op, delta=[0.0, 0.0, 0.0, *delta]), f"{op} turning the hand")
     await _sample(ctx, probe, "here", 10.0)
     end = await read_floats(ctx, probe, "here")
     want = val_rotation(o + delta[0], a + delta[1], t + delta[2])
@@ -264,12 +274,12 @@ async def _turned(
     turn = max(abs(want[i][j] - got[i][j]) for i in range(3) for j in range(3))
     off = math.dist(end[9:], start[9:])
     ctx.expect(
-        turn <= OAT_TOL and off <= POSE_TOL_MM,
+        turn <= OAT_TOL and off <= length(ctx, POSE_TOL_MM),
         clause="incremental.relative",
         expected=f"{op}: the hand at O A T {[round(v, 3) for v in (o, a, t)]} plus {list(delta)}, "
         "position unchanged",
         actual=f"rotation off by {turn:.4f} (got O A T {[round(v, 3) for v in val_angles(end)]}), "
-        f"position moved {off:.3f} mm",
+        f"position moved {off:.4g} {ctx.options.length_unit}",
     )
     return end
 
