@@ -212,13 +212,13 @@ def guide_route_taken(notes: Sequence[str]) -> bool:
 
 
 @pytest.mark.parametrize("fault", sorted(GUIDE_ROUTES, key=lambda f: f.value), ids=lambda f: f.value)
-def test_motion_fault_is_caught_without_extensions(fault: Fault) -> None:
-    """Against a server without manip's Puma extensions (manip-server --no-extensions) the speed factor's
-    effect, the queue's order and an abort dropping the queue are judged by polling the joint angles,
-    so each fault still fails its case."""
+def test_motion_fault_is_caught_through_the_guide_profile(fault: Fault) -> None:
+    """Against a server written from the 1985 guide alone (manip-server --profile guide: no Puma extensions,
+    inches, the guide's asynchronous layout) the speed factor's effect, the queue's order and an abort
+    dropping the queue are judged by polling the joint angles, so each fault still fails its case."""
     faults = FaultSet.of(fault)
     cases = [c for c in suite() if c.id == GUIDE_ROUTES[fault]]
-    report = asyncio.run(run_suite(faults, cases, ServerConfig(faults=faults, extensions=False)))
+    report = asyncio.run(run_suite(faults, cases, ServerConfig.guide_profile(faults=faults)))
     (result,) = report.results
     shown = [v.message for v in result.violations]
     print(f"fault {fault.value} without extensions: {result.outcome} {shown}")
@@ -227,10 +227,10 @@ def test_motion_fault_is_caught_without_extensions(fault: Fault) -> None:
     assert {v.clause for v in result.violations} & set(FAULTS[fault].clauses), result.violations
 
 
-def test_the_guide_routes_pass_against_a_clean_server_without_extensions() -> None:
+def test_the_guide_routes_pass_against_the_clean_guide_profile() -> None:
     """The same cases pass, through the guide's own requests, against a conforming guide-only server."""
     cases = [c for c in suite() if c.id in GUIDE_ROUTE_CASES]
-    report = asyncio.run(run_suite(FaultSet(), cases, ServerConfig(extensions=False)))
+    report = asyncio.run(run_suite(FaultSet(), cases, ServerConfig.guide_profile()))
     outcomes = {r.id: r.outcome for r in report.results}
     assert outcomes == dict.fromkeys(GUIDE_ROUTE_CASES, "pass"), [(r.id, r.reason) for r in report.results]
     assert all(guide_route_taken(r.notes) for r in report.results)
