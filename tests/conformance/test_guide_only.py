@@ -12,12 +12,10 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
+from manip.arm.units import unit_of
 from manip.conformance.cli import main
-from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.results import ExitCode
-from manip.reference_server.session import ServerConfig
 from manip.spec import SPEC
-from tests.support.suite import run_suite
 
 LINK_SPECIFIC = frozenset(
     {"server.link.chaosd-frames", "server.link.chudp-frames", "server.ncp.los-oversize"}
@@ -29,20 +27,23 @@ GUIDE_ROUTES = ("server.speed.scales", "server.motion.queued-segments", "server.
 """Cases whose first route is request notifications, judged by polling the joint angles instead."""
 
 
-def _cartesian(unit: str) -> dict[str, tuple[str, str]]:
-    cases = [c for c in all_cases() if c.id in CARTESIAN]
-    options = {"length_unit": unit, "time_scale": 8.0}
-    report = run_suite(cases, ServerConfig.guide_profile(), seed=3, time_scale=8.0, options=options)
-    return {r.id: (r.outcome, r.reason) for r in report.results}
+def _cartesian(unit: str, tmp_path: Path) -> dict[str, tuple[str, str]]:
+    """The Cartesian cases against the embedded guide profile (in virtual time), sized in ``unit``."""
+    report_path = tmp_path / f"{unit}.json"
+    select = [arg for case_id in CARTESIAN for arg in ("--select", case_id)]
+    args = ["run", "--server-profile", "guide", "--length-unit", unit, "--seed", "3", "-q", *select]
+    result = CliRunner().invoke(main, [*args, "--json", str(report_path)])
+    assert result.exit_code == ExitCode.CONFORMANT, result.output
+    return {c["id"]: (c["outcome"], c["reason"]) for c in json.loads(report_path.read_text())["cases"]}
 
 
-def test_a_server_in_inches_is_judged_with_length_unit_inch() -> None:
+def test_a_server_in_inches_is_judged_with_length_unit_inch(tmp_path: Path) -> None:
     """Sized in millimetres, the straight-line and incremental moves are out of an inch server's reach:
     not judged, saying the unit may be why; sized in inches they are judged and pass."""
-    in_mm = _cartesian("mm")
+    in_mm = _cartesian("mm", tmp_path)
     assert {outcome for outcome, _ in in_mm.values()} == {"not-judged"}, in_mm
     assert all("--length-unit" in reason and "sized in mm" in reason for _, reason in in_mm.values())
-    assert _cartesian("inch") == dict.fromkeys(CARTESIAN, ("pass", ""))
+    assert _cartesian("inch", tmp_path) == dict.fromkeys(CARTESIAN, ("pass", ""))
 
 
 @pytest.mark.slow
@@ -77,3 +78,26 @@ def test_the_guide_profile_gets_a_complete_and_honest_verdict(tmp_path: Path) ->
     for case in data["cases"]:
         if case["outcome"] == "not-judged":
             assert case["reason"], case["id"]  # each says what would judge it
+
+
+@pytest.mark.parametrize(
+    ("height", "unit"),
+    [(864.87, "mm"), (86.49, "cm"), (34.05, "inch"), (865.0 * 3, None), (0.0, None), (-34.05, None)],
+)
+def test_a_unit_is_learned_only_from_a_height_that_fits_one(height: float, unit: str | None) -> None:
+    assert unit_of(height, 864.87) == unit
+
+
+@pytest.mark.parametrize(("profile", "unit"), [("guide", "inch"), ("manip", "mm")])
+def test_length_unit_auto_learns_the_unit_from_the_ready_pose(
+    tmp_path: Path, profile: str, unit: str
+) -> None:
+    report_path = tmp_path / "auto.json"
+    select = [arg for case_id in CARTESIAN for arg in ("--select", case_id)]
+    args = ["run", "--server-profile", profile, "--length-unit", "auto", "--seed", "2", *select]
+    result = CliRunner().invoke(main, [*args, "--json", str(report_path)])
+    assert result.exit_code == ExitCode.CONFORMANT, result.output
+    assert f"lengths (--length-unit auto): learned {unit}" in result.output
+    data = json.loads(report_path.read_text())
+    assert data["length_unit"] == unit and data["counts"]["pass"] == len(CARTESIAN)
+    assert all("--length-unit auto" in case["reproduce"] for case in data["cases"])

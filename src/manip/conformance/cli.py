@@ -29,7 +29,7 @@ import shlex
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
 import click
 from rich.console import Console
@@ -169,12 +169,14 @@ def main() -> None:
 @document_options
 @click.option(
     "--length-unit",
-    type=click.Choice(LENGTH_UNITS),
+    type=click.Choice([*LENGTH_UNITS, "auto"]),
     default="mm",
     show_default=True,
     help="The unit of the target's lengths, which the 1985 guide does not give (erratum units): every "
     "Cartesian move the suite makes (straight-line, incremental, move to a transform) and every position "
-    "tolerance is sized in it.  A move refused as out of reach is not judged, and says to try another.",
+    "tolerance is sized in it.  A move refused as out of reach is not judged, and says to try another.  "
+    "auto: learned before the cases from the height of the target's ready pose (one solve backwards; a "
+    "PUMA 600's, else mm).",
 )
 @click.option(
     "--server-profile",
@@ -299,7 +301,7 @@ def run(
     junit_path: Path | None,
     html_path: Path | None,
     markdown_path: Path | None,
-    length_unit: LengthUnit,
+    length_unit: LengthUnit | Literal["auto"],
     server_profile: str,
     server_faults: tuple[str, ...],
     cougar: str | None,
@@ -377,7 +379,8 @@ def run(
         max_examples=max_examples,
         address=address,
         broken_after=broken_after,
-        length_unit=length_unit,
+        length_unit="mm" if length_unit == "auto" else length_unit,
+        learn_length_unit=length_unit == "auto",
     )
     config = RunConfig(
         address=address,
@@ -400,7 +403,9 @@ def run(
         config.reproduce_prefix = puma_target.reproduce_prefix()
     console.print(f"manip-conform: seed [bold]{seed}[/] (rerun with --seed {seed})")
     console.print(
-        f"lengths taken in {length_unit} (--length-unit; the 1985 guide gives no unit: erratum units)",
+        "lengths: learned from the target's ready pose (--length-unit auto; the 1985 guide gives no unit)"
+        if length_unit == "auto"
+        else f"lengths taken in {length_unit} (--length-unit; the 1985 guide gives no unit: erratum units)",
         markup=False,
     )
     job = Job(
@@ -521,8 +526,8 @@ def _reproduce_options(
         extra += ["--max-examples", str(options.max_examples)]
     if options.time_scale != 1.0:
         extra += ["--target-time-scale", f"{options.time_scale:g}"]
-    if options.length_unit != "mm":
-        extra += ["--length-unit", options.length_unit]
+    if options.learn_length_unit or options.length_unit != "mm":
+        extra += ["--length-unit", "auto" if options.learn_length_unit else options.length_unit]
     if options.robot == "hardware":
         extra += ["--target", "hardware"] + (["--allow-motion"] if options.allow_motion else [])
     if profile != "manip":
@@ -550,6 +555,9 @@ def _finish(
     )
     for problem in report.unwritten:  # a report path that cannot be written is a usage error, found late
         click.echo(f"manip-conform: {problem}", err=True)
+    learned = report.options.get("length_unit_learned")
+    if learned:
+        console.print(f"lengths (--length-unit auto): {learned}", markup=False)
     summary(console, report, quiet)
     return int(report.exit_code) if code is None or report.unwritten else int(code)
 

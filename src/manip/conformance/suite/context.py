@@ -113,6 +113,10 @@ class RunOptions:
     """The unit the target's lengths are taken to be in (``--length-unit``; the 1985 guide gives none,
     erratum ``units``): every Cartesian move and position tolerance of the cases is sized in it."""
 
+    learn_length_unit: bool = False
+    """``--length-unit auto``: the runner learns :attr:`length_unit` from the target's ready pose before
+    the cases (:mod:`manip.conformance.suite.units`)."""
+
     @property
     def mm_per_unit(self) -> float:
         """Millimetres in one unit of the target's lengths."""

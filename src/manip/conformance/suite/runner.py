@@ -49,6 +49,7 @@ from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.invariants import attribution_problem
 from manip.conformance.suite.results import CaseResult, LivenessCheck, Outcome, RunReport
 from manip.conformance.suite.selection import PatternSet
+from manip.conformance.suite.units import learn_length_unit
 from manip.conformance.suite.world import CaseNotJudged, ConditionUnsupported, World, WorldError
 from manip.links import ChaosConnection, open_connection
 from manip.links.api import LinkWrapper
@@ -200,6 +201,14 @@ class Runner:
             self.events.liveness(check)
         return check
 
+    async def _learn_length_unit(self) -> None:
+        """``--length-unit auto``: the unit the cases size their moves in, learned from the target."""
+        unit, how = await learn_length_unit(self.config.options, self.connect)
+        self.config.options = replace(self.config.options, length_unit=unit)
+        self.report.length_unit = unit
+        self.report.options["length_unit"] = unit
+        self.report.options["length_unit_learned"] = how
+
     async def _probe_once(self) -> tuple[bool, str]:
         options = self.config.options
         if self.config.liveness_check is not None:
@@ -254,6 +263,8 @@ class Runner:
                 for item in cases:
                     report.results.append(self._blank(item, "skip", "target unreachable before the run"))
                 return report
+            if self.config.options.learn_length_unit:
+                await self._learn_length_unit()
             dead = False
             for item in cases:
                 if dead:
