@@ -12,7 +12,7 @@ import pytest
 from manip.codecs.error_string import ErrorMessage
 from manip.reference_client import aconnect
 from manip.reference_client.cli import EXIT_SERVER_ERROR
-from manip.reference_client.errors import NonFatalError, RequestTimeout
+from manip.reference_client.errors import AsynchronousError, NonFatalError, RequestTimeout
 from manip.reference_client.manipulator import NOTIFY_SEGMENTS
 from manip.reference_server import ServerConfig
 from manip.spec.constants import RequestOp
@@ -79,6 +79,22 @@ def test_a_wait_by_polling_is_bounded(guide_url: str) -> None:
             with pytest.raises(RequestTimeout, match=r"segment \d+ did not complete \(polled joint angles"):
                 await arm.wait_for_segment(segment, timeout=0.2)
             await arm.kill_power()
+
+    asyncio.run(main())
+
+
+def test_an_abort_fails_a_wait_by_polling(guide_url: str) -> None:
+    async def main() -> None:
+        async with aconnect(guide_url) as arm:
+            await arm.enable_power()
+            await arm.set_speed(0.05)
+            segment = await arm.set_joint_angles(TARGET)
+            segment = await arm.set_joint_angles(READY)
+            waiter = asyncio.create_task(arm.wait_for_segment(segment, timeout=30.0))
+            await asyncio.sleep(0.2)
+            await arm.kill_power()  # the move process aborts the running segment: an asynchronous error
+            with pytest.raises(AsynchronousError):
+                await waiter
 
     asyncio.run(main())
 

@@ -315,8 +315,7 @@ class Manipulator(GenericOperations, PumaOperations):
         try:
             await self.prepare_segment_wait()
             if self._polling:
-                future.cancel()
-                await self._poll_for_segment(number, timeout)
+                await self._poll_for_segment(number, future, timeout)
                 return
             try:
                 await asyncio.wait_for(future, timeout)
@@ -347,8 +346,12 @@ class Manipulator(GenericOperations, PumaOperations):
                 raise
             self._polling = True
 
-    async def _poll_for_segment(self, number: int, timeout: float | None) -> None:
-        """Wait for segment ``number`` with the 1985 guide's own requests (the module docstring)."""
+    async def _poll_for_segment(
+        self, number: int, future: asyncio.Future[None], timeout: float | None
+    ) -> None:
+        """Wait for segment ``number`` with the 1985 guide's own requests (the module docstring); an
+        asynchronous error (the motion aborted) or the connection's end fails the wait through
+        ``future``, as it fails a wait for notifications."""
         bound = POLL_TIMEOUT if timeout is None else timeout
         loop = asyncio.get_running_loop()
         end = loop.time() + bound
@@ -356,6 +359,8 @@ class Manipulator(GenericOperations, PumaOperations):
         last: tuple[float, ...] | None = None
         still = 0
         while True:
+            if future.done():
+                future.result()  # raises what failed the waiters
             if self._segment_done(number):
                 return
             angles = tuple(await self.joint_angles())
