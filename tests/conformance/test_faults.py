@@ -86,9 +86,10 @@ CATCHERS = {
 the fault too)."""
 WRIST_FAULTS = frozenset({Fault.GUARD_HIT_WORD_SWAPPED, Fault.WRIST_TIMEOUT_SILENT, Fault.WRIST_ERROR_FATAL})
 """Faults whose catching case needs the simulated Cougar wrist."""
-VIRTUAL_FAULTS = WRIST_FAULTS | {Fault.SERVO_DOUBLE_RATE}
-"""Faults caught in virtual time (:func:`run_with_wrist`): those needing the wrist, and the 8 ms servo,
-which shows only to samples closer than a real round trip to a time-scaled server allows."""
+VIRTUAL_FAULTS = WRIST_FAULTS | {Fault.SERVO_DOUBLE_RATE, Fault.SEGMENTS_STOP}
+"""Faults caught in virtual time (:func:`run_with_wrist`): those needing the wrist, the 8 ms servo and the
+rest between segments (12.5 ms of real time at 8 times real speed), which show only to samples closer
+than a real round trip to a time-scaled server allows on a loaded machine."""
 CAUGHT = ("fail", "warn")
 
 PROTOCOL_FAULTS = sorted(
