@@ -95,6 +95,8 @@ CATCHERS = {
     Fault.JOINTS_REVERSED: "server.motion.joint-order",
     Fault.FORCES_IN_POUNDS: "server.async.guard-hit",
     Fault.ASYNC_SPLITS_MULTI: "server.describe.not-split",
+    Fault.SPEED_IGNORED: "server.speed.scales",
+    Fault.QUEUE_REVERSED: "server.motion.queued-segments",
 }
 """Faults and the case written to catch each: it must fail, or warn for a SHOULD clause (others may catch
 the fault too)."""
@@ -180,6 +182,47 @@ def test_the_arranged_paths_run_against_the_clean_server() -> None:
     embedded server."""
     report = run_suite(FaultSet(), [c for c in suite() if c.id in PATHS.values()])
     assert {r.id: r.outcome for r in report.results} == dict.fromkeys(PATHS.values(), "pass")
+
+
+GUIDE_ROUTES = {
+    Fault.SPEED_IGNORED: "server.speed.scales",
+    Fault.QUEUE_REVERSED: "server.motion.queued-segments",
+    Fault.ABORT_KEEPS_QUEUE: "server.motion.abort-drops-queue",
+}
+"""The motion faults a server written from the 1985 guide alone can have, and the case that must catch
+each through the guide's own requests (no request notifications to tell when a segment ends)."""
+GUIDE_ROUTE_CASES = (*GUIDE_ROUTES.values(), "server.motion.awa-reset-abort", "server.connect.fresh-state")
+"""The cases with a guide-only route for what they used an extension opcode for."""
+
+
+def guide_route_taken(notes: Sequence[str]) -> bool:
+    """The case said it went the guide's way (the extension it would use was refused)."""
+    return any("a Puma extension" in note and "refused" in note for note in notes)
+
+
+@pytest.mark.parametrize("fault", sorted(GUIDE_ROUTES, key=lambda f: f.value), ids=lambda f: f.value)
+def test_motion_fault_is_caught_through_the_guide_profile(fault: Fault) -> None:
+    """Against a server written from the 1985 guide alone (manip-server --profile guide: no Puma extensions,
+    inches, the guide's asynchronous layout) the speed factor's effect, the queue's order and an abort
+    dropping the queue are judged by polling the joint angles, so each fault still fails its case."""
+    faults = FaultSet.of(fault)
+    cases = [c for c in suite() if c.id == GUIDE_ROUTES[fault]]
+    report = run_suite(faults, cases, ServerConfig.guide_profile(faults=faults))
+    (result,) = report.results
+    shown = [v.message for v in result.violations]
+    print(f"fault {fault.value} without extensions: {result.outcome} {shown}")
+    assert result.outcome in CAUGHT, (result.outcome, result.reason)
+    assert guide_route_taken(result.notes), result.notes
+    assert {v.clause for v in result.violations} & set(FAULTS[fault].clauses), result.violations
+
+
+def test_the_guide_routes_pass_against_the_clean_guide_profile() -> None:
+    """The same cases pass, through the guide's own requests, against a conforming guide-only server."""
+    cases = [c for c in suite() if c.id in GUIDE_ROUTE_CASES]
+    report = run_suite(FaultSet(), cases, ServerConfig.guide_profile())
+    outcomes = {r.id: r.outcome for r in report.results}
+    assert outcomes == dict.fromkeys(GUIDE_ROUTE_CASES, "pass"), [(r.id, r.reason) for r in report.results]
+    assert all(guide_route_taken(r.notes) for r in report.results)
 
 
 def test_packed_error_args_conform() -> None:

@@ -12,9 +12,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from click.testing import CliRunner
 
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.messages import encode_error, encode_reply
+from manip.conformance.cli import main as conform_main
 from manip.conformance.judge.checks import (
     WirePacket,
     check_error_packet,
@@ -23,7 +25,7 @@ from manip.conformance.judge.checks import (
     required_refusal,
 )
 from manip.conformance.output.report import load_schema, report_json, report_junit
-from manip.conformance.suite.case import Case, CaseError, case
+from manip.conformance.suite.case import Case, CaseError, all_cases, case
 from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.results import ExitCode, RunReport
 from manip.conformance.suite.runner import RunConfig, Runner, case_seed
@@ -172,6 +174,24 @@ def test_case_declaration_is_validated() -> None:
         case("Bad Id", clauses=["request.one-reply"])(body)
     with pytest.raises(CaseError, match="names no clause"):
         case("test.no.clause", clauses=[])(body)
+    with pytest.raises(CaseError, match="not Puma extension opcodes"):  # Here is the guide's own
+        case("test.bad.extension", clauses=["request.one-reply"], extensions=["here"])(body)
+    with pytest.raises(CaseError, match="not Puma extension opcodes"):
+        case("test.unknown.extension", clauses=["request.one-reply"], extensions=["no-such-opcode"])(body)
+
+
+def test_cases_that_use_an_extension_say_so() -> None:
+    """The cases whose first route is a Puma extension carry the mark, which the listing shows."""
+    marked = {c.id: c.extensions for c in all_cases() if c.extensions}
+    assert "request-notifications" in marked["server.speed.scales"]
+    assert "reset-abort" in marked["server.motion.awa-reset-abort"]
+    assert marked["server.reply.read-forces"] == ("read-forces",)
+    assert "server.reply.here" not in marked
+    assert all(SPEC.request(name).extension for names in marked.values() for name in names)
+    result = CliRunner().invoke(conform_main, ["cases", "--format", "json", "--select", "server.speed.*"])
+    listed = {item["id"]: item["extensions"] for item in json.loads(result.output)}
+    assert listed["server.speed.scales"] == ["request-notifications"]
+    assert listed["server.speed.bounds"] == []
 
 
 def test_case_seed_depends_on_run_seed_and_id_only() -> None:

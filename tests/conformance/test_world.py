@@ -53,6 +53,8 @@ WORLD_CASES = (
     "server.wrist.force-push",
 )
 """Every case that asks the world for a condition."""
+ABORT_CASE = "server.motion.abort-drops-queue"
+"""The one among them with a route that needs no world (kill power)."""
 OTHERS = ("server.reply.here", "server.describe.reply-shape", "server.motion.queued-segments")
 """A few cases that need no world, for the comparison of verdicts."""
 TIMED = frozenset({"server.motion.queued-segments"})
@@ -236,9 +238,15 @@ def test_without_a_world_the_world_cases_are_not_judged_and_every_report_says_so
             return await run_cases(server.address, WORLD_CASES, None, time_scale=8.0)
 
     report = asyncio.run(go())
-    assert {r.id: r.outcome for r in report.results} == dict.fromkeys(WORLD_CASES, "not-judged")
-    assert all("--world" in r.reason for r in report.results)
-    assert report.exit_code == 0 and report.counts()["pass"] == 0
+    # the abort case has a second route, kill power, that needs no world; the panic button's says --world
+    outcomes = {r.id: r.outcome for r in report.results}
+    assert outcomes == {**dict.fromkeys(WORLD_CASES, "not-judged"), ABORT_CASE: "pass"}
+    (abort,) = [r for r in report.results if r.id == ABORT_CASE]
+    assert any("panic button did not judge" in n and "--world" in n for n in abort.notes), abort.notes
+    assert "motion.abort judged through kill power" in abort.notes[-1]
+    unworldly = [r for r in report.results if r.id != ABORT_CASE]
+    assert all("--world" in r.reason for r in unworldly)
+    assert report.exit_code == 0 and report.counts()["pass"] == 1
     unjudged = report.not_judged_clauses()
     for clause in (
         "motion.collision",
@@ -249,15 +257,15 @@ def test_without_a_world_the_world_cases_are_not_judged_and_every_report_says_so
         assert clause in unjudged
     data = report_json(report)
     _validate(data, load_schema(), load_schema())
-    assert data["not_judged"] == unjudged and data["counts"]["not-judged"] == len(WORLD_CASES)
+    assert data["not_judged"] == unjudged and data["counts"]["not-judged"] == len(unworldly)
     suites = report_junit(report).iter("testsuite")
     cases = [s for s in suites if s.get("name") != "clauses"]  # the clauses suite: one testcase a clause
     skipped = [e.get("message", "") for s in cases for e in s.iter("skipped")]
-    assert len(skipped) == len(WORLD_CASES) and all(m.startswith("not judged:") for m in skipped)
+    assert len(skipped) == len(unworldly) and all(m.startswith("not judged:") for m in skipped)
     statuses = report.clause_statuses()
     assert all(statuses[c].status == "not-judged" and statuses[c].hint == "--world" for c in unjudged)
     markdown = render_markdown(data)
-    assert f"| not-judged | {len(WORLD_CASES)} |" in markdown and "**not judged**" in markdown
+    assert f"| not-judged | {len(unworldly)} |" in markdown and "**not judged**" in markdown
     assert "motion.collision (--world)" in markdown
     page = render_html(data)
     assert 'class="card o-not-judged' in page and "MUST clause(s) not judged on this target" in page

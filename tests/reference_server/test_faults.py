@@ -1073,3 +1073,32 @@ def test_async_splits_multi() -> None:
     assert clean_during == 1 and set(clean) == {ServerOp.RESPONSE}
     assert faulty_during == 0 and faulty[0] == faulty[-1] == ServerOp.RESPONSE
     assert ServerOp.ASYNCHRONOUS_RESPONSE in faulty[1:-1]
+
+
+@covers(Fault.SPEED_IGNORED)
+def test_speed_ignored() -> None:
+    def seconds_to_goal(c: Client) -> float:
+        """How long a move to GOAL takes after set speed 0.25 (the factor itself is still checked)."""
+        refused = c.one("set-speed", factor=2.0)
+        assert isinstance(refused, ErrorReply) and refused.error.code == "BVA"
+        c.one("set-speed", factor=0.25)
+        c.one("set-joint-angles", joints=GOAL)
+        start = c.now
+        while c.session.arm.moving:
+            c.run(0.1)
+        return round(c.now - start, 1)
+
+    clean, faulty = pair(Fault.SPEED_IGNORED, seconds_to_goal)
+    assert clean > 3 * faulty > 0
+
+
+@covers(Fault.QUEUE_REVERSED)
+def test_queue_reversed() -> None:
+    def completed(c: Client) -> list[int]:
+        """The segments reported complete, in order, of three moves queued at once."""
+        c.one("request-notifications", mask=0b10)
+        for goal in (GOAL, OTHER, GOAL):
+            c.one("set-joint-angles", joints=goal)
+        return [int.from_bytes(d[6:8], "little") for _, d in _async(c, 20.0)]
+
+    assert pair(Fault.QUEUE_REVERSED, completed) == ([1, 2, 3], [1, 3, 2])

@@ -360,6 +360,10 @@ class ArmSim:
     server).
     """
 
+    reverse_waiting: bool = False
+    """Run the segments waiting behind the running one newest first; True models a faulty server (with
+    :attr:`stop_between_segments`: the segments then run one at a time)."""
+
     def __init__(
         self,
         model: ArmModel = PUMA600,
@@ -866,6 +870,8 @@ class ArmSim:
         ):
             self._interp.enqueue(packet.request, now)
             self._compliant_tail = packet.request.scheme.compliant
+        elif self.reverse_waiting:
+            self._backlog.appendleft(packet)
         else:
             self._backlog.append(packet)
 

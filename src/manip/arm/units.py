@@ -12,7 +12,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Final, Literal
 
-__all__ = ["LENGTH_UNITS", "MM_PER_UNIT", "LengthUnit", "WireLengths"]
+__all__ = ["LENGTH_UNITS", "MM_PER_UNIT", "LengthUnit", "WireLengths", "unit_of"]
 
 LengthUnit = Literal["mm", "cm", "inch"]
 MM_PER_UNIT: Final[Mapping[LengthUnit, float]] = {"mm": 1.0, "cm": 10.0, "inch": 25.4}
@@ -52,3 +52,20 @@ class WireLengths:
         if self.unit != "mm":
             values[part] = [x * factor for x in values[part]]
         return tuple(values)
+
+
+LEARN_TOLERANCE: Final = 1.25
+"""How far (as a factor) a measured length may be from the expected one in a unit for that unit to be
+learned from it."""
+
+
+def unit_of(measured: float, expected_mm: float) -> LengthUnit | None:
+    """The unit in which a length the model puts at ``expected_mm`` millimetres reads ``measured``: the
+    unit whose size makes them agree within :data:`LEARN_TOLERANCE`, or None when none does."""
+    if not (measured > 0.0 and expected_mm > 0.0):
+        return None
+    ratio = expected_mm / measured
+    for unit, size in MM_PER_UNIT.items():
+        if 1.0 / LEARN_TOLERANCE <= ratio / size <= LEARN_TOLERANCE:
+            return unit
+    return None

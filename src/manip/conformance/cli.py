@@ -29,11 +29,12 @@ import shlex
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar, cast
+from typing import Any, Literal, TypeVar
 
 import click
 from rich.console import Console
 
+from manip.arm.units import LENGTH_UNITS, LengthUnit
 from manip.commandline import FiniteFloat, configure_logging, version_option
 from manip.conformance.cli_options import (
     cases_of_clauses,
@@ -62,7 +63,7 @@ from manip.conformance.puma.target import (
 )
 from manip.conformance.replay.cli import replay_command, verify_command
 from manip.conformance.suite.case import all_cases
-from manip.conformance.suite.context import DEFAULT_REPLY_TIMEOUT, LengthUnit, RunOptions
+from manip.conformance.suite.context import DEFAULT_REPLY_TIMEOUT, RunOptions
 from manip.conformance.suite.results import ExitCode, RunReport
 from manip.conformance.suite.runner import RunConfig
 from manip.conformance.suite.selection import PatternError, PatternSet
@@ -167,6 +168,18 @@ def main() -> None:
 @junit_option
 @document_options
 @click.option(
+    "--length-unit",
+    type=click.Choice([*LENGTH_UNITS, "auto"]),
+    default="mm",
+    show_default=True,
+    help="The unit of the target's lengths, which the 1985 guide does not give (erratum units): every "
+    "Cartesian move the suite makes (straight-line, incremental, move to a transform) and every position "
+    "tolerance is sized in it, and with --cougar a Cougar's frame vector and centre of gravity.  A move "
+    "refused as out of reach is not judged, and says to try another.  auto (not with --cougar): learned "
+    "before the cases from the height of the target's ready pose (one solve backwards; a PUMA 600's, else "
+    "mm).",
+)
+@click.option(
     "--server-profile",
     type=click.Choice(PROFILES),
     default="manip",
@@ -215,14 +228,6 @@ def main() -> None:
     metavar="FILE",
     help="With --cougar: the Cougar's memory map (TOML, docs/drv11j.md), for the cases that read or write "
     "its memory; without one they are not judged (--cougar sim declares its own).",
-)
-@click.option(
-    "--length-unit",
-    "length_unit",
-    type=click.Choice(["mm", "cm", "inch"]),
-    default="mm",
-    show_default=True,
-    help="The unit of the lengths the target takes: a Cougar's frame vector and centre of gravity.",
 )
 @click.option(
     "--puma",
@@ -314,13 +319,13 @@ def run(
     junit_path: Path | None,
     html_path: Path | None,
     markdown_path: Path | None,
+    length_unit: LengthUnit | Literal["auto"],
     server_profile: str,
     server_faults: tuple[str, ...],
     cougar: str | None,
     cougar_faults: tuple[str, ...],
     cougar_readings: tuple[str, ...],
     memory_map: Path | None,
-    length_unit: str,
     puma: bool,
     wrist_listen: str,
     wrist_wait: float,
@@ -351,6 +356,7 @@ def run(
         host, server_faults, target_time_scale, cougar, cougar_faults, allow_motion, target_kind
     )
     _check_profile(server_profile, host=host, cougar=cougar)
+    _check_length_unit(length_unit, cougar=cougar)
     target = _cougar_target(
         cougar, (cougar_faults, cougar_readings), memory_map, host=host, server_faults=server_faults
     )
@@ -396,7 +402,8 @@ def run(
         address=address,
         broken_after=broken_after,
         cougar_map=target.declared_map() if target is not None else None,
-        length_unit=cast(LengthUnit, length_unit),
+        length_unit="mm" if length_unit == "auto" else length_unit,
+        learn_length_unit=length_unit == "auto",
     )
     config = RunConfig(
         address=address,
@@ -418,6 +425,12 @@ def run(
     if puma_target is not None:
         config.reproduce_prefix = puma_target.reproduce_prefix()
     console.print(f"manip-conform: seed [bold]{seed}[/] (rerun with --seed {seed})")
+    console.print(
+        "lengths: learned from the target's ready pose (--length-unit auto; the 1985 guide gives no unit)"
+        if length_unit == "auto"
+        else f"lengths taken in {length_unit} (--length-unit; the 1985 guide gives no unit: erratum units)",
+        markup=False,
+    )
     job = Job(
         config, cases, console, quiet, faults=config_faults, target=target or puma_target,
         world=world_of(world, world_timeout), server_profile=server_profile,
@@ -436,6 +449,14 @@ def _check_profile(server_profile: str, *, host: str | None, cougar: str | None)
     if server_profile != "manip" and (host or cougar is not None):
         raise click.UsageError(
             "--server-profile applies to the embedded server only (omit HOST and --cougar)"
+        )
+
+
+def _check_length_unit(length_unit: str, *, cougar: str | None) -> None:
+    """``--length-unit auto`` learns the unit from a Chaos target's ready pose: a Cougar has none."""
+    if length_unit == "auto" and cougar is not None:
+        raise click.UsageError(
+            "--length-unit auto learns the unit from a server's ready pose: with --cougar name it"
         )
 
 
@@ -484,7 +505,7 @@ def _cougar_target(
     """``--cougar``: the Cougar to judge instead of a server (its faults and readings, its memory map),
     and the options that cannot go with it."""
     if cougar is None:
-        for option in ("cougar_readings", "memory_map", "length_unit"):
+        for option in ("cougar_readings", "memory_map"):
             if given(option):
                 name = option.replace("_", "-").removesuffix("s")
                 raise click.UsageError(f"--{name} describes a Cougar: add --cougar")
@@ -552,12 +573,12 @@ def _reproduce_options(
         extra += ["--broken-after", f"{options.broken_after:g}"]
     if options.strict:
         extra.append("--strict")
-    if options.length_unit != "mm":
-        extra += ["--length-unit", options.length_unit]
     if options.max_examples != 25:
         extra += ["--max-examples", str(options.max_examples)]
     if options.time_scale != 1.0:
         extra += ["--target-time-scale", f"{options.time_scale:g}"]
+    if options.learn_length_unit or options.length_unit != "mm":
+        extra += ["--length-unit", "auto" if options.learn_length_unit else options.length_unit]
     if options.robot == "hardware":
         extra += ["--target", "hardware"] + (["--allow-motion"] if options.allow_motion else [])
     if profile != "manip":
@@ -585,6 +606,9 @@ def _finish(
     )
     for problem in report.unwritten:  # a report path that cannot be written is a usage error, found late
         click.echo(f"manip-conform: {problem}", err=True)
+    learned = report.options.get("length_unit_learned")
+    if learned:
+        console.print(f"lengths (--length-unit auto): {learned}", markup=False)
     summary(console, report, quiet)
     return int(report.exit_code) if code is None or report.unwritten else int(code)
 
@@ -614,7 +638,7 @@ def _check_world(world: str | None, timeout: float | None, *, host: str | None, 
 @click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table", show_default=True)
 @click.option("--select", "select", multiple=True, metavar="PATTERN", help="Only cases matching PATTERN.")
 def cases_command(fmt: str, select: tuple[str, ...]) -> None:
-    """List every case: id, clauses, level, kind, hazard."""
+    """List every case: id, clauses, level, kind, hazard, the Puma extension opcodes it uses."""
     try:
         patterns = PatternSet.of(select, "--select")
     except PatternError as exc:
@@ -630,6 +654,7 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
                 "kind": c.technique,
                 "target": c.target,
                 "hazard": c.hazard,
+                "extensions": list(c.extensions),
                 "deadline": c.deadline,
                 "summary": c.summary,
             }
@@ -637,8 +662,10 @@ def cases_command(fmt: str, select: tuple[str, ...]) -> None:
         ]
         click.echo(json.dumps(data, indent=2))
         return
-    rows = [(c.id, c.level, c.technique, c.hazard, " ".join(c.clauses)) for c in items]
-    columns = ("id", "level", "kind", "hazard", "clauses")
+    rows = [
+        (c.id, c.level, c.technique, c.hazard, " ".join(c.extensions), " ".join(c.clauses)) for c in items
+    ]
+    columns = ("id", "level", "kind", "hazard", "extensions", "clauses")
     print_table(make_console(min_width=TABLE_WIDTH), f"{len(items)} cases", columns, rows)
 
 

@@ -19,6 +19,8 @@ The hook points, by what they decide:
   :meth:`~Defects.wrist_failure`, :attr:`~Defects.discards_after_free_joint`;
 * what a request does: :meth:`~Defects.describe`, :meth:`~Defects.increment`, :meth:`~Defects.move_ready`,
   :meth:`~Defects.configuration`,
+
+  :meth:`~Defects.set_speed`,
   :attr:`~Defects.straight_lines`, :attr:`~Defects.checks_joint_limits`,
   :attr:`~Defects.applies_configuration`;
 * replies: :meth:`~Defects.payload`, :meth:`~Defects.reply`;
@@ -175,6 +177,10 @@ class Defects:
         """The configuration set configuration puts in force when asked for ``lefty`` (or righty)."""
         return lefty
 
+    def set_speed(self, arm: ArmSim, factor: float) -> None:
+        """Set the speed factor of the segments queued from now on (BVA out of range)."""
+        arm.set_speed(factor)
+
     # ---------------------------------------------------------------------------- replies
     def payload(self, op: RequestOpcode, values: Mapping[str, Any], encode: Encoder) -> bytes:
         """A reply's data after the request number, as ``encode`` (the spec codec) writes them."""
@@ -301,6 +307,9 @@ class SwitchedDefects(Defects):
         arm.keep_queue_on_abort = on(Fault.ABORT_KEEPS_QUEUE)
         if on(Fault.SEGMENTS_STOP):
             arm.stop_between_segments = SEGMENTS_STOP_REST_S
+        if on(Fault.QUEUE_REVERSED):
+            arm.stop_between_segments = arm.stop_between_segments or 0.0
+            arm.reverse_waiting = True
         if on(Fault.SERVO_DOUBLE_RATE):
             arm.tick_period /= 2
         arm.collision_test_compliant = on(Fault.COMPLIANT_COLLISION_TEST)
@@ -401,6 +410,11 @@ class SwitchedDefects(Defects):
 
     def configuration(self, lefty: bool) -> bool:
         return not lefty if self._on(Fault.CONFIGURATION_SWAPPED) else lefty
+
+    def set_speed(self, arm: ArmSim, factor: float) -> None:
+        arm.set_speed(factor)  # refused out of range, as the protocol says
+        if self._on(Fault.SPEED_IGNORED):
+            arm.set_speed(1.0)
 
     def move_ready(self, arm: ArmSim, now: float) -> int:
         if self._on(Fault.READY_LEAVES_WRIST):

@@ -95,6 +95,8 @@ class Fault(enum.StrEnum):
     ASYNC_NUMBER_PREVIOUS = "async-number-previous"
     WRIST_ERROR_FATAL = "wrist-error-fatal"
     ABORT_KEEPS_QUEUE = "abort-keeps-queue"
+    SPEED_IGNORED = "speed-ignored"
+    QUEUE_REVERSED = "queue-reversed"
     # protocol defects of the Puma's side of the wrist link (judged by manip-conform run --puma)
     WRIST_FLOAT_WORDS_SWAPPED = "wrist-float-words-swapped"
     WRIST_USER_FIRST = "wrist-user-first"
@@ -572,6 +574,20 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "An abort drops only the segment in execution: the queued ones run once motion is allowed "
                 "again.",
                 "motion.abort",
+            ),
+            _info(
+                Fault.SPEED_IGNORED,
+                "protocol",
+                "Set speed answers done to a factor in range and changes nothing: every move runs at full "
+                "speed.",
+                "motion.speed-scales",
+            ),
+            _info(
+                Fault.QUEUE_REVERSED,
+                "protocol",
+                "Segments queued behind the one running run newest first (each waits for the one before it "
+                "to end).",
+                "segment.fifo-completion",
             ),
             _info(
                 Fault.WRIST_FLOAT_WORDS_SWAPPED,

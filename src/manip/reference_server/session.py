@@ -637,7 +637,7 @@ class ServerSession:
     def _set_speed(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         factor = values["factor"]
         assert isinstance(factor, float)
-        self.arm.set_speed(factor)
+        self.defects.set_speed(self.arm, factor)
         return {}
 
     def _enable_power(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:

@@ -9,6 +9,7 @@ they fail: CI must never pass without having opened the page (the one rule of
 
 from __future__ import annotations
 
+import copy
 import json
 import re
 import shutil
@@ -571,3 +572,11 @@ def test_the_copy_fallback_says_when_copying_failed(
     page = _dump_dom(browser, _with_script(failing_run.html, script, tmp_path / "c.html").as_uri())
     said = page.elements[0].attrs["data-said"]
     assert said.startswith("Copy failed") and said != "Copied", said
+
+
+def test_a_case_that_uses_an_extension_says_so(failing_run: Run) -> None:
+    data = copy.deepcopy(failing_run.data)
+    data["cases"][0]["extensions"] = ["request-notifications", "reset-abort"]
+    page = render_html(data)
+    assert "uses request-notifications, reset-abort (Puma extensions)" in page
+    assert page.count("(Puma extensions)") == 1  # only the case that declares one

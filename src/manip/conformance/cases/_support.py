@@ -9,19 +9,26 @@ it (:func:`reply_view`), and failures that carry their evidence (:class:`Evidenc
 A case reports only the clauses it declares (``manip.conformance.suite.invariants``), so the helpers
 that a case uses to *prepare* its check (read the angles, switch power on) judge nothing themselves:
 :func:`require_response` passes a malformed answer to the transcript invariant and, when the target
-refuses what the case needs, skips the case if the target does not serve the opcode and leaves it not
-judged otherwise (the case of that request reports the refusal): a wrong answer is never a skip.  The
-helpers that check take the clause from their caller.
+refuses what the case needs, ends the case not judged (it applies, but cannot be judged without what was
+refused; the case of that request judges the refusal): a wrong answer is never a skip.  The helpers that
+check take the clause from their caller.
+
+The guide's own route (a server written from the 1985 guide alone has none of manip's Puma extension
+opcodes): :func:`ask_notifications` says whether the target serves request notifications (0257), and when
+it does not, a case learns what the notifications would have told it by polling Joint angles (0202) in the
+run's clock: :func:`poll_joints`, :func:`arrival` (the end of a motion) and :func:`timed_move` (a move's
+duration, either way).  :func:`extension_name` names an extension opcode the way every message does.
 """
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Final, NoReturn
+from typing import Any, Final, NamedTuple, NoReturn
 
 from manip.arm.kinematics import PUMA600, JointLimits, Joints
+from manip.arm.units import MM_PER_UNIT
 from manip.codecs.errors import CodecError
 from manip.codecs.lisp import LispValue
 from manip.codecs.messages import ErrorReply, decode_error, decode_reply
@@ -31,6 +38,7 @@ from manip.conformance.judge.checks import (
     WirePacket,
     check_error_packet,
     check_reply,
+    completed_segment,
     description_operations,
     multi_text,
     parse_description,
@@ -41,7 +49,7 @@ from manip.conformance.judge.violation import CarriesViolation, Violation
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.conformance.suite.invariants import TRANSCRIPT
 from manip.spec import SPEC, RequestName, RequestOpcode
-from manip.spec.constants import ServerOp
+from manip.spec.constants import AsyncCondition, ServerOp
 from manip.spec.notation import octal
 
 UNASSIGNED_OPCODES: Final[tuple[int, ...]] = tuple(
@@ -74,27 +82,31 @@ def floats(answer: Answer) -> tuple[float, ...]:
 def require_response(ctx: CaseContext, answer: Answer, what: str) -> None:
     """The case needs ``answer`` to be a normal response: a malformed answer is the transcript
     invariant's finding (reported here, and the case stops: what follows reads the answer), and a
-    refusal ends the case (:func:`refused`)."""
+    refusal ends the case not judged (:func:`refused`)."""
     ctx.check(check_reply(answer.request, answer.packets), stop=True)
     if not answer.is_response:
         refused(ctx, answer, f"the case needs {what}")
 
 
 def refused(ctx: CaseContext, answer: Answer, needed: str) -> NoReturn:
-    """End a case whose request was refused: skipped when the target does not serve the opcode (C UOP or
-    C UIM: a capability it lacks), else not judged (the target refused what it serves; the opcode's own case
-    judges that answer).  A wrong answer is never a skip."""
+    """End a case whose request was refused, not judged: the case applies, but cannot be judged without
+    what was refused.  When the target does not serve the opcode (C UOP or C UIM: a capability it lacks,
+    such as a Puma extension), a target that serves it judges the case's clauses; otherwise the opcode's
+    own case judges the refusal.  A wrong answer is never a skip."""
     error = error_of(answer)
     op = SPEC.requests.get(answer.request.opcode)
     name = op.name if op is not None else f"opcode {octal(answer.request.opcode)}"
     said = repr(error.error.render()) if error is not None else str(answer)
     if error is not None and error.error.code in NOT_SERVED:
-        ctx.skip(f"{needed}, and the target does not serve {name}: {said}")
+        ctx.not_judged(
+            f"{needed}, and the target does not serve {name}: {said}; a target that serves it judges the "
+            "case's clauses"
+        )
     ctx.not_judged(f"{needed}, and the target refused {name}: {said} (server.reply.{name} judges the answer)")
 
 
 async def read_floats(ctx: CaseContext, probe: Probe, op: RequestName) -> tuple[float, ...]:
-    """Here or joint angles, as floats (the case skips when the target refuses them)."""
+    """Here or joint angles, as floats (the case is not judged when the target refuses them)."""
     answer = await probe.call(op)
     require_response(ctx, answer, f"a normal reply to {op}")
     try:
@@ -174,7 +186,7 @@ def not_judged_for_load(ctx: CaseContext, reason: str) -> None:
     """A timing check that the host's delays left undecided: the case ends not-judged for ``reason``
     (which names the delays measured), unless it already found a violation, which stands (the reason
     is then a note)."""
-    if ctx.soft_failures:
+    if ctx.recorded:
         ctx.note(f"not judged: {reason}")
     else:
         ctx.not_judged(reason)
@@ -194,6 +206,140 @@ async def settle(
         if ctx.clock() >= deadline:
             return None
         await probe.drain(0.1)
+
+
+# ------------------------------------------------------------------------------ the guide's own route
+POLL_S: Final = 0.01
+"""Seconds between two readings of the guide's own route (in the target's time: divided by the time
+scale of a faster-than-real simulated arm)."""
+SEGMENT_MASK: Final = 1 << SPEC.async_codes[AsyncCondition.SEGMENT_COMPLETED].notification_bit
+"""request-notifications mask bit of segment completions."""
+
+
+def extension_name(name: RequestName) -> str:
+    """An extension opcode as messages name it: ``0257, request notifications, a Puma extension``."""
+    op = SPEC.request(name)
+    return f"{octal(op.opcode)}, {op.title[:1].lower()}{op.title[1:]}, a Puma extension"
+
+
+async def ask_notifications(ctx: CaseContext, probe: Probe, mask: int = SEGMENT_MASK) -> bool:
+    """Ask for the asynchronous responses of ``mask`` (request notifications, a Puma extension); whether
+    the target serves it.  A refusal is no finding: the 1985 guide gives no opcode to ask for them, so
+    the case goes the guide's own way (a note says so); a malformed answer is the invariant's finding."""
+    answer = await probe.call("request-notifications", mask=mask)
+    ctx.check(check_reply(answer.request, answer.packets))
+    if answer.is_response:
+        return True
+    ctx.note(
+        f"the target refused {extension_name('request-notifications')} ({answer}): judged with the 1985 "
+        "guide's own requests, polling Joint angles (0202)"
+    )
+    return False
+
+
+def no_wrist(answer: Answer) -> str:
+    """Why a case of the wrist is not judged on a target that refused wrist version: what would judge it."""
+    return (
+        f"the target serves no wrist (it refused {extension_name('wrist-version')}: {answer}), and the 1985 "
+        "guide gives no opcode to reach one: a server with a Cougar wrist judges it (the embedded server, "
+        "manip-conform run without HOST, or manip-server --cougar sim)"
+    )
+
+
+def length(ctx: CaseContext, mm: float) -> float:
+    """A length the suite chose in millimetres, in the unit the run takes the target's lengths in
+    (``--length-unit``; the 1985 guide gives none: erratum ``units``)."""
+    return mm / ctx.options.mm_per_unit
+
+
+UNIT_FREE_REFUSALS: Final = frozenset({"NAP", "AWA"})
+"""Refusal codes that cannot be a length unit's doing (no power, motion aborted)."""
+
+
+def require_reach(ctx: CaseContext, answer: Answer, what: str) -> None:
+    """Like :func:`require_response`, for a Cartesian request (a transform or an increment) the case
+    sized in the run's length unit: a refusal that may be the unit's (TOR, out of reach: any code but no
+    power or an abort) ends the case not-judged with a message that names ``--length-unit``."""
+    ctx.check(check_reply(answer.request, answer.packets))
+    if answer.is_response:
+        return
+    error = error_of(answer)
+    code = error.error.code if error is not None else ""
+    if code not in UNIT_FREE_REFUSALS:
+        unit = ctx.options.length_unit
+        others = "|".join(u for u in MM_PER_UNIT if u != unit)
+        ctx.not_judged(
+            f"the target refused {what}, sized in {unit} ({answer}"
+            + (f", {code}" if code else "")
+            + "): out of reach if its lengths are in another unit, which the 1985 guide does not give "
+            f"(erratum units); run with --length-unit {others} to size the moves in it"
+        )
+    require_response(ctx, answer, what)
+
+
+class Reading(NamedTuple):
+    """One reading of the joint angles, at ``at`` seconds of the case's clock."""
+
+    at: float
+    joints: tuple[float, ...]
+
+
+async def poll_joints(
+    ctx: CaseContext,
+    probe: Probe,
+    *,
+    within: float,
+    until: Callable[[Sequence[Reading]], bool],
+    every: float = POLL_S,
+) -> list[Reading]:
+    """Read the joint angles every ``every`` seconds until ``until`` says the readings so far are
+    enough, or ``within`` seconds pass (the last reading is then the one after the limit)."""
+    out: list[Reading] = []
+    deadline = ctx.clock() + within
+    while True:
+        out.append(Reading(ctx.clock(), await read_floats(ctx, probe, "joint-angles")))
+        if until(out) or out[-1].at >= deadline:
+            return out
+        await probe.drain(every / ctx.options.time_scale)
+
+
+def near(joints: Sequence[float], goal: Sequence[float], tol: float = 1e-3) -> bool:
+    """Every joint within ``tol`` degrees of ``goal``."""
+    return max(abs(a - b) for a, b in zip(joints, goal, strict=True)) <= tol
+
+
+async def arrival(
+    ctx: CaseContext, probe: Probe, goal: Sequence[float], *, within: float = 10.0, tol: float = 1e-3
+) -> float | None:
+    """The end of a motion by the 1985 guide's own requests: the case's clock at the first reading of
+    the joint angles within ``tol`` of ``goal``, or None when ``within`` seconds pass first."""
+    readings = await poll_joints(ctx, probe, within=within, until=lambda r: near(r[-1].joints, goal, tol))
+    return readings[-1].at if near(readings[-1].joints, goal, tol) else None
+
+
+async def timed_move(
+    ctx: CaseContext, probe: Probe, goal: Sequence[float], *, notified: bool, within: float = 10.0
+) -> float:
+    """Seconds from a move to ``goal`` (set joint angles) to its end: its segment-completed response
+    when notifications are on (``notified``), else its arrival seen by polling the joint angles.  The
+    case skips when the move is refused, and ends not-judged when no end is seen within ``within``
+    seconds (the cases of segment completion and of motion judge a missing one)."""
+    start = ctx.clock()
+    answer = await probe.call("set-joint-angles", joints=list(goal))
+    require_response(ctx, answer, "a small move accepted")
+    segment = word(answer.data, 2)
+    if not notified:
+        end = await arrival(ctx, probe, goal, within=within)
+        if end is None:
+            ctx.not_judged(f"the arm did not reach {list(goal)} within {within:g} s, so no move was timed")
+        return end - start
+    while (packet := await probe.next_packet(within)) is not None:
+        if completed_segment(packet) == segment:
+            return ctx.clock() - start
+    ctx.not_judged(
+        f"the case times moves by their segment-completed reports; none came for segment {segment} "
+        "(server.async.segment-completed judges that)"
+    )
 
 
 DONE_SIZE: Final = 2
@@ -252,8 +398,8 @@ async def clear_guards(probe: Probe) -> None:
 
 
 async def power_on(ctx: CaseContext, probe: Probe) -> None:
-    """Clear leftover wrist guards, then enable high power (it also clears an abort); the case skips
-    when the target refuses (``server.reply.enable-power`` judges the answer)."""
+    """Clear leftover wrist guards, then enable high power (it also clears an abort); the case is not
+    judged when the target refuses (``server.reply.enable-power`` judges the answer)."""
     await clear_guards(probe)
     answer = await probe.call("enable-power")
     require_response(ctx, answer, "arm power (enable high power answered with done)")

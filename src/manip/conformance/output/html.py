@@ -470,8 +470,10 @@ def _case_detail(report: Report, case: Mapping[str, Any], order: WireOrder) -> s
     parts.append(f"<h4>Reproduce</h4>{_copy_line(str(case.get('reproduce', '')))}")
     parts.append(f"<h4>Packets</h4>{_packet_log(case, order)}")
     parts.append(f"<h4>Clauses it checks</h4>{_clause_list(report, case['clauses'])}")
+    extensions = case.get("extensions") or []
+    uses = f"uses {_e(', '.join(str(x) for x in extensions))} (Puma extensions) \u00b7 " if extensions else ""
     meta = (
-        f"{_e(case['level'])} \u00b7 {_e(case['kind'])} \u00b7 {_e(case['hazard'])} \u00b7 "
+        f"{_e(case['level'])} \u00b7 {_e(case['kind'])} \u00b7 {_e(case['hazard'])} \u00b7 {uses}"
         f"{float(case['duration']):.3f} s of its {float(case['deadline']):g} s time budget"
         + (
             f" (the contract's deadline for the harness: {float(case['harness_deadline']):g} s)"

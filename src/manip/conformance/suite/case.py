@@ -14,6 +14,7 @@ A case is an ``async`` function of a :class:`~manip.conformance.suite.context.Ca
         hazard="read-only",                          # the most dangerous opcode the case may send
         deadline=5.0,                                # seconds for the whole case (scaled by --deadline-scale)
         waits=None,                                  # or: options -> seconds spent on a target's timer
+        extensions=(),                               # Puma extension opcodes it uses (see below)
     )
     async def describe_terminator(ctx: CaseContext) -> None:
         # (a docstring here: its first paragraph is the case's summary)
@@ -47,6 +48,13 @@ Rules a case follows:
 * It never assumes state left by another case: each gets a fresh connection, which starts the
   per-connection state afresh (power, speed, segments; erratum ``server-robot``), but the arm stands
   wherever the last case left it.
+* ``extensions`` names every Puma extension opcode (0240 and up, the spec's ``extension = true``: request
+  notifications, reset abort, the wrist) the case sends, by spec name.  A server written from the 1985
+  guide alone has none of them, so where the target does not offer one (a refusal, or absent from describe
+  self's ``:operations``) the case judges the same clauses with the guide's own requests (polling Here or
+  Joint angles, enable high power to clear an abort: :mod:`manip.conformance.cases._support`), or ends
+  ``not-judged`` naming what would judge it; it never skips for it.  ``manip-conform cases`` and the
+  reports show the mark.
 * ``hazard`` is honest: with ``--target hardware`` cases above ``config`` are left out unless
   ``--allow-motion`` (property/stateful cases also read ``ctx.options.allowed_hazards`` to restrict
   what they generate).
@@ -180,6 +188,8 @@ class Case:
     module: str
     waits: Callable[[RunOptions], float] | None = None
     """Seconds the case spends waiting on a timer of the target's, added to its deadline unscaled."""
+    extensions: tuple[str, ...] = ()
+    """The Puma extension opcodes (spec request names) the case sends where the target offers them."""
 
     def deadline_for(self, options: RunOptions) -> float:
         """The case's deadline in a run with ``options``."""
@@ -254,6 +264,13 @@ def _validate(
         raise CaseError(f"case {case_id}: deadline must be positive")
 
 
+def _validate_extensions(case_id: str, extensions: tuple[str, ...]) -> None:
+    by_name = {op.name: op for op in SPEC.requests.values()}
+    wrong = [name for name in extensions if name not in by_name or not by_name[name].extension]
+    if wrong:
+        raise CaseError(f"case {case_id}: {wrong} are not Puma extension opcodes of the spec")
+
+
 class Declare:
     """The ``case`` decorator (an object, so that ``case.each`` can go with it)."""
 
@@ -268,6 +285,7 @@ class Declare:
         deadline: float = 5.0,
         summary: str | None = None,
         waits: Callable[[RunOptions], float] | None = None,
+        extensions: Iterable[str] = (),
     ) -> Callable[[CaseFunction], CaseFunction]:
         """Declare a case; the decorated function is returned unchanged (and registered).
 
@@ -275,6 +293,8 @@ class Declare:
         clause_ids = tuple(clauses)
         chosen: Level = level if level is not None else strongest_level(clause_ids)
         _validate(case_id, clause_ids, chosen, technique, hazard, deadline)
+        extension_names = tuple(extensions)
+        _validate_extensions(case_id, extension_names)
 
         def decorate(function: CaseFunction) -> CaseFunction:
             register(
@@ -289,6 +309,7 @@ class Declare:
                     summary=summary if summary is not None else summary_of(function.__doc__),
                     module=function.__module__,
                     waits=waits,
+                    extensions=extension_names,
                 )
             )
             return function

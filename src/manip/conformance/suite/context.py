@@ -58,6 +58,7 @@ from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass, replace
 from typing import Any, Final, Literal, NoReturn
 
+from manip.arm.units import MM_PER_UNIT, LengthUnit
 from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request
 from manip.codecs.packet import Direction, Packet
@@ -112,11 +113,6 @@ Connector = Callable[[bool], Awaitable[ChaosConnection]]
 a refusal as busy (the previous case's connection still closing) is retried."""
 
 
-LengthUnit = Literal["mm", "cm", "inch"]
-"""A length unit a target may take (``--length-unit``; erratum ``cougar-length-unit`` for a Cougar)."""
-MM_PER_UNIT: Final[dict[str, float]] = {"mm": 1.0, "cm": 10.0, "inch": 25.4}
-
-
 @dataclass(frozen=True)
 class RunOptions:
     """The run's settings, as cases see them."""
@@ -142,8 +138,18 @@ class RunOptions:
     """A Cougar target's memory map (``--memory-map``; the simulator's own for ``--cougar sim``): without
     one the cases that read or write Cougar memory are not judged."""
     length_unit: LengthUnit = "mm"
-    """The unit of the lengths the target takes (``--length-unit``): a Cougar's frame vector and centre of
-    gravity."""
+    """The unit the target's lengths are taken to be in (``--length-unit``; the 1985 guide gives none,
+    errata ``units`` and ``cougar-length-unit``): every Cartesian move and position tolerance of the
+    server cases, and a Cougar's frame vector and centre of gravity, are sized in it."""
+
+    learn_length_unit: bool = False
+    """``--length-unit auto``: the runner learns :attr:`length_unit` from the target's ready pose before
+    the cases (:mod:`manip.conformance.suite.units`)."""
+
+    @property
+    def mm_per_unit(self) -> float:
+        """Millimetres in one unit of the target's lengths."""
+        return MM_PER_UNIT[self.length_unit]
 
     @property
     def allowed_hazards(self) -> frozenset[Hazard]:

@@ -243,6 +243,8 @@ class CaseResult:
     harness_deadline: float | None = None
     """Client cases: the contract's deadline for the harness (docs/client-harness.md section 5, the sum
     over the case's plays), apart from :attr:`deadline`, the case's own time budget; None elsewhere."""
+    extensions: tuple[str, ...] = ()
+    """The Puma extension opcodes the case uses where the target offers them (its declaration's)."""
 
     @property
     def failure(self) -> Violation | None:
@@ -293,6 +295,8 @@ class RunReport:
     time: str = "real"
     """The clock the run used: ``real`` (wall clock) or ``virtual`` (the embedded server simulated on the
     runner's loop; case durations and packet times are then simulated seconds)."""
+    length_unit: str = "mm"
+    """The unit the target's lengths were taken to be in (``--length-unit``, erratum ``units``)."""
     unstable: list[str] = field(default_factory=list)
     """Suite problems found by ``--repeat``: cases whose verdict changed between seeds or between two
     runs of one seed (exit 4: a verdict that depends on the draw cannot be trusted)."""

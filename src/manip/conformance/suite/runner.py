@@ -59,6 +59,7 @@ from manip.conformance.suite.context import CaseContext, Probe, RunOptions
 from manip.conformance.suite.invariants import attribution_problem
 from manip.conformance.suite.results import CaseResult, LivenessCheck, Outcome, RunReport, conclude
 from manip.conformance.suite.selection import PatternSet
+from manip.conformance.suite.units import learn_length_unit
 from manip.conformance.suite.world import CaseNotJudged, ConditionUnsupported, World, WorldError
 from manip.links import ChaosConnection, open_connection
 from manip.links.api import LinkWrapper
@@ -116,6 +117,7 @@ def blank_result(
         kind=item.technique,
         target=item.target,
         hazard=item.hazard,
+        extensions=item.extensions,
         summary=item.summary,
         outcome=outcome,
         seed=case_seed(run_seed, item.id),
@@ -182,12 +184,14 @@ class Runner:
                 "reply_timeout": config.options.reply_timeout,
                 "deadline_scale": config.options.deadline_scale,
                 "time_scale": config.options.time_scale,
+                "length_unit": config.options.length_unit,
                 "select": [p.text for p in config.select.patterns],
                 "skip": [p.text for p in config.skip.patterns],
                 "known_failing": [p.text for p in config.known_failing.patterns],
             },
             command=config.command,
             time="virtual" if config.virtual_time else "real",
+            length_unit=config.options.length_unit,
         )
         self._reached = False
         """Whether anything the target sent (a manip packet, not only the Chaos opening) reached the run."""
@@ -235,6 +239,14 @@ class Runner:
         if self.events.liveness:
             self.events.liveness(check)
         return check
+
+    async def _learn_length_unit(self) -> None:
+        """``--length-unit auto``: the unit the cases size their moves in, learned from the target."""
+        unit, how = await learn_length_unit(self.config.options, self.connect)
+        self.config.options = replace(self.config.options, length_unit=unit)
+        self.report.length_unit = unit
+        self.report.options["length_unit"] = unit
+        self.report.options["length_unit_learned"] = how
 
     async def _probe_once(self) -> tuple[bool, str]:
         """One liveness probe: a fresh connection, Here answered, then Here again on it (a target that
@@ -313,6 +325,8 @@ class Runner:
                 for item in cases:
                     report.results.append(self._blank(item, "skip", "target unreachable before the run"))
                 return report
+            if self.config.options.learn_length_unit:
+                await self._learn_length_unit()
             dead = False
             for item in cases:
                 if dead:

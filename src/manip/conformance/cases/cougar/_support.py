@@ -9,6 +9,7 @@ from collections.abc import Iterable, Sequence
 from typing import Final
 
 from manip.arm import READY
+from manip.arm.units import MM_PER_UNIT
 from manip.codecs.cougar import encode
 from manip.conformance.cougar.probe import (
     CougarProbe,
@@ -17,7 +18,7 @@ from manip.conformance.cougar.probe import (
     layout_words,
     words_bytes,
 )
-from manip.conformance.suite.context import MM_PER_UNIT, CaseContext
+from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory_map import MapObject
 from manip.spec import SPEC
 from manip.spec.constants import CougarCommand, CougarResponse

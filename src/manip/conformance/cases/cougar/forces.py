@@ -9,6 +9,7 @@ from typing import Any, Final
 import numpy as np
 
 from manip.arm import READY
+from manip.arm.units import MM_PER_UNIT
 from manip.conformance.cases.cougar._support import (
     POSE_B,
     SETTLE_TICKS,
@@ -28,7 +29,7 @@ from manip.conformance.cougar.probe import (
     cougar_probe,
 )
 from manip.conformance.suite.case import case
-from manip.conformance.suite.context import MM_PER_UNIT, CaseContext
+from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory_map import MapObject
 
 

@@ -20,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from manip.arm import PUMA560_LEE, READY, forward
+from manip.arm.units import MM_PER_UNIT
 from manip.conformance.cases.cougar._support import (
     POSE_B,
     clean,
@@ -34,7 +35,7 @@ from manip.conformance.cases.cougar._support import (
 )
 from manip.conformance.cougar.probe import CougarProbe, cougar_probe
 from manip.conformance.suite.case import case
-from manip.conformance.suite.context import MM_PER_UNIT, CaseContext
+from manip.conformance.suite.context import CaseContext
 
 OBJECT_OZ: Final = 48.0
 """The weight of the object Cougar is told of (NEWWC) and the hand does not hold."""

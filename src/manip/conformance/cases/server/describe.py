@@ -256,7 +256,7 @@ async def degrees_of_freedom(ctx: CaseContext) -> None:
     dof = await _stated_dof(ctx, probe)
     joints = await probe.call("joint-angles")
     if not joints.is_response:
-        require_response(ctx, joints, "joint angles")  # refused: the case skips
+        require_response(ctx, joints, "joint angles")  # refused: not judged
     ctx.expect(
         _float_count(joints) == dof,
         clause="describe.dof-joint-vectors",

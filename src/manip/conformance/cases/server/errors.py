@@ -21,7 +21,7 @@ EOF_POLL_S: Final = 0.01
 async def _command_error(ctx: CaseContext, probe: Probe, clause: str | None = None) -> Answer:
     """Provoke a non-fatal error: an opcode the spec does not define.  A target that does not refuse
     it breaks ``clause`` when the case declares the refusal; otherwise the case has no error string to
-    judge and skips (``server.negative.unknown-opcodes`` fails the target)."""
+    judge and is not judged (``server.negative.unknown-opcodes`` fails the target)."""
     answer = await probe.call_raw(UNASSIGNED_OPCODES[-1 - ctx.random.randrange(8)])
     if clause is not None:
         ctx.expect(

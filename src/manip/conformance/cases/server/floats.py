@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 import struct
 
-from manip.conformance.cases._support import expect_response, floats, read_floats
+from manip.conformance.cases._support import expect_response, floats, length, read_floats
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec.constants import ServerOp
@@ -72,10 +72,10 @@ async def here_consistent(ctx: CaseContext) -> None:
     solved = floats(answer)
     err = max(abs(x - y) for x, y in zip(solved[9:], pose[9:], strict=True))
     ctx.expect(
-        err < POSITION_TOL_MM,
+        err < length(ctx, POSITION_TOL_MM),
         clause="solve-backwards.data",
         expected="solve backwards of the joint angles equal to Here",
-        actual=f"positions differ by {err:.3f} mm: {solved[9:]} vs {pose[9:]}",
+        actual=f"positions differ by {err:.4g} {ctx.options.length_unit}: {solved[9:]} vs {pose[9:]}",
     )
 
 
@@ -95,7 +95,7 @@ async def solve_round_trip(ctx: CaseContext) -> None:
     rotation = max((abs(x - y) for x, y in zip(again[:9], pose[:9], strict=True)), default=0.0)
     position = max((abs(x - y) for x, y in zip(again[9:], pose[9:], strict=True)), default=0.0)
     ctx.expect(
-        err < POSITION_TOL_MM,
+        err < length(ctx, POSITION_TOL_MM),
         clause="solve-forwards.data",
         expected=f"the solved angles reaching the transform (every float within {POSITION_TOL_MM:g})",
         actual=f"position off by {position:.4f} mm, rotation matrix by {rotation:.4f} (a unitless cosine)",
@@ -181,8 +181,9 @@ async def extremes(ctx: CaseContext) -> None:
         pose = floats(answer)
         worst = max((abs(v) for v in pose[:9]), default=0.0)
         ctx.expect(
-            len(pose) == 12 and worst <= 1.0 + ORTHO_TOL and math.hypot(*pose[9:]) <= REACH_MM,
+            len(pose) == 12 and worst <= 1.0 + ORTHO_TOL and math.hypot(*pose[9:]) <= length(ctx, REACH_MM),
             clause="solve-backwards.data",
-            expected=f"a rotation and a position within {REACH_MM:g} mm for {what}",
+            expected=f"a rotation and a position within {length(ctx, REACH_MM):g} {ctx.options.length_unit} "
+            f"for {what}",
             actual=[f"{v:.4g}" for v in pose],
         )

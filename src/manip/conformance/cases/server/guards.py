@@ -14,6 +14,7 @@ from typing import Final
 
 from manip.conformance.cases._support import (
     expect_refusal,
+    no_wrist,
     power_on,
     read_floats,
     require_response,
@@ -83,21 +84,27 @@ def _condition(packet: WirePacket) -> int | None:
     clauses=["async.layout", "async.codes", "async.only-when-requested", "motion.abort", "read-forces.units"],
     hazard="motion",
     deadline=20.0,
+    extensions=[
+        "wrist-version",
+        "set-weight",
+        "read-forces",
+        "set-guard",
+        "request-notifications",
+        "reset-abort",
+    ],
 )
 async def guard_hit(ctx: CaseContext) -> None:
     """A guard that trips during a move is reported as asked: code 1, word 2 = 1 (stopped) or 2 (goes
     on), word 3 = the guard; a stopping guard aborts the motion (AWA until reset), a continuing one does
     not; with guard hits not asked for, nothing is sent.
 
-    It needs a wrist computer (the wrist opcodes served): against a server without one it skips (the
-    embedded server has the simulated Cougar; a manip-server gets one with --cougar sim)."""
+    It needs a wrist computer (the wrist opcodes, Puma extensions, served): against a server without one
+    it is not judged (the embedded server has the simulated Cougar; a manip-server gets one with --cougar
+    sim)."""
     probe = await ctx.connect()
     version = await probe.call("wrist-version")
     if not version.is_response:
-        ctx.skip(
-            f"the target serves no wrist ({version}): run against a server with a Cougar wrist (the "
-            "embedded server, manip-conform run without HOST, or manip-server --cougar sim)"
-        )
+        ctx.not_judged(no_wrist(version))
     await power_on(ctx, probe)
     start = await read_floats(ctx, probe, "joint-angles")
     # Cougar's settings outlive a connection (erratum cougar-connection-state): start from none, so the
@@ -119,6 +126,11 @@ async def guard_hit(ctx: CaseContext) -> None:
             f"{[round(f, 2) for f in forces]}",
         )
         size = math.sqrt(sum(f * f for f in forces[:3]))
+        if size < PHANTOM_OZ / 4:
+            ctx.not_judged(
+                f"the wrist's corrected force did not follow set weight ({size:.1f} oz for a "
+                f"{PHANTOM_OZ:g} oz object the hand does not hold): no load to trip a guard on"
+            )
         dvec = [f / size for f in forces[:3]] + [0.0, 0.0, 0.0]
         tol = size / 2
         await _stopping(ctx, probe, start, dvec, tol)
@@ -231,6 +243,16 @@ async def _steady_x(ctx: CaseContext, probe: Probe) -> float:
     clauses=["async.layout", "async.codes", "motion.abort"],
     hazard="motion",
     deadline=20.0,
+    extensions=[
+        "wrist-version",
+        "clear-guard",
+        "set-gauge-offsets",
+        "set-frame-vector",
+        "set-weight",
+        "read-forces",
+        "set-guard",
+        "request-notifications",
+    ],
 )
 async def guard_trip_live(ctx: CaseContext) -> None:
     """A stop-the-move guard armed across the hand's x axis does not trip at rest, and trips when the
@@ -238,12 +260,12 @@ async def guard_trip_live(ctx: CaseContext) -> None:
     the motion aborted (AWA until reset).
 
     The target's world puts the force on the hand (``wrist-force``: the embedded server's world always,
-    another target's with ``--world``); without a world the case is not judged.  A target that serves no
-    wrist skips it."""
+    another target's with ``--world``); without a world the case is not judged, nor on a target that
+    serves no wrist."""
     probe = await ctx.connect()
     version = await probe.call("wrist-version")
     if not version.is_response:
-        ctx.skip(f"the target serves no wrist ({version}): the case needs a Cougar wrist")
+        ctx.not_judged(no_wrist(version))
     await power_on(ctx, probe)
     for other in range(16):  # guards other cases left armed would trip too
         await probe.call("clear-guard", index=other)

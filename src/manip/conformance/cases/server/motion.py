@@ -10,23 +10,28 @@ from typing import Final
 
 from manip.codecs.messages import ErrorReply
 from manip.conformance.cases._support import (
+    SEGMENT_MASK,
     TargetArm,
+    ask_notifications,
     describe_target,
     expect_done,
     expect_error_numbers,
     expect_here_served,
     expect_refusal,
     expect_response,
+    extension_name,
     floats,
     host_delay,
+    length,
     not_judged_for_load,
     out_of_range_mask,
     power_on,
     read_floats,
     require_response,
     settle,
+    timed_move,
 )
-from manip.conformance.judge.checks import async_of, check_async_packet, completed_segment, word
+from manip.conformance.judge.checks import async_of, check_async_packet, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.spec import RequestName
@@ -80,7 +85,8 @@ async def _small_move(
     ctx: CaseContext, probe: Probe, by: float = SMALL_STEP_DEG, *, clause: str | None = None
 ) -> int:
     """A small joint move of joint 1; returns its segment number.  With ``clause`` the move being
-    accepted is what the case checks; without, the case needs the move and skips when it is refused."""
+    accepted is what the case checks; without, the case needs the move and is not judged when it is
+    refused."""
     joints = await read_floats(ctx, probe, "joint-angles")
     answer = await probe.call("set-joint-angles", joints=_away_from_zero(joints, by))
     if clause is None:
@@ -154,7 +160,7 @@ async def transform_out_of_reach(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     pose = list(await read_floats(ctx, probe, "here"))
     joints = list(await read_floats(ctx, probe, "joint-angles"))
-    far = [*pose[:9], FAR_MM, 0.0, 0.0]
+    far = [*pose[:9], length(ctx, FAR_MM), 0.0, 0.0]
     answer = await probe.call("solve-forwards", transform=far, current=joints)
     expect_refusal(  # any code: the 1985 guide names none for a place out of reach (manip's is TOR)
         ctx,
@@ -247,7 +253,10 @@ async def transform_out_of_range(ctx: CaseContext) -> None:
             what=f"a move to {what}",
         )
         return
-    ctx.skip("solve forwards found in-range angles for every transform tried (joints 2, 3, 5 past a limit)")
+    ctx.not_judged(
+        "solve forwards found in-range angles for every transform tried (joints 2, 3, 5 past a limit), so no "
+        "TOR was provoked"
+    )
 
 
 @case("server.motion.nap", clauses=["motion.no-power", "kill-power.done"], hazard="power")
@@ -318,11 +327,13 @@ async def awa_reset_by_power(ctx: CaseContext) -> None:
     "server.motion.awa-reset-abort",
     clauses=["motion.abort", "motion.abort-serves-others", "motion.reset"],
     hazard="power",
+    extensions=["reset-abort"],
 )
 async def awa_reset_abort(ctx: CaseContext) -> None:
     """After an abort, motion is refused with AWA while other requests should be served (erratum
     awa-scope: refusing them too, as E.2 reads, only warns); Reset abort (260) clears AWA without
-    restoring power: then NAP, not AWA."""
+    restoring power: then NAP, not AWA.  A target without Reset abort (a Puma extension) has the abort
+    reset the 1985 guide's way, by enable high power (217)."""
     probe = await ctx.connect()
     joints = await read_floats(ctx, probe, "joint-angles")  # in range: a refusal can only be the abort's
     await _abort_by_power_loss(ctx, probe)
@@ -350,7 +361,13 @@ async def awa_reset_abort(ctx: CaseContext) -> None:
         )
     reset = await probe.call("reset-abort")
     if not reset.is_response:
-        ctx.skip(f"the target does not serve Reset abort (0260): {reset}")
+        ctx.note(
+            f"the target refused {extension_name('reset-abort')} ({reset}): the abort is reset by enable "
+            "high power (0217), as Part II §6.2 allows"
+        )
+        await power_on(ctx, probe)
+        await _small_move(ctx, probe, 0.5, clause="motion.reset")
+        return
     await _refused_stay(
         ctx,
         probe,
@@ -413,20 +430,17 @@ async def speed_bounds(ctx: CaseContext) -> None:
         expect_refusal(ctx, answer, clause="speed.range", what=f"speed factor {factor!r}")
 
 
-async def _segment_time(ctx: CaseContext, probe: Probe, factor: float, by: float) -> float:
+async def _segment_time(ctx: CaseContext, probe: Probe, factor: float, by: float, *, notified: bool) -> float:
     answer = await probe.call("set-speed", factor=factor)
     require_response(ctx, answer, f"speed factor {factor!r} accepted")
-    start = ctx.clock()  # the run's clock: simulated seconds in virtual time
-    segment = await _small_move(ctx, probe, by)
-    while True:
-        packet = await probe.next_packet(5.0)
-        if packet is None:  # server.async.segment-completed judges the missing report
-            ctx.not_judged(
-                f"the case times moves by their segment-completed reports; none came for {segment} "
-                "(server.async.segment-completed judges that)"
-            )
-        if completed_segment(packet) == segment:
-            return ctx.clock() - start
+    return await _timed_small_move(ctx, probe, by, notified=notified)
+
+
+async def _timed_small_move(ctx: CaseContext, probe: Probe, by: float, *, notified: bool) -> float:
+    """Seconds a move of joint 1 by ``by`` degrees (towards zero) takes, on the run's clock (simulated
+    seconds in virtual time): by its segment-completed report, or by polling (:func:`timed_move`)."""
+    joints = await read_floats(ctx, probe, "joint-angles")
+    return await timed_move(ctx, probe, _away_from_zero(joints, by), notified=notified)
 
 
 @case(
@@ -434,6 +448,7 @@ async def _segment_time(ctx: CaseContext, probe: Probe, factor: float, by: float
     clauses=["async.layout", "async.codes", "async.only-when-requested"],
     hazard="motion",
     deadline=10.0,
+    extensions=["request-notifications"],
 )
 async def segment_completed(ctx: CaseContext) -> None:
     """Asked for (request-notifications bit 1), a finished segment is reported by 0203 code 2; not
@@ -451,9 +466,12 @@ async def segment_completed(ctx: CaseContext) -> None:
         actual=f"{len(unrequested)} asynchronous response(s)",
         data=unrequested[0].data if unrequested else b"",
     )
-    answer = await probe.call("request-notifications", mask=1 << 1)
-    if not answer.is_response:
-        ctx.skip(f"the target does not serve request-notifications: {answer}")
+    if not await ask_notifications(ctx, probe):
+        ctx.not_judged(
+            "no asynchronous response came unasked (async.only-when-requested held), but the 1985 guide "
+            "gives no request to ask for segment-completed responses; the layout of one (async.layout, "
+            f"async.codes) is judged on a target that serves {extension_name('request-notifications')}"
+        )
     segment = await _small_move(ctx, probe, 1.0)
     seen: list[int | None] = []
     while (packet := await probe.next_packet(3.0)) is not None:
@@ -479,17 +497,22 @@ async def segment_completed(ctx: CaseContext) -> None:
     )
 
 
-@case("server.speed.scales", clauses=["motion.speed-scales"], hazard="motion", deadline=12.0)
+@case(
+    "server.speed.scales",
+    clauses=["motion.speed-scales"],
+    hazard="motion",
+    deadline=12.0,
+    extensions=["request-notifications"],
+)
 async def speed_scales(ctx: CaseContext) -> None:
-    """A move at speed factor 0.25 takes longer than the same move at 1."""
+    """A move at speed factor 0.25 takes longer than the same move at 1 (timed by its segment-completed
+    report, or, on a target without request notifications, by polling the joint angles until it ends)."""
     probe = await ctx.connect()
     await power_on(ctx, probe)
-    answer = await probe.call("request-notifications", mask=1 << 1)
-    if not answer.is_response:
-        ctx.skip(f"the target does not serve request-notifications: {answer}")
+    notified = await ask_notifications(ctx, probe, SEGMENT_MASK)
     delay = await host_delay(ctx)
-    fast = await _segment_time(ctx, probe, 1.0, 1.0)
-    slow = await _segment_time(ctx, probe, 0.25, -1.0)
+    fast = await _segment_time(ctx, probe, 1.0, 1.0, notified=notified)
+    slow = await _segment_time(ctx, probe, 0.25, -1.0, notified=notified)
     delay = max(delay, await host_delay(ctx))
     ctx.note(f"1-degree move: {fast:.3f} s at 1.0, {slow:.3f} s at 0.25")
     # The host's delays lengthen a timing by up to `delay`: a failure is one even with the fast move
@@ -586,10 +609,10 @@ async def configuration(ctx: CaseContext) -> None:
         require_response(ctx, back, "solve backwards of a solution")
         off = math.dist(floats(back)[9:], pose[9:])
         ctx.expect(
-            off <= REACH_TOL_MM,
+            off <= length(ctx, REACH_TOL_MM),
             clause="set-configuration.effect",
             expected=f"the {name} solution reaching the transform",
-            actual=f"{[round(q, 2) for q in solved]}, {off:.3f} mm from it",
+            actual=f"{[round(q, 2) for q in solved]}, {off:.4g} {ctx.options.length_unit} from it",
         )
         solutions[name] = solved
     ctx.expect(
@@ -693,19 +716,6 @@ def _judge_waist_turn(ctx: CaseContext, p0: tuple[float, ...], p1: tuple[float, 
     )
 
 
-async def _timed_move(ctx: CaseContext, probe: Probe, by: float) -> float:
-    """Seconds from a small move's request to its segment-completed report (notifications on)."""
-    start = ctx.clock()
-    segment = await _small_move(ctx, probe, by)
-    while (packet := await probe.next_packet(5.0)) is not None:
-        if completed_segment(packet) == segment:
-            return ctx.clock() - start
-    ctx.not_judged(
-        f"the case times moves by their segment-completed reports; none came for {segment} "
-        "(server.async.segment-completed judges that)"
-    )
-
-
 async def _set_up_state(
     ctx: CaseContext, probe: Probe, pose: list[float]
 ) -> tuple[tuple[float, ...], int | None]:
@@ -727,9 +737,7 @@ async def _set_up_state(
             flipped = value
             break
     require_response(ctx, await probe.call("set-speed", factor=SLOW_FACTOR), "a slow speed factor")
-    require_response(
-        ctx, await probe.call("request-notifications", mask=0b11), "both notifications asked for"
-    )
+    await ask_notifications(ctx, probe, 0b11)  # refused: there are none to keep
     return fresh, flipped
 
 
@@ -738,6 +746,7 @@ async def _set_up_state(
     clauses=["connect.per-connection-state"],
     hazard="motion",
     deadline=20.0,
+    extensions=["request-notifications"],
 )
 async def fresh_state(ctx: CaseContext) -> None:
     """A connection that set a slow speed, both notifications and a configuration closes; the next one
@@ -774,11 +783,11 @@ async def fresh_state(ctx: CaseContext) -> None:
             actual=f"{[round(q, 2) for q in solved] if solved else None}: the last connection's "
             "configuration",
         )
-    require_response(ctx, await probe.call("request-notifications", mask=1 << 1), "segment notifications")
+    notified = await ask_notifications(ctx, probe, SEGMENT_MASK)
     delay = await host_delay(ctx)
-    default = await _timed_move(ctx, probe, -1.0)
+    default = await _timed_small_move(ctx, probe, -1.0, notified=notified)
     require_response(ctx, await probe.call("set-speed", factor=1.0), "speed factor 1")
-    full = await _timed_move(ctx, probe, 1.0)
+    full = await _timed_small_move(ctx, probe, 1.0, notified=notified)
     delay = max(delay, await host_delay(ctx))
     ctx.note(f"1-degree move: {default:.3f} s at the fresh speed, {full:.3f} s at factor 1")
     # As in speed_scales: the host's delays may lengthen either timing by up to `delay`.

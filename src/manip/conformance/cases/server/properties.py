@@ -44,7 +44,7 @@ from manip.conformance.suite.bridge import (
     hypothesis_settings,
     run_in_worker,
 )
-from manip.conformance.suite.case import CaseFailure, CaseSkipped, case
+from manip.conformance.suite.case import CaseFailure, case
 from manip.conformance.suite.context import DEFAULT_REPLY_TIMEOUT, Answer, CaseContext, Probe
 from manip.conformance.suite.invariants import TRANSCRIPT
 from manip.conformance.suite.strategies import (
@@ -55,6 +55,7 @@ from manip.conformance.suite.strategies import (
     requests_of,
     valid_requests,
 )
+from manip.conformance.suite.world import CaseNotJudged
 from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
 
@@ -142,11 +143,11 @@ def _check_answer(answer: Answer) -> None:
 
 def _decode_floats(answer: Answer, what: str, clause: str | None) -> tuple[float, ...]:
     """The floats of a data reply.  A malformed reply is the transcript invariant's evidence; a refusal
-    breaks ``clause``, or skips the case when it only needs the values (``clause`` None)."""
+    breaks ``clause``, or leaves the case not judged when it only needs the values (``clause`` None)."""
     _check_answer(answer)
     if not answer.is_response:
         if clause is None:
-            raise CaseSkipped(f"the case needs {what}, which the target refused: {answer}")
+            raise CaseNotJudged(f"the case needs {what}, which the target refused: {answer}")
         raise Evidence(
             clause,
             f"{what} was refused",
@@ -410,6 +411,8 @@ async def kinematics_round_trip(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     arm = await describe_target(ctx, probe)
     await probe.close()
+    unit = ctx.options.length_unit
+    tol = POSE_TOL_MM / ctx.options.mm_per_unit  # the target's lengths are in --length-unit
 
     def build(session: _Session) -> tuple[Example, Sequence[st.SearchStrategy[Any]]]:
         def body(q: Joints, near: Joints) -> None:
@@ -437,12 +440,12 @@ async def kinematics_round_trip(ctx: CaseContext) -> None:
             t2 = _pose(_decode_floats(third, "solve backwards", "solve-backwards.data"), third)
             distance = t1.distance(t2)
             ctx.exercised("solve-forwards.data")
-            if distance.translation_mm > POSE_TOL_MM or distance.rotation_deg > POSE_TOL_DEG:
+            if distance.translation_mm > tol or distance.rotation_deg > POSE_TOL_DEG:
                 raise Evidence(
                     "solve-forwards.data",
                     "solve forwards returned angles that do not reach the transform",
-                    f"the same pose within {POSE_TOL_MM} mm and {POSE_TOL_DEG} deg",
-                    f"off by {distance.translation_mm:.4g} mm and {distance.rotation_deg:.4g} deg: "
+                    f"the same pose within {tol:.4g} {unit} and {POSE_TOL_DEG} deg",
+                    f"off by {distance.translation_mm:.4g} {unit} and {distance.rotation_deg:.4g} deg: "
                     f"angles {q} gave {t1!r}; solve forwards from {near} gave {q2}, "
                     f"whose transform is {t2!r}",
                     second.data,
@@ -521,6 +524,7 @@ async def _settle(
     technique="property",
     hazard="motion",
     deadline=PROPERTY_DEADLINE,
+    extensions=["request-notifications"],
 )
 async def floats_round_trip(ctx: CaseContext) -> None:
     """Set joint angles, read them back when the arm stands: each float survives the trip within

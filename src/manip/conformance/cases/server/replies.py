@@ -3,8 +3,8 @@ it (done, data, segment number, multi-packet text), echoing the request's packet
 
 The cases are generated from the spec table, one per opcode (``server.reply.<name>``); their hazard is
 the opcode's, so on hardware the motion and power ones are left out unless ``--allow-motion``.  A target
-that refuses the request (an extension it does not implement, say) is not judged on the shape: the
-case is skipped with the error it gave (the error string itself is still checked).
+that refuses the request (a Puma extension it does not implement, say) is not judged on the shape: the
+case ends not-judged with the error it gave (the error string itself is still checked).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable, Mapping
 from typing import Final
 
-from manip.conformance.cases._support import NOT_SERVED, error_of, power_on, valid_values
+from manip.conformance.cases._support import NOT_SERVED, error_of, extension_name, power_on, valid_values
 from manip.conformance.judge.checks import check_reply
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
@@ -73,8 +73,16 @@ def _reply_case(op: RequestOpcode) -> None:
         if error is not None:
             ctx.check(check_reply(answer.request, answer.packets))  # echo and error-string format
             said = repr(error.error.render())
+            if op.extension:
+                ctx.not_judged(
+                    f"the target refused {extension_name(op.name)} ({said}): its reply is judged on a target "
+                    "that serves it"
+                )
             if error.error.code in NOT_SERVED:
-                ctx.skip(f"the target does not serve {op.name}: {said}")
+                ctx.not_judged(
+                    f"the target does not serve {op.name} ({said}): its reply is judged on a target that "
+                    "serves it"
+                )
             ctx.not_judged(
                 f"the target refused a well-formed {op.name} ({said}): its reply's shape shows only in a "
                 "normal reply (a target in the state a normal reply needs would judge it)"
@@ -90,4 +98,5 @@ def _reply_case(op: RequestOpcode) -> None:
         clauses=(*opcode_clauses(op), *follow_clauses),
         hazard=op.hazard,
         deadline=10.0 + (op.answer_within or 0.0),
+        extensions=[op.name] if op.extension else [],
     )(reply_shape)

@@ -566,7 +566,8 @@ class ArmProtocolMachine(RuleBasedStateMachine):
     )
     def incremental_move(self, straight: bool, delta: tuple[float, ...]) -> None:
         name: RequestName = "incremental-straight-move" if straight else "incremental-move"
-        self.call(name, name, delta=list(delta))
+        per_unit = self.env.ctx.options.mm_per_unit  # dX dY dZ drawn in mm, sent in --length-unit
+        self.call(name, name, delta=[*(d / per_unit for d in delta[:3]), *delta[3:]])
 
     @precondition(lambda self: self.env.motion)
     @rule()
@@ -708,6 +709,7 @@ def _counterexample(
     technique="stateful",
     hazard="config",
     deadline=90.0,
+    extensions=["request-notifications", "reset-abort"],
 )
 async def arm_model(ctx: CaseContext) -> None:
     """Random request sequences against a model of the arm's protocol state (power, abort, segments,

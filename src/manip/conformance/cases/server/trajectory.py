@@ -11,24 +11,30 @@ from itertools import pairwise
 from typing import Final, NamedTuple
 
 from manip.conformance.cases._support import (
+    SEGMENT_MASK,
+    ask_notifications,
     describe_target,
     expect_response,
     last_processed,
+    length,
+    near,
     not_judged_for_load,
     power_on,
     read_floats,
+    require_reach,
     require_response,
     settle,
 )
 from manip.conformance.judge.checks import WirePacket, completed_segment, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
-from manip.conformance.suite.world import Obstacle, PanicButton
+from manip.conformance.suite.world import CaseNotJudged, ConditionUnsupported, Obstacle, PanicButton
 from manip.spec import RequestName
 from manip.spec.constants import ServerOp
 
 LINE_TOL_MM: Final = 1.0
-"""How far from the straight line a sampled position may be (erratum straight-line-tolerance)."""
+"""How far from the straight line a sampled position may be (erratum straight-line-tolerance), in
+millimetres (every length below is converted to the run's --length-unit: erratum units)."""
 SERVO_S: Final = 0.016
 SAMPLE_S: Final = 0.006
 """Sampling interval: shorter than half a servo cycle, so a move process running twice as often shows
@@ -47,8 +53,11 @@ OAT_DELTA_BACK: Final = (-7.0, 15.0, -4.0)
 """dO dA dT of its incremental straight move, from where the first turn ended."""
 OAT_TOL: Final = 1e-3
 """Largest difference of a rotation matrix entry from the one computed (about 0.06 degrees)."""
-SEGMENT_BIT: Final = 1 << 1
-"""request-notifications mask bit of segment completions."""
+QUEUED_STEPS: Final = (12.0, 24.0, 30.0)
+"""Where the queued-segments case sends joint 1, in degrees from where it starts (away from zero)."""
+TURNING_STEPS: Final = (12.0, 4.0, 20.0)
+"""The same on the guide's own route: each goal turns the arm back, so the order it reaches them in
+shows in the joint angles alone."""
 
 
 class Sample(NamedTuple):
@@ -116,26 +125,32 @@ async def _at_line_pose(ctx: CaseContext, probe: Probe) -> tuple[tuple[float, ..
 @case("server.motion.straight-line", clauses=["straight-move.line"], hazard="motion", deadline=15.0)
 async def straight_line(ctx: CaseContext) -> None:
     """Straight-line move (205) 120 mm across and back (212): every Here sampled on the way lies within
-    1 mm of the line between where the move starts and its goal."""
+    1 mm of the line between where the move starts and its goal (sizes in the run's --length-unit)."""
     probe = await ctx.connect()
     before, start = await _at_line_pose(ctx, probe)
+    dx, dy, tol, unit = (
+        length(ctx, 80.0),
+        length(ctx, 90.0),
+        length(ctx, LINE_TOL_MM),
+        ctx.options.length_unit,
+    )
     goal = list(start)
-    goal[9] += 80.0
-    goal[10] -= 90.0
+    goal[9] += dx
+    goal[10] -= dy
     for op, values, a, b in (
         ("straight-move", {"transform": goal}, start[9:], goal[9:]),
-        ("incremental-straight-move", {"delta": [-80.0, 90.0, 0.0, 0.0, 0.0, 0.0]}, goal[9:], start[9:]),
+        ("incremental-straight-move", {"delta": [-dx, dy, 0.0, 0.0, 0.0, 0.0]}, goal[9:], start[9:]),
     ):
         answer = await probe.call(op, **values)  # type: ignore[arg-type]
-        require_response(ctx, answer, f"a straight-line move ({op})")
+        require_reach(ctx, answer, f"a straight-line move ({op})")
         samples = await _sample(ctx, probe, "here", 10.0)
         worst = max(_distance_to_segment(sample.values[9:], a, b) for sample in samples)
-        ctx.note(f"{op}: {len(samples)} samples, at most {worst:.4f} mm off the line")
+        ctx.note(f"{op}: {len(samples)} samples, at most {worst:.4f} {unit} off the line")
         ctx.expect(
-            worst <= LINE_TOL_MM,
+            worst <= tol,
             clause="straight-move.line",
-            expected=f"every position within {LINE_TOL_MM:g} mm of the line {list(a)} -> {list(b)}",
-            actual=f"a sample {worst:.3f} mm off it",
+            expected=f"every position within {tol:.4g} {unit} of the line {list(a)} -> {list(b)}",
+            actual=f"a sample {worst:.4g} {unit} off it",
         )
     await probe.call("set-joint-angles", joints=list(before))
     await settle(ctx, probe, before)
@@ -148,23 +163,24 @@ async def incremental_reference(ctx: CaseContext) -> None:
     the workspace (wherever the arm was left, a straight line may not be possible)."""
     probe = await ctx.connect()
     before, start = await _at_line_pose(ctx, probe)
+    down, across, unit = length(ctx, 30.0), length(ctx, 25.0), ctx.options.length_unit
     moves: tuple[tuple[RequestName, list[float]], ...] = (
-        ("incremental-move", [0.0, 0.0, -30.0]),
-        ("incremental-straight-move", [25.0, 0.0, 0.0]),
+        ("incremental-move", [0.0, 0.0, -down]),
+        ("incremental-straight-move", [across, 0.0, 0.0]),
     )
     for op, delta in moves:
         answer = await probe.call(op, delta=[*delta, 0.0, 0.0, 0.0])
-        require_response(ctx, answer, f"an incremental move ({op})")
+        require_reach(ctx, answer, f"an incremental move ({op})")
     await _sample(ctx, probe, "here", 10.0)
     end = await read_floats(ctx, probe, "here")
-    want = [start[9] + 25.0, start[10], start[11] - 30.0]
+    want = [start[9] + across, start[10], start[11] - down]
     off = math.dist(end[9:], want)
     turn = max(abs(x - y) for x, y in zip(end[:9], start[:9], strict=True))
     ctx.expect(
-        off <= POSE_TOL_MM and turn <= 1e-3,
+        off <= length(ctx, POSE_TOL_MM) and turn <= 1e-3,
         clause="incremental.relative",
         expected=f"the hand at {[round(v, 3) for v in want]} (start plus both deltas), orientation unchanged",
-        actual=f"at {[round(v, 3) for v in end[9:]]} mm ({off:.3f} mm off), rotation changed by "
+        actual=f"at {[round(v, 3) for v in end[9:]]} ({off:.4g} {unit} off), rotation changed by "
         f"{turn_deg(end[:9], start[:9]):.3g} deg (its matrix by {turn:.2g} at most, a unitless cosine)",
     )
     await probe.call("set-joint-angles", joints=list(before))
@@ -269,7 +285,7 @@ async def _turned(
     """Turn the hand by ``delta`` (dO dA dT) with ``op``: it must end at R(O + dO, A + dA, T + dT) of
     ``start``'s angles, where ``start`` stood; returns where it ended."""
     o, a, t = val_angles(start)
-    require_response(ctx, await probe.call(op, delta=[0.0, 0.0, 0.0, *delta]), f"{op} turning the hand")
+    require_reach(ctx, await probe.call(op, delta=[0.0, 0.0, 0.0, *delta]), f"{op} turning the hand")
     await _sample(ctx, probe, "here", 10.0)
     end = await read_floats(ctx, probe, "here")
     want = val_rotation(o + delta[0], a + delta[1], t + delta[2])
@@ -278,12 +294,13 @@ async def _turned(
     angle = turn_deg([want[i][j] for j in range(3) for i in range(3)], end[:9])
     off = math.dist(end[9:], start[9:])
     ctx.expect(
-        turn <= OAT_TOL and off <= POSE_TOL_MM,
+        turn <= OAT_TOL and off <= length(ctx, POSE_TOL_MM),
         clause="incremental.relative",
         expected=f"{op}: the hand at O A T {[round(v, 3) for v in (o, a, t)]} plus {list(delta)}, "
         "position unchanged",
         actual=f"rotation off by {angle:.3g} deg (its matrix by {turn:.4f} at most, a unitless cosine; "
-        f"got O A T {[round(v, 3) for v in val_angles(end)]} deg), position moved {off:.3f} mm",
+        f"got O A T {[round(v, 3) for v in val_angles(end)]} deg), position moved {off:.4g} "
+        f"{ctx.options.length_unit}",
     )
     return end
 
@@ -323,17 +340,19 @@ async def incremental_oat(ctx: CaseContext) -> None:
     deadline=15.0,
 )
 async def queued_segments(ctx: CaseContext) -> None:
-    """Three moves of joint 1 queued back to back, sampled every 8 ms: they complete in order, the arm
+    """Three moves of joint 1 queued back to back, sampled every 6 ms: they complete in order, the arm
     does not stop between them, what it reports changes at most once per 16 ms, and it comes to rest
-    on the last goal without overshooting."""
+    on the last goal without overshooting.  The order is judged by the segment-completed reports, or, on
+    a target without request notifications, by the order the arm turns at the goals (each turns it
+    back)."""
     probe = await ctx.connect()
     await power_on(ctx, probe)
-    require_response(ctx, await probe.call("request-notifications", mask=SEGMENT_BIT), "segment notices")
+    notified = await ask_notifications(ctx, probe, SEGMENT_MASK)
     start = await read_floats(ctx, probe, "joint-angles")
     sign = 1.0 if start[0] <= 0 else -1.0
     goals = []
     segments = []
-    for step in (12.0, 24.0, 30.0):
+    for step in QUEUED_STEPS if notified else TURNING_STEPS:
         goal = list(start)
         goal[0] += sign * step
         goals.append(goal)
@@ -344,13 +363,70 @@ async def queued_segments(ctx: CaseContext) -> None:
     lateness: list[float] = []
     samples = await _sample(ctx, probe, "joint-angles", 10.0, lambda v: abs(v[0] - last) <= 1e-3, lateness)
     await probe.drain(0.1)
-    done = [s for p in probe.packets if p.direction == "s2c" and (s := completed_segment(p)) is not None]
+    angle = [sample.values[0] for sample in samples]
+    if notified:
+        done = [s for p in probe.packets if p.direction == "s2c" and (s := completed_segment(p)) is not None]
+        ctx.expect(
+            done == segments,
+            clause="segment.fifo-completion",
+            expected=f"segments {segments} reported complete in that order",
+            actual=f"reported {done}",
+        )
+    else:
+        _expect_turns(ctx, start[0], angle, [g[0] for g in goals], segments)
+    _expect_smooth_rest(ctx, samples, sign, last, max(lateness, default=0.0))
+
+
+TURN_DEG: Final = 0.5
+"""How far joint 1 must come back from an extreme for the extreme to count as a turn (readings that
+jitter do not turn it)."""
+
+
+def _turns(angle: Sequence[float]) -> list[float]:
+    """Where joint 1 turned back (each extreme of its way), then where it ended."""
+    if not angle:
+        return []
+    points: list[float] = []
+    direction = 0.0
+    extreme = angle[0]
+    for a in angle[1:]:
+        if direction == 0.0:
+            if abs(a - extreme) > TURN_DEG:
+                direction, extreme = math.copysign(1.0, a - extreme), a
+        elif (a - extreme) * direction > 0:
+            extreme = a
+        elif (extreme - a) * direction > TURN_DEG:
+            points.append(extreme)
+            direction, extreme = -direction, a
+    return [*points, angle[-1]]
+
+
+def _nearest(goals: Sequence[float], point: float) -> int:
+    """The index of the goal nearest ``point``."""
+    return min(range(len(goals)), key=lambda i: abs(goals[i] - point))
+
+
+def _expect_turns(
+    ctx: CaseContext, start: float, angle: Sequence[float], goals: Sequence[float], segments: Sequence[object]
+) -> None:
+    """segment.fifo-completion by the guide's own requests: joint 1 turns at each goal in the order the
+    segments were queued (each turn is taken as the goal nearest it)."""
+    reached = [_nearest(goals, p) for p in _turns(angle)]
     ctx.expect(
-        done == segments,
+        reached == list(range(len(goals))),
         clause="segment.fifo-completion",
-        expected=f"segments {segments} reported complete in that order",
-        actual=f"reported {done}",
+        expected=f"joint 1 going from {start:.2f} to {', then '.join(f'{g:.2f}' for g in goals)} deg "
+        f"(segments {list(segments)} in the order queued)",
+        actual=f"it turned at {', '.join(f'{p:.2f}' for p in _turns(angle))} deg (polled joint angles)",
     )
+
+
+def _expect_smooth_rest(
+    ctx: CaseContext, samples: Sequence[Sample], sign: float, last: float, late: float
+) -> None:
+    """The arm comes to rest on ``last`` without passing it, its readings change at most once a servo
+    cycle, and it never stands still between the first change and the last (``late``: how late the case's
+    own waits between samples ended at most, seconds on the suite's clock)."""
     angle = [sample.values[0] for sample in samples]
     over = max((sign * (a - last) for a in angle), default=0.0)
     ctx.expect(
@@ -364,7 +440,7 @@ async def queued_segments(ctx: CaseContext) -> None:
     # apart, and equal readings at samples a and b mean the arm stood still at least from received[a] to
     # sent[b].  In virtual time sent == received and these are the plain sample times.
     # Times on the target's clock: a simulated arm with a time scale (--target-time-scale) runs faster.
-    timing = _Timing(samples, ctx.options.time_scale, max(lateness, default=0.0) * ctx.options.time_scale)
+    timing = _Timing(samples, ctx.options.time_scale, late * ctx.options.time_scale)
     unjudged = [reason for reason in (_servo_period(ctx, timing), _blending(ctx, timing)) if reason]
     if unjudged:
         not_judged_for_load(ctx, "; ".join(unjudged))
@@ -523,6 +599,8 @@ ABORT_SWING_DEG: Final = 30.0
 """Each queued move of the abort case turns joint 1 this far: long enough to be moving when the world
 presses the panic button."""
 ABORT_SEGMENTS: Final = 3
+ABORT_KILL_AFTER_S: Final = 0.05
+"""Seconds after the moves are queued at which kill power aborts them (the first is then on its way)."""
 ABORT_WATCH_S: Final = 1.5
 """Seconds the abort case watches, after motion is allowed again, for a dropped segment that runs."""
 
@@ -541,68 +619,103 @@ async def _watch_after(ctx: CaseContext, probe: Probe, seconds: float) -> list[W
     "server.motion.abort-drops-queue",
     clauses=["motion.abort", "motion.reset", "async-error.request-number"],
     hazard="power",
-    deadline=20.0,
+    deadline=30.0,
+    extensions=["request-notifications"],
 )
 async def abort_drops_queue(ctx: CaseContext) -> None:
-    """The panic button pressed while segments are queued: an asynchronous error, and the segment in
-    execution and the queued ones never run nor complete, not even once motion is allowed again
-    (enable high power).
+    """Segments queued, then the motion aborted while they run, once by kill power (206) and once by the
+    panic button (Part II §6.2): an asynchronous error, and the segment in execution and the queued ones
+    never run nor complete, not even once motion is allowed again (enable high power).
 
     The target's world presses the panic button (the embedded server's world always, another target's
-    with ``--world``); without a world the case is not judged."""
+    with ``--world``); without one only kill power judges.  Segments completing are seen in their
+    segment-completed reports, or, on a target without request notifications, in the joint angles."""
+    judged = []
+    if await _abort_route(ctx, "kill power"):
+        judged.append("kill power")
+    try:
+        if await _abort_route(ctx, "the panic button"):
+            judged.append("the panic button")
+    except (CaseNotJudged, ConditionUnsupported) as exc:
+        ctx.note(f"the panic button did not judge motion.abort: {exc}")
+    if not judged:
+        ctx.not_judged(
+            "every queued segment had completed before the motion was aborted (kill power, panic button)"
+        )
+    ctx.note(f"motion.abort judged through {' and '.join(judged)}")
+
+
+async def _abort_route(ctx: CaseContext, how: str) -> bool:
+    """Queue :data:`ABORT_SEGMENTS` moves, abort them by ``how`` (kill power, the panic button), and judge
+    what follows; False when every segment had completed before the abort (nothing to judge)."""
     probe = await ctx.connect()
     await power_on(ctx, probe)
-    answer = await probe.call("request-notifications", mask=SEGMENT_BIT)
-    if not answer.is_response:
-        ctx.skip(f"the case watches segment-completed reports, and the target does not serve them: {answer}")
+    notified = await ask_notifications(ctx, probe, SEGMENT_MASK)
     start = await read_floats(ctx, probe, "joint-angles")
     sign = 1.0 if start[0] <= 0 else -1.0
     segments = []
+    goal = list(start)
     for n in range(ABORT_SEGMENTS):
         goal = list(start)
         goal[0] += sign * ABORT_SWING_DEG * (1 if n % 2 == 0 else 0)
         move = await probe.call("set-joint-angles", joints=goal)
         require_response(ctx, move, "a queued move of joint 1")
         segments.append(word(move.data, 2) or 0)
-    async with ctx.arranged(PanicButton()):
-        aborted = await _next_of(ctx, probe, ServerOp.ASYNCHRONOUS_ERROR, 3.0)
-        if aborted is None:
-            ctx.fail(
-                "no asynchronous error within 3 s of the panic button",
-                clause="motion.abort",
-                expected="an asynchronous error (204) when the panic button aborts the motion",
-                actual="none",
-            )
-        processed = last_processed(probe.packets, aborted)
-        ctx.expect(
-            processed is not None and word(aborted.data) == processed,
-            clause="async-error.request-number",
-            expected=f"the number of the last request processed, #{processed} (the last answered before it)",
-            seen=aborted,
-        )
+    if how == "kill power":
+        await probe.drain(ABORT_KILL_AFTER_S / ctx.options.time_scale)
+        require_response(ctx, await probe.call("kill-power"), "kill power")
+        await _expect_abort_reported(ctx, probe, how)
+    else:
+        async with ctx.arranged(PanicButton()):
+            await _expect_abort_reported(ctx, probe, how)
     done_before = _completed(probe.packets)
-    if set(segments) <= set(done_before):
-        ctx.not_judged("every queued segment had completed before the panic button aborted the motion")
+    stopped = await read_floats(ctx, probe, "joint-angles")
+    if set(segments) <= set(done_before) or (not notified and near(stopped, goal)):
+        ctx.note(f"every queued segment had completed before {how} aborted the motion")
+        await probe.close()
+        return False
     await power_on(ctx, probe)
     before = await read_floats(ctx, probe, "joint-angles")
     after_packets = await _watch_after(ctx, probe, ABORT_WATCH_S)
-    ran = sorted(set(_completed(after_packets)) & (set(segments) - set(done_before)))
+    dropped = sorted(set(segments) - set(done_before)) if notified else segments
+    ran = sorted(set(_completed(after_packets)) & set(dropped))
     after = await read_floats(ctx, probe, "joint-angles")
     ctx.expect(
-        not ran and max(abs(a - b) for a, b in zip(before, after, strict=True)) < 1e-3,
+        not ran and near(before, after),
         clause="motion.abort",
-        expected=f"segments {sorted(set(segments) - set(done_before))}, dropped by the abort, never run nor "
-        "complete once motion is allowed again",
+        expected=f"segments {dropped}, dropped by the abort ({how}), never run nor complete once motion is "
+        "allowed again",
         actual=f"completed afterwards: {ran or 'none'}; joint angles {before} then {after}",
     )
-    refused = await probe.call("set-joint-angles", joints=list(start))
+    moved = await probe.call("set-joint-angles", joints=list(start))
     ctx.expect(
-        refused.is_response,
+        moved.is_response,
         clause="motion.reset",
         expected="motion accepted again after enable high power cleared the abort",
-        seen=refused,
+        seen=moved,
     )
     await settle(ctx, probe, start, within=5.0)
+    await probe.close()
+    return True
+
+
+async def _expect_abort_reported(ctx: CaseContext, probe: Probe, how: str) -> None:
+    """An asynchronous error reports the abort, carrying the number of the last request processed."""
+    aborted = await _next_of(ctx, probe, ServerOp.ASYNCHRONOUS_ERROR, 3.0)
+    if aborted is None:
+        ctx.fail(
+            f"no asynchronous error within 3 s of {how}",
+            clause="motion.abort",
+            expected=f"an asynchronous error (204) when {how} aborts the motion",
+            actual="none",
+        )
+    processed = last_processed(probe.packets, aborted)
+    ctx.expect(
+        processed is not None and word(aborted.data) == processed,
+        clause="async-error.request-number",
+        expected=f"the number of the last request processed, #{processed} (the last answered before it)",
+        seen=aborted,
+    )
 
 
 async def _next_of(ctx: CaseContext, probe: Probe, opcode: int, within: float) -> WirePacket | None:

@@ -4,14 +4,15 @@ non-fatal error, and goes on serving.
 
 The target's world silences the Cougar (condition ``silent-wrist``) and pushes the hand
 (``wrist-force``): the embedded server's world always, another target's with ``--world``; without a world
-those cases are not judged.  A target that serves no wrist at all skips them."""
+those cases are not judged, nor on a target that serves no wrist (the wrist opcodes are Puma
+extensions)."""
 
 from __future__ import annotations
 
 import math
 from typing import Final
 
-from manip.conformance.cases._support import error_of, floats, require_response
+from manip.conformance.cases._support import error_of, floats, no_wrist, require_response
 from manip.conformance.judge.checks import WirePacket, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
@@ -43,6 +44,7 @@ _ANSWERS: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.N
     clauses=["wrist.no-answer"],
     hazard="read-only",
     deadline=15.0,
+    extensions=["wrist-version", "read-forces"],
 )
 async def no_answer(ctx: CaseContext) -> None:
     """Read forces while Cougar is silent is answered with a non-fatal error within a few seconds, and
@@ -92,13 +94,10 @@ async def _judge_silence(ctx: CaseContext, probe: Probe) -> None:
 
 
 async def _require_wrist(ctx: CaseContext, probe: Probe) -> None:
-    """Skip a target that serves no wrist (the opcodes are extensions)."""
+    """A target that serves no wrist (the opcodes are Puma extensions) leaves the case not judged."""
     version = await probe.call("wrist-version")
     if not version.is_response:
-        ctx.skip(
-            f"the target serves no wrist ({version}): run against a server with a Cougar wrist (the "
-            "embedded server, manip-conform run without HOST, or manip-server --cougar sim)"
-        )
+        ctx.not_judged(no_wrist(version))
 
 
 async def _quiet_wrist(ctx: CaseContext, probe: Probe) -> None:
