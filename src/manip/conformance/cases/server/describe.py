@@ -376,7 +376,13 @@ SPLIT_IDLE_S: Final = 3.0
 """Seconds the case sends nothing once the moves are queued, so their reports fall due between requests."""
 
 
-@case("server.describe.not-split", clauses=["multi.not-split"], hazard="motion", deadline=30.0)
+@case(
+    "server.describe.not-split",
+    clauses=["multi.not-split"],
+    hazard="motion",
+    deadline=30.0,
+    extensions=["request-notifications"],
+)
 async def not_split(ctx: CaseContext) -> None:
     """No asynchronous packet comes between the packets of a describe-self reply: with segment-completed
     reports asked for, describe self is asked while short moves complete, and again right after the case

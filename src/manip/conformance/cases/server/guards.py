@@ -86,6 +86,8 @@ def _condition(packet: WirePacket) -> int | None:
     deadline=20.0,
     extensions=[
         "wrist-version",
+        "set-gauge-offsets",
+        "set-frame-vector",
         "set-weight",
         "read-forces",
         "set-guard",

@@ -137,7 +137,13 @@ def _shown(values: tuple[float, ...]) -> str:
     return "(" + ", ".join(f"{v:.2f}" for v in values) + ")"
 
 
-@case("server.wrist.force-weight", clauses=["read-forces.units"], hazard="config", deadline=20.0)
+@case(
+    "server.wrist.force-weight",
+    clauses=["read-forces.units"],
+    hazard="config",
+    deadline=20.0,
+    extensions=["wrist-version", "set-gauge-offsets", "set-frame-vector", "set-weight", "read-forces"],
+)
 async def force_weight(ctx: CaseContext) -> None:
     """Set weight of a 64 oz object the hand does not hold changes the corrected force by 64 oz: Cougar
     subtracts the object's weight the hand does not feel (B.15 NEWWC, weights in ounces).  No world is
@@ -168,6 +174,7 @@ async def force_weight(ctx: CaseContext) -> None:
     clauses=["read-forces.units", "read-forces.current"],
     hazard="config",
     deadline=30.0,
+    extensions=["wrist-version", "set-gauge-offsets", "set-frame-vector", "set-weight", "read-forces"],
 )
 async def force_push(ctx: CaseContext) -> None:
     """Read forces follows what acts on the hand: with the world pushing 48 oz along the hand's z axis and
