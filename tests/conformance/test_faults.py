@@ -259,6 +259,8 @@ def test_only_requests_pipelined_behind_describe_self_see_its_terminator_overtak
     report = run_suite(fault, cases)
     outcomes = {r.id: r.outcome for r in report.results}
     assert outcomes.pop("server.describe.pipelined") == "fail"
+    # the held terminator lets a segment report in between the reply's packets: a split (a SHOULD)
+    assert outcomes.pop("server.describe.not-split") in ("pass", "warn")
     assert set(outcomes.values()) == {"pass"}, outcomes
     clean = run_suite(FaultSet(), [c for c in cases if c.id == "server.describe.pipelined"])
     assert [r.outcome for r in clean.results] == ["pass"]

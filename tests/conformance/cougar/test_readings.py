@@ -169,7 +169,7 @@ def test_cli_declares_a_map_and_a_unit(tmp_path: Path) -> None:
     ("args", "says"),
     [
         (["--memory-map", "{map}"], "add --cougar"),
-        (["--length-unit", "inch"], "add --cougar"),
+        (["--cougar", "sim", "--length-unit", "auto"], "with --cougar name it"),
         (["--cougar-reading", "out-of-sync-bare"], "add --cougar"),
         (["--cougar", "sim", "--memory-map", "{missing}"], "cannot read"),
         (["--cougar", "sim", "--memory-map", "{bad}"], "even byte address 0..0o177776, not 0o1001"),

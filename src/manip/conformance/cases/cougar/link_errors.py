@@ -38,6 +38,8 @@ from manip.cougar.link import (
 from manip.spec.constants import CougarCommand
 
 _READ: Final = 1 << 16
+EXCHANGE_LINES: Final = 40
+"""The most lines of a raw link's exchange a case's report keeps."""
 VERS: Final = (int(CougarCommand.VERS), 1)
 """A good command whose answer (VERSION) shows that Cougar ran a tick."""
 
@@ -63,6 +65,20 @@ class CougarLinkSeen:
     garbage: str = ""
     after: int = 0
     """How many of ``frames`` came before the frame under test was sent."""
+    sent: list[bytes] = field(default_factory=list)
+    """What the case wrote on the link, as written (frames the codec would refuse among them)."""
+
+    def transcript(self) -> str:
+        """The exchange in the order it went, as a passing case's report keeps it (at most
+        :data:`EXCHANGE_LINES` lines)."""
+        lines = [f"-> {chunk.hex(' ', 2)}" for chunk in self.sent[:1]]
+        lines += [f"<- {frame}" for frame in self.frames[: self.after]]
+        lines += [f"-> {chunk.hex(' ', 2)}" for chunk in self.sent[1:]]
+        lines += [f"<- {frame}" for frame in self.frames[self.after :]]
+        lines.append("<- (closed)" if self.ended else "(still open)")
+        shown = lines[:EXCHANGE_LINES]
+        more = len(lines) - len(shown)
+        return "\n".join(shown) + (f"\n... {more} more" if more else "")
 
     @property
     def later(self) -> list[Frame]:
@@ -123,11 +139,13 @@ async def _once(ctx: CaseContext, first: bytes | None, bad: bytes) -> CougarLink
         await _read_until(reader, decoder, link, Hello, timeout)
         if first is not None:
             writer.write(first)
+            link.sent.append(first)
             await _read_until(reader, decoder, link, Ticked, timeout)
         link.after = len(link.frames)
         if not link.ended:
             if not link.busy():
                 writer.write(bad)
+                link.sent.append(bad)
             await _read_until(reader, decoder, link, None, timeout)
     finally:
         writer.close()
@@ -242,6 +260,7 @@ def _bad_frame_case(row: BadFrame) -> None:
 
 def judge_ending(ctx: CaseContext, link: CougarLinkSeen, clause: str, what: str) -> None:
     """Cougar said a good HELLO, sent nothing but BYE after the frame under test, and closed."""
+    ctx.note("DRV-11J exchange (-> Puma to Cougar as raw bytes, <- Cougar to Puma):\n" + link.transcript())
     ctx.expect(
         not link.garbage,
         clause="link.drv11j.framing",
