@@ -1,0 +1,135 @@
+"""Classifying a difference between two sides: a violation, a difference both allowed, or a gap.
+
+* **violation** (class a): the fuzzer's judges (:func:`manip.conformance.fuzz.judge.judge`: the
+  transcript checks and the oracles) find a clause broken on one side's answers to the input and not on
+  the other's: the clause is named, and the other side's answer is the conforming one.  Differences
+  later in the same stream follow from it (their ``follows`` names the first) and are counted with it:
+  after a broken clause the two sides' states need not agree.
+* **allowed** (class b): every part that differs is a freedom (:data:`manip.spec.model.FREEDOMS`) some
+  clause or erratum of the spec data declares (``freedom = [...]``); those are named.
+* **unexplained** (class c): neither: a candidate gap in the spec, shown with the guide section of the
+  clause nearest to it.
+
+Sans-I/O.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Final, Literal
+
+from manip.conformance.diff.pairing import Difference
+from manip.conformance.fuzz.judge import Sighting
+from manip.conformance.fuzz.steps import FuzzInput, RequestStep
+from manip.spec import SPEC
+
+__all__ = ["CLASSES", "Finding", "FindingClass", "classify", "declared", "nearest_section"]
+
+FindingClass = Literal["violation", "allowed", "unexplained"]
+CLASSES: Final[tuple[FindingClass, ...]] = ("violation", "allowed", "unexplained")
+_PART_CLAUSE: Final = {
+    "error": "error-string.format",
+    "async": "async.layout",
+    "end": "error.fatal-then-close",
+    "stray": "ncp.los",
+}
+"""The clause nearest a difference that names no request, by the first word of the part."""
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One classified difference (module docstring)."""
+
+    cls: FindingClass
+    stream: str
+    difference: Difference
+    names: tuple[str, ...] = ()
+    """violation: the clause(s) broken; allowed: the errata and clauses declaring the freedom."""
+    violator: Literal["A", "B", "both", ""] = ""
+    message: str = ""
+    section: str = ""
+    follows: str = ""
+    """For a difference after a violation in its stream: that violation's clause."""
+    shrunk: tuple[int, ...] | None = None
+    """For a gap: the input numbers of the shortest stream found that still shows it."""
+    extra: dict[str, str] = field(default_factory=dict)
+
+
+def declared(part: str) -> tuple[str, ...]:
+    """The errata and clauses that declare ``part`` the implementation's choice (errata first)."""
+    errata = [e.id for e in SPEC.errata.values() if part in e.freedom]
+    clauses = [c.id for c in SPEC.clauses.values() if part in c.freedom and not c.retired]
+    return (*errata, *clauses)
+
+
+def _broken(sightings: Sequence[Sighting], number: int) -> dict[str, str]:
+    """The clauses broken (with the judge's message) by the answers to input ``number``."""
+    return {
+        s.violation.clause or s.violation.kind: s.violation.message
+        for s in sightings
+        if s.number == number or (s.number is None and number >= 0)
+    }
+
+
+def nearest_section(diff: Difference, item: FuzzInput | None) -> tuple[str, str]:
+    """The clause nearest a difference and its guide section: the request's own clauses first."""
+    opcode = next((s.opcode for s in item.steps if isinstance(s, RequestStep)), None) if item else None
+    op = SPEC.requests.get(opcode) if opcode is not None else None
+    if op is not None:
+        for clause in SPEC.clauses.values():
+            if clause.id.startswith(f"{op.name}.") and not clause.retired:
+                return clause.id, clause.section
+    head = diff.parts[0].split(".")[0]
+    cid = _PART_CLAUSE.get(head, "request.one-reply")
+    nearest = SPEC.clauses.get(cid)
+    return (cid, nearest.section) if nearest is not None else ("", "")
+
+
+def classify(
+    stream: str,
+    differences: Sequence[Difference],
+    sightings_a: Sequence[Sighting],
+    sightings_b: Sequence[Sighting],
+    inputs: dict[int, FuzzInput],
+) -> list[Finding]:
+    """Each difference of one stream, classified (module docstring)."""
+    out: list[Finding] = []
+    first: Finding | None = None
+    for diff in differences:
+        broken_a, broken_b = _broken(sightings_a, diff.number), _broken(sightings_b, diff.number)
+        only_a, only_b = set(broken_a) - set(broken_b), set(broken_b) - set(broken_a)
+        if only_a or only_b:
+            violator: Literal["A", "B", "both"] = "both" if only_a and only_b else "A" if only_a else "B"
+            names = tuple(sorted(only_a | only_b))
+            message = (broken_a | broken_b)[names[0]]
+            finding = Finding("violation", stream, diff, names, violator, message, _section(names[0]))
+            first = first or finding
+            out.append(finding)
+        elif first is not None:
+            cid = first.names[0]
+            out.append(
+                Finding("violation", stream, diff, first.names, first.violator, "", _section(cid), cid)
+            )
+        else:
+            out.append(_free_or_gap(stream, diff, inputs.get(diff.number)))
+    return out
+
+
+def _section(cid: str) -> str:
+    clause = SPEC.clauses.get(cid)
+    return clause.section if clause is not None else ""
+
+
+def _free_or_gap(stream: str, diff: Difference, item: FuzzInput | None) -> Finding:
+    names: list[str] = []
+    for part in diff.parts:
+        allowing = declared(part)
+        if not allowing:
+            cid, section = nearest_section(diff, item)
+            what = ", ".join(p for p in diff.parts if not declared(p))
+            message = f"the answers differ in {what}, and no clause or erratum says which conforms"
+            return Finding("unexplained", stream, diff, (cid,) if cid else (), "", message, section)
+        names += [n for n in allowing if n not in names]
+    message = "both conform: " + ", ".join(diff.parts) + " is the implementation's choice"
+    return Finding("allowed", stream, diff, tuple(names), "", message, _section(names[-1]))
