@@ -115,6 +115,14 @@ def _numbers(ctx: click.Context, param: click.Parameter, value: str | None) -> t
     default=None,
     help="Send one stream of exactly these inputs (a shrunk one).",
 )
+@click.option(
+    "--class",
+    "classes",
+    multiple=True,
+    metavar="PATTERN",
+    help="Draw the streams' inputs only from these fuzz input classes (glob, repeatable; "
+    "manip-conform fuzz --list-classes).",
+)
 @click.option("--no-shrink", is_flag=True, help="Do not shrink the streams of unexplained differences.")
 @click.option(
     "--allow-unexplained",
@@ -171,7 +179,9 @@ def diff_command(**options: Any) -> None:
     if options["only_stream"] is not None and options["only_inputs"] is not None:
         raise click.UsageError("--stream and --inputs each choose what is sent: give one")
     seed = options["seed"] if options["seed"] is not None else int.from_bytes(os.urandom(4), "big") >> 1
-    gen = GenOptions(link="stream")
+    gen = GenOptions(link="stream", select=options["classes"])
+    if not gen.classes():
+        raise click.UsageError("--class matches no input class (manip-conform fuzz --list-classes)")
     length = options["length"]
     streams = _streams(seed, options, gen)
     allowance = Allowance(options["reply_timeout"], options["connect_timeout"])
@@ -182,7 +192,13 @@ def diff_command(**options: Any) -> None:
         seed,
         length,
         shlex.join(["manip-conform", *sys.argv[1:]]),
-        ("manip-conform", "diff", *sides[0].words, *sides[1].words),
+        (
+            "manip-conform",
+            "diff",
+            *sides[0].words,
+            *sides[1].words,
+            *[w for c in options["classes"] for w in ("--class", c)],
+        ),
         allow_unexplained=options["allow_unexplained"],
     )
     console = make_console()

@@ -158,10 +158,16 @@ def _error_parts(a: bytes, b: bytes) -> tuple[str, ...]:
     for name in ("where", "severity", "code", "message", "args"):
         if getattr(ea, name) != getattr(eb, name):
             parts.append(f"error.{name}")
-    if not parts or (len(a) - len(b)) % 2:
-        # Same parts but other bytes: the pad byte before the numbers (erratum error-arg-layout).
+    if not parts or _padded(a) != _padded(b):
+        # The pad byte before the numbers (erratum error-arg-layout), or other bytes the parts do not show.
         parts.append("error.args-layout")
     return tuple(parts)
+
+
+def _padded(data: bytes) -> bool:
+    """Whether a pad byte comes between an error string's NUL and its numbers (an odd count after it)."""
+    nul = data.find(b"\0", 2)
+    return nul >= 0 and (len(data) - nul - 1) % 2 == 1
 
 
 def _async_parts(a: bytes, b: bytes) -> tuple[str, ...]:
