@@ -24,6 +24,8 @@ Freedom = Literal[
     "async.layout",
     "data.length-unit",
     "answer.configuration-bits",
+    "request.extension-served",
+    "describe.content",
     "timing",
 ]
 """A part of an answer that is the implementation's choice where a clause or erratum says so

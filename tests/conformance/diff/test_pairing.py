@@ -9,9 +9,10 @@ import dataclasses
 import pytest
 
 from manip.codecs.pdp11float import pack_f
-from manip.conformance.diff.classify import classify, declared
+from manip.conformance.diff.classify import classify, declared, in_context
 from manip.conformance.diff.pairing import SideEvent, compare, differing_parts
 from manip.conformance.fuzz.judge import Sighting
+from manip.conformance.fuzz.steps import FuzzInput, RequestStep
 from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
@@ -99,3 +100,16 @@ def test_classes() -> None:
     assert free[0].cls == "allowed" and "error-string.format" in free[0].names
     gap = classify("s", compare([2], {2: [response(1.0)]}, {2: [response(2.0)]}), [], [], {})
     assert gap[0].cls == "unexplained" and gap[0].section
+
+
+def test_an_extension_request_and_describe_self_explain_their_answers() -> None:
+    extension = next(op for op in SPEC.requests.values() if op.extension)
+    describe = SPEC.request("describe-self")
+    ext_input = FuzzInput(3, "manip.valid", (RequestStep(extension.opcode, b""),), "")
+    describe_input = FuzzInput(4, "manip.valid", (RequestStep(describe.opcode, b""),), "")
+    assert in_context(("opcode",), ext_input) == ("request.extension-served",)
+    assert in_context(("data", "count"), describe_input) == ("describe.content",)
+    assert in_context(("opcode",), describe_input) == ("opcode",)
+    diffs = compare([3], {3: [response(1.0)]}, {3: [error(b"dispatch: C UOP Unknown opcode ~", b"\xa3\x00")]})
+    found = classify("s", diffs, [], [], {3: ext_input})
+    assert found[0].cls == "allowed" and found[0].names == ("extension-range",)

@@ -16,7 +16,7 @@ Sans-I/O.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Final, Literal
 
 from manip.conformance.diff.pairing import Difference
@@ -53,7 +53,8 @@ class Finding:
     """For a difference after a violation in its stream: that violation's clause."""
     shrunk: tuple[int, ...] | None = None
     """For a gap: the input numbers of the shortest stream found that still shows it."""
-    extra: dict[str, str] = field(default_factory=dict)
+    freedoms: tuple[str, ...] = ()
+    """For a difference both allowed: the freedoms it is (:func:`in_context` of its parts)."""
 
 
 def declared(part: str) -> tuple[str, ...]:
@@ -121,9 +122,33 @@ def _section(cid: str) -> str:
     return clause.section if clause is not None else ""
 
 
+_CONTEXTUAL: Final = frozenset({"opcode", "data", "count"})
+"""Parts whose difference a request of the input may explain (:func:`in_context`)."""
+
+
+def in_context(parts: tuple[str, ...], item: FuzzInput | None) -> tuple[str, ...]:
+    """The parts as the input's requests explain them: an answer or its absence to an input that sends
+    a manip extension opcode is ``request.extension-served`` (a server may refuse extensions as unknown,
+    erratum extension-range); the data of describe self's reply is ``describe.content``."""
+    if item is None:
+        return parts
+    ops = [SPEC.requests.get(s.opcode) for s in item.steps if isinstance(s, RequestStep)]
+    extension = any(op is not None and op.extension for op in ops)
+    describe = any(op is not None and op.name == "describe-self" for op in ops)
+    out: list[str] = []
+    for part in parts:
+        if part in _CONTEXTUAL and extension:
+            part = "request.extension-served"
+        elif part in _CONTEXTUAL - {"opcode"} and describe:
+            part = "describe.content"
+        if part not in out:
+            out.append(part)
+    return tuple(out)
+
+
 def _free_or_gap(stream: str, diff: Difference, item: FuzzInput | None) -> Finding:
     names: list[str] = []
-    for part in diff.parts:
+    for part in in_context(diff.parts, item):
         allowing = declared(part)
         if not allowing:
             cid, section = nearest_section(diff, item)
@@ -131,5 +156,6 @@ def _free_or_gap(stream: str, diff: Difference, item: FuzzInput | None) -> Findi
             message = f"the answers differ in {what}, and no clause or erratum says which conforms"
             return Finding("unexplained", stream, diff, (cid,) if cid else (), "", message, section)
         names += [n for n in allowing if n not in names]
-    message = "both conform: " + ", ".join(diff.parts) + " is the implementation's choice"
-    return Finding("allowed", stream, diff, tuple(names), "", message, _section(names[-1]))
+    freedoms = in_context(diff.parts, item)
+    message = f"both conform: {', '.join(freedoms)} is the implementation's choice"
+    return Finding("allowed", stream, diff, tuple(names), "", message, _section(names[-1]), freedoms=freedoms)

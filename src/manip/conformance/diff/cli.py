@@ -307,9 +307,21 @@ def _write(report: DiffReport, options: dict[str, Any]) -> None:
 
 
 def _summary(report: DiffReport, console: Any) -> None:
+    allowed: dict[tuple[tuple[str, ...], tuple[str, ...]], list[str]] = {}
     for result in report.results:
         for finding in result.findings:
+            if finding.cls == "allowed":  # grouped: the same freedom shows again and again
+                where = f"{finding.stream} input {finding.difference.number}"
+                allowed.setdefault((finding.freedoms, finding.names), []).append(where)
+                continue
             console.print("\n".join(finding_lines(report, finding, result)), markup=False, highlight=False)
+    for (parts, names), wheres in allowed.items():
+        console.print(
+            f"(b) both allowed: {', '.join(parts)} [{', '.join(names)}]: {len(wheres)} time(s), first in "
+            f"{wheres[0]} (every one in the JSON and Markdown reports)",
+            markup=False,
+            highlight=False,
+        )
     for result in report.unstable:
         console.print(f"unstable (no finding): {result.stream.label}: {result.unstable_detail}", markup=False)
     for problem in report.problems:

@@ -138,6 +138,7 @@ class DiffReport:
             "input": d.number,
             "position": d.position,
             "parts": list(d.parts),
+            "freedoms": list(f.freedoms),
             "names": list(f.names),
             "violator": f.violator,
             "message": f.message,
@@ -166,7 +167,8 @@ def finding_lines(report: DiffReport, f: Finding, result: StreamResult) -> list[
     d = f.difference
     where = f"{f.stream}, input {d.number}, event {d.position}"
     names = ", ".join(f.names) or "(none)"
-    lines = [f"{CLASS_NAMES[f.cls]}: {where}: {', '.join(d.parts)} [{names}]"]
+    parts = ", ".join(f.freedoms or d.parts)
+    lines = [f"{CLASS_NAMES[f.cls]}: {where}: {parts} [{names}]"]
     if f.cls == "violation":
         if f.follows:
             lines.append(f"  follows:    the violation of {f.follows} earlier in the stream")
