@@ -26,7 +26,6 @@ Freedom = Literal[
     "answer.configuration-bits",
     "request.extension-served",
     "describe.content",
-    "timing",
 ]
 """A part of an answer that is the implementation's choice where a clause or erratum says so
 (``freedom = [...]`` in the spec data): two conforming servers may differ there.  ``manip-conform diff``

@@ -129,16 +129,21 @@ _CONTEXTUAL: Final = frozenset({"opcode", "data", "count"})
 def in_context(parts: tuple[str, ...], item: FuzzInput | None) -> tuple[str, ...]:
     """The parts as the input's requests explain them: an answer or its absence to an input that sends
     a manip extension opcode is ``request.extension-served`` (a server may refuse extensions as unknown,
-    erratum extension-range); the data of describe self's reply is ``describe.content``."""
+    erratum extension-range); the answer to set configuration is ``answer.configuration-bits`` (other bits
+    refused or answered done, and the configuration used after, erratum set-configuration); the data of
+    describe self's reply is ``describe.content``."""
     if item is None:
         return parts
     ops = [SPEC.requests.get(s.opcode) for s in item.steps if isinstance(s, RequestStep)]
     extension = any(op is not None and op.extension for op in ops)
     describe = any(op is not None and op.name == "describe-self" for op in ops)
+    configuration = any(op is not None and op.name == "set-configuration" for op in ops)
     out: list[str] = []
     for part in parts:
         if part in _CONTEXTUAL and extension:
             part = "request.extension-served"
+        elif part in _CONTEXTUAL and configuration:
+            part = "answer.configuration-bits"
         elif part in _CONTEXTUAL - {"opcode"} and describe:
             part = "describe.content"
         if part not in out:
