@@ -13,13 +13,14 @@ import pytest
 from click.testing import CliRunner
 
 from manip.conformance.cli import main as conform_main
-from manip.conformance.diff import driver
+from manip.conformance.diff import driver, sides
 from manip.conformance.diff.driver import DiffConfig, diff_stream, run_diff
 from manip.conformance.diff.pairing import SideEvent
 from manip.conformance.diff.report import load_schema
 from manip.conformance.diff.sides import Observation, Side
 from manip.conformance.diff.streams import make_streams
 from manip.conformance.fuzz.generators import GenOptions
+from manip.conformance.fuzz.session import Allowance
 from manip.reference_server import FaultSet, ServerConfig
 from manip.reference_server.faults import FAULTS, Fault
 from tests.support.json_schema import validate
@@ -114,6 +115,8 @@ def _cli(tmp_path: Path, *args: str) -> tuple[int, dict, str]:  # type: ignore[t
             str(tmp_path / "d.md"),
             "--junit",
             str(tmp_path / "d.xml"),
+            "--html",
+            str(tmp_path / "d.html"),
         ],
         catch_exceptions=False,
     )
@@ -146,6 +149,8 @@ def test_the_command_reports_a_violation_and_replays_it(tmp_path: Path) -> None:
     assert finding["names"] == ["error-string.arg-layout"] and finding["violator"] == "B"
     assert "<failure" in (tmp_path / "d.xml").read_text()
     assert "error-string.arg-layout" in (tmp_path / "d.md").read_text()
+    page = (tmp_path / "d.html").read_text()
+    assert "error-string.arg-layout" in page and "<mark>" in page
     replay = finding["reproduce"].split()[2:]  # without "manip-conform diff"
     code_again, again, _ = _cli(tmp_path, *replay)
     assert code_again == 1 and any(f["class"] == "violation" for f in again["findings"])
@@ -178,3 +183,15 @@ def test_server_options_apply_to_an_embedded_side_only(tmp_path: Path) -> None:
     assert code == 2 and "embedded side A only" in output
     code, _, output = _cli(tmp_path, "embedded", "embedded", "--server-fault-b", "no-such-fault")
     assert code == 2 and "--server-fault-b" in output
+
+
+def test_a_side_that_does_not_finish_its_stream_is_a_runaway(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The bound is in virtual seconds for an embedded side, where a request takes none: a bound of 0 ends
+    the stream at once."""
+    monkeypatch.setattr(sides, "stream_bound", lambda stream, allowance: 0.0)
+    stream = make_streams(1, 1, 2, GenOptions(select=("manip.sequence",)))[0]
+    seen = sides.observe(CLEAN, stream, Allowance(), 1)
+    assert seen.runaway is not None and "did not finish the stream" in seen.runaway
+    assert [s.violation.kind for s in seen.sightings] == ["timeout"]
+    last = stream.all_inputs[-1].number
+    assert seen.events[last][0].kind == "stream"

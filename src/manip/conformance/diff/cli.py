@@ -22,7 +22,14 @@ from rich.markup import escape
 from manip.commandline import FiniteFloat
 from manip.conformance.cli_options import check_output_paths
 from manip.conformance.diff.driver import DiffConfig, StreamResult, run_diff
-from manip.conformance.diff.report import DiffReport, finding_lines, write_json, write_junit, write_markdown
+from manip.conformance.diff.report import (
+    DiffReport,
+    finding_lines,
+    write_html,
+    write_json,
+    write_junit,
+    write_markdown,
+)
 from manip.conformance.diff.sides import Side, reachable
 from manip.conformance.diff.streams import Stream, make_stream, make_streams, stream_of
 from manip.conformance.fuzz.generators import GenOptions
@@ -158,6 +165,13 @@ def _numbers(ctx: click.Context, param: click.Parameter, value: str | None) -> t
     help="Write a Markdown report here.",
 )
 @click.option(
+    "--html",
+    "html_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Write an HTML report here (both answers side by side).",
+)
+@click.option(
     "--junit",
     "junit_path",
     type=click.Path(dir_okay=False, path_type=Path),
@@ -174,7 +188,10 @@ def diff_command(**options: Any) -> None:
     reference server in virtual time, shaped by the -a/-b options)."""
     sides = (_side("A", options), _side("B", options))
     check_output_paths(
-        json=options["json_path"], markdown=options["markdown_path"], junit=options["junit_path"]
+        json=options["json_path"],
+        markdown=options["markdown_path"],
+        html=options["html_path"],
+        junit=options["junit_path"],
     )
     if options["only_stream"] is not None and options["only_inputs"] is not None:
         raise click.UsageError("--stream and --inputs each choose what is sent: give one")
@@ -294,6 +311,7 @@ def _write(report: DiffReport, options: dict[str, Any]) -> None:
     for key, write in (
         ("json_path", write_json),
         ("markdown_path", write_markdown),
+        ("html_path", write_html),
         ("junit_path", write_junit),
     ):
         path = options[key]

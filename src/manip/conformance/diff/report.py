@@ -1,6 +1,6 @@
 """The report of a diff: counts by class, every finding with its clause or erratum, both answers and a
 reproduce line; as the console shows it, as JSON (``diff.schema.json``, next to this module), as
-Markdown and as JUnit XML.
+Markdown, as HTML (both answers side by side, the differing bytes highlighted) and as JUnit XML.
 
 A class (a) difference (a violation) fails the diff, and so does a class (c) one (a gap in the spec)
 unless ``--allow-unexplained`` keeps gaps as warnings; class (b) differences (both allowed) never do.
@@ -10,6 +10,7 @@ An unstable stream is listed apart and is no finding.  Exit statuses: :data:`man
 
 from __future__ import annotations
 
+import html
 import json
 import shlex
 from collections import Counter
@@ -29,6 +30,7 @@ __all__ = [
     "DiffReport",
     "finding_lines",
     "load_schema",
+    "write_html",
     "write_json",
     "write_junit",
     "write_markdown",
@@ -219,6 +221,61 @@ def write_markdown(report: DiffReport, path: Path) -> None:
         out.append(f"- problem: {problem}")
     with atomic_output(path) as fh:
         fh.write("\n".join(out).rstrip() + "\n")
+
+
+_HTML_STYLE: Final = (
+    "body{font-family:sans-serif;margin:2em}table{border-collapse:collapse;width:100%}"
+    "td,th{border:1px solid #ccc;padding:4px;vertical-align:top}td.bytes{font-family:monospace;"
+    "word-break:break-all;width:40%}tr.violation th{background:#f8d0d0}tr.unexplained th{background:#f8ecc0}"
+    "tr.allowed th{background:#d8f0d8}mark{background:#ffe066}"
+)
+
+
+def _marked(ours: str, theirs: str) -> str:
+    """``ours`` escaped, the words that differ from ``theirs`` (by position) highlighted."""
+    words, others = ours.split(" "), theirs.split(" ")
+    out = []
+    for i, word in enumerate(words):
+        same = i < len(others) and others[i] == word
+        out.append(html.escape(word) if same else f"<mark>{html.escape(word)}</mark>")
+    return " ".join(out)
+
+
+def write_html(report: DiffReport, path: Path) -> None:
+    """Every difference, the two sides' answers side by side, the differing bytes highlighted."""
+    rows = []
+    for result in report.results:
+        for f in result.findings:
+            d = f.difference
+            a = d.a.show() if d.a is not None else "(nothing)"
+            b = d.b.show() if d.b is not None else "(nothing)"
+            head = f"{CLASS_NAMES[f.cls]}: {f.stream}, input {d.number}: {', '.join(f.freedoms or d.parts)}"
+            detail = (
+                f"{', '.join(f.names)} {f.message} (1985 guide {f.section})"
+                if f.section
+                else ", ".join(f.names)
+            )
+            rows.append(
+                f'<tr class="{f.cls}"><th colspan="2">{html.escape(head)}<br><small>{html.escape(detail)}'
+                f"<br><code>{html.escape(report.reproduce(f, result))}</code></small></th></tr>"
+                f'<tr><td class="bytes">{_marked(a, b)}</td><td class="bytes">{_marked(b, a)}</td></tr>'
+            )
+    counts = "".join(f"<li>{CLASS_NAMES[c]}: {n}</li>" for c, n in report.counts.items())
+    unstable = "".join(
+        f"<li>{html.escape(r.stream.label)}: {html.escape(r.unstable_detail)}</li>" for r in report.unstable
+    )
+    page = (
+        f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>manip-conform diff</title>"
+        f"<style>{_HTML_STYLE}</style></head><body><h1>manip-conform diff</h1>"
+        f"<p>seed {report.seed}: {html.escape(report.summary_line())}; "
+        f"<b>{html.escape(report.verdict)}</b> (exit {report.exit_code})</p><ul>{counts}</ul>"
+        + (f"<h2>Unstable streams (no finding)</h2><ul>{unstable}</ul>" if unstable else "")
+        + f"<table><tr><th>A: {html.escape(report.a)}</th><th>B: {html.escape(report.b)}</th></tr>"
+        + "".join(rows)
+        + "</table></body></html>\n"
+    )
+    with atomic_output(path) as fh:
+        fh.write(page)
 
 
 def write_junit(report: DiffReport, path: Path) -> None:
