@@ -53,7 +53,7 @@ class Stream:
 
     @property
     def label(self) -> str:
-        if self.number is not None and len(self.inputs) > 0:
+        if self.number is not None:
             return f"stream {self.number}"
         return "inputs " + ",".join(str(n) for n in self.input_numbers)
 
