@@ -113,3 +113,9 @@ def test_an_extension_request_and_describe_self_explain_their_answers() -> None:
     diffs = compare([3], {3: [response(1.0)]}, {3: [error(b"dispatch: C UOP Unknown opcode ~", b"\xa3\x00")]})
     found = classify("s", diffs, [], [], {3: ext_input})
     assert found[0].cls == "allowed" and found[0].names == ("extension-range",)
+
+
+def test_the_numbers_of_another_message_are_part_of_its_difference() -> None:
+    refused = error(b"request-notifications: C BVA Mask ~ has undefined bits", b"\xff\x00")
+    unknown = error(b"dispatch: C UOP Unknown opcode ~", b"\xa3\x00")
+    assert differing_parts(refused, unknown) == ("error.where", "error.code", "error.message")

@@ -13,7 +13,8 @@ NCP's and are never compared.
   connection ended), ``stray`` (what a stray packet was answered with), ``stream`` (stalled, not opened);
 * an error string by its parts: ``error.number``, ``error.where``, ``error.severity``, ``error.code``,
   ``error.message``, ``error.args`` (the numbers), ``error.args-layout`` (the pad byte of erratum
-  ``error-arg-layout``), ``error.text`` (one side's does not parse);
+  ``error-arg-layout``), ``error.text`` (one side's does not parse).  The numbers of two different
+  messages are not compared: they are what each message says (erratum ``error-arg-values``);
 * an asynchronous response: ``async.layout`` (6 or 8 bytes, erratum ``async-request-number``) and
   ``async.data`` (the condition code and words themselves);
 * other data: ``data`` (compared as PDP-11 floats within :data:`FLOAT_TOLERANCE` where both sides'
@@ -155,9 +156,15 @@ def _error_parts(a: bytes, b: bytes) -> tuple[str, ...]:
     parts = []
     if a[:2] != b[:2]:
         parts.append("error.number")
-    for name in ("where", "severity", "code", "message", "args"):
+    for name in ("where", "severity", "code", "message"):
         if getattr(ea, name) != getattr(eb, name):
             parts.append(f"error.{name}")
+    if "error.message" in parts:
+        # The numbers go with the message that says what they are (erratum error-arg-values): another
+        # message's numbers are part of its difference, not one of their own.
+        return tuple(parts)
+    if ea.args != eb.args:
+        parts.append("error.args")
     if not parts or _padded(a) != _padded(b):
         # The pad byte before the numbers (erratum error-arg-layout), or other bytes the parts do not show.
         parts.append("error.args-layout")
