@@ -2,7 +2,8 @@
 
 Stream ``k`` of seed ``S`` with ``length`` inputs is the fuzzer's inputs ``k*length`` to
 ``k*length + length - 1`` of campaign ``S`` (:func:`manip.conformance.fuzz.generators.generate`), after
-a fixed preamble that sets the state both sides start from on their fresh connection (speed 1.0).
+a fixed preamble that sets the state both sides start from on their fresh connection (arm power off,
+speed 1.0).
 The same seed gives the same streams; ``manip-conform diff ... --seed S --stream K`` sends stream ``K``
 again, ``--inputs N,M`` a stream of exactly those inputs (a shrunk one).  Sans-I/O.
 """
@@ -25,10 +26,14 @@ PREAMBLE_NUMBER: Final = -1
 
 
 def preamble() -> FuzzInput:
-    """The requests that put both sides in the same state on a fresh connection: speed 1.0 (a fresh
-    connection has arm power off and no configuration on every conforming server)."""
+    """The requests that put both sides in the same state on a fresh connection: arm power off, speed
+    1.0 (a fresh connection has no configuration on every conforming server).  The arm's pose is not
+    set (that would move it): an embedded side is a fresh server for every stream, at its rest pose."""
+    power = RequestStep(SPEC.request("kill-power").opcode, b"")
     speed = RequestStep(SPEC.request("set-speed").opcode, pack_f(1.0))
-    return FuzzInput(PREAMBLE_NUMBER, "diff.preamble", (speed,), "the preamble: set speed 1.0")
+    return FuzzInput(
+        PREAMBLE_NUMBER, "diff.preamble", (power, speed), "the preamble: kill power, set speed 1.0"
+    )
 
 
 @dataclass(frozen=True)
