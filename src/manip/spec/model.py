@@ -25,7 +25,6 @@ Freedom = Literal[
     "data.length-unit",
     "answer.configuration-bits",
     "request.extension-served",
-    "describe.content",
 ]
 """A part of an answer that is the implementation's choice where a clause or erratum says so
 (``freedom = [...]`` in the spec data): two conforming servers may differ there.  ``manip-conform diff``

@@ -108,8 +108,17 @@ def test_an_extension_request_and_describe_self_explain_their_answers() -> None:
     ext_input = FuzzInput(3, "manip.valid", (RequestStep(extension.opcode, b""),), "")
     describe_input = FuzzInput(4, "manip.valid", (RequestStep(describe.opcode, b""),), "")
     assert in_context(("opcode",), ext_input) == ("request.extension-served",)
-    assert in_context(("data", "count"), describe_input) == ("describe.content",)
-    assert in_context(("opcode",), describe_input) == ("opcode",)
+    assert in_context(("data", "count"), describe_input) == ("data", "count")
+    listed = b"\x05\x00 (:OPERATIONS 200 201%s) (:DOF 6)"
+    ours = SideEvent("packet", ServerOp.RESPONSE, listed % f" {extension.opcode:o}".encode())
+    theirs = SideEvent("packet", ServerOp.RESPONSE, listed % b" 202")
+    served = SideEvent("packet", ServerOp.RESPONSE, listed % b"")
+    lying = compare([4], {4: [ours]}, {4: [theirs]})
+    assert in_context(lying[0].parts, describe_input, lying[0]) == ("data",)
+    extension_listed = compare([4], {4: [ours]}, {4: [served]})
+    assert in_context(extension_listed[0].parts, describe_input, extension_listed[0]) == (
+        "request.extension-served",
+    )
     diffs = compare([3], {3: [response(1.0)]}, {3: [error(b"dispatch: C UOP Unknown opcode ~", b"\xa3\x00")]})
     found = classify("s", diffs, [], [], {3: ext_input})
     assert found[0].cls == "allowed" and found[0].names == ("extension-range",)

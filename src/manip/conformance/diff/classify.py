@@ -15,6 +15,7 @@ Sans-I/O.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Final, Literal
@@ -124,28 +125,45 @@ def _section(cid: str) -> str:
 
 _CONTEXTUAL: Final = frozenset({"opcode", "data", "count"})
 """Parts whose difference a request of the input may explain (:func:`in_context`)."""
+_OPERATIONS: Final = re.compile(rb"\(:OPERATIONS((?: [0-7]+)*)\)")
 
 
-def in_context(parts: tuple[str, ...], item: FuzzInput | None) -> tuple[str, ...]:
+def listed_extensions_only(a: bytes, b: bytes) -> bool:
+    """Whether two describe-self reply packets differ only in the manip extension opcodes their
+    ``:OPERATIONS`` lists name (erratum extension-range: a server may serve them or not, and lists what
+    it serves, erratum describe-self-truthful)."""
+    ma, mb = _OPERATIONS.search(a), _OPERATIONS.search(b)
+    if ma is None or mb is None or _OPERATIONS.sub(b"", a) != _OPERATIONS.sub(b"", b):
+        return False
+    ops_a, ops_b = (frozenset(int(x, 8) for x in m.group(1).split()) for m in (ma, mb))
+    return all(op in SPEC.requests and SPEC.requests[op].extension for op in ops_a ^ ops_b)
+
+
+def in_context(
+    parts: tuple[str, ...], item: FuzzInput | None, diff: Difference | None = None
+) -> tuple[str, ...]:
     """The parts as the input's requests explain them: an answer or its absence to an input that sends
     a manip extension opcode is ``request.extension-served`` (a server may refuse extensions as unknown,
-    erratum extension-range); the answer to set configuration is ``answer.configuration-bits`` (other bits
-    refused or answered done, and the configuration used after, erratum set-configuration); the data of
-    describe self's reply is ``describe.content``."""
+    erratum extension-range), and so is a describe-self reply whose ``:OPERATIONS`` differ only in
+    extension opcodes; the answer to set configuration is ``answer.configuration-bits`` (other bits
+    refused or answered done, erratum set-configuration)."""
     if item is None:
         return parts
     ops = [SPEC.requests.get(s.opcode) for s in item.steps if isinstance(s, RequestStep)]
     extension = any(op is not None and op.extension for op in ops)
-    describe = any(op is not None and op.name == "describe-self" for op in ops)
     configuration = any(op is not None and op.name == "set-configuration" for op in ops)
+    describe = (
+        diff is not None
+        and diff.a is not None
+        and diff.b is not None
+        and listed_extensions_only(diff.a.data, diff.b.data)
+    )
     out: list[str] = []
     for part in parts:
-        if part in _CONTEXTUAL and extension:
+        if (part in _CONTEXTUAL and extension) or (part == "data" and describe):
             part = "request.extension-served"
         elif part in _CONTEXTUAL and configuration:
             part = "answer.configuration-bits"
-        elif part in _CONTEXTUAL - {"opcode"} and describe:
-            part = "describe.content"
         if part not in out:
             out.append(part)
     return tuple(out)
@@ -153,7 +171,7 @@ def in_context(parts: tuple[str, ...], item: FuzzInput | None) -> tuple[str, ...
 
 def _free_or_gap(stream: str, diff: Difference, item: FuzzInput | None) -> Finding:
     names: list[str] = []
-    for part in in_context(diff.parts, item):
+    for part in in_context(diff.parts, item, diff):
         allowing = declared(part)
         if not allowing:
             cid, section = nearest_section(diff, item)
@@ -161,6 +179,6 @@ def _free_or_gap(stream: str, diff: Difference, item: FuzzInput | None) -> Findi
             message = f"the answers differ in {what}, and no clause or erratum says which conforms"
             return Finding("unexplained", stream, diff, (cid,) if cid else (), "", message, section)
         names += [n for n in allowing if n not in names]
-    freedoms = in_context(diff.parts, item)
+    freedoms = in_context(diff.parts, item, diff)
     message = f"both conform: {', '.join(freedoms)} is the implementation's choice"
     return Finding("allowed", stream, diff, tuple(names), "", message, _section(names[-1]), freedoms=freedoms)
