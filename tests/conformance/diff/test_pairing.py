@@ -95,7 +95,7 @@ def test_classes() -> None:
         ("violation", ("error-string.arg-values",), "B"),
         ("violation", ("error-string.arg-values",), "B"),
     ]
-    assert found[1].follows == "error-string.arg-values"
+    assert found[1].follows == "error-string.arg-values (input 1)"
     free = classify("s", compare([1], {1: [error(b"a: C UOP x")]}, {1: [error(b"b: C XYZ y")]}), [], [], {})
     assert free[0].cls == "allowed" and "error-string.format" in free[0].names
     gap = classify("s", compare([2], {2: [response(1.0)]}, {2: [response(2.0)]}), [], [], {})

@@ -1,10 +1,10 @@
 """Classifying a difference between two sides: a violation, a difference both allowed, or a gap.
 
 * **violation** (class a): the fuzzer's judges (:func:`manip.conformance.fuzz.judge.judge`: the
-  transcript checks and the oracles) find a clause broken on one side's answers to the input and not on
-  the other's: the clause is named, and the other side's answer is the conforming one.  Differences
-  later in the same stream follow from it (their ``follows`` names the first) and are counted with it:
-  after a broken clause the two sides' states need not agree.
+  transcript checks and the oracles, and :mod:`.oracles`) find a clause broken on one side's answers to
+  the input and not on the other's: the clause is named, and the other side's answer is the conforming
+  one.  Differences on later inputs of the same stream follow from the first such breach (their
+  ``follows`` names it) and are counted with it: after a broken clause the two sides need not agree.
 * **allowed** (class b): every part that differs is a freedom (:data:`manip.spec.model.FREEDOMS`) some
   clause or erratum of the spec data declares (``freedom = [...]``); those are named.
 * **unexplained** (class c): neither: a candidate gap in the spec, shown with the guide section of the
@@ -88,6 +88,19 @@ def nearest_section(diff: Difference, item: FuzzInput | None) -> tuple[str, str]
     return (cid, nearest.section) if nearest is not None else ("", "")
 
 
+def _unilateral(
+    sightings_a: Sequence[Sighting], sightings_b: Sequence[Sighting], numbers: Sequence[int]
+) -> list[tuple[int, Literal["A", "B"], str, str]]:
+    """Each breach one side showed on an input and the other did not: (input, side, clause, message),
+    in stream order."""
+    out: list[tuple[int, Literal["A", "B"], str, str]] = []
+    for number in numbers:
+        broken_a, broken_b = _broken(sightings_a, number), _broken(sightings_b, number)
+        out += [(number, "A", c, broken_a[c]) for c in sorted(set(broken_a) - set(broken_b))]
+        out += [(number, "B", c, broken_b[c]) for c in sorted(set(broken_b) - set(broken_a))]
+    return out
+
+
 def classify(
     stream: str,
     differences: Sequence[Difference],
@@ -95,24 +108,27 @@ def classify(
     sightings_b: Sequence[Sighting],
     inputs: dict[int, FuzzInput],
 ) -> list[Finding]:
-    """Each difference of one stream, classified (module docstring)."""
+    """Each difference of one stream, classified (module docstring).  A difference on an input where one
+    side broke a clause the other did not is that violation; one after such an input follows from it (a
+    side that broke a clause may answer out of step from then on: an extra reply is paired with the next
+    request)."""
     out: list[Finding] = []
-    first: Finding | None = None
+    order = list(inputs) if inputs else sorted({d.number for d in differences})
+    breaches = _unilateral(sightings_a, sightings_b, order)
+    position = {n: i for i, n in enumerate(order)}
     for diff in differences:
-        broken_a, broken_b = _broken(sightings_a, diff.number), _broken(sightings_b, diff.number)
-        only_a, only_b = set(broken_a) - set(broken_b), set(broken_b) - set(broken_a)
-        if only_a or only_b:
-            violator: Literal["A", "B", "both"] = "both" if only_a and only_b else "A" if only_a else "B"
-            names = tuple(sorted(only_a | only_b))
-            message = (broken_a | broken_b)[names[0]]
-            finding = Finding("violation", stream, diff, names, violator, message, _section(names[0]))
-            first = first or finding
-            out.append(finding)
-        elif first is not None:
-            cid = first.names[0]
-            out.append(
-                Finding("violation", stream, diff, first.names, first.violator, "", _section(cid), cid)
-            )
+        here = position.get(diff.number, len(order))
+        same = [b for b in breaches if b[0] == diff.number]
+        earlier = [b for b in breaches if position.get(b[0], 0) < here]
+        if same:
+            sides = {b[1] for b in same}
+            violator: Literal["A", "B", "both"] = "both" if len(sides) == 2 else same[0][1]
+            names = tuple(dict.fromkeys(b[2] for b in same))
+            out.append(Finding("violation", stream, diff, names, violator, same[0][3], _section(names[0])))
+        elif earlier:
+            number, side, cid, _ = earlier[0]
+            follows = f"{cid} (input {number})"
+            out.append(Finding("violation", stream, diff, (cid,), side, "", _section(cid), follows))
         else:
             out.append(_free_or_gap(stream, diff, inputs.get(diff.number)))
     return out
