@@ -128,3 +128,13 @@ def test_the_numbers_of_another_message_are_part_of_its_difference() -> None:
     refused = error(b"request-notifications: C BVA Mask ~ has undefined bits", b"\xff\x00")
     unknown = error(b"dispatch: C UOP Unknown opcode ~", b"\xa3\x00")
     assert differing_parts(refused, unknown) == ("error.where", "error.code", "error.message")
+
+
+def test_a_gap_names_the_clause_nearest_its_part() -> None:
+    a, b = (
+        error(b"s: E JOR Joint(s) $ out of range", b"\x04\x00"),
+        error(b"s: E JOR Joint(s) $ out of range", b"\x00\x04"),
+    )
+    gap = classify("s", compare([1], {1: [a]}, {1: [b]}), [], [], {})
+    assert gap[0].cls == "unexplained" and gap[0].names == ("error-string.arg-values",)
+    assert gap[0].section == SPEC.clauses["error-string.arg-values"].section

@@ -36,6 +36,14 @@ _PART_CLAUSE: Final = {
     "stray": "ncp.los",
 }
 """The clause nearest a difference that names no request, by the first word of the part."""
+_EXACT_CLAUSE: Final = {
+    "error.args": "error-string.arg-values",
+    "error.args-layout": "error-string.arg-layout",
+    "error.severity": "error.severity-matches-opcode",
+    "error.number": "error.fatal-request-number",
+    "async.data": "async.codes",
+}
+"""The clause that speaks of exactly that part, nearer than the request's own."""
 
 
 @dataclass(frozen=True)
@@ -75,7 +83,11 @@ def _broken(sightings: Sequence[Sighting], number: int) -> dict[str, str]:
 
 
 def nearest_section(diff: Difference, item: FuzzInput | None) -> tuple[str, str]:
-    """The clause nearest a difference and its guide section: the request's own clauses first."""
+    """The clause nearest a difference and its guide section: one about exactly that part, else the
+    request's own clauses, else the part's kind's."""
+    exact = SPEC.clauses.get(_EXACT_CLAUSE.get(diff.parts[0], ""))
+    if exact is not None:
+        return exact.id, exact.section
     opcode = next((s.opcode for s in item.steps if isinstance(s, RequestStep)), None) if item else None
     op = SPEC.requests.get(opcode) if opcode is not None else None
     if op is not None:
