@@ -7,6 +7,7 @@ the reports follow their schema."""
 from __future__ import annotations
 
 import json
+import socket
 from pathlib import Path
 
 import pytest
@@ -195,3 +196,12 @@ def test_a_side_that_does_not_finish_its_stream_is_a_runaway(monkeypatch: pytest
     assert [s.violation.kind for s in seen.sightings] == ["timeout"]
     last = stream.all_inputs[-1].number
     assert seen.events[last][0].kind == "stream"
+
+
+def test_an_unreachable_side_exits_3(tmp_path: Path) -> None:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    code, report, output = _cli(tmp_path, f"tcp://127.0.0.1:{port}", "embedded", "--connect-timeout", "1")
+    assert code == 3 and report["verdict"] == "a side unreachable", output
+    assert "side A" in report["problems"][0]
