@@ -37,6 +37,9 @@ def test_what_fails_the_diff() -> None:
 def test_the_reports(tmp_path: Path) -> None:
     report = _report("unexplained")
     validate(report.to_json(), load_schema())
+    report.results[0].runaway.append("B: the side did not finish the stream within 30 s")
+    validate(report.to_json(), load_schema())
+    assert report.to_json()["runaways"][0]["stream"] == "stream 0"
     assert report.to_json()["findings"][0]["reproduce"].endswith("--seed 9 --stream 0 --length 8")
     write_markdown(report, tmp_path / "d.md")
     write_html(report, tmp_path / "d.html")

@@ -340,6 +340,9 @@ def _summary(report: DiffReport, console: Any) -> None:
             markup=False,
             highlight=False,
         )
+    for result in report.results:
+        for detail in result.runaway:
+            console.print(f"runaway: {result.stream.label}: side {detail}", markup=False)
     for result in report.unstable:
         console.print(f"unstable (no finding): {result.stream.label}: {result.unstable_detail}", markup=False)
     for problem in report.problems:

@@ -128,6 +128,7 @@ class DiffReport:
             "exit_code": self.exit_code,
             "counts": self.counts,
             "unstable": [{"stream": r.stream.label, "detail": r.unstable_detail} for r in self.unstable],
+            "runaways": [{"stream": r.stream.label, "detail": d} for r in self.results for d in r.runaway],
             "problems": list(self.problems),
             "findings": [self._finding_json(f, r) for r in self.results for f in r.findings],
         }
