@@ -205,3 +205,12 @@ def test_an_unreachable_side_exits_3(tmp_path: Path) -> None:
     code, report, output = _cli(tmp_path, f"tcp://127.0.0.1:{port}", "embedded", "--connect-timeout", "1")
     assert code == 3 and report["verdict"] == "a side unreachable", output
     assert "side A" in report["problems"][0]
+
+
+@pytest.mark.slow
+def test_the_same_seed_gives_the_same_report(tmp_path: Path) -> None:
+    args = ["embedded", "embedded", "--server-profile-b", "guide", "--seed", "4", "--streams", "2"]
+    first = _cli(tmp_path, *args)[1]
+    second = _cli(tmp_path, *args)[1]
+    assert first["counts"]["allowed"] > 0
+    assert first["findings"] == second["findings"] and first["counts"] == second["counts"]
