@@ -138,3 +138,23 @@ def test_a_gap_names_the_clause_nearest_its_part() -> None:
     gap = classify("s", compare([1], {1: [a]}, {1: [b]}), [], [], {})
     assert gap[0].cls == "unexplained" and gap[0].names == ("error-string.arg-values",)
     assert gap[0].section == SPEC.clauses["error-string.arg-values"].section
+
+
+def test_two_of_the_guides_own_codes_are_no_choice() -> None:
+    jor = error(b"move: E JOR Joint(s) $ out of range", b"\x04\x00")
+    tor = error(b"move: E TOR Joint(s) $ out of range", b"\x04\x00")
+    assert differing_parts(jor, tor) == ("error.guide-code",)
+    assert classify("s", compare([1], {1: [jor]}, {1: [tor]}), [], [], {})[0].cls == "unexplained"
+    own = error(b"move: E XYZ Joint(s) $ out of range", b"\x04\x00")
+    assert differing_parts(jor, own) == ("error.code",)
+
+
+def test_answers_to_different_requests_are_out_of_step() -> None:
+    here, angles = SPEC.request("here").opcode, SPEC.request("joint-angles").opcode
+    a = [
+        SideEvent("packet", 0o200, b"\x01\x00", request=here),
+        SideEvent("packet", 0o200, b"\x02\x00", request=angles),
+    ]
+    b = [SideEvent("packet", 0o200, b"\x02\x00", request=angles)]
+    found = compare([1], {1: a}, {1: b})
+    assert [d.parts for d in found] == [("step",)]

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Final, Literal
 
-from manip.conformance.diff.pairing import Difference
+from manip.conformance.diff.pairing import Difference, SideEvent
 from manip.conformance.fuzz.judge import Sighting
 from manip.conformance.fuzz.steps import FuzzInput, RequestStep
 from manip.spec import SPEC
@@ -170,16 +170,17 @@ def listed_extensions_only(a: bytes, b: bytes) -> bool:
 def in_context(
     parts: tuple[str, ...], item: FuzzInput | None, diff: Difference | None = None
 ) -> tuple[str, ...]:
-    """The parts as the input's requests explain them: an answer or its absence to an input that sends
-    a manip extension opcode is ``request.extension-served`` (a server may refuse extensions as unknown,
-    erratum extension-range), and so is a describe-self reply whose ``:OPERATIONS`` differ only in
-    extension opcodes; the answer to set configuration is ``answer.configuration-bits`` (other bits
-    refused or answered done, erratum set-configuration)."""
-    if item is None:
-        return parts
-    ops = [SPEC.requests.get(s.opcode) for s in item.steps if isinstance(s, RequestStep)]
-    extension = any(op is not None and op.extension for op in ops)
-    configuration = any(op is not None and op.name == "set-configuration" for op in ops)
+    """The parts as the request answered explains them (the request each side's answer pairs with, else
+    the input's only request): an answer to a manip extension opcode is ``request.extension-served`` (a
+    server may refuse extensions as unknown, erratum extension-range), and so is a describe-self reply
+    whose ``:OPERATIONS`` differ only in extension opcodes; the answer to set configuration is
+    ``answer.configuration-bits`` (other bits refused or answered done, erratum set-configuration)."""
+    ops = {_answered(e, item) for e in (diff.a, diff.b) if e is not None} if diff is not None else set()
+    if diff is None and item is not None:
+        ops = {_answered(None, item)}
+    known = [SPEC.requests[o] for o in ops if o is not None and o in SPEC.requests]
+    named = {op.name for op in known}
+    extension = any(op.extension for op in known)
     describe = (
         diff is not None
         and diff.a is not None
@@ -190,11 +191,19 @@ def in_context(
     for part in parts:
         if (part in _CONTEXTUAL and extension) or (part == "data" and describe):
             part = "request.extension-served"
-        elif part in _CONTEXTUAL and configuration:
+        elif part in _CONTEXTUAL and "set-configuration" in named:
             part = "answer.configuration-bits"
         if part not in out:
             out.append(part)
     return tuple(out)
+
+
+def _answered(event: SideEvent | None, item: FuzzInput | None) -> int | None:
+    """The opcode of the request an answer answers: paired, else the input's only request."""
+    if event is not None and event.request is not None:
+        return event.request
+    requests = [s.opcode for s in item.steps if isinstance(s, RequestStep)] if item is not None else []
+    return requests[0] if len(requests) == 1 else None
 
 
 def _free_or_gap(stream: str, diff: Difference, item: FuzzInput | None) -> Finding:

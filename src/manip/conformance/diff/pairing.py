@@ -10,11 +10,15 @@ NCP's and are never compared.
 :class:`Difference` for every position whose events differ, with the parts that differ:
 
 * ``opcode``, ``count`` (one side has an event the other has not), ``end`` (how or why a
-  connection ended), ``stray`` (what a stray packet was answered with), ``stream`` (stalled, not opened);
+  connection ended), ``stray`` (what a stray packet was answered with), ``stream`` (stalled, not opened),
+  ``step`` (the two answers answer different requests: one side sent a packet more or fewer before; the
+  rest of the input is not compared, as every later position would differ for that one reason);
 * an error string by its parts: ``error.number``, ``error.where``, ``error.severity``, ``error.code``,
   ``error.message``, ``error.args`` (the numbers), ``error.args-layout`` (the pad byte of erratum
-  ``error-arg-layout``), ``error.text`` (one side's does not parse).  The numbers of two different
-  messages are not compared: they are what each message says (erratum ``error-arg-values``);
+  ``error-arg-layout``), ``error.text`` (one side's does not parse); two different codes that are both
+  the 1985 guide's own (TOR and JOR, NAP and JOR) are ``error.guide-code``, which no freedom covers.
+  The numbers of two different messages are not compared: they are what each message says (erratum
+  ``error-arg-values``);
 * an asynchronous response: ``async.layout`` (6 or 8 bytes, erratum ``async-request-number``) and
   ``async.data`` (the condition code and words themselves);
 * other data: ``data`` (compared as PDP-11 floats within :data:`FLOAT_TOLERANCE` where both sides'
@@ -29,14 +33,16 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Final, Literal
 
 from manip.codecs.error_string import parse_error
 from manip.codecs.errors import CodecError
+from manip.codecs.pairing import ReplyPairing
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.fuzz.batch import BatchRun
 from manip.conformance.fuzz.session import Inbox
+from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
 
 __all__ = ["FLOAT_TOLERANCE", "Difference", "SideEvent", "compare", "events_of"]
@@ -46,6 +52,7 @@ FLOAT_TOLERANCE: Final = 1e-5
 INCH: Final = 25.4
 SideEventKind = Literal["packet", "end", "stray", "stream"]
 _ERRORS: Final = frozenset({ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR, ServerOp.ASYNCHRONOUS_ERROR})
+_ANSWERS: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
 _ENDS: Final = {ChaosOp.CLS: "CLS", ChaosOp.LOS: "LOS", ChaosOp.EOF: "EOF"}
 
 
@@ -58,6 +65,9 @@ class SideEvent:
     opcode: int = 0
     data: bytes = b""
     text: str = ""
+    request: int | None = field(default=None, compare=False)
+    """For an answer: the opcode of the request it answers, by the suite's one pairing rule
+    (:class:`~manip.codecs.pairing.ReplyPairing`, erratum capture-pairing); not compared."""
 
     def show(self) -> str:
         if self.kind == "packet":
@@ -84,8 +94,11 @@ def events_of(run: BatchRun, inbox: Inbox) -> dict[int, list[SideEvent]]:
     """Everything a side showed of a stream, by input number (module docstring)."""
     out: dict[int, list[SideEvent]] = {}
     for conn in run.connections:
+        pairing: ReplyPairing[int | None] = ReplyPairing()
+        pairing.rfc(None)
         for wp in conn.packets:
             if wp.direction != "s2c":
+                pairing.request(wp.opcode, wp.opcode, wp.data)
                 continue
             number = conn.origin.get(id(wp), -1)
             name = _ENDS.get(ChaosOp(wp.opcode)) if wp.opcode in _ENDS else None
@@ -94,7 +107,8 @@ def events_of(run: BatchRun, inbox: Inbox) -> dict[int, list[SideEvent]]:
                     "end", wp.opcode, text=f"{name} {wp.data.decode('ascii', 'replace')}".strip()
                 )
             else:
-                event = SideEvent("packet", wp.opcode, bytes(wp.data))
+                request = pairing.server(wp.opcode, wp.data).request if wp.opcode in _ANSWERS else None
+                event = SideEvent("packet", wp.opcode, bytes(wp.data), request=request)
             out.setdefault(number, []).append(event)
     for due in run.due_answers:
         got = sorted({p.opcode for p, _ in inbox.strays.get(due.key, ())}) if due.key else []
@@ -119,10 +133,19 @@ def compare(
     for number in numbers:
         pairs = itertools.zip_longest(a.get(number, ()), b.get(number, ()))
         for position, (ea, eb) in enumerate(pairs):
+            if _out_of_step(ea, eb):
+                # The two answers answer different requests: one side sent a packet more or fewer
+                # before; every later position of the input would differ for that one reason.
+                out.append(Difference(number, position, ("step",), ea, eb))
+                break
             parts = differing_parts(ea, eb)
             if parts:
                 out.append(Difference(number, position, parts, ea, eb))
     return out
+
+
+def _out_of_step(a: SideEvent | None, b: SideEvent | None) -> bool:
+    return a is not None and b is not None and None not in (a.request, b.request) and a.request != b.request
 
 
 def differing_parts(a: SideEvent | None, b: SideEvent | None) -> tuple[str, ...]:
@@ -159,6 +182,9 @@ def _error_parts(a: bytes, b: bytes) -> tuple[str, ...]:
     for name in ("where", "severity", "code", "message"):
         if getattr(ea, name) != getattr(eb, name):
             parts.append(f"error.{name}")
+    if ea.code != eb.code and _guide_code(ea.code) and _guide_code(eb.code):
+        # Two of the 1985 guide's own codes mean different things: no choice of the implementation.
+        parts[parts.index("error.code")] = "error.guide-code"
     if "error.message" in parts:
         # The numbers go with the message that says what they are (erratum error-arg-values): another
         # message's numbers are part of its difference, not one of their own.
@@ -169,6 +195,11 @@ def _error_parts(a: bytes, b: bytes) -> tuple[str, ...]:
         # The pad byte before the numbers (erratum error-arg-layout), or other bytes the parts do not show.
         parts.append("error.args-layout")
     return tuple(parts)
+
+
+def _guide_code(code: str) -> bool:
+    known = SPEC.error_codes.get(code)
+    return known is not None and known.origin == "guide"
 
 
 def _padded(data: bytes) -> bool:
