@@ -84,11 +84,13 @@ def _broken(sightings: Sequence[Sighting], number: int) -> dict[str, str]:
 
 def nearest_section(diff: Difference, item: FuzzInput | None) -> tuple[str, str]:
     """The clause nearest a difference and its guide section: one about exactly that part, else the
-    request's own clauses, else the part's kind's."""
+    clauses of the request answered (else of the input's first request), else the part's kind's."""
     exact = SPEC.clauses.get(_EXACT_CLAUSE.get(diff.parts[0], ""))
     if exact is not None:
         return exact.id, exact.section
-    opcode = next((s.opcode for s in item.steps if isinstance(s, RequestStep)), None) if item else None
+    answered = [_answered(e, item) for e in (diff.a, diff.b) if e is not None]
+    first = next((s.opcode for s in item.steps if isinstance(s, RequestStep)), None) if item else None
+    opcode = next((o for o in answered if o is not None), first)
     op = SPEC.requests.get(opcode) if opcode is not None else None
     if op is not None:
         for clause in SPEC.clauses.values():
