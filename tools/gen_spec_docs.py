@@ -10,6 +10,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from manip.spec import SPEC, Layout
+from manip.spec.model import Erratum
 
 TARGET = Path(__file__).resolve().parents[1] / "docs" / "spec.md"
 
@@ -36,7 +37,30 @@ CLAUSE_LEGEND = (
     "(where a server written from the guide alone could do otherwise, the clause is a SHOULD or a MAY, or "
     "the suite accepts both readings); **Chaosnet**, the Chaosnet documents and link conventions the "
     "section names.",
+    "",
+    "*The implementation's choice*: parts of an answer a clause or erratum leaves to the implementation "
+    "(`freedom` in the spec data); two conforming servers may differ there, and `manip-conform diff` names "
+    "the clause or erratum for each such difference.",
 )
+
+
+def _erratum(erratum: Erratum) -> list[str]:
+    """An erratum's section of the docs."""
+    clauses = ", ".join(f"`{c}`" for c in erratum.clauses)
+    out = [f"### `{erratum.id}`", "", f"*Clauses:* {clauses}", ""]
+    out += [f"*Question.* {erratum.question}", "", f"*Decision.* {erratum.decision}", ""]
+    if erratum.reason:
+        out += [f"*Why.* {erratum.reason}", ""]
+    if erratum.parameter:
+        out += [f"*Configurable:* `{erratum.parameter}`", ""]
+    if erratum.freedom:
+        out += [f"*Two conforming servers may differ here*:{_freedom(erratum.freedom)}", ""]
+    return out
+
+
+def _freedom(parts: tuple[str, ...]) -> str:
+    """The parts of an answer a clause or erratum leaves to the implementation, as the docs show them."""
+    return " (the implementation's choice: " + ", ".join(f"`{f}`" for f in parts) + ")" if parts else ""
 
 
 def _cell(text: str) -> str:
@@ -132,6 +156,7 @@ def render() -> str:
         if clause.retired:
             continue
         errata = f" (erratum `{clause.errata}`)" if clause.errata else ""
+        errata += _freedom(clause.freedom)
         if clause.judged_from == "recording":
             errata += " (judged from a recording, `verify --judge client`, and live by the choice operations)"
         groups[clause.id.split(".")[0]].append(
@@ -150,13 +175,7 @@ def render() -> str:
 
     out += ["## Errata", ""]
     for erratum in SPEC.errata.values():
-        clauses = ", ".join(f"`{c}`" for c in erratum.clauses)
-        out += [f"### `{erratum.id}`", "", f"*Clauses:* {clauses}", ""]
-        out += [f"*Question.* {erratum.question}", "", f"*Decision.* {erratum.decision}", ""]
-        if erratum.reason:
-            out += [f"*Why.* {erratum.reason}", ""]
-        if erratum.parameter:
-            out += [f"*Configurable:* `{erratum.parameter}`", ""]
+        out += _erratum(erratum)
     return "\n".join(out).rstrip() + "\n"
 
 

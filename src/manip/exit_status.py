@@ -54,6 +54,13 @@ EXIT_STATUSES: Final[Mapping[str, Row]] = {
         (3, "target unreachable (no liveness check passed before the first batch)"),
         (4, "interrupted, or an internal error of the fuzzer"),
     ),
+    "manip-conform diff": (
+        (0, "no difference that fails: none, or only ones both sides may show (gaps: --allow-unexplained)"),
+        (1, "a violation (one side breaks a clause), or a difference no clause or erratum explains"),
+        (2, _USAGE),
+        (3, "a side unreachable (no connection, or Here not answered, before the first stream)"),
+        (4, "interrupted, or an internal error of the diff; a partial report is written"),
+    ),
     "manip-conform coverage": (
         (0, "every MUST clause in scope has a case"),
         (1, "a MUST clause in scope has none"),

@@ -31,6 +31,7 @@ COMMANDS: dict[str, tuple[click.Command, list[str]]] = {
     "manip-conform verify, replay": (conform_main, ["verify"]),
     "manip-conform client": (conform_main, ["client"]),
     "manip-conform fuzz": (conform_main, ["fuzz"]),
+    "manip-conform diff": (conform_main, ["diff"]),
     "manip-conform coverage": (conform_main, ["coverage"]),
     "manip-conform cases, report": (conform_main, ["report"]),
     "manip-client": (client_main, []),

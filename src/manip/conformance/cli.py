@@ -50,6 +50,7 @@ from manip.conformance.cli_options import (
 )
 from manip.conformance.client.cli import client_command
 from manip.conformance.cougar.target import CougarTarget, cougar_cases, liveness_check
+from manip.conformance.diff.cli import diff_command
 from manip.conformance.fuzz.cli import fuzz_command
 from manip.conformance.output.console import make_console, print_table
 from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
@@ -744,6 +745,7 @@ def report_command(report_file: Path, html_path: Path | None, markdown_path: Pat
 main.add_command(replay_command)
 main.add_command(verify_command)
 main.add_command(fuzz_command)
+main.add_command(diff_command)
 main.add_command(client_command)
 
 if __name__ == "__main__":  # pragma: no cover

@@ -18,6 +18,7 @@ from typing import Any, TypeVar, cast, get_args
 
 from manip.spec.constants import RequestName
 from manip.spec.model import (
+    FREEDOMS,
     AsyncCode,
     ChaosOpcode,
     Clause,
@@ -175,6 +176,15 @@ def _cougar(raw: list[dict[str, Any]], where: str) -> Mapping[int, CougarMessage
     return _unique(items, where)
 
 
+def _check_freedoms(spec: Spec) -> None:
+    """Every ``freedom`` a clause or erratum declares is one of :data:`~manip.spec.model.FREEDOMS`."""
+    items: list[Clause | Erratum] = [*spec.clauses.values(), *spec.errata.values()]
+    for item in items:
+        for part in item.freedom:
+            if part not in FREEDOMS:
+                raise SpecError(f"{item.id}: unknown freedom {part!r} (known: {', '.join(FREEDOMS)})")
+
+
 def _check(spec: Spec) -> None:
     for c in spec.clauses.values():
         if c.errata is not None and c.errata not in spec.errata:
@@ -183,6 +193,7 @@ def _check(spec: Spec) -> None:
             raise SpecError(f"clause {c.id}: origin {c.origin!r} is not one of {', '.join(get_args(Origin))}")
         if c.origin == "manip" and c.errata is None and c.section != "manip":
             raise SpecError(f"clause {c.id} is manip's decision but names no erratum saying why")
+    _check_freedoms(spec)
     for e in spec.errata.values():
         for cid in e.clauses:
             if cid not in spec.clauses:
@@ -261,13 +272,28 @@ def load_spec() -> Spec:
         segment_within=float(manip["segment_within"]),
         clauses=_unique(
             [
-                (c["id"], Clause(**{**c, "replaced_by": tuple(c.get("replaced_by", ()))}))
+                (
+                    c["id"],
+                    Clause(
+                        **{
+                            **c,
+                            "replaced_by": tuple(c.get("replaced_by", ())),
+                            "freedom": tuple(c.get("freedom", ())),
+                        }
+                    ),
+                )
                 for c in clauses["clause"]
             ],
             "clause",
         ),
         errata=_unique(
-            [(e["id"], Erratum(**{**e, "clauses": tuple(e["clauses"])})) for e in errata["erratum"]],
+            [
+                (
+                    e["id"],
+                    Erratum(**{**e, "clauses": tuple(e["clauses"]), "freedom": tuple(e.get("freedom", ()))}),
+                )
+                for e in errata["erratum"]
+            ],
             "erratum",
         ),
         field_types=types,

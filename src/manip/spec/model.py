@@ -16,6 +16,21 @@ Hazard = Literal["read-only", "config", "motion", "power"]
 ResponseForm = Literal["done", "data", "segment", "multi"]
 Element = Literal["float", "word", "int16", "small", "counted", "text"]
 
+Freedom = Literal[
+    "error.where",
+    "error.code",
+    "error.message",
+    "error.args-layout",
+    "async.layout",
+    "data.length-unit",
+    "answer.configuration-bits",
+    "request.extension-served",
+]
+"""A part of an answer that is the implementation's choice where a clause or erratum says so
+(``freedom = [...]`` in the spec data): two conforming servers may differ there.  ``manip-conform diff``
+names the clause or erratum declaring the freedom for each such difference."""
+FREEDOMS: tuple[str, ...] = Freedom.__args__  # type: ignore[attr-defined]
+
 ELEMENT_BYTES: dict[str, int] = {"float": 4, "word": 2, "int16": 2, "small": 2}
 """Bytes per element of fixed-size element kinds (``small`` may also arrive as a single byte)."""
 
@@ -39,6 +54,8 @@ class Clause:
     judged from a recording of the client at work (``manip-conform verify --judge client``) and, live,
     through the harness contract's choice operations (docs/client-harness.md section 4.4), by the same
     rule code."""
+    freedom: tuple[Freedom, ...] = ()
+    """The parts of an answer this clause leaves to the implementation (:data:`Freedom`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,6 +66,8 @@ class Erratum:
     decision: str
     reason: str | None = None
     parameter: str | None = None
+    freedom: tuple[Freedom, ...] = ()
+    """The parts of an answer this decision leaves to the implementation (:data:`Freedom`)."""
 
 
 @dataclass(frozen=True, slots=True)

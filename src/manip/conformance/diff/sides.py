@@ -1,0 +1,128 @@
+"""The two sides of a diff, and what one side showed of one stream (the I/O of the diff).
+
+A side is an address (a server someone runs; driven in real time) or the embedded reference server
+with its configuration (a :class:`~manip.reference_server.ServerConfig`: fault switches, the guide
+profile, the error-argument layout).  An embedded side runs in virtual time
+(:func:`manip.conformance.suite.embedded.simulated_server` on a
+:class:`~manip.links.virtual_clock.VirtualClockLoop`): a fresh server for every stream, seeded from
+the diff's seed, so the same stream gives the same bytes every time and a motion costs no wall time.
+An addressed side gets a fresh connection (and fresh links) for every stream.
+
+A stream is sent by the fuzzer's batch runner (:class:`~manip.conformance.fuzz.batch.BatchRunner`: one
+hand-driven Chaos connection, every read bounded by the reply and connect timeouts), followed by its
+liveness check, and judged by the fuzzer's judges (:func:`~manip.conformance.fuzz.judge.judge`).  A
+side that does not finish a stream within :func:`stream_bound` ends it: a *runaway*, judged as a hang.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from dataclasses import dataclass, field
+from typing import Final
+
+from manip.conformance.diff.oracles import arg_value_sightings
+from manip.conformance.diff.pairing import SideEvent, events_of
+from manip.conformance.diff.streams import Stream
+from manip.conformance.fuzz.batch import BatchRunner, liveness
+from manip.conformance.fuzz.judge import Sighting, judge
+from manip.conformance.fuzz.session import Allowance
+from manip.conformance.judge.violation import Violation
+from manip.conformance.suite.embedded import simulated_server
+from manip.links import LinkAddress, parse_address, virtual_clock
+from manip.reference_server import ServerConfig
+
+__all__ = ["Observation", "Side", "observe", "reachable", "stream_bound"]
+
+BOUND_BASE: Final = 30.0
+BOUND_PER_INPUT: Final = 20.0
+"""Seconds (virtual ones for an embedded side) a stream may take: the base and per input."""
+
+
+def stream_bound(stream: Stream, allowance: Allowance) -> float:
+    """How long a side may take over ``stream`` before it is a runaway."""
+    per = max(BOUND_PER_INPUT, 4 * allowance.reply)
+    return BOUND_BASE + per * len(stream.all_inputs)
+
+
+@dataclass(frozen=True)
+class Side:
+    """Side ``name`` (A or B): at ``address``, or the embedded server with ``config``; ``words``: how
+    the command line named it (for reproduce lines)."""
+
+    name: str
+    label: str
+    address: LinkAddress | None = None
+    config: ServerConfig | None = None
+    words: tuple[str, ...] = ()
+
+    @property
+    def embedded(self) -> bool:
+        return self.config is not None
+
+
+@dataclass
+class Observation:
+    """What one side showed of one stream: its events by input, the judges' sightings, a runaway."""
+
+    events: dict[int, list[SideEvent]] = field(default_factory=dict)
+    sightings: list[Sighting] = field(default_factory=list)
+    runaway: str | None = None
+    seconds: float = 0.0
+
+
+def observe(side: Side, stream: Stream, allowance: Allowance, seed: int) -> Observation:
+    """Send ``stream`` to ``side`` and gather what it showed (module docstring)."""
+    if side.config is not None:
+        config = side.config
+
+        async def embedded() -> Observation:
+            async with simulated_server(config, seed=seed) as url:
+                return await _observe(parse_address(url), stream, allowance, seed)
+
+        return virtual_clock.run(embedded(), virtual=True)
+    assert side.address is not None
+    return asyncio.run(_observe(side.address, stream, allowance, seed))
+
+
+async def _observe(address: LinkAddress, stream: Stream, allowance: Allowance, seed: int) -> Observation:
+    loop = asyncio.get_running_loop()
+    started = loop.time()
+    runner = BatchRunner(address, allowance, seed=seed)
+    bound = stream_bound(stream, allowance)
+    try:
+        try:
+            async with asyncio.timeout(bound):
+                run = await runner.run(stream.all_inputs)
+                live = await liveness(runner)
+        except TimeoutError:
+            last = stream.all_inputs[-1].number
+            why = f"the side did not finish the stream within {bound:g} s"
+            hang = Sighting(Violation(why, None, "MUST", "the stream ended", why, kind="timeout"), last)
+            event = SideEvent("stream", text=f"runaway: {why}")
+            return Observation({last: [event]}, [hang], why, loop.time() - started)
+        sightings = judge(run, runner.inbox, live)
+        events = events_of(run, runner.inbox)
+        for item in stream.all_inputs:
+            sightings += arg_value_sightings(item, events.get(item.number, ()))
+        return Observation(events, sightings, None, loop.time() - started)
+    finally:
+        with contextlib.suppress(Exception):
+            runner.close()
+
+
+def reachable(side: Side, allowance: Allowance, seed: int) -> str | None:
+    """None when an addressed side takes a connection and answers Here; else why not."""
+    if side.address is None:
+        return None
+    address = side.address
+
+    async def check() -> str | None:
+        runner = BatchRunner(address, allowance, seed=seed)
+        try:
+            live = await liveness(runner)
+        finally:
+            runner.close()
+        return None if live.alive else live.detail
+
+    return asyncio.run(check())

@@ -1,0 +1,78 @@
+"""The request streams of a diff: the fuzzer's generated inputs, cut into streams, from one seed.
+
+Stream ``k`` of seed ``S`` with ``length`` inputs is the fuzzer's inputs ``k*length`` to
+``k*length + length - 1`` of campaign ``S`` (:func:`manip.conformance.fuzz.generators.generate`), after
+a fixed preamble that sets the state both sides start from on their fresh connection (arm power off,
+speed 1.0).
+The same seed gives the same streams; ``manip-conform diff ... --seed S --stream K`` sends stream ``K``
+again, ``--inputs N,M`` a stream of exactly those inputs (a shrunk one).  Sans-I/O.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Final
+
+from manip.codecs.pdp11float import pack_f
+from manip.conformance.fuzz.generators import GenOptions, generate
+from manip.conformance.fuzz.steps import FuzzInput, RequestStep
+from manip.spec import SPEC
+
+__all__ = ["PREAMBLE_NUMBER", "Stream", "make_stream", "make_streams", "preamble", "stream_of"]
+
+PREAMBLE_NUMBER: Final = -1
+"""The input number of the preamble (the fuzzer numbers its inputs from 0)."""
+
+
+def preamble() -> FuzzInput:
+    """The requests that put both sides in the same state on a fresh connection: arm power off, speed
+    1.0 (a fresh connection has no configuration on every conforming server).  The arm's pose is not
+    set (that would move it): an embedded side is a fresh server for every stream, at its rest pose."""
+    power = RequestStep(SPEC.request("kill-power").opcode, b"")
+    speed = RequestStep(SPEC.request("set-speed").opcode, pack_f(1.0))
+    return FuzzInput(
+        PREAMBLE_NUMBER, "diff.preamble", (power, speed), "the preamble: kill power, set speed 1.0"
+    )
+
+
+@dataclass(frozen=True)
+class Stream:
+    """Stream ``number`` (None: one made of chosen inputs): the preamble, then ``inputs``."""
+
+    number: int | None
+    inputs: tuple[FuzzInput, ...]
+
+    @property
+    def all_inputs(self) -> list[FuzzInput]:
+        return [preamble(), *self.inputs]
+
+    @property
+    def input_numbers(self) -> tuple[int, ...]:
+        return tuple(i.number for i in self.inputs)
+
+    def only(self, numbers: Sequence[int]) -> Stream:
+        """The same stream with only the inputs numbered ``numbers`` (shrinking)."""
+        keep = set(numbers)
+        return Stream(self.number, tuple(i for i in self.inputs if i.number in keep))
+
+    @property
+    def label(self) -> str:
+        if self.number is not None:
+            return f"stream {self.number}"
+        return "inputs " + ",".join(str(n) for n in self.input_numbers)
+
+
+def make_stream(seed: int, number: int, length: int, gen: GenOptions) -> Stream:
+    first = number * length
+    return Stream(number, tuple(generate(seed, n, gen) for n in range(first, first + length)))
+
+
+def make_streams(seed: int, count: int, length: int, gen: GenOptions) -> list[Stream]:
+    """Streams 0 to ``count - 1``."""
+    return [make_stream(seed, k, length, gen) for k in range(count)]
+
+
+def stream_of(seed: int, numbers: Sequence[int], gen: GenOptions) -> Stream:
+    """A stream of exactly the inputs ``numbers`` of campaign ``seed`` (``--inputs``)."""
+    return Stream(None, tuple(generate(seed, n, gen) for n in numbers))
