@@ -20,9 +20,6 @@ from manip.reference_server import FaultSet, ServerConfig, errors
 from manip.reference_server.errors import RequestError
 from tests.support.suite import run_simulated
 
-NOT_WRIST = frozenset({"request-notifications", "reset-abort"})
-"""The Puma extension opcodes the Puma serves without a wrist."""
-
 
 def _run(faults: list[str], select: list[str], *, strict: bool = False) -> RunReport:
     """The selected cases against the embedded target, in virtual time (the timing cases' verdicts then
@@ -43,11 +40,9 @@ def test_clean_reference_server_passes_every_case() -> None:
         if r.outcome not in ("pass", "skip", "not-judged")
     }
     assert not bad
-    # the server has no wrist: the cases that use a wrist opcode (a Puma extension) are not judged
-    wrist = {c.id for c in all_cases() if set(c.extensions) - NOT_WRIST}
+    # the embedded target has the simulated wrist and its world: every case is judged but one
     unjudged = {r.id for r in report.results if r.outcome == "not-judged"}
-    assert unjudged - wrist == {"server.ncp.broken"}  # it needs the run to know the target's timer
-    assert {"server.wrist.no-answer", "server.reply.read-forces"} <= unjudged
+    assert unjudged == {"server.ncp.broken"}  # it needs the run to know the target's timer
     assert report.exit_code == ExitCode.CONFORMANT
     skipped = {r.id for r in report.results if r.outcome == "skip"}
     assert not any(s.startswith(("server.reply.here", "server.describe", "server.negative")) for s in skipped)
