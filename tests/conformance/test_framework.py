@@ -440,3 +440,11 @@ def test_json_report_matches_schema_and_junit_parses() -> None:
     assert cases["t.fail"].find("failure") is not None
     assert cases["t.error"].find("error") is not None
     assert cases["t.pass"].find("failure") is None
+
+
+def test_a_refused_puma_extension_is_judged_by_a_target_that_serves_the_extensions() -> None:
+    from manip.conformance.suite.results import judging_hint
+
+    reason = "the target serves no wrist (it refused 0240, wrist version, a Puma extension: C UOP)"
+    assert judging_hint(reason) == "a target that serves the Puma extensions"
+    assert judging_hint("the world offers no obstacle: run with --world") == "--world"

@@ -80,8 +80,11 @@ _OPTION = re.compile(r"--[a-z][a-z-]+")
 
 
 def judging_hint(reason: str) -> str:
-    """What would judge a not-judged case, in a word: the first option its reason names (``--world``,
+    """What would judge a not-judged case, in a word: a target serving manip's Puma extensions when the
+    reason is a refused extension, else the first option its reason names (``--world``,
     ``--broken-after``), else "see its reason"."""
+    if "a Puma extension" in reason:
+        return "a target that serves the Puma extensions"
     found = _OPTION.search(reason)
     return found.group(0) if found else "see its reason"
 
