@@ -23,18 +23,18 @@ from __future__ import annotations
 import itertools
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Final
 
-from manip.cougar.memory import MAP, Kind, region
+from manip.cougar.memory import MAP, Kind, Region, region
 
 __all__ = [
     "MAX_MAP_BYTES",
     "OBJECTS",
     "CougarMemoryMap",
-    "MapObject",
     "MemoryMapError",
+    "Region",
     "load_memory_map",
     "memory_map_toml",
     "own_map",
@@ -83,38 +83,13 @@ class MemoryMapError(ValueError):
 
 
 @dataclass(frozen=True)
-class MapObject:
-    """One object of a declared map: its name, byte address, kind and element count."""
-
-    name: str
-    address: int
-    kind: Kind
-    count: int
-
-    @property
-    def words(self) -> int:
-        return self.count * (2 if self.kind == "float" else 1)
-
-    @property
-    def end(self) -> int:
-        """First byte address after the object."""
-        return self.address + 2 * self.words
-
-    def at(self, index: int) -> int:
-        """Byte address of element ``index``."""
-        if not 0 <= index < self.count:
-            raise IndexError(f"{self.name} has {self.count} elements, not {index + 1}")
-        return self.address + index * (4 if self.kind == "float" else 2)
-
-
-@dataclass(frozen=True)
 class CougarMemoryMap:
     """A declared map: the objects it names, and where it came from (for messages)."""
 
-    objects: Mapping[str, MapObject]
+    objects: Mapping[str, Region]
     source: str = "manip's own map"
 
-    def get(self, name: str) -> MapObject | None:
+    def get(self, name: str) -> Region | None:
         return self.objects.get(name)
 
 
@@ -139,7 +114,7 @@ def parse_memory_map(text: str, source: str = "the memory map") -> CougarMemoryM
     return CougarMemoryMap(objects, source)
 
 
-def _object(source: str, name: str, entry: object) -> MapObject:
+def _object(source: str, name: str, entry: object) -> Region:
     where = f"{source}: objects.{name}"
     if name not in OBJECTS:
         raise MemoryMapError(f"{where}: not an object the cases use; known: {', '.join(OBJECTS)}")
@@ -160,13 +135,13 @@ def _object(source: str, name: str, entry: object) -> MapObject:
     if type(given) is not int or (given < count if least else given != count):
         what = f"at least {count}" if least else str(count)
         raise MemoryMapError(f"{where}: count must be {what}, not {given!r}")
-    obj = MapObject(name, address, kind, given)
+    obj = Region(name, kind, given, region(name).description, address)
     if obj.end > ADDRESS_SPACE:
         raise MemoryMapError(f"{where}: runs past the 16-bit address space (ends at {obj.end:#o})")
     return obj
 
 
-def _check_overlaps(source: str, objects: Mapping[str, MapObject]) -> None:
+def _check_overlaps(source: str, objects: Mapping[str, Region]) -> None:
     ordered = sorted(objects.values(), key=lambda o: o.address)
     for a, b in itertools.pairwise(ordered):
         if b.address < a.end:
@@ -192,10 +167,7 @@ def load_memory_map(path: Path) -> CougarMemoryMap:
 def own_map(shift: int = 0) -> CougarMemoryMap:
     """manip's own map as declared (every object of :data:`OBJECTS`), moved up by ``shift`` bytes."""
     by_name = {r.name: r for r in MAP}
-    objects = {
-        name: MapObject(name, by_name[name].address + shift, kind, by_name[name].count)
-        for name, (kind, _) in OBJECTS.items()
-    }
+    objects = {name: replace(by_name[name], address=by_name[name].address + shift) for name in OBJECTS}
     source = "manip's own map" + (f", moved up {shift:#o} bytes" if shift else "")
     return CougarMemoryMap(objects, source)
 

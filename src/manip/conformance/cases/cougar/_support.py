@@ -19,7 +19,7 @@ from manip.conformance.cougar.probe import (
     words_bytes,
 )
 from manip.conformance.suite.context import CaseContext
-from manip.cougar.memory_map import MapObject
+from manip.cougar.memory import Region
 from manip.spec import SPEC
 from manip.spec.constants import CougarCommand, CougarResponse
 from manip.spec.notation import octal
@@ -39,7 +39,7 @@ NO_MAP: Final = "declare the Cougar's memory map with --memory-map FILE (its for
 
 
 # ------------------------------------------------------------------------------------------ the memory map
-def mapped(ctx: CaseContext, *names: str) -> list[MapObject]:
+def mapped(ctx: CaseContext, *names: str) -> list[Region]:
     """The objects ``names`` of the run's memory map; the case is not judged without a map, or when the
     map does not name them (the 1985 guide gives no map: erratum cougar-memory-map)."""
     memory_map = ctx.options.cougar_map
@@ -140,11 +140,11 @@ async def expect_examine(ctx: CaseContext, probe: CougarProbe, address: int, cou
     return words
 
 
-async def examine_region(ctx: CaseContext, probe: CougarProbe, obj: MapObject) -> tuple[int, ...]:
+async def examine_region(ctx: CaseContext, probe: CougarProbe, obj: Region) -> tuple[int, ...]:
     return await expect_examine(ctx, probe, obj.address, obj.words)
 
 
-async def region_floats(ctx: CaseContext, probe: CougarProbe, obj: MapObject) -> tuple[float, ...]:
+async def region_floats(ctx: CaseContext, probe: CougarProbe, obj: Region) -> tuple[float, ...]:
     """An object's floats; the case cannot go on without all of them (``ctx.fail``)."""
     words = await examine_region(ctx, probe, obj)
     if len(words) != obj.words:
@@ -168,7 +168,7 @@ async def peek_words(
     return tuple(int(w) for w in reply.data_words[1:])
 
 
-async def peek_region(ctx: CaseContext, probe: CougarProbe, obj: MapObject) -> tuple[int, ...]:
+async def peek_region(ctx: CaseContext, probe: CougarProbe, obj: Region) -> tuple[int, ...]:
     """An object's words, as :func:`peek_words`."""
     return await peek_words(ctx, probe, obj.address, obj.words, obj.name)
 

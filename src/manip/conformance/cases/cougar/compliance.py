@@ -32,7 +32,7 @@ from manip.conformance.cougar.probe import (
 )
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
-from manip.cougar.memory_map import MapObject
+from manip.cougar.memory import Region
 
 # ------------------------------------------------------------------------------------------ NPR, RST
 _THETA_ERROR: Final = (1.0, -1.0, 1.0, 2.0, -2.0, 2.0)
@@ -254,7 +254,7 @@ NB_RATE: Final = (3.0, -2.0, 1.5, 4.0, -3.0, 2.5)
 NB_BJI: Final = 0.001
 
 
-async def _front_jacobian(ctx: CaseContext, probe: CougarProbe) -> tuple[np.ndarray[Any, Any], MapObject]:
+async def _front_jacobian(ctx: CaseContext, probe: CougarProbe) -> tuple[np.ndarray[Any, Any], Region]:
     """J (6x6) of the front buffer, and the buffer's map object."""
     front, *buffers = mapped(ctx, "jacob_front", "jbuf0", "jbuf1")
     (which,) = await expect_examine(ctx, probe, front.address, 1)
@@ -352,7 +352,7 @@ async def jacob_transpose_stored(ctx: CaseContext) -> None:
 
 
 async def _transpose_follows(
-    ctx: CaseContext, probe: CougarProbe, j: np.ndarray[Any, Any], buffer: MapObject
+    ctx: CaseContext, probe: CougarProbe, j: np.ndarray[Any, Any], buffer: Region
 ) -> None:
     words = await expect_examine(ctx, probe, buffer.at(36), 72)
     jt = np.array(floats_of(words) if len(words) == 72 else (float("nan"),) * 36).reshape(6, 6)

@@ -30,7 +30,7 @@ from manip.conformance.cougar.probe import (
 )
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
-from manip.cougar.memory_map import MapObject
+from manip.cougar.memory import Region
 
 
 # ------------------------------------------------------------------------------------------ ADC8, forces
@@ -185,7 +185,7 @@ async def forces_conversion(ctx: CaseContext) -> None:
 
 
 async def _voltmat_follows_fv(
-    ctx: CaseContext, probe: CougarProbe, calmat: Sequence[float], voltmat: MapObject
+    ctx: CaseContext, probe: CougarProbe, calmat: Sequence[float], voltmat: Region
 ) -> np.ndarray[Any, Any]:
     """voltmat for a zero frame vector and for FV_MM, each row block its own check; the last one."""
     inches_per_unit = MM_PER_UNIT[ctx.options.length_unit] / 25.4
