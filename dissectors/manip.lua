@@ -160,6 +160,7 @@ local MANIP_FIELD_TYPES = {
   ["joint"] = {"uint16", "Joint"},
   ["joints"] = {"double", "Joints"},
   ["k"] = {"double", "K"},
+  ["layout"] = {"string", "Asynchronous layout"},
   ["mask"] = {"uint16", "Mask"},
   ["message"] = {"string", "Message"},
   ["name"] = {"string", "Request"},
@@ -505,9 +506,11 @@ local function server_packet(tree, wire, opcode, data, dtvb, op)
     end
     local at = 0
     if n == 8 then
+      root:add(f_manip.layout, "numbered")
       root:add(f_manip.request_number, dtvb(0, 2), number)
       at = 2
     else
+      root:add(f_manip.layout, "guide")
       root:append_text(" (the 1985 guide's layout: no request number)")
     end
     local condition, w2, w3 = u16(data, at), u16(data, at + 2), u16(data, at + 4)

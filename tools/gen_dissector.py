@@ -35,6 +35,7 @@ FIXED_FIELDS: dict[str, tuple[str, str]] = {
     "arguments": ("uint16", "Argument"),
     "rendered": ("string", "Rendered"),
     "condition": ("uint16", "Condition"),
+    "layout": ("string", "Asynchronous layout"),
     "action": ("uint16", "Action"),
     "guard": ("uint16", "Guard"),
     "reserved": ("uint16", "Reserved"),
@@ -459,9 +460,11 @@ local function server_packet(tree, wire, opcode, data, dtvb, op)
     end
     local at = 0
     if n == 8 then
+      root:add(f_manip.layout, "numbered")
       root:add(f_manip.request_number, dtvb(0, 2), number)
       at = 2
     else
+      root:add(f_manip.layout, "guide")
       root:append_text(" (the 1985 guide's layout: no request number)")
     end
     local condition, w2, w3 = u16(data, at), u16(data, at + 2), u16(data, at + 4)
