@@ -23,6 +23,7 @@ Freedom = Literal[
     "error.args-layout",
     "async.layout",
     "data.length-unit",
+    "answer.length-unit",
     "answer.configuration-bits",
     "request.extension-served",
 ]
