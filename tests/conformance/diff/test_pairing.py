@@ -74,7 +74,11 @@ def test_the_spec_declares_the_freedoms_the_diff_names() -> None:
     assert "error-string.code" in declared("error.code")
     assert declared("units") == ()
     assert set(SPEC.errata["units"].freedom) == {"data.length-unit", "answer.length-unit"}
-    assert declared("answer.length-unit") == ("units", "incremental-move.data", "incremental-straight-move.data")
+    assert declared("answer.length-unit") == (
+        "units",
+        "incremental-move.data",
+        "incremental-straight-move.data",
+    )
 
 
 def test_an_unknown_freedom_is_refused() -> None:

@@ -34,7 +34,8 @@ from manip.conformance.diff.pairing import SideEvent
 from manip.conformance.diff.streams import Stream
 from manip.conformance.fuzz.judge import Sighting
 from manip.conformance.fuzz.steps import FuzzInput, Pause, RequestStep, Step
-from manip.conformance.judge.checks import parse_description
+from manip.conformance.judge.checks import completed_segment, parse_description
+from manip.conformance.judge.packets import WirePacket
 from manip.conformance.judge.violation import Violation
 from manip.conformance.suite.world import CalibrationFailure, Obstacle, SilentWrist, SluggishJoint
 from manip.spec import SPEC
@@ -262,8 +263,11 @@ def _check_jor(described: int, probes: dict[int, tuple[float, ...]]) -> Callable
                 if not lo <= a <= hi
             )
             answer = next(iter(_answers(events.get(number, []), _op("set-joint-angles"))), None)
+            if mask and answer is not None and answer.opcode == ServerOp.RESPONSE:
+                message = "set joint angles beyond a joint's limit was accepted"
+                out.append(_sighting(number, "motion.checked-before-queue", message, "E JOR", answer))
             if not mask or answer is None or answer.opcode != ServerOp.NON_FATAL_ERROR:
-                continue  # one accepted is judged against the stated limits by the fuzzer's oracles
+                continue
             try:
                 error = parse_error(answer.data[2:], body="packet")
             except (CodecError, ValueError):
@@ -277,6 +281,32 @@ def _check_jor(described: int, probes: dict[int, tuple[float, ...]]) -> Callable
         return out
 
     return check
+
+
+def _check_fifo(at: int) -> Callable[[Events], list[Sighting]]:
+    """The segments queued at input ``at`` complete in the order they were queued: the segment-completed
+    reports name the numbers their requests were answered with, in that order."""
+
+    def check(events: Events) -> list[Sighting]:
+        here = events.get(at, [])
+        queued = [
+            int.from_bytes(e.data[2:4], "little")
+            for e in _answers(here, _op("set-joint-angles"))
+            if e.opcode == ServerOp.RESPONSE and len(e.data) >= 4
+        ]
+        reports = [(e, completed_segment(_wire(e))) for e in here if e.kind == "packet"]
+        done = [(e, n) for e, n in reports if n is not None]
+        if not done or [n for _, n in done] == queued[: len(done)]:
+            return []
+        shown = [n for _, n in done]
+        message = f"segments queued as {queued} were reported completed as {shown}"
+        return [_sighting(at, "segment.fifo-completion", message, f"completions {queued}", done[0][0])]
+
+    return check
+
+
+def _wire(event: SideEvent) -> WirePacket:
+    return WirePacket("s2c", event.opcode, 0, 0, event.data)
 
 
 def _all(*checks: Callable[[Events], list[Sighting]]) -> Callable[[Events], list[Sighting]]:
@@ -369,6 +399,18 @@ def _speeds() -> Stream:
     return Stream(None, _inputs("speed-range", groups), scenario="speed-range")
 
 
+def _no_power() -> Stream:
+    groups: list[tuple[str, Sequence[Step]]] = [
+        (
+            "set joint angles without power (the preamble killed it)",
+            [_req("set-joint-angles", _floats(POSE))],
+        ),
+        ("move to ready without power", [_req("ready")]),
+        ("here", [_req("here")]),
+    ]
+    return Stream(None, _inputs("no-power", groups), scenario="no-power")
+
+
 def _free_joint() -> Stream:
     groups: list[tuple[str, Sequence[Step]]] = [
         ("enable power, free joint 3", [_req("enable-power"), _req("free-joint", struct.pack("<H", 3))]),
@@ -411,7 +453,7 @@ def _notified() -> Stream:
             [_req("describe-self", lazy=True), _req("describe-self", lazy=True), _req("here")],
         ),
     ]
-    return Stream(None, _inputs("notified-motion", groups), scenario="notified-motion")
+    return Stream(None, _inputs("notified-motion", groups), scenario="notified-motion", check=_check_fifo(1))
 
 
 def _fatal() -> Stream:
@@ -479,6 +521,7 @@ SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
     "read-back": _read_back_scenario,
     "ready": _ready,
     "speed-range": _speeds,
+    "no-power": _no_power,
     "free-joint": _free_joint,
     "unrequested-async": _unrequested,
     "notified-motion": _notified,
