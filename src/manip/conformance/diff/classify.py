@@ -144,6 +144,7 @@ def classify(
         same = [b for b in breaches if b[0] == diff.number]
         earlier = [b for b in breaches if position.get(b[0], 0) < here]
         if same:
+            same += [b for b in _about(diff, inputs.get(diff.number), breaches) if b not in same]
             sides = {b[1] for b in same}
             violator: Literal["A", "B", "both"] = "both" if len(sides) == 2 else same[0][1]
             names = tuple(dict.fromkeys(b[2] for b in same))

@@ -229,6 +229,16 @@ def _floats(data: bytes) -> list[float] | None:
         return None
 
 
+def _dirty(a: bytes, b: bytes) -> bool:
+    """Whether a float of ``a`` or ``b`` has exponent 0 with other bits set where the other side's
+    differs: it reads as zero, yet only all bits clear is an F zero (``float.dirty-zero``)."""
+    for at in range(0, len(a) - 3, 4):
+        wa, wb = a[at : at + 4], b[at : at + 4]
+        if wa != wb and any(not (w[1] << 1 | w[0] >> 7) & 0xFF and any(w) for w in (wa, wb)):
+            return True
+    return False
+
+
 def _close(x: float, y: float) -> bool:
     return math.isclose(x, y, rel_tol=FLOAT_TOLERANCE, abs_tol=FLOAT_TOLERANCE)
 
@@ -241,7 +251,7 @@ def _data_parts(a: bytes, b: bytes) -> tuple[str, ...]:
         return ("data",)
     differing = [(x, y) for x, y in zip(fa, fb, strict=True) if not _close(x, y)]
     if not differing:
-        return ()
+        return ("data",) if _dirty(a[2:], b[2:]) else ()
     if all(_close(x, y * INCH) or _close(y, x * INCH) for x, y in differing):
         return ("data.length-unit",)
     return ("data",)

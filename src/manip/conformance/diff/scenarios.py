@@ -120,12 +120,15 @@ def _close(got: Sequence[float], want: Sequence[float]) -> bool:
     )
 
 
-def _swapped_words(value: float) -> float | None:
-    raw = pack_f(value)
-    try:
-        return unpack_f(raw[2:] + raw[:2])
-    except (CodecError, ValueError):
-        return None
+def _swapped_words(body: bytes) -> list[float]:
+    """The floats of ``body`` read with the two words of each swapped (NaN where that is no F value)."""
+    out: list[float] = []
+    for at in range(0, len(body) - 3, 4):
+        try:
+            out.append(unpack_f(body[at + 2 : at + 4] + body[at : at + 2]))
+        except (CodecError, ValueError):
+            out.append(math.nan)
+    return out
 
 
 def _shown(angles: Sequence[float]) -> str:
@@ -144,7 +147,7 @@ def _check_read_back(at: int, pose: Sequence[float]) -> Callable[[Events], list[
             return []
         answer, angles = got
         expected = f"the angles set, {_shown(pose)}, one per joint from the base"
-        if _close([_swapped_words(a) or math.nan for a in angles], pose):
+        if _close(_swapped_words(_payload(answer)), pose):
             message = f"joint angles read {_shown(angles)}: the angles set with their two words swapped"
             return [_sighting(at, "float.format", message, expected, answer)]
         message = f"joint angles read {_shown(angles)} after the arm was set to {_shown(pose)}"
@@ -205,20 +208,48 @@ def _check_nzi(at: int) -> Callable[[Events], list[Sighting]]:
     return check
 
 
-def _check_collision(at: int) -> Callable[[Events], list[Sighting]]:
-    """A move into the obstacle the condition placed ends with an asynchronous error."""
+def _check_collision(at: int, after: Sequence[int]) -> Callable[[Events], list[Sighting]]:
+    """A move into the obstacle the condition placed (input ``at``, the segment after it queued too)
+    ends with an asynchronous error; from then on motion is refused AWA until a reset, and the segment
+    queued behind the aborted one never completes, not even after the reset (``motion.abort``; the
+    inputs ``after``)."""
 
     def check(events: Events) -> list[Sighting]:
-        seen = [
-            e for e in events.get(at, []) if e.kind == "packet" and e.opcode == ServerOp.ASYNCHRONOUS_ERROR
-        ]
-        last = next(iter(events.get(at, [])), None)
-        if seen or last is None:
+        seen = [(n, e) for n in (at, *after) for e in events.get(n, [])]
+        first = next(iter(events.get(at, [])), None)
+        if first is None:
             return []
-        message = "a move into the obstacle ended without an asynchronous error"
-        return [_sighting(at, "motion.collision", message, "an asynchronous collision error", last)]
+        aborted = next((i for i, (_, e) in enumerate(seen) if _is(e, ServerOp.ASYNCHRONOUS_ERROR)), None)
+        if aborted is None:
+            message = "a move into the obstacle ended without an asynchronous error"
+            return [_sighting(at, "motion.collision", message, "an asynchronous collision error", first)]
+        queued = {
+            int.from_bytes(e.data[2:4], "little")
+            for e in _answers(events.get(at, []), _op("set-joint-angles"))
+            if e.opcode == ServerOp.RESPONSE and len(e.data) >= 4
+        }
+        late = [(n, e) for n, e in seen[aborted:] if completed_segment(_wire(e)) in queued]
+        if late:
+            message = "a segment queued before the abort completed after it"
+            return [_sighting(late[0][0], "motion.abort", message, "the queued segments dropped", late[0][1])]
+        out: list[Sighting] = []
+        for number in after[:1]:
+            for answer in _answers(events.get(number, []), _op("set-joint-angles")):
+                if answer.opcode == ServerOp.RESPONSE:
+                    message = "a motion request after the abort was accepted before any reset"
+                    out.append(_sighting(number, "motion.abort", message, "E AWA", answer))
+            for answer in _answers(events.get(number, []), _op("here")):
+                if answer.opcode != ServerOp.RESPONSE:
+                    message = "here, which moves nothing, was refused while motion was aborted"
+                    clause = "motion.abort-serves-others"
+                    out.append(_sighting(number, clause, message, "the transform, as usual", answer))
+        return out
 
     return check
+
+
+def _is(event: SideEvent, opcode: int) -> bool:
+    return event.kind == "packet" and event.opcode == opcode
 
 
 def _check_description(at: int) -> Callable[[Events], list[Sighting]]:
@@ -495,24 +526,72 @@ def _wrist_silent() -> Stream:
 
 
 def _collision() -> Stream:
+    into = _floats((0.0, -20.0, 90.0, 0.0, 0.0, 0.0))
+    back = _floats((0.0, -80.0, 90.0, 0.0, 0.0, 0.0))
     groups: list[tuple[str, Sequence[Step]]] = [
         (
             "enable power, notifications 3",
             [_req("enable-power"), _req("request-notifications", struct.pack("<H", 3))],
         ),
         (
-            "move joint 2 into the obstacle at -60 degrees, rest",
-            [_req("set-joint-angles", _floats((0.0, -20.0, 90.0, 0.0, 0.0, 0.0))), Pause(SETTLE)],
+            "move joint 2 into the obstacle at -60 degrees, a segment queued behind it, rest",
+            [_req("set-joint-angles", into), _req("set-joint-angles", back), Pause(SETTLE)],
         ),
-        ("here", [_req("here")]),
+        ("a motion request before any reset (AWA), here", [_req("set-joint-angles", back), _req("here")]),
+        ("enable power (the reset), rest, here", [_req("enable-power"), Pause(SETTLE), _req("here")]),
     ]
+    check = _check_collision(1, (2, 3))
     return Stream(
         None,
         _inputs("collision", groups),
         scenario="collision",
         conditions=(Obstacle(2, upper=-60.0),),
-        check=_check_collision(1),
+        check=check,
     )
+
+
+TINY: Final = 1e-38
+HUGE: Final = 1.0e38
+
+
+def _extremes() -> Stream:
+    """The float extremes case's requests: solve backwards and forwards at the ends of the F range."""
+    asks = [
+        _req("solve-backwards", _floats((0.0, 0.0, 0.0, TINY, TINY, TINY))),
+        _req("solve-backwards", _floats((TINY,) * 6)),
+        _req("solve-backwards", _floats((HUGE, -HUGE, 1e20, 3e37, -HUGE, TINY))),
+    ]
+    for position in ((HUGE, HUGE, HUGE), (-HUGE, 0.0, TINY), (TINY, TINY, TINY)):
+        transform = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, *position)
+        asks.append(_req("solve-forwards", _floats(transform) + _floats(READY_POSE)))
+    groups: list[tuple[str, Sequence[Step]]] = [(f"request {i}", [a]) for i, a in enumerate(asks)]
+    groups.append(("here, joint angles", [_req("here"), _req("joint-angles")]))
+    return Stream(None, _inputs("float-extremes", groups), scenario="float-extremes", check=_check_floats)
+
+
+def _check_floats(events: Events) -> list[Sighting]:
+    """Every float of every reply is an F value: never the reserved operand (a NaN or an infinity,
+    ``float.not-finite``), and below 2^-128 a clean zero (``float.dirty-zero``)."""
+    out: list[Sighting] = []
+    for number, seen in events.items():
+        for event in seen:
+            if not _is(event, ServerOp.RESPONSE) or event.request not in _FLOAT_REPLIES:
+                continue
+            body = _payload(event)
+            for i in range(0, len(body) - 3, 4):
+                w0, w1 = struct.unpack_from("<HH", body, i)
+                if (w0 >> 7) & 0xFF or not (w0 or w1):
+                    continue
+                clause = "float.not-finite" if w0 & 0x8000 else "float.dirty-zero"
+                message = f"float words {w0:04x} {w1:04x} at byte {i} of the reply"
+                out.append(_sighting(number, clause, message, "an F value, zero all bits clear", event))
+                break
+    return out
+
+
+_FLOAT_REPLIES: Final = frozenset(
+    SPEC.request(n).opcode for n in ("here", "joint-angles", "solve-forwards", "solve-backwards")
+)
 
 
 SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
@@ -529,6 +608,7 @@ SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
     "warning": _sluggish,
     "wrist-silent": _wrist_silent,
     "collision": _collision,
+    "float-extremes": _extremes,
 }
 """Every scenario by name, in the order a diff sends them."""
 

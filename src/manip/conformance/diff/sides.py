@@ -20,7 +20,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Final
 
 from manip.arm.units import LengthUnit
@@ -154,7 +154,7 @@ async def _observe(address: LinkAddress, stream: Stream, allowance: Allowance, s
             hang = Sighting(Violation(why, None, "MUST", "the stream ended", why, kind="timeout"), last)
             event = SideEvent("stream", text=f"runaway: {why}")
             return Observation({last: [event]}, [hang], why, loop.time() - started)
-        sightings = judge(run, runner.inbox, live)
+        sightings = [_opening(s, stream) for s in judge(run, runner.inbox, live)]
         events = events_of(run, runner.inbox)
         for item in stream.all_inputs:
             sightings += arg_value_sightings(item, events.get(item.number, ()))
@@ -164,6 +164,15 @@ async def _observe(address: LinkAddress, stream: Stream, allowance: Allowance, s
     finally:
         with contextlib.suppress(Exception):
             runner.close()
+
+
+def _opening(sighting: Sighting, stream: Stream) -> Sighting:
+    """A finding about how the connection opened (``connect.*`` with no packet to place it: the initial
+    response never came), placed on the stream's first input, which opened it."""
+    violation = sighting.violation
+    if violation.packet is None and (violation.clause or "").startswith("connect."):
+        return replace(sighting, number=stream.all_inputs[0].number)
+    return sighting
 
 
 def reachable(side: Side, allowance: Allowance, seed: int) -> str | None:
