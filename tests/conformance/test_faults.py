@@ -1,6 +1,6 @@
 """Mutation testing of the conformance suite: every protocol fault of the reference server is caught.
 
-Each protocol fault of :data:`manip.reference_server.faults.FAULTS` is switched on alone, the embedded
+Each fault switch of :class:`manip.reference_server.faults.Fault` is switched on alone, the embedded
 reference server (``serve`` on port 0, in this process) runs with it, and the suite's server cases run
 against it; at least one case must end ``fail`` (or ``warn``, for a fault that breaks a SHOULD clause).
 The clean server must pass every case.
@@ -35,7 +35,7 @@ from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.runner import RunConfig, Runner
-from manip.reference_server.faults import FAULTS, WRIST_SIDE, Fault, FaultSet
+from manip.reference_server.faults import WRIST_SIDE, Fault, FaultSet
 from manip.reference_server.session import ServerConfig
 from tests.support.servers import StartServer
 from tests.support.suite import run_simulated
@@ -102,10 +102,7 @@ CATCHERS = {
 the fault too)."""
 CAUGHT = ("fail", "warn")
 
-PROTOCOL_FAULTS = sorted(
-    (f for f, info in FAULTS.items() if info.kind == "protocol" and f not in WRIST_SIDE),
-    key=lambda f: f.value,
-)
+PROTOCOL_FAULTS = sorted((f for f in Fault if f not in WRIST_SIDE), key=lambda f: f.value)
 """The wrist side's defects are caught by the puma cases (tests/conformance/puma/test_puma.py)."""
 
 
@@ -121,7 +118,7 @@ def suite() -> list[Case]:
 
 def cases_for(fault: Fault) -> list[Case]:
     """The cases citing a clause the fault breaks, and the generic ones."""
-    broken = set(FAULTS[fault].clauses)
+    broken = set(fault.clauses)
     return [c for c in suite() if broken & set(c.clauses) or c.id in GENERIC]
 
 
@@ -137,7 +134,7 @@ def test_every_protocol_fault_has_a_case_citing_its_clauses() -> None:
     """The selection is not empty beyond the generic cases: some case names each fault's clauses."""
     for fault in PROTOCOL_FAULTS:
         specific = [c.id for c in cases_for(fault) if c.id not in GENERIC]
-        assert specific, f"no case cites a clause of fault {fault.value}: {FAULTS[fault].clauses}"
+        assert specific, f"no case cites a clause of fault {fault.value}: {fault.clauses}"
 
 
 @pytest.mark.slow
@@ -167,7 +164,7 @@ def test_protocol_fault_is_caught(fault: Fault) -> None:
     )
     print(f"fault {fault.value}: caught by {shown or 'NO CASE'} [{report.duration:.1f} s]")
     assert not errors, errors
-    assert caught, f"no case caught fault {fault.value} ({FAULTS[fault].description})"
+    assert caught, f"no case caught fault {fault.value} ({fault.breaks})"
     if fault in CATCHERS:
         assert CATCHERS[fault] in {r.id for r in caught}, shown
     skipped = [c for c in cases if c.id in {r.id for r in report.results if r.outcome == "skip"}]
@@ -213,7 +210,7 @@ def test_motion_fault_is_caught_through_the_guide_profile(fault: Fault) -> None:
     print(f"fault {fault.value} without extensions: {result.outcome} {shown}")
     assert result.outcome in CAUGHT, (result.outcome, result.reason)
     assert guide_route_taken(result.notes), result.notes
-    assert {v.clause for v in result.violations} & set(FAULTS[fault].clauses), result.violations
+    assert {v.clause for v in result.violations} & set(fault.clauses), result.violations
 
 
 def test_the_guide_routes_pass_against_the_clean_guide_profile() -> None:

@@ -23,7 +23,7 @@ from manip.conformance.suite.results import ExitCode, RunReport
 from manip.cougar import CougarConfig, CougarSim
 from manip.cougar.cli import main as cougar_main
 from manip.cougar.cli import serve_cougar
-from manip.cougar.faults import FAULTS, parse_faults
+from manip.cougar.faults import CougarFault, parse_faults
 from manip.cougar.link import CougarEnd, Drv11jError, PumaEnd, Tick, encode_frame
 
 #: The case written to catch each fault (others may catch it too).
@@ -74,20 +74,25 @@ def test_clean_simulator_passes_every_cougar_case() -> None:
 
 
 def test_every_fault_has_a_catching_case() -> None:
-    assert set(CATCHERS) == set(FAULTS)
+    assert set(CATCHERS) == {f.value for f in CougarFault}
     ids = {c.id for c in all_cases()}
     assert set(CATCHERS.values()) <= ids
 
 
-@pytest.mark.parametrize("fault", sorted(FAULTS))
+@pytest.mark.parametrize("fault", sorted(f.value for f in CougarFault))
 def test_fault_is_caught(fault: str) -> None:
     report = run(CougarTarget.parse("sim", [fault]))
     got = outcomes(report)
+    failed = [r for r in report.results if r.outcome == "fail"]
+    shown = ", ".join(f"{r.id} ({r.violations[0].clause if r.violations else r.reason})" for r in failed)
+    print(f"cougar fault {fault}: caught by {shown or 'NO CASE'}")
     assert got[CATCHERS[fault]] == "fail", (fault, got)
     assert report.exit_code == ExitCode.NON_CONFORMANT
     assert not any(o == "error" for o in got.values()), [r.traceback for r in report.results if r.traceback]
     catcher = next(r for r in report.results if r.id == CATCHERS[fault])
     assert catcher.violations and all(v.clause for v in catcher.violations)
+    declared = set(CougarFault.named(fault).clauses)
+    assert {v.clause for v in catcher.violations} & declared, (fault, catcher.violations, declared)
     assert f"--cougar-fault {fault}" in catcher.reproduce
 
 

@@ -19,7 +19,7 @@ from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import ExitCode, RunReport
 from manip.links import virtual_clock
-from manip.reference_server.faults import FAULTS, WRIST_SIDE, Fault
+from manip.reference_server.faults import WRIST_SIDE, Fault
 from manip.spec import SPEC
 
 SEED = 5
@@ -108,7 +108,7 @@ def test_clean_reference_server_passes_every_puma_case() -> None:
 def test_every_wrist_side_fault_has_a_catcher() -> None:
     assert set(CATCHERS) == set(WRIST_SIDE)
     for fault, case_id in CATCHERS.items():
-        assert set(FAULTS[fault].clauses) & set(next(c for c in all_cases() if c.id == case_id).clauses)
+        assert set(fault.clauses) & set(next(c for c in all_cases() if c.id == case_id).clauses)
 
 
 @pytest.mark.parametrize("fault", sorted(CATCHERS, key=lambda f: f.value), ids=lambda f: f.value)
@@ -117,7 +117,7 @@ def test_wrist_side_fault_is_caught_by_its_case(fault: Fault) -> None:
     got = outcomes(report)
     errors = [(r.id, r.traceback) for r in report.results if r.outcome == "error"]
     assert not errors, errors
-    must = any(SPEC.clauses[c].level == "MUST" for c in FAULTS[fault].clauses)  # a SHOULD clause warns
+    must = any(SPEC.clauses[c].level == "MUST" for c in fault.clauses)  # a SHOULD clause warns
     assert got[CATCHERS[fault]] == ("fail" if must else "warn"), got
     if must:
         assert report.exit_code == ExitCode.NON_CONFORMANT
