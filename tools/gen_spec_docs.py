@@ -1,6 +1,8 @@
-"""Generate docs/spec.md (opcode tables, clauses, errata) from the spec data files.
+"""Generate docs/spec.md (opcode tables, clauses, their coverage, errata) from the spec data files.
 
-Run after editing src/manip/spec/data/*.toml; tests/spec/test_spec.py fails while docs/spec.md is stale.
+Run after editing src/manip/spec/data/*.toml, a case's clauses or a fault switch's declaration;
+tests/spec/test_spec.py fails while docs/spec.md is stale.  The coverage table comes from the case
+declarations and the fault registries (manip.conformance.fault_proof).
 """
 
 from __future__ import annotations
@@ -9,6 +11,8 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
+from manip.conformance.fault_proof import ClauseProof, clause_proofs, totals
+from manip.conformance.suite.case import all_cases
 from manip.spec import SPEC, Layout
 from manip.spec.model import Erratum
 
@@ -65,6 +69,53 @@ def _freedom(parts: tuple[str, ...]) -> str:
 
 def _cell(text: str) -> str:
     return text.replace("|", "\\|")
+
+
+COVERAGE_LEGEND = (
+    "For each live clause: what judges it (*judged by*: the cases that declare it, the judges of a "
+    "client's recording as `verify:FAMILY`, and the suite's own checks of every exchange as "
+    "`invariant:NAME`); the fault switches that *prove* it; and whether it is judged on a *guide-only "
+    "server*.",
+    "",
+    "*Proven by*: a fault switch of the reference server (`server:`), the reference client (`client:`) or "
+    "the simulated Cougar (`cougar:`) proves a clause when the clause is among those the switch declares "
+    "it breaks, and one of the cases the switch declares catch it (`caught_by`) cites the clause: the "
+    "switch's fault matrix requires each of those cases to catch it (to fail, or to warn for a SHOULD "
+    "clause: `tests/conformance/test_faults.py` for the server, `tests/conformance/puma/test_puma.py` for "
+    "its wrist side, `tests/conformance/client/test_faults.py`, and `tests/conformance/cougar/"
+    "test_cougar.py`).  A switch is listed under every clause it proves.",
+    "",
+    "*Guide-only server*: **yes**, a case of the server that sends no Puma extension opcode (no "
+    "`extensions=` in its `@case`; a server written from the 1985 guide alone has none of them) declares "
+    "the clause, or `invariant:transcript` checks it on every exchange; **no**, only cases that send an "
+    "extension judge it; **n/a**, no case of the server judges it (a clause of the client, the Cougar or "
+    "the Puma's wrist side).",
+    "",
+    "The spec data has no notion of a statement the wire cannot show; the totals count INFO clauses "
+    "(statements of fact, not requirements) apart, and every other live clause in one of the first three "
+    "lines.",
+)
+
+
+def _coverage(rows: list[ClauseProof]) -> list[str]:
+    """The clause coverage section: legend, totals, and one row per clause."""
+    t = totals(rows)
+    out = ["## Clause coverage", "", *COVERAGE_LEGEND, ""]
+    out += [
+        f"- judged by a case proven by a fault: {t.proven}",
+        f"- judged, but proven by no fault: {t.unproven}",
+        f"- not judged by any case: {t.unjudged}",
+        f"- INFO (not requirements, not judged as such): {t.info}",
+        f"- judged on a guide-only server (of the first three lines): {t.guide_only}",
+        "",
+        "| clause | level | judged by | proven by | guide-only server |",
+        "|---|---|---|---|---|",
+    ]
+    for row in rows:
+        judges = ", ".join(f"`{c}`" for c in row.cases) or "—"
+        faults = ", ".join(f"`{f}`" for f in row.faults) or "—"
+        out.append(f"| `{row.clause}` | {row.level} | {judges} | {faults} | {row.guide_only} |")
+    return [*out, ""]
 
 
 def render() -> str:
@@ -173,6 +224,7 @@ def render() -> str:
             "",
         ]
 
+    out += _coverage(clause_proofs(all_cases()))
     out += ["## Errata", ""]
     for erratum in SPEC.errata.values():
         out += _erratum(erratum)

@@ -28,121 +28,143 @@ class CougarFault(FaultSwitch):
         "wrong-version-code",
         "VERS is answered with response code 3 instead of 8 (CougarSim._version)",
         "cougar.vers.reply",
+        caught_by=("cougar.reply.version",),
     )
     NO_OUT_OF_SYNC = defect(
         "no-out-of-sync",
         "an unknown command code dumps the buffer but sends no out-of-sync message (CougarSim._comint_run)",
         "cougar.comint.unknown-code",
+        caught_by=("cougar.comint.unknown-code",),
     )
     GUARD_TRIPS_TWICE = defect(
         "guard-trips-twice",
         "a tripped guard stays armed for one more trip (CougarSim._guardm)",
         "cougar.guard-trips-once",
+        caught_by=("cougar.guard.trips-once",),
     )
     FORCES_WRONG_SIGN = defect(
         "forces-wrong-sign",
         "the conversion drops the -1: forces are the load on the hand, not the force the robot applies "
         "(CougarSim._convert)",
         "cougar.nfv-conversion",
+        caught_by=("cougar.forces.conversion",),
     )
     EXMN_WRONG_COUNT = defect(
         "exmn-wrong-count",
         "EXMN retrieves one word fewer than asked (CougarSim._exp)",
         "cougar.exmn.reply",
+        caught_by=("cougar.reply.exmn",),
     )
     COMINT_EXECUTES_PARTIAL = defect(
         "comint-executes-partial",
         "COMINT runs a command whose data words have not all arrived, the missing ones taken as 0 "
         "(Comint.take)",
         "cougar.comint.partial-waits",
+        caught_by=("cougar.comint.partial-waits",),
     )
     IGNORES_GUARDC = defect(
         "ignores-guardc",
         "GUARDC leaves the guard armed (CougarSim._guardc)",
         "cougar.guardc",
+        caught_by=("cougar.guard.clear",),
     )
     RST_IGNORED = defect(
         "rst-ignored",
         "RST leaves the velocities as they were (CougarSim._resetw)",
         "cougar.rst",
+        caught_by=("cougar.rst.zeroes-velocities",),
     )
     NPR_IGNORES_K = defect(
         "npr-ignores-k",
         "the compliance equation leaves out the spring term K (CougarSim._newpr)",
         "cougar.npr.reply",
+        caught_by=("cougar.npr.gains",),
     )
     FILTER_CON_SWAPPED = defect(
         "filter-con-swapped",
         "FILTER weighs the filtered value with con4 and the sample with con3 (CougarSim._newpr)",
         "cougar.filter",
+        caught_by=("cougar.filter.output",),
     )
     GRAVITY_FIXED_ORIENTATION = defect(
         "gravity-fixed-orientation",
         "GRAVITY takes the hand to be at READY whatever angles SEN or NPR sent (CougarSim._gravity)",
         "cougar.gravity",
+        caught_by=("cougar.gravity.point-mass",),
     )
     GRAVITY_IGNORES_CG = defect(
         "gravity-ignores-cg",
         "GRAVITY corrects the force of the weight but not its torque about the centre of gravity "
         "(CougarSim._gravity)",
         "cougar.gravity",
+        caught_by=("cougar.gravity.point-mass",),
     )
     NFV_KEEPS_GRAVITY = defect(
         "nfv-keeps-gravity",
         "NFV rewrites the conversion matrix but leaves the gravity model about the old compliance centre "
         "(CougarSim._newfv)",
         "cougar.nfv-conversion",
+        caught_by=("cougar.gravity.nfv-redoes-model",),
     )
     NB_TRANSPOSED = defect(
         "nb-transposed",
         "NPR reads NB's 36 elements column after column instead of row after row (CougarSim._newpr)",
         "cougar.nb-row-order",
+        caught_by=("cougar.npr.damping-matrix",),
     )
     JACOBIAN_TRANSPOSE_NOT_STORED = defect(
         "jacobian-transpose-not-stored",
         "JACOB stores J again where its transpose belongs, after J (Jacob._encode)",
         "cougar.jacob-transpose",
+        caught_by=("cougar.jacob.transpose-stored",),
     )
     FILTER_TRUNCATES_TERMS = defect(
         "filter-truncates-terms",
         "ADC8 shifts each term of the sum right by 3 before adding, so a constant input settles up to 7 "
         "counts low (CougarSim._adc8)",
         "cougar.adc8-filter",
+        caught_by=("cougar.adc8.integer-filter",),
     )
     RRAW_LESS_OFFSETS = defect(
         "rraw-less-offsets",
         "RRAW reports the readings with the gauge offsets subtracted, not the gauges as read "
         "(CougarSim._reraw)",
         "cougar.rraw.before-offsets",
+        caught_by=("cougar.rraw.before-offsets",),
     )
     LINK_SKIPS_BAD_FRAMES = defect(
         "link-skips-bad-frames",
         "the DRV-11J link drops a frame it cannot decode (a bad HELLO, an unknown type, a TICK of the "
         "wrong length) and carries on (FrameDecoder.feed, for CougarEnd)",
         "link.drv11j.bad-frame-ends",
+        caught_by=("cougar.link.unknown-type",),
     )
     LINK_IGNORES_WRONG_SIDE = defect(
         "link-ignores-wrong-side",
         "the link takes a HELLO naming the Cougar's own role and ignores frames only Cougar sends "
         "(COUGAR, TICKED) instead of ending (CougarEnd)",
         "link.drv11j.bad-frame-ends",
+        caught_by=("cougar.link.wrong-side",),
     )
     LINK_TICK_BACKWARDS_RUNS = defect(
         "link-tick-backwards-runs",
         "a TICK earlier than the one before it runs at the earlier tick's time instead of ending the link "
         "(CougarEnd._model_time)",
         "link.drv11j.tick-backwards",
+        caught_by=("cougar.link.tick-backwards",),
     )
     LINK_IGNORES_BYE = defect(
         "link-ignores-bye",
         "the link carries on after the Puma's BYE (CougarEnd, _End._frames)",
         "link.drv11j.bye",
+        caught_by=("cougar.link.bye",),
     )
     LINK_BUSY_SERVES_SECOND = defect(
         "link-busy-serves-second",
         "a second Puma connecting while one is linked is served too, not sent BYE 'busy' "
         "(CougarServer._handle)",
         "link.drv11j.busy",
+        caught_by=("cougar.link.busy",),
     )
 
 

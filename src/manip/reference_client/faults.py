@@ -28,48 +28,69 @@ class ClientFault(FaultSwitch):
         "wrong-request-number",
         "a reply is matched to the request numbered one above the number it carries",
         "client.reply-matching",
+        caught_by=("client.connect.initial-response", "client.pipeline.replies-matched"),
     )
-    IGNORE_ASYNC = defect("ignore-async", "asynchronous responses (0203) are dropped", "client.async-routing")
+    IGNORE_ASYNC = defect(
+        "ignore-async",
+        "asynchronous responses (0203) are dropped",
+        "client.async-routing",
+        caught_by=("client.async.segment-interleaved", "client.async.guard-hits"),
+    )
     ASYNC_AS_REPLY = defect(
         "async-as-reply",
         "an asynchronous response answers the oldest pending request",
         "client.async-routing",
+        caught_by=("client.async.segment-interleaved", "client.async.guard-hits"),
     )
     DOLLAR_AS_NUMBER = defect(
         "dollar-as-number",
         "$ in an error message is printed as the raw number, not the joints",
         "client.error-report",
         "error-string.substitution",
+        caught_by=("client.error.args-padded", "client.error.async-error-between"),
     )
     TILDE_OCTAL = defect(
         "tilde-octal",
         "~ in an error message is printed in octal",
         "client.error-report",
         "error-string.substitution",
+        caught_by=("client.error.args-padded", "client.error.args-aligned"),
     )
     FATAL_AS_NON_FATAL = defect(
         "fatal-as-non-fatal",
         "a fatal error (0201) is taken as a non-fatal error of its request; the connection goes on",
         "client.fatal-ends",
+        caught_by=("client.fatal.severity-f", "client.fatal.severity-bf"),
     )
     SWAPPED_FLOAT_WORDS = defect(
         "swapped-float-words",
         "the two words of each float in a reply are read in the wrong order",
         "client.reply-data",
+        caught_by=("client.reply.here", "client.float.edges"),
     )
     SET_SPEED_LENGTH = defect(
-        "set-speed-length", "set-speed carries 8 data bytes instead of one float", "request-data.types"
+        "set-speed-length",
+        "set-speed carries 8 data bytes instead of one float",
+        "request-data.types",
+        caught_by=("client.request.set-speed",),
     )
     NEVER_ACK = defect(
-        "never-ack", "the client's NCP acknowledges nothing (ack field 0, no STS)", "ncp.acknowledge"
+        "never-ack",
+        "the client's NCP acknowledges nothing (ack field 0, no STS)",
+        "ncp.acknowledge",
+        caught_by=("client.ncp.acknowledge",),
     )
     RESERVED_AS_ZERO = defect(
-        "reserved-as-zero", "a reserved-operand float in a reply is read as 0.0", "float.reserved-operand"
+        "reserved-as-zero",
+        "a reserved-operand float in a reply is read as 0.0",
+        "float.reserved-operand",
+        caught_by=("client.float.reserved-operand",),
     )
     NO_INITIAL_WAIT = defect(
         "no-initial-wait",
         "requests go out without waiting for the initial RESPONSE",
         "client.initial-response",
+        caught_by=("client.connect.initial-response",),
     )
     IGNORE_PAD = defect(
         "ignore-pad",
@@ -77,59 +98,80 @@ class ClientFault(FaultSwitch):
         "client.error-report",
         "client.error-args-layout",
         "error-string.substitution",
+        caught_by=("client.error.args-padded",),
     )
     MULTI_FIRST_PACKET = defect(
-        "multi-first-packet", "a multi-packet reply ends at its first packet", "client.multi-packet"
+        "multi-first-packet",
+        "a multi-packet reply ends at its first packet",
+        "client.multi-packet",
+        caught_by=("client.describe.split-mid-token", "client.describe.many-packets"),
     )
-    EARLY_TIMEOUT = defect("early-timeout", "a request times out at half its timeout", "client.reply-wait")
+    EARLY_TIMEOUT = defect(
+        "early-timeout",
+        "a request times out at half its timeout",
+        "client.reply-wait",
+        caught_by=("client.timing.reply-near-timeout", "client.timing.no-reply"),
+    )
     SILENT_CLOSE = defect(
         "silent-close",
         "the end of the connection is not reported; requests in flight wait for their timeout",
         "client.connection-lost",
+        caught_by=("client.conn.cls-mid-request",),
     )
     IGNORE_WINDOW = defect(
         "ignore-window",
         "the client's NCP ignores the window the server offers (OPN and STS read as the largest window)",
         "ncp.window",
+        caught_by=("client.ncp.window", "client.ncp.window-opens-late", "client.ncp.window-shrinks"),
     )
     ARRIVAL_ORDER = defect(
         "arrival-order",
         "a reply is matched to the oldest request waiting, whatever number it carries (by arrival order)",
         "client.reply-matching",
+        caught_by=("client.pipeline.interleaved",),
     )
     GUARD_ZERO = defect(
-        "guard-zero", "a new guard always gets number 0, armed or not", "client.guard-numbers"
+        "guard-zero",
+        "a new guard always gets number 0, armed or not",
+        "client.guard-numbers",
+        caught_by=("client.choice.guard-numbers",),
     )
     NO_NEWWC = defect(
         "no-newwc",
         "a change of load sends set frame vector but never set weight (NEWWC)",
         "client.newwc-on-load",
+        caught_by=("client.choice.newwc-on-load",),
     )
     NEWWC_UNDER_GUARD = defect(
         "newwc-under-guard",
         "a change of load sends set weight while guards are armed",
         "client.no-newwc-with-guard",
+        caught_by=("client.choice.no-newwc-with-guard",),
     )
     IGNORE_WINDOW_SHRINK = defect(
         "ignore-window-shrink",
         "the client's NCP keeps the widest window the server offered: a window shrunk by an STS is ignored",
         "ncp.window",
+        caught_by=("client.ncp.window-shrinks",),
     )
     WINDOW_ON_NEW_ACK_ONLY = defect(
         "window-on-new-ack-only",
         "the client's NCP reads an STS's window only when the STS acknowledges something new",
         "ncp.window",
+        caught_by=("client.ncp.window-shrinks", "client.ncp.window-opens-by-status"),
     )
     GUARD_ALWAYS_CONTINUE = defect(
         "guard-always-continue",
         "arm-guard arms every guard as one that lets the move continue (bit 15 of set guard's first word "
         "clear even when the guard should stop the move)",
         "client.guard-word",
+        caught_by=("client.choice.guard-numbers",),
     )
     NO_NEWWC_WITHOUT_OFFSET = defect(
         "no-newwc-without-offset",
         "a change of load without a new frame vector sends nothing (no set weight, NEWWC)",
         "client.newwc-on-load",
+        caught_by=("client.choice.newwc-without-offset", "client.choice.plain-guards"),
     )
     PLAIN_GUARDS_UNTRACKED = defect(
         "plain-guards-untracked",
@@ -138,18 +180,25 @@ class ClientFault(FaultSwitch):
         "client.guard-numbers",
         "client.no-newwc-with-guard",
         "client.newwc-on-load",
+        caught_by=("client.choice.plain-guards",),
     )
     ASYNC_TO_WAITING = defect(
         "async-to-waiting-request",
         "an asynchronous response (0203) arriving while a request waits is handed to that request's "
         "handler: reported with that request's op and request number",
         "client.async-routing",
+        caught_by=(
+            "client.async.segment-interleaved",
+            "client.async.guard-hits",
+            "client.pipeline.interleaved",
+        ),
     )
     CHOICE_ERROR_UNNUMBERED = defect(
         "choice-error-unnumbered",
         "a choice operation's server error is reported with request_number null, as its reply is, not the "
         "number the error carries",
         "client.error-report",
+        caught_by=("client.choice.errors",),
     )
     ASYNC_ERROR_TO_WAITING = defect(
         "async-error-to-waiting-request",
@@ -157,6 +206,11 @@ class ClientFault(FaultSwitch):
         "request's op and request number",
         "client.async-routing",
         "client.error-report",
+        caught_by=(
+            "client.error.async-error-between",
+            "client.error.warning-between",
+            "client.pipeline.interleaved",
+        ),
     )
     CLEAR_GUARDS_FIRST = reading(
         "clear-guards-first",

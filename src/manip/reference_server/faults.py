@@ -35,98 +35,126 @@ class Fault(FaultSwitch):
         "wrong-request-number",
         "Replies echo the request's packet number plus one.",
         "response.echoes-request-number",
+        caught_by=("property.requests.well-formed",),
     )
     ECHO_ACK_NUMBER = defect(
         "echo-ack-number",
         "Replies echo the request's Chaos ack field instead of its packet number.",
         "response.echoes-request-number",
+        caught_by=("property.requests.well-formed",),
     )
     NO_INITIAL_RESPONSE = defect(
-        "no-initial-response", "No RESPONSE is sent when the connection opens.", "connect.initial-response"
+        "no-initial-response",
+        "No RESPONSE is sent when the connection opens.",
+        "connect.initial-response",
+        caught_by=("server.connect.initial-response",),
     )
     INITIAL_RESPONSE_NUMBER = defect(
         "initial-response-wrong-number",
         "The initial RESPONSE carries the RFC's packet number plus one.",
         "connect.initial-response-number",
+        caught_by=("server.connect.initial-response",),
     )
     NO_DESCRIBE_TERMINATOR = defect(
         "no-describe-terminator",
         "Describe self is not ended by an empty response packet.",
         "multi.terminated-by-empty",
         "describe.reply-shape",
+        caught_by=("property.requests.well-formed",),
     )
     DESCRIBE_TERMINATOR_OVERTAKEN = defect(
         "describe-terminator-overtaken",
         "Describe self's empty terminator waits 25 servo ticks (0.4 s): a request pipelined behind describe "
         "self is answered before its reply ends.",
         "request.one-reply",
+        caught_by=("server.describe.pipelined",),
     )
     MULTI_WRONG_NUMBER = defect(
         "multi-wrong-number",
         "Packets of describe self after the first carry the request number plus one.",
         "multi.same-request-number",
+        caught_by=("server.describe.reply-shape",),
     )
     NO_PROTOCOL_VERSION = defect(
         "no-protocol-version",
         "The describe-self alist has no :protocol-version.",
         "describe.protocol-version",
+        caught_by=("server.describe.protocol-version",),
     )
     SWAPPED_FLOAT_WORDS = defect(
-        "swapped-float-words", "Floats in replies are sent with their two words swapped.", "float.format"
+        "swapped-float-words",
+        "Floats in replies are sent with their two words swapped.",
+        "float.format",
+        caught_by=("property.floats.round-trip",),
     )
     WRONG_SEVERITY = defect(
         "wrong-severity",
         "Non-fatal and asynchronous errors carry severity F (and fatal errors E).",
         "error.severity-matches-opcode",
         "request.unknown-opcode",
+        caught_by=("server.error.fatal-then-close",),
     )
     ERROR_WITHOUT_COLON = defect(
-        "error-without-colon", "Error strings lose the colon after where.", "error-string.format"
+        "error-without-colon",
+        "Error strings lose the colon after where.",
+        "error-string.format",
+        caught_by=("property.requests.well-formed",),
     )
     ERROR_PAD_MISPLACED = defect(
         "error-pad-misplaced",
         "Error strings put a pad byte after the NUL even where the NUL ends at an even offset, so the "
         "numbers start at an odd one.",
         "error-string.arg-layout",
+        caught_by=("server.error.arg-alignment",),
     )
     UOP_OPCODE_SWAPPED = defect(
-        "uop-opcode-byte-swapped", "The opcode in C UOP is sent high byte first.", "error-string.arg-values"
+        "uop-opcode-byte-swapped",
+        "The opcode in C UOP is sent high byte first.",
+        "error-string.arg-values",
+        caught_by=("server.negative.unknown-opcodes",),
     )
     BDL_COUNTS_SWAPPED = defect(
         "bdl-counts-byte-swapped",
         "The byte counts in C BDL are sent high byte first.",
         "error-string.arg-values",
+        caught_by=("server.negative.data-length.safe",),
     )
     JOINT_MASK_SWAPPED = defect(
         "joint-mask-byte-swapped",
         "The joint masks in JOR and TOR are sent high byte first.",
         "error-string.arg-values",
+        caught_by=("server.motion.jor",),
     )
     UNKNOWN_OPCODE_ANSWERED = defect(
         "unknown-opcode-answered",
         "An unknown opcode gets an empty normal response instead of C UOP.",
         "request.unknown-opcode",
+        caught_by=("server.error.severity-matches-opcode",),
     )
     LENGTH_UNCHECKED = defect(
         "length-unchecked",
         "A request with the wrong data length is cut or zero-padded and executed instead of C BDL.",
         "request.data-length",
+        caught_by=("server.negative.data-length.safe",),
     )
     EXTRA_REPLY_AFTER_ERROR = defect(
         "extra-reply-after-error",
         "A non-fatal error is followed by an empty normal response to the same request.",
         "error.non-fatal-is-reply",
         "request.one-reply",
+        caught_by=("server.error.non-fatal-is-reply",),
     )
     FATAL_WITHOUT_CLOSE = defect(
         "fatal-without-close",
         "A fatal error leaves the connection open and the session running.",
         "error.fatal-then-close",
+        caught_by=("server.error.fatal-then-close",),
     )
     NO_JOR = defect(
         "no-jor",
         "Set joint angles accepts out-of-range joints (clamped to the limits) instead of JOR.",
         "motion.checked-before-queue",
+        caught_by=("server.motion.jor",),
     )
     SWAP_TOR_JOR = defect(
         "swap-tor-jor",
@@ -134,138 +162,171 @@ class Fault(FaultSwitch):
         "joint angles with TOR.",
         "solve-forwards.errors",
         "motion.checked-before-queue",
+        caught_by=("server.motion.jor",),
     )
     NO_NAP = defect(
-        "no-nap", "Motion requests are accepted without arm power instead of NAP.", "motion.no-power"
+        "no-nap",
+        "Motion requests are accepted without arm power instead of NAP.",
+        "motion.no-power",
+        caught_by=("server.motion.nap",),
     )
     AWA_IGNORED = defect(
-        "awa-ignored", "Motion requests are accepted after an abort instead of AWA.", "motion.abort"
+        "awa-ignored",
+        "Motion requests are accepted after an abort instead of AWA.",
+        "motion.abort",
+        caught_by=("server.async.guard-hit",),
     )
     AWA_REFUSES_ALL = defect(
         "awa-refuses-all",
         "After an abort every request but enable power and reset abort is refused with AWA, not only motion "
         "(the E.2 table's reading, which conforms but warns; erratum awa-scope).",
         "motion.abort-serves-others",
+        caught_by=("server.motion.awa-reset-abort",),
     )
     SPEED_UNCHECKED = defect(
         "speed-unchecked",
         "Set speed answers done to any factor (out-of-range ones are ignored) instead of C BVA.",
         "speed.range",
+        caught_by=("server.speed.bounds",),
     )
     SEGMENT_NUMBER_STUCK = defect(
-        "segment-number-stuck", "Every segment gets number 1.", "segment.number-increases"
+        "segment-number-stuck",
+        "Every segment gets number 1.",
+        "segment.number-increases",
+        caught_by=("property.segments.numbering",),
     )
     UNREQUESTED_ASYNC = defect(
         "unrequested-async",
         "Segment-completed asynchronous responses are sent without being requested.",
         "async.only-when-requested",
+        caught_by=("server.async.guard-hit",),
     )
     ASYNC_STRAY_BYTE = defect(
         "async-stray-byte",
         "Asynchronous responses carry a stray zero byte after their data: 9 bytes (7 in the 1985 guide's "
         "layout), a length neither layout has.",
         "async.layout",
+        caught_by=("server.async.segment-completed",),
     )
     FREE_JOINT_EXECUTES = defect(
         "free-joint-executes",
         "The packet after free joint is executed instead of discarded with done.",
         "free-joint.awaits-next-packet",
         "free-joint.replies",
+        caught_by=("server.free-joint.discard",),
     )
     DESCRIBE_EXTRA_OPERATION = defect(
         "describe-extra-operation",
         "Describe self lists an opcode the server refuses as unknown (the first unassigned one).",
         "describe.operations-answered",
+        caught_by=("server.describe.operations-served",),
     )
     DESCRIBE_MISSING_OPERATION = defect(
         "describe-missing-operation",
         "Describe self leaves solve backwards (0221) out of :operations, though it is served.",
         "describe.operations-complete",
+        caught_by=("server.describe.operations-served",),
     )
     DESCRIBE_WRONG_DOF = defect(
         "describe-wrong-dof",
         "Describe self states one more degree of freedom than the arm's joint vectors have.",
         "describe.dof-joint-vectors",
+        caught_by=("server.describe.degrees-of-freedom",),
     )
     DESCRIBE_NARROW_LIMITS = defect(
         "describe-narrow-limits",
         "Describe self states every joint range 5 degrees narrower at each end than the arm's.",
         "describe.joint-limits",
+        caught_by=("server.describe.joint-limits",),
     )
     DESCRIBE_LIMITS_SHORT = defect(
         "describe-limits-short",
         "Describe self's :joint-limits leaves out the last joint's pair (one fewer than "
         ":degrees-of-freedom).",
         "describe.joint-limits-count",
+        caught_by=("server.describe.joint-limits",),
     )
     DESCRIBE_READY_OFF = defect(
         "describe-ready-off",
         "Describe self states a :ready-position with joint 2 ten degrees from where move to ready goes.",
         "describe.ready-position",
+        caught_by=("server.motion.ready-position",),
     )
     WARNING_INTERRUPTS = defect(
         "warning-interrupts",
         "A joint lagging its command stops the arm and aborts the motion after the warning, as a collision "
         "would.",
         "async-warning.format",
+        caught_by=("server.async.warning-format",),
     )
     GUARD_HIT_WORD_SWAPPED = defect(
         "guard-hit-word-swapped",
         "Guard-hit asynchronous responses say continue (2) for a guard that stopped the move and stop (1) "
         "for one that did not.",
         "async.layout",
+        caught_by=("server.async.guard-hit",),
     )
     STRAIGHT_AS_JOINT = defect(
         "straight-as-joint",
         "Straight-line moves (205, 212) are interpolated in joint space: the hand strays off the line.",
         "straight-move.line",
+        caught_by=("server.motion.straight-line",),
     )
     INCREMENT_FROM_ACTUAL = defect(
         "increment-from-actual",
         "Incremental moves add to where the arm stands when they are queued, not to where the queue ends.",
         "incremental.relative",
+        caught_by=("server.motion.incremental-reference",),
     )
     INCREMENT_O_T_SWAPPED = defect(
         "increment-o-t-swapped",
         "Incremental moves add dO to the pose's T angle and dT to its O angle.",
         "incremental.relative",
+        caught_by=("server.motion.incremental-oat",),
     )
     CONFIGURATION_IGNORED = defect(
         "configuration-ignored",
         "Set configuration answers done and changes nothing: transforms are solved nearest the current "
         "angles whatever configuration was asked for.",
         "set-configuration.effect",
+        caught_by=("server.motion.configuration",),
     )
     KEEPS_SPEED = defect(
         "connection-keeps-speed",
         "A new connection keeps the speed factor the last one set.",
         "connect.per-connection-state",
+        caught_by=("server.connect.fresh-state",),
     )
     KEEPS_CONFIGURATION = defect(
         "connection-keeps-configuration",
         "A new connection keeps the configuration (lefty or righty) the last one set.",
         "connect.per-connection-state",
+        caught_by=("server.connect.fresh-state",),
     )
     KEEPS_NOTIFICATIONS = defect(
         "connection-keeps-notifications",
         "A new connection keeps the notification mask the last one asked for.",
         "connect.per-connection-state",
+        caught_by=("server.connect.fresh-state",),
     )
     READY_LEAVES_WRIST = defect(
         "ready-leaves-wrist",
         "Move to ready moves joints 1-3 only: the wrist joints stay where they are.",
         "ready.pose",
+        caught_by=("server.motion.ready",),
     )
     SEGMENT_REPORT_PREVIOUS = defect(
         "segment-report-previous",
         "Segment-completed reports name the segment queued before the one that completed.",
         "segment.fifo-completion",
+        caught_by=("server.motion.queued-segments",),
     )
     COLLISION_UNCHECKED = defect(
         "collision-unchecked",
         "The move process never compares the angles reached with those commanded: a blocked joint draws no "
         "error and the motion goes on.",
         "motion.collision",
+        caught_by=("server.motion.collision",),
     )
     CLOSE_KEEPS_MOVING = defect(
         "close-keeps-moving",
@@ -273,123 +334,151 @@ class Fault(FaultSwitch):
         "segment counter.",
         "connect.close-stops-arm",
         "connect.per-connection-state",
+        caught_by=("server.connect.close-stops-arm",),
     )
     SEGMENTS_STOP = defect(
         "segments-stop",
         "Queued joint segments do not blend: the arm comes to rest after each and waits 0.1 s before the "
         "next.",
         "motion.smooth-transitions",
+        caught_by=("server.motion.queued-segments",),
     )
     SERVO_DOUBLE_RATE = defect(
         "servo-double-rate",
         "The move process runs every 8 ms instead of 16: the angles change twice per servo cycle.",
         "motion.servo-period",
+        caught_by=("server.motion.queued-segments",),
     )
     WRIST_TIMEOUT_SILENT = defect(
         "wrist-timeout-silent",
         "A request whose wrist command Cougar never answers is never answered either (no E WNR); the "
         "requests after it wait for ever.",
         "wrist.no-answer",
+        caught_by=("server.wrist.no-answer",),
     )
     UNDERFLOW_DIRTY_ZERO = defect(
         "underflow-dirty-zero",
         "Reply floats below the smallest F magnitude (2^-128) are sent with exponent 0 and their fraction "
         "bits (a dirty zero) instead of a clean zero.",
         "float.dirty-zero",
+        caught_by=("server.float.extremes",),
     )
     NOT_FINITE_RESERVED = defect(
         "not-finite-reserved",
         "Solve forwards of a transform out of reach answers six angles that are not numbers, sent as the "
         "reserved operand, instead of refusing.",
         "float.not-finite",
+        caught_by=("server.float.extremes",),
     )
     FATAL_NUMBER_PREVIOUS = defect(
         "fatal-number-previous",
         "A fatal error carries the number of the request before the packet last received.",
         "error.fatal-request-number",
+        caught_by=("server.error.fatal-then-close",),
     )
     FATAL_SEVERITY_E = defect(
         "fatal-severity-e",
         "Fatal errors carry severity E (the other errors keep theirs).",
         "error.severity-matches-opcode",
+        caught_by=("server.error.fatal-then-close",),
     )
     FATAL_DROPS_LINK = defect(
         "fatal-drops-link",
         "After a fatal error the server drops the link under the connection instead of sending CLS.",
         "error.fatal-then-close",
+        caught_by=("server.error.fatal-then-close",),
     )
     ASYNC_NUMBER_PREVIOUS = defect(
         "async-number-previous",
         "Asynchronous errors and warnings carry the number of the request processed before the last one.",
         "async-error.request-number",
+        caught_by=("server.async.warning-format",),
     )
     WRIST_ERROR_FATAL = defect(
         "wrist-error-fatal",
         "A wrist request that fails (Cougar silent, its link down) is answered with a fatal error (severity "
         "F) and the connection closed, instead of a non-fatal E error.",
         "wrist.no-answer",
+        caught_by=("server.wrist.no-answer",),
     )
     ABORT_KEEPS_QUEUE = defect(
         "abort-keeps-queue",
         "An abort drops only the segment in execution: the queued ones run once motion is allowed again.",
         "motion.abort",
+        caught_by=("server.motion.abort-drops-queue",),
     )
     SPEED_IGNORED = defect(
         "speed-ignored",
         "Set speed answers done to a factor in range and changes nothing: every move runs at full speed.",
         "motion.speed-scales",
+        caught_by=("server.speed.scales",),
     )
     QUEUE_REVERSED = defect(
         "queue-reversed",
         "Segments queued behind the one running run newest first (each waits for the one before it to end).",
         "segment.fifo-completion",
+        caught_by=("server.motion.queued-segments",),
     )
     # protocol defects of the Puma's side of the wrist link (judged by manip-conform run --puma)
     WRIST_FLOAT_WORDS_SWAPPED = defect(
         "wrist-float-words-swapped",
         "Floats in the commands the wrist processes queue for Cougar have their two words swapped.",
         "cougar.command.layout",
+        caught_by=("puma.wrist.command-layout",),
     )
     WRIST_USER_FIRST = defect(
         "wrist-user-first",
         "The wrist output process sends the user's commands before New Position and Rate and Reset.",
         "puma.wrist.priority",
+        caught_by=("puma.wrist.priority",),
     )
     WRIST_NO_WAIT = defect(
         "wrist-no-wait",
         "Read forces is answered at once with the last forces seen, without waiting for Cougar.",
         "puma.wrist.waits",
+        caught_by=("puma.wrist.waits",),
     )
     READ_FORCES_NO_ANGLES = defect(
         "read-forces-no-angles",
         "Read forces sends Report Forces without the current joint angles (SEN) before it.",
         "puma.wrist.read-forces-angles",
+        caught_by=("puma.wrist.read-forces-angles",),
     )
     NPR_SKIPPED = defect(
         "npr-skipped",
         "A compliant segment sends New Position and Rate only every other servo cycle.",
         "puma.compliance.npr-every-cycle",
+        caught_by=("puma.compliance.npr-every-cycle",),
     )
     COMPLIANT_COLLISION_TEST = defect(
         "compliant-collision-test",
         "The collision test stays on under compliance.",
         "puma.compliance.no-collision-test",
+        caught_by=("puma.compliance.no-collision-test",),
     )
     COMPLIANT_SNAP_BACK = defect(
         "compliant-snap-back",
         "When a compliant episode ends the arm jumps back to the nominal goal.",
         "puma.compliance.segment-end",
+        caught_by=("puma.compliance.segment-end",),
     )
     GUARD_IGNORED = defect(
-        "guard-ignored", "A stop-the-move guard trip is reported but the arm keeps moving.", "puma.guard.stop"
+        "guard-ignored",
+        "A stop-the-move guard trip is reported but the arm keeps moving.",
+        "puma.guard.stop",
+        caught_by=("puma.guard.stop",),
     )
     GUARD_UNREPORTED = defect(
-        "guard-unreported", "Guard trips are never reported to the client.", "puma.guard.report"
+        "guard-unreported",
+        "Guard trips are never reported to the client.",
+        "puma.guard.report",
+        caught_by=("puma.guard.report",),
     )
     CALIBRATE_ONE_POSE = defect(
         "calibrate-one-pose",
         "Calibrate-wrist sets the mean of one pose's readings (gravity in them) as the offsets.",
         "puma.calibrate-wrist",
+        caught_by=("puma.calibrate-wrist",),
     )
     # protocol defects found from outside (issue 32)
     FATAL_EOF_WITHOUT_CLS = defect(
@@ -397,68 +486,80 @@ class Fault(FaultSwitch):
         "After a fatal error the server sends EOF and then drops the link under the connection before the "
         "peer's acknowledgement can draw its CLS: the connection ends with EOF, never CLS.",
         "error.fatal-then-close",
+        caught_by=("server.error.fatal-then-close",),
     )
     KEEPS_ABORT = defect(
         "connection-keeps-abort",
         "A new connection keeps the abort condition the last one closed with: its first move is refused AWA.",
         "connect.per-connection-state",
+        caught_by=("server.connect.abort-not-carried",),
     )
     NZI_MASK_SHIFTED = defect(
         "nzi-mask-shifted",
         "The joint mask of F NZI counts joints from 0 (joint n as bit n): it names the joint after each one "
         "that failed.",
         "calibrate.nzi-mask",
+        caught_by=("server.error.fatal-then-close",),
     )
     CONFIGURATION_SWAPPED = defect(
         "configuration-swapped",
         "Set configuration reads bit 0 the wrong way round: 1 gives the righty solutions, 0 the lefty ones.",
         "set-configuration.lefty-side",
+        caught_by=("server.motion.configuration-side",),
     )
     JOINTS_REVERSED = defect(
         "joints-reversed",
         "Every joint vector on the wire starts at the hand, not the base (requests, replies and describe "
         "self's limits and ready position alike): element 1 is joint 6.",
         "joint-angles.reply",
+        caught_by=("server.motion.joint-order",),
     )
     FORCES_IN_POUNDS = defect(
         "forces-in-pounds",
         "Read forces answers pounds and pound-inches, not ounces and ounce-inches: every component 16 times "
         "too small.",
         "read-forces.units",
+        caught_by=("server.async.guard-hit",),
     )
     FORCES_STALE = defect(
         "forces-stale",
         "Every read forces on a connection answers that connection's first reading again.",
         "read-forces.current",
+        caught_by=("server.wrist.force-push",),
     )
     ASYNC_SPLITS_MULTI = defect(
         "async-splits-multi",
         "The asynchronous packets of the move and wrist processes wait for the main process's next request, "
         "and it sends them after the first packet of a multi-packet reply: describe self is split by them.",
         "multi.not-split",
+        caught_by=("server.describe.not-split",),
     )
     WRIST_CONFIG_AFTER_MOTION = defect(
         "wrist-config-after-motion",
         "The wrist output process holds the user's commands while the arm moves: a setting reaches Cougar "
         "only once the queued segments are done.",
         "puma.wrist.config-at-once",
+        caught_by=("puma.wrist.config-at-once",),
     )
     WRIST_USER_HELD_COMPLIANT = defect(
         "wrist-user-held-compliant",
         "The wrist output process holds the user's commands during a compliant segment: read forces then "
         "times out and settings wait for the segment's end.",
         "puma.wrist.user-during-compliance",
+        caught_by=("puma.wrist.user-during-compliance",),
     )
     OUT_OF_SYNC_IGNORED = defect(
         "out-of-sync-ignored",
         "Cougar's out-of-sync message is dropped: the requests waiting for Cougar wait out the wrist "
         "timeout, and the client is not warned.",
         "puma.wrist.out-of-sync",
+        caught_by=("puma.wrist.out-of-sync",),
     )
     GUARDS_OUTLIVE_CONNECTION = defect(
         "guards-outlive-connection",
         "The guards a connection left armed on Cougar stay armed for the next connection.",
         "puma.wrist.connection-state",
+        caught_by=("puma.wrist.connection-state",),
     )
 
 

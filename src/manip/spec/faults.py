@@ -13,6 +13,9 @@ A switch's record says:
   takes another reading the spec allows and breaks nothing (the suite must pass it);
 * ``breaks``: one line saying what changes;
 * ``clauses``: the clause ids it breaks (none for a reading), checked against the spec;
+* ``caught_by``: the cases its fault matrix requires to catch it (fail, or warn for a SHOULD clause),
+  each citing one of the clauses it breaks (none for a reading; the tests check the ids, and the
+  coverage table of ``docs/spec.md`` reads them);
 * ``argument``: what ``NAME=ARG`` means, for the few switches that take one (None for the others).
 
 The conditions of an arm's world (an obstacle, the panic button...) are not fault switches: a conforming
@@ -32,18 +35,21 @@ __all__ = ["FaultKind", "FaultSwitch", "defect", "reading"]
 FaultKind = Literal["protocol", "reading"]
 """A defect that breaks its clauses, or another reading the spec allows (it breaks none)."""
 
-Declaration = tuple[str, FaultKind, str, tuple[str, ...], str | None]
-"""A member's value as declared: name, kind, breaks, clauses, argument (:func:`defect`, :func:`reading`)."""
+Declaration = tuple[str, FaultKind, str, tuple[str, ...], tuple[str, ...], str | None]
+"""A member's value as declared: name, kind, breaks, clauses, caught by, argument (:func:`defect`,
+:func:`reading`)."""
 
 
-def defect(name: str, breaks: str, *clauses: str, argument: str | None = None) -> Declaration:
+def defect(
+    name: str, breaks: str, *clauses: str, caught_by: tuple[str, ...] = (), argument: str | None = None
+) -> Declaration:
     """Declare a switch that breaks ``clauses`` (a registry member's value)."""
-    return name, "protocol", breaks, clauses, argument
+    return name, "protocol", breaks, clauses, caught_by, argument
 
 
 def reading(name: str, breaks: str) -> Declaration:
     """Declare a switch that takes another reading the spec allows: it breaks no clause."""
-    return name, "reading", breaks, (), None
+    return name, "reading", breaks, (), (), None
 
 
 class FaultSwitch(enum.StrEnum):
@@ -52,10 +58,17 @@ class FaultSwitch(enum.StrEnum):
     kind: FaultKind
     breaks: str
     clauses: tuple[str, ...]
+    caught_by: tuple[str, ...]
     argument: str | None
 
     def __new__(
-        cls, name: str, kind: FaultKind, breaks: str, clauses: tuple[str, ...], argument: str | None
+        cls,
+        name: str,
+        kind: FaultKind,
+        breaks: str,
+        clauses: tuple[str, ...],
+        caught_by: tuple[str, ...],
+        argument: str | None,
     ) -> Self:
         if kind == "protocol" and not clauses:
             raise ValueError(f"fault switch {name} breaks no clause: declare it a reading")
@@ -66,7 +79,8 @@ class FaultSwitch(enum.StrEnum):
             raise ValueError(f"fault switch {name} names unknown clauses {unknown}")
         member = str.__new__(cls, name)
         member._value_ = name
-        member.kind, member.breaks, member.clauses, member.argument = kind, breaks, clauses, argument
+        member.kind, member.breaks, member.clauses = kind, breaks, clauses
+        member.caught_by, member.argument = caught_by, argument
         return member
 
     @classmethod

@@ -26,31 +26,8 @@ from manip.cougar.cli import serve_cougar
 from manip.cougar.faults import CougarFault, parse_faults
 from manip.cougar.link import CougarEnd, Drv11jError, PumaEnd, Tick, encode_frame
 
-#: The case written to catch each fault (others may catch it too).
-CATCHERS = {
-    "wrong-version-code": "cougar.reply.version",
-    "no-out-of-sync": "cougar.comint.unknown-code",
-    "guard-trips-twice": "cougar.guard.trips-once",
-    "forces-wrong-sign": "cougar.forces.conversion",
-    "exmn-wrong-count": "cougar.reply.exmn",
-    "comint-executes-partial": "cougar.comint.partial-waits",
-    "ignores-guardc": "cougar.guard.clear",
-    "rst-ignored": "cougar.rst.zeroes-velocities",
-    "npr-ignores-k": "cougar.npr.gains",
-    "filter-con-swapped": "cougar.filter.output",
-    "gravity-fixed-orientation": "cougar.gravity.point-mass",
-    "gravity-ignores-cg": "cougar.gravity.point-mass",
-    "nfv-keeps-gravity": "cougar.gravity.nfv-redoes-model",
-    "nb-transposed": "cougar.npr.damping-matrix",
-    "jacobian-transpose-not-stored": "cougar.jacob.transpose-stored",
-    "filter-truncates-terms": "cougar.adc8.integer-filter",
-    "rraw-less-offsets": "cougar.rraw.before-offsets",
-    "link-skips-bad-frames": "cougar.link.unknown-type",
-    "link-ignores-wrong-side": "cougar.link.wrong-side",
-    "link-tick-backwards-runs": "cougar.link.tick-backwards",
-    "link-ignores-bye": "cougar.link.bye",
-    "link-busy-serves-second": "cougar.link.busy",
-}
+#: The case each fault declares catches it (others may catch it too).
+CATCHERS = {fault.value: fault.caught_by[0] for fault in CougarFault}
 OPTIONS = RunOptions(reply_timeout=1.0, connect_timeout=2.0)
 
 

@@ -23,23 +23,8 @@ from manip.reference_server.faults import WRIST_SIDE, Fault
 from manip.spec import SPEC
 
 SEED = 5
-#: The case written to catch each wrist-side fault (others may catch it too).
-CATCHERS: dict[Fault, str] = {
-    Fault.WRIST_FLOAT_WORDS_SWAPPED: "puma.wrist.command-layout",
-    Fault.WRIST_USER_FIRST: "puma.wrist.priority",
-    Fault.WRIST_NO_WAIT: "puma.wrist.waits",
-    Fault.READ_FORCES_NO_ANGLES: "puma.wrist.read-forces-angles",
-    Fault.NPR_SKIPPED: "puma.compliance.npr-every-cycle",
-    Fault.COMPLIANT_COLLISION_TEST: "puma.compliance.no-collision-test",
-    Fault.COMPLIANT_SNAP_BACK: "puma.compliance.segment-end",
-    Fault.GUARD_IGNORED: "puma.guard.stop",
-    Fault.GUARD_UNREPORTED: "puma.guard.report",
-    Fault.CALIBRATE_ONE_POSE: "puma.calibrate-wrist",
-    Fault.WRIST_CONFIG_AFTER_MOTION: "puma.wrist.config-at-once",
-    Fault.WRIST_USER_HELD_COMPLIANT: "puma.wrist.user-during-compliance",
-    Fault.OUT_OF_SYNC_IGNORED: "puma.wrist.out-of-sync",
-    Fault.GUARDS_OUTLIVE_CONNECTION: "puma.wrist.connection-state",
-}
+#: The case each wrist-side fault declares catches it (others may catch it too).
+CATCHERS: dict[Fault, str] = {fault: fault.caught_by[0] for fault in WRIST_SIDE}
 
 
 def run(target: PumaTarget, select: tuple[str, ...] = ()) -> RunReport:
