@@ -12,7 +12,7 @@ from typing import Final
 
 from manip.codecs.packet import Packet
 from manip.conformance.client.server import WireRecord
-from manip.conformance.judge.checks import check_client_request
+from manip.conformance.judge.client_checks import check_client_request
 from manip.conformance.judge.packets import WirePacket
 from manip.conformance.judge.violation import Violation
 from manip.conformance.suite.invariants import CLIENT_WIRE

@@ -39,12 +39,11 @@ from manip.captures import Session
 from manip.conformance.judge.checks import (
     CLOSE_OPCODES,
     WirePacket,
-    check_client_guards,
-    check_client_request,
     check_transcript,
     describe,
     required_refusal,
 )
+from manip.conformance.judge.client_checks import check_client_guards, check_client_request
 from manip.conformance.replay.capture_report import capture_report, open_capture, select_sessions
 from manip.conformance.suite.case import LEVEL_ORDER
 from manip.conformance.suite.results import CaseResult, RunReport, Violation
