@@ -20,7 +20,7 @@ import tempfile
 from collections.abc import Iterator
 from typing import IO, Any, Literal, overload
 
-__all__ = ["OutputError", "atomic_output", "check_writable"]
+__all__ = ["OutputError", "atomic_output"]
 
 
 class OutputError(OSError):
@@ -101,19 +101,3 @@ def _keep_mode(target: str, temp: str) -> None:
         mode = 0o666 & ~umask
     with contextlib.suppress(OSError):
         os.chmod(temp, mode)
-
-
-def check_writable(path: str | os.PathLike[str]) -> None:
-    """Raise :class:`OutputError` now if ``path`` cannot be created (its directory missing or read-only,
-    or it is a directory), so a command can refuse before doing its work."""
-    target = os.fspath(path)
-    if os.path.isdir(target):
-        raise OutputError(target, "it is a directory")
-    folder = os.path.dirname(os.path.abspath(target))
-    if not os.path.isdir(folder):
-        raise OutputError(target, f"no such directory: {folder}")
-    if os.path.exists(target):
-        if not os.access(target, os.W_OK):
-            raise OutputError(target, "permission denied")
-    elif not os.access(folder, os.W_OK):
-        raise OutputError(target, f"permission denied in {folder}")

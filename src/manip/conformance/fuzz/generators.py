@@ -47,13 +47,9 @@ STEPS_PER_INPUT: Final = 32
 MAX_PIPELINE: Final = 500
 UNKNOWN_OPCODES: Final = tuple(op for op in range(0o200, 0o400) if op not in SPEC.requests)
 """Data opcodes no request of the spec uses (0300-0377 are 16-bit data, never a request)."""
-READ_ONLY_PROBES: Final = tuple(
-    op.opcode for op in SPEC.requests.values() if op.hazard == "read-only" and not op.request.fields
-)
 HERE: Final = int(RequestOp.HERE)
 PAUSE: Final = 0.05
 """Seconds a sequence waits for its motion to end (less when the target reports something first)."""
-SEGMENT_OPS: Final = tuple(op.opcode for op in SPEC.requests.values() if op.response.form == "segment")
 
 
 @dataclass(frozen=True)

@@ -84,7 +84,6 @@ if TYPE_CHECKING:
 __all__ = [
     "HAZARD_ORDER",
     "LEVEL_ORDER",
-    "TARGETS",
     "TECHNIQUES",
     "Case",
     "CaseError",
@@ -111,7 +110,6 @@ TECHNIQUES: Final[tuple[str, ...]] = get_args(Technique)
 Target = Literal["server", "cougar", "client", "puma"]
 """What a case tests, from the first component of its id: a manip server, a Cougar, a client, the
 Puma's side of the wrist link (a server judged by the suite playing Cougar)."""
-TARGETS: Final[tuple[str, ...]] = get_args(Target)
 
 LEVEL_ORDER: Final[Mapping[str, int]] = {"MUST": 3, "SHOULD": 2, "MAY": 1, "INFO": 0}
 """Strength of a level; a case's default level is the strongest among its clauses."""
