@@ -108,7 +108,7 @@ class Instruction:
     case: str
     seed: int
     link: str
-    target: str
+    address: str
     contact: str
     timeout: float
     operations: tuple[Op, ...]
@@ -121,7 +121,7 @@ class Instruction:
             "case": self.case,
             "seed": self.seed,
             "link": self.link,
-            "target": self.target,
+            "target": self.address,
             "contact": self.contact,
             "timeout": self.timeout,
             "operations": [op.to_json() for op in self.operations],

@@ -189,7 +189,7 @@ class ClientContext(CaseContext):
                 self.case_id,
                 self.seed,
                 session.link,
-                listener.target,
+                listener.address,
                 "PUMA",
                 self.timeout if timeout is None else timeout,
                 tuple(operations),
