@@ -2,16 +2,31 @@
 
 Run after editing src/manip/spec/data/*.toml, a case's clauses or a fault switch's declaration;
 tests/spec/test_spec.py fails while docs/spec.md is stale.  The coverage table comes from the case
-declarations and the fault registries (manip.conformance.fault_proof).
+declarations and the fault registries (manip.conformance.fault_proof), and its guide-only column from a
+run of the suite against the reference server's guide profile (about 40 s; ``--keep-guide-column`` keeps
+the column docs/spec.md has, for a change that cannot move it; the slow test of
+tests/conformance/test_guide_only.py holds the column to that run).
 """
 
 from __future__ import annotations
 
+import json
+import re
+import subprocess
 import sys
+import tempfile
 from collections import defaultdict
+from collections.abc import Mapping
 from pathlib import Path
 
-from manip.conformance.fault_proof import ClauseProof, clause_proofs, totals
+from manip.conformance.fault_proof import (
+    GUIDE_RUN,
+    NOT_RUN,
+    ClauseProof,
+    clause_proofs,
+    guide_statuses,
+    totals,
+)
 from manip.conformance.suite.case import all_cases
 from manip.spec import SPEC, Layout
 from manip.spec.model import Erratum
@@ -74,8 +89,7 @@ def _cell(text: str) -> str:
 COVERAGE_LEGEND = (
     "For each live clause: what judges it (*judged by*: the cases that declare it, the judges of a "
     "client's recording as `verify:FAMILY`, and the suite's own checks of every exchange as "
-    "`invariant:NAME`); the fault switches that *prove* it; and whether it is judged on a *guide-only "
-    "server*.",
+    "`invariant:NAME`); the fault switches that *prove* it; and its status on a *guide-only server*.",
     "",
     "*Proven by*: a fault switch of the reference server (`server:`), the reference client (`client:`) or "
     "the simulated Cougar (`cougar:`) proves a clause when the clause is among those the switch declares "
@@ -85,16 +99,20 @@ COVERAGE_LEGEND = (
     "its wrist side, `tests/conformance/client/test_faults.py`, and `tests/conformance/cougar/"
     "test_cougar.py`).  A switch is listed under every clause it proves.",
     "",
-    "*Guide-only server*: **yes**, a case of the server that sends no Puma extension opcode (no "
-    "`extensions=` in its `@case`; a server written from the 1985 guide alone has none of them) declares "
-    "the clause, or `invariant:transcript` checks it on every exchange; **no**, only cases that send an "
-    "extension judge it; **n/a**, no case of the server judges it (a clause of the client, the Cougar or "
-    "the Puma's wrist side).",
+    f"*Guide-only server*: the clause's status in the report of `manip-conform {' '.join(GUIDE_RUN)}`, "
+    "the reference server's guide profile, which serves what the 1985 guide describes and no Puma "
+    "extension opcode: **held** (or **broken**), a case came to a verdict on it; **not-judged**, the cases "
+    "that cite it need a Puma extension (the report says what would judge each); **not-exercised**, no "
+    "check reached it (the clauses of a link the embedded server is not on); "
+    f"**{NOT_RUN}**, no case of that run cites it (a clause of the client, the Cougar or the Puma's wrist "
+    "side; or one only an invariant checks, which a run's report gives no status).",
     "",
     "The spec data has no notion of a statement the wire cannot show; the totals count INFO clauses "
     "(statements of fact, not requirements) apart, and every other live clause in one of the first three "
     "lines.",
 )
+GUIDE_CELL = re.compile(r"^\| `(?P<clause>[^`]+)` \| .* \| (?P<status>[a-z/-]+) \|$", re.MULTILINE)
+"""A row of the coverage table: its clause and its guide-only column."""
 
 
 def _coverage(rows: list[ClauseProof]) -> list[str]:
@@ -118,7 +136,27 @@ def _coverage(rows: list[ClauseProof]) -> list[str]:
     return [*out, ""]
 
 
-def render() -> str:
+def guide_run() -> dict[str, str]:
+    """Each clause's status in the report of the guide-profile run (``GUIDE_RUN``), run for this."""
+    with tempfile.TemporaryDirectory() as tmp:
+        report = Path(tmp) / "guide.json"
+        command = [sys.executable, "-m", "manip.conformance.cli", *GUIDE_RUN, "-q", "--json", str(report)]
+        done = subprocess.run(command, capture_output=True, text=True, check=False)
+        if done.returncode != 0:
+            raise SystemExit(f"the guide-profile run exited {done.returncode}:\n{done.stdout}{done.stderr}")
+        return guide_statuses(json.loads(report.read_text(encoding="utf-8"))["clause_status"])
+
+
+def guide_column(markdown: str) -> dict[str, str]:
+    """The guide-only column of the coverage table in ``markdown`` (a docs/spec.md), by clause, without
+    the clauses it marks as not in the run."""
+    section = markdown[markdown.index("## Clause coverage") : markdown.index("## Errata")]
+    rows = {m["clause"]: m["status"] for m in GUIDE_CELL.finditer(section)}
+    return {clause: status for clause, status in rows.items() if status != NOT_RUN}
+
+
+def render(guide: Mapping[str, str]) -> str:
+    """docs/spec.md, with ``guide`` the clauses' statuses on a guide-only server (:func:`guide_run`)."""
     out: list[str] = [
         "# The Chaos manipulator protocol and the Cougar word protocol, as manip specifies them",
         "",
@@ -224,19 +262,23 @@ def render() -> str:
             "",
         ]
 
-    out += _coverage(clause_proofs(all_cases()))
+    out += _coverage(clause_proofs(all_cases(), guide))
     out += ["## Errata", ""]
     for erratum in SPEC.errata.values():
         out += _erratum(erratum)
     return "\n".join(out).rstrip() + "\n"
 
 
-def main() -> int:
+def main(argv: list[str]) -> int:
+    if argv not in ([], ["--keep-guide-column"]):
+        print("usage: gen_spec_docs.py [--keep-guide-column]", file=sys.stderr)
+        return 2
+    guide = guide_column(TARGET.read_text(encoding="utf-8")) if argv else guide_run()
     TARGET.parent.mkdir(exist_ok=True)
-    TARGET.write_text(render())
+    TARGET.write_text(render(guide))
     print(f"wrote {TARGET}")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(sys.argv[1:]))

@@ -12,16 +12,17 @@ require each to fail or warn; the client's and the Cougar's, to fail) declares t
 :func:`clause_proofs` gives, for every live clause of the spec: the cases that judge it (``@case``
 declarations, the client recordings' ``verify:FAMILY`` judges and the suite's ``invariant:NAME`` checks,
 as ``manip-conform coverage`` lists them), the switches that prove it, and whether a server written from
-the 1985 guide alone has it judged (a case of the server that sends no Puma extension opcode declares
-it, or the transcript invariant checks it).  Nothing here is typed by hand: every fact comes from the
-case declarations, the spec and the fault registries.
+the 1985 guide alone has it judged: its status in the report of :data:`GUIDE_RUN`, a run of the suite
+against the reference server's guide profile, which serves what the 1985 guide describes and no Puma
+extension.  Nothing here is typed by hand: every fact comes from the case declarations, the spec, the
+fault registries and that run's report.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Final, Literal
+from typing import Final
 
 from manip.conformance.output.coverage import coverage
 from manip.conformance.suite.case import Case
@@ -31,7 +32,17 @@ from manip.reference_server.faults import Fault
 from manip.spec import SPEC
 from manip.spec.faults import FaultSwitch
 
-__all__ = ["REGISTRIES", "ClauseProof", "Totals", "clause_proofs", "proves", "totals"]
+__all__ = [
+    "GUIDE_RUN",
+    "NOT_RUN",
+    "REGISTRIES",
+    "ClauseProof",
+    "Totals",
+    "clause_proofs",
+    "guide_statuses",
+    "proves",
+    "totals",
+]
 
 REGISTRIES: Final[Mapping[str, type[FaultSwitch]]] = {
     "server": Fault,
@@ -39,10 +50,18 @@ REGISTRIES: Final[Mapping[str, type[FaultSwitch]]] = {
     "cougar": CougarFault,
 }
 """Each implementation's fault registry, by the name the table gives it."""
-SERVER_TARGET: Final = "server"
-SERVER_INVARIANT: Final = "invariant:transcript"
-"""The invariant that checks every exchange with a server, whichever server it is."""
-GuideOnly = Literal["yes", "no", "n/a"]
+GUIDE_RUN: Final = ("run", "--server-profile", "guide", "--length-unit", "inch", "--seed", "5")
+"""The ``manip-conform`` run whose report gives the guide-only column: the embedded reference server's
+guide profile (no Puma extension opcode, lengths in inches, the guide's asynchronous layout) with its
+world, in virtual time."""
+NOT_RUN: Final = "n/a"
+"""The guide-only column of a clause no case of :data:`GUIDE_RUN` cites (a clause of the client, the
+Cougar or the Puma's wrist side); the others show the clause's status in that run's report (``held`` or
+``broken``: judged; ``not-judged``: the cases citing it need what the 1985 guide does not offer, and say
+what would judge it; ``not-exercised``: no check reached it, as for a link the embedded server is not
+on)."""
+_JUDGED: Final = frozenset({"held", "broken"})
+"""The statuses of a clause a case came to a verdict on."""
 
 
 @dataclass(frozen=True)
@@ -56,9 +75,8 @@ class ClauseProof:
     """What judges it: case ids, then ``verify:FAMILY`` and ``invariant:NAME``."""
     faults: tuple[str, ...]
     """The switches that prove it, as ``IMPLEMENTATION:NAME`` (``server:no-jor``)."""
-    guide_only: GuideOnly
-    """Judged on a guide-only server: ``yes``; only by cases that send an extension opcode: ``no``; no
-    case of the server judges it (a clause of the client or the Cougar...): ``n/a``."""
+    guide_only: str
+    """Its status on a guide-only server (:data:`NOT_RUN`)."""
 
     @property
     def judged(self) -> bool:
@@ -83,7 +101,7 @@ class Totals:
     """INFO clauses: statements of fact, not requirements; the spec data has no other notion of what the
     wire cannot show, so this is the count of what is not to be judged."""
     guide_only: int
-    """Judged on a guide-only server."""
+    """Judged on a guide-only server (a case of :data:`GUIDE_RUN` came to a verdict on it)."""
 
 
 def proves(fault: FaultSwitch, clause: str, cases: Mapping[str, Case]) -> bool:
@@ -92,8 +110,15 @@ def proves(fault: FaultSwitch, clause: str, cases: Mapping[str, Case]) -> bool:
     return clause in fault.clauses and any(clause in cases[k].clauses for k in fault.caught_by if k in cases)
 
 
-def clause_proofs(cases: Sequence[Case]) -> list[ClauseProof]:
-    """Every live clause with what judges it, the switches that prove it, and its guide-only status."""
+def guide_statuses(clause_status: Iterable[Mapping[str, object]]) -> dict[str, str]:
+    """Each clause's status on a guide-only server, from the ``clause_status`` of :data:`GUIDE_RUN`'s JSON
+    report."""
+    return {str(row["clause"]): str(row["status"]) for row in clause_status}
+
+
+def clause_proofs(cases: Sequence[Case], guide: Mapping[str, str]) -> list[ClauseProof]:
+    """Every live clause with what judges it, the switches that prove it, and its status on a guide-only
+    server (``guide``, from :func:`guide_statuses`; :data:`NOT_RUN` for a clause it does not list)."""
     by_id = {c.id: c for c in cases}
     rows = coverage(cases, {c.party for c in SPEC.clauses.values()})
     return [
@@ -108,17 +133,10 @@ def clause_proofs(cases: Sequence[Case]) -> list[ClauseProof]:
                 for fault in registry
                 if proves(fault, row.clause, by_id)
             ),
-            _guide_only(row.clause, row.cases, by_id),
+            guide.get(row.clause, NOT_RUN),
         )
         for row in rows
     ]
-
-
-def _guide_only(clause: str, judges: Iterable[str], cases: Mapping[str, Case]) -> GuideOnly:
-    server = [cases[j] for j in judges if j in cases and cases[j].target == SERVER_TARGET]
-    if any(not c.extensions for c in server) or SERVER_INVARIANT in judges:
-        return "yes"
-    return "no" if server else "n/a"
 
 
 def totals(rows: Iterable[ClauseProof]) -> Totals:
@@ -130,5 +148,5 @@ def totals(rows: Iterable[ClauseProof]) -> Totals:
         unproven=sum(r.judged and not r.proven for r in rules),
         unjudged=sum(not r.judged for r in rules),
         info=len(listed) - len(rules),
-        guide_only=sum(r.guide_only == "yes" for r in rules),
+        guide_only=sum(r.guide_only in _JUDGED for r in rules),
     )
