@@ -26,8 +26,8 @@ import click
 
 from manip.commandline import check_host, configure_logging, version_option
 from manip.cougar.environment import Contacts, Spring, Surface
-from manip.cougar.faults import FAULTS, parse_faults
-from manip.cougar.link import CougarEnd, CougarModel, Drv11jError, parse_address
+from manip.cougar.faults import CougarFault, link_defects, parse_faults
+from manip.cougar.link import CougarEnd, CougarModel, Drv11jError, parse_drv11j_address
 from manip.cougar.memory_map import memory_map_toml
 from manip.cougar.readings import READINGS, parse_readings
 from manip.cougar.sim import CougarConfig, CougarSim
@@ -45,7 +45,7 @@ class CougarServer:
 
     def __init__(self, model: CougarModel, faults: frozenset[str] = frozenset()) -> None:
         self.model = model
-        self.faults = faults
+        self.defects = link_defects(faults)
         """The link's defects (:mod:`manip.cougar.faults`, ``link-*``), for testing conformance suites."""
         self.connections = 0
         self.busy = False
@@ -55,9 +55,9 @@ class CougarServer:
         """The model's time at the last tick of any link: the next link's clock continues from it."""
 
     async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        end = CougarEnd(self.model, resume_after=self.last_time, faults=self.faults)
+        end = CougarEnd(self.model, resume_after=self.last_time, defects=self.defects)
         writer.write(end.hello())
-        if self.busy and "link-busy-serves-second" not in self.faults:
+        if self.busy and self.defects.refuses_second_puma:
             writer.write(end.bye(BUSY))
             await _close(writer)
             return
@@ -103,7 +103,7 @@ async def serve_cougar(
 ) -> AsyncIterator[CougarServer]:
     """Serve ``model`` on ``address`` (``tcp://HOST:PORT``, port 0 for a free one) for the block; the
     link has the defects ``faults`` names (``link-*`` of :mod:`manip.cougar.faults`; none by default)."""
-    host, port = parse_address(address)
+    host, port = parse_drv11j_address(address)
     cougar = CougarServer(model, faults)
     server = await asyncio.start_server(cougar._handle, host, port)
     cougar.server = server
@@ -184,7 +184,7 @@ async def _serve_forever(model: CougarModel, address: str, faults: frozenset[str
     "--cougar-fault",
     "faults",
     multiple=True,
-    type=click.Choice(sorted(FAULTS)),
+    type=click.Choice(sorted(f.value for f in CougarFault)),
     help="Simulate a protocol defect (to check a conformance suite catches it); repeatable.",
 )
 @click.option(
@@ -220,7 +220,7 @@ def main(
         return
     configure_logging(logging.INFO if verbose else logging.WARNING)
     try:
-        host, _port = parse_address(address)
+        host, _port = parse_drv11j_address(address)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--listen") from None
     why = check_host(host)

@@ -37,7 +37,7 @@ from manip.reference_client.errors import (
     ServerError,
 )
 from manip.reference_client.extractors import extract_done, extract_segment, extract_text, extract_values
-from manip.reference_client.faults import FAULTS, NO_FAULTS, ClientFault, ClientFaults
+from manip.reference_client.faults import NO_FAULTS, ClientFault, ClientFaults
 from manip.reference_client.guards import WristBook
 from manip.reference_client.manipulator import Manipulator
 from manip.reference_client.options import ClientOptions
@@ -130,7 +130,7 @@ class CaseRun:
     def __init__(self, instruction: Mapping[str, Any], emit: Emit, faults: ClientFaults = NO_FAULTS) -> None:
         self.faults = faults
         self.case = str(instruction.get("case"))
-        self.target = str(instruction.get("target"))
+        self.address = str(instruction.get("target"))
         self.contact = str(instruction.get("contact") or "PUMA")
         self.timeout = float(instruction.get("timeout") or 5.0)
         self.operations: list[Mapping[str, Any]] = list(instruction.get("operations") or [])
@@ -193,7 +193,7 @@ class CaseRun:
             faults=self.faults,
         )
         try:
-            arm = await open_manipulator(self.target, options)
+            arm = await open_manipulator(self.address, options)
         except ServerError as exc:
             self.report_error(ident, exc)
             self.emit("state", ident, state="refused", reason=str(exc))
@@ -497,8 +497,8 @@ def main(argv: Sequence[str] | None = None, *, prog: str = "python -m manip.refe
     parser.add_argument("-v", "--verbose", action="store_true", help="log to stderr")
     args = parser.parse_args(argv)
     if args.list_faults:
-        for fault, info in FAULTS.items():
-            print(f"{fault.value:24} {info.what} [{', '.join(info.clauses)}]")
+        for fault in ClientFault:
+            print(f"{fault.value:24} {fault.breaks} [{', '.join(fault.clauses)}]")
         return 0
     try:
         faults = ClientFaults.parse(args.fault)
