@@ -23,14 +23,14 @@ from manip.conformance.diff.streams import Stream, make_streams
 from manip.conformance.fuzz.generators import GenOptions
 from manip.conformance.fuzz.session import Allowance
 from manip.reference_server import FaultSet, ServerConfig
-from manip.reference_server.faults import FAULTS, WRIST_SIDE, Fault
+from manip.reference_server.faults import WRIST_SIDE, Fault
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 
 SEED = 7
 CLEAN = Side("A", "clean", config=ServerConfig())
 PROTOCOL_FAULTS = sorted(
-    (f for f, info in FAULTS.items() if info.kind == "protocol" and f not in WRIST_SIDE),
+    (f for f in Fault if f.kind == "protocol" and f not in WRIST_SIDE),
     key=lambda f: f.value,
 )
 """The server's protocol faults (the wrist side's are the Puma cases' to catch: they need the suite
@@ -179,7 +179,7 @@ def test_a_protocol_fault_is_a_violation_of_its_clause(fault: Fault) -> None:
     found = findings(fault)
     assert not [f for f in found if f.cls == "violation" and f.violator in ("A", "both")], "the clean side"
     named = {n for f in found if f.cls == "violation" and f.violator == "B" for n in f.names}
-    wanted = set(FAULTS[fault].clauses)
+    wanted = set(fault.clauses)
     shown = sorted({(f.cls, f.names) for f in found})
     print(f"{fault.value}: wanted {sorted(wanted)}; named {sorted(named)}; {len(found)} difference(s)")
     if fault in NOT_SHOWN:
