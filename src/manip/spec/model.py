@@ -30,6 +30,7 @@ Freedom = Literal[
     "answer.length-unit",
     "answer.configuration-bits",
     "request.extension-served",
+    "error.abort-scope",
 ]
 """A part of an answer that is the implementation's choice where a clause or erratum says so
 (``freedom = [...]`` in the spec data): two conforming servers may differ there.  ``manip-conform diff``

@@ -173,7 +173,9 @@ _CARRIED: Final = ("answer.length-unit", "request.extension-served")
 """Freedoms whose difference changes what the two sides do next: after a Cartesian move one side made
 and the other refused for its length unit, the arm stands elsewhere on one side (every later answer may
 differ); after an extension refused by one side (request notifications), the asynchronous packets it
-would have asked for do not come."""
+would have asked for do not come, and after one served by one side only (a motion extension), the
+asynchronous packets of the motion it made come on that side alone and put the two sides' answers out
+of step (the ``step`` part; no judge of either side found a reply missing or extra)."""
 
 
 def _following(found: Finding, allowed: Sequence[str]) -> Finding:
@@ -184,7 +186,7 @@ def _following(found: Finding, allowed: Sequence[str]) -> Finding:
         for e in (d.a, d.b)
     )
     for freedom in allowed:
-        if freedom == "answer.length-unit" or asynchronous:
+        if freedom == "answer.length-unit" or asynchronous or d.parts == ("step",):
             names = declared(freedom)
             message = f"both conform: it follows from an earlier difference both allowed ({freedom})"
             return Finding(
