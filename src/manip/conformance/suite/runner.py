@@ -275,7 +275,9 @@ class Runner:
         finally:
             self._initial_seen = bool(ctx.probes) and ctx.probes[0].initial is not None
             self._note_reached(ctx)
-            await _quietly(ctx.close_all())
+            # No wait for the target to read our EOF: a target that floods and never reads again
+            # would cost a second per check, after every failed case.
+            await _quietly(ctx.close_all(wait=0.0))
 
     async def _answer_to_here(self, probe: Probe) -> tuple[bool, str, bool]:
         """Send Here and wait for any answer: (answered, what happened, the answer was a fatal error)."""
