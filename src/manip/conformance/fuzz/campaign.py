@@ -30,12 +30,13 @@ from typing import Final
 
 from manip.conformance.fuzz.batch import BatchRun, BatchRunner, Liveness, liveness
 from manip.conformance.fuzz.generators import GenOptions, generate
-from manip.conformance.fuzz.judge import ALWAYS, Sighting, judge
+from manip.conformance.fuzz.judge import Sighting, judge
 from manip.conformance.fuzz.report import HEALTH, CampaignViolation, ClassTally, FuzzReport, MinimalInput
 from manip.conformance.fuzz.session import Allowance
 from manip.conformance.fuzz.shrink import Budget, BudgetError, ddmin
 from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, RequestStep, Step, Stray
 from manip.conformance.fuzz.target import FuzzedServer, UnreachableError
+from manip.conformance.judge.verdict import counts
 from manip.spec import SPEC
 from manip.spec.notation import octal
 
@@ -273,9 +274,9 @@ class Campaign:
             report.findings[known].followers += o.followers
             return
         kind = _class_of(o, inputs)
-        level = o.level
-        counts = o.violation.kind in ALWAYS or level == "MUST" or (self.config.strict and level == "SHOULD")
-        finding = CampaignViolation(o.violation, kind, batch, counts=counts, followers=o.followers)
+        finding = CampaignViolation(
+            o.violation, kind, batch, counts=counts(o.violation, self.config.strict), followers=o.followers
+        )
         index = len(report.findings)
         report.findings.append(finding)
         self._known[o.signature] = index

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any, Final, cast
 
 from manip.conformance.fuzz.judge import FUZZ_KINDS, KIND_NAMES
+from manip.conformance.judge.verdict import Outcome, grade
 from manip.conformance.judge.violation import FailureKind
 from manip.conformance.output.report import report_junit, write_xml
 from manip.conformance.suite.results import CaseResult, ExitCode, RunReport, Violation
@@ -288,13 +289,9 @@ def report_json(report: FuzzReport) -> dict[str, Any]:
     }
 
 
-def _outcome(report: FuzzReport, tally: ClassTally) -> str:
-    found = [report.findings[i] for i in tally.findings]
-    if any(f.counts for f in found):
-        return "fail"
-    if found:
-        return "warn"
-    return "pass" if tally.inputs else "skip"
+def _outcome(report: FuzzReport, tally: ClassTally) -> Outcome:
+    found = [report.findings[i].violation for i in tally.findings]
+    return grade(Outcome.PASS if tally.inputs or tally.id == HEALTH else Outcome.SKIP, found, report.strict)
 
 
 def write_json(report: FuzzReport, path: Path) -> None:
@@ -325,11 +322,7 @@ def as_run_report(report: FuzzReport) -> RunReport:
         )
     for tally in tallies:
         found = [report.findings[i] for i in tally.findings]
-        outcome = (
-            _outcome(report, tally)
-            if tally.id != HEALTH
-            else ("fail" if any(f.counts for f in found) else "warn")
-        )
+        outcome = _outcome(report, tally)
         result = CaseResult(
             id=tally.id,
             clauses=tally.clauses or ("request.one-reply",),
@@ -337,7 +330,7 @@ def as_run_report(report: FuzzReport) -> RunReport:
             kind="fuzz",
             hazard=tally.hazard,
             summary=f"{tally.sends}; expected: {tally.expected}",
-            outcome=outcome,  # type: ignore[arg-type]
+            outcome=outcome,
             seed=report.seed,
             deadline=max(report.duration, 1.0),
             duration=0.0,

@@ -45,7 +45,7 @@ from manip.conformance.output.report_view import (
 
 __all__ = ["render_html"]
 
-_RANK: Final = {outcome: n for n, outcome in enumerate(OUTCOME_ORDER)}
+_RANK: Final[dict[str, int]] = {str(outcome): outcome.rank for outcome in OUTCOME_ORDER}
 _CASES_PER_GROUP: Final = 12
 """Cases listed under each broken clause at the top; the rest are in the table (filter by clause)."""
 DETAILS_FOR_EVERY_CASE: Final = 300

@@ -15,9 +15,9 @@ from pathlib import Path
 from typing import Any, Final
 
 from manip.conformance.judge.packets import WirePacket, describe
+from manip.conformance.judge.verdict import Outcome, judging_hint
 from manip.conformance.output.packet_text import annotated
 from manip.conformance.output.report import SCHEMA_VERSION
-from manip.conformance.suite.results import OUTCOMES, judging_hint
 from manip.conformance.suite.world import WITHOUT_WORLD
 from manip.links import AddressError, parse_address
 from manip.spec import SPEC
@@ -46,23 +46,11 @@ __all__ = [
     "wire_order",
 ]
 
-OUTCOME_ORDER: Final = (
-    "fail",
-    "error",
-    "fixed",
-    "warn",
-    "known-fail",
-    "not-judged",
-    "skip",
-    "unsupported",
-    "pass",
-)
-if set(OUTCOME_ORDER) != set(OUTCOMES):  # a new outcome must get its place (and colour) in the documents
-    raise RuntimeError(f"OUTCOME_ORDER {OUTCOME_ORDER} does not list the outcomes {OUTCOMES}")
-"""Outcomes, the ones needing attention first."""
-FAILING: Final = frozenset({"fail", "error", "fixed"})
+OUTCOME_ORDER: Final = Outcome.by_rank()
+"""Outcomes, the ones needing attention first (:attr:`Outcome.rank`)."""
+FAILING: Final = frozenset(o for o in Outcome if o.fails_run)
 """Outcomes that fail the run."""
-ATTENTION: Final = FAILING | {"warn", "known-fail"}
+ATTENTION: Final = frozenset(o for o in Outcome if o.needs_attention)
 """Outcomes a reader needs to look at (the rest are quiet: passed, skipped, not run...)."""
 LEVELS: Final = ("MUST", "SHOULD", "MAY", "INFO")
 _REQUIRED: Final = ("verdict", "exit_code", "counts", "cases", "by_clause", "seed", "target")

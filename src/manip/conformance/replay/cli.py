@@ -38,7 +38,7 @@ from manip.conformance.cli_options import check_output_paths, given, json_option
 from manip.conformance.output.console import make_console
 from manip.conformance.output.documents import document_options, write_reports
 from manip.conformance.output.report import failure_text
-from manip.conformance.output.run_console import OUTCOME_STYLE, print_by_clause
+from manip.conformance.output.run_console import OUTCOME_STYLE, print_by_clause, shown
 from manip.conformance.suite.embedded import EmbeddedServer, simulated_server
 from manip.conformance.suite.results import ExitCode, RunReport, completeness_text
 from manip.exit_status import epilog
@@ -116,8 +116,8 @@ def _finish(
     markdown_path: Path | None = None,
 ) -> None:
     for result in report.results:
-        if result.outcome in ("fail", "error") or (result.outcome == "warn" and not quiet):
-            style = OUTCOME_STYLE.get(result.outcome, "")
+        if shown(result, quiet):
+            style = OUTCOME_STYLE[result.outcome]
             console.print(f"[{style}]{result.outcome.upper():>10}[/] {result.id}")
             body = failure_text(result) if result.outcome != "error" else result.traceback.rstrip()
             if body:

@@ -323,14 +323,16 @@ class Runner:
             if not before.alive and not self._reached:
                 report.unreachable = True
                 for item in cases:
-                    report.results.append(self._blank(item, "skip", "target unreachable before the run"))
+                    report.results.append(
+                        self._blank(item, Outcome.SKIP, "target unreachable before the run")
+                    )
                 return report
             if self.config.options.learn_length_unit:
                 await self._learn_length_unit()
             dead = False
             for item in cases:
                 if dead:
-                    result = self._blank(item, "not-judged", self._dead_reason)
+                    result = self._blank(item, Outcome.NOT_JUDGED, self._dead_reason)
                 else:
                     result = await self.run_case(item)
                 report.results.append(result)
@@ -401,11 +403,11 @@ class Runner:
     async def run_case(self, item: Case) -> CaseResult:
         """Run one case to its outcome (never raises, except on interruption)."""
         options = self.config.options
-        result = self._blank(item, "pass", "")
+        result = self._blank(item, Outcome.PASS, "")
         if self.events.case_started:
             self.events.case_started(item)
         if item.hazard not in options.allowed_hazards:
-            result.outcome = "skip"
+            result.outcome = Outcome.SKIP
             result.reason = f"{item.hazard} case on {options.robot} target without --allow-motion"
             return result
         ctx = CaseContext(
@@ -434,20 +436,20 @@ class Runner:
         except CaseFailure as exc:
             failure = exc
         except CaseSkipped as exc:
-            result.outcome = "skip"
+            result.outcome = Outcome.SKIP
             result.reason = exc.reason
         except CaseNotJudged as exc:
-            result.outcome = "not-judged"
+            result.outcome = Outcome.NOT_JUDGED
             result.reason = exc.reason
         except ConditionUnsupported as exc:
-            result.outcome = "not-judged"
+            result.outcome = Outcome.NOT_JUDGED
             result.reason = f"{exc}; a world that can would judge it"
         except WorldError as exc:
-            result.outcome = "error"
+            result.outcome = Outcome.ERROR
             result.reason = f"the world failed: {exc}"
         except TimeoutError as exc:
             if scope is None or not scope.expired():
-                result.outcome = "error"
+                result.outcome = Outcome.ERROR
                 result.reason = f"TimeoutError inside the case: {exc}"
                 result.traceback = traceback.format_exc()
                 failure = None
@@ -462,7 +464,7 @@ class Runner:
             await _quietly(ctx.close_all())
             raise
         except Exception as exc:
-            result.outcome = "error"
+            result.outcome = Outcome.ERROR
             result.reason = f"{type(exc).__name__}: {exc}"
             result.traceback = traceback.format_exc()
         finally:
@@ -496,7 +498,7 @@ class Runner:
         for clause, invariant in reported:
             problem = attribution_problem(result.id, result.clauses, clause, invariant)
             if problem is not None:
-                result.outcome = "error"
+                result.outcome = Outcome.ERROR
                 result.reason = f"bug of the suite: {problem}"
                 return
 
