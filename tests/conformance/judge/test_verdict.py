@@ -16,7 +16,6 @@ from manip.conformance.client.runner import _judge as client_judge
 from manip.conformance.fuzz.campaign import Campaign, CampaignConfig
 from manip.conformance.fuzz.generators import GenOptions
 from manip.conformance.fuzz.judge import Sighting
-from manip.conformance.fuzz.report import as_run_report
 from manip.conformance.judge.verdict import Outcome, counts, grade
 from manip.conformance.judge.violation import Violation
 from manip.conformance.replay.verify import judge_findings
@@ -79,7 +78,7 @@ def by_fuzz(violations: list[Violation], strict: bool) -> Outcome:
     (kind,) = [c.id for c in gen.classes()]
     config = CampaignConfig(seed=0, gen=gen, only=(0,), strict=strict, shrink=False)
     campaign = Campaign(config, SimpleNamespace(embedded=True))  # type: ignore[arg-type]
-    campaign.report.classes[kind].inputs = 1
+    campaign.facts.classes[kind].inputs = 1
     item = SimpleNamespace(number=0, kind=kind, note="", steps=[], requests=1)
 
     async def record() -> None:
@@ -87,7 +86,7 @@ def by_fuzz(violations: list[Violation], strict: bool) -> Outcome:
             await campaign._record(Sighting(v, 0), [item], 0)  # type: ignore[list-item]
 
     asyncio.run(record())
-    (result,) = [r for r in as_run_report(campaign.report).results if r.id == kind]
+    (result,) = [r for r in campaign.finish().results if r.id == kind]
     return result.outcome
 
 

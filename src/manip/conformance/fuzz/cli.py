@@ -13,6 +13,7 @@ import asyncio
 import os
 import shlex
 import sys
+import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,15 +23,16 @@ from rich.console import Console
 from rich.markup import escape
 
 from manip.commandline import CommandLine, FiniteFloat
-from manip.conformance.cli_options import check_output_paths, given, json_option, junit_option
+from manip.conformance.cli_options import check_output_paths, given, report_options
 from manip.conformance.fuzz.campaign import Campaign, CampaignConfig, CampaignEvents
 from manip.conformance.fuzz.generators import CLASSES, HAZARD_ORDER, GenOptions
-from manip.conformance.fuzz.report import CampaignViolation, FuzzReport, finding_text, write_json, write_junit
+from manip.conformance.fuzz.report import CampaignFacts, CampaignViolation, finding_text
 from manip.conformance.fuzz.session import Allowance
 from manip.conformance.fuzz.target import FuzzedServer, LaunchedServer, RemoteServer, reference_server_argv
 from manip.conformance.output.console import make_console, progress_bar
+from manip.conformance.output.documents import ReportPaths, write_reports
 from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REPLY_TIMEOUT
-from manip.conformance.suite.results import ExitCode
+from manip.conformance.suite.results import ExitCode, RunReport
 from manip.conformance.suite.selection import match_id
 from manip.exit_status import epilog
 from manip.links import AddressError, LinkAddress, parse_address
@@ -196,8 +198,7 @@ def class_listing() -> str:
 @click.option(
     "--strict", is_flag=True, help="Findings of SHOULD clauses count (without it they are warnings)."
 )
-@json_option
-@junit_option
+@report_options
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar; findings and the summary only.")
 def fuzz_command(
     host: str | None,
@@ -222,8 +223,7 @@ def fuzz_command(
     no_shrink: bool,
     shrink_seconds: float,
     strict: bool,
-    json_path: Path | None,
-    junit_path: Path | None,
+    reports: ReportPaths,
     quiet: bool,
 ) -> None:
     """Fuzz HOST (tcp://HOST:PORT, unix:///PATH or chudp://HOST:PORT?addr=OCTAL) with inputs made from
@@ -239,7 +239,7 @@ def fuzz_command(
     console = make_console()
     _check_options(host, launch, server_log, target_kind, allow_motion, only, server_faults, classes)
     address = _address(host)
-    check_output_paths(json=json_path, junit=junit_path)
+    check_output_paths(**reports.paths)
     hazards: frozenset[Hazard] = frozenset(HAZARD_ORDER)
     if target_kind == "hardware" and not allow_motion:
         hazards = frozenset({"read-only", "config"})
@@ -289,17 +289,11 @@ def fuzz_command(
     )
     console.print(f"manip-conform fuzz: seed [bold]{seed}[/] (rerun with --seed {seed})")
     report = _campaign(config, server.fuzzed(seed), console, quiet, total=len(only) if only else inputs)
-    unwritten = []
-    for path, write in ((json_path, write_json), (junit_path, write_junit)):
-        if path is not None:
-            try:
-                write(report, path)
-            except OSError as exc:
-                unwritten.append(str(exc))
+    report.unwritten.extend(write_reports(report, reports))
     _summary(console, report)
-    for problem in unwritten:  # a report path that cannot be written is a usage error, found late
+    for problem in report.unwritten:  # a report path that cannot be written is a usage error, found late
         click.echo(f"manip-conform: {problem}", err=True)
-    sys.exit(2 if unwritten else int(report.exit_code))
+    sys.exit(int(report.exit_code))
 
 
 def _reproduce_options(
@@ -413,12 +407,15 @@ class _Server:
 
 def _campaign(
     config: CampaignConfig, target: FuzzedServer, console: Console, quiet: bool, *, total: int
-) -> FuzzReport:
+) -> RunReport:
     progress = progress_bar(console, quiet)
     task = progress.add_task("fuzz", total=total)
 
-    def batch_done(report: FuzzReport) -> None:
-        progress.update(task, completed=report.inputs, description=f"fuzz {report.rate:.0f}/s")
+    started = time.monotonic()
+
+    def batch_done(facts: CampaignFacts) -> None:
+        rate = facts.rate(time.monotonic() - started)
+        progress.update(task, completed=facts.inputs, description=f"fuzz {rate:.0f}/s")
 
     def found(finding: CampaignViolation) -> None:
         style = _STYLE.get(finding.kind, "bold red" if finding.counts else "yellow")
@@ -433,10 +430,10 @@ def _campaign(
         try:
             report = asyncio.run(campaign.run())
         except KeyboardInterrupt:
-            report = campaign.report
+            report = campaign.finish()
             report.interrupted = True
         except Exception as exc:  # an internal error of the fuzzer: keep what was done
-            report = campaign.report
+            report = campaign.finish()
             report.internal_error = traceback.format_exc()
             console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {escape(str(exc))}")
     if not report.target:
@@ -444,8 +441,10 @@ def _campaign(
     return report
 
 
-def _summary(console: Console, report: FuzzReport) -> None:
-    for finding in report.findings:
+def _summary(console: Console, report: RunReport) -> None:
+    facts = report.campaign
+    assert isinstance(facts, CampaignFacts)
+    for finding in facts.findings:
         console.print(finding_text(finding), markup=False, highlight=False)
     for problem in report.problems:
         console.print(f"[bold red]problem[/]: {escape(problem)}")
@@ -453,5 +452,5 @@ def _summary(console: Console, report: FuzzReport) -> None:
         console.print(report.internal_error, markup=False)
     style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
     console.print(f"target: {report.target}", markup=False)
-    console.print(report.summary_line(), markup=False)
+    console.print(facts.summary_line(report.duration), markup=False)
     console.print(f"[{style}]{report.verdict}[/] (exit {int(report.exit_code)}); seed {report.seed}")

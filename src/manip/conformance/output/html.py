@@ -30,6 +30,7 @@ from manip.conformance.output.report_view import (
     PacketRow,
     Report,
     WireOrder,
+    campaign_line,
     clause_info,
     clause_statuses,
     completeness_line,
@@ -152,6 +153,7 @@ def _summary(report: Report) -> str:
             if judged
             else ""
         )
+        + (f'<p class="campaign">{_e(campaign)}</p>' if (campaign := campaign_line(report)) else "")
         + (f'<ul class="problems">{problems}</ul>' if problems else "")
         + "</section>"
     )

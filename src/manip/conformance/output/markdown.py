@@ -19,6 +19,7 @@ from manip.conformance.output.report_view import (
     FAILING,
     OUTCOME_ORDER,
     Report,
+    campaign_line,
     clause_statuses,
     completeness_line,
     failure_groups,
@@ -108,6 +109,8 @@ def render_markdown(report: Report) -> str:
         *(f"| {o} | {int(counts.get(o, 0))} |" for o in OUTCOME_ORDER if counts.get(o, 0)),
         "",
     ]
+    if campaign := campaign_line(report):
+        lines += [_text(campaign), ""]
     if judged := completeness_line(report):
         lines += [f"**{_text(judged)}**", "", *_status_table(report)]
     for problem in [*report.get("problems", []), *report.get("unstable", [])]:

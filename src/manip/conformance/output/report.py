@@ -242,6 +242,7 @@ def clause_catalog(report: RunReport) -> dict[str, dict[str, str]]:
 def report_json(report: RunReport) -> dict[str, Any]:
     """The report as JSON-ready data (validates against :func:`load_schema`)."""
     statuses = report.clause_statuses()
+    campaign = {} if report.campaign is None else {"campaign": report.campaign.to_json(report.duration)}
     return {
         "schema_version": SCHEMA_VERSION,
         "tool": "manip-conform",
@@ -274,6 +275,7 @@ def report_json(report: RunReport) -> dict[str, Any]:
         "not_judged": report.not_judged_clauses(),
         "clauses": clause_catalog(report),
         "cases": [_case_json(r) for r in report.results],
+        **campaign,
     }
 
 

@@ -31,6 +31,7 @@ __all__ = [
     "PacketRow",
     "ReportError",
     "WireOrder",
+    "campaign_line",
     "clause_info",
     "clause_statuses",
     "completeness_line",
@@ -99,6 +100,12 @@ def not_judged_line(report: Report) -> str:
         f"{len(clauses)} MUST clause(s) not judged on this target: {listed}; what would judge each is in "
         f"brackets{world}"
     )
+
+
+def campaign_line(report: Report) -> str:
+    """A fuzz campaign in one line (its ``campaign`` block's summary); "" for every other report."""
+    campaign = report.get("campaign")
+    return f"fuzz campaign: {campaign.get('summary', '')}" if isinstance(campaign, Mapping) else ""
 
 
 def completeness_line(report: Report) -> str:

@@ -17,7 +17,7 @@ import enum
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
 from manip.conformance.judge.packets import WirePacket
 from manip.conformance.judge.verdict import (
@@ -37,6 +37,7 @@ if TYPE_CHECKING:
 
 
 __all__ = [
+    "CampaignBlock",
     "CaseResult",
     "ClauseVerdict",
     "ExitCode",
@@ -91,6 +92,9 @@ class CaseResult:
     extensions: tuple[str, ...] = ()
     """The Puma extension opcodes the case uses where the target offers them (its declaration's)."""
 
+    def __post_init__(self) -> None:
+        self.outcome = Outcome(self.outcome)  # its facts, for a result made with the outcome's name
+
     @property
     def failure(self) -> Violation | None:
         return self.violations[0] if self.violations else None
@@ -113,6 +117,15 @@ class LivenessCheck:
     alive: bool
     detail: str
     duration: float
+
+
+class CampaignBlock(Protocol):
+    """The facts a fuzz campaign adds to its report (``manip.conformance.fuzz.report.CampaignFacts``):
+    the optional ``campaign`` block of the JSON report, and its one-line summary."""
+
+    def to_json(self, duration: float) -> dict[str, Any]: ...
+
+    def summary_line(self, duration: float) -> str: ...
 
 
 @dataclass
@@ -145,6 +158,8 @@ class RunReport:
     unstable: list[str] = field(default_factory=list)
     """Suite problems found by ``--repeat``: cases whose verdict changed between seeds or between two
     runs of one seed (exit 4: a verdict that depends on the draw cannot be trusted)."""
+    campaign: CampaignBlock | None = None
+    """A fuzz campaign's own facts (``manip-conform fuzz``); None for every other command."""
 
     def capture_problem(self, problem: str) -> None:
         """The capture cannot be used (unreadable, or without the sessions asked for): exit 3."""
