@@ -300,7 +300,7 @@ def test_a_silent_peer_names_the_default_chaos_address_as_such() -> None:
         with foreign_server(_silent) as address:
             options = RunOptions(address=address, reply_timeout=0.2, connect_timeout=0.3)
             select = PatternSet.of(["server.reply.here"], "--select")
-            config = RunConfig(address, options, seed=1, select=select)
+            config = RunConfig(options, seed=1, select=select)
             return await Runner(config, all_cases()).run()
 
     report = asyncio.run(go())

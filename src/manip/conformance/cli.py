@@ -394,19 +394,18 @@ def run(
         time_scale=target_time_scale,
         max_examples=max_examples,
         address=address,
+        embedded=not host if target is None else target.embedded,
         broken_after=broken_after,
         cougar_map=target.declared_map() if target is not None else None,
         length_unit="mm" if length_unit == "auto" else length_unit,
         learn_length_unit=length_unit == "auto",
     )
     config = RunConfig(
-        address=address,
         options=options,
         seed=seed,
         select=select_set,
         skip=skip_set,
         known_failing=known_set,
-        embedded=not host if target is None else target.embedded,
         virtual_time=virtual,
         reproduce_options=_reproduce_options(
             options, server_faults, simulated=simulated, virtual=virtual, world=world, profile=server_profile

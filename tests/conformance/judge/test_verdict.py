@@ -53,7 +53,7 @@ def _blank(outcome: Outcome = Outcome.PASS, kind: str = "protocol") -> CaseResul
 
 
 def by_run(violations: list[Violation], strict: bool) -> Outcome:
-    runner = Runner(RunConfig(address="tcp://127.0.0.1:1", options=RunOptions(strict=strict), seed=0), [])
+    runner = Runner(RunConfig(options=RunOptions(address="tcp://127.0.0.1:1", strict=strict), seed=0), [])
     result = _blank()
     runner._judge(result, SimpleNamespace(reached=set(), recorded=list(violations)), None)  # type: ignore[arg-type]
     return result.outcome
@@ -76,7 +76,7 @@ def by_fuzz(violations: list[Violation], strict: bool) -> Outcome:
     """Each violation sighted by a campaign on one input of one class; the class's case in the report."""
     gen = GenOptions(select=("manip.wrong-length",))
     (kind,) = [c.id for c in gen.classes()]
-    config = CampaignConfig(seed=0, gen=gen, only=(0,), strict=strict, shrink=False)
+    config = CampaignConfig(seed=0, gen=gen, options=RunOptions(strict=strict), only=(0,), shrink=False)
     campaign = Campaign(config, SimpleNamespace(embedded=True))  # type: ignore[arg-type]
     campaign.facts.classes[kind].inputs = 1
     item = SimpleNamespace(number=0, kind=kind, note="", steps=[], requests=1)

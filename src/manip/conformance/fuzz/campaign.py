@@ -24,7 +24,7 @@ import contextlib
 import datetime
 import shlex
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -44,6 +44,7 @@ from manip.conformance.fuzz.shrink import Budget, BudgetError, ddmin
 from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, RequestStep, Step, Stray
 from manip.conformance.fuzz.target import FuzzedServer, UnreachableError
 from manip.conformance.judge.verdict import counts
+from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import RunReport
 from manip.spec import SPEC
 from manip.spec.notation import octal
@@ -57,14 +58,17 @@ COUNT_SETTLE: Final = 0.05
 
 @dataclass
 class CampaignConfig:
+    """One campaign's configuration, built once by ``manip-conform fuzz`` and read everywhere: the
+    judging settings the suite's run has too (``options``: strictness, how long answers may take, the
+    robot kind), what shapes the inputs (``gen``), and what only a campaign has."""
+
     seed: int
     gen: GenOptions
+    options: RunOptions = field(default_factory=RunOptions)
     inputs: int | None = 10_000
     seconds: float | None = None
     batch: int = 100
     only: Sequence[int] = ()
-    allowance: Allowance = field(default_factory=Allowance)
-    strict: bool = False
     shrink: bool = True
     shrink_trials: int = 200
     shrink_seconds: float = 60.0
@@ -72,7 +76,23 @@ class CampaignConfig:
     reproduce_prefix: Sequence[str] = ("manip-conform", "fuzz")
     reproduce_options: Sequence[str] = ()
     command: str = ""
-    options: dict[str, object] = field(default_factory=dict)
+    server: Mapping[str, object] = field(default_factory=dict)
+    """How the server fuzzed was chosen (its link, faults, wrist), for the report's options."""
+
+    def report_options(self) -> dict[str, object]:
+        """The report's ``options``: the campaign's settings, each read from where it is kept."""
+        return {
+            "inputs": len(self.only) if self.only else self.inputs,
+            "seconds": self.seconds,
+            "batch": self.batch,
+            "classes": list(self.gen.select),
+            "target": self.options.robot,
+            "allow_motion": self.options.allow_motion,
+            "reply_timeout": self.options.reply_timeout,
+            "deadline_scale": self.options.deadline_scale,
+            **self.server,
+            "only": list(self.only),
+        }
 
 
 @dataclass
@@ -123,8 +143,8 @@ class Campaign:
             target="",
             embedded=target.embedded,
             seed=config.seed,
-            strict=config.strict,
-            options=dict(config.options),
+            strict=config.options.strict,
+            options=config.report_options(),
             command=config.command,
             campaign=self.facts,
         )
@@ -132,6 +152,7 @@ class Campaign:
             self.facts.classes[c.id] = ClassTally(
                 c.id, c.layer, c.sends, c.expected, c.clauses, c.level, c.hazard
             )
+        self._allowance = Allowance.of(config.options)
         self._runner: BatchRunner | None = None
         self._known: dict[tuple[str, str], int] = {}
         self._bad_seen: int | None = None
@@ -172,10 +193,8 @@ class Campaign:
             report.problems.append(str(exc))
             return
         report.target = self.target.label
-        self._runner = BatchRunner(self.target.address, self.config.allowance, seed=self.config.seed)
-        first = await self._await_alive(
-            self.config.allowance.connect if not self.target.can_restart else 30.0
-        )
+        self._runner = self._new_runner()
+        first = await self._await_alive(self._allowance.connect if not self.target.can_restart else 30.0)
         if not first.alive:
             report.unreachable = True
             report.problems.append(f"the target is not alive: {first.detail}")
@@ -246,7 +265,7 @@ class Campaign:
     def _new_runner(self) -> BatchRunner:
         if self._runner is not None:
             self._runner.close()
-        return BatchRunner(self.target.address, self.config.allowance, seed=self.config.seed)
+        return BatchRunner(self.target.address, self._allowance, seed=self.config.seed)
 
     async def trial(self, inputs: list[FuzzInput]) -> tuple[list[Sighting], BatchRun, Liveness]:
         """Send one batch, check liveness, collect what the target logged and counted; judge."""
@@ -293,7 +312,11 @@ class Campaign:
             return
         kind = _class_of(o, inputs)
         finding = CampaignViolation(
-            o.violation, kind, batch, counts=counts(o.violation, self.config.strict), followers=o.followers
+            o.violation,
+            kind,
+            batch,
+            counts=counts(o.violation, self.config.options.strict),
+            followers=o.followers,
         )
         index = len(facts.findings)
         facts.findings.append(finding)

@@ -25,19 +25,17 @@ from rich.markup import escape
 from manip.commandline import CommandLine, FiniteFloat
 from manip.conformance.cli_options import check_output_paths, given, report_options
 from manip.conformance.fuzz.campaign import Campaign, CampaignConfig, CampaignEvents
-from manip.conformance.fuzz.generators import CLASSES, HAZARD_ORDER, GenOptions
+from manip.conformance.fuzz.generators import CLASSES, GenOptions
 from manip.conformance.fuzz.report import CampaignFacts, CampaignViolation, finding_text
-from manip.conformance.fuzz.session import Allowance
 from manip.conformance.fuzz.target import FuzzedServer, LaunchedServer, RemoteServer, reference_server_argv
 from manip.conformance.output.console import make_console, progress_bar
 from manip.conformance.output.documents import ReportPaths, write_reports
-from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REPLY_TIMEOUT
+from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REPLY_TIMEOUT, RunOptions
 from manip.conformance.suite.results import ExitCode, RunReport
 from manip.conformance.suite.selection import match_id
 from manip.exit_status import epilog
 from manip.links import AddressError, LinkAddress, parse_address
 from manip.reference_server import FaultSet
-from manip.spec.model import Hazard
 
 __all__ = ["fuzz_command"]
 
@@ -240,13 +238,22 @@ def fuzz_command(
     _check_options(host, launch, server_log, target_kind, allow_motion, only, server_faults, classes)
     address = _address(host)
     check_output_paths(**reports.paths)
-    hazards: frozenset[Hazard] = frozenset(HAZARD_ORDER)
-    if target_kind == "hardware" and not allow_motion:
-        hazards = frozenset({"read-only", "config"})
+    if seed is None:
+        seed = int.from_bytes(os.urandom(4), "big")
+    options = RunOptions(
+        robot="hardware" if target_kind == "hardware" else "sim",
+        allow_motion=allow_motion,
+        strict=strict,
+        reply_timeout=reply_timeout,
+        connect_timeout=connect_timeout,
+        deadline_scale=deadline_scale,
+        address=host or "",
+        embedded=address is None,
+    )
     chudp = (address.scheme == "chudp") if address is not None else link == "chudp"
     gen = GenOptions(
         link="datagram" if chudp else "stream",
-        hazards=hazards,
+        hazards=options.allowed_hazards,
         select=classes,
         contact=address.contact if address is not None else "PUMA",
     )
@@ -254,8 +261,6 @@ def fuzz_command(
         raise click.UsageError(
             "--class and --target leave no input class to send on this link (--list-classes)"
         )
-    if seed is None:
-        seed = int.from_bytes(os.urandom(4), "big")
     server = _Server(address, link, server_faults, wrist, launch, server_log)
     config = CampaignConfig(
         seed=seed,
@@ -264,28 +269,14 @@ def fuzz_command(
         seconds=seconds,
         batch=batch,
         only=only,
-        allowance=Allowance(reply_timeout, connect_timeout, deadline_scale),
-        strict=strict,
+        options=options,
         shrink=not no_shrink,
         shrink_seconds=shrink_seconds,
         restart_wait=restart_wait,
         reproduce_prefix=["manip-conform", "fuzz", *([host] if host else [])],  # as given, every parameter
         reproduce_options=_reproduce_options(classes, target_kind, allow_motion, server),
         command=shlex.join(["manip-conform", *sys.argv[1:]]),
-        options={
-            "inputs": len(only) if only else inputs,
-            "seconds": seconds,
-            "batch": batch,
-            "classes": list(classes),
-            "target": target_kind,
-            "allow_motion": allow_motion,
-            "reply_timeout": reply_timeout,
-            "deadline_scale": deadline_scale,
-            "server_faults": list(server_faults),
-            "link": "chudp" if chudp else "stream",
-            "wrist": wrist,
-            "only": list(only),
-        },
+        server={"server_faults": list(server_faults), "link": "chudp" if chudp else "stream", "wrist": wrist},
     )
     console.print(f"manip-conform fuzz: seed [bold]{seed}[/] (rerun with --seed {seed})")
     report = _campaign(config, server.fuzzed(seed), console, quiet, total=len(only) if only else inputs)

@@ -130,14 +130,15 @@ def blank_result(
 
 @dataclass
 class RunConfig:
-    address: str
-    """The target's link address (``tcp://HOST:PORT``...)."""
+    """One run's configuration, built once by its command and read everywhere: the settings cases see
+    (``options``, with the target's address and whether the suite started it), and what only the
+    runner reads.  No setting is in both."""
+
     options: RunOptions
     seed: int
     select: PatternSet = field(default_factory=PatternSet)
     skip: PatternSet = field(default_factory=PatternSet)
     known_failing: PatternSet = field(default_factory=PatternSet)
-    embedded: bool = False
     virtual_time: bool = False
     """The run's event loop is a :class:`~manip.links.virtual_clock.VirtualClockLoop` (the embedded
     server simulated on the same loop)."""
@@ -173,8 +174,8 @@ class Runner:
         self.all_cases = list(cases)
         self.events = events or RunEvents()
         self.report = RunReport(
-            target=config.address,
-            embedded=config.embedded,
+            target=config.options.address,
+            embedded=config.options.embedded,
             seed=config.seed,
             strict=config.options.strict,
             options={
@@ -221,7 +222,7 @@ class Runner:
         config = self.config
         return await open_retrying_busy(
             lambda: open_connection(
-                config.address, timeout=config.options.connect_timeout, wrap_link=config.wrap_link
+                config.options.address, timeout=config.options.connect_timeout, wrap_link=config.wrap_link
             ),
             retry=retry_busy,
         )
@@ -395,8 +396,8 @@ class Runner:
     def reproduce(self, item: Case) -> str:
         config = self.config
         words = [*config.reproduce_prefix]
-        if not config.embedded:
-            words.append(config.address)
+        if not config.options.embedded:
+            words.append(config.options.address)
         words += ["--select", item.id, "--seed", str(config.seed), *config.reproduce_options]
         return shlex.join(words)
 
