@@ -718,9 +718,9 @@ def coverage_command(fmt: str, parties: tuple[str, ...]) -> None:
 )
 @document_options
 def report_command(report_file: Path, reports: ReportPaths) -> None:
-    """Render a saved JSON report (of run, verify or replay --json) as a one-file HTML report and/or a
-    Markdown summary.  Exit 0 when written, whatever the run's verdict; 2 on a usage error or a file
-    that is not a manip-conform JSON report."""
+    """Render a saved JSON report (of run, client, verify, replay or fuzz --json) as a one-file HTML
+    report and/or a Markdown summary.  Exit 0 when written, whatever the run's verdict; 2 on a usage
+    error or a file that is not a manip-conform JSON report."""
     if not reports.paths:
         raise click.UsageError("give --html FILE, --markdown FILE or both")
     check_output_paths(**reports.paths)
