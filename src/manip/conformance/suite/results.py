@@ -188,16 +188,16 @@ class RunReport:
 
     @property
     def exit_code(self) -> ExitCode:
-        counts = self.counts()
+        failing = {r.outcome for r in self.results if r.outcome.fails_run}
         if self.unwritten:  # a report path that cannot be written is a usage error, found late
             return ExitCode.USAGE
         if self.unreachable:
             return ExitCode.UNREACHABLE
         if self.interrupted or self.internal_error or self.unstable:
             return ExitCode.INTERNAL
-        if counts["fail"] or counts["fixed"] or self.problems:
+        if failing - {Outcome.ERROR} or self.problems:
             return ExitCode.NON_CONFORMANT
-        if counts["error"]:  # the one outcome failing the run that is the suite's, not the target's
+        if failing:  # only errors: they fail the run, but they are the suite's, not the target's
             return ExitCode.INTERNAL
         return ExitCode.CONFORMANT
 
