@@ -15,7 +15,7 @@ from manip.codecs.framing import decode_chudp, decode_tcp, encode_chudp, encode_
 from manip.codecs.messages import encode_error, encode_reply
 from manip.codecs.packet import Packet
 from manip.codecs.pdp11float import pack_f
-from manip.conformance.fuzz.generators import CLASSES, GenOptions, generate, stray_index
+from manip.conformance.fuzz.generators import INPUT_CLASSES, GenOptions, generate, stray_index
 from manip.conformance.fuzz.judge import _connection
 from manip.conformance.fuzz.oracles import oracle_findings
 from manip.conformance.fuzz.shrink import Budget, ddmin
@@ -57,7 +57,7 @@ def test_every_class_of_the_link_is_drawn(options: GenOptions) -> None:
     drawn = Counter(item.kind for item in _inputs(options, 4000))
     expected = {c.id for c in options.classes()}
     assert set(drawn) == expected
-    assert all(options.link in CLASSES[kind].links for kind in drawn)
+    assert all(options.link in INPUT_CLASSES[kind].links for kind in drawn)
 
 
 def test_the_classes_cover_what_the_issue_names() -> None:
@@ -67,7 +67,7 @@ def test_the_classes_cover_what_the_issue_names() -> None:
     assert {"link.chudp-header", "link.chudp-length", "chaos.oversize"} <= datagram
     assert {"chaos.out-of-window", "chaos.no-connection", "chaos.wrong-source", "chaos.rfc-flood"} <= stream
     assert {"manip.wrong-length", "manip.reserved-float", "manip.extreme-float", "manip.pipeline"} <= stream
-    for c in CLASSES.values():
+    for c in INPUT_CLASSES.values():
         assert c.clauses and all(clause in SPEC.clauses for clause in c.clauses), c.id
         assert c.expected and c.sends
 

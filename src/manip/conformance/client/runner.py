@@ -41,7 +41,7 @@ from manip.conformance.client.wire import (
     wire_packet,
 )
 from manip.conformance.judge.verdict import Outcome
-from manip.conformance.judge.violation import FailureKind, Violation
+from manip.conformance.judge.violation import FailureKind
 from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
 from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.invariants import CLIENT_WIRE
@@ -190,7 +190,7 @@ class ClientContext(CaseContext):
                 self.case_id,
                 self.seed,
                 session.link,
-                listener.target,
+                listener.address,
                 "PUMA",
                 self.timeout if timeout is None else timeout,
                 tuple(operations),
@@ -469,7 +469,3 @@ def _judge(
 
 async def _no_connector(_retry_busy: bool) -> Any:
     raise RuntimeError("a client case plays scenarios (ctx.play); it opens no connection itself")
-
-
-def violation_text(v: Violation) -> str:
-    return f"[{v.clause}] {v.message}"

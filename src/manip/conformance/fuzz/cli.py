@@ -25,7 +25,7 @@ from rich.markup import escape
 from manip.commandline import CommandLine, FiniteFloat
 from manip.conformance.cli_options import check_output_paths, given, report_options
 from manip.conformance.fuzz.campaign import Campaign, CampaignConfig, CampaignEvents
-from manip.conformance.fuzz.generators import CLASSES, GenOptions
+from manip.conformance.fuzz.generators import INPUT_CLASSES, GenOptions
 from manip.conformance.fuzz.report import CampaignFacts, CampaignViolation, finding_text
 from manip.conformance.fuzz.target import FuzzedServer, LaunchedServer, RemoteServer, reference_server_argv
 from manip.conformance.output.console import make_console, progress_bar
@@ -58,7 +58,7 @@ def _numbers(ctx: click.Context, param: click.Parameter, value: str | None) -> t
 
 def class_listing() -> str:
     lines = []
-    for c in CLASSES.values():
+    for c in INPUT_CLASSES.values():
         links = "" if len(c.links) == 2 else f" ({', '.join(sorted(c.links))} links only)"
         lines.append(f"{c.id}  [{c.level}, {c.hazard}]{links}")
         lines.append(f"    sends:    {c.sends}")
@@ -323,7 +323,7 @@ def _check_options(
         except ValueError as exc:
             raise click.UsageError(f"--server-fault: {exc}") from None
     for pattern in classes:
-        if not any(match_id(pattern, c) for c in CLASSES):
+        if not any(match_id(pattern, c) for c in INPUT_CLASSES):
             raise click.UsageError(f"--class {pattern!r} matches no input class (--list-classes lists them)")
 
 

@@ -24,7 +24,7 @@ from typing import Final, Literal, NamedTuple, Protocol
 
 from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC
-from manip.spec.model import Level
+from manip.spec.model import LEVELS, Level
 
 __all__ = [
     "CLAUSE_STATUSES",
@@ -127,8 +127,6 @@ _FACTS: Final[Mapping[Outcome, _Facts]] = {
 if set(_FACTS) != set(Outcome):  # a new outcome must state its facts
     raise RuntimeError(f"outcomes without facts: {set(Outcome) - set(_FACTS)}")
 
-_STRENGTH: Final[Mapping[str, int]] = {"MUST": 3, "SHOULD": 2, "MAY": 1, "INFO": 0}
-
 
 def counts(violation: Violation, strict: bool) -> bool:
     """Whether ``violation`` fails what it is found in: MUST (or a level not known), or SHOULD under
@@ -138,7 +136,7 @@ def counts(violation: Violation, strict: bool) -> bool:
 
 def strongest_first(violations: Iterable[Violation]) -> list[Violation]:
     """``violations`` the strongest level first (stable: their order within one level is kept)."""
-    return sorted(violations, key=lambda v: -_STRENGTH[v.strength])
+    return sorted(violations, key=lambda v: LEVELS.index(v.strength))
 
 
 _REGRADED: Final = frozenset({Outcome.PASS, Outcome.SKIP, Outcome.NOT_JUDGED, Outcome.UNSUPPORTED})

@@ -25,14 +25,13 @@ from manip.conformance.output.culprit import AFTER, BEFORE, OPENING
 from manip.conformance.output.report_view import (
     ATTENTION,
     FAILING,
-    LEVELS,
     OUTCOME_ORDER,
     PacketRow,
     Report,
     WireOrder,
     campaign_line,
     clause_info,
-    clause_statuses,
+    clause_status_entries,
     completeness_line,
     failure_groups,
     group_message,
@@ -43,6 +42,7 @@ from manip.conformance.output.report_view import (
     target_label,
     wire_order,
 )
+from manip.spec.model import LEVELS
 
 __all__ = ["render_html"]
 
@@ -263,7 +263,7 @@ def _clause_table(report: Report) -> str:
         for clause in c["clauses"]:
             cited.setdefault(clause, Counter())[c["outcome"]] += 1
     broken: Mapping[str, Mapping[str, Any]] = {t["clause"]: t for t in report["by_clause"] if t["clause"]}
-    statuses = clause_statuses(report)
+    statuses = clause_status_entries(report)
     rows = []
     for clause in sorted(
         cited, key=lambda k: (-int(broken.get(k, {}).get("failures", 0)), k not in broken, k)

@@ -20,7 +20,7 @@ from manip.conformance.output.report_view import (
     OUTCOME_ORDER,
     Report,
     campaign_line,
-    clause_statuses,
+    clause_status_entries,
     completeness_line,
     failure_groups,
     group_message,
@@ -66,7 +66,7 @@ def _status_table(report: Report) -> list[str]:
     """Every clause of the run with its status, folded (held and broken first, then what was not
     judged or not exercised, with why and what would judge it)."""
     statuses = sorted(
-        clause_statuses(report).values(),
+        clause_status_entries(report).values(),
         key=lambda s: (
             ("broken", "not-judged", "not-exercised", "held").index(str(s["status"])),
             s["clause"],

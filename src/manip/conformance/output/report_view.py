@@ -25,7 +25,6 @@ from manip.spec import SPEC
 __all__ = [
     "ATTENTION",
     "FAILING",
-    "LEVELS",
     "OUTCOME_ORDER",
     "ClauseInfo",
     "PacketRow",
@@ -33,7 +32,7 @@ __all__ = [
     "WireOrder",
     "campaign_line",
     "clause_info",
-    "clause_statuses",
+    "clause_status_entries",
     "completeness_line",
     "failure_groups",
     "group_message",
@@ -53,7 +52,6 @@ FAILING: Final = frozenset(o for o in Outcome if o.fails_run)
 """Outcomes that fail the run."""
 ATTENTION: Final = frozenset(o for o in Outcome if o.needs_attention)
 """Outcomes a reader needs to look at (the rest are quiet: passed, skipped, not run...)."""
-LEVELS: Final = ("MUST", "SHOULD", "MAY", "INFO")
 _REQUIRED: Final = ("verdict", "exit_code", "counts", "cases", "by_clause", "seed", "target")
 Report = Mapping[str, Any]
 
@@ -114,8 +112,10 @@ def completeness_line(report: Report) -> str:
     return str(completeness.get("text", "")) if isinstance(completeness, Mapping) else ""
 
 
-def clause_statuses(report: Report) -> dict[str, Mapping[str, Any]]:
-    """Each clause's status entry (``clause_status``: status, why, hint, cases), by clause id."""
+def clause_status_entries(report: Report) -> dict[str, Mapping[str, Any]]:
+    """Each clause's status as a report read back saved it (its ``clause_status`` entries: status, why,
+    hint, cases), by clause id; a run computes them with
+    :func:`~manip.conformance.judge.verdict.clause_statuses`."""
     return {str(s["clause"]): s for s in report.get("clause_status", []) if isinstance(s, Mapping)}
 
 
