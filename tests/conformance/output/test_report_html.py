@@ -391,6 +391,7 @@ def test_a_fuzz_campaign_writes_the_suites_documents(fuzz_campaign: Run) -> None
     assert failed["id"] == "manip.wrong-length" and failed["kind"] == "fuzz"
     markdown = fuzz_campaign.markdown.read_text()
     assert "fuzz campaign: 100 inputs" in markdown and "request.data-length" in markdown
+    assert markdown.splitlines()[2].startswith("1 case against the embedded reference server")
     assert failed["reproduce"] in markdown
     page = Page(fuzz_campaign.html.read_text())
     assert "fuzz campaign: 100 inputs" in page.by_class("campaign", "p")[0].content

@@ -25,6 +25,7 @@ from manip.conformance.output.report_view import (
     failure_groups,
     group_message,
     not_judged_line,
+    plural,
     seeded,
     target_label,
 )
@@ -98,7 +99,7 @@ def render_markdown(report: Report) -> str:
     lines = [
         f"## manip-conform: {_text(report['verdict'])} (exit {int(report['exit_code'])})",
         "",
-        f"{len(report['cases'])} cases against "
+        f"{plural(len(report['cases']), 'case')} against "
         + (target_label(report) + ", " if report.get("embedded") else f"{_code(report['target'])}, ")
         + (f"seed {int(report['seed'])}, " if seeded(report) and not report.get("embedded") else "")
         + f"{float(report.get('duration', 0.0)):.1f} s"
