@@ -149,17 +149,18 @@ class CampaignFacts:
 
     def summary_line(self, duration: float) -> str:
         counts = self.counts()
-        kinds = ", ".join(f"{n} {_plural(KIND_NAMES[kind], n)}" for kind, n in counts.items())
+        kinds = ", ".join(_count(n, KIND_NAMES[kind]) for kind, n in counts.items())
         logs = (
             ""
             if self.tracebacks_seen is None
-            else f"; {self.tracebacks_seen} traceback(s) in the target's log"
+            else f"; {_count(self.tracebacks_seen, 'traceback')} in the target's log"
         )
         return (
-            f"{self.inputs} inputs ({self.requests} requests) in {duration:.1f} s "
-            f"({self.rate(duration):.0f} inputs/s), {self.batches} batches, "
-            f"{self.liveness_checks - self.liveness_failures} of {self.liveness_checks} liveness checks "
-            f"passed{logs}; {kinds}" + (f"; {self.warnings} warning(s)" if self.warnings else "")
+            f"{_count(self.inputs, 'input')} ({_count(self.requests, 'request')}) in {duration:.1f} s "
+            f"({self.rate(duration):.0f} inputs/s), {_count(self.batches, 'batch')}, "
+            f"{self.liveness_checks - self.liveness_failures} of "
+            f"{_count(self.liveness_checks, 'liveness check')} passed{logs}; {kinds}"
+            + (f"; {_count(self.warnings, 'warning')}" if self.warnings else "")
         )
 
     def to_json(self, duration: float) -> dict[str, Any]:
@@ -196,7 +197,12 @@ class CampaignFacts:
 def _plural(word: str, n: int) -> str:
     if n == 1:
         return word
-    return word + ("es" if word.endswith("sh") else "s")
+    return word + ("es" if word.endswith(("sh", "ch")) else "s")
+
+
+def _count(n: int, word: str) -> str:
+    """``1 batch``, ``3 batches``."""
+    return f"{n} {_plural(word, n)}"
 
 
 def finding_json(f: CampaignViolation) -> dict[str, Any]:
