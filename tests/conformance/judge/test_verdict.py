@@ -76,7 +76,8 @@ def by_fuzz(violations: list[Violation], strict: bool) -> Outcome:
     """Each violation sighted by a campaign on one input of one class; the class's case in the report."""
     gen = GenOptions(select=("manip.wrong-length",))
     (kind,) = [c.id for c in gen.classes()]
-    config = CampaignConfig(seed=0, gen=gen, options=RunOptions(strict=strict), only=(0,), shrink=False)
+    options = RunOptions(strict=strict, embedded=True)
+    config = CampaignConfig(seed=0, gen=gen, options=options, only=(0,), shrink=False)
     campaign = Campaign(config, SimpleNamespace(embedded=True))  # type: ignore[arg-type]
     campaign.facts.classes[kind].inputs = 1
     item = SimpleNamespace(number=0, kind=kind, note="", steps=[], requests=1)

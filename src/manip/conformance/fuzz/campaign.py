@@ -141,7 +141,7 @@ class Campaign:
         self.facts = CampaignFacts()
         self.report = RunReport(
             target="",
-            embedded=target.embedded,
+            embedded=config.options.embedded,
             seed=config.seed,
             strict=config.options.strict,
             options=config.report_options(),
