@@ -49,6 +49,9 @@ FAULTS: Final[Mapping[str, str]] = {
     "type, a TICK of the wrong length) and carries on (FrameDecoder.feed, for CougarEnd)",
     "link-ignores-wrong-side": "the link takes a HELLO naming the Cougar's own role and ignores frames "
     "only Cougar sends (COUGAR, TICKED) instead of ending (CougarEnd)",
+    "link-hello-optional": "the link takes a first frame that is not HELLO as if HELLO had come before it "
+    "(_End._frames)",
+    "link-ignores-version": "the link takes a HELLO of any version, not only 1 (_End._frames)",
     "link-tick-backwards-runs": "a TICK earlier than the one before it runs at the earlier tick's time "
     "instead of ending the link (CougarEnd._model_time)",
     "link-ignores-bye": "the link carries on after the Puma's BYE (CougarEnd, _End._frames)",

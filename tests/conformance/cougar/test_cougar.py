@@ -47,6 +47,8 @@ CATCHERS = {
     "rraw-less-offsets": "cougar.rraw.before-offsets",
     "link-skips-bad-frames": "cougar.link.unknown-type",
     "link-ignores-wrong-side": "cougar.link.wrong-side",
+    "link-hello-optional": "cougar.link.not-hello-first",
+    "link-ignores-version": "cougar.link.hello-other-version",
     "link-tick-backwards-runs": "cougar.link.tick-backwards",
     "link-ignores-bye": "cougar.link.bye",
     "link-busy-serves-second": "cougar.link.busy",
