@@ -305,6 +305,31 @@ def test_a_world_that_cannot_arrange_leaves_the_case_not_judged(
     assert result.outcome == "not-judged" and reason in result.reason, (result.outcome, result.reason)
 
 
+class ClaimingWorld:
+    """A world that says it arranged every condition and does nothing: the server meets none of them."""
+
+    description = "a world that arranges nothing it claims"
+
+    @asynccontextmanager
+    async def arranged(self, condition: object) -> AsyncIterator[None]:
+        yield
+
+
+def test_a_calibration_that_succeeds_under_an_arranged_failure_is_reported() -> None:
+    """Calibrate answered done while the world holds a calibration failure is a wrong answer: the case
+    reports it against calibrate.nzi naming the answer (a warning: the clause is the 1985 guide's
+    example, MAY), never ends not judged."""
+
+    async def go() -> RunReport:
+        async with world_server() as (server, _):
+            return await run_cases(server.address, ["server.error.fatal-then-close"], ClaimingWorld())
+
+    (result,) = asyncio.run(go()).results
+    assert result.outcome == "warn", (result.outcome, result.reason)
+    assert result.violations[0].clause == "calibrate.nzi", result.violations
+    assert "F NZI naming joints" in result.violations[0].expected
+
+
 def test_the_world_cases_judge_through_a_world_over_tcp() -> None:
     async def go() -> RunReport:
         async with world_server() as (server, url), open_world(url) as world:

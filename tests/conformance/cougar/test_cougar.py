@@ -91,6 +91,17 @@ def test_fault_is_caught(fault: str) -> None:
     catcher = next(r for r in report.results if r.id == CATCHERS[fault])
     assert catcher.violations and all(v.clause for v in catcher.violations)
     assert f"--cougar-fault {fault}" in catcher.reproduce
+    # every case passes on the clean simulator: a wrong answer fails, or leaves a case not judged naming
+    # the case that judges it, and never makes one skip
+    skipped = [(r.id, r.reason) for r in report.results if r.outcome == "skip"]
+    assert not skipped, f"fault {fault} makes cases skip that pass on the clean Cougar: {skipped}"
+    ids = {c.id for c in all_cases()}
+    unnamed = [
+        (r.id, r.reason)
+        for r in report.results
+        if r.outcome == "not-judged" and not any(i in r.reason for i in ids)
+    ]
+    assert not unnamed, f"fault {fault} leaves cases not judged naming nothing that judges them: {unnamed}"
 
 
 def test_every_must_cougar_clause_has_a_case() -> None:

@@ -121,6 +121,9 @@ def test_wrist_side_fault_is_caught_by_its_case(fault: Fault) -> None:
     assert got[CATCHERS[fault]] == ("fail" if must else "warn"), got
     if must:
         assert report.exit_code == ExitCode.NON_CONFORMANT
+    # every case passes on the clean server: a wrong answer never makes one skip or leaves it not judged
+    unjudged = [(r.id, r.outcome, r.reason) for r in report.results if r.outcome in ("skip", "not-judged")]
+    assert not unjudged, f"fault {fault.value} leaves cases unjudged that pass when clean: {unjudged}"
 
 
 @pytest.mark.slow

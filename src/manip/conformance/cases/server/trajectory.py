@@ -214,8 +214,15 @@ async def ready_position(ctx: CaseContext) -> None:
     """Move to ready (214) ends at the joint angles describe self states as :ready-position."""
     probe = await ctx.connect()
     arm = await describe_target(ctx, probe)
-    if arm.stated_ready is None:
-        ctx.skip("the description states no usable :ready-position (one number per joint)")
+    if arm.ready_value is None:
+        ctx.skip("the description states no :ready-position")
+    if arm.stated_ready is None:  # stated, but not angles: a wrong answer, never a skip
+        ctx.fail(
+            "the stated :ready-position is not one angle per joint",
+            clause="describe.ready-position",
+            expected=f":ready-position as {arm.dof} numbers, one angle per degree of freedom",
+            actual=repr(arm.ready_value),
+        )
     await power_on(ctx, probe)
     start = await read_floats(ctx, probe, "joint-angles")
     away = list(start)
