@@ -508,6 +508,8 @@ class TargetArm:
     degree of freedom)."""
     ready_value: LispValue | None = None
     """The :ready-position value as describe self gave it, usable or not (None: not given)."""
+    described: bool = False
+    """Describe self answered with a whole, readable description (the values above may come from it)."""
 
 
 def _number(value: LispValue) -> float | None:
@@ -551,9 +553,17 @@ async def describe_target(ctx: CaseContext, probe: Probe) -> TargetArm:
     ready = _stated_ready(value, dof)
     if limits is None:
         ctx.note("describe self gives no usable :joint-limits; assuming the PUMA 600's")
-        return TargetArm(dof=dof, operations=operations, stated_ready=ready, ready_value=value)
+        return TargetArm(
+            dof=dof, operations=operations, stated_ready=ready, ready_value=value, described=True
+        )
     return TargetArm(
-        limits=limits, declared=True, dof=dof, operations=operations, stated_ready=ready, ready_value=value
+        limits=limits,
+        declared=True,
+        dof=dof,
+        operations=operations,
+        stated_ready=ready,
+        ready_value=value,
+        described=True,
     )
 
 

@@ -214,6 +214,11 @@ async def ready_position(ctx: CaseContext) -> None:
     """Move to ready (214) ends at the joint angles describe self states as :ready-position."""
     probe = await ctx.connect()
     arm = await describe_target(ctx, probe)
+    if not arm.described:  # a wrong answer, never a skip
+        ctx.not_judged(
+            "describe self gave no whole, readable description to take a :ready-position from "
+            "(server.describe.reply-shape and server.describe.alist judge its answer)"
+        )
     if arm.ready_value is None:
         ctx.skip("the description states no :ready-position")
     if arm.stated_ready is None:  # stated, but not angles: a wrong answer, never a skip
