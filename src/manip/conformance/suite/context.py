@@ -867,11 +867,6 @@ def _request_name(code: int) -> str:
     return op.name if op is not None else octal(code)
 
 
-def request_packets(packets: Sequence[WirePacket]) -> list[WirePacket]:
-    """The client's requests of a recording."""
-    return [p for p in packets if p.direction == "c2s" and not p.is_close]
-
-
 def _loop_clock() -> Callable[[], float]:
     """The running loop's clock (the one every deadline uses), or the monotonic clock outside a loop."""
     try:

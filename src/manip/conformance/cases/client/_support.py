@@ -4,13 +4,12 @@ reported against what the judging server sent."""
 from __future__ import annotations
 
 import random
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any, Final
 
 from manip.codecs.error_string import ErrorMessage, format_joint_mask
 from manip.codecs.messages import decode_reply, response_layout
-from manip.codecs.packet import Packet
-from manip.codecs.pdp11float import f_to_u32, u32_to_f
+from manip.codecs.pdp11float import u32_to_f
 from manip.conformance.client.contract import Op, Result
 from manip.conformance.client.runner import ClientContext, Play
 from manip.conformance.judge.diagnosis import number_diagnosis
@@ -294,15 +293,6 @@ def render(error: ErrorMessage) -> str:
                 continue
         out.append(ch)
     return "".join(out)
-
-
-def data_packets(packets: Sequence[Packet]) -> list[Packet]:
-    return [p for p in packets if p.opcode >= 0o200]
-
-
-def floats_words(values: Sequence[float]) -> bytes:
-    """Floats as wire bytes."""
-    return b"".join(f_to_u32(v).to_bytes(4, "little") for v in values)
 
 
 def spec_request(name: str) -> RequestOpcode:

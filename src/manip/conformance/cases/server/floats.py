@@ -19,7 +19,6 @@ TINY = 1e-38
 HUGE = 1.0e38
 """Near the top of the F range (1.7e38)."""
 POSITION_TOL_MM = 0.05
-ANGLE_TOL_DEG = 0.05
 
 
 def _dot(a: tuple[float, ...], b: tuple[float, ...]) -> float:
