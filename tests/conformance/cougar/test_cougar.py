@@ -53,6 +53,20 @@ CATCHERS = {
     "link-ignores-bye": "cougar.link.bye",
     "link-busy-serves-second": "cougar.link.busy",
 }
+LINK_PATHS = {
+    "cougar.link.bad-hello": "link-skips-bad-frames",
+    "cougar.link.unknown-type": "link-skips-bad-frames",
+    "cougar.link.short-tick": "link-skips-bad-frames",
+    "cougar.link.hello-wrong-role": "link-ignores-wrong-side",
+    "cougar.link.wrong-side": "link-ignores-wrong-side",
+    "cougar.link.not-hello-first": "link-hello-optional",
+    "cougar.link.hello-other-version": "link-ignores-version",
+    "cougar.link.tick-backwards": "link-tick-backwards-runs",
+    "cougar.link.bye": "link-ignores-bye",
+    "cougar.link.busy": "link-busy-serves-second",
+}
+"""Every error path of the DRV-11J link (a case each) and the Cougar fault that must make it fail: a
+fault that breaks several paths is caught on each of them, not only by its catcher."""
 OPTIONS = RunOptions(reply_timeout=1.0, connect_timeout=2.0)
 
 
@@ -79,6 +93,9 @@ def test_every_fault_has_a_catching_case() -> None:
     assert set(CATCHERS) == set(FAULTS)
     ids = {c.id for c in all_cases()}
     assert set(CATCHERS.values()) <= ids
+    link_cases = {c.id for c in all_cases() if c.module.endswith(".link_errors")}
+    assert set(LINK_PATHS) == link_cases, "every error path of the link has the fault that breaks it"
+    assert set(LINK_PATHS.values()) == {f for f in FAULTS if f.startswith("link-")}
 
 
 @pytest.mark.parametrize("fault", sorted(FAULTS))
@@ -91,6 +108,8 @@ def test_fault_is_caught(fault: str) -> None:
     catcher = next(r for r in report.results if r.id == CATCHERS[fault])
     assert catcher.violations and all(v.clause for v in catcher.violations)
     assert f"--cougar-fault {fault}" in catcher.reproduce
+    paths = {case: got[case] for case, path_fault in LINK_PATHS.items() if path_fault == fault}
+    assert set(paths.values()) <= {"fail"}, f"link error paths of {fault} not caught: {paths}"
     # every case passes on the clean simulator: a wrong answer fails, or leaves a case not judged naming
     # the case that judges it, and never makes one skip
     skipped = [(r.id, r.reason) for r in report.results if r.outcome == "skip"]
