@@ -25,6 +25,8 @@ from manip.cougar.cli import main as cougar_main
 from manip.cougar.cli import serve_cougar
 from manip.cougar.faults import FAULTS, parse_faults
 from manip.cougar.link import CougarEnd, Drv11jError, PumaEnd, Tick, encode_frame
+from tests.support.paths import ROOT
+from tests.support.servers import MANIP_COUGAR, StartServer
 
 #: The case written to catch each fault (others may catch it too).
 CATCHERS = {
@@ -68,6 +70,8 @@ LINK_PATHS = {
 """Every error path of the DRV-11J link (a case each) and the Cougar fault that must make it fail: a
 fault that breaks several paths is caught on each of them, not only by its catcher."""
 OPTIONS = RunOptions(reply_timeout=1.0, connect_timeout=2.0)
+MEMORY_MAP = ROOT / "examples" / "cougar-memory-map.toml"
+"""manip's Cougar memory map as a file, declared for a manip-cougar process as for any external Cougar."""
 
 
 def run(target: CougarTarget, select: Iterable[str] = ()) -> RunReport:
@@ -121,6 +125,28 @@ def test_fault_is_caught(fault: str) -> None:
         if r.outcome == "not-judged" and not any(i in r.reason for i in ids)
     ]
     assert not unnamed, f"fault {fault} leaves cases not judged naming nothing that judges them: {unnamed}"
+
+
+def cases_catching(fault: str) -> list[str]:
+    """The case written to catch ``fault`` and the link error paths it breaks."""
+    return sorted({CATCHERS[fault], *(case for case, f in LINK_PATHS.items() if f == fault)})
+
+
+@pytest.mark.waits
+@pytest.mark.parametrize("fault", ["", *sorted(FAULTS)], ids=lambda f: f or "clean")
+def test_fault_of_a_manip_cougar_process_is_caught_over_its_link(
+    fault: str, manip_server: StartServer
+) -> None:
+    """A manip-cougar process with the fault (``--cougar-fault``), judged over its DRV-11J link as any
+    external Cougar is (its memory map declared with the example file, ``--memory-map``), fails the cases
+    that catch the fault in the embedded Cougar; the clean process passes every one of them."""
+    selected = sorted({c for f in FAULTS for c in cases_catching(f)}) if not fault else cases_catching(fault)
+    process = manip_server("--seed", "7", *(("--cougar-fault", fault) if fault else ()), command=MANIP_COUGAR)
+    report = run(CougarTarget.parse(process.url, memory_map=MEMORY_MAP), select=selected)
+    got = outcomes(report)
+    assert set(got) == set(selected), got
+    want = "fail" if fault else "pass"
+    assert set(got.values()) == {want}, [(r.id, r.outcome, r.reason, r.violations) for r in report.results]
 
 
 def test_every_must_cougar_clause_has_a_case() -> None:
