@@ -43,6 +43,9 @@ FAULTS: Final[Mapping[str, str]] = {
     "(Jacob._encode)",
     "filter-truncates-terms": "ADC8 shifts each term of the sum right by 3 before adding, so a constant "
     "input settles up to 7 counts low (CougarSim._adc8)",
+    "guards-sensed-force": "GUARDM tests the sensed force, before GRAVITY's correction (CougarSim._guardm)",
+    "compliance-sensed-force": "NPR's compliance equation uses the sensed force, before GRAVITY's "
+    "correction (CougarSim._newpr)",
     "rraw-less-offsets": "RRAW reports the readings with the gauge offsets subtracted, not the gauges as "
     "read (CougarSim._reraw)",
     "link-skips-bad-frames": "the DRV-11J link drops a frame it cannot decode (a bad HELLO, an unknown "

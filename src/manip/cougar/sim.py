@@ -393,7 +393,7 @@ class CougarSim:
         active = mem.word("guard_active")
         if not active:
             return
-        force = mem.array("force")
+        force = mem.array("force_sensed" if "guards-sensed-force" in self._faults else "force")
         base = region("guards").address
         for i in range(16):
             if not active >> i & 1:
@@ -464,7 +464,7 @@ class CougarSim:
             k=np.zeros(6) if "npr-ignores-k" in self._faults else mem.array("k"),
             b=b.T if "nb-transposed" in self._faults else b,
             fc=mem.array("fc"),
-            force=mem.array("force"),
+            force=mem.array("force_sensed" if "compliance-sensed-force" in self._faults else "force"),
             theta_error=theta_error,
             rate_difference=mem.array("rate_difference"),
         )

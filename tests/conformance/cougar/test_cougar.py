@@ -47,6 +47,8 @@ CATCHERS = {
     "jacobian-transpose-not-stored": "cougar.jacob.transpose-stored",
     "filter-truncates-terms": "cougar.adc8.integer-filter",
     "rraw-less-offsets": "cougar.rraw.before-offsets",
+    "guards-sensed-force": "cougar.guard.gravity-corrected",
+    "compliance-sensed-force": "cougar.gravity.compliance-corrected",
     "link-skips-bad-frames": "cougar.link.unknown-type",
     "link-ignores-wrong-side": "cougar.link.wrong-side",
     "link-hello-optional": "cougar.link.not-hello-first",
