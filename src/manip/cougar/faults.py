@@ -29,6 +29,9 @@ FAULTS: Final[Mapping[str, str]] = {
     "ignores-guardc": "GUARDC leaves the guard armed (CougarSim._guardc)",
     "rst-ignored": "RST leaves the velocities as they were (CougarSim._resetw)",
     "npr-ignores-k": "the compliance equation leaves out the spring term K (CougarSim._newpr)",
+    "npr-ignores-fc": "the compliance equation leaves out the commanded force NFC (CougarSim._newpr)",
+    "nbji-first-only": "the compliance equation scales every joint by NBJI's first element, not each by "
+    "its own (CougarSim._newpr)",
     "filter-con-swapped": "FILTER weighs the filtered value with con4 and the sample with con3 "
     "(CougarSim._newpr)",
     "gravity-fixed-orientation": "GRAVITY takes the hand to be at READY whatever angles SEN or NPR sent "

@@ -211,6 +211,7 @@ class CougarSim:
             self.config.geometry,
             mm_per_unit=self.config.mm_per_unit,
             transpose_stored="jacobian-transpose-not-stored" not in self._faults,
+            bji_per_joint="nbji-first-only" not in self._faults,
         )
         self._stats = CougarStats()
         self._pose: tuple[float, ...] = tuple(float(q) for q in self.config.initial_angles)
@@ -463,7 +464,7 @@ class CougarSim:
             p,
             k=np.zeros(6) if "npr-ignores-k" in self._faults else mem.array("k"),
             b=b.T if "nb-transposed" in self._faults else b,
-            fc=mem.array("fc"),
+            fc=np.zeros(6) if "npr-ignores-fc" in self._faults else mem.array("fc"),
             force=mem.array("force_sensed" if "compliance-sensed-force" in self._faults else "force"),
             theta_error=theta_error,
             rate_difference=mem.array("rate_difference"),

@@ -39,6 +39,8 @@ CATCHERS = {
     "ignores-guardc": "cougar.guard.clear",
     "rst-ignored": "cougar.rst.zeroes-velocities",
     "npr-ignores-k": "cougar.npr.gains",
+    "npr-ignores-fc": "cougar.gravity.compliance-corrected",
+    "nbji-first-only": "cougar.npr.gains",
     "filter-con-swapped": "cougar.filter.output",
     "gravity-fixed-orientation": "cougar.gravity.point-mass",
     "gravity-ignores-cg": "cougar.gravity.point-mass",
