@@ -97,6 +97,7 @@ CATCHERS = {
     Fault.ASYNC_SPLITS_MULTI: "server.describe.not-split",
     Fault.SPEED_IGNORED: "server.speed.scales",
     Fault.QUEUE_REVERSED: "server.motion.queued-segments",
+    Fault.JOINT_MOVES_STRAIGHT: "server.motion.joint-interpolated",
 }
 """Faults and the case written to catch each: it must fail, or warn for a SHOULD clause (others may catch
 the fault too)."""

@@ -63,6 +63,7 @@ OTHERS = (
     "server.motion.joint-order",
     "server.connect.abort-not-carried",
     "server.describe.not-split",
+    "server.motion.joint-interpolated",
 )
 """A few cases that need no world, for the comparison of verdicts: among them the catchers of the
 defects in :data:`WORLD_FAULTS` that need no world, so each passes the clean process it fails with the
@@ -422,12 +423,14 @@ WORLD_FAULTS = (
     Fault.JOINTS_REVERSED,
     Fault.KEEPS_ABORT,
     Fault.ASYNC_SPLITS_MULTI,
+    Fault.JOINT_MOVES_STRAIGHT,
 )
 """Defects that show only under a condition of the world (every protocol fault on a world case's
 path), and the other server defects found from outside that the 1985 guide's statements were re-judged
 for (the lefty side, the joint order, an abort carried into the next connection, an asynchronous packet
-inside a multi-packet reply), each caught through a manip-server process with its world by the case in
-:data:`CATCHER`, as the embedded server's fault matrix (``tests/conformance/test_faults.py``) catches it."""
+inside a multi-packet reply, a Move that is not joint-interpolated), each caught through a manip-server
+process with its world by the case in :data:`CATCHER`, as the embedded server's fault matrix
+(``tests/conformance/test_faults.py``) catches it."""
 CATCHER = {
     Fault.FATAL_WITHOUT_CLOSE: "server.error.fatal-then-close",
     Fault.FATAL_NUMBER_PREVIOUS: "server.error.fatal-then-close",
@@ -448,6 +451,7 @@ CATCHER = {
     Fault.JOINTS_REVERSED: "server.motion.joint-order",
     Fault.KEEPS_ABORT: "server.connect.abort-not-carried",
     Fault.ASYNC_SPLITS_MULTI: "server.describe.not-split",
+    Fault.JOINT_MOVES_STRAIGHT: "server.motion.joint-interpolated",
 }
 SHOULD_BROKEN = (Fault.FATAL_SEVERITY_E, Fault.ASYNC_SPLITS_MULTI, Fault.CONFIGURATION_SWAPPED)
 """Faults that break a SHOULD clause: their case warns."""

@@ -121,6 +121,7 @@ class Fault(enum.StrEnum):
     WRIST_USER_HELD_COMPLIANT = "wrist-user-held-compliant"
     OUT_OF_SYNC_IGNORED = "out-of-sync-ignored"
     GUARDS_OUTLIVE_CONNECTION = "guards-outlive-connection"
+    JOINT_MOVES_STRAIGHT = "joint-moves-straight"
 
 
 Kind = Literal["environment", "protocol"]
@@ -732,6 +733,13 @@ FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
                 "protocol",
                 "The guards a connection left armed on Cougar stay armed for the next connection.",
                 "puma.wrist.connection-state",
+            ),
+            _info(
+                Fault.JOINT_MOVES_STRAIGHT,
+                "protocol",
+                "Move and incremental move (204, 211) go along a straight line, interpolated in Cartesian "
+                "space: the joints do not keep together.",
+                "joint-move.interpolated",
             ),
         ]
     )
