@@ -23,56 +23,13 @@ from manip.conformance.suite.results import ExitCode, RunReport
 from manip.cougar import CougarConfig, CougarSim
 from manip.cougar.cli import main as cougar_main
 from manip.cougar.cli import serve_cougar
-from manip.cougar.faults import FAULTS, parse_faults
+from manip.cougar.faults import CougarFault, parse_faults
 from manip.cougar.link import CougarEnd, Drv11jError, PumaEnd, Tick, encode_frame
 from tests.support.paths import ROOT
 from tests.support.servers import MANIP_COUGAR, StartServer
 
-#: The case written to catch each fault (others may catch it too).
-CATCHERS = {
-    "wrong-version-code": "cougar.reply.version",
-    "no-out-of-sync": "cougar.comint.unknown-code",
-    "guard-trips-twice": "cougar.guard.trips-once",
-    "forces-wrong-sign": "cougar.forces.conversion",
-    "exmn-wrong-count": "cougar.reply.exmn",
-    "comint-executes-partial": "cougar.comint.partial-waits",
-    "ignores-guardc": "cougar.guard.clear",
-    "rst-ignored": "cougar.rst.zeroes-velocities",
-    "npr-ignores-k": "cougar.npr.gains",
-    "npr-ignores-fc": "cougar.gravity.compliance-corrected",
-    "nbji-first-only": "cougar.npr.gains",
-    "filter-con-swapped": "cougar.filter.output",
-    "gravity-fixed-orientation": "cougar.gravity.point-mass",
-    "gravity-ignores-cg": "cougar.gravity.point-mass",
-    "nfv-keeps-gravity": "cougar.gravity.nfv-redoes-model",
-    "nb-transposed": "cougar.npr.damping-matrix",
-    "jacobian-transpose-not-stored": "cougar.jacob.transpose-stored",
-    "filter-truncates-terms": "cougar.adc8.integer-filter",
-    "rraw-less-offsets": "cougar.rraw.before-offsets",
-    "guards-sensed-force": "cougar.guard.gravity-corrected",
-    "compliance-sensed-force": "cougar.gravity.compliance-corrected",
-    "link-skips-bad-frames": "cougar.link.unknown-type",
-    "link-ignores-wrong-side": "cougar.link.wrong-side",
-    "link-hello-optional": "cougar.link.not-hello-first",
-    "link-ignores-version": "cougar.link.hello-other-version",
-    "link-tick-backwards-runs": "cougar.link.tick-backwards",
-    "link-ignores-bye": "cougar.link.bye",
-    "link-busy-serves-second": "cougar.link.busy",
-}
-LINK_PATHS = {
-    "cougar.link.bad-hello": "link-skips-bad-frames",
-    "cougar.link.unknown-type": "link-skips-bad-frames",
-    "cougar.link.short-tick": "link-skips-bad-frames",
-    "cougar.link.hello-wrong-role": "link-ignores-wrong-side",
-    "cougar.link.wrong-side": "link-ignores-wrong-side",
-    "cougar.link.not-hello-first": "link-hello-optional",
-    "cougar.link.hello-other-version": "link-ignores-version",
-    "cougar.link.tick-backwards": "link-tick-backwards-runs",
-    "cougar.link.bye": "link-ignores-bye",
-    "cougar.link.busy": "link-busy-serves-second",
-}
-"""Every error path of the DRV-11J link (a case each) and the Cougar fault that must make it fail: a
-fault that breaks several paths is caught on each of them, not only by its catcher."""
+#: The cases each fault declares catch it (others may catch it too): each must fail.
+CATCHERS = {fault.value: fault.caught_by for fault in CougarFault}
 OPTIONS = RunOptions(reply_timeout=1.0, connect_timeout=2.0)
 MEMORY_MAP = ROOT / "examples" / "cougar-memory-map.toml"
 """manip's Cougar memory map as a file, declared for a manip-cougar process as for any external Cougar."""
@@ -98,26 +55,32 @@ def test_clean_simulator_passes_every_cougar_case() -> None:
 
 
 def test_every_fault_has_a_catching_case() -> None:
-    assert set(CATCHERS) == set(FAULTS)
+    assert set(CATCHERS) == {f.value for f in CougarFault}
     ids = {c.id for c in all_cases()}
-    assert set(CATCHERS.values()) <= ids
-    link_cases = {c.id for c in all_cases() if c.module.endswith(".link_errors")}
-    assert set(LINK_PATHS) == link_cases, "every error path of the link has the fault that breaks it"
-    assert set(LINK_PATHS.values()) == {f for f in FAULTS if f.startswith("link-")}
+    assert all(catchers and set(catchers) <= ids for catchers in CATCHERS.values())
+    # every error path of the DRV-11J link (a case each) is declared caught by the fault that breaks it
+    link_paths = {c.id for c in all_cases() if c.module.endswith(".link_errors")}
+    declared = {
+        case for fault, catchers in CATCHERS.items() if fault.startswith("link-") for case in catchers
+    }
+    assert link_paths == declared, link_paths ^ declared
 
 
-@pytest.mark.parametrize("fault", sorted(FAULTS))
+@pytest.mark.parametrize("fault", sorted(f.value for f in CougarFault))
 def test_fault_is_caught(fault: str) -> None:
     report = run(CougarTarget.parse("sim", [fault]))
     got = outcomes(report)
-    assert got[CATCHERS[fault]] == "fail", (fault, got)
+    failed = [r for r in report.results if r.outcome == "fail"]
+    shown = ", ".join(f"{r.id} ({r.violations[0].clause if r.violations else r.reason})" for r in failed)
+    print(f"cougar fault {fault}: caught by {shown or 'NO CASE'}")
+    assert {got[case] for case in CATCHERS[fault]} == {"fail"}, (fault, got)
     assert report.exit_code == ExitCode.NON_CONFORMANT
     assert not any(o == "error" for o in got.values()), [r.traceback for r in report.results if r.traceback]
-    catcher = next(r for r in report.results if r.id == CATCHERS[fault])
-    assert catcher.violations and all(v.clause for v in catcher.violations)
-    assert f"--cougar-fault {fault}" in catcher.reproduce
-    paths = {case: got[case] for case, path_fault in LINK_PATHS.items() if path_fault == fault}
-    assert set(paths.values()) <= {"fail"}, f"link error paths of {fault} not caught: {paths}"
+    declared = set(CougarFault.named(fault).clauses)
+    for catcher in (r for r in report.results if r.id in CATCHERS[fault]):
+        assert catcher.violations and all(v.clause for v in catcher.violations)
+        assert {v.clause for v in catcher.violations} & declared, (fault, catcher.violations, declared)
+        assert f"--cougar-fault {fault}" in catcher.reproduce
     # every case passes on the clean simulator: a wrong answer fails, or leaves a case not judged naming
     # the case that judges it, and never makes one skip
     skipped = [(r.id, r.reason) for r in report.results if r.outcome == "skip"]
@@ -131,20 +94,17 @@ def test_fault_is_caught(fault: str) -> None:
     assert not unnamed, f"fault {fault} leaves cases not judged naming nothing that judges them: {unnamed}"
 
 
-def cases_catching(fault: str) -> list[str]:
-    """The case written to catch ``fault`` and the link error paths it breaks."""
-    return sorted({CATCHERS[fault], *(case for case, f in LINK_PATHS.items() if f == fault)})
-
-
 @pytest.mark.waits
-@pytest.mark.parametrize("fault", ["", *sorted(FAULTS)], ids=lambda f: f or "clean")
+@pytest.mark.parametrize("fault", ["", *sorted(f.value for f in CougarFault)], ids=lambda f: f or "clean")
 def test_fault_of_a_manip_cougar_process_is_caught_over_its_link(
     fault: str, manip_server: StartServer
 ) -> None:
     """A manip-cougar process with the fault (``--cougar-fault``), judged over its DRV-11J link as any
     external Cougar is (its memory map declared with the example file, ``--memory-map``), fails the cases
     that catch the fault in the embedded Cougar; the clean process passes every one of them."""
-    selected = sorted({c for f in FAULTS for c in cases_catching(f)}) if not fault else cases_catching(fault)
+    selected = (
+        sorted({c for catchers in CATCHERS.values() for c in catchers}) if not fault else CATCHERS[fault]
+    )
     process = manip_server("--seed", "7", *(("--cougar-fault", fault) if fault else ()), command=MANIP_COUGAR)
     report = run(CougarTarget.parse(process.url, memory_map=MEMORY_MAP), select=selected)
     got = outcomes(report)
