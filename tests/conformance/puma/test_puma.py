@@ -142,6 +142,11 @@ def _catching(fault: Fault | None) -> set[str]:
     return {c for f in PROCESS_FAULTS for c in CATCHERS[f]} if fault is None else set(CATCHERS[fault])
 
 
+PROCESS_TIME_SCALE = 0.5
+"""The server process runs at half speed (``--time-scale``, and the run is told so): a compliant segment
+lasts long enough in real time for a busy machine's suite to reach it while it runs."""
+
+
 async def _judge_a_server_process(manip_server: StartServer, fault: Fault | None) -> RunReport:
     """The judging Cougar on a free port, a manip-server process (``--cougar`` pointed at it, its world
     on another port, ``--fault`` if one), and the case catching ``fault`` (all of them when None) run
@@ -152,6 +157,7 @@ async def _judge_a_server_process(manip_server: StartServer, fault: Fault | None
     with judging(judge):
         async with serve_cougar(judge, "tcp://127.0.0.1:0") as cougar:
             args = ("--cougar", cougar.address, "--world", "tcp://127.0.0.1:0", "--log-level", "WARNING")
+            args += ("--time-scale", str(PROCESS_TIME_SCALE))
             extra = ("--fault", fault.value) if fault is not None else ()
             process = await asyncio.to_thread(manip_server, *args, *extra)
             assert process.proc.stdout is not None
@@ -162,7 +168,7 @@ async def _judge_a_server_process(manip_server: StartServer, fault: Fault | None
                 while not cougar.connections:
                     await asyncio.sleep(0.01)
             async with open_world(world_url) as world:
-                options = RunOptions(address=process.url, reply_timeout=2.0)
+                options = RunOptions(address=process.url, reply_timeout=2.0, time_scale=PROCESS_TIME_SCALE)
                 config = RunConfig(address=process.url, options=options, seed=SEED, world=world)
                 return await Runner(config, selected).run()
 
