@@ -124,6 +124,10 @@ NOT_SHOWN: dict[Fault, str] = {
         "the fault changes how the arm moves (its path or its timing), not what the server answers; the "
         "diff pairs answers, and the arm's motion is the directed cases' to judge"
     ),
+    Fault.JOINT_MOVES_STRAIGHT: (
+        "the fault changes how the arm moves (its path or its timing), not what the server answers; the "
+        "diff pairs answers, and the arm's motion is the directed cases' to judge"
+    ),
     Fault.WARNING_INTERRUPTS: (
         "the warning scenario's sluggish joint warns inside a reply on both sides; where it lands shows "
         "as an unexplained difference (c) of request.one-reply, no judge of one side reading the "
