@@ -29,6 +29,7 @@ __all__ = [
     "check_selection",
     "close_case_ids",
     "document_options",
+    "format_options",
     "given",
     "known_failing_option",
     "report_options",
@@ -60,7 +61,10 @@ strict_option = click.option(
 )
 
 
-def _format_options(forms: Sequence[ReportFormat]) -> Callable[[F], F]:
+def format_options(forms: Sequence[ReportFormat[Any]]) -> Callable[[F], F]:
+    """An option per format of ``forms``, given to the command as one ``reports`` parameter
+    (:class:`~manip.conformance.output.documents.ReportPaths`)."""
+
     def decorate(function: F) -> F:
         @functools.wraps(function)
         def command(*args: Any, **kwargs: Any) -> Any:
@@ -81,11 +85,11 @@ def _format_options(forms: Sequence[ReportFormat]) -> Callable[[F], F]:
     return decorate
 
 
-report_options = _format_options(REPORT_FORMATS)
+report_options = format_options(REPORT_FORMATS)
 """An option per report format (:data:`~manip.conformance.output.documents.REPORT_FORMATS`: ``--json``,
 ``--junit``, ``--html``, ``--markdown``), given to the command as one ``reports`` parameter
 (:class:`~manip.conformance.output.documents.ReportPaths`)."""
-document_options = _format_options([form for form in REPORT_FORMATS if form.from_data])
+document_options = format_options([form for form in REPORT_FORMATS if form.from_data])
 """The options of the formats rendered from a JSON report's data (``manip-conform report``)."""
 
 

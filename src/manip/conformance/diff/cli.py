@@ -13,7 +13,6 @@ import shlex
 import sys
 import time
 import traceback
-from pathlib import Path
 from typing import Any
 
 import click
@@ -21,26 +20,19 @@ from rich.markup import escape
 
 from manip.arm.units import LENGTH_UNITS, LengthUnit
 from manip.commandline import FiniteFloat
-from manip.conformance.cli_options import check_output_paths
+from manip.conformance.cli_options import check_output_paths, format_options
 from manip.conformance.diff.driver import DiffConfig, StreamResult, run_diff
-from manip.conformance.diff.report import (
-    DiffReport,
-    finding_lines,
-    write_html,
-    write_json,
-    write_junit,
-    write_markdown,
-)
+from manip.conformance.diff.report import DIFF_FORMATS, DiffReport, finding_lines
 from manip.conformance.diff.scenarios import SCENARIOS, scenario, scenarios
 from manip.conformance.diff.sides import Side, reachable
 from manip.conformance.diff.streams import Stream, make_stream, make_streams, stream_of
 from manip.conformance.fuzz.generators import GenOptions
 from manip.conformance.fuzz.session import Allowance
 from manip.conformance.output.console import make_console
+from manip.conformance.output.documents import write_formats
 from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REPLY_TIMEOUT
 from manip.exit_status import epilog
 from manip.links import AddressError, parse_address
-from manip.outfile import OutputError
 from manip.reference_server import FaultSet
 from manip.reference_server.session import PROFILES, server_config
 
@@ -184,34 +176,7 @@ def _numbers(ctx: click.Context, param: click.Parameter, value: str | None) -> t
     show_default=True,
     help="Seconds a connection may take to open.",
 )
-@click.option(
-    "--json",
-    "json_path",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="Write the JSON report (diff.schema.json) here.",
-)
-@click.option(
-    "--markdown",
-    "markdown_path",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="Write a Markdown report here.",
-)
-@click.option(
-    "--html",
-    "html_path",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="Write an HTML report here (both answers side by side).",
-)
-@click.option(
-    "--junit",
-    "junit_path",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="Write a JUnit XML report here (one test case per stream).",
-)
+@format_options(DIFF_FORMATS)
 @click.option("-q", "--quiet", is_flag=True, help="No line per stream; the findings and the summary only.")
 def diff_command(**options: Any) -> None:
     """Send the same request streams (the fuzzer's inputs, from one seed) to servers A and B, each stream
@@ -221,12 +186,7 @@ def diff_command(**options: Any) -> None:
     shrunk, with the nearest section of the 1985 guide).  A and B: a link address, or "embedded" (the
     reference server in virtual time, shaped by the -a/-b options)."""
     sides = (_side("A", options), _side("B", options))
-    check_output_paths(
-        json=options["json_path"],
-        markdown=options["markdown_path"],
-        html=options["html_path"],
-        junit=options["junit_path"],
-    )
+    check_output_paths(**options["reports"].paths)
     chosen = [options[k] is not None for k in ("only_stream", "only_inputs", "only_scenario")]
     if sum(chosen) > 1:
         raise click.UsageError("--stream, --inputs and --scenario each choose what is sent: give one")
@@ -373,20 +333,11 @@ def _run(
 
 
 def _write(report: DiffReport, options: dict[str, Any]) -> None:
-    for key, write in (
-        ("json_path", write_json),
-        ("markdown_path", write_markdown),
-        ("html_path", write_html),
-        ("junit_path", write_junit),
-    ):
-        path = options[key]
-        if path is None:
-            continue
-        try:
-            write(report, path)
-        except OutputError as exc:
-            click.echo(f"manip-conform: {exc}", err=True)
-            sys.exit(2)
+    problems = write_formats(report, options["reports"], DIFF_FORMATS)
+    for problem in problems:
+        click.echo(f"manip-conform: {problem}", err=True)
+    if problems:
+        sys.exit(2)
 
 
 def _summary(report: DiffReport, console: Any) -> None:

@@ -22,11 +22,13 @@ from xml.etree import ElementTree as ET
 
 from manip.conformance.diff.classify import CLASSES, Finding
 from manip.conformance.diff.driver import StreamResult
+from manip.conformance.output.documents import ReportFormat
 from manip.outfile import atomic_output
 from manip.spec import SPEC
 
 __all__ = [
     "CLASS_NAMES",
+    "DIFF_FORMATS",
     "DiffReport",
     "finding_lines",
     "load_schema",
@@ -314,3 +316,13 @@ def write_junit(report: DiffReport, path: Path) -> None:
     suite.set("failures", str(failures))
     with atomic_output(path, "wb") as fh:
         ET.ElementTree(suite).write(fh, encoding="utf-8", xml_declaration=True)
+
+
+DIFF_FORMATS: Final[tuple[ReportFormat[DiffReport], ...]] = (
+    ReportFormat("json", "Write the JSON report (diff.schema.json).", write_json),
+    ReportFormat("junit", "Write JUnit XML (a test case per stream).", write_junit),
+    ReportFormat("html", "Write an HTML report (both answers side by side).", write_html),
+    ReportFormat("markdown", "Write a Markdown report.", write_markdown),
+)
+"""The diff's report formats: the options of ``manip-conform diff`` are made from them as every judging
+command's are from :data:`~manip.conformance.output.documents.REPORT_FORMATS`."""

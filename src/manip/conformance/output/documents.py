@@ -11,10 +11,10 @@ not at all) and one :class:`ReportFormat` row here.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 from manip.conformance.output.html import render_html
 from manip.conformance.output.markdown import render_markdown
@@ -30,6 +30,7 @@ __all__ = [
     "ReportPaths",
     "render_saved",
     "write_documents",
+    "write_formats",
     "write_reports",
 ]
 
@@ -69,14 +70,18 @@ def _write_markdown(report: RunReport, path: Path) -> None:
     write_documents(report, None, path)
 
 
+R = TypeVar("R")
+"""The report a format writes: a run's :class:`RunReport`, or another command's (``diff``'s)."""
+
+
 @dataclass(frozen=True)
-class ReportFormat:
+class ReportFormat(Generic[R]):
     """One kind of report: its name, the option that asks for it, and its writer."""
 
     name: str
     """The option without its dashes, and the keyword of ``check_output_paths``."""
     help: str
-    write: Callable[[RunReport, Path], None]
+    write: Callable[[R, Path], None]
     from_data: bool = False
     """It is rendered from the JSON report's data, so ``manip-conform report`` renders a saved one."""
 
@@ -85,7 +90,7 @@ class ReportFormat:
         return f"--{self.name}"
 
 
-REPORT_FORMATS: tuple[ReportFormat, ...] = (
+REPORT_FORMATS: tuple[ReportFormat[RunReport], ...] = (
     ReportFormat("json", "Write the JSON report.", write_json),
     ReportFormat("junit", "Write JUnit XML.", write_junit),
     ReportFormat(
@@ -114,11 +119,16 @@ class ReportPaths:
 
 
 def write_reports(report: RunReport, reports: ReportPaths) -> list[str]:
-    """Every report asked for; what could not be written, one message each (the path and why).  A
-    report is written whole or not at all, and one that fails does not keep the others from being
-    written."""
+    """Every report of :data:`REPORT_FORMATS` asked for (:func:`write_formats`)."""
+    return write_formats(report, reports, REPORT_FORMATS)
+
+
+def write_formats(report: R, reports: ReportPaths, forms: Sequence[ReportFormat[R]]) -> list[str]:
+    """Every report of ``forms`` asked for; what could not be written, one message each (the path and
+    why).  A report is written whole or not at all, and one that fails does not keep the others from
+    being written."""
     problems = []
-    for form in REPORT_FORMATS:
+    for form in forms:
         path = reports.get(form.name)
         if path is None:
             continue
