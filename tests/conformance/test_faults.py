@@ -37,6 +37,7 @@ from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.runner import RunConfig, Runner
 from manip.reference_server.faults import FAULTS, WRIST_SIDE, Fault, FaultSet
 from manip.reference_server.session import ServerConfig
+from tests.support.culprits import unnamed_violations
 from tests.support.servers import StartServer
 from tests.support.suite import run_simulated
 
@@ -167,6 +168,7 @@ def test_protocol_fault_is_caught(fault: Fault) -> None:
     )
     print(f"fault {fault.value}: caught by {shown or 'NO CASE'} [{report.duration:.1f} s]")
     assert not errors, errors
+    assert not unnamed_violations(report), unnamed_violations(report)  # every culprit named and kept
     assert caught, f"no case caught fault {fault.value} ({FAULTS[fault].description})"
     if fault in CATCHERS:
         assert CATCHERS[fault] in {r.id for r in caught}, shown

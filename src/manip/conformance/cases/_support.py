@@ -45,8 +45,8 @@ from manip.conformance.judge.checks import (
     word,
 )
 from manip.conformance.judge.model import AnswerSummary
-from manip.conformance.judge.violation import CarriesViolation, Violation
-from manip.conformance.suite.context import Answer, CaseContext, Probe
+from manip.conformance.judge.violation import CarriesViolation, Violation, shown
+from manip.conformance.suite.context import DONE_SIZE, Answer, CaseContext, Probe
 from manip.conformance.suite.invariants import TRANSCRIPT
 from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
@@ -342,39 +342,11 @@ async def timed_move(
     )
 
 
-DONE_SIZE: Final = 2
-"""Data bytes of an empty done: the request number alone."""
-
-
-def expect_response(
-    ctx: CaseContext,
-    answer: Answer,
-    *,
-    clause: str,
-    expected: str,
-    size: int | None = None,
-    min_size: int = 0,
-) -> None:
-    """The answer must be a normal response, of exactly ``size`` data bytes when given and of at
-    least ``min_size``."""
-    ctx.expect(
-        answer.is_response and (size is None or len(answer.data) == size) and len(answer.data) >= min_size,
-        clause=clause,
-        expected=expected,
-        seen=answer,
-    )
-
-
-def expect_done(ctx: CaseContext, answer: Answer, *, clause: str, expected: str) -> None:
-    """The answer must be an empty done (a normal response carrying only the request number)."""
-    expect_response(ctx, answer, clause=clause, expected=expected, size=DONE_SIZE)
-
-
 async def expect_here_served(ctx: CaseContext, probe: Probe, expected: str) -> None:
     """Here must be served normally, with its transform (after a discarded packet, for example)."""
     again = await probe.call("here")
-    expect_response(
-        ctx, again, clause="free-joint.awaits-next-packet", expected=expected, min_size=DONE_SIZE + 1
+    ctx.expect_response(
+        again, clause="free-joint.awaits-next-packet", expected=expected, min_size=DONE_SIZE + 1
     )
 
 
@@ -419,11 +391,8 @@ def expect_refusal(
     wanted = f"a non-fatal error (0202) of severity {'/'.join(severities)}" + (
         f" and code {'/'.join(codes)}" if codes else ""
     )
-    if not ctx.expect(
-        answer.opcode == ServerOp.NON_FATAL_ERROR,
-        clause=clause,
-        expected=f"{wanted} for {what}",
-        seen=answer,
+    if not ctx.expect_opcode(
+        answer, ServerOp.NON_FATAL_ERROR, clause=clause, expected=f"{wanted} for {what}"
     ):
         return None  # a weaker clause than MUST: recorded, and there is no error string to judge
     error = error_of(answer)
@@ -433,23 +402,20 @@ def expect_refusal(
             f"the error string for {what} does not decode",
             clause=clause,
             expected=f"{wanted} for {what}",
-            actual=answer.data.hex(),
-            data=answer.data,
+            seen=shown(answer, answer.data.hex()),
         )
     ctx.expect(
         error.error.severity in severities,
         clause=clause,
         expected=f"{wanted} for {what}",
-        actual=repr(error.error.render()),
-        data=answer.data,
+        seen=shown(answer, repr(error.error.render())),
     )
     if codes:
         ctx.expect(
             error.error.code in codes,
             clause=clause,
             expected=f"{wanted} for {what}",
-            actual=repr(error.error.render()),
-            data=answer.data,
+            seen=shown(answer, repr(error.error.render())),
         )
     return error
 
@@ -469,13 +435,12 @@ def expect_error_numbers(
         return
     choices = {tuple(w) for w in wanted}
     args = error.error.args
-    shown = " or ".join(str(list(c)) for c in sorted(choices))
+    wanted_text = " or ".join(str(list(c)) for c in sorted(choices))
     ctx.expect(
         args in choices,
         clause="error-string.arg-values",
-        expected=f"the numbers {shown} for {what}",
-        actual=f"{list(args)} in {error.error.render()!r}",
-        data=answer.data,
+        expected=f"the numbers {wanted_text} for {what}",
+        seen=shown(answer, f"{list(args)} in {error.error.render()!r}"),
     )
 
 

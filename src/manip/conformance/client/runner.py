@@ -40,7 +40,7 @@ from manip.conformance.client.wire import (
     window_findings,
     wire_packet,
 )
-from manip.conformance.judge.violation import FailureKind, Violation
+from manip.conformance.judge.violation import FailureKind, Violation, shown
 from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
 from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.invariants import CLIENT_WIRE
@@ -252,8 +252,7 @@ class ClientContext(CaseContext):
                     False,
                     clause=finding.clause,
                     expected=finding.expected,
-                    actual=finding.actual,
-                    data=finding.data,
+                    seen=shown(finding.packets or finding.data, finding.actual),
                     message=finding.message,
                     invariant=CLIENT_WIRE.name,
                 )

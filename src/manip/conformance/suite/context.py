@@ -64,7 +64,7 @@ from manip.codecs.messages import encode_request
 from manip.codecs.packet import Direction, Packet
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, check_transcript, describe, word
-from manip.conformance.judge.violation import Violation, evidence, shown_packet
+from manip.conformance.judge.violation import Violation, evidence, seen_kind, seen_packets
 from manip.conformance.suite.case import (
     LEVEL_ORDER,
     CaseError,
@@ -83,6 +83,7 @@ from manip.spec.model import Hazard, Level
 from manip.spec.notation import octal
 
 __all__ = [
+    "DONE_SIZE",
     "MAX_CASE_PACKETS",
     "Answer",
     "CaseContext",
@@ -101,6 +102,8 @@ _CHECKER_CLAUSES: Final = (
 )
 """What a checker run on one answer evaluates (:meth:`CaseContext.check`): the transcript's clauses,
 the byte order its decoding relies on, and the reply clauses of the opcodes, whose layouts it decodes."""
+DONE_SIZE: Final = 2
+"""Data bytes of an empty done: the request number alone."""
 DEFAULT_REPLY_TIMEOUT: Final = 2.0
 DEFAULT_CONNECT_TIMEOUT: Final = 5.0
 MAX_CASE_PACKETS: Final = 20_000
@@ -251,11 +254,14 @@ class Probe:
         self._ctx.auto_check = False
         self._ctx.check(check_transcript(self.packets, rfc_packet_no=self.rfc_packet_no))
         raise CaseFailure(
-            f"the target sent more than {MAX_CASE_PACKETS:,} packets within one case; "
-            "the suite reads no more",
-            expected=f"at most {MAX_CASE_PACKETS:,} packets for one case's requests",
-            actual=f"{self._ctx.received - 1:,} packets, and more coming",
-            kind="unexpected_message",
+            Violation(
+                f"the target sent more than {MAX_CASE_PACKETS:,} packets within one case; "
+                "the suite reads no more",
+                expected=f"at most {MAX_CASE_PACKETS:,} packets for one case's requests",
+                actual=f"{self._ctx.received - 1:,} packets, and more coming",
+                kind="unexpected_message",
+                packets=self._ctx.judged(),
+            )
         )
 
     # ------------------------------------------------------------------------------------- sending
@@ -476,15 +482,18 @@ class Probe:
 
     def _too_large(self, number: int, packets: Sequence[WirePacket], size: int) -> NoReturn:
         raise CaseFailure(
-            f"the multi-packet reply to request #{number} goes past {DEFAULT_MAX_REPLY_BYTES:,} data bytes "
-            "without its terminator; the suite reads no more of it (erratum reply-size-limit)",
-            clause="request.one-reply",
-            expected=f"the empty terminator within {DEFAULT_MAX_REPLY_BYTES:,} data bytes "
-            "(manip-client's bound)",
-            actual=f"{len(packets):,} packets, {size:,} data bytes, no terminator",
-            data=packets[-1].data,
-            kind="unexpected_message",
-            invariant=TRANSCRIPT.name,
+            Violation(
+                f"the multi-packet reply to request #{number} goes past {DEFAULT_MAX_REPLY_BYTES:,} data "
+                "bytes without its terminator; the suite reads no more of it (erratum reply-size-limit)",
+                "request.one-reply",
+                expected=f"the empty terminator within {DEFAULT_MAX_REPLY_BYTES:,} data bytes "
+                "(manip-client's bound)",
+                actual=f"{len(packets):,} packets, {size:,} data bytes, no terminator",
+                data=packets[-1].data,
+                kind="unexpected_message",
+                invariant=TRANSCRIPT.name,
+                packet=packets[-1],
+            )
         )
 
     async def drain(self, quiet: float = 0.2) -> list[WirePacket]:
@@ -616,13 +625,16 @@ class CaseContext:
                 if packet is not None:
                     probe.push_back(packet)
                 raise CaseFailure(
-                    "no initial RESPONSE after the connection opened",
-                    clause="connect.initial-response",
-                    expected=f"a RESPONSE (200) within {self.options.reply_timeout:g} s of the open",
-                    actual="nothing" if packet is None else describe(packet),
-                    data=b"" if packet is None else packet.data,
-                    kind="missing_response",
-                    invariant=TRANSCRIPT.name,
+                    Violation(
+                        "no initial RESPONSE after the connection opened",
+                        "connect.initial-response",
+                        expected=f"a RESPONSE (200) within {self.options.reply_timeout:g} s of the open",
+                        actual="nothing" if packet is None else describe(packet),
+                        data=b"" if packet is None else packet.data,
+                        kind="missing_response",
+                        invariant=TRANSCRIPT.name,
+                        packet=packet,
+                    )
                 )
             probe.initial = packet
         return probe
@@ -659,20 +671,20 @@ class CaseContext:
         clause: str | None = None,
         expected: str = "",
         seen: object = None,
-        actual: object = "",
-        data: bytes = b"",
         message: str | None = None,
         level: Level | None = None,
         invariant: str | None = None,
     ) -> bool:
-        """Check ``condition``; when false: MUST raises CaseFailure, weaker levels are recorded.
+        """Check ``condition``; when false, a violation is recorded and the case goes on.
 
-        ``seen`` is the evidence (an answer, a packet, Cougar responses, a list of them...): the
-        violation's ``actual`` text and bytes are derived from it
-        (:func:`~manip.conformance.judge.violation.evidence`); ``actual``/``data`` say it in the case's
-        own words instead.  The level is ``level`` if given, else the clause's, else the case's.
-        Returns ``bool(condition)``.  ``clause`` must be one the case declares, or one of
-        ``invariant``'s when a suite invariant's finding is passed on: checked at every call, true or
+        ``seen`` is the evidence, in the one form of :mod:`~manip.conformance.judge.violation`: an
+        answer, a packet, Cougar responses, a list of them, ``shown(answer, "text")`` in the case's own
+        words, or ``missing("text")`` for a packet that never came.  The violation's text, bytes and
+        packets are derived from it; evidence that names no packet (text alone) names the last packet
+        of the case's recording, the one the check was reading (:meth:`judged`), so that every violation
+        but a ``missing`` one carries its culprit.  The level is ``level`` if given, else the clause's,
+        else the case's.  Returns ``bool(condition)``.  ``clause`` must be one the case declares, or one
+        of ``invariant``'s when a suite invariant's finding is passed on: checked at every call, true or
         not (UndeclaredClauseError).  ``clause`` and ``expected`` are keywords so that the clause scan of
         ``tests/support/clause_scan.py`` sees every clause a case can report.
 
@@ -693,20 +705,69 @@ class CaseContext:
             )
         if condition:
             return True
-        shown, shown_data = evidence(seen) if seen is not None else ("", b"")
+        text = message or (f"expected {expected}" if expected else "check failed")
         self._report(
-            Violation(
-                message or (f"expected {expected}" if expected else "check failed"),
-                clause,
-                self._clause_level(clause, level),
-                expected,
-                str(actual) if actual != "" else shown,
-                bytes(data) if data else shown_data,
-                invariant=attributed,
-                packet=shown_packet(seen),
-            )
+            self._violation(text, clause, self._clause_level(clause, level), expected, seen, attributed)
         )
         return False
+
+    def _violation(
+        self,
+        message: str,
+        clause: str | None,
+        level: Level | None,
+        expected: str,
+        seen: object,
+        invariant: str | None,
+    ) -> Violation:
+        """The violation a false check states, its evidence ``seen`` (see :meth:`expect`)."""
+        actual, data = evidence(seen) if seen is not None else ("", b"")
+        kind = seen_kind(seen)
+        packets = seen_packets(seen) or (self.judged() if kind != "missing_response" else ())
+        return Violation(message, clause, level, expected, actual, data, kind, invariant, packets=packets)
+
+    # The common checks, one line each: the evidence is the answer they judge.
+
+    def expect_response(
+        self, answer: Answer, *, clause: str, expected: str, size: int | None = None, min_size: int = 0
+    ) -> bool:
+        """``answer`` is a normal response (RESPONSE, 200), of exactly ``size`` data bytes when given and
+        of at least ``min_size``."""
+        data = len(answer.data)
+        return self.expect(
+            answer.is_response and (size is None or data == size) and data >= min_size,
+            clause=clause,
+            expected=expected,
+            seen=answer,
+        )
+
+    def expect_done(self, answer: Answer, *, clause: str, expected: str) -> bool:
+        """``answer`` is an empty done: a normal response carrying only the request number."""
+        return self.expect_response(answer, clause=clause, expected=expected, size=DONE_SIZE)
+
+    def expect_opcode(self, answer: Answer, opcode: int, *, clause: str, expected: str) -> bool:
+        """``answer`` (its first packet) has ``opcode``."""
+        return self.expect(answer.opcode == opcode, clause=clause, expected=expected, seen=answer)
+
+    def expect_echo(self, answer: Answer, *, clause: str, expected: str) -> bool:
+        """``answer`` quotes the number of the request it answers."""
+        return self.expect(
+            answer.number == answer.request.packet_no, clause=clause, expected=expected, seen=answer
+        )
+
+    def expect_near(
+        self, value: float, wanted: float, tolerance: float, *, clause: str, expected: str, seen: object
+    ) -> bool:
+        """``value`` is within ``tolerance`` of ``wanted`` (``seen``: the evidence, as for :meth:`expect`)."""
+        return self.expect(abs(value - wanted) <= tolerance, clause=clause, expected=expected, seen=seen)
+
+    def judged(self) -> tuple[WirePacket, ...]:
+        """What a check whose evidence names no packet judged: the last packet of the case's recording
+        (the reply it was reading), or nothing before any."""
+        for packet in reversed(self.shown_packets or self.transcript):
+            if not packet.is_close:
+                return (packet,)
+        return ()
 
     def require(
         self,
@@ -715,15 +776,11 @@ class CaseContext:
         clause: str | None = None,
         expected: str = "",
         seen: object = None,
-        actual: object = "",
-        data: bytes = b"",
         message: str | None = None,
     ) -> None:
         """:meth:`expect` for a check the rest of the case depends on: when false, the violation is
         recorded and the case stops there (whatever the clause's level)."""
-        if not self.expect(
-            condition, clause=clause, expected=expected, seen=seen, actual=actual, data=data, message=message
-        ):
+        if not self.expect(condition, clause=clause, expected=expected, seen=seen, message=message):
             raise CaseFailure(self.recorded.pop())
 
     def _reach(self, clause: str | None, attributed: str | None) -> None:
@@ -774,25 +831,12 @@ class CaseContext:
         clause: str | None = None,
         expected: str = "",
         seen: object = None,
-        actual: object = "",
-        data: bytes = b"",
         invariant: str | None = None,
     ) -> NoReturn:
         """Fail outright, the case stops; ``clause``, ``seen`` and ``invariant`` as for :meth:`expect`."""
         attributed = self._attribute(clause, invariant)
         self._reach(clause, attributed)
-        shown, shown_data = evidence(seen) if seen is not None else ("", b"")
-        raise CaseFailure(
-            Violation(
-                message,
-                clause,
-                expected=expected,
-                actual=str(actual) if actual != "" else shown,
-                data=bytes(data) if data else shown_data,
-                invariant=attributed,
-                packet=shown_packet(seen),
-            )
-        )
+        raise CaseFailure(self._violation(message, clause, None, expected, seen, attributed))
 
     def fail_with(self, violation: Violation) -> NoReturn:
         """Fail with a violation found elsewhere (a failed example's); attributed as for :meth:`expect`."""

@@ -16,8 +16,8 @@ from manip.conformance.cougar.probe import (
     WordReply,
     floats_of,
     layout_words,
-    words_bytes,
 )
+from manip.conformance.judge.violation import shown
 from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory import Region
 from manip.spec import SPEC
@@ -152,7 +152,7 @@ async def region_floats(ctx: CaseContext, probe: CougarProbe, obj: Region) -> tu
             f"EXMN did not return the {obj.words} words of {obj.name}: the case cannot go on",
             clause="cougar.exmn.reply",
             expected=f"{obj.words} words at {octal(obj.address)}",
-            actual=f"{len(words)} words",
+            seen=f"{len(words)} words",
         )
     return floats_of(words)
 
@@ -190,8 +190,7 @@ async def read_forces(ctx: CaseContext, probe: CougarProbe) -> tuple[float, ...]
         len(values) == 6 and all(math.isfinite(v) for v in values),
         clause="cougar.rfrc.reply",
         expected="six finite floats",
-        actual=str(values),
-        data=words_bytes(reply.words),
+        seen=shown(reply, str(values)),
     )
     return values
 

@@ -109,7 +109,7 @@ async def gravity_point_mass(ctx: CaseContext) -> None:
                         expected=f"at {label}, an object of {OBJECT_OZ:g} oz at cg {fmt(cg_inch)} in moves "
                         f"{name} by {want[i]:.4g} (Rᵀ(0, 0, -W), cg × f; within {REL:.0%} of {scale:.3g} "
                         f"+ {SLACK_OZ})",
-                        actual=f"{change:.4g} ({bare[i]:.4g} -> {loaded[i]:.4g})",
+                        seen=f"{change:.4g} ({bare[i]:.4g} -> {loaded[i]:.4g})",
                     )
             await _guard_on_torque(ctx, probe, bare, want)
         finally:
@@ -134,13 +134,13 @@ async def _guard_on_torque(ctx: CaseContext, probe: CougarProbe, bare: Vector, w
         clause="cougar.guard-corrected-force",
         expected=f"guard 3 along the object's torque, tol {base + 0.5 * size:.4g} (half its {size:.4g} oz-in "
         "above the bare reading), tripping on the corrected force",
-        actual=str(trips) if trips else "no trip",
+        seen=str(trips) if trips else "no trip",
     )
     ctx.expect(
         all(index != 4 for _, index in trips),
         clause="cougar.guard-corrected-force",
         expected=f"guard 4 along it, tol {base + 1.5 * size:.4g} (one and a half times the torque), quiet",
-        actual=str(trips),
+        seen=str(trips),
     )
 
 
@@ -182,7 +182,7 @@ async def gravity_nfv_redoes_model(ctx: CaseContext) -> None:
                     clause="cougar.nfv-conversion",
                     expected=f"after NFV {fmt(in_unit(ctx, FV_MM))} {ctx.options.length_unit}, {name} = "
                     f"{want[i]:.4g} (the same wrench about the new centre: force unchanged, τ - r × f)",
-                    actual=f"{after[i]:.4g} (before NFV {before[i]:.4g})",
+                    seen=f"{after[i]:.4g} (before NFV {before[i]:.4g})",
                 )
         finally:
             await probe.send("NFV", offset=fv0)

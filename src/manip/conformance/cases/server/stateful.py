@@ -758,10 +758,12 @@ async def arm_model(ctx: CaseContext) -> None:
         ctx.note(note)
     reproduce = ctx.reproduce if ctx.options.embedded and ctx.reproduce else None
     address = ctx.options.address or "tcp://HOST:PORT"
-    _record_disagreements(ctx, disagreements, address, reproduce, failure)
+    others = _record_disagreements(ctx, disagreements, address, reproduce, failure)
+    if failure is None and others:
+        ctx.show_packets([*ctx.transcript, *others])
     if failure is not None:
         shown = _counterexample(failure, address, reproduce)
-        ctx.show_packets(failure.example or failure.packets)
+        ctx.show_packets([*(failure.example or failure.packets), *others])
         culprit = failure.culprit
         ctx.fail_with(replace(failure.violation, actual=shown, packet=culprit))
 
@@ -778,19 +780,24 @@ def _record_disagreements(
     address: str,
     reproduce: str | None,
     stopped: MachineFailure | None,
-) -> None:
+) -> list[WirePacket]:
     """Report every distinct disagreement with the model the runs went on after, but the one the case
-    stops with (``stopped``, shrunk; its packets are the case's packet log)."""
+    stops with (``stopped``, shrunk; its packets are the case's packet log); the packets that show them,
+    which the packet log shows after that run's."""
+    shown: list[WirePacket] = []
     for item in found.kept.values():
         if stopped is not None and _kind(item) == _kind(stopped):
             continue  # the one the case stops with, shrunk
         text = _counterexample(item, address, reproduce, shrunk=False)
-        ctx.record(replace(item.violation, actual=text, packet=item.culprit))
+        violation = replace(item.violation, actual=text, packet=item.culprit)
+        ctx.record(violation)
+        shown += [p for p in (*item.packets, *violation.packets) if not any(p is q for q in shown)]
     if found.dropped:
         ctx.note(
             f"{found.dropped} more distinct disagreement(s) with the model not reported "
             f"(at most {found.bound} per case)"
         )
+    return shown
 
 
 # ------------------------------------------------------------------------------------- replay
