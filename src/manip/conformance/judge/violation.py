@@ -50,7 +50,6 @@ __all__ = [
     "seen_kind",
     "seen_packets",
     "shown",
-    "shown_packet",
 ]
 
 FailureKind = Literal[
@@ -165,12 +164,6 @@ def seen_packets(seen: object) -> tuple[WirePacket, ...]:
     if isinstance(seen, list | tuple):
         return tuple(p for item in seen for p in seen_packets(item))
     return ()
-
-
-def shown_packet(seen: object) -> WirePacket | None:
-    """The packet the evidence ``seen`` is about (the first it judged), or None."""
-    packets = seen_packets(seen)
-    return packets[0] if packets else None
 
 
 def seen_kind(seen: object) -> FailureKind:

@@ -64,7 +64,7 @@ from manip.codecs.messages import encode_request
 from manip.codecs.packet import Direction, Packet
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, check_transcript, describe, word
-from manip.conformance.judge.violation import Violation, evidence, seen_kind, seen_packets
+from manip.conformance.judge.violation import NEVER_CAME, Violation, evidence, seen_kind, seen_packets
 from manip.conformance.suite.case import (
     LEVEL_ORDER,
     CaseError,
@@ -761,6 +761,13 @@ class CaseContext:
         """``value`` is within ``tolerance`` of ``wanted`` (``seen``: the evidence, as for :meth:`expect`)."""
         return self.expect(abs(value - wanted) <= tolerance, clause=clause, expected=expected, seen=seen)
 
+    def _named(self, violation: Violation) -> Violation:
+        """``violation`` naming a packet: one found elsewhere that names none (a checker's finding about a
+        whole reply's text) names what :meth:`judged` names, unless it is about a packet that never came."""
+        if violation.packets or violation.kind in NEVER_CAME:
+            return violation
+        return replace(violation, packets=self.judged())
+
     def judged(self) -> tuple[WirePacket, ...]:
         """What a check whose evidence names no packet judged: the last packet of the case's recording
         (the reply it was reading), or nothing before any."""
@@ -815,7 +822,7 @@ class CaseContext:
         stopping: Violation | None = None
         for finding in items:
             attributed = self._attribute(finding.clause, TRANSCRIPT.name)
-            violation = replace(finding, invariant=attributed)
+            violation = self._named(replace(finding, invariant=attributed))
             if stop and stopping is None and violation.level == "MUST":
                 stopping = violation
             else:
@@ -842,14 +849,14 @@ class CaseContext:
         """Fail with a violation found elsewhere (a failed example's); attributed as for :meth:`expect`."""
         attributed = self._attribute(violation.clause, violation.invariant)
         self._reach(violation.clause, attributed)
-        raise CaseFailure(replace(violation, invariant=attributed))
+        raise CaseFailure(self._named(replace(violation, invariant=attributed)))
 
     def record(self, violation: Violation) -> None:
         """Record a violation found elsewhere (one of several a stateful run found) and go on;
         attributed as for :meth:`expect`."""
         attributed = self._attribute(violation.clause, violation.invariant)
         self._reach(violation.clause, attributed)
-        self._report(replace(violation, invariant=attributed))
+        self._report(self._named(replace(violation, invariant=attributed)))
 
     def skip(self, reason: str) -> NoReturn:
         raise CaseSkipped(reason)

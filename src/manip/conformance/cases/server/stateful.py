@@ -789,9 +789,9 @@ def _record_disagreements(
         if stopped is not None and _kind(item) == _kind(stopped):
             continue  # the one the case stops with, shrunk
         text = _counterexample(item, address, reproduce, shrunk=False)
-        violation = replace(item.violation, actual=text, packet=item.culprit)
-        ctx.record(violation)
-        shown += [p for p in (*item.packets, *violation.packets) if not any(p is q for q in shown)]
+        ctx.record(replace(item.violation, actual=text, packet=item.culprit))
+        named = ctx.recorded[-1].packets  # the culprit, or what the context named for it
+        shown += [p for p in (*item.packets, *named) if not any(p is q for q in shown)]
     if found.dropped:
         ctx.note(
             f"{found.dropped} more distinct disagreement(s) with the model not reported "
