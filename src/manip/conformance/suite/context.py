@@ -31,20 +31,23 @@ more than :data:`~manip.reference_client.options.DEFAULT_MAX_REPLY_BYTES` withou
 request the case cannot send because the target ended the connection fails like a reply that never
 came.
 
-``ctx.expect(cond, clause=..., expected=..., seen=answer)`` is the one way to state a check: false,
-on a clause of any level, is recorded (``ctx.recorded``) and the case goes on, so its report lists every
-violation; ``ctx.require(...)`` is the same check for what the rest of the case depends on, and stops
-the case when false, as the probe does when an answer never comes.  Every clause a check evaluated,
-true or false, is *reached* (``ctx.reached``): only a reached clause can count as held.  The clause
-must be one the case declares: any other is a
-bug of the suite (:class:`~manip.conformance.suite.case.UndeclaredClauseError`, raised at the call whether the
-condition holds or not), except a finding of the transcript invariant's checkers
+``ctx.expect(cond, clause=..., expected=..., seen=answer)`` is the one way to state a check, and the
+common ones are one line each (``ctx.expect_response``, ``expect_done``, ``expect_opcode``,
+``expect_echo``, ``expect_near``).  Evidence has one form, ``seen=`` (an answer, packets, ``shown(answer,
+text)``, ``missing(text)``: :mod:`~manip.conformance.judge.violation`), and every violation names the
+packets it judged (text alone: the last packet recorded, :meth:`CaseContext.judged`), but one about a
+packet that never came.  A false check, on a clause of any level, is recorded (``ctx.recorded``) and the
+case goes on, so its report lists every violation; ``ctx.require(...)`` is the same check for what the
+rest of the case depends on, and stops the case when false, as the probe does when an answer never comes.
+Every clause a check evaluated, true or false, is *reached* (``ctx.reached``): only a reached clause can
+count as held.  The clause must be one the case declares: any other is a bug of the suite
+(:class:`~manip.conformance.suite.case.UndeclaredClauseError`, raised at the call whether the condition
+holds or not), except a finding of the transcript invariant's checkers
 (:mod:`manip.conformance.suite.invariants`).  ``ctx.check(findings)`` applies the same rule to the
-findings of a checker; ``ctx.fail(...)`` fails outright; ``ctx.skip(reason)`` ends the case as
-skipped (not applicable), and ``ctx.not_judged(reason)`` as not judged (applicable, but this target
-cannot be judged on it; the reason says what would judge it).  ``async with ctx.arranged(condition):``
-has the target's world hold a condition of the arm's world (:mod:`manip.conformance.suite.world`) for
-the block.
+findings of a checker; ``ctx.fail(...)`` fails outright; ``ctx.skip(reason)`` ends the case as skipped
+(not applicable), and ``ctx.not_judged(reason)`` as not judged (applicable, but this target cannot be
+judged on it; the reason says what would judge it).  ``async with ctx.arranged(condition):`` has the
+target's world hold a condition of the arm's world (:mod:`manip.conformance.suite.world`) for the block.
 """
 
 from __future__ import annotations
