@@ -100,5 +100,5 @@ def test_the_report_window_never_cuts_a_culprit() -> None:
     kept = kept_indices(len(packets), culprits, 200)
     assert set(culprits) <= set(kept) and {0, 1, 2, 3} <= set(kept)
     late = Violation("x", packets=(packets[950], packets[400]))
-    assert judged_indices(packets, late) == [400, 950]
-    assert {400, 950} <= set(kept_indices(len(packets), judged_indices(packets, late), 200))
+    assert judged_indices(packets, [late]) == [400, 950]
+    assert {400, 950} <= set(kept_indices(len(packets), judged_indices(packets, [late]), 200))

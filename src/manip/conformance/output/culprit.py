@@ -49,13 +49,17 @@ def culprit_index(packets: Sequence[WirePacket], violation: Violation) -> int | 
     return None
 
 
-def judged_indices(packets: Sequence[WirePacket], violation: Violation) -> list[int]:
-    """The indices in ``packets`` of every packet ``violation`` judged (its ``packets``) and of its
-    culprit (:func:`culprit_index`); those not among ``packets`` are left out."""
+def judged_indices(packets: Sequence[WirePacket], violations: Iterable[Violation]) -> list[int]:
+    """The indices in ``packets`` of every packet the ``violations`` judged (their ``packets``) and of
+    their culprits (:func:`culprit_index`); those not among ``packets`` are left out."""
     where = {id(p): i for i, p in enumerate(packets)}
-    found = {where[id(p)] for p in violation.packets if id(p) in where}
-    culprit = culprit_index(packets, violation)
-    return sorted(found if culprit is None else found | {culprit})
+    found: set[int] = set()
+    for violation in violations:
+        found.update(where[id(p)] for p in violation.packets if id(p) in where)
+        culprit = culprit_index(packets, violation)
+        if culprit is not None:
+            found.add(culprit)
+    return sorted(found)
 
 
 def kept_indices(total: int, culprits: Iterable[int], limit: int) -> list[int]:

@@ -195,8 +195,7 @@ def _packets_json(result: CaseResult) -> tuple[list[dict[str, Any]], list[int | 
     violation's culprit packet (None when no packet shows it)."""
     packets = result.packets
     culprits = [culprit_index(packets, v) for v in result.violations]
-    judged = [i for v in result.violations for i in judged_indices(packets, v)]
-    kept = kept_indices(len(packets), judged, MAX_PACKETS_IN_REPORT)
+    kept = kept_indices(len(packets), judged_indices(packets, result.violations), MAX_PACKETS_IN_REPORT)
     shown = [{**packets[i].to_json(), "n": i + 1} for i in kept]
     return shown, [None if c is None else c + 1 for c in culprits]
 
