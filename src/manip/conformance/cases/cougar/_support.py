@@ -96,22 +96,12 @@ def expect_reply(ctx: CaseContext, reply: WordReply, name: str, clause: str, *, 
         expected=f"a Table 1 response{where} ({name}, {layout_words(SPEC.cougar_responses[code])})",
         seen=reply,
     )
-    ctx.expect(
-        reply.name == name,
-        clause=clause,
-        expected=f"{name} (code {code}){where}",
-        seen=reply,
-    )
+    ctx.expect(reply.name == name, clause=clause, expected=f"{name} (code {code}){where}", seen=reply)
     return reply
 
 
 def expect_none(ctx: CaseContext, replies: Sequence[WordReply], clause: str, why: str) -> None:
-    ctx.expect(
-        not replies,
-        clause=clause,
-        expected=f"no response ({why})",
-        seen=replies,
-    )
+    ctx.expect(not replies, clause=clause, expected=f"no response ({why})", seen=replies)
 
 
 async def expect_quiet(ctx: CaseContext, probe: CougarProbe, clause: str, why: str, ticks: int = 2) -> None:

@@ -96,9 +96,7 @@ async def unknown_opcodes(ctx: CaseContext) -> None:
         expect_error_numbers(ctx, answer, error, [(opcode,)], what=what)
     answer = await probe.call("here")
     ctx.expect_response(
-        answer,
-        clause="request.unknown-opcode",
-        expected="the connection still serving after unknown opcodes",
+        answer, clause="request.unknown-opcode", expected="the connection still serving after unknown opcodes"
     )
 
 
