@@ -268,8 +268,8 @@ class ServerThread:
         ).result(10)
 
     @property
-    def target(self) -> str:
-        return self.listener.target
+    def address(self) -> str:
+        return self.listener.address
 
     def close(self) -> None:
         with contextlib.suppress(Exception):
@@ -342,7 +342,7 @@ def run_command_in_process(scenario: str, script: Script, command: str, seed: in
     """One command of ``manip-client``, in this process (click's test runner)."""
 
     with hostile_server(script, seed) as server:
-        args = [server.target, *COMMANDS[command], "--timeout", str(min(timeout / 2, 5.0))]
+        args = [server.address, *COMMANDS[command], "--timeout", str(min(timeout / 2, 5.0))]
         started = time.monotonic()
         result = CliRunner().invoke(client_main, args)
         took = time.monotonic() - started
@@ -378,7 +378,7 @@ def run_command_process(
         tempfile.TemporaryFile() as out,
         tempfile.TemporaryFile() as err,
     ):
-        args = [str(exe), server.target, *COMMANDS[command], "--timeout", str(min(timeout / 2, 5.0))]
+        args = [str(exe), server.address, *COMMANDS[command], "--timeout", str(min(timeout / 2, 5.0))]
         proc = subprocess.Popen(args, stdout=out, stderr=err)
         peak, deadline = 0.0, time.monotonic() + timeout
         while proc.poll() is None and time.monotonic() < deadline:
@@ -416,7 +416,7 @@ def run_library(scenario: str, script: Script, call: str, seed: int, timeout: fl
     name = call
     with hostile_server(script, seed) as server:
         try:
-            asyncio.run(asyncio.wait_for(_library_call(server.target, call, timeout), timeout))
+            asyncio.run(asyncio.wait_for(_library_call(server.address, call, timeout), timeout))
         except ManipError as exc:  # before TimeoutError: a RequestTimeout is one too
             expected = EXPECTED.get(scenario)
             if expected is not None and expected not in str(exc).lower():

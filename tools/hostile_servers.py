@@ -331,8 +331,8 @@ class ServerThread:
         ).result(10)
 
     @property
-    def target(self) -> str:
-        return self.listener.target
+    def address(self) -> str:
+        return self.listener.address
 
     def close(self) -> None:
         with contextlib.suppress(Exception):
@@ -424,7 +424,7 @@ def run_scenario(
         tempfile.TemporaryFile() as out,
     ):
         report = Path(tmp) / "report.json"
-        args = command_line(command, server.target, report, extra)
+        args = command_line(command, server.address, report, extra)
         started = time.monotonic()
         proc = subprocess.Popen(args, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
         peak = 0.0

@@ -20,7 +20,7 @@ import tempfile
 from collections.abc import Iterator
 from typing import IO, Any, Literal, overload
 
-__all__ = ["OutputError", "atomic_output", "check_writable"]
+__all__ = ["OutputError", "atomic_output"]
 
 
 class OutputError(OSError):
@@ -62,58 +62,42 @@ def atomic_output(
 
 
 @contextlib.contextmanager
-def _atomic(target: str, mode: str) -> Iterator[IO[Any]]:
+def _atomic(path: str, mode: str) -> Iterator[IO[Any]]:
     encoding = None if "b" in mode else "utf-8"
-    if _is_special(target):
+    if _is_special(path):
         try:
-            with open(target, mode, encoding=encoding) as f:
+            with open(path, mode, encoding=encoding) as f:
                 yield f
         except OSError as exc:
             if isinstance(exc, OutputError):
                 raise
-            raise OutputError(target, _reason(exc)) from exc
+            raise OutputError(path, _reason(exc)) from exc
         return
-    folder = os.path.dirname(os.path.abspath(target))
+    folder = os.path.dirname(os.path.abspath(path))
     try:
-        fd, temp = tempfile.mkstemp(prefix=f".{os.path.basename(target)}.", suffix=".part", dir=folder)
+        fd, temp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".part", dir=folder)
     except OSError as exc:
-        raise OutputError(target, _reason(exc)) from exc
+        raise OutputError(path, _reason(exc)) from exc
     try:
         with os.fdopen(fd, mode, encoding=encoding) as f:
             yield f
-        _keep_mode(target, temp)
-        os.replace(temp, target)
+        _keep_mode(path, temp)
+        os.replace(temp, path)
     except BaseException as exc:
         with contextlib.suppress(OSError):
             os.unlink(temp)
         if isinstance(exc, OSError) and not isinstance(exc, OutputError):
-            raise OutputError(target, _reason(exc)) from exc
+            raise OutputError(path, _reason(exc)) from exc
         raise
 
 
-def _keep_mode(target: str, temp: str) -> None:
+def _keep_mode(path: str, temp: str) -> None:
     """The new file gets the old one's permissions, or the ones a plain ``open`` would give."""
     try:
-        mode = stat.S_IMODE(os.stat(target).st_mode)
+        mode = stat.S_IMODE(os.stat(path).st_mode)
     except OSError:
         umask = os.umask(0)
         os.umask(umask)
         mode = 0o666 & ~umask
     with contextlib.suppress(OSError):
         os.chmod(temp, mode)
-
-
-def check_writable(path: str | os.PathLike[str]) -> None:
-    """Raise :class:`OutputError` now if ``path`` cannot be created (its directory missing or read-only,
-    or it is a directory), so a command can refuse before doing its work."""
-    target = os.fspath(path)
-    if os.path.isdir(target):
-        raise OutputError(target, "it is a directory")
-    folder = os.path.dirname(os.path.abspath(target))
-    if not os.path.isdir(folder):
-        raise OutputError(target, f"no such directory: {folder}")
-    if os.path.exists(target):
-        if not os.access(target, os.W_OK):
-            raise OutputError(target, "permission denied")
-    elif not os.access(folder, os.W_OK):
-        raise OutputError(target, f"permission denied in {folder}")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import pytest
 
 from manip.conformance.judge.packets import WirePacket
-from manip.conformance.judge.violation import NEVER_CAME, Violation, evidence, missing, seen_packets, shown
+from manip.conformance.judge.violation import NEVER_CAME, Violation, evidence, missing, seen_packets, showing
 from manip.conformance.output.culprit import judged_indices, kept_indices
 from manip.conformance.suite.case import CaseFailure
 from manip.conformance.suite.context import Answer, CaseContext, RunOptions
@@ -45,9 +45,9 @@ def _answer(number: int, data: bytes, echo: int | None = None) -> Answer:
 def test_each_form_of_evidence_shows_text_bytes_and_packets() -> None:
     answer = _answer(3, b"\x01\x02")
     assert seen_packets(answer) == answer.packets
-    text, data = evidence(shown(answer, "mask 5"))
+    text, data = evidence(showing(answer, "mask 5"))
     assert (text, data) == ("mask 5", answer.data)
-    assert seen_packets(shown(answer, "mask 5")) == answer.packets
+    assert seen_packets(showing(answer, "mask 5")) == answer.packets
     assert seen_packets([answer, answer.request]) == (*answer.packets, answer.request)
     assert evidence(missing("no CLS", after=answer)) == ("no CLS", answer.data)
     assert seen_packets(missing("no CLS")) == ()

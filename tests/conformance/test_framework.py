@@ -24,7 +24,7 @@ from manip.conformance.judge.checks import (
     check_transcript,
     required_refusal,
 )
-from manip.conformance.judge.violation import missing, shown
+from manip.conformance.judge.violation import missing, showing
 from manip.conformance.output.report import load_schema, report_json, report_junit
 from manip.conformance.suite.case import Case, CaseError, all_cases, case
 from manip.conformance.suite.context import CaseContext, RunOptions
@@ -227,7 +227,7 @@ async def _passes(ctx: CaseContext) -> None:
 async def _fails(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     await probe.call("here")
-    ctx.expect(False, clause="response.echoes-request-number", expected="x", seen=shown(b"\x01\x02", "y"))
+    ctx.expect(False, clause="response.echoes-request-number", expected="x", seen=showing(b"\x01\x02", "y"))
 
 
 async def _warns(ctx: CaseContext) -> None:

@@ -25,7 +25,7 @@ from manip.cougar.link import (
     Ticked,
     Words,
     encode_frame,
-    parse_address,
+    parse_drv11j_address,
 )
 from manip.links.drv11j import Drv11jPort
 from manip.reference_server.cougar_wrist import CougarWrist
@@ -113,11 +113,11 @@ def test_the_ends_carry_words_and_ticks() -> None:
 
 
 def test_addresses() -> None:
-    assert parse_address("tcp://127.0.0.1:0") == ("127.0.0.1", 0)
-    assert parse_address("tcp://localhost") == ("localhost", 42011)
+    assert parse_drv11j_address("tcp://127.0.0.1:0") == ("127.0.0.1", 0)
+    assert parse_drv11j_address("tcp://localhost") == ("localhost", 42011)
     for bad in ("udp://h:1", "tcp://:5", "tcp://h:1/x", "tcp://h:99999"):
         with pytest.raises(ValueError):
-            parse_address(bad)
+            parse_drv11j_address(bad)
 
 
 # ---------------------------------------------------------------------------------- over TCP

@@ -39,7 +39,7 @@ SCENARIOS = HOSTILE.scenarios(1)
 async def _describe(scenario: str, options: ClientOptions) -> object:
     listener = await serve_scenario("tcp", SCENARIOS[scenario], rng=random.Random(1))
     try:
-        async with asyncio.timeout(30), aconnect(listener.target, options) as arm:
+        async with asyncio.timeout(30), aconnect(listener.address, options) as arm:
             return await arm.describe()
     finally:
         await listener.aclose()
@@ -72,7 +72,7 @@ def test_a_connection_given_up_with_los_is_lost_at_once_not_timed_out(scenario: 
 
 def _cli(scenario: str, *args: str) -> tuple[int, str]:
     with HOSTILE.hostile_server(SCENARIOS[scenario]) as server:
-        result = CliRunner().invoke(client_main, [server.target, *args, "--timeout", "10"])
+        result = CliRunner().invoke(client_main, [server.address, *args, "--timeout", "10"])
     assert result.exception is None or isinstance(result.exception, SystemExit), result.exception
     assert "Traceback" not in result.output and "background process failed" not in result.output
     return result.exit_code, result.output

@@ -127,11 +127,6 @@ def _stamp(t_ns: int) -> dict[str, int]:
     return {"sec": sec, "nsec": nsec}
 
 
-def frame_transform(pose: Transform, t_ns: int) -> dict[str, Any]:
-    """The ``foxglove.FrameTransform`` message of a hand pose (mm in, metres out)."""
-    return _frame_transform(pose.rotation, pose.p, t_ns)
-
-
 def _frame_transform(rotation: Any, p: Any, t_ns: int) -> dict[str, Any]:
     x, y, z = (float(v) / 1000.0 for v in p)
     qx, qy, qz, qw = quaternion(rotation)

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 import os
-import struct
 import zlib
 from typing import Final
 
@@ -42,8 +41,6 @@ def _max_record_bytes() -> int:
 
 MAX_RECORD_BYTES: Final = _max_record_bytes()
 """The largest record (and decompressed chunk) a reader accepts; see the module docstring."""
-
-RECORD_HEAD: Final = struct.Struct("<BQ")
 
 
 class CaptureDamagedError(CaptureError):

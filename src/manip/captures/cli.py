@@ -27,7 +27,7 @@ from manip.commandline import FiniteFloat, check_host, configure_logging, versio
 from manip.exit_status import epilog
 
 from .listing import info_json, info_lines
-from .pcap import CHUDP_PORT, export_pcapng, import_pcap, parse_address
+from .pcap import CHUDP_PORT, export_pcapng, import_pcap, parse_host_port
 from .proxy import Endpoint, parse_endpoint, start_proxy
 from .reader import read_capture
 from .recorder import COMPRESSIONS, DEFAULT_FLUSH_INTERVAL, CaptureError, Recorder
@@ -186,7 +186,7 @@ def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> t
     if value is None:
         return None
     try:
-        return parse_address(value)
+        return parse_host_port(value)
     except ValueError as exc:
         raise click.BadParameter(str(exc)) from None
 

@@ -286,7 +286,7 @@ def looks_like_chudp(payload: bytes) -> bool:
     return len(payload) >= len(CHUDP_HEADER) and payload[0] == 1 and payload[1] == 1
 
 
-def parse_address(text: str) -> Address:
+def parse_host_port(text: str) -> Address:
     """``HOST:PORT`` (``[V6]:PORT``) as an address; ValueError says what is wrong."""
     host, sep, port = text.rpartition(":")
     if not sep or not port.isdigit():
@@ -616,5 +616,5 @@ __all__ = [
     "iter_datagrams",
     "iter_pcap_packets",
     "looks_like_chudp",
-    "parse_address",
+    "parse_host_port",
 ]

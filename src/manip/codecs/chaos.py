@@ -42,8 +42,6 @@ HEADER_SIZE: Final = 16
 """Bytes in the eight header words."""
 TRAILER_SIZE: Final = 6
 """Bytes in the hardware trailer (destination, source, checksum) on links that carry one."""
-MAX_PACKET_SIZE: Final = HEADER_SIZE + MAX_DATA
-"""Largest canonical packet (488 is even, so no pad byte)."""
 
 _HEADER_WORDS = struct.Struct("<8H")
 

@@ -133,7 +133,7 @@ def main() -> None:
 @_number_option("--max-examples", click.IntRange(1), 25, "Examples per property-based case.")
 @click.option(
     "--target",
-    "target_kind",
+    "robot",
     type=click.Choice(["sim", "hardware"]),
     default="sim",
     show_default=True,
@@ -310,7 +310,7 @@ def run(
     strict: bool,
     seed: int | None,
     max_examples: int,
-    target_kind: str,
+    robot: str,
     allow_motion: bool,
     reply_timeout: float,
     deadline_scale: float,
@@ -354,7 +354,7 @@ def run(
     except (PatternError, AddressError) as exc:
         raise click.UsageError(str(exc)) from None
     config_faults = _check_server_options(
-        host, server_faults, target_time_scale, cougar, cougar_faults, allow_motion, target_kind
+        host, server_faults, target_time_scale, cougar, cougar_faults, allow_motion, robot
     )
     _check_profile(server_profile, host=host, cougar=cougar)
     _check_length_unit(length_unit, cougar=cougar)
@@ -393,7 +393,7 @@ def run(
         cases = cougar_cases(all_cases(), cougar=target is not None)
     check_selection(select_set, skip_set, cases, cougar=target is not None)
     options = RunOptions(
-        robot="hardware" if target_kind == "hardware" else "sim",
+        robot="hardware" if robot == "hardware" else "sim",
         allow_motion=allow_motion,
         strict=strict,
         reply_timeout=reply_timeout,
@@ -468,7 +468,7 @@ def _check_server_options(
     cougar: str | None,
     cougar_faults: tuple[str, ...],
     allow_motion: bool,
-    target_kind: str,
+    robot: str,
 ) -> FaultSet | None:
     """Usage errors of the options that describe the server (or its absence); the embedded server's
     fault set, if any."""
@@ -483,7 +483,7 @@ def _check_server_options(
             "--cougar-fault switches on a defect of the simulated Cougar: add --cougar sim "
             "(without --cougar the suite checks a manip server)"
         )
-    if allow_motion and target_kind != "hardware":
+    if allow_motion and robot != "hardware":
         raise click.UsageError(
             "--allow-motion applies to --target hardware (the simulated arm always gets the motion cases)"
         )

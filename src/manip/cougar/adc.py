@@ -47,7 +47,6 @@ __all__ = [
     "GaugeModel",
     "adc8_filter",
     "resolution_pattern",
-    "saturate12",
 ]
 
 GAUGES: Final = 8
@@ -56,13 +55,7 @@ ADC_MAX: Final = 2047
 #: Volts per count: the ±10 V wrist range over 2048 counts (§8.2).
 VOLTS_PER_COUNT: Final = 10.0 / 2048.0
 
-IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
-
-
-def saturate12(x: int) -> int:
-    """Clamp to the converter's 12-bit signed range."""
-    return ADC_MIN if x < ADC_MIN else ADC_MAX if x > ADC_MAX else x
 
 
 def adc8_filter(u: int, u_previous: int, y_previous: int) -> int:

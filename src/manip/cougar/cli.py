@@ -27,7 +27,7 @@ import click
 from manip.commandline import check_host, configure_logging, version_option
 from manip.cougar.environment import Contacts, Spring, Surface
 from manip.cougar.faults import FAULTS, parse_faults
-from manip.cougar.link import CougarEnd, CougarModel, Drv11jError, parse_address
+from manip.cougar.link import CougarEnd, CougarModel, Drv11jError, parse_drv11j_address
 from manip.cougar.memory_map import memory_map_toml
 from manip.cougar.readings import READINGS, parse_readings
 from manip.cougar.sim import CougarConfig, CougarSim
@@ -103,7 +103,7 @@ async def serve_cougar(
 ) -> AsyncIterator[CougarServer]:
     """Serve ``model`` on ``address`` (``tcp://HOST:PORT``, port 0 for a free one) for the block; the
     link has the defects ``faults`` names (``link-*`` of :mod:`manip.cougar.faults`; none by default)."""
-    host, port = parse_address(address)
+    host, port = parse_drv11j_address(address)
     cougar = CougarServer(model, faults)
     server = await asyncio.start_server(cougar._handle, host, port)
     cougar.server = server
@@ -220,7 +220,7 @@ def main(
         return
     configure_logging(logging.INFO if verbose else logging.WARNING)
     try:
-        host, _port = parse_address(address)
+        host, _port = parse_drv11j_address(address)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--listen") from None
     why = check_host(host)

@@ -66,9 +66,9 @@ def _table() -> dict[int, CommandEntry]:
             raise ValueError(f"Cougar command {msg.name} has no fixed length")
         dest: int | None = None
         if n:
-            target = region(_DESTINATIONS[msg.name])
-            dest = target.address
-            if dest + 2 * n not in ends and dest + 2 * n > target.end:
+            destination = region(_DESTINATIONS[msg.name])
+            dest = destination.address
+            if dest + 2 * n not in ends and dest + 2 * n > destination.end:
                 raise ValueError(f"{msg.name}'s {n} data words do not fill whole memory regions")
         table[code] = CommandEntry(code, msg.name, msg.label or "noop", n, dest)
     return table

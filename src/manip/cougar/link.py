@@ -49,7 +49,7 @@ __all__ = [
     "Ticked",
     "Words",
     "encode_frame",
-    "parse_address",
+    "parse_drv11j_address",
 ]
 
 MAGIC: Final = 0x444A
@@ -63,7 +63,7 @@ DEFAULT_PORT: Final = 42011
 """TCP port of ``manip-cougar`` when the address names none ("DRV-11")."""
 
 
-def parse_address(text: str) -> tuple[str, int]:
+def parse_drv11j_address(text: str) -> tuple[str, int]:
     """``tcp://HOST[:PORT]`` (port 0 = any free one, when listening) -> (host, port); ValueError."""
     parts = urlsplit(text)
     if parts.scheme != "tcp" or not parts.hostname or parts.path not in ("", "/") or parts.query:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterator
 
 from manip.decode.describe import TreeNode
@@ -23,10 +22,6 @@ def _tree_lines(node: TreeNode, indent: int, lines: list[str]) -> None:
     lines.append(f"{pad}{node.label}: {node.text}{where}" if node.text else f"{pad}{node.label}{where}")
     for child in node.children:
         _tree_lines(child, indent + 1, lines)
-
-
-def render_json(nodes: list[TreeNode]) -> str:
-    return json.dumps([n.to_json() for n in nodes], indent=2)
 
 
 def _span(first: int, size: int, region: int, msb_first: bool) -> tuple[int, int]:

@@ -18,7 +18,7 @@ import contextlib
 from collections.abc import Sequence
 from typing import Final
 
-from manip.cougar.link import Drv11jError, PumaEnd, parse_address
+from manip.cougar.link import Drv11jError, PumaEnd, parse_drv11j_address
 
 __all__ = ["CONNECT_TIMEOUT", "Drv11jPort"]
 
@@ -31,7 +31,7 @@ class Drv11jPort:
 
     def __init__(self, address: str, *, connect_timeout: float = CONNECT_TIMEOUT) -> None:
         self.address = address
-        self.host, self.port = parse_address(address)
+        self.host, self.port = parse_drv11j_address(address)
         self.connect_timeout = connect_timeout
         self.end = PumaEnd()
         self._inbox: list[int] = []

@@ -100,9 +100,9 @@ class VirtualClockLoop(asyncio.SelectorEventLoop):
         nanoseconds, so a replay of it reaches exactly the instants of the run, and what happens at one
         instant (a request and a servo tick) happens alike in both."""
         if seconds > 0:
-            target = self._now + seconds
-            ns = round(target * 1e9)
-            if ns / 1e9 < target:
+            instant = self._now + seconds
+            ns = round(instant * 1e9)
+            if ns / 1e9 < instant:
                 ns += 1
             self._now = ns / 1e9
             self.jumps += 1

@@ -12,7 +12,6 @@ from manip.spec.constants import ChaosOp
 
 __all__ = [
     "MAX_DATA",
-    "is_controlled",
     "is_data",
     "is_legal_opcode",
     "make_los",
@@ -22,21 +21,13 @@ __all__ = [
 ]
 
 _STATUS: Final = struct.Struct("<HH")
-# Plain ints: reading an attribute of the ChaosOp enum class costs more than the comparison itself.
-_RFC: Final = int(ChaosOp.RFC)
-_OPN: Final = int(ChaosOp.OPN)
-_EOF: Final = int(ChaosOp.EOF)
+# A plain int: reading an attribute of the ChaosOp enum class costs more than the comparison itself.
 _DAT: Final = int(ChaosOp.DAT)
 
 
 def is_data(opcode: int) -> bool:
     """Data opcodes: 0200-0277 (8-bit) and 0300-0377 (16-bit)."""
     return _DAT <= opcode <= 0o377
-
-
-def is_controlled(opcode: int) -> bool:
-    """Controlled packets are numbered, windowed and retransmitted: RFC, OPN, EOF and data."""
-    return opcode in (_RFC, _OPN, _EOF) or _DAT <= opcode <= 0o377
 
 
 def pack_status(receipt: int, window: int) -> bytes:

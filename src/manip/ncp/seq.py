@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from typing import Final
 
-MODULUS: Final = 0x10000
 MASK: Final = 0xFFFF
 _HALF: Final = 0x8000
 

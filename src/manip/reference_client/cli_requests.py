@@ -53,7 +53,6 @@ RAW_UNCHECKED: Final = (0o200, 0o377)
 """Every Chaos data opcode: with ``--no-check``, also the ones no request uses."""
 
 _WORD_MAX: Final = 0xFFFF
-_INT16: Final = (-0x8000, 0x7FFF)
 _HEX_JUNK: Final = re.compile(r"[\s:,]|0x", re.IGNORECASE)
 _WHOLE: Final = re.compile(r"[+-]?(0x[0-9a-fA-F]+|\d+)")
 _ELEMENT_WORDS: Final = {"word": "word", "int16": "signed word", "float": "float", "small": "byte"}

@@ -130,7 +130,7 @@ class CaseRun:
     def __init__(self, instruction: Mapping[str, Any], emit: Emit, faults: ClientFaults = NO_FAULTS) -> None:
         self.faults = faults
         self.case = str(instruction.get("case"))
-        self.target = str(instruction.get("target"))
+        self.address = str(instruction.get("target"))
         self.contact = str(instruction.get("contact") or "PUMA")
         self.timeout = float(instruction.get("timeout") or 5.0)
         self.operations: list[Mapping[str, Any]] = list(instruction.get("operations") or [])
@@ -193,7 +193,7 @@ class CaseRun:
             faults=self.faults,
         )
         try:
-            arm = await open_manipulator(self.target, options)
+            arm = await open_manipulator(self.address, options)
         except ServerError as exc:
             self.report_error(ident, exc)
             self.emit("state", ident, state="refused", reason=str(exc))

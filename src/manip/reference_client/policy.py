@@ -11,13 +11,9 @@ request as usual.  A request that should return data always fails: there is no v
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from manip.reference_client.errors import NonFatalError
-
-TrivialErrorPolicy = Callable[[NonFatalError], bool]
-"""Says whether a non-fatal error is trivial."""
 
 
 @dataclass(frozen=True)

@@ -51,7 +51,7 @@ from manip.commandline import (
     configure_logging,
     version_option,
 )
-from manip.cougar.link import parse_address as parse_drv11j_address
+from manip.cougar.link import parse_drv11j_address
 from manip.exit_status import epilog
 from manip.links import (
     AccessError,

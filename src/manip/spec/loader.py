@@ -41,8 +41,6 @@ from manip.spec.notation import octal
 K = TypeVar("K")
 V = TypeVar("V")
 
-DATA_FILES = ("chaos.toml", "manip.toml", "cougar.toml", "clauses.toml", "errata.toml")
-
 
 class SpecError(Exception):
     """The spec data files are inconsistent."""

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Final, Literal, get_args
 
 from manip.spec.constants import RequestName
 
@@ -13,6 +13,10 @@ Origin = Literal["guide", "manip", "chaosnet"]
 """Whose statement a clause is: the 1985 guide's, manip's decision where the guide is silent or
 ambiguous (an erratum says why), or the Chaosnet documents' (AIM 628, CHUDP, the chaosd socket)."""
 Hazard = Literal["read-only", "config", "motion", "power"]
+LEVELS: Final[tuple[Level, ...]] = get_args(Level)
+"""The clause levels, strongest first: the one order of levels every report and judge uses."""
+HAZARDS: Final[tuple[Hazard, ...]] = get_args(Hazard)
+"""The hazard classes of a request, least dangerous first: the one order of hazards."""
 ResponseForm = Literal["done", "data", "segment", "multi"]
 Element = Literal["float", "word", "int16", "small", "counted", "text"]
 

@@ -27,7 +27,7 @@ from manip.conformance.client.contract import (
 )
 from manip.conformance.client.server import WireRecord
 from manip.conformance.client.wire import window_findings
-from manip.conformance.judge.checks import check_client_guards
+from manip.conformance.judge.client_checks import check_client_guards
 from manip.conformance.judge.packets import Direction, WirePacket
 from manip.ncp.packets import pack_status
 from manip.spec import SPEC

@@ -14,7 +14,8 @@ from click.testing import CliRunner
 from manip.captures import read_session
 from manip.codecs.messages import encode_request
 from manip.conformance.cli import main
-from manip.conformance.judge.checks import WirePacket, check_client_guards, check_client_request
+from manip.conformance.judge.checks import WirePacket
+from manip.conformance.judge.client_checks import check_client_guards, check_client_request
 from manip.conformance.output.coverage import coverage, gaps
 from manip.conformance.output.report import load_schema, report_json
 from manip.conformance.replay.against import ReplayOptions, replay_capture

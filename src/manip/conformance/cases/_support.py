@@ -45,7 +45,7 @@ from manip.conformance.judge.checks import (
     word,
 )
 from manip.conformance.judge.model import AnswerSummary
-from manip.conformance.judge.violation import CarriesViolation, Violation, shown
+from manip.conformance.judge.violation import CarriesViolation, Violation, showing
 from manip.conformance.suite.context import DONE_SIZE, Answer, CaseContext, Probe
 from manip.conformance.suite.invariants import TRANSCRIPT
 from manip.spec import SPEC, RequestName, RequestOpcode
@@ -402,20 +402,20 @@ def expect_refusal(
             f"the error string for {what} does not decode",
             clause=clause,
             expected=f"{wanted} for {what}",
-            seen=shown(answer, answer.data.hex()),
+            seen=showing(answer, answer.data.hex()),
         )
     ctx.expect(
         error.error.severity in severities,
         clause=clause,
         expected=f"{wanted} for {what}",
-        seen=shown(answer, repr(error.error.render())),
+        seen=showing(answer, repr(error.error.render())),
     )
     if codes:
         ctx.expect(
             error.error.code in codes,
             clause=clause,
             expected=f"{wanted} for {what}",
-            seen=shown(answer, repr(error.error.render())),
+            seen=showing(answer, repr(error.error.render())),
         )
     return error
 
@@ -440,7 +440,7 @@ def expect_error_numbers(
         args in choices,
         clause="error-string.arg-values",
         expected=f"the numbers {wanted_text} for {what}",
-        seen=shown(answer, f"{list(args)} in {error.error.render()!r}"),
+        seen=showing(answer, f"{list(args)} in {error.error.render()!r}"),
     )
 
 

@@ -20,7 +20,6 @@ __all__ = [
     "CHOICE_REQUESTS",
     "CONTRACT",
     "CONTROL_OPERATIONS",
-    "FEATURES",
     "LINKS",
     "REQUEST_OPERATIONS",
     "RESULT_TYPES",
@@ -53,7 +52,6 @@ changes), judged from what it sends (revision 2, optional)."""
 REQUEST_OPERATIONS: Final[tuple[str, ...]] = tuple(op.name for op in SPEC.requests.values())
 """Every request of the spec, by name: the operations that send a request."""
 LINKS: Final[tuple[str, ...]] = ("tcp", "chudp", "chaosd")
-FEATURES: Final[tuple[str, ...]] = ("pipeline",)
 RESULT_TYPES: Final[frozenset[str]] = frozenset({"state", "reply", "error", "async", "unsupported", "done"})
 STATES: Final[frozenset[str]] = frozenset({"connected", "closed", "lost", "refused"})
 ERROR_ORIGINS: Final[frozenset[str]] = frozenset(
@@ -110,7 +108,7 @@ class Instruction:
     case: str
     seed: int
     link: str
-    target: str
+    address: str
     contact: str
     timeout: float
     operations: tuple[Op, ...]
@@ -123,7 +121,7 @@ class Instruction:
             "case": self.case,
             "seed": self.seed,
             "link": self.link,
-            "target": self.target,
+            "target": self.address,
             "contact": self.contact,
             "timeout": self.timeout,
             "operations": [op.to_json() for op in self.operations],

@@ -40,7 +40,7 @@ from manip.conformance.client.wire import (
     window_findings,
     wire_packet,
 )
-from manip.conformance.judge.violation import FailureKind, Violation, shown
+from manip.conformance.judge.violation import FailureKind, showing
 from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
 from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.invariants import CLIENT_WIRE
@@ -189,7 +189,7 @@ class ClientContext(CaseContext):
                 self.case_id,
                 self.seed,
                 session.link,
-                listener.target,
+                listener.address,
                 "PUMA",
                 self.timeout if timeout is None else timeout,
                 tuple(operations),
@@ -252,7 +252,7 @@ class ClientContext(CaseContext):
                     False,
                     clause=finding.clause,
                     expected=finding.expected,
-                    seen=shown(finding.packets or finding.data, finding.actual),
+                    seen=showing(finding.packets or finding.data, finding.actual),
                     message=finding.message,
                     invariant=CLIENT_WIRE.name,
                 )
@@ -467,7 +467,3 @@ def _judge(
 
 async def _no_connector(_retry_busy: bool) -> Any:
     raise RuntimeError("a client case plays scenarios (ctx.play); it opens no connection itself")
-
-
-def violation_text(v: Violation) -> str:
-    return f"[{v.clause}] {v.message}"

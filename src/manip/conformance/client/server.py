@@ -355,7 +355,7 @@ class Listener:
 
     server: ChaosServer
     wire: Wire
-    target: str
+    address: str
     done: asyncio.Event
     script_error: list[BaseException]
     sides: list[ServerSide]
@@ -428,10 +428,10 @@ async def serve_scenario(
     )
     if socket_dir is None:
         where = f"127.0.0.1:{server.port}"
-    target = f"{link}://{where}?me={CLIENT_ADDR:04o}&addr={JUDGE_ADDR:04o}"
+    address = f"{link}://{where}?me={CLIENT_ADDR:04o}&addr={JUDGE_ADDR:04o}"
     if contact != "PUMA":
-        target += f"&contact={contact}"
-    return Listener(server, wire, target, done, errors, sides, socket_dir)
+        address += f"&contact={contact}"
+    return Listener(server, wire, address, done, errors, sides, socket_dir)
 
 
 def _carries_ack(packet: Packet) -> bool:

@@ -8,20 +8,17 @@ call the same functions and report under their own clauses.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Final
 
 from manip.codecs.packet import Packet
 from manip.conformance.client.server import WireRecord
-from manip.conformance.judge.checks import check_client_request
+from manip.conformance.judge.client_checks import check_client_request
 from manip.conformance.judge.packets import WirePacket
 from manip.conformance.judge.violation import Violation
-from manip.conformance.suite.invariants import CLIENT_WIRE
 from manip.ncp.packets import unpack_status
 from manip.ncp.seq import seq_gt, seq_lt
 from manip.spec.constants import ChaosOp, ServerOp
 
 __all__ = [
-    "CLIENT_WIRE_CLAUSES",
     "ack_findings",
     "client_requests",
     "initial_response_findings",
@@ -31,8 +28,6 @@ __all__ = [
     "window_findings",
     "wire_packet",
 ]
-
-CLIENT_WIRE_CLAUSES: Final = CLIENT_WIRE.clauses
 
 
 def wire_packet(record: WireRecord) -> WirePacket:

@@ -43,7 +43,7 @@ from manip.conformance.suite.busy import BUSY_DELAY, BUSY_PATIENCE, says_busy
 from manip.conformance.suite.case import CaseFailure
 from manip.conformance.suite.context import CaseContext
 from manip.conformance.suite.invariants import COUGAR_LINK
-from manip.cougar.link import Drv11jError, PumaEnd, parse_address
+from manip.cougar.link import Drv11jError, PumaEnd, parse_drv11j_address
 from manip.spec.constants import CougarResponse
 from manip.spec.model import CougarMessage
 from manip.spec.notation import octal_words
@@ -199,7 +199,7 @@ class CougarProbe:
         busy_wait: float = BUSY_PATIENCE,
     ) -> CougarProbe:
         """Connect, exchange HELLO, run one empty tick; a busy Cougar is retried for ``busy_wait`` s."""
-        host, port = parse_address(address)
+        host, port = parse_drv11j_address(address)
         loop = asyncio.get_running_loop()
         give_up = loop.time() + busy_wait
         while True:

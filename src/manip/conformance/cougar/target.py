@@ -24,7 +24,7 @@ from manip.conformance.suite.runner import RunConfig, RunEvents, Runner
 from manip.conformance.suite.selection import PatternSet
 from manip.cougar.cli import CougarServer, serve_cougar
 from manip.cougar.faults import parse_faults
-from manip.cougar.link import parse_address
+from manip.cougar.link import parse_drv11j_address
 from manip.cougar.memory_map import CougarMemoryMap, load_memory_map, own_map
 from manip.cougar.readings import parse_readings
 from manip.cougar.sim import CougarConfig, CougarSim
@@ -61,7 +61,7 @@ class CougarTarget:
         chosen = parse_faults(faults)
         taken = parse_readings(readings)
         if text != EMBEDDED:
-            parse_address(text)
+            parse_drv11j_address(text)
             if chosen:
                 raise ValueError("--cougar-fault applies to the embedded Cougar only (--cougar sim)")
             if taken:

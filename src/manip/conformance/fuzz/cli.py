@@ -24,7 +24,7 @@ from rich.markup import escape
 from manip.commandline import CommandLine, FiniteFloat
 from manip.conformance.cli_options import check_output_paths, given, json_option, junit_option
 from manip.conformance.fuzz.campaign import Campaign, CampaignConfig, CampaignEvents
-from manip.conformance.fuzz.generators import CLASSES, HAZARD_ORDER, GenOptions
+from manip.conformance.fuzz.generators import CLASSES, GenOptions
 from manip.conformance.fuzz.report import CampaignViolation, FuzzReport, finding_text, write_json, write_junit
 from manip.conformance.fuzz.session import Allowance
 from manip.conformance.fuzz.target import FuzzedServer, LaunchedServer, RemoteServer, reference_server_argv
@@ -35,7 +35,7 @@ from manip.conformance.suite.selection import match_id
 from manip.exit_status import epilog
 from manip.links import AddressError, LinkAddress, parse_address
 from manip.reference_server import FaultSet
-from manip.spec.model import Hazard
+from manip.spec.model import HAZARDS, Hazard
 
 __all__ = ["fuzz_command"]
 
@@ -240,7 +240,7 @@ def fuzz_command(
     _check_options(host, launch, server_log, target_kind, allow_motion, only, server_faults, classes)
     address = _address(host)
     check_output_paths(json=json_path, junit=junit_path)
-    hazards: frozenset[Hazard] = frozenset(HAZARD_ORDER)
+    hazards: frozenset[Hazard] = frozenset(HAZARDS)
     if target_kind == "hardware" and not allow_motion:
         hazards = frozenset({"read-only", "config"})
     chudp = (address.scheme == "chudp") if address is not None else link == "chudp"

@@ -26,7 +26,7 @@ from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, Requ
 from manip.conformance.suite.selection import match_id
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import ChaosOp, RequestOp
-from manip.spec.model import Field, Hazard
+from manip.spec.model import HAZARDS, Field, Hazard
 from manip.spec.notation import octal
 
 __all__ = [
@@ -41,19 +41,14 @@ __all__ = [
 LinkKind = Literal["stream", "datagram"]
 Layer = Literal["link", "chaos", "manip"]
 
-HAZARD_ORDER: Final[tuple[Hazard, ...]] = ("read-only", "config", "motion", "power")
 STEPS_PER_INPUT: Final = 32
 """Most stray packets one input sends: their source indices are unique within 2,000 inputs."""
 MAX_PIPELINE: Final = 500
 UNKNOWN_OPCODES: Final = tuple(op for op in range(0o200, 0o400) if op not in SPEC.requests)
 """Data opcodes no request of the spec uses (0300-0377 are 16-bit data, never a request)."""
-READ_ONLY_PROBES: Final = tuple(
-    op.opcode for op in SPEC.requests.values() if op.hazard == "read-only" and not op.request.fields
-)
 HERE: Final = int(RequestOp.HERE)
 PAUSE: Final = 0.05
 """Seconds a sequence waits for its motion to end (less when the target reports something first)."""
-SEGMENT_OPS: Final = tuple(op.opcode for op in SPEC.requests.values() if op.response.form == "segment")
 
 
 @dataclass(frozen=True)
@@ -62,7 +57,7 @@ class GenOptions:
     classes chosen, the contact name."""
 
     link: LinkKind = "stream"
-    hazards: frozenset[Hazard] = frozenset(HAZARD_ORDER)
+    hazards: frozenset[Hazard] = frozenset(HAZARDS)
     select: tuple[str, ...] = ()
     """Glob patterns of class ids (``manip.*``); none: every class."""
     contact: str = "PUMA"

@@ -33,7 +33,7 @@ from manip.conformance.judge.violation import FailureKind, Violation
 from manip.conformance.suite.rawchaos import format_packet
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
-from manip.spec.model import Level
+from manip.spec.model import LEVELS, Level
 from manip.spec.notation import octal
 
 __all__ = ["ALWAYS", "FUZZ_KINDS", "KIND_NAMES", "Sighting", "judge"]
@@ -57,7 +57,6 @@ KIND_NAMES: Final[dict[FailureKind, str]] = {
 }
 """How the console names each kind: a target that does not answer *hangs*, a request never answered
 is *dropped silently*."""
-LEVELS: Final = ("MUST", "SHOULD", "MAY", "INFO")
 DISRUPTIVE: Final = frozenset(
     {
         "connect.initial-response",

@@ -14,14 +14,14 @@ print it:
 * anything with ``data`` bytes and a ``str`` (an ``Answer``, a Cougar ``WordReply``): both, and an
   answer's packets;
 * a list or tuple of those: joined with ``"; "`` (``"nothing"`` when empty), the bytes concatenated;
-* :func:`shown` (``shown(answer, "mask 5")``): the case's own words about what ``answer`` showed: the
+* :func:`showing` (``showing(answer, "mask 5")``): the case's own words about what ``answer`` showed: the
   text is the case's, the bytes and packets the answer's;
 * :func:`missing` (``missing("no CLS within 2 s", after=answer)``): a packet that never came; the
   violation's kind is ``missing_response``, the one kind of a case's check that may name no packet (it
   names those of ``after``, what the packet should have followed, when given);
 * ``bytes``: shown in hex; a string: the text alone; anything else: its ``str``.  Text alone names no
-  packet: the context then names the packets the target sent since the case's previous check
-  (:meth:`~manip.conformance.suite.context.CaseContext.expect`).
+  packet: the context then names the last packet of the case's recording, the one the check was reading
+  (:meth:`~manip.conformance.suite.context.CaseContext.judged`).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ __all__ = [
     "missing",
     "seen_kind",
     "seen_packets",
-    "shown",
+    "showing",
 ]
 
 FailureKind = Literal[
@@ -117,7 +117,7 @@ class Missing:
     after: object = None
 
 
-def shown(of: object, text: object) -> Shown:
+def showing(of: object, text: object) -> Shown:
     """Evidence ``of`` (an answer, packets...) in the case's own words ``text`` (its ``str``)."""
     return Shown(of, str(text))
 
@@ -150,7 +150,7 @@ def evidence(seen: object) -> tuple[str, bytes]:
 
 def seen_packets(seen: object) -> tuple[WirePacket, ...]:
     """The packets the evidence ``seen`` judged: the packet itself, an answer's packets (anything with
-    ``packets``), those of :func:`shown`'s evidence or of what a :func:`missing` one should have
+    ``packets``), those of :func:`showing`'s evidence or of what a :func:`missing` one should have
     followed, those of each item of a list; none for text, bytes or nothing."""
     if isinstance(seen, WirePacket):
         return (seen,)

@@ -25,7 +25,6 @@ from manip.conformance.output.culprit import AFTER, BEFORE, OPENING
 from manip.conformance.output.report_view import (
     ATTENTION,
     FAILING,
-    LEVELS,
     OUTCOME_ORDER,
     PacketRow,
     Report,
@@ -42,6 +41,7 @@ from manip.conformance.output.report_view import (
     target_label,
     wire_order,
 )
+from manip.spec.model import LEVELS
 
 __all__ = ["render_html"]
 

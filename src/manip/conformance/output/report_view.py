@@ -25,7 +25,6 @@ from manip.spec import SPEC
 __all__ = [
     "ATTENTION",
     "FAILING",
-    "LEVELS",
     "OUTCOME_ORDER",
     "ClauseInfo",
     "PacketRow",
@@ -64,7 +63,6 @@ FAILING: Final = frozenset({"fail", "error", "fixed"})
 """Outcomes that fail the run."""
 ATTENTION: Final = FAILING | {"warn", "known-fail"}
 """Outcomes a reader needs to look at (the rest are quiet: passed, skipped, not run...)."""
-LEVELS: Final = ("MUST", "SHOULD", "MAY", "INFO")
 _REQUIRED: Final = ("verdict", "exit_code", "counts", "cases", "by_clause", "seed", "target")
 Report = Mapping[str, Any]
 

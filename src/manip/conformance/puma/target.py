@@ -39,7 +39,7 @@ from manip.conformance.suite.runner import RunConfig, RunEvents, Runner
 from manip.conformance.suite.selection import PatternSet
 from manip.conformance.suite.world import World
 from manip.cougar.cli import serve_cougar
-from manip.cougar.link import DEFAULT_PORT, parse_address
+from manip.cougar.link import DEFAULT_PORT, parse_drv11j_address
 from manip.reference_server import FaultSet, ServerConfig
 from manip.reference_server.cougar_wrist import CougarWrist
 from manip.reference_server.driver import serve
@@ -79,7 +79,7 @@ class PumaTarget:
     virtual: bool = True
 
     def __post_init__(self) -> None:
-        parse_address(self.wrist_listen)  # ValueError for a bad address
+        parse_drv11j_address(self.wrist_listen)  # ValueError for a bad address
         if self.host is not None and self.faults:
             raise ValueError("fault switches apply to the embedded server only (omit HOST)")
         self.server_config()  # ValueError for a bad fault

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import fnmatch
 import math
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -56,7 +56,6 @@ __all__ = [
     "DESCRIBE_MASKED_KEYS",
     "FLOAT_ABS_TOL",
     "FLOAT_REL_TOL",
-    "MASKS",
     "Mismatch",
     "NumberMap",
     "SegmentBase",
@@ -72,16 +71,6 @@ FLOAT_REL_TOL: Final = 2.0**-21
 FLOAT_ABS_TOL: Final = 2.0**-20
 """Absolute tolerance, for values near zero (rotation entries of about 1e-7 are rounding noise)."""
 DESCRIBE_MASKED_KEYS: Final = frozenset({"unique-name", "software-version"})
-MASKS: Final[Mapping[str, str]] = {
-    "packet-numbers": "request-number words compared through the recorded->live request mapping",
-    "initial-response": "the initial RESPONSE must quote the live RFC's packet number",
-    "chaos-header": "acks, packet numbers, indices, STS/SNS and retransmissions are not compared",
-    "timestamps": "capture times and pacing are not compared",
-    "segment-base": "segment numbers compared relative to each session's first",
-    "floats": f"floats equal within {FLOAT_REL_TOL:g} relative or {FLOAT_ABS_TOL:g} absolute",
-    "describe-identity": "describe-self compared as one alist; :unique-name and :software-version "
-    "values not compared",
-}
 
 
 @dataclass(frozen=True)

@@ -39,23 +39,22 @@ from manip.captures import Session
 from manip.conformance.judge.checks import (
     CLOSE_OPCODES,
     WirePacket,
-    check_client_guards,
-    check_client_request,
     check_transcript,
     describe,
     required_refusal,
 )
+from manip.conformance.judge.client_checks import check_client_guards, check_client_request
 from manip.conformance.replay.capture_report import capture_report, open_capture, select_sessions
 from manip.conformance.suite.case import LEVEL_ORDER
 from manip.conformance.suite.results import CaseResult, RunReport, Violation
 from manip.spec import SPEC, RequestName
 from manip.spec.constants import ChaosOp, ServerOp
-from manip.spec.model import Hazard, Level
+from manip.spec.model import HAZARDS, Hazard, Level
 
 __all__ = [
     "CLIENT_FAMILIES",
     "FAMILIES",
-    "JUDGED",
+    "JUDGE_FAMILIES",
     "VERIFY_DEADLINE",
     "Family",
     "Judge",
@@ -72,7 +71,6 @@ __all__ = [
 ]
 
 VERIFY_DEADLINE: Final = 1.0
-HAZARD_ORDER: Final[tuple[Hazard, ...]] = ("read-only", "config", "motion", "power")
 _ERRORS: Final = frozenset(
     {
         ServerOp.FATAL_ERROR,
@@ -267,7 +265,7 @@ CLIENT_FAMILIES: Final[tuple[Family, ...]] = (
 )
 """What ``--judge client`` reports: the client's side of each session."""
 Judge = Literal["server", "client", "both"]
-JUDGED: Final[Mapping[str, tuple[Family, ...]]] = {
+JUDGE_FAMILIES: Final[Mapping[str, tuple[Family, ...]]] = {
     "server": FAMILIES,
     "client": CLIENT_FAMILIES,
     "both": FAMILIES + CLIENT_FAMILIES,
@@ -334,10 +332,8 @@ def judge_session(session: Session, connection: int = 0) -> tuple[list[WirePacke
 
 def session_hazard(packets: Sequence[WirePacket]) -> Hazard:
     """The highest hazard class among the session's request opcodes."""
-    levels = [
-        HAZARD_ORDER.index(op.hazard) for p in _requests(packets) if (op := SPEC.requests.get(p.opcode))
-    ]
-    return HAZARD_ORDER[max(levels, default=0)]
+    levels = [HAZARDS.index(op.hazard) for p in _requests(packets) if (op := SPEC.requests.get(p.opcode))]
+    return HAZARDS[max(levels, default=0)]
 
 
 def judge_findings(result: CaseResult, findings: Iterable[Violation], *, strict: bool) -> None:
@@ -379,7 +375,7 @@ def verify_capture(
     if capture is None or report.unreachable:
         report.duration = time.monotonic() - t0
         return report
-    families = JUDGED[judge]
+    families = JUDGE_FAMILIES[judge]
     for number, session in chosen:
         start = time.monotonic()
         packets, findings = judge_session(session, connection=number - 1)

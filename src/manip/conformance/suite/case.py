@@ -76,7 +76,7 @@ from typing import TYPE_CHECKING, Final, Literal, TypeVar, get_args
 
 from manip.conformance.judge.violation import CarriesViolation, FailureKind, Violation
 from manip.spec import SPEC
-from manip.spec.model import Hazard, Level
+from manip.spec.model import HAZARDS, LEVELS, Hazard, Level
 
 if TYPE_CHECKING:
     from manip.conformance.suite.context import CaseContext, RunOptions
@@ -84,7 +84,6 @@ if TYPE_CHECKING:
 __all__ = [
     "HAZARD_ORDER",
     "LEVEL_ORDER",
-    "TARGETS",
     "TECHNIQUES",
     "Case",
     "CaseError",
@@ -111,11 +110,10 @@ TECHNIQUES: Final[tuple[str, ...]] = get_args(Technique)
 Target = Literal["server", "cougar", "client", "puma"]
 """What a case tests, from the first component of its id: a manip server, a Cougar, a client, the
 Puma's side of the wrist link (a server judged by the suite playing Cougar)."""
-TARGETS: Final[tuple[str, ...]] = get_args(Target)
 
-LEVEL_ORDER: Final[Mapping[str, int]] = {"MUST": 3, "SHOULD": 2, "MAY": 1, "INFO": 0}
+LEVEL_ORDER: Final[Mapping[str, int]] = {level: len(LEVELS) - 1 - n for n, level in enumerate(LEVELS)}
 """Strength of a level; a case's default level is the strongest among its clauses."""
-HAZARD_ORDER: Final[Mapping[str, int]] = {"read-only": 0, "config": 1, "motion": 2, "power": 3}
+HAZARD_ORDER: Final[Mapping[str, int]] = {hazard: n for n, hazard in enumerate(HAZARDS)}
 """How dangerous an opcode class is on real hardware (the spec's hazard classes)."""
 
 CaseFunction = Callable[["CaseContext"], Awaitable[None]]

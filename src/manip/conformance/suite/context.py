@@ -33,7 +33,7 @@ came.
 
 ``ctx.expect(cond, clause=..., expected=..., seen=answer)`` is the one way to state a check, and the
 common ones are one line each (``ctx.expect_response``, ``expect_done``, ``expect_opcode``,
-``expect_echo``, ``expect_near``).  Evidence has one form, ``seen=`` (an answer, packets, ``shown(answer,
+``expect_echo``, ``expect_near``).  Evidence has one form, ``seen=`` (an answer, packets, ``showing(answer,
 text)``, ``missing(text)``: :mod:`~manip.conformance.judge.violation`), and every violation names the
 packets it judged (text alone: the last packet recorded, :meth:`CaseContext.judged`), but one about a
 packet that never came.  A false check, on a clause of any level, is recorded (``ctx.recorded``) and the
@@ -681,7 +681,7 @@ class CaseContext:
         """Check ``condition``; when false, a violation is recorded and the case goes on.
 
         ``seen`` is the evidence, in the one form of :mod:`~manip.conformance.judge.violation`: an
-        answer, a packet, Cougar responses, a list of them, ``shown(answer, "text")`` in the case's own
+        answer, a packet, Cougar responses, a list of them, ``showing(answer, "text")`` in the case's own
         words, or ``missing("text")`` for a packet that never came.  The violation's text, bytes and
         packets are derived from it; evidence that names no packet (text alone) names the last packet
         of the case's recording, the one the check was reading (:meth:`judged`), so that every violation
@@ -919,11 +919,6 @@ class CaseContext:
 def _request_name(code: int) -> str:
     op = SPEC.requests.get(code)
     return op.name if op is not None else octal(code)
-
-
-def request_packets(packets: Sequence[WirePacket]) -> list[WirePacket]:
-    """The client's requests of a recording."""
-    return [p for p in packets if p.direction == "c2s" and not p.is_close]
 
 
 def _loop_clock() -> Callable[[], float]:

@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, Final, Literal
 from manip.conformance.judge.packets import WirePacket
 from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC
-from manip.spec.model import Level
+from manip.spec.model import LEVELS, Level
 
 if TYPE_CHECKING:
     from manip.conformance.suite.case import Target
@@ -91,7 +91,6 @@ def judging_hint(reason: str) -> str:
 
 ClauseStatus = Literal["held", "broken", "not-judged", "not-exercised"]
 CLAUSE_STATUSES: Final[tuple[str, ...]] = ("held", "broken", "not-judged", "not-exercised")
-_STRENGTH: Final = {"MUST": 3, "SHOULD": 2, "MAY": 1, "INFO": 0}
 _VERDICT_OUTCOMES: Final = frozenset({"fail", "warn", "known-fail"})
 """Outcomes whose violations break their clauses (an ``error`` is the suite's, not the target's)."""
 _UNJUDGING_OUTCOMES: Final = frozenset({"not-judged", "unsupported", "error"})
@@ -369,7 +368,7 @@ def conclude(
     if failure is not None:
         result.violations.append(failure)
     # the strongest first (stable): the case's failure is its first MUST violation, wherever it came
-    result.violations += sorted(recorded, key=lambda v: -_STRENGTH.get(v.strength, 0))
+    result.violations += sorted(recorded, key=lambda v: LEVELS.index(v.strength))
     fails = any(v.level in counted for v in result.violations)
     if result.outcome == "error" and fails and not result.reason.startswith("bug of the suite"):
         result.notes.append(f"the case could not go on after its violations: {result.reason}")

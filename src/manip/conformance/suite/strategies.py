@@ -28,7 +28,7 @@ from manip.arm.kinematics import PUMA600, JointLimits, Joints
 from manip.codecs.messages import encode_request
 from manip.codecs.pdp11float import F_MAX, f_to_u32, u32_to_f
 from manip.spec import SPEC, FieldType, Layout, RequestOpcode
-from manip.spec.model import Hazard
+from manip.spec.model import HAZARDS, Hazard
 
 __all__ = [
     "ALL_HAZARDS",
@@ -61,7 +61,7 @@ __all__ = [
 F_RELATIVE_ULP: Final = 2.0**-23
 #: Hazard classes safe on real hardware: nothing moves and power is not touched.
 SAFE_HAZARDS: Final[frozenset[Hazard]] = frozenset({"read-only", "config"})
-ALL_HAZARDS: Final[frozenset[Hazard]] = frozenset({"read-only", "config", "motion", "power"})
+ALL_HAZARDS: Final[frozenset[Hazard]] = frozenset(HAZARDS)
 #: Request opcodes are 0200-0277 (clause request.opcode-range).
 REQUEST_OPCODES: Final = range(0o200, 0o300)
 MAX_DATA: Final = 488

@@ -45,7 +45,6 @@ __all__ = [
     "World",
     "WorldError",
     "WristForce",
-    "condition_from_json",
 ]
 
 WITHOUT_WORLD: Final = (
@@ -79,12 +78,6 @@ def _joint(value: object, what: str = "joint") -> int:
     if not isinstance(value, int) or isinstance(value, bool) or not 1 <= value <= 6:
         raise ValueError(f"{what} must be a joint number 1..6, not {value!r}")
     return value
-
-
-def _number(value: object, what: str) -> float:
-    if not isinstance(value, int | float) or isinstance(value, bool):
-        raise ValueError(f"{what} must be a number, not {value!r}")
-    return float(value)
 
 
 @dataclass(frozen=True)
@@ -238,40 +231,6 @@ CONDITIONS: Final[dict[str, type[Condition]]] = {
     for kind in (Obstacle, CalibrationFailure, SluggishJoint, SilentWrist, PanicButton, WristForce)
 }
 """Every condition of contract 2, by its name."""
-
-
-def _vector3(value: object, what: str) -> tuple[float, float, float]:
-    if not isinstance(value, list) or len(value) != 3:
-        raise ValueError(f"{what} must be an array of 3 numbers, not {value!r}")
-    a, b, c = (_number(v, what) for v in value)
-    return a, b, c
-
-
-def condition_from_json(name: str, args: dict[str, Any]) -> Condition:
-    """The condition an ``arrange`` message names; ValueError says what is wrong with it."""
-    match name:
-        case "obstacle":
-            lower, upper = args.get("lower"), args.get("upper")
-            return Obstacle(
-                _joint(args.get("joint")),
-                None if lower is None else _number(lower, "lower"),
-                None if upper is None else _number(upper, "upper"),
-            )
-        case "calibration-failure":
-            joints = args.get("joints", [2, 3])
-            if not isinstance(joints, list):
-                raise ValueError(f"joints must be an array, not {joints!r}")
-            return CalibrationFailure(tuple(_joint(j) for j in joints))
-        case "sluggish-joint":
-            return SluggishJoint(_joint(args.get("joint", 2)), _number(args.get("lag", 0.35), "lag"))
-        case "silent-wrist":
-            return SilentWrist()
-        case "panic-button":
-            return PanicButton()
-        case "wrist-force":
-            force = _vector3(args.get("force", [0, 0, 0]), "force")
-            return WristForce(force, _vector3(args.get("torque", [0, 0, 0]), "torque"))
-    raise ValueError(f"unknown condition {name!r}; known: {', '.join(CONDITIONS)}")
 
 
 class World(Protocol):

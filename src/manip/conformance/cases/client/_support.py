@@ -4,17 +4,16 @@ reported against what the judging server sent."""
 from __future__ import annotations
 
 import random
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any, Final
 
 from manip.codecs.error_string import ErrorMessage, format_joint_mask
 from manip.codecs.messages import decode_reply, response_layout
-from manip.codecs.packet import Packet
-from manip.codecs.pdp11float import f_to_u32, u32_to_f
+from manip.codecs.pdp11float import u32_to_f
 from manip.conformance.client.contract import Op, Result
 from manip.conformance.client.runner import ClientContext, Play
 from manip.conformance.judge.diagnosis import number_diagnosis
-from manip.conformance.judge.violation import shown
+from manip.conformance.judge.violation import showing
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
 from manip.spec.model import FieldType, Layout, RequestOpcode
@@ -186,7 +185,7 @@ def expect_reply(
     )
     assert answer is not None
     for expected, seen in reply_mismatches(op, payload, number, answer.data):
-        ctx.expect(False, clause=clause, expected=expected, seen=shown(payload, seen))
+        ctx.expect(False, clause=clause, expected=expected, seen=showing(payload, seen))
     return answer
 
 
@@ -295,15 +294,6 @@ def render(error: ErrorMessage) -> str:
                 continue
         out.append(ch)
     return "".join(out)
-
-
-def data_packets(packets: Sequence[Packet]) -> list[Packet]:
-    return [p for p in packets if p.opcode >= 0o200]
-
-
-def floats_words(values: Sequence[float]) -> bytes:
-    """Floats as wire bytes."""
-    return b"".join(f_to_u32(v).to_bytes(4, "little") for v in values)
 
 
 def spec_request(name: str) -> RequestOpcode:

@@ -3,7 +3,7 @@ hand's load changes, and that it leaves the gravity model alone while a guard is
 
 The harness is told only *what* to do (the contract's choice operations ``arm-guard`` and
 ``change-load``, docs/client-harness.md section 4.4); the client decides which packets that takes.  The
-packets it sent are judged by :func:`~manip.conformance.judge.checks.check_client_guards`, the rule
+packets it sent are judged by :func:`~manip.conformance.judge.client_checks.check_client_guards`, the rule
 ``manip-conform verify --judge client`` applies to a recording, over the same packets a recording would
 hold (:func:`~manip.conformance.client.wire.judged_packets`).
 """
@@ -19,7 +19,7 @@ from manip.conformance.client.contract import Op
 from manip.conformance.client.runner import ClientContext, Play, client_context
 from manip.conformance.client.server import ServerSide, WireRecord, plain_answer
 from manip.conformance.client.wire import client_requests, judged_packets
-from manip.conformance.judge.checks import check_client_guards
+from manip.conformance.judge.client_checks import check_client_guards
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec import SPEC

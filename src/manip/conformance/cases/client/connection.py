@@ -9,7 +9,7 @@ from manip.conformance.cases.client._support import close, connect, request
 from manip.conformance.client.runner import ClientContext, Play, client_context
 from manip.conformance.client.server import ServerSide
 from manip.conformance.client.wire import initial_response_findings
-from manip.conformance.judge.violation import shown
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec.constants import ChaosOp, ServerOp
@@ -38,7 +38,7 @@ async def initial_response(base: CaseContext) -> None:
             False,
             clause="client.initial-response",
             expected=finding.expected,
-            seen=shown(finding.packet, finding.actual),
+            seen=showing(finding.packet, finding.actual),
         )
     answer = play.answer(1)
     ctx.expect(

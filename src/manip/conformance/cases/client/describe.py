@@ -11,7 +11,7 @@ from manip.codecs.lispm_text import decode_lispm, encode_lispm
 from manip.conformance.cases.client._support import close, connect, request
 from manip.conformance.client.runner import ClientContext, Play, client_context
 from manip.conformance.client.server import ServerSide
-from manip.conformance.judge.violation import shown
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 
@@ -73,7 +73,7 @@ def expect_text(ctx: ClientContext, play: Play, raw: bytes, *, clause: str = "cl
         values.get("text") == decode_lispm(raw),
         clause=clause,
         expected=f"the whole text, {len(raw)} bytes: {decode_lispm(raw)!r}",
-        seen=shown(raw, repr(values.get("text"))),
+        seen=showing(raw, repr(values.get("text"))),
     )
     ctx.expect(
         raw_seen == raw.hex().upper(),

@@ -27,7 +27,7 @@ from manip.conformance.client.contract import Op
 from manip.conformance.client.runner import ClientContext, Play, client_context
 from manip.conformance.client.server import Mangle, ServerSide, plain_answer
 from manip.conformance.client.wire import ack_findings, numbering_findings, window_findings
-from manip.conformance.judge.violation import shown
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.links import NcpConfig
@@ -52,7 +52,7 @@ async def numbers_wrap(base: CaseContext) -> None:
             False,
             clause="ncp.packet-numbers",
             expected=finding.expected,
-            seen=shown(finding.packet, finding.actual),
+            seen=showing(finding.packet, finding.actual),
         )
 
 
@@ -69,7 +69,7 @@ async def acknowledge(base: CaseContext) -> None:
             False,
             clause="ncp.acknowledge",
             expected=finding.expected,
-            seen=shown(finding.packet, finding.actual),
+            seen=showing(finding.packet, finding.actual),
         )
     expect_text(ctx, play, raw)
 
@@ -273,7 +273,10 @@ def _expect_window(ctx: ClientContext, play: Play, window: int, sent: Answered, 
     """The window held on the wire (as offered at each moment), and every request answered and matched."""
     for finding in window_findings(play.wire, window):
         ctx.expect(
-            False, clause="ncp.window", expected=finding.expected, seen=shown(finding.packet, finding.actual)
+            False,
+            clause="ncp.window",
+            expected=finding.expected,
+            seen=showing(finding.packet, finding.actual),
         )
     ctx.expect(
         len(sent) == count,

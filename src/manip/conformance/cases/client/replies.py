@@ -15,7 +15,7 @@ from manip.conformance.cases.client._support import (
 )
 from manip.conformance.client.runner import client_context
 from manip.conformance.client.server import ServerSide, plain_answer
-from manip.conformance.judge.violation import missing, shown
+from manip.conformance.judge.violation import missing, showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec import SPEC
@@ -122,7 +122,7 @@ def _request_case(op: RequestOpcode) -> None:
             req.data == want,
             clause=clauses[1],
             expected=f"{op.name} data {want.hex()} ({len(want)} bytes) for {args}",
-            seen=shown(req, f"{req.data.hex()} ({len(req.data)} bytes)"),
+            seen=showing(req, f"{req.data.hex()} ({len(req.data)} bytes)"),
         )
 
     case(

@@ -17,7 +17,7 @@ from manip.conformance.cougar.probe import (
     floats_of,
     layout_words,
 )
-from manip.conformance.judge.violation import shown
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory import Region
 from manip.spec import SPEC
@@ -180,7 +180,7 @@ async def read_forces(ctx: CaseContext, probe: CougarProbe) -> tuple[float, ...]
         len(values) == 6 and all(math.isfinite(v) for v in values),
         clause="cougar.rfrc.reply",
         expected="six finite floats",
-        seen=shown(reply, str(values)),
+        seen=showing(reply, str(values)),
     )
     return values
 

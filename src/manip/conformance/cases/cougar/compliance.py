@@ -30,7 +30,7 @@ from manip.conformance.cougar.probe import (
     floats_of,
     words_bytes,
 )
-from manip.conformance.judge.violation import shown
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory import Region
@@ -69,7 +69,7 @@ async def _ntd(
         len(values) == 6 and all(math.isfinite(v) for v in values),
         clause="cougar.npr.reply",
         expected="six finite floats",
-        seen=shown(reply, fmt(values)),
+        seen=showing(reply, fmt(values)),
     )
     return values
 
@@ -172,7 +172,7 @@ async def rst_zeroes_velocities(ctx: CaseContext) -> None:
                 all(v == 0.0 for v in values),
                 clause="cougar.rst",
                 expected=f"{name} zero after RST",
-                seen=shown(words_bytes(words), fmt(values)),
+                seen=showing(words_bytes(words), fmt(values)),
             )
         await probe.send("NBJI", bji=(0.0,) * 6)
         await probe.run(1)

@@ -15,7 +15,7 @@ from manip.conformance.cougar.probe import (
     cougar_probe,
     words_bytes,
 )
-from manip.conformance.judge.violation import shown
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 
@@ -65,7 +65,7 @@ async def jacob_front_buffer(ctx: CaseContext) -> None:
             not mixed,
             clause="cougar.jacob-double-buffer",
             expected="the front buffer always the old or the new Jacobian",
-            seen=shown(
+            seen=showing(
                 words_bytes(seen[mixed[0]]) if mixed else b"",
                 f"another one at tick(s) {mixed} after the move",
             ),

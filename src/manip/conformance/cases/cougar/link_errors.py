@@ -33,7 +33,7 @@ from manip.cougar.link import (
     Ticked,
     Words,
     encode_frame,
-    parse_address,
+    parse_drv11j_address,
 )
 from manip.spec.constants import CougarCommand
 
@@ -122,7 +122,7 @@ async def _read_until(
 async def _once(ctx: CaseContext, first: bytes | None, bad: bytes) -> CougarLinkSeen:
     """One raw link: Cougar's HELLO, then ``first`` (a good HELLO and a tick whose TICKED is awaited) or
     nothing, then ``bad``; Cougar's frames until it closes or the reply timeout passes."""
-    host, port = parse_address(ctx.options.address)
+    host, port = parse_drv11j_address(ctx.options.address)
     timeout = ctx.options.reply_timeout
     try:
         async with asyncio.timeout(ctx.options.connect_timeout):

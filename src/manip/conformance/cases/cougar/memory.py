@@ -14,7 +14,7 @@ from manip.conformance.cougar.probe import (
     cougar_probe,
     words_bytes,
 )
-from manip.conformance.judge.violation import shown
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec import SPEC
@@ -85,7 +85,7 @@ async def memory_parameters(ctx: CaseContext) -> None:
                 clause="cougar.memory",
                 expected=f"{name}'s data words at {octal(objects[where].address)} ({where}): "
                 f"{octal_words(words[1:])}",
-                seen=shown(words_bytes(stored), octal_words(stored)),
+                seen=showing(words_bytes(stored), octal_words(stored)),
             )
         zero = {
             CougarCommand.NK: "k",

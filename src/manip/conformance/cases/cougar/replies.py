@@ -18,7 +18,7 @@ from manip.conformance.cases.cougar._support import (
 from manip.conformance.cougar.probe import (
     cougar_probe,
 )
-from manip.conformance.judge.violation import shown
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec.notation import octal, octal_words
@@ -42,7 +42,7 @@ async def reply_ntd(ctx: CaseContext) -> None:
                 len(reply.floats()) == 6 and all(math.isfinite(v) for v in reply.floats()),
                 clause="cougar.npr.reply",
                 expected="six finite floats of joint-rate change",
-                seen=shown(reply, fmt(reply.floats())),
+                seen=showing(reply, fmt(reply.floats())),
             )
             await expect_quiet(ctx, probe, "cougar.response.layout", "NPR has one response")
 
@@ -89,7 +89,7 @@ async def reply_raw(ctx: CaseContext) -> None:
                 len(gauges) == 8 and all(-2048 <= g <= 2047 for g in gauges),
                 clause="cougar.gauge-range",
                 expected="eight readings in -2048..2047",
-                seen=shown(reply, str(gauges)),
+                seen=showing(reply, str(gauges)),
             )
             await expect_quiet(ctx, probe, "cougar.response.layout", "RAW is eight words", ticks=1)
 

@@ -28,7 +28,7 @@ from manip.conformance.judge.checks import (
     required_refusal,
     word,
 )
-from manip.conformance.judge.violation import shown
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.spec import SPEC
@@ -69,7 +69,7 @@ async def reply_shape(ctx: CaseContext) -> None:
         answer.terminated,
         clause="multi.terminated-by-empty",
         expected="an empty RESPONSE ending the reply",
-        seen=shown(answer.packets[-1], f"{len(answer.packets)} packet(s), no terminator"),
+        seen=showing(answer.packets[-1], f"{len(answer.packets)} packet(s), no terminator"),
     )
     ctx.note(f"{len(answer.packets) - 1} text packet(s)")
     after = await probe.call("here")  # the next answer belongs to the next request
@@ -212,14 +212,14 @@ def _operations_case(row: tuple[str, tuple[Hazard, ...], str]) -> None:
                 verdict or opcode not in listed,
                 clause="describe.operations-answered",
                 expected=f"opcode {octal(opcode)}, listed under :operations, served",
-                seen=shown(answer, f"refused as unserved: {answer}"),
+                seen=showing(answer, f"refused as unserved: {answer}"),
             )
             ctx.expect(
                 not verdict or opcode in listed,
                 clause="describe.operations-complete",
                 expected=f"opcode {octal(opcode)} listed under :operations: it is served "
                 "(not refused unserved)",
-                seen=shown(answer, f"answered with {answer}; {operations}"),
+                seen=showing(answer, f"answered with {answer}; {operations}"),
             )
         ctx.note(f"served: {' '.join(octal(o) for o in served)} ({len(served)} of {len(probed)} probed)")
 
@@ -258,7 +258,7 @@ async def degrees_of_freedom(ctx: CaseContext) -> None:
         _float_count(joints) == dof,
         clause="describe.dof-joint-vectors",
         expected=f"{dof} joint angles (:degrees-of-freedom {dof})",
-        seen=shown(joints, f"{len(joints.data) - 2} data bytes after the request number"),
+        seen=showing(joints, f"{len(joints.data) - 2} data bytes after the request number"),
     )
     require_response(ctx, joints, "joint angles")  # a reply off the layout is the transcript invariant's
     pose = await read_floats(ctx, probe, "here")
@@ -270,7 +270,7 @@ async def degrees_of_freedom(ctx: CaseContext) -> None:
         _float_count(solved) == dof,
         clause="describe.dof-joint-vectors",
         expected=f"{dof} joint angles from solve forwards (:degrees-of-freedom {dof})",
-        seen=shown(solved, f"{len(solved.data) - 2} data bytes after the request number"),
+        seen=showing(solved, f"{len(solved.data) - 2} data bytes after the request number"),
     )
 
 
@@ -297,7 +297,7 @@ async def dof_set_joint_angles(ctx: CaseContext) -> None:
             expected=f"set joint angles with {count} floats "
             + ("taken as well formed (no command error)" if count == dof else "refused as a bad length (C)")
             + f": :degrees-of-freedom is {dof}",
-            seen=shown(answer, str(answer) if error is None else repr(error.error.render())),
+            seen=showing(answer, str(answer) if error is None else repr(error.error.render())),
         )
 
 

@@ -7,7 +7,7 @@ from typing import Final
 
 from manip.conformance.cases._support import UNASSIGNED_OPCODES, error_of
 from manip.conformance.judge.checks import check_error_packet
-from manip.conformance.judge.violation import missing, shown
+from manip.conformance.judge.violation import missing, showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.conformance.suite.world import CalibrationFailure
@@ -102,7 +102,7 @@ async def severity_matches(ctx: CaseContext) -> None:
         error.severity == "C",
         clause="request.unknown-opcode",
         expected="severity C for an unknown opcode",
-        seen=shown(answer, repr(error.render())),
+        seen=showing(answer, repr(error.render())),
     )
 
 
@@ -116,7 +116,7 @@ async def non_fatal_is_reply(ctx: CaseContext) -> None:
         not extra,
         clause="error.non-fatal-is-reply",
         expected="no other reply after the non-fatal error",
-        seen=shown(extra[:1], f"{len(extra)} more packet(s)"),
+        seen=showing(extra[:1], f"{len(extra)} more packet(s)"),
     )
     after = await probe.call("here")
     ctx.expect_echo(after, clause="request.one-reply", expected="the next reply answers the next request")
@@ -178,7 +178,7 @@ async def _judge_fatal(ctx: CaseContext, probe: Probe, answer: Answer, failed: t
             error.error.has_nul and len(error.error.args) == 1 and "$" in error.error.message,
             clause="calibrate.nzi",
             expected="NZI with the joints as one $ mask argument",
-            seen=shown(answer, repr(error.error.render())),
+            seen=showing(answer, repr(error.error.render())),
         )
         _judge_mask(ctx, answer, error.error.args, failed)
     closed = await probe.wait_closed(ctx.options.reply_timeout)
@@ -195,7 +195,7 @@ async def _judge_fatal(ctx: CaseContext, probe: Probe, answer: Answer, failed: t
         isinstance(end, ConnectionClosed) and end.by_peer and end.reason != "EOF",
         clause="error.fatal-then-close",
         expected="the server to end the connection with CLS after the fatal error (EOF first or not)",
-        seen=shown(answer, f"the connection ended otherwise: {end or 'EOF, and no CLS followed it'}"),
+        seen=showing(answer, f"the connection ended otherwise: {end or 'EOF, and no CLS followed it'}"),
     )
 
 
@@ -207,7 +207,7 @@ def _judge_mask(ctx: CaseContext, answer: Answer, args: tuple[int, ...], failed:
         bool(args) and args[0] == wanted,
         clause="calibrate.nzi-mask",
         expected=f"mask {wanted} (joints {', '.join(map(str, failed))}, whose zero index the world hid)",
-        seen=shown(answer, f"mask {args[0] if args else None} (joints {named})"),
+        seen=showing(answer, f"mask {args[0] if args else None} (joints {named})"),
     )
 
 

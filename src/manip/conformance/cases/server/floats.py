@@ -7,7 +7,7 @@ import math
 import struct
 
 from manip.conformance.cases._support import floats, length, read_floats
-from manip.conformance.judge.violation import shown
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec.constants import ServerOp
@@ -20,7 +20,6 @@ TINY = 1e-38
 HUGE = 1.0e38
 """Near the top of the F range (1.7e38)."""
 POSITION_TOL_MM = 0.05
-ANGLE_TOL_DEG = 0.05
 
 
 def _dot(a: tuple[float, ...], b: tuple[float, ...]) -> float:
@@ -117,7 +116,7 @@ async def dirty_zero(ctx: CaseContext) -> None:
                 exponent != 0 or (w0 & 0x7F == 0 and w1 == 0 and not w0 & 0x8000),
                 clause="float.dirty-zero",
                 expected="a clean zero",
-                seen=shown(answer, f"float words {w0:04x} {w1:04x} in {op}"),
+                seen=showing(answer, f"float words {w0:04x} {w1:04x} in {op}"),
             )
 
 
@@ -165,14 +164,14 @@ async def extremes(ctx: CaseContext) -> None:
             clause="float.not-finite",
             expected=f"finite floats only in the answer to {what}: never the reserved operand (sign 1, "
             "exponent 0), which is what a NaN or an infinity becomes",
-            seen=shown(answer, "; ".join(reserved)),
+            seen=showing(answer, "; ".join(reserved)),
         )
         ctx.expect(
             not dirty,
             clause="float.dirty-zero",
             expected=f"floats below 2^-128 in the answer to {what} sent as a clean zero (erratum "
             "float-decode)",
-            seen=shown(answer, "exponent 0 with fraction bits: " + "; ".join(dirty)),
+            seen=showing(answer, "exponent 0 with fraction bits: " + "; ".join(dirty)),
         )
         if op != "solve-backwards" or reserved:
             continue

@@ -30,7 +30,7 @@ from manip.conformance.cases._support import (
     timed_move,
 )
 from manip.conformance.judge.checks import async_of, check_async_packet, word
-from manip.conformance.judge.violation import missing, shown
+from manip.conformance.judge.violation import missing, showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.spec import RequestName
@@ -209,7 +209,7 @@ def _expect_tor_mask(
         bool(mask >> (joint - 1) & 1) and mask >> dof == 0,
         clause="error-string.arg-values",
         expected=f"a joint mask holding joint {joint} and no joint beyond {dof}",
-        seen=shown(answer, f"mask {mask:#06x} in {error.error.render()!r}"),
+        seen=showing(answer, f"mask {mask:#06x} in {error.error.render()!r}"),
     )
 
 
@@ -309,7 +309,7 @@ async def awa_reset_by_power(ctx: CaseContext) -> None:
             (word(packet.data) or 0) <= last_request and len(packet.data) >= 2,
             clause="async-error.request-number",
             expected="the number of the last request processed",
-            seen=shown(packet, str(word(packet.data))),
+            seen=showing(packet, str(word(packet.data))),
         )
     joints = await read_floats(ctx, probe, "joint-angles")
     await _refused_stay(
@@ -458,7 +458,7 @@ async def segment_completed(ctx: CaseContext) -> None:
         not unrequested,
         clause="async.only-when-requested",
         expected="no asynchronous response before any was asked for",
-        seen=shown(unrequested[:1], f"{len(unrequested)} asynchronous response(s)"),
+        seen=showing(unrequested[:1], f"{len(unrequested)} asynchronous response(s)"),
     )
     if not await ask_notifications(ctx, probe):
         ctx.not_judged(
@@ -477,7 +477,7 @@ async def segment_completed(ctx: CaseContext) -> None:
             message is not None and message.condition == AsyncCondition.SEGMENT_COMPLETED,
             clause="async.layout",
             expected="condition 2 (segment completed)",
-            seen=shown(packet, f"condition {message.condition if message else None}"),
+            seen=showing(packet, f"condition {message.condition if message else None}"),
         )
         seen.append(message.word3 if message else None)
         if seen[-1] == segment:
@@ -760,7 +760,7 @@ async def fresh_state(ctx: CaseContext) -> None:
         not reports,
         clause="connect.per-connection-state",
         expected="no asynchronous response: the notifications the last connection asked for are not in force",
-        seen=shown(reports[:1], f"{len(reports)} asynchronous response(s)"),
+        seen=showing(reports[:1], f"{len(reports)} asynchronous response(s)"),
     )
     if flipped is None:
         ctx.note("set configuration changed no solution: the configuration is not judged")

@@ -19,7 +19,7 @@ from manip.codecs.messages import encode_request
 from manip.codecs.packet import MAX_DATA, Packet
 from manip.conformance.cases._support import host_delay
 from manip.conformance.judge.checks import WirePacket
-from manip.conformance.judge.violation import missing, shown
+from manip.conformance.judge.violation import missing, showing
 from manip.conformance.suite.case import CaseFailure, case
 from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.rawchaos import (
@@ -181,7 +181,7 @@ async def los_unknown_connection(ctx: CaseContext) -> None:
             los.opcode == ChaosOp.LOS,
             clause="ncp.los",
             expected=f"LOS answering {format_packet(probe)}",
-            seen=shown(answer.raw, format_packet(los)),
+            seen=showing(answer.raw, format_packet(los)),
         )
         ctx.note(f"LOS: {format_packet(los)}")
         if (los.packet_no, los.ack_no, los.src_index) != (number, ack, bogus):
@@ -201,7 +201,7 @@ async def los_unknown_connection(ctx: CaseContext) -> None:
                 f"a {name} to a connection that does not exist was answered",
                 clause="ncp.los",
                 expected=f"no answer to a {name} (never a LOS in answer to a LOS or CLS)",
-                seen=shown(_frames(sent, late[0].raw), _lines(late)),
+                seen=showing(_frames(sent, late[0].raw), _lines(late)),
             )
 
 
@@ -219,7 +219,7 @@ def _illegal_frame_check(
         answer.packet.opcode == ChaosOp.LOS,
         clause="ncp.los",
         expected=f"LOS answering {why}",
-        seen=shown(_frames(frame, answer.raw), format_packet(answer.packet)),
+        seen=showing(_frames(frame, answer.raw), format_packet(answer.packet)),
     )
     ctx.note(f"{why}: {format_packet(answer.packet)}")
 
@@ -311,7 +311,7 @@ async def duplicate_rfc(ctx: CaseContext) -> None:
                         + ("opened a second connection" if second else "was treated as a new request"),
                         clause="ncp.duplicate-rfc",
                         expected=f"nothing, or the OPN from index {octal(conn.remote_index)} again",
-                        seen=shown(_frames(frame, r.raw), format_packet(p)),
+                        seen=showing(_frames(frame, r.raw), format_packet(p)),
                     )
 
         await duplicate("before the OPN was acknowledged")
@@ -327,7 +327,7 @@ async def duplicate_rfc(ctx: CaseContext) -> None:
             reply.packet.data[:2] == request.packet_no.to_bytes(2, "little"),
             clause="ncp.duplicate-rfc",
             expected=f"the first connection still serving: a reply quoting request #{request.packet_no}",
-            seen=shown(reply.raw, format_packet(reply.packet)),
+            seen=showing(reply.raw, format_packet(reply.packet)),
         )
         conn.sts(ack=reply.packet.packet_no, window=5)
 
@@ -434,7 +434,7 @@ async def retransmission(ctx: CaseContext) -> None:
             (copy.packet_no, copy.opcode, copy.data) == (first.packet_no, first.opcode, first.data),
             clause="ncp.retransmission",
             expected=f"the same packet again: {format_packet(first)}",
-            seen=shown(_frames(reply.raw, again.raw), format_packet(copy)),
+            seen=showing(_frames(reply.raw, again.raw), format_packet(copy)),
         )
         ctx.note(f"retransmitted after {again.time - reply.time:.2f} s")
 
@@ -451,7 +451,7 @@ async def retransmission(ctx: CaseContext) -> None:
                 clause="ncp.retransmission",
                 expected=f"no copy of #{number} later than {allowed:.3f} s after the receipt "
                 f"({IN_FLIGHT:g} s in flight, the rest this host's measured delay)",
-                seen=shown(late[0].raw, _lines(late)),
+                seen=showing(late[0].raw, _lines(late)),
             )
         echo = request.packet_no
         twice = [
@@ -464,7 +464,7 @@ async def retransmission(ctx: CaseContext) -> None:
                 f"the repeated request #{echo} was delivered again and answered a second time",
                 clause="ncp.retransmission",
                 expected="a repeated packet number delivered to the user once (dropped, at most an STS)",
-                seen=shown(_frames(repeat, twice[0].raw), _lines(twice)),
+                seen=showing(_frames(repeat, twice[0].raw), _lines(twice)),
             )
 
 
@@ -492,7 +492,7 @@ async def acknowledge(ctx: CaseContext) -> None:
                 f"the request #{number} was never acknowledged within {bound:g} s",
                 clause="ncp.acknowledge",
                 expected=f"a packet of the connection whose ack field (or STS receipt) reaches #{number}",
-                seen=shown(
+                seen=showing(
                     initial.raw,
                     f"none: its ack fields stayed below it (initial RESPONSE: #{initial.packet.ack_no})",
                 ),
@@ -525,7 +525,7 @@ class _WindowWatch:
                     f"packet #{n} sent with #{self.acked} acknowledged and a window of {WINDOW} ({when})",
                     clause="ncp.window",
                     expected=f"nothing beyond #{limit} ({WINDOW} past the last acknowledged #{self.acked})",
-                    seen=shown(r.raw, format_packet(r.packet)),
+                    seen=showing(r.raw, format_packet(r.packet)),
                 )
             self.seen.setdefault(n, r)
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import Final
 
 from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, describe, word
-from manip.conformance.judge.violation import shown
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
 from manip.spec import RequestName
@@ -62,7 +62,7 @@ async def describe_pipelined(ctx: CaseContext) -> None:
         ends,
         clause="multi.terminated-by-empty",
         expected=f"describe self (#{first}) ended by an empty RESPONSE echoing #{first}",
-        seen=shown(got[-1] if got else None, f"{len(got)} answer packet(s), none of them its terminator"),
+        seen=showing(got[-1] if got else None, f"{len(got)} answer packet(s), none of them its terminator"),
     )
     end = ends[0]
     early = [p for p in got[:end] if word(p.data) in later]
@@ -72,7 +72,7 @@ async def describe_pipelined(ctx: CaseContext) -> None:
         expected=f"describe self's terminator (#{first}) before the replies to "
         + ", ".join(f"#{n}" for n in later)
         + ", sent behind it",
-        seen=shown(
+        seen=showing(
             early[0],
             f"{describe(early[0])} came as answer packet {got.index(early[0]) + 1}, before the terminator "
             f"(answer packet {end + 1})",

@@ -26,7 +26,7 @@ from manip.conformance.cases._support import (
     settle,
 )
 from manip.conformance.judge.checks import WirePacket, completed_segment, word
-from manip.conformance.judge.violation import missing, shown
+from manip.conformance.judge.violation import missing, showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
 from manip.conformance.suite.world import CaseNotJudged, ConditionUnsupported, Obstacle, PanicButton
@@ -301,7 +301,7 @@ async def _turned(
         clause="incremental.relative",
         expected=f"{op}: the hand at O A T {[round(v, 3) for v in (o, a, t)]} plus {list(delta)}, "
         "position unchanged",
-        seen=shown(
+        seen=showing(
             here,
             f"rotation off by {angle:.3g} deg (its matrix by {turn:.4f} at most, a unitless cosine; "
             f"got O A T {[round(v, 3) for v in val_angles(end)]} deg), position moved {off:.4g} "
