@@ -26,7 +26,7 @@ server's packets in the order they come, and judges nothing by itself (the check
 What a probe reads from the target is bounded, as in ``manip-client``: a multi-packet reply that brings
 more than :data:`~manip.reference_client.options.DEFAULT_MAX_REPLY_BYTES` without its terminator fails
 ``request.one-reply`` (erratum ``reply-size-limit``), and a case that receives more than
-:data:`MAX_CASE_PACKETS` packets from the target ends failed with the first MUST finding of its recording
+:data:`MAX_CASE_PACKETS` packets from the target ends failed with the first MUST violation of its recording
 (a flood of extra replies or asynchronous packets is one), or without a clause when there is none.  A
 request the case cannot send because the target ended the connection fails like a reply that never
 came.
@@ -42,9 +42,9 @@ rest of the case depends on, and stops the case when false, as the probe does wh
 Every clause a check evaluated, true or false, is *reached* (``ctx.reached``): only a reached clause can
 count as held.  The clause must be one the case declares: any other is a bug of the suite
 (:class:`~manip.conformance.suite.case.UndeclaredClauseError`, raised at the call whether the condition
-holds or not), except a finding of the transcript invariant's checkers
-(:mod:`manip.conformance.suite.invariants`).  ``ctx.check(findings)`` applies the same rule to the
-findings of a checker; ``ctx.fail(...)`` fails outright; ``ctx.skip(reason)`` ends the case as skipped
+holds or not), except a violation the transcript invariant's checkers found
+(:mod:`manip.conformance.suite.invariants`).  ``ctx.check(violations)`` applies the same rule to the
+violations of a checker; ``ctx.fail(...)`` fails outright; ``ctx.skip(reason)`` ends the case as skipped
 (not applicable), and ``ctx.not_judged(reason)`` as not judged (applicable, but this target cannot be
 judged on it; the reason says what would judge it).  ``async with ctx.arranged(condition):`` has the
 target's world hold a condition of the arm's world (:mod:`manip.conformance.suite.world`) for the block.
@@ -252,7 +252,7 @@ class Probe:
 
     def _flooded(self) -> NoReturn:
         """The case took :data:`MAX_CASE_PACKETS` from the target: it reads no more.  The recording's
-        first MUST finding is the failure (what the flood broke); without one, a failure of its own."""
+        first MUST violation is the failure (what the flood broke); without one, a failure of its own."""
         self.end_reason = self.end_reason or ConnectionClosed("the case stopped reading", by_peer=False)
         self._ctx.auto_check = False
         self._ctx.check(check_transcript(self.packets, rfc_packet_no=self.rfc_packet_no))
@@ -687,7 +687,7 @@ class CaseContext:
         of the case's recording, the one the check was reading (:meth:`judged`), so that every violation
         but a ``missing`` one carries its culprit.  The level is ``level`` if given, else the clause's,
         else the case's.  Returns ``bool(condition)``.  ``clause`` must be one the case declares, or one
-        of ``invariant``'s when a suite invariant's finding is passed on: checked at every call, true or
+        of ``invariant``'s when a suite invariant's violation is passed on: checked at every call, true or
         not (UndeclaredClauseError).  ``clause`` and ``expected`` are keywords so that the clause scan of
         ``tests/support/clause_scan.py`` sees every clause a case can report.
 
@@ -765,7 +765,7 @@ class CaseContext:
         return self.expect(abs(value - wanted) <= tolerance, clause=clause, expected=expected, seen=seen)
 
     def _named(self, violation: Violation) -> Violation:
-        """``violation`` naming a packet: one found elsewhere that names none (a checker's finding about a
+        """``violation`` naming a packet: one found elsewhere that names none (a checker's violation about a
         whole reply's text) names what :meth:`judged` names, unless it is about a packet that never came."""
         if violation.packets or violation.kind in NEVER_CAME:
             return violation
@@ -810,22 +810,22 @@ class CaseContext:
         self.recorded.append(violation)
 
     def check(
-        self, findings: Iterable[Violation], *, clauses: Iterable[str] | None = None, stop: bool = False
+        self, violations: Iterable[Violation], *, clauses: Iterable[str] | None = None, stop: bool = False
     ) -> bool:
-        """Report a checker's findings, the strongest first; the case goes on.  True when there were
-        none.  The checkers are the transcript invariant's: a finding of a clause the case does not
+        """Report a checker's violations, the strongest first; the case goes on.  True when there were
+        none.  The checkers are the transcript invariant's: a violation of a clause the case does not
         declare is attributed to it.  ``clauses``: the clauses the checker evaluated, marked reached
         (default: the case's own clauses among those a checker run on one answer judges, which is an
         approximation; the runner's check of the whole recording passes none).  ``stop``: a MUST
-        finding stops the case (what follows needs the answer well formed)."""
-        items = sorted(findings, key=lambda f: -LEVEL_ORDER[f.strength])
+        violation stops the case (what follows needs the answer well formed)."""
+        items = sorted(violations, key=lambda v: -LEVEL_ORDER[v.strength])
         if clauses is None:
             clauses = (c for c in self.clauses or () if c in _CHECKER_CLAUSES)
         self.exercised(*clauses)
         stopping: Violation | None = None
-        for finding in items:
-            attributed = self._attribute(finding.clause, TRANSCRIPT.name)
-            violation = self._named(replace(finding, invariant=attributed))
+        for item in items:
+            attributed = self._attribute(item.clause, TRANSCRIPT.name)
+            violation = self._named(replace(item, invariant=attributed))
             if stop and stopping is None and violation.level == "MUST":
                 stopping = violation
             else:

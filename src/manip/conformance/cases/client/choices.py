@@ -54,9 +54,9 @@ def _load(ctx: ClientContext, *, offset: bool) -> dict[str, Any]:
 
 def _expect_rule(ctx: ClientContext, play: Play, clause: str) -> None:
     """The recording rule for ``clause``, over the packets of the play."""
-    for finding in check_client_guards(judged_packets(play.wire)):
-        if finding.clause == clause:
-            ctx.expect(False, clause=clause, expected=finding.expected, seen=finding.message)
+    for violation in check_client_guards(judged_packets(play.wire)):
+        if violation.clause == clause:
+            ctx.expect(False, clause=clause, expected=violation.expected, seen=violation.message)
 
 
 def _sent(play: Play, opcode: int) -> list[bytes]:

@@ -33,12 +33,12 @@ async def initial_response(base: CaseContext) -> None:
             await side.serve_plainly()
 
     play = await ctx.play([connect(0), request(1, "here"), close(2)], script, initial=False)
-    for finding in initial_response_findings(play.wire):
+    for violation in initial_response_findings(play.wire):
         ctx.expect(
             False,
             clause="client.initial-response",
-            expected=finding.expected,
-            seen=showing(finding.packet, finding.actual),
+            expected=violation.expected,
+            seen=showing(violation.packet, violation.actual),
         )
     answer = play.answer(1)
     ctx.expect(

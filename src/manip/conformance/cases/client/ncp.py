@@ -47,12 +47,12 @@ async def numbers_wrap(base: CaseContext) -> None:
     first = 0x10000 - ctx.random.randint(3, 12)
     play = await play_description(ctx, chunks_at(raw, cuts), ncp=NcpConfig(first_packet_no=first))
     expect_text(ctx, play, raw)
-    for finding in numbering_findings(play.wire):
+    for violation in numbering_findings(play.wire):
         ctx.expect(
             False,
             clause="ncp.packet-numbers",
-            expected=finding.expected,
-            seen=showing(finding.packet, finding.actual),
+            expected=violation.expected,
+            seen=showing(violation.packet, violation.actual),
         )
 
 
@@ -64,12 +64,12 @@ async def acknowledge(base: CaseContext) -> None:
     raw = encode_lispm(DESCRIPTION)
     cuts = sorted(ctx.random.sample(range(1, len(raw)), 39))
     play = await play_description(ctx, chunks_at(raw, cuts))
-    for finding in ack_findings(play.wire, settle=0.5):
+    for violation in ack_findings(play.wire, settle=0.5):
         ctx.expect(
             False,
             clause="ncp.acknowledge",
-            expected=finding.expected,
-            seen=showing(finding.packet, finding.actual),
+            expected=violation.expected,
+            seen=showing(violation.packet, violation.actual),
         )
     expect_text(ctx, play, raw)
 
@@ -271,12 +271,12 @@ async def interleaved(base: CaseContext) -> None:
 
 def _expect_window(ctx: ClientContext, play: Play, window: int, sent: Answered, count: int) -> None:
     """The window held on the wire (as offered at each moment), and every request answered and matched."""
-    for finding in window_findings(play.wire, window):
+    for violation in window_findings(play.wire, window):
         ctx.expect(
             False,
             clause="ncp.window",
-            expected=finding.expected,
-            seen=showing(finding.packet, finding.actual),
+            expected=violation.expected,
+            seen=showing(violation.packet, violation.actual),
         )
     ctx.expect(
         len(sent) == count,

@@ -46,8 +46,8 @@ async def _describe(ctx: CaseContext, probe: Probe) -> Answer:
 async def _entries(ctx: CaseContext, probe: Probe | None = None) -> dict[str, LispValue]:
     probe = probe or await ctx.connect()
     answer = await _describe(ctx, probe)
-    entries, findings = parse_description(multi_text(answer.packets))
-    ctx.check(findings)
+    entries, violations = parse_description(multi_text(answer.packets))
+    ctx.check(violations)
     assert entries is not None
     return entries
 
@@ -416,7 +416,7 @@ async def not_split(ctx: CaseContext) -> None:
 def _inside_replies(probe: Probe, opcode: int) -> list[list[WirePacket]]:
     """For each request of ``opcode`` on ``probe`` (sent one at a time), the packets other than responses
     that came between the first packet of its reply and the last (a response numbered wrongly is
-    multi.same-request-number's finding, not an intruder)."""
+    a violation of multi.same-request-number, not an intruder)."""
     out: list[list[WirePacket]] = []
     numbers = {p.packet_no for p in probe.packets if p.direction == "c2s" and p.opcode == opcode}
     sent = [p for p in probe.packets if p.direction == "s2c"]
