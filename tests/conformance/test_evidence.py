@@ -7,14 +7,16 @@ names, the one-line common checks, and a report window that never cuts a culprit
 
 from __future__ import annotations
 
+import asyncio
+
 import pytest
 
 from manip.conformance.judge.packets import WirePacket
 from manip.conformance.judge.violation import NEVER_CAME, Violation, evidence, missing, seen_packets, showing
 from manip.conformance.output.culprit import judged_indices, kept_indices
 from manip.conformance.suite.case import CaseFailure
-from manip.conformance.suite.context import Answer, CaseContext, RunOptions
-from manip.links import ChaosConnection
+from manip.conformance.suite.context import Answer, CaseContext, Probe, RunOptions
+from manip.links import ChaosConnection, ConnectionClosed
 from manip.spec.constants import ServerOp
 
 HERE = 0o201
@@ -79,6 +81,30 @@ def test_a_packet_that_never_came_is_the_one_violation_without_a_packet() -> Non
         ctx.fail("no CLS", clause="error.fatal-then-close", seen=missing("the connection still open"))
     violation = failed.value.violation
     assert violation.kind in NEVER_CAME and violation.packet is None
+
+
+class _Unanswering:
+    """A connection that takes requests and ends before answering any (what a probe needs of one)."""
+
+    async def send(self, data: bytes, opcode: int) -> int:
+        return 5
+
+    async def receive(self) -> None:
+        raise ConnectionClosed("CLS", by_peer=True)
+
+
+def test_a_reply_that_never_came_names_the_request_it_answers() -> None:
+    async def go() -> Probe:
+        probe = Probe(_context(), _Unanswering(), 0)  # type: ignore[arg-type]
+        await probe.call_raw(HERE)
+        return probe
+
+    with pytest.raises(CaseFailure) as failed:
+        asyncio.run(go())
+    violation = failed.value.violation
+    assert violation.clause == "request.one-reply" and violation.kind in NEVER_CAME
+    assert violation.packet is not None and violation.packet.direction == "c2s"
+    assert violation.packet.opcode == HERE and violation.packet.packet_no == 5
 
 
 def test_the_common_checks_are_one_line_each() -> None:

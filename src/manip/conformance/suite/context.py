@@ -412,6 +412,9 @@ class Probe:
         self._buffer.insert(0, packet)
 
     async def _next_answer_packet(self, number: int, timeout: float | None, what: str) -> WirePacket:
+        """The next answer packet to request ``number``; none (a timeout, the end of the connection)
+        fails ``request.one-reply``, naming the request that went unanswered."""
+        request = self._request(number)
         loop = asyncio.get_running_loop()
         if timeout is None:
             wait, budget = self.allowance(number)
@@ -423,20 +426,26 @@ class Probe:
             if packet is None:
                 if self.end_reason is not None:
                     raise CaseFailure(
-                        f"the connection ended while waiting for {what}",
-                        clause="request.one-reply",
-                        expected=what,
-                        actual=f"connection ended: {self.end_reason}",
-                        kind="closed",
-                        invariant=TRANSCRIPT.name,
+                        Violation(
+                            f"the connection ended while waiting for {what}",
+                            "request.one-reply",
+                            expected=what,
+                            actual=f"connection ended: {self.end_reason}",
+                            kind="closed",
+                            invariant=TRANSCRIPT.name,
+                            packets=(request,),
+                        )
                     )
                 raise CaseFailure(
-                    f"{what} did not come within {wait:g} s ({budget})",
-                    clause="request.one-reply",
-                    expected=f"{what} within {wait:g} s",
-                    actual="nothing (timeout)",
-                    kind="timeout",
-                    invariant=TRANSCRIPT.name,
+                    Violation(
+                        f"{what} did not come within {wait:g} s ({budget})",
+                        "request.one-reply",
+                        expected=f"{what} within {wait:g} s",
+                        actual="nothing (timeout)",
+                        kind="timeout",
+                        invariant=TRANSCRIPT.name,
+                        packets=(request,),
+                    )
                 )
             if packet.opcode in ANSWER_OPCODES:
                 self._answered(number, packet)
