@@ -107,6 +107,32 @@ def test_a_reply_that_never_came_names_the_request_it_answers() -> None:
     assert violation.packet.opcode == HERE and violation.packet.packet_no == 5
 
 
+class _ClosingAfterOne(_Unanswering):
+    """A connection that takes one request, then ends before the next can be sent."""
+
+    def __init__(self) -> None:
+        self.sent = 0
+
+    async def send(self, data: bytes, opcode: int) -> int:
+        self.sent += 1
+        if self.sent > 1:
+            raise ConnectionClosed("CLS", by_peer=True)
+        return 5
+
+
+def test_a_request_the_target_would_not_take_names_the_unanswered_ones() -> None:
+    async def go() -> None:
+        probe = Probe(_context(), _ClosingAfterOne(), 0)  # type: ignore[arg-type]
+        await probe.request(HERE)
+        await probe.request(HERE)
+
+    with pytest.raises(CaseFailure) as failed:
+        asyncio.run(go())
+    violation = failed.value.violation
+    assert violation.clause == "request.one-reply" and violation.kind in NEVER_CAME
+    assert [(p.direction, p.packet_no) for p in violation.packets] == [("c2s", 5)]
+
+
 def test_the_common_checks_are_one_line_each() -> None:
     ctx = _context()
     good, wrong = _answer(3, b""), _answer(4, b"", echo=5)

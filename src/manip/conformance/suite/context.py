@@ -36,7 +36,7 @@ common ones are one line each (``ctx.expect_response``, ``expect_done``, ``expec
 ``expect_echo``, ``expect_near``).  Evidence has one form, ``seen=`` (an answer, packets, ``showing(answer,
 text)``, ``missing(text)``: :mod:`~manip.conformance.judge.violation`), and every violation names the
 packets it judged (text alone: the last packet recorded, :meth:`CaseContext.judged`), but one about a
-packet that never came.  A false check, on a clause of any level, is recorded (``ctx.recorded``) and the
+packet that never came (a reply that never came names the request it answers).  A false check, on a clause of any level, is recorded (``ctx.recorded``) and the
 case goes on, so its report lists every violation; ``ctx.require(...)`` is the same check for what the
 rest of the case depends on, and stops the case when false, as the probe does when an answer never comes.
 Every clause a check evaluated, true or false, is *reached* (``ctx.reached``): only a reached clause can
@@ -280,27 +280,37 @@ class Probe:
             self._ctx.auto_check = False
             self._ctx.check(check_transcript(self.packets, rfc_packet_no=self.rfc_packet_no))
             raise CaseFailure(
-                f"the target did not take request {_request_name(code)} within {wait:g} s: the window it "
-                "offers stayed full (it acknowledged none of the requests before it)",
-                expected=f"room in the target's window within {wait:g} s",
-                actual="the window full",
-                kind="timeout",
+                Violation(
+                    f"the target did not take request {_request_name(code)} within {wait:g} s: the window "
+                    "it offers stayed full (it acknowledged none of the requests before it)",
+                    expected=f"room in the target's window within {wait:g} s",
+                    actual="the window full",
+                    kind="timeout",
+                    packets=self._unanswered_requests(),
+                )
             ) from None
         except ChaosError as exc:
             self._ended(exc)
             raise CaseFailure(
-                f"the target ended the connection before request {_request_name(code)} could be sent",
-                clause="request.one-reply" if self._unanswered else None,
-                expected="the connection open until the case closes it"
-                + (", and a reply to every request sent" if self._unanswered else ""),
-                actual=f"connection ended: {exc}",
-                kind="closed",
-                invariant=TRANSCRIPT.name if self._unanswered else None,
+                Violation(
+                    f"the target ended the connection before request {_request_name(code)} could be sent",
+                    "request.one-reply" if self._unanswered else None,
+                    expected="the connection open until the case closes it"
+                    + (", and a reply to every request sent" if self._unanswered else ""),
+                    actual=f"connection ended: {exc}",
+                    kind="closed",
+                    invariant=TRANSCRIPT.name if self._unanswered else None,
+                    packets=self._unanswered_requests(),
+                )
             ) from exc
         ack = 0
         self._record("c2s", code, number, ack, data)
         self._unanswered[number] = (code, self.arm_wait(code))
         return number
+
+    def _unanswered_requests(self) -> tuple[WirePacket, ...]:
+        """The requests sent and not answered yet, oldest first: what a failure to send names."""
+        return tuple(self._request(number) for number in self._unanswered)
 
     def _send_wait(self) -> float:
         """How long a request may wait for room in the target's window: the reply timeout, or the
