@@ -36,9 +36,10 @@ common ones are one line each (``ctx.expect_response``, ``expect_done``, ``expec
 ``expect_echo``, ``expect_near``).  Evidence has one form, ``seen=`` (an answer, packets, ``showing(answer,
 text)``, ``missing(text)``: :mod:`~manip.conformance.judge.violation`), and every violation names the
 packets it judged (text alone: the last packet recorded, :meth:`CaseContext.judged`), but one about a
-packet that never came (a reply that never came names the request it answers).  A false check, on a clause of any level, is recorded (``ctx.recorded``) and the
-case goes on, so its report lists every violation; ``ctx.require(...)`` is the same check for what the
-rest of the case depends on, and stops the case when false, as the probe does when an answer never comes.
+packet that never came (a reply that never came names the request it answers).  A false check, on a
+clause of any level, is recorded (``ctx.recorded``) and the case goes on, so its report lists every
+violation; ``ctx.require(...)`` is the same check for what the rest of the case depends on, and stops the
+case when false, as the probe does when an answer never comes.
 Every clause a check evaluated, true or false, is *reached* (``ctx.reached``): only a reached clause can
 count as held.  The clause must be one the case declares: any other is a bug of the suite
 (:class:`~manip.conformance.suite.case.UndeclaredClauseError`, raised at the call whether the condition
