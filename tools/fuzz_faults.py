@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from manip.reference_server.faults import FAULTS, Fault
+from manip.reference_server.faults import Fault
 
 WITH: dict[str, tuple[str, ...]] = {
     "fatal-without-close": ("calibrate-nzi",),
@@ -88,10 +88,10 @@ def main() -> int:
     parser.add_argument("--fault", action="append", default=[], help="only these faults (repeatable)")
     parser.add_argument("--markdown", action="store_true", help="a Markdown table")
     args, extra = parser.parse_known_args()
-    faults = [info for info in FAULTS.values() if info.kind == "protocol"]
+    faults = list(Fault)
     if args.fault:
-        wanted = {Fault(name) for name in args.fault}
-        faults = [info for info in faults if info.fault in wanted]
+        wanted = {Fault.named(name) for name in args.fault}
+        faults = [fault for fault in faults if fault in wanted]
     clean = True
     for environment in [(), *sorted({(env,) for envs in WITH.values() for env in envs})]:
         report, seconds, code = campaign(environment, args.inputs, args.seed, extra)
@@ -99,10 +99,10 @@ def main() -> int:
         seen = "; ".join(f"{f['kind']} {f['clause'] or ''}" for f in report["findings"]) or "none"
         print(f"{' + '.join(environment) or 'no fault'}: exit {code}, findings: {seen}, {seconds:.1f} s")
     outcomes: list[Outcome] = []
-    for info in faults:
-        switched = (info.name, *WITH.get(info.name, ()))
+    for fault in faults:
+        switched = (fault.value, *WITH.get(fault.value, ()))
         report, seconds, code = campaign(switched, args.inputs, args.seed, extra)
-        outcome = judge(" + ".join(switched), info.clauses, report, seconds, code)
+        outcome = judge(" + ".join(switched), fault.clauses, report, seconds, code)
         outcomes.append(outcome)
         if not args.markdown:
             shrunk = f", shrunk to {outcome.shrunk_to} input(s)" if outcome.shrunk_to else ""

@@ -1,14 +1,33 @@
-"""Generate docs/spec.md (opcode tables, clauses, errata) from the spec data files.
+"""Generate docs/spec.md (opcode tables, clauses, their coverage, errata) from the spec data files.
 
-Run after editing src/manip/spec/data/*.toml; tests/spec/test_spec.py fails while docs/spec.md is stale.
+Run after editing src/manip/spec/data/*.toml, a case's clauses or a fault switch's declaration;
+tests/spec/test_spec.py fails while docs/spec.md is stale.  The coverage table comes from the case
+declarations and the fault registries (manip.conformance.fault_proof), and its guide-only column from a
+run of the suite against the reference server's guide profile (about 40 s; ``--keep-guide-column`` keeps
+the column docs/spec.md has, for a change that cannot move it; the slow test of
+tests/conformance/test_guide_only.py holds the column to that run).
 """
 
 from __future__ import annotations
 
+import json
+import re
+import subprocess
 import sys
+import tempfile
 from collections import defaultdict
+from collections.abc import Mapping
 from pathlib import Path
 
+from manip.conformance.fault_proof import (
+    GUIDE_RUN,
+    NOT_RUN,
+    ClauseProof,
+    clause_proofs,
+    guide_statuses,
+    totals,
+)
+from manip.conformance.suite.case import all_cases
 from manip.spec import SPEC, Layout
 from manip.spec.model import Erratum
 
@@ -67,7 +86,77 @@ def _cell(text: str) -> str:
     return text.replace("|", "\\|")
 
 
-def render() -> str:
+COVERAGE_LEGEND = (
+    "For each live clause: what judges it (*judged by*: the cases that declare it, the judges of a "
+    "client's recording as `verify:FAMILY`, and the suite's own checks of every exchange as "
+    "`invariant:NAME`); the fault switches that *prove* it; and its status on a *guide-only server*.",
+    "",
+    "*Proven by*: a fault switch of the reference server (`server:`), the reference client (`client:`) or "
+    "the simulated Cougar (`cougar:`) proves a clause when the clause is among those the switch declares "
+    "it breaks, and one of the cases the switch declares catch it (`caught_by`) cites the clause: the "
+    "switch's fault matrix requires each of those cases to catch it (to fail, or to warn for a SHOULD "
+    "clause: `tests/conformance/test_faults.py` for the server, `tests/conformance/puma/test_puma.py` for "
+    "its wrist side, `tests/conformance/client/test_faults.py`, and `tests/conformance/cougar/"
+    "test_cougar.py`).  A switch is listed under every clause it proves.",
+    "",
+    f"*Guide-only server*: the clause's status in the report of `manip-conform {' '.join(GUIDE_RUN)}`, "
+    "the reference server's guide profile, which serves what the 1985 guide describes and no Puma "
+    "extension opcode: **held** (or **broken**), a case came to a verdict on it; **not-judged**, the cases "
+    "that cite it need a Puma extension (the report says what would judge each); **not-exercised**, no "
+    "check reached it (the clauses of a link the embedded server is not on); "
+    f"**{NOT_RUN}**, no case of that run cites it (a clause of the client, the Cougar or the Puma's wrist "
+    "side; or one only an invariant checks, which a run's report gives no status).",
+    "",
+    "The spec data has no notion of a statement the wire cannot show; the totals count INFO clauses "
+    "(statements of fact, not requirements) apart, and every other live clause in one of the first three "
+    "lines.",
+)
+GUIDE_CELL = re.compile(r"^\| `(?P<clause>[^`]+)` \| .* \| (?P<status>[a-z/-]+) \|$", re.MULTILINE)
+"""A row of the coverage table: its clause and its guide-only column."""
+
+
+def _coverage(rows: list[ClauseProof]) -> list[str]:
+    """The clause coverage section: legend, totals, and one row per clause."""
+    t = totals(rows)
+    out = ["## Clause coverage", "", *COVERAGE_LEGEND, ""]
+    out += [
+        f"- judged by a case proven by a fault: {t.proven}",
+        f"- judged, but proven by no fault: {t.unproven}",
+        f"- not judged by any case: {t.unjudged}",
+        f"- INFO (not requirements, not judged as such): {t.info}",
+        f"- judged on a guide-only server (of the first three lines): {t.guide_only}",
+        "",
+        "| clause | level | judged by | proven by | guide-only server |",
+        "|---|---|---|---|---|",
+    ]
+    for row in rows:
+        judges = ", ".join(f"`{c}`" for c in row.cases) or "—"
+        faults = ", ".join(f"`{f}`" for f in row.faults) or "—"
+        out.append(f"| `{row.clause}` | {row.level} | {judges} | {faults} | {row.guide_only} |")
+    return [*out, ""]
+
+
+def guide_run() -> dict[str, str]:
+    """Each clause's status in the report of the guide-profile run (``GUIDE_RUN``), run for this."""
+    with tempfile.TemporaryDirectory() as tmp:
+        report = Path(tmp) / "guide.json"
+        command = [sys.executable, "-m", "manip.conformance.cli", *GUIDE_RUN, "-q", "--json", str(report)]
+        done = subprocess.run(command, capture_output=True, text=True, check=False)
+        if done.returncode != 0:
+            raise SystemExit(f"the guide-profile run exited {done.returncode}:\n{done.stdout}{done.stderr}")
+        return guide_statuses(json.loads(report.read_text(encoding="utf-8"))["clause_status"])
+
+
+def guide_column(markdown: str) -> dict[str, str]:
+    """The guide-only column of the coverage table in ``markdown`` (a docs/spec.md), by clause, without
+    the clauses it marks as not in the run."""
+    section = markdown[markdown.index("## Clause coverage") : markdown.index("## Errata")]
+    rows = {m["clause"]: m["status"] for m in GUIDE_CELL.finditer(section)}
+    return {clause: status for clause, status in rows.items() if status != NOT_RUN}
+
+
+def render(guide: Mapping[str, str]) -> str:
+    """docs/spec.md, with ``guide`` the clauses' statuses on a guide-only server (:func:`guide_run`)."""
     out: list[str] = [
         "# The Chaos manipulator protocol and the Cougar word protocol, as manip specifies them",
         "",
@@ -173,18 +262,23 @@ def render() -> str:
             "",
         ]
 
+    out += _coverage(clause_proofs(all_cases(), guide))
     out += ["## Errata", ""]
     for erratum in SPEC.errata.values():
         out += _erratum(erratum)
     return "\n".join(out).rstrip() + "\n"
 
 
-def main() -> int:
+def main(argv: list[str]) -> int:
+    if argv not in ([], ["--keep-guide-column"]):
+        print("usage: gen_spec_docs.py [--keep-guide-column]", file=sys.stderr)
+        return 2
+    guide = guide_column(TARGET.read_text(encoding="utf-8")) if argv else guide_run()
     TARGET.parent.mkdir(exist_ok=True)
-    TARGET.write_text(render())
+    TARGET.write_text(render(guide))
     print(f"wrote {TARGET}")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(sys.argv[1:]))

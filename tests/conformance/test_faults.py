@@ -1,6 +1,6 @@
 """Mutation testing of the conformance suite: every protocol fault of the reference server is caught.
 
-Each protocol fault of :data:`manip.reference_server.faults.FAULTS` is switched on alone, the embedded
+Each fault switch of :class:`manip.reference_server.faults.Fault` is switched on alone, the embedded
 reference server (``serve`` on port 0, in this process) runs with it, and the suite's server cases run
 against it; at least one case must end ``fail`` (or ``warn``, for a fault that breaks a SHOULD clause).
 The clean server must pass every case.
@@ -35,8 +35,11 @@ from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.runner import RunConfig, Runner
-from manip.reference_server.faults import FAULTS, WRIST_SIDE, Fault, FaultSet
+from manip.cougar.faults import CougarFault
+from manip.reference_client.faults import ClientFault
+from manip.reference_server.faults import WRIST_SIDE, Fault, FaultSet
 from manip.reference_server.session import ServerConfig
+from manip.spec.faults import FaultSwitch
 from tests.support.culprits import unnamed_violations
 from tests.support.servers import StartServer
 from tests.support.suite import run_simulated
@@ -51,62 +54,28 @@ SUITE_PREFIXES = ("server.", "property.", "stateful.")
 """The cases that judge a server over the default link (the Cougar cases need --cougar)."""
 GENERIC = ("stateful.arm-model",)
 CONDITIONS: dict[Fault, tuple[str, ...]] = {}
-PATHS = {
-    Fault.FATAL_WITHOUT_CLOSE: "server.error.fatal-then-close",
-    Fault.FATAL_NUMBER_PREVIOUS: "server.error.fatal-then-close",
-    Fault.FATAL_SEVERITY_E: "server.error.fatal-then-close",
-    Fault.FATAL_DROPS_LINK: "server.error.fatal-then-close",
-    Fault.WARNING_INTERRUPTS: "server.async.warning-format",
-    Fault.ASYNC_NUMBER_PREVIOUS: "server.async.warning-format",
-    Fault.GUARD_HIT_WORD_SWAPPED: "server.async.guard-hit",
-    Fault.WRIST_TIMEOUT_SILENT: "server.wrist.no-answer",
-    Fault.WRIST_ERROR_FATAL: "server.wrist.no-answer",
-    Fault.ABORT_KEEPS_QUEUE: "server.motion.abort-drops-queue",
-    Fault.FATAL_EOF_WITHOUT_CLS: "server.error.fatal-then-close",
-    Fault.NZI_MASK_SHIFTED: "server.error.fatal-then-close",
-    Fault.FORCES_STALE: "server.wrist.force-push",
-}
-"""The fault of each path the target's world arranges, and the case that must catch it."""
-CATCHERS = {
-    **PATHS,
-    Fault.STRAIGHT_AS_JOINT: "server.motion.straight-line",
-    Fault.INCREMENT_FROM_ACTUAL: "server.motion.incremental-reference",
-    Fault.READY_LEAVES_WRIST: "server.motion.ready",
-    Fault.SEGMENT_REPORT_PREVIOUS: "server.motion.queued-segments",
-    Fault.SEGMENTS_STOP: "server.motion.queued-segments",
-    Fault.SERVO_DOUBLE_RATE: "server.motion.queued-segments",
-    Fault.COLLISION_UNCHECKED: "server.motion.collision",
-    Fault.CLOSE_KEEPS_MOVING: "server.connect.close-stops-arm",
-    Fault.UNDERFLOW_DIRTY_ZERO: "server.float.extremes",
-    Fault.NOT_FINITE_RESERVED: "server.float.extremes",
-    Fault.ERROR_PAD_MISPLACED: "server.error.arg-alignment",
-    Fault.UOP_OPCODE_SWAPPED: "server.negative.unknown-opcodes",
-    Fault.BDL_COUNTS_SWAPPED: "server.negative.data-length.safe",
-    Fault.JOINT_MASK_SWAPPED: "server.motion.jor",
-    Fault.DESCRIBE_LIMITS_SHORT: "server.describe.joint-limits",
-    Fault.DESCRIBE_READY_OFF: "server.motion.ready-position",
-    Fault.INCREMENT_O_T_SWAPPED: "server.motion.incremental-oat",
-    Fault.CONFIGURATION_IGNORED: "server.motion.configuration",
-    Fault.KEEPS_SPEED: "server.connect.fresh-state",
-    Fault.KEEPS_CONFIGURATION: "server.connect.fresh-state",
-    Fault.KEEPS_NOTIFICATIONS: "server.connect.fresh-state",
-    Fault.DESCRIBE_TERMINATOR_OVERTAKEN: "server.describe.pipelined",
-    Fault.KEEPS_ABORT: "server.connect.abort-not-carried",
-    Fault.CONFIGURATION_SWAPPED: "server.motion.configuration-side",
-    Fault.JOINTS_REVERSED: "server.motion.joint-order",
-    Fault.FORCES_IN_POUNDS: "server.async.guard-hit",
-    Fault.ASYNC_SPLITS_MULTI: "server.describe.not-split",
-    Fault.SPEED_IGNORED: "server.speed.scales",
-    Fault.QUEUE_REVERSED: "server.motion.queued-segments",
-}
-"""Faults and the case written to catch each: it must fail, or warn for a SHOULD clause (others may catch
-the fault too)."""
+PATHS = (
+    Fault.FATAL_WITHOUT_CLOSE,
+    Fault.FATAL_NUMBER_PREVIOUS,
+    Fault.FATAL_SEVERITY_E,
+    Fault.FATAL_DROPS_LINK,
+    Fault.WARNING_INTERRUPTS,
+    Fault.ASYNC_NUMBER_PREVIOUS,
+    Fault.GUARD_HIT_WORD_SWAPPED,
+    Fault.WRIST_TIMEOUT_SILENT,
+    Fault.WRIST_ERROR_FATAL,
+    Fault.ABORT_KEEPS_QUEUE,
+    Fault.FATAL_EOF_WITHOUT_CLS,
+    Fault.NZI_MASK_SHIFTED,
+    Fault.FORCES_STALE,
+)
+"""The faults on a path the target's world arranges (their case needs the world to catch them)."""
+CATCHERS = {fault: fault.caught_by for fault in Fault}
+"""The cases each fault's declaration says catch it (``caught_by``): each must fail, or warn for a SHOULD
+clause (others may catch the fault too)."""
 CAUGHT = ("fail", "warn")
 
-PROTOCOL_FAULTS = sorted(
-    (f for f, info in FAULTS.items() if info.kind == "protocol" and f not in WRIST_SIDE),
-    key=lambda f: f.value,
-)
+PROTOCOL_FAULTS = sorted((f for f in Fault if f not in WRIST_SIDE), key=lambda f: f.value)
 """The wrist side's defects are caught by the puma cases (tests/conformance/puma/test_puma.py)."""
 
 
@@ -122,7 +91,7 @@ def suite() -> list[Case]:
 
 def cases_for(fault: Fault) -> list[Case]:
     """The cases citing a clause the fault breaks, and the generic ones."""
-    broken = set(FAULTS[fault].clauses)
+    broken = set(fault.clauses)
     return [c for c in suite() if broken & set(c.clauses) or c.id in GENERIC]
 
 
@@ -134,11 +103,24 @@ def run_suite(faults: FaultSet, cases: Sequence[Case], config: ServerConfig | No
     return run_simulated(cases, config, seed=SEED, options=options)
 
 
+@pytest.mark.parametrize("registry", [Fault, ClientFault, CougarFault], ids=lambda r: r.__name__)
+def test_every_fault_names_the_cases_that_catch_it(registry: type[FaultSwitch]) -> None:
+    """Each defect of the server, the client and the Cougar says which cases its fault matrix requires to
+    catch it (``caught_by``), and each of those cases cites one of the clauses it breaks; a reading names
+    none."""
+    cases = {c.id: c for c in all_cases()}
+    for fault in registry:
+        assert bool(fault.caught_by) == (fault.kind == "protocol"), fault
+        for case_id in fault.caught_by:
+            assert case_id in cases, (fault, case_id)
+            assert set(fault.clauses) & set(cases[case_id].clauses), (fault, case_id)
+
+
 def test_every_protocol_fault_has_a_case_citing_its_clauses() -> None:
     """The selection is not empty beyond the generic cases: some case names each fault's clauses."""
     for fault in PROTOCOL_FAULTS:
         specific = [c.id for c in cases_for(fault) if c.id not in GENERIC]
-        assert specific, f"no case cites a clause of fault {fault.value}: {FAULTS[fault].clauses}"
+        assert specific, f"no case cites a clause of fault {fault.value}: {fault.clauses}"
 
 
 @pytest.mark.slow
@@ -169,9 +151,8 @@ def test_protocol_fault_is_caught(fault: Fault) -> None:
     print(f"fault {fault.value}: caught by {shown or 'NO CASE'} [{report.duration:.1f} s]")
     assert not errors, errors
     assert not unnamed_violations(report), unnamed_violations(report)  # every culprit named and kept
-    assert caught, f"no case caught fault {fault.value} ({FAULTS[fault].description})"
-    if fault in CATCHERS:
-        assert CATCHERS[fault] in {r.id for r in caught}, shown
+    assert caught, f"no case caught fault {fault.value} ({fault.breaks})"
+    assert set(CATCHERS[fault]) <= {r.id for r in caught}, shown
     skipped = [c for c in cases if c.id in {r.id for r in report.results if r.outcome == "skip"}]
     if skipped:  # a skip is for a target that cannot offer the condition, never for a wrong answer
         clean = run_suite(FaultSet(), skipped)
@@ -182,8 +163,9 @@ def test_protocol_fault_is_caught(fault: Fault) -> None:
 def test_the_arranged_paths_run_against_the_clean_server() -> None:
     """The cases whose paths the world arranges pass (not skip, not not-judged) against the clean
     embedded server."""
-    report = run_suite(FaultSet(), [c for c in suite() if c.id in PATHS.values()])
-    assert {r.id: r.outcome for r in report.results} == dict.fromkeys(PATHS.values(), "pass")
+    catchers = {case for fault in PATHS for case in fault.caught_by}
+    report = run_suite(FaultSet(), [c for c in suite() if c.id in catchers])
+    assert {r.id: r.outcome for r in report.results} == dict.fromkeys(catchers, "pass")
 
 
 GUIDE_ROUTES = {
@@ -215,7 +197,7 @@ def test_motion_fault_is_caught_through_the_guide_profile(fault: Fault) -> None:
     print(f"fault {fault.value} without extensions: {result.outcome} {shown}")
     assert result.outcome in CAUGHT, (result.outcome, result.reason)
     assert guide_route_taken(result.notes), result.notes
-    assert {v.clause for v in result.violations} & set(FAULTS[fault].clauses), result.violations
+    assert {v.clause for v in result.violations} & set(fault.clauses), result.violations
 
 
 def test_the_guide_routes_pass_against_the_clean_guide_profile() -> None:

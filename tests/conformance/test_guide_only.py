@@ -6,6 +6,7 @@ skip, and the run says which length unit it assumed and which MUST clauses it co
 
 from __future__ import annotations
 
+import importlib.util
 import json
 from pathlib import Path
 
@@ -14,8 +15,10 @@ from click.testing import CliRunner
 
 from manip.arm.units import unit_of
 from manip.conformance.cli import main
+from manip.conformance.fault_proof import GUIDE_RUN, guide_statuses
 from manip.conformance.suite.results import ExitCode
 from manip.spec import SPEC
+from tests.support.paths import ROOT
 
 LINK_SPECIFIC = frozenset(
     {"server.link.chaosd-frames", "server.link.chudp-frames", "server.ncp.los-oversize"}
@@ -49,9 +52,10 @@ def test_a_server_in_inches_is_judged_with_length_unit_inch(tmp_path: Path) -> N
 @pytest.mark.slow
 def test_the_guide_profile_gets_a_complete_and_honest_verdict(tmp_path: Path) -> None:
     """Against the guide profile with its world (the embedded server's), run exits 0, skips nothing but the
-    cases of other links, and names every MUST clause it could not judge, in its output and its report."""
+    cases of other links, and names every MUST clause it could not judge, in its output and its report;
+    docs/spec.md's coverage table gives each clause the status this run gives it."""
     report_path = tmp_path / "guide.json"
-    args = ["run", "--server-profile", "guide", "--length-unit", "inch", "--seed", "5", "-q"]
+    args = [*GUIDE_RUN, "-q"]
     result = CliRunner().invoke(main, [*args, "--json", str(report_path)])
     assert result.exit_code == ExitCode.CONFORMANT, result.output
     assert "lengths taken in inch" in result.output
@@ -80,6 +84,16 @@ def test_the_guide_profile_gets_a_complete_and_honest_verdict(tmp_path: Path) ->
     for case in data["cases"]:
         if case["outcome"] == "not-judged":
             assert case["reason"], case["id"]  # each says what would judge it
+    column = _generator().guide_column((ROOT / "docs" / "spec.md").read_text(encoding="utf-8"))
+    assert column == guide_statuses(data["clause_status"]), "run: python tools/gen_spec_docs.py"
+
+
+def _generator():  # type: ignore[no-untyped-def]
+    spec = importlib.util.spec_from_file_location("gen_spec_docs", ROOT / "tools" / "gen_spec_docs.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 @pytest.mark.parametrize(

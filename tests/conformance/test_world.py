@@ -34,7 +34,7 @@ from manip.conformance.suite.runner import RunConfig, Runner
 from manip.conformance.suite.world import CONDITIONS, CalibrationFailure, Obstacle, World, WorldError
 from manip.conformance.suite.world_link import open_world
 from manip.links import virtual_clock
-from manip.reference_server import FaultSet, ServerConfig
+from manip.reference_server import FaultSet, ServerConfig, WorldCondition
 from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import ReferenceServer, serve
 from manip.reference_server.faults import Fault
@@ -104,7 +104,7 @@ def test_the_reference_world_arranges_and_clears_by_contract() -> None:
                 ("failed", 3),
                 ("failed", 4),
             ]
-            assert Fault.OBSTACLE in server.config.faults
+            assert WorldCondition.OBSTACLE in server.config.faults
             # a second suite is told the world is busy
             other_reader, other_writer = await asyncio.open_connection(host, int(port))
             (busy,) = await _lines(other_reader, 1)
@@ -112,17 +112,17 @@ def test_the_reference_world_arranges_and_clears_by_contract() -> None:
             other_writer.close()
             writer.write(b'{"type": "clear", "id": 5, "arrangement": 1}\n')
             assert (await _lines(reader, 1))[0] == {"type": "cleared", "id": 5}
-            assert Fault.OBSTACLE not in server.config.faults
+            assert WorldCondition.OBSTACLE not in server.config.faults
             # what a suite leaves arranged is cleared when it goes
             writer.write(b'{"type": "arrange", "id": 6, "condition": "calibration-failure", "args": {}}\n')
             assert (await _lines(reader, 1))[0]["type"] == "arranged"
-            assert Fault.CALIBRATE_NZI in server.config.faults
+            assert WorldCondition.CALIBRATE_NZI in server.config.faults
             writer.close()
             for _ in range(50):
-                if Fault.CALIBRATE_NZI not in server.config.faults:
+                if WorldCondition.CALIBRATE_NZI not in server.config.faults:
                     break
                 await asyncio.sleep(0.02)
-            assert Fault.CALIBRATE_NZI not in server.config.faults
+            assert WorldCondition.CALIBRATE_NZI not in server.config.faults
 
     asyncio.run(go())
 

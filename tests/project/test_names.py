@@ -87,8 +87,6 @@ ENTRY_POINT = "main"
 """Every command's entry point is its module's ``main`` (``pyproject.toml``'s scripts name them)."""
 
 DELIBERATE_NAMES: dict[str, str] = {
-    "FAULTS": "the fault registries of the server, the client and the Cougar, being made one shape "
-    "(issue 34, item 3: the coordinator renames or merges them with that work)",
     "CONTRACT": "each contract's name and revision, on both of its sides: the suite and the harness for "
     "contract 1, the suite and the reference world for contract 2 (each side says what it speaks)",
     "CLASSES": "the fuzzer's input classes and the differences `diff` sorts (issue 34 items 1-2 and issue "

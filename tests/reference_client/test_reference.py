@@ -27,7 +27,7 @@ from manip.reference_client import (
     NonFatalError,
     aconnect,
 )
-from manip.reference_server import Fault, FaultSet, ServerConfig, ServerSession, State
+from manip.reference_server import FaultSet, ServerConfig, ServerSession, State
 from manip.spec.constants import AsyncCondition, RequestOp, ServerOp
 from tests.support.fake_arm import run
 
@@ -300,7 +300,7 @@ def test_window_limits_requests_in_flight() -> None:
 
 def test_a_fatal_error_fails_every_pending_request_at_once() -> None:
     async def main() -> None:
-        config = ServerConfig(faults=FaultSet.of(Fault.CALIBRATE_NZI))
+        config = ServerConfig(faults=FaultSet.parse(["calibrate-nzi"]))
         async with reference(config, hold=True) as (arm, transport, _core):
             errors: list[ManipError] = []
             arm.add_error_listener(errors.append)

@@ -31,7 +31,7 @@ from manip.reference_client import (
     aconnect,
 )
 from manip.reference_client.ncp_transport import describe_chaos_end
-from manip.reference_server import Fault
+from manip.reference_server import WorldCondition
 from manip.reference_server.driver import ReferenceServer
 from manip.spec.constants import ServerOp
 from tests.support.fake_arm import run
@@ -115,7 +115,7 @@ def test_cannot_connect_to_a_free_port() -> None:
     run(main())
 
 
-@pytest.mark.parametrize("served", [ServerOptions(faults=(Fault.CALIBRATE_NZI,))], indirect=True)
+@pytest.mark.parametrize("served", [ServerOptions(faults=(WorldCondition.CALIBRATE_NZI,))], indirect=True)
 def test_a_fatal_error_fails_the_pipelined_requests_and_aborts(served: ReferenceServer) -> None:
     async def main() -> None:
         async with aconnect(served.address) as arm:

@@ -13,7 +13,8 @@ from manip.codecs.messages import Reply, decode_server_packet
 from manip.links import NcpConfig, open_connection
 from manip.reference_server import cli
 from manip.reference_server.cli import main
-from manip.reference_server.faults import FAULTS, Fault
+from manip.reference_server.conditions import WorldCondition
+from manip.reference_server.faults import Fault
 from manip.reference_server.session import ServerConfig
 from manip.spec.constants import RequestOp
 from tests.support.servers import StartServer
@@ -27,10 +28,13 @@ def test_list_faults_shows_every_switch_with_kind_and_clauses() -> None:
     result = CliRunner().invoke(main, ["--list-faults"])
     assert result.exit_code == 0, result.output
     out = result.output
-    for info in FAULTS.values():
-        assert f"{info.name}  [{info.kind}]" in out
-        assert info.description in out
-        assert f"clauses: {', '.join(info.clauses)}" in out
+    for name, kind, what, clauses in [
+        *((c.value, "environment", c.description, c.clauses) for c in WorldCondition),
+        *((f.value, f.kind, f.breaks, f.clauses) for f in Fault),
+    ]:
+        assert f"{name}  [{kind}]" in out
+        assert what in out
+        assert f"clauses: {', '.join(clauses)}" in out
     assert "obstacle=JOINT:LOWER:UPPER" in out
 
 

@@ -7,6 +7,7 @@ and checks that the clean one conforms and the faulted one differs in the claime
 from __future__ import annotations
 
 import ast
+import dataclasses
 import math
 import struct
 from collections.abc import Callable
@@ -17,9 +18,9 @@ from typing import TypeVar
 import pytest
 from click.testing import CliRunner
 
-from manip import reference_server
+import manip
 from manip.arm.kinematics import READY, forward
-from manip.arm.sim import Obstacle
+from manip.arm.sim import ArmDefects, Obstacle
 from manip.arm.trajectory import TICK
 from manip.codecs.errors import DecodeError
 from manip.codecs.lisp import read_alist
@@ -28,7 +29,8 @@ from manip.codecs.pdp11float import pack_f
 from manip.conformance.cli import main as conform_main
 from manip.conformance.judge.checks import word
 from manip.cougar import CougarSim
-from manip.reference_server import FAULTS, Fault, FaultSet, Output, ServerConfig, State
+from manip.cougar.faults import CougarFault
+from manip.reference_server import Fault, FaultSet, Output, ServerConfig, State, WorldCondition
 from manip.reference_server import session as session_module
 from manip.reference_server.cougar_port import SimPort
 from manip.reference_server.cougar_wrist import CougarWrist
@@ -41,10 +43,10 @@ from tests.support.session_client import GOAL, OTHER, Client
 from tests.support.session_client import reply as _reply
 
 T = TypeVar("T")
-COVERED: set[Fault] = set()
+COVERED: set[Fault | WorldCondition] = set()
 
 
-def covers(fault: Fault) -> Callable[[Callable[[], None]], Callable[[], None]]:
+def covers(fault: Fault | WorldCondition) -> Callable[[Callable[[], None]], Callable[[], None]]:
     def mark(test: Callable[[], None]) -> Callable[[], None]:
         COVERED.add(fault)
         return test
@@ -61,10 +63,7 @@ def pair(
 ) -> tuple[T, T]:
     """The scenario's result on a clean session (``base`` faults only) and on one with ``fault`` added."""
     clean = base or FaultSet()
-    if isinstance(fault, FaultSet):
-        faulty = FaultSet(clean.active | fault.active, fault.panic_delay, fault.obstacle, fault.nzi_joints)
-    else:
-        faulty = FaultSet(clean.active | {fault}, clean.panic_delay, clean.obstacle, clean.nzi_joints)
+    faulty = clean.merged(fault if isinstance(fault, FaultSet) else FaultSet.of(fault))
     results = [scenario(Client(ServerConfig(powered_at_open=powered, faults=f))) for f in (clean, faulty)]
     return results[0], results[1]
 
@@ -80,21 +79,24 @@ def _raw(client: Client, op: str, data: bytes | None = None, **values: object) -
 
 # ------------------------------------------------------------------------------- the registry
 def test_registry_describes_every_fault() -> None:
-    assert set(FAULTS) == set(Fault)
-    for info in FAULTS.values():
-        assert info.name == info.fault.value and info.description.endswith(".")
-        assert info.clauses and all(c in SPEC.clauses for c in info.clauses)
-        if info.kind == "protocol":
-            assert any(SPEC.clauses[c].level in ("MUST", "SHOULD") for c in info.clauses)
+    for fault in Fault:
+        assert fault.kind == "protocol" and fault.breaks.endswith(".")
+        assert fault.clauses and all(c in SPEC.clauses for c in fault.clauses)
+        assert any(SPEC.clauses[c].level in ("MUST", "SHOULD") for c in fault.clauses)
+    for condition in WorldCondition:  # not faults: what a conforming server meets too
+        assert condition.description.endswith(".") and condition.clauses
+        assert condition.value not in {f.value for f in Fault}
 
 
 def test_parse() -> None:
     faults = FaultSet.parse(["panic-button=2.5", "obstacle=2::-60", "calibrate-nzi=1,6", "no-jor"])
-    assert faults.active == {Fault.PANIC_BUTTON, Fault.OBSTACLE, Fault.CALIBRATE_NZI, Fault.NO_JOR}
-    assert faults.panic_delay == 2.5 and faults.nzi_joints == (1, 6)
-    assert faults.obstacle == Obstacle(2, None, -60.0)
-    assert Fault.NO_JOR in faults and Fault.NO_NAP not in faults
-    assert FaultSet.parse(["panic-button", "calibrate-nzi"]).nzi_joints == (2, 3)
+    assert faults.active == {Fault.NO_JOR}
+    conditions = {WorldCondition.PANIC_BUTTON, WorldCondition.OBSTACLE, WorldCondition.CALIBRATE_NZI}
+    assert faults.world.on == conditions
+    assert faults.world.panic_delay == 2.5 and faults.world.nzi_joints == (1, 6)
+    assert faults.world.obstacle == Obstacle(2, None, -60.0)
+    assert Fault.NO_JOR in faults and Fault.NO_NAP not in faults and WorldCondition.OBSTACLE in faults
+    assert FaultSet.parse(["panic-button", "calibrate-nzi"]).world.nzi_joints == (2, 3)
     for bad, message in [
         (["no-such-fault"], "unknown fault"),
         (["no-jor=1"], "takes no argument"),
@@ -111,11 +113,11 @@ def test_parse() -> None:
 def test_every_fault_has_a_test() -> None:
     # The wrist side's defects show only to the suite playing Cougar: tests/conformance/puma/test_puma.py
     # has them.
-    assert set(Fault) - WRIST_SIDE == COVERED
+    assert (set(Fault) - WRIST_SIDE) | set(WorldCondition) == COVERED
 
 
 # ---------------------------------------------------------------------------- environment
-@covers(Fault.PANIC_BUTTON)
+@covers(WorldCondition.PANIC_BUTTON)
 def test_panic_button() -> None:
     def scenario(c: Client) -> list[str]:
         c.one("set-joint-angles", joints=GOAL)
@@ -124,7 +126,7 @@ def test_panic_button() -> None:
     assert pair(FaultSet.parse(["panic-button=0.5"]), scenario) == ([], ["PAN"])
 
 
-@covers(Fault.OBSTACLE)
+@covers(WorldCondition.OBSTACLE)
 def test_obstacle() -> None:
     def scenario(c: Client) -> list[int]:
         c.one("set-joint-angles", joints=GOAL)
@@ -134,7 +136,7 @@ def test_obstacle() -> None:
     assert clean == [] and faulty == [ServerOp.ASYNCHRONOUS_WARNING, ServerOp.ASYNCHRONOUS_ERROR]
 
 
-@covers(Fault.CALIBRATE_NZI)
+@covers(WorldCondition.CALIBRATE_NZI)
 def test_calibrate_nzi() -> None:
     def scenario(c: Client) -> tuple[list[int], bool]:
         out = c.raw(RequestOp.CALIBRATE, b"")
@@ -672,7 +674,7 @@ def test_collision_unchecked() -> None:
     assert clean == [ServerOp.ASYNCHRONOUS_WARNING, ServerOp.ASYNCHRONOUS_ERROR] and faulty == []
 
 
-@covers(Fault.SLUGGISH_JOINT)
+@covers(WorldCondition.SLUGGISH_JOINT)
 def test_sluggish_joint() -> None:
     def scenario(c: Client) -> list[str]:
         c.one("set-joint-angles", joints=GOAL)
@@ -797,7 +799,7 @@ def test_connection_keeps_state() -> None:
 
 
 # ------------------------------------------------------------------- the driver and the wrist
-@covers(Fault.WRIST_SILENT)
+@covers(WorldCondition.WRIST_SILENT)
 @covers(Fault.WRIST_TIMEOUT_SILENT)
 def test_wrist_silent_and_timeout() -> None:
     def read_forces(*faults: str) -> str:
@@ -834,25 +836,63 @@ def test_driver_and_wrist_faults_against_their_cases() -> None:
         assert (_conform(select), _conform(select, fault)) == (0, 1), fault
 
 
-def test_no_module_but_defects_tests_a_fault() -> None:
-    """The protocol code reads as the protocol: no module of the reference server tests a fault switch
-    (``Fault.X in ...``, ``is``, ``==``) but :mod:`~manip.reference_server.faults`, which defines them,
-    and :mod:`~manip.reference_server.defects`, which bends the session's hook points by them (the
-    world may still name the conditions it switches on); the session names none at all."""
-    package = Path(reference_server.__file__).parent
-    tests = [
-        f"{path.name}:{node.lineno}"
-        for path in sorted(package.glob("*.py"))
-        if path.name not in ("faults.py", "defects.py")
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
-        if isinstance(node, ast.Compare) and any(_names_a_fault(n) for n in (node.left, *node.comparators))
-    ]
+PROTOCOL_PACKAGES = ("reference_server", "arm", "cougar")
+"""The packages whose code reads as the protocol: the reference server, the arm and the Cougar."""
+REGISTRIES = {"reference_server/faults.py", "reference_server/defects.py", "cougar/faults.py"}
+"""Where fault switches are declared, and turned into hook points and defect values."""
+SWITCH_CLASSES = {"Fault", "CougarFault", "ClientFault"}
+
+
+def test_no_protocol_module_tests_a_fault() -> None:
+    """The protocol code reads as the protocol: no module of the reference server, the arm or the Cougar
+    tests a fault switch (``Fault.X in ...``, ``is``, ``==``, or a switch's name as a string) but those
+    that declare them and those that turn them into hook points and defect values
+    (:data:`REGISTRIES`); the session names none at all.  A defect reaches the arm, the wrist and the
+    Cougar as a value they are given (``ArmDefects``, ``WristDefects``, ``CougarDefects``,
+    ``LinkDefects``), never as a flag set on them afterwards."""
+    root = Path(manip.__file__).parent
+    names = {f.value for f in Fault} | {f.value for f in CougarFault}
+    defect_fields = {f.name for f in dataclasses.fields(ArmDefects)}
+    tests, flags = [], []
+    for package in PROTOCOL_PACKAGES:
+        for path in sorted((root / package).glob("*.py")):
+            where = f"{package}/{path.name}"
+            if where in REGISTRIES:
+                continue
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                if isinstance(node, ast.Compare) and any(
+                    _names_a_fault(n, names) for n in (node.left, *node.comparators)
+                ):
+                    tests.append(f"{where}:{node.lineno}")
+                if isinstance(node, ast.Assign | ast.AugAssign):
+                    targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                    flags += [
+                        f"{where}:{node.lineno}"
+                        for t in targets
+                        if isinstance(t, ast.Attribute) and t.attr in defect_fields
+                    ]
     assert not tests, tests
-    assert "Fault." not in (package / "session.py").read_text(encoding="utf-8")
+    assert not flags, flags
+    assert "Fault." not in (root / "reference_server" / "session.py").read_text(encoding="utf-8")
 
 
-def _names_a_fault(node: ast.expr) -> bool:
-    return isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "Fault"
+def test_the_guard_sees_a_fault_tested() -> None:
+    """The scan of :func:`test_no_protocol_module_tests_a_fault` finds each way of testing a switch."""
+    names = {"rst-ignored"}
+    for source in ('"rst-ignored" in faults', "Fault.NO_JOR in on", "x is CougarFault.RST_IGNORED"):
+        (compare,) = [n for n in ast.walk(ast.parse(source)) if isinstance(n, ast.Compare)]
+        assert any(_names_a_fault(n, names) for n in (compare.left, *compare.comparators)), source
+    assert not _names_a_fault(ast.parse('"relocated-map"', mode="eval").body, names)
+
+
+def _names_a_fault(node: ast.expr, names: set[str]) -> bool:
+    if isinstance(node, ast.Constant):
+        return node.value in names
+    return (
+        isinstance(node, ast.Attribute)
+        and isinstance(node.value, ast.Name)
+        and node.value.id in SWITCH_CLASSES
+    )
 
 
 def _tour(client: Client) -> list[tuple[int, bytes]]:

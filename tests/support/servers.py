@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from typing import IO, Any, Literal, TypeVar
 
 from manip.links import ChaosConnection, start_server
-from manip.reference_server import Fault, FaultSet, ServerConfig
+from manip.reference_server import Fault, FaultSet, ServerConfig, WorldCondition
 from manip.reference_server.driver import ReferenceServer, serve
 
 T = TypeVar("T")
@@ -115,12 +115,13 @@ def in_thread(server: AbstractAsyncContextManager[T]) -> Iterator[T]:
 class ServerOptions:
     """How the ``served`` fixture sets up its reference server (``indirect`` parametrisation)."""
 
-    faults: tuple[Fault, ...] = ()
+    faults: tuple[Fault | WorldCondition, ...] = ()
+    """Fault switches and conditions of the world, as ``--fault`` names them."""
     link: Literal["tcp", "chudp"] = "tcp"
     contact: str = "PUMA"
 
     def start(self) -> AbstractAsyncContextManager[ReferenceServer]:
-        config = ServerConfig(faults=FaultSet.of(*self.faults))
+        config = ServerConfig(faults=FaultSet.parse(f.value for f in self.faults))
         return running_server(config, address=LINK_ADDRESSES[self.link], contact=self.contact)
 
 

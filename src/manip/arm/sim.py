@@ -115,6 +115,7 @@ __all__ = [
     "SEGMENT_MODULUS",
     "STRAIGHT_JUMP_DEG",
     "AbortCause",
+    "ArmDefects",
     "ArmEvent",
     "ArmSim",
     "Compliance",
@@ -343,7 +344,7 @@ def _sq_distance(a: Sequence[float], b: Sequence[float]) -> float:
 # --------------------------------------------------------------------------------------------- arm
 @dataclass
 class _KeptQueue:
-    """The joint segments a faulty server keeps through an abort (``keep_queue_on_abort``)."""
+    """The joint segments a faulty server keeps through an abort (``ArmDefects.keep_queue_on_abort``)."""
 
     queued: dict[int, MoveRequest] = field(default_factory=dict)
     """Joint segments queued, by id."""
@@ -351,18 +352,46 @@ class _KeptQueue:
     """Those an abort kept, to run once motion is allowed again."""
 
 
+@dataclass(frozen=True)
+class ArmDefects:
+    """How a faulty server's move process departs from Part II of the 1985 guide; the defaults are the
+    guide's (no defect).  The reference server's fault switches choose them
+    (:mod:`manip.reference_server.defects`); an :class:`ArmSim` is given them when it is made."""
+
+    enforce_power: bool = True
+    """Refuse motion without arm power (NAP)."""
+    enforce_abort: bool = True
+    """Refuse motion after an abort (AWA)."""
+    collision_test: bool = True
+    """Compare the actual angles with those commanded (False: no collision is ever seen)."""
+    collision_test_compliant: bool = False
+    """Run the collision test under compliance too (Part II §5.2 inhibits it)."""
+    hold_compliant_end: bool = True
+    """End a compliant episode where compliance left the arm (False snaps back to the nominal goal)."""
+    increment_from_actual: bool = False
+    """Resolve incremental moves from where the arm stands, not where the queue ends."""
+    stop_between_segments: float | None = None
+    """Seconds to rest between queued joint segments instead of blending them (None: they blend, Part II
+    §5.1)."""
+    reverse_waiting: bool = False
+    """Run the segments waiting behind the running one newest first (with :attr:`stop_between_segments`:
+    the segments then run one at a time)."""
+    keep_queue_on_abort: bool = False
+    """An abort drops only the segment in execution, and the queued ones run once motion is allowed
+    again (Part II §6.2 drops them all)."""
+    segment_step: int = 1
+    """The increment of the segment counter."""
+    servo_rate: float = 1.0
+    """Servo cycles per period of the clock (2: the servo runs twice as fast)."""
+
+
 class ArmSim:
     """One connection's simulated arm and move process.  See the module docstring.
 
     ``start`` is where the arm stands (default: the model's ready position); ``powered`` whether arm
     power is on at the start (off by default, as on a freshly connected Puma: Enable high power first).
-    ``segment_step`` is the increment of the segment counter (1; other values exist to model a faulty
-    server).
+    ``defects`` are a faulty server's (none by default).
     """
-
-    reverse_waiting: bool = False
-    """Run the segments waiting behind the running one newest first; True models a faulty server (with
-    :attr:`stop_between_segments`: the segments then run one at a time)."""
 
     def __init__(
         self,
@@ -376,8 +405,8 @@ class ArmSim:
         cartesian_limits: CartesianLimits = DEFAULT_CARTESIAN_LIMITS,
         collision_tol_deg: float = COLLISION_TOL_DEG,
         max_queue: int = MAX_QUEUE,
-        segment_step: int = 1,
         compliance: Compliance | None = None,
+        defects: ArmDefects | None = None,
     ) -> None:
         if scheme is Scheme.COSINE:
             raise ValueError("the cosine scheme needs its own parameters; use move_cosine")
@@ -385,12 +414,12 @@ class ArmSim:
             raise ValueError("tick_period must be finite and positive")
         self.model = model
         self.limits = limits
-        self.tick_period = float(tick_period)
+        self.defects = defects = defects or ArmDefects()
+        self.tick_period = float(tick_period) / defects.servo_rate
         self.scheme = scheme
         self.cartesian_limits = cartesian_limits
-        self.collision_tol_deg = float(collision_tol_deg)
+        self.collision_tol_deg = float(collision_tol_deg) if defects.collision_test else math.inf
         self.max_queue = int(max_queue)
-        self.segment_step = int(segment_step)
         self.compliance = compliance
 
         here = _joints(model.ready if start is None else start)
@@ -408,25 +437,8 @@ class ArmSim:
         self.free_joint: int | None = None
         self.obstacle: Obstacle | None = None
         self.sluggish: Sluggish | None = None
-        """A joint that trails its command (an environment condition of the fault switches)."""
-        self.enforce_power = True
-        """Refuse motion without arm power (NAP); False models a faulty server."""
-        self.enforce_abort = True
-        """Refuse motion after an abort (AWA); False models a faulty server."""
-        self.collision_test_compliant = False
-        """Run the collision test under compliance too; True models a faulty server (§5.2 inhibits it)."""
-        self.hold_compliant_end = True
-        """End a compliant episode where compliance left the arm; False (a faulty server) snaps back to
-        the nominal goal."""
-        self.increment_from_actual = False
-        """Resolve incremental moves from where the arm stands, not where the queue ends (a faulty server)."""
-        self.stop_between_segments: float | None = None
-        """Seconds a faulty server rests between queued joint segments instead of blending them (None:
-        they blend, Part II §5.1)."""
+        """A joint that trails its command (a condition of the arm's world)."""
         self._resting_since: float | None = None
-        # keep_queue_on_abort: an abort drops only the segment in execution, and the queued ones run
-        # once motion is allowed again (a faulty server: Part II §6.2 drops them all).
-        self.keep_queue_on_abort = False
         self._kept = _KeptQueue()
 
         self._next_segment = 1
@@ -492,7 +504,7 @@ class ArmSim:
         self.aborted = False
         self.abort_cause = None
         kept, self._kept.kept = self._kept.kept, []
-        for request in kept:  # only with keep_queue_on_abort (a faulty server)
+        for request in kept:  # only with ArmDefects.keep_queue_on_abort (a faulty server)
             self._enqueue(_JointPacket(request), self._clock)
 
     def press_panic(self, at: float | None = None) -> None:
@@ -564,10 +576,10 @@ class ArmSim:
         at that time) also with a full queue (SQF) or before the last servo cycle (ValueError)."""
         if now is not None and now < self._clock:
             raise ValueError(f"request at {now} before the last servo cycle {self._clock}; tick first")
-        if self.aborted and self.enforce_abort:
+        if self.aborted and self.defects.enforce_abort:
             cause = self.abort_cause.value if self.abort_cause else "abort"
             raise Refused("AWA", f"motion aborted ({cause}); reset first")
-        if not self.powered and self.enforce_power:
+        if not self.powered and self.defects.enforce_power:
             raise Refused("NAP", "arm power is off")
         if now is not None and self.queued >= self.max_queue:
             raise Refused("SQF", f"{self.queued} segments queued")
@@ -608,7 +620,7 @@ class ArmSim:
         self.check_motion(now)
         if len(delta) != 6:
             raise ValueError("an increment is dX dY dZ dO dA dT")
-        from_actual = self.increment_from_actual
+        from_actual = self.defects.increment_from_actual
         base = forward(self.actual if from_actual else self._planned, self.model.geometry)
         oat = None if from_actual else self._planned_oat
         if oat is None:
@@ -675,7 +687,7 @@ class ArmSim:
             self._abort(t, AbortCause.POWER_LOST, (), events)
             return
         compliant = self._scheme_now is not None and self._scheme_now.compliant
-        if self.moving and (self.collision_test_compliant or not compliant):
+        if self.moving and (self.defects.collision_test_compliant or not compliant):
             lagging = self._lagging(self.collision_tol_deg)
             if lagging:
                 self._abort(t, AbortCause.COLLISION, lagging, events)
@@ -713,7 +725,7 @@ class ArmSim:
             if self.compliance is not None:
                 q = _joints(self.compliance.adjust(t, nominal, self.actual))
             self._correction = _joints([a - b for a, b in zip(q, nominal, strict=True)])
-        elif self._correction is not None and not self.hold_compliant_end:
+        elif self._correction is not None and not self.defects.hold_compliant_end:
             self._correction = None
         elif self._correction is not None:
             # The episode's last segment completed on this cycle: the arm stays where the contact let
@@ -725,8 +737,8 @@ class ArmSim:
                     for a, b, lo, hi in zip(nominal, self._correction, lim.lower, lim.upper, strict=True)
                 ]
             )
-        if sample.done and self.stop_between_segments is not None:
-            self._rest_then_resume(q, t, self.stop_between_segments)
+        if sample.done and self.defects.stop_between_segments is not None:
+            self._rest_then_resume(q, t, self.defects.stop_between_segments)
         elif sample.done:
             if self._compliant_tail:
                 self._restart(q, t)  # rebase what waits behind the episode
@@ -738,8 +750,8 @@ class ArmSim:
         return q
 
     def _rest_then_resume(self, here: Joints, t: float, rest: float) -> None:
-        """The faulty server of :attr:`stop_between_segments`: after each segment, ``rest`` seconds at
-        rest, then what waits starts from where the arm stands."""
+        """The faulty server of :attr:`ArmDefects.stop_between_segments`: after each segment, ``rest``
+        seconds at rest, then what waits starts from where the arm stands."""
         if self._resting_since is None:
             self._resting_since = t
         waiting = self._backlog and isinstance(self._backlog[0], _JointPacket)
@@ -831,7 +843,7 @@ class ArmSim:
 
     def _abort(self, t: float, cause: AbortCause, joints: tuple[int, ...], events: list[ArmEvent]) -> None:
         dropped = list(self._interp.abort(t))
-        if self.keep_queue_on_abort:  # the segments behind the one in execution are kept
+        if self.defects.keep_queue_on_abort:  # the segments behind the one in execution are kept
             queued = self._kept.queued
             kept = [queued.pop(sid) for sid in dropped[1:] if sid in queued]
             self._kept.kept += kept
@@ -857,7 +869,7 @@ class ArmSim:
     # ---------------------------------------------------------------------------- queueing
     def _allocate(self) -> int:
         number = self._next_segment
-        self._next_segment = (number + self.segment_step) % SEGMENT_MODULUS
+        self._next_segment = (number + self.defects.segment_step) % SEGMENT_MODULUS
         return number
 
     def _enqueue(self, packet: _JointPacket | _PathPacket, now: float) -> None:
@@ -866,18 +878,18 @@ class ArmSim:
             and self._playback is None
             and not self._backlog
             and self._joins(packet)
-            and (self.stop_between_segments is None or not self._interp.queued)
+            and (self.defects.stop_between_segments is None or not self._interp.queued)
         ):
             self._interp.enqueue(packet.request, now)
             self._compliant_tail = packet.request.scheme.compliant
-        elif self.reverse_waiting:
+        elif self.defects.reverse_waiting:
             self._backlog.appendleft(packet)
         else:
             self._backlog.append(packet)
 
     def _queue_joints(self, goal: Joints, now: float, scheme: Scheme | None) -> int:
         request = MoveRequest.to(self._allocate(), goal, scheme or self.scheme, self.speed)
-        if self.keep_queue_on_abort:
+        if self.defects.keep_queue_on_abort:
             self._kept.queued[request.segment_id] = request
         self._enqueue(_JointPacket(request), now)
         self._planned, self._planned_oat = goal, None

@@ -26,7 +26,7 @@ import click
 
 from manip.commandline import check_host, configure_logging, version_option
 from manip.cougar.environment import Contacts, Spring, Surface
-from manip.cougar.faults import FAULTS, parse_faults
+from manip.cougar.faults import CougarFault, link_defects, parse_faults
 from manip.cougar.link import CougarEnd, CougarModel, Drv11jError, parse_drv11j_address
 from manip.cougar.memory_map import memory_map_toml
 from manip.cougar.readings import READINGS, parse_readings
@@ -45,7 +45,7 @@ class CougarServer:
 
     def __init__(self, model: CougarModel, faults: frozenset[str] = frozenset()) -> None:
         self.model = model
-        self.faults = faults
+        self.defects = link_defects(faults)
         """The link's defects (:mod:`manip.cougar.faults`, ``link-*``), for testing conformance suites."""
         self.connections = 0
         self.busy = False
@@ -55,9 +55,9 @@ class CougarServer:
         """The model's time at the last tick of any link: the next link's clock continues from it."""
 
     async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        end = CougarEnd(self.model, resume_after=self.last_time, faults=self.faults)
+        end = CougarEnd(self.model, resume_after=self.last_time, defects=self.defects)
         writer.write(end.hello())
-        if self.busy and "link-busy-serves-second" not in self.faults:
+        if self.busy and self.defects.refuses_second_puma:
             writer.write(end.bye(BUSY))
             await _close(writer)
             return
@@ -184,7 +184,7 @@ async def _serve_forever(model: CougarModel, address: str, faults: frozenset[str
     "--cougar-fault",
     "faults",
     multiple=True,
-    type=click.Choice(sorted(FAULTS)),
+    type=click.Choice(sorted(f.value for f in CougarFault)),
     help="Simulate a protocol defect (to check a conformance suite catches it); repeatable.",
 )
 @click.option(

@@ -1,66 +1,271 @@
 """Defects the simulated Cougar can be told to have, so the conformance suite can be shown to catch them.
 
-Each fault is a name in :attr:`manip.cougar.CougarConfig.faults` (``manip-cougar --cougar-fault NAME``,
-``manip-conform run --cougar sim --cougar-fault NAME``) and is honoured at exactly one place of the
-simulator, or of its end of the DRV-11J link for the ``link-*`` ones (:class:`manip.cougar.link.CougarEnd`
-and ``manip-cougar``'s server, given the faults by ``serve_cougar``), named below.  A clean Cougar has
-none; the mutation test (``tests/conformance/cougar/test_cougar.py``) runs the Cougar cases against each
-fault and requires at least one case to fail.
+:class:`CougarFault` is the registry: each switch declared once, with what it breaks and the clauses it
+breaks (the one record of every implementation's switches, :class:`manip.spec.faults.FaultSwitch`).  A
+switch is named in :attr:`manip.cougar.CougarConfig.faults` (``manip-cougar --cougar-fault NAME``,
+``manip-conform run --cougar sim --cougar-fault NAME``).  The simulator never tests a switch: it is given
+the behaviours they choose as values, :class:`CougarDefects` (from its configuration) and, for the
+``link-*`` ones, its end of the DRV-11J link :class:`LinkDefects` (:class:`manip.cougar.link.CougarEnd`
+and ``manip-cougar``'s server, given the faults by ``serve_cougar``).  A clean Cougar has none; the
+mutation test (``tests/conformance/cougar/test_cougar.py``) runs the Cougar cases against each fault and
+requires its case to fail on one of the clauses it breaks.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
-from typing import Final
+from collections.abc import Iterable
+from dataclasses import dataclass
 
-__all__ = ["FAULTS", "parse_faults"]
+from manip.spec.faults import FaultSwitch, defect
 
-#: Fault name -> what goes wrong (and where it is honoured).
-FAULTS: Final[Mapping[str, str]] = {
-    "wrong-version-code": "VERS is answered with response code 3 instead of 8 (CougarSim._version)",
-    "no-out-of-sync": "an unknown command code dumps the buffer but sends no out-of-sync message "
-    "(CougarSim._comint_run)",
-    "guard-trips-twice": "a tripped guard stays armed for one more trip (CougarSim._guardm)",
-    "forces-wrong-sign": "the conversion drops the -1: forces are the load on the hand, not the force the "
-    "robot applies (CougarSim._convert)",
-    "exmn-wrong-count": "EXMN retrieves one word fewer than asked (CougarSim._exp)",
-    "comint-executes-partial": "COMINT runs a command whose data words have not all arrived, the missing "
-    "ones taken as 0 (Comint.take)",
-    "ignores-guardc": "GUARDC leaves the guard armed (CougarSim._guardc)",
-    "rst-ignored": "RST leaves the velocities as they were (CougarSim._resetw)",
-    "npr-ignores-k": "the compliance equation leaves out the spring term K (CougarSim._newpr)",
-    "filter-con-swapped": "FILTER weighs the filtered value with con4 and the sample with con3 "
-    "(CougarSim._newpr)",
-    "gravity-fixed-orientation": "GRAVITY takes the hand to be at READY whatever angles SEN or NPR sent "
-    "(CougarSim._gravity)",
-    "gravity-ignores-cg": "GRAVITY corrects the force of the weight but not its torque about the centre "
-    "of gravity (CougarSim._gravity)",
-    "nfv-keeps-gravity": "NFV rewrites the conversion matrix but leaves the gravity model about the old "
-    "compliance centre (CougarSim._newfv)",
-    "nb-transposed": "NPR reads NB's 36 elements column after column instead of row after row "
-    "(CougarSim._newpr)",
-    "jacobian-transpose-not-stored": "JACOB stores J again where its transpose belongs, after J "
-    "(Jacob._encode)",
-    "filter-truncates-terms": "ADC8 shifts each term of the sum right by 3 before adding, so a constant "
-    "input settles up to 7 counts low (CougarSim._adc8)",
-    "rraw-less-offsets": "RRAW reports the readings with the gauge offsets subtracted, not the gauges as "
-    "read (CougarSim._reraw)",
-    "link-skips-bad-frames": "the DRV-11J link drops a frame it cannot decode (a bad HELLO, an unknown "
-    "type, a TICK of the wrong length) and carries on (FrameDecoder.feed, for CougarEnd)",
-    "link-ignores-wrong-side": "the link takes a HELLO naming the Cougar's own role and ignores frames "
-    "only Cougar sends (COUGAR, TICKED) instead of ending (CougarEnd)",
-    "link-tick-backwards-runs": "a TICK earlier than the one before it runs at the earlier tick's time "
-    "instead of ending the link (CougarEnd._model_time)",
-    "link-ignores-bye": "the link carries on after the Puma's BYE (CougarEnd, _End._frames)",
-    "link-busy-serves-second": "a second Puma connecting while one is linked is served too, not sent "
-    "BYE 'busy' (CougarServer._handle)",
-}
+__all__ = ["CougarDefects", "CougarFault", "LinkDefects", "cougar_defects", "link_defects", "parse_faults"]
 
 
-def parse_faults(names: Iterable[str]) -> frozenset[str]:
-    """The set of fault names; ValueError naming the known ones for an unknown name."""
-    chosen = frozenset(n.strip() for n in names if n.strip())
-    unknown = sorted(chosen - FAULTS.keys())
+class CougarFault(FaultSwitch):
+    """The simulated Cougar's fault switches, each declared once (where it acts, in brackets)."""
+
+    WRONG_VERSION_CODE = defect(
+        "wrong-version-code",
+        "VERS is answered with response code 3 instead of 8 (CougarSim._version)",
+        "cougar.vers.reply",
+        caught_by=("cougar.reply.version",),
+    )
+    NO_OUT_OF_SYNC = defect(
+        "no-out-of-sync",
+        "an unknown command code dumps the buffer but sends no out-of-sync message (CougarSim._comint_run)",
+        "cougar.comint.unknown-code",
+        caught_by=("cougar.comint.unknown-code",),
+    )
+    GUARD_TRIPS_TWICE = defect(
+        "guard-trips-twice",
+        "a tripped guard stays armed for one more trip (CougarSim._guardm)",
+        "cougar.guard-trips-once",
+        caught_by=("cougar.guard.trips-once",),
+    )
+    FORCES_WRONG_SIGN = defect(
+        "forces-wrong-sign",
+        "the conversion drops the -1: forces are the load on the hand, not the force the robot applies "
+        "(CougarSim._convert)",
+        "cougar.nfv-conversion",
+        caught_by=("cougar.forces.conversion",),
+    )
+    EXMN_WRONG_COUNT = defect(
+        "exmn-wrong-count",
+        "EXMN retrieves one word fewer than asked (CougarSim._exp)",
+        "cougar.exmn.reply",
+        caught_by=("cougar.reply.exmn",),
+    )
+    COMINT_EXECUTES_PARTIAL = defect(
+        "comint-executes-partial",
+        "COMINT runs a command whose data words have not all arrived, the missing ones taken as 0 "
+        "(Comint.take)",
+        "cougar.comint.partial-waits",
+        caught_by=("cougar.comint.partial-waits",),
+    )
+    IGNORES_GUARDC = defect(
+        "ignores-guardc",
+        "GUARDC leaves the guard armed (CougarSim._guardc)",
+        "cougar.guardc",
+        caught_by=("cougar.guard.clear",),
+    )
+    RST_IGNORED = defect(
+        "rst-ignored",
+        "RST leaves the velocities as they were (CougarSim._resetw)",
+        "cougar.rst",
+        caught_by=("cougar.rst.zeroes-velocities",),
+    )
+    NPR_IGNORES_K = defect(
+        "npr-ignores-k",
+        "the compliance equation leaves out the spring term K (CougarSim._newpr)",
+        "cougar.npr.reply",
+        caught_by=("cougar.npr.gains",),
+    )
+    FILTER_CON_SWAPPED = defect(
+        "filter-con-swapped",
+        "FILTER weighs the filtered value with con4 and the sample with con3 (CougarSim._newpr)",
+        "cougar.filter",
+        caught_by=("cougar.filter.output",),
+    )
+    GRAVITY_FIXED_ORIENTATION = defect(
+        "gravity-fixed-orientation",
+        "GRAVITY takes the hand to be at READY whatever angles SEN or NPR sent (CougarSim._gravity)",
+        "cougar.gravity",
+        caught_by=("cougar.gravity.point-mass",),
+    )
+    GRAVITY_IGNORES_CG = defect(
+        "gravity-ignores-cg",
+        "GRAVITY corrects the force of the weight but not its torque about the centre of gravity "
+        "(CougarSim._gravity)",
+        "cougar.gravity",
+        caught_by=("cougar.gravity.point-mass",),
+    )
+    NFV_KEEPS_GRAVITY = defect(
+        "nfv-keeps-gravity",
+        "NFV rewrites the conversion matrix but leaves the gravity model about the old compliance centre "
+        "(CougarSim._newfv)",
+        "cougar.nfv-conversion",
+        caught_by=("cougar.gravity.nfv-redoes-model",),
+    )
+    NB_TRANSPOSED = defect(
+        "nb-transposed",
+        "NPR reads NB's 36 elements column after column instead of row after row (CougarSim._newpr)",
+        "cougar.nb-row-order",
+        caught_by=("cougar.npr.damping-matrix",),
+    )
+    JACOBIAN_TRANSPOSE_NOT_STORED = defect(
+        "jacobian-transpose-not-stored",
+        "JACOB stores J again where its transpose belongs, after J (Jacob._encode)",
+        "cougar.jacob-transpose",
+        caught_by=("cougar.jacob.transpose-stored",),
+    )
+    FILTER_TRUNCATES_TERMS = defect(
+        "filter-truncates-terms",
+        "ADC8 shifts each term of the sum right by 3 before adding, so a constant input settles up to 7 "
+        "counts low (CougarSim._adc8)",
+        "cougar.adc8-filter",
+        caught_by=("cougar.adc8.integer-filter",),
+    )
+    RRAW_LESS_OFFSETS = defect(
+        "rraw-less-offsets",
+        "RRAW reports the readings with the gauge offsets subtracted, not the gauges as read "
+        "(CougarSim._reraw)",
+        "cougar.rraw.before-offsets",
+        caught_by=("cougar.rraw.before-offsets",),
+    )
+    LINK_SKIPS_BAD_FRAMES = defect(
+        "link-skips-bad-frames",
+        "the DRV-11J link drops a frame it cannot decode (a bad HELLO, an unknown type, a TICK of the "
+        "wrong length) and carries on (FrameDecoder.feed, for CougarEnd)",
+        "link.drv11j.bad-frame-ends",
+        caught_by=("cougar.link.unknown-type",),
+    )
+    LINK_IGNORES_WRONG_SIDE = defect(
+        "link-ignores-wrong-side",
+        "the link takes a HELLO naming the Cougar's own role and ignores frames only Cougar sends "
+        "(COUGAR, TICKED) instead of ending (CougarEnd)",
+        "link.drv11j.bad-frame-ends",
+        caught_by=("cougar.link.wrong-side",),
+    )
+    LINK_TICK_BACKWARDS_RUNS = defect(
+        "link-tick-backwards-runs",
+        "a TICK earlier than the one before it runs at the earlier tick's time instead of ending the link "
+        "(CougarEnd._model_time)",
+        "link.drv11j.tick-backwards",
+        caught_by=("cougar.link.tick-backwards",),
+    )
+    LINK_IGNORES_BYE = defect(
+        "link-ignores-bye",
+        "the link carries on after the Puma's BYE (CougarEnd, _End._frames)",
+        "link.drv11j.bye",
+        caught_by=("cougar.link.bye",),
+    )
+    LINK_BUSY_SERVES_SECOND = defect(
+        "link-busy-serves-second",
+        "a second Puma connecting while one is linked is served too, not sent BYE 'busy' "
+        "(CougarServer._handle)",
+        "link.drv11j.busy",
+        caught_by=("cougar.link.busy",),
+    )
+
+
+@dataclass(frozen=True)
+class CougarDefects:
+    """How a faulty Cougar departs from Part III of the 1985 guide; the defaults are the guide's."""
+
+    version_code_right: bool = True
+    """VERS is answered with response code 8."""
+    sends_out_of_sync: bool = True
+    """An unknown command code is reported with the out-of-sync message."""
+    guard_trips_once: bool = True
+    """A guard is disarmed when it trips."""
+    conversion_negated: bool = True
+    """The force conversion has its -1: the force the robot applies."""
+    exmn_whole_count: bool = True
+    """EXMN retrieves every word asked for."""
+    comint_waits_for_data: bool = True
+    """COMINT runs a command only once its data words have all arrived."""
+    guardc_disarms: bool = True
+    """GUARDC disarms the guard."""
+    rst_zeroes_velocities: bool = True
+    """RST zeroes the velocities."""
+    npr_spring_term: bool = True
+    """The compliance equation has its spring term K."""
+    filter_cons_in_order: bool = True
+    """FILTER weighs the sample with con3 and the filtered value with con4."""
+    gravity_follows_angles: bool = True
+    """GRAVITY turns the load with the angles SEN or NPR sent."""
+    gravity_torque_about_cg: bool = True
+    """GRAVITY corrects the torque of the weight about the centre of gravity too."""
+    nfv_redoes_gravity: bool = True
+    """NFV redoes the gravity model about the new compliance centre."""
+    nb_by_rows: bool = True
+    """NPR reads NB row after row."""
+    jacobian_transpose_stored: bool = True
+    """JACOB stores Jᵀ after J."""
+    adc8_sums_then_shifts: bool = True
+    """ADC8 adds the terms of the filter's sum before shifting it right by 3."""
+    rraw_before_offsets: bool = True
+    """RRAW reports the gauges as read, before the offsets are subtracted."""
+
+
+@dataclass(frozen=True)
+class LinkDefects:
+    """How a faulty Cougar's end of the DRV-11J link departs from ``docs/drv11j.md``; the defaults are
+    the link's rules."""
+
+    ends_on_bad_frame: bool = True
+    """A frame that cannot be decoded ends the link."""
+    ends_on_wrong_side: bool = True
+    """A HELLO naming Cougar's own role, or a frame only Cougar sends, ends the link."""
+    ends_on_tick_backwards: bool = True
+    """A TICK earlier than the one before it ends the link."""
+    ends_on_bye: bool = True
+    """The Puma's BYE ends the link."""
+    refuses_second_puma: bool = True
+    """A second Puma connecting while one is linked is sent BYE 'busy'."""
+
+
+def cougar_defects(faults: Iterable[str]) -> CougarDefects:
+    """The behaviours the switches ``faults`` give the simulator."""
+    on = parse_faults(faults)
+    return CougarDefects(
+        version_code_right=CougarFault.WRONG_VERSION_CODE not in on,
+        sends_out_of_sync=CougarFault.NO_OUT_OF_SYNC not in on,
+        guard_trips_once=CougarFault.GUARD_TRIPS_TWICE not in on,
+        conversion_negated=CougarFault.FORCES_WRONG_SIGN not in on,
+        exmn_whole_count=CougarFault.EXMN_WRONG_COUNT not in on,
+        comint_waits_for_data=CougarFault.COMINT_EXECUTES_PARTIAL not in on,
+        guardc_disarms=CougarFault.IGNORES_GUARDC not in on,
+        rst_zeroes_velocities=CougarFault.RST_IGNORED not in on,
+        npr_spring_term=CougarFault.NPR_IGNORES_K not in on,
+        filter_cons_in_order=CougarFault.FILTER_CON_SWAPPED not in on,
+        gravity_follows_angles=CougarFault.GRAVITY_FIXED_ORIENTATION not in on,
+        gravity_torque_about_cg=CougarFault.GRAVITY_IGNORES_CG not in on,
+        nfv_redoes_gravity=CougarFault.NFV_KEEPS_GRAVITY not in on,
+        nb_by_rows=CougarFault.NB_TRANSPOSED not in on,
+        jacobian_transpose_stored=CougarFault.JACOBIAN_TRANSPOSE_NOT_STORED not in on,
+        adc8_sums_then_shifts=CougarFault.FILTER_TRUNCATES_TERMS not in on,
+        rraw_before_offsets=CougarFault.RRAW_LESS_OFFSETS not in on,
+    )
+
+
+def link_defects(faults: Iterable[str]) -> LinkDefects:
+    """The behaviours the ``link-*`` switches among ``faults`` give Cougar's end of the link."""
+    on = parse_faults(faults)
+    return LinkDefects(
+        ends_on_bad_frame=CougarFault.LINK_SKIPS_BAD_FRAMES not in on,
+        ends_on_wrong_side=CougarFault.LINK_IGNORES_WRONG_SIDE not in on,
+        ends_on_tick_backwards=CougarFault.LINK_TICK_BACKWARDS_RUNS not in on,
+        ends_on_bye=CougarFault.LINK_IGNORES_BYE not in on,
+        refuses_second_puma=CougarFault.LINK_BUSY_SERVES_SECOND not in on,
+    )
+
+
+def parse_faults(names: Iterable[str]) -> frozenset[CougarFault]:
+    """The switches named (blank names skipped); ValueError naming the known ones for an unknown name."""
+    chosen = {n.strip() for n in names if n.strip()}
+    unknown = sorted(chosen - {f.value for f in CougarFault})
     if unknown:
-        raise ValueError(f"unknown Cougar fault(s) {unknown}; known: {', '.join(sorted(FAULTS))}")
-    return chosen
+        known = ", ".join(sorted(f.value for f in CougarFault))
+        raise ValueError(f"unknown Cougar fault(s) {unknown}; known: {known}")
+    return CougarFault.parse(chosen)

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 from typing import Final, Protocol
 from urllib.parse import urlsplit
 
+from manip.cougar.faults import LinkDefects
+
 __all__ = [
     "DEFAULT_PORT",
     "MAGIC",
@@ -257,10 +259,10 @@ class CougarModel(Protocol):
 class _End:
     role: Role
 
-    def __init__(self, faults: frozenset[str] = frozenset()) -> None:
-        self._faults = faults
+    def __init__(self, defects: LinkDefects | None = None) -> None:
+        self._defects = defects or LinkDefects()
         """Defects of the link (:mod:`manip.cougar.faults`, ``link-*``): only a Cougar's end has any."""
-        self._decoder = FrameDecoder(skip_bad="link-skips-bad-frames" in faults)
+        self._decoder = FrameDecoder(skip_bad=not self._defects.ends_on_bad_frame)
         self.peer_ready = False
         """The peer's HELLO has arrived."""
         self.closed: str | None = None
@@ -284,13 +286,13 @@ class _End:
                 if not isinstance(frame, Hello):
                     self.closed = "the peer did not start with HELLO"
                     raise Drv11jError(self.closed)
-                wrong_side = frame.role is self.role and "link-ignores-wrong-side" not in self._faults
+                wrong_side = frame.role is self.role and self._defects.ends_on_wrong_side
                 if frame.version != VERSION or wrong_side:
                     self.closed = f"incompatible peer (role {frame.role.name}, version {frame.version})"
                     raise Drv11jError(self.closed)
                 self.peer_ready = True
                 continue
-            if isinstance(frame, Bye) and "link-ignores-bye" in self._faults:
+            if isinstance(frame, Bye) and not self._defects.ends_on_bye:
                 continue
             if isinstance(frame, Bye):
                 self.closed = frame.reason or "closed by the peer"
@@ -343,9 +345,9 @@ class CougarEnd(_End):
     role = Role.COUGAR
 
     def __init__(
-        self, cougar: CougarModel, *, resume_after: float | None = None, faults: frozenset[str] = frozenset()
+        self, cougar: CougarModel, *, resume_after: float | None = None, defects: LinkDefects | None = None
     ) -> None:
-        super().__init__(faults)
+        super().__init__(defects)
         self.cougar = cougar
         self.ticks = 0
         self.last_time: float | None = resume_after
@@ -360,7 +362,7 @@ class CougarEnd(_End):
         if self.ticks == 0 and last is not None and time <= last:
             self._shift = last + RESUME_GAP - time
         now = time + self._shift
-        if last is not None and now < last and "link-tick-backwards-runs" in self._faults:
+        if last is not None and now < last and not self._defects.ends_on_tick_backwards:
             return last
         if last is not None and now < last:
             self.closed = f"tick time went backwards ({time} s after {last - self._shift} s)"
@@ -380,7 +382,7 @@ class CougarEnd(_End):
                 if words:
                     out.append(encode_frame(Words(Role.COUGAR, tuple(words))))
                 out.append(encode_frame(Ticked(frame.index)))
-            elif "link-ignores-wrong-side" in self._faults:
+            elif not self._defects.ends_on_wrong_side:
                 continue
             else:
                 self.closed = f"unexpected {type(frame).__name__} frame from the Puma"

@@ -85,7 +85,7 @@ from manip.cougar.compliance import (
     voltmat_torque_rows,
 )
 from manip.cougar.environment import Environment, FreeSpace
-from manip.cougar.faults import parse_faults
+from manip.cougar.faults import CougarDefects, cougar_defects, parse_faults
 from manip.cougar.jacob import STEPS, Jacob, front_buffer
 from manip.cougar.memory import GUARD_DVEC, GUARD_TOL, GUARD_WORDS, MAP_BASE, MEMORY_BYTES, Memory, region
 from manip.cougar.readings import MAP_SHIFT, parse_readings
@@ -139,7 +139,7 @@ class CougarConfig:
     reentry_char: str = "!"
     wake_message: str = "Cougar {version}\r\n"
     faults: frozenset[str] = frozenset()
-    """Defects to simulate (:data:`manip.cougar.faults.FAULTS`), for testing conformance suites."""
+    """Defects to simulate (:class:`manip.cougar.faults.CougarFault`), for testing conformance suites."""
     readings: frozenset[str] = frozenset()
     """Other readings of the 1985 guide to take (:data:`manip.cougar.readings.READINGS`): conforming."""
 
@@ -154,6 +154,11 @@ class CougarConfig:
             raise ValueError("CougarConfig needs jacob_steps_per_tick >= 0 and tick_hz > 0")
         object.__setattr__(self, "faults", parse_faults(self.faults))
         object.__setattr__(self, "readings", parse_readings(self.readings))
+
+    @property
+    def defects(self) -> CougarDefects:
+        """The behaviours :attr:`faults` give the simulator (none: the 1985 guide's)."""
+        return cougar_defects(self.faults)
 
     @property
     def map_shift(self) -> int:
@@ -201,16 +206,16 @@ class CougarSim:
         self.environment: Environment = environment if environment is not None else FreeSpace()
         self.memory = Memory()
         self._rng = np.random.default_rng(seed)
-        self._faults = self.config.faults
+        self._defects = defects = self.config.defects
         self._readings = self.config.readings
-        self._comint = Comint(execute_partial="comint-executes-partial" in self._faults)
-        self._tripped_once: set[int] = set()  # fault guard-trips-twice
+        self._comint = Comint(execute_partial=not defects.comint_waits_for_data)
+        self._tripped_once: set[int] = set()  # a guard that trips twice (CougarDefects.guard_trips_once)
         self._guard_values: dict[int, tuple[list[int], Vector, float]] = {}
         """Guard i's table words, and its dvec and tol decoded from them."""
         self._jacob = Jacob(
             self.config.geometry,
             mm_per_unit=self.config.mm_per_unit,
-            transpose_stored="jacobian-transpose-not-stored" not in self._faults,
+            transpose_stored=defects.jacobian_transpose_stored,
         )
         self._stats = CougarStats()
         self._pose: tuple[float, ...] = tuple(float(q) for q in self.config.initial_angles)
@@ -352,7 +357,7 @@ class CougarSim:
         y_previous = mem.int16s("gauge_filtered")
         if "filter-rounds-to-nearest" in self._readings:
             y = [round((u[i] + u_previous[i] + 6 * y_previous[i]) / 8) for i in range(GAUGES)]
-        elif "filter-truncates-terms" in self._faults:
+        elif not self._defects.adc8_sums_then_shifts:
             y = [(u[i] >> 3) + (u_previous[i] >> 3) + (6 * y_previous[i] >> 3) for i in range(GAUGES)]
         else:
             y = [adc8_filter(u[i], u_previous[i], y_previous[i]) for i in range(GAUGES)]
@@ -373,15 +378,15 @@ class CougarSim:
             filtered = _less(filtered, mem.int16s("gauge_offsets"))
         counts = np.array(filtered, dtype=np.float64)
         force = (mem.array("voltmat").reshape(6, 8) @ counts).tolist()
-        if "forces-wrong-sign" in self._faults:
+        if not self._defects.conversion_negated:
             force = [-1.0 * f for f in force]
         mem.put("force_sensed", force)
 
     def _gravity(self) -> None:
         mem = self.memory
-        theta = READY if "gravity-fixed-orientation" in self._faults else mem.floats("theta_sensed")
+        theta = mem.floats("theta_sensed") if self._defects.gravity_follows_angles else READY
         r = hand_rotation(theta, self.config.geometry)
-        cg = _UNTOUCHED[:3] if "gravity-ignores-cg" in self._faults else mem.floats("grav_cg")
+        cg = mem.floats("grav_cg") if self._defects.gravity_torque_about_cg else _UNTOUCHED[:3]
         load = gravity_load(r, mem.floats("grav_weight")[0], cg)
         force = [s + g for s, g in zip(mem.floats("force_sensed"), load, strict=True)]
         if mem.word("flags") & FLAG_LIMIT:
@@ -409,7 +414,7 @@ class CougarSim:
             if (
                 dot > tol if "guard-trips-above-tol" in self._readings else dot >= tol
             ):  # erratum guard-trip-comparison
-                if "guard-trips-twice" in self._faults and i not in self._tripped_once:
+                if not self._defects.guard_trips_once and i not in self._tripped_once:
                     self._tripped_once.add(i)
                 else:
                     self._tripped_once.discard(i)
@@ -426,7 +431,7 @@ class CougarSim:
             if isinstance(item, OutOfSyncEvent):
                 self._stats.out_of_sync += 1
                 self._stats.discarded_words += len(item.discarded)
-                if "no-out-of-sync" not in self._faults:
+                if self._defects.sends_out_of_sync:
                     bare = "out-of-sync-bare" in self._readings
                     self._send(CougarResponse.OUT_OF_SYNC, [] if bare else [item.code])
                 continue
@@ -461,15 +466,15 @@ class CougarSim:
         sample = compliance_sample(
             j,
             p,
-            k=np.zeros(6) if "npr-ignores-k" in self._faults else mem.array("k"),
-            b=b.T if "nb-transposed" in self._faults else b,
+            k=mem.array("k") if self._defects.npr_spring_term else np.zeros(6),
+            b=b if self._defects.nb_by_rows else b.T,
             fc=mem.array("fc"),
             force=mem.array("force"),
             theta_error=theta_error,
             rate_difference=mem.array("rate_difference"),
         )
         con = mem.array("con")
-        if "filter-con-swapped" in self._faults:
+        if not self._defects.filter_cons_in_order:
             con = con[[0, 1, 3, 2]]
         previous, last = mem.array("dtheta_previous"), mem.array("dtheta_filtered")
         filtered, output = output_filter(sample, previous, last, con)
@@ -489,7 +494,7 @@ class CougarSim:
         mem = self.memory
         rows = voltmat_torque_rows(mem.get("calmat"), self._lengths_mm("fv"))
         mem.write_floats(region("voltmat").at(24), rows.reshape(-1))  # rows 4-6 only
-        if "nfv-keeps-gravity" not in self._faults:
+        if self._defects.nfv_redoes_gravity:
             self._newwc()
 
     def _newwc(self) -> None:
@@ -506,7 +511,7 @@ class CougarSim:
         mem.put("grav_cg", cg)
 
     def _resetw(self) -> None:
-        if "rst-ignored" in self._faults:
+        if not self._defects.rst_zeroes_velocities:
             return
         for name in ("dtheta_previous", "dtheta_filtered", "dtheta_out", "rate_difference"):
             self.memory.put(name, np.zeros(6))
@@ -541,7 +546,7 @@ class CougarSim:
             return
         if Memory.valid(address):
             n = min(count, (MEMORY_BYTES - address) // 2)
-            if "exmn-wrong-count" in self._faults and n > 0:
+            if not self._defects.exmn_whole_count and n > 0:
                 n -= 1
         else:
             n = 0
@@ -557,7 +562,7 @@ class CougarSim:
         return [self._read(a, 1)[0] if Memory.valid(a) else 0 for a in range(start, start + 2 * count, 2)]
 
     def _version(self) -> None:
-        code = 3 if "wrong-version-code" in self._faults else CougarResponse.VERSION
+        code = CougarResponse.VERSION if self._defects.version_code_right else 3
         self._send(code, [self.memory.word("version")])
 
     def _rfr(self) -> None:
@@ -576,7 +581,7 @@ class CougarSim:
         mem.set_word("guard_active", mem.word("guard_active") | 1 << index)
 
     def _guardc(self) -> None:
-        if "ignores-guardc" in self._faults:
+        if not self._defects.guardc_disarms:
             return
         index = self.memory.word("args") & 0xF
         self.memory.set_word("guard_active", self.memory.word("guard_active") & ~(1 << index) & 0xFFFF)
@@ -585,7 +590,7 @@ class CougarSim:
         # the gauges as the wrist reads them: the filtered readings with the offsets added back
         unfiltered = "rraw-unfiltered" in self._readings
         raw = self.memory.int16s("gauge_raw" if unfiltered else "gauge_filtered")
-        if "rraw-less-offsets" in self._faults:  # the readings as corrected, offsets subtracted
+        if not self._defects.rraw_before_offsets:  # the readings as corrected, offsets subtracted
             if "offsets-after-filter" in self._readings:
                 raw = _less(raw, self.memory.int16s("gauge_offsets"))
         elif "offsets-after-filter" not in self._readings:  # there, the readings have them

@@ -11,175 +11,219 @@ gets them, and ``manip-conform client`` passes them on in the harness command it
 
 from __future__ import annotations
 
-import enum
 from collections.abc import Iterable
-from dataclasses import dataclass
 from typing import Final
 
 from manip.codecs.error_string import format_joint_mask
+from manip.spec.faults import FaultSwitch, defect, reading
 from manip.spec.model import Layout
 
-__all__ = ["FAULTS", "NO_FAULTS", "ClientFault", "ClientFaultInfo", "ClientFaults"]
+__all__ = ["NO_FAULTS", "ClientFault", "ClientFaults"]
 
 
-class ClientFault(enum.Enum):
-    WRONG_REQUEST_NUMBER = "wrong-request-number"
-    IGNORE_ASYNC = "ignore-async"
-    ASYNC_AS_REPLY = "async-as-reply"
-    DOLLAR_AS_NUMBER = "dollar-as-number"
-    TILDE_OCTAL = "tilde-octal"
-    FATAL_AS_NON_FATAL = "fatal-as-non-fatal"
-    SWAPPED_FLOAT_WORDS = "swapped-float-words"
-    SET_SPEED_LENGTH = "set-speed-length"
-    NEVER_ACK = "never-ack"
-    RESERVED_AS_ZERO = "reserved-as-zero"
-    NO_INITIAL_WAIT = "no-initial-wait"
-    IGNORE_PAD = "ignore-pad"
-    MULTI_FIRST_PACKET = "multi-first-packet"
-    EARLY_TIMEOUT = "early-timeout"
-    SILENT_CLOSE = "silent-close"
-    IGNORE_WINDOW = "ignore-window"
-    LITERAL_EXAMPLES = "literal-examples"
-    ARRIVAL_ORDER = "arrival-order"
-    GUARD_ZERO = "guard-zero"
-    NO_NEWWC = "no-newwc"
-    NEWWC_UNDER_GUARD = "newwc-under-guard"
-    IGNORE_WINDOW_SHRINK = "ignore-window-shrink"
-    WINDOW_ON_NEW_ACK_ONLY = "window-on-new-ack-only"
-    GUARD_ALWAYS_CONTINUE = "guard-always-continue"
-    NO_NEWWC_WITHOUT_OFFSET = "no-newwc-without-offset"
-    PLAIN_GUARDS_UNTRACKED = "plain-guards-untracked"
-    ASYNC_TO_WAITING = "async-to-waiting-request"
-    CHOICE_ERROR_UNNUMBERED = "choice-error-unnumbered"
-    ASYNC_ERROR_TO_WAITING = "async-error-to-waiting-request"
-    CLEAR_GUARDS_FIRST = "clear-guards-first"
+class ClientFault(FaultSwitch):
+    """The reference client's fault switches, each declared once."""
 
-
-@dataclass(frozen=True)
-class ClientFaultInfo:
-    what: str
-    clauses: tuple[str, ...]
-    """The clauses it breaks; none for a switch that picks another allowed reading of the contract."""
-
-
-FAULTS: Final[dict[ClientFault, ClientFaultInfo]] = {
-    ClientFault.WRONG_REQUEST_NUMBER: ClientFaultInfo(
+    WRONG_REQUEST_NUMBER = defect(
+        "wrong-request-number",
         "a reply is matched to the request numbered one above the number it carries",
-        ("client.reply-matching",),
-    ),
-    ClientFault.IGNORE_ASYNC: ClientFaultInfo(
-        "asynchronous responses (0203) are dropped", ("client.async-routing",)
-    ),
-    ClientFault.ASYNC_AS_REPLY: ClientFaultInfo(
-        "an asynchronous response answers the oldest pending request", ("client.async-routing",)
-    ),
-    ClientFault.DOLLAR_AS_NUMBER: ClientFaultInfo(
+        "client.reply-matching",
+        caught_by=("client.connect.initial-response", "client.pipeline.replies-matched"),
+    )
+    IGNORE_ASYNC = defect(
+        "ignore-async",
+        "asynchronous responses (0203) are dropped",
+        "client.async-routing",
+        caught_by=("client.async.segment-interleaved", "client.async.guard-hits"),
+    )
+    ASYNC_AS_REPLY = defect(
+        "async-as-reply",
+        "an asynchronous response answers the oldest pending request",
+        "client.async-routing",
+        caught_by=("client.async.segment-interleaved", "client.async.guard-hits"),
+    )
+    DOLLAR_AS_NUMBER = defect(
+        "dollar-as-number",
         "$ in an error message is printed as the raw number, not the joints",
-        ("client.error-report", "error-string.substitution"),
-    ),
-    ClientFault.TILDE_OCTAL: ClientFaultInfo(
-        "~ in an error message is printed in octal", ("client.error-report", "error-string.substitution")
-    ),
-    ClientFault.FATAL_AS_NON_FATAL: ClientFaultInfo(
+        "client.error-report",
+        "error-string.substitution",
+        caught_by=("client.error.args-padded", "client.error.async-error-between"),
+    )
+    TILDE_OCTAL = defect(
+        "tilde-octal",
+        "~ in an error message is printed in octal",
+        "client.error-report",
+        "error-string.substitution",
+        caught_by=("client.error.args-padded", "client.error.args-aligned"),
+    )
+    FATAL_AS_NON_FATAL = defect(
+        "fatal-as-non-fatal",
         "a fatal error (0201) is taken as a non-fatal error of its request; the connection goes on",
-        ("client.fatal-ends",),
-    ),
-    ClientFault.SWAPPED_FLOAT_WORDS: ClientFaultInfo(
-        "the two words of each float in a reply are read in the wrong order", ("client.reply-data",)
-    ),
-    ClientFault.SET_SPEED_LENGTH: ClientFaultInfo(
-        "set-speed carries 8 data bytes instead of one float", ("request-data.types",)
-    ),
-    ClientFault.NEVER_ACK: ClientFaultInfo(
-        "the client's NCP acknowledges nothing (ack field 0, no STS)", ("ncp.acknowledge",)
-    ),
-    ClientFault.RESERVED_AS_ZERO: ClientFaultInfo(
-        "a reserved-operand float in a reply is read as 0.0", ("float.reserved-operand",)
-    ),
-    ClientFault.NO_INITIAL_WAIT: ClientFaultInfo(
-        "requests go out without waiting for the initial RESPONSE", ("client.initial-response",)
-    ),
-    ClientFault.IGNORE_PAD: ClientFaultInfo(
+        "client.fatal-ends",
+        caught_by=("client.fatal.severity-f", "client.fatal.severity-bf"),
+    )
+    SWAPPED_FLOAT_WORDS = defect(
+        "swapped-float-words",
+        "the two words of each float in a reply are read in the wrong order",
+        "client.reply-data",
+        caught_by=("client.reply.here", "client.float.edges"),
+    )
+    SET_SPEED_LENGTH = defect(
+        "set-speed-length",
+        "set-speed carries 8 data bytes instead of one float",
+        "request-data.types",
+        caught_by=("client.request.set-speed",),
+    )
+    NEVER_ACK = defect(
+        "never-ack",
+        "the client's NCP acknowledges nothing (ack field 0, no STS)",
+        "ncp.acknowledge",
+        caught_by=("client.ncp.acknowledge",),
+    )
+    RESERVED_AS_ZERO = defect(
+        "reserved-as-zero",
+        "a reserved-operand float in a reply is read as 0.0",
+        "float.reserved-operand",
+        caught_by=("client.float.reserved-operand",),
+    )
+    NO_INITIAL_WAIT = defect(
+        "no-initial-wait",
+        "requests go out without waiting for the initial RESPONSE",
+        "client.initial-response",
+        caught_by=("client.connect.initial-response",),
+    )
+    IGNORE_PAD = defect(
+        "ignore-pad",
         "the numbers of an error string are read right after the NUL, a pad byte included",
-        ("client.error-report", "client.error-args-layout", "error-string.substitution"),
-    ),
-    ClientFault.MULTI_FIRST_PACKET: ClientFaultInfo(
-        "a multi-packet reply ends at its first packet", ("client.multi-packet",)
-    ),
-    ClientFault.EARLY_TIMEOUT: ClientFaultInfo(
-        "a request times out at half its timeout", ("client.reply-wait",)
-    ),
-    ClientFault.SILENT_CLOSE: ClientFaultInfo(
+        "client.error-report",
+        "client.error-args-layout",
+        "error-string.substitution",
+        caught_by=("client.error.args-padded",),
+    )
+    MULTI_FIRST_PACKET = defect(
+        "multi-first-packet",
+        "a multi-packet reply ends at its first packet",
+        "client.multi-packet",
+        caught_by=("client.describe.split-mid-token", "client.describe.many-packets"),
+    )
+    EARLY_TIMEOUT = defect(
+        "early-timeout",
+        "a request times out at half its timeout",
+        "client.reply-wait",
+        caught_by=("client.timing.reply-near-timeout", "client.timing.no-reply"),
+    )
+    SILENT_CLOSE = defect(
+        "silent-close",
         "the end of the connection is not reported; requests in flight wait for their timeout",
-        ("client.connection-lost",),
-    ),
-    ClientFault.IGNORE_WINDOW: ClientFaultInfo(
+        "client.connection-lost",
+        caught_by=("client.conn.cls-mid-request",),
+    )
+    IGNORE_WINDOW = defect(
+        "ignore-window",
         "the client's NCP ignores the window the server offers (OPN and STS read as the largest window)",
-        ("ncp.window",),
-    ),
-    ClientFault.ARRIVAL_ORDER: ClientFaultInfo(
+        "ncp.window",
+        caught_by=("client.ncp.window", "client.ncp.window-opens-late", "client.ncp.window-shrinks"),
+    )
+    ARRIVAL_ORDER = defect(
+        "arrival-order",
         "a reply is matched to the oldest request waiting, whatever number it carries (by arrival order)",
-        ("client.reply-matching",),
-    ),
-    ClientFault.GUARD_ZERO: ClientFaultInfo(
-        "a new guard always gets number 0, armed or not", ("client.guard-numbers",)
-    ),
-    ClientFault.NO_NEWWC: ClientFaultInfo(
-        "a change of load sends set frame vector but never set weight (NEWWC)", ("client.newwc-on-load",)
-    ),
-    ClientFault.NEWWC_UNDER_GUARD: ClientFaultInfo(
-        "a change of load sends set weight while guards are armed", ("client.no-newwc-with-guard",)
-    ),
-    ClientFault.IGNORE_WINDOW_SHRINK: ClientFaultInfo(
+        "client.reply-matching",
+        caught_by=("client.pipeline.interleaved",),
+    )
+    GUARD_ZERO = defect(
+        "guard-zero",
+        "a new guard always gets number 0, armed or not",
+        "client.guard-numbers",
+        caught_by=("client.choice.guard-numbers",),
+    )
+    NO_NEWWC = defect(
+        "no-newwc",
+        "a change of load sends set frame vector but never set weight (NEWWC)",
+        "client.newwc-on-load",
+        caught_by=("client.choice.newwc-on-load",),
+    )
+    NEWWC_UNDER_GUARD = defect(
+        "newwc-under-guard",
+        "a change of load sends set weight while guards are armed",
+        "client.no-newwc-with-guard",
+        caught_by=("client.choice.no-newwc-with-guard",),
+    )
+    IGNORE_WINDOW_SHRINK = defect(
+        "ignore-window-shrink",
         "the client's NCP keeps the widest window the server offered: a window shrunk by an STS is ignored",
-        ("ncp.window",),
-    ),
-    ClientFault.WINDOW_ON_NEW_ACK_ONLY: ClientFaultInfo(
+        "ncp.window",
+        caught_by=("client.ncp.window-shrinks",),
+    )
+    WINDOW_ON_NEW_ACK_ONLY = defect(
+        "window-on-new-ack-only",
         "the client's NCP reads an STS's window only when the STS acknowledges something new",
-        ("ncp.window",),
-    ),
-    ClientFault.GUARD_ALWAYS_CONTINUE: ClientFaultInfo(
+        "ncp.window",
+        caught_by=("client.ncp.window-shrinks", "client.ncp.window-opens-by-status"),
+    )
+    GUARD_ALWAYS_CONTINUE = defect(
+        "guard-always-continue",
         "arm-guard arms every guard as one that lets the move continue (bit 15 of set guard's first word "
         "clear even when the guard should stop the move)",
-        ("client.guard-word",),
-    ),
-    ClientFault.NO_NEWWC_WITHOUT_OFFSET: ClientFaultInfo(
+        "client.guard-word",
+        caught_by=("client.choice.guard-numbers",),
+    )
+    NO_NEWWC_WITHOUT_OFFSET = defect(
+        "no-newwc-without-offset",
         "a change of load without a new frame vector sends nothing (no set weight, NEWWC)",
-        ("client.newwc-on-load",),
-    ),
-    ClientFault.PLAIN_GUARDS_UNTRACKED: ClientFaultInfo(
+        "client.newwc-on-load",
+        caught_by=("client.choice.newwc-without-offset", "client.choice.plain-guards"),
+    )
+    PLAIN_GUARDS_UNTRACKED = defect(
+        "plain-guards-untracked",
         "guards armed and cleared by plain set guard and clear guard requests are not tracked: arm-guard "
         "may reuse their numbers, and a change of load ignores them",
-        ("client.guard-numbers", "client.no-newwc-with-guard", "client.newwc-on-load"),
-    ),
-    ClientFault.ASYNC_TO_WAITING: ClientFaultInfo(
+        "client.guard-numbers",
+        "client.no-newwc-with-guard",
+        "client.newwc-on-load",
+        caught_by=("client.choice.plain-guards",),
+    )
+    ASYNC_TO_WAITING = defect(
+        "async-to-waiting-request",
         "an asynchronous response (0203) arriving while a request waits is handed to that request's "
         "handler: reported with that request's op and request number",
-        ("client.async-routing",),
-    ),
-    ClientFault.CHOICE_ERROR_UNNUMBERED: ClientFaultInfo(
-        "a choice operation's server error is reported with request_number null, as its reply is, not "
-        "the number the error carries",
-        ("client.error-report",),
-    ),
-    ClientFault.ASYNC_ERROR_TO_WAITING: ClientFaultInfo(
-        "an asynchronous error or warning (0204, 0205) arriving while a request waits is reported with "
-        "that request's op and request number",
-        ("client.async-routing", "client.error-report"),
-    ),
-    ClientFault.CLEAR_GUARDS_FIRST: ClientFaultInfo(
+        "client.async-routing",
+        caught_by=(
+            "client.async.segment-interleaved",
+            "client.async.guard-hits",
+            "client.pipeline.interleaved",
+        ),
+    )
+    CHOICE_ERROR_UNNUMBERED = defect(
+        "choice-error-unnumbered",
+        "a choice operation's server error is reported with request_number null, as its reply is, not the "
+        "number the error carries",
+        "client.error-report",
+        caught_by=("client.choice.errors",),
+    )
+    ASYNC_ERROR_TO_WAITING = defect(
+        "async-error-to-waiting-request",
+        "an asynchronous error or warning (0204, 0205) arriving while a request waits is reported with that "
+        "request's op and request number",
+        "client.async-routing",
+        "client.error-report",
+        caught_by=(
+            "client.error.async-error-between",
+            "client.error.warning-between",
+            "client.pipeline.interleaved",
+        ),
+    )
+    CLEAR_GUARDS_FIRST = reading(
+        "clear-guards-first",
         "no fault: a change of load with guards armed clears them first (a clear guard each), then sends "
         "the load's requests, instead of refusing; docs/client-harness.md allows both, so the suite must "
         "pass it",
-        (),
-    ),
-    ClientFault.LITERAL_EXAMPLES: ClientFaultInfo(
+    )
+    LITERAL_EXAMPLES = reading(
+        "literal-examples",
         "no fault: the harness takes every example of docs/client-harness.md literally where the contract "
-        "allows two readings (a one-element raw as a bare string, as the segment example; state lost "
-        "after the not-connected errors of the requests in flight); the suite must pass it",
-        (),
-    ),
-}
+        "allows two readings (a one-element raw as a bare string, as the segment example; state lost after "
+        "the not-connected errors of the requests in flight); the suite must pass it",
+    )
 
 
 class ClientFaults(frozenset[ClientFault]):
@@ -188,15 +232,7 @@ class ClientFaults(frozenset[ClientFault]):
     @classmethod
     def parse(cls, names: Iterable[str]) -> ClientFaults:
         """Faults by name (blank names skipped); ValueError naming the known ones for a name that is not."""
-        known = {f.value: f for f in ClientFault}
-        out: set[ClientFault] = set()
-        for name in (n.strip() for n in names):
-            if not name:
-                continue
-            if name not in known:
-                raise ValueError(f"unknown client fault {name!r}; known: {', '.join(sorted(known))}")
-            out.add(known[name])
-        return cls(out)
+        return cls(ClientFault.parse(names, "client fault"))
 
     def render_message(self, message: str, args: tuple[int, ...], has_nul: bool) -> str | None:
         """The message as a faulty client renders it, or None when no rendering fault is on."""

@@ -37,7 +37,7 @@ from manip.reference_client.errors import (
     ServerError,
 )
 from manip.reference_client.extractors import extract_done, extract_segment, extract_text, extract_values
-from manip.reference_client.faults import FAULTS, NO_FAULTS, ClientFault, ClientFaults
+from manip.reference_client.faults import NO_FAULTS, ClientFault, ClientFaults
 from manip.reference_client.guards import WristBook
 from manip.reference_client.manipulator import Manipulator
 from manip.reference_client.options import ClientOptions
@@ -497,8 +497,8 @@ def main(argv: Sequence[str] | None = None, *, prog: str = "python -m manip.refe
     parser.add_argument("-v", "--verbose", action="store_true", help="log to stderr")
     args = parser.parse_args(argv)
     if args.list_faults:
-        for fault, info in FAULTS.items():
-            print(f"{fault.value:24} {info.what} [{', '.join(info.clauses)}]")
+        for fault in ClientFault:
+            print(f"{fault.value:24} {fault.breaks} [{', '.join(fault.clauses)}]")
         return 0
     try:
         faults = ClientFaults.parse(args.fault)

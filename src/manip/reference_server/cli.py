@@ -65,9 +65,10 @@ from manip.links import (
 )
 from manip.links.address import DEFAULT_CONTACT, DEFAULT_TCP_PORT, Scheme
 from manip.links.guard import DEFAULT_FRAME_TIMEOUT, DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_LINKS
+from manip.reference_server.conditions import WorldCondition
 from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import DEFAULT_ADDRESS, ReferenceServer, serve
-from manip.reference_server.faults import FAULTS, FaultSet
+from manip.reference_server.faults import Fault, FaultSet
 from manip.reference_server.session import (
     PROFILES,
     ConfigurationBits,
@@ -89,14 +90,17 @@ LOG_LEVELS: Final = ("DEBUG", "INFO", "WARNING", "ERROR")
 
 
 def fault_listing() -> str:
-    """Every fault switch: name, kind, what it does, the clauses involved and its argument."""
+    """Every name ``--fault`` takes: the world's conditions (``environment``), then the fault switches
+    (``protocol``), each with what it does, the clauses involved and its argument."""
     lines = []
-    for info in FAULTS.values():
-        lines.append(f"{info.name}  [{info.kind}]")
-        lines.append(f"    {info.description}")
-        lines.append(f"    clauses: {', '.join(info.clauses)}")
-        if info.argument is not None:
-            lines.append(f"    argument: {info.name}={info.argument}")
+    conditions = [(c, "environment", c.description) for c in WorldCondition]
+    switches = conditions + [(f, f.kind, f.breaks) for f in Fault]
+    for switch, kind, what in switches:
+        lines.append(f"{switch.value}  [{kind}]")
+        lines.append(f"    {what}")
+        lines.append(f"    clauses: {', '.join(switch.clauses)}")
+        if switch.argument is not None:
+            lines.append(f"    argument: {switch.value}={switch.argument}")
     return "\n".join(lines)
 
 

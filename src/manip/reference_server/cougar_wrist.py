@@ -65,7 +65,7 @@ from manip.reference_server import errors
 from manip.reference_server.cougar_port import CougarPort, SimPort
 from manip.reference_server.errors import RequestError
 from manip.reference_server.session import WRIST_OPERATIONS
-from manip.reference_server.wrist import GuardHit, Pending, WristConditions, WristEvent, WristNotice
+from manip.reference_server.wrist import GuardHit, Pending, WristDefects, WristEvent, WristNotice
 from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import CougarCommand, CougarResponse
 
@@ -270,8 +270,10 @@ class CougarWrist:
         self._link_reported = False
         self._cycles = 0
         self._forces: tuple[float, ...] = (0.0,) * 6
-        self.conditions = WristConditions()
-        """Set by each connection as it opens (its fault switches)."""
+        self.defects = WristDefects()
+        """Given by each connection as it opens (its fault switches)."""
+        self.silent = False
+        """Cougar's words never reach the Puma (a condition of the connection's world)."""
         self.lazy = lazy
         """Leave Cougar unticked while nothing can come of a tick (see :meth:`tick`)."""
         self._armed: set[int] = set()
@@ -282,11 +284,11 @@ class CougarWrist:
         """An in-process Cougar's environment before :meth:`load_hand` first changed it."""
 
     # ------------------------------------------------------------------------------ Wrist API
-    def condition(self, conditions: WristConditions) -> None:
-        """A connection opens: its conditions, and no guard an earlier connection left armed (erratum
-        cougar-connection-state: Cougar's settings stay, its guards are cleared)."""
-        self.conditions = conditions
-        if conditions.clears_old_guards:
+    def condition(self, defects: WristDefects, *, silent: bool = False) -> None:
+        """A connection opens: its defects and world, and no guard an earlier connection left armed
+        (erratum cougar-connection-state: Cougar's settings stay, its guards are cleared)."""
+        self.defects, self.silent = defects, silent
+        if defects.clears_old_guards:
             for index in sorted(self._armed):
                 self.queue_command(CougarCommand.GUARDC, index=index)
             self._armed.clear()
@@ -369,7 +371,7 @@ class CougarWrist:
             for s, ps, n, pn in zip(actual, ep.prev_sensed, nominal, ep.prev_nominal, strict=True)
         )
         self._cycles += 1
-        if self.conditions.npr_every_cycle or self._cycles % 2:
+        if self.defects.npr_every_cycle or self._cycles % 2:
             self._npr.append(
                 encode(
                     "command",
@@ -405,7 +407,7 @@ class CougarWrist:
     def queue_command(self, name: str | int, **values: Any) -> None:
         """Put a command on the user queue (sent on the next tick)."""
         words = encode("command", name, **values)
-        if self.conditions.command_floats_swapped:
+        if self.defects.command_floats_swapped:
             words = _swap_float_words(words)
         self._user.append(words)
 
@@ -449,11 +451,11 @@ class CougarWrist:
     def _output(self, arm: ArmSim) -> None:
         """The output process: everything queued, in the 1985 guide's priority order."""
         words: list[int] = []
-        conditions = self.conditions
-        held = (not conditions.user_while_moving and arm.moving) or (
-            not conditions.user_while_compliant and bool(self._npr)
+        defects = self.defects
+        held = (not defects.user_while_moving and arm.moving) or (
+            not defects.user_while_compliant and bool(self._npr)
         )  # a defect either way: the user's commands wait
-        if conditions.user_commands_first and not held:
+        if defects.user_commands_first and not held:
             while self._user:
                 words += self._user.popleft()
                 self.stats.commands += 1
@@ -519,7 +521,7 @@ class CougarWrist:
     def _input(self, arm: ArmSim) -> None:
         """The input process: decode what Cougar sent and act on it."""
         words = self.port.receive()
-        if not words or self.conditions.silent:
+        if not words or self.silent:
             return
         for item in self._stream.feed(words):
             if isinstance(item, CougarMsg):
@@ -555,7 +557,7 @@ class CougarWrist:
             self._guard(msg, arm)
             return
         if code == CougarResponse.OUT_OF_SYNC:
-            if self.conditions.handles_out_of_sync:
+            if self.defects.handles_out_of_sync:
                 self._lost_sync(msg)
             return
         stale = self._stale.get(code)
@@ -583,7 +585,7 @@ class CougarWrist:
         stop = msg.code == CougarResponse.GUARD_STOP
         self.stats.guard_hits += 1
         self._armed.discard(index)
-        halts = stop and self.conditions.guard_stops_arm
+        halts = stop and self.defects.guard_stops_arm
         arm_events = tuple(arm.halt(AbortCause.GUARD)) if halts else ()
         if halts:
             self._reset = True
@@ -616,14 +618,14 @@ class CougarWrist:
     def _expire(self, now: float) -> None:
         keep: list[_Waiter] = []
         for waiter in self._waiters:
-            if (waiter.cancelled() or now >= waiter.deadline) and not self.conditions.silent:
+            if (waiter.cancelled() or now >= waiter.deadline) and not self.silent:
                 # Its reply may still come (replies keep their order): drop it if it comes soon.
                 self._stale.setdefault(waiter.response, deque()).append(now + self.reply_timeout)
             if waiter.cancelled():
                 pass
             elif now >= waiter.deadline:
                 self.stats.timeouts += 1
-                if self.conditions.answer_timeouts:
+                if self.defects.answer_timeouts:
                     waiter.on_fail(_timeout_error(waiter.command, self.reply_timeout))
             else:
                 keep.append(waiter)
@@ -657,10 +659,10 @@ class CougarWrist:
     # ------------------------------------------------------------------------------ handlers
     def _read_forces(self, values: Mapping[str, Value], now: float, arm: ArmSim) -> Pending | dict[str, Any]:
         # §6.3: the current joint angles go first, so Cougar's gravity correction is up to date.
-        if self.conditions.read_forces_sends_angles:
+        if self.defects.read_forces_sends_angles:
             self._interrupt.append(encode("command", CougarCommand.SEN, theta_sensed=arm.actual))
             self._sen_sent = arm.actual
-        if not self.conditions.read_forces_waits:
+        if not self.defects.read_forces_waits:
             self.queue_command(CougarCommand.RFRC)
             return {"forces": self._forces}
         return self._request(
@@ -917,7 +919,7 @@ class _Calibration:
             return False
         if len(self.readings[self.position]) < self.settings.samples:
             return False  # replies still to come (or a timeout, which fails us)
-        if self.position == 0 and self.wrist.conditions.calibrate_two_poses:
+        if self.position == 0 and self.wrist.defects.calibrate_two_poses:
             self.position, self.settled, self.asked = 1, 0, 0
             try:
                 arm.move_joints(self.poses[1], t)

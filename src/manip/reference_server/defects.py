@@ -10,9 +10,9 @@ when a session is made.  The protocol code never tests a fault; only this module
 
 The hook points, by what they decide:
 
-* the connection: :meth:`~Defects.condition` (the move process and the wrist a connection runs with),
-  :meth:`~Defects.inherit` (what a new connection keeps of the last), :meth:`~Defects.opened` (what the
-  world does once it is open), :attr:`~Defects.keeps_arm_after_close` (the driver's);
+* the connection: :attr:`~Defects.arm` and :attr:`~Defects.wrist` (the defects the move process and the
+  wrist a connection runs with are given, as values), :meth:`~Defects.inherit` (what a new connection
+  keeps of the last), :attr:`~Defects.keeps_arm_after_close` (the driver's);
 * request numbers: :meth:`~Defects.initial_numbers`, :meth:`~Defects.reply_number`;
 * when a held-back reply packet goes out: :meth:`~Defects.held_back` (at the servo tick);
 * serving a request: :meth:`~Defects.decode`, :meth:`~Defects.check`, :meth:`~Defects.refused`,
@@ -30,8 +30,9 @@ The hook points, by what they decide:
   :meth:`~Defects.reports_guard`, :meth:`~Defects.after_warning`;
 * the packets sent: :meth:`~Defects.sent` (their order, one step of the session at a time).
 
-The environment faults (the panic button, an obstacle, a calibration failure, a sluggish joint, a silent
-wrist) are conditions of the arm's world, not defects, but they enter through the same points.
+The conditions of the arm's world (the panic button, an obstacle, a calibration failure, a sluggish joint,
+a silent wrist) are not defects: the session meets them through
+:class:`~manip.reference_server.conditions.WorldConditions`, conforming or not.
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any, Final, Literal
 
-from manip.arm.sim import AbortCause, ArmEvent, ArmSim, Refused
+from manip.arm.sim import AbortCause, ArmDefects, ArmEvent, ArmSim, Refused
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.errors import DecodeError
 from manip.codecs.messages import Value, decode_request, encode_async
@@ -51,14 +52,14 @@ from manip.reference_server import errors
 from manip.reference_server.describe import Statement
 from manip.reference_server.errors import RequestError
 from manip.reference_server.faults import Fault, FaultSet
-from manip.reference_server.wrist import GuardHit, Wrist, WristConditions
+from manip.reference_server.wrist import GuardHit, WristDefects
 from manip.spec import SPEC, Field, RequestName, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
 
 if TYPE_CHECKING:
     from manip.reference_server.session import Outgoing, ServerSession
 
-__all__ = ["AfterFatal", "Defects", "SwitchedDefects", "defects_for"]
+__all__ = ["AfterFatal", "Defects", "SwitchedDefects", "arm_defects", "defects_for"]
 
 AfterFatal = Literal["close", "stay-open", "drop-link", "eof-drop-link"]
 """What follows a fatal error: the connection closes (the protocol), it stays open, the driver drops
@@ -119,18 +120,15 @@ class Defects:
     """Set configuration changes the configuration transforms are solved in."""
     after_fatal: AfterFatal = "close"
     """What follows a fatal error: the connection closes (clause error.fatal-then-close)."""
+    arm: ArmDefects = ArmDefects()
+    """The defects the connection's move process is made with: none."""
+    wrist: WristDefects = WristDefects()
+    """The defects the (shared) wrist takes for the connection: none."""
 
     # ---------------------------------------------------------------------------- the connection
-    def condition(self, arm: ArmSim, wrist: Wrist) -> None:
-        """Set up the move process and the (shared) wrist for the connection being made."""
-        wrist.condition(WristConditions())
-
     def inherit(self, session: ServerSession, previous: ServerSession) -> None:
         """Take over what ``previous``, the connection before, set (a conforming session takes nothing:
         erratum server-robot)."""
-
-    def opened(self, arm: ArmSim, now: float) -> None:
-        """The connection opened at ``now``."""
 
     # ---------------------------------------------------------------------------- request numbers
     def initial_numbers(self, rfc_packet_no: int) -> tuple[int, ...]:
@@ -255,6 +253,8 @@ class SwitchedDefects(Defects):
         self._held_async: list[Outgoing] = []
         """Asynchronous packets waiting for the next request (fault async-splits-multi)."""
         on = faults.active
+        self.arm = arm_defects(faults)
+        self.wrist = _wrist_defects(faults)
         self.keeps_arm_after_close = Fault.CLOSE_KEEPS_MOVING in on
         self.discards_after_free_joint = Fault.FREE_JOINT_EXECUTES not in on
         self.straight_lines = Fault.STRAIGHT_AS_JOINT not in on
@@ -274,47 +274,6 @@ class SwitchedDefects(Defects):
         return fault in self.faults.active
 
     # ---------------------------------------------------------------------------- the connection
-    def condition(self, arm: ArmSim, wrist: Wrist) -> None:
-        faults, on = self.faults, self._on
-        wrist.condition(
-            WristConditions(
-                silent=on(Fault.WRIST_SILENT),
-                answer_timeouts=not on(Fault.WRIST_TIMEOUT_SILENT),
-                npr_every_cycle=not on(Fault.NPR_SKIPPED),
-                command_floats_swapped=on(Fault.WRIST_FLOAT_WORDS_SWAPPED),
-                user_commands_first=on(Fault.WRIST_USER_FIRST),
-                guard_stops_arm=not on(Fault.GUARD_IGNORED),
-                read_forces_sends_angles=not on(Fault.READ_FORCES_NO_ANGLES),
-                read_forces_waits=not on(Fault.WRIST_NO_WAIT),
-                calibrate_two_poses=not on(Fault.CALIBRATE_ONE_POSE),
-                user_while_moving=not on(Fault.WRIST_CONFIG_AFTER_MOTION),
-                user_while_compliant=not on(Fault.WRIST_USER_HELD_COMPLIANT),
-                handles_out_of_sync=not on(Fault.OUT_OF_SYNC_IGNORED),
-                clears_old_guards=not on(Fault.GUARDS_OUTLIVE_CONNECTION),
-            )
-        )
-        if on(Fault.SEGMENT_NUMBER_STUCK):
-            arm.segment_step = 0
-        arm.enforce_power = not on(Fault.NO_NAP)
-        arm.enforce_abort = not on(Fault.AWA_IGNORED)
-        if faults.obstacle is not None and on(Fault.OBSTACLE):
-            arm.place_obstacle(faults.obstacle)
-        if on(Fault.SLUGGISH_JOINT):
-            arm.sluggish = faults.sluggish
-        if on(Fault.COLLISION_UNCHECKED):
-            arm.collision_tol_deg = math.inf
-        arm.increment_from_actual = on(Fault.INCREMENT_FROM_ACTUAL)
-        arm.keep_queue_on_abort = on(Fault.ABORT_KEEPS_QUEUE)
-        if on(Fault.SEGMENTS_STOP):
-            arm.stop_between_segments = SEGMENTS_STOP_REST_S
-        if on(Fault.QUEUE_REVERSED):
-            arm.stop_between_segments = arm.stop_between_segments or 0.0
-            arm.reverse_waiting = True
-        if on(Fault.SERVO_DOUBLE_RATE):
-            arm.tick_period /= 2
-        arm.collision_test_compliant = on(Fault.COMPLIANT_COLLISION_TEST)
-        arm.hold_compliant_end = not on(Fault.COMPLIANT_SNAP_BACK)
-
     def inherit(self, session: ServerSession, previous: ServerSession) -> None:
         if self._on(Fault.KEEPS_SPEED):
             session.arm.set_speed(previous.arm.speed)
@@ -324,10 +283,6 @@ class SwitchedDefects(Defects):
             session.notifications = previous.notifications
         if self._on(Fault.KEEPS_ABORT):
             session.arm.aborted, session.arm.abort_cause = previous.arm.aborted, previous.arm.abort_cause
-
-    def opened(self, arm: ArmSim, now: float) -> None:
-        if self._on(Fault.PANIC_BUTTON):
-            arm.press_panic(at=now + self.faults.panic_delay)
 
     # ---------------------------------------------------------------------------- request numbers
     def initial_numbers(self, rfc_packet_no: int) -> tuple[int, ...]:
@@ -356,8 +311,6 @@ class SwitchedDefects(Defects):
     def check(self, op: RequestOpcode, arm: ArmSim) -> None:
         if self._on(Fault.AWA_REFUSES_ALL) and arm.aborted and op.name not in ("enable-power", "reset-abort"):
             raise errors.refusal_error(op.name, Refused("AWA", "motion aborted; reset first"))
-        if self._on(Fault.CALIBRATE_NZI) and op.name == "calibrate":
-            raise errors.nzi_error(self.faults.nzi_joints)
 
     def refused(self, op: RequestOpcode | None, error: RequestError) -> RequestError | dict[str, Any]:
         code, name = error.error.code, op.name if op is not None else None
@@ -568,6 +521,47 @@ def _renumbered(packet: bytes, by: int) -> bytes:
 def _float_words_swapped(packet: bytes) -> bytes:
     body = packet[2:]
     return packet[:2] + b"".join(body[i + 2 : i + 4] + body[i : i + 2] for i in range(0, len(body), 4))
+
+
+def arm_defects(faults: FaultSet) -> ArmDefects:
+    """The defects of the move process the switches of ``faults`` give it."""
+    on = faults.active
+    return ArmDefects(
+        enforce_power=Fault.NO_NAP not in on,
+        enforce_abort=Fault.AWA_IGNORED not in on,
+        collision_test=Fault.COLLISION_UNCHECKED not in on,
+        collision_test_compliant=Fault.COMPLIANT_COLLISION_TEST in on,
+        hold_compliant_end=Fault.COMPLIANT_SNAP_BACK not in on,
+        increment_from_actual=Fault.INCREMENT_FROM_ACTUAL in on,
+        stop_between_segments=SEGMENTS_STOP_REST_S
+        if Fault.SEGMENTS_STOP in on
+        else 0.0
+        if Fault.QUEUE_REVERSED in on
+        else None,
+        reverse_waiting=Fault.QUEUE_REVERSED in on,
+        keep_queue_on_abort=Fault.ABORT_KEEPS_QUEUE in on,
+        segment_step=0 if Fault.SEGMENT_NUMBER_STUCK in on else 1,
+        servo_rate=2.0 if Fault.SERVO_DOUBLE_RATE in on else 1.0,
+    )
+
+
+def _wrist_defects(faults: FaultSet) -> WristDefects:
+    """The defects of the wrist processes the switches of ``faults`` give them."""
+    on = faults.active
+    return WristDefects(
+        answer_timeouts=Fault.WRIST_TIMEOUT_SILENT not in on,
+        npr_every_cycle=Fault.NPR_SKIPPED not in on,
+        command_floats_swapped=Fault.WRIST_FLOAT_WORDS_SWAPPED in on,
+        user_commands_first=Fault.WRIST_USER_FIRST in on,
+        guard_stops_arm=Fault.GUARD_IGNORED not in on,
+        read_forces_sends_angles=Fault.READ_FORCES_NO_ANGLES not in on,
+        read_forces_waits=Fault.WRIST_NO_WAIT not in on,
+        calibrate_two_poses=Fault.CALIBRATE_ONE_POSE not in on,
+        user_while_moving=Fault.WRIST_CONFIG_AFTER_MOTION not in on,
+        user_while_compliant=Fault.WRIST_USER_HELD_COMPLIANT not in on,
+        handles_out_of_sync=Fault.OUT_OF_SYNC_IGNORED not in on,
+        clears_old_guards=Fault.GUARDS_OUTLIVE_CONNECTION not in on,
+    )
 
 
 def defects_for(faults: FaultSet) -> Defects:

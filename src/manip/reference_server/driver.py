@@ -80,6 +80,7 @@ from manip.links.api import LinkWrapper
 from manip.links.stream import StreamLink
 from manip.links.virtual_clock import is_virtual
 from manip.ncp import ConnectionRequested
+from manip.reference_server.defects import arm_defects
 from manip.reference_server.session import Outgoing, Output, ServerConfig, ServerSession, State
 from manip.reference_server.wrist import Wrist
 from manip.spec import SPEC, RequestOpcode
@@ -293,7 +294,12 @@ class ReferenceServer:
 
     def _new_session(self) -> ServerSession:
         config = self.config
-        arm = ArmSim(config.model, start=self.joints, powered=config.powered_at_open)
+        arm = ArmSim(
+            config.model,
+            start=self.joints,
+            powered=config.powered_at_open,
+            defects=arm_defects(config.faults),
+        )
         arm.hand_open = self.hand_open
         if self._carried is not None:
             arm, self._carried = self._carried, None

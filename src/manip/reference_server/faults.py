@@ -1,749 +1,567 @@
-"""Fault switches of the reference server: conditions and defects injected on purpose.
+"""Fault switches of the reference server: defects injected on purpose.
 
 A conformance suite is only as good as the defects it catches.  Each switch here makes the reference
-server either meet a condition of the arm's world (``environment`` faults: the panic button, an obstacle,
-a calibration failure; the server stays conformant and the suite can check how it reports them) or break
-exactly one rule of the protocol (``protocol`` faults).  Running the suite against the server with each
-protocol fault on, one at a time, shows whether some case catches it (mutation testing of the suite).
+server break exactly one rule of the protocol.  Running the suite against the server with each switch
+on, one at a time, shows whether some case catches it (mutation testing of the suite).
 
-:data:`FAULTS` describes every switch: its name, one line saying what changes, the clause ids involved
-(for a protocol fault the clauses it violates, for an environment fault the clauses whose behaviour it
-triggers) and, when it takes one, what its argument means.  :class:`FaultSet` is the set a server runs
-with; :meth:`FaultSet.parse` reads the ``NAME`` / ``NAME=ARG`` form a command line gives.
+:class:`Fault` is the registry: each member is declared once, with one line saying what changes and the
+clause ids it breaks (the record of every implementation's switches, :class:`manip.spec.faults.FaultSwitch`).
+The conditions of the arm's world (the panic button, an obstacle, a calibration failure...) are not
+faults: :mod:`manip.reference_server.conditions` has them, and ``--fault`` takes their names too.
+:class:`FaultSet` is what a server runs with (the switches on, and the conditions its world starts in);
+:meth:`FaultSet.parse` reads the ``NAME`` / ``NAME=ARG`` form a command line gives.
 """
 
 from __future__ import annotations
 
-import enum
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Final, Literal
+from typing import Final
 
-from manip.arm.sim import Obstacle, Sluggish
+from manip.arm.sim import Obstacle
+from manip.reference_server.conditions import WorldCondition, WorldConditions
 from manip.spec import SPEC
+from manip.spec.faults import FaultSwitch, defect
 
-__all__ = ["FAULTS", "RETIRED", "WRIST_SIDE", "Fault", "FaultInfo", "FaultSet"]
+__all__ = ["RETIRED", "WRIST_SIDE", "Fault", "FaultSet", "switch_named"]
 
 
-class Fault(enum.StrEnum):
-    """Names of the fault switches."""
+class Fault(FaultSwitch):
+    """The reference server's fault switches, each declared once."""
 
-    # environment
-    PANIC_BUTTON = "panic-button"
-    OBSTACLE = "obstacle"
-    CALIBRATE_NZI = "calibrate-nzi"
-    SLUGGISH_JOINT = "sluggish-joint"
-    WRIST_SILENT = "wrist-silent"
     # protocol defects
-    WRONG_REQUEST_NUMBER = "wrong-request-number"
-    ECHO_ACK_NUMBER = "echo-ack-number"
-    NO_INITIAL_RESPONSE = "no-initial-response"
-    INITIAL_RESPONSE_NUMBER = "initial-response-wrong-number"
-    NO_DESCRIBE_TERMINATOR = "no-describe-terminator"
-    DESCRIBE_TERMINATOR_OVERTAKEN = "describe-terminator-overtaken"
-    MULTI_WRONG_NUMBER = "multi-wrong-number"
-    NO_PROTOCOL_VERSION = "no-protocol-version"
-    SWAPPED_FLOAT_WORDS = "swapped-float-words"
-    WRONG_SEVERITY = "wrong-severity"
-    ERROR_WITHOUT_COLON = "error-without-colon"
-    ERROR_PAD_MISPLACED = "error-pad-misplaced"
-    UOP_OPCODE_SWAPPED = "uop-opcode-byte-swapped"
-    BDL_COUNTS_SWAPPED = "bdl-counts-byte-swapped"
-    JOINT_MASK_SWAPPED = "joint-mask-byte-swapped"
-    UNKNOWN_OPCODE_ANSWERED = "unknown-opcode-answered"
-    LENGTH_UNCHECKED = "length-unchecked"
-    EXTRA_REPLY_AFTER_ERROR = "extra-reply-after-error"
-    FATAL_WITHOUT_CLOSE = "fatal-without-close"
-    NO_JOR = "no-jor"
-    SWAP_TOR_JOR = "swap-tor-jor"
-    NO_NAP = "no-nap"
-    AWA_IGNORED = "awa-ignored"
-    AWA_REFUSES_ALL = "awa-refuses-all"
-    SPEED_UNCHECKED = "speed-unchecked"
-    SEGMENT_NUMBER_STUCK = "segment-number-stuck"
-    UNREQUESTED_ASYNC = "unrequested-async"
-    ASYNC_STRAY_BYTE = "async-stray-byte"
-    FREE_JOINT_EXECUTES = "free-joint-executes"
-    DESCRIBE_EXTRA_OPERATION = "describe-extra-operation"
-    DESCRIBE_MISSING_OPERATION = "describe-missing-operation"
-    DESCRIBE_WRONG_DOF = "describe-wrong-dof"
-    DESCRIBE_NARROW_LIMITS = "describe-narrow-limits"
-    DESCRIBE_LIMITS_SHORT = "describe-limits-short"
-    DESCRIBE_READY_OFF = "describe-ready-off"
-    WARNING_INTERRUPTS = "warning-interrupts"
-    GUARD_HIT_WORD_SWAPPED = "guard-hit-word-swapped"
-    STRAIGHT_AS_JOINT = "straight-as-joint"
-    INCREMENT_FROM_ACTUAL = "increment-from-actual"
-    INCREMENT_O_T_SWAPPED = "increment-o-t-swapped"
-    CONFIGURATION_IGNORED = "configuration-ignored"
-    KEEPS_SPEED = "connection-keeps-speed"
-    KEEPS_CONFIGURATION = "connection-keeps-configuration"
-    KEEPS_NOTIFICATIONS = "connection-keeps-notifications"
-    READY_LEAVES_WRIST = "ready-leaves-wrist"
-    SEGMENT_REPORT_PREVIOUS = "segment-report-previous"
-    COLLISION_UNCHECKED = "collision-unchecked"
-    CLOSE_KEEPS_MOVING = "close-keeps-moving"
-    SEGMENTS_STOP = "segments-stop"
-    SERVO_DOUBLE_RATE = "servo-double-rate"
-    WRIST_TIMEOUT_SILENT = "wrist-timeout-silent"
-    UNDERFLOW_DIRTY_ZERO = "underflow-dirty-zero"
-    NOT_FINITE_RESERVED = "not-finite-reserved"
-    FATAL_NUMBER_PREVIOUS = "fatal-number-previous"
-    FATAL_SEVERITY_E = "fatal-severity-e"
-    FATAL_DROPS_LINK = "fatal-drops-link"
-    ASYNC_NUMBER_PREVIOUS = "async-number-previous"
-    WRIST_ERROR_FATAL = "wrist-error-fatal"
-    ABORT_KEEPS_QUEUE = "abort-keeps-queue"
-    SPEED_IGNORED = "speed-ignored"
-    QUEUE_REVERSED = "queue-reversed"
-    # protocol defects of the Puma's side of the wrist link (judged by manip-conform run --puma)
-    WRIST_FLOAT_WORDS_SWAPPED = "wrist-float-words-swapped"
-    WRIST_USER_FIRST = "wrist-user-first"
-    WRIST_NO_WAIT = "wrist-no-wait"
-    READ_FORCES_NO_ANGLES = "read-forces-no-angles"
-    NPR_SKIPPED = "npr-skipped"
-    COMPLIANT_COLLISION_TEST = "compliant-collision-test"
-    COMPLIANT_SNAP_BACK = "compliant-snap-back"
-    GUARD_IGNORED = "guard-ignored"
-    GUARD_UNREPORTED = "guard-unreported"
-    CALIBRATE_ONE_POSE = "calibrate-one-pose"
-    # protocol defects found from outside (issue 32)
-    FATAL_EOF_WITHOUT_CLS = "fatal-eof-without-cls"
-    KEEPS_ABORT = "connection-keeps-abort"
-    NZI_MASK_SHIFTED = "nzi-mask-shifted"
-    CONFIGURATION_SWAPPED = "configuration-swapped"
-    JOINTS_REVERSED = "joints-reversed"
-    FORCES_IN_POUNDS = "forces-in-pounds"
-    FORCES_STALE = "forces-stale"
-    ASYNC_SPLITS_MULTI = "async-splits-multi"
-    WRIST_CONFIG_AFTER_MOTION = "wrist-config-after-motion"
-    WRIST_USER_HELD_COMPLIANT = "wrist-user-held-compliant"
-    OUT_OF_SYNC_IGNORED = "out-of-sync-ignored"
-    GUARDS_OUTLIVE_CONNECTION = "guards-outlive-connection"
-
-
-Kind = Literal["environment", "protocol"]
-
-
-@dataclass(frozen=True)
-class FaultInfo:
-    """What a fault switch does."""
-
-    fault: Fault
-    kind: Kind
-    description: str
-    clauses: tuple[str, ...]
-    argument: str | None = None
-    """What ``NAME=ARG`` means, for the switches that take an argument."""
-
-    @property
-    def name(self) -> str:
-        return self.fault.value
-
-
-def _info(
-    fault: Fault, kind: Kind, description: str, *clauses: str, argument: str | None = None
-) -> tuple[Fault, FaultInfo]:
-    return fault, FaultInfo(fault, kind, description, clauses, argument)
-
-
-FAULTS: Final[Mapping[Fault, FaultInfo]] = MappingProxyType(
-    dict(
-        [
-            _info(
-                Fault.PANIC_BUTTON,
-                "environment",
-                "The panic button is pressed: arm power off, motion aborted with an asynchronous error.",
-                "motion.abort",
-                "motion.reset",
-                "async-error.request-number",
-                argument="seconds after the connection opens (default 1)",
-            ),
-            _info(
-                Fault.OBSTACLE,
-                "environment",
-                "An obstacle stops one joint; moving into it is a collision (asynchronous COL error).",
-                "motion.abort",
-                "motion.reset",
-                "async-error.request-number",
-                argument="JOINT:LOWER:UPPER in degrees, either bound may be empty (e.g. 2::-60)",
-            ),
-            _info(
-                Fault.CALIBRATE_NZI,
-                "environment",
-                "Calibrate finds no zero index: fatal F NZI with the joint mask, then the connection closes.",
-                "calibrate.nzi",
-                "error.fatal-request-number",
-                "error.fatal-then-close",
-                argument="joint numbers, comma separated (default 2,3)",
-            ),
-            _info(
-                Fault.SLUGGISH_JOINT,
-                "environment",
-                "One joint trails its command while it moves, by more than half the collision tolerance "
-                "and within it: an asynchronous warning (W COL), and the motion goes on.",
-                "async-warning.format",
-                "async-error.request-number",
-                argument="JOINT:LAG, the joint and its lag in degrees (default 2:0.35)",
-            ),
-            _info(
-                Fault.WRIST_SILENT,
-                "environment",
-                "The wrist computer stops answering (hung, or its link cut): a request that needs its "
-                "data waits the wrist timeout and is answered E WNR.",
-                "wrist.no-answer",
-            ),
-            _info(
-                Fault.WRONG_REQUEST_NUMBER,
-                "protocol",
-                "Replies echo the request's packet number plus one.",
-                "response.echoes-request-number",
-            ),
-            _info(
-                Fault.ECHO_ACK_NUMBER,
-                "protocol",
-                "Replies echo the request's Chaos ack field instead of its packet number.",
-                "response.echoes-request-number",
-            ),
-            _info(
-                Fault.NO_INITIAL_RESPONSE,
-                "protocol",
-                "No RESPONSE is sent when the connection opens.",
-                "connect.initial-response",
-            ),
-            _info(
-                Fault.INITIAL_RESPONSE_NUMBER,
-                "protocol",
-                "The initial RESPONSE carries the RFC's packet number plus one.",
-                "connect.initial-response-number",
-            ),
-            _info(
-                Fault.NO_DESCRIBE_TERMINATOR,
-                "protocol",
-                "Describe self is not ended by an empty response packet.",
-                "multi.terminated-by-empty",
-                "describe.reply-shape",
-            ),
-            _info(
-                Fault.DESCRIBE_TERMINATOR_OVERTAKEN,
-                "protocol",
-                "Describe self's empty terminator waits 25 servo ticks (0.4 s): a request pipelined "
-                "behind describe self is answered before its reply ends.",
-                "request.one-reply",
-            ),
-            _info(
-                Fault.MULTI_WRONG_NUMBER,
-                "protocol",
-                "Packets of describe self after the first carry the request number plus one.",
-                "multi.same-request-number",
-            ),
-            _info(
-                Fault.NO_PROTOCOL_VERSION,
-                "protocol",
-                "The describe-self alist has no :protocol-version.",
-                "describe.protocol-version",
-            ),
-            _info(
-                Fault.SWAPPED_FLOAT_WORDS,
-                "protocol",
-                "Floats in replies are sent with their two words swapped.",
-                "float.format",
-            ),
-            _info(
-                Fault.WRONG_SEVERITY,
-                "protocol",
-                "Non-fatal and asynchronous errors carry severity F (and fatal errors E).",
-                "error.severity-matches-opcode",
-                "request.unknown-opcode",
-            ),
-            _info(
-                Fault.ERROR_WITHOUT_COLON,
-                "protocol",
-                "Error strings lose the colon after where.",
-                "error-string.format",
-            ),
-            _info(
-                Fault.ERROR_PAD_MISPLACED,
-                "protocol",
-                "Error strings put a pad byte after the NUL even where the NUL ends at an even offset, so "
-                "the numbers start at an odd one.",
-                "error-string.arg-layout",
-            ),
-            _info(
-                Fault.UOP_OPCODE_SWAPPED,
-                "protocol",
-                "The opcode in C UOP is sent high byte first.",
-                "error-string.arg-values",
-            ),
-            _info(
-                Fault.BDL_COUNTS_SWAPPED,
-                "protocol",
-                "The byte counts in C BDL are sent high byte first.",
-                "error-string.arg-values",
-            ),
-            _info(
-                Fault.JOINT_MASK_SWAPPED,
-                "protocol",
-                "The joint masks in JOR and TOR are sent high byte first.",
-                "error-string.arg-values",
-            ),
-            _info(
-                Fault.UNKNOWN_OPCODE_ANSWERED,
-                "protocol",
-                "An unknown opcode gets an empty normal response instead of C UOP.",
-                "request.unknown-opcode",
-            ),
-            _info(
-                Fault.LENGTH_UNCHECKED,
-                "protocol",
-                "A request with the wrong data length is cut or zero-padded and executed instead of C BDL.",
-                "request.data-length",
-            ),
-            _info(
-                Fault.EXTRA_REPLY_AFTER_ERROR,
-                "protocol",
-                "A non-fatal error is followed by an empty normal response to the same request.",
-                "error.non-fatal-is-reply",
-                "request.one-reply",
-            ),
-            _info(
-                Fault.FATAL_WITHOUT_CLOSE,
-                "protocol",
-                "A fatal error leaves the connection open and the session running.",
-                "error.fatal-then-close",
-            ),
-            _info(
-                Fault.NO_JOR,
-                "protocol",
-                "Set joint angles accepts out-of-range joints (clamped to the limits) instead of JOR.",
-                "motion.checked-before-queue",
-            ),
-            _info(
-                Fault.SWAP_TOR_JOR,
-                "protocol",
-                "TOR and JOR are swapped: a transform no in-range angles reach is refused with JOR, "
-                "out-of-range joint angles with TOR.",
-                "solve-forwards.errors",
-                "motion.checked-before-queue",
-            ),
-            _info(
-                Fault.NO_NAP,
-                "protocol",
-                "Motion requests are accepted without arm power instead of NAP.",
-                "motion.no-power",
-            ),
-            _info(
-                Fault.AWA_IGNORED,
-                "protocol",
-                "Motion requests are accepted after an abort instead of AWA.",
-                "motion.abort",
-            ),
-            _info(
-                Fault.AWA_REFUSES_ALL,
-                "protocol",
-                "After an abort every request but enable power and reset abort is refused with AWA, not only "
-                "motion (the E.2 table's reading, which conforms but warns; erratum awa-scope).",
-                "motion.abort-serves-others",
-            ),
-            _info(
-                Fault.SPEED_UNCHECKED,
-                "protocol",
-                "Set speed answers done to any factor (out-of-range ones are ignored) instead of C BVA.",
-                "speed.range",
-            ),
-            _info(
-                Fault.SEGMENT_NUMBER_STUCK,
-                "protocol",
-                "Every segment gets number 1.",
-                "segment.number-increases",
-            ),
-            _info(
-                Fault.UNREQUESTED_ASYNC,
-                "protocol",
-                "Segment-completed asynchronous responses are sent without being requested.",
-                "async.only-when-requested",
-            ),
-            _info(
-                Fault.ASYNC_STRAY_BYTE,
-                "protocol",
-                "Asynchronous responses carry a stray zero byte after their data: 9 bytes (7 in the 1985 "
-                "guide's layout), a length neither layout has.",
-                "async.layout",
-            ),
-            _info(
-                Fault.FREE_JOINT_EXECUTES,
-                "protocol",
-                "The packet after free joint is executed instead of discarded with done.",
-                "free-joint.awaits-next-packet",
-                "free-joint.replies",
-            ),
-            _info(
-                Fault.DESCRIBE_EXTRA_OPERATION,
-                "protocol",
-                "Describe self lists an opcode the server refuses as unknown (the first unassigned one).",
-                "describe.operations-answered",
-            ),
-            _info(
-                Fault.DESCRIBE_MISSING_OPERATION,
-                "protocol",
-                "Describe self leaves solve backwards (0221) out of :operations, though it is served.",
-                "describe.operations-complete",
-            ),
-            _info(
-                Fault.DESCRIBE_WRONG_DOF,
-                "protocol",
-                "Describe self states one more degree of freedom than the arm's joint vectors have.",
-                "describe.dof-joint-vectors",
-            ),
-            _info(
-                Fault.DESCRIBE_NARROW_LIMITS,
-                "protocol",
-                "Describe self states every joint range 5 degrees narrower at each end than the arm's.",
-                "describe.joint-limits",
-            ),
-            _info(
-                Fault.DESCRIBE_LIMITS_SHORT,
-                "protocol",
-                "Describe self's :joint-limits leaves out the last joint's pair (one fewer than "
-                ":degrees-of-freedom).",
-                "describe.joint-limits-count",
-            ),
-            _info(
-                Fault.DESCRIBE_READY_OFF,
-                "protocol",
-                "Describe self states a :ready-position with joint 2 ten degrees from where move to ready "
-                "goes.",
-                "describe.ready-position",
-            ),
-            _info(
-                Fault.WARNING_INTERRUPTS,
-                "protocol",
-                "A joint lagging its command stops the arm and aborts the motion after the warning, as a "
-                "collision would.",
-                "async-warning.format",
-            ),
-            _info(
-                Fault.GUARD_HIT_WORD_SWAPPED,
-                "protocol",
-                "Guard-hit asynchronous responses say continue (2) for a guard that stopped the move and "
-                "stop (1) for one that did not.",
-                "async.layout",
-            ),
-            _info(
-                Fault.STRAIGHT_AS_JOINT,
-                "protocol",
-                "Straight-line moves (205, 212) are interpolated in joint space: the hand strays off the "
-                "line.",
-                "straight-move.line",
-            ),
-            _info(
-                Fault.INCREMENT_FROM_ACTUAL,
-                "protocol",
-                "Incremental moves add to where the arm stands when they are queued, not to where the queue "
-                "ends.",
-                "incremental.relative",
-            ),
-            _info(
-                Fault.INCREMENT_O_T_SWAPPED,
-                "protocol",
-                "Incremental moves add dO to the pose's T angle and dT to its O angle.",
-                "incremental.relative",
-            ),
-            _info(
-                Fault.CONFIGURATION_IGNORED,
-                "protocol",
-                "Set configuration answers done and changes nothing: transforms are solved nearest the "
-                "current angles whatever configuration was asked for.",
-                "set-configuration.effect",
-            ),
-            _info(
-                Fault.KEEPS_SPEED,
-                "protocol",
-                "A new connection keeps the speed factor the last one set.",
-                "connect.per-connection-state",
-            ),
-            _info(
-                Fault.KEEPS_CONFIGURATION,
-                "protocol",
-                "A new connection keeps the configuration (lefty or righty) the last one set.",
-                "connect.per-connection-state",
-            ),
-            _info(
-                Fault.KEEPS_NOTIFICATIONS,
-                "protocol",
-                "A new connection keeps the notification mask the last one asked for.",
-                "connect.per-connection-state",
-            ),
-            _info(
-                Fault.READY_LEAVES_WRIST,
-                "protocol",
-                "Move to ready moves joints 1-3 only: the wrist joints stay where they are.",
-                "ready.pose",
-            ),
-            _info(
-                Fault.SEGMENT_REPORT_PREVIOUS,
-                "protocol",
-                "Segment-completed reports name the segment queued before the one that completed.",
-                "segment.fifo-completion",
-            ),
-            _info(
-                Fault.COLLISION_UNCHECKED,
-                "protocol",
-                "The move process never compares the angles reached with those commanded: a blocked joint "
-                "draws no error and the motion goes on.",
-                "motion.collision",
-            ),
-            _info(
-                Fault.CLOSE_KEEPS_MOVING,
-                "protocol",
-                "A connection that closes leaves its queued segments running, and the next connection "
-                "continues its segment counter.",
-                "connect.close-stops-arm",
-                "connect.per-connection-state",
-            ),
-            _info(
-                Fault.SEGMENTS_STOP,
-                "protocol",
-                "Queued joint segments do not blend: the arm comes to rest after each and waits 0.1 s "
-                "before the next.",
-                "motion.smooth-transitions",
-            ),
-            _info(
-                Fault.SERVO_DOUBLE_RATE,
-                "protocol",
-                "The move process runs every 8 ms instead of 16: the angles change twice per servo cycle.",
-                "motion.servo-period",
-            ),
-            _info(
-                Fault.WRIST_TIMEOUT_SILENT,
-                "protocol",
-                "A request whose wrist command Cougar never answers is never answered either (no E WNR); "
-                "the requests after it wait for ever.",
-                "wrist.no-answer",
-            ),
-            _info(
-                Fault.UNDERFLOW_DIRTY_ZERO,
-                "protocol",
-                "Reply floats below the smallest F magnitude (2^-128) are sent with exponent 0 and their "
-                "fraction bits (a dirty zero) instead of a clean zero.",
-                "float.dirty-zero",
-            ),
-            _info(
-                Fault.NOT_FINITE_RESERVED,
-                "protocol",
-                "Solve forwards of a transform out of reach answers six angles that are not numbers, sent as "
-                "the reserved operand, instead of refusing.",
-                "float.not-finite",
-            ),
-            _info(
-                Fault.FATAL_NUMBER_PREVIOUS,
-                "protocol",
-                "A fatal error carries the number of the request before the packet last received.",
-                "error.fatal-request-number",
-            ),
-            _info(
-                Fault.FATAL_SEVERITY_E,
-                "protocol",
-                "Fatal errors carry severity E (the other errors keep theirs).",
-                "error.severity-matches-opcode",
-            ),
-            _info(
-                Fault.FATAL_DROPS_LINK,
-                "protocol",
-                "After a fatal error the server drops the link under the connection instead of sending CLS.",
-                "error.fatal-then-close",
-            ),
-            _info(
-                Fault.ASYNC_NUMBER_PREVIOUS,
-                "protocol",
-                "Asynchronous errors and warnings carry the number of the request processed before the last "
-                "one.",
-                "async-error.request-number",
-            ),
-            _info(
-                Fault.WRIST_ERROR_FATAL,
-                "protocol",
-                "A wrist request that fails (Cougar silent, its link down) is answered with a fatal error "
-                "(severity F) and the connection closed, instead of a non-fatal E error.",
-                "wrist.no-answer",
-            ),
-            _info(
-                Fault.ABORT_KEEPS_QUEUE,
-                "protocol",
-                "An abort drops only the segment in execution: the queued ones run once motion is allowed "
-                "again.",
-                "motion.abort",
-            ),
-            _info(
-                Fault.SPEED_IGNORED,
-                "protocol",
-                "Set speed answers done to a factor in range and changes nothing: every move runs at full "
-                "speed.",
-                "motion.speed-scales",
-            ),
-            _info(
-                Fault.QUEUE_REVERSED,
-                "protocol",
-                "Segments queued behind the one running run newest first (each waits for the one before it "
-                "to end).",
-                "segment.fifo-completion",
-            ),
-            _info(
-                Fault.WRIST_FLOAT_WORDS_SWAPPED,
-                "protocol",
-                "Floats in the commands the wrist processes queue for Cougar have their two words swapped.",
-                "cougar.command.layout",
-            ),
-            _info(
-                Fault.WRIST_USER_FIRST,
-                "protocol",
-                "The wrist output process sends the user's commands before New Position and Rate and Reset.",
-                "puma.wrist.priority",
-            ),
-            _info(
-                Fault.WRIST_NO_WAIT,
-                "protocol",
-                "Read forces is answered at once with the last forces seen, without waiting for Cougar.",
-                "puma.wrist.waits",
-            ),
-            _info(
-                Fault.READ_FORCES_NO_ANGLES,
-                "protocol",
-                "Read forces sends Report Forces without the current joint angles (SEN) before it.",
-                "puma.wrist.read-forces-angles",
-            ),
-            _info(
-                Fault.NPR_SKIPPED,
-                "protocol",
-                "A compliant segment sends New Position and Rate only every other servo cycle.",
-                "puma.compliance.npr-every-cycle",
-            ),
-            _info(
-                Fault.COMPLIANT_COLLISION_TEST,
-                "protocol",
-                "The collision test stays on under compliance.",
-                "puma.compliance.no-collision-test",
-            ),
-            _info(
-                Fault.COMPLIANT_SNAP_BACK,
-                "protocol",
-                "When a compliant episode ends the arm jumps back to the nominal goal.",
-                "puma.compliance.segment-end",
-            ),
-            _info(
-                Fault.GUARD_IGNORED,
-                "protocol",
-                "A stop-the-move guard trip is reported but the arm keeps moving.",
-                "puma.guard.stop",
-            ),
-            _info(
-                Fault.GUARD_UNREPORTED,
-                "protocol",
-                "Guard trips are never reported to the client.",
-                "puma.guard.report",
-            ),
-            _info(
-                Fault.CALIBRATE_ONE_POSE,
-                "protocol",
-                "Calibrate-wrist sets the mean of one pose's readings (gravity in them) as the offsets.",
-                "puma.calibrate-wrist",
-            ),
-            _info(
-                Fault.FATAL_EOF_WITHOUT_CLS,
-                "protocol",
-                "After a fatal error the server sends EOF and then drops the link under the connection "
-                "before the peer's acknowledgement can draw its CLS: the connection ends with EOF, never "
-                "CLS.",
-                "error.fatal-then-close",
-            ),
-            _info(
-                Fault.KEEPS_ABORT,
-                "protocol",
-                "A new connection keeps the abort condition the last one closed with: its first move is "
-                "refused AWA.",
-                "connect.per-connection-state",
-            ),
-            _info(
-                Fault.NZI_MASK_SHIFTED,
-                "protocol",
-                "The joint mask of F NZI counts joints from 0 (joint n as bit n): it names the joint after "
-                "each one that failed.",
-                "calibrate.nzi-mask",
-            ),
-            _info(
-                Fault.CONFIGURATION_SWAPPED,
-                "protocol",
-                "Set configuration reads bit 0 the wrong way round: 1 gives the righty solutions, 0 the "
-                "lefty ones.",
-                "set-configuration.lefty-side",
-            ),
-            _info(
-                Fault.JOINTS_REVERSED,
-                "protocol",
-                "Every joint vector on the wire starts at the hand, not the base (requests, replies and "
-                "describe self's limits and ready position alike): element 1 is joint 6.",
-                "joint-angles.reply",
-            ),
-            _info(
-                Fault.FORCES_IN_POUNDS,
-                "protocol",
-                "Read forces answers pounds and pound-inches, not ounces and ounce-inches: every component "
-                "16 times too small.",
-                "read-forces.units",
-            ),
-            _info(
-                Fault.FORCES_STALE,
-                "protocol",
-                "Every read forces on a connection answers that connection's first reading again.",
-                "read-forces.current",
-            ),
-            _info(
-                Fault.ASYNC_SPLITS_MULTI,
-                "protocol",
-                "The asynchronous packets of the move and wrist processes wait for the main process's next "
-                "request, and it sends them after the first packet of a multi-packet reply: describe self is "
-                "split by them.",
-                "multi.not-split",
-            ),
-            _info(
-                Fault.WRIST_CONFIG_AFTER_MOTION,
-                "protocol",
-                "The wrist output process holds the user's commands while the arm moves: a setting reaches "
-                "Cougar only once the queued segments are done.",
-                "puma.wrist.config-at-once",
-            ),
-            _info(
-                Fault.WRIST_USER_HELD_COMPLIANT,
-                "protocol",
-                "The wrist output process holds the user's commands during a compliant segment: read forces "
-                "then times out and settings wait for the segment's end.",
-                "puma.wrist.user-during-compliance",
-            ),
-            _info(
-                Fault.OUT_OF_SYNC_IGNORED,
-                "protocol",
-                "Cougar's out-of-sync message is dropped: the requests waiting for Cougar wait out the wrist "
-                "timeout, and the client is not warned.",
-                "puma.wrist.out-of-sync",
-            ),
-            _info(
-                Fault.GUARDS_OUTLIVE_CONNECTION,
-                "protocol",
-                "The guards a connection left armed on Cougar stay armed for the next connection.",
-                "puma.wrist.connection-state",
-            ),
-        ]
+    WRONG_REQUEST_NUMBER = defect(
+        "wrong-request-number",
+        "Replies echo the request's packet number plus one.",
+        "response.echoes-request-number",
+        caught_by=("property.requests.well-formed",),
     )
-)
+    ECHO_ACK_NUMBER = defect(
+        "echo-ack-number",
+        "Replies echo the request's Chaos ack field instead of its packet number.",
+        "response.echoes-request-number",
+        caught_by=("property.requests.well-formed",),
+    )
+    NO_INITIAL_RESPONSE = defect(
+        "no-initial-response",
+        "No RESPONSE is sent when the connection opens.",
+        "connect.initial-response",
+        caught_by=("server.connect.initial-response",),
+    )
+    INITIAL_RESPONSE_NUMBER = defect(
+        "initial-response-wrong-number",
+        "The initial RESPONSE carries the RFC's packet number plus one.",
+        "connect.initial-response-number",
+        caught_by=("server.connect.initial-response",),
+    )
+    NO_DESCRIBE_TERMINATOR = defect(
+        "no-describe-terminator",
+        "Describe self is not ended by an empty response packet.",
+        "multi.terminated-by-empty",
+        "describe.reply-shape",
+        caught_by=("property.requests.well-formed",),
+    )
+    DESCRIBE_TERMINATOR_OVERTAKEN = defect(
+        "describe-terminator-overtaken",
+        "Describe self's empty terminator waits 25 servo ticks (0.4 s): a request pipelined behind describe "
+        "self is answered before its reply ends.",
+        "request.one-reply",
+        caught_by=("server.describe.pipelined",),
+    )
+    MULTI_WRONG_NUMBER = defect(
+        "multi-wrong-number",
+        "Packets of describe self after the first carry the request number plus one.",
+        "multi.same-request-number",
+        caught_by=("server.describe.reply-shape",),
+    )
+    NO_PROTOCOL_VERSION = defect(
+        "no-protocol-version",
+        "The describe-self alist has no :protocol-version.",
+        "describe.protocol-version",
+        caught_by=("server.describe.protocol-version",),
+    )
+    SWAPPED_FLOAT_WORDS = defect(
+        "swapped-float-words",
+        "Floats in replies are sent with their two words swapped.",
+        "float.format",
+        caught_by=("property.floats.round-trip",),
+    )
+    WRONG_SEVERITY = defect(
+        "wrong-severity",
+        "Non-fatal and asynchronous errors carry severity F (and fatal errors E).",
+        "error.severity-matches-opcode",
+        "request.unknown-opcode",
+        caught_by=("server.error.fatal-then-close",),
+    )
+    ERROR_WITHOUT_COLON = defect(
+        "error-without-colon",
+        "Error strings lose the colon after where.",
+        "error-string.format",
+        caught_by=("property.requests.well-formed",),
+    )
+    ERROR_PAD_MISPLACED = defect(
+        "error-pad-misplaced",
+        "Error strings put a pad byte after the NUL even where the NUL ends at an even offset, so the "
+        "numbers start at an odd one.",
+        "error-string.arg-layout",
+        caught_by=("server.error.arg-alignment",),
+    )
+    UOP_OPCODE_SWAPPED = defect(
+        "uop-opcode-byte-swapped",
+        "The opcode in C UOP is sent high byte first.",
+        "error-string.arg-values",
+        caught_by=("server.negative.unknown-opcodes",),
+    )
+    BDL_COUNTS_SWAPPED = defect(
+        "bdl-counts-byte-swapped",
+        "The byte counts in C BDL are sent high byte first.",
+        "error-string.arg-values",
+        caught_by=("server.negative.data-length.safe",),
+    )
+    JOINT_MASK_SWAPPED = defect(
+        "joint-mask-byte-swapped",
+        "The joint masks in JOR and TOR are sent high byte first.",
+        "error-string.arg-values",
+        caught_by=("server.motion.jor",),
+    )
+    UNKNOWN_OPCODE_ANSWERED = defect(
+        "unknown-opcode-answered",
+        "An unknown opcode gets an empty normal response instead of C UOP.",
+        "request.unknown-opcode",
+        caught_by=("server.error.severity-matches-opcode",),
+    )
+    LENGTH_UNCHECKED = defect(
+        "length-unchecked",
+        "A request with the wrong data length is cut or zero-padded and executed instead of C BDL.",
+        "request.data-length",
+        caught_by=("server.negative.data-length.safe",),
+    )
+    EXTRA_REPLY_AFTER_ERROR = defect(
+        "extra-reply-after-error",
+        "A non-fatal error is followed by an empty normal response to the same request.",
+        "error.non-fatal-is-reply",
+        "request.one-reply",
+        caught_by=("server.error.non-fatal-is-reply",),
+    )
+    FATAL_WITHOUT_CLOSE = defect(
+        "fatal-without-close",
+        "A fatal error leaves the connection open and the session running.",
+        "error.fatal-then-close",
+        caught_by=("server.error.fatal-then-close",),
+    )
+    NO_JOR = defect(
+        "no-jor",
+        "Set joint angles accepts out-of-range joints (clamped to the limits) instead of JOR.",
+        "motion.checked-before-queue",
+        caught_by=("server.motion.jor",),
+    )
+    SWAP_TOR_JOR = defect(
+        "swap-tor-jor",
+        "TOR and JOR are swapped: a transform no in-range angles reach is refused with JOR, out-of-range "
+        "joint angles with TOR.",
+        "solve-forwards.errors",
+        "motion.checked-before-queue",
+        caught_by=("server.motion.jor",),
+    )
+    NO_NAP = defect(
+        "no-nap",
+        "Motion requests are accepted without arm power instead of NAP.",
+        "motion.no-power",
+        caught_by=("server.motion.nap",),
+    )
+    AWA_IGNORED = defect(
+        "awa-ignored",
+        "Motion requests are accepted after an abort instead of AWA.",
+        "motion.abort",
+        caught_by=("server.async.guard-hit",),
+    )
+    AWA_REFUSES_ALL = defect(
+        "awa-refuses-all",
+        "After an abort every request but enable power and reset abort is refused with AWA, not only motion "
+        "(the E.2 table's reading, which conforms but warns; erratum awa-scope).",
+        "motion.abort-serves-others",
+        caught_by=("server.motion.awa-reset-abort",),
+    )
+    SPEED_UNCHECKED = defect(
+        "speed-unchecked",
+        "Set speed answers done to any factor (out-of-range ones are ignored) instead of C BVA.",
+        "speed.range",
+        caught_by=("server.speed.bounds",),
+    )
+    SEGMENT_NUMBER_STUCK = defect(
+        "segment-number-stuck",
+        "Every segment gets number 1.",
+        "segment.number-increases",
+        caught_by=("property.segments.numbering",),
+    )
+    UNREQUESTED_ASYNC = defect(
+        "unrequested-async",
+        "Segment-completed asynchronous responses are sent without being requested.",
+        "async.only-when-requested",
+        caught_by=("server.async.guard-hit",),
+    )
+    ASYNC_STRAY_BYTE = defect(
+        "async-stray-byte",
+        "Asynchronous responses carry a stray zero byte after their data: 9 bytes (7 in the 1985 guide's "
+        "layout), a length neither layout has.",
+        "async.layout",
+        caught_by=("server.async.segment-completed",),
+    )
+    FREE_JOINT_EXECUTES = defect(
+        "free-joint-executes",
+        "The packet after free joint is executed instead of discarded with done.",
+        "free-joint.awaits-next-packet",
+        "free-joint.replies",
+        caught_by=("server.free-joint.discard",),
+    )
+    DESCRIBE_EXTRA_OPERATION = defect(
+        "describe-extra-operation",
+        "Describe self lists an opcode the server refuses as unknown (the first unassigned one).",
+        "describe.operations-answered",
+        caught_by=("server.describe.operations-served",),
+    )
+    DESCRIBE_MISSING_OPERATION = defect(
+        "describe-missing-operation",
+        "Describe self leaves solve backwards (0221) out of :operations, though it is served.",
+        "describe.operations-complete",
+        caught_by=("server.describe.operations-served",),
+    )
+    DESCRIBE_WRONG_DOF = defect(
+        "describe-wrong-dof",
+        "Describe self states one more degree of freedom than the arm's joint vectors have.",
+        "describe.dof-joint-vectors",
+        caught_by=("server.describe.degrees-of-freedom",),
+    )
+    DESCRIBE_NARROW_LIMITS = defect(
+        "describe-narrow-limits",
+        "Describe self states every joint range 5 degrees narrower at each end than the arm's.",
+        "describe.joint-limits",
+        caught_by=("server.describe.joint-limits",),
+    )
+    DESCRIBE_LIMITS_SHORT = defect(
+        "describe-limits-short",
+        "Describe self's :joint-limits leaves out the last joint's pair (one fewer than "
+        ":degrees-of-freedom).",
+        "describe.joint-limits-count",
+        caught_by=("server.describe.joint-limits",),
+    )
+    DESCRIBE_READY_OFF = defect(
+        "describe-ready-off",
+        "Describe self states a :ready-position with joint 2 ten degrees from where move to ready goes.",
+        "describe.ready-position",
+        caught_by=("server.motion.ready-position",),
+    )
+    WARNING_INTERRUPTS = defect(
+        "warning-interrupts",
+        "A joint lagging its command stops the arm and aborts the motion after the warning, as a collision "
+        "would.",
+        "async-warning.format",
+        caught_by=("server.async.warning-format",),
+    )
+    GUARD_HIT_WORD_SWAPPED = defect(
+        "guard-hit-word-swapped",
+        "Guard-hit asynchronous responses say continue (2) for a guard that stopped the move and stop (1) "
+        "for one that did not.",
+        "async.layout",
+        caught_by=("server.async.guard-hit",),
+    )
+    STRAIGHT_AS_JOINT = defect(
+        "straight-as-joint",
+        "Straight-line moves (205, 212) are interpolated in joint space: the hand strays off the line.",
+        "straight-move.line",
+        caught_by=("server.motion.straight-line",),
+    )
+    INCREMENT_FROM_ACTUAL = defect(
+        "increment-from-actual",
+        "Incremental moves add to where the arm stands when they are queued, not to where the queue ends.",
+        "incremental.relative",
+        caught_by=("server.motion.incremental-reference",),
+    )
+    INCREMENT_O_T_SWAPPED = defect(
+        "increment-o-t-swapped",
+        "Incremental moves add dO to the pose's T angle and dT to its O angle.",
+        "incremental.relative",
+        caught_by=("server.motion.incremental-oat",),
+    )
+    CONFIGURATION_IGNORED = defect(
+        "configuration-ignored",
+        "Set configuration answers done and changes nothing: transforms are solved nearest the current "
+        "angles whatever configuration was asked for.",
+        "set-configuration.effect",
+        caught_by=("server.motion.configuration",),
+    )
+    KEEPS_SPEED = defect(
+        "connection-keeps-speed",
+        "A new connection keeps the speed factor the last one set.",
+        "connect.per-connection-state",
+        caught_by=("server.connect.fresh-state",),
+    )
+    KEEPS_CONFIGURATION = defect(
+        "connection-keeps-configuration",
+        "A new connection keeps the configuration (lefty or righty) the last one set.",
+        "connect.per-connection-state",
+        caught_by=("server.connect.fresh-state",),
+    )
+    KEEPS_NOTIFICATIONS = defect(
+        "connection-keeps-notifications",
+        "A new connection keeps the notification mask the last one asked for.",
+        "connect.per-connection-state",
+        caught_by=("server.connect.fresh-state",),
+    )
+    READY_LEAVES_WRIST = defect(
+        "ready-leaves-wrist",
+        "Move to ready moves joints 1-3 only: the wrist joints stay where they are.",
+        "ready.pose",
+        caught_by=("server.motion.ready",),
+    )
+    SEGMENT_REPORT_PREVIOUS = defect(
+        "segment-report-previous",
+        "Segment-completed reports name the segment queued before the one that completed.",
+        "segment.fifo-completion",
+        caught_by=("server.motion.queued-segments",),
+    )
+    COLLISION_UNCHECKED = defect(
+        "collision-unchecked",
+        "The move process never compares the angles reached with those commanded: a blocked joint draws no "
+        "error and the motion goes on.",
+        "motion.collision",
+        caught_by=("server.motion.collision",),
+    )
+    CLOSE_KEEPS_MOVING = defect(
+        "close-keeps-moving",
+        "A connection that closes leaves its queued segments running, and the next connection continues its "
+        "segment counter.",
+        "connect.close-stops-arm",
+        "connect.per-connection-state",
+        caught_by=("server.connect.close-stops-arm",),
+    )
+    SEGMENTS_STOP = defect(
+        "segments-stop",
+        "Queued joint segments do not blend: the arm comes to rest after each and waits 0.1 s before the "
+        "next.",
+        "motion.smooth-transitions",
+        caught_by=("server.motion.queued-segments",),
+    )
+    SERVO_DOUBLE_RATE = defect(
+        "servo-double-rate",
+        "The move process runs every 8 ms instead of 16: the angles change twice per servo cycle.",
+        "motion.servo-period",
+        caught_by=("server.motion.queued-segments",),
+    )
+    WRIST_TIMEOUT_SILENT = defect(
+        "wrist-timeout-silent",
+        "A request whose wrist command Cougar never answers is never answered either (no E WNR); the "
+        "requests after it wait for ever.",
+        "wrist.no-answer",
+        caught_by=("server.wrist.no-answer",),
+    )
+    UNDERFLOW_DIRTY_ZERO = defect(
+        "underflow-dirty-zero",
+        "Reply floats below the smallest F magnitude (2^-128) are sent with exponent 0 and their fraction "
+        "bits (a dirty zero) instead of a clean zero.",
+        "float.dirty-zero",
+        caught_by=("server.float.extremes",),
+    )
+    NOT_FINITE_RESERVED = defect(
+        "not-finite-reserved",
+        "Solve forwards of a transform out of reach answers six angles that are not numbers, sent as the "
+        "reserved operand, instead of refusing.",
+        "float.not-finite",
+        caught_by=("server.float.extremes",),
+    )
+    FATAL_NUMBER_PREVIOUS = defect(
+        "fatal-number-previous",
+        "A fatal error carries the number of the request before the packet last received.",
+        "error.fatal-request-number",
+        caught_by=("server.error.fatal-then-close",),
+    )
+    FATAL_SEVERITY_E = defect(
+        "fatal-severity-e",
+        "Fatal errors carry severity E (the other errors keep theirs).",
+        "error.severity-matches-opcode",
+        caught_by=("server.error.fatal-then-close",),
+    )
+    FATAL_DROPS_LINK = defect(
+        "fatal-drops-link",
+        "After a fatal error the server drops the link under the connection instead of sending CLS.",
+        "error.fatal-then-close",
+        caught_by=("server.error.fatal-then-close",),
+    )
+    ASYNC_NUMBER_PREVIOUS = defect(
+        "async-number-previous",
+        "Asynchronous errors and warnings carry the number of the request processed before the last one.",
+        "async-error.request-number",
+        caught_by=("server.async.warning-format",),
+    )
+    WRIST_ERROR_FATAL = defect(
+        "wrist-error-fatal",
+        "A wrist request that fails (Cougar silent, its link down) is answered with a fatal error (severity "
+        "F) and the connection closed, instead of a non-fatal E error.",
+        "wrist.no-answer",
+        caught_by=("server.wrist.no-answer",),
+    )
+    ABORT_KEEPS_QUEUE = defect(
+        "abort-keeps-queue",
+        "An abort drops only the segment in execution: the queued ones run once motion is allowed again.",
+        "motion.abort",
+        caught_by=("server.motion.abort-drops-queue",),
+    )
+    SPEED_IGNORED = defect(
+        "speed-ignored",
+        "Set speed answers done to a factor in range and changes nothing: every move runs at full speed.",
+        "motion.speed-scales",
+        caught_by=("server.speed.scales",),
+    )
+    QUEUE_REVERSED = defect(
+        "queue-reversed",
+        "Segments queued behind the one running run newest first (each waits for the one before it to end).",
+        "segment.fifo-completion",
+        caught_by=("server.motion.queued-segments",),
+    )
+    # protocol defects of the Puma's side of the wrist link (judged by manip-conform run --puma)
+    WRIST_FLOAT_WORDS_SWAPPED = defect(
+        "wrist-float-words-swapped",
+        "Floats in the commands the wrist processes queue for Cougar have their two words swapped.",
+        "cougar.command.layout",
+        caught_by=("puma.wrist.command-layout",),
+    )
+    WRIST_USER_FIRST = defect(
+        "wrist-user-first",
+        "The wrist output process sends the user's commands before New Position and Rate and Reset.",
+        "puma.wrist.priority",
+        caught_by=("puma.wrist.priority",),
+    )
+    WRIST_NO_WAIT = defect(
+        "wrist-no-wait",
+        "Read forces is answered at once with the last forces seen, without waiting for Cougar.",
+        "puma.wrist.waits",
+        caught_by=("puma.wrist.waits",),
+    )
+    READ_FORCES_NO_ANGLES = defect(
+        "read-forces-no-angles",
+        "Read forces sends Report Forces without the current joint angles (SEN) before it.",
+        "puma.wrist.read-forces-angles",
+        caught_by=("puma.wrist.read-forces-angles",),
+    )
+    NPR_SKIPPED = defect(
+        "npr-skipped",
+        "A compliant segment sends New Position and Rate only every other servo cycle.",
+        "puma.compliance.npr-every-cycle",
+        caught_by=("puma.compliance.npr-every-cycle",),
+    )
+    COMPLIANT_COLLISION_TEST = defect(
+        "compliant-collision-test",
+        "The collision test stays on under compliance.",
+        "puma.compliance.no-collision-test",
+        caught_by=("puma.compliance.no-collision-test",),
+    )
+    COMPLIANT_SNAP_BACK = defect(
+        "compliant-snap-back",
+        "When a compliant episode ends the arm jumps back to the nominal goal.",
+        "puma.compliance.segment-end",
+        caught_by=("puma.compliance.segment-end",),
+    )
+    GUARD_IGNORED = defect(
+        "guard-ignored",
+        "A stop-the-move guard trip is reported but the arm keeps moving.",
+        "puma.guard.stop",
+        caught_by=("puma.guard.stop",),
+    )
+    GUARD_UNREPORTED = defect(
+        "guard-unreported",
+        "Guard trips are never reported to the client.",
+        "puma.guard.report",
+        caught_by=("puma.guard.report",),
+    )
+    CALIBRATE_ONE_POSE = defect(
+        "calibrate-one-pose",
+        "Calibrate-wrist sets the mean of one pose's readings (gravity in them) as the offsets.",
+        "puma.calibrate-wrist",
+        caught_by=("puma.calibrate-wrist",),
+    )
+    # protocol defects found from outside (issue 32)
+    FATAL_EOF_WITHOUT_CLS = defect(
+        "fatal-eof-without-cls",
+        "After a fatal error the server sends EOF and then drops the link under the connection before the "
+        "peer's acknowledgement can draw its CLS: the connection ends with EOF, never CLS.",
+        "error.fatal-then-close",
+        caught_by=("server.error.fatal-then-close",),
+    )
+    KEEPS_ABORT = defect(
+        "connection-keeps-abort",
+        "A new connection keeps the abort condition the last one closed with: its first move is refused AWA.",
+        "connect.per-connection-state",
+        caught_by=("server.connect.abort-not-carried",),
+    )
+    NZI_MASK_SHIFTED = defect(
+        "nzi-mask-shifted",
+        "The joint mask of F NZI counts joints from 0 (joint n as bit n): it names the joint after each one "
+        "that failed.",
+        "calibrate.nzi-mask",
+        caught_by=("server.error.fatal-then-close",),
+    )
+    CONFIGURATION_SWAPPED = defect(
+        "configuration-swapped",
+        "Set configuration reads bit 0 the wrong way round: 1 gives the righty solutions, 0 the lefty ones.",
+        "set-configuration.lefty-side",
+        caught_by=("server.motion.configuration-side",),
+    )
+    JOINTS_REVERSED = defect(
+        "joints-reversed",
+        "Every joint vector on the wire starts at the hand, not the base (requests, replies and describe "
+        "self's limits and ready position alike): element 1 is joint 6.",
+        "joint-angles.reply",
+        caught_by=("server.motion.joint-order",),
+    )
+    FORCES_IN_POUNDS = defect(
+        "forces-in-pounds",
+        "Read forces answers pounds and pound-inches, not ounces and ounce-inches: every component 16 times "
+        "too small.",
+        "read-forces.units",
+        caught_by=("server.async.guard-hit",),
+    )
+    FORCES_STALE = defect(
+        "forces-stale",
+        "Every read forces on a connection answers that connection's first reading again.",
+        "read-forces.current",
+        caught_by=("server.wrist.force-push",),
+    )
+    ASYNC_SPLITS_MULTI = defect(
+        "async-splits-multi",
+        "The asynchronous packets of the move and wrist processes wait for the main process's next request, "
+        "and it sends them after the first packet of a multi-packet reply: describe self is split by them.",
+        "multi.not-split",
+        caught_by=("server.describe.not-split",),
+    )
+    WRIST_CONFIG_AFTER_MOTION = defect(
+        "wrist-config-after-motion",
+        "The wrist output process holds the user's commands while the arm moves: a setting reaches Cougar "
+        "only once the queued segments are done.",
+        "puma.wrist.config-at-once",
+        caught_by=("puma.wrist.config-at-once",),
+    )
+    WRIST_USER_HELD_COMPLIANT = defect(
+        "wrist-user-held-compliant",
+        "The wrist output process holds the user's commands during a compliant segment: read forces then "
+        "times out and settings wait for the segment's end.",
+        "puma.wrist.user-during-compliance",
+        caught_by=("puma.wrist.user-during-compliance",),
+    )
+    OUT_OF_SYNC_IGNORED = defect(
+        "out-of-sync-ignored",
+        "Cougar's out-of-sync message is dropped: the requests waiting for Cougar wait out the wrist "
+        "timeout, and the client is not warned.",
+        "puma.wrist.out-of-sync",
+        caught_by=("puma.wrist.out-of-sync",),
+    )
+    GUARDS_OUTLIVE_CONNECTION = defect(
+        "guards-outlive-connection",
+        "The guards a connection left armed on Cougar stay armed for the next connection.",
+        "puma.wrist.connection-state",
+        caught_by=("puma.wrist.connection-state",),
+    )
 
-for _fault in Fault:
-    if _fault not in FAULTS:
-        raise RuntimeError(f"fault {_fault.value} has no description")
-for _info_entry in FAULTS.values():
-    for _clause in _info_entry.clauses:
-        if _clause not in SPEC.clauses:
-            raise RuntimeError(f"fault {_info_entry.name} names unknown clause {_clause!r}")
 
 RETIRED: Final[Mapping[str, str]] = MappingProxyType(
     {
@@ -755,101 +573,66 @@ RETIRED: Final[Mapping[str, str]] = MappingProxyType(
 """Fault switches withdrawn, and what to use instead (:meth:`FaultSet.parse` says so)."""
 
 WRIST_SIDE: Final[frozenset[Fault]] = frozenset(
-    info.fault for info in FAULTS.values() if all(SPEC.clauses[c].party == "puma" for c in info.clauses)
+    fault for fault in Fault if all(SPEC.clauses[c].party == "puma" for c in fault.clauses)
 )
 """Defects of the Puma's side of the wrist link: the server cases cannot see them (they need the suite
 playing Cougar, ``manip-conform run --puma``)."""
 
-DEFAULT_PANIC_DELAY: Final = 1.0
-DEFAULT_NZI_JOINTS: Final = (2, 3)
-DEFAULT_SLUGGISH: Final = Sluggish(2, 0.35)
+
+def switch_named(name: str) -> Fault | WorldCondition:
+    """The fault switch or world condition ``--fault NAME`` names; ValueError naming the known ones."""
+    if name in RETIRED:
+        raise ValueError(f"fault {name} was withdrawn: {RETIRED[name]}")
+    for kind in (WorldCondition, Fault):
+        for member in kind:
+            if member.value == name:
+                return member
+    known = ", ".join([*(c.value for c in WorldCondition), *(f.value for f in Fault)])
+    raise ValueError(f"unknown fault {name!r}; known: {known}")
 
 
 @dataclass(frozen=True)
 class FaultSet:
-    """The faults a server runs with, and the arguments of the environment faults."""
+    """What a server runs with: the fault switches on, and the conditions of the world it starts in."""
 
     active: frozenset[Fault] = frozenset()
-    panic_delay: float = DEFAULT_PANIC_DELAY
-    """Seconds after the connection opens at which the panic button is pressed."""
-    obstacle: Obstacle | None = None
-    nzi_joints: tuple[int, ...] = DEFAULT_NZI_JOINTS
-    sluggish: Sluggish = DEFAULT_SLUGGISH
-    """The joint that trails its command, and by how much."""
+    world: WorldConditions = field(default_factory=WorldConditions)
 
-    def __post_init__(self) -> None:
-        if Fault.OBSTACLE in self.active and self.obstacle is None:
-            raise ValueError("the obstacle fault needs an Obstacle")
-        if not self.nzi_joints or any(not 1 <= j <= 6 for j in self.nzi_joints):
-            raise ValueError("calibrate-nzi joints must be 1..6")
-        if self.panic_delay < 0.0:
-            raise ValueError("the panic delay must not be negative")
-
-    def __contains__(self, fault: object) -> bool:
-        return fault in self.active
+    def __contains__(self, switch: object) -> bool:
+        return switch in self.active or switch in self.world
 
     def merged(self, other: FaultSet) -> FaultSet:
-        """The switches of both; the arguments of a switch ``other`` turns on are ``other``'s."""
-        on = other.active
-        return FaultSet(
-            self.active | on,
-            panic_delay=other.panic_delay if Fault.PANIC_BUTTON in on else self.panic_delay,
-            obstacle=other.obstacle if Fault.OBSTACLE in on else self.obstacle,
-            nzi_joints=other.nzi_joints if Fault.CALIBRATE_NZI in on else self.nzi_joints,
-            sluggish=other.sluggish if Fault.SLUGGISH_JOINT in on else self.sluggish,
-        )
+        """The switches and conditions of both; the arguments of a condition ``other`` has are ``other``'s."""
+        return FaultSet(self.active | other.active, self.world.merged(other.world))
 
     @classmethod
     def of(cls, *faults: Fault, obstacle: Obstacle | None = None) -> FaultSet:
-        """A set of argument-free faults (and an obstacle, switched on when given)."""
-        active = frozenset(faults) | ({Fault.OBSTACLE} if obstacle is not None else frozenset())
-        return cls(active, obstacle=obstacle)
+        """A set of fault switches (and an obstacle in the arm's way, when given)."""
+        world = (
+            WorldConditions()
+            if obstacle is None
+            else WorldConditions(frozenset({WorldCondition.OBSTACLE}), obstacle=obstacle)
+        )
+        return cls(frozenset(faults), world)
 
     @classmethod
     def parse(cls, specs: Iterable[str]) -> FaultSet:
-        """Read ``NAME`` or ``NAME=ARG`` items; ValueError names the bad one."""
-        out = cls()
+        """Read ``NAME`` or ``NAME=ARG`` items (fault switches and world conditions); ValueError names
+        the bad one."""
+        active: set[Fault] = set()
+        world = WorldConditions()
         for spec in specs:
             name, sep, arg = spec.partition("=")
-            if name.strip() in RETIRED:
-                raise ValueError(f"fault {name.strip()} was withdrawn: {RETIRED[name.strip()]}")
+            switch = switch_named(name.strip())
+            if isinstance(switch, Fault):
+                if sep:
+                    raise ValueError(f"fault {switch.value} takes no argument")
+                active.add(switch)
+                continue
+            if sep and switch.argument is None:
+                raise ValueError(f"fault {switch.value} takes no argument")
             try:
-                fault = Fault(name.strip())
-            except ValueError:
-                known = ", ".join(f.value for f in Fault)
-                raise ValueError(f"unknown fault {name!r}; known: {known}") from None
-            if sep and FAULTS[fault].argument is None:
-                raise ValueError(f"fault {fault.value} takes no argument")
-            try:
-                out = _apply(out, fault, arg.strip() if sep else None)
+                world = world.with_condition(switch, arg.strip() if sep else None)
             except ValueError as exc:
-                raise ValueError(f"fault {fault.value}: {exc} (argument: {FAULTS[fault].argument})") from exc
-        return out
-
-
-def _apply(faults: FaultSet, fault: Fault, arg: str | None) -> FaultSet:
-    """``faults`` with ``fault`` switched on and its argument read."""
-    active = faults.active | {fault}
-    if fault is Fault.PANIC_BUTTON:
-        delay = DEFAULT_PANIC_DELAY if arg is None else float(arg)
-        return replace(faults, active=active, panic_delay=delay)
-    if fault is Fault.CALIBRATE_NZI:
-        joints = DEFAULT_NZI_JOINTS if arg is None else tuple(int(j) for j in arg.split(","))
-        return replace(faults, active=active, nzi_joints=joints)
-    if fault is Fault.SLUGGISH_JOINT:
-        if arg is None:
-            return replace(faults, active=active)
-        joint, sep, lag = arg.partition(":")
-        if not sep:
-            raise ValueError(f"{arg!r} is not JOINT:LAG")
-        return replace(faults, active=active, sluggish=Sluggish(int(joint), float(lag)))
-    if fault is Fault.OBSTACLE:
-        if arg is None:
-            raise ValueError("needs an argument")
-        parts = arg.split(":")
-        if len(parts) != 3:
-            raise ValueError(f"{arg!r} is not JOINT:LOWER:UPPER")
-        lower = float(parts[1]) if parts[1] else None
-        upper = float(parts[2]) if parts[2] else None
-        return replace(faults, active=active, obstacle=Obstacle(int(parts[0]), lower, upper))
-    return replace(faults, active=active)
+                raise ValueError(f"fault {switch.value}: {exc} (argument: {switch.argument})") from exc
+        return cls(frozenset(active), world)

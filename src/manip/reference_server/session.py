@@ -258,9 +258,14 @@ class ServerSession:
         """Where wire lengths become the arm model's millimetres and back (the one place)."""
         self.defects: Defects = defects_for(self.config.faults)
         """The hook points the fault switches bend (chosen once, here)."""
-        self.arm = arm or ArmSim(self.config.model, powered=self.config.powered_at_open)
+        self.arm = arm or ArmSim(
+            self.config.model, powered=self.config.powered_at_open, defects=self.defects.arm
+        )
         self.wrist: Wrist = wrist or NoWrist()
-        self.defects.condition(self.arm, self.wrist)
+        self.world = self.config.faults.world
+        """The conditions of the arm's world this connection meets (none by default)."""
+        self.world.place(self.arm)
+        self.wrist.condition(self.defects.wrist, silent=self.world.wrist_silent)
         self.state = State.AWAITING_INITIAL
         self.notifications = 0
         """The request-notifications mask in force (bit 0 guard hit, bit 1 segment completed)."""
@@ -343,7 +348,7 @@ class ServerSession:
     def _send_initial(self, event: _Event) -> State | None:
         self.last_processed = event.packet_no
         self.arm.tick(event.now)  # the move process starts with the connection
-        self.defects.opened(self.arm, event.now)
+        self.world.opened(self.arm, event.now)
         for number in self.defects.initial_numbers(event.packet_no):
             self._emit(ServerOp.RESPONSE, _word(number))
         return None
@@ -470,6 +475,7 @@ class ServerSession:
             raise errors.not_served(op.opcode)
         values = self._decode(op, event.data)
         self.defects.check(op, self.arm)
+        self.world.check(op.name)
         try:
             if handler is None:
                 return self.wrist.handle(op, values, event.now, self.arm)

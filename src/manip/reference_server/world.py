@@ -6,9 +6,9 @@ button, a force on the hand.  :class:`ReferenceWorld` arranges each on a running
 :class:`~manip.reference_server.driver.ReferenceServer`:
 
 * the conditions a connection meets from its start (an obstacle, a calibration failure, a sluggish joint,
-  a silent wrist) are the server's environment fault switches (:data:`~manip.reference_server.faults.FAULTS`
-  of kind ``environment``), merged into the configuration that every connection opened while they are
-  held reads when it opens;
+  a silent wrist) are :class:`~manip.reference_server.conditions.WorldConditions` (the ones
+  ``manip-server --fault NAME`` names), merged into the configuration that every connection opened
+  while they are held reads when it opens;
 * the panic button is pressed at once for the connections open now (their arm loses power, its motion
   is aborted), and stays pressed for the connections opened while it is held;
 * a force on the hand is put on an in-process Cougar's hand at once
@@ -37,8 +37,8 @@ from manip import __version__
 from manip.arm.sim import Obstacle, Sluggish
 from manip.cougar.environment import HandLoad
 from manip.links.address import parse_address
+from manip.reference_server.conditions import WorldCondition, WorldConditions
 from manip.reference_server.driver import ReferenceServer
-from manip.reference_server.faults import Fault, FaultSet
 
 __all__ = [
     "CONTRACT",
@@ -73,7 +73,7 @@ class WorldRefusal(Exception):  # noqa: N818 - an answer
 
 @dataclass(frozen=True)
 class _Held:
-    faults: FaultSet
+    world: WorldConditions
     hand: HandLoad | None = None
 
 
@@ -123,11 +123,11 @@ class ReferenceWorld:
                 out.append("wrist-force")
         return tuple(out)
 
-    def hold(self, faults: FaultSet, hand: HandLoad | None = None) -> int:
-        """Hold environment ``faults`` (and a load on the hand) until :meth:`clear`; returns its token."""
+    def hold(self, world: WorldConditions, hand: HandLoad | None = None) -> int:
+        """Hold the conditions ``world`` (and a load on the hand) until :meth:`clear`; returns its token."""
         token = self._next
         self._next += 1
-        self._held[token] = _Held(faults, hand)
+        self._held[token] = _Held(world, hand)
         self._apply()
         return token
 
@@ -143,7 +143,7 @@ class ReferenceWorld:
                 else "the server's Cougar is not in-process (start it with --cougar sim)"
             )
         if name == "panic-button":
-            token = self.hold(FaultSet(frozenset({Fault.PANIC_BUTTON}), panic_delay=0.0))
+            token = self.hold(WorldConditions(frozenset({WorldCondition.PANIC_BUTTON}), panic_delay=0.0))
             now = self._server.now()
             for session in self._server.sessions:
                 session.arm.press_panic(at=now)
@@ -152,8 +152,8 @@ class ReferenceWorld:
             # The sensor reads the reaction of what pushes the hand: push the opposite way.
             force, torque = _vector(args, "force"), _vector(args, "torque")
             push = HandLoad([-f for f in force], [-t for t in torque])
-            return self.hold(FaultSet(), push)
-        return self.hold(_faults(name, args))
+            return self.hold(WorldConditions(), push)
+        return self.hold(_world(name, args))
 
     def clear(self, token: int) -> bool:
         """Take an arrangement out; False when ``token`` is not held."""
@@ -167,36 +167,38 @@ class ReferenceWorld:
         self._apply()
 
     def _apply(self) -> None:
-        faults = self._base.faults
+        world = self._base.faults.world
         hand: HandLoad | None = None
         for held in self._held.values():
-            faults = faults.merged(held.faults)
+            world = world.merged(held.world)
             hand = held.hand or hand
-        self._server.config = replace(self._base, faults=faults)
+        self._server.config = replace(self._base, faults=replace(self._base.faults, world=world))
         load = getattr(self._server.wrist, "load_hand", None)
         if load is not None:
             load(hand)
 
 
-def _faults(name: str, args: Mapping[str, Any]) -> FaultSet:
-    """The environment switches of a condition that connections meet from their start."""
+def _world(name: str, args: Mapping[str, Any]) -> WorldConditions:
+    """The world of a condition that connections meet from their start."""
     match name:
         case "obstacle":
             lower, upper = _optional(args, "lower"), _optional(args, "upper")
             if lower is None and upper is None:
                 raise ValueError("an obstacle needs a lower or an upper bound")
-            return FaultSet.of(obstacle=Obstacle(_joint(args), lower, upper))
+            return WorldConditions(
+                frozenset({WorldCondition.OBSTACLE}), obstacle=Obstacle(_joint(args), lower, upper)
+            )
         case "calibration-failure":
             joints = args.get("joints", [2, 3])
             if not isinstance(joints, list) or not joints:
                 raise ValueError(f"joints must be a non-empty array, not {joints!r}")
             picked = tuple(_joint({"joint": j}) for j in joints)
-            return FaultSet(frozenset({Fault.CALIBRATE_NZI}), nzi_joints=picked)
+            return WorldConditions(frozenset({WorldCondition.CALIBRATE_NZI}), nzi_joints=picked)
         case "sluggish-joint":
             lag = _number(args.get("lag", 0.35), "lag")
             sluggish = Sluggish(_joint(args, default=2), lag)
-            return FaultSet(frozenset({Fault.SLUGGISH_JOINT}), sluggish=sluggish)
-    return FaultSet(frozenset({Fault.WRIST_SILENT}))
+            return WorldConditions(frozenset({WorldCondition.SLUGGISH_JOINT}), sluggish=sluggish)
+    return WorldConditions(frozenset({WorldCondition.WRIST_SILENT}))
 
 
 # ------------------------------------------------------------------------------------------ contract 2

@@ -41,7 +41,7 @@ from manip.codecs.messages import Value
 from manip.reference_server.errors import RequestError, not_served
 from manip.spec import RequestOpcode
 
-__all__ = ["GuardHit", "NoWrist", "Pending", "Wrist", "WristConditions", "WristEvent", "WristNotice"]
+__all__ = ["GuardHit", "NoWrist", "Pending", "Wrist", "WristDefects", "WristEvent", "WristNotice"]
 
 
 class Pending:
@@ -115,11 +115,10 @@ WristEvent = GuardHit | WristNotice
 
 
 @dataclass(frozen=True)
-class WristConditions:
-    """What a connection's fault switches make of the wrist (it is shared: each connection sets them)."""
+class WristDefects:
+    """How a faulty server's wrist processes depart from the 1985 guide's; the defaults are the guide's
+    (no defect).  The wrist is shared: each connection gives it its own as it opens."""
 
-    silent: bool = False
-    """Cougar's words never reach the Puma (a hung Cougar, a cut link): requests wait the wrist timeout."""
     answer_timeouts: bool = True
     """False: a request whose Cougar command timed out is never answered (a defect)."""
     # The Puma's wrist processes as the 1985 guide has them; the other value of each is a defect, for
@@ -166,8 +165,9 @@ class Wrist(Protocol):
         """The wrist processes' turn after the arm ran up to ``now``; returns what to report."""
         ...
 
-    def condition(self, conditions: WristConditions) -> None:
-        """Take the conditions of the connection that opens now."""
+    def condition(self, defects: WristDefects, *, silent: bool = False) -> None:
+        """Take the defects of the connection that opens now, and whether its world keeps Cougar silent
+        (a hung Cougar, a cut link: its words never reach the Puma, requests wait the wrist timeout)."""
         ...
 
 
@@ -186,5 +186,5 @@ class NoWrist:
     def tick(self, now: float, arm: ArmSim) -> list[WristEvent]:
         return []
 
-    def condition(self, conditions: WristConditions) -> None:
+    def condition(self, defects: WristDefects, *, silent: bool = False) -> None:
         pass

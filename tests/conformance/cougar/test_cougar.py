@@ -23,34 +23,11 @@ from manip.conformance.suite.results import ExitCode, RunReport
 from manip.cougar import CougarConfig, CougarSim
 from manip.cougar.cli import main as cougar_main
 from manip.cougar.cli import serve_cougar
-from manip.cougar.faults import FAULTS, parse_faults
+from manip.cougar.faults import CougarFault, parse_faults
 from manip.cougar.link import CougarEnd, Drv11jError, PumaEnd, Tick, encode_frame
 
-#: The case written to catch each fault (others may catch it too).
-CATCHERS = {
-    "wrong-version-code": "cougar.reply.version",
-    "no-out-of-sync": "cougar.comint.unknown-code",
-    "guard-trips-twice": "cougar.guard.trips-once",
-    "forces-wrong-sign": "cougar.forces.conversion",
-    "exmn-wrong-count": "cougar.reply.exmn",
-    "comint-executes-partial": "cougar.comint.partial-waits",
-    "ignores-guardc": "cougar.guard.clear",
-    "rst-ignored": "cougar.rst.zeroes-velocities",
-    "npr-ignores-k": "cougar.npr.gains",
-    "filter-con-swapped": "cougar.filter.output",
-    "gravity-fixed-orientation": "cougar.gravity.point-mass",
-    "gravity-ignores-cg": "cougar.gravity.point-mass",
-    "nfv-keeps-gravity": "cougar.gravity.nfv-redoes-model",
-    "nb-transposed": "cougar.npr.damping-matrix",
-    "jacobian-transpose-not-stored": "cougar.jacob.transpose-stored",
-    "filter-truncates-terms": "cougar.adc8.integer-filter",
-    "rraw-less-offsets": "cougar.rraw.before-offsets",
-    "link-skips-bad-frames": "cougar.link.unknown-type",
-    "link-ignores-wrong-side": "cougar.link.wrong-side",
-    "link-tick-backwards-runs": "cougar.link.tick-backwards",
-    "link-ignores-bye": "cougar.link.bye",
-    "link-busy-serves-second": "cougar.link.busy",
-}
+#: The cases each fault declares catch it (others may catch it too): each must fail.
+CATCHERS = {fault.value: fault.caught_by for fault in CougarFault}
 OPTIONS = RunOptions(reply_timeout=1.0, connect_timeout=2.0)
 
 
@@ -74,21 +51,26 @@ def test_clean_simulator_passes_every_cougar_case() -> None:
 
 
 def test_every_fault_has_a_catching_case() -> None:
-    assert set(CATCHERS) == set(FAULTS)
+    assert set(CATCHERS) == {f.value for f in CougarFault}
     ids = {c.id for c in all_cases()}
-    assert set(CATCHERS.values()) <= ids
+    assert all(catchers and set(catchers) <= ids for catchers in CATCHERS.values())
 
 
-@pytest.mark.parametrize("fault", sorted(FAULTS))
+@pytest.mark.parametrize("fault", sorted(f.value for f in CougarFault))
 def test_fault_is_caught(fault: str) -> None:
     report = run(CougarTarget.parse("sim", [fault]))
     got = outcomes(report)
-    assert got[CATCHERS[fault]] == "fail", (fault, got)
+    failed = [r for r in report.results if r.outcome == "fail"]
+    shown = ", ".join(f"{r.id} ({r.violations[0].clause if r.violations else r.reason})" for r in failed)
+    print(f"cougar fault {fault}: caught by {shown or 'NO CASE'}")
+    assert {got[case] for case in CATCHERS[fault]} == {"fail"}, (fault, got)
     assert report.exit_code == ExitCode.NON_CONFORMANT
     assert not any(o == "error" for o in got.values()), [r.traceback for r in report.results if r.traceback]
-    catcher = next(r for r in report.results if r.id == CATCHERS[fault])
-    assert catcher.violations and all(v.clause for v in catcher.violations)
-    assert f"--cougar-fault {fault}" in catcher.reproduce
+    declared = set(CougarFault.named(fault).clauses)
+    for catcher in (r for r in report.results if r.id in CATCHERS[fault]):
+        assert catcher.violations and all(v.clause for v in catcher.violations)
+        assert {v.clause for v in catcher.violations} & declared, (fault, catcher.violations, declared)
+        assert f"--cougar-fault {fault}" in catcher.reproduce
 
 
 def test_every_must_cougar_clause_has_a_case() -> None:
