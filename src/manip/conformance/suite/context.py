@@ -32,7 +32,7 @@ request the case cannot send because the target ended the connection fails like 
 came.
 
 ``ctx.expect(cond, clause=..., expected=..., seen=answer)`` is the one way to state a check, and the
-common ones are one line each (``ctx.expect_response``, ``expect_done``, ``expect_opcode``,
+common ones build their condition themselves (``ctx.expect_response``, ``expect_done``, ``expect_opcode``,
 ``expect_echo``, ``expect_near``).  Evidence has one form, ``seen=`` (an answer, packets, ``showing(answer,
 text)``, ``missing(text)``: :mod:`~manip.conformance.judge.violation`), and every violation names the
 packets it judged (text alone: the last packet recorded, :meth:`CaseContext.judged`), but one about a
@@ -749,7 +749,7 @@ class CaseContext:
         packets = seen_packets(seen) or (self.judged() if kind != "missing_response" else ())
         return Violation(message, clause, level, expected, actual, data, kind, invariant, packets=packets)
 
-    # The common checks, one line each: the evidence is the answer they judge.
+    # The common checks: the condition is theirs, the evidence the answer they judge.
 
     def expect_response(
         self, answer: Answer, *, clause: str, expected: str, size: int | None = None, min_size: int = 0
