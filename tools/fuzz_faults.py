@@ -72,7 +72,7 @@ def campaign(
 
 
 def judge(name: str, clauses: tuple[str, ...], report: dict[str, Any], seconds: float, code: int) -> Outcome:
-    findings = report["findings"]
+    findings = report["campaign"]["findings"]
     named = [f"{f['kind']} {f['clause'] or ''}".strip() for f in findings]
     hits = [f for f in findings if f["clause"] in clauses]
     verdict = "found" if hits else "found otherwise" if findings else "not found"
@@ -95,8 +95,8 @@ def main() -> int:
     clean = True
     for environment in [(), *sorted({(env,) for envs in WITH.values() for env in envs})]:
         report, seconds, code = campaign(environment, args.inputs, args.seed, extra)
-        clean = clean and code == 0 and not report["findings"]
-        seen = "; ".join(f"{f['kind']} {f['clause'] or ''}" for f in report["findings"]) or "none"
+        clean = clean and code == 0 and not report["campaign"]["findings"]
+        seen = "; ".join(f"{f['kind']} {f['clause'] or ''}" for f in report["campaign"]["findings"]) or "none"
         print(f"{' + '.join(environment) or 'no fault'}: exit {code}, findings: {seen}, {seconds:.1f} s")
     outcomes: list[Outcome] = []
     for fault in faults:

@@ -17,6 +17,7 @@ import inspect
 import struct
 import sys
 from collections.abc import Awaitable, Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -380,7 +381,7 @@ def test_the_runner_turns_an_undeclared_report_into_an_error() -> None:
     async def go() -> dict[str, tuple[str, str]]:
         async with serve("tcp://127.0.0.1:0") as server:
             options = RunOptions(reply_timeout=0.5, connect_timeout=1.0)
-            config = RunConfig(address=server.address, options=options, seed=1)
+            config = RunConfig(options=replace(options, address=server.address), seed=1)
             report = await Runner(config, cases).run()
         return {r.id: (r.outcome, r.reason) for r in report.results}
 

@@ -300,7 +300,7 @@ def test_a_silent_peer_names_the_default_chaos_address_as_such() -> None:
         with foreign_server(_silent) as address:
             options = RunOptions(address=address, reply_timeout=0.2, connect_timeout=0.3)
             select = PatternSet.of(["server.reply.here"], "--select")
-            config = RunConfig(address, options, seed=1, select=select)
+            config = RunConfig(options, seed=1, select=select)
             return await Runner(config, all_cases()).run()
 
     report = asyncio.run(go())
@@ -379,3 +379,22 @@ def test_a_reproduce_line_names_the_target_as_it_was_given(reference_server_url:
     assert result.exit_code == 0, result.output
     (case,) = json.loads(report.read_text())["cases"]
     assert shlex.split(case["reproduce"])[:3] == ["manip-conform", "run", given]
+
+
+@pytest.mark.parametrize("command", ["run", "client", "verify", "replay", "fuzz"])
+def test_every_judging_command_takes_every_report_format(command: str) -> None:
+    """The report options come from one declaration (``REPORT_FORMATS``): the same option, help and
+    writer on each command, so a new format reaches them all."""
+    from manip.conformance.output.documents import REPORT_FORMATS
+
+    found = main.commands[command]
+    options = {p.opts[0]: p for p in found.params if p.opts and p.opts[0].startswith("--")}
+    for form in REPORT_FORMATS:
+        assert form.option in options, (command, form.option)
+        assert options[form.option].help == form.help
+
+
+def test_a_report_path_that_cannot_be_written_is_a_usage_error_on_fuzz_too(tmp_path: Path) -> None:
+    missing = tmp_path / "no-such-directory" / "fuzz.html"
+    result = CliRunner().invoke(main, ["fuzz", "--inputs", "1", "--html", str(missing)])
+    assert result.exit_code == 2 and "--html" in result.output, result.output

@@ -264,9 +264,7 @@ def test_segments_stop_of_a_server_process_in_real_time(fault: str, manip_server
     turns either verdict into the other."""
     process = manip_server("--log-level", "WARNING", *(("--fault", fault) if fault else ()))
     selected = [c for c in suite() if c.id == "server.motion.queued-segments"]
-    config = RunConfig(
-        address=process.url, options=RunOptions(address=process.url, reply_timeout=2.0), seed=SEED
-    )
+    config = RunConfig(options=RunOptions(address=process.url, reply_timeout=2.0), seed=SEED)
     (result,) = asyncio.run(Runner(config, selected).run()).results
     print(f"{fault or 'clean'} manip-server in real time: {result.outcome} {result.reason} {result.notes}")
     if result.outcome == "not-judged":

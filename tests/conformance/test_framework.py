@@ -8,6 +8,7 @@ import json
 import struct
 import xml.etree.ElementTree as ET
 from collections.abc import Awaitable, Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -305,8 +306,7 @@ def _run(
         options = RunOptions(strict=strict, robot=robot, reply_timeout=0.5, connect_timeout=1.0)  # type: ignore[arg-type]
         if address is not None:
             config = RunConfig(
-                address=address,
-                options=options,
+                options=replace(options, address=address),
                 seed=3,
                 select=PatternSet.of(select, "--select"),
                 known_failing=PatternSet.of(known, "--known-failing"),
@@ -314,8 +314,7 @@ def _run(
             return await Runner(config, cases).run()
         async with serve("tcp://127.0.0.1:0") as server:
             config = RunConfig(
-                address=server.address,
-                options=options,
+                options=replace(options, address=server.address),
                 seed=3,
                 select=PatternSet.of(select, "--select"),
                 known_failing=PatternSet.of(known, "--known-failing"),

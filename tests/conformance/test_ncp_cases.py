@@ -268,7 +268,7 @@ async def _run_case(
     address: str, case_id: str, seed: int = 7, broken_after: float | None = None
 ) -> CaseResult:
     options = RunOptions(address=address, reply_timeout=1.0, connect_timeout=2.0, broken_after=broken_after)
-    config = RunConfig(address=address, options=options, seed=seed)
+    config = RunConfig(options=options, seed=seed)
     return await Runner(config, list(CASES.values())).run_case(CASES[case_id])
 
 

@@ -224,7 +224,6 @@ def test_world_usage_errors() -> None:
 # ---------------------------------------------------------------------------------- not judged
 async def run_cases(address: str, ids: Sequence[str], world: World | None, **options: Any) -> RunReport:
     config = RunConfig(
-        address=address,
         options=RunOptions(address=address, reply_timeout=2.0, **options),
         seed=SEED,
         world=world,
@@ -338,10 +337,8 @@ def test_a_server_process_with_its_world_is_judged_as_the_embedded_server(manip_
     async def embedded() -> RunReport:
         async with simulated_environment(seed=SEED, wrist=True) as environment:
             config = RunConfig(
-                address=environment.address,
-                options=RunOptions(address=environment.address),
+                options=RunOptions(address=environment.address, embedded=True),
                 seed=SEED,
-                embedded=True,
                 virtual_time=True,
                 world=environment.world,
             )

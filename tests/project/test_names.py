@@ -89,15 +89,10 @@ ENTRY_POINT = "main"
 DELIBERATE_NAMES: dict[str, str] = {
     "CONTRACT": "each contract's name and revision, on both of its sides: the suite and the harness for "
     "contract 1, the suite and the reference world for contract 2 (each side says what it speaks)",
-    "CLASSES": "the fuzzer's input classes and the differences `diff` sorts (issue 34 items 1-2 and issue "
-    "35 own those modules: to rename there)",
-    "SCHEMA_VERSION": "each report schema's version; the fuzzer's own goes with issue 34 item 2",
-    "load_schema": "each report schema's loader; the fuzzer's own goes with issue 34 item 2",
-    "write_json": "each report's JSON writer; the fuzzer's own goes with issue 34 item 2",
-    "write_junit": "each report's JUnit writer; the fuzzer's own goes with issue 34 item 2",
-    "report_json": "the run's and the fuzzer's report as JSON; the fuzzer's own goes with issue 34 item 2",
-    "clause_statuses": "a clause's status from a run and from a report read back (issue 34 item 1 makes "
-    "them one)",
+    "load_schema": "each report schema's loader: the suite's (report.schema.json) and diff's "
+    "(diff.schema.json)",
+    "write_json": "each report's JSON writer: the suite's RunReport and diff's comparison",
+    "write_junit": "each report's JUnit writer: the suite's RunReport and diff's comparison",
     "HELLO_TIMEOUT": "how long each contract's peer may take to say hello: contract 1's harness, "
     "contract 2's world",
     "MAX_LINE": "the longest line of contract 2, as the suite reads it and as the reference world does",
@@ -148,8 +143,6 @@ DELIBERATE_LISTS: dict[str, str] = {
     "CONTROL / CONTROL_OPERATIONS": "contract 1's control operations on its two sides: the suite's "
     "(conformance.client.contract) and the reference harness's, a layer below, which must not import the "
     "suite; each is written from docs/client-harness.md",
-    "OUTCOMES / OUTCOME_ORDER": "the outcomes and their order in the documents (issue 34 item 1 gives the "
-    "outcome one definition that carries its order)",
 }
 """Lists of one concept's values written in two modules on purpose (or for now), by their names -> why."""
 

@@ -40,12 +40,12 @@ async def run_on_reference_server(
 
     ``options`` are the :class:`RunOptions` besides the address (which is the server's); ``world``
     gives the run the server's world (its :class:`ServerEnvironment`'s), as the embedded target has; the other
-    keywords are :class:`RunConfig` fields (``select``, ``embedded``...)."""
+    keywords are :class:`RunConfig` fields (``select``...)."""
     async with serve(LINK_ADDRESSES["tcp"], server, time_scale=time_scale) as reference:
         run_options = RunOptions(address=reference.address, **(options or {}))
         if world:
             config["world"] = ServerEnvironment(reference).world
-        run_config = RunConfig(address=reference.address, options=run_options, seed=seed, **config)
+        run_config = RunConfig(options=run_options, seed=seed, **config)
         return await Runner(run_config, cases).run()
 
 
@@ -70,12 +70,10 @@ def run_simulated(
     async def main() -> RunReport:
         async with simulated_environment(server, seed=seed, wrist=True) as environment:
             address = environment.address
-            run_options = RunOptions(address=address, **(options or {}))
+            run_options = RunOptions(address=address, embedded=True, **(options or {}))
             run_config = RunConfig(
-                address=address,
                 options=run_options,
                 seed=seed,
-                embedded=True,
                 world=environment.world,
                 virtual_time=True,
                 **config,

@@ -40,10 +40,10 @@ from manip.conformance.cli_options import (
     cases_of_clauses,
     check_output_paths,
     check_selection,
+    document_options,
     given,
-    json_option,
-    junit_option,
     known_failing_option,
+    report_options,
     select_option,
     skip_option,
     strict_option,
@@ -54,7 +54,7 @@ from manip.conformance.diff.cli import diff_command
 from manip.conformance.fuzz.cli import fuzz_command
 from manip.conformance.output.console import make_console, print_table
 from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
-from manip.conformance.output.documents import ReportError, document_options, render_saved, write_reports
+from manip.conformance.output.documents import ReportError, ReportPaths, render_saved, write_reports
 from manip.conformance.output.run_console import summary
 from manip.conformance.puma.target import (
     DEFAULT_WRIST_LISTEN,
@@ -165,9 +165,7 @@ def main() -> None:
     "embedded server, the server gets this timer too (below 5 s the other NCP cases, which keep quiet "
     "for up to 3 s on purpose, may lose their connections).",
 )
-@json_option
-@junit_option
-@document_options
+@report_options
 @click.option(
     "--length-unit",
     type=click.Choice([*LENGTH_UNITS, "auto"]),
@@ -316,10 +314,7 @@ def run(
     deadline_scale: float,
     target_time_scale: float,
     broken_after: float | None,
-    json_path: Path | None,
-    junit_path: Path | None,
-    html_path: Path | None,
-    markdown_path: Path | None,
+    reports: ReportPaths,
     length_unit: LengthUnit | Literal["auto"],
     server_profile: str,
     server_faults: tuple[str, ...],
@@ -382,9 +377,7 @@ def run(
         # against a server whose timer is short enough to keep the run fast (and above the 3 s the
         # other NCP cases stay quiet).
         broken_after = VIRTUAL_BROKEN_AFTER
-    check_output_paths(
-        record=record, json=json_path, junit=junit_path, html=html_path, markdown=markdown_path
-    )
+    check_output_paths(record=record, **reports.paths)
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "big")
     if puma_target is not None:
@@ -401,19 +394,18 @@ def run(
         time_scale=target_time_scale,
         max_examples=max_examples,
         address=address,
+        embedded=not host if target is None else target.embedded,
         broken_after=broken_after,
         cougar_map=target.declared_map() if target is not None else None,
         length_unit="mm" if length_unit == "auto" else length_unit,
         learn_length_unit=length_unit == "auto",
     )
     config = RunConfig(
-        address=address,
         options=options,
         seed=seed,
         select=select_set,
         skip=skip_set,
         known_failing=known_set,
-        embedded=not host if target is None else target.embedded,
         virtual_time=virtual,
         reproduce_options=_reproduce_options(
             options, server_faults, simulated=simulated, virtual=virtual, world=world, profile=server_profile
@@ -441,8 +433,7 @@ def run(
     else:
         code = execute(job, record)
         report = job.report
-    sys.exit(_finish(report, code, console, quiet, json=json_path, junit=junit_path, html=html_path,
-                     markdown=markdown_path))  # fmt: skip
+    sys.exit(_finish(report, code, console, quiet, reports))
 
 
 def _check_profile(server_profile: str, *, host: str | None, cougar: str | None) -> None:
@@ -594,17 +585,14 @@ def _reproduce_options(
 
 
 def _finish(
-    report: RunReport | None, code: int | None, console: Console, quiet: bool, **paths: Path | None
+    report: RunReport | None, code: int | None, console: Console, quiet: bool, reports: ReportPaths
 ) -> int:
-    """The reports written (``paths``: json, junit, html, markdown), the summary printed; the exit
-    status (``code``, else the report's)."""
+    """The reports written, the summary printed; the exit status (``code``, else the report's)."""
     if report is None:
         return int(code) if code is not None else int(ExitCode.INTERNAL)
     if code == ExitCode.INTERNAL and not report.interrupted and not report.internal_error:
         report.internal_error = "internal error"
-    report.unwritten.extend(
-        write_reports(report, paths["json"], paths["junit"], paths["html"], paths["markdown"])
-    )
+    report.unwritten.extend(write_reports(report, reports))
     for problem in report.unwritten:  # a report path that cannot be written is a usage error, found late
         click.echo(f"manip-conform: {problem}", err=True)
     learned = report.options.get("length_unit_learned")
@@ -729,15 +717,15 @@ def coverage_command(fmt: str, parties: tuple[str, ...]) -> None:
     "report_file", metavar="REPORT.json", type=click.Path(exists=True, dir_okay=False, path_type=Path)
 )
 @document_options
-def report_command(report_file: Path, html_path: Path | None, markdown_path: Path | None) -> None:
-    """Render a saved JSON report (of run, verify or replay --json) as a one-file HTML report and/or a
-    Markdown summary.  Exit 0 when written, whatever the run's verdict; 2 on a usage error or a file
-    that is not a manip-conform JSON report."""
-    if html_path is None and markdown_path is None:
+def report_command(report_file: Path, reports: ReportPaths) -> None:
+    """Render a saved JSON report (of run, client, verify, replay or fuzz --json) as a one-file HTML
+    report and/or a Markdown summary.  Exit 0 when written, whatever the run's verdict; 2 on a usage
+    error or a file that is not a manip-conform JSON report."""
+    if not reports.paths:
         raise click.UsageError("give --html FILE, --markdown FILE or both")
-    check_output_paths(html=html_path, markdown=markdown_path)
+    check_output_paths(**reports.paths)
     try:
-        render_saved(report_file, html_path, markdown_path)
+        render_saved(report_file, reports.get("html"), reports.get("markdown"))
     except (ReportError, OSError) as exc:  # OSError: manip.outfile.OutputError, naming the path
         raise click.UsageError(str(exc)) from None
 

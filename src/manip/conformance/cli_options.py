@@ -6,27 +6,32 @@ made before anything runs."""
 from __future__ import annotations
 
 import difflib
+import functools
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any, TypeVar, cast
 
 import click
 from click.core import ParameterSource
 
 from manip.conformance.cougar.target import cougar_cases
+from manip.conformance.output.documents import REPORT_FORMATS, ReportFormat, ReportPaths
 from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.selection import PatternSet, match_id
 from manip.spec import SPEC, UnknownClauseError
+
+F = TypeVar("F", bound=Callable[..., Any])
 
 __all__ = [
     "cases_of_clauses",
     "check_output_paths",
     "check_selection",
     "close_case_ids",
+    "document_options",
     "given",
-    "json_option",
-    "junit_option",
     "known_failing_option",
+    "report_options",
     "select_option",
     "skip_option",
     "strict_option",
@@ -53,12 +58,35 @@ known_failing_option = click.option(
 strict_option = click.option(
     "--strict", is_flag=True, help="SHOULD failures count (without it they are warnings)."
 )
-json_option = click.option(
-    "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the JSON report."
-)
-junit_option = click.option(
-    "--junit", "junit_path", type=click.Path(dir_okay=False, path_type=Path), help="Write JUnit XML."
-)
+
+
+def _format_options(forms: Sequence[ReportFormat]) -> Callable[[F], F]:
+    def decorate(function: F) -> F:
+        @functools.wraps(function)
+        def command(*args: Any, **kwargs: Any) -> Any:
+            given_paths = {form.name: kwargs.pop(f"{form.name}_path") for form in forms}
+            reports = ReportPaths({name: path for name, path in given_paths.items() if path is not None})
+            return function(*args, reports=reports, **kwargs)
+
+        for form in reversed(forms):
+            command = click.option(
+                form.option,
+                f"{form.name}_path",
+                type=click.Path(dir_okay=False, path_type=Path),
+                metavar="FILE",
+                help=form.help,
+            )(command)
+        return cast(F, command)
+
+    return decorate
+
+
+report_options = _format_options(REPORT_FORMATS)
+"""An option per report format (:data:`~manip.conformance.output.documents.REPORT_FORMATS`: ``--json``,
+``--junit``, ``--html``, ``--markdown``), given to the command as one ``reports`` parameter
+(:class:`~manip.conformance.output.documents.ReportPaths`)."""
+document_options = _format_options([form for form in REPORT_FORMATS if form.from_data])
+"""The options of the formats rendered from a JSON report's data (``manip-conform report``)."""
 
 
 def given(name: str) -> bool:

@@ -171,7 +171,7 @@ async def _run_target(job: Job) -> None:
             said = f"embedded simulated Cougar at {address}" if target.embedded else ""
             await _run_at(job, address, said)
         return
-    if not config.embedded:
+    if not config.options.embedded:
         async with _opened_world(job):
             await _run_with(job)
         return
@@ -186,13 +186,13 @@ async def _run_target(job: Job) -> None:
         ) as environment:
             config.world = environment.world
             said = "embedded reference server in virtual time (with the simulated Cougar wrist)"
-            await _run_at(job, environment.address, said, embedded=True)
+            await _run_at(job, environment.address, said)
         return
     embedded = EmbeddedServer(server_config, wrist=True, broken_after=broken_after)
     with embedded as address:
         config.world = embedded.environment.world if embedded.environment is not None else None
         said = f"embedded reference server at {address} (with the simulated Cougar wrist)"
-        await _run_at(job, address, said, embedded=True)
+        await _run_at(job, address, said)
 
 
 async def _run_puma(job: Job, puma: PumaTarget) -> None:
@@ -214,13 +214,11 @@ async def _run_puma(job: Job, puma: PumaTarget) -> None:
             await _run_at(job, address, said)
 
 
-async def _run_at(job: Job, address: str, said: str, *, embedded: bool = False) -> None:
-    """The run against the target now listening at ``address`` (an embedded one marked so in the
-    options), once ``said`` (if anything) is printed."""
+async def _run_at(job: Job, address: str, said: str) -> None:
+    """The run against the target now listening at ``address``, once ``said`` (if anything) is
+    printed."""
     config = job.config
-    config.address = address
-    options = replace(config.options, address=address)
-    config.options = replace(options, embedded=True) if embedded else options
+    config.options = replace(config.options, address=address)
     if said:
         job.console.print(said, markup=False)
     await _run_with(job)

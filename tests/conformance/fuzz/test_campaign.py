@@ -6,7 +6,8 @@
   causes it again: a crash, a hang, a traceback and a silent drop (``tests/support/fuzz_fake_server.py``,
   started by the fuzzer with ``--launch``), and a protocol fault switch of the reference server
   (which the same inputs do not trip without the fault).
-* Reports follow their schema; usage errors exit 2, an unreachable target 3.
+* A campaign's report is the suite's report (``report.schema.json``) with its ``campaign`` block; usage
+  errors exit 2, an unreachable target 3.
 """
 
 from __future__ import annotations
@@ -23,10 +24,9 @@ from click.testing import CliRunner, Result
 
 from manip.conformance.cli import main
 from manip.conformance.fuzz.generators import GenOptions, generate
-from manip.conformance.fuzz.report import load_schema
 from manip.conformance.fuzz.steps import RequestStep
 from manip.conformance.judge.violation import FAILURE_KINDS
-from manip.conformance.output.report import load_schema as load_run_schema
+from manip.conformance.output.report import load_schema
 from tests.support.json_schema import validate as _validate
 from tests.support.paths import SUPPORT
 from tests.support.servers import StartServer, free_port
@@ -41,17 +41,20 @@ def fuzz(*args: str) -> Result:
 
 
 def report_of(path: Path) -> dict[str, Any]:
-    """The campaign's JSON report, valid for fuzz.schema.json, each finding a violation as the run
-    report has it (report.schema.json) with the suite's kinds."""
+    """The campaign's JSON report, valid for the suite's report schema, each finding a violation as the
+    report's cases have it with the suite's kinds; returned with its ``campaign`` block's fields on top
+    (the campaign's ``counts`` are its findings by kind, the report's its cases by outcome)."""
     data: dict[str, Any] = json.loads(path.read_text())
     schema = load_schema()
     _validate(data, schema, schema)
-    run = load_run_schema()
-    violation = run["$defs"]["violation"]
-    for finding in data["findings"]:
-        _validate({key: finding[key] for key in violation["required"]}, violation, run)
+    violation = schema["$defs"]["violation"]
+    campaign = data["campaign"]
+    for finding in campaign["findings"]:
+        _validate({key: finding[key] for key in violation["required"]}, violation, schema)
         assert finding["kind"] in FAILURE_KINDS
-    return data
+        case = next(c for c in data["cases"] if c["id"] == finding["input_class"])
+        assert finding["message"] in [v["message"] for v in case["violations"]]
+    return {**data, **campaign}
 
 
 def assert_clean(report: dict[str, Any], inputs: int) -> None:
@@ -78,7 +81,7 @@ def test_a_short_campaign_against_the_reference_server_finds_nothing(tmp_path: P
     assert_clean(report, 20000)
     assert report["requests"] > 40000
     assert result.exit_code == 0, result.output
-    assert "20000 inputs" in result.output and "no findings (exit 0)" in result.output
+    assert "20000 inputs" in result.output and "conformant (exit 0)" in result.output
     print(f"fuzz campaign: {report['inputs']} inputs in {report['duration']:.1f} s ({report['rate']:.0f}/s)")
 
 

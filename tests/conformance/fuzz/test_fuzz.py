@@ -15,9 +15,10 @@ from manip.codecs.framing import decode_chudp, decode_tcp, encode_chudp, encode_
 from manip.codecs.messages import encode_error, encode_reply
 from manip.codecs.packet import Packet
 from manip.codecs.pdp11float import pack_f
-from manip.conformance.fuzz.generators import CLASSES, GenOptions, generate, stray_index
+from manip.conformance.fuzz.generators import INPUT_CLASSES, GenOptions, generate, stray_index
 from manip.conformance.fuzz.judge import _connection
 from manip.conformance.fuzz.oracles import oracle_findings
+from manip.conformance.fuzz.report import CampaignFacts
 from manip.conformance.fuzz.shrink import Budget, ddmin
 from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, RequestStep, Stray
 from manip.conformance.fuzz.target import TracebackScanner
@@ -57,7 +58,7 @@ def test_every_class_of_the_link_is_drawn(options: GenOptions) -> None:
     drawn = Counter(item.kind for item in _inputs(options, 4000))
     expected = {c.id for c in options.classes()}
     assert set(drawn) == expected
-    assert all(options.link in CLASSES[kind].links for kind in drawn)
+    assert all(options.link in INPUT_CLASSES[kind].links for kind in drawn)
 
 
 def test_the_classes_cover_what_the_issue_names() -> None:
@@ -67,7 +68,7 @@ def test_the_classes_cover_what_the_issue_names() -> None:
     assert {"link.chudp-header", "link.chudp-length", "chaos.oversize"} <= datagram
     assert {"chaos.out-of-window", "chaos.no-connection", "chaos.wrong-source", "chaos.rfc-flood"} <= stream
     assert {"manip.wrong-length", "manip.reserved-float", "manip.extreme-float", "manip.pipeline"} <= stream
-    for c in CLASSES.values():
+    for c in INPUT_CLASSES.values():
         assert c.clauses and all(clause in SPEC.clauses for clause in c.clauses), c.id
         assert c.expected and c.sends
 
@@ -306,3 +307,16 @@ def test_stray_steps_say_what_must_come_back() -> None:
     assert expects[("chaos.no-connection", "los")] and expects[("chaos.no-los-for-los", "silence")]
     assert expects[("chaos.rfc-flood", "answer")] and expects[("link.bad-checksum", "silence")]
     assert not [key for key in expects if key[0] == "chaos.no-connection" and key[1] != "los"]
+
+
+def test_the_campaign_line_counts_in_words() -> None:
+    """One of a thing is singular, any other number plural (``1 batch``, ``3 batches``)."""
+    one = CampaignFacts(inputs=1, requests=1, batches=1, liveness_checks=1, tracebacks_seen=1)
+    assert one.summary_line(1.0).startswith(
+        "1 input (1 request) in 1.0 s (1 inputs/s), 1 batch, 1 of 1 liveness check passed; "
+        "1 traceback in the target's log; 0 crashes"
+    )
+    many = CampaignFacts(inputs=10, requests=12, batches=3, liveness_checks=3, tracebacks_seen=0)
+    line = many.summary_line(1.0)
+    assert "10 inputs (12 requests)" in line
+    assert "3 batches, 3 of 3 liveness checks passed; 0 tracebacks in the target's log" in line

@@ -362,6 +362,51 @@ def test_a_screenshot_of_the_report(failing_run: Run, browser: list[str], tmp_pa
     shutil.copyfile(shot, ARTIFACT)
 
 
+FUZZ_FAULT = "length-unchecked"
+"""A fault the fuzzer's wrong-length inputs find at once (request.data-length)."""
+
+
+@pytest.fixture(scope="module")
+def fuzz_campaign(tmp_path_factory: pytest.TempPathFactory) -> Run:
+    """A short campaign against the reference server with a fault: --json, --html and --markdown, through
+    the same writers as run's."""
+    where = tmp_path_factory.mktemp("fuzz")
+    done = subprocess.run(
+        [sys.executable, "-m", "manip.conformance.cli", "fuzz", "-q", "--seed", "1", "--inputs", "100",
+         "--class", "manip.wrong-length", "--no-shrink", "--server-fault", FUZZ_FAULT,
+         "--json", "fuzz.json", "--html", "fuzz.html", "--markdown", "fuzz.md"],
+        capture_output=True, text=True, timeout=120, check=False, cwd=where,
+    )  # fmt: skip
+    assert done.returncode == 1, done.stdout + done.stderr
+    data = json.loads((where / "fuzz.json").read_text())
+    schema = load_schema()
+    _validate(data, schema, schema)
+    return Run(where / "fuzz.json", where / "fuzz.html", where / "fuzz.md", data)
+
+
+def test_a_fuzz_campaign_writes_the_suites_documents(fuzz_campaign: Run) -> None:
+    data = fuzz_campaign.data
+    assert data["campaign"]["inputs"] == 100 and data["counts"]["fail"] == 1
+    (failed,) = _failing(fuzz_campaign)
+    assert failed["id"] == "manip.wrong-length" and failed["kind"] == "fuzz"
+    markdown = fuzz_campaign.markdown.read_text()
+    assert "fuzz campaign: 100 inputs" in markdown and "request.data-length" in markdown
+    assert markdown.splitlines()[2].startswith("1 case against the embedded reference server")
+    assert failed["reproduce"] in markdown
+    page = Page(fuzz_campaign.html.read_text())
+    assert "fuzz campaign: 100 inputs" in page.by_class("campaign", "p")[0].content
+
+
+def test_the_fuzz_report_in_chromium_after_its_script_ran(fuzz_campaign: Run, browser: list[str]) -> None:
+    page = _dump_dom(browser, fuzz_campaign.html.as_uri())
+    assert page.elements[0].tag == "html" and page.elements[0].attrs.get("data-ready") == "yes"
+    total = len(fuzz_campaign.data["cases"])
+    assert page.by_id("shown").content == f"{total} of {total} shown"  # written by the script
+    group = page.by_class("group", "article")[0]
+    assert "request.data-length" in group.content and "manip.wrong-length" in group.content
+    assert page.by_class("campaign", "p")
+
+
 def test_verify_writes_both_documents_of_a_golden_capture(tmp_path: Path) -> None:
     """verify's report: its target is a file, not a link, so the bytes are said to be in memory order."""
     html, md = tmp_path / "v.html", tmp_path / "v.md"

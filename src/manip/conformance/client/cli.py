@@ -6,7 +6,6 @@ import asyncio
 import os
 import shlex
 import sys
-from pathlib import Path
 
 import click
 
@@ -14,9 +13,8 @@ from manip.commandline import FiniteFloat
 from manip.conformance.cli_options import (
     check_output_paths,
     check_selection,
-    json_option,
-    junit_option,
     known_failing_option,
+    report_options,
     select_option,
     skip_option,
     strict_option,
@@ -28,7 +26,7 @@ from manip.conformance.client.runner import (
     run_client_suite,
 )
 from manip.conformance.output.console import make_console, progress_bar
-from manip.conformance.output.documents import document_options, write_reports
+from manip.conformance.output.documents import ReportPaths, write_reports
 from manip.conformance.output.run_console import headline, shown, summary
 from manip.conformance.suite.case import Case, all_cases
 from manip.conformance.suite.context import RunOptions
@@ -87,9 +85,7 @@ def _by_clause(patterns: tuple[str, ...], cases: list[Case]) -> list[Case]:
     show_default=True,
     help="Multiply every deadline.",
 )
-@json_option
-@junit_option
-@document_options
+@report_options
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar; failures and the summary only.")
 def client_command(
     command: tuple[str, ...],
@@ -102,10 +98,7 @@ def client_command(
     seed: int | None,
     reply_timeout: float,
     deadline_scale: float,
-    json_path: Path | None,
-    junit_path: Path | None,
-    html_path: Path | None,
-    markdown_path: Path | None,
+    reports: ReportPaths,
     quiet: bool,
 ) -> None:
     """Judge a client: start CMD (a harness speaking docs/client-harness.md), play a scripted Puma for
@@ -124,7 +117,7 @@ def client_command(
     check_selection(
         select_set, skip_set, cases, hint=" (manip-conform cases --select 'client.**' lists them)"
     )
-    check_output_paths(json=json_path, junit=junit_path, html=html_path, markdown=markdown_path)
+    check_output_paths(**reports.paths)
     if seed is None:
         seed = int.from_bytes(os.urandom(4), "big")
     options = RunOptions(strict=strict, reply_timeout=reply_timeout, deadline_scale=deadline_scale)
@@ -140,7 +133,7 @@ def client_command(
     )
     console.print(f"manip-conform client: seed [bold]{seed}[/] (rerun with --seed {seed})")
     report = _run(config, cases, console, quiet)
-    report.unwritten.extend(write_reports(report, json_path, junit_path, html_path, markdown_path))
+    report.unwritten.extend(write_reports(report, reports))
     for problem in report.unwritten:  # a report path that cannot be written is a usage error, found late
         click.echo(f"manip-conform: {problem}", err=True)
     summary(console, report, quiet)

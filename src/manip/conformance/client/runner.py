@@ -40,6 +40,7 @@ from manip.conformance.client.wire import (
     window_findings,
     wire_packet,
 )
+from manip.conformance.judge.verdict import Outcome
 from manip.conformance.judge.violation import FailureKind, showing
 from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
 from manip.conformance.suite.context import CaseContext, RunOptions
@@ -427,10 +428,10 @@ async def run_client_case(config: ClientRunConfig, session: ClientRun, item: Cas
     except CaseFailure as exc:
         failure = exc
     except CaseUnsupported as exc:
-        result.outcome = "unsupported"
+        result.outcome = Outcome.UNSUPPORTED
         result.reason = exc.reason
     except CaseSkipped as exc:
-        result.outcome = "skip"
+        result.outcome = Outcome.SKIP
         result.reason = exc.reason
     except TimeoutError:
         failure = CaseFailure(
@@ -443,7 +444,7 @@ async def run_client_case(config: ClientRunConfig, session: ClientRun, item: Cas
     except (asyncio.CancelledError, KeyboardInterrupt):
         raise
     except Exception as exc:
-        result.outcome = "error"
+        result.outcome = Outcome.ERROR
         result.reason = f"{type(exc).__name__}: {exc}"
         result.traceback = traceback.format_exc()
     result.duration = time.monotonic() - start

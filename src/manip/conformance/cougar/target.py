@@ -140,11 +140,14 @@ async def run_cougar_suite(
     async with target.running() as address:
         options = options or RunOptions()
         config = RunConfig(
-            address=address,
-            options=replace(options, address=address, cougar_map=options.cougar_map or target.declared_map()),
+            options=replace(
+                options,
+                address=address,
+                embedded=target.embedded,
+                cougar_map=options.cougar_map or target.declared_map(),
+            ),
             seed=seed,
             select=PatternSet.of(select, "select"),
-            embedded=target.embedded,
             reproduce_prefix=target.reproduce_prefix(),
             liveness_check=liveness_check,
         )

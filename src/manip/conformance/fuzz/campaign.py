@@ -24,18 +24,28 @@ import contextlib
 import datetime
 import shlex
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
 from manip.conformance.fuzz.batch import BatchRun, BatchRunner, Liveness, liveness
 from manip.conformance.fuzz.generators import GenOptions, generate
-from manip.conformance.fuzz.judge import ALWAYS, Sighting, judge
-from manip.conformance.fuzz.report import HEALTH, CampaignViolation, ClassTally, FuzzReport, MinimalInput
+from manip.conformance.fuzz.judge import Sighting, judge
+from manip.conformance.fuzz.report import (
+    HEALTH,
+    CampaignFacts,
+    CampaignViolation,
+    ClassTally,
+    MinimalInput,
+    class_results,
+)
 from manip.conformance.fuzz.session import Allowance
 from manip.conformance.fuzz.shrink import Budget, BudgetError, ddmin
 from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, RequestStep, Step, Stray
 from manip.conformance.fuzz.target import FuzzedServer, UnreachableError
+from manip.conformance.judge.verdict import counts
+from manip.conformance.suite.context import RunOptions
+from manip.conformance.suite.results import RunReport
 from manip.spec import SPEC
 from manip.spec.notation import octal
 
@@ -48,14 +58,17 @@ COUNT_SETTLE: Final = 0.05
 
 @dataclass
 class CampaignConfig:
+    """One campaign's configuration, built once by ``manip-conform fuzz`` and read everywhere: the
+    judging settings the suite's run has too (``options``: strictness, how long answers may take, the
+    robot kind), what shapes the inputs (``gen``), and what only a campaign has."""
+
     seed: int
     gen: GenOptions
+    options: RunOptions = field(default_factory=RunOptions)
     inputs: int | None = 10_000
     seconds: float | None = None
     batch: int = 100
     only: Sequence[int] = ()
-    allowance: Allowance = field(default_factory=Allowance)
-    strict: bool = False
     shrink: bool = True
     shrink_trials: int = 200
     shrink_seconds: float = 60.0
@@ -63,14 +76,30 @@ class CampaignConfig:
     reproduce_prefix: Sequence[str] = ("manip-conform", "fuzz")
     reproduce_options: Sequence[str] = ()
     command: str = ""
-    options: dict[str, object] = field(default_factory=dict)
+    server: Mapping[str, object] = field(default_factory=dict)
+    """How the server fuzzed was chosen (its link, faults, wrist), for the report's options."""
+
+    def report_options(self) -> dict[str, object]:
+        """The report's ``options``: the campaign's settings, each read from where it is kept."""
+        return {
+            "inputs": len(self.only) if self.only else self.inputs,
+            "seconds": self.seconds,
+            "batch": self.batch,
+            "classes": list(self.gen.select),
+            "target": self.options.robot,
+            "allow_motion": self.options.allow_motion,
+            "reply_timeout": self.options.reply_timeout,
+            "deadline_scale": self.options.deadline_scale,
+            **self.server,
+            "only": list(self.only),
+        }
 
 
 @dataclass
 class CampaignEvents:
     """Callbacks for a console: after each batch (inputs sent so far), at each new finding."""
 
-    batch_done: Callable[[FuzzReport], None] = lambda report: None
+    batch_done: Callable[[CampaignFacts], None] = lambda facts: None
     found: Callable[[CampaignViolation], None] = lambda finding: None
     note: Callable[[str], None] = lambda text: None
 
@@ -109,25 +138,29 @@ class Campaign:
         self.config = config
         self.target = target
         self.events = events or CampaignEvents()
-        self.report = FuzzReport(
+        self.facts = CampaignFacts()
+        self.report = RunReport(
             target="",
-            embedded=target.embedded,
+            embedded=config.options.embedded,
             seed=config.seed,
+            strict=config.options.strict,
+            options=config.report_options(),
             command=config.command,
-            options=dict(config.options),
-            strict=config.strict,
+            campaign=self.facts,
         )
         for c in config.gen.classes():
-            self.report.classes[c.id] = ClassTally(
+            self.facts.classes[c.id] = ClassTally(
                 c.id, c.layer, c.sends, c.expected, c.clauses, c.level, c.hazard
             )
+        self._allowance = Allowance.of(config.options)
         self._runner: BatchRunner | None = None
         self._known: dict[tuple[str, str], int] = {}
         self._bad_seen: int | None = None
 
     # ------------------------------------------------------------------------------------ running
 
-    async def run(self) -> FuzzReport:
+    async def run(self) -> RunReport:
+        """Run the campaign; its report (:meth:`finish`, also after an interruption)."""
         report = self.report
         report.started = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
         started = time.monotonic()
@@ -142,8 +175,14 @@ class Campaign:
                 self._runner.close()
             with contextlib.suppress(Exception):
                 await self.target.stop()
-            report.tracebacks_seen = self.target.tracebacks_seen
+            self.facts.tracebacks_seen = self.target.tracebacks_seen
+            self.finish()
         return report
+
+    def finish(self) -> RunReport:
+        """The report with its cases: one per input class, graded from its findings."""
+        self.report.results = class_results(self.report, self.facts)
+        return self.report
 
     async def _run(self) -> None:
         report = self.report
@@ -154,10 +193,8 @@ class Campaign:
             report.problems.append(str(exc))
             return
         report.target = self.target.label
-        self._runner = BatchRunner(self.target.address, self.config.allowance, seed=self.config.seed)
-        first = await self._await_alive(
-            self.config.allowance.connect if not self.target.can_restart else 30.0
-        )
+        self._runner = self._new_runner()
+        first = await self._await_alive(self._allowance.connect if not self.target.can_restart else 30.0)
         if not first.alive:
             report.unreachable = True
             report.problems.append(f"the target is not alive: {first.detail}")
@@ -170,20 +207,21 @@ class Campaign:
                 break
             inputs = [generate(self.config.seed, n, self.config.gen) for n in numbers]
             sightings, run, live = await self.trial(inputs)
-            report.batches += 1
-            report.inputs += len(inputs)
-            report.requests += run.sent_requests
-            report.bad_frames_sent += run.counted
+            facts = self.facts
+            facts.batches += 1
+            facts.inputs += len(inputs)
+            facts.requests += run.sent_requests
+            facts.bad_frames_sent += run.counted
             for item in inputs:
-                tally = report.classes[item.kind]
+                tally = facts.classes[item.kind]
                 tally.inputs += 1
                 tally.requests += item.requests
             for sighting in sightings:
-                await self._record(sighting, inputs, report.batches - 1)
-            self.events.batch_done(report)
+                await self._record(sighting, inputs, facts.batches - 1)
+            self.events.batch_done(facts)
             if not live.alive and not await self._revive():
                 report.problems.append(
-                    f"the target did not come back after batch {report.batches - 1}: {live.detail}"
+                    f"the target did not come back after batch {facts.batches - 1}: {live.detail}"
                 )
                 return
 
@@ -213,7 +251,7 @@ class Campaign:
             except UnreachableError as exc:
                 self.report.problems.append(f"restarting the target failed: {exc}")
                 return False
-            self.report.restarts += 1
+            self.facts.restarts += 1
             self._runner = self._new_runner()
             live = await self._await_alive(30.0)
             self.target.tracebacks()
@@ -227,7 +265,7 @@ class Campaign:
     def _new_runner(self) -> BatchRunner:
         if self._runner is not None:
             self._runner.close()
-        return BatchRunner(self.target.address, self.config.allowance, seed=self.config.seed)
+        return BatchRunner(self.target.address, self._allowance, seed=self.config.seed)
 
     async def trial(self, inputs: list[FuzzInput]) -> tuple[list[Sighting], BatchRun, Liveness]:
         """Send one batch, check liveness, collect what the target logged and counted; judge."""
@@ -235,12 +273,12 @@ class Campaign:
         assert runner is not None
         run = await runner.run(inputs)
         live = await liveness(runner)
-        self.report.liveness_checks += 1
+        self.facts.liveness_checks += 1
         gone = self.target.gone()
         if gone is not None:
             live = Liveness(False, "crash", gone, live.duration)
         if not live.alive:
-            self.report.liveness_failures += 1
+            self.facts.liveness_failures += 1
         uncounted = await self._count(run) if live.alive else None
         sightings = judge(run, runner.inbox, live, tracebacks=self.target.tracebacks(), uncounted=uncounted)
         runner.finish()
@@ -260,24 +298,28 @@ class Campaign:
         if now is None:
             return None
         self._bad_seen = now
-        self.report.bad_frames_counted = (self.report.bad_frames_counted or 0) + (now - before)
+        self.facts.bad_frames_counted = (self.facts.bad_frames_counted or 0) + (now - before)
         return run.counted, now - before
 
     # ------------------------------------------------------------------------------------ findings
 
     async def _record(self, o: Sighting, inputs: list[FuzzInput], batch: int) -> None:
-        report = self.report
+        facts = self.facts
         known = self._known.get(o.signature)
         if known is not None:
-            report.findings[known].occurrences += 1
-            report.findings[known].followers += o.followers
+            facts.findings[known].occurrences += 1
+            facts.findings[known].followers += o.followers
             return
         kind = _class_of(o, inputs)
-        level = o.level
-        counts = o.violation.kind in ALWAYS or level == "MUST" or (self.config.strict and level == "SHOULD")
-        finding = CampaignViolation(o.violation, kind, batch, counts=counts, followers=o.followers)
-        index = len(report.findings)
-        report.findings.append(finding)
+        finding = CampaignViolation(
+            o.violation,
+            kind,
+            batch,
+            counts=counts(o.violation, self.config.options.strict),
+            followers=o.followers,
+        )
+        index = len(facts.findings)
+        facts.findings.append(finding)
         self._known[o.signature] = index
         numbers = [i.number for i in inputs]
         if self.config.shrink and not self.config.only:
@@ -293,7 +335,7 @@ class Campaign:
         if finding.minimal and kind == HEALTH and finding.shrunk:
             finding.input_class = finding.minimal[-1].kind
         finding.reproduce = self._reproduce(minimal)
-        tally = report.classes.get(finding.input_class)
+        tally = facts.classes.get(finding.input_class)
         if tally is not None:
             tally.findings.append(index)
         self.events.found(finding)
@@ -322,7 +364,7 @@ class Campaign:
         except UnreachableError as exc:
             return numbers, False, f"not shrunk: {exc}"
         finally:
-            self.report.shrink_trials += budget.used
+            self.facts.shrink_trials += budget.used
         note = f"{budget.used} trials" + ("" if complete else ", the budget ran out before it was minimal")
         return minimal, complete, note
 
@@ -331,12 +373,9 @@ class Campaign:
         if not await self._alive_for_trial():
             raise UnreachableError("the target is not alive to try inputs on")
         inputs = [generate(self.config.seed, n, self.config.gen) for n in numbers]
-        checks, failures = self.report.liveness_checks, self.report.liveness_failures
+        checks, failures = self.facts.liveness_checks, self.facts.liveness_failures
         sightings, _, live = await self.trial(inputs)
-        self.report.liveness_checks, self.report.liveness_failures = (
-            checks,
-            failures,
-        )  # trials are not the campaign's
+        self.facts.liveness_checks, self.facts.liveness_failures = checks, failures  # not the campaign's
         if not live.alive and not await self._revive():
             raise UnreachableError("the target did not come back")
         return any(x.signature == signature for x in sightings)

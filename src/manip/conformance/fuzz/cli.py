@@ -13,6 +13,7 @@ import asyncio
 import os
 import shlex
 import sys
+import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,20 +23,19 @@ from rich.console import Console
 from rich.markup import escape
 
 from manip.commandline import CommandLine, FiniteFloat
-from manip.conformance.cli_options import check_output_paths, given, json_option, junit_option
+from manip.conformance.cli_options import check_output_paths, given, report_options
 from manip.conformance.fuzz.campaign import Campaign, CampaignConfig, CampaignEvents
-from manip.conformance.fuzz.generators import CLASSES, GenOptions
-from manip.conformance.fuzz.report import CampaignViolation, FuzzReport, finding_text, write_json, write_junit
-from manip.conformance.fuzz.session import Allowance
+from manip.conformance.fuzz.generators import INPUT_CLASSES, GenOptions
+from manip.conformance.fuzz.report import CampaignFacts, CampaignViolation, finding_text
 from manip.conformance.fuzz.target import FuzzedServer, LaunchedServer, RemoteServer, reference_server_argv
 from manip.conformance.output.console import make_console, progress_bar
-from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REPLY_TIMEOUT
-from manip.conformance.suite.results import ExitCode
+from manip.conformance.output.documents import ReportPaths, write_reports
+from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REPLY_TIMEOUT, RunOptions
+from manip.conformance.suite.results import ExitCode, RunReport
 from manip.conformance.suite.selection import match_id
 from manip.exit_status import epilog
 from manip.links import AddressError, LinkAddress, parse_address
 from manip.reference_server import FaultSet
-from manip.spec.model import HAZARDS, Hazard
 
 __all__ = ["fuzz_command"]
 
@@ -58,7 +58,7 @@ def _numbers(ctx: click.Context, param: click.Parameter, value: str | None) -> t
 
 def class_listing() -> str:
     lines = []
-    for c in CLASSES.values():
+    for c in INPUT_CLASSES.values():
         links = "" if len(c.links) == 2 else f" ({', '.join(sorted(c.links))} links only)"
         lines.append(f"{c.id}  [{c.level}, {c.hazard}]{links}")
         lines.append(f"    sends:    {c.sends}")
@@ -196,8 +196,7 @@ def class_listing() -> str:
 @click.option(
     "--strict", is_flag=True, help="Findings of SHOULD clauses count (without it they are warnings)."
 )
-@json_option
-@junit_option
+@report_options
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar; findings and the summary only.")
 def fuzz_command(
     host: str | None,
@@ -222,8 +221,7 @@ def fuzz_command(
     no_shrink: bool,
     shrink_seconds: float,
     strict: bool,
-    json_path: Path | None,
-    junit_path: Path | None,
+    reports: ReportPaths,
     quiet: bool,
 ) -> None:
     """Fuzz HOST (tcp://HOST:PORT, unix:///PATH or chudp://HOST:PORT?addr=OCTAL) with inputs made from
@@ -239,14 +237,23 @@ def fuzz_command(
     console = make_console()
     _check_options(host, launch, server_log, target_kind, allow_motion, only, server_faults, classes)
     address = _address(host)
-    check_output_paths(json=json_path, junit=junit_path)
-    hazards: frozenset[Hazard] = frozenset(HAZARDS)
-    if target_kind == "hardware" and not allow_motion:
-        hazards = frozenset({"read-only", "config"})
+    check_output_paths(**reports.paths)
+    if seed is None:
+        seed = int.from_bytes(os.urandom(4), "big")
+    options = RunOptions(
+        robot="hardware" if target_kind == "hardware" else "sim",
+        allow_motion=allow_motion,
+        strict=strict,
+        reply_timeout=reply_timeout,
+        connect_timeout=connect_timeout,
+        deadline_scale=deadline_scale,
+        address=host or "",
+        embedded=address is None,
+    )
     chudp = (address.scheme == "chudp") if address is not None else link == "chudp"
     gen = GenOptions(
         link="datagram" if chudp else "stream",
-        hazards=hazards,
+        hazards=options.allowed_hazards,
         select=classes,
         contact=address.contact if address is not None else "PUMA",
     )
@@ -254,8 +261,6 @@ def fuzz_command(
         raise click.UsageError(
             "--class and --target leave no input class to send on this link (--list-classes)"
         )
-    if seed is None:
-        seed = int.from_bytes(os.urandom(4), "big")
     server = _Server(address, link, server_faults, wrist, launch, server_log)
     config = CampaignConfig(
         seed=seed,
@@ -264,42 +269,22 @@ def fuzz_command(
         seconds=seconds,
         batch=batch,
         only=only,
-        allowance=Allowance(reply_timeout, connect_timeout, deadline_scale),
-        strict=strict,
+        options=options,
         shrink=not no_shrink,
         shrink_seconds=shrink_seconds,
         restart_wait=restart_wait,
         reproduce_prefix=["manip-conform", "fuzz", *([host] if host else [])],  # as given, every parameter
         reproduce_options=_reproduce_options(classes, target_kind, allow_motion, server),
         command=shlex.join(["manip-conform", *sys.argv[1:]]),
-        options={
-            "inputs": len(only) if only else inputs,
-            "seconds": seconds,
-            "batch": batch,
-            "classes": list(classes),
-            "target": target_kind,
-            "allow_motion": allow_motion,
-            "reply_timeout": reply_timeout,
-            "deadline_scale": deadline_scale,
-            "server_faults": list(server_faults),
-            "link": "chudp" if chudp else "stream",
-            "wrist": wrist,
-            "only": list(only),
-        },
+        server={"server_faults": list(server_faults), "link": "chudp" if chudp else "stream", "wrist": wrist},
     )
     console.print(f"manip-conform fuzz: seed [bold]{seed}[/] (rerun with --seed {seed})")
     report = _campaign(config, server.fuzzed(seed), console, quiet, total=len(only) if only else inputs)
-    unwritten = []
-    for path, write in ((json_path, write_json), (junit_path, write_junit)):
-        if path is not None:
-            try:
-                write(report, path)
-            except OSError as exc:
-                unwritten.append(str(exc))
+    report.unwritten.extend(write_reports(report, reports))
     _summary(console, report)
-    for problem in unwritten:  # a report path that cannot be written is a usage error, found late
+    for problem in report.unwritten:  # a report path that cannot be written is a usage error, found late
         click.echo(f"manip-conform: {problem}", err=True)
-    sys.exit(2 if unwritten else int(report.exit_code))
+    sys.exit(int(report.exit_code))
 
 
 def _reproduce_options(
@@ -338,7 +323,7 @@ def _check_options(
         except ValueError as exc:
             raise click.UsageError(f"--server-fault: {exc}") from None
     for pattern in classes:
-        if not any(match_id(pattern, c) for c in CLASSES):
+        if not any(match_id(pattern, c) for c in INPUT_CLASSES):
             raise click.UsageError(f"--class {pattern!r} matches no input class (--list-classes lists them)")
 
 
@@ -413,12 +398,15 @@ class _Server:
 
 def _campaign(
     config: CampaignConfig, target: FuzzedServer, console: Console, quiet: bool, *, total: int
-) -> FuzzReport:
+) -> RunReport:
     progress = progress_bar(console, quiet)
     task = progress.add_task("fuzz", total=total)
 
-    def batch_done(report: FuzzReport) -> None:
-        progress.update(task, completed=report.inputs, description=f"fuzz {report.rate:.0f}/s")
+    started = time.monotonic()
+
+    def batch_done(facts: CampaignFacts) -> None:
+        rate = facts.rate(time.monotonic() - started)
+        progress.update(task, completed=facts.inputs, description=f"fuzz {rate:.0f}/s")
 
     def found(finding: CampaignViolation) -> None:
         style = _STYLE.get(finding.kind, "bold red" if finding.counts else "yellow")
@@ -433,10 +421,10 @@ def _campaign(
         try:
             report = asyncio.run(campaign.run())
         except KeyboardInterrupt:
-            report = campaign.report
+            report = campaign.finish()
             report.interrupted = True
         except Exception as exc:  # an internal error of the fuzzer: keep what was done
-            report = campaign.report
+            report = campaign.finish()
             report.internal_error = traceback.format_exc()
             console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {escape(str(exc))}")
     if not report.target:
@@ -444,8 +432,10 @@ def _campaign(
     return report
 
 
-def _summary(console: Console, report: FuzzReport) -> None:
-    for finding in report.findings:
+def _summary(console: Console, report: RunReport) -> None:
+    facts = report.campaign
+    assert isinstance(facts, CampaignFacts)
+    for finding in facts.findings:
         console.print(finding_text(finding), markup=False, highlight=False)
     for problem in report.problems:
         console.print(f"[bold red]problem[/]: {escape(problem)}")
@@ -453,5 +443,5 @@ def _summary(console: Console, report: FuzzReport) -> None:
         console.print(report.internal_error, markup=False)
     style = "bold green" if report.exit_code == ExitCode.CONFORMANT else "bold red"
     console.print(f"target: {report.target}", markup=False)
-    console.print(report.summary_line(), markup=False)
+    console.print(facts.summary_line(report.duration), markup=False)
     console.print(f"[{style}]{report.verdict}[/] (exit {int(report.exit_code)}); seed {report.seed}")

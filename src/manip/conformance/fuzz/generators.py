@@ -1,7 +1,7 @@
 """The input classes of a fuzz campaign, generated from the spec's tables.
 
 Every class says what it sends, what the spec says the answer must be, and the clauses that say so
-(:data:`CLASSES`; ``manip-conform fuzz --list-classes`` prints them).  The manip classes take the
+(:data:`INPUT_CLASSES`; ``manip-conform fuzz --list-classes`` prints them).  The manip classes take the
 opcodes, their data layouts and field types from :data:`manip.spec.SPEC`; the Chaos classes its
 opcode table; the link classes the framings of :mod:`manip.codecs.framing`.
 
@@ -30,7 +30,7 @@ from manip.spec.model import HAZARDS, Field, Hazard
 from manip.spec.notation import octal
 
 __all__ = [
-    "CLASSES",
+    "INPUT_CLASSES",
     "GenOptions",
     "InputClass",
     "LinkKind",
@@ -66,7 +66,7 @@ class GenOptions:
         """The classes this campaign draws from: for its link, sendable with its hazards, selected."""
         return [
             c
-            for c in CLASSES.values()
+            for c in INPUT_CLASSES.values()
             if self.link in c.links
             and (c.hazard in self.hazards or c.adapts)
             and (not self.select or any(match_id(p, c.id) for p in self.select))
@@ -865,7 +865,7 @@ _TABLE: Final[tuple[InputClass, ...]] = (
     ),
 )
 
-CLASSES: Final[dict[str, InputClass]] = {c.id: c for c in _TABLE}
+INPUT_CLASSES: Final[dict[str, InputClass]] = {c.id: c for c in _TABLE}
 
 for _c in _TABLE:
     for _clause in _c.clauses:

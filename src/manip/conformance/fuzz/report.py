@@ -1,67 +1,49 @@
-"""The report of a campaign: one result per input class, every finding with its shrunk input, as the
-console shows it, as JSON (``fuzz.schema.json``, next to this module) and as JUnit XML.
+"""What a campaign found, and its report: a :class:`~manip.conformance.suite.results.RunReport`, the
+suite's one report, written by the suite's writers (JSON, JUnit, HTML, Markdown), with the campaign's
+own facts in its optional ``campaign`` block (:class:`CampaignFacts`).
 
 A *finding* is a :class:`~manip.conformance.judge.violation.Violation`, the suite's one record of a
 broken clause, of one of the fuzzer's kinds (:data:`~.judge.KIND_NAMES`: crash, hang, traceback,
 silent drop, wrong answer, uncounted drop); a campaign reports each kind and clause once, as a
 :class:`CampaignViolation`: the violation first seen, how often it was seen, the input class it came
 from, the fewest inputs found to cause it (numbers of the campaign, so ``--only`` sends them again),
-their bytes, and one reproduce line.  In the JSON report a finding is the violation's JSON
-(:meth:`Violation.to_json`, as in the conformance report) with those fields added.
+their bytes, and one reproduce line.  In the ``campaign`` block a finding is the violation's JSON
+(:meth:`Violation.to_json`, as in the report's cases) with those fields added.
 
-Findings of a SHOULD, MAY or INFO clause are warnings (with ``--strict`` SHOULD ones count); crashes,
-hangs, tracebacks and uncounted drops always count.  Exit codes: 0 no finding, 1 findings, 2 usage,
-3 target unreachable (no liveness check ever passed), 4 interrupted or an internal error.
-
-JUnit: one test case per input class (``classname`` its layer: link, chaos, manip), failing with its
-findings; findings of the target as a whole (a crash or a traceback no input could be tied to) go to
-the case ``target.health``.  It is made with the conformance report's writer
-(:func:`manip.conformance.output.report.report_junit`), one
-:class:`~manip.conformance.suite.results.CaseResult` per class.
+The report's cases are the input classes (``classname`` in JUnit: the layer, link, chaos or manip), each
+graded by the one verdict (:func:`~manip.conformance.judge.verdict.grade`) from its findings; findings of
+the target as a whole (a crash or a traceback no input could be tied to) go to the case
+``target.health``.  Findings of a SHOULD, MAY or INFO clause are warnings (with ``--strict`` SHOULD ones
+count); crashes, hangs, tracebacks and uncounted drops are MUST findings of the target's health.
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
-from importlib import resources
-from pathlib import Path
 from typing import Any, Final, cast
 
 from manip.conformance.fuzz.judge import FUZZ_KINDS, KIND_NAMES
+from manip.conformance.judge.verdict import Outcome, grade
 from manip.conformance.judge.violation import FailureKind
-from manip.conformance.output.report import report_junit, write_xml
-from manip.conformance.suite.results import CaseResult, ExitCode, RunReport, Violation
-from manip.outfile import atomic_output
+from manip.conformance.suite.results import CaseResult, RunReport, Violation
 from manip.spec import SPEC
 from manip.spec.model import Level
 
 __all__ = [
     "CONSOLE_CUT",
     "HEALTH",
-    "SCHEMA_VERSION",
+    "CampaignFacts",
     "CampaignViolation",
     "ClassTally",
-    "FuzzReport",
     "MinimalInput",
-    "as_run_report",
+    "class_results",
     "cut",
     "finding_json",
     "finding_text",
-    "load_schema",
-    "report_json",
-    "write_json",
-    "write_junit",
 ]
 
-SCHEMA_VERSION: Final = 1
 HEALTH: Final = "target.health"
 """The result findings of the target as a whole are reported under."""
-
-
-def load_schema() -> dict[str, Any]:
-    text = resources.files("manip.conformance.fuzz").joinpath("fuzz.schema.json").read_text(encoding="utf-8")
-    return dict(json.loads(text))
 
 
 @dataclass
@@ -132,17 +114,10 @@ class CampaignViolation:
 
 
 @dataclass
-class FuzzReport:
-    """Everything a campaign did and found."""
+class CampaignFacts:
+    """What a campaign did and found, beyond what every report holds: the ``campaign`` block of its
+    :class:`~manip.conformance.suite.results.RunReport`."""
 
-    target: str
-    embedded: bool
-    seed: int
-    command: str
-    options: dict[str, Any]
-    strict: bool = False
-    started: str = ""
-    duration: float = 0.0
     inputs: int = 0
     requests: int = 0
     batches: int = 0
@@ -155,13 +130,9 @@ class FuzzReport:
     bad_frames_counted: int | None = None
     classes: dict[str, ClassTally] = field(default_factory=dict)
     findings: list[CampaignViolation] = field(default_factory=list)
-    problems: list[str] = field(default_factory=list)
-    interrupted: bool = False
-    internal_error: str = ""
-    unreachable: bool = False
 
     def counts(self) -> dict[FailureKind, int]:
-        """Findings (not warnings) by kind, every kind present."""
+        """Findings that count (not warnings) by kind, every kind present."""
         out: dict[FailureKind, int] = dict.fromkeys(FUZZ_KINDS, 0)
         for f in self.findings:
             if f.counts:
@@ -172,50 +143,66 @@ class FuzzReport:
     def warnings(self) -> int:
         return sum(not f.counts for f in self.findings)
 
-    @property
-    def exit_code(self) -> ExitCode:
-        if self.unreachable:
-            return ExitCode.UNREACHABLE
-        if self.interrupted or self.internal_error:
-            return ExitCode.INTERNAL
-        if any(self.counts().values()) or self.problems:
-            return ExitCode.NON_CONFORMANT
-        return ExitCode.CONFORMANT
+    def rate(self, duration: float) -> float:
+        """Inputs per second over ``duration``."""
+        return self.inputs / duration if duration > 0 else 0.0
 
-    @property
-    def verdict(self) -> str:
-        return {
-            ExitCode.CONFORMANT: "no findings",
-            ExitCode.NON_CONFORMANT: "findings",
-            ExitCode.UNREACHABLE: "target unreachable",
-            ExitCode.INTERNAL: "interrupted" if self.interrupted else "internal error",
-            ExitCode.USAGE: "usage error",
-        }[self.exit_code]
-
-    @property
-    def rate(self) -> float:
-        return self.inputs / self.duration if self.duration > 0 else 0.0
-
-    def summary_line(self) -> str:
+    def summary_line(self, duration: float) -> str:
         counts = self.counts()
-        kinds = ", ".join(f"{n} {_plural(KIND_NAMES[kind], n)}" for kind, n in counts.items())
+        kinds = ", ".join(_count(n, KIND_NAMES[kind]) for kind, n in counts.items())
         logs = (
             ""
             if self.tracebacks_seen is None
-            else f"; {self.tracebacks_seen} traceback(s) in the target's log"
+            else f"; {_count(self.tracebacks_seen, 'traceback')} in the target's log"
         )
         return (
-            f"{self.inputs} inputs ({self.requests} requests) in {self.duration:.1f} s "
-            f"({self.rate:.0f} inputs/s), {self.batches} batches, "
-            f"{self.liveness_checks - self.liveness_failures} of {self.liveness_checks} liveness checks "
-            f"passed{logs}; {kinds}" + (f"; {self.warnings} warning(s)" if self.warnings else "")
+            f"{_count(self.inputs, 'input')} ({_count(self.requests, 'request')}) in {duration:.1f} s "
+            f"({self.rate(duration):.0f} inputs/s), {_count(self.batches, 'batch')}, "
+            f"{self.liveness_checks - self.liveness_failures} of "
+            f"{_count(self.liveness_checks, 'liveness check')} passed{logs}; {kinds}"
+            + (f"; {_count(self.warnings, 'warning')}" if self.warnings else "")
         )
+
+    def to_json(self, duration: float) -> dict[str, Any]:
+        """The ``campaign`` block of the JSON report (``report.schema.json``, ``$defs/campaign``)."""
+        return {
+            "summary": self.summary_line(duration),
+            "inputs": self.inputs,
+            "requests": self.requests,
+            "batches": self.batches,
+            "rate": round(self.rate(duration), 3),
+            "liveness": {"checks": self.liveness_checks, "failed": self.liveness_failures},
+            "restarts": self.restarts,
+            "shrink_trials": self.shrink_trials,
+            "tracebacks_seen": self.tracebacks_seen,
+            "bad_frames": {"sent": self.bad_frames_sent, "counted": self.bad_frames_counted},
+            "counts": self.counts(),
+            "warnings": self.warnings,
+            "classes": [
+                {
+                    "id": c.id,
+                    "layer": c.layer,
+                    "sends": c.sends,
+                    "expected": c.expected,
+                    "inputs": c.inputs,
+                    "requests": c.requests,
+                    "findings": list(c.findings),
+                }
+                for c in self.classes.values()
+            ],
+            "findings": [finding_json(f) for f in self.findings],
+        }
 
 
 def _plural(word: str, n: int) -> str:
     if n == 1:
         return word
-    return word + ("es" if word.endswith("sh") else "s")
+    return word + ("es" if word.endswith(("sh", "ch")) else "s")
+
+
+def _count(n: int, word: str) -> str:
+    """``1 batch``, ``3 batches``."""
+    return f"{n} {_plural(word, n)}"
 
 
 def finding_json(f: CampaignViolation) -> dict[str, Any]:
@@ -238,121 +225,41 @@ def finding_json(f: CampaignViolation) -> dict[str, Any]:
     }
 
 
-def report_json(report: FuzzReport) -> dict[str, Any]:
-    """The report as JSON-ready data (validates against :func:`load_schema`)."""
-    return {
-        "schema_version": SCHEMA_VERSION,
-        "tool": "manip-conform fuzz",
-        "spec_revision": SPEC.revision,
-        "target": report.target,
-        "embedded": report.embedded,
-        "command": report.command,
-        "started": report.started,
-        "duration": round(report.duration, 6),
-        "seed": report.seed,
-        "strict": report.strict,
-        "options": report.options,
-        "verdict": report.verdict,
-        "exit_code": int(report.exit_code),
-        "inputs": report.inputs,
-        "requests": report.requests,
-        "batches": report.batches,
-        "rate": round(report.rate, 3),
-        "liveness": {"checks": report.liveness_checks, "failed": report.liveness_failures},
-        "restarts": report.restarts,
-        "shrink_trials": report.shrink_trials,
-        "tracebacks_seen": report.tracebacks_seen,
-        "bad_frames": {"sent": report.bad_frames_sent, "counted": report.bad_frames_counted},
-        "counts": report.counts(),
-        "warnings": report.warnings,
-        "problems": list(report.problems),
-        "interrupted": report.interrupted,
-        "internal_error": report.internal_error,
-        "classes": [
-            {
-                "id": c.id,
-                "layer": c.layer,
-                "sends": c.sends,
-                "expected": c.expected,
-                "clauses": list(c.clauses),
-                "level": c.level,
-                "hazard": c.hazard,
-                "inputs": c.inputs,
-                "requests": c.requests,
-                "outcome": _outcome(report, c),
-                "findings": list(c.findings),
-            }
-            for c in report.classes.values()
-        ],
-        "findings": [finding_json(f) for f in report.findings],
-    }
-
-
-def _outcome(report: FuzzReport, tally: ClassTally) -> str:
-    found = [report.findings[i] for i in tally.findings]
-    if any(f.counts for f in found):
-        return "fail"
-    if found:
-        return "warn"
-    return "pass" if tally.inputs else "skip"
-
-
-def write_json(report: FuzzReport, path: Path) -> None:
-    """The JSON report, written whole or not at all (``OutputError`` names the path and the reason)."""
-    with atomic_output(path) as f:
-        f.write(json.dumps(report_json(report), indent=2) + "\n")
-
-
-def as_run_report(report: FuzzReport) -> RunReport:
-    """The campaign in the conformance report's shape: one case per input class (and the target's health)."""
-    run = RunReport(
-        target=report.target,
-        embedded=report.embedded,
-        seed=report.seed,
-        strict=report.strict,
-        options=report.options,
-        command=report.command,
-        started=report.started,
-        duration=report.duration,
-    )
-    health = [i for i, f in enumerate(report.findings) if f.input_class == HEALTH]
-    tallies = list(report.classes.values())
+def class_results(report: RunReport, facts: CampaignFacts) -> list[CaseResult]:
+    """The report's cases: one per input class (and the target's health when a finding is of it),
+    each graded by the one verdict from its findings."""
+    health = [i for i, f in enumerate(facts.findings) if f.input_class == HEALTH]
+    tallies = list(facts.classes.values())
     if health:
         tallies.append(
             ClassTally(
                 HEALTH, "target", "", "alive and silent in its log", (), "MUST", "read-only", findings=health
             )
         )
+    results = []
     for tally in tallies:
-        found = [report.findings[i] for i in tally.findings]
-        outcome = (
-            _outcome(report, tally)
-            if tally.id != HEALTH
-            else ("fail" if any(f.counts for f in found) else "warn")
+        found = [facts.findings[i] for i in tally.findings]
+        ran = tally.inputs or tally.id == HEALTH
+        outcome = grade(Outcome.PASS if ran else Outcome.SKIP, [f.violation for f in found], report.strict)
+        results.append(
+            CaseResult(
+                id=tally.id,
+                clauses=tally.clauses or ("request.one-reply",),
+                level=cast(Level, tally.level),
+                kind="fuzz",
+                hazard=tally.hazard,
+                summary=f"{tally.sends}; expected: {tally.expected}",
+                outcome=outcome,
+                seed=report.seed,
+                deadline=max(report.duration, 1.0),
+                duration=0.0,
+                violations=[f.violation for f in found],
+                reason="no input of this class was sent" if outcome == Outcome.SKIP else "",
+                notes=[f"{tally.inputs} inputs, {tally.requests} requests"],
+                reproduce=next((f.reproduce for f in found), ""),
+            )
         )
-        result = CaseResult(
-            id=tally.id,
-            clauses=tally.clauses or ("request.one-reply",),
-            level=cast(Level, tally.level),
-            kind="fuzz",
-            hazard=tally.hazard,
-            summary=f"{tally.sends}; expected: {tally.expected}",
-            outcome=outcome,  # type: ignore[arg-type]
-            seed=report.seed,
-            deadline=max(report.duration, 1.0),
-            duration=0.0,
-            violations=[f.violation for f in found],
-            reason="no input of this class was sent" if outcome == "skip" else "",
-            notes=[f"{tally.inputs} inputs, {tally.requests} requests"],
-            reproduce=next((f.reproduce for f in found), ""),
-        )
-        run.results.append(result)
-    return run
-
-
-def write_junit(report: FuzzReport, path: Path) -> None:
-    """The JUnit XML, written whole or not at all (``OutputError`` names the path and the reason)."""
-    write_xml(report_junit(as_run_report(report)), path)
+    return results
 
 
 CONSOLE_CUT: Final = 200

@@ -43,6 +43,7 @@ from manip.codecs.pairing import ReplyPairing
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.fuzz.steps import ConnPacket
 from manip.conformance.judge.checks import WirePacket, required_refusal
+from manip.conformance.suite.context import DEFAULT_CONNECT_TIMEOUT, DEFAULT_REPLY_TIMEOUT, RunOptions
 from manip.conformance.suite.rawchaos import KEPT_BAD, MAX_RECEIVED, RawLink, Received, rfc_until_open
 from manip.ncp.packets import is_data, pack_status, text, unpack_status
 from manip.ncp.seq import seq_add, seq_gt, seq_le, seq_sub
@@ -120,11 +121,16 @@ class Inbox:
 @dataclass(frozen=True)
 class Allowance:
     """How long answers may take (seconds): the reply timeout, the connect timeout, and the factor on
-    every wait for the arm (``--deadline-scale``)."""
+    every wait for the arm (``--deadline-scale``).  A campaign's is read from its run options
+    (:meth:`of`), where those settings are kept."""
 
-    reply: float = 2.0
-    connect: float = 5.0
+    reply: float = DEFAULT_REPLY_TIMEOUT
+    connect: float = DEFAULT_CONNECT_TIMEOUT
     scale: float = 1.0
+
+    @classmethod
+    def of(cls, options: RunOptions) -> Allowance:
+        return cls(options.reply_timeout, options.connect_timeout, options.deadline_scale)
 
 
 @dataclass

@@ -1,19 +1,20 @@
-"""The report documents people open: ``--html FILE`` and ``--markdown FILE`` on every command that
-judges (one decorator, :func:`document_options`); ``manip-conform report REPORT.json`` renders a saved
-JSON report the same way (:func:`render_saved`).
+"""Every report a judging command writes (``run``, ``client``, ``verify``, ``replay``, ``fuzz``), declared
+once: :data:`REPORT_FORMATS` names each format with its option and its writer, :class:`ReportPaths` is
+what a command was asked for, and :func:`write_reports` writes them all.  The options themselves come
+from one decorator (``manip.conformance.cli_options.report_options``), so each command gets every
+format.  ``manip-conform report REPORT.json`` renders a saved JSON report as the HTML and Markdown
+documents do (:func:`render_saved`).
 
-A command adds both options with ``@document_options`` (its function then takes ``html_path`` and
-``markdown_path``), checks the paths with the other outputs before it runs, and ends with
-``write_documents(report, html_path, markdown_path)``.
+Adding a format: its writer (a function of a :class:`RunReport` and a path, writing the file whole or
+not at all) and one :class:`ReportFormat` row here.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeVar
-
-import click
+from typing import Any
 
 from manip.conformance.output.html import render_html
 from manip.conformance.output.markdown import render_markdown
@@ -22,27 +23,15 @@ from manip.conformance.output.report_view import ReportError, load_report
 from manip.conformance.suite.results import RunReport
 from manip.outfile import OutputError, atomic_output
 
-__all__ = ["ReportError", "document_options", "render_saved", "write_documents", "write_reports"]
-
-F = TypeVar("F", bound=Callable[..., Any])
-
-_html_option = click.option(
-    "--html",
-    "html_path",
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Write a one-file HTML report (opens offline: summary, failures by clause, every case's packets).",
-)
-_markdown_option = click.option(
-    "--markdown",
-    "markdown_path",
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Write a Markdown summary (for CI step summaries: counts, failures by clause, reproduce lines).",
-)
-
-
-def document_options(function: F) -> F:
-    """``--html FILE`` and ``--markdown FILE`` (parameters ``html_path``, ``markdown_path``)."""
-    return _html_option(_markdown_option(function))
+__all__ = [
+    "REPORT_FORMATS",
+    "ReportError",
+    "ReportFormat",
+    "ReportPaths",
+    "render_saved",
+    "write_documents",
+    "write_reports",
+]
 
 
 def write_documents(
@@ -72,28 +61,69 @@ def render_saved(report_file: Path, html_path: Path | None, markdown_path: Path 
         ) from None
 
 
-def write_reports(
-    report: RunReport,
-    json_path: Path | None,
-    junit_path: Path | None,
-    html_path: Path | None = None,
-    markdown_path: Path | None = None,
-) -> list[str]:
+def _write_html(report: RunReport, path: Path) -> None:
+    write_documents(report, path, None)
+
+
+def _write_markdown(report: RunReport, path: Path) -> None:
+    write_documents(report, None, path)
+
+
+@dataclass(frozen=True)
+class ReportFormat:
+    """One kind of report: its name, the option that asks for it, and its writer."""
+
+    name: str
+    """The option without its dashes, and the keyword of ``check_output_paths``."""
+    help: str
+    write: Callable[[RunReport, Path], None]
+    from_data: bool = False
+    """It is rendered from the JSON report's data, so ``manip-conform report`` renders a saved one."""
+
+    @property
+    def option(self) -> str:
+        return f"--{self.name}"
+
+
+REPORT_FORMATS: tuple[ReportFormat, ...] = (
+    ReportFormat("json", "Write the JSON report.", write_json),
+    ReportFormat("junit", "Write JUnit XML.", write_junit),
+    ReportFormat(
+        "html",
+        "Write a one-file HTML report (opens offline: summary, failures by clause, every case's packets).",
+        _write_html,
+        from_data=True,
+    ),
+    ReportFormat(
+        "markdown",
+        "Write a Markdown summary (for CI step summaries: counts, failures by clause, reproduce lines).",
+        _write_markdown,
+        from_data=True,
+    ),
+)
+
+
+@dataclass(frozen=True)
+class ReportPaths:
+    """The reports a command was asked for: a file per format name (:data:`REPORT_FORMATS`)."""
+
+    paths: Mapping[str, Path] = field(default_factory=dict)
+
+    def get(self, name: str) -> Path | None:
+        return self.paths.get(name)
+
+
+def write_reports(report: RunReport, reports: ReportPaths) -> list[str]:
     """Every report asked for; what could not be written, one message each (the path and why).  A
     report is written whole or not at all, and one that fails does not keep the others from being
     written."""
-    writers: tuple[tuple[Path | None, Callable[[RunReport, Path], None]], ...] = (
-        (json_path, write_json),
-        (junit_path, write_junit),
-        (html_path, lambda r, path: write_documents(r, path, None)),
-        (markdown_path, lambda r, path: write_documents(r, None, path)),
-    )
     problems = []
-    for path, write in writers:
+    for form in REPORT_FORMATS:
+        path = reports.get(form.name)
         if path is None:
             continue
         try:
-            write(report, path)
+            form.write(report, path)
         except OSError as exc:
             problems.append(str(exc) if isinstance(exc, OutputError) else f"cannot write {path}: {exc}")
     return problems

@@ -29,8 +29,9 @@ from manip.conformance.output.report_view import (
     PacketRow,
     Report,
     WireOrder,
+    campaign_line,
     clause_info,
-    clause_statuses,
+    clause_status_entries,
     completeness_line,
     failure_groups,
     group_message,
@@ -45,7 +46,7 @@ from manip.spec.model import LEVELS
 
 __all__ = ["render_html"]
 
-_RANK: Final = {outcome: n for n, outcome in enumerate(OUTCOME_ORDER)}
+_RANK: Final[dict[str, int]] = {str(outcome): outcome.rank for outcome in OUTCOME_ORDER}
 _CASES_PER_GROUP: Final = 12
 """Cases listed under each broken clause at the top; the rest are in the table (filter by clause)."""
 DETAILS_FOR_EVERY_CASE: Final = 300
@@ -152,6 +153,7 @@ def _summary(report: Report) -> str:
             if judged
             else ""
         )
+        + (f'<p class="campaign">{_e(campaign)}</p>' if (campaign := campaign_line(report)) else "")
         + (f'<ul class="problems">{problems}</ul>' if problems else "")
         + "</section>"
     )
@@ -261,7 +263,7 @@ def _clause_table(report: Report) -> str:
         for clause in c["clauses"]:
             cited.setdefault(clause, Counter())[c["outcome"]] += 1
     broken: Mapping[str, Mapping[str, Any]] = {t["clause"]: t for t in report["by_clause"] if t["clause"]}
-    statuses = clause_statuses(report)
+    statuses = clause_status_entries(report)
     rows = []
     for clause in sorted(
         cited, key=lambda k: (-int(broken.get(k, {}).get("failures", 0)), k not in broken, k)

@@ -19,11 +19,13 @@ from manip.conformance.output.report_view import (
     FAILING,
     OUTCOME_ORDER,
     Report,
-    clause_statuses,
+    campaign_line,
+    clause_status_entries,
     completeness_line,
     failure_groups,
     group_message,
     not_judged_line,
+    plural,
     seeded,
     target_label,
 )
@@ -65,7 +67,7 @@ def _status_table(report: Report) -> list[str]:
     """Every clause of the run with its status, folded (held and broken first, then what was not
     judged or not exercised, with why and what would judge it)."""
     statuses = sorted(
-        clause_statuses(report).values(),
+        clause_status_entries(report).values(),
         key=lambda s: (
             ("broken", "not-judged", "not-exercised", "held").index(str(s["status"])),
             s["clause"],
@@ -97,7 +99,7 @@ def render_markdown(report: Report) -> str:
     lines = [
         f"## manip-conform: {_text(report['verdict'])} (exit {int(report['exit_code'])})",
         "",
-        f"{len(report['cases'])} cases against "
+        f"{plural(len(report['cases']), 'case')} against "
         + (target_label(report) + ", " if report.get("embedded") else f"{_code(report['target'])}, ")
         + (f"seed {int(report['seed'])}, " if seeded(report) and not report.get("embedded") else "")
         + f"{float(report.get('duration', 0.0)):.1f} s"
@@ -108,6 +110,8 @@ def render_markdown(report: Report) -> str:
         *(f"| {o} | {int(counts.get(o, 0))} |" for o in OUTCOME_ORDER if counts.get(o, 0)),
         "",
     ]
+    if campaign := campaign_line(report):
+        lines += [_text(campaign), ""]
     if judged := completeness_line(report):
         lines += [f"**{_text(judged)}**", "", *_status_table(report)]
     for problem in [*report.get("problems", []), *report.get("unstable", [])]:

@@ -32,16 +32,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Final
 
+from manip.conformance.judge.verdict import CLAUSE_STATUSES, Outcome, counts, judged_counts
 from manip.conformance.output.culprit import culprit_index, judged_indices, kept_indices
-from manip.conformance.suite.results import (
-    CLAUSE_STATUSES,
-    CaseResult,
-    ClauseVerdict,
-    RunReport,
-    Violation,
-    completeness_text,
-    judged_counts,
-)
+from manip.conformance.suite.results import CaseResult, ClauseVerdict, RunReport, Violation, completeness_text
 from manip.outfile import atomic_output
 from manip.spec import SPEC
 
@@ -122,7 +115,6 @@ def _tally_key(violation: Violation) -> tuple[str | None, str]:
 
 def by_clause(report: RunReport) -> list[ClauseTally]:
     """Every clause some case broke, the most failures first; a case counts once per clause."""
-    counted = {"MUST", "SHOULD"} if report.strict else {"MUST"}
     buckets: dict[tuple[str | None, str], dict[str, set[str]]] = defaultdict(
         lambda: {"failures": set(), "warnings": set(), "known_failures": set()}
     )
@@ -130,14 +122,14 @@ def by_clause(report: RunReport) -> list[ClauseTally]:
     for result in report.results:
         for violation in result.violations:
             key = _tally_key(violation)
-            if result.outcome == "known-fail":
-                bucket = "known_failures"
-            elif result.outcome == "fail" and violation.level in counted:
-                bucket = "failures"
-            elif result.outcome in ("fail", "warn"):
-                bucket = "warnings"
-            else:
+            if not result.outcome.breaks_clauses:
                 continue
+            if result.outcome == Outcome.KNOWN_FAIL:
+                bucket = "known_failures"
+            elif result.outcome == Outcome.FAIL and counts(violation, report.strict):
+                bucket = "failures"
+            else:
+                bucket = "warnings"
             buckets[key][bucket].add(result.id)
             levels.setdefault(key, violation.strength)
     tallies = []
@@ -250,6 +242,7 @@ def clause_catalog(report: RunReport) -> dict[str, dict[str, str]]:
 def report_json(report: RunReport) -> dict[str, Any]:
     """The report as JSON-ready data (validates against :func:`load_schema`)."""
     statuses = report.clause_statuses()
+    campaign = {} if report.campaign is None else {"campaign": report.campaign.to_json(report.duration)}
     return {
         "schema_version": SCHEMA_VERSION,
         "tool": "manip-conform",
@@ -282,6 +275,7 @@ def report_json(report: RunReport) -> dict[str, Any]:
         "not_judged": report.not_judged_clauses(),
         "clauses": clause_catalog(report),
         "cases": [_case_json(r) for r in report.results],
+        **campaign,
     }
 
 

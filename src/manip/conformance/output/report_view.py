@@ -15,9 +15,9 @@ from pathlib import Path
 from typing import Any, Final
 
 from manip.conformance.judge.packets import WirePacket, describe
+from manip.conformance.judge.verdict import Outcome, judging_hint
 from manip.conformance.output.packet_text import annotated
 from manip.conformance.output.report import SCHEMA_VERSION
-from manip.conformance.suite.results import OUTCOMES, judging_hint
 from manip.conformance.suite.world import WITHOUT_WORLD
 from manip.links import AddressError, parse_address
 from manip.spec import SPEC
@@ -30,8 +30,9 @@ __all__ = [
     "PacketRow",
     "ReportError",
     "WireOrder",
+    "campaign_line",
     "clause_info",
-    "clause_statuses",
+    "clause_status_entries",
     "completeness_line",
     "failure_groups",
     "group_message",
@@ -45,23 +46,11 @@ __all__ = [
     "wire_order",
 ]
 
-OUTCOME_ORDER: Final = (
-    "fail",
-    "error",
-    "fixed",
-    "warn",
-    "known-fail",
-    "not-judged",
-    "skip",
-    "unsupported",
-    "pass",
-)
-if set(OUTCOME_ORDER) != set(OUTCOMES):  # a new outcome must get its place (and colour) in the documents
-    raise RuntimeError(f"OUTCOME_ORDER {OUTCOME_ORDER} does not list the outcomes {OUTCOMES}")
-"""Outcomes, the ones needing attention first."""
-FAILING: Final = frozenset({"fail", "error", "fixed"})
+OUTCOME_ORDER: Final = Outcome.by_rank()
+"""Outcomes, the ones needing attention first (:attr:`Outcome.rank`)."""
+FAILING: Final = frozenset(o for o in Outcome if o.fails_run)
 """Outcomes that fail the run."""
-ATTENTION: Final = FAILING | {"warn", "known-fail"}
+ATTENTION: Final = frozenset(o for o in Outcome if o.needs_attention)
 """Outcomes a reader needs to look at (the rest are quiet: passed, skipped, not run...)."""
 _REQUIRED: Final = ("verdict", "exit_code", "counts", "cases", "by_clause", "seed", "target")
 Report = Mapping[str, Any]
@@ -111,14 +100,22 @@ def not_judged_line(report: Report) -> str:
     )
 
 
+def campaign_line(report: Report) -> str:
+    """A fuzz campaign in one line (its ``campaign`` block's summary); "" for every other report."""
+    campaign = report.get("campaign")
+    return f"fuzz campaign: {campaign.get('summary', '')}" if isinstance(campaign, Mapping) else ""
+
+
 def completeness_line(report: Report) -> str:
     """ "N of M MUST clauses judged, ..." ("" for a report written before clause statuses existed)."""
     completeness = report.get("completeness")
     return str(completeness.get("text", "")) if isinstance(completeness, Mapping) else ""
 
 
-def clause_statuses(report: Report) -> dict[str, Mapping[str, Any]]:
-    """Each clause's status entry (``clause_status``: status, why, hint, cases), by clause id."""
+def clause_status_entries(report: Report) -> dict[str, Mapping[str, Any]]:
+    """Each clause's status as a report read back saved it (its ``clause_status`` entries: status, why,
+    hint, cases), by clause id; a run computes them with
+    :func:`~manip.conformance.judge.verdict.clause_statuses`."""
     return {str(s["clause"]): s for s in report.get("clause_status", []) if isinstance(s, Mapping)}
 
 

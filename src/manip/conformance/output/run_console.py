@@ -7,6 +7,7 @@ from __future__ import annotations
 from rich.console import Console
 from rich.markup import escape
 
+from manip.conformance.judge.verdict import Outcome
 from manip.conformance.output.report import clause_lines, failure_text
 from manip.conformance.suite.results import CaseResult, ExitCode, RunReport, completeness_text
 from manip.conformance.suite.world import WITHOUT_WORLD
@@ -33,7 +34,8 @@ def counts_text(report: RunReport) -> str:
 
 
 def shown(result: CaseResult, quiet: bool) -> bool:
-    return result.outcome in ("fail", "error", "fixed") or (result.outcome == "warn" and not quiet)
+    """Whether the summary shows the case in full: it fails the run, or warns (not with ``--quiet``)."""
+    return result.outcome.fails_run or (result.outcome == Outcome.WARN and not quiet)
 
 
 def headline(console: Console, result: CaseResult) -> None:

@@ -175,11 +175,9 @@ async def run_puma_suite(
     loop for a virtual-time target)."""
     async with target.running_with_world(seed) as (address, world):
         config = RunConfig(
-            address=address,
-            options=replace(options or RunOptions(), address=address),
+            options=replace(options or RunOptions(), address=address, embedded=target.embedded),
             seed=seed,
             select=PatternSet.of(select, "select"),
-            embedded=target.embedded,
             virtual_time=target.embedded and target.virtual,
             reproduce_prefix=target.reproduce_prefix(),
             world=world,

@@ -55,6 +55,7 @@ from typing import Final
 from manip.captures import Session
 from manip.codecs.pairing import ReplyPairing
 from manip.conformance.judge.checks import WirePacket, check_transcript, describe
+from manip.conformance.judge.verdict import Outcome, grade
 from manip.conformance.replay.capture_report import capture_report, read_sessions
 from manip.conformance.replay.masking import (
     Mismatch,
@@ -530,7 +531,7 @@ def _results(replay: SessionReplay, path: str, reproduce: Sequence[str], strict:
         hazard=hazard,
         summary=f"session {number} of {os.path.basename(path)}: {len(script.sends)} request(s) replayed, "
         "every answer compared with the recording",
-        outcome="pass",
+        outcome=Outcome.PASS,
         seed=0,
         deadline=deadline,
         duration=replay.duration,
@@ -552,8 +553,7 @@ def _results(replay: SessionReplay, path: str, reproduce: Sequence[str], strict:
                 "stopped",
             )
         )
-    if exchange.violations:
-        exchange.outcome = "fail"
+    exchange.outcome = grade(exchange.outcome, exchange.violations, strict)
     checks = CaseResult(
         id=f"replay.session-{number}.checks",
         clauses=CHECK_CLAUSES,
@@ -561,7 +561,7 @@ def _results(replay: SessionReplay, path: str, reproduce: Sequence[str], strict:
         kind="replay",
         hazard=hazard,
         summary=f"session {number}: the live transcript judged by the suite's checks",
-        outcome="pass",
+        outcome=Outcome.PASS,
         seed=0,
         deadline=deadline,
         duration=0.0,
@@ -577,7 +577,7 @@ def _results(replay: SessionReplay, path: str, reproduce: Sequence[str], strict:
         )
         judge_findings(checks, findings, strict=strict)
     else:
-        checks.outcome = "skip"
+        checks.outcome = Outcome.SKIP
         checks.reason = replay.stopped
     return [exchange, checks]
 
@@ -591,7 +591,7 @@ def _refused(number: int, session: Session, path: str) -> CaseResult:
         kind="replay",
         hazard="read-only",
         summary=f"session {number} of {os.path.basename(path)}",
-        outcome="skip",
+        outcome=Outcome.SKIP,
         seed=0,
         deadline=DEFAULT_REPLY_TIMEOUT,
         reason="the recorded connection never opened (refused): not replayed",

@@ -34,11 +34,11 @@ from rich.console import Console
 from rich.markup import escape
 
 from manip.commandline import FiniteFloat, LinkAddressType
-from manip.conformance.cli_options import check_output_paths, given, json_option, junit_option, strict_option
+from manip.conformance.cli_options import check_output_paths, given, report_options, strict_option
 from manip.conformance.output.console import make_console
-from manip.conformance.output.documents import document_options, write_reports
+from manip.conformance.output.documents import ReportPaths, write_reports
 from manip.conformance.output.report import failure_text
-from manip.conformance.output.run_console import OUTCOME_STYLE, print_by_clause
+from manip.conformance.output.run_console import OUTCOME_STYLE, print_by_clause, shown
 from manip.conformance.suite.embedded import EmbeddedServer, simulated_server
 from manip.conformance.suite.results import ExitCode, RunReport, completeness_text
 from manip.exit_status import epilog
@@ -110,21 +110,18 @@ def _finish(
     report: RunReport,
     console: Console,
     quiet: bool,
-    json_path: Path | None,
-    junit_path: Path | None,
-    html_path: Path | None = None,
-    markdown_path: Path | None = None,
+    reports: ReportPaths,
 ) -> None:
     for result in report.results:
-        if result.outcome in ("fail", "error") or (result.outcome == "warn" and not quiet):
-            style = OUTCOME_STYLE.get(result.outcome, "")
+        if shown(result, quiet):
+            style = OUTCOME_STYLE[result.outcome]
             console.print(f"[{style}]{result.outcome.upper():>10}[/] {result.id}")
             body = failure_text(result) if result.outcome != "error" else result.traceback.rstrip()
             if body:
                 console.print(body, markup=False, highlight=False)
             for note in result.notes:
                 console.print(f"           note: {note}", markup=False, highlight=False)
-    report.unwritten.extend(write_reports(report, json_path, junit_path, html_path, markdown_path))
+    report.unwritten.extend(write_reports(report, reports))
     print_by_clause(console, report)
     for problem in [*report.problems, *report.unwritten]:
         console.print(f"[bold red]problem[/]: {escape(problem)}")
@@ -177,19 +174,14 @@ _file_argument = click.argument("file", type=click.Path(exists=True, dir_okay=Fa
     show_default=True,
     help="Whose side of each session to judge: the server's answers, the client's requests, or both.",
 )
-@json_option
-@junit_option
-@document_options
+@report_options
 @click.option("-q", "--quiet", is_flag=True, help="Failures and the summary only.")
 def verify_command(
     file: Path,
     sessions: tuple[int, ...],
     strict: bool,
     judge: Judge,
-    json_path: Path | None,
-    junit_path: Path | None,
-    html_path: Path | None,
-    markdown_path: Path | None,
+    reports: ReportPaths,
     quiet: bool,
 ) -> None:
     """Judge a recorded capture FILE offline with the suite's checks (request-number echo, reply
@@ -197,7 +189,7 @@ def verify_command(
     the client's requests instead (opcodes, data layouts)."""
     from manip.conformance.replay.verify import verify_capture  # noqa: PLC0415
 
-    check_output_paths(json=json_path, junit=junit_path, html=html_path, markdown=markdown_path)
+    check_output_paths(**reports.paths)
     console = make_console()
     command = shlex.join(["manip-conform", *sys.argv[1:]])
     try:
@@ -206,7 +198,7 @@ def verify_command(
         console.print(f"[bold magenta]internal error[/]: {type(exc).__name__}: {escape(str(exc))}")
         console.print(traceback.format_exc(), markup=False, highlight=False)
         sys.exit(int(ExitCode.INTERNAL))
-    _finish(report, console, quiet, json_path, junit_path, html_path, markdown_path)
+    _finish(report, console, quiet, reports)
     sys.exit(int(report.exit_code))
 
 
@@ -303,9 +295,7 @@ def _capture_settings(file: Path) -> _Recorded:
     help="Record the live side to an MCAP capture (then: manip-conform verify OUT).",
 )
 @click.option("--strict", is_flag=True, help="SHOULD failures of the live checks count.")
-@json_option
-@junit_option
-@document_options
+@report_options
 @click.option("-q", "--quiet", is_flag=True, help="Failures and the summary only.")
 def replay_command(
     file: Path,
@@ -320,10 +310,7 @@ def replay_command(
     server_faults: tuple[str, ...],
     record: Path | None,
     strict: bool,
-    json_path: Path | None,
-    junit_path: Path | None,
-    html_path: Path | None,
-    markdown_path: Path | None,
+    reports: ReportPaths,
     quiet: bool,
 ) -> None:
     """Replay a recorded capture FILE: its client side to a live server (--against URL; without it the
@@ -354,9 +341,7 @@ def replay_command(
         faults = FaultSet.parse(server_faults) if server_faults else None
     except ValueError as exc:
         raise click.UsageError(f"--server-fault: {exc}") from None
-    check_output_paths(
-        record=record, json=json_path, junit=junit_path, html=html_path, markdown=markdown_path
-    )
+    check_output_paths(record=record, **reports.paths)
     command = shlex.join(["manip-conform", *sys.argv[1:]])
 
     if serve:
@@ -427,5 +412,5 @@ def replay_command(
         outcome = _run(replay_job, console, virtual=virtual)
     if isinstance(outcome, int):
         sys.exit(outcome)
-    _finish(outcome, console, quiet, json_path, junit_path, html_path, markdown_path)
+    _finish(outcome, console, quiet, reports)
     sys.exit(int(outcome.exit_code))

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from manip.conformance.judge.checks import WirePacket, describe
+from manip.conformance.judge.verdict import Outcome, grade
 from manip.conformance.replay.against import AnswerSorter
 from manip.conformance.replay.capture_report import capture_report, read_sessions
 from manip.conformance.replay.masking import Mismatch, NumberMap, compare_request, masked
@@ -277,12 +278,12 @@ async def serve_capture(
         report.unreachable = True
         report.problems.append("no client connected")
     reproduce = ["manip-conform", "replay", name, "--serve", address]
-    report.results = [_result(s, name, reproduce) for s in sessions]
+    report.results = [_result(s, name, reproduce, options.strict) for s in sessions]
     report.duration = time.monotonic() - t0
     return report
 
 
-def _result(served: ServedSession, path: str, reproduce: Sequence[str]) -> CaseResult:
+def _result(served: ServedSession, path: str, reproduce: Sequence[str], strict: bool) -> CaseResult:
     turns = served.turns
     result = CaseResult(
         id=f"replay.session-{served.number}.served",
@@ -292,7 +293,7 @@ def _result(served: ServedSession, path: str, reproduce: Sequence[str]) -> CaseR
         hazard=session_hazard(turns.packets),
         summary=f"session {served.number} of {os.path.basename(path)} served: "
         f"{len(turns.requests)} recorded request(s) compared with the client's",
-        outcome="pass",
+        outcome=Outcome.PASS,
         seed=0,
         deadline=SESSION_DEADLINE,
         duration=served.duration,
@@ -314,6 +315,5 @@ def _result(served: ServedSession, path: str, reproduce: Sequence[str]) -> CaseR
         )
     for m in served.mismatches:
         result.violations.append(m.violation("request.opcode-range" if m.path == "opcode" else None))
-    if result.violations:
-        result.outcome = "fail"
+    result.outcome = grade(result.outcome, result.violations, strict)
     return result

@@ -44,6 +44,7 @@ from manip.conformance.judge.checks import (
     required_refusal,
 )
 from manip.conformance.judge.client_checks import check_client_guards, check_client_request
+from manip.conformance.judge.verdict import Outcome, grade, strongest_first
 from manip.conformance.replay.capture_report import capture_report, open_capture, select_sessions
 from manip.conformance.suite.case import LEVEL_ORDER
 from manip.conformance.suite.results import CaseResult, RunReport, Violation
@@ -337,11 +338,9 @@ def session_hazard(packets: Sequence[WirePacket]) -> Hazard:
 
 
 def judge_findings(result: CaseResult, findings: Iterable[Violation], *, strict: bool) -> None:
-    """Record ``findings`` as the result's violations (MUST first) and set its outcome."""
-    result.violations.extend(sorted(findings, key=lambda f: -LEVEL_ORDER[f.strength]))
-    counted = {"MUST", "SHOULD"} if strict else {"MUST"}
-    if result.violations and result.outcome in ("pass", "skip"):
-        result.outcome = "fail" if any(v.level in counted for v in result.violations) else "warn"
+    """Record ``findings`` as the result's violations (the strongest first) and grade its outcome."""
+    result.violations.extend(strongest_first(findings))
+    result.outcome = grade(result.outcome, result.violations, strict)
 
 
 def _family_level(family: Family) -> Level:
@@ -393,7 +392,9 @@ def verify_capture(
                 kind="verify",
                 hazard=hazard,
                 summary=f"session {number} ({session.contact or 'no RFC recorded'}): {family.summary}",
-                outcome="pass" if opened(session) and family.exercised(packets, initial) else "skip",
+                outcome=Outcome.PASS
+                if opened(session) and family.exercised(packets, initial)
+                else Outcome.SKIP,
                 seed=0,
                 deadline=VERIFY_DEADLINE,
                 duration=elapsed,

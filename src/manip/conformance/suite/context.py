@@ -544,12 +544,13 @@ class Probe:
                 return packet
         raise ValueError(f"request #{number} was not sent on this probe")
 
-    async def close(self) -> None:
-        """Close the connection (abort after a short wait: the target may already be gone)."""
+    async def close(self, wait: float = 1.0) -> None:
+        """Close the connection: our EOF, then a CLS once the target has read it, or after ``wait``
+        seconds whatever it did (it may be gone, or never read again)."""
         if self.end_reason is None:
             self.end_reason = ConnectionClosed("closed by the case", by_peer=False)
         with contextlib.suppress(ChaosError):
-            await self.conn.close(timeout=1.0)
+            await self.conn.close(timeout=wait)
 
 
 class CaseContext:
@@ -662,9 +663,10 @@ class CaseContext:
             probe.initial = packet
         return probe
 
-    async def close_all(self) -> None:
+    async def close_all(self, wait: float = 1.0) -> None:
+        """Close every connection of the case (:meth:`Probe.close`)."""
         for probe in self.probes:
-            await probe.close()
+            await probe.close(wait)
 
     # ------------------------------------------------------------------------------------- verdicts
 

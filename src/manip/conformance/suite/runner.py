@@ -130,14 +130,15 @@ def blank_result(
 
 @dataclass
 class RunConfig:
-    address: str
-    """The target's link address (``tcp://HOST:PORT``...)."""
+    """One run's configuration, built once by its command and read everywhere: the settings cases see
+    (``options``, with the target's address and whether the suite started it), and what only the
+    runner reads.  No setting is in both."""
+
     options: RunOptions
     seed: int
     select: PatternSet = field(default_factory=PatternSet)
     skip: PatternSet = field(default_factory=PatternSet)
     known_failing: PatternSet = field(default_factory=PatternSet)
-    embedded: bool = False
     virtual_time: bool = False
     """The run's event loop is a :class:`~manip.links.virtual_clock.VirtualClockLoop` (the embedded
     server simulated on the same loop)."""
@@ -173,8 +174,8 @@ class Runner:
         self.all_cases = list(cases)
         self.events = events or RunEvents()
         self.report = RunReport(
-            target=config.address,
-            embedded=config.embedded,
+            target=config.options.address,
+            embedded=config.options.embedded,
             seed=config.seed,
             strict=config.options.strict,
             options={
@@ -221,7 +222,7 @@ class Runner:
         config = self.config
         return await open_retrying_busy(
             lambda: open_connection(
-                config.address, timeout=config.options.connect_timeout, wrap_link=config.wrap_link
+                config.options.address, timeout=config.options.connect_timeout, wrap_link=config.wrap_link
             ),
             retry=retry_busy,
         )
@@ -275,7 +276,9 @@ class Runner:
         finally:
             self._initial_seen = bool(ctx.probes) and ctx.probes[0].initial is not None
             self._note_reached(ctx)
-            await _quietly(ctx.close_all())
+            # No wait for the target to read our EOF: a target that floods and never reads again
+            # would cost a second per check, after every failed case.
+            await _quietly(ctx.close_all(wait=0.0))
 
     async def _answer_to_here(self, probe: Probe) -> tuple[bool, str, bool]:
         """Send Here and wait for any answer: (answered, what happened, the answer was a fatal error)."""
@@ -323,14 +326,16 @@ class Runner:
             if not before.alive and not self._reached:
                 report.unreachable = True
                 for item in cases:
-                    report.results.append(self._blank(item, "skip", "target unreachable before the run"))
+                    report.results.append(
+                        self._blank(item, Outcome.SKIP, "target unreachable before the run")
+                    )
                 return report
             if self.config.options.learn_length_unit:
                 await self._learn_length_unit()
             dead = False
             for item in cases:
                 if dead:
-                    result = self._blank(item, "not-judged", self._dead_reason)
+                    result = self._blank(item, Outcome.NOT_JUDGED, self._dead_reason)
                 else:
                     result = await self.run_case(item)
                 report.results.append(result)
@@ -393,19 +398,19 @@ class Runner:
     def reproduce(self, item: Case) -> str:
         config = self.config
         words = [*config.reproduce_prefix]
-        if not config.embedded:
-            words.append(config.address)
+        if not config.options.embedded:
+            words.append(config.options.address)
         words += ["--select", item.id, "--seed", str(config.seed), *config.reproduce_options]
         return shlex.join(words)
 
     async def run_case(self, item: Case) -> CaseResult:
         """Run one case to its outcome (never raises, except on interruption)."""
         options = self.config.options
-        result = self._blank(item, "pass", "")
+        result = self._blank(item, Outcome.PASS, "")
         if self.events.case_started:
             self.events.case_started(item)
         if item.hazard not in options.allowed_hazards:
-            result.outcome = "skip"
+            result.outcome = Outcome.SKIP
             result.reason = f"{item.hazard} case on {options.robot} target without --allow-motion"
             return result
         ctx = CaseContext(
@@ -434,20 +439,20 @@ class Runner:
         except CaseFailure as exc:
             failure = exc
         except CaseSkipped as exc:
-            result.outcome = "skip"
+            result.outcome = Outcome.SKIP
             result.reason = exc.reason
         except CaseNotJudged as exc:
-            result.outcome = "not-judged"
+            result.outcome = Outcome.NOT_JUDGED
             result.reason = exc.reason
         except ConditionUnsupported as exc:
-            result.outcome = "not-judged"
+            result.outcome = Outcome.NOT_JUDGED
             result.reason = f"{exc}; a world that can would judge it"
         except WorldError as exc:
-            result.outcome = "error"
+            result.outcome = Outcome.ERROR
             result.reason = f"the world failed: {exc}"
         except TimeoutError as exc:
             if scope is None or not scope.expired():
-                result.outcome = "error"
+                result.outcome = Outcome.ERROR
                 result.reason = f"TimeoutError inside the case: {exc}"
                 result.traceback = traceback.format_exc()
                 failure = None
@@ -462,7 +467,7 @@ class Runner:
             await _quietly(ctx.close_all())
             raise
         except Exception as exc:
-            result.outcome = "error"
+            result.outcome = Outcome.ERROR
             result.reason = f"{type(exc).__name__}: {exc}"
             result.traceback = traceback.format_exc()
         finally:
@@ -496,7 +501,7 @@ class Runner:
         for clause, invariant in reported:
             problem = attribution_problem(result.id, result.clauses, clause, invariant)
             if problem is not None:
-                result.outcome = "error"
+                result.outcome = Outcome.ERROR
                 result.reason = f"bug of the suite: {problem}"
                 return
 
