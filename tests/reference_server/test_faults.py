@@ -1115,6 +1115,36 @@ def test_async_splits_multi() -> None:
     assert ServerOp.ASYNCHRONOUS_RESPONSE in faulty[1:-1]
 
 
+@covers(Fault.JOINT_MOVES_STRAIGHT)
+def test_joint_moves_straight() -> None:
+    seed = (20.0, -60.0, 150.0, 0.0, -60.0, 0.0)
+    goal = list(forward(seed).to_floats())
+    goal[9:12] = [goal[9] + 60.0, goal[10] + 150.0, goal[11] - 80.0]
+
+    def spread(c: Client) -> float:
+        """How far apart the joints' fractions of their ways get during a Move."""
+        c.one("set-joint-angles", joints=seed)
+        c.settle()
+        c.one("move", transform=goal)
+        path = []
+        while c.session.arm.moving:
+            c.run(0.05)
+            path.append(c.session.arm.actual)
+        end = path[-1]
+        return max(
+            max(fractions) - min(fractions)
+            for q in path
+            if (
+                fractions := [
+                    (q[i] - seed[i]) / (end[i] - seed[i]) for i in range(6) if abs(end[i] - seed[i]) > 2
+                ]
+            )
+        )
+
+    clean, faulty = pair(Fault.JOINT_MOVES_STRAIGHT, spread)
+    assert clean < 1e-6 and faulty > 0.1
+
+
 @covers(Fault.SPEED_IGNORED)
 def test_speed_ignored() -> None:
     def seconds_to_goal(c: Client) -> float:

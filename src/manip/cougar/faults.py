@@ -125,6 +125,32 @@ class CougarFault(FaultSwitch):
         "cougar.adc8-filter",
         caught_by=("cougar.adc8.integer-filter",),
     )
+    GUARDS_SENSED_FORCE = defect(
+        "guards-sensed-force",
+        "GUARDM tests the sensed force, before GRAVITY's correction (CougarSim._guardm)",
+        "cougar.guard-corrected-force",
+        caught_by=("cougar.guard.gravity-corrected", "cougar.gravity.point-mass"),
+    )
+    COMPLIANCE_SENSED_FORCE = defect(
+        "compliance-sensed-force",
+        "NPR's compliance equation uses the sensed force, before GRAVITY's correction (CougarSim._newpr)",
+        "cougar.compliance-corrected-force",
+        caught_by=("cougar.gravity.compliance-corrected",),
+    )
+    NPR_IGNORES_FC = defect(
+        "npr-ignores-fc",
+        "the compliance equation leaves out the commanded force NFC (CougarSim._newpr)",
+        "cougar.npr.reply",
+        "cougar.compliance-corrected-force",
+        caught_by=("cougar.gravity.compliance-corrected",),
+    )
+    NBJI_FIRST_ONLY = defect(
+        "nbji-first-only",
+        "the compliance equation scales every joint by NBJI's first element, not each by its own "
+        "(Jacob.step)",
+        "cougar.npr.reply",
+        caught_by=("cougar.npr.gains",),
+    )
     RRAW_LESS_OFFSETS = defect(
         "rraw-less-offsets",
         "RRAW reports the readings with the gauge offsets subtracted, not the gauges as read "
@@ -137,14 +163,14 @@ class CougarFault(FaultSwitch):
         "the DRV-11J link drops a frame it cannot decode (a bad HELLO, an unknown type, a TICK of the "
         "wrong length) and carries on (FrameDecoder.feed, for CougarEnd)",
         "link.drv11j.bad-frame-ends",
-        caught_by=("cougar.link.unknown-type",),
+        caught_by=("cougar.link.unknown-type", "cougar.link.bad-hello", "cougar.link.short-tick"),
     )
     LINK_IGNORES_WRONG_SIDE = defect(
         "link-ignores-wrong-side",
         "the link takes a HELLO naming the Cougar's own role and ignores frames only Cougar sends "
         "(COUGAR, TICKED) instead of ending (CougarEnd)",
         "link.drv11j.bad-frame-ends",
-        caught_by=("cougar.link.wrong-side",),
+        caught_by=("cougar.link.wrong-side", "cougar.link.hello-wrong-role"),
     )
     LINK_TICK_BACKWARDS_RUNS = defect(
         "link-tick-backwards-runs",
@@ -152,6 +178,18 @@ class CougarFault(FaultSwitch):
         "(CougarEnd._model_time)",
         "link.drv11j.tick-backwards",
         caught_by=("cougar.link.tick-backwards",),
+    )
+    LINK_HELLO_OPTIONAL = defect(
+        "link-hello-optional",
+        "the link takes a first frame that is not HELLO as if HELLO had come before it (_End._greeted)",
+        "link.drv11j.hello-first",
+        caught_by=("cougar.link.not-hello-first",),
+    )
+    LINK_IGNORES_VERSION = defect(
+        "link-ignores-version",
+        "the link takes a HELLO of any version, not only 1 (_End._greeted)",
+        "link.drv11j.hello-version",
+        caught_by=("cougar.link.hello-other-version",),
     )
     LINK_IGNORES_BYE = defect(
         "link-ignores-bye",
@@ -206,6 +244,14 @@ class CougarDefects:
     """ADC8 adds the terms of the filter's sum before shifting it right by 3."""
     rraw_before_offsets: bool = True
     """RRAW reports the gauges as read, before the offsets are subtracted."""
+    guards_on_corrected_force: bool = True
+    """GUARDM tests the gravity-corrected force."""
+    compliance_on_corrected_force: bool = True
+    """NPR's compliance equation uses the gravity-corrected force."""
+    npr_commanded_force: bool = True
+    """The compliance equation has the commanded force NFC."""
+    bji_per_joint: bool = True
+    """Each joint's NTD is scaled by its own element of NBJI."""
 
 
 @dataclass(frozen=True)
@@ -223,6 +269,10 @@ class LinkDefects:
     """The Puma's BYE ends the link."""
     refuses_second_puma: bool = True
     """A second Puma connecting while one is linked is sent BYE 'busy'."""
+    requires_hello_first: bool = True
+    """A first frame that is not HELLO ends the link."""
+    checks_version: bool = True
+    """A HELLO of another version than 1 ends the link."""
 
 
 def cougar_defects(faults: Iterable[str]) -> CougarDefects:
@@ -246,6 +296,10 @@ def cougar_defects(faults: Iterable[str]) -> CougarDefects:
         jacobian_transpose_stored=CougarFault.JACOBIAN_TRANSPOSE_NOT_STORED not in on,
         adc8_sums_then_shifts=CougarFault.FILTER_TRUNCATES_TERMS not in on,
         rraw_before_offsets=CougarFault.RRAW_LESS_OFFSETS not in on,
+        guards_on_corrected_force=CougarFault.GUARDS_SENSED_FORCE not in on,
+        compliance_on_corrected_force=CougarFault.COMPLIANCE_SENSED_FORCE not in on,
+        npr_commanded_force=CougarFault.NPR_IGNORES_FC not in on,
+        bji_per_joint=CougarFault.NBJI_FIRST_ONLY not in on,
     )
 
 
@@ -258,6 +312,8 @@ def link_defects(faults: Iterable[str]) -> LinkDefects:
         ends_on_tick_backwards=CougarFault.LINK_TICK_BACKWARDS_RUNS not in on,
         ends_on_bye=CougarFault.LINK_IGNORES_BYE not in on,
         refuses_second_puma=CougarFault.LINK_BUSY_SERVES_SECOND not in on,
+        requires_hello_first=CougarFault.LINK_HELLO_OPTIONAL not in on,
+        checks_version=CougarFault.LINK_IGNORES_VERSION not in on,
     )
 
 

@@ -72,6 +72,8 @@ class Jacob:
     a Cougar in inches: reading ``lengths-in-inches``)."""
     transpose_stored: bool = True
     """False only for the fault ``jacobian-transpose-not-stored``: J's words stored again where Jᵀ goes."""
+    bji_per_joint: bool = True
+    """False only for the fault ``nbji-first-only``: every joint scaled by BJI's first element."""
     step_index: int = 0
     cycles: int = 0
     _j: Matrix = field(default_factory=lambda: np.zeros((6, 6)))
@@ -85,7 +87,8 @@ class Jacob:
         back = _buffer_address(memory, front=False)
         if self.step_index == 0:
             theta, fv = memory.floats("theta_sensed"), memory.floats("fv")
-            self._bji = memory.floats("bji")
+            bji = memory.floats("bji")
+            self._bji = bji if self.bji_per_joint else (bji[0],) * len(bji)
             inputs = (theta, fv, self._bji)
             if inputs != self._inputs:  # decoded floats, never NaN: equal inputs, the same J and P
                 if self._inputs is None or inputs[:2] != self._inputs[:2]:

@@ -282,15 +282,7 @@ class _End:
             raise
         good: list[Frame] = []
         for frame in frames:
-            if not self.peer_ready:
-                if not isinstance(frame, Hello):
-                    self.closed = "the peer did not start with HELLO"
-                    raise Drv11jError(self.closed)
-                wrong_side = frame.role is self.role and self._defects.ends_on_wrong_side
-                if frame.version != VERSION or wrong_side:
-                    self.closed = f"incompatible peer (role {frame.role.name}, version {frame.version})"
-                    raise Drv11jError(self.closed)
-                self.peer_ready = True
+            if not self.peer_ready and self._greeted(frame):
                 continue
             if isinstance(frame, Bye) and not self._defects.ends_on_bye:
                 continue
@@ -299,6 +291,23 @@ class _End:
                 break
             good.append(frame)
         return good
+
+    def _greeted(self, frame: Frame) -> bool:
+        """Check the peer's first frame: True if it was the HELLO (taken), False if a defect let the link
+        start without one (the frame is then taken as any other); Drv11jError for a bad first frame."""
+        if not isinstance(frame, Hello):
+            if not self._defects.requires_hello_first:
+                self.peer_ready = True
+                return False
+            self.closed = "the peer did not start with HELLO"
+            raise Drv11jError(self.closed)
+        wrong_side = frame.role is self.role and self._defects.ends_on_wrong_side
+        wrong_version = frame.version != VERSION and self._defects.checks_version
+        if wrong_version or wrong_side:
+            self.closed = f"incompatible peer (role {frame.role.name}, version {frame.version})"
+            raise Drv11jError(self.closed)
+        self.peer_ready = True
+        return True
 
     def bye(self, reason: str) -> bytes:
         """Bytes that end the link."""

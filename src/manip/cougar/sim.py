@@ -216,6 +216,7 @@ class CougarSim:
             self.config.geometry,
             mm_per_unit=self.config.mm_per_unit,
             transpose_stored=defects.jacobian_transpose_stored,
+            bji_per_joint=defects.bji_per_joint,
         )
         self._stats = CougarStats()
         self._pose: tuple[float, ...] = tuple(float(q) for q in self.config.initial_angles)
@@ -398,7 +399,7 @@ class CougarSim:
         active = mem.word("guard_active")
         if not active:
             return
-        force = mem.array("force")
+        force = mem.array("force" if self._defects.guards_on_corrected_force else "force_sensed")
         base = region("guards").address
         for i in range(16):
             if not active >> i & 1:
@@ -468,8 +469,8 @@ class CougarSim:
             p,
             k=mem.array("k") if self._defects.npr_spring_term else np.zeros(6),
             b=b if self._defects.nb_by_rows else b.T,
-            fc=mem.array("fc"),
-            force=mem.array("force"),
+            fc=mem.array("fc") if self._defects.npr_commanded_force else np.zeros(6),
+            force=mem.array("force" if self._defects.compliance_on_corrected_force else "force_sensed"),
             theta_error=theta_error,
             rate_difference=mem.array("rate_difference"),
         )

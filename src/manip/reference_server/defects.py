@@ -21,7 +21,7 @@ The hook points, by what they decide:
   :meth:`~Defects.configuration`,
 
   :meth:`~Defects.set_speed`,
-  :attr:`~Defects.straight_lines`, :attr:`~Defects.checks_joint_limits`,
+  :attr:`~Defects.straight_lines`, :attr:`~Defects.joint_moves`, :attr:`~Defects.checks_joint_limits`,
   :attr:`~Defects.applies_configuration`;
 * replies: :meth:`~Defects.payload`, :meth:`~Defects.reply`;
 * errors: :meth:`~Defects.error_number`, :meth:`~Defects.error`, :meth:`~Defects.error_string`,
@@ -114,6 +114,8 @@ class Defects:
     """The packet after free joint is answered done without being executed."""
     straight_lines: bool = True
     """Straight-line moves are interpolated in Cartesian space."""
+    joint_moves: bool = True
+    """Move and incremental move are interpolated in joint space."""
     checks_joint_limits: bool = True
     """Set joint angles refuses out-of-range joints with JOR."""
     applies_configuration: bool = True
@@ -258,6 +260,7 @@ class SwitchedDefects(Defects):
         self.keeps_arm_after_close = Fault.CLOSE_KEEPS_MOVING in on
         self.discards_after_free_joint = Fault.FREE_JOINT_EXECUTES not in on
         self.straight_lines = Fault.STRAIGHT_AS_JOINT not in on
+        self.joint_moves = Fault.JOINT_MOVES_STRAIGHT not in on
         self.checks_joint_limits = Fault.NO_JOR not in on
         self.applies_configuration = Fault.CONFIGURATION_IGNORED not in on
         self.after_fatal = (

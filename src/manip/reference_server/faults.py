@@ -561,6 +561,13 @@ class Fault(FaultSwitch):
         "puma.wrist.connection-state",
         caught_by=("puma.wrist.connection-state",),
     )
+    JOINT_MOVES_STRAIGHT = defect(
+        "joint-moves-straight",
+        "Move and incremental move (204, 211) go along a straight line, interpolated in Cartesian space: "
+        "the joints do not keep together.",
+        "joint-move.interpolated",
+        caught_by=("server.motion.joint-interpolated",),
+    )
 
 
 RETIRED: Final[Mapping[str, str]] = MappingProxyType(

@@ -596,7 +596,8 @@ class ServerSession:
         return {}  # the simulated arm needs no calibration
 
     def _move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
-        return {"segment": self.arm.move_to(self._transform("move", values), now)}
+        straight = not self.defects.joint_moves
+        return {"segment": self.arm.move_to(self._transform("move", values), now, straight=straight)}
 
     def _straight_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         pose = self._transform("straight-move", values)
@@ -622,7 +623,8 @@ class ServerSession:
         return self.defects.increment(self.lengths.increment_in(_floats(values["delta"])))
 
     def _incremental_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
-        return {"segment": self.arm.move_increment(self._delta(values), now)}
+        straight = not self.defects.joint_moves
+        return {"segment": self.arm.move_increment(self._delta(values), now, straight=straight)}
 
     def _incremental_straight_move(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         straight = self.defects.straight_lines

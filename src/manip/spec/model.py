@@ -27,8 +27,10 @@ Freedom = Literal[
     "error.args-layout",
     "async.layout",
     "data.length-unit",
+    "answer.length-unit",
     "answer.configuration-bits",
     "request.extension-served",
+    "error.abort-scope",
 ]
 """A part of an answer that is the implementation's choice where a clause or erratum says so
 (``freedom = [...]`` in the spec data): two conforming servers may differ there.  ``manip-conform diff``

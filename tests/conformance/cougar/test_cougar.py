@@ -25,10 +25,14 @@ from manip.cougar.cli import main as cougar_main
 from manip.cougar.cli import serve_cougar
 from manip.cougar.faults import CougarFault, parse_faults
 from manip.cougar.link import CougarEnd, Drv11jError, PumaEnd, Tick, encode_frame
+from tests.support.paths import ROOT
+from tests.support.servers import MANIP_COUGAR, StartServer
 
 #: The cases each fault declares catch it (others may catch it too): each must fail.
 CATCHERS = {fault.value: fault.caught_by for fault in CougarFault}
 OPTIONS = RunOptions(reply_timeout=1.0, connect_timeout=2.0)
+MEMORY_MAP = ROOT / "examples" / "cougar-memory-map.toml"
+"""manip's Cougar memory map as a file, declared for a manip-cougar process as for any external Cougar."""
 
 
 def run(target: CougarTarget, select: Iterable[str] = ()) -> RunReport:
@@ -54,6 +58,12 @@ def test_every_fault_has_a_catching_case() -> None:
     assert set(CATCHERS) == {f.value for f in CougarFault}
     ids = {c.id for c in all_cases()}
     assert all(catchers and set(catchers) <= ids for catchers in CATCHERS.values())
+    # every error path of the DRV-11J link (a case each) is declared caught by the fault that breaks it
+    link_paths = {c.id for c in all_cases() if c.module.endswith(".link_errors")}
+    declared = {
+        case for fault, catchers in CATCHERS.items() if fault.startswith("link-") for case in catchers
+    }
+    assert link_paths == declared, link_paths ^ declared
 
 
 @pytest.mark.parametrize("fault", sorted(f.value for f in CougarFault))
@@ -71,6 +81,36 @@ def test_fault_is_caught(fault: str) -> None:
         assert catcher.violations and all(v.clause for v in catcher.violations)
         assert {v.clause for v in catcher.violations} & declared, (fault, catcher.violations, declared)
         assert f"--cougar-fault {fault}" in catcher.reproduce
+    # every case passes on the clean simulator: a wrong answer fails, or leaves a case not judged naming
+    # the case that judges it, and never makes one skip
+    skipped = [(r.id, r.reason) for r in report.results if r.outcome == "skip"]
+    assert not skipped, f"fault {fault} makes cases skip that pass on the clean Cougar: {skipped}"
+    ids = {c.id for c in all_cases()}
+    unnamed = [
+        (r.id, r.reason)
+        for r in report.results
+        if r.outcome == "not-judged" and not any(i in r.reason for i in ids)
+    ]
+    assert not unnamed, f"fault {fault} leaves cases not judged naming nothing that judges them: {unnamed}"
+
+
+@pytest.mark.waits
+@pytest.mark.parametrize("fault", ["", *sorted(f.value for f in CougarFault)], ids=lambda f: f or "clean")
+def test_fault_of_a_manip_cougar_process_is_caught_over_its_link(
+    fault: str, manip_server: StartServer
+) -> None:
+    """A manip-cougar process with the fault (``--cougar-fault``), judged over its DRV-11J link as any
+    external Cougar is (its memory map declared with the example file, ``--memory-map``), fails the cases
+    that catch the fault in the embedded Cougar; the clean process passes every one of them."""
+    selected = (
+        sorted({c for catchers in CATCHERS.values() for c in catchers}) if not fault else CATCHERS[fault]
+    )
+    process = manip_server("--seed", "7", *(("--cougar-fault", fault) if fault else ()), command=MANIP_COUGAR)
+    report = run(CougarTarget.parse(process.url, memory_map=MEMORY_MAP), select=selected)
+    got = outcomes(report)
+    assert set(got) == set(selected), got
+    want = "fail" if fault else "pass"
+    assert set(got.values()) == {want}, [(r.id, r.outcome, r.reason, r.violations) for r in report.results]
 
 
 def test_every_must_cougar_clause_has_a_case() -> None:

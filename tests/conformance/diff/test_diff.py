@@ -152,6 +152,7 @@ def test_the_command_reports_a_violation_and_replays_it(tmp_path: Path) -> None:
     assert "error-string.arg-layout" in (tmp_path / "d.md").read_text()
     page = (tmp_path / "d.html").read_text()
     assert "error-string.arg-layout" in page and "<mark>" in page
+    assert "\n" not in finding["reproduce"] and finding["reproduce"].startswith("manip-conform diff ")
     replay = finding["reproduce"].split()[2:]  # without "manip-conform diff"
     code_again, again, _ = _cli(tmp_path, *replay)
     assert code_again == 1 and any(f["class"] == "violation" for f in again["findings"])

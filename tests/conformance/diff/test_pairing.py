@@ -73,7 +73,12 @@ def test_the_spec_declares_the_freedoms_the_diff_names() -> None:
     assert "async-request-number" in declared("async.layout")
     assert "error-string.code" in declared("error.code")
     assert declared("units") == ()
-    assert all(f in ("data.length-unit",) for f in SPEC.errata["units"].freedom)
+    assert set(SPEC.errata["units"].freedom) == {"data.length-unit", "answer.length-unit"}
+    assert declared("answer.length-unit") == (
+        "units",
+        "incremental-move.data",
+        "incremental-straight-move.data",
+    )
 
 
 def test_an_unknown_freedom_is_refused() -> None:
@@ -158,3 +163,27 @@ def test_answers_to_different_requests_are_out_of_step() -> None:
     b = [SideEvent("packet", 0o200, b"\x02\x00", request=angles)]
     found = compare([1], {1: a}, {1: b})
     assert [d.parts for d in found] == [("step",)]
+
+
+def test_awa_for_a_request_that_may_move_the_arm_is_the_servers_choice() -> None:
+    hand, here = SPEC.request("hand").opcode, SPEC.request("here").opcode
+    awa = dataclasses.replace(error(b"hand: E AWA Arm motion was aborted"), request=hand)
+    nap = dataclasses.replace(error(b"hand: E NAP No arm power"), request=hand)
+    assert differing_parts(awa, nap) == ("error.abort-scope", "error.message")
+    assert declared("error.abort-scope") == ("awa-scope",)
+    on_here = [dataclasses.replace(e, request=here) for e in (awa, nap)]
+    assert differing_parts(*on_here) == ("error.guide-code", "error.message")
+
+
+def test_answers_out_of_step_after_an_extension_one_side_served_follow_from_it() -> None:
+    extension = next(op for op in SPEC.requests.values() if op.extension)
+    ext_input = FuzzInput(3, "manip.valid", (RequestStep(extension.opcode, b""),), "")
+    later = FuzzInput(4, "manip.valid", (RequestStep(SPEC.request("here").opcode, b""),), "")
+    refused = error(b"dispatch: C UOP Unknown opcode ~", b"\xa3\x00")
+    here, angles = SPEC.request("here").opcode, SPEC.request("joint-angles").opcode
+    a = {3: [response(1.0)], 4: [SideEvent("packet", ServerOp.RESPONSE, b"\x07\x00", request=here)]}
+    b = {3: [refused], 4: [SideEvent("packet", ServerOp.RESPONSE, b"\x08\x00", request=angles)]}
+    found = classify("s", compare([3, 4], a, b), [], [], {3: ext_input, 4: later})
+    assert [f.cls for f in found] == ["allowed", "allowed"]
+    alone = classify("s", compare([4], {4: a[4]}, {4: b[4]}), [], [], {4: later})
+    assert [(f.cls, f.difference.parts) for f in alone] == [("unexplained", ("step",))]

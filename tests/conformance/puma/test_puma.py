@@ -4,6 +4,7 @@ TCP in real time, coverage of the puma clauses, and the CLI."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 from pathlib import Path
 
@@ -13,15 +14,26 @@ from click.testing import CliRunner
 from manip.codecs.cougar import OutOfSync, encode
 from manip.conformance.cli import main as conform_main
 from manip.conformance.output.coverage import DEFAULT_PARTIES, coverage, gaps
-from manip.conformance.puma.judge import CougarScript, FramedPort, JudgingCougar, NoJudgeError, current_judge
+from manip.conformance.puma.judge import (
+    CougarScript,
+    FramedPort,
+    JudgingCougar,
+    NoJudgeError,
+    current_judge,
+    judging,
+)
 from manip.conformance.puma.target import PumaTarget, puma_cases, run_puma_suite
 from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import ExitCode, RunReport
+from manip.conformance.suite.runner import RunConfig, Runner
+from manip.conformance.suite.world_link import open_world
+from manip.cougar.cli import serve_cougar
 from manip.links import virtual_clock
 from manip.reference_server.faults import WRIST_SIDE, Fault
 from manip.spec import SPEC
 from tests.support.culprits import unnamed_violations
+from tests.support.servers import StartServer
 
 SEED = 5
 #: The cases each wrist-side fault declares catch it (others may catch it too).
@@ -110,6 +122,75 @@ def test_wrist_side_fault_is_caught_by_its_case(fault: Fault) -> None:
     assert {got[case] for case in CATCHERS[fault]} == {"fail" if must else "warn"}, got
     if must:
         assert report.exit_code == ExitCode.NON_CONFORMANT
+    # every case passes on the clean server: a wrong answer never makes one skip or leaves it not judged
+    unjudged = [(r.id, r.outcome, r.reason) for r in report.results if r.outcome in ("skip", "not-judged")]
+    assert not unjudged, f"fault {fault.value} leaves cases unjudged that pass when clean: {unjudged}"
+
+
+PROCESS_FAULTS = (
+    Fault.WRIST_CONFIG_AFTER_MOTION,
+    Fault.WRIST_USER_HELD_COMPLIANT,
+    Fault.OUT_OF_SYNC_IGNORED,
+    Fault.GUARDS_OUTLIVE_CONNECTION,
+)
+"""The Puma's wrist defects found from outside (a setting held back while the arm moves, the user's
+requests held during a compliant segment, Cougar's out-of-sync message dropped, guards left armed for
+the next connection), each caught through a manip-server process with its world, as the suite judges a
+Puma at HOST."""
+
+
+def _catching(fault: Fault | None) -> set[str]:
+    """The cases ``fault`` declares catch it; for None, those of every fault in :data:`PROCESS_FAULTS`."""
+    return {c for f in PROCESS_FAULTS for c in CATCHERS[f]} if fault is None else set(CATCHERS[fault])
+
+
+PROCESS_TIME_SCALE = 0.5
+"""The server process runs at half speed (``--time-scale``, and the run is told so): a compliant segment
+lasts long enough in real time for a busy machine's suite to reach it while it runs."""
+
+
+async def _judge_a_server_process(manip_server: StartServer, fault: Fault | None) -> RunReport:
+    """The judging Cougar on a free port, a manip-server process (``--cougar`` pointed at it, its world
+    on another port, ``--fault`` if one), and the case catching ``fault`` (all of them when None) run
+    against it with its world."""
+    wanted = _catching(fault)
+    selected = [c for c in puma_cases(all_cases()) if c.id in wanted]
+    judge = JudgingCougar(SEED)
+    with judging(judge):
+        async with serve_cougar(judge, "tcp://127.0.0.1:0") as cougar:
+            args = ("--cougar", cougar.address, "--world", "tcp://127.0.0.1:0", "--log-level", "WARNING")
+            args += ("--time-scale", str(PROCESS_TIME_SCALE))
+            extra = ("--fault", fault.value) if fault is not None else ()
+            process = await asyncio.to_thread(manip_server, *args, *extra)
+            assert process.proc.stdout is not None
+            line = await asyncio.to_thread(process.proc.stdout.readline)
+            assert "world on" in line, line
+            world_url = line.split("world on ", 1)[1].split()[0]
+            async with asyncio.timeout(20.0):
+                while not cougar.connections:
+                    await asyncio.sleep(0.01)
+            async with open_world(world_url) as world:
+                options = RunOptions(address=process.url, reply_timeout=2.0, time_scale=PROCESS_TIME_SCALE)
+                config = RunConfig(address=process.url, options=options, seed=SEED, world=world)
+                return await Runner(config, selected).run()
+
+
+@pytest.mark.waits
+@pytest.mark.parametrize("fault", [None, *PROCESS_FAULTS], ids=lambda f: f.value if f else "clean")
+def test_wrist_defect_of_a_server_process_is_caught_through_its_world(
+    fault: Fault | None, manip_server: StartServer
+) -> None:
+    """A manip-server process whose wrist is the judging Cougar, run with its world: each defect fails
+    (or warns, for a SHOULD clause) the case that catches it in the embedded server, and the clean process
+    passes those cases."""
+    report = asyncio.run(_judge_a_server_process(manip_server, fault))
+    got = outcomes(report)
+    shown = [(r.id, r.outcome, r.reason, [v.message for v in r.violations]) for r in report.results]
+    if fault is None:
+        assert got == dict.fromkeys(_catching(None), "pass"), shown
+        return
+    must = any(SPEC.clauses[c].level == "MUST" for c in fault.clauses)  # a SHOULD clause warns
+    assert got == dict.fromkeys(_catching(fault), "fail" if must else "warn"), shown
 
 
 @pytest.mark.slow

@@ -331,7 +331,10 @@ async def timed_move(
     if not notified:
         end = await arrival(ctx, probe, goal, within=within)
         if end is None:
-            ctx.not_judged(f"the arm did not reach {list(goal)} within {within:g} s, so no move was timed")
+            ctx.not_judged(
+                f"the arm did not reach {list(goal)} within {within:g} s, so no move was timed "
+                "(server.motion.queued-segments judges where a motion ends: motion.ends-at-rest)"
+            )
         return end - start
     while (packet := await probe.next_packet(within)) is not None:
         if completed_segment(packet) == segment:
@@ -468,6 +471,10 @@ class TargetArm:
     stated_ready: tuple[float, ...] | None = None
     """The joint angles describe self states as :ready-position (None: none, or not one number per
     degree of freedom)."""
+    ready_value: LispValue | None = None
+    """The :ready-position value as describe self gave it, usable or not (None: not given)."""
+    described: bool = False
+    """Describe self answered with a whole, readable description (the values above may come from it)."""
 
 
 def _number(value: LispValue) -> float | None:
@@ -507,11 +514,22 @@ async def describe_target(ctx: CaseContext, probe: Probe) -> TargetArm:
     dof = int(dof_value) if isinstance(dof_value, int) and dof_value > 0 else 6
     listed = description_operations(entries)
     operations = frozenset(listed) if listed else None
-    ready = _stated_ready(entries.get("ready-position"), dof)
+    value = entries.get("ready-position")
+    ready = _stated_ready(value, dof)
     if limits is None:
         ctx.note("describe self gives no usable :joint-limits; assuming the PUMA 600's")
-        return TargetArm(dof=dof, operations=operations, stated_ready=ready)
-    return TargetArm(limits=limits, declared=True, dof=dof, operations=operations, stated_ready=ready)
+        return TargetArm(
+            dof=dof, operations=operations, stated_ready=ready, ready_value=value, described=True
+        )
+    return TargetArm(
+        limits=limits,
+        declared=True,
+        dof=dof,
+        operations=operations,
+        stated_ready=ready,
+        ready_value=value,
+        described=True,
+    )
 
 
 def _stated_ready(value: LispValue | None, dof: int) -> tuple[float, ...] | None:

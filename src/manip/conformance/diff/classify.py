@@ -15,15 +15,19 @@ Sans-I/O.
 
 from __future__ import annotations
 
+import contextlib
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Final, Literal
 
+from manip.codecs.error_string import parse_error
+from manip.codecs.errors import CodecError
 from manip.conformance.diff.pairing import Difference, SideEvent
 from manip.conformance.fuzz.judge import Sighting
 from manip.conformance.fuzz.steps import FuzzInput, RequestStep
 from manip.spec import SPEC
+from manip.spec.constants import ServerOp
 
 __all__ = ["CLASSES", "Finding", "FindingClass", "classify", "declared", "nearest_section"]
 
@@ -121,31 +125,91 @@ def classify(
     sightings_a: Sequence[Sighting],
     sightings_b: Sequence[Sighting],
     inputs: dict[int, FuzzInput],
+    *,
+    units_differ: bool = False,
 ) -> list[Finding]:
     """Each difference of one stream, classified (module docstring).  A difference on an input where one
     side broke a clause the other did not is that violation; one after such an input follows from it (a
     side that broke a clause may answer out of step from then on: an extra reply is paired with the next
-    request)."""
+    request).  ``units_differ``: the two sides use different length units (erratum units), so a
+    Cartesian move one refuses as out of reach and the other makes is both allowed, and so is every
+    difference after it (the arm stands elsewhere on one side)."""
     out: list[Finding] = []
     order = list(inputs) if inputs else sorted({d.number for d in differences})
     breaches = _unilateral(sightings_a, sightings_b, order)
     position = {n: i for i, n in enumerate(order)}
+    allowed: list[str] = []
     for diff in differences:
         here = position.get(diff.number, len(order))
         same = [b for b in breaches if b[0] == diff.number]
         earlier = [b for b in breaches if position.get(b[0], 0) < here]
         if same:
+            same += [b for b in _about(diff, inputs.get(diff.number), breaches) if b not in same]
             sides = {b[1] for b in same}
             violator: Literal["A", "B", "both"] = "both" if len(sides) == 2 else same[0][1]
             names = tuple(dict.fromkeys(b[2] for b in same))
             out.append(Finding("violation", stream, diff, names, violator, same[0][3], _section(names[0])))
+        elif about := _about(diff, inputs.get(diff.number), breaches):
+            sides = {b[1] for b in about}
+            violator = "both" if len(sides) == 2 else about[0][1]
+            names = tuple(dict.fromkeys(b[2] for b in about))
+            message = f"{about[0][3]} (judged at input {about[0][0]})"
+            out.append(Finding("violation", stream, diff, names, violator, message, _section(names[0])))
         elif earlier:
             number, side, cid, _ = earlier[0]
             follows = f"{cid} (input {number})"
             out.append(Finding("violation", stream, diff, (cid,), side, "", _section(cid), follows))
         else:
-            out.append(_free_or_gap(stream, diff, inputs.get(diff.number)))
+            found = _free_or_gap(stream, diff, inputs.get(diff.number), units_differ=units_differ)
+            if found.cls == "unexplained":
+                found = _following(found, allowed)
+            elif found.cls == "allowed":
+                allowed += [f for f in found.freedoms if f in _CARRIED and f not in allowed]
+            out.append(found)
     return out
+
+
+_CARRIED: Final = ("answer.length-unit", "request.extension-served")
+"""Freedoms whose difference changes what the two sides do next: after a Cartesian move one side made
+and the other refused for its length unit, the arm stands elsewhere on one side (every later answer may
+differ); after an extension refused by one side (request notifications), the asynchronous packets it
+would have asked for do not come, and after one served by one side only (a motion extension), the
+asynchronous packets of the motion it made come on that side alone and put the two sides' answers out
+of step (the ``step`` part; no judge of either side found a reply missing or extra)."""
+
+
+def _following(found: Finding, allowed: Sequence[str]) -> Finding:
+    """A gap that follows from an earlier difference both allowed (:data:`_CARRIED`), as that one."""
+    d = found.difference
+    asynchronous = any(
+        e is not None and e.kind == "packet" and e.opcode == ServerOp.ASYNCHRONOUS_RESPONSE
+        for e in (d.a, d.b)
+    )
+    for freedom in allowed:
+        if freedom == "answer.length-unit" or asynchronous or d.parts == ("step",):
+            names = declared(freedom)
+            message = f"both conform: it follows from an earlier difference both allowed ({freedom})"
+            return Finding(
+                "allowed", found.stream, d, names, "", message, _section(names[-1]), freedoms=(freedom,)
+            )
+    return found
+
+
+_ABOUT: Final = {"describe-self": "describe"}
+"""The first word of the clauses about a request's answer, where it is not the request's name."""
+
+
+def _about(
+    diff: Difference, item: FuzzInput | None, breaches: Sequence[tuple[int, Literal["A", "B"], str, str]]
+) -> list[tuple[int, Literal["A", "B"], str, str]]:
+    """The breaches, anywhere in the stream, of a clause about the request the differing answer answers:
+    what an answer states may be judged only by a later request that tests it (describe self's
+    :operations by a request of a listed opcode, its :joint-limits by a joint angle beyond one), and
+    the judge then attributes the breach to that request."""
+    opcodes = {_answered(e, item) for e in (diff.a, diff.b) if e is not None}
+    names = {SPEC.requests[o].name for o in opcodes if o is not None and o in SPEC.requests}
+    prefixes = {f"{_ABOUT.get(n, n)}." for n in names}
+    return [b for b in breaches if any(b[2].startswith(p) for p in prefixes)]
 
 
 def _section(cid: str) -> str:
@@ -169,8 +233,43 @@ def listed_extensions_only(a: bytes, b: bytes) -> bool:
     return all(op in SPEC.requests and SPEC.requests[op].extension for op in ops_a ^ ops_b)
 
 
+_UNIT_MOVES: Final = frozenset({"incremental-move", "incremental-straight-move"})
+"""The requests whose clauses declare ``answer.length-unit`` (their dX dY dZ are in the side's unit)."""
+
+
+def _unit_reach(diff: Difference | None) -> bool:
+    """One side's answer is done and the other's a refusal as out of reach (TOR)."""
+    if diff is None or diff.a is None or diff.b is None:
+        return False
+    kinds = set()
+    for event in (diff.a, diff.b):
+        if event.kind == "packet" and event.opcode == ServerOp.RESPONSE:
+            kinds.add("done")
+        elif event.kind == "packet" and event.opcode == ServerOp.NON_FATAL_ERROR:
+            try:
+                kinds.add(parse_error(event.data, body="packet").code)
+            except (CodecError, ValueError):
+                return False
+    return kinds == {"done", "TOR"}
+
+
+def _refused_unknown(diff: Difference | None) -> bool:
+    """One side refused the request as an opcode it does not serve (C UOP): whatever the other side
+    answered, the difference is whether the request is served."""
+    for event in (diff.a, diff.b) if diff is not None else ():
+        if event is not None and event.kind == "packet" and event.opcode == ServerOp.NON_FATAL_ERROR:
+            with contextlib.suppress(CodecError, ValueError):
+                if parse_error(event.data, body="packet").code == "UOP":
+                    return True
+    return False
+
+
 def in_context(
-    parts: tuple[str, ...], item: FuzzInput | None, diff: Difference | None = None
+    parts: tuple[str, ...],
+    item: FuzzInput | None,
+    diff: Difference | None = None,
+    *,
+    units_differ: bool = False,
 ) -> tuple[str, ...]:
     """The parts as the request answered explains them (the request each side's answer pairs with, else
     the input's only request): an answer to a manip extension opcode is ``request.extension-served`` (a
@@ -189,9 +288,15 @@ def in_context(
         and diff.b is not None
         and listed_extensions_only(diff.a.data, diff.b.data)
     )
+    reach = units_differ and bool(named & _UNIT_MOVES) and _unit_reach(diff)
+    unserved = extension and _refused_unknown(diff)
     out: list[str] = []
     for part in parts:
-        if (part in _CONTEXTUAL and extension) or (part == "data" and describe):
+        if unserved:
+            part = "request.extension-served"
+        elif part == "opcode" and reach:
+            part = "answer.length-unit"
+        elif (part in _CONTEXTUAL and extension) or (part == "data" and describe):
             part = "request.extension-served"
         elif part in _CONTEXTUAL and "set-configuration" in named:
             part = "answer.configuration-bits"
@@ -208,9 +313,12 @@ def _answered(event: SideEvent | None, item: FuzzInput | None) -> int | None:
     return requests[0] if len(requests) == 1 else None
 
 
-def _free_or_gap(stream: str, diff: Difference, item: FuzzInput | None) -> Finding:
+def _free_or_gap(
+    stream: str, diff: Difference, item: FuzzInput | None, *, units_differ: bool = False
+) -> Finding:
     names: list[str] = []
-    for part in in_context(diff.parts, item, diff):
+    freedoms = in_context(diff.parts, item, diff, units_differ=units_differ)
+    for part in freedoms:
         allowing = declared(part)
         if not allowing:
             cid, section = nearest_section(diff, item)
@@ -218,6 +326,5 @@ def _free_or_gap(stream: str, diff: Difference, item: FuzzInput | None) -> Findi
             message = f"the answers differ in {what}, and no clause or erratum says which conforms"
             return Finding("unexplained", stream, diff, (cid,) if cid else (), "", message, section)
         names += [n for n in allowing if n not in names]
-    freedoms = in_context(diff.parts, item, diff)
     message = f"both conform: {', '.join(freedoms)} is the implementation's choice"
     return Finding("allowed", stream, diff, tuple(names), "", message, _section(names[-1]), freedoms=freedoms)

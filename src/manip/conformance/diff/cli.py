@@ -19,6 +19,7 @@ from typing import Any
 import click
 from rich.markup import escape
 
+from manip.arm.units import LENGTH_UNITS, LengthUnit
 from manip.commandline import FiniteFloat
 from manip.conformance.cli_options import check_output_paths
 from manip.conformance.diff.driver import DiffConfig, StreamResult, run_diff
@@ -30,6 +31,7 @@ from manip.conformance.diff.report import (
     write_junit,
     write_markdown,
 )
+from manip.conformance.diff.scenarios import SCENARIOS, scenario, scenarios
 from manip.conformance.diff.sides import Side, reachable
 from manip.conformance.diff.streams import Stream, make_stream, make_streams, stream_of
 from manip.conformance.fuzz.generators import GenOptions
@@ -75,6 +77,23 @@ def _side_options(letter: str) -> list[Any]:
             help=f"Side {letter} embedded: the layout of an error string's numbers "
             "(erratum error-arg-layout).",
         ),
+        click.option(
+            f"--length-unit-{lower}",
+            f"unit_{lower}",
+            type=click.Choice(LENGTH_UNITS),
+            default=None,
+            help=f"Side {letter}'s unit of lengths (erratum units): an embedded server's (default: its "
+            "profile's); the unit an addressed side uses (default mm), as manip-conform run "
+            "--length-unit names a target's.",
+        ),
+        click.option(
+            f"--world-{lower}",
+            f"world_{lower}",
+            metavar="tcp://HOST:PORT|COMMAND",
+            default=None,
+            help=f"Side {letter} addressed: its world (contract 2, docs/world-harness.md), which arranges "
+            "the conditions the world's scenarios need; without it they are not sent to that side.",
+        ),
     ]
 
 
@@ -115,6 +134,21 @@ def _numbers(ctx: click.Context, param: click.Parameter, value: str | None) -> t
     "--length", type=click.IntRange(1, 200), default=8, show_default=True, help="Fuzz inputs per stream."
 )
 @click.option("--stream", "only_stream", type=click.IntRange(0), default=None, help="Send only stream N.")
+@click.option(
+    "--scenario",
+    "only_scenario",
+    type=click.Choice(list(SCENARIOS)),
+    default=None,
+    help="Send only this scenario (a directed case's request sequence).",
+)
+@click.option(
+    "--scenarios/--no-scenarios",
+    "with_scenarios",
+    default=True,
+    show_default=True,
+    help="Send the scenarios (the directed cases' request sequences, each with its judge) before the "
+    "generated streams.",
+)
 @click.option(
     "--inputs",
     "only_inputs",
@@ -193,8 +227,9 @@ def diff_command(**options: Any) -> None:
         html=options["html_path"],
         junit=options["junit_path"],
     )
-    if options["only_stream"] is not None and options["only_inputs"] is not None:
-        raise click.UsageError("--stream and --inputs each choose what is sent: give one")
+    chosen = [options[k] is not None for k in ("only_stream", "only_inputs", "only_scenario")]
+    if sum(chosen) > 1:
+        raise click.UsageError("--stream, --inputs and --scenario each choose what is sent: give one")
     seed = options["seed"] if options["seed"] is not None else int.from_bytes(os.urandom(4), "big") >> 1
     gen = GenOptions(link="stream", select=options["classes"])
     if not gen.classes():
@@ -227,34 +262,37 @@ def diff_command(**options: Any) -> None:
 
 
 def _streams(seed: int, options: dict[str, Any], gen: GenOptions) -> list[Stream]:
+    if options["only_scenario"] is not None:
+        return [scenario(options["only_scenario"])]
     if options["only_inputs"] is not None:
         return [stream_of(seed, options["only_inputs"], gen)]
     if options["only_stream"] is not None:
         return [make_stream(seed, options["only_stream"], options["length"], gen)]
-    return make_streams(seed, options["count"], options["length"], gen)
+    made = make_streams(seed, options["count"], options["length"], gen)
+    return [*scenarios(), *made] if options["with_scenarios"] else made
 
 
 def _side(letter: str, options: dict[str, Any]) -> Side:
     """Side ``letter`` as the command line names it; a usage error for options that do not apply."""
     lower = letter.lower()
     target = options[lower]
-    faults, profile, error_args = (
+    faults, profile, error_args, unit, world = (
         options[f"faults_{lower}"],
         options[f"profile_{lower}"],
         options[f"error_args_{lower}"],
+        options[f"unit_{lower}"],
+        options[f"world_{lower}"],
     )
+    if target == EMBEDDED and world is not None:
+        raise click.UsageError(
+            f"--world-{lower} is an addressed side's world: the embedded server has its own, in-process"
+        )
     if target != EMBEDDED:
         if faults or profile != "manip" or error_args is not None:
             raise click.UsageError(
                 f"the --...-{lower} server options apply to an embedded side {letter} only"
             )
-        try:
-            address = parse_address(target)
-        except AddressError as exc:
-            raise click.UsageError(f"{letter}: {exc}") from None
-        if address.scheme not in ("tcp", "unix"):
-            raise click.UsageError(f"{letter}: diff speaks tcp:// and unix:// links, not {address.scheme}://")
-        return Side(letter, str(address), address=address, words=(target,))
+        return _addressed(letter, target, unit, world)
     try:
         fault_set = FaultSet.parse(faults)
     except ValueError as exc:
@@ -264,13 +302,34 @@ def _side(letter: str, options: dict[str, Any]) -> Side:
     if error_args is not None:
         changes["error_args"] = error_args
         words += [f"--error-args-{lower}", error_args]
+    if unit is not None:
+        changes["length_unit"] = unit
+        words += [f"--length-unit-{lower}", unit]
     if profile != "manip":
         words += [f"--server-profile-{lower}", profile]
     config = server_config(profile, **changes)
     label = " ".join(["the reference server", f"(profile {profile}", *(f"fault {f}" for f in faults)]) + (
-        f", error args {error_args})" if error_args else ")"
+        f", error args {error_args}" if error_args else ""
     )
+    label += f", lengths in {unit})" if unit else ")"
     return Side(letter, label, config=config, words=tuple(words))
+
+
+def _addressed(letter: str, target: str, unit: LengthUnit | None, world: str | None) -> Side:
+    """Side ``letter`` at the address ``target``, its declared length unit, its world."""
+    lower = letter.lower()
+    try:
+        address = parse_address(target)
+    except AddressError as exc:
+        raise click.UsageError(f"{letter}: {exc}") from None
+    if address.scheme not in ("tcp", "unix"):
+        raise click.UsageError(f"{letter}: diff speaks tcp:// and unix:// links, not {address.scheme}://")
+    words = [target]
+    if unit is not None:
+        words += [f"--length-unit-{lower}", unit]
+    if world is not None:
+        words += [f"--world-{lower}", world]
+    return Side(letter, str(address), address=address, words=tuple(words), world=world, unit=unit or "mm")
 
 
 def _run(
@@ -293,7 +352,13 @@ def _run(
     def done(result: StreamResult) -> None:
         report.results.append(result)
         if not quiet:
-            state = "unstable" if result.unstable else f"{len(result.findings)} difference(s)"
+            state = (
+                f"not compared: {result.unarranged}"
+                if result.unarranged
+                else "unstable"
+                if result.unstable
+                else f"{len(result.findings)} difference(s)"
+            )
             console.print(f"[dim]{escape(result.stream.label)}: {state} ({result.seconds:.2f} s)[/]")
 
     try:
@@ -343,6 +408,9 @@ def _summary(report: DiffReport, console: Any) -> None:
     for result in report.results:
         for detail in result.runaway:
             console.print(f"runaway: {result.stream.label}: side {detail}", markup=False)
+    for result in report.results:
+        if result.unarranged:
+            console.print(f"not compared: {result.stream.label}: {result.unarranged}", markup=False)
     for result in report.unstable:
         console.print(f"unstable (no finding): {result.stream.label}: {result.unstable_detail}", markup=False)
     for problem in report.problems:

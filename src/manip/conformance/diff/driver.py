@@ -49,6 +49,9 @@ class StreamResult:
     unstable_detail: str = ""
     runaway: list[str] = field(default_factory=list)
     seconds: float = 0.0
+    unarranged: str = ""
+    """Why the stream (a scenario) was not compared: a condition of the arm's world it needs could not
+    be arranged on a side.  Not a finding: nothing was compared."""
 
 
 def _once(
@@ -60,9 +63,16 @@ def _once(
     return oa, ob, compare(numbers, oa.events, ob.events)
 
 
-def _findings(stream: Stream, oa: Observation, ob: Observation, diffs: Sequence[Difference]) -> list[Finding]:
+def _findings(
+    stream: Stream,
+    oa: Observation,
+    ob: Observation,
+    diffs: Sequence[Difference],
+    *,
+    units_differ: bool = False,
+) -> list[Finding]:
     inputs = {i.number: i for i in stream.all_inputs}
-    return classify(stream.label, diffs, oa.sightings, ob.sightings, inputs)
+    return classify(stream.label, diffs, oa.sightings, ob.sightings, inputs, units_differ=units_differ)
 
 
 def diff_stream(a: Side, b: Side, stream: Stream, config: DiffConfig) -> StreamResult:
@@ -71,7 +81,10 @@ def diff_stream(a: Side, b: Side, stream: Stream, config: DiffConfig) -> StreamR
     result = StreamResult(stream)
     oa, ob, diffs = _once(a, b, stream, config)
     result.runaway = [f"{s.name}: {o.runaway}" for s, o in ((a, oa), (b, ob)) if o.runaway]
-    if diffs:
+    unarranged = [f"side {s.name}: {o.unarranged}" for s, o in ((a, oa), (b, ob)) if o.unarranged]
+    if unarranged:
+        result.unarranged = "; ".join(unarranged)
+    elif diffs:
         _, _, again = _once(a, b, stream, config)
         if [d.signature for d in again] != [d.signature for d in diffs]:
             result.unstable = True
@@ -81,8 +94,8 @@ def diff_stream(a: Side, b: Side, stream: Stream, config: DiffConfig) -> StreamR
                 f"{len(first)} came or went"
             )
         else:
-            result.findings = _findings(stream, oa, ob, diffs)
-            if config.shrink:
+            result.findings = _findings(stream, oa, ob, diffs, units_differ=a.length_unit != b.length_unit)
+            if config.shrink and not stream.scenario:
                 result.findings = _shrink_gaps(a, b, stream, result.findings, config)
     result.seconds = time.monotonic() - started
     return result
@@ -110,7 +123,8 @@ def _shrink(a: Side, b: Side, stream: Stream, parts: tuple[str, ...], config: Di
     async def still(candidate: list[int]) -> bool:
         sub = stream.only(candidate)
         oa, ob, diffs = _once(a, b, sub, config)
-        return parts in _gap_parts(_findings(sub, oa, ob, diffs))
+        found = _findings(sub, oa, ob, diffs, units_differ=a.length_unit != b.length_unit)
+        return parts in _gap_parts(found)
 
     budget = Budget(config.shrink_trials, config.shrink_seconds)
 

@@ -16,7 +16,8 @@ NCP's and are never compared.
 * an error string by its parts: ``error.number``, ``error.where``, ``error.severity``, ``error.code``,
   ``error.message``, ``error.args`` (the numbers), ``error.args-layout`` (the pad byte of erratum
   ``error-arg-layout``), ``error.text`` (one side's does not parse); two different codes that are both
-  the 1985 guide's own (TOR and JOR, NAP and JOR) are ``error.guide-code``, which no freedom covers.
+  the 1985 guide's own (TOR and JOR, NAP and JOR) are ``error.guide-code``, which no freedom covers
+  (but AWA against another for calibrate, hand or free joint is ``error.abort-scope``, erratum awa-scope).
   The numbers of two different messages are not compared: they are what each message says (erratum
   ``error-arg-values``);
 * an asynchronous response: ``async.layout`` (6 or 8 bytes, erratum ``async-request-number``) and
@@ -165,7 +166,7 @@ def differing_parts(a: SideEvent | None, b: SideEvent | None) -> tuple[str, ...]
     if a.kind != "packet":
         return (a.kind,)
     if a.opcode in _ERRORS:
-        return _error_parts(a.data, b.data)
+        return _abort_scope(_error_parts(a.data, b.data), a, b)
     if a.opcode == ServerOp.ASYNCHRONOUS_RESPONSE:
         return _async_parts(a.data, b.data)
     return _data_parts(a.data, b.data)
@@ -195,6 +196,27 @@ def _error_parts(a: bytes, b: bytes) -> tuple[str, ...]:
         # The pad byte before the numbers (erratum error-arg-layout), or other bytes the parts do not show.
         parts.append("error.args-layout")
     return tuple(parts)
+
+
+_MAY_ABORT: Final = frozenset(SPEC.request(n).opcode for n in ("calibrate", "hand", "free-joint"))
+"""Requests that may move the arm without being motion requests: refusing them AWA while an abort stands
+is the server's choice (erratum awa-scope)."""
+
+
+def _abort_scope(parts: tuple[str, ...], a: SideEvent, b: SideEvent) -> tuple[str, ...]:
+    """``error.guide-code`` as ``error.abort-scope`` where one side refused AWA a request of
+    :data:`_MAY_ABORT` and the other refused it with another of the guide's codes."""
+    if "error.guide-code" not in parts or a.request != b.request or a.request not in _MAY_ABORT:
+        return parts
+    try:
+        codes = {parse_error(e.data, body="packet").code for e in (a, b)}
+    except (CodecError, ValueError):
+        return parts
+    return (
+        tuple("error.abort-scope" if p == "error.guide-code" else p for p in parts)
+        if "AWA" in codes
+        else parts
+    )
 
 
 def _guide_code(code: str) -> bool:
@@ -229,6 +251,16 @@ def _floats(data: bytes) -> list[float] | None:
         return None
 
 
+def _dirty(a: bytes, b: bytes) -> bool:
+    """Whether a float of ``a`` or ``b`` has exponent 0 with other bits set where the other side's
+    differs: it reads as zero, yet only all bits clear is an F zero (``float.dirty-zero``)."""
+    for at in range(0, len(a) - 3, 4):
+        wa, wb = a[at : at + 4], b[at : at + 4]
+        if wa != wb and any(not (w[1] << 1 | w[0] >> 7) & 0xFF and any(w) for w in (wa, wb)):
+            return True
+    return False
+
+
 def _close(x: float, y: float) -> bool:
     return math.isclose(x, y, rel_tol=FLOAT_TOLERANCE, abs_tol=FLOAT_TOLERANCE)
 
@@ -241,7 +273,7 @@ def _data_parts(a: bytes, b: bytes) -> tuple[str, ...]:
         return ("data",)
     differing = [(x, y) for x, y in zip(fa, fb, strict=True) if not _close(x, y)]
     if not differing:
-        return ()
+        return ("data",) if _dirty(a[2:], b[2:]) else ()
     if all(_close(x, y * INCH) or _close(y, x * INCH) for x, y in differing):
         return ("data.length-unit",)
     return ("data",)

@@ -93,7 +93,9 @@ class DiffReport:
     def reproduce(self, finding: Finding, result: StreamResult) -> str:
         """The command that sends the finding's stream (or its shrunk inputs) to both sides again."""
         words = [*self.reproduce_prefix, "--seed", str(self.seed)]
-        if finding.shrunk is not None:
+        if result.stream.scenario:
+            words += ["--scenario", result.stream.scenario]
+        elif finding.shrunk is not None:
             words += ["--inputs", ",".join(str(n) for n in finding.shrunk) or "none"]
         elif result.stream.number is not None:
             words += ["--stream", str(result.stream.number), "--length", str(self.length)]
@@ -129,6 +131,9 @@ class DiffReport:
             "counts": self.counts,
             "unstable": [{"stream": r.stream.label, "detail": r.unstable_detail} for r in self.unstable],
             "runaways": [{"stream": r.stream.label, "detail": d} for r in self.results for d in r.runaway],
+            "not_arranged": [
+                {"stream": r.stream.label, "detail": r.unarranged} for r in self.results if r.unarranged
+            ],
             "problems": list(self.problems),
             "findings": [self._finding_json(f, r) for r in self.results for f in r.findings],
         }
@@ -206,6 +211,11 @@ def write_markdown(report: DiffReport, path: Path) -> None:
         *[f"| {CLASS_NAMES[c]} | {n} |" for c, n in report.counts.items()],
         "",
     ]
+    unarranged = [r for r in report.results if r.unarranged]
+    if unarranged:
+        out += ["## Scenarios not compared (a condition of the world not arranged)", ""]
+        out += [f"- {r.stream.label}: {r.unarranged}" for r in unarranged]
+        out.append("")
     if report.unstable:
         out += ["## Unstable streams (no finding)", ""]
         out += [f"- {r.stream.label}: {r.unstable_detail}" for r in report.unstable]

@@ -1,7 +1,8 @@
 """The two sides of a diff, and what one side showed of one stream (the I/O of the diff).
 
 A side is an address (a server someone runs; driven in real time) or the embedded reference server
-with its configuration (a :class:`~manip.reference_server.ServerConfig`: fault switches, the guide
+(with its simulated Cougar wrist and its world, as ``manip-conform run``'s embedded target) with its
+configuration (a :class:`~manip.reference_server.ServerConfig`: fault switches, the guide
 profile, the error-argument layout).  An embedded side runs in virtual time
 (:func:`manip.conformance.suite.embedded.simulated_server` on a
 :class:`~manip.links.virtual_clock.VirtualClockLoop`): a fresh server for every stream, seeded from
@@ -18,9 +19,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from typing import Final
 
+from manip.arm.units import LengthUnit
 from manip.conformance.diff.oracles import arg_value_sightings
 from manip.conformance.diff.pairing import SideEvent, events_of
 from manip.conformance.diff.streams import Stream
@@ -28,7 +31,9 @@ from manip.conformance.fuzz.batch import BatchRunner, liveness
 from manip.conformance.fuzz.judge import Sighting, judge
 from manip.conformance.fuzz.session import Allowance
 from manip.conformance.judge.violation import Violation
-from manip.conformance.suite.embedded import simulated_server
+from manip.conformance.suite.embedded import simulated_environment
+from manip.conformance.suite.world import Condition, ConditionUnsupported, World, WorldError
+from manip.conformance.suite.world_link import open_world
 from manip.links import LinkAddress, parse_address, virtual_clock
 from manip.reference_server import ServerConfig
 
@@ -55,10 +60,19 @@ class Side:
     address: LinkAddress | None = None
     config: ServerConfig | None = None
     words: tuple[str, ...] = ()
+    world: str | None = None
+    """An addressed side's world (``--world-a/-b``: tcp://HOST:PORT or a command, contract 2)."""
+    unit: LengthUnit = "mm"
+    """An addressed side's length unit, as the command line declares it (nothing on the wire says it)."""
 
     @property
     def embedded(self) -> bool:
         return self.config is not None
+
+    @property
+    def length_unit(self) -> LengthUnit:
+        """The unit of lengths on the side's wire (erratum units): an embedded server's own."""
+        return self.config.length_unit if self.config is not None else self.unit
 
 
 @dataclass
@@ -69,6 +83,8 @@ class Observation:
     sightings: list[Sighting] = field(default_factory=list)
     runaway: str | None = None
     seconds: float = 0.0
+    unarranged: str | None = None
+    """Why the stream was not sent: a condition of the arm's world it needs was not arranged."""
 
 
 def observe(side: Side, stream: Stream, allowance: Allowance, seed: int) -> Observation:
@@ -77,12 +93,49 @@ def observe(side: Side, stream: Stream, allowance: Allowance, seed: int) -> Obse
         config = side.config
 
         async def embedded() -> Observation:
-            async with simulated_server(config, seed=seed) as url:
-                return await _observe(parse_address(url), stream, allowance, seed)
+            async with simulated_environment(config, seed=seed, wrist=True) as env:
+                arranged = await _arranged(env.world, stream.conditions)
+                if isinstance(arranged, str):
+                    return Observation(unarranged=arranged)
+                async with arranged:
+                    return await _observe(parse_address(env.address), stream, allowance, seed)
 
         return virtual_clock.run(embedded(), virtual=True)
     assert side.address is not None
-    return asyncio.run(_observe(side.address, stream, allowance, seed))
+    address = side.address
+    if not stream.conditions:
+        return asyncio.run(_observe(address, stream, allowance, seed))
+    if side.world is None:
+        needs = ", ".join(c.describe() for c in stream.conditions)
+        return Observation(
+            unarranged=f"it needs {needs}, and side {side.name} has no --world-{side.name.lower()}"
+        )
+
+    async def with_world(spec: str) -> Observation:
+        try:
+            async with open_world(spec, answer_timeout=allowance.connect) as world:
+                arranged = await _arranged(world, stream.conditions)
+                if isinstance(arranged, str):
+                    return Observation(unarranged=arranged)
+                async with arranged:
+                    return await _observe(address, stream, allowance, seed)
+        except WorldError as exc:
+            return Observation(unarranged=f"side {side.name}'s world failed: {exc}")
+
+    return asyncio.run(with_world(side.world))
+
+
+async def _arranged(world: World, conditions: Sequence[Condition]) -> contextlib.AsyncExitStack | str:
+    """An exit stack holding every condition arranged (leave it to clear them), or why one could not
+    be."""
+    stack = contextlib.AsyncExitStack()
+    try:
+        for condition in conditions:
+            await stack.enter_async_context(world.arranged(condition))
+    except (ConditionUnsupported, WorldError) as exc:
+        await stack.aclose()
+        return f"{world.description} cannot arrange it: {exc}"
+    return stack
 
 
 async def _observe(address: LinkAddress, stream: Stream, allowance: Allowance, seed: int) -> Observation:
@@ -101,14 +154,25 @@ async def _observe(address: LinkAddress, stream: Stream, allowance: Allowance, s
             hang = Sighting(Violation(why, None, "MUST", "the stream ended", why, kind="timeout"), last)
             event = SideEvent("stream", text=f"runaway: {why}")
             return Observation({last: [event]}, [hang], why, loop.time() - started)
-        sightings = judge(run, runner.inbox, live)
+        sightings = [_opening(s, stream) for s in judge(run, runner.inbox, live)]
         events = events_of(run, runner.inbox)
         for item in stream.all_inputs:
             sightings += arg_value_sightings(item, events.get(item.number, ()))
+        if stream.check is not None:
+            sightings += stream.check(events)
         return Observation(events, sightings, None, loop.time() - started)
     finally:
         with contextlib.suppress(Exception):
             runner.close()
+
+
+def _opening(sighting: Sighting, stream: Stream) -> Sighting:
+    """A finding about how the connection opened (``connect.*`` with no packet to place it: the initial
+    response never came), placed on the stream's first input, which opened it."""
+    violation = sighting.violation
+    if violation.packet is None and (violation.clause or "").startswith("connect."):
+        return replace(sighting, number=stream.all_inputs[0].number)
+    return sighting
 
 
 def reachable(side: Side, allowance: Allowance, seed: int) -> str | None:

@@ -10,16 +10,29 @@ again, ``--inputs N,M`` a stream of exactly those inputs (a shrunk one).  Sans-I
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Final
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Final
 
 from manip.codecs.pdp11float import pack_f
 from manip.conformance.fuzz.generators import GenOptions, generate
 from manip.conformance.fuzz.steps import FuzzInput, RequestStep
 from manip.spec import SPEC
 
-__all__ = ["PREAMBLE_NUMBER", "Stream", "make_stream", "make_streams", "preamble", "stream_of"]
+if TYPE_CHECKING:
+    from manip.conformance.diff.pairing import SideEvent
+    from manip.conformance.fuzz.judge import Sighting
+    from manip.conformance.suite.world import Condition
+
+__all__ = [
+    "PREAMBLE_NUMBER",
+    "ScenarioCheck",
+    "Stream",
+    "make_stream",
+    "make_streams",
+    "preamble",
+    "stream_of",
+]
 
 PREAMBLE_NUMBER: Final = -1
 """The input number of the preamble (the fuzzer numbers its inputs from 0)."""
@@ -36,12 +49,24 @@ def preamble() -> FuzzInput:
     )
 
 
+ScenarioCheck = Callable[["dict[int, list[SideEvent]]"], "list[Sighting]"]
+"""A scenario's own judge: a side's events of the stream in, the clauses they break out
+(:mod:`manip.conformance.diff.scenarios`)."""
+
+
 @dataclass(frozen=True)
 class Stream:
-    """Stream ``number`` (None: one made of chosen inputs): the preamble, then ``inputs``."""
+    """Stream ``number`` (None: one made of chosen inputs, or a scenario): the preamble, then ``inputs``.
+
+    A scenario (:mod:`manip.conformance.diff.scenarios`) has its ``scenario`` name, the environment
+    conditions of the arm's world each side's world arranges for it (``conditions``) and its own
+    ``check`` of each side's answers."""
 
     number: int | None
     inputs: tuple[FuzzInput, ...]
+    scenario: str = ""
+    conditions: tuple[Condition, ...] = ()
+    check: ScenarioCheck | None = None
 
     @property
     def all_inputs(self) -> list[FuzzInput]:
@@ -54,10 +79,12 @@ class Stream:
     def only(self, numbers: Sequence[int]) -> Stream:
         """The same stream with only the inputs numbered ``numbers`` (shrinking)."""
         keep = set(numbers)
-        return Stream(self.number, tuple(i for i in self.inputs if i.number in keep))
+        return replace(self, inputs=tuple(i for i in self.inputs if i.number in keep))
 
     @property
     def label(self) -> str:
+        if self.scenario:
+            return f"scenario {self.scenario}"
         if self.number is not None:
             return f"stream {self.number}"
         return "inputs " + ",".join(str(n) for n in self.input_numbers)

@@ -151,10 +151,14 @@ async def peek_words(
     ctx: CaseContext, probe: CougarProbe, address: int, words: int, name: str
 ) -> tuple[int, ...]:
     """Memory words for a case that only needs them (to send them back unchanged): judges nothing, and
-    skips the case when EXMN does not return them (``cougar.reply.exmn`` judges EXMN)."""
+    leaves the case not judged when EXMN does not return them (a wrong answer, which
+    ``cougar.reply.exmn`` judges: never a skip)."""
     reply = await probe.examine(address, words)
     if reply.problem or reply.name != "EXMN-DATA" or reply.data_words[:1] != (words,):
-        ctx.skip(f"the case needs Cougar's {name} words, which EXMN did not return: {reply}")
+        ctx.not_judged(
+            f"the case needs Cougar's {name} words ({words} at {octal(address)}), which EXMN did not "
+            f"return: {reply} (cougar.reply.exmn judges EXMN's answer)"
+        )
     return tuple(int(w) for w in reply.data_words[1:])
 
 

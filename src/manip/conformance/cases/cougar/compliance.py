@@ -37,6 +37,8 @@ from manip.cougar.memory import Region
 
 # ------------------------------------------------------------------------------------------ NPR, RST
 _THETA_ERROR: Final = (1.0, -1.0, 1.0, 2.0, -2.0, 2.0)
+BJI_STEPS: Final = (1.0, 2.0, 3.0, 0.5, 1.5, 2.5)
+"""Each joint's BJI as a multiple of the uniform one: a diagonal BJI scales joint i's NTD by its own."""
 GAIN: Final = 5.0
 """K (oz/mm) and B (oz s/mm) steps: with the position error and rate difference used, their force
 terms are ~100 oz, so gauge noise of a fraction of an ounce stays far inside the 2 % tolerance."""
@@ -48,14 +50,14 @@ async def _ntd(
     *,
     k: float,
     b: float,
-    bji: float,
+    bji: float | tuple[float, ...],
     rate: float,
 ) -> tuple[float, ...]:
-    """NTD for diagonal gains (K = k, B = b I, BJI = bji) at READY with a fixed position error,
-    after RST (so the output filter starts from rest whatever its constants)."""
+    """NTD for diagonal gains (K = k, B = b I, BJI = bji, or each joint's own) at READY with a fixed
+    position error, after RST (so the output filter starts from rest whatever its constants)."""
     await probe.send("NK", k=(k,) * 6)
     await probe.send("NB", b=tuple(b if i % 7 == 0 else 0.0 for i in range(36)))
-    await probe.send("NBJI", bji=(bji,) * 6)
+    await probe.send("NBJI", bji=bji if isinstance(bji, tuple) else (bji,) * 6)
     await probe.send("NFC", force=(0.0,) * 6)
     await probe.send("RST")
     expect_none(ctx, await probe.run(3), "cougar.word-link", "parameter commands have no response")
@@ -83,7 +85,8 @@ async def _ntd(
 async def npr_gains(ctx: CaseContext) -> None:
     """NTD answers the gains NK, NB and NBJI set: zero joint damping inverse gives zero; the part due
     to K (position error) and to B (rate difference) is non-zero and doubles when the gain doubles;
-    doubling BJI doubles the whole answer (erratum cougar-compliance-equation)."""
+    doubling BJI doubles the whole answer, and each joint's element of BJI scales that joint's part alone
+    (erratum cougar-compliance-equation)."""
     async with cougar_probe(ctx) as probe:
         await clean(probe)
         await settle(probe)
@@ -124,6 +127,16 @@ async def npr_gains(ctx: CaseContext) -> None:
                 clause="cougar.npr.reply",
                 expected=f"doubling BJI doubles NTD: {fmt(2 * v for v in one)}",
                 seen=fmt(two),
+            )
+            each = tuple(bji * m for m in BJI_STEPS)
+            own = await _ntd(ctx, probe, k=GAIN, b=0.0, bji=each, rate=0.0)
+            want = [v * m for v, m in zip(one, BJI_STEPS, strict=True)]
+            ctx.expect(
+                close_to(own, want, rel=0.02, floor=1e-6),
+                clause="cougar.npr.reply",
+                expected=f"BJI {fmt(each)} (diagonal: joint i's own element scales joint i) gives NTD "
+                f"{fmt(want)}",
+                seen=fmt(own),
             )
         finally:
             await probe.send("NBJI", bji=(0.0,) * 6)

@@ -24,6 +24,7 @@ from manip.arm.units import MM_PER_UNIT
 from manip.conformance.cases.cougar._support import (
     POSE_B,
     clean,
+    expect_reply,
     fmt,
     guard_trips,
     guard_words,
@@ -188,3 +189,93 @@ async def gravity_nfv_redoes_model(ctx: CaseContext) -> None:
             await probe.send("NFV", offset=fv0)
             await probe.send("SEN", theta_sensed=READY)
             await probe.run(1)
+
+
+BJI: Final = 0.01
+"""The joint accommodation of the compliance check: NTD = BJI Jᵀ (F_commanded - F) with K and B zero."""
+NOISE_FACTOR: Final = 20.0
+"""How far above the noise of two like NPRs the commanded force's effect on NTD must be for the check
+of the corrected force to mean anything."""
+
+
+async def _ntd_at_rest(ctx: CaseContext, probe: CougarProbe, commanded_force: Sequence[float]) -> Vector:
+    """NTD for NPR at READY with the arm where it is commanded (no position error, no rate), after RST
+    (the output filter at rest), the commanded force set to ``commanded_force``."""
+    await probe.send("NFC", force=tuple(commanded_force))
+    await probe.send("RST")
+    await probe.run(2)
+    reply = await probe.call("NPR", theta_sensed=READY, theta_commanded=READY, rate_difference=(0.0,) * 6)
+    values = expect_reply(ctx, reply, "NTD", "cougar.npr.reply", after="NPR").floats()
+    ctx.expect(
+        len(values) == 6 and all(np.isfinite(values)),
+        clause="cougar.npr.reply",
+        expected="six finite floats",
+        seen=fmt(values),
+    )
+    return np.array(values if len(values) == 6 else (0.0,) * 6, dtype=np.float64)
+
+
+@case(
+    "cougar.gravity.compliance-corrected",
+    clauses=[
+        "cougar.compliance-corrected-force",
+        "cougar.npr.reply",
+        "cougar.rfrc.reply",
+        "cougar.response.layout",
+    ],
+    hazard="config",
+    deadline=8.0,
+)
+async def gravity_compliance_corrected(ctx: CaseContext) -> None:
+    """NPR's compliance equation works on the gravity-corrected force (B.8): with only BJI set (K and B
+    zero, the arm where it is commanded), telling Cougar of an object the hand does not hold changes NTD
+    as lowering the commanded force by the object's load (the change RFRC shows) does."""
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        try:
+            await probe.send("NK", k=(0.0,) * 6)
+            await probe.send("NB", b=(0.0,) * 36)
+            await probe.send("NBJI", bji=(BJI,) * 6)
+            await probe.send("NEWWC", weight=0.0, cg=(0.0, 0.0, 0.0))
+            await settle(probe, READY)
+            bare_force = np.array(await read_forces(ctx, probe))
+            bare = await _ntd_at_rest(ctx, probe, (0.0,) * 6)
+            again = await _ntd_at_rest(ctx, probe, (0.0,) * 6)
+            await probe.send("NEWWC", weight=OBJECT_OZ, cg=in_unit(ctx, OBJECT_CG_MM))
+            await probe.run(2)
+            load = np.array(await read_forces(ctx, probe)) - bare_force
+            loaded = await _ntd_at_rest(ctx, probe, (0.0,) * 6)
+            await probe.send("NEWWC", weight=0.0, cg=(0.0, 0.0, 0.0))
+            await probe.run(2)
+            shifted = await _ntd_at_rest(ctx, probe, tuple(float(v) for v in -load))
+            _expect_same_ntd(ctx, loaded, shifted, bare, load)
+            noise = float(np.abs(again - bare).max())
+            ctx.expect(
+                float(np.abs(shifted - bare).max()) > NOISE_FACTOR * noise,
+                clause="cougar.npr.reply",
+                expected=f"NTD moving with the commanded force (F_commanded in the compliance equation, "
+                f"erratum cougar-compliance-equation) by more than {NOISE_FACTOR:g} times its noise "
+                f"({noise:.2g})",
+                seen=f"NFC {fmt(-load)} gave NTD {fmt(shifted)}, NFC 0 gave {fmt(bare)}",
+            )
+        finally:
+            await probe.send("NBJI", bji=(0.0,) * 6)
+            await probe.send("NFC", force=(0.0,) * 6)
+            await probe.send("NEWWC", weight=0.0, cg=(0.0, 0.0, 0.0))
+            await probe.send("RST")
+            await probe.run(1)
+
+
+def _expect_same_ntd(ctx: CaseContext, loaded: Vector, shifted: Vector, bare: Vector, load: Vector) -> None:
+    """NTD with the object told of equals NTD with no object and the commanded force lowered by its load,
+    within 2 % of that load's effect on NTD plus the gauge noise's share of it."""
+    effect = float(np.abs(shifted - bare).max())
+    slack = effect * (REL + SLACK_OZ / max(float(np.abs(load).max()), SLACK_OZ))
+    for i, name in enumerate(("joint 1", "joint 2", "joint 3", "joint 4", "joint 5", "joint 6")):
+        ctx.expect(
+            abs(float(loaded[i] - shifted[i])) <= slack,
+            clause="cougar.compliance-corrected-force",
+            expected=f"NTD {name} with the object told of (NEWWC {OBJECT_OZ:g} oz) = NTD with none and the "
+            f"commanded force lowered by its load {fmt(load)}: {shifted[i]:.4g} (within {slack:.2g})",
+            seen=f"{loaded[i]:.4g} (with no object and no commanded force: {bare[i]:.4g})",
+        )

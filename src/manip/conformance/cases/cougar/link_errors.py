@@ -1,6 +1,6 @@
 """The error paths of the emulated DRV-11J link (docs/drv11j.md, manip's own contract): a bad HELLO, a
-frame from the wrong side or of an unknown type, a short TICK, a TICK going backwards, the Puma's BYE,
-and a second Puma while one is linked.
+first frame that is not HELLO, a HELLO of another version, a frame from the wrong side or of an unknown
+type, a short TICK, a TICK going backwards, the Puma's BYE, and a second Puma while one is linked.
 
 Each case plays the Puma by hand on a raw TCP connection (the word probe only ever sends good frames),
 sends the frame under test followed by a good command and TICK, and judges what Cougar does: it ends the
@@ -172,7 +172,9 @@ GOOD_START: Final = encode_frame(Hello(Role.PUMA)) + _carry_on(0, 0.0)
 @dataclass(frozen=True)
 class BadFrame:
     """One error path: the case's id and summary, the clause it judges, whether the bad frame is the
-    first one (in place of HELLO), its bytes, and what it is (for the report)."""
+    first one (in place of HELLO), its bytes, and what it is (for the report).  ``then_hello``: a good
+    HELLO follows a bad first frame, for a Cougar that dropped it; a Cougar that took the bad frame as
+    its greeting answers the TICK after it, which a second HELLO would stop first."""
 
     name: str
     clause: str
@@ -180,6 +182,7 @@ class BadFrame:
     first: bool
     bad: bytes
     what: str
+    then_hello: bool = True
 
 
 _BAD_FRAMES: Final = (
@@ -198,6 +201,24 @@ _BAD_FRAMES: Final = (
         True,
         encode_frame(Hello(Role.COUGAR)),
         "after a HELLO naming role Cougar",
+    ),
+    BadFrame(
+        "not-hello-first",
+        "link.drv11j.hello-first",
+        "A link whose first frame is a command (PUMA), with no HELLO before it, ends.",
+        True,
+        encode_frame(Words(Role.PUMA, VERS)),
+        "after a PUMA frame (then TICK 1) with no HELLO before it",
+        then_hello=False,
+    ),
+    BadFrame(
+        "hello-other-version",
+        "link.drv11j.hello-version",
+        "A first frame that is HELLO of version 2 (the framing is version 1) ends the link.",
+        True,
+        encode_frame(Hello(Role.PUMA, version=2)),
+        "after a HELLO of version 2",
+        then_hello=False,
     ),
     BadFrame(
         "wrong-side",
@@ -246,7 +267,8 @@ _BAD_FRAMES: Final = (
 def _bad_frame_case(row: BadFrame) -> None:
     async def ends(ctx: CaseContext) -> None:
         # a Cougar that carried on would take the good HELLO (after a bad first frame) and answer the tick
-        trailer = (encode_frame(Hello(Role.PUMA)) if row.first else b"") + _carry_on(1, 1.0)
+        hello = row.first and row.then_hello
+        trailer = (encode_frame(Hello(Role.PUMA)) if hello else b"") + _carry_on(1, 1.0)
         link = await run_link(ctx, None if row.first else GOOD_START, row.bad + trailer)
         judge_ending(ctx, link, row.clause, row.what)
 

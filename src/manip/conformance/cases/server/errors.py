@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import asyncio
-from typing import Final
+from typing import Final, NoReturn
 
 from manip.conformance.cases._support import UNASSIGNED_OPCODES, error_of
 from manip.conformance.judge.checks import check_error_packet
@@ -146,15 +146,31 @@ async def fatal_then_close(ctx: CaseContext) -> None:
         probe = await ctx.connect()
         answer = await probe.call("enable-power")
         answer = await probe.call("calibrate", timeout=5.0)
-        if answer.is_response:
-            ctx.expect(len(answer.data) == 2, clause="calibrate.done", expected="an empty done", seen=answer)
-            ctx.not_judged(
-                f"calibrate succeeded although the world arranged {failure.describe()}: no "
-                "fatal error to judge"
-            )
         if answer.opcode != ServerOp.FATAL_ERROR:
-            ctx.not_judged(f"calibrate was refused with a non-fatal error, not failed: {answer}")
+            _not_fatal(ctx, answer, failure)
         await _judge_fatal(ctx, probe, answer, failure.joints)
+
+
+def _not_fatal(ctx: CaseContext, answer: Answer, failure: CalibrationFailure) -> NoReturn:
+    """Calibrate, under an arranged calibration failure, answered other than with a fatal error: done, or
+    NZI as a non-fatal error, is a wrong answer (the 1985 guide's table: F NZI); a refusal for another
+    reason leaves no calibration to judge, and server.reply.calibrate judges that answer."""
+    expected = f"F NZI naming joints {list(failure.joints)}, as the world arranged {failure.describe()}"
+    if answer.is_response:
+        ctx.expect(len(answer.data) == 2, clause="calibrate.done", expected="an empty done", seen=answer)
+        ctx.fail(
+            "calibrate succeeded although it could not",
+            clause="calibrate.nzi",
+            expected=expected,
+            seen=answer,
+        )
+    error = error_of(answer)
+    if error is not None and error.error.code == "NZI":
+        ctx.fail("NZI came as a non-fatal error", clause="calibrate.nzi", expected=expected, seen=answer)
+    ctx.not_judged(
+        f"calibrate was refused with a non-fatal error, not failed: {answer} (server.reply.calibrate "
+        "judges that answer)"
+    )
 
 
 async def _judge_fatal(ctx: CaseContext, probe: Probe, answer: Answer, failed: tuple[int, ...]) -> None:

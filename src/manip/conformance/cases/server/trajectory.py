@@ -157,6 +157,73 @@ async def straight_line(ctx: CaseContext) -> None:
     await settle(ctx, probe, before)
 
 
+JOINT_MOVE_MM: Final = (60.0, 150.0, -80.0)
+"""dX dY dZ of the joint-interpolated case's Move (and, back, its incremental move), in millimetres: far
+enough that a straight line would take the joints out of step."""
+FRACTION_TOL: Final = 0.02
+"""How far apart, as fractions of their ways, two moving joints may be at one sample of a
+joint-interpolated move (a snapshot of the arm, so only the servo's lag separates them)."""
+MOVING_DEG: Final = 2.0
+"""A joint whose way is shorter than this (degrees) is left out of the comparison of fractions."""
+
+
+@case("server.motion.joint-interpolated", clauses=["joint-move.interpolated"], hazard="motion", deadline=15.0)
+async def joint_interpolated(ctx: CaseContext) -> None:
+    """Move (204) 180 mm away and incremental move (211) back: in every Joint angles sampled on the way the
+    joints that move have covered the same fraction of their ways (joint-interpolated motion), and each
+    move ends at its goal (Here within 0.05 mm of it)."""
+    probe = await ctx.connect()
+    before, start = await _at_line_pose(ctx, probe)
+    shift = [length(ctx, v) for v in JOINT_MOVE_MM]
+    goal = list(start)
+    for i, v in enumerate(shift):
+        goal[9 + i] += v
+    moves = (
+        ("move", {"transform": goal}, goal),
+        ("incremental-move", {"delta": [-v for v in shift] + [0.0, 0.0, 0.0]}, list(start)),
+    )
+    for op, values, target in moves:
+        first = await read_floats(ctx, probe, "joint-angles")
+        answer = await probe.call(op, **values)  # type: ignore[arg-type]
+        require_reach(ctx, answer, f"a joint-interpolated move ({op})")
+        samples = await _sample(ctx, probe, "joint-angles", 10.0)
+        _expect_in_step(ctx, op, first, [sample.values for sample in samples])
+        here = await read_floats(ctx, probe, "here")
+        off = math.dist(here[9:], target[9:])
+        ctx.expect(
+            off <= length(ctx, POSE_TOL_MM),
+            clause="joint-move.interpolated",
+            expected=f"{op} ending at its goal {list(target[9:])}",
+            seen=f"Here {list(here[9:])}, {off:.4g} {ctx.options.length_unit} from it",
+        )
+    await probe.call("set-joint-angles", joints=list(before))
+    await settle(ctx, probe, before)
+
+
+def _expect_in_step(
+    ctx: CaseContext, op: str, first: Sequence[float], path: Sequence[Sequence[float]]
+) -> None:
+    """Every sample of ``path`` (from ``first`` to where it stood still) has the joints that moved at
+    one fraction of their ways, within :data:`FRACTION_TOL`."""
+    last = path[-1] if path else first
+    moving = [i for i, (a, b) in enumerate(zip(first, last, strict=True)) if abs(b - a) >= MOVING_DEG]
+    worst, where = 0.0, tuple(first)
+    for q in path:
+        fractions = [(q[i] - first[i]) / (last[i] - first[i]) for i in moving]
+        spread = max(fractions) - min(fractions) if fractions else 0.0
+        if spread > worst:
+            worst, where = spread, tuple(q)
+    ctx.note(f"{op}: {len(path)} samples, joints {[i + 1 for i in moving]} moved, at most {worst:.4f} apart")
+    ctx.expect(
+        len(moving) >= 2 and worst <= FRACTION_TOL,
+        clause="joint-move.interpolated",
+        expected=f"{op}: at least two joints moving {list(first)} -> {list(last)}, at every sample at one "
+        f"fraction of their ways (within {FRACTION_TOL:g})",
+        seen=f"joints {[i + 1 for i in moving]} moved; at {list(where)} their fractions were {worst:.4f} "
+        "apart",
+    )
+
+
 @case("server.motion.incremental-reference", clauses=["incremental.relative"], hazard="motion", deadline=15.0)
 async def incremental_reference(ctx: CaseContext) -> None:
     """Two incremental moves queued back to back (211 then 212) add to where the previous one ends: the
@@ -215,8 +282,20 @@ async def ready_position(ctx: CaseContext) -> None:
     """Move to ready (214) ends at the joint angles describe self states as :ready-position."""
     probe = await ctx.connect()
     arm = await describe_target(ctx, probe)
-    if arm.stated_ready is None:
-        ctx.skip("the description states no usable :ready-position (one number per joint)")
+    if not arm.described:  # a wrong answer, never a skip
+        ctx.not_judged(
+            "describe self gave no whole, readable description to take a :ready-position from "
+            "(server.describe.reply-shape and server.describe.alist judge its answer)"
+        )
+    if arm.ready_value is None:
+        ctx.skip("the description states no :ready-position")
+    if arm.stated_ready is None:  # stated, but not angles: a wrong answer, never a skip
+        ctx.fail(
+            "the stated :ready-position is not one angle per joint",
+            clause="describe.ready-position",
+            expected=f":ready-position as {arm.dof} numbers, one angle per degree of freedom",
+            seen=repr(arm.ready_value),
+        )
     await power_on(ctx, probe)
     start = await read_floats(ctx, probe, "joint-angles")
     away = list(start)
