@@ -40,6 +40,7 @@ from manip.reference_client.faults import ClientFault
 from manip.reference_server.faults import WRIST_SIDE, Fault, FaultSet
 from manip.reference_server.session import ServerConfig
 from manip.spec.faults import FaultSwitch
+from tests.support.culprits import unnamed_violations
 from tests.support.servers import StartServer
 from tests.support.suite import run_simulated
 
@@ -149,6 +150,7 @@ def test_protocol_fault_is_caught(fault: Fault) -> None:
     )
     print(f"fault {fault.value}: caught by {shown or 'NO CASE'} [{report.duration:.1f} s]")
     assert not errors, errors
+    assert not unnamed_violations(report), unnamed_violations(report)  # every culprit named and kept
     assert caught, f"no case caught fault {fault.value} ({fault.breaks})"
     assert set(CATCHERS[fault]) <= {r.id for r in caught}, shown
     skipped = [c for c in cases if c.id in {r.id for r in report.results if r.outcome == "skip"}]

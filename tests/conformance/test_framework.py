@@ -25,6 +25,7 @@ from manip.conformance.judge.checks import (
     check_transcript,
     required_refusal,
 )
+from manip.conformance.judge.violation import missing, showing
 from manip.conformance.output.report import load_schema, report_json, report_junit
 from manip.conformance.suite.case import Case, CaseError, all_cases, case
 from manip.conformance.suite.context import CaseContext, RunOptions
@@ -221,17 +222,17 @@ def _case(case_id: str, body: Callable[[CaseContext], Awaitable[None]], **kw: An
 async def _passes(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     answer = await probe.call("here")
-    ctx.expect(answer.is_response, clause="request.one-reply", expected="a reply", actual=str(answer))
+    ctx.expect(answer.is_response, clause="request.one-reply", expected="a reply", seen=answer)
 
 
 async def _fails(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     await probe.call("here")
-    ctx.expect(False, clause="response.echoes-request-number", expected="x", actual="y", data=b"\x01\x02")
+    ctx.expect(False, clause="response.echoes-request-number", expected="x", seen=showing(b"\x01\x02", "y"))
 
 
 async def _warns(ctx: CaseContext) -> None:
-    ctx.expect(False, clause="segment.number-increases", expected="n+1", actual="n")
+    ctx.expect(False, clause="segment.number-increases", expected="n+1", seen="n")
 
 
 async def _crashes(ctx: CaseContext) -> None:
@@ -255,18 +256,18 @@ CASES = [
 async def _fails_twice(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     answer = await probe.call("here")
-    ctx.expect(False, clause="response.echoes-request-number", expected="first", actual="a")
+    ctx.expect(False, clause="response.echoes-request-number", expected="first", seen="a")
     ctx.expect(answer.is_response, clause="request.one-reply", expected="a reply")
-    ctx.expect(False, clause="here.transform", expected="second", actual="b")
+    ctx.expect(False, clause="here.transform", expected="second", seen="b")
 
 
 async def _stumbles(ctx: CaseContext) -> None:
-    ctx.expect(False, clause="here.transform", expected="a transform", actual="garbage")
+    ctx.expect(False, clause="here.transform", expected="a transform", seen="garbage")
     raise KeyError("what the violation left")  # e.g. decoding what was not there
 
 
 async def _requires(ctx: CaseContext) -> None:
-    ctx.require(False, clause="here.transform", expected="a transform", actual="nothing")
+    ctx.require(False, clause="here.transform", expected="a transform", seen=missing("nothing"))
     ctx.expect(False, clause="request.one-reply", expected="never checked")
 
 

@@ -32,6 +32,7 @@ from manip.cougar.cli import serve_cougar
 from manip.links import virtual_clock
 from manip.reference_server.faults import WRIST_SIDE, Fault
 from manip.spec import SPEC
+from tests.support.culprits import unnamed_violations
 from tests.support.servers import StartServer
 
 SEED = 5
@@ -116,6 +117,7 @@ def test_wrist_side_fault_is_caught_by_its_case(fault: Fault) -> None:
     got = outcomes(report)
     errors = [(r.id, r.traceback) for r in report.results if r.outcome == "error"]
     assert not errors, errors
+    assert not unnamed_violations(report), unnamed_violations(report)  # every culprit named and kept
     must = any(SPEC.clauses[c].level == "MUST" for c in fault.clauses)  # a SHOULD clause warns
     assert {got[case] for case in CATCHERS[fault]} == {"fail" if must else "warn"}, got
     if must:

@@ -45,8 +45,8 @@ from manip.conformance.judge.checks import (
     word,
 )
 from manip.conformance.judge.model import AnswerSummary
-from manip.conformance.judge.violation import CarriesViolation, Violation
-from manip.conformance.suite.context import Answer, CaseContext, Probe
+from manip.conformance.judge.violation import CarriesViolation, Violation, showing
+from manip.conformance.suite.context import DONE_SIZE, Answer, CaseContext, Probe
 from manip.conformance.suite.invariants import TRANSCRIPT
 from manip.spec import SPEC, RequestName, RequestOpcode
 from manip.spec.constants import AsyncCondition, ServerOp
@@ -80,8 +80,8 @@ def floats(answer: Answer) -> tuple[float, ...]:
 
 
 def require_response(ctx: CaseContext, answer: Answer, what: str) -> None:
-    """The case needs ``answer`` to be a normal response: a malformed answer is the transcript
-    invariant's finding (reported here, and the case stops: what follows reads the answer), and a
+    """The case needs ``answer`` to be a normal response: a malformed answer is a violation of the
+    transcript invariant (reported here, and the case stops: what follows reads the answer), and a
     refusal ends the case not judged (:func:`refused`)."""
     ctx.check(check_reply(answer.request, answer.packets), stop=True)
     if not answer.is_response:
@@ -137,7 +137,7 @@ async def valid_values(ctx: CaseContext, probe: Probe, op: RequestOpcode) -> dic
 
 def error_of(packet: Answer | WirePacket) -> ErrorReply | None:
     """The decoded error string of an error packet or answer, its numbers read in either layout (erratum
-    error-arg-layout), or else straight after the NUL (a bad pad byte is the format checker's finding, not
+    error-arg-layout), or else straight after the NUL (a bad pad byte is the format checker's violation, not
     a reason to misjudge the error); None for a packet that is no error, or whose string reads neither
     way."""
     if packet.opcode not in ERROR_OPCODES:
@@ -224,8 +224,8 @@ def extension_name(name: RequestName) -> str:
 
 async def ask_notifications(ctx: CaseContext, probe: Probe, mask: int = SEGMENT_MASK) -> bool:
     """Ask for the asynchronous responses of ``mask`` (request notifications, a Puma extension); whether
-    the target serves it.  A refusal is no finding: the 1985 guide gives no opcode to ask for them, so
-    the case goes the guide's own way (a note says so); a malformed answer is the invariant's finding."""
+    the target serves it.  A refusal is no violation: the 1985 guide gives no opcode to ask for them, so
+    the case goes the guide's own way (a note says so); a malformed answer is the invariant's violation."""
     answer = await probe.call("request-notifications", mask=mask)
     ctx.check(check_reply(answer.request, answer.packets))
     if answer.is_response:
@@ -345,39 +345,11 @@ async def timed_move(
     )
 
 
-DONE_SIZE: Final = 2
-"""Data bytes of an empty done: the request number alone."""
-
-
-def expect_response(
-    ctx: CaseContext,
-    answer: Answer,
-    *,
-    clause: str,
-    expected: str,
-    size: int | None = None,
-    min_size: int = 0,
-) -> None:
-    """The answer must be a normal response, of exactly ``size`` data bytes when given and of at
-    least ``min_size``."""
-    ctx.expect(
-        answer.is_response and (size is None or len(answer.data) == size) and len(answer.data) >= min_size,
-        clause=clause,
-        expected=expected,
-        seen=answer,
-    )
-
-
-def expect_done(ctx: CaseContext, answer: Answer, *, clause: str, expected: str) -> None:
-    """The answer must be an empty done (a normal response carrying only the request number)."""
-    expect_response(ctx, answer, clause=clause, expected=expected, size=DONE_SIZE)
-
-
 async def expect_here_served(ctx: CaseContext, probe: Probe, expected: str) -> None:
     """Here must be served normally, with its transform (after a discarded packet, for example)."""
     again = await probe.call("here")
-    expect_response(
-        ctx, again, clause="free-joint.awaits-next-packet", expected=expected, min_size=DONE_SIZE + 1
+    ctx.expect_response(
+        again, clause="free-joint.awaits-next-packet", expected=expected, min_size=DONE_SIZE + 1
     )
 
 
@@ -422,11 +394,8 @@ def expect_refusal(
     wanted = f"a non-fatal error (0202) of severity {'/'.join(severities)}" + (
         f" and code {'/'.join(codes)}" if codes else ""
     )
-    if not ctx.expect(
-        answer.opcode == ServerOp.NON_FATAL_ERROR,
-        clause=clause,
-        expected=f"{wanted} for {what}",
-        seen=answer,
+    if not ctx.expect_opcode(
+        answer, ServerOp.NON_FATAL_ERROR, clause=clause, expected=f"{wanted} for {what}"
     ):
         return None  # a weaker clause than MUST: recorded, and there is no error string to judge
     error = error_of(answer)
@@ -436,23 +405,20 @@ def expect_refusal(
             f"the error string for {what} does not decode",
             clause=clause,
             expected=f"{wanted} for {what}",
-            actual=answer.data.hex(),
-            data=answer.data,
+            seen=showing(answer, answer.data.hex()),
         )
     ctx.expect(
         error.error.severity in severities,
         clause=clause,
         expected=f"{wanted} for {what}",
-        actual=repr(error.error.render()),
-        data=answer.data,
+        seen=showing(answer, repr(error.error.render())),
     )
     if codes:
         ctx.expect(
             error.error.code in codes,
             clause=clause,
             expected=f"{wanted} for {what}",
-            actual=repr(error.error.render()),
-            data=answer.data,
+            seen=showing(answer, repr(error.error.render())),
         )
     return error
 
@@ -472,13 +438,12 @@ def expect_error_numbers(
         return
     choices = {tuple(w) for w in wanted}
     args = error.error.args
-    shown = " or ".join(str(list(c)) for c in sorted(choices))
+    wanted_text = " or ".join(str(list(c)) for c in sorted(choices))
     ctx.expect(
         args in choices,
         clause="error-string.arg-values",
-        expected=f"the numbers {shown} for {what}",
-        actual=f"{list(args)} in {error.error.render()!r}",
-        data=answer.data,
+        expected=f"the numbers {wanted_text} for {what}",
+        seen=showing(answer, f"{list(args)} in {error.error.render()!r}"),
     )
 
 
@@ -588,16 +553,16 @@ def reply_view(answer: Answer) -> AnswerSummary:
     return AnswerSummary(False, error=None if decoded is None else decoded.error)
 
 
-def must(findings: Iterable[Violation]) -> list[Violation]:
-    """The findings that break a MUST clause."""
-    return [f for f in findings if f.level == "MUST"]
+def must(violations: Iterable[Violation]) -> list[Violation]:
+    """The violations of a MUST clause."""
+    return [v for v in violations if v.level == "MUST"]
 
 
 class Evidence(CarriesViolation, AssertionError):  # noqa: N818 - a failed example, not an error of the suite
     """A failed example: its :class:`~manip.conformance.judge.violation.Violation` (``.violation``), and
     the packets that showed it.
 
-    ``invariant``: the suite invariant that found it (a checker's finding, a probe's failure), passed
+    ``invariant``: the suite invariant that found it (a checker's violation, a probe's failure), passed
     on to ``ctx.fail_with`` so that a clause the case does not declare is attributed to it."""
 
     # ``args`` is set instead of calling ``super().__init__``: tests/support/clause_scan.py binds the
@@ -626,16 +591,16 @@ class Evidence(CarriesViolation, AssertionError):  # noqa: N818 - a failed examp
         """What Hypothesis drew for that example, as the report shows it (set by the case's runner)."""
 
     @classmethod
-    def of(cls, finding: Violation, packets: Iterable[WirePacket] = ()) -> Evidence:
-        """A checker's finding (the transcript invariant's checkers)."""
+    def of(cls, violation: Violation, packets: Iterable[WirePacket] = ()) -> Evidence:
+        """A violation a checker found (the transcript invariant's checkers)."""
         evidence = cls("", "", "", "", packets=packets)
-        evidence.violation = replace(finding, invariant=TRANSCRIPT.name)
+        evidence.violation = replace(violation, invariant=TRANSCRIPT.name)
         evidence.args = (str(evidence.violation),)
         return evidence
 
     @property
     def culprit(self) -> WirePacket | None:
-        """The packet the failure is about: the finding's own, else the first server packet among those
+        """The packet the failure is about: the violation's own, else the first server packet among those
         that show it (what the server got wrong), else the first of them."""
         if self.violation.packet is not None:
             return self.violation.packet

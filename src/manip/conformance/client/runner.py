@@ -41,7 +41,7 @@ from manip.conformance.client.wire import (
     wire_packet,
 )
 from manip.conformance.judge.verdict import Outcome
-from manip.conformance.judge.violation import FailureKind
+from manip.conformance.judge.violation import FailureKind, showing
 from manip.conformance.suite.case import Case, CaseFailure, CaseSkipped
 from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.invariants import CLIENT_WIRE
@@ -253,8 +253,7 @@ class ClientContext(CaseContext):
                     False,
                     clause=finding.clause,
                     expected=finding.expected,
-                    actual=finding.actual,
-                    data=finding.data,
+                    seen=showing(finding.packets or finding.data, finding.actual),
                     message=finding.message,
                     invariant=CLIENT_WIRE.name,
                 )

@@ -375,6 +375,7 @@ def check_initial_response(packet: WirePacket | None, rfc_packet_no: int | None 
                 expected="a RESPONSE (200) packet first",
                 actual="nothing" if packet is None else describe(packet),
                 data=b"" if packet is None else packet.data,
+                kind="missing_response",
                 packet=packet,
             )
         ]

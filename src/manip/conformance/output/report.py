@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from manip.conformance.judge.verdict import CLAUSE_STATUSES, Outcome, counts, judged_counts
-from manip.conformance.output.culprit import culprit_index, kept_indices
+from manip.conformance.output.culprit import culprit_index, judged_indices, kept_indices
 from manip.conformance.suite.results import CaseResult, ClauseVerdict, RunReport, Violation, completeness_text
 from manip.outfile import atomic_output
 from manip.spec import SPEC
@@ -187,7 +187,7 @@ def _packets_json(result: CaseResult) -> tuple[list[dict[str, Any]], list[int | 
     violation's culprit packet (None when no packet shows it)."""
     packets = result.packets
     culprits = [culprit_index(packets, v) for v in result.violations]
-    kept = kept_indices(len(packets), [c for c in culprits if c is not None], MAX_PACKETS_IN_REPORT)
+    kept = kept_indices(len(packets), judged_indices(packets, result.violations), MAX_PACKETS_IN_REPORT)
     shown = [{**packets[i].to_json(), "n": i + 1} for i in kept]
     return shown, [None if c is None else c + 1 for c in culprits]
 

@@ -26,25 +26,29 @@ server's packets in the order they come, and judges nothing by itself (the check
 What a probe reads from the target is bounded, as in ``manip-client``: a multi-packet reply that brings
 more than :data:`~manip.reference_client.options.DEFAULT_MAX_REPLY_BYTES` without its terminator fails
 ``request.one-reply`` (erratum ``reply-size-limit``), and a case that receives more than
-:data:`MAX_CASE_PACKETS` packets from the target ends failed with the first MUST finding of its recording
+:data:`MAX_CASE_PACKETS` packets from the target ends failed with the first MUST violation of its recording
 (a flood of extra replies or asynchronous packets is one), or without a clause when there is none.  A
 request the case cannot send because the target ended the connection fails like a reply that never
 came.
 
-``ctx.expect(cond, clause=..., expected=..., seen=answer)`` is the one way to state a check: false,
-on a clause of any level, is recorded (``ctx.recorded``) and the case goes on, so its report lists every
-violation; ``ctx.require(...)`` is the same check for what the rest of the case depends on, and stops
-the case when false, as the probe does when an answer never comes.  Every clause a check evaluated,
-true or false, is *reached* (``ctx.reached``): only a reached clause can count as held.  The clause
-must be one the case declares: any other is a
-bug of the suite (:class:`~manip.conformance.suite.case.UndeclaredClauseError`, raised at the call whether the
-condition holds or not), except a finding of the transcript invariant's checkers
-(:mod:`manip.conformance.suite.invariants`).  ``ctx.check(findings)`` applies the same rule to the
-findings of a checker; ``ctx.fail(...)`` fails outright; ``ctx.skip(reason)`` ends the case as
-skipped (not applicable), and ``ctx.not_judged(reason)`` as not judged (applicable, but this target
-cannot be judged on it; the reason says what would judge it).  ``async with ctx.arranged(condition):``
-has the target's world hold a condition of the arm's world (:mod:`manip.conformance.suite.world`) for
-the block.
+``ctx.expect(cond, clause=..., expected=..., seen=answer)`` is the one way to state a check, and the
+common ones build their condition themselves (``ctx.expect_response``, ``expect_done``, ``expect_opcode``,
+``expect_echo``, ``expect_near``).  Evidence has one form, ``seen=`` (an answer, packets, ``showing(answer,
+text)``, ``missing(text)``: :mod:`~manip.conformance.judge.violation`), and every violation names the
+packets it judged (text alone: the last packet recorded, :meth:`CaseContext.judged`), but one about a
+packet that never came (a reply that never came names the request it answers).  A false check, on a
+clause of any level, is recorded (``ctx.recorded``) and the case goes on, so its report lists every
+violation; ``ctx.require(...)`` is the same check for what the rest of the case depends on, and stops the
+case when false, as the probe does when an answer never comes.
+Every clause a check evaluated, true or false, is *reached* (``ctx.reached``): only a reached clause can
+count as held.  The clause must be one the case declares: any other is a bug of the suite
+(:class:`~manip.conformance.suite.case.UndeclaredClauseError`, raised at the call whether the condition
+holds or not), except a violation the transcript invariant's checkers found
+(:mod:`manip.conformance.suite.invariants`).  ``ctx.check(violations)`` applies the same rule to the
+violations of a checker; ``ctx.fail(...)`` fails outright; ``ctx.skip(reason)`` ends the case as skipped
+(not applicable), and ``ctx.not_judged(reason)`` as not judged (applicable, but this target cannot be
+judged on it; the reason says what would judge it).  ``async with ctx.arranged(condition):`` has the
+target's world hold a condition of the arm's world (:mod:`manip.conformance.suite.world`) for the block.
 """
 
 from __future__ import annotations
@@ -64,7 +68,7 @@ from manip.codecs.messages import encode_request
 from manip.codecs.packet import Direction, Packet
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, check_transcript, describe, word
-from manip.conformance.judge.violation import Violation, evidence, shown_packet
+from manip.conformance.judge.violation import NEVER_CAME, Violation, evidence, seen_kind, seen_packets
 from manip.conformance.suite.case import (
     LEVEL_ORDER,
     CaseError,
@@ -83,6 +87,7 @@ from manip.spec.model import Hazard, Level
 from manip.spec.notation import octal
 
 __all__ = [
+    "DONE_SIZE",
     "MAX_CASE_PACKETS",
     "Answer",
     "CaseContext",
@@ -101,6 +106,8 @@ _CHECKER_CLAUSES: Final = (
 )
 """What a checker run on one answer evaluates (:meth:`CaseContext.check`): the transcript's clauses,
 the byte order its decoding relies on, and the reply clauses of the opcodes, whose layouts it decodes."""
+DONE_SIZE: Final = 2
+"""Data bytes of an empty done: the request number alone."""
 DEFAULT_REPLY_TIMEOUT: Final = 2.0
 DEFAULT_CONNECT_TIMEOUT: Final = 5.0
 MAX_CASE_PACKETS: Final = 20_000
@@ -246,16 +253,19 @@ class Probe:
 
     def _flooded(self) -> NoReturn:
         """The case took :data:`MAX_CASE_PACKETS` from the target: it reads no more.  The recording's
-        first MUST finding is the failure (what the flood broke); without one, a failure of its own."""
+        first MUST violation is the failure (what the flood broke); without one, a failure of its own."""
         self.end_reason = self.end_reason or ConnectionClosed("the case stopped reading", by_peer=False)
         self._ctx.auto_check = False
         self._ctx.check(check_transcript(self.packets, rfc_packet_no=self.rfc_packet_no))
         raise CaseFailure(
-            f"the target sent more than {MAX_CASE_PACKETS:,} packets within one case; "
-            "the suite reads no more",
-            expected=f"at most {MAX_CASE_PACKETS:,} packets for one case's requests",
-            actual=f"{self._ctx.received - 1:,} packets, and more coming",
-            kind="unexpected_message",
+            Violation(
+                f"the target sent more than {MAX_CASE_PACKETS:,} packets within one case; "
+                "the suite reads no more",
+                expected=f"at most {MAX_CASE_PACKETS:,} packets for one case's requests",
+                actual=f"{self._ctx.received - 1:,} packets, and more coming",
+                kind="unexpected_message",
+                packets=self._ctx.judged(),
+            )
         )
 
     # ------------------------------------------------------------------------------------- sending
@@ -271,27 +281,37 @@ class Probe:
             self._ctx.auto_check = False
             self._ctx.check(check_transcript(self.packets, rfc_packet_no=self.rfc_packet_no))
             raise CaseFailure(
-                f"the target did not take request {_request_name(code)} within {wait:g} s: the window it "
-                "offers stayed full (it acknowledged none of the requests before it)",
-                expected=f"room in the target's window within {wait:g} s",
-                actual="the window full",
-                kind="timeout",
+                Violation(
+                    f"the target did not take request {_request_name(code)} within {wait:g} s: the window "
+                    "it offers stayed full (it acknowledged none of the requests before it)",
+                    expected=f"room in the target's window within {wait:g} s",
+                    actual="the window full",
+                    kind="timeout",
+                    packets=self._unanswered_requests(),
+                )
             ) from None
         except ChaosError as exc:
             self._ended(exc)
             raise CaseFailure(
-                f"the target ended the connection before request {_request_name(code)} could be sent",
-                clause="request.one-reply" if self._unanswered else None,
-                expected="the connection open until the case closes it"
-                + (", and a reply to every request sent" if self._unanswered else ""),
-                actual=f"connection ended: {exc}",
-                kind="closed",
-                invariant=TRANSCRIPT.name if self._unanswered else None,
+                Violation(
+                    f"the target ended the connection before request {_request_name(code)} could be sent",
+                    "request.one-reply" if self._unanswered else None,
+                    expected="the connection open until the case closes it"
+                    + (", and a reply to every request sent" if self._unanswered else ""),
+                    actual=f"connection ended: {exc}",
+                    kind="closed",
+                    invariant=TRANSCRIPT.name if self._unanswered else None,
+                    packets=self._unanswered_requests(),
+                )
             ) from exc
         ack = 0
         self._record("c2s", code, number, ack, data)
         self._unanswered[number] = (code, self.arm_wait(code))
         return number
+
+    def _unanswered_requests(self) -> tuple[WirePacket, ...]:
+        """The requests sent and not answered yet, oldest first: what a failure to send names."""
+        return tuple(self._request(number) for number in self._unanswered)
 
     def _send_wait(self) -> float:
         """How long a request may wait for room in the target's window: the reply timeout, or the
@@ -403,6 +423,9 @@ class Probe:
         self._buffer.insert(0, packet)
 
     async def _next_answer_packet(self, number: int, timeout: float | None, what: str) -> WirePacket:
+        """The next answer packet to request ``number``; none (a timeout, the end of the connection)
+        fails ``request.one-reply``, naming the request that went unanswered."""
+        request = self._request(number)
         loop = asyncio.get_running_loop()
         if timeout is None:
             wait, budget = self.allowance(number)
@@ -414,20 +437,26 @@ class Probe:
             if packet is None:
                 if self.end_reason is not None:
                     raise CaseFailure(
-                        f"the connection ended while waiting for {what}",
-                        clause="request.one-reply",
-                        expected=what,
-                        actual=f"connection ended: {self.end_reason}",
-                        kind="closed",
-                        invariant=TRANSCRIPT.name,
+                        Violation(
+                            f"the connection ended while waiting for {what}",
+                            "request.one-reply",
+                            expected=what,
+                            actual=f"connection ended: {self.end_reason}",
+                            kind="closed",
+                            invariant=TRANSCRIPT.name,
+                            packets=(request,),
+                        )
                     )
                 raise CaseFailure(
-                    f"{what} did not come within {wait:g} s ({budget})",
-                    clause="request.one-reply",
-                    expected=f"{what} within {wait:g} s",
-                    actual="nothing (timeout)",
-                    kind="timeout",
-                    invariant=TRANSCRIPT.name,
+                    Violation(
+                        f"{what} did not come within {wait:g} s ({budget})",
+                        "request.one-reply",
+                        expected=f"{what} within {wait:g} s",
+                        actual="nothing (timeout)",
+                        kind="timeout",
+                        invariant=TRANSCRIPT.name,
+                        packets=(request,),
+                    )
                 )
             if packet.opcode in ANSWER_OPCODES:
                 self._answered(number, packet)
@@ -476,15 +505,18 @@ class Probe:
 
     def _too_large(self, number: int, packets: Sequence[WirePacket], size: int) -> NoReturn:
         raise CaseFailure(
-            f"the multi-packet reply to request #{number} goes past {DEFAULT_MAX_REPLY_BYTES:,} data bytes "
-            "without its terminator; the suite reads no more of it (erratum reply-size-limit)",
-            clause="request.one-reply",
-            expected=f"the empty terminator within {DEFAULT_MAX_REPLY_BYTES:,} data bytes "
-            "(manip-client's bound)",
-            actual=f"{len(packets):,} packets, {size:,} data bytes, no terminator",
-            data=packets[-1].data,
-            kind="unexpected_message",
-            invariant=TRANSCRIPT.name,
+            Violation(
+                f"the multi-packet reply to request #{number} goes past {DEFAULT_MAX_REPLY_BYTES:,} data "
+                "bytes without its terminator; the suite reads no more of it (erratum reply-size-limit)",
+                "request.one-reply",
+                expected=f"the empty terminator within {DEFAULT_MAX_REPLY_BYTES:,} data bytes "
+                "(manip-client's bound)",
+                actual=f"{len(packets):,} packets, {size:,} data bytes, no terminator",
+                data=packets[-1].data,
+                kind="unexpected_message",
+                invariant=TRANSCRIPT.name,
+                packet=packets[-1],
+            )
         )
 
     async def drain(self, quiet: float = 0.2) -> list[WirePacket]:
@@ -617,13 +649,16 @@ class CaseContext:
                 if packet is not None:
                     probe.push_back(packet)
                 raise CaseFailure(
-                    "no initial RESPONSE after the connection opened",
-                    clause="connect.initial-response",
-                    expected=f"a RESPONSE (200) within {self.options.reply_timeout:g} s of the open",
-                    actual="nothing" if packet is None else describe(packet),
-                    data=b"" if packet is None else packet.data,
-                    kind="missing_response",
-                    invariant=TRANSCRIPT.name,
+                    Violation(
+                        "no initial RESPONSE after the connection opened",
+                        "connect.initial-response",
+                        expected=f"a RESPONSE (200) within {self.options.reply_timeout:g} s of the open",
+                        actual="nothing" if packet is None else describe(packet),
+                        data=b"" if packet is None else packet.data,
+                        kind="missing_response",
+                        invariant=TRANSCRIPT.name,
+                        packet=packet,
+                    )
                 )
             probe.initial = packet
         return probe
@@ -661,20 +696,20 @@ class CaseContext:
         clause: str | None = None,
         expected: str = "",
         seen: object = None,
-        actual: object = "",
-        data: bytes = b"",
         message: str | None = None,
         level: Level | None = None,
         invariant: str | None = None,
     ) -> bool:
-        """Check ``condition``; when false: MUST raises CaseFailure, weaker levels are recorded.
+        """Check ``condition``; when false, a violation is recorded and the case goes on.
 
-        ``seen`` is the evidence (an answer, a packet, Cougar responses, a list of them...): the
-        violation's ``actual`` text and bytes are derived from it
-        (:func:`~manip.conformance.judge.violation.evidence`); ``actual``/``data`` say it in the case's
-        own words instead.  The level is ``level`` if given, else the clause's, else the case's.
-        Returns ``bool(condition)``.  ``clause`` must be one the case declares, or one of
-        ``invariant``'s when a suite invariant's finding is passed on: checked at every call, true or
+        ``seen`` is the evidence, in the one form of :mod:`~manip.conformance.judge.violation`: an
+        answer, a packet, Cougar responses, a list of them, ``showing(answer, "text")`` in the case's own
+        words, or ``missing("text")`` for a packet that never came.  The violation's text, bytes and
+        packets are derived from it; evidence that names no packet (text alone) names the last packet
+        of the case's recording, the one the check was reading (:meth:`judged`), so that every violation
+        but a ``missing`` one carries its culprit.  The level is ``level`` if given, else the clause's,
+        else the case's.  Returns ``bool(condition)``.  ``clause`` must be one the case declares, or one
+        of ``invariant``'s when a suite invariant's violation is passed on: checked at every call, true or
         not (UndeclaredClauseError).  ``clause`` and ``expected`` are keywords so that the clause scan of
         ``tests/support/clause_scan.py`` sees every clause a case can report.
 
@@ -695,20 +730,76 @@ class CaseContext:
             )
         if condition:
             return True
-        shown, shown_data = evidence(seen) if seen is not None else ("", b"")
+        text = message or (f"expected {expected}" if expected else "check failed")
         self._report(
-            Violation(
-                message or (f"expected {expected}" if expected else "check failed"),
-                clause,
-                self._clause_level(clause, level),
-                expected,
-                str(actual) if actual != "" else shown,
-                bytes(data) if data else shown_data,
-                invariant=attributed,
-                packet=shown_packet(seen),
-            )
+            self._violation(text, clause, self._clause_level(clause, level), expected, seen, attributed)
         )
         return False
+
+    def _violation(
+        self,
+        message: str,
+        clause: str | None,
+        level: Level | None,
+        expected: str,
+        seen: object,
+        invariant: str | None,
+    ) -> Violation:
+        """The violation a false check states, its evidence ``seen`` (see :meth:`expect`)."""
+        actual, data = evidence(seen) if seen is not None else ("", b"")
+        kind = seen_kind(seen)
+        packets = seen_packets(seen) or (self.judged() if kind != "missing_response" else ())
+        return Violation(message, clause, level, expected, actual, data, kind, invariant, packets=packets)
+
+    # The common checks: the condition is theirs, the evidence the answer they judge.
+
+    def expect_response(
+        self, answer: Answer, *, clause: str, expected: str, size: int | None = None, min_size: int = 0
+    ) -> bool:
+        """``answer`` is a normal response (RESPONSE, 200), of exactly ``size`` data bytes when given and
+        of at least ``min_size``."""
+        data = len(answer.data)
+        return self.expect(
+            answer.is_response and (size is None or data == size) and data >= min_size,
+            clause=clause,
+            expected=expected,
+            seen=answer,
+        )
+
+    def expect_done(self, answer: Answer, *, clause: str, expected: str) -> bool:
+        """``answer`` is an empty done: a normal response carrying only the request number."""
+        return self.expect_response(answer, clause=clause, expected=expected, size=DONE_SIZE)
+
+    def expect_opcode(self, answer: Answer, opcode: int, *, clause: str, expected: str) -> bool:
+        """``answer`` (its first packet) has ``opcode``."""
+        return self.expect(answer.opcode == opcode, clause=clause, expected=expected, seen=answer)
+
+    def expect_echo(self, answer: Answer, *, clause: str, expected: str) -> bool:
+        """``answer`` quotes the number of the request it answers."""
+        return self.expect(
+            answer.number == answer.request.packet_no, clause=clause, expected=expected, seen=answer
+        )
+
+    def expect_near(
+        self, value: float, wanted: float, tolerance: float, *, clause: str, expected: str, seen: object
+    ) -> bool:
+        """``value`` is within ``tolerance`` of ``wanted`` (``seen``: the evidence, as for :meth:`expect`)."""
+        return self.expect(abs(value - wanted) <= tolerance, clause=clause, expected=expected, seen=seen)
+
+    def _named(self, violation: Violation) -> Violation:
+        """``violation`` naming a packet: one found elsewhere that names none (a checker's violation about a
+        whole reply's text) names what :meth:`judged` names, unless it is about a packet that never came."""
+        if violation.packets or violation.kind in NEVER_CAME:
+            return violation
+        return replace(violation, packets=self.judged())
+
+    def judged(self) -> tuple[WirePacket, ...]:
+        """What a check whose evidence names no packet judged: the last packet of the case's recording
+        (the reply it was reading), or nothing before any."""
+        for packet in reversed(self.shown_packets or self.transcript):
+            if not packet.is_close:
+                return (packet,)
+        return ()
 
     def require(
         self,
@@ -717,15 +808,11 @@ class CaseContext:
         clause: str | None = None,
         expected: str = "",
         seen: object = None,
-        actual: object = "",
-        data: bytes = b"",
         message: str | None = None,
     ) -> None:
         """:meth:`expect` for a check the rest of the case depends on: when false, the violation is
         recorded and the case stops there (whatever the clause's level)."""
-        if not self.expect(
-            condition, clause=clause, expected=expected, seen=seen, actual=actual, data=data, message=message
-        ):
+        if not self.expect(condition, clause=clause, expected=expected, seen=seen, message=message):
             raise CaseFailure(self.recorded.pop())
 
     def _reach(self, clause: str | None, attributed: str | None) -> None:
@@ -745,22 +832,22 @@ class CaseContext:
         self.recorded.append(violation)
 
     def check(
-        self, findings: Iterable[Violation], *, clauses: Iterable[str] | None = None, stop: bool = False
+        self, violations: Iterable[Violation], *, clauses: Iterable[str] | None = None, stop: bool = False
     ) -> bool:
-        """Report a checker's findings, the strongest first; the case goes on.  True when there were
-        none.  The checkers are the transcript invariant's: a finding of a clause the case does not
+        """Report a checker's violations, the strongest first; the case goes on.  True when there were
+        none.  The checkers are the transcript invariant's: a violation of a clause the case does not
         declare is attributed to it.  ``clauses``: the clauses the checker evaluated, marked reached
         (default: the case's own clauses among those a checker run on one answer judges, which is an
         approximation; the runner's check of the whole recording passes none).  ``stop``: a MUST
-        finding stops the case (what follows needs the answer well formed)."""
-        items = sorted(findings, key=lambda f: -LEVEL_ORDER[f.strength])
+        violation stops the case (what follows needs the answer well formed)."""
+        items = sorted(violations, key=lambda v: -LEVEL_ORDER[v.strength])
         if clauses is None:
             clauses = (c for c in self.clauses or () if c in _CHECKER_CLAUSES)
         self.exercised(*clauses)
         stopping: Violation | None = None
-        for finding in items:
-            attributed = self._attribute(finding.clause, TRANSCRIPT.name)
-            violation = replace(finding, invariant=attributed)
+        for item in items:
+            attributed = self._attribute(item.clause, TRANSCRIPT.name)
+            violation = self._named(replace(item, invariant=attributed))
             if stop and stopping is None and violation.level == "MUST":
                 stopping = violation
             else:
@@ -776,38 +863,25 @@ class CaseContext:
         clause: str | None = None,
         expected: str = "",
         seen: object = None,
-        actual: object = "",
-        data: bytes = b"",
         invariant: str | None = None,
     ) -> NoReturn:
         """Fail outright, the case stops; ``clause``, ``seen`` and ``invariant`` as for :meth:`expect`."""
         attributed = self._attribute(clause, invariant)
         self._reach(clause, attributed)
-        shown, shown_data = evidence(seen) if seen is not None else ("", b"")
-        raise CaseFailure(
-            Violation(
-                message,
-                clause,
-                expected=expected,
-                actual=str(actual) if actual != "" else shown,
-                data=bytes(data) if data else shown_data,
-                invariant=attributed,
-                packet=shown_packet(seen),
-            )
-        )
+        raise CaseFailure(self._violation(message, clause, None, expected, seen, attributed))
 
     def fail_with(self, violation: Violation) -> NoReturn:
         """Fail with a violation found elsewhere (a failed example's); attributed as for :meth:`expect`."""
         attributed = self._attribute(violation.clause, violation.invariant)
         self._reach(violation.clause, attributed)
-        raise CaseFailure(replace(violation, invariant=attributed))
+        raise CaseFailure(self._named(replace(violation, invariant=attributed)))
 
     def record(self, violation: Violation) -> None:
         """Record a violation found elsewhere (one of several a stateful run found) and go on;
         attributed as for :meth:`expect`."""
         attributed = self._attribute(violation.clause, violation.invariant)
         self._reach(violation.clause, attributed)
-        self._report(replace(violation, invariant=attributed))
+        self._report(self._named(replace(violation, invariant=attributed)))
 
     def skip(self, reason: str) -> NoReturn:
         raise CaseSkipped(reason)

@@ -13,6 +13,7 @@ from manip.codecs.pdp11float import u32_to_f
 from manip.conformance.client.contract import Op, Result
 from manip.conformance.client.runner import ClientContext, Play
 from manip.conformance.judge.diagnosis import number_diagnosis
+from manip.conformance.judge.violation import showing
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
 from manip.spec.model import FieldType, Layout, RequestOpcode
@@ -180,11 +181,11 @@ def expect_reply(
         answer is not None and answer.type == "reply",
         clause=clause,
         expected=f"a reply to op {op_id} ({op.name})",
-        actual=str(answer) if answer is not None else f"no result for op {op_id}:\n{play.describe()}",
+        seen=str(answer) if answer is not None else f"no result for op {op_id}:\n{play.describe()}",
     )
     assert answer is not None
     for expected, seen in reply_mismatches(op, payload, number, answer.data):
-        ctx.expect(False, clause=clause, expected=expected, actual=seen, data=payload)
+        ctx.expect(False, clause=clause, expected=expected, seen=showing(payload, seen))
     return answer
 
 
@@ -223,14 +224,14 @@ def expect_error_parts(
         result is not None and result.type == "error" and result.get("origin") == origin,
         clause=clause,
         expected=f"an error result of origin {origin}",
-        actual=str(result),
+        seen=str(result),
     )
     assert result is not None
     ctx.expect(
         result.op in ops,
         clause=clause,
         expected=f"op {' or '.join('null' if o is None else str(o) for o in ops)}",
-        actual=f"op {result.op!r} in {result}",
+        seen=f"op {result.op!r} in {result}",
     )
     numbers = sent_numbers(play, ORIGIN_OPCODES[origin], error.message.encode("latin-1"))
     ctx.expect(
@@ -238,7 +239,7 @@ def expect_error_parts(
         clause=clause,
         expected=f"request_number {' or '.join(str(n) for n in sorted(numbers))}: the first data word "
         "of the error packet",
-        actual=f"request_number {result.get('request_number')!r} in {result}",
+        seen=f"request_number {result.get('request_number')!r} in {result}",
     )
     for key, value in error_parts(error).items():
         cause = _arguments_cause(result.get(key), list(error.args)) if key == "arguments" else None
@@ -246,7 +247,7 @@ def expect_error_parts(
             result.get(key) == value,
             clause=clause,
             expected=f"{key} = {value!r}",
-            actual=f"{key} = {result.get(key)!r} in {result}",
+            seen=f"{key} = {result.get(key)!r} in {result}",
             message=f"expected {key} = {value!r}; {cause}" if cause else None,
         )
 

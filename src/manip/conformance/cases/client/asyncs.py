@@ -28,13 +28,13 @@ def expect_async(ctx: ClientContext, play: Play, code: int, word2: int, word3: i
         bool(found),
         clause="client.async-routing",
         expected=f"an async result code {code} words {word2} {word3}",
-        actual=play.describe(),
+        seen=play.describe(),
     )
     ctx.expect(
         found[0].get("handler") == handler,
         clause="client.async-routing",
         expected=f"handled as {handler}",
-        actual=str(found[0]),
+        seen=str(found[0]),
     )
     numbers = {
         int.from_bytes(r.packet.data[:2], "little")
@@ -48,7 +48,7 @@ def expect_async(ctx: ClientContext, play: Play, code: int, word2: int, word3: i
         clause="client.async-routing",
         expected=f"op null and request_number {' or '.join(str(n) for n in sorted(numbers))} (the async "
         "packet's first word): an asynchronous response belongs to no op",
-        actual=str(found[0]),
+        seen=str(found[0]),
     )
 
 
@@ -60,7 +60,7 @@ def expect_segment(ctx: ClientContext, play: Play, op: int, segment: int) -> Non
         and (answer.get("values") or {}).get("segment") == segment,
         clause="client.async-routing",
         expected=f"op {op} answered with segment {segment}",
-        actual=str(answer) if answer is not None else play.describe(),
+        seen=str(answer) if answer is not None else play.describe(),
     )
 
 
@@ -145,5 +145,5 @@ async def guard_hits(base: CaseContext) -> None:
         and (answer.get("values") or {}).get("transform") == [0.0] * 12,
         clause="client.async-routing",
         expected="here answered by its own reply, not by an asynchronous response",
-        actual=str(answer),
+        seen=str(answer),
     )

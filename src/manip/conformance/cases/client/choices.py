@@ -54,9 +54,9 @@ def _load(ctx: ClientContext, *, offset: bool) -> dict[str, Any]:
 
 def _expect_rule(ctx: ClientContext, play: Play, clause: str) -> None:
     """The recording rule for ``clause``, over the packets of the play."""
-    for finding in check_client_guards(judged_packets(play.wire)):
-        if finding.clause == clause:
-            ctx.expect(False, clause=clause, expected=finding.expected, actual=finding.message)
+    for violation in check_client_guards(judged_packets(play.wire)):
+        if violation.clause == clause:
+            ctx.expect(False, clause=clause, expected=violation.expected, seen=violation.message)
 
 
 def _sent(play: Play, opcode: int) -> list[bytes]:
@@ -81,7 +81,7 @@ def _expect_guard_words(ctx: ClientContext, play: Play, arms: list[tuple[int, di
             clause="client.guard-word",
             expected=f"op {op_id}: set guard {want.hex()} (first word {first:#06x}: guard {number}, "
             f"{'stop' if stop else 'continue'}: bit 15 {'set' if stop else 'clear'})",
-            actual=f"set guard {data.hex()} (first word {int.from_bytes(data[:2], 'little'):#06x})",
+            seen=f"set guard {data.hex()} (first word {int.from_bytes(data[:2], 'little'):#06x})",
         )
 
 
@@ -124,14 +124,14 @@ async def guard_numbers(base: CaseContext) -> None:
         len(chosen) == GUARDS + 1,
         clause="client.guard-numbers",
         expected=f"{GUARDS + 1} arm-guard ops answered (one guard number free for the last: {tripped})",
-        actual=play.describe(),
+        seen=play.describe(),
     )
     numbers = [int.from_bytes(d[:2], "little") & 0xF for d in _sent(play, SET_GUARD)]
     ctx.expect(
         not tripped or numbers[-1:] == tripped,
         clause="client.guard-numbers",
         expected=f"the last guard armed with number {tripped}, the only one free",
-        actual=f"set-guard numbers sent: {numbers}",
+        seen=f"set-guard numbers sent: {numbers}",
     )
 
 
@@ -159,14 +159,14 @@ async def newwc_on_load(base: CaseContext) -> None:
         want in _sent(play, SET_WEIGHT),
         clause="client.newwc-on-load",
         expected=f"set weight {want.hex()} (weight {load['weight']}, cg {load['cg']}) after the load changed",
-        actual=f"set weight data sent: {[d.hex() for d in _sent(play, SET_WEIGHT)]}",
+        seen=f"set weight data sent: {[d.hex() for d in _sent(play, SET_WEIGHT)]}",
     )
     answer = play.answer(1)
     ctx.expect(
         answer is not None and answer.type == "reply",
         clause="client.newwc-on-load",
         expected="change-load done",
-        actual=str(answer),
+        seen=str(answer),
     )
 
 
@@ -200,7 +200,7 @@ async def no_newwc_with_guard(base: CaseContext) -> None:
         answer is not None and (refused or answer.type == "reply"),
         clause="client.no-newwc-with-guard",
         expected="change-load refused (refused-locally) or done",
-        actual=str(answer),
+        seen=str(answer),
     )
 
 
@@ -213,7 +213,7 @@ def _expect_newwc(ctx: ClientContext, play: Play, load: dict[str, Any], *, after
         want in sent,
         clause="client.newwc-on-load",
         expected=f"set weight {want.hex()} (weight {load['weight']}, cg {load['cg']}) after the load changed",
-        actual=f"set weight data sent: {[d.hex() for d in sent]}",
+        seen=f"set weight data sent: {[d.hex() for d in sent]}",
     )
 
 
@@ -242,7 +242,7 @@ async def newwc_without_offset(base: CaseContext) -> None:
         answer is not None and answer.type == "reply",
         clause="client.newwc-on-load",
         expected="change-load done",
-        actual=str(answer),
+        seen=str(answer),
     )
 
 
@@ -298,7 +298,7 @@ async def plain_guards(base: CaseContext) -> None:
         clause="client.guard-numbers",
         expected=f"arm-guard done, with a number not armed (0 and {other} are, unless the client cleared "
         "them before the change of load)",
-        actual=str(chosen) if chosen is not None else play.describe(),
+        seen=str(chosen) if chosen is not None else play.describe(),
     )
     answer = play.answer(4)
     ctx.expect(
@@ -306,7 +306,7 @@ async def plain_guards(base: CaseContext) -> None:
         and (answer.type == "reply" or (answer.type == "error" and answer.get("kind") == "refused-locally")),
         clause="client.no-newwc-with-guard",
         expected="the change-load under plain guards refused (refused-locally) or done",
-        actual=str(answer),
+        seen=str(answer),
     )
     before = sum(
         1 for r in client_requests(play.wire) if r.packet.opcode == SET_WEIGHT and _before_clear(play, r)
@@ -317,7 +317,7 @@ async def plain_guards(base: CaseContext) -> None:
         answer is not None and answer.type == "reply",
         clause="client.newwc-on-load",
         expected="the change-load with no guard armed done",
-        actual=str(answer),
+        seen=str(answer),
     )
 
 
@@ -381,5 +381,5 @@ async def choice_errors(base: CaseContext) -> None:
         answer is not None and answer.type == "reply",
         clause="client.guard-numbers",
         expected="the arm-guard after a refused one done",
-        actual=str(answer),
+        seen=str(answer),
     )

@@ -9,6 +9,7 @@ from manip.conformance.cases.client._support import close, connect, request
 from manip.conformance.client.runner import ClientContext, Play, client_context
 from manip.conformance.client.server import ServerSide
 from manip.conformance.client.wire import initial_response_findings
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec.constants import ChaosOp, ServerOp
@@ -32,8 +33,13 @@ async def initial_response(base: CaseContext) -> None:
             await side.serve_plainly()
 
     play = await ctx.play([connect(0), request(1, "here"), close(2)], script, initial=False)
-    for finding in initial_response_findings(play.wire):
-        ctx.expect(False, clause="client.initial-response", expected=finding.expected, actual=finding.actual)
+    for violation in initial_response_findings(play.wire):
+        ctx.expect(
+            False,
+            clause="client.initial-response",
+            expected=violation.expected,
+            seen=showing(violation.packet, violation.actual),
+        )
     answer = play.answer(1)
     ctx.expect(
         answer is not None
@@ -41,7 +47,7 @@ async def initial_response(base: CaseContext) -> None:
         and (answer.get("values") or {}).get("transform") == values,
         clause="client.reply-matching",
         expected=f"here answered with the transform sent after the initial RESPONSE ({values})",
-        actual=str(answer),
+        seen=str(answer),
     )
 
 
@@ -62,30 +68,27 @@ async def close_sequence(base: CaseContext) -> None:
         ChaosOp.CLS in ends,
         clause="client.close",
         expected="a CLS from the client after close",
-        actual=f"client control packets: {octal_words(ends)}",
+        seen=f"client control packets: {octal_words(ends)}",
     )
     ctx.expect(
         play.one("state", 2) is not None and play.one("state", 2).get("state") == "closed",  # type: ignore[union-attr]
         clause="client.close",
         expected="state closed reported for the close op",
-        actual=play.describe(),
+        seen=play.describe(),
     )
 
 
 def _lost(ctx: ClientContext, play: Play, reason_part: str | None) -> None:
     lost = [r for r in play.of("state", any_op=True) if r.get("state") == "lost"]
     ctx.expect(
-        bool(lost),
-        clause="client.connection-lost",
-        expected="state lost reported",
-        actual=play.describe(),
+        bool(lost), clause="client.connection-lost", expected="state lost reported", seen=play.describe()
     )
     if reason_part is not None:
         ctx.expect(
             reason_part in str(lost[0].get("reason", "")),
             clause="client.connection-lost",
             expected=f"the reason naming the server's text {reason_part!r}",
-            actual=str(lost[0]),
+            seen=str(lost[0]),
         )
     for op in (1, 2):
         answer = play.answer(op)
@@ -93,7 +96,7 @@ def _lost(ctx: ClientContext, play: Play, reason_part: str | None) -> None:
             answer is not None and answer.type == "error" and answer.get("kind") == "not-connected",
             clause="client.connection-lost",
             expected=f"op {op} failed as not-connected (in flight when the connection went, or after)",
-            actual=str(answer),
+            seen=str(answer),
         )
 
 
@@ -159,12 +162,12 @@ async def busy(base: CaseContext) -> None:
         state is not None and state.get("state") == "refused" and "Busy" in str(state.get("reason")),
         clause="client.connection-lost",
         expected=f"state refused with the reason {reason!r}",
-        actual=str(state) if state is not None else play.describe(),
+        seen=str(state) if state is not None else play.describe(),
     )
     answer = play.answer(1)
     ctx.expect(
         answer is not None and answer.type == "error" and answer.get("kind") == "not-connected",
         clause="client.connection-lost",
         expected="the request after the refusal failed as not-connected",
-        actual=str(answer),
+        seen=str(answer),
     )

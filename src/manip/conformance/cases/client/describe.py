@@ -11,6 +11,7 @@ from manip.codecs.lispm_text import decode_lispm, encode_lispm
 from manip.conformance.cases.client._support import close, connect, request
 from manip.conformance.client.runner import ClientContext, Play, client_context
 from manip.conformance.client.server import ServerSide
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 
@@ -63,7 +64,7 @@ def expect_text(ctx: ClientContext, play: Play, raw: bytes, *, clause: str = "cl
         answer is not None and answer.type == "reply",
         clause=clause,
         expected="a reply to describe-self",
-        actual=str(answer) if answer is not None else play.describe(),
+        seen=str(answer) if answer is not None else play.describe(),
     )
     assert answer is not None
     values = answer.get("values") or {}
@@ -72,14 +73,13 @@ def expect_text(ctx: ClientContext, play: Play, raw: bytes, *, clause: str = "cl
         values.get("text") == decode_lispm(raw),
         clause=clause,
         expected=f"the whole text, {len(raw)} bytes: {decode_lispm(raw)!r}",
-        actual=repr(values.get("text")),
-        data=raw,
+        seen=showing(raw, repr(values.get("text"))),
     )
     ctx.expect(
         raw_seen == raw.hex().upper(),
         clause=clause,
         expected=f"raw text {raw.hex().upper()}",
-        actual=raw_seen,
+        seen=str(raw_seen),
     )
 
 

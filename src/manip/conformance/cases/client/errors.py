@@ -67,7 +67,7 @@ def _arg_case(row: tuple[str, bool, bool, str]) -> None:
             later is not None and later.type == "reply",
             clause="client.error-report",
             expected="the next request answered normally: a non-fatal error fails its own request only",
-            actual=str(later),
+            seen=str(later),
         )
 
     case(
@@ -159,14 +159,14 @@ def _async_error_case(row: tuple[str, int, ErrorMessage, str]) -> None:
             bool(found),
             clause="client.async-routing",
             expected=f"an error result of origin {origin}",
-            actual=play.describe(),
+            seen=play.describe(),
         )
         expect_error_parts(ctx, found[0], error, origin, clause="client.error-report", play=play, ops=(None,))
         ctx.expect(
             found[0].op is None,
             clause="client.async-routing",
             expected="an asynchronous error tied to no op",
-            actual=str(found[0]),
+            seen=str(found[0]),
         )
         answer = play.answer(1)
         ctx.expect(
@@ -175,7 +175,7 @@ def _async_error_case(row: tuple[str, int, ErrorMessage, str]) -> None:
             and answer.get("values", {}).get("joints") == values,
             clause="client.async-routing",
             expected=f"the reply that came after it, joints {values}",
-            actual=str(answer),
+            seen=str(answer),
         )
 
     case(
@@ -217,7 +217,7 @@ def _fatal_case(row: tuple[str, str]) -> None:
             bool(fatal_results),
             clause="client.fatal-ends",
             expected="an error result of origin fatal-error",
-            actual=play.describe(),
+            seen=play.describe(),
         )
         expect_error_parts(
             ctx,
@@ -232,20 +232,20 @@ def _fatal_case(row: tuple[str, str]) -> None:
             not after,
             clause="client.fatal-ends",
             expected="no request after the fatal error",
-            actual=f"request opcode(s) {octal_words(after)} sent after it",
+            seen=f"request opcode(s) {octal_words(after)} sent after it",
         )
         ctx.expect(
             "lost" in play.states(),
             clause="client.fatal-ends",
             expected="the connection reported lost after the fatal error",
-            actual=f"states {play.states()}",
+            seen=f"states {play.states()}",
         )
         later = play.answer(2)
         ctx.expect(
             later is not None and later.type == "error" and later.get("kind") == "not-connected",
             clause="client.fatal-ends",
             expected="the request after the fatal error refused as not-connected",
-            actual=str(later),
+            seen=str(later),
         )
 
     case(

@@ -70,7 +70,7 @@ async def reserved_operand(base: CaseContext) -> None:
         answer is not None and answer.type == "error" and answer.get("kind") == "bad-data",
         clause="float.reserved-operand",
         expected=f"an error (bad-data): joint {where + 1} is a reserved operand",
-        actual=str(answer),
+        seen=str(answer),
     )
 
 

@@ -27,6 +27,7 @@ from manip.conformance.client.contract import Op
 from manip.conformance.client.runner import ClientContext, Play, client_context
 from manip.conformance.client.server import Mangle, ServerSide, plain_answer
 from manip.conformance.client.wire import ack_findings, numbering_findings, window_findings
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.links import NcpConfig
@@ -46,8 +47,13 @@ async def numbers_wrap(base: CaseContext) -> None:
     first = 0x10000 - ctx.random.randint(3, 12)
     play = await play_description(ctx, chunks_at(raw, cuts), ncp=NcpConfig(first_packet_no=first))
     expect_text(ctx, play, raw)
-    for finding in numbering_findings(play.wire):
-        ctx.expect(False, clause="ncp.packet-numbers", expected=finding.expected, actual=finding.actual)
+    for violation in numbering_findings(play.wire):
+        ctx.expect(
+            False,
+            clause="ncp.packet-numbers",
+            expected=violation.expected,
+            seen=showing(violation.packet, violation.actual),
+        )
 
 
 @case("client.ncp.acknowledge", clauses=["ncp.acknowledge", "client.multi-packet"])
@@ -58,8 +64,13 @@ async def acknowledge(base: CaseContext) -> None:
     raw = encode_lispm(DESCRIPTION)
     cuts = sorted(ctx.random.sample(range(1, len(raw)), 39))
     play = await play_description(ctx, chunks_at(raw, cuts))
-    for finding in ack_findings(play.wire, settle=0.5):
-        ctx.expect(False, clause="ncp.acknowledge", expected=finding.expected, actual=finding.actual)
+    for violation in ack_findings(play.wire, settle=0.5):
+        ctx.expect(
+            False,
+            clause="ncp.acknowledge",
+            expected=violation.expected,
+            seen=showing(violation.packet, violation.actual),
+        )
     expect_text(ctx, play, raw)
 
 
@@ -128,7 +139,7 @@ async def pipeline(base: CaseContext) -> None:
         len(sent) == len(PIPELINED),
         clause="client.reply-matching",
         expected=f"{len(PIPELINED)} requests",
-        actual=f"{len(sent)} reached the judging server",
+        seen=f"{len(sent)} reached the judging server",
     )
     for i, (name, (number, payload)) in enumerate(zip(PIPELINED, sent, strict=True)):
         expect_reply(ctx, play, i + 1, spec_request(name), payload, number, clause="client.reply-matching")
@@ -254,19 +265,24 @@ async def interleaved(base: CaseContext) -> None:
         len(warnings) == 1 and warnings[0].op is None,
         clause="client.async-routing",
         expected="one asynchronous-warning result, tied to no op",
-        actual="; ".join(str(r) for r in warnings) or play.describe(),
+        seen="; ".join(str(r) for r in warnings) or play.describe(),
     )
 
 
 def _expect_window(ctx: ClientContext, play: Play, window: int, sent: Answered, count: int) -> None:
     """The window held on the wire (as offered at each moment), and every request answered and matched."""
-    for finding in window_findings(play.wire, window):
-        ctx.expect(False, clause="ncp.window", expected=finding.expected, actual=finding.actual)
+    for violation in window_findings(play.wire, window):
+        ctx.expect(
+            False,
+            clause="ncp.window",
+            expected=violation.expected,
+            seen=showing(violation.packet, violation.actual),
+        )
     ctx.expect(
         len(sent) == count,
         clause="client.reply-matching",
         expected=f"{count} requests answered",
-        actual=f"{len(sent)}",
+        seen=f"{len(sent)}",
     )
     for i, (number, payload) in enumerate(sent):
         expect_reply(ctx, play, i + 1, spec_request("here"), payload, number, clause="client.reply-matching")
@@ -385,9 +401,7 @@ async def window_opens_by_status(base: CaseContext) -> None:
         clause="ncp.window",
         expected=f"{OPENED} requests sent once an STS acknowledging nothing new opened the window to "
         f"{OPENED} (every STS sets the window)",
-        actual=f"fewer than {OPENED} had arrived {wait_for:g} s after the STS"
-        if filled
-        else "no request came",
+        seen=f"fewer than {OPENED} had arrived {wait_for:g} s after the STS" if filled else "no request came",
     )
     _expect_window(ctx, play, 1, sent, len(names))
 

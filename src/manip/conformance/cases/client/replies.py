@@ -15,6 +15,7 @@ from manip.conformance.cases.client._support import (
 )
 from manip.conformance.client.runner import client_context
 from manip.conformance.client.server import ServerSide, plain_answer
+from manip.conformance.judge.violation import missing, showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec import SPEC
@@ -57,14 +58,14 @@ def _reply_case(op: RequestOpcode) -> None:
             "number" in sent,
             clause="client.reply-matching",
             expected=f"{a_or_an(op.name)} request",
-            actual="no request reached the judging server",
+            seen="no request reached the judging server",
         )
         reply = expect_reply(ctx, play, 1, op, sent["payload"], sent["number"], clause="client.reply-data")
         ctx.expect(
             reply.get("request_number") in (None, sent["number"]),
             clause="client.reply-matching",
             expected=f"the reply reported for request #{sent['number']}",
-            actual=str(reply),
+            seen=str(reply),
         )
 
     case(
@@ -107,22 +108,21 @@ def _request_case(op: RequestOpcode) -> None:
             bool(got),
             clause="request.opcode-range",
             expected=f"{a_or_an(op.name)} request",
-            actual=f"no request reached the judging server:\n{play.describe()}",
+            seen=f"no request reached the judging server:\n{play.describe()}",
         )
         req = got[0]
         ctx.expect(
             req.opcode == op.opcode,
             clause="request.opcode-range",
             expected=f"opcode {octal(op.opcode)}",
-            actual=f"opcode {octal(req.opcode)}",
+            seen=f"opcode {octal(req.opcode)}",
         )
         want = encode_request(op.opcode, **args)
         ctx.expect(
             req.data == want,
             clause=clauses[1],
             expected=f"{op.name} data {want.hex()} ({len(want)} bytes) for {args}",
-            actual=f"{req.data.hex()} ({len(req.data)} bytes)",
-            data=req.data,
+            seen=showing(req, f"{req.data.hex()} ({len(req.data)} bytes)"),
         )
 
     case(
@@ -161,7 +161,9 @@ async def out_of_sequence(base: CaseContext) -> None:
 
     play = await ctx.play([connect(0), request(1, "here"), close(2)], script)
     if "number" not in sent:
-        ctx.expect(False, clause="client.out-of-sequence", expected="a here request", actual="none came")
+        ctx.expect(
+            False, clause="client.out-of-sequence", expected="a here request", seen=missing("none came")
+        )
         return
     # the stray packet fails no other request: the here request still gets its own reply
     expect_reply(
@@ -177,5 +179,5 @@ async def out_of_sequence(base: CaseContext) -> None:
         clause="client.out-of-sequence",
         expected=f"an error of kind out-of-sequence, op null, request_number {sent['stray']}: the request "
         "number the stray RESPONSE carries in its first data word, not its Chaos packet number",
-        actual="; ".join(str(r) for r in play.of("error", any_op=True)) or "no error reported",
+        seen="; ".join(str(r) for r in play.of("error", any_op=True)) or "no error reported",
     )

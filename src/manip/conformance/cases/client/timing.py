@@ -40,7 +40,7 @@ async def reply_near_timeout(base: CaseContext) -> None:
         and (answer.get("values") or {}).get("joints") == values,
         clause="client.reply-wait",
         expected=f"the reply sent {delay:.2f} s after the request (timeout {TIMEOUT:g} s) delivered",
-        actual=str(answer),
+        seen=str(answer),
     )
 
 
@@ -59,7 +59,7 @@ async def no_reply(base: CaseContext) -> None:
         answer is not None and answer.type == "error" and answer.get("kind") == "timeout",
         clause="client.reply-wait",
         expected="op 1 failed with a timeout",
-        actual=str(answer),
+        seen=str(answer),
     )
     assert answer is not None
     sent = [r.t for r in play.requests()]
@@ -70,5 +70,5 @@ async def no_reply(base: CaseContext) -> None:
             TIMEOUT * 0.95 <= waited <= TIMEOUT + LATE_SLACK,
             clause="client.reply-wait",
             expected=f"the timeout reported {TIMEOUT:g} to {TIMEOUT + LATE_SLACK:g} s after the request",
-            actual=f"{waited:.2f} s after it",
+            seen=f"{waited:.2f} s after it",
         )

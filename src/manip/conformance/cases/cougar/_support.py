@@ -16,8 +16,8 @@ from manip.conformance.cougar.probe import (
     WordReply,
     floats_of,
     layout_words,
-    words_bytes,
 )
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory import Region
 from manip.spec import SPEC
@@ -96,22 +96,12 @@ def expect_reply(ctx: CaseContext, reply: WordReply, name: str, clause: str, *, 
         expected=f"a Table 1 response{where} ({name}, {layout_words(SPEC.cougar_responses[code])})",
         seen=reply,
     )
-    ctx.expect(
-        reply.name == name,
-        clause=clause,
-        expected=f"{name} (code {code}){where}",
-        seen=reply,
-    )
+    ctx.expect(reply.name == name, clause=clause, expected=f"{name} (code {code}){where}", seen=reply)
     return reply
 
 
 def expect_none(ctx: CaseContext, replies: Sequence[WordReply], clause: str, why: str) -> None:
-    ctx.expect(
-        not replies,
-        clause=clause,
-        expected=f"no response ({why})",
-        seen=replies,
-    )
+    ctx.expect(not replies, clause=clause, expected=f"no response ({why})", seen=replies)
 
 
 async def expect_quiet(ctx: CaseContext, probe: CougarProbe, clause: str, why: str, ticks: int = 2) -> None:
@@ -152,7 +142,7 @@ async def region_floats(ctx: CaseContext, probe: CougarProbe, obj: Region) -> tu
             f"EXMN did not return the {obj.words} words of {obj.name}: the case cannot go on",
             clause="cougar.exmn.reply",
             expected=f"{obj.words} words at {octal(obj.address)}",
-            actual=f"{len(words)} words",
+            seen=f"{len(words)} words",
         )
     return floats_of(words)
 
@@ -194,8 +184,7 @@ async def read_forces(ctx: CaseContext, probe: CougarProbe) -> tuple[float, ...]
         len(values) == 6 and all(math.isfinite(v) for v in values),
         clause="cougar.rfrc.reply",
         expected="six finite floats",
-        actual=str(values),
-        data=words_bytes(reply.words),
+        seen=showing(reply, str(values)),
     )
     return values
 

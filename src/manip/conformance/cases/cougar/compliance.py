@@ -30,6 +30,7 @@ from manip.conformance.cougar.probe import (
     floats_of,
     words_bytes,
 )
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.cougar.memory import Region
@@ -70,8 +71,7 @@ async def _ntd(
         len(values) == 6 and all(math.isfinite(v) for v in values),
         clause="cougar.npr.reply",
         expected="six finite floats",
-        actual=fmt(values),
-        data=words_bytes(reply.words),
+        seen=showing(reply, fmt(values)),
     )
     return values
 
@@ -96,7 +96,7 @@ async def npr_gains(ctx: CaseContext) -> None:
                 all(abs(v) <= 1e-6 for v in zero),
                 clause="cougar.npr.reply",
                 expected="NTD all zero with BJI = 0",
-                actual=fmt(zero),
+                seen=fmt(zero),
             )
             bji = 0.01
             base = await _ntd(ctx, probe, k=0.0, b=0.0, bji=bji, rate=0.0)
@@ -112,13 +112,13 @@ async def npr_gains(ctx: CaseContext) -> None:
                     clause="cougar.npr.reply",
                     expected=f"NTD to change when {gain} goes from 0 to {GAIN:g} (with a "
                     f"{'position error' if kw == 'k' else 'rate difference'})",
-                    actual=f"{fmt(rest)} -> {fmt(one)}",
+                    seen=f"{fmt(rest)} -> {fmt(one)}",
                 )
                 ctx.expect(
                     close_to(d2, [2 * v for v in d1], rel=0.02, floor=1e-6),
                     clause="cougar.npr.reply",
                     expected=f"doubling {gain} doubles its part of NTD: {fmt(2 * v for v in d1)}",
-                    actual=fmt(d2),
+                    seen=fmt(d2),
                 )
             one = await _ntd(ctx, probe, k=GAIN, b=0.0, bji=bji, rate=0.0)
             two = await _ntd(ctx, probe, k=GAIN, b=0.0, bji=2 * bji, rate=0.0)
@@ -126,7 +126,7 @@ async def npr_gains(ctx: CaseContext) -> None:
                 close_to(two, [2 * v for v in one], rel=0.02, floor=1e-6),
                 clause="cougar.npr.reply",
                 expected=f"doubling BJI doubles NTD: {fmt(2 * v for v in one)}",
-                actual=fmt(two),
+                seen=fmt(two),
             )
             each = tuple(bji * m for m in BJI_STEPS)
             own = await _ntd(ctx, probe, k=GAIN, b=0.0, bji=each, rate=0.0)
@@ -136,7 +136,7 @@ async def npr_gains(ctx: CaseContext) -> None:
                 clause="cougar.npr.reply",
                 expected=f"BJI {fmt(each)} (diagonal: joint i's own element scales joint i) gives NTD "
                 f"{fmt(want)}",
-                actual=fmt(own),
+                seen=fmt(own),
             )
         finally:
             await probe.send("NBJI", bji=(0.0,) * 6)
@@ -174,7 +174,7 @@ async def rst_zeroes_velocities(ctx: CaseContext) -> None:
             close_to(stored, rate, rel=1e-6, floor=0.0),
             clause="cougar.memory",
             expected=f"NPR's rate difference in memory before RST: {fmt(rate)}",
-            actual=fmt(stored),
+            seen=fmt(stored),
         )
         await probe.send("RST")
         await probe.run(1)
@@ -185,8 +185,7 @@ async def rst_zeroes_velocities(ctx: CaseContext) -> None:
                 all(v == 0.0 for v in values),
                 clause="cougar.rst",
                 expected=f"{name} zero after RST",
-                actual=fmt(values),
-                data=words_bytes(words),
+                seen=showing(words_bytes(words), fmt(values)),
             )
         await probe.send("NBJI", bji=(0.0,) * 6)
         await probe.run(1)
@@ -220,7 +219,7 @@ async def filter_output(ctx: CaseContext) -> None:
                 max(abs(v) for v in sample) > 1e-3,
                 clause="cougar.npr.reply",
                 expected="a non-zero NTD for a position error with K and BJI set",
-                actual=fmt(sample),
+                seen=fmt(sample),
             )
             words = [w for c in FILTER_CON for w in f_to_words(c)]
             for i, w in enumerate(words):
@@ -243,7 +242,7 @@ async def filter_output(ctx: CaseContext) -> None:
                     clause="cougar.filter",
                     expected=f"the {label} NTD after RST with con = {FILTER_CON}: {factor:g} x the "
                     f"sample, {fmt(want)}",
-                    actual=fmt(got),
+                    seen=fmt(got),
                 )
         finally:
             for i, w in enumerate(old):
@@ -278,7 +277,7 @@ async def _front_jacobian(ctx: CaseContext, probe: CougarProbe) -> tuple[np.ndar
             "EXMN did not return the Jacobian: the case cannot go on",
             clause="cougar.exmn.reply",
             expected=f"72 words at {buffer.address:#o}",
-            actual=f"{len(j)} words",
+            seen=f"{len(j)} words",
         )
     return np.array(floats_of(j)).reshape(6, 6), buffer
 
@@ -324,12 +323,14 @@ async def npr_damping_matrix(ctx: CaseContext) -> None:
             got = damped - rest
             scale = float(np.abs(want).max())
             for i in range(6):
-                ctx.expect(
-                    abs(got[i] - want[i]) <= 0.01 * scale + 1e-6,
+                ctx.expect_near(
+                    got[i],
+                    want[i],
+                    0.01 * scale + 1e-6,
                     clause="cougar.nb-row-order",
                     expected=f"joint {i + 1}: NB's part of NTD = -BJI (Jᵀ B J rate)[{i}] = {want[i]:.5g} "
                     f"for B row after row (within 1 % of {scale:.3g})",
-                    actual=f"{got[i]:.5g} (B transposed would give "
+                    seen=f"{got[i]:.5g} (B transposed would give "
                     f"{float(-NB_BJI * (j.T @ (b.T @ (j @ np.array(NB_RATE))))[i]):.5g})",
                 )
         finally:
@@ -375,5 +376,5 @@ async def _transpose_follows(
             clause="cougar.jacob-transpose",
             expected=f"row {row + 1} of the floats after J ({buffer.name}, from {buffer.at(36):#o}) = "
             f"column {row + 1} of J: {fmt(j.T[row])}",
-            actual=fmt(jt[row]),
+            seen=fmt(jt[row]),
         )

@@ -68,7 +68,7 @@ async def adc8_integer_filter(ctx: CaseContext) -> None:
             got[0].tick == got[1].tick,
             clause="cougar.comint.partial-waits",
             expected="two EXMNs sent together answered in the same tick",
-            actual=f"ticks {got[0].tick} and {got[1].tick}",
+            seen=f"ticks {got[0].tick} and {got[1].tick}",
         )
         return int16(got[0].data_words[1:]), int16(got[1].data_words[1:])
 
@@ -83,7 +83,7 @@ async def adc8_integer_filter(ctx: CaseContext) -> None:
             y_prev == [y - 100 for y in y0],
             clause="cougar.memory",
             expected=f"the deposited filter state {[y - 100 for y in y0]}",
-            actual=str(y_prev),
+            seen=str(y_prev),
         )
         for k in range(12):
             u, y = await sample()  # the next tick
@@ -96,7 +96,7 @@ async def adc8_integer_filter(ctx: CaseContext) -> None:
                     expected=f"tick {k + 1} after the disturbance, gauge {i}: "
                     f"Y = (u + u_prev + 6 Y_prev) / 8 = ({u[i]} + {u_prev[i]} + 6 x {y_prev[i]}) / 8 = "
                     f"{total / 8:g}, rounded: {low}" + (f" or {high}" if high != low else ""),
-                    actual=f"Y = {y[i]}",
+                    seen=f"Y = {y[i]}",
                 )
             u_prev, y_prev = u, y
         await probe.run(SETTLE_TICKS)
@@ -128,7 +128,7 @@ async def _settles_near(ctx: CaseContext, sample: Any) -> None:
             clause="cougar.adc8-filter",
             expected=f"gauge {i} settled: the filtered reading within {ROUNDING_BIAS} counts of the sample "
             "(unity DC gain but for the division's rounding; a count of noise allowed)",
-            actual=f"Y - u = {[row[i] for row in errors]} (mean {mean:.3g})",
+            seen=f"Y - u = {[row[i] for row in errors]} (mean {mean:.3g})",
         )
 
 
@@ -203,7 +203,7 @@ async def _voltmat_follows_fv(
                 clause="cougar.nfv-conversion",
                 expected=f"voltmat's {what} = -(10/2048) calmat about fv = {fmt(fv)} "
                 f"{ctx.options.length_unit}: {fmt(want[rows].reshape(-1)[:8])}...",
-                actual=f"{fmt(vm[rows].reshape(-1)[:8])}... (largest difference "
+                seen=f"{fmt(vm[rows].reshape(-1)[:8])}... (largest difference "
                 f"{float(np.abs(vm[rows] - want[rows]).max()):.3g})",
             )
         if force_rows is None:
@@ -213,7 +213,7 @@ async def _voltmat_follows_fv(
                 bool(np.array_equal(vm[:3], force_rows)),
                 clause="cougar.nfv-conversion",
                 expected="NFV leaves the force rows of voltmat unchanged",
-                actual=f"largest change {float(np.abs(vm[:3] - force_rows).max()):.3g}",
+                seen=f"largest change {float(np.abs(vm[:3] - force_rows).max()):.3g}",
             )
     return vm
 
@@ -240,7 +240,7 @@ async def _offset_step(
             clause="cougar.nfv-conversion",
             expected=f"gauge {gauge} offset +{OFFSET_STEP} moves force[{i}] by -voltmat[{i}, {gauge}] x "
             f"{OFFSET_STEP} = {want[i]:.4g} (within {slack[i]:.3g}: {COUNTS_SLACK} counts)",
-            actual=f"{change:.4g} ({before[i]:.4g} -> {after[i]:.4g})",
+            seen=f"{change:.4g} ({before[i]:.4g} -> {after[i]:.4g})",
         )
 
 
@@ -280,12 +280,14 @@ async def rraw_before_offsets(ctx: CaseContext) -> None:
             await probe.run(SETTLE_TICKS)
             after = await _raw_gauges(ctx, probe)
             for i, (b, a) in enumerate(zip(before, after, strict=True)):
-                ctx.expect(
-                    abs(a - b) <= RRAW_SLACK,
+                ctx.expect_near(
+                    a,
+                    b,
+                    RRAW_SLACK,
                     clause="cougar.rraw.before-offsets",
                     expected=f"gauge {i}: the same raw reading after every offset rose by {OFFSET_STEP} "
                     f"(within {RRAW_SLACK} counts; WGOV's vector is subtracted from the raw readings)",
-                    actual=f"{b} -> {a}",
+                    seen=f"{b} -> {a}",
                 )
         finally:
             await probe.send("WGOV", offsets=offsets0)

@@ -110,7 +110,7 @@ async def gravity_point_mass(ctx: CaseContext) -> None:
                         expected=f"at {label}, an object of {OBJECT_OZ:g} oz at cg {fmt(cg_inch)} in moves "
                         f"{name} by {want[i]:.4g} (Rᵀ(0, 0, -W), cg × f; within {REL:.0%} of {scale:.3g} "
                         f"+ {SLACK_OZ})",
-                        actual=f"{change:.4g} ({bare[i]:.4g} -> {loaded[i]:.4g})",
+                        seen=f"{change:.4g} ({bare[i]:.4g} -> {loaded[i]:.4g})",
                     )
             await _guard_on_torque(ctx, probe, bare, want)
         finally:
@@ -135,13 +135,13 @@ async def _guard_on_torque(ctx: CaseContext, probe: CougarProbe, bare: Vector, w
         clause="cougar.guard-corrected-force",
         expected=f"guard 3 along the object's torque, tol {base + 0.5 * size:.4g} (half its {size:.4g} oz-in "
         "above the bare reading), tripping on the corrected force",
-        actual=str(trips) if trips else "no trip",
+        seen=str(trips) if trips else "no trip",
     )
     ctx.expect(
         all(index != 4 for _, index in trips),
         clause="cougar.guard-corrected-force",
         expected=f"guard 4 along it, tol {base + 1.5 * size:.4g} (one and a half times the torque), quiet",
-        actual=str(trips),
+        seen=str(trips),
     )
 
 
@@ -183,7 +183,7 @@ async def gravity_nfv_redoes_model(ctx: CaseContext) -> None:
                     clause="cougar.nfv-conversion",
                     expected=f"after NFV {fmt(in_unit(ctx, FV_MM))} {ctx.options.length_unit}, {name} = "
                     f"{want[i]:.4g} (the same wrench about the new centre: force unchanged, τ - r × f)",
-                    actual=f"{after[i]:.4g} (before NFV {before[i]:.4g})",
+                    seen=f"{after[i]:.4g} (before NFV {before[i]:.4g})",
                 )
         finally:
             await probe.send("NFV", offset=fv0)
@@ -210,7 +210,7 @@ async def _ntd_at_rest(ctx: CaseContext, probe: CougarProbe, commanded_force: Se
         len(values) == 6 and all(np.isfinite(values)),
         clause="cougar.npr.reply",
         expected="six finite floats",
-        actual=fmt(values),
+        seen=fmt(values),
     )
     return np.array(values if len(values) == 6 else (0.0,) * 6, dtype=np.float64)
 
@@ -256,7 +256,7 @@ async def gravity_compliance_corrected(ctx: CaseContext) -> None:
                 expected=f"NTD moving with the commanded force (F_commanded in the compliance equation, "
                 f"erratum cougar-compliance-equation) by more than {NOISE_FACTOR:g} times its noise "
                 f"({noise:.2g})",
-                actual=f"NFC {fmt(-load)} gave NTD {fmt(shifted)}, NFC 0 gave {fmt(bare)}",
+                seen=f"NFC {fmt(-load)} gave NTD {fmt(shifted)}, NFC 0 gave {fmt(bare)}",
             )
         finally:
             await probe.send("NBJI", bji=(0.0,) * 6)
@@ -277,5 +277,5 @@ def _expect_same_ntd(ctx: CaseContext, loaded: Vector, shifted: Vector, bare: Ve
             clause="cougar.compliance-corrected-force",
             expected=f"NTD {name} with the object told of (NEWWC {OBJECT_OZ:g} oz) = NTD with none and the "
             f"commanded force lowered by its load {fmt(load)}: {shifted[i]:.4g} (within {slack:.2g})",
-            actual=f"{loaded[i]:.4g} (with no object and no commanded force: {bare[i]:.4g})",
+            seen=f"{loaded[i]:.4g} (with no object and no commanded force: {bare[i]:.4g})",
         )

@@ -15,6 +15,7 @@ from manip.conformance.cougar.probe import (
     cougar_probe,
     words_bytes,
 )
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 
@@ -51,21 +52,23 @@ async def jacob_front_buffer(ctx: CaseContext) -> None:
             new != old,
             clause="cougar.jacob-double-buffer",
             expected="a new Jacobian in the front buffer within 11 ticks of SEN to a new pose",
-            actual="unchanged",
+            seen="unchanged",
         )
         ctx.expect(
             seen[-3:] == [new] * 3,
             clause="cougar.jacob-double-buffer",
             expected="the front buffer's Jacobian steady from 9 ticks after SEN to a new pose",
-            actual="still changing after 9 ticks",
+            seen="still changing after 9 ticks",
         )
         mixed = [i for i, j in enumerate(seen) if j not in (old, new)]
         ctx.expect(
             not mixed,
             clause="cougar.jacob-double-buffer",
             expected="the front buffer always the old or the new Jacobian",
-            actual=f"another one at tick(s) {mixed} after the move",
-            data=words_bytes(seen[mixed[0]]) if mixed else b"",
+            seen=showing(
+                words_bytes(seen[mixed[0]]) if mixed else b"",
+                f"another one at tick(s) {mixed} after the move",
+            ),
         )
         await probe.send("SEN", theta_sensed=READY)
         await probe.run(1)

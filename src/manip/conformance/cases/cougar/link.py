@@ -17,6 +17,7 @@ from manip.conformance.cougar.probe import (
     cougar_probe,
     words_bytes,
 )
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec import SPEC
@@ -41,8 +42,10 @@ async def link_framing(ctx: CaseContext) -> None:
                     [r.name for r in got] == ["VERSION"],
                     clause="link.drv11j.framing",
                     expected=f"link {link + 1}, tick {probe.ticks - 1}: VERSION before its TICKED",
-                    actual="; ".join(str(r) for r in got) or "nothing before TICKED",
-                    data=words_bytes([w for r in got for w in r.words]),
+                    seen=showing(
+                        words_bytes([w for r in got for w in r.words]),
+                        "; ".join(str(r) for r in got) or "nothing before TICKED",
+                    ),
                 )
 
 

@@ -132,7 +132,7 @@ async def _once(ctx: CaseContext, first: bytes | None, bad: bytes) -> CougarLink
             f"DRV-11J link to {ctx.options.address}: cannot connect",
             clause="link.drv11j.framing",
             expected="Cougar accepting a link",
-            actual=str(exc) or type(exc).__name__,
+            seen=str(str(exc) or type(exc).__name__),
         )
     link, decoder = CougarLinkSeen(), FrameDecoder()
     try:
@@ -287,26 +287,26 @@ def judge_ending(ctx: CaseContext, link: CougarLinkSeen, clause: str, what: str)
         not link.garbage,
         clause="link.drv11j.framing",
         expected="every frame from Cougar well formed",
-        actual=link.garbage,
+        seen=str(link.garbage),
     )
     ctx.expect(
         bool(link.frames) and link.frames[0] == Hello(Role.COUGAR),
         clause="link.drv11j.framing",
         expected="Cougar's HELLO (version 1, role Cougar) first",
-        actual=str(link.frames[:1]),
+        seen=str(link.frames[:1]),
     )
     others = [f for f in link.later if not isinstance(f, Bye)]
     ctx.expect(
         not others,
         clause=clause,
         expected=f"{what}: nothing from Cougar but, at most, BYE with its reason",
-        actual="; ".join(str(f) for f in others[:4]),
+        seen="; ".join(str(f) for f in others[:4]),
     )
     ctx.expect(
         link.ended,
         clause=clause,
         expected=f"{what}: Cougar closes the link within {ctx.options.reply_timeout:g} s",
-        actual=f"still open; it sent {[str(f) for f in link.later][:4]}",
+        seen=f"still open; it sent {[str(f) for f in link.later][:4]}",
     )
 
 
@@ -325,19 +325,19 @@ async def link_busy(ctx: CaseContext) -> None:
             bool(second.frames) and second.frames[0] == Hello(Role.COUGAR),
             clause="link.drv11j.framing",
             expected="Cougar's HELLO first, on the second connection too",
-            actual=str(second.frames[:1]),
+            seen=str(second.frames[:1]),
         )
         ctx.expect(
             any(says_busy(b.reason) for b in byes),
             clause="link.drv11j.busy",
             expected="BYE with a reason that says busy on a second connection while a link is up",
-            actual=f"frames {[str(f) for f in second.frames[1:4]]}",
+            seen=f"frames {[str(f) for f in second.frames[1:4]]}",
         )
         ctx.expect(
             second.ended,
             clause="link.drv11j.busy",
             expected=f"the second connection closed by Cougar within {ctx.options.reply_timeout:g} s",
-            actual="still open",
+            seen="still open",
         )
         reply = await probe.call("VERS", version=1)
         ctx.expect(

@@ -14,6 +14,7 @@ from manip.conformance.cougar.probe import (
     cougar_probe,
     words_bytes,
 )
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec import SPEC
@@ -43,7 +44,7 @@ async def memory_deposit_examine(ctx: CaseContext) -> None:
                 seen == new,
                 clause="cougar.memory",
                 expected=f"EXMN after DPST {octal(new)} at {octal(address)} reads {octal(new)}",
-                actual=octal(seen),
+                seen=octal(seen),
             )
             reply = expect_reply(ctx, await probe.call("VERS", version=1), "VERSION", "cougar.vers.reply")
             ctx.expect(
@@ -84,8 +85,7 @@ async def memory_parameters(ctx: CaseContext) -> None:
                 clause="cougar.memory",
                 expected=f"{name}'s data words at {octal(objects[where].address)} ({where}): "
                 f"{octal_words(words[1:])}",
-                actual=octal_words(stored),
-                data=words_bytes(stored),
+                seen=showing(words_bytes(stored), octal_words(stored)),
             )
         zero = {
             CougarCommand.NK: "k",

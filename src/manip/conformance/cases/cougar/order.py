@@ -70,11 +70,13 @@ async def gravity_corrected(ctx: CaseContext) -> None:
             after = await read_forces(ctx, probe)
             shift = [a - b for a, b in zip(after[:3], before[:3], strict=True)]
             size = math.sqrt(sum(v * v for v in shift))
-            ctx.expect(
-                abs(size - PHANTOM_OZ) <= 0.1 * PHANTOM_OZ,
+            ctx.expect_near(
+                size,
+                PHANTOM_OZ,
+                0.1 * PHANTOM_OZ,
                 clause="cougar.gravity",
                 expected=f"the force to move by the {PHANTOM_OZ:g} oz of the object NEWWC describes",
-                actual=f"it moved by {size:.2f} oz: {before[:3]} -> {after[:3]}",
+                seen=f"it moved by {size:.2f} oz: {before[:3]} -> {after[:3]}",
             )
             dvec = (*(v / size for v in shift), 0.0, 0.0, 0.0) if size else (0.0,) * 6
             await probe.send("NEWWC", weight=0.0, cg=(0.0, 0.0, 0.0))

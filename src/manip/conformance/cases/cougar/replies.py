@@ -17,8 +17,8 @@ from manip.conformance.cases.cougar._support import (
 )
 from manip.conformance.cougar.probe import (
     cougar_probe,
-    words_bytes,
 )
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec.notation import octal, octal_words
@@ -42,8 +42,7 @@ async def reply_ntd(ctx: CaseContext) -> None:
                 len(reply.floats()) == 6 and all(math.isfinite(v) for v in reply.floats()),
                 clause="cougar.npr.reply",
                 expected="six finite floats of joint-rate change",
-                actual=fmt(reply.floats()),
-                data=words_bytes(reply.words),
+                seen=showing(reply, fmt(reply.floats())),
             )
             await expect_quiet(ctx, probe, "cougar.response.layout", "NPR has one response")
 
@@ -90,8 +89,7 @@ async def reply_raw(ctx: CaseContext) -> None:
                 len(gauges) == 8 and all(-2048 <= g <= 2047 for g in gauges),
                 clause="cougar.gauge-range",
                 expected="eight readings in -2048..2047",
-                actual=str(gauges),
-                data=words_bytes(reply.words),
+                seen=showing(reply, str(gauges)),
             )
             await expect_quiet(ctx, probe, "cougar.response.layout", "RAW is eight words", ticks=1)
 
@@ -118,7 +116,7 @@ async def reply_exmn(ctx: CaseContext) -> None:
                     words[:1] == first,
                     clause="cougar.memory",
                     expected=f"the word at {octal(base)} the same in every examine ({octal_words(first)})",
-                    actual=octal_words(words[:1]),
+                    seen=octal_words(words[:1]),
                 )
 
 

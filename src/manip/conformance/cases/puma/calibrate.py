@@ -74,7 +74,7 @@ async def calibrate_wrist(ctx: CaseContext) -> None:
         cancelling,
         clause="puma.calibrate-wrist",
         expected="Read Raw Gauges in two poses whose gravity loads on the wrist cancel",
-        actual=f"{len(poses)} readings, gravity in the hand: "
+        seen=f"{len(poses)} readings, gravity in the hand: "
         + "; ".join(sorted({"(" + ", ".join(f"{v:.3f}" for v in g) + ")" for g in loads})[:4]),
     )
     wgov = judge.commands(mark, CougarCommand.WGOV)
@@ -83,7 +83,7 @@ async def calibrate_wrist(ctx: CaseContext) -> None:
         isinstance(sent, tuple) and all(abs(a - b) <= 1 for a, b in zip(sent, offsets, strict=True)),
         clause="puma.calibrate-wrist",
         expected=f"Write Gauge Offset Vector with the gauges' offsets {offsets} (within 1 count)",
-        actual=str(wgov[-1]) if wgov else "no WGOV sent",
+        seen=str(wgov[-1]) if wgov else "no WGOV sent",
     )
     replied = decode_reply(answer.data, SPEC.request("calibrate-wrist")).values.get("offsets")
     ctx.expect(

@@ -22,6 +22,7 @@ from manip.conformance.cases.puma._support import (
     session,
     wait_async,
 )
+from manip.conformance.judge.violation import missing
 from manip.conformance.puma.judge import CougarScript, Heard, JudgingCougar, Said
 from manip.conformance.puma.target import OBSTACLE_FROM, OBSTACLE_JOINT
 from manip.conformance.suite.case import case
@@ -103,7 +104,7 @@ async def npr_every_cycle(ctx: CaseContext) -> None:
         len(npr) >= 3 and not wrong,
         clause="puma.compliance.npr-every-cycle",
         expected="one New Position and Rate for every servo cycle of the compliant segment",
-        actual=f"{len(npr)} NPR on ticks {ticks[:1]}..{ticks[-1:]}: {wrong}",
+        seen=f"{len(npr)} NPR on ticks {ticks[:1]}..{ticks[-1:]}: {wrong}",
     )
     # The correction of cycle k (commanded_k - nominal_k) shows in the next NPR's sensed angles:
     # sensed_{k+1} - nominal_k.  It may use only NTDs sent before cycle k's NPR, and all but the last few.
@@ -118,7 +119,7 @@ async def npr_every_cycle(ctx: CaseContext) -> None:
             clause="puma.compliance.npr-every-cycle",
             expected=f"joint 6 held {NTD_RATE:g} deg/s x {TICK} s per NTD received before the cycle: "
             f"between {least:.4f} and {most:.4f} deg off the nominal path on tick {before.tick}",
-            actual=f"{offset:.4f} deg ({sent} NTD sent before that tick; {len(said)} in all)",
+            seen=f"{offset:.4f} deg ({sent} NTD sent before that tick; {len(said)} in all)",
         )
     ctx.note(f"{len(npr)} NPR on ticks {ticks[0]}..{ticks[-1]}")
 
@@ -143,7 +144,7 @@ async def segment_end(ctx: CaseContext) -> None:
         clause="puma.compliance.segment-end",
         expected=f"the compliant segment {segment} reported complete within {SEGMENT_WITHIN:g} s (its "
         "clean-up done, as for any segment)",
-        actual="no segment-completed report",
+        seen=missing("no segment-completed report"),
     )
     judge.begin(CougarScript(ntd=(0.0,) * 6))
     await judge.wait_ticks(3, SEGMENT_WITHIN)
@@ -160,7 +161,7 @@ async def segment_end(ctx: CaseContext) -> None:
         clause="puma.compliance.segment-end",
         expected=f"the arm at rest where compliance left it: joint 6 near {goal[5] + held:.4f} "
         f"(goal {goal[5]:g} plus the {held:.4f} deg correction held on the last cycle)",
-        actual=f"joint angles {fmt(rest)}",
+        seen=f"joint angles {fmt(rest)}",
     )
     back = await move(ctx, probe, "set-joint-angles", joints=list(here))
     finished = await wait_async(ctx, probe, is_completed(back), SEGMENT_WITHIN)
@@ -169,7 +170,7 @@ async def segment_end(ctx: CaseContext) -> None:
         finished is not None and close(final, here, ARRIVED_DEG),
         clause="puma.compliance.segment-end",
         expected=f"the next segment ({back}) started from there, completed and reached {fmt(here)}",
-        actual=f"{'completed' if finished else 'not reported complete'}; joint angles {fmt(final)}",
+        seen=f"{'completed' if finished else 'not reported complete'}; joint angles {fmt(final)}",
     )
 
 
@@ -220,7 +221,6 @@ async def _no_collision_test(ctx: CaseContext) -> None:
         clause="puma.compliance.no-collision-test",
         expected=f"compliant segments {push} (into the obstacle) and {back} (back) completed with no "
         "collision error",
-        seen=errors or end,
-        actual="" if errors or end else "neither completion nor error",
+        seen=(errors or end) or missing("neither completion nor error"),
     )
     ctx.note(f"judge heard {judge.ticks} ticks")

@@ -86,7 +86,7 @@ async def guard_stop(ctx: CaseContext) -> None:
         close(a, b, ARRIVED_DEG) and not close(a, far, MOVING_DEG),
         clause="puma.guard.stop",
         expected=f"the arm stopped short of {fmt(far)} after stop guard {g} tripped",
-        actual=f"joint angles {fmt(a)}, then {STILL_TICKS} ticks later {fmt(b)}",
+        seen=f"joint angles {fmt(a)}, then {STILL_TICKS} ticks later {fmt(b)}",
     )
     late = await wait_async(ctx, probe, lambda p: is_completed(first)(p) or is_completed(second)(p), 1.0)
     ctx.expect(
@@ -109,7 +109,7 @@ async def guard_stop(ctx: CaseContext) -> None:
         done is not None and close(final, here, ARRIVED_DEG),
         clause="puma.guard.stop",
         expected=f"segment {third} completed at {fmt(here)} although continue guard {h} tripped",
-        actual=f"{'completed' if done else 'not reported complete'}; joint angles {fmt(final)}",
+        seen=f"{'completed' if done else 'not reported complete'}; joint angles {fmt(final)}",
     )
 
 

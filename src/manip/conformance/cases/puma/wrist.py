@@ -21,6 +21,7 @@ from manip.conformance.cases.puma._support import (
     session,
     wait_async,
 )
+from manip.conformance.judge.violation import missing
 from manip.conformance.puma.judge import SENSED, CougarScript, Heard
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
@@ -105,7 +106,7 @@ async def command_layout(ctx: CaseContext) -> None:
         not unreadable,
         clause="cougar.command.layout",
         expected="only Table 1 commands of the right length (a code word, then its data words)",
-        actual="; ".join(str(h) for h in unreadable[:3]),
+        seen="; ".join(str(h) for h in unreadable[:3]),
     )
     position = 0
     for command, values in expected:
@@ -115,7 +116,7 @@ async def command_layout(ctx: CaseContext) -> None:
             found is not None,
             clause="cougar.command.layout",
             expected=f"{command} (code {int(code)}) sent for the request, in request order",
-            actual="; ".join(str(h) for h in heard[position:][:6]) or "nothing",
+            seen="; ".join(str(h) for h in heard[position:][:6]) or "nothing",
         )
         assert found is not None
         msg = heard[found].msg
@@ -125,7 +126,7 @@ async def command_layout(ctx: CaseContext) -> None:
             got == values,
             clause="cougar.command.layout",
             expected=f"{command} carrying {values} (floats two words each, sign/exponent word first)",
-            actual=f"{heard[found]} = {got}",
+            seen=f"{heard[found]} = {got}",
         )
         position = found + 1
     ctx.note(f"{len(expected)} configuration commands judged, {len(heard)} commands heard")
@@ -153,7 +154,7 @@ async def read_forces_angles(ctx: CaseContext) -> None:
         at is not None,
         clause="puma.wrist.read-forces-angles",
         expected="Report Forces (RFRC) sent to Cougar for read forces",
-        actual="; ".join(str(h) for h in heard[:6]) or "nothing",
+        seen="; ".join(str(h) for h in heard[:6]) or "nothing",
     )
     assert at is not None
     before = [h for h in heard[:at] if h.code in SENSED]
@@ -162,7 +163,7 @@ async def read_forces_angles(ctx: CaseContext) -> None:
         isinstance(sent, tuple) and close(sent, here, SENSED_TOL),
         clause="puma.wrist.read-forces-angles",
         expected=f"SEN with the current joint angles {fmt(here)} sent after the request and before RFRC",
-        actual=str(before[-1]) if before else f"no SEN or NPR between the request and {heard[at]}",
+        seen=str(before[-1]) if before else f"no SEN or NPR between the request and {heard[at]}",
     )
 
 
@@ -188,7 +189,7 @@ async def waits(ctx: CaseContext) -> None:
         clause="puma.wrist.waits",
         expected=f"read forces #{first} answered with the forces Cougar sent {FORCES_DELAY} ticks "
         f"({FORCES_DELAY * TICK:.2f} s) late: {fmt(forces)}",
-        actual=f"{answer} = {got}" + (f"; Cougar's FORCES went on tick {said[-1].tick}" if said else ""),
+        seen=f"{answer} = {got}" + (f"; Cougar's FORCES went on tick {said[-1].tick}" if said else ""),
     )
     ctx.expect(
         following.number == second,
@@ -208,11 +209,8 @@ async def waits(ctx: CaseContext) -> None:
     )
     judge.begin()
     after = await probe.call("joint-angles")
-    ctx.expect(
-        after.is_response,
-        clause="puma.wrist.waits",
-        expected="joint angles served normally after the failed read forces",
-        seen=after,
+    ctx.expect_response(
+        after, clause="puma.wrist.waits", expected="joint angles served normally after the failed read forces"
     )
 
 
@@ -248,7 +246,7 @@ async def priority(ctx: CaseContext) -> None:
             ranks == sorted(ranks),
             clause="puma.wrist.priority",
             expected="New Position and Rate, then Reset Wrist, then other commands, within a tick",
-            actual=f"tick {tick}: " + ", ".join(h.msg.name if h.msg else "?" for h in items),
+            seen=f"tick {tick}: " + ", ".join(h.msg.name if h.msg else "?" for h in items),
         )
     if not mixed:
         ctx.skip("no tick carried New Position and Rate or Reset Wrist together with another command")
@@ -281,11 +279,8 @@ async def config_at_once(ctx: CaseContext) -> None:
     asked = judge.ticks
     weight = round(ctx.random.uniform(1.0, 20.0), 3)
     answer = await probe.call("set-weight", weight=weight, cg=[0.0] * 3)
-    ctx.expect(
-        answer.is_response,
-        clause="puma.wrist.config-at-once",
-        expected="set weight answered done while the move runs",
-        seen=answer,
+    ctx.expect_response(
+        answer, clause="puma.wrist.config-at-once", expected="set weight answered done while the move runs"
     )
     await judge.wait_ticks(AT_ONCE_TICKS, SEGMENT_WITHIN)
     sent = _first_after(judge.since(mark), CougarCommand.NEWWC, asked)
@@ -294,7 +289,7 @@ async def config_at_once(ctx: CaseContext) -> None:
         clause="puma.wrist.config-at-once",
         expected=f"NEWWC sent to Cougar within {AT_ONCE_TICKS} servo cycles of set weight (tick {asked}), "
         f"while segment {segment} still runs",
-        actual=str(sent) if sent is not None else f"nothing by tick {judge.ticks}",
+        seen=str(sent) if sent is not None else missing(f"nothing by tick {judge.ticks}"),
     )
     await wait_async(ctx, probe, is_completed(segment), 2 * SEGMENT_WITHIN)
     await probe.call("set-weight", weight=0.0, cg=[0.0] * 3)
@@ -329,7 +324,7 @@ async def user_during_compliance(ctx: CaseContext) -> None:
         got == forces,
         clause="puma.wrist.user-during-compliance",
         expected=f"read forces during the compliant segment answered with Cougar's forces {fmt(forces)}",
-        actual=f"{answer} = {got}",
+        seen=f"{answer} = {got}",
     )
     asked = judge.ticks
     require_response(ctx, await probe.call("set-commanded-force", force=[0.0] * 6), "set commanded force")
@@ -339,14 +334,14 @@ async def user_during_compliance(ctx: CaseContext) -> None:
         sent is not None and sent.tick - asked <= AT_ONCE_TICKS,
         clause="puma.wrist.user-during-compliance",
         expected=f"NFC sent to Cougar within {AT_ONCE_TICKS} servo cycles of set commanded force",
-        actual=str(sent) if sent is not None else f"nothing by tick {judge.ticks}",
+        seen=str(sent) if sent is not None else missing(f"nothing by tick {judge.ticks}"),
     )
     done = await wait_async(ctx, probe, is_completed(segment), SEGMENT_WITHIN)
     ctx.expect(
         done is not None,
         clause="puma.wrist.user-during-compliance",
         expected=f"the compliant segment {segment} going on to its end (reported complete)",
-        actual="no segment-completed report",
+        seen=missing("no segment-completed report"),
     )
 
 
@@ -372,22 +367,21 @@ async def out_of_sync(ctx: CaseContext) -> None:
         clause="puma.wrist.out-of-sync",
         expected=f"read forces #{number} answered with a non-fatal error (202) within {AT_ONCE_TICKS + 1} "
         "servo cycles of Cougar's out-of-sync message",
-        actual=f"{answer}, {late} servo cycles after it",
+        seen=f"{answer}, {late} servo cycles after it",
     )
     warning = await wait_async(ctx, probe, lambda p: p.opcode == ServerOp.ASYNCHRONOUS_WARNING, 1.0)
     ctx.expect(
         warning is not None,
         clause="puma.wrist.out-of-sync",
         expected="an asynchronous warning (205) telling the client that the wrist computer lost sync",
-        actual="none",
+        seen=missing("none"),
     )
     judge.begin()
     after = await probe.call("joint-angles")
-    ctx.expect(
-        after.is_response,
+    ctx.expect_response(
+        after,
         clause="puma.wrist.out-of-sync",
         expected="joint angles served normally after the out-of-sync message",
-        seen=after,
     )
 
 
@@ -442,13 +436,13 @@ async def connection_state(ctx: CaseContext) -> None:
         bool(cleared),
         clause="puma.wrist.connection-state",
         expected=f"GUARDC for guard {index}, which the last connection left armed, once the next one opens",
-        actual="; ".join(str(h) for h in heard[:6]) or "nothing sent to Cougar",
+        seen="; ".join(str(h) for h in heard[:6]) or "nothing sent to Cougar",
     )
     resent = [h for h in heard if h.code in _SETTINGS]
     ctx.expect(
         not resent,
         clause="puma.wrist.connection-state",
         expected="none of Cougar's settings sent again when a connection opens",
-        actual="; ".join(str(h) for h in resent[:6]),
+        seen="; ".join(str(h) for h in resent[:6]),
     )
     await second.call("set-weight", weight=0.0, cg=[0.0] * 3)

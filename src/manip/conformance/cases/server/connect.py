@@ -51,7 +51,7 @@ async def one_server_per_robot(ctx: CaseContext) -> None:
         False,
         clause="connect.one-server-per-robot",
         expected="the second RFC refused with CLS while a client is connected",
-        actual=f"a second connection opened (peer index {octal(second.conn.peer[1])})",
+        seen=f"a second connection opened (peer index {octal(second.conn.peer[1])})",
     )
     ctx.note(f"first connection {octal(first.conn.peer[1])} still open")
 

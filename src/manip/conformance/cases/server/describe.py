@@ -28,6 +28,7 @@ from manip.conformance.judge.checks import (
     required_refusal,
     word,
 )
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.spec import SPEC
@@ -45,8 +46,8 @@ async def _describe(ctx: CaseContext, probe: Probe) -> Answer:
 async def _entries(ctx: CaseContext, probe: Probe | None = None) -> dict[str, LispValue]:
     probe = probe or await ctx.connect()
     answer = await _describe(ctx, probe)
-    entries, findings = parse_description(multi_text(answer.packets))
-    ctx.check(findings)
+    entries, violations = parse_description(multi_text(answer.packets))
+    ctx.check(violations)
     assert entries is not None
     return entries
 
@@ -68,16 +69,14 @@ async def reply_shape(ctx: CaseContext) -> None:
         answer.terminated,
         clause="multi.terminated-by-empty",
         expected="an empty RESPONSE ending the reply",
-        actual=f"{len(answer.packets)} packet(s), no terminator",
-        data=answer.packets[-1].data,
+        seen=showing(answer.packets[-1], f"{len(answer.packets)} packet(s), no terminator"),
     )
     ctx.note(f"{len(answer.packets) - 1} text packet(s)")
     after = await probe.call("here")  # the next answer belongs to the next request
-    ctx.expect(
-        after.number == after.request.packet_no,
+    ctx.expect_echo(
+        after,
         clause="request.one-reply",
         expected=f"the reply to request #{after.request.packet_no} after the terminator",
-        seen=after,
     )
 
 
@@ -94,7 +93,7 @@ async def alist(ctx: CaseContext) -> None:
         not wrong,
         clause="describe.numbers-octal",
         expected=":operations opcodes in 200-377 read in octal",
-        actual=f"{octal_words(wrong)} (written in decimal?)",
+        seen=f"{octal_words(wrong)} (written in decimal?)",
     )
 
 
@@ -208,21 +207,19 @@ def _operations_case(row: tuple[str, tuple[Hazard, ...], str]) -> None:
                 continue
             if verdict:
                 served.append(opcode)
-            shown = f":operations {' '.join(octal(o) for o in sorted(listed))}"
+            operations = f":operations {' '.join(octal(o) for o in sorted(listed))}"
             ctx.expect(
                 verdict or opcode not in listed,
                 clause="describe.operations-answered",
                 expected=f"opcode {octal(opcode)}, listed under :operations, served",
-                actual=f"refused as unserved: {answer}",
-                data=answer.data,
+                seen=showing(answer, f"refused as unserved: {answer}"),
             )
             ctx.expect(
                 not verdict or opcode in listed,
                 clause="describe.operations-complete",
                 expected=f"opcode {octal(opcode)} listed under :operations: it is served "
                 "(not refused unserved)",
-                actual=f"answered with {answer}; {shown}",
-                data=answer.data,
+                seen=showing(answer, f"answered with {answer}; {operations}"),
             )
         ctx.note(f"served: {' '.join(octal(o) for o in served)} ({len(served)} of {len(probed)} probed)")
 
@@ -261,8 +258,7 @@ async def degrees_of_freedom(ctx: CaseContext) -> None:
         _float_count(joints) == dof,
         clause="describe.dof-joint-vectors",
         expected=f"{dof} joint angles (:degrees-of-freedom {dof})",
-        actual=f"{len(joints.data) - 2} data bytes after the request number",
-        data=joints.data,
+        seen=showing(joints, f"{len(joints.data) - 2} data bytes after the request number"),
     )
     require_response(ctx, joints, "joint angles")  # a reply off the layout is the transcript invariant's
     pose = await read_floats(ctx, probe, "here")
@@ -274,8 +270,7 @@ async def degrees_of_freedom(ctx: CaseContext) -> None:
         _float_count(solved) == dof,
         clause="describe.dof-joint-vectors",
         expected=f"{dof} joint angles from solve forwards (:degrees-of-freedom {dof})",
-        actual=f"{len(solved.data) - 2} data bytes after the request number",
-        data=solved.data,
+        seen=showing(solved, f"{len(solved.data) - 2} data bytes after the request number"),
     )
 
 
@@ -302,8 +297,7 @@ async def dof_set_joint_angles(ctx: CaseContext) -> None:
             expected=f"set joint angles with {count} floats "
             + ("taken as well formed (no command error)" if count == dof else "refused as a bad length (C)")
             + f": :degrees-of-freedom is {dof}",
-            actual=str(answer) if error is None else repr(error.error.render()),
-            data=answer.data,
+            seen=showing(answer, str(answer) if error is None else repr(error.error.render())),
         )
 
 
@@ -337,13 +331,13 @@ async def joint_limits(ctx: CaseContext) -> None:
         count == dof,
         clause="describe.joint-limits-count",
         expected=f":joint-limits with {dof} (lower upper) pairs, one per degree of freedom",
-        actual=f"{count} entries: {stated!r}" if count is not None else repr(stated),
+        seen=f"{count} entries: {stated!r}" if count is not None else repr(stated),
     )
     ctx.expect(
         isinstance(stated, list) and all(_is_range(pair) for pair in stated),
         clause="describe.joint-limits-count",
         expected="each entry a (lower upper) pair of numbers, lower not above upper",
-        actual=repr(stated),
+        seen=repr(stated),
     )
     limits = stated_limits(stated)
     if limits is None:
@@ -422,7 +416,7 @@ async def not_split(ctx: CaseContext) -> None:
 def _inside_replies(probe: Probe, opcode: int) -> list[list[WirePacket]]:
     """For each request of ``opcode`` on ``probe`` (sent one at a time), the packets other than responses
     that came between the first packet of its reply and the last (a response numbered wrongly is
-    multi.same-request-number's finding, not an intruder)."""
+    a violation of multi.same-request-number, not an intruder)."""
     out: list[list[WirePacket]] = []
     numbers = {p.packet_no for p in probe.packets if p.direction == "c2s" and p.opcode == opcode}
     sent = [p for p in probe.packets if p.direction == "s2c"]

@@ -7,6 +7,7 @@ from typing import Final, NoReturn
 
 from manip.conformance.cases._support import UNASSIGNED_OPCODES, error_of
 from manip.conformance.judge.checks import check_error_packet
+from manip.conformance.judge.violation import missing, showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.conformance.suite.world import CalibrationFailure
@@ -24,11 +25,11 @@ async def _command_error(ctx: CaseContext, probe: Probe, clause: str | None = No
     judge and is not judged (``server.negative.unknown-opcodes`` fails the target)."""
     answer = await probe.call_raw(UNASSIGNED_OPCODES[-1 - ctx.random.randrange(8)])
     if clause is not None:
-        ctx.expect(
-            answer.opcode == ServerOp.NON_FATAL_ERROR,
+        ctx.expect_opcode(
+            answer,
+            ServerOp.NON_FATAL_ERROR,
             clause=clause,
             expected="a non-fatal error (0202) for an unknown opcode",
-            seen=answer,
         )
     elif answer.opcode != ServerOp.NON_FATAL_ERROR:
         ctx.not_judged(
@@ -101,8 +102,7 @@ async def severity_matches(ctx: CaseContext) -> None:
         error.severity == "C",
         clause="request.unknown-opcode",
         expected="severity C for an unknown opcode",
-        actual=repr(error.render()),
-        data=answer.data,
+        seen=showing(answer, repr(error.render())),
     )
 
 
@@ -116,16 +116,10 @@ async def non_fatal_is_reply(ctx: CaseContext) -> None:
         not extra,
         clause="error.non-fatal-is-reply",
         expected="no other reply after the non-fatal error",
-        actual=f"{len(extra)} more packet(s)",
-        data=extra[0].data if extra else b"",
+        seen=showing(extra[:1], f"{len(extra)} more packet(s)"),
     )
     after = await probe.call("here")
-    ctx.expect(
-        after.number == after.request.packet_no,
-        clause="request.one-reply",
-        expected="the next reply answers the next request",
-        seen=after,
-    )
+    ctx.expect_echo(after, clause="request.one-reply", expected="the next reply answers the next request")
 
 
 @case(
@@ -183,11 +177,10 @@ async def _judge_fatal(ctx: CaseContext, probe: Probe, answer: Answer, failed: t
     """A fatal error: its request number, its severity, its NZI form, then CLS (a dropped link or a LOS
     is not the CLS the clause asks for)."""
     ctx.check(check_error_packet(answer.first))
-    ctx.expect(
-        answer.number == answer.request.packet_no,
+    ctx.expect_echo(
+        answer,
         clause="error.fatal-request-number",
         expected=f"request number {answer.request.packet_no}, the packet last received",
-        seen=answer,
     )
     error = error_of(answer)
     ctx.expect(
@@ -201,8 +194,7 @@ async def _judge_fatal(ctx: CaseContext, probe: Probe, answer: Answer, failed: t
             error.error.has_nul and len(error.error.args) == 1 and "$" in error.error.message,
             clause="calibrate.nzi",
             expected="NZI with the joints as one $ mask argument",
-            actual=repr(error.error.render()),
-            data=answer.data,
+            seen=showing(answer, repr(error.error.render())),
         )
         _judge_mask(ctx, answer, error.error.args, failed)
     closed = await probe.wait_closed(ctx.options.reply_timeout)
@@ -210,8 +202,7 @@ async def _judge_fatal(ctx: CaseContext, probe: Probe, answer: Answer, failed: t
         closed,
         clause="error.fatal-then-close",
         expected=f"CLS within {ctx.options.reply_timeout:g} s of the fatal error",
-        actual="the connection still open",
-        data=answer.data,
+        seen=missing("the connection still open", after=answer),
     )
     end = probe.end_reason
     if isinstance(end, ConnectionClosed) and end.reason == "EOF":
@@ -220,8 +211,7 @@ async def _judge_fatal(ctx: CaseContext, probe: Probe, answer: Answer, failed: t
         isinstance(end, ConnectionClosed) and end.by_peer and end.reason != "EOF",
         clause="error.fatal-then-close",
         expected="the server to end the connection with CLS after the fatal error (EOF first or not)",
-        actual=f"the connection ended otherwise: {end or 'EOF, and no CLS followed it'}",
-        data=answer.data,
+        seen=showing(answer, f"the connection ended otherwise: {end or 'EOF, and no CLS followed it'}"),
     )
 
 
@@ -233,8 +223,7 @@ def _judge_mask(ctx: CaseContext, answer: Answer, args: tuple[int, ...], failed:
         bool(args) and args[0] == wanted,
         clause="calibrate.nzi-mask",
         expected=f"mask {wanted} (joints {', '.join(map(str, failed))}, whose zero index the world hid)",
-        actual=f"mask {args[0] if args else None} (joints {named})",
-        data=answer.data,
+        seen=showing(answer, f"mask {args[0] if args else None} (joints {named})"),
     )
 
 

@@ -6,7 +6,8 @@ from __future__ import annotations
 import math
 import struct
 
-from manip.conformance.cases._support import expect_response, floats, length, read_floats
+from manip.conformance.cases._support import floats, length, read_floats
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec.constants import ServerOp
@@ -43,7 +44,7 @@ async def here_consistent(ctx: CaseContext) -> None:
         len(pose) == 12 and all(math.isfinite(v) for v in pose),
         clause="here.transform",
         expected="12 finite floats",
-        actual=pose,
+        seen=str(pose),
     )
     n, o, a = pose[0:3], pose[3:6], pose[6:9]
     worst = max(
@@ -58,23 +59,23 @@ async def here_consistent(ctx: CaseContext) -> None:
         worst < ORTHO_TOL,
         clause="float.format",
         expected="N, O, A orthonormal (floats decoded as PDP-11 F, sign/exponent word first)",
-        actual=f"deviation {worst:.3g} in {[round(v, 4) for v in pose[:9]]}",
+        seen=f"deviation {worst:.3g} in {[round(v, 4) for v in pose[:9]]}",
     )
     ctx.expect(
         all(abs(q) <= 720.0 for q in joints),
         clause="joint-angles.reply",
         expected="six joint angles in degrees",
-        actual=joints,
+        seen=str(joints),
     )
     answer = await probe.call("solve-backwards", joints=list(joints))
-    expect_response(ctx, answer, clause="solve-backwards.data", expected="a transform")
+    ctx.expect_response(answer, clause="solve-backwards.data", expected="a transform")
     solved = floats(answer)
     err = max(abs(x - y) for x, y in zip(solved[9:], pose[9:], strict=True))
     ctx.expect(
         err < length(ctx, POSITION_TOL_MM),
         clause="solve-backwards.data",
         expected="solve backwards of the joint angles equal to Here",
-        actual=f"positions differ by {err:.4g} {ctx.options.length_unit}: {solved[9:]} vs {pose[9:]}",
+        seen=f"positions differ by {err:.4g} {ctx.options.length_unit}: {solved[9:]} vs {pose[9:]}",
     )
 
 
@@ -85,10 +86,10 @@ async def solve_round_trip(ctx: CaseContext) -> None:
     pose = await read_floats(ctx, probe, "here")
     joints = await read_floats(ctx, probe, "joint-angles")
     answer = await probe.call("solve-forwards", transform=list(pose), current=list(joints))
-    expect_response(ctx, answer, clause="solve-forwards.data", expected="six joint angles")
+    ctx.expect_response(answer, clause="solve-forwards.data", expected="six joint angles")
     solved = floats(answer)
     back = await probe.call("solve-backwards", joints=list(solved))
-    expect_response(ctx, back, clause="solve-backwards.data", expected="a transform")
+    ctx.expect_response(back, clause="solve-backwards.data", expected="a transform")
     again = floats(back)
     err = max(abs(x - y) for x, y in zip(again, pose, strict=True))
     rotation = max((abs(x - y) for x, y in zip(again[:9], pose[:9], strict=True)), default=0.0)
@@ -97,7 +98,7 @@ async def solve_round_trip(ctx: CaseContext) -> None:
         err < length(ctx, POSITION_TOL_MM),
         clause="solve-forwards.data",
         expected=f"the solved angles reaching the transform (every float within {POSITION_TOL_MM:g})",
-        actual=f"position off by {position:.4f} mm, rotation matrix by {rotation:.4f} (a unitless cosine)",
+        seen=f"position off by {position:.4f} mm, rotation matrix by {rotation:.4f} (a unitless cosine)",
     )
 
 
@@ -115,8 +116,7 @@ async def dirty_zero(ctx: CaseContext) -> None:
                 exponent != 0 or (w0 & 0x7F == 0 and w1 == 0 and not w0 & 0x8000),
                 clause="float.dirty-zero",
                 expected="a clean zero",
-                actual=f"float words {w0:04x} {w1:04x} in {op}",
-                data=answer.data,
+                seen=showing(answer, f"float words {w0:04x} {w1:04x} in {op}"),
             )
 
 
@@ -156,7 +156,7 @@ async def extremes(ctx: CaseContext) -> None:
         if op == "solve-forwards" and answer.opcode == ServerOp.NON_FATAL_ERROR:
             continue  # out of reach: refusing is the answer
         clause = "solve-backwards.data" if op == "solve-backwards" else "float.not-finite"
-        expect_response(ctx, answer, clause=clause, expected=f"an answer or a refusal for {what}")
+        ctx.expect_response(answer, clause=clause, expected=f"an answer or a refusal for {what}")
         reserved, dirty = _bad_patterns(answer.payload)
         ctx.exercised("float.range")  # every float of the answer read as an F value
         ctx.expect(
@@ -164,16 +164,14 @@ async def extremes(ctx: CaseContext) -> None:
             clause="float.not-finite",
             expected=f"finite floats only in the answer to {what}: never the reserved operand (sign 1, "
             "exponent 0), which is what a NaN or an infinity becomes",
-            actual="; ".join(reserved),
-            data=answer.data,
+            seen=showing(answer, "; ".join(reserved)),
         )
         ctx.expect(
             not dirty,
             clause="float.dirty-zero",
             expected=f"floats below 2^-128 in the answer to {what} sent as a clean zero (erratum "
             "float-decode)",
-            actual="exponent 0 with fraction bits: " + "; ".join(dirty),
-            data=answer.data,
+            seen=showing(answer, "exponent 0 with fraction bits: " + "; ".join(dirty)),
         )
         if op != "solve-backwards" or reserved:
             continue
@@ -184,5 +182,5 @@ async def extremes(ctx: CaseContext) -> None:
             clause="solve-backwards.data",
             expected=f"a rotation and a position within {length(ctx, REACH_MM):g} {ctx.options.length_unit} "
             f"for {what}",
-            actual=[f"{v:.4g}" for v in pose],
+            seen=str([f"{v:.4g}" for v in pose]),
         )

@@ -22,6 +22,7 @@ from manip.conformance.cases._support import (
 )
 from manip.conformance.cases.server.wrist import steady_forces
 from manip.conformance.judge.checks import WirePacket, async_of
+from manip.conformance.judge.violation import missing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
 from manip.conformance.suite.world import WristForce
@@ -119,12 +120,14 @@ async def guard_hit(ctx: CaseContext) -> None:
     try:
         forces = await steady_forces(ctx, probe, "after set weight")
         change = math.dist(forces[:3], rest[:3])
-        ctx.expect(
-            abs(change - PHANTOM_OZ) <= PHANTOM_TOL_OZ,
+        ctx.expect_near(
+            change,
+            PHANTOM_OZ,
+            PHANTOM_TOL_OZ,
             clause="read-forces.units",
             expected=f"the corrected force changed by {PHANTOM_OZ:g} oz after set weight of a "
             f"{PHANTOM_OZ:g} oz object the hand does not hold (ounces)",
-            actual=f"changed by {change:.2f}, from {[round(f, 2) for f in rest]} to "
+            seen=f"changed by {change:.2f}, from {[round(f, 2) for f in rest]} to "
             f"{[round(f, 2) for f in forces]}",
         )
         size = math.sqrt(sum(f * f for f in forces[:3]))
@@ -194,7 +197,7 @@ async def _continuing(
         await settle(ctx, probe, goal, within=5.0) is not None,
         clause="motion.abort",
         expected="the move to end at its goal after a continue guard (nothing aborted)",
-        actual="the arm stopped short of it",
+        seen="the arm stopped short of it",
     )
 
 
@@ -332,7 +335,7 @@ async def _expect_hit(ctx: CaseContext, probe: Probe, index: int, *, after: str,
             f"no guard-hit response within {HIT_WAIT:g} s of {after}",
             clause="async.codes",
             expected="an asynchronous response (203) with condition code 1 (guard hit)",
-            actual="nothing",
+            seen=missing("nothing"),
         )
     kind, said = (1, "trajectory stopped") if stops else (2, "trajectory continues")
     message = async_of(hit)

@@ -64,7 +64,7 @@ def _frames_case(row: tuple[str, tuple[str, ...]]) -> None:
             stats.bad_total == 0,
             clause=clauses[0],
             expected=f"every {scheme} frame from the server well formed",
-            actual=f"{stats.bad_total} bad frame(s): {dict(stats.bad)}",
+            seen=f"{stats.bad_total} bad frame(s): {dict(stats.bad)}",
         )
         ctx.exercised(*clauses, *_FRAME_CLAUSES)  # the link decoded every frame by all of them
 
@@ -86,7 +86,7 @@ async def packet_numbers(ctx: CaseContext) -> None:
         not bad,
         clause="ncp.packet-numbers",
         expected="consecutive packet numbers",
-        actual=f"jumps {bad[:5]} in {numbers[:20]}",
+        seen=f"jumps {bad[:5]} in {numbers[:20]}",
     )
 
 
@@ -131,14 +131,13 @@ async def warning_format(ctx: CaseContext) -> None:
         reached is not None,
         clause="async-warning.format",
         expected=f"the move the warning is about to end at its goal {[round(v, 3) for v in goal]}",
-        actual="the arm stopped short of it (the warning interrupted the motion)",
+        seen="the arm stopped short of it (the warning interrupted the motion)",
     )
     back = await probe.call("set-joint-angles", joints=list(start))
-    ctx.expect(
-        back.is_response,
+    ctx.expect_response(
+        back,
         clause="async-warning.format",
         expected="the next move taken after a warning (a warning does not abort motion)",
-        seen=back,
     )
     await settle(ctx, probe, start, within=5.0)
 

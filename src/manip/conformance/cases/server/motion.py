@@ -14,11 +14,9 @@ from manip.conformance.cases._support import (
     TargetArm,
     ask_notifications,
     describe_target,
-    expect_done,
     expect_error_numbers,
     expect_here_served,
     expect_refusal,
-    expect_response,
     extension_name,
     floats,
     host_delay,
@@ -32,6 +30,7 @@ from manip.conformance.cases._support import (
     timed_move,
 )
 from manip.conformance.judge.checks import async_of, check_async_packet, word
+from manip.conformance.judge.violation import missing, showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
 from manip.spec import RequestName
@@ -78,7 +77,7 @@ def _away_from_zero(joints: tuple[float, ...], by: float) -> list[float]:
 
 
 def _expect_segment_reply(ctx: CaseContext, answer: Answer, expected: str) -> None:
-    expect_response(ctx, answer, clause="response.segment-number", expected=expected, size=SEGMENT_REPLY_SIZE)
+    ctx.expect_response(answer, clause="response.segment-number", expected=expected, size=SEGMENT_REPLY_SIZE)
 
 
 async def _small_move(
@@ -92,8 +91,7 @@ async def _small_move(
     if clause is None:
         require_response(ctx, answer, "a small move of joint 1 accepted")
     else:
-        expect_response(
-            ctx,
+        ctx.expect_response(
             answer,
             clause=clause,
             expected="a segment-number reply to set joint angles",
@@ -149,7 +147,7 @@ async def joint_out_of_range(ctx: CaseContext) -> None:
         moved < 0.01,
         clause="motion.checked-before-queue",
         expected="the arm standing still",
-        actual=f"a joint moved by {moved:.3f} degrees",
+        seen=f"a joint moved by {moved:.3f} degrees",
     )
 
 
@@ -211,8 +209,7 @@ def _expect_tor_mask(
         bool(mask >> (joint - 1) & 1) and mask >> dof == 0,
         clause="error-string.arg-values",
         expected=f"a joint mask holding joint {joint} and no joint beyond {dof}",
-        actual=f"mask {mask:#06x} in {error.error.render()!r}",
-        data=answer.data,
+        seen=showing(answer, f"mask {mask:#06x} in {error.error.render()!r}"),
     )
 
 
@@ -264,7 +261,7 @@ async def no_arm_power(ctx: CaseContext) -> None:
     """After kill power, motion is refused with NAP; enable power makes it accepted again."""
     probe = await ctx.connect()
     answer = await probe.call("kill-power")
-    expect_done(ctx, answer, clause="kill-power.done", expected="an empty done")
+    ctx.expect_done(answer, clause="kill-power.done", expected="an empty done")
     joints = await read_floats(ctx, probe, "joint-angles")
     await _refused_stay(
         ctx, probe, joints, clause="motion.no-power", codes=("NAP",), what="a move without arm power"
@@ -293,7 +290,7 @@ async def _abort_by_power_loss(ctx: CaseContext, probe: Probe) -> None:
         aborts,
         clause="motion.abort",
         expected="an asynchronous error (0204) when power is lost during a move",
-        actual="no asynchronous error",
+        seen=missing("no asynchronous error", after=answer),
     )
 
 
@@ -312,8 +309,7 @@ async def awa_reset_by_power(ctx: CaseContext) -> None:
             (word(packet.data) or 0) <= last_request and len(packet.data) >= 2,
             clause="async-error.request-number",
             expected="the number of the last request processed",
-            actual=str(word(packet.data)),
-            data=packet.data,
+            seen=showing(packet, str(word(packet.data))),
         )
     joints = await read_floats(ctx, probe, "joint-angles")
     await _refused_stay(
@@ -353,8 +349,7 @@ async def awa_reset_abort(ctx: CaseContext) -> None:
     )
     for op, values, what in served:
         answer = await probe.call(op, **values)
-        expect_response(
-            ctx,
+        ctx.expect_response(
             answer,
             clause="motion.abort-serves-others",
             expected=f"{op} answered with {what} while motion is aborted",
@@ -398,7 +393,7 @@ async def reply_before_motion(ctx: CaseContext) -> None:
         abs(now[0] - goal[0]) > 0.5,
         clause="motion.reply-before-motion",
         expected="the reply before the arm reaches the goal",
-        actual=f"joint 1 already at {now[0]:.2f} (goal {goal[0]:.2f}) when the reply came after {took:.3f} s",
+        seen=f"joint 1 already at {now[0]:.2f} (goal {goal[0]:.2f}) when the reply came after {took:.3f} s",
     )
     ctx.note(f"move answered in {took * 1000:.1f} ms")
 
@@ -414,7 +409,7 @@ async def segment_numbers(ctx: CaseContext) -> None:
         ok,
         clause="segment.number-increases",
         expected="segment numbers increasing by one",
-        actual=f"segments {numbers}",
+        seen=f"segments {numbers}",
     )
 
 
@@ -424,7 +419,7 @@ async def speed_bounds(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     for factor in (1.0, 0.5, 2.0**-20):
         answer = await probe.call("set-speed", factor=factor)
-        expect_done(ctx, answer, clause="speed.range", expected=f"done for speed factor {factor!r}")
+        ctx.expect_done(answer, clause="speed.range", expected=f"done for speed factor {factor!r}")
     for factor in (0.0, -0.5, 1.0 + 2.0**-20, 2.0, 1e30):
         answer = await probe.call("set-speed", factor=factor)
         expect_refusal(ctx, answer, clause="speed.range", what=f"speed factor {factor!r}")
@@ -463,8 +458,7 @@ async def segment_completed(ctx: CaseContext) -> None:
         not unrequested,
         clause="async.only-when-requested",
         expected="no asynchronous response before any was asked for",
-        actual=f"{len(unrequested)} asynchronous response(s)",
-        data=unrequested[0].data if unrequested else b"",
+        seen=showing(unrequested[:1], f"{len(unrequested)} asynchronous response(s)"),
     )
     if not await ask_notifications(ctx, probe):
         ctx.not_judged(
@@ -483,8 +477,7 @@ async def segment_completed(ctx: CaseContext) -> None:
             message is not None and message.condition == AsyncCondition.SEGMENT_COMPLETED,
             clause="async.layout",
             expected="condition 2 (segment completed)",
-            actual=f"condition {message.condition if message else None}",
-            data=packet.data,
+            seen=showing(packet, f"condition {message.condition if message else None}"),
         )
         seen.append(message.word3 if message else None)
         if seen[-1] == segment:
@@ -493,7 +486,7 @@ async def segment_completed(ctx: CaseContext) -> None:
         f"no segment-completed response for segment {segment}",
         clause="async.layout",
         expected=f"an asynchronous segment-completed response for segment {segment}",
-        actual=f"segments reported: {seen}",
+        seen=f"segments reported: {seen}",
     )
 
 
@@ -522,7 +515,7 @@ async def speed_scales(ctx: CaseContext) -> None:
             slow > (fast - delay) * 1.3,
             clause="motion.speed-scales",
             expected="the slow move taking longer",
-            actual=f"{fast:.3f} s at speed 1, {slow:.3f} s at speed 0.25",
+            seen=f"{fast:.3f} s at speed 1, {slow:.3f} s at speed 0.25",
         )
         and slow - delay <= fast * 1.3
     ):
@@ -543,10 +536,9 @@ async def free_joint_discard(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     await power_on(ctx, probe)
     answer = await probe.call("free-joint", joint=1)
-    expect_done(ctx, answer, clause="free-joint.replies", expected="done once the joint is freed")
+    ctx.expect_done(answer, clause="free-joint.replies", expected="done once the joint is freed")
     discarded = await probe.call("here")
-    expect_done(
-        ctx,
+    ctx.expect_done(
         discarded,
         clause="free-joint.awaits-next-packet",
         expected="an empty done: the packet after free joint is not executed",
@@ -612,14 +604,14 @@ async def configuration(ctx: CaseContext) -> None:
             off <= length(ctx, REACH_TOL_MM),
             clause="set-configuration.effect",
             expected=f"the {name} solution reaching the transform",
-            actual=f"{[round(q, 2) for q in solved]}, {off:.4g} {ctx.options.length_unit} from it",
+            seen=f"{[round(q, 2) for q in solved]}, {off:.4g} {ctx.options.length_unit} from it",
         )
         solutions[name] = solved
     ctx.expect(
         not _same(solutions["lefty"], solutions["righty"]),
         clause="set-configuration.effect",
         expected="different solutions for lefty and righty (the seed's transform has both in range)",
-        actual=f"both {[round(q, 2) for q in solutions['lefty']]}",
+        seen=f"both {[round(q, 2) for q in solutions['lefty']]}",
     )
 
 
@@ -658,7 +650,7 @@ async def configuration_side(ctx: CaseContext) -> None:
             clause="set-configuration.lefty-side",
             expected=f"a {name} solution after set configuration {value} (raising joint 2 "
             f"{'lowers' if name == 'lefty' else 'raises'} the hand)",
-            actual=f"{[round(q, 2) for q in solved]}: raising joint 2 by {RAISE_DEG:g} deg moves the hand "
+            seen=f"{[round(q, 2) for q in solved]}: raising joint 2 by {RAISE_DEG:g} deg moves the hand "
             f"{-drop:+.2f} mm in z, a {side} solution",
         )
 
@@ -689,7 +681,7 @@ async def joint_order(ctx: CaseContext) -> None:
             reached is not None,
             clause="joint-angles.reply",
             expected=f"joint angles answering {[round(q, 2) for q in goal]} once the move ends",
-            actual=f"{[round(q, 2) for q in await read_floats(ctx, probe, 'joint-angles')]}",
+            seen=f"{[round(q, 2) for q in await read_floats(ctx, probe, 'joint-angles')]}",
         )
         after = await read_floats(ctx, probe, "here")
         _judge_waist_turn(ctx, before[9:], after[9:], goal[0] - start[0])
@@ -710,7 +702,7 @@ def _judge_waist_turn(ctx: CaseContext, p0: tuple[float, ...], p1: tuple[float, 
         clause="joint-angles.reply",
         expected=f"element 1 the waist: the hand turned {abs(turn):g} deg about the base's z axis, at the "
         "same height and distance from it",
-        actual=f"hand from {[round(x, 1) for x in p0]} to {[round(x, 1) for x in p1]} mm: turned "
+        seen=f"hand from {[round(x, 1) for x in p0]} to {[round(x, 1) for x in p1]} mm: turned "
         f"{turned:+.2f} deg, height {p1[2] - p0[2]:+.2f} mm, distance from the axis "
         f"{radius1 - radius0:+.2f} mm",
     )
@@ -768,8 +760,7 @@ async def fresh_state(ctx: CaseContext) -> None:
         not reports,
         clause="connect.per-connection-state",
         expected="no asynchronous response: the notifications the last connection asked for are not in force",
-        actual=f"{len(reports)} asynchronous response(s)",
-        data=reports[0].data if reports else b"",
+        seen=showing(reports[:1], f"{len(reports)} asynchronous response(s)"),
     )
     if flipped is None:
         ctx.note("set configuration changed no solution: the configuration is not judged")
@@ -780,8 +771,7 @@ async def fresh_state(ctx: CaseContext) -> None:
             clause="connect.per-connection-state",
             expected=f"solve forwards giving {[round(q, 2) for q in fresh]}, as on a fresh connection "
             "(no configuration set)",
-            actual=f"{[round(q, 2) for q in solved] if solved else None}: the last connection's "
-            "configuration",
+            seen=f"{[round(q, 2) for q in solved] if solved else None}: the last connection's configuration",
         )
     notified = await ask_notifications(ctx, probe, SEGMENT_MASK)
     delay = await host_delay(ctx)
@@ -800,7 +790,7 @@ def _expect_fresh_speed(ctx: CaseContext, default: float, full: float, delay: fl
         clause="connect.per-connection-state",
         expected=f"the fresh connection moving at factor 1 (the move within {SPEED_MATCH:g} times the time "
         "at an explicit factor 1)",
-        actual=f"{default:.3f} s against {full:.3f} s (the last connection left factor {SLOW_FACTOR:g})",
+        seen=f"{default:.3f} s against {full:.3f} s (the last connection left factor {SLOW_FACTOR:g})",
     )
     if held and default > (full - delay) * SPEED_MATCH:
         not_judged_for_load(

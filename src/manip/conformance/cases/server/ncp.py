@@ -19,6 +19,7 @@ from manip.codecs.messages import encode_request
 from manip.codecs.packet import MAX_DATA, Packet
 from manip.conformance.cases._support import host_delay
 from manip.conformance.judge.checks import WirePacket
+from manip.conformance.judge.violation import missing, showing
 from manip.conformance.suite.case import CaseFailure, case
 from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.rawchaos import (
@@ -140,7 +141,7 @@ async def _next_data(ctx: CaseContext, peer: RawPeer, conn: RawConnection, after
         ctx.fail(
             f"no {what} within {wait:g} s",
             expected=f"{what} (a data packet numbered after #{after}) on the connection opened by hand",
-            actual=f"nothing; other packets: {_lines(peer.inbox)}",
+            seen=missing(f"nothing; other packets: {_lines(peer.inbox)}"),
         )
     return got
 
@@ -173,16 +174,14 @@ async def los_unknown_connection(ctx: CaseContext) -> None:
                 "no LOS for a data packet to a connection that does not exist",
                 clause="ncp.los",
                 expected=f"LOS to index {octal(index)} within {wait:g} s",
-                actual="nothing" + (f" ({peer.ended})" if peer.ended else ""),
-                data=frame,
+                seen=missing("nothing" + (f" ({peer.ended})" if peer.ended else ""), after=frame),
             )
         los = answer.packet
         ctx.expect(
             los.opcode == ChaosOp.LOS,
             clause="ncp.los",
             expected=f"LOS answering {format_packet(probe)}",
-            actual=format_packet(los),
-            data=answer.raw,
+            seen=showing(answer.raw, format_packet(los)),
         )
         ctx.note(f"LOS: {format_packet(los)}")
         if (los.packet_no, los.ack_no, los.src_index) != (number, ack, bogus):
@@ -202,8 +201,7 @@ async def los_unknown_connection(ctx: CaseContext) -> None:
                 f"a {name} to a connection that does not exist was answered",
                 clause="ncp.los",
                 expected=f"no answer to a {name} (never a LOS in answer to a LOS or CLS)",
-                actual=_lines(late),
-                data=_frames(sent, late[0].raw),
+                seen=showing(_frames(sent, late[0].raw), _lines(late)),
             )
 
 
@@ -215,15 +213,13 @@ def _illegal_frame_check(
             f"no LOS for {why}",
             clause="ncp.los",
             expected=f"LOS to index {octal(sent.src_index)} within {_scale(ctx, LOS_BOUND):g} s",
-            actual="nothing",
-            data=frame,
+            seen=missing("nothing", after=frame),
         )
     ctx.expect(
         answer.packet.opcode == ChaosOp.LOS,
         clause="ncp.los",
         expected=f"LOS answering {why}",
-        actual=format_packet(answer.packet),
-        data=_frames(frame, answer.raw),
+        seen=showing(_frames(frame, answer.raw), format_packet(answer.packet)),
     )
     ctx.note(f"{why}: {format_packet(answer.packet)}")
 
@@ -315,8 +311,7 @@ async def duplicate_rfc(ctx: CaseContext) -> None:
                         + ("opened a second connection" if second else "was treated as a new request"),
                         clause="ncp.duplicate-rfc",
                         expected=f"nothing, or the OPN from index {octal(conn.remote_index)} again",
-                        actual=format_packet(p),
-                        data=_frames(frame, r.raw),
+                        seen=showing(_frames(frame, r.raw), format_packet(p)),
                     )
 
         await duplicate("before the OPN was acknowledged")
@@ -332,8 +327,7 @@ async def duplicate_rfc(ctx: CaseContext) -> None:
             reply.packet.data[:2] == request.packet_no.to_bytes(2, "little"),
             clause="ncp.duplicate-rfc",
             expected=f"the first connection still serving: a reply quoting request #{request.packet_no}",
-            actual=format_packet(reply.packet),
-            data=reply.raw,
+            seen=showing(reply.raw, format_packet(reply.packet)),
         )
         conn.sts(ack=reply.packet.packet_no, window=5)
 
@@ -395,15 +389,14 @@ async def broken(ctx: CaseContext) -> None:
             clause="ncp.broken",
             expected=f"a LOS for {format_packet(request)}: the connection given up after {after:g} s "
             "of silence",
-            actual=_lines(late) if late else "no LOS and no reply",
+            seen=_lines(late) if late else missing("no LOS and no reply"),
         )
     fresh = await ctx.connect()
     here = await fresh.call("here")
-    ctx.expect(
-        here.is_response,
+    ctx.expect_response(
+        here,
         clause="ncp.broken",
         expected="a new connection served (the robot freed when the silent one was given up)",
-        seen=here,
     )
 
 
@@ -434,16 +427,14 @@ async def retransmission(ctx: CaseContext) -> None:
                 f"the reply #{number} was not sent again within {bound:g} s although nothing receipted it",
                 clause="ncp.retransmission",
                 expected=f"DAT #{number} again within {bound:g} s (retransmission until receipted)",
-                actual="nothing",
-                data=reply.raw,
+                seen=missing("nothing", after=reply.raw),
             )
         first, copy = reply.packet, again.packet
         ctx.expect(
             (copy.packet_no, copy.opcode, copy.data) == (first.packet_no, first.opcode, first.data),
             clause="ncp.retransmission",
             expected=f"the same packet again: {format_packet(first)}",
-            actual=format_packet(copy),
-            data=_frames(reply.raw, again.raw),
+            seen=showing(_frames(reply.raw, again.raw), format_packet(copy)),
         )
         ctx.note(f"retransmitted after {again.time - reply.time:.2f} s")
 
@@ -460,8 +451,7 @@ async def retransmission(ctx: CaseContext) -> None:
                 clause="ncp.retransmission",
                 expected=f"no copy of #{number} later than {allowed:.3f} s after the receipt "
                 f"({IN_FLIGHT:g} s in flight, the rest this host's measured delay)",
-                actual=_lines(late),
-                data=late[0].raw,
+                seen=showing(late[0].raw, _lines(late)),
             )
         echo = request.packet_no
         twice = [
@@ -474,8 +464,7 @@ async def retransmission(ctx: CaseContext) -> None:
                 f"the repeated request #{echo} was delivered again and answered a second time",
                 clause="ncp.retransmission",
                 expected="a repeated packet number delivered to the user once (dropped, at most an STS)",
-                actual=_lines(twice),
-                data=_frames(repeat, twice[0].raw),
+                seen=showing(_frames(repeat, twice[0].raw), _lines(twice)),
             )
 
 
@@ -503,8 +492,10 @@ async def acknowledge(ctx: CaseContext) -> None:
                 f"the request #{number} was never acknowledged within {bound:g} s",
                 clause="ncp.acknowledge",
                 expected=f"a packet of the connection whose ack field (or STS receipt) reaches #{number}",
-                actual=f"none: its ack fields stayed below it (initial RESPONSE: #{initial.packet.ack_no})",
-                data=initial.raw,
+                seen=showing(
+                    initial.raw,
+                    f"none: its ack fields stayed below it (initial RESPONSE: #{initial.packet.ack_no})",
+                ),
             )
         ctx.exercised("ncp.acknowledge")
         ctx.note(f"acknowledged by {format_packet(got.packet)}")
@@ -534,8 +525,7 @@ class _WindowWatch:
                     f"packet #{n} sent with #{self.acked} acknowledged and a window of {WINDOW} ({when})",
                     clause="ncp.window",
                     expected=f"nothing beyond #{limit} ({WINDOW} past the last acknowledged #{self.acked})",
-                    actual=format_packet(r.packet),
-                    data=r.raw,
+                    seen=showing(r.raw, format_packet(r.packet)),
                 )
             self.seen.setdefault(n, r)
 
@@ -552,7 +542,7 @@ class _WindowWatch:
                 f"packet #{number} never came although the window allowed it",
                 clause="ncp.window",
                 expected=f"#{number} within {bound:g} s of our acknowledgement of #{self.acked}",
-                actual=f"nothing; data packets so far: OPN + {relative}",
+                seen=missing(f"nothing; data packets so far: OPN + {relative}"),
             )
         self.absorb([got], "after our acknowledgement")
 

@@ -16,11 +16,9 @@ from manip.codecs.messages import encode_request
 from manip.codecs.packet import Packet
 from manip.conformance.cases._support import (
     UNASSIGNED_OPCODES,
-    expect_done,
     expect_error_numbers,
     expect_here_served,
     expect_refusal,
-    expect_response,
     refused,
     valid_values,
 )
@@ -97,11 +95,8 @@ async def unknown_opcodes(ctx: CaseContext) -> None:
         error = expect_refusal(ctx, answer, clause="request.unknown-opcode", what=what)
         expect_error_numbers(ctx, answer, error, [(opcode,)], what=what)
     answer = await probe.call("here")
-    expect_response(
-        ctx,
-        answer,
-        clause="request.unknown-opcode",
-        expected="the connection still serving after unknown opcodes",
+    ctx.expect_response(
+        answer, clause="request.unknown-opcode", expected="the connection still serving after unknown opcodes"
     )
 
 
@@ -179,8 +174,8 @@ async def set_configuration_sizes(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     for data in (b"\x01", b"\x00\x00"):
         answer = await probe.call_raw(SPEC.request("set-configuration").opcode, data)
-        expect_done(
-            ctx, answer, clause="set-configuration.data", expected=f"done for configuration data {data.hex()}"
+        ctx.expect_done(
+            answer, clause="set-configuration.data", expected=f"done for configuration data {data.hex()}"
         )
     answer = await probe.call_raw(SPEC.request("set-configuration").opcode, b"\x01\x00\x00")
     expect_refusal(ctx, answer, clause="request.data-length", what="set configuration with 3 data bytes")
@@ -200,8 +195,7 @@ async def during_free_joint(ctx: CaseContext) -> None:
     if not answer.is_response:
         refused(ctx, answer, "the case needs free joint of joint 2")
     discarded = await probe.call_raw(UNASSIGNED_OPCODES[0], b"\x01\x02\x03")
-    expect_done(
-        ctx,
+    ctx.expect_done(
         discarded,
         clause="free-joint.replies",
         expected="an empty done for the packet after free joint, whatever it is",
@@ -250,6 +244,6 @@ async def oversize_frame(ctx: CaseContext) -> None:
         )
     fresh = await ctx.connect()
     answer = await fresh.call("here")
-    expect_response(
-        ctx, answer, clause="chaos.data.max-488", expected="the server serving a new connection after it"
+    ctx.expect_response(
+        answer, clause="chaos.data.max-488", expected="the server serving a new connection after it"
     )

@@ -13,6 +13,7 @@ from __future__ import annotations
 from typing import Final
 
 from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, describe, word
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
 from manip.spec import RequestName
@@ -61,8 +62,7 @@ async def describe_pipelined(ctx: CaseContext) -> None:
         ends,
         clause="multi.terminated-by-empty",
         expected=f"describe self (#{first}) ended by an empty RESPONSE echoing #{first}",
-        actual=f"{len(got)} answer packet(s), none of them its terminator",
-        seen=got[-1] if got else None,
+        seen=showing(got[-1] if got else None, f"{len(got)} answer packet(s), none of them its terminator"),
     )
     end = ends[0]
     early = [p for p in got[:end] if word(p.data) in later]
@@ -72,17 +72,19 @@ async def describe_pipelined(ctx: CaseContext) -> None:
         expected=f"describe self's terminator (#{first}) before the replies to "
         + ", ".join(f"#{n}" for n in later)
         + ", sent behind it",
-        actual=f"{describe(early[0])} came as answer packet {got.index(early[0]) + 1}, before the terminator "
-        f"(answer packet {end + 1})"
+        seen=showing(
+            early[0],
+            f"{describe(early[0])} came as answer packet {got.index(early[0]) + 1}, before the terminator "
+            f"(answer packet {end + 1})",
+        )
         if early
-        else "",
-        seen=early[0] if early else None,
+        else None,
     )
     order = [word(p.data) for p in got if word(p.data) in later]
     ctx.expect(
         order == later,
         clause="request.one-reply",
         expected="one reply to each request sent behind it, in order: " + ", ".join(f"#{n}" for n in later),
-        actual="replies to " + (", ".join(f"#{n}" for n in order) or "none"),
+        seen="replies to " + (", ".join(f"#{n}" for n in order) or "none"),
     )
     ctx.note(f"{len(got)} answer packets; describe self's terminator was answer packet {end + 1}")

@@ -135,7 +135,7 @@ async def _ask(probe: Probe, opcode: int | RequestName, data: bytes) -> Answer:
 
 
 def _check_answer(answer: Answer) -> None:
-    """The MUST findings of the generic reply checker, as a failed example."""
+    """The MUST violations the generic reply checker finds, as a failed example."""
     found = must(check_reply(answer.request, answer.packets))
     if found:
         raise Evidence.of(found[0], [answer.request, *answer.packets])

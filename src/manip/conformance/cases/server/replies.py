@@ -42,11 +42,8 @@ def opcode_clauses(op: RequestOpcode) -> tuple[str, ...]:
 async def _release_free_joint(ctx: CaseContext, probe: Probe) -> None:
     """The packet after free joint is discarded with an empty done (it un-frees the joint)."""
     follow = await probe.call("here")
-    ctx.expect(
-        follow.is_response and len(follow.data) == 2,
-        clause="free-joint.replies",
-        expected="an empty done for the packet after free joint",
-        seen=follow,
+    ctx.expect_response(
+        follow, clause="free-joint.replies", expected="an empty done for the packet after free joint", size=2
     )
 
 

@@ -242,24 +242,24 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         self.bridge.failure_seen()
         return failure
 
-    def _finding(
+    def _disagreed(
         self,
-        finding: Violation | None,
+        violation: Violation | None,
         packets: Sequence[WirePacket] = (),
         data: bytes = b"",
         what: str = "an asynchronous packet",
     ) -> None:
         """A disagreement with the model is kept (once per kind) and the run goes on: the caller's model
         then takes the state the server showed."""
-        if finding is None:
+        if violation is None:
             return
-        assert finding.clause is not None  # the model's findings always name one
+        assert violation.clause is not None  # the model's violations always name one
         run = list(self.probe.packets) if self.probe is not None else []
         found = MachineFailure(
-            finding.clause,
-            f"{what}: the arm model does not allow {finding.actual}",
-            finding.expected,
-            finding.actual,
+            violation.clause,
+            f"{what}: the arm model does not allow {violation.actual}",
+            violation.expected,
+            violation.actual,
             data,
             list(packets),
             run,
@@ -268,12 +268,12 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         self.env.found.add(_kind(found), found)
         self.disagreed.append(found)
 
-    def _findings(self, findings: Sequence[Any]) -> None:
-        """Raise the first MUST finding of a checker."""
-        found = must(findings)
+    def _checked(self, violations: Sequence[Any]) -> None:
+        """Raise the first MUST violation a checker found."""
+        found = must(violations)
         if found:
             first = found[0]
-            assert first.clause is not None  # a checker's findings always name one
+            assert first.clause is not None  # a checker's violations always name one
             packets = [first.packet] if first.packet is not None else []
             raise self._fail(
                 first.clause,
@@ -288,7 +288,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
     def _unsolicited(self, packets: Sequence[WirePacket]) -> None:
         """Judge packets that arrived while no answer was due (asynchronous ones, or stray answers)."""
         for packet in packets:
-            self._findings(check_server_opcode(packet))
+            self._checked(check_server_opcode(packet))
             if packet.is_close:
                 raise self._fail(
                     "request.one-reply",
@@ -309,9 +309,9 @@ class ArmProtocolMachine(RuleBasedStateMachine):
                 )
             if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE:
                 self.env.ctx.exercised("async.layout", "async.only-when-requested", "async.codes")
-                self._findings(check_async_packet(packet, None))
+                self._checked(check_async_packet(packet, None))
                 message = decode_async(packet.data)
-                self._finding(
+                self._disagreed(
                     self.model.on_async_response(
                         message.request_number, message.condition, message.word2, message.word3
                     ),
@@ -320,7 +320,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
                 )
             elif packet.opcode in (ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING):
                 self.env.ctx.exercised("async-error.request-number", "error.severity-matches-opcode")
-                self._findings(check_error_packet(packet))
+                self._checked(check_error_packet(packet))
                 if packet.opcode == ServerOp.ASYNCHRONOUS_ERROR:
                     error = error_of(packet)
                     if error is None:
@@ -333,7 +333,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
                             [packet],
                             invariant=TRANSCRIPT.name,  # what check_error_packet finds
                         )
-                    self._finding(
+                    self._disagreed(
                         self.model.on_async_error(error.request_number, error.error), [packet], packet.data
                     )
 
@@ -363,7 +363,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         if expectation.discard:  # check_reply would judge the discarded request as if it were executed
             self._check_echo(answer, packets)
         else:
-            self._findings(check_reply(answer.request, answer.packets))
+            self._checked(check_reply(answer.request, answer.packets))
         if answer.opcode == ServerOp.FATAL_ERROR:
             raise self._fail(
                 "request.one-reply",
@@ -386,7 +386,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
             )
         op = SPEC.requests.get(opcode)
         what = f"request #{number} ({op.name if op else f'opcode {octal(opcode)}'})"
-        self._finding(self.model.judge(expectation, view), packets, answer.data, what)
+        self._disagreed(self.model.judge(expectation, view), packets, answer.data, what)
         self.env.ctx.exercised(*_judged_clauses(op, expectation, view))
         self.model.observe(number, opcode, data, view)
         return answer
@@ -439,7 +439,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
         try:
             if not self.failed:
                 self.pause(END_QUIET)
-                self._findings(check_transcript(probe.packets, rfc_packet_no=probe.rfc_packet_no))
+                self._checked(check_transcript(probe.packets, rfc_packet_no=probe.rfc_packet_no))
             if not self.failed and self.disagreed:
                 # The run went on after its disagreements; at its end the first fails it, so that
                 # Hypothesis shrinks a run that shows one (the others are reported unshrunk).
@@ -678,7 +678,7 @@ def _counterexample(
 
 @case(
     "stateful.arm-model",
-    # the model's findings (it names no other clause), and what the machine checks itself
+    # the model's violations (it names no other clause), and what the machine checks itself
     clauses=sorted(
         MODEL_CLAUSES
         | {
@@ -758,10 +758,12 @@ async def arm_model(ctx: CaseContext) -> None:
         ctx.note(note)
     reproduce = ctx.reproduce if ctx.options.embedded and ctx.reproduce else None
     address = ctx.options.address or "tcp://HOST:PORT"
-    _record_disagreements(ctx, disagreements, address, reproduce, failure)
+    others = _record_disagreements(ctx, disagreements, address, reproduce, failure)
+    if failure is None and others:
+        ctx.show_packets([*ctx.transcript, *others])
     if failure is not None:
         shown = _counterexample(failure, address, reproduce)
-        ctx.show_packets(failure.example or failure.packets)
+        ctx.show_packets([*(failure.example or failure.packets), *others])
         culprit = failure.culprit
         ctx.fail_with(replace(failure.violation, actual=shown, packet=culprit))
 
@@ -778,19 +780,24 @@ def _record_disagreements(
     address: str,
     reproduce: str | None,
     stopped: MachineFailure | None,
-) -> None:
+) -> list[WirePacket]:
     """Report every distinct disagreement with the model the runs went on after, but the one the case
-    stops with (``stopped``, shrunk; its packets are the case's packet log)."""
+    stops with (``stopped``, shrunk; its packets are the case's packet log); the packets that show them,
+    which the packet log shows after that run's."""
+    shown: list[WirePacket] = []
     for item in found.kept.values():
         if stopped is not None and _kind(item) == _kind(stopped):
             continue  # the one the case stops with, shrunk
         text = _counterexample(item, address, reproduce, shrunk=False)
         ctx.record(replace(item.violation, actual=text, packet=item.culprit))
+        named = ctx.recorded[-1].packets  # the culprit, or what the context named for it
+        shown += [p for p in (*item.packets, *named) if not any(p is q for q in shown)]
     if found.dropped:
         ctx.note(
             f"{found.dropped} more distinct disagreement(s) with the model not reported "
             f"(at most {found.bound} per case)"
         )
+    return shown
 
 
 # ------------------------------------------------------------------------------------- replay

@@ -14,7 +14,7 @@ from manip.conformance.cases._support import (
     SEGMENT_MASK,
     ask_notifications,
     describe_target,
-    expect_response,
+    floats,
     last_processed,
     length,
     near,
@@ -26,6 +26,7 @@ from manip.conformance.cases._support import (
     settle,
 )
 from manip.conformance.judge.checks import WirePacket, completed_segment, word
+from manip.conformance.judge.violation import missing, showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
 from manip.conformance.suite.world import CaseNotJudged, ConditionUnsupported, Obstacle, PanicButton
@@ -150,7 +151,7 @@ async def straight_line(ctx: CaseContext) -> None:
             worst <= tol,
             clause="straight-move.line",
             expected=f"every position within {tol:.4g} {unit} of the line {list(a)} -> {list(b)}",
-            actual=f"a sample {worst:.4g} {unit} off it",
+            seen=f"a sample {worst:.4g} {unit} off it",
         )
     await probe.call("set-joint-angles", joints=list(before))
     await settle(ctx, probe, before)
@@ -193,7 +194,7 @@ async def joint_interpolated(ctx: CaseContext) -> None:
             off <= length(ctx, POSE_TOL_MM),
             clause="joint-move.interpolated",
             expected=f"{op} ending at its goal {list(target[9:])}",
-            actual=f"Here {list(here[9:])}, {off:.4g} {ctx.options.length_unit} from it",
+            seen=f"Here {list(here[9:])}, {off:.4g} {ctx.options.length_unit} from it",
         )
     await probe.call("set-joint-angles", joints=list(before))
     await settle(ctx, probe, before)
@@ -218,7 +219,7 @@ def _expect_in_step(
         clause="joint-move.interpolated",
         expected=f"{op}: at least two joints moving {list(first)} -> {list(last)}, at every sample at one "
         f"fraction of their ways (within {FRACTION_TOL:g})",
-        actual=f"joints {[i + 1 for i in moving]} moved; at {list(where)} their fractions were {worst:.4f} "
+        seen=f"joints {[i + 1 for i in moving]} moved; at {list(where)} their fractions were {worst:.4f} "
         "apart",
     )
 
@@ -247,7 +248,7 @@ async def incremental_reference(ctx: CaseContext) -> None:
         off <= length(ctx, POSE_TOL_MM) and turn <= 1e-3,
         clause="incremental.relative",
         expected=f"the hand at {[round(v, 3) for v in want]} (start plus both deltas), orientation unchanged",
-        actual=f"at {[round(v, 3) for v in end[9:]]} ({off:.4g} {unit} off), rotation changed by "
+        seen=f"at {[round(v, 3) for v in end[9:]]} ({off:.4g} {unit} off), rotation changed by "
         f"{turn_deg(end[:9], start[:9]):.3g} deg (its matrix by {turn:.2g} at most, a unitless cosine)",
     )
     await probe.call("set-joint-angles", joints=list(before))
@@ -264,7 +265,7 @@ async def ready(ctx: CaseContext) -> None:
     away[4] += 20.0 if away[4] < 0 else -20.0
     require_response(ctx, await probe.call("set-joint-angles", joints=away), "a move away from ready")
     answer = await probe.call("ready")
-    expect_response(ctx, answer, clause="ready.pose", expected="a segment number", size=4)
+    ctx.expect_response(answer, clause="ready.pose", expected="a segment number", size=4)
     await _sample(ctx, probe, "joint-angles", 10.0)
     pose = await read_floats(ctx, probe, "here")
     approach = pose[6:9]
@@ -272,7 +273,7 @@ async def ready(ctx: CaseContext) -> None:
         math.dist(approach, (0.0, 0.0, 1.0)) <= 1e-3,
         clause="ready.pose",
         expected="the approach vector A straight up, (0, 0, 1)",
-        actual=f"A = {[round(v, 5) for v in approach]}",
+        seen=f"A = {[round(v, 5) for v in approach]}",
     )
 
 
@@ -293,7 +294,7 @@ async def ready_position(ctx: CaseContext) -> None:
             "the stated :ready-position is not one angle per joint",
             clause="describe.ready-position",
             expected=f":ready-position as {arm.dof} numbers, one angle per degree of freedom",
-            actual=repr(arm.ready_value),
+            seen=repr(arm.ready_value),
         )
     await power_on(ctx, probe)
     start = await read_floats(ctx, probe, "joint-angles")
@@ -309,7 +310,7 @@ async def ready_position(ctx: CaseContext) -> None:
         off <= READY_TOL_DEG,
         clause="describe.ready-position",
         expected=f"the arm at the stated :ready-position {list(arm.stated_ready)}",
-        actual=f"at {[round(q, 3) for q in reached]} after move to ready ({off:.3f} degrees off)",
+        seen=f"at {[round(q, 3) for q in reached]} after move to ready ({off:.3f} degrees off)",
     )
 
 
@@ -366,7 +367,9 @@ async def _turned(
     o, a, t = val_angles(start)
     require_reach(ctx, await probe.call(op, delta=[0.0, 0.0, 0.0, *delta]), f"{op} turning the hand")
     await _sample(ctx, probe, "here", 10.0)
-    end = await read_floats(ctx, probe, "here")
+    here = await probe.call("here")
+    require_response(ctx, here, "a normal reply to here")
+    end = floats(here)
     want = val_rotation(o + delta[0], a + delta[1], t + delta[2])
     got = tuple(tuple(end[3 * j + i] for j in range(3)) for i in range(3))
     turn = max(abs(want[i][j] - got[i][j]) for i in range(3) for j in range(3))
@@ -377,9 +380,12 @@ async def _turned(
         clause="incremental.relative",
         expected=f"{op}: the hand at O A T {[round(v, 3) for v in (o, a, t)]} plus {list(delta)}, "
         "position unchanged",
-        actual=f"rotation off by {angle:.3g} deg (its matrix by {turn:.4f} at most, a unitless cosine; "
-        f"got O A T {[round(v, 3) for v in val_angles(end)]} deg), position moved {off:.4g} "
-        f"{ctx.options.length_unit}",
+        seen=showing(
+            here,
+            f"rotation off by {angle:.3g} deg (its matrix by {turn:.4f} at most, a unitless cosine; "
+            f"got O A T {[round(v, 3) for v in val_angles(end)]} deg), position moved {off:.4g} "
+            f"{ctx.options.length_unit}",
+        ),
     )
     return end
 
@@ -449,7 +455,7 @@ async def queued_segments(ctx: CaseContext) -> None:
             done == segments,
             clause="segment.fifo-completion",
             expected=f"segments {segments} reported complete in that order",
-            actual=f"reported {done}",
+            seen=f"reported {done}",
         )
     else:
         _expect_turns(ctx, start[0], angle, [g[0] for g in goals], segments)
@@ -496,7 +502,7 @@ def _expect_turns(
         clause="segment.fifo-completion",
         expected=f"joint 1 going from {start:.2f} to {', then '.join(f'{g:.2f}' for g in goals)} deg "
         f"(segments {list(segments)} in the order queued)",
-        actual=f"it turned at {', '.join(f'{p:.2f}' for p in _turns(angle))} deg (polled joint angles)",
+        seen=f"it turned at {', '.join(f'{p:.2f}' for p in _turns(angle))} deg (polled joint angles)",
     )
 
 
@@ -512,7 +518,7 @@ def _expect_smooth_rest(
         over <= 1e-3 and abs(angle[-1] - last) <= 1e-3,
         clause="motion.ends-at-rest",
         expected=f"joint 1 coming to rest on {last:.3f} without passing it",
-        actual=f"it went {over:.4f} deg past it and ended at {angle[-1]:.4f}",
+        seen=f"it went {over:.4f} deg past it and ended at {angle[-1]:.4f}",
     )
     # The bounds hold whatever the round trips: a reading was taken somewhere between a sample's sent and
     # received times, so two changes seen at samples i and j happened less than received[j] - sent[i-1]
@@ -570,7 +576,7 @@ def _servo_period(ctx: CaseContext, timing: _Timing) -> str | None:
         clause="motion.servo-period",
         expected=f"the angles changing at most once per {SERVO_S * 1000:g} ms servo cycle"
         + (f" ({timing.late * 1000:.1f} ms allowed for the host's delays)" if timing.late else ""),
-        actual=f"two changes at most {min(closest, default=0) * 1000:.1f} ms apart",
+        seen=f"two changes at most {min(closest, default=0) * 1000:.1f} ms apart",
     )
     pairs = timing.pairs
     typical = pairs[len(pairs) // 2] if pairs else math.inf
@@ -598,7 +604,7 @@ def _blending(ctx: CaseContext, timing: _Timing) -> str | None:
         clause="motion.smooth-transitions",
         expected=f"joint 1 never standing still between {samples[changed[0]].received:.3f} s and "
         f"{samples[changed[-1]].sent:.3f} s (queued moves blend)",
-        actual=f"it stood still for at least {longest * 1000:.0f} ms",
+        seen=f"it stood still for at least {longest * 1000:.0f} ms",
     )
     unseen = timing.late + 2 * max(timing.gaps, default=0.0) + 2 * max(timing.trips, default=0.0)
     if seen and unseen > 3 * SERVO_S:
@@ -646,7 +652,7 @@ async def collision(ctx: CaseContext) -> None:
             bool(errors),
             clause="motion.collision",
             expected=f"an asynchronous error (204) when joint 1 meets the obstacle at {wall:.2f} deg",
-            actual="none",
+            seen=missing("none"),
         )
         processed = last_processed(probe.packets, errors[0])
         ctx.expect(
@@ -660,14 +666,14 @@ async def collision(ctx: CaseContext) -> None:
             sign * (here[0] - wall) <= 1.0,
             clause="motion.collision",
             expected=f"the arm stopped where it was, at the obstacle ({wall:.2f} deg)",
-            actual=f"joint 1 at {here[0]:.3f} deg",
+            seen=f"joint 1 at {here[0]:.3f} deg",
         )
         refused = await probe.call("set-joint-angles", joints=list(start))
-        ctx.expect(
-            refused.opcode == ServerOp.NON_FATAL_ERROR,
+        ctx.expect_opcode(
+            refused,
+            ServerOp.NON_FATAL_ERROR,
             clause="motion.abort",
             expected="motion refused (AWA) after the collision",
-            seen=refused,
         )
     await probe.call("enable-power")
     await probe.call("set-joint-angles", joints=list(start))
@@ -764,14 +770,13 @@ async def _abort_route(ctx: CaseContext, how: str) -> bool:
         clause="motion.abort",
         expected=f"segments {dropped}, dropped by the abort ({how}), never run nor complete once motion is "
         "allowed again",
-        actual=f"completed afterwards: {ran or 'none'}; joint angles {before} then {after}",
+        seen=f"completed afterwards: {ran or 'none'}; joint angles {before} then {after}",
     )
     moved = await probe.call("set-joint-angles", joints=list(start))
-    ctx.expect(
-        moved.is_response,
+    ctx.expect_response(
+        moved,
         clause="motion.reset",
         expected="motion accepted again after enable high power cleared the abort",
-        seen=moved,
     )
     await settle(ctx, probe, start, within=5.0)
     await probe.close()
@@ -786,7 +791,7 @@ async def _expect_abort_reported(ctx: CaseContext, probe: Probe, how: str) -> No
             f"no asynchronous error within 3 s of {how}",
             clause="motion.abort",
             expected=f"an asynchronous error (204) when {how} aborts the motion",
-            actual="none",
+            seen=missing("none"),
         )
     processed = last_processed(probe.packets, aborted)
     ctx.expect(
@@ -841,7 +846,7 @@ async def close_stops_arm(ctx: CaseContext) -> None:
         first == second,
         clause="connect.close-stops-arm",
         expected="the arm standing still after the connection that moved it closed",
-        actual=f"joint angles {first} then, 0.5 s later, {second}",
+        seen=f"joint angles {first} then, 0.5 s later, {second}",
     )
     await power_on(ctx, fresh)
     answer = await fresh.call("set-joint-angles", joints=list(start))

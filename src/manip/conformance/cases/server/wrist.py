@@ -76,7 +76,7 @@ async def _judge_silence(ctx: CaseContext, probe: Probe) -> None:
         clause="wrist.no-answer",
         expected=f"read forces (#{forces}) answered with a non-fatal error (202) within {GIVE_UP_S:g} s "
         "while Cougar is silent",
-        actual=seen,
+        seen=str(seen),
     )
     error = error_of(answers[0])
     ctx.expect(
@@ -89,7 +89,7 @@ async def _judge_silence(ctx: CaseContext, probe: Probe) -> None:
         len(answers) == 2 and numbers[1] == angles and answers[1].opcode == ServerOp.RESPONSE,
         clause="wrist.no-answer",
         expected=f"joint angles (#{angles}), sent after it, answered after it",
-        actual=seen,
+        seen=str(seen),
     )
 
 
@@ -164,7 +164,7 @@ async def force_weight(ctx: CaseContext) -> None:
         clause="read-forces.units",
         expected=f"the corrected force changed by {WEIGHT_OZ:g} oz, the weight of the object set weight "
         "told of (ounces)",
-        actual=f"changed by {size:.2f} (from {_shown(rest[:3])} to {_shown(loaded[:3])})"
+        seen=f"changed by {size:.2f} (from {_shown(rest[:3])} to {_shown(loaded[:3])})"
         + (f": {WEIGHT_OZ / size:.1f} times too small" if 0 < size < WEIGHT_OZ / 2 else ""),
     )
 
@@ -195,7 +195,7 @@ async def force_push(ctx: CaseContext) -> None:
         clause="read-forces.current",
         expected="each reading the force Cougar senses then: the one while the world pushed differing from "
         "those before and after",
-        actual=f"at rest {_shown(rest)}, pushed {_shown(pushed)}, let go {_shown(released)}",
+        seen=f"at rest {_shown(rest)}, pushed {_shown(pushed)}, let go {_shown(released)}",
     )
     change = tuple(b - a for a, b in zip(rest, pushed, strict=True))
     wanted = (0.0, 0.0, PUSH_OZ, 0.0, 0.0, TWIST_OZ_IN)
@@ -204,12 +204,12 @@ async def force_push(ctx: CaseContext) -> None:
         clause="read-forces.units",
         expected=f"the reading changed by {_shown(wanted)}: {PUSH_OZ:g} oz along z and {TWIST_OZ_IN:g} "
         "oz-in about it, the wrench the world put on the hand",
-        actual=f"changed by {_shown(change)}"
+        seen=f"changed by {_shown(change)}"
         + (f": {PUSH_OZ / change[2]:.1f} times too small" if 0 < change[2] < PUSH_OZ / 2 else ""),
     )
     ctx.expect(
         all(_near(b - a, 0.0) for a, b in zip(rest, released, strict=True)),
         clause="read-forces.current",
         expected=f"the reading back at rest, {_shown(rest)}, once the world let go",
-        actual=_shown(released),
+        seen=str(_shown(released)),
     )
