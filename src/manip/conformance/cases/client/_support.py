@@ -4,7 +4,7 @@ reported against what the judging server sent."""
 from __future__ import annotations
 
 import random
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any, Final
 
 from manip.codecs.error_string import ErrorMessage, format_joint_mask
@@ -13,7 +13,7 @@ from manip.codecs.pdp11float import u32_to_f
 from manip.conformance.client.contract import Op, Result
 from manip.conformance.client.runner import ClientContext, Play
 from manip.conformance.judge.diagnosis import number_diagnosis
-from manip.conformance.judge.violation import showing
+from manip.conformance.judge.violation import Violation, showing
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
 from manip.spec.model import FieldType, Layout, RequestOpcode
@@ -184,9 +184,25 @@ def expect_reply(
         seen=str(answer) if answer is not None else f"no result for op {op_id}:\n{play.describe()}",
     )
     assert answer is not None
+    if any(f.type.element == "float" for f in response_layout(op).fields):
+        ctx.exercised("float.format")  # every value is compared exactly, so the floats' decoding is judged
     for expected, seen in reply_mismatches(op, payload, number, answer.data):
         ctx.expect(False, clause=clause, expected=expected, seen=showing(payload, seen))
     return answer
+
+
+def expect_wire(ctx: ClientContext, violations: Iterable[Violation], *, clause: str) -> None:
+    """A wire judge's verdict on ``clause`` (``client.wire``): the clause is reached whatever it found
+    (a clean client's judged packets are a pass, not "not exercised"), and each violation is reported
+    with its packet."""
+    ctx.exercised(clause)
+    for violation in violations:
+        ctx.expect(
+            False,
+            clause=clause,
+            expected=violation.expected,
+            seen=showing(violation.packet, violation.actual),
+        )
 
 
 ORIGIN_OPCODES: Final = {

@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import asyncio
 
-from manip.conformance.cases.client._support import close, connect, request
+from manip.conformance.cases.client._support import close, connect, expect_wire, request
 from manip.conformance.client.runner import ClientContext, Play, client_context
 from manip.conformance.client.server import ServerSide
 from manip.conformance.client.wire import initial_response_findings
-from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec.constants import ChaosOp, ServerOp
@@ -33,13 +32,7 @@ async def initial_response(base: CaseContext) -> None:
             await side.serve_plainly()
 
     play = await ctx.play([connect(0), request(1, "here"), close(2)], script, initial=False)
-    for violation in initial_response_findings(play.wire):
-        ctx.expect(
-            False,
-            clause="client.initial-response",
-            expected=violation.expected,
-            seen=showing(violation.packet, violation.actual),
-        )
+    expect_wire(ctx, initial_response_findings(play.wire), clause="client.initial-response")
     answer = play.answer(1)
     ctx.expect(
         answer is not None
