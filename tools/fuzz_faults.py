@@ -1,15 +1,15 @@
 """Run a fuzz campaign against the reference server with each protocol fault switch on, one at a time,
 and say which faults the campaign finds.
 
-A fault is *found* when the campaign reports a finding citing one of the clauses the fault breaks
-(``manip-server --list-faults`` names them); *found otherwise* when it reports findings, none of them
+A fault is *found* when the campaign reports a violation citing one of the clauses the fault breaks
+(``manip-server --list-faults`` names them); *found otherwise* when it reports violations, none of them
 on those clauses; *not found* when the campaign sees nothing wrong.  Environment faults (the panic
 button, an obstacle, a calibration failure) change the arm's world, not the protocol, and are not
 judged themselves.  Two protocol faults only show when the arm's world gives them the chance, so their
-campaigns also switch on an environment fault (:data:`WITH`): a fatal error comes from calibrate finding
+campaigns also switch on an environment fault (:data:`WITH`): a fatal error comes from calibrate violation
 no zero index, an abort from an obstacle that joint 2 runs into on its way to the ready position.
 Those environment faults are also run alone first: a conformant server meeting them must give no
-finding.  Each line gives the findings (kind and clause), how many inputs the first one was shrunk to,
+violation.  Each line gives the violations (kind and clause), how many inputs the first one was shrunk to,
 and the campaign's time.
 
     .venv/bin/python tools/fuzz_faults.py                    # 3,000 inputs per fault, seed 1
@@ -17,7 +17,7 @@ and the campaign's time.
     .venv/bin/python tools/fuzz_faults.py --fault wrong-severity --fault no-jor
 
 Options it does not know go to ``manip-conform fuzz`` (``--batch 200``...).  Exit status: 0 when the
-campaigns without a protocol fault have no finding and every campaign ran, 1 otherwise.
+campaigns without a protocol fault have no violation and every campaign ran, 1 otherwise.
 """
 
 from __future__ import annotations
@@ -72,11 +72,11 @@ def campaign(
 
 
 def judge(name: str, clauses: tuple[str, ...], report: dict[str, Any], seconds: float, code: int) -> Outcome:
-    findings = report["campaign"]["findings"]
-    named = [f"{f['kind']} {f['clause'] or ''}".strip() for f in findings]
-    hits = [f for f in findings if f["clause"] in clauses]
-    verdict = "found" if hits else "found otherwise" if findings else "not found"
-    first = (hits or findings)[:1]
+    violations = report["campaign"]["violations"]
+    named = [f"{f['kind']} {f['clause'] or ''}".strip() for f in violations]
+    hits = [f for f in violations if f["clause"] in clauses]
+    verdict = "found" if hits else "found otherwise" if violations else "not found"
+    first = (hits or violations)[:1]
     shrunk = len(first[0]["minimal"]) if first and first[0]["shrunk"] else None
     return Outcome(name, clauses, verdict, named, shrunk, seconds, code)
 
@@ -95,9 +95,10 @@ def main() -> int:
     clean = True
     for environment in [(), *sorted({(env,) for envs in WITH.values() for env in envs})]:
         report, seconds, code = campaign(environment, args.inputs, args.seed, extra)
-        clean = clean and code == 0 and not report["campaign"]["findings"]
-        seen = "; ".join(f"{f['kind']} {f['clause'] or ''}" for f in report["campaign"]["findings"]) or "none"
-        print(f"{' + '.join(environment) or 'no fault'}: exit {code}, findings: {seen}, {seconds:.1f} s")
+        clean = clean and code == 0 and not report["campaign"]["violations"]
+        violations = report["campaign"]["violations"]
+        seen = "; ".join(f"{f['kind']} {f['clause'] or ''}" for f in violations) or "none"
+        print(f"{' + '.join(environment) or 'no fault'}: exit {code}, violations: {seen}, {seconds:.1f} s")
     outcomes: list[Outcome] = []
     for fault in faults:
         switched = (fault.value, *WITH.get(fault.value, ()))
@@ -109,7 +110,7 @@ def main() -> int:
             kinds = ", ".join(outcome.found)
             print(f"{outcome.name}: {outcome.verdict}{shrunk} ({seconds:.1f} s) [{kinds}]", flush=True)
     if args.markdown:
-        print("| fault | clauses it breaks | campaign | findings (kind clause) | first shrunk to |")
+        print("| fault | clauses it breaks | campaign | violations (kind clause) | first shrunk to |")
         print("|---|---|---|---|---|")
         for o in outcomes:
             shrunk = str(o.shrunk_to) if o.shrunk_to else "-"

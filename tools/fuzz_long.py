@@ -3,13 +3,13 @@ sampled on the way, the figures printed at the end.
 
 It runs ``manip-conform fuzz`` (which starts the reference server itself) with ``--json`` and samples
 the server process, the fuzzer's child, every ``--interval`` seconds: resident memory (VmRSS) and open
-descriptors.  The campaign passes with no finding at all: no crash, hang, traceback, silent drop,
+descriptors.  The campaign passes with no violation at all: no crash, hang, traceback, silent drop,
 wrong answer or uncounted drop.
 
     .venv/bin/python tools/fuzz_long.py > fuzz-long.txt                # 1,000,000 inputs, seed 1985
     .venv/bin/python tools/fuzz_long.py --inputs 200000 --seed 7 -- --link chudp
 
-Options after ``--`` go to ``manip-conform fuzz``.  Exit status: the campaign's (0: no finding).
+Options after ``--`` go to ``manip-conform fuzz``.  Exit status: the campaign's (0: no violation).
 """
 
 from __future__ import annotations
@@ -89,7 +89,7 @@ def main() -> int:
         f"{report['duration']:.0f} s ({report['rate']:.0f} inputs/s); liveness checks {passed} of {checks} "
         f"passed; restarts {report['restarts']}"
     )
-    print(f"findings by kind: {report['counts']}; warnings {report['warnings']}")
+    print(f"violations by kind: {report['counts']}; warnings {report['warnings']}")
     print(
         f"tracebacks in the server's log: {report['tracebacks_seen']}; bad frames sent {report['bad_frames']}"
     )
@@ -100,10 +100,8 @@ def main() -> int:
             f"server rss MB: first {rss[0]:.1f}, min {min(rss):.1f}, max {max(rss):.1f}, last {rss[-1]:.1f}; "
             f"fds: first {fds[0]}, min {min(fds)}, max {max(fds)}, last {fds[-1]} ({len(samples)} samples)"
         )
-    for finding in report["findings"]:
-        print(
-            f"finding: {finding['kind']} {finding['clause']}: {finding['message']} -> {finding['reproduce']}"
-        )
+    for v in report["violations"]:
+        print(f"violation: {v['kind']} {v['clause']}: {v['message']} -> {v['reproduce']}")
     return int(report["exit_code"])
 
 

@@ -48,8 +48,8 @@ EXIT_STATUSES: Final[Mapping[str, Row]] = {
         (4, "interrupted or internal error"),
     ),
     "manip-conform fuzz": (
-        (0, "no finding"),
-        (1, "findings: a crash, hang, traceback, silent drop, wrong answer or uncounted drop"),
+        (0, "no violation"),
+        (1, "violations: a crash, hang, traceback, silent drop, wrong answer or uncounted drop"),
         (2, _USAGE),
         (3, "target unreachable (no liveness check passed before the first batch)"),
         (4, "interrupted, or an internal error of the fuzzer"),

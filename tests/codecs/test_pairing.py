@@ -149,7 +149,7 @@ def by_fuzz_oracles(conn: Connection) -> list[Where]:
     return [place.get(id(p)) for p in wire if p.direction == "s2c"]
 
 
-def check_findings_agree(conn: Connection, places: list[Where]) -> None:
+def check_violations_agree(conn: Connection, places: list[Where]) -> None:
     """The checker judges each answer against the request the other two pair it with: a wrong echo is
     a finding naming that request, a right one is none, an answer to nothing is an extra."""
     wire = conn.wire()
@@ -157,7 +157,7 @@ def check_findings_agree(conn: Connection, places: list[Where]) -> None:
     requests = [p for p in wire if p.direction == "c2s"]
     server = [p for p in wire if p.direction == "s2c"]
     for packet, place in zip(server, places, strict=True):
-        echo_findings = {
+        echo_violations = {
             int(m.group(1))
             for f in findings
             if f.packet is packet and f.clause in ECHO_CLAUSES
@@ -167,7 +167,7 @@ def check_findings_agree(conn: Connection, places: list[Where]) -> None:
         if isinstance(place, int) and place >= 0:
             echoed = int.from_bytes(packet.data[:2], "little")
             wanted = requests[place].packet_no
-            assert echo_findings == (set() if echoed == wanted else {wanted}), (packet, place, findings)
+            assert echo_violations == (set() if echoed == wanted else {wanted}), (packet, place, findings)
         elif place is None and packet.opcode in (0o200, 0o201, 0o202):
             clauses = {f.clause for f in findings if f.packet is packet}
             assert clauses & {"request.one-reply", "error.non-fatal-is-reply", "error.fatal-then-close"}
@@ -233,7 +233,7 @@ def test_view_sorter_and_checks_pair_generated_connections_alike(conn: Connectio
     view, sorter = by_view(conn), by_sorter(conn)
     assert view == sorter
     assert by_fuzz_oracles(conn) == [p if isinstance(p, int) and p >= 0 else None for p in sorter]
-    check_findings_agree(conn, sorter)
+    check_violations_agree(conn, sorter)
 
 
 @pytest.mark.parametrize("name", ["describe-self", "motion", "errors"])

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import pytest
 
 from manip.conformance.cases.server.stateful import replay_async
-from manip.conformance.judge.model import MAX_DISTINCT_FINDINGS, DistinctFindings
+from manip.conformance.judge.model import MAX_DISTINCT_VIOLATIONS, DistinctViolations
 from manip.conformance.output.culprit import culprit_index
 from manip.conformance.suite import bridge
 from manip.conformance.suite.case import all_cases
@@ -149,12 +149,12 @@ def test_the_model_goes_on_after_a_disagreement_and_reports_each_distinct_one(
     assert {"motion.no-power", "speed.range"} <= set(clauses), (clauses, r.notes)
     assert "requests of the shrunk counterexample" in r.violations[0].actual
     assert any("requests of the run up to it (not shrunk)" in v.actual for v in r.violations[1:])
-    assert len(r.violations) <= MAX_DISTINCT_FINDINGS + 1
+    assert len(r.violations) <= MAX_DISTINCT_VIOLATIONS + 1
     assert "motion.no-power" in r.reached and "speed.range" in r.reached
 
 
-def test_distinct_findings_keep_each_kind_once_up_to_the_bound() -> None:
-    found: DistinctFindings[int] = DistinctFindings(bound=2)
+def test_distinct_violations_keep_each_kind_once_up_to_the_bound() -> None:
+    found: DistinctViolations[int] = DistinctViolations(bound=2)
     assert found.add(("speed.range", "set_speed"), 1)
     assert not found.add(("speed.range", "set_speed"), 2)  # the same kind again
     assert found.add(("motion.no-power", "move"), 3)

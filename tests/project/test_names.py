@@ -168,3 +168,33 @@ def test_no_order_or_set_of_one_concept_is_written_twice() -> None:
     assert not unexplained, f"one concept's values listed in more than one module: {unexplained}"
     gone = [names for names in DELIBERATE_LISTS if names not in twice]
     assert not gone, f"no longer listed twice (take them off DELIBERATE_LISTS): {gone}"
+
+
+DIFF_PACKAGE = "src/manip/conformance/diff/"
+"""Where "finding" names what the diff reports: a classified difference, which may be allowed."""
+
+
+def test_a_violation_is_never_called_a_finding() -> None:
+    """Outside ``manip-conform diff``, no name in ``src`` (function, class, argument, variable, attribute)
+    says "finding": a breach of a clause is a violation, whoever reports it."""
+    named = sorted(
+        f"{module}:{node.lineno} {name}"
+        for module, tree in _modules().items()
+        if not module.startswith(DIFF_PACKAGE)
+        for node in ast.walk(tree)
+        for name in _names_bound(node)
+        if "finding" in name.lower()
+    )
+    assert not named, named
+
+
+def _names_bound(node: ast.AST) -> list[str]:
+    if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+        return [node.name]
+    if isinstance(node, ast.arg):
+        return [node.arg]
+    if isinstance(node, ast.Name):
+        return [node.id]
+    if isinstance(node, ast.Attribute):
+        return [node.attr]
+    return []

@@ -11,7 +11,7 @@ time and sends its reply before it reads the next, so answers come in request or
 * **By position.**  An answer (RESPONSE 0200, fatal error 0201, non-fatal error 0202) belongs to the
   oldest request not yet fully answered; with :meth:`ReplyPairing.rfc` the RFC is the oldest, answered
   by the initial RESPONSE.  The request-number word is *not* used to pair: a wrong echo is the checker's
-  finding (``response.echoes-request-number``), never a re-pairing, so one bad word cannot shift every
+  violation (``response.echoes-request-number``), never a re-pairing, so one bad word cannot shift every
   later answer.
 * **Multi-packet replies.**  The RESPONSE to a well-formed request whose reply is ``multi`` (describe
   self) leaves the request open until a RESPONSE with no text (the terminator).  An error arriving

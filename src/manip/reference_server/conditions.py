@@ -161,6 +161,6 @@ class WorldConditions:
             arm.press_panic(at=now + self.panic_delay)
 
     def check(self, request: str) -> None:
-        """Refuse a request the world makes fail (calibrate, finding no zero index): raise RequestError."""
+        """Refuse a request the world makes fail (calibrate, violation no zero index): raise RequestError."""
         if WorldCondition.CALIBRATE_NZI in self.on and request == "calibrate":
             raise errors.nzi_error(self.nzi_joints)

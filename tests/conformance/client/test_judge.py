@@ -26,7 +26,7 @@ from manip.conformance.client.contract import (
     request_args,
 )
 from manip.conformance.client.server import WireRecord
-from manip.conformance.client.wire import window_findings
+from manip.conformance.client.wire import window_violations
 from manip.conformance.judge.client_checks import check_client_guards
 from manip.conformance.judge.packets import Direction, WirePacket
 from manip.ncp.packets import pack_status
@@ -49,39 +49,39 @@ OPN = WireRecord(0.0, "s2c", Packet(ChaosOp.OPN, packet_no=1, ack_no=1, data=pac
 
 def test_the_window_is_the_one_offered_when_the_packet_went_out() -> None:
     filled = [OPN, *(_c2s(0.1, n) for n in range(2, 6))]  # 4 unacknowledged: the window of 4, full
-    assert window_findings(filled, 15) == []
+    assert window_violations(filled, 15) == []
     shrunk = [*filled, _sts(0.2, 3, 1), _c2s(0.3, 6)]  # 3 unacknowledged after the shrink to 1
-    found = window_findings(shrunk, 15)
+    found = window_violations(shrunk, 15)
     assert [f.clause for f in found] == ["ncp.window"] and "window is 1" in found[0].message
     opened = [*filled, _sts(0.2, 5, 1), _c2s(0.3, 6)]  # all acknowledged: one more is allowed
-    assert window_findings(opened, 15) == []
+    assert window_violations(opened, 15) == []
 
 
 def test_past_the_offered_window_is_found_before_any_status() -> None:
     wire = [OPN, *(_c2s(0.1, n) for n in range(2, 7))]  # 5 unacknowledged, window 4
-    assert [f.clause for f in window_findings(wire, 15)] == ["ncp.window"]
+    assert [f.clause for f in window_violations(wire, 15)] == ["ncp.window"]
 
 
 def test_an_eof_counts_against_the_window_and_a_retransmission_is_judged_when_first_sent() -> None:
     filled = [OPN, *(_c2s(0.1, n) for n in range(2, 6))]  # 4 unacknowledged: the window of 4, full
     eof = WireRecord(0.2, "c2s", Packet(ChaosOp.EOF, packet_no=6, ack_no=1))
-    assert [f.clause for f in window_findings([*filled, eof], 15)] == ["ncp.window"]
-    assert "EOF 6" in window_findings([*filled, eof], 15)[0].message
+    assert [f.clause for f in window_violations([*filled, eof], 15)] == ["ncp.window"]
+    assert "EOF 6" in window_violations([*filled, eof], 15)[0].message
     resent = [*filled, _sts(0.2, 2, 1), _c2s(0.3, 3)]  # packet 3 again, sent first under the window of 4
-    assert window_findings(resent, 15) == []
+    assert window_violations(resent, 15) == []
 
 
 def test_an_sts_that_acknowledges_nothing_new_still_sets_the_window() -> None:
     filled = [OPN, *(_c2s(0.1, n) for n in range(2, 4))]  # 2 unacknowledged
     shrunk = [*filled, _sts(0.2, 1, 1), _c2s(0.3, 4)]  # the same ack, window 1: packet 4 is past it
-    assert [f.clause for f in window_findings(shrunk, 15)] == ["ncp.window"]
+    assert [f.clause for f in window_violations(shrunk, 15)] == ["ncp.window"]
     opened = [
         WireRecord(0.0, "s2c", Packet(ChaosOp.OPN, packet_no=1, ack_no=1, data=pack_status(1, 1))),
         _c2s(0.1, 2),
         _sts(0.2, 1, 4),  # nothing new acknowledged, window 4
         *(_c2s(0.3, n) for n in range(3, 6)),
     ]
-    assert window_findings(opened, 15) == []
+    assert window_violations(opened, 15) == []
 
 
 def _guard_packet(direction: Direction, opcode: int, number: int, data: bytes) -> WirePacket:

@@ -1,7 +1,7 @@
 """``manip-conform fuzz`` against real targets: the campaign as evidence, and the fuzzer's own proof.
 
 * The reference server takes tens of thousands of inputs (and a CHUDP campaign) with no crash, hang,
-  traceback or any other finding.
+  traceback or any other violation.
 * Each kind of defect is found, shrunk to the one input that causes it, and its reproduce line
   causes it again: a crash, a hang, a traceback and a silent drop (``tests/support/fuzz_fake_server.py``,
   started by the fuzzer with ``--launch``), and a protocol fault switch of the reference server
@@ -41,27 +41,27 @@ def fuzz(*args: str) -> Result:
 
 
 def report_of(path: Path) -> dict[str, Any]:
-    """The campaign's JSON report, valid for the suite's report schema, each finding a violation as the
+    """The campaign's JSON report, valid for the suite's report schema, each of its violations one as the
     report's cases have it with the suite's kinds; returned with its ``campaign`` block's fields on top
-    (the campaign's ``counts`` are its findings by kind, the report's its cases by outcome)."""
+    (the campaign's ``counts`` are its violations by kind, the report's its cases by outcome)."""
     data: dict[str, Any] = json.loads(path.read_text())
     schema = load_schema()
     _validate(data, schema, schema)
-    violation = schema["$defs"]["violation"]
+    shape = schema["$defs"]["violation"]
     campaign = data["campaign"]
-    for finding in campaign["findings"]:
-        _validate({key: finding[key] for key in violation["required"]}, violation, schema)
-        assert finding["kind"] in FAILURE_KINDS
-        case = next(c for c in data["cases"] if c["id"] == finding["input_class"])
-        assert finding["message"] in [v["message"] for v in case["violations"]]
+    for violation in campaign["violations"]:
+        _validate({key: violation[key] for key in shape["required"]}, shape, schema)
+        assert violation["kind"] in FAILURE_KINDS
+        case = next(c for c in data["cases"] if c["id"] == violation["input_class"])
+        assert violation["message"] in [v["message"] for v in case["violations"]]
     return {**data, **campaign}
 
 
 def assert_clean(report: dict[str, Any], inputs: int) -> None:
-    assert report["exit_code"] == 0, [f["message"] for f in report["findings"]]
+    assert report["exit_code"] == 0, [f["message"] for f in report["violations"]]
     assert report["inputs"] == inputs
     assert report["counts"] == dict.fromkeys(KINDS, 0)
-    assert report["findings"] == [] and report["warnings"] == 0
+    assert report["violations"] == [] and report["warnings"] == 0
     assert report["tracebacks_seen"] == 0, "the fuzzer read the server's log and found tracebacks"
     assert report["liveness"]["failed"] == 0 and report["liveness"]["checks"] == report["batches"]
     assert report["bad_frames"]["counted"] == report["bad_frames"]["sent"] > 0
@@ -136,17 +136,17 @@ def test_a_defect_is_found_shrunk_to_its_input_and_reproduced(mode: str, kind: s
     )
     report = report_of(path)
     assert result.exit_code == 1, result.output
-    found = [f for f in report["findings"] if f["kind"] == kind]
-    assert found, [(f["kind"], f["message"]) for f in report["findings"]]
-    finding = found[0]
-    assert finding["shrunk"] and [m["number"] for m in finding["minimal"]] == [trigger]
-    assert "request 0277" in finding["minimal"][0]["steps"][0]
-    assert f"--only {trigger}" in finding["reproduce"] and "--launch" in finding["reproduce"]
-    assert finding["input_class"] == "manip.unknown-opcode"
+    found = [f for f in report["violations"] if f["kind"] == kind]
+    assert found, [(f["kind"], f["message"]) for f in report["violations"]]
+    violation = found[0]
+    assert violation["shrunk"] and [m["number"] for m in violation["minimal"]] == [trigger]
+    assert "request 0277" in violation["minimal"][0]["steps"][0]
+    assert f"--only {trigger}" in violation["reproduce"] and "--launch" in violation["reproduce"]
+    assert violation["input_class"] == "manip.unknown-opcode"
     if kind in ("crash", "timeout"):
         assert report["restarts"] >= 1
-    again = reproduce(finding["reproduce"], tmp_path)
-    assert again["exit_code"] == 1 and any(f["kind"] == kind for f in again["findings"])
+    again = reproduce(violation["reproduce"], tmp_path)
+    assert again["exit_code"] == 1 and any(f["kind"] == kind for f in again["violations"])
 
 
 @pytest.mark.timeout(90)
@@ -167,10 +167,10 @@ def test_a_traceback_in_the_log_of_a_server_run_elsewhere_is_found(
     result = fuzz(url, *args, "--inputs", str(trigger + 20), "--batch", "50", "--json", str(path))
     report = report_of(path)
     assert result.exit_code == 1, result.output
-    (finding,) = report["findings"]
-    assert finding["kind"] == "traceback" and "fake defect" in finding["actual"]
-    assert [m["number"] for m in finding["minimal"]] == [trigger]
-    assert f"--server-log {log}" in finding["reproduce"]
+    (violation,) = report["violations"]
+    assert violation["kind"] == "traceback" and "fake defect" in violation["actual"]
+    assert [m["number"] for m in violation["minimal"]] == [trigger]
+    assert f"--server-log {log}" in violation["reproduce"]
     assert report["tracebacks_seen"] >= 1
 
 
@@ -192,21 +192,21 @@ def test_a_fault_switch_is_found_and_its_reproduce_line_needs_the_fault(tmp_path
     )
     report = report_of(path)
     assert result.exit_code == 1
-    (finding,) = [f for f in report["findings"] if f["clause"] == "request.data-length"]
-    assert finding["kind"] == "wrong_value" and finding["counts"] and finding["level"] == "MUST"
-    assert finding["shrunk"] and len(finding["minimal"]) == 1
-    assert finding["spec"].startswith("A request whose data length does not fit")
-    assert "--server-fault length-unchecked" in finding["reproduce"]
-    again = reproduce(finding["reproduce"], tmp_path)
-    assert any(f["clause"] == "request.data-length" for f in again["findings"])
-    without = reproduce(finding["reproduce"].replace(" --server-fault length-unchecked", ""), tmp_path)
+    (violation,) = [f for f in report["violations"] if f["clause"] == "request.data-length"]
+    assert violation["kind"] == "wrong_value" and violation["counts"] and violation["level"] == "MUST"
+    assert violation["shrunk"] and len(violation["minimal"]) == 1
+    assert violation["spec"].startswith("A request whose data length does not fit")
+    assert "--server-fault length-unchecked" in violation["reproduce"]
+    again = reproduce(violation["reproduce"], tmp_path)
+    assert any(f["clause"] == "request.data-length" for f in again["violations"])
+    without = reproduce(violation["reproduce"].replace(" --server-fault length-unchecked", ""), tmp_path)
     assert without["exit_code"] == 0, "the same input finds nothing without the fault"
     tree = ET.parse(junit)
     classes = [s for s in tree.iter("testsuite") if s.get("name") != "clauses"]  # not the clause statuses
     failed = [
         case.get("name") for s in classes for case in s.iter("testcase") if case.find("failure") is not None
     ]
-    assert failed == [finding["input_class"]]
+    assert failed == [violation["input_class"]]
     assert "inputs (" in result.output and "reproduce: manip-conform fuzz --seed 1 --only" in result.output
 
 

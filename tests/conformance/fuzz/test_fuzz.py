@@ -17,7 +17,7 @@ from manip.codecs.packet import Packet
 from manip.codecs.pdp11float import pack_f
 from manip.conformance.fuzz.generators import INPUT_CLASSES, GenOptions, generate, stray_index
 from manip.conformance.fuzz.judge import _connection
-from manip.conformance.fuzz.oracles import oracle_findings
+from manip.conformance.fuzz.oracles import oracle_violations
 from manip.conformance.fuzz.report import CampaignFacts
 from manip.conformance.fuzz.shrink import Budget, ddmin
 from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, RequestStep, Stray
@@ -196,20 +196,20 @@ def _done(number: int) -> WirePacket:
 def test_a_speed_outside_its_range_answered_done_is_a_wrong_answer() -> None:
     speed = SPEC.request("set-speed").opcode
     packets = [_s2c(ServerOp.RESPONSE, b"\x01\x00"), _c2s(speed, 2, pack_f(2.0)), _done(2)]
-    (found,) = oracle_findings(packets)
+    (found,) = oracle_violations(packets)
     assert found.clause == "speed.range"
     refused = encode_error(ServerOp.NON_FATAL_ERROR, 2, bad_value("set-speed", "factor 2 > 1").error)
-    assert not oracle_findings([*packets[:2], _s2c(ServerOp.NON_FATAL_ERROR, refused)])
+    assert not oracle_violations([*packets[:2], _s2c(ServerOp.NON_FATAL_ERROR, refused)])
 
 
 def test_a_move_accepted_after_kill_power_is_a_wrong_answer() -> None:
     kill, ready = SPEC.request("kill-power").opcode, SPEC.request("ready").opcode
     segment = _s2c(ServerOp.RESPONSE, struct.pack("<HH", 3, 1))
     packets = [_c2s(kill, 2), _done(2), _c2s(ready, 3), segment]
-    assert [f.clause for f in oracle_findings(packets)] == ["motion.no-power"]
+    assert [f.clause for f in oracle_violations(packets)] == ["motion.no-power"]
     enable = SPEC.request("enable-power").opcode
     powered = [_c2s(kill, 2), _done(2), _c2s(enable, 3), _done(3), _c2s(ready, 4), segment]
-    assert not oracle_findings(powered)
+    assert not oracle_violations(powered)
 
 
 def test_a_move_accepted_after_an_abort_is_a_wrong_answer_until_a_reset() -> None:
@@ -219,10 +219,10 @@ def test_a_move_accepted_after_an_abort_is_a_wrong_answer_until_a_reset() -> Non
     aborted = _s2c(ServerOp.ASYNCHRONOUS_ERROR, encode_error(ServerOp.ASYNCHRONOUS_ERROR, 2, collision))
     again = _s2c(ServerOp.RESPONSE, struct.pack("<HH", 3, 2))
     packets = [_c2s(ready, 2), segment, aborted, _c2s(ready, 3), again]
-    (found,) = oracle_findings(packets)
+    (found,) = oracle_violations(packets)
     assert found.clause == "motion.abort" and found.packet is again and found.kind == "wrong_value"
     after_reset = [*packets[:3], _c2s(reset, 3), _done(3), _c2s(ready, 4), again]
-    assert not oracle_findings(after_reset)
+    assert not oracle_violations(after_reset)
 
 
 class _Conn:

@@ -145,7 +145,7 @@ def test_segment_numbers_that_do_not_increase_are_a_should_finding() -> None:
     s.do("ready", AnswerSummary(True, segment=1))
     s.do("ready", AnswerSummary(True, segment=1))
     s.do("ready", AnswerSummary(True, segment=2))
-    assert [f.clause for f in s.model.segment_findings] == ["segment.number-increases"]
+    assert [f.clause for f in s.model.segment_violations] == ["segment.number-increases"]
     assert SPEC.clauses["segment.number-increases"].level == "SHOULD"
 
 

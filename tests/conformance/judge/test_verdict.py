@@ -18,7 +18,7 @@ from manip.conformance.fuzz.generators import GenOptions
 from manip.conformance.fuzz.judge import Sighting
 from manip.conformance.judge.verdict import Outcome, counts, grade
 from manip.conformance.judge.violation import Violation
-from manip.conformance.replay.verify import judge_findings
+from manip.conformance.replay.verify import judge_violations
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import CaseResult
 from manip.conformance.suite.runner import RunConfig, Runner
@@ -68,7 +68,7 @@ def by_client(violations: list[Violation], strict: bool) -> Outcome:
 
 def by_verify(violations: list[Violation], strict: bool) -> Outcome:
     result = _blank(kind="verify")
-    judge_findings(result, violations, strict=strict)
+    judge_violations(result, violations, strict=strict)
     return result.outcome
 
 

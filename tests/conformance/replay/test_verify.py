@@ -20,7 +20,7 @@ from manip.conformance.output.coverage import coverage, gaps
 from manip.conformance.output.report import load_schema, report_json
 from manip.conformance.replay.against import ReplayOptions, replay_capture
 from manip.conformance.replay.cli import recording
-from manip.conformance.replay.verify import fatal_close_findings, verify_capture, wire_packets
+from manip.conformance.replay.verify import fatal_close_violations, verify_capture, wire_packets
 from manip.conformance.suite.case import all_cases
 from manip.conformance.suite.embedded import EmbeddedServer
 from manip.reference_server import FaultSet, ServerConfig
@@ -89,9 +89,9 @@ def test_fatal_error_then_client_close_is_a_finding() -> None:
     fatal = WirePacket("s2c", ServerOp.FATAL_ERROR, 5, 3, b"\x03\x00x: F ABC boom")
     client_close = WirePacket("c2s", ChaosOp.CLS, 0, 0, b"bye")
     server_close = WirePacket("s2c", ChaosOp.CLS, 0, 0, b"bye")
-    (finding,) = fatal_close_findings([fatal, client_close, server_close])
+    (finding,) = fatal_close_violations([fatal, client_close, server_close])
     assert finding.clause == "error.fatal-then-close"
-    assert fatal_close_findings([fatal, server_close, client_close]) == []
+    assert fatal_close_violations([fatal, server_close, client_close]) == []
 
 
 def test_cli_exit_codes_and_reports(tmp_path: Path) -> None:

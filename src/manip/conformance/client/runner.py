@@ -32,12 +32,12 @@ from manip.conformance.client.contract import HarnessHello, Instruction, Op, Res
 from manip.conformance.client.process import HarnessError, HarnessProblem, HarnessProcess, Limits
 from manip.conformance.client.server import Mangle, Script, ServerSide, WireRecord, serve_scenario
 from manip.conformance.client.wire import (
-    ack_findings,
+    ack_violations,
     client_requests,
-    initial_response_findings,
-    numbering_findings,
-    request_findings,
-    window_findings,
+    initial_response_violations,
+    numbering_violations,
+    request_violations,
+    window_violations,
     wire_packet,
 )
 from manip.conformance.judge.verdict import Outcome
@@ -241,20 +241,20 @@ class ClientContext(CaseContext):
     def judge_wire(self) -> None:
         """The ``client-wire`` invariant over every play of the case."""
         for play in self.plays:
-            findings = (
-                request_findings(play.wire)
-                + initial_response_findings(play.wire)
-                + numbering_findings(play.wire)
-                + ack_findings(play.wire, settle=1.0)
+            violations = (
+                request_violations(play.wire)
+                + initial_response_violations(play.wire)
+                + numbering_violations(play.wire)
+                + ack_violations(play.wire, settle=1.0)
             )
-            findings += window_findings(play.wire, play.window)
-            for finding in findings:
+            violations += window_violations(play.wire, play.window)
+            for violation in violations:
                 self.expect(
                     False,
-                    clause=finding.clause,
-                    expected=finding.expected,
-                    seen=showing(finding.packets or finding.data, finding.actual),
-                    message=finding.message,
+                    clause=violation.clause,
+                    expected=violation.expected,
+                    seen=showing(violation.packets or violation.data, violation.actual),
+                    message=violation.message,
                     invariant=CLIENT_WIRE.name,
                 )
 

@@ -19,13 +19,13 @@ from manip.ncp.seq import seq_gt, seq_lt
 from manip.spec.constants import ChaosOp, ServerOp
 
 __all__ = [
-    "ack_findings",
+    "ack_violations",
     "client_requests",
-    "initial_response_findings",
+    "initial_response_violations",
     "judged_packets",
-    "numbering_findings",
-    "request_findings",
-    "window_findings",
+    "numbering_violations",
+    "request_violations",
+    "window_violations",
     "wire_packet",
 ]
 
@@ -62,7 +62,7 @@ def judged_packets(records: Sequence[WireRecord]) -> list[WirePacket]:
     ]
 
 
-def request_findings(records: Sequence[WireRecord]) -> list[Violation]:
+def request_violations(records: Sequence[WireRecord]) -> list[Violation]:
     """Every request a request opcode with the data its layout says (``check_client_request``)."""
     out: list[Violation] = []
     for r in client_requests(records):
@@ -70,7 +70,7 @@ def request_findings(records: Sequence[WireRecord]) -> list[Violation]:
     return out
 
 
-def initial_response_findings(records: Sequence[WireRecord]) -> list[Violation]:
+def initial_response_violations(records: Sequence[WireRecord]) -> list[Violation]:
     """No request before the server's initial RESPONSE went out."""
     initial_at: float | None = None
     for r in records:
@@ -90,7 +90,7 @@ def initial_response_findings(records: Sequence[WireRecord]) -> list[Violation]:
     return []
 
 
-def numbering_findings(records: Sequence[WireRecord]) -> list[Violation]:
+def numbering_violations(records: Sequence[WireRecord]) -> list[Violation]:
     """The client's controlled packets numbered consecutively modulo 2^16."""
     last: int | None = None
     seen: set[int] = set()
@@ -114,7 +114,7 @@ def numbering_findings(records: Sequence[WireRecord]) -> list[Violation]:
     return []
 
 
-def ack_findings(records: Sequence[WireRecord], *, settle: float = 0.0) -> list[Violation]:
+def ack_violations(records: Sequence[WireRecord], *, settle: float = 0.0) -> list[Violation]:
     """Every controlled packet the server sent, up to ``settle`` seconds before the client's last
     packet, is acknowledged by a later client packet (its ack field or an STS receipt)."""
     client = [r for r in records if r.dir == "c2s"]
@@ -150,7 +150,7 @@ def ack_findings(records: Sequence[WireRecord], *, settle: float = 0.0) -> list[
     return []
 
 
-def window_findings(records: Sequence[WireRecord], window: int) -> list[Violation]:
+def window_violations(records: Sequence[WireRecord], window: int) -> list[Violation]:
     """The client never had more controlled packets unacknowledged than the window in force when it sent
     one: ``window`` until the server's OPN or an STS says otherwise, then what the latest of them says
     (read from every STS, whether or not it acknowledges anything new; a window shrunk mid-case binds

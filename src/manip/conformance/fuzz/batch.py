@@ -2,7 +2,7 @@
 
 A batch runs on a fresh connection (:class:`~.session.FuzzConnection`) over a fresh link, so each
 batch starts from the state a new client finds, and any subset of a batch can be sent again the same
-way when a finding is shrunk.  Its steps go out in input order:
+way when a violation is shrunk.  Its steps go out in input order:
 
 * requests on the connection (a new one is opened when the target closes it, after a fatal error);
 * packets placed wrongly on the connection's link;

@@ -1,4 +1,4 @@
-"""The campaign: inputs in batches, a liveness check after each, findings shrunk as they are found.
+"""The campaign: inputs in batches, a liveness check after each, violations shrunk as they are found.
 
 Theory of operation:
 
@@ -8,8 +8,8 @@ Theory of operation:
    sent or ``seconds`` passed; with ``only`` exactly those inputs are sent, as one batch.  After each
    batch: the liveness check, the target's new tracebacks, its count of bad frames, and the judgement
    (:mod:`.judge`).
-3. Each violation a batch shows (a :class:`~.judge.Sighting`) is a finding, or one more occurrence of
-   a finding already made (same kind and clause).  A new finding is shrunk (:mod:`.shrink`): first the
+3. Each violation a batch shows (a :class:`~.judge.Sighting`) is new, or one more occurrence of a
+   violation already seen (same kind and clause).  A new violation is shrunk (:mod:`.shrink`): first the
    input it is attributed to alone, then delta debugging over its batch, every trial a batch of its own
    on a fresh connection (and, for a crash or hang, a restarted target).  The shrunk inputs are what
    the report shows, with the reproduce line ``manip-conform fuzz ... --seed S --only N,M``.
@@ -97,10 +97,10 @@ class CampaignConfig:
 
 @dataclass
 class CampaignEvents:
-    """Callbacks for a console: after each batch (inputs sent so far), at each new finding."""
+    """Callbacks for a console: after each batch (inputs sent so far), at each new violation."""
 
     batch_done: Callable[[CampaignFacts], None] = lambda facts: None
-    found: Callable[[CampaignViolation], None] = lambda finding: None
+    found: Callable[[CampaignViolation], None] = lambda violation: None
     note: Callable[[str], None] = lambda text: None
 
 
@@ -180,7 +180,7 @@ class Campaign:
         return report
 
     def finish(self) -> RunReport:
-        """The report with its cases: one per input class, graded from its findings."""
+        """The report with its cases: one per input class, graded from its violations."""
         self.report.results = class_results(self.report, self.facts)
         return self.report
 
@@ -301,44 +301,44 @@ class Campaign:
         self.facts.bad_frames_counted = (self.facts.bad_frames_counted or 0) + (now - before)
         return run.counted, now - before
 
-    # ------------------------------------------------------------------------------------ findings
+    # ------------------------------------------------------------------------------------ violations
 
     async def _record(self, o: Sighting, inputs: list[FuzzInput], batch: int) -> None:
         facts = self.facts
         known = self._known.get(o.signature)
         if known is not None:
-            facts.findings[known].occurrences += 1
-            facts.findings[known].followers += o.followers
+            facts.violations[known].occurrences += 1
+            facts.violations[known].followers += o.followers
             return
         kind = _class_of(o, inputs)
-        finding = CampaignViolation(
+        violation = CampaignViolation(
             o.violation,
             kind,
             batch,
             counts=counts(o.violation, self.config.options.strict),
             followers=o.followers,
         )
-        index = len(facts.findings)
-        facts.findings.append(finding)
+        index = len(facts.violations)
+        facts.violations.append(violation)
         self._known[o.signature] = index
         numbers = [i.number for i in inputs]
         if self.config.shrink and not self.config.only:
-            self.events.note(f"shrinking: {finding.title()}")
-            minimal, finding.shrunk, finding.shrink_note = await self._shrink(o, numbers)
+            self.events.note(f"shrinking: {violation.title()}")
+            minimal, violation.shrunk, violation.shrink_note = await self._shrink(o, numbers)
         else:
             minimal = [o.number] if o.number is not None and not self.config.only else numbers
-            finding.shrink_note = "not shrunk" if not self.config.only else "the inputs given with --only"
+            violation.shrink_note = "not shrunk" if not self.config.only else "the inputs given with --only"
         by_number = {i.number: i for i in inputs}
-        finding.minimal = [
+        violation.minimal = [
             _minimal(by_number.get(n) or generate(self.config.seed, n, self.config.gen)) for n in minimal
         ]
-        if finding.minimal and kind == HEALTH and finding.shrunk:
-            finding.input_class = finding.minimal[-1].kind
-        finding.reproduce = self._reproduce(minimal)
-        tally = facts.classes.get(finding.input_class)
+        if violation.minimal and kind == HEALTH and violation.shrunk:
+            violation.input_class = violation.minimal[-1].kind
+        violation.reproduce = self._reproduce(minimal)
+        tally = facts.classes.get(violation.input_class)
         if tally is not None:
-            tally.findings.append(index)
-        self.events.found(finding)
+            tally.violations.append(index)
+        self.events.found(violation)
 
     async def _shrink(self, o: Sighting, numbers: list[int]) -> tuple[list[int], bool, str]:
         budget = Budget(self.config.shrink_trials, self.config.shrink_seconds)

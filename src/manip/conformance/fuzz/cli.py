@@ -26,7 +26,7 @@ from manip.commandline import CommandLine, FiniteFloat
 from manip.conformance.cli_options import check_output_paths, given, report_options
 from manip.conformance.fuzz.campaign import Campaign, CampaignConfig, CampaignEvents
 from manip.conformance.fuzz.generators import INPUT_CLASSES, GenOptions
-from manip.conformance.fuzz.report import CampaignFacts, CampaignViolation, finding_text
+from manip.conformance.fuzz.report import CampaignFacts, CampaignViolation, violation_text
 from manip.conformance.fuzz.target import FuzzedServer, LaunchedServer, RemoteServer, reference_server_argv
 from manip.conformance.output.console import make_console, progress_bar
 from manip.conformance.output.documents import ReportPaths, write_reports
@@ -174,7 +174,7 @@ def class_listing() -> str:
     "--server-log",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
-    help="With HOST: the server's log file; a traceback written to it is a finding.",
+    help="With HOST: the server's log file; a traceback written to it is a violation.",
 )
 @click.option(
     "--restart-wait",
@@ -185,19 +185,19 @@ def class_listing() -> str:
     help="With HOST (no --launch): after a crash, wait this long for the server to come back (to go on, "
     "and to shrink the crash).",
 )
-@click.option("--no-shrink", is_flag=True, help="Report findings with their whole batch, unshrunk.")
+@click.option("--no-shrink", is_flag=True, help="Report violations with their whole batch, unshrunk.")
 @click.option(
     "--shrink-seconds",
     type=FiniteFloat(min=1.0),
     default=60.0,
     show_default=True,
-    help="Most time spent shrinking one finding.",
+    help="Most time spent shrinking one violation.",
 )
 @click.option(
-    "--strict", is_flag=True, help="Findings of SHOULD clauses count (without it they are warnings)."
+    "--strict", is_flag=True, help="Violations of SHOULD clauses count (without it they are warnings)."
 )
 @report_options
-@click.option("-q", "--quiet", is_flag=True, help="No progress bar; findings and the summary only.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar; violations and the summary only.")
 def fuzz_command(
     host: str | None,
     seed: int | None,
@@ -290,7 +290,7 @@ def fuzz_command(
 def _reproduce_options(
     classes: tuple[str, ...], target_kind: str, allow_motion: bool, server: _Server
 ) -> list[str]:
-    """The options of a finding's reproduce line: the classes, the target kind, the same server."""
+    """The options of a violation's reproduce line: the classes, the target kind, the same server."""
     extra = [word for pattern in classes for word in ("--class", pattern)]
     if target_kind == "hardware":
         extra += ["--target", "hardware"] + (["--allow-motion"] if allow_motion else [])
@@ -408,9 +408,9 @@ def _campaign(
         rate = facts.rate(time.monotonic() - started)
         progress.update(task, completed=facts.inputs, description=f"fuzz {rate:.0f}/s")
 
-    def found(finding: CampaignViolation) -> None:
-        style = _STYLE.get(finding.kind, "bold red" if finding.counts else "yellow")
-        progress.console.print(f"[{style}]{escape(finding.title())}[/]")
+    def found(violation: CampaignViolation) -> None:
+        style = _STYLE.get(violation.kind, "bold red" if violation.counts else "yellow")
+        progress.console.print(f"[{style}]{escape(violation.title())}[/]")
 
     def note(text: str) -> None:
         if not quiet:
@@ -435,8 +435,8 @@ def _campaign(
 def _summary(console: Console, report: RunReport) -> None:
     facts = report.campaign
     assert isinstance(facts, CampaignFacts)
-    for finding in facts.findings:
-        console.print(finding_text(finding), markup=False, highlight=False)
+    for violation in facts.violations:
+        console.print(violation_text(violation), markup=False, highlight=False)
     for problem in report.problems:
         console.print(f"[bold red]problem[/]: {escape(problem)}")
     if report.internal_error:

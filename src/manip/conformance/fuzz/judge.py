@@ -9,7 +9,7 @@ with the input it is attributed to, as a :class:`Sighting`.
   suite's stateful model (a factor out of range, motion without power or after an abort) and what
   describe self said.  A request
   never answered is a *silent drop* (also when the replies skip it: a reply carrying the number of a
-  later request), anything else a *wrong answer*.  A connection is judged up to its first finding
+  later request), anything else a *wrong answer*.  A connection is judged up to its first violation
   that may put answers out of step with requests (:data:`DISRUPTIVE`); the rest are only counted.
 * Every stray packet and raw link has an :class:`~.batch.DueAnswer`: a LOS or an RFC answer that
   did not come is a silent drop; an answer to a packet that must be dropped, or a link kept after its
@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 from typing import Final
 
 from manip.conformance.fuzz.batch import BatchRun, DueAnswer, Liveness
-from manip.conformance.fuzz.oracles import answers, oracle_findings
+from manip.conformance.fuzz.oracles import answers, oracle_violations
 from manip.conformance.fuzz.session import FuzzConnection, Inbox
 from manip.conformance.judge.checks import WirePacket, check_transcript, describe, word
 from manip.conformance.judge.violation import FailureKind, Violation
@@ -76,16 +76,16 @@ DISRUPTIVE: Final = frozenset(
     }
 )
 """Clauses whose breach may pair later answers with the wrong requests (a reply missing, extra or of
-another shape), so that later findings on the connection may be its consequence."""
+another shape), so that later violations on the connection may be its consequence."""
 ALWAYS: Final[frozenset[FailureKind]] = frozenset({"crash", "timeout", "traceback", "uncounted_drop"})
-"""Kinds that are findings whatever the level: the target's health is no matter of degree."""
+"""Kinds that are violations whatever the level: the target's health is no matter of degree."""
 _RFC_ANSWERS: Final = frozenset({ChaosOp.OPN, ChaosOp.CLS, ChaosOp.ANS, ChaosOp.FWD})
 
 
 @dataclass(frozen=True)
 class Sighting:
     """A :class:`~manip.conformance.judge.violation.Violation` one batch showed, with the input it is
-    attributed to (None: the batch as a whole) and how many findings came after it on the same
+    attributed to (None: the batch as a whole) and how many violations came after it on the same
     connection (not judged on their own: they may be its consequence)."""
 
     violation: Violation
@@ -98,7 +98,7 @@ class Sighting:
 
     @property
     def signature(self) -> tuple[str, str]:
-        """What makes two sightings the same finding: the kind and the clause."""
+        """What makes two sightings the same violation: the kind and the clause."""
         return self.violation.kind, self.violation.clause or ""
 
 
@@ -196,7 +196,7 @@ def judge(
 
 
 def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[Sighting]:
-    """What is wrong on one connection, in the order it showed, up to the first finding after which
+    """What is wrong on one connection, in the order it showed, up to the first violation after which
     answers may be paired with the wrong requests (:data:`DISRUPTIVE`): what follows may be its
     consequence, so it is only counted (``followers``)."""
     packets = conn.packets
@@ -206,9 +206,9 @@ def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[
         number = conn.origin.get(id(f.packet), last) if f.packet is not None else last
         drop = f.clause == "request.one-reply" and f.actual == "nothing"
         if drop and not report_drops:
-            continue  # the hang or crash is the finding
+            continue  # the hang or crash is the violation
         kind: FailureKind = "missing_response" if drop else "wrong_value"
-        # Where it shows: a request never answered at the end, a finding without a packet is about the
+        # Where it shows: a request never answered at the end, a violation without a packet is about the
         # opening (first) or a whole reply's text (last).
         if drop or f.packet is None:
             at = 0 if (f.clause or "").startswith("connect.") else len(packets)
@@ -233,7 +233,7 @@ def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[
             conn.origin.get(id(request), last),
         )
         found.append((len(packets), ended))
-    for judged in oracle_findings(packets, rfc_packet_no=conn.rfc_no):
+    for judged in oracle_violations(packets, rfc_packet_no=conn.rfc_no):
         number = conn.origin.get(id(judged.packet), last)
         found.append((position.get(id(judged.packet), len(packets)), Sighting(judged, number)))
     if not found:

@@ -49,7 +49,7 @@ from manip.spec import SPEC
 from manip.spec.constants import ServerOp
 from manip.spec.notation import octal
 
-__all__ = ["STATEFUL", "AnsweredRequest", "answers", "oracle_findings"]
+__all__ = ["STATEFUL", "AnsweredRequest", "answers", "oracle_violations"]
 
 _ERRORS: Final = frozenset(
     {
@@ -65,7 +65,7 @@ _SET_JOINTS: Final = SPEC.request("set-joint-angles").opcode
 _JOINT_REPLIES: Final = frozenset(SPEC.request(name).opcode for name in ("joint-angles", "solve-forwards"))
 _REQUESTS: Final = range(0o200, 0o300)
 STATEFUL: Final = frozenset({"speed.range", "motion.no-power", "motion.abort"})
-"""The clauses of the stateful model's findings the fuzzer reports (module docstring)."""
+"""The clauses of the stateful model's violations the fuzzer reports (module docstring)."""
 UNSERVED: Final = ("UOP", "UIM")
 """Error codes saying an opcode is not served (erratum unknown-opcode; UIM: not on this robot)."""
 
@@ -168,7 +168,7 @@ def _limits(entries: Mapping[str, LispValue]) -> tuple[tuple[float, float], ...]
     return tuple(out)
 
 
-def oracle_findings(packets: Sequence[WirePacket], *, rfc_packet_no: int | None = None) -> list[Violation]:
+def oracle_violations(packets: Sequence[WirePacket], *, rfc_packet_no: int | None = None) -> list[Violation]:
     """Everything the module docstring lists, in the order the answers came.  ``rfc_packet_no``: the
     RFC's number, which an asynchronous error before any answer carries."""
     out: list[Violation] = []
@@ -203,7 +203,7 @@ def oracle_findings(packets: Sequence[WirePacket], *, rfc_packet_no: int | None 
 
 def _view(answer: WirePacket, error: ErrorReply | None) -> AnswerSummary | None:
     """The model's view of an answer (``error``: its decoded error string); None for an error whose
-    string does not decode (the transcript checks' finding)."""
+    string does not decode (the transcript checks' violation)."""
     if answer.opcode == ServerOp.RESPONSE:
         segment = word(answer.data, 2) if len(answer.data) == 4 else None
         return AnswerSummary(True, empty=len(answer.data) == 2, segment=segment)
@@ -235,7 +235,7 @@ def _described(said: _Description, item: AnsweredRequest, decoded: ErrorReply | 
     opcode = request.opcode
     error = None if decoded is None else (decoded.error.severity, decoded.error.code)
     if opcode not in _REQUESTS or (error is None and answer.opcode != ServerOp.RESPONSE):
-        return out  # an error that does not decode is its own finding already
+        return out  # an error that does not decode is its own violation already
     accepted = answer.opcode == ServerOp.RESPONSE
     add = functools.partial(_add, out, item)
     if said.operations is not None:

@@ -2,19 +2,19 @@
 suite's one report, written by the suite's writers (JSON, JUnit, HTML, Markdown), with the campaign's
 own facts in its optional ``campaign`` block (:class:`CampaignFacts`).
 
-A *finding* is a :class:`~manip.conformance.judge.violation.Violation`, the suite's one record of a
+A *violation* is a :class:`~manip.conformance.judge.violation.Violation`, the suite's one record of a
 broken clause, of one of the fuzzer's kinds (:data:`~.judge.KIND_NAMES`: crash, hang, traceback,
 silent drop, wrong answer, uncounted drop); a campaign reports each kind and clause once, as a
 :class:`CampaignViolation`: the violation first seen, how often it was seen, the input class it came
 from, the fewest inputs found to cause it (numbers of the campaign, so ``--only`` sends them again),
-their bytes, and one reproduce line.  In the ``campaign`` block a finding is the violation's JSON
+their bytes, and one reproduce line.  In the ``campaign`` block each is its first violation's JSON
 (:meth:`Violation.to_json`, as in the report's cases) with those fields added.
 
 The report's cases are the input classes (``classname`` in JUnit: the layer, link, chaos or manip), each
-graded by the one verdict (:func:`~manip.conformance.judge.verdict.grade`) from its findings; findings of
+graded by the one verdict (:func:`~manip.conformance.judge.verdict.grade`) from its violations; violations of
 the target as a whole (a crash or a traceback no input could be tied to) go to the case
-``target.health``.  Findings of a SHOULD, MAY or INFO clause are warnings (with ``--strict`` SHOULD ones
-count); crashes, hangs, tracebacks and uncounted drops are MUST findings of the target's health.
+``target.health``.  Violations of a SHOULD, MAY or INFO clause are warnings (with ``--strict`` SHOULD ones
+count); crashes, hangs, tracebacks and uncounted drops are MUST violations of the target's health.
 """
 
 from __future__ import annotations
@@ -38,12 +38,12 @@ __all__ = [
     "MinimalInput",
     "class_results",
     "cut",
-    "finding_json",
-    "finding_text",
+    "violation_json",
+    "violation_text",
 ]
 
 HEALTH: Final = "target.health"
-"""The result findings of the target as a whole are reported under."""
+"""The result under which violations of the target as a whole are reported."""
 
 
 @dataclass
@@ -59,13 +59,13 @@ class ClassTally:
     hazard: str
     inputs: int = 0
     requests: int = 0
-    findings: list[int] = field(default_factory=list)
-    """Indices into the report's findings."""
+    violations: list[int] = field(default_factory=list)
+    """Indices into the report's violations."""
 
 
 @dataclass
 class MinimalInput:
-    """One input of a finding's shrunk example, as it was sent."""
+    """One input of a violation's shrunk example, as it was sent."""
 
     number: int
     kind: str
@@ -90,7 +90,7 @@ class CampaignViolation:
     counts: bool = True
     """It fails the campaign (False: a warning)."""
     followers: int = 0
-    """Findings that came after it on the same connections, not judged on their own (consequences?)."""
+    """Violations that came after it on the same connections, not judged on their own (consequences?)."""
 
     @property
     def kind(self) -> FailureKind:
@@ -129,19 +129,19 @@ class CampaignFacts:
     bad_frames_sent: int = 0
     bad_frames_counted: int | None = None
     classes: dict[str, ClassTally] = field(default_factory=dict)
-    findings: list[CampaignViolation] = field(default_factory=list)
+    violations: list[CampaignViolation] = field(default_factory=list)
 
     def counts(self) -> dict[FailureKind, int]:
-        """Findings that count (not warnings) by kind, every kind present."""
+        """Violations that count (not warnings) by kind, every kind present."""
         out: dict[FailureKind, int] = dict.fromkeys(FUZZ_KINDS, 0)
-        for f in self.findings:
+        for f in self.violations:
             if f.counts:
                 out[f.kind] += 1
         return out
 
     @property
     def warnings(self) -> int:
-        return sum(not f.counts for f in self.findings)
+        return sum(not f.counts for f in self.violations)
 
     def rate(self, duration: float) -> float:
         """Inputs per second over ``duration``."""
@@ -186,11 +186,11 @@ class CampaignFacts:
                     "expected": c.expected,
                     "inputs": c.inputs,
                     "requests": c.requests,
-                    "findings": list(c.findings),
+                    "violations": list(c.violations),
                 }
                 for c in self.classes.values()
             ],
-            "findings": [finding_json(f) for f in self.findings],
+            "violations": [violation_json(f) for f in self.violations],
         }
 
 
@@ -205,7 +205,7 @@ def _count(n: int, word: str) -> str:
     return f"{n} {_plural(word, n)}"
 
 
-def finding_json(f: CampaignViolation) -> dict[str, Any]:
+def violation_json(f: CampaignViolation) -> dict[str, Any]:
     """The violation's JSON, as the conformance report has it, and what the campaign adds."""
     return {
         **f.violation.to_json(),
@@ -226,19 +226,26 @@ def finding_json(f: CampaignViolation) -> dict[str, Any]:
 
 
 def class_results(report: RunReport, facts: CampaignFacts) -> list[CaseResult]:
-    """The report's cases: one per input class (and the target's health when a finding is of it),
-    each graded by the one verdict from its findings."""
-    health = [i for i, f in enumerate(facts.findings) if f.input_class == HEALTH]
+    """The report's cases: one per input class (and the target's health when a violation is of it),
+    each graded by the one verdict from its violations."""
+    health = [i for i, f in enumerate(facts.violations) if f.input_class == HEALTH]
     tallies = list(facts.classes.values())
     if health:
         tallies.append(
             ClassTally(
-                HEALTH, "target", "", "alive and silent in its log", (), "MUST", "read-only", findings=health
+                HEALTH,
+                "target",
+                "",
+                "alive and silent in its log",
+                (),
+                "MUST",
+                "read-only",
+                violations=health,
             )
         )
     results = []
     for tally in tallies:
-        found = [facts.findings[i] for i in tally.findings]
+        found = [facts.violations[i] for i in tally.violations]
         ran = tally.inputs or tally.id == HEALTH
         outcome = grade(Outcome.PASS if ran else Outcome.SKIP, [f.violation for f in found], report.strict)
         results.append(
@@ -263,7 +270,7 @@ def class_results(report: RunReport, facts: CampaignFacts) -> list[CaseResult]:
 
 
 CONSOLE_CUT: Final = 200
-"""Characters of one line of a finding the console shows (an input of 488 bytes is some 1,500 as hex);
+"""Characters of one line of a violation the console shows (an input of 488 bytes is some 1,500 as hex);
 the rest is counted, and the JSON report keeps it whole."""
 
 
@@ -274,8 +281,8 @@ def cut(line: str, limit: int = CONSOLE_CUT) -> str:
     return f"{line[:limit]} ... ({len(line) - limit} more characters; whole in the JSON report)"
 
 
-def finding_text(f: CampaignViolation) -> str:
-    """A finding for the console: what broke, the spec, expected and actual, the shrunk input with its
+def violation_text(f: CampaignViolation) -> str:
+    """A violation for the console: what broke, the spec, expected and actual, the shrunk input with its
     bytes, the reproduce line; a long line is cut with a count (:func:`cut`), never the reproduce line."""
     lines = [f.title()]
     v = f.violation
@@ -293,7 +300,7 @@ def finding_text(f: CampaignViolation) -> str:
     lines.append(f"  seen:      {f.occurrences} time(s), first in batch {f.first_batch}")
     if f.followers:
         lines.append(
-            f"  after it:  {f.followers} more finding(s) on its connections, not judged on their own"
+            f"  after it:  {f.followers} more violation(s) on its connections, not judged on their own"
         )
     if f.minimal:
         state = "shrunk to" if f.shrunk else "not shrunk:"

@@ -1,4 +1,4 @@
-"""Shrinking a finding to the fewest inputs that still cause it: delta debugging over the batch.
+"""Shrinking a violation to the fewest inputs that still cause it: delta debugging over the batch.
 
 :func:`ddmin` is Zeller's minimizing delta debugging: split the inputs in ``n`` parts, keep a part
 (or the rest without a part) that still fails, else split finer; it ends with a set from which no

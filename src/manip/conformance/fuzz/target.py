@@ -2,12 +2,12 @@
 
 * :class:`RemoteServer`: a server someone else runs (``manip-conform fuzz HOST``).  Its answers are
   all there is, unless ``--server-log FILE`` names its log: every traceback written there during the
-  campaign is then a finding.  A crash ends the campaign unless the server comes back (``--restart-wait``).
+  campaign is then a violation.  A crash ends the campaign unless the server comes back (``--restart-wait``).
 * :class:`LaunchedServer`: a server the fuzzer starts itself and restarts after a crash, reading its
   standard error (and output) for tracebacks: the embedded reference server (no HOST: ``manip-server``
   on a free loopback port, with ``--server-fault`` switches), or an implementer's own (``--launch
   CMD`` with HOST).  The reference server also reports its count of bad frames (SIGUSR1, the
-  ``--stats`` line), so a drop it did not count is a finding too.
+  ``--stats`` line), so a drop it did not count is a violation too.
 
 A traceback is a ``Traceback (most recent call last):`` line through the exception line that ends it
 (:class:`TracebackScanner`).

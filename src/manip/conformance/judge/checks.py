@@ -201,25 +201,25 @@ def check_error_packet(packet: WirePacket) -> list[Violation]:
     except CodecError as exc:
         if exc.clause != "error-string.arg-layout":
             return [
-                _codec_finding(
+                _codec_violation(
                     exc, packet, "error-string.format", "an error string 'where: severity code message'"
                 )
             ]
-        out.append(_layout_finding(packet, str(exc)))
+        out.append(_layout_violation(packet, str(exc)))
         try:
             error = decode_error(packet.opcode, data, align_args=False).error
         except CodecError as inner:
-            out.append(_codec_finding(inner, packet, "error-string.format", "an error string"))
+            out.append(_codec_violation(inner, packet, "error-string.format", "an error string"))
             return out
     else:
         nul = data.find(0, 2)
         if nul >= 0 and (len(data) - nul - 1) % 2 and (nul + 1) % 2 == 0:
-            out.append(_layout_finding(packet, f"a pad byte at data byte {nul + 1}, an even offset"))
-    out += _error_text_findings(error, packet)
+            out.append(_layout_violation(packet, f"a pad byte at data byte {nul + 1}, an even offset"))
+    out += _error_text_violations(error, packet)
     return out
 
 
-def _layout_finding(packet: WirePacket, actual: str) -> Violation:
+def _layout_violation(packet: WirePacket, actual: str) -> Violation:
     return Violation.at(
         packet,
         "error-string.arg-layout",
@@ -230,7 +230,7 @@ def _layout_finding(packet: WirePacket, actual: str) -> Violation:
     )
 
 
-def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Violation]:
+def _error_text_violations(error: ErrorMessage, packet: WirePacket) -> list[Violation]:
     out: list[Violation] = []
     shown = repr(error.render())
 
@@ -279,7 +279,7 @@ def _error_text_findings(error: ErrorMessage, packet: WirePacket) -> list[Violat
     return out
 
 
-def _codec_finding(exc: CodecError, packet: WirePacket, default: str, expected: str) -> Violation:
+def _codec_violation(exc: CodecError, packet: WirePacket, default: str, expected: str) -> Violation:
     clause = exc.clause if exc.clause in TRANSCRIPT_CLAUSES else default
     return Violation(str(exc), clause, expected=expected, actual=str(exc), data=packet.data, packet=packet)
 
@@ -492,7 +492,7 @@ def _check_refusal(refusal: Refusal, packet: WirePacket) -> list[Violation]:
     try:
         error = decode_error(packet.opcode, packet.data, align_args=False).error
     except CodecError:
-        return []  # the format findings already say it
+        return []  # the format violations already say it
     if packet.opcode == ServerOp.NON_FATAL_ERROR and error.severity == "C":
         return []
     return [
@@ -604,7 +604,7 @@ def _check_multi(op: RequestOpcode, request: WirePacket, answer: Sequence[WirePa
 
 
 def parse_description(text: str) -> tuple[dict[str, LispValue] | None, list[Violation]]:
-    """Read the describe-self alist: the entries by keyword name, or None and the findings."""
+    """Read the describe-self alist: the entries by keyword name, or None and the violations."""
     try:
         return read_alist(text), []
     except DecodeError as exc:
@@ -642,7 +642,7 @@ def check_description(text: str, *, protocol_version: int = SPEC.protocol_versio
 def check_description_entries(
     entries: Mapping[str, LispValue], text: str = "", *, protocol_version: int = SPEC.protocol_version
 ) -> list[Violation]:
-    """The 1985 guide's keys of a read description (``text``: the raw text, kept as the finding's bytes)."""
+    """The 1985 guide's keys of a read description (``text``: the raw text, kept as the violation's bytes)."""
     out: list[Violation] = []
     data = text.encode("utf-8", "replace")
 
@@ -739,7 +739,7 @@ class _Pending:
 
 @dataclass
 class _Session:
-    findings: list[Violation] = field(default_factory=list)
+    violations: list[Violation] = field(default_factory=list)
     pairing: ReplyPairing[_Pending] = field(default_factory=ReplyPairing)
     answer: list[WirePacket] = field(default_factory=list)
     """The packets so far of the answer being received (a multi-packet reply in progress)."""
@@ -764,11 +764,11 @@ def check_transcript(
     ``capture-pairing``), the rule the capture view and replay use too.  ``expect_initial``: the
     recording starts at the open, so the first server packet must be the initial RESPONSE, and the
     first answer is the RFC's.  ``complete``: the recording ran to the end of the exchange, so a request
-    still unanswered at the end is a finding (leave it False for a case that stopped early)."""
+    still unanswered at the end is a violation (leave it False for a case that stopped early)."""
     s = _Session()
     if expect_initial:
         server = [p for p in packets if p.direction == "s2c"]
-        s.findings += check_initial_response(server[0] if server else None, rfc_packet_no)
+        s.violations += check_initial_response(server[0] if server else None, rfc_packet_no)
         s.pairing.rfc(_Pending(None))
     for packet in packets:
         if packet.direction == "c2s":
@@ -781,7 +781,7 @@ def check_transcript(
             _on_server_packet(s, packet)
     _finish_answer(s, s.pairing.in_progress)
     if s.fatal is not None and not s.closed and complete:
-        s.findings.append(
+        s.violations.append(
             Violation(
                 "the connection stayed open after a fatal error",
                 "error.fatal-then-close",
@@ -795,7 +795,7 @@ def check_transcript(
         for item in s.pairing.outstanding():
             if item.request is None:
                 continue  # no initial RESPONSE: check_initial_response said so
-            s.findings.append(
+            s.violations.append(
                 Violation(
                     f"request #{item.request.packet_no} ({opcode_name(item.request)}) was never answered",
                     "request.one-reply",
@@ -805,7 +805,7 @@ def check_transcript(
                     packet=item.request,
                 )
             )
-    return s.findings
+    return s.violations
 
 
 def _on_request(s: _Session, packet: WirePacket) -> None:
@@ -827,10 +827,10 @@ def _allowed_mask(s: _Session) -> int:
 
 
 def _on_server_packet(s: _Session, packet: WirePacket) -> None:
-    s.findings.extend(check_server_opcode(packet))
+    s.violations.extend(check_server_opcode(packet))
     place = s.pairing.server(packet.opcode, packet.data)
     if s.fatal is not None:
-        s.findings.append(
+        s.violations.append(
             Violation.at(
                 packet,
                 "error.fatal-then-close",
@@ -841,14 +841,14 @@ def _on_server_packet(s: _Session, packet: WirePacket) -> None:
         return
     if place.role == "async":
         if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE:
-            s.findings.extend(check_async_packet(packet, _allowed_mask(s)))
+            s.violations.extend(check_async_packet(packet, _allowed_mask(s)))
         else:
-            s.findings.extend(check_error_packet(packet))
+            s.violations.extend(check_error_packet(packet))
         return
     if place.role == "extra":
         number = word(packet.data)
         clause = "error.non-fatal-is-reply" if number in s.answered_with_error else "request.one-reply"
-        s.findings.append(
+        s.violations.append(
             Violation.at(
                 packet,
                 clause,
@@ -875,22 +875,22 @@ def _finish_answer(s: _Session, item: _Pending | None) -> None:
     request = item.request
     if request is None:  # the RFC's: judged by check_initial_response, and an error string as such
         if answer[0].opcode != ServerOp.RESPONSE:
-            s.findings.extend(check_error_packet(answer[0]))
+            s.violations.extend(check_error_packet(answer[0]))
         return
     if item.discarded:
         _check_discarded(s, request, answer[0])
         return
-    s.findings.extend(check_reply(request, answer))
+    s.violations.extend(check_reply(request, answer))
     last = answer[-1]
     if len(answer) > 1 and last.opcode == ServerOp.RESPONSE and len(last.data) <= 2:
-        s.findings.extend(check_description(multi_text(answer)))
+        s.violations.extend(check_description(multi_text(answer)))
     _after_answer(s, request, answer)
 
 
 def _check_discarded(s: _Session, request: WirePacket, packet: WirePacket) -> None:
-    s.findings.extend(check_echo(request, packet))
+    s.violations.extend(check_echo(request, packet))
     if packet.opcode != ServerOp.RESPONSE or len(packet.data) != 2:
-        s.findings.append(
+        s.violations.append(
             Violation.at(
                 packet,
                 "free-joint.replies",
@@ -914,7 +914,7 @@ def _after_answer(s: _Session, request: WirePacket, answer: Sequence[WirePacket]
         segment = word(packet.data, 2)
         assert segment is not None
         if s.last_segment is not None and segment != (s.last_segment + 1) & 0xFFFF:
-            s.findings.append(
+            s.violations.append(
                 Violation.at(
                     packet,
                     "segment.number-increases",

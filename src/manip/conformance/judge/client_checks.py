@@ -27,7 +27,7 @@ _MOVE_OPCODES: Final = frozenset(SPEC.request(name).opcode for name in ("move", 
 def check_client_request(request: WirePacket) -> list[Violation]:
     """Judge one request as its client built it: a request opcode (0200-0277), and data laid out as the
     opcode's layout says (words, PDP-11 floats, nothing else; a move's 12 floats).  An opcode the spec
-    does not define is the server's to refuse (request.unknown-opcode), not a client finding."""
+    does not define is the server's to refuse (request.unknown-opcode), not a client violation."""
     opcode = request.opcode
     if not ChaosOp.DAT <= opcode < ChaosOp.DWD:
         return [

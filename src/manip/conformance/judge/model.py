@@ -40,11 +40,11 @@ How a request is judged (:meth:`ProtocolModel.expect`), from its bytes alone:
 The model never allows a fatal error or a BE (bug) error.  While segments are outstanding it allows a
 non-fatal error of any code to a motion request or free joint (queue full, joint busy: the 1985 guide
 names no code for either; manip's server says SQF).  Segment numbers that do not increase by one are
-recorded in :attr:`ProtocolModel.segment_findings` rather than refused, because that clause is a SHOULD.
+recorded in :attr:`ProtocolModel.segment_violations` rather than refused, because that clause is a SHOULD.
 
 A run goes on after the server disagrees with the model: :meth:`ProtocolModel.observe` takes the reply
 that came into the state (a NAP where power was expected means the arm is unpowered, an AWA that it is
-aborted), and :class:`DistinctFindings` keeps each distinct disagreement once, up to a bound.
+aborted), and :class:`DistinctViolations` keeps each distinct disagreement once, up to a bound.
 """
 
 from __future__ import annotations
@@ -63,13 +63,13 @@ from manip.spec import SPEC, RequestOpcode
 from manip.spec.constants import AsyncCondition
 
 __all__ = [
-    "MAX_DISTINCT_FINDINGS",
+    "MAX_DISTINCT_VIOLATIONS",
     "MODEL_CLAUSES",
     "AnswerSummary",
-    "DistinctFindings",
+    "DistinctViolations",
     "Expectation",
     "ProtocolModel",
-    "finding",
+    "violation",
 ]
 
 MODEL_CLAUSES: Final = frozenset(
@@ -103,8 +103,8 @@ MODEL_CLAUSES: Final = frozenset(
         "speed.range",
     }
 )
-"""Every clause a :func:`finding` of the model may name (checked when one is made): the stateful case,
-which reports the model's findings, declares them all."""
+"""Every clause a :func:`violation` of the model may name (checked when one is made): the stateful case,
+which reports the model's violations, declares them all."""
 
 WORD: Final = 0xFFFF
 #: A transform whose rotation deviates less than this from orthonormal is certainly valid; more than
@@ -172,21 +172,21 @@ class AnswerSummary:
     """The error string of a non-fatal error."""
 
 
-MAX_DISTINCT_FINDINGS: Final = 20
+MAX_DISTINCT_VIOLATIONS: Final = 20
 """How many distinct disagreements with the model one stateful run reports (the rest are counted)."""
 
 
 @dataclass
-class DistinctFindings(Generic[Kept]):
+class DistinctViolations(Generic[Kept]):
     """The distinct disagreements a run found, the first of each kind kept (a kind: the clause and the
     request it was found on, as the caller names them), up to ``bound``.  The run goes on after each:
     the model takes the state the server showed (:meth:`ProtocolModel.observe` takes the reply that
     came, not the one expected), so one disputed answer does not hide what follows it."""
 
-    bound: int = MAX_DISTINCT_FINDINGS
+    bound: int = MAX_DISTINCT_VIOLATIONS
     kept: dict[tuple[str, ...], Kept] = field(default_factory=dict)
     dropped: int = 0
-    """Distinct findings past the bound, counted only."""
+    """Distinct violations past the bound, counted only."""
 
     def add(self, key: tuple[str, ...], item: Kept) -> bool:
         """Keep ``item`` if ``key`` is a new kind and the bound allows; True if kept."""
@@ -202,10 +202,10 @@ class DistinctFindings(Generic[Kept]):
         return len(self.kept)
 
 
-def finding(clause: str, expected: str, actual: str) -> Violation:
+def violation(clause: str, expected: str, actual: str) -> Violation:
     """A rule the server broke, found by the model: a clause of :data:`MODEL_CLAUSES` (checked)."""
     if clause not in MODEL_CLAUSES:
-        raise ValueError(f"model finding of clause {clause!r}, which is not in MODEL_CLAUSES")
+        raise ValueError(f"model violation of clause {clause!r}, which is not in MODEL_CLAUSES")
     return Violation(f"the arm model does not allow {actual}", clause, expected=expected, actual=actual)
 
 
@@ -222,7 +222,7 @@ class ProtocolModel:
     speed: float | None = None
     outstanding: list[int] = field(default_factory=list)
     next_segment: int | None = None
-    segment_findings: list[Violation] = field(default_factory=list)
+    segment_violations: list[Violation] = field(default_factory=list)
     served: frozenset[int] | None = None
     """The opcodes describe self lists under :operations (None: unknown); extensions outside it may be
     refused as unserved."""
@@ -398,15 +398,15 @@ class ProtocolModel:
         if expectation.discard:
             if reply.normal and reply.empty:
                 return None
-            return finding(expectation.clause, expectation.describe(), _show(reply))
+            return violation(expectation.clause, expectation.describe(), _show(reply))
         if reply.normal:
             if expectation.normal:
                 return None
-            return finding(expectation.clause, expectation.describe(), _show(reply))
+            return violation(expectation.clause, expectation.describe(), _show(reply))
         err = reply.error
         assert err is not None
         if err.severity in ("F", "BF", "BE"):
-            return finding(
+            return violation(
                 "error.severity-matches-opcode" if err.severity != "BE" else expectation.clause,
                 expectation.describe(),
                 _show(reply),
@@ -415,7 +415,7 @@ class ProtocolModel:
             return None
         if expectation.any_code and err.code not in expectation.excluded:
             return None
-        return finding(expectation.clause, expectation.describe(), _show(reply))
+        return violation(expectation.clause, expectation.describe(), _show(reply))
 
     def observe(self, number: int, opcode: int, data: bytes, reply: AnswerSummary) -> None:
         """Take the (already judged) reply to request ``number`` into the state."""
@@ -479,8 +479,8 @@ class ProtocolModel:
     def _take_segment(self, segment: int) -> None:
         expected = self.next_segment
         if expected is not None and segment != expected:
-            self.segment_findings.append(
-                finding(
+            self.segment_violations.append(
+                violation(
                     "segment.number-increases",
                     f"segment number {expected} (one more than the last, mod 2^16)",
                     f"segment number {segment}",
@@ -502,7 +502,7 @@ class ProtocolModel:
         """An asynchronous response (0203) arrived carrying request number ``number`` (None: the 1985
         guide's layout, which carries none; the mask in force now is the one that counts)."""
         if number is not None and not self.last_processed_ok(number):
-            return finding(
+            return violation(
                 "async.layout",
                 "the number of the last request processed (one sent and not older than the last answered)",
                 f"request number {number}",
@@ -512,15 +512,15 @@ class ProtocolModel:
         )
         if condition == AsyncCondition.SEGMENT_COMPLETED:
             if not mask & _SEGMENT_BIT:
-                return finding(
+                return violation(
                     "async.only-when-requested",
                     "no segment-completed response: not asked for (0257 mask bit 1 clear)",
                     f"segment-completed for segment {word3} after request {number}",
                 )
             if word2 != 0:
-                return finding("async.layout", "reserved word 0", f"word2 = {word2}")
+                return violation("async.layout", "reserved word 0", f"word2 = {word2}")
             if word3 not in self.outstanding:
-                return finding(
+                return violation(
                     "async.layout",
                     f"a queued segment not yet reported or dropped (outstanding: {self.outstanding})",
                     f"segment {word3}",
@@ -529,15 +529,15 @@ class ProtocolModel:
             return None
         if condition == AsyncCondition.GUARD_HIT:
             if not mask & _GUARD_BIT:
-                return finding(
+                return violation(
                     "async.only-when-requested",
                     "no guard-hit response: not asked for (0257 mask bit 0 clear)",
                     f"guard hit, guard {word3}",
                 )
             if word2 not in (1, 2):
-                return finding("async.layout", "word2 1 (stop) or 2 (continue)", f"word2 = {word2}")
+                return violation("async.layout", "word2 1 (stop) or 2 (continue)", f"word2 = {word2}")
             return None
-        return finding(
+        return violation(
             "async.codes", "condition 1 (guard hit) or 2 (segment completed)", f"condition {condition}"
         )
 
@@ -545,13 +545,13 @@ class ProtocolModel:
         """An asynchronous error (0204) arrived.  While segments may be running it reports an abort
         (clause motion.abort): queued segments are dropped and motion is refused until a reset."""
         if not self.last_processed_ok(number):
-            return finding(
+            return violation(
                 "async-error.request-number",
                 "the number of the last request processed",
                 f"request number {number}",
             )
         if error.severity not in ("E", "C", "BE"):
-            return finding(
+            return violation(
                 "error.severity-matches-opcode", "severity E, C or BE on 0204", f"severity {error.severity}"
             )
         if self.outstanding or self.aborted is None:

@@ -67,7 +67,7 @@ from manip.conformance.replay.masking import (
 )
 from manip.conformance.replay.verify import (
     FAMILIES,
-    judge_findings,
+    judge_violations,
     opened,
     rfc_number,
     session_hazard,
@@ -569,13 +569,13 @@ def _results(replay: SessionReplay, path: str, reproduce: Sequence[str], strict:
         reproduce=command,
     )
     if replay.connected:
-        findings = check_transcript(
+        violations = check_transcript(
             replay.packets,
             rfc_packet_no=replay.live_rfc,
             expect_initial=script.rfc is not None,
             complete=not replay.stopped,
         )
-        judge_findings(checks, findings, strict=strict)
+        judge_violations(checks, violations, strict=strict)
     else:
         checks.outcome = Outcome.SKIP
         checks.reason = replay.stopped

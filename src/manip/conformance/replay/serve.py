@@ -20,7 +20,7 @@ word rewritten from the recorded request (or RFC) number to the live one (mask `
 arrives.  Each client request is compared with the recorded one
 (:func:`~manip.conformance.replay.masking.compare_request`: opcode, then decoded fields, floats with the
 replay tolerance); a difference, a request beyond the recording, or a client that closes before sending
-every recorded request, is a finding of that session's result ``replay.session-N.served``.
+every recorded request, is a violation of that session's result ``replay.session-N.served``.
 
 The run ends when every session was served, or after ``seconds``; sessions no client opened are
 failures, and none opened at all is "unreachable" (exit 3).

@@ -13,7 +13,7 @@ the recording holds the session's end), plus one check the transcript checker ca
 connection it watched live: after a fatal error the *server* must close, so a recording in which the
 client closed first is a failure of ``error.fatal-then-close``.
 
-The findings are sorted into :data:`FAMILIES` (initial response, request numbers, one reply per
+The violations are sorted into :data:`FAMILIES` (initial response, request numbers, one reply per
 request, reply shapes, refusals, error strings, asynchronous responses, describe-self, segments, fatal
 close, free joint); each family of each session is one result ``verify.session-N.FAMILY`` of the
 suite's report, with its clauses and level: ``pass``, ``fail`` (a MUST clause broke; a SHOULD one too
@@ -60,9 +60,9 @@ __all__ = [
     "Family",
     "Judge",
     "family_of",
-    "fatal_close_findings",
-    "judge_findings",
+    "fatal_close_violations",
     "judge_session",
+    "judge_violations",
     "opened",
     "rfc_number",
     "select_sessions",
@@ -285,7 +285,7 @@ _PREFIX_FAMILY: Final = {
 
 
 def family_of(clause: str | None) -> Family:
-    """The family a finding's clause belongs to (codec clauses by their area; the rest, and a finding
+    """The family a violation's clause belongs to (codec clauses by their area; the rest, and a violation
     without a clause: reply shapes)."""
     if clause in _BY_CLAUSE:
         return _BY_CLAUSE[clause]
@@ -293,7 +293,7 @@ def family_of(clause: str | None) -> Family:
     return next(f for f in FAMILIES if f.name == name)
 
 
-def fatal_close_findings(packets: Sequence[WirePacket]) -> list[Violation]:
+def fatal_close_violations(packets: Sequence[WirePacket]) -> list[Violation]:
     """After a fatal error the first close must be the server's (a recording shows who closed first)."""
     fatal: WirePacket | None = None
     for p in packets:
@@ -318,17 +318,19 @@ def fatal_close_findings(packets: Sequence[WirePacket]) -> list[Violation]:
 
 
 def judge_session(session: Session, connection: int = 0) -> tuple[list[WirePacket], list[Violation]]:
-    """The session's packets and every finding about them (the server's and the client's)."""
+    """The session's packets and every violation about them (the server's and the client's)."""
     packets = wire_packets(session, connection)
     rfc = rfc_number(session)
     complete = any(p.is_close for p in packets)
-    findings = check_transcript(packets, rfc_packet_no=rfc, expect_initial=rfc is not None, complete=complete)
-    if not any(f.clause == "error.fatal-then-close" for f in findings):
-        findings += fatal_close_findings(packets)
+    violations = check_transcript(
+        packets, rfc_packet_no=rfc, expect_initial=rfc is not None, complete=complete
+    )
+    if not any(f.clause == "error.fatal-then-close" for f in violations):
+        violations += fatal_close_violations(packets)
     for request in _requests(packets):
-        findings += check_client_request(request)
-    findings += check_client_guards(packets)
-    return packets, findings
+        violations += check_client_request(request)
+    violations += check_client_guards(packets)
+    return packets, violations
 
 
 def session_hazard(packets: Sequence[WirePacket]) -> Hazard:
@@ -337,9 +339,9 @@ def session_hazard(packets: Sequence[WirePacket]) -> Hazard:
     return HAZARDS[max(levels, default=0)]
 
 
-def judge_findings(result: CaseResult, findings: Iterable[Violation], *, strict: bool) -> None:
-    """Record ``findings`` as the result's violations (the strongest first) and grade its outcome."""
-    result.violations.extend(strongest_first(findings))
+def judge_violations(result: CaseResult, violations: Iterable[Violation], *, strict: bool) -> None:
+    """Record ``violations`` as the result's violations (the strongest first) and grade its outcome."""
+    result.violations.extend(strongest_first(violations))
     result.outcome = grade(result.outcome, result.violations, strict)
 
 
@@ -377,10 +379,10 @@ def verify_capture(
     families = JUDGE_FAMILIES[judge]
     for number, session in chosen:
         start = time.monotonic()
-        packets, findings = judge_session(session, connection=number - 1)
+        packets, violations = judge_session(session, connection=number - 1)
         initial = rfc_number(session) is not None
         by_family: dict[str, list[Violation]] = {}
-        for f in findings:
+        for f in violations:
             by_family.setdefault(family_of(f.clause).name, []).append(f)
         hazard = session_hazard(packets)
         elapsed = (time.monotonic() - start) / len(families)
@@ -409,7 +411,7 @@ def verify_capture(
                 result.reason = (
                     "the recording does not exercise it" if opened(session) else "the connection never opened"
                 )
-            judge_findings(result, by_family.get(family.name, ()), strict=strict)
+            judge_violations(result, by_family.get(family.name, ()), strict=strict)
             report.results.append(result)
     if capture.bad_frames:
         report.problems.append(

@@ -20,7 +20,7 @@ A case is an ``async`` function of a :class:`~manip.conformance.suite.context.Ca
         # (a docstring here: its first paragraph is the case's summary)
         probe = await ctx.connect()                  # fresh Chaos connection, initial RESPONSE consumed
         answer = await probe.call("describe-self")   # every packet up to the empty terminator
-        ctx.check(check_reply(answer.request, answer.packets))   # findings of the pure checkers
+        ctx.check(check_reply(answer.request, answer.packets))   # violations of the pure checkers
         ctx.expect(answer.terminated, clause="multi.terminated-by-empty",
                    expected="an empty RESPONSE ending the reply", seen=answer)
 

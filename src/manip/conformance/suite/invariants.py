@@ -10,7 +10,7 @@ the case declares.  Those checks are *invariants*, and what they find is attribu
   reply shapes, asynchronous responses only when asked for...), and the Chaos probe itself fails a case
   when a request gets no answer or a connection opens without its initial RESPONSE.  A case that runs a
   checker of that family on its own answers (``ctx.check(check_reply(...))``) finds the same things; a
-  finding of a clause the case does not declare is the invariant's.
+  violation of a clause the case does not declare is the invariant's.
 * ``cougar-link``: the Cougar probe fails a case when the DRV-11J link breaks, a tick is not answered
   with its TICKED, or Cougar does not answer a command in time.
 * ``client-wire``: after each client case (``manip-conform client``) the packets the client sent are

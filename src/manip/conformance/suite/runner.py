@@ -512,7 +512,7 @@ class Runner:
 
 
 def _found_by_then(ctx: CaseContext) -> CaseFailure | None:
-    """At a case's deadline: the first MUST finding of what was recorded by then (a target that floods
+    """At a case's deadline: the first MUST violation of what was recorded by then (a target that floods
     the case with extra replies broke a clause the transcript shows), else None."""
     if not ctx.auto_check:
         return None

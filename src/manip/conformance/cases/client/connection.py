@@ -8,7 +8,7 @@ import asyncio
 from manip.conformance.cases.client._support import close, connect, expect_wire, request
 from manip.conformance.client.runner import ClientContext, Play, client_context
 from manip.conformance.client.server import ServerSide
-from manip.conformance.client.wire import initial_response_findings
+from manip.conformance.client.wire import initial_response_violations
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.spec.constants import ChaosOp, ServerOp
@@ -32,7 +32,7 @@ async def initial_response(base: CaseContext) -> None:
             await side.serve_plainly()
 
     play = await ctx.play([connect(0), request(1, "here"), close(2)], script, initial=False)
-    expect_wire(ctx, initial_response_findings(play.wire), clause="client.initial-response")
+    expect_wire(ctx, initial_response_violations(play.wire), clause="client.initial-response")
     answer = play.answer(1)
     ctx.expect(
         answer is not None

@@ -27,7 +27,7 @@ from manip.conformance.cases.client.describe import DESCRIPTION, chunks_at, expe
 from manip.conformance.client.contract import Op
 from manip.conformance.client.runner import ClientContext, Play, client_context
 from manip.conformance.client.server import Mangle, ServerSide, plain_answer
-from manip.conformance.client.wire import ack_findings, numbering_findings, window_findings
+from manip.conformance.client.wire import ack_violations, numbering_violations, window_violations
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
 from manip.links import NcpConfig
@@ -47,7 +47,7 @@ async def numbers_wrap(base: CaseContext) -> None:
     first = 0x10000 - ctx.random.randint(3, 12)
     play = await play_description(ctx, chunks_at(raw, cuts), ncp=NcpConfig(first_packet_no=first))
     expect_text(ctx, play, raw)
-    expect_wire(ctx, numbering_findings(play.wire), clause="ncp.packet-numbers")
+    expect_wire(ctx, numbering_violations(play.wire), clause="ncp.packet-numbers")
 
 
 @case("client.ncp.acknowledge", clauses=["ncp.acknowledge", "client.multi-packet"])
@@ -58,7 +58,7 @@ async def acknowledge(base: CaseContext) -> None:
     raw = encode_lispm(DESCRIPTION)
     cuts = sorted(ctx.random.sample(range(1, len(raw)), 39))
     play = await play_description(ctx, chunks_at(raw, cuts))
-    expect_wire(ctx, ack_findings(play.wire, settle=0.5), clause="ncp.acknowledge")
+    expect_wire(ctx, ack_violations(play.wire, settle=0.5), clause="ncp.acknowledge")
     expect_text(ctx, play, raw)
 
 
@@ -259,7 +259,7 @@ async def interleaved(base: CaseContext) -> None:
 
 def _expect_window(ctx: ClientContext, play: Play, window: int, sent: Answered, count: int) -> None:
     """The window held on the wire (as offered at each moment), and every request answered and matched."""
-    expect_wire(ctx, window_findings(play.wire, window), clause="ncp.window")
+    expect_wire(ctx, window_violations(play.wire, window), clause="ncp.window")
     ctx.expect(
         len(sent) == count,
         clause="client.reply-matching",

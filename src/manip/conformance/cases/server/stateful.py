@@ -70,7 +70,7 @@ from manip.conformance.judge.checks import (
 from manip.conformance.judge.model import (
     MODEL_CLAUSES,
     AnswerSummary,
-    DistinctFindings,
+    DistinctViolations,
     Expectation,
     ProtocolModel,
 )
@@ -163,7 +163,7 @@ class _Env:
     """Opcodes malformed requests may be built on."""
     log: FailureLog[MachineFailure]
     runs: dict[str, int]
-    found: DistinctFindings[MachineFailure]
+    found: DistinctViolations[MachineFailure]
     """The model's disagreements with the server: each distinct one kept, and the run goes on."""
 
 
@@ -722,7 +722,7 @@ async def arm_model(ctx: CaseContext) -> None:
     safe = [op for op in safe if op.request.fixed_size is not None]
     log: FailureLog[MachineFailure] = FailureLog()
     runs = {"examples": 0}
-    disagreements: DistinctFindings[MachineFailure] = DistinctFindings()
+    disagreements: DistinctViolations[MachineFailure] = DistinctViolations()
 
     def work(bridge: Bridge) -> tuple[MachineFailure | None, str]:
         env = _Env(ctx, bridge, arm, motion, safe, log, runs, disagreements)
@@ -776,7 +776,7 @@ def _kind(failure: MachineFailure) -> tuple[str, ...]:
 
 def _record_disagreements(
     ctx: CaseContext,
-    found: DistinctFindings[MachineFailure],
+    found: DistinctViolations[MachineFailure],
     address: str,
     reproduce: str | None,
     stopped: MachineFailure | None,
