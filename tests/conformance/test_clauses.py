@@ -293,7 +293,7 @@ def test_the_stateful_case_declares_every_clause_of_the_model() -> None:
     stateful = next(c for c in CASES if c.id == "stateful.arm-model")
     assert set(MODEL_CLAUSES) <= set(stateful.clauses)
     with pytest.raises(ValueError, match="MODEL_CLAUSES"):
-        model_module.finding("describe.brand-name", "x", "y")
+        model_module.violation("describe.brand-name", "x", "y")
 
 
 # ------------------------------------------------------------------------------- at run time

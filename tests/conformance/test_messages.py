@@ -88,30 +88,30 @@ def test_cases_and_coverage_piped_are_one_record_per_line_never_padded() -> None
     assert "server.describe.pipelined" in ids
 
 
-def test_a_fuzz_finding_cuts_a_long_input_on_the_console_and_keeps_it_whole_in_the_report() -> None:
+def test_a_fuzz_violation_cuts_a_long_input_on_the_console_and_keeps_it_whole_in_the_report() -> None:
     from manip.conformance.fuzz.report import (
         CONSOLE_CUT,
         CampaignViolation,
         MinimalInput,
-        finding_json,
-        finding_text,
+        violation_json,
+        violation_text,
     )
     from manip.conformance.judge.violation import Violation
 
     data = bytes(range(256)) + bytes(232)  # a 488-byte input
     step = f"request 0201, {len(data)} data bytes: {data.hex(' ')}"
-    finding = CampaignViolation(
+    violation = CampaignViolation(
         Violation("wrong answer", "request.data-length", expected="a C error", actual="done"),
         input_class="wrong-length",
         first_batch=1,
         minimal=[MinimalInput(7, "wrong-length", "488 bytes", [step])],
         reproduce="manip-conform fuzz --seed 1 --only 7 " + "x" * 300,
     )
-    text = finding_text(finding)
+    text = violation_text(violation)
     assert max(len(line) for line in text.splitlines() if "reproduce:" not in line) < CONSOLE_CUT + 80
     assert f"{len(step) + 6 - CONSOLE_CUT} more characters; whole in the JSON report" in text
-    assert finding.reproduce in text  # a reproduce line is never cut
-    assert step in str(finding_json(finding))
+    assert violation.reproduce in text  # a reproduce line is never cut
+    assert step in str(violation_json(violation))
 
 
 def test_a_case_summary_is_whole_sentences_never_its_first_line_cut() -> None:

@@ -18,7 +18,7 @@ always agree and a file without the view can still be read.
   server packets that answer it carry the same id.  Which request a packet answers is the shared rule
   of :mod:`manip.codecs.pairing` (erratum ``capture-pairing``), the one ``manip-conform verify`` and
   replay use: by position, answers in request order, the request-number word shown but never used to
-  re-pair (a wrong echo is verify's violation).  A multi-packet reply keeps its pair until the empty
+  re-pair (a wrong echo is a violation verify reports).  A multi-packet reply keeps its pair until the empty
   terminator or an error, which is ``final``.  Asynchronous packets (0203-0205) quote the last request
   processed; they are not replies and carry no pair.
 * **Meaning.**  Requests are decoded by their opcode's layout; a RESPONSE by the layout of the request

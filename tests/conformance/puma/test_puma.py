@@ -171,7 +171,7 @@ async def _judge_a_server_process(manip_server: StartServer, fault: Fault | None
                     await asyncio.sleep(0.01)
             async with open_world(world_url) as world:
                 options = RunOptions(address=process.url, reply_timeout=2.0, time_scale=PROCESS_TIME_SCALE)
-                config = RunConfig(address=process.url, options=options, seed=SEED, world=world)
+                config = RunConfig(options=options, seed=SEED, world=world)
                 return await Runner(config, selected).run()
 
 
