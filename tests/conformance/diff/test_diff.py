@@ -142,6 +142,7 @@ def test_the_command_reports_a_violation_and_replays_it(tmp_path: Path) -> None:
         "manip.unknown-opcode",
         "--class",
         "manip.wrong-length",
+        "--no-scenarios",
     ]
     code, report, output = _cli(tmp_path, *args)
     validate(report, load_schema())
@@ -175,6 +176,7 @@ def test_the_command_passes_two_clean_servers_and_allowed_differences(tmp_path: 
         "2",
         "--class",
         "manip.unknown-opcode",
+        "--no-scenarios",
     ]
     code, report, output = _cli(tmp_path, *args)
     assert code == 0 and report["counts"]["allowed"] >= 1 and report["counts"]["violation"] == 0, output
@@ -210,7 +212,17 @@ def test_an_unreachable_side_exits_3(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_the_same_seed_gives_the_same_report(tmp_path: Path) -> None:
-    args = ["embedded", "embedded", "--server-profile-b", "guide", "--seed", "4", "--streams", "2"]
+    args = [
+        "embedded",
+        "embedded",
+        "--server-profile-b",
+        "guide",
+        "--seed",
+        "4",
+        "--streams",
+        "2",
+        "--no-scenarios",
+    ]
     first = _cli(tmp_path, *args)[1]
     second = _cli(tmp_path, *args)[1]
     assert first["counts"]["allowed"] > 0
