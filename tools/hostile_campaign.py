@@ -48,10 +48,9 @@ import random
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from collections import Counter
-from collections.abc import Awaitable, Callable, Iterator, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
@@ -60,7 +59,7 @@ from click.testing import CliRunner
 
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.packet import Packet
-from manip.conformance.client.server import Listener, ServerSide, plain_answer, serve_scenario
+from manip.conformance.client.server import Listener, ServerSide, plain_answer, scenario_in_thread
 from manip.reference_client import ClientOptions, ManipError, aconnect
 from manip.reference_client.cli import main as client_main
 from manip.spec.constants import ChaosOp, RequestOp, ServerOp
@@ -73,25 +72,6 @@ Script = Callable[[ServerSide], Awaitable[None]]
 
 
 # ---------------------------------------------------------------------------------------- the server
-
-
-def _chaos(side: ServerSide, opcode: int, data: bytes) -> None:
-    """A Chaos packet sent on the link as it is, around the NCP (illegal opcodes, stray control)."""
-    opn = next(
-        (r.packet for r in side.wire.records if r.dir == "s2c" and r.packet.opcode == ChaosOp.OPN), None
-    )
-    if opn is None or not side.wire.links:
-        return
-    side.wire.links[0].send(
-        Packet(
-            opcode,
-            dest_host=opn.dest_host,
-            dest_index=opn.dest_index,
-            src_host=opn.src_host,
-            src_index=opn.src_index,
-            data=data,
-        )
-    )
 
 
 async def _each_request(side: ServerSide, answer: Callable[[Packet], Awaitable[None]]) -> None:
@@ -167,7 +147,7 @@ async def _illegal_chaos(side: ServerSide) -> None:
     if await side.next_request(30.0) is None:
         return
     for opcode in (0o17, 0o77, 0o150):
-        _chaos(side, opcode, b"hostile")
+        side.send_raw(opcode, b"hostile")
     await side.next_request(30.0)
 
 
@@ -185,7 +165,7 @@ async def _illegal_deaf(side: ServerSide) -> None:
 
     link._receiver = deaf
     for opcode in (0o17, 0o77, 0o150):
-        _chaos(side, opcode, b"hostile")
+        side.send_raw(opcode, b"hostile")
     await side.next_request(30.0)
 
 
@@ -256,39 +236,9 @@ EXPECTED: Final = {"illegal-chaos": "illegal packet", "illegal-deaf": "illegal p
 """What a scenario's error must say (any error will do for the others)."""
 
 
-class ServerThread:
+def hostile_server(script: Script, seed: int = 0) -> contextlib.AbstractContextManager[Listener]:
     """A scenario's server on a loop of its own thread (the client under test runs in the main one)."""
-
-    def __init__(self, script: Script, seed: int) -> None:
-        self.loop = asyncio.new_event_loop()
-        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
-        self.thread.start()
-        self.listener: Listener = asyncio.run_coroutine_threadsafe(
-            serve_scenario("tcp", script, rng=random.Random(seed)), self.loop
-        ).result(10)
-
-    @property
-    def address(self) -> str:
-        return self.listener.address
-
-    def close(self) -> None:
-        with contextlib.suppress(Exception):
-            asyncio.run_coroutine_threadsafe(self.listener.aclose(), self.loop).result(10)
-        for task in asyncio.all_tasks(self.loop):
-            self.loop.call_soon_threadsafe(task.cancel)
-        self.loop.call_soon_threadsafe(self.loop.stop)
-        self.thread.join(10)
-        if not self.thread.is_alive():
-            self.loop.close()
-
-
-@contextlib.contextmanager
-def hostile_server(script: Script, seed: int = 0) -> Iterator[ServerThread]:
-    server = ServerThread(script, seed)
-    try:
-        yield server
-    finally:
-        server.close()
+    return scenario_in_thread("tcp", script, rng=random.Random(seed))
 
 
 # ---------------------------------------------------------------------------------------- clients

@@ -46,16 +46,15 @@ import random
 import subprocess
 import sys
 import tempfile
-import threading
 import time
-from collections.abc import Awaitable, Callable, Iterator, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.packet import Packet
-from manip.conformance.client.server import Listener, ServerSide, plain_answer, serve_scenario
+from manip.conformance.client.server import Listener, ServerSide, plain_answer, scenario_in_thread
 from manip.spec.constants import ChaosOp, RequestOp, ServerOp
 
 MAX_DATA: Final = 488
@@ -79,25 +78,6 @@ def _trim(side: ServerSide) -> None:
     records = side.wire.records
     if len(records) > 4 * KEPT_RECORDS:
         del records[KEPT_RECORDS:]
-
-
-def _raw(side: ServerSide, opcode: int, data: bytes = b"", *, packet_no: int = 0, ack_no: int = 0) -> None:
-    """A Chaos packet put on the link as it is, around the server's NCP."""
-    opn = side._opn()
-    if opn is None or not side.wire.links:
-        return
-    side.wire.links[0].send(
-        Packet(
-            opcode,
-            dest_host=opn.dest_host,
-            dest_index=opn.dest_index,
-            src_host=opn.src_host,
-            src_index=opn.src_index,
-            packet_no=packet_no & 0xFFFF,
-            ack_no=ack_no & 0xFFFF,
-            data=data,
-        )
-    )
 
 
 async def _each_request(side: ServerSide, answer: Callable[[Packet], Awaitable[None]]) -> None:
@@ -193,7 +173,7 @@ async def _window_0(side: ServerSide) -> None:
 async def _absurd_acks(side: ServerSide) -> None:
     async def answer(request: Packet) -> None:
         for k in range(8):
-            _raw(side, ChaosOp.STS, bytes(4), ack_no=request.packet_no + 20_000 + k)
+            side.send_raw(ChaosOp.STS, bytes(4), ack_no=request.packet_no + 20_000 + k)
         await plain_answer(side, request)
 
     await _each_request(side, answer)
@@ -202,7 +182,7 @@ async def _absurd_acks(side: ServerSide) -> None:
 async def _far_ahead(side: ServerSide) -> None:
     async def answer(request: Packet) -> None:
         for k in range(8):
-            _raw(side, ServerOp.RESPONSE, _number(request), packet_no=30_000 + k, ack_no=request.packet_no)
+            side.send_raw(ServerOp.RESPONSE, _number(request), packet_no=30_000 + k, ack_no=request.packet_no)
         await plain_answer(side, request)
 
     await _each_request(side, answer)
@@ -213,7 +193,9 @@ async def _garbage(side: ServerSide) -> None:
 
     async def answer(request: Packet) -> None:
         for _ in range(6):
-            _raw(side, rng.choice((0o17, 0o77, 0o150, 0o200, 0o377)), rng.randbytes(rng.randrange(MAX_DATA)))
+            side.send_raw(
+                rng.choice((0o17, 0o77, 0o150, 0o200, 0o377)), rng.randbytes(rng.randrange(MAX_DATA))
+            )
         if rng.random() < 0.5:
             await plain_answer(side, request)
 
@@ -319,39 +301,9 @@ def scenarios() -> dict[str, Scenario]:
 # ---------------------------------------------------------------------------------------- the server
 
 
-class ServerThread:
+def hostile_server(scenario: Scenario, link: str = "tcp") -> contextlib.AbstractContextManager[Listener]:
     """A scenario's server on a loop of its own thread (the suite under test is another process)."""
-
-    def __init__(self, scenario: Scenario, link: str) -> None:
-        self.loop = asyncio.new_event_loop()
-        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
-        self.thread.start()
-        self.listener: Listener = asyncio.run_coroutine_threadsafe(
-            serve_scenario(link, scenario.script, rng=random.Random(1), initial=scenario.initial), self.loop
-        ).result(10)
-
-    @property
-    def address(self) -> str:
-        return self.listener.address
-
-    def close(self) -> None:
-        with contextlib.suppress(Exception):
-            asyncio.run_coroutine_threadsafe(self.listener.aclose(), self.loop).result(10)
-        for task in asyncio.all_tasks(self.loop):
-            self.loop.call_soon_threadsafe(task.cancel)
-        self.loop.call_soon_threadsafe(self.loop.stop)
-        self.thread.join(10)
-        if not self.thread.is_alive():
-            self.loop.close()
-
-
-@contextlib.contextmanager
-def hostile_server(scenario: Scenario, link: str = "tcp") -> Iterator[ServerThread]:
-    server = ServerThread(scenario, link)
-    try:
-        yield server
-    finally:
-        server.close()
+    return scenario_in_thread(link, scenario.script, rng=random.Random(1), initial=scenario.initial)
 
 
 # ---------------------------------------------------------------------------------------- the runs

@@ -24,7 +24,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Final
 
-from manip.conformance.output.coverage import coverage
+from manip.conformance.output.coverage import ClauseCoverage, coverage
 from manip.conformance.suite.case import Case
 from manip.cougar.faults import CougarFault
 from manip.reference_client.faults import ClientFault
@@ -65,17 +65,12 @@ _JUDGED: Final = frozenset({"held", "broken"})
 
 
 @dataclass(frozen=True)
-class ClauseProof:
-    """One clause's row of the coverage table."""
+class ClauseProof(ClauseCoverage):
+    """One clause's row of the coverage table: its coverage (what judges it), and what proves it."""
 
-    clause: str
-    level: str
-    party: str
-    cases: tuple[str, ...]
-    """What judges it: case ids, then ``verify:FAMILY`` and ``invariant:NAME``."""
-    faults: tuple[str, ...]
+    faults: tuple[str, ...] = ()
     """The switches that prove it, as ``IMPLEMENTATION:NAME`` (``server:no-jor``)."""
-    guide_only: str
+    guide_only: str = NOT_RUN
     """Its status on a guide-only server (:data:`NOT_RUN`)."""
 
     @property
@@ -123,17 +118,14 @@ def clause_proofs(cases: Sequence[Case], guide: Mapping[str, str]) -> list[Claus
     rows = coverage(cases, {c.party for c in SPEC.clauses.values()})
     return [
         ClauseProof(
-            row.clause,
-            row.level,
-            row.party,
-            row.cases,
-            tuple(
+            **vars(row),
+            faults=tuple(
                 f"{name}:{fault.value}"
                 for name, registry in REGISTRIES.items()
                 for fault in registry
                 if proves(fault, row.clause, by_id)
             ),
-            guide.get(row.clause, NOT_RUN),
+            guide_only=guide.get(row.clause, NOT_RUN),
         )
         for row in rows
     ]

@@ -10,6 +10,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
+from manip.arm.trajectory.ends import SegmentEnds
 from manip.arm.trajectory.limits import (
     DEFAULT_CARTESIAN_LIMITS,
     CartesianLimits,
@@ -61,7 +62,7 @@ def _orthonormal(r: Vector) -> Vector:
     return out
 
 
-class CartesianSegment:
+class CartesianSegment(SegmentEnds):
     """Straight-line move between two 4x4 poses (mm), with a quintic or trapezoidal time scaling.
 
     The position follows ``p0 + s·(p1 - p0)``; the orientation is ``R0·Rot(k, s·θ)`` where
@@ -72,7 +73,7 @@ class CartesianSegment:
     transform visits the same positions but different intermediate orientations.
     """
 
-    __slots__ = ("_angle", "_axis", "_duration", "_goal", "_plain", "_r0", "_start", "profile")
+    __slots__ = ("_angle", "_axis", "_plain", "_r0", "profile")
 
     def __init__(
         self,
@@ -107,18 +108,6 @@ class CartesianSegment:
             if not (math.isfinite(duration) and duration >= 0.0):
                 raise ValueError("duration must be finite and >= 0")
             self._duration = float(duration)
-
-    @property
-    def start(self) -> Vector:
-        return self._start
-
-    @property
-    def goal(self) -> Vector:
-        return self._goal
-
-    @property
-    def duration(self) -> float:
-        return self._duration
 
     @property
     def distance(self) -> float:

@@ -11,6 +11,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
+from manip.arm.trajectory.ends import SegmentEnds
 from manip.arm.trajectory.limits import PUMA_LIMITS, MotionLimits, Vector, _check_speed, _check_time, _vector
 from manip.arm.trajectory.scaling import Profile, quintic_scaling
 
@@ -26,7 +27,7 @@ class JointSegment(Protocol):
     def velocity(self, t: float) -> Vector: ...
 
 
-class QuinticSegment:
+class QuinticSegment(SegmentEnds):
     """Coordinated point-to-point joint move, fifth-degree polynomial in time (scheme QUINTIC).
 
     ``duration`` is the smallest time in which every joint stays within ``limits.scaled(speed)``
@@ -34,7 +35,7 @@ class QuinticSegment:
     start and clamp it to ``[0, duration]``.
     """
 
-    __slots__ = ("_delta", "_duration", "_goal", "_start", "limits", "speed")
+    __slots__ = ("_delta", "limits", "speed")
 
     def __init__(
         self,
@@ -60,18 +61,6 @@ class QuinticSegment:
                 raise ValueError("tick must be positive")
             duration = math.ceil(duration / tick - 1e-9) * tick
         self._duration = duration
-
-    @property
-    def start(self) -> Vector:
-        return self._start
-
-    @property
-    def goal(self) -> Vector:
-        return self._goal
-
-    @property
-    def duration(self) -> float:
-        return self._duration
 
     def _scaling(self, t: float) -> tuple[float, float, float]:
         if self._duration == 0.0:

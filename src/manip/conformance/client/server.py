@@ -22,7 +22,8 @@ import contextlib
 import random
 import shutil
 import tempfile
-from collections.abc import Awaitable, Callable, Sequence
+import threading
+from collections.abc import Awaitable, Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Final, Literal
 
@@ -37,7 +38,16 @@ from manip.ncp.packets import pack_status, unpack_status
 from manip.spec.constants import ChaosOp, ServerOp
 from manip.spec.model import FieldType
 
-__all__ = ["CLIENT_ADDR", "JUDGE_ADDR", "Mangle", "ServerSide", "Wire", "WireRecord", "serve_scenario"]
+__all__ = [
+    "CLIENT_ADDR",
+    "JUDGE_ADDR",
+    "Mangle",
+    "ServerSide",
+    "Wire",
+    "WireRecord",
+    "scenario_in_thread",
+    "serve_scenario",
+]
 
 JUDGE_ADDR: Final = 0o440
 CLIENT_ADDR: Final = 0o401
@@ -239,18 +249,26 @@ class ServerSide:
     def send_los(self, reason: str) -> bool:
         """Send the client a LOS for this connection, as an NCP that lost it would; False when the OPN
         (which gives the indexes) was not recorded."""
+        return self.send_raw(ChaosOp.LOS, reason.encode("latin-1"))
+
+    def send_raw(self, opcode: int, data: bytes = b"", *, packet_no: int = 0, ack_no: int = 0) -> bool:
+        """Put a Chaos packet for this connection on the link as it is, around the server's NCP (stray
+        control packets, illegal opcodes, numbers of its own); False when the OPN (which gives the
+        indexes) was not recorded."""
         opn = self._opn()
         if opn is None or not self.wire.links:
             return False
-        los = Packet(
-            ChaosOp.LOS,
+        packet = Packet(
+            opcode,
             dest_host=opn.dest_host,
             dest_index=opn.dest_index,
             src_host=opn.src_host,
             src_index=opn.src_index,
-            data=reason.encode("latin-1"),
+            packet_no=packet_no & 0xFFFF,
+            ack_no=ack_no & 0xFFFF,
+            data=data,
         )
-        return self.wire.links[0].send(los)
+        return self.wire.links[0].send(packet)
 
     async def hold(self, seconds: float) -> None:
         """Take nothing for ``seconds``: the client's requests stay unacknowledged and unanswered (the
@@ -432,6 +450,33 @@ async def serve_scenario(
     if contact != "PUMA":
         address += f"&contact={contact}"
     return Listener(server, wire, address, done, errors, sides, socket_dir)
+
+
+@contextlib.contextmanager
+def scenario_in_thread(
+    link: str, script: Script, *, rng: random.Random, initial: bool = True
+) -> Iterator[Listener]:
+    """:func:`serve_scenario` on an event loop of its own thread, for a caller that blocks meanwhile (a
+    client under test in the main thread, or a process it waits for).  Yields the listener; at the end
+    the listener is closed, its tasks cancelled and the loop and thread stopped."""
+    loop = asyncio.new_event_loop()
+    thread = threading.Thread(target=loop.run_forever, daemon=True)
+    thread.start()
+    try:
+        serving = serve_scenario(link, script, rng=rng, initial=initial)
+        listener = asyncio.run_coroutine_threadsafe(serving, loop).result(10)
+        try:
+            yield listener
+        finally:
+            with contextlib.suppress(Exception):
+                asyncio.run_coroutine_threadsafe(listener.aclose(), loop).result(10)
+    finally:
+        for task in asyncio.all_tasks(loop):
+            loop.call_soon_threadsafe(task.cancel)
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(10)
+        if not thread.is_alive():
+            loop.close()
 
 
 def _carries_ack(packet: Packet) -> bool:
