@@ -74,14 +74,15 @@ def assert_clean(report: dict[str, Any], inputs: int) -> None:
 @pytest.mark.waits
 @pytest.mark.timeout(150)
 def test_a_short_campaign_against_the_reference_server_finds_nothing(tmp_path: Path) -> None:
-    """Tens of thousands of inputs (about half a minute here): no crash, hang, traceback, drop."""
+    """Thousands of inputs (about ten seconds here; the long campaigns are ``fuzz``'s own, by hand): no
+    crash, hang, traceback, drop."""
     path = tmp_path / "fuzz.json"
-    result = fuzz("--inputs", "20000", "--seed", "20161", "--batch", "200", "--json", str(path))
+    result = fuzz("--inputs", "6000", "--seed", "20161", "--batch", "200", "--json", str(path))
     report = report_of(path)
-    assert_clean(report, 20000)
-    assert report["requests"] > 40000
+    assert_clean(report, 6000)
+    assert report["requests"] > 12000
     assert result.exit_code == 0, result.output
-    assert "20000 inputs" in result.output and "conformant (exit 0)" in result.output
+    assert "6000 inputs" in result.output and "conformant (exit 0)" in result.output
     print(f"fuzz campaign: {report['inputs']} inputs in {report['duration']:.1f} s ({report['rate']:.0f}/s)")
 
 

@@ -544,14 +544,13 @@ def test_the_culprit_is_highlighted_and_opened_in_chromium(browser: list[str], t
 
 
 FULL_PAGE_BYTES = 2_000_000
-FULL_PAGE_READY_MS = 2000
 
 
 @pytest.mark.slow
-def test_a_full_suite_verify_page_is_small_and_opens_fast(browser: list[str], tmp_path: Path) -> None:
-    """``verify`` of a recording of the whole suite (about 1,600 cases): the page stays under 2 MB and is
-    usable within 2 s in Chromium.  The time is the page's own: parsed up to the end of its script and the
-    script run (``performance.now()`` there, written to ``data-ready-ms``), not Chromium's start-up."""
+def test_a_full_suite_verify_page_is_small_and_lists_every_check(browser: list[str], tmp_path: Path) -> None:
+    """``verify`` of a recording of the whole suite (about 1,600 cases): the page stays under 2 MB, and in
+    Chromium its script runs to the end and shows every row.  How soon it is usable depends on the
+    machine: ``bench/report_page.py`` measures that, against a plain page of the same size."""
     capture = tmp_path / "run.mcap"
     done = subprocess.run(
         [sys.executable, "-m", "manip.conformance.cli", "run", "-q", "--seed", "11", "--record", "run.mcap"],
@@ -565,16 +564,9 @@ def test_a_full_suite_verify_page_is_small_and_opens_fast(browser: list[str], tm
     cases = page_text.count('<tr data-verdict="')
     assert cases > 1000, cases  # the whole suite's checks, every one in the table
     assert len(page_text.encode()) < FULL_PAGE_BYTES, len(page_text.encode())
-    times = []
-    for _ in range(3):  # the best of up to three loads: other tests share the machine's two cores
-        page = _dump_dom(browser, html.as_uri())
-        root = page.elements[0]
-        assert root.attrs.get("data-ready") == "yes"
-        assert page.by_id("shown").content == f"{cases} of {cases} shown"
-        times.append(int(root.attrs["data-ready-ms"]))
-        if times[-1] < FULL_PAGE_READY_MS:
-            break
-    assert min(times) < FULL_PAGE_READY_MS, times
+    page = _dump_dom(browser, html.as_uri())
+    assert page.elements[0].attrs.get("data-ready") == "yes"
+    assert page.by_id("shown").content == f"{cases} of {cases} shown"
 
 
 def _with_script(page: Path, script: str, out: Path) -> Path:
