@@ -88,11 +88,18 @@ async def reply_raw(ctx: CaseContext) -> None:
         await clean(probe)
         for _ in range(3):
             replies, words = await answer_words(probe, "RRAW")
+            seen = showing(words_bytes(words), octal_words(words) or "nothing")
+            ctx.expect(
+                words[:1] != (CougarResponse.RAW,) or len(words) == 9,
+                clause="cougar.response.layout",
+                expected=f"code {int(CougarResponse.RAW)} then the eight data words Table 1 gives it",
+                seen=seen,
+            )
             ctx.require(
                 words[:1] == (CougarResponse.RAW,) and len(words) == 9,
                 clause="cougar.rraw.reply",
                 expected=f"code {int(CougarResponse.RAW)} and eight words, all Cougar sends for RRAW",
-                seen=showing(words_bytes(words), octal_words(words) or "nothing"),
+                seen=seen,
             )
             reply = expect_reply(ctx, replies[0], "RAW", "cougar.rraw.reply", after="RRAW")
             gauges = int16(reply.data_words)
