@@ -97,10 +97,14 @@ class OutOfSyncEvent:
 class Comint:
     """The input buffer and its parser; :meth:`take` yields the next thing to do, or None."""
 
-    def __init__(self, *, execute_partial: bool = False) -> None:
+    def __init__(
+        self, *, execute_partial: bool = False, table: Mapping[int, CommandEntry] = COMMANDS
+    ) -> None:
         self._buffer: list[int] = []
         self._execute_partial = execute_partial
         """A defect for mutation testing (fault ``comint-executes-partial``): never set it otherwise."""
+        self._table = table
+        """The command table: :data:`COMMANDS` (another only for the faults of the table)."""
 
     @property
     def pending(self) -> tuple[int, ...]:
@@ -119,7 +123,7 @@ class Comint:
     def take(self) -> Executable | OutOfSyncEvent | None:
         if not self._buffer:
             return None
-        entry = COMMANDS.get(self._buffer[0])
+        entry = self._table.get(self._buffer[0])
         if entry is None:
             dumped = tuple(self._buffer)
             self._buffer.clear()

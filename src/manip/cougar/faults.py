@@ -204,6 +204,104 @@ class CougarFault(FaultSwitch):
         "link.drv11j.busy",
         caught_by=("cougar.link.busy",),
     )
+    RFRC_NTD_CODE = defect(
+        "rfrc-ntd-code",
+        "RFRC's six floats go out under NTD's response code 1, not 5 (the send copied from NPR's; "
+        "CougarSim._rfr)",
+        "cougar.rfrc.reply",
+        caught_by=("cougar.reply.forces",),
+    )
+    RRAW_SEVEN_GAUGES = defect(
+        "rraw-seven-gauges",
+        "RRAW's loop stops one gauge short: code 9 and seven words (CougarSim._reraw)",
+        "cougar.rraw.reply",
+        "cougar.response.layout",
+        caught_by=("cougar.reply.raw",),
+    )
+    RRAW_UNSIGNED = defect(
+        "rraw-unsigned",
+        "RRAW sends each reading as the converter's 12-bit code, not sign-extended: a negative reading "
+        "comes as 4096 more (CougarSim._reraw)",
+        "cougar.gauge-range",
+        caught_by=("cougar.reply.raw",),
+    )
+    VERSION_ECHOES_PUMA = defect(
+        "version-echoes-puma",
+        "VERSION carries the Puma's version word after Cougar's: two data words, not one "
+        "(CougarSim._version)",
+        "cougar.response.layout",
+        caught_by=("cougar.reply.version",),
+    )
+    FINIT_NO_DATA = defect(
+        "finit-no-data",
+        "COMINT's table gives the obsolete FINIT no data words, as WINIT has none: its six floats are read "
+        "as commands (CougarSim, Comint's table)",
+        "cougar.word-link",
+        caught_by=("cougar.table1.finit",),
+    )
+    NOP_UNKNOWN = defect(
+        "nop-unknown",
+        "COMINT's table starts at WINIT: NOP is an unknown code, so a NOP dumps the buffer and draws an "
+        "out-of-sync message (CougarSim, Comint's table)",
+        "cougar.nop-resync",
+        caught_by=("cougar.comint.nop-resync",),
+    )
+    IDXS_RESTARTED = defect(
+        "idxs-restarted",
+        "IDXS is started for every response, in progress or not: each response queued while it is still "
+        "sending loses the word that was due next (CougarSim._send)",
+        "cougar.idxs-in-progress",
+        caught_by=("cougar.link.idxs-burst",),
+    )
+    GUARD_TYPE_LOW_BYTE = defect(
+        "guard-type-low-byte",
+        "GUARDS takes a guard's type from bit 7 (a TSTB of the word: the low byte's sign), not from the high "
+        "byte (CougarSim._guards)",
+        "cougar.guards",
+        caught_by=("cougar.guard.trips-once",),
+    )
+    GUARD_COMPARE_REVERSED = defect(
+        "guard-compare-reversed",
+        "GUARDM's comparison has its operands the wrong way round (CMPF's order): a guard trips while the "
+        "dot product is below tol (CougarSim._guardm)",
+        "cougar.guard-trip-threshold",
+        caught_by=("cougar.guard.threshold",),
+    )
+    VERS_BUILT_IN = defect(
+        "vers-built-in",
+        "VERS answers the version Cougar was built with, not the version word in memory: a DPST there "
+        "changes nothing it does (CougarSim._version)",
+        "cougar.memory",
+        caught_by=("cougar.memory.deposit-examine",),
+    )
+    GUTS_PART_ON_REENTRY = defect(
+        "guts-part-on-reentry",
+        "a tick that finds GUTS still running runs COMINT's part on the commands waiting before it returns, "
+        "and leaves them in the buffer for the GUTS it interrupted: their answers come twice "
+        "(CougarSim.tick)",
+        "cougar.guts-reentry",
+        "cougar.guts-cost-model",
+        caught_by=("cougar.guts.no-nesting", "cougar.guts.reentry"),
+    )
+    COMINT_BEFORE_GUARDM = defect(
+        "comint-before-guardm",
+        "GUTS runs COMINT before GUARDM: a guard armed in a tick is tested in that tick (CougarSim.tick)",
+        "cougar.guts-order",
+        caught_by=("cougar.guts.order",),
+    )
+    JACOB_ONE_BUFFER = defect(
+        "jacob-one-buffer",
+        "JACOB writes the new Jacobian into the one buffer the foreground reads, a row per background step, "
+        "and never switches buffers: between ticks the foreground may see part of it (Jacob.step)",
+        "cougar.jacob-double-buffer",
+        caught_by=("cougar.jacob.front-buffer-complete",),
+    )
+    LINK_TICKED_FIRST = defect(
+        "link-ticked-first",
+        "the link sends a tick's TICKED before the words the tick produced, not after them (CougarEnd)",
+        "link.drv11j.framing",
+        caught_by=("cougar.link.drv11j-framing",),
+    )
 
 
 @dataclass(frozen=True)
@@ -252,6 +350,32 @@ class CougarDefects:
     """The compliance equation has the commanded force NFC."""
     bji_per_joint: bool = True
     """Each joint's NTD is scaled by its own element of NBJI."""
+    rfrc_code_forces: bool = True
+    """RFRC is answered with response code 5."""
+    rraw_all_gauges: bool = True
+    """RRAW reports all eight gauges."""
+    rraw_sign_extended: bool = True
+    """RRAW reports each reading sign-extended to 16 bits."""
+    version_one_word: bool = True
+    """VERSION carries one data word, Cougar's version."""
+    finit_takes_data: bool = True
+    """COMINT's table gives FINIT its six floats."""
+    nop_known: bool = True
+    """COMINT's table has NOP."""
+    idxs_checks_in_progress: bool = True
+    """IDXS is started only when it is not already sending."""
+    guard_type_in_high_byte: bool = True
+    """GUARDS reads a guard's type from the high byte of its first word."""
+    guard_compare_ordered: bool = True
+    """GUARDM trips a guard when the dot product reaches tol (not when it is below it)."""
+    vers_reads_memory: bool = True
+    """VERS answers the version word in memory."""
+    reentry_returns_at_once: bool = True
+    """A tick that finds GUTS still running returns at once."""
+    guardm_before_comint: bool = True
+    """GUTS runs GUARDM before COMINT."""
+    jacob_double_buffered: bool = True
+    """JACOB computes into the buffer the foreground does not read and then switches."""
 
 
 @dataclass(frozen=True)
@@ -273,6 +397,8 @@ class LinkDefects:
     """A first frame that is not HELLO ends the link."""
     checks_version: bool = True
     """A HELLO of another version than 1 ends the link."""
+    ticked_after_words: bool = True
+    """A tick's TICKED follows the words the tick produced."""
 
 
 def cougar_defects(faults: Iterable[str]) -> CougarDefects:
@@ -300,6 +426,19 @@ def cougar_defects(faults: Iterable[str]) -> CougarDefects:
         compliance_on_corrected_force=CougarFault.COMPLIANCE_SENSED_FORCE not in on,
         npr_commanded_force=CougarFault.NPR_IGNORES_FC not in on,
         bji_per_joint=CougarFault.NBJI_FIRST_ONLY not in on,
+        rfrc_code_forces=CougarFault.RFRC_NTD_CODE not in on,
+        rraw_all_gauges=CougarFault.RRAW_SEVEN_GAUGES not in on,
+        rraw_sign_extended=CougarFault.RRAW_UNSIGNED not in on,
+        version_one_word=CougarFault.VERSION_ECHOES_PUMA not in on,
+        finit_takes_data=CougarFault.FINIT_NO_DATA not in on,
+        nop_known=CougarFault.NOP_UNKNOWN not in on,
+        idxs_checks_in_progress=CougarFault.IDXS_RESTARTED not in on,
+        guard_type_in_high_byte=CougarFault.GUARD_TYPE_LOW_BYTE not in on,
+        guard_compare_ordered=CougarFault.GUARD_COMPARE_REVERSED not in on,
+        vers_reads_memory=CougarFault.VERS_BUILT_IN not in on,
+        reentry_returns_at_once=CougarFault.GUTS_PART_ON_REENTRY not in on,
+        guardm_before_comint=CougarFault.COMINT_BEFORE_GUARDM not in on,
+        jacob_double_buffered=CougarFault.JACOB_ONE_BUFFER not in on,
     )
 
 
@@ -314,6 +453,7 @@ def link_defects(faults: Iterable[str]) -> LinkDefects:
         refuses_second_puma=CougarFault.LINK_BUSY_SERVES_SECOND not in on,
         requires_hello_first=CougarFault.LINK_HELLO_OPTIONAL not in on,
         checks_version=CougarFault.LINK_IGNORES_VERSION not in on,
+        ticked_after_words=CougarFault.LINK_TICKED_FIRST not in on,
     )
 
 

@@ -32,6 +32,11 @@ from manip.cougar.memory import JBUF_J, JBUF_JT, JBUF_P, Memory, region
 __all__ = ["STEPS", "Jacob", "front_buffer"]
 
 STEPS: Final = 4
+_ROWS: Final = 6
+_ROW_BYTES: Final = 4 * 6
+"""One row of J: six floats of two words."""
+IN_PLACE_STEPS: Final = _ROWS + 2
+"""Steps of one computation written in place (fault ``jacob-one-buffer``): J's six rows, Jᵀ, P."""
 Matrix = npt.NDArray[np.float64]
 
 
@@ -74,6 +79,9 @@ class Jacob:
     """False only for the fault ``jacobian-transpose-not-stored``: J's words stored again where Jᵀ goes."""
     bji_per_joint: bool = True
     """False only for the fault ``nbji-first-only``: every joint scaled by BJI's first element."""
+    double_buffered: bool = True
+    """False only for the fault ``jacob-one-buffer``: J written a row per step into the front buffer, which
+    never switches (:data:`IN_PLACE_STEPS` steps a computation)."""
     step_index: int = 0
     cycles: int = 0
     _j: Matrix = field(default_factory=lambda: np.zeros((6, 6)))
@@ -84,19 +92,12 @@ class Jacob:
 
     def step(self, memory: Memory) -> None:
         """Run one step of the computation."""
+        if not self.double_buffered:
+            self._step_in_place(memory)
+            return
         back = _buffer_address(memory, front=False)
         if self.step_index == 0:
-            theta, fv = memory.floats("theta_sensed"), memory.floats("fv")
-            bji = memory.floats("bji")
-            self._bji = bji if self.bji_per_joint else (bji[0],) * len(bji)
-            inputs = (theta, fv, self._bji)
-            if inputs != self._inputs:  # decoded floats, never NaN: equal inputs, the same J and P
-                if self._inputs is None or inputs[:2] != self._inputs[:2]:
-                    # angles that are not angles (a bad deposit) keep the last Jacobian
-                    with contextlib.suppress(ValueError):
-                        self._j = self._jacobian(theta, fv)
-                self._inputs = inputs
-                self._words = self._encode()
+            self._snapshot(memory)
             memory.store_encoded(back + 4 * JBUF_J, *self._stored_words()[0])
         elif self.step_index == 1:
             memory.store_encoded(back + 4 * JBUF_JT, *self._stored_words()[1])
@@ -106,6 +107,34 @@ class Jacob:
             memory.set_word("jacob_front", (memory.word("jacob_front") & 1) ^ 1)
             self.cycles += 1
         self.step_index = (self.step_index + 1) % STEPS
+
+    def _snapshot(self, memory: Memory) -> None:
+        """Take θ_sensed, the frame vector and BJI from memory; J, Jᵀ and P for them, encoded."""
+        theta, fv = memory.floats("theta_sensed"), memory.floats("fv")
+        bji = memory.floats("bji")
+        self._bji = bji if self.bji_per_joint else (bji[0],) * len(bji)
+        inputs = (theta, fv, self._bji)
+        if inputs != self._inputs:  # decoded floats, never NaN: equal inputs, the same J and P
+            if self._inputs is None or inputs[:2] != self._inputs[:2]:
+                # angles that are not angles (a bad deposit) keep the last Jacobian
+                with contextlib.suppress(ValueError):
+                    self._j = self._jacobian(theta, fv)
+            self._inputs = inputs
+            self._words = self._encode()
+
+    def _step_in_place(self, memory: Memory) -> None:
+        """One step of the fault ``jacob-one-buffer``: rows of J, then Jᵀ, then P, into the front buffer."""
+        front, i = _buffer_address(memory, front=True), self.step_index
+        if i == 0:
+            self._snapshot(memory)
+        (j_words, saturated), jt, p = self._stored_words()
+        if i < _ROWS:
+            row = _ROW_BYTES * i
+            memory.store_encoded(front + 4 * JBUF_J + row, j_words[row : row + _ROW_BYTES], saturated)
+        else:
+            memory.store_encoded(front + 4 * (JBUF_JT if i == _ROWS else JBUF_P), *(jt if i == _ROWS else p))
+            self.cycles += i == IN_PLACE_STEPS - 1
+        self.step_index = (i + 1) % IN_PLACE_STEPS
 
     def _jacobian(self, theta: tuple[float, ...], fv: tuple[float, ...]) -> Matrix:
         """J at the compliance centre, in the Cougar's length unit."""

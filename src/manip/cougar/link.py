@@ -339,6 +339,9 @@ class PumaEnd(_End):
         out: list[int] = []
         for frame in self._frames(data):
             if isinstance(frame, Words) and frame.source is Role.COUGAR:
+                if self.ticks_done == self.ticks_sent:  # its tick was over: TICKED comes after its words
+                    self.closed = f"words from Cougar after TICKED #{self.ticks_done - 1}, with no TICK since"
+                    raise Drv11jError(self.closed)
                 out.extend(frame.words)
             elif isinstance(frame, Ticked):
                 self.ticks_done = frame.index + 1
@@ -388,9 +391,13 @@ class CougarEnd(_End):
                 words = self.cougar.tick(now)
                 self.ticks += 1
                 self.last_time = now
+                ticked = encode_frame(Ticked(frame.index))
+                if not self._defects.ticked_after_words:
+                    out.append(ticked)
                 if words:
                     out.append(encode_frame(Words(Role.COUGAR, tuple(words))))
-                out.append(encode_frame(Ticked(frame.index)))
+                if self._defects.ticked_after_words:
+                    out.append(ticked)
             elif not self._defects.ends_on_wrong_side:
                 continue
             else:

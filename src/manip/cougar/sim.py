@@ -62,7 +62,7 @@ The compliance equation NPR answers is in :mod:`manip.cougar.compliance`.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Final
 
 import numpy as np
@@ -70,7 +70,7 @@ import numpy.typing as npt
 
 from manip.arm import PUMA560_LEE, READY, PumaGeometry, Transform, forward
 from manip.cougar.adc import GAUGES, GaugeModel, adc8_filter
-from manip.cougar.comint import Comint, Executable, OutOfSyncEvent
+from manip.cougar.comint import COMMANDS, Comint, Executable, OutOfSyncEvent
 from manip.cougar.compliance import (
     MM_PER_INCH,
     compliance_sample,
@@ -89,7 +89,7 @@ from manip.cougar.faults import CougarDefects, cougar_defects, parse_faults
 from manip.cougar.jacob import STEPS, Jacob, front_buffer
 from manip.cougar.memory import GUARD_DVEC, GUARD_TOL, GUARD_WORDS, MAP_BASE, MEMORY_BYTES, Memory, region
 from manip.cougar.readings import MAP_SHIFT, parse_readings
-from manip.spec.constants import CougarResponse
+from manip.spec.constants import CougarCommand, CougarResponse
 
 __all__ = ["CougarConfig", "CougarSim", "CougarStats"]
 
@@ -99,6 +99,8 @@ GUARD_STOP_BIT: Final = 0x8000
 #: The bits of the type word any of which makes a trip stop the move: the high byte (errata
 #: ``guard-type-bit``: Table 1's "hi bit" and B.9's "high byte" both read so; stop is the safe side).
 GUARD_STOP_MASK: Final = 0xFF00
+#: Bit 7 of a guard's type word, the sign of its low byte (fault guard-type-low-byte reads the type there).
+GUARD_LOW_BYTE_SIGN: Final = 0x0080
 #: Bit 0 of the ``flags`` word: LIMIT is applied.
 FLAG_LIMIT: Final = 1
 _UNTOUCHED: Final = (0.0,) * 6
@@ -208,7 +210,7 @@ class CougarSim:
         self._rng = np.random.default_rng(seed)
         self._defects = defects = self.config.defects
         self._readings = self.config.readings
-        self._comint = Comint(execute_partial=not defects.comint_waits_for_data)
+        self._comint = self._new_comint()
         self._tripped_once: set[int] = set()  # a guard that trips twice (CougarDefects.guard_trips_once)
         self._guard_values: dict[int, tuple[list[int], Vector, float]] = {}
         """Guard i's table words, and its dvec and tol decoded from them."""
@@ -217,6 +219,7 @@ class CougarSim:
             mm_per_unit=self.config.mm_per_unit,
             transpose_stored=defects.jacobian_transpose_stored,
             bji_per_joint=defects.bji_per_joint,
+            double_buffered=defects.jacob_double_buffered,
         )
         self._stats = CougarStats()
         self._pose: tuple[float, ...] = tuple(float(q) for q in self.config.initial_angles)
@@ -265,7 +268,7 @@ class CougarSim:
         if nested or (self._busy_until is not None and now < self._busy_until):
             self._stats.guts_reentries += 1
             self._terminal.append(self.config.reentry_char)
-            return []
+            return [] if nested or self._defects.reentry_returns_at_once else self._comint_part()
         self._last_now = now
         mem.set_word("guts_busy", 1)
         self._out = []
@@ -273,8 +276,11 @@ class CougarSim:
             self._adc8()
             self._convert()
             self._gravity()
-            self._guardm()
+            if self._defects.guardm_before_comint:
+                self._guardm()
             commands, words = self._comint_run()
+            if not self._defects.guardm_before_comint:
+                self._guardm()
         finally:
             mem.set_word("guts_busy", 0)
         c = self.config
@@ -287,6 +293,28 @@ class CougarSim:
         out, self._out = self._out, []
         self._stats.words_sent += len(out)
         self._stats.float_faults = mem.float_faults
+        return out
+
+    def _new_comint(self) -> Comint:
+        """COMINT with its table (NOP and FINIT as Table 1 has them but for a defect of the table)."""
+        d = self._defects
+        table = dict(COMMANDS)
+        if not d.nop_known:
+            del table[CougarCommand.NOP]
+        if not d.finit_takes_data:
+            table[CougarCommand.FINIT] = replace(table[CougarCommand.FINIT], data_words=0, destination=None)
+        return Comint(execute_partial=not d.comint_waits_for_data, table=table)
+
+    def _comint_part(self) -> list[int]:
+        """The answers of the commands waiting, which stay waiting (fault guts-part-on-reentry)."""
+        real, self._comint = self._comint, self._new_comint()
+        self._comint.receive(real.pending)
+        self._out = []
+        try:
+            self._comint_run()
+        finally:
+            self._comint = real
+        out, self._out = self._out, []
         return out
 
     def run_background(self, steps: int) -> None:
@@ -412,9 +440,11 @@ class CougarSim:
                 kept = self._guard_values[i] = (words, mem.read_floats(entry + 2 * GUARD_DVEC, 6), tol)
             _, dvec, tol = kept
             dot = float(np.dot(force, dvec))
-            if (
-                dot > tol if "guard-trips-above-tol" in self._readings else dot >= tol
-            ):  # erratum guard-trip-comparison
+            if not self._defects.guard_compare_ordered:
+                trips = dot < tol
+            else:  # erratum guard-trip-comparison
+                trips = dot > tol if "guard-trips-above-tol" in self._readings else dot >= tol
+            if trips:
                 if not self._defects.guard_trips_once and i not in self._tripped_once:
                     self._tripped_once.add(i)
                 else:
@@ -443,6 +473,8 @@ class CougarSim:
         return commands, words
 
     def _send(self, code: int, words: Sequence[int]) -> None:
+        if len(self._out) > 1 and not self._defects.idxs_checks_in_progress:
+            del self._out[1]  # IDXS restarted while sending: the word due next went before the Puma was ready
         self._out.append(int(code))
         self._out.extend(int(w) for w in words)
 
@@ -563,17 +595,22 @@ class CougarSim:
         return [self._read(a, 1)[0] if Memory.valid(a) else 0 for a in range(start, start + 2 * count, 2)]
 
     def _version(self) -> None:
-        code = CougarResponse.VERSION if self._defects.version_code_right else 3
-        self._send(code, [self.memory.word("version")])
+        d, mem = self._defects, self.memory
+        code = CougarResponse.VERSION if d.version_code_right else 3
+        version = mem.word("version") if d.vers_reads_memory else self.config.version
+        self._send(code, [version] if d.version_one_word else [version, mem.word("puma_version")])
 
     def _rfr(self) -> None:
-        self._send(CougarResponse.FORCES, self._region_words("force"))
+        code = CougarResponse.FORCES if self._defects.rfrc_code_forces else CougarResponse.NTD
+        self._send(code, self._region_words("force"))
 
     def _guards(self) -> None:
         mem = self.memory
         data = mem.read_words(region("guard_in").address, GUARD_WORDS)
         index = data[0] & 0xF
         mask = GUARD_STOP_BIT if "guard-hi-bit-only" in self._readings else GUARD_STOP_MASK
+        if not self._defects.guard_type_in_high_byte:
+            mask = GUARD_LOW_BYTE_SIGN
         stop = GUARD_STOP_BIT if data[0] & mask else 0
         data[0] = (
             stop | data[0] & 0xF
@@ -596,7 +633,9 @@ class CougarSim:
                 raw = _less(raw, self.memory.int16s("gauge_offsets"))
         elif "offsets-after-filter" not in self._readings:  # there, the readings have them
             raw = _plus(raw, self.memory.int16s("gauge_offsets"))
-        self._send(CougarResponse.RAW, [v & 0xFFFF for v in raw])
+        d = self._defects
+        words = [v & (0xFFFF if d.rraw_sign_extended else 0o7777) for v in raw]
+        self._send(CougarResponse.RAW, words if d.rraw_all_gauges else words[:-1])
 
     def _region_words(self, name: str) -> list[int]:
         r = region(name)

@@ -212,6 +212,33 @@ class ClientFault(FaultSwitch):
             "client.pipeline.interleaved",
         ),
     )
+    STRAY_UNSIGNALLED = defect(
+        "stray-unsignalled",
+        "a RESPONSE whose request number matches no request is dropped without a word: no out-of-sequence "
+        "signal to the user",
+        "client.out-of-sequence",
+        caught_by=("client.reply.out-of-sequence",),
+    )
+    MOVE_ROW_MAJOR = defect(
+        "move-row-major",
+        "move and straight-line move send their transform row after row (nx ox ax px, ny ...) instead of "
+        "column after column as Here lays it out (N O A P)",
+        "move.transform-data",
+        caught_by=("client.request.move", "client.request.straight-move"),
+    )
+    ALWAYS_PAD = defect(
+        "always-pad",
+        "the numbers of an error string are always read after a pad byte, as if the server had aligned "
+        "them to a word, even when the bytes after the NUL are even (none)",
+        "client.error-args-layout",
+        caught_by=("client.error.args-unpadded",),
+    )
+    NO_CLS = defect(
+        "no-cls",
+        "the client's NCP ends a connection by dropping its link: the CLS of the close never goes out",
+        "client.close",
+        caught_by=("client.close.sequence",),
+    )
     CLEAR_GUARDS_FIRST = reading(
         "clear-guards-first",
         "no fault: a change of load with guards armed clears them first (a clear guard each), then sends "

@@ -87,6 +87,18 @@ RequestData = bytes | bytearray | int | float | Iterable[Any]
 sequences are flattened; bytes are sent as they are."""
 
 
+_MOVES: Final = frozenset({"move", "straight-move"})
+_ROW_MAJOR: Final = tuple(column * 3 + row for row in range(3) for column in range(4))
+"""Where each float of a transform goes row after row (fault move-row-major): its column-major index."""
+
+
+def _row_major(payload: bytes) -> bytes:
+    """A transform's 12 floats (column major, N O A P) sent row after row (fault move-row-major)."""
+    if len(payload) != 48:
+        return payload
+    return b"".join(payload[4 * i : 4 * i + 4] for i in _ROW_MAJOR)
+
+
 def _extract_unfree(request: Request[Any], payloads: Sequence[bytes]) -> None:
     """The reply to the packet that un-frees a joint: done (or a Here reply from a lax server)."""
     return None
@@ -178,6 +190,8 @@ class Manipulator(GenericOperations, PumaOperations):
         faults = self.options.faults
         if ClientFault.SET_SPEED_LENGTH in faults and rc.spec is not None and rc.spec.name == "set-speed":
             payload += bytes(4)
+        if ClientFault.MOVE_ROW_MAJOR in faults and rc.spec is not None and rc.spec.name in _MOVES:
+            payload = _row_major(payload)
         if len(payload) > MAX_DATA:  # a Chaos packet cannot carry it: refused here, not by the link later
             raise ValueError(f"{rc}: {len(payload)} data bytes, more than a Chaos packet holds ({MAX_DATA})")
         if ClientFault.EARLY_TIMEOUT in faults and isinstance(timeout, int | float):

@@ -351,6 +351,8 @@ class ResponseContext:
 
     def out_of_sequence(self, reason: OutOfSequenceReason | None = None, detail: str = "") -> None:
         """Report this packet as answering nothing; the reason defaults to what the history says."""
+        if ClientFault.STRAY_UNSIGNALLED in self.core.faults:
+            return
         if reason is None:
             reason = self.core.why_unmatched(self.request_number)
         self.emit(
@@ -367,20 +369,20 @@ class ResponseContext:
             rest = len(payload) - payload.index(0) - 1
             with contextlib.suppress(CodecError):
                 return parse_error(payload[: len(payload) - rest % 2], align_args=False, body="string")
-        try:  # either layout, told apart by parity (erratum error-arg-layout)
-            return parse_error(payload, body="string")
-        except CodecError:
-            pass
-        try:
-            return parse_error(payload, align_args=self.core.align_args, body="string")
-        except CodecError:
-            pass
-        try:  # a server that did not pad the numbers to a word (clause client.error-args-layout)
-            return parse_error(payload, align_args=not self.core.align_args, body="string")
-        except CodecError as exc:
-            nul = payload.find(0)
-            text = decode_lispm(payload if nul < 0 else payload[:nul])
-            return ErrorMessage("client", "?", "???", f"unreadable error string {text!r} ({exc})")
+        # either layout, told apart by parity (erratum error-arg-layout); then each layout alone, for a
+        # server that did not pad the numbers to a word (clause client.error-args-layout); the fault
+        # always-pad reads the aligned layout only
+        aligned = self.core.align_args
+        layouts = (True,) if ClientFault.ALWAYS_PAD in self.core.faults else (None, aligned, not aligned)
+        problem = ""
+        for align in layouts:
+            try:
+                return parse_error(payload, align_args=align, body="string")
+            except CodecError as exc:
+                problem = str(exc)
+        nul = payload.find(0)
+        text = decode_lispm(payload if nul < 0 else payload[:nul])
+        return ErrorMessage("client", "?", "???", f"unreadable error string {text!r} ({problem})")
 
     def keep_packet(self) -> None:
         if not any(isinstance(e, PacketKept) and e.packet is self.packet for e in self.events):

@@ -92,6 +92,8 @@ class NcpTransport:
         # the client gives the connection up at once rather than wait for replies that cannot come.
         self.ncp_options = replace(ncp_options or NcpConfig(), lose_on_illegal=True)
         self.wrap_link = _no_ack(wrap_link) if ClientFault.NEVER_ACK in faults else wrap_link
+        if ClientFault.NO_CLS in faults:
+            self.wrap_link = _dropping(self.wrap_link, ChaosOp.CLS)
         if faults & _WINDOW_FAULTS:
             self.wrap_link = _bent_window(self.wrap_link, _WindowBend(faults))
         self._conn: ChaosConnection | None = None
@@ -220,22 +222,35 @@ class NcpTransport:
             self._wakeup()
 
 
-def _no_ack(inner: LinkWrapper | None) -> LinkWrapper:
-    """Fault never-ack: every packet goes out with ack 0 and no STS goes out at all."""
+SendFilter = Callable[[Packet], Packet | None]
+"""What goes out in place of a packet the client's NCP sends (None: nothing)."""
+
+
+def _filtered(inner: LinkWrapper | None, bend: SendFilter) -> LinkWrapper:
+    """A link wrapper that sends ``bend(packet)`` for every packet (a fault of the client's NCP)."""
 
     def wrap(link: Link) -> Link:
         wrapped = inner(link) if inner is not None else link
         send = wrapped.send
 
-        def send_without_acks(packet: Packet, next_hop: int | None = None) -> bool:
-            if packet.opcode == ChaosOp.STS:
-                return True
-            return send(packet.with_(ack_no=0), next_hop)
+        def send_bent(packet: Packet, next_hop: int | None = None) -> bool:
+            bent = bend(packet)
+            return True if bent is None else send(bent, next_hop)
 
-        wrapped.send = send_without_acks  # type: ignore[method-assign]
+        wrapped.send = send_bent  # type: ignore[method-assign]
         return wrapped
 
     return wrap
+
+
+def _dropping(inner: LinkWrapper | None, opcode: int) -> LinkWrapper:
+    """Fault no-cls: no packet of ``opcode`` goes out (the link is dropped without it)."""
+    return _filtered(inner, lambda packet: None if packet.opcode == opcode else packet)
+
+
+def _no_ack(inner: LinkWrapper | None) -> LinkWrapper:
+    """Fault never-ack: every packet goes out with ack 0 and no STS goes out at all."""
+    return _filtered(inner, lambda packet: None if packet.opcode == ChaosOp.STS else packet.with_(ack_no=0))
 
 
 _WINDOW_FAULTS = frozenset(

@@ -25,6 +25,7 @@ from manip.cougar.cli import main as cougar_main
 from manip.cougar.cli import serve_cougar
 from manip.cougar.faults import CougarFault, parse_faults
 from manip.cougar.link import CougarEnd, Drv11jError, PumaEnd, Tick, encode_frame
+from manip.spec import SPEC
 from tests.support.paths import ROOT
 from tests.support.servers import MANIP_COUGAR, StartServer
 
@@ -33,6 +34,14 @@ CATCHERS = {fault.value: fault.caught_by for fault in CougarFault}
 OPTIONS = RunOptions(reply_timeout=1.0, connect_timeout=2.0)
 MEMORY_MAP = ROOT / "examples" / "cougar-memory-map.toml"
 """manip's Cougar memory map as a file, declared for a manip-cougar process as for any external Cougar."""
+
+
+def wanted(fault: CougarFault, case_id: str) -> set[str]:
+    """The outcomes that count as catching ``fault`` in case ``case_id``: fail, or warn when every clause
+    of the fault the case cites is a SHOULD (a SHOULD's violation warns)."""
+    (case,) = (c for c in all_cases() if c.id == case_id)
+    cited = set(case.clauses) & set(fault.clauses)
+    return {"fail", "warn"} if cited and all(SPEC.clauses[c].level == "SHOULD" for c in cited) else {"fail"}
 
 
 def run(target: CougarTarget, select: Iterable[str] = ()) -> RunReport:
@@ -63,7 +72,7 @@ def test_every_fault_has_a_catching_case() -> None:
     declared = {
         case for fault, catchers in CATCHERS.items() if fault.startswith("link-") for case in catchers
     }
-    assert link_paths == declared, link_paths ^ declared
+    assert link_paths <= declared, link_paths - declared
 
 
 @pytest.mark.parametrize("fault", sorted(f.value for f in CougarFault))
@@ -73,7 +82,8 @@ def test_fault_is_caught(fault: str) -> None:
     failed = [r for r in report.results if r.outcome == "fail"]
     shown = ", ".join(f"{r.id} ({r.violations[0].clause if r.violations else r.reason})" for r in failed)
     print(f"cougar fault {fault}: caught by {shown or 'NO CASE'}")
-    assert {got[case] for case in CATCHERS[fault]} == {"fail"}, (fault, got)
+    switch = CougarFault.named(fault)
+    assert all(got[case] in wanted(switch, case) for case in CATCHERS[fault]), (fault, got)
     assert report.exit_code == ExitCode.NON_CONFORMANT
     assert not any(o == "error" for o in got.values()), [r.traceback for r in report.results if r.traceback]
     declared = set(CougarFault.named(fault).clauses)
@@ -109,8 +119,9 @@ def test_fault_of_a_manip_cougar_process_is_caught_over_its_link(
     report = run(CougarTarget.parse(process.url, memory_map=MEMORY_MAP), select=selected)
     got = outcomes(report)
     assert set(got) == set(selected), got
-    want = "fail" if fault else "pass"
-    assert set(got.values()) == {want}, [(r.id, r.outcome, r.reason, r.violations) for r in report.results]
+    for r in report.results:
+        want = wanted(CougarFault.named(fault), r.id) if fault else {"pass"}
+        assert r.outcome in want, (r.id, r.outcome, r.reason, r.violations)
 
 
 def test_every_must_cougar_clause_has_a_case() -> None:

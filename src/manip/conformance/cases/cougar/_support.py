@@ -12,6 +12,7 @@ from manip.arm import READY
 from manip.arm.units import MM_PER_UNIT
 from manip.codecs.cougar import encode
 from manip.conformance.cougar.probe import (
+    DEFAULT_WITHIN,
     CougarProbe,
     WordReply,
     floats_of,
@@ -100,6 +101,20 @@ def expect_reply(ctx: CaseContext, reply: WordReply, name: str, clause: str, *, 
     return reply
 
 
+async def answer_words(probe: CougarProbe, name: str) -> tuple[list[WordReply], tuple[int, ...]]:
+    """Send command ``name`` (no data) and tick until a whole response has come, at most DEFAULT_WITHIN
+    ticks: the responses, and every word Cougar sent meanwhile as it came (a response may span ticks),
+    for a case that judges the words themselves, whatever response they make."""
+    first = len(probe.events)
+    await probe.send(name)
+    replies: list[WordReply] = []
+    for _ in range(DEFAULT_WITHIN):
+        replies += await probe.run(1)
+        if replies:
+            break
+    return replies, tuple(w for e in probe.events[first:] if e.direction == "cougar" for w in e.words)
+
+
 def expect_none(ctx: CaseContext, replies: Sequence[WordReply], clause: str, why: str) -> None:
     ctx.expect(not replies, clause=clause, expected=f"no response ({why})", seen=replies)
 
@@ -111,8 +126,19 @@ async def expect_quiet(ctx: CaseContext, probe: CougarProbe, clause: str, why: s
 
 async def expect_examine(ctx: CaseContext, probe: CougarProbe, address: int, count: int) -> tuple[int, ...]:
     """EXMN that must return ``count`` words (an address inside memory)."""
+    await probe.send("EXMN", address=address, count=count)
+    return await expect_examined(ctx, probe, address, count)
+
+
+async def expect_examined(ctx: CaseContext, probe: CougarProbe, address: int, count: int) -> tuple[int, ...]:
+    """The next response, the answer to an EXMN of ``count`` words at ``address`` already sent, which
+    must return them (an address inside memory)."""
     reply = expect_reply(
-        ctx, await probe.examine(address, count), "EXMN-DATA", "cougar.exmn.reply", after="EXMN"
+        ctx,
+        await probe.reply(f"EXMN ({octal(address)}, {count})"),
+        "EXMN-DATA",
+        "cougar.exmn.reply",
+        after="EXMN",
     )
     words = tuple(int(w) for w in reply.data_words[1:])
     ctx.expect(

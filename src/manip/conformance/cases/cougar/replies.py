@@ -6,6 +6,7 @@ import math
 
 from manip.arm import READY
 from manip.conformance.cases.cougar._support import (
+    answer_words,
     any_address,
     clean,
     expect_examine,
@@ -17,10 +18,12 @@ from manip.conformance.cases.cougar._support import (
 )
 from manip.conformance.cougar.probe import (
     cougar_probe,
+    words_bytes,
 )
 from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
+from manip.spec.constants import CougarResponse
 from manip.spec.notation import octal, octal_words
 
 
@@ -79,11 +82,26 @@ async def reply_forces(ctx: CaseContext) -> None:
     clauses=["cougar.rraw.reply", "cougar.gauge-range", "cougar.response.layout"],
 )
 async def reply_raw(ctx: CaseContext) -> None:
-    """RRAW is answered with RAW (code 9) and eight words, each a 12-bit reading in -2048..2047."""
+    """RRAW is answered with RAW (code 9) and eight words, each a 12-bit reading in -2048..2047: the
+    words Cougar sends for it are those nine, whatever the probe makes of them."""
     async with cougar_probe(ctx) as probe:
         await clean(probe)
         for _ in range(3):
-            reply = expect_reply(ctx, await probe.call("RRAW"), "RAW", "cougar.rraw.reply", after="RRAW")
+            replies, words = await answer_words(probe, "RRAW")
+            seen = showing(words_bytes(words), octal_words(words) or "nothing")
+            ctx.expect(
+                words[:1] != (CougarResponse.RAW,) or len(words) == 9,
+                clause="cougar.response.layout",
+                expected=f"code {int(CougarResponse.RAW)} then the eight data words Table 1 gives it",
+                seen=seen,
+            )
+            ctx.require(
+                words[:1] == (CougarResponse.RAW,) and len(words) == 9,
+                clause="cougar.rraw.reply",
+                expected=f"code {int(CougarResponse.RAW)} and eight words, all Cougar sends for RRAW",
+                seen=seen,
+            )
+            reply = expect_reply(ctx, replies[0], "RAW", "cougar.rraw.reply", after="RRAW")
             gauges = int16(reply.data_words)
             ctx.expect(
                 len(gauges) == 8 and all(-2048 <= g <= 2047 for g in gauges),
