@@ -71,6 +71,13 @@ if TYPE_CHECKING:
 PROFILE_VARIABLE = "MANIP_HYPOTHESIS_PROFILE"
 EXAMPLES_VARIABLE = "MANIP_HYPOTHESIS_EXAMPLES"
 LONG_EXAMPLES = 1000
+TIMEOUT_SCALE_VARIABLE = "MANIP_TIMEOUT_SCALE"
+TIMEOUT_SCALE = 4.0
+"""Every test's time limit (pytest-timeout's, the ini's 120 s or the test's own ``timeout`` mark) is
+multiplied by this (``MANIP_TIMEOUT_SCALE`` overrides it).  A limit is a net for a test that hangs, never a
+judgement of speed: the limits were set from idle runs, and on a loaded machine (two cores at a load of
+12 or more, as when other jobs share CI's machine) whole simulated runs take five times as long, and a
+limit hit in the middle of one fails it with a misleading message.  Speed is judged in ``bench/``."""
 
 # Built on Hypothesis's own defaults, whichever profile it chose at import (it picks "ci" on CI machines).
 _STEADY = settings(
@@ -81,6 +88,31 @@ _STEADY = settings(
     print_blob=True,
 )
 settings.register_profile("manip", _STEADY, derandomize=True)
+
+
+def _positive(variable: str, default: float) -> float:
+    raw = os.environ.get(variable, "")
+    try:
+        value = float(raw) if raw else default
+    except ValueError:
+        value = 0.0
+    if not value > 0:
+        raise pytest.UsageError(f"{variable} must be a positive number, got {raw!r}")
+    return value
+
+
+def _widen_time_limits(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Each test's time limit, times :data:`TIMEOUT_SCALE`: a mark placed first, which pytest-timeout
+    reads as the test's own (its other settings, such as ``method``, kept)."""
+    scale = _positive(TIMEOUT_SCALE_VARIABLE, TIMEOUT_SCALE)
+    default = float(config.getini("timeout") or 0)
+    for item in items:
+        own = item.get_closest_marker("timeout")
+        kwargs = dict(own.kwargs) if own else {}
+        limit = own.args[0] if own and own.args else kwargs.pop("timeout", None)
+        limit = default if limit is None else float(limit)
+        if limit > 0:
+            item.add_marker(pytest.mark.timeout(limit * scale, **kwargs), append=False)
 
 
 def _long_examples() -> int:
@@ -125,7 +157,7 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     gc.freeze()
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Tests marked ``slow`` (whole simulated runs, CPU-bound) come first and, with ``--dist loadgroup``
     (the README's command), go to two workers, one per core, taking turns: the longest then starts at
     once instead of a third of the way in, no more of them than there are cores run at a time, and the
@@ -133,8 +165,11 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     go first, so that their waiting overlaps the CPU-bound tests instead of ending the run alone (a
     fuzzing test that waits out a hang once ran for the last 23 s with every other worker done).
 
+    Every time limit is widened by :data:`TIMEOUT_SCALE`.
+
     ``manip``: refuse a test whose own settings turn derandomization or the database back on.
     ``long``: raise a test's own smaller ``max_examples`` to the profile's."""
+    _widen_time_limits(config, items)
 
     def rank(item: pytest.Item) -> int:
         return 0 if item.get_closest_marker("slow") else 1 if item.get_closest_marker("waits") else 2
