@@ -1172,3 +1172,144 @@ def test_queue_reversed() -> None:
         return [int.from_bytes(d[6:8], "little") for _, d in _async(c, 20.0)]
 
     assert pair(Fault.QUEUE_REVERSED, completed) == ([1, 2, 3], [1, 3, 2])
+
+
+# ----------------------------------------------------------- clauses no fault proved before (issue 32)
+@covers(Fault.CALIBRATE_REPLIES_MASK)
+@covers(Fault.KILL_POWER_REPLIES_STATE)
+@covers(Fault.ENABLE_POWER_REPLIES_STATE)
+def test_done_replies_carry_a_word() -> None:
+    def scenario(c: Client) -> list[bytes]:
+        return [_raw(c, op)[0][1][2:] for op in ("calibrate", "kill-power", "enable-power")]
+
+    assert pair(Fault.CALIBRATE_REPLIES_MASK, scenario) == ([b""] * 3, [b"\x3f\x00", b"", b""])
+    assert pair(Fault.KILL_POWER_REPLIES_STATE, scenario) == ([b""] * 3, [b"", b"\x00\x00", b""])
+    assert pair(Fault.ENABLE_POWER_REPLIES_STATE, scenario) == ([b""] * 3, [b"", b"", b"\x01\x00"])
+
+
+@covers(Fault.NZI_MASK_IN_TEXT)
+def test_nzi_mask_in_text() -> None:
+    def scenario(c: Client) -> tuple[tuple[int, ...], bool, str]:
+        ((opcode, data),) = _packets(c.raw(RequestOp.CALIBRATE, b""))
+        error = decode_error(opcode, data).error
+        return error.args, error.has_nul, error.message
+
+    clean, faulty = pair(Fault.NZI_MASK_IN_TEXT, scenario, base=FaultSet.parse(["calibrate-nzi=2,3"]))
+    assert clean[:2] == ((6,), True) and "$" in clean[2]
+    assert faulty == ((), False, "No zero index found on joints 2 3")
+
+
+@covers(Fault.SET_CONFIGURATION_WORD_ONLY)
+@covers(Fault.HAND_FLAG_ONLY)
+def test_request_data_read_narrowly() -> None:
+    done, error = ServerOp.RESPONSE, ServerOp.NON_FATAL_ERROR
+
+    def configurations(c: Client) -> list[int]:
+        return [_raw(c, "set-configuration", data)[0][0] for data in (b"\x01", b"\x01\x00", b"\x00")]
+
+    assert pair(Fault.SET_CONFIGURATION_WORD_ONLY, configurations) == ([done] * 3, [error, done, error])
+
+    def hands(c: Client) -> list[int]:
+        return [_raw(c, "hand", amount=amount)[0][0] for amount in (0, 1, 2, 0o400, 0o177777)]
+
+    assert pair(Fault.HAND_FLAG_ONLY, hands) == ([done] * 5, [done, done, error, error, error])
+
+
+@covers(Fault.FREE_JOINT_FROM_ZERO)
+def test_free_joint_from_zero() -> None:
+    def scenario(c: Client) -> list[tuple[int, int | None]]:
+        out = []
+        for joint in (0, 1, 6):
+            ((opcode, _),) = _raw(c, "free-joint", joint=joint)
+            out.append((opcode, c.session.arm.free_joint))
+            if opcode == ServerOp.RESPONSE:
+                _raw(c, "here")  # the packet after free joint, discarded
+        return out
+
+    done, error = ServerOp.RESPONSE, ServerOp.NON_FATAL_ERROR
+    assert pair(Fault.FREE_JOINT_FROM_ZERO, scenario) == (
+        [(error, None), (done, 1), (done, 6)],
+        [(done, 1), (done, 2), (error, None)],
+    )
+
+
+@covers(Fault.INCREMENT_ANGLES_FIRST)
+def test_increment_angles_first() -> None:
+    def scenario(c: Client) -> tuple[float, ...]:
+        c.one("set-joint-angles", joints=(20.0, -60.0, 150.0, 0.0, -60.0, 0.0))
+        c.settle()
+        before = _here(c)
+        c.one("incremental-straight-move", delta=(0.0, 0.0, 0.0, 3.0, 0.0, 0.0))
+        c.settle()
+        return tuple(round(b - a, 3) for a, b in zip(before[9:], _here(c)[9:], strict=True))
+
+    clean, faulty = pair(Fault.INCREMENT_ANGLES_FIRST, scenario)
+    assert clean == (0.0, 0.0, 0.0) and faulty == (3.0, 0.0, 0.0)  # dO read as dX (millimetres)
+
+
+@covers(Fault.MOTION_REPLY_AT_REST)
+def test_motion_reply_at_rest() -> None:
+    def scenario(c: Client) -> tuple[int, bool]:
+        answered = len(_raw(c, "set-joint-angles", joints=GOAL)) + len(_raw(c, "here"))
+        for _ in range(1000):  # 16 s
+            if answered == 2:
+                break
+            c.now += 0.016
+            answered += sum(op == ServerOp.RESPONSE for op, _ in _packets(c.session.tick(c.now)))
+        return answered, c.session.arm.moving
+
+    assert pair(Fault.MOTION_REPLY_AT_REST, scenario) == ((2, True), (2, False))
+
+
+@covers(Fault.POWER_KEEPS_ABORT)
+def test_power_keeps_abort() -> None:
+    def scenario(c: Client) -> str:
+        c.one("set-joint-angles", joints=GOAL)
+        c.one("kill-power")
+        c.run(0.1)
+        c.one("enable-power")
+        return _motion_reply(c)
+
+    assert pair(Fault.POWER_KEEPS_ABORT, scenario) == ("segment 2", "AWA")
+
+
+@covers(Fault.ASYNC_CODES_FROM_BITS)
+def test_async_codes_from_bits() -> None:
+    def scenario(c: Client) -> list[int]:
+        c.one("request-notifications", mask=3)
+        c.one("set-joint-angles", joints=GOAL)
+        return [
+            decode_async(data).condition
+            for op, data in _async(c, 5.0)
+            if op == ServerOp.ASYNCHRONOUS_RESPONSE
+        ]
+
+    assert pair(Fault.ASYNC_CODES_FROM_BITS, scenario) == ([2], [1])
+
+
+@covers(Fault.SECOND_CLIENT_ADMITTED)
+def test_second_client_admitted_against_its_case() -> None:
+    """A fault of the driver: the one-server-per-robot case (a SHOULD: --strict counts it) passes clean
+    and fails with it."""
+    select = "server.connect.one-server-per-robot"
+    runs = [
+        CliRunner().invoke(conform_main, ["run", "--select", select, "--seed", "7", "--strict", *faults])
+        for faults in ((), ("--server-fault", "second-client-admitted"))
+    ]
+    assert [run.exit_code for run in runs] == [0, 1], [run.output for run in runs]
+
+
+@covers(Fault.COMMAND_LEAD)
+def test_command_lead() -> None:
+    def scenario(c: Client) -> tuple[float, float]:
+        start = c.session.arm.actual
+        goal = (start[0] + 30.0, *start[1:])
+        c.one("set-joint-angles", joints=goal)
+        past = 0.0
+        for _ in range(400):
+            c.run(0.016)
+            past = max(past, c.session.arm.actual[0] - goal[0])
+        return round(past, 3), round(c.session.arm.actual[0] - goal[0], 6)
+
+    clean, faulty = pair(Fault.COMMAND_LEAD, scenario)
+    assert clean == (0.0, 0.0) and faulty[0] > 0.1 and faulty[1] == 0.0

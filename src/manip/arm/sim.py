@@ -362,6 +362,8 @@ class ArmDefects:
     """Refuse motion without arm power (NAP)."""
     enforce_abort: bool = True
     """Refuse motion after an abort (AWA)."""
+    power_resets_abort: bool = True
+    """Enable high power clears an abort (erratum ``abort-reset``; False: only Reset abort does)."""
     collision_test: bool = True
     """Compare the actual angles with those commanded (False: no collision is ever seen)."""
     collision_test_compliant: bool = False
@@ -383,6 +385,9 @@ class ArmDefects:
     """The increment of the segment counter."""
     servo_rate: float = 1.0
     """Servo cycles per period of the clock (2: the servo runs twice as fast)."""
+    command_lead: float = 0.0
+    """Servo cycles of the path's velocity added to each command (0: the path as interpolated; more runs
+    the arm ahead of its path, and past a goal before it settles there)."""
 
 
 class ArmSim:
@@ -425,6 +430,8 @@ class ArmSim:
         here = _joints(model.ready if start is None else start)
         self.commanded: Joints = here
         """Angles sent to the controller on the last servo cycle."""
+        self._path_before: Joints | None = None
+        """The path's angles on the last servo cycle (with :attr:`ArmDefects.command_lead` only)."""
         self.actual: Joints = here
         """Angles the arm actually reached (the sensed angles)."""
         self.powered = bool(powered)
@@ -493,7 +500,8 @@ class ArmSim:
     def enable_power(self) -> None:
         """Arm power on; also clears an abort (erratum ``abort-reset``)."""
         self.powered = True
-        self.reset_abort()
+        if self.defects.power_resets_abort:
+            self.reset_abort()
 
     def kill_power(self) -> None:
         """Arm power off.  Segments in flight are aborted on the next servo cycle (cause POWER_LOST)."""
@@ -697,9 +705,20 @@ class ArmSim:
                 events.append(FollowingWarning(t, warn))
             self._lag_warned = bool(warn)
         q = self._next_command(t, events)
+        if self.defects.command_lead:
+            q = self._led(q)
         reached = self.sluggish.follow(self.commanded, q) if self.sluggish is not None else q
         self.commanded = q
         self.actual = self.obstacle.clamp(reached) if self.obstacle is not None else reached
+
+    def _led(self, q: Joints) -> Joints:
+        """The faulty server of :attr:`ArmDefects.command_lead`: the path's angles ``q`` plus its velocity
+        times the lead (nothing added at rest)."""
+        before, self._path_before = self._path_before, q
+        if before is None:
+            return q
+        lead = self.defects.command_lead
+        return _joints([x + lead * (x - b) for x, b in zip(q, before, strict=True)])
 
     def _lagging(self, tol: float) -> tuple[int, ...]:
         return tuple(
@@ -857,7 +876,7 @@ class ArmSim:
         self._playback = None
         self._backlog.clear()
         stop = self.actual  # the arm stops where it is
-        self.commanded = stop
+        self.commanded, self._path_before = stop, None
         self._interp = MoveInterpolator(stop, self.limits, self.speed)
         self._planned, self._planned_oat = stop, None
         self._scheme_now = None

@@ -930,7 +930,7 @@ class _Calibration:
         offsets = tuple(round(sum(s[i] for s in samples) / len(samples)) for i in range(8))
         offsets = tuple(min(max(v, -0x8000), 0x7FFF) for v in offsets)
         self.wrist.queue_command(CougarCommand.WGOV, offsets=offsets)
-        if self.settings.return_to_start:
+        if self.settings.return_to_start and self.wrist.defects.calibrate_moves_back:
             try:
                 arm.move_joints(self.start, t)
             except Exception as exc:

@@ -12,9 +12,10 @@ The hook points, by what they decide:
 
 * the connection: :attr:`~Defects.arm` and :attr:`~Defects.wrist` (the defects the move process and the
   wrist a connection runs with are given, as values), :meth:`~Defects.inherit` (what a new connection
-  keeps of the last), :attr:`~Defects.keeps_arm_after_close` (the driver's);
+  keeps of the last), :attr:`~Defects.keeps_arm_after_close` and :attr:`~Defects.admits_second_client`
+  (the driver's);
 * request numbers: :meth:`~Defects.initial_numbers`, :meth:`~Defects.reply_number`;
-* when a held-back reply packet goes out: :meth:`~Defects.held_back` (at the servo tick);
+* when a held-back reply packet goes out: :meth:`~Defects.held_back` (at the servo tick, given the arm);
 * serving a request: :meth:`~Defects.decode`, :meth:`~Defects.check`, :meth:`~Defects.refused`,
   :meth:`~Defects.wrist_failure`, :attr:`~Defects.discards_after_free_joint`;
 * what a request does: :meth:`~Defects.describe`, :meth:`~Defects.increment`, :meth:`~Defects.move_ready`,
@@ -74,8 +75,13 @@ NARROWED_DEG: Final = 5.0
 """How much narrower than the arm's each joint range is stated under ``describe-narrow-limits``."""
 READY_OFF_DEG: Final = 10.0
 """How far from where move to ready goes joint 2 of :ready-position is stated under ``describe-ready-off``."""
+COMMAND_LEAD_CYCLES: Final = 4.0
+"""Servo cycles of the path's velocity the command-lead fault adds to each command (about 0.2 degrees
+past a 30-degree move's goal)."""
 SEGMENTS_STOP_REST_S: Final = 0.1
 """How long the segments-stop fault rests between queued segments: clearly more than a blend's pause."""
+CALIBRATED_MASK: Final = 0o77
+"""The word calibrate-replies-mask appends to calibrate's done: every joint found its zero index."""
 OUNCES_PER_POUND: Final = 16.0
 """What the forces-in-pounds fault divides read forces' answer by."""
 RESERVED_OPERAND: Final = 0x8000
@@ -110,6 +116,8 @@ class Defects:
 
     keeps_arm_after_close: bool = False
     """The driver hands the arm of a closed connection, still moving, to the next one."""
+    admits_second_client: bool = False
+    """The driver accepts a connection while another is open (one server per robot: it refuses it)."""
     discards_after_free_joint: bool = True
     """The packet after free joint is answered done without being executed."""
     straight_lines: bool = True
@@ -191,9 +199,9 @@ class Defects:
         included."""
         return packets
 
-    def held_back(self) -> tuple[bytes, ...]:
-        """Reply packets held back from an earlier request, sent at the servo tick (none: a reply
-        goes out whole, at once)."""
+    def held_back(self, arm: ArmSim) -> tuple[bytes, ...]:
+        """Reply packets held back from an earlier request, sent at the servo tick before ``arm`` runs
+        (none: a reply goes out whole, at once)."""
         return ()
 
     # ---------------------------------------------------------------------------- errors
@@ -254,10 +262,13 @@ class SwitchedDefects(Defects):
         """The connection's first read forces answer (fault forces-stale)."""
         self._held_async: list[Outgoing] = []
         """Asynchronous packets waiting for the next request (fault async-splits-multi)."""
+        self._held_replies: list[bytes] = []
+        """Replies waiting for the arm to come to rest (fault motion-reply-at-rest)."""
         on = faults.active
         self.arm = arm_defects(faults)
         self.wrist = _wrist_defects(faults)
         self.keeps_arm_after_close = Fault.CLOSE_KEEPS_MOVING in on
+        self.admits_second_client = Fault.SECOND_CLIENT_ADMITTED in on
         self.discards_after_free_joint = Fault.FREE_JOINT_EXECUTES not in on
         self.straight_lines = Fault.STRAIGHT_AS_JOINT not in on
         self.joint_moves = Fault.JOINT_MOVES_STRAIGHT not in on
@@ -302,6 +313,8 @@ class SwitchedDefects(Defects):
 
     # ---------------------------------------------------------------------------- serving a request
     def decode(self, op: RequestOpcode, data: bytes) -> Mapping[str, Value]:
+        if op.name == "set-configuration" and len(data) == 1 and self._on(Fault.SET_CONFIGURATION_WORD_ONLY):
+            raise errors.bad_length(2, 1)
         try:
             values = super().decode(op, data)
         except DecodeError as exc:
@@ -309,6 +322,11 @@ class SwitchedDefects(Defects):
                 raise
             expected = op.request.fixed_size or 0
             values = super().decode(op, data[:expected].ljust(expected, b"\0"))
+        if op.name == "hand" and values["amount"] not in (0, 1) and self._on(Fault.HAND_FLAG_ONLY):
+            raise errors.bad_value("hand", f"amount {values['amount']} is neither 0 (close) nor 1 (open)")
+        joint = values.get("joint") if op.name == "free-joint" else None
+        if isinstance(joint, int) and self._on(Fault.FREE_JOINT_FROM_ZERO):
+            values = {**values, "joint": (joint & 0xFF) + 1}  # byte n taken as joint n+1
         return _joints_reversed(op.request.fields, values) if self._on(Fault.JOINTS_REVERSED) else values
 
     def check(self, op: RequestOpcode, arm: ArmSim) -> None:
@@ -359,6 +377,8 @@ class SwitchedDefects(Defects):
         )
 
     def increment(self, delta: tuple[float, ...]) -> tuple[float, ...]:
+        if self._on(Fault.INCREMENT_ANGLES_FIRST):  # the floats on the wire read as dO dA dT dX dY dZ
+            delta = (*delta[3:], *delta[:3])
         if self._on(Fault.INCREMENT_O_T_SWAPPED):
             dx, dy, dz, do, da, dt = delta
             return (dx, dy, dz, dt, da, do)
@@ -384,9 +404,22 @@ class SwitchedDefects(Defects):
             values = _joints_reversed(fields, values)
         if op.name == "read-forces":
             values = self._forces(values)
+        extra = self._done_word(op)
+        if extra is not None:
+            return encode(op, values) + _word(extra)
         if self.faults.active & _FLOAT_FAULTS and fields and all(f.type.element == "float" for f in fields):
             return b"".join(self._float(float(x)) for f in fields for x in values[f.name])
         return encode(op, values)
+
+    def _done_word(self, op: RequestOpcode) -> int | None:
+        """The word a done-word fault appends to ``op``'s empty done (None: nothing)."""
+        if op.name == "calibrate" and self._on(Fault.CALIBRATE_REPLIES_MASK):
+            return CALIBRATED_MASK
+        if op.name == "kill-power" and self._on(Fault.KILL_POWER_REPLIES_STATE):
+            return 0
+        if op.name == "enable-power" and self._on(Fault.ENABLE_POWER_REPLIES_STATE):
+            return 1
+        return None
 
     def _forces(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
         """Read forces' answer as the force faults bend it."""
@@ -410,6 +443,11 @@ class SwitchedDefects(Defects):
 
     def reply(self, op: RequestOpcode | None, packets: list[bytes]) -> Sequence[bytes]:
         packets = self._overtaking(op, packets)
+        if self._on(Fault.MOTION_REPLY_AT_REST) and (
+            self._held_replies or (op is not None and op.response.form == "segment")
+        ):
+            self._held_replies += packets  # the main process waits for the arm before it answers
+            return []
         if op is None:
             return packets
         if op.response.form == "multi":
@@ -436,6 +474,9 @@ class SwitchedDefects(Defects):
             error = replace(error, severity="E")
         if self._on(Fault.WRONG_SEVERITY):
             error = replace(error, severity="E" if opcode == ServerOp.FATAL_ERROR else "F")
+        if error.code == "NZI" and error.args and self._on(Fault.NZI_MASK_IN_TEXT):
+            joints = " ".join(str(j) for j in range(1, 17) if error.args[0] >> (j - 1) & 1)
+            error = replace(error, message=f"No zero index found on joints {joints}", args=(), has_nul=False)
         if error.code == "NZI" and error.args and self._on(Fault.NZI_MASK_SHIFTED):
             error = replace(error, args=(error.args[0] << 1 & WORD_MASK, *error.args[1:]))
         if any(self._on(fault) and error.code in codes for fault, codes in _SWAPPED_ARGS.items()):
@@ -467,6 +508,8 @@ class SwitchedDefects(Defects):
             word2 = GUARD_STOP + GUARD_CONTINUE - word2
         if condition == AsyncCondition.SEGMENT_COMPLETED and self._on(Fault.SEGMENT_REPORT_PREVIOUS):
             word3 = (word3 - 1) & WORD_MASK
+        if self._on(Fault.ASYNC_CODES_FROM_BITS):
+            condition = SPEC.async_codes[condition].notification_bit
         data = encode_async(number, condition, word2, word3, async_has_request_number=numbered)
         return data + b"\0" if self._on(Fault.ASYNC_STRAY_BYTE) else data
 
@@ -476,7 +519,10 @@ class SwitchedDefects(Defects):
     def after_warning(self, arm: ArmSim) -> list[ArmEvent]:
         return arm.halt(AbortCause.COLLISION) if self._on(Fault.WARNING_INTERRUPTS) else []
 
-    def held_back(self) -> tuple[bytes, ...]:
+    def held_back(self, arm: ArmSim) -> tuple[bytes, ...]:
+        if self._held_replies and not arm.moving:
+            replies, self._held_replies = tuple(self._held_replies), []
+            return replies
         if self._held_terminator is None:
             return ()
         self._held_ticks += 1
@@ -532,6 +578,7 @@ def arm_defects(faults: FaultSet) -> ArmDefects:
     return ArmDefects(
         enforce_power=Fault.NO_NAP not in on,
         enforce_abort=Fault.AWA_IGNORED not in on,
+        power_resets_abort=Fault.POWER_KEEPS_ABORT not in on,
         collision_test=Fault.COLLISION_UNCHECKED not in on,
         collision_test_compliant=Fault.COMPLIANT_COLLISION_TEST in on,
         hold_compliant_end=Fault.COMPLIANT_SNAP_BACK not in on,
@@ -545,6 +592,7 @@ def arm_defects(faults: FaultSet) -> ArmDefects:
         keep_queue_on_abort=Fault.ABORT_KEEPS_QUEUE in on,
         segment_step=0 if Fault.SEGMENT_NUMBER_STUCK in on else 1,
         servo_rate=2.0 if Fault.SERVO_DOUBLE_RATE in on else 1.0,
+        command_lead=COMMAND_LEAD_CYCLES if Fault.COMMAND_LEAD in on else 0.0,
     )
 
 
@@ -560,6 +608,7 @@ def _wrist_defects(faults: FaultSet) -> WristDefects:
         read_forces_sends_angles=Fault.READ_FORCES_NO_ANGLES not in on,
         read_forces_waits=Fault.WRIST_NO_WAIT not in on,
         calibrate_two_poses=Fault.CALIBRATE_ONE_POSE not in on,
+        calibrate_moves_back=Fault.CALIBRATE_STAYS_AWAY not in on,
         user_while_moving=Fault.WRIST_CONFIG_AFTER_MOTION not in on,
         user_while_compliant=Fault.WRIST_USER_HELD_COMPLIANT not in on,
         handles_out_of_sync=Fault.OUT_OF_SYNC_IGNORED not in on,

@@ -80,7 +80,7 @@ from manip.links.api import LinkWrapper
 from manip.links.stream import StreamLink
 from manip.links.virtual_clock import is_virtual
 from manip.ncp import ConnectionRequested
-from manip.reference_server.defects import arm_defects
+from manip.reference_server.defects import arm_defects, defects_for
 from manip.reference_server.session import Outgoing, Output, ServerConfig, ServerSession, State
 from manip.reference_server.wrist import Wrist
 from manip.spec import SPEC, RequestOpcode
@@ -199,6 +199,8 @@ class ReferenceServer:
         self.rng = random.Random(seed)
         """The server's random generator (seeded by ``seed``); the arm model itself is deterministic."""
         self.max_clients = max_clients
+        self._admits_all = defects_for(config.faults).admits_second_client
+        """Every RFC is accepted, whatever is open (fault second-client-admitted)."""
         self.wrist = wrist
         self.stats = ServerStats()
         self.servo_period = max(TICK / self.time_scale, MIN_SERVO_PERIOD)
@@ -280,7 +282,7 @@ class ReferenceServer:
             for conn in server.connections
             if not conn.ended and conn not in self._released
         )
-        if live < self.max_clients:
+        if live < self.max_clients or self._admits_all:
             return None
         self.stats.refused += 1
         log.info(

@@ -568,6 +568,103 @@ class Fault(FaultSwitch):
         "joint-move.interpolated",
         caught_by=("server.motion.joint-interpolated",),
     )
+    # protocol defects proving the clauses no fault proved (issue 32)
+    CALIBRATE_REPLIES_MASK = defect(
+        "calibrate-replies-mask",
+        "Calibrate answers done with a word after the request number: the mask of the joints that found "
+        "their zero index.",
+        "calibrate.done",
+        "response.done-empty",
+        caught_by=("server.reply.calibrate",),
+    )
+    NZI_MASK_IN_TEXT = defect(
+        "nzi-mask-in-text",
+        'F NZI names the joints that failed in its text ("joints 2 5"), with no NUL and no $ mask argument.',
+        "calibrate.nzi",
+        "calibrate.nzi-mask",
+        caught_by=("server.error.fatal-then-close",),
+    )
+    KILL_POWER_REPLIES_STATE = defect(
+        "kill-power-replies-state",
+        "Kill power answers done with a word after the request number: arm power as it now is (0, off).",
+        "kill-power.done",
+        "response.done-empty",
+        caught_by=("server.reply.kill-power", "server.motion.nap"),
+    )
+    ENABLE_POWER_REPLIES_STATE = defect(
+        "enable-power-replies-state",
+        "Enable high power answers done with a word after the request number: arm power as it now is "
+        "(1, on).",
+        "enable-power.done",
+        "response.done-empty",
+        caught_by=("server.reply.enable-power",),
+    )
+    SET_CONFIGURATION_WORD_ONLY = defect(
+        "set-configuration-word-only",
+        "Set configuration takes a word only: one data byte, which the 1985 guide allows, is refused with "
+        "C BDL.",
+        "set-configuration.data",
+        caught_by=("server.negative.set-configuration-sizes",),
+    )
+    HAND_FLAG_ONLY = defect(
+        "hand-flag-only",
+        "Open or close hand refuses any amount but 0 and 1 with C BVA, as if the word were a flag.",
+        "hand.data",
+        caught_by=("server.hand.amounts",),
+    )
+    INCREMENT_ANGLES_FIRST = defect(
+        "increment-angles-first",
+        "Incremental moves (211, 212) read their six floats as dO dA dT dX dY dZ: the angles first.",
+        "incremental-move.data",
+        "incremental-straight-move.data",
+        caught_by=("server.motion.incremental-oat",),
+    )
+    FREE_JOINT_FROM_ZERO = defect(
+        "free-joint-from-zero",
+        "Free joint counts joints from 0: 0 frees joint 1, 5 frees joint 6, and 6 is refused.",
+        "free-joint.data",
+        caught_by=("server.free-joint.bad-joint",),
+    )
+    MOTION_REPLY_AT_REST = defect(
+        "motion-reply-at-rest",
+        "The main process waits for the arm: a motion request's reply, and every reply after it, is held "
+        "until the arm comes to rest.",
+        "motion.reply-before-motion",
+        caught_by=("server.motion.reply-before-motion",),
+    )
+    POWER_KEEPS_ABORT = defect(
+        "power-keeps-abort",
+        "Enable high power restores arm power but leaves an abort in force: only Reset abort clears AWA.",
+        "motion.reset",
+        caught_by=("server.motion.awa-reset-by-power",),
+    )
+    ASYNC_CODES_FROM_BITS = defect(
+        "async-codes-from-bits",
+        "Asynchronous responses carry their condition's request-notifications bit as its code: guard hit 0, "
+        "segment completed 1.",
+        "async.codes",
+        caught_by=("server.async.segment-completed",),
+    )
+    CALIBRATE_STAYS_AWAY = defect(
+        "calibrate-stays-away",
+        "Calibrate wrist answers with the arm left at its second calibration pose: it never moves back to "
+        "where it started.",
+        "puma.calibrate-wrist.positions",
+        caught_by=("puma.calibrate-wrist.positions",),
+    )
+    COMMAND_LEAD = defect(
+        "command-lead",
+        "The move process adds four servo cycles of the path's velocity to each command: the arm runs ahead "
+        "of its path, and passes a goal with nothing queued after it before it settles there.",
+        "motion.ends-at-rest",
+        caught_by=("server.motion.queued-segments",),
+    )
+    SECOND_CLIENT_ADMITTED = defect(
+        "second-client-admitted",
+        "A second connection while one is open is accepted, with a session of its own on the one robot.",
+        "connect.one-server-per-robot",
+        caught_by=("server.connect.one-server-per-robot",),
+    )
 
 
 RETIRED: Final[Mapping[str, str]] = MappingProxyType(

@@ -355,7 +355,7 @@ class ServerSession:
 
     def _run_arm(self, event: _Event) -> State | None:
         """Run the move process up to ``now``, then the wrist processes, and report what they did."""
-        for data in self.defects.held_back():
+        for data in self.defects.held_back(self.arm):
             self._emit(ServerOp.RESPONSE, data)
         number = self.last_processed or 0
         self._report_arm(number, self.arm.tick(event.now))

@@ -137,6 +137,8 @@ class WristDefects:
     """Read forces waits for Cougar's answer (not the last forces seen)."""
     calibrate_two_poses: bool = True
     """Calibrate-wrist takes its readings in two poses (not one, gravity in them)."""
+    calibrate_moves_back: bool = True
+    """Calibrate-wrist brings the arm back to where it started (not left at its second pose)."""
     user_while_moving: bool = True
     """The user's commands go out on the next tick while the arm moves (not once the queue is done)."""
     user_while_compliant: bool = True

@@ -11,8 +11,8 @@ import numpy as np
 
 from manip.arm.kinematics import PUMA600, forward
 from manip.codecs.messages import decode_reply
-from manip.conformance.cases._support import require_response
-from manip.conformance.cases.puma._support import begin, session
+from manip.conformance.cases._support import read_floats, require_response, settle
+from manip.conformance.cases.puma._support import SEGMENT_WITHIN, begin, session
 from manip.conformance.puma.judge import SENSED, CougarScript, Heard
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
@@ -24,6 +24,10 @@ LOAD: Final = 400
 """Gauge counts per unit of gravity along each hand axis (the gravity load is up to this big)."""
 CANCEL: Final = 0.02
 """Two poses' gravity directions in the hand cancel when their sum is shorter than this."""
+HORIZONTAL: Final = 0.02
+"""The tool axis is horizontal when its world z component is smaller than this (about 1.1 degrees)."""
+SAME_DEG: Final = 0.5
+"""Two readings of a joint within this many degrees are the same angle."""
 
 
 def gravity_in_hand(pose: Sequence[float]) -> np.ndarray:
@@ -92,3 +96,53 @@ async def calibrate_wrist(ctx: CaseContext) -> None:
         expected=f"calibrate-wrist answered with the offsets set: {sent}",
         seen=answer,
     )
+
+
+def _half_turn_apart(first: Sequence[float], other: Sequence[float]) -> bool:
+    """``other`` is ``first`` with joint 6 turned half a turn, joints 1-5 the same."""
+    turned = abs((other[5] - first[5]) % 360.0 - 180.0) <= SAME_DEG
+    return turned and all(abs(a - b) <= SAME_DEG for a, b in zip(first[:5], other[:5], strict=True))
+
+
+@case(
+    "puma.calibrate-wrist.positions",
+    clauses=["puma.calibrate-wrist.positions"],
+    hazard="motion",
+    deadline=60.0,
+)
+async def calibrate_wrist_positions(ctx: CaseContext) -> None:
+    """Calibrate wrist reads the gauges first with the tool axis horizontal, then with joint 6 turned half
+    a turn from there (joints 1-5 unchanged), and brings the arm back to where it started."""
+    probe = await session(ctx, notify=None)
+    start = await read_floats(ctx, probe, "joint-angles")
+    judge, mark = begin(ctx, CougarScript(gauges=lambda pose: [0] * GAUGES))
+    answer = await probe.call("calibrate-wrist")
+    require_response(ctx, answer, "calibrate-wrist answered")
+    poses = _poses_of_reads(judge.since(mark))
+    first = poses[0] if poses else None
+    tilt = float(np.asarray(forward(tuple(first), PUMA600.geometry).matrix)[2, 2]) if first else None
+    ctx.expect(
+        tilt is not None and abs(tilt) < HORIZONTAL,
+        clause="puma.calibrate-wrist.positions",
+        expected=f"the first Read Raw Gauges with the tool axis horizontal (world z below {HORIZONTAL:g})",
+        seen=f"read at {_rounded(first)}: tool axis z {tilt}" if first else "no Read Raw Gauges",
+    )
+    others = sorted({tuple(round(v, 2) for v in p) for p in poses if p != first})
+    ctx.expect(
+        first is not None and any(_half_turn_apart(first, p) for p in poses),
+        clause="puma.calibrate-wrist.positions",
+        expected="a second pose with joint 6 half a turn from the first, joints 1-5 unchanged",
+        seen=f"first pose {_rounded(first)}, others {others[:3]}",
+    )
+    back = await settle(ctx, probe, start, within=SEGMENT_WITHIN * ctx.options.deadline_scale, tol=SAME_DEG)
+    now = await read_floats(ctx, probe, "joint-angles")
+    ctx.expect(
+        back is not None,
+        clause="puma.calibrate-wrist.positions",
+        expected=f"the arm back where it started, {_rounded(start)}",
+        seen=f"it stays at {_rounded(now)}",
+    )
+
+
+def _rounded(pose: Sequence[float] | None) -> tuple[float, ...] | None:
+    return None if pose is None else tuple(round(v, 2) for v in pose)

@@ -47,6 +47,10 @@ async def one_server_per_robot(ctx: CaseContext) -> None:
             ctx.note(f"second connection refused: {cause.reason}")
             return
         raise
+    # The server opened it: wait for its first packet, so the transcript judged holds what it sent.
+    opened = await second.next_packet(ctx.options.reply_timeout)
+    if opened is not None:
+        second.push_back(opened)
     ctx.expect(
         False,
         clause="connect.one-server-per-robot",

@@ -33,7 +33,7 @@ from manip.conformance.judge.checks import async_of, check_async_packet, word
 from manip.conformance.judge.violation import missing, showing
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import Answer, CaseContext, Probe
-from manip.spec import RequestName
+from manip.spec import SPEC, RequestName
 from manip.spec.constants import AsyncCondition, ServerOp
 
 FAR_MM = 100_000.0
@@ -385,7 +385,10 @@ async def reply_before_motion(ctx: CaseContext) -> None:
     before = await read_floats(ctx, probe, "joint-angles")
     goal = _away_from_zero(before, 20.0)
     start = ctx.clock()
-    answer = await probe.call("set-joint-angles", joints=goal)
+    # Waited for as long as the segment may take: a reply held until the arm arrives is then seen late,
+    # and judged so, rather than missed.
+    wait = SPEC.segment_within * ctx.options.deadline_scale
+    answer = await probe.call("set-joint-angles", joints=goal, timeout=max(ctx.options.reply_timeout, wait))
     took = ctx.clock() - start
     _expect_segment_reply(ctx, answer, "a segment-number reply")
     now = await read_floats(ctx, probe, "joint-angles")
@@ -473,10 +476,10 @@ async def segment_completed(ctx: CaseContext) -> None:
             continue
         ctx.check(check_async_packet(packet, 1 << 1))
         message = async_of(packet)
-        ctx.expect(
-            message is not None and message.condition == AsyncCondition.SEGMENT_COMPLETED,
-            clause="async.layout",
-            expected="condition 2 (segment completed)",
+        ctx.expect(  # a packet of neither layout is async.layout's, which check_async_packet names
+            message is None or message.condition == AsyncCondition.SEGMENT_COMPLETED,
+            clause="async.codes",
+            expected="condition code 2 (segment completed)",
             seen=showing(packet, f"condition {message.condition if message else None}"),
         )
         seen.append(message.word3 if message else None)
@@ -554,6 +557,24 @@ async def free_joint_bad(ctx: CaseContext) -> None:
     for joint in (0, 7):
         answer = await probe.call("free-joint", joint=joint)
         expect_refusal(ctx, answer, clause="free-joint.data", what=f"free joint {joint}")
+
+
+HAND_AMOUNTS: Final = (0, 1, 0, 2, 0, 0o400, 0, 0o177777)
+"""Open or close hand's amounts the hand-amounts case sends: each but 0 opens a binary hand, 0o400 with
+a low byte of zero, 0o177777 with every bit set."""
+
+
+@case("server.hand.amounts", clauses=["hand.data"], hazard="motion")
+async def hand_amounts(ctx: CaseContext) -> None:
+    """Open or close hand takes any 16-bit amount, answered with done: 0 closes a binary hand and every
+    other value opens it (2, 0o400, 0o177777 as well as 1)."""
+    probe = await ctx.connect()
+    await power_on(ctx, probe)
+    for amount in HAND_AMOUNTS:
+        answer = await probe.call("hand", amount=amount)
+        ctx.expect_done(
+            answer, clause="hand.data", expected=f"done for open or close hand of amount {amount}"
+        )
 
 
 # ------------------------------------------------------------------ configuration and per-connection state

@@ -361,9 +361,11 @@ async def _turned(
     op: RequestName,
     start: tuple[float, ...],
     delta: tuple[float, float, float],
+    data_clause: str,
 ) -> tuple[float, ...]:
     """Turn the hand by ``delta`` (dO dA dT) with ``op``: it must end at R(O + dO, A + dA, T + dT) of
-    ``start``'s angles, where ``start`` stood; returns where it ended."""
+    ``start``'s angles, where ``start`` stood, its position unchanged (``data_clause``: the opcode's
+    data clause, six floats dX dY dZ dO dA dT); returns where it ended."""
     o, a, t = val_angles(start)
     require_reach(ctx, await probe.call(op, delta=[0.0, 0.0, 0.0, *delta]), f"{op} turning the hand")
     await _sample(ctx, probe, "here", 10.0)
@@ -375,6 +377,13 @@ async def _turned(
     turn = max(abs(want[i][j] - got[i][j]) for i in range(3) for j in range(3))
     angle = turn_deg([want[i][j] for j in range(3) for i in range(3)], end[:9])
     off = math.dist(end[9:], start[9:])
+    ctx.expect(  # from rest, where the queue ends is where the arm stands: a move shows how it read them
+        off <= length(ctx, POSE_TOL_MM),
+        clause=data_clause,
+        expected=f"{op} of dX dY dZ 0 0 0, dO dA dT {list(delta)}: the six floats read in that order, so the "
+        "hand's position unchanged",
+        seen=showing(here, f"position moved {off:.4g} {ctx.options.length_unit}"),
+    )
     ctx.expect(
         turn <= OAT_TOL and off <= length(ctx, POSE_TOL_MM),
         clause="incremental.relative",
@@ -402,13 +411,9 @@ async def incremental_oat(ctx: CaseContext) -> None:
     started (computed here from docs/kinematics.md's convention), and the position unchanged."""
     probe = await ctx.connect()
     before, start = await _at_line_pose(ctx, probe)
-    turns: tuple[tuple[RequestName, tuple[float, float, float]], ...] = (
-        ("incremental-move", OAT_DELTA),
-        ("incremental-straight-move", OAT_DELTA_BACK),
-    )
-    for op, delta in turns:
-        start = await _turned(ctx, probe, op, start, delta)
-        ctx.exercised(f"{op}.data")  # the turn it made is the one its data asked for
+    start = await _turned(ctx, probe, "incremental-move", start, OAT_DELTA, "incremental-move.data")
+    data_clause = "incremental-straight-move.data"
+    await _turned(ctx, probe, "incremental-straight-move", start, OAT_DELTA_BACK, data_clause)
     await probe.call("set-joint-angles", joints=list(before))
     await settle(ctx, probe, before)
 
