@@ -26,6 +26,24 @@ def _dot(a: tuple[float, ...], b: tuple[float, ...]) -> float:
     return sum(x * y for x, y in zip(a, b, strict=True))
 
 
+def _rotation_error(pose: tuple[float, ...]) -> float:
+    """How far N, O, A (the first nine floats, column by column) are from orthonormal."""
+    n, o, a = pose[0:3], pose[3:6], pose[6:9]
+    return max(
+        abs(_dot(n, n) - 1),
+        abs(_dot(o, o) - 1),
+        abs(_dot(a, a) - 1),
+        abs(_dot(n, o)),
+        abs(_dot(n, a)),
+        abs(_dot(o, a)),
+    )
+
+
+def _by_rows(pose: tuple[float, ...]) -> tuple[float, ...]:
+    """The twelve floats of a transform sent row by row (Nx Ox Ax Px Ny ...), in column-major order."""
+    return tuple(pose[row * 4 + column] for column in range(4) for row in range(3))
+
+
 @case(
     "server.float.here-consistent",
     clauses=[
@@ -46,21 +64,24 @@ async def here_consistent(ctx: CaseContext) -> None:
         expected="12 finite floats",
         seen=str(pose),
     )
-    n, o, a = pose[0:3], pose[3:6], pose[6:9]
-    worst = max(
-        abs(_dot(n, n) - 1),
-        abs(_dot(o, o) - 1),
-        abs(_dot(a, a) - 1),
-        abs(_dot(n, o)),
-        abs(_dot(n, a)),
-        abs(_dot(o, a)),
+    worst = _rotation_error(pose)
+    by_rows = _by_rows(pose)
+    # read row by row (Nx Ox Ax Px Ny ...) the floats are a rotation: Here broke its order, not the floats
+    sent_by_rows = worst >= ORTHO_TOL and len(pose) == 12 and _rotation_error(by_rows) < ORTHO_TOL
+    ctx.expect(
+        not sent_by_rows,
+        clause="here.transform",
+        expected="the transform column by column: Nx Ny Nz Ox Oy Oz Ax Ay Az Px Py Pz",
+        seen=f"read row by row (Nx Ox Ax Px Ny ...) the floats are a rotation: {[round(v, 4) for v in pose]}",
     )
     ctx.expect(
-        worst < ORTHO_TOL,
+        worst < ORTHO_TOL or sent_by_rows,
         clause="float.format",
         expected="N, O, A orthonormal (floats decoded as PDP-11 F, sign/exponent word first)",
         seen=f"deviation {worst:.3g} in {[round(v, 4) for v in pose[:9]]}",
     )
+    if sent_by_rows:
+        pose = by_rows  # solve backwards is judged against the transform Here meant
     ctx.expect(
         all(abs(q) <= 720.0 for q in joints),
         clause="joint-angles.reply",
