@@ -146,6 +146,19 @@ NOT_SHOWN: dict[Fault, str] = {
         "shown as a violation of request.one-reply (side B): an answer with another number is a reply to "
         "no request outstanding, and the request's own reply missing"
     ),
+    Fault.HERE_ROW_MAJOR: (
+        "Here's floats differ from the clean side's, but no judge of one side knows which transform is right "
+        "(a layout of 12 floats is all the fuzzer's checks see): an unexplained difference (c) near "
+        "here.transform"
+    ),
+    Fault.SOLVE_BACKWARDS_RADIANS: (
+        "the transform solve backwards answers differs from the clean side's, but no judge of one side knows "
+        "which is right: an unexplained difference (c) near solve-backwards.data"
+    ),
+    Fault.SOLVE_FORWARDS_RADIANS: (
+        "no scenario or generated stream asks solve forwards of a transform in reach: every one they send is "
+        "refused alike on both sides, so the angles it would answer never differ"
+    ),
 }
 """Faults the diff does not show as a violation of one of their clauses, and why (the directed case
 that catches each is the fault matrix's, tests/conformance/test_faults.py)."""
