@@ -57,7 +57,7 @@ from manip.reference_server.errors import RequestError
 from manip.reference_server.faults import Fault, FaultSet
 from manip.reference_server.wrist import GuardHit, WristDefects
 from manip.spec import SPEC, Field, RequestName, RequestOpcode
-from manip.spec.constants import AsyncCondition, ServerOp
+from manip.spec.constants import AsyncCondition, ChaosOp, ServerOp
 
 if TYPE_CHECKING:
     from manip.reference_server.session import Outgoing, ServerSession
@@ -97,8 +97,6 @@ _FLOAT_FAULTS: Final = frozenset({Fault.UNDERFLOW_DIRTY_ZERO, Fault.NOT_FINITE_R
 _SWAPPED_CODES: Final = {"TOR": "JOR", "JOR": "TOR"}
 _ASYNC_ERRORS: Final = frozenset({ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING})
 _ASYNC_OPS: Final = _ASYNC_ERRORS | {ServerOp.ASYNCHRONOUS_RESPONSE}
-CHAOS_DWD: Final = 0o300
-"""The Chaos opcode of 16-bit word data (DWD), which data replies carry under ``data-replies-dwd``."""
 WHERE_SERVER: Final = "PUMA"
 """What the where part of an error string starts with, before a colon, under ``where-with-colon``."""
 SERIAL_NUMBER: Final = 600
@@ -500,7 +498,7 @@ class SwitchedDefects(Defects):
 
     def reply_opcode(self, op: RequestOpcode | None) -> int:
         if op is not None and op.response.form == "data" and self._on(Fault.DATA_REPLIES_DWD):
-            return CHAOS_DWD
+            return ChaosOp.DWD  # Chaos's opcode of 16-bit word data
         return ServerOp.RESPONSE
 
     # ---------------------------------------------------------------------------- errors
