@@ -25,7 +25,7 @@ from manip.arm.trajectory import TICK
 from manip.codecs.errors import DecodeError
 from manip.codecs.lisp import Symbol, read_alist
 from manip.codecs.messages import ErrorReply, decode_async, decode_error, decode_reply, encode_request
-from manip.codecs.pdp11float import pack_f, unpack_f
+from manip.codecs.pdp11float import F_MIN_NORMAL, pack_f, unpack_f
 from manip.conformance.cli import main as conform_main
 from manip.conformance.judge.checks import word
 from manip.cougar import CougarSim
@@ -1336,3 +1336,13 @@ def test_solve_backwards_radians() -> None:
     )
     degrees = _floats(_raw(Client(), "solve-backwards", joints=[math.degrees(q) for q in angles])[0][1])
     assert faulty == pytest.approx(degrees, abs=1e-3) and faulty != pytest.approx(clean, abs=1e-3)
+
+
+@covers(Fault.UNDERFLOW_CLAMPED)
+def test_underflow_clamped() -> None:
+    def scenario(c: Client) -> int:
+        tiny = _floats(_raw(c, "solve-backwards", joints=(0.0, 0.0, 0.0, 1e-38, 1e-38, 1e-38))[0][1])
+        return sum(1 for v in tiny if abs(v) == F_MIN_NORMAL)
+
+    clean, faulty = pair(Fault.UNDERFLOW_CLAMPED, scenario)
+    assert clean == 0 and faulty > 0

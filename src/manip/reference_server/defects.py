@@ -93,7 +93,9 @@ _SWAPPED_ARGS: Final[Mapping[Fault, frozenset[str]]] = {
     Fault.JOINT_MASK_SWAPPED: frozenset({"JOR", "TOR"}),
 }
 """The error codes whose numbers each byte-swapping fault sends high byte first."""
-_FLOAT_FAULTS: Final = frozenset({Fault.UNDERFLOW_DIRTY_ZERO, Fault.NOT_FINITE_RESERVED})
+_FLOAT_FAULTS: Final = frozenset(
+    {Fault.UNDERFLOW_DIRTY_ZERO, Fault.UNDERFLOW_CLAMPED, Fault.NOT_FINITE_RESERVED}
+)
 _SWAPPED_CODES: Final = {"TOR": "JOR", "JOR": "TOR"}
 _ASYNC_ERRORS: Final = frozenset({ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING})
 _ASYNC_OPS: Final = _ASYNC_ERRORS | {ServerOp.ASYNCHRONOUS_RESPONSE}
@@ -477,6 +479,8 @@ class SwitchedDefects(Defects):
         if 0.0 < abs(x) < F_MIN_NORMAL and self._on(Fault.UNDERFLOW_DIRTY_ZERO):
             fraction = max(1, int(abs(x) / F_MIN_NORMAL * (1 << 23)))  # exponent 0, the bits kept
             return struct.pack("<HH", fraction >> 16 & 0x7F, fraction & 0xFFFF)
+        if 0.0 < abs(x) < F_MIN_NORMAL and self._on(Fault.UNDERFLOW_CLAMPED):
+            return pack_f(math.copysign(F_MIN_NORMAL, x))  # the least exponent, not zero
         return pack_f(x)
 
     def reply(self, op: RequestOpcode | None, packets: list[bytes]) -> Sequence[bytes]:

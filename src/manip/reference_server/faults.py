@@ -356,6 +356,13 @@ class Fault(FaultSwitch):
         "wrist.no-answer",
         caught_by=("server.wrist.no-answer",),
     )
+    UNDERFLOW_CLAMPED = defect(
+        "underflow-clamped",
+        "Reply floats below the smallest F magnitude (2^-128) are sent as plus or minus 2^-128 (the encoder "
+        "clamps the exponent at its least) instead of zero.",
+        "float.range",
+        caught_by=("server.float.extremes",),
+    )
     UNDERFLOW_DIRTY_ZERO = defect(
         "underflow-dirty-zero",
         "Reply floats below the smallest F magnitude (2^-128) are sent with exponent 0 and their fraction "

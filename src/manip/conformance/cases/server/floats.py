@@ -9,7 +9,7 @@ import struct
 from manip.conformance.cases._support import floats, length, read_floats
 from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
-from manip.conformance.suite.context import CaseContext
+from manip.conformance.suite.context import CaseContext, Probe
 from manip.spec.constants import ServerOp
 
 ORTHO_TOL = 1e-3
@@ -17,6 +17,9 @@ REACH_MM = 5000.0
 """Far beyond any PUMA's reach: a position further out is no position Solve backwards can give."""
 TINY = 1e-38
 """Degrees whose sines are below 2^-128: the transform's entries then underflow and must be clean zeros."""
+TINY_WRIST = (0.0, 0.0, 0.0, TINY, TINY, TINY)
+"""Joint angles whose transform's rotation differs from that of all joints at 0 by at most 3 sin(TINY
+degrees), about 5e-40: below 2^-128, so where that rotation has a zero, this one has a zero too."""
 HUGE = 1.0e38
 """Near the top of the F range (1.7e38)."""
 POSITION_TOL_MM = 0.05
@@ -164,7 +167,7 @@ async def extremes(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     joints = await read_floats(ctx, probe, "joint-angles")
     asks: list[tuple[str, dict[str, list[float]]]] = [
-        ("solve-backwards", {"joints": [0.0, 0.0, 0.0, TINY, TINY, TINY]}),
+        ("solve-backwards", {"joints": list(TINY_WRIST)}),
         ("solve-backwards", {"joints": [TINY] * 6}),
         ("solve-backwards", {"joints": [HUGE, -HUGE, 1e20, 3e37, -HUGE, TINY]}),
     ]
@@ -205,3 +208,23 @@ async def extremes(ctx: CaseContext) -> None:
             f"for {what}",
             seen=str([f"{v:.4g}" for v in pose]),
         )
+    await _underflow_flushed(ctx, probe)
+
+
+async def _underflow_flushed(ctx: CaseContext, probe: Probe) -> None:
+    """float.range: a rotation entry that is zero with every joint at 0 is zero with the wrist joints at
+    :data:`TINY` degrees, whose change to it (at most 3 sin(TINY degrees), about 5e-40) is below 2^-128:
+    sent as zero, never as the smallest F magnitude or another value F cannot give it."""
+    zero = await probe.call("solve-backwards", joints=[0.0] * 6)
+    tiny = await probe.call("solve-backwards", joints=list(TINY_WRIST))
+    if not (zero.is_response and tiny.is_response):
+        return  # a refusal: the answers above judged it
+    pairs = zip(floats(zero)[:9], floats(tiny)[:9], strict=True)
+    unflushed = [f"{v:.4g} at float {i + 1}" for i, (z, v) in enumerate(pairs) if z == 0.0 and v != 0.0]
+    ctx.expect(
+        not unflushed,
+        clause="float.range",
+        expected=f"zero where the rotation of all joints at 0 has zero, for joints {list(TINY_WRIST)}: a "
+        "magnitude below 2^-128 is sent as zero",
+        seen=showing(tiny, "; ".join(unflushed)),
+    )
