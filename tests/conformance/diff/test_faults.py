@@ -156,8 +156,8 @@ NOT_SHOWN: dict[Fault, str] = {
         "which is right: an unexplained difference (c) near solve-backwards.data"
     ),
     Fault.UNDERFLOW_CLAMPED: (
-        "2^-128 where the clean side sends zero is within the tolerance the diff pairs floats by, and no judge "
-        "of one side knows the true value is below 2^-128: no difference at all"
+        "2^-128 where the clean side sends zero is within the tolerance the diff pairs floats by, and no "
+        "judge of one side knows the true value is below 2^-128: no difference at all"
     ),
     Fault.SOLVE_FORWARDS_RADIANS: (
         "no scenario or generated stream asks solve forwards of a transform in reach: every one they send is "
