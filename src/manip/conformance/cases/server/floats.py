@@ -221,10 +221,8 @@ async def _underflow_flushed(ctx: CaseContext, probe: Probe) -> None:
         return  # a refusal: the answers above judged it
     pairs = zip(floats(zero)[:9], floats(tiny)[:9], strict=True)
     unflushed = [f"{v:.4g} at float {i + 1}" for i, (z, v) in enumerate(pairs) if z == 0.0 and v != 0.0]
-    ctx.expect(
-        not unflushed,
-        clause="float.range",
-        expected=f"zero where the rotation of all joints at 0 has zero, for joints {list(TINY_WRIST)}: a "
-        "magnitude below 2^-128 is sent as zero",
-        seen=showing(tiny, "; ".join(unflushed)),
+    wanted = (
+        f"zero where the rotation of all joints at 0 has zero, for joints {list(TINY_WRIST)}: a magnitude "
     )
+    wanted += "below 2^-128 is sent as zero"
+    ctx.expect(not unflushed, clause="float.range", expected=wanted, seen=showing(tiny, "; ".join(unflushed)))
