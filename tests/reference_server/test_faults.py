@@ -23,9 +23,9 @@ from manip.arm.kinematics import READY, forward
 from manip.arm.sim import ArmDefects, Obstacle
 from manip.arm.trajectory import TICK
 from manip.codecs.errors import DecodeError
-from manip.codecs.lisp import read_alist
+from manip.codecs.lisp import Symbol, read_alist
 from manip.codecs.messages import ErrorReply, decode_async, decode_error, decode_reply, encode_request
-from manip.codecs.pdp11float import pack_f
+from manip.codecs.pdp11float import F_MIN_NORMAL, pack_f, unpack_f
 from manip.conformance.cli import main as conform_main
 from manip.conformance.judge.checks import word
 from manip.cougar import CougarSim
@@ -1313,3 +1313,177 @@ def test_command_lead() -> None:
 
     clean, faulty = pair(Fault.COMMAND_LEAD, scenario)
     assert clean == (0.0, 0.0) and faulty[0] > 0.1 and faulty[1] == 0.0
+
+
+# ------------------------------------------------------------ the wire's layouts (issue 32)
+def _floats(data: bytes) -> list[float]:
+    """The floats of a reply's data after the request number."""
+    return [unpack_f(data[i : i + 4]) for i in range(2, len(data) - 3, 4)]
+
+
+def _description(c: Client) -> str:
+    return "".join(str(decode_reply(d, "describe-self").values.get("text", "")) for d in _describe(c))
+
+
+def _read_clause(text: str, base: int = 8) -> str | None:
+    """The clause reading ``text`` as an alist breaks (None: it reads)."""
+    try:
+        read_alist(text, base=base)
+    except DecodeError as exc:
+        return exc.clause
+    return None
+
+
+@covers(Fault.RESERVED_FLOAT_AS_ZERO)
+def test_reserved_float_as_zero() -> None:
+    reserved = struct.pack("<HH", 0x8000, 0) + encode_request("solve-backwards", joints=READY)[4:]
+    clean, faulty = pair(Fault.RESERVED_FLOAT_AS_ZERO, lambda c: _raw(c, "solve-backwards", reserved)[0])
+    assert clean[0] == ServerOp.NON_FATAL_ERROR and decode_error(*clean).error.code == "BFL"
+    ((_, zero),) = _raw(Client(), "solve-backwards", joints=(0.0, *READY[1:]))
+    assert faulty[0] == ServerOp.RESPONSE and faulty[1][2:] == zero[2:]
+
+
+@covers(Fault.REQUEST_NUMBER_HIGH_FIRST)
+def test_request_number_high_byte_first() -> None:
+    def scenario(c: Client) -> tuple[bytes, int]:
+        ((_, data),) = _raw(c, "here")
+        return data[:2], c.packet_no
+
+    (clean, number), (faulty, _) = pair(Fault.REQUEST_NUMBER_HIGH_FIRST, scenario)
+    assert clean == number.to_bytes(2, "little") != faulty == number.to_bytes(2, "big")
+
+
+@covers(Fault.DATA_REPLIES_DWD)
+def test_data_replies_dwd() -> None:
+    def scenario(c: Client) -> list[int]:
+        return [opcode for op in ("here", "enable-power", "describe-self") for opcode, _ in _raw(c, op)[:1]]
+
+    assert pair(Fault.DATA_REPLIES_DWD, scenario) == ([0o200] * 3, [0o300, 0o200, 0o200])
+
+
+@covers(Fault.DONE_WITH_WORD)
+def test_done_with_zero_word() -> None:
+    clean, faulty = pair(Fault.DONE_WITH_WORD, lambda c: _raw(c, "enable-power")[0][1])
+    assert len(clean) == 2 and faulty == clean + b"\0\0"
+
+
+@covers(Fault.DATA_LENGTH_WORD)
+def test_data_length_word() -> None:
+    clean, faulty = pair(Fault.DATA_LENGTH_WORD, lambda c: _raw(c, "joint-angles")[0][1])
+    assert len(clean) == 26 and faulty == clean[:2] + (24).to_bytes(2, "little") + clean[2:]
+
+
+@covers(Fault.MOTION_REPLY_DONE)
+def test_motion_reply_done() -> None:
+    clean, faulty = pair(Fault.MOTION_REPLY_DONE, lambda c: _raw(c, "set-joint-angles", joints=GOAL)[0][1])
+    assert decode_reply(clean, "set-joint-angles").segment == 1 and faulty == clean[:2]
+
+
+@covers(Fault.DESCRIBE_DONE)
+def test_describe_self_done() -> None:
+    clean, faulty = pair(Fault.DESCRIBE_DONE, _describe)
+    assert len(clean) > 1 and faulty == clean[-1:] and len(faulty[0]) == 2
+
+
+@covers(Fault.DESCRIBE_UNCLOSED)
+def test_describe_unclosed() -> None:
+    clean, faulty = pair(Fault.DESCRIBE_UNCLOSED, _description)
+    assert _read_clause(clean) is None and _read_clause(faulty) == "describe.alist-readable"
+    assert read_alist(faulty + ")") == read_alist(clean)
+
+
+@covers(Fault.DESCRIBE_KEY_TWICE)
+def test_describe_key_twice() -> None:
+    clean, faulty = pair(Fault.DESCRIBE_KEY_TWICE, _description)
+    assert _read_clause(clean) is None and _read_clause(faulty) == "describe.alist-shape"
+    assert faulty.count(":SOFTWARE-VERSION") == 2
+
+
+@covers(Fault.DESCRIBE_DECIMAL)
+def test_describe_decimal() -> None:
+    clean, faulty = pair(Fault.DESCRIBE_DECIMAL, _description)
+    assert _read_clause(clean) is None and _read_clause(faulty) == "describe.numbers-octal"
+    assert read_alist(faulty, base=10) == read_alist(clean)
+
+
+DESCRIBE_TYPES = [
+    (Fault.DESCRIBE_BRAND_SYMBOL, "brand-name", Symbol),
+    (Fault.DESCRIBE_UNIQUE_NUMBER, "unique-name", int),
+    (Fault.DESCRIBE_DOF_STRING, "degrees-of-freedom", str),
+]
+"""Each fault that writes a describe-self value as another type: the key, and the type it is written as."""
+COVERED.update(fault for fault, *_ in DESCRIBE_TYPES)
+
+
+@pytest.mark.parametrize(("fault", "key", "kind"), DESCRIBE_TYPES, ids=[f.value for f, *_ in DESCRIBE_TYPES])
+def test_describe_key_written_as_another_type(fault: Fault, key: str, kind: type) -> None:
+    clean, faulty = pair(fault, lambda c: _alist(c)[key])
+    assert not isinstance(clean, kind) and isinstance(faulty, kind)
+
+
+@covers(Fault.DESCRIBE_OPERATION_NAMES)
+def test_describe_operation_names() -> None:
+    clean, faulty = pair(Fault.DESCRIBE_OPERATION_NAMES, lambda c: _alist(c)["operations"])
+    assert isinstance(clean, list) and isinstance(faulty, list) and len(clean) == len(faulty)
+    assert SPEC.request("here").opcode in clean and Symbol("here") in faulty
+    assert all(isinstance(o, Symbol) for o in faulty)
+
+
+ERROR_PARTS = [
+    (Fault.WHERE_WITH_COLON, "where", "PUMA:dispatch"),
+    (Fault.SEVERITY_LOWER_CASE, "severity", "c"),
+    (Fault.ERROR_CODE_NUMBERS, "code", f"{list(SPEC.error_codes).index('UOP'):03o}"),
+]
+"""Each fault that writes a part of an error string otherwise: the part, and how C UOP's is written."""
+COVERED.update(fault for fault, *_ in ERROR_PARTS)
+
+
+@pytest.mark.parametrize(("fault", "part", "written"), ERROR_PARTS, ids=[f.value for f, *_ in ERROR_PARTS])
+def test_error_string_part_written_otherwise(fault: Fault, part: str, written: str) -> None:
+    clean, faulty = pair(
+        fault, lambda c: getattr(decode_error(ServerOp.NON_FATAL_ERROR, _uop(c)).error, part)
+    )
+    assert clean == {"where": "dispatch", "severity": "C", "code": "UOP"}[part] and faulty == written
+
+
+@covers(Fault.ERROR_ARGS_BYTES)
+def test_error_args_bytes() -> None:
+    clean, faulty = pair(Fault.ERROR_ARGS_BYTES, _uop)
+    assert decode_error(ServerOp.NON_FATAL_ERROR, clean).error.args == (0o230,)
+    assert faulty[faulty.index(0, 2) :] == bytes([0, 0o230])
+
+
+@covers(Fault.HERE_ROW_MAJOR)
+def test_here_row_major() -> None:
+    clean, faulty = pair(Fault.HERE_ROW_MAJOR, lambda c: _floats(_raw(c, "here")[0][1]))
+    assert faulty == [clean[column * 3 + row] for row in range(3) for column in range(4)] != clean
+
+
+@covers(Fault.SOLVE_FORWARDS_RADIANS)
+def test_solve_forwards_radians() -> None:
+    def scenario(c: Client) -> list[float]:
+        ((_, here),) = _raw(c, "here")
+        return _floats(_raw(c, "solve-forwards", transform=_floats(here), current=READY)[0][1])
+
+    clean, faulty = pair(Fault.SOLVE_FORWARDS_RADIANS, scenario)
+    assert faulty == pytest.approx([math.radians(q) for q in clean], rel=1e-6) and clean != faulty
+
+
+@covers(Fault.SOLVE_BACKWARDS_RADIANS)
+def test_solve_backwards_radians() -> None:
+    angles = (0.1, -0.5, 0.6, 0.0, 0.2, 0.0)
+    clean, faulty = pair(
+        Fault.SOLVE_BACKWARDS_RADIANS, lambda c: _floats(_raw(c, "solve-backwards", joints=angles)[0][1])
+    )
+    degrees = _floats(_raw(Client(), "solve-backwards", joints=[math.degrees(q) for q in angles])[0][1])
+    assert faulty == pytest.approx(degrees, abs=1e-3) and faulty != pytest.approx(clean, abs=1e-3)
+
+
+@covers(Fault.UNDERFLOW_CLAMPED)
+def test_underflow_clamped() -> None:
+    def scenario(c: Client) -> int:
+        tiny = _floats(_raw(c, "solve-backwards", joints=(0.0, 0.0, 0.0, 1e-38, 1e-38, 1e-38))[0][1])
+        return sum(1 for v in tiny if abs(v) == F_MIN_NORMAL)
+
+    clean, faulty = pair(Fault.UNDERFLOW_CLAMPED, scenario)
+    assert clean == 0 and faulty > 0

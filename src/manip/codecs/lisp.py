@@ -15,7 +15,8 @@ Reading (traditional Lisp Machine syntax, clause ``describe.alist-readable``, er
 * bare integers are in ``base`` (8 by default, the protocol's convention); a trailing dot means decimal
   (``6.``, ``-12.``); ``#o``, ``#x``, ``#b`` and ``#NNr`` give an explicit radix;
 * floats are decimal: ``1.5``, ``.5``, ``1.5e3``, ``1e3`` (exponent marker ``e`` only);
-* a token of digits that are not all valid in ``base`` (``19`` in base 8) is an error, not a symbol;
+* a token of digits that are not all valid in ``base`` (``19`` in base 8) is an error, not a symbol, of
+  clause ``describe.numbers-octal``: a number written in decimal without its trailing point;
 * strings are delimited by ``"``; the escape character is ``/`` (Zetalisp).  ``\\`` is an ordinary character
   unless the caller selects Common Lisp syntax with ``escape="\\\\"``;
 * ``'x`` reads as ``(quote x)``; ``;`` starts a comment to the end of the line;
@@ -49,6 +50,8 @@ MAX_DEPTH = 64
 walks a value recursively (the client's text and JSON output, ``json``) stays far from Python's
 recursion limit.  :func:`read_lisp` itself reads any depth unless given ``max_depth``."""
 SHAPE_CLAUSE = "describe.alist-shape"
+OCTAL_CLAUSE = "describe.numbers-octal"
+"""The clause of a token of digits not valid in the reader's base: a decimal number without its point."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -165,7 +168,11 @@ def _classify(token: str, base: int, start: int, escape: str) -> LispValue:
         if value is not None:
             return value
         if base <= 10 and m.group(2).isdigit() and m.group(2).isascii():
-            raise _error(f"{token!r} has digits that are not valid in base {base}", start)
+            raise DecodeError(
+                f"{token!r} has digits that are not valid in base {base} (a decimal number needs its point)",
+                offset=start,
+                clause=OCTAL_CLAUSE,
+            )
     if _FLOAT.fullmatch(token):
         return float(token)
     if set(token) == {"."}:

@@ -18,13 +18,14 @@ The hook points, by what they decide:
 * when a held-back reply packet goes out: :meth:`~Defects.held_back` (at the servo tick, given the arm);
 * serving a request: :meth:`~Defects.decode`, :meth:`~Defects.check`, :meth:`~Defects.refused`,
   :meth:`~Defects.wrist_failure`, :attr:`~Defects.discards_after_free_joint`;
-* what a request does: :meth:`~Defects.describe`, :meth:`~Defects.increment`, :meth:`~Defects.move_ready`,
+* what a request does: :meth:`~Defects.describe`, :meth:`~Defects.describe_text`, :meth:`~Defects.increment`,
+  :meth:`~Defects.move_ready`,
   :meth:`~Defects.configuration`,
 
   :meth:`~Defects.set_speed`,
   :attr:`~Defects.straight_lines`, :attr:`~Defects.joint_moves`, :attr:`~Defects.checks_joint_limits`,
   :attr:`~Defects.applies_configuration`;
-* replies: :meth:`~Defects.payload`, :meth:`~Defects.reply`;
+* replies: :meth:`~Defects.payload`, :meth:`~Defects.reply`, :meth:`~Defects.reply_opcode`;
 * errors: :meth:`~Defects.error_number`, :meth:`~Defects.error`, :meth:`~Defects.error_string`,
   :meth:`~Defects.after_error`, :attr:`~Defects.after_fatal` (the driver's too);
 * asynchronous packets: :meth:`~Defects.notifications`, :meth:`~Defects.async_response`,
@@ -47,15 +48,17 @@ from typing import TYPE_CHECKING, Any, Final, Literal
 from manip.arm.sim import AbortCause, ArmDefects, ArmEvent, ArmSim, Refused
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.errors import DecodeError
+from manip.codecs.lisp import Keyword, LispValue, Symbol, alist_to_dict, cons, print_lisp, read_lisp
+from manip.codecs.lispm_text import encode_lispm
 from manip.codecs.messages import Value, decode_request, encode_async
 from manip.codecs.pdp11float import F_MIN_NORMAL, pack_f
 from manip.reference_server import errors
-from manip.reference_server.describe import Statement
+from manip.reference_server.describe import Statement, alist_text
 from manip.reference_server.errors import RequestError
 from manip.reference_server.faults import Fault, FaultSet
 from manip.reference_server.wrist import GuardHit, WristDefects
 from manip.spec import SPEC, Field, RequestName, RequestOpcode
-from manip.spec.constants import AsyncCondition, ServerOp
+from manip.spec.constants import AsyncCondition, ChaosOp, ServerOp
 
 if TYPE_CHECKING:
     from manip.reference_server.session import Outgoing, ServerSession
@@ -96,10 +99,28 @@ _SWAPPED_ARGS: Final[Mapping[Fault, frozenset[str]]] = {
     Fault.JOINT_MASK_SWAPPED: frozenset({"JOR", "TOR"}),
 }
 """The error codes whose numbers each byte-swapping fault sends high byte first."""
-_FLOAT_FAULTS: Final = frozenset({Fault.UNDERFLOW_DIRTY_ZERO, Fault.NOT_FINITE_RESERVED})
+_FLOAT_FAULTS: Final = frozenset(
+    {Fault.UNDERFLOW_DIRTY_ZERO, Fault.UNDERFLOW_CLAMPED, Fault.NOT_FINITE_RESERVED}
+)
 _SWAPPED_CODES: Final = {"TOR": "JOR", "JOR": "TOR"}
 _ASYNC_ERRORS: Final = frozenset({ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING})
 _ASYNC_OPS: Final = _ASYNC_ERRORS | {ServerOp.ASYNCHRONOUS_RESPONSE}
+WHERE_SERVER: Final = "PUMA"
+"""What the where part of an error string starts with, before a colon, under ``where-with-colon``."""
+SERIAL_NUMBER: Final = 600
+""":unique-name under ``describe-unique-number``."""
+_DESCRIBE_TEXT_FAULTS: Final = frozenset(
+    {
+        Fault.DESCRIBE_UNCLOSED,
+        Fault.DESCRIBE_KEY_TWICE,
+        Fault.DESCRIBE_DECIMAL,
+        Fault.DESCRIBE_BRAND_SYMBOL,
+        Fault.DESCRIBE_UNIQUE_NUMBER,
+        Fault.DESCRIBE_DOF_STRING,
+        Fault.DESCRIBE_OPERATION_NAMES,
+    }
+)
+"""The faults that change how the describe-self text is written, not what it states."""
 
 
 HELD_TICKS: Final = 25
@@ -173,6 +194,10 @@ class Defects:
         """What describe self states (the truth about the arm)."""
         return statement
 
+    def describe_text(self, text: str) -> str:
+        """The describe-self text as written: the alist of what :meth:`describe` states, as printed."""
+        return text
+
     def increment(self, delta: tuple[float, ...]) -> tuple[float, ...]:
         """The dX dY dZ dO dA dT an incremental move adds to the pose."""
         return delta
@@ -198,6 +223,10 @@ class Defects:
         """The RESPONSE packets (data) that answer a request, the terminator of a multi-packet reply
         included."""
         return packets
+
+    def reply_opcode(self, op: RequestOpcode | None) -> int:
+        """The Chaos opcode of the packets that answer a request normally: RESPONSE (0200)."""
+        return ServerOp.RESPONSE
 
     def held_back(self, arm: ArmSim) -> tuple[bytes, ...]:
         """Reply packets held back from an earlier request, sent at the servo tick before ``arm`` runs
@@ -309,6 +338,8 @@ class SwitchedDefects(Defects):
             return ack_no if ack_no is not None else 0
         if self._on(Fault.WRONG_REQUEST_NUMBER):
             return (packet_no + 1) & WORD_MASK
+        if self._on(Fault.REQUEST_NUMBER_HIGH_FIRST):
+            return _byte_swapped(packet_no)
         return packet_no
 
     # ---------------------------------------------------------------------------- serving a request
@@ -318,6 +349,9 @@ class SwitchedDefects(Defects):
         try:
             values = super().decode(op, data)
         except DecodeError as exc:
+            if exc.clause == "float.reserved-operand" and self._on(Fault.RESERVED_FLOAT_AS_ZERO):
+                at = exc.offset or 0
+                return self.decode(op, data[:at] + bytes(4) + data[at + 4 :])  # read as a zero
             if exc.clause != "request.data-length" or not self._on(Fault.LENGTH_UNCHECKED):
                 raise
             expected = op.request.fixed_size or 0
@@ -327,6 +361,8 @@ class SwitchedDefects(Defects):
         joint = values.get("joint") if op.name == "free-joint" else None
         if isinstance(joint, int) and self._on(Fault.FREE_JOINT_FROM_ZERO):
             values = {**values, "joint": (joint & 0xFF) + 1}  # byte n taken as joint n+1
+        if op.name == "solve-backwards" and self._on(Fault.SOLVE_BACKWARDS_RADIANS):
+            values = {**values, "joints": tuple(math.degrees(float(q)) for q in _floats_of(values["joints"]))}
         return _joints_reversed(op.request.fields, values) if self._on(Fault.JOINTS_REVERSED) else values
 
     def check(self, op: RequestOpcode, arm: ArmSim) -> None:
@@ -376,6 +412,26 @@ class SwitchedDefects(Defects):
             protocol_version=statement.protocol_version and not on(Fault.NO_PROTOCOL_VERSION),
         )
 
+    def describe_text(self, text: str) -> str:
+        on = self.faults.active & _DESCRIBE_TEXT_FAULTS
+        if not on:
+            return text
+        entries = alist_to_dict(read_lisp(text))
+        if Fault.DESCRIBE_BRAND_SYMBOL in on:
+            entries["brand-name"] = Symbol(str(entries["brand-name"]).replace(" ", "-"))
+        if Fault.DESCRIBE_UNIQUE_NUMBER in on:
+            entries["unique-name"] = SERIAL_NUMBER
+        if Fault.DESCRIBE_DOF_STRING in on:
+            entries["degrees-of-freedom"] = str(entries["degrees-of-freedom"])
+        if Fault.DESCRIBE_OPERATION_NAMES in on:
+            entries["operations"] = [_operation_name(o) for o in _list_of(entries["operations"])]
+        pairs = [cons(Keyword(key), value) for key, value in entries.items()]
+        if Fault.DESCRIBE_KEY_TWICE in on:
+            pairs.append(cons(Keyword("software-version"), 1))
+        decimal = Fault.DESCRIBE_DECIMAL in on
+        text = alist_text(print_lisp(p, base=10 if decimal else 8, nopoint=decimal) for p in pairs)
+        return text.removesuffix(")\n") + "\n" if Fault.DESCRIBE_UNCLOSED in on else text
+
     def increment(self, delta: tuple[float, ...]) -> tuple[float, ...]:
         if self._on(Fault.INCREMENT_ANGLES_FIRST):  # the floats on the wire read as dO dA dT dX dY dZ
             delta = (*delta[3:], *delta[:3])
@@ -404,12 +460,29 @@ class SwitchedDefects(Defects):
             values = _joints_reversed(fields, values)
         if op.name == "read-forces":
             values = self._forces(values)
+        if op.name == "here" and self._on(Fault.HERE_ROW_MAJOR):
+            t = _floats_of(values["transform"])
+            rows = tuple(t[column * 3 + row] for row in range(3) for column in range(4))
+            values = {**values, "transform": rows}
+        if op.name == "solve-forwards" and self._on(Fault.SOLVE_FORWARDS_RADIANS):
+            values = {**values, "joints": tuple(math.radians(q) for q in _floats_of(values["joints"]))}
         extra = self._done_word(op)
         if extra is not None:
             return encode(op, values) + _word(extra)
         if self.faults.active & _FLOAT_FAULTS and fields and all(f.type.element == "float" for f in fields):
             return b"".join(self._float(float(x)) for f in fields for x in values[f.name])
-        return encode(op, values)
+        return self._relaid(op, encode(op, values))
+
+    def _relaid(self, op: RequestOpcode, data: bytes) -> bytes:
+        """A reply's data after the request number as the layout faults lay it out."""
+        form = op.response.form
+        if form == "done" and self._on(Fault.DONE_WITH_WORD):
+            return data + _word(0)
+        if form == "segment" and self._on(Fault.MOTION_REPLY_DONE):
+            return b""
+        if form == "data" and self._on(Fault.DATA_LENGTH_WORD):
+            return _word(len(data)) + data
+        return data
 
     def _done_word(self, op: RequestOpcode) -> int | None:
         """The word a done-word fault appends to ``op``'s empty done (None: nothing)."""
@@ -439,6 +512,8 @@ class SwitchedDefects(Defects):
         if 0.0 < abs(x) < F_MIN_NORMAL and self._on(Fault.UNDERFLOW_DIRTY_ZERO):
             fraction = max(1, int(abs(x) / F_MIN_NORMAL * (1 << 23)))  # exponent 0, the bits kept
             return struct.pack("<HH", fraction >> 16 & 0x7F, fraction & 0xFFFF)
+        if 0.0 < abs(x) < F_MIN_NORMAL and self._on(Fault.UNDERFLOW_CLAMPED):
+            return pack_f(math.copysign(F_MIN_NORMAL, x))  # the least exponent, not zero
         return pack_f(x)
 
     def reply(self, op: RequestOpcode | None, packets: list[bytes]) -> Sequence[bytes]:
@@ -455,11 +530,18 @@ class SwitchedDefects(Defects):
                 packets = [packets[0], *(_renumbered(p, 1) for p in packets[1:-1]), packets[-1]]
             if self._on(Fault.NO_DESCRIBE_TERMINATOR):
                 packets = packets[:-1]
+            if self._on(Fault.DESCRIBE_DONE):
+                packets = packets[-1:]  # the terminator alone
             return packets
         floats_only = all(f.type.element == "float" for f in op.response.data.fields)
         if self._on(Fault.SWAPPED_FLOAT_WORDS) and op.response.form == "data" and floats_only:
             return [_float_words_swapped(p) for p in packets]
         return packets
+
+    def reply_opcode(self, op: RequestOpcode | None) -> int:
+        if op is not None and op.response.form == "data" and self._on(Fault.DATA_REPLIES_DWD):
+            return ChaosOp.DWD  # Chaos's opcode of 16-bit word data
+        return ServerOp.RESPONSE
 
     # ---------------------------------------------------------------------------- errors
     def error_number(self, opcode: int, number: int, before: int | None) -> int:
@@ -480,9 +562,13 @@ class SwitchedDefects(Defects):
         if error.code == "NZI" and error.args and self._on(Fault.NZI_MASK_SHIFTED):
             error = replace(error, args=(error.args[0] << 1 & WORD_MASK, *error.args[1:]))
         if any(self._on(fault) and error.code in codes for fault, codes in _SWAPPED_ARGS.items()):
-            error = replace(
-                error, args=tuple(int.from_bytes(a.to_bytes(2, "little"), "big") for a in error.args)
-            )
+            error = replace(error, args=tuple(_byte_swapped(a) for a in error.args))
+        if self._on(Fault.WHERE_WITH_COLON):
+            error = replace(error, where=f"{WHERE_SERVER}:{error.where}")
+        if self._on(Fault.SEVERITY_LOWER_CASE):
+            error = replace(error, severity=error.severity.lower())
+        if self._on(Fault.ERROR_CODE_NUMBERS):
+            error = replace(error, code=_code_number(error.code))
         return error
 
     def error_string(self, error: ErrorMessage, encoded: bytes) -> bytes:
@@ -492,6 +578,8 @@ class SwitchedDefects(Defects):
                 encoded = encoded[:after_nul] + b"\0" + encoded[after_nul:]
         if self._on(Fault.ERROR_WITHOUT_COLON):
             encoded = encoded.replace(b": ", b" ", 1)
+        if self._on(Fault.ERROR_ARGS_BYTES) and error.args:
+            encoded = encode_lispm(error.text) + b"\0" + bytes(a & 0xFF for a in error.args)
         return encoded
 
     def after_error(self, number: int) -> tuple[bytes, ...]:
@@ -560,6 +648,31 @@ def _joints_reversed(fields: Sequence[Field], values: Mapping[str, Any]) -> dict
     """``values`` with every joint vector among ``fields`` in the reverse order (fault joints-reversed)."""
     joints = {f.name for f in fields if f.type.name == "joints"}
     return {name: tuple(value)[::-1] if name in joints else value for name, value in values.items()}
+
+
+def _byte_swapped(word: int) -> int:
+    """A 16-bit word with its two bytes exchanged (as a high-byte-first writer sends it)."""
+    return int.from_bytes(word.to_bytes(2, "little"), "big")
+
+
+def _floats_of(value: Any) -> tuple[float, ...]:
+    return tuple(float(x) for x in value)
+
+
+def _list_of(value: LispValue) -> list[LispValue]:
+    return value if isinstance(value, list) else [value]
+
+
+def _operation_name(opcode: LispValue) -> LispValue:
+    """An :operations entry by name (describe-operation-names); one the spec does not name stays."""
+    op = SPEC.requests.get(opcode) if isinstance(opcode, int) else None
+    return opcode if op is None else Symbol(op.name)
+
+
+def _code_number(code: str) -> str:
+    """An error code as the error's place in the spec's table, three octal digits (error-code-numbers)."""
+    codes = list(SPEC.error_codes)
+    return f"{codes.index(code) if code in codes else len(codes):03o}"
 
 
 def _renumbered(packet: bytes, by: int) -> bytes:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from manip.arm.kinematics import ArmModel
 from manip.codecs.lisp import Keyword, LispValue, cons, print_lisp
 
-__all__ = ["Description", "Statement", "describe_text"]
+__all__ = ["Description", "Statement", "alist_text", "describe_text"]
 
 
 @dataclass(frozen=True)
@@ -52,6 +52,12 @@ class Statement:
 
 def _entry(key: str, value: LispValue) -> str:
     return print_lisp(cons(Keyword(key), value))
+
+
+def alist_text(entries: Iterable[str]) -> str:
+    """The printed ``entries`` as describe self sends them: one per line, the first line opening and the
+    last closing the list."""
+    return "(" + "\n ".join(entries) + ")\n"
 
 
 def describe_text(
@@ -91,4 +97,4 @@ def describe_text(
         _entry("ready-position", [float(q) for q in ready]),
         _entry("joint-limits", limits),
     ]
-    return "(" + "\n ".join(entries) + ")\n"
+    return alist_text(entries)

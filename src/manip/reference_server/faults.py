@@ -162,7 +162,7 @@ class Fault(FaultSwitch):
         "joint angles with TOR.",
         "solve-forwards.errors",
         "motion.checked-before-queue",
-        caught_by=("server.motion.jor",),
+        caught_by=("server.motion.jor", "server.motion.tor-limits"),
     )
     NO_NAP = defect(
         "no-nap",
@@ -355,6 +355,13 @@ class Fault(FaultSwitch):
         "requests after it wait for ever.",
         "wrist.no-answer",
         caught_by=("server.wrist.no-answer",),
+    )
+    UNDERFLOW_CLAMPED = defect(
+        "underflow-clamped",
+        "Reply floats below the smallest F magnitude (2^-128) are sent as plus or minus 2^-128 (the encoder "
+        "clamps the exponent at its least) instead of zero.",
+        "float.range",
+        caught_by=("server.float.extremes",),
     )
     UNDERFLOW_DIRTY_ZERO = defect(
         "underflow-dirty-zero",
@@ -664,6 +671,140 @@ class Fault(FaultSwitch):
         "A second connection while one is open is accepted, with a session of its own on the one robot.",
         "connect.one-server-per-robot",
         caught_by=("server.connect.one-server-per-robot",),
+    )
+    # protocol defects of the wire's layouts: the replies, describe self, error strings (issue 32)
+    RESERVED_FLOAT_AS_ZERO = defect(
+        "reserved-float-as-zero",
+        "A reserved-operand float in a request is read as zero (a decoder that looks at the exponent only) "
+        "and the request is executed, instead of refused with C BFL.",
+        "request.reserved-float",
+        caught_by=("server.negative.reserved-float.safe",),
+    )
+    REQUEST_NUMBER_HIGH_FIRST = defect(
+        "request-number-high-byte-first",
+        "Replies and errors carry the request number high byte first (a big-endian host's own order).",
+        "response.word-byte-order",
+        caught_by=("server.reply.here",),
+    )
+    DATA_REPLIES_DWD = defect(
+        "data-replies-dwd",
+        "Data replies (here, joint angles, the solutions, the wrist's readings) go out with Chaos opcode "
+        "0300 (DWD, word data: their data are words and floats) instead of RESPONSE (0200).",
+        "response.server-opcodes",
+        caught_by=("server.reply.here",),
+    )
+    DONE_WITH_WORD = defect(
+        "done-with-zero-word",
+        "A simple done carries a zero word after the request number (the segment replies' layout used for "
+        "every reply).",
+        "response.done-empty",
+        caught_by=("server.reply.enable-power",),
+    )
+    DATA_LENGTH_WORD = defect(
+        "data-length-word",
+        "Data replies carry a word giving their data's length in bytes before the data.",
+        "response.data-layout",
+        caught_by=("server.reply.joint-angles",),
+    )
+    MOTION_REPLY_DONE = defect(
+        "motion-reply-done",
+        "Motion requests are answered with an empty done (E.1's 'The response is a done' read alone), "
+        "without the segment number.",
+        "response.segment-number",
+        caught_by=("server.reply.move",),
+    )
+    DESCRIBE_DONE = defect(
+        "describe-self-done",
+        "Describe self is answered by a bare done (an empty RESPONSE): no text packet before it.",
+        "describe.reply-shape",
+        caught_by=("server.describe.reply-shape",),
+    )
+    DESCRIBE_UNCLOSED = defect(
+        "describe-unclosed",
+        "The describe-self alist is never closed: its last parenthesis is left out.",
+        "describe.alist-readable",
+        caught_by=("server.describe.alist",),
+    )
+    DESCRIBE_KEY_TWICE = defect(
+        "describe-key-twice",
+        "Describe self states :software-version twice: its modules' versions, then the server's own number.",
+        "describe.alist-shape",
+        caught_by=("server.describe.alist",),
+    )
+    DESCRIBE_DECIMAL = defect(
+        "describe-decimal",
+        "Describe self prints its numbers in decimal without the trailing point (opcodes 128 to 177).",
+        "describe.numbers-octal",
+        caught_by=("server.describe.alist",),
+    )
+    DESCRIBE_BRAND_SYMBOL = defect(
+        "describe-brand-symbol",
+        ":brand-name is written without its double quotes, as a symbol (UNIMATION-PUMA-600).",
+        "describe.brand-name",
+        caught_by=("server.describe.keys",),
+    )
+    DESCRIBE_UNIQUE_NUMBER = defect(
+        "describe-unique-number",
+        ":unique-name is the robot's serial number, written as a number, not a string.",
+        "describe.unique-name",
+        caught_by=("server.describe.keys",),
+    )
+    DESCRIBE_DOF_STRING = defect(
+        "describe-dof-string",
+        ':degrees-of-freedom is written as a string ("6"), not a number.',
+        "describe.degrees-of-freedom",
+        caught_by=("server.describe.keys",),
+    )
+    DESCRIBE_OPERATION_NAMES = defect(
+        "describe-operation-names",
+        ":operations lists the operations by name (DESCRIBE-SELF HERE ...), not by opcode.",
+        "describe.operations",
+        caught_by=("server.describe.keys",),
+    )
+    WHERE_WITH_COLON = defect(
+        "where-with-colon",
+        "The where part of error strings names the server and its handler with a colon between "
+        "(PUMA:dispatch).",
+        "error-string.where-no-colon",
+        caught_by=("server.error.string-format",),
+    )
+    SEVERITY_LOWER_CASE = defect(
+        "severity-lower-case",
+        "Error strings carry their severity in lower case (c, e, f, w, bf, be).",
+        "error-string.severity",
+        caught_by=("server.error.string-format",),
+    )
+    ERROR_CODE_NUMBERS = defect(
+        "error-code-numbers",
+        "Error strings carry the error's number (its place in the server's table, three octal digits) "
+        "instead of its three-letter code.",
+        "error-string.code",
+        caught_by=("server.error.string-format",),
+    )
+    ERROR_ARGS_BYTES = defect(
+        "error-args-bytes",
+        "The numbers after an error string's NUL are single bytes (as the 1985 guide's NZI example calls its "
+        "joint mask), not 16-bit words.",
+        "error-string.args",
+        caught_by=("server.error.string-format",),
+    )
+    HERE_ROW_MAJOR = defect(
+        "here-row-major",
+        "Here sends its transform row by row (Nx Ox Ax Px Ny ...), not in column-major order.",
+        "here.transform",
+        caught_by=("server.float.here-consistent",),
+    )
+    SOLVE_FORWARDS_RADIANS = defect(
+        "solve-forwards-radians",
+        "Solve forwards answers its six angles in radians, as its kinematics computes them, not degrees.",
+        "solve-forwards.data",
+        caught_by=("server.float.solve-round-trip",),
+    )
+    SOLVE_BACKWARDS_RADIANS = defect(
+        "solve-backwards-radians",
+        "Solve backwards reads its six angles as radians, not degrees.",
+        "solve-backwards.data",
+        caught_by=("server.float.here-consistent",),
     )
 
 

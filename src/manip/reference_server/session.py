@@ -523,8 +523,9 @@ class ServerSession:
             packets = self._text_packets(number, str(values["text"]))
         else:
             packets = [_word(number) + self.defects.payload(op, values, self._payload)]
+        opcode = self.defects.reply_opcode(op)
         for data in self.defects.reply(op, packets):
-            self._emit(ServerOp.RESPONSE, data)
+            self._emit(opcode, data)
 
     def _payload(self, op: RequestOpcode, values: Mapping[str, Any]) -> bytes:
         """A reply's data after the request number, by the spec codec."""
@@ -581,7 +582,7 @@ class ServerSession:
             joint_limits=stated.joint_limits,
             ready_position=stated.ready_position,
         )
-        return {"text": text}
+        return {"text": self.defects.describe_text(text)}
 
     def _here(self, values: Mapping[str, Value], now: float) -> dict[str, Any]:
         actual = self.arm.actual

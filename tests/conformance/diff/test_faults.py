@@ -188,6 +188,23 @@ NOT_SHOWN: dict[Fault, str] = {
         "the generated set configuration requests carry a word, as the spec codec lays them out; no stream "
         "sends the one byte the 1985 guide allows"
     ),
+    Fault.HERE_ROW_MAJOR: (
+        "Here's floats differ from the clean side's, but no judge of one side knows which transform is right "
+        "(a layout of 12 floats is all the fuzzer's checks see): an unexplained difference (c) near "
+        "here.transform"
+    ),
+    Fault.SOLVE_BACKWARDS_RADIANS: (
+        "the transform solve backwards answers differs from the clean side's, but no judge of one side knows "
+        "which is right: an unexplained difference (c) near solve-backwards.data"
+    ),
+    Fault.UNDERFLOW_CLAMPED: (
+        "2^-128 where the clean side sends zero is within the tolerance the diff pairs floats by, and no "
+        "judge of one side knows the true value is below 2^-128: no difference at all"
+    ),
+    Fault.SOLVE_FORWARDS_RADIANS: (
+        "no scenario or generated stream asks solve forwards of a transform in reach: every one they send is "
+        "refused alike on both sides, so the angles it would answer never differ"
+    ),
 }
 """Faults the diff does not show as a violation of one of their clauses, and why (the directed case
 that catches each is the fault matrix's, tests/conformance/test_faults.py)."""

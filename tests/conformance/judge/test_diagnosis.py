@@ -54,10 +54,14 @@ def test_a_round_trip_names_the_swap_that_gives_the_values_sent() -> None:
 
 def test_request_numbers_one_off_or_byte_swapped() -> None:
     request = WirePacket("c2s", HERE, 0x0107, 0, b"")
-    for number, said in ((0x0108, "one more"), (0x0106, "one less"), (0x0701, "two bytes swapped")):
+    for number, said, clause in (
+        (0x0108, "one more", "response.echoes-request-number"),
+        (0x0106, "one less", "response.echoes-request-number"),
+        (0x0701, "two bytes swapped", "response.word-byte-order"),  # sent high byte first
+    ):
         reply = encode_reply("here", number, transform=POSE)
         (finding,) = check_reply(request, _here_reply(number, reply))
-        assert finding.clause == "response.echoes-request-number" and said in finding.message, finding.message
+        assert finding.clause == clause and said in finding.message, finding.message
     assert number_diagnosis(900, 7) is None and number_diagnosis(7, 7) is None
 
 

@@ -90,6 +90,7 @@ TRANSCRIPT_CLAUSES: Final = frozenset(
         "describe.alist-shape",
         "describe.brand-name",
         "describe.degrees-of-freedom",
+        "describe.numbers-octal",
         "describe.operations",
         "describe.protocol-version",
         "describe.reply-shape",
@@ -121,6 +122,7 @@ TRANSCRIPT_CLAUSES: Final = frozenset(
         "response.echoes-request-number",
         "response.segment-number",
         "response.server-opcodes",
+        "response.word-byte-order",
         "segment.number-increases",
         "text.lispm-charset",
     }
@@ -161,12 +163,15 @@ def check_server_opcode(packet: WirePacket) -> list[Violation]:
 
 
 def check_echo(request: WirePacket, reply: WirePacket) -> list[Violation]:
-    """The reply's first data word is the request's packet number (a fatal error's: the last received)."""
-    clause = "error.fatal-request-number" if reply.opcode == ServerOp.FATAL_ERROR else None
-    clause = clause or "response.echoes-request-number"
+    """The reply's first data word is the request's packet number (a fatal error's: the last received),
+    low byte first: the number sent high byte first breaks ``response.word-byte-order``."""
     number = word(reply.data)
     if number == request.packet_no:
         return []
+    clause = "error.fatal-request-number" if reply.opcode == ServerOp.FATAL_ERROR else None
+    clause = clause or "response.echoes-request-number"
+    if number is not None and number == int.from_bytes(request.packet_no.to_bytes(2, "little"), "big"):
+        clause = "response.word-byte-order"
     actual = "no request-number word" if number is None else f"request number {number}"
     cause = None if number is None else number_diagnosis(number, request.packet_no, what="request number")
     return [

@@ -67,7 +67,14 @@ from manip.codecs.errors import CodecError
 from manip.codecs.messages import encode_request
 from manip.codecs.packet import Direction, Packet
 from manip.codecs.pdp11float import unpack_f
-from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, check_transcript, describe, word
+from manip.conformance.judge.checks import (
+    ANSWER_OPCODES,
+    WirePacket,
+    check_server_opcode,
+    check_transcript,
+    describe,
+    word,
+)
 from manip.conformance.judge.violation import NEVER_CAME, Violation, evidence, seen_kind, seen_packets
 from manip.conformance.suite.case import (
     LEVEL_ORDER,
@@ -424,8 +431,10 @@ class Probe:
 
     async def _next_answer_packet(self, number: int, timeout: float | None, what: str) -> WirePacket:
         """The next answer packet to request ``number``; none (a timeout, the end of the connection)
-        fails ``request.one-reply``, naming the request that went unanswered."""
+        fails ``request.one-reply``, naming the request that went unanswered, or
+        ``response.server-opcodes`` when a packet of no server opcode came in its place."""
         request = self._request(number)
+        strays: list[Violation] = []  # what came while waiting that no server may send
         loop = asyncio.get_running_loop()
         if timeout is None:
             wait, budget = self.allowance(number)
@@ -447,6 +456,16 @@ class Probe:
                             packets=(request,),
                         )
                     )
+                if strays:  # the answer came, under an opcode a server never sends
+                    stray = strays[0]
+                    raise CaseFailure(
+                        replace(
+                            stray,
+                            message=f"{what} did not come within {wait:g} s; a {stray.message} came instead",
+                            invariant=TRANSCRIPT.name,
+                            packets=(*stray.packets, request),
+                        )
+                    )
                 raise CaseFailure(
                     Violation(
                         f"{what} did not come within {wait:g} s ({budget})",
@@ -461,6 +480,7 @@ class Probe:
             if packet.opcode in ANSWER_OPCODES:
                 self._answered(number, packet)
                 return packet
+            strays += check_server_opcode(packet)
             self.unsolicited.append(packet)
 
     async def reply(self, number: int, timeout: float | None = None) -> Answer:

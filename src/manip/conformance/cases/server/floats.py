@@ -9,7 +9,7 @@ import struct
 from manip.conformance.cases._support import floats, length, read_floats
 from manip.conformance.judge.violation import showing
 from manip.conformance.suite.case import case
-from manip.conformance.suite.context import CaseContext
+from manip.conformance.suite.context import CaseContext, Probe
 from manip.spec.constants import ServerOp
 
 ORTHO_TOL = 1e-3
@@ -17,6 +17,9 @@ REACH_MM = 5000.0
 """Far beyond any PUMA's reach: a position further out is no position Solve backwards can give."""
 TINY = 1e-38
 """Degrees whose sines are below 2^-128: the transform's entries then underflow and must be clean zeros."""
+TINY_WRIST = (0.0, 0.0, 0.0, TINY, TINY, TINY)
+"""Joint angles whose transform's rotation differs from that of all joints at 0 by at most 3 sin(TINY
+degrees), about 5e-40: below 2^-128, so where that rotation has a zero, this one has a zero too."""
 HUGE = 1.0e38
 """Near the top of the F range (1.7e38)."""
 POSITION_TOL_MM = 0.05
@@ -24,6 +27,24 @@ POSITION_TOL_MM = 0.05
 
 def _dot(a: tuple[float, ...], b: tuple[float, ...]) -> float:
     return sum(x * y for x, y in zip(a, b, strict=True))
+
+
+def _rotation_error(pose: tuple[float, ...]) -> float:
+    """How far N, O, A (the first nine floats, column by column) are from orthonormal."""
+    n, o, a = pose[0:3], pose[3:6], pose[6:9]
+    return max(
+        abs(_dot(n, n) - 1),
+        abs(_dot(o, o) - 1),
+        abs(_dot(a, a) - 1),
+        abs(_dot(n, o)),
+        abs(_dot(n, a)),
+        abs(_dot(o, a)),
+    )
+
+
+def _by_rows(pose: tuple[float, ...]) -> tuple[float, ...]:
+    """The twelve floats of a transform sent row by row (Nx Ox Ax Px Ny ...), in column-major order."""
+    return tuple(pose[row * 4 + column] for column in range(4) for row in range(3))
 
 
 @case(
@@ -46,21 +67,24 @@ async def here_consistent(ctx: CaseContext) -> None:
         expected="12 finite floats",
         seen=str(pose),
     )
-    n, o, a = pose[0:3], pose[3:6], pose[6:9]
-    worst = max(
-        abs(_dot(n, n) - 1),
-        abs(_dot(o, o) - 1),
-        abs(_dot(a, a) - 1),
-        abs(_dot(n, o)),
-        abs(_dot(n, a)),
-        abs(_dot(o, a)),
+    worst = _rotation_error(pose)
+    by_rows = _by_rows(pose)
+    # read row by row (Nx Ox Ax Px Ny ...) the floats are a rotation: Here broke its order, not the floats
+    sent_by_rows = worst >= ORTHO_TOL and len(pose) == 12 and _rotation_error(by_rows) < ORTHO_TOL
+    ctx.expect(
+        not sent_by_rows,
+        clause="here.transform",
+        expected="the transform column by column: Nx Ny Nz Ox Oy Oz Ax Ay Az Px Py Pz",
+        seen=f"read row by row (Nx Ox Ax Px Ny ...) the floats are a rotation: {[round(v, 4) for v in pose]}",
     )
     ctx.expect(
-        worst < ORTHO_TOL,
+        worst < ORTHO_TOL or sent_by_rows,
         clause="float.format",
         expected="N, O, A orthonormal (floats decoded as PDP-11 F, sign/exponent word first)",
         seen=f"deviation {worst:.3g} in {[round(v, 4) for v in pose[:9]]}",
     )
+    if sent_by_rows:
+        pose = by_rows  # solve backwards is judged against the transform Here meant
     ctx.expect(
         all(abs(q) <= 720.0 for q in joints),
         clause="joint-angles.reply",
@@ -143,7 +167,7 @@ async def extremes(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     joints = await read_floats(ctx, probe, "joint-angles")
     asks: list[tuple[str, dict[str, list[float]]]] = [
-        ("solve-backwards", {"joints": [0.0, 0.0, 0.0, TINY, TINY, TINY]}),
+        ("solve-backwards", {"joints": list(TINY_WRIST)}),
         ("solve-backwards", {"joints": [TINY] * 6}),
         ("solve-backwards", {"joints": [HUGE, -HUGE, 1e20, 3e37, -HUGE, TINY]}),
     ]
@@ -184,3 +208,21 @@ async def extremes(ctx: CaseContext) -> None:
             f"for {what}",
             seen=str([f"{v:.4g}" for v in pose]),
         )
+    await _underflow_flushed(ctx, probe)
+
+
+async def _underflow_flushed(ctx: CaseContext, probe: Probe) -> None:
+    """float.range: a rotation entry that is zero with every joint at 0 is zero with the wrist joints at
+    :data:`TINY` degrees, whose change to it (at most 3 sin(TINY degrees), about 5e-40) is below 2^-128:
+    sent as zero, never as the smallest F magnitude or another value F cannot give it."""
+    zero = await probe.call("solve-backwards", joints=[0.0] * 6)
+    tiny = await probe.call("solve-backwards", joints=list(TINY_WRIST))
+    if not (zero.is_response and tiny.is_response):
+        return  # a refusal: the answers above judged it
+    pairs = zip(floats(zero)[:9], floats(tiny)[:9], strict=True)
+    unflushed = [f"{v:.4g} at float {i + 1}" for i, (z, v) in enumerate(pairs) if z == 0.0 and v != 0.0]
+    wanted = (
+        f"zero where the rotation of all joints at 0 has zero, for joints {list(TINY_WRIST)}: a magnitude "
+    )
+    wanted += "below 2^-128 is sent as zero"
+    ctx.expect(not unflushed, clause="float.range", expected=wanted, seen=showing(tiny, "; ".join(unflushed)))
