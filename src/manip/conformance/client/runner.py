@@ -215,7 +215,7 @@ class ClientContext(CaseContext):
             (ncp or NcpConfig()).window if offer is None else offer,
         )
         self.plays.append(play)
-        self.transcript += [wire_packet(r) for r in play.wire if r.packet.opcode >= 0o200]
+        self.transcript += [wire_packet(r) for r in play.wire]
         for side in listener.sides:
             self.notes += side.notes
         if listener.script_error:

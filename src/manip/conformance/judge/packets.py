@@ -26,6 +26,7 @@ __all__ = [
     "DRV11J_FRAME",
     "Direction",
     "WirePacket",
+    "carries_data",
     "describe",
     "link_words",
     "opcode_name",
@@ -72,6 +73,12 @@ class WirePacket:
         } | ({"link": self.link} if self.link else {})
 
 
+def carries_data(packet: WirePacket) -> bool:
+    """A data packet of a manip session or a DRV-11J record: neither a Chaos control packet (RFC, OPN,
+    STS...) nor a close."""
+    return bool(packet.link) or packet.opcode >= ChaosOp.DAT
+
+
 def word(data: bytes, offset: int = 0) -> int | None:
     """The little-endian word at ``offset``, or None when the data are too short."""
     if len(data) < offset + 2:
@@ -83,7 +90,8 @@ def describe(packet: WirePacket) -> str:
     """A short human description of a packet: opcode (octal), number and data length.  A request shows
     its Chaos packet number (which its answer must echo), a server packet the request number its first
     data word carries: ``here 0201 (packet number 23, 0 data bytes)``, ``response 0200 (request number
-    23, 50 data bytes)``."""
+    23, 50 data bytes)``.  A Chaos control packet (a client's recording has them) shows its Chaos name, its
+    number and its ack: ``OPN 02 (packet number 1, ack 5)``."""
     if packet.link == DRV11J:
         return _describe_words(packet)
     if packet.link == DRV11J_FRAME:
@@ -92,6 +100,9 @@ def describe(packet: WirePacket) -> str:
         reason = packet.data.decode("ascii", "replace")
         close = SPEC.chaos_opcode_name(packet.opcode)
         return f"{close} ({reason})" if reason else close
+    if packet.opcode < ChaosOp.DAT:
+        control = SPEC.chaos_opcode_name(packet.opcode)
+        return f"{control} 0{packet.opcode:o} (packet number {packet.packet_no}, ack {packet.ack_no})"
     name = opcode_name(packet)
     if packet.direction == "c2s":
         shown = f"packet number {packet.packet_no}"

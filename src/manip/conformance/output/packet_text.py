@@ -30,7 +30,7 @@ from manip.codecs.messages import (
     response_layout,
 )
 from manip.conformance.judge.checks import WirePacket, describe, word
-from manip.conformance.judge.packets import DRV11J, link_words
+from manip.conformance.judge.packets import DRV11J, carries_data, link_words
 from manip.spec import SPEC, Layout
 from manip.spec.constants import ServerOp
 from manip.spec.notation import octal_words
@@ -93,6 +93,8 @@ def decoded(packet: WirePacket, request_opcode: int | None = None) -> str:
         return _decoded_words(packet)
     if packet.link:
         return packet.data.hex(" ", 2) or "(none)"
+    if not carries_data(packet) and not packet.is_close:
+        return f"data {packet.data.hex(' ') or '(none)'}"
     return _decoded_packet(packet, request_opcode)
 
 

@@ -68,6 +68,7 @@ from manip.codecs.messages import encode_request
 from manip.codecs.packet import Direction, Packet
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.judge.checks import ANSWER_OPCODES, WirePacket, check_transcript, describe, word
+from manip.conformance.judge.packets import carries_data
 from manip.conformance.judge.violation import NEVER_CAME, Violation, evidence, seen_kind, seen_packets
 from manip.conformance.suite.case import (
     LEVEL_ORDER,
@@ -794,12 +795,11 @@ class CaseContext:
         return replace(violation, packets=self.judged())
 
     def judged(self) -> tuple[WirePacket, ...]:
-        """What a check whose evidence names no packet judged: the last packet of the case's recording
-        (the reply it was reading), or nothing before any."""
-        for packet in reversed(self.shown_packets or self.transcript):
-            if not packet.is_close:
-                return (packet,)
-        return ()
+        """What a check whose evidence names no packet judged: the last data packet of the case's
+        recording (the reply it was reading); in a recording with none (a client's that never got as far
+        as a request) its last Chaos control packet; nothing before any."""
+        recorded = [p for p in reversed(self.shown_packets or self.transcript) if not p.is_close]
+        return next(((p,) for p in recorded if carries_data(p)), tuple(recorded[:1]))
 
     def require(
         self,
