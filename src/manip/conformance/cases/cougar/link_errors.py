@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
+from manip.conformance.cases.cougar._support import expect_names
 from manip.conformance.cougar.probe import LinkLog, cougar_probe
 from manip.conformance.judge.packets import DRV11J_FRAME, WirePacket
 from manip.conformance.judge.violation import showing
@@ -368,9 +369,10 @@ async def link_busy(ctx: CaseContext) -> None:
             seen=second.shown(second.frames, "still open"),
         )
         reply = await probe.call("VERS", version=1)
-        ctx.expect(
-            reply.name == "VERSION",
+        expect_names(
+            ctx,
+            [reply],
+            ["VERSION"],
             clause="link.drv11j.busy",
             expected="the first link carrying on: VERS answered with VERSION",
-            seen=reply,
         )

@@ -40,12 +40,7 @@ async def here_consistent(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     pose = await read_floats(ctx, probe, "here")
     joints = await read_floats(ctx, probe, "joint-angles")
-    ctx.expect(
-        len(pose) == 12 and all(math.isfinite(v) for v in pose),
-        clause="here.transform",
-        expected="12 finite floats",
-        seen=str(pose),
-    )
+    ctx.expect_finite(pose, 12, clause="here.transform", expected="12 finite floats", seen=str(pose))
     n, o, a = pose[0:3], pose[3:6], pose[6:9]
     worst = max(
         abs(_dot(n, n) - 1),
