@@ -8,6 +8,7 @@ names, the one-line common checks, and a report window that never cuts a culprit
 from __future__ import annotations
 
 import asyncio
+import math
 
 import pytest
 
@@ -143,7 +144,14 @@ def test_the_common_checks_are_one_line_each() -> None:
     assert not ctx.expect_opcode(good, ServerOp.NON_FATAL_ERROR, clause="here.transform", expected="an error")
     assert ctx.expect_near(1.0, 1.05, 0.1, clause="here.transform", expected="1 +- 0.1", seen=good)
     assert not ctx.expect_near(1.0, 1.2, 0.1, clause="here.transform", expected="1 +- 0.1", seen=good)
-    assert [v.packet for v in ctx.recorded] == [wrong.first, good.first, good.first, good.first]
+    assert ctx.expect_finite((1.0, 2.0), 2, clause="here.transform", expected="two floats", seen=good)
+    assert not ctx.expect_finite((1.0, math.inf), 2, clause="here.transform", expected="finite", seen=good)
+    assert not ctx.expect_finite((1.0,), 2, clause="here.transform", expected="two floats", seen=good)
+    assert ctx.expect_none([], clause="here.transform", expected="nothing more")
+    assert not ctx.expect_none([wrong], clause="here.transform", expected="nothing more")
+    culprits = [v.packet for v in ctx.recorded]
+    assert culprits == [wrong.first, good.first, good.first, good.first, good.first, good.first, wrong.first]
+    assert ctx.recorded[-1].actual == str(wrong)
 
 
 def test_the_report_window_never_cuts_a_culprit() -> None:

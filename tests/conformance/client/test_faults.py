@@ -13,7 +13,7 @@ import asyncio
 import sys
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, Final
 
 import pytest
 
@@ -39,6 +39,7 @@ from manip.reference_client.faults import ClientFault, ClientFaults
 from manip.reference_client.harness import CaseRun
 from manip.spec import SPEC
 from manip.spec.constants import ServerOp
+from tests.support.culprits import unnamed_violations
 
 HARNESS = [sys.executable, "-m", "manip.reference_client.harness"]
 SEED = 4242
@@ -108,6 +109,29 @@ def test_each_fault_is_caught_by_its_named_cases(fault: ClientFault, link: str) 
         assert result.outcome == "fail", f"{fault.value}: {case_id} {result.outcome} {result.reason}"
     clauses = {v.clause for r in got.values() for v in r.violations}
     assert clauses & set(fault.clauses), f"{fault.value}: broke {clauses}, says {fault.clauses}"
+    assert not unnamed_violations(report), unnamed_violations(report)  # every culprit named and kept
+
+
+NEVER_CONNECTS: Final = (
+    "client.request.hand",
+    "client.reply.here",
+    "client.pipeline.replies-matched",
+    "client.error.severities",
+)
+"""Cases whose every check a client that never gets its connection open fails (a request, a reply, a
+pipeline, error reports): under never-ack the judging server never opens the connection."""
+
+
+@pytest.mark.waits
+def test_a_client_that_never_connects_breaks_clauses_naming_what_they_judged() -> None:
+    """Under never-ack no request ever reaches the judging server: each case fails, and each violation
+    names its culprit (the Chaos packet never acknowledged, the last packet of the recording) or says
+    what never came (``missing``: the request)."""
+    report = run(NEVER_CONNECTS, "--fault", "never-ack")
+    assert {r.id: r.outcome for r in report.results} == dict.fromkeys(NEVER_CONNECTS, "fail")
+    kinds = {v.kind for r in report.results for v in r.violations}
+    assert "missing_response" in kinds and "wrong_value" in kinds, kinds
+    assert not unnamed_violations(report), unnamed_violations(report)
 
 
 @pytest.mark.parametrize("link", LINKS)

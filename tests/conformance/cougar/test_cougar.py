@@ -17,6 +17,8 @@ from manip.conformance.cli import main as conform_main
 from manip.conformance.cougar.probe import CougarProbe, TickClock, cougar_liveness
 from manip.conformance.cougar.target import CougarTarget, cougar_cases, run_cougar_suite, wait_idle
 from manip.conformance.output.coverage import coverage, gaps
+from manip.conformance.output.report import load_schema
+from manip.conformance.output.report_view import packet_rows, wire_order
 from manip.conformance.suite.case import CaseFailure, all_cases
 from manip.conformance.suite.context import RunOptions
 from manip.conformance.suite.results import ExitCode, RunReport
@@ -26,6 +28,8 @@ from manip.cougar.cli import serve_cougar
 from manip.cougar.faults import CougarFault, parse_faults
 from manip.cougar.link import CougarEnd, Drv11jError, PumaEnd, Tick, encode_frame
 from manip.spec import SPEC
+from tests.support.culprits import unnamed_violations
+from tests.support.json_schema import validate
 from tests.support.paths import ROOT
 from tests.support.servers import MANIP_COUGAR, StartServer
 
@@ -91,6 +95,7 @@ def test_fault_is_caught(fault: str) -> None:
         assert catcher.violations and all(v.clause for v in catcher.violations)
         assert {v.clause for v in catcher.violations} & declared, (fault, catcher.violations, declared)
         assert f"--cougar-fault {fault}" in catcher.reproduce
+    assert not unnamed_violations(report), unnamed_violations(report)  # every culprit named and kept
     # every case passes on the clean simulator: a wrong answer fails, or leaves a case not judged naming
     # the case that judges it, and never makes one skip
     skipped = [(r.id, r.reason) for r in report.results if r.outcome == "skip"]
@@ -313,6 +318,29 @@ def test_cli_cougar_sim_report(tmp_path: Path) -> None:
     data = json.loads(out.read_text())
     assert data["cases"] and all(c["outcome"] == "pass" for c in data["cases"])
     assert all(c["id"].startswith("cougar.reply.") for c in data["cases"])
+
+
+def test_cougar_report_shows_the_link_and_names_the_exchange(tmp_path: Path) -> None:
+    """A Cougar case's report lists the words that went each way as DRV-11J records (commands sent,
+    responses received; the schema's ``link``), and a violation names the response it judged, shown
+    decoded in the report's view: a wrong VERSION code fails cougar.reply.version naming the response."""
+    out = tmp_path / "report.json"
+    CliRunner().invoke(
+        conform_main,
+        [
+            *("run", "--cougar", "sim", "--cougar-fault", "wrong-version-code"),
+            *("--select", "cougar.reply.version", "-q", "--seed", "5", "--json", str(out)),
+        ],
+    )
+    data = json.loads(out.read_text())
+    validate(data, load_schema(), load_schema())
+    (case,) = data["cases"]
+    assert case["outcome"] == "fail"
+    assert {(p["dir"], p.get("link")) for p in case["packets"]} == {("c2s", "drv11j"), ("s2c", "drv11j")}
+    rows = {row.number: row for row in packet_rows(case, wire_order(data))}
+    culprits = [rows[v["packet"]] for v in case["violations"]]
+    assert culprits and all("from Cougar" in row.head for row in culprits), culprits
+    assert all(rows[row.number - 1].head.startswith("VERS 13 to Cougar") for row in culprits), rows
 
 
 def test_cli_cougar_fault_is_non_conformant() -> None:

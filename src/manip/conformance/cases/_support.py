@@ -164,6 +164,17 @@ def last_processed(packets: Sequence[WirePacket], before: WirePacket) -> int | N
     return number
 
 
+def expect_last_processed(ctx: CaseContext, packet: WirePacket, processed: int | None) -> bool:
+    """An asynchronous error carries the number of the last request processed before it, ``processed``
+    (:func:`last_processed`)."""
+    return ctx.expect(
+        processed is not None and word(packet.data) == processed,
+        clause="async-error.request-number",
+        expected=f"the number of the last request processed, #{processed} (the last answered before it)",
+        seen=packet,
+    )
+
+
 HOST_PROBES: Final = 8
 HOST_PAUSE: Final = 0.002
 """:func:`host_delay` sleeps this many times this long (16 ms in all, nothing in virtual time)."""

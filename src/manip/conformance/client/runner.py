@@ -23,7 +23,7 @@ import contextlib
 import shlex
 import time
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from typing import Any, Final
@@ -215,7 +215,7 @@ class ClientContext(CaseContext):
             (ncp or NcpConfig()).window if offer is None else offer,
         )
         self.plays.append(play)
-        self.transcript += [wire_packet(r) for r in play.wire if r.packet.opcode >= 0o200]
+        self.transcript += [wire_packet(r) for r in play.wire]
         for side in listener.sides:
             self.notes += side.notes
         if listener.script_error:
@@ -237,6 +237,27 @@ class ClientContext(CaseContext):
             actual=actual,
             kind=_PROBLEM_KIND.get(problem.what, "missing"),
         )
+
+    def expect_result(
+        self,
+        answer: Result | None,
+        kind: str = "reply",
+        *,
+        clause: str,
+        expected: str,
+        values: Mapping[str, object] | None = None,
+        seen: object = None,
+    ) -> bool:
+        """The harness reported ``answer`` (an op's result) as a reply, with ``values`` among its values
+        when given, or (``kind`` other than "reply") as an error of that kind (``not-connected``,
+        ``timeout``, ``bad-data``...).  The evidence is the result (``seen`` when given)."""
+        got = (answer.get("values") or {}) if answer is not None else {}
+        met = answer is not None and (
+            answer.type == "reply" and all(got.get(k) == v for k, v in (values or {}).items())
+            if kind == "reply"
+            else answer.type == "error" and answer.get("kind") == kind
+        )
+        return self.expect(met, clause=clause, expected=expected, seen=str(answer) if seen is None else seen)
 
     def judge_wire(self) -> None:
         """The ``client-wire`` invariant over every play of the case."""

@@ -20,6 +20,12 @@ which words Cougar had when each of its clock ticks ran:
 * :meth:`CougarProbe.reply` waits, ticking, for the next response (``within`` ticks); :meth:`call` is
   send + reply; :meth:`examine` reads Cougar memory with EXMN.
 
+What went each way is recorded in the case's transcript (:class:`LinkLog`), as the Chaos probe records
+its packets: the words of each command frame sent and of each response received, so a violation names
+the exchange it judged (:attr:`WordReply.packets`: the response, then the command before it) and the
+report shows it.  The log is bounded as a Chaos probe's is: a case that takes more than
+:data:`~manip.conformance.suite.context.MAX_CASE_PACKETS` responses from Cougar ends failed.
+
 Tick times come from one clock per process (:data:`TICK_CLOCK`): the monotonic clock, but always at
 least one 60 Hz period after the previous tick sent, so a target that keeps its state across links (as
 ``manip-cougar`` does) never sees time go backwards.  A failure of the link raises
@@ -33,15 +39,18 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
+from collections import deque
 from collections.abc import AsyncIterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Final, Literal
 
 from manip.codecs.cougar import CougarMsg, CougarValue, Malformed, OutOfSync, WordStream, encode
 from manip.codecs.pdp11float import words_to_f
+from manip.conformance.judge.packets import DRV11J, Direction, WirePacket
+from manip.conformance.judge.violation import Violation
 from manip.conformance.suite.busy import BUSY_DELAY, BUSY_PATIENCE, says_busy
 from manip.conformance.suite.case import CaseFailure
-from manip.conformance.suite.context import CaseContext
+from manip.conformance.suite.context import MAX_CASE_PACKETS, CaseContext
 from manip.conformance.suite.invariants import COUGAR_LINK
 from manip.cougar.link import Drv11jError, PumaEnd, parse_drv11j_address
 from manip.spec.constants import CougarResponse
@@ -53,6 +62,7 @@ __all__ = [
     "TICK_CLOCK",
     "CougarProbe",
     "LinkEvent",
+    "LinkLog",
     "TickClock",
     "WordReply",
     "cougar_liveness",
@@ -98,6 +108,54 @@ class TickClock:
 TICK_CLOCK: Final = TickClock()
 
 
+class LinkLog:
+    """What went each way on one DRV-11J link, recorded in the case's transcript as
+    :class:`~manip.conformance.judge.packets.WirePacket` records of ``link`` (:data:`DRV11J` by
+    default), numbered as the case's next connection; without a case (the liveness probe) nothing is
+    kept.  Bounded as a Chaos probe's recording: past :data:`MAX_CASE_PACKETS` records from Cougar the
+    case ends failed."""
+
+    def __init__(self, ctx: CaseContext | None, link: str = DRV11J) -> None:
+        self._ctx = ctx
+        self.link = link
+        self.connection = 1 + max((p.connection for p in ctx.transcript), default=-1) if ctx else 0
+        self.last_sent: WirePacket | None = None
+        """The last record of what went to Cougar (what a response answers)."""
+
+    def record(self, direction: Direction, code: int, tick: int, data: bytes) -> WirePacket:
+        """One record: ``code`` the first word (a Table 1 code, a frame type), ``tick`` the probe's tick."""
+        ctx = self._ctx
+        when = ctx.clock() if ctx is not None else 0.0
+        number = tick & 0xFFFF
+        packet = WirePacket(direction, code & 0xFFFF, number, 0, data, when, self.connection, self.link)
+        if direction == "c2s":
+            self.last_sent = packet
+        if ctx is None:
+            return packet
+        ctx.transcript.append(packet)
+        if direction == "s2c":
+            ctx.received += 1
+            if ctx.received > MAX_CASE_PACKETS:
+                raise CaseFailure(
+                    Violation(
+                        f"Cougar sent more than {MAX_CASE_PACKETS:,} responses within one case; the "
+                        "suite reads no more",
+                        "cougar.word-link",
+                        expected=f"at most {MAX_CASE_PACKETS:,} responses for one case's commands",
+                        actual=f"{ctx.received - 1:,} responses, and more coming",
+                        kind="unexpected_message",
+                        invariant=COUGAR_LINK.name,
+                        packet=packet,
+                    )
+                )
+        return packet
+
+    def last(self) -> tuple[WirePacket, ...]:
+        """The last record of the case (what a check of the link's state judged), or none."""
+        ctx = self._ctx
+        return ctx.judged() if ctx is not None else ()
+
+
 @dataclass(frozen=True)
 class WordReply:
     """One response from Cougar: decoded (``message``) or not (``problem`` says why)."""
@@ -109,6 +167,15 @@ class WordReply:
     problem: str = ""
     bare: str = ""
     """The name of a response recognised without its data (a lone out-of-sync code word)."""
+    record: WirePacket | None = field(default=None, compare=False, repr=False)
+    """Its record in the case's transcript."""
+    command: WirePacket | None = field(default=None, compare=False, repr=False)
+    """The record of the last words sent to Cougar before it (the command it answers)."""
+
+    @property
+    def packets(self) -> tuple[WirePacket, ...]:
+        """The exchange it closes, as evidence names it: this response, then the command before it."""
+        return tuple(p for p in (self.record, self.command) if p is not None)
 
     @property
     def code(self) -> int:
@@ -174,13 +241,16 @@ class CougarProbe:
         address: str,
         reply_timeout: float,
         clock: TickClock = TICK_CLOCK,
+        log: LinkLog | None = None,
     ) -> None:
         self.address = address
         self.reply_timeout = reply_timeout
         self.clock = clock
-        self.events: list[LinkEvent] = []
-        self.replies: list[WordReply] = []
-        """Every response received on this link, in order."""
+        self.log = log or LinkLog(None)
+        """The records of the link in the case's transcript."""
+        self.events: deque[LinkEvent] = deque(maxlen=_TRANSCRIPT_NOTE)
+        """The last link events (ticks included), for the case's notes."""
+        self.event_count = 0
         self._reader = reader
         self._writer = writer
         self._end = end
@@ -197,8 +267,10 @@ class CougarProbe:
         reply_timeout: float,
         connect_timeout: float,
         busy_wait: float = BUSY_PATIENCE,
+        ctx: CaseContext | None = None,
     ) -> CougarProbe:
-        """Connect, exchange HELLO, run one empty tick; a busy Cougar is retried for ``busy_wait`` s."""
+        """Connect, exchange HELLO, run one empty tick; a busy Cougar is retried for ``busy_wait`` s.
+        With ``ctx`` the link is recorded in the case's transcript (:class:`LinkLog`)."""
         host, port = parse_drv11j_address(address)
         loop = asyncio.get_running_loop()
         give_up = loop.time() + busy_wait
@@ -209,7 +281,7 @@ class CougarProbe:
             except (OSError, TimeoutError) as exc:
                 raise _link_failure(address, f"cannot connect: {exc or type(exc).__name__}") from exc
             end = PumaEnd()
-            probe = cls(reader, writer, end, address=address, reply_timeout=reply_timeout)
+            probe = cls(reader, writer, end, address=address, reply_timeout=reply_timeout, log=LinkLog(ctx))
             writer.write(end.hello())
             try:
                 await probe.run(1)
@@ -219,7 +291,7 @@ class CougarProbe:
                     await asyncio.sleep(BUSY_DELAY)
                     continue
                 raise
-            probe._inbox.clear()  # replies to the empty tick stay in probe.replies only
+            probe._inbox.clear()  # replies to the empty tick are in the log only
             return probe
 
     async def close(self) -> None:
@@ -246,8 +318,13 @@ class CougarProbe:
         if not words:
             return
         self._check_open()
-        self.events.append(LinkEvent("puma", self._ticks, tuple(words)))
+        self._event(LinkEvent("puma", self._ticks, tuple(words)))
+        self.log.record("c2s", words[0], self._ticks, words_bytes(words))
         self._writer.write(self._end.send(words))
+
+    def _event(self, event: LinkEvent) -> None:
+        self.events.append(event)
+        self.event_count += 1
 
     # ------------------------------------------------------------------------------------ ticking
     @property
@@ -275,16 +352,20 @@ class CougarProbe:
                 break
             await self._tick(None)
         pending = self.pending_words
+        sent = self.log.last_sent
         raise CaseFailure(
-            f"no response from Cougar to {what} within {within} ticks",
-            clause="cougar.word-link",
-            expected=f"a response to {what} within {within} ticks",
-            actual=f"no whole response: {len(pending)} word(s) came that make no Table 1 response yet: "
-            f"{octal_words(pending)}"
-            if pending
-            else "nothing",
-            kind="timeout",
-            invariant=COUGAR_LINK.name,
+            Violation(
+                f"no response from Cougar to {what} within {within} ticks",
+                "cougar.word-link",
+                expected=f"a response to {what} within {within} ticks",
+                actual=f"no whole response: {len(pending)} word(s) came that make no Table 1 response "
+                f"yet: {octal_words(pending)}"
+                if pending
+                else "nothing",
+                kind="timeout",
+                invariant=COUGAR_LINK.name,
+                packets=() if sent is None else (sent,),
+            )
         )
 
     async def call(self, name: str, *, within: int = DEFAULT_WITHIN, **values: Any) -> WordReply:
@@ -300,7 +381,7 @@ class CougarProbe:
         self._check_open()
         index = self._ticks
         now = self.clock.next(gap)
-        self.events.append(LinkEvent("tick", index, (), now))
+        self._event(LinkEvent("tick", index, (), now))
         self._writer.write(self._end.tick(now))
         self._ticks += 1
         loop = asyncio.get_running_loop()
@@ -330,32 +411,40 @@ class CougarProbe:
             except Drv11jError as exc:
                 raise _link_failure(self.address, f"bad DRV-11J stream: {exc}") from exc
             if words:
-                self.events.append(LinkEvent("cougar", index, tuple(words)))
+                self._event(LinkEvent("cougar", index, tuple(words)))
                 self._decode(index, words)
             if self._end.closed is not None and self._end.ticks_done <= index:
                 raise _link_failure(self.address, f"Cougar ended the link: {self._end.closed}")
         self._bare_out_of_sync(index)
         if self._end.ticks_done != index + 1:
             raise CaseFailure(
-                f"Cougar answered TICK #{index} with TICKED #{self._end.ticks_done - 1}",
-                clause="link.drv11j.framing",
-                expected=f"TICKED #{index}",
-                actual=f"TICKED #{self._end.ticks_done - 1}",
-                kind="wrong_value",
-                invariant=COUGAR_LINK.name,
+                Violation(
+                    f"Cougar answered TICK #{index} with TICKED #{self._end.ticks_done - 1}",
+                    "link.drv11j.framing",
+                    expected=f"TICKED #{index}",
+                    actual=f"TICKED #{self._end.ticks_done - 1}",
+                    invariant=COUGAR_LINK.name,
+                    packets=self.log.last(),
+                )
             )
 
     def _decode(self, tick: int, words: Sequence[int]) -> None:
         for item in self._stream.feed(words):
             if isinstance(item, CougarMsg):
-                reply = WordReply(tick, item.words, item)
+                message, got, problem = item, item.words, ""
             elif isinstance(item, OutOfSync):
-                reply = WordReply(tick, item.discarded, None, f"{item.code} is no Table 1 response code")
+                message, got, problem = None, item.discarded, f"{item.code} is no Table 1 response code"
             else:
                 assert isinstance(item, Malformed)
-                reply = WordReply(tick, item.words, None, str(item.error))
-            self.replies.append(reply)
-            self._inbox.append(reply)
+                message, got, problem = None, item.words, str(item.error)
+            record = self._recorded(tick, got)
+            self._inbox.append(
+                WordReply(tick, got, message, problem, record=record, command=self.log.last_sent)
+            )
+
+    def _recorded(self, tick: int, words: Sequence[int]) -> WirePacket:
+        """A response's words recorded in the log."""
+        return self.log.record("s2c", words[0] if words else 0, tick, words_bytes(words))
 
     def _bare_out_of_sync(self, tick: int) -> None:
         """A lone out-of-sync code word left at the end of a tick is the whole message (B.7 gives the
@@ -365,9 +454,11 @@ class CougarProbe:
         if self._stream.pending != (CougarResponse.OUT_OF_SYNC,):
             return
         self._stream = WordStream("response")
-        reply = WordReply(tick, (int(CougarResponse.OUT_OF_SYNC),), None, bare="OUT-OF-SYNC")
-        self.replies.append(reply)
-        self._inbox.append(reply)
+        words = (int(CougarResponse.OUT_OF_SYNC),)
+        record = self._recorded(tick, words)
+        self._inbox.append(
+            WordReply(tick, words, None, bare="OUT-OF-SYNC", record=record, command=self.log.last_sent)
+        )
 
     def _check_open(self) -> None:
         if self._end.closed is not None or self._writer.is_closing():
@@ -381,10 +472,9 @@ class CougarProbe:
 
     def transcript(self, last: int = _TRANSCRIPT_NOTE) -> str:
         """The last ``last`` link events, one a line."""
-        shown = self.events[-last:]
-        head = (
-            [f"... {len(self.events) - len(shown)} earlier events"] if len(shown) < len(self.events) else []
-        )
+        shown = list(self.events)[-last:]
+        earlier = self.event_count - len(shown)
+        head = [f"... {earlier} earlier events"] if earlier else []
         return "\n".join(head + [str(e) for e in shown])
 
 
@@ -431,7 +521,10 @@ async def cougar_probe(ctx: CaseContext) -> AsyncIterator[CougarProbe]:
     can be audited; within the same bound as a failing one's)."""
     options = ctx.options
     probe = await CougarProbe.open(
-        options.address, reply_timeout=options.reply_timeout, connect_timeout=options.connect_timeout
+        options.address,
+        reply_timeout=options.reply_timeout,
+        connect_timeout=options.connect_timeout,
+        ctx=ctx,
     )
     try:
         yield probe

@@ -20,6 +20,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Final
 
+from manip.codecs.cougar import CougarMsg, WordStream
 from manip.codecs.errors import CodecError
 from manip.codecs.messages import (
     decode_async,
@@ -29,8 +30,10 @@ from manip.codecs.messages import (
     response_layout,
 )
 from manip.conformance.judge.checks import WirePacket, describe, word
+from manip.conformance.judge.packets import DRV11J, carries_data, link_words
 from manip.spec import SPEC, Layout
 from manip.spec.constants import ServerOp
+from manip.spec.notation import octal_words
 
 __all__ = ["MAX_LISTED", "annotated", "decoded", "packet_listing", "show_value"]
 
@@ -85,7 +88,17 @@ def _undecoded(data: bytes, exc: CodecError) -> str:
 
 def decoded(packet: WirePacket, request_opcode: int | None = None) -> str:
     """What ``packet``'s data say; ``request_opcode`` (for an answer) decodes a reply by its request's
-    layout."""
+    layout.  A DRV-11J record: its words and the Table 1 messages they make, or a raw frame's bytes."""
+    if packet.link == DRV11J:
+        return _decoded_words(packet)
+    if packet.link:
+        return packet.data.hex(" ", 2) or "(none)"
+    if not carries_data(packet) and not packet.is_close:
+        return f"data {packet.data.hex(' ') or '(none)'}"
+    return _decoded_packet(packet, request_opcode)
+
+
+def _decoded_packet(packet: WirePacket, request_opcode: int | None) -> str:
     data = packet.data
     if packet.is_close:
         return data.decode("ascii", "replace") or "(no reason given)"
@@ -123,6 +136,20 @@ def decoded(packet: WirePacket, request_opcode: int | None = None) -> str:
     except CodecError as exc:
         return _undecoded(data, exc)
     return f"data {data.hex(' ') or '(none)'}"
+
+
+def _decoded_words(packet: WirePacket) -> str:
+    """A DRV-11J record's words in octal, and the Table 1 messages they make (a frame we sent may hold
+    several commands, or part of one)."""
+    words = link_words(packet)
+    stream = WordStream("command" if packet.direction == "c2s" else "response")
+    messages = [
+        " ".join([item.name, *(f"{k}={show_value(v)}" for k, v in item.values.items())])
+        for item in stream.feed(words)
+        if isinstance(item, CougarMsg)
+    ]
+    rest = " (then an incomplete message)" if stream.pending else ""
+    return f"{octal_words(words)}: " + ("; ".join(messages) or "no whole Table 1 message") + rest
 
 
 def annotated(packets: Sequence[WirePacket], *, from_open: bool = False) -> list[tuple[WirePacket, str]]:

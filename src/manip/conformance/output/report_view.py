@@ -231,6 +231,12 @@ def _hex(data: bytes, order: WireOrder) -> str:
     return wire_bytes(data, order).hex(" ")
 
 
+def _wire_hex(packet: WirePacket, order: WireOrder) -> str:
+    """A packet's bytes in the link's order; a DRV-11J record's as the DRV-11J link sends them (each
+    word low byte first, whatever link carries the server's packets)."""
+    return packet.data.hex(" ") if packet.link else _hex(packet.data, order)
+
+
 @dataclass(frozen=True)
 class PacketRow:
     number: int
@@ -251,6 +257,7 @@ def _packet(item: Mapping[str, Any]) -> WirePacket:
         bytes.fromhex(item["data"]),
         float(item.get("time", 0.0)),
         int(item.get("connection", 0)),
+        str(item.get("link", "")),
     )
 
 
@@ -261,6 +268,6 @@ def packet_rows(case: Mapping[str, Any], order: WireOrder) -> list[PacketRow]:
     packets: Sequence[WirePacket] = [_packet(p) for p in items]
     numbers = [int(p.get("n", i)) for i, p in enumerate(items, 1)]  # older reports: the first ones
     return [
-        PacketRow(n, packet, describe(packet), text, "" if packet.is_close else _hex(packet.data, order))
+        PacketRow(n, packet, describe(packet), text, "" if packet.is_close else _wire_hex(packet, order))
         for n, (packet, text) in zip(numbers, annotated(packets, from_open=True), strict=True)
     ]

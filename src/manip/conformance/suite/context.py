@@ -33,10 +33,11 @@ came.
 
 ``ctx.expect(cond, clause=..., expected=..., seen=answer)`` is the one way to state a check, and the
 common ones build their condition themselves (``ctx.expect_response``, ``expect_done``, ``expect_opcode``,
-``expect_echo``, ``expect_near``).  Evidence has one form, ``seen=`` (an answer, packets, ``showing(answer,
-text)``, ``missing(text)``: :mod:`~manip.conformance.judge.violation`), and every violation names the
-packets it judged (text alone: the last packet recorded, :meth:`CaseContext.judged`), but one about a
-packet that never came (a reply that never came names the request it answers).  A false check, on a
+``expect_echo``, ``expect_near``, ``expect_finite``, ``expect_none``).  Evidence has one form, ``seen=``
+(an answer, packets, ``showing(answer, text)``, ``missing(text)``:
+:mod:`~manip.conformance.judge.violation`), and every violation names the packets it judged (text
+alone: the last packet recorded, :meth:`CaseContext.judged`), but one about a packet that never came (a
+reply that never came names the request it answers).  A false check, on a
 clause of any level, is recorded (``ctx.recorded``) and the case goes on, so its report lists every
 violation; ``ctx.require(...)`` is the same check for what the rest of the case depends on, and stops the
 case when false, as the probe does when an answer never comes.
@@ -55,6 +56,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import random
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterable, Sequence
@@ -75,6 +77,7 @@ from manip.conformance.judge.checks import (
     describe,
     word,
 )
+from manip.conformance.judge.packets import carries_data
 from manip.conformance.judge.violation import NEVER_CAME, Violation, evidence, seen_kind, seen_packets
 from manip.conformance.suite.case import (
     LEVEL_ORDER,
@@ -800,6 +803,17 @@ class CaseContext:
             answer.number == answer.request.packet_no, clause=clause, expected=expected, seen=answer
         )
 
+    def expect_finite(
+        self, values: Sequence[float], count: int, *, clause: str, expected: str, seen: object
+    ) -> bool:
+        """``values`` are ``count`` finite floats (``seen``: the evidence, as for :meth:`expect`)."""
+        whole = len(values) == count and all(math.isfinite(v) for v in values)
+        return self.expect(whole, clause=clause, expected=expected, seen=seen)
+
+    def expect_none(self, items: Sequence[object], *, clause: str, expected: str) -> bool:
+        """Nothing came of what ``items`` collects (extra packets, responses): the evidence is ``items``."""
+        return self.expect(not items, clause=clause, expected=expected, seen=items)
+
     def expect_near(
         self, value: float, wanted: float, tolerance: float, *, clause: str, expected: str, seen: object
     ) -> bool:
@@ -814,12 +828,11 @@ class CaseContext:
         return replace(violation, packets=self.judged())
 
     def judged(self) -> tuple[WirePacket, ...]:
-        """What a check whose evidence names no packet judged: the last packet of the case's recording
-        (the reply it was reading), or nothing before any."""
-        for packet in reversed(self.shown_packets or self.transcript):
-            if not packet.is_close:
-                return (packet,)
-        return ()
+        """What a check whose evidence names no packet judged: the last data packet of the case's
+        recording (the reply it was reading); in a recording with none (a client's that never got as far
+        as a request) its last Chaos control packet; nothing before any."""
+        recorded = [p for p in reversed(self.shown_packets or self.transcript) if not p.is_close]
+        return next(((p,) for p in recorded if carries_data(p)), tuple(recorded[:1]))
 
     def require(
         self,

@@ -54,13 +54,10 @@ def expect_async(ctx: ClientContext, play: Play, code: int, word2: int, word3: i
 
 def expect_segment(ctx: ClientContext, play: Play, op: int, segment: int) -> None:
     answer = play.answer(op)
-    ctx.expect(
-        answer is not None
-        and answer.type == "reply"
-        and (answer.get("values") or {}).get("segment") == segment,
-        clause="client.async-routing",
-        expected=f"op {op} answered with segment {segment}",
-        seen=str(answer) if answer is not None else play.describe(),
+    shown = str(answer) if answer is not None else play.describe()
+    expected = f"op {op} answered with segment {segment}"
+    ctx.expect_result(
+        answer, values={"segment": segment}, clause="client.async-routing", expected=expected, seen=shown
     )
 
 
@@ -139,11 +136,5 @@ async def guard_hits(base: CaseContext) -> None:
     expect_async(ctx, play, 2, 0, 1, "segment-completed")
     expect_async(ctx, play, 1, 1, guard_b, "guard-hit")
     answer = play.answer(4)
-    ctx.expect(
-        answer is not None
-        and answer.type == "reply"
-        and (answer.get("values") or {}).get("transform") == [0.0] * 12,
-        clause="client.async-routing",
-        expected="here answered by its own reply, not by an asynchronous response",
-        seen=str(answer),
-    )
+    own = "here answered by its own reply, not by an asynchronous response"
+    ctx.expect_result(answer, values={"transform": [0.0] * 12}, clause="client.async-routing", expected=own)

@@ -162,12 +162,7 @@ async def newwc_on_load(base: CaseContext) -> None:
         seen=f"set weight data sent: {[d.hex() for d in _sent(play, SET_WEIGHT)]}",
     )
     answer = play.answer(1)
-    ctx.expect(
-        answer is not None and answer.type == "reply",
-        clause="client.newwc-on-load",
-        expected="change-load done",
-        seen=str(answer),
-    )
+    ctx.expect_result(answer, clause="client.newwc-on-load", expected="change-load done")
 
 
 @case(
@@ -238,12 +233,7 @@ async def newwc_without_offset(base: CaseContext) -> None:
     _expect_rule(ctx, play, "client.newwc-on-load")
     _expect_newwc(ctx, play, load)
     answer = play.answer(1)
-    ctx.expect(
-        answer is not None and answer.type == "reply",
-        clause="client.newwc-on-load",
-        expected="change-load done",
-        seen=str(answer),
-    )
+    ctx.expect_result(answer, clause="client.newwc-on-load", expected="change-load done")
 
 
 @case(
@@ -313,11 +303,8 @@ async def plain_guards(base: CaseContext) -> None:
     )
     _expect_newwc(ctx, play, second, after=before)
     answer = play.answer(9)
-    ctx.expect(
-        answer is not None and answer.type == "reply",
-        clause="client.newwc-on-load",
-        expected="the change-load with no guard armed done",
-        seen=str(answer),
+    ctx.expect_result(
+        answer, clause="client.newwc-on-load", expected="the change-load with no guard armed done"
     )
 
 
@@ -377,9 +364,6 @@ async def choice_errors(base: CaseContext) -> None:
             ops=(op_id,),
         )
     answer = play.answer(4)
-    ctx.expect(
-        answer is not None and answer.type == "reply",
-        clause="client.guard-numbers",
-        expected="the arm-guard after a refused one done",
-        seen=str(answer),
+    ctx.expect_result(
+        answer, clause="client.guard-numbers", expected="the arm-guard after a refused one done"
     )

@@ -34,14 +34,8 @@ async def initial_response(base: CaseContext) -> None:
     play = await ctx.play([connect(0), request(1, "here"), close(2)], script, initial=False)
     expect_wire(ctx, initial_response_violations(play.wire), clause="client.initial-response")
     answer = play.answer(1)
-    ctx.expect(
-        answer is not None
-        and answer.type == "reply"
-        and (answer.get("values") or {}).get("transform") == values,
-        clause="client.reply-matching",
-        expected=f"here answered with the transform sent after the initial RESPONSE ({values})",
-        seen=str(answer),
-    )
+    after = f"here answered with the transform sent after the initial RESPONSE ({values})"
+    ctx.expect_result(answer, values={"transform": values}, clause="client.reply-matching", expected=after)
 
 
 @case("client.close.sequence", clauses=["client.close"])
@@ -85,11 +79,11 @@ def _lost(ctx: ClientContext, play: Play, reason_part: str | None) -> None:
         )
     for op in (1, 2):
         answer = play.answer(op)
-        ctx.expect(
-            answer is not None and answer.type == "error" and answer.get("kind") == "not-connected",
+        ctx.expect_result(
+            answer,
+            "not-connected",
             clause="client.connection-lost",
             expected=f"op {op} failed as not-connected (in flight when the connection went, or after)",
-            seen=str(answer),
         )
 
 
@@ -158,9 +152,9 @@ async def busy(base: CaseContext) -> None:
         seen=str(state) if state is not None else play.describe(),
     )
     answer = play.answer(1)
-    ctx.expect(
-        answer is not None and answer.type == "error" and answer.get("kind") == "not-connected",
+    ctx.expect_result(
+        answer,
+        "not-connected",
         clause="client.connection-lost",
         expected="the request after the refusal failed as not-connected",
-        seen=str(answer),
     )

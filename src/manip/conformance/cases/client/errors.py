@@ -63,12 +63,8 @@ def _arg_case(row: tuple[str, bool, bool, str]) -> None:
             ops=(1,),
         )
         later = play.answer(2)
-        ctx.expect(
-            later is not None and later.type == "reply",
-            clause="client.error-report",
-            expected="the next request answered normally: a non-fatal error fails its own request only",
-            seen=str(later),
-        )
+        normally = "the next request answered normally: a non-fatal error fails its own request only"
+        ctx.expect_result(later, clause="client.error-report", expected=normally)
 
     case(
         f"client.error.args-{name}",
@@ -169,14 +165,8 @@ def _async_error_case(row: tuple[str, int, ErrorMessage, str]) -> None:
             seen=str(found[0]),
         )
         answer = play.answer(1)
-        ctx.expect(
-            answer is not None
-            and answer.type == "reply"
-            and answer.get("values", {}).get("joints") == values,
-            clause="client.async-routing",
-            expected=f"the reply that came after it, joints {values}",
-            seen=str(answer),
-        )
+        after = f"the reply that came after it, joints {values}"
+        ctx.expect_result(answer, values={"joints": values}, clause="client.async-routing", expected=after)
 
     case(
         f"client.error.{name}-between",
@@ -241,12 +231,8 @@ def _fatal_case(row: tuple[str, str]) -> None:
             seen=f"states {play.states()}",
         )
         later = play.answer(2)
-        ctx.expect(
-            later is not None and later.type == "error" and later.get("kind") == "not-connected",
-            clause="client.fatal-ends",
-            expected="the request after the fatal error refused as not-connected",
-            seen=str(later),
-        )
+        refused = "the request after the fatal error refused as not-connected"
+        ctx.expect_result(later, "not-connected", clause="client.fatal-ends", expected=refused)
 
     case(
         f"client.fatal.severity-{name}",

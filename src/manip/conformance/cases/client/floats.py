@@ -66,11 +66,11 @@ async def reserved_operand(base: CaseContext) -> None:
     floats[where] = RESERVED
     play, _ = await _joints_reply(ctx, b"".join(floats))
     answer = play.answer(1)
-    ctx.expect(
-        answer is not None and answer.type == "error" and answer.get("kind") == "bad-data",
+    ctx.expect_result(
+        answer,
+        "bad-data",
         clause="float.reserved-operand",
         expected=f"an error (bad-data): joint {where + 1} is a reserved operand",
-        seen=str(answer),
     )
 
 

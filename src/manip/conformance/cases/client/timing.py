@@ -34,14 +34,8 @@ async def reply_near_timeout(base: CaseContext) -> None:
 
     play = await ctx.play([connect(0), request(1, "joint-angles", timeout=TIMEOUT), close(2)], script)
     answer = play.answer(1)
-    ctx.expect(
-        answer is not None
-        and answer.type == "reply"
-        and (answer.get("values") or {}).get("joints") == values,
-        clause="client.reply-wait",
-        expected=f"the reply sent {delay:.2f} s after the request (timeout {TIMEOUT:g} s) delivered",
-        seen=str(answer),
-    )
+    delivered = f"the reply sent {delay:.2f} s after the request (timeout {TIMEOUT:g} s) delivered"
+    ctx.expect_result(answer, values={"joints": values}, clause="client.reply-wait", expected=delivered)
 
 
 @case("client.timing.no-reply", clauses=["client.reply-wait"])
@@ -55,12 +49,7 @@ async def no_reply(base: CaseContext) -> None:
 
     play = await ctx.play([connect(0), request(1, "here", timeout=TIMEOUT), close(2)], script)
     answer = play.answer(1)
-    ctx.expect(
-        answer is not None and answer.type == "error" and answer.get("kind") == "timeout",
-        clause="client.reply-wait",
-        expected="op 1 failed with a timeout",
-        seen=str(answer),
-    )
+    ctx.expect_result(answer, "timeout", clause="client.reply-wait", expected="op 1 failed with a timeout")
     assert answer is not None
     sent = [r.t for r in play.requests()]
     reported = play.time_of(answer)

@@ -4,7 +4,6 @@ name, nothing more on the link)."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Sequence
 from typing import Final
 
@@ -105,14 +104,24 @@ async def answer_words(probe: CougarProbe, name: str) -> tuple[list[WordReply], 
     """Send command ``name`` (no data) and tick until a whole response has come, at most DEFAULT_WITHIN
     ticks: the responses, and every word Cougar sent meanwhile as it came (a response may span ticks),
     for a case that judges the words themselves, whatever response they make."""
-    first = len(probe.events)
+    first = probe.event_count
     await probe.send(name)
     replies: list[WordReply] = []
     for _ in range(DEFAULT_WITHIN):
         replies += await probe.run(1)
         if replies:
             break
-    return replies, tuple(w for e in probe.events[first:] if e.direction == "cougar" for w in e.words)
+    since = probe.event_count - first  # the events are a bounded window: the last ``since`` of them
+    recent = list(probe.events)[-since:] if since else []
+    return replies, tuple(w for e in recent if e.direction == "cougar" for w in e.words)
+
+
+def expect_names(
+    ctx: CaseContext, replies: Sequence[WordReply], names: Sequence[str], *, clause: str, expected: str
+) -> bool:
+    """``replies`` are responses named ``names``, in that order, and no others."""
+    named = [r.name for r in replies] == list(names)
+    return ctx.expect(named, clause=clause, expected=expected, seen=replies)
 
 
 def expect_none(ctx: CaseContext, replies: Sequence[WordReply], clause: str, why: str) -> None:
@@ -206,11 +215,8 @@ async def settle(probe: CougarProbe, pose: Sequence[float] = READY) -> None:
 async def read_forces(ctx: CaseContext, probe: CougarProbe) -> tuple[float, ...]:
     reply = expect_reply(ctx, await probe.call("RFRC"), "FORCES", "cougar.rfrc.reply", after="RFRC")
     values = reply.floats()
-    ctx.expect(
-        len(values) == 6 and all(math.isfinite(v) for v in values),
-        clause="cougar.rfrc.reply",
-        expected="six finite floats",
-        seen=showing(reply, str(values)),
+    ctx.expect_finite(
+        values, 6, clause="cougar.rfrc.reply", expected="six finite floats", seen=showing(reply, str(values))
     )
     return values
 
@@ -230,6 +236,33 @@ def guard_trips(replies: Iterable[WordReply]) -> list[tuple[str, int]]:
 
 def others(replies: Iterable[WordReply]) -> list[WordReply]:
     return [r for r in replies if r.name not in ("GUARD-STOP", "GUARD-CONTINUE")]
+
+
+def expect_trips(
+    ctx: CaseContext,
+    replies: Sequence[WordReply],
+    trips: Sequence[tuple[str, int]],
+    *,
+    clause: str,
+    expected: str,
+) -> bool:
+    """The guard responses among ``replies`` are ``trips`` ((name, index), in order), none when empty."""
+    return ctx.expect(guard_trips(replies) == list(trips), clause=clause, expected=expected, seen=replies)
+
+
+def expect_close(
+    ctx: CaseContext,
+    got: Sequence[float],
+    want: Sequence[float],
+    *,
+    rel: float,
+    floor: float = 1e-6,
+    clause: str,
+    expected: str,
+) -> bool:
+    """``got`` matches ``want`` element-wise (:func:`close_to`), the evidence ``got``."""
+    near = close_to(got, want, rel=rel, floor=floor)
+    return ctx.expect(near, clause=clause, expected=expected, seen=fmt(got))
 
 
 def close_to(a: Sequence[float], b: Sequence[float], *, rel: float, floor: float) -> bool:

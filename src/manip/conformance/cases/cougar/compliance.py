@@ -3,7 +3,6 @@ law has."""
 
 from __future__ import annotations
 
-import math
 from typing import Any, Final
 
 import numpy as np
@@ -13,8 +12,8 @@ from manip.codecs.pdp11float import f_to_words
 from manip.conformance.cases.cougar._support import (
     POSE_B,
     clean,
-    close_to,
     examine_region,
+    expect_close,
     expect_examine,
     expect_none,
     expect_reply,
@@ -67,11 +66,8 @@ async def _ntd(
     )
     expect_reply(ctx, reply, "NTD", "cougar.npr.reply", after="NPR")
     values = reply.floats()
-    ctx.expect(
-        len(values) == 6 and all(math.isfinite(v) for v in values),
-        clause="cougar.npr.reply",
-        expected="six finite floats",
-        seen=showing(reply, fmt(values)),
+    ctx.expect_finite(
+        values, 6, clause="cougar.npr.reply", expected="six finite floats", seen=showing(reply, fmt(values))
     )
     return values
 
@@ -114,29 +110,37 @@ async def npr_gains(ctx: CaseContext) -> None:
                     f"{'position error' if kw == 'k' else 'rate difference'})",
                     seen=f"{fmt(rest)} -> {fmt(one)}",
                 )
-                ctx.expect(
-                    close_to(d2, [2 * v for v in d1], rel=0.02, floor=1e-6),
+                doubled = [2 * v for v in d1]
+                expect_close(
+                    ctx,
+                    d2,
+                    doubled,
+                    rel=0.02,
                     clause="cougar.npr.reply",
-                    expected=f"doubling {gain} doubles its part of NTD: {fmt(2 * v for v in d1)}",
-                    seen=fmt(d2),
+                    expected=f"doubling {gain} doubles its part of NTD: {fmt(doubled)}",
                 )
             one = await _ntd(ctx, probe, k=GAIN, b=0.0, bji=bji, rate=0.0)
             two = await _ntd(ctx, probe, k=GAIN, b=0.0, bji=2 * bji, rate=0.0)
-            ctx.expect(
-                close_to(two, [2 * v for v in one], rel=0.02, floor=1e-6),
+            doubled = [2 * v for v in one]
+            expect_close(
+                ctx,
+                two,
+                doubled,
+                rel=0.02,
                 clause="cougar.npr.reply",
-                expected=f"doubling BJI doubles NTD: {fmt(2 * v for v in one)}",
-                seen=fmt(two),
+                expected=f"doubling BJI doubles NTD: {fmt(doubled)}",
             )
             each = tuple(bji * m for m in BJI_STEPS)
             own = await _ntd(ctx, probe, k=GAIN, b=0.0, bji=each, rate=0.0)
             want = [v * m for v, m in zip(one, BJI_STEPS, strict=True)]
-            ctx.expect(
-                close_to(own, want, rel=0.02, floor=1e-6),
+            diagonal = f"BJI {fmt(each)} (diagonal: joint i's own element scales joint i)"
+            expect_close(
+                ctx,
+                own,
+                want,
+                rel=0.02,
                 clause="cougar.npr.reply",
-                expected=f"BJI {fmt(each)} (diagonal: joint i's own element scales joint i) gives NTD "
-                f"{fmt(want)}",
-                seen=fmt(own),
+                expected=f"{diagonal} gives NTD {fmt(want)}",
             )
         finally:
             await probe.send("NBJI", bji=(0.0,) * 6)
@@ -170,11 +174,14 @@ async def rst_zeroes_velocities(ctx: CaseContext) -> None:
         reply = await probe.call("NPR", theta_sensed=READY, theta_commanded=commanded, rate_difference=rate)
         expect_reply(ctx, reply, "NTD", "cougar.npr.reply", after="NPR")
         stored = await region_floats(ctx, probe, objects[0])
-        ctx.expect(
-            close_to(stored, rate, rel=1e-6, floor=0.0),
+        expect_close(
+            ctx,
+            stored,
+            rate,
+            rel=1e-6,
+            floor=0.0,
             clause="cougar.memory",
             expected=f"NPR's rate difference in memory before RST: {fmt(rate)}",
-            seen=fmt(stored),
         )
         await probe.send("RST")
         await probe.run(1)
@@ -237,12 +244,14 @@ async def filter_output(ctx: CaseContext) -> None:
                 ("second", second, -c2 * c1 * c3 + c4),
             ):
                 want = [factor * v for v in sample]
-                ctx.expect(
-                    close_to(got, want, rel=0.02, floor=1e-6),
+                after_rst = f"the {label} NTD after RST with con = {FILTER_CON}"
+                expect_close(
+                    ctx,
+                    got,
+                    want,
+                    rel=0.02,
                     clause="cougar.filter",
-                    expected=f"the {label} NTD after RST with con = {FILTER_CON}: {factor:g} x the "
-                    f"sample, {fmt(want)}",
-                    seen=fmt(got),
+                    expected=f"{after_rst}: {factor:g} x the sample, {fmt(want)}",
                 )
         finally:
             for i, w in enumerate(old):

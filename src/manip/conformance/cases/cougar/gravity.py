@@ -206,12 +206,7 @@ async def _ntd_at_rest(ctx: CaseContext, probe: CougarProbe, commanded_force: Se
     await probe.run(2)
     reply = await probe.call("NPR", theta_sensed=READY, theta_commanded=READY, rate_difference=(0.0,) * 6)
     values = expect_reply(ctx, reply, "NTD", "cougar.npr.reply", after="NPR").floats()
-    ctx.expect(
-        len(values) == 6 and all(np.isfinite(values)),
-        clause="cougar.npr.reply",
-        expected="six finite floats",
-        seen=fmt(values),
-    )
+    ctx.expect_finite(values, 6, clause="cougar.npr.reply", expected="six finite floats", seen=fmt(values))
     return np.array(values if len(values) == 6 else (0.0,) * 6, dtype=np.float64)
 
 

@@ -9,6 +9,7 @@ from manip.conformance.cases.cougar._support import (
     STOP_BIT,
     clean,
     expect_none,
+    expect_trips,
     guard_trips,
     guard_words,
     others,
@@ -77,11 +78,12 @@ async def guard_trips_once(ctx: CaseContext) -> None:
         expect_none(ctx, others(got), "cougar.guards", "only guard responses")
         await probe.send_words(guard_words(STOP_BIT | 3))
         got = await probe.run(6)
-        ctx.expect(
-            guard_trips(got) == [("GUARD-STOP", 3)],
+        expect_trips(
+            ctx,
+            got,
+            [("GUARD-STOP", 3)],
             clause="cougar.guard-trips-once",
             expected="guard 3, armed again, trips once more (one GUARD-STOP 3)",
-            seen=got,
         )
         await probe.send("GUARDC", index=7)
         await probe.run(1)

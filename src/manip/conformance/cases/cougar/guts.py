@@ -9,6 +9,7 @@ from manip.conformance.cases.cougar._support import (
     POSE_B,
     clean,
     expect_examined,
+    expect_names,
     mapped,
 )
 from manip.conformance.cougar.probe import (
@@ -92,12 +93,10 @@ async def guts_no_nesting(ctx: CaseContext) -> None:
         await probe.send("VERS", version=1)
         nested = await probe.run(1, gap=REENTRY_GAP_S)
         late = await probe.run(1)
-        ctx.expect(
-            [r.name for r in nested + late] == ["VERSION"],
-            clause="cougar.guts-reentry",
-            expected=f"one VERSION from the tick {REENTRY_GAP_S * 1e6:g} us after the previous one or from "
-            "the next tick, nothing else",
-            seen=nested + late,
+        gap = REENTRY_GAP_S * 1e6
+        once = f"one VERSION from the tick {gap:g} us after the previous one or from the next tick"
+        expect_names(
+            ctx, nested + late, ["VERSION"], clause="cougar.guts-reentry", expected=f"{once}, nothing else"
         )
         ctx.expect(
             not any(r.problem for r in nested + late),
@@ -129,15 +128,12 @@ async def guts_reentry(ctx: CaseContext) -> None:
             ctx.skip(
                 "this Cougar ran a whole GUTS for a tick 0.5 ms after the previous one: no re-entry to judge"
             )
-        ctx.expect(
-            not early,
-            clause="cougar.guts-cost-model",
-            expected="no words from a tick that re-entered GUTS (or a whole GUTS: the VERS answered, once)",
-            seen=early + late,
-        )
-        ctx.expect(
-            [r.name for r in late] == ["VERSION"],
+        reentered = "no words from a tick that re-entered GUTS (or a whole GUTS: the VERS answered, once)"
+        ctx.expect_none(early, clause="cougar.guts-cost-model", expected=reentered)
+        expect_names(
+            ctx,
+            late,
+            ["VERSION"],
             clause="cougar.guts-cost-model",
             expected="the VERS waiting in the buffer answered at the next full tick",
-            seen=late,
         )

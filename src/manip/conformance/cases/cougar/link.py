@@ -8,6 +8,7 @@ from manip.codecs.cougar import encode
 from manip.conformance.cases.cougar._support import (
     any_address,
     clean,
+    expect_names,
     expect_none,
     expect_quiet,
     expect_reply,
@@ -71,11 +72,8 @@ async def comint_in_order(ctx: CaseContext) -> None:
             if len(replies) >= len(expected):
                 break
         replies += await probe.run(1)
-        ctx.expect(
-            [r.name for r in replies] == expected,
-            clause="cougar.comint.partial-waits",
-            expected=" then ".join(expected),
-            seen=replies,
+        expect_names(
+            ctx, replies, expected, clause="cougar.comint.partial-waits", expected=" then ".join(expected)
         )
 
 
@@ -122,11 +120,12 @@ async def comint_partial_waits(ctx: CaseContext) -> None:
                 expect_none(ctx, got, "cougar.comint.partial-waits", f"NPR has {cut} of {len(npr)} words")
             else:
                 got += await probe.run(1) if not got else []
-                ctx.expect(
-                    [r.name for r in got] == ["NTD"],
+                expect_names(
+                    ctx,
+                    got,
+                    ["NTD"],
                     clause="cougar.comint.partial-waits",
                     expected="one NTD once the last word of the split NPR arrived",
-                    seen=got,
                 )
         expect_reply(ctx, await probe.call("VERS", version=1), "VERSION", "cougar.word-link")
 

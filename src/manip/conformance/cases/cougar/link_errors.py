@@ -6,17 +6,23 @@ Each case plays the Puma by hand on a raw TCP connection (the word probe only ev
 sends the frame under test followed by a good command and TICK, and judges what Cougar does: it ends the
 link (closes the connection), sending nothing after the bad frame but, if it likes, a BYE with its
 reason; a Cougar that carried on would answer the TICK that follows.  A BYE that says busy means another
-link had not quite ended yet: the case tries again, as the probe does.
+link had not quite ended yet: the case tries again, as the probe does.  What went each way is recorded
+in the case's transcript as whole frames (:data:`~manip.conformance.judge.packets.DRV11J_FRAME`), and each
+violation names the frames it judged.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
-from manip.conformance.cougar.probe import cougar_probe
+from manip.conformance.cases.cougar._support import expect_names
+from manip.conformance.cougar.probe import LinkLog, cougar_probe
+from manip.conformance.judge.packets import DRV11J_FRAME, WirePacket
+from manip.conformance.judge.violation import showing
 from manip.conformance.suite.busy import BUSY_DELAY, BUSY_PATIENCE, says_busy
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext
@@ -67,6 +73,30 @@ class CougarLinkSeen:
     """How many of ``frames`` came before the frame under test was sent."""
     sent: list[bytes] = field(default_factory=list)
     """What the case wrote on the link, as written (frames the codec would refuse among them)."""
+    log: LinkLog = field(default_factory=lambda: LinkLog(None, DRV11J_FRAME))
+    records: list[WirePacket] = field(default_factory=list)
+    """The record of each of ``frames`` in the case's transcript."""
+    garbage_record: WirePacket | None = None
+    """The record of the data that did not decode."""
+
+    def send(self, writer: asyncio.StreamWriter, chunk: bytes) -> None:
+        """Write ``chunk`` on the link and record it."""
+        writer.write(chunk)
+        self.sent.append(chunk)
+        self.log.record("c2s", int.from_bytes(chunk[:2], "little"), 0, chunk)
+
+    def received(self, frames: list[Frame]) -> None:
+        """Frames that came from Cougar, recorded."""
+        for frame in frames:
+            data = encode_frame(frame)
+            self.frames.append(frame)
+            self.records.append(self.log.record("s2c", int.from_bytes(data[:2], "little"), 0, data))
+
+    def shown(self, frames: Sequence[Frame], text: str) -> object:
+        """Evidence: ``text`` about ``frames`` (some of :attr:`frames`), naming their records, or the last
+        record of the link when there are none."""
+        chosen = [r for f, r in zip(self.frames, self.records, strict=True) if any(f is g for g in frames)]
+        return showing(chosen or self.records[-1:] or self.log.last(), text)
 
     def transcript(self) -> str:
         """The exchange in the order it went, as a passing case's report keeps it (at most
@@ -113,9 +143,10 @@ async def _read_until(
             link.ended = True
             return
         try:
-            link.frames += decoder.feed(data)
+            link.received(decoder.feed(data))
         except Drv11jError as exc:
             link.garbage = str(exc)
+            link.garbage_record = link.log.record("s2c", int.from_bytes(data[:2], "little"), 0, data)
             return
 
 
@@ -134,18 +165,16 @@ async def _once(ctx: CaseContext, first: bytes | None, bad: bytes) -> CougarLink
             expected="Cougar accepting a link",
             seen=str(str(exc) or type(exc).__name__),
         )
-    link, decoder = CougarLinkSeen(), FrameDecoder()
+    link, decoder = CougarLinkSeen(log=LinkLog(ctx, DRV11J_FRAME)), FrameDecoder()
     try:
         await _read_until(reader, decoder, link, Hello, timeout)
         if first is not None:
-            writer.write(first)
-            link.sent.append(first)
+            link.send(writer, first)
             await _read_until(reader, decoder, link, Ticked, timeout)
         link.after = len(link.frames)
         if not link.ended:
             if not link.busy():
-                writer.write(bad)
-                link.sent.append(bad)
+                link.send(writer, bad)
             await _read_until(reader, decoder, link, None, timeout)
     finally:
         writer.close()
@@ -287,26 +316,26 @@ def judge_ending(ctx: CaseContext, link: CougarLinkSeen, clause: str, what: str)
         not link.garbage,
         clause="link.drv11j.framing",
         expected="every frame from Cougar well formed",
-        seen=str(link.garbage),
+        seen=showing(link.garbage_record, link.garbage),
     )
     ctx.expect(
         bool(link.frames) and link.frames[0] == Hello(Role.COUGAR),
         clause="link.drv11j.framing",
         expected="Cougar's HELLO (version 1, role Cougar) first",
-        seen=str(link.frames[:1]),
+        seen=link.shown(link.frames[:1], str(link.frames[:1])),
     )
     others = [f for f in link.later if not isinstance(f, Bye)]
     ctx.expect(
         not others,
         clause=clause,
         expected=f"{what}: nothing from Cougar but, at most, BYE with its reason",
-        seen="; ".join(str(f) for f in others[:4]),
+        seen=link.shown(others, "; ".join(str(f) for f in others[:4])),
     )
     ctx.expect(
         link.ended,
         clause=clause,
         expected=f"{what}: Cougar closes the link within {ctx.options.reply_timeout:g} s",
-        seen=f"still open; it sent {[str(f) for f in link.later][:4]}",
+        seen=link.shown(link.later, f"still open; it sent {[str(f) for f in link.later][:4]}"),
     )
 
 
@@ -325,24 +354,25 @@ async def link_busy(ctx: CaseContext) -> None:
             bool(second.frames) and second.frames[0] == Hello(Role.COUGAR),
             clause="link.drv11j.framing",
             expected="Cougar's HELLO first, on the second connection too",
-            seen=str(second.frames[:1]),
+            seen=second.shown(second.frames[:1], str(second.frames[:1])),
         )
         ctx.expect(
             any(says_busy(b.reason) for b in byes),
             clause="link.drv11j.busy",
             expected="BYE with a reason that says busy on a second connection while a link is up",
-            seen=f"frames {[str(f) for f in second.frames[1:4]]}",
+            seen=second.shown(second.frames[1:4], f"frames {[str(f) for f in second.frames[1:4]]}"),
         )
         ctx.expect(
             second.ended,
             clause="link.drv11j.busy",
             expected=f"the second connection closed by Cougar within {ctx.options.reply_timeout:g} s",
-            seen="still open",
+            seen=second.shown(second.frames, "still open"),
         )
         reply = await probe.call("VERS", version=1)
-        ctx.expect(
-            reply.name == "VERSION",
+        expect_names(
+            ctx,
+            [reply],
+            ["VERSION"],
             clause="link.drv11j.busy",
             expected="the first link carrying on: VERS answered with VERSION",
-            seen=reply,
         )

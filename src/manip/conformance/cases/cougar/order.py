@@ -9,8 +9,9 @@ from typing import Final
 from manip.conformance.cases.cougar._support import (
     ALWAYS,
     clean,
+    expect_names,
     expect_reply,
-    guard_trips,
+    expect_trips,
     guard_words,
     read_forces,
     settle,
@@ -36,18 +37,20 @@ async def guts_order(ctx: CaseContext) -> None:
         await probe.run(1)
         await probe.send_words(guard_words(5, tol=ALWAYS))
         first = await probe.run(1)
-        ctx.expect(
-            not guard_trips(first),
+        expect_trips(
+            ctx,
+            first,
+            [],
             clause="cougar.guts-order",
             expected="no trip in the tick that read GUARDS (GUARDM runs before COMINT)",
-            seen=first,
         )
         second = await probe.run(1)
-        ctx.expect(
-            guard_trips(second) == [("GUARD-CONTINUE", 5)],
+        expect_trips(
+            ctx,
+            second,
+            [("GUARD-CONTINUE", 5)],
             clause="cougar.guts-order",
             expected="guard 5 tripping on the next tick (GUARD-CONTINUE 5)",
-            seen=second,
         )
 
 
@@ -83,19 +86,21 @@ async def gravity_corrected(ctx: CaseContext) -> None:
             await probe.run(2)
             await probe.send_words(guard_words(9, dvec, PHANTOM_OZ / 2))
             quiet = await probe.run(3)
-            ctx.expect(
-                not guard_trips(quiet),
+            expect_trips(
+                ctx,
+                quiet,
+                [],
                 clause="cougar.guard-corrected-force",
                 expected="no trip while the gravity model matches the hand",
-                seen=quiet,
             )
             await probe.send("NEWWC", weight=PHANTOM_OZ, cg=(0.0, 0.0, 0.0))
             tripped = await probe.run(3)
-            ctx.expect(
-                guard_trips(tripped) == [("GUARD-CONTINUE", 9)],
+            expect_trips(
+                ctx,
+                tripped,
+                [("GUARD-CONTINUE", 9)],
                 clause="cougar.guard-corrected-force",
                 expected="guard 9 tripping once NEWWC adds an object the hand does not hold",
-                seen=tripped,
             )
         finally:
             await probe.send("NEWWC", weight=0.0, cg=(0.0, 0.0, 0.0))
@@ -118,19 +123,21 @@ async def nop_resync(ctx: CaseContext) -> None:
         await clean(probe)
         await probe.send_words([UNKNOWN_CODE])
         got = await probe.run(2)
-        ctx.expect(
-            [r.name for r in got] == ["OUT-OF-SYNC"],
+        expect_names(
+            ctx,
+            got,
+            ["OUT-OF-SYNC"],
             clause="cougar.comint.unknown-code",
             expected=f"one OUT-OF-SYNC for the unknown code {octal(UNKNOWN_CODE)}",
-            seen=got,
         )
         await probe.send_words([CougarCommand.NOP] * NOPS + [CougarCommand.VERS, 1])
         got = await probe.run(2)
-        ctx.expect(
-            [r.name for r in got] == ["VERSION"],
+        expect_names(
+            ctx,
+            got,
+            ["VERSION"],
             clause="cougar.nop-resync",
             expected=f"{NOPS} NOPs answered with nothing, then VERS answered with VERSION",
-            seen=got,
         )
         expect_reply(ctx, got[0], "VERSION", "cougar.vers.reply", after="VERS")
 
@@ -149,11 +156,13 @@ async def idxs_burst(ctx: CaseContext) -> None:
             [CougarCommand.RFRC, CougarCommand.VERS, 1, CougarCommand.RRAW, CougarCommand.RFRC]
         )
         got = await probe.run(2)
-        ctx.expect(
-            [r.name for r in got] == ["FORCES", "VERSION", "RAW", "FORCES"],
+        asked = ["FORCES", "VERSION", "RAW", "FORCES"]
+        expect_names(
+            ctx,
+            got,
+            asked,
             clause="cougar.idxs-in-progress",
-            expected="FORCES, VERSION, RAW, FORCES, in the order asked, nothing doubled",
-            seen=got,
+            expected=f"{', '.join(asked)}, in the order asked, nothing doubled",
         )
         ctx.expect(
             not any(r.problem for r in got),

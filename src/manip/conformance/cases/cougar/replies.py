@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import math
-
 from manip.arm import READY
 from manip.conformance.cases.cougar._support import (
     answer_words,
     any_address,
     clean,
     expect_examine,
+    expect_names,
     expect_quiet,
     expect_reply,
     fmt,
@@ -41,11 +40,13 @@ async def reply_ntd(ctx: CaseContext) -> None:
         for rate in ((0.0,) * 6, (1.0, -1.0, 0.5, 0.0, 2.0, -2.0)):
             reply = await probe.call("NPR", theta_sensed=READY, theta_commanded=target, rate_difference=rate)
             expect_reply(ctx, reply, "NTD", "cougar.npr.reply", after="NPR")
-            ctx.expect(
-                len(reply.floats()) == 6 and all(math.isfinite(v) for v in reply.floats()),
+            floats = reply.floats()
+            ctx.expect_finite(
+                floats,
+                6,
                 clause="cougar.npr.reply",
                 expected="six finite floats of joint-rate change",
-                seen=showing(reply, fmt(reply.floats())),
+                seen=showing(reply, fmt(floats)),
             )
             await expect_quiet(ctx, probe, "cougar.response.layout", "NPR has one response")
 
@@ -175,9 +176,10 @@ async def exmn_bad_address(ctx: CaseContext) -> None:
                 seen=reply,
             )
         reply = await probe.call("VERS", version=1)
-        ctx.expect(
-            reply.name == "VERSION",
+        expect_names(
+            ctx,
+            [reply],
+            ["VERSION"],
             clause="cougar.word-link",
             expected="VERSION after the bad addresses (Cougar still in sync)",
-            seen=reply,
         )

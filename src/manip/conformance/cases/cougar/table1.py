@@ -12,6 +12,7 @@ from manip.conformance.cases.cougar._support import (
     NEVER,
     any_address,
     clean,
+    expect_names,
     expect_reply,
     int16,
     peek_region,
@@ -108,13 +109,9 @@ def _expect_sync(
     replies: Sequence[WordReply],
     expected: list[str],
 ) -> None:
-    ctx.expect(
-        [r.name for r in replies] == expected,
-        clause="cougar.word-link",
-        expected=f"{msg.name} ({octal_words(sent)}), NOP, VERS answered by {', '.join(expected)}: "
-        "the command taken with its Table 1 data length, sync kept",
-        seen=replies,
-    )
+    answered = f"{msg.name} ({octal_words(sent)}), NOP, VERS answered by {', '.join(expected)}"
+    why = "the command taken with its Table 1 data length, sync kept"
+    expect_names(ctx, replies, expected, clause="cougar.word-link", expected=f"{answered}: {why}")
 
 
 @case.each(SPEC.cougar_commands.values())

@@ -264,6 +264,16 @@ def _first_after(heard: Sequence[Heard], code: int, tick: int) -> Heard | None:
     return next((h for h in heard if h.code == code and h.tick >= tick), None)
 
 
+def _expect_at_once(
+    ctx: CaseContext, sent: Heard | None, asked: int, ticks: int, *, clause: str, expected: str
+) -> bool:
+    """``sent`` (the command Cougar heard) went within :data:`AT_ONCE_TICKS` servo cycles of tick
+    ``asked``; none by tick ``ticks`` is a command that never came."""
+    soon = sent is not None and sent.tick - asked <= AT_ONCE_TICKS
+    seen = str(sent) if sent is not None else missing(f"nothing by tick {ticks}")
+    return ctx.expect(soon, clause=clause, expected=expected, seen=seen)
+
+
 @case("puma.wrist.config-at-once", clauses=["puma.wrist.config-at-once"], hazard="motion", deadline=40.0)
 async def config_at_once(ctx: CaseContext) -> None:
     """Set weight sent while a long move runs is answered done and reaches Cougar (NEWWC) within a few
@@ -284,13 +294,9 @@ async def config_at_once(ctx: CaseContext) -> None:
     )
     await judge.wait_ticks(AT_ONCE_TICKS, SEGMENT_WITHIN)
     sent = _first_after(judge.since(mark), CougarCommand.NEWWC, asked)
-    ctx.expect(
-        sent is not None and sent.tick - asked <= AT_ONCE_TICKS,
-        clause="puma.wrist.config-at-once",
-        expected=f"NEWWC sent to Cougar within {AT_ONCE_TICKS} servo cycles of set weight (tick {asked}), "
-        f"while segment {segment} still runs",
-        seen=str(sent) if sent is not None else missing(f"nothing by tick {judge.ticks}"),
-    )
+    within = f"NEWWC sent to Cougar within {AT_ONCE_TICKS} servo cycles of set weight (tick {asked})"
+    running = f"{within}, while segment {segment} still runs"
+    _expect_at_once(ctx, sent, asked, judge.ticks, clause="puma.wrist.config-at-once", expected=running)
     await wait_async(ctx, probe, is_completed(segment), 2 * SEGMENT_WITHIN)
     await probe.call("set-weight", weight=0.0, cg=[0.0] * 3)
 
@@ -330,11 +336,9 @@ async def user_during_compliance(ctx: CaseContext) -> None:
     require_response(ctx, await probe.call("set-commanded-force", force=[0.0] * 6), "set commanded force")
     await judge.wait_ticks(AT_ONCE_TICKS, SEGMENT_WITHIN)
     sent = _first_after(judge.since(mark), CougarCommand.NFC, asked)
-    ctx.expect(
-        sent is not None and sent.tick - asked <= AT_ONCE_TICKS,
-        clause="puma.wrist.user-during-compliance",
-        expected=f"NFC sent to Cougar within {AT_ONCE_TICKS} servo cycles of set commanded force",
-        seen=str(sent) if sent is not None else missing(f"nothing by tick {judge.ticks}"),
+    within = f"NFC sent to Cougar within {AT_ONCE_TICKS} servo cycles of set commanded force"
+    _expect_at_once(
+        ctx, sent, asked, judge.ticks, clause="puma.wrist.user-during-compliance", expected=within
     )
     done = await wait_async(ctx, probe, is_completed(segment), SEGMENT_WITHIN)
     ctx.expect(

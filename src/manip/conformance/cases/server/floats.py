@@ -61,12 +61,7 @@ async def here_consistent(ctx: CaseContext) -> None:
     probe = await ctx.connect()
     pose = await read_floats(ctx, probe, "here")
     joints = await read_floats(ctx, probe, "joint-angles")
-    ctx.expect(
-        len(pose) == 12 and all(math.isfinite(v) for v in pose),
-        clause="here.transform",
-        expected="12 finite floats",
-        seen=str(pose),
-    )
+    ctx.expect_finite(pose, 12, clause="here.transform", expected="12 finite floats", seen=str(pose))
     worst = _rotation_error(pose)
     by_rows = _by_rows(pose)
     # read row by row (Nx Ox Ax Px Ny ...) the floats are a rotation: Here broke its order, not the floats

@@ -172,12 +172,8 @@ async def _stopping(
     )
     await probe.drain(QUIET)
     extra = _unrequested(probe, GUARD_BIT, since)
-    ctx.expect(
-        not extra,
-        clause="async.only-when-requested",
-        expected="no segment-completed responses (only guard hits asked for)",
-        seen=extra,
-    )
+    only = "no segment-completed responses (only guard hits asked for)"
+    ctx.expect_none(extra, clause="async.only-when-requested", expected=only)
 
 
 async def _continuing(
@@ -212,11 +208,10 @@ async def _unasked(ctx: CaseContext, probe: Probe, dvec: list[float], tol: float
     await probe.call("wrist-version")
     await probe.drain(QUIET)
     extra = _unrequested(probe, 0, since)
-    ctx.expect(
-        not extra,
+    ctx.expect_none(
+        extra,
         clause="async.only-when-requested",
         expected="no asynchronous response for a guard hit not asked for",
-        seen=extra,
     )
 
 

@@ -9,13 +9,14 @@ from typing import Final
 from manip.conformance.cases._support import (
     UNASSIGNED_OPCODES,
     error_of,
+    expect_last_processed,
     last_processed,
     power_on,
     read_floats,
     require_response,
     settle,
 )
-from manip.conformance.judge.checks import WirePacket, check_error_packet, word
+from manip.conformance.judge.checks import WirePacket, check_error_packet
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
 from manip.conformance.suite.world import SluggishJoint
@@ -152,9 +153,4 @@ def _judge_warning(ctx: CaseContext, probe: Probe, packet: WirePacket) -> None:
         seen=packet,
     )
     processed = last_processed(probe.packets, packet)
-    ctx.expect(
-        processed is not None and word(packet.data) == processed,
-        clause="async-error.request-number",
-        expected=f"the number of the last request processed, #{processed} (the last answered before it)",
-        seen=packet,
-    )
+    expect_last_processed(ctx, packet, processed)

@@ -14,6 +14,7 @@ from manip.conformance.cases._support import (
     SEGMENT_MASK,
     ask_notifications,
     describe_target,
+    expect_last_processed,
     floats,
     last_processed,
     length,
@@ -660,12 +661,7 @@ async def collision(ctx: CaseContext) -> None:
             seen=missing("none"),
         )
         processed = last_processed(probe.packets, errors[0])
-        ctx.expect(
-            processed is not None and word(errors[0].data) == processed,
-            clause="async-error.request-number",
-            expected=f"the number of the last request processed, #{processed} (the last answered before it)",
-            seen=errors[0],
-        )
+        expect_last_processed(ctx, errors[0], processed)
         here = await read_floats(ctx, probe, "joint-angles")
         ctx.expect(
             sign * (here[0] - wall) <= 1.0,
@@ -799,12 +795,7 @@ async def _expect_abort_reported(ctx: CaseContext, probe: Probe, how: str) -> No
             seen=missing("none"),
         )
     processed = last_processed(probe.packets, aborted)
-    ctx.expect(
-        processed is not None and word(aborted.data) == processed,
-        clause="async-error.request-number",
-        expected=f"the number of the last request processed, #{processed} (the last answered before it)",
-        seen=aborted,
-    )
+    expect_last_processed(ctx, aborted, processed)
 
 
 async def _next_of(ctx: CaseContext, probe: Probe, opcode: int, within: float) -> WirePacket | None:
