@@ -3,10 +3,10 @@ against a clean side A, shows as a class (a) difference naming one of the clause
 names for it (side B the violator), or is on :data:`NOT_SHOWN` with the reason the diff cannot show it.
 
 Each fault runs the scenarios (the directed cases' request sequences, with the conditions of the world
-they need arranged on both sides) and two generated streams, stopping at the first that names one of its
-clauses (a fault on NOT_SHOWN runs them all).  The clean side's observations are the
-same for every fault, so each worker observes them once (``DiffConfig.seen_a``).  Everything runs in
-virtual time.
+they need arranged on both sides) and two generated streams, those with the least pause first, stopping
+at the first that names one of its clauses (a fault on NOT_SHOWN runs them all).  The clean side's
+observations are the same for every fault, so each worker observes them once (``DiffConfig.seen_a``).
+Everything runs in virtual time.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from manip.conformance.diff.scenarios import scenarios
 from manip.conformance.diff.sides import Observation, Side
 from manip.conformance.diff.streams import Stream, make_streams
 from manip.conformance.fuzz.generators import GenOptions
+from manip.conformance.fuzz.steps import Pause
 from manip.reference_server import FaultSet, ServerConfig
 from manip.reference_server.faults import WRIST_SIDE, Fault
 
@@ -70,7 +71,14 @@ _CLEAN_SEEN: dict[tuple[str, tuple[int, ...]], Observation] = {}
 
 
 def streams() -> list[Stream]:
-    return [*scenarios(), *make_streams(SEED, 2, 8, GenOptions())]
+    """The scenarios and two generated streams, those that let the arm's clock run least first (a fault
+    stops at the first stream that shows it, so the cheap ones are tried first)."""
+    return sorted([*scenarios(), *make_streams(SEED, 2, 8, GenOptions())], key=_paused)
+
+
+def _paused(stream: Stream) -> float:
+    """The seconds of pause a stream's inputs ask for (the simulated time its sides run, at the most)."""
+    return sum(s.seconds for i in stream.all_inputs for s in i.steps if isinstance(s, Pause))
 
 
 def findings(fault: Fault, wanted: set[str] | None = None) -> list[Finding]:
