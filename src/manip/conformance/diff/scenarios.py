@@ -706,6 +706,8 @@ SWING_DEG: Final = 30.0
 """How far joint 1 swings in a timed move (from the ready position)."""
 MIDWAY: Final = 0.4
 """Seconds after a timed move is answered that the scenario reads the joints: mid-move at factor 1."""
+STILL: Final = 1.0
+"""Seconds between two reads that show the arm at rest (the same both times) before it is judged."""
 INCREMENT: Final = ((0.0, 0.0, -30.0), (25.0, 0.0, 0.0))
 """The deltas (mm) of the two incremental moves queued back to back."""
 OAT_TURN: Final = (12.0, 0.0, 0.0)
@@ -792,14 +794,15 @@ def _configuration() -> Stream:
 
 def _check_increments(start: int, end: int, turned: int) -> Callable[[Events], list[Sighting]]:
     """Here at input ``start``, after two incremental moves queued back to back (``end``) and after an
-    incremental turn by :data:`OAT_TURN` (``turned``): the hand moved by both deltas, orientation kept,
-    then turned by dO dA dT of VAL's angles, position kept (``incremental.relative``)."""
+    incremental turn by :data:`OAT_TURN` (``turned``), each judged once the arm is at rest: the hand
+    moved by both deltas, orientation kept, then turned by dO dA dT of VAL's angles, position kept
+    (``incremental.relative``)."""
 
     def check(events: Events) -> list[Sighting]:
         first, moved, last = (_read_here(events, n) for n in (start, end, turned))
-        if not _all_done(events, end, 2):
-            return []  # refused (out of reach in the side's length unit, say): nothing moved to judge
-        if not _all_done(events, turned, 1):
+        if not (_all_done(events, end, 2) and _at_rest(events, end)):
+            return []  # refused (out of reach in the side's unit, say), or still moving: nothing to judge
+        if not (_all_done(events, turned, 1) and _at_rest(events, turned)):
             last = None
         out: list[Sighting] = []
         if first is not None and moved is not None:
@@ -832,6 +835,12 @@ def _all_done(events: Events, number: int, count: int) -> bool:
     return len(answers) == count and all(e.opcode == ServerOp.RESPONSE for e in answers)
 
 
+def _at_rest(events: Events, number: int) -> bool:
+    """Whether the last two Here answers of input ``number``, :data:`STILL` seconds apart, agree."""
+    got = _floats_at(events, number, "here")
+    return len(got) >= 2 and _close(got[-2][1], got[-1][1])
+
+
 def _read_here(events: Events, number: int) -> tuple[SideEvent, list[float]] | None:
     got = _floats_at(events, number, "here")
     return got[-1] if got and len(got[-1][1]) == 12 else None
@@ -847,17 +856,25 @@ def _increments() -> Stream:
             [_req("enable-power"), _req("set-joint-angles", _floats(SEED_ANGLES)), Pause(REST), _req("here")],
         ),
         (
-            "two incremental moves queued back to back, rest, here",
+            "two incremental moves queued back to back, rest, here twice",
             [
                 _req("incremental-move", delta((*INCREMENT[0], 0.0, 0.0, 0.0))),
                 _req("incremental-straight-move", delta((*INCREMENT[1], 0.0, 0.0, 0.0))),
                 Pause(REST),
                 _req("here"),
+                Pause(STILL),
+                _req("here"),
             ],
         ),
         (
-            "an incremental turn, rest, here",
-            [_req("incremental-move", delta((0.0, 0.0, 0.0, *OAT_TURN))), Pause(REST), _req("here")],
+            "an incremental turn, rest, here twice",
+            [
+                _req("incremental-move", delta((0.0, 0.0, 0.0, *OAT_TURN))),
+                Pause(REST),
+                _req("here"),
+                Pause(STILL),
+                _req("here"),
+            ],
         ),
     ]
     return Stream(
