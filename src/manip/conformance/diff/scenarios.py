@@ -701,7 +701,7 @@ REST: Final = 5.0
 SEED_ANGLES: Final = CONFIGURATION_SEED
 """Joint angles whose transform has a lefty and a righty solution in range (the configuration cases')."""
 SLOW: Final = 0.25
-"""The speed factor a first connection leaves behind."""
+"""The slow speed factor: the one a first connection leaves behind, and the one a swing is timed at."""
 SWING_DEG: Final = 30.0
 """How far joint 1 swings in a timed move (from the ready position)."""
 MIDWAY: Final = 0.4
