@@ -248,7 +248,7 @@ def _check_collision(at: int, after: Sequence[int]) -> Callable[[Events], list[S
             message = "a segment queued before the abort completed after it"
             return [_sighting(late[0][0], "motion.abort", message, "the queued segments dropped", late[0][1])]
         out: list[Sighting] = []
-        for number in after[:1]:
+        for number in [n for n in after[:1] if n > seen[aborted][0]]:  # only once the abort was seen
             for answer in _answers(events.get(number, []), _op("set-joint-angles")):
                 if answer.opcode == ServerOp.RESPONSE:
                     message = "a motion request after the abort was accepted before any reset"
