@@ -166,6 +166,36 @@ def test_transcript_async_only_when_requested_and_free_joint() -> None:
     assert [f.clause for f in check_transcript([], rfc_packet_no=1)] == ["connect.initial-response"]
 
 
+def test_transcript_a_first_packet_answering_a_request_is_no_initial_response() -> None:
+    """The first server packet carries a request's number, not the RFC's: the initial RESPONSE never
+    came (connect.initial-response), rather than came with a wrong number."""
+    answered = [_req(2), _srv(ServerOp.RESPONSE, encode_reply("here", 2, transform=[1.0] * 12))]
+    assert [f.clause for f in check_transcript(answered, rfc_packet_no=1)][:1] == ["connect.initial-response"]
+    wrong = [_srv(ServerOp.RESPONSE, struct.pack("<H", 5)), _req(2)]
+    assert [f.clause for f in check_transcript(wrong, rfc_packet_no=1)] == ["connect.initial-response-number"]
+
+
+def _describe_packets(number: int) -> list[WirePacket]:
+    text = b"((:BRAND-NAME . 1))"
+    return [_srv(ServerOp.RESPONSE, struct.pack("<H", number) + text)]
+
+
+def test_transcript_a_reply_inside_a_multi_packet_reply_is_a_reply_out_of_turn() -> None:
+    """A pipelined request's reply inside describe self's, whose terminator comes after it, is that
+    request answered out of turn (request.one-reply); describe self's packets numbered as the next
+    request, with no packet of its own number after them, are wrong numbers (multi.same-request-number)."""
+    describe = SPEC.request("describe-self").opcode
+    initial = _srv(ServerOp.RESPONSE, struct.pack("<H", 1))
+    sent = [initial, _req(2, describe), _req(3, describe)]
+    end = [_srv(ServerOp.RESPONSE, struct.pack("<H", n)) for n in (2, 3)]
+    overtaken = [*sent, *_describe_packets(2), *_describe_packets(3), end[0], end[1]]
+    clauses = [f.clause for f in check_transcript(overtaken, rfc_packet_no=1)]
+    assert clauses[:1] == ["request.one-reply"], clauses
+    renumbered = [*sent, *_describe_packets(2), *_describe_packets(3), end[1], *_describe_packets(3), end[1]]
+    clauses = [f.clause for f in check_transcript(renumbered, rfc_packet_no=1)]
+    assert clauses[:1] == ["multi.same-request-number"], clauses
+
+
 def test_case_declaration_is_validated() -> None:
     async def body(ctx: CaseContext) -> None:
         return None

@@ -18,6 +18,7 @@ from manip.conformance.diff import driver, sides
 from manip.conformance.diff.driver import DiffConfig, diff_stream, run_diff
 from manip.conformance.diff.pairing import SideEvent
 from manip.conformance.diff.report import load_schema
+from manip.conformance.diff.scenarios import scenario
 from manip.conformance.diff.sides import Observation, Side
 from manip.conformance.diff.streams import make_streams
 from manip.conformance.fuzz.generators import GenOptions
@@ -82,6 +83,21 @@ def test_every_difference_from_the_guide_profile_is_classified() -> None:
     assert all(f.cls in ("violation", "allowed", "unexplained") and f.names for f in found)
     assert not [f for f in found if f.cls == "violation"], "the guide profile conforms"
     assert {"allowed"} <= {f.cls for f in found}
+
+
+@pytest.mark.slow
+def test_the_guide_profile_passes_the_scenarios_of_lengths() -> None:
+    """The scenarios whose requests carry lengths (transforms, increments), against the guide profile in
+    inches: nothing broken, and what differs is the length unit (erratum units)."""
+    guide = Side("B", "guide", config=ServerConfig.guide_profile())
+    names = ("configuration", "increments", "paths")
+    results = run_diff(CLEAN, guide, [scenario(n) for n in names], DiffConfig(5, shrink=False))
+    found = [f for r in results for f in r.findings]
+    assert found and not any(r.unarranged or r.unstable for r in results)
+    assert {f.cls for f in found} == {"allowed"}, [
+        (f.stream, f.cls, f.names) for f in found if f.cls != "allowed"
+    ]
+    assert {n for f in found for n in f.names} & {"units", "move.transform-data", "solve-forwards.data"}
 
 
 def test_the_same_seed_gives_the_same_streams() -> None:

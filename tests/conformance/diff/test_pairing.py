@@ -76,9 +76,24 @@ def test_the_spec_declares_the_freedoms_the_diff_names() -> None:
     assert set(SPEC.errata["units"].freedom) == {"data.length-unit", "answer.length-unit"}
     assert declared("answer.length-unit") == (
         "units",
+        "move.transform-data",
         "incremental-move.data",
         "incremental-straight-move.data",
+        "solve-forwards.data",
     )
+
+
+def test_a_transform_out_of_reach_in_one_sides_length_unit_is_both_allowed() -> None:
+    """Solve forwards of a transform in millimetres, solved on one side and refused TOR on a side of
+    another length unit: both conform (erratum units); of one unit, a gap."""
+    solve = SPEC.request("solve-forwards").opcode
+    item = FuzzInput(5, "scenario.x", (RequestStep(solve, bytes(74)),), "")
+    refused = error(b"solve-forwards: E TOR Transform cannot be reached")
+    diffs = compare([5], {5: [response(*[1.0] * 6)]}, {5: [refused]})
+    (other_unit,) = classify("s", diffs, [], [], {5: item}, units_differ=True)
+    assert other_unit.cls == "allowed" and "units" in other_unit.names
+    (same_unit,) = classify("s", diffs, [], [], {5: item})
+    assert same_unit.cls == "unexplained"
 
 
 def test_an_unknown_freedom_is_refused() -> None:

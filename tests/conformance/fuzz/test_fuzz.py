@@ -251,6 +251,23 @@ def test_a_request_skipped_by_the_replies_is_a_silent_drop_not_a_wrong_number() 
     assert sightings[0].number == 1  # the request never answered, not the one after it
 
 
+def test_replies_each_numbered_as_the_next_request_are_wrong_numbers_not_drops() -> None:
+    """Every request answered in position, each reply carrying the next request's number: no request
+    went unanswered, so the first violation is the echo, not a silent drop."""
+    here = SPEC.request("here").opcode
+    packets = [
+        _s2c(ServerOp.RESPONSE, b"\x01\x00"),
+        _c2s(here, 2),
+        _c2s(here, 3),
+        _s2c(ServerOp.RESPONSE, encode_reply("here", 3, transform=[1.0] * 12)),
+        _s2c(ServerOp.RESPONSE, encode_reply("here", 4, transform=[1.0] * 12)),
+    ]
+    sightings = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
+    first = sightings[0].violation
+    assert first.kind == "wrong_value" and first.clause == "response.echoes-request-number"
+    assert sightings[0].number == 3  # the first reply, in position for request #2
+
+
 def test_a_reply_to_a_request_answered_already_is_a_second_reply() -> None:
     unknown = 0o277
     refusal = encode_error(ServerOp.NON_FATAL_ERROR, 2, bad_value("dispatch", "unknown").error)

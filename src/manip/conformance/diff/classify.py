@@ -233,8 +233,12 @@ def listed_extensions_only(a: bytes, b: bytes) -> bool:
     return all(op in SPEC.requests and SPEC.requests[op].extension for op in ops_a ^ ops_b)
 
 
-_UNIT_MOVES: Final = frozenset({"incremental-move", "incremental-straight-move"})
-"""The requests whose clauses declare ``answer.length-unit`` (their dX dY dZ are in the side's unit)."""
+_UNIT_MOVES: Final = frozenset(
+    {"incremental-move", "incremental-straight-move", "move", "straight-move", "solve-forwards"}
+)
+"""The requests whose clauses declare ``answer.length-unit`` (``incremental-move.data``,
+``incremental-straight-move.data``, ``move.transform-data``, ``solve-forwards.data``): their dX dY dZ, or
+their transform's position, are in the side's unit."""
 
 
 def _unit_reach(diff: Difference | None) -> bool:

@@ -37,6 +37,9 @@ class DiffConfig:
     shrink: bool = True
     shrink_trials: int = SHRINK_TRIALS
     shrink_seconds: float = SHRINK_SECONDS
+    seen_a: dict[tuple[str, tuple[int, ...]], Observation] | None = field(default=None, compare=False)
+    """Side A's observations by stream (label, inputs), kept for the next diff whose side A is the same
+    (a caller diffing many sides B against one side A observes each stream on it once); None: none kept."""
 
 
 @dataclass
@@ -57,10 +60,20 @@ class StreamResult:
 def _once(
     a: Side, b: Side, stream: Stream, config: DiffConfig
 ) -> tuple[Observation, Observation, list[Difference]]:
-    oa = observe(a, stream, config.allowance, config.seed)
+    oa = _observe_a(a, stream, config)
     ob = observe(b, stream, config.allowance, config.seed)
     numbers = (PREAMBLE_NUMBER, *stream.input_numbers)
     return oa, ob, compare(numbers, oa.events, ob.events)
+
+
+def _observe_a(a: Side, stream: Stream, config: DiffConfig) -> Observation:
+    seen = config.seen_a
+    key = (stream.label, stream.input_numbers)
+    if seen is None:
+        return observe(a, stream, config.allowance, config.seed)
+    if key not in seen:
+        seen[key] = observe(a, stream, config.allowance, config.seed)
+    return seen[key]
 
 
 def _findings(

@@ -9,7 +9,11 @@ fuzzer's judges plus its own :data:`~manip.conformance.diff.streams.ScenarioChec
 knows what the requests it sent demand of the answers (the joint angles a set joint angles put the
 arm at, the ready position describe self stated, the joints a calibration failure names).  A breach
 its check finds is a :class:`~manip.conformance.fuzz.judge.Sighting` like any judge's, so a
-difference on that input is a violation (class a) naming the clause.
+difference on that input is a violation (class a) naming the clause.  A scenario about what a
+connection leaves behind closes its connection and goes on on the next
+(:class:`~manip.conformance.fuzz.steps.Reconnect`); one about how the arm moves reads the joints or the
+hand midway through a move, a fixed time after it was answered (the same time on both sides, in virtual
+time on an embedded one).
 
 Some scenarios need a condition of the arm's world (``conditions``: the world contract's
 :class:`~manip.conformance.suite.world.Condition`, as the directed cases arrange them): an embedded
@@ -20,20 +24,31 @@ so).  Sans-I/O.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import struct
 from collections.abc import Callable, Sequence
 from typing import Final
 
-from manip.arm.kinematics import PUMA600
+from manip.arm.kinematics import PUMA600, configuration, forward
 from manip.codecs.error_string import parse_error
 from manip.codecs.errors import CodecError
 from manip.codecs.lispm_text import decode_lispm
 from manip.codecs.pdp11float import pack_f, unpack_f
+from manip.conformance.cases.server.motion import CONFIGURATION_SEED, HAND_TOL_MM, SPEED_MATCH, TURN_TOL_DEG
+from manip.conformance.cases.server.trajectory import (
+    FRACTION_TOL,
+    LINE_TOL_MM,
+    MOVING_DEG,
+    OAT_TOL,
+    val_angles,
+    val_rotation,
+    wrap180,
+)
 from manip.conformance.diff.pairing import SideEvent
 from manip.conformance.diff.streams import Stream
 from manip.conformance.fuzz.judge import Sighting
-from manip.conformance.fuzz.steps import FuzzInput, Pause, RequestStep, Step
+from manip.conformance.fuzz.steps import FuzzInput, Pause, Reconnect, RequestStep, Step
 from manip.conformance.judge.checks import completed_segment, parse_description
 from manip.conformance.judge.packets import WirePacket
 from manip.conformance.judge.violation import Violation
@@ -233,7 +248,7 @@ def _check_collision(at: int, after: Sequence[int]) -> Callable[[Events], list[S
             message = "a segment queued before the abort completed after it"
             return [_sighting(late[0][0], "motion.abort", message, "the queued segments dropped", late[0][1])]
         out: list[Sighting] = []
-        for number in after[:1]:
+        for number in [n for n in after[:1] if n > seen[aborted][0]]:  # only once the abort was seen
             for answer in _answers(events.get(number, []), _op("set-joint-angles")):
                 if answer.opcode == ServerOp.RESPONSE:
                     message = "a motion request after the abort was accepted before any reset"
@@ -502,6 +517,57 @@ def _fatal() -> Stream:
     )
 
 
+WARNED_GOAL: Final = (0.0, -20.0, 90.0, 0.0, 0.0, 0.0)
+"""The goal of the warning scenario's long move of joint 2 (the sluggish joint lags on its way)."""
+WARNED_READS: Final = 2.0
+"""Seconds between the warning scenario's two reads of the joints after the warning."""
+
+
+def _stream_order(events: Events) -> list[tuple[int, SideEvent]]:
+    return [(n, e) for n in sorted(events) for e in events[n]]
+
+
+def _check_async_number(events: Events) -> list[Sighting]:
+    """An asynchronous error carries the number of the last request processed: the one whose answer
+    came last before it (``async-error.request-number``, erratum async-last-processed)."""
+    last: int | None = None
+    for number, event in _stream_order(events):
+        if event.kind != "packet" or len(event.data) < 2:
+            continue
+        said = int.from_bytes(event.data[:2], "little")
+        if event.request is not None:
+            last = said
+        elif event.opcode == ServerOp.ASYNCHRONOUS_ERROR and last is not None and said != last:
+            message = (
+                f"an asynchronous error carries request number {said}; the last request answered was {last}"
+            )
+            return [_sighting(number, "async-error.request-number", message, f"request number {last}", event)]
+    return []
+
+
+def _check_warning(moved: int, read: int, goal: Sequence[float]) -> Callable[[Events], list[Sighting]]:
+    """A warning does not interrupt work: after an asynchronous warning during the move (input
+    ``moved``), no asynchronous error follows, and the arm, read twice at input ``read``, is still on
+    its way (or at the goal) (``async-warning.format``)."""
+
+    def check(events: Events) -> list[Sighting]:
+        order = _stream_order(events)
+        warned = next((i for i, (_, e) in enumerate(order) if _is(e, ServerOp.ASYNCHRONOUS_WARNING)), None)
+        if warned is None:
+            return []
+        for _, event in order[warned:]:
+            if _is(event, ServerOp.ASYNCHRONOUS_ERROR):
+                message = "an asynchronous error followed the warning: the warning interrupted the motion"
+                return [_sighting(moved, "async-warning.format", message, "the motion going on", event)]
+        reads = _floats_at(events, read, "joint-angles")
+        if len(reads) != 2 or not _close(reads[0][1], reads[1][1]) or _close(reads[1][1], goal):
+            return []
+        message = f"after the warning the arm stood still at {_shown(reads[1][1])}, short of {_shown(goal)}"
+        return [_sighting(moved, "async-warning.format", message, "the motion going on", reads[1][0])]
+
+    return check
+
+
 def _sluggish() -> Stream:
     groups: list[tuple[str, Sequence[Step]]] = [
         (
@@ -510,11 +576,39 @@ def _sluggish() -> Stream:
         ),
         (
             "a long move of joint 2, rest",
-            [_req("set-joint-angles", _floats((0.0, -20.0, 90.0, 0.0, 0.0, 0.0))), Pause(SETTLE)],
+            [_req("set-joint-angles", _floats(WARNED_GOAL)), Pause(SETTLE)],
         ),
-        ("joint angles, here", [_req("joint-angles"), _req("here")]),
+        (
+            "joint angles twice, seconds apart, here",
+            [_req("joint-angles"), Pause(WARNED_READS), _req("joint-angles"), _req("here")],
+        ),
     ]
-    return Stream(None, _inputs("warning", groups), scenario="warning", conditions=(SluggishJoint(),))
+    return Stream(
+        None,
+        _inputs("warning", groups),
+        scenario="warning",
+        conditions=(SluggishJoint(),),
+        check=_check_warning(1, 2, WARNED_GOAL),
+    )
+
+
+def _check_wrist(at: int) -> Callable[[Events], list[Sighting]]:
+    """While the wrist is silent, read forces (input ``at``) is answered with a non-fatal error, never
+    left unanswered nor answered with a fatal one (``wrist.no-answer``)."""
+
+    def check(events: Events) -> list[Sighting]:
+        answer = next(iter(_answers(events.get(at, []), _op("read-forces"))), None)
+        if answer is not None and answer.opcode == ServerOp.NON_FATAL_ERROR:
+            return []
+        if answer is None:
+            message = "read forces got no answer while the wrist was silent"
+            seen = SideEvent("stream", text="no answer to read forces")
+        else:
+            message = f"read forces was answered 0{answer.opcode:o} while the wrist was silent"
+            seen = answer
+        return [_sighting(at, "wrist.no-answer", message, "a non-fatal error (202)", seen)]
+
+    return check
 
 
 def _wrist_silent() -> Stream:
@@ -522,7 +616,13 @@ def _wrist_silent() -> Stream:
         ("read forces (the wrist does not answer)", [_req("read-forces")]),
         ("here", [_req("here")]),
     ]
-    return Stream(None, _inputs("wrist-silent", groups), scenario="wrist-silent", conditions=(SilentWrist(),))
+    return Stream(
+        None,
+        _inputs("wrist-silent", groups),
+        scenario="wrist-silent",
+        conditions=(SilentWrist(),),
+        check=_check_wrist(0),
+    )
 
 
 def _collision() -> Stream:
@@ -540,7 +640,7 @@ def _collision() -> Stream:
         ("a motion request before any reset (AWA), here", [_req("set-joint-angles", back), _req("here")]),
         ("enable power (the reset), rest, here", [_req("enable-power"), Pause(SETTLE), _req("here")]),
     ]
-    check = _check_collision(1, (2, 3))
+    check = _all(_check_collision(1, (2, 3)), _check_async_number)
     return Stream(
         None,
         _inputs("collision", groups),
@@ -594,6 +694,561 @@ _FLOAT_REPLIES: Final = frozenset(
 )
 
 
+# What a connection leaves behind, and the arm's pose after a request --------------------------------
+
+REST: Final = 5.0
+"""Seconds of pause after a move of these scenarios (a few tens of degrees: well within it)."""
+SEED_ANGLES: Final = CONFIGURATION_SEED
+"""Joint angles whose transform has a lefty and a righty solution in range (the configuration cases')."""
+SLOW: Final = 0.25
+"""The slow speed factor: the one a first connection leaves behind, and the one a swing is timed at."""
+SWING_DEG: Final = 30.0
+"""How far joint 1 swings in a timed move (from the ready position)."""
+MIDWAY: Final = 0.4
+"""Seconds after a timed move is answered that the scenario reads the joints: mid-move at factor 1."""
+STILL: Final = 1.0
+"""Seconds between two reads that show the arm at rest (the same both times) before it is judged."""
+INCREMENT: Final = ((0.0, 0.0, -30.0), (25.0, 0.0, 0.0))
+"""The deltas (mm) of the two incremental moves queued back to back."""
+OAT_TURN: Final = (12.0, 0.0, 0.0)
+"""dO dA dT of the incremental turn (dO alone: added to T instead, it shows)."""
+
+
+def _seed_transform() -> tuple[float, ...]:
+    return forward(SEED_ANGLES, PUMA600.geometry).to_floats()
+
+
+def _solve_seed() -> RequestStep:
+    return _req("solve-forwards", _floats(_seed_transform()) + _floats(SEED_ANGLES))
+
+
+def _word(value: int) -> bytes:
+    return struct.pack("<H", value)
+
+
+def _responses(events: Events, number: int, name: RequestName) -> list[SideEvent]:
+    return [e for e in _answers(events.get(number, []), _op(name)) if e.opcode == ServerOp.RESPONSE]
+
+
+def _solution(events: Events, number: int) -> tuple[SideEvent, list[float]] | None:
+    """The first solve forwards answered with six angles at input ``number``."""
+    for answer in _responses(events, number, "solve-forwards"):
+        angles = _angles(answer)
+        if angles is not None and len(angles) == 6:
+            return answer, angles
+    return None
+
+
+def _segment(events: Events, number: int) -> tuple[SideEvent, int] | None:
+    """The first segment number a set joint angles was answered with at input ``number``."""
+    for answer in _responses(events, number, "set-joint-angles"):
+        if len(answer.data) >= 4:
+            return answer, int.from_bytes(answer.data[2:4], "little")
+    return None
+
+
+def _floats_at(events: Events, number: int, name: RequestName) -> list[tuple[SideEvent, list[float]]]:
+    """Every answer of ``name`` at input ``number`` read as floats, in order."""
+    out = []
+    for answer in _responses(events, number, name):
+        values = _angles(answer)
+        if values is not None:
+            out.append((answer, values))
+    return out
+
+
+def _check_configuration(lefty: int, righty: int) -> Callable[[Events], list[Sighting]]:
+    """Solve forwards of the seed's transform after set configuration 1 (input ``lefty``) and 0
+    (``righty``): two different solutions (``set-configuration.effect``), the first lefty and the second
+    righty by the arm's geometry (raising joint 2 alone lowers the wrist in a lefty one,
+    ``set-configuration.lefty-side``).  Judged where the first answer is (what follows it differs for it)."""
+
+    def check(events: Events) -> list[Sighting]:
+        got_l, got_r = _solution(events, lefty), _solution(events, righty)
+        if got_l is None or got_r is None:
+            return []
+        (answer, left), (_, right) = got_l, got_r
+        if _close(left, right):
+            message = f"set configuration 1 and 0 gave one solution, {_shown(left)}"
+            expected = "a lefty and a righty solution (the transform has both in range)"
+            return [_sighting(lefty, "set-configuration.effect", message, expected, answer)]
+        sides = [configuration(q, PUMA600.geometry)[0] for q in (left, right)]
+        if sides == [True, False]:
+            return []
+        shown = ", ".join("lefty" if s else "righty" for s in sides)
+        message = f"the solutions after set configuration 1 and 0 are {shown}"
+        return [_sighting(lefty, "set-configuration.lefty-side", message, "lefty, then righty", answer)]
+
+    return check
+
+
+def _configuration() -> Stream:
+    groups: list[tuple[str, Sequence[Step]]] = [
+        ("set configuration 1, solve forwards", [_req("set-configuration", _word(1)), _solve_seed()]),
+        ("set configuration 0, solve forwards", [_req("set-configuration", _word(0)), _solve_seed()]),
+    ]
+    return Stream(
+        None, _inputs("configuration", groups), scenario="configuration", check=_check_configuration(0, 1)
+    )
+
+
+def _check_increments(start: int, end: int, turned: int) -> Callable[[Events], list[Sighting]]:
+    """Here at input ``start``, after two incremental moves queued back to back (``end``) and after an
+    incremental turn by :data:`OAT_TURN` (``turned``), each judged once the arm is at rest: the hand
+    moved by both deltas, orientation kept, then turned by dO dA dT of VAL's angles, position kept
+    (``incremental.relative``)."""
+
+    def check(events: Events) -> list[Sighting]:
+        first, moved, last = (_read_here(events, n) for n in (start, end, turned))
+        if not (_all_done(events, end, 2) and _at_rest(events, end)):
+            return []  # refused (out of reach in the side's unit, say), or still moving: nothing to judge
+        if not (_all_done(events, turned, 1) and _at_rest(events, turned)):
+            last = None
+        out: list[Sighting] = []
+        if first is not None and moved is not None:
+            want = [p + sum(d[i] for d in INCREMENT) for i, p in enumerate(first[1][9:])]
+            off = math.dist(moved[1][9:], want)
+            turn = max(abs(x - y) for x, y in zip(moved[1][:9], first[1][:9], strict=True))
+            if off > HAND_TOL_MM or turn > OAT_TOL:
+                message = (
+                    f"after both incremental moves the hand is {off:.3g} mm from the start plus both deltas"
+                )
+                out.append(_sighting(end, "incremental.relative", message, _shown(want), moved[0]))
+        if moved is not None and last is not None:
+            o, a, t = val_angles(moved[1])
+            want_r = val_rotation(o + OAT_TURN[0], a + OAT_TURN[1], t + OAT_TURN[2])
+            got = tuple(tuple(last[1][3 * j + i] for j in range(3)) for i in range(3))
+            turn = max(abs(want_r[i][j] - got[i][j]) for i in range(3) for j in range(3))
+            if turn > OAT_TOL or math.dist(last[1][9:], moved[1][9:]) > HAND_TOL_MM:
+                message = f"after an incremental turn by dO dA dT {OAT_TURN} the rotation is {turn:.3g} off"
+                expected = f"O A T {_shown((o, a, t))} plus {_shown(OAT_TURN)}, position kept"
+                out.append(_sighting(turned, "incremental.relative", message, expected, last[0]))
+        return out
+
+    return check
+
+
+def _all_done(events: Events, number: int, count: int) -> bool:
+    """Whether the ``count`` incremental moves of input ``number`` were each answered with a segment."""
+    names: tuple[RequestName, ...] = ("incremental-move", "incremental-straight-move")
+    answers = [e for n in names for e in _answers(events.get(number, []), _op(n))]
+    return len(answers) == count and all(e.opcode == ServerOp.RESPONSE for e in answers)
+
+
+def _at_rest(events: Events, number: int) -> bool:
+    """Whether the last two Here answers of input ``number``, :data:`STILL` seconds apart, agree."""
+    got = _floats_at(events, number, "here")
+    return len(got) >= 2 and _close(got[-2][1], got[-1][1])
+
+
+def _read_here(events: Events, number: int) -> tuple[SideEvent, list[float]] | None:
+    got = _floats_at(events, number, "here")
+    return got[-1] if got and len(got[-1][1]) == 12 else None
+
+
+def _increments() -> Stream:
+    def delta(values: Sequence[float]) -> bytes:
+        return _floats(values)
+
+    groups: list[tuple[str, Sequence[Step]]] = [
+        (
+            "enable power, set joint angles, rest, here",
+            [_req("enable-power"), _req("set-joint-angles", _floats(SEED_ANGLES)), Pause(REST), _req("here")],
+        ),
+        (
+            "two incremental moves queued back to back, rest, here twice",
+            [
+                _req("incremental-move", delta((*INCREMENT[0], 0.0, 0.0, 0.0))),
+                _req("incremental-straight-move", delta((*INCREMENT[1], 0.0, 0.0, 0.0))),
+                Pause(REST),
+                _req("here"),
+                Pause(STILL),
+                _req("here"),
+            ],
+        ),
+        (
+            "an incremental turn, rest, here twice",
+            [
+                _req("incremental-move", delta((0.0, 0.0, 0.0, *OAT_TURN))),
+                Pause(REST),
+                _req("here"),
+                Pause(STILL),
+                _req("here"),
+            ],
+        ),
+    ]
+    return Stream(
+        None, _inputs("increments", groups), scenario="increments", check=_check_increments(0, 1, 2)
+    )
+
+
+def _check_joint_order(before: int, after: int) -> Callable[[Events], list[Sighting]]:
+    """Element 1 of a joint vector is the waist: set joint angles with element 1 alone changed by
+    :data:`SWING_DEG` turns the hand about the base's z axis by as much, at the same height and distance
+    from the axis (``joint-angles.reply``)."""
+
+    def check(events: Events) -> list[Sighting]:
+        first, last = _read_here(events, before), _read_here(events, after)
+        if first is None or last is None:
+            return []
+        p0, p1 = first[1][9:], last[1][9:]
+        turned = wrap180(math.degrees(math.atan2(p1[1], p1[0]) - math.atan2(p0[1], p0[0])))
+        if (
+            abs(p1[2] - p0[2]) <= HAND_TOL_MM
+            and abs(math.hypot(p1[0], p1[1]) - math.hypot(p0[0], p0[1])) <= HAND_TOL_MM
+            and abs(turned - SWING_DEG) <= TURN_TOL_DEG
+        ):
+            return []
+        message = f"element 1 turned by {SWING_DEG:g} deg moved the hand {_shown(p0)} -> {_shown(p1)}"
+        expected = f"the hand turned {SWING_DEG:g} deg about the base's z axis (element 1 the waist)"
+        # Judged where the first Here is: the hand at the angles set already differs for it.
+        return [_sighting(before, "joint-angles.reply", message, expected, first[0])]
+
+    return check
+
+
+def _joint_order() -> Stream:
+    swung = (READY_POSE[0] + SWING_DEG, *READY_POSE[1:])
+    groups: list[tuple[str, Sequence[Step]]] = [
+        (
+            "enable power, set joint angles to ready, rest, here",
+            [_req("enable-power"), _req("set-joint-angles", _floats(READY_POSE)), Pause(REST), _req("here")],
+        ),
+        (
+            "element 1 alone turned, rest, here",
+            [_req("set-joint-angles", _floats(swung)), Pause(REST), _req("here")],
+        ),
+    ]
+    return Stream(
+        None, _inputs("joint-order", groups), scenario="joint-order", check=_check_joint_order(0, 1)
+    )
+
+
+def _timed_move(goal: Sequence[float]) -> list[Step]:
+    return [_req("set-joint-angles", _floats(goal)), Pause(MIDWAY), _req("joint-angles"), Pause(REST)]
+
+
+def _progress(start: float, goal: float, at: float) -> float:
+    return (at - start) / (goal - start)
+
+
+def _check_fresh(
+    first: int, queued: int, solved: int, moved: int, timed: int
+) -> Callable[[Events], list[Sighting]]:
+    """The second connection (from input ``solved``) finds none of what the first set
+    (``connect.per-connection-state``): solve forwards gives the solution the first gave before set
+    configuration (input ``first``), its first move is never refused AWA (input ``moved``) and has the
+    segment number the first connection's first move had (input ``queued``), no asynchronous response
+    comes unasked, and a move gets as far midway as one at an explicit factor 1 (input ``timed``)."""
+
+    def check(events: Events) -> list[Sighting]:
+        out: list[Sighting] = []
+        fresh, again = _solution(events, first), _solution(events, solved)
+        if fresh is not None and again is not None and not _close(fresh[1], again[1]):
+            message = (
+                f"solve forwards gave {_shown(again[1])} anew, {_shown(fresh[1])} on the first connection"
+            )
+            out.append(_sighting(solved, _FRESH, message, "the fresh connection's solution", again[0]))
+        out += _first_move(events, queued, moved, timed)
+        out += _unasked(events, moved, timed)
+        out += _fresh_speed(events, timed)
+        return out
+
+    return check
+
+
+_FRESH: Final = "connect.per-connection-state"
+
+
+def _first_move(events: Events, queued: int, moved: int, timed: int) -> list[Sighting]:
+    out: list[Sighting] = []
+    for answer in _answers(events.get(moved, []), _op("set-joint-angles"))[:1]:
+        with contextlib.suppress(CodecError, ValueError):
+            if (
+                answer.opcode == ServerOp.NON_FATAL_ERROR
+                and parse_error(answer.data, body="packet").code == "AWA"
+            ):
+                message = "the new connection's first move was refused AWA: the last connection's abort"
+                out.append(_sighting(moved, _FRESH, message, "done, or NAP without power", answer))
+    at = moved if _segment(events, moved) is not None else timed  # NAP: the first move is later
+    old, new = _segment(events, queued), _segment(events, at)
+    if old is not None and new is not None and new[1] != old[1]:
+        message = f"the new connection's first segment is {new[1]}, the first connection's was {old[1]}"
+        out.append(_sighting(at, _FRESH, message, "the segment counter afresh", new[0]))
+    return out
+
+
+def _unasked(events: Events, moved: int, timed: int) -> list[Sighting]:
+    for number in range(moved, timed + 1):
+        for event in events.get(number, []):
+            if _is(event, ServerOp.ASYNCHRONOUS_RESPONSE):
+                message = "an asynchronous response on a connection that asked for none"
+                expected = "none: the last connection's notifications are not in force"
+                return [_sighting(number, _FRESH, message, expected, event)]
+    return []
+
+
+def _fresh_speed(events: Events, timed: int) -> list[Sighting]:
+    """A swing at the fresh connection's speed gets as far midway as the one back at factor 1."""
+    got = _midway(events, timed)
+    if got is None or got[0] * SPEED_MATCH >= got[1]:
+        return []
+    default, explicit, event = got
+    message = f"midway a move got {default:.0%} of its way at the fresh speed, {explicit:.0%} at factor 1"
+    return [_sighting(timed, _FRESH, message, "the fresh connection moving at factor 1", event)]
+
+
+def _fresh_connection() -> Stream:
+    swung = (READY_POSE[0] + SWING_DEG, *READY_POSE[1:])
+    groups: list[tuple[str, Sequence[Step]]] = [
+        ("solve forwards (no configuration set)", [_solve_seed()]),
+        (
+            "enable power, a move to ready, set configuration 0, a slow speed, notifications 3",
+            [
+                _req("enable-power"),
+                _req("set-joint-angles", _floats(READY_POSE)),
+                _req("set-configuration", _word(0)),
+                _req("set-speed", pack_f(SLOW)),
+                _req("request-notifications", _word(3)),
+            ],
+        ),
+        (
+            "a move cut short by kill power (an abort stands), a new connection",
+            [_req("set-joint-angles", _floats(swung)), _req("kill-power"), Pause(1.0), Reconnect()],
+        ),
+        ("solve forwards", [_solve_seed()]),
+        ("set joint angles to ready", [_req("set-joint-angles", _floats(READY_POSE))]),
+        (
+            "to ready, a timed swing, one back at factor 1",
+            _timed_pair([]),
+        ),
+    ]
+    check = _check_fresh(0, 1, 3, 4, 5)
+    return Stream(None, _inputs("fresh-connection", groups), scenario="fresh-connection", check=check)
+
+
+def _check_still(at: int) -> Callable[[Events], list[Sighting]]:
+    """Joint angles read twice, seconds apart, on the connection after one closed under a move: the
+    same (``connect.close-stops-arm``)."""
+
+    def check(events: Events) -> list[Sighting]:
+        reads = _floats_at(events, at, "joint-angles")
+        if len(reads) != 2 or _close(reads[0][1], reads[1][1]):
+            return []
+        message = (
+            f"the arm moved from {_shown(reads[0][1])} to {_shown(reads[1][1])} after the connection closed"
+        )
+        return [_sighting(at, "connect.close-stops-arm", message, "the arm standing still", reads[1][0])]
+
+    return check
+
+
+def _close_moving() -> Stream:
+    far = (READY_POSE[0] + 90.0, *READY_POSE[1:])
+    groups: list[tuple[str, Sequence[Step]]] = [
+        (
+            "enable power, to ready, rest, a long move, a new connection at once",
+            [
+                _req("enable-power"),
+                _req("set-joint-angles", _floats(READY_POSE)),
+                Pause(REST),
+                _req("set-joint-angles", _floats(far)),
+                Reconnect(),
+            ],
+        ),
+        ("joint angles twice, seconds apart", [_req("joint-angles"), Pause(2.0), _req("joint-angles")]),
+    ]
+    return Stream(None, _inputs("close-moving", groups), scenario="close-moving", check=_check_still(1))
+
+
+def _midway(events: Events, timed: int) -> tuple[float, float, SideEvent] | None:
+    """How far joint 1 got midway through a swing from the ready position (read before it) and midway
+    through the one back (read at its goal): the joint angles read four times at input ``timed``."""
+    reads = _floats_at(events, timed, "joint-angles")
+    if len(reads) != 4:
+        return None
+    start, first, goal, second = (r[1][0] for r in reads)
+    there = READY_POSE[0] + SWING_DEG
+    if not (_close([start], [READY_POSE[0]]) and _close([goal], [there])):
+        return None
+    return _progress(start, there, first), _progress(there, start, second), reads[1][0]
+
+
+def _check_speed_scales(timed: int) -> Callable[[Events], list[Sighting]]:
+    """A swing at factor :data:`SLOW` gets at most 1 / :data:`SPEED_MATCH` as far midway as the one back at
+    factor 1 (``motion.speed-scales``)."""
+
+    def check(events: Events) -> list[Sighting]:
+        got = _midway(events, timed)
+        if got is None or got[0] * SPEED_MATCH <= got[1]:
+            return []
+        slow, full, event = got
+        message = f"midway a move got {slow:.0%} of its way at factor {SLOW:g}, {full:.0%} at factor 1"
+        return [
+            _sighting(timed, "motion.speed-scales", message, f"the move {1 / SLOW:g} times slower", event)
+        ]
+
+    return check
+
+
+def _timed_pair(first: Sequence[Step]) -> list[Step]:
+    """To ready, the joints read, ``first`` (a speed), a timed swing, the joints read, factor 1, a timed
+    swing back."""
+    swung = (READY_POSE[0] + SWING_DEG, *READY_POSE[1:])
+    return [
+        _req("enable-power"),
+        _req("set-joint-angles", _floats(READY_POSE)),
+        Pause(REST),
+        _req("joint-angles"),
+        *first,
+        *_timed_move(swung),
+        _req("joint-angles"),
+        _req("set-speed", pack_f(1.0)),
+        *_timed_move(READY_POSE),
+    ]
+
+
+def _speed_scales() -> Stream:
+    groups: list[tuple[str, Sequence[Step]]] = [
+        (
+            f"a timed swing at factor {SLOW:g}, one back at factor 1",
+            _timed_pair([_req("set-speed", pack_f(SLOW))]),
+        )
+    ]
+    return Stream(
+        None, _inputs("speed-scales", groups), scenario="speed-scales", check=_check_speed_scales(0)
+    )
+
+
+def _check_not_split(at: int) -> Callable[[Events], list[Sighting]]:
+    """No other packet comes between the first packet of describe self's reply at input ``at`` and its
+    terminator (``multi.not-split``)."""
+
+    def check(events: Events) -> list[Sighting]:
+        seen = events.get(at, [])
+        mine = [i for i, e in enumerate(seen) if e.kind == "packet" and e.request == _op("describe-self")]
+        if not mine:
+            return []
+        inside = [e for e in seen[mine[0] : mine[-1]] if e.kind == "packet" and e.request is None]
+        if not inside:
+            return []
+        message = f"0{inside[0].opcode:o} came inside describe self's reply"
+        return [
+            _sighting(at, "multi.not-split", message, "the reply whole, then the other packets", inside[0])
+        ]
+
+    return check
+
+
+def _split() -> Stream:
+    groups: list[tuple[str, Sequence[Step]]] = [
+        (
+            "enable power, notifications 3, a move, rest",
+            [
+                _req("enable-power"),
+                _req("request-notifications", _word(3)),
+                _req("set-joint-angles", _floats(POSE)),
+                Pause(REST),
+            ],
+        ),
+        ("describe self", [_req("describe-self")]),
+    ]
+    return Stream(None, _inputs("not-split", groups), scenario="not-split", check=_check_not_split(1))
+
+
+LINE_SHIFT: Final = (80.0, 40.0, -60.0)
+"""How far (mm) the paths scenario's straight-line move takes the hand from the seed's pose."""
+JOINT_SHIFT: Final = (30.0, 20.0, -25.0, 15.0, 20.0, -30.0)
+"""How far (deg) each joint goes in the paths scenario's joint-interpolated move to a transform."""
+
+
+def _shifted(angles: Sequence[float], shift: Sequence[float]) -> bytes:
+    """The transform of ``angles`` with its position moved by ``shift`` (mm)."""
+    floats = list(forward(angles, PUMA600.geometry).to_floats())
+    floats[9:] = [p + d for p, d in zip(floats[9:], shift, strict=True)]
+    return _floats(floats)
+
+
+def _off_line(p: Sequence[float], a: Sequence[float], b: Sequence[float]) -> tuple[float, float]:
+    """The distance of ``p`` from the line through ``a`` and ``b``, and how far along it p lies (0 to 1)."""
+    ab = [y - x for x, y in zip(a, b, strict=True)]
+    length = math.hypot(*ab)
+    if length == 0:
+        return 0.0, 0.0
+    along = sum((q - x) * d for q, x, d in zip(p, a, ab, strict=True)) / length**2
+    nearest = [x + along * d for x, d in zip(a, ab, strict=True)]
+    return math.dist(p, nearest), along
+
+
+def _check_paths(line: int, joint: int) -> Callable[[Events], list[Sighting]]:
+    """Midway through a straight-line move (input ``line``: Here before, midway, at the end) the hand is
+    on the line from where it started to where it ended (``straight-move.line``); midway through a move
+    (input ``joint``: joint angles before, midway, at the end) the joints that move are at one fraction
+    of their ways (``joint-move.interpolated``)."""
+
+    def check(events: Events) -> list[Sighting]:
+        out: list[Sighting] = []
+        heres = _floats_at(events, line, "here")
+        if len(heres) == 3 and all(len(h[1]) == 12 for h in heres):
+            start, mid, end = (h[1][9:] for h in heres)
+            off, along = _off_line(mid, start, end)
+            if 0.0 < along < 1.0 and off > LINE_TOL_MM:
+                message = (
+                    f"midway the hand is {off:.3g} mm off the line from {_shown(start)} to {_shown(end)}"
+                )
+                out.append(
+                    _sighting(line, "straight-move.line", message, "the hand on the line", heres[1][0])
+                )
+        reads = _floats_at(events, joint, "joint-angles")
+        if len(reads) == 3:
+            first, mid, last = (r[1] for r in reads)
+            moving = [i for i, (a, b) in enumerate(zip(first, last, strict=True)) if abs(b - a) >= MOVING_DEG]
+            fractions = [(mid[i] - first[i]) / (last[i] - first[i]) for i in moving]
+            spread = max(fractions) - min(fractions) if fractions else 0.0
+            if spread > FRACTION_TOL:
+                message = f"midway the moving joints were {spread:.3f} apart in the fractions of their ways"
+                expected = "every moving joint at one fraction of its way"
+                out.append(_sighting(joint, "joint-move.interpolated", message, expected, reads[1][0]))
+        return out
+
+    return check
+
+
+def _paths() -> Stream:
+    start = _floats(SEED_ANGLES)
+    goal = tuple(a + d for a, d in zip(SEED_ANGLES, JOINT_SHIFT, strict=True))
+    groups: list[tuple[str, Sequence[Step]]] = [
+        (
+            "enable power, to the seed's angles, rest",
+            [_req("enable-power"), _req("set-joint-angles", start), Pause(REST)],
+        ),
+        (
+            "here, a straight-line move, here midway and at the end",
+            [
+                _req("here"),
+                _req("straight-move", _shifted(SEED_ANGLES, LINE_SHIFT)),
+                Pause(MIDWAY),
+                _req("here"),
+                Pause(REST),
+                _req("here"),
+            ],
+        ),
+        ("back to the seed's angles, rest", [_req("set-joint-angles", start), Pause(REST)]),
+        (
+            "joint angles, a move to a transform, joint angles midway and at the end",
+            [
+                _req("joint-angles"),
+                _req("move", _shifted(goal, (0.0, 0.0, 0.0))),
+                Pause(MIDWAY),
+                _req("joint-angles"),
+                Pause(REST),
+                _req("joint-angles"),
+            ],
+        ),
+    ]
+    return Stream(None, _inputs("paths", groups), scenario="paths", check=_check_paths(1, 3))
+
+
 SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
     "describe-probe": _describe_probe,
     "joint-limits": _limits,
@@ -609,6 +1264,14 @@ SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
     "wrist-silent": _wrist_silent,
     "collision": _collision,
     "float-extremes": _extremes,
+    "configuration": _configuration,
+    "increments": _increments,
+    "joint-order": _joint_order,
+    "fresh-connection": _fresh_connection,
+    "close-moving": _close_moving,
+    "speed-scales": _speed_scales,
+    "not-split": _split,
+    "paths": _paths,
 }
 """Every scenario by name, in the order a diff sends them."""
 

@@ -30,7 +30,7 @@ from typing import Final, Literal
 
 from manip.codecs.packet import Packet
 from manip.conformance.fuzz.session import Allowance, FuzzConnection, Inbox
-from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, RequestStep, Stray
+from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, Reconnect, RequestStep, Stray
 from manip.conformance.suite.rawchaos import RawError, RawLink, frame, open_link
 from manip.links.address import LinkAddress
 from manip.spec.constants import ChaosOp, RequestOp
@@ -194,9 +194,23 @@ class BatchRunner:
                 await self._stray(run, item, index, step, conn)
             elif isinstance(step, Pause):
                 await conn.pause(step.seconds)
+            elif isinstance(step, Reconnect):
+                reopened = await self._reconnect(run, conn, step)
+                if reopened is None:
+                    return None
+                conn = reopened
+                conn.current = item.number
             else:
                 await self._raw(run, item, step)
         return conn
+
+    async def _reconnect(self, run: BatchRun, conn: FuzzConnection, step: Reconnect) -> FuzzConnection | None:
+        """Close ``conn`` once its requests are answered, and open the next connection."""
+        if conn.ended is None:
+            await conn.settle()
+            conn.close("fuzz: a new connection")
+        await asyncio.sleep(step.after)
+        return await self._open(run)
 
     async def _open(self, run: BatchRun) -> FuzzConnection | None:
         link: RawLink | None = None

@@ -41,7 +41,16 @@ from manip.conformance.fuzz.report import (
 )
 from manip.conformance.fuzz.session import Allowance
 from manip.conformance.fuzz.shrink import Budget, BudgetError, ddmin
-from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, RequestStep, Step, Stray
+from manip.conformance.fuzz.steps import (
+    ConnPacket,
+    FuzzInput,
+    Pause,
+    Raw,
+    Reconnect,
+    RequestStep,
+    Step,
+    Stray,
+)
 from manip.conformance.fuzz.target import FuzzedServer, UnreachableError
 from manip.conformance.judge.verdict import counts
 from manip.conformance.suite.context import RunOptions
@@ -124,6 +133,8 @@ def describe_step(step: Step) -> str:
         )
     if isinstance(step, Pause):
         return f"a pause of up to {step.seconds:g} s (ended by an asynchronous packet)"
+    if isinstance(step, Reconnect):
+        return f"the connection closed once answered, and a new one opened {step.after:g} s later"
     assert isinstance(step, Raw)
     held = " (left open)" if step.hold else ""
     return f"raw bytes on a link of their own{held}: {step.data.hex(' ') or '(none)'}"

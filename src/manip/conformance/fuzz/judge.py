@@ -280,8 +280,8 @@ def _skipped(
             origin.get(id(earlier.request), last),
         )
     skipped = sent[len(done) : index]
-    if not skipped:
-        return None
+    if not skipped or _answered_each(packets):
+        return None  # every request got its answer in position: only the number is wrong
     first = skipped[0]
     return _seen(
         "missing_response",
@@ -292,6 +292,13 @@ def _skipped(
         first.data,
         origin.get(id(first), last),
     )
+
+
+def _answered_each(packets: Sequence[WirePacket]) -> bool:
+    """Whether the connection's answers, paired by position, number as many as its requests: then none
+    was dropped, whatever numbers they carry."""
+    requests = sum(1 for p in packets if p.direction == "c2s" and not p.is_close)
+    return requests > 0 and len(list(answers(packets))) >= requests
 
 
 def _busy(e: DueAnswer, when: float | None) -> bool:

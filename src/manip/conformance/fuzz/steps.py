@@ -13,6 +13,8 @@ seed gives the same inputs and ``--only N,M`` sends exactly inputs N and M again
 * :class:`Raw`: bytes on a link of their own (stream links: the link is opened, written and left to
   the target), or one datagram of arbitrary bytes (CHUDP).
 * :class:`Pause`: time for the target's arm to move, so that what it reports of motion is seen.
+* :class:`Reconnect`: close the connection (once every request on it is answered) and open a new one,
+  to see what a connection leaves behind (the diff's scenarios; the generators never make one).
 
 Each non-request step carries the answer the spec demands (``expect``) and the clause that demands it.
 """
@@ -30,6 +32,7 @@ __all__ = [
     "FuzzInput",
     "Pause",
     "Raw",
+    "Reconnect",
     "Relative",
     "RequestStep",
     "Step",
@@ -106,7 +109,15 @@ class Pause:
     seconds: float
 
 
-Step = RequestStep | ConnPacket | Stray | Raw | Pause
+@dataclass(frozen=True, slots=True)
+class Reconnect:
+    """Close the connection once its requests are answered, let the target's clock run ``after``
+    seconds (the close taken before the next RFC comes), and go on on a new connection."""
+
+    after: float = 0.5
+
+
+Step = RequestStep | ConnPacket | Stray | Raw | Pause | Reconnect
 
 
 @dataclass(frozen=True, slots=True)

@@ -25,7 +25,7 @@ What a client sent is judged in :mod:`manip.conformance.judge.client_checks`.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -370,12 +370,19 @@ def check_async_packet(packet: WirePacket, requested_mask: int | None = None) ->
     return out
 
 
-def check_initial_response(packet: WirePacket | None, rfc_packet_no: int | None = None) -> list[Violation]:
-    """The first server packet is a RESPONSE (0200) holding only the RFC's packet number."""
-    if packet is None or packet.is_close:
+def check_initial_response(
+    packet: WirePacket | None, rfc_packet_no: int | None = None, requests: Collection[int] = ()
+) -> list[Violation]:
+    """The first server packet is a RESPONSE (0200) holding only the RFC's packet number.  ``requests``:
+    the packet numbers of the requests sent before it; a first packet carrying one of them (and not the
+    RFC's) answers that request, so the initial RESPONSE never came."""
+    number = word(packet.data) if packet is not None and not packet.is_close else None
+    answers_request = number is not None and number in requests and number != rfc_packet_no
+    if packet is None or packet.is_close or answers_request:
+        said = f": the first server packet answers request #{number}" if answers_request else ""
         return [
             Violation(
-                "no initial RESPONSE after the connection opened",
+                f"no initial RESPONSE after the connection opened{said}",
                 "connect.initial-response",
                 expected="a RESPONSE (200) packet first",
                 actual="nothing" if packet is None else describe(packet),
@@ -393,7 +400,6 @@ def check_initial_response(packet: WirePacket | None, rfc_packet_no: int | None 
                 expected="a RESPONSE (200) packet first",
             )
         ]
-    number = word(packet.data)
     if len(packet.data) != 2 or (rfc_packet_no is not None and number != rfc_packet_no):
         expected = "only a request-number word" + (
             f" holding {rfc_packet_no}, the RFC's packet number" if rfc_packet_no is not None else ""
@@ -773,7 +779,10 @@ def check_transcript(
     s = _Session()
     if expect_initial:
         server = [p for p in packets if p.direction == "s2c"]
-        s.violations += check_initial_response(server[0] if server else None, rfc_packet_no)
+        first = server[0] if server else None
+        before = packets[: packets.index(first)] if first is not None else packets
+        sent = [p.packet_no for p in before if p.direction == "c2s" and not p.is_close]
+        s.violations += check_initial_response(first, rfc_packet_no, sent)
         s.pairing.rfc(_Pending(None))
     for packet in packets:
         if packet.direction == "c2s":
@@ -885,11 +894,50 @@ def _finish_answer(s: _Session, item: _Pending | None) -> None:
     if item.discarded:
         _check_discarded(s, request, answer[0])
         return
-    s.violations.extend(check_reply(request, answer))
+    found = check_reply(request, answer)
+    if any(v.clause == "multi.same-request-number" for v in found) and _interleaved(
+        request.packet_no, answer
+    ):
+        later = {
+            p.request.packet_no for p in s.pairing.outstanding() if p is not None and p.request is not None
+        }
+        found = [_overtaken(v, later) for v in found]
+    s.violations.extend(found)
     last = answer[-1]
     if len(answer) > 1 and last.opcode == ServerOp.RESPONSE and len(last.data) <= 2:
         s.violations.extend(check_description(multi_text(answer)))
     _after_answer(s, request, answer)
+
+
+def _interleaved(number: int, answer: Sequence[WirePacket]) -> bool:
+    """Whether the packets of ``answer`` carrying ``number`` are a whole description with packets of
+    other numbers among them: another reply inside this one (rather than this one's packets numbered
+    wrongly, whose text is whole only with theirs)."""
+    numbers = [word(p.data) for p in answer]
+    other = next((i for i, n in enumerate(numbers) if n != number), None)
+    if other is None or number not in numbers[other + 1 :]:
+        return False
+    entries, problems = parse_description(
+        multi_text([p for p, n in zip(answer, numbers, strict=True) if n == number])
+    )
+    return entries is not None and not problems
+
+
+def _overtaken(violation: Violation, later: Collection[int]) -> Violation:
+    """A packet of a multi-packet reply carrying the number of a request sent after it (``later``: those
+    outstanding, when :func:`_interleaved`), said as what it is: that request answered before the reply
+    ended (``request.one-reply``), not a wrong number."""
+    packet = violation.packet
+    number = word(packet.data) if packet is not None else None
+    if violation.clause != "multi.same-request-number" or packet is None or number not in later:
+        return violation
+    return Violation.at(
+        packet,
+        "request.one-reply",
+        f"request #{number} was answered before the multi-packet reply in progress ended",
+        expected="each reply after the one before it, a multi-packet one ended by its terminator",
+        actual=f"{describe(packet)} inside the reply",
+    )
 
 
 def _check_discarded(s: _Session, request: WirePacket, packet: WirePacket) -> None:
