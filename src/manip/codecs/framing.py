@@ -254,10 +254,10 @@ def _decode_body_checked(body: bytes, base: int, order: WordOrder, *, verify: bo
     return checked_packet(words, len(body) - MIN_BODY, data, at, exact=True, trailer=Trailer(*words[-3:]))
 
 
-def _check_body_length(length: int, offset: int, clause: str, what: str) -> None:
-    if length & 1 or not MIN_BODY <= length <= MAX_BODY:
+def _check_body_length(length: int, offset: int, clause: str, what: str, most: int = MAX_BODY) -> None:
+    if length & 1 or not MIN_BODY <= length <= most:
         raise DecodeError(
-            f"{what} {length} is not an even number from {MIN_BODY} to {MAX_BODY}",
+            f"{what} {length} is not an even number from {MIN_BODY} to {most}",
             path="length",
             offset=offset,
             clause=clause,
@@ -334,8 +334,11 @@ class StreamDecoder(ABC):
     clause: ClassVar[str]
     """The clause a framing error of this link breaks."""
 
-    def __init__(self, *, verify: bool = True) -> None:
+    def __init__(self, *, verify: bool = True, max_body: int = MAX_BODY) -> None:
         self.verify = verify
+        self.max_body = max_body
+        """The longest frame body taken (:data:`MAX_BODY`: 488 data bytes; a host without that bound,
+        a defect, takes longer ones)."""
         self._buf = bytearray()
         self._start = 0  # stream offset of self._buf[0]
         self._failed: FrameSyncError | None = None
@@ -429,8 +432,8 @@ class TcpFrameDecoder(StreamDecoder):
 
     def _body_length(self, src: Buffer, pos: int, offset: int) -> int:
         length = src[pos] << 8 | src[pos + 1]
-        if length & 1 or not MIN_BODY <= length <= MAX_BODY:
-            _check_body_length(length, offset, self.clause, "frame length")
+        if length & 1 or not MIN_BODY <= length <= self.max_body:
+            _check_body_length(length, offset, self.clause, "frame length", self.max_body)
         return length
 
     def _decode(self, src: Buffer, start: int, end: int, offset: int) -> Packet:
@@ -443,8 +446,8 @@ class ChaosdFrameDecoder(StreamDecoder):
     prefix = 4
     clause = "link.chaosd.framing"
 
-    def __init__(self, *, verify: bool = False) -> None:
-        super().__init__(verify=verify)
+    def __init__(self, *, verify: bool = False, max_body: int = MAX_BODY) -> None:
+        super().__init__(verify=verify, max_body=max_body)
 
     def _body_length(self, src: Buffer, pos: int, offset: int) -> int:
         header = bytes(src[pos : pos + 4])
@@ -456,7 +459,7 @@ class ChaosdFrameDecoder(StreamDecoder):
                 clause=self.clause,
             )
         length = header[0] << 8 | header[1]
-        _check_body_length(length, offset, self.clause, "chaosd length")
+        _check_body_length(length, offset, self.clause, "chaosd length", self.max_body)
         return length
 
     def _decode(self, src: Buffer, start: int, end: int, offset: int) -> Packet:

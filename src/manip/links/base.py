@@ -24,9 +24,14 @@ from typing import Final
 from manip.codecs.chaos import IllegalPacketError
 from manip.codecs.errors import DecodeError
 from manip.codecs.packet import Packet
+from manip.ncp.defects import ChaosDefects
+
+from .defective import defective_frame
 
 log = logging.getLogger("manip.links")
 
+Encoder = Callable[..., bytes]
+"""``encode(packet, hw_dest=..., hw_src=...)``, one of the framing module's encoders."""
 Receiver = Callable[["Link", Packet], None]
 """Called with each good packet a link receives."""
 CloseCallback = Callable[["Link"], None]
@@ -104,8 +109,13 @@ class Link(ABC):
     kind: str = "link"
     point_to_point: bool = True
 
-    def __init__(self, *, my_addr: int, peer_addr: int | None = None, name: str = "") -> None:
+    def __init__(
+        self, *, my_addr: int, peer_addr: int | None = None, name: str = "", defects: ChaosDefects | None = None
+    ) -> None:
         self.my_addr = my_addr
+        self.defects = defects or ChaosDefects()
+        """How this host departs from the Chaosnet rules (none, but for the reference server's faults)."""
+        self._framed_by_the_rules = self.defects.frames_by_the_rules
         self.peer_addr = peer_addr
         self.name = name or self.kind
         self.stats = LinkStats()
@@ -152,6 +162,13 @@ class Link(ABC):
         """Close the link; queued output is still flushed where the transport can."""
 
     # ---------------------------------------------------------------- helpers for subclasses
+
+    def _frame(self, encode: Encoder, packet: Packet, hop: int | None) -> bytes:
+        """``packet``'s frame for neighbour ``hop``: as ``encode`` (the codec's) lays it out, or with this
+        link's framing defects."""
+        if self._framed_by_the_rules:
+            return encode(packet, hw_dest=hop, hw_src=self.my_addr)
+        return defective_frame(self.kind, packet, hop, self.my_addr, self.defects)
 
     def _deliver(self, packet: Packet) -> None:
         self.stats.frames_in += 1

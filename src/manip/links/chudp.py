@@ -25,6 +25,7 @@ from manip.codecs.chaos import IllegalPacketError
 from manip.codecs.errors import DecodeError, EncodeError
 from manip.codecs.framing import decode_chudp, encode_chudp
 from manip.codecs.packet import Packet
+from manip.ncp.defects import ChaosDefects
 from manip.spec.notation import octal
 
 from .base import Link, bad_reason
@@ -54,8 +55,9 @@ class ChudpLink(Link, asyncio.DatagramProtocol):
         learn_peers: bool = False,
         admit: Admit | None = None,
         name: str = "",
+        defects: ChaosDefects | None = None,
     ) -> None:
-        super().__init__(my_addr=my_addr, name=name)
+        super().__init__(my_addr=my_addr, name=name, defects=defects)
         self.admit = admit
         self.peers: dict[int, Endpoint] = dict(peers or {})
         """Chaos address -> UDP endpoint of every neighbour, configured and learnt."""
@@ -132,7 +134,7 @@ class ChudpLink(Link, asyncio.DatagramProtocol):
         if endpoint is None:
             return self._drop("no_peer", packet)
         try:
-            datagram = encode_chudp(packet, hw_dest=hop, hw_src=self.my_addr)
+            datagram = self._frame(encode_chudp, packet, hop)
         except EncodeError:
             return self._drop("encode", packet)
         transport.sendto(datagram, endpoint)
@@ -163,6 +165,7 @@ async def bind_chudp(
     peers: Mapping[int, Endpoint] | None = None,
     learn_peers: bool = False,
     admit: Admit | None = None,
+    defects: ChaosDefects | None = None,
 ) -> ChudpLink:
     """Bind a CHUDP socket at ``host:port`` (0: any free port); peer hosts are resolved here, once.
 
@@ -176,7 +179,7 @@ async def bind_chudp(
         except OSError as exc:
             raise LinkError(f"cannot resolve CHUDP peer {peer_host}:{peer_port}: {exc}") from exc
         resolved[address] = _endpoint(infos[0][4])
-    link = ChudpLink(my_addr=my_addr, peers=resolved, learn_peers=learn_peers, admit=admit)
+    link = ChudpLink(my_addr=my_addr, peers=resolved, learn_peers=learn_peers, admit=admit, defects=defects)
     try:
         await loop.create_datagram_endpoint(lambda: link, local_addr=(host, port), family=family)
     except OSError as exc:

@@ -8,6 +8,7 @@ NCPs against each other over a bad network on a simulated clock.
 from __future__ import annotations
 
 from .config import NcpConfig
+from .defects import ChaosDefects
 from .connection import ConnectionInfo, NcpStats
 from .errors import InvalidStateError, NcpError, NoFreeIndexError, UnknownConnectionError, WindowFullError
 from .events import (
@@ -32,6 +33,7 @@ __all__ = [
     "Answered",
     "Broken",
     "ChannelStats",
+    "ChaosDefects",
     "Closed",
     "ConnState",
     "ConnectionInfo",

@@ -48,6 +48,7 @@ from manip.codecs.error_string import ErrorMessage
 from manip.codecs.errors import DecodeError
 from manip.codecs.messages import Value, decode_request, encode_async
 from manip.codecs.pdp11float import F_MIN_NORMAL, pack_f
+from manip.ncp.defects import ChaosDefects
 from manip.reference_server import errors
 from manip.reference_server.describe import Statement
 from manip.reference_server.errors import RequestError
@@ -59,7 +60,7 @@ from manip.spec.constants import AsyncCondition, ServerOp
 if TYPE_CHECKING:
     from manip.reference_server.session import Outgoing, ServerSession
 
-__all__ = ["AfterFatal", "Defects", "SwitchedDefects", "arm_defects", "defects_for"]
+__all__ = ["AfterFatal", "Defects", "SwitchedDefects", "arm_defects", "chaos_defects", "defects_for"]
 
 AfterFatal = Literal["close", "stay-open", "drop-link", "eof-drop-link"]
 """What follows a fatal error: the connection closes (the protocol), it stays open, the driver drops
@@ -564,6 +565,30 @@ def _wrist_defects(faults: FaultSet) -> WristDefects:
         user_while_compliant=Fault.WRIST_USER_HELD_COMPLIANT not in on,
         handles_out_of_sync=Fault.OUT_OF_SYNC_IGNORED not in on,
         clears_old_guards=Fault.GUARDS_OUTLIVE_CONNECTION not in on,
+    )
+
+
+def chaos_defects(faults: FaultSet) -> ChaosDefects:
+    """The defects of the server's NCP and links the switches of ``faults`` give them."""
+    on = faults.active
+    return ChaosDefects(
+        los_unknown_connection=Fault.LOS_UNKNOWN_IGNORED not in on,
+        los_illegal_opcode=Fault.ILLEGAL_OPCODE_IGNORED not in on,
+        bounds_data=Fault.OVERSIZE_SERVED not in on,
+        retransmits=Fault.NO_RETRANSMISSION not in on,
+        recognises_duplicate_rfc=Fault.DUPLICATE_RFC_NEW not in on,
+        gives_up_silent_peer=Fault.SILENT_PEER_KEPT not in on,
+        packet_number_step=2 if Fault.PACKET_NUMBERS_SKIP in on else 1,
+        header_low_byte=1 if Fault.HEADER_LOW_BYTE_SET in on else 0,
+        nbytes_counts_odd_byte=Fault.NBYTES_WHOLE_WORDS not in on,
+        data_first_byte_low=Fault.DATA_BYTES_SWAPPED not in on,
+        chudp_header=Fault.CHUDP_NO_HEADER not in on,
+        chudp_pads_odd_byte=Fault.CHUDP_ODD_BYTE_UNPADDED not in on,
+        chudp_msb_first=Fault.CHUDP_LSB_FIRST not in on,
+        trailer_source_own=Fault.TRAILER_SOURCE_DESTINATION not in on,
+        checksum_covers_trailer=Fault.CHECKSUM_WITHOUT_TRAILER not in on,
+        tcp_length_big_endian=Fault.TCP_LENGTH_LITTLE_ENDIAN not in on,
+        chaosd_little_endian=Fault.CHAOSD_MSB_FIRST not in on,
     )
 
 
