@@ -254,6 +254,26 @@ def _decode_body_checked(body: bytes, base: int, order: WordOrder, *, verify: bo
     return checked_packet(words, len(body) - MIN_BODY, data, at, exact=True, trailer=Trailer(*words[-3:]))
 
 
+def _in_other_order(
+    exc: DecodeError, body: Buffer, base: int, order: WordOrder, clause: str, *, verify: bool
+) -> DecodeError:
+    """``exc``, the error of a frame body read in the link's word ``order``; but when the body decodes with
+    its words in the other byte order, an error naming ``clause`` (the link's word order) instead: a
+    sender that swaps every word breaks the word order, not the field its swap garbles first."""
+    if isinstance(exc, IllegalPacketError):
+        return exc
+    try:
+        _decode_body_checked(bytes(body), base, "<" if order == ">" else ">", verify=verify)
+    except DecodeError:
+        return exc
+    return DecodeError(
+        f"the words are sent in the other byte order (read so, the frame decodes): {exc.message}",
+        path="frame.word-order",
+        offset=base,
+        clause=clause,
+    )
+
+
 def _check_body_length(length: int, offset: int, clause: str, what: str, most: int = MAX_BODY) -> None:
     if length & 1 or not MIN_BODY <= length <= most:
         raise DecodeError(
@@ -310,6 +330,8 @@ def decode_chudp(datagram: bytes, *, verify: bool = True, strict: bool = True) -
         if strict:
             raise
         return exc.packet
+    except DecodeError as exc:
+        raise _in_other_order(exc, datagram[4:], 4, ">", "chudp.word-order", verify=verify) from None
 
 
 # ------------------------------------------------------------------------------------ stream links
@@ -437,7 +459,10 @@ class TcpFrameDecoder(StreamDecoder):
         return length
 
     def _decode(self, src: Buffer, start: int, end: int, offset: int) -> Packet:
-        return _decode_body(src, start, end, offset, ">", verify=self.verify)
+        try:
+            return _decode_body(src, start, end, offset, ">", verify=self.verify)
+        except DecodeError as exc:
+            raise _in_other_order(exc, src[start:end], offset, ">", self.clause, verify=self.verify) from None
 
 
 class ChaosdFrameDecoder(StreamDecoder):
@@ -463,7 +488,10 @@ class ChaosdFrameDecoder(StreamDecoder):
         return length
 
     def _decode(self, src: Buffer, start: int, end: int, offset: int) -> Packet:
-        return _decode_body(src, start, end, offset, "<", verify=self.verify)
+        try:
+            return _decode_body(src, start, end, offset, "<", verify=self.verify)
+        except DecodeError as exc:
+            raise _in_other_order(exc, src[start:end], offset, "<", self.clause, verify=self.verify) from None
 
 
 def _one_frame(decoder: StreamDecoder, frame: bytes, strict: bool) -> Packet:

@@ -38,6 +38,8 @@ CloseCallback = Callable[["Link"], None]
 
 _CLAUSE_REASONS: Final = {
     "chudp.checksum": "checksum",
+    "chudp.word-order": "word_order",
+    "chudp.trailer": "trailer",
     "chudp.length": "short",
     "chaos.header.nbytes": "nbytes",
     "chaos.header.unused-byte-zero": "header",
@@ -58,6 +60,8 @@ BAD_REASONS: Final = (
     "opcode",
     "oversize",
     "unknown_peer",
+    "word_order",
+    "trailer",
     "other",
 )
 """The names bad input is counted under (``LinkStats.bad``)."""
@@ -65,6 +69,8 @@ BAD_REASONS: Final = (
 
 def bad_reason(exc: DecodeError) -> str:
     """The counter name for a decode failure, from the spec clause it breaks."""
+    if exc.path.endswith("word-order"):  # a whole frame in the other byte order (a framing clause)
+        return "word_order"
     if exc.clause == "chudp.header":
         return "function" if exc.path.endswith("function") else "version"
     return _CLAUSE_REASONS.get(exc.clause or "", "other")
@@ -72,15 +78,17 @@ def bad_reason(exc: DecodeError) -> str:
 
 @dataclass(slots=True)
 class LinkStats:
-    """Counters of one link.  ``bad`` counts refused input by reason, ``dropped`` refused output, and
-    ``illegal`` the sound frames with an illegal packet that were delivered for the NCP to answer with LOS
-    (also counted in ``frames_in``), under ``opcode`` or ``oversize``."""
+    """Counters of one link.  ``bad`` counts refused input by reason (and ``bad_clauses`` by the clause
+    of the spec it breaks, where one says), ``dropped`` refused output, and ``illegal`` the sound frames
+    with an illegal packet that were delivered for the NCP to answer with LOS (also counted in
+    ``frames_in``), under ``opcode`` or ``oversize``."""
 
     frames_in: int = 0
     frames_out: int = 0
     bytes_in: int = 0
     bytes_out: int = 0
     bad: Counter[str] = field(default_factory=Counter)
+    bad_clauses: Counter[str] = field(default_factory=Counter)
     dropped: Counter[str] = field(default_factory=Counter)
     illegal: Counter[str] = field(default_factory=Counter)
 
@@ -95,6 +103,7 @@ class LinkStats:
         self.bytes_in += other.bytes_in
         self.bytes_out += other.bytes_out
         self.bad.update(other.bad)
+        self.bad_clauses.update(other.bad_clauses)
         self.dropped.update(other.dropped)
         self.illegal.update(other.illegal)
 
@@ -110,7 +119,12 @@ class Link(ABC):
     point_to_point: bool = True
 
     def __init__(
-        self, *, my_addr: int, peer_addr: int | None = None, name: str = "", defects: ChaosDefects | None = None
+        self,
+        *,
+        my_addr: int,
+        peer_addr: int | None = None,
+        name: str = "",
+        defects: ChaosDefects | None = None,
     ) -> None:
         self.my_addr = my_addr
         self.defects = defects or ChaosDefects()
@@ -187,8 +201,10 @@ class Link(ABC):
         log.debug("%s: illegal packet passed on for a LOS: %s%s", self.name, exc, detail)
         return exc.packet
 
-    def _bad(self, reason: str, detail: object) -> None:
+    def _bad(self, reason: str, detail: object, clause: str | None = None) -> None:
         self.stats.bad[reason] += 1
+        if clause is not None:
+            self.stats.bad_clauses[clause] += 1
         log.debug("%s: dropped bad input (%s): %s", self.name, reason, detail)
 
     def _drop(self, reason: str, packet: Packet) -> bool:

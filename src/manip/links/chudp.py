@@ -4,7 +4,9 @@ One UDP socket reaches many neighbours, so the link keeps a table from Chaos add
 and the driver names the neighbour (``next_hop``) for each packet.  Outgoing trailers carry our own
 address as source and the neighbour's as destination, which is what klh10 learns peers from.
 
-Incoming datagrams are decoded with the checksum checked; a bad one is counted and dropped.  A sound
+Incoming datagrams are decoded with the checksum checked; a bad one is counted and dropped, and so is
+one whose trailer names our own address as its hardware source (clause ``chudp.trailer``: no other host
+has it, and a peer learnt from it would be ourselves).  A sound
 one holding an illegal packet (opcode, or more than 488 data bytes) is treated as good, so the NCP can
 answer it with LOS, and counted under ``stats.illegal``.  A good one is accepted from a configured
 endpoint or from a known address; from anyone else only if ``learn_peers`` is on (klh10's dynamic
@@ -99,9 +101,16 @@ class ChudpLink(Link, asyncio.DatagramProtocol):
         except IllegalPacketError as exc:
             packet, illegal = exc.packet, exc
         except DecodeError as exc:
-            self._bad(bad_reason(exc), f"{exc} (from {sender})")
+            self._bad(bad_reason(exc), f"{exc} (from {sender})", exc.clause)
             return
         trailer = packet.trailer
+        if trailer is not None and trailer.source == self.my_addr:  # no other host has our address
+            self._bad(
+                "trailer",
+                f"trailer source {octal(trailer.source)} is our own (from {sender})",
+                "chudp.trailer",
+            )
+            return
         source = trailer.source if trailer is not None and trailer.source else packet.src_host
         known = self.peers.get(source)
         if known != sender and sender not in self._configured_endpoints:

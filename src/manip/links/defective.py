@@ -52,4 +52,5 @@ def defective_frame(kind: str, p: Packet, hw_dest: int | None, hw_src: int | Non
         return (CHUDP_HEADER if d.chudp_header else b"") + body
     if kind == "chaosd":
         return bytes((len(body) >> 8, len(body) & 0xFF, 1, 0)) + body
-    return len(body).to_bytes(2, "big" if d.tcp_length_big_endian else "little") + body
+    length = len(body) - (1 if len(p.data) & 1 and not d.tcp_length_counts_pad else 0)
+    return length.to_bytes(2, "big") + body

@@ -88,7 +88,7 @@ class StreamLink(Link, asyncio.Protocol):
         except FrameSyncError as exc:
             foreign = not exc.items and not self.stats.frames_in and not self.stats.bad_total
             self._take(exc.items)
-            self._bad("framing", exc)
+            self._bad("framing", exc, exc.clause)
             if foreign:  # not one frame before the framing broke: the peer does not speak it at all
                 self.abort(f"{not_a_chaos_link(self._head)} (framing lost: {exc})")
             else:
@@ -161,7 +161,7 @@ class StreamLink(Link, asyncio.Protocol):
         for item in items:
             if isinstance(item, DecodeError):
                 if not isinstance(item, IllegalPacketError):
-                    self._bad(bad_reason(item), item)
+                    self._bad(bad_reason(item), item, item.clause)
                     continue
                 item = self._illegal(item)
             if self.peer_addr is None:

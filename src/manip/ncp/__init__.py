@@ -8,8 +8,8 @@ NCPs against each other over a bad network on a simulated clock.
 from __future__ import annotations
 
 from .config import NcpConfig
-from .defects import ChaosDefects
 from .connection import ConnectionInfo, NcpStats
+from .defects import ChaosDefects
 from .errors import InvalidStateError, NcpError, NoFreeIndexError, UnknownConnectionError, WindowFullError
 from .events import (
     Answered,

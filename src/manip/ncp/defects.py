@@ -53,8 +53,8 @@ class ChaosDefects:
     """The trailer's hardware source is the sender's own address (``chudp.trailer``)."""
     checksum_covers_trailer: bool = True
     """The checksum covers the trailer's destination and source words (``chudp.checksum``)."""
-    tcp_length_big_endian: bool = True
-    """The TCP link's frame length goes high byte first (``link.tcp.framing``)."""
+    tcp_length_counts_pad: bool = True
+    """The TCP link's frame length counts the pad byte after an odd last data byte (``link.tcp.framing``)."""
     chaosd_little_endian: bool = True
     """The chaosd socket's words go low byte first (``link.chaosd.framing``)."""
 
@@ -74,7 +74,7 @@ FRAME_FIELDS = (
     "chudp_msb_first",
     "trailer_source_own",
     "checksum_covers_trailer",
-    "tcp_length_big_endian",
+    "tcp_length_counts_pad",
     "chaosd_little_endian",
 )
 """The fields that change how a link lays out a frame (the rest change what the NCP does)."""

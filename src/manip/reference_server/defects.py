@@ -587,7 +587,7 @@ def chaos_defects(faults: FaultSet) -> ChaosDefects:
         chudp_msb_first=Fault.CHUDP_LSB_FIRST not in on,
         trailer_source_own=Fault.TRAILER_SOURCE_DESTINATION not in on,
         checksum_covers_trailer=Fault.CHECKSUM_WITHOUT_TRAILER not in on,
-        tcp_length_big_endian=Fault.TCP_LENGTH_LITTLE_ENDIAN not in on,
+        tcp_length_counts_pad=Fault.TCP_LENGTH_UNPADDED not in on,
         chaosd_little_endian=Fault.CHAOSD_MSB_FIRST not in on,
     )
 

@@ -636,9 +636,10 @@ class Fault(FaultSwitch):
         "chaos.data.byte-order",
         caught_by=("server.link.tcp-frames",),
     )
-    TCP_LENGTH_LITTLE_ENDIAN = defect(
-        "tcp-length-little-endian",
-        "The TCP link's frame length is written low byte first.",
+    TCP_LENGTH_UNPADDED = defect(
+        "tcp-length-unpadded",
+        "The TCP link's frame length leaves out the pad byte after an odd last data byte (the pad itself is "
+        "sent): the first such frame has an odd length, and the stream its frames can no longer be found in.",
         "link.tcp.framing",
         caught_by=("server.link.tcp-frames",),
     )
@@ -680,6 +681,7 @@ class Fault(FaultSwitch):
         "link.chaosd.framing",
         caught_by=("server.link.chaosd-frames",),
     )
+
 
 RETIRED: Final[Mapping[str, str]] = MappingProxyType(
     {
