@@ -17,6 +17,7 @@ from manip.conformance.cases._support import (
     settle,
 )
 from manip.conformance.judge.checks import WirePacket, check_error_packet, word
+from manip.conformance.judge.violation import missing
 from manip.conformance.suite.case import CaseFailure, case
 from manip.conformance.suite.context import CaseContext, Probe
 from manip.conformance.suite.world import SluggishJoint
@@ -71,8 +72,10 @@ def _judge_frames(ctx: CaseContext, links: list[Link], clauses: tuple[str, ...])
             False,
             clause=clause if clause in cited else clauses[0],
             expected=f"every frame from the server well formed ({clause})",
-            seen=f"{count} frame(s) breaking {clause}; the link's counters: bad {dict(stats.bad)}, "
-            f"illegal {dict(stats.illegal)}",
+            seen=missing(
+                f"{count} frame(s) refused by the link for breaking {clause} (its counters: bad "
+                f"{dict(stats.bad)}, illegal {dict(stats.illegal)}): the packets they held never came"
+            ),
         )
     return bool(broken)
 
@@ -177,7 +180,9 @@ def _judge_gap(ctx: CaseContext) -> None:
             clause="ncp.packet-numbers",
             expected=f"packet #{(info.last_received + 1) & 0xFFFF} after #{info.last_received} (numbers "
             "consecutive)",
-            seen=f"{info.buffered} later packet(s) waiting for it",
+            seen=missing(
+                f"packet #{(info.last_received + 1) & 0xFFFF}; {info.buffered} later packet(s) waiting for it"
+            ),
         )
 
 
