@@ -3,7 +3,9 @@
 A link moves whole Chaos packets; it knows framings and sockets, not connections.  Input from the wire
 is untrusted, so a link never lets a bad frame escape as an exception: it counts the frame under a short
 reason (:data:`BAD_REASONS`), logs it at debug level and drops it.  Only a stream whose framing is lost
-is closed, because nothing after the bad length can be trusted.
+is closed, because nothing after the bad length can be trusted.  A packet that names our own address as
+its source is bad input too: no other host has it, so its header is laid out wrong (clause
+``chaos.header.layout``).
 
 A frame that is sound (framing, checksum and lengths check out) but carries an *illegal* packet (an
 illegal opcode, more than 488 data bytes) is not bad input: the NCP must answer it with LOS, so the link
@@ -185,6 +187,11 @@ class Link(ABC):
         return defective_frame(self.kind, packet, hop, self.my_addr, self.defects)
 
     def _deliver(self, packet: Packet) -> None:
+        if packet.src_host == self.my_addr:  # no other host has our address: its header is laid out wrong
+            self._bad(
+                "header", f"source host {packet.src_host:o} is our own: {packet!r}", "chaos.header.layout"
+            )
+            return
         self.stats.frames_in += 1
         receiver = self._receiver
         if receiver is None:

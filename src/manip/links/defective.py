@@ -32,6 +32,8 @@ def defective_frame(kind: str, p: Packet, hw_dest: int | None, hw_src: int | Non
     other: ``tcp`` and ``unix``), laid out with the defects ``d``."""
     header = header_words(p)
     header[0] |= d.header_low_byte & 0xFF
+    if d.header_source_first:
+        header[2:6] = header[4:6] + header[2:4]
     if len(p.data) & 1 and not d.nbytes_counts_odd_byte:
         header[1] -= 1
     words = header + _data_words(p.data, d.data_first_byte_low)

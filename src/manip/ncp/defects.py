@@ -37,6 +37,9 @@ class ChaosDefects:
     """What each controlled packet adds to the packet number (``ncp.packet-numbers``)."""
 
     # ------------------------------------------------------------------ the frames a link sends
+    header_source_first: bool = False
+    """The source host and index words come before the destination's in the header
+    (``chaos.header.layout``)."""
     header_low_byte: int = 0
     """The byte below the opcode in header word 0 (``chaos.header.unused-byte-zero``)."""
     nbytes_counts_odd_byte: bool = True
@@ -66,6 +69,7 @@ class ChaosDefects:
 
 _RULES = ChaosDefects()
 FRAME_FIELDS = (
+    "header_source_first",
     "header_low_byte",
     "nbytes_counts_odd_byte",
     "data_first_byte_low",

@@ -579,6 +579,7 @@ def chaos_defects(faults: FaultSet) -> ChaosDefects:
         recognises_duplicate_rfc=Fault.DUPLICATE_RFC_NEW not in on,
         gives_up_silent_peer=Fault.SILENT_PEER_KEPT not in on,
         packet_number_step=2 if Fault.PACKET_NUMBERS_SKIP in on else 1,
+        header_source_first=Fault.HEADER_SOURCE_FIRST in on,
         header_low_byte=1 if Fault.HEADER_LOW_BYTE_SET in on else 0,
         nbytes_counts_odd_byte=Fault.NBYTES_WHOLE_WORDS not in on,
         data_first_byte_low=Fault.DATA_BYTES_SWAPPED not in on,

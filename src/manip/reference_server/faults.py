@@ -617,6 +617,13 @@ class Fault(FaultSwitch):
         "ncp.packet-numbers",
         caught_by=("server.link.packet-numbers",),
     )
+    HEADER_SOURCE_FIRST = defect(
+        "header-source-first",
+        "The header's source host and index words come before the destination's: every packet names the "
+        "server's peer as its source.",
+        "chaos.header.layout",
+        caught_by=("server.link.tcp-frames",),
+    )
     HEADER_LOW_BYTE_SET = defect(
         "header-low-byte-set",
         "The byte below the opcode in header word 0 is sent as 1, not zero.",

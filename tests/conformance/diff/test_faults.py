@@ -180,6 +180,11 @@ NOT_SHOWN: dict[Fault, str] = {
         "strings' clauses (side B): every number and string of side B is byte-swapped, and no judge of one "
         "side reads the data's byte order as such"
     ),
+    Fault.HEADER_SOURCE_FIRST: (
+        "the diff's client links refuse every packet of side B (it names their own address as its source), "
+        "so side B answers nothing: its differences are missing answers, named by no judge of one side as "
+        "chaos.header.layout"
+    ),
     Fault.CHUDP_NO_HEADER: (
         "the diff's sides are reached over a Unix socket with the TCP link framing: the CHUDP framing it "
         "breaks is never used"
@@ -214,6 +219,7 @@ NOT_RUN = frozenset(
         Fault.SILENT_PEER_KEPT,
         Fault.PACKET_NUMBERS_SKIP,
         Fault.DATA_BYTES_SWAPPED,
+        Fault.HEADER_SOURCE_FIRST,
         Fault.CHUDP_NO_HEADER,
         Fault.CHUDP_ODD_BYTE_UNPADDED,
         Fault.CHUDP_LSB_FIRST,
