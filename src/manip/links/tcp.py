@@ -29,17 +29,10 @@ class TcpLink(StreamLink):
     kind = "tcp"
 
     def __init__(
-        self,
-        *,
-        my_addr: int,
-        peer_addr: int | None = None,
-        name: str = "",
-        defects: ChaosDefects | None = None,
+        self, *, my_addr: int, peer_addr: int | None = None, defects: ChaosDefects | None = None
     ) -> None:
         decoder = TcpFrameDecoder(max_body=stream_max_body(defects))
-        super().__init__(
-            encode_tcp, decoder, my_addr=my_addr, peer_addr=peer_addr, name=name, defects=defects
-        )
+        super().__init__(encode_tcp, decoder, my_addr=my_addr, peer_addr=peer_addr, defects=defects)
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         peer = transport.get_extra_info("peername")

@@ -568,28 +568,35 @@ def _wrist_defects(faults: FaultSet) -> WristDefects:
     )
 
 
+_CHAOS_RULES: Final[Mapping[str, Fault]] = {
+    "los_unknown_connection": Fault.LOS_UNKNOWN_IGNORED,
+    "los_illegal_opcode": Fault.ILLEGAL_OPCODE_IGNORED,
+    "bounds_data": Fault.OVERSIZE_SERVED,
+    "retransmits": Fault.NO_RETRANSMISSION,
+    "recognises_duplicate_rfc": Fault.DUPLICATE_RFC_NEW,
+    "gives_up_silent_peer": Fault.SILENT_PEER_KEPT,
+    "nbytes_counts_odd_byte": Fault.NBYTES_WHOLE_WORDS,
+    "data_first_byte_low": Fault.DATA_BYTES_SWAPPED,
+    "chudp_header": Fault.CHUDP_NO_HEADER,
+    "chudp_pads_odd_byte": Fault.CHUDP_ODD_BYTE_UNPADDED,
+    "chudp_msb_first": Fault.CHUDP_LSB_FIRST,
+    "trailer_source_own": Fault.TRAILER_SOURCE_DESTINATION,
+    "checksum_covers_trailer": Fault.CHECKSUM_WITHOUT_TRAILER,
+    "tcp_length_counts_pad": Fault.TCP_LENGTH_UNPADDED,
+    "chaosd_little_endian": Fault.CHAOSD_MSB_FIRST,
+}
+"""Each rule of :class:`ChaosDefects` kept by default (a field true unless broken) and the switch that
+breaks it."""
+
+
 def chaos_defects(faults: FaultSet) -> ChaosDefects:
     """The defects of the server's NCP and links the switches of ``faults`` give them."""
     on = faults.active
     return ChaosDefects(
-        los_unknown_connection=Fault.LOS_UNKNOWN_IGNORED not in on,
-        los_illegal_opcode=Fault.ILLEGAL_OPCODE_IGNORED not in on,
-        bounds_data=Fault.OVERSIZE_SERVED not in on,
-        retransmits=Fault.NO_RETRANSMISSION not in on,
-        recognises_duplicate_rfc=Fault.DUPLICATE_RFC_NEW not in on,
-        gives_up_silent_peer=Fault.SILENT_PEER_KEPT not in on,
+        **{rule: fault not in on for rule, fault in _CHAOS_RULES.items()},
         packet_number_step=2 if Fault.PACKET_NUMBERS_SKIP in on else 1,
         header_source_first=Fault.HEADER_SOURCE_FIRST in on,
         header_low_byte=1 if Fault.HEADER_LOW_BYTE_SET in on else 0,
-        nbytes_counts_odd_byte=Fault.NBYTES_WHOLE_WORDS not in on,
-        data_first_byte_low=Fault.DATA_BYTES_SWAPPED not in on,
-        chudp_header=Fault.CHUDP_NO_HEADER not in on,
-        chudp_pads_odd_byte=Fault.CHUDP_ODD_BYTE_UNPADDED not in on,
-        chudp_msb_first=Fault.CHUDP_LSB_FIRST not in on,
-        trailer_source_own=Fault.TRAILER_SOURCE_DESTINATION not in on,
-        checksum_covers_trailer=Fault.CHECKSUM_WITHOUT_TRAILER not in on,
-        tcp_length_counts_pad=Fault.TCP_LENGTH_UNPADDED not in on,
-        chaosd_little_endian=Fault.CHAOSD_MSB_FIRST not in on,
     )
 
 
