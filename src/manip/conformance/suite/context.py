@@ -639,7 +639,9 @@ class CaseContext:
         ``retry_busy=False`` for a case that expects the refusal (one server per robot); ``watch`` is
         given the connection's link (:class:`Connector`)."""
         try:
-            conn = await self._connector(retry_busy, watch)
+            conn = await (
+                self._connector(retry_busy) if watch is None else self._connector(retry_busy, watch)
+            )
         except ChaosError as exc:
             raise CaseFailure(
                 f"could not connect: {exc}",
