@@ -116,13 +116,16 @@ MAX_CASE_PACKETS: Final = 20_000
 A case needs a few dozen, a property case a few thousand; a describe-self at the reply bound is 2,160."""
 
 
-class Connector(Protocol):
+class _Connector(Protocol):
     """Opens one fresh Chaos connection to the target (the runner provides it): ``retry_busy`` says
     whether a refusal as busy (the previous case's connection still closing) is retried, ``watch`` is
     given the connection's link first (a case that judges the link keeps it, to read its counters even
     when the connection never opens)."""
 
     def __call__(self, retry_busy: bool, watch: LinkWrapper | None = None) -> Awaitable[ChaosConnection]: ...
+
+
+Connector = _Connector
 
 
 @dataclass(frozen=True)

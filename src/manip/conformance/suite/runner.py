@@ -213,6 +213,8 @@ class Runner:
             length_unit=config.options.length_unit,
         )
         self._reached = False
+        self._reached_by_frames_only = False
+        # reached only through frames its link refused (or packets held back for a number it skipped)
         """Whether anything the target sent (a manip packet, not only the Chaos opening) reached the run."""
         self._initial_seen = True
         """Whether the last liveness probe got its initial RESPONSE."""
@@ -305,11 +307,11 @@ class Runner:
         finally:
             self._initial_seen = bool(ctx.probes) and ctx.probes[0].initial is not None
             self._note_reached(ctx)
-            self._reached = (
-                self._reached
-                or any(_sent_chaos_frames(link.stats) for link in links)
-                or any(_held_back(probe) for probe in ctx.probes)
-            )
+            if not self._reached and (
+                any(_sent_chaos_frames(link.stats) for link in links)
+                or any(_held_back(p) for p in ctx.probes)
+            ):
+                self._reached = self._reached_by_frames_only = True
             # No wait for the target to read our EOF: a target that floods and never reads again
             # would cost a second per check, after every failed case.
             await _quietly(ctx.close_all(wait=0.0))
@@ -376,7 +378,7 @@ class Runner:
                 if self.events.case_finished:
                     self.events.case_finished(result)
                 if (
-                    before.alive  # a target reached but never alive (its frames refused) cannot die
+                    not (self._reached_by_frames_only and not before.alive)  # never alive: cannot die
                     and not dead
                     and (result.outcome in ("fail", "error", "known-fail") or item.technique == "negative")
                 ):

@@ -54,10 +54,10 @@ _CLAUSE_OF_ILLEGAL: Final = {"opcode": "chaos.opcode.legal", "oversize": "chaos.
 """The clause a sound frame with an illegal packet breaks, by the link's counter (``LinkStats.illegal``)."""
 
 
-def _judge_frames(ctx: CaseContext, links: list[Link], clauses: tuple[str, ...]) -> bool:
-    """A violation for each rule the frames that came on ``links`` broke (by the clause each bad frame
-    breaks; one this case does not cite counts against the link's own framing, ``clauses[0]``, and names
-    its clause); True if there was any."""
+def _refused_frames(links: list[Link], clauses: tuple[str, ...]) -> tuple[dict[str, list[str]], LinkStats]:
+    """What the frames that came on ``links`` and were refused broke, by the clause a frames case citing
+    ``clauses`` reports (one it does not cite counts against the link's own framing, ``clauses[0]``, and
+    names its clause); and the links' counters."""
     stats = LinkStats()
     for link in links:
         stats.add(link.stats)
@@ -66,18 +66,10 @@ def _judge_frames(ctx: CaseContext, links: list[Link], clauses: tuple[str, ...])
     unnamed = stats.bad_total - sum(stats.bad_clauses.values())
     if unnamed:
         broken[clauses[0]] += unnamed
-    cited = {*clauses, *_FRAME_CLAUSES}
+    said: dict[str, list[str]] = {c: [] for c in (*clauses, *_FRAME_CLAUSES)}
     for clause, count in sorted(broken.items()):
-        ctx.expect(
-            False,
-            clause=clause if clause in cited else clauses[0],
-            expected=f"every frame from the server well formed ({clause})",
-            seen=missing(
-                f"{count} frame(s) refused by the link for breaking {clause} (its counters: bad "
-                f"{dict(stats.bad)}, illegal {dict(stats.illegal)}): the packets they held never came"
-            ),
-        )
-    return bool(broken)
+        said[clause if clause in said else clauses[0]].append(f"{count} frame(s) breaking {clause}")
+    return said, stats
 
 
 def _swapped_numbers(probe: Probe) -> list[WirePacket]:
@@ -117,14 +109,30 @@ def _frames_case(row: tuple[str, tuple[str, ...]]) -> None:
             links.append(link)
             return link
 
+        def judged_refused() -> bool:
+            """A violation for each rule the refused frames broke; True if there was any."""
+            said, stats = _refused_frames(links, clauses)
+            for named in (*clauses, *_FRAME_CLAUSES):
+                if said[named]:
+                    ctx.expect(
+                        False,
+                        clause=named,
+                        expected=f"every frame from the server well formed ({named})",
+                        seen=missing(
+                            f"{'; '.join(said[named])}, refused by the link (its counters: bad "
+                            f"{dict(stats.bad)}, illegal {dict(stats.illegal)}): the packets never came"
+                        ),
+                    )
+            return any(said.values())
+
         try:
             probe = await ctx.connect(watch=watch)
             await _exchange(probe)
         except CaseFailure:
-            if _judge_frames(ctx, links, clauses):
+            if judged_refused():
                 return  # the bad frames are why the exchange failed
             raise
-        if _judge_frames(ctx, links, clauses):
+        if judged_refused():
             return
         swapped = _swapped_numbers(probe)
         ctx.expect(
