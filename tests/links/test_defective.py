@@ -9,29 +9,22 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from manip.codecs import framing
 from manip.codecs.errors import DecodeError
-from manip.codecs.framing import (
-    decode_chaosd,
-    decode_chudp,
-    decode_tcp,
-    encode_chaosd,
-    encode_chudp,
-    encode_tcp,
-)
 from manip.codecs.packet import MAX_DATA, Packet
 from manip.links.defective import defective_frame
 from manip.ncp.defects import FRAME_FIELDS, ChaosDefects
 from manip.spec.constants import ServerOp
 
 ENCODERS: dict[str, Callable[..., bytes]] = {
-    "tcp": encode_tcp,
-    "chudp": encode_chudp,
-    "chaosd": encode_chaosd,
+    "tcp": framing.encode_tcp,
+    "chudp": framing.encode_chudp,
+    "chaosd": framing.encode_chaosd,
 }
 DECODERS: dict[str, Callable[..., Packet]] = {
-    "tcp": decode_tcp,
-    "chudp": decode_chudp,
-    "chaosd": lambda frame: decode_chaosd(frame, verify=True),
+    "tcp": framing.decode_tcp,
+    "chudp": framing.decode_chudp,
+    "chaosd": lambda frame: framing.decode_chaosd(frame, verify=True),
 }
 ODD = Packet(ServerOp.RESPONSE, 0o401, 0x0A01, 0o440, 0x5E02, 7, 3, b"odd")
 """A reply with an odd number of data bytes (every framing defect shows on it)."""
@@ -95,9 +88,9 @@ def test_the_defects_a_frame_cannot_show_leave_it_sound(
     """Swapped data bytes, a trailer naming the next hop as the source and the header's addresses in the
     wrong order make sound frames: the receiver sees them in what they carry (the link and frames cases)."""
     defects = ChaosDefects(**defect)  # type: ignore[arg-type]
-    packet = decode_chudp(defective_frame("chudp", ODD, 0o401, 0o440, defects))
+    packet = framing.decode_chudp(defective_frame("chudp", ODD, 0o401, 0o440, defects))
     assert shows(packet), packet
-    assert not shows(decode_chudp(defective_frame("chudp", ODD, 0o401, 0o440, ChaosDefects())))
+    assert not shows(framing.decode_chudp(defective_frame("chudp", ODD, 0o401, 0o440, ChaosDefects())))
 
 
 def test_the_frame_fields_are_the_links() -> None:
