@@ -39,10 +39,11 @@ from manip.cougar.faults import CougarFault
 from manip.reference_client.faults import ClientFault
 from manip.reference_server.faults import WRIST_SIDE, Fault, FaultSet
 from manip.reference_server.session import ServerConfig
+from manip.spec import SPEC
 from manip.spec.faults import FaultSwitch
 from tests.support.culprits import unnamed_violations
 from tests.support.servers import StartServer
-from tests.support.suite import run_simulated
+from tests.support.suite import run_over_link, run_simulated
 
 SEED = 20260
 MAX_EXAMPLES = 10
@@ -75,8 +76,22 @@ CATCHERS = {fault: fault.caught_by for fault in Fault}
 clause (others may catch the fault too)."""
 CAUGHT = ("fail", "warn")
 
-PROTOCOL_FAULTS = sorted((f for f in Fault if f not in WRIST_SIDE), key=lambda f: f.value)
-"""The wrist side's defects are caught by the puma cases (tests/conformance/puma/test_puma.py)."""
+LINK_CASES = {"server.link.chudp-frames": "chudp", "server.link.chaosd-frames": "chaosd"}
+"""The cases that judge the frames of a link the embedded target is not on, and that link."""
+OVER_LINKS = {fault: LINK_CASES[c] for fault in Fault for c in fault.caught_by if c in LINK_CASES}
+"""The faults of a link's framing, each caught over its link (``test_link_fault_is_caught_over_its_link``):
+the embedded target's Unix socket carries the TCP link framing."""
+CHAOS_LEVEL = frozenset(f for f in Fault if all(SPEC.clauses[c].party == "link" for c in f.clauses))
+"""The faults of the NCP and the links: their catching case must fail on one of their clauses."""
+BROKEN_AFTER = {Fault.SILENT_PEER_KEPT: 5.0}
+"""The server's broken-connection timer (and the suite's --broken-after) in a fault's run: the case waits
+it out, in virtual time."""
+
+PROTOCOL_FAULTS = sorted(
+    (f for f in Fault if f not in WRIST_SIDE and f not in OVER_LINKS), key=lambda f: f.value
+)
+"""The wrist side's defects are caught by the puma cases (tests/conformance/puma/test_puma.py), those of
+the CHUDP and chaosd framings over their links."""
 
 
 @pytest.fixture(autouse=True)
@@ -95,12 +110,17 @@ def cases_for(fault: Fault) -> list[Case]:
     return [c for c in suite() if broken & set(c.clauses) or c.id in GENERIC]
 
 
-def run_suite(faults: FaultSet, cases: Sequence[Case], config: ServerConfig | None = None) -> RunReport:
+def run_suite(
+    faults: FaultSet,
+    cases: Sequence[Case],
+    config: ServerConfig | None = None,
+    broken_after: float | None = None,
+) -> RunReport:
     """The cases against the embedded target set up by ``config`` (``faults`` without one), in virtual
-    time."""
+    time; ``broken_after`` is the server's broken-connection timer, and the suite is told it."""
     config = ServerConfig(faults=faults) if config is None else config
-    options = {"max_examples": MAX_EXAMPLES, "reply_timeout": REPLY_TIMEOUT}
-    return run_simulated(cases, config, seed=SEED, options=options)
+    options = {"max_examples": MAX_EXAMPLES, "reply_timeout": REPLY_TIMEOUT, "broken_after": broken_after}
+    return run_simulated(cases, config, seed=SEED, options=options, broken_after=broken_after)
 
 
 @pytest.mark.parametrize("registry", [Fault, ClientFault, CougarFault], ids=lambda r: r.__name__)
@@ -142,7 +162,7 @@ def test_clean_server_passes_every_case() -> None:
 def test_protocol_fault_is_caught(fault: Fault) -> None:
     faults = FaultSet.parse([fault.value, *CONDITIONS.get(fault, ())])
     cases = cases_for(fault)
-    report = run_suite(faults, cases)
+    report = run_suite(faults, cases, broken_after=BROKEN_AFTER.get(fault))
     caught = [r for r in report.results if r.outcome in CAUGHT]
     errors = [(r.id, r.reason) for r in report.results if r.outcome == "error"]
     shown = ", ".join(
@@ -153,11 +173,38 @@ def test_protocol_fault_is_caught(fault: Fault) -> None:
     assert not unnamed_violations(report), unnamed_violations(report)  # every culprit named and kept
     assert caught, f"no case caught fault {fault.value} ({fault.breaks})"
     assert set(CATCHERS[fault]) <= {r.id for r in caught}, shown
+    if fault in CHAOS_LEVEL:  # the catching case says which rule broke
+        named = {v.clause for r in caught if r.id in CATCHERS[fault] for v in r.violations}
+        assert named & set(fault.clauses), shown
     skipped = [c for c in cases if c.id in {r.id for r in report.results if r.outcome == "skip"}]
     if skipped:  # a skip is for a target that cannot offer the condition, never for a wrong answer
         clean = run_suite(FaultSet(), skipped)
         passing = [r.id for r in clean.results if r.outcome == "pass"]
         assert not passing, f"fault {fault.value} makes {passing} skip, which pass on the conforming server"
+
+
+@pytest.mark.waits
+@pytest.mark.parametrize("fault", sorted(OVER_LINKS, key=lambda f: f.value), ids=lambda f: f.value)
+def test_link_fault_is_caught_over_its_link(fault: Fault) -> None:
+    """A fault of the CHUDP or chaosd framing, run over that link (a reference server in real time in this
+    process, on a loopback port or behind a chaosd hub): its case fails on one of its clauses.  Its frames
+    refused, the connections wait out a short connect timeout: the test mostly waits."""
+    cases = [c for c in suite() if c.id in fault.caught_by]
+    report = run_over_link(cases, OVER_LINKS[fault], ServerConfig(faults=FaultSet.of(fault)), seed=SEED)
+    shown = [(r.id, r.outcome, [v.clause for v in r.violations]) for r in report.results]
+    print(f"fault {fault.value} over {OVER_LINKS[fault]}: {shown}")
+    assert {r.id for r in report.results} == set(fault.caught_by), shown
+    for result in report.results:
+        assert result.outcome in CAUGHT, shown
+        assert {v.clause for v in result.violations} & set(fault.clauses), shown
+
+
+@pytest.mark.parametrize("scheme", sorted(set(LINK_CASES.values())))
+def test_the_clean_server_passes_the_link_cases_over_each_link(scheme: str) -> None:
+    """The cases the link faults' matrix runs over CHUDP and chaosd pass against the clean server there."""
+    wanted = {c for c, link in LINK_CASES.items() if link == scheme} | {"server.link.packet-numbers"}
+    report = run_over_link([c for c in suite() if c.id in wanted], scheme, seed=SEED)
+    assert {r.id: r.outcome for r in report.results} == dict.fromkeys(wanted, "pass"), report.results
 
 
 def test_the_arranged_paths_run_against_the_clean_server() -> None:

@@ -343,7 +343,12 @@ def test_conforming_fake_passes(case_id: str, scheme: str) -> None:
     [
         ("server.ncp.los-unknown-connection", Flaws(los_unknown=False), "ncp.los", "no LOS"),
         ("server.ncp.los-unknown-connection", Flaws(los_answers_los=True), "ncp.los", "LOS to a connection"),
-        ("server.ncp.los-illegal-opcode", Flaws(los_illegal=False), "ncp.los", "no LOS for opcode"),
+        (
+            "server.ncp.los-illegal-opcode",
+            Flaws(los_illegal=False),
+            "chaos.opcode.legal",
+            "no LOS for opcode",
+        ),
         ("server.ncp.duplicate-rfc", Flaws(dup_rfc="new"), "ncp.duplicate-rfc", "second connection"),
         ("server.ncp.duplicate-rfc", Flaws(dup_rfc="refuse"), "ncp.duplicate-rfc", "new request"),
         ("server.ncp.retransmission", Flaws(retransmit=False), "ncp.retransmission", "not sent again"),

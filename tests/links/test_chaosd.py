@@ -1,4 +1,4 @@
-"""The driver over usim's chaosd unix socket, against a tiny chaosd stand-in written here."""
+"""The driver over usim's chaosd unix socket, against a tiny chaosd stand-in (tests/support/chaosd_hub.py)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import pytest
 
 from manip.links import ChaosConnection, LinkError, NcpConfig, open_connection, start_server
 from manip.links.chaosd import ChaosdLink, connect_chaosd
+from tests.support.chaosd_hub import Hub
 
 FAST = NcpConfig(retransmit_interval=0.1, ack_delay=0.01)
 
@@ -31,31 +32,6 @@ def socket_dir() -> Iterator[Path]:
     path = Path(tempfile.mkdtemp(prefix="chaosd", dir="/tmp"))
     yield path
     shutil.rmtree(path, ignore_errors=True)
-
-
-class Hub:
-    """A chaosd stand-in: reads frames by their 4-byte header and hands each to every other client."""
-
-    def __init__(self) -> None:
-        self.clients: list[asyncio.StreamWriter] = []
-        self.frames: list[bytes] = []
-
-    async def handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        self.clients.append(writer)
-        try:
-            while True:
-                header = await reader.readexactly(4)
-                assert header[2:] == b"\x01\x00"
-                body = await reader.readexactly(header[0] << 8 | header[1])
-                self.frames.append(header + body)
-                for other in self.clients:
-                    if other is not writer:
-                        other.write(header + body)
-        except asyncio.IncompleteReadError:
-            pass
-        finally:
-            self.clients.remove(writer)
-            writer.close()
 
 
 def test_round_trip_through_a_chaosd_hub(socket_dir: Path) -> None:

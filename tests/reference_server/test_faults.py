@@ -30,11 +30,12 @@ from manip.conformance.cli import main as conform_main
 from manip.conformance.judge.checks import word
 from manip.cougar import CougarSim
 from manip.cougar.faults import CougarFault
+from manip.ncp import ChaosDefects
 from manip.reference_server import Fault, FaultSet, Output, ServerConfig, State, WorldCondition
 from manip.reference_server import session as session_module
 from manip.reference_server.cougar_port import SimPort
 from manip.reference_server.cougar_wrist import CougarWrist
-from manip.reference_server.defects import HELD_TICKS, Defects, SwitchedDefects
+from manip.reference_server.defects import HELD_TICKS, Defects, SwitchedDefects, arm_defects, chaos_defects
 from manip.reference_server.faults import WRIST_SIDE
 from manip.spec import SPEC
 from manip.spec.constants import RequestOp, ServerOp
@@ -114,6 +115,46 @@ def test_every_fault_has_a_test() -> None:
     # The wrist side's defects show only to the suite playing Cougar: tests/conformance/puma/test_puma.py
     # has them.
     assert (set(Fault) - WRIST_SIDE) | set(WorldCondition) == COVERED
+
+
+# ---------------------------------------------------------------------------- the Chaos level
+CHAOS_LEVEL = frozenset(f for f in Fault if all(SPEC.clauses[c].party == "link" for c in f.clauses))
+
+
+@covers(Fault.LOS_UNKNOWN_IGNORED)
+@covers(Fault.ILLEGAL_OPCODE_IGNORED)
+@covers(Fault.OVERSIZE_SERVED)
+@covers(Fault.NO_RETRANSMISSION)
+@covers(Fault.DUPLICATE_RFC_NEW)
+@covers(Fault.SILENT_PEER_KEPT)
+@covers(Fault.PACKET_NUMBERS_SKIP)
+@covers(Fault.HEADER_SOURCE_FIRST)
+@covers(Fault.HEADER_LOW_BYTE_SET)
+@covers(Fault.NBYTES_WHOLE_WORDS)
+@covers(Fault.DATA_BYTES_SWAPPED)
+@covers(Fault.TCP_LENGTH_UNPADDED)
+@covers(Fault.CHUDP_NO_HEADER)
+@covers(Fault.CHUDP_ODD_BYTE_UNPADDED)
+@covers(Fault.CHUDP_LSB_FIRST)
+@covers(Fault.TRAILER_SOURCE_DESTINATION)
+@covers(Fault.CHECKSUM_WITHOUT_TRAILER)
+@covers(Fault.CHAOSD_MSB_FIRST)
+def test_each_chaos_level_fault_bends_one_rule_of_the_ncp_or_the_links() -> None:
+    """A fault of the Chaos level reaches the NCP and the links as one field of ChaosDefects, its own (the
+    fault matrices, tests/conformance/test_faults.py, show each caught); the session's hooks stay the
+    conforming ones."""
+    rules = ChaosDefects()
+    bent: dict[str, Fault] = {}
+    for fault in CHAOS_LEVEL:
+        defects = chaos_defects(FaultSet.of(fault))
+        (field,) = [
+            f.name for f in dataclasses.fields(defects) if getattr(defects, f.name) != getattr(rules, f.name)
+        ]
+        assert field not in bent, (fault, bent[field])
+        bent[field] = fault
+        assert arm_defects(FaultSet.of(fault)) == ArmDefects()
+    assert chaos_defects(FaultSet()) == rules
+    assert len(bent) == len(CHAOS_LEVEL) == len(dataclasses.fields(rules))
 
 
 # ---------------------------------------------------------------------------- environment

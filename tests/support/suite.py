@@ -22,6 +22,7 @@ from manip.conformance.suite.runner import RunConfig, Runner
 from manip.links import virtual_clock
 from manip.reference_server import ServerConfig
 from manip.reference_server.driver import serve
+from tests.support.chaosd_hub import chaosd_hub
 from tests.support.servers import LINK_ADDRESSES
 
 
@@ -60,15 +61,18 @@ def run_simulated(
     *,
     seed: int,
     options: Mapping[str, Any] | None = None,
+    broken_after: float | None = None,
     **config: Any,
 ) -> RunReport:
     """Run ``cases`` against the embedded target set up by ``server``, in virtual time, as
     ``manip-conform run`` does without a target: the reference server with the simulated Cougar wrist, on
-    a Unix-domain socket in this loop, and its world.  ``options`` and the other keywords as for
-    :func:`run_on_reference_server`."""
+    a Unix-domain socket in this loop, and its world.  ``broken_after`` is the server's broken-connection
+    timer (default 90 s); ``options`` and the other keywords as for :func:`run_on_reference_server`."""
 
     async def main() -> RunReport:
-        async with simulated_environment(server, seed=seed, wrist=True) as environment:
+        async with simulated_environment(
+            server, seed=seed, wrist=True, broken_after=broken_after
+        ) as environment:
             address = environment.address
             run_options = RunOptions(address=address, embedded=True, **(options or {}))
             run_config = RunConfig(
@@ -81,3 +85,29 @@ def run_simulated(
             return await Runner(run_config, cases).run()
 
     return virtual_clock.run(main(), virtual=True)
+
+
+LINK_OPTIONS = {"reply_timeout": 1.0, "connect_timeout": 1.0}
+"""Run options of a run over a real link: a loopback answer takes well under a millisecond; a frame the
+link refuses costs this much per wait."""
+
+
+def run_over_link(
+    cases: Sequence[Case], scheme: str, server: ServerConfig | None = None, *, seed: int
+) -> RunReport:
+    """Run ``cases`` against a reference server reached over a ``scheme`` link (``chudp``, or ``chaosd``
+    through a hub standing in for the daemon), in real time in this process: what the embedded run's
+    Unix socket cannot show, the frames of those links."""
+
+    async def main() -> RunReport:
+        if scheme == "chaosd":
+            async with chaosd_hub() as (path, _hub), serve(f"chaosd://{path}?addr=0440", server):
+                return await _run(f"chaosd://{path}?addr=0440")
+        async with serve(LINK_ADDRESSES[scheme], server) as reference:
+            return await _run(reference.address)
+
+    async def _run(address: str) -> RunReport:
+        config = RunConfig(options=RunOptions(address=address, **LINK_OPTIONS), seed=seed)
+        return await Runner(config, cases).run()
+
+    return asyncio.run(main())

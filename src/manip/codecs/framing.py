@@ -254,10 +254,30 @@ def _decode_body_checked(body: bytes, base: int, order: WordOrder, *, verify: bo
     return checked_packet(words, len(body) - MIN_BODY, data, at, exact=True, trailer=Trailer(*words[-3:]))
 
 
-def _check_body_length(length: int, offset: int, clause: str, what: str) -> None:
-    if length & 1 or not MIN_BODY <= length <= MAX_BODY:
+def _in_other_order(
+    exc: DecodeError, body: Buffer, base: int, order: WordOrder, clause: str, *, verify: bool
+) -> DecodeError:
+    """``exc``, the error of a frame body read in the link's word ``order``; but when the body decodes with
+    its words in the other byte order, an error naming ``clause`` (the link's word order) instead: a
+    sender that swaps every word breaks the word order, not the field its swap garbles first."""
+    if isinstance(exc, IllegalPacketError):
+        return exc
+    try:
+        _decode_body_checked(bytes(body), base, "<" if order == ">" else ">", verify=verify)
+    except DecodeError:
+        return exc
+    return DecodeError(
+        f"the words are sent in the other byte order (read so, the frame decodes): {exc.message}",
+        path="frame.word-order",
+        offset=base,
+        clause=clause,
+    )
+
+
+def _check_body_length(length: int, offset: int, clause: str, what: str, most: int = MAX_BODY) -> None:
+    if length & 1 or not MIN_BODY <= length <= most:
         raise DecodeError(
-            f"{what} {length} is not an even number from {MIN_BODY} to {MAX_BODY}",
+            f"{what} {length} is not an even number from {MIN_BODY} to {most}",
             path="length",
             offset=offset,
             clause=clause,
@@ -310,6 +330,8 @@ def decode_chudp(datagram: bytes, *, verify: bool = True, strict: bool = True) -
         if strict:
             raise
         return exc.packet
+    except DecodeError as exc:
+        raise _in_other_order(exc, datagram[4:], 4, ">", "chudp.word-order", verify=verify) from None
 
 
 # ------------------------------------------------------------------------------------ stream links
@@ -334,8 +356,11 @@ class StreamDecoder(ABC):
     clause: ClassVar[str]
     """The clause a framing error of this link breaks."""
 
-    def __init__(self, *, verify: bool = True) -> None:
+    def __init__(self, *, verify: bool = True, max_body: int = MAX_BODY) -> None:
         self.verify = verify
+        self.max_body = max_body
+        """The longest frame body taken (:data:`MAX_BODY`: 488 data bytes; a host without that bound,
+        a defect, takes longer ones)."""
         self._buf = bytearray()
         self._start = 0  # stream offset of self._buf[0]
         self._failed: FrameSyncError | None = None
@@ -429,12 +454,15 @@ class TcpFrameDecoder(StreamDecoder):
 
     def _body_length(self, src: Buffer, pos: int, offset: int) -> int:
         length = src[pos] << 8 | src[pos + 1]
-        if length & 1 or not MIN_BODY <= length <= MAX_BODY:
-            _check_body_length(length, offset, self.clause, "frame length")
+        if length & 1 or not MIN_BODY <= length <= self.max_body:
+            _check_body_length(length, offset, self.clause, "frame length", self.max_body)
         return length
 
     def _decode(self, src: Buffer, start: int, end: int, offset: int) -> Packet:
-        return _decode_body(src, start, end, offset, ">", verify=self.verify)
+        try:
+            return _decode_body(src, start, end, offset, ">", verify=self.verify)
+        except DecodeError as exc:
+            raise _in_other_order(exc, src[start:end], offset, ">", self.clause, verify=self.verify) from None
 
 
 class ChaosdFrameDecoder(StreamDecoder):
@@ -443,8 +471,8 @@ class ChaosdFrameDecoder(StreamDecoder):
     prefix = 4
     clause = "link.chaosd.framing"
 
-    def __init__(self, *, verify: bool = False) -> None:
-        super().__init__(verify=verify)
+    def __init__(self, *, verify: bool = False, max_body: int = MAX_BODY) -> None:
+        super().__init__(verify=verify, max_body=max_body)
 
     def _body_length(self, src: Buffer, pos: int, offset: int) -> int:
         header = bytes(src[pos : pos + 4])
@@ -456,11 +484,14 @@ class ChaosdFrameDecoder(StreamDecoder):
                 clause=self.clause,
             )
         length = header[0] << 8 | header[1]
-        _check_body_length(length, offset, self.clause, "chaosd length")
+        _check_body_length(length, offset, self.clause, "chaosd length", self.max_body)
         return length
 
     def _decode(self, src: Buffer, start: int, end: int, offset: int) -> Packet:
-        return _decode_body(src, start, end, offset, "<", verify=self.verify)
+        try:
+            return _decode_body(src, start, end, offset, "<", verify=self.verify)
+        except DecodeError as exc:
+            raise _in_other_order(exc, src[start:end], offset, "<", self.clause, verify=self.verify) from None
 
 
 def _one_frame(decoder: StreamDecoder, frame: bytes, strict: bool) -> Packet:

@@ -240,6 +240,7 @@ async def start_server(
     addr = _address(address)
     name = contact or addr.contact
     node = Node(addr.peer_addr, options)
+    defects = options.defects if options is not None else None
     guard = LinkGuard(limits, allow, in_use=node.links_in_use, name=str(addr))
 
     def attach(link: Link, hosts: Iterable[int] = (), default: bool = False) -> Link:
@@ -259,6 +260,7 @@ async def start_server(
                 my_addr=addr.peer_addr,
                 on_link=lambda link: guard.track(link, attach(link)),
                 guard=guard,
+                defects=defects,
             )
             tcp = listener
             bound = replace(addr, port=int(listener.sockets[0].getsockname()[1]))
@@ -269,6 +271,7 @@ async def start_server(
                 my_addr=addr.peer_addr,
                 on_link=lambda link: guard.track(link, attach(link)),
                 guard=guard,
+                defects=defects,
             )
             bound = addr
         elif addr.scheme == "chudp":
@@ -280,6 +283,7 @@ async def start_server(
                 peers=peers,
                 learn_peers=learn_peers,
                 admit=admit,
+                defects=defects,
             )
             attach(link, hosts=list(link.peers))
             bound = replace(addr, port=link.local_address[1])
@@ -294,7 +298,7 @@ async def start_server(
             bound = addr
         else:
             assert addr.path is not None
-            attach(await connect_chaosd(addr.path, my_addr=addr.peer_addr), default=True)
+            attach(await connect_chaosd(addr.path, my_addr=addr.peer_addr, defects=defects), default=True)
             bound = addr
         guard.name = str(bound)
         server = ChaosServer(node, bound, name, handler, tcp, guard)

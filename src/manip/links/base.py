@@ -3,7 +3,9 @@
 A link moves whole Chaos packets; it knows framings and sockets, not connections.  Input from the wire
 is untrusted, so a link never lets a bad frame escape as an exception: it counts the frame under a short
 reason (:data:`BAD_REASONS`), logs it at debug level and drops it.  Only a stream whose framing is lost
-is closed, because nothing after the bad length can be trusted.
+is closed, because nothing after the bad length can be trusted.  A packet that names our own address as
+its source is bad input too: no other host has it, so its header is laid out wrong (clause
+``chaos.header.layout``).
 
 A frame that is sound (framing, checksum and lengths check out) but carries an *illegal* packet (an
 illegal opcode, more than 488 data bytes) is not bad input: the NCP must answer it with LOS, so the link
@@ -24,15 +26,22 @@ from typing import Final
 from manip.codecs.chaos import IllegalPacketError
 from manip.codecs.errors import DecodeError
 from manip.codecs.packet import Packet
+from manip.ncp.defects import ChaosDefects
+
+from .defective import defective_frame
 
 log = logging.getLogger("manip.links")
 
+Encoder = Callable[..., bytes]
+"""``encode(packet, hw_dest=..., hw_src=...)``, one of the framing module's encoders."""
 Receiver = Callable[["Link", Packet], None]
 """Called with each good packet a link receives."""
 CloseCallback = Callable[["Link"], None]
 
 _CLAUSE_REASONS: Final = {
     "chudp.checksum": "checksum",
+    "chudp.word-order": "word_order",
+    "chudp.trailer": "trailer",
     "chudp.length": "short",
     "chaos.header.nbytes": "nbytes",
     "chaos.header.unused-byte-zero": "header",
@@ -53,6 +62,8 @@ BAD_REASONS: Final = (
     "opcode",
     "oversize",
     "unknown_peer",
+    "word_order",
+    "trailer",
     "other",
 )
 """The names bad input is counted under (``LinkStats.bad``)."""
@@ -60,6 +71,8 @@ BAD_REASONS: Final = (
 
 def bad_reason(exc: DecodeError) -> str:
     """The counter name for a decode failure, from the spec clause it breaks."""
+    if exc.path.endswith("word-order"):  # a whole frame in the other byte order (a framing clause)
+        return "word_order"
     if exc.clause == "chudp.header":
         return "function" if exc.path.endswith("function") else "version"
     return _CLAUSE_REASONS.get(exc.clause or "", "other")
@@ -67,15 +80,17 @@ def bad_reason(exc: DecodeError) -> str:
 
 @dataclass(slots=True)
 class LinkStats:
-    """Counters of one link.  ``bad`` counts refused input by reason, ``dropped`` refused output, and
-    ``illegal`` the sound frames with an illegal packet that were delivered for the NCP to answer with LOS
-    (also counted in ``frames_in``), under ``opcode`` or ``oversize``."""
+    """Counters of one link.  ``bad`` counts refused input by reason (and ``bad_clauses`` by the clause
+    of the spec it breaks, where one says), ``dropped`` refused output, and ``illegal`` the sound frames
+    with an illegal packet that were delivered for the NCP to answer with LOS (also counted in
+    ``frames_in``), under ``opcode`` or ``oversize``."""
 
     frames_in: int = 0
     frames_out: int = 0
     bytes_in: int = 0
     bytes_out: int = 0
     bad: Counter[str] = field(default_factory=Counter)
+    bad_clauses: Counter[str] = field(default_factory=Counter)
     dropped: Counter[str] = field(default_factory=Counter)
     illegal: Counter[str] = field(default_factory=Counter)
 
@@ -90,6 +105,7 @@ class LinkStats:
         self.bytes_in += other.bytes_in
         self.bytes_out += other.bytes_out
         self.bad.update(other.bad)
+        self.bad_clauses.update(other.bad_clauses)
         self.dropped.update(other.dropped)
         self.illegal.update(other.illegal)
 
@@ -104,8 +120,18 @@ class Link(ABC):
     kind: str = "link"
     point_to_point: bool = True
 
-    def __init__(self, *, my_addr: int, peer_addr: int | None = None, name: str = "") -> None:
+    def __init__(
+        self,
+        *,
+        my_addr: int,
+        peer_addr: int | None = None,
+        name: str = "",
+        defects: ChaosDefects | None = None,
+    ) -> None:
         self.my_addr = my_addr
+        self.defects = defects or ChaosDefects()
+        """How this host departs from the Chaosnet rules (none, but for the reference server's faults)."""
+        self._framed_by_the_rules = self.defects.frames_by_the_rules
         self.peer_addr = peer_addr
         self.name = name or self.kind
         self.stats = LinkStats()
@@ -153,7 +179,19 @@ class Link(ABC):
 
     # ---------------------------------------------------------------- helpers for subclasses
 
+    def _frame(self, encode: Encoder, packet: Packet, hop: int | None) -> bytes:
+        """``packet``'s frame for neighbour ``hop``: as ``encode`` (the codec's) lays it out, or with this
+        link's framing defects."""
+        if self._framed_by_the_rules:
+            return encode(packet, hw_dest=hop, hw_src=self.my_addr)
+        return defective_frame(self.kind, packet, hop, self.my_addr, self.defects)
+
     def _deliver(self, packet: Packet) -> None:
+        if packet.src_host == self.my_addr:  # no other host has our address: its header is laid out wrong
+            self._bad(
+                "header", f"source host {packet.src_host:o} is our own: {packet!r}", "chaos.header.layout"
+            )
+            return
         self.stats.frames_in += 1
         receiver = self._receiver
         if receiver is None:
@@ -170,8 +208,10 @@ class Link(ABC):
         log.debug("%s: illegal packet passed on for a LOS: %s%s", self.name, exc, detail)
         return exc.packet
 
-    def _bad(self, reason: str, detail: object) -> None:
+    def _bad(self, reason: str, detail: object, clause: str | None = None) -> None:
         self.stats.bad[reason] += 1
+        if clause is not None:
+            self.stats.bad_clauses[clause] += 1
         log.debug("%s: dropped bad input (%s): %s", self.name, reason, detail)
 
     def _drop(self, reason: str, packet: Packet) -> bool:

@@ -16,11 +16,12 @@ from collections.abc import Callable
 
 from manip.codecs.framing import ChaosdFrameDecoder, encode_chaosd
 from manip.codecs.packet import Packet
+from manip.ncp.defects import ChaosDefects
 
 from .errors import LinkError
 from .guard import LinkGuard, LinkLimits
 from .listener import StreamListener, bind_unix
-from .stream import StreamLink, dial
+from .stream import StreamLink, dial, stream_max_body
 
 
 class ChaosdLink(StreamLink):
@@ -29,17 +30,21 @@ class ChaosdLink(StreamLink):
     kind = "chaosd"
     learns_peer = False  # the daemon's trailers name the daemon, not the far end
 
-    def __init__(self, *, my_addr: int, name: str = "") -> None:
-        super().__init__(encode_chaosd, ChaosdFrameDecoder(), my_addr=my_addr, name=name)
+    def __init__(self, *, my_addr: int, name: str = "", defects: ChaosDefects | None = None) -> None:
+        decoder = ChaosdFrameDecoder(max_body=stream_max_body(defects))
+        super().__init__(encode_chaosd, decoder, my_addr=my_addr, name=name, defects=defects)
 
     def send(self, packet: Packet, next_hop: int | None = None) -> bool:
         """The daemon routes, so the trailer names the packet's own destination, not a next hop."""
         return super().send(packet, packet.dest_host)
 
 
-async def connect_chaosd(path: str, *, my_addr: int, timeout: float | None = 10.0) -> ChaosdLink:
-    """Connect to the chaosd daemon's socket at ``path``; raise :class:`LinkError` if that fails."""
-    link = ChaosdLink(my_addr=my_addr, name=f"chaosd:{path}")
+async def connect_chaosd(
+    path: str, *, my_addr: int, timeout: float | None = 10.0, defects: ChaosDefects | None = None
+) -> ChaosdLink:
+    """Connect to the chaosd daemon's socket at ``path`` (sending with ``defects``, when given); raise
+    :class:`LinkError` if that fails."""
+    link = ChaosdLink(my_addr=my_addr, name=f"chaosd:{path}", defects=defects)
     loop = asyncio.get_running_loop()
     return await dial(
         link, lambda: loop.create_unix_connection(lambda: link, path), f"chaosd socket {path}", timeout

@@ -4,7 +4,9 @@ One UDP socket reaches many neighbours, so the link keeps a table from Chaos add
 and the driver names the neighbour (``next_hop``) for each packet.  Outgoing trailers carry our own
 address as source and the neighbour's as destination, which is what klh10 learns peers from.
 
-Incoming datagrams are decoded with the checksum checked; a bad one is counted and dropped.  A sound
+Incoming datagrams are decoded with the checksum checked; a bad one is counted and dropped, and so is
+one whose trailer names our own address as its hardware source (clause ``chudp.trailer``: no other host
+has it, and a peer learnt from it would be ourselves).  A sound
 one holding an illegal packet (opcode, or more than 488 data bytes) is treated as good, so the NCP can
 answer it with LOS, and counted under ``stats.illegal``.  A good one is accepted from a configured
 endpoint or from a known address; from anyone else only if ``learn_peers`` is on (klh10's dynamic
@@ -25,6 +27,7 @@ from manip.codecs.chaos import IllegalPacketError
 from manip.codecs.errors import DecodeError, EncodeError
 from manip.codecs.framing import decode_chudp, encode_chudp
 from manip.codecs.packet import Packet
+from manip.ncp.defects import ChaosDefects
 from manip.spec.notation import octal
 
 from .base import Link, bad_reason
@@ -54,8 +57,9 @@ class ChudpLink(Link, asyncio.DatagramProtocol):
         learn_peers: bool = False,
         admit: Admit | None = None,
         name: str = "",
+        defects: ChaosDefects | None = None,
     ) -> None:
-        super().__init__(my_addr=my_addr, name=name)
+        super().__init__(my_addr=my_addr, name=name, defects=defects)
         self.admit = admit
         self.peers: dict[int, Endpoint] = dict(peers or {})
         """Chaos address -> UDP endpoint of every neighbour, configured and learnt."""
@@ -97,9 +101,16 @@ class ChudpLink(Link, asyncio.DatagramProtocol):
         except IllegalPacketError as exc:
             packet, illegal = exc.packet, exc
         except DecodeError as exc:
-            self._bad(bad_reason(exc), f"{exc} (from {sender})")
+            self._bad(bad_reason(exc), f"{exc} (from {sender})", exc.clause)
             return
         trailer = packet.trailer
+        if trailer is not None and trailer.source == self.my_addr:  # no other host has our address
+            self._bad(
+                "trailer",
+                f"trailer source {octal(trailer.source)} is our own (from {sender})",
+                "chudp.trailer",
+            )
+            return
         source = trailer.source if trailer is not None and trailer.source else packet.src_host
         known = self.peers.get(source)
         if known != sender and sender not in self._configured_endpoints:
@@ -132,7 +143,7 @@ class ChudpLink(Link, asyncio.DatagramProtocol):
         if endpoint is None:
             return self._drop("no_peer", packet)
         try:
-            datagram = encode_chudp(packet, hw_dest=hop, hw_src=self.my_addr)
+            datagram = self._frame(encode_chudp, packet, hop)
         except EncodeError:
             return self._drop("encode", packet)
         transport.sendto(datagram, endpoint)
@@ -163,6 +174,7 @@ async def bind_chudp(
     peers: Mapping[int, Endpoint] | None = None,
     learn_peers: bool = False,
     admit: Admit | None = None,
+    defects: ChaosDefects | None = None,
 ) -> ChudpLink:
     """Bind a CHUDP socket at ``host:port`` (0: any free port); peer hosts are resolved here, once.
 
@@ -176,7 +188,7 @@ async def bind_chudp(
         except OSError as exc:
             raise LinkError(f"cannot resolve CHUDP peer {peer_host}:{peer_port}: {exc}") from exc
         resolved[address] = _endpoint(infos[0][4])
-    link = ChudpLink(my_addr=my_addr, peers=resolved, learn_peers=learn_peers, admit=admit)
+    link = ChudpLink(my_addr=my_addr, peers=resolved, learn_peers=learn_peers, admit=admit, defects=defects)
     try:
         await loop.create_datagram_endpoint(lambda: link, local_addr=(host, port), family=family)
     except OSError as exc:

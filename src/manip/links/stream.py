@@ -15,23 +15,30 @@ from typing import Final, TypeVar, cast
 
 from manip.codecs.chaos import IllegalPacketError
 from manip.codecs.errors import DecodeError, EncodeError
-from manip.codecs.framing import FrameSyncError, StreamDecoder, StreamItem
+from manip.codecs.framing import MAX_BODY, MIN_BODY, FrameSyncError, StreamDecoder, StreamItem
 from manip.codecs.packet import Packet
+from manip.ncp.defects import ChaosDefects
 
-from .base import Link, bad_reason
+from .base import Encoder, Link, bad_reason
 from .errors import LinkError, not_a_chaos_link
 
 S = TypeVar("S", bound="StreamLink")
 
-Encoder = Callable[..., bytes]
-"""``encode(packet, hw_dest=..., hw_src=...)``, one of the framing module's encoders."""
 
 HEAD_KEPT: Final = 80
 """Bytes kept of what the peer sent first: when it is not the link framing at all (an HTTP server at the
 address), the reason the link closes shows them (:func:`~manip.links.errors.not_a_chaos_link`)."""
+UNBOUNDED_BODY: Final = MIN_BODY + 0x1000
+"""The longest frame body a stream link takes without the 488-byte bound: 4095 data bytes and a pad."""
 WRITE_BUFFER_LIMIT: Final = 256 * 1024
 """Above this many unsent bytes a link drops packets (``dropped['congested']``) instead of queueing
 more: a peer that stopped reading must not make us buffer without end, and the NCP retransmits."""
+
+
+def stream_max_body(defects: ChaosDefects | None) -> int:
+    """The longest frame body a stream link with ``defects`` takes: 488 data bytes, or with no bound on
+    the data (a defect) what the 12-bit nbytes can count."""
+    return MAX_BODY if defects is None or defects.bounds_data else UNBOUNDED_BODY
 
 
 class StreamLink(Link, asyncio.Protocol):
@@ -48,8 +55,9 @@ class StreamLink(Link, asyncio.Protocol):
         my_addr: int,
         peer_addr: int | None = None,
         name: str = "",
+        defects: ChaosDefects | None = None,
     ) -> None:
-        super().__init__(my_addr=my_addr, peer_addr=peer_addr, name=name)
+        super().__init__(my_addr=my_addr, peer_addr=peer_addr, name=name, defects=defects)
         self._encode = encode
         self._decoder = decoder
         self._transport: asyncio.Transport | None = None
@@ -80,7 +88,7 @@ class StreamLink(Link, asyncio.Protocol):
         except FrameSyncError as exc:
             foreign = not exc.items and not self.stats.frames_in and not self.stats.bad_total
             self._take(exc.items)
-            self._bad("framing", exc)
+            self._bad("framing", exc, exc.clause)
             if foreign:  # not one frame before the framing broke: the peer does not speak it at all
                 self.abort(f"{not_a_chaos_link(self._head)} (framing lost: {exc})")
             else:
@@ -116,7 +124,7 @@ class StreamLink(Link, asyncio.Protocol):
             return self._drop("congested", packet)
         hop = next_hop if next_hop is not None else self.peer_addr
         try:
-            frame = self._encode(packet, hw_dest=hop, hw_src=self.my_addr)
+            frame = self._frame(self._encode, packet, hop)
         except EncodeError:
             return self._drop("encode", packet)
         transport.write(frame)
@@ -153,7 +161,7 @@ class StreamLink(Link, asyncio.Protocol):
         for item in items:
             if isinstance(item, DecodeError):
                 if not isinstance(item, IllegalPacketError):
-                    self._bad(bad_reason(item), item)
+                    self._bad(bad_reason(item), item, item.clause)
                     continue
                 item = self._illegal(item)
             if self.peer_addr is None:

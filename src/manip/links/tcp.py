@@ -15,11 +15,12 @@ import socket
 from collections.abc import Callable
 
 from manip.codecs.framing import TcpFrameDecoder, encode_tcp
+from manip.ncp.defects import ChaosDefects
 
 from .errors import LinkError
 from .guard import LinkGuard, LinkLimits
 from .listener import StreamListener, bind_stream, bind_unix
-from .stream import StreamLink, dial
+from .stream import StreamLink, dial, stream_max_body
 
 
 class TcpLink(StreamLink):
@@ -27,8 +28,11 @@ class TcpLink(StreamLink):
 
     kind = "tcp"
 
-    def __init__(self, *, my_addr: int, peer_addr: int | None = None, name: str = "") -> None:
-        super().__init__(encode_tcp, TcpFrameDecoder(), my_addr=my_addr, peer_addr=peer_addr, name=name)
+    def __init__(
+        self, *, my_addr: int, peer_addr: int | None = None, defects: ChaosDefects | None = None
+    ) -> None:
+        decoder = TcpFrameDecoder(max_body=stream_max_body(defects))
+        super().__init__(encode_tcp, decoder, my_addr=my_addr, peer_addr=peer_addr, defects=defects)
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         peer = transport.get_extra_info("peername")
@@ -61,6 +65,7 @@ async def serve_tcp(
     my_addr: int,
     on_link: Callable[[TcpLink], None],
     guard: LinkGuard | None = None,
+    defects: ChaosDefects | None = None,
 ) -> StreamListener:
     """Listen for TCP links; ``on_link`` gets each new link before any packet arrives on it.
 
@@ -70,7 +75,7 @@ async def serve_tcp(
         sockets = await bind_stream(host, port)
     except OSError as exc:
         raise LinkError(f"cannot listen on tcp://{_endpoint((host, port))}: {exc}") from exc
-    return _listener(sockets, my_addr, on_link, guard)
+    return _listener(sockets, my_addr, on_link, guard, defects)
 
 
 async def connect_unix(
@@ -85,7 +90,12 @@ async def connect_unix(
 
 
 async def serve_unix(
-    path: str, *, my_addr: int, on_link: Callable[[TcpLink], None], guard: LinkGuard | None = None
+    path: str,
+    *,
+    my_addr: int,
+    on_link: Callable[[TcpLink], None],
+    guard: LinkGuard | None = None,
+    defects: ChaosDefects | None = None,
 ) -> StreamListener:
     """Listen for links with the TCP link framing on a Unix-domain socket at ``path`` (which must not
     exist yet), under ``guard`` as :func:`serve_tcp` is."""
@@ -93,16 +103,21 @@ async def serve_unix(
         sock = bind_unix(path)
     except OSError as exc:
         raise LinkError(f"cannot listen on unix://{path}: {exc}") from exc
-    return _listener([sock], my_addr, on_link, guard)
+    return _listener([sock], my_addr, on_link, guard, defects)
 
 
 def _listener(
-    sockets: list[socket.socket], my_addr: int, on_link: Callable[[TcpLink], None], guard: LinkGuard | None
+    sockets: list[socket.socket],
+    my_addr: int,
+    on_link: Callable[[TcpLink], None],
+    guard: LinkGuard | None,
+    defects: ChaosDefects | None,
 ) -> StreamListener:
-    """Accept TCP-framed links on ``sockets``; each new link goes to ``on_link`` before it reads."""
+    """Accept TCP-framed links on ``sockets``; each new link goes to ``on_link`` before it reads (and
+    sends with ``defects``, when given)."""
 
     def factory() -> TcpLink:
-        link = TcpLink(my_addr=my_addr)
+        link = TcpLink(my_addr=my_addr, defects=defects)
         on_link(link)
         return link
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from .config import NcpConfig
 from .connection import ConnectionInfo, NcpStats
+from .defects import ChaosDefects
 from .errors import InvalidStateError, NcpError, NoFreeIndexError, UnknownConnectionError, WindowFullError
 from .events import (
     Answered,
@@ -32,6 +33,7 @@ __all__ = [
     "Answered",
     "Broken",
     "ChannelStats",
+    "ChaosDefects",
     "Closed",
     "ConnState",
     "ConnectionInfo",

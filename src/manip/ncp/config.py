@@ -26,13 +26,18 @@ Times are in seconds, on whatever clock the caller passes the core as ``now``:
                          Lost (the peer takes our LOS as the end of the connection, so nothing more
                          will come).  False (the default, the server's): only the LOS is sent.
                          Erratum ``illegal-packet-gives-up``.
+``defects``              how this host departs from the Chaosnet rules
+                         (:class:`~manip.ncp.defects.ChaosDefects`: none by default; the reference
+                         server's Chaos-level fault switches set them).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Final
+
+from .defects import ChaosDefects
 
 __all__ = ["MAX_WINDOW", "NcpConfig"]
 
@@ -53,6 +58,7 @@ class NcpConfig:
     first_packet_no: int = 1
     auto_read: bool = True
     lose_on_illegal: bool = False
+    defects: ChaosDefects = field(default_factory=ChaosDefects)
 
     def __post_init__(self) -> None:
         if not 1 <= self.window <= MAX_WINDOW:

@@ -35,6 +35,7 @@ an outgoing packet carried the news first (every controlled packet, SNS and STS 
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -230,7 +231,7 @@ class Connection:
             if now >= self.started_at + cfg.rfc_timeout:
                 self.handle(ConnInput.UNANSWERED, Trigger(now, data=b"Timeout"))
         elif state is _OPEN:
-            if now >= self.last_heard + cfg.broken_after:
+            if now >= self.last_heard + cfg.broken_after and cfg.defects.gives_up_silent_peer:
                 reason = f"No packet from the peer for {cfg.broken_after:g} s"
                 self.handle(ConnInput.SILENCE, Trigger(now, data=reason.encode()))
                 return
@@ -254,7 +255,8 @@ class Connection:
         if state is _RFC_RECEIVED:
             return self.started_at + cfg.rfc_timeout
         if state is _OPEN:
-            due = min(self.last_heard + cfg.broken_after, self.probe_at, self._retransmit_deadline())
+            silence = self.last_heard + cfg.broken_after if cfg.defects.gives_up_silent_peer else math.inf
+            due = min(silence, self.probe_at, self._retransmit_deadline())
             if self.ack_due is not None:
                 due = min(due, self.ack_due)
             return due
@@ -313,7 +315,7 @@ class Connection:
         self.twsize = 0
 
     def _send_controlled(self, now: float, opcode: int, data: bytes) -> int:
-        number = (self.tlast + 1) & 0xFFFF
+        number = (self.tlast + self.config.defects.packet_number_step) & 0xFFFF
         packet = make_packet(
             opcode, self.peer_host, self.peer_index, self.address, self.index, number, self._told_ack(), data
         )
@@ -362,11 +364,13 @@ class Connection:
                 queue.popleft()
 
     def _retransmit_deadline(self) -> float:
-        if not self.queue:
+        if not self.queue or not self.config.defects.retransmits:
             return float("inf")
         return min(s.sent_at for s in self.queue) + self.config.retransmit_interval
 
     def _retransmit(self, now: float, min_age: float) -> None:
+        if not self.config.defects.retransmits:
+            return
         for sent in self.queue:
             if now >= sent.sent_at + min_age:
                 packet = sent.packet

@@ -128,6 +128,7 @@ class Ncp:
         self._address = address
         self._config = replace(config or NcpConfig(), **overrides)  # NcpConfig checks every value
         self._first_packet_no = self._config.first_packet_no
+        self._defects = self._config.defects
         self._uniquizer = uniquizer
         self._next_slot = first_slot
         self._slots: list[Connection | None] = [None] * (_SLOTS + 1)
@@ -255,14 +256,16 @@ class Ncp:
             out.stats.dropped += 1
             return
         opcode = packet.opcode
-        if len(packet.data) > MAX_DATA:
+        defects = self._defects
+        if len(packet.data) > MAX_DATA and defects.bounds_data:
             self._illegal(now, packet, f"Illegal byte count {len(packet.data)} (at most {MAX_DATA})")
             return
         data = _DAT <= opcode <= 0o377
         if not data:
             if not is_legal_opcode(opcode):
-                # The wire text of erratum illegal-packet-delivery: three octal digits.
-                self._illegal(now, packet, f"Illegal opcode {opcode:03o}")
+                if defects.los_illegal_opcode:
+                    # The wire text of erratum illegal-packet-delivery: three octal digits.
+                    self._illegal(now, packet, f"Illegal opcode {opcode:03o}")
                 return
             if opcode in _DROPPED:
                 out.stats.dropped += 1
@@ -277,7 +280,7 @@ class Ncp:
         ):
             conn = None
         if conn is None:
-            if opcode not in _SILENT_IF_UNKNOWN:
+            if opcode not in _SILENT_IF_UNKNOWN and defects.los_unknown_connection:
                 self._los(packet, "Connection doesn't exist")
             return
         conn.last_heard = now
@@ -381,7 +384,7 @@ class Ncp:
 
     def _take_rfc(self, now: float, packet: Packet) -> None:
         key = (packet.src_host, packet.src_index)
-        existing = self._by_peer.get(key)
+        existing = self._by_peer.get(key) if self._defects.recognises_duplicate_rfc else None
         if existing is not None and not existing.finished:
             existing.last_heard = now
             self._handle(existing, ConnInput.RFC, Trigger(now, packet))

@@ -52,6 +52,7 @@ from manip.codecs.lisp import Keyword, LispValue, Symbol, alist_to_dict, cons, p
 from manip.codecs.lispm_text import encode_lispm
 from manip.codecs.messages import Value, decode_request, encode_async
 from manip.codecs.pdp11float import F_MIN_NORMAL, pack_f
+from manip.ncp.defects import ChaosDefects
 from manip.reference_server import errors
 from manip.reference_server.describe import Statement, alist_text
 from manip.reference_server.errors import RequestError
@@ -63,7 +64,7 @@ from manip.spec.constants import AsyncCondition, ChaosOp, ServerOp
 if TYPE_CHECKING:
     from manip.reference_server.session import Outgoing, ServerSession
 
-__all__ = ["AfterFatal", "Defects", "SwitchedDefects", "arm_defects", "defects_for"]
+__all__ = ["AfterFatal", "Defects", "SwitchedDefects", "arm_defects", "chaos_defects", "defects_for"]
 
 AfterFatal = Literal["close", "stay-open", "drop-link", "eof-drop-link"]
 """What follows a fatal error: the connection closes (the protocol), it stays open, the driver drops
@@ -726,6 +727,38 @@ def _wrist_defects(faults: FaultSet) -> WristDefects:
         user_while_compliant=Fault.WRIST_USER_HELD_COMPLIANT not in on,
         handles_out_of_sync=Fault.OUT_OF_SYNC_IGNORED not in on,
         clears_old_guards=Fault.GUARDS_OUTLIVE_CONNECTION not in on,
+    )
+
+
+_CHAOS_RULES: Final[Mapping[str, Fault]] = {
+    "los_unknown_connection": Fault.LOS_UNKNOWN_IGNORED,
+    "los_illegal_opcode": Fault.ILLEGAL_OPCODE_IGNORED,
+    "bounds_data": Fault.OVERSIZE_SERVED,
+    "retransmits": Fault.NO_RETRANSMISSION,
+    "recognises_duplicate_rfc": Fault.DUPLICATE_RFC_NEW,
+    "gives_up_silent_peer": Fault.SILENT_PEER_KEPT,
+    "nbytes_counts_odd_byte": Fault.NBYTES_WHOLE_WORDS,
+    "data_first_byte_low": Fault.DATA_BYTES_SWAPPED,
+    "chudp_header": Fault.CHUDP_NO_HEADER,
+    "chudp_pads_odd_byte": Fault.CHUDP_ODD_BYTE_UNPADDED,
+    "chudp_msb_first": Fault.CHUDP_LSB_FIRST,
+    "trailer_source_own": Fault.TRAILER_SOURCE_DESTINATION,
+    "checksum_covers_trailer": Fault.CHECKSUM_WITHOUT_TRAILER,
+    "tcp_length_counts_pad": Fault.TCP_LENGTH_UNPADDED,
+    "chaosd_little_endian": Fault.CHAOSD_MSB_FIRST,
+}
+"""Each rule of :class:`ChaosDefects` kept by default (a field true unless broken) and the switch that
+breaks it."""
+
+
+def chaos_defects(faults: FaultSet) -> ChaosDefects:
+    """The defects of the server's NCP and links the switches of ``faults`` give them."""
+    on = faults.active
+    return ChaosDefects(
+        **{rule: fault not in on for rule, fault in _CHAOS_RULES.items()},
+        packet_number_step=2 if Fault.PACKET_NUMBERS_SKIP in on else 1,
+        header_source_first=Fault.HEADER_SOURCE_FIRST in on,
+        header_low_byte=1 if Fault.HEADER_LOW_BYTE_SET in on else 0,
     )
 
 

@@ -79,8 +79,8 @@ from manip.links import (
 from manip.links.api import LinkWrapper
 from manip.links.stream import StreamLink
 from manip.links.virtual_clock import is_virtual
-from manip.ncp import ConnectionRequested
-from manip.reference_server.defects import arm_defects, defects_for
+from manip.ncp import ChaosDefects, ConnectionRequested
+from manip.reference_server.defects import arm_defects, chaos_defects, defects_for
 from manip.reference_server.session import Outgoing, Output, ServerConfig, ServerSession, State
 from manip.reference_server.wrist import Wrist
 from manip.spec import SPEC, RequestOpcode
@@ -611,8 +611,12 @@ async def serve(
     ``RecorderTap(recorder, "server").wrap`` records all the server's traffic.  ``limits`` and
     ``allow`` bound the links and say who may connect (:func:`manip.links.start_server`; default:
     :class:`~manip.links.LinkLimits`, everyone)."""
+    config = config or ServerConfig()
+    defects = chaos_defects(config.faults)
+    if defects != ChaosDefects():  # the Chaos-level faults reach the NCP and the links as a value
+        options = replace(options or NcpConfig(), defects=defects)
     server = ReferenceServer(
-        config or ServerConfig(),
+        config,
         contact=contact,
         time_scale=time_scale,
         seed=seed,

@@ -807,6 +807,126 @@ class Fault(FaultSwitch):
         caught_by=("server.float.here-consistent",),
     )
 
+    # protocol defects of the Chaos level: the NCP and the link framings (issue 32)
+    LOS_UNKNOWN_IGNORED = defect(
+        "no-los-unknown-connection",
+        "A packet for a connection that does not exist is dropped without a LOS.",
+        "ncp.los",
+        caught_by=("server.ncp.los-unknown-connection",),
+    )
+    ILLEGAL_OPCODE_IGNORED = defect(
+        "illegal-opcode-ignored",
+        "A packet with an illegal opcode (017-0177) is dropped without a LOS.",
+        "chaos.opcode.legal",
+        "ncp.los",
+        caught_by=("server.ncp.los-illegal-opcode",),
+    )
+    OVERSIZE_SERVED = defect(
+        "oversize-served",
+        "Neither the link nor the NCP bounds a packet's data at 488 bytes: a frame carrying more is taken, "
+        "and its packet delivered, without a LOS.",
+        "chaos.data.max-488",
+        "ncp.los",
+        caught_by=("server.negative.oversize-frame",),
+    )
+    NO_RETRANSMISSION = defect(
+        "no-retransmission",
+        "Controlled packets are sent once: a packet no receipt covers is never sent again.",
+        "ncp.retransmission",
+        caught_by=("server.ncp.retransmission",),
+    )
+    DUPLICATE_RFC_NEW = defect(
+        "duplicate-rfc-new",
+        "A retransmitted RFC (same host and index) is taken as a new request, not matched to the connection "
+        "it opened: it is refused, the robot being taken.",
+        "ncp.duplicate-rfc",
+        caught_by=("server.ncp.duplicate-rfc",),
+    )
+    SILENT_PEER_KEPT = defect(
+        "silent-peer-kept",
+        "A connection whose peer falls silent is never declared broken: it keeps the robot for ever.",
+        "ncp.broken",
+        caught_by=("server.ncp.broken",),
+    )
+    PACKET_NUMBERS_SKIP = defect(
+        "packet-numbers-skip",
+        "Each data packet is numbered two after the one before (the counter advanced when the packet is "
+        "queued and again when it is sent): the peer waits for ever for the numbers skipped.",
+        "ncp.packet-numbers",
+        caught_by=("server.link.packet-numbers",),
+    )
+    HEADER_SOURCE_FIRST = defect(
+        "header-source-first",
+        "The header's source host and index words come before the destination's: every packet names the "
+        "server's peer as its source.",
+        "chaos.header.layout",
+        caught_by=("server.link.tcp-frames",),
+    )
+    HEADER_LOW_BYTE_SET = defect(
+        "header-low-byte-set",
+        "The byte below the opcode in header word 0 is sent as 1, not zero.",
+        "chaos.header.unused-byte-zero",
+        caught_by=("server.link.tcp-frames",),
+    )
+    NBYTES_WHOLE_WORDS = defect(
+        "nbytes-whole-words",
+        "nbytes counts the data in whole words: an odd last data byte is sent but not counted.",
+        "chaos.header.nbytes",
+        caught_by=("server.link.tcp-frames",),
+    )
+    DATA_BYTES_SWAPPED = defect(
+        "data-bytes-swapped",
+        "The data go out with the first byte of each word in its high byte, not its low one: the "
+        "request numbers the replies quote, like everything else, are byte-swapped.",
+        "chaos.data.byte-order",
+        caught_by=("server.link.tcp-frames",),
+    )
+    TCP_LENGTH_UNPADDED = defect(
+        "tcp-length-unpadded",
+        "The TCP link's frame length leaves out the pad byte after an odd last data byte (the pad itself is "
+        "sent): the first such frame has an odd length, and the stream its frames can no longer be found in.",
+        "link.tcp.framing",
+        caught_by=("server.link.tcp-frames",),
+    )
+    CHUDP_NO_HEADER = defect(
+        "chudp-no-header",
+        "CHUDP datagrams are sent without their 4-byte header 01 01 00 00: the packet and trailer alone.",
+        "chudp.header",
+        caught_by=("server.link.chudp-frames",),
+    )
+    CHUDP_ODD_BYTE_UNPADDED = defect(
+        "chudp-odd-byte-unpadded",
+        "On CHUDP an odd last data byte is sent alone, without the zero byte that makes its word whole.",
+        "chudp.length",
+        caught_by=("server.link.chudp-frames",),
+    )
+    CHUDP_LSB_FIRST = defect(
+        "chudp-lsb-first",
+        "CHUDP words are sent least significant byte first (as the comment of klh10's dpchaos.c has it).",
+        "chudp.word-order",
+        caught_by=("server.link.chudp-frames",),
+    )
+    TRAILER_SOURCE_DESTINATION = defect(
+        "trailer-source-destination",
+        "The trailer's hardware source names the next hop (the hardware destination) instead of the "
+        "sender's own address.",
+        "chudp.trailer",
+        caught_by=("server.link.chudp-frames",),
+    )
+    CHECKSUM_WITHOUT_TRAILER = defect(
+        "checksum-without-trailer",
+        "The checksum is taken over the header and data only, leaving out the trailer's two address words.",
+        "chudp.checksum",
+        caught_by=("server.link.chudp-frames",),
+    )
+    CHAOSD_MSB_FIRST = defect(
+        "chaosd-msb-first",
+        "On the chaosd socket the words are sent most significant byte first, as on CHUDP, not low byte "
+        "first.",
+        "link.chaosd.framing",
+        caught_by=("server.link.chaosd-frames",),
+    )
+
 
 RETIRED: Final[Mapping[str, str]] = MappingProxyType(
     {

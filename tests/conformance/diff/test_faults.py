@@ -121,9 +121,92 @@ NOT_SHOWN: dict[Fault, str] = {
         "no scenario or generated stream asks solve forwards of a transform in reach: every one they send is "
         "refused alike on both sides, so the angles it would answer never differ"
     ),
+    Fault.LOS_UNKNOWN_IGNORED: (
+        "the diff's clients only send packets for connections that exist, so the server's missing LOS for "
+        "one that does not never shows; server.ncp.los-unknown-connection sends one by hand"
+    ),
+    Fault.ILLEGAL_OPCODE_IGNORED: (
+        "the diff's clients send only legal Chaos opcodes, so the server's silence about an illegal one "
+        "never shows; server.ncp.los-illegal-opcode forges one"
+    ),
+    Fault.OVERSIZE_SERVED: (
+        "the diff's clients never send more than 488 data bytes in a packet (their codec refuses to), so "
+        "the missing bound never shows; server.negative.oversize-frame forges such a frame"
+    ),
+    Fault.NO_RETRANSMISSION: (
+        "the diff's link (a Unix socket in one process) loses nothing and its NCPs receipt promptly, so no "
+        "packet ever waits to be sent again"
+    ),
+    Fault.DUPLICATE_RFC_NEW: (
+        "the diff's connections open at the first RFC (a Unix socket loses none), so no RFC is ever sent "
+        "twice"
+    ),
+    Fault.SILENT_PEER_KEPT: (
+        "the diff's clients are never silent for the server's broken-connection timer (90 s), so no "
+        "connection is ever given up on either side"
+    ),
+    Fault.PACKET_NUMBERS_SKIP: (
+        "side B's replies are all held back by the diff's client NCP for the number skipped, so side B "
+        "answers nothing: the differences are replies missing on side B (after the diff's reply timeout "
+        "each), which no judge of one side names as ncp.packet-numbers"
+    ),
+    Fault.DATA_BYTES_SWAPPED: (
+        "shown as violations of response.echoes-request-number, multi.same-request-number and the error "
+        "strings' clauses (side B): every number and string of side B is byte-swapped, and no judge of one "
+        "side reads the data's byte order as such"
+    ),
+    Fault.HEADER_SOURCE_FIRST: (
+        "the diff's client links refuse every packet of side B (it names their own address as its source), "
+        "so side B answers nothing: its differences are missing answers, named by no judge of one side as "
+        "chaos.header.layout"
+    ),
+    Fault.CHUDP_NO_HEADER: (
+        "the diff's sides are reached over a Unix socket with the TCP link framing: the CHUDP framing it "
+        "breaks is never used"
+    ),
+    Fault.CHUDP_ODD_BYTE_UNPADDED: (
+        "the diff's sides are reached over a Unix socket with the TCP link framing: the CHUDP framing it "
+        "breaks is never used"
+    ),
+    Fault.CHUDP_LSB_FIRST: (
+        "the diff's sides are reached over a Unix socket with the TCP link framing: the CHUDP framing it "
+        "breaks is never used"
+    ),
+    Fault.TRAILER_SOURCE_DESTINATION: (
+        "the diff's sides are reached over a Unix socket with the TCP link framing, whose receivers do not "
+        "learn peers from the trailer: only a CHUDP link refuses the trailer"
+    ),
+    Fault.CHAOSD_MSB_FIRST: (
+        "the diff's sides are reached over a Unix socket with the TCP link framing: the chaosd framing it "
+        "breaks is never used"
+    ),
 }
 """Faults the diff does not show as a violation of one of their clauses, and why (the directed case
 that catches each is the fault matrix's, tests/conformance/test_faults.py)."""
+
+NOT_RUN = frozenset(
+    {
+        Fault.LOS_UNKNOWN_IGNORED,
+        Fault.ILLEGAL_OPCODE_IGNORED,
+        Fault.OVERSIZE_SERVED,
+        Fault.NO_RETRANSMISSION,
+        Fault.DUPLICATE_RFC_NEW,
+        Fault.SILENT_PEER_KEPT,
+        Fault.PACKET_NUMBERS_SKIP,
+        Fault.DATA_BYTES_SWAPPED,
+        Fault.HEADER_SOURCE_FIRST,
+        Fault.CHUDP_NO_HEADER,
+        Fault.CHUDP_ODD_BYTE_UNPADDED,
+        Fault.CHUDP_LSB_FIRST,
+        Fault.TRAILER_SOURCE_DESTINATION,
+        Fault.CHAOSD_MSB_FIRST,
+    }
+)
+"""Faults of the Chaos level on :data:`NOT_SHOWN` that are not run through the diff: their defect lies
+where its connections never go (another link's framing, packets a well-behaved client never sends, losses
+and silences that never happen), or shows only as side B's answers missing or garbled throughout; every
+stream run against one costs some 30 s of CPU to show nothing of theirs (the fault matrix's cases catch
+each, tests/conformance/test_faults.py)."""
 
 _CLEAN_SEEN: dict[tuple[str, tuple[int, ...]], Observation] = {}
 """The clean side's observations, by stream: the same for every fault, so each worker observes them once."""
@@ -157,7 +240,7 @@ def _named_by_b(found: list[Finding]) -> set[str]:
     return {n for f in found if f.cls == "violation" and f.violator == "B" for n in f.names}
 
 
-@pytest.mark.parametrize("fault", PROTOCOL_FAULTS, ids=lambda f: f.value)
+@pytest.mark.parametrize("fault", [f for f in PROTOCOL_FAULTS if f not in NOT_RUN], ids=lambda f: f.value)
 def test_a_protocol_fault_is_a_violation_of_its_clause(fault: Fault) -> None:
     wanted = set(fault.clauses)
     found = findings(fault, None if fault in NOT_SHOWN else wanted)
@@ -173,4 +256,5 @@ def test_a_protocol_fault_is_a_violation_of_its_clause(fault: Fault) -> None:
 
 def test_the_allow_list_names_protocol_faults_with_reasons() -> None:
     assert set(NOT_SHOWN) <= set(PROTOCOL_FAULTS)
+    assert set(NOT_SHOWN) >= NOT_RUN
     assert all(len(why) > 40 for why in NOT_SHOWN.values())

@@ -487,5 +487,5 @@ def _judge(
     conclude(result, stopped, ctx.recorded, config.options.strict)
 
 
-async def _no_connector(_retry_busy: bool) -> Any:
+async def _no_connector(_retry_busy: bool, _watch: object = None) -> Any:
     raise RuntimeError("a client case plays scenarios (ctx.play); it opens no connection itself")

@@ -62,7 +62,7 @@ import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterable, Sequence
 from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass, replace
-from typing import Any, Final, Literal, NoReturn
+from typing import Any, Final, Literal, NoReturn, Protocol
 
 from manip.arm.units import MM_PER_UNIT, LengthUnit
 from manip.codecs.errors import CodecError
@@ -90,6 +90,7 @@ from manip.conformance.suite.invariants import TRANSCRIPT, attribution_problem
 from manip.conformance.suite.world import CaseNotJudged, Condition, World, no_world
 from manip.cougar.memory_map import CougarMemoryMap
 from manip.links import ChaosConnection, ChaosError, ConnectionClosed, ConnectionLost
+from manip.links.api import LinkWrapper
 from manip.reference_client.options import DEFAULT_MAX_REPLY_BYTES
 from manip.spec import SPEC, RequestName
 from manip.spec.constants import ChaosOp, ServerOp
@@ -125,9 +126,16 @@ MAX_CASE_PACKETS: Final = 20_000
 A case needs a few dozen, a property case a few thousand; a describe-self at the reply bound is 2,160."""
 
 
-Connector = Callable[[bool], Awaitable[ChaosConnection]]
-"""Opens one fresh Chaos connection to the target (the runner provides it); the argument says whether
-a refusal as busy (the previous case's connection still closing) is retried."""
+class _Connector(Protocol):
+    """Opens one fresh Chaos connection to the target (the runner provides it): ``retry_busy`` says
+    whether a refusal as busy (the previous case's connection still closing) is retried, ``watch`` is
+    given the connection's link first (a case that judges the link keeps it, to read its counters even
+    when the connection never opens)."""
+
+    def __call__(self, retry_busy: bool, watch: LinkWrapper | None = None) -> Awaitable[ChaosConnection]: ...
+
+
+Connector = _Connector
 
 
 @dataclass(frozen=True)
@@ -649,12 +657,17 @@ class CaseContext:
 
     # ------------------------------------------------------------------------------------- connecting
 
-    async def connect(self, *, initial: bool = True, retry_busy: bool = True) -> Probe:
+    async def connect(
+        self, *, initial: bool = True, retry_busy: bool = True, watch: LinkWrapper | None = None
+    ) -> Probe:
         """A new probe over a fresh connection; with ``initial`` the initial RESPONSE is taken first.
 
-        ``retry_busy=False`` for a case that expects the refusal (one server per robot)."""
+        ``retry_busy=False`` for a case that expects the refusal (one server per robot); ``watch`` is
+        given the connection's link (:class:`Connector`)."""
         try:
-            conn = await self._connector(retry_busy)
+            conn = await (
+                self._connector(retry_busy) if watch is None else self._connector(retry_busy, watch)
+            )
         except ChaosError as exc:
             raise CaseFailure(
                 f"could not connect: {exc}",

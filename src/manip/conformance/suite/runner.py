@@ -13,7 +13,9 @@ Theory of operation
    connection.  A target that
    fails it without having sent a single manip packet is *unreachable*: no case runs, exit code 3.  A
    target that sent something (the initial RESPONSE, a partial reply) and then broke the exchange was
-   reached: the cases run, and the first one's failure says what it did.
+   reached: the cases run, and the first one's failure says what it did.  So was a target whose frames
+   the link refused for a rule of Chaos (a checksum, a header, the word order): the link cases say
+   which.
 3. **Each case**, one at a time, gets a :class:`~manip.conformance.suite.context.CaseContext` with its own
    seed (derived from the run seed and the case id, so a case's seed does not depend on what else
    runs) and its deadline (``case.deadline * deadline_scale``, plus any wait on a target's timer).  Its
@@ -26,7 +28,8 @@ Theory of operation
    run: it becomes an ``error`` outcome with its traceback (unless it came after a violation, which
    it then merely follows), and so does a violation of a clause the
    case does not declare that no suite invariant reported (:mod:`manip.conformance.suite.invariants`).
-4. **Liveness after** every failure or error and after every negative case; if the target is dead
+4. **Liveness after** every failure or error and after every negative case (unless the target was
+   never alive, only reached: then every case runs and says what it saw); if the target is dead
    (after one retry), or a case failed for want of the initial RESPONSE and the liveness check got none
    either, or a case failed under a flood of :data:`RUNAWAY_PACKETS` packets or more (a runaway target),
    the run notices it once: the remaining cases end at once ``not-judged`` (a live target would judge
@@ -63,6 +66,7 @@ from manip.conformance.suite.units import learn_length_unit
 from manip.conformance.suite.world import CaseNotJudged, ConditionUnsupported, World, WorldError
 from manip.links import ChaosConnection, open_connection
 from manip.links.api import LinkWrapper
+from manip.links.base import Link, LinkStats
 from manip.spec.constants import ServerOp
 from manip.spec.notation import octal
 
@@ -86,6 +90,20 @@ RUNAWAY_PACKETS = 5_000
 """A case that fails having taken this many packets from the target (a case needs a few dozen, a property
 case a few hundred) shows a runaway target: the run gives it up, as it does a dead one."""
 """How long a case may run past its deadline, whatever the target does: the closing of its connections."""
+
+
+def _sent_chaos_frames(stats: LinkStats) -> bool:
+    """Whether the target sent frames its link refused for a rule of Chaos (a checksum, a header, a whole
+    frame in the other byte order...), not only a stream the link could find no frame in: a Chaos host,
+    reached, whose frames the link cases judge (``server.link.*-frames``)."""
+    return sum(stats.bad_clauses.values()) > stats.bad["framing"]
+
+
+def _held_back(probe: Probe) -> bool:
+    """Whether the probe's connection holds packets of the target beyond one that never came (its
+    numbering has a gap): the target sent data, which ``server.link.packet-numbers`` judges."""
+    info = probe.conn.info()
+    return info is not None and info.buffered > 0
 
 
 def liveness_bound(options: RunOptions) -> float:
@@ -195,6 +213,8 @@ class Runner:
             length_unit=config.options.length_unit,
         )
         self._reached = False
+        self._reached_by_frames_only = False
+        # reached only through frames its link refused (or packets held back for a number it skipped)
         """Whether anything the target sent (a manip packet, not only the Chaos opening) reached the run."""
         self._initial_seen = True
         """Whether the last liveness probe got its initial RESPONSE."""
@@ -217,12 +237,17 @@ class Runner:
 
     # --------------------------------------------------------------------------------- connecting
 
-    async def connect(self, retry_busy: bool = True) -> ChaosConnection:
-        """A fresh connection to the target; a refusal as busy is retried briefly (``retry_busy``)."""
+    async def connect(self, retry_busy: bool = True, watch: LinkWrapper | None = None) -> ChaosConnection:
+        """A fresh connection to the target; a refusal as busy is retried briefly (``retry_busy``).
+        ``watch`` is given the link before the run's own wrapper (a capture's tap) is."""
         config = self.config
+        wrap = config.wrap_link
+        if watch is not None:
+            outer = wrap
+            wrap = watch if outer is None else (lambda link: outer(watch(link)))
         return await open_retrying_busy(
             lambda: open_connection(
-                config.options.address, timeout=config.options.connect_timeout, wrap_link=config.wrap_link
+                config.options.address, timeout=config.options.connect_timeout, wrap_link=wrap
             ),
             retry=retry_busy,
         )
@@ -256,11 +281,17 @@ class Runner:
         if self.config.liveness_check is not None:
             return await self.config.liveness_check(options)
         ctx = CaseContext(case_id="liveness", level="MUST", seed=0, options=options, connector=self.connect)
+        links: list[Link] = []
+
+        def watch(link: Link) -> Link:
+            links.append(link)
+            return link
+
         try:
             async with asyncio.timeout(
                 options.connect_timeout + LIVENESS_REQUESTS * options.reply_timeout + 1.0
             ):
-                probe = await ctx.connect(initial=False)
+                probe = await ctx.connect(initial=False, watch=watch)
                 detail = ""
                 for _ in range(LIVENESS_REQUESTS):
                     answered, detail, fatal = await self._answer_to_here(probe)
@@ -276,6 +307,11 @@ class Runner:
         finally:
             self._initial_seen = bool(ctx.probes) and ctx.probes[0].initial is not None
             self._note_reached(ctx)
+            if not self._reached and (
+                any(_sent_chaos_frames(link.stats) for link in links)
+                or any(_held_back(p) for p in ctx.probes)
+            ):
+                self._reached = self._reached_by_frames_only = True
             # No wait for the target to read our EOF: a target that floods and never reads again
             # would cost a second per check, after every failed case.
             await _quietly(ctx.close_all(wait=0.0))
@@ -343,8 +379,10 @@ class Runner:
                 report.results.append(result)
                 if self.events.case_finished:
                     self.events.case_finished(result)
-                if not dead and (
-                    result.outcome in ("fail", "error", "known-fail") or item.technique == "negative"
+                if (
+                    not (self._reached_by_frames_only and not before.alive)  # never alive: cannot die
+                    and not dead
+                    and (result.outcome in ("fail", "error", "known-fail") or item.technique == "negative")
                 ):
                     dead = await self._dead_after(item, result)
                 if not dead and self._runaway:

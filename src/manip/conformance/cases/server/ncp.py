@@ -206,18 +206,20 @@ async def los_unknown_connection(ctx: CaseContext) -> None:
 
 
 def _illegal_frame_check(
-    ctx: CaseContext, answer: Received | None, sent: Packet, frame: bytes, why: str
+    ctx: CaseContext, answer: Received | None, sent: Packet, frame: bytes, why: str, clause: str
 ) -> None:
+    """The answer to an illegal packet must be a LOS: ``clause`` is the rule the packet broke (an illegal
+    opcode, more than 488 data bytes), which says so as well as ``ncp.los`` does."""
     if answer is None:
         ctx.fail(
             f"no LOS for {why}",
-            clause="ncp.los",
+            clause=clause,
             expected=f"LOS to index {octal(sent.src_index)} within {_scale(ctx, LOS_BOUND):g} s",
             seen=missing("nothing", after=frame),
         )
     ctx.expect(
         answer.packet.opcode == ChaosOp.LOS,
-        clause="ncp.los",
+        clause=clause,
         expected=f"LOS answering {why}",
         seen=showing(_frames(frame, answer.raw), format_packet(answer.packet)),
     )
@@ -248,7 +250,7 @@ async def los_illegal_opcode(ctx: CaseContext) -> None:
                 ),
                 _scale(ctx, LOS_BOUND),
             )
-            _illegal_frame_check(ctx, answer, p, frame, f"opcode {octal(opcode)}")
+            _illegal_frame_check(ctx, answer, p, frame, f"opcode {octal(opcode)}", "chaos.opcode.legal")
 
 
 @case(
@@ -271,7 +273,7 @@ async def los_oversize(ctx: CaseContext) -> None:
         answer = await peer.receive(
             lambda q: q.dest_index == index and q.opcode in (ChaosOp.LOS, ChaosOp.CLS), _scale(ctx, LOS_BOUND)
         )
-        _illegal_frame_check(ctx, answer, p, frame, f"{MAX_DATA + 2} data bytes")
+        _illegal_frame_check(ctx, answer, p, frame, f"{MAX_DATA + 2} data bytes", "chaos.data.max-488")
 
 
 # ------------------------------------------------------------------------------------------ duplicate RFC
