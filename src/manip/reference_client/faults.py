@@ -226,6 +226,14 @@ class ClientFault(FaultSwitch):
         "move.transform-data",
         caught_by=("client.request.move", "client.request.straight-move"),
     )
+    SOLVE_OPCODES_SWAPPED = defect(
+        "solve-opcodes-swapped",
+        "solve forwards goes out under solve backwards' opcode and solve backwards under solve forwards' "
+        "(two lines of the opcode table swapped), each with its own data",
+        "request.opcode-range",
+        "request-data.types",
+        caught_by=("client.request.solve-forwards", "client.request.solve-backwards"),
+    )
     ALWAYS_PAD = defect(
         "always-pad",
         "the numbers of an error string are always read after a pad byte, as if the server had aligned "

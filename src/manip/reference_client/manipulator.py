@@ -34,6 +34,7 @@ from __future__ import annotations
 import asyncio
 from collections.abc import AsyncIterator, Callable, Iterable, Mapping, Sequence
 from contextlib import asynccontextmanager
+from dataclasses import replace
 from types import TracebackType
 from typing import Any, Final, SupportsInt, TypeVar
 
@@ -88,6 +89,8 @@ sequences are flattened; bytes are sent as they are."""
 
 
 _MOVES: Final = frozenset({"move", "straight-move"})
+_SOLVES_SWAPPED: Final = {"solve-forwards": "solve-backwards", "solve-backwards": "solve-forwards"}
+"""Each solve request and the one whose opcode it goes out under (fault solve-opcodes-swapped)."""
 _ROW_MAJOR: Final = tuple(column * 3 + row for row in range(3) for column in range(4))
 """Where each float of a transform goes row after row (fault move-row-major): its column-major index."""
 
@@ -192,6 +195,9 @@ class Manipulator(GenericOperations, PumaOperations):
             payload += bytes(4)
         if ClientFault.MOVE_ROW_MAJOR in faults and rc.spec is not None and rc.spec.name in _MOVES:
             payload = _row_major(payload)
+        if ClientFault.SOLVE_OPCODES_SWAPPED in faults and rc.name in _SOLVES_SWAPPED:
+            other = self.registry.request_code(_SOLVES_SWAPPED[rc.name], self.options.manipulator_type)
+            rc = replace(rc, opcode=other.opcode)  # this request's data under the other's opcode
         if len(payload) > MAX_DATA:  # a Chaos packet cannot carry it: refused here, not by the link later
             raise ValueError(f"{rc}: {len(payload)} data bytes, more than a Chaos packet holds ({MAX_DATA})")
         if ClientFault.EARLY_TIMEOUT in faults and isinstance(timeout, int | float):
