@@ -174,10 +174,11 @@ def test_a_cougar_response_that_never_completes_shows_the_words_that_came() -> N
 
     import pytest
 
-    from manip.conformance.cougar.probe import CougarProbe
+    from manip.conformance.cougar.probe import CougarProbe, LinkLog
     from manip.conformance.suite.case import CaseFailure
 
     probe = CougarProbe.__new__(CougarProbe)  # no link: the ticks do nothing, one word waits
+    probe.log = LinkLog(None)
     probe._inbox = []  # type: ignore[attr-defined]
     probe._stream = SimpleNamespace(pending=(2,))  # type: ignore[attr-defined]
 
