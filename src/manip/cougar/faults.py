@@ -296,6 +296,13 @@ class CougarFault(FaultSwitch):
         "cougar.jacob-double-buffer",
         caught_by=("cougar.jacob.front-buffer-complete",),
     )
+    JACOBIAN_JOINT_SIGN = defect(
+        "jacobian-joint-sign",
+        "JACOB takes joint 2 as turning the other way round from the arm model: the second column of J "
+        "(and so of Jᵀ and P) has the wrong sign (Jacob._jacobian)",
+        "cougar.jacob-values",
+        caught_by=("cougar.jacob.values",),
+    )
     LINK_TICKED_FIRST = defect(
         "link-ticked-first",
         "the link sends a tick's TICKED before the words the tick produced, not after them (CougarEnd)",
@@ -338,6 +345,8 @@ class CougarDefects:
     """NPR reads NB row after row."""
     jacobian_transpose_stored: bool = True
     """JACOB stores Jᵀ after J."""
+    jacobian_joint_signs_right: bool = True
+    """JACOB turns every joint the way the arm model does."""
     adc8_sums_then_shifts: bool = True
     """ADC8 adds the terms of the filter's sum before shifting it right by 3."""
     rraw_before_offsets: bool = True
@@ -439,6 +448,7 @@ def cougar_defects(faults: Iterable[str]) -> CougarDefects:
         reentry_returns_at_once=CougarFault.GUTS_PART_ON_REENTRY not in on,
         guardm_before_comint=CougarFault.COMINT_BEFORE_GUARDM not in on,
         jacob_double_buffered=CougarFault.JACOB_ONE_BUFFER not in on,
+        jacobian_joint_signs_right=CougarFault.JACOBIAN_JOINT_SIGN not in on,
     )
 
 

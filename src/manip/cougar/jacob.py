@@ -82,6 +82,8 @@ class Jacob:
     double_buffered: bool = True
     """False only for the fault ``jacob-one-buffer``: J written a row per step into the front buffer, which
     never switches (:data:`IN_PLACE_STEPS` steps a computation)."""
+    joint_signs_right: bool = True
+    """False only for the fault ``jacobian-joint-sign``: J's second column (joint 2) negated."""
     step_index: int = 0
     cycles: int = 0
     _j: Matrix = field(default_factory=lambda: np.zeros((6, 6)))
@@ -139,9 +141,12 @@ class Jacob:
     def _jacobian(self, theta: tuple[float, ...], fv: tuple[float, ...]) -> Matrix:
         """J at the compliance centre, in the Cougar's length unit."""
         if self.mm_per_unit == 1.0:
-            return centre_jacobian(theta, fv, self.geometry)
-        j = centre_jacobian(theta, [v * self.mm_per_unit for v in fv], self.geometry)
-        j[:3] /= self.mm_per_unit
+            j = centre_jacobian(theta, fv, self.geometry)
+        else:
+            j = centre_jacobian(theta, [v * self.mm_per_unit for v in fv], self.geometry)
+            j[:3] /= self.mm_per_unit
+        if not self.joint_signs_right:
+            j[:, 1] = -j[:, 1]
         return j
 
     def _stored_words(self) -> tuple[Encoded, Encoded, Encoded]:

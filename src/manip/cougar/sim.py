@@ -220,6 +220,7 @@ class CougarSim:
             transpose_stored=defects.jacobian_transpose_stored,
             bji_per_joint=defects.bji_per_joint,
             double_buffered=defects.jacob_double_buffered,
+            joint_signs_right=defects.jacobian_joint_signs_right,
         )
         self._stats = CougarStats()
         self._pose: tuple[float, ...] = tuple(float(q) for q in self.config.initial_angles)

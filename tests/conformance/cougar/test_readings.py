@@ -36,6 +36,7 @@ MEMORY_CASES = {
     "cougar.filter.output",
     "cougar.jacob.front-buffer-complete",
     "cougar.jacob.transpose-stored",
+    "cougar.jacob.values",
     "cougar.npr.damping-matrix",
     "cougar.gravity.nfv-redoes-model",
     "cougar.rraw.before-offsets",

@@ -7,7 +7,8 @@ from typing import Any, Final
 
 import numpy as np
 
-from manip.arm import READY
+from manip.arm import PUMA560_LEE, READY, forward
+from manip.arm.units import MM_PER_UNIT
 from manip.codecs.pdp11float import f_to_words
 from manip.conformance.cases.cougar._support import (
     POSE_B,
@@ -18,6 +19,7 @@ from manip.conformance.cases.cougar._support import (
     expect_none,
     expect_reply,
     fmt,
+    in_unit,
     mapped,
     peek_region,
     region_floats,
@@ -387,3 +389,80 @@ async def _transpose_follows(
             f"column {row + 1} of J: {fmt(j.T[row])}",
             seen=fmt(jt[row]),
         )
+
+
+# ------------------------------------------------------------------------------------------ J's values
+JACOB_FV_MM: Final = (25.0, -40.0, 120.0)
+"""The compliance centre the Jacobian check moves to, in millimetres (sent in the run's length unit): off
+every hand axis, so the centre's part of each translational row shows."""
+JACOB_STEP_DEG: Final = 1.0e-3
+"""Half the step of the central differences that work J out: their truncation error is ~ step² (in
+radians) of J, 1e-10 of it, and their rounding ~ 1e-13 mm per degree."""
+JACOB_REL: Final = 1.0e-4
+"""How far an element of J may be from the one worked out, as a fraction of the largest element of its
+block (translational or rotational rows).  Cougar stores J as PDP-11 F_floating (24-bit significand: each
+float within 6e-8 of its value) and computes it in that arithmetic, a few dozen products and sums of link
+lengths with sines and cosines good to their last bit: well under 1e-6 of the block's largest element.
+1e-4 leaves a hundredfold margin, while a wrong sign, a link length mixed up or degrees taken as radians
+moves elements by a sizeable part of the block."""
+Matrix = np.ndarray[Any, Any]
+
+
+def worked_jacobian(theta_deg: tuple[float, ...], fv_mm: tuple[float, ...]) -> Matrix:
+    """J (mm/deg, deg/deg) at ``theta_deg`` about the point ``fv_mm`` of the hand (hand axes), worked out
+    from the arm model's poses alone: each column is the central difference, over ±JACOB_STEP_DEG of its
+    joint, of the point's position and of the hand's turn, both in hand axes at ``theta_deg``."""
+    rotation = forward(theta_deg, PUMA560_LEE).matrix[:3, :3]
+    fv = np.array(fv_mm, dtype=np.float64)
+    columns = []
+    for joint in range(6):
+        ends = []
+        for sign in (1.0, -1.0):
+            q = list(theta_deg)
+            q[joint] += sign * JACOB_STEP_DEG
+            ends.append(forward(tuple(q), PUMA560_LEE).matrix)
+        plus, minus = ends
+        moved = (plus[:3, 3] + plus[:3, :3] @ fv) - (minus[:3, 3] + minus[:3, :3] @ fv)
+        turn = plus[:3, :3] @ minus[:3, :3].T  # I + [w]x (2 step in radians), w the base-axes turn rate
+        w = np.array([turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0], turn[1, 0] - turn[0, 1]]) / 2.0
+        columns.append(
+            np.concatenate([rotation.T @ moved, rotation.T @ w / np.radians(1.0)]) / (2.0 * JACOB_STEP_DEG)
+        )
+    return np.array(columns).T
+
+
+@case(
+    "cougar.jacob.values",
+    clauses=["cougar.jacob-values", "cougar.memory", "cougar.exmn.reply", "cougar.response.layout"],
+    hazard="config",
+)
+async def jacob_values(ctx: CaseContext) -> None:
+    """The Jacobian in the front buffer, after SEN of a pose away from READY and NFV of a centre off every
+    axis, is the one worked out here from the arm model's poses at those angles (erratum
+    cougar-compliance-equation: about the compliance centre, hand axes; the run's length unit per degree
+    and degrees per degree), each row its own check."""
+    (fv_obj,) = mapped(ctx, "fv")
+    async with cougar_probe(ctx) as probe:
+        await clean(probe)
+        fv0 = await region_floats(ctx, probe, fv_obj)
+        try:
+            await probe.send("NFV", offset=in_unit(ctx, JACOB_FV_MM))
+            await settle(probe, POSE_B)
+            j, buffer = await _front_jacobian(ctx, probe)
+            want = worked_jacobian(POSE_B, JACOB_FV_MM)
+            want[:3] /= MM_PER_UNIT[ctx.options.length_unit]
+            unit = f"{ctx.options.length_unit}/deg"
+            for rows, units in ((range(3), unit), (range(3, 6), "deg/deg")):
+                tolerance = JACOB_REL * float(np.abs(want[rows.start : rows.stop]).max())
+                for row in rows:
+                    ctx.expect(
+                        bool(np.all(np.abs(j[row] - want[row]) <= tolerance)),
+                        clause="cougar.jacob-values",
+                        expected=f"row {row + 1} of J ({buffer.name}, {units}) at {fmt(POSE_B)} about "
+                        f"{fmt(JACOB_FV_MM)} mm = {fmt(want[row])} (each within {tolerance:.2g})",
+                        seen=fmt(j[row]),
+                    )
+        finally:
+            await probe.send("NFV", offset=fv0)
+            await probe.send("SEN", theta_sensed=READY)
+            await probe.run(1)
