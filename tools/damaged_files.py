@@ -52,7 +52,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,6 +65,7 @@ from mcap.writer import CompressionType, Writer
 import manip.captures.cli
 import manip.conformance.cli
 import manip.decode.cli
+from campaign_tally import tally
 from manip.captures.pcap import export_pcapng
 from manip.captures.reader import iter_packets
 
@@ -478,15 +478,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         rss_mb=args.rss_mb,
         report=show,
     )
-    counts = Counter(o.outcome for o in outcomes)
-    peak = max((o.rss_mb for o in outcomes), default=0.0)
-    print(
-        f"{len(outcomes)} runs on {args.inputs} inputs (seed {args.seed}) "
-        f"in {time.monotonic() - started:.0f} s: "
-        + ", ".join(f"{k} {counts[k]}" for k in OUTCOMES)
-        + (f"; peak RSS {peak:.0f} MB" if args.processes else "")
+    return tally(
+        outcomes,
+        f"on {args.inputs} inputs (seed {args.seed})",
+        started=started,
+        kinds=OUTCOMES,
+        bad=BAD,
+        peak=args.processes,
     )
-    return 1 if any(counts[k] for k in BAD) else 0
 
 
 if __name__ == "__main__":

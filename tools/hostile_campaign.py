@@ -49,7 +49,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections import Counter
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,6 +56,7 @@ from typing import Any, Final
 
 from click.testing import CliRunner
 
+from campaign_tally import peak_rss_mb, tally
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.packet import Packet
 from manip.conformance.client.server import Listener, ServerSide, plain_answer, scenario_in_thread
@@ -308,14 +308,6 @@ def run_command_in_process(scenario: str, script: Script, command: str, seed: in
     return Outcome(scenario, name, outcome, detail)
 
 
-def _peak_rss_mb(pid: int) -> float:
-    with contextlib.suppress(OSError), open(f"/proc/{pid}/status") as f:
-        for line in f:
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1024
-    return 0.0
-
-
 def run_command_process(
     scenario: str, script: Script, command: str, seed: int, timeout: float, rss_mb: float
 ) -> Outcome:
@@ -332,7 +324,7 @@ def run_command_process(
         proc = subprocess.Popen(args, stdout=out, stderr=err)
         peak, deadline = 0.0, time.monotonic() + timeout
         while proc.poll() is None and time.monotonic() < deadline:
-            peak = max(peak, _peak_rss_mb(proc.pid))
+            peak = max(peak, peak_rss_mb(proc.pid))
             time.sleep(0.05)
         if proc.poll() is None:
             proc.kill()
@@ -454,15 +446,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         only=args.only,
         report=show,
     )
-    counts = Counter(o.outcome for o in outcomes)
-    peak = max((o.rss_mb for o in outcomes), default=0.0)
-    print(
-        f"{len(outcomes)} runs (seed {args.seed}, {args.rounds} round(s)) "
-        f"in {time.monotonic() - started:.0f} s: "
-        + ", ".join(f"{k} {counts[k]}" for k in OUTCOMES)
-        + (f"; peak RSS {peak:.0f} MB" if args.processes else "")
+    return tally(
+        outcomes,
+        f"(seed {args.seed}, {args.rounds} round(s))",
+        started=started,
+        kinds=OUTCOMES,
+        bad=BAD,
+        peak=args.processes,
     )
-    return 1 if any(counts[k] for k in BAD) else 0
 
 
 if __name__ == "__main__":

@@ -52,6 +52,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
+from campaign_tally import peak_rss_mb
 from manip.codecs.error_string import ErrorMessage
 from manip.codecs.packet import Packet
 from manip.conformance.client.server import Listener, ServerSide, plain_answer, scenario_in_thread
@@ -352,14 +353,6 @@ def command_line(command: str, target: str, report: Path, extra: Sequence[str]) 
     raise ValueError(command)
 
 
-def _peak_rss_mb(pid: int) -> float:
-    with contextlib.suppress(OSError), open(f"/proc/{pid}/status") as f:
-        for line in f:
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1024
-    return 0.0
-
-
 def run_scenario(
     name: str,
     scenario: Scenario,
@@ -381,7 +374,7 @@ def run_scenario(
         proc = subprocess.Popen(args, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
         peak = 0.0
         while proc.poll() is None and time.monotonic() - started < timeout:
-            peak = max(peak, _peak_rss_mb(proc.pid))
+            peak = max(peak, peak_rss_mb(proc.pid))
             time.sleep(0.05)
         code: int | None = proc.poll()
         if code is None:

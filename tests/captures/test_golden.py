@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -17,6 +16,7 @@ from manip.captures.cli import main as capture_main
 from manip.decode.cli import main as decode_main
 from manip.spec import SPEC
 from tests.support.paths import ROOT
+from tests.support.tools import load_tool
 
 GOLDEN = ROOT / "captures"
 NAMES = ("describe-self", "motion", "errors")
@@ -89,10 +89,7 @@ def test_manip_decode_lists_a_capture() -> None:
 
 
 def test_generated_capture_docs_are_current() -> None:
-    spec = importlib.util.spec_from_file_location("gen_capture_docs", ROOT / "tools" / "gen_capture_docs.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_tool("gen_capture_docs")
     current = (ROOT / "docs" / "captures.md").read_text()
     assert current == module.render(), "run: python tools/gen_capture_docs.py"
 

@@ -6,7 +6,6 @@ skip, and the run says which length unit it assumed and which MUST clauses it co
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
@@ -19,6 +18,7 @@ from manip.conformance.fault_proof import GUIDE_RUN, guide_statuses
 from manip.conformance.suite.results import ExitCode
 from manip.spec import SPEC
 from tests.support.paths import ROOT
+from tests.support.tools import load_tool
 
 LINK_SPECIFIC = frozenset(
     {"server.link.chaosd-frames", "server.link.chudp-frames", "server.ncp.los-oversize"}
@@ -89,11 +89,7 @@ def test_the_guide_profile_gets_a_complete_and_honest_verdict(tmp_path: Path) ->
 
 
 def _generator():  # type: ignore[no-untyped-def]
-    spec = importlib.util.spec_from_file_location("gen_spec_docs", ROOT / "tools" / "gen_spec_docs.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_tool("gen_spec_docs")
 
 
 @pytest.mark.parametrize(

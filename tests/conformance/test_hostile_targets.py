@@ -6,25 +6,18 @@ machine runs them slower); what they catch is growth without end, a hang, or the
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from types import ModuleType
 
 import pytest
 
 from manip.conformance.judge.violation import MAX_EVIDENCE_BYTES, MAX_TEXT, Violation
-from tests.support.paths import ROOT
+from tests.support.tools import load_tool
 
 pytestmark = pytest.mark.waits  # real processes against a real server: mostly waiting
 
 
 def _tool() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("hostile_servers", ROOT / "tools" / "hostile_servers.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["hostile_servers"] = module  # its dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return load_tool("hostile_servers")
 
 
 HOSTILE = _tool()

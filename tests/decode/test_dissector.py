@@ -15,7 +15,6 @@ where a missing one is a failure: the dissector must never go untested there (th
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import re
@@ -32,6 +31,7 @@ from manip.captures.pcap import export_pcapng, iter_datagrams
 from manip.decode.cli import main as decode_main
 from tests.support.paths import ROOT
 from tests.support.programs import need_program
+from tests.support.tools import load_tool
 
 LUA = ROOT / "dissectors" / "manip.lua"
 GOLDEN = ("describe-self", "motion", "errors")
@@ -40,11 +40,7 @@ LUAS = ("lua5.4", "lua5.2")
 
 
 def _generator() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("gen_dissector", ROOT / "tools" / "gen_dissector.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_tool("gen_dissector")
 
 
 def test_generated_dissector_is_current() -> None:

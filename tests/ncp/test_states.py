@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 from types import ModuleType
 
 import pytest
@@ -19,14 +18,11 @@ from manip.ncp.states import (
     transition,
 )
 from tests.support.paths import ROOT
+from tests.support.tools import load_tool
 
 
 def _generator() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("gen_ncp_diagram", ROOT / "tools" / "gen_ncp_diagram.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_tool("gen_ncp_diagram")
 
 
 def test_generated_diagram_is_current() -> None:

@@ -4,7 +4,6 @@ of ``tools/damaged_files.py`` runs here in a short form; the long form is run by
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import struct
 import subprocess
@@ -24,17 +23,13 @@ from manip.conformance.cli import main as conform_main
 from manip.decode.cli import main as decode_main
 from manip.outfile import OutputError, atomic_output
 from tests.support.paths import ROOT
+from tests.support.tools import load_tool
 
 MOTION = ROOT / "captures" / "motion.mcap"
 
 
 def _tool() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("damaged_files", ROOT / "tools" / "damaged_files.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["damaged_files"] = module  # its dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return load_tool("damaged_files")
 
 
 DAMAGED = _tool()

@@ -6,9 +6,7 @@ on a loopback port."""
 from __future__ import annotations
 
 import asyncio
-import importlib.util
 import random
-import sys
 import time
 from types import ModuleType
 
@@ -18,18 +16,13 @@ from click.testing import CliRunner
 from manip.conformance.client.server import serve_scenario
 from manip.reference_client import ClientOptions, ConnectionLostError, ReplyTooLargeError, aconnect
 from manip.reference_client.cli import main as client_main
-from tests.support.paths import ROOT
+from tests.support.tools import load_tool
 
 pytestmark = pytest.mark.waits  # real sockets and the client's real close: mostly waiting
 
 
 def _tool() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("hostile_campaign", ROOT / "tools" / "hostile_campaign.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["hostile_campaign"] = module  # its dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return load_tool("hostile_campaign")
 
 
 HOSTILE = _tool()

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import re
 
 import pytest
@@ -10,16 +9,13 @@ import pytest
 from manip.spec import SPEC, SpecError, load_spec
 from manip.spec import loader as spec_loader
 from tests.support.paths import ROOT
+from tests.support.tools import load_tool
 
 SLUG = re.compile(r"^[a-z0-9]+(?:[.-][a-z0-9]+)*$")
 
 
 def _gen_module():  # type: ignore[no-untyped-def]
-    spec = importlib.util.spec_from_file_location("gen_constants", ROOT / "tools" / "gen_constants.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_tool("gen_constants")
 
 
 def test_generated_constants_are_current() -> None:
@@ -111,10 +107,7 @@ def test_inconsistent_data_is_rejected(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def test_generated_spec_docs_are_current() -> None:
-    spec = importlib.util.spec_from_file_location("gen_spec_docs", ROOT / "tools" / "gen_spec_docs.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_tool("gen_spec_docs")
     on_disk = (ROOT / "docs" / "spec.md").read_text()
     # the guide-only column comes from a whole run, which tests/conformance/test_guide_only.py checks
     assert on_disk == module.render(module.guide_column(on_disk)), "run: python tools/gen_spec_docs.py"
