@@ -37,11 +37,11 @@ from manip.conformance.suite.case import Case, CaseError, CaseFailure, Undeclare
 from manip.conformance.suite.context import CaseContext, RunOptions
 from manip.conformance.suite.invariants import COUGAR_LINK, INVARIANTS, TRANSCRIPT, attribution_problem
 from manip.conformance.suite.runner import RunConfig, Runner
-from manip.links import ChaosConnection
 from manip.reference_server.driver import serve
 from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
 from tests.support.clause_scan import Index, Scanner, scan_all
+from tests.support.contexts import bare_context
 
 CASES = all_cases()
 
@@ -297,19 +297,8 @@ def test_the_stateful_case_declares_every_clause_of_the_model() -> None:
 
 
 # ------------------------------------------------------------------------------- at run time
-async def _no_connection(retry_busy: bool) -> ChaosConnection:
-    raise AssertionError("the case connected")
-
-
 def _context(*clauses: str) -> CaseContext:
-    return CaseContext(
-        case_id="t.ctx",
-        level="MUST",
-        seed=1,
-        options=RunOptions(),
-        connector=_no_connection,
-        clauses=clauses,
-    )
+    return bare_context("t.ctx", *clauses)
 
 
 def test_expect_and_fail_refuse_an_undeclared_clause_even_when_it_holds() -> None:

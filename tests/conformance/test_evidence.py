@@ -16,27 +16,17 @@ from manip.conformance.judge.packets import WirePacket
 from manip.conformance.judge.violation import NEVER_CAME, Violation, evidence, missing, seen_packets, showing
 from manip.conformance.output.culprit import judged_indices, kept_indices
 from manip.conformance.suite.case import CaseFailure
-from manip.conformance.suite.context import Answer, CaseContext, Probe, RunOptions
-from manip.links import ChaosConnection, ConnectionClosed
+from manip.conformance.suite.context import Answer, CaseContext, Probe
+from manip.links import ConnectionClosed
 from manip.spec.constants import ServerOp
+from tests.support.contexts import bare_context
 
 HERE = 0o201
 CLAUSES = ("here.transform", "response.echoes-request-number", "error.fatal-then-close")
 
 
-async def _no_connection(retry_busy: bool) -> ChaosConnection:
-    raise AssertionError("the case connected")
-
-
 def _context() -> CaseContext:
-    return CaseContext(
-        case_id="t.evidence",
-        level="MUST",
-        seed=1,
-        options=RunOptions(),
-        connector=_no_connection,
-        clauses=CLAUSES,
-    )
+    return bare_context("t.evidence", *CLAUSES)
 
 
 def _answer(number: int, data: bytes, echo: int | None = None) -> Answer:
