@@ -125,7 +125,8 @@ def expect_names(
 
 
 def expect_none(ctx: CaseContext, replies: Sequence[WordReply], clause: str, why: str) -> None:
-    ctx.expect(not replies, clause=clause, expected=f"no response ({why})", seen=replies)
+    """No response came (``why`` says why none should)."""
+    ctx.expect_none(replies, clause=clause, expected=f"no response ({why})")
 
 
 async def expect_quiet(ctx: CaseContext, probe: CougarProbe, clause: str, why: str, ticks: int = 2) -> None:
