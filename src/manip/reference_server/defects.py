@@ -467,9 +467,6 @@ class SwitchedDefects(Defects):
             values = {**values, "transform": rows}
         if op.name == "solve-forwards" and self._on(Fault.SOLVE_FORWARDS_RADIANS):
             values = {**values, "joints": tuple(math.radians(q) for q in _floats_of(values["joints"]))}
-        extra = self._done_word(op)
-        if extra is not None:
-            return encode(op, values) + _word(extra)
         if self.faults.active & _FLOAT_FAULTS and fields and all(f.type.element == "float" for f in fields):
             return b"".join(self._float(float(x)) for f in fields for x in values[f.name])
         return self._relaid(op, encode(op, values))
@@ -477,8 +474,9 @@ class SwitchedDefects(Defects):
     def _relaid(self, op: RequestOpcode, data: bytes) -> bytes:
         """A reply's data after the request number as the layout faults lay it out."""
         form = op.response.form
-        if form == "done" and self._on(Fault.DONE_WITH_WORD):
-            return data + _word(0)
+        extra = self._done_word(op) if form == "done" else None
+        if extra is not None:
+            return data + _word(extra)
         if form == "segment" and self._on(Fault.MOTION_REPLY_DONE):
             return b""
         if form == "data" and self._on(Fault.DATA_LENGTH_WORD):
@@ -486,14 +484,15 @@ class SwitchedDefects(Defects):
         return data
 
     def _done_word(self, op: RequestOpcode) -> int | None:
-        """The word a done-word fault appends to ``op``'s empty done (None: nothing)."""
+        """The word a done-word fault appends to ``op``'s empty done: the op's own fault's, else
+        done-with-zero-word's 0 (None: nothing)."""
         if op.name == "calibrate" and self._on(Fault.CALIBRATE_REPLIES_MASK):
             return CALIBRATED_MASK
         if op.name == "kill-power" and self._on(Fault.KILL_POWER_REPLIES_STATE):
             return 0
         if op.name == "enable-power" and self._on(Fault.ENABLE_POWER_REPLIES_STATE):
             return 1
-        return None
+        return 0 if self._on(Fault.DONE_WITH_WORD) else None
 
     def _forces(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
         """Read forces' answer as the force faults bend it."""
