@@ -33,6 +33,7 @@ from manip.links import (
     NcpConfig,
     open_connection,
 )
+from manip.links.address import DEFAULT_SERVER_ADDR
 from manip.reference_server import FaultSet, ServerConfig
 from manip.reference_server.driver import BUSY_REASON, ReferenceServer, serve
 from manip.spec import SPEC
@@ -76,7 +77,10 @@ class Raw:
         options = NcpConfig(retransmit_interval=0.1, ack_delay=0.01, first_packet_no=first_packet_no)
         # Each client its own Chaos address: two clients on one address clash if their random
         # connection indices happen to be equal (the server then refuses the second one for that).
+        # Never the server's own: a packet from its own address is refused as laid out wrong.
         cls._me = cls._me + 1 if cls._me < 0o477 else 0o402
+        if cls._me == DEFAULT_SERVER_ADDR:
+            cls._me += 1
         sep = "&" if "?" in url else "?"
         conn = await open_connection(f"{url}{sep}me={cls._me:o}", options=options, timeout=5.0)
         packet = await asyncio.wait_for(conn.receive(), 5.0)
