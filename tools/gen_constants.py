@@ -18,7 +18,7 @@ DO NOT EDIT: regenerate with ``python tools/gen_constants.py``; a test checks th
 """
 
 from enum import IntEnum
-from typing import Literal
+from typing import Final, Literal
 '''
 
 
@@ -82,6 +82,39 @@ def _names(name: str, doc: str, names: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _opcode_sets(spec: Spec) -> str:
+    """Groups of server opcodes, from the flags of the spec data (one definition for every module)."""
+    carrying = {o for s in spec.severities.values() for o in s.server_opcodes}
+    groups = [
+        (
+            "ANSWER_OPS",
+            "Server opcodes that answer a request.",
+            [s for s in spec.server_opcodes.values() if s.answers],
+        ),
+        (
+            "ASYNC_OPS",
+            "Server opcodes sent unasked, between replies.",
+            [s for s in spec.server_opcodes.values() if s.asynchronous],
+        ),
+        (
+            "ERROR_STRING_OPS",
+            "Server opcodes whose data is a request number and an error string (the severities' opcodes).",
+            [s for s in spec.server_opcodes.values() if s.opcode in carrying],
+        ),
+        (
+            "ERROR_REPLY_OPS",
+            "Server opcodes that answer a request with an error string.",
+            [s for s in spec.server_opcodes.values() if s.answers and s.opcode in carrying],
+        ),
+    ]
+    out = ""
+    for name, doc, members in groups:
+        listed = "".join(f"        ServerOp.{_ident(s.name)},\n" for s in members)
+        out += f"\n\n{name}: Final[frozenset[ServerOp]] = frozenset(\n    {{\n{listed}    }}\n)\n"
+        out += f'"""{doc}"""\n'
+    return out
+
+
 def render() -> str:
     spec = load_spec()
     names = _names(
@@ -89,7 +122,7 @@ def render() -> str:
         "Every request opcode's name: a misspelt operation name is a type error.",
         [r.name for r in spec.requests.values()],
     )
-    return HEADER + "".join(_enum(*table) for table in _tables(spec)) + names
+    return HEADER + "".join(_enum(*table) for table in _tables(spec)) + names + _opcode_sets(spec)
 
 
 def main() -> int:

@@ -49,7 +49,7 @@ from manip.codecs.messages import (
 from manip.codecs.packet import Direction, Packet
 from manip.codecs.pairing import Placement, ReplyPairing
 from manip.spec import SPEC, RequestOpcode
-from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.constants import ANSWER_OPS, ChaosOp, ServerOp
 
 SEEN_KEPT: Final = 2048
 """Packet numbers remembered per direction for spotting retransmissions (a window is at most 15)."""
@@ -63,7 +63,7 @@ _ERROR_OPS: Final = frozenset(
         ServerOp.ASYNCHRONOUS_WARNING,
     }
 )
-_REPLY_OPS: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
+_REPLY_OPS: Final = ANSWER_OPS
 _TEXT_EVENTS: Final = {
     ChaosOp.CLS: "cls",
     ChaosOp.LOS: "los",

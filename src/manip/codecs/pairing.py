@@ -35,7 +35,7 @@ from typing import Final, Generic, Literal, TypeVar
 from manip.codecs.errors import DecodeError
 from manip.codecs.messages import decode_request
 from manip.spec import SPEC
-from manip.spec.constants import ServerOp
+from manip.spec.constants import ANSWER_OPS, ASYNC_OPS, ServerOp
 
 __all__ = ["ANSWER_OPCODES", "UNSOLICITED_OPCODES", "Placement", "ReplyPairing", "Role", "opens_multi"]
 
@@ -45,10 +45,8 @@ Role = Literal["answer", "async", "extra", "other"]
 """What a server packet is to the exchange: an answer to a request, an asynchronous packet, an answer
 to nothing (an extra), or an opcode that is neither (arm-specific or unknown)."""
 
-ANSWER_OPCODES: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
-UNSOLICITED_OPCODES: Final = frozenset(
-    {ServerOp.ASYNCHRONOUS_RESPONSE, ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING}
-)
+ANSWER_OPCODES: Final = ANSWER_OPS
+UNSOLICITED_OPCODES: Final = ASYNC_OPS
 _RESPONSE: Final = int(ServerOp.RESPONSE)
 _FATAL: Final = int(ServerOp.FATAL_ERROR)
 _MULTI_OPCODES: Final = frozenset(op.opcode for op in SPEC.requests.values() if op.response.form == "multi")

@@ -59,7 +59,7 @@ from manip.reference_server.errors import RequestError
 from manip.reference_server.faults import Fault, FaultSet
 from manip.reference_server.wrist import GuardHit, WristDefects
 from manip.spec import SPEC, Field, RequestName, RequestOpcode
-from manip.spec.constants import AsyncCondition, ChaosOp, ServerOp
+from manip.spec.constants import ASYNC_OPS, ERROR_STRING_OPS, AsyncCondition, ChaosOp, ServerOp
 
 if TYPE_CHECKING:
     from manip.reference_server.session import Outgoing, ServerSession
@@ -104,7 +104,7 @@ _FLOAT_FAULTS: Final = frozenset(
     {Fault.UNDERFLOW_DIRTY_ZERO, Fault.UNDERFLOW_CLAMPED, Fault.NOT_FINITE_RESERVED}
 )
 _SWAPPED_CODES: Final = {"TOR": "JOR", "JOR": "TOR"}
-_ASYNC_ERRORS: Final = frozenset({ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING})
+_ASYNC_ERRORS: Final = ASYNC_OPS & ERROR_STRING_OPS
 _ASYNC_OPS: Final = _ASYNC_ERRORS | {ServerOp.ASYNCHRONOUS_RESPONSE}
 WHERE_SERVER: Final = "PUMA"
 """What the where part of an error string starts with, before a colon, under ``where-with-colon``."""

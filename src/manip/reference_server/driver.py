@@ -84,7 +84,7 @@ from manip.reference_server.defects import arm_defects, chaos_defects, defects_f
 from manip.reference_server.session import Outgoing, Output, ServerConfig, ServerSession, State
 from manip.reference_server.wrist import Wrist
 from manip.spec import SPEC, RequestOpcode
-from manip.spec.constants import ServerOp
+from manip.spec.constants import ASYNC_OPS, ERROR_REPLY_OPS, ServerOp
 from manip.spec.notation import octal
 
 __all__ = [
@@ -112,10 +112,6 @@ DROP_LINK_DELAY: Final = 0.05
 """Seconds the fault fatal-drops-link lets the fatal error travel before it drops the link."""
 LATENESS_KEPT: Final = 1 << 16
 
-_ERROR_OPS: Final = frozenset({ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
-_ASYNC_OPS: Final = frozenset(
-    {ServerOp.ASYNCHRONOUS_RESPONSE, ServerOp.ASYNCHRONOUS_ERROR, ServerOp.ASYNCHRONOUS_WARNING}
-)
 _COMMAND_ERROR: Final = "C"
 """Severity of a request the server could not understand (bad input)."""
 
@@ -427,12 +423,12 @@ class ReferenceServer:
         for packet in output.packets:
             opcode = packet.opcode
             out.append((opcode, packet.data))
-            if opcode in _ASYNC_OPS:
+            if opcode in ASYNC_OPS:
                 stats.async_packets += 1
                 continue
             if answer is None:
                 answer = packet
-            if opcode in _ERROR_OPS:
+            if opcode in ERROR_REPLY_OPS:
                 stats.errors += 1
                 if opcode == ServerOp.FATAL_ERROR:
                     stats.fatal += 1
@@ -569,7 +565,7 @@ def _error(packet: Outgoing) -> ErrorMessage | None:
 
 def _outcome(op: RequestOpcode | None, answer: Outgoing, output: Output) -> str:
     """How a request was answered, for the log."""
-    if answer.opcode in _ERROR_OPS:
+    if answer.opcode in ERROR_REPLY_OPS:
         kind = "FATAL" if answer.opcode == ServerOp.FATAL_ERROR else "error"
         error = _error(answer)
         return f"{kind} {error.render() if error is not None else '(undecodable error string)'}"

@@ -4,7 +4,7 @@ DO NOT EDIT: regenerate with ``python tools/gen_constants.py``; a test checks th
 """
 
 from enum import IntEnum
-from typing import Literal
+from typing import Final, Literal
 
 
 class ChaosOp(IntEnum):
@@ -164,3 +164,43 @@ RequestName = Literal[
     "set-commanded-force",
 ]
 """Every request opcode's name: a misspelt operation name is a type error."""
+
+
+ANSWER_OPS: Final[frozenset[ServerOp]] = frozenset(
+    {
+        ServerOp.RESPONSE,
+        ServerOp.FATAL_ERROR,
+        ServerOp.NON_FATAL_ERROR,
+    }
+)
+"""Server opcodes that answer a request."""
+
+
+ASYNC_OPS: Final[frozenset[ServerOp]] = frozenset(
+    {
+        ServerOp.ASYNCHRONOUS_RESPONSE,
+        ServerOp.ASYNCHRONOUS_ERROR,
+        ServerOp.ASYNCHRONOUS_WARNING,
+    }
+)
+"""Server opcodes sent unasked, between replies."""
+
+
+ERROR_STRING_OPS: Final[frozenset[ServerOp]] = frozenset(
+    {
+        ServerOp.FATAL_ERROR,
+        ServerOp.NON_FATAL_ERROR,
+        ServerOp.ASYNCHRONOUS_ERROR,
+        ServerOp.ASYNCHRONOUS_WARNING,
+    }
+)
+"""Server opcodes whose data is a request number and an error string (the severities' opcodes)."""
+
+
+ERROR_REPLY_OPS: Final[frozenset[ServerOp]] = frozenset(
+    {
+        ServerOp.FATAL_ERROR,
+        ServerOp.NON_FATAL_ERROR,
+    }
+)
+"""Server opcodes that answer a request with an error string."""

@@ -150,6 +150,10 @@ class ServerOpcode:
     generic_code: int
     body: str
     generic_name: str | None = None
+    answers: bool = False
+    """It answers a request (a reply, or the fatal error that ends the connection)."""
+    asynchronous: bool = False
+    """It is sent unasked, between replies."""
 
 
 @dataclass(frozen=True, slots=True)

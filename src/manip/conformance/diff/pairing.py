@@ -44,7 +44,7 @@ from manip.codecs.pdp11float import unpack_f
 from manip.conformance.fuzz.batch import BatchRun
 from manip.conformance.fuzz.session import Inbox
 from manip.spec import SPEC
-from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.constants import ANSWER_OPS, ERROR_STRING_OPS, ChaosOp, ServerOp
 
 __all__ = ["FLOAT_TOLERANCE", "Difference", "SideEvent", "compare", "events_of"]
 
@@ -52,8 +52,8 @@ FLOAT_TOLERANCE: Final = 1e-5
 """Relative difference under which two floats are the same value (a PDP-11 F float has 24 bits)."""
 INCH: Final = 25.4
 SideEventKind = Literal["packet", "end", "stray", "stream"]
-_ERRORS: Final = frozenset({ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR, ServerOp.ASYNCHRONOUS_ERROR})
-_ANSWERS: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
+_ERRORS: Final = ERROR_STRING_OPS
+_ANSWERS: Final = ANSWER_OPS
 _ENDS: Final = {ChaosOp.CLS: "CLS", ChaosOp.LOS: "LOS", ChaosOp.EOF: "EOF"}
 
 

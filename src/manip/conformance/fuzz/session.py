@@ -48,7 +48,7 @@ from manip.conformance.suite.rawchaos import KEPT_BAD, MAX_RECEIVED, RawLink, Re
 from manip.ncp.packets import is_data, pack_status, text, unpack_status
 from manip.ncp.seq import seq_add, seq_gt, seq_le, seq_sub
 from manip.spec import SPEC
-from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.constants import ANSWER_OPS, ChaosOp, ServerOp
 from manip.spec.notation import octal
 
 __all__ = ["Allowance", "FuzzConnection", "Inbox", "Receiver"]
@@ -63,7 +63,7 @@ SETTLE_CAP: Final = 5
 """A wait for answers ends after this many answer budgets even while answers keep coming."""
 _FREE_JOINT: Final = SPEC.request("free-joint").opcode
 _SET_SPEED: Final = SPEC.request("set-speed").opcode
-_ANSWERS: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
+_ANSWERS: Final = ANSWER_OPS
 
 
 class Receiver(Protocol):

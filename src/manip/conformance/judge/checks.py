@@ -39,7 +39,7 @@ from manip.conformance.judge.diagnosis import float_payload, floats_diagnosis, n
 from manip.conformance.judge.packets import CLOSE_OPCODES, Direction, WirePacket, describe, opcode_name, word
 from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC, RequestOpcode
-from manip.spec.constants import AsyncCondition, ServerOp
+from manip.spec.constants import ERROR_REPLY_OPS, AsyncCondition, ServerOp
 from manip.spec.notation import a_or_an, octal
 
 __all__ = [
@@ -468,7 +468,7 @@ def check_reply(request: WirePacket, answer: Sequence[WirePacket]) -> list[Viola
         ]
     out += check_echo(request, first)
     refusal = required_refusal(request.opcode, request.data)
-    if first.opcode in (ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):
+    if first.opcode in ERROR_REPLY_OPS:
         out += check_error_packet(first)
         if refusal is not None:
             out += _check_refusal(refusal, first)
@@ -583,7 +583,7 @@ def _check_multi(op: RequestOpcode, request: WirePacket, answer: Sequence[WirePa
             break
         texts += 1
     last = answer[-1]
-    if last.opcode in (ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):  # it cut the reply short
+    if last.opcode in ERROR_REPLY_OPS:  # it cut the reply short
         out += check_echo(request, last) + check_error_packet(last)
     if not terminated:
         out.append(

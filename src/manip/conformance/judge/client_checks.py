@@ -14,7 +14,7 @@ from manip.conformance.judge.checks import async_of, required_refusal
 from manip.conformance.judge.packets import WirePacket, word
 from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC
-from manip.spec.constants import AsyncCondition, ChaosOp, ServerOp
+from manip.spec.constants import ERROR_REPLY_OPS, AsyncCondition, ChaosOp, ServerOp
 from manip.spec.model import Layout
 from manip.spec.notation import octal
 
@@ -133,7 +133,7 @@ def _server_frees(packet: WirePacket, armed: dict[int, WirePacket]) -> None:
     hit = async_of(packet) if packet.opcode == ServerOp.ASYNCHRONOUS_RESPONSE else None
     if hit is not None and hit.condition == AsyncCondition.GUARD_HIT:
         armed.pop(hit.word3 & 0xF, None)
-    elif packet.opcode in (ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):
+    elif packet.opcode in ERROR_REPLY_OPS:
         number = word(packet.data, 0)
         for index, request in list(armed.items()):
             if request.packet_no == number:

@@ -49,7 +49,7 @@ from manip.codecs.messages import ASYNC_SIZES, decode_async, decode_error, decod
 from manip.conformance.judge.checks import WirePacket, describe, multi_text, parse_description, word
 from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC
-from manip.spec.constants import AsyncCondition, ServerOp
+from manip.spec.constants import ERROR_REPLY_OPS, AsyncCondition, ServerOp
 from manip.spec.notation import octal
 
 __all__ = [
@@ -293,7 +293,7 @@ def compare_answer(
             c.add("data.length", len(first.data), len(live[0].data), number_clause)
         return c.out
     _number(c, "request_number", first, live[0], numbers)
-    if first.opcode in (ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR):
+    if first.opcode in ERROR_REPLY_OPS:
         c.out += _compare_error(first, live[0])
         return c.out
     op = SPEC.requests.get(request_opcode)

@@ -93,7 +93,7 @@ from manip.links import ChaosConnection, ChaosError, ConnectionClosed, Connectio
 from manip.links.api import LinkWrapper
 from manip.reference_client.options import DEFAULT_MAX_REPLY_BYTES
 from manip.spec import SPEC, RequestName
-from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.constants import ERROR_REPLY_OPS, ChaosOp, ServerOp
 from manip.spec.model import Hazard, Level
 from manip.spec.notation import octal
 
@@ -222,7 +222,7 @@ class Answer:
 
     @property
     def is_error(self) -> bool:
-        return self.opcode in (ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR)
+        return self.opcode in ERROR_REPLY_OPS
 
     @property
     def all_data(self) -> bytes:

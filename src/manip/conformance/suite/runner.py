@@ -67,7 +67,7 @@ from manip.conformance.suite.world import CaseNotJudged, ConditionUnsupported, W
 from manip.links import ChaosConnection, open_connection
 from manip.links.api import LinkWrapper
 from manip.links.base import Link, LinkStats
-from manip.spec.constants import ServerOp
+from manip.spec.constants import ANSWER_OPS, ServerOp
 from manip.spec.notation import octal
 
 __all__ = [
@@ -325,7 +325,7 @@ class Runner:
             if packet is None:
                 reason = probe.end_reason or f"no answer within {timeout:g} s"
                 return False, f"request #{number} sent, {reason}", False
-            if packet.opcode in (ServerOp.RESPONSE, ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR):
+            if packet.opcode in ANSWER_OPS:
                 if (
                     probe.initial is None
                     and len(packet.data) == 2

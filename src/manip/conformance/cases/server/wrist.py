@@ -17,7 +17,7 @@ from manip.conformance.judge.checks import WirePacket, word
 from manip.conformance.suite.case import case
 from manip.conformance.suite.context import CaseContext, Probe
 from manip.conformance.suite.world import SilentWrist, WristForce
-from manip.spec.constants import ServerOp
+from manip.spec.constants import ANSWER_OPS, ServerOp
 
 WEIGHT_OZ: Final = 64.0
 """The object set weight tells Cougar of, which the hand does not hold (ounces)."""
@@ -36,7 +36,7 @@ STEADY_TOL: Final = 0.5
 GIVE_UP_S: Final = 5.0
 """How long the case waits for the answers: the erratum's wrist timeout is 0.5 s, and the 1985 guide's
 'reasonable amount of time' is taken to be well within ten times that."""
-_ANSWERS: Final = frozenset({ServerOp.RESPONSE, ServerOp.FATAL_ERROR, ServerOp.NON_FATAL_ERROR})
+_ANSWERS: Final = ANSWER_OPS
 
 
 @case(
