@@ -285,13 +285,7 @@ async def move_queue_first(ctx: CaseContext) -> None:
     """While a plain move runs the move process sends the sensed angles (SEN) every servo cycle; user
     settings sent then, one a cycle, go to Cougar after them within each tick: the move process's queue
     ahead of the user's (erratum wrist-move-queue)."""
-    probe = await session(ctx)
-    here = await angles(ctx, probe)
-    judge, mark = begin(ctx)
-    goal = list(here)
-    goal[0] += AT_ONCE_MOVE_DEG if here[0] <= 0 else -AT_ONCE_MOVE_DEG
-    segment = await move(ctx, probe, "set-joint-angles", joints=goal)
-    await judge.wait_ticks(2, SEGMENT_WITHIN)
+    probe, here, (judge, mark), segment = await _long_move(ctx)
     await _user_commands_each_tick(ctx, probe, judge)
     await wait_async(ctx, probe, is_completed(segment), 2 * SEGMENT_WITHIN)
     met = sum({MOVE_QUEUE, USER_QUEUE} <= places for places in _expect_priority(ctx, judge.since(mark)))
@@ -310,6 +304,19 @@ AT_ONCE_MOVE_DEG: Final = 30.0
 """How far joint 1 moves while the configuration request is sent: many servo cycles."""
 AT_ONCE_TICKS: Final = 3
 """Servo cycles within which a configuration request's command reaches Cougar."""
+
+
+async def _long_move(ctx: CaseContext) -> tuple[Probe, tuple[float, ...], tuple[JudgingCougar, int], int]:
+    """A session, where the arm stands, the judge (and its mark), and a plain move of joint 1 by
+    :data:`AT_ONCE_MOVE_DEG` (away from the obstacle's side) two servo cycles under way: its segment."""
+    probe = await session(ctx)
+    here = await angles(ctx, probe)
+    judge, mark = begin(ctx)
+    goal = list(here)
+    goal[0] += AT_ONCE_MOVE_DEG if here[0] <= 0 else -AT_ONCE_MOVE_DEG
+    segment = await move(ctx, probe, "set-joint-angles", joints=goal)
+    await judge.wait_ticks(2, SEGMENT_WITHIN)
+    return probe, here, (judge, mark), segment
 
 
 def _first_after(heard: Sequence[Heard], code: int, tick: int) -> Heard | None:
@@ -331,13 +338,7 @@ async def config_at_once(ctx: CaseContext) -> None:
     """Set weight sent while a long move runs is answered done and reaches Cougar (NEWWC) within a few
     servo cycles, before the move ends: not held for the queued segments (erratum
     wrist-config-immediate)."""
-    probe = await session(ctx)
-    here = await angles(ctx, probe)
-    judge, mark = begin(ctx)
-    goal = list(here)
-    goal[0] += AT_ONCE_MOVE_DEG if here[0] <= 0 else -AT_ONCE_MOVE_DEG
-    segment = await move(ctx, probe, "set-joint-angles", joints=goal)
-    await judge.wait_ticks(2, SEGMENT_WITHIN)
+    probe, _, (judge, mark), segment = await _long_move(ctx)
     asked = judge.ticks
     weight = round(ctx.random.uniform(1.0, 20.0), 3)
     answer = await probe.call("set-weight", weight=weight, cg=[0.0] * 3)
