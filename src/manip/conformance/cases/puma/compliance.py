@@ -186,9 +186,9 @@ def _expect_adjusted_path(
         if ntd[j] == 0.0 and abs(off) > PATH_TOL
     ]
     outside = [f for f in fractions if not -PATH_TOL <= f <= 1.0 + PATH_TOL]
+    k, j = astray[0] if astray else (0, 0)
     seen = (
-        f"cycle {astray[0][0]}: joint {astray[0][1] + 1} {offsets[astray[0][0]][astray[0][1]]:+.4f} deg off, "
-        f"sensed {fmt(sensed[astray[0][0]])}"
+        f"cycle {k + 1}: joint {j + 1} {offsets[k][j]:+.4f} deg off, sensed {fmt(sensed[k])}"
         if astray
         else f"fractions {outside[:3]}"
     )
