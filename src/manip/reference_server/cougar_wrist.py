@@ -217,6 +217,8 @@ class _Episode:
     last_t: float
     prev_sensed: Joints
     prev_nominal: Joints
+    start: Joints
+    """Where the arm stood when the episode began."""
     offset: list[float] = field(default_factory=lambda: [0.0] * 6)
 
 
@@ -361,10 +363,13 @@ class CougarWrist:
         h = arm.tick_period if arm is not None else 0.016
         scheme = (arm.current_scheme if arm is not None else None) or Scheme.COMPLIANT_MOTION
         ep = self._episode
+        follows = self.defects.compliant_follows_nominal
         if ep is None or t - ep.last_t > 1.5 * h:
-            ep = self._episode = _Episode(t - h, actual, nominal)
+            ep = self._episode = _Episode(t - h, actual, nominal if follows else actual, actual)
             self._reset = True
             self.ntd = None
+        if not follows:
+            nominal = ep.start  # a defect: the segment's nominal path left out
         dt = t - ep.last_t
         rate = tuple(
             ((s - ps) - (n - pn)) / dt
@@ -473,12 +478,15 @@ class CougarWrist:
         if arm.actual != self._sen_sent:
             self._interrupt.append(encode("command", CougarCommand.SEN, theta_sensed=arm.actual))
             self._sen_sent = arm.actual
+        move: list[int] = []
         while self._interrupt:
-            words += self._interrupt.popleft()
+            move += self._interrupt.popleft()
             self.stats.commands += 1
+        user: list[int] = []
         while self._user and not held:
-            words += self._user.popleft()
+            user += self._user.popleft()
             self.stats.commands += 1
+        words += move + user if defects.move_queue_before_user else user + move
         if words:
             self.port.send(words)
 

@@ -726,6 +726,8 @@ def _wrist_defects(faults: FaultSet) -> WristDefects:
         user_while_compliant=Fault.WRIST_USER_HELD_COMPLIANT not in on,
         handles_out_of_sync=Fault.OUT_OF_SYNC_IGNORED not in on,
         clears_old_guards=Fault.GUARDS_OUTLIVE_CONNECTION not in on,
+        compliant_follows_nominal=Fault.COMPLIANT_NOMINAL_IGNORED not in on,
+        move_queue_before_user=Fault.WRIST_USER_BEFORE_MOVE_QUEUE not in on,
     )
 
 

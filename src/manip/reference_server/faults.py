@@ -568,6 +568,20 @@ class Fault(FaultSwitch):
         "puma.wrist.connection-state",
         caught_by=("puma.wrist.connection-state",),
     )
+    COMPLIANT_NOMINAL_IGNORED = defect(
+        "compliant-nominal-ignored",
+        "A compliant segment leaves out its nominal path: the arm stays where the segment began, moved only "
+        "by Cougar's New Theta Dot corrections, and rests there when the segment ends.",
+        "puma.compliance.nominal-path",
+        caught_by=("puma.compliance.nominal-path",),
+    )
+    WRIST_USER_BEFORE_MOVE_QUEUE = defect(
+        "wrist-user-before-move-queue",
+        "The wrist output process sends the user's commands before the move process's wrist packets (the "
+        "sensed angles it queues while the arm moves); New Position and Rate and Reset still go first.",
+        "puma.wrist.priority",
+        caught_by=("puma.wrist.move-queue-first",),
+    )
     JOINT_MOVES_STRAIGHT = defect(
         "joint-moves-straight",
         "Move and incremental move (204, 211) go along a straight line, interpolated in Cartesian space: "

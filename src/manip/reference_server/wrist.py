@@ -147,6 +147,11 @@ class WristDefects:
     """Cougar's out-of-sync message fails the waiting requests at once and is reported as a warning."""
     clears_old_guards: bool = True
     """A new connection starts with no guard armed: those an earlier one left are cleared on Cougar."""
+    compliant_follows_nominal: bool = True
+    """A compliant segment follows its nominal path (False: the arm stays where the segment began, moved
+    only by Cougar's corrections)."""
+    move_queue_before_user: bool = True
+    """The move process's wrist packets (the interrupt queue) go out before the user's commands."""
 
 
 class Wrist(Protocol):

@@ -132,11 +132,14 @@ PROCESS_FAULTS = (
     Fault.WRIST_USER_HELD_COMPLIANT,
     Fault.OUT_OF_SYNC_IGNORED,
     Fault.GUARDS_OUTLIVE_CONNECTION,
+    Fault.COMPLIANT_NOMINAL_IGNORED,
+    Fault.WRIST_USER_BEFORE_MOVE_QUEUE,
 )
 """The Puma's wrist defects found from outside (a setting held back while the arm moves, the user's
 requests held during a compliant segment, Cougar's out-of-sync message dropped, guards left armed for
-the next connection), each caught through a manip-server process with its world, as the suite judges a
-Puma at HOST."""
+the next connection, a compliant segment off its nominal path, the user's commands ahead of the move
+process's), each caught through a manip-server process with its world, as the suite judges a Puma at
+HOST."""
 
 
 def _catching(fault: Fault | None) -> set[str]:

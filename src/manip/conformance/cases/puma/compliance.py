@@ -15,6 +15,7 @@ from manip.conformance.cases.puma._support import (
     angles,
     begin,
     close,
+    f_float,
     fmt,
     is_async_error,
     is_completed,
@@ -44,12 +45,16 @@ def _npr(judge: JudgingCougar, mark: int) -> list[Heard]:
     return judge.commands(mark, CougarCommand.NPR)
 
 
-def _joint6(h: Heard, name: str) -> float:
+def _angles_of(h: Heard, name: str) -> tuple[float, ...]:
     msg = h.msg
     assert msg is not None
     values = msg.values[name]
     assert isinstance(values, tuple)
-    return float(values[5])
+    return tuple(float(v) for v in values)
+
+
+def _joint6(h: Heard, name: str) -> float:
+    return _angles_of(h, name)[5]
 
 
 def _ntd_before(said: Sequence[Said], tick: int) -> int:
@@ -122,6 +127,131 @@ async def npr_every_cycle(ctx: CaseContext) -> None:
             seen=f"{offset:.4f} deg ({sent} NTD sent before that tick; {len(said)} in all)",
         )
     ctx.note(f"{len(npr)} NPR on ticks {ticks[0]}..{ticks[-1]}")
+
+
+NOMINAL_WAY: Final = (0.0, 0.0, 0.0, 8.0, 0.0, 12.0)
+"""Degrees each joint goes in ``puma.compliance.nominal-path``: joint 4, which Cougar never corrects,
+gives the nominal path's fraction; joint 6 is the one corrected."""
+REFERENCE_JOINT: Final = 3
+"""Joint 4 (0-based): moving, and never corrected."""
+PATH_TOL: Final = 0.01
+"""Degrees a joint may stand off the line the nominal fraction gives (F floats of angles near 180
+degrees carry about 1e-5)."""
+STEP_TOL: Final = 1e-3
+"""Degrees a cycle's correction may differ from NTD x T (or from none, before the first NTD)."""
+
+
+def _fraction(sensed: Sequence[float], start: Sequence[float], goal: Sequence[float]) -> float:
+    j = REFERENCE_JOINT
+    return (sensed[j] - start[j]) / (goal[j] - start[j])
+
+
+def _off_path(sensed: Sequence[float], start: Sequence[float], goal: Sequence[float]) -> list[float]:
+    """How far each joint stands off the linear path at the fraction the reference joint gives."""
+    f = _fraction(sensed, start, goal)
+    return [s - (a + f * (b - a)) for s, a, b in zip(sensed, start, goal, strict=True)]
+
+
+def _steps_wrong(offsets: Sequence[float], rate: float, first_by: int) -> str:
+    """What is wrong with a corrected joint's offsets, one per cycle ('' if nothing): from one cycle to
+    the next it moves by none before the first NTD arrives and by ``rate`` x T on every cycle from then,
+    which is at the latest the ``first_by``-th."""
+    steps = [b - a for a, b in itertools.pairwise(offsets)]
+    first = next((i for i, d in enumerate(steps) if abs(d) > STEP_TOL), len(steps))
+    want = rate * TICK
+    wrong = [i for i, d in enumerate(steps) if abs(d - (want if i >= first else 0.0)) > STEP_TOL]
+    if wrong:
+        i = wrong[0]
+        return f"cycle {i + 1} moved it {steps[i]:+.4f} deg (want {want if i >= first else 0.0:+.4f})"
+    if first > first_by:
+        return f"no correction before cycle {first + 1} (want one by cycle {first_by + 1})"
+    return ""
+
+
+def _expect_adjusted_path(
+    ctx: CaseContext,
+    sensed: Sequence[Sequence[float]],
+    start: Sequence[float],
+    goal: Sequence[float],
+    ntd: Sequence[float],
+) -> None:
+    """The sensed angles of each cycle: on the linear path from ``start`` to ``goal`` (at the reference
+    joint's fraction), but for the joints ``ntd`` corrects, which leave it by NTD x T a cycle."""
+    offsets = [_off_path(s, start, goal) for s in sensed]
+    fractions = [_fraction(s, start, goal) for s in sensed]
+    astray = [
+        (k, j)
+        for k, row in enumerate(offsets)
+        for j, off in enumerate(row)
+        if ntd[j] == 0.0 and abs(off) > PATH_TOL
+    ]
+    outside = [f for f in fractions if not -PATH_TOL <= f <= 1.0 + PATH_TOL]
+    k, j = astray[0] if astray else (0, 0)
+    seen = (
+        f"cycle {k + 1}: joint {j + 1} {offsets[k][j]:+.4f} deg off, sensed {fmt(sensed[k])}"
+        if astray
+        else f"fractions {outside[:3]}"
+    )
+    ctx.expect(
+        bool(sensed) and not astray and not outside,
+        clause="puma.compliance.nominal-path",
+        expected=f"every cycle's sensed angles on the line {fmt(start)} -> {fmt(goal)} (within {PATH_TOL:g} "
+        f"deg, at joint {REFERENCE_JOINT + 1}'s fraction, between 0 and 1) but for the joints NTD corrects",
+        seen=seen if sensed else missing("no New Position and Rate"),
+    )
+    # NTD's first reply comes on the tick after the first NPR: the second cycle may use it, and the sensed
+    # angles of a cycle are the command of the one before.
+    first_by = 1 + LATENCY_TICKS if is_virtual() else max(1 + LATENCY_TICKS, len(sensed) // 2)
+    for j, rate in enumerate(ntd):
+        if rate == 0.0:
+            continue
+        wrong = _steps_wrong([row[j] for row in offsets], rate, first_by)
+        ctx.expect(
+            len(sensed) > first_by + 1 and not wrong,
+            clause="puma.compliance.nominal-path",
+            expected=f"joint {j + 1} leaving the nominal path by {rate:g} deg/s x {TICK} s on every cycle "
+            f"from the first NTD (by cycle {first_by + 1})",
+            seen=f"{len(sensed)} cycles; {wrong}",
+        )
+
+
+@case(
+    "puma.compliance.nominal-path",
+    clauses=["puma.compliance.nominal-path"],
+    hazard="motion",
+    deadline=50.0,
+)
+async def nominal_path(ctx: CaseContext) -> None:
+    """A compliant move with Cougar sending a zero New Theta Dot follows the linear scheme's path (the
+    joints at one fraction of their ways) to its goal; the move back, with Cougar asking joint 6 for
+    NTD_RATE deg/s, leaves joint 6 off that path by NTD_RATE x T more each cycle and joint 4 on it
+    (erratum compliant-nominal-path)."""
+    probe = await session(ctx)
+    here = await angles(ctx, probe)
+    away = tuple(f_float(h + d) for h, d in zip(here, NOMINAL_WAY, strict=True))
+    legs = (((0.0,) * 6, here, away), ((0.0,) * 5 + (NTD_RATE,), away, here))
+    for ntd, start, goal in legs:
+        judge, mark = begin(ctx, CougarScript(ntd=ntd))
+        segment = await move(ctx, probe, "compliant-move", joints=list(goal), scheme=0)
+        if await wait_async(ctx, probe, is_completed(segment), SEGMENT_WITHIN) is None:
+            ctx.not_judged(
+                f"the compliant segment {segment} was not reported complete within {SEGMENT_WITHIN:g} s "
+                "(puma.compliance.segment-end judges that)"
+            )
+        sensed = [_angles_of(h, "theta_sensed") for h in _npr(judge, mark)]
+        _expect_adjusted_path(ctx, sensed, start, goal, ntd)
+        if any(ntd):
+            break
+        rest = await angles(ctx, probe)
+        if not ctx.expect(
+            close(rest, goal, PATH_TOL),
+            clause="puma.compliance.nominal-path",
+            expected=f"with no correction the compliant segment ending at its goal {fmt(goal)}",
+            seen=f"joint angles {fmt(rest)}",
+        ):
+            break
+    back = await move(ctx, probe, "set-joint-angles", joints=list(here))
+    await wait_async(ctx, probe, is_completed(back), SEGMENT_WITHIN)
 
 
 @case(

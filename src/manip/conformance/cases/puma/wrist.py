@@ -22,9 +22,9 @@ from manip.conformance.cases.puma._support import (
     wait_async,
 )
 from manip.conformance.judge.violation import missing
-from manip.conformance.puma.judge import SENSED, CougarScript, Heard
+from manip.conformance.puma.judge import SENSED, CougarScript, Heard, JudgingCougar
 from manip.conformance.suite.case import case
-from manip.conformance.suite.context import CaseContext
+from manip.conformance.suite.context import CaseContext, Probe
 from manip.spec import SPEC, RequestName
 from manip.spec.constants import CougarCommand, ServerOp
 
@@ -215,9 +215,51 @@ async def waits(ctx: CaseContext) -> None:
 
 
 # ------------------------------------------------------------------------------ priority
-_RANK: Final[Mapping[int, int]] = {CougarCommand.NPR: 0, CougarCommand.RST: 1}
+_RANK: Final[Mapping[int, int]] = {CougarCommand.NPR: 0, CougarCommand.RST: 1, CougarCommand.SEN: 2}
+"""Each command's place within a tick: New Position and Rate, Reset Wrist, the move process's packets
+(the sensed angles it queues while the arm moves, erratum wrist-move-queue), then the user's (3)."""
+MOVE_QUEUE: Final = 2
+USER_QUEUE: Final = 3
 PRIORITY_MOVE_DEG: Final = 12.0
 USER_COMMANDS: Final = 6
+
+
+def _ranks(items: Sequence[Heard]) -> list[int]:
+    """The place of each command of one tick; a tick that reads forces has its SEN ranked as the user's
+    (§6.3's SEN before Report Forces is the user request's own, on either queue)."""
+    reading = any(h.code == CougarCommand.RFRC for h in items)
+    out = []
+    for h in items:
+        rank = _RANK.get(h.code if h.code is not None else -1, USER_QUEUE)
+        out.append(USER_QUEUE if reading and rank == MOVE_QUEUE else rank)
+    return out
+
+
+def _expect_priority(ctx: CaseContext, heard: Sequence[Heard]) -> list[set[int]]:
+    """Each tick's commands in the order of priority; the places each tick carried."""
+    by_tick: dict[int, list[Heard]] = {}
+    for h in heard:
+        by_tick.setdefault(h.tick, []).append(h)
+    carried = []
+    for tick, items in sorted(by_tick.items()):
+        ranks = _ranks(items)
+        carried.append(set(ranks))
+        ctx.expect(
+            ranks == sorted(ranks),
+            clause="puma.wrist.priority",
+            expected="New Position and Rate, then Reset Wrist, then the move process's packets (SEN), then "
+            "the user's commands, within a tick",
+            seen=f"tick {tick}: " + ", ".join(h.msg.name if h.msg else "?" for h in items),
+        )
+    return carried
+
+
+async def _user_commands_each_tick(ctx: CaseContext, probe: Probe, judge: JudgingCougar) -> None:
+    """A user setting (set commanded force, zero) sent on each of :data:`USER_COMMANDS` servo ticks."""
+    for _ in range(USER_COMMANDS):
+        answer = await probe.call("set-commanded-force", force=[0.0] * 6)
+        require_response(ctx, answer, "set commanded force answered done")
+        await judge.wait_ticks(1, SEGMENT_WITHIN)
 
 
 @case("puma.wrist.priority", clauses=["puma.wrist.priority"], hazard="motion", deadline=40.0)
@@ -230,27 +272,31 @@ async def priority(ctx: CaseContext) -> None:
     goal = [*here[:5], here[5] + PRIORITY_MOVE_DEG]
     segment = await move(ctx, probe, "compliant-move", joints=goal, scheme=0)
     await judge.wait_for(lambda: bool(judge.commands(mark, CougarCommand.NPR)), SEGMENT_WITHIN)
-    for _ in range(USER_COMMANDS):
-        answer = await probe.call("set-commanded-force", force=[0.0] * 6)
-        require_response(ctx, answer, "set commanded force answered done")
-        await judge.wait_ticks(1, SEGMENT_WITHIN)
+    await _user_commands_each_tick(ctx, probe, judge)
     await wait_async(ctx, probe, is_completed(segment), SEGMENT_WITHIN)
-    by_tick: dict[int, list[Heard]] = {}
-    for h in judge.since(mark):
-        by_tick.setdefault(h.tick, []).append(h)
-    mixed = 0
-    for tick, items in sorted(by_tick.items()):
-        ranks = [_RANK.get(h.code if h.code is not None else -1, 2) for h in items]
-        mixed += len(set(ranks)) > 1
-        ctx.expect(
-            ranks == sorted(ranks),
-            clause="puma.wrist.priority",
-            expected="New Position and Rate, then Reset Wrist, then other commands, within a tick",
-            seen=f"tick {tick}: " + ", ".join(h.msg.name if h.msg else "?" for h in items),
-        )
+    mixed = sum(len(places) > 1 for places in _expect_priority(ctx, judge.since(mark)))
     if not mixed:
         ctx.skip("no tick carried New Position and Rate or Reset Wrist together with another command")
     ctx.note(f"{mixed} ticks carried commands of two priorities")
+
+
+@case("puma.wrist.move-queue-first", clauses=["puma.wrist.priority"], hazard="motion", deadline=40.0)
+async def move_queue_first(ctx: CaseContext) -> None:
+    """While a plain move runs the move process sends the sensed angles (SEN) every servo cycle; user
+    settings sent then, one a cycle, go to Cougar after them within each tick: the move process's queue
+    ahead of the user's (erratum wrist-move-queue)."""
+    probe, here, (judge, mark), segment = await _long_move(ctx)
+    await _user_commands_each_tick(ctx, probe, judge)
+    await wait_async(ctx, probe, is_completed(segment), 2 * SEGMENT_WITHIN)
+    met = sum({MOVE_QUEUE, USER_QUEUE} <= places for places in _expect_priority(ctx, judge.since(mark)))
+    await probe.call("set-joint-angles", joints=list(here))
+    if not met:
+        ctx.not_judged(
+            "no servo tick carried the move process's sensed angles (SEN) together with a user command: "
+            "the Puma sends no SEN while the arm moves, so its two queues never met (erratum "
+            "wrist-move-queue)"
+        )
+    ctx.note(f"{met} ticks carried the move process's SEN and a user command")
 
 
 # ------------------------------------------------------------------------------ at once, during compliance
@@ -258,6 +304,19 @@ AT_ONCE_MOVE_DEG: Final = 30.0
 """How far joint 1 moves while the configuration request is sent: many servo cycles."""
 AT_ONCE_TICKS: Final = 3
 """Servo cycles within which a configuration request's command reaches Cougar."""
+
+
+async def _long_move(ctx: CaseContext) -> tuple[Probe, tuple[float, ...], tuple[JudgingCougar, int], int]:
+    """A session, where the arm stands, the judge (and its mark), and a plain move of joint 1 by
+    :data:`AT_ONCE_MOVE_DEG` (away from the obstacle's side) two servo cycles under way: its segment."""
+    probe = await session(ctx)
+    here = await angles(ctx, probe)
+    judge, mark = begin(ctx)
+    goal = list(here)
+    goal[0] += AT_ONCE_MOVE_DEG if here[0] <= 0 else -AT_ONCE_MOVE_DEG
+    segment = await move(ctx, probe, "set-joint-angles", joints=goal)
+    await judge.wait_ticks(2, SEGMENT_WITHIN)
+    return probe, here, (judge, mark), segment
 
 
 def _first_after(heard: Sequence[Heard], code: int, tick: int) -> Heard | None:
@@ -279,13 +338,7 @@ async def config_at_once(ctx: CaseContext) -> None:
     """Set weight sent while a long move runs is answered done and reaches Cougar (NEWWC) within a few
     servo cycles, before the move ends: not held for the queued segments (erratum
     wrist-config-immediate)."""
-    probe = await session(ctx)
-    here = await angles(ctx, probe)
-    judge, mark = begin(ctx)
-    goal = list(here)
-    goal[0] += AT_ONCE_MOVE_DEG if here[0] <= 0 else -AT_ONCE_MOVE_DEG
-    segment = await move(ctx, probe, "set-joint-angles", joints=goal)
-    await judge.wait_ticks(2, SEGMENT_WITHIN)
+    probe, _, (judge, mark), segment = await _long_move(ctx)
     asked = judge.ticks
     weight = round(ctx.random.uniform(1.0, 20.0), 3)
     answer = await probe.call("set-weight", weight=weight, cg=[0.0] * 3)
