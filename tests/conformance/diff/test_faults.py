@@ -35,11 +35,6 @@ PROTOCOL_FAULTS = sorted(
 playing Cougar)."""
 
 NOT_SHOWN: dict[Fault, str] = {
-    Fault.FATAL_EOF_WITHOUT_CLS: (
-        "both sides' connections are recorded as ended by the EOF that comes first: the fuzzer's "
-        "connection keeps the first end it sees, not the CLS a conforming server sends after it, so the "
-        "two ends pair equal and no judge of one side sees the CLS missing"
-    ),
     Fault.FORCES_IN_POUNDS: (
         "no scenario reads forces under a known load: without a force on the hand the reference wrist "
         "reads zero ounces, which is zero pounds too; the world's wrist-force is stated in the hand's "
@@ -173,7 +168,6 @@ NOT_RUN = frozenset(
         Fault.TRAILER_SOURCE_DESTINATION,
         Fault.CHAOSD_MSB_FIRST,
         # no stream differs at all: every answer of side B is side A's (tools/diff_faults.py, seed 7)
-        Fault.FATAL_EOF_WITHOUT_CLS,
         Fault.FORCES_IN_POUNDS,
         Fault.FORCES_STALE,
         Fault.GUARD_HIT_WORD_SWAPPED,
