@@ -26,7 +26,8 @@ from manip.conformance.diff.scenarios.kit import (
     opcode_of,
     read_here,
     req,
-    scenario_inputs,
+    rest_at,
+    scenario_stream,
     sighting,
     word,
 )
@@ -178,7 +179,7 @@ def _calibrate() -> Stream:
         ("enable power, calibrate", [req("enable-power"), req("calibrate")]),
         ("here", [req("here")]),
     ]
-    return Stream(None, scenario_inputs("calibrate-done", groups), scenario="calibrate-done")
+    return scenario_stream("calibrate-done", groups)
 
 
 def _free_joint_range() -> Stream:
@@ -187,87 +188,56 @@ def _free_joint_range() -> Stream:
     for joint in BAD_JOINTS:
         asked[len(groups)] = joint
         groups += [(f"free joint {joint}", [req("free-joint", word(joint))]), ("here", [req("here")])]
-    return Stream(
-        None,
-        scenario_inputs("free-joint-range", groups),
-        scenario="free-joint-range",
-        check=_check_bad_joints(asked),
-    )
+    return scenario_stream("free-joint-range", groups, _check_bad_joints(asked))
+
+
+def _answered_done(
+    name: str, request: RequestName, clause: str, sent: Sequence[tuple[str, RequestStep]], powered: bool
+) -> Stream:
+    """Scenario ``name``: each request of ``sent`` (what it sends, in words, and the request) in an input
+    of its own, after enable power if ``powered``, each to be answered with an empty done (``clause``)."""
+    groups: list[tuple[str, Sequence[Step]]] = [("enable power", [req("enable-power")])] if powered else []
+    asked = {len(groups) + n: what for n, (what, _) in enumerate(sent)}
+    groups += [(what, [step]) for what, step in sent]
+    return scenario_stream(name, groups, _check_done(request, clause, asked))
 
 
 def _hand_amounts() -> Stream:
-    groups: list[tuple[str, Sequence[Step]]] = [("enable power", [req("enable-power")])]
-    groups += [(f"open or close hand, amount {a}", [req("hand", word(a))]) for a in HAND_AMOUNTS]
-    asked = {n: f"open or close hand of amount {a}" for n, a in enumerate(HAND_AMOUNTS, start=1)}
-    return Stream(
-        None,
-        scenario_inputs("hand-amounts", groups),
-        scenario="hand-amounts",
-        check=_check_done("hand", "hand.data", asked),
-    )
+    sent = [(f"open or close hand of amount {a}", req("hand", word(a))) for a in HAND_AMOUNTS]
+    return _answered_done("hand-amounts", "hand", "hand.data", sent, powered=True)
 
 
 def _configuration_byte() -> Stream:
     opcode = opcode_of("set-configuration")
-    groups: list[tuple[str, Sequence[Step]]] = [
-        (f"set configuration, one data byte {d.hex()}", [RequestStep(opcode, d)]) for d in CONFIGURATION_BYTES
-    ]
-    asked = {n: f"set configuration of one byte {d.hex()}" for n, d in enumerate(CONFIGURATION_BYTES)}
-    return Stream(
-        None,
-        scenario_inputs("configuration-byte", groups),
-        scenario="configuration-byte",
-        check=_check_done("set-configuration", "set-configuration.data", asked),
+    sent = [(f"set configuration of one byte {d.hex()}", RequestStep(opcode, d)) for d in CONFIGURATION_BYTES]
+    return _answered_done(
+        "configuration-byte", "set-configuration", "set-configuration.data", sent, powered=False
     )
 
 
 def _abort_reset() -> Stream:
+    swing, ready = (req("set-joint-angles", floats_data(goal)) for goal in (ABORTED_GOAL, READY_POSE))
+    aborted: list[Step] = [req("enable-power"), swing, Pause(ABORT_AFTER), req("kill-power"), Pause(STILL)]
     groups: list[tuple[str, Sequence[Step]]] = [
-        (
-            "enable power, a move aborted by killing power midway",
-            [
-                req("enable-power"),
-                req("set-joint-angles", floats_data(ABORTED_GOAL)),
-                Pause(ABORT_AFTER),
-                req("kill-power"),
-                Pause(STILL),
-            ],
-        ),
-        (
-            "enable power, a move to the ready position",
-            [req("enable-power"), req("set-joint-angles", floats_data(READY_POSE)), Pause(REST)],
-        ),
+        ("enable power, a move aborted by killing power midway", aborted),
+        ("enable power, a move to the ready position", [req("enable-power"), ready, Pause(REST)]),
     ]
-    return Stream(None, scenario_inputs("abort-reset", groups), scenario="abort-reset", check=_check_reset(1))
+    return scenario_stream("abort-reset", groups, _check_reset(1))
 
 
 def _increment_data() -> Stream:
-    def rested(step: RequestStep, note: str) -> tuple[str, Sequence[Step]]:
-        return note, [step, Pause(SETTLED), req("here"), Pause(STILL), req("here")]
+    def turned(name: RequestName, delta: Sequence[float]) -> tuple[str, Sequence[Step]]:
+        move = req(name, floats_data((0.0, 0.0, 0.0, *delta)))
+        return f"{name} turning the hand, rest, here twice", [
+            move,
+            Pause(SETTLED),
+            req("here"),
+            Pause(STILL),
+            req("here"),
+        ]
 
-    groups: list[tuple[str, Sequence[Step]]] = [
-        (
-            "enable power, set joint angles, rest, here",
-            [
-                req("enable-power"),
-                req("set-joint-angles", floats_data(SEED_ANGLES)),
-                Pause(REST),
-                req("here"),
-            ],
-        ),
-        *(
-            rested(
-                req(name, floats_data((0.0, 0.0, 0.0, *delta))), f"{name} turning the hand, rest, here twice"
-            )
-            for name, delta in TURNS
-        ),
-    ]
-    return Stream(
-        None,
-        scenario_inputs("increment-data", groups),
-        scenario="increment-data",
-        check=_check_increment_data(0),
-    )
+    groups = [rest_at(SEED_ANGLES), *(turned(name, delta) for name, delta in TURNS)]
+    return scenario_stream("increment-data", groups, _check_increment_data(0))
 
 
 def _second_client() -> Stream:
@@ -286,7 +256,7 @@ def _second_client() -> Stream:
         ),
         ("here", [req("here")]),
     ]
-    return Stream(None, scenario_inputs("second-client", groups), scenario="second-client")
+    return scenario_stream("second-client", groups)
 
 
 SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
