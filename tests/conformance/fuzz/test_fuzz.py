@@ -234,6 +234,7 @@ class _Conn:
         self.rfc_no = 1
         self.ended: str | None = None
         self.unanswered = 0
+        self.after_eof: str | None = None
 
 
 def test_a_request_skipped_by_the_replies_is_a_silent_drop_not_a_wrong_number() -> None:
@@ -290,6 +291,31 @@ def test_after_a_reply_out_of_step_later_findings_are_only_counted() -> None:
     sightings = _connection(_Conn(packets), 0, report_drops=True)  # type: ignore[arg-type]
     assert [o.violation.clause for o in sightings] == ["request.unknown-opcode"]
     assert sightings[0].followers >= 1
+
+
+@pytest.mark.parametrize(
+    ("after_eof", "closes"), [("none", ()), ("CLS", (ChaosOp.CLS,))], ids=["none", "CLS"]
+)
+def test_an_eof_after_a_fatal_error_must_be_followed_by_cls(after_eof: str, closes: tuple[int, ...]) -> None:
+    """The connection watched to its end after the target's EOF: nothing after the EOF breaks
+    error.fatal-then-close (judged at the EOF's input); a CLS after it does not."""
+    calibrate = SPEC.request("calibrate").opcode
+    fatal = encode_error(ServerOp.FATAL_ERROR, 2, bad_value("calibrate", "no zero index").error)
+    packets = [
+        _s2c(ServerOp.RESPONSE, b"\x01\x00"),
+        _c2s(calibrate, 2),
+        _s2c(ServerOp.FATAL_ERROR, fatal),
+        _s2c(ChaosOp.EOF, b""),
+        *(_s2c(opcode, b"") for opcode in closes),
+    ]
+    conn = _Conn(packets)
+    conn.after_eof = after_eof
+    unclosed = [
+        s
+        for s in _connection(conn, 0, report_drops=True)  # type: ignore[arg-type]
+        if s.violation.clause == "error.fatal-then-close"
+    ]
+    assert [s.number for s in unclosed] == ([3] if after_eof == "none" else [])
 
 
 def test_the_scanner_finds_each_traceback_with_the_line_before_it() -> None:

@@ -2,7 +2,8 @@
 
 What a side showed of a stream is a list of :class:`SideEvent` per input: each packet of the server on the
 stream's connection in order (answers, multi-packet replies to their empty packet, asynchronous
-packets), each end of a connection (EOF, CLS, LOS, with its text), the answers to stray packets and
+packets), each end of a connection (EOF, CLS, LOS, with its text; after an EOF, the CLS or LOS that
+followed it, or an end event saying none did), the answers to stray packets and
 the stream's own end when it stalled or could not open.  Packet and acknowledgement numbers are the
 NCP's and are never compared.
 
@@ -55,6 +56,8 @@ SideEventKind = Literal["packet", "end", "stray", "stream"]
 _ERRORS: Final = ERROR_STRING_OPS
 _ANSWERS: Final = ANSWER_OPS
 _ENDS: Final = {ChaosOp.CLS: "CLS", ChaosOp.LOS: "LOS", ChaosOp.EOF: "EOF"}
+NO_CLS: Final = "none after the EOF: no CLS or LOS came, the link dropped or silence"
+"""The end event that follows an EOF nothing followed (the connection watched to its end)."""
 
 
 @dataclass(frozen=True)
@@ -111,6 +114,8 @@ def events_of(run: BatchRun, inbox: Inbox) -> dict[int, list[SideEvent]]:
                 request = pairing.server(wp.opcode, wp.data).request if wp.opcode in _ANSWERS else None
                 event = SideEvent("packet", wp.opcode, bytes(wp.data), request=request)
             out.setdefault(number, []).append(event)
+            if wp.opcode == ChaosOp.EOF and conn.after_eof == "none":
+                out[number].append(SideEvent("end", text=NO_CLS))
     for due in run.due_answers:
         got = sorted({p.opcode for p, _ in inbox.strays.get(due.key, ())}) if due.key else []
         if due.what == "close":

@@ -10,10 +10,10 @@ way when a violation is shrunk.  Its steps go out in input order:
   an RFC that is answered with OPN is closed again at once;
 * raw bytes on links of their own (on CHUDP: datagrams).
 
-Then the batch waits, within the allowances, until every request is answered, every LOS and RFC
-answer due has come and every link whose framing was lost has been dropped, and closes the
-connection.  What came is judged by :mod:`.judge` after the liveness check, so late packets that
-should never have come are seen too.
+Then the batch waits, within the allowances, until every request is answered, every connection the
+target ended with EOF has its CLS, every LOS and RFC answer due has come and every link whose framing
+was lost has been dropped, and closes the connection.  What came is judged by :mod:`.judge` after
+the liveness check, so late packets that should never have come are seen too.
 
 The liveness check (:func:`liveness`): a new link, a new connection, its initial RESPONSE and one
 Here answered.  A target that refuses the link is gone (a crash); one that takes the link but does
@@ -312,6 +312,7 @@ class BatchRunner:
         for conn in run.connections:
             if conn.ended is None and not await conn.settle():
                 run.stalled = run.stalled or conn.stalled
+            await conn.await_close()  # after an EOF: the CLS that must follow it
         deadline = self._loop.time() + self.allowance.reply
         while self._due(run) and self._loop.time() < deadline:
             self.inbox.arrived.clear()

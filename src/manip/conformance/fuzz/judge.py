@@ -233,6 +233,9 @@ def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[
             conn.origin.get(id(request), last),
         )
         found.append((len(packets), ended))
+    unclosed = _unclosed(conn, last) if fatal else None
+    if unclosed is not None:
+        found.append(unclosed)
     for judged in oracle_violations(packets, rfc_packet_no=conn.rfc_no):
         number = conn.origin.get(id(judged.packet), last)
         found.append((position.get(id(judged.packet), len(packets)), Sighting(judged, number)))
@@ -247,6 +250,25 @@ def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[
             break
         out.append(o)
     return out
+
+
+def _unclosed(conn: FuzzConnection, last: int) -> tuple[int, Sighting] | None:
+    """After a fatal error, the target's EOF with no CLS after it (``after_eof``: the connection was
+    watched to its end): the 1985 guide's server sends CLS after a fatal error (error.fatal-then-close)."""
+    ends = [(i, p) for i, p in enumerate(conn.packets) if p.direction == "s2c" and p.opcode == ChaosOp.EOF]
+    if conn.after_eof != "none" or not ends:
+        return None
+    at, eof = ends[-1]
+    seen = _seen(
+        "wrong_value",
+        "error.fatal-then-close",
+        "the connection ended with EOF after the fatal error, and no CLS followed it",
+        "CLS after the fatal error (EOF first or not)",
+        "EOF, then the link dropped or silence",
+        eof.data,
+        conn.origin.get(id(eof), last),
+    )
+    return at, seen
 
 
 def _skipped(

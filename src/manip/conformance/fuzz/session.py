@@ -16,7 +16,9 @@ retransmit and window for it.  :class:`FuzzConnection` does the least a peer mus
   target's window stops us.
 * **Recording**: every request and every packet of the target, in order, as
   :class:`~manip.conformance.judge.packets.WirePacket` (CLS, EOF and LOS as close pseudo-packets), for the
-  transcript checks; ``origin`` says which input each one belongs to.
+  transcript checks; ``origin`` says which input each one belongs to.  A connection the target ends
+  with EOF is recorded to its end: :meth:`FuzzConnection.await_close` waits for the CLS that follows
+  the EOF (``after_eof``: CLS, LOS, or none), so that an EOF with no CLS after it shows.
 * **Answers**: requests are paired with answers by the suite's one rule,
   :class:`~manip.codecs.pairing.ReplyPairing` (erratum ``capture-pairing``: by position, the initial
   RESPONSE the RFC's, a describe-self reply up to its empty packet, the packet after free joint
@@ -61,6 +63,10 @@ LAZY_GRACE: Final = 0.001
 """Seconds a lazy sender waits, its window full, before it reads (acknowledges) what came."""
 SETTLE_CAP: Final = 5
 """A wait for answers ends after this many answer budgets even while answers keep coming."""
+END_POLL: Final = 0.05
+"""Seconds between looks at the link while waiting for the CLS after an EOF (a dropped link wakes
+nothing)."""
+_EOF_ENDED: Final = "EOF from the target"
 _FREE_JOINT: Final = SPEC.request("free-joint").opcode
 _SET_SPEED: Final = SPEC.request("set-speed").opcode
 _ANSWERS: Final = ANSWER_OPS
@@ -173,6 +179,9 @@ class FuzzConnection:
         """When the connection began to end (EOF, CLS or LOS from the target, or our CLS), loop clock."""
         self.stalled = False
         """A wait for an answer or for the window ran out of its allowance."""
+        self.after_eof: str | None = None
+        """What ended the connection after the target's EOF (:meth:`await_close`): "CLS", "LOS", or
+        "none" (the link dropped, or nothing within the reply timeout); None: no EOF, or not waited."""
         self.sts_times: list[float] = []
         self.requests = 0
         self.asynchronous = 0
@@ -432,6 +441,17 @@ class FuzzConnection:
                 self._sts()
             await self._wait(deadline - self._loop.time())
 
+    async def await_close(self) -> None:
+        """After an EOF from the target, wait up to the reply timeout for the CLS (or LOS) that ends the
+        connection, and say in ``after_eof`` what came.  Nothing to wait for without an EOF."""
+        if self.ended != _EOF_ENDED:
+            return
+        deadline = self._loop.time() + self.allowance.reply
+        while self.ended == _EOF_ENDED and self.link.ended is None and self._loop.time() < deadline:
+            await self._wait(min(END_POLL, deadline - self._loop.time()))
+        ended = self.ended or ""
+        self.after_eof = ended[:3] if ended.startswith(("CLS", "LOS")) else "none"
+
     @property
     def unanswered(self) -> int:
         return len(self._outstanding())
@@ -514,7 +534,7 @@ class FuzzConnection:
         number = self._number()
         wp = self._record("s2c", opcode, packet.packet_no, packet.ack_no, packet.data, number)
         if opcode == ChaosOp.EOF:  # acknowledged at once: the target's CLS waits for that
-            self.ended = "EOF from the target"
+            self.ended = _EOF_ENDED
             self.ended_at = now
             self._sts()
         elif opcode in _ANSWERS:

@@ -13,6 +13,7 @@ from manip.codecs.lispm_text import decode_lispm
 from manip.codecs.pdp11float import pack_f, unpack_f
 from manip.conformance.cases.server.motion import CONFIGURATION_SEED
 from manip.conformance.diff.pairing import SideEvent
+from manip.conformance.diff.streams import ScenarioCheck, Stream
 from manip.conformance.fuzz.judge import Sighting
 from manip.conformance.fuzz.steps import FuzzInput, Pause, RequestStep, Step
 from manip.conformance.judge.checks import parse_description
@@ -52,6 +53,13 @@ def scenario_inputs(name: str, groups: Sequence[tuple[str, Sequence[Step]]]) -> 
     return tuple(
         FuzzInput(n, f"scenario.{name}", tuple(steps), note) for n, (note, steps) in enumerate(groups)
     )
+
+
+def scenario_stream(
+    name: str, groups: Sequence[tuple[str, Sequence[Step]]], check: ScenarioCheck | None = None
+) -> Stream:
+    """Scenario ``name``: its groups of steps as inputs numbered from 0, judged by ``check``."""
+    return Stream(None, scenario_inputs(name, groups), scenario=name, check=check)
 
 
 # What the answers say ------------------------------------------------------------------------------
@@ -234,3 +242,11 @@ def midway_at(events: Events, timed: int) -> tuple[float, float, SideEvent] | No
     if not (close_to([start], [READY_POSE[0]]) and close_to([goal], [there])):
         return None
     return _progress(start, there, first), _progress(there, start, second), reads[1][0]
+
+
+def rest_at(angles: Sequence[float]) -> tuple[str, Sequence[Step]]:
+    """An input that powers the arm, sets its joints to ``angles``, lets it come to rest and reads Here."""
+    return (
+        "enable power, set joint angles, rest, here",
+        [req("enable-power"), req("set-joint-angles", floats_data(angles)), Pause(REST), req("here")],
+    )
