@@ -34,7 +34,6 @@ from manip.conformance.diff.scenarios.kit import (
     REST,
     SWING_DEG,
     Events,
-    all_of,
     angles_of,
     answers_to,
     byte_swapped,
@@ -122,36 +121,63 @@ def _came_to_rest(samples: Sequence[Sample]) -> bool:
     return bool(moved) and samples[-1].sent - samples[moved[-1]].received >= 3 * SERVO_S
 
 
-def _check_queued(at: int) -> Callable[[Events], list[Sighting]]:
+Judgement = tuple[list[Sighting], list[str]]
+"""What a timing judge found on a side: its sightings, and what it could not judge (and why)."""
+NOTHING: Final[Judgement] = ([], [])
+
+
+def _timed(
+    name: str, groups: Sequence[tuple[str, Sequence[Step]]], judge: Callable[[Events], Judgement]
+) -> Stream:
+    """Scenario ``name`` judged by ``judge``: its sightings the check's, the rest what it could not judge."""
+    return Stream(
+        None,
+        scenario_inputs(name, groups),
+        scenario=name,
+        check=lambda events: judge(events)[0],
+        unjudged=lambda events: judge(events)[1],
+    )
+
+
+def _judge_queued(at: int) -> Callable[[Events], Judgement]:
     """Three moves of joint 1 queued at input ``at``, from the ready position, sampled every 6 ms: the
     arm comes to rest on the last goal without passing it (``motion.ends-at-rest``), what it reports
     changes at most once per 16 ms servo cycle (``motion.servo-period``), and it never stands still
     between its first change and its last (``motion.smooth-transitions``): the directed case
-    ``server.motion.queued-segments``'s judges, on the side's times."""
+    ``server.motion.queued-segments``'s judges, on the side's times (each not judged, saying why,
+    where the samples' round trips or the host's delays could hide a breach)."""
 
-    def check(events: Events) -> list[Sighting]:
+    def judge(events: Events) -> Judgement:
         reads = floats_at(events, at, "joint-angles")
         moves = _segments(events, at)
         if len(reads) < 2 or len(moves) != 1 + len(QUEUED_STEPS) or not close_to(reads[0][1], READY_POSE):
-            return []  # refused, or not at the ready position when the moves were queued: nothing judged
+            return NOTHING  # refused, or not at the ready position when the moves were queued
         samples = _samples(reads[1:])
         if samples is None:
-            return []
+            return NOTHING
         timing = Timing(samples, 1.0, _lateness(samples))
         last = READY_POSE[0] + QUEUED_STEPS[-1]
         judged: list[tuple[str, TimingCheck | None]] = [
             ("motion.servo-period", servo_period(timing)),
             ("motion.smooth-transitions", blending(timing)),
         ]
+        unjudged = []
         if _came_to_rest(samples):  # sampled until it stood still: where it came to rest is judged
             judged.append(("motion.ends-at-rest", rest_on_goal([s.values[0] for s in samples], 1.0, last)))
+        else:
+            unjudged.append(
+                f"motion.ends-at-rest: joint 1 was not seen standing still on {last:g} within the "
+                f"{len(samples)} samples ({timing.delays()})"
+            )
         out = []
         for clause, verdict in judged:
             if verdict is not None and not verdict.held:
                 out.append(sighting(at, clause, verdict.seen, verdict.expected, reads[-1][0]))
-        return out
+            elif verdict is not None and verdict.unjudged:
+                unjudged.append(verdict.unjudged)
+        return out, unjudged
 
-    return check
+    return judge
 
 
 def _queued() -> Stream:
@@ -165,46 +191,50 @@ def _queued() -> Stream:
             _ready_then(steps),
         )
     ]
-    return Stream(
-        None, scenario_inputs("queued-timing", groups), scenario="queued-timing", check=_check_queued(0)
-    )
+    return _timed("queued-timing", groups, _judge_queued(0))
 
 
 # A move's reply, and the angles read back -------------------------------------------------------------
 
 
-def _check_reply(at: int) -> Callable[[Events], list[Sighting]]:
+def _judge_reply(at: int) -> Callable[[Events], Judgement]:
     """A move of joint 1 by :data:`REPLY_SWING_DEG` from the ready position (input ``at``: the joint angles
     before it, its reply, the joint angles every :data:`READ_EVERY` seconds after it): the reply comes
     before the arm reaches the goal (``motion.reply-before-motion``).  The readings asked before the
     reply came show where the arm was when it came: past half its way, the reply waited for the motion.
 
-    Not judged (no sighting) unless the side answered promptly what needs no arm: the reading before
+    Not judged (saying why) unless the side answered promptly what needs no arm: the reading before
     the move, and those asked after the reply came, each within :data:`PROMPT_S` (on an addressed side
     a host whose answers lag could hold every reply as long)."""
 
-    def check(events: Events) -> list[Sighting]:
+    def judge(events: Events) -> Judgement:
         reads, moves = floats_at(events, at, "joint-angles"), _segments(events, at)
         if len(reads) < 3 or len(moves) != 1 or not close_to(reads[0][1], READY_POSE):
-            return []
+            return NOTHING
         reply = moves[0][0]
         if reply.asked is None or any(e.asked is None for e, _ in reads):
-            return []
+            return NOTHING
         before = [v[0] for e, v in reads[1:] if (e.asked or 0.0) < reply.time]
         after = [e for e, _ in reads[1:] if (e.asked or 0.0) >= reply.time]
-        prompt = all(e.time - (e.asked or 0.0) <= PROMPT_S for e in [reads[0][0], *after])
         way = (max(before, default=READY_POSE[0]) - READY_POSE[0]) / REPLY_SWING_DEG
-        if not prompt or way <= 0.5:
-            return []
+        if way <= 0.5:
+            return NOTHING
         took = reply.time - reply.asked
+        slowest = max(e.time - (e.asked or 0.0) for e in [reads[0][0], *after])
+        if slowest > PROMPT_S:
+            return [], [
+                f"motion.reply-before-motion: the move's reply came after {took:.3f} s, but an answer that "
+                f"needs no arm took {slowest:.3f} s (more than {PROMPT_S:g} s): the host's delays could "
+                "explain it"
+            ]
         message = (
             f"the move's reply came after {took:.3f} s, when joint 1 had gone {way:.0%} of its way "
             f"(read at {max(before):.2f}, goal {READY_POSE[0] + REPLY_SWING_DEG:.2f})"
         )
         expected = "the reply as soon as the segment is queued, before the arm reaches the goal"
-        return [sighting(at, "motion.reply-before-motion", message, expected, reply)]
+        return [sighting(at, "motion.reply-before-motion", message, expected, reply)], []
 
-    return check
+    return judge
 
 
 def _check_byte_order(at: int) -> Callable[[Events], list[Sighting]]:
@@ -240,8 +270,8 @@ def _reply() -> Stream:
             f"notifications of segments completed, joint angles, a move of joint 1, joint angles every "
             f"{READ_EVERY * 1000:g} ms",
             [
-                # The segment's report comes between the readings: where, on the side's wire, shows
-                # when the reply came (times are never compared).
+                # Where the segment's report comes among the answers shows when the reply came (the
+                # times are never compared): after the readings, or, held until the arm rests, first.
                 req("request-notifications", word(SEGMENT_MASK)),
                 req("joint-angles"),
                 req("set-joint-angles", floats_data(_swung(REPLY_SWING_DEG))),
@@ -249,8 +279,13 @@ def _reply() -> Stream:
             ],
         ),
     ]
-    check = all_of(_check_byte_order(0), _check_reply(1))
-    return Stream(None, scenario_inputs("reply-timing", groups), scenario="reply-timing", check=check)
+    byte_order, reply = _check_byte_order(0), _judge_reply(1)
+
+    def judge(events: Events) -> Judgement:
+        sightings, unjudged = reply(events)
+        return byte_order(events) + sightings, unjudged
+
+    return _timed("reply-timing", groups, judge)
 
 
 # The reports of segments completed --------------------------------------------------------------------
