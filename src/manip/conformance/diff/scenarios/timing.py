@@ -29,24 +29,17 @@ from manip.conformance.cases.server.trajectory import (
     servo_period,
 )
 from manip.conformance.diff.pairing import SideEvent
+from manip.conformance.diff.scenarios import kit
 from manip.conformance.diff.scenarios.kit import (
     READY_POSE,
     REST,
     SWING_DEG,
     Events,
-    angles_of,
-    answers_to,
-    byte_swapped,
-    close_to,
     floats_at,
     floats_data,
-    is_op,
-    opcode_of,
     req,
     scenario_inputs,
-    shown_angles,
     sighting,
-    wire_of,
     word,
 )
 from manip.conformance.diff.streams import Stream
@@ -57,7 +50,8 @@ from manip.spec.constants import AsyncCondition, ServerOp
 
 SAMPLES: Final = 480
 """Joint angles read every :data:`~manip.conformance.cases.server.trajectory.SAMPLE_S` after the
-queued moves: 1.8 s of samples, the three moves and their rest after them at speed factor 1."""
+queued moves: 2.88 s of samples, the three moves (2.6 s at speed factor 1) and the arm at rest after
+them."""
 REPLY_SWING_DEG: Final = 10.0
 """How far joint 1 turns in the move whose reply is timed: short enough that a reply held until the arm
 comes to rest still comes within the reply timeout (the diff would otherwise see it missing)."""
@@ -87,11 +81,11 @@ def _swung(by: float) -> tuple[float, ...]:
 
 def _segments(events: Events, number: int) -> list[tuple[SideEvent, int]]:
     """Every set joint angles of input ``number`` answered with a segment number, and the number."""
-    answers = answers_to(events.get(number, []), opcode_of("set-joint-angles"))
+    answers = kit.answers_to(events.get(number, []), kit.opcode_of("set-joint-angles"))
     return [
         (e, int.from_bytes(e.data[2:4], "little"))
         for e in answers
-        if is_op(e, ServerOp.RESPONSE) and len(e.data) >= 4
+        if kit.is_op(e, ServerOp.RESPONSE) and len(e.data) >= 4
     ]
 
 
@@ -150,7 +144,7 @@ def _judge_queued(at: int) -> Callable[[Events], Judgement]:
     def judge(events: Events) -> Judgement:
         reads = floats_at(events, at, "joint-angles")
         moves = _segments(events, at)
-        if len(reads) < 2 or len(moves) != 1 + len(QUEUED_STEPS) or not close_to(reads[0][1], READY_POSE):
+        if len(reads) < 2 or len(moves) != 1 + len(QUEUED_STEPS) or not kit.close_to(reads[0][1], READY_POSE):
             return NOTHING  # refused, or not at the ready position when the moves were queued
         samples = _samples(reads[1:])
         if samples is None:
@@ -209,7 +203,7 @@ def _judge_reply(at: int) -> Callable[[Events], Judgement]:
 
     def judge(events: Events) -> Judgement:
         reads, moves = floats_at(events, at, "joint-angles"), _segments(events, at)
-        if len(reads) < 3 or len(moves) != 1 or not close_to(reads[0][1], READY_POSE):
+        if len(reads) < 3 or len(moves) != 1 or not kit.close_to(reads[0][1], READY_POSE):
             return NOTHING
         reply = moves[0][0]
         if reply.asked is None or any(e.asked is None for e, _ in reads):
@@ -243,17 +237,17 @@ def _check_byte_order(at: int) -> Callable[[Events], list[Sighting]]:
     (``chaos.data.byte-order``)."""
 
     def check(events: Events) -> list[Sighting]:
-        answers = answers_to(events.get(at, []), opcode_of("joint-angles"))
-        read = next((e for e in reversed(answers) if is_op(e, ServerOp.RESPONSE)), None)
+        answers = kit.answers_to(events.get(at, []), kit.opcode_of("joint-angles"))
+        read = next((e for e in reversed(answers) if kit.is_op(e, ServerOp.RESPONSE)), None)
         if read is None:
             return []
-        as_sent = angles_of(read)
-        if as_sent is not None and close_to(as_sent, READY_POSE):
+        as_sent = kit.angles_of(read)
+        if as_sent is not None and kit.close_to(as_sent, READY_POSE):
             return []  # the ready position: the byte order is right
-        if not close_to(byte_swapped(read), READY_POSE):
+        if not kit.close_to(kit.byte_swapped(read), READY_POSE):
             return []  # wrong, but not for its byte order: not this check's to name
         message = (
-            f"the joint angles read {shown_angles(READY_POSE)} at the ready position only with the two "
+            f"the joint angles read {kit.shown_angles(READY_POSE)} at the ready position only with the two "
             "bytes of every word swapped"
         )
         return [
@@ -302,7 +296,9 @@ def _check_codes(at: int) -> Callable[[Events], list[Sighting]]:
             return []
         move = moves[-1]
         for event in events.get(at, []):
-            report = async_of(wire_of(event)) if is_op(event, ServerOp.ASYNCHRONOUS_RESPONSE) else None
+            report = (
+                async_of(kit.wire_of(event)) if kit.is_op(event, ServerOp.ASYNCHRONOUS_RESPONSE) else None
+            )
             if (
                 report is None
                 or report.word3 != move[1]
