@@ -7,7 +7,8 @@ came, and ``asked``, when its request went out: the side's clock, virtual time o
 the directed case ``server.motion.queued-segments`` reads its samples' times, and judge them with that
 case's own judges (:mod:`manip.conformance.cases.server.trajectory`).  On an addressed side, in real
 time, a timing clause whose breach the samples' round trips or the host's delays could hide, or
-explain, is not judged: no sighting is made of it.
+explain, is not judged: no sighting is made of it, and the diff reports it not judged with the delays
+measured (:attr:`~manip.conformance.diff.streams.Stream.unjudged`).
 """
 
 from __future__ import annotations
