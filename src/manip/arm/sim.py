@@ -770,15 +770,19 @@ class ArmSim:
 
     def _rest_then_resume(self, here: Joints, t: float, rest: float) -> None:
         """The faulty server of :attr:`ArmDefects.stop_between_segments`: after each segment, ``rest``
-        seconds at rest, then what waits starts from where the arm stands."""
+        seconds at rest, then what waits starts from where the arm stands (a straight-line segment
+        played from there, as one that follows a blended segment is)."""
         if self._resting_since is None:
             self._resting_since = t
-        waiting = self._backlog and isinstance(self._backlog[0], _JointPacket)
-        if waiting and t - self._resting_since >= rest:
-            self._resting_since = None
-            self._interp = MoveInterpolator(here, self.limits, self.speed)
-            packet = self._backlog.popleft()
-            assert isinstance(packet, _JointPacket)
+        if not self._backlog or t - self._resting_since < rest:
+            return
+        self._resting_since = None
+        self._interp = MoveInterpolator(here, self.limits, self.speed)
+        packet = self._backlog.popleft()
+        if isinstance(packet, _PathPacket):
+            self._playback = self._play(self._from(packet, here))
+            self._scheme_now = None
+        else:
             self._interp.enqueue(packet.request, t)
 
     def _restart(self, here: Joints, t: float) -> None:

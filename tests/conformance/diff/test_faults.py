@@ -47,30 +47,7 @@ NOT_SHOWN: dict[Fault, str] = {
     Fault.GUARD_HIT_WORD_SWAPPED: (
         "no scenario arranges a guarded move that hits its guard, so no guard-hit report is sent"
     ),
-    Fault.SEGMENTS_STOP: (
-        "the fault changes when the arm moves between queued segments, which the diff sees only as angles "
-        "sampled midway that differ (the paths scenario shows them as unexplained (c)); a stop between "
-        "segments needs samples timed around a segment's end, and the diff's events carry no times"
-    ),
-    Fault.SERVO_DOUBLE_RATE: (
-        "the fault changes how often the angles change within a servo period, which the diff sees only as "
-        "angles sampled midway that differ (the paths scenario shows them as unexplained (c)); judging the "
-        "period needs samples closer than 16 ms with their times, and the diff's events carry no times"
-    ),
     # clauses no fault proved before (issue 32)
-    Fault.ASYNC_CODES_FROM_BITS: (
-        "shown as a violation of async.layout (side B): a segment-completed report carrying code 1 reads as "
-        "a guard hit whose stop/continue word is 0, which the judge names as the layout's"
-    ),
-    Fault.COMMAND_LEAD: (
-        "the fault changes how the arm moves (its path or its timing), not what the server answers; the "
-        "diff pairs answers, and the arm's motion is the directed cases' to judge"
-    ),
-    Fault.MOTION_REPLY_AT_REST: (
-        "shown as violations of request.one-reply (side B): the diff waits one allowance for each answer, "
-        "and replies held until the arm comes to rest miss it; where the arm stands when a reply comes is "
-        "not paired"
-    ),
     Fault.HERE_ROW_MAJOR: (
         "Here's floats differ from the clean side's, but no judge of one side knows which transform is right "
         "(a layout of 12 floats is all the fuzzer's checks see): an unexplained difference (c) near "
@@ -117,11 +94,6 @@ NOT_SHOWN: dict[Fault, str] = {
         "answers nothing: the differences are replies missing on side B (after the diff's reply timeout "
         "each), which no judge of one side names as ncp.packet-numbers"
     ),
-    Fault.DATA_BYTES_SWAPPED: (
-        "shown as violations of response.echoes-request-number, multi.same-request-number and the error "
-        "strings' clauses (side B): every number and string of side B is byte-swapped, and no judge of one "
-        "side reads the data's byte order as such"
-    ),
     Fault.HEADER_SOURCE_FIRST: (
         "the diff's client links refuse every packet of side B (it names their own address as its source), "
         "so side B answers nothing: its differences are missing answers, named by no judge of one side as "
@@ -160,7 +132,6 @@ NOT_RUN = frozenset(
         Fault.DUPLICATE_RFC_NEW,
         Fault.SILENT_PEER_KEPT,
         Fault.PACKET_NUMBERS_SKIP,
-        Fault.DATA_BYTES_SWAPPED,
         Fault.HEADER_SOURCE_FIRST,
         Fault.CHUDP_NO_HEADER,
         Fault.CHUDP_ODD_BYTE_UNPADDED,

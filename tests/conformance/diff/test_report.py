@@ -50,3 +50,14 @@ def test_the_reports(tmp_path: Path) -> None:
     allowed = _report("unexplained", allow=True)
     write_junit(allowed, tmp_path / "a.xml")
     assert 'failures="0"' in (tmp_path / "a.xml").read_text()
+
+
+def test_what_a_check_could_not_judge_is_reported_and_fails_nothing(tmp_path: Path) -> None:
+    report = _report("allowed")
+    why = "side B: motion.servo-period: two samples in a row typically spanned 40.0 ms"
+    report.results[0].unjudged.append(why)
+    validate(report.to_json(), load_schema())
+    assert report.to_json()["not_judged"] == [{"stream": "stream 0", "detail": why}]
+    assert report.exit_code == 0
+    write_markdown(report, tmp_path / "d.md")
+    assert why in (tmp_path / "d.md").read_text()

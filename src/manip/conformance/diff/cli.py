@@ -340,6 +340,13 @@ def _write(report: DiffReport, options: dict[str, Any]) -> None:
         sys.exit(2)
 
 
+def _stream_notes(report: DiffReport) -> list[str]:
+    """What the streams did that is no finding: runaways, scenarios not compared, checks not judged."""
+    out = [f"runaway: {r.stream.label}: side {d}" for r in report.results for d in r.runaway]
+    out += [f"not compared: {r.stream.label}: {r.unarranged}" for r in report.results if r.unarranged]
+    return out + [f"not judged: {r.stream.label}: {d}" for r in report.results for d in r.unjudged]
+
+
 def _summary(report: DiffReport, console: Any) -> None:
     allowed: dict[tuple[tuple[str, ...], tuple[str, ...]], list[str]] = {}
     for result in report.results:
@@ -356,12 +363,8 @@ def _summary(report: DiffReport, console: Any) -> None:
             markup=False,
             highlight=False,
         )
-    for result in report.results:
-        for detail in result.runaway:
-            console.print(f"runaway: {result.stream.label}: side {detail}", markup=False)
-    for result in report.results:
-        if result.unarranged:
-            console.print(f"not compared: {result.stream.label}: {result.unarranged}", markup=False)
+    for line in _stream_notes(report):
+        console.print(line, markup=False)
     for result in report.unstable:
         console.print(f"unstable (no finding): {result.stream.label}: {result.unstable_detail}", markup=False)
     for problem in report.problems:

@@ -55,6 +55,8 @@ class StreamResult:
     unarranged: str = ""
     """Why the stream (a scenario) was not compared: a condition of the arm's world it needs could not
     be arranged on a side.  Not a finding: nothing was compared."""
+    unjudged: list[str] = field(default_factory=list)
+    """What the scenario's check could not judge, side by side, and why.  Not a finding."""
 
 
 def _once(
@@ -95,6 +97,7 @@ def diff_stream(a: Side, b: Side, stream: Stream, config: DiffConfig) -> StreamR
     oa, ob, diffs = _once(a, b, stream, config)
     result.runaway = [f"{s.name}: {o.runaway}" for s, o in ((a, oa), (b, ob)) if o.runaway]
     unarranged = [f"side {s.name}: {o.unarranged}" for s, o in ((a, oa), (b, ob)) if o.unarranged]
+    result.unjudged = [f"side {s.name}: {note}" for s, o in ((a, oa), (b, ob)) for note in o.unjudged]
     if unarranged:
         result.unarranged = "; ".join(unarranged)
     elif diffs:

@@ -5,7 +5,9 @@ stream's connection in order (answers, multi-packet replies to their empty packe
 packets), each end of a connection (EOF, CLS, LOS, with its text; after an EOF, the CLS or LOS that
 followed it, or an end event saying none did), the answers to stray packets and
 the stream's own end when it stalled or could not open.  Packet and acknowledgement numbers are the
-NCP's and are never compared.
+NCP's and are never compared.  Each event has the time it was received on the side's clock (virtual
+time on an embedded side, the real clock on an addressed one), and an answer the time its request went
+out: never compared, only read by a scenario's check that judges when the arm moved or a reply came.
 
 :func:`compare` walks the two lists of each input position by position and returns a
 :class:`Difference` for every position whose events differ, with the parts that differ:
@@ -44,6 +46,7 @@ from manip.codecs.pairing import ReplyPairing
 from manip.codecs.pdp11float import unpack_f
 from manip.conformance.fuzz.batch import BatchRun
 from manip.conformance.fuzz.session import Inbox
+from manip.conformance.judge.packets import WirePacket
 from manip.spec import SPEC
 from manip.spec.constants import ANSWER_OPS, ERROR_STRING_OPS, ChaosOp, ServerOp
 
@@ -72,6 +75,11 @@ class SideEvent:
     request: int | None = field(default=None, compare=False)
     """For an answer: the opcode of the request it answers, by the suite's one pairing rule
     (:class:`~manip.codecs.pairing.ReplyPairing`, erratum capture-pairing); not compared."""
+    time: float = field(default=0.0, compare=False)
+    """Seconds from the stream's start to when the side's packet came (the stream's end for a stalled
+    stream), on the side's clock; not compared."""
+    asked: float | None = field(default=None, compare=False)
+    """For an answer: seconds from the stream's start to when its request went out; not compared."""
 
     def show(self) -> str:
         if self.kind == "packet":
@@ -98,36 +106,48 @@ def events_of(run: BatchRun, inbox: Inbox) -> dict[int, list[SideEvent]]:
     """Everything a side showed of a stream, by input number (module docstring)."""
     out: dict[int, list[SideEvent]] = {}
     for conn in run.connections:
-        pairing: ReplyPairing[int | None] = ReplyPairing()
+        pairing: ReplyPairing[WirePacket | None] = ReplyPairing()
         pairing.rfc(None)
+        since = conn.t0 - run.started  # a connection's packets are timed from when it opened
         for wp in conn.packets:
             if wp.direction != "s2c":
-                pairing.request(wp.opcode, wp.opcode, wp.data)
+                pairing.request(wp, wp.opcode, wp.data)
                 continue
             number = conn.origin.get(id(wp), -1)
             name = _ENDS.get(ChaosOp(wp.opcode)) if wp.opcode in _ENDS else None
+            at = since + wp.time
             if name is not None:
-                event = SideEvent(
-                    "end", wp.opcode, text=f"{name} {wp.data.decode('ascii', 'replace')}".strip()
-                )
+                text = f"{name} {wp.data.decode('ascii', 'replace')}".strip()
+                event = SideEvent("end", wp.opcode, text=text, time=at)
             else:
-                request = pairing.server(wp.opcode, wp.data).request if wp.opcode in _ANSWERS else None
-                event = SideEvent("packet", wp.opcode, bytes(wp.data), request=request)
+                asked = pairing.server(wp.opcode, wp.data).request if wp.opcode in _ANSWERS else None
+                event = SideEvent(
+                    "packet",
+                    wp.opcode,
+                    bytes(wp.data),
+                    request=asked.opcode if asked is not None else None,
+                    time=at,
+                    asked=since + asked.time if asked is not None else None,
+                )
             out.setdefault(number, []).append(event)
             if wp.opcode == ChaosOp.EOF and conn.after_eof == "none":
                 out[number].append(SideEvent("end", text=NO_CLS))
     for due in run.due_answers:
-        got = sorted({p.opcode for p, _ in inbox.strays.get(due.key, ())}) if due.key else []
+        came = inbox.strays.get(due.key, []) if due.key else []
+        got = sorted({p.opcode for p, _ in came})
         if due.what == "close":
             got_text = "dropped" if due.link is not None and due.link.ended is not None else "kept"
         else:
             got_text = " ".join(f"0{o:o}" for o in got) or "nothing"
-        out.setdefault(due.number, []).append(SideEvent("stray", text=f"{due.what}: {got_text}"))
+        at = (came[0][1] if came else due.since) - run.started
+        out.setdefault(due.number, []).append(SideEvent("stray", text=f"{due.what}: {got_text}", time=at))
     last = run.last_number
+    end = run.duration
     if run.stalled:
-        out.setdefault(last, []).append(SideEvent("stream", text="stalled: an answer did not come in time"))
+        stalled = SideEvent("stream", text="stalled: an answer did not come in time", time=end)
+        out.setdefault(last, []).append(stalled)
     if run.open_error is not None:
-        out.setdefault(last, []).append(SideEvent("stream", text=f"not opened: {run.open_error}"))
+        out.setdefault(last, []).append(SideEvent("stream", text=f"not opened: {run.open_error}", time=end))
     return out
 
 

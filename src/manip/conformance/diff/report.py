@@ -136,6 +136,7 @@ class DiffReport:
             "not_arranged": [
                 {"stream": r.stream.label, "detail": r.unarranged} for r in self.results if r.unarranged
             ],
+            "not_judged": [{"stream": r.stream.label, "detail": d} for r in self.results for d in r.unjudged],
             "problems": list(self.problems),
             "findings": [self._finding_json(f, r) for r in self.results for f in r.findings],
         }
@@ -217,6 +218,11 @@ def write_markdown(report: DiffReport, path: Path) -> None:
     if unarranged:
         out += ["## Scenarios not compared (a condition of the world not arranged)", ""]
         out += [f"- {r.stream.label}: {r.unarranged}" for r in unarranged]
+        out.append("")
+    unjudged = [(r, d) for r in report.results for d in r.unjudged]
+    if unjudged:
+        out += ["## What a scenario's check could not judge (no finding)", ""]
+        out += [f"- {r.stream.label}: {d}" for r, d in unjudged]
         out.append("")
     if report.unstable:
         out += ["## Unstable streams (no finding)", ""]

@@ -85,6 +85,8 @@ class Observation:
     seconds: float = 0.0
     unarranged: str | None = None
     """Why the stream was not sent: a condition of the arm's world it needs was not arranged."""
+    unjudged: list[str] = field(default_factory=list)
+    """What the scenario's check could not judge on this side, and why (never a finding)."""
 
 
 def observe(side: Side, stream: Stream, allowance: Allowance, seed: int) -> Observation:
@@ -160,7 +162,8 @@ async def _observe(address: LinkAddress, stream: Stream, allowance: Allowance, s
             sightings += arg_value_sightings(item, events.get(item.number, ()))
         if stream.check is not None:
             sightings += stream.check(events)
-        return Observation(events, sightings, None, loop.time() - started)
+        unjudged = stream.unjudged(events) if stream.unjudged is not None else []
+        return Observation(events, sightings, None, loop.time() - started, unjudged=unjudged)
     finally:
         with contextlib.suppress(Exception):
             runner.close()

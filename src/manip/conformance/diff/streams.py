@@ -27,6 +27,7 @@ if TYPE_CHECKING:
 __all__ = [
     "PREAMBLE_NUMBER",
     "ScenarioCheck",
+    "ScenarioUnjudged",
     "Stream",
     "make_stream",
     "make_streams",
@@ -52,6 +53,9 @@ def preamble() -> FuzzInput:
 ScenarioCheck = Callable[["dict[int, list[SideEvent]]"], "list[Sighting]"]
 """A scenario's own judge: a side's events of the stream in, the clauses they break out
 (:mod:`manip.conformance.diff.scenarios`)."""
+ScenarioUnjudged = Callable[["dict[int, list[SideEvent]]"], "list[str]"]
+"""What a scenario's judge could not judge on a side, and why (a timing clause whose breach an addressed
+side's round trips or host delays could hide or explain): a side's events in, one text per clause out."""
 
 
 @dataclass(frozen=True)
@@ -60,13 +64,14 @@ class Stream:
 
     A scenario (:mod:`manip.conformance.diff.scenarios`) has its ``scenario`` name, the environment
     conditions of the arm's world each side's world arranges for it (``conditions``) and its own
-    ``check`` of each side's answers."""
+    ``check`` of each side's answers, with what it could not judge on a side (``unjudged``)."""
 
     number: int | None
     inputs: tuple[FuzzInput, ...]
     scenario: str = ""
     conditions: tuple[Condition, ...] = ()
     check: ScenarioCheck | None = None
+    unjudged: ScenarioUnjudged | None = None
 
     @property
     def all_inputs(self) -> list[FuzzInput]:

@@ -518,31 +518,51 @@ def _expect_smooth_rest(
     """The arm comes to rest on ``last`` without passing it, its readings change at most once a servo
     cycle, and it never stands still between the first change and the last (``late``: how late the case's
     own waits between samples ended at most, seconds on the suite's clock)."""
-    angle = [sample.values[0] for sample in samples]
-    over = max((sign * (a - last) for a in angle), default=0.0)
-    ctx.expect(
-        over <= 1e-3 and abs(angle[-1] - last) <= 1e-3,
-        clause="motion.ends-at-rest",
-        expected=f"joint 1 coming to rest on {last:.3f} without passing it",
-        seen=f"it went {over:.4f} deg past it and ended at {angle[-1]:.4f}",
-    )
-    # The bounds hold whatever the round trips: a reading was taken somewhere between a sample's sent and
-    # received times, so two changes seen at samples i and j happened less than received[j] - sent[i-1]
-    # apart, and equal readings at samples a and b mean the arm stood still at least from received[a] to
-    # sent[b].  In virtual time sent == received and these are the plain sample times.
+    rest = rest_on_goal([sample.values[0] for sample in samples], sign, last)
+    ctx.expect(rest.held, clause="motion.ends-at-rest", expected=rest.expected, seen=rest.seen)
     # Times on the target's clock: a simulated arm with a time scale (--target-time-scale) runs faster.
-    timing = _Timing(samples, ctx.options.time_scale, late * ctx.options.time_scale)
-    unjudged = [reason for reason in (_servo_period(ctx, timing), _blending(ctx, timing)) if reason]
+    timing = Timing(samples, ctx.options.time_scale, late * ctx.options.time_scale)
+    period, blend = servo_period(timing), blending(timing)
+    ctx.expect(period.held, clause="motion.servo-period", expected=period.expected, seen=period.seen)
+    if blend is not None:
+        ctx.expect(blend.held, clause="motion.smooth-transitions", expected=blend.expected, seen=blend.seen)
+    unjudged = [check.unjudged for check in (period, blend) if check is not None and check.unjudged]
     if unjudged:
         not_judged_for_load(ctx, "; ".join(unjudged))
 
 
-class _Timing:
+class TimingCheck(NamedTuple):
+    """One clause judged from a sampled motion: whether it ``held``, what was ``expected`` and ``seen``,
+    and, when it held but the samples were too coarse (or the host too late) to show a breach,
+    ``unjudged``: why it is not judged, with the delays measured (it never passes then)."""
+
+    held: bool
+    expected: str
+    seen: str
+    unjudged: str | None = None
+
+
+def rest_on_goal(angle: Sequence[float], sign: float, last: float) -> TimingCheck:
+    """Joint 1's readings ``angle`` (moving in the direction of ``sign``) come to rest on ``last``
+    without passing it (``motion.ends-at-rest``)."""
+    over = max((sign * (a - last) for a in angle), default=0.0)
+    return TimingCheck(
+        over <= 1e-3 and bool(angle) and abs(angle[-1] - last) <= 1e-3,
+        f"joint 1 coming to rest on {last:.3f} without passing it",
+        f"it went {over:.4f} deg past it and ended at {angle[-1] if angle else math.nan:.4f}",
+    )
+
+
+# The bounds hold whatever the round trips: a reading was taken somewhere between a sample's sent and
+# received times, so two changes seen at samples i and j happened less than received[j] - sent[i-1]
+# apart, and equal readings at samples a and b mean the arm stood still at least from received[a] to
+# sent[b].  In virtual time sent == received and these are the plain sample times.
+class Timing:
     """The timing of a sampled motion, on the target's clock: where joint 1 changed, and how finely the
     samples could show it (what the host's load made of the sampling).
 
-    ``late`` is the largest delay of the case's own timers while sampling.  A real-time target on a busy
-    host may be delayed as much (its servo ticks late, then catches up), so the checks allow it as a
+    ``late`` is the largest delay of the sampler's own timers while sampling.  A real-time target on a
+    busy host may be delayed as much (its servo ticks late, then catches up), so the checks allow it as a
     margin; when the delays and the gaps between samples are larger than what a check measures, that
     check is not judged, with the figures measured: it never passes then."""
 
@@ -566,60 +586,58 @@ class _Timing:
     def delays(self) -> str:
         return (
             f"samples up to {max(self.gaps, default=0.0) * 1000:.1f} ms apart, round trips up to "
-            f"{max(self.trips, default=0.0) * 1000:.1f} ms, the case's own timers up to "
+            f"{max(self.trips, default=0.0) * 1000:.1f} ms, the sampler's own timers up to "
             f"{self.late * 1000:.1f} ms late (target's clock)"
         )
 
 
-def _servo_period(ctx: CaseContext, timing: _Timing) -> str | None:
-    """At most one change per 16 ms servo cycle; not judged (the reason) when consecutive samples were
-    typically too far apart, or the host too late, to show changes closer than that."""
-    changed = timing.changed
-    closest = [timing.span(i - 1, j) for i, j in pairwise(changed)]
-    bound = SERVO_S - timing.late
-    seen = ctx.expect(
-        not closest or min(closest) >= bound - 1e-6,
-        clause="motion.servo-period",
-        expected=f"the angles changing at most once per {SERVO_S * 1000:g} ms servo cycle"
-        + (f" ({timing.late * 1000:.1f} ms allowed for the host's delays)" if timing.late else ""),
-        seen=f"two changes at most {min(closest, default=0) * 1000:.1f} ms apart",
-    )
+def servo_period(timing: Timing) -> TimingCheck:
+    """At most one change per 16 ms servo cycle (``motion.servo-period``); not judged (the reason) when
+    consecutive samples were typically too far apart, or the host too late, to show changes closer than
+    that."""
+    closest = [timing.span(i - 1, j) for i, j in pairwise(timing.changed)]
+    held = not closest or min(closest) >= SERVO_S - timing.late - 1e-6
     pairs = timing.pairs
     typical = pairs[len(pairs) // 2] if pairs else math.inf
-    if seen and typical + timing.late >= SERVO_S:
-        return (
-            f"motion.servo-period: two samples in a row typically spanned {typical * 1000:.1f} ms "
-            f"({timing.delays()}), too coarse to show changes closer than the {SERVO_S * 1000:g} ms servo "
-            "cycle; an idle host (or the embedded target, in virtual time) would judge it"
-        )
-    return None
+    coarse = held and typical + timing.late >= SERVO_S
+    return TimingCheck(
+        held,
+        f"the angles changing at most once per {SERVO_S * 1000:g} ms servo cycle"
+        + (f" ({timing.late * 1000:.1f} ms allowed for the host's delays)" if timing.late else ""),
+        f"two changes at most {min(closest, default=0) * 1000:.1f} ms apart",
+        f"motion.servo-period: two samples in a row typically spanned {typical * 1000:.1f} ms "
+        f"({timing.delays()}), too coarse to show changes closer than the {SERVO_S * 1000:g} ms servo "
+        "cycle; an idle host (or the embedded target, in virtual time) would judge it"
+        if coarse
+        else None,
+    )
 
 
-def _blending(ctx: CaseContext, timing: _Timing) -> str | None:
+def blending(timing: Timing) -> TimingCheck | None:
     """Queued moves blend: joint 1 never stands still for three servo cycles between its first and last
-    change; not judged (the reason) when a stop that long could have hidden between the samples."""
+    change (``motion.smooth-transitions``); not judged (the reason) when a stop that long could have
+    hidden between the samples; None when joint 1 never moved (nothing to judge)."""
     changed, samples = timing.changed, timing.samples
     if not changed:
         return None
-    scale = timing.scale
-    stills = [(samples[b - 1].sent - samples[a].received) * scale for a, b in pairwise(changed) if b - 1 > a]
+    stills = [
+        (samples[b - 1].sent - samples[a].received) * timing.scale for a, b in pairwise(changed) if b - 1 > a
+    ]
     longest = max(stills, default=0.0)
     allowed = STILL_LIMIT_S + timing.late
-    seen = ctx.expect(
-        longest <= allowed + 1e-6,
-        clause="motion.smooth-transitions",
-        expected=f"joint 1 never standing still between {samples[changed[0]].received:.3f} s and "
-        f"{samples[changed[-1]].sent:.3f} s (queued moves blend)",
-        seen=f"it stood still for at least {longest * 1000:.0f} ms",
-    )
+    held = longest <= allowed + 1e-6
     unseen = timing.late + 2 * max(timing.gaps, default=0.0) + 2 * max(timing.trips, default=0.0)
-    if seen and unseen > 3 * SERVO_S:
-        return (
-            f"motion.smooth-transitions: a stop of up to {(allowed + unseen) * 1000:.0f} ms could have "
-            f"gone unseen ({timing.delays()}), more than the {3 * SERVO_S * 1000:g} ms (3 servo cycles) "
-            "the check looks for; an idle host (or the embedded target, in virtual time) would judge it"
-        )
-    return None
+    return TimingCheck(
+        held,
+        f"joint 1 never standing still between {samples[changed[0]].received:.3f} s and "
+        f"{samples[changed[-1]].sent:.3f} s (queued moves blend)",
+        f"it stood still for at least {longest * 1000:.0f} ms",
+        f"motion.smooth-transitions: a stop of up to {(allowed + unseen) * 1000:.0f} ms could have "
+        f"gone unseen ({timing.delays()}), more than the {3 * SERVO_S * 1000:g} ms (3 servo cycles) "
+        "the check looks for; an idle host (or the embedded target, in virtual time) would judge it"
+        if held and unseen > 3 * SERVO_S
+        else None,
+    )
 
 
 OBSTACLE_DEG: Final = 5.0

@@ -27,7 +27,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Final
 
-from manip.conformance.diff.scenarios import asyncs, motion, requests, state, values
+from manip.conformance.diff.scenarios import asyncs, motion, requests, state, timing, values
 from manip.conformance.diff.scenarios.kit import ANGLE_TOLERANCE
 from manip.conformance.diff.streams import Stream
 
@@ -40,6 +40,7 @@ SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
     **values.SCENARIOS,
     **motion.SCENARIOS,
     **requests.SCENARIOS,
+    **timing.SCENARIOS,
 }
 """Every scenario by name, in the order a diff sends them."""
 

@@ -117,6 +117,22 @@ def swapped_words(body: bytes) -> list[float]:
     return out
 
 
+def byte_swapped(event: SideEvent) -> list[float]:
+    """The floats of ``event``'s payload read with the two bytes of each word swapped (NaN where that is
+    no F value; none when the payload is not whole floats)."""
+    body = payload(event)
+    if len(body) % 4:
+        return []
+    swapped = bytes(b for at in range(0, len(body), 2) for b in (body[at + 1], body[at]))
+    out: list[float] = []
+    for at in range(0, len(swapped), 4):
+        try:
+            out.append(unpack_f(swapped[at : at + 4]))
+        except (CodecError, ValueError):
+            out.append(math.nan)
+    return out
+
+
 def shown_angles(angles: Sequence[float]) -> str:
     return "(" + " ".join(f"{a:g}" for a in angles) + ")"
 
