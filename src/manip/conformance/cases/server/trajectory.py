@@ -127,9 +127,9 @@ TURN_BACK_TOL_DEG: Final = 0.5
 """How far a sample's angle to the goal orientation may grow past the least it has been (the turn never
 goes back)."""
 MIDWAY_TURN_SHARE: Final = 0.02
-"""The least share of the whole turn the hand has made, and has left, when it is midway along its line."""
-MIDWAY_BAND: Final = 0.25
-"""How far from half its way the position may be for the sample nearest it to count as midway."""
+"""The least share of the whole turn the hand has made, and has left, when it is half way along its line:
+a sample before half way must have that much left, one after it that much made (the turn never going
+back, what one shows holds half way too, however sparse the samples)."""
 END_TURN_TOL_DEG: Final = 0.1
 """How far from the goal's orientation a straight-line move (205) may end."""
 
@@ -147,11 +147,12 @@ class Turn(NamedTuple):
         """How far past the whole turn the two angles add up (0 on the shortest rotation)."""
         return self.turned + self.left - self.whole
 
-    @property
-    def still_turning(self) -> bool:
-        """It has turned, and has left, at least :data:`MIDWAY_TURN_SHARE` of the whole turn."""
+    def off_pace(self, along: float) -> bool:
+        """Seen at ``along`` of the line (0 to 1), it shows the hand not turning half way: before half way
+        with less than :data:`MIDWAY_TURN_SHARE` of the whole turn left, or after it with less than that
+        made."""
         least = MIDWAY_TURN_SHARE * self.whole
-        return self.turned >= least and self.left >= least
+        return (0.0 < along <= 0.5 and self.left < least) or (0.5 <= along < 1.0 and self.turned < least)
 
 
 def turn_at(first: Sequence[float], here: Sequence[float], last: Sequence[float]) -> Turn:
@@ -174,14 +175,13 @@ def _distance_to_segment(p: Sequence[float], a: Sequence[float], b: Sequence[flo
 
 class TurnSeen(NamedTuple):
     """What the samples of one straight-line move show of its turn: the ``whole`` turn (degrees), the
-    worst ``off_way`` sample and how far, how far the turn went ``back`` at most, and the sample nearest
-    midway along the line (None when none lies within :data:`MIDWAY_BAND` of it) with where it is on the
-    turn."""
+    worst ``off_way`` sample and how far, how far the turn went ``back`` at most, and the first sample
+    ``off_pace`` (None when none is), with where it is on the turn and along the line."""
 
     whole: float
     off_way: tuple[float, tuple[float, ...]]
     back: float
-    midway: tuple[Turn, tuple[float, ...]] | None
+    off_pace: tuple[Turn, float, tuple[float, ...]] | None
 
 
 def turn_seen(first: Sequence[float], path: Sequence[Sequence[float]]) -> TurnSeen:
@@ -190,23 +190,22 @@ def turn_seen(first: Sequence[float], path: Sequence[Sequence[float]]) -> TurnSe
     last = path[-1] if path else first
     worst: tuple[float, tuple[float, ...]] = (0.0, tuple(first))
     back, least = 0.0, math.inf
-    midway: tuple[Turn, tuple[float, ...]] | None = None
-    nearest = MIDWAY_BAND
+    off_pace: tuple[Turn, float, tuple[float, ...]] | None = None
     for here in path:
         turn = turn_at(first, here, last)
         if turn.off_way > worst[0]:
             worst = (turn.off_way, tuple(here))
         back, least = max(back, turn.left - least), min(least, turn.left)
-        off_half = abs(along_line(here[9:], first[9:], last[9:]) - 0.5)
-        if off_half <= nearest:
-            midway, nearest = (turn, tuple(here)), off_half
-    return TurnSeen(turn_deg(first, last), worst, back, midway)
+        along = along_line(here[9:], first[9:], last[9:])
+        if off_pace is None and turn.off_pace(along):
+            off_pace = (turn, along, tuple(here))
+    return TurnSeen(turn_deg(first, last), worst, back, off_pace)
 
 
 def _expect_turn(ctx: CaseContext, op: str, first: Sequence[float], path: Sequence[Sequence[float]]) -> None:
     """straight-move.orientation on the samples ``path`` of a straight-line move from ``first``: each
     orientation on the way from the start's to where it ended, never turning back, and still turning
-    midway along the line."""
+    half way along the line."""
     seen = turn_seen(first, path)
     ctx.note(
         f"{op}: turned {seen.whole:.2f} deg, at most {seen.off_way[0]:.4f} deg off the way, "
@@ -228,16 +227,19 @@ def _expect_turn(ctx: CaseContext, op: str, first: Sequence[float], path: Sequen
         f"within {TURN_BACK_TOL_DEG:g} deg)",
         seen=f"the angle to the goal's orientation grew by {seen.back:.3g} deg",
     )
-    if seen.midway is None or seen.whole < 1.0:
-        ctx.note(f"{op}: no sample midway along a line that turned the hand; its pace on the way not judged")
+    if seen.whole < 1.0:
+        ctx.note(f"{op}: the hand turned {seen.whole:.3g} deg; the pace of its turn not judged")
         return
-    turn, here = seen.midway
+    off = seen.off_pace
     ctx.expect(
-        turn.still_turning,
+        off is None,
         clause=clause,
-        expected=f"{op}: midway along the line, the hand still turning (at least {MIDWAY_TURN_SHARE:.0%} of "
-        f"the whole turn of {turn.whole:.3g} deg made, and as much left)",
-        seen=f"Here {_shown(here)}: turned {turn.turned:.3g} deg, {turn.left:.3g} deg left",
+        expected=f"{op}: half way along the line, the hand still turning (at least {MIDWAY_TURN_SHARE:.0%} "
+        f"of the whole turn of {seen.whole:.3g} deg made, and as much left)",
+        seen=""
+        if off is None
+        else f"{off[1]:.0%} along the line, Here {_shown(off[2])}: turned "
+        f"{off[0].turned:.3g} deg, {off[0].left:.3g} deg left",
     )
 
 

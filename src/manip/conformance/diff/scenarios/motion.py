@@ -17,7 +17,6 @@ from manip.conformance.cases.server.motion import SPEED_MATCH
 from manip.conformance.cases.server.trajectory import (
     FRACTION_TOL,
     LINE_TOL_MM,
-    MIDWAY_BAND,
     MOVING_DEG,
     TURN_WAY_TOL_DEG,
     along_line,
@@ -300,20 +299,20 @@ def _off_line(p: Sequence[float], a: Sequence[float], b: Sequence[float]) -> tup
 
 
 def _turn_midway(line: int, heres: Sequence[tuple[SideEvent, list[float]]], along: float) -> list[Sighting]:
-    """Midway along its line (``along`` within :data:`MIDWAY_BAND` of half) the hand is on the way from
-    the orientation it started at to the one it ended at, and still turning
+    """On its line (``along`` of the way), the hand is on its way from the orientation it started at to
+    the one it ended at, and not done turning before half way nor yet to begin after it
     (``straight-move.orientation``)."""
     start, mid, end = (h[1] for h in heres)
     turn = turn_at(start, mid, end)
-    if abs(along - 0.5) > MIDWAY_BAND or turn.whole < 1.0:
+    if not 0.0 < along < 1.0 or turn.whole < 1.0:
         return []
-    if turn.off_way <= TURN_WAY_TOL_DEG and turn.still_turning:
+    if turn.off_way <= TURN_WAY_TOL_DEG and not turn.off_pace(along):
         return []
     message = (
-        f"midway along the line the hand had turned {turn.turned:.3g} deg of a {turn.whole:.3g}-degree turn, "
-        f"{turn.left:.3g} deg left ({turn.off_way:.3g} deg off the way)"
+        f"{along:.0%} along the line the hand had turned {turn.turned:.3g} deg of a {turn.whole:.3g}-degree "
+        f"turn, {turn.left:.3g} deg left ({turn.off_way:.3g} deg off the way)"
     )
-    expected = "the hand on its way from the start's orientation to the end's, still turning"
+    expected = "the hand on its way from the start's orientation to the end's, still turning half way"
     return [sighting(line, "straight-move.orientation", message, expected, heres[1][0])]
 
 
