@@ -644,3 +644,21 @@ def test_cartesian_pose_along_ends_and_bad_parameters() -> None:
     assert np.array_equal(seg.pose_along(1.0), t1) and np.array_equal(seg.pose_along(7.0), t1)
     with pytest.raises(ValueError, match="NaN"):
         seg.pose_along(math.nan)
+
+
+def test_cartesian_turn_share_turns_ahead_of_the_position() -> None:
+    """A faulty server's turn_share (fault straight-turn-first) turns the hand to the goal's orientation
+    over that share of the line and carries it unturned the rest of the way; the position is the line's
+    whatever the share, and the default turns in step with it."""
+    t0 = _pose(np.array([0.3, -0.2, 1.0]), 20.0, np.array([400.0, 100.0, 300.0]))
+    t1 = _pose(np.array([1.0, 0.5, 0.0]), 40.0, np.array([480.0, 10.0, 300.0])) @ t0
+    ahead, in_step = CartesianSegment(t0, t1, turn_share=0.1), CartesianSegment(t0, t1)
+    for s in (0.05, 0.1, 0.5, 0.9):
+        pose, step = ahead.pose_along(s), in_step.pose_along(s)
+        assert np.allclose(pose[:3, 3], step[:3, 3], atol=1e-9)
+        turned = _angle_deg(t0[:3, :3].T @ pose[:3, :3])
+        assert turned == pytest.approx(min(1.0, s / 0.1) * in_step.angle, abs=1e-6)
+        assert _angle_deg(t0[:3, :3].T @ step[:3, :3]) == pytest.approx(s * in_step.angle, abs=1e-6)
+    for share in (0.0, -0.5, 1.5, math.nan):
+        with pytest.raises(ValueError, match="turn_share"):
+            CartesianSegment(t0, t1, turn_share=share)

@@ -64,6 +64,7 @@ OTHERS = (
     "server.connect.abort-not-carried",
     "server.describe.not-split",
     "server.motion.joint-interpolated",
+    "server.motion.straight-line",
 )
 """A few cases that need no world, for the comparison of verdicts: among them the catchers of the
 defects in :data:`WORLD_FAULTS` that need no world, so each passes the clean process it fails with the
@@ -430,11 +431,13 @@ WORLD_FAULTS = (
     Fault.KEEPS_ABORT,
     Fault.ASYNC_SPLITS_MULTI,
     Fault.JOINT_MOVES_STRAIGHT,
+    Fault.STRAIGHT_TURN_FIRST,
 )
 """Defects that show only under a condition of the world (every protocol fault on a world case's
 path), and the other server defects found from outside that the 1985 guide's statements were re-judged
 for (the lefty side, the joint order, an abort carried into the next connection, an asynchronous packet
-inside a multi-packet reply, a Move that is not joint-interpolated), each caught through a manip-server
+inside a multi-packet reply, a Move that is not joint-interpolated, a straight line whose hand turns
+ahead of it), each caught through a manip-server
 process with its world by the case in :data:`CATCHER`, as the embedded server's fault matrix
 (``tests/conformance/test_faults.py``) catches it."""
 CATCHER = {
@@ -458,6 +461,7 @@ CATCHER = {
     Fault.KEEPS_ABORT: "server.connect.abort-not-carried",
     Fault.ASYNC_SPLITS_MULTI: "server.describe.not-split",
     Fault.JOINT_MOVES_STRAIGHT: "server.motion.joint-interpolated",
+    Fault.STRAIGHT_TURN_FIRST: "server.motion.straight-line",
 }
 SHOULD_BROKEN = (Fault.FATAL_SEVERITY_E, Fault.ASYNC_SPLITS_MULTI, Fault.CONFIGURATION_SWAPPED)
 """Faults that break a SHOULD clause: their case warns."""

@@ -15,6 +15,7 @@ from itertools import pairwise
 from pathlib import Path
 from typing import TypeVar
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -22,6 +23,7 @@ import manip
 from manip.arm.kinematics import READY, forward
 from manip.arm.sim import ArmDefects, Obstacle
 from manip.arm.trajectory import TICK
+from manip.arm.transform import Transform, rotation_angle_deg
 from manip.codecs.errors import DecodeError
 from manip.codecs.lisp import Symbol, read_alist
 from manip.codecs.messages import ErrorReply, decode_async, decode_error, decode_reply, encode_request
@@ -703,6 +705,31 @@ def test_straight_as_joint() -> None:
 
     clean, faulty = pair(Fault.STRAIGHT_AS_JOINT, scenario)
     assert clean < 0.01 and faulty > 1.0  # the conformance case allows 1 mm
+
+
+@covers(Fault.STRAIGHT_TURN_FIRST)
+def test_straight_turn_first() -> None:
+    def scenario(c: Client) -> tuple[float, float]:
+        """The share of its turn the hand has made when it is half way along a straight line that turns
+        it by 30 degrees about the hand's z axis, and how far the position strays from the line."""
+        c.one("set-joint-angles", joints=(20.0, -60.0, 150.0, 0.0, -60.0, 0.0))
+        c.settle()
+        start = Transform.from_floats(_here(c))
+        goal = Transform.trans(80.0, -90.0, 0.0) @ start @ Transform.rot_z(30.0)
+        c.one("straight-move", transform=goal.to_floats())
+        share, off, a, b = 0.0, 0.0, start.p, goal.p
+        while c.session.arm.moving:
+            c.run(0.016)
+            here = Transform.from_floats(_here(c))
+            along = float(np.dot(here.p - a, b - a) / np.dot(b - a, b - a))
+            off = max(off, float(np.linalg.norm(a + along * (b - a) - here.p)))
+            if abs(along - 0.5) < 0.03:
+                share = rotation_angle_deg(start.rotation.T @ here.rotation) / 30.0
+        return share, off
+
+    (clean, clean_off), (faulty, faulty_off) = pair(Fault.STRAIGHT_TURN_FIRST, scenario)
+    assert abs(clean - 0.5) < 0.1 and faulty > 0.999  # half the turn made half way, or all of it
+    assert clean_off < 0.01 and faulty_off < 0.01  # on the line either way
 
 
 @covers(Fault.COLLISION_UNCHECKED)

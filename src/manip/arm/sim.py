@@ -388,6 +388,10 @@ class ArmDefects:
     command_lead: float = 0.0
     """Servo cycles of the path's velocity added to each command (0: the path as interpolated; more runs
     the arm ahead of its path, and past a goal before it settles there)."""
+    turn_share: float = 1.0
+    """The share of a straight line's way over which the hand turns to the goal's orientation (1: all the
+    way, with the position; less turns it ahead of the position and carries it unturned the rest of the
+    line)."""
 
 
 class ArmSim:
@@ -967,7 +971,13 @@ class ArmSim:
             raise Refused("TOR", f"the goal is out of the workspace ({exc.reason})") from exc
         except OutOfRange:
             pass  # reachable, so the line is short enough to walk: where it breaks a limit is said there
-        line = CartesianSegment(forward(start, g).matrix, pose.matrix, self.cartesian_limits, speed)
+        line = CartesianSegment(
+            forward(start, g).matrix,
+            pose.matrix,
+            self.cartesian_limits,
+            speed,
+            turn_share=self.defects.turn_share,
+        )
         spacing = max(line.distance / LINE_CHECK_MM, line.angle / LINE_CHECK_DEG)
         n = min(max(1, math.ceil(spacing - _EPS)), MAX_LINE_CHECKS)
         finest = (1.0 + _EPS) / (n << REFINE_DEPTH)

@@ -84,6 +84,9 @@ COMMAND_LEAD_CYCLES: Final = 4.0
 past a 30-degree move's goal)."""
 SEGMENTS_STOP_REST_S: Final = 0.1
 """How long the segments-stop fault rests between queued segments: clearly more than a blend's pause."""
+TURN_FIRST_SHARE: Final = 0.1
+"""The share of a straight line's way over which the straight-turn-first fault turns the hand to its goal
+orientation (the rest of the line carries it unturned)."""
 CALIBRATED_MASK: Final = 0o77
 """The word calibrate-replies-mask appends to calibrate's done: every joint found its zero index."""
 OUNCES_PER_POUND: Final = 16.0
@@ -706,6 +709,7 @@ def arm_defects(faults: FaultSet) -> ArmDefects:
         segment_step=0 if Fault.SEGMENT_NUMBER_STUCK in on else 1,
         servo_rate=2.0 if Fault.SERVO_DOUBLE_RATE in on else 1.0,
         command_lead=COMMAND_LEAD_CYCLES if Fault.COMMAND_LEAD in on else 0.0,
+        turn_share=TURN_FIRST_SHARE if Fault.STRAIGHT_TURN_FIRST in on else 1.0,
     )
 
 

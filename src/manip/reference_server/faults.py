@@ -272,6 +272,14 @@ class Fault(FaultSwitch):
         "straight-move.line",
         caught_by=("server.motion.straight-line",),
     )
+    STRAIGHT_TURN_FIRST = defect(
+        "straight-turn-first",
+        "Straight-line moves (205, 212) turn the hand to its goal orientation over the first tenth of the "
+        "line and carry it unturned the rest of the way: the position follows the line, the turn does not "
+        "go with it.",
+        "straight-move.orientation",
+        caught_by=("server.motion.straight-line",),
+    )
     INCREMENT_FROM_ACTUAL = defect(
         "increment-from-actual",
         "Incremental moves add to where the arm stands when they are queued, not to where the queue ends.",

@@ -71,9 +71,14 @@ class CartesianSegment(SegmentEnds):
     keeps the tool speed/acceleration and the rotation rate within ``limits`` scaled by the speed factor
     (f and f²), unless ``duration`` is given explicitly.  This is the slerp form; Paul's drive
     transform visits the same positions but different intermediate orientations.
+
+    ``turn_share`` is the share of the way over which the orientation turns: 1 (the default) turns it in
+    step with the position, all the way; a faulty server's smaller share turns the hand to the goal's
+    orientation ahead of the position (``Rot(k, min(1, s/turn_share)·θ)``) and carries it unturned the
+    rest of the line (erratum ``straight-line-orientation``).
     """
 
-    __slots__ = ("_angle", "_axis", "_plain", "_r0", "profile")
+    __slots__ = ("_angle", "_axis", "_plain", "_r0", "_turn_share", "profile")
 
     def __init__(
         self,
@@ -84,7 +89,11 @@ class CartesianSegment(SegmentEnds):
         profile: Profile = Profile.QUINTIC,
         *,
         duration: float | None = None,
+        turn_share: float = 1.0,
     ) -> None:
+        if not 0.0 < turn_share <= 1.0:
+            raise ValueError("turn_share must be in (0, 1]")
+        self._turn_share = float(turn_share)
         self._start = _pose(start, "start")
         self._goal = _pose(goal, "goal")
         self.profile = profile
@@ -145,7 +154,8 @@ class CartesianSegment(SegmentEnds):
         if s >= 1.0:
             return self._goal.copy()
         r0, k, k2, p0, dp = self._plain
-        sn, vs = math.sin(s * self._angle), 1.0 - math.cos(s * self._angle)
+        turned = min(1.0, s / self._turn_share) * self._angle
+        sn, vs = math.sin(turned), 1.0 - math.cos(turned)
         # Rodrigues, Rot(k, sθ) = I + sin·K + (1 − cos)·K², then R0·Rot
         rot = [[float(i == j) + sn * k[i][j] + vs * k2[i][j] for j in range(3)] for i in range(3)]
         rows = [

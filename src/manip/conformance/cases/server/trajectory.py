@@ -106,14 +106,6 @@ async def _sample(
     return out
 
 
-def _distance_to_segment(p: Sequence[float], a: Sequence[float], b: Sequence[float]) -> float:
-    ab = [y - x for x, y in zip(a, b, strict=True)]
-    ap = [y - x for x, y in zip(a, p, strict=True)]
-    length2 = sum(v * v for v in ab)
-    t = 0.0 if length2 == 0 else max(0.0, min(1.0, sum(x * y for x, y in zip(ap, ab, strict=True)) / length2))
-    return math.dist(p, [x + t * v for x, v in zip(a, ab, strict=True)])
-
-
 async def _at_line_pose(ctx: CaseContext, probe: Probe) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Power on and move to :data:`LINE_POSE`; the joint angles before the move, and the transform the
     arm stands at after it."""
@@ -124,38 +116,194 @@ async def _at_line_pose(ctx: CaseContext, probe: Probe) -> tuple[tuple[float, ..
     return before, await read_floats(ctx, probe, "here")
 
 
-@case("server.motion.straight-line", clauses=["straight-move.line"], hazard="motion", deadline=15.0)
+STRAIGHT_TURN: Final = (15.0, -12.0, 20.0)
+"""dO dA dT by which the straight-line case's move (205) turns the hand, about 36 degrees in all (and its
+way back, 212, turns it back)."""
+TURN_WAY_TOL_DEG: Final = 2.0
+"""How far past the whole turn a sample's angle from the start orientation and its angle to the goal's may
+add up (erratum straight-line-orientation): 0 on the shortest rotation, under a degree for O A T or Paul's
+drive transform stepped along the suite's turns."""
+TURN_BACK_TOL_DEG: Final = 0.5
+"""How far a sample's angle to the goal orientation may grow past the least it has been (the turn never
+goes back)."""
+MIDWAY_TURN_SHARE: Final = 0.02
+"""The least share of the whole turn the hand has made, and has left, when it is half way along its line:
+a sample before half way must have that much left, one after it that much made (the turn never going
+back, what one shows holds half way too, however sparse the samples)."""
+END_TURN_TOL_DEG: Final = 0.1
+"""How far from the goal's orientation a straight-line move (205) may end."""
+
+
+class Turn(NamedTuple):
+    """One orientation on a turn from ``first`` to ``last`` (degrees): how far it has ``turned`` from the
+    first, how far it has ``left`` to the last, and the ``whole`` turn."""
+
+    turned: float
+    left: float
+    whole: float
+
+    @property
+    def off_way(self) -> float:
+        """How far past the whole turn the two angles add up (0 on the shortest rotation)."""
+        return self.turned + self.left - self.whole
+
+    def off_pace(self, along: float) -> bool:
+        """Seen at ``along`` of the line (0 to 1), it shows the hand not turning half way: before half way
+        with less than :data:`MIDWAY_TURN_SHARE` of the whole turn left, or after it with less than that
+        made."""
+        least = MIDWAY_TURN_SHARE * self.whole
+        return (0.0 < along <= 0.5 and self.left < least) or (0.5 <= along < 1.0 and self.turned < least)
+
+
+def turn_at(first: Sequence[float], here: Sequence[float], last: Sequence[float]) -> Turn:
+    """Where ``here`` is on the turn from ``first`` to ``last`` (each a Here transform, 12 floats)."""
+    return Turn(turn_deg(first, here), turn_deg(here, last), turn_deg(first, last))
+
+
+def along_line(p: Sequence[float], a: Sequence[float], b: Sequence[float]) -> float:
+    """How far along the line from ``a`` to ``b`` the point ``p`` lies (its projection: 0 at ``a``, 1 at
+    ``b``; 0 when they are one point)."""
+    ab = [y - x for x, y in zip(a, b, strict=True)]
+    length2 = sum(v * v for v in ab)
+    return 0.0 if length2 == 0 else sum((q - x) * v for q, x, v in zip(p, a, ab, strict=True)) / length2
+
+
+def _distance_to_segment(p: Sequence[float], a: Sequence[float], b: Sequence[float]) -> float:
+    t = max(0.0, min(1.0, along_line(p, a, b)))
+    return math.dist(p, [x + t * (y - x) for x, y in zip(a, b, strict=True)])
+
+
+class TurnSeen(NamedTuple):
+    """What the samples of one straight-line move show of its turn: the ``whole`` turn (degrees), the
+    worst ``off_way`` sample and how far, how far the turn went ``back`` at most, and the first sample
+    ``off_pace`` (None when none is), with where it is on the turn and along the line."""
+
+    whole: float
+    off_way: tuple[float, tuple[float, ...]]
+    back: float
+    off_pace: tuple[Turn, float, tuple[float, ...]] | None
+
+
+def turn_seen(first: Sequence[float], path: Sequence[Sequence[float]]) -> TurnSeen:
+    """The turn of the samples ``path`` of a move from ``first`` (Here at rest before it) to where the
+    last sample stands (each 12 floats)."""
+    last = path[-1] if path else first
+    worst: tuple[float, tuple[float, ...]] = (0.0, tuple(first))
+    back, least = 0.0, math.inf
+    off_pace: tuple[Turn, float, tuple[float, ...]] | None = None
+    for here in path:
+        turn = turn_at(first, here, last)
+        if turn.off_way > worst[0]:
+            worst = (turn.off_way, tuple(here))
+        back, least = max(back, turn.left - least), min(least, turn.left)
+        along = along_line(here[9:], first[9:], last[9:])
+        if off_pace is None and turn.off_pace(along):
+            off_pace = (turn, along, tuple(here))
+    return TurnSeen(turn_deg(first, last), worst, back, off_pace)
+
+
+def _expect_turn(ctx: CaseContext, op: str, first: Sequence[float], path: Sequence[Sequence[float]]) -> None:
+    """straight-move.orientation on the samples ``path`` of a straight-line move from ``first``: each
+    orientation on the way from the start's to where it ended, never turning back, and still turning
+    half way along the line."""
+    seen = turn_seen(first, path)
+    ctx.note(
+        f"{op}: turned {seen.whole:.2f} deg, at most {seen.off_way[0]:.4f} deg off the way, "
+        f"{seen.back:.4f} deg back"
+    )
+    clause = "straight-move.orientation"
+    ctx.expect(
+        seen.off_way[0] <= TURN_WAY_TOL_DEG,
+        clause=clause,
+        expected=f"{op}: every orientation on the way from the start's to the goal's (its angles from "
+        f"the one and to the other adding up to the whole turn of {seen.whole:.3g} deg, within "
+        f"{TURN_WAY_TOL_DEG:g})",
+        seen=f"Here {_shown(seen.off_way[1])}, {seen.off_way[0]:.3g} deg off the way",
+    )
+    ctx.expect(
+        seen.back <= TURN_BACK_TOL_DEG,
+        clause=clause,
+        expected=f"{op}: a turn that never goes back (the angle to the goal's orientation never growing, "
+        f"within {TURN_BACK_TOL_DEG:g} deg)",
+        seen=f"the angle to the goal's orientation grew by {seen.back:.3g} deg",
+    )
+    if seen.whole < 1.0:
+        ctx.note(f"{op}: the hand turned {seen.whole:.3g} deg; the pace of its turn not judged")
+        return
+    off = seen.off_pace
+    ctx.expect(
+        off is None,
+        clause=clause,
+        expected=f"{op}: half way along the line, the hand still turning (at least {MIDWAY_TURN_SHARE:.0%} "
+        f"of the whole turn of {seen.whole:.3g} deg made, and as much left)",
+        seen=""
+        if off is None
+        else f"{off[1]:.0%} along the line, Here {_shown(off[2])}: turned "
+        f"{off[0].turned:.3g} deg, {off[0].left:.3g} deg left",
+    )
+
+
+def _shown(here: Sequence[float]) -> list[float]:
+    return [round(v, 4) for v in here]
+
+
+@case(
+    "server.motion.straight-line",
+    clauses=["straight-move.line", "straight-move.orientation"],
+    hazard="motion",
+    deadline=15.0,
+)
 async def straight_line(ctx: CaseContext) -> None:
-    """Straight-line move (205) 120 mm across and back (212): every Here sampled on the way lies within
-    1 mm of the line between where the move starts and its goal (sizes in the run's --length-unit)."""
+    """Straight-line move (205) 120 mm across, turning the hand by dO dA dT 15 -12 20, and back (212):
+    every Here sampled on the way lies within 1 mm of the line between where the move starts and its
+    goal (sizes in the run's --length-unit), and its orientation on the way from the start's to the
+    goal's, never turning back and still turning when the hand is midway along the line; the 205 ends at
+    its goal's orientation."""
     probe = await ctx.connect()
     before, start = await _at_line_pose(ctx, probe)
-    dx, dy, tol, unit = (
-        length(ctx, 80.0),
-        length(ctx, 90.0),
-        length(ctx, LINE_TOL_MM),
-        ctx.options.length_unit,
+    dx, dy = length(ctx, 80.0), length(ctx, 90.0)
+    o, a, t = val_angles(start)
+    turned = val_rotation(o + STRAIGHT_TURN[0], a + STRAIGHT_TURN[1], t + STRAIGHT_TURN[2])
+    goal = [*(turned[i][j] for j in range(3) for i in range(3)), start[9] + dx, start[10] - dy, start[11]]
+    end = await _straight_leg(ctx, probe, ("straight-move", {"transform": goal}), start, goal[9:])
+    off = turn_deg(end, goal)
+    ctx.expect(
+        off <= END_TURN_TOL_DEG,
+        clause="straight-move.orientation",
+        expected=f"straight-move ending at its goal's orientation (within {END_TURN_TOL_DEG:g} deg)",
+        seen=f"Here {_shown(end)}, {off:.3g} deg from it",
     )
-    goal = list(start)
-    goal[9] += dx
-    goal[10] -= dy
-    for op, values, a, b in (
-        ("straight-move", {"transform": goal}, start[9:], goal[9:]),
-        ("incremental-straight-move", {"delta": [-dx, dy, 0.0, 0.0, 0.0, 0.0]}, goal[9:], start[9:]),
-    ):
-        answer = await probe.call(op, **values)  # type: ignore[arg-type]
-        require_reach(ctx, answer, f"a straight-line move ({op})")
-        samples = await _sample(ctx, probe, "here", 10.0)
-        worst = max(_distance_to_segment(sample.values[9:], a, b) for sample in samples)
-        ctx.note(f"{op}: {len(samples)} samples, at most {worst:.4f} {unit} off the line")
-        ctx.expect(
-            worst <= tol,
-            clause="straight-move.line",
-            expected=f"every position within {tol:.4g} {unit} of the line {list(a)} -> {list(b)}",
-            seen=f"a sample {worst:.4g} {unit} off it",
-        )
+    back = [-dx, dy, 0.0, *(-v for v in STRAIGHT_TURN)]
+    await _straight_leg(ctx, probe, ("incremental-straight-move", {"delta": back}), end, start[9:])
     await probe.call("set-joint-angles", joints=list(before))
     await settle(ctx, probe, before)
+
+
+async def _straight_leg(
+    ctx: CaseContext,
+    probe: Probe,
+    request: tuple[RequestName, dict[str, list[float]]],
+    first: tuple[float, ...],
+    goal: Sequence[float],
+) -> tuple[float, ...]:
+    """Send the straight-line move ``request`` from where Here says ``first`` to the position ``goal`` and
+    sample Here until the arm stands still: every position within :data:`LINE_TOL_MM` of the line
+    (straight-move.line), the orientation on its way (straight-move.orientation); where it ended."""
+    op, values = request
+    tol, unit = length(ctx, LINE_TOL_MM), ctx.options.length_unit
+    answer = await probe.call(op, **values)  # type: ignore[arg-type]
+    require_reach(ctx, answer, f"a straight-line move ({op})")
+    path = [sample.values for sample in await _sample(ctx, probe, "here", 10.0)]
+    worst = max(_distance_to_segment(here[9:], first[9:], goal) for here in path)
+    ctx.note(f"{op}: {len(path)} samples, at most {worst:.4f} {unit} off the line")
+    ctx.expect(
+        worst <= tol,
+        clause="straight-move.line",
+        expected=f"every position within {tol:.4g} {unit} of the line {list(first[9:])} -> {list(goal)}",
+        seen=f"a sample {worst:.4g} {unit} off it",
+    )
+    _expect_turn(ctx, op, first, path)
+    return path[-1]
 
 
 JOINT_MOVE_MM: Final = (60.0, 150.0, -80.0)

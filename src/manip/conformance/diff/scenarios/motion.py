@@ -9,6 +9,7 @@ from collections.abc import Callable, Sequence
 from typing import Final
 
 from manip.arm.kinematics import PUMA600, forward
+from manip.arm.oat import rotation_from_oat, xyzoat_from_transform
 from manip.codecs.error_string import parse_error
 from manip.codecs.errors import CodecError
 from manip.codecs.pdp11float import pack_f
@@ -17,7 +18,11 @@ from manip.conformance.cases.server.trajectory import (
     FRACTION_TOL,
     LINE_TOL_MM,
     MOVING_DEG,
+    TURN_WAY_TOL_DEG,
+    along_line,
+    turn_at,
 )
+from manip.conformance.diff.pairing import SideEvent
 from manip.conformance.diff.scenarios.kit import (
     MIDWAY,
     POSE,
@@ -263,33 +268,60 @@ def _split() -> Stream:
 
 LINE_SHIFT: Final = (80.0, 40.0, -60.0)
 """How far (mm) the paths scenario's straight-line move takes the hand from the seed's pose."""
+LINE_TURN: Final = (15.0, -12.0, 20.0)
+"""dO dA dT (deg) by which the paths scenario's straight-line move turns the hand on the way."""
+LINE_MIDWAY: Final = 0.55
+"""Seconds from the straight-line move to the Here read midway: about half its way on the reference
+server, whose 36-degree turn at 60 degrees a second takes about 1.1 s (a check judges the turn only where
+that Here is within a quarter of the line of half its way)."""
 JOINT_SHIFT: Final = (30.0, 20.0, -25.0, 15.0, 20.0, -30.0)
 """How far (deg) each joint goes in the paths scenario's joint-interpolated move to a transform."""
 
 
-def _shifted(angles: Sequence[float], shift: Sequence[float]) -> bytes:
-    """The transform of ``angles`` with its position moved by ``shift`` (mm)."""
-    floats = list(forward(angles, PUMA600.geometry).to_floats())
+def _shifted(
+    angles: Sequence[float], shift: Sequence[float], turn: Sequence[float] = (0.0, 0.0, 0.0)
+) -> bytes:
+    """The transform of ``angles`` with its position moved by ``shift`` (mm) and, given ``turn``, its
+    rotation turned by that dO dA dT (deg) of VAL's angles."""
+    pose = forward(angles, PUMA600.geometry)
+    floats = list(pose.to_floats())
     floats[9:] = [p + d for p, d in zip(floats[9:], shift, strict=True)]
+    if any(turn):
+        _, _, _, o, a, t = xyzoat_from_transform(pose)
+        floats[:9] = rotation_from_oat(o + turn[0], a + turn[1], t + turn[2]).T.ravel().tolist()
     return floats_data(floats)
 
 
 def _off_line(p: Sequence[float], a: Sequence[float], b: Sequence[float]) -> tuple[float, float]:
     """The distance of ``p`` from the line through ``a`` and ``b``, and how far along it p lies (0 to 1)."""
-    ab = [y - x for x, y in zip(a, b, strict=True)]
-    length = math.hypot(*ab)
-    if length == 0:
-        return 0.0, 0.0
-    along = sum((q - x) * d for q, x, d in zip(p, a, ab, strict=True)) / length**2
-    nearest = [x + along * d for x, d in zip(a, ab, strict=True)]
-    return math.dist(p, nearest), along
+    along = along_line(p, a, b)
+    return math.dist(p, [x + along * (y - x) for x, y in zip(a, b, strict=True)]), along
+
+
+def _turn_midway(line: int, heres: Sequence[tuple[SideEvent, list[float]]], along: float) -> list[Sighting]:
+    """On its line (``along`` of the way), the hand is on its way from the orientation it started at to
+    the one it ended at, and not done turning before half way nor yet to begin after it
+    (``straight-move.orientation``)."""
+    start, mid, end = (h[1] for h in heres)
+    turn = turn_at(start, mid, end)
+    if not 0.0 < along < 1.0 or turn.whole < 1.0:
+        return []
+    if turn.off_way <= TURN_WAY_TOL_DEG and not turn.off_pace(along):
+        return []
+    message = (
+        f"{along:.0%} along the line the hand had turned {turn.turned:.3g} deg of a {turn.whole:.3g}-degree "
+        f"turn, {turn.left:.3g} deg left ({turn.off_way:.3g} deg off the way)"
+    )
+    expected = "the hand on its way from the start's orientation to the end's, still turning half way"
+    return [sighting(line, "straight-move.orientation", message, expected, heres[1][0])]
 
 
 def _check_paths(line: int, joint: int) -> Callable[[Events], list[Sighting]]:
     """Midway through a straight-line move (input ``line``: Here before, midway, at the end) the hand is
-    on the line from where it started to where it ended (``straight-move.line``); midway through a move
-    (input ``joint``: joint angles before, midway, at the end) the joints that move are at one fraction
-    of their ways (``joint-move.interpolated``)."""
+    on the line from where it started to where it ended (``straight-move.line``) and on its turn from the
+    orientation it started at to the one it ended at, still turning (``straight-move.orientation``);
+    midway through a move (input ``joint``: joint angles before, midway, at the end) the joints that move
+    are at one fraction of their ways (``joint-move.interpolated``)."""
 
     def check(events: Events) -> list[Sighting]:
         out: list[Sighting] = []
@@ -301,6 +333,7 @@ def _check_paths(line: int, joint: int) -> Callable[[Events], list[Sighting]]:
                 ends = f"{shown_angles(start)} to {shown_angles(end)}"
                 message = f"midway the hand is {off:.3g} mm off the line from {ends}"
                 out.append(sighting(line, "straight-move.line", message, "the hand on the line", heres[1][0]))
+            out += _turn_midway(line, heres, along)
         reads = floats_at(events, joint, "joint-angles")
         if len(reads) == 3:
             first, mid, last = (r[1] for r in reads)
@@ -328,8 +361,8 @@ def _paths() -> Stream:
             "here, a straight-line move, here midway and at the end",
             [
                 req("here"),
-                req("straight-move", _shifted(SEED_ANGLES, LINE_SHIFT)),
-                Pause(MIDWAY),
+                req("straight-move", _shifted(SEED_ANGLES, LINE_SHIFT, LINE_TURN)),
+                Pause(LINE_MIDWAY),
                 req("here"),
                 Pause(REST),
                 req("here"),
