@@ -104,23 +104,6 @@ NOT_SHOWN: dict[Fault, str] = {
         "the generated set configuration requests carry a word, as the spec codec lays them out; no stream "
         "sends the one byte the 1985 guide allows"
     ),
-    Fault.HERE_ROW_MAJOR: (
-        "Here's floats differ from the clean side's, but no judge of one side knows which transform is right "
-        "(a layout of 12 floats is all the fuzzer's checks see): an unexplained difference (c) near "
-        "here.transform"
-    ),
-    Fault.SOLVE_BACKWARDS_RADIANS: (
-        "the transform solve backwards answers differs from the clean side's, but no judge of one side knows "
-        "which is right: an unexplained difference (c) near solve-backwards.data"
-    ),
-    Fault.UNDERFLOW_CLAMPED: (
-        "2^-128 where the clean side sends zero is within the tolerance the diff pairs floats by, and no "
-        "judge of one side knows the true value is below 2^-128: no difference at all"
-    ),
-    Fault.SOLVE_FORWARDS_RADIANS: (
-        "no scenario or generated stream asks solve forwards of a transform in reach: every one they send is "
-        "refused alike on both sides, so the angles it would answer never differ"
-    ),
     Fault.LOS_UNKNOWN_IGNORED: (
         "the diff's clients only send packets for connections that exist, so the server's missing LOS for "
         "one that does not never shows; server.ncp.los-unknown-connection sends one by hand"
@@ -211,7 +194,6 @@ NOT_RUN = frozenset(
         Fault.POWER_KEEPS_ABORT,
         Fault.SECOND_CLIENT_ADMITTED,
         Fault.SET_CONFIGURATION_WORD_ONLY,
-        Fault.UNDERFLOW_CLAMPED,
     }
 )
 """Faults on :data:`NOT_SHOWN` that are not run through the diff here, because a run shows nothing of
