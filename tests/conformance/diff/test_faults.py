@@ -40,18 +40,6 @@ NOT_SHOWN: dict[Fault, str] = {
         "connection keeps the first end it sees, not the CLS a conforming server sends after it, so the "
         "two ends pair equal and no judge of one side sees the CLS missing"
     ),
-    Fault.FORCES_IN_POUNDS: (
-        "no scenario reads forces under a known load: without a force on the hand the reference wrist "
-        "reads zero ounces, which is zero pounds too; the world's wrist-force is stated in the hand's "
-        "axes, and no check of the diff maps it to the wrist sensor's reading"
-    ),
-    Fault.FORCES_STALE: (
-        "no stream reads forces twice under a changing load: a world condition holds for the whole stream, "
-        "and the reference wrist's reading does not change under a steady one"
-    ),
-    Fault.GUARD_HIT_WORD_SWAPPED: (
-        "no scenario arranges a guarded move that hits its guard, so no guard-hit report is sent"
-    ),
     Fault.SEGMENTS_STOP: (
         "the fault changes when the arm moves between queued segments, which the diff sees only as angles "
         "sampled midway that differ (the paths scenario shows them as unexplained (c)); a stop between "
@@ -186,10 +174,7 @@ NOT_RUN = frozenset(
         # no stream differs at all: every answer of side B is side A's (tools/diff_faults.py, seed 7)
         Fault.CALIBRATE_REPLIES_MASK,
         Fault.FATAL_EOF_WITHOUT_CLS,
-        Fault.FORCES_IN_POUNDS,
-        Fault.FORCES_STALE,
         Fault.FREE_JOINT_FROM_ZERO,
-        Fault.GUARD_HIT_WORD_SWAPPED,
         Fault.HAND_FLAG_ONLY,
         Fault.POWER_KEEPS_ABORT,
         Fault.SECOND_CLIENT_ADMITTED,

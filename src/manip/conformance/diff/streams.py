@@ -26,6 +26,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "PREAMBLE_NUMBER",
+    "Phase",
     "ScenarioCheck",
     "Stream",
     "make_stream",
@@ -55,18 +56,35 @@ ScenarioCheck = Callable[["dict[int, list[SideEvent]]"], "list[Sighting]"]
 
 
 @dataclass(frozen=True)
+class Phase:
+    """A condition of the arm's world that holds for some inputs of a stream only: arranged before the
+    first of ``inputs`` is sent, once every request sent before it is answered, and cleared so before
+    the next input not among them (a change the answers before and after it show: a force put on the
+    hand and taken off again)."""
+
+    condition: Condition
+    inputs: tuple[int, ...]
+
+
+@dataclass(frozen=True)
 class Stream:
     """Stream ``number`` (None: one made of chosen inputs, or a scenario): the preamble, then ``inputs``.
 
     A scenario (:mod:`manip.conformance.diff.scenarios`) has its ``scenario`` name, the environment
-    conditions of the arm's world each side's world arranges for it (``conditions``) and its own
-    ``check`` of each side's answers."""
+    conditions of the arm's world each side's world arranges for it (``conditions``, for the whole
+    stream; ``phases``, for some of its inputs) and its own ``check`` of each side's answers."""
 
     number: int | None
     inputs: tuple[FuzzInput, ...]
     scenario: str = ""
     conditions: tuple[Condition, ...] = ()
     check: ScenarioCheck | None = None
+    phases: tuple[Phase, ...] = ()
+
+    @property
+    def needs(self) -> tuple[Condition, ...]:
+        """Every condition of the arm's world the stream needs arranged, for all of it or a phase."""
+        return (*self.conditions, *(p.condition for p in self.phases))
 
     @property
     def all_inputs(self) -> list[FuzzInput]:

@@ -27,7 +27,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Final
 
-from manip.conformance.diff.scenarios import asyncs, kinematics, motion, state, values
+from manip.conformance.diff.scenarios import asyncs, forces, kinematics, motion, state, values
 from manip.conformance.diff.scenarios.kit import ANGLE_TOLERANCE
 from manip.conformance.diff.streams import Stream
 
@@ -40,6 +40,7 @@ SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
     **values.SCENARIOS,
     **motion.SCENARIOS,
     **kinematics.SCENARIOS,
+    **forces.SCENARIOS,
 }
 """Every scenario by name, in the order a diff sends them."""
 
@@ -52,4 +53,4 @@ def scenario(name: str) -> Stream:
 def scenarios(*, world: bool = True) -> list[Stream]:
     """Every scenario; without ``world``, only those that need no condition of the arm's world."""
     out = [make() for make in SCENARIOS.values()]
-    return [s for s in out if world or not s.conditions]
+    return [s for s in out if world or not s.needs]
