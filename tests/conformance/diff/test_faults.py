@@ -51,10 +51,6 @@ NOT_SHOWN: dict[Fault, str] = {
         "period needs samples closer than 16 ms with their times, and the diff's events carry no times"
     ),
     # clauses no fault proved before (issue 32)
-    Fault.ASYNC_CODES_FROM_BITS: (
-        "shown as a violation of async.layout (side B): a segment-completed report carrying code 1 reads as "
-        "a guard hit whose stop/continue word is 0, which the judge names as the layout's"
-    ),
     Fault.CALIBRATE_REPLIES_MASK: (
         "the only scenario that calibrates arranges a calibration failure, answered F NZI on both sides; "
         "the generated streams never send calibrate, so no done of calibrate is paired"

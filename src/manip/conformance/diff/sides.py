@@ -140,7 +140,7 @@ async def _arranged(world: World, conditions: Sequence[Condition]) -> contextlib
 
 
 class _Phases:
-    """A stream's phased conditions (:class:`~manip.conformance.diff.streams.Phase`) on one side's
+    """A stream's phased conditions (:class:`~manip.conformance.diff.streams.WorldPhase`) on one side's
     world: before each input where the conditions that hold change, those that end are cleared and
     those that begin arranged; whatever holds at the end is cleared by :meth:`aclose`."""
 

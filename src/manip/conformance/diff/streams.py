@@ -26,9 +26,9 @@ if TYPE_CHECKING:
 
 __all__ = [
     "PREAMBLE_NUMBER",
-    "Phase",
     "ScenarioCheck",
     "Stream",
+    "WorldPhase",
     "make_stream",
     "make_streams",
     "preamble",
@@ -56,7 +56,7 @@ ScenarioCheck = Callable[["dict[int, list[SideEvent]]"], "list[Sighting]"]
 
 
 @dataclass(frozen=True)
-class Phase:
+class WorldPhase:
     """A condition of the arm's world that holds for some inputs of a stream only: arranged before the
     first of ``inputs`` is sent, once every request sent before it is answered, and cleared so before
     the next input not among them (a change the answers before and after it show: a force put on the
@@ -79,7 +79,7 @@ class Stream:
     scenario: str = ""
     conditions: tuple[Condition, ...] = ()
     check: ScenarioCheck | None = None
-    phases: tuple[Phase, ...] = ()
+    phases: tuple[WorldPhase, ...] = ()
 
     @property
     def needs(self) -> tuple[Condition, ...]:

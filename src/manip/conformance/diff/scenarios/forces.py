@@ -2,9 +2,9 @@
 hand, and a guard that trips on the push.
 
 The push is the world contract's ``wrist-force`` condition, held for the middle input only (a
-:class:`~manip.conformance.diff.streams.Phase`), as the directed case server.wrist.force-push arranges it
-for part of its connection; its judges are that case's (what the reading must change by, in ounces and
-ounce-inches, and that each reading is the current one).  Each reading is judged once the wrist's filter
+:class:`~manip.conformance.diff.streams.WorldPhase`), as the directed case server.wrist.force-push
+arranges it for part of its connection; its judges are that case's (what the reading must change by, in
+ounces and ounce-inches, and that each reading is the current one).  Each reading is judged once the wrist's filter
 has followed the change: two readings a quarter second apart that agree.  A stop-the-move guard armed
 across the push trips; its guard-hit report says so (1 = stop) and names the guard (the 1985 guide,
 E.3 Opcode 203).  The wrist opcodes are manip's Puma extensions: a side that refuses them (a server
@@ -39,7 +39,7 @@ from manip.conformance.diff.scenarios.kit import (
     sighting,
     wire_of,
 )
-from manip.conformance.diff.streams import Phase, Stream
+from manip.conformance.diff.streams import Stream, WorldPhase
 from manip.conformance.fuzz.judge import Sighting
 from manip.conformance.fuzz.steps import Pause, RequestStep, Step
 from manip.conformance.judge.checks import async_of
@@ -156,7 +156,7 @@ def _push() -> Stream:
         scenario_inputs("force-push", groups),
         scenario="force-push",
         check=all_of(_check_push(0, 1, 2), _check_guard),
-        phases=(Phase(PUSH_CONDITION, (1,)),),
+        phases=(WorldPhase(PUSH_CONDITION, (1,)),),
     )
 
 

@@ -44,33 +44,33 @@ from manip.conformance.fuzz.judge import Sighting
 from manip.conformance.fuzz.steps import Pause, Step
 from manip.spec.constants import ServerOp
 
-ROTATION_TOL: Final = 0.01
+SAME_POSE_TURN: Final = 0.01
 """How far two rotations of one pose may differ, entry by entry (a joint settled within a few hundredths
 of a degree turns the hand by far less; angles read as radians, by tens of degrees)."""
-POSITION_TOL_MM: Final = 2.0
+SAME_POSE_MM: Final = 2.0
 """How far two positions of one pose may be apart (mm; in the side's unit, as many of its units)."""
 POSE_TRANSFORM: Final = forward(POSE, PUMA600.geometry).to_floats()
 """The transform of :data:`POSE` by the spec's kinematics, in millimetres."""
 
 
-def in_unit(transform: Sequence[float], unit: LengthUnit) -> tuple[float, ...]:
+def _in_unit(transform: Sequence[float], unit: LengthUnit) -> tuple[float, ...]:
     """``transform`` (mm) with its position in ``unit``."""
     return (*transform[:9], *(p / MM_PER_UNIT[unit] for p in transform[9:]))
 
 
 def same_pose(got: Sequence[float], want: Sequence[float], unit: LengthUnit) -> bool:
-    """Whether two transforms in ``unit`` are one pose within :data:`ROTATION_TOL` and
-    :data:`POSITION_TOL_MM`."""
+    """Whether two transforms in ``unit`` are one pose within :data:`SAME_POSE_TURN` and
+    :data:`SAME_POSE_MM`."""
     if len(got) != 12 or len(want) != 12:
         return False
     turn = max(abs(g - w) for g, w in zip(got[:9], want[:9], strict=True))
-    return turn <= ROTATION_TOL and math.dist(got[9:], want[9:]) <= POSITION_TOL_MM / MM_PER_UNIT[unit]
+    return turn <= SAME_POSE_TURN and math.dist(got[9:], want[9:]) <= SAME_POSE_MM / MM_PER_UNIT[unit]
 
 
 def _unit_of(here: Sequence[float]) -> LengthUnit | None:
     """The unit in which the side's Here at :data:`POSE` is the spec's transform of it (None: in none;
     the side's arm is not the spec's, and nothing here judges its solutions)."""
-    return next((u for u in LENGTH_UNITS if same_pose(here, in_unit(POSE_TRANSFORM, u), u)), None)
+    return next((u for u in LENGTH_UNITS if same_pose(here, _in_unit(POSE_TRANSFORM, u), u)), None)
 
 
 def _check_here(at: int) -> Callable[[Events], list[Sighting]]:
@@ -126,7 +126,7 @@ def _reaches(angles: Sequence[float], transform: Sequence[float], unit: LengthUn
     )
     return at_pose or (
         len(angles) == 6
-        and same_pose(in_unit(forward(angles, PUMA600.geometry).to_floats(), unit), transform, unit)
+        and same_pose(_in_unit(forward(angles, PUMA600.geometry).to_floats(), unit), transform, unit)
     )
 
 
@@ -191,7 +191,7 @@ def _kinematics() -> Stream:
         (
             "solve forwards of their transform, in mm, cm and inches",
             [
-                req("solve-forwards", floats_data(in_unit(POSE_TRANSFORM, u)) + floats_data(POSE))
+                req("solve-forwards", floats_data(_in_unit(POSE_TRANSFORM, u)) + floats_data(POSE))
                 for u in LENGTH_UNITS
             ],
         ),
