@@ -4,11 +4,11 @@ hand, and a guard that trips on the push.
 The push is the world contract's ``wrist-force`` condition, held for the middle input only (a
 :class:`~manip.conformance.diff.streams.WorldPhase`), as the directed case server.wrist.force-push
 arranges it for part of its connection; its judges are that case's (what the reading must change by, in
-ounces and ounce-inches, and that each reading is the current one).  Each reading is judged once the wrist's filter
-has followed the change: two readings a quarter second apart that agree.  A stop-the-move guard armed
-across the push trips; its guard-hit report says so (1 = stop) and names the guard (the 1985 guide,
-E.3 Opcode 203).  The wrist opcodes are manip's Puma extensions: a side that refuses them (a server
-written from the 1985 guide alone) answers nothing a check judges.
+ounces and ounce-inches, and that each reading is the current one).  Each reading is judged once the
+wrist's filter has followed the change: two readings a quarter second apart that agree.  A
+stop-the-move guard armed across the push trips; its guard-hit report says so (1 = stop) and names the
+guard (the 1985 guide, E.3 Opcode 203).  The wrist opcodes are manip's Puma extensions: a side that
+refuses them (a server written from the 1985 guide alone) answers nothing a check judges.
 """
 
 from __future__ import annotations
