@@ -84,3 +84,13 @@ def test_each_judge_names_the_answer_it_judges(
     name: str, bend: Callable[[list[float]], list[float]], which: int, clause: str
 ) -> None:
     assert _named(_bent(_guide_events(), name, bend, which)) == {clause}
+
+
+@pytest.mark.slow
+def test_a_dirty_zero_is_named_as_such() -> None:
+    events = _bent(_guide_events(), "solve-backwards", lambda t: t)
+    number = max(events)
+    out = {n: list(seen) for n, seen in events.items()}
+    event = out[number][-1]
+    out[number][-1] = dataclasses.replace(event, data=event.data[:6] + b"\x0f\x00\x36\x34" + event.data[10:])
+    assert _named(out) == {"float.dirty-zero"}

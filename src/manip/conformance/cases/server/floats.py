@@ -144,7 +144,7 @@ async def dirty_zero(ctx: CaseContext) -> None:
             )
 
 
-def _bad_patterns(payload: bytes) -> tuple[list[str], list[str]]:
+def bad_patterns(payload: bytes) -> tuple[list[str], list[str]]:
     """(reserved operands, dirty zeros) among the floats of ``payload``, as hex words."""
     reserved: list[str] = []
     dirty: list[str] = []
@@ -181,7 +181,7 @@ async def extremes(ctx: CaseContext) -> None:
             continue  # out of reach: refusing is the answer
         clause = "solve-backwards.data" if op == "solve-backwards" else "float.not-finite"
         ctx.expect_response(answer, clause=clause, expected=f"an answer or a refusal for {what}")
-        reserved, dirty = _bad_patterns(answer.payload)
+        reserved, dirty = bad_patterns(answer.payload)
         ctx.exercised("float.range")  # every float of the answer read as an F value
         ctx.expect(
             not reserved,

@@ -20,7 +20,7 @@ from typing import Final
 
 from manip.arm.kinematics import PUMA600, forward
 from manip.arm.units import LENGTH_UNITS, MM_PER_UNIT, LengthUnit
-from manip.conformance.cases.server.floats import TINY_WRIST, by_rows, sent_by_rows, unflushed
+from manip.conformance.cases.server.floats import TINY_WRIST, bad_patterns, by_rows, sent_by_rows, unflushed
 from manip.conformance.diff.scenarios.kit import (
     POSE,
     REST,
@@ -32,6 +32,7 @@ from manip.conformance.diff.scenarios.kit import (
     floats_at,
     floats_data,
     opcode_of,
+    payload,
     read_back,
     read_here,
     req,
@@ -157,10 +158,16 @@ def _check_forwards(at: int, solved: int) -> Callable[[Events], list[Sighting]]:
 def _check_underflow(at: int) -> Callable[[Events], list[Sighting]]:
     """Solve backwards of every joint at 0 and of :data:`TINY_WRIST` (input ``at``, in that order): where
     the first rotation has a zero the second has one too, its change there being below 2^-128
-    (``float.range``; the directed case server.float.extremes's judge)."""
+    (``float.range``), and no float of theirs is a dirty zero (``float.dirty-zero``) (the directed case
+    server.float.extremes's judges)."""
 
     def check(events: Events) -> list[Sighting]:
         answers = floats_at(events, at, "solve-backwards")
+        for event, _ in answers:
+            dirty = bad_patterns(payload(event))[1]
+            if dirty:
+                message = f"solve backwards answered exponent 0 with fraction bits: {'; '.join(dirty)}"
+                return [sighting(at, "float.dirty-zero", message, "a clean zero (all bits 0)", event)]
         if len(answers) != 2 or len(answers[0][1]) != 12 or len(answers[1][1]) != 12:
             return []
         wrong = unflushed(answers[0][1], answers[1][1])
