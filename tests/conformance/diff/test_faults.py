@@ -35,36 +35,7 @@ PROTOCOL_FAULTS = sorted(
 playing Cougar)."""
 
 NOT_SHOWN: dict[Fault, str] = {
-    Fault.FORCES_IN_POUNDS: (
-        "no scenario reads forces under a known load: without a force on the hand the reference wrist "
-        "reads zero ounces, which is zero pounds too; the world's wrist-force is stated in the hand's "
-        "axes, and no check of the diff maps it to the wrist sensor's reading"
-    ),
-    Fault.FORCES_STALE: (
-        "no stream reads forces twice under a changing load: a world condition holds for the whole stream, "
-        "and the reference wrist's reading does not change under a steady one"
-    ),
-    Fault.GUARD_HIT_WORD_SWAPPED: (
-        "no scenario arranges a guarded move that hits its guard, so no guard-hit report is sent"
-    ),
     # clauses no fault proved before (issue 32)
-    Fault.HERE_ROW_MAJOR: (
-        "Here's floats differ from the clean side's, but no judge of one side knows which transform is right "
-        "(a layout of 12 floats is all the fuzzer's checks see): an unexplained difference (c) near "
-        "here.transform"
-    ),
-    Fault.SOLVE_BACKWARDS_RADIANS: (
-        "the transform solve backwards answers differs from the clean side's, but no judge of one side knows "
-        "which is right: an unexplained difference (c) near solve-backwards.data"
-    ),
-    Fault.UNDERFLOW_CLAMPED: (
-        "2^-128 where the clean side sends zero is within the tolerance the diff pairs floats by, and no "
-        "judge of one side knows the true value is below 2^-128: no difference at all"
-    ),
-    Fault.SOLVE_FORWARDS_RADIANS: (
-        "no scenario or generated stream asks solve forwards of a transform in reach: every one they send is "
-        "refused alike on both sides, so the angles it would answer never differ"
-    ),
     Fault.LOS_UNKNOWN_IGNORED: (
         "the diff's clients only send packets for connections that exist, so the server's missing LOS for "
         "one that does not never shows; server.ncp.los-unknown-connection sends one by hand"
@@ -139,10 +110,6 @@ NOT_RUN = frozenset(
         Fault.TRAILER_SOURCE_DESTINATION,
         Fault.CHAOSD_MSB_FIRST,
         # no stream differs at all: every answer of side B is side A's (tools/diff_faults.py, seed 7)
-        Fault.FORCES_IN_POUNDS,
-        Fault.FORCES_STALE,
-        Fault.GUARD_HIT_WORD_SWAPPED,
-        Fault.UNDERFLOW_CLAMPED,
     }
 )
 """Faults on :data:`NOT_SHOWN` that are not run through the diff here, because a run shows nothing of

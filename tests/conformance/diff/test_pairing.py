@@ -54,6 +54,14 @@ def test_floats_within_tolerance_are_the_same_and_inches_are_a_length_unit() -> 
     assert differing_parts(response(1.0, 254.0), response(2.0, 10.0)) == ("data",)
 
 
+def test_a_zero_against_the_least_magnitude_differs_whatever_the_tolerance() -> None:
+    least = 2.0**-128  # within tolerance of zero, yet float.range sends a smaller magnitude as zero
+    assert differing_parts(response(1.0, 0.0), response(1.0, -least)) == ("data",)
+    assert differing_parts(response(least, 2.0), response(0.0, 2.0)) == ("data",)
+    assert differing_parts(response(1.0, 0.0), response(1.0, 1e-7)) == ()  # rounding, both conform
+    assert differing_parts(response(1.0, least), response(1.0, least)) == ()
+
+
 def test_asynchronous_layouts() -> None:
     words = b"\x01\x00\x00\x00\x07\x00"
     guide = SideEvent("packet", ServerOp.ASYNCHRONOUS_RESPONSE, words)

@@ -26,8 +26,9 @@ out: never compared, only read by a scenario's check that judges when the arm mo
 * an asynchronous response: ``async.layout`` (6 or 8 bytes, erratum ``async-request-number``) and
   ``async.data`` (the condition code and words themselves);
 * other data: ``data`` (compared as PDP-11 floats within :data:`FLOAT_TOLERANCE` where both sides'
-  bytes read as floats), or ``data.length-unit`` when every float that differs is the other's times
-  25.4 (inches against millimetres, erratum ``units``).
+  bytes read as floats, but a dirty zero or a zero against the least F magnitude differs whatever the
+  tolerance), or ``data.length-unit`` when every float that differs is the other's times 25.4 (inches
+  against millimetres, erratum ``units``).
 
 Sans-I/O.
 """
@@ -286,6 +287,22 @@ def _dirty(a: bytes, b: bytes) -> bool:
     return False
 
 
+def _floored(a: bytes, b: bytes) -> bool:
+    """Whether a float of ``a`` or ``b`` is zero where the other side's has the least exponent (a
+    magnitude below 2^-127): within tolerance of zero, yet a magnitude below 2^-128 is sent as zero
+    (``float.range``), so one of them may be an underflow not flushed."""
+    for at in range(0, len(a) - 3, 4):
+        wa, wb = a[at : at + 4], b[at : at + 4]
+        if (not any(wa) and _exponent(wb) == 1) or (not any(wb) and _exponent(wa) == 1):
+            return True
+    return False
+
+
+def _exponent(word: bytes) -> int:
+    """The exponent field of a PDP-11 F float (its first word low byte first)."""
+    return (word[1] << 1 | word[0] >> 7) & 0xFF
+
+
 def _close(x: float, y: float) -> bool:
     return math.isclose(x, y, rel_tol=FLOAT_TOLERANCE, abs_tol=FLOAT_TOLERANCE)
 
@@ -298,7 +315,7 @@ def _data_parts(a: bytes, b: bytes) -> tuple[str, ...]:
         return ("data",)
     differing = [(x, y) for x, y in zip(fa, fb, strict=True) if not _close(x, y)]
     if not differing:
-        return ("data",) if _dirty(a[2:], b[2:]) else ()
+        return ("data",) if _dirty(a[2:], b[2:]) or _floored(a[2:], b[2:]) else ()
     if all(_close(x, y * INCH) or _close(y, x * INCH) for x, y in differing):
         return ("data.length-unit",)
     return ("data",)

@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Sequence
+import functools
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Final
 
@@ -100,15 +101,15 @@ def observe(side: Side, stream: Stream, allowance: Allowance, seed: int) -> Obse
                 if isinstance(arranged, str):
                     return Observation(unarranged=arranged)
                 async with arranged:
-                    return await _observe(parse_address(env.address), stream, allowance, seed)
+                    return await _observe(parse_address(env.address), stream, allowance, seed, env.world)
 
         return virtual_clock.run(embedded(), virtual=True)
     assert side.address is not None
     address = side.address
-    if not stream.conditions:
+    if not stream.needs:
         return asyncio.run(_observe(address, stream, allowance, seed))
     if side.world is None:
-        needs = ", ".join(c.describe() for c in stream.conditions)
+        needs = ", ".join(c.describe() for c in stream.needs)
         return Observation(
             unarranged=f"it needs {needs}, and side {side.name} has no --world-{side.name.lower()}"
         )
@@ -120,7 +121,7 @@ def observe(side: Side, stream: Stream, allowance: Allowance, seed: int) -> Obse
                 if isinstance(arranged, str):
                     return Observation(unarranged=arranged)
                 async with arranged:
-                    return await _observe(address, stream, allowance, seed)
+                    return await _observe(address, stream, allowance, seed, world)
         except WorldError as exc:
             return Observation(unarranged=f"side {side.name}'s world failed: {exc}")
 
@@ -140,16 +141,51 @@ async def _arranged(world: World, conditions: Sequence[Condition]) -> contextlib
     return stack
 
 
-async def _observe(address: LinkAddress, stream: Stream, allowance: Allowance, seed: int) -> Observation:
+class _Phases:
+    """A stream's phased conditions (:class:`~manip.conformance.diff.streams.WorldPhase`) on one side's
+    world: before each input where the conditions that hold change, those that end are cleared and
+    those that begin arranged; whatever holds at the end is cleared by :meth:`aclose`."""
+
+    def __init__(self, world: World | None, stream: Stream) -> None:
+        self.world = world
+        self.held: dict[Condition, contextlib.AsyncExitStack] = {}
+        self.changes: dict[int, Callable[[], Awaitable[None]]] = {}
+        before: frozenset[Condition] = frozenset()
+        for item in stream.inputs:
+            wanted = frozenset(p.condition for p in stream.phases if item.number in p.inputs)
+            if wanted != before:
+                self.changes[item.number] = functools.partial(self._to, wanted)
+            before = wanted
+
+    async def _to(self, wanted: frozenset[Condition]) -> None:
+        for condition in [c for c in self.held if c not in wanted]:
+            await self.held.pop(condition).aclose()
+        for condition in wanted - set(self.held):
+            assert self.world is not None  # a stream with phases is sent only to a side with a world
+            stack = contextlib.AsyncExitStack()
+            await stack.enter_async_context(self.world.arranged(condition))
+            self.held[condition] = stack
+
+    async def aclose(self) -> None:
+        await self._to(frozenset())
+
+
+async def _observe(
+    address: LinkAddress, stream: Stream, allowance: Allowance, seed: int, world: World | None = None
+) -> Observation:
     loop = asyncio.get_running_loop()
     started = loop.time()
-    runner = BatchRunner(address, allowance, seed=seed)
+    phases = _Phases(world, stream)
+    runner = BatchRunner(address, allowance, seed=seed, changes=phases.changes)
     bound = stream_bound(stream, allowance)
     try:
         try:
             async with asyncio.timeout(bound):
                 run = await runner.run(stream.all_inputs)
                 live = await liveness(runner)
+        except (ConditionUnsupported, WorldError) as exc:  # a phase's condition, mid-stream
+            whose = world.description if world is not None else "the side's world"
+            return Observation(unarranged=f"{whose} cannot arrange it: {exc}")
         except TimeoutError:
             last = stream.all_inputs[-1].number
             why = f"the side did not finish the stream within {bound:g} s"
@@ -167,6 +203,7 @@ async def _observe(address: LinkAddress, stream: Stream, allowance: Allowance, s
     finally:
         with contextlib.suppress(Exception):
             runner.close()
+        await phases.aclose()
 
 
 def _opening(sighting: Sighting, stream: Stream) -> Sighting:

@@ -29,6 +29,7 @@ __all__ = [
     "ScenarioCheck",
     "ScenarioUnjudged",
     "Stream",
+    "WorldPhase",
     "make_stream",
     "make_streams",
     "preamble",
@@ -59,12 +60,24 @@ side's round trips or host delays could hide or explain): a side's events in, on
 
 
 @dataclass(frozen=True)
+class WorldPhase:
+    """A condition of the arm's world that holds for some inputs of a stream only: arranged before the
+    first of ``inputs`` is sent, once every request sent before it is answered, and cleared so before
+    the next input not among them (a change the answers before and after it show: a force put on the
+    hand and taken off again)."""
+
+    condition: Condition
+    inputs: tuple[int, ...]
+
+
+@dataclass(frozen=True)
 class Stream:
     """Stream ``number`` (None: one made of chosen inputs, or a scenario): the preamble, then ``inputs``.
 
     A scenario (:mod:`manip.conformance.diff.scenarios`) has its ``scenario`` name, the environment
-    conditions of the arm's world each side's world arranges for it (``conditions``) and its own
-    ``check`` of each side's answers, with what it could not judge on a side (``unjudged``)."""
+    conditions of the arm's world each side's world arranges for it (``conditions``, for the whole
+    stream; ``phases``, for some of its inputs) and its own ``check`` of each side's answers, with what
+    it could not judge on a side (``unjudged``)."""
 
     number: int | None
     inputs: tuple[FuzzInput, ...]
@@ -72,6 +85,12 @@ class Stream:
     conditions: tuple[Condition, ...] = ()
     check: ScenarioCheck | None = None
     unjudged: ScenarioUnjudged | None = None
+    phases: tuple[WorldPhase, ...] = ()
+
+    @property
+    def needs(self) -> tuple[Condition, ...]:
+        """Every condition of the arm's world the stream needs arranged, for all of it or a phase."""
+        return (*self.conditions, *(p.condition for p in self.phases))
 
     @property
     def all_inputs(self) -> list[FuzzInput]:

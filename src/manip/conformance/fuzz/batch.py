@@ -25,6 +25,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import random
+from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Final, Literal
 
@@ -91,9 +92,19 @@ class Liveness:
 class BatchRunner:
     """Sends batches to the target at ``address``; ``inbox`` takes everything that comes back."""
 
-    def __init__(self, address: LinkAddress, allowance: Allowance, *, seed: int = 0) -> None:
+    def __init__(
+        self,
+        address: LinkAddress,
+        allowance: Allowance,
+        *,
+        seed: int = 0,
+        changes: Mapping[int, Callable[[], Awaitable[None]]] | None = None,
+    ) -> None:
         self.address = address
         self.allowance = allowance
+        self.changes = dict(changes or {})
+        """What changes in the target's world before an input, by its number (the diff's phased
+        conditions): awaited once every request sent before the input is answered."""
         self.inbox = Inbox()
         self.inbox.on_stray = self._on_stray
         self.datagram = address.scheme == "chudp"
@@ -178,6 +189,10 @@ class BatchRunner:
     async def _input(self, run: BatchRun, conn: FuzzConnection, item: FuzzInput) -> FuzzConnection | None:
         """Send the steps of one input; the connection it leaves (a new one after the target closed the
         last, None if none could be opened)."""
+        change = self.changes.get(item.number)
+        if change is not None:
+            await conn.settle()
+            await change()
         conn.current = item.number
         for index, step in enumerate(item.steps):
             if isinstance(step, RequestStep):

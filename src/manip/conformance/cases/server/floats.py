@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Sequence
 
 from manip.conformance.cases._support import floats, length, read_floats
 from manip.conformance.judge.violation import showing
@@ -25,11 +26,11 @@ HUGE = 1.0e38
 POSITION_TOL_MM = 0.05
 
 
-def _dot(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+def _dot(a: Sequence[float], b: Sequence[float]) -> float:
     return sum(x * y for x, y in zip(a, b, strict=True))
 
 
-def _rotation_error(pose: tuple[float, ...]) -> float:
+def rotation_error(pose: Sequence[float]) -> float:
     """How far N, O, A (the first nine floats, column by column) are from orthonormal."""
     n, o, a = pose[0:3], pose[3:6], pose[6:9]
     return max(
@@ -42,9 +43,15 @@ def _rotation_error(pose: tuple[float, ...]) -> float:
     )
 
 
-def _by_rows(pose: tuple[float, ...]) -> tuple[float, ...]:
+def by_rows(pose: Sequence[float]) -> tuple[float, ...]:
     """The twelve floats of a transform sent row by row (Nx Ox Ax Px Ny ...), in column-major order."""
     return tuple(pose[row * 4 + column] for column in range(4) for row in range(3))
+
+
+def sent_by_rows(pose: Sequence[float]) -> bool:
+    """Whether Here's twelve floats are no rotation read column by column but one read row by row (Nx
+    Ox Ax Px Ny ...): Here broke its order, not the floats."""
+    return len(pose) == 12 and rotation_error(pose) >= ORTHO_TOL and rotation_error(by_rows(pose)) < ORTHO_TOL
 
 
 @case(
@@ -62,24 +69,22 @@ async def here_consistent(ctx: CaseContext) -> None:
     pose = await read_floats(ctx, probe, "here")
     joints = await read_floats(ctx, probe, "joint-angles")
     ctx.expect_finite(pose, 12, clause="here.transform", expected="12 finite floats", seen=str(pose))
-    worst = _rotation_error(pose)
-    by_rows = _by_rows(pose)
-    # read row by row (Nx Ox Ax Px Ny ...) the floats are a rotation: Here broke its order, not the floats
-    sent_by_rows = worst >= ORTHO_TOL and len(pose) == 12 and _rotation_error(by_rows) < ORTHO_TOL
+    worst = rotation_error(pose)
+    row_major = sent_by_rows(pose)
     ctx.expect(
-        not sent_by_rows,
+        not row_major,
         clause="here.transform",
         expected="the transform column by column: Nx Ny Nz Ox Oy Oz Ax Ay Az Px Py Pz",
         seen=f"read row by row (Nx Ox Ax Px Ny ...) the floats are a rotation: {[round(v, 4) for v in pose]}",
     )
     ctx.expect(
-        worst < ORTHO_TOL or sent_by_rows,
+        worst < ORTHO_TOL or row_major,
         clause="float.format",
         expected="N, O, A orthonormal (floats decoded as PDP-11 F, sign/exponent word first)",
         seen=f"deviation {worst:.3g} in {[round(v, 4) for v in pose[:9]]}",
     )
-    if sent_by_rows:
-        pose = by_rows  # solve backwards is judged against the transform Here meant
+    if row_major:
+        pose = by_rows(pose)  # solve backwards is judged against the transform Here meant
     ctx.expect(
         all(abs(q) <= 720.0 for q in joints),
         clause="joint-angles.reply",
@@ -139,7 +144,7 @@ async def dirty_zero(ctx: CaseContext) -> None:
             )
 
 
-def _bad_patterns(payload: bytes) -> tuple[list[str], list[str]]:
+def bad_patterns(payload: bytes) -> tuple[list[str], list[str]]:
     """(reserved operands, dirty zeros) among the floats of ``payload``, as hex words."""
     reserved: list[str] = []
     dirty: list[str] = []
@@ -176,7 +181,7 @@ async def extremes(ctx: CaseContext) -> None:
             continue  # out of reach: refusing is the answer
         clause = "solve-backwards.data" if op == "solve-backwards" else "float.not-finite"
         ctx.expect_response(answer, clause=clause, expected=f"an answer or a refusal for {what}")
-        reserved, dirty = _bad_patterns(answer.payload)
+        reserved, dirty = bad_patterns(answer.payload)
         ctx.exercised("float.range")  # every float of the answer read as an F value
         ctx.expect(
             not reserved,
@@ -206,6 +211,13 @@ async def extremes(ctx: CaseContext) -> None:
     await _underflow_flushed(ctx, probe)
 
 
+def unflushed(zero: Sequence[float], tiny: Sequence[float]) -> list[str]:
+    """The rotation entries of ``tiny`` (solve backwards of :data:`TINY_WRIST`) that are not zero where
+    those of ``zero`` (of every joint at 0) are, each as its value and its place."""
+    pairs = zip(zero[:9], tiny[:9], strict=True)
+    return [f"{v:.4g} at float {i + 1}" for i, (z, v) in enumerate(pairs) if z == 0.0 and v != 0.0]
+
+
 async def _underflow_flushed(ctx: CaseContext, probe: Probe) -> None:
     """float.range: a rotation entry that is zero with every joint at 0 is zero with the wrist joints at
     :data:`TINY` degrees, whose change to it (at most 3 sin(TINY degrees), about 5e-40) is below 2^-128:
@@ -214,10 +226,9 @@ async def _underflow_flushed(ctx: CaseContext, probe: Probe) -> None:
     tiny = await probe.call("solve-backwards", joints=list(TINY_WRIST))
     if not (zero.is_response and tiny.is_response):
         return  # a refusal: the answers above judged it
-    pairs = zip(floats(zero)[:9], floats(tiny)[:9], strict=True)
-    unflushed = [f"{v:.4g} at float {i + 1}" for i, (z, v) in enumerate(pairs) if z == 0.0 and v != 0.0]
+    wrong = unflushed(floats(zero), floats(tiny))
     wanted = (
         f"zero where the rotation of all joints at 0 has zero, for joints {list(TINY_WRIST)}: a magnitude "
     )
     wanted += "below 2^-128 is sent as zero"
-    ctx.expect(not unflushed, clause="float.range", expected=wanted, seen=showing(tiny, "; ".join(unflushed)))
+    ctx.expect(not wrong, clause="float.range", expected=wanted, seen=showing(tiny, "; ".join(wrong)))

@@ -10,6 +10,7 @@ extensions)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Final
 
 from manip.conformance.cases._support import error_of, floats, no_wrist, require_response
@@ -133,6 +134,31 @@ def _near(seen: float, wanted: float) -> bool:
     return abs(seen - wanted) <= ABSOLUTE_TOL + RELATIVE_TOL * abs(wanted)
 
 
+PUSH_CONDITION: Final = WristForce((0.0, 0.0, PUSH_OZ), (0.0, 0.0, TWIST_OZ_IN))
+"""The world's push on the hand that server.wrist.force-push reads forces under."""
+PUSH_WRENCH: Final = (0.0, 0.0, PUSH_OZ, 0.0, 0.0, TWIST_OZ_IN)
+"""What the reading changes by while the world pushes the hand (:data:`PUSH_OZ` along its z axis,
+:data:`TWIST_OZ_IN` about it): forces in ounces, torques in ounce-inches."""
+
+
+def push_shown(rest: Sequence[float], pushed: Sequence[float], released: Sequence[float]) -> bool:
+    """Whether the reading while the world pushed differs from those before and after
+    (``read-forces.current``)."""
+    return tuple(pushed) not in (tuple(rest), tuple(released))
+
+
+def push_sized(change: Sequence[float]) -> bool:
+    """Whether the reading changed by :data:`PUSH_WRENCH` when the world pushed (``read-forces.units``)."""
+    return len(change) == len(PUSH_WRENCH) and all(
+        _near(c, w) for c, w in zip(change, PUSH_WRENCH, strict=True)
+    )
+
+
+def let_go(rest: Sequence[float], released: Sequence[float]) -> bool:
+    """Whether the reading came back to ``rest`` once the world let go (``read-forces.current``)."""
+    return len(rest) == len(released) and all(_near(b - a, 0.0) for a, b in zip(rest, released, strict=True))
+
+
 def _shown(values: tuple[float, ...]) -> str:
     return "(" + ", ".join(f"{v:.2f}" for v in values) + ")"
 
@@ -187,20 +213,20 @@ async def force_push(ctx: CaseContext) -> None:
     await _require_wrist(ctx, probe)
     await _quiet_wrist(ctx, probe)
     rest = await steady_forces(ctx, probe, "at rest")
-    async with ctx.arranged(WristForce((0.0, 0.0, PUSH_OZ), (0.0, 0.0, TWIST_OZ_IN))):
+    async with ctx.arranged(PUSH_CONDITION):
         pushed = await steady_forces(ctx, probe, "while the world pushed the hand")
     released = await steady_forces(ctx, probe, "once the world let go")
     ctx.expect(
-        pushed not in (rest, released),
+        push_shown(rest, pushed, released),
         clause="read-forces.current",
         expected="each reading the force Cougar senses then: the one while the world pushed differing from "
         "those before and after",
         seen=f"at rest {_shown(rest)}, pushed {_shown(pushed)}, let go {_shown(released)}",
     )
     change = tuple(b - a for a, b in zip(rest, pushed, strict=True))
-    wanted = (0.0, 0.0, PUSH_OZ, 0.0, 0.0, TWIST_OZ_IN)
+    wanted = PUSH_WRENCH
     ctx.expect(
-        all(_near(c, w) for c, w in zip(change, wanted, strict=True)),
+        push_sized(change),
         clause="read-forces.units",
         expected=f"the reading changed by {_shown(wanted)}: {PUSH_OZ:g} oz along z and {TWIST_OZ_IN:g} "
         "oz-in about it, the wrench the world put on the hand",
@@ -208,7 +234,7 @@ async def force_push(ctx: CaseContext) -> None:
         + (f": {PUSH_OZ / change[2]:.1f} times too small" if 0 < change[2] < PUSH_OZ / 2 else ""),
     )
     ctx.expect(
-        all(_near(b - a, 0.0) for a, b in zip(rest, released, strict=True)),
+        let_go(rest, released),
         clause="read-forces.current",
         expected=f"the reading back at rest, {_shown(rest)}, once the world let go",
         seen=str(_shown(released)),

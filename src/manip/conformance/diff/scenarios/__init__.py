@@ -27,7 +27,16 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Final
 
-from manip.conformance.diff.scenarios import asyncs, motion, requests, state, timing, values
+from manip.conformance.diff.scenarios import (
+    asyncs,
+    forces,
+    kinematics,
+    motion,
+    requests,
+    state,
+    timing,
+    values,
+)
 from manip.conformance.diff.scenarios.kit import ANGLE_TOLERANCE
 from manip.conformance.diff.streams import Stream
 
@@ -41,6 +50,8 @@ SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
     **motion.SCENARIOS,
     **requests.SCENARIOS,
     **timing.SCENARIOS,
+    **kinematics.SCENARIOS,
+    **forces.SCENARIOS,
 }
 """Every scenario by name, in the order a diff sends them."""
 
@@ -53,4 +64,4 @@ def scenario(name: str) -> Stream:
 def scenarios(*, world: bool = True) -> list[Stream]:
     """Every scenario; without ``world``, only those that need no condition of the arm's world."""
     out = [make() for make in SCENARIOS.values()]
-    return [s for s in out if world or not s.conditions]
+    return [s for s in out if world or not s.needs]
