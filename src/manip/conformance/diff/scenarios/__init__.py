@@ -27,7 +27,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Final
 
-from manip.conformance.diff.scenarios import asyncs, motion, state, values
+from manip.conformance.diff.scenarios import asyncs, chaos, motion, state, values
 from manip.conformance.diff.scenarios.kit import ANGLE_TOLERANCE
 from manip.conformance.diff.streams import Stream
 
@@ -39,6 +39,7 @@ SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
     **asyncs.SCENARIOS,
     **values.SCENARIOS,
     **motion.SCENARIOS,
+    **chaos.SCENARIOS,
 }
 """Every scenario by name, in the order a diff sends them."""
 

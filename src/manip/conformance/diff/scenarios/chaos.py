@@ -1,0 +1,81 @@
+"""The diff's scenarios of the Chaos level: what the server's NCP and link must do with packets a
+well-behaved client never sends (the NCP cases' packets, sent by hand).
+
+A packet for a connection that does not exist and one with an illegal opcode each draw a LOS back to
+the sender (clauses ``ncp.los``, ``chaos.opcode.legal``): the fuzzer's judges know the LOS is due (a
+:class:`~manip.conformance.fuzz.steps.Stray` says so).  A packet with more than 488 data bytes on the
+connection is not served (``chaos.data.max-488``): the server may answer it with a LOS or drop the link
+whose framing it breaks, but an answer to it is a breach, which this module's check names.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Final
+
+from manip.codecs.packet import MAX_DATA, Packet
+from manip.conformance.diff.scenarios.kit import Events, req, scenario_inputs, sighting
+from manip.conformance.diff.streams import Stream
+from manip.conformance.fuzz.generators import stray_index
+from manip.conformance.fuzz.judge import Sighting
+from manip.conformance.fuzz.steps import ConnPacket, Pause, Step, Stray
+from manip.spec.constants import ChaosOp, ServerOp
+
+NOWHERE: Final = 0o123456
+"""The destination index of the stray packets: no connection of the server's (the batch picks another
+should the server's connection have it)."""
+ILLEGAL_OPCODE: Final = 0o77
+"""An opcode between the control opcodes (001-016) and the data opcodes (0200-0377)."""
+OVERSIZE: Final = MAX_DATA + 2
+"""Data bytes of the oversize packet: a word more than a packet may carry."""
+ANSWER_WAIT: Final = 0.5
+"""Seconds the oversize scenario waits for an answer it must not get."""
+_ANSWERS: Final = frozenset({ServerOp.RESPONSE, ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR})
+
+
+def _strays() -> Stream:
+    """A data packet to a connection that does not exist, then a packet with an illegal opcode: each must
+    draw a LOS back to the index it came from."""
+    dat = Packet(ChaosOp.DAT, 0, NOWHERE, 0, stray_index(0, 0), 0, 0, b"manip")
+    illegal = Packet(ILLEGAL_OPCODE, 0, NOWHERE, 0, stray_index(1, 0), 0, 0, b"manip")
+    groups = [
+        ("a data packet to no connection", [Stray(dat, "los", "ncp.los")]),
+        ("a packet with an illegal opcode", [Stray(illegal, "los", "chaos.opcode.legal")]),
+    ]
+    return Stream(None, scenario_inputs("stray-packets", groups), scenario="stray-packets")
+
+
+def _not_served(events: Events) -> list[Sighting]:
+    """Any answer to the oversize packet (its input has no request of its own) is the packet served."""
+    served = [e for e in events.get(1, []) if e.kind == "packet" and e.opcode in _ANSWERS]
+    return [
+        sighting(
+            1,
+            "chaos.data.max-488",
+            f"a packet of {OVERSIZE} data bytes was served",
+            "the packet refused (a LOS, or the link dropped), never answered",
+            e,
+        )
+        for e in served[:1]
+    ]
+
+
+def _oversize() -> Stream:
+    """Here (its answer waited for: a server that drops the link for the oversize frame drops what it
+    had still to send), then a Here of :data:`OVERSIZE` data bytes numbered as the connection's next
+    packet (sent as it is: the codec refuses to frame it), which must not be served."""
+    here = req("here")
+    oversize = ConnPacket("behind", here.opcode, bytes(OVERSIZE), offset=0, clause="chaos.data.max-488")
+    groups: list[tuple[str, list[Step]]] = [
+        ("here", [here, Pause(ANSWER_WAIT)]),
+        ("a here of more than 488 data bytes", [oversize, Pause(ANSWER_WAIT)]),
+    ]
+    inputs = scenario_inputs("oversize", groups)
+    return Stream(None, inputs, scenario="oversize", check=_not_served)
+
+
+SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
+    "stray-packets": _strays,
+    "oversize": _oversize,
+}
+"""This module's scenarios by name, in the order a diff sends them."""
