@@ -155,6 +155,8 @@ class FuzzConnection:
         self.index = index
         self.allowance = allowance
         self.rfc_no = rfc_no & 0xFFFF
+        self.contact = ""
+        """The contact name the RFC asked for (set by :meth:`open`)."""
         self._loop = asyncio.get_running_loop()
         self.t0 = self._loop.time()
         self.server_index = 0
@@ -198,17 +200,8 @@ class FuzzConnection:
         """RFC until OPN, then the initial RESPONSE (waited for up to the reply timeout);
         :class:`~manip.conformance.suite.rawchaos.RefusedError` on another answer,
         :class:`~manip.conformance.suite.rawchaos.RawError` on none."""
-        address = self.link.address
-        rfc = Packet(
-            ChaosOp.RFC,
-            address.peer_addr,
-            0,
-            address.my_addr,
-            self.index,
-            self.rfc_no,
-            0,
-            contact.encode("ascii"),
-        )
+        self.contact = contact
+        rfc = self._rfc()
         self.inbox.register(self.index, self)
         try:
             received = await rfc_until_open(
@@ -256,6 +249,12 @@ class FuzzConnection:
 
     def _send(self, packet: Packet) -> None:
         self.link.send(self.link.forge(packet))
+
+    def _rfc(self) -> Packet:
+        """The connection's RFC: sent until the OPN comes, and again by a ``rfc`` step."""
+        address = self.link.address
+        contact = self.contact.encode("ascii")
+        return Packet(ChaosOp.RFC, address.peer_addr, 0, address.my_addr, self.index, self.rfc_no, 0, contact)
 
     def _packet(
         self, opcode: int, packet_no: int, ack_no: int, data: bytes = b"", src: int | None = None
@@ -343,6 +342,9 @@ class FuzzConnection:
                 number = seq_add(self.next_no, -1)
             else:
                 opcode, data, number = self._last_request
+        elif step.what == "rfc":
+            self._send(self._rfc())
+            return None
         elif step.what == "wrong-source":
             bogus = 0xFF00 | (((self.index & 0xFF) ^ (step.offset & 0xFF or 1)) & 0xFF)
             self._send(self._packet(opcode, self.next_no, ack, data, src=bogus))

@@ -74,8 +74,23 @@ def _oversize() -> Stream:
     return Stream(None, inputs, scenario="oversize", check=_not_served)
 
 
+def _duplicate_rfc() -> Stream:
+    """Here, the connection's own RFC again (same index and number, as a retransmission is), then Here
+    again: the RFC is matched to the open connection (answered with nothing or its OPN again, which the
+    fuzzer's judges hold as a :class:`~manip.conformance.fuzz.steps.ConnPacket` ``rfc``'s due), never
+    refused or opened as a second connection from another index, and the connection goes on serving."""
+    again = ConnPacket("rfc", ChaosOp.RFC, clause="ncp.duplicate-rfc")
+    groups: list[tuple[str, list[Step]]] = [
+        ("here", [req("here"), Pause(ANSWER_WAIT)]),
+        ("the connection's RFC again", [again, Pause(ANSWER_WAIT)]),
+        ("here on the connection", [req("here")]),
+    ]
+    return Stream(None, scenario_inputs("duplicate-rfc", groups), scenario="duplicate-rfc")
+
+
 SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
     "stray-packets": _strays,
     "oversize": _oversize,
+    "duplicate-rfc": _duplicate_rfc,
 }
 """This module's scenarios by name, in the order a diff sends them."""
