@@ -251,6 +251,11 @@ class RawDatagramLink(RawLink, asyncio.DatagramProtocol):
         except DecodeError as exc:
             self.sink.reject(data, exc)
             return
+        trailer = packet.trailer
+        if trailer is not None and trailer.source == self.address.my_addr:  # no other host has our address
+            why = f"the trailer's hardware source {octal(trailer.source)} is our own address"
+            self.sink.reject(data, DecodeError(why, "trailer.source", len(data) - 4, "chudp.trailer"))
+            return
         self.sink.deliver(packet, data, self._loop.time())
 
     def error_received(self, exc: Exception) -> None:

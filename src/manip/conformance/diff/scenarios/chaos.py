@@ -14,11 +14,13 @@ from collections.abc import Callable
 from typing import Final
 
 from manip.codecs.packet import MAX_DATA, Packet
+from manip.codecs.pdp11float import pack_f
 from manip.conformance.diff.scenarios.kit import Events, req, scenario_inputs, sighting
 from manip.conformance.diff.streams import Stream
 from manip.conformance.fuzz.generators import stray_index
 from manip.conformance.fuzz.judge import Sighting
-from manip.conformance.fuzz.steps import ConnPacket, Pause, Step, Stray
+from manip.conformance.fuzz.steps import ConnPacket, Pause, RequestStep, Step, Stray
+from manip.spec import SPEC
 from manip.spec.constants import ChaosOp, ServerOp
 
 NOWHERE: Final = 0o123456
@@ -88,7 +90,23 @@ def _duplicate_rfc() -> Stream:
     return Stream(None, scenario_inputs("duplicate-rfc", groups), scenario="duplicate-rfc")
 
 
+def _frames() -> Stream:
+    """Every shape of server packet, as the link frames cases exchange them: describe self (text over
+    several packets), Here (data), set speed (a done), an unassigned opcode (an error string, whose text
+    may leave an odd byte).  What their frames break on the side's link the fuzzer's judges name (a frame
+    that does not decode, by the link's clause)."""
+    unassigned = next(code for code in range(0o200, 0o400) if code not in SPEC.requests)
+    groups: list[tuple[str, list[Step]]] = [
+        ("describe self", [req("describe-self")]),
+        ("here", [req("here")]),
+        ("set speed 1.0", [req("set-speed", pack_f(1.0))]),
+        (f"the unassigned opcode 0{unassigned:o}", [RequestStep(unassigned, b"")]),
+    ]
+    return Stream(None, scenario_inputs("frames", groups), scenario="frames")
+
+
 SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
+    "frames": _frames,
     "stray-packets": _strays,
     "oversize": _oversize,
     "duplicate-rfc": _duplicate_rfc,
