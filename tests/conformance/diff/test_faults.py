@@ -134,21 +134,6 @@ NOT_SHOWN: dict[Fault, str] = {
         "the diff's clients are never silent for the server's broken-connection timer (90 s), so no "
         "connection is ever given up on either side"
     ),
-    Fault.PACKET_NUMBERS_SKIP: (
-        "side B's replies are all held back by the diff's client NCP for the number skipped, so side B "
-        "answers nothing: the differences are replies missing on side B (after the diff's reply timeout "
-        "each), which no judge of one side names as ncp.packet-numbers"
-    ),
-    Fault.DATA_BYTES_SWAPPED: (
-        "shown as violations of response.echoes-request-number, multi.same-request-number and the error "
-        "strings' clauses (side B): every number and string of side B is byte-swapped, and no judge of one "
-        "side reads the data's byte order as such"
-    ),
-    Fault.HEADER_SOURCE_FIRST: (
-        "the diff's client links refuse every packet of side B (it names their own address as its source), "
-        "so side B answers nothing: its differences are missing answers, named by no judge of one side as "
-        "chaos.header.layout"
-    ),
     Fault.CHAOSD_MSB_FIRST: (
         "the diff's sides are reached over a Unix socket with the TCP link framing: the chaosd framing it "
         "breaks is never used"
@@ -161,9 +146,6 @@ NOT_RUN = frozenset(
     {
         Fault.NO_RETRANSMISSION,
         Fault.SILENT_PEER_KEPT,
-        Fault.PACKET_NUMBERS_SKIP,
-        Fault.DATA_BYTES_SWAPPED,
-        Fault.HEADER_SOURCE_FIRST,
         Fault.CHAOSD_MSB_FIRST,
         # no stream differs at all: every answer of side B is side A's (tools/diff_faults.py, seed 7)
         Fault.CALIBRATE_REPLIES_MASK,
@@ -201,6 +183,9 @@ OWN_SCENARIO = {
     Fault.ILLEGAL_OPCODE_IGNORED: "stray-packets",
     Fault.OVERSIZE_SERVED: "oversize",
     Fault.DUPLICATE_RFC_NEW: "duplicate-rfc",
+    Fault.PACKET_NUMBERS_SKIP: "frames",
+    Fault.HEADER_SOURCE_FIRST: "frames",
+    Fault.DATA_BYTES_SWAPPED: "frames",
     **dict.fromkeys(LINKS, "frames"),
 }
 """The scenario made to show a fault, tried before the others: the Chaos level's faults make side B

@@ -233,6 +233,18 @@ def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[
             conn.origin.get(id(request), last),
         )
         found.append((len(packets), ended))
+    gap = conn.skipped()
+    if gap is not None:  # first: every answer missing after it is its consequence
+        first = next((conn.origin.get(id(p), last) for p in packets if p.direction == "c2s"), last)
+        skipped = _seen(
+            "missing_response",
+            "ncp.packet-numbers",
+            f"the target's packet #{gap} never came, though packets numbered past it came again",
+            "controlled packets numbered consecutively",
+            f"packets numbered {', '.join(f'#{n}' for n in sorted(conn.ahead)[:4])}",
+            number=first,
+        )
+        found.insert(0, (0, skipped))
     for judged in oracle_violations(packets, rfc_packet_no=conn.rfc_no):
         number = conn.origin.get(id(judged.packet), last)
         found.append((position.get(id(judged.packet), len(packets)), Sighting(judged, number)))

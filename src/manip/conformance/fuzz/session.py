@@ -32,7 +32,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections import defaultdict
+from collections import Counter, defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Final, Protocol
@@ -176,6 +176,8 @@ class FuzzConnection:
         self.stalled = False
         """A wait for an answer or for the window ran out of its allowance."""
         self.sts_times: list[float] = []
+        self.ahead: Counter[int] = Counter()
+        """How many times each controlled packet numbered past the next one expected came (dropped)."""
         self.requests = 0
         self.asynchronous = 0
         """Data packets from the target that answer no request (asynchronous responses, errors, warnings)."""
@@ -434,6 +436,14 @@ class FuzzConnection:
                 self._sts()
             await self._wait(deadline - self._loop.time())
 
+    def skipped(self) -> int | None:
+        """The packet number the target skipped, if that shows: the next number expected never came, and
+        a packet numbered past it came again (a target sends again every packet not receipted, so the
+        one expected would have come again with it, had it been sent)."""
+        expected = seq_add(self.received_upto, 1)
+        again = any(times > 1 and seq_gt(number, expected) for number, times in self.ahead.items())
+        return expected if again else None
+
     @property
     def unanswered(self) -> int:
         return len(self._outstanding())
@@ -511,6 +521,8 @@ class FuzzConnection:
         if packet.packet_no != expected:
             if seq_le(packet.packet_no, self.received_upto) and not self._lazy:
                 self._sts()  # a retransmission: our receipt was not seen
+            elif len(self.ahead) < MAX_RECEIVED or packet.packet_no in self.ahead:
+                self.ahead[packet.packet_no] += 1
             return
         self.received_upto = expected
         number = self._number()

@@ -11,11 +11,12 @@ whose framing it breaks, but an answer to it is a breach, which this module's ch
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Final
 
 from manip.codecs.packet import MAX_DATA, Packet
 from manip.codecs.pdp11float import pack_f
-from manip.conformance.diff.scenarios.kit import Events, req, scenario_inputs, sighting
+from manip.conformance.diff.scenarios.kit import Events, description_at, req, scenario_inputs, sighting
 from manip.conformance.diff.streams import Stream
 from manip.conformance.fuzz.generators import stray_index
 from manip.conformance.fuzz.judge import Sighting
@@ -90,11 +91,41 @@ def _duplicate_rfc() -> Stream:
     return Stream(None, scenario_inputs("duplicate-rfc", groups), scenario="duplicate-rfc")
 
 
+def _swapped_text(data: bytes) -> bytes:
+    """``data`` with the two bytes of each whole word swapped, without the zero byte that padded an odd
+    length (swapped to the front of the last word)."""
+    whole = len(data) & ~1
+    return (bytes(data[i ^ 1] for i in range(whole)) + data[whole:]).rstrip(b"\0")
+
+
+def _text_byte_order(events: Events) -> list[Sighting]:
+    """Describe self's text that reads as a description only with the bytes of each word swapped: the
+    data went out first byte high (``chaos.data.byte-order``)."""
+    if description_at(events, 0) is not None:
+        return []
+    swapped = {
+        0: [replace(e, data=_swapped_text(e.data)) if e.kind == "packet" else e for e in events.get(0, [])]
+    }
+    if description_at(swapped, 0) is None:
+        return []
+    first = next(e for e in events[0] if e.kind == "packet")
+    return [
+        sighting(
+            0,
+            "chaos.data.byte-order",
+            "describe self's text reads as a description only with the two bytes of each word swapped",
+            "each word's first byte in its low byte",
+            first,
+        )
+    ]
+
+
 def _frames() -> Stream:
     """Every shape of server packet, as the link frames cases exchange them: describe self (text over
     several packets), Here (data), set speed (a done), an unassigned opcode (an error string, whose text
     may leave an odd byte).  What their frames break on the side's link the fuzzer's judges name (a frame
-    that does not decode, by the link's clause)."""
+    that does not decode, by the link's clause); the data's byte order this module's check reads from
+    describe self's text."""
     unassigned = next(code for code in range(0o200, 0o400) if code not in SPEC.requests)
     groups: list[tuple[str, list[Step]]] = [
         ("describe self", [req("describe-self")]),
@@ -102,7 +133,7 @@ def _frames() -> Stream:
         ("set speed 1.0", [req("set-speed", pack_f(1.0))]),
         (f"the unassigned opcode 0{unassigned:o}", [RequestStep(unassigned, b"")]),
     ]
-    return Stream(None, scenario_inputs("frames", groups), scenario="frames")
+    return Stream(None, scenario_inputs("frames", groups), scenario="frames", check=_text_byte_order)
 
 
 SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
