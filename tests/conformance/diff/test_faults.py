@@ -126,10 +126,6 @@ NOT_SHOWN: dict[Fault, str] = {
         "no scenario or generated stream asks solve forwards of a transform in reach: every one they send is "
         "refused alike on both sides, so the angles it would answer never differ"
     ),
-    Fault.NO_RETRANSMISSION: (
-        "the diff's link (a Unix socket in one process) loses nothing and its NCPs receipt promptly, so no "
-        "packet ever waits to be sent again"
-    ),
     Fault.SILENT_PEER_KEPT: (
         "the diff's clients are never silent for the server's broken-connection timer (90 s), so no "
         "connection is ever given up on either side"
@@ -144,7 +140,6 @@ that catches each is the fault matrix's, tests/conformance/test_faults.py)."""
 
 NOT_RUN = frozenset(
     {
-        Fault.NO_RETRANSMISSION,
         Fault.SILENT_PEER_KEPT,
         Fault.CHAOSD_MSB_FIRST,
         # no stream differs at all: every answer of side B is side A's (tools/diff_faults.py, seed 7)
@@ -183,6 +178,7 @@ OWN_SCENARIO = {
     Fault.ILLEGAL_OPCODE_IGNORED: "stray-packets",
     Fault.OVERSIZE_SERVED: "oversize",
     Fault.DUPLICATE_RFC_NEW: "duplicate-rfc",
+    Fault.NO_RETRANSMISSION: "lost-answer",
     Fault.PACKET_NUMBERS_SKIP: "frames",
     Fault.HEADER_SOURCE_FIRST: "frames",
     Fault.DATA_BYTES_SWAPPED: "frames",

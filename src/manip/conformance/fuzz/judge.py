@@ -245,6 +245,17 @@ def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[
             number=first,
         )
         found.insert(0, (0, skipped))
+    lost = conn.never_again()
+    if lost is not None:
+        again = _seen(
+            "missing_response",
+            "ncp.retransmission",
+            f"the target's packet #{lost[0]}, lost on its way, never came again",
+            "a controlled packet sent again until a receipt covers it",
+            "nothing",
+            number=lost[1],
+        )
+        found.insert(0, (0, again))
     for judged in oracle_violations(packets, rfc_packet_no=conn.rfc_no):
         number = conn.origin.get(id(judged.packet), last)
         found.append((position.get(id(judged.packet), len(packets)), Sighting(judged, number)))

@@ -178,6 +178,10 @@ class FuzzConnection:
         self.sts_times: list[float] = []
         self.ahead: Counter[int] = Counter()
         """How many times each controlled packet numbered past the next one expected came (dropped)."""
+        self.lost: tuple[int, int] | None = None
+        """The number of the packet a ``lose`` step lost, and the input of the step."""
+        self._lose: int | None = None
+        """The input of a ``lose`` step whose packet has not come yet."""
         self.requests = 0
         self.asynchronous = 0
         """Data packets from the target that answer no request (asynchronous responses, errors, warnings)."""
@@ -347,6 +351,9 @@ class FuzzConnection:
         elif step.what == "rfc":
             self._send(self._rfc())
             return None
+        elif step.what == "lose":
+            self._lose = self.current
+            return None
         elif step.what == "wrong-source":
             bogus = 0xFF00 | (((self.index & 0xFF) ^ (step.offset & 0xFF or 1)) & 0xFF)
             self._send(self._packet(opcode, self.next_no, ack, data, src=bogus))
@@ -444,6 +451,16 @@ class FuzzConnection:
         again = any(times > 1 and seq_gt(number, expected) for number, times in self.ahead.items())
         return expected if again else None
 
+    def never_again(self) -> tuple[int, int] | None:
+        """The packet a ``lose`` step lost (its number, the step's input), if it never came again."""
+        if (
+            self.lost is None
+            or seq_gt(self.received_upto, self.lost[0])
+            or self.received_upto == self.lost[0]
+        ):
+            return None
+        return self.lost
+
     @property
     def unanswered(self) -> int:
         return len(self._outstanding())
@@ -518,6 +535,10 @@ class FuzzConnection:
         """A data packet or EOF: taken in order (a duplicate of one taken is acknowledged again)."""
         opcode = packet.opcode
         expected = seq_add(self.received_upto, 1)
+        if packet.packet_no == expected and self._lose is not None:  # lost on its way: never seen
+            self.lost = (packet.packet_no, self._lose)
+            self._lose = None
+            return
         if packet.packet_no != expected:
             if seq_le(packet.packet_no, self.received_upto) and not self._lazy:
                 self._sts()  # a retransmission: our receipt was not seen

@@ -136,10 +136,23 @@ def _frames() -> Stream:
     return Stream(None, scenario_inputs("frames", groups), scenario="frames", check=_text_byte_order)
 
 
+def _lost_answer() -> Stream:
+    """Here (its answer waited for), Here with its answer lost on its way (dropped unreceipted), then Here
+    again: the lost packet must come again, as every controlled packet does until a receipt covers it."""
+    lose = ConnPacket("lose", 0, clause="ncp.retransmission")
+    groups: list[tuple[str, list[Step]]] = [
+        ("here", [req("here"), Pause(ANSWER_WAIT)]),
+        ("here, its answer lost", [lose, req("here")]),
+        ("here", [req("here")]),
+    ]
+    return Stream(None, scenario_inputs("lost-answer", groups), scenario="lost-answer")
+
+
 SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
     "frames": _frames,
     "stray-packets": _strays,
     "oversize": _oversize,
     "duplicate-rfc": _duplicate_rfc,
+    "lost-answer": _lost_answer,
 }
 """This module's scenarios by name, in the order a diff sends them."""
