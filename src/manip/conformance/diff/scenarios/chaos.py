@@ -16,6 +16,7 @@ from typing import Final
 
 from manip.codecs.packet import MAX_DATA, Packet
 from manip.codecs.pdp11float import pack_f
+from manip.conformance.cases.server.ncp import RETRANSMIT_BOUND
 from manip.conformance.diff.scenarios.kit import Events, description_at, req, scenario_inputs, sighting
 from manip.conformance.diff.streams import Stream
 from manip.conformance.fuzz.generators import stray_index
@@ -137,12 +138,13 @@ def _frames() -> Stream:
 
 
 def _lost_answer() -> Stream:
-    """Here (its answer waited for), Here with its answer lost on its way (dropped unreceipted), then Here
-    again: the lost packet must come again, as every controlled packet does until a receipt covers it."""
+    """Here (its answer waited for), Here with its answer lost on its way (dropped unreceipted) and the
+    time server.ncp.retransmission allows for it to come again, then Here again: the lost packet must come
+    again, as every controlled packet does until a receipt covers it."""
     lose = ConnPacket("lose", 0, clause="ncp.retransmission")
     groups: list[tuple[str, list[Step]]] = [
         ("here", [req("here"), Pause(ANSWER_WAIT)]),
-        ("here, its answer lost", [lose, req("here")]),
+        ("here, its answer lost", [lose, req("here"), Pause(RETRANSMIT_BOUND)]),
         ("here", [req("here")]),
     ]
     return Stream(None, scenario_inputs("lost-answer", groups), scenario="lost-answer")
