@@ -5,6 +5,7 @@ that shows the fault).
 
     .venv/bin/python tools/diff_faults.py                      # every protocol fault, seed 7, 2 streams
     .venv/bin/python tools/diff_faults.py --fault joints-reversed --fault keeps-abort --streams 4
+    .venv/bin/python tools/diff_faults.py --link chudp --fault chudp-lsb-first   # both sides over CHUDP
 
 One line per fault: its differences by class, (a) violation, (b) both allowed, (c) unexplained;
 ``shown`` when a class (a) difference with side B the violator names one of the fault's clauses; the
@@ -19,6 +20,7 @@ import argparse
 import sys
 import time
 from collections import Counter
+from dataclasses import replace
 
 from manip.conformance.diff.classify import CLASSES, Finding
 from manip.conformance.diff.driver import DiffConfig, run_diff
@@ -26,10 +28,12 @@ from manip.conformance.diff.scenarios import scenarios
 from manip.conformance.diff.sides import Side
 from manip.conformance.diff.streams import Stream, make_streams
 from manip.conformance.fuzz.generators import GenOptions
+from manip.conformance.suite.embedded import SimulatedLink
 from manip.reference_server import FaultSet, ServerConfig
 from manip.reference_server.faults import WRIST_SIDE, Fault
 
 CLEAN = Side("A", "clean", config=ServerConfig())
+LINKS = ("unix", "chudp")
 
 
 def protocol_faults() -> list[Fault]:
@@ -37,9 +41,9 @@ def protocol_faults() -> list[Fault]:
     return sorted((f for f in Fault if f.kind == "protocol" and f not in WRIST_SIDE), key=lambda f: f.value)
 
 
-def findings(fault: Fault, streams: list[Stream], config: DiffConfig) -> list[Finding]:
-    faulty = Side("B", fault.value, config=ServerConfig(faults=FaultSet.parse([fault.value])))
-    return [f for r in run_diff(CLEAN, faulty, streams, config) for f in r.findings]
+def findings(fault: Fault, streams: list[Stream], config: DiffConfig, link: SimulatedLink) -> list[Finding]:
+    faulty = Side("B", fault.value, config=ServerConfig(faults=FaultSet.parse([fault.value])), link=link)
+    return [f for r in run_diff(replace(CLEAN, link=link), faulty, streams, config) for f in r.findings]
 
 
 def main() -> int:
@@ -48,9 +52,12 @@ def main() -> int:
     parser.add_argument("--streams", type=int, default=2, help="generated streams after the scenarios")
     parser.add_argument("--length", type=int, default=8, help="inputs per generated stream")
     parser.add_argument("--fault", action="append", default=[], help="only this fault (repeatable)")
+    parser.add_argument("--link", choices=LINKS, default="unix", help="how both sides are reached")
     args = parser.parse_args()
+    link: SimulatedLink = args.link
     chosen = [f for f in protocol_faults() if not args.fault or f.value in args.fault]
-    streams = [*scenarios(), *make_streams(args.seed, args.streams, args.length, GenOptions())]
+    gen = GenOptions(link="stream" if link == "unix" else "datagram")
+    streams = [*scenarios(), *make_streams(args.seed, args.streams, args.length, gen)]
     config = DiffConfig(args.seed, shrink=False, seen_a={})  # the clean side observed once per stream
     started = time.process_time()
     totals: Counter[str] = Counter()
@@ -58,7 +65,7 @@ def main() -> int:
     status = 0
     print("fault\ta\tb\tc\tshown\tclauses named (a)")
     for fault in chosen:
-        found = findings(fault, streams, config)
+        found = findings(fault, streams, config, link)
         counts = Counter(f.cls for f in found)
         totals.update(counts)
         named = sorted({n for f in found if f.cls == "violation" and f.violator == "B" for n in f.names})

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import socket
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -18,11 +19,12 @@ from manip.conformance.diff import driver, sides
 from manip.conformance.diff.driver import DiffConfig, diff_stream, run_diff
 from manip.conformance.diff.pairing import SideEvent
 from manip.conformance.diff.report import load_schema
-from manip.conformance.diff.scenarios import scenario
+from manip.conformance.diff.scenarios import chaos, scenario
 from manip.conformance.diff.sides import Observation, Side
 from manip.conformance.diff.streams import make_streams
 from manip.conformance.fuzz.generators import GenOptions
 from manip.conformance.fuzz.session import Allowance
+from manip.conformance.suite.embedded import SimulatedLink
 from manip.reference_server import FaultSet, ServerConfig
 from manip.reference_server.faults import Fault
 from tests.support.json_schema import validate
@@ -98,6 +100,31 @@ def test_the_guide_profile_passes_the_scenarios_of_lengths() -> None:
         (f.stream, f.cls, f.names) for f in found if f.cls != "allowed"
     ]
     assert {n for f in found for n in f.names} & {"units", "move.transform-data", "solve-forwards.data"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("link", ["unix", "chudp"])
+def test_the_chaos_scenarios_name_neither_a_clean_server_nor_the_guide_profile(link: SimulatedLink) -> None:
+    """The Chaos level's scenarios, a clean server against another and against the guide profile, over
+    each link (CHUDP with one stream of the datagram link's inputs too): no violation, nothing unstable."""
+    streams = [scenario(name) for name in chaos.SCENARIOS]
+    if link == "chudp":
+        streams += make_streams(7, 1, 4, GenOptions(link="datagram"))
+    clean = replace(CLEAN, link=link)
+    for b in (
+        Side("B", "clean", config=ServerConfig()),
+        Side("B", "guide", config=ServerConfig.guide_profile()),
+    ):
+        results = run_diff(clean, replace(b, link=link), streams, DiffConfig(7, shrink=False))
+        assert not any(r.unstable or r.runaway for r in results), b.label
+        found = [(r.stream.label, f.cls, f.names) for r in results for f in r.findings]
+        assert not [f for f in found if f[1] != "allowed"], (b.label, found)
+        assert b.label == "guide" or not found
+
+
+def test_a_link_other_than_the_unix_socket_needs_embedded_sides(tmp_path: Path) -> None:
+    code, _, output = _cli(tmp_path, "tcp://127.0.0.1:1", "embedded", "--link", "chudp")
+    assert code == 2 and "--link chudp" in output
 
 
 def test_the_same_seed_gives_the_same_streams() -> None:

@@ -235,6 +235,36 @@ class _Conn:
         self.ended: str | None = None
         self.unanswered = 0
         self.after_eof: str | None = None
+        self.ahead: dict[int, int] = {}
+        self.gap: int | None = None
+        self.lost: tuple[int, int] | None = None
+
+    def skipped(self) -> int | None:
+        return self.gap
+
+    def never_again(self) -> tuple[int, int] | None:
+        return self.lost
+
+
+def test_a_packet_number_skipped_is_named_first_and_the_rest_only_counted() -> None:
+    packets = [_c2s(SPEC.request("here").opcode, 2)]
+    conn = _Conn(packets)
+    conn.gap, conn.ahead = 2, {3: 2}
+    sightings = _connection(conn, 0, report_drops=True)  # type: ignore[arg-type]
+    first = sightings[0]
+    assert (first.violation.clause, first.violation.kind) == ("ncp.packet-numbers", "missing_response")
+    assert first.number == 0 and len(sightings) == 1 and first.followers >= 1  # the Here never answered
+    refused = _connection(conn, 0, report_drops=True, refused=True)  # type: ignore[arg-type]
+    assert all(s.violation.clause != "ncp.packet-numbers" for s in refused)  # it may be among the refused
+
+
+def test_a_lost_packet_never_sent_again_is_a_retransmission_violation_of_the_losing_input() -> None:
+    conn = _Conn([_c2s(SPEC.request("here").opcode, 2)])
+    conn.lost = (7, 4)
+    (first, *_) = _connection(conn, 9, report_drops=True)  # type: ignore[arg-type]
+    assert (first.violation.clause, first.number) == ("ncp.retransmission", 4)
+    conn.lost = None
+    assert all(s.violation.clause != "ncp.retransmission" for s in _connection(conn, 9, report_drops=True))  # type: ignore[arg-type]
 
 
 def test_a_request_skipped_by_the_replies_is_a_silent_drop_not_a_wrong_number() -> None:

@@ -2,8 +2,9 @@
 
 A and B are each a link address (``tcp://HOST:PORT``, ``unix:///PATH``) or ``embedded``: the reference
 server in virtual time, shaped by ``--server-fault-a/-b``, ``--server-profile-a/-b`` and
-``--error-args-a/-b``.  See :mod:`manip.conformance.diff.driver` for what is sent and
-:mod:`manip.conformance.diff.classify` for the classes.
+``--error-args-a/-b``, and reached over ``--link`` (a Unix socket, or CHUDP).  See
+:mod:`manip.conformance.diff.driver` for what is sent and :mod:`manip.conformance.diff.classify` for the
+classes.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import shlex
 import sys
 import time
 import traceback
+from dataclasses import replace
 from typing import Any
 
 import click
@@ -125,6 +127,15 @@ def _numbers(ctx: click.Context, param: click.Parameter, value: str | None) -> t
 @click.option(
     "--length", type=click.IntRange(1, 200), default=8, show_default=True, help="Fuzz inputs per stream."
 )
+@click.option(
+    "--link",
+    type=click.Choice(["unix", "chudp"]),
+    default="unix",
+    show_default=True,
+    help="How the embedded sides are reached: a Unix socket with manip's TCP link framing, or CHUDP on a "
+    "loopback UDP port (its framing judged too; the streams then draw the datagram link's inputs).  Both "
+    "sides embedded.",
+)
 @click.option("--stream", "only_stream", type=click.IntRange(0), default=None, help="Send only stream N.")
 @click.option(
     "--scenario",
@@ -191,7 +202,11 @@ def diff_command(**options: Any) -> None:
     if sum(chosen) > 1:
         raise click.UsageError("--stream, --inputs and --scenario each choose what is sent: give one")
     seed = options["seed"] if options["seed"] is not None else int.from_bytes(os.urandom(4), "big") >> 1
-    gen = GenOptions(link="stream", select=options["classes"])
+    link = options["link"]
+    if link != "unix" and not all(side.embedded for side in sides):
+        raise click.UsageError(f"--link {link} reaches embedded sides: give both as {EMBEDDED}")
+    sides = (replace(sides[0], link=link), replace(sides[1], link=link))
+    gen = GenOptions(link="stream" if link == "unix" else "datagram", select=options["classes"])
     if not gen.classes():
         raise click.UsageError("--class matches no input class (manip-conform fuzz --list-classes)")
     length = options["length"]
@@ -209,6 +224,7 @@ def diff_command(**options: Any) -> None:
             "diff",
             *sides[0].words,
             *sides[1].words,
+            *(("--link", link) if link != "unix" else ()),
             *[w for c in options["classes"] for w in ("--class", c)],
         ),
         allow_unexplained=options["allow_unexplained"],

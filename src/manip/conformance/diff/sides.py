@@ -32,7 +32,7 @@ from manip.conformance.fuzz.batch import BatchRunner, liveness
 from manip.conformance.fuzz.judge import Sighting, judge
 from manip.conformance.fuzz.session import Allowance
 from manip.conformance.judge.violation import Violation
-from manip.conformance.suite.embedded import simulated_environment
+from manip.conformance.suite.embedded import SimulatedLink, simulated_environment
 from manip.conformance.suite.world import Condition, ConditionUnsupported, World, WorldError
 from manip.conformance.suite.world_link import open_world
 from manip.links import LinkAddress, parse_address, virtual_clock
@@ -65,6 +65,8 @@ class Side:
     """An addressed side's world (``--world-a/-b``: tcp://HOST:PORT or a command, contract 2)."""
     unit: LengthUnit = "mm"
     """An addressed side's length unit, as the command line declares it (nothing on the wire says it)."""
+    link: SimulatedLink = "unix"
+    """How an embedded side is reached (``--link``): a Unix socket with the TCP link framing, or CHUDP."""
 
     @property
     def embedded(self) -> bool:
@@ -96,7 +98,7 @@ def observe(side: Side, stream: Stream, allowance: Allowance, seed: int) -> Obse
         config = side.config
 
         async def embedded() -> Observation:
-            async with simulated_environment(config, seed=seed, wrist=True) as env:
+            async with simulated_environment(config, seed=seed, wrist=True, link=side.link) as env:
                 arranged = await _arranged(env.world, stream.conditions)
                 if isinstance(arranged, str):
                     return Observation(unarranged=arranged)

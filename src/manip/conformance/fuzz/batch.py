@@ -243,7 +243,11 @@ class BatchRunner:
     def _relative(self, run: BatchRun, conn: FuzzConnection, item: FuzzInput, step: ConnPacket) -> None:
         since = self._loop.time()
         bogus = conn.send_relative(step)
-        if bogus is not None:
+        if step.what == "rfc":  # the RFC again: nothing from another index of the target may answer it
+            run.due_answers.append(
+                DueAnswer(item.number, "silence", step.clause, conn.index, since, item.note, step.data, conn)
+            )
+        elif bogus is not None:
             run.due_answers.append(
                 DueAnswer(item.number, "los", step.clause, bogus, since, item.note, step.data, conn)
             )

@@ -141,7 +141,7 @@ def judge(
             )
         )
     for conn in run.connections:
-        out += _connection(conn, last, report_drops=live.alive)
+        out += _connection(conn, last, report_drops=live.alive, refused=bool(inbox.bad))
     for e in run.due_answers:
         found = _judge_due(e, inbox)
         if found is not None:
@@ -195,7 +195,9 @@ def judge(
     return out
 
 
-def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[Sighting]:
+def _connection(
+    conn: FuzzConnection, last: int, *, report_drops: bool, refused: bool = False
+) -> list[Sighting]:
     """What is wrong on one connection, in the order it showed, up to the first violation after which
     answers may be paired with the wrong requests (:data:`DISRUPTIVE`): what follows may be its
     consequence, so it is only counted (``followers``)."""
@@ -236,6 +238,31 @@ def _connection(conn: FuzzConnection, last: int, *, report_drops: bool) -> list[
     unclosed = _unclosed(conn, last) if fatal else None
     if unclosed is not None:
         found.append(unclosed)
+    # A packet number missing, or a lost packet that never came again, is the target's doing only when
+    # no frame of the target was refused (``refused``): the one missing may be among them.
+    gap = None if refused else conn.skipped()
+    if gap is not None:  # first: every answer missing after it is its consequence
+        first = next((conn.origin.get(id(p), last) for p in packets if p.direction == "c2s"), last)
+        skipped = _seen(
+            "missing_response",
+            "ncp.packet-numbers",
+            f"the target's packet #{gap} never came, though packets numbered past it came again",
+            "controlled packets numbered consecutively",
+            f"packets numbered {', '.join(f'#{n}' for n in sorted(conn.ahead)[:4])}",
+            number=first,
+        )
+        found.insert(0, (0, skipped))
+    lost = None if refused else conn.never_again()
+    if lost is not None:
+        again = _seen(
+            "missing_response",
+            "ncp.retransmission",
+            f"the target's packet #{lost[0]}, lost on its way, never came again",
+            "a controlled packet sent again until a receipt covers it",
+            "nothing",
+            number=lost[1],
+        )
+        found.insert(0, (0, again))
     for judged in oracle_violations(packets, rfc_packet_no=conn.rfc_no):
         number = conn.origin.get(id(judged.packet), last)
         found.append((position.get(id(judged.packet), len(packets)), Sighting(judged, number)))

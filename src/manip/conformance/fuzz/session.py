@@ -34,7 +34,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections import defaultdict
+from collections import Counter, defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Final, Protocol
@@ -161,6 +161,8 @@ class FuzzConnection:
         self.index = index
         self.allowance = allowance
         self.rfc_no = rfc_no & 0xFFFF
+        self.contact = ""
+        """The contact name the RFC asked for (set by :meth:`open`)."""
         self._loop = asyncio.get_running_loop()
         self.t0 = self._loop.time()
         self.server_index = 0
@@ -183,6 +185,12 @@ class FuzzConnection:
         """What ended the connection after the target's EOF (:meth:`await_close`): "CLS", "LOS", or
         "none" (the link dropped, or nothing within the reply timeout); None: no EOF, or not waited."""
         self.sts_times: list[float] = []
+        self.ahead: Counter[int] = Counter()
+        """How many times each controlled packet numbered past the next one expected came (dropped)."""
+        self.lost: tuple[int, int] | None = None
+        """The number of the packet a ``lose`` step lost, and the input of the step."""
+        self._lose: int | None = None
+        """The input of a ``lose`` step whose packet has not come yet."""
         self.requests = 0
         self.asynchronous = 0
         """Data packets from the target that answer no request (asynchronous responses, errors, warnings)."""
@@ -207,17 +215,8 @@ class FuzzConnection:
         """RFC until OPN, then the initial RESPONSE (waited for up to the reply timeout);
         :class:`~manip.conformance.suite.rawchaos.RefusedError` on another answer,
         :class:`~manip.conformance.suite.rawchaos.RawError` on none."""
-        address = self.link.address
-        rfc = Packet(
-            ChaosOp.RFC,
-            address.peer_addr,
-            0,
-            address.my_addr,
-            self.index,
-            self.rfc_no,
-            0,
-            contact.encode("ascii"),
-        )
+        self.contact = contact
+        rfc = self._rfc()
         self.inbox.register(self.index, self)
         try:
             received = await rfc_until_open(
@@ -265,6 +264,12 @@ class FuzzConnection:
 
     def _send(self, packet: Packet) -> None:
         self.link.send(self.link.forge(packet))
+
+    def _rfc(self) -> Packet:
+        """The connection's RFC: sent until the OPN comes, and again by a ``rfc`` step."""
+        address = self.link.address
+        contact = self.contact.encode("ascii")
+        return Packet(ChaosOp.RFC, address.peer_addr, 0, address.my_addr, self.index, self.rfc_no, 0, contact)
 
     def _packet(
         self, opcode: int, packet_no: int, ack_no: int, data: bytes = b"", src: int | None = None
@@ -352,6 +357,12 @@ class FuzzConnection:
                 number = seq_add(self.next_no, -1)
             else:
                 opcode, data, number = self._last_request
+        elif step.what == "rfc":
+            self._send(self._rfc())
+            return None
+        elif step.what == "lose":
+            self._lose = self.current
+            return None
         elif step.what == "wrong-source":
             bogus = 0xFF00 | (((self.index & 0xFF) ^ (step.offset & 0xFF or 1)) & 0xFF)
             self._send(self._packet(opcode, self.next_no, ack, data, src=bogus))
@@ -452,6 +463,24 @@ class FuzzConnection:
         ended = self.ended or ""
         self.after_eof = ended[:3] if ended.startswith(("CLS", "LOS")) else "none"
 
+    def skipped(self) -> int | None:
+        """The packet number the target skipped, if that shows: the next number expected never came, and
+        a packet numbered past it came again (a target sends again every packet not receipted, so the
+        one expected would have come again with it, had it been sent)."""
+        expected = seq_add(self.received_upto, 1)
+        again = any(times > 1 and seq_gt(number, expected) for number, times in self.ahead.items())
+        return expected if again else None
+
+    def never_again(self) -> tuple[int, int] | None:
+        """The packet a ``lose`` step lost (its number, the step's input), if it never came again."""
+        if (
+            self.lost is None
+            or seq_gt(self.received_upto, self.lost[0])
+            or self.received_upto == self.lost[0]
+        ):
+            return None
+        return self.lost
+
     @property
     def unanswered(self) -> int:
         return len(self._outstanding())
@@ -526,9 +555,15 @@ class FuzzConnection:
         """A data packet or EOF: taken in order (a duplicate of one taken is acknowledged again)."""
         opcode = packet.opcode
         expected = seq_add(self.received_upto, 1)
+        if packet.packet_no == expected and self._lose is not None:  # lost on its way: never seen
+            self.lost = (packet.packet_no, self._lose)
+            self._lose = None
+            return
         if packet.packet_no != expected:
             if seq_le(packet.packet_no, self.received_upto) and not self._lazy:
                 self._sts()  # a retransmission: our receipt was not seen
+            elif len(self.ahead) < MAX_RECEIVED or packet.packet_no in self.ahead:
+                self.ahead[packet.packet_no] += 1
             return
         self.received_upto = expected
         number = self._number()

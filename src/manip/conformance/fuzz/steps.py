@@ -40,10 +40,13 @@ __all__ = [
     "StrayExpect",
 ]
 
-Relative = Literal["ahead", "behind", "duplicate", "wrong-source", "sns", "unc"]
+Relative = Literal["ahead", "behind", "duplicate", "wrong-source", "sns", "unc", "rfc", "lose"]
 """How a :class:`ConnPacket` relates to the connection: numbered past the receive window, numbered
 before the next expected packet, the last request again, from a source index that is not the
-connection's, a sense-status request, uncontrolled data."""
+connection's, a sense-status request, uncontrolled data, the connection's own RFC again (a
+retransmitted RFC: its opcode and data are the RFC's, whatever the step says); ``lose`` sends nothing:
+the next controlled packet from the target is lost on its way (dropped unreceipted, as a lossy link
+drops one), and must come again."""
 StrayExpect = Literal["los", "answer", "silence"]
 """A LOS back to the sender, an answer to an RFC (OPN, CLS, ANS or FWD), or nothing at all."""
 

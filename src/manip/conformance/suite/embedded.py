@@ -29,7 +29,7 @@ import tempfile
 import threading
 from collections.abc import AsyncIterator
 from types import TracebackType
-from typing import Final
+from typing import Final, Literal
 
 from manip.conformance.suite.world import Condition, ConditionUnsupported
 from manip.links import NcpConfig
@@ -42,9 +42,15 @@ __all__ = [
     "EmbeddedServer",
     "EmbeddedWorld",
     "ServerEnvironment",
+    "SimulatedLink",
     "simulated_environment",
     "simulated_server",
 ]
+
+SimulatedLink = Literal["unix", "chudp"]
+"""How a simulated server is reached: manip's TCP link framing on a Unix-domain socket (the default), or
+CHUDP on a loopback UDP port (its own framing, for what only that link shows)."""
+CHUDP_LOOPBACK: Final = "chudp://127.0.0.1:0?addr=0440"
 
 START_TIMEOUT: Final = 10.0
 STOP_TIMEOUT: Final = 5.0
@@ -110,19 +116,22 @@ async def simulated_environment(
     seed: int,
     wrist: bool = False,
     broken_after: float | None = None,
+    link: SimulatedLink = "unix",
 ) -> AsyncIterator[ServerEnvironment]:
     """``async with simulated_environment(config, seed=...) as env:`` a reference server on this loop,
-    at ``env.address``.
+    at ``env.address``, reached over ``link`` (:data:`SimulatedLink`).
 
     The global ``random`` generator is part of the simulated world (connection indices are drawn from
-    it): it is seeded from ``seed`` here, so both ends' indices repeat with the run."""
+    it): it is seeded from ``seed`` here, so both ends' indices repeat with the run.  Over CHUDP the
+    virtual clock's jump is as sound as a loopback datagram is delivered before its ``sendto`` returns,
+    which Linux does (the receiving queue is filled in the sender's system call)."""
     random.seed(seed)
     options = None if broken_after is None else NcpConfig.breaking_after(broken_after)
     wrist_factory = functools.partial(make_cougar_wrist, "sim", seed=seed) if wrist else None
     with tempfile.TemporaryDirectory(prefix="manip-sim-") as directory:
         path = os.path.join(directory, SOCKET_NAME)
         async with serve(
-            f"unix://{path}",
+            f"unix://{path}" if link == "unix" else CHUDP_LOOPBACK,
             config or ServerConfig(),
             seed=seed,
             wrist_factory=wrist_factory,

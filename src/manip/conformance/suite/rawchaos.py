@@ -157,6 +157,15 @@ class RawLink:
         hop = (self.address.peer_addr, self.address.my_addr)
         return frame(p, datagram=self.datagram, hop=hop, damage=damage)
 
+    def _take(self, packet: Packet, raw: bytes, now: float) -> None:
+        """Hand ``packet`` to the sink, unless it names our own address as its source: no other host has
+        it, so its header is laid out wrong (``chaos.header.layout``), and a link refuses it."""
+        if packet.src_host == self.address.my_addr:
+            why = f"the source host {octal(packet.src_host)} is our own address"
+            self.sink.reject(raw, DecodeError(why, "header.source", 8, "chaos.header.layout"))
+            return
+        self.sink.deliver(packet, raw, now)
+
     def _end(self, reason: str) -> None:
         if self.ended is None:
             self.ended = reason
@@ -197,7 +206,7 @@ class RawStreamLink(RawLink, asyncio.Protocol):
             del self._buffer[:size]
             self._frames += 1
             if isinstance(item, Packet):
-                self.sink.deliver(item, raw, now)
+                self._take(item, raw, now)
             else:
                 self.sink.reject(raw, item)
         if lost is not None:
@@ -251,7 +260,12 @@ class RawDatagramLink(RawLink, asyncio.DatagramProtocol):
         except DecodeError as exc:
             self.sink.reject(data, exc)
             return
-        self.sink.deliver(packet, data, self._loop.time())
+        trailer = packet.trailer
+        if trailer is not None and trailer.source == self.address.my_addr:  # no other host has our address
+            why = f"the trailer's hardware source {octal(trailer.source)} is our own address"
+            self.sink.reject(data, DecodeError(why, "trailer.source", len(data) - 4, "chudp.trailer"))
+            return
+        self._take(packet, data, self._loop.time())
 
     def error_received(self, exc: Exception) -> None:
         pass  # ICMP unreachable from a target that is gone: no answer says so

@@ -29,6 +29,7 @@ from typing import Final
 
 from manip.conformance.diff.scenarios import (
     asyncs,
+    chaos,
     forces,
     kinematics,
     motion,
@@ -52,6 +53,7 @@ SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
     **timing.SCENARIOS,
     **kinematics.SCENARIOS,
     **forces.SCENARIOS,
+    **chaos.SCENARIOS,
 }
 """Every scenario by name, in the order a diff sends them."""
 
