@@ -56,9 +56,12 @@ def test_no_protocol_fault_makes_a_case_skip_that_passes_on_the_clean_server() -
     case_ids = {c.id for c in all_cases()}
     clean = run(cases, [])
     assert any(r.outcome == "pass" for r in clean.results)
+    # Only a case that passes on the clean server can be made to skip wrongly: the others (the link cases
+    # of the links the run is not on) need not run under every fault.
+    passing = [c for c in cases if any(r.id == c.id and r.outcome == "pass" for r in clean.results)]
     found = {}
     for fault in sorted((f for f in Fault if f.kind == "protocol"), key=lambda f: f.value):
-        wrong = unjudged_wrongly(clean, run(cases, [fault.value]), case_ids)
+        wrong = unjudged_wrongly(clean, run(passing, [fault.value]), case_ids)
         if wrong:
             found[fault.value] = wrong
     assert not found, found
