@@ -21,7 +21,7 @@ import click
 from rich.markup import escape
 
 from manip.arm.units import LENGTH_UNITS, LengthUnit
-from manip.commandline import FiniteFloat
+from manip.commandline import FiniteFloat, broken_after_option
 from manip.conformance.cli_options import check_output_paths, format_options
 from manip.conformance.diff.driver import DiffConfig, StreamResult, run_diff
 from manip.conformance.diff.report import DIFF_FORMATS, DiffReport, finding_lines
@@ -187,16 +187,12 @@ def _numbers(ctx: click.Context, param: click.Parameter, value: str | None) -> t
     show_default=True,
     help="Seconds a connection may take to open.",
 )
-@click.option(
-    "--broken-after",
-    type=FiniteFloat(min=0.1),
-    default=None,
-    metavar="SECONDS",
-    help="Both sides' broken-connection timer (90 s on manip's NCP, the ITS Chaos NCP's: the 1985 guide "
+@broken_after_option(
+    "Both sides' broken-connection timer (90 s on manip's NCP, the ITS Chaos NCP's: the 1985 guide "
     "gives none; erratum ncp-timers), as manip-conform run --broken-after: an embedded side's server is "
     "given it, an addressed side is declared to use it.  With it the silent-peer scenario is sent: its "
     "connection falls silent that long and a margin, and must then be found given up (ncp.broken); "
-    "without it that scenario is not sent.",
+    "without it that scenario is not sent."
 )
 @format_options(DIFF_FORMATS)
 @click.option("-q", "--quiet", is_flag=True, help="No line per stream; the findings and the summary only.")
