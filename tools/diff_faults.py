@@ -6,6 +6,7 @@ that shows the fault).
     .venv/bin/python tools/diff_faults.py                      # every protocol fault, seed 7, 2 streams
     .venv/bin/python tools/diff_faults.py --fault joints-reversed --fault keeps-abort --streams 4
     .venv/bin/python tools/diff_faults.py --link chudp --fault chudp-lsb-first   # both sides over CHUDP
+    .venv/bin/python tools/diff_faults.py --fault silent-peer-kept --broken-after 90   # the timer told
 
 One line per fault: its differences by class, (a) violation, (b) both allowed, (c) unexplained;
 ``shown`` when a class (a) difference with side B the violator names one of the fault's clauses; the
@@ -41,9 +42,15 @@ def protocol_faults() -> list[Fault]:
     return sorted((f for f in Fault if f.kind == "protocol" and f not in WRIST_SIDE), key=lambda f: f.value)
 
 
-def findings(fault: Fault, streams: list[Stream], config: DiffConfig, link: SimulatedLink) -> list[Finding]:
-    faulty = Side("B", fault.value, config=ServerConfig(faults=FaultSet.parse([fault.value])), link=link)
-    return [f for r in run_diff(replace(CLEAN, link=link), faulty, streams, config) for f in r.findings]
+def findings(
+    fault: Fault, streams: list[Stream], config: DiffConfig, link: SimulatedLink, timer: float | None = None
+) -> list[Finding]:
+    """The differences of ``fault`` on side B; ``timer``: both sides' broken-connection timer (None:
+    not told, and the scenario that waits it out is not sent)."""
+    config_b = ServerConfig(faults=FaultSet.parse([fault.value]))
+    faulty = Side("B", fault.value, config=config_b, link=link, broken_after=timer)
+    clean = replace(CLEAN, link=link, broken_after=timer)
+    return [f for r in run_diff(clean, faulty, streams, config) for f in r.findings]
 
 
 def main() -> int:
@@ -53,6 +60,12 @@ def main() -> int:
     parser.add_argument("--length", type=int, default=8, help="inputs per generated stream")
     parser.add_argument("--fault", action="append", default=[], help="only this fault (repeatable)")
     parser.add_argument("--link", choices=LINKS, default="unix", help="how both sides are reached")
+    parser.add_argument(
+        "--broken-after",
+        type=float,
+        default=None,
+        help="both sides' broken-connection timer, s (without it the silent-peer scenario is not sent)",
+    )
     args = parser.parse_args()
     link: SimulatedLink = args.link
     chosen = [f for f in protocol_faults() if not args.fault or f.value in args.fault]
@@ -65,7 +78,7 @@ def main() -> int:
     status = 0
     print("fault\ta\tb\tc\tshown\tclauses named (a)")
     for fault in chosen:
-        found = findings(fault, streams, config, link)
+        found = findings(fault, streams, config, link, args.broken_after)
         counts = Counter(f.cls for f in found)
         totals.update(counts)
         named = sorted({n for f in found if f.cls == "violation" and f.violator == "B" for n in f.names})

@@ -40,6 +40,7 @@ __all__ = [
     "FiniteFloat",
     "LinkAddressType",
     "LogFormatter",
+    "broken_after_option",
     "check_host",
     "configure_logging",
     "version_option",
@@ -56,6 +57,14 @@ def version_option(prog: str) -> Callable[[F], F]:
     """``--version`` for the command ``prog``: the installed package's version (importlib.metadata,
     read only when asked)."""
     return click.version_option(package_name=PACKAGE, prog_name=prog, message=VERSION_MESSAGE)
+
+
+def broken_after_option(help: str) -> Callable[[F], F]:
+    """``--broken-after SECONDS``: a Chaos connection's broken-connection timer (erratum ncp-timers),
+    given to a server or told about a target; ``help`` says which."""
+    return click.option(
+        "--broken-after", type=FiniteFloat(min=0.1), default=None, metavar="SECONDS", help=help
+    )
 
 
 class LogFormatter(logging.Formatter):

@@ -35,7 +35,7 @@ import click
 from rich.console import Console
 
 from manip.arm.units import LENGTH_UNITS, LengthUnit
-from manip.commandline import FiniteFloat, configure_logging, version_option
+from manip.commandline import FiniteFloat, broken_after_option, configure_logging, version_option
 from manip.conformance.cli_options import (
     cases_of_clauses,
     check_output_paths,
@@ -153,17 +153,13 @@ def main() -> None:
     "HOST's arm runs this many times faster than real time (a simulated server started with --time-scale):"
     " its 16 ms servo cycle is judged at that rate (erratum server-time-scale).",
 )
-@click.option(
-    "--broken-after",
-    type=FiniteFloat(min=0.1),
-    default=None,
-    metavar="SECONDS",
-    help="The target's broken-connection timer (90 s by default, the ITS Chaos NCP's: the 1985 guide "
+@broken_after_option(
+    "The target's broken-connection timer (90 s by default, the ITS Chaos NCP's: the 1985 guide "
     "gives none; erratum ncp-timers): server.ncp.broken goes silent "
     "that long and checks the connection was given up.  Without it that case is skipped, except against "
     "the embedded server in virtual time, whose timer is then 10 s (silence costs little there).  With the "
     "embedded server, the server gets this timer too (below 5 s the other NCP cases, which keep quiet "
-    "for up to 3 s on purpose, may lose their connections).",
+    "for up to 3 s on purpose, may lose their connections)."
 )
 @report_options
 @click.option(

@@ -47,6 +47,7 @@ from manip.commandline import (
     FINITE,
     FiniteFloat,
     LinkAddressType,
+    broken_after_option,
     check_host,
     configure_logging,
     version_option,
@@ -200,14 +201,10 @@ def command_line(ctx: click.Context) -> list[str]:
     help="Simulated seconds per real second (e.g. 10: moves finish ten times sooner).",
 )
 @click.option("--seed", type=int, default=None, help="Seed of the server's random generator.")
-@click.option(
-    "--broken-after",
-    type=FiniteFloat(min=0.1),
-    default=None,
-    metavar="SECONDS",
-    help="Declare a connection broken when its client is silent this long (default 90, the ITS Chaos "
+@broken_after_option(
+    "Declare a connection broken when its client is silent this long (default 90, the ITS Chaos "
     "NCP's interval: the 1985 guide gives none; erratum ncp-timers; shorter to check a client's or the "
-    "suite's handling quickly).",
+    "suite's handling quickly)."
 )
 @click.option(
     "--fault",

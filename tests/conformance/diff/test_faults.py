@@ -6,7 +6,8 @@ Each fault runs the scenarios (the directed cases' request sequences, with the c
 they need arranged on both sides) and two generated streams, the scenario made for it first
 (:data:`OWN_SCENARIO`), then those with the least pause, stopping at the first that names one of its
 clauses (a fault on NOT_SHOWN runs them all).  A fault of a link's framing runs with both sides reached
-over that link (:data:`LINKS`).  The clean side's
+over that link (:data:`LINKS`), one shown by waiting out the broken-connection timer with both sides
+told the reference server's (:data:`TIMERS`).  The clean side's
 observations are the same for every fault, so each worker observes them once (``DiffConfig.seen_a``).
 Everything runs in virtual time.
 """
@@ -25,6 +26,7 @@ from manip.conformance.diff.streams import Stream, make_streams
 from manip.conformance.fuzz.generators import GenOptions
 from manip.conformance.fuzz.steps import Pause
 from manip.conformance.suite.embedded import SimulatedLink
+from manip.ncp import NcpConfig
 from manip.reference_server import FaultSet, ServerConfig
 from manip.reference_server.faults import WRIST_SIDE, Fault
 
@@ -41,13 +43,6 @@ playing Cougar)."""
 
 NOT_SHOWN: dict[Fault, str] = {
     # clauses no fault proved before (issue 32)
-    Fault.SILENT_PEER_KEPT: (
-        "the broken-connection timer is each server's choice (erratum ncp-timers: 90 s by default, "
-        "configurable; ncp.broken is a SHOULD), and the diff is told no side's: a scenario silent past 90 s "
-        "would name a conforming server with a longer timer, and would cost every diff some 3 s of CPU (the "
-        "arm's servo ticks through 90 virtual seconds on each side); server.ncp.broken judges it when the "
-        "run is told the timer (--broken-after)"
-    ),
     Fault.CHAOSD_MSB_FIRST: (
         "the diff reaches its sides over a Unix socket or CHUDP only: the fuzzer's raw links speak no chaosd "
         "framing (open_link refuses chaosd://), and an embedded side behind chaosd needs a daemon in the "
@@ -60,7 +55,6 @@ that catches each is the fault matrix's, tests/conformance/test_faults.py)."""
 
 NOT_RUN = frozenset(
     {
-        Fault.SILENT_PEER_KEPT,
         Fault.CHAOSD_MSB_FIRST,
         # no stream differs at all: every answer of side B is side A's (tools/diff_faults.py, seed 7)
     }
@@ -92,6 +86,7 @@ OWN_SCENARIO = {
     Fault.HEADER_SOURCE_FIRST: "frames",
     Fault.DATA_BYTES_SWAPPED: "frames",
     **dict.fromkeys(LINKS, "frames"),
+    Fault.SILENT_PEER_KEPT: "silent-peer",
     # the directed cases' sequences that show a fault of the arm's motion or state (found by trying every
     # stream, tools/diff_faults.py): tried first, they spare the test running the scenarios before them
     Fault.POWER_KEEPS_ABORT: "abort-reset",
@@ -128,9 +123,13 @@ answer little or nothing on every other stream, each request then waiting out th
 fault of the arm's motion shows only in the scenario that moves the arm as its directed case does (a
 hint, not the verdict: a fault its scenario no longer shows goes on through every other stream)."""
 
-_CLEAN_SEEN: dict[str, dict[tuple[str, tuple[int, ...]], Observation]] = {}
-"""The clean side's observations, by link and stream: the same for every fault, so each worker observes
-them once."""
+TIMERS: dict[Fault, float] = {Fault.SILENT_PEER_KEPT: NcpConfig().broken_after}
+"""Faults shown by a scenario that waits out the broken-connection timer: both sides are told the
+reference server's own (as the diff's --broken-after tells them), which the scenario is sent for."""
+
+_CLEAN_SEEN: dict[tuple[str, float | None], dict[tuple[str, tuple[int, ...]], Observation]] = {}
+"""The clean side's observations, by link, timer and stream: the same for every fault, so each worker
+observes them once."""
 
 
 def streams(first: str = "", link: SimulatedLink = "unix") -> list[Stream]:
@@ -149,10 +148,11 @@ def _paused(stream: Stream) -> float:
 def findings(fault: Fault, wanted: set[str] | None = None) -> list[Finding]:
     """What the diff shows of ``fault`` on side B, stream by stream; with ``wanted``, it stops at the
     first stream where side B is named violating one of those clauses (the rest cannot undo that)."""
-    link = LINKS.get(fault, "unix")
-    clean = replace(CLEAN, link=link)
-    faulty = Side("B", fault.value, config=ServerConfig(faults=FaultSet.parse([fault.value])), link=link)
-    seen = _CLEAN_SEEN.setdefault(link, {})
+    link, timer = LINKS.get(fault, "unix"), TIMERS.get(fault)
+    clean = replace(CLEAN, link=link, broken_after=timer)
+    config = ServerConfig(faults=FaultSet.parse([fault.value]))
+    faulty = Side("B", fault.value, config=config, link=link, broken_after=timer)
+    seen = _CLEAN_SEEN.setdefault((link, timer), {})
     found: list[Finding] = []
     for stream in streams(OWN_SCENARIO.get(fault, ""), link):
         (result,) = run_diff(clean, faulty, [stream], DiffConfig(SEED, shrink=False, seen_a=seen))

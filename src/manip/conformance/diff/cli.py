@@ -21,7 +21,7 @@ import click
 from rich.markup import escape
 
 from manip.arm.units import LENGTH_UNITS, LengthUnit
-from manip.commandline import FiniteFloat
+from manip.commandline import FiniteFloat, broken_after_option
 from manip.conformance.cli_options import check_output_paths, format_options
 from manip.conformance.diff.driver import DiffConfig, StreamResult, run_diff
 from manip.conformance.diff.report import DIFF_FORMATS, DiffReport, finding_lines
@@ -187,6 +187,13 @@ def _numbers(ctx: click.Context, param: click.Parameter, value: str | None) -> t
     show_default=True,
     help="Seconds a connection may take to open.",
 )
+@broken_after_option(
+    "Both sides' broken-connection timer (90 s on manip's NCP, the ITS Chaos NCP's: the 1985 guide "
+    "gives none; erratum ncp-timers), as manip-conform run --broken-after: an embedded side's server is "
+    "given it, an addressed side is declared to use it.  With it the silent-peer scenario is sent: its "
+    "connection falls silent that long and a margin, and must then be found given up (ncp.broken); "
+    "without it that scenario is not sent."
+)
 @format_options(DIFF_FORMATS)
 @click.option("-q", "--quiet", is_flag=True, help="No line per stream; the findings and the summary only.")
 def diff_command(**options: Any) -> None:
@@ -205,7 +212,11 @@ def diff_command(**options: Any) -> None:
     link = options["link"]
     if link != "unix" and not all(side.embedded for side in sides):
         raise click.UsageError(f"--link {link} reaches embedded sides: give both as {EMBEDDED}")
-    sides = (replace(sides[0], link=link), replace(sides[1], link=link))
+    timer = options["broken_after"]
+    sides = (
+        replace(sides[0], link=link, broken_after=timer),
+        replace(sides[1], link=link, broken_after=timer),
+    )
     gen = GenOptions(link="stream" if link == "unix" else "datagram", select=options["classes"])
     if not gen.classes():
         raise click.UsageError("--class matches no input class (manip-conform fuzz --list-classes)")
@@ -225,6 +236,7 @@ def diff_command(**options: Any) -> None:
             *sides[0].words,
             *sides[1].words,
             *(("--link", link) if link != "unix" else ()),
+            *(("--broken-after", f"{timer:g}") if timer is not None else ()),
             *[w for c in options["classes"] for w in ("--class", c)],
         ),
         allow_unexplained=options["allow_unexplained"],

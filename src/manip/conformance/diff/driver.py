@@ -1,7 +1,9 @@
 """Driving a diff: each stream to both sides, its differences paired, checked for stability,
 classified, and each gap shrunk.
 
-1. Stream ``k`` goes to side A, then to side B (:func:`~.sides.observe`), each from the same start.
+1. Stream ``k`` goes to side A, then to side B (:func:`~.sides.observe`), each from the same start (a
+   scenario that waits out the broken-connection timer is made for the sides' timers, and is not sent
+   while one is unknown).
 2. The two sides' events are paired (:func:`~.pairing.compare`).  No difference: the stream is done.
 3. A stream that differs is sent to both sides again: if its differences are not the same the second
    time, the stream is *unstable* (reported as such, never as a finding).
@@ -90,10 +92,31 @@ def _findings(
     return classify(stream.label, diffs, oa.sightings, ob.sightings, inputs, units_differ=units_differ)
 
 
+def _timed(a: Side, b: Side, stream: Stream) -> Stream | str:
+    """``stream``, made for the sides' broken-connection timer if it waits one out (the longer of the
+    two); why it is not sent if a side's is unknown."""
+    if stream.timed is None:
+        return stream
+    timers = [side.broken_after for side in (a, b) if side.broken_after is not None]
+    if len(timers) < 2:
+        unknown = [side.name for side in (a, b) if side.broken_after is None]
+        whose = f"side {unknown[0]}" if len(unknown) == 1 else "sides A and B"
+        return (
+            f"it waits out the sides' broken-connection timer, not known for {whose}: "
+            "give it with --broken-after SECONDS"
+        )
+    return stream.timed(max(timers))
+
+
 def diff_stream(a: Side, b: Side, stream: Stream, config: DiffConfig) -> StreamResult:
     """One stream through steps 1 to 4 of the module docstring."""
     started = time.monotonic()
     result = StreamResult(stream)
+    timed = _timed(a, b, stream)
+    if isinstance(timed, str):
+        result.unarranged = timed
+        return result
+    stream = result.stream = timed
     oa, ob, diffs = _once(a, b, stream, config)
     result.runaway = [f"{s.name}: {o.runaway}" for s, o in ((a, oa), (b, ob)) if o.runaway]
     unarranged = [f"side {s.name}: {o.unarranged}" for s, o in ((a, oa), (b, ob)) if o.unarranged]

@@ -3,11 +3,12 @@
 What a side showed of a stream is a list of :class:`SideEvent` per input: each packet of the server on the
 stream's connection in order (answers, multi-packet replies to their empty packet, asynchronous
 packets), each end of a connection (EOF, CLS, LOS, with its text; after an EOF, the CLS or LOS that
-followed it, or an end event saying none did), the answers to stray packets and
-the stream's own end when it stalled or could not open.  Packet and acknowledgement numbers are the
-NCP's and are never compared.  Each event has the time it was received on the side's clock (virtual
-time on an embedded side, the real clock on an addressed one), and an answer the time its request went
-out: never compared, only read by a scenario's check that judges when the arm moved or a reply came.
+followed it, or an end event saying none did), the answers to stray packets (and the STS answering an
+SNS on the connection) and the stream's own end when it stalled or could not open.  Packet and
+acknowledgement numbers are the NCP's and are never compared.  Each event has the time it was received
+on the side's clock (virtual time on an embedded side, the real clock on an addressed one), and an
+answer the time its request went out: never compared, only read by a scenario's check that judges when
+the arm moved or a reply came.
 
 :func:`compare` walks the two lists of each input position by position and returns a
 :class:`Difference` for every position whose events differ, with the parts that differ:
@@ -45,7 +46,7 @@ from manip.codecs.error_string import parse_error
 from manip.codecs.errors import CodecError
 from manip.codecs.pairing import ReplyPairing
 from manip.codecs.pdp11float import unpack_f
-from manip.conformance.fuzz.batch import BatchRun
+from manip.conformance.fuzz.batch import BatchRun, DueAnswer
 from manip.conformance.fuzz.session import Inbox
 from manip.conformance.judge.packets import WirePacket
 from manip.spec import SPEC
@@ -135,7 +136,7 @@ def events_of(run: BatchRun, inbox: Inbox) -> dict[int, list[SideEvent]]:
                 out[number].append(SideEvent("end", text=NO_CLS))
     for due in run.due_answers:
         came = inbox.strays.get(due.key, []) if due.key else []
-        got = sorted({p.opcode for p, _ in came})
+        got = sorted({p.opcode for p, _ in came} | _sts_for(due))
         if due.what == "close":
             got_text = "dropped" if due.link is not None and due.link.ended is not None else "kept"
         else:
@@ -150,6 +151,14 @@ def events_of(run: BatchRun, inbox: Inbox) -> dict[int, list[SideEvent]]:
     if run.open_error is not None:
         out.setdefault(last, []).append(SideEvent("stream", text=f"not opened: {run.open_error}", time=end))
     return out
+
+
+def _sts_for(due: DueAnswer) -> set[int]:
+    """An SNS's STS, which comes on its connection (no stray): STS if one came after it was sent."""
+    conn = due.connection
+    if due.what != "sts" or conn is None or not any(t >= due.since for t in conn.sts_times):
+        return set()
+    return {ChaosOp.STS}
 
 
 def compare(

@@ -31,6 +31,7 @@ from manip.conformance.diff.streams import Stream
 from manip.conformance.fuzz.batch import BatchRunner, liveness
 from manip.conformance.fuzz.judge import Sighting, judge
 from manip.conformance.fuzz.session import Allowance
+from manip.conformance.fuzz.steps import Silence
 from manip.conformance.judge.violation import Violation
 from manip.conformance.suite.embedded import SimulatedLink, simulated_environment
 from manip.conformance.suite.world import Condition, ConditionUnsupported, World, WorldError
@@ -46,9 +47,10 @@ BOUND_PER_INPUT: Final = 20.0
 
 
 def stream_bound(stream: Stream, allowance: Allowance) -> float:
-    """How long a side may take over ``stream`` before it is a runaway."""
+    """How long a side may take over ``stream`` before it is a runaway (its silences on top)."""
     per = max(BOUND_PER_INPUT, 4 * allowance.reply)
-    return BOUND_BASE + per * len(stream.all_inputs)
+    silent = sum(s.seconds for i in stream.all_inputs for s in i.steps if isinstance(s, Silence))
+    return BOUND_BASE + per * len(stream.all_inputs) + silent
 
 
 @dataclass(frozen=True)
@@ -67,6 +69,10 @@ class Side:
     """An addressed side's length unit, as the command line declares it (nothing on the wire says it)."""
     link: SimulatedLink = "unix"
     """How an embedded side is reached (``--link``): a Unix socket with the TCP link framing, or CHUDP."""
+    broken_after: float | None = None
+    """The side's broken-connection timer in seconds (``--broken-after``; erratum ncp-timers): an
+    embedded server is given it, an addressed side is declared to use it.  None: not known, and the
+    scenarios that wait it out are not sent."""
 
     @property
     def embedded(self) -> bool:
@@ -98,7 +104,9 @@ def observe(side: Side, stream: Stream, allowance: Allowance, seed: int) -> Obse
         config = side.config
 
         async def embedded() -> Observation:
-            async with simulated_environment(config, seed=seed, wrist=True, link=side.link) as env:
+            async with simulated_environment(
+                config, seed=seed, wrist=True, link=side.link, broken_after=side.broken_after
+            ) as env:
                 arranged = await _arranged(env.world, stream.conditions)
                 if isinstance(arranged, str):
                     return Observation(unarranged=arranged)

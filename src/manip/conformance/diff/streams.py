@@ -11,7 +11,7 @@ again, ``--inputs N,M`` a stream of exactly those inputs (a shrunk one).  Sans-I
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Final
 
 from manip.codecs.pdp11float import pack_f
@@ -77,7 +77,8 @@ class Stream:
     A scenario (:mod:`manip.conformance.diff.scenarios`) has its ``scenario`` name, the environment
     conditions of the arm's world each side's world arranges for it (``conditions``, for the whole
     stream; ``phases``, for some of its inputs) and its own ``check`` of each side's answers, with what
-    it could not judge on a side (``unjudged``)."""
+    it could not judge on a side (``unjudged``); one that waits out the sides' broken-connection timer
+    is made for the timer (``timed``)."""
 
     number: int | None
     inputs: tuple[FuzzInput, ...]
@@ -86,6 +87,10 @@ class Stream:
     check: ScenarioCheck | None = None
     unjudged: ScenarioUnjudged | None = None
     phases: tuple[WorldPhase, ...] = ()
+    timed: Callable[[float], Stream] | None = field(default=None, compare=False)
+    """A scenario that waits out the sides' broken-connection timer (erratum ncp-timers): the stream it
+    is for a timer of so many seconds.  The diff sends ``timed(timer)`` only when told both sides'
+    timers (``--broken-after``), and says otherwise that it was not sent."""
 
     @property
     def needs(self) -> tuple[Condition, ...]:

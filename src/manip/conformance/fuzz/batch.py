@@ -31,7 +31,16 @@ from typing import Final, Literal
 
 from manip.codecs.packet import Packet
 from manip.conformance.fuzz.session import Allowance, FuzzConnection, Inbox
-from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, Pause, Raw, Reconnect, RequestStep, Stray
+from manip.conformance.fuzz.steps import (
+    ConnPacket,
+    FuzzInput,
+    Pause,
+    Raw,
+    Reconnect,
+    RequestStep,
+    Silence,
+    Stray,
+)
 from manip.conformance.suite.rawchaos import RawError, RawLink, frame, open_link
 from manip.links.address import LinkAddress
 from manip.spec.constants import ChaosOp, RequestOp
@@ -209,6 +218,8 @@ class BatchRunner:
                 await self._stray(run, item, index, step, conn)
             elif isinstance(step, Pause):
                 await conn.pause(step.seconds)
+            elif isinstance(step, Silence):
+                await conn.silence(step.seconds)
             elif isinstance(step, Reconnect):
                 reopened = await self._reconnect(run, conn, step)
                 if reopened is None:

@@ -48,6 +48,7 @@ from manip.conformance.fuzz.steps import (
     Raw,
     Reconnect,
     RequestStep,
+    Silence,
     Step,
     Stray,
 )
@@ -135,6 +136,8 @@ def describe_step(step: Step) -> str:
         return f"a pause of up to {step.seconds:g} s (ended by an asynchronous packet)"
     if isinstance(step, Reconnect):
         return f"the connection closed once answered, and a new one opened {step.after:g} s later"
+    if isinstance(step, Silence):
+        return f"the connection silent for {step.seconds:g} s once answered (no receipt, no answer to SNS)"
     assert isinstance(step, Raw)
     held = " (left open)" if step.hold else ""
     return f"raw bytes on a link of their own{held}: {step.data.hex(' ') or '(none)'}"

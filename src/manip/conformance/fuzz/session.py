@@ -200,6 +200,8 @@ class FuzzConnection:
         self._lazy = False
         self._writing = False
         self._sts_due = False
+        self._silent = False
+        """A :class:`~.steps.Silence` step runs: no receipt goes out (:meth:`silence`)."""
         self._progress = asyncio.Event()
         self._acked_at = self._answered_at = self.t0
         self._answer: asyncio.Future[Received] | None = None
@@ -281,6 +283,8 @@ class FuzzConnection:
         )
 
     def _sts(self) -> None:
+        if self._silent:  # a peer gone quiet receipts nothing, and answers no SNS
+            return
         if self._writing:  # a frame is going out in pieces: nothing may come between them
             self._sts_due = True
             return
@@ -451,6 +455,17 @@ class FuzzConnection:
             if self.acked_upto != self.received_upto:
                 self._sts()
             await self._wait(deadline - self._loop.time())
+
+    async def silence(self, seconds: float) -> None:
+        """Once every request is answered and receipted, send nothing for ``seconds``: no receipt of what
+        comes meanwhile, no STS for the target's SNS probes (what comes is recorded)."""
+        if self.ended is not None or not await self.settle():
+            return
+        self._silent = True
+        try:
+            await asyncio.sleep(seconds)
+        finally:
+            self._silent = False
 
     async def await_close(self) -> None:
         """After an EOF from the target, wait up to the reply timeout for the CLS (or LOS) that ends the

@@ -15,6 +15,8 @@ seed gives the same inputs and ``--only N,M`` sends exactly inputs N and M again
 * :class:`Pause`: time for the target's arm to move, so that what it reports of motion is seen.
 * :class:`Reconnect`: close the connection (once every request on it is answered) and open a new one,
   to see what a connection leaves behind (the diff's scenarios; the generators never make one).
+* :class:`Silence`: the connection kept silent, not even receipting, to see whether the target gives it
+  up (the diff's silent-peer scenario; the generators never make one).
 
 Each non-request step carries the answer the spec demands (``expect``) and the clause that demands it.
 """
@@ -35,6 +37,7 @@ __all__ = [
     "Reconnect",
     "Relative",
     "RequestStep",
+    "Silence",
     "Step",
     "Stray",
     "StrayExpect",
@@ -120,7 +123,16 @@ class Reconnect:
     after: float = 0.5
 
 
-Step = RequestStep | ConnPacket | Stray | Raw | Pause | Reconnect
+@dataclass(frozen=True, slots=True)
+class Silence:
+    """Once every request on the connection is answered and receipted, let the target's clock run
+    ``seconds`` with the connection silent: nothing sent on it, no receipt of what comes, no answer to the
+    target's SNS probes (a peer gone quiet, as ``server.ncp.broken``'s is)."""
+
+    seconds: float
+
+
+Step = RequestStep | ConnPacket | Stray | Raw | Pause | Reconnect | Silence
 
 
 @dataclass(frozen=True, slots=True)

@@ -337,7 +337,7 @@ async def duplicate_rfc(ctx: CaseContext) -> None:
 # ------------------------------------------------------------------------------------------ broken
 
 
-def _broken_slack(broken_after: float) -> float:
+def broken_slack(broken_after: float) -> float:
     """Seconds beyond the target's timer before the broken case looks: timers run on a coarse clock
     (the ITS NCP checks its connections every few seconds)."""
     return max(2.0, 0.25 * broken_after)
@@ -346,7 +346,7 @@ def _broken_slack(broken_after: float) -> float:
 def _broken_wait(options: RunOptions) -> float:
     if options.broken_after is None:
         return 0.0
-    return options.broken_after + _broken_slack(options.broken_after)
+    return options.broken_after + broken_slack(options.broken_after)
 
 
 @case(
@@ -371,7 +371,7 @@ async def broken(ctx: CaseContext) -> None:
         conn = await _handshake(ctx, peer, index, ctx.random.randrange(0x10000))
         conn.sts(ack=conn.opn_no, window=5)  # the connection is open on both sides; now silence
         silent_from = ctx.clock()
-        wait = after + _broken_slack(after)
+        wait = after + broken_slack(after)
         seen = await peer.collect(wait, lambda p: p.dest_index == index)
         probes = sum(1 for r in seen if r.packet.opcode == ChaosOp.SNS)
         ended = [r for r in seen if r.packet.opcode in (ChaosOp.LOS, ChaosOp.CLS)]

@@ -19,7 +19,9 @@ Some scenarios need a condition of the arm's world (``conditions``: the world co
 :class:`~manip.conformance.suite.world.Condition`, as the directed cases arrange them): an embedded
 side's world arranges them at once; an addressed side's through its ``--world-a/-b`` (contract 2).  A
 side whose world cannot arrange one, or that has none, is not sent the scenario (the report says
-so).  Sans-I/O.
+so).  One waits out the server's broken-connection timer, each server's own choice (erratum
+``ncp-timers``): it is sent only when the diff is told the sides' timers (``--broken-after``), and
+the report says otherwise that it was not.  Sans-I/O.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from manip.conformance.diff.scenarios import (
     kinematics,
     motion,
     requests,
+    silence,
     state,
     timing,
     values,
@@ -54,6 +57,7 @@ SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
     **kinematics.SCENARIOS,
     **forces.SCENARIOS,
     **chaos.SCENARIOS,
+    **silence.SCENARIOS,
 }
 """Every scenario by name, in the order a diff sends them."""
 
