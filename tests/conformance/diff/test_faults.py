@@ -20,7 +20,7 @@ import pytest
 from manip.conformance.diff.classify import Finding
 from manip.conformance.diff.driver import DiffConfig, run_diff
 from manip.conformance.diff.scenarios import scenarios
-from manip.conformance.diff.sides import Observation, Side
+from manip.conformance.diff.sides import Observation, Side, input_link
 from manip.conformance.diff.streams import Stream, make_streams
 from manip.conformance.fuzz.generators import GenOptions
 from manip.conformance.fuzz.steps import Pause
@@ -48,12 +48,6 @@ NOT_SHOWN: dict[Fault, str] = {
         "arm's servo ticks through 90 virtual seconds on each side); server.ncp.broken judges it when the "
         "run is told the timer (--broken-after)"
     ),
-    Fault.CHAOSD_MSB_FIRST: (
-        "the diff reaches its sides over a Unix socket or CHUDP only: the fuzzer's raw links speak no chaosd "
-        "framing (open_link refuses chaosd://), and an embedded side behind chaosd needs a daemon in the "
-        "process that routes between the server and the diff's several client links by address (the tests' "
-        "hub hands every frame to every other client, so each client would get the others' packets)"
-    ),
 }
 """Faults the diff does not show as a violation of one of their clauses, and why (the directed case
 that catches each is the fault matrix's, tests/conformance/test_faults.py)."""
@@ -61,7 +55,6 @@ that catches each is the fault matrix's, tests/conformance/test_faults.py)."""
 NOT_RUN = frozenset(
     {
         Fault.SILENT_PEER_KEPT,
-        Fault.CHAOSD_MSB_FIRST,
         # no stream differs at all: every answer of side B is side A's (tools/diff_faults.py, seed 7)
     }
 )
@@ -79,6 +72,7 @@ LINKS: dict[Fault, SimulatedLink] = {
     Fault.CHUDP_ODD_BYTE_UNPADDED: "chudp",
     Fault.CHUDP_LSB_FIRST: "chudp",
     Fault.TRAILER_SOURCE_DESTINATION: "chudp",
+    Fault.CHAOSD_MSB_FIRST: "chaosd",
 }
 """Faults of a framing the Unix socket does not carry, run with both sides reached over their link (the
 others: over the Unix socket)."""
@@ -105,7 +99,7 @@ def streams(first: str = "", link: SimulatedLink = "unix") -> list[Stream]:
     """The scenarios and two generated streams (of the link's inputs), the scenario ``first`` first, then
     those that let the arm's clock run least (a fault stops at the first stream that shows it, so the
     cheap ones are tried first)."""
-    generated = make_streams(SEED, 2, 8, GenOptions(link="stream" if link == "unix" else "datagram"))
+    generated = make_streams(SEED, 2, 8, GenOptions(link=input_link(link)))
     return sorted([*scenarios(), *generated], key=lambda s: (s.scenario != first, _paused(s)))
 
 

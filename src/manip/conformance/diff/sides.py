@@ -29,6 +29,7 @@ from manip.conformance.diff.oracles import arg_value_sightings
 from manip.conformance.diff.pairing import SideEvent, events_of
 from manip.conformance.diff.streams import Stream
 from manip.conformance.fuzz.batch import BatchRunner, liveness
+from manip.conformance.fuzz.generators import LinkKind
 from manip.conformance.fuzz.judge import Sighting, judge
 from manip.conformance.fuzz.session import Allowance
 from manip.conformance.judge.violation import Violation
@@ -38,7 +39,7 @@ from manip.conformance.suite.world_link import open_world
 from manip.links import LinkAddress, parse_address, virtual_clock
 from manip.reference_server import ServerConfig
 
-__all__ = ["Observation", "Side", "observe", "reachable", "stream_bound"]
+__all__ = ["Observation", "Side", "input_link", "observe", "reachable", "stream_bound"]
 
 BOUND_BASE: Final = 30.0
 BOUND_PER_INPUT: Final = 20.0
@@ -49,6 +50,13 @@ def stream_bound(stream: Stream, allowance: Allowance) -> float:
     """How long a side may take over ``stream`` before it is a runaway."""
     per = max(BOUND_PER_INPUT, 4 * allowance.reply)
     return BOUND_BASE + per * len(stream.all_inputs)
+
+
+def input_link(link: SimulatedLink) -> LinkKind:
+    """The link whose inputs the generated streams draw for embedded sides reached over ``link``: the
+    datagram link's for CHUDP, the stream link's for the Unix socket and chaosd (whose raw frames in
+    manip's TCP link framing the chaosd daemon stand-in, not the server, takes: it closes the link)."""
+    return "datagram" if link == "chudp" else "stream"
 
 
 @dataclass(frozen=True)
@@ -66,7 +74,8 @@ class Side:
     unit: LengthUnit = "mm"
     """An addressed side's length unit, as the command line declares it (nothing on the wire says it)."""
     link: SimulatedLink = "unix"
-    """How an embedded side is reached (``--link``): a Unix socket with the TCP link framing, or CHUDP."""
+    """How an embedded side is reached (``--link``): a Unix socket with the TCP link framing, CHUDP, or
+    usim's chaosd framing through a routing daemon stand-in."""
 
     @property
     def embedded(self) -> bool:
