@@ -80,10 +80,14 @@ class _Host(asyncio.Protocol):
 
 class ChaosdRouter:
     """``async with ChaosdRouter(path) as router:`` a chaosd stand-in listening on the socket file
-    ``path`` (which must not exist yet; module docstring)."""
+    ``path`` (which must not exist yet; module docstring); it keeps the first ``keep`` frames it is sent
+    (:attr:`frames`, whether routed or not)."""
 
-    def __init__(self, path: str) -> None:
+    def __init__(self, path: str, *, keep: int = 0) -> None:
         self.path = path
+        self.keep = keep
+        self.frames: list[bytes] = []
+        """The first :attr:`keep` frames hosts sent, in the order they came."""
         self.dropped: Counter[str] = Counter()
         """Frames not delivered, by reason (``unroutable``, ``congested``, ``framing lost``)."""
         self.forwarded = 0
@@ -106,11 +110,16 @@ class ChaosdRouter:
             with contextlib.suppress(Exception):
                 await self._server.wait_closed()
 
+    @property
+    def connected(self) -> int:
+        """Hosts connected now."""
+        return len(self._hosts)
+
     async def name_silent(self, address: int, *, hosts: int = 1) -> None:
         """The hosts connected now that have sent nothing are at ``address`` (a daemon told its hosts'
         addresses; every other address is learnt from the frames), once at least ``hosts`` are (a host
         whose dial has returned may not be accepted yet: this waits turns of the loop, not time)."""
-        while len(self._hosts) < hosts:
+        while self.connected < hosts:
             await asyncio.sleep(0)
         for host in self._hosts:
             if not host.spoke:
@@ -127,6 +136,8 @@ class ChaosdRouter:
         dest = int.from_bytes(frame[-6:-4], "little")
         source = int.from_bytes(frame[-4:-2], "little")
         sender.spoke = True
+        if len(self.frames) < self.keep:
+            self.frames.append(frame)
         self._learn(source, sender)
         to = [h for h in self._routes.get(dest, []) if h is not sender]
         if not to:
