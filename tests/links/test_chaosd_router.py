@@ -69,6 +69,7 @@ def test_frames_go_to_the_host_the_trailer_names() -> None:
             assert router.forwarded == 7 and not router.dropped
             for _, w in (server, a1, b):
                 w.close()
+                await w.wait_closed()
 
     run(main())
 
@@ -83,5 +84,6 @@ def test_what_cannot_be_routed_is_dropped_and_counted() -> None:
             a[1].write(b"\x00\x16\x02\x00" + bytes(22))  # header bytes 2-3 must be 01 00
             assert await a[0].read() == b""  # the router closed the connection
             assert router.dropped == {"unroutable": 1, "framing lost": 1}
+            a[1].close()
 
     run(main())
