@@ -7,6 +7,7 @@ that shows the fault).
     .venv/bin/python tools/diff_faults.py --fault joints-reversed --fault keeps-abort --streams 4
     .venv/bin/python tools/diff_faults.py --link chudp --fault chudp-lsb-first   # both sides over CHUDP
     .venv/bin/python tools/diff_faults.py --fault silent-peer-kept --broken-after 90   # the timer told
+    .venv/bin/python tools/diff_faults.py --link chaosd --fault chaosd-msb-first # both behind a chaosd
 
 One line per fault: its differences by class, (a) violation, (b) both allowed, (c) unexplained;
 ``shown`` when a class (a) difference with side B the violator names one of the fault's clauses; the
@@ -26,7 +27,7 @@ from dataclasses import replace
 from manip.conformance.diff.classify import CLASSES, Finding
 from manip.conformance.diff.driver import DiffConfig, run_diff
 from manip.conformance.diff.scenarios import scenarios
-from manip.conformance.diff.sides import Side
+from manip.conformance.diff.sides import Side, input_link
 from manip.conformance.diff.streams import Stream, make_streams
 from manip.conformance.fuzz.generators import GenOptions
 from manip.conformance.suite.embedded import SimulatedLink
@@ -34,7 +35,7 @@ from manip.reference_server import FaultSet, ServerConfig
 from manip.reference_server.faults import WRIST_SIDE, Fault
 
 CLEAN = Side("A", "clean", config=ServerConfig())
-LINKS = ("unix", "chudp")
+LINKS = ("unix", "chudp", "chaosd")
 
 
 def protocol_faults() -> list[Fault]:
@@ -69,7 +70,7 @@ def main() -> int:
     args = parser.parse_args()
     link: SimulatedLink = args.link
     chosen = [f for f in protocol_faults() if not args.fault or f.value in args.fault]
-    gen = GenOptions(link="stream" if link == "unix" else "datagram")
+    gen = GenOptions(link=input_link(link))
     streams = [*scenarios(), *make_streams(args.seed, args.streams, args.length, gen)]
     config = DiffConfig(args.seed, shrink=False, seen_a={})  # the clean side observed once per stream
     started = time.process_time()

@@ -1,4 +1,4 @@
-"""The driver over usim's chaosd unix socket, against a tiny chaosd stand-in (tests/support/chaosd_hub.py)."""
+"""The driver over usim's chaosd unix socket, through the routing chaosd stand-in (links/chaosd_router)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import pytest
 
 from manip.links import ChaosConnection, LinkError, NcpConfig, open_connection, start_server
 from manip.links.chaosd import ChaosdLink, connect_chaosd
-from tests.support.chaosd_hub import Hub
+from tests.support.chaosd_router import chaosd_router
 
 FAST = NcpConfig(retransmit_interval=0.1, ack_delay=0.01)
 
@@ -34,24 +34,22 @@ def socket_dir() -> Iterator[Path]:
     shutil.rmtree(path, ignore_errors=True)
 
 
-def test_round_trip_through_a_chaosd_hub(socket_dir: Path) -> None:
+def test_round_trip_through_a_chaosd_router() -> None:
     async def echo(conn: ChaosConnection) -> None:
         async for packet in conn:
             await conn.send(packet.data.upper())
 
     async def main() -> None:
-        hub = Hub()
-        path = socket_dir / "chaosd_server"
-        daemon = await asyncio.start_unix_server(hub.handle, str(path))
-        async with daemon:
+        async with chaosd_router() as (path, router):
             server = await start_server(f"chaosd://{path}?addr=0440", "PUMA", echo, options=FAST)
+            await router.name_silent(0o440)
             url = f"chaosd://{path}?addr=0440"
             async with server, await open_connection(url, options=FAST) as conn:
                 for word in (b"puma", b"arm", b"x"):
                     await conn.send(word)
                     assert (await conn.receive()).data == word.upper()
             # usim's framing: big-endian length, 01 00, then little-endian words; the RFC first.
-            rfc = hub.frames[0]
+            rfc = router.frames[0]
             assert rfc[:4] == bytes([0, 26, 1, 0])
             assert rfc[4:8] == b"\x00\x01\x04\x00"  # opcode 1 in the high byte; nbytes 4
             assert rfc[8:12] == b"\x20\x01\x00\x00"  # to 0440, index 0

@@ -22,7 +22,7 @@ from manip.conformance.suite.runner import RunConfig, Runner
 from manip.links import virtual_clock
 from manip.reference_server import ServerConfig
 from manip.reference_server.driver import serve
-from tests.support.chaosd_hub import chaosd_hub
+from tests.support.chaosd_router import chaosd_router
 from tests.support.servers import LINK_ADDRESSES
 
 
@@ -96,12 +96,13 @@ def run_over_link(
     cases: Sequence[Case], scheme: str, server: ServerConfig | None = None, *, seed: int
 ) -> RunReport:
     """Run ``cases`` against a reference server reached over a ``scheme`` link (``chudp``, or ``chaosd``
-    through a hub standing in for the daemon), in real time in this process: what the embedded run's
+    through a routing stand-in for the daemon), in real time in this process: what the embedded run's
     Unix socket cannot show, the frames of those links."""
 
     async def main() -> RunReport:
         if scheme == "chaosd":
-            async with chaosd_hub() as (path, _hub), serve(f"chaosd://{path}?addr=0440", server):
+            async with chaosd_router() as (path, router), serve(f"chaosd://{path}?addr=0440", server):
+                await router.name_silent(0o440)
                 return await _run(f"chaosd://{path}?addr=0440")
         async with serve(LINK_ADDRESSES[scheme], server) as reference:
             return await _run(reference.address)

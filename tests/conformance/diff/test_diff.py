@@ -20,7 +20,7 @@ from manip.conformance.diff.driver import DiffConfig, diff_stream, run_diff
 from manip.conformance.diff.pairing import SideEvent
 from manip.conformance.diff.report import load_schema
 from manip.conformance.diff.scenarios import chaos, scenario
-from manip.conformance.diff.sides import Observation, Side
+from manip.conformance.diff.sides import Observation, Side, input_link
 from manip.conformance.diff.streams import make_streams
 from manip.conformance.fuzz.generators import GenOptions
 from manip.conformance.fuzz.session import Allowance
@@ -103,13 +103,13 @@ def test_the_guide_profile_passes_the_scenarios_of_lengths() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("link", ["unix", "chudp"])
+@pytest.mark.parametrize("link", ["unix", "chudp", "chaosd"])
 def test_the_chaos_scenarios_name_neither_a_clean_server_nor_the_guide_profile(link: SimulatedLink) -> None:
     """The Chaos level's scenarios, a clean server against another and against the guide profile, over
-    each link (CHUDP with one stream of the datagram link's inputs too): no violation, nothing unstable."""
+    each link (CHUDP and chaosd with one stream of their link's inputs too): no violation, none unstable."""
     streams = [scenario(name) for name in chaos.SCENARIOS]
-    if link == "chudp":
-        streams += make_streams(7, 1, 4, GenOptions(link="datagram"))
+    if link != "unix":
+        streams += make_streams(7, 1, 4, GenOptions(link=input_link(link)))
     clean = replace(CLEAN, link=link)
     for b in (
         Side("B", "clean", config=ServerConfig()),

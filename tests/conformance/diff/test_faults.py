@@ -21,7 +21,7 @@ import pytest
 from manip.conformance.diff.classify import Finding
 from manip.conformance.diff.driver import DiffConfig, run_diff
 from manip.conformance.diff.scenarios import scenarios
-from manip.conformance.diff.sides import Observation, Side
+from manip.conformance.diff.sides import Observation, Side, input_link
 from manip.conformance.diff.streams import Stream, make_streams
 from manip.conformance.fuzz.generators import GenOptions
 from manip.conformance.fuzz.steps import Pause
@@ -41,38 +41,22 @@ PROTOCOL_FAULTS = sorted(
 """The server's protocol faults (the wrist side's are the Puma cases' to catch: they need the suite
 playing Cougar)."""
 
-NOT_SHOWN: dict[Fault, str] = {
-    # clauses no fault proved before (issue 32)
-    Fault.CHAOSD_MSB_FIRST: (
-        "the diff reaches its sides over a Unix socket or CHUDP only: the fuzzer's raw links speak no chaosd "
-        "framing (open_link refuses chaosd://), and an embedded side behind chaosd needs a daemon in the "
-        "process that routes between the server and the diff's several client links by address (the tests' "
-        "hub hands every frame to every other client, so each client would get the others' packets)"
-    ),
-}
-"""Faults the diff does not show as a violation of one of their clauses, and why (the directed case
-that catches each is the fault matrix's, tests/conformance/test_faults.py)."""
+NOT_SHOWN: dict[Fault, str] = {}
+"""Faults the diff does not show as a violation of one of their clauses, each with the reason the diff
+cannot show it (the directed case that catches each is the fault matrix's, tests/conformance/test_faults.py).
+Empty: every protocol fault shows.  A new fault goes here only with a reason a reader can check."""
 
-NOT_RUN = frozenset(
-    {
-        Fault.CHAOSD_MSB_FIRST,
-        # no stream differs at all: every answer of side B is side A's (tools/diff_faults.py, seed 7)
-    }
-)
-"""Faults on :data:`NOT_SHOWN` that are not run through the diff here, because a run shows nothing of
-them.  The Chaos level's defects lie where the diff's connections never go (another link's framing,
-packets a well-behaved client never sends, losses and silences that never happen), or show only as side
-B's answers missing or garbled throughout: every stream run against one costs some 30 s of CPU.  The
-others make no difference on any stream (side B answers every request as side A does), measured by
-``tools/diff_faults.py``, which runs every fault through every stream and is where a new scenario that
-reaches one of them shows it; each costs some 7 s of CPU here to show that nothing differs.  The fault
-matrix's cases catch each one (tests/conformance/test_faults.py)."""
+NOT_RUN: frozenset[Fault] = frozenset()
+"""Faults on :data:`NOT_SHOWN` that a run shows nothing of at all (side B answers every stream as side A
+does, measured by ``tools/diff_faults.py``, which runs every fault through every stream), so they are
+not run here."""
 
 LINKS: dict[Fault, SimulatedLink] = {
     Fault.CHUDP_NO_HEADER: "chudp",
     Fault.CHUDP_ODD_BYTE_UNPADDED: "chudp",
     Fault.CHUDP_LSB_FIRST: "chudp",
     Fault.TRAILER_SOURCE_DESTINATION: "chudp",
+    Fault.CHAOSD_MSB_FIRST: "chaosd",
 }
 """Faults of a framing the Unix socket does not carry, run with both sides reached over their link (the
 others: over the Unix socket)."""
@@ -136,7 +120,7 @@ def streams(first: str = "", link: SimulatedLink = "unix") -> list[Stream]:
     """The scenarios and two generated streams (of the link's inputs), the scenario ``first`` first, then
     those that let the arm's clock run least (a fault stops at the first stream that shows it, so the
     cheap ones are tried first)."""
-    generated = make_streams(SEED, 2, 8, GenOptions(link="stream" if link == "unix" else "datagram"))
+    generated = make_streams(SEED, 2, 8, GenOptions(link=input_link(link)))
     return sorted([*scenarios(), *generated], key=lambda s: (s.scenario != first, _paused(s)))
 
 

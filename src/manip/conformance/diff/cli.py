@@ -2,7 +2,7 @@
 
 A and B are each a link address (``tcp://HOST:PORT``, ``unix:///PATH``) or ``embedded``: the reference
 server in virtual time, shaped by ``--server-fault-a/-b``, ``--server-profile-a/-b`` and
-``--error-args-a/-b``, and reached over ``--link`` (a Unix socket, or CHUDP).  See
+``--error-args-a/-b``, and reached over ``--link`` (a Unix socket, CHUDP, or chaosd).  See
 :mod:`manip.conformance.diff.driver` for what is sent and :mod:`manip.conformance.diff.classify` for the
 classes.
 """
@@ -26,7 +26,7 @@ from manip.conformance.cli_options import check_output_paths, format_options
 from manip.conformance.diff.driver import DiffConfig, StreamResult, run_diff
 from manip.conformance.diff.report import DIFF_FORMATS, DiffReport, finding_lines
 from manip.conformance.diff.scenarios import SCENARIOS, scenario, scenarios
-from manip.conformance.diff.sides import Side, reachable
+from manip.conformance.diff.sides import Side, input_link, reachable
 from manip.conformance.diff.streams import Stream, make_stream, make_streams, stream_of
 from manip.conformance.fuzz.generators import GenOptions
 from manip.conformance.fuzz.session import Allowance
@@ -129,12 +129,13 @@ def _numbers(ctx: click.Context, param: click.Parameter, value: str | None) -> t
 )
 @click.option(
     "--link",
-    type=click.Choice(["unix", "chudp"]),
+    type=click.Choice(["unix", "chudp", "chaosd"]),
     default="unix",
     show_default=True,
-    help="How the embedded sides are reached: a Unix socket with manip's TCP link framing, or CHUDP on a "
-    "loopback UDP port (its framing judged too; the streams then draw the datagram link's inputs).  Both "
-    "sides embedded.",
+    help="How the embedded sides are reached: a Unix socket with manip's TCP link framing, CHUDP on a "
+    "loopback UDP port (its framing judged too; the streams then draw the datagram link's inputs), or "
+    "usim's chaosd framing through a routing chaosd stand-in in the process (its framing judged too).  "
+    "Both sides embedded.",
 )
 @click.option("--stream", "only_stream", type=click.IntRange(0), default=None, help="Send only stream N.")
 @click.option(
@@ -217,7 +218,7 @@ def diff_command(**options: Any) -> None:
         replace(sides[0], link=link, broken_after=timer),
         replace(sides[1], link=link, broken_after=timer),
     )
-    gen = GenOptions(link="stream" if link == "unix" else "datagram", select=options["classes"])
+    gen = GenOptions(link=input_link(link), select=options["classes"])
     if not gen.classes():
         raise click.UsageError("--class matches no input class (manip-conform fuzz --list-classes)")
     length = options["length"]

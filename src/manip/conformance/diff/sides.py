@@ -29,6 +29,7 @@ from manip.conformance.diff.oracles import arg_value_sightings
 from manip.conformance.diff.pairing import SideEvent, events_of
 from manip.conformance.diff.streams import Stream
 from manip.conformance.fuzz.batch import BatchRunner, liveness
+from manip.conformance.fuzz.generators import LinkKind
 from manip.conformance.fuzz.judge import Sighting, judge
 from manip.conformance.fuzz.session import Allowance
 from manip.conformance.fuzz.steps import Silence
@@ -39,7 +40,7 @@ from manip.conformance.suite.world_link import open_world
 from manip.links import LinkAddress, parse_address, virtual_clock
 from manip.reference_server import ServerConfig
 
-__all__ = ["Observation", "Side", "observe", "reachable", "stream_bound"]
+__all__ = ["Observation", "Side", "input_link", "observe", "reachable", "stream_bound"]
 
 BOUND_BASE: Final = 30.0
 BOUND_PER_INPUT: Final = 20.0
@@ -51,6 +52,13 @@ def stream_bound(stream: Stream, allowance: Allowance) -> float:
     per = max(BOUND_PER_INPUT, 4 * allowance.reply)
     silent = sum(s.seconds for i in stream.all_inputs for s in i.steps if isinstance(s, Silence))
     return BOUND_BASE + per * len(stream.all_inputs) + silent
+
+
+def input_link(link: SimulatedLink) -> LinkKind:
+    """The link whose inputs the generated streams draw for embedded sides reached over ``link``: the
+    datagram link's for CHUDP, the stream link's for the Unix socket and chaosd (whose raw frames in
+    manip's TCP link framing the chaosd daemon stand-in, not the server, takes: it closes the link)."""
+    return "datagram" if link == "chudp" else "stream"
 
 
 @dataclass(frozen=True)
@@ -68,7 +76,8 @@ class Side:
     unit: LengthUnit = "mm"
     """An addressed side's length unit, as the command line declares it (nothing on the wire says it)."""
     link: SimulatedLink = "unix"
-    """How an embedded side is reached (``--link``): a Unix socket with the TCP link framing, or CHUDP."""
+    """How an embedded side is reached (``--link``): a Unix socket with the TCP link framing, CHUDP, or
+    usim's chaosd framing through a routing daemon stand-in."""
     broken_after: float | None = None
     """The side's broken-connection timer in seconds (``--broken-after``; erratum ncp-timers): an
     embedded server is given it, an addressed side is declared to use it.  None: not known, and the

@@ -283,7 +283,9 @@ class BatchRunner:
             packet = packet.with_(dest_index=(packet.dest_index * 7 + 1) & 0xFFFF or 1)
         dest, source = packet.dest_host or self.address.peer_addr, packet.src_host or self.address.my_addr
         packet = packet.with_(dest_host=dest, src_host=source)
-        raw = frame(packet, datagram=self.datagram, hop=(dest, source), damage=step.damage)
+        raw = frame(
+            packet, datagram=self.datagram, hop=(dest, source), damage=step.damage, chaosd=link.chaosd
+        )
         if packet.opcode == ChaosOp.RFC:
             self._rfc_links[packet.src_index] = link
         link.send(raw)

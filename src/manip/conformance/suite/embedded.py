@@ -33,6 +33,8 @@ from typing import Final, Literal
 
 from manip.conformance.suite.world import Condition, ConditionUnsupported
 from manip.links import NcpConfig
+from manip.links.address import DEFAULT_SERVER_ADDR
+from manip.links.chaosd_router import ChaosdRouter
 from manip.reference_server import ServerConfig
 from manip.reference_server.cougar_wrist import make_cougar_wrist
 from manip.reference_server.driver import ReferenceServer, serve
@@ -47,10 +49,13 @@ __all__ = [
     "simulated_server",
 ]
 
-SimulatedLink = Literal["unix", "chudp"]
-"""How a simulated server is reached: manip's TCP link framing on a Unix-domain socket (the default), or
-CHUDP on a loopback UDP port (its own framing, for what only that link shows)."""
+SimulatedLink = Literal["unix", "chudp", "chaosd"]
+"""How a simulated server is reached: manip's TCP link framing on a Unix-domain socket (the default),
+CHUDP on a loopback UDP port, or usim's chaosd framing through a routing chaosd stand-in in the process
+(:class:`~manip.links.chaosd_router.ChaosdRouter`) that the server dials as its daemon (each link's own
+framing, for what only that link shows)."""
 CHUDP_LOOPBACK: Final = "chudp://127.0.0.1:0?addr=0440"
+CHAOSD_SOCKET: Final = "chaosd.sock"
 
 START_TIMEOUT: Final = 10.0
 STOP_TIMEOUT: Final = 5.0
@@ -124,19 +129,27 @@ async def simulated_environment(
     The global ``random`` generator is part of the simulated world (connection indices are drawn from
     it): it is seeded from ``seed`` here, so both ends' indices repeat with the run.  Over CHUDP the
     virtual clock's jump is as sound as a loopback datagram is delivered before its ``sendto`` returns,
-    which Linux does (the receiving queue is filled in the sender's system call)."""
+    which Linux does (the receiving queue is filled in the sender's system call); over chaosd, as the
+    router's reads and writes on Unix sockets are (its hop costs a turn of the loop, not time)."""
     random.seed(seed)
     options = None if broken_after is None else NcpConfig.breaking_after(broken_after)
     wrist_factory = functools.partial(make_cougar_wrist, "sim", seed=seed) if wrist else None
     with tempfile.TemporaryDirectory(prefix="manip-sim-") as directory:
-        path = os.path.join(directory, SOCKET_NAME)
-        async with serve(
-            f"unix://{path}" if link == "unix" else CHUDP_LOOPBACK,
-            config or ServerConfig(),
-            seed=seed,
-            wrist_factory=wrist_factory,
-            options=options,
-        ) as server:
+        path = os.path.join(directory, SOCKET_NAME if link != "chaosd" else CHAOSD_SOCKET)
+        async with contextlib.AsyncExitStack() as stack:
+            if link == "chaosd":
+                router = await stack.enter_async_context(ChaosdRouter(path))
+            server = await stack.enter_async_context(
+                serve(
+                    {"unix": f"unix://{path}", "chudp": CHUDP_LOOPBACK, "chaosd": f"chaosd://{path}"}[link],
+                    config or ServerConfig(),
+                    seed=seed,
+                    wrist_factory=wrist_factory,
+                    options=options,
+                )
+            )
+            if link == "chaosd":
+                await router.name_silent(DEFAULT_SERVER_ADDR)
             yield ServerEnvironment(server)
 
 

@@ -10,14 +10,15 @@ peer must and nothing else).
 Theory of operation:
 
 * **Links.**  :func:`open_link` opens a :class:`RawLink` to the target: a :class:`RawStreamLink` (``tcp://``,
-  ``unix://``: manip's TCP link framing, :mod:`manip.codecs.framing`) or a :class:`RawDatagramLink`
-  (``chudp://``).  Every frame that arrives goes to the link's :class:`PacketSink`, decoded with its
-  bytes (``deliver``) or refused (``reject``, with why); a stream whose framing is lost (a frame length
-  no frame can have) is closed, and when that happens before any frame the link says what the peer is
-  instead (:func:`~manip.links.errors.not_a_chaos_link`).  :meth:`RawLink.encode` frames a packet as
-  the codecs do (they refuse what is illegal); :func:`frame` lays out any packet at all, with the damage
-  a fuzz input asks for (:data:`Damage`) and the checksum recomputed after it (unless the checksum is
-  the damage), so exactly one thing is wrong with it.
+  ``unix://``: manip's TCP link framing, :mod:`manip.codecs.framing`; ``chaosd://``: usim's chaosd
+  framing, through a daemon that routes by the trailer) or a :class:`RawDatagramLink` (``chudp://``).
+  Every frame that arrives goes to the link's :class:`PacketSink`, decoded with its bytes (``deliver``)
+  or refused (``reject``, with why); a stream whose framing is lost (a frame length no frame can have)
+  is closed, and when that happens before any frame the link says what the peer is instead
+  (:func:`~manip.links.errors.not_a_chaos_link`).  :meth:`RawLink.encode` frames a packet as the
+  codecs do (they refuse what is illegal); :func:`frame` lays out any packet at all, with the damage a
+  fuzz input asks for (:data:`Damage`) and the checksum recomputed after it (unless the checksum is the
+  damage), so exactly one thing is wrong with it.
 * **The NCP cases' peer.**  :meth:`RawPeer.open` opens one link and is its sink: every packet goes to
   ``inbox`` as a :class:`Received` (packet, bytes, time), frames that do not decode to ``bad``, and both
   ways to ``on_packet`` (cases record them).  :meth:`RawPeer.receive` takes the first inbox packet a
@@ -47,9 +48,12 @@ from manip.codecs.chaos import chaos_checksum, packet_words
 from manip.codecs.errors import DecodeError
 from manip.codecs.framing import (
     CHUDP_HEADER,
+    ChaosdFrameDecoder,
     FrameSyncError,
+    StreamDecoder,
     TcpFrameDecoder,
     decode_chudp,
+    encode_chaosd,
     encode_chudp,
     encode_tcp,
 )
@@ -130,6 +134,9 @@ class RawLink:
     """One link to the target (see the module docstring)."""
 
     datagram = False
+    chaosd = False
+    """The stream carries usim's chaosd framing (4-byte header, words low byte first), not manip's TCP
+    link framing."""
 
     def __init__(self, address: LinkAddress, sink: PacketSink) -> None:
         self.address = address
@@ -150,12 +157,14 @@ class RawLink:
     def encode(self, p: Packet) -> bytes:
         """``p`` framed by the codecs, the trailer naming the target as the next hop and us as the last."""
         hop = {"hw_dest": self.address.peer_addr, "hw_src": self.address.my_addr}
-        return encode_chudp(p, **hop) if self.datagram else encode_tcp(p, **hop)
+        if self.datagram:
+            return encode_chudp(p, **hop)
+        return encode_chaosd(p, **hop) if self.chaosd else encode_tcp(p, **hop)
 
     def forge(self, p: Packet, *, damage: Damage = "") -> bytes:
         """``p`` framed with no checks at all (an illegal opcode, more than 488 data bytes...)."""
         hop = (self.address.peer_addr, self.address.my_addr)
-        return frame(p, datagram=self.datagram, hop=hop, damage=damage)
+        return frame(p, datagram=self.datagram, hop=hop, damage=damage, chaosd=self.chaosd)
 
     def _take(self, packet: Packet, raw: bytes, now: float) -> None:
         """Hand ``packet`` to the sink, unless it names our own address as its source: no other host has
@@ -175,12 +184,14 @@ class RawLink:
 
 
 class RawStreamLink(RawLink, asyncio.Protocol):
-    """A connection carrying manip's TCP link frames."""
+    """A connection carrying manip's TCP link frames (or, for ``chaosd://``, usim's chaosd frames)."""
 
     def __init__(self, address: LinkAddress, sink: PacketSink) -> None:
         super().__init__(address, sink)
         self._transport: asyncio.Transport | None = None
-        self._decoder = TcpFrameDecoder()
+        self.chaosd = address.scheme == "chaosd"
+        self._decoder: StreamDecoder = ChaosdFrameDecoder() if self.chaosd else TcpFrameDecoder()
+        self._prefix = 4 if self.chaosd else 2
         self._buffer = bytearray()
         """The bytes of the frames the decoder has not returned yet."""
         self._head = b""
@@ -201,7 +212,7 @@ class RawStreamLink(RawLink, asyncio.Protocol):
         except FrameSyncError as exc:
             items, lost = list(exc.items), exc
         for item in items:
-            size = 2 + int.from_bytes(self._buffer[:2], "big")
+            size = self._prefix + int.from_bytes(self._buffer[:2], "big")
             raw = bytes(self._buffer[:size])
             del self._buffer[:size]
             self._frames += 1
@@ -292,7 +303,7 @@ async def open_link(address: LinkAddress, sink: PacketSink, timeout: float) -> R
                 lambda: RawStreamLink(address, sink), address.host, address.port
             )
             return stream
-        if address.scheme == "unix":
+        if address.scheme in ("unix", "chaosd"):
             assert address.path is not None
             _, stream = await loop.create_unix_connection(lambda: RawStreamLink(address, sink), address.path)
             return stream
@@ -307,9 +318,12 @@ async def open_link(address: LinkAddress, sink: PacketSink, timeout: float) -> R
     raise RawError(f"raw Chaos packets are not supported on {address.scheme}:// links")
 
 
-def frame(packet: Packet, *, datagram: bool, hop: tuple[int, int], damage: Damage = "") -> bytes:
+def frame(
+    packet: Packet, *, datagram: bool, hop: tuple[int, int], damage: Damage = "", chaosd: bool = False
+) -> bytes:
     """``packet`` laid out for a link as it is (no check), its trailer naming ``hop`` (next hop, last
-    hop), with ``damage`` done to it (:data:`Damage`)."""
+    hop), with ``damage`` done to it (:data:`Damage`); a stream's frame in usim's chaosd framing with
+    ``chaosd``, in manip's TCP link framing without."""
     dest, source = hop
     words = packet_words(packet)
     if damage == "header-byte":
@@ -321,7 +335,11 @@ def frame(packet: Packet, *, datagram: bool, hop: tuple[int, int], damage: Damag
     checksum = chaos_checksum([*words, dest, source])
     if damage == "checksum":
         checksum ^= 1 + (packet.packet_no % 0xFFFE)
-    body = struct.pack(f">{len(words) + 3}H", *words, dest, source, checksum)
+    body = struct.pack(
+        f"{'<' if chaosd and not datagram else '>'}{len(words) + 3}H", *words, dest, source, checksum
+    )
+    if chaosd and not datagram:
+        return len(body).to_bytes(2, "big") + b"\x01\x00" + body
     if not datagram:
         return len(body).to_bytes(2, "big") + body
     head = CHUDP_HEADER
