@@ -230,6 +230,12 @@ def _expect_turn(ctx: CaseContext, op: str, first: Sequence[float], path: Sequen
     if seen.whole < 1.0:
         ctx.note(f"{op}: the hand turned {seen.whole:.3g} deg; the pace of its turn not judged")
         return
+    last = path[-1]
+    alongs = [along_line(here[9:], first[9:], last[9:]) for here in path]
+    before, after = sum(0.0 < a <= 0.5 for a in alongs), sum(0.5 <= a < 1.0 for a in alongs)
+    # The pace is judged only on samples on either side of half way: too few, and a turn made early or
+    # late goes unseen, which the report must say rather than imply.
+    ctx.note(f"{op}: the pace of the turn judged on {before} sample(s) before half way, {after} after")
     off = seen.off_pace
     ctx.expect(
         off is None,
