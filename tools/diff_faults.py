@@ -43,15 +43,24 @@ def protocol_faults() -> list[Fault]:
     return sorted((f for f in Fault if f.kind == "protocol" and f not in WRIST_SIDE), key=lambda f: f.value)
 
 
+def side_pair(fault: Fault, link: SimulatedLink, timer: float | None = None) -> tuple[Side, Side]:
+    """The clean side A and side B with ``fault`` on, both reached over ``link``; ``timer``: both sides'
+    broken-connection timer (None: not told, and the scenario that waits it out is not sent)."""
+    config_b = ServerConfig(faults=FaultSet.parse([fault.value]))
+    faulty = Side("B", fault.value, config=config_b, link=link, broken_after=timer)
+    return replace(CLEAN, link=link, broken_after=timer), faulty
+
+
+def named_by_b(found: list[Finding]) -> set[str]:
+    """The clauses the class (a) differences name with side B the violator."""
+    return {n for f in found if f.cls == "violation" and f.violator == "B" for n in f.names}
+
+
 def findings(
     fault: Fault, streams: list[Stream], config: DiffConfig, link: SimulatedLink, timer: float | None = None
 ) -> list[Finding]:
-    """The differences of ``fault`` on side B; ``timer``: both sides' broken-connection timer (None:
-    not told, and the scenario that waits it out is not sent)."""
-    config_b = ServerConfig(faults=FaultSet.parse([fault.value]))
-    faulty = Side("B", fault.value, config=config_b, link=link, broken_after=timer)
-    clean = replace(CLEAN, link=link, broken_after=timer)
-    return [f for r in run_diff(clean, faulty, streams, config) for f in r.findings]
+    """The differences of ``fault`` on side B (:func:`side_pair`)."""
+    return [f for r in run_diff(*side_pair(fault, link, timer), streams, config) for f in r.findings]
 
 
 def main() -> int:
@@ -82,7 +91,7 @@ def main() -> int:
         found = findings(fault, streams, config, link, args.broken_after)
         counts = Counter(f.cls for f in found)
         totals.update(counts)
-        named = sorted({n for f in found if f.cls == "violation" and f.violator == "B" for n in f.names})
+        named = sorted(named_by_b(found))
         hit = bool(set(named) & set(fault.clauses))
         shown += hit
         if any(f.cls == "violation" and f.violator in ("A", "both") for f in found):

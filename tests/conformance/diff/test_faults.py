@@ -14,30 +14,27 @@ Everything runs in virtual time.
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import pytest
 
 from manip.conformance.diff.classify import Finding
 from manip.conformance.diff.driver import DiffConfig, run_diff
 from manip.conformance.diff.scenarios import scenarios
-from manip.conformance.diff.sides import Observation, Side, input_link
+from manip.conformance.diff.sides import Observation, input_link
 from manip.conformance.diff.streams import Stream, make_streams
 from manip.conformance.fuzz.generators import GenOptions
 from manip.conformance.fuzz.steps import Pause
 from manip.conformance.suite.embedded import SimulatedLink
 from manip.ncp import NcpConfig
-from manip.reference_server import FaultSet, ServerConfig
-from manip.reference_server.faults import WRIST_SIDE, Fault
+from manip.reference_server.faults import Fault
+from tests.support.tools import load_tool
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 
 SEED = 7
-CLEAN = Side("A", "clean", config=ServerConfig())
-PROTOCOL_FAULTS = sorted(
-    (f for f in Fault if f.kind == "protocol" and f not in WRIST_SIDE),
-    key=lambda f: f.value,
-)
+SWEEP = load_tool("diff_faults")
+"""``tools/diff_faults.py``, which runs every fault through every stream: the sides of a fault and what
+side B is named for are the sweep's and this test's alike."""
+PROTOCOL_FAULTS: list[Fault] = SWEEP.protocol_faults()
 """The server's protocol faults (the wrist side's are the Puma cases' to catch: they need the suite
 playing Cougar)."""
 
@@ -133,21 +130,15 @@ def findings(fault: Fault, wanted: set[str] | None = None) -> list[Finding]:
     """What the diff shows of ``fault`` on side B, stream by stream; with ``wanted``, it stops at the
     first stream where side B is named violating one of those clauses (the rest cannot undo that)."""
     link, timer = LINKS.get(fault, "unix"), TIMERS.get(fault)
-    clean = replace(CLEAN, link=link, broken_after=timer)
-    config = ServerConfig(faults=FaultSet.parse([fault.value]))
-    faulty = Side("B", fault.value, config=config, link=link, broken_after=timer)
+    clean, faulty = SWEEP.side_pair(fault, link, timer)
     seen = _CLEAN_SEEN.setdefault((link, timer), {})
     found: list[Finding] = []
     for stream in streams(OWN_SCENARIO.get(fault, ""), link):
         (result,) = run_diff(clean, faulty, [stream], DiffConfig(SEED, shrink=False, seen_a=seen))
         found += result.findings
-        if wanted is not None and wanted & _named_by_b(result.findings):
+        if wanted is not None and wanted & SWEEP.named_by_b(result.findings):
             break
     return found
-
-
-def _named_by_b(found: list[Finding]) -> set[str]:
-    return {n for f in found if f.cls == "violation" and f.violator == "B" for n in f.names}
 
 
 @pytest.mark.parametrize("fault", [f for f in PROTOCOL_FAULTS if f not in NOT_RUN], ids=lambda f: f.value)
@@ -155,7 +146,7 @@ def test_a_protocol_fault_is_a_violation_of_its_clause(fault: Fault) -> None:
     wanted = set(fault.clauses)
     found = findings(fault, None if fault in NOT_SHOWN else wanted)
     assert not [f for f in found if f.cls == "violation" and f.violator in ("A", "both")], "the clean side"
-    named = _named_by_b(found)
+    named: set[str] = SWEEP.named_by_b(found)
     shown = sorted({(f.cls, f.names) for f in found})
     print(f"{fault.value}: wanted {sorted(wanted)}; named {sorted(named)}; {len(found)} difference(s)")
     if fault in NOT_SHOWN:
