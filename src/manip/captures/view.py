@@ -63,7 +63,6 @@ _ERROR_OPS: Final = frozenset(
         ServerOp.ASYNCHRONOUS_WARNING,
     }
 )
-_REPLY_OPS: Final = ANSWER_OPS
 _TEXT_EVENTS: Final = {
     ChaosOp.CLS: "cls",
     ChaosOp.LOS: "los",
@@ -302,7 +301,7 @@ class Annotator:
                     "rendered": err.render(),
                     "problems": list(err.problems),
                 }
-                if opcode in _REPLY_OPS:
+                if opcode in ANSWER_OPS:
                     ann.final = True
             else:
                 a = decode_async(data)

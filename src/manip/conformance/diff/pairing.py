@@ -58,8 +58,6 @@ FLOAT_TOLERANCE: Final = 1e-5
 """Relative difference under which two floats are the same value (a PDP-11 F float has 24 bits)."""
 INCH: Final = 25.4
 SideEventKind = Literal["packet", "end", "stray", "stream"]
-_ERRORS: Final = ERROR_STRING_OPS
-_ANSWERS: Final = ANSWER_OPS
 _ENDS: Final = {ChaosOp.CLS: "CLS", ChaosOp.LOS: "LOS", ChaosOp.EOF: "EOF"}
 NO_CLS: Final = "none after the EOF: no CLS or LOS came, the link dropped or silence"
 """The end event that follows an EOF nothing followed (the connection watched to its end)."""
@@ -122,7 +120,7 @@ def events_of(run: BatchRun, inbox: Inbox) -> dict[int, list[SideEvent]]:
                 text = f"{name} {wp.data.decode('ascii', 'replace')}".strip()
                 event = SideEvent("end", wp.opcode, text=text, time=at)
             else:
-                asked = pairing.server(wp.opcode, wp.data).request if wp.opcode in _ANSWERS else None
+                asked = pairing.server(wp.opcode, wp.data).request if wp.opcode in ANSWER_OPS else None
                 event = SideEvent(
                     "packet",
                     wp.opcode,
@@ -200,7 +198,7 @@ def differing_parts(a: SideEvent | None, b: SideEvent | None) -> tuple[str, ...]
         )
     if a.kind != "packet":
         return (a.kind,)
-    if a.opcode in _ERRORS:
+    if a.opcode in ERROR_STRING_OPS:
         return _abort_scope(_error_parts(a.data, b.data), a, b)
     if a.opcode == ServerOp.ASYNCHRONOUS_RESPONSE:
         return _async_parts(a.data, b.data)

@@ -69,7 +69,6 @@ nothing)."""
 _EOF_ENDED: Final = "EOF from the target"
 _FREE_JOINT: Final = SPEC.request("free-joint").opcode
 _SET_SPEED: Final = SPEC.request("set-speed").opcode
-_ANSWERS: Final = ANSWER_OPS
 
 
 class Receiver(Protocol):
@@ -587,7 +586,7 @@ class FuzzConnection:
             self.ended = _EOF_ENDED
             self.ended_at = now
             self._sts()
-        elif opcode in _ANSWERS:
+        elif opcode in ANSWER_OPS:
             self._answered(packet, wp)
         else:
             self.asynchronous += 1

@@ -37,7 +37,6 @@ STEADY_TOL: Final = 0.5
 GIVE_UP_S: Final = 5.0
 """How long the case waits for the answers: the erratum's wrist timeout is 0.5 s, and the 1985 guide's
 'reasonable amount of time' is taken to be well within ten times that."""
-_ANSWERS: Final = ANSWER_OPS
 
 
 @case(
@@ -68,7 +67,7 @@ async def _judge_silence(ctx: CaseContext, probe: Probe) -> None:
         packet = await probe.next_packet(left)
         if packet is None:
             break
-        if packet.opcode in _ANSWERS:
+        if packet.opcode in ANSWER_OPS:
             answers.append(packet)
     numbers = [word(p.data, 0) for p in answers]
     seen = ", ".join(f"0{p.opcode:o} for #{n}" for p, n in zip(answers, numbers, strict=True)) or "nothing"
