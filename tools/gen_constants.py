@@ -106,6 +106,11 @@ def _opcode_sets(spec: Spec) -> str:
             "Server opcodes that answer a request with an error string.",
             [s for s in spec.server_opcodes.values() if s.answers and s.opcode in carrying],
         ),
+        (
+            "ASYNC_ERROR_OPS",
+            "Server opcodes sent unasked with an error string (which quote the last request processed).",
+            [s for s in spec.server_opcodes.values() if s.asynchronous and s.opcode in carrying],
+        ),
     ]
     out = ""
     for name, doc, members in groups:

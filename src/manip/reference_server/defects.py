@@ -59,7 +59,13 @@ from manip.reference_server.errors import RequestError
 from manip.reference_server.faults import Fault, FaultSet
 from manip.reference_server.wrist import GuardHit, WristDefects
 from manip.spec import SPEC, Field, RequestName, RequestOpcode
-from manip.spec.constants import ASYNC_OPS, ERROR_STRING_OPS, AsyncCondition, ChaosOp, ServerOp
+from manip.spec.constants import (
+    ASYNC_ERROR_OPS,
+    ASYNC_OPS,
+    AsyncCondition,
+    ChaosOp,
+    ServerOp,
+)
 
 if TYPE_CHECKING:
     from manip.reference_server.session import Outgoing, ServerSession
@@ -107,8 +113,6 @@ _FLOAT_FAULTS: Final = frozenset(
     {Fault.UNDERFLOW_DIRTY_ZERO, Fault.UNDERFLOW_CLAMPED, Fault.NOT_FINITE_RESERVED}
 )
 _SWAPPED_CODES: Final = {"TOR": "JOR", "JOR": "TOR"}
-_ASYNC_ERRORS: Final = ASYNC_OPS & ERROR_STRING_OPS
-_ASYNC_OPS: Final = _ASYNC_ERRORS | {ServerOp.ASYNCHRONOUS_RESPONSE}
 WHERE_SERVER: Final = "PUMA"
 """What the where part of an error string starts with, before a colon, under ``where-with-colon``."""
 SERIAL_NUMBER: Final = 600
@@ -550,7 +554,7 @@ class SwitchedDefects(Defects):
     def error_number(self, opcode: int, number: int, before: int | None) -> int:
         if opcode == ServerOp.FATAL_ERROR and self._on(Fault.FATAL_NUMBER_PREVIOUS):
             return (number - 1) & WORD_MASK
-        if opcode in _ASYNC_ERRORS and self._on(Fault.ASYNC_NUMBER_PREVIOUS) and before is not None:
+        if opcode in ASYNC_ERROR_OPS and self._on(Fault.ASYNC_NUMBER_PREVIOUS) and before is not None:
             return before
         return number
 
@@ -639,8 +643,8 @@ class SwitchedDefects(Defects):
         if not self._on(Fault.ASYNC_SPLITS_MULTI):
             return packets
         if not request:  # the other processes' reports wait for the main process
-            self._held_async += [p for p in packets if p.opcode in _ASYNC_OPS]
-            return [p for p in packets if p.opcode not in _ASYNC_OPS]
+            self._held_async += [p for p in packets if p.opcode in ASYNC_OPS]
+            return [p for p in packets if p.opcode not in ASYNC_OPS]
         held, self._held_async = self._held_async, []
         replies = [i for i, p in enumerate(packets) if p.opcode == ServerOp.RESPONSE]
         at = replies[0] + 1 if len(replies) > 1 else 0  # after a multi-packet reply's first packet

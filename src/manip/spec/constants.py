@@ -204,3 +204,12 @@ ERROR_REPLY_OPS: Final[frozenset[ServerOp]] = frozenset(
     }
 )
 """Server opcodes that answer a request with an error string."""
+
+
+ASYNC_ERROR_OPS: Final[frozenset[ServerOp]] = frozenset(
+    {
+        ServerOp.ASYNCHRONOUS_ERROR,
+        ServerOp.ASYNCHRONOUS_WARNING,
+    }
+)
+"""Server opcodes sent unasked with an error string (which quote the last request processed)."""

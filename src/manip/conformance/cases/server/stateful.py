@@ -103,7 +103,7 @@ from manip.conformance.suite.strategies import (
 )
 from manip.links import open_connection
 from manip.spec import SPEC, RequestName, RequestOpcode
-from manip.spec.constants import ASYNC_OPS, ERROR_STRING_OPS, ServerOp
+from manip.spec.constants import ASYNC_ERROR_OPS, ServerOp
 from manip.spec.notation import octal
 
 __all__ = ["STEPS_PER_EXAMPLE", "Step", "replay", "replay_async"]
@@ -318,7 +318,7 @@ class ArmProtocolMachine(RuleBasedStateMachine):
                     [packet],
                     packet.data,
                 )
-            elif packet.opcode in ASYNC_OPS & ERROR_STRING_OPS:
+            elif packet.opcode in ASYNC_ERROR_OPS:
                 self.env.ctx.exercised("async-error.request-number", "error.severity-matches-opcode")
                 self._checked(check_error_packet(packet))
                 if packet.opcode == ServerOp.ASYNCHRONOUS_ERROR:

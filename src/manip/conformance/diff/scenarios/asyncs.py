@@ -33,7 +33,7 @@ from manip.conformance.fuzz.judge import Sighting
 from manip.conformance.fuzz.steps import Pause, Step
 from manip.conformance.judge.checks import completed_segment
 from manip.conformance.suite.world import CalibrationFailure, Obstacle, SilentWrist, SluggishJoint
-from manip.spec.constants import ASYNC_OPS, ERROR_STRING_OPS, ServerOp
+from manip.spec.constants import ASYNC_ERROR_OPS, ServerOp
 
 
 def _check_nzi(at: int) -> Callable[[Events], list[Sighting]]:
@@ -179,10 +179,6 @@ WARNED_READS: Final = 2.0
 """Seconds between the warning scenario's two reads of the joints after the warning."""
 
 
-_NUMBERED_ASYNC: Final = ASYNC_OPS & ERROR_STRING_OPS
-"""Asynchronous packets with an error string, which quote the last request processed."""
-
-
 def _stream_order(events: Events) -> list[tuple[int, SideEvent]]:
     return [(n, e) for n in sorted(events) for e in events[n]]
 
@@ -197,7 +193,7 @@ def _check_async_number(events: Events) -> list[Sighting]:
         said = int.from_bytes(event.data[:2], "little")
         if event.request is not None:
             last = said
-        elif event.opcode in _NUMBERED_ASYNC and last is not None and said != last:
+        elif event.opcode in ASYNC_ERROR_OPS and last is not None and said != last:
             what = "error" if event.opcode == ServerOp.ASYNCHRONOUS_ERROR else "warning"
             message = (
                 f"an asynchronous {what} carries request number {said}; the last request answered was {last}"
