@@ -106,15 +106,21 @@ def close_to(got: Sequence[float], want: Sequence[float]) -> bool:
     )
 
 
-def swapped_words(body: bytes) -> list[float]:
-    """The floats of ``body`` read with the two words of each swapped (NaN where that is no F value)."""
+def _floats_or_nan(body: bytes) -> list[float]:
+    """The floats of ``body``, 4 bytes each, NaN where 4 bytes are no F value."""
     out: list[float] = []
     for at in range(0, len(body) - 3, 4):
         try:
-            out.append(unpack_f(body[at + 2 : at + 4] + body[at : at + 2]))
+            out.append(unpack_f(body[at : at + 4]))
         except (CodecError, ValueError):
             out.append(math.nan)
     return out
+
+
+def swapped_words(body: bytes) -> list[float]:
+    """The floats of ``body`` read with the two words of each swapped (NaN where that is no F value)."""
+    whole = len(body) - len(body) % 4
+    return _floats_or_nan(b"".join(body[at + 2 : at + 4] + body[at : at + 2] for at in range(0, whole, 4)))
 
 
 def byte_swapped(event: SideEvent) -> list[float]:
@@ -123,14 +129,7 @@ def byte_swapped(event: SideEvent) -> list[float]:
     body = payload(event)
     if len(body) % 4:
         return []
-    swapped = bytes(b for at in range(0, len(body), 2) for b in (body[at + 1], body[at]))
-    out: list[float] = []
-    for at in range(0, len(swapped), 4):
-        try:
-            out.append(unpack_f(swapped[at : at + 4]))
-        except (CodecError, ValueError):
-            out.append(math.nan)
-    return out
+    return _floats_or_nan(bytes(b for at in range(0, len(body), 2) for b in (body[at + 1], body[at])))
 
 
 def shown_angles(angles: Sequence[float]) -> str:
