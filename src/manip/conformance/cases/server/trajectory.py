@@ -1,7 +1,9 @@
 """The move process seen from the wire (Part II §5.1, §5.2; E.1 Opcodes 205, 211, 212, 214): the arm is
 sampled during its moves with Here and Joint angles.  Against the embedded server in virtual time a
 sample every few milliseconds costs nothing and lands exactly; against another target the samples are
-as dense as its round trips allow, and every bound below holds for sparser sampling too."""
+as dense as its round trips allow, and every bound below holds for sparser sampling too.  A path is
+judged only where the samples saw it: one they left more than a quarter of unseen ends the case
+not-judged, saying so, as a busy host or a target many times faster than real time may."""
 
 from __future__ import annotations
 
@@ -45,6 +47,9 @@ STILL_LIMIT_S: Final = 3 * SERVO_S - SAMPLE_S
 """The longest stillness the samples may show between queued moves: what a stop of three servo cycles
 shows at least, sampled every :data:`SAMPLE_S` (queued moves blend, and never stop that long)."""
 POSE_TOL_MM: Final = 0.05
+UNSEEN_WAY: Final = 0.25
+"""The longest stretch of a move's way (as a share of it) its samples may leave unseen for its path to be
+judged: a turn made early or a bow in the middle shows only to a sample inside it."""
 LINE_POSE: Final = (20.0, -60.0, 150.0, 0.0, -60.0, 0.0)
 """Where the straight lines start: well inside the workspace, away from the singular ready pose."""
 READY_TOL_DEG: Final = 0.01
@@ -249,6 +254,34 @@ def _expect_turn(ctx: CaseContext, op: str, first: Sequence[float], path: Sequen
     )
 
 
+def _require_seen(
+    ctx: CaseContext, op: str, samples: Sequence[Sample], way: Callable[[Sequence[float]], float]
+) -> None:
+    """The path of a move is judged only where its ``samples`` saw it: no stretch of the way (``way``
+    tells how far along it, 0 to 1, a reading is) longer than :data:`UNSEEN_WAY` between two of them.
+    A longer one (a busy host, a target many times faster than real time, or an arm that jumps) leaves
+    the case not-judged, never passed; a violation already seen stands."""
+    ways = [min(1.0, max(0.0, way(s.values))) for s in samples]
+    edges = [(0.0, -math.inf), *sorted(zip(ways, (s.sent for s in samples), strict=True)), (1.0, math.inf)]
+    gap, (a, before), (b, after) = max(((b[0] - a[0], a, b) for a, b in pairwise(edges)), key=lambda g: g[0])
+    if gap <= UNSEEN_WAY:
+        return
+    if before == -math.inf:
+        unseen = f"the first of {len(samples)} readings saw the arm {b:.0%} of its way already"
+    elif after == math.inf:
+        unseen = f"the last of {len(samples)} readings saw the arm only {a:.0%} of its way"
+    else:
+        unseen = (
+            f"no reading saw the arm between {a:.0%} and {b:.0%} of its way (two readings "
+            f"{abs(after - before) * 1000:.0f} ms apart on the run's clock; {len(samples)} in all)"
+        )
+    not_judged_for_load(
+        ctx,
+        f"{op}: {unseen}: a path is judged on readings at most {UNSEEN_WAY:.0%} of its way apart; a less "
+        "busy host, or the target at a lower --time-scale, would judge it",
+    )
+
+
 def _shown(here: Sequence[float]) -> list[float]:
     return [round(v, 4) for v in here]
 
@@ -299,7 +332,8 @@ async def _straight_leg(
     tol, unit = length(ctx, LINE_TOL_MM), ctx.options.length_unit
     answer = await probe.call(op, **values)  # type: ignore[arg-type]
     require_reach(ctx, answer, f"a straight-line move ({op})")
-    path = [sample.values for sample in await _sample(ctx, probe, "here", 10.0)]
+    samples = await _sample(ctx, probe, "here", 10.0)
+    path = [sample.values for sample in samples]
     worst = max(_distance_to_segment(here[9:], first[9:], goal) for here in path)
     ctx.note(f"{op}: {len(path)} samples, at most {worst:.4f} {unit} off the line")
     ctx.expect(
@@ -309,6 +343,7 @@ async def _straight_leg(
         seen=f"a sample {worst:.4g} {unit} off it",
     )
     _expect_turn(ctx, op, first, path)
+    _require_seen(ctx, op, samples, lambda here: along_line(here[9:], first[9:], goal))
     return path[-1]
 
 
@@ -343,6 +378,7 @@ async def joint_interpolated(ctx: CaseContext) -> None:
         require_reach(ctx, answer, f"a joint-interpolated move ({op})")
         samples = await _sample(ctx, probe, "joint-angles", 10.0)
         _expect_in_step(ctx, op, first, [sample.values for sample in samples])
+        _require_seen(ctx, op, samples, _way_of_leading_joint(first, samples[-1].values))
         here = await read_floats(ctx, probe, "here")
         off = math.dist(here[9:], target[9:])
         ctx.expect(
@@ -353,6 +389,16 @@ async def joint_interpolated(ctx: CaseContext) -> None:
         )
     await probe.call("set-joint-angles", joints=list(before))
     await settle(ctx, probe, before)
+
+
+def _way_of_leading_joint(
+    first: Sequence[float], last: Sequence[float]
+) -> Callable[[Sequence[float]], float]:
+    """How far along its way (0 to 1) a Joint angles reading has the joint that moves furthest from
+    ``first`` to ``last``."""
+    i = max(range(len(first)), key=lambda j: abs(last[j] - first[j]))
+    way = last[i] - first[i]
+    return lambda q: 0.0 if way == 0 else (q[i] - first[i]) / way
 
 
 def _expect_in_step(
