@@ -189,3 +189,21 @@ def test_a_cougar_response_that_never_completes_shows_the_words_that_came() -> N
     with pytest.raises(CaseFailure) as failed:
         asyncio.run(probe.reply("NOP", within=2))
     assert failed.value.actual == "no whole response: 1 word(s) came that make no Table 1 response yet: 02"
+
+
+def test_the_clauses_no_case_reached_are_listed_with_the_case_that_would_reach_them() -> None:
+    """A run that skips the link cases a TCP target cannot offer says, one line per reason, which
+    clauses went unexercised and which case, had it run, would have reached them (and over what)."""
+    from click.testing import CliRunner
+
+    from manip.conformance.cli import main
+
+    result = CliRunner().invoke(main, ["run", "--seed", "1", "--select", "server.link.*"])
+    lines = result.output.splitlines()
+    at = lines.index("not exercised (no check of the run reached them):")
+    chudp, chaosd = lines[at + 1 : at + 3]
+    assert chudp.startswith("  chudp.checksum, chudp.header, chudp.length, chudp.trailer, chudp.word-order: ")
+    assert "server.link.chudp-frames (skip: " in chudp and "chudp:// address" in chudp, chudp
+    assert chaosd.startswith("  link.chaosd.framing: ") and "server.link.chaosd-frames (skip: " in chaosd, (
+        chaosd
+    )

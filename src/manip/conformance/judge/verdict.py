@@ -302,8 +302,9 @@ def _unjudged(clause: str, level: Level, citing: list[Judged]) -> ClauseVerdict:
             why,
             "more examples (--max-examples) or another random draw",
         )
-    reasons = sorted({r.reason for r in citing if r.reason})
-    why = "its cases did not run" + (f" ({'; '.join(reasons)})" if reasons else "")
+    why = "its cases did not run: " + "; ".join(
+        f"{r.id} ({r.outcome}: {r.reason})" if r.reason else f"{r.id} ({r.outcome})" for r in citing
+    )
     return ClauseVerdict(clause, level, "not-exercised", cases, why, "a target its cases apply to")
 
 

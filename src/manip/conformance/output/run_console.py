@@ -91,12 +91,14 @@ def summary(console: Console, report: RunReport, quiet: bool = False) -> None:
         + ("; virtual time" if report.time == "virtual" else "")
         + (f"; {completeness_text(statuses)}" if statuses else "")
     )
-    unexercised = [v.clause for v in statuses.values() if v.status == "not-exercised" and v.level == "MUST"]
+    unexercised: dict[str, list[str]] = {}
+    for v in statuses.values():
+        if v.status == "not-exercised" and v.level == "MUST":
+            unexercised.setdefault(v.why, []).append(v.clause)
     if unexercised:
-        console.print(
-            f"[{OUTCOME_STYLE['skip']}]not exercised[/] (no check of the run reached them): "
-            + escape(", ".join(unexercised))
-        )
+        console.print(f"[{OUTCOME_STYLE['skip']}]not exercised[/] (no check of the run reached them):")
+        for why, clauses in unexercised.items():  # one line per reason: what would reach them
+            console.print(f"  {escape(', '.join(clauses))}: {escape(why)}")
     if unjudged:
         listed = ", ".join(f"{clause} ({hint})" for clause, hint in unjudged.items())
         console.print(
