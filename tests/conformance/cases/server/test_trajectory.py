@@ -10,6 +10,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from manip.arm.kinematics import PUMA600, forward
 from manip.arm.oat import rotation_from_oat, xyzoat_from_transform
@@ -19,7 +21,10 @@ from manip.conformance.cases.server.trajectory import (
     STRAIGHT_TURN,
     TURN_BACK_TOL_DEG,
     TURN_WAY_TOL_DEG,
+    UNSEEN_WAY,
+    Sample,
     TurnSeen,
+    largest_unseen,
     turn_seen,
 )
 
@@ -143,3 +148,34 @@ def test_sparse_samples_still_show_a_turn_made_ahead_of_the_line() -> None:
     for path, off_pace in ((_segment(0.1), True), (_segment(), False)):
         samples = [_here(path(s), s) for s in (0.2, 1.0)]
         assert (turn_seen(first, samples).off_pace is not None) == off_pace
+
+
+# ------------------------------------------------------------------ where the samples saw the path
+def _readings(ways: Sequence[float]) -> list[Sample]:
+    """One reading per share of the way (a 1-float 'Joint angles'), 10 ms apart."""
+    return [Sample(i * 0.01, i * 0.01 + 0.002, (w,)) for i, w in enumerate(ways)]
+
+
+@given(st.lists(st.floats(-0.5, 1.5), max_size=30), st.floats(0.0, 1.0))
+def test_the_largest_unseen_stretch_holds_no_reading_and_no_longer_one_is_empty(
+    ways: list[float], at: float
+) -> None:
+    """No reading lies inside the stretch found, and any stretch of [0, 1] longer than it holds a
+    reading or an end of the way (checked at an arbitrary place, not by the same scan)."""
+    gap = largest_unseen(_readings(ways), lambda q: q[0])
+    clipped = [min(1.0, max(0.0, w)) for w in ways]
+    assert 0.0 <= gap.start <= gap.end <= 1.0
+    assert not any(gap.start < w < gap.end for w in clipped)
+    longer = gap.share + 1e-9
+    x = at * max(0.0, 1.0 - longer)
+    if x + longer <= 1.0:
+        assert any(x <= w <= x + longer for w in [0.0, 1.0, *clipped])
+    assert (gap.before is None) == (gap.start == 0.0 and not any(w == 0.0 for w in clipped))
+
+
+def test_a_path_seen_only_at_its_ends_is_one_stretch_unseen_between_two_readings() -> None:
+    readings = _readings([0.0, 0.0, 1.0, 1.0])
+    gap = largest_unseen(readings, lambda q: q[0])
+    assert (gap.start, gap.end, gap.before, gap.after) == (0.0, 1.0, readings[1], readings[2])
+    assert largest_unseen(_readings([0.6, 1.0]), lambda q: q[0])[:3] == (0.0, 0.6, None)
+    assert largest_unseen(_readings([0.0, 0.2, 0.45, 0.7, 0.9, 1.0]), lambda q: q[0]).share <= UNSEEN_WAY

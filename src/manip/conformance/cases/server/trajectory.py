@@ -254,31 +254,53 @@ def _expect_turn(ctx: CaseContext, op: str, first: Sequence[float], path: Sequen
     )
 
 
+class Unseen(NamedTuple):
+    """The longest stretch of a move's way no reading fell in: from ``start`` to ``end`` (shares of the
+    way, 0 to 1), between the readings ``before`` and ``after`` (None at the way's own ends)."""
+
+    start: float
+    end: float
+    before: Sample | None
+    after: Sample | None
+
+    @property
+    def share(self) -> float:
+        return self.end - self.start
+
+
+def largest_unseen(samples: Sequence[Sample], way: Callable[[Sequence[float]], float]) -> Unseen:
+    """The longest stretch of the way that ``samples`` left unseen, ``way`` telling how far along it
+    (0 to 1; beyond is taken as the end) each reading is."""
+    seen = sorted(((min(1.0, max(0.0, way(s.values))), i) for i, s in enumerate(samples)))
+    edges = [(0.0, None), *((w, samples[i]) for w, i in seen), (1.0, None)]
+    (start, before), (end, after) = max(pairwise(edges), key=lambda pair: pair[1][0] - pair[0][0])
+    return Unseen(start, end, before, after)
+
+
 def _require_seen(
     ctx: CaseContext, op: str, samples: Sequence[Sample], way: Callable[[Sequence[float]], float]
 ) -> None:
     """The path of a move is judged only where its ``samples`` saw it: no stretch of the way (``way``
-    tells how far along it, 0 to 1, a reading is) longer than :data:`UNSEEN_WAY` between two of them.
-    A longer one (a busy host, a target many times faster than real time, or an arm that jumps) leaves
-    the case not-judged, never passed; a violation already seen stands."""
-    ways = [min(1.0, max(0.0, way(s.values))) for s in samples]
-    edges = [(0.0, -math.inf), *sorted(zip(ways, (s.sent for s in samples), strict=True)), (1.0, math.inf)]
-    gap, (a, before), (b, after) = max(((b[0] - a[0], a, b) for a, b in pairwise(edges)), key=lambda g: g[0])
-    if gap <= UNSEEN_WAY:
+    tells how far along it a reading is) longer than :data:`UNSEEN_WAY` between two of them.  A longer
+    one (a busy host, a target many times faster than real time, or an arm that jumps) leaves the case
+    not-judged, never passed; a violation already seen stands."""
+    gap = largest_unseen(samples, way)
+    if gap.share <= UNSEEN_WAY:
         return
-    if before == -math.inf:
-        unseen = f"the first of {len(samples)} readings saw the arm {b:.0%} of its way already"
-    elif after == math.inf:
-        unseen = f"the last of {len(samples)} readings saw the arm only {a:.0%} of its way"
+    if gap.before is None:
+        unseen = f"the earliest of {len(samples)} readings on the way saw the arm {gap.end:.0%} along it"
+    elif gap.after is None:
+        unseen = f"the furthest of {len(samples)} readings saw the arm only {gap.start:.0%} of its way"
     else:
+        apart = abs(gap.after.sent - gap.before.sent) * 1000
         unseen = (
-            f"no reading saw the arm between {a:.0%} and {b:.0%} of its way (two readings "
-            f"{abs(after - before) * 1000:.0f} ms apart on the run's clock; {len(samples)} in all)"
+            f"no reading saw the arm between {gap.start:.0%} and {gap.end:.0%} of its way (two readings "
+            f"{apart:.0f} ms apart on the run's clock; {len(samples)} in all)"
         )
     not_judged_for_load(
         ctx,
         f"{op}: {unseen}: a path is judged on readings at most {UNSEEN_WAY:.0%} of its way apart; a less "
-        "busy host, or the target at a lower --time-scale, would judge it",
+        "busy host would judge it, or a simulated target run less fast (and --target-time-scale to match)",
     )
 
 
