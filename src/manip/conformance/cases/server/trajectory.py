@@ -82,10 +82,12 @@ async def _sample(
     within: float,
     arrived: Callable[[tuple[float, ...]], bool] | None = None,
     lateness: list[float] | None = None,
+    before: Sequence[float] | None = None,
 ) -> list[Sample]:
     """``op`` every :data:`SAMPLE_S` until the arm, seen to move, has stood still for three servo cycles
     (and, given ``arrived``, where that says the motion ends: a pause on the way is sampled through), or
-    ``within`` seconds pass.
+    ``within`` seconds pass.  Given ``before`` (the reading just before the move was asked for), a first
+    sample away from it has seen the arm move: a move over before the first sample ends the sampling too.
 
     Given ``lateness``, it gets how late each of the case's own waits between samples ended (seconds on
     the run's clock; a wait a packet cut into is left out): the host's scheduling delay, measured while
@@ -98,7 +100,8 @@ async def _sample(
     while ctx.clock() < deadline:
         sent = ctx.clock()
         values = await read_floats(ctx, probe, op)  # type: ignore[arg-type]
-        if out and values != out[-1].values:
+        previous = out[-1].values if out else (tuple(before) if before is not None else values)
+        if values != previous:
             moved, still = True, 0
         elif out:
             still += 1
@@ -354,7 +357,7 @@ async def _straight_leg(
     tol, unit = length(ctx, LINE_TOL_MM), ctx.options.length_unit
     answer = await probe.call(op, **values)  # type: ignore[arg-type]
     require_reach(ctx, answer, f"a straight-line move ({op})")
-    samples = await _sample(ctx, probe, "here", 10.0)
+    samples = await _sample(ctx, probe, "here", 10.0, before=first)
     path = [sample.values for sample in samples]
     worst = max(_distance_to_segment(here[9:], first[9:], goal) for here in path)
     ctx.note(f"{op}: {len(path)} samples, at most {worst:.4f} {unit} off the line")
@@ -398,7 +401,7 @@ async def joint_interpolated(ctx: CaseContext) -> None:
         first = await read_floats(ctx, probe, "joint-angles")
         answer = await probe.call(op, **values)  # type: ignore[arg-type]
         require_reach(ctx, answer, f"a joint-interpolated move ({op})")
-        samples = await _sample(ctx, probe, "joint-angles", 10.0)
+        samples = await _sample(ctx, probe, "joint-angles", 10.0, before=first)
         _expect_in_step(ctx, op, first, [sample.values for sample in samples])
         _require_seen(ctx, op, samples, _way_of_leading_joint(first, samples[-1].values))
         here = await read_floats(ctx, probe, "here")
