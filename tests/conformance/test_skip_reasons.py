@@ -11,6 +11,7 @@ its outcome on the clean server.
 
 from __future__ import annotations
 
+import functools
 import inspect
 
 import pytest
@@ -48,23 +49,31 @@ def unjudged_wrongly(clean: RunReport, faulty: RunReport, case_ids: set[str]) ->
     return found
 
 
-@pytest.mark.slow
-@pytest.mark.timeout(600)
-def test_no_protocol_fault_makes_a_case_skip_that_passes_on_the_clean_server() -> None:
+PROTOCOL_FAULTS = sorted((f for f in Fault if f.kind == "protocol"), key=lambda f: f.value)
+
+
+@functools.cache
+def clean_run() -> tuple[RunReport, tuple[Case, ...]]:
+    """The skipping cases on the clean server, and those among them that pass there: only such a case can
+    be made to skip wrongly (the others, the link cases of the links the run is not on, need not run
+    under every fault).  Once per test process."""
     cases = skipping_cases()
-    assert {"server.describe.joint-limits", "server.motion.ready-position"} <= {c.id for c in cases}
-    case_ids = {c.id for c in all_cases()}
     clean = run(cases, [])
-    assert any(r.outcome == "pass" for r in clean.results)
-    # Only a case that passes on the clean server can be made to skip wrongly: the others (the link cases
-    # of the links the run is not on) need not run under every fault.
-    passing = [c for c in cases if any(r.id == c.id and r.outcome == "pass" for r in clean.results)]
-    found = {}
-    for fault in sorted((f for f in Fault if f.kind == "protocol"), key=lambda f: f.value):
-        wrong = unjudged_wrongly(clean, run(passing, [fault.value]), case_ids)
-        if wrong:
-            found[fault.value] = wrong
-    assert not found, found
+    passed = {r.id for r in clean.results if r.outcome == "pass"}
+    return clean, tuple(c for c in cases if c.id in passed)
+
+
+def test_the_sweep_covers_the_cases_that_skip_and_some_pass_cleanly() -> None:
+    ids = {c.id for c in skipping_cases()}
+    assert {"server.describe.joint-limits", "server.motion.ready-position"} <= ids
+    assert clean_run()[1]
+
+
+@pytest.mark.parametrize("fault", PROTOCOL_FAULTS, ids=lambda f: f.value)
+def test_no_protocol_fault_makes_a_case_skip_that_passes_on_the_clean_server(fault: Fault) -> None:
+    clean, passing = clean_run()
+    wrong = unjudged_wrongly(clean, run(list(passing), [fault.value]), {c.id for c in all_cases()})
+    assert not wrong, wrong
 
 
 def test_the_check_finds_a_skip_on_a_wrong_answer() -> None:
