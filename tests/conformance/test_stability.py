@@ -24,13 +24,13 @@ def _invoke(*args: str) -> tuple[int, str]:
 
 @pytest.mark.slow
 @pytest.mark.timeout(900)
-def test_three_seeds_are_conformant_and_the_first_repeats_itself(tmp_path: Path) -> None:
-    # The README's gate is --repeat 20; three seeds (four whole runs) test the same mechanism at a fifth
+def test_two_seeds_are_conformant_and_the_first_repeats_itself(tmp_path: Path) -> None:
+    # The README's gate is --repeat 20; two seeds (three whole runs) test the same mechanism at a seventh
     # of the CPU: the test suite runs on two cores within the CI budget.
     report_path = tmp_path / "repeat.json"
-    code, output = _invoke("--repeat", "3", "-q", "--seed", "20261126", "--json", str(report_path))
+    code, output = _invoke("--repeat", "2", "-q", "--seed", "20261126", "--json", str(report_path))
     assert code == ExitCode.CONFORMANT, output
-    assert output.count("conformant, ") == 4  # 3 seeds, then the first again
+    assert output.count("conformant, ") == 3  # 2 seeds, then the first again
     report = json.loads(report_path.read_text())
     assert report["time"] == "virtual"
     assert report["unstable"] == []
