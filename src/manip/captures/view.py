@@ -49,20 +49,12 @@ from manip.codecs.messages import (
 from manip.codecs.packet import Direction, Packet
 from manip.codecs.pairing import Placement, ReplyPairing
 from manip.spec import SPEC, RequestOpcode
-from manip.spec.constants import ANSWER_OPS, ChaosOp, ServerOp
+from manip.spec.constants import ERROR_REPLY_OPS, ERROR_STRING_OPS, ChaosOp, ServerOp
 
 SEEN_KEPT: Final = 2048
 """Packet numbers remembered per direction for spotting retransmissions (a window is at most 15)."""
 
 _CONTROLLED: Final = frozenset(op.value for op in SPEC.chaos_opcodes.values() if op.controlled)
-_ERROR_OPS: Final = frozenset(
-    {
-        ServerOp.FATAL_ERROR,
-        ServerOp.NON_FATAL_ERROR,
-        ServerOp.ASYNCHRONOUS_ERROR,
-        ServerOp.ASYNCHRONOUS_WARNING,
-    }
-)
 _TEXT_EVENTS: Final = {
     ChaosOp.CLS: "cls",
     ChaosOp.LOS: "los",
@@ -279,7 +271,7 @@ class Annotator:
         pending = waiting
         if opcode == _ASYNC_RESPONSE:
             kind = "async"
-        elif opcode in _ERROR_OPS:
+        elif opcode in ERROR_STRING_OPS:
             kind = "error"
         else:
             kind = "reply"
@@ -301,7 +293,7 @@ class Annotator:
                     "rendered": err.render(),
                     "problems": list(err.problems),
                 }
-                if opcode in ANSWER_OPS:
+                if opcode in ERROR_REPLY_OPS:
                     ann.final = True
             else:
                 a = decode_async(data)

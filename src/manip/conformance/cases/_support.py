@@ -34,7 +34,6 @@ from manip.codecs.lisp import LispValue
 from manip.codecs.messages import ErrorReply, decode_error, decode_reply
 from manip.conformance.judge.checks import (
     ANSWER_OPCODES,
-    ERROR_OPCODES,
     WirePacket,
     check_error_packet,
     check_reply,
@@ -49,7 +48,7 @@ from manip.conformance.judge.violation import CarriesViolation, Violation, showi
 from manip.conformance.suite.context import DONE_SIZE, Answer, CaseContext, Probe
 from manip.conformance.suite.invariants import TRANSCRIPT
 from manip.spec import SPEC, RequestName, RequestOpcode
-from manip.spec.constants import AsyncCondition, ServerOp
+from manip.spec.constants import ERROR_STRING_OPS, AsyncCondition, ServerOp
 from manip.spec.notation import octal
 
 UNASSIGNED_OPCODES: Final[tuple[int, ...]] = tuple(
@@ -140,7 +139,7 @@ def error_of(packet: Answer | WirePacket) -> ErrorReply | None:
     error-arg-layout), or else straight after the NUL (a bad pad byte is the format checker's violation, not
     a reason to misjudge the error); None for a packet that is no error, or whose string reads neither
     way."""
-    if packet.opcode not in ERROR_OPCODES:
+    if packet.opcode not in ERROR_STRING_OPS:
         return None
     align: bool | None
     for align in (None, False):

@@ -70,14 +70,6 @@ __all__ = [
     "word",
 ]
 
-ERROR_OPCODES: Final = frozenset(
-    {
-        ServerOp.FATAL_ERROR,
-        ServerOp.NON_FATAL_ERROR,
-        ServerOp.ASYNCHRONOUS_ERROR,
-        ServerOp.ASYNCHRONOUS_WARNING,
-    }
-)
 ARM_SPECIFIC_SERVER_OPCODES: Final = range(0o250, 0o300)
 TRANSCRIPT_CLAUSES: Final = frozenset(
     {

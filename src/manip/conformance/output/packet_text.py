@@ -32,7 +32,7 @@ from manip.codecs.messages import (
 from manip.conformance.judge.checks import WirePacket, describe, word
 from manip.conformance.judge.packets import DRV11J, carries_data, link_words
 from manip.spec import SPEC, Layout
-from manip.spec.constants import ServerOp
+from manip.spec.constants import ERROR_STRING_OPS, ServerOp
 from manip.spec.notation import octal_words
 
 __all__ = ["MAX_LISTED", "annotated", "decoded", "packet_listing", "show_value"]
@@ -42,14 +42,6 @@ MAX_LISTED: Final = 80
 MAX_TEXT: Final = 160
 """Characters shown of a text field (a describe-self packet's alist)."""
 _TRANSFORM_COLUMNS: Final = ("N", "O", "A", "P")
-_ERRORS: Final = frozenset(
-    {
-        ServerOp.FATAL_ERROR,
-        ServerOp.NON_FATAL_ERROR,
-        ServerOp.ASYNCHRONOUS_ERROR,
-        ServerOp.ASYNCHRONOUS_WARNING,
-    }
-)
 
 
 def show_value(value: object) -> str:
@@ -127,7 +119,7 @@ def _decoded_packet(packet: WirePacket, request_opcode: int | None) -> str:
                 if number is not None
                 else f"and {message.word3} (the 1985 guide's layout: no request number)"
             )
-        if packet.opcode in _ERRORS:
+        if packet.opcode in ERROR_STRING_OPS:
             try:
                 error = decode_error(packet.opcode, data)
             except CodecError:

@@ -49,7 +49,7 @@ from manip.conformance.replay.capture_report import capture_report, open_capture
 from manip.conformance.suite.case import LEVEL_ORDER
 from manip.conformance.suite.results import CaseResult, RunReport, Violation
 from manip.spec import SPEC, RequestName
-from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.constants import ERROR_STRING_OPS, ChaosOp, ServerOp
 from manip.spec.model import HAZARDS, Hazard, Level
 
 __all__ = [
@@ -72,14 +72,6 @@ __all__ = [
 ]
 
 VERIFY_DEADLINE: Final = 1.0
-_ERRORS: Final = frozenset(
-    {
-        ServerOp.FATAL_ERROR,
-        ServerOp.NON_FATAL_ERROR,
-        ServerOp.ASYNCHRONOUS_ERROR,
-        ServerOp.ASYNCHRONOUS_WARNING,
-    }
-)
 
 
 def wire_packets(session: Session, connection: int = 0) -> list[WirePacket]:
@@ -207,7 +199,7 @@ FAMILIES: Final[tuple[Family, ...]] = (
             "error-string.arg-layout",
             "error.severity-matches-opcode",
         ),
-        lambda packets, _initial: _server(packets, _ERRORS),
+        lambda packets, _initial: _server(packets, ERROR_STRING_OPS),
     ),
     Family(
         "async",

@@ -93,7 +93,7 @@ from manip.links import ChaosConnection, ChaosError, ConnectionClosed, Connectio
 from manip.links.api import LinkWrapper
 from manip.reference_client.options import DEFAULT_MAX_REPLY_BYTES
 from manip.spec import SPEC, RequestName
-from manip.spec.constants import ERROR_REPLY_OPS, ChaosOp, ServerOp
+from manip.spec.constants import ASYNC_OPS, ERROR_REPLY_OPS, ChaosOp, ServerOp
 from manip.spec.model import Hazard, Level
 from manip.spec.notation import octal
 
@@ -519,11 +519,7 @@ class Probe:
             packet = await self.next_packet(timeout)
             if packet is None:
                 return Answer(request, tuple(packets), terminated=False)
-            if packet.opcode in (
-                ServerOp.ASYNCHRONOUS_RESPONSE,
-                ServerOp.ASYNCHRONOUS_ERROR,
-                ServerOp.ASYNCHRONOUS_WARNING,
-            ):
+            if packet.opcode in ASYNC_OPS:
                 self.unsolicited.append(packet)
                 continue
             if packet.opcode != ServerOp.RESPONSE:
