@@ -27,7 +27,7 @@ from manip.conformance.judge.violation import missing
 from manip.conformance.puma.judge import CougarScript, Heard, JudgingCougar, Said
 from manip.conformance.puma.target import OBSTACLE_FROM, OBSTACLE_JOINT
 from manip.conformance.suite.case import case
-from manip.conformance.suite.context import CaseContext
+from manip.conformance.suite.context import CaseContext, Probe
 from manip.conformance.suite.world import Obstacle
 from manip.links.virtual_clock import is_virtual
 from manip.spec.constants import CougarCommand
@@ -159,10 +159,10 @@ def _steps_wrong(offsets: Sequence[float], rate: float, first_by: int) -> str:
     steps = [b - a for a, b in itertools.pairwise(offsets)]
     first = next((i for i, d in enumerate(steps) if abs(d) > STEP_TOL), len(steps))
     want = rate * TICK
-    wrong = [i for i, d in enumerate(steps) if abs(d - (want if i >= first else 0.0)) > STEP_TOL]
+    wrong = [i for i in range(first, len(steps)) if abs(steps[i] - want) > STEP_TOL]  # none before first
     if wrong:
         i = wrong[0]
-        return f"cycle {i + 1} moved it {steps[i]:+.4f} deg (want {want if i >= first else 0.0:+.4f})"
+        return f"cycle {i + 1} moved it {steps[i]:+.4f} deg (want {want:+.4f})"
     if first > first_by:
         return f"no correction before cycle {first + 1} (want one by cycle {first_by + 1})"
     return ""
@@ -215,6 +215,22 @@ def _expect_adjusted_path(
         )
 
 
+async def _compliant_leg(
+    ctx: CaseContext, probe: Probe, ntd: tuple[float, ...], start: Sequence[float], goal: Sequence[float]
+) -> None:
+    """A compliant move from ``start`` to ``goal`` with Cougar sending ``ntd``: its sensed angles on the
+    path :func:`_expect_adjusted_path` wants."""
+    judge, mark = begin(ctx, CougarScript(ntd=ntd))
+    segment = await move(ctx, probe, "compliant-move", joints=list(goal), scheme=0)
+    if await wait_async(ctx, probe, is_completed(segment), SEGMENT_WITHIN) is None:
+        ctx.not_judged(
+            f"the compliant segment {segment} was not reported complete within {SEGMENT_WITHIN:g} s "
+            "(puma.compliance.segment-end judges that)"
+        )
+    sensed = [_angles_of(h, "theta_sensed") for h in _npr(judge, mark)]
+    _expect_adjusted_path(ctx, sensed, start, goal, ntd)
+
+
 @case(
     "puma.compliance.nominal-path",
     clauses=["puma.compliance.nominal-path"],
@@ -229,27 +245,15 @@ async def nominal_path(ctx: CaseContext) -> None:
     probe = await session(ctx)
     here = await angles(ctx, probe)
     away = tuple(f_float(h + d) for h, d in zip(here, NOMINAL_WAY, strict=True))
-    legs = (((0.0,) * 6, here, away), ((0.0,) * 5 + (NTD_RATE,), away, here))
-    for ntd, start, goal in legs:
-        judge, mark = begin(ctx, CougarScript(ntd=ntd))
-        segment = await move(ctx, probe, "compliant-move", joints=list(goal), scheme=0)
-        if await wait_async(ctx, probe, is_completed(segment), SEGMENT_WITHIN) is None:
-            ctx.not_judged(
-                f"the compliant segment {segment} was not reported complete within {SEGMENT_WITHIN:g} s "
-                "(puma.compliance.segment-end judges that)"
-            )
-        sensed = [_angles_of(h, "theta_sensed") for h in _npr(judge, mark)]
-        _expect_adjusted_path(ctx, sensed, start, goal, ntd)
-        if any(ntd):
-            break
-        rest = await angles(ctx, probe)
-        if not ctx.expect(
-            close(rest, goal, PATH_TOL),
-            clause="puma.compliance.nominal-path",
-            expected=f"with no correction the compliant segment ending at its goal {fmt(goal)}",
-            seen=f"joint angles {fmt(rest)}",
-        ):
-            break
+    await _compliant_leg(ctx, probe, (0.0,) * 6, here, away)
+    rest = await angles(ctx, probe)
+    if ctx.expect(
+        close(rest, away, PATH_TOL),
+        clause="puma.compliance.nominal-path",
+        expected=f"with no correction the compliant segment ending at its goal {fmt(away)}",
+        seen=f"joint angles {fmt(rest)}",
+    ):  # the way back starts where the arm stands, within PATH_TOL of its goal
+        await _compliant_leg(ctx, probe, (0.0,) * 5 + (NTD_RATE,), rest, here)
     back = await move(ctx, probe, "set-joint-angles", joints=list(here))
     await wait_async(ctx, probe, is_completed(back), SEGMENT_WITHIN)
 
