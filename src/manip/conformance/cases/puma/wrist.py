@@ -215,11 +215,12 @@ async def waits(ctx: CaseContext) -> None:
 
 
 # ------------------------------------------------------------------------------ priority
-_RANK: Final[Mapping[int, int]] = {CougarCommand.NPR: 0, CougarCommand.RST: 1, CougarCommand.SEN: 2}
-"""Each command's place within a tick: New Position and Rate, Reset Wrist, the move process's packets
-(the sensed angles it queues while the arm moves, erratum wrist-move-queue), then the user's (3)."""
 MOVE_QUEUE: Final = 2
 USER_QUEUE: Final = 3
+_RANK: Final[Mapping[int, int]] = {CougarCommand.NPR: 0, CougarCommand.RST: 1, CougarCommand.SEN: MOVE_QUEUE}
+"""Each command's place within a tick: New Position and Rate, Reset Wrist, the move process's packets
+(the sensed angles it queues while the arm moves, erratum wrist-move-queue), then the user's
+(:data:`USER_QUEUE`)."""
 PRIORITY_MOVE_DEG: Final = 12.0
 USER_COMMANDS: Final = 6
 
@@ -276,7 +277,11 @@ async def priority(ctx: CaseContext) -> None:
     await wait_async(ctx, probe, is_completed(segment), SEGMENT_WITHIN)
     mixed = sum(len(places) > 1 for places in _expect_priority(ctx, judge.since(mark)))
     if not mixed:
-        ctx.skip("no tick carried New Position and Rate or Reset Wrist together with another command")
+        ctx.not_judged(
+            "no tick carried New Position and Rate or Reset Wrist together with another command, so their "
+            "order never showed: puma.compliance.npr-every-cycle judges a New Position and Rate missing "
+            "from a tick, puma.wrist.user-during-compliance user commands held back during the move"
+        )
     ctx.note(f"{mixed} ticks carried commands of two priorities")
 
 
@@ -289,12 +294,19 @@ async def move_queue_first(ctx: CaseContext) -> None:
     await _user_commands_each_tick(ctx, probe, judge)
     await wait_async(ctx, probe, is_completed(segment), 2 * SEGMENT_WITHIN)
     met = sum({MOVE_QUEUE, USER_QUEUE} <= places for places in _expect_priority(ctx, judge.since(mark)))
-    await probe.call("set-joint-angles", joints=list(here))
+    sensed = len(judge.commands(mark, CougarCommand.SEN))
+    back = await move(ctx, probe, "set-joint-angles", joints=list(here))
+    await wait_async(ctx, probe, is_completed(back), SEGMENT_WITHIN)
     if not met:
         ctx.not_judged(
-            "no servo tick carried the move process's sensed angles (SEN) together with a user command: "
-            "the Puma sends no SEN while the arm moves, so its two queues never met (erratum "
-            "wrist-move-queue)"
+            "no servo tick carried the move process's sensed angles (SEN) together with a user command, so "
+            "the order of its two queues never showed (erratum wrist-move-queue): "
+            + (
+                f"the Puma sent {sensed} SEN during the move, each on a tick without a user command "
+                "(puma.wrist.config-at-once judges a user command held back)"
+                if sensed
+                else "the Puma sent no SEN while the arm moved"
+            )
         )
     ctx.note(f"{met} ticks carried the move process's SEN and a user command")
 
