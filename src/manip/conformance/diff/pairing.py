@@ -289,7 +289,7 @@ def _dirty(a: bytes, b: bytes) -> bool:
     differs: it reads as zero, yet only all bits clear is an F zero (``float.dirty-zero``)."""
     for at in range(0, len(a) - 3, 4):
         wa, wb = a[at : at + 4], b[at : at + 4]
-        if wa != wb and any(not (w[1] << 1 | w[0] >> 7) & 0xFF and any(w) for w in (wa, wb)):
+        if wa != wb and any(not _exponent(w) and any(w) for w in (wa, wb)):
             return True
     return False
 
