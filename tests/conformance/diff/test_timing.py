@@ -44,8 +44,9 @@ def _servo(period: float) -> Timed:
 
 def _judged(name: str, events: dict[int, list[SideEvent]]) -> tuple[list[str], list[str]]:
     stream = scenario(name)
-    assert stream.check is not None and stream.unjudged is not None
-    return [s.violation.clause or "" for s in stream.check(events)], stream.unjudged(events)
+    assert stream.check is None and stream.judge is not None
+    sightings, unjudged = stream.judge(events)
+    return [s.violation.clause or "" for s in sightings], unjudged
 
 
 def test_the_times_an_event_carries_are_never_compared() -> None:

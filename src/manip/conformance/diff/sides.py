@@ -217,7 +217,10 @@ async def _observe(
             sightings += arg_value_sightings(item, events.get(item.number, ()))
         if stream.check is not None:
             sightings += stream.check(events)
-        unjudged = stream.unjudged(events) if stream.unjudged is not None else []
+        unjudged: list[str] = []
+        if stream.judge is not None:
+            found, unjudged = stream.judge(events)
+            sightings += found
         return Observation(events, sightings, None, loop.time() - started, unjudged=unjudged)
     finally:
         with contextlib.suppress(Exception):

@@ -27,7 +27,7 @@ if TYPE_CHECKING:
 __all__ = [
     "PREAMBLE_NUMBER",
     "ScenarioCheck",
-    "ScenarioUnjudged",
+    "ScenarioJudge",
     "Stream",
     "WorldPhase",
     "make_stream",
@@ -54,9 +54,10 @@ def preamble() -> FuzzInput:
 ScenarioCheck = Callable[["dict[int, list[SideEvent]]"], "list[Sighting]"]
 """A scenario's own judge: a side's events of the stream in, the clauses they break out
 (:mod:`manip.conformance.diff.scenarios`)."""
-ScenarioUnjudged = Callable[["dict[int, list[SideEvent]]"], "list[str]"]
-"""What a scenario's judge could not judge on a side, and why (a timing clause whose breach an addressed
-side's round trips or host delays could hide or explain): a side's events in, one text per clause out."""
+ScenarioJudge = Callable[["dict[int, list[SideEvent]]"], "tuple[list[Sighting], list[str]]"]
+"""A scenario's own judge that may leave clauses unjudged: a side's events in, the clauses they break out,
+with what it could not judge on that side, and why (a timing clause whose breach an addressed side's
+round trips or host delays could hide or explain), one text per clause."""
 
 
 @dataclass(frozen=True)
@@ -76,16 +77,16 @@ class Stream:
 
     A scenario (:mod:`manip.conformance.diff.scenarios`) has its ``scenario`` name, the environment
     conditions of the arm's world each side's world arranges for it (``conditions``, for the whole
-    stream; ``phases``, for some of its inputs) and its own ``check`` of each side's answers, with what
-    it could not judge on a side (``unjudged``); one that waits out the sides' broken-connection timer
-    is made for the timer (``timed``)."""
+    stream; ``phases``, for some of its inputs) and its own ``check`` of each side's answers, or its own
+    ``judge`` of them that also says what it could not judge on a side; one that waits out the sides'
+    broken-connection timer is made for the timer (``timed``)."""
 
     number: int | None
     inputs: tuple[FuzzInput, ...]
     scenario: str = ""
     conditions: tuple[Condition, ...] = ()
     check: ScenarioCheck | None = None
-    unjudged: ScenarioUnjudged | None = None
+    judge: ScenarioJudge | None = None
     phases: tuple[WorldPhase, ...] = ()
     timed: Callable[[float], Stream] | None = field(default=None, compare=False)
     """A scenario that waits out the sides' broken-connection timer (erratum ncp-timers): the stream it

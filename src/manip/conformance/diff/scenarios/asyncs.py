@@ -7,8 +7,6 @@ import struct
 from collections.abc import Callable, Sequence
 from typing import Final
 
-from manip.codecs.error_string import parse_error
-from manip.codecs.errors import CodecError
 from manip.conformance.diff.pairing import SideEvent
 from manip.conformance.diff.scenarios.kit import (
     NZI_JOINTS,
@@ -16,14 +14,17 @@ from manip.conformance.diff.scenarios.kit import (
     SETTLE,
     Events,
     all_of,
+    answer_at,
     answers_to,
     close_to,
+    error_in,
     floats_at,
     floats_data,
     is_op,
     opcode_of,
     req,
     scenario_inputs,
+    scenario_stream,
     shown_angles,
     sighting,
     wire_of,
@@ -43,9 +44,8 @@ def _check_nzi(at: int) -> Callable[[Events], list[Sighting]]:
         fatal = [e for e in events.get(at, []) if e.kind == "packet" and e.opcode == ServerOp.FATAL_ERROR]
         if not fatal:
             return []
-        try:
-            error = parse_error(fatal[0].data[2:], body="packet")
-        except (CodecError, ValueError):
+        error = error_in(fatal[0], ServerOp.FATAL_ERROR)
+        if error is None:
             return []
         want = sum(1 << (j - 1) for j in NZI_JOINTS)
         if error.code != "NZI" or error.args == (want,):
@@ -128,7 +128,7 @@ def _unrequested() -> Stream:
         ),
         ("here", [req("here")]),
     ]
-    return Stream(None, scenario_inputs("unrequested-async", groups), scenario="unrequested-async")
+    return scenario_stream("unrequested-async", groups)
 
 
 def _notified() -> Stream:
@@ -255,7 +255,7 @@ def _check_wrist(at: int) -> Callable[[Events], list[Sighting]]:
     left unanswered nor answered with a fatal one (``wrist.no-answer``)."""
 
     def check(events: Events) -> list[Sighting]:
-        answer = next(iter(answers_to(events.get(at, []), opcode_of("read-forces"))), None)
+        answer = answer_at(events, at, "read-forces")
         if answer is not None and answer.opcode == ServerOp.NON_FATAL_ERROR:
             return []
         if answer is None:

@@ -17,13 +17,20 @@ from typing import Final
 from manip.codecs.packet import MAX_DATA, Packet
 from manip.codecs.pdp11float import pack_f
 from manip.conformance.cases.server.ncp import RETRANSMIT_BOUND
-from manip.conformance.diff.scenarios.kit import Events, description_at, req, scenario_inputs, sighting
+from manip.conformance.diff.scenarios.kit import (
+    Events,
+    description_at,
+    req,
+    scenario_stream,
+    sighting,
+    swap_word_bytes,
+)
 from manip.conformance.diff.streams import Stream
 from manip.conformance.fuzz.generators import stray_index
 from manip.conformance.fuzz.judge import Sighting
 from manip.conformance.fuzz.steps import ConnPacket, Pause, RequestStep, Step, Stray
 from manip.spec import SPEC
-from manip.spec.constants import ChaosOp, ServerOp
+from manip.spec.constants import ANSWER_OPS, ChaosOp
 
 NOWHERE: Final = 0o123456
 """The destination index of the stray packets: no connection of the server's (the batch picks another
@@ -34,7 +41,6 @@ OVERSIZE: Final = MAX_DATA + 2
 """Data bytes of the oversize packet: a word more than a packet may carry."""
 ANSWER_WAIT: Final = 0.5
 """Seconds the oversize scenario waits for an answer it must not get."""
-_ANSWERS: Final = frozenset({ServerOp.RESPONSE, ServerOp.NON_FATAL_ERROR, ServerOp.FATAL_ERROR})
 
 
 def _strays() -> Stream:
@@ -46,12 +52,12 @@ def _strays() -> Stream:
         ("a data packet to no connection", [Stray(dat, "los", "ncp.los")]),
         ("a packet with an illegal opcode", [Stray(illegal, "los", "chaos.opcode.legal")]),
     ]
-    return Stream(None, scenario_inputs("stray-packets", groups), scenario="stray-packets")
+    return scenario_stream("stray-packets", groups)
 
 
 def _not_served(events: Events) -> list[Sighting]:
     """Any answer to the oversize packet (its input has no request of its own) is the packet served."""
-    served = [e for e in events.get(1, []) if e.kind == "packet" and e.opcode in _ANSWERS]
+    served = [e for e in events.get(1, []) if e.kind == "packet" and e.opcode in ANSWER_OPS]
     return [
         sighting(
             1,
@@ -74,8 +80,7 @@ def _oversize() -> Stream:
         ("here", [here, Pause(ANSWER_WAIT)]),
         ("a here of more than 488 data bytes", [oversize, Pause(ANSWER_WAIT)]),
     ]
-    inputs = scenario_inputs("oversize", groups)
-    return Stream(None, inputs, scenario="oversize", check=_not_served)
+    return scenario_stream("oversize", groups, _not_served)
 
 
 def _duplicate_rfc() -> Stream:
@@ -89,14 +94,13 @@ def _duplicate_rfc() -> Stream:
         ("the connection's RFC again", [again, Pause(ANSWER_WAIT)]),
         ("here on the connection", [req("here")]),
     ]
-    return Stream(None, scenario_inputs("duplicate-rfc", groups), scenario="duplicate-rfc")
+    return scenario_stream("duplicate-rfc", groups)
 
 
 def _swapped_text(data: bytes) -> bytes:
     """``data`` with the two bytes of each whole word swapped, without the zero byte that padded an odd
     length (swapped to the front of the last word)."""
-    whole = len(data) & ~1
-    return (bytes(data[i ^ 1] for i in range(whole)) + data[whole:]).rstrip(b"\0")
+    return swap_word_bytes(data).rstrip(b"\0")
 
 
 def _text_byte_order(events: Events) -> list[Sighting]:
@@ -134,7 +138,7 @@ def _frames() -> Stream:
         ("set speed 1.0", [req("set-speed", pack_f(1.0))]),
         (f"the unassigned opcode 0{unassigned:o}", [RequestStep(unassigned, b"")]),
     ]
-    return Stream(None, scenario_inputs("frames", groups), scenario="frames", check=_text_byte_order)
+    return scenario_stream("frames", groups, _text_byte_order)
 
 
 def _lost_answer() -> Stream:
@@ -147,7 +151,7 @@ def _lost_answer() -> Stream:
         ("here, its answer lost", [lose, req("here"), Pause(RETRANSMIT_BOUND)]),
         ("here", [req("here")]),
     ]
-    return Stream(None, scenario_inputs("lost-answer", groups), scenario="lost-answer")
+    return scenario_stream("lost-answer", groups)
 
 
 SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {

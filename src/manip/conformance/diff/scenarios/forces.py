@@ -31,19 +31,17 @@ from manip.conformance.diff.pairing import SideEvent
 from manip.conformance.diff.scenarios.kit import (
     Events,
     all_of,
+    async_in,
     floats_at,
-    is_op,
     req,
     scenario_inputs,
     shown_angles,
     sighting,
-    wire_of,
 )
 from manip.conformance.diff.streams import Stream, WorldPhase
 from manip.conformance.fuzz.judge import Sighting
 from manip.conformance.fuzz.steps import Pause, RequestStep, Step
-from manip.conformance.judge.checks import async_of
-from manip.spec.constants import AsyncCondition, RequestName, ServerOp
+from manip.spec.constants import AsyncCondition, RequestName
 
 FILTER_S: Final = 1.0
 """Seconds after a change that the wrist's reading is read (its filter follows within a few ticks)."""
@@ -117,7 +115,7 @@ def _check_guard(events: Events) -> list[Sighting]:
     word 3 = the guard (``async.layout``)."""
     for number, seen in events.items():
         for event in seen:
-            message = async_of(wire_of(event)) if is_op(event, ServerOp.ASYNCHRONOUS_RESPONSE) else None
+            message = async_in(event)
             if message is None or message.condition != AsyncCondition.GUARD_HIT or message.word3 != GUARD:
                 continue
             if message.word2 != GUARD_STOPPED:

@@ -19,7 +19,7 @@ from collections.abc import Callable, Sequence
 from typing import Final
 
 from manip.arm.kinematics import PUMA600, forward
-from manip.arm.units import LENGTH_UNITS, MM_PER_UNIT, LengthUnit
+from manip.arm.units import LENGTH_UNITS, MM_PER_UNIT, LengthUnit, WireLengths
 from manip.conformance.cases.server.floats import TINY_WRIST, bad_patterns, by_rows, sent_by_rows, unflushed
 from manip.conformance.diff.scenarios.kit import (
     POSE,
@@ -36,7 +36,7 @@ from manip.conformance.diff.scenarios.kit import (
     read_back,
     read_here,
     req,
-    scenario_inputs,
+    scenario_stream,
     shown_angles,
     sighting,
 )
@@ -54,9 +54,9 @@ POSE_TRANSFORM: Final = forward(POSE, PUMA600.geometry).to_floats()
 """The transform of :data:`POSE` by the spec's kinematics, in millimetres."""
 
 
-def _in_unit(transform: Sequence[float], unit: LengthUnit) -> tuple[float, ...]:
-    """``transform`` (mm) with its position in ``unit``."""
-    return (*transform[:9], *(p / MM_PER_UNIT[unit] for p in transform[9:]))
+def _pose_in(unit: LengthUnit) -> tuple[float, ...]:
+    """:data:`POSE_TRANSFORM` with its position in ``unit``."""
+    return WireLengths(unit).transform_out(POSE_TRANSFORM)
 
 
 def same_pose(got: Sequence[float], want: Sequence[float], unit: LengthUnit) -> bool:
@@ -71,7 +71,7 @@ def same_pose(got: Sequence[float], want: Sequence[float], unit: LengthUnit) -> 
 def _unit_of(here: Sequence[float]) -> LengthUnit | None:
     """The unit in which the side's Here at :data:`POSE` is the spec's transform of it (None: in none;
     the side's arm is not the spec's, and nothing here judges its solutions)."""
-    return next((u for u in LENGTH_UNITS if same_pose(here, _in_unit(POSE_TRANSFORM, u), u)), None)
+    return next((u for u in LENGTH_UNITS if same_pose(here, _pose_in(u), u)), None)
 
 
 def _check_here(at: int) -> Callable[[Events], list[Sighting]]:
@@ -125,10 +125,10 @@ def _reaches(angles: Sequence[float], transform: Sequence[float], unit: LengthUn
     at_pose = len(angles) == 6 and all(
         close_to([math.remainder(a - p, 360.0)], [0.0]) for a, p in zip(angles, POSE, strict=True)
     )
-    return at_pose or (
-        len(angles) == 6
-        and same_pose(_in_unit(forward(angles, PUMA600.geometry).to_floats(), unit), transform, unit)
-    )
+    if at_pose or len(angles) != 6:
+        return at_pose
+    reached = WireLengths(unit).transform_out(forward(angles, PUMA600.geometry).to_floats())
+    return same_pose(reached, transform, unit)
 
 
 def _check_forwards(at: int, solved: int) -> Callable[[Events], list[Sighting]]:
@@ -197,10 +197,7 @@ def _kinematics() -> Stream:
         ("solve backwards of the angles set", [req("solve-backwards", floats_data(POSE))]),
         (
             "solve forwards of their transform, in mm, cm and inches",
-            [
-                req("solve-forwards", floats_data(_in_unit(POSE_TRANSFORM, u)) + floats_data(POSE))
-                for u in LENGTH_UNITS
-            ],
+            [req("solve-forwards", floats_data(_pose_in(u)) + floats_data(POSE)) for u in LENGTH_UNITS],
         ),
         (
             "solve backwards of every joint at 0 and of wrist angles whose sines underflow",
@@ -211,7 +208,7 @@ def _kinematics() -> Stream:
         ),
     ]
     check = all_of(_check_here(0), _check_backwards(0, 1), _check_forwards(0, 2), _check_underflow(3))
-    return Stream(None, scenario_inputs("kinematics", groups), scenario="kinematics", check=check)
+    return scenario_stream("kinematics", groups, check)
 
 
 SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {

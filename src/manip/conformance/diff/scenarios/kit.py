@@ -8,15 +8,18 @@ from collections.abc import Callable, Sequence
 from typing import Final
 
 from manip.arm.kinematics import PUMA600, forward
+from manip.codecs.error_string import ErrorMessage
 from manip.codecs.errors import CodecError
 from manip.codecs.lispm_text import decode_lispm
+from manip.codecs.messages import AsyncResponse
 from manip.codecs.pdp11float import pack_f, unpack_f
+from manip.conformance.cases._support import error_of
 from manip.conformance.cases.server.motion import CONFIGURATION_SEED
 from manip.conformance.diff.pairing import SideEvent
-from manip.conformance.diff.streams import ScenarioCheck, Stream
+from manip.conformance.diff.streams import ScenarioCheck, ScenarioJudge, Stream
 from manip.conformance.fuzz.judge import Sighting
 from manip.conformance.fuzz.steps import FuzzInput, Pause, RequestStep, Step
-from manip.conformance.judge.checks import parse_description
+from manip.conformance.judge.checks import async_of, parse_description
 from manip.conformance.judge.packets import WirePacket
 from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC
@@ -56,10 +59,15 @@ def scenario_inputs(name: str, groups: Sequence[tuple[str, Sequence[Step]]]) -> 
 
 
 def scenario_stream(
-    name: str, groups: Sequence[tuple[str, Sequence[Step]]], check: ScenarioCheck | None = None
+    name: str,
+    groups: Sequence[tuple[str, Sequence[Step]]],
+    check: ScenarioCheck | None = None,
+    *,
+    judge: ScenarioJudge | None = None,
 ) -> Stream:
-    """Scenario ``name``: its groups of steps as inputs numbered from 0, judged by ``check``."""
-    return Stream(None, scenario_inputs(name, groups), scenario=name, check=check)
+    """Scenario ``name``: its groups of steps as inputs numbered from 0, judged by ``check`` (or by
+    ``judge``, which also says what it could not judge)."""
+    return Stream(None, scenario_inputs(name, groups), scenario=name, check=check, judge=judge)
 
 
 # What the answers say ------------------------------------------------------------------------------
@@ -69,8 +77,29 @@ def answers_to(events: Sequence[SideEvent], opcode: int) -> list[SideEvent]:
     return [e for e in events if e.kind == "packet" and e.request == opcode]
 
 
+def answer_at(events: Events, number: int, name: RequestName) -> SideEvent | None:
+    """The first answer of ``name`` at input ``number``."""
+    return next(iter(answers_to(events.get(number, []), opcode_of(name))), None)
+
+
 def payload(event: SideEvent) -> bytes:
     return event.data[2:]
+
+
+def error_in(event: SideEvent | None, opcode: int) -> ErrorMessage | None:
+    """The error string of ``event`` when it is an error packet of ``opcode``, its numbers read in either
+    layout (:func:`~manip.conformance.cases._support.error_of`); None for no event, another packet, or a
+    string that reads neither way."""
+    if event is None or not is_op(event, opcode):
+        return None
+    reply = error_of(wire_of(event))
+    return reply.error if reply is not None else None
+
+
+def async_in(event: SideEvent) -> AsyncResponse | None:
+    """The fields of an asynchronous response ``event`` (either layout); None for another event, or one
+    whose length is neither layout's."""
+    return async_of(wire_of(event)) if is_op(event, ServerOp.ASYNCHRONOUS_RESPONSE) else None
 
 
 def angles_of(event: SideEvent) -> list[float] | None:
@@ -84,7 +113,7 @@ def angles_of(event: SideEvent) -> list[float] | None:
 
 
 def read_back(events: Events, number: int) -> tuple[SideEvent, list[float]] | None:
-    answer = next(iter(answers_to(events.get(number, []), opcode_of("joint-angles"))), None)
+    answer = answer_at(events, number, "joint-angles")
     angles = angles_of(answer) if answer is not None else None
     return (answer, angles) if answer is not None and angles is not None else None
 
@@ -123,13 +152,19 @@ def swapped_words(body: bytes) -> list[float]:
     return _floats_or_nan(b"".join(body[at + 2 : at + 4] + body[at : at + 2] for at in range(0, whole, 4)))
 
 
+def swap_word_bytes(data: bytes) -> bytes:
+    """``data`` with the two bytes of each whole word swapped (an odd last byte as it is)."""
+    whole = len(data) & ~1
+    return bytes(data[i ^ 1] for i in range(whole)) + data[whole:]
+
+
 def byte_swapped(event: SideEvent) -> list[float]:
     """The floats of ``event``'s payload read with the two bytes of each word swapped (NaN where that is
     no F value; none when the payload is not whole floats)."""
     body = payload(event)
     if len(body) % 4:
         return []
-    return _floats_or_nan(bytes(b for at in range(0, len(body), 2) for b in (body[at + 1], body[at])))
+    return _floats_or_nan(swap_word_bytes(body))
 
 
 def shown_angles(angles: Sequence[float]) -> str:
@@ -202,12 +237,18 @@ def solution_at(events: Events, number: int) -> tuple[SideEvent, list[float]] | 
     return None
 
 
+def segments_at(events: Events, number: int) -> list[tuple[SideEvent, int]]:
+    """Every set joint angles of input ``number`` answered with a segment number, and the number."""
+    return [
+        (answer, int.from_bytes(answer.data[2:4], "little"))
+        for answer in _responses(events, number, "set-joint-angles")
+        if len(answer.data) >= 4
+    ]
+
+
 def segment_at(events: Events, number: int) -> tuple[SideEvent, int] | None:
     """The first segment number a set joint angles was answered with at input ``number``."""
-    for answer in _responses(events, number, "set-joint-angles"):
-        if len(answer.data) >= 4:
-            return answer, int.from_bytes(answer.data[2:4], "little")
-    return None
+    return next(iter(segments_at(events, number)), None)
 
 
 def floats_at(events: Events, number: int, name: RequestName) -> list[tuple[SideEvent, list[float]]]:

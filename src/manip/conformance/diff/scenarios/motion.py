@@ -3,15 +3,12 @@ unsplit replies, paths."""
 
 from __future__ import annotations
 
-import contextlib
 import math
 from collections.abc import Callable, Sequence
 from typing import Final
 
 from manip.arm.kinematics import PUMA600, forward
 from manip.arm.oat import rotation_from_oat, xyzoat_from_transform
-from manip.codecs.error_string import parse_error
-from manip.codecs.errors import CodecError
 from manip.codecs.pdp11float import pack_f
 from manip.conformance.cases.server.motion import SPEED_MATCH
 from manip.conformance.cases.server.trajectory import (
@@ -32,8 +29,9 @@ from manip.conformance.diff.scenarios.kit import (
     SLOW,
     SWING_DEG,
     Events,
-    answers_to,
+    answer_at,
     close_to,
+    error_in,
     floats_at,
     floats_data,
     is_op,
@@ -41,6 +39,7 @@ from manip.conformance.diff.scenarios.kit import (
     opcode_of,
     req,
     scenario_inputs,
+    scenario_stream,
     segment_at,
     shown_angles,
     sighting,
@@ -84,14 +83,11 @@ _FRESH: Final = "connect.per-connection-state"
 
 def _first_move(events: Events, queued: int, moved: int, timed: int) -> list[Sighting]:
     out: list[Sighting] = []
-    for answer in answers_to(events.get(moved, []), opcode_of("set-joint-angles"))[:1]:
-        with contextlib.suppress(CodecError, ValueError):
-            if (
-                answer.opcode == ServerOp.NON_FATAL_ERROR
-                and parse_error(answer.data, body="packet").code == "AWA"
-            ):
-                message = "the new connection's first move was refused AWA: the last connection's abort"
-                out.append(sighting(moved, _FRESH, message, "done, or NAP without power", answer))
+    answer = answer_at(events, moved, "set-joint-angles")
+    error = error_in(answer, ServerOp.NON_FATAL_ERROR)
+    if answer is not None and error is not None and error.code == "AWA":
+        message = "the new connection's first move was refused AWA: the last connection's abort"
+        out.append(sighting(moved, _FRESH, message, "done, or NAP without power", answer))
     at = moved if segment_at(events, moved) is not None else timed  # NAP: the first move is later
     old, new = segment_at(events, queued), segment_at(events, at)
     if old is not None and new is not None and new[1] != old[1]:
@@ -146,7 +142,7 @@ def _fresh_connection() -> Stream:
         ),
     ]
     check = _check_fresh(0, 1, 3, 4, 5)
-    return Stream(None, scenario_inputs("fresh-connection", groups), scenario="fresh-connection", check=check)
+    return scenario_stream("fresh-connection", groups, check)
 
 
 def _check_still(at: int) -> Callable[[Events], list[Sighting]]:
@@ -263,7 +259,7 @@ def _split() -> Stream:
         ),
         ("describe self", [req("describe-self")]),
     ]
-    return Stream(None, scenario_inputs("not-split", groups), scenario="not-split", check=_check_not_split(1))
+    return scenario_stream("not-split", groups, _check_not_split(1))
 
 
 LINE_SHIFT: Final = (80.0, 40.0, -60.0)
@@ -381,7 +377,7 @@ def _paths() -> Stream:
             ],
         ),
     ]
-    return Stream(None, scenario_inputs("paths", groups), scenario="paths", check=_check_paths(1, 3))
+    return scenario_stream("paths", groups, _check_paths(1, 3))
 
 
 SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {

@@ -8,8 +8,6 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Final
 
-from manip.codecs.error_string import parse_error
-from manip.codecs.errors import CodecError
 from manip.codecs.packet import Packet
 from manip.conformance.cases.server.motion import HAND_TOL_MM
 from manip.conformance.cases.server.trajectory import OAT_DELTA, OAT_DELTA_BACK
@@ -20,8 +18,9 @@ from manip.conformance.diff.scenarios.kit import (
     SEED_ANGLES,
     STILL,
     Events,
-    answers_to,
+    answer_at,
     at_rest,
+    error_in,
     floats_data,
     opcode_of,
     read_here,
@@ -59,20 +58,10 @@ an end with no pause between them come at the same instant."""
 # The checks ----------------------------------------------------------------------------------------
 
 
-def _answer(events: Events, number: int, name: RequestName) -> SideEvent | None:
-    """The first answer of ``name`` at input ``number``."""
-    return next(iter(answers_to(events.get(number, []), opcode_of(name))), None)
-
-
 def _code(event: SideEvent) -> tuple[str, str] | None:
     """A non-fatal error's severity and code (None: another answer, or a string that does not parse)."""
-    if event.opcode != ServerOp.NON_FATAL_ERROR:
-        return None
-    try:
-        error = parse_error(event.data[2:], body="packet")
-    except (CodecError, ValueError):
-        return None
-    return error.severity, error.code
+    error = error_in(event, ServerOp.NON_FATAL_ERROR)
+    return (error.severity, error.code) if error is not None else None
 
 
 def _check_done(name: RequestName, clause: str, asked: dict[int, str]) -> Callable[[Events], list[Sighting]]:
@@ -82,7 +71,7 @@ def _check_done(name: RequestName, clause: str, asked: dict[int, str]) -> Callab
     def check(events: Events) -> list[Sighting]:
         out: list[Sighting] = []
         for number, what in asked.items():
-            answer = _answer(events, number, name)
+            answer = answer_at(events, number, name)
             if answer is None or (answer.opcode == ServerOp.RESPONSE and len(answer.data) == 2):
                 continue
             message = f"{what} was answered 0{answer.opcode:o}, not done"
@@ -99,7 +88,7 @@ def _check_bad_joints(asked: dict[int, int]) -> Callable[[Events], list[Sighting
     def check(events: Events) -> list[Sighting]:
         out: list[Sighting] = []
         for number, joint in asked.items():
-            answer = _answer(events, number, "free-joint")
+            answer = answer_at(events, number, "free-joint")
             code = _code(answer) if answer is not None else ("C", "")
             if answer is None or (code is not None and code[0] == "C"):
                 continue
@@ -116,7 +105,7 @@ def _check_reset(moved: int) -> Callable[[Events], list[Sighting]]:
     not refused AWA (``motion.reset``)."""
 
     def check(events: Events) -> list[Sighting]:
-        answer = _answer(events, moved, "set-joint-angles")
+        answer = answer_at(events, moved, "set-joint-angles")
         code = _code(answer) if answer is not None else None
         if answer is None or code is None or code[1] != "AWA":
             return []
@@ -163,7 +152,7 @@ def _rested(events: Events, before: int, after: int, name: RequestName) -> Reste
     """Where the hand stood at input ``before`` and where the move ``name`` at input ``after`` left it at
     rest (None: a Here missing, the move refused, out of reach say, or the arm still moving)."""
     first, last = read_here(events, before), read_here(events, after)
-    moved = _answer(events, after, name)
+    moved = answer_at(events, after, name)
     if first is None or last is None or moved is None or moved.opcode != ServerOp.RESPONSE:
         return None
     return (first[1], last) if at_rest(events, after) else None

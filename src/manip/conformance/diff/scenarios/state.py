@@ -8,8 +8,6 @@ from collections.abc import Callable, Sequence
 from typing import Final
 
 from manip.arm.kinematics import PUMA600
-from manip.codecs.error_string import parse_error
-from manip.codecs.errors import CodecError
 from manip.codecs.pdp11float import pack_f
 from manip.conformance.diff.scenarios.kit import (
     POSE,
@@ -17,9 +15,11 @@ from manip.conformance.diff.scenarios.kit import (
     SETTLE,
     Events,
     all_of,
+    answer_at,
     answers_to,
     close_to,
     description_at,
+    error_in,
     floats_data,
     floats_of,
     opcode_of,
@@ -27,6 +27,7 @@ from manip.conformance.diff.scenarios.kit import (
     read_back,
     req,
     scenario_inputs,
+    scenario_stream,
     shown_angles,
     sighting,
     swapped_words,
@@ -131,15 +132,13 @@ def _check_jor(described: int, probes: dict[int, tuple[float, ...]]) -> Callable
                 for j, (a, (lo, hi)) in enumerate(zip(angles, limits, strict=True))
                 if not lo <= a <= hi
             )
-            answer = next(iter(answers_to(events.get(number, []), opcode_of("set-joint-angles"))), None)
-            if mask and answer is not None and answer.opcode == ServerOp.RESPONSE:
+            answer = answer_at(events, number, "set-joint-angles")
+            if not mask or answer is None:
+                continue
+            if answer.opcode == ServerOp.RESPONSE:
                 message = "set joint angles beyond a joint's limit was accepted"
                 out.append(sighting(number, "motion.checked-before-queue", message, "E JOR", answer))
-            if not mask or answer is None or answer.opcode != ServerOp.NON_FATAL_ERROR:
-                continue
-            try:
-                error = parse_error(answer.data[2:], body="packet")
-            except (CodecError, ValueError):
+            if (error := error_in(answer, ServerOp.NON_FATAL_ERROR)) is None:
                 continue
             if error.code != "JOR":
                 message = f"set joint angles beyond a joint's limit was refused {error.code}, not JOR"
@@ -196,7 +195,7 @@ def _limits() -> Stream:
             )
     probes = {n: floats_of(steps) for n, (_, steps) in enumerate(groups) if n and n % 2 == 0}
     check = all_of(_check_description(0), _check_jor(0, probes))
-    return Stream(None, scenario_inputs("joint-limits", groups), scenario="joint-limits", check=check)
+    return scenario_stream("joint-limits", groups, check)
 
 
 def _read_back_scenario() -> Stream:
@@ -224,14 +223,14 @@ def _ready() -> Stream:
         ("joint angles", [req("joint-angles")]),
     ]
     check = all_of(_check_description(0), _check_read_back(2, POSE), _check_ready(0, 2, 4))
-    return Stream(None, scenario_inputs("ready", groups), scenario="ready", check=check)
+    return scenario_stream("ready", groups, check)
 
 
 def _speeds() -> Stream:
     groups: list[tuple[str, Sequence[Step]]] = [
         (f"set speed {v:g}", [req("set-speed", pack_f(v))]) for v in (0.0, -0.5, 1.5, 100.0, 0.5)
     ]
-    return Stream(None, scenario_inputs("speed-range", groups), scenario="speed-range")
+    return scenario_stream("speed-range", groups)
 
 
 def _no_power() -> Stream:
@@ -243,7 +242,7 @@ def _no_power() -> Stream:
         ("move to ready without power", [req("ready")]),
         ("here", [req("here")]),
     ]
-    return Stream(None, scenario_inputs("no-power", groups), scenario="no-power")
+    return scenario_stream("no-power", groups)
 
 
 def _free_joint() -> Stream:
@@ -252,7 +251,7 @@ def _free_joint() -> Stream:
         ("joint angles (discarded)", [req("joint-angles")]),
         ("here, kill power", [req("here"), req("kill-power")]),
     ]
-    return Stream(None, scenario_inputs("free-joint", groups), scenario="free-joint")
+    return scenario_stream("free-joint", groups)
 
 
 SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {

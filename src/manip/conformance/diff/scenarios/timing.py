@@ -8,7 +8,7 @@ the directed case ``server.motion.queued-segments`` reads its samples' times, an
 case's own judges (:mod:`manip.conformance.cases.server.trajectory`).  On an addressed side, in real
 time, a timing clause whose breach the samples' round trips or the host's delays could hide, or
 explain, is not judged: no sighting is made of it, and the diff reports it not judged with the delays
-measured (:attr:`~manip.conformance.diff.streams.Stream.unjudged`).
+measured (:attr:`~manip.conformance.diff.streams.Stream.judge`).
 """
 
 from __future__ import annotations
@@ -24,10 +24,7 @@ from manip.conformance.cases.server.trajectory import (
     SERVO_S,
     Sample,
     Timing,
-    TimingCheck,
-    blending,
-    rest_on_goal,
-    servo_period,
+    smooth_rest_checks,
 )
 from manip.conformance.diff.pairing import SideEvent
 from manip.conformance.diff.scenarios import kit
@@ -39,14 +36,14 @@ from manip.conformance.diff.scenarios.kit import (
     floats_at,
     floats_data,
     req,
-    scenario_inputs,
+    scenario_stream,
+    segments_at,
     sighting,
     word,
 )
 from manip.conformance.diff.streams import Stream
 from manip.conformance.fuzz.judge import Sighting
 from manip.conformance.fuzz.steps import Pause, Step
-from manip.conformance.judge.checks import async_of
 from manip.spec.constants import AsyncCondition, ServerOp
 
 SAMPLES: Final = 480
@@ -80,16 +77,6 @@ def _swung(by: float) -> tuple[float, ...]:
     return (READY_POSE[0] + by, *READY_POSE[1:])
 
 
-def _segments(events: Events, number: int) -> list[tuple[SideEvent, int]]:
-    """Every set joint angles of input ``number`` answered with a segment number, and the number."""
-    answers = kit.answers_to(events.get(number, []), kit.opcode_of("set-joint-angles"))
-    return [
-        (e, int.from_bytes(e.data[2:4], "little"))
-        for e in answers
-        if kit.is_op(e, ServerOp.RESPONSE) and len(e.data) >= 4
-    ]
-
-
 # Queued moves sampled ---------------------------------------------------------------------------------
 
 
@@ -110,28 +97,15 @@ def _lateness(samples: Sequence[Sample]) -> float:
     return max((max(0.0, b.sent - a.sent - SAMPLE_S) for a, b in pairwise(samples)), default=0.0)
 
 
-def _came_to_rest(samples: Sequence[Sample]) -> bool:
+def _came_to_rest(timing: Timing) -> bool:
     """Whether joint 1 was seen standing still for three servo cycles after it last changed."""
-    moved = [i for i in range(1, len(samples)) if samples[i].values[0] != samples[i - 1].values[0]]
+    samples, moved = timing.samples, timing.changed
     return bool(moved) and samples[-1].sent - samples[moved[-1]].received >= 3 * SERVO_S
 
 
 Judgement = tuple[list[Sighting], list[str]]
 """What a timing judge found on a side: its sightings, and what it could not judge (and why)."""
 NOTHING: Final[Judgement] = ([], [])
-
-
-def _timed(
-    name: str, groups: Sequence[tuple[str, Sequence[Step]]], judge: Callable[[Events], Judgement]
-) -> Stream:
-    """Scenario ``name`` judged by ``judge``: its sightings the check's, the rest what it could not judge."""
-    return Stream(
-        None,
-        scenario_inputs(name, groups),
-        scenario=name,
-        check=lambda events: judge(events)[0],
-        unjudged=lambda events: judge(events)[1],
-    )
 
 
 def _judge_queued(at: int) -> Callable[[Events], Judgement]:
@@ -144,7 +118,7 @@ def _judge_queued(at: int) -> Callable[[Events], Judgement]:
 
     def judge(events: Events) -> Judgement:
         reads = floats_at(events, at, "joint-angles")
-        moves = _segments(events, at)
+        moves = segments_at(events, at)
         if len(reads) < 2 or len(moves) != 1 + len(QUEUED_STEPS) or not kit.close_to(reads[0][1], READY_POSE):
             return NOTHING  # refused, or not at the ready position when the moves were queued
         samples = _samples(reads[1:])
@@ -152,23 +126,21 @@ def _judge_queued(at: int) -> Callable[[Events], Judgement]:
             return NOTHING
         timing = Timing(samples, 1.0, _lateness(samples))
         last = READY_POSE[0] + QUEUED_STEPS[-1]
-        judged: list[tuple[str, TimingCheck | None]] = [
-            ("motion.servo-period", servo_period(timing)),
-            ("motion.smooth-transitions", blending(timing)),
-        ]
+        judged = dict(smooth_rest_checks(timing, 1.0, last))
+        rest = judged.pop("motion.ends-at-rest")
         unjudged = []
-        if _came_to_rest(samples):  # sampled until it stood still: where it came to rest is judged
-            judged.append(("motion.ends-at-rest", rest_on_goal([s.values[0] for s in samples], 1.0, last)))
+        if _came_to_rest(timing):  # sampled until it stood still: where it came to rest is judged
+            judged["motion.ends-at-rest"] = rest
         else:
             unjudged.append(
                 f"motion.ends-at-rest: joint 1 was not seen standing still on {last:g} within the "
                 f"{len(samples)} samples ({timing.delays()})"
             )
         out = []
-        for clause, verdict in judged:
-            if verdict is not None and not verdict.held:
+        for clause, verdict in judged.items():
+            if not verdict.held:
                 out.append(sighting(at, clause, verdict.seen, verdict.expected, reads[-1][0]))
-            elif verdict is not None and verdict.unjudged:
+            elif verdict.unjudged:
                 unjudged.append(verdict.unjudged)
         return out, unjudged
 
@@ -186,7 +158,7 @@ def _queued() -> Stream:
             _ready_then(steps),
         )
     ]
-    return _timed("queued-timing", groups, _judge_queued(0))
+    return scenario_stream("queued-timing", groups, judge=_judge_queued(0))
 
 
 # A move's reply, and the angles read back -------------------------------------------------------------
@@ -203,7 +175,7 @@ def _judge_reply(at: int) -> Callable[[Events], Judgement]:
     a host whose answers lag could hold every reply as long)."""
 
     def judge(events: Events) -> Judgement:
-        reads, moves = floats_at(events, at, "joint-angles"), _segments(events, at)
+        reads, moves = floats_at(events, at, "joint-angles"), segments_at(events, at)
         if len(reads) < 3 or len(moves) != 1 or not kit.close_to(reads[0][1], READY_POSE):
             return NOTHING
         reply = moves[0][0]
@@ -280,7 +252,7 @@ def _reply() -> Stream:
         sightings, unjudged = reply(events)
         return byte_order(events) + sightings, unjudged
 
-    return _timed("reply-timing", groups, judge)
+    return scenario_stream("reply-timing", groups, judge=judge)
 
 
 # The reports of segments completed --------------------------------------------------------------------
@@ -292,14 +264,12 @@ def _check_codes(at: int) -> Callable[[Events], list[Sighting]]:
     completed), never 1 (guard hit): ``async.codes``."""
 
     def check(events: Events) -> list[Sighting]:
-        moves = _segments(events, at)
+        moves = segments_at(events, at)
         if len(moves) != 2:
             return []
         move = moves[-1]
         for event in events.get(at, []):
-            report = (
-                async_of(kit.wire_of(event)) if kit.is_op(event, ServerOp.ASYNCHRONOUS_RESPONSE) else None
-            )
+            report = kit.async_in(event)
             if (
                 report is None
                 or report.word3 != move[1]
@@ -330,9 +300,7 @@ def _codes() -> Stream:
             ),
         )
     ]
-    return Stream(
-        None, scenario_inputs("segment-codes", groups), scenario="segment-codes", check=_check_codes(0)
-    )
+    return scenario_stream("segment-codes", groups, _check_codes(0))
 
 
 SCENARIOS: Final[dict[str, Callable[[], Stream]]] = {
