@@ -19,11 +19,12 @@ from manip.conformance.fuzz.generators import INPUT_CLASSES, GenOptions, generat
 from manip.conformance.fuzz.judge import _connection
 from manip.conformance.fuzz.oracles import oracle_violations
 from manip.conformance.fuzz.report import CampaignFacts
+from manip.conformance.fuzz.session import Allowance, FuzzConnection, Inbox
 from manip.conformance.fuzz.shrink import Budget, ddmin
 from manip.conformance.fuzz.steps import ConnPacket, FuzzInput, RequestStep, Stray
 from manip.conformance.fuzz.target import TracebackScanner
 from manip.conformance.judge.checks import WirePacket, required_refusal
-from manip.conformance.suite.rawchaos import frame
+from manip.conformance.suite.rawchaos import MAX_RECEIVED, frame
 from manip.links.address import parse_address
 from manip.reference_server.errors import bad_value
 from manip.spec import SPEC
@@ -265,6 +266,53 @@ def test_a_lost_packet_never_sent_again_is_a_retransmission_violation_of_the_los
     assert (first.violation.clause, first.number) == ("ncp.retransmission", 4)
     conn.lost = None
     assert all(s.violation.clause != "ncp.retransmission" for s in _connection(conn, 9, report_drops=True))  # type: ignore[arg-type]
+
+
+def test_a_lost_packet_that_is_also_the_gap_is_one_retransmission_violation() -> None:
+    """Later packets sent again but never the lost one: the next number expected is the lost packet's,
+    one fault (ncp.retransmission), not also a packet number skipped."""
+    conn = _Conn([_c2s(SPEC.request("here").opcode, 2)])
+    conn.lost = (7, 4)
+    alone = _connection(conn, 9, report_drops=True)  # type: ignore[arg-type]
+    conn.gap, conn.ahead = 7, {8: 2}
+    sightings = _connection(conn, 9, report_drops=True)  # type: ignore[arg-type]
+    assert sightings == alone and sightings[0].violation.clause == "ncp.retransmission"
+    conn.gap = 6  # another number missing is a fault of its own
+    (first,) = _connection(conn, 9, report_drops=True)  # type: ignore[arg-type]
+    assert first.followers == alone[0].followers + 1
+
+
+def _connection_to(server_index: int, inbox: Inbox) -> FuzzConnection:
+    """A connection already open to the target's ``server_index`` (its link is never used)."""
+    conn = FuzzConnection(None, inbox, 0o101, Allowance())  # type: ignore[arg-type]
+    conn.server_index = server_index
+    return conn
+
+
+def test_a_flood_from_a_wrong_source_is_kept_bounded() -> None:
+    async def flood() -> Inbox:
+        inbox = Inbox()
+        conn = _connection_to(0o7001, inbox)
+        for n in range(MAX_RECEIVED + 50):
+            conn.on_packet(Packet(ChaosOp.DAT, 0o440, 0o101, 0o401, 0o7002, n & 0xFFFF, 0, b""), b"", 0.0)
+        return inbox
+
+    inbox = asyncio.run(flood())
+    assert len(inbox.strays[0o101]) == MAX_RECEIVED  # what came first is kept
+    assert inbox.strays[0o101][0][0].packet_no == 0
+
+
+def test_a_lazy_reader_does_not_count_an_old_packet_sent_again_as_ahead() -> None:
+    async def resend() -> Counter[int]:
+        conn = _connection_to(0o7001, Inbox())
+        conn.received_upto = conn.acked_upto = 5
+        conn._lazy = True
+        for number in (4, 5, 8, 8):
+            conn.on_packet(Packet(ChaosOp.DAT, 0o440, 0o101, 0o401, 0o7001, number, 0, b""), b"", 0.0)
+        assert conn.skipped() == 6
+        return conn.ahead
+
+    assert asyncio.run(resend()) == Counter({8: 2})
 
 
 def test_a_request_skipped_by_the_replies_is_a_silent_drop_not_a_wrong_number() -> None:

@@ -240,29 +240,8 @@ def _connection(
         found.append(unclosed)
     # A packet number missing, or a lost packet that never came again, is the target's doing only when
     # no frame of the target was refused (``refused``): the one missing may be among them.
-    gap = None if refused else conn.skipped()
-    if gap is not None:  # first: every answer missing after it is its consequence
-        first = next((conn.origin.get(id(p), last) for p in packets if p.direction == "c2s"), last)
-        skipped = _seen(
-            "missing_response",
-            "ncp.packet-numbers",
-            f"the target's packet #{gap} never came, though packets numbered past it came again",
-            "controlled packets numbered consecutively",
-            f"packets numbered {', '.join(f'#{n}' for n in sorted(conn.ahead)[:4])}",
-            number=first,
-        )
-        found.insert(0, (0, skipped))
-    lost = None if refused else conn.never_again()
-    if lost is not None:
-        again = _seen(
-            "missing_response",
-            "ncp.retransmission",
-            f"the target's packet #{lost[0]}, lost on its way, never came again",
-            "a controlled packet sent again until a receipt covers it",
-            "nothing",
-            number=lost[1],
-        )
-        found.insert(0, (0, again))
+    if not refused:  # first: every answer missing after them is their consequence
+        found[:0] = [(0, seen) for seen in _numbering(conn, last)]
     for judged in oracle_violations(packets, rfc_packet_no=conn.rfc_no):
         number = conn.origin.get(id(judged.packet), last)
         found.append((position.get(id(judged.packet), len(packets)), Sighting(judged, number)))
@@ -276,6 +255,36 @@ def _connection(
             out.append(replace(o, followers=len(found) - index - 1))
             break
         out.append(o)
+    return out
+
+
+def _numbering(conn: FuzzConnection, last: int) -> list[Sighting]:
+    """A lost packet that never came again, and a packet number the target skipped (the lost packet is
+    also the next one expected: its gap is that retransmission failure, not a second fault)."""
+    out: list[Sighting] = []
+    lost = conn.never_again()
+    if lost is not None:
+        again = _seen(
+            "missing_response",
+            "ncp.retransmission",
+            f"the target's packet #{lost[0]}, lost on its way, never came again",
+            "a controlled packet sent again until a receipt covers it",
+            "nothing",
+            number=lost[1],
+        )
+        out.append(again)
+    gap = conn.skipped()
+    if gap is not None and (lost is None or gap != lost[0]):
+        first = next((conn.origin.get(id(p), last) for p in conn.packets if p.direction == "c2s"), last)
+        skipped = _seen(
+            "missing_response",
+            "ncp.packet-numbers",
+            f"the target's packet #{gap} never came, though packets numbered past it came again",
+            "controlled packets numbered consecutively",
+            f"packets numbered {', '.join(f'#{n}' for n in sorted(conn.ahead)[:4])}",
+            number=first,
+        )
+        out.append(skipped)
     return out
 
 

@@ -103,12 +103,17 @@ class Inbox:
         if conn is not None:
             conn.on_packet(packet, raw, now)
         else:
-            kept = self.strays[packet.dest_index]
-            if len(kept) < MAX_RECEIVED:  # a flood to an index of ours is judged by what came first
-                kept.append((packet, now))
+            self.keep_stray(packet, now)
             if self.on_stray is not None:
                 self.on_stray(packet)
         self.arrived.set()
+
+    def keep_stray(self, packet: Packet, now: float) -> None:
+        """Keep a packet no connection takes, by its destination index (at most :data:`MAX_RECEIVED` of
+        one index: a flood to an index of ours is judged by what came first)."""
+        kept = self.strays[packet.dest_index]
+        if len(kept) < MAX_RECEIVED:
+            kept.append((packet, now))
 
     def reject(self, raw: bytes, exc: DecodeError) -> None:
         if len(self.bad) < KEPT_BAD:
@@ -487,11 +492,7 @@ class FuzzConnection:
 
     def never_again(self) -> tuple[int, int] | None:
         """The packet a ``lose`` step lost (its number, the step's input), if it never came again."""
-        if (
-            self.lost is None
-            or seq_gt(self.received_upto, self.lost[0])
-            or self.received_upto == self.lost[0]
-        ):
+        if self.lost is None or seq_le(self.lost[0], self.received_upto):
             return None
         return self.lost
 
@@ -540,7 +541,7 @@ class FuzzConnection:
                 self._answer.set_result(Received(packet, raw, now))
             return
         if packet.src_index != self.server_index and packet.opcode != ChaosOp.OPN:
-            self.inbox.strays[packet.dest_index].append((packet, now))
+            self.inbox.keep_stray(packet, now)
             return
         self._progress.set()
         opcode = packet.opcode
@@ -574,8 +575,9 @@ class FuzzConnection:
             self._lose = None
             return
         if packet.packet_no != expected:
-            if seq_le(packet.packet_no, self.received_upto) and not self._lazy:
-                self._sts()  # a retransmission: our receipt was not seen
+            if seq_le(packet.packet_no, self.received_upto):  # a retransmission: our receipt was not seen
+                if not self._lazy:  # a lazy reader receipts nothing yet
+                    self._sts()
             elif len(self.ahead) < MAX_RECEIVED or packet.packet_no in self.ahead:
                 self.ahead[packet.packet_no] += 1
             return
