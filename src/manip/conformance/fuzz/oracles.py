@@ -46,19 +46,11 @@ from manip.conformance.judge.checks import (
 from manip.conformance.judge.model import AnswerSummary, ProtocolModel
 from manip.conformance.judge.violation import Violation
 from manip.spec import SPEC
-from manip.spec.constants import ServerOp
+from manip.spec.constants import ERROR_STRING_OPS, ServerOp
 from manip.spec.notation import octal
 
 __all__ = ["STATEFUL", "AnsweredRequest", "answers", "oracle_violations"]
 
-_ERRORS: Final = frozenset(
-    {
-        ServerOp.NON_FATAL_ERROR,
-        ServerOp.FATAL_ERROR,
-        ServerOp.ASYNCHRONOUS_ERROR,
-        ServerOp.ASYNCHRONOUS_WARNING,
-    }
-)
 _FREE_JOINT: Final = SPEC.request("free-joint").opcode
 _DESCRIBE: Final = SPEC.request("describe-self").opcode
 _SET_JOINTS: Final = SPEC.request("set-joint-angles").opcode
@@ -118,7 +110,7 @@ def answers(packets: Sequence[WirePacket]) -> Iterator[AnsweredRequest]:
 
 def _error(packet: WirePacket) -> ErrorReply | None:
     """The decoded error string of an error packet, or None."""
-    if packet.opcode not in _ERRORS:
+    if packet.opcode not in ERROR_STRING_OPS:
         return None
     aligned: bool | None
     for aligned in (None, False):  # either layout (erratum error-arg-layout), else a bad pad read as numbers
