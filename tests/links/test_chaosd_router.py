@@ -7,6 +7,8 @@ import asyncio
 from collections.abc import Coroutine
 from typing import Any
 
+import pytest
+
 from manip.codecs.framing import decode_chaosd, encode_chaosd
 from manip.codecs.packet import Packet
 from manip.spec.constants import ChaosOp
@@ -85,5 +87,18 @@ def test_what_cannot_be_routed_is_dropped_and_counted() -> None:
             assert await a[0].read() == b""  # the router closed the connection
             assert router.dropped == {"unroutable": 1, "framing lost": 1}
             a[1].close()
+
+    run(main())
+
+
+def test_naming_hosts_that_never_connect_times_out() -> None:
+    async def main() -> None:
+        async with chaosd_router() as (path, router):
+            server = await asyncio.open_unix_connection(str(path))
+            with pytest.raises(TimeoutError, match="1 of 2 host"):
+                await router.name_silent(0o440, hosts=2, timeout=0.05)
+            await router.name_silent(0o440, timeout=0.05)  # the one connected is named
+            server[1].close()
+            await server[1].wait_closed()
 
     run(main())

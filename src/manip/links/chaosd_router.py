@@ -29,12 +29,14 @@ from typing import Final
 
 from .listener import bind_unix
 
-__all__ = ["OUTBOUND_LIMIT", "ChaosdRouter"]
+__all__ = ["JOIN_TIMEOUT", "OUTBOUND_LIMIT", "ChaosdRouter"]
 
 HEADER: Final = 4
 TRAILER: Final = 6
 OUTBOUND_LIMIT: Final = 256 * 1024
 """Unsent bytes a host's socket may hold; frames for it past that are dropped (``congested``)."""
+JOIN_TIMEOUT: Final = 5.0
+"""Seconds :meth:`ChaosdRouter.name_silent` waits for the hosts it names to connect."""
 
 
 class _Host(asyncio.Protocol):
@@ -50,6 +52,7 @@ class _Host(asyncio.Protocol):
         assert isinstance(transport, asyncio.Transport)
         self.transport = transport
         self.router._hosts.append(self)
+        self.router._joined.set()
 
     def data_received(self, data: bytes) -> None:
         self.buffer += data
@@ -94,6 +97,8 @@ class ChaosdRouter:
         self._hosts: list[_Host] = []
         self._routes: dict[int, list[_Host]] = {}
         self._server: asyncio.Server | None = None
+        self._joined = asyncio.Event()
+        """Set when a host connects."""
 
     async def __aenter__(self) -> ChaosdRouter:
         loop = asyncio.get_running_loop()
@@ -115,12 +120,22 @@ class ChaosdRouter:
         """Hosts connected now."""
         return len(self._hosts)
 
-    async def name_silent(self, address: int, *, hosts: int = 1) -> None:
+    async def name_silent(self, address: int, *, hosts: int = 1, timeout: float = JOIN_TIMEOUT) -> None:
         """The hosts connected now that have sent nothing are at ``address`` (a daemon told its hosts'
         addresses; every other address is learnt from the frames), once at least ``hosts`` are (a host
-        whose dial has returned may not be accepted yet: this waits turns of the loop, not time)."""
-        while self.connected < hosts:
-            await asyncio.sleep(0)
+        whose dial has returned may not be accepted yet); :class:`TimeoutError` if fewer have connected
+        within ``timeout`` seconds.  A dial that returned is accepted in turns of the loop, before a
+        virtual clock jumps."""
+        try:
+            async with asyncio.timeout(timeout):
+                while self.connected < hosts:
+                    self._joined.clear()
+                    await self._joined.wait()
+        except TimeoutError:
+            raise TimeoutError(
+                f"chaosd router at {self.path}: {self.connected} of {hosts} host(s) connected"
+                f" within {timeout} s"
+            ) from None
         for host in self._hosts:
             if not host.spoke:
                 self._learn(address, host)
