@@ -544,7 +544,12 @@ def decode_tcp(frame: bytes, *, verify: bool = True, strict: bool = True) -> Pac
 
 def encode_chaosd(p: Packet, *, hw_dest: int | None = None, hw_src: int | None = None) -> bytes:
     """One chaosd socket frame carrying ``p`` (trailer words little-endian like the rest)."""
-    body = _body(p, "<", hw_dest, hw_src)
+    return chaosd_frame(_body(p, "<", hw_dest, hw_src))
+
+
+def chaosd_frame(body: bytes) -> bytes:
+    """``body`` (a packet and its trailer) behind the chaosd frame header: its length, high byte first,
+    then 01 00."""
     return bytes((len(body) >> 8, len(body) & 0xFF, 1, 0)) + body
 
 

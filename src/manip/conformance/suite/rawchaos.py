@@ -52,6 +52,7 @@ from manip.codecs.framing import (
     FrameSyncError,
     StreamDecoder,
     TcpFrameDecoder,
+    chaosd_frame,
     decode_chudp,
     encode_chaosd,
     encode_chudp,
@@ -191,7 +192,6 @@ class RawStreamLink(RawLink, asyncio.Protocol):
         self._transport: asyncio.Transport | None = None
         self.chaosd = address.scheme == "chaosd"
         self._decoder: StreamDecoder = ChaosdFrameDecoder() if self.chaosd else TcpFrameDecoder()
-        self._prefix = 4 if self.chaosd else 2
         self._buffer = bytearray()
         """The bytes of the frames the decoder has not returned yet."""
         self._head = b""
@@ -212,7 +212,7 @@ class RawStreamLink(RawLink, asyncio.Protocol):
         except FrameSyncError as exc:
             items, lost = list(exc.items), exc
         for item in items:
-            size = self._prefix + int.from_bytes(self._buffer[:2], "big")
+            size = self._decoder.prefix + int.from_bytes(self._buffer[:2], "big")
             raw = bytes(self._buffer[:size])
             del self._buffer[:size]
             self._frames += 1
@@ -339,7 +339,7 @@ def frame(
         f"{'<' if chaosd and not datagram else '>'}{len(words) + 3}H", *words, dest, source, checksum
     )
     if chaosd and not datagram:
-        return len(body).to_bytes(2, "big") + b"\x01\x00" + body
+        return chaosd_frame(body)
     if not datagram:
         return len(body).to_bytes(2, "big") + body
     head = CHUDP_HEADER
