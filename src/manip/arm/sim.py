@@ -768,8 +768,7 @@ class ArmSim:
             if self._backlog and isinstance(self._backlog[0], _PathPacket):
                 packet = self._backlog.popleft()
                 assert isinstance(packet, _PathPacket)
-                self._playback = self._play(self._from(packet, q))
-                self._scheme_now = None
+                self._play(packet, q)
         return q
 
     def _rest_then_resume(self, here: Joints, t: float, rest: float) -> None:
@@ -784,8 +783,7 @@ class ArmSim:
         self._interp = MoveInterpolator(here, self.limits, self.speed)
         packet = self._backlog.popleft()
         if isinstance(packet, _PathPacket):
-            self._playback = self._play(self._from(packet, here))
-            self._scheme_now = None
+            self._play(packet, here)
         else:
             self._interp.enqueue(packet.request, t)
 
@@ -826,9 +824,13 @@ class ArmSim:
             return replace(packet, offset=offset)
         return _PathPacket(packet.segment, line, checked, here, packet.goal, packet.speed)
 
-    def _play(self, packet: _PathPacket) -> _Playback:
+    def _play(self, packet: _PathPacket, here: Joints) -> None:
+        """Start the straight-line ``packet`` from ``here`` (:meth:`_from`): it commands the arm, no
+        joint-interpolated scheme, until its last cycle."""
+        packet = self._from(packet, here)
         ticks = max(1, math.ceil(packet.line.duration / self.tick_period - _EPS))
-        return _Playback(packet, ticks, packet.start)
+        self._playback = _Playback(packet, ticks, packet.start)
+        self._scheme_now = None
 
     def _line_step(self, play: _Playback) -> Joints:
         """The next servo cycle of a straight-line move.
