@@ -20,6 +20,7 @@ from manip.conformance.suite.embedded import ServerEnvironment, simulated_enviro
 from manip.conformance.suite.results import RunReport
 from manip.conformance.suite.runner import RunConfig, Runner
 from manip.links import virtual_clock
+from manip.links.address import DEFAULT_SERVER_ADDR
 from manip.reference_server import ServerConfig
 from manip.reference_server.driver import serve
 from tests.support.chaosd_router import chaosd_router
@@ -101,9 +102,10 @@ def run_over_link(
 
     async def main() -> RunReport:
         if scheme == "chaosd":
-            async with chaosd_router() as (path, router), serve(f"chaosd://{path}?addr=0440", server):
-                await router.name_silent(0o440)
-                return await _run(f"chaosd://{path}?addr=0440")
+            # The server at the default address, as in the embedded run.
+            async with chaosd_router() as (path, router), serve(f"chaosd://{path}", server):
+                await router.name_silent(DEFAULT_SERVER_ADDR)
+                return await _run(f"chaosd://{path}")
         async with serve(LINK_ADDRESSES[scheme], server) as reference:
             return await _run(reference.address)
 
